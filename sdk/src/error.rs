@@ -1,0 +1,71 @@
+//! The one error type of the SDK.
+
+use std::path::PathBuf;
+
+/// Every failure the SDK reports. Each variant names the offending input so that a caller (or the
+/// `holo` CLI) can print a message a person can act on; nothing in the SDK panics on bad input.
+#[derive(Debug, thiserror::Error)]
+pub enum HoloError {
+    /// A scalar parameter is out of its valid range (zero pitch, negative wavelength, zero levels…).
+    #[error("invalid parameter `{name}`: {reason}")]
+    InvalidParameter {
+        /// Parameter name as the API spells it (e.g. `pixel_pitch_m`).
+        name: &'static str,
+        /// What is wrong and what is expected.
+        reason: String,
+    },
+    /// Two arrays that must agree in shape do not.
+    #[error("shape mismatch for {what}: expected {expected:?}, got {got:?}")]
+    ShapeMismatch {
+        /// Which array (e.g. `depth map vs RGB image`).
+        what: String,
+        /// Expected shape.
+        expected: Vec<usize>,
+        /// Shape that was passed.
+        got: Vec<usize>,
+    },
+    /// Depth data is unusable (NaN, no valid pixel, wrong range for its encoding…).
+    #[error("invalid depth: {0}")]
+    InvalidDepth(String),
+    /// Image or field data is unusable (NaN amplitude, empty image…).
+    #[error("invalid data: {0}")]
+    InvalidData(String),
+    /// A file could not be read or written.
+    #[error("cannot access `{path}`: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// An image file could not be decoded or encoded.
+    #[error("cannot decode or encode image `{path}`: {source}")]
+    Image {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: image::ImageError,
+    },
+    /// A `.npy` file could not be read or written, or holds the wrong dtype/shape.
+    #[error("cannot read or write npy `{path}`: {reason}")]
+    Npy {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        reason: String,
+    },
+    /// Refusing to overwrite a file the user passed in as input.
+    #[error("refusing to overwrite input file `{0}`")]
+    WouldOverwriteInput(PathBuf),
+}
+
+/// Result alias used throughout the SDK.
+pub type Result<T> = std::result::Result<T, HoloError>;
+
+/// Shorthand for [`HoloError::InvalidParameter`].
+pub(crate) fn invalid(name: &'static str, reason: impl Into<String>) -> HoloError {
+    HoloError::InvalidParameter {
+        name,
+        reason: reason.into(),
+    }
+}

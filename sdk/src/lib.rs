@@ -1,0 +1,29 @@
+//! # tensorholo
+//!
+//! Core engine of Tensor Holography V2 (Shi, Li, Matusik, *Light: Science & Applications* 2022):
+//! RGB-D frame → midpoint hologram → offset propagation → double phase encoding → 8-bit SLM phase.
+//!
+//! Modules, one per concept (see `ARCHITECTURE.md`):
+//! - [`optics`]: angular spectrum method (Eq. 2), offset propagation (Eq. 6), Fourier filter (Eq. 8–9),
+//!   focal-stack reconstruction.
+//! - [`encoding`]: double phase encoding (Eq. 7), AA-DPM, BL-DPM, phase wrapping and 8-bit codes.
+//! - [`synthesis`]: silhouette-mask layer-based method (SM-LBM, Eq. 1–4) for reference holograms.
+//! - [`scene`]: RGB-D frames, layered depth images, depth decoders, the built-in procedural scene.
+//! - [`metrics`]: PSNR and SSIM.
+//! - [`io`]: PNG and `.npy` input/output.
+//!
+//! Conventions (`DESIGN.md` §2): SI units, channel order R, G, B, normalised depth `d ∈ [0,1]` with
+//! 0 = near, a point at `d` lies at `z(d) = (0.5 − d)·volume_depth` from the midpoint plane, `+z` along the
+//! light (toward the viewer).
+
+pub mod color;
+pub mod encoding;
+pub mod error;
+pub mod io;
+pub mod metrics;
+pub mod optics;
+pub mod scene;
+pub mod synthesis;
+
+pub use error::{HoloError, Result};
+pub use num_complex::Complex32;
