@@ -1,1 +1,9 @@
-//! placeholder
+//! Phase-only encoding of complex holograms: the double phase method (paper Eq. 7) and its pre-filtered
+//! variants AA-DPM (TensorHolo V1, Shi et al. 2021) and BL-DPM (Sui et al., Opt. Express 29, 2597, 2021), phase
+//! wrapping, and 8-bit SLM codes through a linear look-up table.
+
+mod double_phase;
+mod lut;
+
+pub use double_phase::{double_phase_encode, DoublePhase, DoublePhaseMethod};
+pub use lut::{phase_to_codes, wrap_phase, LinearLut};

@@ -1,1 +1,150 @@
-//! placeholder
+//! Wave optics: the angular spectrum method (paper Eq. 2), offset propagation (Eq. 6, Eq. 10), the Fourier
+//! (aperture) filter (Eq. 8–9) and focal-stack reconstruction.
+//!
+//! Fields are `Complex32`, row-major `[height, width]`; colour stacks are `[channel, height, width]` in R, G, B
+//! order and are processed one colour per thread (rayon).
+
+pub mod fft;
+pub mod filter;
+pub mod propagation;
+pub mod reconstruct;
+
+use ndarray::{Array3, ArrayView3, Axis};
+use num_complex::Complex32;
+use rayon::prelude::*;
+
+pub use filter::FourierFilter;
+pub use propagation::{
+    Carrier, PropagationOptions, Propagator, Scratch, SpectralPlan, TransferFunction,
+};
+pub use reconstruct::{focal_stack, simulate_phase_only};
+
+use crate::error::{invalid, HoloError, Result};
+use propagation::check_positive;
+
+/// The display geometry of `DESIGN.md` §2: laser wavelengths, SLM pixel pitch and the depth of the 3D volume
+/// centred on the midpoint hologram. `Default` is the paper's setup (638/520/450 nm, 8 µm, 6 mm).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct OpticalSetup {
+    /// Wavelengths in metres of the R, G, B lasers.
+    pub wavelengths_m: [f64; 3],
+    /// SLM pixel pitch in metres.
+    pub pixel_pitch_m: f64,
+    /// Depth of the 3D volume in metres; normalised depth `d ∈ [0,1]` spans it, centred on the midpoint plane.
+    pub volume_depth_m: f64,
+}
+
+impl Default for OpticalSetup {
+    fn default() -> Self {
+        Self {
+            wavelengths_m: [638e-9, 520e-9, 450e-9],
+            pixel_pitch_m: 8e-6,
+            volume_depth_m: 6e-3,
+        }
+    }
+}
+
+impl OpticalSetup {
+    /// Checks every field is finite and positive.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] naming the offending field.
+    pub fn validate(&self) -> Result<()> {
+        for w in self.wavelengths_m {
+            check_positive("wavelength_m", w)?;
+        }
+        check_positive("pixel_pitch_m", self.pixel_pitch_m)?;
+        check_positive("volume_depth_m", self.volume_depth_m)
+    }
+
+    /// Axial position in metres, relative to the midpoint plane, of normalised depth `d` (0 = near):
+    /// `z(d) = (0.5 − d) · volume_depth` (`DESIGN.md` §2; near points are on the viewer's side, `z > 0`).
+    pub fn depth_to_z(&self, d: f64) -> f64 {
+        (0.5 - d) * self.volume_depth_m
+    }
+
+    /// One [`Propagator`] per colour for `[height, width]` fields.
+    ///
+    /// Errors: as [`Propagator::new`].
+    pub fn propagators(
+        &self,
+        height: usize,
+        width: usize,
+        options: PropagationOptions,
+    ) -> Result<Vec<Propagator>> {
+        self.validate()?;
+        self.wavelengths_m
+            .iter()
+            .map(|&l| Propagator::new(height, width, self.pixel_pitch_m, l, options))
+            .collect()
+    }
+}
+
+/// Checks a colour stack is `[3, H, W]` with `H, W ≥ 1` and returns `(H, W)`.
+pub(crate) fn check_colour_stack<T>(what: &str, a: &ArrayView3<T>) -> Result<(usize, usize)> {
+    let (c, h, w) = a.dim();
+    if c != 3 || h == 0 || w == 0 {
+        return Err(HoloError::ShapeMismatch {
+            what: format!("{what} (expected [3, height, width], channels R, G, B)"),
+            expected: vec![3, h.max(1), w.max(1)],
+            got: vec![c, h, w],
+        });
+    }
+    Ok((h, w))
+}
+
+/// Checks every value of a complex field is finite.
+pub(crate) fn check_finite_field(what: &str, a: &ArrayView3<Complex32>) -> Result<()> {
+    let bad = a.iter().filter(|v| !v.is_finite()).count();
+    if bad > 0 {
+        return Err(HoloError::InvalidData(format!(
+            "{what} has {bad} non-finite (NaN or infinite) values"
+        )));
+    }
+    Ok(())
+}
+
+/// Runs `f(channel, slice)` on each channel of a standard-layout `[C, H, W]` array, channels in parallel.
+pub(crate) fn par_channels<T: Send + Sync>(
+    field: &mut Array3<T>,
+    f: impl Fn(usize, &mut [T]) -> Result<()> + Sync + Send,
+) -> Result<()> {
+    field
+        .axis_iter_mut(Axis(0))
+        .into_par_iter()
+        .enumerate()
+        .try_for_each(|(c, mut lane)| {
+            let slice = lane
+                .as_slice_mut()
+                .ok_or_else(|| invalid("field", "must be in standard (row-major) layout"))?;
+            f(c, slice)
+        })
+}
+
+/// Propagates a colour stack `[3, H, W]` (R, G, B) in place by `distance_m` metres with the angular spectrum
+/// method (Eq. 2), one colour per thread, each at its own wavelength of `setup`.
+///
+/// With [`Carrier::Remove`] this is the offset propagation of Eq. 6 (`distance_m = s`, midpoint → SLM) and
+/// its inverse of Eq. 10 (`distance_m = −s`, SLM → midpoint), `DESIGN.md` §2.
+///
+/// Allocating convenience: plans and transfer functions are built per call. Hot paths keep [`Propagator`]s,
+/// [`TransferFunction`]s and [`Scratch`] instead.
+///
+/// Errors: invalid setup or distance ([`HoloError::InvalidParameter`]), a field that is not `[3, H, W]`
+/// ([`HoloError::ShapeMismatch`]), non-finite values ([`HoloError::InvalidData`]).
+pub fn propagate_colour(
+    field: &mut Array3<Complex32>,
+    setup: &OpticalSetup,
+    distance_m: f64,
+    carrier: Carrier,
+    options: PropagationOptions,
+) -> Result<()> {
+    let (h, w) = check_colour_stack("field", &field.view())?;
+    check_finite_field("field", &field.view())?;
+    if !field.is_standard_layout() {
+        *field = field.as_standard_layout().into_owned();
+    }
+    let props = setup.propagators(h, w, options)?;
+    par_channels(field, |c, slice| {
+        props[c].propagate_by(slice, distance_m, carrier)
+    })
+}

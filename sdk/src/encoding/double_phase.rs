@@ -1,0 +1,277 @@
+//! Double phase encoding (paper Eq. 7) with optional pre-filtering (AA-DPM, BL-DPM).
+
+use std::f32::consts::TAU;
+
+use ndarray::{Array2, Array3, ArrayView3, Axis, Zip};
+use num_complex::Complex32;
+
+use super::lut::wrap_phase;
+use crate::error::{invalid, HoloError, Result};
+use crate::optics::{check_colour_stack, check_finite_field, par_channels, SpectralPlan};
+
+/// Which low-pass pre-filter, if any, to apply to the complex hologram before double phase encoding.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[serde(tag = "method", rename_all = "kebab-case")]
+pub enum DoublePhaseMethod {
+    /// Plain double phase encoding, Eq. 7 (what DDPM uses after its pre-filter CNN).
+    Plain,
+    /// Anti-aliasing DPM (TensorHolo V1): Gaussian blur of the real and imaginary parts with standard
+    /// deviation `sigma_px` (pixels) and an odd `kernel_size` (pixels), edges clamped, before encoding.
+    AntiAliased {
+        /// Gaussian standard deviation in pixels (> 0).
+        sigma_px: f32,
+        /// Kernel width in pixels (odd, ≥ 1).
+        kernel_size: usize,
+    },
+    /// Band-limiting DPM (Sui et al. 2021): the hologram's spectrum is multiplied by a diamond-shaped mask
+    /// `|fx|/f_Nx + |fy|/f_Ny ≤ k` (`f_N` the Nyquist frequency `1/(2p)` of each axis), `0 < k ≤ 1`. The
+    /// diamond is the Nyquist cell of the checkerboard (quincunx) lattice on which each of the two double-phase
+    /// sub-holograms is sampled, so frequencies outside it alias when the two are interleaved; smaller `k`
+    /// trades sharpness for less speckle.
+    BandLimited {
+        /// Cut-off as a fraction of the diamond Nyquist cell, `0 < k ≤ 1`.
+        k: f32,
+    },
+}
+
+impl Default for DoublePhaseMethod {
+    fn default() -> Self {
+        Self::AntiAliased {
+            sigma_px: 0.7,
+            kernel_size: 5,
+        }
+    }
+}
+
+impl DoublePhaseMethod {
+    fn validate(&self) -> Result<()> {
+        match *self {
+            Self::Plain => Ok(()),
+            Self::AntiAliased {
+                sigma_px,
+                kernel_size,
+            } => {
+                if !(sigma_px.is_finite() && sigma_px > 0.0) {
+                    return Err(invalid("sigma_px", format!("must be > 0, got {sigma_px}")));
+                }
+                if kernel_size == 0 || kernel_size % 2 == 0 {
+                    return Err(invalid(
+                        "kernel_size",
+                        format!("must be odd and ≥ 1, got {kernel_size}"),
+                    ));
+                }
+                Ok(())
+            }
+            Self::BandLimited { k } => {
+                if !(k.is_finite() && k > 0.0 && k <= 1.0) {
+                    return Err(invalid("k", format!("must lie in (0, 1], got {k}")));
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+/// A double-phase-encoded hologram.
+#[derive(Debug, Clone)]
+pub struct DoublePhase {
+    /// Phase-only pattern `[3, H, W]` (R, G, B) in radians, wrapped to `[0, 2π)`.
+    pub phase: Array3<f32>,
+    /// The global amplitude normaliser `a` (max amplitude over all colours after pre-filtering): the pattern
+    /// reconstructs (after the Fourier filter) to about `H / a` up to a per-channel constant phase.
+    pub amplitude_scale: f32,
+    /// Per-channel mean phase (radians) removed before encoding.
+    pub mean_phase: [f32; 3],
+}
+
+/// Double phase encoding of a complex hologram `field` `[3, H, W]` (R, G, B), paper Eq. 7 (`DESIGN.md` §2):
+///
+/// 1. optional pre-filter (`method`);
+/// 2. amplitude normalised by one global maximum `a` over all colours: `Ã = A / a ∈ [0, 1]`;
+/// 3. phase `φ = arg H` de-meaned per channel;
+/// 4. `P = φ − acos Ã` where `x + y` is odd, `φ + acos Ã` where it is even (`x` column, `y` row);
+/// 5. `P` wrapped to `[0, 2π)`.
+///
+/// The scale `0.5·a` of Eq. 7 cannot be shown by a phase-only SLM; it is returned as `amplitude_scale`.
+///
+/// Errors: a field that is not `[3, H, W]` ([`HoloError::ShapeMismatch`]), non-finite values or an all-zero
+/// field ([`HoloError::InvalidData`]), invalid method parameters ([`HoloError::InvalidParameter`]).
+pub fn double_phase_encode(
+    field: ArrayView3<Complex32>,
+    method: &DoublePhaseMethod,
+) -> Result<DoublePhase> {
+    let (h, w) = check_colour_stack("hologram", &field)?;
+    check_finite_field("hologram", &field)?;
+    method.validate()?;
+    let mut filtered = field.as_standard_layout().into_owned();
+    match *method {
+        DoublePhaseMethod::Plain => {}
+        DoublePhaseMethod::AntiAliased {
+            sigma_px,
+            kernel_size,
+        } => {
+            let kernel = gaussian_kernel(sigma_px, kernel_size);
+            par_channels(&mut filtered, |_, slice| {
+                blur_separable(slice, h, w, &kernel);
+                Ok(())
+            })?;
+        }
+        DoublePhaseMethod::BandLimited { k } => {
+            let plan = SpectralPlan::new(h, w, false)?;
+            let norm = 1.0 / plan.spectrum_len() as f32;
+            let (hh, hw) = ((h as f64 / 2.0).max(0.5), (w as f64 / 2.0).max(0.5));
+            let mask = plan.build_multiplier(|kx, ky| {
+                let r = kx.unsigned_abs() as f64 / hw + ky.unsigned_abs() as f64 / hh;
+                Complex32::new(if r <= k as f64 { norm } else { 0.0 }, 0.0)
+            });
+            par_channels(&mut filtered, |_, slice| {
+                plan.apply(slice, &mask, &mut plan.scratch())
+            })?;
+        }
+    }
+    let a = filtered.iter().map(|v| v.norm()).fold(0.0f32, f32::max);
+    if !(a > 0.0 && a.is_finite()) {
+        return Err(HoloError::InvalidData(
+            "hologram amplitude is zero everywhere: nothing to encode".into(),
+        ));
+    }
+    let mut phase = Array3::<f32>::zeros((3, h, w));
+    let mut mean_phase = [0.0f32; 3];
+    for (c, (src, mut dst)) in filtered
+        .axis_iter(Axis(0))
+        .zip(phase.axis_iter_mut(Axis(0)))
+        .enumerate()
+    {
+        let arg: Array2<f32> = src.mapv(|v| v.arg());
+        let mean = (arg.iter().map(|&p| p as f64).sum::<f64>() / arg.len() as f64) as f32;
+        mean_phase[c] = mean;
+        Zip::indexed(&mut dst)
+            .and(&src)
+            .and(&arg)
+            .for_each(|(y, x), p, v, &phi| {
+                let theta = (v.norm() / a).clamp(0.0, 1.0).acos();
+                let value = if (x + y) % 2 == 1 {
+                    phi - mean - theta
+                } else {
+                    phi - mean + theta
+                };
+                *p = wrap_phase(value);
+            });
+    }
+    debug_assert!(phase.iter().all(|p| (0.0..TAU).contains(p)));
+    Ok(DoublePhase {
+        phase,
+        amplitude_scale: a,
+        mean_phase,
+    })
+}
+
+/// Normalised 1D Gaussian kernel of odd length `size` and standard deviation `sigma` (pixels).
+fn gaussian_kernel(sigma: f32, size: usize) -> Vec<f32> {
+    let r = (size / 2) as i64;
+    let k: Vec<f32> = (-r..=r)
+        .map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp())
+        .collect();
+    let s: f32 = k.iter().sum();
+    k.into_iter().map(|v| v / s).collect()
+}
+
+/// Separable convolution of a `[h, w]` complex image with `kernel` along both axes, edges clamped.
+fn blur_separable(data: &mut [Complex32], h: usize, w: usize, kernel: &[f32]) {
+    let r = (kernel.len() / 2) as i64;
+    let mut tmp = vec![Complex32::default(); h * w];
+    for y in 0..h {
+        for x in 0..w {
+            let mut acc = Complex32::default();
+            for (j, &kv) in kernel.iter().enumerate() {
+                let xx = (x as i64 + j as i64 - r).clamp(0, w as i64 - 1) as usize;
+                acc += data[y * w + xx] * kv;
+            }
+            tmp[y * w + x] = acc;
+        }
+    }
+    for y in 0..h {
+        for x in 0..w {
+            let mut acc = Complex32::default();
+            for (j, &kv) in kernel.iter().enumerate() {
+                let yy = (y as i64 + j as i64 - r).clamp(0, h as i64 - 1) as usize;
+                acc += tmp[yy * w + x] * kv;
+            }
+            data[y * w + x] = acc;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn checkerboard_pairs_sum_to_the_encoded_complex_value() {
+        // For each pixel pair the two phasors average to Ã·e^{i(φ − mean)} exactly (the double phase identity).
+        let field = Array3::from_shape_fn((3, 4, 6), |(c, y, x)| {
+            Complex32::from_polar(0.2 + 0.1 * (x + y + c) as f32, 0.3 * x as f32 - 0.2 * y as f32)
+        });
+        let dp = double_phase_encode(field.view(), &DoublePhaseMethod::Plain).unwrap();
+        for c in 0..3 {
+            for y in 0..4 {
+                for x in 0..6 {
+                    let v = field[[c, y, x]];
+                    let theta = (v.norm() / dp.amplitude_scale).acos();
+                    let phi = v.arg() - dp.mean_phase[c];
+                    let plus = Complex32::from_polar(1.0, phi + theta);
+                    let minus = Complex32::from_polar(1.0, phi - theta);
+                    let got = Complex32::from_polar(1.0, dp.phase[[c, y, x]]);
+                    let expected = if (x + y) % 2 == 0 { plus } else { minus };
+                    assert!((got - expected).norm() < 1e-4);
+                    let avg = (plus + minus) * 0.5;
+                    let target = Complex32::from_polar(v.norm() / dp.amplitude_scale, phi);
+                    assert!((avg - target).norm() < 1e-5);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn global_normaliser_is_the_max_over_all_colours() {
+        let mut field = Array3::from_elem((3, 4, 4), Complex32::new(0.5, 0.0));
+        field[[2, 1, 1]] = Complex32::new(0.0, 2.0);
+        let dp = double_phase_encode(field.view(), &DoublePhaseMethod::Plain).unwrap();
+        assert!((dp.amplitude_scale - 2.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn bad_inputs_are_rejected() {
+        let zero = Array3::<Complex32>::zeros((3, 4, 4));
+        assert!(matches!(
+            double_phase_encode(zero.view(), &DoublePhaseMethod::Plain),
+            Err(HoloError::InvalidData(_))
+        ));
+        let two = Array3::from_elem((2, 4, 4), Complex32::new(1.0, 0.0));
+        assert!(matches!(
+            double_phase_encode(two.view(), &DoublePhaseMethod::Plain),
+            Err(HoloError::ShapeMismatch { .. })
+        ));
+        let mut nan = Array3::from_elem((3, 4, 4), Complex32::new(1.0, 0.0));
+        nan[[0, 0, 0]] = Complex32::new(f32::NAN, 0.0);
+        assert!(double_phase_encode(nan.view(), &DoublePhaseMethod::Plain).is_err());
+        let ones = Array3::from_elem((3, 4, 4), Complex32::new(1.0, 0.0));
+        for m in [
+            DoublePhaseMethod::AntiAliased { sigma_px: 0.0, kernel_size: 5 },
+            DoublePhaseMethod::AntiAliased { sigma_px: 1.0, kernel_size: 4 },
+            DoublePhaseMethod::BandLimited { k: 1.5 },
+        ] {
+            assert!(matches!(
+                double_phase_encode(ones.view(), &m),
+                Err(HoloError::InvalidParameter { .. })
+            ));
+        }
+    }
+
+    #[test]
+    fn gaussian_kernel_is_normalised_and_symmetric() {
+        let k = gaussian_kernel(1.0, 7);
+        assert!((k.iter().sum::<f32>() - 1.0).abs() < 1e-6);
+        assert!((k[0] - k[6]).abs() < 1e-9 && k[3] > k[2]);
+    }
+}
