@@ -1,1 +1,281 @@
-//! placeholder
+//! File input/output: NumPy `.npy` arrays (complex fields, real maps) and 8-bit PNG images
+//! (amplitude previews, SLM phase codes), plus a guard against overwriting input files.
+//!
+//! `.npy` files follow the NumPy format specification (version 1.0/2.0 headers, C order on write) and
+//! are read and written through `ndarray-npy`; complex fields are stored as `complex64` (`'<c8'`),
+//! the dtype `numpy.load` gives back as `np.complex64`. Every error names the file.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Write};
+use std::path::{Component, Path, PathBuf};
+
+use ndarray::{Array3, ArrayD, ArrayView, ArrayView2, ArrayView3, Axis, Dimension, Ix3};
+use ndarray_npy::{ReadNpyError, ReadNpyExt, WriteNpyExt};
+use num_complex::{Complex32, Complex64};
+
+use crate::color::amplitude_to_srgb8;
+use crate::error::{invalid, HoloError, Result};
+
+/// Writes a complex field stack of shape `[C, H, W]` (channel order R, G, B for colour) to `path` as
+/// a NumPy `.npy` file of dtype `complex64` (`'<c8'`, little-endian), C order, shape `(C, H, W)`:
+/// `numpy.load(path)` returns it unchanged. Any memory layout of `field` is accepted.
+///
+/// # Errors
+/// [`HoloError::Io`] if the file cannot be created or written, [`HoloError::Npy`] if the array
+/// cannot be serialised; both carry `path`.
+pub fn write_complex_npy(path: &Path, field: ArrayView3<Complex32>) -> Result<()> {
+    write_npy_any(path, field)
+}
+
+/// Reads a NumPy `.npy` complex field from `path`: shape `[C, H, W]`, or `[H, W]` returned as
+/// `[1, H, W]`. Accepts `complex64` (`c8`) and `complex128` (`c16`, converted to single precision),
+/// either byte order, C or Fortran order; the result is in standard (C) layout.
+///
+/// # Errors
+/// [`HoloError::Io`] if the file cannot be opened; [`HoloError::Npy`] naming `path` if it is not a
+/// valid `.npy` file, its dtype is not complex64/complex128 (e.g. `'<f8'`), or its rank is not 2 or 3.
+pub fn read_complex_npy(path: &Path) -> Result<Array3<Complex32>> {
+    let any: ArrayD<Complex32> = match read_npy_file::<Complex32>(path) {
+        Ok(a) => a,
+        Err(ReadNpyError::WrongDescriptor(_)) => match read_npy_file::<Complex64>(path) {
+            Ok(a) => a.mapv(|z| Complex32::new(z.re as f32, z.im as f32)),
+            Err(ReadNpyError::WrongDescriptor(descr)) => {
+                return Err(npy_error(
+                    path,
+                    format!(
+                        "dtype {descr} is not a complex field: expected complex64 ('<c8') or \
+                         complex128 ('<c16')"
+                    ),
+                ))
+            }
+            Err(e) => return Err(read_error(path, e)),
+        },
+        Err(e) => return Err(read_error(path, e)),
+    };
+    let shape = any.shape().to_vec();
+    let any = match any.ndim() {
+        2 => any.insert_axis(Axis(0)),
+        3 => any,
+        _ => {
+            return Err(npy_error(
+                path,
+                format!(
+                    "complex field has shape {shape:?}: expected rank 2 [H, W] or rank 3 [C, H, W]"
+                ),
+            ))
+        }
+    };
+    let a = any
+        .into_dimensionality::<Ix3>()
+        .expect("rank checked above");
+    Ok(if a.is_standard_layout() {
+        a
+    } else {
+        a.as_standard_layout().into_owned()
+    })
+}
+
+/// Writes a real `f32` array of any dimension (depth map `[H, W]`, amplitude stack `[C, H, W]`…) to
+/// `path` as a NumPy `.npy` file of dtype `float32` (`'<f4'`), C order, same shape.
+///
+/// # Errors
+/// [`HoloError::Io`] / [`HoloError::Npy`] carrying `path`, as [`write_complex_npy`].
+pub fn write_f32_npy<D: Dimension>(path: &Path, a: ArrayView<f32, D>) -> Result<()> {
+    write_npy_any(path, a)
+}
+
+/// Saves an amplitude image as an 8-bit sRGB PNG. `amplitude` is `[3, H, W]` (R, G, B → RGB PNG) or
+/// `[1, H, W]` (→ greyscale PNG), with amplitude ≥ 0 and `1` = white (`DESIGN.md` §2: amplitude =
+/// √linear intensity). Each value is multiplied by `scale`, then encoded by
+/// [`crate::color::amplitude_to_srgb8`]: intensity `amplitude²`, clamped to `[0, 1]`, sRGB transfer
+/// curve, rounded. Negative amplitudes and NaN are written as 0 (black). The file is written as PNG
+/// whatever the extension of `path`.
+///
+/// # Errors
+/// - [`HoloError::InvalidParameter`] (`scale`) if `scale` is negative or not finite;
+/// - [`HoloError::ShapeMismatch`] if the channel count is neither 1 nor 3;
+/// - [`HoloError::InvalidData`] if the image is empty or larger than PNG allows;
+/// - [`HoloError::Image`] (with `path`) if encoding or writing fails.
+pub fn save_amplitude_png(path: &Path, amplitude: ArrayView3<f32>, scale: f32) -> Result<()> {
+    if !(scale.is_finite() && scale >= 0.0) {
+        return Err(invalid(
+            "scale",
+            format!("must be finite and >= 0, got {scale}"),
+        ));
+    }
+    let (c, h, w) = amplitude.dim();
+    if c != 1 && c != 3 {
+        return Err(HoloError::ShapeMismatch {
+            what: "amplitude image channels (1 = grey or 3 = R, G, B)".into(),
+            expected: vec![3, h, w],
+            got: vec![c, h, w],
+        });
+    }
+    let (w32, h32) = png_dims(w, h)?;
+    let code = |a: f32| amplitude_to_srgb8((a * scale).max(0.0));
+    // Interleave to row-major H, W, C bytes.
+    let bytes: Vec<u8> = amplitude
+        .permuted_axes([1, 2, 0])
+        .iter()
+        .map(|&a| code(a))
+        .collect();
+    let color = if c == 3 {
+        image::ExtendedColorType::Rgb8
+    } else {
+        image::ExtendedColorType::L8
+    };
+    save_png(path, &bytes, w32, h32, color)
+}
+
+/// Saves one 8-bit plane `[H, W]` (e.g. SLM phase codes of one laser) as a greyscale 8-bit PNG, codes
+/// unchanged. The file is written as PNG whatever the extension of `path`.
+///
+/// # Errors
+/// [`HoloError::InvalidData`] if the plane is empty or too large for PNG; [`HoloError::Image`] (with
+/// `path`) if encoding or writing fails.
+pub fn save_u8_png(path: &Path, codes: ArrayView2<u8>) -> Result<()> {
+    let (h, w) = codes.dim();
+    let (w32, h32) = png_dims(w, h)?;
+    let bytes: Vec<u8> = codes.iter().copied().collect();
+    save_png(path, &bytes, w32, h32, image::ExtendedColorType::L8)
+}
+
+/// Refuses to let `output` be written over one of `inputs`. Paths are compared after resolving them:
+/// a path that exists is canonicalised (symbolic links, `.`/`..`, relative spellings); a path that
+/// does not exist yet is resolved through its nearest existing ancestor. On Unix two existing paths
+/// that are hard links to the same file (same device and inode) also count as the same.
+///
+/// # Errors
+/// [`HoloError::WouldOverwriteInput`] carrying `output` if it names the same file as an input.
+pub fn ensure_not_input(output: &Path, inputs: &[&Path]) -> Result<()> {
+    let out = resolve(output);
+    for input in inputs {
+        if resolve(input) == out || same_file(output, input) {
+            return Err(HoloError::WouldOverwriteInput(output.to_path_buf()));
+        }
+    }
+    Ok(())
+}
+
+/// Best-effort absolute, normalised form of `p`: canonicalise the longest existing prefix, then append
+/// the rest with `.` dropped and `..` popped lexically.
+fn resolve(p: &Path) -> PathBuf {
+    if let Ok(c) = p.canonicalize() {
+        return c;
+    }
+    let abs = if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        std::env::current_dir()
+            .map(|d| d.join(p))
+            .unwrap_or_else(|_| p.to_path_buf())
+    };
+    // Find the longest existing ancestor.
+    let mut base = abs.as_path();
+    let canon_base = loop {
+        if let Ok(c) = base.canonicalize() {
+            break c;
+        }
+        match base.parent() {
+            Some(parent) => base = parent,
+            None => break base.to_path_buf(),
+        }
+    };
+    // Re-walk the non-existing tail lexically.
+    let tail = abs.strip_prefix(base).unwrap_or(Path::new(""));
+    let mut out = canon_base;
+    for comp in tail.components() {
+        match comp {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                out.pop();
+            }
+            other => out.push(other.as_os_str()),
+        }
+    }
+    out
+}
+
+#[cfg(unix)]
+fn same_file(a: &Path, b: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    match (std::fs::metadata(a), std::fs::metadata(b)) {
+        (Ok(ma), Ok(mb)) => ma.dev() == mb.dev() && ma.ino() == mb.ino(),
+        _ => false,
+    }
+}
+
+#[cfg(not(unix))]
+fn same_file(_a: &Path, _b: &Path) -> bool {
+    false
+}
+
+fn npy_error(path: &Path, reason: impl Into<String>) -> HoloError {
+    HoloError::Npy {
+        path: path.to_path_buf(),
+        reason: reason.into(),
+    }
+}
+
+fn read_error(path: &Path, e: ReadNpyError) -> HoloError {
+    match e {
+        ReadNpyError::Io(source) => HoloError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+        other => npy_error(path, other.to_string()),
+    }
+}
+
+fn read_npy_file<T: ndarray_npy::ReadableElement>(
+    path: &Path,
+) -> std::result::Result<ArrayD<T>, ReadNpyError> {
+    let file = File::open(path)?;
+    ArrayD::<T>::read_npy(BufReader::new(file))
+}
+
+/// Writes `a` in C order (copying if its layout is not standard) as `.npy`.
+fn write_npy_any<T, D>(path: &Path, a: ArrayView<T, D>) -> Result<()>
+where
+    T: ndarray_npy::WritableElement + Clone,
+    D: Dimension,
+{
+    let io_err = |source| HoloError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = File::create(path).map_err(io_err)?;
+    let mut writer = BufWriter::new(file);
+    a.as_standard_layout()
+        .write_npy(&mut writer)
+        .map_err(|e| match e {
+            ndarray_npy::WriteNpyError::Io(source) => io_err(source),
+            other => npy_error(path, other.to_string()),
+        })?;
+    writer.flush().map_err(io_err)
+}
+
+/// PNG sizes are non-zero `u32`s.
+fn png_dims(w: usize, h: usize) -> Result<(u32, u32)> {
+    match (u32::try_from(w), u32::try_from(h)) {
+        (Ok(w32), Ok(h32)) if w32 > 0 && h32 > 0 => Ok((w32, h32)),
+        _ => Err(HoloError::InvalidData(format!(
+            "cannot write a {h}x{w} image as PNG (each side must be 1..=2^32-1 pixels)"
+        ))),
+    }
+}
+
+fn save_png(
+    path: &Path,
+    bytes: &[u8],
+    w: u32,
+    h: u32,
+    color: image::ExtendedColorType,
+) -> Result<()> {
+    image::save_buffer_with_format(path, bytes, w, h, color, image::ImageFormat::Png).map_err(
+        |source| HoloError::Image {
+            path: path.to_path_buf(),
+            source,
+        },
+    )
+}

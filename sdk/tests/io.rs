@@ -1,0 +1,402 @@
+//! `.npy` and PNG input/output, and the overwrite guard.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use ndarray::{Array2, Array3, Axis, Slice};
+use tensorholo::color::srgb8_to_amplitude;
+use tensorholo::io::{
+    ensure_not_input, read_complex_npy, save_amplitude_png, save_u8_png, write_complex_npy,
+    write_f32_npy,
+};
+use tensorholo::{Complex32, HoloError};
+
+/// A fresh, empty scratch folder under Cargo's per-target temporary folder.
+fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("io_tests")
+        .join(name);
+    let _ = fs::remove_dir_all(&dir);
+    fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A version-1.0 `.npy` file built by hand (independent of the writer under test).
+fn npy_bytes(descr: &str, fortran: bool, shape: &str, data: &[u8]) -> Vec<u8> {
+    let fortran = if fortran { "True" } else { "False" };
+    let mut header =
+        format!("{{'descr': '{descr}', 'fortran_order': {fortran}, 'shape': {shape}, }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut out = b"\x93NUMPY\x01\x00".to_vec();
+    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    out.extend_from_slice(data);
+    out
+}
+
+/// Header dictionary text of a `.npy` file (version 1.0 or 2.0).
+fn npy_header(bytes: &[u8]) -> String {
+    assert_eq!(&bytes[..6], b"\x93NUMPY");
+    let (len, start) = match bytes[6] {
+        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
+        _ => (
+            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+            12,
+        ),
+    };
+    assert_eq!((start + len) % 64, 0, "header not 64-byte aligned");
+    String::from_utf8(bytes[start..start + len].to_vec()).unwrap()
+}
+
+fn test_field() -> Array3<Complex32> {
+    Array3::from_shape_fn((3, 4, 5), |(c, y, x)| {
+        Complex32::new(
+            (c * 100 + y * 10 + x) as f32 * 0.125 - 7.0,
+            ((x * 31 + y * 17 + c) as f32).sin() * 1e-3,
+        )
+    })
+}
+
+fn bits(a: &Array3<Complex32>) -> Vec<(u32, u32)> {
+    a.iter().map(|z| (z.re.to_bits(), z.im.to_bits())).collect()
+}
+
+#[test]
+fn complex_npy_round_trip_is_bit_exact() {
+    let dir = scratch("complex_round_trip");
+    let mut field = test_field();
+    field[[0, 0, 0]] = Complex32::new(f32::MIN_POSITIVE / 8.0, -0.0); // subnormal, negative zero
+    field[[1, 2, 3]] = Complex32::new(f32::INFINITY, f32::NAN);
+    field[[2, 3, 4]] = Complex32::new(f32::MAX, f32::EPSILON);
+    let path = dir.join("field.npy");
+    write_complex_npy(&path, field.view()).unwrap();
+    let back = read_complex_npy(&path).unwrap();
+    assert_eq!(back.dim(), (3, 4, 5));
+    assert!(back.is_standard_layout());
+    assert_eq!(bits(&back), bits(&field));
+
+    // A non-contiguous, reversed view is written in logical C order.
+    // (`s![]` cannot be used: the workspace forbids `unsafe_code`, which the macro allows.)
+    let mut view = field.view();
+    view.slice_axis_inplace(Axis(0), Slice::new(0, None, 2));
+    view.slice_axis_inplace(Axis(1), Slice::new(0, None, -1));
+    view.slice_axis_inplace(Axis(2), Slice::from(1..));
+    assert!(!view.is_standard_layout());
+    let path2 = dir.join("strided.npy");
+    write_complex_npy(&path2, view).unwrap();
+    assert_eq!(
+        bits(&read_complex_npy(&path2).unwrap()),
+        bits(&view.to_owned())
+    );
+}
+
+#[test]
+fn complex_npy_header_is_c8_c_order_chw() {
+    let dir = scratch("complex_header");
+    let field = test_field();
+    let path = dir.join("field.npy");
+    write_complex_npy(&path, field.view()).unwrap();
+    let bytes = fs::read(&path).unwrap();
+    let header = npy_header(&bytes);
+    assert!(header.contains("'descr': '<c8'"), "{header}");
+    assert!(header.contains("'fortran_order': False"), "{header}");
+    assert!(header.contains("'shape': (3, 4, 5)"), "{header}");
+    assert!(header.ends_with('\n'));
+    // Data: 60 little-endian (re, im) f32 pairs in C order right after the header.
+    let data = &bytes[bytes.len() - 3 * 4 * 5 * 8..];
+    assert_eq!(bytes.len() - data.len(), 10 + header.len());
+    let z = field[[0, 1, 2]];
+    let k = (5 + 2) * 8; // [0, 1, 2] is element 0·20 + 1·5 + 2 in C order, 8 bytes each
+    assert_eq!(&data[k..k + 4], &z.re.to_le_bytes());
+    assert_eq!(&data[k + 4..k + 8], &z.im.to_le_bytes());
+}
+
+#[test]
+fn reads_rank_2_as_one_channel_and_other_encodings() {
+    let dir = scratch("complex_read_variants");
+    // [H, W] = [2, 3] complex64, little-endian.
+    let vals: Vec<Complex32> = (0..6)
+        .map(|i| Complex32::new(i as f32, -(i as f32) / 2.0))
+        .collect();
+    let le: Vec<u8> = vals
+        .iter()
+        .flat_map(|z| [z.re.to_le_bytes(), z.im.to_le_bytes()].concat())
+        .collect();
+    let p = dir.join("hw.npy");
+    fs::write(&p, npy_bytes("<c8", false, "(2, 3)", &le)).unwrap();
+    let a = read_complex_npy(&p).unwrap();
+    assert_eq!(a.dim(), (1, 2, 3));
+    assert_eq!(a[[0, 1, 2]], vals[5]);
+
+    // Big-endian complex64.
+    let be: Vec<u8> = vals
+        .iter()
+        .flat_map(|z| [z.re.to_be_bytes(), z.im.to_be_bytes()].concat())
+        .collect();
+    let p = dir.join("be.npy");
+    fs::write(&p, npy_bytes(">c8", false, "(1, 2, 3)", &be)).unwrap();
+    assert_eq!(
+        read_complex_npy(&p)
+            .unwrap()
+            .iter()
+            .copied()
+            .collect::<Vec<_>>(),
+        vals
+    );
+
+    // complex128 is converted to complex64.
+    let c16: Vec<u8> = vals
+        .iter()
+        .flat_map(|z| [(z.re as f64).to_le_bytes(), (z.im as f64).to_le_bytes()].concat())
+        .collect();
+    let p = dir.join("c16.npy");
+    fs::write(&p, npy_bytes("<c16", false, "(2, 3)", &c16)).unwrap();
+    let a = read_complex_npy(&p).unwrap();
+    assert_eq!(a.dim(), (1, 2, 3));
+    assert_eq!(a.iter().copied().collect::<Vec<_>>(), vals);
+
+    // Fortran order: element (y, x) is stored at x·H + y; the result is C-contiguous.
+    let fort: Vec<u8> = (0..3)
+        .flat_map(|x| (0..2).map(move |y| y * 3 + x))
+        .flat_map(|i| {
+            let z = vals[i];
+            [z.re.to_le_bytes(), z.im.to_le_bytes()].concat()
+        })
+        .collect();
+    let p = dir.join("fortran.npy");
+    fs::write(&p, npy_bytes("<c8", true, "(2, 3)", &fort)).unwrap();
+    let a = read_complex_npy(&p).unwrap();
+    assert!(a.is_standard_layout());
+    assert_eq!(a.iter().copied().collect::<Vec<_>>(), vals);
+}
+
+fn assert_npy_error(path: &Path, needle: &str) {
+    match read_complex_npy(path) {
+        Err(e @ HoloError::Npy { .. }) => {
+            let msg = e.to_string();
+            assert!(msg.contains(&path.display().to_string()), "{msg}");
+            assert!(msg.contains(needle), "{msg} should mention {needle}");
+        }
+        other => panic!("expected an Npy error, got {other:?}"),
+    }
+}
+
+#[test]
+fn wrong_dtype_rank_or_garbage_is_a_clear_error() {
+    let dir = scratch("complex_read_errors");
+    let p = dir.join("float64.npy");
+    fs::write(&p, npy_bytes("<f8", false, "(2, 2)", &[0u8; 32])).unwrap();
+    assert_npy_error(&p, "<f8");
+
+    let p = dir.join("float32.npy");
+    write_f32_npy(&p, Array2::<f32>::zeros((2, 2)).view()).unwrap();
+    assert_npy_error(&p, "<f4");
+
+    let p = dir.join("rank4.npy");
+    fs::write(&p, npy_bytes("<c8", false, "(1, 1, 2, 2)", &[0u8; 32])).unwrap();
+    assert_npy_error(&p, "rank");
+    let p = dir.join("rank1.npy");
+    fs::write(&p, npy_bytes("<c8", false, "(4,)", &[0u8; 32])).unwrap();
+    assert_npy_error(&p, "rank");
+
+    let p = dir.join("truncated.npy");
+    fs::write(&p, npy_bytes("<c8", false, "(2, 2)", &[0u8; 20])).unwrap();
+    assert!(matches!(read_complex_npy(&p), Err(HoloError::Npy { .. })));
+
+    let p = dir.join("not_npy.npy");
+    fs::write(&p, b"hello, world").unwrap();
+    assert!(matches!(read_complex_npy(&p), Err(HoloError::Npy { .. })));
+
+    let p = dir.join("missing.npy");
+    match read_complex_npy(&p) {
+        Err(HoloError::Io { path, .. }) => assert_eq!(path, p),
+        other => panic!("expected Io error, got {other:?}"),
+    }
+}
+
+#[test]
+fn f32_npy_header_and_data() {
+    let dir = scratch("f32_npy");
+    let depth = Array2::from_shape_fn((2, 3), |(y, x)| y as f32 + x as f32 / 4.0);
+    let p = dir.join("depth.npy");
+    write_f32_npy(&p, depth.t()).unwrap(); // transposed view: written as (3, 2) C order
+    let bytes = fs::read(&p).unwrap();
+    let header = npy_header(&bytes);
+    assert!(header.contains("'descr': '<f4'"), "{header}");
+    assert!(header.contains("'fortran_order': False"), "{header}");
+    assert!(header.contains("'shape': (3, 2)"), "{header}");
+    let data: Vec<f32> = bytes[bytes.len() - 24..]
+        .chunks(4)
+        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+        .collect();
+    assert_eq!(data, depth.t().iter().copied().collect::<Vec<_>>());
+
+    // Write errors carry the path.
+    let bad = dir.join("no_such_dir").join("x.npy");
+    match write_f32_npy(&bad, depth.view()) {
+        Err(HoloError::Io { path, .. }) => assert_eq!(path, bad),
+        other => panic!("expected Io error, got {other:?}"),
+    }
+    assert!(write_complex_npy(&bad, Array3::<Complex32>::zeros((1, 1, 1)).view()).is_err());
+}
+
+#[test]
+fn amplitude_png_round_trip_reproduces_srgb_codes() {
+    let dir = scratch("amplitude_png");
+    let (h, w) = (5, 7);
+    let code_at = |c: usize, y: usize, x: usize| ((c * 97 + y * 37 + x * 11) % 256) as u8;
+    let amp = Array3::from_shape_fn((3, h, w), |(c, y, x)| srgb8_to_amplitude(code_at(c, y, x)));
+    let p = dir.join("rgb.png");
+    save_amplitude_png(&p, amp.view(), 1.0).unwrap();
+    let img = image::open(&p).unwrap();
+    assert_eq!(img.color(), image::ColorType::Rgb8);
+    let rgb = img.to_rgb8();
+    assert_eq!(rgb.dimensions(), (w as u32, h as u32));
+    for y in 0..h {
+        for x in 0..w {
+            let px = rgb.get_pixel(x as u32, y as u32).0;
+            assert_eq!(px, [code_at(0, y, x), code_at(1, y, x), code_at(2, y, x)]);
+        }
+    }
+
+    // `scale` multiplies amplitude: half amplitude = quarter intensity. NaN and negatives → black,
+    // above-white clamps to 255. The extension does not choose the format.
+    let mut amp2 = Array3::from_elem((1, 2, 3), 1.0f32);
+    amp2[[0, 0, 1]] = f32::NAN;
+    amp2[[0, 0, 2]] = -0.5;
+    amp2[[0, 1, 0]] = 3.0;
+    amp2[[0, 1, 1]] = f32::INFINITY;
+    let p = dir.join("grey.out");
+    save_amplitude_png(&p, amp2.view(), 0.5).unwrap();
+    let img = image::ImageReader::open(&p)
+        .unwrap()
+        .with_guessed_format()
+        .unwrap()
+        .decode()
+        .unwrap();
+    assert_eq!(img.color(), image::ColorType::L8);
+    let quarter = tensorholo::color::amplitude_to_srgb8(0.5);
+    assert_eq!(quarter, 137); // sRGB code of linear 0.25
+    assert_eq!(
+        img.to_luma8().into_raw(),
+        vec![quarter, 0, 0, 255, 255, quarter]
+    );
+}
+
+#[test]
+fn amplitude_png_rejects_bad_input() {
+    let dir = scratch("amplitude_png_errors");
+    let p = dir.join("x.png");
+    let two = Array3::<f32>::zeros((2, 4, 4));
+    assert!(matches!(
+        save_amplitude_png(&p, two.view(), 1.0),
+        Err(HoloError::ShapeMismatch { .. })
+    ));
+    let one = Array3::<f32>::zeros((3, 4, 4));
+    for scale in [-1.0, f32::NAN, f32::INFINITY] {
+        assert!(matches!(
+            save_amplitude_png(&p, one.view(), scale),
+            Err(HoloError::InvalidParameter { name: "scale", .. })
+        ));
+    }
+    let empty = Array3::<f32>::zeros((3, 0, 4));
+    assert!(matches!(
+        save_amplitude_png(&p, empty.view(), 1.0),
+        Err(HoloError::InvalidData(_))
+    ));
+    let bad = dir.join("missing_dir").join("x.png");
+    match save_amplitude_png(&bad, one.view(), 1.0) {
+        Err(e @ HoloError::Image { .. }) => assert!(e.to_string().contains("missing_dir")),
+        other => panic!("expected Image error, got {other:?}"),
+    }
+}
+
+#[test]
+fn u8_png_round_trip() {
+    let dir = scratch("u8_png");
+    let codes = Array2::from_shape_fn((6, 9), |(y, x)| (y * 40 + x * 3) as u8);
+    let p = dir.join("phase.png");
+    save_u8_png(&p, codes.view()).unwrap();
+    let img = image::open(&p).unwrap();
+    assert_eq!(img.color(), image::ColorType::L8);
+    let back = img.to_luma8();
+    assert_eq!(back.dimensions(), (9, 6));
+    assert_eq!(back.into_raw(), codes.iter().copied().collect::<Vec<_>>());
+    // Non-contiguous view.
+    let p = dir.join("phase_t.png");
+    save_u8_png(&p, codes.t()).unwrap();
+    let back = image::open(&p).unwrap().to_luma8();
+    assert_eq!(back.dimensions(), (6, 9));
+    assert_eq!(
+        back.into_raw(),
+        codes.t().iter().copied().collect::<Vec<_>>()
+    );
+    assert!(save_u8_png(&p, Array2::<u8>::zeros((0, 3)).view()).is_err());
+}
+
+/// `p` (absolute) spelled relative to the current directory, starting with `./` and using `..`.
+fn relative_to_cwd(p: &Path) -> PathBuf {
+    let cwd = std::env::current_dir().unwrap().canonicalize().unwrap();
+    let p = p.canonicalize().unwrap();
+    let common = cwd
+        .components()
+        .zip(p.components())
+        .take_while(|(a, b)| a == b)
+        .count();
+    let mut rel = PathBuf::from(".");
+    for _ in common..cwd.components().count() {
+        rel.push("..");
+    }
+    for c in p.components().skip(common) {
+        rel.push(c);
+    }
+    rel
+}
+
+#[test]
+fn ensure_not_input_sees_through_path_spellings() {
+    let dir = scratch("overwrite_guard");
+    fs::create_dir_all(dir.join("sub")).unwrap();
+    let input = dir.join("f.png");
+    fs::write(&input, b"x").unwrap();
+    let other = dir.join("g.png");
+    fs::write(&other, b"y").unwrap();
+
+    let dotted = dir.join(".").join("f.png");
+    let dotdot = dir.join("sub").join("..").join("f.png");
+    for out in [&input, &dotted, &dotdot] {
+        match ensure_not_input(out, &[&other, &input]) {
+            Err(HoloError::WouldOverwriteInput(p)) => assert_eq!(&p, out),
+            r => panic!("{} should be refused, got {r:?}", out.display()),
+        }
+    }
+    ensure_not_input(&other, &[&input]).unwrap();
+    ensure_not_input(&dir.join("new.png"), &[&input, &other]).unwrap();
+    ensure_not_input(&input, &[]).unwrap();
+
+    // Neither side exists yet: compared after lexical normalisation under the existing parent.
+    let a = dir.join("sub").join("..").join("later.npy");
+    let b = dir.join("later.npy");
+    assert!(ensure_not_input(&a, &[&b]).is_err());
+    assert!(ensure_not_input(&dir.join("missing").join("..").join("f.png"), &[&input]).is_err());
+
+    // Relative spelling from the current directory (`./../target/…` from `sdk/`).
+    let rel = relative_to_cwd(&input);
+    assert!(rel.is_relative());
+    assert!(ensure_not_input(&rel, &[&input]).is_err());
+    assert!(ensure_not_input(&input, &[&rel]).is_err());
+    ensure_not_input(&relative_to_cwd(&other), &[&rel]).unwrap();
+
+    #[cfg(unix)]
+    {
+        let link = dir.join("link.png");
+        std::os::unix::fs::symlink(&input, &link).unwrap();
+        assert!(ensure_not_input(&link, &[&input]).is_err());
+        let hard = dir.join("hard.png");
+        fs::hard_link(&input, &hard).unwrap();
+        assert!(ensure_not_input(&hard, &[&input]).is_err());
+    }
+}
