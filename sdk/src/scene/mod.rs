@@ -1,1 +1,24 @@
-//! placeholder
+//! Scene input: RGB-D frames and layered depth images, depth decoders for real sensor and file formats,
+//! and a built-in procedural scene.
+//!
+//! * [`RgbdFrame`]: `[3, H, W]` linear amplitude (R, G, B) + `[H, W]` normalised depth `d ∈ [0,1]`,
+//!   0 = near (`DESIGN.md` §2).
+//! * [`LayeredDepthImage`] / [`LdiLayer`]: Shade et al. 1998, the LDI input of the paper's Fig. 1.
+//! * Depth from files ([`load_rgbd`]): [`decode_depth_file`] with a [`DepthEncoding`] (one per row of
+//!   `shared/data/README.md`) → [`normalise_depth`] with a [`DepthRange`] and a [`DepthMapping`] (linear
+//!   in diopters by default) → [`fill_invalid`] (holes take the farthest neighbouring depth, before any
+//!   resizing, never read as near) → [`RgbdFrame::resize`].
+//! * [`procedural`]: a deterministic test scene with near, mid and far textured objects and occlusions.
+
+mod depth;
+mod frame;
+mod load;
+pub mod procedural;
+
+pub use depth::{
+    decode_depth, decode_depth_file, fill_invalid, normalise_depth, DecodedDepth, DepthEncoding,
+    DepthMapping, DepthRange,
+};
+pub use frame::{LayeredDepthImage, LdiLayer, RgbdFrame};
+pub use load::{load_rgb, load_rgbd, DepthReport, LoadOptions};
+pub use procedural::{default_scene, default_scene_ldi};

@@ -1,0 +1,150 @@
+//! Loading colour images and RGB-D pairs from files: decode → normalise → fill → (resize).
+
+use std::path::Path;
+
+use image::DynamicImage;
+use ndarray::Array3;
+use serde::Serialize;
+
+use super::depth::{
+    decode_depth_file, fill_invalid, normalise_depth, DepthEncoding, DepthMapping, DepthRange,
+};
+use super::frame::RgbdFrame;
+use crate::color::{srgb8_to_amplitude, srgb_to_linear};
+use crate::error::{HoloError, Result};
+
+/// Reads an sRGB colour image (PNG, JPEG, PPM…) into linear amplitude `[3, H, W]`, channels R, G, B,
+/// values `√(linear intensity)` in `[0, 1]` ([`crate::color::srgb8_to_amplitude`]). Alpha is dropped,
+/// grey is expanded to three equal channels; 16-bit files keep their precision.
+///
+/// Errors: [`HoloError::Io`] (unreadable) or [`HoloError::Image`] (undecodable), naming `path`;
+/// [`HoloError::InvalidData`] for an empty image.
+pub fn load_rgb(path: &Path) -> Result<Array3<f32>> {
+    let bytes = std::fs::read(path).map_err(|source| HoloError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let img = image::ImageReader::new(std::io::Cursor::new(&bytes))
+        .with_guessed_format()
+        .map_err(|source| HoloError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?
+        .decode()
+        .map_err(|source| HoloError::Image {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    if w == 0 || h == 0 {
+        return Err(HoloError::InvalidData(format!(
+            "`{}` is an empty image",
+            path.display()
+        )));
+    }
+    let eight_bit = matches!(
+        img,
+        DynamicImage::ImageLuma8(_)
+            | DynamicImage::ImageLumaA8(_)
+            | DynamicImage::ImageRgb8(_)
+            | DynamicImage::ImageRgba8(_)
+    );
+    Ok(if eight_bit {
+        let lut: [f32; 256] = std::array::from_fn(|c| srgb8_to_amplitude(c as u8));
+        let rgb = img.to_rgb8();
+        let raw = rgb.as_raw();
+        Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+            lut[raw[(y * w + x) * 3 + c] as usize]
+        })
+    } else {
+        let rgb = img.to_rgb32f();
+        let raw = rgb.as_raw();
+        Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+            srgb_to_linear(raw[(y * w + x) * 3 + c]).sqrt()
+        })
+    })
+}
+
+/// Options of [`load_rgbd`]. `Default`: automatic range (1st/99th percentiles), linear in diopters,
+/// native size.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LoadOptions {
+    /// Metric range mapped to `d ∈ [0,1]`; `None` = 1st/99th percentiles of the valid depths. Ignored for
+    /// relative encodings.
+    pub range: Option<DepthRange>,
+    /// Metric → `d` mapping ([`DepthMapping::LinearDiopters`] by default).
+    pub mapping: DepthMapping,
+    /// Output size `(height, width)`; `None` keeps the files' size. Resizing happens after hole filling
+    /// ([`RgbdFrame::resize`]).
+    pub size: Option<(usize, usize)>,
+}
+
+/// What [`load_rgbd`] found in the depth file, for logs and CLI output (serialisable to JSON).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DepthReport {
+    /// The encoding used to decode the file.
+    pub encoding: DepthEncoding,
+    /// Fraction of pixels that were invalid (holes, no reading, empty background) and were filled.
+    pub invalid_fraction: f32,
+    /// Smallest valid depth in metres (`None` for relative encodings or no valid pixel).
+    pub metric_min_m: Option<f32>,
+    /// Largest valid depth in metres (`None` for relative encodings or no valid pixel).
+    pub metric_max_m: Option<f32>,
+    /// Range mapped to `d ∈ [0,1]` (given or automatic); `None` for relative encodings.
+    pub range_used: Option<DepthRange>,
+    /// `(height, width)` of the files, before any resize.
+    pub source_size: (usize, usize),
+}
+
+/// Loads an RGB-D pair into an [`RgbdFrame`]: [`load_rgb`], [`decode_depth_file`], check that both have
+/// the same `H × W`, [`normalise_depth`] with `options.range`/`options.mapping`, [`fill_invalid`] (so holes
+/// are never read as near), then [`RgbdFrame::resize`] to `options.size` if given. Mismatched inputs are
+/// never resized silently (NYU's raw depth is unregistered but has the RGB's size, so it loads).
+///
+/// Errors: those of the steps above; [`HoloError::ShapeMismatch`] naming both files when their sizes
+/// differ (expected = RGB `[H, W]`, got = depth `[H, W]`).
+pub fn load_rgbd(
+    rgb: &Path,
+    depth: &Path,
+    encoding: DepthEncoding,
+    options: &LoadOptions,
+) -> Result<(RgbdFrame, DepthReport)> {
+    let amplitude = load_rgb(rgb)?;
+    let decoded = decode_depth_file(depth, encoding)?;
+    let (_, h, w) = amplitude.dim();
+    if decoded.values.dim() != (h, w) {
+        return Err(HoloError::ShapeMismatch {
+            what: format!(
+                "depth map `{}` vs RGB image `{}`",
+                depth.display(),
+                rgb.display()
+            ),
+            expected: vec![h, w],
+            got: decoded.values.shape().to_vec(),
+        });
+    }
+    let (d, range_used) = normalise_depth(&decoded, options.range, options.mapping)?;
+    let filled = fill_invalid(&d, &decoded.valid)?;
+    let min_max = decoded.valid_min_max().filter(|_| decoded.metric);
+    let report = DepthReport {
+        encoding,
+        invalid_fraction: decoded.invalid_fraction(),
+        metric_min_m: min_max.map(|m| m.0),
+        metric_max_m: min_max.map(|m| m.1),
+        range_used,
+        source_size: (h, w),
+    };
+    log::info!(
+        "loaded `{}` + `{}` ({encoding}): {h}x{w}, {:.1} % invalid, range {}",
+        rgb.display(),
+        depth.display(),
+        100.0 * report.invalid_fraction,
+        range_used.map_or_else(|| "relative".to_string(), |r| r.to_string())
+    );
+    let frame = RgbdFrame::new(amplitude, filled)?;
+    let frame = match options.size {
+        Some((height, width)) => frame.resize(height, width)?,
+        None => frame,
+    };
+    Ok((frame, report))
+}

@@ -1,0 +1,457 @@
+//! Scene loading against the real third-party RGB-D files of `shared/data` (read in place, never copied),
+//! checking the documented facts of `shared/data/README.md`, plus error paths and properties.
+
+use std::path::{Path, PathBuf};
+
+use ndarray::{Array2, Array3};
+use proptest::prelude::*;
+use tensorholo::scene::*;
+use tensorholo::HoloError;
+
+/// Path of a shared data file; fails loudly (never skips) when the shared data checkout is missing.
+fn data(rel: &str) -> PathBuf {
+    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"));
+    let p = root.join(rel);
+    assert!(
+        p.is_file(),
+        "shared test data file missing: {} (tests read third-party RGB-D data in place from \
+         `../shared/data` next to the workspace; see shared/data/README.md)",
+        p.display()
+    );
+    p
+}
+
+fn decode(rel: &str, enc: DepthEncoding) -> DecodedDepth {
+    decode_depth_file(&data(rel), enc).unwrap_or_else(|e| panic!("decoding {rel} as {enc}: {e}"))
+}
+
+/// Checks size, invalid fraction and valid min/max against the README table.
+#[track_caller]
+fn check(
+    d: &DecodedDepth,
+    size: (usize, usize),
+    invalid: (f32, f32),
+    min: f32,
+    max: f32,
+    tol: f32,
+) {
+    assert_eq!(d.values.dim(), size);
+    let inv = d.invalid_fraction();
+    assert!(
+        (invalid.0..=invalid.1).contains(&inv),
+        "invalid fraction {inv} not in {invalid:?}"
+    );
+    let (lo, hi) = d.valid_min_max().expect("some valid pixels");
+    assert!((lo - min).abs() <= tol, "min {lo} vs README {min}");
+    assert!((hi - max).abs() <= tol, "max {hi} vs README {max}");
+    assert!(d.values.iter().zip(d.valid.iter()).all(|(&v, &ok)| if ok {
+        v.is_finite() && v > 0.0
+    } else {
+        v == 0.0
+    }));
+}
+
+#[test]
+fn redwood_sequence_mm16_matches_readme() {
+    // README: 0.96–2.70 m, 12–13 % invalid, 640×480, 5 frames.
+    for i in 0..5 {
+        let d = decode(
+            &format!("redwood_livingroom_seq/depth/0000{i}.png"),
+            DepthEncoding::Millimetres16,
+        );
+        assert!(d.metric);
+        let (lo, hi) = d.valid_min_max().unwrap();
+        assert!((0.95..=1.06).contains(&lo), "frame {i}: min {lo}");
+        assert!((2.67..=2.71).contains(&hi), "frame {i}: max {hi}");
+        let inv = d.invalid_fraction();
+        assert!((0.12..=0.135).contains(&inv), "frame {i}: invalid {inv}");
+        assert_eq!(d.values.dim(), (480, 640));
+    }
+    let d0 = decode(
+        "redwood_livingroom_seq/depth/00000.png",
+        DepthEncoding::Millimetres16,
+    );
+    check(&d0, (480, 640), (0.12, 0.135), 0.96, 2.70, 0.01);
+}
+
+#[test]
+fn nyu_raw_kinect_disparity_matches_readme() {
+    // README: little-endian 16-bit PGM, 351.3/(1092.5 − raw), 1.39–6.69 m, raw ≥ 1092 invalid, 7 %.
+    let d = decode("nyu/NYU_depth.pgm", DepthEncoding::KinectDisparity);
+    check(&d, (480, 640), (0.065, 0.08), 1.39, 6.69, 0.01);
+}
+
+#[test]
+fn nyu_raw_and_derived_mm_agree() {
+    let raw = decode("nyu/NYU_depth.pgm", DepthEncoding::KinectDisparity);
+    let mm = decode(
+        "nyu/derived/NYU_depth_mm_u16_UNALIGNED.png",
+        DepthEncoding::Millimetres16,
+    );
+    assert_eq!(raw.valid, mm.valid, "validity masks differ");
+    let (mut n, mut worst, mut sum) = (0usize, 0.0f32, 0.0f32);
+    for ((&a, &b), &ok) in raw
+        .values
+        .iter()
+        .zip(mm.values.iter())
+        .zip(raw.valid.iter())
+    {
+        if ok {
+            let e = (a - b).abs();
+            worst = worst.max(e);
+            sum += e;
+            n += 1;
+        }
+    }
+    assert!(n > 250_000);
+    // mm rounding: half a millimetre, plus f32 slack.
+    assert!(worst <= 0.000_6, "worst difference {worst} m");
+    assert!(
+        sum / (n as f32) < 0.000_3,
+        "mean difference {} m",
+        sum / n as f32
+    );
+}
+
+#[test]
+fn sun_rotated_matches_readme_and_derived() {
+    // README: bits rotated left by 3 on disk, 1.06–9.87 m, 18 % invalid.
+    let raw = decode("sun/SUN_depth.png", DepthEncoding::SunRotated);
+    check(&raw, (480, 640), (0.175, 0.19), 1.06, 9.87, 0.01);
+    let mm = decode(
+        "sun/derived/SUN_depth_mm_u16.png",
+        DepthEncoding::Millimetres16,
+    );
+    assert_eq!(
+        raw, mm,
+        "SUN raw (rotated) and derived mm must decode identically"
+    );
+    // Reading the raw file as plain mm would be wrong: it is not the same data.
+    let wrong = decode("sun/SUN_depth.png", DepthEncoding::Millimetres16);
+    assert_ne!(wrong.values, mm.values);
+}
+
+#[test]
+fn tum_matches_readme() {
+    // README: v/5000, 1.46–9.33 m, 19 % invalid.
+    let d = decode("tum/TUM_depth.png", DepthEncoding::Tum5000);
+    check(&d, (480, 640), (0.185, 0.2), 1.46, 9.33, 0.01);
+}
+
+#[test]
+fn iphone_disparity_matches_readme() {
+    // README: 8-bit JPEG, 576×768 (W×H), 1/(0.650879 + v/255·1.858887), 0.40–1.54 m, none invalid.
+    let d = decode(
+        "iphone_portrait_vase/disparity_aux_576x768.jpg",
+        DepthEncoding::IphoneDisparity,
+    );
+    check(&d, (768, 576), (0.0, 0.0), 0.40, 1.54, 0.01);
+}
+
+#[test]
+fn odak_relative_near_bright_matches_readme() {
+    // README: 1600×900, 8-bit ×3 channels, relative, larger = nearer, 0 = empty background (71 %).
+    let d = decode(
+        "odak_dragonbunny/DragonBunny_depthmap.png",
+        DepthEncoding::RelativeNearBright,
+    );
+    assert!(!d.metric);
+    assert_eq!(d.values.dim(), (900, 1600));
+    let inv = d.invalid_fraction();
+    assert!((0.70..=0.72).contains(&inv), "invalid {inv}");
+    let (lo, hi) = d.valid_min_max().unwrap();
+    assert!(
+        lo >= 0.0 && hi < 1.0 && hi - lo > 0.3,
+        "relative range {lo}..{hi}"
+    );
+}
+
+#[test]
+fn every_pair_loads_with_filled_depth() {
+    use DepthEncoding::*;
+    let pairs = [
+        (
+            "redwood_livingroom_seq/color/00000.jpg",
+            "redwood_livingroom_seq/depth/00000.png",
+            Millimetres16,
+        ),
+        ("nyu/NYU_color.ppm", "nyu/NYU_depth.pgm", KinectDisparity),
+        ("sun/SUN_color.jpg", "sun/SUN_depth.png", SunRotated),
+        ("tum/TUM_color.png", "tum/TUM_depth.png", Tum5000),
+        (
+            "iphone_portrait_vase/derived_rgb_576x768.png",
+            "iphone_portrait_vase/disparity_aux_576x768.jpg",
+            IphoneDisparity,
+        ),
+        (
+            "odak_dragonbunny/DragonBunny_rgb.png",
+            "odak_dragonbunny/DragonBunny_depthmap.png",
+            RelativeNearBright,
+        ),
+    ];
+    for (rgb, depth, enc) in pairs {
+        let (frame, report) = load_rgbd(&data(rgb), &data(depth), enc, &LoadOptions::default())
+            .unwrap_or_else(|e| panic!("{rgb} + {depth}: {e}"));
+        assert_eq!((frame.height(), frame.width()), report.source_size);
+        assert_eq!(report.encoding, enc);
+        assert!(frame.depth.iter().all(|d| (0.0..=1.0).contains(d)));
+        assert!(frame.amplitude.iter().all(|a| (0.0..=1.0).contains(a)));
+        if enc.is_metric() {
+            // Both ends of the range are used (automatic percentiles).
+            let near = frame.depth.iter().filter(|&&d| d < 0.1).count();
+            let far = frame.depth.iter().filter(|&&d| d > 0.9).count();
+            assert!(near > 0 && far > 0, "{depth}: near {near} far {far}");
+            let r = report.range_used.expect("metric range");
+            assert!(r.z_near_m >= report.metric_min_m.unwrap());
+            assert!(r.z_far_m <= report.metric_max_m.unwrap());
+        } else {
+            assert!(report.range_used.is_none() && report.metric_min_m.is_none());
+            // Relative depth passes through: the filled map stays within the decoded valid range.
+            let dec = decode_depth_file(&data(depth), enc).unwrap();
+            let (lo, hi) = dec.valid_min_max().unwrap();
+            assert!(frame.depth.iter().all(|&d| d >= lo && d <= hi));
+        }
+    }
+}
+
+#[test]
+fn holes_in_real_depth_take_the_farthest_neighbour() {
+    // TUM: 19 % holes. In the first ring around valid data each hole must equal the largest valid d
+    // among its 3×3 neighbours, i.e. the background side of the occlusion edge.
+    let dec = decode("tum/TUM_depth.png", DepthEncoding::Tum5000);
+    let (d, range) = normalise_depth(&dec, None, DepthMapping::LinearDiopters).unwrap();
+    let r = range.unwrap();
+    assert!(
+        (r.z_near_m - 1.516).abs() < 0.01 && (r.z_far_m - 7.33).abs() < 0.01,
+        "{r}"
+    );
+    let filled = fill_invalid(&d, &dec.valid).unwrap();
+    let (h, w) = d.dim();
+    let mut ring = 0;
+    for y in 1..h - 1 {
+        for x in 1..w - 1 {
+            if dec.valid[[y, x]] {
+                assert_eq!(filled[[y, x]], d[[y, x]]);
+                continue;
+            }
+            let mut best = f32::NEG_INFINITY;
+            for yy in y - 1..=y + 1 {
+                for xx in x - 1..=x + 1 {
+                    if dec.valid[[yy, xx]] {
+                        best = best.max(d[[yy, xx]]);
+                    }
+                }
+            }
+            if best.is_finite() {
+                assert_eq!(filled[[y, x]], best, "hole at ({y}, {x})");
+                ring += 1;
+            }
+        }
+    }
+    assert!(ring > 1000, "{ring}");
+    assert!(filled.iter().all(|v| v.is_finite()));
+}
+
+#[test]
+fn explicit_range_and_resize_are_honoured() {
+    let range = DepthRange::new(1.0, 3.0).unwrap();
+    let opts = LoadOptions {
+        range: Some(range),
+        mapping: DepthMapping::LinearMetres,
+        size: Some((240, 320)),
+    };
+    let (frame, report) = load_rgbd(
+        &data("redwood_livingroom_seq/color/00000.jpg"),
+        &data("redwood_livingroom_seq/depth/00000.png"),
+        DepthEncoding::Millimetres16,
+        &opts,
+    )
+    .unwrap();
+    assert_eq!(report.range_used, Some(range));
+    assert_eq!(report.source_size, (480, 640));
+    assert_eq!((frame.height(), frame.width()), (240, 320));
+    assert_eq!(frame.amplitude.dim(), (3, 240, 320));
+    // Nearest of 0.955 m is clamped to d = 0; 2.70 m maps to (2.70 − 1)/2 = 0.85 at most.
+    let max = frame.depth.iter().cloned().fold(0.0, f32::max);
+    assert!((max - 0.851).abs() < 0.01, "{max}");
+    let json = serde_json::to_value(&report).unwrap();
+    assert_eq!(json["encoding"], "mm16");
+    assert_eq!(json["source_size"], serde_json::json!([480, 640]));
+}
+
+#[test]
+fn load_rgb_is_linear_amplitude_in_rgb_order() {
+    let p = data("tum/TUM_color.png");
+    let amp = load_rgb(&p).unwrap();
+    assert_eq!(amp.dim(), (3, 480, 640));
+    let img = image::open(&p).unwrap().to_rgb8();
+    for (x, y) in [(0u32, 0u32), (100, 200), (639, 479), (320, 240)] {
+        let px = img.get_pixel(x, y);
+        for c in 0..3 {
+            assert_eq!(
+                amp[[c, y as usize, x as usize]],
+                tensorholo::color::srgb8_to_amplitude(px[c])
+            );
+        }
+    }
+    // Grey JPEG (the iPhone disparity) expands to three equal channels.
+    let g = load_rgb(&data("iphone_portrait_vase/disparity_aux_576x768.jpg")).unwrap();
+    assert_eq!(g.dim(), (3, 768, 576));
+    assert_eq!(
+        g.index_axis(ndarray::Axis(0), 0),
+        g.index_axis(ndarray::Axis(0), 2)
+    );
+}
+
+#[test]
+fn mismatched_rgb_and_depth_sizes_are_an_error_naming_both_files() {
+    let rgb = data("sun/SUN_color.jpg"); // 640×480
+    let depth = data("iphone_portrait_vase/disparity_aux_576x768.jpg"); // 576×768
+    let err = load_rgbd(
+        &rgb,
+        &depth,
+        DepthEncoding::IphoneDisparity,
+        &LoadOptions {
+            size: Some((100, 100)), // must not hide the mismatch
+            ..LoadOptions::default()
+        },
+    )
+    .unwrap_err();
+    match err {
+        HoloError::ShapeMismatch {
+            what,
+            expected,
+            got,
+        } => {
+            assert!(
+                what.contains("SUN_color.jpg") && what.contains("disparity_aux_576x768.jpg"),
+                "{what}"
+            );
+            assert_eq!(expected, vec![480, 640]);
+            assert_eq!(got, vec![768, 576]);
+        }
+        e => panic!("expected ShapeMismatch, got {e}"),
+    }
+}
+
+#[test]
+fn wrong_bit_depth_is_a_clear_error() {
+    // 8-bit file as mm16.
+    let p = data("iphone_portrait_vase/disparity_aux_576x768.jpg");
+    match decode_depth_file(&p, DepthEncoding::Millimetres16).unwrap_err() {
+        HoloError::InvalidDepth(msg) => {
+            assert!(msg.contains("disparity_aux_576x768.jpg"), "{msg}");
+            assert!(
+                msg.contains("mm16") && msg.contains("8-bit") && msg.contains("16-bit"),
+                "{msg}"
+            );
+        }
+        e => panic!("expected InvalidDepth, got {e}"),
+    }
+    // 16-bit file as an 8-bit encoding.
+    let p = data("tum/TUM_depth.png");
+    match decode_depth_file(&p, DepthEncoding::RelativeNearDark).unwrap_err() {
+        HoloError::InvalidDepth(msg) => {
+            assert!(
+                msg.contains("TUM_depth.png") && msg.contains("relative-near-dark"),
+                "{msg}"
+            )
+        }
+        e => panic!("expected InvalidDepth, got {e}"),
+    }
+    // An 8-bit RGB colour image through kinect-disparity (not a PGM): also refused.
+    assert!(matches!(
+        decode_depth_file(&data("tum/TUM_color.png"), DepthEncoding::KinectDisparity),
+        Err(HoloError::InvalidDepth(_))
+    ));
+}
+
+#[test]
+fn unreadable_paths_are_named_in_errors() {
+    let missing = Path::new("/nonexistent/dir/no_such_depth.png");
+    let err = decode_depth_file(missing, DepthEncoding::Millimetres16).unwrap_err();
+    assert!(matches!(err, HoloError::Io { .. }));
+    assert!(err.to_string().contains("no_such_depth.png"), "{err}");
+    let err = load_rgb(Path::new("/nonexistent/no_such_rgb.png")).unwrap_err();
+    assert!(matches!(err, HoloError::Io { .. }) && err.to_string().contains("no_such_rgb.png"));
+    // Readable but not an image: Image error naming the file.
+    let notimg = data("README.md");
+    let err = load_rgb(&notimg).unwrap_err();
+    assert!(matches!(err, HoloError::Image { .. }), "{err}");
+    assert!(err.to_string().contains("README.md"), "{err}");
+    let err = load_rgbd(
+        &data("tum/TUM_color.png"),
+        Path::new("/nonexistent/d.png"),
+        DepthEncoding::Tum5000,
+        &LoadOptions::default(),
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("/nonexistent/d.png"), "{err}");
+}
+
+#[test]
+fn nan_depth_is_rejected_by_rgbd_frame() {
+    let mut depth = Array2::from_elem((4, 4), 0.5f32);
+    depth[[2, 3]] = f32::NAN;
+    let err = RgbdFrame::new(Array3::from_elem((3, 4, 4), 0.5), depth).unwrap_err();
+    assert!(matches!(err, HoloError::InvalidDepth(_)), "{err}");
+}
+
+fn small_map() -> impl Strategy<Value = (Array2<f32>, Array2<bool>)> {
+    (1usize..12, 1usize..12).prop_flat_map(|(h, w)| {
+        (
+            proptest::collection::vec(0.0f32..1.0, h * w),
+            proptest::collection::vec(any::<bool>(), h * w),
+            0..h * w,
+        )
+            .prop_map(move |(d, mut v, force)| {
+                v[force] = true; // at least one valid pixel
+                (
+                    Array2::from_shape_vec((h, w), d).unwrap(),
+                    Array2::from_shape_vec((h, w), v).unwrap(),
+                )
+            })
+    })
+}
+
+proptest! {
+    #[test]
+    fn fill_invalid_properties((depth, valid) in small_map()) {
+        let out = fill_invalid(&depth, &valid).unwrap();
+        let valid_values: Vec<f32> = depth.iter().zip(valid.iter()).filter(|x| *x.1).map(|x| *x.0).collect();
+        let vmax = valid_values.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+        for ((idx, &o), &ok) in out.indexed_iter().zip(valid.iter()) {
+            if ok {
+                prop_assert_eq!(o, depth[idx]);
+            } else {
+                // Filled values are copies of valid values, never invented (no "near" zeros).
+                prop_assert!(valid_values.contains(&o));
+            }
+        }
+        let omax = out.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+        prop_assert_eq!(omax, vmax);
+    }
+
+    #[test]
+    fn diopter_mapping_is_monotone(near in 0.1f32..2.0, span in 0.05f32..10.0, a in 0.0f32..1.0, b in 0.0f32..1.0) {
+        let r = DepthRange::new(near, near + span).unwrap();
+        let (za, zb) = (near + a * span, near + b * span);
+        let m = DepthMapping::LinearDiopters;
+        if za <= zb {
+            prop_assert!(m.apply(za, &r) <= m.apply(zb, &r));
+        }
+        prop_assert!(m.apply(near, &r).abs() < 1e-5);
+        prop_assert!((m.apply(near + span, &r) - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn resize_keeps_invariants(h in 1usize..20, w in 1usize..20, oh in 1usize..30, ow in 1usize..30) {
+        let f = default_scene(h, w).unwrap();
+        let r = f.resize(oh, ow).unwrap();
+        prop_assert_eq!(r.amplitude.dim(), (3, oh, ow));
+        prop_assert!(r.amplitude.iter().all(|a| a.is_finite() && *a >= 0.0));
+        let src: Vec<f32> = f.depth.iter().cloned().collect();
+        prop_assert!(r.depth.iter().all(|d| src.contains(d)));
+        prop_assert!(RgbdFrame::new(r.amplitude.clone(), r.depth.clone()).is_ok());
+    }
+}
