@@ -9,6 +9,7 @@
 //! - [`encoding`]: double phase encoding (Eq. 7), AA-DPM, BL-DPM, phase wrapping and 8-bit codes.
 //! - [`synthesis`]: silhouette-mask layer-based method (SM-LBM, Eq. 1–4) for reference holograms.
 //! - [`scene`]: RGB-D frames, layered depth images, depth decoders, the built-in procedural scene.
+//! - [`reference`]: the non-learned pipeline (SM-LBM → offset → double phase → SLM codes → previews).
 //! - [`metrics`]: PSNR and SSIM.
 //! - [`io`]: PNG and `.npy` input/output.
 //!
@@ -22,6 +23,7 @@ pub mod error;
 pub mod io;
 pub mod metrics;
 pub mod optics;
+pub mod reference;
 pub mod scene;
 pub mod synthesis;
 

@@ -18,7 +18,7 @@ fn smooth_field(h: usize, w: usize, seed: u64) -> Array3<Complex32> {
         .map(|_| {
             let fx = (rng.next() - 0.5) * 0.1;
             let fy = (rng.next() - 0.5) * 0.1;
-            (fx, fy, rng.next() * 6.28, rng.next())
+            (fx, fy, rng.next() * std::f32::consts::TAU, rng.next())
         })
         .collect();
     let smooth = |y: usize, x: usize, k: usize| -> f32 {
@@ -32,9 +32,18 @@ fn smooth_field(h: usize, w: usize, seed: u64) -> Array3<Complex32> {
     })
 }
 
-fn encode_and_reconstruct(field: &Array3<Complex32>, method: DoublePhaseMethod) -> (Array3<f32>, Array3<f32>) {
+fn encode_and_reconstruct(
+    field: &Array3<Complex32>,
+    method: DoublePhaseMethod,
+) -> (Array3<f32>, Array3<f32>) {
     let dp = double_phase_encode(field.view(), &method).unwrap();
-    let recon = simulate_phase_only(dp.phase.view(), &OpticalSetup::default(), 0.0, Default::default()).unwrap();
+    let recon = simulate_phase_only(
+        dp.phase.view(),
+        &OpticalSetup::default(),
+        0.0,
+        Default::default(),
+    )
+    .unwrap();
     let target = field.mapv(|v| v.norm() / dp.amplitude_scale);
     (recon.mapv(|v| v.norm()), target)
 }
@@ -43,8 +52,13 @@ fn encode_and_reconstruct(field: &Array3<Complex32>, method: DoublePhaseMethod) 
 fn double_phase_plus_fourier_filter_reproduces_a_smooth_field() {
     let field = smooth_field(128, 160, 1);
     let dp = double_phase_encode(field.view(), &DoublePhaseMethod::Plain).unwrap();
-    let recon =
-        simulate_phase_only(dp.phase.view(), &OpticalSetup::default(), 0.0, Default::default()).unwrap();
+    let recon = simulate_phase_only(
+        dp.phase.view(),
+        &OpticalSetup::default(),
+        0.0,
+        Default::default(),
+    )
+    .unwrap();
     let (_, h, w) = field.dim();
     // Compare the complex field (amplitude and phase, up to the removed per-channel mean phase), away from the
     // borders where the periodic FFT meets a non-periodic field.
@@ -91,10 +105,17 @@ fn offset_encoding_reconstructs_at_the_midpoint() {
     let setup = OpticalSetup::default();
     let field = smooth_field(96, 96, 3);
     let mut slm = field.clone();
-    tensorholo::optics::propagate_colour(&mut slm, &setup, 6e-3, Carrier::Remove, PropagationOptions::default())
-        .unwrap();
+    tensorholo::optics::propagate_colour(
+        &mut slm,
+        &setup,
+        6e-3,
+        Carrier::Remove,
+        PropagationOptions::default(),
+    )
+    .unwrap();
     let dp = double_phase_encode(slm.view(), &DoublePhaseMethod::Plain).unwrap();
-    let recon = simulate_phase_only(dp.phase.view(), &setup, 6e-3, PropagationOptions::default()).unwrap();
+    let recon =
+        simulate_phase_only(dp.phase.view(), &setup, 6e-3, PropagationOptions::default()).unwrap();
     let a = recon.mapv(|v| v.norm() * dp.amplitude_scale);
     let t = field.mapv(|v| v.norm());
     let p = psnr(t.view(), a.view(), 1.0).unwrap();
@@ -107,20 +128,39 @@ fn pre_filters_trade_detail_for_smoothness() {
     // A field with fine detail (random amplitude per pixel): AA-DPM and BL-DPM blur it, so the encoded
     // reconstruction loses high-frequency energy relative to plain DPM.
     let mut rng = Rng::new(4);
-    let field = Array3::from_shape_fn((3, 64, 64), |_| Complex32::from_polar(0.2 + 0.8 * rng.next(), 0.0));
+    let field = Array3::from_shape_fn((3, 64, 64), |_| {
+        Complex32::from_polar(0.2 + 0.8 * rng.next(), 0.0)
+    });
     let hf = |a: &Array3<f32>| -> f64 {
         let mut e = 0.0;
         for ch in a.axis_iter(Axis(0)) {
-            let g: Array2<f32> = Array2::from_shape_fn((63, 63), |(y, x)| ch[[y, x + 1]] - ch[[y, x]]);
+            let g: Array2<f32> =
+                Array2::from_shape_fn((63, 63), |(y, x)| ch[[y, x + 1]] - ch[[y, x]]);
             e += g.mapv(|v| (v * v) as f64).sum();
         }
         e
     };
     let (plain, _) = encode_and_reconstruct(&field, DoublePhaseMethod::Plain);
-    let (aa, _) = encode_and_reconstruct(&field, DoublePhaseMethod::AntiAliased { sigma_px: 1.0, kernel_size: 7 });
+    let (aa, _) = encode_and_reconstruct(
+        &field,
+        DoublePhaseMethod::AntiAliased {
+            sigma_px: 1.0,
+            kernel_size: 7,
+        },
+    );
     let (bl, _) = encode_and_reconstruct(&field, DoublePhaseMethod::BandLimited { k: 0.5 });
-    assert!(hf(&aa) < 0.7 * hf(&plain), "AA {} vs plain {}", hf(&aa), hf(&plain));
-    assert!(hf(&bl) < 0.7 * hf(&plain), "BL {} vs plain {}", hf(&bl), hf(&plain));
+    assert!(
+        hf(&aa) < 0.7 * hf(&plain),
+        "AA {} vs plain {}",
+        hf(&aa),
+        hf(&plain)
+    );
+    assert!(
+        hf(&bl) < 0.7 * hf(&plain),
+        "BL {} vs plain {}",
+        hf(&bl),
+        hf(&plain)
+    );
 }
 
 #[test]

@@ -38,11 +38,17 @@ fn band_limited_field(h: usize, w: usize, seed: u64) -> Vec<Complex32> {
 fn propagating_z_then_minus_z_returns_the_band_limited_field() {
     let (h, w) = (48, 64);
     let field = band_limited_field(h, w, 1);
-    let options = PropagationOptions { pad: false, band_limit: true };
+    let options = PropagationOptions {
+        pad: false,
+        band_limit: true,
+    };
     let prop = Propagator::new(h, w, PITCH, GREEN, options).unwrap();
     let mut u = field.clone();
     prop.propagate_by(&mut u, 3e-3, Carrier::Keep).unwrap();
-    assert!(rel_error(&u, &field) > 0.1, "3 mm must visibly change the field");
+    assert!(
+        rel_error(&u, &field) > 0.1,
+        "3 mm must visibly change the field"
+    );
     prop.propagate_by(&mut u, -3e-3, Carrier::Keep).unwrap();
     let err = rel_error(&u, &field);
     assert!(err < 1e-4, "round-trip relative error {err}");
@@ -59,8 +65,17 @@ fn padded_round_trip_returns_a_compact_field() {
         }
     }
     // Smooth it so that it stays compact over 0.5 mm.
-    let prop = Propagator::new(h, w, PITCH, GREEN, PropagationOptions { pad: true, band_limit: true })
-        .unwrap();
+    let prop = Propagator::new(
+        h,
+        w,
+        PITCH,
+        GREEN,
+        PropagationOptions {
+            pad: true,
+            band_limit: true,
+        },
+    )
+    .unwrap();
     let mut u = field.clone();
     prop.propagate_by(&mut u, 0.5e-3, Carrier::Keep).unwrap();
     prop.propagate_by(&mut u, -0.5e-3, Carrier::Keep).unwrap();
@@ -89,7 +104,10 @@ fn tilted_plane_wave_matches_the_analytic_solution() {
     // u = exp(i2π fx x) on the grid is an eigenfunction: ASM multiplies it by exp(i2πz√(λ⁻² − fx² − fy²)).
     let (h, w) = (32, 48);
     let (kx, ky) = (5i64, -3i64);
-    let (fx, fy) = (kx as f64 / (w as f64 * PITCH), ky as f64 / (h as f64 * PITCH));
+    let (fx, fy) = (
+        kx as f64 / (w as f64 * PITCH),
+        ky as f64 / (h as f64 * PITCH),
+    );
     let plane = |phase0: f64| -> Vec<Complex32> {
         (0..h * w)
             .map(|i| {
@@ -125,7 +143,10 @@ fn matches_a_naive_f64_dft_implementation_of_eq_2_on_random_input() {
                 let mut acc = Complex64::default();
                 for y in 0..h {
                     for x in 0..w {
-                        let a = sign * 2.0 * PI * ((ky * y) as f64 / h as f64 + (kx * x) as f64 / w as f64);
+                        let a = sign
+                            * 2.0
+                            * PI
+                            * ((ky * y) as f64 / h as f64 + (kx * x) as f64 / w as f64);
                         acc += input[y * w + x] * Complex64::from_polar(1.0, a);
                     }
                 }
@@ -134,12 +155,23 @@ fn matches_a_naive_f64_dft_implementation_of_eq_2_on_random_input() {
         }
         out
     };
-    let input: Vec<Complex64> = field.iter().map(|v| Complex64::new(v.re as f64, v.im as f64)).collect();
+    let input: Vec<Complex64> = field
+        .iter()
+        .map(|v| Complex64::new(v.re as f64, v.im as f64))
+        .collect();
     let mut spec = dft(&input, -1.0);
     for ky in 0..h {
         for kx in 0..w {
-            let sx = if kx < w.div_ceil(2) { kx as f64 } else { kx as f64 - w as f64 };
-            let sy = if ky < h.div_ceil(2) { ky as f64 } else { ky as f64 - h as f64 };
+            let sx = if kx < w.div_ceil(2) {
+                kx as f64
+            } else {
+                kx as f64 - w as f64
+            };
+            let sy = if ky < h.div_ceil(2) {
+                ky as f64
+            } else {
+                ky as f64 - h as f64
+            };
             let (fx, fy) = (sx / (w as f64 * pitch), sy / (h as f64 * pitch));
             let arg = lambda.powi(-2) - fx * fx - fy * fy;
             spec[ky * w + kx] *= if arg > 0.0 {
@@ -151,7 +183,12 @@ fn matches_a_naive_f64_dft_implementation_of_eq_2_on_random_input() {
     }
     let naive: Vec<Complex32> = dft(&spec, 1.0)
         .into_iter()
-        .map(|v| Complex32::new((v.re / (h * w) as f64) as f32, (v.im / (h * w) as f64) as f32))
+        .map(|v| {
+            Complex32::new(
+                (v.re / (h * w) as f64) as f32,
+                (v.im / (h * w) as f64) as f32,
+            )
+        })
         .collect();
     // pitch 0.4 µm with λ = 633 nm: the corner frequencies are evanescent, which the naive code zeroes too.
     let prop = Propagator::new(h, w, pitch, lambda, PropagationOptions::default()).unwrap();
@@ -159,7 +196,10 @@ fn matches_a_naive_f64_dft_implementation_of_eq_2_on_random_input() {
     prop.propagate_by(&mut u, z, Carrier::Keep).unwrap();
     let err = rel_error(&u, &naive);
     assert!(err < 1e-5, "relative error vs naive {err}");
-    assert!(energy(&u) < 0.99 * energy(&field), "evanescent energy must be lost");
+    assert!(
+        energy(&u) < 0.99 * energy(&field),
+        "evanescent energy must be lost"
+    );
 }
 
 #[test]
@@ -172,7 +212,11 @@ fn evanescent_plane_wave_is_removed() {
     let prop = Propagator::new(h, w, pitch, 638e-9, PropagationOptions::default()).unwrap();
     let mut u = u0.clone();
     prop.propagate_by(&mut u, 1e-6, Carrier::Keep).unwrap();
-    assert!(energy(&u) < 1e-8 * energy(&u0), "energy left {}", energy(&u));
+    assert!(
+        energy(&u) < 1e-8 * energy(&u0),
+        "energy left {}",
+        energy(&u)
+    );
 }
 
 #[test]
@@ -182,8 +226,17 @@ fn padding_turns_circular_into_linear_convolution() {
     let mut point = vec![Complex32::default(); h * w];
     point[16 * w + 1] = Complex32::new(1.0, 0.0);
     let right_energy = |pad: bool| {
-        let prop = Propagator::new(h, w, PITCH, 638e-9, PropagationOptions { pad, band_limit: false })
-            .unwrap();
+        let prop = Propagator::new(
+            h,
+            w,
+            PITCH,
+            638e-9,
+            PropagationOptions {
+                pad,
+                band_limit: false,
+            },
+        )
+        .unwrap();
         let mut u = point.clone();
         prop.propagate_by(&mut u, 2e-3, Carrier::Keep).unwrap();
         (0..h)
@@ -193,32 +246,69 @@ fn padding_turns_circular_into_linear_convolution() {
             / energy(&u)
     };
     let (circular, linear) = (right_energy(false), right_energy(true));
-    assert!(circular > 0.05, "unpadded: wrapped energy fraction {circular}");
-    assert!(linear < 0.1 * circular, "padded: {linear} vs unpadded {circular}");
+    assert!(
+        circular > 0.05,
+        "unpadded: wrapped energy fraction {circular}"
+    );
+    assert!(
+        linear < 0.1 * circular,
+        "padded: {linear} vs unpadded {circular}"
+    );
 }
 
 #[test]
 fn offset_carrier_keeps_a_plane_wave_phase_at_zero() {
     let setup = OpticalSetup::default();
     let mut field = Array3::from_elem((3, 8, 8), Complex32::new(0.7, 0.0));
-    propagate_colour(&mut field, &setup, 6e-3, Carrier::Remove, PropagationOptions::default()).unwrap();
+    propagate_colour(
+        &mut field,
+        &setup,
+        6e-3,
+        Carrier::Remove,
+        PropagationOptions::default(),
+    )
+    .unwrap();
     for v in field.iter() {
         assert!((v - Complex32::new(0.7, 0.0)).norm() < 1e-5, "{v}");
     }
     let mut kept = Array3::from_elem((3, 8, 8), Complex32::new(0.7, 0.0));
-    propagate_colour(&mut kept, &setup, 6e-3, Carrier::Keep, PropagationOptions::default()).unwrap();
+    propagate_colour(
+        &mut kept,
+        &setup,
+        6e-3,
+        Carrier::Keep,
+        PropagationOptions::default(),
+    )
+    .unwrap();
     for (c, lambda) in setup.wavelengths_m.iter().enumerate() {
         let expected = (2.0 * PI * 6e-3 / lambda).rem_euclid(2.0 * PI);
         let got = (kept[[c, 3, 3]].arg() as f64).rem_euclid(2.0 * PI);
         let d = (got - expected).abs();
-        assert!(d.min(2.0 * PI - d) < 1e-3, "colour {c}: phase {got} vs {expected}");
+        assert!(
+            d.min(2.0 * PI - d) < 1e-3,
+            "colour {c}: phase {got} vs {expected}"
+        );
     }
     // Offset forward (Eq. 6) then back (Eq. 10) is the identity.
     let mut rng = Rng::new(5);
     let orig = Array3::from_shape_fn((3, 16, 24), |_| Complex32::new(rng.next(), rng.next()));
     let mut f = orig.clone();
-    propagate_colour(&mut f, &setup, 12e-3, Carrier::Remove, PropagationOptions::default()).unwrap();
-    propagate_colour(&mut f, &setup, -12e-3, Carrier::Remove, PropagationOptions::default()).unwrap();
+    propagate_colour(
+        &mut f,
+        &setup,
+        12e-3,
+        Carrier::Remove,
+        PropagationOptions::default(),
+    )
+    .unwrap();
+    propagate_colour(
+        &mut f,
+        &setup,
+        -12e-3,
+        Carrier::Remove,
+        PropagationOptions::default(),
+    )
+    .unwrap();
     let err = rel_error(f.as_slice().unwrap(), orig.as_slice().unwrap());
     assert!(err < 1e-4, "{err}");
 }
@@ -231,7 +321,10 @@ fn fourier_filter_removes_the_checkerboard_and_keeps_low_frequencies() {
     let low = band_limited_field(h, w, 9);
     let mut u = low.clone();
     filter.apply(&mut u, &mut scratch).unwrap();
-    assert!(rel_error(&u, &low) < 1e-5, "low frequencies must pass unchanged");
+    assert!(
+        rel_error(&u, &low) < 1e-5,
+        "low frequencies must pass unchanged"
+    );
     let checker: Vec<Complex32> = (0..h * w)
         .map(|i| Complex32::new(if (i / w + i % w) % 2 == 0 { 1.0 } else { -1.0 }, 0.0))
         .collect();
@@ -254,16 +347,32 @@ fn fourier_filter_removes_the_checkerboard_and_keeps_low_frequencies() {
 #[test]
 fn bad_parameters_are_clear_errors() {
     let opts = PropagationOptions::default();
-    for (pitch, lambda) in [(0.0, GREEN), (-1e-6, GREEN), (PITCH, 0.0), (PITCH, f64::NAN)] {
+    for (pitch, lambda) in [
+        (0.0, GREEN),
+        (-1e-6, GREEN),
+        (PITCH, 0.0),
+        (PITCH, f64::NAN),
+    ] {
         let err = Propagator::new(8, 8, pitch, lambda, opts).unwrap_err();
         assert!(matches!(err, HoloError::InvalidParameter { .. }), "{err}");
     }
     assert!(Propagator::new(0, 8, PITCH, GREEN, opts).is_err());
     let prop = Propagator::new(8, 8, PITCH, GREEN, opts).unwrap();
-    assert!(prop.transfer_function(f64::INFINITY, Carrier::Keep).is_err());
+    assert!(prop
+        .transfer_function(f64::INFINITY, Carrier::Keep)
+        .is_err());
     let mut wrong = vec![Complex32::default(); 63];
-    let err = prop.propagate_by(&mut wrong, 1e-3, Carrier::Keep).unwrap_err();
+    let err = prop
+        .propagate_by(&mut wrong, 1e-3, Carrier::Keep)
+        .unwrap_err();
     assert!(err.to_string().contains("shape mismatch"), "{err}");
     let mut nan = Array3::from_elem((3, 4, 4), Complex32::new(f32::NAN, 0.0));
-    assert!(propagate_colour(&mut nan, &OpticalSetup::default(), 1e-3, Carrier::Keep, opts).is_err());
+    assert!(propagate_colour(
+        &mut nan,
+        &OpticalSetup::default(),
+        1e-3,
+        Carrier::Keep,
+        opts
+    )
+    .is_err());
 }

@@ -36,20 +36,41 @@ fn a_point_source_refocuses_to_a_spot_at_its_depth() {
     let spot_fraction = |a: &Array3<f32>, c: usize| -> f64 {
         let ch = a.index_axis(Axis(0), c);
         let total: f64 = ch.iter().map(|v| (v * v) as f64).sum();
-        let spot: f64 = ch.slice(s![29..32, 39..42]).iter().map(|v| (v * v) as f64).sum();
+        let spot: f64 = ch
+            .slice(s![29..32, 39..42])
+            .iter()
+            .map(|v| (v * v) as f64)
+            .sum();
         spot / total
     };
     let mid = holo.mapv(|v| v.norm());
     let depths = [0.0, d_point, 0.5, 0.8];
-    let stack = focal_stack(holo.view(), &OpticalSetup::default(), 0.0, &depths, Default::default(), false)
-        .unwrap();
+    let stack = focal_stack(
+        holo.view(),
+        &OpticalSetup::default(),
+        0.0,
+        &depths,
+        Default::default(),
+        false,
+    )
+    .unwrap();
     for c in 0..3 {
-        assert!(spot_fraction(&mid, c) < 0.2, "midpoint plane must not be in focus");
+        assert!(
+            spot_fraction(&mid, c) < 0.2,
+            "midpoint plane must not be in focus"
+        );
         let focused = spot_fraction(&stack[1], c);
-        assert!(focused > 0.95, "colour {c}: energy in 3×3 spot at focus {focused}");
+        assert!(
+            focused > 0.95,
+            "colour {c}: energy in 3×3 spot at focus {focused}"
+        );
         for k in [0, 2, 3] {
             let f = spot_fraction(&stack[k], c);
-            assert!(f < 0.5 * focused, "colour {c}: depth {} has spot fraction {f}", depths[k]);
+            assert!(
+                f < 0.5 * focused,
+                "colour {c}: depth {} has spot fraction {f}",
+                depths[k]
+            );
         }
         // The peak is at the point's pixel.
         let ch = stack[1].index_axis(Axis(0), c);
@@ -79,19 +100,38 @@ fn a_textured_plane_is_sharpest_when_reconstructed_at_its_depth() {
     let (h, w) = (96, 96);
     for d in [0.15f32, 0.7] {
         let (amp, depth) = textured_plane(h, w, d, 4);
-        let layer = SceneLayer { amplitude: amp.view(), depth: depth.view(), valid: None };
+        let layer = SceneLayer {
+            amplitude: amp.view(),
+            depth: depth.view(),
+            valid: None,
+        };
         let holo = config(1024).synthesize(&[layer], &no_progress).unwrap();
         let depths: Vec<f64> = (0..=20).map(|k| k as f64 / 20.0).collect();
-        let stack = focal_stack(holo.view(), &OpticalSetup::default(), 0.0, &depths, Default::default(), false)
-            .unwrap();
+        let stack = focal_stack(
+            holo.view(),
+            &OpticalSetup::default(),
+            0.0,
+            &depths,
+            Default::default(),
+            false,
+        )
+        .unwrap();
         let sharpness: Vec<f64> = stack
             .iter()
-            .map(|a| (0..3).map(|c| gradient_energy(a.index_axis(Axis(0), c), None)).sum())
+            .map(|a| {
+                (0..3)
+                    .map(|c| gradient_energy(a.index_axis(Axis(0), c), None))
+                    .sum()
+            })
             .collect();
         let best = (0..depths.len())
             .max_by(|&i, &j| sharpness[i].total_cmp(&sharpness[j]))
             .unwrap();
-        assert!((depths[best] - d as f64).abs() < 0.051, "plane at {d}: sharpest at {}", depths[best]);
+        assert!(
+            (depths[best] - d as f64).abs() < 0.051,
+            "plane at {d}: sharpest at {}",
+            depths[best]
+        );
         // And the in-focus reconstruction reproduces the texture.
         let k = (d as f64 * 20.0).round() as usize;
         let err: f32 = (&stack[k] - &amp).mapv(|v| v * v).mean().unwrap().sqrt();
@@ -105,7 +145,11 @@ fn a_uniform_plane_gives_a_flat_zero_phase_midpoint_hologram() {
     let (h, w) = (16, 16);
     let amp = Array3::from_elem((3, h, w), 0.6f32);
     let depth = Array2::from_elem((h, w), 0.9f32);
-    let layer = SceneLayer { amplitude: amp.view(), depth: depth.view(), valid: None };
+    let layer = SceneLayer {
+        amplitude: amp.view(),
+        depth: depth.view(),
+        valid: None,
+    };
     let holo = config(100).synthesize(&[layer], &no_progress).unwrap();
     for v in holo.iter() {
         assert!((v - Complex32::new(0.6, 0.0)).norm() < 1e-3, "{v}");
@@ -126,8 +170,12 @@ struct BarScene {
 fn bar_scene() -> BarScene {
     let (h, w) = (96, 96);
     let (d_front, d_rear) = (0.1f32, 0.9f32);
-    let front_region = Array2::from_shape_fn((h, w), |(y, x)| (40..56).contains(&y) && (44..80).contains(&x));
-    let rear_bar = Array2::from_shape_fn((h, w), |(y, x)| (36..60).contains(&y) && (16..76).contains(&x));
+    let front_region = Array2::from_shape_fn((h, w), |(y, x)| {
+        (40..56).contains(&y) && (44..80).contains(&x)
+    });
+    let rear_bar = Array2::from_shape_fn((h, w), |(y, x)| {
+        (36..60).contains(&y) && (16..76).contains(&x)
+    });
     let mut front_amp = Array3::zeros((3, h, w));
     let mut front_depth = Array2::from_elem((h, w), d_rear);
     let mut front_valid = Array2::from_elem((h, w), false);
@@ -157,7 +205,15 @@ fn bar_scene() -> BarScene {
             }
         }
     }
-    BarScene { front_amp, front_depth, front_valid, rear_amp, rear_depth, rear_valid, front_region }
+    BarScene {
+        front_amp,
+        front_depth,
+        front_valid,
+        rear_amp,
+        rear_depth,
+        rear_valid,
+        front_region,
+    }
 }
 
 #[test]
@@ -175,9 +231,14 @@ fn fig9_occluded_half_of_the_rear_bar_does_not_leak_into_the_front_focus() {
     };
     let setup = OpticalSetup::default();
     let front_focus = |layers: &[SceneLayer], masks: bool| -> Array3<f32> {
-        let cfg = SmLbm { silhouette_masks: masks, ..config(251) };
+        let cfg = SmLbm {
+            silhouette_masks: masks,
+            ..config(251)
+        };
         let holo = cfg.synthesize(layers, &no_progress).unwrap();
-        focal_stack(holo.view(), &setup, 0.0, &[0.1], Default::default(), false).unwrap().remove(0)
+        focal_stack(holo.view(), &setup, 0.0, &[0.1], Default::default(), false)
+            .unwrap()
+            .remove(0)
     };
     let inside = |a: &Array3<f32>| -> Vec<f32> {
         let mut v = Vec::new();
@@ -193,17 +254,47 @@ fn fig9_occluded_half_of_the_rear_bar_does_not_leak_into_the_front_focus() {
     // With silhouette masks, the front bar at front focus is exactly its own amplitude: the hidden half of the
     // rear bar (2nd LDI layer) leaves no trace on it (no type-1/type-2 leakage, Fig. 9).
     let ldi = front_focus(&[front, rear], true);
-    let max_dev = inside(&ldi).iter().map(|v| (v - 0.5).abs()).fold(0.0f32, f32::max);
-    assert!(max_dev < 1e-3, "front bar deviates by {max_dev} from its amplitude 0.5");
+    let max_dev = inside(&ldi)
+        .iter()
+        .map(|v| (v - 0.5).abs())
+        .fold(0.0f32, f32::max);
+    assert!(
+        max_dev < 1e-3,
+        "front bar deviates by {max_dev} from its amplitude 0.5"
+    );
     // Without masks the rear bar's wavefront leaks through the front bar.
     let leaky = front_focus(&[front, rear], false);
-    let leak = inside(&leaky).iter().map(|v| (v - 0.5).abs()).fold(0.0f32, f32::max);
-    assert!(leak > 0.1, "without silhouette masks the leak is only {leak}");
+    let leak = inside(&leaky)
+        .iter()
+        .map(|v| (v - 0.5).abs())
+        .fold(0.0f32, f32::max);
+    assert!(
+        leak > 0.1,
+        "without silhouette masks the leak is only {leak}"
+    );
     // The hidden half still contributes to the rear focus: the LDI differs there from the RGB-D (layer 1) scene.
-    let holo_ldi = config(251).synthesize(&[front, rear], &no_progress).unwrap();
+    let holo_ldi = config(251)
+        .synthesize(&[front, rear], &no_progress)
+        .unwrap();
     let holo_rgbd = config(251).synthesize(&[front], &no_progress).unwrap();
-    let rear_ldi = focal_stack(holo_ldi.view(), &setup, 0.0, &[0.9], Default::default(), false).unwrap();
-    let rear_rgbd = focal_stack(holo_rgbd.view(), &setup, 0.0, &[0.9], Default::default(), false).unwrap();
+    let rear_ldi = focal_stack(
+        holo_ldi.view(),
+        &setup,
+        0.0,
+        &[0.9],
+        Default::default(),
+        false,
+    )
+    .unwrap();
+    let rear_rgbd = focal_stack(
+        holo_rgbd.view(),
+        &setup,
+        0.0,
+        &[0.9],
+        Default::default(),
+        false,
+    )
+    .unwrap();
     // Next to the front bar's left edge, on the visible rear bar, RGB-D loses amplitude (type-3 artifact).
     let region = s![.., 40..56, 40..48];
     let mean = |a: &Array3<f32>| a.slice(region).mean().unwrap();
@@ -223,13 +314,35 @@ fn without_masks_the_hologram_is_the_superposition_of_each_plane_propagated() {
     let mut rng = Rng::new(21);
     let amp = Array3::from_shape_fn((3, h, w), |_| rng.next());
     let levels = 11;
-    let depth = Array2::from_shape_fn((h, w), |(y, _)| if y < 10 { 0.2 } else if y < 20 { 0.6 } else { 1.0 });
-    let layer = SceneLayer { amplitude: amp.view(), depth: depth.view(), valid: None };
-    let cfg = SmLbm { silhouette_masks: false, ..config(levels) };
+    let depth = Array2::from_shape_fn((h, w), |(y, _)| {
+        if y < 10 {
+            0.2
+        } else if y < 20 {
+            0.6
+        } else {
+            1.0
+        }
+    });
+    let layer = SceneLayer {
+        amplitude: amp.view(),
+        depth: depth.view(),
+        valid: None,
+    };
+    let cfg = SmLbm {
+        silhouette_masks: false,
+        ..config(levels)
+    };
     let holo = cfg.synthesize(&[layer], &no_progress).unwrap();
     for c in 0..3 {
         let lambda = setup.wavelengths_m[c];
-        let prop = Propagator::new(h, w, setup.pixel_pitch_m, lambda, PropagationOptions::default()).unwrap();
+        let prop = Propagator::new(
+            h,
+            w,
+            setup.pixel_pitch_m,
+            lambda,
+            PropagationOptions::default(),
+        )
+        .unwrap();
         let mut total = vec![Complex32::default(); h * w];
         for d in [0.2f64, 0.6, 1.0] {
             let z = setup.depth_to_z(d);
@@ -258,28 +371,64 @@ fn without_masks_the_hologram_is_the_superposition_of_each_plane_propagated() {
 fn bad_scenes_are_clear_errors() {
     let amp = Array3::from_elem((3, 8, 8), 0.5f32);
     let depth = Array2::from_elem((8, 8), 0.5f32);
-    let ok = SceneLayer { amplitude: amp.view(), depth: depth.view(), valid: None };
-    let err = SmLbm { levels: 0, ..SmLbm::default() }.synthesize(&[ok], &no_progress).unwrap_err();
-    assert!(matches!(err, HoloError::InvalidParameter { name: "levels", .. }), "{err}");
+    let ok = SceneLayer {
+        amplitude: amp.view(),
+        depth: depth.view(),
+        valid: None,
+    };
+    let err = SmLbm {
+        levels: 0,
+        ..SmLbm::default()
+    }
+    .synthesize(&[ok], &no_progress)
+    .unwrap_err();
+    assert!(
+        matches!(err, HoloError::InvalidParameter { name: "levels", .. }),
+        "{err}"
+    );
     let mut nan_depth = depth.clone();
     nan_depth[[2, 3]] = f32::NAN;
-    let bad = SceneLayer { depth: nan_depth.view(), ..ok };
+    let bad = SceneLayer {
+        depth: nan_depth.view(),
+        ..ok
+    };
     let err = config(16).synthesize(&[bad], &no_progress).unwrap_err();
-    assert!(matches!(err, HoloError::InvalidDepth(_)) && err.to_string().contains("row 2, column 3"), "{err}");
+    assert!(
+        matches!(err, HoloError::InvalidDepth(_)) && err.to_string().contains("row 2, column 3"),
+        "{err}"
+    );
     let small = Array2::from_elem((8, 7), 0.5f32);
     let err = config(16)
-        .synthesize(&[SceneLayer { depth: small.view(), ..ok }], &no_progress)
+        .synthesize(
+            &[SceneLayer {
+                depth: small.view(),
+                ..ok
+            }],
+            &no_progress,
+        )
         .unwrap_err();
     assert!(matches!(err, HoloError::ShapeMismatch { .. }), "{err}");
     let none = Array2::from_elem((8, 8), false);
     let err = config(16)
-        .synthesize(&[SceneLayer { valid: Some(none.view()), ..ok }], &no_progress)
+        .synthesize(
+            &[SceneLayer {
+                valid: Some(none.view()),
+                ..ok
+            }],
+            &no_progress,
+        )
         .unwrap_err();
     assert!(err.to_string().contains("no valid point"), "{err}");
     let mut neg = amp.clone();
     neg[[1, 0, 0]] = -0.1;
     let err = config(16)
-        .synthesize(&[SceneLayer { amplitude: neg.view(), ..ok }], &no_progress)
+        .synthesize(
+            &[SceneLayer {
+                amplitude: neg.view(),
+                ..ok
+            }],
+            &no_progress,
+        )
         .unwrap_err();
     assert!(matches!(err, HoloError::InvalidData(_)), "{err}");
     assert!(config(16).synthesize(&[], &no_progress).is_err());

@@ -210,7 +210,10 @@ mod tests {
     fn checkerboard_pairs_sum_to_the_encoded_complex_value() {
         // For each pixel pair the two phasors average to Ã·e^{i(φ − mean)} exactly (the double phase identity).
         let field = Array3::from_shape_fn((3, 4, 6), |(c, y, x)| {
-            Complex32::from_polar(0.2 + 0.1 * (x + y + c) as f32, 0.3 * x as f32 - 0.2 * y as f32)
+            Complex32::from_polar(
+                0.2 + 0.1 * (x + y + c) as f32,
+                0.3 * x as f32 - 0.2 * y as f32,
+            )
         });
         let dp = double_phase_encode(field.view(), &DoublePhaseMethod::Plain).unwrap();
         for c in 0..3 {
@@ -257,8 +260,14 @@ mod tests {
         assert!(double_phase_encode(nan.view(), &DoublePhaseMethod::Plain).is_err());
         let ones = Array3::from_elem((3, 4, 4), Complex32::new(1.0, 0.0));
         for m in [
-            DoublePhaseMethod::AntiAliased { sigma_px: 0.0, kernel_size: 5 },
-            DoublePhaseMethod::AntiAliased { sigma_px: 1.0, kernel_size: 4 },
+            DoublePhaseMethod::AntiAliased {
+                sigma_px: 0.0,
+                kernel_size: 5,
+            },
+            DoublePhaseMethod::AntiAliased {
+                sigma_px: 1.0,
+                kernel_size: 4,
+            },
             DoublePhaseMethod::BandLimited { k: 1.5 },
         ] {
             assert!(matches!(

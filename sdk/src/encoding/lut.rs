@@ -68,7 +68,11 @@ mod tests {
         for c in 0..=255u8 {
             assert_eq!(LinearLut.code(LinearLut.phase(c)), c);
         }
-        assert_eq!(LinearLut.code(TAU - 1e-4), 0, "just below 2π wraps to code 0");
+        assert_eq!(
+            LinearLut.code(TAU - 1e-4),
+            0,
+            "just below 2π wraps to code 0"
+        );
         assert_eq!(LinearLut.code(-TAU / 256.0), 255);
     }
 }

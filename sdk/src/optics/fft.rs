@@ -78,7 +78,12 @@ impl Fft2 {
 
     /// Forward DFT: `data` `[height, width]` (overwritten with intermediate row transforms) → `spectrum`
     /// `[width, height]` (transposed). Both slices must hold `height·width` values.
-    pub fn forward(&self, data: &mut [Complex32], spectrum: &mut [Complex32], scratch: &mut [Complex32]) {
+    pub fn forward(
+        &self,
+        data: &mut [Complex32],
+        spectrum: &mut [Complex32],
+        scratch: &mut [Complex32],
+    ) {
         debug_assert_eq!(data.len(), self.height * self.width);
         debug_assert_eq!(spectrum.len(), self.height * self.width);
         let scratch = &mut scratch[..self.scratch_len];
@@ -89,7 +94,12 @@ impl Fft2 {
 
     /// Inverse DFT (unnormalised): transposed `spectrum` `[width, height]` (overwritten) → `data`
     /// `[height, width]`.
-    pub fn inverse(&self, spectrum: &mut [Complex32], data: &mut [Complex32], scratch: &mut [Complex32]) {
+    pub fn inverse(
+        &self,
+        spectrum: &mut [Complex32],
+        data: &mut [Complex32],
+        scratch: &mut [Complex32],
+    ) {
         debug_assert_eq!(data.len(), self.height * self.width);
         debug_assert_eq!(spectrum.len(), self.height * self.width);
         let scratch = &mut scratch[..self.scratch_len];

@@ -27,7 +27,10 @@ impl FourierFilter {
         let plan = SpectralPlan::new(height, width, false)?;
         let mask = aperture_mask(&plan);
         let norm = 1.0 / plan.spectrum_len() as f32;
-        let multiplier = mask.iter().map(|&m| Complex32::new(m * norm, 0.0)).collect();
+        let multiplier = mask
+            .iter()
+            .map(|&m| Complex32::new(m * norm, 0.0))
+            .collect();
         Ok(Self {
             plan,
             mask,

@@ -232,7 +232,10 @@ impl SpectralPlan {
 
     /// Calls `f(fx_index, fy_index, value)` to fill a multiplier in this plan's layout, where the indices are
     /// signed DFT bin indices of the computational grid (see [`signed_index`]).
-    pub(crate) fn build_multiplier(&self, mut f: impl FnMut(i64, i64) -> Complex32) -> Vec<Complex32> {
+    pub(crate) fn build_multiplier(
+        &self,
+        mut f: impl FnMut(i64, i64) -> Complex32,
+    ) -> Vec<Complex32> {
         let (ch, cw) = self.computational_shape();
         let mut out = Vec::with_capacity(ch * cw);
         for kx in 0..cw {

@@ -49,7 +49,9 @@ pub fn focal_stack(
             let mut scratch = plan.scratch();
             let mut spectrum = vec![Complex32::default(); plan.spectrum_len()];
             let lane = field.index_axis(Axis(0), c);
-            let src = lane.as_slice().ok_or_else(|| HoloError::InvalidData("layout".into()))?;
+            let src = lane
+                .as_slice()
+                .ok_or_else(|| HoloError::InvalidData("layout".into()))?;
             plan.forward(src, &mut spectrum, &mut scratch)?;
             let mask = aperture.then(|| aperture_mask(plan));
             let mut out_field = vec![Complex32::default(); h * w];

@@ -9,9 +9,7 @@ use ndarray::{Array3, ArrayView2, ArrayView3};
 use num_complex::Complex32;
 
 use crate::error::{invalid, HoloError, Result};
-use crate::optics::{
-    par_channels, Carrier, OpticalSetup, PropagationOptions, TransferFunction,
-};
+use crate::optics::{par_channels, Carrier, OpticalSetup, PropagationOptions, TransferFunction};
 
 /// One layer of scene points, borrowed: amplitude `[3, H, W]` (R, G, B, linear amplitude ≥ 0), normalised depth
 /// `[H, W]` (`d ∈ [0, 1]`, 0 = near) and, optionally, which pixels hold a point (`[H, W]`; all if `None`).

@@ -8,9 +8,11 @@ use num_complex::Complex32;
 pub struct Rng(u64);
 
 impl Rng {
+    /// A generator seeded with `seed` (any value).
     pub fn new(seed: u64) -> Self {
         Self(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
     }
+    /// The next uniform value in [0, 1).
     pub fn next(&mut self) -> f32 {
         self.0 ^= self.0 << 13;
         self.0 ^= self.0 >> 7;
@@ -19,6 +21,7 @@ impl Rng {
     }
 }
 
+/// Total energy Σ|u|² of a field (f64 accumulation).
 pub fn energy(field: &[Complex32]) -> f64 {
     field.iter().map(|v| v.norm_sqr() as f64).sum()
 }
@@ -45,6 +48,10 @@ pub fn gradient_energy(img: ArrayView2<f32>, region: Option<&Array2<bool>>) -> f
 
 /// Relative L2 error |a − b| / |b|.
 pub fn rel_error(a: &[Complex32], b: &[Complex32]) -> f64 {
-    let num: f64 = a.iter().zip(b).map(|(x, y)| (x - y).norm_sqr() as f64).sum();
+    let num: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).norm_sqr() as f64)
+        .sum();
     (num / energy(b)).sqrt()
 }

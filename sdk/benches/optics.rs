@@ -1,0 +1,107 @@
+//! Criterion benchmarks of the optics hot paths (results and the command in `docs/BENCHMARKS.md`):
+//! ASM per colour at 384×384 and 1920×1080 (with and without 2× padding), SM-LBM at 384×384 for 256 and 2048
+//! depth planes on the built-in scene, double phase encoding at 1080p.
+//!
+//! Run: `cargo bench -p tensorholo --bench optics`.
+#![allow(missing_docs)] // criterion_group! generates undocumented items
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use ndarray::Array3;
+use num_complex::Complex32;
+use std::time::Duration;
+use tensorholo::encoding::{double_phase_encode, DoublePhaseMethod};
+use tensorholo::optics::{Carrier, PropagationOptions, Propagator};
+use tensorholo::scene::procedural;
+use tensorholo::synthesis::{SceneLayer, SmLbm};
+
+fn test_field(h: usize, w: usize) -> Vec<Complex32> {
+    (0..h * w)
+        .map(|i| Complex32::from_polar(((i % 97) as f32 / 97.0).sqrt(), (i % 13) as f32 * 0.4))
+        .collect()
+}
+
+fn asm(c: &mut Criterion) {
+    let mut group = c.benchmark_group("asm_per_colour");
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(4));
+    for (h, w) in [(384, 384), (1080, 1920)] {
+        for pad in [false, true] {
+            let prop = Propagator::new(
+                h,
+                w,
+                8e-6,
+                520e-9,
+                PropagationOptions {
+                    pad,
+                    band_limit: false,
+                },
+            )
+            .expect("valid parameters");
+            let tf = prop
+                .transfer_function(3e-3, Carrier::Keep)
+                .expect("finite distance");
+            let mut scratch = prop.plan().scratch();
+            let mut field = test_field(h, w);
+            let id = format!("{h}x{w}{}", if pad { "_padded" } else { "" });
+            group.bench_function(BenchmarkId::from_parameter(id), |b| {
+                b.iter(|| {
+                    prop.propagate(&mut field, &tf, &mut scratch)
+                        .expect("sizes match")
+                })
+            });
+        }
+    }
+    group.finish();
+}
+
+fn sm_lbm(c: &mut Criterion) {
+    let mut group = c.benchmark_group("sm_lbm_384x384");
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(10));
+    let frame = procedural::default_scene(384, 384).expect("built-in scene");
+    let layer = SceneLayer {
+        amplitude: frame.amplitude.view(),
+        depth: frame.depth.view(),
+        valid: None,
+    };
+    for levels in [256, 2048] {
+        let cfg = SmLbm {
+            levels,
+            ..SmLbm::default()
+        };
+        group.bench_function(
+            BenchmarkId::from_parameter(format!("{levels}_levels")),
+            |b| b.iter(|| cfg.synthesize(&[layer], &|_, _| {}).expect("valid scene")),
+        );
+    }
+    group.finish();
+}
+
+fn double_phase(c: &mut Criterion) {
+    let mut group = c.benchmark_group("double_phase_1080p");
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(5));
+    let (h, w) = (1080, 1920);
+    let field = Array3::from_shape_fn((3, h, w), |(ch, y, x)| {
+        Complex32::from_polar(
+            0.2 + 0.8 * ((x * 7 + y * 3 + ch) % 101) as f32 / 101.0,
+            (x as f32) * 0.01,
+        )
+    });
+    for (name, method) in [
+        ("dpm", DoublePhaseMethod::Plain),
+        ("aa_dpm", DoublePhaseMethod::default()),
+        ("bl_dpm", DoublePhaseMethod::BandLimited { k: 0.5 }),
+    ] {
+        group.bench_function(name, |b| {
+            b.iter(|| double_phase_encode(field.view(), &method).expect("valid field"))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, asm, sm_lbm, double_phase);
+criterion_main!(benches);
