@@ -107,7 +107,7 @@ pub struct ReferenceArgs {
     #[arg(long, default_value_t = 8e-6)]
     pitch_m: f64,
     /// Laser wavelengths in metres, R,G,B.
-    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [638e-9, 520e-9, 450e-9])]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_values_t = [638e-9, 520e-9, 450e-9])]
     wavelengths_m: Vec<f64>,
     /// Depth of the 3D volume in metres, centred on the midpoint hologram.
     #[arg(long, default_value_t = 6e-3)]
@@ -151,6 +151,12 @@ fn progress_bar(total: u64) -> ProgressBar {
 /// Runs `holo reference`.
 pub fn run(args: &ReferenceArgs) -> Result<()> {
     let t_all = Instant::now();
+    if args.wavelengths_m.len() != 3 {
+        bail!(
+            "--wavelengths-m needs 3 comma-separated values (R,G,B), got {}",
+            args.wavelengths_m.len()
+        );
+    }
     let setup = OpticalSetup {
         wavelengths_m: [
             args.wavelengths_m[0],

@@ -1,0 +1,283 @@
+//! End-to-end tests of the `holo` binary: outputs, interoperability files and error messages.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use ndarray::Array3;
+use num_complex::Complex32;
+use tensorholo::io::{read_complex_npy, write_complex_npy};
+
+fn holo(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_holo"))
+        .args(args)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("holo runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn shared(relative: &str) -> PathBuf {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data")
+        .join(relative);
+    assert!(p.exists(), "shared test data {} is missing", p.display());
+    p
+}
+
+/// Width and height from a PNG's IHDR chunk.
+fn png_size(path: &Path) -> (u32, u32) {
+    let bytes = std::fs::read(path).unwrap();
+    assert_eq!(&bytes[1..4], b"PNG", "{} is not a PNG", path.display());
+    let be = |i: usize| u32::from_be_bytes(bytes[i..i + 4].try_into().unwrap());
+    (be(16), be(20))
+}
+
+#[test]
+fn reference_on_the_built_in_scene_writes_every_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let o = holo(&[
+        "reference",
+        "--size",
+        "48x64",
+        "--levels",
+        "32",
+        "--offset-mm",
+        "6",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for name in [
+        "phase_r.png",
+        "phase_g.png",
+        "phase_b.png",
+        "focus_near.png",
+        "focus_mid.png",
+        "focus_far.png",
+        "target.png",
+        "depth.png",
+    ] {
+        assert_eq!(png_size(&out.join(name)), (64, 48), "{name}");
+    }
+    let mid = read_complex_npy(&out.join("midpoint.npy")).unwrap();
+    assert_eq!(mid.dim(), (3, 48, 64));
+    assert!(mid.iter().all(|v| v.is_finite()) && mid.iter().any(|v| v.norm() > 0.1));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["parameters"]["synthesis"]["levels"], 32);
+    assert_eq!(report["parameters"]["offset_m"], 0.006);
+    assert!(report["timings_s"]["synthesis"].as_f64().unwrap() > 0.0);
+    let focus = report["statistics"]["focus"].as_array().unwrap();
+    assert_eq!(focus.len(), 3);
+    for f in focus {
+        let p = f["encoding_psnr_db"].as_f64().unwrap();
+        assert!(p > 10.0 && p < 80.0, "{p}");
+    }
+}
+
+#[test]
+fn mismatched_rgb_and_depth_sizes_name_both_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let rgb = shared("tum/TUM_color.png");
+    let depth = shared("iphone_portrait_vase/disparity_aux_576x768.jpg");
+    let o = holo(&[
+        "reference",
+        "--rgb",
+        rgb.to_str().unwrap(),
+        "--depth",
+        depth.to_str().unwrap(),
+        "--depth-encoding",
+        "iphone-disparity",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("shape mismatch") && e.contains("TUM_color.png") && e.contains("disparity_aux"),
+        "{e}"
+    );
+}
+
+#[test]
+fn bad_parameters_and_files_are_named_in_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let cases: [(&[&str], &str); 6] = [
+        (
+            &["reference", "--pitch-m", "0", "--out", out],
+            "pixel_pitch_m",
+        ),
+        (
+            &[
+                "reference",
+                "--levels",
+                "0",
+                "--size",
+                "16x16",
+                "--out",
+                out,
+            ],
+            "levels",
+        ),
+        (
+            &[
+                "reference",
+                "--wavelengths-m",
+                "638e-9,-520e-9,450e-9",
+                "--out",
+                out,
+            ],
+            "wavelength_m",
+        ),
+        (
+            &["reference", "--size", "0x16", "--out", out],
+            "positive integer",
+        ),
+        (
+            &[
+                "reference",
+                "--rgb",
+                "/no/such/rgb.png",
+                "--depth",
+                "/no/such/d.png",
+                "--depth-encoding",
+                "mm16",
+                "--out",
+                out,
+            ],
+            "/no/such/",
+        ),
+        (
+            &[
+                "reference",
+                "--rgb",
+                "a.png",
+                "--depth",
+                "b.png",
+                "--depth-encoding",
+                "feet",
+                "--out",
+                out,
+            ],
+            "mm16",
+        ),
+    ];
+    for (args, needle) in cases {
+        let o = holo(args);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(stderr(&o).contains(needle), "{args:?}: {}", stderr(&o));
+    }
+}
+
+#[test]
+fn inputs_are_never_overwritten() {
+    let dir = tempfile::tempdir().unwrap();
+    // An input that sits where an output would be written.
+    let rgb = dir.path().join("target.png");
+    let depth = dir.path().join("d.jpg");
+    std::fs::copy(shared("iphone_portrait_vase/derived_rgb_576x768.png"), &rgb).unwrap();
+    std::fs::copy(
+        shared("iphone_portrait_vase/disparity_aux_576x768.jpg"),
+        &depth,
+    )
+    .unwrap();
+    let before = std::fs::read(&rgb).unwrap();
+    let o = holo(&[
+        "reference",
+        "--rgb",
+        rgb.to_str().unwrap(),
+        "--depth",
+        depth.to_str().unwrap(),
+        "--depth-encoding",
+        "iphone-disparity",
+        "--out",
+        dir.path().join(".").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("refusing to overwrite input"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(std::fs::read(&rgb).unwrap(), before);
+}
+
+#[test]
+fn propagate_round_trips_a_field_and_checks_wavelength_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("field.npy");
+    let there = dir.path().join("there.npy");
+    let back = dir.path().join("back.npy");
+    let field = Array3::from_shape_fn((3, 24, 32), |(c, y, x)| {
+        Complex32::from_polar(0.5 + 0.1 * c as f32, 0.05 * (x * y) as f32)
+    });
+    write_complex_npy(&input, field.view()).unwrap();
+    let run = |from: &Path, to: &Path, d: &str| {
+        holo(&[
+            "propagate",
+            "--input",
+            from.to_str().unwrap(),
+            "--distance-m",
+            d,
+            "--wavelength-m",
+            "638e-9,520e-9,450e-9",
+            "--pitch-m",
+            "8e-6",
+            "--output",
+            to.to_str().unwrap(),
+        ])
+    };
+    assert!(run(&input, &there, "2e-3").status.success());
+    assert!(run(&there, &back, "-2e-3").status.success());
+    let moved = read_complex_npy(&there).unwrap();
+    let result = read_complex_npy(&back).unwrap();
+    let diff = |a: &Array3<Complex32>| {
+        a.iter()
+            .zip(field.iter())
+            .map(|(x, y)| (x - y).norm())
+            .fold(0.0f32, f32::max)
+    };
+    assert!(diff(&moved) > 0.05, "2 mm must change the field");
+    assert!(diff(&result) < 1e-4, "round trip error {}", diff(&result));
+    let o = holo(&[
+        "propagate",
+        "--input",
+        input.to_str().unwrap(),
+        "--distance-m",
+        "1e-3",
+        "--wavelength-m",
+        "638e-9,520e-9",
+        "--pitch-m",
+        "8e-6",
+        "--output",
+        there.to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("3 channels"),
+        "{}",
+        stderr(&o)
+    );
+    let o = holo(&[
+        "propagate",
+        "--input",
+        input.to_str().unwrap(),
+        "--distance-m",
+        "1e-3",
+        "--wavelength-m",
+        "520e-9",
+        "--pitch-m",
+        "8e-6",
+        "--output",
+        input.to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("refusing to overwrite"),
+        "{}",
+        stderr(&o)
+    );
+}
