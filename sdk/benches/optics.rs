@@ -6,7 +6,7 @@
 #![allow(missing_docs)] // criterion_group! generates undocumented items
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use ndarray::Array3;
+use ndarray::{Array2, Array3};
 use num_complex::Complex32;
 use std::time::Duration;
 use tensorholo::encoding::{double_phase_encode, DoublePhaseMethod};
@@ -61,20 +61,28 @@ fn sm_lbm(c: &mut Criterion) {
         .sample_size(10)
         .measurement_time(Duration::from_secs(10));
     let frame = procedural::default_scene(384, 384).expect("built-in scene");
-    let layer = SceneLayer {
-        amplitude: frame.amplitude.view(),
-        depth: frame.depth.view(),
-        valid: None,
-    };
-    for levels in [256, 2048] {
-        let cfg = SmLbm {
-            levels,
-            ..SmLbm::default()
+    // Worst case: a plane tilted through the whole volume (767 distinct depths, so most planes are non-empty).
+    let ramp = Array2::from_shape_fn((384, 384), |(y, x)| (x + y) as f32 / 766.0);
+    for (scene, depth) in [
+        ("default_scene", frame.depth.view()),
+        ("full_ramp", ramp.view()),
+    ] {
+        let layer = SceneLayer {
+            amplitude: frame.amplitude.view(),
+            depth,
+            valid: None,
         };
-        group.bench_function(
-            BenchmarkId::from_parameter(format!("{levels}_levels")),
-            |b| b.iter(|| cfg.synthesize(&[layer], &|_, _| {}).expect("valid scene")),
-        );
+        for levels in [256, 2048] {
+            let cfg = SmLbm {
+                levels,
+                ..SmLbm::default()
+            };
+            let planes = cfg.propagation_count(&[layer]).expect("valid scene");
+            let id = format!("{scene}_{levels}_levels_{planes}_planes");
+            group.bench_function(BenchmarkId::from_parameter(id), |b| {
+                b.iter(|| cfg.synthesize(&[layer], &|_, _| {}).expect("valid scene"))
+            });
+        }
     }
     group.finish();
 }

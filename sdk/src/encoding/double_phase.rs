@@ -2,7 +2,8 @@
 
 use std::f32::consts::TAU;
 
-use ndarray::{Array2, Array3, ArrayView3, Axis, Zip};
+use ndarray::{Array3, ArrayView3, CowArray, Ix3};
+use rayon::prelude::*;
 use num_complex::Complex32;
 
 use super::lut::wrap_phase;
@@ -103,18 +104,19 @@ pub fn double_phase_encode(
     let (h, w) = check_colour_stack("hologram", &field)?;
     check_finite_field("hologram", &field)?;
     method.validate()?;
-    let mut filtered = field.as_standard_layout().into_owned();
-    match *method {
-        DoublePhaseMethod::Plain => {}
+    let filtered: CowArray<Complex32, Ix3> = match *method {
+        DoublePhaseMethod::Plain => field.as_standard_layout(),
         DoublePhaseMethod::AntiAliased {
             sigma_px,
             kernel_size,
         } => {
             let kernel = gaussian_kernel(sigma_px, kernel_size);
-            par_channels(&mut filtered, |_, slice| {
+            let mut owned = field.as_standard_layout().into_owned();
+            par_channels(&mut owned, |_, slice| {
                 blur_separable(slice, h, w, &kernel);
                 Ok(())
             })?;
+            owned.into()
         }
         DoublePhaseMethod::BandLimited { k } => {
             let plan = SpectralPlan::new(h, w, false)?;
@@ -124,40 +126,62 @@ pub fn double_phase_encode(
                 let r = kx.unsigned_abs() as f64 / hw + ky.unsigned_abs() as f64 / hh;
                 Complex32::new(if r <= k as f64 { norm } else { 0.0 }, 0.0)
             });
-            par_channels(&mut filtered, |_, slice| {
+            let mut owned = field.as_standard_layout().into_owned();
+            par_channels(&mut owned, |_, slice| {
                 plan.apply(slice, &mask, &mut plan.scratch())
             })?;
+            owned.into()
         }
-    }
-    let a = filtered.iter().map(|v| v.norm()).fold(0.0f32, f32::max);
+    };
+    // Pass 1 (rows in parallel): phase φ = arg H into the output, per-row max |H|² and Σφ.
+    let mut phase = Array3::<f32>::zeros((3, h, w));
+    let src = filtered.as_slice().expect("standard layout");
+    let rows: Vec<(f32, f64)> = phase
+        .as_slice_mut()
+        .expect("fresh array")
+        .par_chunks_mut(w)
+        .zip(src.par_chunks(w))
+        .map(|(out, row)| {
+            let (mut max2, mut sum) = (0.0f32, 0.0f64);
+            for (p, v) in out.iter_mut().zip(row) {
+                *p = v.im.atan2(v.re);
+                max2 = max2.max(v.norm_sqr());
+                sum += *p as f64;
+            }
+            (max2, sum)
+        })
+        .collect();
+    let a = rows.iter().map(|r| r.0).fold(0.0f32, f32::max).sqrt();
     if !(a > 0.0 && a.is_finite()) {
         return Err(HoloError::InvalidData(
             "hologram amplitude is zero everywhere: nothing to encode".into(),
         ));
     }
-    let mut phase = Array3::<f32>::zeros((3, h, w));
     let mut mean_phase = [0.0f32; 3];
-    for (c, (src, mut dst)) in filtered
-        .axis_iter(Axis(0))
-        .zip(phase.axis_iter_mut(Axis(0)))
+    for (c, m) in mean_phase.iter_mut().enumerate() {
+        *m = (rows[c * h..(c + 1) * h].iter().map(|r| r.1).sum::<f64>() / (h * w) as f64) as f32;
+    }
+    // Pass 2 (rows in parallel): P = φ − mean ∓ acos(Ã), checkerboard by x + y parity (Eq. 7).
+    let inv_a = 1.0 / a;
+    phase
+        .as_slice_mut()
+        .expect("fresh array")
+        .par_chunks_mut(w)
+        .zip(src.par_chunks(w))
         .enumerate()
-    {
-        let arg: Array2<f32> = src.mapv(|v| v.arg());
-        let mean = (arg.iter().map(|&p| p as f64).sum::<f64>() / arg.len() as f64) as f32;
-        mean_phase[c] = mean;
-        Zip::indexed(&mut dst)
-            .and(&src)
-            .and(&arg)
-            .for_each(|(y, x), p, v, &phi| {
-                let theta = (v.norm() / a).clamp(0.0, 1.0).acos();
+        .for_each(|(r, (out, row))| {
+            let (c, y) = (r / h, r % h);
+            let mean = mean_phase[c];
+            for (x, (p, v)) in out.iter_mut().zip(row).enumerate() {
+                let theta = (v.norm_sqr().sqrt() * inv_a).min(1.0).acos();
                 let value = if (x + y) % 2 == 1 {
-                    phi - mean - theta
+                    *p - mean - theta
                 } else {
-                    phi - mean + theta
+                    *p - mean + theta
                 };
                 *p = wrap_phase(value);
-            });
-    }
+            }
+        });
     debug_assert!(phase.iter().all(|p| (0.0..TAU).contains(p)));
     Ok(DoublePhase {
         phase,

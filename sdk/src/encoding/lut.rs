@@ -6,6 +6,24 @@ use ndarray::{Array, ArrayView, Dimension};
 
 /// Wraps a phase in radians to `[0, 2π)`. NaN stays NaN (callers validate their inputs).
 pub fn wrap_phase(phase: f32) -> f32 {
+    // Fast path for the usual few-cycle range (double phase values lie within ±3π).
+    if (-2.0 * TAU..2.0 * TAU).contains(&phase) {
+        let mut w = phase;
+        if w < 0.0 {
+            w += TAU;
+        }
+        if w < 0.0 {
+            w += TAU;
+        }
+        if w >= TAU {
+            w -= TAU;
+        }
+        if w >= TAU {
+            w -= TAU;
+        }
+        // Adding 2π to a tiny negative value can round up to exactly 2π.
+        return if (0.0..TAU).contains(&w) { w } else { 0.0 };
+    }
     let w = phase.rem_euclid(TAU);
     // rem_euclid can round up to exactly 2π for tiny negative inputs.
     if w >= TAU {
