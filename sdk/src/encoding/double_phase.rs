@@ -3,8 +3,8 @@
 use std::f32::consts::TAU;
 
 use ndarray::{Array3, ArrayView3, CowArray, Ix3};
-use rayon::prelude::*;
 use num_complex::Complex32;
+use rayon::prelude::*;
 
 use super::lut::wrap_phase;
 use crate::error::{invalid, HoloError, Result};
