@@ -16,7 +16,7 @@ use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
 use tensorholo::scene::{
     load_rgbd, procedural, DepthEncoding, DepthMapping, DepthRange, LoadOptions, RgbdFrame,
 };
-use tensorholo::synthesis::{SceneLayer, SmLbm};
+use tensorholo::synthesis::{ldi_layers, SceneLayer, SmLbm};
 
 /// Phase-only encodings offered on the command line.
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -112,6 +112,10 @@ pub struct ReferenceArgs {
     /// Depth of the 3D volume in metres, centred on the midpoint hologram.
     #[arg(long, default_value_t = 6e-3)]
     volume_depth_m: f64,
+    /// Use the built-in scene as a 2-layer layered depth image (paper Fig. 1: the second layer holds what the
+    /// bar and the disc hide), instead of an RGB-D image.
+    #[arg(long, conflicts_with = "rgb")]
+    ldi: bool,
     /// Output folder (created if missing). Files of the same names in it are replaced; inputs never are.
     #[arg(long)]
     out: PathBuf,
@@ -121,6 +125,8 @@ const EXAMPLES: &str = "\
 Examples:
   holo reference --out out/default
       built-in procedural scene (384x384, occluding bar, disc and textured background)
+  holo reference --ldi --out out/ldi
+      the same scene as a 2-layer layered depth image (occluded content included)
   holo reference --rgb photo.png --depth depth.png --depth-encoding mm16 --size 384x512 --out out/photo
       a depth-camera frame; metric range from the 1st/99th percentiles of its depths
   holo reference --rgb derived_rgb_576x768.png --depth disparity_aux_576x768.jpg \\
@@ -226,14 +232,19 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
 
-    let layer = SceneLayer {
-        amplitude: frame.amplitude.view(),
-        depth: frame.depth.view(),
-        valid: None,
+    let ldi = if args.ldi {
+        let (h, w) = (frame.height(), frame.width());
+        Some(procedural::default_scene_ldi(h, w)?)
+    } else {
+        None
     };
-    let total = 3 * pipeline.synthesis.propagation_count(&[layer])? as u64;
+    let layers: Vec<SceneLayer> = match &ldi {
+        Some(ldi) => ldi_layers(ldi),
+        None => vec![SceneLayer::from(&frame)],
+    };
+    let total = 3 * pipeline.synthesis.propagation_count(&layers)? as u64;
     let bar = progress_bar(total);
-    let hologram = pipeline.run(&[layer], &|done, _| bar.set_position(done))?;
+    let hologram = pipeline.run(&layers, &|done, _| bar.set_position(done))?;
     bar.finish_and_clear();
     log::info!(
         "SM-LBM {:.2} s, offset {:.3} s, encoding {:.3} s",
@@ -344,7 +355,11 @@ fn load_scene(args: &ReferenceArgs) -> Result<(RgbdFrame, serde_json::Value)> {
             let (h, w) = args.size.unwrap_or((384, 384));
             Ok((
                 procedural::default_scene(h, w)?,
-                json!({"kind": "built-in procedural scene"}),
+                json!({"kind": if args.ldi {
+                    "built-in procedural scene, 2-layer layered depth image"
+                } else {
+                    "built-in procedural scene"
+                }}),
             ))
         }
         _ => bail!(

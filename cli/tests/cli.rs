@@ -80,6 +80,24 @@ fn reference_on_the_built_in_scene_writes_every_output() {
 }
 
 #[test]
+fn reference_accepts_the_built_in_scene_as_a_layered_depth_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = holo(&[
+        "reference",
+        "--ldi",
+        "--size",
+        "32x32",
+        "--levels",
+        "16",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report = std::fs::read_to_string(dir.path().join("report.json")).unwrap();
+    assert!(report.contains("2-layer layered depth image"));
+}
+
+#[test]
 fn mismatched_rgb_and_depth_sizes_name_both_files() {
     let dir = tempfile::tempdir().unwrap();
     let rgb = shared("tum/TUM_color.png");

@@ -376,3 +376,34 @@ fn bad_parameters_are_clear_errors() {
     )
     .is_err());
 }
+
+#[test]
+fn focal_stack_with_aperture_removes_the_checkerboard_term_at_the_field_plane() {
+    // A smooth field plus a Nyquist checkerboard: the aperture keeps the first and removes the second.
+    let (h, w) = (32, 48);
+    let smooth = band_limited_field(h, w, 12);
+    let field = Array3::from_shape_fn((3, h, w), |(_, y, x)| {
+        smooth[y * w + x] + Complex32::new(if (x + y) % 2 == 0 { 3.0 } else { -3.0 }, 0.0)
+    });
+    let setup = OpticalSetup::default();
+    let opts = PropagationOptions::default();
+    let with =
+        tensorholo::optics::focal_stack(field.view(), &setup, 0.0, &[0.5], opts, true).unwrap();
+    let without =
+        tensorholo::optics::focal_stack(field.view(), &setup, 0.0, &[0.5], opts, false).unwrap();
+    for c in 0..3 {
+        for y in 0..h {
+            for x in 0..w {
+                let expected = smooth[y * w + x].norm();
+                assert!((with[0][[c, y, x]] - expected).abs() < 1e-3);
+            }
+        }
+    }
+    let max_dev = (0..h * w)
+        .map(|i| (without[0][[0, i / w, i % w]] - smooth[i].norm()).abs())
+        .fold(0.0f32, f32::max);
+    assert!(
+        max_dev > 1.0,
+        "without the aperture the checkerboard stays: {max_dev}"
+    );
+}

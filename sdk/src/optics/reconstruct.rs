@@ -53,7 +53,12 @@ pub fn focal_stack(
                 .as_slice()
                 .ok_or_else(|| HoloError::InvalidData("layout".into()))?;
             plan.forward(src, &mut spectrum, &mut scratch)?;
-            let mask = aperture.then(|| aperture_mask(plan));
+            let mask: Option<Vec<Complex32>> = aperture.then(|| {
+                aperture_mask(plan)
+                    .into_iter()
+                    .map(|v| Complex32::new(v, 0.0))
+                    .collect()
+            });
             let mut out_field = vec![Complex32::default(); h * w];
             depths
                 .iter()
@@ -61,8 +66,7 @@ pub fn focal_stack(
                     let mut tf =
                         prop.transfer_function(setup.depth_to_z(d) - plane_z_m, Carrier::Remove)?;
                     if let Some(m) = &mask {
-                        let m: Vec<Complex32> = m.iter().map(|&v| Complex32::new(v, 0.0)).collect();
-                        tf.multiply(&m)?;
+                        tf.multiply(m)?;
                     }
                     plan.inverse(&spectrum, tf.values(), &mut out_field, &mut scratch)?;
                     Ok(out_field.iter().map(|v| v.norm()).collect())

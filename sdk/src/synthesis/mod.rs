@@ -4,3 +4,32 @@
 mod sm_lbm;
 
 pub use sm_lbm::{SceneLayer, SmLbm};
+
+use crate::scene::{LayeredDepthImage, LdiLayer, RgbdFrame};
+
+impl<'a> From<&'a RgbdFrame> for SceneLayer<'a> {
+    /// An RGB-D frame is one layer in which every pixel holds a point.
+    fn from(frame: &'a RgbdFrame) -> Self {
+        SceneLayer {
+            amplitude: frame.amplitude.view(),
+            depth: frame.depth.view(),
+            valid: None,
+        }
+    }
+}
+
+impl<'a> From<&'a LdiLayer> for SceneLayer<'a> {
+    /// One LDI layer with its validity mask.
+    fn from(layer: &'a LdiLayer) -> Self {
+        SceneLayer {
+            amplitude: layer.amplitude.view(),
+            depth: layer.depth.view(),
+            valid: Some(layer.valid.view()),
+        }
+    }
+}
+
+/// The layers of a layered depth image (front to back) as [`SceneLayer`]s for [`SmLbm::synthesize`].
+pub fn ldi_layers(ldi: &LayeredDepthImage) -> Vec<SceneLayer<'_>> {
+    ldi.layers().iter().map(SceneLayer::from).collect()
+}
