@@ -279,3 +279,27 @@ fn save_png(
         },
     )
 }
+
+/// Reads a whole file, naming it in the error ([`HoloError::Io`]).
+pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|source| HoloError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Decodes an image file's bytes with the `image` crate (format guessed from the content), naming `path` in
+/// the error ([`HoloError::Image`]).
+pub(crate) fn decode_image(path: &Path, bytes: &[u8]) -> Result<image::DynamicImage> {
+    image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|source| HoloError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?
+        .decode()
+        .map_err(|source| HoloError::Image {
+            path: path.to_path_buf(),
+            source,
+        })
+}

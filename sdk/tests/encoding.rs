@@ -6,7 +6,9 @@ mod common;
 use common::Rng;
 use ndarray::{Array2, Array3, Axis};
 use num_complex::Complex32;
-use tensorholo::encoding::{double_phase_encode, phase_to_codes, DoublePhaseMethod, LinearLut};
+use tensorholo::encoding::{
+    double_phase_encode, phase_to_codes, DoublePhase, DoublePhaseMethod, LinearLut,
+};
 use tensorholo::metrics::psnr;
 use tensorholo::optics::{simulate_phase_only, Carrier, OpticalSetup, PropagationOptions};
 
@@ -32,10 +34,11 @@ fn smooth_field(h: usize, w: usize, seed: u64) -> Array3<Complex32> {
     })
 }
 
-fn encode_and_reconstruct(
+/// Double phase encoding, then the display's Fourier filter at a 0 mm offset: (encoding, field at midpoint).
+fn encode_and_simulate(
     field: &Array3<Complex32>,
     method: DoublePhaseMethod,
-) -> (Array3<f32>, Array3<f32>) {
+) -> (DoublePhase, Array3<Complex32>) {
     let dp = double_phase_encode(field.view(), &method).unwrap();
     let recon = simulate_phase_only(
         dp.phase.view(),
@@ -44,6 +47,14 @@ fn encode_and_reconstruct(
         Default::default(),
     )
     .unwrap();
+    (dp, recon)
+}
+
+fn encode_and_reconstruct(
+    field: &Array3<Complex32>,
+    method: DoublePhaseMethod,
+) -> (Array3<f32>, Array3<f32>) {
+    let (dp, recon) = encode_and_simulate(field, method);
     let target = field.mapv(|v| v.norm() / dp.amplitude_scale);
     (recon.mapv(|v| v.norm()), target)
 }
@@ -51,14 +62,7 @@ fn encode_and_reconstruct(
 #[test]
 fn double_phase_plus_fourier_filter_reproduces_a_smooth_field() {
     let field = smooth_field(128, 160, 1);
-    let dp = double_phase_encode(field.view(), &DoublePhaseMethod::Plain).unwrap();
-    let recon = simulate_phase_only(
-        dp.phase.view(),
-        &OpticalSetup::default(),
-        0.0,
-        Default::default(),
-    )
-    .unwrap();
+    let (dp, recon) = encode_and_simulate(&field, DoublePhaseMethod::Plain);
     let (_, h, w) = field.dim();
     // Compare the complex field (amplitude and phase, up to the removed per-channel mean phase), away from the
     // borders where the periodic FFT meets a non-periodic field.

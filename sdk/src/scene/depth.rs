@@ -259,24 +259,11 @@ pub fn decode_depth(raw: &Array2<u16>, encoding: DepthEncoding) -> DecodedDepth 
 /// [`HoloError::InvalidDepth`] naming the file and encoding when the bit depth is wrong, the image is
 /// empty or floating-point, or Kinect samples exceed 11 bits in both byte orders.
 pub fn decode_depth_file(path: &Path, encoding: DepthEncoding) -> Result<DecodedDepth> {
-    let bytes = std::fs::read(path).map_err(|source| HoloError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = crate::io::read_bytes(path)?;
     let (raw, bits) = if encoding == DepthEncoding::KinectDisparity && bytes.starts_with(b"P5") {
         read_kinect_pgm(&bytes, path)?
     } else {
-        let img = image::ImageReader::new(std::io::Cursor::new(&bytes))
-            .with_guessed_format()
-            .map_err(|source| HoloError::Io {
-                path: path.to_path_buf(),
-                source,
-            })?
-            .decode()
-            .map_err(|source| HoloError::Image {
-                path: path.to_path_buf(),
-                source,
-            })?;
+        let img = crate::io::decode_image(path, &bytes)?;
         first_channel(&img, path, encoding)?
     };
     if raw.is_empty() {

@@ -20,21 +20,7 @@ use crate::error::{HoloError, Result};
 /// Errors: [`HoloError::Io`] (unreadable) or [`HoloError::Image`] (undecodable), naming `path`;
 /// [`HoloError::InvalidData`] for an empty image.
 pub fn load_rgb(path: &Path) -> Result<Array3<f32>> {
-    let bytes = std::fs::read(path).map_err(|source| HoloError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let img = image::ImageReader::new(std::io::Cursor::new(&bytes))
-        .with_guessed_format()
-        .map_err(|source| HoloError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?
-        .decode()
-        .map_err(|source| HoloError::Image {
-            path: path.to_path_buf(),
-            source,
-        })?;
+    let img = crate::io::decode_image(path, &crate::io::read_bytes(path)?)?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     if w == 0 || h == 0 {
         return Err(HoloError::InvalidData(format!(
