@@ -3,6 +3,7 @@
 //! Every subcommand is a thin layer over the `tensorholo` public API: argument parsing, progress output and
 //! files. The physics lives in the SDK.
 
+mod dataset;
 mod propagate;
 mod reference;
 
@@ -29,6 +30,9 @@ enum Command {
     /// Propagate a complex field stored in .npy with the angular spectrum method (paper Eq. 2), for checks
     /// against other implementations.
     Propagate(propagate::PropagateArgs),
+    /// Generate a training dataset: random-scene layered depth images with their SM-LBM midpoint holograms
+    /// (paper section "MIT-CGH-4K-V2"), in .npz shards with a manifest.json (format: docs/DATASET.md).
+    Dataset(Box<dataset::DatasetArgs>),
 }
 
 fn main() {
@@ -39,6 +43,7 @@ fn main() {
     let result = match cli.command {
         Command::Reference(args) => reference::run(&args),
         Command::Propagate(args) => propagate::run(&args),
+        Command::Dataset(args) => dataset::run(&args),
     };
     if let Err(err) = result {
         eprintln!("error: {err:#}");

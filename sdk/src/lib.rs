@@ -12,12 +12,15 @@
 //! - [`reference`]: the non-learned pipeline (SM-LBM → offset → double phase → SLM codes → previews).
 //! - [`metrics`]: PSNR and SSIM.
 //! - [`io`]: PNG and `.npy` input/output.
+//! - [`dataset`]: the training dataset (MIT-CGH-4K-V2 style): random LDIs + SM-LBM midpoint holograms in
+//!   `.npz` shards with a `manifest.json`.
 //!
 //! Conventions (`DESIGN.md` §2): SI units, channel order R, G, B, normalised depth `d ∈ [0,1]` with
 //! 0 = near, a point at `d` lies at `z(d) = (0.5 − d)·volume_depth` from the midpoint plane, `+z` along the
 //! light (toward the viewer).
 
 pub mod color;
+pub mod dataset;
 pub mod encoding;
 pub mod error;
 pub mod io;

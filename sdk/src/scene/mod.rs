@@ -9,11 +9,14 @@
 //!   in diopters by default) → [`fill_invalid`] (holes take the farthest neighbouring depth, before any
 //!   resizing, never read as near) → [`RgbdFrame::resize`].
 //! * [`procedural`]: a deterministic test scene with near, mid and far textured objects and occlusions.
+//! * [`random`]: random textured scenes as LDIs ([`random_ldi`]), the input side of the training dataset
+//!   (paper section "MIT-CGH-4K-V2"), built by per-pixel depth sorting ([`ldi_from_fragments`]).
 
 mod depth;
 mod frame;
 mod load;
 pub mod procedural;
+pub mod random;
 
 pub use depth::{
     decode_depth, decode_depth_file, fill_invalid, normalise_depth, DecodedDepth, DepthEncoding,
@@ -22,3 +25,6 @@ pub use depth::{
 pub use frame::{LayeredDepthImage, LdiLayer, RgbdFrame};
 pub use load::{load_rgb, load_rgbd, DepthReport, LoadOptions};
 pub use procedural::{default_scene, default_scene_ldi};
+pub use random::{
+    ldi_from_fragments, list_photos, random_ldi, Fragment, RandomSceneConfig, RandomSceneGenerator,
+};

@@ -72,7 +72,8 @@ struct Planes {
 const TF_CACHE_BYTES: usize = 64 << 20;
 
 impl SmLbm {
-    fn validate(&self) -> Result<()> {
+    /// Checks `levels` and the optical setup.
+    pub(crate) fn validate(&self) -> Result<()> {
         self.setup.validate()?;
         if self.levels == 0 || self.levels > 1 << 20 {
             return Err(invalid(

@@ -1,0 +1,330 @@
+//! `holo dataset`: random-scene LDIs + SM-LBM midpoint holograms in `.npz` shards with a manifest
+//! (the paper's MIT-CGH-4K-V2 recipe; format in `docs/DATASET.md`).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use tensorholo::dataset::{
+    generate, save_ldi_previews, DatasetConfig, GenerateOptions, SampleGenerator, Split,
+    MANIFEST_FILE,
+};
+use tensorholo::io::ensure_not_input;
+use tensorholo::optics::{OpticalSetup, PropagationOptions};
+use tensorholo::scene::RandomSceneConfig;
+use tensorholo::synthesis::SmLbm;
+
+/// `SIZE` (square) or `HEIGHTxWIDTH`.
+fn parse_size(s: &str) -> std::result::Result<(usize, usize), String> {
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<usize>()
+            .ok()
+            .filter(|&n| n > 0)
+            .ok_or_else(|| format!("`{v}` is not a positive integer"))
+    };
+    match s.split_once(['x', 'X']) {
+        Some((h, w)) => Ok((parse(h)?, parse(w)?)),
+        None => {
+            let n = parse(s)?;
+            Ok((n, n))
+        }
+    }
+}
+
+/// `MIN-MAX` (inclusive) or a single number.
+fn parse_count_range(s: &str) -> std::result::Result<[usize; 2], String> {
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<usize>()
+            .map_err(|_| format!("`{v}` is not a non-negative integer"))
+    };
+    let (lo, hi) = match s.split_once('-') {
+        Some((a, b)) => (parse(a)?, parse(b)?),
+        None => {
+            let n = parse(s)?;
+            (n, n)
+        }
+    };
+    if lo > hi {
+        return Err(format!("range `{s}`: MIN must not exceed MAX"));
+    }
+    Ok([lo, hi])
+}
+
+/// Arguments of `holo dataset`.
+#[derive(Debug, Args)]
+#[command(after_long_help = EXAMPLES)]
+pub struct DatasetArgs {
+    /// Output folder (created if missing). A folder that already holds a dataset (manifest.json) is
+    /// refused unless --force.
+    #[arg(long)]
+    out: PathBuf,
+    /// Training samples (paper: 3800).
+    #[arg(long, default_value_t = 8)]
+    train: usize,
+    /// Validation samples (paper: 100).
+    #[arg(long, default_value_t = 2)]
+    val: usize,
+    /// Test samples (paper: 100).
+    #[arg(long, default_value_t = 2)]
+    test: usize,
+    /// Sample size: SIZE (square) or HEIGHTxWIDTH (paper: 384).
+    #[arg(long, default_value = "384", value_parser = parse_size)]
+    size: (usize, usize),
+    /// LDI layers kept per pixel (paper: 5).
+    #[arg(long, default_value_t = 5)]
+    layers: usize,
+    /// SM-LBM depth planes of the ground-truth hologram (paper: 2048 suffices; 10000 as a showcase).
+    #[arg(long, default_value_t = 2048)]
+    levels: usize,
+    /// Base seed; sample i of a split is regenerated exactly from (seed, split, i).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Samples per .npz shard.
+    #[arg(long, default_value_t = 16)]
+    shard_size: usize,
+    /// Folder of photos (PNG, JPEG, PPM) whose random crops may texture the shapes.
+    #[arg(long)]
+    photos: Option<PathBuf>,
+    /// Probability that a texture is a photo crop (with --photos).
+    #[arg(long, default_value_t = 0.5, requires = "photos")]
+    photo_probability: f32,
+    /// Number of shapes per scene, MIN-MAX (default 8-40), in front of the background plane.
+    #[arg(long, value_parser = parse_count_range)]
+    shapes: Option<[usize; 2]>,
+    /// Probability that a shape is a thin structure (line, thin bar, ring, wavy stroke); default 0.2.
+    #[arg(long)]
+    thin_probability: Option<f32>,
+    /// Store shard arrays uncompressed (about twice the size, faster to read) instead of deflated
+    /// (numpy.load reads both).
+    #[arg(long)]
+    uncompressed: bool,
+    /// PNG previews of the first training samples written to OUT/previews/.
+    #[arg(long, default_value_t = 4)]
+    previews: usize,
+    /// Worker threads (default: all cores, or RAYON_NUM_THREADS). Samples run in parallel; each
+    /// sample's three colours share the same pool.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Zero-pad propagations to 2H x 2W (linear convolution; 4x slower).
+    #[arg(long)]
+    pad: bool,
+    /// Band-limit transfer functions (Matsushima & Shimobaba 2009).
+    #[arg(long)]
+    band_limit: bool,
+    /// SLM pixel pitch in metres.
+    #[arg(long, default_value_t = 8e-6)]
+    pitch_m: f64,
+    /// Laser wavelengths in metres, R,G,B.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_values_t = [638e-9, 520e-9, 450e-9])]
+    wavelengths_m: Vec<f64>,
+    /// Depth of the 3D volume in metres, centred on the midpoint hologram.
+    #[arg(long, default_value_t = 6e-3)]
+    volume_depth_m: f64,
+    /// Replace a dataset already in --out (manifest, same-named shards, shards the old manifest listed).
+    #[arg(long)]
+    force: bool,
+}
+
+const EXAMPLES: &str = "\
+Examples:
+  holo dataset --out data/quick
+      8/2/2 samples of 384x384, 5-layer LDIs, 2048 SM-LBM planes (a few minutes on 2 cores)
+  holo dataset --out data/mit-cgh-4k-v2 --train 3800 --val 100 --test 100 --size 384 --layers 5 --levels 10000
+      the paper's MIT-CGH-4K-V2 configuration
+  holo dataset --out data/photos --photos ~/Pictures/textures --photo-probability 0.7
+      shapes textured with random crops of your photos
+
+Outputs in --out:
+  manifest.json            format, generator (version, git commit), seed, splits and shard files,
+                           resolution, LDI layers, SM-LBM levels, optics, scene configuration, array
+                           layouts, statistics (non-empty planes, occlusion, timings)
+  train-00000.npz ...      shards: ldi float32 [N, 4L, H, W] (per layer R, G, B amplitude, depth),
+  val-00000.npz ...        ldi_valid uint8 [N, L, H, W], midpoint complex64 [N, 3, H, W] (R, G, B),
+  test-00000.npz ...       seed uint64 [N], index uint64 [N]; see docs/DATASET.md
+  previews/train_00000_rgb.png, _depth.png, _layers.png
+                           first-layer amplitude, first-layer depth (white = far), all layers";
+
+/// The git commit of this build's source tree, `-dirty` if it has uncommitted changes to tracked
+/// files; from `TENSORHOLO_GIT_COMMIT` at build time if set, else asked of git at run time (works when
+/// run from a checkout), else `None`.
+fn git_commit() -> Option<String> {
+    if let Some(c) = option_env!("TENSORHOLO_GIT_COMMIT") {
+        return Some(c.to_string());
+    }
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let out = Command::new("git")
+        .arg("-C")
+        .arg(dir)
+        .args(["rev-parse", "HEAD"])
+        .output()
+        .ok()?;
+    if !out.status.success() {
+        return None;
+    }
+    let commit = String::from_utf8(out.stdout).ok()?.trim().to_string();
+    let dirty = Command::new("git")
+        .arg("-C")
+        .arg(dir)
+        .args(["status", "--porcelain", "--untracked-files=no"])
+        .output()
+        .map(|o| o.status.success() && !o.stdout.is_empty())
+        .unwrap_or(false);
+    Some(if dirty { commit + "-dirty" } else { commit })
+}
+
+fn progress_bar(total: u64) -> ProgressBar {
+    let bar = ProgressBar::new(total);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{msg} [{elapsed_precise}] {wide_bar} {pos}/{len} samples ({per_sec}, eta {eta})",
+        )
+        .expect("valid template"),
+    );
+    bar.set_message("dataset");
+    bar
+}
+
+/// Builds the dataset configuration from the arguments.
+fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
+    if args.wavelengths_m.len() != 3 {
+        bail!(
+            "--wavelengths-m needs 3 comma-separated values (R,G,B), got {}",
+            args.wavelengths_m.len()
+        );
+    }
+    let defaults = RandomSceneConfig::default();
+    let scene = RandomSceneConfig {
+        height: args.size.0,
+        width: args.size.1,
+        layers: args.layers,
+        shape_count: args.shapes.unwrap_or(defaults.shape_count),
+        thin_probability: args.thin_probability.unwrap_or(defaults.thin_probability),
+        photo_folder: args.photos.clone(),
+        photo_probability: args.photo_probability,
+        ..defaults
+    };
+    let synthesis = SmLbm {
+        levels: args.levels,
+        setup: OpticalSetup {
+            wavelengths_m: [
+                args.wavelengths_m[0],
+                args.wavelengths_m[1],
+                args.wavelengths_m[2],
+            ],
+            pixel_pitch_m: args.pitch_m,
+            volume_depth_m: args.volume_depth_m,
+        },
+        options: PropagationOptions {
+            pad: args.pad,
+            band_limit: args.band_limit,
+        },
+        silhouette_masks: true,
+    };
+    let config = DatasetConfig {
+        scene,
+        synthesis,
+        seed: args.seed,
+        train: args.train,
+        val: args.val,
+        test: args.test,
+        shard_size: args.shard_size,
+        compress: !args.uncompressed,
+    };
+    config.validate()?;
+    Ok(config)
+}
+
+/// Runs `holo dataset`.
+pub fn run(args: &DatasetArgs) -> Result<()> {
+    let config = config(args)?;
+    if args.out.join(MANIFEST_FILE).exists() && !args.force {
+        bail!(
+            "`{}` already holds a dataset ({MANIFEST_FILE}); pass --force to replace it or choose \
+             another --out",
+            args.out.display()
+        );
+    }
+    let pool = {
+        let mut b = rayon::ThreadPoolBuilder::new();
+        if let Some(n) = args.threads {
+            if n == 0 {
+                bail!("--threads must be at least 1");
+            }
+            b = b.num_threads(n);
+        }
+        b.build().context("cannot start the worker threads")?
+    };
+    pool.install(|| run_in_pool(args, &config))
+}
+
+fn run_in_pool(args: &DatasetArgs, config: &DatasetConfig) -> Result<()> {
+    let generator = SampleGenerator::new(config)?;
+    let photos: Vec<&Path> = generator
+        .scenes()
+        .photo_paths()
+        .iter()
+        .map(PathBuf::as_path)
+        .collect();
+    let total = (config.train + config.val + config.test) as u64;
+    log::info!(
+        "{} samples ({}/{}/{}) of {}x{}, {} LDI layers, {} SM-LBM planes, {} threads{}",
+        total,
+        config.train,
+        config.val,
+        config.test,
+        config.scene.height,
+        config.scene.width,
+        config.scene.layers,
+        config.synthesis.levels,
+        rayon::current_num_threads(),
+        if photos.is_empty() {
+            String::new()
+        } else {
+            format!(", {} photos", photos.len())
+        }
+    );
+
+    // Previews first (cheap: scenes only), so that a long run can be checked early.
+    let preview_dir = args.out.join("previews");
+    for i in 0..args.previews.min(config.train) {
+        let stem = format!("train_{i:05}");
+        for suffix in ["rgb", "depth", "layers"] {
+            ensure_not_input(&preview_dir.join(format!("{stem}_{suffix}.png")), &photos)?;
+        }
+        let ldi = generator.ldi(Split::Train, i)?;
+        save_ldi_previews(&preview_dir, &stem, &ldi)?;
+    }
+
+    let bar = progress_bar(total);
+    let options = GenerateOptions {
+        overwrite: args.force,
+        git_commit: git_commit(),
+        command: std::env::args().collect(),
+    };
+    let manifest = generate(&args.out, config, &options, &|done, _| {
+        bar.set_position(done)
+    })?;
+    bar.finish_and_clear();
+    let st = &manifest.statistics;
+    log::info!(
+        "wrote {} ({} shards) in {:.1} s: {:.2} s per sample on one worker, {:.0} non-empty SM-LBM \
+         planes per sample (min {}, max {}), valid pixels per layer {:?}, {:.0}% of pixels with >= 2 layers",
+        args.out.display(),
+        manifest.splits.iter().map(|s| s.shards.len()).sum::<usize>(),
+        st.wall_seconds,
+        st.mean_sample_seconds,
+        st.mean_nonempty_planes,
+        st.min_nonempty_planes,
+        st.max_nonempty_planes,
+        st.mean_valid_fraction
+            .iter()
+            .map(|v| format!("{:.0}%", 100.0 * v))
+            .collect::<Vec<_>>(),
+        100.0 * st.mean_multi_layer_fraction
+    );
+    Ok(())
+}

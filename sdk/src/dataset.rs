@@ -1,0 +1,1096 @@
+//! The training dataset: random layered depth images paired with their SM-LBM midpoint holograms, as
+//! in the paper's MIT-CGH-4K-V2 (section "MIT-CGH-4K-V2": 3800/100/100 samples of 384×384, 5-layer
+//! LDIs, SM-LBM with 2048 planes or more).
+//!
+//! One *sample* is a random scene ([`crate::scene::random`]) rendered as an `L`-layer LDI and the
+//! midpoint hologram that [`SmLbm`] computes from the **full** LDI (the ground truth the hologram CNN
+//! learns, paper Fig. 3). Samples are written in `.npz` *shards* (NumPy zip archives, one per
+//! `shard_size` consecutive samples of a split) next to a `manifest.json` that records everything
+//! needed to read, check and regenerate them. The format is specified in `docs/DATASET.md`:
+//!
+//! | array | dtype | shape | content |
+//! |---|---|---|---|
+//! | `ldi` | float32 | `[N, 4·L, H, W]` | per layer `k` (front to back) channels `4k..4k+3` = R, G, B amplitude in `[0, 1]`, depth `d ∈ [0, 1]` (0 = near); invalid pixels: amplitude 0, depth 1 |
+//! | `ldi_valid` | uint8 | `[N, L, H, W]` | 1 where layer `k` holds a point |
+//! | `midpoint` | complex64 | `[N, 3, H, W]` | R, G, B midpoint hologram (complex field at `z = 0`) |
+//! | `seed` | uint64 | `[N]` | scene seed ([`sample_seed`]) |
+//! | `index` | uint64 | `[N]` | sample index within its split |
+//!
+//! Every sample is a pure function of (base seed, split, index) and the configuration, so generation
+//! runs in parallel over samples (rayon; [`SmLbm`] parallelises colours inside a sample on the same
+//! pool) and any sample can be regenerated alone ([`SampleGenerator::sample`]).
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+use ndarray::{s, Array1, Array3, Array4, ArrayView3, Axis, Zip};
+use ndarray_npy::{NpzReader, NpzWriter};
+use num_complex::Complex32;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{invalid, HoloError, Result};
+use crate::io::{ensure_not_input, save_amplitude_png};
+use crate::scene::{LayeredDepthImage, LdiLayer, RandomSceneConfig, RandomSceneGenerator};
+use crate::synthesis::{ldi_layers, SmLbm};
+
+/// Value of the manifest's `format` field.
+pub const FORMAT_NAME: &str = "tensorholo-ldi-hologram-dataset";
+/// Version of the file format described in `docs/DATASET.md` (manifest field `format_version`).
+pub const FORMAT_VERSION: u32 = 1;
+/// File name of the manifest inside a dataset folder.
+pub const MANIFEST_FILE: &str = "manifest.json";
+
+/// A dataset split. Serialised in lower case (`"train"`, `"val"`, `"test"`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Split {
+    /// Training samples (paper: 3800).
+    Train,
+    /// Validation samples (paper: 100).
+    Val,
+    /// Test samples (paper: 100).
+    Test,
+}
+
+impl Split {
+    /// The three splits in file order.
+    pub const ALL: [Split; 3] = [Split::Train, Split::Val, Split::Test];
+
+    /// Lower-case name, used in shard file names.
+    pub fn name(self) -> &'static str {
+        match self {
+            Split::Train => "train",
+            Split::Val => "val",
+            Split::Test => "test",
+        }
+    }
+
+    /// Numeric id mixed into [`sample_seed`]: train 0, val 1, test 2.
+    pub fn id(self) -> u64 {
+        match self {
+            Split::Train => 0,
+            Split::Val => 1,
+            Split::Test => 2,
+        }
+    }
+}
+
+/// SplitMix64 finaliser (Steele, Lea, Flood 2014).
+fn splitmix64(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// The scene seed of sample `index` of `split` in a dataset of base seed `base_seed`:
+/// `m(m(m(base_seed) ^ split.id()) ^ index)` with `m` the SplitMix64 finaliser (wrapping `u64`
+/// arithmetic; constants in the source and `docs/DATASET.md`). The scene is then
+/// [`crate::scene::random_ldi`]`(config, seed)`, i.e. a `ChaCha8Rng::seed_from_u64(seed)` stream.
+pub fn sample_seed(base_seed: u64, split: Split, index: u64) -> u64 {
+    splitmix64(splitmix64(splitmix64(base_seed) ^ split.id()) ^ index)
+}
+
+/// What to generate. `Default`: the random-scene defaults (384×384, 5 layers), SM-LBM with 2048 planes
+/// and the paper's optics, seed 1, 8/2/2 samples, 16 samples per shard, deflate-compressed shards.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DatasetConfig {
+    /// Random scenes (size, layers, shapes, textures).
+    pub scene: RandomSceneConfig,
+    /// Ground-truth hologram synthesis: planes (`levels`), optics, propagation options.
+    pub synthesis: SmLbm,
+    /// Base seed ([`sample_seed`]).
+    pub seed: u64,
+    /// Training samples (paper: 3800).
+    pub train: usize,
+    /// Validation samples (paper: 100).
+    pub val: usize,
+    /// Test samples (paper: 100).
+    pub test: usize,
+    /// Samples per `.npz` shard (the last shard of a split may hold fewer).
+    pub shard_size: usize,
+    /// Deflate-compress the arrays inside each shard (as `numpy.savez_compressed`; about half the size,
+    /// mostly from the sparse rear LDI layers); `numpy.load` reads both kinds.
+    pub compress: bool,
+}
+
+impl Default for DatasetConfig {
+    fn default() -> Self {
+        Self {
+            scene: RandomSceneConfig::default(),
+            synthesis: SmLbm::default(),
+            seed: 1,
+            train: 8,
+            val: 2,
+            test: 2,
+            shard_size: 16,
+            compress: true,
+        }
+    }
+}
+
+impl DatasetConfig {
+    /// Number of samples of `split`.
+    pub fn count(&self, split: Split) -> usize {
+        match split {
+            Split::Train => self.train,
+            Split::Val => self.val,
+            Split::Test => self.test,
+        }
+    }
+
+    /// Checks the configuration.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for a bad scene configuration
+    /// ([`RandomSceneConfig::validate`]), bad synthesis parameters (`levels`, optics), `shard_size`
+    /// of 0, or no sample at all (`train + val + test = 0`), or more than 10⁸ samples per split.
+    pub fn validate(&self) -> Result<()> {
+        self.scene.validate()?;
+        self.synthesis.validate()?;
+        if self.shard_size == 0 {
+            return Err(invalid("shard_size", "must be at least 1"));
+        }
+        if Split::ALL.iter().all(|&s| self.count(s) == 0) {
+            return Err(invalid(
+                "samples",
+                "the dataset needs at least one sample (train + val + test > 0)",
+            ));
+        }
+        if let Some(s) = Split::ALL.iter().find(|&&s| self.count(s) > 100_000_000) {
+            return Err(invalid(
+                "samples",
+                format!(
+                    "{} split: at most 10^8 samples, got {}",
+                    s.name(),
+                    self.count(*s)
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Occlusion statistics of one LDI.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LdiStatistics {
+    /// Fraction of pixels valid in each layer `[L]` (layer 0 first).
+    pub valid_fraction: Vec<f64>,
+    /// Fraction of pixels with at least two valid layers: something is hidden behind what an RGB-D
+    /// camera would see.
+    pub multi_layer_fraction: f64,
+    /// Mean number of valid layers per pixel.
+    pub mean_valid_layers: f64,
+}
+
+impl LdiStatistics {
+    /// Statistics of `ldi`.
+    pub fn of(ldi: &LayeredDepthImage) -> Self {
+        let n = (ldi.height() * ldi.width()) as f64;
+        let valid_fraction: Vec<f64> = ldi
+            .layers()
+            .iter()
+            .map(|l| l.valid.iter().filter(|&&v| v).count() as f64 / n)
+            .collect();
+        let mut counts = ndarray::Array2::<u32>::zeros((ldi.height(), ldi.width()));
+        for l in ldi.layers() {
+            Zip::from(&mut counts)
+                .and(&l.valid)
+                .for_each(|c, &v| *c += u32::from(v));
+        }
+        let multi = counts.iter().filter(|&&c| c >= 2).count() as f64 / n;
+        Self {
+            mean_valid_layers: valid_fraction.iter().sum(),
+            valid_fraction,
+            multi_layer_fraction: multi,
+        }
+    }
+}
+
+/// One generated sample.
+#[derive(Debug, Clone)]
+pub struct Sample {
+    /// Split it belongs to.
+    pub split: Split,
+    /// Index within the split.
+    pub index: usize,
+    /// Scene seed ([`sample_seed`]).
+    pub seed: u64,
+    /// The random scene, `L` layers of `[3, H, W]` amplitude, `[H, W]` depth and validity.
+    pub ldi: LayeredDepthImage,
+    /// Midpoint hologram `[3, H, W]` (R, G, B) of the full LDI by [`SmLbm::synthesize`].
+    pub midpoint: Array3<Complex32>,
+    /// Number of non-empty SM-LBM depth planes (propagations per colour).
+    pub nonempty_planes: usize,
+    /// Seconds spent generating the sample (scene and hologram) on its worker thread.
+    pub seconds: f64,
+}
+
+/// Generates samples of one [`DatasetConfig`] (scene generator with its photos loaded, synthesis,
+/// base seed). `Sync`: share one across threads.
+#[derive(Debug, Clone)]
+pub struct SampleGenerator {
+    scenes: RandomSceneGenerator,
+    synthesis: SmLbm,
+    seed: u64,
+}
+
+impl SampleGenerator {
+    /// Validates `config` and loads its photos.
+    ///
+    /// Errors: as [`DatasetConfig::validate`] and [`RandomSceneGenerator::new`].
+    pub fn new(config: &DatasetConfig) -> Result<Self> {
+        config.validate()?;
+        Ok(Self {
+            scenes: RandomSceneGenerator::new(config.scene.clone())?,
+            synthesis: config.synthesis,
+            seed: config.seed,
+        })
+    }
+
+    /// The scene generator (configuration, photo list).
+    pub fn scenes(&self) -> &RandomSceneGenerator {
+        &self.scenes
+    }
+
+    /// The LDI of sample `index` of `split` (cheap: no hologram).
+    ///
+    /// Errors: as [`RandomSceneGenerator::generate`].
+    pub fn ldi(&self, split: Split, index: usize) -> Result<LayeredDepthImage> {
+        self.scenes
+            .generate(sample_seed(self.seed, split, index as u64))
+    }
+
+    /// Sample `index` of `split`: its LDI and the SM-LBM midpoint hologram of all its layers.
+    ///
+    /// Errors: as [`RandomSceneGenerator::generate`] and [`SmLbm::synthesize`].
+    pub fn sample(&self, split: Split, index: usize) -> Result<Sample> {
+        let t = Instant::now();
+        let seed = sample_seed(self.seed, split, index as u64);
+        let ldi = self.scenes.generate(seed)?;
+        let layers = ldi_layers(&ldi);
+        let nonempty_planes = self.synthesis.propagation_count(&layers)?;
+        let midpoint = self.synthesis.synthesize(&layers, &|_, _| {})?;
+        drop(layers);
+        Ok(Sample {
+            split,
+            index,
+            seed,
+            ldi,
+            midpoint,
+            nonempty_planes,
+            seconds: t.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+/// The network-input tensor of an LDI: `ldi` `[4·L, H, W]` f32 (per layer R, G, B amplitude then depth;
+/// invalid pixels amplitude 0 and depth 1) and `valid` `[L, H, W]` u8 (1 = point present). This is one
+/// sample of the shard arrays `ldi` and `ldi_valid`, and the hologram CNN's input layout
+/// (`DESIGN.md` §3).
+pub fn ldi_tensor(ldi: &LayeredDepthImage) -> (Array3<f32>, Array3<u8>) {
+    let (l, h, w) = (ldi.num_layers(), ldi.height(), ldi.width());
+    let mut x = Array3::<f32>::zeros((4 * l, h, w));
+    let mut valid = Array3::<u8>::zeros((l, h, w));
+    for (k, layer) in ldi.layers().iter().enumerate() {
+        for c in 0..3 {
+            Zip::from(x.index_axis_mut(Axis(0), 4 * k + c))
+                .and(layer.amplitude.index_axis(Axis(0), c))
+                .and(&layer.valid)
+                .for_each(|o, &a, &v| *o = if v { a } else { 0.0 });
+        }
+        Zip::from(x.index_axis_mut(Axis(0), 4 * k + 3))
+            .and(&layer.depth)
+            .and(&layer.valid)
+            .for_each(|o, &d, &v| *o = if v { d } else { 1.0 });
+        Zip::from(valid.index_axis_mut(Axis(0), k))
+            .and(&layer.valid)
+            .for_each(|o, &v| *o = u8::from(v));
+    }
+    (x, valid)
+}
+
+/// The inverse of [`ldi_tensor`]: an LDI from `ldi` `[4·L, H, W]` and `valid` `[L, H, W]`.
+///
+/// Errors: [`HoloError::ShapeMismatch`] if the shapes disagree or `4·L` channels do not match `L`
+/// validity planes; otherwise as [`LayeredDepthImage::new`].
+pub fn ldi_from_tensor(ldi: ArrayView3<f32>, valid: ArrayView3<u8>) -> Result<LayeredDepthImage> {
+    let (c, h, w) = ldi.dim();
+    let l = valid.dim().0;
+    if c != 4 * l || valid.dim() != (l, h, w) || l == 0 {
+        return Err(HoloError::ShapeMismatch {
+            what: "LDI tensor [4*L, H, W] vs validity [L, H, W]".into(),
+            expected: vec![4 * l.max(1), h, w],
+            got: vec![c, valid.dim().1, valid.dim().2],
+        });
+    }
+    let layers = (0..l)
+        .map(|k| LdiLayer {
+            amplitude: ldi.slice(s![4 * k..4 * k + 3, .., ..]).to_owned(),
+            depth: ldi.index_axis(Axis(0), 4 * k + 3).to_owned(),
+            valid: valid.index_axis(Axis(0), k).mapv(|v| v != 0),
+        })
+        .collect();
+    LayeredDepthImage::new(layers)
+}
+
+fn npz_error(path: &Path, reason: impl std::fmt::Display) -> HoloError {
+    HoloError::Npy {
+        path: path.to_path_buf(),
+        reason: reason.to_string(),
+    }
+}
+
+fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> HoloError + '_ {
+    move |source| HoloError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// Writes `bytes`-producing `write` to `path` atomically: into a hidden temporary file beside it,
+/// then renamed over `path`.
+fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let name = path
+        .file_name()
+        .ok_or_else(|| invalid("path", format!("`{}` has no file name", path.display())))?;
+    let tmp = path.with_file_name(format!(".{}.partial", name.to_string_lossy()));
+    let result = write(&tmp).and_then(|()| std::fs::rename(&tmp, path).map_err(io_error(path)));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Writes `samples` (all of one size and layer count) as one `.npz` shard at `path`, arrays stacked
+/// along axis 0 in the given order: `ldi` f32 `[N, 4·L, H, W]`, `ldi_valid` u8 `[N, L, H, W]`,
+/// `midpoint` complex64 `[N, 3, H, W]`, `seed` u64 `[N]`, `index` u64 `[N]` (see the module docs).
+/// With `compress` the members are deflated. The file appears atomically (temporary file + rename).
+///
+/// Errors: [`HoloError::InvalidParameter`] (`samples`) for an empty slice;
+/// [`HoloError::ShapeMismatch`] if samples differ in size or layer count; [`HoloError::Io`] /
+/// [`HoloError::Npy`] naming `path` if writing fails.
+pub fn write_shard(path: &Path, samples: &[Sample], compress: bool) -> Result<()> {
+    let first = samples
+        .first()
+        .ok_or_else(|| invalid("samples", "a shard needs at least one sample"))?;
+    let (l, h, w) = (
+        first.ldi.num_layers(),
+        first.ldi.height(),
+        first.ldi.width(),
+    );
+    let n = samples.len();
+    let mut ldi = Array4::<f32>::zeros((n, 4 * l, h, w));
+    let mut valid = Array4::<u8>::zeros((n, l, h, w));
+    let mut midpoint = Array4::<Complex32>::zeros((n, 3, h, w));
+    for (i, sample) in samples.iter().enumerate() {
+        let got = (
+            sample.ldi.num_layers(),
+            sample.ldi.height(),
+            sample.ldi.width(),
+        );
+        if got != (l, h, w) || sample.midpoint.dim() != (3, h, w) {
+            return Err(HoloError::ShapeMismatch {
+                what: format!("sample {i} of the shard (LDI layers, height, width) vs sample 0"),
+                expected: vec![l, h, w],
+                got: vec![got.0, got.1, got.2],
+            });
+        }
+        let (x, v) = ldi_tensor(&sample.ldi);
+        ldi.index_axis_mut(Axis(0), i).assign(&x);
+        valid.index_axis_mut(Axis(0), i).assign(&v);
+        midpoint.index_axis_mut(Axis(0), i).assign(&sample.midpoint);
+    }
+    let seed = Array1::from_iter(samples.iter().map(|s| s.seed));
+    let index = Array1::from_iter(samples.iter().map(|s| s.index as u64));
+    write_atomic(path, |tmp| {
+        let file = std::fs::File::create(tmp).map_err(io_error(tmp))?;
+        let buf = std::io::BufWriter::with_capacity(1 << 20, file);
+        let mut npz = if compress {
+            NpzWriter::new_compressed(buf)
+        } else {
+            NpzWriter::new(buf)
+        };
+        let err = |e| npz_error(path, e);
+        npz.add_array("ldi", &ldi).map_err(err)?;
+        npz.add_array("ldi_valid", &valid).map_err(err)?;
+        npz.add_array("midpoint", &midpoint).map_err(err)?;
+        npz.add_array("seed", &seed).map_err(err)?;
+        npz.add_array("index", &index).map_err(err)?;
+        npz.finish().map_err(err)?;
+        Ok(())
+    })
+}
+
+/// The arrays of one shard, as written by [`write_shard`] (see the module docs for layouts).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Shard {
+    /// `[N, 4·L, H, W]` f32: per layer R, G, B amplitude, depth.
+    pub ldi: Array4<f32>,
+    /// `[N, L, H, W]` u8: 1 where the layer holds a point.
+    pub ldi_valid: Array4<u8>,
+    /// `[N, 3, H, W]` complex64: R, G, B midpoint hologram.
+    pub midpoint: Array4<Complex32>,
+    /// `[N]` scene seeds.
+    pub seed: Array1<u64>,
+    /// `[N]` sample indices within the split.
+    pub index: Array1<u64>,
+}
+
+impl Shard {
+    /// Number of samples `N`.
+    pub fn len(&self) -> usize {
+        self.seed.len()
+    }
+
+    /// Whether the shard holds no sample.
+    pub fn is_empty(&self) -> bool {
+        self.seed.is_empty()
+    }
+
+    /// Sample `i` of the shard as an LDI.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`i`) out of range; as [`ldi_from_tensor`].
+    pub fn sample_ldi(&self, i: usize) -> Result<LayeredDepthImage> {
+        if i >= self.len() {
+            return Err(invalid(
+                "i",
+                format!("sample {i} out of range (shard holds {})", self.len()),
+            ));
+        }
+        ldi_from_tensor(
+            self.ldi.index_axis(Axis(0), i),
+            self.ldi_valid.index_axis(Axis(0), i),
+        )
+    }
+}
+
+/// Reads a shard written by [`write_shard`] (compressed or not) and checks that its arrays agree.
+///
+/// Errors: [`HoloError::Io`] if the file cannot be opened; [`HoloError::Npy`] naming `path` if it is
+/// not an `.npz` archive, an array is missing or has the wrong dtype or rank;
+/// [`HoloError::ShapeMismatch`] if the arrays disagree in `N`, `L`, `H` or `W`.
+pub fn read_shard(path: &Path) -> Result<Shard> {
+    let file = std::fs::File::open(path).map_err(io_error(path))?;
+    let mut npz = NpzReader::new(std::io::BufReader::new(file)).map_err(|e| npz_error(path, e))?;
+    let named =
+        |name: &str, e: ndarray_npy::ReadNpzError| npz_error(path, format!("array `{name}`: {e}"));
+    let ldi: Array4<f32> = npz.by_name("ldi").map_err(|e| named("ldi", e))?;
+    let ldi_valid: Array4<u8> = npz
+        .by_name("ldi_valid")
+        .map_err(|e| named("ldi_valid", e))?;
+    let midpoint: Array4<Complex32> = npz.by_name("midpoint").map_err(|e| named("midpoint", e))?;
+    let seed: Array1<u64> = npz.by_name("seed").map_err(|e| named("seed", e))?;
+    let index: Array1<u64> = npz.by_name("index").map_err(|e| named("index", e))?;
+    let (n, c, h, w) = ldi.dim();
+    let l = c / 4;
+    let mismatch = |what: &str, expected: Vec<usize>, got: &[usize]| HoloError::ShapeMismatch {
+        what: format!("`{}`: {what}", path.display()),
+        expected,
+        got: got.to_vec(),
+    };
+    if c % 4 != 0 || c == 0 {
+        return Err(mismatch(
+            "ldi channels (4 per layer)",
+            vec![n, 4 * l.max(1), h, w],
+            ldi.shape(),
+        ));
+    }
+    if ldi_valid.dim() != (n, l, h, w) {
+        return Err(mismatch(
+            "ldi_valid vs ldi",
+            vec![n, l, h, w],
+            ldi_valid.shape(),
+        ));
+    }
+    if midpoint.dim() != (n, 3, h, w) {
+        return Err(mismatch(
+            "midpoint vs ldi",
+            vec![n, 3, h, w],
+            midpoint.shape(),
+        ));
+    }
+    if seed.len() != n || index.len() != n {
+        return Err(mismatch(
+            "seed and index vs ldi",
+            vec![n, n],
+            &[seed.len(), index.len()],
+        ));
+    }
+    Ok(Shard {
+        ldi,
+        ldi_valid,
+        midpoint,
+        seed,
+        index,
+    })
+}
+
+/// Who generated a dataset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GeneratorInfo {
+    /// `"tensorholo"`.
+    pub name: String,
+    /// Crate version.
+    pub version: String,
+    /// Git commit of the generating source (`"unknown"` if not known; `-dirty` suffix for local changes).
+    pub git_commit: String,
+    /// Command line, if generated by a program that supplied it.
+    pub command: Vec<String>,
+}
+
+/// SM-LBM parameters of the ground truth.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SynthesisInfo {
+    /// `"SM-LBM"` (silhouette-mask layer-based method, paper Eq. 1–4, all LDI layers).
+    pub method: String,
+    /// Number of depth planes `N` at `d_n = n/(N − 1)`.
+    pub levels: usize,
+    /// Silhouette masks applied (Eq. 3).
+    pub silhouette_masks: bool,
+    /// Propagations zero-padded to `2H × 2W`.
+    pub pad: bool,
+    /// Matsushima band limit applied.
+    pub band_limit: bool,
+    /// Plane at which the hologram is given: `"midpoint (z = 0)"`.
+    pub hologram_plane: String,
+    /// Initial phase of the plane fields: Maimone et al., `exp(i·2π·z_n/λ)` (Eq. 1, 4).
+    pub initial_phase: String,
+}
+
+/// Display geometry (`DESIGN.md` §2).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OpticsInfo {
+    /// R, G, B wavelengths in metres.
+    pub wavelengths_m: [f64; 3],
+    /// SLM pixel pitch in metres.
+    pub pixel_pitch_m: f64,
+    /// 3D volume depth in metres, centred on the midpoint hologram.
+    pub volume_depth_m: f64,
+    /// How normalised depth maps to position: `"z(d) = (0.5 - d) * volume_depth_m"`.
+    pub depth_to_z: String,
+}
+
+/// One shard file of a split.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ShardInfo {
+    /// File name inside the dataset folder (`<split>-<nnnnn>.npz`).
+    pub file: String,
+    /// Samples in it.
+    pub samples: usize,
+    /// Index (within the split) of its first sample; the rest follow consecutively.
+    pub first_index: usize,
+}
+
+/// One split.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SplitInfo {
+    /// Which split.
+    pub name: Split,
+    /// Number of samples.
+    pub samples: usize,
+    /// Its shards in order.
+    pub shards: Vec<ShardInfo>,
+}
+
+/// Description of one array in every shard.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ArrayInfo {
+    /// Member name (NumPy key).
+    pub name: String,
+    /// NumPy dtype (`float32`, `uint8`, `complex64`, `uint64`).
+    pub dtype: String,
+    /// Symbolic shape (`N` = samples in the shard, `L`, `H`, `W`).
+    pub shape: Vec<String>,
+    /// Content, units and layout.
+    pub description: String,
+}
+
+/// Statistics over all samples of a generated dataset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DatasetStatistics {
+    /// Number of samples.
+    pub samples: usize,
+    /// Mean number of non-empty SM-LBM planes (propagations per colour) per sample.
+    pub mean_nonempty_planes: f64,
+    /// Fewest non-empty planes of any sample.
+    pub min_nonempty_planes: usize,
+    /// Most non-empty planes of any sample.
+    pub max_nonempty_planes: usize,
+    /// Mean fraction of valid pixels per LDI layer `[L]`.
+    pub mean_valid_fraction: Vec<f64>,
+    /// Mean fraction of pixels with at least two valid layers.
+    pub mean_multi_layer_fraction: f64,
+    /// Smallest such fraction of any sample.
+    pub min_multi_layer_fraction: f64,
+    /// Mean number of valid layers per pixel.
+    pub mean_valid_layers: f64,
+    /// Largest midpoint amplitude `|H|` over all samples and colours.
+    pub max_midpoint_amplitude: f64,
+    /// Mean midpoint amplitude `|H|` over all samples, colours and pixels.
+    pub mean_midpoint_amplitude: f64,
+    /// Mean seconds per sample on one worker (scene + SM-LBM, colours in parallel on the pool).
+    pub mean_sample_seconds: f64,
+    /// Wall-clock seconds of the whole generation.
+    pub wall_seconds: f64,
+    /// Worker threads used.
+    pub threads: usize,
+}
+
+/// The `manifest.json` of a dataset folder (specified in `docs/DATASET.md`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// [`FORMAT_NAME`].
+    pub format: String,
+    /// [`FORMAT_VERSION`].
+    pub format_version: u32,
+    /// Who generated it.
+    pub generator: GeneratorInfo,
+    /// Seconds since the Unix epoch when generation finished.
+    pub created_unix_s: u64,
+    /// Base seed.
+    pub seed: u64,
+    /// How per-sample seeds derive from the base seed ([`sample_seed`]).
+    pub seed_derivation: String,
+    /// `[H, W]` in pixels.
+    pub resolution: [usize; 2],
+    /// LDI layers `L`.
+    pub ldi_layers: usize,
+    /// Ground-truth synthesis.
+    pub synthesis: SynthesisInfo,
+    /// Display geometry.
+    pub optics: OpticsInfo,
+    /// Random-scene configuration.
+    pub scene: RandomSceneConfig,
+    /// Photos used for textures (paths as given), empty without a photo folder.
+    pub photos: Vec<PathBuf>,
+    /// Samples per shard.
+    pub shard_size: usize,
+    /// Whether shard members are deflate-compressed.
+    pub compressed: bool,
+    /// The splits, train, val, test.
+    pub splits: Vec<SplitInfo>,
+    /// Arrays in every shard.
+    pub arrays: Vec<ArrayInfo>,
+    /// Statistics over all samples.
+    pub statistics: DatasetStatistics,
+}
+
+impl Manifest {
+    /// The entry of `split`.
+    pub fn split(&self, split: Split) -> Option<&SplitInfo> {
+        self.splits.iter().find(|s| s.name == split)
+    }
+}
+
+/// Reads and checks `dir/manifest.json`.
+///
+/// Errors: [`HoloError::Io`] if unreadable; [`HoloError::InvalidData`] if it is not valid JSON of this
+/// format, or another format or a newer version.
+pub fn read_manifest(dir: &Path) -> Result<Manifest> {
+    let path = dir.join(MANIFEST_FILE);
+    let text = std::fs::read_to_string(&path).map_err(io_error(&path))?;
+    let m: Manifest = serde_json::from_str(&text).map_err(|e| {
+        HoloError::InvalidData(format!(
+            "`{}` is not a dataset manifest: {e}",
+            path.display()
+        ))
+    })?;
+    if m.format != FORMAT_NAME || m.format_version > FORMAT_VERSION {
+        return Err(HoloError::InvalidData(format!(
+            "`{}` has format {} version {}; this build reads {FORMAT_NAME} up to version {FORMAT_VERSION}",
+            path.display(),
+            m.format,
+            m.format_version
+        )));
+    }
+    Ok(m)
+}
+
+/// Shard file name: `<split>-<nnnnn>.npz`.
+pub fn shard_file_name(split: Split, shard: usize) -> String {
+    format!("{}-{shard:05}.npz", split.name())
+}
+
+fn array_infos() -> Vec<ArrayInfo> {
+    let info = |name: &str, dtype: &str, shape: &[&str], description: &str| ArrayInfo {
+        name: name.into(),
+        dtype: dtype.into(),
+        shape: shape.iter().map(|s| s.to_string()).collect(),
+        description: description.into(),
+    };
+    vec![
+        info(
+            "ldi",
+            "float32",
+            &["N", "4*L", "H", "W"],
+            "layered depth image, layers front to back; channel 4k+c of layer k: c = 0, 1, 2 R, G, B \
+             amplitude (sqrt of linear intensity, [0, 1]), c = 3 normalised depth d in [0, 1] \
+             (0 = near, z(d) = (0.5 - d) * volume_depth_m from the midpoint plane); invalid pixels \
+             have amplitude 0 and depth 1",
+        ),
+        info(
+            "ldi_valid",
+            "uint8",
+            &["N", "L", "H", "W"],
+            "1 where layer k holds a scene point, else 0; layer 0 is 1 everywhere; \
+             ldi_valid[:, k+1] <= ldi_valid[:, k]",
+        ),
+        info(
+            "midpoint",
+            "complex64",
+            &["N", "3", "H", "W"],
+            "R, G, B midpoint hologram: complex field at z = 0 (centre of the 3D volume) computed by \
+             SM-LBM from all L layers; unnormalised (a plane wave of amplitude a has |H| = a)",
+        ),
+        info("seed", "uint64", &["N"], "scene seed of each sample"),
+        info("index", "uint64", &["N"], "index of each sample within its split"),
+    ]
+}
+
+/// Options of [`generate`] that are not part of the dataset's content.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GenerateOptions {
+    /// Replace a dataset already in the folder (its `manifest.json`, same-named shards, and shards
+    /// its manifest listed that the new one does not). Without it, a folder holding a manifest is
+    /// refused.
+    pub overwrite: bool,
+    /// Git commit of the generating source, recorded in the manifest (`None` → `"unknown"`).
+    pub git_commit: Option<String>,
+    /// Command line recorded in the manifest.
+    pub command: Vec<String>,
+}
+
+/// Running sums for [`DatasetStatistics`].
+#[derive(Default)]
+struct Accumulator {
+    samples: usize,
+    planes_sum: f64,
+    planes_min: usize,
+    planes_max: usize,
+    valid_sum: Vec<f64>,
+    multi_sum: f64,
+    multi_min: f64,
+    layers_sum: f64,
+    amp_max: f64,
+    amp_sum: f64,
+    seconds_sum: f64,
+}
+
+impl Accumulator {
+    fn add(&mut self, s: &Sample) {
+        let st = LdiStatistics::of(&s.ldi);
+        if self.samples == 0 {
+            self.planes_min = usize::MAX;
+            self.multi_min = f64::INFINITY;
+            self.valid_sum = vec![0.0; st.valid_fraction.len()];
+        }
+        self.samples += 1;
+        self.planes_sum += s.nonempty_planes as f64;
+        self.planes_min = self.planes_min.min(s.nonempty_planes);
+        self.planes_max = self.planes_max.max(s.nonempty_planes);
+        for (a, v) in self.valid_sum.iter_mut().zip(&st.valid_fraction) {
+            *a += v;
+        }
+        self.multi_sum += st.multi_layer_fraction;
+        self.multi_min = self.multi_min.min(st.multi_layer_fraction);
+        self.layers_sum += st.mean_valid_layers;
+        let (mut mx, mut sum) = (0.0f64, 0.0f64);
+        for v in &s.midpoint {
+            let a = f64::from(v.norm());
+            mx = mx.max(a);
+            sum += a;
+        }
+        self.amp_max = self.amp_max.max(mx);
+        self.amp_sum += sum / s.midpoint.len() as f64;
+        self.seconds_sum += s.seconds;
+    }
+
+    fn finish(&self, wall_seconds: f64) -> DatasetStatistics {
+        let n = self.samples.max(1) as f64;
+        DatasetStatistics {
+            samples: self.samples,
+            mean_nonempty_planes: self.planes_sum / n,
+            min_nonempty_planes: if self.samples == 0 {
+                0
+            } else {
+                self.planes_min
+            },
+            max_nonempty_planes: self.planes_max,
+            mean_valid_fraction: self.valid_sum.iter().map(|v| v / n).collect(),
+            mean_multi_layer_fraction: self.multi_sum / n,
+            min_multi_layer_fraction: if self.samples == 0 {
+                0.0
+            } else {
+                self.multi_min
+            },
+            mean_valid_layers: self.layers_sum / n,
+            max_midpoint_amplitude: self.amp_max,
+            mean_midpoint_amplitude: self.amp_sum / n,
+            mean_sample_seconds: self.seconds_sum / n,
+            wall_seconds,
+            threads: rayon::current_num_threads(),
+        }
+    }
+}
+
+/// A shard to produce: split, shard number, first index, sample count.
+#[derive(Debug, Clone, Copy)]
+struct ShardJob {
+    split: Split,
+    shard: usize,
+    first: usize,
+    samples: usize,
+}
+
+/// Generates a whole dataset into `out_dir`: every sample of every split (in parallel on the current
+/// rayon pool), the `.npz` shards (see [`write_shard`]; each written while the next ones compute) and
+/// finally `manifest.json` (see [`Manifest`]). `progress(done, total)` is called after every sample
+/// (from worker threads). Returns the manifest written.
+///
+/// Nothing is written unless the configuration is valid. A folder that already holds a
+/// `manifest.json` is refused unless [`GenerateOptions::overwrite`]. Photos (inputs) are never
+/// overwritten. Files appear atomically; an interrupted run leaves no manifest, so the folder is not
+/// mistaken for a dataset.
+///
+/// Errors: as [`SampleGenerator::new`] and [`SampleGenerator::sample`];
+/// [`HoloError::InvalidParameter`] (`out_dir`) if a dataset exists there and `overwrite` is false;
+/// [`HoloError::WouldOverwriteInput`] if an output file would replace a photo; [`HoloError::Io`] /
+/// [`HoloError::Npy`] for write failures.
+pub fn generate(
+    out_dir: &Path,
+    config: &DatasetConfig,
+    options: &GenerateOptions,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<Manifest> {
+    let t_all = Instant::now();
+    let generator = SampleGenerator::new(config)?;
+    let manifest_path = out_dir.join(MANIFEST_FILE);
+    let mut stale: Vec<String> = Vec::new();
+    if manifest_path.exists() {
+        if !options.overwrite {
+            return Err(invalid(
+                "out_dir",
+                format!(
+                    "`{}` already holds a dataset ({MANIFEST_FILE}); choose another folder or allow \
+                     overwriting it",
+                    out_dir.display()
+                ),
+            ));
+        }
+        if let Ok(old) = read_manifest(out_dir) {
+            stale = old
+                .splits
+                .iter()
+                .flat_map(|s| s.shards.iter().map(|f| f.file.clone()))
+                .collect();
+        }
+    }
+
+    // Plan the shards.
+    let mut jobs = Vec::new();
+    let mut splits = Vec::new();
+    for split in Split::ALL {
+        let count = config.count(split);
+        let mut shards = Vec::new();
+        for (shard, first) in (0..count).step_by(config.shard_size).enumerate() {
+            let samples = config.shard_size.min(count - first);
+            jobs.push(ShardJob {
+                split,
+                shard,
+                first,
+                samples,
+            });
+            shards.push(ShardInfo {
+                file: shard_file_name(split, shard),
+                samples,
+                first_index: first,
+            });
+        }
+        splits.push(SplitInfo {
+            name: split,
+            samples: count,
+            shards,
+        });
+    }
+    let photos: Vec<&Path> = generator
+        .scenes()
+        .photo_paths()
+        .iter()
+        .map(PathBuf::as_path)
+        .collect();
+    ensure_not_input(&manifest_path, &photos)?;
+    for split in &splits {
+        for shard in &split.shards {
+            ensure_not_input(&out_dir.join(&shard.file), &photos)?;
+        }
+    }
+    std::fs::create_dir_all(out_dir).map_err(io_error(out_dir))?;
+
+    // Compute groups of shards with at least two samples per worker thread in flight; write each group
+    // on a background thread while the next one computes.
+    let total: u64 = jobs.iter().map(|j| j.samples as u64).sum();
+    let done = AtomicU64::new(0);
+    let target = 2 * rayon::current_num_threads().max(1);
+    let mut groups: Vec<Vec<ShardJob>> = Vec::new();
+    let mut in_group = 0;
+    for job in jobs {
+        if in_group >= target || groups.is_empty() {
+            groups.push(Vec::new());
+            in_group = 0;
+        }
+        in_group += job.samples;
+        groups.last_mut().expect("pushed above").push(job);
+    }
+    let mut acc = Accumulator::default();
+    std::thread::scope(|scope| -> Result<()> {
+        let mut writer: Option<std::thread::ScopedJoinHandle<'_, Result<()>>> = None;
+        let join = |h: std::thread::ScopedJoinHandle<'_, Result<()>>| {
+            h.join().unwrap_or_else(|_| {
+                Err(HoloError::InvalidData(
+                    "the shard writer thread panicked".into(),
+                ))
+            })
+        };
+        for group in groups {
+            let items: Vec<(Split, usize)> = group
+                .iter()
+                .flat_map(|j| (j.first..j.first + j.samples).map(move |i| (j.split, i)))
+                .collect();
+            let mut samples: Vec<Sample> = items
+                .par_iter()
+                .map(|&(split, index)| {
+                    let s = generator.sample(split, index)?;
+                    progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
+                    Ok(s)
+                })
+                .collect::<Result<_>>()?;
+            for s in &samples {
+                acc.add(s);
+            }
+            if let Some(h) = writer.take() {
+                join(h)?;
+            }
+            let compress = config.compress;
+            writer = Some(scope.spawn(move || {
+                for job in group.iter().rev() {
+                    let rest = samples.split_off(samples.len() - job.samples);
+                    let path = out_dir.join(shard_file_name(job.split, job.shard));
+                    write_shard(&path, &rest, compress)?;
+                }
+                Ok(())
+            }));
+        }
+        if let Some(h) = writer.take() {
+            join(h)?;
+        }
+        Ok(())
+    })?;
+
+    // Shards of a replaced dataset that the new one does not have.
+    let current: std::collections::HashSet<&str> = splits
+        .iter()
+        .flat_map(|s| s.shards.iter().map(|f| f.file.as_str()))
+        .collect();
+    for file in &stale {
+        let plain = Path::new(file)
+            .file_name()
+            .is_some_and(|n| n == file.as_str());
+        if plain && file.ends_with(".npz") && !current.contains(file.as_str()) {
+            let _ = std::fs::remove_file(out_dir.join(file));
+        }
+    }
+
+    let setup = config.synthesis.setup;
+    let manifest = Manifest {
+        format: FORMAT_NAME.into(),
+        format_version: FORMAT_VERSION,
+        generator: GeneratorInfo {
+            name: "tensorholo".into(),
+            version: env!("CARGO_PKG_VERSION").into(),
+            git_commit: options
+                .git_commit
+                .clone()
+                .unwrap_or_else(|| "unknown".into()),
+            command: options.command.clone(),
+        },
+        created_unix_s: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_secs())
+            .unwrap_or(0),
+        seed: config.seed,
+        seed_derivation: "seed(split, i) = m(m(m(base_seed) ^ split_id) ^ i), m = SplitMix64 \
+                          finaliser, split_id train 0 / val 1 / test 2; scene RNG = \
+                          ChaCha8Rng::seed_from_u64(seed)"
+            .into(),
+        resolution: [config.scene.height, config.scene.width],
+        ldi_layers: config.scene.layers,
+        synthesis: SynthesisInfo {
+            method: "SM-LBM".into(),
+            levels: config.synthesis.levels,
+            silhouette_masks: config.synthesis.silhouette_masks,
+            pad: config.synthesis.options.pad,
+            band_limit: config.synthesis.options.band_limit,
+            hologram_plane: "midpoint (z = 0)".into(),
+            initial_phase: "exp(i 2 pi z_n / lambda) (Maimone et al.)".into(),
+        },
+        optics: OpticsInfo {
+            wavelengths_m: setup.wavelengths_m,
+            pixel_pitch_m: setup.pixel_pitch_m,
+            volume_depth_m: setup.volume_depth_m,
+            depth_to_z: "z(d) = (0.5 - d) * volume_depth_m".into(),
+        },
+        scene: config.scene.clone(),
+        photos: generator.scenes().photo_paths().to_vec(),
+        shard_size: config.shard_size,
+        compressed: config.compress,
+        splits,
+        arrays: array_infos(),
+        statistics: acc.finish(t_all.elapsed().as_secs_f64()),
+    };
+    let json = serde_json::to_string_pretty(&manifest)
+        .map_err(|e| HoloError::InvalidData(format!("cannot serialise the manifest: {e}")))?;
+    write_atomic(&manifest_path, |tmp| {
+        std::fs::write(tmp, json + "\n").map_err(io_error(tmp))
+    })?;
+    Ok(manifest)
+}
+
+/// Saves previews of an LDI into `dir`: `<stem>_rgb.png` (layer 0 amplitude, sRGB), `<stem>_depth.png`
+/// (layer 0 depth, grey, white = far) and `<stem>_layers.png` (all layers side by side: amplitudes in
+/// the top row, depths in the bottom row, invalid pixels dark red). Returns the paths written.
+///
+/// Errors: [`HoloError::Io`] if `dir` cannot be created; as [`save_amplitude_png`].
+pub fn save_ldi_previews(dir: &Path, stem: &str, ldi: &LayeredDepthImage) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(io_error(dir))?;
+    let (l, h, w) = (ldi.num_layers(), ldi.height(), ldi.width());
+    let first = &ldi.layers()[0];
+    let rgb = dir.join(format!("{stem}_rgb.png"));
+    save_amplitude_png(&rgb, first.amplitude.view(), 1.0)?;
+    // Grey PNG of intensity d: amplitude √d.
+    let depth = dir.join(format!("{stem}_depth.png"));
+    let d = first.depth.mapv(f32::sqrt).insert_axis(Axis(0));
+    save_amplitude_png(&depth, d.view(), 1.0)?;
+    let mut mosaic = Array3::<f32>::zeros((3, 2 * h, l * w));
+    const INVALID: [f32; 3] = [0.6, 0.0, 0.0];
+    for (k, layer) in ldi.layers().iter().enumerate() {
+        for y in 0..h {
+            for x in 0..w {
+                let ok = layer.valid[[y, x]];
+                let dv = layer.depth[[y, x]].sqrt();
+                for c in 0..3 {
+                    mosaic[[c, y, k * w + x]] = if ok {
+                        layer.amplitude[[c, y, x]]
+                    } else {
+                        INVALID[c]
+                    };
+                    mosaic[[c, h + y, k * w + x]] = if ok { dv } else { INVALID[c] };
+                }
+            }
+        }
+    }
+    let layers = dir.join(format!("{stem}_layers.png"));
+    save_amplitude_png(&layers, mosaic.view(), 1.0)?;
+    Ok(vec![rgb, depth, layers])
+}
