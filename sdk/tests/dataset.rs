@@ -153,7 +153,7 @@ fn depth_peeling(
         let mut best: Vec<Option<Fragment>> = vec![None; h * w];
         for f in frags {
             let p = f.row as usize * w + f.col as usize;
-            if f.depth > prev[p] && best[p].map_or(true, |b| f.depth < b.depth) {
+            if f.depth > prev[p] && best[p].is_none_or(|b| f.depth < b.depth) {
                 best[p] = Some(*f);
             }
         }

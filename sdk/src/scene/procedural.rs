@@ -71,7 +71,7 @@ fn backdrop(p: &Px) -> Sample {
         let grout = fu < 0.06 || fv < 0.08;
         let checker = (tu.floor() as i64 + tv.floor() as i64).rem_euclid(2) == 0;
         // Fine 4-pixel speckle inside the tiles: high-frequency texture on the tilted plane.
-        let fine = if (p.x / 2 + p.y / 2) % 2 == 0 {
+        let fine = if (p.x / 2 + p.y / 2).is_multiple_of(2) {
             1.0
         } else {
             0.7
@@ -96,7 +96,7 @@ fn backdrop(p: &Px) -> Sample {
         };
         let diag = (p.u + p.v) / 0.07;
         let stripe = if diag - diag.floor() < 0.5 { 1.0 } else { 0.55 };
-        let fine = if (p.x / 3 + p.y / 3) % 2 == 0 {
+        let fine = if (p.x / 3 + p.y / 3).is_multiple_of(2) {
             1.0
         } else {
             0.7
@@ -135,7 +135,7 @@ fn bar(p: &Px) -> Option<Sample> {
     let centre = (BAR_U.0 + BAR_U.1) / 2.0;
     let c = if (p.u - centre).abs() < 0.008 {
         [0.05, 0.05, 0.05]
-    } else if (p.y / 5) % 2 == 0 {
+    } else if (p.y / 5).is_multiple_of(2) {
         [0.95, 0.15, 0.1]
     } else {
         [1.0, 0.95, 0.9]
