@@ -3,6 +3,7 @@
 //! Every subcommand is a thin layer over the `tensorholo` public API: argument parsing, progress output and
 //! files. The physics lives in the SDK.
 
+mod encode;
 mod propagate;
 mod reference;
 
@@ -29,6 +30,10 @@ enum Command {
     /// Propagate a complex field stored in .npy with the angular spectrum method (paper Eq. 2), for checks
     /// against other implementations.
     Propagate(propagate::PropagateArgs),
+    /// Encode a complex midpoint hologram (.npy) for a phase-only SLM: offset propagation (Eq. 6), double phase
+    /// (Eq. 7, DPM/AA-DPM/BL-DPM), and the simulated post-encoding midpoint hologram (Eq. 8-10), for checks
+    /// against other implementations.
+    Encode(Box<encode::EncodeArgs>),
 }
 
 fn main() {
@@ -39,6 +44,7 @@ fn main() {
     let result = match cli.command {
         Command::Reference(args) => reference::run(&args),
         Command::Propagate(args) => propagate::run(&args),
+        Command::Encode(args) => encode::run(&args),
     };
     if let Err(err) = result {
         eprintln!("error: {err:#}");
