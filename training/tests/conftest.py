@@ -8,7 +8,8 @@ import torch
 sys.path.insert(0, os.path.abspath(os.path.join(os.path.dirname(__file__), "..")))
 torch.set_num_threads(min(2, torch.get_num_threads()))
 
-FIXTURES = os.path.join(os.path.dirname(__file__), "fixtures")
+# TENSORHOLO_FIXTURES: compare against fixtures regenerated elsewhere (CI: by the freshly built holo).
+FIXTURES = os.environ.get("TENSORHOLO_FIXTURES") or os.path.join(os.path.dirname(__file__), "fixtures")
 
 
 @pytest.fixture(scope="session")
