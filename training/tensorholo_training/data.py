@@ -1,24 +1,23 @@
 """Reader of the layered-depth-image (LDI) hologram dataset written by ``holo dataset``.
 
-Format (``docs/DATASET.md`` of the dataset branch; this reader accepts the variants listed):
+Format: ``docs/DATASET.md`` (``format = "tensorholo-ldi-hologram-dataset"``, ``format_version = 1``):
 
 ``<root>/manifest.json``
-    JSON object. Used keys (all optional except the shard list):
+    ``splits``: a list of ``{"name": "train"|"val"|"test", "samples": n, "shards": [{"file", "samples",
+    "first_index"}]}``; ``resolution`` ``[H, W]``; ``ldi_layers`` ``L``; ``optics``: ``wavelengths_m``,
+    ``pixel_pitch_m``, ``volume_depth_m``; ``synthesis``: SM-LBM parameters incl. ``pad``/``band_limit``.
+    Also accepted: ``splits`` as an object ``{name: [files] | {"shards": [...]}}``, display keys at the top
+    level or under ``display``/``setup``, and no manifest at all (shards found as ``<split>-*.npz``,
+    ``<split>_*.npz`` or ``<split>/*.npz``). Other formats and newer versions are refused.
 
-    - ``splits``: ``{"train": S, "val": S, "test": S}`` where ``S`` is a list of shard paths relative to
-      ``root``, or an object with ``"shards"`` (or ``"files"``) holding that list (and e.g. ``"count"``).
-      Without ``splits`` the shards are found as ``<split>/*.npz``, ``<split>-*.npz`` or ``<split>_*.npz``.
-    - ``layers`` (``L``), ``height``, ``width``;
-    - display: ``wavelengths_m``, ``pixel_pitch_m``, ``volume_depth_m`` at the top level or under
-      ``"display"``/``"setup"`` (checked against the training configuration by :func:`check_display`).
-
-``<root>/<shard>.npz`` (``numpy.savez`` or ``savez_compressed``), ``N`` scenes each:
+``<root>/<split>-<nnnnn>.npz`` (``numpy.savez`` or ``savez_compressed``), ``N`` scenes each:
 
 - ``ldi`` float32 ``[N, 4·L, H, W]``: per layer ``r, g, b`` amplitude (√ of linear intensity) then
   normalised depth ``d`` (0 = near); invalid pixels have amplitude 0 and depth 1;
 - ``ldi_valid`` uint8 ``[N, L, H, W]`` (1 = valid); optional (derived from amplitude/depth if absent);
 - ``midpoint`` complex64 ``[N, 3, H, W]``: the SM-LBM midpoint hologram (R, G, B), or ``midpoint_re`` and
-  ``midpoint_im`` float32 ``[N, 3, H, W]``.
+  ``midpoint_im`` float32 ``[N, 3, H, W]``;
+- ``seed``, ``index`` uint64 ``[N]`` (ignored here).
 
 The RGB-D input of the RGB-D CNN is the first layer's 4 channels; the LDI CNN reads all ``4·L``.
 """
@@ -53,13 +52,36 @@ class Augment:
     vflip: bool = False
 
 
+FORMAT = "tensorholo-ldi-hologram-dataset"
+FORMAT_VERSION = 1
+
+
+def _shard_file(entry) -> str:
+    return entry["file"] if isinstance(entry, dict) else entry
+
+
+def split_names(manifest: dict) -> list[str]:
+    """Names of the splits a manifest lists with at least one shard (``[]`` if it lists none)."""
+    splits = manifest.get("splits")
+    if isinstance(splits, list):
+        return [s["name"] for s in splits if s.get("shards")]
+    if isinstance(splits, dict):
+        return [k for k, v in splits.items() if (v.get("shards", v.get("files")) if isinstance(v, dict) else v)]
+    return []
+
+
 def _split_shards(root: str, manifest: dict, split: str) -> list[str]:
     splits = manifest.get("splits")
-    if isinstance(splits, dict) and split in splits:
-        s = splits[split]
-        if isinstance(s, dict):
-            s = s.get("shards", s.get("files", []))
-        return [os.path.join(root, p) for p in s]
+    entries = None
+    if isinstance(splits, list):
+        entry = next((s for s in splits if s.get("name") == split), None)
+        entries = entry.get("shards", []) if entry is not None else []
+    elif isinstance(splits, dict) and split in splits:
+        entries = splits[split]
+        if isinstance(entries, dict):
+            entries = entries.get("shards", entries.get("files", []))
+    if entries is not None:
+        return [os.path.join(root, _shard_file(e)) for e in entries]
     found: list[str] = []
     for pattern in (f"{split}/*.npz", f"{split}-*.npz", f"{split}_*.npz"):
         found += sorted(glob.glob(os.path.join(root, pattern)))
@@ -72,12 +94,18 @@ def read_manifest(root: str) -> dict:
     if not os.path.exists(path):
         return {}
     with open(path) as f:
-        return json.load(f)
+        m = json.load(f)
+    fmt, version = m.get("format"), m.get("format_version", 1)
+    if fmt is not None and fmt != FORMAT:
+        raise ValueError(f"{path}: format {fmt!r} is not {FORMAT!r}")
+    if int(version) > FORMAT_VERSION:
+        raise ValueError(f"{path}: format_version {version} is newer than this reader ({FORMAT_VERSION})")
+    return m
 
 
 def manifest_display(manifest: dict) -> Display | None:
     """The display geometry a dataset was generated for, or ``None`` if the manifest does not say."""
-    for src in (manifest, manifest.get("display", {}), manifest.get("setup", {})):
+    for src in (manifest.get("optics", {}), manifest, manifest.get("display", {}), manifest.get("setup", {})):
         if isinstance(src, dict) and "wavelengths_m" in src:
             return Display(
                 wavelengths_m=tuple(float(v) for v in src["wavelengths_m"]),
@@ -85,6 +113,16 @@ def manifest_display(manifest: dict) -> Display | None:
                 volume_depth_m=float(src.get("volume_depth_m", Display.volume_depth_m)),
             )
     return None
+
+
+def manifest_propagation(manifest: dict) -> PropagationOptions | None:
+    """The ASM options the dataset's holograms were synthesised with (``synthesis.pad``/``band_limit``), or
+    ``None`` if the manifest does not say. Focal-stack losses should use the same, so that the target focal
+    stack is what the data means (``docs/DATASET.md``: "no padding unless ``synthesis.pad``")."""
+    syn = manifest.get("synthesis")
+    if not isinstance(syn, dict) or "pad" not in syn:
+        return None
+    return PropagationOptions(bool(syn.get("pad", False)), bool(syn.get("band_limit", False)))
 
 
 def check_display(manifest: dict, display: Display, rel_tol: float = 1e-6) -> None:
@@ -377,7 +415,7 @@ def write_synthetic_dataset(
     counts = counts or {"train": 16, "val": 4}
     rng = np.random.default_rng(seed)
     os.makedirs(root, exist_ok=True)
-    splits = {}
+    splits = []
     for split, n in counts.items():
         files = []
         for start in range(0, n, per_shard):
@@ -395,15 +433,17 @@ def write_synthetic_dataset(
                 arrays["midpoint_re"] = mid.real.astype(np.float32)
                 arrays["midpoint_im"] = mid.imag.astype(np.float32)
             np.savez(os.path.join(root, name), **arrays)
-            files.append(name)
-        splits[split] = {"shards": files, "count": n}
+            files.append({"file": name, "samples": m, "first_index": start})
+        splits.append({"name": split, "samples": n, "shards": files})
     manifest = {
-        "format": "tensorholo-ldi-dataset",
-        "generator": "tensorholo_training.data.write_synthetic_dataset (synthetic, layer-based, no occlusion)",
-        "layers": layers,
-        "height": height,
-        "width": width,
-        "display": display.to_dict(),
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "generator": {"name": "tensorholo_training.data.write_synthetic_dataset",
+                      "note": "synthetic test data: layer-based hologram of layer 0, no occlusion handling"},
+        "resolution": [height, width],
+        "ldi_layers": layers,
+        "synthesis": {"method": "layer-based (no occlusion)", "levels": 16, "pad": True, "band_limit": False},
+        "optics": display.to_dict(),
         "splits": splits,
     }
     with open(os.path.join(root, "manifest.json"), "w") as f:

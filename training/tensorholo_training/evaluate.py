@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from . import optics
-from .data import LdiDataset
+from .data import LdiDataset, manifest_propagation, read_manifest
 from .losses import ddpm_forward, select_focal_depths
 from .metrics import psnr, ssim
 from .optics import Display, PropagationOptions
@@ -38,7 +38,7 @@ Predictor = Callable[[int, dict], torch.Tensor]
 
 
 def cnn_predictor(net, prefilter=None, offset_m: float = 0.0, display: Display = Display(),
-                  phase_only: bool = False, options=PropagationOptions(pad=True), device="cpu") -> Predictor:
+                  phase_only: bool = False, options=PropagationOptions(), device="cpu") -> Predictor:
     """A predictor ``(index, item) -> complex64 [3, H, W]`` from a PyTorch hologram CNN (and pre-filter).
 
     Args:
@@ -62,7 +62,7 @@ def cnn_predictor(net, prefilter=None, offset_m: float = 0.0, display: Display =
 
 def onnx_predictor(path: str, prefilter_path: str | None = None, offset_m: float = 0.0,
                    display: Display = Display(), phase_only: bool = False,
-                   options=PropagationOptions(pad=True), threads: int = 1) -> Predictor:
+                   options=PropagationOptions(), threads: int = 1) -> Predictor:
     """Like :func:`cnn_predictor` for exported ONNX files run by onnxruntime (f32 or int8)."""
     import onnxruntime as ort
 
@@ -101,7 +101,7 @@ def npy_baseline(folder: str) -> Predictor:
 
 
 def scene_metrics(pred: torch.Tensor, gt: torch.Tensor, depth: torch.Tensor, display: Display,
-                  focal: torch.Tensor, options=PropagationOptions(pad=True)) -> dict[str, float]:
+                  focal: torch.Tensor, options=PropagationOptions()) -> dict[str, float]:
     """Table 2 metrics of one scene.
 
     Args:
@@ -119,7 +119,7 @@ def scene_metrics(pred: torch.Tensor, gt: torch.Tensor, depth: torch.Tensor, dis
 
 
 def evaluate(dataset: LdiDataset, predictors: dict[str, Predictor], display: Display = Display(),
-             options=PropagationOptions(pad=True), limit: int | None = None, seed: int = 0) -> dict:
+             options=PropagationOptions(), limit: int | None = None, seed: int = 0) -> dict:
     """Runs the Table 2 protocol for several predictors on the same scenes and focal depths.
 
     Args:
@@ -163,6 +163,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--limit", type=int)
     ap.add_argument("--out")
     args = ap.parse_args(argv)
+    # Focal stacks with the ASM options the dataset's holograms were made with (docs/DATASET.md).
+    options = manifest_propagation(read_manifest(args.dataset)) or PropagationOptions()
     if args.checkpoint:
         from .export import load_checkpoint
 
@@ -170,7 +172,9 @@ def main(argv: list[str] | None = None) -> int:
         cfg = ck["config"]
         display = Display(tuple(cfg["wavelengths_m"]), cfg["pixel_pitch_m"], cfg["volume_depth_m"])
         layers = cfg["input_layers"]
-        model = cnn_predictor(ck["net"], ck["prefilter"], cfg["offset_mm"] * 1e-3, display, args.phase_only)
+        train_opts = PropagationOptions(bool(cfg.get("asm_pad")), bool(cfg.get("asm_band_limit")))
+        model = cnn_predictor(ck["net"], ck["prefilter"], cfg["offset_mm"] * 1e-3, display, args.phase_only,
+                              train_opts)
     else:
         from .export import read_metadata
 
@@ -179,13 +183,13 @@ def main(argv: list[str] | None = None) -> int:
                           float(meta["tensorholo.pixel_pitch_m"]), float(meta["tensorholo.volume_depth_m"]))
         layers = int(meta["tensorholo.input_layers"])
         offset = args.offset_mm * 1e-3 if args.offset_mm is not None else float(meta["tensorholo.offset_m"])
-        model = onnx_predictor(args.onnx, args.prefilter_onnx, offset, display, args.phase_only)
+        model = onnx_predictor(args.onnx, args.prefilter_onnx, offset, display, args.phase_only, options)
     ds = LdiDataset(args.dataset, args.split, layers)
     predictors = {"model": model}
     for b in args.baseline:
         name, _, folder = b.partition("=")
         predictors[name] = npy_baseline(folder)
-    report = evaluate(ds, predictors, display, limit=args.limit)
+    report = evaluate(ds, predictors, display, options, limit=args.limit)
     summary = {k: v["mean"] for k, v in report.items() if isinstance(v, dict)}
     print(json.dumps({"scenes": report["scenes"], "mean": summary}, indent=1))
     if args.out:

@@ -32,7 +32,10 @@ import torch
 
 from . import losses as L
 from . import optics
-from .data import Augment, LdiDataset, check_display, collate, read_manifest, write_synthetic_dataset
+from .data import (
+    Augment, LdiDataset, check_display, collate, manifest_propagation, read_manifest, split_names,
+    write_synthetic_dataset,
+)
 from .metrics import psnr
 from .model import count_parameters, hologram_cnn, prefilter_cnn
 from .optics import Display, PropagationOptions
@@ -90,8 +93,8 @@ class TrainConfig:
     fs_top: int = 15
     fs_random: int = 5
     fs_attention_scale: float = 5.0
-    asm_pad: bool = True
-    asm_band_limit: bool = False
+    asm_pad: bool | None = None  # None: as the dataset's synthesis.pad (manifest), else False
+    asm_band_limit: bool | None = None  # None: as the dataset's synthesis.band_limit, else False
     fs_chunk: int = 0
     # runtime
     device: str = "auto"  # "auto", "cpu", "cuda", "cuda:1", ...
@@ -123,14 +126,15 @@ class TrainConfig:
 
     @property
     def options(self) -> PropagationOptions:
-        """ASM options of the losses and of the DDPM chain."""
-        return PropagationOptions(self.asm_pad, self.asm_band_limit)
+        """ASM options of the losses and of the DDPM chain (``None`` fields read as False; the
+        :class:`Trainer` first resolves them from the dataset manifest)."""
+        return PropagationOptions(bool(self.asm_pad), bool(self.asm_band_limit))
 
     def fs_config(self) -> L.FocalStackLossConfig:
         """The focal stack loss configuration."""
         return L.FocalStackLossConfig(
             self.fs_bins, self.fs_top, self.fs_random, self.fs_attention_scale, self.loss_kind,
-            self.asm_pad, self.asm_band_limit, self.fs_chunk or None,
+            bool(self.asm_pad), bool(self.asm_band_limit), self.fs_chunk or None,
         )
 
     def weights(self) -> L.LossWeights:
@@ -221,14 +225,25 @@ class Trainer:
                 write_synthetic_dataset(root, dict(cfg.synthetic_counts), n, n, max(2, cfg.input_layers),
                                         display=self.display, seed=cfg.seed)
         self.dataset_root = root
-        check_display(read_manifest(root), self.display)
+        manifest = read_manifest(root)
+        check_display(manifest, self.display)
+        synth = manifest_propagation(manifest) or PropagationOptions()
+        if cfg.asm_pad is None or cfg.asm_band_limit is None:
+            cfg = dataclasses.replace(
+                cfg,
+                asm_pad=synth.pad if cfg.asm_pad is None else cfg.asm_pad,
+                asm_band_limit=synth.band_limit if cfg.asm_band_limit is None else cfg.asm_band_limit,
+            )
+            self.cfg = cfg
         crop = tuple(cfg.crop) if isinstance(cfg.crop, (list, tuple)) else (
             (cfg.crop, cfg.crop) if cfg.crop else None)
         self.train_set = LdiDataset(root, "train", cfg.input_layers, Augment(crop, cfg.hflip, cfg.vflip),
                                     seed=cfg.seed)
-        val_split = "val" if "val" in (read_manifest(root).get("splits") or {"val": 1}) else "test"
+        names = split_names(manifest)
+        val_split = next((s for s in ("val", "test") if s in names), None) if names else "val"
         try:
-            self.val_set = LdiDataset(root, val_split, cfg.input_layers, Augment(crop), seed=cfg.seed + 1)
+            self.val_set = (LdiDataset(root, val_split, cfg.input_layers, Augment(crop), seed=cfg.seed + 1)
+                            if val_split else None)
         except FileNotFoundError:
             self.val_set = None
         self.trained_resolution = list(crop) if crop else list(self.train_set.shape)

@@ -6,7 +6,10 @@ import numpy as np
 import pytest
 import torch
 
-from tensorholo_training.data import Augment, LdiDataset, batches, check_display, load_shard, write_synthetic_dataset
+from tensorholo_training.data import (
+    Augment, LdiDataset, batches, check_display, load_shard, manifest_propagation, read_manifest, split_names,
+    write_synthetic_dataset,
+)
 from tensorholo_training.optics import Display
 
 
@@ -71,3 +74,49 @@ def test_display_mismatch_is_refused(tiny_dataset):
     check_display(manifest, Display())
     with pytest.raises(ValueError, match="generated for"):
         check_display(manifest, Display(pixel_pitch_m=6.4e-6))
+
+
+def test_manifest_of_docs_dataset_md(tiny_dataset, tmp_path):
+    m = read_manifest(tiny_dataset)
+    assert m["format"] == "tensorholo-ldi-hologram-dataset" and split_names(m) == ["train", "val"]
+    assert manifest_propagation(m).pad is True
+    bad = dict(m, format_version=2)
+    (tmp_path / "manifest.json").write_text(json.dumps(bad))
+    with pytest.raises(ValueError, match="newer"):
+        read_manifest(str(tmp_path))
+    (tmp_path / "manifest.json").write_text(json.dumps(dict(m, format="something-else")))
+    with pytest.raises(ValueError, match="format"):
+        read_manifest(str(tmp_path))
+    # the older dict form of "splits" is read too
+    legacy = dict(m, splits={"train": {"shards": ["train-00000.npz"]}})
+    assert split_names(legacy) == ["train"]
+
+
+def test_reads_a_dataset_written_by_holo(fixtures_dir, tmp_path):
+    root = os.path.join(fixtures_dir, "holo_dataset")
+    if not os.path.exists(os.path.join(root, "manifest.json")):
+        pytest.skip("no holo dataset fixture (holo without the dataset subcommand)")
+    m = read_manifest(root)
+    assert split_names(m) == ["train", "val", "test"]
+    assert manifest_propagation(m).pad == bool(m["synthesis"]["pad"])
+    check_display(m, Display())
+    ds = LdiDataset(root, "train", input_layers=5)
+    assert len(ds) == m["splits"][0]["samples"] and ds.layers == m["ldi_layers"]
+    for i in range(len(ds)):
+        it = ds[i]
+        layers = it["rgbd"].view(5, 4, *ds.shape)
+        valid = it["valid"].bool()
+        assert valid[0].all()
+        assert ((layers[:, :3] >= 0) & (layers[:, :3] <= 1)).all()
+        assert (layers[:, 3][~valid] == 1).all() and (layers[:, :3].permute(1, 0, 2, 3)[:, ~valid] == 0).all()
+        assert it["midpoint"].dtype == torch.complex64 and torch.isfinite(it["midpoint"].abs()).all()
+    # the trainer runs on it, with the dataset's own ASM options
+    from tensorholo_training.train import TrainConfig, Trainer
+
+    cfg = TrainConfig(run_dir=str(tmp_path / "run"), dataset=root, num_layers=8, channels=8, input_layers=5,
+                      stages=["stage1", "stage2"], stage1_steps=2, stage2_steps=2, fs_top=3, fs_random=2,
+                      log_every=1, val_every=2, val_batches=1)
+    tr = Trainer(cfg, log=lambda msg: None)
+    assert tr.cfg.asm_pad is False and tr.prefilter is None
+    metrics = tr.run()
+    assert np.isfinite(metrics["val_psnr_amp"]) and tr.trained_resolution == [16, 24]
