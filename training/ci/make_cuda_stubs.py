@@ -78,13 +78,35 @@ def version_owners(path: str) -> dict[str, str]:
     return owners
 
 
+_LDCONFIG_CACHE: dict[str, str] | None = None
+_LIB_DIRS = ("/lib/x86_64-linux-gnu", "/usr/lib/x86_64-linux-gnu", "/lib64", "/usr/lib64", "/lib", "/usr/lib",
+             "/usr/local/lib")
+
+# Only libraries of the CUDA family are stubbed; any other missing library is an error.
+CUDA_FAMILY = re.compile(r"^lib(cuda|cudart|cublas|cublasLt|cudnn|cufft|cufile|curand|cusolver|cusparse|"
+                         r"cusparseLt|cupti|nccl|nvrtc|nvshmem|nvJitLink|nvToolsExt|nvjpeg)[._]")
+
+
 def system_library(name: str) -> str | None:
-    """Path of a system library found by the dynamic linker cache, or None."""
-    out = subprocess.run(["ldconfig", "-p"], capture_output=True, text=True).stdout
-    for line in out.splitlines():
-        parts = line.strip().split(" => ")
-        if len(parts) == 2 and parts[0].split(" ")[0] == name and "x86-64" in parts[0] + "x86-64":
-            return parts[1]
+    """Path of a system library (dynamic linker cache, else the usual library folders), or None."""
+    global _LDCONFIG_CACHE
+    if _LDCONFIG_CACHE is None:
+        _LDCONFIG_CACHE = {}
+        for exe in ("ldconfig", "/sbin/ldconfig", "/usr/sbin/ldconfig"):
+            try:
+                out = subprocess.run([exe, "-p"], capture_output=True, text=True).stdout
+            except OSError:
+                continue
+            for line in out.splitlines():
+                parts = line.strip().split(" => ")
+                if len(parts) == 2 and "x86-64" in parts[0]:
+                    _LDCONFIG_CACHE.setdefault(parts[0].split(" ")[0], parts[1])
+            break
+    if name in _LDCONFIG_CACHE:
+        return _LDCONFIG_CACHE[name]
+    for d in _LIB_DIRS + tuple(os.environ.get("LD_LIBRARY_PATH", "").split(":")):
+        if d and os.path.exists(os.path.join(d, name)):
+            return os.path.join(d, name)
     return None
 
 
@@ -123,6 +145,11 @@ def main() -> int:
     if not missing:
         print("nothing to stub: every library torch needs is present")
         return 0
+    foreign = sorted(m for m in missing if not CUDA_FAMILY.match(m))
+    if foreign:
+        print(f"torch needs libraries that are neither CUDA nor on this system: {', '.join(foreign)}",
+              file=sys.stderr)
+        return 1
     undefined: set[tuple[str, str | None, str]] = set()
     provided: set[str] = set()
     owners: dict[str, str] = {}
