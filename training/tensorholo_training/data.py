@@ -217,9 +217,8 @@ class LdiDataset(torch.utils.data.Dataset):
         self.layers = None
         for s, path in enumerate(self.shards):
             with np.load(path) as z:
-                name = "ldi" if "ldi" in z.files else None
-                if name is None:
-                    raise ValueError(f"{path}: no 'ldi' array")
+                if "ldi" not in z.files:
+                    raise ValueError(f"{path}: no 'ldi' array (has {sorted(z.files)})")
                 shape = _npz_shape(z, "ldi")
             n = shape[0]
             self.layers = shape[1] // 4

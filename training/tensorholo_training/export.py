@@ -18,7 +18,8 @@ Files (``NAME`` e.g. ``holo30_rgbd_6mm``):
 Every file carries ``metadata_props`` (all keys prefixed ``tensorholo.``): ``kind`` (``hologram-cnn`` or
 ``prefilter-cnn``), ``layers``, ``wavelengths_m`` (comma-separated, R,G,B), ``pixel_pitch_m``,
 ``volume_depth_m``, ``offset_m``, ``input_layers``, ``trained_resolution`` (``HxW``), ``training_commit``, plus
-``precision`` (``f32``, ``int8-qoperator-conv``, ``int8-qdq-conv``), ``channels`` and ``format_version``.
+``precision`` (``f32``, ``int8-qoperator-conv``, ``int8-qdq-conv``), ``channels``, ``format_version`` and ``io``
+(a one-line statement of the input/output semantics).
 """
 from __future__ import annotations
 
@@ -37,6 +38,14 @@ from .model import ResidualCNN, hologram_cnn, prefilter_cnn
 INPUT_NAMES = {"hologram-cnn": "rgbd", "prefilter-cnn": "slm_field"}
 OUTPUT_NAMES = ("amplitude", "phase")
 METADATA_PREFIX = "tensorholo."
+IO_DESCRIPTION = {
+    "hologram-cnn": "rgbd[1,4L,H,W] in [0,1], per layer r,g,b amplitude then depth d (0 = near) -> "
+                    "amplitude[1,3,H,W] in [0,sqrt2], phase[1,3,H,W] in [0,1] meaning (p-0.5)*2pi rad: "
+                    "the midpoint hologram, R,G,B",
+    "prefilter-cnn": "slm_field[1,6,H,W] = |H|, arg(H)/2pi+0.5 of H = ASM(H_mid, s)*exp(-i 2pi s/lambda) "
+                     "(amplitude in midpoint units, not rescaled) -> amplitude[1,3,H,W] in [0,sqrt2], "
+                     "phase[1,3,H,W] in [0,1] (same meaning), then double phase encoding",
+}
 
 
 def model_metadata(
@@ -79,6 +88,7 @@ def model_metadata(
         "training_commit": training_commit,
         "precision": precision,
         "format_version": "1",
+        "io": IO_DESCRIPTION[kind],
     }
     return {METADATA_PREFIX + k: v for k, v in values.items()}
 

@@ -22,7 +22,7 @@ in float64 and rounded to complex64, as in Rust. All operators are differentiabl
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from functools import lru_cache
 from typing import Sequence
 
@@ -260,7 +260,7 @@ class DoublePhase:
 
     phase: torch.Tensor
     amplitude_scale: torch.Tensor
-    mean_phase: torch.Tensor = field(default=None)
+    mean_phase: torch.Tensor
 
 
 def double_phase_encode(

@@ -1,5 +1,4 @@
 """Table 2 protocol: metrics on the same scenes for the model and a baseline hook."""
-import os
 
 import numpy as np
 import pytest
