@@ -4,6 +4,7 @@
 //! files. The physics lives in the SDK.
 
 mod dataset;
+mod encode;
 mod propagate;
 mod reference;
 
@@ -33,6 +34,10 @@ enum Command {
     /// Generate a training dataset: random-scene layered depth images with their SM-LBM midpoint holograms
     /// (paper section "MIT-CGH-4K-V2"), in .npz shards with a manifest.json (format: docs/DATASET.md).
     Dataset(Box<dataset::DatasetArgs>),
+    /// Encode a complex midpoint hologram (.npy) for a phase-only SLM: offset propagation (Eq. 6), double phase
+    /// (Eq. 7, DPM/AA-DPM/BL-DPM), and the simulated post-encoding midpoint hologram (Eq. 8-10), for checks
+    /// against other implementations.
+    Encode(Box<encode::EncodeArgs>),
 }
 
 fn main() {
@@ -44,6 +49,7 @@ fn main() {
         Command::Reference(args) => reference::run(&args),
         Command::Propagate(args) => propagate::run(&args),
         Command::Dataset(args) => dataset::run(&args),
+        Command::Encode(args) => encode::run(&args),
     };
     if let Err(err) = result {
         eprintln!("error: {err:#}");

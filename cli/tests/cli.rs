@@ -299,3 +299,75 @@ fn propagate_round_trips_a_field_and_checks_wavelength_count() {
         stderr(&o)
     );
 }
+
+#[test]
+fn encode_writes_every_output_and_reproduces_a_smooth_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("mid.npy");
+    let (h, w) = (24usize, 32usize);
+    let field = Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+        let a = 0.6 + 0.3 * ((x as f32) * 0.2).cos() * ((y as f32) * 0.15 + c as f32).cos();
+        Complex32::from_polar(a, 0.3 * ((x + y) as f32 * 0.1).sin())
+    });
+    write_complex_npy(&input, field.view()).unwrap();
+    for offset in ["6", "0"] {
+        let out = dir.path().join(format!("enc{offset}"));
+        let o = holo(&[
+            "encode",
+            "--input",
+            input.to_str().unwrap(),
+            "--offset-mm",
+            offset,
+            "--method",
+            "dpm",
+            "--pad",
+            "--depths",
+            "0.2,0.7",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        for name in [
+            "slm_field.npy",
+            "phase.npy",
+            "post_midpoint.npy",
+            "focal_stack.npy",
+            "target_focal_stack.npy",
+            "encode.json",
+        ] {
+            assert!(out.join(name).exists(), "{name} missing");
+        }
+        let report: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("encode.json")).unwrap())
+                .unwrap();
+        let offset_m: f64 = offset.parse::<f64>().unwrap() * 1e-3;
+        assert!((report["offset_m"].as_f64().unwrap() - offset_m).abs() < 1e-12);
+        if offset == "0" {
+            // DPM + Fourier filter gives back the smooth field's amplitude (÷ a) at the SLM plane. (At 6 mm
+            // this small grid loses light over its edges, so only the 0 mm case is compared.)
+            let scale = report["amplitude_scale"].as_f64().unwrap() as f32;
+            let post = read_complex_npy(&out.join("post_midpoint.npy")).unwrap();
+            let worst = post
+                .iter()
+                .zip(field.iter())
+                .map(|(p, f)| (p.norm() * scale - f.norm()).abs())
+                .fold(0.0f32, f32::max);
+            assert!(worst < 0.15, "post-encoding amplitude error {worst}");
+        }
+    }
+    // a 2-channel field is refused with a message naming the problem
+    let two = dir.path().join("two.npy");
+    write_complex_npy(&two, field.slice(ndarray::s![0..2, .., ..])).unwrap();
+    let o = holo(&[
+        "encode",
+        "--input",
+        two.to_str().unwrap(),
+        "--out",
+        dir.path().join("x").to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("2 channels"),
+        "{}",
+        stderr(&o)
+    );
+}

@@ -1,0 +1,299 @@
+"""ONNX export of trained CNNs (``DESIGN.md`` §3) and int8 static quantisation.
+
+``python -m tensorholo_training.export --checkpoint RUN/final.pt --out-dir models --name NAME
+[--int8 --calib-dataset DIR]``
+
+Files (``NAME`` e.g. ``holo30_rgbd_6mm``):
+
+- ``NAME.onnx``: hologram CNN, float32, opset 17, input ``rgbd`` ``[1, 4·L, H, W]`` with symbolic ``H``,
+  ``W``; outputs ``amplitude`` and ``phase`` ``[1, 3, H, W]``;
+- ``NAME.prefilter.onnx``: the DDPM pre-filter CNN (only when the run trained one), input ``slm_field``
+  ``[1, 6, H, W]`` (amplitude ``|H|``, phase ``arg H/2π + 0.5`` of the offset hologram), same outputs;
+- with ``--int8``, for each: ``.int8-qop.onnx`` (QOperator: ``QLinearConv``; only ``Conv`` nodes are
+  quantised, so residual ``Add``, ``Concat``, ``Relu`` and ``Tanh`` stay float, because tract 0.23 runs
+  ``QLinearConv`` but not ``QLinearAdd``) and ``.int8-qdq.onnx`` (QDQ: ``QuantizeLinear``/``DequantizeLinear``
+  pairs around float ``Conv``, which tract folds). Static calibration (MinMax) on training inputs; weights
+  int8 symmetric per tensor, activations uint8.
+
+Every file carries ``metadata_props`` (all keys prefixed ``tensorholo.``): ``kind`` (``hologram-cnn`` or
+``prefilter-cnn``), ``layers``, ``wavelengths_m`` (comma-separated, R,G,B), ``pixel_pitch_m``,
+``volume_depth_m``, ``offset_m``, ``input_layers``, ``trained_resolution`` (``HxW``), ``training_commit``, plus
+``precision`` (``f32``, ``int8-qoperator-conv``, ``int8-qdq-conv``), ``channels``, ``format_version`` and ``io``
+(a one-line statement of the input/output semantics).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import warnings
+from typing import Iterable, Sequence
+
+import numpy as np
+import torch
+
+from .model import ResidualCNN, hologram_cnn, prefilter_cnn
+
+INPUT_NAMES = {"hologram-cnn": "rgbd", "prefilter-cnn": "slm_field"}
+OUTPUT_NAMES = ("amplitude", "phase")
+METADATA_PREFIX = "tensorholo."
+IO_DESCRIPTION = {
+    "hologram-cnn": "rgbd[1,4L,H,W] in [0,1], per layer r,g,b amplitude then depth d (0 = near) -> "
+                    "amplitude[1,3,H,W] in [0,sqrt2], phase[1,3,H,W] in [0,1] meaning (p-0.5)*2pi rad: "
+                    "the midpoint hologram, R,G,B",
+    "prefilter-cnn": "slm_field[1,6,H,W] = |H|, arg(H)/2pi+0.5 of H = ASM(H_mid, s)*exp(-i 2pi s/lambda) "
+                     "(amplitude in midpoint units, not rescaled) -> amplitude[1,3,H,W] in [0,sqrt2], "
+                     "phase[1,3,H,W] in [0,1] (same meaning), then double phase encoding",
+}
+
+
+def model_metadata(
+    kind: str,
+    module: ResidualCNN,
+    wavelengths_m: Sequence[float],
+    pixel_pitch_m: float,
+    volume_depth_m: float,
+    offset_m: float,
+    input_layers: int,
+    trained_resolution: Sequence[int],
+    training_commit: str,
+    precision: str = "f32",
+) -> dict[str, str]:
+    """The ``metadata_props`` of an exported CNN (``DESIGN.md`` §3), keys prefixed ``tensorholo.``.
+
+    Args:
+        kind: ``"hologram-cnn"`` or ``"prefilter-cnn"``.
+        module: the network (its layer and channel counts are recorded).
+        wavelengths_m: R, G, B wavelengths in metres; pixel_pitch_m, volume_depth_m, offset_m: metres.
+        input_layers: ``L`` of the hologram CNN (for a pre-filter: that of the hologram CNN it was trained with).
+        trained_resolution: ``(H, W)`` of the training crops.
+        training_commit: git commit of the training code.
+        precision: ``f32``, ``int8-qoperator-conv`` or ``int8-qdq-conv``.
+    Returns:
+        dict of strings.
+    """
+    if kind not in INPUT_NAMES:
+        raise ValueError(f"kind must be one of {sorted(INPUT_NAMES)}, got {kind!r}")
+    values = {
+        "kind": kind,
+        "layers": str(module.num_layers),
+        "channels": str(module.channels),
+        "wavelengths_m": ",".join(repr(float(w)) for w in wavelengths_m),
+        "pixel_pitch_m": repr(float(pixel_pitch_m)),
+        "volume_depth_m": repr(float(volume_depth_m)),
+        "offset_m": repr(float(offset_m)),
+        "input_layers": str(int(input_layers)),
+        "trained_resolution": f"{int(trained_resolution[0])}x{int(trained_resolution[1])}",
+        "training_commit": training_commit,
+        "precision": precision,
+        "format_version": "1",
+        "io": IO_DESCRIPTION[kind],
+    }
+    return {METADATA_PREFIX + k: v for k, v in values.items()}
+
+
+def set_metadata(path: str, metadata: dict[str, str]) -> None:
+    """Replaces the ``metadata_props`` of the ONNX file at ``path`` by ``metadata`` (others are kept)."""
+    import onnx
+
+    m = onnx.load(path)
+    keep = [p for p in m.metadata_props if p.key not in metadata]
+    del m.metadata_props[:]
+    m.metadata_props.extend(keep)
+    for k, v in metadata.items():
+        p = m.metadata_props.add()
+        p.key, p.value = k, v
+    onnx.save(m, path)
+
+
+def read_metadata(path: str) -> dict[str, str]:
+    """The ``metadata_props`` of an ONNX file as a dict."""
+    import onnx
+
+    return {p.key: p.value for p in onnx.load(path).metadata_props}
+
+
+def export_onnx(module: ResidualCNN, path: str, kind: str, metadata: dict[str, str], example_size=(64, 64),
+                opset: int = 17) -> str:
+    """Exports a CNN to ONNX (float32, batch 1, symbolic ``H``, ``W``) and writes its metadata.
+
+    Args:
+        module: the network (moved to CPU float32 for export).
+        path: output ``.onnx`` path.
+        kind: ``"hologram-cnn"`` (input ``rgbd``) or ``"prefilter-cnn"`` (input ``slm_field``).
+        metadata: from :func:`model_metadata`.
+        example_size: ``(H, W)`` of the tracing input (any; the graph is size-independent).
+        opset: ONNX opset (17).
+    Returns:
+        ``path``.
+    """
+    module = module.to("cpu").float().eval()
+    x = torch.rand(1, module.in_channels, *example_size)
+    name = INPUT_NAMES[kind]
+    axes = {2: "H", 3: "W"}
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with torch.no_grad(), warnings.catch_warnings():
+        # The TorchScript exporter (dynamo=False) is deprecated but needs no onnxscript and gives plain graphs.
+        warnings.simplefilter("ignore", DeprecationWarning)
+        torch.onnx.export(
+            module, (x,), path, dynamo=False, opset_version=opset, input_names=[name],
+            output_names=list(OUTPUT_NAMES), dynamic_axes={name: axes, "amplitude": axes, "phase": axes},
+            do_constant_folding=True,
+        )
+    set_metadata(path, metadata)
+    return path
+
+
+class _Reader:
+    """onnxruntime ``CalibrationDataReader`` over a list of input arrays."""
+
+    def __init__(self, name: str, inputs: Iterable[np.ndarray]):
+        self.name = name
+        self.items = iter(list(inputs))
+
+    def get_next(self):
+        x = next(self.items, None)
+        return None if x is None else {self.name: x.astype(np.float32)}
+
+
+def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray], fmt: str = "qoperator") -> str:
+    """Static int8 quantisation of the ``Conv`` nodes only (onnxruntime.quantization, MinMax calibration).
+
+    Args:
+        f32_path: float32 model from :func:`export_onnx`.
+        out_path: output path.
+        calibration: inputs ``[1, C, H, W]`` float32 (training crops), e.g. 16–64 of them.
+        fmt: ``"qoperator"`` (``QLinearConv``) or ``"qdq"`` (Q/DQ pairs around float ``Conv``).
+    Returns:
+        ``out_path`` (metadata copied, ``tensorholo.precision`` updated).
+    """
+    from onnxruntime.quantization import QuantFormat, QuantType, quantize_static
+
+    formats = {"qoperator": (QuantFormat.QOperator, "int8-qoperator-conv"),
+               "qdq": (QuantFormat.QDQ, "int8-qdq-conv")}
+    if fmt not in formats:
+        raise ValueError(f"fmt must be 'qoperator' or 'qdq', got {fmt!r}")
+    qformat, precision = formats[fmt]
+    meta = read_metadata(f32_path)
+    import tempfile
+
+    import onnx
+    from onnxruntime.quantization.shape_inference import quant_pre_process
+
+    name = onnx.load(f32_path).graph.input[0].name
+    with tempfile.TemporaryDirectory() as tmp:
+        prepared = os.path.join(tmp, "prepared.onnx")
+        quant_pre_process(f32_path, prepared)
+        quantize_static(
+            prepared, out_path, _Reader(name, calibration), quant_format=qformat, op_types_to_quantize=["Conv"],
+            per_channel=False, activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
+        )
+    meta[METADATA_PREFIX + "precision"] = precision
+    set_metadata(out_path, meta)
+    return out_path
+
+
+def run_onnx(path: str, x: np.ndarray, threads: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Runs an exported CNN with onnxruntime on CPU.
+
+    Args:
+        path: ``.onnx`` file; x: float32 ``[1, C, H, W]``.
+    Returns:
+        ``(amplitude, phase)`` float32 ``[1, 3, H, W]``.
+    """
+    import onnxruntime as ort
+
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = threads
+    so.log_severity_level = 3
+    sess = ort.InferenceSession(path, so, providers=["CPUExecutionProvider"])
+    name = sess.get_inputs()[0].name
+    amp, phs = sess.run(list(OUTPUT_NAMES), {name: x.astype(np.float32)})
+    return amp, phs
+
+
+def load_checkpoint(path: str) -> dict:
+    """Loads a training checkpoint and rebuilds its networks: ``{"net", "prefilter" (or None), "config",
+    "training_commit", "trained_resolution"}``."""
+    s = torch.load(path, map_location="cpu", weights_only=False)
+    cfg = s["config"]
+    net = hologram_cnn(cfg["num_layers"], cfg["input_layers"], cfg["channels"])
+    net.load_state_dict(s["net"])
+    pre = None
+    if s.get("prefilter") is not None:
+        pre = prefilter_cnn(cfg["prefilter_layers"], cfg["prefilter_channels"])
+        pre.load_state_dict(s["prefilter"])
+    return {"net": net.eval(), "prefilter": pre.eval() if pre is not None else None, "config": cfg,
+            "training_commit": s.get("training_commit", "unknown"),
+            "trained_resolution": s.get("trained_resolution", [0, 0])}
+
+
+def calibration_inputs(dataset_root: str, input_layers: int, count: int = 32, size: int | None = None,
+                       split: str = "train", seed: int = 0) -> list[np.ndarray]:
+    """Hologram-CNN calibration inputs ``[1, 4·L, h, w]`` from a dataset (random crops of ``size`` if given)."""
+    from .data import Augment, LdiDataset
+
+    ds = LdiDataset(dataset_root, split, input_layers, Augment((size, size) if size else None), seed=seed)
+    idx = np.random.default_rng(seed).permutation(len(ds))[:count]
+    return [ds[int(i)]["rgbd"].numpy()[None] for i in idx]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point (see the module docstring)."""
+    ap = argparse.ArgumentParser(prog="python -m tensorholo_training.export", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--checkpoint", required=True, help="training checkpoint (final.pt / stage1.pt)")
+    ap.add_argument("--out-dir", required=True)
+    ap.add_argument("--name", required=True, help="file stem, e.g. holo30_rgbd_6mm")
+    ap.add_argument("--int8", action="store_true", help="also write int8 QOperator and QDQ models")
+    ap.add_argument("--calib-dataset", help="dataset for int8 calibration (default: the run's dataset)")
+    ap.add_argument("--calib-samples", type=int, default=32)
+    ap.add_argument("--calib-size", type=int, default=0, help="crop size of calibration inputs (0 = full)")
+    ap.add_argument("--no-prefilter", action="store_true", help="export only the hologram CNN")
+    args = ap.parse_args(argv)
+    ck = load_checkpoint(args.checkpoint)
+    cfg = ck["config"]
+    common = dict(wavelengths_m=cfg["wavelengths_m"], pixel_pitch_m=cfg["pixel_pitch_m"],
+                  volume_depth_m=cfg["volume_depth_m"], offset_m=cfg["offset_mm"] * 1e-3,
+                  input_layers=cfg["input_layers"], trained_resolution=ck["trained_resolution"],
+                  training_commit=ck["training_commit"])
+    written = []
+    path = os.path.join(args.out_dir, f"{args.name}.onnx")
+    export_onnx(ck["net"], path, "hologram-cnn", model_metadata("hologram-cnn", ck["net"], **common))
+    written.append(path)
+    pre_path = None
+    if ck["prefilter"] is not None and not args.no_prefilter:
+        pre_path = os.path.join(args.out_dir, f"{args.name}.prefilter.onnx")
+        export_onnx(ck["prefilter"], pre_path, "prefilter-cnn",
+                    model_metadata("prefilter-cnn", ck["prefilter"], **common))
+        written.append(pre_path)
+    if args.int8:
+        root = args.calib_dataset or cfg["dataset"]
+        if root == "synthetic":
+            root = os.path.join(cfg["run_dir"], "synthetic_dataset")
+        calib = calibration_inputs(root, cfg["input_layers"], args.calib_samples, args.calib_size or None)
+        for fmt, suffix in (("qoperator", "int8-qop"), ("qdq", "int8-qdq")):
+            out = os.path.join(args.out_dir, f"{args.name}.{suffix}.onnx")
+            quantize_int8(path, out, calib, fmt)
+            written.append(out)
+        if pre_path is not None:
+            from .model import prefilter_input
+            from .optics import Display, amp_phase_to_complex, offset_to_slm
+
+            display = Display(tuple(cfg["wavelengths_m"]), cfg["pixel_pitch_m"], cfg["volume_depth_m"])
+            pre_calib = []
+            with torch.no_grad():
+                for x in calib:
+                    a, p = ck["net"](torch.from_numpy(x))
+                    slm = offset_to_slm(amp_phase_to_complex(a, p), cfg["offset_mm"] * 1e-3, display)
+                    pre_calib.append(prefilter_input(slm).numpy())
+            for fmt, suffix in (("qoperator", "int8-qop"), ("qdq", "int8-qdq")):
+                out = os.path.join(args.out_dir, f"{args.name}.prefilter.{suffix}.onnx")
+                quantize_int8(pre_path, out, pre_calib, fmt)
+                written.append(out)
+    print(json.dumps({"written": written, "metadata": read_metadata(path)}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,567 @@
+"""Two-stage training of the hologram CNN (and the DDPM pre-filter CNN).
+
+``python -m tensorholo_training.train --config CONFIG.json [--set key=value ...] [--run-dir DIR]``
+
+Phases (``TrainConfig.stages``):
+
+1. ``stage1``: supervised, hologram CNN only (data fidelity + dynamic focal stack + TV);
+2. ``identity``: identity pre-training of the pre-filter CNN (when one is used: ``offset_mm != 0`` by default);
+3. ``stage2``: DDPM, both CNNs (focal stack of the post-encoding hologram + TV + Eq. 11).
+
+Everything needed to resume lives in ``<run_dir>/checkpoint.pt`` (models, optimizer, phase and step, the
+data order is a function of ``(seed, epoch)`` and the focal depths of ``(seed, step)``); a rerun of the same
+command resumes where it stopped. The resolved configuration is saved as ``<run_dir>/config.json``; losses
+and PSNRs go to ``<run_dir>/learning_curve.csv`` and stdout. ``<run_dir>/stage1.pt`` and ``final.pt`` are
+written at the end of stage 1 and of the run (inputs of :mod:`.export`).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from . import losses as L
+from . import optics
+from .data import (
+    Augment, LdiDataset, check_display, collate, manifest_propagation, read_manifest, split_names,
+    write_synthetic_dataset,
+)
+from .metrics import psnr
+from .model import count_parameters, hologram_cnn, prefilter_cnn
+from .optics import Display, PropagationOptions
+
+
+@dataclass
+class TrainConfig:
+    """Training configuration (saved as JSON with the run). Units: SI except ``offset_mm`` (paper's mm).
+
+    Data: ``dataset`` is a ``holo dataset`` folder, or ``"synthetic"`` for a small generated one
+    (:func:`~.data.write_synthetic_dataset`, ``synthetic_size``/``synthetic_counts``) written into the run.
+    Schedule: ``*_steps`` optimizer steps per phase; a positive ``*_epochs`` overrides them
+    (``steps = ceil(epochs · N_train / batch_size)``; paper: 3000 / 50 / 1000 epochs, batch 2).
+    """
+
+    run_dir: str = "runs/small"
+    dataset: str = "synthetic"
+    synthetic_size: int = 64
+    synthetic_counts: dict = field(default_factory=lambda: {"train": 32, "val": 8})
+    input_layers: int = 1
+    crop: list | None = None
+    hflip: bool = True
+    vflip: bool = True
+    # models
+    num_layers: int = 8
+    channels: int = 24
+    prefilter_layers: int = 8
+    prefilter_channels: int = 8
+    use_prefilter: str = "auto"  # "auto" (iff offset_mm != 0), "yes", "no"
+    # display
+    wavelengths_m: list = field(default_factory=lambda: [638e-9, 520e-9, 450e-9])
+    pixel_pitch_m: float = 8e-6
+    volume_depth_m: float = 6e-3
+    offset_mm: float = 0.0
+    # schedule
+    stages: list = field(default_factory=lambda: ["stage1", "identity", "stage2"])
+    batch_size: int = 2
+    stage1_steps: int = 200
+    identity_steps: int = 20
+    stage2_steps: int = 100
+    stage1_epochs: float = 0.0
+    identity_epochs: float = 0.0
+    stage2_epochs: float = 0.0
+    lr: float = 1e-4
+    betas: list = field(default_factory=lambda: [0.9, 0.99])
+    init_from: str = ""  # checkpoint whose hologram CNN (and pre-filter, if any) initialises this run
+    # losses
+    data_mode: str = "complex"
+    loss_kind: str = "l2"
+    w_data: float = 1.0
+    w_focal_stack: float = 1.0
+    w_focal_stack_tv: float = 1.0
+    w_regulariser: float = 0.07
+    fs_bins: int = 200
+    fs_top: int = 15
+    fs_random: int = 5
+    fs_attention_scale: float = 5.0
+    asm_pad: bool | None = None  # None: as the dataset's synthesis.pad (manifest), else False
+    asm_band_limit: bool | None = None  # None: as the dataset's synthesis.band_limit, else False
+    fs_chunk: int = 0
+    # runtime
+    device: str = "auto"  # "auto", "cpu", "cuda", "cuda:1", ...
+    precision: str = "auto"  # "auto" (bf16/fp16 autocast on CUDA, fp32 on CPU), "fp32", "bf16", "fp16"
+    threads: int = 0  # torch CPU threads (0 = torch's default)
+    seed: int = 0
+    log_every: int = 10
+    val_every: int = 50
+    val_batches: int = 4
+    ckpt_every: int = 50
+
+    # -- derived ------------------------------------------------------------------------------------------
+    @property
+    def display(self) -> Display:
+        """The display geometry."""
+        return Display(tuple(self.wavelengths_m), self.pixel_pitch_m, self.volume_depth_m)
+
+    @property
+    def offset_m(self) -> float:
+        """SLM offset in metres."""
+        return self.offset_mm * 1e-3
+
+    @property
+    def prefilter_enabled(self) -> bool:
+        """Whether stage 2 uses the pre-filter CNN."""
+        if self.use_prefilter == "auto":
+            return self.offset_mm != 0.0
+        return self.use_prefilter == "yes"
+
+    @property
+    def options(self) -> PropagationOptions:
+        """ASM options of the losses and of the DDPM chain (``None`` fields read as False; the
+        :class:`Trainer` first resolves them from the dataset manifest)."""
+        return PropagationOptions(bool(self.asm_pad), bool(self.asm_band_limit))
+
+    def fs_config(self) -> L.FocalStackLossConfig:
+        """The focal stack loss configuration."""
+        return L.FocalStackLossConfig(
+            self.fs_bins, self.fs_top, self.fs_random, self.fs_attention_scale, self.loss_kind,
+            bool(self.asm_pad), bool(self.asm_band_limit), self.fs_chunk or None,
+        )
+
+    def weights(self) -> L.LossWeights:
+        """Loss weights."""
+        return L.LossWeights(self.w_data, self.w_focal_stack, self.w_focal_stack_tv, self.w_regulariser)
+
+    def to_dict(self) -> dict:
+        """JSON-serialisable dict."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "TrainConfig":
+        """From a dict; unknown keys are an error (typos must not pass silently)."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(d) - names - {"_comment", "training_commit"}
+        if unknown:
+            raise ValueError(f"unknown configuration keys: {sorted(unknown)}")
+        return cls(**{k: v for k, v in d.items() if k in names})
+
+
+def set_option(cfg: TrainConfig, assignment: str) -> TrainConfig:
+    """Applies ``key=value`` (value parsed as JSON when possible, else a string) to a configuration."""
+    key, sep, value = assignment.partition("=")
+    if not sep:
+        raise ValueError(f"--set expects key=value, got {assignment!r}")
+    names = {f.name for f in dataclasses.fields(cfg)}
+    if key not in names:
+        raise ValueError(f"unknown configuration key {key!r}")
+    try:
+        parsed = json.loads(value)
+    except json.JSONDecodeError:
+        parsed = value
+    return dataclasses.replace(cfg, **{key: parsed})
+
+
+def git_commit() -> str:
+    """``git rev-parse HEAD`` of the source tree (with ``-dirty`` if modified), or ``"unknown"``."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    try:
+        rev = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, check=True)
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
+                               capture_output=True, text=True, check=True)
+        return rev.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def resolve_device(cfg: TrainConfig) -> torch.device:
+    """The torch device of a configuration (``auto``: CUDA when available)."""
+    if cfg.device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(cfg.device)
+
+
+def autocast_dtype(cfg: TrainConfig, device: torch.device) -> torch.dtype | None:
+    """Autocast dtype of the CNNs (``None`` = float32). Optics always run in complex64/float64."""
+    p = cfg.precision
+    if p == "auto":
+        if device.type != "cuda":
+            return None
+        return torch.bfloat16 if torch.cuda.is_bf16_supported() else torch.float16
+    return {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}[p]
+
+
+class Trainer:
+    """Runs the phases of a :class:`TrainConfig` with checkpoints that resume (see the module docstring).
+
+    Args:
+        cfg: the configuration; ``cfg.run_dir`` is created.
+        log: print function for progress lines.
+    """
+
+    def __init__(self, cfg: TrainConfig, log=print):
+        self.cfg = cfg
+        self.log = log
+        os.makedirs(cfg.run_dir, exist_ok=True)
+        if cfg.threads:
+            torch.set_num_threads(cfg.threads)
+        torch.manual_seed(cfg.seed)
+        self.device = resolve_device(cfg)
+        self.amp_dtype = autocast_dtype(cfg, self.device)
+        self.display = cfg.display
+        root = cfg.dataset
+        if root == "synthetic":
+            root = os.path.join(cfg.run_dir, "synthetic_dataset")
+            if not os.path.exists(os.path.join(root, "manifest.json")):
+                n = cfg.synthetic_size
+                write_synthetic_dataset(root, dict(cfg.synthetic_counts), n, n, max(2, cfg.input_layers),
+                                        display=self.display, seed=cfg.seed)
+        self.dataset_root = root
+        manifest = read_manifest(root)
+        check_display(manifest, self.display)
+        synth = manifest_propagation(manifest) or PropagationOptions()
+        if cfg.asm_pad is None or cfg.asm_band_limit is None:
+            cfg = dataclasses.replace(
+                cfg,
+                asm_pad=synth.pad if cfg.asm_pad is None else cfg.asm_pad,
+                asm_band_limit=synth.band_limit if cfg.asm_band_limit is None else cfg.asm_band_limit,
+            )
+            self.cfg = cfg
+        crop = tuple(cfg.crop) if isinstance(cfg.crop, (list, tuple)) else (
+            (cfg.crop, cfg.crop) if cfg.crop else None)
+        self.train_set = LdiDataset(root, "train", cfg.input_layers, Augment(crop, cfg.hflip, cfg.vflip),
+                                    seed=cfg.seed)
+        names = split_names(manifest)
+        val_split = next((s for s in ("val", "test") if s in names), None) if names else "val"
+        try:
+            self.val_set = (LdiDataset(root, val_split, cfg.input_layers, Augment(crop), seed=cfg.seed + 1)
+                            if val_split else None)
+        except FileNotFoundError:
+            self.val_set = None
+        self.trained_resolution = list(crop) if crop else list(self.train_set.shape)
+        torch.manual_seed(cfg.seed)
+        self.net = hologram_cnn(cfg.num_layers, cfg.input_layers, cfg.channels).to(self.device)
+        self.prefilter = (
+            prefilter_cnn(cfg.prefilter_layers, cfg.prefilter_channels).to(self.device)
+            if cfg.prefilter_enabled else None
+        )
+        if cfg.init_from:
+            state = torch.load(cfg.init_from, map_location=self.device, weights_only=False)
+            self.net.load_state_dict(state["net"])
+            if self.prefilter is not None and state.get("prefilter") is not None:
+                self.prefilter.load_state_dict(state["prefilter"])
+            self.log(f"initialised from {cfg.init_from}")
+        self.phases = self._phases()
+        self.phase_index = 0
+        self.phase_step = 0
+        self.global_step = 0
+        self.optimizer = None
+        self.scaler = None
+        self._new_optimizer()
+        self.commit = git_commit()
+
+    # -- schedule -----------------------------------------------------------------------------------------
+    def _phases(self) -> list[tuple[str, int]]:
+        cfg = self.cfg
+        per_epoch = max(1, len(self.train_set) // cfg.batch_size)
+        out = []
+        for name in cfg.stages:
+            if name not in ("stage1", "identity", "stage2"):
+                raise ValueError(f"unknown stage {name!r} (stage1, identity, stage2)")
+            if name == "identity" and self.prefilter is None:
+                continue
+            epochs = getattr(cfg, f"{name}_epochs")
+            steps = math.ceil(epochs * per_epoch) if epochs > 0 else getattr(cfg, f"{name}_steps")
+            if steps > 0:
+                out.append((name, int(steps)))
+        return out
+
+    @property
+    def phase(self) -> str | None:
+        """Name of the current phase (``None`` when done)."""
+        return self.phases[self.phase_index][0] if self.phase_index < len(self.phases) else None
+
+    def _params(self, phase: str | None):
+        if phase == "identity":
+            return list(self.prefilter.parameters())
+        if phase == "stage2" and self.prefilter is not None:
+            return list(self.net.parameters()) + list(self.prefilter.parameters())
+        return list(self.net.parameters())
+
+    def _new_optimizer(self):
+        self.optimizer = torch.optim.Adam(self._params(self.phase), lr=self.cfg.lr, betas=tuple(self.cfg.betas))
+        self.scaler = torch.amp.GradScaler("cuda", enabled=self.amp_dtype == torch.float16)
+
+    # -- one step -----------------------------------------------------------------------------------------
+    def _autocast(self):
+        if self.amp_dtype is None:
+            return torch.autocast(self.device.type, enabled=False)
+        return torch.autocast(self.device.type, dtype=self.amp_dtype)
+
+    def _generator(self, step: int, salt: int = 0) -> torch.Generator:
+        return torch.Generator().manual_seed(self.cfg.seed * 1_000_003 + step * 7 + salt)
+
+    def compute_loss(self, batch: dict, phase: str, generator: torch.Generator) -> dict:
+        """Losses of one batch for ``phase`` (see :mod:`.losses`); also ``"pred"`` (complex midpoint used
+        for PSNR: the CNN output in stage 1, the post-encoding hologram in stage 2)."""
+        cfg = self.cfg
+        rgbd = batch["rgbd"].to(self.device)
+        gt = batch["midpoint"].to(self.device)
+        depth = batch["depth"].to(self.device)
+        with self._autocast(), torch.set_grad_enabled(torch.is_grad_enabled() and phase != "identity"):
+            amp, phs = self.net(rgbd)
+        amp, phs = amp.float(), phs.float()
+        if phase == "stage1":
+            out = L.stage1_loss(amp, phs, gt, depth, self.display, cfg.weights(), cfg.fs_config(),
+                                cfg.data_mode, generator)
+            out["pred"] = optics.amp_phase_to_complex(amp, phs)
+            return out
+        if phase == "identity":
+            with torch.no_grad():
+                slm = optics.offset_to_slm(optics.amp_phase_to_complex(amp, phs), cfg.offset_m, self.display,
+                                           cfg.options)
+            with self._autocast():
+                loss = L.identity_loss(self.prefilter, slm, cfg.loss_kind)
+            return {"total": loss.float(), "identity": loss.float(), "pred": optics.amp_phase_to_complex(amp, phs)}
+        with self._autocast():
+            dd = L.ddpm_forward(amp, phs, self.prefilter, cfg.offset_m, self.display, cfg.options)
+        out = L.stage2_loss(dd, gt, depth, self.display, cfg.weights(), cfg.fs_config(), generator)
+        out["pred"] = dd.post_midpoint
+        return out
+
+    def train_step(self, batch: dict) -> dict[str, float]:
+        """One optimizer step of the current phase; returns the loss terms as floats."""
+        phase = self.phase
+        self.net.train(phase != "identity")
+        out = self.compute_loss(batch, phase, self._generator(self.global_step))
+        self.optimizer.zero_grad(set_to_none=True)
+        self.scaler.scale(out["total"]).backward()
+        self.scaler.step(self.optimizer)
+        self.scaler.update()
+        return {k: float(v.detach()) for k, v in out.items() if k != "pred"}
+
+    @torch.no_grad()
+    def validate(self, phase: str) -> dict[str, float]:
+        """Mean loss and PSNRs on up to ``val_batches`` validation batches (fixed focal depths per batch).
+
+        ``psnr_amp``: amplitude of the predicted (stage 1) or post-encoding (stage 2) midpoint hologram vs
+        the ground-truth amplitude, data range 1 (paper Table 2). ``psnr_fs``: the same over the focal stack
+        of 15 most frequent + 5 random depths of each scene.
+        """
+        if self.val_set is None:
+            return {}
+        self.net.eval()
+        totals, amp_psnr, fs_psnr, n = 0.0, [], [], 0
+        bs = self.cfg.batch_size
+        for k in range(0, min(len(self.val_set), bs * self.cfg.val_batches), bs):
+            items = []
+            for i in range(k, min(k + bs, len(self.val_set))):
+                self.val_set.rng = np.random.default_rng([self.cfg.seed, 1_000_000, i])
+                items.append(self.val_set[i])
+            batch = collate(items)
+            g = self._generator(k, salt=1)
+            out = self.compute_loss(batch, phase, g)
+            totals += float(out["total"])
+            n += 1
+            gt = batch["midpoint"].to(self.device)
+            pred = out["pred"]
+            amp_psnr += psnr(gt.abs(), pred.abs()).tolist()
+            depth = batch["depth"].to(self.device)
+            focal = L.select_focal_depths(depth, self.cfg.fs_bins, self.cfg.fs_top, self.cfg.fs_random,
+                                          self._generator(k, salt=2))
+            opts = self.cfg.options
+            s_gt = optics.focal_stack(gt, focal, self.display, 0.0, opts, chunk=self.cfg.fs_chunk or None)
+            s_pr = optics.focal_stack(pred, focal, self.display, 0.0, opts, chunk=self.cfg.fs_chunk or None)
+            fs_psnr += psnr(s_gt.flatten(0, 1), s_pr.flatten(0, 1)).view(len(items), -1).mean(1).tolist()
+        return {"val_loss": totals / max(n, 1), "val_psnr_amp": float(np.mean(amp_psnr)),
+                "val_psnr_fs": float(np.mean(fs_psnr))}
+
+    # -- checkpoints --------------------------------------------------------------------------------------
+    def state(self) -> dict:
+        """Everything needed to resume (and to export)."""
+        return {
+            "config": self.cfg.to_dict(),
+            "training_commit": self.commit,
+            "trained_resolution": self.trained_resolution,
+            "net": self.net.state_dict(),
+            "prefilter": self.prefilter.state_dict() if self.prefilter is not None else None,
+            "optimizer": self.optimizer.state_dict(),
+            "scaler": self.scaler.state_dict(),
+            "phase_index": self.phase_index,
+            "phase_step": self.phase_step,
+            "global_step": self.global_step,
+            "phases": self.phases,
+            "torch_rng": torch.get_rng_state(),
+        }
+
+    def save(self, name: str = "checkpoint.pt") -> str:
+        """Writes ``<run_dir>/<name>`` atomically; returns its path."""
+        path = os.path.join(self.cfg.run_dir, name)
+        tmp = path + ".tmp"
+        torch.save(self.state(), tmp)
+        os.replace(tmp, path)
+        return path
+
+    def load(self, path: str) -> None:
+        """Restores a :meth:`state` written by :meth:`save`."""
+        s = torch.load(path, map_location=self.device, weights_only=False)
+        self.net.load_state_dict(s["net"])
+        if self.prefilter is not None and s.get("prefilter") is not None:
+            self.prefilter.load_state_dict(s["prefilter"])
+        self.phase_index, self.phase_step, self.global_step = s["phase_index"], s["phase_step"], s["global_step"]
+        self._new_optimizer()
+        if self.phase is not None:
+            self.optimizer.load_state_dict(s["optimizer"])
+            self.scaler.load_state_dict(s["scaler"])
+        torch.set_rng_state(s["torch_rng"])
+
+    # -- the loop -----------------------------------------------------------------------------------------
+    def _csv(self, row: dict) -> None:
+        path = os.path.join(self.cfg.run_dir, "learning_curve.csv")
+        fields = ["global_step", "phase", "phase_step", "train_loss", "val_loss", "val_psnr_amp", "val_psnr_fs",
+                  "elapsed_s"]
+        new = not os.path.exists(path)
+        with open(path, "a", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
+            if new:
+                w.writeheader()
+            w.writerow(row)
+
+    def _truncate_csv(self) -> None:
+        """On resume, drop learning-curve rows written after the checkpoint's step."""
+        path = os.path.join(self.cfg.run_dir, "learning_curve.csv")
+        if not os.path.exists(path):
+            return
+        with open(path) as f:
+            rows = list(csv.DictReader(f))
+        if not rows:
+            return
+        fields = list(rows[0].keys())
+        keep = [r for r in rows if int(r["global_step"]) <= self.global_step]
+        with open(path, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=fields)
+            w.writeheader()
+            w.writerows(keep)
+
+    def _batches(self):
+        """Endless shard-grouped batches; the order of epoch ``e`` depends only on ``(seed, e)`` and the
+        augmentation of item ``k`` only on ``(seed, e, k)``, so a resumed run sees the same data."""
+        bs = self.cfg.batch_size
+        per_epoch = max(1, len(self.train_set) // bs)
+        start = self.global_step
+        epoch, pos = divmod(start, per_epoch)
+        while True:
+            rng = np.random.default_rng([self.cfg.seed, epoch])
+            order = self.train_set.shard_grouped_order(rng)
+            for b in range(pos, per_epoch):
+                items = []
+                for j in order[b * bs : (b + 1) * bs]:
+                    self.train_set.rng = np.random.default_rng([self.cfg.seed, epoch, j])
+                    items.append(self.train_set[j])
+                yield collate(items)
+            epoch, pos = epoch + 1, 0
+
+    def run(self, max_steps: int | None = None) -> dict:
+        """Runs (or resumes) all phases; returns the last validation metrics.
+
+        Args:
+            max_steps: stop (with a checkpoint) once ``global_step`` reaches this, as an interruption would;
+                the next :meth:`run` resumes.
+        """
+        cfg = self.cfg
+        ckpt = os.path.join(cfg.run_dir, "checkpoint.pt")
+        if os.path.exists(ckpt):
+            self.load(ckpt)
+            self._truncate_csv()
+            self.log(f"resumed from {ckpt} at step {self.global_step} ({self.phase or 'done'})")
+        config = cfg.to_dict() | {"training_commit": self.commit}
+        with open(os.path.join(cfg.run_dir, "config.json"), "w") as f:
+            json.dump(config, f, indent=1)
+        self.log(f"device {self.device}, autocast {self.amp_dtype}, hologram CNN {cfg.num_layers} layers "
+                 f"({count_parameters(self.net)} parameters)"
+                 + (f", pre-filter {count_parameters(self.prefilter)} parameters" if self.prefilter else "")
+                 + f", {len(self.train_set)} training scenes, phases {self.phases}")
+        t0 = time.time()
+        metrics: dict = {}
+        running, count = 0.0, 0
+        batches = self._batches()
+        while self.phase is not None:
+            name, steps = self.phases[self.phase_index]
+            if self.phase_step >= steps:
+                if name == "stage1":
+                    self.save("stage1.pt")
+                self.phase_index += 1
+                self.phase_step = 0
+                self._new_optimizer()
+                continue
+            if max_steps is not None and self.global_step >= max_steps:
+                self.save()
+                self.log(f"stopped at step {self.global_step} (max_steps)")
+                return metrics
+            terms = self.train_step(next(batches))
+            if not math.isfinite(terms["total"]):
+                raise FloatingPointError(f"non-finite loss at step {self.global_step}: {terms}")
+            self.phase_step += 1
+            self.global_step += 1
+            running += terms["total"]
+            count += 1
+            last = self.phase_step == steps
+            if self.global_step % cfg.log_every == 0 or last:
+                msg = " ".join(f"{k} {v:.5f}" for k, v in terms.items())
+                row = {"global_step": self.global_step, "phase": name, "phase_step": self.phase_step,
+                       "train_loss": running / count, "elapsed_s": round(time.time() - t0, 2)}
+                if self.global_step % cfg.val_every == 0 or last:
+                    metrics = self.validate(name)
+                    row |= metrics
+                    msg += " | " + " ".join(f"{k} {v:.4f}" for k, v in metrics.items())
+                self.log(f"[{name} {self.phase_step}/{steps}] step {self.global_step} {msg}")
+                self._csv(row)
+                running, count = 0.0, 0
+            if self.global_step % cfg.ckpt_every == 0 or last:
+                self.save()
+        self.save()
+        self.save("final.pt")
+        self.log(f"done in {time.time() - t0:.1f} s; checkpoints in {cfg.run_dir}")
+        return metrics
+
+
+def load_config(path: str | None, sets: list[str] | None = None, run_dir: str | None = None) -> TrainConfig:
+    """Reads a JSON configuration (or the defaults when ``path`` is None) and applies ``key=value`` overrides."""
+    cfg = TrainConfig()
+    if path:
+        with open(path) as f:
+            cfg = TrainConfig.from_dict(json.load(f))
+    for s in sets or []:
+        cfg = set_option(cfg, s)
+    if run_dir:
+        cfg = dataclasses.replace(cfg, run_dir=run_dir)
+    return cfg
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point (see the module docstring)."""
+    ap = argparse.ArgumentParser(prog="python -m tensorholo_training.train", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--config", help="JSON configuration (keys of TrainConfig); default: the small CPU run")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a configuration key (value parsed as JSON), repeatable")
+    ap.add_argument("--run-dir", help="override run_dir")
+    ap.add_argument("--print-config", action="store_true", help="print the resolved configuration and exit")
+    args = ap.parse_args(argv)
+    cfg = load_config(args.config, args.set, args.run_dir)
+    if args.print_config:
+        print(json.dumps(cfg.to_dict(), indent=1))
+        return 0
+    Trainer(cfg, log=lambda m: print(m, flush=True)).run()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,95 @@
+"""ONNX export round trip (f32 and int8) and metadata (DESIGN.md §3)."""
+import numpy as np
+import onnx
+import pytest
+import torch
+
+from tensorholo_training.export import (
+    export_onnx, model_metadata, quantize_int8, read_metadata, run_onnx,
+)
+from tensorholo_training.model import hologram_cnn, prefilter_cnn
+
+KEYS = ["kind", "layers", "wavelengths_m", "pixel_pitch_m", "volume_depth_m", "offset_m", "input_layers",
+        "trained_resolution", "training_commit"]
+
+# int8 tolerance: weights and activations are quantised per tensor to 8 bits; on random-init networks the heads
+# move by up to a few percent of their range. Mean |error| must stay below 0.01 and max below 0.1 (amplitude
+# range √2, phase range 1); measured ≈0.001 mean, ≈0.05 max.
+INT8_MEAN, INT8_MAX = 0.01, 0.1
+
+
+def meta(net, kind="hologram-cnn"):
+    return model_metadata(kind, net, [638e-9, 520e-9, 450e-9], 8e-6, 6e-3, 6e-3, 1, [384, 384], "abc123")
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    torch.manual_seed(0)
+    net = hologram_cnn(8, 1).eval()
+    d = tmp_path_factory.mktemp("onnx")
+    path = export_onnx(net, str(d / "holo8.onnx"), "hologram-cnn", meta(net))
+    return net, path, d
+
+
+def test_f32_round_trip_with_symbolic_size(exported):
+    net, path, _ = exported
+    m = onnx.load(path)
+    onnx.checker.check_model(m)
+    assert m.opset_import[0].version == 17
+    assert [i.name for i in m.graph.input] == ["rgbd"] and [o.name for o in m.graph.output] == ["amplitude", "phase"]
+    dims = [d.dim_param or d.dim_value for d in m.graph.input[0].type.tensor_type.shape.dim]
+    assert dims == [1, 4, "H", "W"]
+    for h, w in ((24, 40), (37, 19)):
+        x = np.random.default_rng(h).random((1, 4, h, w), dtype=np.float32)
+        with torch.no_grad():
+            a, p = net(torch.from_numpy(x))
+        oa, op = run_onnx(path, x)
+        err = max(np.abs(oa - a.numpy()).max(), np.abs(op - p.numpy()).max())
+        print(f"f32 ONNX vs PyTorch at {h}x{w}: max abs error {err:.1e}")
+        assert err < 1e-5
+
+
+def test_metadata_present(exported):
+    _, path, _ = exported
+    md = read_metadata(path)
+    for k in KEYS:
+        assert "tensorholo." + k in md, k
+    assert md["tensorholo.kind"] == "hologram-cnn" and md["tensorholo.layers"] == "8"
+    assert [float(v) for v in md["tensorholo.wavelengths_m"].split(",")] == [638e-9, 520e-9, 450e-9]
+    assert md["tensorholo.trained_resolution"] == "384x384" and md["tensorholo.precision"] == "f32"
+
+
+@pytest.mark.parametrize("fmt", ["qoperator", "qdq"])
+def test_int8_round_trip(exported, fmt):
+    net, path, d = exported
+    rng = np.random.default_rng(1)
+    calib = [rng.random((1, 4, 32, 32), dtype=np.float32) for _ in range(8)]
+    out = quantize_int8(path, str(d / f"holo8.{fmt}.onnx"), calib, fmt)
+    ops = {n.op_type for n in onnx.load(out).graph.node}
+    if fmt == "qoperator":
+        assert "QLinearConv" in ops and "Conv" not in ops and "QLinearAdd" not in ops
+    else:
+        assert "QuantizeLinear" in ops and "DequantizeLinear" in ops and "QLinearConv" not in ops
+    assert "Add" in ops  # residual additions stay float (tract 0.23 has no QLinearAdd)
+    md = read_metadata(out)
+    assert md["tensorholo.precision"].startswith("int8") and md["tensorholo.kind"] == "hologram-cnn"
+    x = rng.random((1, 4, 28, 36), dtype=np.float32)
+    with torch.no_grad():
+        a, p = net(torch.from_numpy(x))
+    oa, op = run_onnx(out, x)
+    errs = np.concatenate([np.abs(oa - a.numpy()).ravel(), np.abs(op - p.numpy()).ravel()])
+    print(f"int8 {fmt}: mean abs error {errs.mean():.4f}, max {errs.max():.4f}")
+    assert errs.mean() < INT8_MEAN and errs.max() < INT8_MAX
+
+
+def test_prefilter_export(tmp_path):
+    pre = prefilter_cnn().eval()
+    path = export_onnx(pre, str(tmp_path / "pre.onnx"), "prefilter-cnn", meta(pre, "prefilter-cnn"))
+    m = onnx.load(path)
+    assert [i.name for i in m.graph.input] == ["slm_field"]
+    x = np.random.default_rng(0).random((1, 6, 20, 20), dtype=np.float32)
+    with torch.no_grad():
+        a, p = pre(torch.from_numpy(x))
+    oa, op = run_onnx(path, x)
+    assert np.abs(oa - a.numpy()).max() < 1e-5 and np.abs(op - p.numpy()).max() < 1e-5
+    assert read_metadata(path)["tensorholo.kind"] == "prefilter-cnn"
