@@ -253,9 +253,11 @@ fn wrong_input_size_is_an_error_and_the_model_stays_usable() {
     compare(&m, "holo", "24x32", "holo", 1e-4);
 }
 
-/// int8 files from `export.quantize_int8`. tract 0.23 runs both forms; they are compared with onnxruntime's
-/// outputs of the same file (quantisation error itself is not tested here, only that tract agrees with
-/// onnxruntime to within a few quantisation steps of the output heads).
+/// int8 files from `export.quantize_int8`. tract 0.23 runs both forms (QOperator `QLinearConv` and QDQ, the
+/// latter parsed with value infos ignored); they are compared with onnxruntime's outputs of the same file.
+/// Measured on x86-64: bit-identical to onnxruntime (the quantised last conv leaves 193 distinct output
+/// values), while int8 vs f32 differ by up to 5e-3; the tolerance allows about one output quantum of
+/// rounding difference on other CPUs.
 #[test]
 fn int8_qoperator_and_qdq_files_load_and_run() {
     for (file, tag) in [
@@ -264,7 +266,7 @@ fn int8_qoperator_and_qdq_files_load_and_run() {
     ] {
         let m = hologram(file);
         assert!(m.metadata().precision.starts_with("int8-"), "{file}");
-        let (da, dp) = compare(&m, "holo", "24x32", tag, 0.05);
+        let (da, dp) = compare(&m, "holo", "24x32", tag, 0.02);
         eprintln!("{file}: tract vs onnxruntime max |Δamplitude| {da:.2e}, |Δphase| {dp:.2e}");
         let x = npy("io_holo_16x20_input.npy");
         assert_eq!(m.run(x.view()).unwrap().dim(), (3, 16, 20));

@@ -275,18 +275,18 @@ impl HologramModel {
         for (i, d) in fact.shape.iter().skip(2).take(2).enumerate() {
             match d {
                 TDim::Sym(s) => dims[i] = Some(s.clone()),
-                _ => {
-                    match d.to_i64() {
-                        Ok(v) if v > 0 => fixed[i] = Some(v as usize),
-                        _ => return Err(HoloError::ModelContract {
+                _ => match d.to_i64() {
+                    Ok(v) if v > 0 => fixed[i] = Some(v as usize),
+                    _ => {
+                        return Err(HoloError::ModelContract {
                             source_name,
                             reason: format!(
                                 "input dimension {} is `{d}`, expected a symbol or a positive size",
                                 i + 2
                             ),
-                        }),
+                        })
                     }
-                }
+                },
             }
         }
         Ok(Self {
