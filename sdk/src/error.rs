@@ -54,6 +54,37 @@ pub enum HoloError {
         /// What went wrong.
         reason: String,
     },
+    /// A CNN file (`DESIGN.md` §3) could not be decoded or compiled: truncated or corrupt protobuf, an
+    /// operator tract cannot run, a graph that does not type-check.
+    #[error("cannot load model `{source_name}`: {reason}")]
+    ModelLoad {
+        /// The file path, or `<bytes>` for an in-memory model.
+        source_name: String,
+        /// What went wrong (tract's message chain).
+        reason: String,
+    },
+    /// A CNN file decodes but its inputs/outputs are not the contract's (`DESIGN.md` §3: input `rgbd`
+    /// `[1,4L,H,W]` or `slm_field` `[1,6,H,W]`, outputs `amplitude` and `phase` `[1,3,H,W]`, f32).
+    #[error("model `{source_name}` does not follow the I/O contract (DESIGN §3): {reason}")]
+    ModelContract {
+        /// The file path, or `<bytes>`.
+        source_name: String,
+        /// Which input/output is wrong and what was expected.
+        reason: String,
+    },
+    /// A CNN file's `tensorholo.*` metadata is missing, unparsable or disagrees with the SDK's configuration.
+    #[error("model metadata `{key}` is `{found}`, expected {expected}")]
+    ModelMetadata {
+        /// Full key, e.g. `tensorholo.pixel_pitch_m`.
+        key: String,
+        /// The file's value (`<missing>` if absent).
+        found: String,
+        /// The expected value or format.
+        expected: String,
+    },
+    /// Running a CNN failed inside the inference engine (the model stays usable).
+    #[error("model inference failed: {0}")]
+    ModelRun(String),
     /// Refusing to overwrite a file the user passed in as input.
     #[error("refusing to overwrite input file `{0}`")]
     WouldOverwriteInput(PathBuf),

@@ -11,6 +11,7 @@
 //! - [`scene`]: RGB-D frames, layered depth images, depth decoders, the built-in procedural scene.
 //! - [`reference`]: the non-learned pipeline (SM-LBM → offset → double phase → SLM codes → previews).
 //! - [`metrics`]: PSNR and SSIM.
+//! - [`model`]: the hologram and pre-filter CNNs (ONNX, run with tract), metadata and I/O contract checks.
 //! - [`io`]: PNG and `.npy` input/output.
 //! - [`dataset`]: the training dataset (MIT-CGH-4K-V2 style): random LDIs + SM-LBM midpoint holograms in
 //!   `.npz` shards with a `manifest.json`.
@@ -25,6 +26,7 @@ pub mod encoding;
 pub mod error;
 pub mod io;
 pub mod metrics;
+pub mod model;
 pub mod optics;
 pub mod reference;
 pub mod scene;

@@ -1,0 +1,515 @@
+//! [`HologramModel`]: one ONNX CNN loaded with tract, checked against the I/O contract and metadata of
+//! `DESIGN.md` §3, with one optimised [`ModelPlan`] per resolution.
+
+use std::collections::{BTreeMap, HashMap};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+
+use ndarray::{Array3, ArrayView3, Zip};
+use num_complex::Complex32;
+use tract_onnx::pb;
+use tract_onnx::prelude::{
+    tvec, Framework, InferenceModelExt, IntoRunnable, IntoTValue, Symbol, TDim, Tensor, TypedModel,
+    TypedSimplePlan,
+};
+
+use super::metadata::{ModelConfig, ModelKind, ModelMetadata};
+use crate::error::{HoloError, Result};
+use crate::scene::RgbdFrame;
+
+/// ONNX `TensorProto.DataType.FLOAT`.
+const ONNX_FLOAT: i32 = 1;
+/// Output names of both CNNs, in the order tract returns them after [`HologramModel`] loads a file.
+const OUTPUT_NAMES: [&str; 2] = ["amplitude", "phase"];
+
+/// Converts the CNN heads to a complex field (`DESIGN.md` §3): `A · exp(i·(p − 0.5)·2π)`.
+///
+/// `amplitude` (in `[0, √2]`) and `phase` (in `[0, 1]`) are `[3, H, W]`; the result is `[3, H, W]`
+/// (R, G, B). Errors: [`HoloError::ShapeMismatch`] if the two shapes differ.
+pub fn heads_to_field(
+    amplitude: ArrayView3<f32>,
+    phase: ArrayView3<f32>,
+) -> Result<Array3<Complex32>> {
+    if amplitude.shape() != phase.shape() {
+        return Err(HoloError::ShapeMismatch {
+            what: "amplitude head vs phase head".into(),
+            expected: amplitude.shape().to_vec(),
+            got: phase.shape().to_vec(),
+        });
+    }
+    let mut out = Array3::<Complex32>::zeros(amplitude.raw_dim());
+    Zip::from(&mut out)
+        .and(&amplitude)
+        .and(&phase)
+        .for_each(|o, &a, &p| *o = Complex32::from_polar(a, (p - 0.5) * std::f32::consts::TAU));
+    Ok(out)
+}
+
+/// Formats a tract error with its whole context chain on one line.
+fn tract_msg(e: &tract_onnx::prelude::TractError) -> String {
+    format!("{e:#}")
+}
+
+/// Runs `f`, turning a panic inside tract into an error (a corrupt file must never panic the caller).
+fn guarded<T>(
+    what: &str,
+    f: impl FnOnce() -> std::result::Result<T, String>,
+) -> std::result::Result<T, String> {
+    match catch_unwind(AssertUnwindSafe(f)) {
+        Ok(r) => r,
+        Err(p) => {
+            let msg = p
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "unknown panic".into());
+            Err(format!("{what} panicked: {msg}"))
+        }
+    }
+}
+
+/// One dimension of a graph input/output as written in the file.
+#[derive(Debug, Clone, PartialEq)]
+enum Dim {
+    Fixed(i64),
+    Named(String),
+    Unknown,
+}
+
+impl std::fmt::Display for Dim {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Dim::Fixed(v) => write!(f, "{v}"),
+            Dim::Named(s) => f.write_str(s),
+            Dim::Unknown => f.write_str("?"),
+        }
+    }
+}
+
+/// `(elem_type, dims)` of a graph value; `None` when the file gives no tensor type or shape.
+fn value_type(v: &pb::ValueInfoProto) -> Option<(i32, Vec<Dim>)> {
+    use pb::tensor_shape_proto::dimension::Value;
+    use pb::type_proto::Value as TypeValue;
+    // `TensorType` is the only variant tract's protobuf knows; sequences/maps decode as `None`.
+    let TypeValue::TensorType(t) = v.r#type.as_ref()?.value.as_ref()?;
+    let dims = t
+        .shape
+        .as_ref()?
+        .dim
+        .iter()
+        .map(|d| match &d.value {
+            Some(Value::DimValue(v)) => Dim::Fixed(*v),
+            Some(Value::DimParam(s)) if !s.is_empty() => Dim::Named(s.clone()),
+            _ => Dim::Unknown,
+        })
+        .collect();
+    Some((t.elem_type, dims))
+}
+
+fn dims_str(d: &[Dim]) -> String {
+    let parts: Vec<String> = d.iter().map(Dim::to_string).collect();
+    format!("[{}]", parts.join(","))
+}
+
+/// Checks one graph value is f32 `[1, channels, H, W]` (H, W named, fixed or unknown).
+fn check_value(
+    v: &pb::ValueInfoProto,
+    role: &str,
+    channels: usize,
+) -> std::result::Result<(), String> {
+    let want = format!("f32 [1,{channels},H,W]");
+    let (elem, dims) = value_type(v)
+        .ok_or_else(|| format!("{role} `{}` has no tensor shape, expected {want}", v.name))?;
+    if elem != ONNX_FLOAT {
+        return Err(format!(
+            "{role} `{}` has ONNX element type {elem}, expected {want} (f32 at the boundary)",
+            v.name
+        ));
+    }
+    let ok = dims.len() == 4
+        && matches!(dims[0], Dim::Fixed(1) | Dim::Named(_) | Dim::Unknown)
+        && dims[1] == Dim::Fixed(channels as i64)
+        && dims[2..]
+            .iter()
+            .all(|d| !matches!(d, Dim::Fixed(v) if *v <= 0));
+    if !ok {
+        return Err(format!(
+            "{role} `{}` has shape {}, expected {want}",
+            v.name,
+            dims_str(&dims)
+        ));
+    }
+    Ok(())
+}
+
+/// Checks the graph's inputs and outputs against `DESIGN.md` §3 for `metadata.kind`.
+fn check_contract(graph: &pb::GraphProto, md: &ModelMetadata) -> std::result::Result<(), String> {
+    let initialisers: std::collections::HashSet<&str> =
+        graph.initializer.iter().map(|t| t.name.as_str()).collect();
+    let inputs: Vec<&pb::ValueInfoProto> = graph
+        .input
+        .iter()
+        .filter(|i| !initialisers.contains(i.name.as_str()))
+        .collect();
+    let in_name = md.kind.input_name();
+    let in_channels = md.input_channels();
+    let names: Vec<&str> = inputs.iter().map(|i| i.name.as_str()).collect();
+    if inputs.len() != 1 || inputs[0].name != in_name {
+        return Err(format!(
+            "inputs are {names:?}, expected exactly one input `{in_name}` f32 [1,{in_channels},H,W] for a {}",
+            md.kind
+        ));
+    }
+    check_value(inputs[0], "input", in_channels)?;
+    let out_names: Vec<&str> = graph.output.iter().map(|o| o.name.as_str()).collect();
+    if out_names != OUTPUT_NAMES {
+        return Err(format!(
+            "outputs are {out_names:?}, expected {OUTPUT_NAMES:?} (f32 [1,3,H,W] each)"
+        ));
+    }
+    for o in &graph.output {
+        check_value(o, "output", 3)?;
+    }
+    Ok(())
+}
+
+/// A hologram or pre-filter CNN loaded from ONNX (`DESIGN.md` §3, paper Fig. 3), ready to be planned per
+/// resolution.
+///
+/// Holds the decluttered tract graph with symbolic `H`, `W` and a cache of optimised [`ModelPlan`]s, one per
+/// `(height, width)`. `Send + Sync`: plans can be built and run from several threads; a failed plan or run
+/// leaves the model usable.
+#[derive(Debug)]
+pub struct HologramModel {
+    metadata: ModelMetadata,
+    source_name: String,
+    decluttered: TypedModel,
+    /// Symbols of the input's height and width (`None` where the file fixes that dimension).
+    dims: [Option<Symbol>; 2],
+    /// Fixed input height/width from the file, where not symbolic.
+    fixed: [Option<usize>; 2],
+    plans: Mutex<HashMap<(usize, usize), ModelPlan>>,
+}
+
+impl HologramModel {
+    /// Loads a CNN from the bytes of an ONNX file and checks it (see the [module docs](super)).
+    ///
+    /// * `kind`: which CNN the caller expects (`tensorholo.kind` must agree);
+    /// * `expected`: the display and pipeline settings the file's metadata must match.
+    ///
+    /// Errors: [`HoloError::ModelLoad`] (not an ONNX protobuf, truncated, an operator tract cannot type),
+    /// [`HoloError::ModelMetadata`] (missing/unparsable key or mismatch with `expected`, naming the key, the
+    /// file's value and the expected one), [`HoloError::ModelContract`] (inputs/outputs not the contract's).
+    pub fn from_bytes(bytes: &[u8], kind: ModelKind, expected: &ModelConfig) -> Result<Self> {
+        Self::load(bytes, "<bytes>".into(), kind, expected)
+    }
+
+    /// Loads a CNN from an ONNX file; as [`HologramModel::from_bytes`], plus [`HoloError::Io`] if the file
+    /// cannot be read. Errors name the path.
+    pub fn from_path(
+        path: impl AsRef<Path>,
+        kind: ModelKind,
+        expected: &ModelConfig,
+    ) -> Result<Self> {
+        let path = path.as_ref();
+        let bytes = std::fs::read(path).map_err(|source| HoloError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::load(&bytes, path.display().to_string(), kind, expected)
+    }
+
+    fn load(
+        bytes: &[u8],
+        source_name: String,
+        kind: ModelKind,
+        expected: &ModelConfig,
+    ) -> Result<Self> {
+        let load_err = |reason: String| HoloError::ModelLoad {
+            source_name: source_name.clone(),
+            reason,
+        };
+        // Value infos are hints on intermediate tensors; tract 0.23 rejects the QDQ exporter's, and the
+        // graph's own ops determine every type anyway.
+        let onnx = tract_onnx::onnx().with_ignore_value_info(true);
+        let proto = guarded("decoding", || {
+            onnx.proto_model_for_read(&mut &bytes[..])
+                .map_err(|e| format!("not a valid ONNX protobuf ({})", tract_msg(&e)))
+        })
+        .map_err(load_err)?;
+        let graph = proto
+            .graph
+            .as_ref()
+            .filter(|g| !g.node.is_empty() || !g.output.is_empty())
+            .ok_or_else(|| {
+                load_err("the file holds no graph (empty or not an ONNX model)".into())
+            })?;
+        let raw: BTreeMap<String, String> = proto
+            .metadata_props
+            .iter()
+            .map(|p| (p.key.clone(), p.value.clone()))
+            .collect();
+        let metadata = ModelMetadata::from_props(raw)?;
+        metadata.check(kind, expected)?;
+        check_contract(graph, &metadata).map_err(|reason| HoloError::ModelContract {
+            source_name: source_name.clone(),
+            reason,
+        })?;
+        let decluttered = guarded("typing the graph", || {
+            let model = onnx
+                .model_for_proto_model(&proto)
+                .map_err(|e| format!("cannot parse the graph: {}", tract_msg(&e)))?;
+            model
+                .into_typed()
+                .and_then(|m| m.into_decluttered())
+                .map_err(|e| format!("cannot type the graph: {}", tract_msg(&e)))
+        })
+        .map_err(load_err)?;
+        let fact = decluttered
+            .input_fact(0)
+            .map_err(|e| load_err(tract_msg(&e)))?
+            .clone();
+        let mut dims = [None, None];
+        let mut fixed = [None, None];
+        for (i, d) in fact.shape.iter().skip(2).take(2).enumerate() {
+            match d {
+                TDim::Sym(s) => dims[i] = Some(s.clone()),
+                _ => match d.to_i64() {
+                    Ok(v) if v > 0 => fixed[i] = Some(v as usize),
+                    _ => {
+                        return Err(HoloError::ModelContract {
+                            source_name,
+                            reason: format!(
+                                "input dimension {} is `{d}`, expected a symbol or a positive size",
+                                i + 2
+                            ),
+                        })
+                    }
+                },
+            }
+        }
+        Ok(Self {
+            metadata,
+            source_name,
+            decluttered,
+            dims,
+            fixed,
+            plans: Mutex::new(HashMap::new()),
+        })
+    }
+
+    /// The file's parsed `tensorholo.*` metadata.
+    pub fn metadata(&self) -> &ModelMetadata {
+        &self.metadata
+    }
+
+    /// Hologram CNN or pre-filter.
+    pub fn kind(&self) -> ModelKind {
+        self.metadata.kind
+    }
+
+    /// Channels of the network input: `4·L` (hologram CNN) or 6 (pre-filter).
+    pub fn input_channels(&self) -> usize {
+        self.metadata.input_channels()
+    }
+
+    /// The resolutions planned so far, sorted (`[height, width]` pairs).
+    pub fn planned_resolutions(&self) -> Vec<(usize, usize)> {
+        let mut v: Vec<_> = self.lock().keys().copied().collect();
+        v.sort_unstable();
+        v
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<(usize, usize), ModelPlan>> {
+        // No code panics while holding the lock; recover the map anyway rather than propagate poison.
+        self.plans.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The runnable plan for `height × width` inputs, optimised for that resolution (the graph with `H`, `W`
+    /// bound, then tract's codegen). Built on first use and cached inside the model; cheap afterwards
+    /// (an `Arc` clone).
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for a zero size, [`HoloError::ShapeMismatch`] if the file
+    /// fixes a different size, [`HoloError::ModelLoad`] if tract cannot optimise the graph at that size.
+    pub fn plan(&self, height: usize, width: usize) -> Result<ModelPlan> {
+        if height == 0 || width == 0 {
+            return Err(crate::error::invalid(
+                "height/width",
+                format!("a CNN plan needs a non-empty resolution, got {height}×{width}"),
+            ));
+        }
+        if let Some(p) = self.lock().get(&(height, width)) {
+            return Ok(p.clone());
+        }
+        for (i, &n) in [height, width].iter().enumerate() {
+            if let Some(f) = self.fixed[i] {
+                if f != n {
+                    return Err(HoloError::ShapeMismatch {
+                        what: format!("model input size (fixed in `{}`)", self.source_name),
+                        expected: vec![
+                            self.fixed[0].unwrap_or(height),
+                            self.fixed[1].unwrap_or(width),
+                        ],
+                        got: vec![height, width],
+                    });
+                }
+            }
+        }
+        let subs: HashMap<Symbol, TDim> = self
+            .dims
+            .iter()
+            .zip([height, width])
+            .filter_map(|(s, n)| s.clone().map(|s| (s, TDim::Val(n as i64))))
+            .collect();
+        let plan = guarded("optimising", || {
+            self.decluttered
+                .set_symbols(&subs)
+                .and_then(|m| m.into_optimized())
+                .and_then(|m| m.into_runnable())
+                .map_err(|e| tract_msg(&e))
+        })
+        .map_err(|reason| HoloError::ModelLoad {
+            source_name: self.source_name.clone(),
+            reason: format!("cannot optimise for {height}×{width}: {reason}"),
+        })?;
+        let plan = ModelPlan {
+            plan,
+            kind: self.metadata.kind,
+            channels: self.input_channels(),
+            height,
+            width,
+        };
+        Ok(self.lock().entry((height, width)).or_insert(plan).clone())
+    }
+
+    /// Runs the network on one input `[C, H, W]` (`C` = [`HologramModel::input_channels`]; hologram CNN:
+    /// per layer `r, g, b` amplitude then depth `d`, all in `[0, 1]`; pre-filter: `|H|` then
+    /// `arg H/2π + 0.5`), planning `H × W` if needed.
+    ///
+    /// Returns the complex field `[3, H, W]` (R, G, B): the midpoint hologram for the hologram CNN, the
+    /// filtered SLM-plane hologram for the pre-filter ([`heads_to_field`]).
+    ///
+    /// Errors: as [`HologramModel::plan`] and [`ModelPlan::run`].
+    pub fn run(&self, input: ArrayView3<f32>) -> Result<Array3<Complex32>> {
+        let (_, h, w) = input.dim();
+        self.plan(h, w)?.run(input)
+    }
+
+    /// Runs a hologram CNN with RGB-D input (`L = 1`) on a frame: input `[r, g, b, d]` from the frame's
+    /// linear amplitude `[3, H, W]` and normalised depth `[H, W]` (0 = near). Returns the midpoint hologram
+    /// `[3, H, W]`.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] if the model is a pre-filter or takes `L ≠ 1` layers; as
+    /// [`HologramModel::run`] otherwise.
+    pub fn run_frame(&self, frame: &RgbdFrame) -> Result<Array3<Complex32>> {
+        if self.kind() != ModelKind::Hologram || self.metadata.input_layers != 1 {
+            return Err(crate::error::invalid(
+                "model",
+                format!(
+                    "run_frame needs an RGB-D hologram CNN (L = 1); this file is a {} with L = {}",
+                    self.kind(),
+                    self.metadata.input_layers
+                ),
+            ));
+        }
+        let (_, h, w) = frame.amplitude.dim();
+        let mut input = Array3::<f32>::zeros((4, h, w));
+        input
+            .slice_mut(ndarray::s![..3, .., ..])
+            .assign(&frame.amplitude);
+        input.slice_mut(ndarray::s![3, .., ..]).assign(&frame.depth);
+        self.run(input.view())
+    }
+}
+
+/// A tract plan for one resolution of a [`HologramModel`] (graph with `H`, `W` bound and optimised).
+///
+/// Cloning is cheap (shared plan). Each [`ModelPlan::run`] spawns its own tract state, so one plan may run
+/// from several threads.
+#[derive(Debug, Clone)]
+pub struct ModelPlan {
+    plan: Arc<TypedSimplePlan>,
+    kind: ModelKind,
+    channels: usize,
+    height: usize,
+    width: usize,
+}
+
+impl ModelPlan {
+    /// `(channels, height, width)` of the input this plan accepts.
+    pub fn input_dim(&self) -> (usize, usize, usize) {
+        (self.channels, self.height, self.width)
+    }
+
+    /// Which CNN this plan runs.
+    pub fn kind(&self) -> ModelKind {
+        self.kind
+    }
+
+    /// Runs the network on `input` `[C, H, W]` and returns the raw heads `(amplitude, phase)`, each
+    /// `[3, H, W]`: amplitude in `[0, √2]`, phase in `[0, 1]` meaning `(p − 0.5)·2π` rad.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] if `input` is not this plan's `[C, H, W]`;
+    /// [`HoloError::InvalidData`] if it holds NaN/∞; [`HoloError::ModelRun`] if tract fails or returns
+    /// outputs of an unexpected type or shape.
+    pub fn run_heads(&self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
+        let want = [self.channels, self.height, self.width];
+        if input.shape() != want {
+            return Err(HoloError::ShapeMismatch {
+                what: format!("{} input [C, H, W] vs the plan's", self.kind),
+                expected: want.to_vec(),
+                got: input.shape().to_vec(),
+            });
+        }
+        if input.iter().any(|v| !v.is_finite()) {
+            return Err(HoloError::InvalidData(format!(
+                "{} input holds NaN or infinite values",
+                self.kind
+            )));
+        }
+        let data: Vec<f32> = input.iter().copied().collect();
+        let tensor = Tensor::from_shape(&[1, self.channels, self.height, self.width], &data)
+            .map_err(|e| HoloError::ModelRun(tract_msg(&e)))?;
+        let outputs = guarded("running", || {
+            self.plan
+                .run(tvec!(tensor.into_tvalue()))
+                .map_err(|e| tract_msg(&e))
+        })
+        .map_err(HoloError::ModelRun)?;
+        if outputs.len() != 2 {
+            return Err(HoloError::ModelRun(format!(
+                "expected 2 outputs, got {}",
+                outputs.len()
+            )));
+        }
+        let shape = (3, self.height, self.width);
+        let head = |i: usize| -> Result<Array3<f32>> {
+            let t = &outputs[i];
+            let got = t.shape().to_vec();
+            let slice = t
+                .try_as_plain_ram()
+                .and_then(|v| v.as_slice::<f32>().map(<[f32]>::to_vec))
+                .map_err(|e| {
+                    HoloError::ModelRun(format!("output `{}`: {}", OUTPUT_NAMES[i], tract_msg(&e)))
+                })?;
+            if got != [1, 3, self.height, self.width] {
+                return Err(HoloError::ShapeMismatch {
+                    what: format!("output `{}`", OUTPUT_NAMES[i]),
+                    expected: vec![1, 3, self.height, self.width],
+                    got,
+                });
+            }
+            Array3::from_shape_vec(shape, slice).map_err(|e| HoloError::ModelRun(e.to_string()))
+        };
+        Ok((head(0)?, head(1)?))
+    }
+
+    /// Runs the network on `input` `[C, H, W]` and converts the heads to the complex field `[3, H, W]`
+    /// ([`heads_to_field`]): the midpoint hologram for a hologram CNN, the filtered SLM-plane hologram for a
+    /// pre-filter. Errors: as [`ModelPlan::run_heads`].
+    pub fn run(&self, input: ArrayView3<f32>) -> Result<Array3<Complex32>> {
+        let (a, p) = self.run_heads(input)?;
+        heads_to_field(a.view(), p.view())
+    }
+}

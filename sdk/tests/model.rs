@@ -1,0 +1,274 @@
+//! The CNN loader and runner (`tensorholo::model`, DESIGN §3) on the tiny random-init fixtures written by
+//! `fixtures/models/make_models.py` with the training package's own ONNX export.
+
+use std::path::{Path, PathBuf};
+
+use ndarray::{Array3, ArrayView3};
+use tensorholo::model::{heads_to_field, HologramModel, ModelConfig, ModelKind};
+use tensorholo::scene::RgbdFrame;
+use tensorholo::HoloError;
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/models")
+        .join(name)
+}
+
+fn npy(name: &str) -> Array3<f32> {
+    ndarray_npy::read_npy(fixture(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+fn max_abs_diff(a: ArrayView3<f32>, b: ArrayView3<f32>) -> f32 {
+    assert_eq!(a.shape(), b.shape());
+    a.iter()
+        .zip(b.iter())
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
+}
+
+fn hologram(name: &str) -> HologramModel {
+    HologramModel::from_path(fixture(name), ModelKind::Hologram, &ModelConfig::default())
+        .unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+/// Runs `model` on `io_{prefix}_{HxW}_input.npy` and compares both heads with the reference outputs.
+fn compare(
+    model: &HologramModel,
+    prefix: &str,
+    size: &str,
+    reference: &str,
+    tol: f32,
+) -> (f32, f32) {
+    let x = npy(&format!("io_{prefix}_{size}_input.npy"));
+    let (_, h, w) = x.dim();
+    let plan = model.plan(h, w).unwrap();
+    let (a, p) = plan.run_heads(x.view()).unwrap();
+    let da = max_abs_diff(
+        a.view(),
+        npy(&format!("io_{reference}_{size}_amplitude.npy")).view(),
+    );
+    let dp = max_abs_diff(
+        p.view(),
+        npy(&format!("io_{reference}_{size}_phase.npy")).view(),
+    );
+    assert!(
+        da <= tol && dp <= tol,
+        "{reference} {size}: max |Δamplitude| {da}, |Δphase| {dp} > {tol}"
+    );
+    // The complex output is exactly the heads' field.
+    let field = model.run(x.view()).unwrap();
+    let want = heads_to_field(a.view(), p.view()).unwrap();
+    assert_eq!(field, want);
+    (da, dp)
+}
+
+#[test]
+fn f32_hologram_cnn_matches_pytorch_at_two_resolutions_from_one_file() {
+    let m = hologram("holo8_rgbd.onnx");
+    assert_eq!(m.kind(), ModelKind::Hologram);
+    assert_eq!(m.input_channels(), 4);
+    assert_eq!(m.metadata().layers, 8);
+    assert_eq!(m.metadata().channels, Some(24));
+    assert_eq!(m.metadata().trained_resolution, [384, 384]);
+    assert_eq!(m.metadata().training_commit, "fixture");
+    assert_eq!(m.metadata().precision, "f32");
+    compare(&m, "holo", "24x32", "holo", 1e-4);
+    compare(&m, "holo", "16x20", "holo", 1e-4);
+    // Second time: cached plans, same answer.
+    compare(&m, "holo", "24x32", "holo", 1e-4);
+    assert_eq!(m.planned_resolutions(), vec![(16, 20), (24, 32)]);
+}
+
+#[test]
+fn f32_prefilter_cnn_matches_pytorch() {
+    let m = HologramModel::from_path(
+        fixture("holo8_rgbd.prefilter.onnx"),
+        ModelKind::PreFilter,
+        &ModelConfig::default(),
+    )
+    .unwrap();
+    assert_eq!(m.input_channels(), 6);
+    compare(&m, "pre", "24x32", "pre", 1e-4);
+    compare(&m, "pre", "16x20", "pre", 1e-4);
+}
+
+#[test]
+fn field_is_amplitude_times_centred_phase() {
+    let a = Array3::from_elem((3, 1, 2), 1.0f32);
+    let mut p = Array3::from_elem((3, 1, 2), 0.5f32);
+    p[[0, 0, 1]] = 0.75; // (0.75 − 0.5)·2π = π/2
+    let f = heads_to_field(a.view(), p.view()).unwrap();
+    assert!((f[[0, 0, 0]].re - 1.0).abs() < 1e-6 && f[[0, 0, 0]].im.abs() < 1e-6);
+    assert!(f[[0, 0, 1]].re.abs() < 1e-6 && (f[[0, 0, 1]].im - 1.0).abs() < 1e-6);
+}
+
+#[test]
+fn run_frame_feeds_amplitude_then_depth() {
+    let m = hologram("holo8_rgbd.onnx");
+    let x = npy("io_holo_16x20_input.npy");
+    let frame = RgbdFrame::new(
+        x.slice(ndarray::s![..3, .., ..]).to_owned(),
+        x.slice(ndarray::s![3, .., ..]).to_owned(),
+    )
+    .unwrap();
+    assert_eq!(m.run_frame(&frame).unwrap(), m.run(x.view()).unwrap());
+    let pre = HologramModel::from_path(
+        fixture("holo8_rgbd.prefilter.onnx"),
+        ModelKind::PreFilter,
+        &ModelConfig::default(),
+    )
+    .unwrap();
+    assert!(matches!(
+        pre.run_frame(&frame),
+        Err(HoloError::InvalidParameter { .. })
+    ));
+}
+
+#[test]
+fn metadata_mismatch_is_refused_naming_key_and_values() {
+    let bytes = std::fs::read(fixture("holo8_rgbd.onnx")).unwrap();
+    let mut cfg = ModelConfig::default();
+    cfg.optics.pixel_pitch_m = 6.4e-6;
+    let e = HologramModel::from_bytes(&bytes, ModelKind::Hologram, &cfg).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        matches!(&e, HoloError::ModelMetadata { key, .. } if key == "tensorholo.pixel_pitch_m"),
+        "{msg}"
+    );
+    assert!(
+        msg.contains("0.000008") && msg.contains("0.0000064"),
+        "{msg}"
+    );
+
+    let cfg = ModelConfig {
+        offset_m: 12e-3,
+        ..ModelConfig::default()
+    };
+    let e = HologramModel::from_bytes(&bytes, ModelKind::Hologram, &cfg).unwrap_err();
+    assert!(
+        matches!(&e, HoloError::ModelMetadata { key, .. } if key == "tensorholo.offset_m"),
+        "{e}"
+    );
+
+    let mut cfg = ModelConfig::default();
+    cfg.optics.wavelengths_m[2] = 473e-9;
+    let e = HologramModel::from_bytes(&bytes, ModelKind::Hologram, &cfg).unwrap_err();
+    assert!(
+        matches!(&e, HoloError::ModelMetadata { key, .. } if key == "tensorholo.wavelengths_m"),
+        "{e}"
+    );
+
+    let cfg = ModelConfig {
+        input_layers: 5,
+        ..ModelConfig::default()
+    };
+    let e = HologramModel::from_bytes(&bytes, ModelKind::Hologram, &cfg).unwrap_err();
+    assert!(
+        matches!(&e, HoloError::ModelMetadata { key, .. } if key == "tensorholo.input_layers"),
+        "{e}"
+    );
+
+    // A hologram CNN where a pre-filter is expected.
+    let e = HologramModel::from_bytes(&bytes, ModelKind::PreFilter, &ModelConfig::default())
+        .unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        matches!(&e, HoloError::ModelMetadata { key, .. } if key == "tensorholo.kind"),
+        "{msg}"
+    );
+    assert!(
+        msg.contains("hologram-cnn") && msg.contains("prefilter-cnn"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn corrupt_truncated_or_empty_files_give_clear_errors() {
+    let bytes = std::fs::read(fixture("holo8_rgbd.onnx")).unwrap();
+    let cfg = ModelConfig::default();
+    for (what, data) in [
+        ("truncated", bytes[..bytes.len() / 2].to_vec()),
+        (
+            "garbage",
+            (0..4096u32)
+                .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
+                .collect(),
+        ),
+        ("empty", Vec::new()),
+        ("text", b"this is not an onnx file\n".to_vec()),
+    ] {
+        match HologramModel::from_bytes(&data, ModelKind::Hologram, &cfg) {
+            Err(HoloError::ModelLoad {
+                source_name,
+                reason,
+            }) => {
+                assert_eq!(source_name, "<bytes>");
+                assert!(!reason.is_empty(), "{what}");
+            }
+            Err(e) => panic!("{what}: unexpected error kind: {e}"),
+            Ok(_) => panic!("{what}: a corrupt file was accepted"),
+        }
+    }
+    let e = HologramModel::from_path(fixture("does-not-exist.onnx"), ModelKind::Hologram, &cfg)
+        .unwrap_err();
+    assert!(matches!(e, HoloError::Io { .. }), "{e}");
+}
+
+#[test]
+fn onnx_with_other_inputs_is_refused() {
+    let e = HologramModel::from_path(
+        fixture("other_input.onnx"),
+        ModelKind::Hologram,
+        &ModelConfig::default(),
+    )
+    .unwrap_err();
+    let msg = e.to_string();
+    assert!(matches!(e, HoloError::ModelContract { .. }), "{msg}");
+    assert!(msg.contains("`rgbd`") && msg.contains("image"), "{msg}");
+}
+
+#[test]
+fn wrong_input_size_is_an_error_and_the_model_stays_usable() {
+    let m = hologram("holo8_rgbd.onnx");
+    let plan = m.plan(24, 32).unwrap();
+    assert_eq!(plan.input_dim(), (4, 24, 32));
+    let small = npy("io_holo_16x20_input.npy");
+    let e = plan.run(small.view()).unwrap_err();
+    assert!(matches!(e, HoloError::ShapeMismatch { .. }), "{e}");
+    let three = Array3::<f32>::zeros((3, 24, 32));
+    assert!(matches!(
+        m.run(three.view()),
+        Err(HoloError::ShapeMismatch { .. })
+    ));
+    let mut nan = Array3::<f32>::zeros((4, 24, 32));
+    nan[[0, 1, 2]] = f32::NAN;
+    assert!(matches!(
+        plan.run(nan.view()),
+        Err(HoloError::InvalidData(_))
+    ));
+    assert!(matches!(
+        m.plan(0, 32),
+        Err(HoloError::InvalidParameter { .. })
+    ));
+    compare(&m, "holo", "24x32", "holo", 1e-4);
+}
+
+/// int8 files from `export.quantize_int8`. tract 0.23 runs both forms (QOperator `QLinearConv` and QDQ, the
+/// latter parsed with value infos ignored); they are compared with onnxruntime's outputs of the same file.
+/// Measured on x86-64: bit-identical to onnxruntime (the quantised last conv leaves 193 distinct output
+/// values), while int8 vs f32 differ by up to 5e-3; the tolerance allows about one output quantum of
+/// rounding difference on other CPUs.
+#[test]
+fn int8_qoperator_and_qdq_files_load_and_run() {
+    for (file, tag) in [
+        ("holo8_rgbd.int8-qop.onnx", "holo_int8-qop"),
+        ("holo8_rgbd.int8-qdq.onnx", "holo_int8-qdq"),
+    ] {
+        let m = hologram(file);
+        assert!(m.metadata().precision.starts_with("int8-"), "{file}");
+        let (da, dp) = compare(&m, "holo", "24x32", tag, 0.02);
+        eprintln!("{file}: tract vs onnxruntime max |Δamplitude| {da:.2e}, |Δphase| {dp:.2e}");
+        let x = npy("io_holo_16x20_input.npy");
+        assert_eq!(m.run(x.view()).unwrap().dim(), (3, 16, 20));
+    }
+}
