@@ -12,7 +12,6 @@ use tensorholo::dataset::{
     MANIFEST_FILE,
 };
 use tensorholo::io::ensure_not_input;
-use tensorholo::optics::{OpticalSetup, PropagationOptions};
 use tensorholo::scene::RandomSceneConfig;
 use tensorholo::synthesis::SmLbm;
 
@@ -109,21 +108,8 @@ pub struct DatasetArgs {
     /// sample's three colours share the same pool.
     #[arg(long)]
     threads: Option<usize>,
-    /// Zero-pad propagations to 2H x 2W (linear convolution; 4x slower).
-    #[arg(long)]
-    pad: bool,
-    /// Band-limit transfer functions (Matsushima & Shimobaba 2009).
-    #[arg(long)]
-    band_limit: bool,
-    /// SLM pixel pitch in metres.
-    #[arg(long, default_value_t = 8e-6)]
-    pitch_m: f64,
-    /// Laser wavelengths in metres, R,G,B.
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_values_t = [638e-9, 520e-9, 450e-9])]
-    wavelengths_m: Vec<f64>,
-    /// Depth of the 3D volume in metres, centred on the midpoint hologram.
-    #[arg(long, default_value_t = 6e-3)]
-    volume_depth_m: f64,
+    #[command(flatten)]
+    optics: crate::args::OpticsArgs,
     /// Replace a dataset already in --out (manifest, same-named shards, shards the old manifest listed).
     #[arg(long)]
     force: bool,
@@ -190,12 +176,6 @@ fn progress_bar(total: u64) -> ProgressBar {
 
 /// Builds the dataset configuration from the arguments.
 fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
-    if args.wavelengths_m.len() != 3 {
-        bail!(
-            "--wavelengths-m needs 3 comma-separated values (R,G,B), got {}",
-            args.wavelengths_m.len()
-        );
-    }
     let defaults = RandomSceneConfig::default();
     let scene = RandomSceneConfig {
         height: args.size.0,
@@ -209,19 +189,8 @@ fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
     };
     let synthesis = SmLbm {
         levels: args.levels,
-        setup: OpticalSetup {
-            wavelengths_m: [
-                args.wavelengths_m[0],
-                args.wavelengths_m[1],
-                args.wavelengths_m[2],
-            ],
-            pixel_pitch_m: args.pitch_m,
-            volume_depth_m: args.volume_depth_m,
-        },
-        options: PropagationOptions {
-            pad: args.pad,
-            band_limit: args.band_limit,
-        },
+        setup: args.optics.setup()?,
+        options: args.optics.options(),
         silhouette_masks: true,
     };
     let config = DatasetConfig {

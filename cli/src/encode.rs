@@ -10,9 +10,7 @@ use ndarray::{Array4, Axis};
 use serde_json::json;
 use tensorholo::encoding::{double_phase_encode, DoublePhaseMethod};
 use tensorholo::io::{ensure_not_input, read_complex_npy, write_complex_npy, write_f32_npy};
-use tensorholo::optics::{
-    focal_stack, propagate_colour, simulate_phase_only, Carrier, OpticalSetup, PropagationOptions,
-};
+use tensorholo::optics::{focal_stack, propagate_colour, simulate_phase_only, Carrier};
 
 /// Phase-only encodings offered on the command line.
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -47,21 +45,8 @@ pub struct EncodeArgs {
     /// BL-DPM cut-off k in (0, 1] (fraction of the checkerboard Nyquist cell).
     #[arg(long, default_value_t = 0.5)]
     bl_k: f32,
-    /// Zero-pad propagations to 2H x 2W (linear convolution).
-    #[arg(long)]
-    pad: bool,
-    /// Band-limit transfer functions (Matsushima & Shimobaba 2009).
-    #[arg(long)]
-    band_limit: bool,
-    /// SLM pixel pitch in metres.
-    #[arg(long, default_value_t = 8e-6)]
-    pitch_m: f64,
-    /// Laser wavelengths in metres, R,G,B.
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_values_t = [638e-9, 520e-9, 450e-9])]
-    wavelengths_m: Vec<f64>,
-    /// Depth of the 3D volume in metres, centred on the midpoint hologram.
-    #[arg(long, default_value_t = 6e-3)]
-    volume_depth_m: f64,
+    #[command(flatten)]
+    optics: crate::args::OpticsArgs,
     /// Normalised depths (0 = near, 1 = far) of the focal stacks, comma-separated.
     #[arg(long, value_delimiter = ',', default_values_t = [0.0, 0.5, 1.0])]
     depths: Vec<f64>,
@@ -101,28 +86,13 @@ fn stack(planes: &[ndarray::Array3<f32>]) -> Result<Array4<f32>> {
 
 /// Runs `holo encode`.
 pub fn run(args: &EncodeArgs) -> Result<()> {
-    if args.wavelengths_m.len() != 3 {
-        bail!(
-            "--wavelengths-m needs 3 comma-separated values (R,G,B), got {}",
-            args.wavelengths_m.len()
-        );
-    }
     if !args.offset_mm.is_finite() {
         bail!("--offset-mm must be a finite number of millimetres");
     }
     if args.depths.is_empty() {
         bail!("--depths needs at least one normalised depth in [0, 1]");
     }
-    let setup = OpticalSetup {
-        wavelengths_m: [
-            args.wavelengths_m[0],
-            args.wavelengths_m[1],
-            args.wavelengths_m[2],
-        ],
-        pixel_pitch_m: args.pitch_m,
-        volume_depth_m: args.volume_depth_m,
-    };
-    setup.validate()?;
+    let setup = args.optics.setup()?;
     let method = match args.method {
         Method::Dpm => DoublePhaseMethod::Plain,
         Method::AaDpm => DoublePhaseMethod::AntiAliased {
@@ -131,10 +101,7 @@ pub fn run(args: &EncodeArgs) -> Result<()> {
         },
         Method::BlDpm => DoublePhaseMethod::BandLimited { k: args.bl_k },
     };
-    let options = PropagationOptions {
-        pad: args.pad,
-        band_limit: args.band_limit,
-    };
+    let options = args.optics.options();
     let offset_m = args.offset_mm * 1e-3;
     for name in OUTPUTS {
         ensure_not_input(&args.out.join(name), &[&args.input])?;

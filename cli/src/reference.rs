@@ -11,7 +11,6 @@ use serde_json::json;
 use tensorholo::encoding::DoublePhaseMethod;
 use tensorholo::io::{ensure_not_input, save_amplitude_png, save_u8_png, write_complex_npy};
 use tensorholo::metrics::{psnr, ssim_multichannel};
-use tensorholo::optics::{OpticalSetup, PropagationOptions};
 use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
 use tensorholo::scene::{
     load_rgbd, procedural, DepthEncoding, DepthMapping, DepthRange, LoadOptions, RgbdFrame,
@@ -97,21 +96,8 @@ pub struct ReferenceArgs {
     /// Distance from the midpoint hologram to the SLM plane in millimetres (paper: 0, 6 or 12).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     offset_mm: f64,
-    /// Zero-pad propagations to 2H x 2W (linear convolution; 4x slower).
-    #[arg(long)]
-    pad: bool,
-    /// Band-limit transfer functions (Matsushima & Shimobaba 2009).
-    #[arg(long)]
-    band_limit: bool,
-    /// SLM pixel pitch in metres.
-    #[arg(long, default_value_t = 8e-6)]
-    pitch_m: f64,
-    /// Laser wavelengths in metres, R,G,B.
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_values_t = [638e-9, 520e-9, 450e-9])]
-    wavelengths_m: Vec<f64>,
-    /// Depth of the 3D volume in metres, centred on the midpoint hologram.
-    #[arg(long, default_value_t = 6e-3)]
-    volume_depth_m: f64,
+    #[command(flatten)]
+    optics: crate::args::OpticsArgs,
     /// Use the built-in scene as a 2-layer layered depth image (paper Fig. 1: the second layer holds what the
     /// bar and the disc hide), instead of an RGB-D image.
     #[arg(long, conflicts_with = "rgb")]
@@ -157,22 +143,7 @@ fn progress_bar(total: u64) -> ProgressBar {
 /// Runs `holo reference`.
 pub fn run(args: &ReferenceArgs) -> Result<()> {
     let t_all = Instant::now();
-    if args.wavelengths_m.len() != 3 {
-        bail!(
-            "--wavelengths-m needs 3 comma-separated values (R,G,B), got {}",
-            args.wavelengths_m.len()
-        );
-    }
-    let setup = OpticalSetup {
-        wavelengths_m: [
-            args.wavelengths_m[0],
-            args.wavelengths_m[1],
-            args.wavelengths_m[2],
-        ],
-        pixel_pitch_m: args.pitch_m,
-        volume_depth_m: args.volume_depth_m,
-    };
-    setup.validate()?;
+    let setup = args.optics.setup()?;
     let encoding = match args.encoding {
         Encoding::Dpm => DoublePhaseMethod::Plain,
         Encoding::AaDpm => DoublePhaseMethod::AntiAliased {
@@ -188,10 +159,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         synthesis: SmLbm {
             levels: args.levels,
             setup,
-            options: PropagationOptions {
-                pad: args.pad,
-                band_limit: args.band_limit,
-            },
+            options: args.optics.options(),
             silhouette_masks: true,
         },
         offset_m: args.offset_mm * 1e-3,
