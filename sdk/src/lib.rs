@@ -12,6 +12,8 @@
 //! - [`reference`]: the non-learned pipeline (SM-LBM → offset → double phase → SLM codes → previews).
 //! - [`metrics`]: PSNR and SSIM.
 //! - [`model`]: the hologram and pre-filter CNNs (ONNX, run with tract), metadata and I/O contract checks.
+//! - [`pipeline`]: the real-time pipeline: [`pipeline::HologramSession`] turns RGB-D frames into SLM codes
+//!   with the CNNs (hologram CNN → offset → pre-filter CNN → double phase → LUT), frame by frame or streamed.
 //! - [`io`]: PNG and `.npy` input/output.
 //! - [`dataset`]: the training dataset (MIT-CGH-4K-V2 style): random LDIs + SM-LBM midpoint holograms in
 //!   `.npz` shards with a `manifest.json`.
@@ -28,6 +30,7 @@ pub mod io;
 pub mod metrics;
 pub mod model;
 pub mod optics;
+pub mod pipeline;
 pub mod reference;
 pub mod scene;
 pub mod synthesis;

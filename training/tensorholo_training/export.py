@@ -249,7 +249,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--calib-dataset", help="dataset for int8 calibration (default: the run's dataset)")
     ap.add_argument("--calib-samples", type=int, default=32)
     ap.add_argument("--calib-size", type=int, default=0, help="crop size of calibration inputs (0 = full)")
-    ap.add_argument("--no-prefilter", action="store_true", help="export only the hologram CNN")
+    only = ap.add_mutually_exclusive_group()
+    only.add_argument("--no-prefilter", action="store_true", help="export only the hologram CNN")
+    only.add_argument("--prefilter-only", action="store_true",
+                      help="export only the pre-filter CNN (NAME.onnx, NAME.int8-*.onnx); the SDK pairs it with "
+                           "any hologram CNN of the same optics (runs with stage2_train_hologram=false)")
     args = ap.parse_args(argv)
     ck = load_checkpoint(args.checkpoint)
     cfg = ck["config"]
@@ -259,11 +263,14 @@ def main(argv: list[str] | None = None) -> int:
                   training_commit=ck["training_commit"])
     written = []
     path = os.path.join(args.out_dir, f"{args.name}.onnx")
-    export_onnx(ck["net"], path, "hologram-cnn", model_metadata("hologram-cnn", ck["net"], **common))
-    written.append(path)
+    if args.prefilter_only and ck["prefilter"] is None:
+        ap.error(f"{args.checkpoint} holds no pre-filter CNN (a 0 mm run?)")
+    if not args.prefilter_only:
+        export_onnx(ck["net"], path, "hologram-cnn", model_metadata("hologram-cnn", ck["net"], **common))
+        written.append(path)
     pre_path = None
     if ck["prefilter"] is not None and not args.no_prefilter:
-        pre_path = os.path.join(args.out_dir, f"{args.name}.prefilter.onnx")
+        pre_path = path if args.prefilter_only else os.path.join(args.out_dir, f"{args.name}.prefilter.onnx")
         export_onnx(ck["prefilter"], pre_path, "prefilter-cnn",
                     model_metadata("prefilter-cnn", ck["prefilter"], **common))
         written.append(pre_path)
@@ -273,6 +280,8 @@ def main(argv: list[str] | None = None) -> int:
             root = os.path.join(cfg["run_dir"], "synthetic_dataset")
         calib = calibration_inputs(root, cfg["input_layers"], args.calib_samples, args.calib_size or None)
         for fmt, suffix in (("qoperator", "int8-qop"), ("qdq", "int8-qdq")):
+            if args.prefilter_only:
+                break
             out = os.path.join(args.out_dir, f"{args.name}.{suffix}.onnx")
             quantize_int8(path, out, calib, fmt)
             written.append(out)
@@ -288,7 +297,8 @@ def main(argv: list[str] | None = None) -> int:
                     slm = offset_to_slm(amp_phase_to_complex(a, p), cfg["offset_mm"] * 1e-3, display)
                     pre_calib.append(prefilter_input(slm).numpy())
             for fmt, suffix in (("qoperator", "int8-qop"), ("qdq", "int8-qdq")):
-                out = os.path.join(args.out_dir, f"{args.name}.prefilter.{suffix}.onnx")
+                stem = args.name if args.prefilter_only else f"{args.name}.prefilter"
+                out = os.path.join(args.out_dir, f"{stem}.{suffix}.onnx")
                 quantize_int8(pre_path, out, pre_calib, fmt)
                 written.append(out)
     print(json.dumps({"written": written, "metadata": read_metadata(path)}, indent=1))

@@ -82,6 +82,9 @@ class TrainConfig:
     lr: float = 1e-4
     betas: list = field(default_factory=lambda: [0.9, 0.99])
     init_from: str = ""  # checkpoint whose hologram CNN (and pre-filter, if any) initialises this run
+    # stage 2 trains both CNNs (paper); False freezes the hologram CNN so that the pre-filter of one offset
+    # serves every hologram CNN trained on the same optics (the SDK pairs any hologram CNN with a pre-filter)
+    stage2_train_hologram: bool = True
     # losses
     data_mode: str = "complex"
     loss_kind: str = "l2"
@@ -293,6 +296,8 @@ class Trainer:
         if phase == "identity":
             return list(self.prefilter.parameters())
         if phase == "stage2" and self.prefilter is not None:
+            if not self.cfg.stage2_train_hologram:
+                return list(self.prefilter.parameters())
             return list(self.net.parameters()) + list(self.prefilter.parameters())
         return list(self.net.parameters())
 
@@ -316,7 +321,8 @@ class Trainer:
         rgbd = batch["rgbd"].to(self.device)
         gt = batch["midpoint"].to(self.device)
         depth = batch["depth"].to(self.device)
-        with self._autocast(), torch.set_grad_enabled(torch.is_grad_enabled() and phase != "identity"):
+        frozen = phase == "identity" or (phase == "stage2" and not cfg.stage2_train_hologram)
+        with self._autocast(), torch.set_grad_enabled(torch.is_grad_enabled() and not frozen):
             amp, phs = self.net(rgbd)
         amp, phs = amp.float(), phs.float()
         if phase == "stage1":
@@ -340,7 +346,7 @@ class Trainer:
     def train_step(self, batch: dict) -> dict[str, float]:
         """One optimizer step of the current phase; returns the loss terms as floats."""
         phase = self.phase
-        self.net.train(phase != "identity")
+        self.net.train(phase != "identity" and (phase != "stage2" or self.cfg.stage2_train_hologram))
         out = self.compute_loss(batch, phase, self._generator(self.global_step))
         self.optimizer.zero_grad(set_to_none=True)
         self.scaler.scale(out["total"]).backward()

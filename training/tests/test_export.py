@@ -93,3 +93,22 @@ def test_prefilter_export(tmp_path):
     oa, op = run_onnx(path, x)
     assert np.abs(oa - a.numpy()).max() < 1e-5 and np.abs(op - p.numpy()).max() < 1e-5
     assert read_metadata(path)["tensorholo.kind"] == "prefilter-cnn"
+
+
+def test_cli_exports_hologram_and_prefilter_separately(tmp_path, tiny_dataset):
+    from tensorholo_training.export import main
+    from tensorholo_training.train import TrainConfig, Trainer
+
+    cfg = TrainConfig(run_dir=str(tmp_path / "run"), dataset=tiny_dataset, num_layers=8, channels=12,
+                      crop=[16, 16], fs_top=3, fs_random=2, stages=["stage1", "stage2"], stage1_steps=1,
+                      stage2_steps=1, offset_mm=6.0, stage2_train_hologram=False, val_every=100,
+                      ckpt_every=100)
+    Trainer(cfg, log=lambda m: None).run()
+    ck = str(tmp_path / "run" / "final.pt")
+    out = tmp_path / "models"
+    assert main(["--checkpoint", ck, "--out-dir", str(out), "--name", "holo8", "--no-prefilter"]) == 0
+    assert main(["--checkpoint", ck, "--out-dir", str(out), "--name", "pre6", "--prefilter-only"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["holo8.onnx", "pre6.onnx"]
+    assert read_metadata(str(out / "holo8.onnx"))["tensorholo.kind"] == "hologram-cnn"
+    pre = read_metadata(str(out / "pre6.onnx"))
+    assert pre["tensorholo.kind"] == "prefilter-cnn" and float(pre["tensorholo.offset_m"]) == 6e-3

@@ -54,6 +54,18 @@ def test_resume_gives_the_same_state_across_all_phases(tmp_path, tiny_dataset):
     assert {r["phase"] for r in rows} == {"stage1", "identity", "stage2"}
 
 
+def test_stage2_with_frozen_hologram_cnn_trains_only_the_prefilter(tmp_path, tiny_dataset):
+    cfg = small_cfg(tmp_path, tiny_dataset, stages=["stage1", "stage2"], stage1_steps=2, stage2_steps=3,
+                    offset_mm=6.0, stage2_train_hologram=False)
+    tr = Trainer(cfg, log=lambda m: None)
+    tr.run(max_steps=2)
+    net0 = {k: v.clone() for k, v in tr.net.state_dict().items()}
+    pre0 = {k: v.clone() for k, v in tr.prefilter.state_dict().items()}
+    tr.run()
+    assert all(torch.equal(net0[k], v) for k, v in tr.net.state_dict().items())
+    assert any(not torch.equal(pre0[k], v) for k, v in tr.prefilter.state_dict().items())
+
+
 def test_cli_config_and_overrides(tmp_path, capsys):
     path = tmp_path / "c.json"
     path.write_text(json.dumps({"num_layers": 15, "offset_mm": 6}))

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use super::lut::wrap_phase;
 use crate::error::{invalid, HoloError, Result};
-use crate::optics::{check_colour_stack, check_finite_field, par_channels, SpectralPlan};
+use crate::optics::{check_colour_stack, check_finite_field, par_channels, Scratch, SpectralPlan};
 
 /// Which low-pass pre-filter, if any, to apply to the complex hologram before double phase encoding.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -106,29 +106,22 @@ pub fn double_phase_encode(
     method.validate()?;
     let filtered: CowArray<Complex32, Ix3> = match *method {
         DoublePhaseMethod::Plain => field.as_standard_layout(),
-        DoublePhaseMethod::AntiAliased {
-            sigma_px,
-            kernel_size,
-        } => {
-            let kernel = gaussian_kernel(sigma_px, kernel_size);
+        _ => {
             let mut owned = field.as_standard_layout().into_owned();
+            let band = match *method {
+                DoublePhaseMethod::BandLimited { k } => Some(BandLimit::new(h, w, k)?),
+                _ => None,
+            };
+            let kernel = method.kernel();
             par_channels(&mut owned, |_, slice| {
-                blur_separable(slice, h, w, &kernel);
-                Ok(())
-            })?;
-            owned.into()
-        }
-        DoublePhaseMethod::BandLimited { k } => {
-            let plan = SpectralPlan::new(h, w, false)?;
-            let norm = 1.0 / plan.spectrum_len() as f32;
-            let (hh, hw) = ((h as f64 / 2.0).max(0.5), (w as f64 / 2.0).max(0.5));
-            let mask = plan.build_multiplier(|kx, ky| {
-                let r = kx.unsigned_abs() as f64 / hw + ky.unsigned_abs() as f64 / hh;
-                Complex32::new(if r <= k as f64 { norm } else { 0.0 }, 0.0)
-            });
-            let mut owned = field.as_standard_layout().into_owned();
-            par_channels(&mut owned, |_, slice| {
-                plan.apply(slice, &mask, &mut plan.scratch())
+                let mut tmp = Vec::new();
+                match &band {
+                    Some(b) => b.apply(slice, &mut b.plan.scratch()),
+                    None => {
+                        blur_separable(slice, h, w, &kernel, &mut tmp);
+                        Ok(())
+                    }
+                }
             })?;
             owned.into()
         }
@@ -136,31 +129,18 @@ pub fn double_phase_encode(
     // Pass 1 (rows in parallel): phase φ = arg H into the output, per-row max |H|² and Σφ.
     let mut phase = Array3::<f32>::zeros((3, h, w));
     let src = filtered.as_slice().expect("standard layout");
-    let rows: Vec<(f32, f64)> = phase
+    let rows: Vec<ChannelStats> = phase
         .as_slice_mut()
         .expect("fresh array")
         .par_chunks_mut(w)
         .zip(src.par_chunks(w))
-        .map(|(out, row)| {
-            let (mut max2, mut sum) = (0.0f32, 0.0f64);
-            for (p, v) in out.iter_mut().zip(row) {
-                *p = v.im.atan2(v.re);
-                max2 = max2.max(v.norm_sqr());
-                sum += *p as f64;
-            }
-            (max2, sum)
-        })
+        .map(|(out, row)| analyse_row(row, out))
         .collect();
-    let a = rows.iter().map(|r| r.0).fold(0.0f32, f32::max).sqrt();
-    if !(a > 0.0 && a.is_finite()) {
-        return Err(HoloError::InvalidData(
-            "hologram amplitude is zero everywhere: nothing to encode".into(),
-        ));
-    }
-    let mut mean_phase = [0.0f32; 3];
-    for (c, m) in mean_phase.iter_mut().enumerate() {
-        *m = (rows[c * h..(c + 1) * h].iter().map(|r| r.1).sum::<f64>() / (h * w) as f64) as f32;
-    }
+    let stats: Vec<ChannelStats> = rows
+        .chunks(h)
+        .map(|c| c.iter().fold(ChannelStats::default(), |a, b| a.merge(*b)))
+        .collect();
+    let (a, mean_phase) = normaliser(&stats, h * w)?;
     // Pass 2 (rows in parallel): P = φ − mean ∓ acos(Ã), checkerboard by x + y parity (Eq. 7).
     let inv_a = 1.0 / a;
     phase
@@ -170,17 +150,7 @@ pub fn double_phase_encode(
         .zip(src.par_chunks(w))
         .enumerate()
         .for_each(|(r, (out, row))| {
-            let (c, y) = (r / h, r % h);
-            let mean = mean_phase[c];
-            for (x, (p, v)) in out.iter_mut().zip(row).enumerate() {
-                let theta = (v.norm_sqr().sqrt() * inv_a).min(1.0).acos();
-                let value = if (x + y) % 2 == 1 {
-                    *p - mean - theta
-                } else {
-                    *p - mean + theta
-                };
-                *p = wrap_phase(value);
-            }
+            encode_row(row, out, None, r % h, mean_phase[r / h], inv_a);
         });
     debug_assert!(phase.iter().all(|p| (0.0..TAU).contains(p)));
     Ok(DoublePhase {
@@ -188,6 +158,249 @@ pub fn double_phase_encode(
         amplitude_scale: a,
         mean_phase,
     })
+}
+
+/// What pass 1 of the double phase encoding learns about a channel (or a row of it): the maximum `|H|²` and
+/// the sum of `arg H` (radians) over its pixels.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ChannelStats {
+    /// Maximum squared amplitude.
+    pub max_amplitude_sq: f32,
+    /// Sum of the phases `arg H` (radians), in f64 to keep the mean exact over millions of pixels.
+    pub phase_sum: f64,
+}
+
+impl ChannelStats {
+    fn merge(self, o: Self) -> Self {
+        Self {
+            max_amplitude_sq: self.max_amplitude_sq.max(o.max_amplitude_sq),
+            phase_sum: self.phase_sum + o.phase_sum,
+        }
+    }
+}
+
+/// The global normaliser `a = max |H|` over all colours and the per-channel mean phases (Eq. 7) from the
+/// pass-1 statistics of the three channels of `pixels` pixels each.
+///
+/// Errors: [`HoloError::InvalidData`] if the hologram is zero everywhere (or not finite).
+pub fn normaliser(stats: &[ChannelStats], pixels: usize) -> Result<(f32, [f32; 3])> {
+    let a = stats
+        .iter()
+        .map(|s| s.max_amplitude_sq)
+        .fold(0.0f32, f32::max)
+        .sqrt();
+    if !(a > 0.0 && a.is_finite()) {
+        return Err(HoloError::InvalidData(
+            "hologram amplitude is zero everywhere: nothing to encode".into(),
+        ));
+    }
+    let mut mean = [0.0f32; 3];
+    for (m, s) in mean.iter_mut().zip(stats) {
+        *m = (s.phase_sum / pixels as f64) as f32;
+    }
+    Ok((a, mean))
+}
+
+/// Pass 1 on one row: `out ← arg H`, returns the row's statistics.
+fn analyse_row(row: &[Complex32], out: &mut [f32]) -> ChannelStats {
+    let mut st = ChannelStats::default();
+    for (p, v) in out.iter_mut().zip(row) {
+        *p = v.im.atan2(v.re);
+        st.max_amplitude_sq = st.max_amplitude_sq.max(v.norm_sqr());
+        st.phase_sum += *p as f64;
+    }
+    st
+}
+
+/// Pass 2 on row `y`: `out` holds `arg H` from pass 1 and becomes the wrapped double phase
+/// `φ − mean ± acos(|H|/a)` (Eq. 7, `+` where `x + y` is even); `codes`, if given, receives the 8-bit codes of
+/// the [`LinearLut`](super::LinearLut).
+fn encode_row(
+    row: &[Complex32],
+    out: &mut [f32],
+    codes: Option<&mut [u8]>,
+    y: usize,
+    mean: f32,
+    inv_a: f32,
+) {
+    for (x, (p, v)) in out.iter_mut().zip(row).enumerate() {
+        let theta = (v.norm_sqr().sqrt() * inv_a).min(1.0).acos();
+        let value = if (x + y) % 2 == 1 {
+            *p - mean - theta
+        } else {
+            *p - mean + theta
+        };
+        *p = wrap_phase(value);
+    }
+    if let Some(codes) = codes {
+        for (c, p) in codes.iter_mut().zip(out.iter()) {
+            *c = super::LinearLut.code(*p);
+        }
+    }
+}
+
+/// The diamond band limit of BL-DPM for one field size: plan, mask (with the inverse-FFT normalisation).
+#[derive(Debug, Clone)]
+struct BandLimit {
+    plan: SpectralPlan,
+    mask: Vec<Complex32>,
+}
+
+impl BandLimit {
+    fn new(h: usize, w: usize, k: f32) -> Result<Self> {
+        let plan = SpectralPlan::new(h, w, false)?;
+        let norm = 1.0 / plan.spectrum_len() as f32;
+        let (hh, hw) = ((h as f64 / 2.0).max(0.5), (w as f64 / 2.0).max(0.5));
+        let mask = plan.build_multiplier(|kx, ky| {
+            let r = kx.unsigned_abs() as f64 / hw + ky.unsigned_abs() as f64 / hh;
+            Complex32::new(if r <= k as f64 { norm } else { 0.0 }, 0.0)
+        });
+        Ok(Self { plan, mask })
+    }
+
+    fn apply(&self, field: &mut [Complex32], scratch: &mut Scratch) -> Result<()> {
+        self.plan.apply(field, &self.mask, scratch)
+    }
+}
+
+/// Allocation-free double phase encoding of one colour channel `[H, W]` for real-time sessions: everything
+/// it needs (blur buffer, BL-DPM plan, mask and scratch) is allocated once in [`ChannelEncoder::new`].
+///
+/// Encoding is two passes around the global normaliser, which couples the colours (Eq. 7, `DESIGN.md` §2):
+/// [`ChannelEncoder::analyse`] on each channel, [`normaliser`] over the three [`ChannelStats`], then
+/// [`ChannelEncoder::encode`] on each channel. The result equals [`double_phase_encode`]'s (same row kernels).
+#[derive(Debug)]
+pub struct ChannelEncoder {
+    height: usize,
+    width: usize,
+    method: DoublePhaseMethod,
+    kernel: Vec<f32>,
+    tmp: Vec<Complex32>,
+    band: Option<(BandLimit, Scratch)>,
+}
+
+impl ChannelEncoder {
+    /// Prepares the encoder for `[height, width]` channels.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for invalid method parameters or an empty size.
+    pub fn new(height: usize, width: usize, method: DoublePhaseMethod) -> Result<Self> {
+        method.validate()?;
+        if height == 0 || width == 0 {
+            return Err(invalid(
+                "channel size",
+                format!("height and width must be ≥ 1, got {height}×{width}"),
+            ));
+        }
+        let band = match method {
+            DoublePhaseMethod::BandLimited { k } => {
+                let b = BandLimit::new(height, width, k)?;
+                let s = b.plan.scratch();
+                Some((b, s))
+            }
+            _ => None,
+        };
+        let tmp = match method {
+            DoublePhaseMethod::AntiAliased { .. } => vec![Complex32::default(); height * width],
+            _ => Vec::new(),
+        };
+        Ok(Self {
+            height,
+            width,
+            method,
+            kernel: method.kernel(),
+            tmp,
+            band,
+        })
+    }
+
+    /// The encoding method.
+    pub fn method(&self) -> DoublePhaseMethod {
+        self.method
+    }
+
+    fn check(&self, what: &str, len: usize) -> Result<()> {
+        if len != self.height * self.width {
+            return Err(HoloError::ShapeMismatch {
+                what: format!("{what} vs the encoder's [H, W]"),
+                expected: vec![self.height, self.width],
+                got: vec![len],
+            });
+        }
+        Ok(())
+    }
+
+    /// Pass 1: applies the method's pre-filter to `field` (row-major `[H, W]`) in place and writes
+    /// `arg H` (radians) into `phase`; returns the channel's statistics for [`normaliser`].
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for wrong lengths.
+    pub fn analyse(&mut self, field: &mut [Complex32], phase: &mut [f32]) -> Result<ChannelStats> {
+        self.check("field", field.len())?;
+        self.check("phase", phase.len())?;
+        match (&self.method, &mut self.band) {
+            (DoublePhaseMethod::AntiAliased { .. }, _) => {
+                blur_separable(field, self.height, self.width, &self.kernel, &mut self.tmp)
+            }
+            (DoublePhaseMethod::BandLimited { .. }, Some((b, scratch))) => {
+                b.apply(field, scratch)?
+            }
+            _ => {}
+        }
+        let w = self.width;
+        Ok(field
+            .chunks_exact(w)
+            .zip(phase.chunks_exact_mut(w))
+            .fold(ChannelStats::default(), |acc, (row, out)| {
+                acc.merge(analyse_row(row, out))
+            }))
+    }
+
+    /// Pass 2: turns `phase` (from [`ChannelEncoder::analyse`] on the same `field`) into the wrapped double
+    /// phase pattern in `[0, 2π)` (Eq. 7) with the channel's `mean_phase` and the global `amplitude_scale`
+    /// from [`normaliser`], and writes the 8-bit codes of the linear look-up table into `codes`.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for wrong lengths; [`HoloError::InvalidParameter`] for a
+    /// non-positive scale.
+    pub fn encode(
+        &self,
+        field: &[Complex32],
+        phase: &mut [f32],
+        codes: &mut [u8],
+        mean_phase: f32,
+        amplitude_scale: f32,
+    ) -> Result<()> {
+        self.check("field", field.len())?;
+        self.check("phase", phase.len())?;
+        self.check("codes", codes.len())?;
+        if !(amplitude_scale > 0.0 && amplitude_scale.is_finite()) {
+            return Err(invalid(
+                "amplitude_scale",
+                format!("must be > 0, got {amplitude_scale}"),
+            ));
+        }
+        let (w, inv_a) = (self.width, 1.0 / amplitude_scale);
+        for (y, ((row, out), c)) in field
+            .chunks_exact(w)
+            .zip(phase.chunks_exact_mut(w))
+            .zip(codes.chunks_exact_mut(w))
+            .enumerate()
+        {
+            encode_row(row, out, Some(c), y, mean_phase, inv_a);
+        }
+        Ok(())
+    }
+}
+
+impl DoublePhaseMethod {
+    /// The Gaussian kernel of AA-DPM (empty for the other methods).
+    fn kernel(&self) -> Vec<f32> {
+        match *self {
+            Self::AntiAliased {
+                sigma_px,
+                kernel_size,
+            } => gaussian_kernel(sigma_px, kernel_size),
+            _ => Vec::new(),
+        }
+    }
 }
 
 /// Normalised 1D Gaussian kernel of odd length `size` and standard deviation `sigma` (pixels).
@@ -200,10 +413,17 @@ fn gaussian_kernel(sigma: f32, size: usize) -> Vec<f32> {
     k.into_iter().map(|v| v / s).collect()
 }
 
-/// Separable convolution of a `[h, w]` complex image with `kernel` along both axes, edges clamped.
-fn blur_separable(data: &mut [Complex32], h: usize, w: usize, kernel: &[f32]) {
+/// Separable convolution of a `[h, w]` complex image with `kernel` along both axes, edges clamped; `tmp` is
+/// resized to `h·w` (no allocation once it has that capacity).
+fn blur_separable(
+    data: &mut [Complex32],
+    h: usize,
+    w: usize,
+    kernel: &[f32],
+    tmp: &mut Vec<Complex32>,
+) {
     let r = (kernel.len() / 2) as i64;
-    let mut tmp = vec![Complex32::default(); h * w];
+    tmp.resize(h * w, Complex32::default());
     for y in 0..h {
         for x in 0..w {
             let mut acc = Complex32::default();
@@ -298,6 +518,56 @@ mod tests {
                 double_phase_encode(ones.view(), &m),
                 Err(HoloError::InvalidParameter { .. })
             ));
+        }
+    }
+
+    #[test]
+    fn channel_encoder_matches_double_phase_encode_for_every_method() {
+        let (h, w) = (12, 10);
+        let field = Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+            let t = (c * 131 + y * 17 + x * 7) as f32;
+            Complex32::from_polar(0.1 + (t * 0.37).sin().abs(), (t * 0.11).cos() * 3.0)
+        });
+        let methods = [
+            DoublePhaseMethod::Plain,
+            DoublePhaseMethod::default(),
+            DoublePhaseMethod::BandLimited { k: 0.6 },
+        ];
+        for method in methods {
+            let reference = double_phase_encode(field.view(), &method).unwrap();
+            let mut encoders: Vec<_> = (0..3)
+                .map(|_| ChannelEncoder::new(h, w, method).unwrap())
+                .collect();
+            let mut fields: Vec<Vec<Complex32>> = (0..3)
+                .map(|c| {
+                    field
+                        .index_axis(ndarray::Axis(0), c)
+                        .iter()
+                        .copied()
+                        .collect()
+                })
+                .collect();
+            let mut phase = vec![vec![0.0f32; h * w]; 3];
+            let mut codes = vec![vec![0u8; h * w]; 3];
+            let stats: Vec<_> = (0..3)
+                .map(|c| encoders[c].analyse(&mut fields[c], &mut phase[c]).unwrap())
+                .collect();
+            let (a, mean) = normaliser(&stats, h * w).unwrap();
+            assert!(
+                (a - reference.amplitude_scale).abs() <= 1e-6 * a,
+                "{method:?}"
+            );
+            for c in 0..3 {
+                assert!((mean[c] - reference.mean_phase[c]).abs() < 1e-6);
+                encoders[c]
+                    .encode(&fields[c], &mut phase[c], &mut codes[c], mean[c], a)
+                    .unwrap();
+                let want = reference.phase.index_axis(ndarray::Axis(0), c);
+                for (i, (got, want)) in phase[c].iter().zip(want.iter()).enumerate() {
+                    assert!((got - want).abs() < 1e-5, "{method:?} c{c} pixel {i}");
+                    assert_eq!(codes[c][i], crate::encoding::LinearLut.code(*got));
+                }
+            }
         }
     }
 

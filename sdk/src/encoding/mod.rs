@@ -5,5 +5,7 @@
 mod double_phase;
 mod lut;
 
-pub use double_phase::{double_phase_encode, DoublePhase, DoublePhaseMethod};
+pub use double_phase::{
+    double_phase_encode, normaliser, ChannelEncoder, ChannelStats, DoublePhase, DoublePhaseMethod,
+};
 pub use lut::{phase_to_codes, wrap_phase, LinearLut};

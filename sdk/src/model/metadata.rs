@@ -251,7 +251,9 @@ impl ModelMetadata {
     /// Checks the file against the expected kind and configuration.
     ///
     /// Errors: [`HoloError::ModelMetadata`] naming the first mismatching key, the file's value and the
-    /// expected one (kind, each wavelength, pitch, volume depth, offset, input layers).
+    /// expected one (kind, each wavelength, pitch, volume depth, offset, input layers). A hologram CNN whose
+    /// `offset_m` is 0 (trained for the midpoint hologram alone) matches any offset; a pre-filter's
+    /// `input_layers` is not checked (it sees the offset hologram, not the scene).
     pub fn check(&self, kind: ModelKind, expected: &ModelConfig) -> Result<()> {
         if self.kind != kind {
             return Err(bad("kind", self.kind.metadata_name(), kind.metadata_name()));
@@ -277,14 +279,25 @@ impl ModelMetadata {
                 self.volume_depth_m,
                 expected.optics.volume_depth_m,
             ),
-            ("offset_m", self.offset_m, expected.offset_m),
         ];
         for (key, found, want) in checks {
             if !close(found, want) {
                 return Err(bad(key, found.to_string(), want.to_string()));
             }
         }
-        if self.input_layers != expected.input_layers {
+        // A hologram CNN trained for the midpoint alone (stage 1, `offset_m = 0`) serves every offset; one
+        // fine-tuned jointly with a pre-filter (stage 2 of the paper) only that pre-filter's offset.
+        if (kind == ModelKind::PreFilter || self.offset_m != 0.0)
+            && !close(self.offset_m, expected.offset_m)
+        {
+            return Err(bad(
+                "offset_m",
+                self.offset_m.to_string(),
+                expected.offset_m.to_string(),
+            ));
+        }
+        // The pre-filter sees the offset hologram, whatever input the hologram CNN had.
+        if kind == ModelKind::Hologram && self.input_layers != expected.input_layers {
             return Err(bad(
                 "input_layers",
                 self.input_layers.to_string(),

@@ -23,4 +23,4 @@ mod metadata;
 mod network;
 
 pub use metadata::{ModelConfig, ModelKind, ModelMetadata, FORMAT_VERSION, METADATA_PREFIX};
-pub use network::{heads_to_field, HologramModel, ModelPlan};
+pub use network::{head_to_phasor, heads_to_field, HologramModel, ModelPlan};

@@ -42,8 +42,14 @@ pub fn heads_to_field(
     Zip::from(&mut out)
         .and(&amplitude)
         .and(&phase)
-        .for_each(|o, &a, &p| *o = Complex32::from_polar(a, (p - 0.5) * std::f32::consts::TAU));
+        .for_each(|o, &a, &p| *o = head_to_phasor(a, p));
     Ok(out)
+}
+
+/// One pixel of [`heads_to_field`]: amplitude head `a` and phase head `p ∈ [0, 1]` → `a·e^{i(p − 0.5)2π}`.
+#[inline]
+pub fn head_to_phasor(a: f32, p: f32) -> Complex32 {
+    Complex32::from_polar(a, (p - 0.5) * std::f32::consts::TAU)
 }
 
 /// Formats a tract error with its whole context chain on one line.

@@ -1,0 +1,725 @@
+//! The real-time hologram pipeline (`DESIGN.md` §4, paper Fig. 3): RGB-D frame (or layered depth image) →
+//! hologram CNN (tract) → midpoint hologram → offset propagation (Eq. 6) → pre-filter CNN (DDPM) → double
+//! phase encoding (Eq. 7) → look-up table → three 8-bit SLM planes.
+//!
+//! - [`HologramPipeline`] holds the loaded CNNs and the display configuration, checked against each other
+//!   once.
+//! - [`HologramSession`] (one per resolution) owns everything a frame reuses: the tract plans, FFT plans,
+//!   transfer functions, double-phase encoders and scratch buffers, and three colour worker threads. After
+//!   the first frame, the optics stages (offset propagation, pre-filter input, double phase, LUT) perform no
+//!   heap allocation (`sdk/tests/pipeline_alloc.rs` counts); the CNN stages allocate inside tract.
+//! - [`HologramSession::render_stream`] overlaps the hologram CNN of frame `n + 1` with the optics of frame
+//!   `n` (two threads); its output equals [`HologramSession::render`]'s bit for bit.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+use ndarray::{s, Array3, ArrayView3, Axis};
+use num_complex::Complex32;
+
+use crate::encoding::{normaliser, ChannelEncoder, ChannelStats, DoublePhaseMethod};
+use crate::error::{invalid, HoloError, Result};
+use crate::model::{head_to_phasor, HologramModel, ModelConfig, ModelKind, ModelPlan};
+use crate::optics::{Carrier, OpticalSetup, PropagationOptions, Scratch, SpectralPlan};
+use crate::scene::{LayeredDepthImage, RgbdFrame};
+
+/// Display and encoding settings of a [`HologramPipeline`].
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct PipelineConfig {
+    /// Wavelengths, pixel pitch and volume depth (must match the models' metadata).
+    pub optics: OpticalSetup,
+    /// Angular spectrum options of the offset propagation.
+    pub options: PropagationOptions,
+    /// Signed distance `s` in metres from the midpoint plane to the SLM (Eq. 6; the paper uses 0, 6e-3 and
+    /// 12e-3). A pre-filter CNN, if given, must be trained for this offset.
+    pub offset_m: f64,
+    /// Double phase method used *without* a pre-filter CNN (with one, DDPM encodes with plain Eq. 7).
+    pub encoding: DoublePhaseMethod,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> Self {
+        Self {
+            optics: OpticalSetup::default(),
+            options: PropagationOptions::default(),
+            offset_m: 0.0,
+            encoding: DoublePhaseMethod::default(),
+        }
+    }
+}
+
+/// The loaded CNNs plus their configuration: a factory of [`HologramSession`]s.
+#[derive(Debug, Clone)]
+pub struct HologramPipeline {
+    config: PipelineConfig,
+    hologram: Arc<HologramModel>,
+    prefilter: Option<Arc<HologramModel>>,
+}
+
+impl HologramPipeline {
+    /// Combines a hologram CNN with an optional pre-filter CNN (DDPM) under `config`.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for an invalid setup or offset, a pre-filter with a 0 m offset,
+    /// or models of the wrong kind; [`HoloError::ModelMetadata`] if a model's metadata does not match
+    /// `config` (optics; the pre-filter's offset).
+    pub fn new(
+        hologram: Arc<HologramModel>,
+        prefilter: Option<Arc<HologramModel>>,
+        config: PipelineConfig,
+    ) -> Result<Self> {
+        config.optics.validate()?;
+        if !config.offset_m.is_finite() {
+            return Err(invalid("offset_m", "must be finite"));
+        }
+        let expected = ModelConfig {
+            optics: config.optics,
+            offset_m: config.offset_m,
+            input_layers: hologram.metadata().input_layers,
+        };
+        hologram.metadata().check(ModelKind::Hologram, &expected)?;
+        if let Some(p) = &prefilter {
+            if config.offset_m == 0.0 {
+                return Err(invalid(
+                    "prefilter",
+                    "a pre-filter CNN belongs to a non-zero SLM offset (DDPM, Eq. 6); none is used at 0 m",
+                ));
+            }
+            p.metadata().check(ModelKind::PreFilter, &expected)?;
+        }
+        Ok(Self {
+            config,
+            hologram,
+            prefilter,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &PipelineConfig {
+        &self.config
+    }
+
+    /// The hologram CNN.
+    pub fn hologram_model(&self) -> &HologramModel {
+        &self.hologram
+    }
+
+    /// The pre-filter CNN, if any.
+    pub fn prefilter_model(&self) -> Option<&HologramModel> {
+        self.prefilter.as_deref()
+    }
+
+    /// The double phase method this pipeline encodes with: [`DoublePhaseMethod::Plain`] after a pre-filter
+    /// CNN (DDPM), otherwise the configured one.
+    pub fn encoding(&self) -> DoublePhaseMethod {
+        if self.prefilter.is_some() {
+            DoublePhaseMethod::Plain
+        } else {
+            self.config.encoding
+        }
+    }
+
+    /// Prepares a session for `height × width` frames: optimises the CNNs for that size (cached in the
+    /// models), plans the FFTs, computes the offset transfer functions and allocates all buffers, and starts
+    /// three colour worker threads.
+    ///
+    /// Errors: as [`HologramModel::plan`], [`SpectralPlan::new`] and [`ChannelEncoder::new`].
+    pub fn session(&self, height: usize, width: usize) -> Result<HologramSession> {
+        HologramSession::new(self, height, width)
+    }
+}
+
+/// The CNN heads of the midpoint hologram, `[3, H, W]` each: amplitude in `[0, √2]`, phase in `[0, 1]`
+/// meaning `(p − 0.5)·2π` rad (`DESIGN.md` §3).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Heads {
+    /// Amplitude head `[3, H, W]`.
+    pub amplitude: Array3<f32>,
+    /// Phase head `[3, H, W]`.
+    pub phase: Array3<f32>,
+}
+
+impl Heads {
+    /// The complex midpoint hologram `[3, H, W]` (R, G, B): `A·e^{i(p − 0.5)2π}`.
+    pub fn to_field(&self) -> Array3<Complex32> {
+        let mut out = Array3::<Complex32>::zeros(self.amplitude.raw_dim());
+        ndarray::Zip::from(&mut out)
+            .and(&self.amplitude)
+            .and(&self.phase)
+            .for_each(|o, &a, &p| *o = head_to_phasor(a, p));
+        out
+    }
+}
+
+/// Wall-clock seconds of each stage of one frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct FrameTimings {
+    /// Hologram CNN (input packing + tract).
+    pub cnn_s: f64,
+    /// Heads → field and offset propagation (Eq. 6), colours in parallel.
+    pub offset_s: f64,
+    /// Pre-filter CNN (0 without one).
+    pub prefilter_s: f64,
+    /// Double phase encoding (with its pre-filter, if any) and the look-up table, colours in parallel.
+    pub encoding_s: f64,
+    /// The whole frame (in a stream: from the end of the previous frame, i.e. the frame period).
+    pub total_s: f64,
+}
+
+/// One frame's SLM patterns, owned by the session and overwritten by the next frame.
+#[derive(Debug, Clone)]
+pub struct SlmFrame {
+    /// 8-bit SLM codes `[3, H, W]` (R, G, B; one plane per laser, field-sequential), linear look-up table.
+    pub codes: Array3<u8>,
+    /// The double phase pattern `[3, H, W]` in radians, `[0, 2π)`.
+    pub phase: Array3<f32>,
+    /// The global amplitude normaliser `a` of Eq. 7 (see [`crate::encoding::DoublePhase`]).
+    pub amplitude_scale: f32,
+    /// Per-channel mean phase removed before encoding (radians).
+    pub mean_phase: [f32; 3],
+    /// Stage timings.
+    pub timings: FrameTimings,
+}
+
+/// What a colour worker does next (see [`ColourState::run`]).
+#[derive(Debug, Clone, Copy)]
+enum Task {
+    /// Heads → field, offset propagation, then the pre-filter input or pass 1 of the encoding.
+    Midpoint { prefilter: bool },
+    /// Pre-filter heads → field, then pass 1 of the encoding.
+    Filtered,
+    /// Pass 2 of the encoding and the LUT.
+    Encode {
+        mean_phase: f32,
+        amplitude_scale: f32,
+    },
+}
+
+/// Everything one colour channel reuses between frames.
+#[derive(Debug)]
+struct ColourState {
+    /// Amplitude and phase heads of this colour (`[H, W]`), written by the session.
+    amp: Vec<f32>,
+    phs: Vec<f32>,
+    field: Vec<Complex32>,
+    plan: SpectralPlan,
+    /// Offset transfer function with the carrier removed (Eq. 6); `None` at 0 m.
+    transfer: Option<Vec<Complex32>>,
+    scratch: Scratch,
+    encoder: ChannelEncoder,
+    phase: Vec<f32>,
+    codes: Vec<u8>,
+    stats: ChannelStats,
+}
+
+impl ColourState {
+    fn run(&mut self, task: Task) -> Result<()> {
+        match task {
+            Task::Midpoint { prefilter } => {
+                self.heads_to_field();
+                if let Some(t) = &self.transfer {
+                    self.plan.apply(&mut self.field, t, &mut self.scratch)?;
+                }
+                if prefilter {
+                    // Pre-filter input (DESIGN §3): |H| and arg H/2π + 0.5, into the heads buffers.
+                    for ((a, p), v) in self.amp.iter_mut().zip(&mut self.phs).zip(&self.field) {
+                        *a = v.norm();
+                        *p = v.im.atan2(v.re) / std::f32::consts::TAU + 0.5;
+                    }
+                } else {
+                    self.stats = self.encoder.analyse(&mut self.field, &mut self.phase)?;
+                }
+                Ok(())
+            }
+            Task::Filtered => {
+                self.heads_to_field();
+                self.stats = self.encoder.analyse(&mut self.field, &mut self.phase)?;
+                Ok(())
+            }
+            Task::Encode {
+                mean_phase,
+                amplitude_scale,
+            } => self.encoder.encode(
+                &self.field,
+                &mut self.phase,
+                &mut self.codes,
+                mean_phase,
+                amplitude_scale,
+            ),
+        }
+    }
+
+    fn heads_to_field(&mut self) {
+        for ((f, &a), &p) in self.field.iter_mut().zip(&self.amp).zip(&self.phs) {
+            *f = head_to_phasor(a, p);
+        }
+    }
+}
+
+type Reply = (usize, Box<ColourState>, Result<()>);
+
+/// Three persistent threads, one per colour. A task moves a colour's state to its worker and back through
+/// bounded channels, so dispatching allocates nothing (unlike a rayon pool, whose injector queue allocates a
+/// block every 63 jobs submitted from outside the pool).
+#[derive(Debug)]
+struct ColourWorkers {
+    senders: Vec<SyncSender<(Task, Box<ColourState>)>>,
+    replies: Receiver<Reply>,
+    handles: Vec<JoinHandle<()>>,
+}
+
+impl ColourWorkers {
+    fn start() -> Result<Self> {
+        let (reply_tx, replies) = sync_channel::<Reply>(3);
+        let mut senders = Vec::new();
+        let mut handles = Vec::new();
+        for c in 0..3 {
+            let (tx, rx) = sync_channel::<(Task, Box<ColourState>)>(1);
+            let reply_tx = reply_tx.clone();
+            let handle = std::thread::Builder::new()
+                .name(format!("tensorholo-colour-{c}"))
+                .spawn(move || {
+                    while let Ok((task, mut state)) = rx.recv() {
+                        let result = catch_unwind(AssertUnwindSafe(|| state.run(task)))
+                            .unwrap_or_else(|_| {
+                                Err(HoloError::InvalidData(format!(
+                                    "colour worker {c} panicked (a bug: please report it)"
+                                )))
+                            });
+                        if reply_tx.send((c, state, result)).is_err() {
+                            break;
+                        }
+                    }
+                })
+                .map_err(|e| invalid("threads", format!("cannot start a colour worker: {e}")))?;
+            senders.push(tx);
+            handles.push(handle);
+        }
+        Ok(Self {
+            senders,
+            replies,
+            handles,
+        })
+    }
+
+    /// Runs `task(c)` on each colour's state in parallel; the states come back in colour order. Returns the
+    /// first error after all three have come back.
+    fn run(
+        &self,
+        states: &mut [Option<Box<ColourState>>; 3],
+        task: impl Fn(usize) -> Task,
+    ) -> Result<()> {
+        for (c, slot) in states.iter_mut().enumerate() {
+            let state = slot.take().ok_or_else(lost_state)?;
+            self.senders[c]
+                .send((task(c), state))
+                .map_err(|_| lost_state())?;
+        }
+        let mut first_err = None;
+        for _ in 0..3 {
+            let (c, state, result) = self.replies.recv().map_err(|_| lost_state())?;
+            states[c] = Some(state);
+            if let (Err(e), None) = (result, &first_err) {
+                first_err = Some(e);
+            }
+        }
+        first_err.map_or(Ok(()), Err)
+    }
+}
+
+fn lost_state() -> HoloError {
+    HoloError::InvalidData(
+        "a colour worker of this session has stopped; create a new session".into(),
+    )
+}
+
+impl Drop for ColourWorkers {
+    fn drop(&mut self) {
+        self.senders.clear(); // closing the channels ends the worker loops
+        for h in self.handles.drain(..) {
+            let _ = h.join();
+        }
+    }
+}
+
+/// Packs frames into the hologram CNN's input and runs it (one per thread in a stream).
+#[derive(Debug, Clone)]
+struct CnnStage {
+    plan: ModelPlan,
+    input: Array3<f32>,
+}
+
+impl CnnStage {
+    fn run_frame(&mut self, frame: &RgbdFrame) -> Result<(Heads, f64)> {
+        let t = Instant::now();
+        let (c, h, w) = self.plan.input_dim();
+        if c != 4 {
+            return Err(invalid(
+                "frame",
+                format!(
+                    "this hologram CNN takes a {}-layer LDI, not an RGB-D frame",
+                    c / 4
+                ),
+            ));
+        }
+        check_size("RGB-D frame", frame.amplitude.dim(), (h, w))?;
+        self.input
+            .slice_mut(s![..3, .., ..])
+            .assign(&frame.amplitude);
+        self.input.slice_mut(s![3, .., ..]).assign(&frame.depth);
+        self.run(t)
+    }
+
+    fn run_ldi(&mut self, ldi: &LayeredDepthImage) -> Result<(Heads, f64)> {
+        let t = Instant::now();
+        let (c, h, w) = self.plan.input_dim();
+        let want = c / 4;
+        if ldi.num_layers() != want {
+            return Err(invalid(
+                "ldi",
+                format!(
+                    "this hologram CNN takes {want} layer(s), the LDI has {}",
+                    ldi.num_layers()
+                ),
+            ));
+        }
+        check_size("LDI", (3, ldi.height(), ldi.width()), (h, w))?;
+        // Invalid pixels enter the CNN as amplitude 0, depth 1 (docs/DATASET.md, what training saw).
+        for (l, layer) in ldi.layers().iter().enumerate() {
+            let base = 4 * l;
+            for ch in 0..3 {
+                ndarray::Zip::from(self.input.index_axis_mut(Axis(0), base + ch))
+                    .and(layer.amplitude.index_axis(Axis(0), ch))
+                    .and(&layer.valid)
+                    .for_each(|o, &a, &v| *o = if v { a } else { 0.0 });
+            }
+            ndarray::Zip::from(self.input.index_axis_mut(Axis(0), base + 3))
+                .and(&layer.depth)
+                .and(&layer.valid)
+                .for_each(|o, &d, &v| *o = if v { d } else { 1.0 });
+        }
+        self.run(t)
+    }
+
+    fn run(&mut self, t: Instant) -> Result<(Heads, f64)> {
+        let (amplitude, phase) = self.plan.run_heads(self.input.view())?;
+        Ok((Heads { amplitude, phase }, t.elapsed().as_secs_f64()))
+    }
+}
+
+fn check_size(what: &str, got: (usize, usize, usize), want: (usize, usize)) -> Result<()> {
+    if (got.1, got.2) != want {
+        return Err(HoloError::ShapeMismatch {
+            what: format!("{what} vs the session's [H, W]"),
+            expected: vec![want.0, want.1],
+            got: vec![got.1, got.2],
+        });
+    }
+    Ok(())
+}
+
+/// A hologram session for one resolution (see the [module docs](self)). Not `Sync`: one frame at a time;
+/// a failed frame (wrong size, NaN) leaves the session usable.
+#[derive(Debug)]
+pub struct HologramSession {
+    height: usize,
+    width: usize,
+    encoding: DoublePhaseMethod,
+    offset_m: f64,
+    cnn: CnnStage,
+    prefilter: Option<ModelPlan>,
+    prefilter_input: Array3<f32>,
+    states: [Option<Box<ColourState>>; 3],
+    workers: ColourWorkers,
+    output: SlmFrame,
+    last_heads: Option<Heads>,
+}
+
+impl HologramSession {
+    fn new(pipeline: &HologramPipeline, height: usize, width: usize) -> Result<Self> {
+        let hologram = pipeline.hologram.plan(height, width)?;
+        let prefilter = match &pipeline.prefilter {
+            Some(p) => Some(p.plan(height, width)?),
+            None => None,
+        };
+        let cfg = &pipeline.config;
+        let encoding = pipeline.encoding();
+        let props = cfg.optics.propagators(height, width, cfg.options)?;
+        let n = height * width;
+        let mut states: [Option<Box<ColourState>>; 3] = [None, None, None];
+        for (slot, prop) in states.iter_mut().zip(&props) {
+            let transfer = if cfg.offset_m != 0.0 {
+                Some(
+                    prop.transfer_function(cfg.offset_m, Carrier::Remove)?
+                        .values()
+                        .to_vec(),
+                )
+            } else {
+                None
+            };
+            *slot = Some(Box::new(ColourState {
+                amp: vec![0.0; n],
+                phs: vec![0.0; n],
+                field: vec![Complex32::default(); n],
+                plan: prop.plan().clone(),
+                transfer,
+                scratch: prop.plan().scratch(),
+                encoder: ChannelEncoder::new(height, width, encoding)?,
+                phase: vec![0.0; n],
+                codes: vec![0; n],
+                stats: ChannelStats::default(),
+            }));
+        }
+        let (c, _, _) = hologram.input_dim();
+        Ok(Self {
+            height,
+            width,
+            encoding,
+            offset_m: cfg.offset_m,
+            cnn: CnnStage {
+                plan: hologram,
+                input: Array3::zeros((c, height, width)),
+            },
+            prefilter_input: Array3::zeros((
+                if prefilter.is_some() { 6 } else { 0 },
+                height,
+                width,
+            )),
+            prefilter,
+            states,
+            workers: ColourWorkers::start()?,
+            output: SlmFrame {
+                codes: Array3::zeros((3, height, width)),
+                phase: Array3::zeros((3, height, width)),
+                amplitude_scale: 0.0,
+                mean_phase: [0.0; 3],
+                timings: FrameTimings::default(),
+            },
+            last_heads: None,
+        })
+    }
+
+    /// `(height, width)` of this session's frames.
+    pub fn size(&self) -> (usize, usize) {
+        (self.height, self.width)
+    }
+
+    /// The SLM offset `s` in metres.
+    pub fn offset_m(&self) -> f64 {
+        self.offset_m
+    }
+
+    /// The double phase method (plain after a pre-filter CNN).
+    pub fn encoding(&self) -> DoublePhaseMethod {
+        self.encoding
+    }
+
+    /// Whether a pre-filter CNN runs between offset propagation and double phase encoding (DDPM).
+    pub fn has_prefilter(&self) -> bool {
+        self.prefilter.is_some()
+    }
+
+    /// The output of the last successful frame (codes all zero before the first).
+    pub fn output(&self) -> &SlmFrame {
+        &self.output
+    }
+
+    /// The hologram CNN heads of the last successful frame (the midpoint hologram; [`Heads::to_field`]).
+    pub fn last_heads(&self) -> Option<&Heads> {
+        self.last_heads.as_ref()
+    }
+
+    /// Renders one RGB-D frame (`[3, H, W]` amplitude and `[H, W]` normalised depth at the session's size)
+    /// into SLM patterns.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for a frame of another size; [`HoloError::InvalidData`] for
+    /// non-finite values; [`HoloError::InvalidParameter`] if the CNN takes an LDI; tract failures
+    /// ([`HoloError::ModelRun`]). The session stays usable after an error.
+    pub fn render(&mut self, frame: &RgbdFrame) -> Result<&SlmFrame> {
+        let (heads, cnn_s) = self.cnn.run_frame(frame)?;
+        self.encode_heads(heads, cnn_s)
+    }
+
+    /// Renders a layered depth image (the LDI-input CNN of the paper; layers `[r, g, b, d]` each).
+    ///
+    /// Errors: as [`HologramSession::render`], and [`HoloError::InvalidParameter`] if the number of layers is
+    /// not the CNN's.
+    pub fn render_ldi(&mut self, ldi: &LayeredDepthImage) -> Result<&SlmFrame> {
+        let (heads, cnn_s) = self.cnn.run_ldi(ldi)?;
+        self.encode_heads(heads, cnn_s)
+    }
+
+    /// Runs the stages after the hologram CNN on `heads` (midpoint hologram): offset propagation, pre-filter
+    /// CNN, double phase encoding and LUT. `cnn_s` is recorded as the CNN time of this frame.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for heads of another size; [`HoloError::InvalidData`] for
+    /// non-finite heads or a hologram that is zero everywhere.
+    pub fn encode_heads(&mut self, heads: Heads, cnn_s: f64) -> Result<&SlmFrame> {
+        let t0 = Instant::now();
+        self.propagate_to_slm(&heads)?;
+        let offset_s = t0.elapsed().as_secs_f64();
+        let t = Instant::now();
+        self.run_prefilter()?;
+        let prefilter_s = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        self.encode()?;
+        let encoding_s = t.elapsed().as_secs_f64();
+        self.output.timings = FrameTimings {
+            cnn_s,
+            offset_s,
+            prefilter_s,
+            encoding_s,
+            total_s: cnn_s + t0.elapsed().as_secs_f64(),
+        };
+        self.last_heads = Some(heads);
+        Ok(&self.output)
+    }
+
+    /// Stage 2 on its own (no heap allocation after the first frame): copies the midpoint `heads` into the
+    /// colour states; the workers convert them to the field, propagate it to the SLM (Eq. 6, carrier removed)
+    /// and either prepare the pre-filter input or run pass 1 of the double phase encoding. Follow with
+    /// [`HologramSession::run_prefilter`] and [`HologramSession::encode`] ([`HologramSession::encode_heads`]
+    /// does all three).
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for heads of another size; [`HoloError::InvalidData`] for
+    /// non-finite values.
+    pub fn propagate_to_slm(&mut self, heads: &Heads) -> Result<()> {
+        let want = [3, self.height, self.width];
+        for head in [&heads.amplitude, &heads.phase] {
+            if head.shape() != want {
+                return Err(HoloError::ShapeMismatch {
+                    what: "midpoint heads vs the session's [3, H, W]".into(),
+                    expected: want.to_vec(),
+                    got: head.shape().to_vec(),
+                });
+            }
+        }
+        let non_finite = heads
+            .amplitude
+            .iter()
+            .chain(heads.phase.iter())
+            .any(|v| !v.is_finite());
+        if non_finite {
+            return Err(HoloError::InvalidData(
+                "midpoint heads hold NaN or infinite values".into(),
+            ));
+        }
+        self.load_heads(heads.amplitude.view(), heads.phase.view())?;
+        let prefilter = self.prefilter.is_some();
+        self.workers
+            .run(&mut self.states, |_| Task::Midpoint { prefilter })
+    }
+
+    fn load_heads(&mut self, amplitude: ArrayView3<f32>, phase: ArrayView3<f32>) -> Result<()> {
+        for (c, slot) in self.states.iter_mut().enumerate() {
+            let st = slot.as_mut().ok_or_else(lost_state)?;
+            copy_channel(amplitude, c, &mut st.amp);
+            copy_channel(phase, c, &mut st.phs);
+        }
+        Ok(())
+    }
+
+    /// Stage 3 on its own: the pre-filter CNN (allocates inside tract), if the session has one: packs
+    /// `[|H|, arg H/2π + 0.5]` (`DESIGN.md` §3), runs it and lets the workers turn its heads into the
+    /// filtered field and run pass 1 of the encoding. A no-op without a pre-filter.
+    ///
+    /// Errors: tract failures ([`HoloError::ModelRun`]); call after [`HologramSession::propagate_to_slm`].
+    pub fn run_prefilter(&mut self) -> Result<()> {
+        let Some(plan) = &self.prefilter else {
+            return Ok(());
+        };
+        for (c, slot) in self.states.iter().enumerate() {
+            let st = slot.as_ref().ok_or_else(lost_state)?;
+            fill_channel(&mut self.prefilter_input, c, &st.amp);
+            fill_channel(&mut self.prefilter_input, 3 + c, &st.phs);
+        }
+        let (amplitude, phase) = plan.run_heads(self.prefilter_input.view())?;
+        self.load_heads(amplitude.view(), phase.view())?;
+        self.workers.run(&mut self.states, |_| Task::Filtered)
+    }
+
+    /// Stage 4 on its own (no heap allocation after the first frame): the global normaliser, pass 2 of the
+    /// double phase encoding (Eq. 7) and the LUT on the workers; the colour planes are copied into
+    /// [`HologramSession::output`] (timings are not updated).
+    ///
+    /// Errors: [`HoloError::InvalidData`] if the hologram is zero everywhere.
+    pub fn encode(&mut self) -> Result<&SlmFrame> {
+        let mut stats = [ChannelStats::default(); 3];
+        for (s, slot) in stats.iter_mut().zip(&self.states) {
+            *s = slot.as_ref().ok_or_else(lost_state)?.stats;
+        }
+        let (a, mean) = normaliser(&stats, self.height * self.width)?;
+        self.workers.run(&mut self.states, |c| Task::Encode {
+            mean_phase: mean[c],
+            amplitude_scale: a,
+        })?;
+        for (c, slot) in self.states.iter().enumerate() {
+            let st = slot.as_ref().ok_or_else(lost_state)?;
+            fill_channel(&mut self.output.phase, c, &st.phase);
+            fill_channel(&mut self.output.codes, c, &st.codes);
+        }
+        self.output.amplitude_scale = a;
+        self.output.mean_phase = mean;
+        Ok(&self.output)
+    }
+
+    /// Renders a sequence, overlapping the hologram CNN of frame `n + 1` (on a second thread) with the optics
+    /// of frame `n`. `sink(index, frame)` receives each result in order; an error from a frame, the source or
+    /// the sink stops the stream and is returned. Outputs equal [`HologramSession::render`]'s bit for bit;
+    /// `timings.total_s` is the frame period (time since the previous frame was delivered).
+    ///
+    /// Errors: the first error of the source, a frame (as [`HologramSession::render`]) or the sink.
+    pub fn render_stream<I, F>(&mut self, frames: I, mut sink: F) -> Result<usize>
+    where
+        I: IntoIterator<Item = Result<RgbdFrame>>,
+        I::IntoIter: Send,
+        F: FnMut(usize, &SlmFrame) -> Result<()>,
+    {
+        let frames = frames.into_iter();
+        let mut cnn = self.cnn.clone();
+        std::thread::scope(|scope| {
+            let (tx, rx) = sync_channel::<Result<(Heads, f64)>>(1);
+            scope.spawn(move || {
+                for frame in frames {
+                    let out = frame.and_then(|f| cnn.run_frame(&f));
+                    let stop = out.is_err();
+                    if tx.send(out).is_err() || stop {
+                        break;
+                    }
+                }
+            });
+            let mut count = 0;
+            let mut last = Instant::now();
+            for item in rx {
+                let (heads, cnn_s) = item?;
+                self.encode_heads(heads, cnn_s)?;
+                let now = Instant::now();
+                self.output.timings.total_s = (now - last).as_secs_f64();
+                last = now;
+                sink(count, &self.output)?;
+                count += 1;
+            }
+            Ok(count)
+        })
+    }
+}
+
+/// Copies channel `c` of a `[C, H, W]` array into `out` (`H·W` values).
+fn copy_channel(a: ArrayView3<f32>, c: usize, out: &mut [f32]) {
+    let lane = a.index_axis(Axis(0), c);
+    match lane.as_slice() {
+        Some(src) => out.copy_from_slice(src),
+        None => out.iter_mut().zip(lane.iter()).for_each(|(o, v)| *o = *v),
+    }
+}
+
+/// Writes `src` (`H·W` values) into channel `c` of a standard-layout `[C, H, W]` array.
+fn fill_channel<T: Copy>(a: &mut Array3<T>, c: usize, src: &[T]) {
+    let mut lane = a.index_axis_mut(Axis(0), c);
+    match lane.as_slice_mut() {
+        Some(dst) => dst.copy_from_slice(src),
+        None => lane.iter_mut().zip(src).for_each(|(o, v)| *o = *v),
+    }
+}

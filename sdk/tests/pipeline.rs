@@ -1,0 +1,225 @@
+//! The real-time pipeline (`tensorholo::pipeline`, DESIGN §4) on the random-init fixture CNNs: the session
+//! against a naive composition of the SDK's stand-alone stages, streaming vs single frames, and bad input.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use ndarray::{Array2, Array3, Axis};
+use tensorholo::encoding::{double_phase_encode, phase_to_codes};
+use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
+use tensorholo::optics::{propagate_colour, Carrier};
+use tensorholo::pipeline::{Heads, HologramPipeline, PipelineConfig};
+use tensorholo::scene::RgbdFrame;
+use tensorholo::HoloError;
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/models")
+        .join(name)
+}
+
+fn load(name: &str, kind: ModelKind) -> Arc<HologramModel> {
+    Arc::new(HologramModel::from_path(fixture(name), kind, &ModelConfig::default()).unwrap())
+}
+
+/// The fixtures are trained for a 6 mm offset.
+fn config(offset_m: f64) -> PipelineConfig {
+    PipelineConfig {
+        offset_m,
+        ..PipelineConfig::default()
+    }
+}
+
+fn pipeline(prefilter: bool) -> HologramPipeline {
+    let pre = prefilter.then(|| load("holo8_rgbd.prefilter.onnx", ModelKind::PreFilter));
+    HologramPipeline::new(
+        load("holo8_rgbd.onnx", ModelKind::Hologram),
+        pre,
+        config(6e-3),
+    )
+    .unwrap()
+}
+
+fn frame(h: usize, w: usize, seed: usize) -> RgbdFrame {
+    let amp = Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+        (((x * 7 + y * 13 + c * 5 + seed * 3) % 17) as f32 / 16.0).sqrt()
+    });
+    let depth = Array2::from_shape_fn((h, w), |(y, x)| ((x + 2 * y + seed) % 11) as f32 / 10.0);
+    RgbdFrame::new(amp, depth).unwrap()
+}
+
+/// The same frame through the stand-alone SDK functions, allocating freely: CNN → field → offset
+/// propagation → (pre-filter CNN) → double phase → codes.
+fn naive(p: &HologramPipeline, f: &RgbdFrame) -> (Array3<f32>, Array3<u8>) {
+    let cfg = p.config();
+    let mut field = p.hologram_model().run_frame(f).unwrap();
+    propagate_colour(
+        &mut field,
+        &cfg.optics,
+        cfg.offset_m,
+        Carrier::Remove,
+        cfg.options,
+    )
+    .unwrap();
+    if let Some(pre) = p.prefilter_model() {
+        let (_, h, w) = field.dim();
+        let mut input = Array3::<f32>::zeros((6, h, w));
+        for c in 0..3 {
+            for ((y, x), v) in field.index_axis(Axis(0), c).indexed_iter() {
+                input[[c, y, x]] = v.norm();
+                input[[3 + c, y, x]] = v.arg() / std::f32::consts::TAU + 0.5;
+            }
+        }
+        field = pre.run(input.view()).unwrap();
+    }
+    let dp = double_phase_encode(field.view(), &p.encoding()).unwrap();
+    let codes = phase_to_codes(dp.phase.view());
+    (dp.phase, codes)
+}
+
+fn assert_matches_naive(p: &HologramPipeline, f: &RgbdFrame) {
+    let (phase, codes) = naive(p, f);
+    let mut session = p.session(f.height(), f.width()).unwrap();
+    let out = session.render(f).unwrap();
+    // The same kernels run in the same order (per colour), so the session reproduces the stand-alone stages
+    // exactly, even though its buffers and threads differ.
+    let worst = out
+        .phase
+        .iter()
+        .zip(phase.iter())
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    println!(
+        "prefilter {}: max phase difference {worst:.2e} rad",
+        p.prefilter_model().is_some()
+    );
+    assert_eq!(worst, 0.0);
+    assert_eq!(out.codes, codes);
+    assert!(out.timings.cnn_s > 0.0 && out.timings.total_s >= out.timings.cnn_s);
+}
+
+#[test]
+fn session_equals_the_naive_composition_with_and_without_prefilter() {
+    let f = frame(24, 32, 0);
+    assert_matches_naive(&pipeline(true), &f);
+    assert_matches_naive(&pipeline(false), &f);
+}
+
+#[test]
+fn zero_offset_refuses_an_offset_trained_cnn_and_any_prefilter() {
+    let p = HologramPipeline::new(
+        load("holo8_rgbd.onnx", ModelKind::Hologram),
+        None,
+        config(0.0),
+    );
+    // The fixture CNN was exported for 6 mm (jointly trained with its pre-filter), so 0 mm is refused ...
+    assert!(matches!(p, Err(HoloError::ModelMetadata { .. })));
+    // ... and a pre-filter never runs at 0 mm.
+    let e = HologramPipeline::new(
+        load("holo8_rgbd.onnx", ModelKind::Hologram),
+        Some(load("holo8_rgbd.prefilter.onnx", ModelKind::PreFilter)),
+        PipelineConfig {
+            offset_m: 0.0,
+            ..PipelineConfig::default()
+        },
+    )
+    .unwrap_err();
+    assert!(matches!(
+        e,
+        HoloError::ModelMetadata { .. } | HoloError::InvalidParameter { .. }
+    ));
+}
+
+#[test]
+fn stream_equals_single_frames_bit_for_bit() {
+    let p = pipeline(true);
+    let frames: Vec<RgbdFrame> = (0..4).map(|i| frame(16, 20, i)).collect();
+    let mut single = p.session(16, 20).unwrap();
+    let expected: Vec<Array3<u8>> = frames
+        .iter()
+        .map(|f| single.render(f).unwrap().codes.clone())
+        .collect();
+    let mut session = p.session(16, 20).unwrap();
+    let mut got = Vec::new();
+    let n = session
+        .render_stream(frames.clone().into_iter().map(Ok), |i, out| {
+            assert_eq!(i, got.len());
+            assert!(out.timings.total_s > 0.0);
+            got.push(out.codes.clone());
+            Ok(())
+        })
+        .unwrap();
+    assert_eq!(n, 4);
+    assert_eq!(got, expected);
+    // Frames differ, so the comparison means something.
+    assert_ne!(expected[0], expected[1]);
+}
+
+#[test]
+fn bad_input_is_refused_and_the_session_stays_usable() {
+    let p = pipeline(true);
+    let mut session = p.session(16, 20).unwrap();
+    let good = frame(16, 20, 1);
+    let first = session.render(&good).unwrap().codes.clone();
+
+    let e = session.render(&frame(20, 16, 1)).unwrap_err();
+    assert!(matches!(e, HoloError::ShapeMismatch { .. }), "{e}");
+
+    let mut heads = Heads {
+        amplitude: Array3::from_elem((3, 16, 20), 0.5),
+        phase: Array3::from_elem((3, 16, 20), 0.5),
+    };
+    heads.phase[[1, 2, 3]] = f32::NAN;
+    let e = session.encode_heads(heads, 0.0).unwrap_err();
+    assert!(matches!(e, HoloError::InvalidData(_)), "{e}");
+
+    let zero = Heads {
+        amplitude: Array3::zeros((3, 16, 20)),
+        phase: Array3::from_elem((3, 16, 20), 0.5),
+    };
+    let bad_size = Heads {
+        amplitude: Array3::zeros((3, 8, 20)),
+        phase: Array3::zeros((3, 8, 20)),
+    };
+    assert!(matches!(
+        session.encode_heads(bad_size, 0.0),
+        Err(HoloError::ShapeMismatch { .. })
+    ));
+    // A zero hologram cannot be encoded (without pre-filter: the pre-filter may make it non-zero).
+    let mut plain = pipeline(false).session(16, 20).unwrap();
+    assert!(matches!(
+        plain.encode_heads(zero, 0.0),
+        Err(HoloError::InvalidData(_))
+    ));
+
+    assert_eq!(session.render(&good).unwrap().codes, first);
+    let mut stream = p.session(16, 20).unwrap();
+    let frames = vec![Ok(good.clone()), Ok(frame(8, 8, 0)), Ok(good.clone())];
+    let mut delivered = 0;
+    let e = stream
+        .render_stream(frames, |_, _| {
+            delivered += 1;
+            Ok(())
+        })
+        .unwrap_err();
+    assert!(matches!(e, HoloError::ShapeMismatch { .. }), "{e}");
+    assert_eq!(delivered, 1);
+    assert_eq!(stream.render(&good).unwrap().codes, first);
+}
+
+#[test]
+fn pipeline_refuses_mismatched_models() {
+    let holo = load("holo8_rgbd.onnx", ModelKind::Hologram);
+    let pre = load("holo8_rgbd.prefilter.onnx", ModelKind::PreFilter);
+    let e = HologramPipeline::new(holo.clone(), Some(pre), config(12e-3)).unwrap_err();
+    assert!(
+        matches!(&e, HoloError::ModelMetadata { key, .. } if key.ends_with("offset_m")),
+        "{e}"
+    );
+    let mut cfg = config(6e-3);
+    cfg.optics.pixel_pitch_m = 6.4e-6;
+    assert!(matches!(
+        HologramPipeline::new(holo, None, cfg),
+        Err(HoloError::ModelMetadata { .. })
+    ));
+}

@@ -1,0 +1,95 @@
+//! Proves that after warm-up a frame's optics stages (offset propagation, pre-filter input, double phase
+//! encoding, LUT, output copy) perform no heap allocation: a counting global allocator counts every
+//! allocation of every thread (the colour workers included) around the session's stage methods.
+//! The CNN stages allocate inside tract and are measured separately, as a sanity check that the counter works.
+//!
+//! This binary holds a single test so that no other test allocates concurrently.
+
+use std::alloc::System;
+use std::path::Path;
+use std::sync::Arc;
+
+use ndarray::{Array2, Array3};
+use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
+use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
+use tensorholo::pipeline::{Heads, HologramPipeline, PipelineConfig};
+use tensorholo::scene::RgbdFrame;
+
+#[global_allocator]
+static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
+
+/// Allocations (including reallocations) of all threads while `f` runs.
+fn allocations_during<T>(f: impl FnOnce() -> T) -> (usize, T) {
+    let region = Region::new(GLOBAL);
+    let out = f();
+    let stats = region.change();
+    (stats.allocations + stats.reallocations, out)
+}
+
+fn load(name: &str, kind: ModelKind) -> Arc<HologramModel> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/models")
+        .join(name);
+    Arc::new(HologramModel::from_path(path, kind, &ModelConfig::default()).unwrap())
+}
+
+#[test]
+fn optics_stages_allocate_nothing_after_warm_up() {
+    let (h, w) = (32, 48);
+    let frames: Vec<RgbdFrame> = (0..6)
+        .map(|i| {
+            let amp = Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+                ((x * 3 + y * 5 + c + i) % 9) as f32 / 8.0
+            });
+            let depth = Array2::from_shape_fn((h, w), |(y, x)| ((x + y + i) % 7) as f32 / 6.0);
+            RgbdFrame::new(amp, depth).unwrap()
+        })
+        .collect();
+    for prefilter in [true, false] {
+        let pre = prefilter.then(|| load("holo8_rgbd.prefilter.onnx", ModelKind::PreFilter));
+        let config = PipelineConfig {
+            offset_m: 6e-3,
+            ..PipelineConfig::default()
+        };
+        let pipeline =
+            HologramPipeline::new(load("holo8_rgbd.onnx", ModelKind::Hologram), pre, config)
+                .unwrap();
+        let mut session = pipeline.session(h, w).unwrap();
+        // Warm-up: thread-local channel contexts, tract's first run.
+        session.render(&frames[0]).unwrap();
+        let heads: Vec<Heads> = frames
+            .iter()
+            .map(|f| {
+                let field = pipeline.hologram_model().run_frame(f).unwrap();
+                Heads {
+                    amplitude: field.mapv(|v| v.norm()),
+                    phase: field.mapv(|v| v.arg() / std::f32::consts::TAU + 0.5),
+                }
+            })
+            .collect();
+        let mut optics = 0;
+        let mut cnn = 0;
+        let mut last = Array3::<u8>::zeros((3, h, w));
+        for hd in &heads[1..] {
+            let (n, r) = allocations_during(|| session.propagate_to_slm(hd));
+            r.unwrap();
+            optics += n;
+            let (n, r) = allocations_during(|| session.run_prefilter());
+            r.unwrap();
+            cnn += n;
+            let (n, r) = allocations_during(|| session.encode().map(|_| ()));
+            r.unwrap();
+            optics += n;
+            assert_ne!(session.output().codes, last, "frames must differ");
+            last = session.output().codes.clone();
+        }
+        println!(
+            "pre-filter {prefilter}: {optics} allocations in the optics stages of 5 frames, {cnn} in the \
+             pre-filter CNN"
+        );
+        assert_eq!(optics, 0);
+        if prefilter {
+            assert!(cnn > 0, "the counter must see tract's allocations");
+        }
+    }
+}

@@ -1,0 +1,72 @@
+#!/usr/bin/env bash
+# Reproduces the interim models shipped in models/ (trained on 2 CPU cores, no GPU; see models/MODEL_CARD.md):
+#   hologram CNNs holo{8,15,30}_rgbd.onnx (stage 1, midpoint hologram, offset-independent) and the pre-filter
+#   CNNs prefilter_{6,12}mm.onnx (identity pre-training + DDPM stage 2 with the 8-layer hologram CNN frozen),
+#   each in f32 and int8 (QOperator conv-only and QDQ), then the Table 2 evaluation on the test split.
+#
+#   training/ship_cpu.sh [STEP ...]      STEP: dataset holo8 holo15 holo30 pre6 pre12 export eval (default: all)
+#
+# Environment: DATA (default data/cpu256), HOLO (holo binary; default target/release/holo, built if missing),
+# PYTHON (default .venv/bin/python), MODELS (default models), RUNS (default runs/cpu),
+# STEPS8/STEPS15/STEPS30 (stage-1 steps, default 6000/4000/3000), PRE_STEPS (stage 2, default 1500).
+# Every step resumes from its last checkpoint when rerun.
+set -euo pipefail
+root="$(cd "$(dirname "$0")/.." && pwd)"
+cd "$root"
+py="${PYTHON:-$root/.venv/bin/python}"
+data="${DATA:-data/cpu256}"
+models="${MODELS:-models}"
+runs="${RUNS:-runs/cpu}"
+holo="${HOLO:-target/release/holo}"
+export PYTHONPATH="$root/training${PYTHONPATH:+:$PYTHONPATH}"
+steps=("$@")
+[ ${#steps[@]} -eq 0 ] && steps=(dataset holo8 holo15 holo30 pre6 pre12 export eval)
+
+stage1() {  # LAYERS STEPS
+  "$py" -m tensorholo_training.train --config training/configs/cpu_stage1.json --run-dir "$runs/holo$1" \
+    --set dataset="\"$data\"" --set num_layers="$1" --set stage1_steps="$2"
+}
+prefilter() {  # OFFSET_MM
+  "$py" -m tensorholo_training.train --config training/configs/cpu_prefilter.json --run-dir "$runs/pre$1" \
+    --set dataset="\"$data\"" --set offset_mm="$1" --set init_from="\"$runs/holo8/stage1.pt\"" \
+    --set stage2_steps="${PRE_STEPS:-1500}"
+}
+for step in "${steps[@]}"; do
+  echo "== $step"
+  case "$step" in
+    dataset)
+      if [ ! -f "$data/manifest.json" ]; then
+        [ -x "$holo" ] || cargo build --release --locked -p holo
+        "$holo" dataset --out "$data" --train 600 --val 40 --test 40 --size 256 --levels 2048 --seed 2026
+      fi ;;
+    holo8) stage1 8 "${STEPS8:-6000}" ;;
+    holo15) stage1 15 "${STEPS15:-4000}" ;;
+    holo30) stage1 30 "${STEPS30:-3000}" ;;
+    pre6) prefilter 6 ;;
+    pre12) prefilter 12 ;;
+    export)
+      mkdir -p "$models"
+      for l in 8 15 30; do
+        "$py" -m tensorholo_training.export --checkpoint "$runs/holo$l/final.pt" --out-dir "$models" \
+          --name "holo${l}_rgbd" --no-prefilter --int8 --calib-dataset "$data" --calib-samples 32 --calib-size 128
+      done
+      for o in 6 12; do
+        "$py" -m tensorholo_training.export --checkpoint "$runs/pre$o/final.pt" --out-dir "$models" \
+          --name "prefilter_${o}mm" --prefilter-only --int8 --calib-dataset "$data" --calib-samples 32 --calib-size 128
+      done ;;
+    eval)
+      mkdir -p "$models/eval"
+      for l in 8 15 30; do
+        for prec in "" .int8-qop .int8-qdq; do
+          "$py" -m tensorholo_training.evaluate --onnx "$models/holo${l}_rgbd$prec.onnx" --dataset "$data" \
+            --split test --out "$models/eval/holo${l}_rgbd$prec.json"
+        done
+        for o in 6 12; do
+          "$py" -m tensorholo_training.evaluate --onnx "$models/holo${l}_rgbd.onnx" \
+            --prefilter-onnx "$models/prefilter_${o}mm.onnx" --offset-mm "$o" --phase-only --dataset "$data" \
+            --split test --out "$models/eval/holo${l}_rgbd+prefilter_${o}mm.json"
+        done
+      done ;;
+    *) echo "unknown step $step" >&2; exit 2 ;;
+  esac
+done
