@@ -1,8 +1,15 @@
 //! Command-line flags shared by several subcommands.
 
-use anyhow::{bail, Result};
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
 use clap::Args;
+use serde_json::json;
+use tensorholo::encoding::DoublePhaseMethod;
 use tensorholo::optics::{OpticalSetup, PropagationOptions};
+use tensorholo::scene::{
+    load_rgbd, procedural, DepthEncoding, DepthMapping, DepthRange, LoadOptions, RgbdFrame,
+};
 
 /// Display geometry and angular-spectrum options (`DESIGN.md` §2), shared by `reference`, `encode` and
 /// `dataset`.
@@ -50,4 +57,172 @@ impl OpticsArgs {
             band_limit: self.band_limit,
         }
     }
+}
+
+/// Phase-only encodings offered on the command line (`tensorholo::encoding`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Encoding {
+    /// Plain double phase encoding (paper Eq. 7), what DDPM applies after its pre-filter CNN.
+    Dpm,
+    /// Anti-aliasing DPM: Gaussian pre-blur (--aa-sigma-px, --aa-kernel).
+    AaDpm,
+    /// Band-limiting DPM (Sui et al. 2021): diamond Fourier mask (--bl-k).
+    BlDpm,
+}
+
+/// Double phase encoding flags, shared by `reference`, `render`, `video` and `encode`.
+#[derive(Debug, Args)]
+pub struct EncodingArgs {
+    /// Phase-only encoding [default: aa-dpm for reference/render/video (without a pre-filter CNN), dpm for
+    /// encode]. `--method` is accepted as an alias.
+    #[arg(long, alias = "method", value_enum)]
+    pub encoding: Option<Encoding>,
+    /// AA-DPM Gaussian standard deviation (pixels).
+    #[arg(long, default_value_t = 0.7)]
+    pub aa_sigma_px: f32,
+    /// AA-DPM Gaussian kernel width (pixels, odd).
+    #[arg(long, default_value_t = 5)]
+    pub aa_kernel: usize,
+    /// BL-DPM cut-off k in (0, 1] (fraction of the checkerboard Nyquist cell).
+    #[arg(long, default_value_t = 0.5)]
+    pub bl_k: f32,
+}
+
+impl EncodingArgs {
+    /// The chosen encoding (`default` where none is given) and its SDK method.
+    pub fn method(&self, default: Encoding) -> (Encoding, DoublePhaseMethod) {
+        let e = self.encoding.unwrap_or(default);
+        let m = match e {
+            Encoding::Dpm => DoublePhaseMethod::Plain,
+            Encoding::AaDpm => DoublePhaseMethod::AntiAliased {
+                sigma_px: self.aa_sigma_px,
+                kernel_size: self.aa_kernel,
+            },
+            Encoding::BlDpm => DoublePhaseMethod::BandLimited { k: self.bl_k },
+        };
+        (e, m)
+    }
+}
+
+/// Parses a depth encoding name, listing the valid ones on error.
+pub fn parse_depth_encoding(s: &str) -> std::result::Result<DepthEncoding, String> {
+    s.parse::<DepthEncoding>().map_err(|e| {
+        let names: Vec<String> = DepthEncoding::ALL.iter().map(|e| e.to_string()).collect();
+        format!("{e} (one of: {})", names.join(", "))
+    })
+}
+
+/// Parses `HEIGHTxWIDTH` (e.g. `384x384`).
+pub fn parse_size(s: &str) -> std::result::Result<(usize, usize), String> {
+    let (h, w) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected HEIGHTxWIDTH such as 384x384, got `{s}`"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<usize>()
+            .ok()
+            .filter(|&n| n > 0)
+            .ok_or_else(|| format!("`{v}` is not a positive integer"))
+    };
+    Ok((parse(h)?, parse(w)?))
+}
+
+/// How sensor depth becomes normalised depth, shared by every command that reads RGB-D files.
+#[derive(Debug, Args)]
+pub struct DepthArgs {
+    /// How the depth file stores depth: mm16 (16-bit millimetres: Redwood, derived NYU/SUN), tum (16-bit,
+    /// /5000 m), sun (SUN RGB-D bit-rotated mm), kinect-disparity (NYU raw PGM), iphone-disparity (8-bit
+    /// normalised disparity of iPhone portraits), relative-near-bright, relative-near-dark (8-bit unitless).
+    #[arg(long, value_parser = parse_depth_encoding)]
+    pub depth_encoding: Option<DepthEncoding>,
+    /// Nearest metric depth mapped to the front of the 3D volume (metres). Default: 1st percentile of the
+    /// valid depths (per frame; give both for a video). Ignored for relative encodings.
+    #[arg(long, requires = "z_far_m")]
+    pub z_near_m: Option<f32>,
+    /// Farthest metric depth mapped to the back of the 3D volume (metres). Default: 99th percentile.
+    #[arg(long, requires = "z_near_m")]
+    pub z_far_m: Option<f32>,
+    /// Mapping from metric depth to the volume: linear in diopters (1/m, how eyes focus) or in metres.
+    #[arg(long, default_value = "diopters", value_parser = ["diopters", "metres"])]
+    pub depth_mapping: String,
+    /// Resize the scene to HEIGHTxWIDTH (e.g. 384x384, the paper's training size). Default: the input's own
+    /// size (384x384 for the built-in scene).
+    #[arg(long, value_parser = parse_size)]
+    pub size: Option<(usize, usize)>,
+}
+
+impl DepthArgs {
+    /// Loader options from the flags.
+    pub fn load_options(&self) -> Result<LoadOptions> {
+        let range = match (self.z_near_m, self.z_far_m) {
+            (Some(z_near_m), Some(z_far_m)) => Some(DepthRange { z_near_m, z_far_m }),
+            _ => None,
+        };
+        Ok(LoadOptions {
+            range,
+            mapping: self
+                .depth_mapping
+                .parse::<DepthMapping>()
+                .map_err(|e| anyhow::anyhow!("{e}"))?,
+            size: self.size,
+        })
+    }
+}
+
+/// One RGB-D input (files or the built-in scene), shared by `reference` and `render`.
+#[derive(Debug, Args)]
+pub struct SceneArgs {
+    /// RGB image (PNG, JPEG or PPM, sRGB). Omit (with --depth) to use the built-in procedural scene.
+    #[arg(long, requires_all = ["depth", "depth_encoding"])]
+    pub rgb: Option<PathBuf>,
+    /// Depth map matching the RGB image pixel for pixel.
+    #[arg(long, requires = "rgb")]
+    pub depth: Option<PathBuf>,
+    #[command(flatten)]
+    pub depth_args: DepthArgs,
+}
+
+impl SceneArgs {
+    /// The input files (never overwritten).
+    pub fn inputs(&self) -> Vec<&Path> {
+        [self.rgb.as_deref(), self.depth.as_deref()]
+            .into_iter()
+            .flatten()
+            .collect()
+    }
+
+    /// Loads the RGB-D input or builds the procedural scene (`ldi` only changes the description); returns
+    /// it with a JSON description of its source.
+    pub fn load(&self, ldi: bool) -> Result<(RgbdFrame, serde_json::Value)> {
+        match (&self.rgb, &self.depth, self.depth_args.depth_encoding) {
+            (Some(rgb), Some(depth), Some(encoding)) => {
+                let options = self.depth_args.load_options()?;
+                let (frame, report) = load_rgbd(rgb, depth, encoding, &options)?;
+                Ok((
+                    frame,
+                    json!({"kind": "rgbd-files", "rgb": rgb, "depth": depth, "depth_report": report}),
+                ))
+            }
+            (None, None, _) => {
+                let (h, w) = self.depth_args.size.unwrap_or((384, 384));
+                Ok((
+                    procedural::default_scene(h, w)?,
+                    json!({"kind": if ldi {
+                        "built-in procedural scene, 2-layer layered depth image"
+                    } else {
+                        "built-in procedural scene"
+                    }}),
+                ))
+            }
+            _ => bail!(
+                "give --rgb, --depth and --depth-encoding together, or none for the built-in scene"
+            ),
+        }
+    }
+}
+
+/// Writes `value` as pretty JSON with a trailing newline.
+pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
+    std::fs::write(path, serde_json::to_string_pretty(value)? + "\n")
+        .with_context(|| format!("cannot write {}", path.display()))
 }

@@ -2,26 +2,15 @@
 //! of a complex `.npy` field, so that other implementations (the PyTorch training code) can be checked
 //! against the SDK on the same input ("one physics, checked twice").
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use clap::{Args, ValueEnum};
+use clap::Args;
 use ndarray::{Array4, Axis};
 use serde_json::json;
-use tensorholo::encoding::{double_phase_encode, DoublePhaseMethod};
+use tensorholo::encoding::double_phase_encode;
 use tensorholo::io::{ensure_not_input, read_complex_npy, write_complex_npy, write_f32_npy};
 use tensorholo::optics::{focal_stack, propagate_colour, simulate_phase_only, Carrier};
-
-/// Phase-only encodings offered on the command line.
-#[derive(Debug, Clone, Copy, ValueEnum)]
-enum Method {
-    /// Plain double phase encoding (paper Eq. 7), what DDPM applies after its pre-filter CNN.
-    Dpm,
-    /// Anti-aliasing DPM: Gaussian pre-blur (--aa-sigma-px, --aa-kernel).
-    AaDpm,
-    /// Band-limiting DPM (Sui et al. 2021): diamond Fourier mask (--bl-k).
-    BlDpm,
-}
 
 /// Arguments of `holo encode`.
 #[derive(Debug, Args)]
@@ -33,18 +22,8 @@ pub struct EncodeArgs {
     /// Distance s from the midpoint hologram to the SLM plane in millimetres (paper: 0, 6 or 12).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     offset_mm: f64,
-    /// Phase-only encoding.
-    #[arg(long, value_enum, default_value_t = Method::Dpm)]
-    method: Method,
-    /// AA-DPM Gaussian standard deviation (pixels).
-    #[arg(long, default_value_t = 0.7)]
-    aa_sigma_px: f32,
-    /// AA-DPM Gaussian kernel width (pixels, odd).
-    #[arg(long, default_value_t = 5)]
-    aa_kernel: usize,
-    /// BL-DPM cut-off k in (0, 1] (fraction of the checkerboard Nyquist cell).
-    #[arg(long, default_value_t = 0.5)]
-    bl_k: f32,
+    #[command(flatten)]
+    encoding: crate::args::EncodingArgs,
     #[command(flatten)]
     optics: crate::args::OpticsArgs,
     /// Normalised depths (0 = near, 1 = far) of the focal stacks, comma-separated.
@@ -57,8 +36,8 @@ pub struct EncodeArgs {
 
 const EXAMPLES: &str = "\
 Examples:
-  holo encode --input out/default/midpoint.npy --offset-mm 6 --method dpm --out out/encoded
-  holo encode --input field.npy --method aa-dpm --aa-sigma-px 1.0 --depths 0.2,0.8 --out out/aa
+  holo encode --input out/default/midpoint.npy --offset-mm 6 --encoding dpm --out out/encoded
+  holo encode --input field.npy --encoding aa-dpm --aa-sigma-px 1.0 --depths 0.2,0.8 --out out/aa
 
 Outputs in --out:
   slm_field.npy            complex64 [3, H, W]  ASM(H_mid, s) * exp(-i 2 pi s / lambda) (Eq. 6; the input if s = 0)
@@ -93,14 +72,7 @@ pub fn run(args: &EncodeArgs) -> Result<()> {
         bail!("--depths needs at least one normalised depth in [0, 1]");
     }
     let setup = args.optics.setup()?;
-    let method = match args.method {
-        Method::Dpm => DoublePhaseMethod::Plain,
-        Method::AaDpm => DoublePhaseMethod::AntiAliased {
-            sigma_px: args.aa_sigma_px,
-            kernel_size: args.aa_kernel,
-        },
-        Method::BlDpm => DoublePhaseMethod::BandLimited { k: args.bl_k },
-    };
+    let (name, method) = args.encoding.method(crate::args::Encoding::Dpm);
     let options = args.optics.options();
     let offset_m = args.offset_mm * 1e-3;
     for name in OUTPUTS {
@@ -148,17 +120,12 @@ pub fn run(args: &EncodeArgs) -> Result<()> {
         "amplitude_scale": encoded.amplitude_scale,
         "mean_phase_rad": encoded.mean_phase,
     });
-    write_json(&path("encode.json"), &report)?;
+    crate::args::write_json(&path("encode.json"), &report)?;
     log::info!(
         "encoded {c}×{h}×{w} hologram (offset {} mm, {:?}) → {}",
         args.offset_mm,
-        args.method,
+        name,
         args.out.display()
     );
     Ok(())
-}
-
-fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
-    std::fs::write(path, serde_json::to_string_pretty(value)? + "\n")
-        .with_context(|| format!("cannot write {}", path.display()))
 }

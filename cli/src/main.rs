@@ -4,10 +4,15 @@
 //! files. The physics lives in the SDK.
 
 mod args;
+mod baselines;
+mod bench;
 mod dataset;
 mod encode;
+mod output;
 mod propagate;
 mod reference;
+mod render;
+mod video;
 
 use clap::{Parser, Subcommand};
 
@@ -24,6 +29,18 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Turn an RGB-D frame into SLM phase patterns with the hologram CNN (the SDK's main job): CNN → offset
+    /// propagation (Eq. 6) → pre-filter CNN → double phase (Eq. 7) → 8-bit codes, with previews, timings and
+    /// optional quality scores (--evaluate).
+    ///
+    /// Without --rgb/--depth it runs the shipped 8-layer model on a built-in procedural scene.
+    Render(Box<render::RenderArgs>),
+    /// Process an RGB-D sequence (folders of frames) with one hologram session, overlapping the CNN of the
+    /// next frame with the optics of the current one; reports per-frame latency and FPS.
+    Video(Box<video::VideoArgs>),
+    /// Benchmark the CNNs (every variant, precision, size and thread count: ms, FPS, GFLOP/s), the post-CNN
+    /// stages and the end-to-end pipeline; prints a Markdown table (docs/BENCHMARKS.md).
+    Bench(Box<bench::BenchArgs>),
     /// Compute a reference hologram with the silhouette-mask layer-based method (paper Eq. 1-4), encode it for
     /// a phase-only SLM and write the SLM patterns, the midpoint hologram and simulated reconstructions.
     ///
@@ -39,6 +56,10 @@ enum Command {
     /// (Eq. 7, DPM/AA-DPM/BL-DPM), and the simulated post-encoding midpoint hologram (Eq. 8-10), for checks
     /// against other implementations.
     Encode(Box<encode::EncodeArgs>),
+    /// Compute the non-learned baselines of the model card (Maimone-style layer-based hologram; SM-LBM +
+    /// AA-DPM at each SLM offset) from the RGB-D input of every scene of a dataset split, as .npy midpoint
+    /// holograms for the Python evaluator (`--baseline NAME=FOLDER`).
+    Baselines(Box<baselines::BaselinesArgs>),
 }
 
 fn main() {
@@ -47,10 +68,14 @@ fn main() {
         .init();
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Render(args) => render::run(&args),
+        Command::Video(args) => video::run(&args),
+        Command::Bench(args) => bench::run(&args),
         Command::Reference(args) => reference::run(&args),
         Command::Propagate(args) => propagate::run(&args),
         Command::Dataset(args) => dataset::run(&args),
         Command::Encode(args) => encode::run(&args),
+        Command::Baselines(args) => baselines::run(&args),
     };
     if let Err(err) = result {
         eprintln!("error: {err:#}");

@@ -11,6 +11,7 @@
 //! - [`scene`]: RGB-D frames, layered depth images, depth decoders, the built-in procedural scene.
 //! - [`reference`]: the non-learned pipeline (SM-LBM → offset → double phase → SLM codes → previews).
 //! - [`metrics`]: PSNR and SSIM.
+//! - [`evaluation`]: the paper's Table 2 protocol (amplitude and focal-stack PSNR/SSIM against SM-LBM).
 //! - [`model`]: the hologram and pre-filter CNNs (ONNX, run with tract), metadata and I/O contract checks.
 //! - [`pipeline`]: the real-time pipeline: [`pipeline::HologramSession`] turns RGB-D frames into SLM codes
 //!   with the CNNs (hologram CNN → offset → pre-filter CNN → double phase → LUT), frame by frame or streamed.
@@ -26,6 +27,7 @@ pub mod color;
 pub mod dataset;
 pub mod encoding;
 pub mod error;
+pub mod evaluation;
 pub mod io;
 pub mod metrics;
 pub mod model;

@@ -96,6 +96,56 @@ impl HologramPipeline {
         })
     }
 
+    /// The shipped models (`models/`, feature `embedded-models`): the RGB-D hologram CNN with `layers` ∈
+    /// {8, 15, 30} layers and, if `prefilter` and the offset is not 0, the DDPM pre-filter CNN of
+    /// `config.offset_m` (6 or 12 mm), both in `precision`.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for a layer count or offset without a shipped model; as
+    /// [`HologramModel::from_bytes`] and [`HologramPipeline::new`].
+    #[cfg(feature = "embedded-models")]
+    pub fn embedded(
+        layers: usize,
+        precision: crate::model::Precision,
+        prefilter: bool,
+        config: PipelineConfig,
+    ) -> Result<Self> {
+        use crate::model::embedded;
+        let expected = ModelConfig {
+            optics: config.optics,
+            offset_m: config.offset_m,
+            input_layers: 1,
+        };
+        let hologram = HologramModel::from_bytes(
+            embedded::hologram_cnn(layers, precision)?,
+            ModelKind::Hologram,
+            &expected,
+        )?;
+        let prefilter = if prefilter && config.offset_m != 0.0 {
+            let mm = config.offset_m * 1e3;
+            let offset_mm = embedded::PREFILTER_OFFSETS_MM
+                .into_iter()
+                .find(|&o| (o as f64 - mm).abs() < 1e-6)
+                .ok_or_else(|| {
+                    invalid(
+                        "offset_m",
+                        format!(
+                            "no shipped pre-filter CNN for {mm} mm (shipped: {:?} mm); use 0 mm or \
+                             encode without a pre-filter",
+                            embedded::PREFILTER_OFFSETS_MM
+                        ),
+                    )
+                })?;
+            Some(Arc::new(HologramModel::from_bytes(
+                embedded::prefilter_cnn(offset_mm, precision)?,
+                ModelKind::PreFilter,
+                &expected,
+            )?))
+        } else {
+            None
+        };
+        Self::new(Arc::new(hologram), prefilter, config)
+    }
+
     /// The configuration.
     pub fn config(&self) -> &PipelineConfig {
         &self.config

@@ -9,7 +9,7 @@ use num_complex::Complex32;
 
 use crate::encoding::{double_phase_encode, phase_to_codes, DoublePhase, DoublePhaseMethod};
 use crate::error::{invalid, Result};
-use crate::optics::{focal_stack, propagate_colour, simulate_phase_only, Carrier};
+use crate::optics::{focal_stack, post_encoding_midpoint, propagate_colour, Carrier};
 use crate::synthesis::{SceneLayer, SmLbm};
 
 /// Configuration of [`ReferencePipeline::run`].
@@ -119,19 +119,14 @@ impl ReferencePipeline {
     ) -> Result<Vec<Array3<f32>>> {
         let setup = &self.synthesis.setup;
         let options = self.synthesis.options;
-        let at_mid = simulate_phase_only(
+        let at_mid = post_encoding_midpoint(
             hologram.double_phase.phase.view(),
+            hologram.double_phase.amplitude_scale,
             setup,
             self.offset_m,
             options,
         )?;
-        let scale = hologram.double_phase.amplitude_scale;
-        Ok(
-            focal_stack(at_mid.view(), setup, 0.0, depths, options, false)?
-                .into_iter()
-                .map(|a| a * scale)
-                .collect(),
-        )
+        focal_stack(at_mid.view(), setup, 0.0, depths, options, false)
     }
 
     /// Amplitude reconstructions `[3, H, W]` of the complex midpoint hologram at normalised depths `depths`

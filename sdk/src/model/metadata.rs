@@ -240,6 +240,17 @@ impl ModelMetadata {
         Ok(Self { raw, ..md })
     }
 
+    /// Multiply-accumulates per output pixel of the residual CNN of `DESIGN.md` §3 (3×3 convolutions: input →
+    /// `channels`, `layers − 2` hidden `channels → channels`, and the last layer from `channels` plus the
+    /// network input to 6 outputs): 147,528 for the 30-layer RGB-D hologram CNN, 33,480 for 8 layers, 4,644
+    /// for the pre-filter. `None` without `tensorholo.channels`. FLOPs per frame = `2 · MAC · H · W`.
+    pub fn macs_per_pixel(&self) -> Option<u64> {
+        let c = self.channels? as u64;
+        let i = self.input_channels() as u64;
+        let l = self.layers.max(2) as u64;
+        Some(9 * (i * c + (l - 2) * c * c + (c + i) * 6))
+    }
+
     /// Channels of the network input: `4·L` for a hologram CNN, 6 for a pre-filter (`DESIGN.md` §3).
     pub fn input_channels(&self) -> usize {
         match self.kind {

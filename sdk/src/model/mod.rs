@@ -19,8 +19,74 @@
 //! `DequantizeLinear` around float `Conv`) both load; value-info hints are ignored when parsing because
 //! tract 0.23 refuses the QDQ file's quantised value infos otherwise.
 
+#[cfg(feature = "embedded-models")]
+pub mod embedded;
 mod metadata;
 mod network;
+
+/// How a model file stores its weights (`training/tensorholo_training/export.py`). All forms take and
+/// return f32 at the boundary (`DESIGN.md` §3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Precision {
+    /// 32-bit float weights and activations (`NAME.onnx`).
+    F32,
+    /// int8 QOperator form: `QLinearConv` with int8 weights and uint8 activations, residual adds in float
+    /// (`NAME.int8-qop.onnx`; tract runs real int8 kernels).
+    Int8QOperator,
+    /// int8 QDQ form: `QuantizeLinear`/`DequantizeLinear` pairs around float `Conv` (`NAME.int8-qdq.onnx`;
+    /// tract 0.23 computes in f32 with the quantisation error).
+    Int8Qdq,
+}
+
+impl Precision {
+    /// All forms, f32 first.
+    pub const ALL: [Precision; 3] = [Self::F32, Self::Int8QOperator, Self::Int8Qdq];
+
+    /// The file-name suffix before `.onnx` (`""`, `".int8-qop"`, `".int8-qdq"`).
+    pub fn file_suffix(self) -> &'static str {
+        match self {
+            Self::F32 => "",
+            Self::Int8QOperator => ".int8-qop",
+            Self::Int8Qdq => ".int8-qdq",
+        }
+    }
+
+    /// Short name: `f32`, `int8-qop`, `int8-qdq`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::F32 => "f32",
+            Self::Int8QOperator => "int8-qop",
+            Self::Int8Qdq => "int8-qdq",
+        }
+    }
+}
+
+impl std::fmt::Display for Precision {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Sets how many threads tract uses for the matrix products and convolutions of every CNN run afterwards
+/// (process-wide; tract's default executor). `1` (the default) runs on the calling thread; `n > 1` starts a
+/// private `n`-thread pool. Only matmul, direct convolution and element-wise ops run in parallel.
+///
+/// Errors: [`HoloError::InvalidParameter`](crate::HoloError) for `threads == 0`.
+pub fn set_cnn_threads(threads: usize) -> crate::Result<()> {
+    use tract_linalg::multithread::{set_default_executor, Executor};
+    match threads {
+        0 => Err(crate::error::invalid("threads", "must be ≥ 1")),
+        1 => {
+            set_default_executor(Executor::SingleThread);
+            Ok(())
+        }
+        n => {
+            set_default_executor(Executor::multithread(n));
+            Ok(())
+        }
+    }
+}
 
 pub use metadata::{ModelConfig, ModelKind, ModelMetadata, FORMAT_VERSION, METADATA_PREFIX};
 pub use network::{head_to_phasor, heads_to_field, HologramModel, ModelPlan};

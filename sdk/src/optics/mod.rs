@@ -17,7 +17,7 @@ pub use filter::FourierFilter;
 pub use propagation::{
     Carrier, PropagationOptions, Propagator, Scratch, SpectralPlan, TransferFunction,
 };
-pub use reconstruct::{focal_stack, simulate_phase_only};
+pub use reconstruct::{focal_stack, post_encoding_midpoint, simulate_phase_only};
 
 use crate::error::{invalid, HoloError, Result};
 use propagation::check_positive;

@@ -124,3 +124,28 @@ pub fn simulate_phase_only(
     })?;
     Ok(field)
 }
+
+/// The post-encoding midpoint hologram of a double-phase pattern in the units of the encoded hologram:
+/// [`simulate_phase_only`] multiplied by the encoding's global amplitude normaliser `amplitude_scale`
+/// ([`crate::encoding::DoublePhase::amplitude_scale`]), so that its amplitude compares directly with the
+/// scene's or the ground truth's (the "phase-only" column of the Table 2 protocol).
+///
+/// Errors: as [`simulate_phase_only`]; [`HoloError::InvalidParameter`] for a non-positive scale.
+pub fn post_encoding_midpoint(
+    phase: ArrayView3<f32>,
+    amplitude_scale: f32,
+    setup: &OpticalSetup,
+    offset_m: f64,
+    options: PropagationOptions,
+) -> Result<Array3<Complex32>> {
+    if !(amplitude_scale > 0.0 && amplitude_scale.is_finite()) {
+        return Err(invalid(
+            "amplitude_scale",
+            format!("must be > 0, got {amplitude_scale}"),
+        ));
+    }
+    Ok(
+        simulate_phase_only(phase, setup, offset_m, options)?
+            * Complex32::new(amplitude_scale, 0.0),
+    )
+}

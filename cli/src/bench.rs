@@ -1,0 +1,232 @@
+//! `holo bench`: CNN throughput of every shipped variant (layers × precision × size × threads), the post-CNN
+//! stages and the end-to-end pipeline, as a Markdown table (docs/BENCHMARKS.md). Compare with
+//! `benchmarks/cnn_onnxruntime.py` (onnxruntime and the NumPy matmul peak on the same machine).
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::Args;
+use ndarray::Array3;
+use serde_json::json;
+use tensorholo::model::{
+    embedded, set_cnn_threads, HologramModel, ModelConfig, ModelKind, Precision,
+};
+use tensorholo::pipeline::{HologramPipeline, PipelineConfig};
+use tensorholo::scene::{procedural, RgbdFrame};
+
+use crate::args::parse_size;
+use crate::render::PrecisionArg;
+
+/// Arguments of `holo bench`.
+#[derive(Debug, Args)]
+#[command(after_long_help = EXAMPLES)]
+pub struct BenchArgs {
+    /// Hologram CNN depths to measure.
+    #[arg(long, value_delimiter = ',', default_values_t = [8, 15, 30])]
+    layers: Vec<usize>,
+    /// Weight formats to measure.
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [PrecisionArg::F32, PrecisionArg::Int8Qop, PrecisionArg::Int8Qdq])]
+    precision: Vec<PrecisionArg>,
+    /// Frame sizes HEIGHTxWIDTH.
+    #[arg(long, value_delimiter = ',', value_parser = parse_size, default_values = ["384x384", "540x960", "1080x1920"])]
+    sizes: Vec<(usize, usize)>,
+    /// CNN thread counts (tract's executor).
+    #[arg(long, value_delimiter = ',', default_values_t = [1, 2])]
+    threads: Vec<usize>,
+    /// Timed runs per case after one warm-up run (fewer once --max-seconds is spent; at least one).
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+    /// Time budget per case in seconds.
+    #[arg(long, default_value_t = 30.0)]
+    max_seconds: f64,
+    /// SLM offset (mm) of the pipeline rows (pre-filter CNN of that offset; 0 = AA-DPM, no pre-filter).
+    #[arg(long, default_value_t = 6)]
+    offset_mm: u32,
+    /// Skip the CNN table.
+    #[arg(long)]
+    skip_cnn: bool,
+    /// Skip the pipeline table (post-CNN stages and end-to-end frames).
+    #[arg(long)]
+    skip_pipeline: bool,
+    /// Also write every measurement to this JSON file.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+const EXAMPLES: &str = "\
+Examples:
+  holo bench                                   the full table (takes long at 1080p on a small CPU)
+  holo bench --sizes 384x384 --layers 8 --threads 1
+  holo bench --skip-cnn --sizes 1080x1920      post-CNN stages and end-to-end frames only";
+
+/// Median and count of timed runs of `f` after one warm-up, within `budget` seconds.
+fn time_runs(
+    repeat: usize,
+    budget: f64,
+    mut f: impl FnMut() -> Result<()>,
+) -> Result<(f64, usize)> {
+    f()?;
+    let start = Instant::now();
+    let mut v = Vec::new();
+    while v.len() < repeat.max(1) {
+        let t = Instant::now();
+        f()?;
+        v.push(t.elapsed().as_secs_f64());
+        if start.elapsed().as_secs_f64() > budget {
+            break;
+        }
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    Ok((v[v.len() / 2], v.len()))
+}
+
+/// Peak resident memory of this process (Linux `VmHWM`), in MiB.
+fn peak_rss_mib() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
+
+fn test_frame(h: usize, w: usize) -> Result<RgbdFrame> {
+    Ok(procedural::default_scene(h, w)?)
+}
+
+/// Runs `holo bench`.
+pub fn run(args: &BenchArgs) -> Result<()> {
+    let config = ModelConfig {
+        offset_m: 0.0,
+        ..ModelConfig::default()
+    };
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|v| v.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    println!(
+        "holo bench {}: {cpu}, {cores} logical cores; tract 0.23 (multithread-mm executor); median of up to {} \
+         runs after a warm-up, ≤ {} s per case\n",
+        env!("CARGO_PKG_VERSION"),
+        args.repeat,
+        args.max_seconds
+    );
+    let mut results = Vec::new();
+    if !args.skip_cnn {
+        println!(
+            "| CNN | precision | size (HxW) | threads | ms | FPS | GFLOP/s | runs | plan ms |"
+        );
+        println!("|---|---|---|---:|---:|---:|---:|---:|---:|");
+        for &(h, w) in &args.sizes {
+            for &layers in &args.layers {
+                for &p in &args.precision {
+                    let precision: Precision = p.into();
+                    let bytes = embedded::hologram_cnn(layers, precision)?;
+                    let model = HologramModel::from_bytes(bytes, ModelKind::Hologram, &config)
+                        .with_context(|| embedded::hologram_file(layers, precision))?;
+                    let macs = model.metadata().macs_per_pixel().unwrap_or(0);
+                    let t = Instant::now();
+                    let plan = model.plan(h, w)?;
+                    let plan_ms = t.elapsed().as_secs_f64() * 1e3;
+                    let input = Array3::<f32>::from_shape_fn((4, h, w), |(c, y, x)| {
+                        ((x * 7 + y * 3 + c) % 13) as f32 / 12.0
+                    });
+                    for &threads in &args.threads {
+                        set_cnn_threads(threads)?;
+                        let (s, runs) = time_runs(args.repeat, args.max_seconds, || {
+                            plan.run_heads(input.view())?;
+                            Ok(())
+                        })?;
+                        let gflops = 2.0 * macs as f64 * (h * w) as f64 / s / 1e9;
+                        println!(
+                            "| holo{layers} | {precision} | {h}x{w} | {threads} | {:.1} | {:.2} | {:.1} | {runs} | {:.0} |",
+                            s * 1e3,
+                            1.0 / s,
+                            gflops,
+                            plan_ms
+                        );
+                        results.push(json!({"kind": "cnn", "layers": layers, "precision": precision,
+                            "size": [h, w], "threads": threads, "ms": s * 1e3, "fps": 1.0 / s,
+                            "gflops": gflops, "runs": runs, "macs_per_pixel": macs, "plan_ms": plan_ms}));
+                    }
+                }
+            }
+        }
+        println!();
+    }
+    if !args.skip_pipeline {
+        println!(
+            "Pipeline (`HologramSession`, offset {} mm{}): median stage times in ms, end-to-end FPS of single \
+             frames and of a stream (CNN of frame n+1 overlapping the optics of frame n)\n",
+            args.offset_mm,
+            if args.offset_mm == 0 { ", AA-DPM" } else { ", pre-filter CNN + DPM" }
+        );
+        println!("| CNN | precision | size (HxW) | threads | CNN | offset | pre-filter | DPM + LUT | frame | FPS | stream FPS |");
+        println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+        for &(h, w) in &args.sizes {
+            let frame = test_frame(h, w)?;
+            for &layers in &args.layers {
+                for &p in &args.precision {
+                    let precision: Precision = p.into();
+                    let pipeline = HologramPipeline::embedded(
+                        layers,
+                        precision,
+                        args.offset_mm != 0,
+                        PipelineConfig {
+                            offset_m: args.offset_mm as f64 * 1e-3,
+                            ..PipelineConfig::default()
+                        },
+                    )?;
+                    let mut session = pipeline.session(h, w)?;
+                    for &threads in &args.threads {
+                        set_cnn_threads(threads)?;
+                        let mut timings = Vec::new();
+                        let (s, runs) = time_runs(args.repeat, args.max_seconds, || {
+                            timings.push(session.render(&frame)?.timings);
+                            Ok(())
+                        })?;
+                        let med = crate::render::median_timings(&timings[1..]);
+                        let n = 4usize;
+                        let t = Instant::now();
+                        session.render_stream((0..n).map(|_| Ok(frame.clone())), |_, _| Ok(()))?;
+                        let stream_fps = n as f64 / t.elapsed().as_secs_f64();
+                        println!(
+                            "| holo{layers} | {precision} | {h}x{w} | {threads} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} |",
+                            med.cnn_s * 1e3,
+                            med.offset_s * 1e3,
+                            med.prefilter_s * 1e3,
+                            med.encoding_s * 1e3,
+                            s * 1e3,
+                            1.0 / s,
+                            stream_fps
+                        );
+                        results.push(
+                            json!({"kind": "pipeline", "layers": layers, "precision": precision,
+                            "size": [h, w], "threads": threads, "offset_mm": args.offset_mm,
+                            "median_stages_s": med, "frame_ms": s * 1e3, "fps": 1.0 / s,
+                            "stream_fps": stream_fps, "runs": runs}),
+                        );
+                    }
+                }
+            }
+        }
+        println!();
+    }
+    let peak = peak_rss_mib();
+    if let Some(p) = peak {
+        println!("Peak resident memory of the whole run: {p:.0} MiB");
+    }
+    if let Some(path) = &args.json {
+        crate::args::write_json(
+            path,
+            &json!({"cpu": cpu, "cores": cores, "results": results, "peak_rss_mib": peak,
+                    "command": std::env::args().collect::<Vec<_>>()}),
+        )?;
+    }
+    Ok(())
+}

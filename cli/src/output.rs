@@ -1,0 +1,97 @@
+//! The files `holo reference` and `holo render` both write: SLM patterns, midpoint hologram, focal previews,
+//! the scene itself and a report.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use ndarray::{Array3, ArrayView3, Axis};
+use num_complex::Complex32;
+use serde_json::json;
+use tensorholo::io::{ensure_not_input, save_amplitude_png, save_u8_png, write_complex_npy};
+use tensorholo::metrics::{psnr, ssim_multichannel};
+use tensorholo::optics::OpticalSetup;
+use tensorholo::reference::channel_means;
+use tensorholo::scene::RgbdFrame;
+
+/// Files written into `--out`.
+pub const OUTPUTS: [&str; 10] = [
+    "phase_r.png",
+    "phase_g.png",
+    "phase_b.png",
+    "midpoint.npy",
+    "focus_near.png",
+    "focus_mid.png",
+    "focus_far.png",
+    "target.png",
+    "depth.png",
+    "report.json",
+];
+
+/// Names of the three focal previews, near to far.
+pub const FOCUS: [&str; 3] = ["focus_near.png", "focus_mid.png", "focus_far.png"];
+
+/// The output-file section of `--help`.
+pub const OUTPUTS_HELP: &str = "\
+Outputs in --out:
+  phase_r.png phase_g.png phase_b.png  8-bit SLM patterns, one per laser (linear LUT: code c = 2*pi*c/256 rad)
+  midpoint.npy                         complex64 [3, H, W] midpoint hologram (numpy.load reads it)
+  focus_near.png focus_mid.png focus_far.png
+                                       simulated reconstructions of the SLM patterns (Fourier filter +
+                                       propagation) focused at the 5th/50th/95th depth percentiles
+  target.png depth.png                 the scene amplitude and normalised depth (white = far)
+  report.json                          inputs, parameters, timings per stage, image statistics";
+
+/// Refuses an output folder whose files would overwrite an input; creates it.
+pub fn prepare(out: &Path, inputs: &[&Path]) -> Result<()> {
+    for name in OUTPUTS {
+        ensure_not_input(&out.join(name), inputs)?;
+    }
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create output folder {}", out.display()))
+}
+
+/// Writes the SLM codes `[3, H, W]`, the midpoint hologram, the three focal previews `focus` (phase-only
+/// reconstructions at `depths`), the scene and its depth. Returns per-preview statistics, comparing each
+/// with `ideal` (the complex hologram's reconstruction at the same depth) when given.
+pub fn write_images(
+    out: &Path,
+    codes: ArrayView3<u8>,
+    midpoint: ArrayView3<Complex32>,
+    focus: &[Array3<f32>],
+    ideal: Option<&[Array3<f32>]>,
+    depths: &[f64],
+    setup: &OpticalSetup,
+    frame: &RgbdFrame,
+) -> Result<Vec<serde_json::Value>> {
+    for (c, name) in ["phase_r.png", "phase_g.png", "phase_b.png"]
+        .iter()
+        .enumerate()
+    {
+        save_u8_png(&out.join(name), codes.index_axis(Axis(0), c))?;
+    }
+    write_complex_npy(&out.join("midpoint.npy"), midpoint)?;
+    let mut stats = Vec::new();
+    for (i, ((name, &d), recon)) in FOCUS.iter().zip(depths).zip(focus).enumerate() {
+        save_amplitude_png(&out.join(name), recon.view(), 1.0)?;
+        let mut s = json!({
+            "file": name,
+            "depth": d,
+            "z_m": setup.depth_to_z(d),
+            "mean_amplitude_rgb": channel_means(recon),
+        });
+        if let Some(ideal) = ideal {
+            let (a, b) = (clamp01(&ideal[i]), clamp01(recon));
+            s["encoding_psnr_db"] = json!(psnr(a.view(), b.view(), 1.0)?);
+            s["encoding_ssim"] = json!(ssim_multichannel(a.view(), b.view(), 1.0)?);
+        }
+        stats.push(s);
+    }
+    save_amplitude_png(&out.join("target.png"), frame.amplitude.view(), 1.0)?;
+    let depth_preview = frame.depth.mapv(f32::sqrt).insert_axis(Axis(0));
+    save_amplitude_png(&out.join("depth.png"), depth_preview.view(), 1.0)?;
+    Ok(stats)
+}
+
+fn clamp01(a: &Array3<f32>) -> Array3<f32> {
+    a.mapv(|v| v.clamp(0.0, 1.0))
+}

@@ -1,0 +1,451 @@
+//! `holo render`: the real-time pipeline on one RGB-D frame with the shipped (or given) CNNs: hologram CNN →
+//! offset propagation → pre-filter CNN → double phase → SLM codes, plus previews, timings and, with
+//! `--evaluate`, the Table 2 scores against an SM-LBM ground truth of the same input.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use serde_json::json;
+use tensorholo::evaluation::{focal_depths, table2};
+use tensorholo::model::{set_cnn_threads, HologramModel, ModelConfig, ModelKind, Precision};
+use tensorholo::optics::{focal_stack, post_encoding_midpoint};
+use tensorholo::pipeline::{FrameTimings, HologramPipeline, HologramSession, PipelineConfig};
+use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
+use tensorholo::scene::RgbdFrame;
+use tensorholo::synthesis::{SceneLayer, SmLbm};
+
+/// Weight formats selectable on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PrecisionArg {
+    /// 32-bit float.
+    F32,
+    /// int8 QOperator (`QLinearConv`, real int8 kernels in tract).
+    Int8Qop,
+    /// int8 QDQ (quantise/dequantise around float convolutions).
+    Int8Qdq,
+}
+
+impl From<PrecisionArg> for Precision {
+    fn from(p: PrecisionArg) -> Self {
+        match p {
+            PrecisionArg::F32 => Precision::F32,
+            PrecisionArg::Int8Qop => Precision::Int8QOperator,
+            PrecisionArg::Int8Qdq => Precision::Int8Qdq,
+        }
+    }
+}
+
+/// The int8 form `--int8` selects: the fastest one that loses at most 0.5 dB (docs/BENCHMARKS.md).
+pub const DEFAULT_INT8: Precision = Precision::Int8Qdq;
+
+fn parse_layers(s: &str) -> std::result::Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(n @ (8 | 15 | 30)) => Ok(n),
+        _ => Err(format!(
+            "the shipped hologram CNNs have 8, 15 or 30 layers, not `{s}`"
+        )),
+    }
+}
+
+/// Which CNNs to run: shared by `render`, `video` and `bench`.
+#[derive(Debug, Args)]
+pub struct ModelArgs {
+    /// Hologram CNN depth (shipped models: 8, 15 or 30 convolution layers).
+    #[arg(long, default_value_t = 8, value_parser = parse_layers)]
+    pub layers: usize,
+    /// Distance s from the midpoint hologram to the SLM plane in millimetres (paper: 0, 6 or 12; shipped
+    /// pre-filter CNNs exist for 6 and 12).
+    #[arg(long, default_value_t = 6.0, allow_hyphen_values = true)]
+    pub offset_mm: f64,
+    /// Run the int8 models (the form the benchmarks found fastest within 0.5 dB; see --precision).
+    #[arg(long, conflicts_with = "precision")]
+    pub int8: bool,
+    /// Weight format of the shipped models.
+    #[arg(long, value_enum)]
+    pub precision: Option<PrecisionArg>,
+    /// Hologram CNN ONNX file to use instead of the shipped one (metadata must match the optics).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Pre-filter CNN ONNX file to use instead of the shipped one for --offset-mm.
+    #[arg(long, conflicts_with = "no_prefilter")]
+    pub prefilter_model: Option<PathBuf>,
+    /// Encode without the pre-filter CNN (double phase method of --encoding, default AA-DPM).
+    #[arg(long)]
+    pub no_prefilter: bool,
+    /// Threads for the CNN's matrix products (tract); the three colours of the optics always run in
+    /// parallel.
+    #[arg(long, default_value_t = 1)]
+    pub threads: usize,
+    #[command(flatten)]
+    pub encoding: crate::args::EncodingArgs,
+    #[command(flatten)]
+    pub optics: crate::args::OpticsArgs,
+}
+
+impl ModelArgs {
+    /// The selected weight format.
+    pub fn precision(&self) -> Precision {
+        match (self.int8, self.precision) {
+            (true, _) => DEFAULT_INT8,
+            (false, Some(p)) => p.into(),
+            (false, None) => Precision::F32,
+        }
+    }
+
+    /// Loads the models and builds the pipeline; also returns a JSON description of what was loaded.
+    pub fn pipeline(&self) -> Result<(HologramPipeline, serde_json::Value)> {
+        if !self.offset_mm.is_finite() {
+            bail!("--offset-mm must be a finite number of millimetres");
+        }
+        set_cnn_threads(self.threads)?;
+        let (_, encoding) = self.encoding.method(crate::args::Encoding::AaDpm);
+        let config = PipelineConfig {
+            optics: self.optics.setup()?,
+            options: self.optics.options(),
+            offset_m: self.offset_mm * 1e-3,
+            encoding,
+        };
+        let precision = self.precision();
+        let want_prefilter = !self.no_prefilter && config.offset_m != 0.0;
+        let t = Instant::now();
+        let pipeline = if self.model.is_none() && self.prefilter_model.is_none() {
+            HologramPipeline::embedded(self.layers, precision, want_prefilter, config)
+                .context("loading the shipped models")?
+        } else {
+            let expected = ModelConfig {
+                optics: config.optics,
+                offset_m: config.offset_m,
+                input_layers: 1,
+            };
+            let hologram = match &self.model {
+                Some(p) => HologramModel::from_path(p, ModelKind::Hologram, &expected)?,
+                None => HologramModel::from_bytes(
+                    tensorholo::model::embedded::hologram_cnn(self.layers, precision)?,
+                    ModelKind::Hologram,
+                    &expected,
+                )?,
+            };
+            let prefilter = match (&self.prefilter_model, want_prefilter) {
+                (Some(p), _) => Some(HologramModel::from_path(
+                    p,
+                    ModelKind::PreFilter,
+                    &expected,
+                )?),
+                (None, true) => {
+                    let mm = self.offset_mm.round() as u32;
+                    if (mm as f64 - self.offset_mm).abs() > 1e-9 {
+                        bail!("no shipped pre-filter for {} mm: give --prefilter-model or --no-prefilter", self.offset_mm);
+                    }
+                    Some(HologramModel::from_bytes(
+                        tensorholo::model::embedded::prefilter_cnn(mm, precision)?,
+                        ModelKind::PreFilter,
+                        &expected,
+                    )?)
+                }
+                (None, false) => None,
+            };
+            HologramPipeline::new(Arc::new(hologram), prefilter.map(Arc::new), config)?
+        };
+        let describe = |m: &HologramModel| {
+            let md = m.metadata();
+            json!({
+                "layers": md.layers,
+                "input_layers": md.input_layers,
+                "offset_m": md.offset_m,
+                "precision": md.precision,
+                "trained_resolution": md.trained_resolution,
+                "training_commit": md.training_commit,
+            })
+        };
+        let info = json!({
+            "source": match (&self.model, &self.prefilter_model) {
+                (None, None) => "shipped (embedded)".to_string(),
+                (m, p) => format!("files: {:?} {:?}", m, p),
+            },
+            "precision": precision,
+            "cnn_threads": self.threads,
+            "hologram_cnn": describe(pipeline.hologram_model()),
+            "prefilter_cnn": pipeline.prefilter_model().map(describe),
+            "encoding": pipeline.encoding(),
+            "load_s": t.elapsed().as_secs_f64(),
+        });
+        Ok((pipeline, info))
+    }
+}
+
+/// Arguments of `holo render`.
+#[derive(Debug, Args)]
+#[command(after_long_help = format!("{EXAMPLES}\n\n{}", crate::output::OUTPUTS_HELP))]
+pub struct RenderArgs {
+    #[command(flatten)]
+    scene: crate::args::SceneArgs,
+    #[command(flatten)]
+    model: ModelArgs,
+    /// Timed repetitions of the frame after the first (warm-up) one; report.json gives their medians.
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+    /// Also compute the SM-LBM ground truth of the input (--levels planes) and score the CNN's midpoint
+    /// hologram and what the SLM shows with the paper's Table 2 protocol (PSNR/SSIM of the amplitude and of
+    /// a 15 + 5-depth focal stack), next to SM-LBM + the same double phase method without CNN.
+    #[arg(long)]
+    evaluate: bool,
+    /// SM-LBM depth planes of the --evaluate ground truth.
+    #[arg(long, default_value_t = 2048)]
+    levels: usize,
+    /// Output folder (created if missing). Files of the same names in it are replaced; inputs never are.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+const EXAMPLES: &str = "\
+Examples:
+  holo render --out out/render
+      shipped 8-layer CNN + 6 mm pre-filter on the built-in scene (384x384)
+  holo render --layers 30 --int8 --offset-mm 12 --evaluate --out out/render30
+      the 30-layer int8 model, scored against the SM-LBM ground truth
+  holo render --rgb derived_rgb_576x768.png --depth disparity_aux_576x768.jpg \\
+      --depth-encoding iphone-disparity --out out/vase
+  holo render --model my.onnx --prefilter-model my.prefilter.onnx --out out/mine";
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    if v.is_empty() {
+        0.0
+    } else {
+        v[v.len() / 2]
+    }
+}
+
+/// Median of each stage over `timings`.
+pub fn median_timings(timings: &[FrameTimings]) -> FrameTimings {
+    let m = |f: fn(&FrameTimings) -> f64| median(timings.iter().map(f).collect());
+    FrameTimings {
+        cnn_s: m(|t| t.cnn_s),
+        offset_s: m(|t| t.offset_s),
+        prefilter_s: m(|t| t.prefilter_s),
+        encoding_s: m(|t| t.encoding_s),
+        total_s: m(|t| t.total_s),
+    }
+}
+
+/// Runs `holo render`.
+pub fn run(args: &RenderArgs) -> Result<()> {
+    let t_all = Instant::now();
+    crate::output::prepare(&args.out, &args.scene.inputs())?;
+    let t = Instant::now();
+    let (frame, source) = args.scene.load(false)?;
+    let load_s = t.elapsed().as_secs_f64();
+    let (pipeline, models) = args.model.pipeline()?;
+    let (h, w) = (frame.height(), frame.width());
+    log::info!(
+        "{h}×{w} frame ({}), {}-layer CNN {}, offset {} mm, {}",
+        source["kind"].as_str().unwrap_or("?"),
+        args.model.layers,
+        args.model.precision(),
+        args.model.offset_mm,
+        if pipeline.prefilter_model().is_some() {
+            "pre-filter CNN + DPM (DDPM)".to_string()
+        } else {
+            format!("{:?}", pipeline.encoding())
+        }
+    );
+    let t = Instant::now();
+    let mut session = pipeline.session(h, w)?;
+    let session_s = t.elapsed().as_secs_f64();
+    let first = session.render(&frame)?.timings;
+    let mut timed = Vec::new();
+    for _ in 0..args.repeat {
+        timed.push(session.render(&frame)?.timings);
+    }
+    let med = median_timings(&timed);
+    log::info!(
+        "session {:.0} ms; first frame {:.0} ms; then (median of {}) CNN {:.1} ms, offset {:.1} ms, \
+         pre-filter {:.1} ms, encoding {:.1} ms, total {:.1} ms ({:.2} FPS)",
+        session_s * 1e3,
+        first.total_s * 1e3,
+        timed.len(),
+        med.cnn_s * 1e3,
+        med.offset_s * 1e3,
+        med.prefilter_s * 1e3,
+        med.encoding_s * 1e3,
+        med.total_s * 1e3,
+        if med.total_s > 0.0 { 1.0 / med.total_s } else { 0.0 }
+    );
+    write_outputs(
+        args,
+        &pipeline,
+        &session,
+        &frame,
+        source,
+        models,
+        |report| {
+            report["timings_s"] = json!({
+                "load": load_s,
+                "session_setup": session_s,
+                "first_frame": first,
+                "median": med,
+                "repeats": timed,
+                "fps_median": if med.total_s > 0.0 { 1.0 / med.total_s } else { 0.0 },
+            });
+        },
+    )?;
+    log::info!(
+        "wrote {} in {:.1} s",
+        args.out.display(),
+        t_all.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// Previews, midpoint, codes, optional evaluation and report.json of the session's last frame.
+fn write_outputs(
+    args: &RenderArgs,
+    pipeline: &HologramPipeline,
+    session: &HologramSession,
+    frame: &RgbdFrame,
+    source: serde_json::Value,
+    models: serde_json::Value,
+    add: impl FnOnce(&mut serde_json::Value),
+) -> Result<()> {
+    let cfg = pipeline.config();
+    let out = session.output();
+    let midpoint = session
+        .last_heads()
+        .context("no frame rendered")?
+        .to_field();
+    let t = Instant::now();
+    let displayed = post_encoding_midpoint(
+        out.phase.view(),
+        out.amplitude_scale,
+        &cfg.optics,
+        cfg.offset_m,
+        cfg.options,
+    )?;
+    let depths = preview_depths(frame.depth.iter());
+    let focus = focal_stack(
+        displayed.view(),
+        &cfg.optics,
+        0.0,
+        &depths,
+        cfg.options,
+        false,
+    )?;
+    let ideal = focal_stack(
+        midpoint.view(),
+        &cfg.optics,
+        0.0,
+        &depths,
+        cfg.options,
+        false,
+    )?;
+    let reconstruction_s = t.elapsed().as_secs_f64();
+    let focus_stats = crate::output::write_images(
+        &args.out,
+        out.codes.view(),
+        midpoint.view(),
+        &focus,
+        Some(&ideal),
+        &depths,
+        &cfg.optics,
+        frame,
+    )?;
+    let evaluation = if args.evaluate {
+        Some(evaluate(args, pipeline, frame, &midpoint, &displayed)?)
+    } else {
+        None
+    };
+    let amp = midpoint.mapv(|v| v.norm());
+    let mut report = json!({
+        "tensorholo_version": env!("CARGO_PKG_VERSION"),
+        "command": std::env::args().collect::<Vec<_>>(),
+        "input": source,
+        "size": [frame.height(), frame.width()],
+        "models": models,
+        "pipeline": cfg,
+        "reconstruction_s": reconstruction_s,
+        "statistics": {
+            "scene_mean_amplitude_rgb": channel_means(&frame.amplitude),
+            "midpoint_mean_amplitude_rgb": channel_means(&amp),
+            "midpoint_max_amplitude": amp.iter().copied().fold(0.0f32, f32::max),
+            "double_phase_amplitude_scale": out.amplitude_scale,
+            "double_phase_mean_phase_rad": out.mean_phase,
+            "focus": focus_stats,
+        },
+        "evaluation": evaluation,
+    });
+    add(&mut report);
+    crate::args::write_json(&args.out.join("report.json"), &report)
+}
+
+/// The Table 2 scores of the CNN midpoint hologram, of what the SLM shows, and of SM-LBM + the same
+/// encoding without CNN, all against the SM-LBM ground truth of the RGB-D input.
+fn evaluate(
+    args: &RenderArgs,
+    pipeline: &HologramPipeline,
+    frame: &RgbdFrame,
+    midpoint: &ndarray::Array3<num_complex::Complex32>,
+    displayed: &ndarray::Array3<num_complex::Complex32>,
+) -> Result<serde_json::Value> {
+    let cfg = pipeline.config();
+    let t = Instant::now();
+    let reference = ReferencePipeline {
+        synthesis: SmLbm {
+            levels: args.levels,
+            setup: cfg.optics,
+            options: cfg.options,
+            silhouette_masks: true,
+        },
+        offset_m: cfg.offset_m,
+        encoding: cfg.encoding,
+    };
+    log::info!(
+        "--evaluate: SM-LBM ground truth with {} planes ...",
+        args.levels
+    );
+    let gt = reference.run(&[SceneLayer::from(frame)], &|_, _| {})?;
+    let reference_displayed = post_encoding_midpoint(
+        gt.double_phase.phase.view(),
+        gt.double_phase.amplitude_scale,
+        &cfg.optics,
+        cfg.offset_m,
+        cfg.options,
+    )?;
+    let depths = focal_depths(frame.depth.view(), 200, 15, 5, 0)?;
+    let score = |pred: &ndarray::Array3<num_complex::Complex32>| {
+        table2(
+            pred.view(),
+            gt.midpoint.view(),
+            &cfg.optics,
+            cfg.options,
+            &depths,
+        )
+    };
+    let cnn = score(midpoint)?;
+    let shown = score(displayed)?;
+    let reference_shown = score(&reference_displayed)?;
+    log::info!(
+        "Table 2 vs SM-LBM ({} planes): CNN midpoint {:.2} dB / SSIM {:.3} (focal stack {:.2} dB / {:.3}); \
+         displayed {:.2} dB (focal stack {:.2} dB); SM-LBM + {:?} displayed {:.2} dB (focal stack {:.2} dB)",
+        args.levels,
+        cnn.psnr_amp,
+        cnn.ssim_amp,
+        cnn.psnr_fs,
+        cnn.ssim_fs,
+        shown.psnr_amp,
+        shown.psnr_fs,
+        cfg.encoding,
+        reference_shown.psnr_amp,
+        reference_shown.psnr_fs
+    );
+    Ok(json!({
+        "ground_truth": {"method": "SM-LBM (Eq. 1-4) of the RGB-D input", "levels": args.levels},
+        "focal_depths": depths,
+        "cnn_midpoint": cnn,
+        "displayed": shown,
+        "smlbm_encoded_displayed": {"encoding": cfg.encoding, "scores": reference_shown},
+        "seconds": t.elapsed().as_secs_f64(),
+    }))
+}

@@ -1,0 +1,236 @@
+//! `holo video`: an RGB-D sequence through one [`HologramSession`](tensorholo::pipeline::HologramSession),
+//! with the hologram CNN of frame n + 1 overlapping the optics of frame n; per-frame latency and FPS.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use ndarray::Axis;
+use serde_json::json;
+use tensorholo::io::{ensure_not_input, save_u8_png};
+use tensorholo::scene::{load_rgbd, DepthRange, LoadOptions, RgbdFrame};
+use tensorholo::HoloError;
+
+/// Arguments of `holo video`.
+#[derive(Debug, Args)]
+#[command(after_long_help = EXAMPLES)]
+pub struct VideoArgs {
+    /// Folder of RGB frames (PNG, JPEG or PPM); frames are paired with --depth-dir by file stem, in name order.
+    #[arg(long)]
+    rgb_dir: PathBuf,
+    /// Folder of depth frames with the same stems as the RGB frames.
+    #[arg(long)]
+    depth_dir: PathBuf,
+    #[command(flatten)]
+    depth: crate::args::DepthArgs,
+    #[command(flatten)]
+    model: crate::render::ModelArgs,
+    /// Process at most this many frames.
+    #[arg(long)]
+    limit: Option<usize>,
+    /// Write each frame's SLM patterns as frames/NNNNN_phase_{r,g,b}.png (inside the timed loop, as a
+    /// display would consume them).
+    #[arg(long)]
+    save_frames: bool,
+    /// Output folder for report.json (and frames/).
+    #[arg(long)]
+    out: PathBuf,
+}
+
+const EXAMPLES: &str = "\
+Examples:
+  holo video --rgb-dir ../shared/data/redwood_livingroom_seq/color \\
+      --depth-dir ../shared/data/redwood_livingroom_seq/depth --depth-encoding mm16 --size 384x512 --out out/video
+      the 5-frame Redwood sequence (metric range from the first frame, kept for the whole sequence)
+
+Outputs in --out:
+  report.json   per-frame timings (load+CNN, offset, pre-filter, encoding, frame period), mean FPS, and whether the
+                streamed first frame equals a single-frame render of it bit for bit
+  frames/       with --save-frames: NNNNN_phase_r.png, _g, _b per frame";
+
+/// Pairs the files of the two folders by stem (sorted by name).
+fn pair_frames(rgb_dir: &Path, depth_dir: &Path) -> Result<Vec<(PathBuf, PathBuf)>> {
+    let list = |dir: &Path| -> Result<Vec<PathBuf>> {
+        let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+            .with_context(|| format!("cannot read folder {}", dir.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.is_file())
+            .collect();
+        v.sort();
+        Ok(v)
+    };
+    let depths = list(depth_dir)?;
+    let mut pairs = Vec::new();
+    for rgb in list(rgb_dir)? {
+        let stem = rgb.file_stem().map(|s| s.to_owned());
+        if let Some(d) = depths
+            .iter()
+            .find(|d| d.file_stem().map(|s| s.to_owned()) == stem)
+        {
+            pairs.push((rgb, d.clone()));
+        }
+    }
+    if pairs.is_empty() {
+        bail!(
+            "no RGB frame in {} has a depth frame of the same name stem in {}",
+            rgb_dir.display(),
+            depth_dir.display()
+        );
+    }
+    Ok(pairs)
+}
+
+/// Runs `holo video`.
+pub fn run(args: &VideoArgs) -> Result<()> {
+    let t_all = Instant::now();
+    let encoding = args
+        .depth
+        .depth_encoding
+        .context("--depth-encoding is required (how the depth frames store depth)")?;
+    let mut pairs = pair_frames(&args.rgb_dir, &args.depth_dir)?;
+    if let Some(n) = args.limit {
+        if n == 0 {
+            bail!("--limit must be at least 1");
+        }
+        pairs.truncate(n);
+    }
+    let inputs: Vec<&Path> = pairs
+        .iter()
+        .flat_map(|(r, d)| [r.as_path(), d.as_path()])
+        .collect();
+    ensure_not_input(&args.out.join("report.json"), &inputs)?;
+    let frames_dir = args.out.join("frames");
+    std::fs::create_dir_all(if args.save_frames {
+        &frames_dir
+    } else {
+        &args.out
+    })
+    .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
+
+    // One metric range for the whole sequence (the first frame's percentiles unless given), so that the
+    // depth mapping does not flicker from frame to frame.
+    let mut options = args.depth.load_options()?;
+    let (first, first_report) = load_rgbd(&pairs[0].0, &pairs[0].1, encoding, &options)?;
+    if options.range.is_none() {
+        options.range = first_report.range_used;
+    }
+    let range: Option<DepthRange> = options.range;
+    let (h, w) = (first.height(), first.width());
+    let (pipeline, models) = args.model.pipeline()?;
+    let t = Instant::now();
+    let mut session = pipeline.session(h, w)?;
+    let session_s = t.elapsed().as_secs_f64();
+    log::info!(
+        "{} frames of {h}×{w}, depth range {:?} m, {}-layer CNN {}, offset {} mm",
+        pairs.len(),
+        range.map(|r| (r.z_near_m, r.z_far_m)),
+        args.model.layers,
+        args.model.precision(),
+        args.model.offset_mm
+    );
+
+    let loader = |(rgb, depth): &(PathBuf, PathBuf),
+                  options: &LoadOptions|
+     -> tensorholo::Result<RgbdFrame> {
+        let (f, _) = load_rgbd(rgb, depth, encoding, options)?;
+        if (f.height(), f.width()) != (h, w) {
+            return Err(HoloError::ShapeMismatch {
+                what: format!("frame {} vs the first frame", rgb.display()),
+                expected: vec![h, w],
+                got: vec![f.height(), f.width()],
+            });
+        }
+        Ok(f)
+    };
+    let mut rows = Vec::new();
+    let mut first_codes = None;
+    let t_stream = Instant::now();
+    let opts = options.clone();
+    let n = session.render_stream(
+        pairs.iter().map(|p| {
+            let t = Instant::now();
+            loader(p, &opts).map(|f| {
+                log::debug!("loaded {} in {:.1} ms", p.0.display(), t.elapsed().as_secs_f64() * 1e3);
+                f
+            })
+        }),
+        |i, out| {
+            let t = out.timings;
+            log::info!(
+                "frame {i}: CNN {:.1} ms, offset {:.1} ms, pre-filter {:.1} ms, encoding {:.1} ms, period {:.1} ms",
+                t.cnn_s * 1e3,
+                t.offset_s * 1e3,
+                t.prefilter_s * 1e3,
+                t.encoding_s * 1e3,
+                t.total_s * 1e3
+            );
+            if i == 0 {
+                first_codes = Some(out.codes.clone());
+            }
+            if args.save_frames {
+                for (c, ch) in ["r", "g", "b"].iter().enumerate() {
+                    save_u8_png(
+                        &frames_dir.join(format!("{i:05}_phase_{ch}.png")),
+                        out.codes.index_axis(Axis(0), c),
+                    )?;
+                }
+            }
+            rows.push(json!({
+                "index": i,
+                "rgb": pairs[i].0,
+                "depth": pairs[i].1,
+                "timings_s": t,
+                "amplitude_scale": out.amplitude_scale,
+            }));
+            Ok(())
+        },
+    )?;
+    let stream_s = t_stream.elapsed().as_secs_f64();
+    // The streamed output must equal a single-frame render of the same frame.
+    let single = session.render(&loader(&pairs[0], &options)?)?.codes.clone();
+    let identical = first_codes.as_ref() == Some(&single);
+    if !identical {
+        log::warn!("streamed frame 0 differs from its single-frame render");
+    }
+    let periods: Vec<f64> = rows
+        .iter()
+        .skip(1)
+        .filter_map(|r| r["timings_s"]["total_s"].as_f64())
+        .collect();
+    let mean_period = if periods.is_empty() {
+        stream_s / n.max(1) as f64
+    } else {
+        periods.iter().sum::<f64>() / periods.len() as f64
+    };
+    let report = json!({
+        "tensorholo_version": env!("CARGO_PKG_VERSION"),
+        "command": std::env::args().collect::<Vec<_>>(),
+        "frames": n,
+        "size": [h, w],
+        "depth_range_m": range.map(|r| [r.z_near_m, r.z_far_m]),
+        "models": models,
+        "pipeline": pipeline.config(),
+        "session_setup_s": session_s,
+        "stream_s": stream_s,
+        "fps_overall": n as f64 / stream_s,
+        "fps_steady": if mean_period > 0.0 { 1.0 / mean_period } else { 0.0 },
+        "mean_period_after_first_s": mean_period,
+        "stream_equals_single_frame": identical,
+        "per_frame": rows,
+        "total_s": t_all.elapsed().as_secs_f64(),
+    });
+    crate::args::write_json(&args.out.join("report.json"), &report)?;
+    log::info!(
+        "{n} frames in {:.2} s: {:.2} FPS overall, {:.2} FPS after the first frame; report in {}",
+        stream_s,
+        n as f64 / stream_s,
+        if mean_period > 0.0 {
+            1.0 / mean_period
+        } else {
+            0.0
+        },
+        args.out.display()
+    );
+    Ok(())
+}
