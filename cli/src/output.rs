@@ -50,19 +50,35 @@ pub fn prepare(out: &Path, inputs: &[&Path]) -> Result<()> {
         .with_context(|| format!("cannot create output folder {}", out.display()))
 }
 
-/// Writes the SLM codes `[3, H, W]`, the midpoint hologram, the three focal previews `focus` (phase-only
-/// reconstructions at `depths`), the scene and its depth. Returns per-preview statistics, comparing each
-/// with `ideal` (the complex hologram's reconstruction at the same depth) when given.
+/// What [`write_images`] writes besides the scene.
+pub struct Images<'a> {
+    /// SLM codes `[3, H, W]`.
+    pub codes: ArrayView3<'a, u8>,
+    /// Complex midpoint hologram `[3, H, W]`.
+    pub midpoint: ArrayView3<'a, Complex32>,
+    /// The three focal previews (phase-only reconstructions at `depths`), near to far.
+    pub focus: &'a [Array3<f32>],
+    /// The complex hologram's reconstructions at the same depths, if the encoding loss should be reported.
+    pub ideal: Option<&'a [Array3<f32>]>,
+    /// Normalised depths of the previews.
+    pub depths: &'a [f64],
+}
+
+/// Writes the SLM codes, the midpoint hologram, the focal previews, the scene and its depth. Returns
+/// per-preview statistics (PSNR/SSIM against `ideal` when given).
 pub fn write_images(
     out: &Path,
-    codes: ArrayView3<u8>,
-    midpoint: ArrayView3<Complex32>,
-    focus: &[Array3<f32>],
-    ideal: Option<&[Array3<f32>]>,
-    depths: &[f64],
+    images: &Images,
     setup: &OpticalSetup,
     frame: &RgbdFrame,
 ) -> Result<Vec<serde_json::Value>> {
+    let Images {
+        codes,
+        midpoint,
+        focus,
+        ideal,
+        depths,
+    } = *images;
     for (c, name) in ["phase_r.png", "phase_g.png", "phase_b.png"]
         .iter()
         .enumerate()

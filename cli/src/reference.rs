@@ -122,16 +122,14 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     let reconstruction_s = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let focus_stats = crate::output::write_images(
-        &args.out,
-        hologram.codes.view(),
-        hologram.midpoint.view(),
-        &phase_only,
-        Some(&complex),
-        &depths,
-        &setup,
-        &frame,
-    )?;
+    let images = crate::output::Images {
+        codes: hologram.codes.view(),
+        midpoint: hologram.midpoint.view(),
+        focus: &phase_only,
+        ideal: Some(&complex),
+        depths: &depths,
+    };
+    let focus_stats = crate::output::write_images(&args.out, &images, &setup, &frame)?;
     let write_s = t.elapsed().as_secs_f64();
 
     let amp = hologram.midpoint.mapv(|v| v.norm());

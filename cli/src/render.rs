@@ -342,16 +342,14 @@ fn write_outputs(
         false,
     )?;
     let reconstruction_s = t.elapsed().as_secs_f64();
-    let focus_stats = crate::output::write_images(
-        &args.out,
-        out.codes.view(),
-        midpoint.view(),
-        &focus,
-        Some(&ideal),
-        &depths,
-        &cfg.optics,
-        frame,
-    )?;
+    let images = crate::output::Images {
+        codes: out.codes.view(),
+        midpoint: midpoint.view(),
+        focus: &focus,
+        ideal: Some(&ideal),
+        depths: &depths,
+    };
+    let focus_stats = crate::output::write_images(&args.out, &images, &cfg.optics, frame)?;
     let evaluation = if args.evaluate {
         Some(evaluate(args, pipeline, frame, &midpoint, &displayed)?)
     } else {

@@ -146,13 +146,12 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     let mut rows = Vec::new();
     let mut first_codes = None;
     let t_stream = Instant::now();
-    let opts = options.clone();
+    let opts = options;
     let n = session.render_stream(
         pairs.iter().map(|p| {
             let t = Instant::now();
-            loader(p, &opts).map(|f| {
-                log::debug!("loaded {} in {:.1} ms", p.0.display(), t.elapsed().as_secs_f64() * 1e3);
-                f
+            loader(p, &opts).inspect(|_| {
+                log::debug!("loaded {} in {:.1} ms", p.0.display(), t.elapsed().as_secs_f64() * 1e3)
             })
         }),
         |i, out| {

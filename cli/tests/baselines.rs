@@ -149,6 +149,7 @@ fn baselines_match_the_sdk_and_lose_only_encoding() {
         assert_eq!(maimone.dim(), (3, 16, 24));
         let expected = unmasked.synthesize(&layer, &|_, _| {}).unwrap();
         let d = relative_l2(&maimone, &expected);
+        eprintln!("scene {i}: maimone vs SDK recomputation (relative L2) {d:.1e}");
         assert!(d < 1e-5, "scene {i}: maimone vs SDK recomputation {d}");
         // ... which is not the ground truth where occluded layers exist (and lacks its occlusion).
         let hidden = shard
@@ -164,7 +165,7 @@ fn baselines_match_the_sdk_and_lose_only_encoding() {
         if hidden > 0 {
             occluded_scenes += 1;
             assert!(
-                d_gt > 0.05,
+                d_gt > 0.2,
                 "scene {i}: maimone too close to the ground truth ({d_gt})"
             );
         }
@@ -173,18 +174,27 @@ fn baselines_match_the_sdk_and_lose_only_encoding() {
         let masked = smlbm.synthesize(&layer, &|_, _| {}).unwrap();
         let reference = amplitude(&masked);
         let mut psnrs = Vec::new();
+        let mut posts = Vec::new();
         for folder in &folders[1..] {
             let post = npy(&out.join(folder).join(&name));
             assert_eq!(post.dim(), (3, 16, 24));
             assert!(post.iter().all(|v| v.is_finite()));
             psnrs.push(psnr(reference.view(), amplitude(&post).view(), 1.0).unwrap());
+            posts.push(post);
         }
         let vs_maimone = psnr(reference.view(), amplitude(&maimone).view(), 1.0).unwrap();
         eprintln!(
             "scene {i}: amplitude PSNR vs masked SM-LBM of layer 0: AA-DPM 0/6/12 mm {psnrs:.2?} dB, \
              maimone {vs_maimone:.2} dB"
         );
+        // Measured 17.4 and 20.8 dB at 0 mm (17.4-21.6 dB at 6 and 12 mm) on the two scenes.
         assert!(psnrs[0] > 15.0, "scene {i}: AA-DPM 0 mm {} dB", psnrs[0]);
+        assert!(psnrs.iter().all(|&p| p > 15.0), "scene {i}: {psnrs:?}");
+        // Each offset is its own encoding (the SLM sees a different field), not a copy.
+        for k in 1..posts.len() {
+            let d = relative_l2(&posts[k], &posts[0]);
+            assert!(d > 1e-2, "scene {i}: offset {k} equals 0 mm ({d})");
+        }
         // The 0 mm encoding reproduces SM-LBM better than the occlusion-unaware hologram does.
         assert!(
             psnrs[0] > vs_maimone,

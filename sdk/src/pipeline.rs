@@ -612,7 +612,11 @@ impl HologramSession {
         let offset_s = t0.elapsed().as_secs_f64();
         let t = Instant::now();
         self.run_prefilter()?;
-        let prefilter_s = t.elapsed().as_secs_f64();
+        let prefilter_s = if self.prefilter.is_some() {
+            t.elapsed().as_secs_f64()
+        } else {
+            0.0
+        };
         let t = Instant::now();
         self.encode()?;
         let encoding_s = t.elapsed().as_secs_f64();

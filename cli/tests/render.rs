@@ -1,0 +1,184 @@
+//! End-to-end tests of `holo render`, `holo video` and `holo bench` with the shipped (embedded) models.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn holo(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_holo"))
+        .args(args)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("holo runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn shared(relative: &str) -> PathBuf {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data")
+        .join(relative);
+    assert!(p.exists(), "shared test data {} is missing", p.display());
+    p
+}
+
+fn report(dir: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn render_runs_the_shipped_model_on_the_built_in_scene_and_evaluates_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("r");
+    let o = holo(&[
+        "render",
+        "--size",
+        "48x64",
+        "--repeat",
+        "1",
+        "--evaluate",
+        "--levels",
+        "128",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "phase_r.png",
+        "phase_g.png",
+        "phase_b.png",
+        "midpoint.npy",
+        "focus_near.png",
+        "focus_mid.png",
+        "focus_far.png",
+        "target.png",
+        "depth.png",
+        "report.json",
+    ] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    let r = report(&out);
+    assert_eq!(r["models"]["hologram_cnn"]["layers"], 8);
+    assert_eq!(r["models"]["prefilter_cnn"]["offset_m"], 0.006);
+    assert!(r["timings_s"]["median"]["cnn_s"].as_f64().unwrap() > 0.0);
+    assert!(r["timings_s"]["median"]["prefilter_s"].as_f64().unwrap() > 0.0);
+    let ev = &r["evaluation"];
+    assert_eq!(ev["focal_depths"].as_array().unwrap().len(), 20);
+    for key in ["cnn_midpoint", "displayed"] {
+        let p = ev[key]["psnr_fs"].as_f64().unwrap();
+        let s = ev[key]["ssim_fs"].as_f64().unwrap();
+        assert!(
+            (10.0..60.0).contains(&p) && (0.0..=1.0).contains(&s),
+            "{key}: {p} dB, {s}"
+        );
+    }
+
+    // Without the pre-filter, at 0 mm: AA-DPM, no pre-filter time.
+    let out0 = dir.path().join("r0");
+    let o = holo(&[
+        "render",
+        "--size",
+        "32x32",
+        "--repeat",
+        "1",
+        "--offset-mm",
+        "0",
+        "--layers",
+        "15",
+        "--int8",
+        "--out",
+        out0.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = report(&out0);
+    assert_eq!(r["models"]["hologram_cnn"]["layers"], 15);
+    assert!(r["models"]["prefilter_cnn"].is_null());
+    assert_eq!(r["timings_s"]["median"]["prefilter_s"], 0.0);
+    assert_eq!(r["pipeline"]["encoding"]["method"], "anti-aliased");
+}
+
+#[test]
+fn render_refuses_bad_models_and_options_clearly() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x");
+    let corrupt = dir.path().join("corrupt.onnx");
+    std::fs::write(&corrupt, b"definitely not a protobuf").unwrap();
+    let o = holo(&[
+        "render",
+        "--model",
+        corrupt.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("cannot load model"), "{}", stderr(&o));
+
+    let o = holo(&["render", "--layers", "12", "--out", out.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("8, 15 or 30"), "{}", stderr(&o));
+
+    let o = holo(&["render", "--offset-mm", "3", "--out", out.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("pre-filter"), "{}", stderr(&o));
+}
+
+#[test]
+fn video_streams_the_redwood_sequence_and_matches_single_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("v");
+    let rgb = shared("redwood_livingroom_seq/color");
+    let depth = shared("redwood_livingroom_seq/depth");
+    let o = holo(&[
+        "video",
+        "--rgb-dir",
+        rgb.to_str().unwrap(),
+        "--depth-dir",
+        depth.to_str().unwrap(),
+        "--depth-encoding",
+        "mm16",
+        "--size",
+        "48x64",
+        "--save-frames",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = report(&out);
+    assert_eq!(r["frames"], 5);
+    assert_eq!(r["stream_equals_single_frame"], true);
+    assert!(r["fps_overall"].as_f64().unwrap() > 0.0);
+    // One metric range for the whole sequence, from the first frame.
+    let range = r["depth_range_m"].as_array().unwrap();
+    assert!(range[0].as_f64().unwrap() < range[1].as_f64().unwrap());
+    assert!(out.join("frames/00004_phase_b.png").exists());
+    // Consecutive frames of a moving camera differ.
+    let a = std::fs::read(out.join("frames/00000_phase_g.png")).unwrap();
+    let b = std::fs::read(out.join("frames/00004_phase_g.png")).unwrap();
+    assert_ne!(a, b);
+}
+
+#[test]
+fn bench_prints_a_row_per_case() {
+    let o = holo(&[
+        "bench",
+        "--sizes",
+        "24x32",
+        "--layers",
+        "8",
+        "--precision",
+        "f32,int8-qop",
+        "--threads",
+        "1",
+        "--repeat",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let table = String::from_utf8_lossy(&o.stdout);
+    assert!(table.contains("| holo8 | f32 | 24x32 | 1 |"), "{table}");
+    assert!(
+        table.contains("| holo8 | int8-qop | 24x32 | 1 |"),
+        "{table}"
+    );
+    assert!(table.contains("Peak resident memory"), "{table}");
+}

@@ -1,0 +1,105 @@
+//! Every shipped model file (`models/`, embedded with the default feature `embedded-models`) loads with tract,
+//! carries the metadata its name promises, and reproduces PyTorch's output of the checkpoint it was exported
+//! from (`models/fixtures/`, written by `training/make_shipped_fixtures.py`): f32 within 1e-4, int8 within the
+//! quantisation tolerance of `training/tests/test_export.py` (mean |error| < 0.01, max < 0.1).
+#![cfg(feature = "embedded-models")]
+
+use std::path::{Path, PathBuf};
+
+use ndarray::Array3;
+use tensorholo::model::{embedded, HologramModel, ModelConfig, ModelKind, Precision};
+
+fn fixture(name: &str) -> Array3<f32> {
+    let path: PathBuf = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../models/fixtures")
+        .join(name);
+    ndarray_npy::read_npy(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+fn check(
+    name: &str,
+    bytes: &[u8],
+    kind: ModelKind,
+    config: &ModelConfig,
+    layers: usize,
+    precision: Precision,
+) {
+    let model =
+        HologramModel::from_bytes(bytes, kind, config).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let md = model.metadata();
+    assert_eq!(md.layers, layers, "{name}");
+    let want_precision = match precision {
+        Precision::F32 => "f32",
+        Precision::Int8QOperator => "int8-qoperator-conv",
+        Precision::Int8Qdq => "int8-qdq-conv",
+    };
+    assert_eq!(md.precision, want_precision, "{name}");
+    assert_ne!(md.training_commit, "fixture", "{name}");
+    let stem = name.split('.').next().unwrap();
+    let input = fixture(&format!("{stem}_input.npy"));
+    let (a, p) = model
+        .plan(input.dim().1, input.dim().2)
+        .unwrap()
+        .run_heads(input.view())
+        .unwrap();
+    let (ra, rp) = (
+        fixture(&format!("{stem}_amplitude.npy")),
+        fixture(&format!("{stem}_phase.npy")),
+    );
+    let diffs: Vec<f32> = a
+        .iter()
+        .zip(ra.iter())
+        .chain(p.iter().zip(rp.iter()))
+        .map(|(x, y)| (x - y).abs())
+        .collect();
+    let max = diffs.iter().copied().fold(0.0f32, f32::max);
+    let mean = diffs.iter().sum::<f32>() / diffs.len() as f32;
+    println!("{name}: max |tract − torch| {max:.2e}, mean {mean:.2e}");
+    if precision == Precision::F32 {
+        assert!(max < 1e-4, "{name}: {max}");
+    } else {
+        assert!(mean < 0.01 && max < 0.1, "{name}: mean {mean}, max {max}");
+    }
+}
+
+#[test]
+fn every_shipped_model_matches_pytorch() {
+    let base = ModelConfig::default();
+    for layers in embedded::LAYERS {
+        for precision in Precision::ALL {
+            let name = embedded::hologram_file(layers, precision);
+            // Hologram CNNs predict the midpoint hologram (offset 0 in their metadata) and serve every offset.
+            for offset_m in [0.0, 6e-3, 12e-3] {
+                let config = ModelConfig { offset_m, ..base };
+                let bytes = embedded::hologram_cnn(layers, precision).unwrap();
+                check(
+                    &name,
+                    bytes,
+                    ModelKind::Hologram,
+                    &config,
+                    layers,
+                    precision,
+                );
+            }
+        }
+    }
+    for mm in embedded::PREFILTER_OFFSETS_MM {
+        let config = ModelConfig {
+            offset_m: mm as f64 * 1e-3,
+            ..base
+        };
+        for precision in Precision::ALL {
+            let name = embedded::prefilter_file(mm, precision);
+            let bytes = embedded::prefilter_cnn(mm, precision).unwrap();
+            check(&name, bytes, ModelKind::PreFilter, &config, 8, precision);
+            // A pre-filter belongs to its offset only.
+            let other = ModelConfig {
+                offset_m: if mm == 6 { 12e-3 } else { 6e-3 },
+                ..base
+            };
+            assert!(HologramModel::from_bytes(bytes, ModelKind::PreFilter, &other).is_err());
+        }
+    }
+    assert!(embedded::hologram_cnn(12, Precision::F32).is_err());
+    assert!(embedded::prefilter_cnn(0, Precision::F32).is_err());
+}
