@@ -112,19 +112,24 @@ pub fn parse_depth_encoding(s: &str) -> std::result::Result<DepthEncoding, Strin
     })
 }
 
-/// Parses `HEIGHTxWIDTH` (e.g. `384x384`).
+/// Parses `HEIGHTxWIDTH` (e.g. `384x512`) or `SIZE` for a square.
 pub fn parse_size(s: &str) -> std::result::Result<(usize, usize), String> {
-    let (h, w) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("expected HEIGHTxWIDTH such as 384x384, got `{s}`"))?;
     let parse = |v: &str| {
         v.trim()
             .parse::<usize>()
             .ok()
             .filter(|&n| n > 0)
-            .ok_or_else(|| format!("`{v}` is not a positive integer"))
+            .ok_or_else(|| {
+                format!("`{v}` is not a positive integer (expected HEIGHTxWIDTH or SIZE)")
+            })
     };
-    Ok((parse(h)?, parse(w)?))
+    match s.split_once(['x', 'X']) {
+        Some((h, w)) => Ok((parse(h)?, parse(w)?)),
+        None => {
+            let n = parse(s)?;
+            Ok((n, n))
+        }
+    }
 }
 
 /// How sensor depth becomes normalised depth, shared by every command that reads RGB-D files.

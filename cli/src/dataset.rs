@@ -15,24 +15,6 @@ use tensorholo::io::ensure_not_input;
 use tensorholo::scene::RandomSceneConfig;
 use tensorholo::synthesis::SmLbm;
 
-/// `SIZE` (square) or `HEIGHTxWIDTH`.
-fn parse_size(s: &str) -> std::result::Result<(usize, usize), String> {
-    let parse = |v: &str| {
-        v.trim()
-            .parse::<usize>()
-            .ok()
-            .filter(|&n| n > 0)
-            .ok_or_else(|| format!("`{v}` is not a positive integer"))
-    };
-    match s.split_once(['x', 'X']) {
-        Some((h, w)) => Ok((parse(h)?, parse(w)?)),
-        None => {
-            let n = parse(s)?;
-            Ok((n, n))
-        }
-    }
-}
-
 /// `MIN-MAX` (inclusive) or a single number.
 fn parse_count_range(s: &str) -> std::result::Result<[usize; 2], String> {
     let parse = |v: &str| {
@@ -71,7 +53,7 @@ pub struct DatasetArgs {
     #[arg(long, default_value_t = 2)]
     test: usize,
     /// Sample size: SIZE (square) or HEIGHTxWIDTH (paper: 384).
-    #[arg(long, default_value = "384", value_parser = parse_size)]
+    #[arg(long, default_value = "384", value_parser = crate::args::parse_size)]
     size: (usize, usize),
     /// LDI layers kept per pixel (paper: 5).
     #[arg(long, default_value_t = 5)]

@@ -1,8 +1,11 @@
 //! End-to-end tests of `holo baselines`: the Maimone-style and SM-LBM + AA-DPM baselines of a tiny
 //! dataset's test split, checked against the SDK and against each other (physics, not only shapes).
 
+mod common;
+
+use common::{holo, stderr};
+
 use std::path::Path;
-use std::process::{Command, Output};
 
 use ndarray::{s, Array3, Axis};
 use ndarray_npy::read_npy;
@@ -10,18 +13,6 @@ use num_complex::Complex32;
 use tensorholo::dataset::read_shard;
 use tensorholo::metrics::psnr;
 use tensorholo::synthesis::{SceneLayer, SmLbm};
-
-fn holo(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_holo"))
-        .args(args)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("holo runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// A 1/1/2-scene dataset of 16x24 pixels, 5 LDI layers, 64 SM-LBM planes.
 fn tiny_dataset(dir: &Path) {

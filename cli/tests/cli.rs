@@ -1,39 +1,14 @@
 //! End-to-end tests of the `holo` binary: outputs, interoperability files and error messages.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+
+use common::{holo, png_size, shared, stderr};
+
+use std::path::Path;
 
 use ndarray::Array3;
 use num_complex::Complex32;
 use tensorholo::io::{read_complex_npy, write_complex_npy};
-
-fn holo(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_holo"))
-        .args(args)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("holo runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn shared(relative: &str) -> PathBuf {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data")
-        .join(relative);
-    assert!(p.exists(), "shared test data {} is missing", p.display());
-    p
-}
-
-/// Width and height from a PNG's IHDR chunk.
-fn png_size(path: &Path) -> (u32, u32) {
-    let bytes = std::fs::read(path).unwrap();
-    assert_eq!(&bytes[1..4], b"PNG", "{} is not a PNG", path.display());
-    let be = |i: usize| u32::from_be_bytes(bytes[i..i + 4].try_into().unwrap());
-    (be(16), be(20))
-}
 
 #[test]
 fn reference_on_the_built_in_scene_writes_every_output() {

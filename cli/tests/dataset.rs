@@ -1,31 +1,15 @@
 //! End-to-end tests of `holo dataset`: shards, manifest, previews, refusing an existing dataset.
 
+mod common;
+
+use common::{holo, png_size, stderr};
+
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use ndarray::{Array1, Array4, Ix4, OwnedRepr};
 use ndarray_npy::NpzReader;
 use num_complex::Complex32;
-
-fn holo(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_holo"))
-        .args(args)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("holo runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-/// Width and height from a PNG's IHDR chunk.
-fn png_size(path: &Path) -> (u32, u32) {
-    let bytes = std::fs::read(path).unwrap();
-    assert_eq!(&bytes[1..4], b"PNG", "{} is not a PNG", path.display());
-    let be = |i: usize| u32::from_be_bytes(bytes[i..i + 4].try_into().unwrap());
-    (be(16), be(20))
-}
 
 const TINY: [&str; 14] = [
     "dataset",

@@ -1,27 +1,8 @@
 //! End-to-end tests of `holo render`, `holo video` and `holo bench` with the shipped (embedded) models.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
+mod common;
 
-fn holo(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_holo"))
-        .args(args)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("holo runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn shared(relative: &str) -> PathBuf {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data")
-        .join(relative);
-    assert!(p.exists(), "shared test data {} is missing", p.display());
-    p
-}
+use common::{holo, shared, stderr};
 
 fn report(dir: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap()

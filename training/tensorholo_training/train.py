@@ -423,8 +423,20 @@ class Trainer:
         if self.prefilter is not None and s.get("prefilter") is not None:
             self.prefilter.load_state_dict(s["prefilter"])
         self.phase_index, self.phase_step, self.global_step = s["phase_index"], s["phase_step"], s["global_step"]
+        finished = self.phase_index >= len(self.phases)
+        if finished:
+            # A finished run whose schedule has since been lengthened (more steps in the config) continues at
+            # its global step, in whichever phase that step now falls; Adam restarts (its moments are not
+            # kept once a run is done).
+            done = 0
+            for i, (_, steps) in enumerate(self.phases):
+                if self.global_step < done + steps:
+                    self.phase_index, self.phase_step = i, self.global_step - done
+                    self.log(f"extending the finished run from step {self.global_step}")
+                    break
+                done += steps
         self._new_optimizer()
-        if self.phase is not None:
+        if self.phase is not None and not finished:
             self.optimizer.load_state_dict(s["optimizer"])
             self.scaler.load_state_dict(s["scaler"])
         torch.set_rng_state(s["torch_rng"])

@@ -66,6 +66,20 @@ def test_stage2_with_frozen_hologram_cnn_trains_only_the_prefilter(tmp_path, tin
     assert any(not torch.equal(pre0[k], v) for k, v in tr.prefilter.state_dict().items())
 
 
+def test_a_finished_run_is_extended_by_raising_its_steps(tmp_path, tiny_dataset):
+    cfg = small_cfg(tmp_path, tiny_dataset, stage1_steps=3)
+    Trainer(cfg, log=lambda m: None).run()
+    first = torch.load(os.path.join(cfg.run_dir, "final.pt"), weights_only=False)
+    longer = small_cfg(tmp_path, tiny_dataset, stage1_steps=5)
+    tr = Trainer(longer, log=lambda m: None)
+    tr.run()
+    assert tr.global_step == 5
+    rows = list(csv.DictReader(open(os.path.join(cfg.run_dir, "learning_curve.csv"))))
+    assert [int(r["global_step"]) for r in rows] == [1, 2, 3, 4, 5]
+    final = torch.load(os.path.join(cfg.run_dir, "final.pt"), weights_only=False)
+    assert any(not torch.equal(t, final["net"][k]) for k, t in first["net"].items())
+
+
 def test_cli_config_and_overrides(tmp_path, capsys):
     path = tmp_path / "c.json"
     path.write_text(json.dumps({"num_layers": 15, "offset_mm": 6}))
