@@ -5,7 +5,7 @@ double phase, Fourier filter; ``--phase-only`` evaluation chain).
     PYTHONPATH=training .venv/bin/python training/model_card_figure.py --dataset data/cpu256 --index 0 \\
         --baselines data/cpu256/baselines --out models/model_card_focal_stacks.png
 
-Rows: ground truth, Maimone-style, SM-LBM + AA-DPM (6 mm), holo8/15/30 (+ 6 mm pre-filter), f32 and the
+Rows (central 128×128 crops by default): ground truth, Maimone-style, SM-LBM + AA-DPM (6 mm), holo8/15/30 (+ 6 mm pre-filter), f32 and the
 default int8 form. Columns: focused at the 10th, 50th and 90th percentile of the scene's depth. A PNG is
 written with zlib only (no imaging library needed).
 """
@@ -54,6 +54,7 @@ def main() -> None:
     ap.add_argument("--models", default="models")
     ap.add_argument("--baselines", help="holo baselines output folder")
     ap.add_argument("--int8", default="int8-qdq", help="int8 form to show (file suffix)")
+    ap.add_argument("--crop", type=int, default=128, help="central crop of each tile (pixels; 0 = whole)")
     ap.add_argument("--out", required=True)
     args = ap.parse_args()
     options = manifest_propagation(read_manifest(args.dataset)) or PropagationOptions()
@@ -75,6 +76,10 @@ def main() -> None:
     tiles = []
     for name, field in rows:
         stack = optics.focal_stack(field[None], d[None], display, 0.0, options)[0].numpy()
+        if args.crop:
+            h, w = stack.shape[-2:]
+            y, x = (h - args.crop) // 2, (w - args.crop) // 2
+            stack = stack[..., y:y + args.crop, x:x + args.crop]
         tiles.append(np.concatenate([to_srgb8(stack[k]) for k in range(3)], axis=1))
         print(f"row {len(tiles)}: {name}")
     sep = np.full((4, tiles[0].shape[1], 3), 255, np.uint8)

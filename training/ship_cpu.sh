@@ -5,11 +5,12 @@
 #   each in f32 and int8 (QOperator conv-only and QDQ), then the Table 2 evaluation on the test split.
 #
 #   training/ship_cpu.sh [STEP ...]      STEP: dataset holo8 holo15 holo30 pre6 pre12 export eval (default: all)
+#   then: training/make_shipped_fixtures.py (models/fixtures), holo baselines + evaluate (models/MODEL_CARD.md)
 #
 # Environment: DATA (default data/cpu256), HOLO (holo binary; default target/release/holo, built if missing),
 # PYTHON (default .venv/bin/python), MODELS (default models), RUNS (default runs/cpu),
-# STEPS8/STEPS15/STEPS30 (stage-1 steps, default 2500/800/500), PRE_STEPS (stage 2, default 400),
-# EVAL_LIMIT (test scenes evaluated, default 20).
+# STEPS8/STEPS15/STEPS30 (stage-1 steps, default 4000/2000/1200), PRE_STEPS (stage 2, default 1000),
+# EVAL_LIMIT (test scenes evaluated, default 10).
 # Every step resumes from its last checkpoint when rerun.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
@@ -30,7 +31,7 @@ stage1() {  # LAYERS STEPS
 prefilter() {  # OFFSET_MM
   "$py" -m tensorholo_training.train --config training/configs/cpu_prefilter.json --run-dir "$runs/pre$1" \
     --set dataset="\"$data\"" --set offset_mm="$1" --set init_from="\"$runs/holo8/stage1.pt\"" \
-    --set stage2_steps="${PRE_STEPS:-400}"
+    --set stage2_steps="${PRE_STEPS:-1000}"
 }
 for step in "${steps[@]}"; do
   echo "== $step"
@@ -40,9 +41,9 @@ for step in "${steps[@]}"; do
         [ -x "$holo" ] || cargo build --release --locked -p holo
         "$holo" dataset --out "$data" --train 600 --val 40 --test 40 --size 256 --levels 2048 --seed 2026
       fi ;;
-    holo8) stage1 8 "${STEPS8:-2500}" ;;
-    holo15) stage1 15 "${STEPS15:-800}" ;;
-    holo30) stage1 30 "${STEPS30:-500}" ;;
+    holo8) stage1 8 "${STEPS8:-4000}" ;;
+    holo15) stage1 15 "${STEPS15:-2000}" ;;
+    holo30) stage1 30 "${STEPS30:-1200}" ;;
     pre6) prefilter 6 ;;
     pre12) prefilter 12 ;;
     export)
@@ -60,12 +61,12 @@ for step in "${steps[@]}"; do
       for l in 8 15 30; do
         for prec in "" .int8-qop .int8-qdq; do
           "$py" -m tensorholo_training.evaluate --onnx "$models/holo${l}_rgbd$prec.onnx" --dataset "$data" \
-            --split test --limit "${EVAL_LIMIT:-20}" --out "$models/eval/holo${l}_rgbd$prec.json"
+            --split test --limit "${EVAL_LIMIT:-10}" --out "$models/eval/holo${l}_rgbd$prec.json"
         done
         for o in 6 12; do
           "$py" -m tensorholo_training.evaluate --onnx "$models/holo${l}_rgbd.onnx" \
             --prefilter-onnx "$models/prefilter_${o}mm.onnx" --offset-mm "$o" --phase-only --dataset "$data" \
-            --split test --limit "${EVAL_LIMIT:-20}" --out "$models/eval/holo${l}_rgbd+prefilter_${o}mm.json"
+            --split test --limit "${EVAL_LIMIT:-10}" --out "$models/eval/holo${l}_rgbd+prefilter_${o}mm.json"
         done
       done ;;
     *) echo "unknown step $step" >&2; exit 2 ;;

@@ -21,6 +21,7 @@ fn render_runs_the_shipped_model_on_the_built_in_scene_and_evaluates_it() {
         "--evaluate",
         "--levels",
         "128",
+        "--prefilter",
         "--out",
         out.to_str().unwrap(),
     ]);
@@ -99,7 +100,14 @@ fn render_refuses_bad_models_and_options_clearly() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("8, 15 or 30"), "{}", stderr(&o));
 
-    let o = holo(&["render", "--offset-mm", "3", "--out", out.to_str().unwrap()]);
+    let o = holo(&[
+        "render",
+        "--offset-mm",
+        "3",
+        "--prefilter",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("pre-filter"), "{}", stderr(&o));
 }
