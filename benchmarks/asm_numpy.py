@@ -48,6 +48,8 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from machine import cpu_model  # noqa: E402  (benchmarks/machine.py, beside this script)
+
 PITCH_M = 8e-6
 WAVELENGTH_M = 520e-9
 DISTANCE_M = 3e-3
@@ -139,18 +141,6 @@ def bench(runs, warmup, cases):
         )
         print(f"  {name}: median {statistics.median(ms):.2f} ms", file=sys.stderr)
     return results
-
-
-def cpu_model():
-    """CPU model name (Linux /proc/cpuinfo), else what `platform` knows."""
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def environment():

@@ -76,6 +76,8 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from machine import cpu_model  # noqa: E402  (benchmarks/machine.py, beside this script)
+
 try:  # optional: only used to cap and report the BLAS pool of the matmul workers
     import threadpoolctl  # noqa: E402
 except ImportError:
@@ -338,18 +340,6 @@ def bench_models(ort, onnx, paths, sizes, threads_list, repeat, max_seconds):
 # --------------------------------------------------------------------------------------------------
 # Environment, output
 # --------------------------------------------------------------------------------------------------
-
-
-def cpu_model():
-    """CPU model name (Linux /proc/cpuinfo), else what `platform` knows."""
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def loadavg():

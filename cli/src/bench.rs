@@ -13,7 +13,7 @@ use tensorholo::model::{
     embedded, set_cnn_threads, HologramModel, ModelConfig, ModelKind, Precision,
 };
 use tensorholo::pipeline::{HologramPipeline, PipelineConfig};
-use tensorholo::scene::{procedural, RgbdFrame};
+use tensorholo::scene::procedural;
 
 use crate::args::parse_size;
 use crate::render::PrecisionArg;
@@ -87,10 +87,6 @@ fn peak_rss_mib() -> Option<f64> {
     let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb / 1024.0)
-}
-
-fn test_frame(h: usize, w: usize) -> Result<RgbdFrame> {
-    Ok(procedural::default_scene(h, w)?)
 }
 
 /// Runs `holo bench`.
@@ -169,7 +165,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         println!("| CNN | precision | size (HxW) | threads | CNN | offset | pre-filter | DPM + LUT | frame | FPS | stream FPS |");
         println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
         for &(h, w) in &args.sizes {
-            let frame = test_frame(h, w)?;
+            let frame = procedural::default_scene(h, w)?;
             for &layers in &args.layers {
                 for &p in &args.precision {
                     let precision: Precision = p.into();
