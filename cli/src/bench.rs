@@ -10,13 +10,14 @@ use clap::Args;
 use ndarray::Array3;
 use serde_json::json;
 use tensorholo::model::{
-    embedded, set_cnn_threads, HologramModel, ModelConfig, ModelKind, Precision,
+    embedded, set_cnn_threads, CnnLayout, HologramModel, ModelConfig, ModelKind, NodeTiming,
+    Precision,
 };
 use tensorholo::pipeline::{HologramPipeline, PipelineConfig};
 use tensorholo::scene::procedural;
 
 use crate::args::parse_size;
-use crate::render::PrecisionArg;
+use crate::render::{LayoutArg, PrecisionArg};
 
 /// Arguments of `holo bench`.
 #[derive(Debug, Args)]
@@ -31,6 +32,9 @@ pub struct BenchArgs {
     /// Frame sizes HEIGHTxWIDTH.
     #[arg(long, value_delimiter = ',', value_parser = parse_size, default_values = ["384x384", "540x960", "1080x1920"])]
     sizes: Vec<(usize, usize)>,
+    /// Memory layouts tract runs the CNNs in (nhwc rows are skipped for int8-qop, which tract cannot move).
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [LayoutArg::Nchw])]
+    layout: Vec<LayoutArg>,
     /// CNN thread counts (tract's executor).
     #[arg(long, value_delimiter = ',', default_values_t = [1, 2])]
     threads: Vec<usize>,
@@ -49,6 +53,10 @@ pub struct BenchArgs {
     /// Skip the pipeline table (post-CNN stages and end-to-end frames).
     #[arg(long)]
     skip_pipeline: bool,
+    /// After the CNN table, time every tract operator of each CNN case once (one extra run per case) and print
+    /// the time per operator kind: where the CNN's time goes (convolution algorithm, adds, activations).
+    #[arg(long)]
+    profile: bool,
     /// Also write every measurement to this JSON file.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -58,7 +66,10 @@ const EXAMPLES: &str = "\
 Examples:
   holo bench                                   the full table (takes long at 1080p on a small CPU)
   holo bench --sizes 384x384 --layers 8 --threads 1
-  holo bench --skip-cnn --sizes 1080x1920      post-CNN stages and end-to-end frames only";
+  holo bench --skip-cnn --sizes 1080x1920      post-CNN stages and end-to-end frames only
+  holo bench --skip-pipeline --layers 8 --precision f32 --sizes 384x384 --threads 1 --profile
+                                               time per tract operator (which convolution algorithm ran)
+  TRACT_DISABLE_DIRECT_SPATIAL=1 holo bench ... tract's own knobs (environment) change what it plans";
 
 /// Median and count of timed runs of `f` after one warm-up, within `budget` seconds.
 fn time_runs(
@@ -89,6 +100,50 @@ fn peak_rss_mib() -> Option<f64> {
     Some(kb / 1024.0)
 }
 
+/// Prints the `--profile` table: per case, the time of each tract operator kind (summed over its nodes) and
+/// its share of the run, largest first; adds each row to `results`.
+fn print_profiles(profiles: &[(String, Vec<NodeTiming>)], results: &mut Vec<serde_json::Value>) {
+    println!("Time per tract operator (one profiled run per case; `--profile`)\n");
+    println!("| CNN | precision | layout | size (HxW) | threads | operator | nodes | ms | share |");
+    println!("|---|---|---|---|---:|---|---:|---:|---:|");
+    for (case, timings) in profiles {
+        let total: f64 = timings.iter().map(|t| t.seconds).sum();
+        let mut by_op: Vec<(String, usize, f64)> = Vec::new();
+        for t in timings {
+            match by_op.iter_mut().find(|(op, _, _)| *op == t.op) {
+                Some(e) => {
+                    e.1 += 1;
+                    e.2 += t.seconds;
+                }
+                None => by_op.push((t.op.clone(), 1, t.seconds)),
+            }
+        }
+        by_op.sort_by(|a, b| b.2.total_cmp(&a.2));
+        for (op, nodes, sec) in by_op {
+            println!(
+                "| {case} | {op} | {nodes} | {:.1} | {:.1} % |",
+                sec * 1e3,
+                100.0 * sec / total.max(f64::MIN_POSITIVE)
+            );
+            results.push(
+                json!({"kind": "profile", "case": case, "operator": op, "nodes": nodes,
+                "ms": sec * 1e3, "share": sec / total.max(f64::MIN_POSITIVE)}),
+            );
+        }
+    }
+    println!();
+}
+
+/// The `--layout` values that apply to `precision`: tract 0.23 cannot move QOperator int8 graphs
+/// channels-last.
+fn layouts(args: &BenchArgs, precision: Precision) -> Vec<CnnLayout> {
+    args.layout
+        .iter()
+        .map(|&l| CnnLayout::from(l))
+        .filter(|&l| l == CnnLayout::ChannelsFirst || precision != Precision::Int8QOperator)
+        .collect()
+}
+
 /// Runs `holo bench`.
 pub fn run(args: &BenchArgs) -> Result<()> {
     let config = ModelConfig {
@@ -113,11 +168,12 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         args.max_seconds
     );
     let mut results = Vec::new();
+    let mut profiles = Vec::new();
     if !args.skip_cnn {
         println!(
-            "| CNN | precision | size (HxW) | threads | ms | FPS | GFLOP/s | runs | plan ms |"
+            "| CNN | precision | layout | size (HxW) | threads | ms | FPS | GFLOP/s | runs | plan ms |"
         );
-        println!("|---|---|---|---:|---:|---:|---:|---:|---:|");
+        println!("|---|---|---|---|---:|---:|---:|---:|---:|---:|");
         for &(h, w) in &args.sizes {
             for &layers in &args.layers {
                 for &p in &args.precision {
@@ -126,34 +182,45 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                     let model = HologramModel::from_bytes(bytes, ModelKind::Hologram, &config)
                         .with_context(|| embedded::hologram_file(layers, precision))?;
                     let macs = model.metadata().macs_per_pixel().unwrap_or(0);
-                    let t = Instant::now();
-                    let plan = model.plan(h, w)?;
-                    let plan_ms = t.elapsed().as_secs_f64() * 1e3;
                     let input = Array3::<f32>::from_shape_fn((4, h, w), |(c, y, x)| {
                         ((x * 7 + y * 3 + c) % 13) as f32 / 12.0
                     });
-                    for &threads in &args.threads {
-                        set_cnn_threads(threads)?;
-                        let (s, runs) = time_runs(args.repeat, args.max_seconds, || {
-                            plan.run_heads(input.view())?;
-                            Ok(())
-                        })?;
-                        let gflops = 2.0 * macs as f64 * (h * w) as f64 / s / 1e9;
-                        println!(
-                            "| holo{layers} | {precision} | {h}x{w} | {threads} | {:.1} | {:.2} | {:.1} | {runs} | {:.0} |",
+                    for layout in layouts(args, precision) {
+                        let t = Instant::now();
+                        let plan = model.plan_with_layout(h, w, layout)?;
+                        let plan_ms = t.elapsed().as_secs_f64() * 1e3;
+                        for &threads in &args.threads {
+                            set_cnn_threads(threads)?;
+                            let (s, runs) = time_runs(args.repeat, args.max_seconds, || {
+                                plan.run_heads(input.view())?;
+                                Ok(())
+                            })?;
+                            let gflops = 2.0 * macs as f64 * (h * w) as f64 / s / 1e9;
+                            println!(
+                            "| holo{layers} | {precision} | {layout} | {h}x{w} | {threads} | {:.1} | {:.2} | {:.1} | {runs} | {:.0} |",
                             s * 1e3,
                             1.0 / s,
                             gflops,
                             plan_ms
                         );
-                        results.push(json!({"kind": "cnn", "layers": layers, "precision": precision,
-                            "size": [h, w], "threads": threads, "ms": s * 1e3, "fps": 1.0 / s,
+                            results.push(json!({"kind": "cnn", "layers": layers, "precision": precision,
+                            "layout": layout, "size": [h, w], "threads": threads, "ms": s * 1e3, "fps": 1.0 / s,
                             "gflops": gflops, "runs": runs, "macs_per_pixel": macs, "plan_ms": plan_ms}));
+                            if args.profile {
+                                let case = format!(
+                                    "holo{layers} | {precision} | {layout} | {h}x{w} | {threads}"
+                                );
+                                profiles.push((case, plan.profile(input.view())?));
+                            }
+                        }
                     }
                 }
             }
         }
         println!();
+    }
+    if !profiles.is_empty() {
+        print_profiles(&profiles, &mut results);
     }
     if !args.skip_pipeline {
         println!(
@@ -162,37 +229,40 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             args.offset_mm,
             if args.offset_mm == 0 { ", AA-DPM" } else { ", pre-filter CNN + DPM" }
         );
-        println!("| CNN | precision | size (HxW) | threads | CNN | offset | pre-filter | DPM + LUT | frame | FPS | stream FPS |");
-        println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+        println!("| CNN | precision | layout | size (HxW) | threads | CNN | offset | pre-filter | DPM + LUT | frame | FPS | stream FPS |");
+        println!("|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
         for &(h, w) in &args.sizes {
             let frame = procedural::default_scene(h, w)?;
             for &layers in &args.layers {
                 for &p in &args.precision {
                     let precision: Precision = p.into();
-                    let pipeline = HologramPipeline::embedded(
-                        layers,
-                        precision,
-                        args.offset_mm != 0,
-                        PipelineConfig {
-                            offset_m: args.offset_mm as f64 * 1e-3,
-                            ..PipelineConfig::default()
-                        },
-                    )?;
-                    let mut session = pipeline.session(h, w)?;
-                    for &threads in &args.threads {
-                        set_cnn_threads(threads)?;
-                        let mut timings = Vec::new();
-                        let (s, runs) = time_runs(args.repeat, args.max_seconds, || {
-                            timings.push(session.render(&frame)?.timings);
-                            Ok(())
-                        })?;
-                        let med = crate::render::median_timings(&timings[1..]);
-                        let n = 4usize;
-                        let t = Instant::now();
-                        session.render_stream((0..n).map(|_| Ok(frame.clone())), |_, _| Ok(()))?;
-                        let stream_fps = n as f64 / t.elapsed().as_secs_f64();
-                        println!(
-                            "| holo{layers} | {precision} | {h}x{w} | {threads} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} |",
+                    for layout in layouts(args, precision) {
+                        let pipeline = HologramPipeline::embedded(
+                            layers,
+                            precision,
+                            args.offset_mm != 0,
+                            PipelineConfig {
+                                offset_m: args.offset_mm as f64 * 1e-3,
+                                cnn_layout: layout,
+                                ..PipelineConfig::default()
+                            },
+                        )?;
+                        let mut session = pipeline.session(h, w)?;
+                        for &threads in &args.threads {
+                            set_cnn_threads(threads)?;
+                            let mut timings = Vec::new();
+                            let (s, runs) = time_runs(args.repeat, args.max_seconds, || {
+                                timings.push(session.render(&frame)?.timings);
+                                Ok(())
+                            })?;
+                            let med = crate::render::median_timings(&timings[1..]);
+                            let n = 4usize;
+                            let t = Instant::now();
+                            session
+                                .render_stream((0..n).map(|_| Ok(frame.clone())), |_, _| Ok(()))?;
+                            let stream_fps = n as f64 / t.elapsed().as_secs_f64();
+                            println!(
+                            "| holo{layers} | {precision} | {layout} | {h}x{w} | {threads} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} |",
                             med.cnn_s * 1e3,
                             med.offset_s * 1e3,
                             med.prefilter_s * 1e3,
@@ -201,12 +271,13 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                             1.0 / s,
                             stream_fps
                         );
-                        results.push(
+                            results.push(
                             json!({"kind": "pipeline", "layers": layers, "precision": precision,
-                            "size": [h, w], "threads": threads, "offset_mm": args.offset_mm,
+                            "layout": layout, "size": [h, w], "threads": threads, "offset_mm": args.offset_mm,
                             "median_stages_s": med, "frame_ms": s * 1e3, "fps": 1.0 / s,
                             "stream_fps": stream_fps, "runs": runs}),
                         );
+                        }
                     }
                 }
             }

@@ -10,7 +10,9 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use tensorholo::evaluation::{focal_depths, table2};
-use tensorholo::model::{set_cnn_threads, HologramModel, ModelConfig, ModelKind, Precision};
+use tensorholo::model::{
+    set_cnn_threads, CnnLayout, HologramModel, ModelConfig, ModelKind, Precision,
+};
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{FrameTimings, HologramPipeline, HologramSession, PipelineConfig};
 use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
@@ -34,6 +36,24 @@ impl From<PrecisionArg> for Precision {
             PrecisionArg::F32 => Precision::F32,
             PrecisionArg::Int8Qop => Precision::Int8QOperator,
             PrecisionArg::Int8Qdq => Precision::Int8Qdq,
+        }
+    }
+}
+
+/// CNN memory layouts selectable on the command line ([`CnnLayout`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LayoutArg {
+    /// Channels first, as in the ONNX file (tract's direct spatial convolution).
+    Nchw,
+    /// Channels last (tract's lazy im2col and matrix product; not for int8-qop files).
+    Nhwc,
+}
+
+impl From<LayoutArg> for CnnLayout {
+    fn from(l: LayoutArg) -> Self {
+        match l {
+            LayoutArg::Nchw => CnnLayout::ChannelsFirst,
+            LayoutArg::Nhwc => CnnLayout::ChannelsLast,
         }
     }
 }
@@ -82,6 +102,10 @@ pub struct ModelArgs {
     /// parallel.
     #[arg(long, default_value_t = 1)]
     pub threads: usize,
+    /// Memory layout tract runs the hologram CNN in (nhwc: not for int8-qop; which is faster depends on the
+    /// frame size: `holo bench --layout nchw,nhwc`).
+    #[arg(long, value_enum, default_value_t = LayoutArg::Nchw)]
+    pub layout: LayoutArg,
     #[command(flatten)]
     pub encoding: crate::args::EncodingArgs,
     #[command(flatten)]
@@ -110,6 +134,7 @@ impl ModelArgs {
             options: self.optics.options(),
             offset_m: self.offset_mm * 1e-3,
             encoding,
+            cnn_layout: self.layout.into(),
         };
         let precision = self.precision();
         let want_prefilter =
@@ -171,6 +196,7 @@ impl ModelArgs {
             },
             "precision": precision,
             "cnn_threads": self.threads,
+            "cnn_layout": pipeline.config().cnn_layout,
             "hologram_cnn": describe(pipeline.hologram_model()),
             "prefilter_cnn": pipeline.prefilter_model().map(describe),
             "encoding": pipeline.encoding(),

@@ -161,12 +161,41 @@ fn bench_prints_a_row_per_case() {
         "1",
         "--repeat",
         "1",
+        "--layout",
+        "nchw,nhwc",
+        "--profile",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let table = String::from_utf8_lossy(&o.stdout);
-    assert!(table.contains("| holo8 | f32 | 24x32 | 1 |"), "{table}");
+    // Timing rows (CNN and pipeline tables) have a number after the thread count; profile rows an operator.
+    let rows = |prefix: &str| {
+        table
+            .lines()
+            .filter(|l| l.starts_with(prefix))
+            .filter(|l| {
+                l.split('|')
+                    .nth(6)
+                    .is_some_and(|f| f.trim().parse::<f64>().is_ok())
+            })
+            .count()
+    };
+    // CNN table and pipeline table: both layouts for f32, channels-first only for int8-qop (tract cannot
+    // move QLinearConv); the profile table has one row per tract operator kind of each CNN case.
+    assert_eq!(rows("| holo8 | f32 | nchw | 24x32 | 1 | "), 2, "{table}");
+    assert_eq!(rows("| holo8 | f32 | nhwc | 24x32 | 1 | "), 2, "{table}");
+    assert_eq!(
+        rows("| holo8 | int8-qop | nchw | 24x32 | 1 | "),
+        2,
+        "{table}"
+    );
+    assert_eq!(rows("| holo8 | int8-qop | nhwc |"), 0, "{table}");
+    assert!(table.contains("Time per tract operator"), "{table}");
     assert!(
-        table.contains("| holo8 | int8-qop | 24x32 | 1 |"),
+        table.contains("| holo8 | f32 | nhwc | 24x32 | 1 | Pad | 8 |"),
+        "{table}"
+    );
+    assert!(
+        table.contains("| holo8 | int8-qop | nchw | 24x32 | 1 | Im2col | 8 |"),
         "{table}"
     );
     assert!(table.contains("Peak resident memory"), "{table}");

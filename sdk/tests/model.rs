@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use ndarray::{Array3, ArrayView3};
-use tensorholo::model::{heads_to_field, HologramModel, ModelConfig, ModelKind};
+use tensorholo::model::{heads_to_field, CnnLayout, HologramModel, ModelConfig, ModelKind};
 use tensorholo::scene::RgbdFrame;
 use tensorholo::HoloError;
 
@@ -39,9 +39,29 @@ fn compare(
     reference: &str,
     tol: f32,
 ) -> (f32, f32) {
+    compare_in(
+        model,
+        CnnLayout::ChannelsFirst,
+        prefix,
+        size,
+        reference,
+        tol,
+    )
+}
+
+/// [`compare`] with a plan in `layout`.
+fn compare_in(
+    model: &HologramModel,
+    layout: CnnLayout,
+    prefix: &str,
+    size: &str,
+    reference: &str,
+    tol: f32,
+) -> (f32, f32) {
     let x = npy(&format!("io_{prefix}_{size}_input.npy"));
     let (_, h, w) = x.dim();
-    let plan = model.plan(h, w).unwrap();
+    let plan = model.plan_with_layout(h, w, layout).unwrap();
+    assert_eq!(plan.layout(), layout);
     let (a, p) = plan.run_heads(x.view()).unwrap();
     let da = max_abs_diff(
         a.view(),
@@ -56,7 +76,7 @@ fn compare(
         "{reference} {size}: max |Δamplitude| {da}, |Δphase| {dp} > {tol}"
     );
     // The complex output is exactly the heads' field.
-    let field = model.run(x.view()).unwrap();
+    let field = plan.run(x.view()).unwrap();
     let want = heads_to_field(a.view(), p.view()).unwrap();
     assert_eq!(field, want);
     (da, dp)
@@ -270,5 +290,83 @@ fn int8_qoperator_and_qdq_files_load_and_run() {
         eprintln!("{file}: tract vs onnxruntime max |Δamplitude| {da:.2e}, |Δphase| {dp:.2e}");
         let x = npy("io_holo_16x20_input.npy");
         assert_eq!(m.run(x.view()).unwrap().dim(), (3, 16, 20));
+        if tag.ends_with("qdq") {
+            // QDQ is float convolutions between quantise/dequantise pairs: it moves channels-last too.
+            compare_in(&m, CnnLayout::ChannelsLast, "holo", "24x32", tag, 0.02);
+        } else {
+            // tract 0.23 cannot move a quantised convolution (`QLinearConv`) channels-last: a clear error,
+            // and the model stays usable in its own layout.
+            let err = m
+                .plan_with_layout(16, 20, CnnLayout::ChannelsLast)
+                .unwrap_err();
+            assert!(
+                matches!(&err, HoloError::InvalidParameter { name, reason }
+                    if *name == "layout" && reason.contains("nhwc") && reason.contains(file)),
+                "{file}: {err}"
+            );
+            assert_eq!(m.run(x.view()).unwrap().dim(), (3, 16, 20));
+        }
     }
+}
+
+/// The channels-last plan (the whole graph moved NHWC by tract) computes the same network: it matches the
+/// PyTorch reference like the channels-first plan, at two sizes, for both CNNs, while taking and returning
+/// `[C, H, W]` arrays. Both plans of one resolution live side by side in the model's cache.
+#[test]
+fn channels_last_plans_match_pytorch_with_the_same_chw_interface() {
+    let m = hologram("holo8_rgbd.onnx");
+    for size in ["24x32", "16x20"] {
+        compare_in(&m, CnnLayout::ChannelsLast, "holo", size, "holo", 1e-4);
+        compare_in(&m, CnnLayout::ChannelsFirst, "holo", size, "holo", 1e-4);
+    }
+    assert_eq!(m.planned_resolutions(), vec![(16, 20), (24, 32)]);
+    let pre = HologramModel::from_path(
+        fixture("holo8_rgbd.prefilter.onnx"),
+        ModelKind::PreFilter,
+        &ModelConfig::default(),
+    )
+    .unwrap();
+    compare_in(&pre, CnnLayout::ChannelsLast, "pre", "24x32", "pre", 1e-4);
+    // What tract runs differs (rows of ≥ 128 pixels): channels-first takes tract's direct spatial
+    // convolution, channels-last pads explicitly and gathers a lazy im2col for a matrix product.
+    let ops = |layout| -> Vec<String> {
+        m.plan_with_layout(8, 128, layout)
+            .unwrap()
+            .operators()
+            .into_iter()
+            .map(|(_, op)| op)
+            .collect()
+    };
+    let (first, last) = (ops(CnnLayout::ChannelsFirst), ops(CnnLayout::ChannelsLast));
+    let count = |ops: &[String], name: &str| ops.iter().filter(|op| *op == name).count();
+    assert_eq!(count(&first, "DirectSpatialConv"), 8, "{first:?}");
+    assert_eq!(count(&last, "DirectSpatialConv"), 0, "{last:?}");
+    assert_eq!(count(&last, "LazyIm2col"), 8, "{last:?}");
+    assert_eq!(count(&last, "Pad"), 8, "{last:?}");
+}
+
+/// `ModelPlan::profile` times every evaluated operator of the plan once, and its operators are the plan's.
+#[test]
+fn profile_times_each_operator_of_the_plan() {
+    let m = hologram("holo8_rgbd.onnx");
+    let x = npy("io_holo_24x32_input.npy");
+    let plan = m.plan(24, 32).unwrap();
+    let timings = plan.profile(x.view()).unwrap();
+    let operators = plan.operators();
+    assert!(timings.len() >= 8, "{timings:?}");
+    for t in &timings {
+        assert!(t.seconds >= 0.0 && t.seconds.is_finite());
+        assert!(
+            operators
+                .iter()
+                .any(|(node, op)| *node == t.node && *op == t.op),
+            "{t:?} not among {operators:?}"
+        );
+    }
+    // Bad input is refused as by run_heads.
+    assert!(matches!(
+        plan.profile(x.slice(ndarray::s![.., ..16, ..]))
+            .unwrap_err(),
+        HoloError::ShapeMismatch { .. }
+    ));
 }

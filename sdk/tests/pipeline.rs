@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use ndarray::{Array2, Array3, Axis};
 use tensorholo::encoding::{double_phase_encode, phase_to_codes};
-use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
+use tensorholo::model::{CnnLayout, HologramModel, ModelConfig, ModelKind};
 use tensorholo::optics::{propagate_colour, Carrier};
 use tensorholo::pipeline::{Heads, HologramPipeline, PipelineConfig};
 use tensorholo::scene::RgbdFrame;
@@ -103,6 +103,47 @@ fn session_equals_the_naive_composition_with_and_without_prefilter() {
     let f = frame(24, 32, 0);
     assert_matches_naive(&pipeline(true), &f);
     assert_matches_naive(&pipeline(false), &f);
+}
+
+/// The hologram CNN run channels-last gives the same hologram as channels-first up to float rounding, so the
+/// SLM phase agrees to well under one 8-bit code (2π/256 = 0.025 rad), circularly.
+#[test]
+fn channels_last_session_agrees_with_channels_first() {
+    let f = frame(24, 32, 1);
+    let render = |layout| {
+        let p = HologramPipeline::new(
+            load("holo8_rgbd.onnx", ModelKind::Hologram),
+            Some(load("holo8_rgbd.prefilter.onnx", ModelKind::PreFilter)),
+            PipelineConfig {
+                cnn_layout: layout,
+                ..config(6e-3)
+            },
+        )
+        .unwrap();
+        let mut s = p.session(24, 32).unwrap();
+        let out = s.render(&f).unwrap().clone();
+        (out, s.last_heads().unwrap().amplitude.clone())
+    };
+    let (first, amp_first) = render(CnnLayout::ChannelsFirst);
+    let (last, amp_last) = render(CnnLayout::ChannelsLast);
+    let amp = amp_first
+        .iter()
+        .zip(amp_last.iter())
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    let tau = std::f32::consts::TAU;
+    let phase = first
+        .phase
+        .iter()
+        .zip(last.phase.iter())
+        .map(|(a, b)| {
+            let d = (a - b).abs() % tau;
+            d.min(tau - d)
+        })
+        .fold(0.0f32, f32::max);
+    println!("channels-last vs first: max |Δamplitude head| {amp:.2e}, max circular |Δphase| {phase:.2e} rad");
+    assert!(amp < 1e-5, "{amp}");
+    assert!(phase < 1e-3, "{phase}");
 }
 
 #[test]

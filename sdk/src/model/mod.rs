@@ -68,6 +68,46 @@ impl std::fmt::Display for Precision {
     }
 }
 
+/// The memory layout tract runs a CNN in. The ONNX files are always channels-first `[1, C, H, W]`
+/// (`DESIGN.md` §3) and a plan takes and returns `[C, H, W]` arrays in both layouts; only tract's internal
+/// graph differs ([`HologramModel::plan_with_layout`]).
+///
+/// Measured with `holo bench --layout nchw,nhwc` (docs/BENCHMARKS.md, "tract speed study"): neither layout wins
+/// everywhere, so the default stays the file's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CnnLayout {
+    /// Channels first (NCHW), as in the file. tract 0.23 runs the 3×3 convolutions as its direct spatial
+    /// convolution (a filter along W, four output channels at a time) where the rows are ≥ 128 pixels wide.
+    #[default]
+    ChannelsFirst,
+    /// Channels last (NHWC): the whole graph is moved by tract's axis-change propagation, and the
+    /// convolutions run as a lazy im2col (one gather per output pixel of 3 contiguous runs of 3·C values)
+    /// feeding tract's matrix-product kernels, after an explicit zero `Pad`. f32 and int8 QDQ files (float
+    /// convolutions); tract 0.23 does not move a quantised `QLinearConv`, so an int8 QOperator file in this
+    /// layout is an error.
+    ChannelsLast,
+}
+
+impl CnnLayout {
+    /// Both layouts, the default first.
+    pub const ALL: [CnnLayout; 2] = [Self::ChannelsFirst, Self::ChannelsLast];
+
+    /// Short name: `nchw`, `nhwc`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::ChannelsFirst => "nchw",
+            Self::ChannelsLast => "nhwc",
+        }
+    }
+}
+
+impl std::fmt::Display for CnnLayout {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// Sets how many threads tract uses for the matrix products and convolutions of every CNN run afterwards
 /// (process-wide; tract's default executor). `1` (the default) runs on the calling thread; `n > 1` starts a
 /// private `n`-thread pool. Only matmul, direct convolution and element-wise ops run in parallel.
@@ -89,4 +129,4 @@ pub fn set_cnn_threads(threads: usize) -> crate::Result<()> {
 }
 
 pub use metadata::{ModelConfig, ModelKind, ModelMetadata, FORMAT_VERSION, METADATA_PREFIX};
-pub use network::{head_to_phasor, heads_to_field, HologramModel, ModelPlan};
+pub use network::{head_to_phasor, heads_to_field, HologramModel, ModelPlan, NodeTiming};

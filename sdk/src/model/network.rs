@@ -15,6 +15,7 @@ use tract_onnx::prelude::{
 };
 
 use super::metadata::{ModelConfig, ModelKind, ModelMetadata};
+use super::CnnLayout;
 use crate::error::{HoloError, Result};
 use crate::scene::RgbdFrame;
 
@@ -58,10 +59,10 @@ fn tract_msg(e: &tract_onnx::prelude::TractError) -> String {
 }
 
 /// Runs `f`, turning a panic inside tract into an error (a corrupt file must never panic the caller).
-fn guarded<T>(
+fn guarded<T, E: From<String>>(
     what: &str,
-    f: impl FnOnce() -> std::result::Result<T, String>,
-) -> std::result::Result<T, String> {
+    f: impl FnOnce() -> std::result::Result<T, E>,
+) -> std::result::Result<T, E> {
     match catch_unwind(AssertUnwindSafe(f)) {
         Ok(r) => r,
         Err(p) => {
@@ -70,9 +71,65 @@ fn guarded<T>(
                 .cloned()
                 .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
                 .unwrap_or_else(|| "unknown panic".into());
-            Err(format!("{what} panicked: {msg}"))
+            Err(E::from(format!("{what} panicked: {msg}")))
         }
     }
+}
+
+/// Why [`optimise`] failed: the requested layout does not apply to the graph, or tract failed.
+enum PlanFailure {
+    Layout(String),
+    Tract(String),
+}
+
+impl From<String> for PlanFailure {
+    fn from(reason: String) -> Self {
+        Self::Tract(reason)
+    }
+}
+
+/// Optimises a graph whose `H`, `W` are bound, for `layout` (see [`CnnLayout`]).
+///
+/// Channels-last: after tract's declutter, the axis change `Move(1, 3)` is applied at the input and
+/// propagated through the whole graph with tract's own `change_axes` (convolutions switch to NHWC, the
+/// element-wise ops, concatenations and slices follow, the outputs become `[1, H, W, 3]`); then tract
+/// declutters again (the interfaces are locked, so nothing moves back) and generates code. It fails if any
+/// operator refuses the change.
+fn optimise(
+    mut model: TypedModel,
+    layout: CnnLayout,
+) -> std::result::Result<TypedModel, PlanFailure> {
+    use tract_onnx::tract_core::ops::change_axes::{AxisChange, AxisOp};
+    let tract = |e: tract_onnx::prelude::TractError| PlanFailure::Tract(tract_msg(&e));
+    if layout == CnnLayout::ChannelsLast {
+        model.declutter().map_err(tract)?;
+        let input = model.input_outlets().map_err(tract)?[0];
+        if model.outlet_fact(input).map_err(tract)?.rank() != 4 {
+            return Err(PlanFailure::Layout("the input is not [1, C, H, W]".into()));
+        }
+        let change = AxisChange {
+            outlet: input,
+            op: AxisOp::Move(1, 3),
+        };
+        let mut explored = Default::default();
+        let (patch, _) = tract_onnx::tract_core::optim::change_axes::change_axes(
+            &model,
+            &change,
+            &[],
+            &[],
+            &mut explored,
+        )
+        .map_err(tract)?
+        .ok_or_else(|| {
+            PlanFailure::Layout(
+                "an operator of the graph refuses the channels-last axis change (tract 0.23 does not \
+                 move quantised convolutions: QOperator int8 files run channels-first only)"
+                    .into(),
+            )
+        })?;
+        patch.apply(&mut model).map_err(tract)?;
+    }
+    model.into_optimized().map_err(tract)
 }
 
 /// One dimension of a graph input/output as written in the file.
@@ -195,7 +252,7 @@ pub struct HologramModel {
     dims: [Option<Symbol>; 2],
     /// Fixed input height/width from the file, where not symbolic.
     fixed: [Option<usize>; 2],
-    plans: Mutex<HashMap<(usize, usize), ModelPlan>>,
+    plans: Mutex<HashMap<(usize, usize, CnnLayout), ModelPlan>>,
 }
 
 impl HologramModel {
@@ -322,12 +379,13 @@ impl HologramModel {
 
     /// The resolutions planned so far, sorted (`[height, width]` pairs).
     pub fn planned_resolutions(&self) -> Vec<(usize, usize)> {
-        let mut v: Vec<_> = self.lock().keys().copied().collect();
+        let mut v: Vec<_> = self.lock().keys().map(|&(h, w, _)| (h, w)).collect();
         v.sort_unstable();
+        v.dedup();
         v
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<(usize, usize), ModelPlan>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<(usize, usize, CnnLayout), ModelPlan>> {
         // No code panics while holding the lock; recover the map anyway rather than propagate poison.
         self.plans.lock().unwrap_or_else(|p| p.into_inner())
     }
@@ -339,13 +397,27 @@ impl HologramModel {
     /// Errors: [`HoloError::InvalidParameter`] for a zero size, [`HoloError::ShapeMismatch`] if the file
     /// fixes a different size, [`HoloError::ModelLoad`] if tract cannot optimise the graph at that size.
     pub fn plan(&self, height: usize, width: usize) -> Result<ModelPlan> {
+        self.plan_with_layout(height, width, CnnLayout::ChannelsFirst)
+    }
+
+    /// As [`HologramModel::plan`], run in `layout` (see [`CnnLayout`]); plans are cached per resolution and
+    /// layout. Inputs and outputs of the returned plan stay `[C, H, W]` / `[3, H, W]` whatever the layout.
+    ///
+    /// Errors: as [`HologramModel::plan`]; [`HoloError::InvalidParameter`] if tract cannot move this graph
+    /// channels-last (int8 QOperator files: tract 0.23's quantised convolution takes no axis change).
+    pub fn plan_with_layout(
+        &self,
+        height: usize,
+        width: usize,
+        layout: CnnLayout,
+    ) -> Result<ModelPlan> {
         if height == 0 || width == 0 {
             return Err(crate::error::invalid(
                 "height/width",
                 format!("a CNN plan needs a non-empty resolution, got {height}×{width}"),
             ));
         }
-        if let Some(p) = self.lock().get(&(height, width)) {
+        if let Some(p) = self.lock().get(&(height, width, layout)) {
             return Ok(p.clone());
         }
         for (i, &n) in [height, width].iter().enumerate() {
@@ -369,15 +441,23 @@ impl HologramModel {
             .filter_map(|(s, n)| s.clone().map(|s| (s, TDim::Val(n as i64))))
             .collect();
         let plan = guarded("optimising", || {
-            self.decluttered
+            let model = self
+                .decluttered
                 .set_symbols(&subs)
-                .and_then(|m| m.into_optimized())
-                .and_then(|m| m.into_runnable())
-                .map_err(|e| tract_msg(&e))
+                .map_err(|e| PlanFailure::Tract(tract_msg(&e)))?;
+            optimise(model, layout)?
+                .into_runnable()
+                .map_err(|e| PlanFailure::Tract(tract_msg(&e)))
         })
-        .map_err(|reason| HoloError::ModelLoad {
-            source_name: self.source_name.clone(),
-            reason: format!("cannot optimise for {height}×{width}: {reason}"),
+        .map_err(|reason| match reason {
+            PlanFailure::Layout(reason) => crate::error::invalid(
+                "layout",
+                format!("`{}` cannot run {layout}: {reason}", self.source_name),
+            ),
+            PlanFailure::Tract(reason) => HoloError::ModelLoad {
+                source_name: self.source_name.clone(),
+                reason: format!("cannot optimise for {height}×{width} ({layout}): {reason}"),
+            },
         })?;
         let plan = ModelPlan {
             plan,
@@ -385,8 +465,13 @@ impl HologramModel {
             channels: self.input_channels(),
             height,
             width,
+            layout,
         };
-        Ok(self.lock().entry((height, width)).or_insert(plan).clone())
+        Ok(self
+            .lock()
+            .entry((height, width, layout))
+            .or_insert(plan)
+            .clone())
     }
 
     /// Runs the network on one input `[C, H, W]` (`C` = [`HologramModel::input_channels`]; hologram CNN:
@@ -429,6 +514,17 @@ impl HologramModel {
     }
 }
 
+/// Wall-clock time of one operator of a [`ModelPlan`] in one run ([`ModelPlan::profile`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct NodeTiming {
+    /// The node's name in the optimised graph (derived from the ONNX node names).
+    pub node: String,
+    /// tract's operator after optimisation, e.g. `DirectSpatialConv`, `LazyIm2col`, `OptMatMul`.
+    pub op: String,
+    /// Seconds spent evaluating it.
+    pub seconds: f64,
+}
+
 /// A tract plan for one resolution of a [`HologramModel`] (graph with `H`, `W` bound and optimised).
 ///
 /// Cloning is cheap (shared plan). Each [`ModelPlan::run`] spawns its own tract state, so one plan may run
@@ -440,9 +536,15 @@ pub struct ModelPlan {
     channels: usize,
     height: usize,
     width: usize,
+    layout: CnnLayout,
 }
 
 impl ModelPlan {
+    /// The memory layout tract runs this plan in.
+    pub fn layout(&self) -> CnnLayout {
+        self.layout
+    }
+
     /// `(channels, height, width)` of the input this plan accepts.
     pub fn input_dim(&self) -> (usize, usize, usize) {
         (self.channels, self.height, self.width)
@@ -453,13 +555,9 @@ impl ModelPlan {
         self.kind
     }
 
-    /// Runs the network on `input` `[C, H, W]` and returns the raw heads `(amplitude, phase)`, each
-    /// `[3, H, W]`: amplitude in `[0, √2]`, phase in `[0, 1]` meaning `(p − 0.5)·2π` rad.
-    ///
-    /// Errors: [`HoloError::ShapeMismatch`] if `input` is not this plan's `[C, H, W]`;
-    /// [`HoloError::InvalidData`] if it holds NaN/∞; [`HoloError::ModelRun`] if tract fails or returns
-    /// outputs of an unexpected type or shape.
-    pub fn run_heads(&self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
+    /// Checks `input` `[C, H, W]` against this plan (shape, finite values) and copies it into the
+    /// `[1, C, H, W]` tensor tract takes.
+    fn input_tensor(&self, input: ArrayView3<f32>) -> Result<Tensor> {
         let want = [self.channels, self.height, self.width];
         if input.shape() != want {
             return Err(HoloError::ShapeMismatch {
@@ -474,9 +572,72 @@ impl ModelPlan {
                 self.kind
             )));
         }
-        let data: Vec<f32> = input.iter().copied().collect();
-        let tensor = Tensor::from_shape(&[1, self.channels, self.height, self.width], &data)
-            .map_err(|e| HoloError::ModelRun(tract_msg(&e)))?;
+        let (data, shape): (Vec<f32>, _) = match self.layout {
+            CnnLayout::ChannelsFirst => (
+                input.iter().copied().collect(),
+                [1, self.channels, self.height, self.width],
+            ),
+            CnnLayout::ChannelsLast => (
+                input.permuted_axes([1, 2, 0]).iter().copied().collect(),
+                [1, self.height, self.width, self.channels],
+            ),
+        };
+        Tensor::from_shape(&shape, &data).map_err(|e| HoloError::ModelRun(tract_msg(&e)))
+    }
+
+    /// The operators of this plan after tract's optimisation, in evaluation order: `(node name, operator
+    /// name)`, e.g. `("conv_3", "DirectSpatialConv")`: which convolution algorithm tract chose.
+    pub fn operators(&self) -> Vec<(String, String)> {
+        let model = self.plan.model();
+        self.plan
+            .order_without_consts()
+            .iter()
+            .map(|&id| {
+                let n = &model.nodes[id];
+                (n.name.clone(), n.op().name().to_string())
+            })
+            .collect()
+    }
+
+    /// Runs the network once on `input` `[C, H, W]` and times every operator: one [`NodeTiming`] per
+    /// evaluated node, in evaluation order (wall-clock seconds of the node's `eval`, including the work
+    /// it hands to tract's thread pool). `holo bench --profile` sums them per operator.
+    ///
+    /// Errors: as [`ModelPlan::run_heads`].
+    pub fn profile(&self, input: ArrayView3<f32>) -> Result<Vec<NodeTiming>> {
+        let tensor = self.input_tensor(input)?;
+        let mut timings = Vec::new();
+        guarded("profiling", || {
+            let mut state = self.plan.spawn().map_err(|e| tract_msg(&e))?;
+            state
+                .run_plan_with_eval(
+                    tvec!(tensor.into_tvalue()),
+                    |ctx, op_state, node, inputs| {
+                        let start = std::time::Instant::now();
+                        let out = tract_onnx::tract_core::plan::eval(ctx, op_state, node, inputs);
+                        timings.push(NodeTiming {
+                            node: node.name.clone(),
+                            op: node.op().name().to_string(),
+                            seconds: start.elapsed().as_secs_f64(),
+                        });
+                        out
+                    },
+                )
+                .map(drop)
+                .map_err(|e| tract_msg(&e))
+        })
+        .map_err(HoloError::ModelRun)?;
+        Ok(timings)
+    }
+
+    /// Runs the network on `input` `[C, H, W]` and returns the raw heads `(amplitude, phase)`, each
+    /// `[3, H, W]`: amplitude in `[0, √2]`, phase in `[0, 1]` meaning `(p − 0.5)·2π` rad.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] if `input` is not this plan's `[C, H, W]`;
+    /// [`HoloError::InvalidData`] if it holds NaN/∞; [`HoloError::ModelRun`] if tract fails or returns
+    /// outputs of an unexpected type or shape.
+    pub fn run_heads(&self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
+        let tensor = self.input_tensor(input)?;
         let outputs = guarded("running", || {
             self.plan
                 .run(tvec!(tensor.into_tvalue()))
@@ -499,14 +660,25 @@ impl ModelPlan {
                 .map_err(|e| {
                     HoloError::ModelRun(format!("output `{}`: {}", OUTPUT_NAMES[i], tract_msg(&e)))
                 })?;
-            if got != [1, 3, self.height, self.width] {
+            let want = match self.layout {
+                CnnLayout::ChannelsFirst => [1, 3, self.height, self.width],
+                CnnLayout::ChannelsLast => [1, self.height, self.width, 3],
+            };
+            if got != want {
                 return Err(HoloError::ShapeMismatch {
-                    what: format!("output `{}`", OUTPUT_NAMES[i]),
-                    expected: vec![1, 3, self.height, self.width],
+                    what: format!("output `{}` ({} layout)", OUTPUT_NAMES[i], self.layout),
+                    expected: want.to_vec(),
                     got,
                 });
             }
-            Array3::from_shape_vec(shape, slice).map_err(|e| HoloError::ModelRun(e.to_string()))
+            match self.layout {
+                CnnLayout::ChannelsFirst => Array3::from_shape_vec(shape, slice),
+                CnnLayout::ChannelsLast => {
+                    Array3::from_shape_vec((self.height, self.width, 3), slice)
+                        .map(|a| a.permuted_axes([2, 0, 1]).as_standard_layout().into_owned())
+                }
+            }
+            .map_err(|e| HoloError::ModelRun(e.to_string()))
         };
         Ok((head(0)?, head(1)?))
     }
