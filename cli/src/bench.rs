@@ -5,14 +5,11 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use ndarray::Array3;
 use serde_json::json;
-use tensorholo::model::{
-    embedded, set_cnn_threads, CnnLayout, HologramModel, ModelConfig, ModelKind, NodeTiming,
-    Precision,
-};
+use tensorholo::model::{embedded, set_cnn_threads, CnnLayout, ModelConfig, NodeTiming, Precision};
 use tensorholo::pipeline::{HologramPipeline, PipelineConfig};
 use tensorholo::scene::procedural;
 
@@ -178,9 +175,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             for &layers in &args.layers {
                 for &p in &args.precision {
                     let precision: Precision = p.into();
-                    let bytes = embedded::hologram_cnn(layers, precision)?;
-                    let model = HologramModel::from_bytes(bytes, ModelKind::Hologram, &config)
-                        .with_context(|| embedded::hologram_file(layers, precision))?;
+                    let model = embedded::hologram_model(layers, precision, &config)?;
                     let macs = model.metadata().macs_per_pixel().unwrap_or(0);
                     let input = Array3::<f32>::from_shape_fn((4, h, w), |(c, y, x)| {
                         ((x * 7 + y * 3 + c) % 13) as f32 / 12.0

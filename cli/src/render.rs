@@ -151,11 +151,9 @@ impl ModelArgs {
             };
             let hologram = match &self.model {
                 Some(p) => HologramModel::from_path(p, ModelKind::Hologram, &expected)?,
-                None => HologramModel::from_bytes(
-                    tensorholo::model::embedded::hologram_cnn(self.layers, precision)?,
-                    ModelKind::Hologram,
-                    &expected,
-                )?,
+                None => {
+                    tensorholo::model::embedded::hologram_model(self.layers, precision, &expected)?
+                }
             };
             let prefilter = match (&self.prefilter_model, want_prefilter) {
                 (Some(p), _) => Some(HologramModel::from_path(
@@ -168,10 +166,8 @@ impl ModelArgs {
                     if (mm as f64 - self.offset_mm).abs() > 1e-9 {
                         bail!("no shipped pre-filter for {} mm: give --prefilter-model or leave out --prefilter", self.offset_mm);
                     }
-                    Some(HologramModel::from_bytes(
-                        tensorholo::model::embedded::prefilter_cnn(mm, precision)?,
-                        ModelKind::PreFilter,
-                        &expected,
+                    Some(tensorholo::model::embedded::prefilter_model(
+                        mm, precision, &expected,
                     )?)
                 }
                 (None, false) => None,

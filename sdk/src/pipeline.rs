@@ -121,11 +121,7 @@ impl HologramPipeline {
             offset_m: config.offset_m,
             input_layers: 1,
         };
-        let hologram = HologramModel::from_bytes(
-            embedded::hologram_cnn(layers, precision)?,
-            ModelKind::Hologram,
-            &expected,
-        )?;
+        let hologram = embedded::hologram_model(layers, precision, &expected)?;
         let prefilter = if prefilter && config.offset_m != 0.0 {
             let mm = config.offset_m * 1e3;
             let offset_mm = embedded::PREFILTER_OFFSETS_MM
@@ -141,10 +137,8 @@ impl HologramPipeline {
                         ),
                     )
                 })?;
-            Some(Arc::new(HologramModel::from_bytes(
-                embedded::prefilter_cnn(offset_mm, precision)?,
-                ModelKind::PreFilter,
-                &expected,
+            Some(Arc::new(embedded::prefilter_model(
+                offset_mm, precision, &expected,
             )?))
         } else {
             None

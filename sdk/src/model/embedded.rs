@@ -4,7 +4,7 @@
 //! Build with `--no-default-features` to leave them out (≈3 MB) and load files with
 //! [`HologramModel::from_path`](super::HologramModel::from_path) instead.
 
-use super::Precision;
+use super::{HologramModel, ModelConfig, ModelKind, Precision};
 use crate::error::{invalid, Result};
 
 macro_rules! shipped {
@@ -73,4 +73,38 @@ pub fn prefilter_cnn(offset_mm: u32, precision: Precision) -> Result<&'static [u
             format!("the shipped pre-filter CNNs are for {PREFILTER_OFFSETS_MM:?} mm, not {offset_mm} mm"),
         )
     })
+}
+
+/// Loads the shipped RGB-D hologram CNN with `layers` ∈ {8, 15, 30} layers in `precision`, checked against
+/// `expected` like any file ([`HologramModel::from_bytes`]); errors name the embedded file.
+///
+/// Errors: as [`hologram_cnn`] and [`HologramModel::from_bytes`].
+pub fn hologram_model(
+    layers: usize,
+    precision: Precision,
+    expected: &ModelConfig,
+) -> Result<HologramModel> {
+    HologramModel::from_named_bytes(
+        hologram_cnn(layers, precision)?,
+        &hologram_file(layers, precision),
+        ModelKind::Hologram,
+        expected,
+    )
+}
+
+/// Loads the shipped pre-filter CNN for an SLM offset of `offset_mm` ∈ {6, 12} millimetres in `precision`,
+/// checked against `expected` (its `offset_m` must be that offset); errors name the embedded file.
+///
+/// Errors: as [`prefilter_cnn`] and [`HologramModel::from_bytes`].
+pub fn prefilter_model(
+    offset_mm: u32,
+    precision: Precision,
+    expected: &ModelConfig,
+) -> Result<HologramModel> {
+    HologramModel::from_named_bytes(
+        prefilter_cnn(offset_mm, precision)?,
+        &prefilter_file(offset_mm, precision),
+        ModelKind::PreFilter,
+        expected,
+    )
 }

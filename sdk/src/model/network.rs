@@ -268,6 +268,17 @@ impl HologramModel {
         Self::load(bytes, "<bytes>".into(), kind, expected)
     }
 
+    /// As [`HologramModel::from_bytes`], naming the source `name` (e.g. the embedded file's name) in every
+    /// error message instead of `<bytes>`.
+    pub fn from_named_bytes(
+        bytes: &[u8],
+        name: &str,
+        kind: ModelKind,
+        expected: &ModelConfig,
+    ) -> Result<Self> {
+        Self::load(bytes, name.into(), kind, expected)
+    }
+
     /// Loads a CNN from an ONNX file; as [`HologramModel::from_bytes`], plus [`HoloError::Io`] if the file
     /// cannot be read. Errors name the path.
     pub fn from_path(
