@@ -63,7 +63,7 @@ pub struct BaselinesArgs {
     #[arg(long)]
     limit: Option<usize>,
     /// SLM offsets s in millimetres (distance from the midpoint hologram to the SLM; paper: 0, 6, 12), one
-    /// smlbm-aadpm-<s>mm baseline each, comma-separated.
+    /// smlbm-aadpm-{s}mm baseline each, comma-separated.
     #[arg(
         long,
         value_delimiter = ',',

@@ -9,7 +9,7 @@
 //! - [`encoding`]: double phase encoding (Eq. 7), AA-DPM, BL-DPM, phase wrapping and 8-bit codes.
 //! - [`synthesis`]: silhouette-mask layer-based method (SM-LBM, Eq. 1–4) for reference holograms.
 //! - [`scene`]: RGB-D frames, layered depth images, depth decoders, the built-in procedural scene.
-//! - [`reference`]: the non-learned pipeline (SM-LBM → offset → double phase → SLM codes → previews).
+//! - [`reference`](mod@reference): the non-learned pipeline (SM-LBM → offset → double phase → SLM codes → previews).
 //! - [`metrics`]: PSNR and SSIM.
 //! - [`evaluation`]: the paper's Table 2 protocol (amplitude and focal-stack PSNR/SSIM against SM-LBM).
 //! - [`model`]: the hologram and pre-filter CNNs (ONNX, run with tract), metadata and I/O contract checks.

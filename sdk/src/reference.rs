@@ -111,7 +111,7 @@ impl ReferencePipeline {
     /// Fourier filter at the SLM, propagation to `z(d)` (Eq. 8–10), rescaled by the encoding's amplitude
     /// normaliser so that they are comparable with the scene amplitude.
     ///
-    /// Errors: as [`simulate_phase_only`] and [`focal_stack`].
+    /// Errors: as [`simulate_phase_only`](crate::optics::simulate_phase_only) and [`focal_stack`].
     pub fn reconstruct_phase_only(
         &self,
         hologram: &ReferenceHologram,
