@@ -247,20 +247,33 @@ def ddpm_forward(
     return DdpmOutput(slm, pa, pp, dp.phase, dp.amplitude_scale, post)
 
 
-def identity_loss(prefilter: ResidualCNN, slm_field: torch.Tensor, kind: str = "l2") -> torch.Tensor:
-    """Identity pre-training loss of the pre-filter CNN: ``op(A', |H|) + op(p', arg H/2π + 0.5)``.
+def identity_loss(
+    prefilter: ResidualCNN,
+    slm_field: torch.Tensor,
+    kind: str = "l2",
+    target: torch.nn.Module | None = None,
+) -> torch.Tensor:
+    """Pre-training loss of the pre-filter CNN: ``op(A', A_t) + op(p', p_t)`` where ``(A_t, p_t)`` is the
+    input ``(|H|, arg H/2π + 0.5)`` itself (identity, the paper's choice) or, with ``target``, what that
+    filter makes of it (e.g. :class:`.model.AntiAliasFilter`: start DDPM training from AA-DPM).
 
     Args:
         prefilter: the pre-filter CNN.
         slm_field: complex64 ``[B, 3, H, W]`` offset holograms (from the stage-1 hologram CNN).
         kind: ``"l2"`` or ``"l1"``.
+        target: ``None`` (identity) or a module with the pre-filter's interface giving the target heads.
     Returns:
         scalar tensor.
     """
     op = _op(kind)
     x = prefilter_input(slm_field.detach())
     pa, pp = prefilter(x)
-    return op(pa.float(), x[:, :3]) + op(pp.float(), x[:, 3:])
+    if target is None:
+        ta, tp = x[:, :3], x[:, 3:]
+    else:
+        with torch.no_grad():
+            ta, tp = target(x)
+    return op(pa.float(), ta.float()) + op(pp.float(), tp.float())
 
 
 @dataclass

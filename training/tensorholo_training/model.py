@@ -25,7 +25,7 @@ import math
 import torch
 from torch import nn
 
-from .optics import complex_to_amp_phase
+from .optics import amp_phase_to_complex, anti_alias_blur, complex_to_amp_phase
 
 SQRT2 = math.sqrt(2.0)
 
@@ -146,6 +146,21 @@ def prefilter_input(slm_field: torch.Tensor) -> torch.Tensor:
     """
     amp, phs = complex_to_amp_phase(slm_field)
     return torch.cat([amp, phs], dim=1)
+
+
+class AntiAliasFilter(nn.Module):
+    """The non-learned AA-DPM filter with the pre-filter CNN's interface: input :func:`prefilter_input`
+    ``[B, 6, H, W]``, output ``(amplitude, phase01)`` of the Gaussian-blurred field
+    (:func:`.optics.anti_alias_blur`). Puts "CNN + AA-DPM" through the same DDPM chain and metrics as a trained
+    pre-filter, and is the target of the ``identity_target = "aa-dpm"`` pre-training."""
+
+    def __init__(self, sigma_px: float = 0.7, size: int = 5):
+        super().__init__()
+        self.sigma_px, self.size = sigma_px, size
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        field = amp_phase_to_complex(x[:, :3], x[:, 3:])
+        return complex_to_amp_phase(anti_alias_blur(field, self.sigma_px, self.size))
 
 
 def count_parameters(module: nn.Module) -> int:

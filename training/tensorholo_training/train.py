@@ -37,7 +37,7 @@ from .data import (
     write_synthetic_dataset,
 )
 from .metrics import psnr
-from .model import count_parameters, hologram_cnn, prefilter_cnn
+from .model import AntiAliasFilter, count_parameters, hologram_cnn, prefilter_cnn
 from .optics import Display, PropagationOptions
 
 
@@ -75,6 +75,11 @@ class TrainConfig:
     batch_size: int = 2
     stage1_steps: int = 200
     identity_steps: int = 20
+    # what the pre-filter is pre-trained to reproduce: "identity" (paper) or "aa-dpm" (the AA-DPM Gaussian
+    # blur of the SLM field, σ = aa_sigma_px, aa_kernel_size taps), so that DDPM starts from AA-DPM's quality
+    identity_target: str = "identity"
+    aa_sigma_px: float = 0.7
+    aa_kernel_size: int = 5
     stage2_steps: int = 100
     stage1_epochs: float = 0.0
     identity_epochs: float = 0.0
@@ -262,6 +267,10 @@ class Trainer:
             if self.prefilter is not None and state.get("prefilter") is not None:
                 self.prefilter.load_state_dict(state["prefilter"])
             self.log(f"initialised from {cfg.init_from}")
+        if cfg.identity_target not in ("identity", "aa-dpm"):
+            raise ValueError(f"identity_target must be 'identity' or 'aa-dpm', not {cfg.identity_target!r}")
+        self.identity_target = (AntiAliasFilter(cfg.aa_sigma_px, cfg.aa_kernel_size)
+                                if cfg.identity_target == "aa-dpm" else None)
         self.phases = self._phases()
         self.phase_index = 0
         self.phase_step = 0
@@ -335,7 +344,7 @@ class Trainer:
                 slm = optics.offset_to_slm(optics.amp_phase_to_complex(amp, phs), cfg.offset_m, self.display,
                                            cfg.options)
             with self._autocast():
-                loss = L.identity_loss(self.prefilter, slm, cfg.loss_kind)
+                loss = L.identity_loss(self.prefilter, slm, cfg.loss_kind, self.identity_target)
             return {"total": loss.float(), "identity": loss.float(), "pred": optics.amp_phase_to_complex(amp, phs)}
         with self._autocast():
             dd = L.ddpm_forward(amp, phs, self.prefilter, cfg.offset_m, self.display, cfg.options)
