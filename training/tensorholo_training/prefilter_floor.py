@@ -19,10 +19,8 @@ import dataclasses
 import json
 import os
 
-import numpy as np
 import torch
 
-from .data import collate
 from .model import AntiAliasFilter
 from .train import Trainer, TrainConfig
 
@@ -44,14 +42,9 @@ def compare(run_dir: str, checkpoint: str = "final.pt", batches: int | None = No
         row = tr.validate("stage2")
         terms: dict[str, float] = {}
         n = 0
-        bs = cfg.batch_size
-        for k in range(0, min(len(tr.val_set), bs * cfg.val_batches), bs):
-            items = []
-            for i in range(k, min(k + bs, len(tr.val_set))):
-                tr.val_set.rng = np.random.default_rng([cfg.seed, 1_000_000, i])
-                items.append(tr.val_set[i])
+        for k, _, batch in tr.val_batches():
             with torch.no_grad():
-                res = tr.compute_loss(collate(items), "stage2", tr._generator(k, salt=1))
+                res = tr.compute_loss(batch, "stage2", tr._generator(k, salt=1))
             for key, v in res.items():
                 if key != "pred":
                     terms[key] = terms.get(key, 0.0) + float(v)

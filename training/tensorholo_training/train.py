@@ -364,6 +364,17 @@ class Trainer:
         return {k: float(v.detach()) for k, v in out.items() if k != "pred"}
 
     @torch.no_grad()
+    def val_batches(self):
+        """The fixed validation batches: ``(k, items, batch)`` for up to ``val_batches`` batches, each scene
+        cropped with its own fixed seed, so every call (and every run) sees the same pixels."""
+        bs = self.cfg.batch_size
+        for k in range(0, min(len(self.val_set), bs * self.cfg.val_batches), bs):
+            items = []
+            for i in range(k, min(k + bs, len(self.val_set))):
+                self.val_set.rng = np.random.default_rng([self.cfg.seed, 1_000_000, i])
+                items.append(self.val_set[i])
+            yield k, items, collate(items)
+
     def validate(self, phase: str) -> dict[str, float]:
         """Mean loss and PSNRs on up to ``val_batches`` validation batches (fixed focal depths per batch).
 
@@ -375,15 +386,10 @@ class Trainer:
             return {}
         self.net.eval()
         totals, amp_psnr, fs_psnr, n = 0.0, [], [], 0
-        bs = self.cfg.batch_size
-        for k in range(0, min(len(self.val_set), bs * self.cfg.val_batches), bs):
-            items = []
-            for i in range(k, min(k + bs, len(self.val_set))):
-                self.val_set.rng = np.random.default_rng([self.cfg.seed, 1_000_000, i])
-                items.append(self.val_set[i])
-            batch = collate(items)
+        for k, items, batch in self.val_batches():
             g = self._generator(k, salt=1)
-            out = self.compute_loss(batch, phase, g)
+            with torch.no_grad():
+                out = self.compute_loss(batch, phase, g)
             totals += float(out["total"])
             n += 1
             gt = batch["midpoint"].to(self.device)
