@@ -43,10 +43,28 @@ def main() -> None:
                         f"{m['psnr_fs'] - f32['psnr_fs']:+.2f} dB focal stack)"
             print(row(f"holo{layers} {label}", what, m))
         for o in (6, 12):
-            name = f"holo{layers}_rgbd+prefilter_{o}mm.json"
+            aa = None
+            name = f"holo{layers}_rgbd+aadpm_{o}mm.json"
             if os.path.exists(os.path.join(d, name)):
-                print(row(f"holo{layers} f32 + pre-filter {o} mm", "displayed (phase-only, DDPM)",
-                          load(name)["model"]["mean"]))
+                aa = load(name)["model"]["mean"]
+                print(row(f"holo{layers} f32 + AA-DPM {o} mm", "displayed (phase-only, AA-DPM)", aa))
+            ddpm = None
+            for suffix, label in (("", "f32"), (".int8-qop", "int8 QOperator"), (".int8-qdq", "int8 QDQ")):
+                name = f"holo{layers}_rgbd+prefilter_{o}mm{suffix}.json"
+                if not os.path.exists(os.path.join(d, name)):
+                    continue
+                m = load(name)["model"]["mean"]
+                what = "displayed (phase-only, DDPM"
+                if ddpm is None:
+                    ddpm = m
+                    if aa is not None:
+                        what += f"; Δ vs AA-DPM: {m['psnr_amp'] - aa['psnr_amp']:+.2f} dB amp, " \
+                                f"{m['psnr_fs'] - aa['psnr_fs']:+.2f} dB focal stack"
+                else:
+                    what += f"; Δ vs f32: {m['psnr_amp'] - ddpm['psnr_amp']:+.2f} dB amp, " \
+                            f"{m['psnr_fs'] - ddpm['psnr_fs']:+.2f} dB focal stack"
+                both = "" if suffix == "" else " (both CNNs int8)"
+                print(row(f"holo{layers} {label} + pre-filter {o} mm{both}", what + ")", m))
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Reproduces one shipped model from scratch: dataset → stage 1 → (identity pre-training +) stage 2 →
-# ONNX f32 + int8 → Table 2 evaluation on the test split.
+# Reproduces one shipped model from scratch: dataset → stage 1 → stage 2 (DDPM; the pre-filter starts as AA-DPM) →
+# ONNX f32 + int8 of the best validation checkpoint → Table 2 evaluation on the test split.
 #
 #   training/reproduce.sh LAYERS INPUT OFFSET_MM        e.g. training/reproduce.sh 30 rgbd 6
 #
@@ -8,7 +8,7 @@
 #
 # Environment (defaults = the paper): DATA (dataset folder, generated with `holo dataset` if missing;
 # default data/mit-cgh-4k-v2), HOLO (holo binary; default: cargo run --release -p holo), STAGE1_EPOCHS (3000),
-# IDENTITY_EPOCHS (50), STAGE2_EPOCHS (1000), PYTHON (default: .venv/bin/python), MODELS (models).
+# STAGE2_EPOCHS (1000), PYTHON (default: .venv/bin/python), MODELS (models).
 # Runs resume: rerunning the same command continues from the last checkpoint of each step.
 # Outputs: runs/holo${LAYERS}_${INPUT}/stage1 (shared by the offsets), runs/holo${LAYERS}_${INPUT}_${OFFSET}mm,
 # $MODELS/holo${LAYERS}_${INPUT}_${OFFSET}mm{.onnx,.int8-qop.onnx,.int8-qdq.onnx,.prefilter*.onnx,.eval.json}.
@@ -41,13 +41,13 @@ run="runs/$name"
 echo "== stage 2 (offset $offset mm) → $run"
 "$py" -m tensorholo_training.train --config training/configs/gpu_stage2.json --run-dir "$run" \
   --set dataset="\"$data\"" --set num_layers="$layers" --set input_layers="$il" --set offset_mm="$offset" \
-  --set init_from="\"$stage1/stage1.pt\"" --set identity_epochs="${IDENTITY_EPOCHS:-50}" \
+  --set init_from="\"$stage1/stage1.pt\"" \
   --set stage2_epochs="${STAGE2_EPOCHS:-1000}"
 
 echo "== export → $models/$name*.onnx"
-"$py" -m tensorholo_training.export --checkpoint "$run/final.pt" --out-dir "$models" --name "$name" --int8 \
+"$py" -m tensorholo_training.export --checkpoint "$run/best.pt" --out-dir "$models" --name "$name" --int8 \
   --calib-dataset "$data" --calib-samples 64
 
 echo "== evaluate (Table 2 protocol, test split, what the SLM shows) → $models/$name.eval.json"
-"$py" -m tensorholo_training.evaluate --checkpoint "$run/final.pt" --dataset "$data" --split test \
+"$py" -m tensorholo_training.evaluate --checkpoint "$run/best.pt" --dataset "$data" --split test \
   --phase-only --out "$models/$name.eval.json"

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Reproduces the interim models shipped in models/ (trained on 2 CPU cores, no GPU; see models/MODEL_CARD.md):
 #   hologram CNNs holo{8,15,30}_rgbd.onnx (stage 1, midpoint hologram, offset-independent) and the pre-filter
-#   CNNs prefilter_{6,12}mm.onnx (identity pre-training + DDPM stage 2 with the 8-layer hologram CNN frozen),
+#   CNNs prefilter_{6,12}mm.onnx (DDPM stage 2 with the 8-layer hologram CNN frozen; the pre-filter corrects AA-DPM
+#   and starts as AA-DPM; the best validation checkpoint best.pt is exported),
 #   each in f32 and int8 (QOperator conv-only and QDQ), then the Table 2 evaluation on the test split.
 #
 #   training/ship_cpu.sh [STEP ...]      STEP: dataset holo8 holo15 holo30 pre6 pre12 export eval (default: all)
@@ -9,7 +10,7 @@
 #
 # Environment: DATA (default data/cpu256), HOLO (holo binary; default target/release/holo, built if missing),
 # PYTHON (default .venv/bin/python), MODELS (default models), RUNS (default runs/cpu),
-# STEPS8/STEPS15/STEPS30 (stage-1 steps, default 4000/2000/1200), PRE_STEPS (stage 2, default 1000),
+# STEPS8/STEPS15/STEPS30 (stage-1 steps, default 4000/2000/1200), PRE_STEPS (stage 2, default 4000),
 # EVAL_LIMIT (test scenes evaluated, default 10).
 # Every step resumes from its last checkpoint when rerun.
 set -euo pipefail
@@ -31,7 +32,7 @@ stage1() {  # LAYERS STEPS
 prefilter() {  # OFFSET_MM
   "$py" -m tensorholo_training.train --config training/configs/cpu_prefilter.json --run-dir "$runs/pre$1" \
     --set dataset="\"$data\"" --set offset_mm="$1" --set init_from="\"$runs/holo8/stage1.pt\"" \
-    --set stage2_steps="${PRE_STEPS:-1000}"
+    --set stage2_steps="${PRE_STEPS:-4000}"
 }
 for step in "${steps[@]}"; do
   echo "== $step"
@@ -53,7 +54,7 @@ for step in "${steps[@]}"; do
           --name "holo${l}_rgbd" --no-prefilter --int8 --calib-dataset "$data" --calib-samples 32 --calib-size 128
       done
       for o in 6 12; do
-        "$py" -m tensorholo_training.export --checkpoint "$runs/pre$o/final.pt" --out-dir "$models" \
+        "$py" -m tensorholo_training.export --checkpoint "$runs/pre$o/best.pt" --out-dir "$models" \
           --name "prefilter_${o}mm" --prefilter-only --int8 --calib-dataset "$data" --calib-samples 32 --calib-size 128
       done ;;
     eval)
@@ -63,10 +64,20 @@ for step in "${steps[@]}"; do
           "$py" -m tensorholo_training.evaluate --onnx "$models/holo${l}_rgbd$prec.onnx" --dataset "$data" \
             --split test --limit "${EVAL_LIMIT:-10}" --out "$models/eval/holo${l}_rgbd$prec.json"
         done
-        for o in 6 12; do
+        for o in 6 12; do  # displayed: DDPM (the pre-filter CNN) and AA-DPM (the non-learned blur) of the same CNN
           "$py" -m tensorholo_training.evaluate --onnx "$models/holo${l}_rgbd.onnx" \
             --prefilter-onnx "$models/prefilter_${o}mm.onnx" --offset-mm "$o" --phase-only --dataset "$data" \
             --split test --limit "${EVAL_LIMIT:-10}" --out "$models/eval/holo${l}_rgbd+prefilter_${o}mm.json"
+          "$py" -m tensorholo_training.evaluate --onnx "$models/holo${l}_rgbd.onnx" --aa-dpm \
+            --offset-mm "$o" --phase-only --dataset "$data" \
+            --split test --limit "${EVAL_LIMIT:-10}" --out "$models/eval/holo${l}_rgbd+aadpm_${o}mm.json"
+        done
+      done
+      for o in 6 12; do  # the int8 pipeline: int8 hologram CNN + int8 pre-filter of the same form
+        for prec in .int8-qop .int8-qdq; do
+          "$py" -m tensorholo_training.evaluate --onnx "$models/holo8_rgbd$prec.onnx" \
+            --prefilter-onnx "$models/prefilter_${o}mm$prec.onnx" --offset-mm "$o" --phase-only --dataset "$data" \
+            --split test --limit "${EVAL_LIMIT:-10}" --out "$models/eval/holo8_rgbd+prefilter_${o}mm$prec.json"
         done
       done ;;
     *) echo "unknown step $step" >&2; exit 2 ;;

@@ -187,7 +187,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                         for &threads in &args.threads {
                             set_cnn_threads(threads)?;
                             let (s, runs) = time_runs(args.repeat, args.max_seconds, || {
-                                plan.run_heads(input.view())?;
+                                plan.run_outputs(input.view())?;
                                 Ok(())
                             })?;
                             let gflops = 2.0 * macs as f64 * (h * w) as f64 / s / 1e9;

@@ -38,7 +38,7 @@ fn cnn(c: &mut Criterion) {
     for layout in CnnLayout::ALL {
         let plan = model.plan_with_layout(h, w, layout).expect("plans");
         group.bench_function(BenchmarkId::from_parameter(layout), |b| {
-            b.iter(|| plan.run_heads(input.view()).expect("runs"))
+            b.iter(|| plan.run_outputs(input.view()).expect("runs"))
         });
     }
     group.finish();

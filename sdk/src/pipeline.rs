@@ -238,7 +238,7 @@ pub struct SlmFrame {
 enum Task {
     /// Heads → field, offset propagation, then the pre-filter input or pass 1 of the encoding.
     Midpoint { prefilter: bool },
-    /// Pre-filter heads → field, then pass 1 of the encoding.
+    /// Pre-filter output `(Re, Im)` → field, then pass 1 of the encoding.
     Filtered,
     /// Pass 2 of the encoding and the LUT.
     Encode {
@@ -250,9 +250,10 @@ enum Task {
 /// Everything one colour channel reuses between frames.
 #[derive(Debug)]
 struct ColourState {
-    /// Amplitude and phase heads of this colour (`[H, W]`), written by the session.
-    amp: Vec<f32>,
-    phs: Vec<f32>,
+    /// Two real planes of this colour (`[H, W]`), written by the session: the midpoint heads (amplitude,
+    /// phase) before [`Task::Midpoint`]; with a pre-filter, `(Re H, Im H)` of the offset hologram after it
+    /// (the pre-filter's input) and the pre-filter's output `(Re H', Im H')` before [`Task::Filtered`].
+    planes: [Vec<f32>; 2],
     field: Vec<Complex32>,
     plan: SpectralPlan,
     /// Offset transfer function with the carrier removed (Eq. 6); `None` at 0 m.
@@ -273,10 +274,11 @@ impl ColourState {
                     self.plan.apply(&mut self.field, t, &mut self.scratch)?;
                 }
                 if prefilter {
-                    // Pre-filter input (DESIGN §3): |H| and arg H/2π + 0.5, into the heads buffers.
-                    for ((a, p), v) in self.amp.iter_mut().zip(&mut self.phs).zip(&self.field) {
-                        *a = v.norm();
-                        *p = v.im.atan2(v.re) / std::f32::consts::TAU + 0.5;
+                    // Pre-filter input (DESIGN §3, format 2): Re H and Im H, into the two planes.
+                    let [re, im] = &mut self.planes;
+                    for ((r, i), v) in re.iter_mut().zip(im.iter_mut()).zip(&self.field) {
+                        *r = v.re;
+                        *i = v.im;
                     }
                 } else {
                     self.stats = self.encoder.analyse(&mut self.field, &mut self.phase)?;
@@ -284,7 +286,10 @@ impl ColourState {
                 Ok(())
             }
             Task::Filtered => {
-                self.heads_to_field();
+                let [re, im] = &self.planes;
+                for ((f, &r), &i) in self.field.iter_mut().zip(re).zip(im) {
+                    *f = Complex32::new(r, i);
+                }
                 self.stats = self.encoder.analyse(&mut self.field, &mut self.phase)?;
                 Ok(())
             }
@@ -302,7 +307,8 @@ impl ColourState {
     }
 
     fn heads_to_field(&mut self) {
-        for ((f, &a), &p) in self.field.iter_mut().zip(&self.amp).zip(&self.phs) {
+        let [amp, phs] = &self.planes;
+        for ((f, &a), &p) in self.field.iter_mut().zip(amp).zip(phs) {
             *f = head_to_phasor(a, p);
         }
     }
@@ -454,7 +460,7 @@ impl CnnStage {
     }
 
     fn run(&mut self, t: Instant) -> Result<(Heads, f64)> {
-        let (amplitude, phase) = self.plan.run_heads(self.input.view())?;
+        let (amplitude, phase) = self.plan.run_outputs(self.input.view())?;
         Ok((Heads { amplitude, phase }, t.elapsed().as_secs_f64()))
     }
 }
@@ -511,8 +517,7 @@ impl HologramSession {
                 None
             };
             *slot = Some(Box::new(ColourState {
-                amp: vec![0.0; n],
-                phs: vec![0.0; n],
+                planes: [vec![0.0; n], vec![0.0; n]],
                 field: vec![Complex32::default(); n],
                 plan: prop.plan().clone(),
                 transfer,
@@ -661,24 +666,26 @@ impl HologramSession {
                 "midpoint heads hold NaN or infinite values".into(),
             ));
         }
-        self.load_heads(heads.amplitude.view(), heads.phase.view())?;
+        self.load_planes(heads.amplitude.view(), heads.phase.view())?;
         let prefilter = self.prefilter.is_some();
         self.workers
             .run(&mut self.states, |_| Task::Midpoint { prefilter })
     }
 
-    fn load_heads(&mut self, amplitude: ArrayView3<f32>, phase: ArrayView3<f32>) -> Result<()> {
+    /// Copies channel `c` of `first` and `second` (`[3, H, W]`) into colour `c`'s two planes.
+    fn load_planes(&mut self, first: ArrayView3<f32>, second: ArrayView3<f32>) -> Result<()> {
         for (c, slot) in self.states.iter_mut().enumerate() {
             let st = slot.as_mut().ok_or_else(lost_state)?;
-            copy_channel(amplitude, c, &mut st.amp);
-            copy_channel(phase, c, &mut st.phs);
+            copy_channel(first, c, &mut st.planes[0]);
+            copy_channel(second, c, &mut st.planes[1]);
         }
         Ok(())
     }
 
     /// Stage 3 on its own: the pre-filter CNN (allocates inside tract), if the session has one: packs
-    /// `[|H|, arg H/2π + 0.5]` (`DESIGN.md` §3), runs it and lets the workers turn its heads into the
-    /// filtered field and run pass 1 of the encoding. A no-op without a pre-filter.
+    /// `[Re H, Im H]` of the offset hologram (`DESIGN.md` §3, format 2), runs it and lets the workers turn
+    /// its outputs `(Re H', Im H')` into the filtered field and run pass 1 of the encoding. A no-op without a
+    /// pre-filter.
     ///
     /// Errors: tract failures ([`HoloError::ModelRun`]); call after [`HologramSession::propagate_to_slm`].
     pub fn run_prefilter(&mut self) -> Result<()> {
@@ -687,11 +694,11 @@ impl HologramSession {
         };
         for (c, slot) in self.states.iter().enumerate() {
             let st = slot.as_ref().ok_or_else(lost_state)?;
-            fill_channel(&mut self.prefilter_input, c, &st.amp);
-            fill_channel(&mut self.prefilter_input, 3 + c, &st.phs);
+            fill_channel(&mut self.prefilter_input, c, &st.planes[0]);
+            fill_channel(&mut self.prefilter_input, 3 + c, &st.planes[1]);
         }
-        let (amplitude, phase) = plan.run_heads(self.prefilter_input.view())?;
-        self.load_heads(amplitude.view(), phase.view())?;
+        let (real, imag) = plan.run_outputs(self.prefilter_input.view())?;
+        self.load_planes(real.view(), imag.view())?;
         self.workers.run(&mut self.states, |_| Task::Filtered)
     }
 

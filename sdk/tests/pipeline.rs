@@ -66,8 +66,8 @@ fn naive(p: &HologramPipeline, f: &RgbdFrame) -> (Array3<f32>, Array3<u8>) {
         let mut input = Array3::<f32>::zeros((6, h, w));
         for c in 0..3 {
             for ((y, x), v) in field.index_axis(Axis(0), c).indexed_iter() {
-                input[[c, y, x]] = v.norm();
-                input[[3 + c, y, x]] = v.arg() / std::f32::consts::TAU + 0.5;
+                input[[c, y, x]] = v.re;
+                input[[3 + c, y, x]] = v.im;
             }
         }
         field = pre.run(input.view()).unwrap();

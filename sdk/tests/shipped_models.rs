@@ -40,11 +40,12 @@ fn check(
     let (a, p) = model
         .plan(input.dim().1, input.dim().2)
         .unwrap()
-        .run_heads(input.view())
+        .run_outputs(input.view())
         .unwrap();
+    let [first, second] = kind.output_names();
     let (ra, rp) = (
-        fixture(&format!("{stem}_amplitude.npy")),
-        fixture(&format!("{stem}_phase.npy")),
+        fixture(&format!("{stem}_{first}.npy")),
+        fixture(&format!("{stem}_{second}.npy")),
     );
     let diffs: Vec<f32> = a
         .iter()

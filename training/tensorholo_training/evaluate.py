@@ -1,7 +1,7 @@
 """The paper's Table 2 protocol on a dataset split, for trained checkpoints, exported ONNX files and baselines.
 
-``python -m tensorholo_training.evaluate (--checkpoint RUN/final.pt | --onnx NAME.onnx [--prefilter-onnx P])
---dataset DIR [--split test] [--phase-only] [--baseline NAME=FOLDER ...] [--out report.json]``
+``python -m tensorholo_training.evaluate (--checkpoint RUN/final.pt | --onnx NAME.onnx [--prefilter-onnx P |
+--aa-dpm]) --dataset DIR [--split test] [--phase-only] [--baseline NAME=FOLDER ...] [--out report.json]``
 
 For every scene: PSNR and SSIM (data range 1, scikit-image definitions, :mod:`.metrics`) of
 
@@ -11,6 +11,9 @@ For every scene: PSNR and SSIM (data range 1, scikit-image definitions, :mod:`.m
 
 With ``--phase-only`` the prediction is the post-encoding midpoint hologram (DDPM chain: offset, pre-filter,
 double phase, Fourier filter, back-propagation), what the display shows; otherwise the complex CNN output.
+Without a pre-filter the chain is plain double phase; ``--aa-dpm`` puts the non-learned AA-DPM blur (σ = 0.7 px,
+5 taps, the SDK's default) in the pre-filter's place: the CNN's hologram as ``holo render`` shows it without
+``--prefilter``.
 
 Baselines (Maimone et al. / TensorHolo V1 / AA-DPM / BL-DPM for the model card) are computed by ``holo`` on the
 same scenes; ``--baseline NAME=FOLDER`` reads ``FOLDER/<index:05d>.npy`` (complex64 ``[3, H, W]`` midpoint
@@ -62,8 +65,10 @@ def cnn_predictor(net, prefilter=None, offset_m: float = 0.0, display: Display =
 
 def onnx_predictor(path: str, prefilter_path: str | None = None, offset_m: float = 0.0,
                    display: Display = Display(), phase_only: bool = False,
-                   options=PropagationOptions(), threads: int = 1) -> Predictor:
-    """Like :func:`cnn_predictor` for exported ONNX files run by onnxruntime (f32 or int8)."""
+                   options=PropagationOptions(), threads: int = 1, aa_dpm: bool = False) -> Predictor:
+    """Like :func:`cnn_predictor` for exported ONNX files run by onnxruntime (f32 or int8). With ``aa_dpm``
+    (and no ``prefilter_path``) the pre-filter is the non-learned AA-DPM blur: an untrained
+    :class:`.model.PrefilterCNN` on the AA-DPM base, whose correction is zero."""
     import onnxruntime as ort
 
     def session(p):
@@ -82,10 +87,19 @@ def onnx_predictor(path: str, prefilter_path: str | None = None, offset_m: float
 
         def forward(self, x):
             name = self.sess.get_inputs()[0].name
-            a, p = self.sess.run(["amplitude", "phase"], {name: x.detach().cpu().numpy().astype(np.float32)})
-            return torch.from_numpy(a), torch.from_numpy(p)
+            # (amplitude, phase) of a hologram CNN, (real, imag) of a pre-filter: the graph's output order
+            first, second = self.sess.run(None, {name: x.detach().cpu().numpy().astype(np.float32)})
+            return torch.from_numpy(first), torch.from_numpy(second)
 
-    return cnn_predictor(_Onnx(s_net), _Onnx(s_pre) if s_pre else None, offset_m, display, phase_only, options)
+    if s_pre is not None:
+        pre = _Onnx(s_pre)
+    elif aa_dpm:
+        from .model import prefilter_cnn
+
+        pre = prefilter_cnn(base="aa-dpm")
+    else:
+        pre = None
+    return cnn_predictor(_Onnx(s_net), pre, offset_m, display, phase_only, options)
 
 
 def npy_baseline(folder: str) -> Predictor:
@@ -154,7 +168,10 @@ def main(argv: list[str] | None = None) -> int:
     src = ap.add_mutually_exclusive_group(required=True)
     src.add_argument("--checkpoint")
     src.add_argument("--onnx")
-    ap.add_argument("--prefilter-onnx")
+    pre = ap.add_mutually_exclusive_group()
+    pre.add_argument("--prefilter-onnx")
+    pre.add_argument("--aa-dpm", action="store_true",
+                     help="with --phase-only and --onnx: encode with AA-DPM instead of a pre-filter CNN")
     ap.add_argument("--dataset", required=True)
     ap.add_argument("--split", default="test")
     ap.add_argument("--phase-only", action="store_true")
@@ -183,7 +200,8 @@ def main(argv: list[str] | None = None) -> int:
                           float(meta["tensorholo.pixel_pitch_m"]), float(meta["tensorholo.volume_depth_m"]))
         layers = int(meta["tensorholo.input_layers"])
         offset = args.offset_mm * 1e-3 if args.offset_mm is not None else float(meta["tensorholo.offset_m"])
-        model = onnx_predictor(args.onnx, args.prefilter_onnx, offset, display, args.phase_only, options)
+        model = onnx_predictor(args.onnx, args.prefilter_onnx, offset, display, args.phase_only, options,
+                               aa_dpm=args.aa_dpm)
     ds = LdiDataset(args.dataset, args.split, layers)
     predictors = {"model": model}
     for b in args.baseline:

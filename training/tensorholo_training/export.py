@@ -8,18 +8,22 @@ Files (``NAME`` e.g. ``holo30_rgbd_6mm``):
 - ``NAME.onnx``: hologram CNN, float32, opset 17, input ``rgbd`` ``[1, 4·L, H, W]`` with symbolic ``H``,
   ``W``; outputs ``amplitude`` and ``phase`` ``[1, 3, H, W]``;
 - ``NAME.prefilter.onnx``: the DDPM pre-filter CNN (only when the run trained one), input ``slm_field``
-  ``[1, 6, H, W]`` (amplitude ``|H|``, phase ``arg H/2π + 0.5`` of the offset hologram), same outputs;
+  ``[1, 6, H, W]`` = ``[Re H, Im H]`` of the offset hologram, outputs ``real`` and ``imag`` ``[1, 3, H, W]``
+  of the filtered field (format version 2; the AA-DPM base blur is a ``Pad(edge)`` + depthwise ``Conv`` and
+  the residual an ``Add`` inside the graph, :class:`.model.PrefilterCNN`);
 - with ``--int8``, for each: ``.int8-qop.onnx`` (QOperator: ``QLinearConv``; only ``Conv`` nodes are
   quantised, so residual ``Add``, ``Concat``, ``Relu`` and ``Tanh`` stay float, because tract 0.23 runs
   ``QLinearConv`` but not ``QLinearAdd``) and ``.int8-qdq.onnx`` (QDQ: ``QuantizeLinear``/``DequantizeLinear``
   pairs around float ``Conv``, which tract folds). Static calibration (MinMax) on training inputs; weights
-  int8 symmetric per tensor, activations uint8.
+  int8 symmetric per tensor, activations uint8. The pre-filter's fixed blur stays float (it is not learned,
+  and its output carries the whole field, while the learned correction is small).
 
 Every file carries ``metadata_props`` (all keys prefixed ``tensorholo.``): ``kind`` (``hologram-cnn`` or
 ``prefilter-cnn``), ``layers``, ``wavelengths_m`` (comma-separated, R,G,B), ``pixel_pitch_m``,
 ``volume_depth_m``, ``offset_m``, ``input_layers``, ``trained_resolution`` (``HxW``), ``training_commit``, plus
 ``precision`` (``f32``, ``int8-qoperator-conv``, ``int8-qdq-conv``), ``channels``, ``format_version`` and ``io``
-(a one-line statement of the input/output semantics).
+(a one-line statement of the input/output semantics), and for a pre-filter ``prefilter_base``
+(``aa-dpm(sigma_px=0.7,taps=5)`` or ``identity``).
 """
 from __future__ import annotations
 
@@ -33,24 +37,27 @@ from typing import Iterable, Sequence
 import numpy as np
 import torch
 
-from .model import ResidualCNN, hologram_cnn, prefilter_cnn
+from .model import PrefilterCNN, ResidualCNN, hologram_cnn, load_prefilter_state, prefilter_cnn
 
 INPUT_NAMES = {"hologram-cnn": "rgbd", "prefilter-cnn": "slm_field"}
-OUTPUT_NAMES = ("amplitude", "phase")
+OUTPUT_NAMES = {"hologram-cnn": ("amplitude", "phase"), "prefilter-cnn": ("real", "imag")}
+#: ``tensorholo.format_version`` per kind: 2 for the Cartesian pre-filter (``[Re, Im]`` in and out), 1 for the
+#: hologram CNN (unchanged since version 1).
+FORMAT_VERSION = {"hologram-cnn": "1", "prefilter-cnn": "2"}
 METADATA_PREFIX = "tensorholo."
 IO_DESCRIPTION = {
     "hologram-cnn": "rgbd[1,4L,H,W] in [0,1], per layer r,g,b amplitude then depth d (0 = near) -> "
                     "amplitude[1,3,H,W] in [0,sqrt2], phase[1,3,H,W] in [0,1] meaning (p-0.5)*2pi rad: "
                     "the midpoint hologram, R,G,B",
-    "prefilter-cnn": "slm_field[1,6,H,W] = |H|, arg(H)/2pi+0.5 of H = ASM(H_mid, s)*exp(-i 2pi s/lambda) "
-                     "(amplitude in midpoint units, not rescaled) -> amplitude[1,3,H,W] in [0,sqrt2], "
-                     "phase[1,3,H,W] in [0,1] (same meaning), then double phase encoding",
+    "prefilter-cnn": "slm_field[1,6,H,W] = Re H (R,G,B), Im H (R,G,B) of H = ASM(H_mid, s)*exp(-i 2pi s/lambda) "
+                     "(midpoint amplitude units, not rescaled) -> real[1,3,H,W], imag[1,3,H,W] of the filtered "
+                     "field H' = base(H) + CNN(H), then double phase encoding",
 }
 
 
 def model_metadata(
     kind: str,
-    module: ResidualCNN,
+    module: ResidualCNN | PrefilterCNN,
     wavelengths_m: Sequence[float],
     pixel_pitch_m: float,
     volume_depth_m: float,
@@ -87,9 +94,12 @@ def model_metadata(
         "trained_resolution": f"{int(trained_resolution[0])}x{int(trained_resolution[1])}",
         "training_commit": training_commit,
         "precision": precision,
-        "format_version": "1",
+        "format_version": FORMAT_VERSION[kind],
         "io": IO_DESCRIPTION[kind],
     }
+    if isinstance(module, PrefilterCNN):
+        values["prefilter_base"] = (f"aa-dpm(sigma_px={module.sigma_px!r},taps={module.size})"
+                                    if module.base == "aa-dpm" else module.base)
     return {METADATA_PREFIX + k: v for k, v in values.items()}
 
 
@@ -114,7 +124,7 @@ def read_metadata(path: str) -> dict[str, str]:
     return {p.key: p.value for p in onnx.load(path).metadata_props}
 
 
-def export_onnx(module: ResidualCNN, path: str, kind: str, metadata: dict[str, str], example_size=(64, 64),
+def export_onnx(module: ResidualCNN | PrefilterCNN, path: str, kind: str, metadata: dict[str, str], example_size=(64, 64),
                 opset: int = 17) -> str:
     """Exports a CNN to ONNX (float32, batch 1, symbolic ``H``, ``W``) and writes its metadata.
 
@@ -131,6 +141,7 @@ def export_onnx(module: ResidualCNN, path: str, kind: str, metadata: dict[str, s
     module = module.to("cpu").float().eval()
     x = torch.rand(1, module.in_channels, *example_size)
     name = INPUT_NAMES[kind]
+    outputs = list(OUTPUT_NAMES[kind])
     axes = {2: "H", 3: "W"}
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with torch.no_grad(), warnings.catch_warnings():
@@ -138,7 +149,7 @@ def export_onnx(module: ResidualCNN, path: str, kind: str, metadata: dict[str, s
         warnings.simplefilter("ignore", DeprecationWarning)
         torch.onnx.export(
             module, (x,), path, dynamo=False, opset_version=opset, input_names=[name],
-            output_names=list(OUTPUT_NAMES), dynamic_axes={name: axes, "amplitude": axes, "phase": axes},
+            output_names=outputs, dynamic_axes={name: axes} | {o: axes for o in outputs},
             do_constant_folding=True,
         )
     set_metadata(path, metadata)
@@ -185,9 +196,13 @@ def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray
     with tempfile.TemporaryDirectory() as tmp:
         prepared = os.path.join(tmp, "prepared.onnx")
         quant_pre_process(f32_path, prepared)
+        # Grouped convolutions are the pre-filter's fixed AA-DPM blur: kept in float (see the module docs).
+        fixed = [n.name for n in onnx.load(prepared).graph.node if n.op_type == "Conv"
+                 and any(a.name == "group" and a.i > 1 for a in n.attribute)]
         quantize_static(
             prepared, out_path, _Reader(name, calibration), quant_format=qformat, op_types_to_quantize=["Conv"],
             per_channel=False, activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
+            nodes_to_exclude=fixed,
         )
     meta[METADATA_PREFIX + "precision"] = precision
     set_metadata(out_path, meta)
@@ -200,7 +215,8 @@ def run_onnx(path: str, x: np.ndarray, threads: int = 1) -> tuple[np.ndarray, np
     Args:
         path: ``.onnx`` file; x: float32 ``[1, C, H, W]``.
     Returns:
-        ``(amplitude, phase)`` float32 ``[1, 3, H, W]``.
+        its two outputs, float32 ``[1, 3, H, W]`` each: ``(amplitude, phase)`` of a hologram CNN, ``(real,
+        imag)`` of a pre-filter.
     """
     import onnxruntime as ort
 
@@ -209,8 +225,8 @@ def run_onnx(path: str, x: np.ndarray, threads: int = 1) -> tuple[np.ndarray, np
     so.log_severity_level = 3
     sess = ort.InferenceSession(path, so, providers=["CPUExecutionProvider"])
     name = sess.get_inputs()[0].name
-    amp, phs = sess.run(list(OUTPUT_NAMES), {name: x.astype(np.float32)})
-    return amp, phs
+    first, second = sess.run(None, {name: x.astype(np.float32)})
+    return first, second
 
 
 def load_checkpoint(path: str) -> dict:
@@ -222,8 +238,9 @@ def load_checkpoint(path: str) -> dict:
     net.load_state_dict(s["net"])
     pre = None
     if s.get("prefilter") is not None:
-        pre = prefilter_cnn(cfg["prefilter_layers"], cfg["prefilter_channels"])
-        pre.load_state_dict(s["prefilter"])
+        pre = prefilter_cnn(cfg["prefilter_layers"], cfg["prefilter_channels"], cfg.get("prefilter_base", "aa-dpm"),
+                            cfg.get("aa_sigma_px", 0.7), cfg.get("aa_kernel_size", 5))
+        load_prefilter_state(pre, s["prefilter"], path)
     return {"net": net.eval(), "prefilter": pre.eval() if pre is not None else None, "config": cfg,
             "training_commit": s.get("training_commit", "unknown"),
             "trained_resolution": s.get("trained_resolution", [0, 0])}

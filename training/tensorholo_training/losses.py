@@ -3,8 +3,8 @@
 Stage 1 (supervised): ``w_data · data fidelity + w_fs · dynamic focal stack + w_fs_tv · its total variation``.
 Stage 2 (DDPM, unsupervised): the midpoint prediction goes through offset propagation (Eq. 6), the pre-filter
 CNN, double phase encoding without blur (Eq. 7), the Fourier filter (Eq. 8–9) and back-propagation (Eq. 10);
-loss ``w_fs · focal stack(post-encoding, GT) + w_fs_tv · TV + w_reg · Eq. 11``. Identity pre-training of the
-pre-filter: :func:`identity_loss`.
+loss ``w_fs · focal stack(post-encoding, GT) + w_fs_tv · TV + w_reg · Eq. 11``. The pre-filter needs no
+identity pre-training: :class:`.model.PrefilterCNN` starts as its base filter by construction.
 
 Complex fields are complex64 ``[B, 3, H, W]``; depths are normalised (0 = near); amplitudes in the units of
 the midpoint hologram.
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import torch
 
 from . import optics
-from .model import ResidualCNN, prefilter_input
+from .model import PrefilterCNN, prefilter_input, prefilter_output
 from .optics import Display, PropagationOptions
 
 
@@ -205,7 +205,7 @@ class DdpmOutput:
     """Intermediate results of :func:`ddpm_forward` (all ``[B, 3, H, W]``)."""
 
     slm_field: torch.Tensor  #: complex64, offset hologram ``ASM(H_mid, s)·e^{−i2πs/λ}`` (Eq. 6, before the CNN)
-    pre_amplitude: torch.Tensor  #: float, pre-encoding amplitude (pre-filter output or ``|slm_field|``)
+    pre_amplitude: torch.Tensor  #: float, pre-encoding amplitude (``|pre-filter output|`` or ``|slm_field|``)
     pre_phase01: torch.Tensor  #: float, pre-encoding phase in [0, 1]
     phase: torch.Tensor  #: float, double phase pattern (radians, unwrapped)
     amplitude_scale: torch.Tensor  #: float ``[B]``, the double phase normaliser ``a``
@@ -215,7 +215,7 @@ class DdpmOutput:
 def ddpm_forward(
     amplitude: torch.Tensor,
     phase01: torch.Tensor,
-    prefilter: ResidualCNN | None,
+    prefilter: PrefilterCNN | None,
     offset_m: float,
     display: Display,
     options: PropagationOptions = PropagationOptions(pad=True),
@@ -226,7 +226,8 @@ def ddpm_forward(
 
     Args:
         amplitude, phase01: hologram CNN outputs ``[B, 3, H, W]`` (``[0, √2]``, ``[0, 1]``).
-        prefilter: the pre-filter CNN, or ``None`` (plain DPM, e.g. for a 0 mm offset).
+        prefilter: the pre-filter CNN (``[Re, Im]`` in and out), or ``None`` (plain DPM, e.g. for a 0 mm
+            offset).
         offset_m: SLM offset ``s`` in metres.
         display: geometry; options: ASM padding / band limit.
     Returns:
@@ -234,46 +235,12 @@ def ddpm_forward(
     """
     mid = optics.amp_phase_to_complex(amplitude, phase01)
     slm = optics.offset_to_slm(mid, offset_m, display, options)
-    if prefilter is not None:
-        pa, pp = prefilter(prefilter_input(slm))
-        pa, pp = pa.float(), pp.float()
-        pre = optics.amp_phase_to_complex(pa, pp)
-    else:
-        pre = slm
-        pa, pp = optics.complex_to_amp_phase(slm)
+    pre = prefilter_output(*prefilter(prefilter_input(slm))) if prefilter is not None else slm
+    pa, pp = optics.complex_to_amp_phase(pre)
     dp = optics.double_phase_encode(pre, wrap=False, clamp_eps=1e-6)
     post = optics.simulate_phase_only(dp.phase, offset_m, display, options)
     post = post * dp.amplitude_scale[:, None, None, None]
     return DdpmOutput(slm, pa, pp, dp.phase, dp.amplitude_scale, post)
-
-
-def identity_loss(
-    prefilter: ResidualCNN,
-    slm_field: torch.Tensor,
-    kind: str = "l2",
-    target: torch.nn.Module | None = None,
-) -> torch.Tensor:
-    """Pre-training loss of the pre-filter CNN: ``op(A', A_t) + op(p', p_t)`` where ``(A_t, p_t)`` is the
-    input ``(|H|, arg H/2π + 0.5)`` itself (identity, the paper's choice) or, with ``target``, what that
-    filter makes of it (e.g. :class:`.model.AntiAliasFilter`: start DDPM training from AA-DPM).
-
-    Args:
-        prefilter: the pre-filter CNN.
-        slm_field: complex64 ``[B, 3, H, W]`` offset holograms (from the stage-1 hologram CNN).
-        kind: ``"l2"`` or ``"l1"``.
-        target: ``None`` (identity) or a module with the pre-filter's interface giving the target heads.
-    Returns:
-        scalar tensor.
-    """
-    op = _op(kind)
-    x = prefilter_input(slm_field.detach())
-    pa, pp = prefilter(x)
-    if target is None:
-        ta, tp = x[:, :3], x[:, 3:]
-    else:
-        with torch.no_grad():
-            ta, tp = target(x)
-    return op(pa.float(), ta.float()) + op(pp.float(), tp.float())
 
 
 @dataclass

@@ -10,8 +10,10 @@ last layer has 6 outputs through two heads:
 Input ``rgbd`` ``[B, 4·L, H, W]`` in ``[0, 1]`` (``L = 1`` for RGB-D, 5 for an LDI; per layer ``r, g, b, d``,
 depth 0 = near), centred by ``−0.5`` inside the network. Output: the midpoint hologram (Fig. 3).
 
-Pre-filter CNN (DDPM, Eq. 6): the same architecture with 8 layers of 8 filters; input and output ``[B, 6, H, W]``
-= amplitude and phase of the offset (SLM-plane) hologram in the same head semantics (see :func:`prefilter_input`).
+Pre-filter CNN (DDPM, Eq. 6; :class:`PrefilterCNN`): a residual correction of a fixed base filter in Cartesian
+form, ``H' = base(H) + f([Re H, Im H])``, where ``f`` is the same architecture with 8 layers of 8 filters (no
+heads, no input centring) whose last layer starts at zero, and ``base`` is the AA-DPM Gaussian blur (default) or
+the identity. Input and output ``[B, 6, H, W]`` = real and imaginary parts of the offset (SLM-plane) hologram.
 
 Residual wiring (TensorHolo's): with ``y_i`` the output of layer ``i`` and ``s_i`` its input,
 ``s_0 = x``, ``s_i = y_{i−1}`` for ``i ∈ {1, 2}`` or ``i`` even, and ``s_i = y_{i−1} + s_{i−2}`` for odd
@@ -23,9 +25,10 @@ from __future__ import annotations
 import math
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
-from .optics import amp_phase_to_complex, anti_alias_blur, complex_to_amp_phase
+from .optics import gaussian_kernel
 
 SQRT2 = math.sqrt(2.0)
 
@@ -127,40 +130,111 @@ def hologram_cnn(num_layers: int = 30, input_layers: int = 1, channels: int = 24
     return ResidualCNN(num_layers, channels, 4 * input_layers, 6)
 
 
-def prefilter_cnn(num_layers: int = 8, channels: int = 8) -> ResidualCNN:
-    """The DDPM pre-filter CNN: 8 layers × 8 filters, input/output ``[B, 6, H, W]`` (amplitude, phase)."""
-    return ResidualCNN(num_layers, channels, 6, 6)
+#: Bases of the pre-filter CNN (:class:`PrefilterCNN`).
+PREFILTER_BASES = ("aa-dpm", "identity")
+
+
+class PrefilterCNN(nn.Module):
+    """The DDPM pre-filter CNN in Cartesian residual form: ``H' = base(H) + f([Re H, Im H])``.
+
+    ``f`` is a :class:`ResidualCNN` (``num_layers`` × ``channels``, 6 in, 6 out, raw output: no tanh heads, no
+    input centring) whose last layer is zero at initialisation, so an untrained pre-filter is exactly its
+    ``base``: the AA-DPM blur (:func:`.optics.anti_alias_blur`, σ = ``sigma_px``, ``size`` taps, edges
+    replicated) or the identity (plain DPM). This replaces the paper's identity pre-training (the network is
+    the identity, or AA-DPM, by construction) and lets training only improve on that encoding; the paper's
+    amplitude/phase pre-filter cannot represent the blur, whose output phase is not a smooth function of the
+    input phase near zeros of ``|H|`` (``training/README.md``, "Why the amplitude/phase pre-filters lost to
+    AA-DPM").
+
+    The blur is a fixed depthwise 2D convolution (the outer product of the 1D Gaussian) after replicate padding
+    of the 6 real channels, which is the complex separable blur exactly (it is linear), and which ONNX and tract
+    run as ``Pad(mode=edge)`` + grouped ``Conv``.
+
+    Args:
+        num_layers, channels: of the correction CNN ``f`` (8 × 8 in the paper).
+        base: ``"aa-dpm"`` or ``"identity"``.
+        sigma_px, size: the AA-DPM Gaussian (standard deviation in pixels, odd number of taps).
+    """
+
+    def __init__(self, num_layers: int = 8, channels: int = 8, base: str = "aa-dpm", sigma_px: float = 0.7,
+                 size: int = 5):
+        super().__init__()
+        if base not in PREFILTER_BASES:
+            raise ValueError(f"pre-filter base must be one of {PREFILTER_BASES}, got {base!r}")
+        self.base, self.sigma_px, self.size = base, float(sigma_px), int(size)
+        self.net = ResidualCNN(num_layers, channels, in_channels=6, out_channels=6, centre_input=False)
+        nn.init.zeros_(self.net.convs[-1].weight)
+        nn.init.zeros_(self.net.convs[-1].bias)
+        k = gaussian_kernel(self.sigma_px, self.size)
+        self.register_buffer("blur", torch.outer(k, k).expand(6, 1, self.size, self.size).clone(),
+                             persistent=False)
+
+    @property
+    def num_layers(self) -> int:
+        return self.net.num_layers
+
+    @property
+    def channels(self) -> int:
+        return self.net.channels
+
+    @property
+    def in_channels(self) -> int:
+        return 6
+
+    def base_filter(self, x: torch.Tensor) -> torch.Tensor:
+        """``base`` on ``[B, 6, H, W]`` Cartesian channels (identity or the AA-DPM blur)."""
+        if self.base == "identity":
+            return x
+        r = self.size // 2
+        return F.conv2d(F.pad(x, (r, r, r, r), mode="replicate"), self.blur.to(x.dtype), groups=6)
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Filters the offset hologram.
+
+        Args:
+            x: float ``[B, 6, H, W]`` = ``[Re H (R, G, B), Im H (R, G, B)]`` (:func:`prefilter_input`), in the
+                midpoint hologram's amplitude units.
+        Returns:
+            ``(real, imag)``: float ``[B, 3, H, W]`` each, the filtered field ``H'``.
+        """
+        real, imag = torch.split(self.base_filter(x) + self.net.raw(x), 3, dim=1)
+        return real, imag
+
+
+def prefilter_cnn(num_layers: int = 8, channels: int = 8, base: str = "aa-dpm", sigma_px: float = 0.7,
+                  size: int = 5) -> PrefilterCNN:
+    """The DDPM pre-filter CNN (:class:`PrefilterCNN`): 8 layers × 8 filters on an AA-DPM base by default."""
+    return PrefilterCNN(num_layers, channels, base, sigma_px, size)
 
 
 def prefilter_input(slm_field: torch.Tensor) -> torch.Tensor:
-    """Pre-filter CNN input from the SLM-plane field (DESIGN §3, Eq. 6).
-
-    Channels ``[|H|_r, |H|_g, |H|_b, p_r, p_g, p_b]`` with ``|H|`` in the hologram CNN's amplitude units (not
-    rescaled) and ``p = arg(H)/(2π) + 0.5 ∈ [0, 1]``, the same semantics as the CNN heads, so that an identity
-    mapping is representable (TensorHolo's choice).
+    """Pre-filter CNN input from the SLM-plane field (DESIGN §3 as amended, Eq. 6): ``[Re H, Im H]``.
 
     Args:
-        slm_field: complex64 ``[B, 3, H, W]`` after offset propagation with the carrier removed.
+        slm_field: complex64 ``[B, 3, H, W]`` after offset propagation with the carrier removed (amplitude in
+            the hologram CNN's units, not rescaled).
     Returns:
-        float32 ``[B, 6, H, W]``.
+        float32 ``[B, 6, H, W]``: real parts R, G, B then imaginary parts R, G, B.
     """
-    amp, phs = complex_to_amp_phase(slm_field)
-    return torch.cat([amp, phs], dim=1)
+    return torch.cat([slm_field.real, slm_field.imag], dim=1).float()
 
 
-class AntiAliasFilter(nn.Module):
-    """The non-learned AA-DPM filter with the pre-filter CNN's interface: input :func:`prefilter_input`
-    ``[B, 6, H, W]``, output ``(amplitude, phase01)`` of the Gaussian-blurred field
-    (:func:`.optics.anti_alias_blur`). Puts "CNN + AA-DPM" through the same DDPM chain and metrics as a trained
-    pre-filter, and is the target of the ``identity_target = "aa-dpm"`` pre-training."""
+def prefilter_output(real: torch.Tensor, imag: torch.Tensor) -> torch.Tensor:
+    """The filtered complex field ``[B, 3, H, W]`` from the pre-filter's ``(real, imag)`` outputs."""
+    return torch.complex(real.float(), imag.float())
 
-    def __init__(self, sigma_px: float = 0.7, size: int = 5):
-        super().__init__()
-        self.sigma_px, self.size = sigma_px, size
 
-    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        field = amp_phase_to_complex(x[:, :3], x[:, 3:])
-        return complex_to_amp_phase(anti_alias_blur(field, self.sigma_px, self.size))
+def load_prefilter_state(prefilter: PrefilterCNN, state: dict, source: str) -> None:
+    """Loads pre-filter weights, refusing with a clear error those of the removed amplitude/phase pre-filter
+    (a :class:`ResidualCNN` state, keys ``convs.*``) or of another architecture."""
+    try:
+        prefilter.load_state_dict(state)
+    except RuntimeError as e:
+        old = any(k.startswith("convs.") for k in state)
+        raise ValueError(
+            f"{source}: its pre-filter weights do not fit this pre-filter CNN"
+            + (" (they are the old amplitude/phase pre-filter; train a new one from a stage1.pt)" if old else "")
+            + f": {e}") from None
 
 
 def count_parameters(module: nn.Module) -> int:
@@ -180,4 +254,5 @@ if __name__ == "__main__":  # pragma: no cover - printed by `python -m tensorhol
             print(f"hologram CNN {layers:2d} layers {name:5s}: {count_parameters(m):7d} parameters, "
                   f"{macs_per_pixel(m):7d} MAC/pixel")
     p = prefilter_cnn()
-    print(f"pre-filter CNN 8 layers × 8 filters: {count_parameters(p)} parameters, {macs_per_pixel(p)} MAC/pixel")
+    print(f"pre-filter CNN 8 layers × 8 filters: {count_parameters(p)} parameters, "
+          f"{macs_per_pixel(p.net) + 6 * p.size ** 2} MAC/pixel (with the AA-DPM blur)")

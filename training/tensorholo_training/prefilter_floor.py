@@ -4,7 +4,8 @@ protocol (same scenes, crops, focal depths and metrics as the learning curve's `
 The rows:
 
 - ``ddpm``: the run's pre-filter CNN, then double phase (Eq. 6–7), Fourier filter, back to the midpoint;
-- ``aa-dpm``: :class:`.model.AntiAliasFilter` (the SDK's AA-DPM blur) in its place;
+- ``aa-dpm``: an untrained :class:`.model.PrefilterCNN` on the AA-DPM base (its correction starts at zero,
+  so it is exactly the SDK's AA-DPM blur) in its place;
 - ``dpm``: no pre-filter (plain double phase).
 
 Each row gives the amplitude and focal-stack PSNR of the post-encoding midpoint hologram against the
@@ -21,7 +22,7 @@ import os
 
 import torch
 
-from .model import AntiAliasFilter
+from .model import prefilter_cnn
 from .train import Trainer, TrainConfig
 
 
@@ -36,8 +37,9 @@ def compare(run_dir: str, checkpoint: str = "final.pt", batches: int | None = No
     if tr.prefilter is None:
         raise ValueError(f"{run_dir} has no pre-filter (offset {cfg.offset_mm} mm)")
     out = {}
-    for name, pf in [("ddpm", tr.prefilter), ("aa-dpm", AntiAliasFilter(cfg.aa_sigma_px, cfg.aa_kernel_size)),
-                     ("dpm", None)]:
+    aa = prefilter_cnn(cfg.prefilter_layers, cfg.prefilter_channels, "aa-dpm", cfg.aa_sigma_px,
+                       cfg.aa_kernel_size).to(tr.device)
+    for name, pf in [("ddpm", tr.prefilter), ("aa-dpm", aa), ("dpm", None)]:
         tr.prefilter = pf
         row = tr.validate("stage2")
         terms: dict[str, float] = {}

@@ -5,14 +5,17 @@
 Phases (``TrainConfig.stages``):
 
 1. ``stage1``: supervised, hologram CNN only (data fidelity + dynamic focal stack + TV);
-2. ``identity``: identity pre-training of the pre-filter CNN (when one is used: ``offset_mm != 0`` by default);
-3. ``stage2``: DDPM, both CNNs (focal stack of the post-encoding hologram + TV + Eq. 11).
+2. ``stage2``: DDPM, both CNNs (focal stack of the post-encoding hologram + TV + Eq. 11). The pre-filter CNN
+   (when one is used: ``offset_mm != 0`` by default) starts as its base filter (AA-DPM or identity) by
+   construction (:class:`.model.PrefilterCNN`), which stands in for the paper's identity pre-training.
 
 Everything needed to resume lives in ``<run_dir>/checkpoint.pt`` (models, optimizer, phase and step, the
 data order is a function of ``(seed, epoch)`` and the focal depths of ``(seed, step)``); a rerun of the same
 command resumes where it stopped. The resolved configuration is saved as ``<run_dir>/config.json``; losses
 and PSNRs go to ``<run_dir>/learning_curve.csv`` and stdout. ``<run_dir>/stage1.pt`` and ``final.pt`` are
-written at the end of stage 1 and of the run (inputs of :mod:`.export`).
+written at the end of stage 1 and of the run (inputs of :mod:`.export`); ``best.pt`` holds the weights of the
+best validation (``select_metric``) seen in the last phase, the checkpoint to export when the learning curve
+is noisy.
 """
 from __future__ import annotations
 
@@ -37,7 +40,7 @@ from .data import (
     write_synthetic_dataset,
 )
 from .metrics import psnr
-from .model import AntiAliasFilter, count_parameters, hologram_cnn, prefilter_cnn
+from .model import count_parameters, hologram_cnn, load_prefilter_state, prefilter_cnn
 from .optics import Display, PropagationOptions
 
 
@@ -65,24 +68,22 @@ class TrainConfig:
     prefilter_layers: int = 8
     prefilter_channels: int = 8
     use_prefilter: str = "auto"  # "auto" (iff offset_mm != 0), "yes", "no"
+    # the fixed filter the pre-filter CNN corrects (model.PrefilterCNN): "aa-dpm" (the SDK's AA-DPM Gaussian
+    # blur, σ = aa_sigma_px, aa_kernel_size taps) or "identity" (plain DPM)
+    prefilter_base: str = "aa-dpm"
+    aa_sigma_px: float = 0.7
+    aa_kernel_size: int = 5
     # display
     wavelengths_m: list = field(default_factory=lambda: [638e-9, 520e-9, 450e-9])
     pixel_pitch_m: float = 8e-6
     volume_depth_m: float = 6e-3
     offset_mm: float = 0.0
     # schedule
-    stages: list = field(default_factory=lambda: ["stage1", "identity", "stage2"])
+    stages: list = field(default_factory=lambda: ["stage1", "stage2"])
     batch_size: int = 2
     stage1_steps: int = 200
-    identity_steps: int = 20
-    # what the pre-filter is pre-trained to reproduce: "identity" (paper) or "aa-dpm" (the AA-DPM Gaussian
-    # blur of the SLM field, σ = aa_sigma_px, aa_kernel_size taps), so that DDPM starts from AA-DPM's quality
-    identity_target: str = "identity"
-    aa_sigma_px: float = 0.7
-    aa_kernel_size: int = 5
     stage2_steps: int = 100
     stage1_epochs: float = 0.0
-    identity_epochs: float = 0.0
     stage2_epochs: float = 0.0
     lr: float = 1e-4
     betas: list = field(default_factory=lambda: [0.9, 0.99])
@@ -113,6 +114,8 @@ class TrainConfig:
     val_every: int = 50
     val_batches: int = 4
     ckpt_every: int = 50
+    # validation metric whose best value in the last phase is kept as best.pt ("val_psnr_fs" or "val_psnr_amp")
+    select_metric: str = "val_psnr_fs"
 
     # -- derived ------------------------------------------------------------------------------------------
     @property
@@ -155,12 +158,18 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> "TrainConfig":
-        """From a dict; unknown keys are an error (typos must not pass silently)."""
+        """From a dict; unknown keys are an error (typos must not pass silently), except the keys of the
+        removed identity pre-training (``identity_steps``, ``identity_epochs``, ``identity_target``), which
+        configurations of older runs carry and which are ignored."""
         names = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(d) - names - {"_comment", "training_commit"}
+        unknown = set(d) - names - {"_comment", "training_commit"} - REMOVED_KEYS
         if unknown:
             raise ValueError(f"unknown configuration keys: {sorted(unknown)}")
         return cls(**{k: v for k, v in d.items() if k in names})
+
+
+#: Configuration keys of the identity pre-training phase, removed with the amplitude/phase pre-filter.
+REMOVED_KEYS = frozenset({"identity_steps", "identity_epochs", "identity_target"})
 
 
 def set_option(cfg: TrainConfig, assignment: str) -> TrainConfig:
@@ -258,19 +267,19 @@ class Trainer:
         torch.manual_seed(cfg.seed)
         self.net = hologram_cnn(cfg.num_layers, cfg.input_layers, cfg.channels).to(self.device)
         self.prefilter = (
-            prefilter_cnn(cfg.prefilter_layers, cfg.prefilter_channels).to(self.device)
+            prefilter_cnn(cfg.prefilter_layers, cfg.prefilter_channels, cfg.prefilter_base, cfg.aa_sigma_px,
+                          cfg.aa_kernel_size).to(self.device)
             if cfg.prefilter_enabled else None
         )
+        if cfg.select_metric not in ("val_psnr_fs", "val_psnr_amp"):
+            raise ValueError(f"select_metric must be 'val_psnr_fs' or 'val_psnr_amp', not {cfg.select_metric!r}")
         if cfg.init_from:
             state = torch.load(cfg.init_from, map_location=self.device, weights_only=False)
             self.net.load_state_dict(state["net"])
             if self.prefilter is not None and state.get("prefilter") is not None:
-                self.prefilter.load_state_dict(state["prefilter"])
+                load_prefilter_state(self.prefilter, state["prefilter"], cfg.init_from)
             self.log(f"initialised from {cfg.init_from}")
-        if cfg.identity_target not in ("identity", "aa-dpm"):
-            raise ValueError(f"identity_target must be 'identity' or 'aa-dpm', not {cfg.identity_target!r}")
-        self.identity_target = (AntiAliasFilter(cfg.aa_sigma_px, cfg.aa_kernel_size)
-                                if cfg.identity_target == "aa-dpm" else None)
+        self.best: dict = {}
         self.phases = self._phases()
         self.phase_index = 0
         self.phase_step = 0
@@ -286,10 +295,11 @@ class Trainer:
         per_epoch = max(1, len(self.train_set) // cfg.batch_size)
         out = []
         for name in cfg.stages:
-            if name not in ("stage1", "identity", "stage2"):
-                raise ValueError(f"unknown stage {name!r} (stage1, identity, stage2)")
-            if name == "identity" and self.prefilter is None:
-                continue
+            if name == "identity":
+                raise ValueError("the 'identity' stage was removed: the pre-filter CNN starts as its base filter "
+                                 "(prefilter_base) by construction; drop it from `stages`")
+            if name not in ("stage1", "stage2"):
+                raise ValueError(f"unknown stage {name!r} (stage1, stage2)")
             epochs = getattr(cfg, f"{name}_epochs")
             steps = math.ceil(epochs * per_epoch) if epochs > 0 else getattr(cfg, f"{name}_steps")
             if steps > 0:
@@ -302,8 +312,6 @@ class Trainer:
         return self.phases[self.phase_index][0] if self.phase_index < len(self.phases) else None
 
     def _params(self, phase: str | None):
-        if phase == "identity":
-            return list(self.prefilter.parameters())
         if phase == "stage2" and self.prefilter is not None:
             if not self.cfg.stage2_train_hologram:
                 return list(self.prefilter.parameters())
@@ -330,7 +338,7 @@ class Trainer:
         rgbd = batch["rgbd"].to(self.device)
         gt = batch["midpoint"].to(self.device)
         depth = batch["depth"].to(self.device)
-        frozen = phase == "identity" or (phase == "stage2" and not cfg.stage2_train_hologram)
+        frozen = phase == "stage2" and not cfg.stage2_train_hologram
         with self._autocast(), torch.set_grad_enabled(torch.is_grad_enabled() and not frozen):
             amp, phs = self.net(rgbd)
         amp, phs = amp.float(), phs.float()
@@ -339,13 +347,6 @@ class Trainer:
                                 cfg.data_mode, generator)
             out["pred"] = optics.amp_phase_to_complex(amp, phs)
             return out
-        if phase == "identity":
-            with torch.no_grad():
-                slm = optics.offset_to_slm(optics.amp_phase_to_complex(amp, phs), cfg.offset_m, self.display,
-                                           cfg.options)
-            with self._autocast():
-                loss = L.identity_loss(self.prefilter, slm, cfg.loss_kind, self.identity_target)
-            return {"total": loss.float(), "identity": loss.float(), "pred": optics.amp_phase_to_complex(amp, phs)}
         with self._autocast():
             dd = L.ddpm_forward(amp, phs, self.prefilter, cfg.offset_m, self.display, cfg.options)
         out = L.stage2_loss(dd, gt, depth, self.display, cfg.weights(), cfg.fs_config(), generator)
@@ -355,7 +356,7 @@ class Trainer:
     def train_step(self, batch: dict) -> dict[str, float]:
         """One optimizer step of the current phase; returns the loss terms as floats."""
         phase = self.phase
-        self.net.train(phase != "identity" and (phase != "stage2" or self.cfg.stage2_train_hologram))
+        self.net.train(phase != "stage2" or self.cfg.stage2_train_hologram)
         out = self.compute_loss(batch, phase, self._generator(self.global_step))
         self.optimizer.zero_grad(set_to_none=True)
         self.scaler.scale(out["total"]).backward()
@@ -421,6 +422,7 @@ class Trainer:
             "global_step": self.global_step,
             "phases": self.phases,
             "torch_rng": torch.get_rng_state(),
+            "best": self.best,
         }
 
     def save(self, name: str = "checkpoint.pt") -> str:
@@ -436,7 +438,8 @@ class Trainer:
         s = torch.load(path, map_location=self.device, weights_only=False)
         self.net.load_state_dict(s["net"])
         if self.prefilter is not None and s.get("prefilter") is not None:
-            self.prefilter.load_state_dict(s["prefilter"])
+            load_prefilter_state(self.prefilter, s["prefilter"], path)
+        self.best = s.get("best", {})
         self.phase_index, self.phase_step, self.global_step = s["phase_index"], s["phase_step"], s["global_step"]
         finished = self.phase_index >= len(self.phases)
         if finished:
@@ -455,6 +458,17 @@ class Trainer:
             self.optimizer.load_state_dict(s["optimizer"])
             self.scaler.load_state_dict(s["scaler"])
         torch.set_rng_state(s["torch_rng"])
+
+    def _keep_best(self, phase: str, metrics: dict) -> None:
+        """Saves ``best.pt`` when ``metrics[select_metric]`` beats the best seen in the last phase."""
+        metric = self.cfg.select_metric
+        if phase != self.phases[-1][0] or metric not in metrics:
+            return
+        if self.best.get("phase") == phase and metrics[metric] <= self.best["value"]:
+            return
+        self.best = {"phase": phase, "metric": metric, "value": metrics[metric], "global_step": self.global_step}
+        self.save("best.pt")
+        self.log(f"best {metric} {metrics[metric]:.4f} at step {self.global_step}: best.pt")
 
     # -- the loop -----------------------------------------------------------------------------------------
     def _csv(self, row: dict) -> None:
@@ -555,6 +569,7 @@ class Trainer:
                     metrics = self.validate(name)
                     row |= metrics
                     msg += " | " + " ".join(f"{k} {v:.4f}" for k, v in metrics.items())
+                    self._keep_best(name, metrics)
                 self.log(f"[{name} {self.phase_step}/{steps}] step {self.global_step} {msg}")
                 self._csv(row)
                 running, count = 0.0, 0

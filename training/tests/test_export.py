@@ -7,7 +7,7 @@ import torch
 from tensorholo_training.export import (
     export_onnx, model_metadata, quantize_int8, read_metadata, run_onnx,
 )
-from tensorholo_training.model import hologram_cnn, prefilter_cnn
+from tensorholo_training.model import hologram_cnn, prefilter_cnn, prefilter_input
 
 KEYS = ["kind", "layers", "wavelengths_m", "pixel_pitch_m", "volume_depth_m", "offset_m", "input_layers",
         "trained_resolution", "training_commit"]
@@ -82,17 +82,65 @@ def test_int8_round_trip(exported, fmt):
     assert errs.mean() < INT8_MEAN and errs.max() < INT8_MAX
 
 
-def test_prefilter_export(tmp_path):
+def trained_like_prefilter():
+    """A pre-filter whose correction is not zero (an untrained one would hide the CNN from the checks)."""
+    torch.manual_seed(2)
     pre = prefilter_cnn().eval()
+    with torch.no_grad():
+        for p in pre.net.convs[-1].parameters():
+            p.normal_(0, 0.05)
+    return pre
+
+
+def slm_like(h, w, seed=0):
+    """``[Re H, Im H]`` of a random field with |H| up to ≈1.2, as after offset propagation."""
+    g = torch.Generator().manual_seed(seed)
+    field = torch.polar(1.2 * torch.rand(1, 3, h, w, generator=g), 6.3 * torch.rand(1, 3, h, w, generator=g))
+    return prefilter_input(field).numpy()
+
+
+def test_prefilter_export(tmp_path):
+    pre = trained_like_prefilter()
     path = export_onnx(pre, str(tmp_path / "pre.onnx"), "prefilter-cnn", meta(pre, "prefilter-cnn"))
     m = onnx.load(path)
-    assert [i.name for i in m.graph.input] == ["slm_field"]
-    x = np.random.default_rng(0).random((1, 6, 20, 20), dtype=np.float32)
+    onnx.checker.check_model(m)
+    assert [i.name for i in m.graph.input] == ["slm_field"] and [o.name for o in m.graph.output] == ["real", "imag"]
+    pads = [n for n in m.graph.node if n.op_type == "Pad"]
+    assert [a.s for n in pads for a in n.attribute if a.name == "mode"] == [b"edge"]  # the AA-DPM blur's edges
+    for h, w in ((20, 20), (17, 29)):
+        x = slm_like(h, w, h)
+        with torch.no_grad():
+            re, im = pre(torch.from_numpy(x))
+        ore, oim = run_onnx(path, x)
+        assert np.abs(ore - re.numpy()).max() < 1e-5 and np.abs(oim - im.numpy()).max() < 1e-5
+    md = read_metadata(path)
+    assert md["tensorholo.kind"] == "prefilter-cnn" and md["tensorholo.format_version"] == "2"
+    assert md["tensorholo.prefilter_base"] == "aa-dpm(sigma_px=0.7,taps=5)"
+    assert md["tensorholo.layers"] == "8" and md["tensorholo.channels"] == "8"
+
+
+@pytest.mark.parametrize("fmt", ["qoperator", "qdq"])
+def test_prefilter_int8_keeps_the_blur_in_float(tmp_path, fmt):
+    pre = trained_like_prefilter()
+    path = export_onnx(pre, str(tmp_path / "pre.onnx"), "prefilter-cnn", meta(pre, "prefilter-cnn"))
+    calib = [slm_like(32, 32, 10 + i) for i in range(8)]
+    out = quantize_int8(path, str(tmp_path / f"pre.{fmt}.onnx"), calib, fmt)
+    nodes = onnx.load(out).graph.node
+    float_convs = [n for n in nodes if n.op_type == "Conv"]
+    grouped = [n for n in float_convs if any(a.name == "group" and a.i == 6 for a in n.attribute)]
+    assert len(grouped) == 1  # the fixed blur
+    if fmt == "qoperator":
+        assert len(float_convs) == 1 and sum(n.op_type == "QLinearConv" for n in nodes) == 8
+    x = slm_like(24, 24, 99)
     with torch.no_grad():
-        a, p = pre(torch.from_numpy(x))
-    oa, op = run_onnx(path, x)
-    assert np.abs(oa - a.numpy()).max() < 1e-5 and np.abs(op - p.numpy()).max() < 1e-5
-    assert read_metadata(path)["tensorholo.kind"] == "prefilter-cnn"
+        re, im = pre(torch.from_numpy(x))
+        base = pre.base_filter(torch.from_numpy(x))
+    ore, oim = run_onnx(out, x)
+    err = np.abs(np.concatenate([ore, oim], 1) - np.concatenate([re, im], 1))
+    corr = np.abs(np.concatenate([re, im], 1) - base.numpy())
+    print(f"pre-filter int8 {fmt}: mean abs error {err.mean():.4f} (correction itself {corr.mean():.4f})")
+    # only the correction is quantised: the error is a fraction of the correction, not of the field
+    assert err.mean() < 0.25 * corr.mean() and err.max() < INT8_MAX
 
 
 def test_cli_exports_hologram_and_prefilter_separately(tmp_path, tiny_dataset):

@@ -7,6 +7,7 @@ import torch
 from tensorholo_training import losses as L
 from tensorholo_training import optics as O
 from tensorholo_training.model import hologram_cnn, prefilter_cnn
+from tensorholo_training.optics import PropagationOptions
 
 D = O.Display()
 
@@ -106,21 +107,6 @@ def test_stage2_chain_is_differentiable_and_close_to_gt_for_smooth_fields():
     assert rel < 0.1, rel
 
 
-def test_identity_loss_trains_the_prefilter_towards_identity():
-    torch.manual_seed(0)
-    pre = prefilter_cnn()
-    slm = torch.polar(0.2 + 0.8 * torch.rand(2, 3, 16, 16), 0.5 * torch.randn(2, 3, 16, 16))
-    opt = torch.optim.Adam(pre.parameters(), lr=3e-3)
-    first = None
-    for _ in range(30):
-        loss = L.identity_loss(pre, slm)
-        first = first if first is not None else float(loss.detach())
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-    assert float(loss.detach()) < 0.5 * first
-
-
 def _blur_numpy(field, sigma, size):
     """Reference AA-DPM blur: separable Gaussian, edge pixels replicated (the SDK's `blur_separable`)."""
     import numpy as np
@@ -151,36 +137,16 @@ def test_anti_alias_blur_matches_a_numpy_reference_and_keeps_constants():
         O.anti_alias_blur(field, 0.7, 4)
 
 
-def test_anti_alias_filter_has_the_prefilter_interface_and_blurs():
-    from tensorholo_training.model import AntiAliasFilter, prefilter_input
-
+def test_ddpm_with_an_untrained_aa_prefilter_is_aa_dpm():
+    """The chain with a fresh AA-based pre-filter equals double phase of the blurred SLM field (AA-DPM)."""
     g = torch.Generator().manual_seed(4)
-    slm = torch.polar(0.2 + torch.rand(2, 3, 12, 12, generator=g), torch.randn(2, 3, 12, 12, generator=g))
-    amp, p01 = AntiAliasFilter(0.7, 5)(prefilter_input(slm))
-    assert amp.shape == p01.shape == (2, 3, 12, 12)
-    back = O.amp_phase_to_complex(amp, p01)
-    assert torch.allclose(back, O.anti_alias_blur(slm), atol=1e-5)
-
-
-def test_identity_loss_with_a_target_trains_towards_that_target():
-    from tensorholo_training.model import AntiAliasFilter, prefilter_input
-
-    torch.manual_seed(0)
-    pre = prefilter_cnn()
-    slm = torch.polar(0.2 + 0.8 * torch.rand(2, 3, 16, 16), 0.5 * torch.randn(2, 3, 16, 16))
-    target = AntiAliasFilter(1.0, 5)
-    # The identity target and the blur target differ, so the losses differ for the same network.
-    assert float(L.identity_loss(pre, slm, target=target).detach()) != float(L.identity_loss(pre, slm).detach())
-    opt = torch.optim.Adam(pre.parameters(), lr=3e-3)
-    first = None
-    for _ in range(30):
-        loss = L.identity_loss(pre, slm, target=target)
-        first = first if first is not None else float(loss.detach())
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-    assert float(loss.detach()) < 0.5 * first
-    # A network that outputs the target exactly has zero loss.
-    ta, tp = target(prefilter_input(slm))
-    exact = lambda x: (ta, tp)  # noqa: E731
-    assert float(L.identity_loss(exact, slm, target=target)) == 0.0
+    amp = 0.2 + torch.rand(1, 3, 16, 16, generator=g)
+    phs = torch.rand(1, 3, 16, 16, generator=g)
+    dd = L.ddpm_forward(amp, phs, prefilter_cnn(base="aa-dpm"), 6e-3, D)
+    slm = O.offset_to_slm(O.amp_phase_to_complex(amp, phs), 6e-3, D, PropagationOptions(pad=True))
+    blurred = O.anti_alias_blur(slm)
+    assert torch.allclose(O.amp_phase_to_complex(dd.pre_amplitude, dd.pre_phase01), blurred, atol=1e-5)
+    dp = O.double_phase_encode(blurred, wrap=False, clamp_eps=1e-6)
+    assert torch.allclose(dd.phase, dp.phase, atol=1e-4)
+    plain = L.ddpm_forward(amp, phs, None, 6e-3, D)
+    assert float((plain.phase - dd.phase).abs().max().detach()) > 1e-2  # the blur changes the encoding

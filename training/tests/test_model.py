@@ -5,7 +5,8 @@ import pytest
 import torch
 
 from tensorholo_training.model import (
-    count_parameters, hologram_cnn, macs_per_pixel, prefilter_cnn, prefilter_input, ResidualCNN,
+    count_parameters, hologram_cnn, load_prefilter_state, macs_per_pixel, prefilter_cnn, prefilter_input,
+    prefilter_output, ResidualCNN,
 )
 
 
@@ -42,13 +43,51 @@ def test_shapes_and_head_ranges(layers, inputs):
     assert amp.max() > 1.4 and amp.min() < 0.01  # saturated on both sides somewhere
 
 
-def test_prefilter_io():
-    pre = prefilter_cnn()
+def test_prefilter_input_is_cartesian():
     field = torch.polar(torch.rand(1, 3, 10, 10) + 0.1, torch.rand(1, 3, 10, 10) * 6 - 3)
     x = prefilter_input(field)
-    assert x.shape == (1, 6, 10, 10) and x[:, 3:].min() >= 0 and x[:, 3:].max() <= 1
-    a, p = pre(x)
-    assert a.shape == p.shape == (1, 3, 10, 10)
+    assert x.shape == (1, 6, 10, 10) and x.dtype == torch.float32
+    assert torch.equal(x[:, :3], field.real) and torch.equal(x[:, 3:], field.imag)
+    assert torch.equal(prefilter_output(x[:, :3], x[:, 3:]), field)
+
+
+def test_untrained_prefilter_is_exactly_its_base():
+    from tensorholo_training.optics import anti_alias_blur
+
+    g = torch.Generator().manual_seed(5)
+    field = torch.polar(torch.rand(2, 3, 13, 17, generator=g) + 0.1, torch.randn(2, 3, 13, 17, generator=g))
+    for sigma, size in [(0.7, 5), (1.2, 7)]:
+        pre = prefilter_cnn(base="aa-dpm", sigma_px=sigma, size=size)
+        out = prefilter_output(*pre(prefilter_input(field)))
+        # the depthwise 2D blur of [Re, Im] is the separable complex AA-DPM blur (a linear filter)
+        assert (out - anti_alias_blur(field, sigma, size)).abs().max() < 1e-6, (sigma, size)
+    ident = prefilter_cnn(base="identity")
+    assert torch.equal(prefilter_output(*ident(prefilter_input(field))), field)
+    with pytest.raises(ValueError, match="base"):
+        prefilter_cnn(base="blur")
+
+
+def test_prefilter_adds_its_correction_to_the_base():
+    torch.manual_seed(1)
+    pre = prefilter_cnn(base="aa-dpm")
+    with torch.no_grad():
+        for p in pre.net.convs[-1].parameters():
+            p.normal_(0, 0.1)
+    x = torch.randn(1, 6, 9, 11)
+    re, im = pre(x)
+    want = pre.base_filter(x) + pre.net.raw(x)
+    assert torch.allclose(torch.cat([re, im], 1), want, atol=1e-6)
+    assert float((want - pre.base_filter(x)).abs().max()) > 1e-3  # the correction is not zero any more
+    assert count_parameters(pre) == count_parameters(pre.net)  # the blur is a fixed buffer
+    assert "blur" not in pre.state_dict()  # rebuilt from the configuration, not stored
+
+
+def test_old_amplitude_phase_prefilter_weights_are_refused_clearly():
+    old = ResidualCNN(8, 8, 6, 6).state_dict()
+    with pytest.raises(ValueError, match="old amplitude/phase pre-filter"):
+        load_prefilter_state(prefilter_cnn(), old, "old.pt")
+    state = prefilter_cnn().state_dict()
+    load_prefilter_state(prefilter_cnn(), state, "new.pt")
 
 
 def test_residual_wiring_and_input_reinjection():

@@ -36,12 +36,12 @@ def test_smoke_training_reduces_the_loss(tmp_path, tiny_dataset):
 
 
 def test_resume_gives_the_same_state_across_all_phases(tmp_path, tiny_dataset):
-    kw = dict(stages=["stage1", "identity", "stage2"], stage1_steps=3, identity_steps=2, stage2_steps=2,
-              offset_mm=6.0, hflip=True, vflip=True)
+    kw = dict(stages=["stage1", "stage2"], stage1_steps=3, stage2_steps=4, offset_mm=6.0, hflip=True, vflip=True,
+              val_every=2)
     straight = small_cfg(tmp_path / "a", tiny_dataset, **kw)
     Trainer(straight, log=lambda m: None).run()
     resumed = small_cfg(tmp_path / "b", tiny_dataset, **kw)
-    for stop in (2, 4):  # inside stage 1, inside the identity pre-training
+    for stop in (2, 5):  # inside stage 1, inside stage 2 (after a best.pt)
         Trainer(resumed, log=lambda m: None).run(max_steps=stop)
     Trainer(resumed, log=lambda m: None).run()
     a = torch.load(os.path.join(straight.run_dir, "final.pt"), weights_only=False)
@@ -52,7 +52,13 @@ def test_resume_gives_the_same_state_across_all_phases(tmp_path, tiny_dataset):
             assert torch.equal(t, b[key][name]), (key, name)
     rows = list(csv.DictReader(open(os.path.join(resumed.run_dir, "learning_curve.csv"))))
     assert [int(r["global_step"]) for r in rows] == list(range(1, 8))
-    assert {r["phase"] for r in rows} == {"stage1", "identity", "stage2"}
+    assert {r["phase"] for r in rows} == {"stage1", "stage2"}
+    # best.pt: the best stage-2 validation, the same in both runs (its record survives the resume)
+    assert a["best"] == b["best"] and a["best"]["phase"] == "stage2"
+    best = torch.load(os.path.join(resumed.run_dir, "best.pt"), weights_only=False)
+    assert best["global_step"] == a["best"]["global_step"] in (4, 6, 7)
+    fs = {int(r["global_step"]): float(r["val_psnr_fs"]) for r in rows if r["phase"] == "stage2" and r["val_psnr_fs"]}
+    assert a["best"]["value"] == pytest.approx(max(fs.values()), abs=1e-9)
 
 
 def test_stage2_with_frozen_hologram_cnn_trains_only_the_prefilter(tmp_path, tiny_dataset):
@@ -92,24 +98,20 @@ def test_cli_config_and_overrides(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["num_layers"] == 15
 
 
-def test_prefilter_pretraining_towards_aa_dpm(tmp_path, tiny_dataset):
-    cfg = small_cfg(tmp_path, tiny_dataset, stages=["stage1", "identity"], stage1_steps=1, identity_steps=3,
-                    offset_mm=6.0, identity_target="aa-dpm")
-    tr = Trainer(cfg, log=lambda m: None)
-    assert tr.identity_target is not None
-    pre0 = {k: v.clone() for k, v in tr.prefilter.state_dict().items()}
-    tr.run()
-    assert any(not torch.equal(pre0[k], v) for k, v in tr.prefilter.state_dict().items())
-    with pytest.raises(ValueError, match="identity_target"):
-        Trainer(small_cfg(tmp_path / "bad", tiny_dataset, offset_mm=6.0, identity_target="blur"),
-                log=lambda m: None)
+def test_the_removed_identity_stage_is_refused_and_old_keys_are_ignored(tmp_path, tiny_dataset):
+    with pytest.raises(ValueError, match="identity"):
+        Trainer(small_cfg(tmp_path, tiny_dataset, stages=["stage1", "identity"], offset_mm=6.0), log=lambda m: None)
+    cfg = TrainConfig.from_dict({"num_layers": 8, "identity_steps": 300, "identity_target": "aa-dpm"})
+    assert cfg.num_layers == 8
+    with pytest.raises(ValueError, match="select_metric"):
+        Trainer(small_cfg(tmp_path / "m", tiny_dataset, select_metric="loss"), log=lambda m: None)
 
 
 def test_prefilter_floor_compares_ddpm_with_aa_dpm_and_plain_dpm(tmp_path, tiny_dataset):
     from tensorholo_training.prefilter_floor import compare
 
-    cfg = small_cfg(tmp_path, tiny_dataset, stages=["stage1", "identity", "stage2"], stage1_steps=1,
-                    identity_steps=1, stage2_steps=1, offset_mm=6.0)
+    cfg = small_cfg(tmp_path, tiny_dataset, stages=["stage1", "stage2"], stage1_steps=1, stage2_steps=2,
+                    offset_mm=6.0, lr=1e-2)
     Trainer(cfg, log=lambda m: None).run()
     rows = compare(cfg.run_dir, batches=1)
     assert set(rows) == {"ddpm", "aa-dpm", "dpm"}

@@ -15,8 +15,14 @@ use crate::optics::OpticalSetup;
 /// Prefix of every key the SDK reads from an ONNX file's `metadata_props`.
 pub const METADATA_PREFIX: &str = "tensorholo.";
 
-/// The metadata format version this SDK understands (`tensorholo.format_version`).
-pub const FORMAT_VERSION: u32 = 1;
+/// The newest metadata format version this SDK understands (`tensorholo.format_version`). Version 2 changed
+/// the pre-filter's I/O to Cartesian `[Re H, Im H]` (outputs `real`, `imag`); hologram CNNs are the same in
+/// versions 1 and 2.
+pub const FORMAT_VERSION: u32 = 2;
+
+/// The oldest format version of a pre-filter file this SDK runs (the amplitude/phase pre-filter of version 1
+/// is refused: its input and outputs mean something else).
+pub const PREFILTER_FORMAT_VERSION: u32 = 2;
 
 /// Relative tolerance when comparing the file's physical quantities (metres) with the configuration's:
 /// the exporter writes Python `repr(float)` (exact round trip), so only decimal-input noise is tolerated.
@@ -28,8 +34,9 @@ pub enum ModelKind {
     /// The hologram CNN: input `rgbd` `[1, 4·L, H, W]`, outputs the midpoint hologram as `amplitude` and
     /// `phase` `[1, 3, H, W]` (metadata `tensorholo.kind = hologram-cnn`).
     Hologram,
-    /// The DDPM pre-filter CNN (Eq. 6): input `slm_field` `[1, 6, H, W]` (amplitude `|H|`, phase
-    /// `arg H/2π + 0.5` of the offset hologram), same outputs, filtered (`tensorholo.kind = prefilter-cnn`).
+    /// The DDPM pre-filter CNN (Eq. 6): input `slm_field` `[1, 6, H, W]` = `[Re H, Im H]` of the offset
+    /// hologram (R, G, B each, midpoint amplitude units), outputs `real` and `imag` `[1, 3, H, W]` of the
+    /// filtered field (`tensorholo.kind = prefilter-cnn`, format version 2).
     PreFilter,
 }
 
@@ -47,6 +54,15 @@ impl ModelKind {
         match self {
             ModelKind::Hologram => "rgbd",
             ModelKind::PreFilter => "slm_field",
+        }
+    }
+
+    /// The names of the network's two outputs, in order: `["amplitude", "phase"]` (the heads of the midpoint
+    /// hologram) or `["real", "imag"]` (the filtered SLM-plane field).
+    pub fn output_names(self) -> [&'static str; 2] {
+        match self {
+            ModelKind::Hologram => ["amplitude", "phase"],
+            ModelKind::PreFilter => ["real", "imag"],
         }
     }
 
@@ -116,7 +132,7 @@ pub struct ModelMetadata {
     pub training_commit: String,
     /// `tensorholo.precision`: `f32`, `int8-qoperator-conv` or `int8-qdq-conv` (`f32` when absent).
     pub precision: String,
-    /// `tensorholo.format_version` (1 when absent).
+    /// `tensorholo.format_version` (1 when absent; 2 is required of a pre-filter).
     pub format_version: u32,
     /// `tensorholo.io`: the one-line I/O statement, if present.
     pub io: Option<String>,
@@ -152,7 +168,8 @@ impl ModelMetadata {
     /// Parses `metadata_props` (key → value, as stored in the file).
     ///
     /// Errors: [`HoloError::ModelMetadata`] naming the first required key that is missing (found
-    /// `<missing>`) or unparsable, or a `format_version` newer than [`FORMAT_VERSION`].
+    /// `<missing>`) or unparsable, a `format_version` newer than [`FORMAT_VERSION`], or a pre-filter older
+    /// than [`PREFILTER_FORMAT_VERSION`] (the amplitude/phase pre-filter of format 1).
     pub fn from_props(raw: BTreeMap<String, String>) -> Result<Self> {
         let get = |key: &str| -> Result<&str> {
             raw.get(&format!("{METADATA_PREFIX}{key}"))
@@ -170,7 +187,7 @@ impl ModelMetadata {
                 .map(String::as_str)
         };
         let format_version = match opt("format_version") {
-            None => FORMAT_VERSION,
+            None => 1,
             Some(v) => parse("format_version", v, "an integer")?,
         };
         if format_version > FORMAT_VERSION {
@@ -183,6 +200,17 @@ impl ModelMetadata {
         let kind_s = get("kind")?;
         let kind = ModelKind::from_metadata_name(kind_s)
             .ok_or_else(|| bad("kind", kind_s, "`hologram-cnn` or `prefilter-cnn`"))?;
+        if kind == ModelKind::PreFilter && format_version < PREFILTER_FORMAT_VERSION {
+            return Err(bad(
+                "format_version",
+                format_version.to_string(),
+                format!(
+                    "≥ {PREFILTER_FORMAT_VERSION} for a pre-filter: this file is the old amplitude/phase \
+                     pre-filter; retrain and export it with the current training package \
+                     ([Re H, Im H] in, `real`/`imag` out)"
+                ),
+            ));
+        }
         let layers: usize = parse("layers", get("layers")?, "a positive integer")?;
         let channels = match opt("channels") {
             None => None,
@@ -243,7 +271,8 @@ impl ModelMetadata {
     /// Multiply-accumulates per output pixel of the residual CNN of `DESIGN.md` §3 (3×3 convolutions: input →
     /// `channels`, `layers − 2` hidden `channels → channels`, and the last layer from `channels` plus the
     /// network input to 6 outputs): 147,528 for the 30-layer RGB-D hologram CNN, 33,480 for 8 layers, 4,644
-    /// for the pre-filter. `None` without `tensorholo.channels`. FLOPs per frame = `2 · MAC · H · W`.
+    /// for the pre-filter's correction CNN (its fixed AA-DPM blur adds `6 · taps²`, 150 with 5 taps, not
+    /// counted). `None` without `tensorholo.channels`. FLOPs per frame = `2 · MAC · H · W`.
     pub fn macs_per_pixel(&self) -> Option<u64> {
         let c = self.channels? as u64;
         let i = self.input_channels() as u64;

@@ -8,9 +8,9 @@
 //! 2. its `tensorholo.*` `metadata_props` are parsed into [`ModelMetadata`] and checked against a
 //!    [`ModelConfig`] (wavelengths, pitch, volume depth, offset, input layers → a mismatch is
 //!    [`HoloError::ModelMetadata`](crate::HoloError) naming the key, the file's value and the expected one);
-//! 3. its graph inputs/outputs are checked against the contract (`rgbd` `[1,4L,H,W]` or `slm_field`
-//!    `[1,6,H,W]`; `amplitude`, `phase` `[1,3,H,W]`; f32 → otherwise
-//!    [`HoloError::ModelContract`](crate::HoloError));
+//! 3. its graph inputs/outputs are checked against the contract (hologram CNN: `rgbd` `[1,4L,H,W]` →
+//!    `amplitude`, `phase` `[1,3,H,W]`; pre-filter (format 2): `slm_field` `[1,6,H,W]` = `[Re H, Im H]` →
+//!    `real`, `imag` `[1,3,H,W]`; f32 → otherwise [`HoloError::ModelContract`](crate::HoloError));
 //! 4. tract types it and declutters it once, keeping `H`, `W` symbolic.
 //!
 //! [`HologramModel::plan`] then binds `H`, `W` to one resolution and optimises (codegen) the graph for it;
@@ -128,5 +128,8 @@ pub fn set_cnn_threads(threads: usize) -> crate::Result<()> {
     }
 }
 
-pub use metadata::{ModelConfig, ModelKind, ModelMetadata, FORMAT_VERSION, METADATA_PREFIX};
+pub use metadata::{
+    ModelConfig, ModelKind, ModelMetadata, FORMAT_VERSION, METADATA_PREFIX,
+    PREFILTER_FORMAT_VERSION,
+};
 pub use network::{head_to_phasor, heads_to_field, HologramModel, ModelPlan, NodeTiming};

@@ -21,8 +21,6 @@ use crate::scene::RgbdFrame;
 
 /// ONNX `TensorProto.DataType.FLOAT`.
 const ONNX_FLOAT: i32 = 1;
-/// Output names of both CNNs, in the order tract returns them after [`HologramModel`] loads a file.
-const OUTPUT_NAMES: [&str; 2] = ["amplitude", "phase"];
 
 /// Converts the CNN heads to a complex field (`DESIGN.md` §3): `A · exp(i·(p − 0.5)·2π)`.
 ///
@@ -122,8 +120,9 @@ fn optimise(
         .map_err(tract)?
         .ok_or_else(|| {
             PlanFailure::Layout(
-                "an operator of the graph refuses the channels-last axis change (tract 0.23 does not \
-                 move quantised convolutions: QOperator int8 files run channels-first only)"
+                "an operator of the graph refuses the channels-last axis change (with tract 0.23: \
+                 the quantised convolutions of QOperator int8 files, and the pre-filter CNN's graph; \
+                 such files run channels-first only)"
                     .into(),
             )
         })?;
@@ -226,9 +225,11 @@ fn check_contract(graph: &pb::GraphProto, md: &ModelMetadata) -> std::result::Re
     }
     check_value(inputs[0], "input", in_channels)?;
     let out_names: Vec<&str> = graph.output.iter().map(|o| o.name.as_str()).collect();
-    if out_names != OUTPUT_NAMES {
+    let want = md.kind.output_names();
+    if out_names != want {
         return Err(format!(
-            "outputs are {out_names:?}, expected {OUTPUT_NAMES:?} (f32 [1,3,H,W] each)"
+            "outputs are {out_names:?}, expected {want:?} (f32 [1,3,H,W] each) for a {} of format {}",
+            md.kind, md.format_version
         ));
     }
     for o in &graph.output {
@@ -486,11 +487,11 @@ impl HologramModel {
     }
 
     /// Runs the network on one input `[C, H, W]` (`C` = [`HologramModel::input_channels`]; hologram CNN:
-    /// per layer `r, g, b` amplitude then depth `d`, all in `[0, 1]`; pre-filter: `|H|` then
-    /// `arg H/2π + 0.5`), planning `H × W` if needed.
+    /// per layer `r, g, b` amplitude then depth `d`, all in `[0, 1]`; pre-filter: `Re H` then `Im H` of the
+    /// offset hologram), planning `H × W` if needed.
     ///
-    /// Returns the complex field `[3, H, W]` (R, G, B): the midpoint hologram for the hologram CNN, the
-    /// filtered SLM-plane hologram for the pre-filter ([`heads_to_field`]).
+    /// Returns the complex field `[3, H, W]` (R, G, B): the midpoint hologram for the hologram CNN
+    /// ([`heads_to_field`]), the filtered SLM-plane hologram `Re + i·Im` for the pre-filter.
     ///
     /// Errors: as [`HologramModel::plan`] and [`ModelPlan::run`].
     pub fn run(&self, input: ArrayView3<f32>) -> Result<Array3<Complex32>> {
@@ -614,7 +615,7 @@ impl ModelPlan {
     /// evaluated node, in evaluation order (wall-clock seconds of the node's `eval`, including the work
     /// it hands to tract's thread pool). `holo bench --profile` sums them per operator.
     ///
-    /// Errors: as [`ModelPlan::run_heads`].
+    /// Errors: as [`ModelPlan::run_outputs`].
     pub fn profile(&self, input: ArrayView3<f32>) -> Result<Vec<NodeTiming>> {
         let tensor = self.input_tensor(input)?;
         let mut timings = Vec::new();
@@ -641,13 +642,15 @@ impl ModelPlan {
         Ok(timings)
     }
 
-    /// Runs the network on `input` `[C, H, W]` and returns the raw heads `(amplitude, phase)`, each
-    /// `[3, H, W]`: amplitude in `[0, √2]`, phase in `[0, 1]` meaning `(p − 0.5)·2π` rad.
+    /// Runs the network on `input` `[C, H, W]` and returns its two outputs, each `[3, H, W]`, in the
+    /// contract's order (`DESIGN.md` §3, [`ModelKind::output_names`]): for a hologram CNN the heads
+    /// `(amplitude, phase)`, amplitude in `[0, √2]`, phase in `[0, 1]` meaning `(p − 0.5)·2π` rad; for a
+    /// pre-filter `(real, imag)` of the filtered SLM-plane field.
     ///
     /// Errors: [`HoloError::ShapeMismatch`] if `input` is not this plan's `[C, H, W]`;
     /// [`HoloError::InvalidData`] if it holds NaN/∞; [`HoloError::ModelRun`] if tract fails or returns
     /// outputs of an unexpected type or shape.
-    pub fn run_heads(&self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
+    pub fn run_outputs(&self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
         let tensor = self.input_tensor(input)?;
         let outputs = guarded("running", || {
             self.plan
@@ -662,6 +665,7 @@ impl ModelPlan {
             )));
         }
         let shape = (3, self.height, self.width);
+        let names = self.kind.output_names();
         let head = |i: usize| -> Result<Array3<f32>> {
             let t = &outputs[i];
             let got = t.shape().to_vec();
@@ -669,7 +673,7 @@ impl ModelPlan {
                 .try_as_plain_ram()
                 .and_then(|v| v.as_slice::<f32>().map(<[f32]>::to_vec))
                 .map_err(|e| {
-                    HoloError::ModelRun(format!("output `{}`: {}", OUTPUT_NAMES[i], tract_msg(&e)))
+                    HoloError::ModelRun(format!("output `{}`: {}", names[i], tract_msg(&e)))
                 })?;
             let want = match self.layout {
                 CnnLayout::ChannelsFirst => [1, 3, self.height, self.width],
@@ -677,7 +681,7 @@ impl ModelPlan {
             };
             if got != want {
                 return Err(HoloError::ShapeMismatch {
-                    what: format!("output `{}` ({} layout)", OUTPUT_NAMES[i], self.layout),
+                    what: format!("output `{}` ({} layout)", names[i], self.layout),
                     expected: want.to_vec(),
                     got,
                 });
@@ -694,11 +698,21 @@ impl ModelPlan {
         Ok((head(0)?, head(1)?))
     }
 
-    /// Runs the network on `input` `[C, H, W]` and converts the heads to the complex field `[3, H, W]`
-    /// ([`heads_to_field`]): the midpoint hologram for a hologram CNN, the filtered SLM-plane hologram for a
-    /// pre-filter. Errors: as [`ModelPlan::run_heads`].
+    /// Runs the network on `input` `[C, H, W]` and returns its output as the complex field `[3, H, W]`: the
+    /// midpoint hologram for a hologram CNN ([`heads_to_field`]), the filtered SLM-plane hologram
+    /// `Re + i·Im` for a pre-filter. Errors: as [`ModelPlan::run_outputs`].
     pub fn run(&self, input: ArrayView3<f32>) -> Result<Array3<Complex32>> {
-        let (a, p) = self.run_heads(input)?;
-        heads_to_field(a.view(), p.view())
+        let (a, b) = self.run_outputs(input)?;
+        match self.kind {
+            ModelKind::Hologram => heads_to_field(a.view(), b.view()),
+            ModelKind::PreFilter => {
+                let mut out = Array3::<Complex32>::zeros(a.raw_dim());
+                Zip::from(&mut out)
+                    .and(&a)
+                    .and(&b)
+                    .for_each(|o, &re, &im| *o = Complex32::new(re, im));
+                Ok(out)
+            }
+        }
     }
 }
