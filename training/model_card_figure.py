@@ -5,8 +5,9 @@ double phase, Fourier filter; ``--phase-only`` evaluation chain).
     PYTHONPATH=training .venv/bin/python training/model_card_figure.py --dataset data/cpu256 --index 0 \\
         --baselines data/cpu256/baselines --out models/model_card_focal_stacks.png
 
-Rows (central 128×128 crops by default): ground truth, Maimone-style, SM-LBM + AA-DPM (6 mm), holo8/15/30 (+ 6 mm pre-filter), f32 and the
-default int8 form. Columns: focused at the 10th, 50th and 90th percentile of the scene's depth. A PNG is
+Rows (central 128×128 crops by default): ground truth, Maimone-style, SM-LBM + AA-DPM (6 mm), holo8 f32 +
+AA-DPM (6 mm, the non-learned encoding of the CNN's hologram), then holo8/15/30 + the 6 mm pre-filter (DDPM), f32
+and the default int8 form. Columns: focused at the 10th, 50th and 90th percentile of the scene's depth. A PNG is
 written with zlib only (no imaging library needed).
 """
 from __future__ import annotations
@@ -67,6 +68,9 @@ def main() -> None:
         rows.append(("Maimone-style", npy_baseline(os.path.join(args.baselines, "maimone"))(args.index, item)))
         rows.append(("SM-LBM + AA-DPM, 6 mm", npy_baseline(os.path.join(args.baselines, "smlbm-aadpm-6mm"))(
             args.index, item)))
+    holo8 = os.path.join(args.models, "holo8_rgbd.onnx")
+    rows.append(("holo8 f32 + AA-DPM, 6 mm", onnx_predictor(holo8, None, 6e-3, display, True, options,
+                                                            aa_dpm=True)(args.index, item)))
     for layers in (8, 15, 30):
         for suffix in ("", "." + args.int8):
             net = os.path.join(args.models, f"holo{layers}_rgbd{suffix}.onnx")

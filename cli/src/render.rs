@@ -90,14 +90,17 @@ pub struct ModelArgs {
     #[arg(long)]
     pub model: Option<PathBuf>,
     /// Pre-filter CNN ONNX file for --offset-mm (implies --prefilter).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "no_prefilter")]
     pub prefilter_model: Option<PathBuf>,
-    /// Run the DDPM pre-filter CNN of --offset-mm (shipped for 6 and 12 mm) and encode with plain double
-    /// phase (paper Eq. 6–7). Off by default: the shipped (CPU-trained, interim) pre-filters still lose
-    /// 1–1.5 dB against AA-DPM on the CNN's hologram (models/MODEL_CARD.md), so by default the CNN's
-    /// midpoint hologram is encoded with --encoding (AA-DPM).
-    #[arg(long)]
+    /// Require the shipped DDPM pre-filter CNN of --offset-mm (6 or 12 mm; an error otherwise). It runs by
+    /// default wherever one is shipped and no --encoding is given: the CNN's hologram is offset, pre-filtered
+    /// and encoded with plain double phase (paper Eq. 6–7), which beats AA-DPM by about 1 dB on the test
+    /// split (models/MODEL_CARD.md).
+    #[arg(long, conflicts_with_all = ["no_prefilter", "encoding"])]
     pub prefilter: bool,
+    /// Encode the CNN's hologram with --encoding (AA-DPM by default) instead of the DDPM pre-filter CNN.
+    #[arg(long)]
+    pub no_prefilter: bool,
     /// Threads for the CNN's matrix products (tract); the three colours of the optics always run in
     /// parallel.
     #[arg(long, default_value_t = 1)]
@@ -122,6 +125,22 @@ impl ModelArgs {
         }
     }
 
+    /// Whether the pipeline runs a pre-filter CNN at `offset_m`: never at 0 m or with --no-prefilter;
+    /// always with --prefilter or --prefilter-model; otherwise (the default) where a shipped one exists
+    /// (6 and 12 mm) and no --encoding was asked for.
+    fn wants_prefilter(&self, offset_m: f64) -> bool {
+        if offset_m == 0.0 || self.no_prefilter {
+            return false;
+        }
+        if self.prefilter || self.prefilter_model.is_some() {
+            return true;
+        }
+        let mm = self.offset_mm.round();
+        self.encoding.encoding.is_none()
+            && (mm - self.offset_mm).abs() < 1e-9
+            && tensorholo::model::embedded::PREFILTER_OFFSETS_MM.contains(&(mm as u32))
+    }
+
     /// Loads the models and builds the pipeline; also returns a JSON description of what was loaded.
     pub fn pipeline(&self) -> Result<(HologramPipeline, serde_json::Value)> {
         if !self.offset_mm.is_finite() {
@@ -137,8 +156,7 @@ impl ModelArgs {
             cnn_layout: self.layout.into(),
         };
         let precision = self.precision();
-        let want_prefilter =
-            (self.prefilter || self.prefilter_model.is_some()) && config.offset_m != 0.0;
+        let want_prefilter = self.wants_prefilter(config.offset_m);
         let t = Instant::now();
         let pipeline = if self.model.is_none() && self.prefilter_model.is_none() {
             HologramPipeline::embedded(self.layers, precision, want_prefilter, config)
@@ -229,9 +247,9 @@ pub struct RenderArgs {
 const EXAMPLES: &str = "\
 Examples:
   holo render --out out/render
-      shipped 8-layer CNN on the built-in scene (384x384), SLM 6 mm away, AA-DPM
-  holo render --prefilter --out out/ddpm
-      the same with the shipped 6 mm pre-filter CNN (DDPM)
+      shipped 8-layer CNN on the built-in scene (384x384), SLM 6 mm away, shipped 6 mm pre-filter CNN (DDPM)
+  holo render --no-prefilter --out out/aadpm
+      the same encoded with AA-DPM instead of the pre-filter CNN (non-learned; faster)
   holo render --layers 30 --int8 --offset-mm 12 --evaluate --out out/render30
       the 30-layer int8 model, scored against the SM-LBM ground truth
   holo render --rgb derived_rgb_576x768.png --depth disparity_aux_576x768.jpg \\

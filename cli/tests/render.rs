@@ -78,6 +78,35 @@ fn render_runs_the_shipped_model_on_the_built_in_scene_and_evaluates_it() {
     assert!(r["models"]["prefilter_cnn"].is_null());
     assert_eq!(r["timings_s"]["median"]["prefilter_s"], 0.0);
     assert_eq!(r["pipeline"]["encoding"]["method"], "anti-aliased");
+
+    // At 6 mm the shipped pre-filter runs by default; --no-prefilter or an explicit --encoding selects a
+    // non-learned encoding instead.
+    for (extra, prefilter, method) in [
+        (&[][..], true, "plain"),
+        (&["--no-prefilter"][..], false, "anti-aliased"),
+        (&["--encoding", "bl-dpm"][..], false, "band-limited"),
+    ] {
+        let o6 = dir.path().join(format!("r6{}", extra.len()));
+        let mut cmd = vec![
+            "render",
+            "--size",
+            "32x32",
+            "--repeat",
+            "1",
+            "--out",
+            o6.to_str().unwrap(),
+        ];
+        cmd.extend_from_slice(extra);
+        let o = holo(&cmd);
+        assert!(o.status.success(), "{extra:?}: {}", stderr(&o));
+        let r = report(&o6);
+        assert_eq!(
+            !r["models"]["prefilter_cnn"].is_null(),
+            prefilter,
+            "{extra:?}"
+        );
+        assert_eq!(r["models"]["encoding"]["method"], method, "{extra:?}");
+    }
 }
 
 #[test]
@@ -110,6 +139,18 @@ fn render_refuses_bad_models_and_options_clearly() {
     ]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("pre-filter"), "{}", stderr(&o));
+
+    // --prefilter asks for DDPM, --encoding for a non-learned encoding: both at once is refused.
+    let o = holo(&[
+        "render",
+        "--prefilter",
+        "--encoding",
+        "aa-dpm",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("cannot be used with"), "{}", stderr(&o));
 }
 
 #[test]

@@ -1,7 +1,8 @@
 //! Criterion benchmarks of the real-time path with the shipped models (results and the command in
 //! `docs/BENCHMARKS.md`): the 8-layer RGB-D hologram CNN at 384×384 in both tract layouts
-//! ([`CnnLayout`]), and one `HologramSession::render` of the built-in scene with AA-DPM (offset 0, what
-//! `holo render` does) and with the 6 mm DDPM pre-filter. tract runs on one thread (its default); `holo bench`
+//! ([`CnnLayout`]), and one `HologramSession::render` of the built-in scene with AA-DPM (offset 0, or
+//! `holo render --no-prefilter`) and with the 6 mm DDPM pre-filter (what `holo render` does by default).
+//! tract runs on one thread (its default); `holo bench`
 //! covers the other variants, sizes and thread counts.
 //!
 //! Run: `cargo bench -p tensorholo --bench pipeline`.
