@@ -29,18 +29,8 @@ def main() -> None:
                 what = "complex midpoint" if key == "maimone" else "displayed (phase-only)"
                 print(row(label, what, b[key]["mean"]))
     for layers in (8, 15, 30):
-        f32 = None
-        for suffix, label in (("", "f32"), (".int8-qop", "int8 QOperator"), (".int8-qdq", "int8 QDQ")):
-            name = f"holo{layers}_rgbd{suffix}.json"
-            if not os.path.exists(os.path.join(d, name)):
-                continue
-            m = load(name)["model"]["mean"]
-            what = "CNN midpoint"
-            if f32 is None:
-                f32 = m
-            else:
-                what += f" (Δ vs f32: {m['psnr_amp'] - f32['psnr_amp']:+.2f} dB amp, " \
-                        f"{m['psnr_fs'] - f32['psnr_fs']:+.2f} dB focal stack)"
+        for m, label, delta in precisions(d, f"holo{layers}_rgbd{{}}.json", "f32"):
+            what = "CNN midpoint" + (f" ({delta})" if delta else "")
             print(row(f"holo{layers} {label}", what, m))
         for o in (6, 12):
             aa = None
@@ -48,23 +38,32 @@ def main() -> None:
             if os.path.exists(os.path.join(d, name)):
                 aa = load(name)["model"]["mean"]
                 print(row(f"holo{layers} f32 + AA-DPM {o} mm", "displayed (phase-only, AA-DPM)", aa))
-            ddpm = None
-            for suffix, label in (("", "f32"), (".int8-qop", "int8 QOperator"), (".int8-qdq", "int8 QDQ")):
-                name = f"holo{layers}_rgbd+prefilter_{o}mm{suffix}.json"
-                if not os.path.exists(os.path.join(d, name)):
-                    continue
-                m = load(name)["model"]["mean"]
-                what = "displayed (phase-only, DDPM"
-                if ddpm is None:
-                    ddpm = m
-                    if aa is not None:
-                        what += f"; Δ vs AA-DPM: {m['psnr_amp'] - aa['psnr_amp']:+.2f} dB amp, " \
-                                f"{m['psnr_fs'] - aa['psnr_fs']:+.2f} dB focal stack"
-                else:
-                    what += f"; Δ vs f32: {m['psnr_amp'] - ddpm['psnr_amp']:+.2f} dB amp, " \
-                            f"{m['psnr_fs'] - ddpm['psnr_fs']:+.2f} dB focal stack"
-                both = "" if suffix == "" else " (both CNNs int8)"
-                print(row(f"holo{layers} {label} + pre-filter {o} mm{both}", what + ")", m))
+            for m, label, delta in precisions(d, f"holo{layers}_rgbd+prefilter_{o}mm{{}}.json", "f32"):
+                if not delta and aa is not None:
+                    delta = difference(m, aa, "AA-DPM")
+                both = " (both CNNs int8)" if label != "f32" else ""
+                print(row(f"holo{layers} {label} + pre-filter {o} mm{both}", "displayed (phase-only, DDPM"
+                          + (f"; {delta}" if delta else "") + ")", m))
+
+
+def difference(m: dict, ref: dict, name: str) -> str:
+    """``Δ vs NAME: … dB amp, … dB focal stack``."""
+    return (f"Δ vs {name}: {m['psnr_amp'] - ref['psnr_amp']:+.2f} dB amp, "
+            f"{m['psnr_fs'] - ref['psnr_fs']:+.2f} dB focal stack")
+
+
+def precisions(d: str, pattern: str, first: str):
+    """``(mean metrics, precision label, Δ vs the f32 report or "")`` for the f32, int8 QOperator and QDQ
+    reports ``pattern.format(suffix)`` that exist in ``d``."""
+    f32 = None
+    for suffix, label in (("", first), (".int8-qop", "int8 QOperator"), (".int8-qdq", "int8 QDQ")):
+        path = os.path.join(d, pattern.format(suffix))
+        if not os.path.exists(path):
+            continue
+        m = json.load(open(path))["model"]["mean"]
+        delta = "" if f32 is None else difference(m, f32, "f32")
+        f32 = f32 or m
+        yield m, label, delta
 
 
 if __name__ == "__main__":

@@ -125,32 +125,23 @@ fn render_refuses_bad_models_and_options_clearly() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("cannot load model"), "{}", stderr(&o));
 
-    let o = holo(&["render", "--layers", "12", "--out", out.to_str().unwrap()]);
-    assert!(!o.status.success());
-    assert!(stderr(&o).contains("8, 15 or 30"), "{}", stderr(&o));
-
-    let o = holo(&[
-        "render",
-        "--offset-mm",
-        "3",
-        "--prefilter",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(!o.status.success());
-    assert!(stderr(&o).contains("pre-filter"), "{}", stderr(&o));
-
-    // --prefilter asks for DDPM, --encoding for a non-learned encoding: both at once is refused.
-    let o = holo(&[
-        "render",
-        "--prefilter",
-        "--encoding",
-        "aa-dpm",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(!o.status.success());
-    assert!(stderr(&o).contains("cannot be used with"), "{}", stderr(&o));
+    // Each refused clearly: an unshipped depth; --prefilter where no pre-filter is shipped; --prefilter
+    // (DDPM) together with --encoding (a non-learned encoding).
+    let refusals: [(&[&str], &str); 3] = [
+        (&["--layers", "12"], "8, 15 or 30"),
+        (&["--offset-mm", "3", "--prefilter"], "pre-filter"),
+        (
+            &["--prefilter", "--encoding", "aa-dpm"],
+            "cannot be used with",
+        ),
+    ];
+    for (args, message) in refusals {
+        let mut cmd = vec!["render", "--out", out.to_str().unwrap()];
+        cmd.extend_from_slice(args);
+        let o = holo(&cmd);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(stderr(&o).contains(message), "{args:?}: {}", stderr(&o));
+    }
 }
 
 #[test]

@@ -31,6 +31,15 @@ fn hologram(name: &str) -> HologramModel {
         .unwrap_or_else(|e| panic!("{name}: {e}"))
 }
 
+fn prefilter() -> HologramModel {
+    HologramModel::from_path(
+        fixture("holo8_rgbd.prefilter.onnx"),
+        ModelKind::PreFilter,
+        &ModelConfig::default(),
+    )
+    .unwrap()
+}
+
 /// Runs `model` on `io_{prefix}_{HxW}_input.npy` and compares both heads with the reference outputs.
 fn compare(
     model: &HologramModel,
@@ -107,12 +116,7 @@ fn f32_hologram_cnn_matches_pytorch_at_two_resolutions_from_one_file() {
 
 #[test]
 fn f32_prefilter_cnn_matches_pytorch() {
-    let m = HologramModel::from_path(
-        fixture("holo8_rgbd.prefilter.onnx"),
-        ModelKind::PreFilter,
-        &ModelConfig::default(),
-    )
-    .unwrap();
+    let m = prefilter();
     assert_eq!(m.input_channels(), 6);
     compare(&m, "pre", "24x32", "pre", 1e-4);
     compare(&m, "pre", "16x20", "pre", 1e-4);
@@ -138,12 +142,7 @@ fn run_frame_feeds_amplitude_then_depth() {
     )
     .unwrap();
     assert_eq!(m.run_frame(&frame).unwrap(), m.run(x.view()).unwrap());
-    let pre = HologramModel::from_path(
-        fixture("holo8_rgbd.prefilter.onnx"),
-        ModelKind::PreFilter,
-        &ModelConfig::default(),
-    )
-    .unwrap();
+    let pre = prefilter();
     assert!(matches!(
         pre.run_frame(&frame),
         Err(HoloError::InvalidParameter { .. })
@@ -326,12 +325,7 @@ fn channels_last_plans_match_pytorch_with_the_same_chw_interface() {
         compare_in(&m, CnnLayout::ChannelsFirst, "holo", size, "holo", 1e-4);
     }
     assert_eq!(m.planned_resolutions(), vec![(16, 20), (24, 32)]);
-    let pre = HologramModel::from_path(
-        fixture("holo8_rgbd.prefilter.onnx"),
-        ModelKind::PreFilter,
-        &ModelConfig::default(),
-    )
-    .unwrap();
+    let pre = prefilter();
     // The pre-filter's graph (format 2: residual on the fixed blur, outputs split into real and imaginary
     // parts) does not move to channels-last in tract 0.23: refused clearly, and the model stays usable.
     // The pipeline runs it channels-first anyway (it measured 2.1× slower channels-last in format 1).
@@ -393,12 +387,7 @@ fn profile_times_each_operator_of_the_plan() {
 #[test]
 fn format_1_prefilters_are_refused_and_format_1_hologram_cnns_load() {
     use tensorholo::model::{ModelMetadata, FORMAT_VERSION, PREFILTER_FORMAT_VERSION};
-    let pre = HologramModel::from_path(
-        fixture("holo8_rgbd.prefilter.onnx"),
-        ModelKind::PreFilter,
-        &ModelConfig::default(),
-    )
-    .unwrap();
+    let pre = prefilter();
     assert_eq!(pre.metadata().format_version, PREFILTER_FORMAT_VERSION);
     assert_eq!(ModelKind::PreFilter.output_names(), ["real", "imag"]);
     let key = "tensorholo.format_version".to_string();
