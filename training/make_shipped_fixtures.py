@@ -11,8 +11,8 @@ calibration saw; a random-phase field is far outside it, and int8 pre-filters er
 and the PyTorch outputs (f32), float32
 ``[3, 24, 32]`` each: ``<name>_amplitude.npy``, ``<name>_phase.npy`` of a hologram CNN, ``<name>_real.npy``,
 ``<name>_imag.npy`` of a pre-filter. The int8 files are checked against the same f32 outputs with the int8
-tolerance. Pre-filters are read from ``best.pt`` (what ``ship_cpu.sh export`` exports), hologram CNNs from
-``final.pt``.
+tolerance. Checkpoints: ``best.pt`` of each run (what ``ship_cpu.sh export`` exports), ``final.pt`` for runs
+older than ``best.pt``.
 """
 from __future__ import annotations
 
@@ -48,14 +48,16 @@ def main() -> None:
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     rng = np.random.default_rng(2026)
-    jobs = [(f"holo{l}_rgbd", f"{args.runs}/holo{l}/final.pt", "net", 4) for l in (8, 15, 30)]
+    # the checkpoints ship_cpu.sh exports: best.pt (final.pt for runs older than best.pt)
+    best = lambda run: f"{run}/best.pt" if os.path.exists(f"{run}/best.pt") else f"{run}/final.pt"  # noqa: E731
+    jobs = [(f"holo{l}_rgbd", best(f"{args.runs}/holo{l}"), "net", 4) for l in (8, 15, 30)]
     jobs += [(f"prefilter_{o}mm", f"{args.runs}/pre{o}/best.pt", "prefilter", 6) for o in (6, 12)]
     for name, ckpt, key, channels in jobs:
         net = load_checkpoint(ckpt)[key].eval()
         x = rng.random((channels, 24, 32), dtype=np.float32)
         outputs = OUTPUT_NAMES["hologram-cnn" if key == "net" else "prefilter-cnn"]
         if key == "prefilter":
-            x = offset_hologram(args.dataset, f"{args.runs}/holo8/final.pt", load_checkpoint(ckpt)["config"])
+            x = offset_hologram(args.dataset, best(f"{args.runs}/holo8"), load_checkpoint(ckpt)["config"])
         with torch.no_grad():
             a, p = net(torch.from_numpy(x)[None])
         np.save(os.path.join(args.out, f"{name}_input.npy"), x)

@@ -10,7 +10,7 @@
 #
 # Environment: DATA (default data/cpu256), HOLO (holo binary; default target/release/holo, built if missing),
 # PYTHON (default .venv/bin/python), MODELS (default models), RUNS (default runs/cpu),
-# STEPS8/STEPS15/STEPS30 (stage-1 steps, default 4000/2000/1200), PRE_STEPS (stage 2, default 4000),
+# STEPS8/STEPS15/STEPS30 (stage-1 steps, default 4000/4000/5000), PRE_STEPS (stage 2, default 4000),
 # EVAL_LIMIT (test scenes evaluated, default 10).
 # Every step resumes from its last checkpoint when rerun.
 set -euo pipefail
@@ -43,14 +43,16 @@ for step in "${steps[@]}"; do
         "$holo" dataset --out "$data" --train 600 --val 40 --test 40 --size 256 --levels 2048 --seed 2026
       fi ;;
     holo8) stage1 8 "${STEPS8:-4000}" ;;
-    holo15) stage1 15 "${STEPS15:-2000}" ;;
-    holo30) stage1 30 "${STEPS30:-1200}" ;;
+    holo15) stage1 15 "${STEPS15:-4000}" ;;
+    holo30) stage1 30 "${STEPS30:-5000}" ;;
     pre6) prefilter 6 ;;
     pre12) prefilter 12 ;;
     export)
       mkdir -p "$models"
       for l in 8 15 30; do
-        "$py" -m tensorholo_training.export --checkpoint "$runs/holo$l/final.pt" --out-dir "$models" \
+        # the best validation checkpoint; final.pt for runs older than best.pt (the shipped holo8)
+        ck="$runs/holo$l/best.pt"; [ -f "$ck" ] || ck="$runs/holo$l/final.pt"
+        "$py" -m tensorholo_training.export --checkpoint "$ck" --out-dir "$models" \
           --name "holo${l}_rgbd" --no-prefilter --int8 --calib-dataset "$data" --calib-samples 32 --calib-size 128
       done
       for o in 6 12; do

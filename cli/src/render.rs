@@ -92,10 +92,11 @@ pub struct ModelArgs {
     /// Pre-filter CNN ONNX file for --offset-mm (implies --prefilter).
     #[arg(long, conflicts_with = "no_prefilter")]
     pub prefilter_model: Option<PathBuf>,
-    /// Require the shipped DDPM pre-filter CNN of --offset-mm (6 or 12 mm; an error otherwise). It runs by
-    /// default wherever one is shipped and no --encoding is given: the CNN's hologram is offset, pre-filtered
-    /// and encoded with plain double phase (paper Eq. 6–7), which beats AA-DPM by about 1 dB on the test
-    /// split (models/MODEL_CARD.md).
+    /// Require the shipped DDPM pre-filter CNN of --offset-mm (6 or 12 mm; an error otherwise), whatever the
+    /// hologram CNN. By default it runs where one is shipped, no --encoding is given and the hologram CNN has
+    /// the depth it was trained with (8 layers): the CNN's hologram is offset, pre-filtered and encoded with
+    /// plain double phase (paper Eq. 6–7), 1.2 dB above AA-DPM on the test split (with 15 layers +0.8 dB,
+    /// with 30 layers −0.7 dB; models/MODEL_CARD.md).
     #[arg(long, conflicts_with_all = ["no_prefilter", "encoding"])]
     pub prefilter: bool,
     /// Encode the CNN's hologram with --encoding (AA-DPM by default) instead of the DDPM pre-filter CNN.
@@ -125,23 +126,13 @@ impl ModelArgs {
         }
     }
 
-    /// Whether the pipeline runs a pre-filter CNN at `offset_m`: never at 0 m or with --no-prefilter;
-    /// always with --prefilter or --prefilter-model; otherwise (the default) where a shipped one exists
-    /// (6 and 12 mm) and no --encoding was asked for.
-    fn wants_prefilter(&self, offset_m: f64) -> bool {
-        if offset_m == 0.0 || self.no_prefilter {
-            return false;
-        }
-        if self.prefilter || self.prefilter_model.is_some() {
-            return true;
-        }
-        let mm = self.offset_mm.round();
-        self.encoding.encoding.is_none()
-            && (mm - self.offset_mm).abs() < 1e-9
-            && tensorholo::model::embedded::PREFILTER_OFFSETS_MM.contains(&(mm as u32))
-    }
-
     /// Loads the models and builds the pipeline; also returns a JSON description of what was loaded.
+    ///
+    /// The pre-filter CNN: none at 0 mm or with --no-prefilter; --prefilter-model's file; the shipped one of
+    /// --offset-mm with --prefilter (an error where none is shipped); by default the shipped one only where
+    /// it exists, no --encoding was asked for, and it was trained with a hologram CNN of this depth
+    /// (`tensorholo.hologram_layers`): the shipped pre-filters beat AA-DPM with the 8-layer CNN they were
+    /// trained with, not with the deeper CNNs (models/MODEL_CARD.md).
     pub fn pipeline(&self) -> Result<(HologramPipeline, serde_json::Value)> {
         if !self.offset_mm.is_finite() {
             bail!("--offset-mm must be a finite number of millimetres");
@@ -156,42 +147,65 @@ impl ModelArgs {
             cnn_layout: self.layout.into(),
         };
         let precision = self.precision();
-        let want_prefilter = self.wants_prefilter(config.offset_m);
         let t = Instant::now();
-        let pipeline = if self.model.is_none() && self.prefilter_model.is_none() {
-            HologramPipeline::embedded(self.layers, precision, want_prefilter, config)
-                .context("loading the shipped models")?
-        } else {
-            let expected = ModelConfig {
-                optics: config.optics,
-                offset_m: config.offset_m,
-                input_layers: 1,
-            };
-            let hologram = match &self.model {
-                Some(p) => HologramModel::from_path(p, ModelKind::Hologram, &expected)?,
-                None => {
-                    tensorholo::model::embedded::hologram_model(self.layers, precision, &expected)?
-                }
-            };
-            let prefilter = match (&self.prefilter_model, want_prefilter) {
-                (Some(p), _) => Some(HologramModel::from_path(
-                    p,
-                    ModelKind::PreFilter,
-                    &expected,
-                )?),
-                (None, true) => {
-                    let mm = self.offset_mm.round() as u32;
-                    if (mm as f64 - self.offset_mm).abs() > 1e-9 {
-                        bail!("no shipped pre-filter for {} mm: give --prefilter-model or leave out --prefilter", self.offset_mm);
-                    }
-                    Some(tensorholo::model::embedded::prefilter_model(
-                        mm, precision, &expected,
-                    )?)
-                }
-                (None, false) => None,
-            };
-            HologramPipeline::new(Arc::new(hologram), prefilter.map(Arc::new), config)?
+        let expected = ModelConfig {
+            optics: config.optics,
+            offset_m: config.offset_m,
+            input_layers: 1,
         };
+        let hologram = match &self.model {
+            Some(p) => HologramModel::from_path(p, ModelKind::Hologram, &expected)?,
+            None => tensorholo::model::embedded::hologram_model(self.layers, precision, &expected)
+                .context("loading the shipped hologram CNN")?,
+        };
+        let mm = self.offset_mm.round();
+        let shipped_mm = ((mm - self.offset_mm).abs() < 1e-9
+            && tensorholo::model::embedded::PREFILTER_OFFSETS_MM.contains(&(mm as u32)))
+        .then_some(mm as u32);
+        let shipped = |mm: u32| {
+            tensorholo::model::embedded::prefilter_model(mm, precision, &expected)
+                .context("loading the shipped pre-filter CNN")
+        };
+        let prefilter = if config.offset_m == 0.0 || self.no_prefilter {
+            None
+        } else if let Some(p) = &self.prefilter_model {
+            Some(HologramModel::from_path(
+                p,
+                ModelKind::PreFilter,
+                &expected,
+            )?)
+        } else if self.prefilter {
+            match shipped_mm {
+                Some(mm) => Some(shipped(mm)?),
+                None => bail!(
+                    "no shipped pre-filter CNN for {} mm (shipped: {:?} mm): give --prefilter-model or leave \
+                     out --prefilter",
+                    self.offset_mm,
+                    tensorholo::model::embedded::PREFILTER_OFFSETS_MM
+                ),
+            }
+        } else {
+            match shipped_mm.filter(|_| self.encoding.encoding.is_none()) {
+                Some(mm) => {
+                    let p = shipped(mm)?;
+                    let layers = hologram.metadata().layers;
+                    match p.metadata().hologram_layers {
+                        Some(l) if l == layers => Some(p),
+                        trained => {
+                            log::info!(
+                                "no pre-filter CNN by default: the shipped {mm} mm pre-filter was trained \
+                                 with the {} hologram CNN, this one has {layers} layers; encoding with \
+                                 --encoding (AA-DPM) instead (--prefilter forces it)",
+                                trained.map_or("unknown".to_string(), |l| format!("{l}-layer"))
+                            );
+                            None
+                        }
+                    }
+                }
+                None => None,
+            }
+        };
+        let pipeline = HologramPipeline::new(Arc::new(hologram), prefilter.map(Arc::new), config)?;
         let describe = |m: &HologramModel| {
             let md = m.metadata();
             json!({

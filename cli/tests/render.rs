@@ -79,14 +79,19 @@ fn render_runs_the_shipped_model_on_the_built_in_scene_and_evaluates_it() {
     assert_eq!(r["timings_s"]["median"]["prefilter_s"], 0.0);
     assert_eq!(r["pipeline"]["encoding"]["method"], "anti-aliased");
 
-    // At 6 mm the shipped pre-filter runs by default; --no-prefilter or an explicit --encoding selects a
-    // non-learned encoding instead.
-    for (extra, prefilter, method) in [
+    // At 6 mm the shipped pre-filter runs by default with the 8-layer CNN it was trained with, not with the
+    // 30-layer one (unless forced); --no-prefilter or an explicit --encoding selects a non-learned encoding.
+    for (k, (extra, prefilter, method)) in [
         (&[][..], true, "plain"),
         (&["--no-prefilter"][..], false, "anti-aliased"),
         (&["--encoding", "bl-dpm"][..], false, "band-limited"),
-    ] {
-        let o6 = dir.path().join(format!("r6{}", extra.len()));
+        (&["--layers", "30"][..], false, "anti-aliased"),
+        (&["--layers", "30", "--prefilter"][..], true, "plain"),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let o6 = dir.path().join(format!("r6_{k}"));
         let mut cmd = vec![
             "render",
             "--size",

@@ -389,6 +389,11 @@ fn format_1_prefilters_are_refused_and_format_1_hologram_cnns_load() {
     use tensorholo::model::{ModelMetadata, FORMAT_VERSION, PREFILTER_FORMAT_VERSION};
     let pre = prefilter();
     assert_eq!(pre.metadata().format_version, PREFILTER_FORMAT_VERSION);
+    assert_eq!(pre.metadata().hologram_layers, Some(8));
+    let mut raw = pre.metadata().raw.clone();
+    raw.insert("tensorholo.hologram_layers".into(), "eight".into());
+    let e = ModelMetadata::from_props(raw).unwrap_err();
+    assert!(e.to_string().contains("hologram_layers"), "{e}");
     assert_eq!(ModelKind::PreFilter.output_names(), ["real", "imag"]);
     let key = "tensorholo.format_version".to_string();
     let with_version = |raw: &std::collections::BTreeMap<String, String>, v: Option<&str>| {

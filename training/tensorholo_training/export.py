@@ -23,7 +23,8 @@ Every file carries ``metadata_props`` (all keys prefixed ``tensorholo.``): ``kin
 ``volume_depth_m``, ``offset_m``, ``input_layers``, ``trained_resolution`` (``HxW``), ``training_commit``, plus
 ``precision`` (``f32``, ``int8-qoperator-conv``, ``int8-qdq-conv``), ``channels``, ``format_version`` and ``io``
 (a one-line statement of the input/output semantics), and for a pre-filter ``prefilter_base``
-(``aa-dpm(sigma_px=0.7,taps=5)`` or ``identity``).
+(``aa-dpm(sigma_px=0.7,taps=5)`` or ``identity``) and ``hologram_layers`` (the depth of the hologram CNN it
+was trained with).
 """
 from __future__ import annotations
 
@@ -66,6 +67,7 @@ def model_metadata(
     trained_resolution: Sequence[int],
     training_commit: str,
     precision: str = "f32",
+    hologram_layers: int | None = None,
 ) -> dict[str, str]:
     """The ``metadata_props`` of an exported CNN (``DESIGN.md`` §3), keys prefixed ``tensorholo.``.
 
@@ -77,6 +79,8 @@ def model_metadata(
         trained_resolution: ``(H, W)`` of the training crops.
         training_commit: git commit of the training code.
         precision: ``f32``, ``int8-qoperator-conv`` or ``int8-qdq-conv``.
+        hologram_layers: for a pre-filter, the depth of the hologram CNN it was trained with (written as
+            ``tensorholo.hologram_layers``; the SDK runs a pre-filter by default only with that CNN's depth).
     Returns:
         dict of strings.
     """
@@ -97,6 +101,8 @@ def model_metadata(
         "format_version": FORMAT_VERSION[kind],
         "io": IO_DESCRIPTION[kind],
     }
+    if hologram_layers is not None:
+        values["hologram_layers"] = str(int(hologram_layers))
     if isinstance(module, PrefilterCNN):
         values["prefilter_base"] = (f"aa-dpm(sigma_px={module.sigma_px!r},taps={module.size})"
                                     if module.base == "aa-dpm" else module.base)
@@ -289,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
     if ck["prefilter"] is not None and not args.no_prefilter:
         pre_path = path if args.prefilter_only else os.path.join(args.out_dir, f"{args.name}.prefilter.onnx")
         export_onnx(ck["prefilter"], pre_path, "prefilter-cnn",
-                    model_metadata("prefilter-cnn", ck["prefilter"], **common))
+                    model_metadata("prefilter-cnn", ck["prefilter"], **common, hologram_layers=cfg["num_layers"]))
         written.append(pre_path)
     if args.int8:
         root = args.calib_dataset or cfg["dataset"]

@@ -136,6 +136,10 @@ pub struct ModelMetadata {
     pub format_version: u32,
     /// `tensorholo.io`: the one-line I/O statement, if present.
     pub io: Option<String>,
+    /// `tensorholo.hologram_layers` of a pre-filter: the depth of the hologram CNN whose offset holograms it
+    /// was trained on (it is known to help that CNN; `holo render` runs it by default only with it), if
+    /// present.
+    pub hologram_layers: Option<usize>,
     /// Every `metadata_props` entry of the file, prefixed or not (for display and forward compatibility).
     pub raw: BTreeMap<String, String>,
 }
@@ -257,6 +261,10 @@ impl ModelMetadata {
             precision: opt("precision").unwrap_or("f32").to_string(),
             format_version,
             io: opt("io").map(str::to_string),
+            hologram_layers: match opt("hologram_layers") {
+                None => None,
+                Some(v) => Some(parse("hologram_layers", v, "a positive integer")?),
+            },
             raw: BTreeMap::new(),
         };
         if md.layers < 2 {
