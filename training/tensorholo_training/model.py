@@ -171,14 +171,17 @@ class PrefilterCNN(nn.Module):
 
     @property
     def num_layers(self) -> int:
+        """Convolution layers of the correction CNN (8 in the paper; written as ``tensorholo.layers``)."""
         return self.net.num_layers
 
     @property
     def channels(self) -> int:
+        """Filters per hidden layer of the correction CNN (8 in the paper)."""
         return self.net.channels
 
     @property
     def in_channels(self) -> int:
+        """Input channels: 6 = ``[Re H, Im H]`` of R, G, B."""
         return 6
 
     def base_filter(self, x: torch.Tensor) -> torch.Tensor:
