@@ -8,9 +8,8 @@
 use std::path::Path;
 
 use ndarray::{Array2, Array3};
-use tensorholo::model::Precision;
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
-use tensorholo::pipeline::{HologramPipeline, PipelineConfig};
+use tensorholo::pipeline::{HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
 use tensorholo::reference::ReferencePipeline;
 use tensorholo::scene::{load_rgbd, DepthEncoding, LoadOptions, RgbdFrame};
 use tensorholo::synthesis::{SceneLayer, SmLbm};
@@ -44,7 +43,11 @@ fn shipped_cnn(frame: &RgbdFrame, depths: &[f64]) -> Vec<Array3<f32>> {
         offset_m: 6e-3,
         ..PipelineConfig::default()
     };
-    let pipeline = HologramPipeline::embedded(8, Precision::F32, true, config).expect("models");
+    let selection = ModelSelection {
+        prefilter: PrefilterMode::Required,
+        ..ModelSelection::default()
+    };
+    let pipeline = HologramPipeline::embedded(&selection, config).expect("models");
     let mut session = pipeline
         .session(frame.height(), frame.width())
         .expect("session");

@@ -9,8 +9,10 @@ use anyhow::Result;
 use clap::Args;
 use ndarray::Array3;
 use serde_json::json;
-use tensorholo::model::{embedded, set_cnn_threads, CnnLayout, ModelConfig, NodeTiming, Precision};
-use tensorholo::pipeline::{HologramPipeline, PipelineConfig};
+use tensorholo::model::{
+    embedded, CnnLayout, ModelConfig, NodeTiming, PlanRequest, Precision, ThreadCount,
+};
+use tensorholo::pipeline::{HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
 use tensorholo::scene::procedural;
 
 use crate::args::parse_size;
@@ -29,10 +31,11 @@ pub struct BenchArgs {
     /// Frame sizes HEIGHTxWIDTH.
     #[arg(long, value_delimiter = ',', value_parser = parse_size, default_values = ["384x384", "540x960", "1080x1920"])]
     sizes: Vec<(usize, usize)>,
-    /// Memory layouts tract runs the CNNs in (nhwc rows are skipped for int8-qop, which tract cannot move).
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [LayoutArg::Nchw])]
+    /// Memory layouts tract runs the CNNs in (nhwc rows are skipped for int8-qop, which tract cannot move;
+    /// auto times both at plan creation, the tuning cost is the `plan ms` column).
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [LayoutArg::Auto])]
     layout: Vec<LayoutArg>,
-    /// CNN thread counts (tract's executor).
+    /// CNN thread counts (each plan's own executor).
     #[arg(long, value_delimiter = ',', default_values_t = [1, 2])]
     threads: Vec<usize>,
     /// Timed runs per case after one warm-up run (fewer once --max-seconds is spent; at least one).
@@ -137,7 +140,7 @@ fn layouts(args: &BenchArgs, precision: Precision) -> Vec<CnnLayout> {
     args.layout
         .iter()
         .map(|&l| CnnLayout::from(l))
-        .filter(|&l| l == CnnLayout::ChannelsFirst || precision != Precision::Int8QOperator)
+        .filter(|&l| l != CnnLayout::ChannelsLast || precision != Precision::Int8QOperator)
         .collect()
 }
 
@@ -180,12 +183,19 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                     let input = Array3::<f32>::from_shape_fn((4, h, w), |(c, y, x)| {
                         ((x * 7 + y * 3 + c) % 13) as f32 / 12.0
                     });
-                    for layout in layouts(args, precision) {
-                        let t = Instant::now();
-                        let plan = model.plan_with_layout(h, w, layout)?;
-                        let plan_ms = t.elapsed().as_secs_f64() * 1e3;
+                    for requested in layouts(args, precision) {
                         for &threads in &args.threads {
-                            set_cnn_threads(threads)?;
+                            let t = Instant::now();
+                            let request = PlanRequest {
+                                layout: requested,
+                                threads: ThreadCount::Fixed(threads),
+                            };
+                            let (plan, _) = model.tuned_plan(h, w, request)?;
+                            let plan_ms = t.elapsed().as_secs_f64() * 1e3;
+                            let layout = match requested {
+                                CnnLayout::Auto => format!("auto → {}", plan.layout()),
+                                l => l.to_string(),
+                            };
                             let (s, runs) = time_runs(args.repeat, args.max_seconds, || {
                                 plan.run_outputs(input.view())?;
                                 Ok(())
@@ -232,19 +242,32 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 for &p in &args.precision {
                     let precision: Precision = p.into();
                     for layout in layouts(args, precision) {
-                        let pipeline = HologramPipeline::embedded(
-                            layers,
-                            precision,
-                            args.offset_mm != 0,
-                            PipelineConfig {
-                                offset_m: args.offset_mm as f64 * 1e-3,
-                                cnn_layout: layout,
-                                ..PipelineConfig::default()
-                            },
-                        )?;
-                        let mut session = pipeline.session(h, w)?;
                         for &threads in &args.threads {
-                            set_cnn_threads(threads)?;
+                            let selection = ModelSelection {
+                                layers,
+                                precision,
+                                prefilter: if args.offset_mm != 0 {
+                                    PrefilterMode::Required
+                                } else {
+                                    PrefilterMode::Off
+                                },
+                            };
+                            let pipeline = HologramPipeline::embedded(
+                                &selection,
+                                PipelineConfig {
+                                    offset_m: args.offset_mm as f64 * 1e-3,
+                                    cnn_layout: layout,
+                                    cnn_threads: ThreadCount::Fixed(threads),
+                                    ..PipelineConfig::default()
+                                },
+                            )?;
+                            let mut session = pipeline.session(h, w)?;
+                            let layout = match layout {
+                                CnnLayout::Auto => {
+                                    format!("auto → {}", session.plan_report().layout)
+                                }
+                                l => l.to_string(),
+                            };
                             let mut timings = Vec::new();
                             let (s, runs) = time_runs(args.repeat, args.max_seconds, || {
                                 timings.push(session.render(&frame)?.timings);

@@ -10,11 +10,11 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use tensorholo::evaluation::{focal_depths, table2};
-use tensorholo::model::{
-    set_cnn_threads, CnnLayout, HologramModel, ModelConfig, ModelKind, Precision,
-};
+use tensorholo::model::{CnnLayout, HologramModel, ModelConfig, ModelKind, Precision, ThreadCount};
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
-use tensorholo::pipeline::{FrameTimings, HologramPipeline, HologramSession, PipelineConfig};
+use tensorholo::pipeline::{
+    FrameTimings, HologramPipeline, HologramSession, PipelineConfig, PrefilterMode,
+};
 use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
 use tensorholo::scene::RgbdFrame;
 use tensorholo::synthesis::{SceneLayer, SmLbm};
@@ -43,6 +43,8 @@ impl From<PrecisionArg> for Precision {
 /// CNN memory layouts selectable on the command line ([`CnnLayout`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum LayoutArg {
+    /// Time both layouts on this machine when the session is created and keep the faster.
+    Auto,
     /// Channels first, as in the ONNX file (tract's direct spatial convolution).
     Nchw,
     /// Channels last (tract's lazy im2col and matrix product; not for int8-qop files).
@@ -52,6 +54,7 @@ pub enum LayoutArg {
 impl From<LayoutArg> for CnnLayout {
     fn from(l: LayoutArg) -> Self {
         match l {
+            LayoutArg::Auto => CnnLayout::Auto,
             LayoutArg::Nchw => CnnLayout::ChannelsFirst,
             LayoutArg::Nhwc => CnnLayout::ChannelsLast,
         }
@@ -102,13 +105,14 @@ pub struct ModelArgs {
     /// Encode the CNN's hologram with --encoding (AA-DPM by default) instead of the DDPM pre-filter CNN.
     #[arg(long)]
     pub no_prefilter: bool,
-    /// Threads for the CNN's matrix products (tract); the three colours of the optics always run in
-    /// parallel.
-    #[arg(long, default_value_t = 1)]
-    pub threads: usize,
-    /// Memory layout tract runs the hologram CNN in (nhwc: not for int8-qop; which is faster depends on the
-    /// frame size: `holo bench --layout nchw,nhwc`).
-    #[arg(long, value_enum, default_value_t = LayoutArg::Nchw)]
+    /// Threads for the CNN's matrix products (tract); 0 = time 1, half and all cores when the session is
+    /// created and keep the fastest. The three colours of the optics always run in parallel.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=256))]
+    pub threads: u32,
+    /// Memory layout tract runs the hologram CNN in: auto times both when the session is created (the
+    /// choice and timings go to report.json); nhwc is not for int8-qop. Which is faster depends on the CPU
+    /// and the frame size (`holo bench --layout nchw,nhwc,auto`).
+    #[arg(long, value_enum, default_value_t = LayoutArg::Auto)]
     pub layout: LayoutArg,
     #[command(flatten)]
     pub encoding: crate::args::EncodingArgs,
@@ -126,18 +130,27 @@ impl ModelArgs {
         }
     }
 
+    /// The pre-filter mode the flags ask for: `--no-prefilter` or an explicit `--encoding` → off,
+    /// `--prefilter` → required, otherwise the SDK's automatic rule
+    /// ([`HologramPipeline::with_shipped_prefilter`]).
+    pub fn prefilter_mode(&self) -> PrefilterMode {
+        if self.no_prefilter || self.encoding.encoding.is_some() {
+            PrefilterMode::Off
+        } else if self.prefilter {
+            PrefilterMode::Required
+        } else {
+            PrefilterMode::Auto
+        }
+    }
+
     /// Loads the models and builds the pipeline; also returns a JSON description of what was loaded.
     ///
-    /// The pre-filter CNN: none at 0 mm or with --no-prefilter; --prefilter-model's file; the shipped one of
-    /// --offset-mm with --prefilter (an error where none is shipped); by default the shipped one only where
-    /// it exists, no --encoding was asked for, and it was trained with a hologram CNN of this depth
-    /// (`tensorholo.hologram_layers`): the shipped pre-filters beat AA-DPM with the 8-layer CNN they were
-    /// trained with, not with the deeper CNNs (models/MODEL_CARD.md).
+    /// The pre-filter CNN: `--prefilter-model`'s file, or the shipped one as [`ModelArgs::prefilter_mode`]
+    /// says; the rule is the SDK's (the CLI and the bindings share it).
     pub fn pipeline(&self) -> Result<(HologramPipeline, serde_json::Value)> {
         if !self.offset_mm.is_finite() {
             bail!("--offset-mm must be a finite number of millimetres");
         }
-        set_cnn_threads(self.threads)?;
         let (_, encoding) = self.encoding.method(crate::args::Encoding::AaDpm);
         let config = PipelineConfig {
             optics: self.optics.setup()?,
@@ -145,6 +158,7 @@ impl ModelArgs {
             offset_m: self.offset_mm * 1e-3,
             encoding,
             cnn_layout: self.layout.into(),
+            cnn_threads: ThreadCount::from_count(self.threads as usize),
         };
         let precision = self.precision();
         let t = Instant::now();
@@ -158,54 +172,24 @@ impl ModelArgs {
             None => tensorholo::model::embedded::hologram_model(self.layers, precision, &expected)
                 .context("loading the shipped hologram CNN")?,
         };
-        let mm = self.offset_mm.round();
-        let shipped_mm = ((mm - self.offset_mm).abs() < 1e-9
-            && tensorholo::model::embedded::PREFILTER_OFFSETS_MM.contains(&(mm as u32)))
-        .then_some(mm as u32);
-        let shipped = |mm: u32| {
-            tensorholo::model::embedded::prefilter_model(mm, precision, &expected)
-                .context("loading the shipped pre-filter CNN")
-        };
-        let prefilter = if config.offset_m == 0.0 || self.no_prefilter {
-            None
-        } else if let Some(p) = &self.prefilter_model {
-            Some(HologramModel::from_path(
-                p,
-                ModelKind::PreFilter,
-                &expected,
-            )?)
-        } else if self.prefilter {
-            match shipped_mm {
-                Some(mm) => Some(shipped(mm)?),
-                None => bail!(
-                    "no shipped pre-filter CNN for {} mm (shipped: {:?} mm): give --prefilter-model or leave \
-                     out --prefilter",
-                    self.offset_mm,
-                    tensorholo::model::embedded::PREFILTER_OFFSETS_MM
-                ),
+        let pipeline = match &self.prefilter_model {
+            Some(p) if config.offset_m != 0.0 => {
+                let pre = HologramModel::from_path(p, ModelKind::PreFilter, &expected)?;
+                HologramPipeline::new(Arc::new(hologram), Some(Arc::new(pre)), config)?
             }
-        } else {
-            match shipped_mm.filter(|_| self.encoding.encoding.is_none()) {
-                Some(mm) => {
-                    let p = shipped(mm)?;
-                    let layers = hologram.metadata().layers;
-                    match p.metadata().hologram_layers {
-                        Some(l) if l == layers => Some(p),
-                        trained => {
-                            log::info!(
-                                "no pre-filter CNN by default: the shipped {mm} mm pre-filter was trained \
-                                 with the {} hologram CNN, this one has {layers} layers; encoding with \
-                                 --encoding (AA-DPM) instead (--prefilter forces it)",
-                                trained.map_or("unknown".to_string(), |l| format!("{l}-layer"))
-                            );
-                            None
-                        }
-                    }
-                }
-                None => None,
-            }
+            _ => HologramPipeline::with_shipped_prefilter(
+                Arc::new(hologram),
+                self.prefilter_mode(),
+                precision,
+                config,
+            )?,
         };
-        let pipeline = HologramPipeline::new(Arc::new(hologram), prefilter.map(Arc::new), config)?;
+        if pipeline.prefilter_model().is_none() {
+            log::info!(
+                "encoding without a pre-filter CNN: {}",
+                pipeline.prefilter_reason()
+            );
+        }
         let describe = |m: &HologramModel| {
             let md = m.metadata();
             json!({
@@ -223,6 +207,7 @@ impl ModelArgs {
                 (m, p) => format!("files: {:?} {:?}", m, p),
             },
             "precision": precision,
+            "prefilter_reason": pipeline.prefilter_reason(),
             "cnn_threads": self.threads,
             "cnn_layout": pipeline.config().cnn_layout,
             "hologram_cnn": describe(pipeline.hologram_model()),
@@ -342,6 +327,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         source,
         models,
         |report| {
+            report["cnn_plan"] = json!(session.plan_report());
             report["timings_s"] = json!({
                 "load": load_s,
                 "session_setup": session_s,
@@ -375,7 +361,7 @@ fn write_outputs(
     let midpoint = session
         .last_heads()
         .context("no frame rendered")?
-        .to_field();
+        .to_field()?;
     let t = Instant::now();
     let displayed = post_encoding_midpoint(
         out.phase.view(),

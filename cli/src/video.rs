@@ -211,6 +211,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         "models": models,
         "pipeline": pipeline.config(),
         "session_setup_s": session_s,
+        "cnn_plan": session.plan_report(),
         "stream_s": stream_s,
         "fps_overall": n as f64 / stream_s,
         "fps_steady": if mean_period > 0.0 { 1.0 / mean_period } else { 0.0 },

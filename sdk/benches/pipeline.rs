@@ -13,7 +13,7 @@ use std::time::Duration;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use ndarray::Array3;
 use tensorholo::model::{embedded, CnnLayout, ModelConfig, Precision};
-use tensorholo::pipeline::{HologramPipeline, PipelineConfig};
+use tensorholo::pipeline::{HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
 use tensorholo::scene::procedural;
 
 const SIZE: (usize, usize) = (384, 384);
@@ -52,11 +52,16 @@ fn session(c: &mut Criterion) {
         .measurement_time(Duration::from_secs(8));
     let (h, w) = SIZE;
     let frame = procedural::default_scene(h, w).expect("built-in scene");
-    for (name, offset_m, prefilter) in [("aa-dpm_0mm", 0.0, false), ("ddpm_6mm", 6e-3, true)] {
-        let pipeline = HologramPipeline::embedded(
-            8,
-            Precision::F32,
+    for (name, offset_m, prefilter) in [
+        ("aa-dpm_0mm", 0.0, PrefilterMode::Off),
+        ("ddpm_6mm", 6e-3, PrefilterMode::Required),
+    ] {
+        let selection = ModelSelection {
             prefilter,
+            ..ModelSelection::default()
+        };
+        let pipeline = HologramPipeline::embedded(
+            &selection,
             PipelineConfig {
                 offset_m,
                 ..PipelineConfig::default()

@@ -292,18 +292,10 @@ impl SampleGenerator {
 pub fn ldi_tensor(ldi: &LayeredDepthImage) -> (Array3<f32>, Array3<u8>) {
     let (l, h, w) = (ldi.num_layers(), ldi.height(), ldi.width());
     let mut x = Array3::<f32>::zeros((4 * l, h, w));
+    crate::model::contract::pack_ldi(ldi, x.view_mut())
+        .expect("the tensor is allocated at the LDI's own [4·L, H, W]");
     let mut valid = Array3::<u8>::zeros((l, h, w));
     for (k, layer) in ldi.layers().iter().enumerate() {
-        for c in 0..3 {
-            Zip::from(x.index_axis_mut(Axis(0), 4 * k + c))
-                .and(layer.amplitude.index_axis(Axis(0), c))
-                .and(&layer.valid)
-                .for_each(|o, &a, &v| *o = if v { a } else { 0.0 });
-        }
-        Zip::from(x.index_axis_mut(Axis(0), 4 * k + 3))
-            .and(&layer.depth)
-            .and(&layer.valid)
-            .for_each(|o, &d, &v| *o = if v { d } else { 1.0 });
         Zip::from(valid.index_axis_mut(Axis(0), k))
             .and(&layer.valid)
             .for_each(|o, &v| *o = u8::from(v));
@@ -948,7 +940,7 @@ pub fn generate(
         let mut writer: Option<std::thread::ScopedJoinHandle<'_, Result<()>>> = None;
         let join = |h: std::thread::ScopedJoinHandle<'_, Result<()>>| {
             h.join().unwrap_or_else(|_| {
-                Err(HoloError::InvalidData(
+                Err(HoloError::Internal(
                     "the shard writer thread panicked".into(),
                 ))
             })

@@ -85,6 +85,11 @@ pub enum HoloError {
     /// Running a CNN failed inside the inference engine (the model stays usable).
     #[error("model inference failed: {0}")]
     ModelRun(String),
+    /// A failure inside the SDK that no input explains: a worker thread that stopped or panicked, a poisoned
+    /// lock, a broken internal invariant. It is a bug (please report it); the message says what failed.
+    /// The object that returned it may have to be recreated (the message says so where it applies).
+    #[error("internal error (a bug, please report it): {0}")]
+    Internal(String),
     /// Refusing to overwrite a file the user passed in as input.
     #[error("refusing to overwrite input file `{0}`")]
     WouldOverwriteInput(PathBuf),

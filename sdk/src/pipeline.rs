@@ -17,12 +17,16 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Instant;
 
-use ndarray::{s, Array3, ArrayView3, Axis};
+use ndarray::{Array3, ArrayView3, Axis};
 use num_complex::Complex32;
 
 use crate::encoding::{normaliser, ChannelEncoder, ChannelStats, DoublePhaseMethod};
 use crate::error::{invalid, HoloError, Result};
-use crate::model::{head_to_phasor, CnnLayout, HologramModel, ModelConfig, ModelKind, ModelPlan};
+use crate::model::contract::{self, head_to_phasor};
+use crate::model::{
+    CnnLayout, HologramModel, ModelConfig, ModelKind, ModelPlan, PlanReport, PlanRequest,
+    Precision, ThreadCount,
+};
 use crate::optics::{Carrier, OpticalSetup, PropagationOptions, Scratch, SpectralPlan};
 use crate::scene::{LayeredDepthImage, RgbdFrame};
 
@@ -38,11 +42,15 @@ pub struct PipelineConfig {
     pub offset_m: f64,
     /// Double phase method used *without* a pre-filter CNN (with one, DDPM encodes with plain Eq. 7).
     pub encoding: DoublePhaseMethod,
-    /// Memory layout tract runs the hologram CNN in ([`CnnLayout`]; results agree to float rounding). The
+    /// Memory layout tract runs the hologram CNN in ([`CnnLayout`]; results agree to float rounding);
+    /// [`CnnLayout::Auto`] (the default) times both at session creation and keeps the faster. The
     /// pre-filter CNN always runs channels-first: with its 8 filters the channels-last matrix product has
     /// only 8 rows, and it measured 2.1× slower (`holo bench --skip-cnn --layout nchw,nhwc`, 384², 1
-    /// thread: 89 ms against 42 ms).
+    /// thread: 89 ms against 42 ms); tract 0.23 cannot move its graph channels-last anyway.
     pub cnn_layout: CnnLayout,
+    /// Threads of the CNNs' matrix products ([`ThreadCount::Auto`], the default, times 1, half and all
+    /// cores at session creation). The three colours of the optics always run on their own three threads.
+    pub cnn_threads: ThreadCount,
 }
 
 impl Default for PipelineConfig {
@@ -53,6 +61,137 @@ impl Default for PipelineConfig {
             offset_m: 0.0,
             encoding: DoublePhaseMethod::default(),
             cnn_layout: CnnLayout::default(),
+            cnn_threads: ThreadCount::default(),
+        }
+    }
+}
+
+/// Whether the DDPM pre-filter CNN runs between offset propagation and double phase encoding (paper Eq. 6),
+/// chosen by name ([`HologramPipeline::with_shipped_prefilter`] has the rule).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PrefilterMode {
+    /// The shipped pre-filter where one exists for the offset and was trained with this CNN depth.
+    #[default]
+    Auto,
+    /// Never: encode with the configured double phase method (AA-DPM by default).
+    Off,
+    /// Always the shipped pre-filter of the offset; an error where none is shipped.
+    Required,
+}
+
+impl PrefilterMode {
+    /// Short name: `auto`, `off`, `required`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Off => "off",
+            Self::Required => "required",
+        }
+    }
+}
+
+/// The shipped CNNs by name ([`HologramPipeline::embedded`]). `Default`: 8 layers, f32, pre-filter
+/// [`PrefilterMode::Auto`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+pub struct ModelSelection {
+    /// Hologram CNN depth: 8, 15 or 30 convolution layers.
+    pub layers: usize,
+    /// Weight format of both CNNs.
+    pub precision: Precision,
+    /// Whether the DDPM pre-filter CNN runs.
+    pub prefilter: PrefilterMode,
+}
+
+impl Default for ModelSelection {
+    fn default() -> Self {
+        Self {
+            layers: 8,
+            precision: Precision::F32,
+            prefilter: PrefilterMode::Auto,
+        }
+    }
+}
+
+/// The rule of [`HologramPipeline::with_shipped_prefilter`]: the pre-filter to run (if any) and why.
+fn shipped_prefilter(
+    hologram: &HologramModel,
+    mode: PrefilterMode,
+    precision: Precision,
+    config: &PipelineConfig,
+) -> Result<(Option<HologramModel>, String)> {
+    let mm = config.offset_m * 1e3;
+    if mode == PrefilterMode::Off {
+        return Ok((None, "pre-filter off".into()));
+    }
+    if config.offset_m == 0.0 {
+        return match mode {
+            PrefilterMode::Required => Err(invalid(
+                "prefilter",
+                "a pre-filter CNN belongs to a non-zero SLM offset (DDPM, Eq. 6); none exists at 0 mm",
+            )),
+            _ => Ok((None, "no pre-filter at a 0 mm offset".into())),
+        };
+    }
+    #[cfg(feature = "embedded-models")]
+    {
+        use crate::model::embedded::{prefilter_model, PREFILTER_OFFSETS_MM};
+        let shipped = PREFILTER_OFFSETS_MM
+            .into_iter()
+            .find(|&o| (o as f64 - mm).abs() < 1e-6);
+        let Some(offset_mm) = shipped else {
+            return match mode {
+                PrefilterMode::Required => Err(invalid(
+                    "prefilter",
+                    format!(
+                        "no shipped pre-filter CNN for a {mm} mm offset (shipped: {PREFILTER_OFFSETS_MM:?} \
+                         mm); use one of those offsets, or the pre-filter off"
+                    ),
+                )),
+                _ => Ok((
+                    None,
+                    format!("no shipped pre-filter for {mm} mm (shipped: {PREFILTER_OFFSETS_MM:?} mm)"),
+                )),
+            };
+        };
+        let expected = ModelConfig {
+            optics: config.optics,
+            offset_m: config.offset_m,
+            input_layers: hologram.metadata().input_layers,
+        };
+        let p = prefilter_model(offset_mm, precision, &expected)?;
+        let layers = hologram.metadata().layers;
+        let trained = p.metadata().hologram_layers;
+        if mode == PrefilterMode::Required || trained == Some(layers) {
+            let why = format!(
+                "shipped {offset_mm} mm pre-filter ({}, trained with the {} hologram CNN)",
+                if mode == PrefilterMode::Required {
+                    "required"
+                } else {
+                    "auto"
+                },
+                trained.map_or("unknown".to_string(), |l| format!("{l}-layer"))
+            );
+            return Ok((Some(p), why));
+        }
+        Ok((
+            None,
+            format!(
+                "the shipped {offset_mm} mm pre-filter was trained with the {} hologram CNN, this one has \
+                 {layers} layers: encoding without it (require it to force it)",
+                trained.map_or("unknown".to_string(), |l| format!("{l}-layer"))
+            ),
+        ))
+    }
+    #[cfg(not(feature = "embedded-models"))]
+    {
+        let _ = (hologram, precision);
+        match mode {
+            PrefilterMode::Required => Err(invalid(
+                "prefilter",
+                "this build has no embedded models (feature `embedded-models`); pass a pre-filter file",
+            )),
+            _ => Ok((None, format!("no embedded pre-filter in this build ({mm} mm)"))),
         }
     }
 }
@@ -63,6 +202,8 @@ pub struct HologramPipeline {
     config: PipelineConfig,
     hologram: Arc<HologramModel>,
     prefilter: Option<Arc<HologramModel>>,
+    /// Why the pipeline runs (or does not run) a pre-filter CNN, for logs and reports.
+    prefilter_reason: String,
 }
 
 impl HologramPipeline {
@@ -95,58 +236,80 @@ impl HologramPipeline {
             }
             p.metadata().check(ModelKind::PreFilter, &expected)?;
         }
+        let prefilter_reason = if prefilter.is_some() {
+            "pre-filter CNN given by the caller"
+        } else if config.offset_m == 0.0 {
+            "no pre-filter at a 0 mm offset"
+        } else {
+            "no pre-filter CNN given"
+        }
+        .to_string();
         Ok(Self {
             config,
             hologram,
             prefilter,
+            prefilter_reason,
         })
     }
 
-    /// The shipped models (`models/`, feature `embedded-models`): the RGB-D hologram CNN with `layers` ∈
-    /// {8, 15, 30} layers and, if `prefilter` and the offset is not 0, the DDPM pre-filter CNN of
-    /// `config.offset_m` (6 or 12 mm), both in `precision`. The shipped pre-filters were trained on the
-    /// 8-layer CNN's holograms (`ModelMetadata::hologram_layers`): with it they display 1.2 dB above AA-DPM,
-    /// with 15 layers 0.8 dB above, with 30 layers 0.3–0.7 dB below (`models/MODEL_CARD.md`), so pass
-    /// `prefilter = false` (AA-DPM through `config.encoding`) with the 30-layer CNN.
+    /// The shipped models (`models/`, feature `embedded-models`) chosen by name: the RGB-D hologram CNN with
+    /// `selection.layers` ∈ {8, 15, 30} layers in `selection.precision`, and the DDPM pre-filter CNN of
+    /// `config.offset_m` as `selection.prefilter` says ([`HologramPipeline::with_shipped_prefilter`]).
     ///
-    /// Errors: [`HoloError::InvalidParameter`] for a layer count or offset without a shipped model; as
-    /// [`HologramModel::from_bytes`] and [`HologramPipeline::new`].
+    /// Errors: [`HoloError::InvalidParameter`] for a layer count or (with [`PrefilterMode::Required`]) an
+    /// offset without a shipped model; as [`HologramModel::from_bytes`] and [`HologramPipeline::new`].
     #[cfg(feature = "embedded-models")]
-    pub fn embedded(
-        layers: usize,
-        precision: crate::model::Precision,
-        prefilter: bool,
-        config: PipelineConfig,
-    ) -> Result<Self> {
-        use crate::model::embedded;
+    pub fn embedded(selection: &ModelSelection, config: PipelineConfig) -> Result<Self> {
         let expected = ModelConfig {
             optics: config.optics,
             offset_m: config.offset_m,
             input_layers: 1,
         };
-        let hologram = embedded::hologram_model(layers, precision, &expected)?;
-        let prefilter = if prefilter && config.offset_m != 0.0 {
-            let mm = config.offset_m * 1e3;
-            let offset_mm = embedded::PREFILTER_OFFSETS_MM
-                .into_iter()
-                .find(|&o| (o as f64 - mm).abs() < 1e-6)
-                .ok_or_else(|| {
-                    invalid(
-                        "offset_m",
-                        format!(
-                            "no shipped pre-filter CNN for {mm} mm (shipped: {:?} mm); use 0 mm or \
-                             encode without a pre-filter",
-                            embedded::PREFILTER_OFFSETS_MM
-                        ),
-                    )
-                })?;
-            Some(Arc::new(embedded::prefilter_model(
-                offset_mm, precision, &expected,
-            )?))
-        } else {
-            None
-        };
-        Self::new(Arc::new(hologram), prefilter, config)
+        let hologram = crate::model::embedded::hologram_model(
+            selection.layers,
+            selection.precision,
+            &expected,
+        )?;
+        Self::with_shipped_prefilter(
+            Arc::new(hologram),
+            selection.prefilter,
+            selection.precision,
+            config,
+        )
+    }
+
+    /// Combines `hologram` with the shipped pre-filter CNN of `config.offset_m` (in `precision`) as `mode`
+    /// says; the rule the CLI and the bindings share:
+    /// - [`PrefilterMode::Off`], or a 0 m offset: none (encoding with `config.encoding`);
+    /// - [`PrefilterMode::Required`]: the shipped pre-filter of the offset (6 or 12 mm), whatever the CNN;
+    /// - [`PrefilterMode::Auto`]: the shipped pre-filter of the offset only where one exists and it was trained
+    ///   on holograms of a CNN of this depth (`tensorholo.hologram_layers`): the shipped pre-filters display
+    ///   1.2 dB above AA-DPM with the 8-layer CNN they were trained with, 0.8 dB above with 15 layers and
+    ///   0.3–0.7 dB below with 30 (`models/MODEL_CARD.md`). Otherwise none, and
+    ///   [`HologramPipeline::prefilter_reason`] says why.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`prefilter`) for [`PrefilterMode::Required`] at 0 m or at an
+    /// offset without a shipped pre-filter; [`HoloError::InvalidParameter`] (`prefilter`) without the
+    /// `embedded-models` feature unless the mode resolves to none; as [`HologramPipeline::new`].
+    pub fn with_shipped_prefilter(
+        hologram: Arc<HologramModel>,
+        mode: PrefilterMode,
+        precision: Precision,
+        config: PipelineConfig,
+    ) -> Result<Self> {
+        if !config.offset_m.is_finite() {
+            return Err(invalid("offset_m", "must be finite"));
+        }
+        let (prefilter, reason) = shipped_prefilter(&hologram, mode, precision, &config)?;
+        let mut pipeline = Self::new(hologram, prefilter.map(Arc::new), config)?;
+        pipeline.prefilter_reason = reason;
+        Ok(pipeline)
+    }
+
+    /// Why this pipeline runs a pre-filter CNN or not (e.g. "the shipped 6 mm pre-filter was trained with the
+    /// 8-layer hologram CNN, this one has 30 layers").
+    pub fn prefilter_reason(&self) -> &str {
+        &self.prefilter_reason
     }
 
     /// The configuration.
@@ -195,14 +358,12 @@ pub struct Heads {
 }
 
 impl Heads {
-    /// The complex midpoint hologram `[3, H, W]` (R, G, B): `A·e^{i(p − 0.5)2π}`.
-    pub fn to_field(&self) -> Array3<Complex32> {
-        let mut out = Array3::<Complex32>::zeros(self.amplitude.raw_dim());
-        ndarray::Zip::from(&mut out)
-            .and(&self.amplitude)
-            .and(&self.phase)
-            .for_each(|o, &a, &p| *o = head_to_phasor(a, p));
-        out
+    /// The complex midpoint hologram `[3, H, W]` (R, G, B): `A·e^{i(p − 0.5)2π}`
+    /// ([`contract::heads_to_field`]).
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] if the two heads differ in shape.
+    pub fn to_field(&self) -> Result<Array3<Complex32>> {
+        contract::heads_to_field(self.amplitude.view(), self.phase.view())
     }
 }
 
@@ -343,9 +504,7 @@ impl ColourWorkers {
                     while let Ok((task, mut state)) = rx.recv() {
                         let result = catch_unwind(AssertUnwindSafe(|| state.run(task)))
                             .unwrap_or_else(|_| {
-                                Err(HoloError::InvalidData(format!(
-                                    "colour worker {c} panicked (a bug: please report it)"
-                                )))
+                                Err(HoloError::Internal(format!("colour worker {c} panicked")))
                             });
                         if reply_tx.send((c, state, result)).is_err() {
                             break;
@@ -389,9 +548,7 @@ impl ColourWorkers {
 }
 
 fn lost_state() -> HoloError {
-    HoloError::InvalidData(
-        "a colour worker of this session has stopped; create a new session".into(),
-    )
+    HoloError::Internal("a colour worker of this session has stopped; create a new session".into())
 }
 
 impl Drop for ColourWorkers {
@@ -424,10 +581,7 @@ impl CnnStage {
             ));
         }
         check_size("RGB-D frame", frame.amplitude.dim(), (h, w))?;
-        self.input
-            .slice_mut(s![..3, .., ..])
-            .assign(&frame.amplitude);
-        self.input.slice_mut(s![3, .., ..]).assign(&frame.depth);
+        contract::pack_rgbd(frame, self.input.view_mut())?;
         self.run(t)
     }
 
@@ -445,20 +599,7 @@ impl CnnStage {
             ));
         }
         check_size("LDI", (3, ldi.height(), ldi.width()), (h, w))?;
-        // Invalid pixels enter the CNN as amplitude 0, depth 1 (docs/DATASET.md, what training saw).
-        for (l, layer) in ldi.layers().iter().enumerate() {
-            let base = 4 * l;
-            for ch in 0..3 {
-                ndarray::Zip::from(self.input.index_axis_mut(Axis(0), base + ch))
-                    .and(layer.amplitude.index_axis(Axis(0), ch))
-                    .and(&layer.valid)
-                    .for_each(|o, &a, &v| *o = if v { a } else { 0.0 });
-            }
-            ndarray::Zip::from(self.input.index_axis_mut(Axis(0), base + 3))
-                .and(&layer.depth)
-                .and(&layer.valid)
-                .for_each(|o, &d, &v| *o = if v { d } else { 1.0 });
-        }
+        contract::pack_ldi(ldi, self.input.view_mut())?;
         self.run(t)
     }
 
@@ -494,14 +635,24 @@ pub struct HologramSession {
     workers: ColourWorkers,
     output: SlmFrame,
     last_heads: Option<Heads>,
+    plan_report: PlanReport,
 }
 
 impl HologramSession {
     fn new(pipeline: &HologramPipeline, height: usize, width: usize) -> Result<Self> {
-        let layout = pipeline.config.cnn_layout;
-        let hologram = pipeline.hologram.plan_with_layout(height, width, layout)?;
+        let request = PlanRequest {
+            layout: pipeline.config.cnn_layout,
+            threads: pipeline.config.cnn_threads,
+        };
+        let (hologram, plan_report) = pipeline.hologram.tuned_plan(height, width, request)?;
         let prefilter = match &pipeline.prefilter {
-            Some(p) => Some(p.plan(height, width)?),
+            Some(p) => {
+                let plan = p.plan(height, width)?;
+                Some(match plan_report.threads {
+                    Some(t) => plan.with_threads(t)?,
+                    None => plan,
+                })
+            }
             None => None,
         };
         let cfg = &pipeline.config;
@@ -557,7 +708,14 @@ impl HologramSession {
                 timings: FrameTimings::default(),
             },
             last_heads: None,
+            plan_report,
         })
+    }
+
+    /// How the hologram CNN's plan was chosen: layout, threads, and the autotuning timings
+    /// ([`HologramModel::tuned_plan`]). The pre-filter CNN runs channels-first with the same threads.
+    pub fn plan_report(&self) -> &PlanReport {
+        &self.plan_report
     }
 
     /// `(height, width)` of this session's frames.
@@ -697,8 +855,12 @@ impl HologramSession {
         };
         for (c, slot) in self.states.iter().enumerate() {
             let st = slot.as_ref().ok_or_else(lost_state)?;
-            fill_channel(&mut self.prefilter_input, c, &st.planes[0]);
-            fill_channel(&mut self.prefilter_input, 3 + c, &st.planes[1]);
+            contract::pack_prefilter_colour(
+                c,
+                &st.planes[0],
+                &st.planes[1],
+                self.prefilter_input.view_mut(),
+            )?;
         }
         let (real, imag) = plan.run_outputs(self.prefilter_input.view())?;
         self.load_planes(real.view(), imag.view())?;

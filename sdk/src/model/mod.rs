@@ -19,10 +19,12 @@
 //! `DequantizeLinear` around float `Conv`) both load; value-info hints are ignored when parsing because
 //! tract 0.23 refuses the QDQ file's quantised value infos otherwise.
 
+pub mod contract;
 #[cfg(feature = "embedded-models")]
 pub mod embedded;
 mod metadata;
 mod network;
+mod tuning;
 
 /// How a model file stores its weights (`training/tensorholo_training/export.py`). All forms take and
 /// return f32 at the boundary (`DESIGN.md` §3).
@@ -69,33 +71,39 @@ impl std::fmt::Display for Precision {
 }
 
 /// The memory layout tract runs a CNN in. The ONNX files are always channels-first `[1, C, H, W]`
-/// (`DESIGN.md` §3) and a plan takes and returns `[C, H, W]` arrays in both layouts; only tract's internal
-/// graph differs ([`HologramModel::plan_with_layout`]).
+/// (`docs/CONVENTIONS.md`) and a plan takes and returns `[C, H, W]` arrays in every layout; only tract's
+/// internal graph differs ([`HologramModel::plan_with_layout`]).
 ///
-/// Measured with `holo bench --layout nchw,nhwc` (docs/BENCHMARKS.md, "tract speed study"): neither layout wins
-/// everywhere, so the default stays the file's.
+/// Which layout is faster depends on the CPU and the frame size (`docs/BENCHMARKS.md`: on one 2-core Xeon
+/// channels-first won at large frames, on another channels-last was 2.2× faster at 384×384), so the default
+/// is [`CnnLayout::Auto`]: the candidates are timed on the machine at session creation
+/// ([`HologramModel::tuned_plan`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum CnnLayout {
+    /// Time both layouts on this machine at the real resolution and keep the faster
+    /// ([`HologramModel::tuned_plan`]); a plan never runs in `Auto` itself.
+    #[default]
+    Auto,
     /// Channels first (NCHW), as in the file. tract 0.23 runs the 3×3 convolutions as its direct spatial
     /// convolution (a filter along W, four output channels at a time) where the rows are ≥ 128 pixels wide.
-    #[default]
     ChannelsFirst,
     /// Channels last (NHWC): the whole graph is moved by tract's axis-change propagation, and the
     /// convolutions run as a lazy im2col (one gather per output pixel of 3 contiguous runs of 3·C values)
     /// feeding tract's matrix-product kernels, after an explicit zero `Pad`. f32 and int8 QDQ files (float
-    /// convolutions); tract 0.23 does not move a quantised `QLinearConv`, so an int8 QOperator file in this
-    /// layout is an error.
+    /// convolutions); tract 0.23 does not move a quantised `QLinearConv` nor the pre-filter graph, so those
+    /// files in this layout are an error (and `Auto` skips it for them).
     ChannelsLast,
 }
 
 impl CnnLayout {
-    /// Both layouts, the default first.
+    /// The two concrete layouts, channels-first first.
     pub const ALL: [CnnLayout; 2] = [Self::ChannelsFirst, Self::ChannelsLast];
 
-    /// Short name: `nchw`, `nhwc`.
+    /// Short name: `auto`, `nchw`, `nhwc`.
     pub fn name(self) -> &'static str {
         match self {
+            Self::Auto => "auto",
             Self::ChannelsFirst => "nchw",
             Self::ChannelsLast => "nhwc",
         }
@@ -117,6 +125,10 @@ pub fn set_cnn_threads(threads: usize) -> crate::Result<()> {
     use tract_linalg::multithread::{set_default_executor, Executor};
     match threads {
         0 => Err(crate::error::invalid("threads", "must be ≥ 1")),
+        n if n > MAX_CNN_THREADS => Err(crate::error::invalid(
+            "threads",
+            format!("at most {MAX_CNN_THREADS} CNN threads, got {n}"),
+        )),
         1 => {
             set_default_executor(Executor::SingleThread);
             Ok(())
@@ -128,8 +140,10 @@ pub fn set_cnn_threads(threads: usize) -> crate::Result<()> {
     }
 }
 
+pub use contract::{head_to_phasor, heads_to_field};
 pub use metadata::{
     ModelConfig, ModelKind, ModelMetadata, FORMAT_VERSION, METADATA_PREFIX,
     PREFILTER_FORMAT_VERSION,
 };
-pub use network::{head_to_phasor, heads_to_field, HologramModel, ModelPlan, NodeTiming};
+pub use network::{HologramModel, ModelPlan, NodeTiming, MAX_CNN_THREADS};
+pub use tuning::{auto_thread_candidates, PlanReport, PlanRequest, PlanTiming, ThreadCount};

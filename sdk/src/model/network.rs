@@ -14,42 +14,19 @@ use tract_onnx::prelude::{
     TypedSimplePlan,
 };
 
+use super::contract::heads_to_field;
 use super::metadata::{ModelConfig, ModelKind, ModelMetadata};
 use super::CnnLayout;
+use tract_linalg::multithread::{multithread_tract_scope, Executor};
+
+/// The most threads a CNN plan may use ([`ModelPlan::with_threads`]): far above any phone or desktop core
+/// count, low enough that a typo cannot ask the OS for a hundred thousand threads.
+pub const MAX_CNN_THREADS: usize = 256;
 use crate::error::{HoloError, Result};
 use crate::scene::RgbdFrame;
 
 /// ONNX `TensorProto.DataType.FLOAT`.
 const ONNX_FLOAT: i32 = 1;
-
-/// Converts the CNN heads to a complex field (`DESIGN.md` §3): `A · exp(i·(p − 0.5)·2π)`.
-///
-/// `amplitude` (in `[0, √2]`) and `phase` (in `[0, 1]`) are `[3, H, W]`; the result is `[3, H, W]`
-/// (R, G, B). Errors: [`HoloError::ShapeMismatch`] if the two shapes differ.
-pub fn heads_to_field(
-    amplitude: ArrayView3<f32>,
-    phase: ArrayView3<f32>,
-) -> Result<Array3<Complex32>> {
-    if amplitude.shape() != phase.shape() {
-        return Err(HoloError::ShapeMismatch {
-            what: "amplitude head vs phase head".into(),
-            expected: amplitude.shape().to_vec(),
-            got: phase.shape().to_vec(),
-        });
-    }
-    let mut out = Array3::<Complex32>::zeros(amplitude.raw_dim());
-    Zip::from(&mut out)
-        .and(&amplitude)
-        .and(&phase)
-        .for_each(|o, &a, &p| *o = head_to_phasor(a, p));
-    Ok(out)
-}
-
-/// One pixel of [`heads_to_field`]: amplitude head `a` and phase head `p ∈ [0, 1]` → `a·e^{i(p − 0.5)2π}`.
-#[inline]
-pub fn head_to_phasor(a: f32, p: f32) -> Complex32 {
-    Complex32::from_polar(a, (p - 0.5) * std::f32::consts::TAU)
-}
 
 /// Formats a tract error with its whole context chain on one line.
 fn tract_msg(e: &tract_onnx::prelude::TractError) -> String {
@@ -254,6 +231,8 @@ pub struct HologramModel {
     /// Fixed input height/width from the file, where not symbolic.
     fixed: [Option<usize>; 2],
     plans: Mutex<HashMap<(usize, usize, CnnLayout), ModelPlan>>,
+    /// Autotuning results per `(height, width, request)` ([`HologramModel::tuned_plan`]).
+    pub(super) tuned: Mutex<HashMap<(usize, usize, super::PlanRequest), super::PlanReport>>,
 }
 
 impl HologramModel {
@@ -371,6 +350,7 @@ impl HologramModel {
             dims,
             fixed,
             plans: Mutex::new(HashMap::new()),
+            tuned: Mutex::new(HashMap::new()),
         })
     }
 
@@ -397,7 +377,9 @@ impl HologramModel {
         v
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<(usize, usize, CnnLayout), ModelPlan>> {
+    pub(super) fn lock(
+        &self,
+    ) -> std::sync::MutexGuard<'_, HashMap<(usize, usize, CnnLayout), ModelPlan>> {
         // No code panics while holding the lock; recover the map anyway rather than propagate poison.
         self.plans.lock().unwrap_or_else(|p| p.into_inner())
     }
@@ -414,10 +396,37 @@ impl HologramModel {
 
     /// As [`HologramModel::plan`], run in `layout` (see [`CnnLayout`]); plans are cached per resolution and
     /// layout. Inputs and outputs of the returned plan stay `[C, H, W]` / `[3, H, W]` whatever the layout.
+    /// [`CnnLayout::Auto`] times both layouts with tract's process-wide executor and returns the faster
+    /// ([`HologramModel::tuned_plan`], which also reports the timings).
     ///
     /// Errors: as [`HologramModel::plan`]; [`HoloError::InvalidParameter`] if tract cannot move this graph
     /// channels-last (int8 QOperator files: tract 0.23's quantised convolution takes no axis change).
     pub fn plan_with_layout(
+        &self,
+        height: usize,
+        width: usize,
+        layout: CnnLayout,
+    ) -> Result<ModelPlan> {
+        if layout == CnnLayout::Auto {
+            let request = super::PlanRequest {
+                layout,
+                threads: super::ThreadCount::ProcessDefault,
+            };
+            return self.tuned_plan(height, width, request).map(|(p, _)| p);
+        }
+        if let Some(p) = self.lock().get(&(height, width, layout)) {
+            return Ok(p.clone());
+        }
+        let plan = self.build_plan(height, width, layout)?;
+        Ok(self
+            .lock()
+            .entry((height, width, layout))
+            .or_insert(plan)
+            .clone())
+    }
+
+    /// Builds (without caching) the plan for `height × width` in a concrete `layout`.
+    pub(super) fn build_plan(
         &self,
         height: usize,
         width: usize,
@@ -429,23 +438,12 @@ impl HologramModel {
                 format!("a CNN plan needs a non-empty resolution, got {height}×{width}"),
             ));
         }
-        if let Some(p) = self.lock().get(&(height, width, layout)) {
-            return Ok(p.clone());
+        if layout == CnnLayout::Auto {
+            return Err(HoloError::Internal(
+                "build_plan needs a concrete layout".into(),
+            ));
         }
-        for (i, &n) in [height, width].iter().enumerate() {
-            if let Some(f) = self.fixed[i] {
-                if f != n {
-                    return Err(HoloError::ShapeMismatch {
-                        what: format!("model input size (fixed in `{}`)", self.source_name),
-                        expected: vec![
-                            self.fixed[0].unwrap_or(height),
-                            self.fixed[1].unwrap_or(width),
-                        ],
-                        got: vec![height, width],
-                    });
-                }
-            }
-        }
+        self.check_fixed_size(height, width)?;
         let subs: HashMap<Symbol, TDim> = self
             .dims
             .iter()
@@ -471,19 +469,40 @@ impl HologramModel {
                 reason: format!("cannot optimise for {height}×{width} ({layout}): {reason}"),
             },
         })?;
-        let plan = ModelPlan {
+        Ok(ModelPlan {
             plan,
             kind: self.metadata.kind,
             channels: self.input_channels(),
             height,
             width,
             layout,
-        };
-        Ok(self
-            .lock()
-            .entry((height, width, layout))
-            .or_insert(plan)
-            .clone())
+            threads: None,
+            executor: None,
+        })
+    }
+
+    /// Errors: [`HoloError::ShapeMismatch`] if the file fixes a size other than `height × width`.
+    pub(super) fn check_fixed_size(&self, height: usize, width: usize) -> Result<()> {
+        for (i, &n) in [height, width].iter().enumerate() {
+            if let Some(f) = self.fixed[i] {
+                if f != n {
+                    return Err(HoloError::ShapeMismatch {
+                        what: format!("model input size (fixed in `{}`)", self.source_name),
+                        expected: vec![
+                            self.fixed[0].unwrap_or(height),
+                            self.fixed[1].unwrap_or(width),
+                        ],
+                        got: vec![height, width],
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The name of the file (or `<bytes>`) this model was loaded from, as errors name it.
+    pub fn source_name(&self) -> &str {
+        &self.source_name
     }
 
     /// Runs the network on one input `[C, H, W]` (`C` = [`HologramModel::input_channels`]; hologram CNN:
@@ -516,12 +535,8 @@ impl HologramModel {
                 ),
             ));
         }
-        let (_, h, w) = frame.amplitude.dim();
-        let mut input = Array3::<f32>::zeros((4, h, w));
-        input
-            .slice_mut(ndarray::s![..3, .., ..])
-            .assign(&frame.amplitude);
-        input.slice_mut(ndarray::s![3, .., ..]).assign(&frame.depth);
+        let mut input = Array3::<f32>::zeros((4, frame.height(), frame.width()));
+        super::contract::pack_rgbd(frame, input.view_mut())?;
         self.run(input.view())
     }
 }
@@ -539,8 +554,8 @@ pub struct NodeTiming {
 
 /// A tract plan for one resolution of a [`HologramModel`] (graph with `H`, `W` bound and optimised).
 ///
-/// Cloning is cheap (shared plan). Each [`ModelPlan::run`] spawns its own tract state, so one plan may run
-/// from several threads.
+/// Cloning is cheap (shared plan and thread pool). Each [`ModelPlan::run`] spawns its own tract state, so one
+/// plan may run from several threads.
 #[derive(Debug, Clone)]
 pub struct ModelPlan {
     plan: Arc<TypedSimplePlan>,
@@ -549,9 +564,64 @@ pub struct ModelPlan {
     height: usize,
     width: usize,
     layout: CnnLayout,
+    /// Threads of this plan's own executor; `None`: tract's process-wide default ([`super::set_cnn_threads`]).
+    threads: Option<usize>,
+    executor: Option<Executor>,
 }
 
 impl ModelPlan {
+    /// This plan running its matrix products and convolutions on `threads` threads of its own (a private
+    /// pool for `threads > 1`, the calling thread for 1), whatever tract's process-wide default is.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for 0 threads or more than [`MAX_CNN_THREADS`], or if the
+    /// operating system refuses to start the threads.
+    pub fn with_threads(&self, threads: usize) -> Result<ModelPlan> {
+        let executor = match threads {
+            0 => {
+                return Err(crate::error::invalid(
+                    "threads",
+                    "a plan needs at least 1 thread (0 = automatic is resolved by autotuning)",
+                ))
+            }
+            1 => Executor::SingleThread,
+            n if n > MAX_CNN_THREADS => {
+                return Err(crate::error::invalid(
+                    "threads",
+                    format!("at most {MAX_CNN_THREADS} CNN threads, got {n}"),
+                ))
+            }
+            n => {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .thread_name(|i| format!("tensorholo-cnn-{i}"))
+                    .build()
+                    .map_err(|e| {
+                        crate::error::invalid("threads", format!("cannot start {n} threads: {e}"))
+                    })?;
+                Executor::MultiThread(Arc::new(pool))
+            }
+        };
+        Ok(ModelPlan {
+            threads: Some(threads),
+            executor: Some(executor),
+            ..self.clone()
+        })
+    }
+
+    /// The threads of this plan's own executor ([`ModelPlan::with_threads`]); `None` when it uses tract's
+    /// process-wide default.
+    pub fn threads(&self) -> Option<usize> {
+        self.threads
+    }
+
+    /// Runs `f` with this plan's executor as tract's executor on the calling thread.
+    fn scoped<R>(&self, f: impl FnOnce() -> R) -> R {
+        match &self.executor {
+            Some(e) => multithread_tract_scope(e.clone(), f),
+            None => f(),
+        }
+    }
+
     /// The memory layout tract runs this plan in.
     pub fn layout(&self) -> CnnLayout {
         self.layout
@@ -585,7 +655,7 @@ impl ModelPlan {
             )));
         }
         let (data, shape): (Vec<f32>, _) = match self.layout {
-            CnnLayout::ChannelsFirst => (
+            CnnLayout::ChannelsFirst | CnnLayout::Auto => (
                 input.iter().copied().collect(),
                 [1, self.channels, self.height, self.width],
             ),
@@ -621,8 +691,8 @@ impl ModelPlan {
         let mut timings = Vec::new();
         guarded("profiling", || {
             let mut state = self.plan.spawn().map_err(|e| tract_msg(&e))?;
-            state
-                .run_plan_with_eval(
+            self.scoped(|| {
+                state.run_plan_with_eval(
                     tvec!(tensor.into_tvalue()),
                     |ctx, op_state, node, inputs| {
                         let start = std::time::Instant::now();
@@ -635,8 +705,9 @@ impl ModelPlan {
                         out
                     },
                 )
-                .map(drop)
-                .map_err(|e| tract_msg(&e))
+            })
+            .map(drop)
+            .map_err(|e| tract_msg(&e))
         })
         .map_err(HoloError::ModelRun)?;
         Ok(timings)
@@ -653,8 +724,7 @@ impl ModelPlan {
     pub fn run_outputs(&self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
         let tensor = self.input_tensor(input)?;
         let outputs = guarded("running", || {
-            self.plan
-                .run(tvec!(tensor.into_tvalue()))
+            self.scoped(|| self.plan.run(tvec!(tensor.into_tvalue())))
                 .map_err(|e| tract_msg(&e))
         })
         .map_err(HoloError::ModelRun)?;
@@ -676,7 +746,7 @@ impl ModelPlan {
                     HoloError::ModelRun(format!("output `{}`: {}", names[i], tract_msg(&e)))
                 })?;
             let want = match self.layout {
-                CnnLayout::ChannelsFirst => [1, 3, self.height, self.width],
+                CnnLayout::ChannelsFirst | CnnLayout::Auto => [1, 3, self.height, self.width],
                 CnnLayout::ChannelsLast => [1, self.height, self.width, 3],
             };
             if got != want {
@@ -687,7 +757,7 @@ impl ModelPlan {
                 });
             }
             match self.layout {
-                CnnLayout::ChannelsFirst => Array3::from_shape_vec(shape, slice),
+                CnnLayout::ChannelsFirst | CnnLayout::Auto => Array3::from_shape_vec(shape, slice),
                 CnnLayout::ChannelsLast => {
                     Array3::from_shape_vec((self.height, self.width, 3), slice)
                         .map(|a| a.permuted_axes([2, 0, 1]).as_standard_layout().into_owned())

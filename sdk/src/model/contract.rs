@@ -1,0 +1,198 @@
+//! The model I/O contract in one place (`docs/CONVENTIONS.md`, "Model I/O contract"; paper Fig. 3): how the
+//! SDK packs a scene into a CNN input, what an invalid pixel becomes, how the hologram CNN's heads become a
+//! complex field, and how the offset hologram enters the pre-filter CNN. The pipeline, the model loader and the
+//! training-dataset writer all call these functions; nothing else packs a network input.
+//!
+//! | network | input | outputs |
+//! |---|---|---|
+//! | hologram CNN | `rgbd` `[4·L, H, W]`: per layer `k` (front to back) R, G, B amplitude in `[0, 1]` then depth `d ∈ [0, 1]` (0 = near) | `amplitude` `[3, H, W]` in `[0, √2]`, `phase` `[3, H, W]` in `[0, 1]` meaning `(p − 0.5)·2π` rad |
+//! | pre-filter CNN (format 2) | `slm_field` `[6, H, W]`: `Re H` (R, G, B) then `Im H` (R, G, B) of the offset hologram, midpoint amplitude units | `real`, `imag` `[3, H, W]`: `H' = blur(H) + CNN(H)` |
+//!
+//! Invalid pixels (no scene point in an LDI layer) enter the hologram CNN as amplitude
+//! [`INVALID_AMPLITUDE`] = 0 and depth [`INVALID_DEPTH`] = 1 (far): what the training data holds.
+
+use ndarray::{s, Array3, ArrayView3, ArrayViewMut3, Axis, Zip};
+use num_complex::Complex32;
+
+use crate::error::{invalid, HoloError, Result};
+use crate::scene::{LayeredDepthImage, RgbdFrame};
+
+/// Amplitude an invalid LDI pixel takes in the hologram CNN's input (black).
+pub const INVALID_AMPLITUDE: f32 = 0.0;
+/// Normalised depth an invalid LDI pixel takes in the hologram CNN's input (1 = far, never near).
+pub const INVALID_DEPTH: f32 = 1.0;
+
+/// One pixel of [`heads_to_field`]: amplitude head `a` and phase head `p ∈ [0, 1]` → `a·e^{i(p − 0.5)2π}`.
+#[inline]
+pub fn head_to_phasor(a: f32, p: f32) -> Complex32 {
+    Complex32::from_polar(a, (p - 0.5) * std::f32::consts::TAU)
+}
+
+/// Converts the hologram CNN's heads to the complex midpoint hologram: `A · exp(i·(p − 0.5)·2π)`.
+///
+/// `amplitude` (in `[0, √2]`) and `phase` (in `[0, 1]`) are `[3, H, W]`; the result is `[3, H, W]`
+/// (R, G, B). Errors: [`HoloError::ShapeMismatch`] if the two shapes differ.
+pub fn heads_to_field(
+    amplitude: ArrayView3<f32>,
+    phase: ArrayView3<f32>,
+) -> Result<Array3<Complex32>> {
+    if amplitude.shape() != phase.shape() {
+        return Err(HoloError::ShapeMismatch {
+            what: "amplitude head vs phase head".into(),
+            expected: amplitude.shape().to_vec(),
+            got: phase.shape().to_vec(),
+        });
+    }
+    let mut out = Array3::<Complex32>::zeros(amplitude.raw_dim());
+    Zip::from(&mut out)
+        .and(&amplitude)
+        .and(&phase)
+        .for_each(|o, &a, &p| *o = head_to_phasor(a, p));
+    Ok(out)
+}
+
+/// Writes the hologram CNN input of an RGB-D frame into `out` `[4, H, W]`: the frame's linear amplitude
+/// (R, G, B) then its normalised depth (0 = near). Every pixel of an [`RgbdFrame`] is valid (holes were
+/// filled when it was built).
+///
+/// Errors: [`HoloError::ShapeMismatch`] if `out` is not `[4, H, W]` of the frame's size.
+pub fn pack_rgbd(frame: &RgbdFrame, mut out: ArrayViewMut3<f32>) -> Result<()> {
+    let want = [4, frame.height(), frame.width()];
+    if out.shape() != want {
+        return Err(HoloError::ShapeMismatch {
+            what: "RGB-D frame vs the CNN input [4, H, W]".into(),
+            expected: out.shape().to_vec(),
+            got: want.to_vec(),
+        });
+    }
+    out.slice_mut(s![..3, .., ..]).assign(&frame.amplitude);
+    out.slice_mut(s![3, .., ..]).assign(&frame.depth);
+    Ok(())
+}
+
+/// Writes the hologram CNN input of a layered depth image into `out` `[4·L, H, W]`: per layer `k` (front to
+/// back), channels `4k..4k+3` = R, G, B amplitude then depth; where layer `k` holds no point, amplitude
+/// [`INVALID_AMPLITUDE`] and depth [`INVALID_DEPTH`].
+///
+/// Errors: [`HoloError::ShapeMismatch`] if `out` is not `[4·L, H, W]` of the LDI's size.
+pub fn pack_ldi(ldi: &LayeredDepthImage, mut out: ArrayViewMut3<f32>) -> Result<()> {
+    let want = [4 * ldi.num_layers(), ldi.height(), ldi.width()];
+    if out.shape() != want {
+        return Err(HoloError::ShapeMismatch {
+            what: "layered depth image vs the CNN input [4·L, H, W]".into(),
+            expected: out.shape().to_vec(),
+            got: want.to_vec(),
+        });
+    }
+    for (k, layer) in ldi.layers().iter().enumerate() {
+        for c in 0..3 {
+            Zip::from(out.index_axis_mut(Axis(0), 4 * k + c))
+                .and(layer.amplitude.index_axis(Axis(0), c))
+                .and(&layer.valid)
+                .for_each(|o, &a, &v| *o = if v { a } else { INVALID_AMPLITUDE });
+        }
+        Zip::from(out.index_axis_mut(Axis(0), 4 * k + 3))
+            .and(&layer.depth)
+            .and(&layer.valid)
+            .for_each(|o, &d, &v| *o = if v { d } else { INVALID_DEPTH });
+    }
+    Ok(())
+}
+
+/// Writes colour `c` (0 = R, 1 = G, 2 = B) of the offset hologram `H` into the pre-filter input `out`
+/// `[6, H, W]` (format 2): `re` (`H·W` values, row-major) into channel `c`, `im` into channel `3 + c`.
+///
+/// Errors: [`HoloError::InvalidParameter`] for `c > 2`; [`HoloError::ShapeMismatch`] if `out` is not
+/// `[6, H, W]` with `H·W` = `re.len()` = `im.len()`.
+pub fn pack_prefilter_colour(
+    c: usize,
+    re: &[f32],
+    im: &[f32],
+    mut out: ArrayViewMut3<f32>,
+) -> Result<()> {
+    if c > 2 {
+        return Err(invalid(
+            "colour",
+            format!("is 0, 1 or 2 (R, G, B), got {c}"),
+        ));
+    }
+    let (ch, h, w) = out.dim();
+    if ch != 6 || re.len() != h * w || im.len() != h * w {
+        return Err(HoloError::ShapeMismatch {
+            what: "offset hologram planes vs the pre-filter input [6, H, W]".into(),
+            expected: vec![6, h, w],
+            got: vec![ch, re.len(), im.len()],
+        });
+    }
+    for (plane, src) in [(c, re), (3 + c, im)] {
+        let mut lane = out.index_axis_mut(Axis(0), plane);
+        match lane.as_slice_mut() {
+            Some(dst) => dst.copy_from_slice(src),
+            None => lane.iter_mut().zip(src).for_each(|(o, v)| *o = *v),
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::LdiLayer;
+    use ndarray::{array, Array2};
+
+    #[test]
+    fn phasor_maps_half_to_zero_phase_and_ends_to_pi() {
+        let z = head_to_phasor(0.8, 0.5);
+        assert!((z.re - 0.8).abs() < 1e-6 && z.im.abs() < 1e-6);
+        for p in [0.0, 1.0] {
+            let z = head_to_phasor(1.0, p);
+            assert!((z.re + 1.0).abs() < 1e-6 && z.im.abs() < 1e-5, "{z}");
+        }
+        let z = head_to_phasor(2.0, 0.75);
+        assert!(z.re.abs() < 1e-5 && (z.im - 2.0).abs() < 1e-5, "{z}");
+    }
+
+    #[test]
+    fn ldi_invalid_pixels_are_black_and_far() {
+        let layer = LdiLayer {
+            amplitude: Array3::from_elem((3, 1, 2), 0.4),
+            depth: array![[0.2, 0.3]],
+            valid: array![[true, false]],
+        };
+        let ldi = LayeredDepthImage::new(vec![layer]).unwrap();
+        let mut out = Array3::<f32>::from_elem((4, 1, 2), -7.0);
+        pack_ldi(&ldi, out.view_mut()).unwrap();
+        assert_eq!(out.slice(s![.., 0, 0]).to_vec(), vec![0.4, 0.4, 0.4, 0.2]);
+        assert_eq!(
+            out.slice(s![.., 0, 1]).to_vec(),
+            vec![
+                INVALID_AMPLITUDE,
+                INVALID_AMPLITUDE,
+                INVALID_AMPLITUDE,
+                INVALID_DEPTH
+            ]
+        );
+        // A one-layer LDI of an RGB-D frame packs exactly as the frame does.
+        let f = RgbdFrame::new(
+            Array3::from_shape_fn((3, 2, 3), |(c, y, x)| (c + y + x) as f32 / 8.0),
+            Array2::from_shape_fn((2, 3), |(y, x)| (y * 3 + x) as f32 / 6.0),
+        )
+        .unwrap();
+        let (mut a, mut b) = (Array3::zeros((4, 2, 3)), Array3::zeros((4, 2, 3)));
+        pack_rgbd(&f, a.view_mut()).unwrap();
+        pack_ldi(&LayeredDepthImage::from(f), b.view_mut()).unwrap();
+        assert_eq!(a, b);
+        assert!(pack_rgbd(&ldi.to_rgbd(), Array3::zeros((4, 2, 2)).view_mut()).is_err());
+    }
+
+    #[test]
+    fn prefilter_colour_goes_to_c_and_3_plus_c() {
+        let mut out = Array3::<f32>::zeros((6, 1, 2));
+        pack_prefilter_colour(1, &[1.0, 2.0], &[3.0, 4.0], out.view_mut()).unwrap();
+        assert_eq!(out.slice(s![1, 0, ..]).to_vec(), vec![1.0, 2.0]);
+        assert_eq!(out.slice(s![4, 0, ..]).to_vec(), vec![3.0, 4.0]);
+        assert_eq!(out.iter().filter(|v| **v != 0.0).count(), 4);
+        assert!(pack_prefilter_colour(3, &[0.0; 2], &[0.0; 2], out.view_mut()).is_err());
+        assert!(pack_prefilter_colour(0, &[0.0; 3], &[0.0; 2], out.view_mut()).is_err());
+    }
+}

@@ -1,0 +1,321 @@
+//! Autotuned CNN plans: which tract plan is fastest depends on the CPU (channels-first won at large frames on
+//! one 2-core Xeon, channels-last was 2.2× faster at 384×384 on another; a phone is yet another CPU), so the
+//! candidates are timed on the machine, at the session's resolution, when a session is created
+//! (`docs/BENCHMARKS.md`, "Autotuned plans").
+//!
+//! [`HologramModel::tuned_plan`] times every candidate (layout × thread count) of a [`PlanRequest`], keeps the
+//! fastest, and returns a [`PlanReport`] with every timing and what the tuning cost. Results are cached in
+//! the model per resolution and request, so a second session of the same size starts at once.
+
+use std::time::Instant;
+
+use ndarray::Array3;
+
+use super::{CnnLayout, HologramModel, ModelPlan, MAX_CNN_THREADS};
+use crate::error::{invalid, HoloError, Result};
+
+/// Frames above this many pixels are timed on a full-width strip of about this many pixels (at least
+/// [`TUNE_MIN_ROWS`] rows) instead of the whole frame: the convolutions' cost is linear in the rows, and the
+/// layouts' relative speed depends on the row width, which the strip keeps. 1920×1080 is timed on
+/// 1920×136, 384×384 on the whole frame.
+pub const TUNE_PIXELS: usize = 256 * 1024;
+/// The fewest rows of a timing strip ([`TUNE_PIXELS`]).
+pub const TUNE_MIN_ROWS: usize = 64;
+/// A candidate whose first run takes less than this (seconds) is run twice more and its fastest run kept.
+const REPEAT_BELOW_S: f64 = 0.25;
+
+/// How many threads a CNN plan uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ThreadCount {
+    /// Time [`auto_thread_candidates`] and keep the fastest.
+    #[default]
+    Auto,
+    /// Exactly this many threads (≥ 1) in the plan's own executor.
+    Fixed(usize),
+    /// tract's process-wide executor ([`super::set_cnn_threads`]), as plans made by
+    /// [`HologramModel::plan`] use.
+    ProcessDefault,
+}
+
+impl ThreadCount {
+    /// `0` → [`ThreadCount::Auto`], `n` → [`ThreadCount::Fixed`]`(n)`: the `threads` convention of the
+    /// CLI and the bindings.
+    pub fn from_count(threads: usize) -> Self {
+        match threads {
+            0 => Self::Auto,
+            n => Self::Fixed(n),
+        }
+    }
+}
+
+/// What [`HologramModel::tuned_plan`] may choose from: [`CnnLayout::Auto`] tries both layouts, a concrete
+/// layout only itself; [`ThreadCount::Auto`] tries [`auto_thread_candidates`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
+pub struct PlanRequest {
+    /// Memory layout, or [`CnnLayout::Auto`].
+    pub layout: CnnLayout,
+    /// Thread count, or [`ThreadCount::Auto`].
+    pub threads: ThreadCount,
+}
+
+/// One candidate's timing.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct PlanTiming {
+    /// Its layout.
+    pub layout: CnnLayout,
+    /// Its threads (`None`: tract's process-wide executor).
+    pub threads: Option<usize>,
+    /// Fastest wall-clock seconds of one run at the timed resolution; `None` if the candidate cannot run
+    /// (see `skipped`).
+    pub seconds: Option<f64>,
+    /// Why the candidate was not timed (e.g. tract cannot move this graph channels-last).
+    pub skipped: Option<String>,
+}
+
+/// What [`HologramModel::tuned_plan`] chose and why.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct PlanReport {
+    /// `[height, width]` the plan runs at.
+    pub resolution: [usize; 2],
+    /// What was asked for.
+    pub request: PlanRequest,
+    /// The chosen layout (concrete).
+    pub layout: CnnLayout,
+    /// The chosen thread count (`None`: tract's process-wide executor).
+    pub threads: Option<usize>,
+    /// Whether more than one candidate was timed.
+    pub autotuned: bool,
+    /// `[height, width]` the candidates were timed at (the resolution, or a full-width strip of it).
+    pub timed_resolution: [usize; 2],
+    /// Every candidate, in the order timed (empty when only one candidate existed).
+    pub candidates: Vec<PlanTiming>,
+    /// Wall-clock seconds the tuning took (plans and timed runs), 0 when nothing was timed or the result came
+    /// from the model's cache.
+    pub tuning_s: f64,
+}
+
+/// The thread counts [`ThreadCount::Auto`] times on this machine: 1, half the available cores and all of
+/// them (deduplicated; `std::thread::available_parallelism`, at most [`MAX_CNN_THREADS`]).
+pub fn auto_thread_candidates() -> Vec<usize> {
+    let n = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
+        .min(MAX_CNN_THREADS);
+    let mut v = vec![1, n / 2, n];
+    v.retain(|&t| t >= 1);
+    v.sort_unstable();
+    v.dedup();
+    v
+}
+
+/// The `[height, width]` candidates are timed at for a `height × width` session ([`TUNE_PIXELS`]).
+pub fn timing_resolution(height: usize, width: usize) -> [usize; 2] {
+    if height.saturating_mul(width) <= TUNE_PIXELS {
+        return [height, width];
+    }
+    let rows = (TUNE_PIXELS / width.max(1)).max(TUNE_MIN_ROWS).min(height);
+    [rows, width]
+}
+
+impl HologramModel {
+    /// The fastest plan of `request` for `height × width` inputs, and the report of how it was chosen.
+    ///
+    /// Every candidate (layouts × thread counts; a layout tract cannot apply to this graph is skipped with
+    /// the reason) runs on a constant input at [`timing_resolution`]: once, or three times when a run takes
+    /// under 0.25 s (the fastest run counts). The winner's plan is then built at the real resolution (cached
+    /// like [`HologramModel::plan_with_layout`]'s) with its thread count ([`ModelPlan::with_threads`]).
+    /// With a single candidate nothing is timed. Results are cached per `(height, width, request)`.
+    ///
+    /// Errors: as [`HologramModel::plan_with_layout`] and [`ModelPlan::with_threads`];
+    /// [`HoloError::InvalidParameter`] if no candidate can run.
+    pub fn tuned_plan(
+        &self,
+        height: usize,
+        width: usize,
+        request: PlanRequest,
+    ) -> Result<(ModelPlan, PlanReport)> {
+        if height == 0 || width == 0 {
+            return Err(invalid(
+                "height/width",
+                format!("a CNN plan needs a non-empty resolution, got {height}×{width}"),
+            ));
+        }
+        self.check_fixed_size(height, width)?;
+        let key = (height, width, request);
+        let cached = self.tuned_lock().get(&key).cloned();
+        let report = match cached {
+            Some(mut r) => {
+                r.tuning_s = 0.0;
+                r
+            }
+            None => {
+                let r = self.tune(height, width, request)?;
+                if r.autotuned {
+                    log::info!(
+                        "CNN plan for {height}×{width}: {} with {} thread(s), chosen in {:.2} s from {}",
+                        r.layout,
+                        r.threads.map_or("default".into(), |t| t.to_string()),
+                        r.tuning_s,
+                        r.candidates
+                            .iter()
+                            .map(|c| format!(
+                                "{}/{}: {}",
+                                c.layout,
+                                c.threads.map_or("default".into(), |t| t.to_string()),
+                                c.seconds
+                                    .map_or("skipped".into(), |s| format!("{:.1} ms", s * 1e3))
+                            ))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    );
+                }
+                self.tuned_lock().insert(key, r.clone());
+                r
+            }
+        };
+        let plan = self.plan_with_layout(height, width, report.layout)?;
+        let plan = match report.threads {
+            Some(t) => plan.with_threads(t)?,
+            None => plan,
+        };
+        Ok((plan, report))
+    }
+
+    fn tuned_lock(
+        &self,
+    ) -> std::sync::MutexGuard<'_, std::collections::HashMap<(usize, usize, PlanRequest), PlanReport>>
+    {
+        // Nothing panics while holding the lock; recover the map rather than propagate poison.
+        self.tuned.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn tune(&self, height: usize, width: usize, request: PlanRequest) -> Result<PlanReport> {
+        let layouts: Vec<CnnLayout> = match request.layout {
+            CnnLayout::Auto => CnnLayout::ALL.to_vec(),
+            l => vec![l],
+        };
+        let threads: Vec<Option<usize>> = match request.threads {
+            ThreadCount::Auto => auto_thread_candidates().into_iter().map(Some).collect(),
+            ThreadCount::Fixed(n) => vec![Some(n)],
+            ThreadCount::ProcessDefault => vec![None],
+        };
+        let timed_resolution = timing_resolution(height, width);
+        if layouts.len() * threads.len() == 1 {
+            return Ok(PlanReport {
+                resolution: [height, width],
+                request,
+                layout: layouts[0],
+                threads: threads[0],
+                autotuned: false,
+                timed_resolution,
+                candidates: Vec::new(),
+                tuning_s: 0.0,
+            });
+        }
+        let start = Instant::now();
+        let [th, tw] = timed_resolution;
+        let input = Array3::<f32>::from_elem((self.input_channels(), th, tw), 0.5);
+        let mut candidates = Vec::new();
+        for &layout in &layouts {
+            let base = if [th, tw] == [height, width] {
+                self.plan_with_layout(height, width, layout)
+            } else {
+                self.build_plan(th, tw, layout)
+            };
+            let base = match base {
+                Ok(p) => p,
+                Err(HoloError::InvalidParameter {
+                    name: "layout",
+                    reason,
+                }) => {
+                    candidates.extend(threads.iter().map(|&t| PlanTiming {
+                        layout,
+                        threads: t,
+                        seconds: None,
+                        skipped: Some(reason.clone()),
+                    }));
+                    continue;
+                }
+                Err(e) => return Err(e),
+            };
+            for &t in &threads {
+                let plan = match t {
+                    Some(n) => base.with_threads(n)?,
+                    None => base.clone(),
+                };
+                let mut best = time_run(&plan, &input)?;
+                if best < REPEAT_BELOW_S {
+                    for _ in 0..2 {
+                        best = best.min(time_run(&plan, &input)?);
+                    }
+                }
+                candidates.push(PlanTiming {
+                    layout,
+                    threads: t,
+                    seconds: Some(best),
+                    skipped: None,
+                });
+            }
+        }
+        let best = candidates
+            .iter()
+            .filter_map(|c| c.seconds.map(|s| (s, c)))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, c)| (c.layout, c.threads))
+            .ok_or_else(|| {
+                invalid(
+                    "layout",
+                    format!(
+                        "no CNN plan candidate can run `{}`: {:?}",
+                        self.source_name(),
+                        candidates
+                    ),
+                )
+            })?;
+        Ok(PlanReport {
+            resolution: [height, width],
+            request,
+            layout: best.0,
+            threads: best.1,
+            autotuned: true,
+            timed_resolution,
+            candidates,
+            tuning_s: start.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+/// Seconds of one run of `plan` on `input`.
+fn time_run(plan: &ModelPlan, input: &Array3<f32>) -> Result<f64> {
+    let t = Instant::now();
+    plan.run_outputs(input.view())?;
+    Ok(t.elapsed().as_secs_f64())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strips_keep_the_width_and_the_pixel_budget() {
+        assert_eq!(timing_resolution(384, 384), [384, 384]);
+        assert_eq!(timing_resolution(1080, 1920), [136, 1920]);
+        // Very wide frames keep at least TUNE_MIN_ROWS rows, never more than the frame has.
+        assert_eq!(timing_resolution(100, 100_000), [64, 100_000]);
+        assert_eq!(timing_resolution(40, 100_000), [40, 100_000]);
+        let [h, w] = timing_resolution(4000, 3000);
+        assert_eq!(w, 3000);
+        assert!(h * w <= TUNE_PIXELS && h * w > TUNE_PIXELS - 3000);
+    }
+
+    #[test]
+    fn thread_candidates_start_at_one_and_are_unique() {
+        let v = auto_thread_candidates();
+        assert_eq!(v[0], 1);
+        assert!(v.windows(2).all(|w| w[0] < w[1]));
+        assert!(v.iter().all(|&t| t <= MAX_CNN_THREADS));
+        assert_eq!(ThreadCount::from_count(0), ThreadCount::Auto);
+        assert_eq!(ThreadCount::from_count(3), ThreadCount::Fixed(3));
+    }
+}
