@@ -904,29 +904,49 @@ impl HologramSession {
         I::IntoIter: Send,
         F: FnMut(usize, &SlmFrame) -> Result<()>,
     {
+        let tagged = frames.into_iter().enumerate();
+        self.render_stream_each(tagged, |i, out| sink(i, out?))
+    }
+
+    /// As [`HologramSession::render_stream`], but a failed frame does not stop the stream: each item of
+    /// `frames` is `(tag, frame or error)`, and `sink(tag, result)` receives every item in order, with the
+    /// frame's SLM patterns or its error (a conversion error from the source, a CNN or encoding error). Only
+    /// an error returned by `sink` stops the stream. The session stays usable after a failed frame.
+    ///
+    /// Returns the number of items delivered. Errors: the first error `sink` returns.
+    pub fn render_stream_each<T, I, F>(&mut self, frames: I, mut sink: F) -> Result<usize>
+    where
+        T: Send,
+        I: IntoIterator<Item = (T, Result<RgbdFrame>)>,
+        I::IntoIter: Send,
+        F: FnMut(T, Result<&SlmFrame>) -> Result<()>,
+    {
         let frames = frames.into_iter();
         let mut cnn = self.cnn.clone();
         std::thread::scope(|scope| {
-            let (tx, rx) = sync_channel::<Result<(Heads, f64)>>(1);
+            let (tx, rx) = sync_channel::<(T, Result<(Heads, f64)>)>(1);
             scope.spawn(move || {
-                for frame in frames {
+                for (tag, frame) in frames {
                     let out = frame.and_then(|f| cnn.run_frame(&f));
-                    let stop = out.is_err();
-                    if tx.send(out).is_err() || stop {
+                    if tx.send((tag, out)).is_err() {
                         break;
                     }
                 }
             });
             let mut count = 0;
             let mut last = Instant::now();
-            for item in rx {
-                let (heads, cnn_s) = item?;
-                self.encode_heads(heads, cnn_s)?;
-                let now = Instant::now();
-                self.output.timings.total_s = (now - last).as_secs_f64();
-                last = now;
-                sink(count, &self.output)?;
+            for (tag, item) in rx {
+                let encoded = item.and_then(|(heads, cnn_s)| self.encode_heads(heads, cnn_s).map(drop));
                 count += 1;
+                match encoded {
+                    Ok(()) => {
+                        let now = Instant::now();
+                        self.output.timings.total_s = (now - last).as_secs_f64();
+                        last = now;
+                        sink(tag, Ok(&self.output))?;
+                    }
+                    Err(e) => sink(tag, Err(e))?,
+                }
             }
             Ok(count)
         })

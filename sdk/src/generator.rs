@@ -1,0 +1,708 @@
+//! The SDK as a phone app calls it (`docs/CONVENTIONS.md`; paper Fig. 3): camera-buffer frames in, SLM
+//! patterns out, through one thread-safe [`HologramGenerator`].
+//!
+//! - [`GeneratorConfig`]: the hologram (SLM) resolution, the shipped CNNs by name ([`ModelSelection`]), the
+//!   display and how camera frames fit it. Every field but `width` and `height` has a default.
+//! - [`HologramGenerator`]: owns the pipeline and one [`HologramSession`] for the configured resolution
+//!   behind a lock (`Send + Sync`: any thread may call it; calls run one at a time). Returns owned
+//!   [`SlmPatterns`]; [`HologramGenerator::preview`] simulates what a viewer sees at a chosen depth.
+//! - [`HologramStream`]: video. [`HologramStream::push`] never blocks: a bounded queue drops the oldest
+//!   frame when full (camera semantics) and counts the drops; a worker thread runs the session's
+//!   [`HologramSession::render_stream_each`] (the CNN of frame `n + 1` overlaps the optics of frame `n`) and
+//!   hands results to a [`StreamListener`] in frame order. The metric depth range of the first frame is kept
+//!   for the whole stream unless the configuration fixes one, so the volume does not breathe.
+//!
+//! The bindings (`bindings/`, crate `tensorholo-ffi`) are one-line wrappers over this module.
+
+use std::collections::VecDeque;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+use ndarray::{Array3, ArrayView3, Axis};
+
+use crate::color::amplitude_to_srgb8;
+use crate::encoding::DoublePhaseMethod;
+use crate::error::{invalid, HoloError, Result};
+use crate::model::{CnnLayout, PlanReport, Precision, ThreadCount};
+use crate::optics::{focal_stack, post_encoding_midpoint, OpticalSetup, PropagationOptions};
+use crate::pipeline::{
+    FrameTimings, HologramPipeline, HologramSession, ModelSelection, PipelineConfig, PrefilterMode,
+    SlmFrame,
+};
+use crate::scene::{
+    CameraFrame, CameraFrameBuf, CameraFrameReport, DepthMapping, DepthRange, Fit, FrameOptions,
+    RgbdFrame,
+};
+
+/// The largest hologram a generator makes, in pixels (`width · height`): 8192 × 8192, four times a 4K SLM.
+/// Above it the buffers of one session (≈ 200 bytes a pixel) would not fit a phone.
+pub const MAX_HOLOGRAM_PIXELS: usize = 8192 * 8192;
+/// The default capacity of a [`HologramStream`]'s queue: one frame waiting while one is converted and one
+/// runs through the CNN.
+pub const DEFAULT_STREAM_CAPACITY: usize = 2;
+
+/// Everything a [`HologramGenerator`] needs. Build with [`GeneratorConfig::new`] and change the fields
+/// you need; [`GeneratorConfig::validate`] says what is wrong.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct GeneratorConfig {
+    /// Hologram (SLM) width in pixels.
+    pub width: usize,
+    /// Hologram (SLM) height in pixels.
+    pub height: usize,
+    /// The shipped CNNs: layers 8/15/30, precision, pre-filter Auto/Off/Required (default 8, f32, Auto).
+    pub models: ModelSelection,
+    /// Distance `s` from the midpoint hologram to the SLM in metres (Eq. 6; default 6e-3; shipped
+    /// pre-filters exist for 6e-3 and 12e-3).
+    pub offset_m: f64,
+    /// CNN threads ([`ThreadCount::Auto`] by default: timed at creation).
+    pub threads: ThreadCount,
+    /// CNN memory layout ([`CnnLayout::Auto`] by default: timed at creation).
+    pub layout: CnnLayout,
+    /// How camera frames fit the hologram ([`Fit::Crop`] by default).
+    pub fit: Fit,
+    /// Wavelengths (R, G, B), pixel pitch and volume depth, all in metres (the paper's display: 638, 520,
+    /// 450 nm, 8 µm, 6 mm).
+    pub optics: OpticalSetup,
+    /// Angular spectrum options (padding, band limit).
+    pub options: PropagationOptions,
+    /// Double phase method where no pre-filter CNN runs (AA-DPM by default).
+    pub encoding: DoublePhaseMethod,
+    /// Metric depth range mapped to the 3D volume (`None`: 1st/99th percentiles of each frame's valid
+    /// depths; a stream keeps its first frame's).
+    pub depth_range: Option<DepthRange>,
+    /// Metric depth → normalised depth mapping (linear in diopters by default).
+    pub depth_mapping: DepthMapping,
+}
+
+impl GeneratorConfig {
+    /// The defaults for a `width × height` hologram: the shipped 8-layer f32 CNN, its pre-filter where it
+    /// helps (Auto), SLM 6 mm from the midpoint hologram, autotuned CNN plan, centred crop, automatic depth
+    /// range, the paper's display.
+    pub fn new(width: usize, height: usize) -> Self {
+        Self {
+            width,
+            height,
+            models: ModelSelection::default(),
+            offset_m: 6e-3,
+            threads: ThreadCount::Auto,
+            layout: CnnLayout::Auto,
+            fit: Fit::default(),
+            optics: OpticalSetup::default(),
+            options: PropagationOptions::default(),
+            encoding: DoublePhaseMethod::default(),
+            depth_range: None,
+            depth_mapping: DepthMapping::default(),
+        }
+    }
+
+    /// Checks everything that needs no model: non-zero sizes within [`MAX_HOLOGRAM_PIXELS`] whose RGBA
+    /// outputs (`width · height · 4` bytes) fit in a `u32`, a finite non-negative offset, valid optics and
+    /// depth range, and a thread count within [`crate::model::MAX_CNN_THREADS`].
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] naming the field.
+    pub fn validate(&self) -> Result<()> {
+        if self.width == 0 || self.height == 0 {
+            return Err(invalid(
+                "width/height",
+                format!("the hologram needs a non-zero size, got {}×{}", self.width, self.height),
+            ));
+        }
+        let pixels = self.width.checked_mul(self.height).filter(|&p| p <= MAX_HOLOGRAM_PIXELS);
+        let rgba_fits = pixels
+            .and_then(|p| p.checked_mul(4))
+            .is_some_and(|b| b <= u32::MAX as usize);
+        if pixels.is_none() || !rgba_fits {
+            return Err(invalid(
+                "width/height",
+                format!(
+                    "{}×{} is larger than the {MAX_HOLOGRAM_PIXELS} pixels a generator makes",
+                    self.width, self.height
+                ),
+            ));
+        }
+        if !(self.offset_m.is_finite() && self.offset_m >= 0.0) {
+            return Err(invalid(
+                "offset_m",
+                format!("must be finite and ≥ 0 metres, got {}", self.offset_m),
+            ));
+        }
+        self.optics.validate()?;
+        if let Some(r) = &self.depth_range {
+            r.validate()?;
+        }
+        if let ThreadCount::Fixed(n) = self.threads {
+            if n == 0 || n > crate::model::MAX_CNN_THREADS {
+                return Err(invalid(
+                    "threads",
+                    format!(
+                        "0 (automatic) to {} threads, got {n}",
+                        crate::model::MAX_CNN_THREADS
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The pipeline part of this configuration.
+    pub fn pipeline_config(&self) -> PipelineConfig {
+        PipelineConfig {
+            optics: self.optics,
+            options: self.options,
+            offset_m: self.offset_m,
+            encoding: self.encoding,
+            cnn_layout: self.layout,
+            cnn_threads: self.threads,
+        }
+    }
+
+    /// The camera-frame conversion part of this configuration.
+    pub fn frame_options(&self) -> FrameOptions {
+        FrameOptions {
+            fit: self.fit,
+            range: self.depth_range,
+            mapping: self.depth_mapping,
+        }
+    }
+}
+
+/// Seconds of each stage of one frame through a [`HologramGenerator`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct PatternTimings {
+    /// Camera buffers → RGB-D frame at the hologram resolution (decode, rotate, fill, fit).
+    pub convert_s: f64,
+    /// The session's stages (CNN, offset, pre-filter, encoding; `total_s` is their sum, or the frame period in
+    /// a stream).
+    pub frame: FrameTimings,
+}
+
+/// One frame's SLM patterns, owned by the caller: three 8-bit planes, one per laser (field-sequential
+/// colour), code `c` displaying phase `2π·c/256` (linear look-up table).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlmPatterns {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// `[3, H, W]` codes (R, G, B), row-major.
+    pub codes: Array3<u8>,
+    /// The double phase pattern `[3, H, W]` in radians, `[0, 2π)` (what the codes quantise).
+    pub phase: Array3<f32>,
+    /// Global amplitude normaliser of Eq. 7 (for simulating what the SLM shows).
+    pub amplitude_scale: f32,
+    /// Metric depth range used for this frame (`None` for relative depth).
+    pub depth_range: Option<DepthRange>,
+    /// Stage timings.
+    pub timings: PatternTimings,
+}
+
+impl SlmPatterns {
+    fn from_frame(out: &SlmFrame, convert_s: f64, depth_range: Option<DepthRange>) -> Self {
+        let (_, height, width) = out.codes.dim();
+        Self {
+            width,
+            height,
+            codes: out.codes.clone(),
+            phase: out.phase.clone(),
+            amplitude_scale: out.amplitude_scale,
+            depth_range,
+            timings: PatternTimings {
+                convert_s,
+                frame: out.timings,
+            },
+        }
+    }
+
+    /// The 32-bit frame colour-sequential SLM drivers take over HDMI/DisplayPort ([`pack_rgba`]):
+    /// `[H, W, 4]` bytes, one laser's pattern per colour channel, alpha 255.
+    pub fn to_rgba(&self) -> Vec<u8> {
+        pack_rgba(self.codes.view())
+    }
+}
+
+/// Interleaves SLM codes `[3, H, W]` (R, G, B) into the 32-bit frame colour-sequential SLM drivers take over
+/// HDMI: `[H, W, 4]` bytes, row-major, the red laser's pattern in R, green in G, blue in B, alpha 255.
+pub fn pack_rgba(codes: ArrayView3<u8>) -> Vec<u8> {
+    let (c, h, w) = codes.dim();
+    let mut out = vec![255u8; h * w * 4];
+    for ch in 0..c.min(3) {
+        let plane = codes.index_axis(Axis(0), ch);
+        for (px, &v) in out.chunks_exact_mut(4).zip(plane.iter()) {
+            px[ch] = v;
+        }
+    }
+    out
+}
+
+/// A simulated view of the SLM patterns ([`HologramGenerator::preview`]): `[H, W, 4]` sRGB bytes, alpha 255.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Preview {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// `[H, W, 4]` RGBA8 bytes, row-major, sRGB.
+    pub rgba: Vec<u8>,
+}
+
+/// What a [`HologramGenerator`] runs, for apps to show and for bug reports.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct GeneratorInfo {
+    /// `tensorholo` version.
+    pub version: String,
+    /// Hologram width in pixels.
+    pub width: usize,
+    /// Hologram height in pixels.
+    pub height: usize,
+    /// Hologram CNN depth.
+    pub layers: usize,
+    /// Weight format.
+    pub precision: Precision,
+    /// Source of the hologram CNN (embedded file name).
+    pub hologram_model: String,
+    /// Source of the pre-filter CNN, if one runs.
+    pub prefilter_model: Option<String>,
+    /// Why a pre-filter runs or not.
+    pub prefilter_reason: String,
+    /// Encoding after the CNN (`Plain` after a pre-filter, DDPM).
+    pub encoding: DoublePhaseMethod,
+    /// SLM offset in metres.
+    pub offset_m: f64,
+    /// The chosen CNN plan (layout, threads, autotuning timings).
+    pub plan: PlanReport,
+}
+
+/// Receives a [`HologramStream`]'s results, in frame order, on the stream's worker thread.
+pub trait StreamListener: Send {
+    /// The patterns of frame `index` (the value [`HologramStream::push`] returned for it).
+    fn on_patterns(&mut self, index: u64, patterns: SlmPatterns);
+    /// Frame `index` failed (bad buffers, all depth invalid, …); the stream goes on with the next frame.
+    fn on_error(&mut self, index: u64, error: HoloError);
+}
+
+/// RGB-D camera frames → SLM patterns with the shipped CNNs (see the [module docs](self)).
+#[derive(Debug)]
+pub struct HologramGenerator {
+    config: GeneratorConfig,
+    pipeline: HologramPipeline,
+    session: Mutex<HologramSession>,
+}
+
+impl HologramGenerator {
+    /// Loads the shipped CNNs of `config.models`, checks them against the display, and prepares the session
+    /// for `config.height × config.width` (autotuning the CNN plan: see [`PlanReport`]).
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for an invalid configuration ([`GeneratorConfig::validate`]),
+    /// a layer count other than 8/15/30, [`PrefilterMode::Required`] at an offset without a shipped
+    /// pre-filter; model errors as [`HologramPipeline::embedded`].
+    #[cfg(feature = "embedded-models")]
+    pub fn new(config: GeneratorConfig) -> Result<Self> {
+        config.validate()?;
+        let pipeline = HologramPipeline::embedded(&config.models, config.pipeline_config())?;
+        Self::with_pipeline(config, pipeline)
+    }
+
+    /// As [`HologramGenerator::new`] with CNNs the caller loaded (`config.models` is then only reported).
+    ///
+    /// Errors: as [`GeneratorConfig::validate`] and [`HologramPipeline::session`].
+    pub fn with_pipeline(config: GeneratorConfig, pipeline: HologramPipeline) -> Result<Self> {
+        config.validate()?;
+        let session = pipeline.session(config.height, config.width)?;
+        Ok(Self {
+            config,
+            pipeline,
+            session: Mutex::new(session),
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &GeneratorConfig {
+        &self.config
+    }
+
+    /// The session, recreated if a panic poisoned its lock (so a bug in one call cannot lose the generator).
+    fn session(&self) -> Result<MutexGuard<'_, HologramSession>> {
+        match self.session.lock() {
+            Ok(g) => Ok(g),
+            Err(poisoned) => {
+                let mut g = poisoned.into_inner();
+                *g = self
+                    .pipeline
+                    .session(self.config.height, self.config.width)?;
+                self.session.clear_poison();
+                log::warn!("a call panicked while rendering; the session was recreated");
+                Ok(g)
+            }
+        }
+    }
+
+    /// Converts a camera frame to the RGB-D frame the CNN sees at the hologram resolution
+    /// ([`CameraFrame::to_rgbd`] with the configuration's fit and depth range).
+    ///
+    /// Errors: as [`CameraFrame::to_rgbd`].
+    pub fn convert(&self, frame: &CameraFrame) -> Result<(RgbdFrame, CameraFrameReport)> {
+        frame.to_rgbd(
+            self.config.height,
+            self.config.width,
+            &self.config.frame_options(),
+        )
+    }
+
+    /// Renders one camera frame into SLM patterns.
+    ///
+    /// Errors: the conversion's ([`CameraFrame::to_rgbd`]: bad buffer sizes or strides, no valid depth…)
+    /// and the session's ([`HologramSession::render`]). The generator stays usable after any error.
+    pub fn render(&self, frame: &CameraFrame) -> Result<SlmPatterns> {
+        let t = Instant::now();
+        let (rgbd, report) = self.convert(frame)?;
+        let convert_s = t.elapsed().as_secs_f64();
+        let mut session = self.session()?;
+        let out = session.render(&rgbd)?;
+        Ok(SlmPatterns::from_frame(out, convert_s, report.range_used))
+    }
+
+    /// Renders an RGB-D frame already at the hologram resolution (`[3, H, W]` amplitude, `[H, W]` depth).
+    ///
+    /// Errors: as [`HologramSession::render`].
+    pub fn render_rgbd(&self, frame: &RgbdFrame) -> Result<SlmPatterns> {
+        let mut session = self.session()?;
+        let out = session.render(frame)?;
+        Ok(SlmPatterns::from_frame(out, 0.0, None))
+    }
+
+    /// What a viewer sees of `patterns` focused at normalised depth `focus` ∈ [0, 1] (0 = near): the SLM's
+    /// phase-only field (Eq. 8–10, no aperture) propagated from the midpoint plane to `z(focus)`, as sRGB.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for a focus outside [0, 1] or NaN; as
+    /// [`post_encoding_midpoint`] and [`focal_stack`].
+    pub fn preview_patterns(&self, patterns: &SlmPatterns, focus: f32) -> Result<Preview> {
+        if !(0.0..=1.0).contains(&focus) {
+            return Err(invalid(
+                "focus",
+                format!("is a normalised depth in [0, 1] (0 = near), got {focus}"),
+            ));
+        }
+        let cfg = &self.config;
+        let shown = post_encoding_midpoint(
+            patterns.phase.view(),
+            patterns.amplitude_scale,
+            &cfg.optics,
+            cfg.offset_m,
+            cfg.options,
+        )?;
+        let stack = focal_stack(
+            shown.view(),
+            &cfg.optics,
+            0.0,
+            &[focus as f64],
+            cfg.options,
+            false,
+        )?;
+        let amp = stack
+            .first()
+            .ok_or_else(|| HoloError::Internal("focal stack returned no image".into()))?;
+        let (_, height, width) = amp.dim();
+        let mut rgba = vec![255u8; height * width * 4];
+        for c in 0..3 {
+            for (px, &a) in rgba
+                .chunks_exact_mut(4)
+                .zip(amp.index_axis(Axis(0), c).iter())
+            {
+                px[c] = amplitude_to_srgb8(a.max(0.0));
+            }
+        }
+        Ok(Preview {
+            width,
+            height,
+            rgba,
+        })
+    }
+
+    /// Renders `frame` and returns what a viewer sees focused at normalised depth `focus` ∈ [0, 1]
+    /// ([`HologramGenerator::preview_patterns`]), for the phone's screen.
+    ///
+    /// Errors: as [`HologramGenerator::render`] and [`HologramGenerator::preview_patterns`].
+    pub fn preview(&self, frame: &CameraFrame, focus: f32) -> Result<Preview> {
+        if !(0.0..=1.0).contains(&focus) {
+            return Err(invalid(
+                "focus",
+                format!("is a normalised depth in [0, 1] (0 = near), got {focus}"),
+            ));
+        }
+        let patterns = self.render(frame)?;
+        self.preview_patterns(&patterns, focus)
+    }
+
+    /// What this generator runs: models, precision, pre-filter and why, the chosen CNN plan.
+    ///
+    /// Errors: [`HoloError::Internal`] only if the session cannot be recreated after a panic.
+    pub fn info(&self) -> Result<GeneratorInfo> {
+        let plan = self.session()?.plan_report().clone();
+        let md = self.pipeline.hologram_model().metadata();
+        Ok(GeneratorInfo {
+            version: env!("CARGO_PKG_VERSION").to_string(),
+            width: self.config.width,
+            height: self.config.height,
+            layers: md.layers,
+            precision: self.config.models.precision,
+            hologram_model: self.pipeline.hologram_model().source_name().to_string(),
+            prefilter_model: self
+                .pipeline
+                .prefilter_model()
+                .map(|m| m.source_name().to_string()),
+            prefilter_reason: self.pipeline.prefilter_reason().to_string(),
+            encoding: self.pipeline.encoding(),
+            offset_m: self.config.offset_m,
+            plan,
+        })
+    }
+
+    /// Starts a video stream whose results go to `listener` ([`HologramStream`]); its queue holds
+    /// `capacity` frames (≥ 1; [`DEFAULT_STREAM_CAPACITY`]). The stream has its own session (the CNN plans
+    /// and the autotuning result are shared with this generator's), so [`HologramGenerator::render`] stays
+    /// available meanwhile.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for a capacity of 0; as [`HologramPipeline::session`].
+    pub fn stream(
+        &self,
+        listener: Box<dyn StreamListener>,
+        capacity: usize,
+    ) -> Result<HologramStream> {
+        if capacity == 0 {
+            return Err(invalid("capacity", "a stream queue holds at least 1 frame"));
+        }
+        let session = self.pipeline.session(self.config.height, self.config.width)?;
+        HologramStream::start(session, self.config, listener, capacity)
+    }
+}
+
+/// The queue between [`HologramStream::push`] and the worker.
+#[derive(Debug, Default)]
+struct Queue {
+    frames: VecDeque<(u64, CameraFrameBuf)>,
+    next_index: u64,
+    dropped: u64,
+    closed: bool,
+}
+
+#[derive(Debug, Default)]
+struct Shared {
+    queue: Mutex<Queue>,
+    ready: Condvar,
+}
+
+impl Shared {
+    fn lock(&self) -> MutexGuard<'_, Queue> {
+        // The queue's critical sections cannot panic; recover it rather than propagate poison.
+        self.queue.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The next frame, waiting for one; `None` once closed and drained.
+    fn pop(&self) -> Option<(u64, CameraFrameBuf)> {
+        let mut q = self.lock();
+        loop {
+            if let Some(f) = q.frames.pop_front() {
+                return Some(f);
+            }
+            if q.closed {
+                return None;
+            }
+            q = self.ready.wait(q).unwrap_or_else(|p| p.into_inner());
+        }
+    }
+}
+
+/// A video stream of camera frames (see the [module docs](self)); made by [`HologramGenerator::stream`].
+/// Dropping it closes it.
+#[derive(Debug)]
+pub struct HologramStream {
+    shared: Arc<Shared>,
+    capacity: usize,
+    worker: Mutex<Option<JoinHandle<()>>>,
+}
+
+impl HologramStream {
+    fn start(
+        mut session: HologramSession,
+        config: GeneratorConfig,
+        listener: Box<dyn StreamListener>,
+        capacity: usize,
+    ) -> Result<Self> {
+        let shared = Arc::new(Shared::default());
+        let source = Arc::clone(&shared);
+        let worker = std::thread::Builder::new()
+            .name("tensorholo-stream".into())
+            .spawn(move || {
+                let listener = Mutex::new(listener);
+                let deliver = |index: u64, result: Result<SlmPatterns>| {
+                    let mut l = listener.lock().unwrap_or_else(|p| p.into_inner());
+                    match result {
+                        Ok(p) => l.on_patterns(index, p),
+                        Err(e) => l.on_error(index, e),
+                    }
+                };
+                let mut options = config.frame_options();
+                let mut ranges = VecDeque::new();
+                let run = catch_unwind(AssertUnwindSafe(|| {
+                    // The CNN thread converts frames (the first auto range is locked for the rest); the
+                    // ranges travel to the sink in order beside the frames.
+                    let (range_tx, range_rx) = std::sync::mpsc::channel();
+                    let frames = std::iter::from_fn(|| {
+                        let (index, buf) = source.pop()?;
+                        let t = Instant::now();
+                        let converted =
+                            buf.view()
+                                .to_rgbd(config.height, config.width, &options);
+                        let convert_s = t.elapsed().as_secs_f64();
+                        let frame = converted.map(|(frame, report)| {
+                            if options.range.is_none() {
+                                options.range = report.range_used;
+                            }
+                            let _ = range_tx.send((report.range_used, convert_s));
+                            frame
+                        });
+                        if frame.is_err() {
+                            let _ = range_tx.send((None, convert_s));
+                        }
+                        Some((index, frame))
+                    });
+                    session.render_stream_each(frames, |index, result| {
+                        while let Ok(r) = range_rx.try_recv() {
+                            ranges.push_back(r);
+                        }
+                        let (range, convert_s) = ranges.pop_front().unwrap_or((None, 0.0));
+                        deliver(
+                            index,
+                            result.map(|out| SlmPatterns::from_frame(out, convert_s, range)),
+                        );
+                        Ok(())
+                    })
+                }));
+                let failure = match run {
+                    Ok(Ok(_)) => None,
+                    Ok(Err(e)) => Some(e),
+                    Err(_) => Some(HoloError::Internal("the stream's worker panicked".into())),
+                };
+                if let Some(e) = failure {
+                    let index = source.lock().next_index;
+                    deliver(index, Err(e));
+                }
+            })
+            .map_err(|e| HoloError::Internal(format!("cannot start the stream's worker: {e}")))?;
+        Ok(Self {
+            shared,
+            capacity,
+            worker: Mutex::new(Some(worker)),
+        })
+    }
+
+    /// Queues a frame and returns its index (0, 1, 2… in push order). Never blocks on the hologram: when
+    /// the queue is full, the oldest waiting frame is dropped ([`HologramStream::dropped_frames`] counts
+    /// them) and its index is never delivered.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`stream`) after [`HologramStream::close`].
+    pub fn push(&self, frame: CameraFrameBuf) -> Result<u64> {
+        let mut q = self.shared.lock();
+        if q.closed {
+            return Err(invalid("stream", "this stream is closed; start a new one"));
+        }
+        let index = q.next_index;
+        q.next_index += 1;
+        q.frames.push_back((index, frame));
+        while q.frames.len() > self.capacity {
+            q.frames.pop_front();
+            q.dropped += 1;
+        }
+        drop(q);
+        self.shared.ready.notify_one();
+        Ok(index)
+    }
+
+    /// Frames dropped so far because the queue was full.
+    pub fn dropped_frames(&self) -> u64 {
+        self.shared.lock().dropped
+    }
+
+    /// Frames pushed so far.
+    pub fn pushed_frames(&self) -> u64 {
+        self.shared.lock().next_index
+    }
+
+    /// Stops accepting frames, lets the worker finish the frames already queued, and waits for it: after
+    /// `close` returns, the listener is called no more. Calling it again does nothing.
+    pub fn close(&self) {
+        self.shared.lock().closed = true;
+        self.shared.ready.notify_all();
+        let handle = self
+            .worker
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .take();
+        if let Some(h) = handle {
+            // The worker catches its own panics; a join error cannot carry anything more.
+            let _ = h.join();
+        }
+    }
+
+    /// Whether [`HologramStream::close`] was called.
+    pub fn is_closed(&self) -> bool {
+        self.shared.lock().closed
+    }
+}
+
+impl Drop for HologramStream {
+    fn drop(&mut self) {
+        self.close();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rgba_packs_one_laser_per_channel() {
+        let codes = Array3::from_shape_fn((3, 2, 3), |(c, y, x)| (c * 100 + y * 10 + x) as u8);
+        let rgba = pack_rgba(codes.view());
+        assert_eq!(rgba.len(), 2 * 3 * 4);
+        for y in 0..2 {
+            for x in 0..3 {
+                let px = &rgba[(y * 3 + x) * 4..][..4];
+                assert_eq!(
+                    px,
+                    [codes[[0, y, x]], codes[[1, y, x]], codes[[2, y, x]], 255]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn config_refuses_what_cannot_work() {
+        assert!(GeneratorConfig::new(64, 48).validate().is_ok());
+        let bad = |f: fn(&mut GeneratorConfig)| {
+            let mut c = GeneratorConfig::new(64, 48);
+            f(&mut c);
+            c.validate().unwrap_err()
+        };
+        let name = |e: HoloError| match e {
+            HoloError::InvalidParameter { name, .. } => name,
+            e => panic!("unexpected {e}"),
+        };
+        assert_eq!(name(bad(|c| c.width = 0)), "width/height");
+        assert_eq!(name(bad(|c| c.height = usize::MAX)), "width/height");
+        assert_eq!(name(bad(|c| c.width = 40_000)), "width/height");
+        assert_eq!(name(bad(|c| c.offset_m = f64::NAN)), "offset_m");
+        assert_eq!(name(bad(|c| c.offset_m = -1e-3)), "offset_m");
+        assert_eq!(name(bad(|c| c.threads = ThreadCount::Fixed(100_000))), "threads");
+        assert!(matches!(
+            bad(|c| c.optics.pixel_pitch_m = f64::NAN),
+            HoloError::InvalidParameter { .. }
+        ));
+        assert!(matches!(
+            bad(|c| c.depth_range = Some(DepthRange { z_near_m: 2.0, z_far_m: 1.0 })),
+            HoloError::InvalidParameter { .. }
+        ));
+    }
+}
