@@ -8,16 +8,24 @@
 //!   `shared/data/README.md`) → [`normalise_depth`] with a [`DepthRange`] and a [`DepthMapping`] (linear
 //!   in diopters by default) → [`fill_invalid`] (holes take the farthest neighbouring depth, before any
 //!   resizing, never read as near) → [`RgbdFrame::resize`].
+//! * Phone camera buffers ([`CameraFrame::to_rgbd`]): an interleaved 8-bit colour buffer ([`ColorFormat`])
+//!   and a depth buffer in the sensor's format ([`DepthFormat`]: AVDepthData, ARCore, `DEPTH16`), with row
+//!   strides, a [`Rotation`] and a [`Fit`] to the hologram resolution.
 //! * [`procedural`]: a deterministic test scene with near, mid and far textured objects and occlusions.
 //! * [`random`]: random textured scenes as LDIs ([`random_ldi`]), the input side of the training dataset
 //!   (paper section "MIT-CGH-4K-V2"), built by per-pixel depth sorting ([`ldi_from_fragments`]).
 
+mod camera;
 mod depth;
 mod frame;
 mod load;
 pub mod procedural;
 pub mod random;
 
+pub use camera::{
+    CameraFrame, CameraFrameBuf, CameraFrameReport, ColorFormat, ColorImage, ColorImageBuf,
+    DepthFormat, DepthImage, DepthImageBuf, Fit, FrameOptions, Rotation,
+};
 pub use depth::{
     decode_depth, decode_depth_file, fill_invalid, normalise_depth, DecodedDepth, DepthEncoding,
     DepthMapping, DepthRange,

@@ -1,0 +1,882 @@
+//! RGB-D frames from phone camera buffers: an interleaved 8-bit colour buffer with a row stride plus a
+//! depth map in the sensor's own format and resolution → [`RgbdFrame`] at the hologram resolution.
+//!
+//! [`CameraFrame::to_rgbd`] runs, in this order:
+//! 1. validation of both buffers (sizes, row stride, buffer length, all with checked arithmetic) and of the
+//!    target size, before anything is allocated;
+//! 2. decoding: colour ([`ColorFormat`], sRGB 8-bit) → `[3, H, W]` amplitude with
+//!    [`crate::color::srgb8_to_amplitude`], channels R, G, B whatever the byte order; depth
+//!    ([`DepthFormat`], little-endian) → metres + validity mask ([`DecodedDepth`], metric);
+//! 3. the clockwise [`Rotation`] that makes both buffers upright (fused with step 2: each output pixel reads
+//!    its source pixel, no extra copy);
+//! 4. depth (values and validity) resampled to the colour resolution by **nearest neighbour**, so no depth
+//!    is ever mixed across an occlusion edge. Both buffers are assumed to cover the same field of view, as
+//!    AVFoundation's `AVDepthData` (delivered alongside the photo / video frame) and ARCore's depth image
+//!    (aligned with the camera image) do: the depth map is stretched onto the colour frame, so a depth map
+//!    with another aspect ratio is stretched too (logged as a warning);
+//! 5. [`normalise_depth`] with [`FrameOptions::range`] / [`FrameOptions::mapping`] (automatic range = 1st /
+//!    99th percentiles of the valid depths), then [`fill_invalid`]: invalid pixels take the farthest
+//!    neighbouring depth and are never read as near;
+//! 6. the [`Fit`] to the hologram's `height × width` (crop, letterbox or stretch), resampling with
+//!    [`RgbdFrame::resize`] (Catmull-Rom in intensity for amplitude, nearest for depth).
+//!
+//! Memory: the decoded colour `[3, H, W]` f32 and depth at colour resolution, the fitted output, and for
+//! [`Fit::Crop`] one copy of the cropped region; nothing else at full resolution.
+
+use ndarray::{s, Array2, Array3};
+use serde::Serialize;
+
+use super::depth::{
+    fill_invalid, normalise_depth, DecodedDepth, DepthEncoding, DepthMapping, DepthRange,
+};
+use super::frame::{resize_nearest, RgbdFrame};
+use crate::color::srgb8_to_amplitude;
+use crate::error::{invalid, HoloError, Result};
+
+/// Byte layout of an interleaved 8-bit colour buffer. Values are sRGB-encoded; alpha is ignored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+pub enum ColorFormat {
+    /// 4 bytes per pixel in memory order R, G, B, A (e.g. Android `PixelFormat.RGBA_8888`,
+    /// `HardwareBuffer.RGBA_8888`).
+    Rgba8,
+    /// 4 bytes per pixel in memory order B, G, R, A: iOS `kCVPixelFormatType_32BGRA`.
+    Bgra8,
+    /// 3 bytes per pixel in memory order R, G, B (packed RGB, as the `image` crate's `RgbImage`).
+    Rgb8,
+}
+
+impl ColorFormat {
+    /// Bytes per pixel: 4 for [`Rgba8`](Self::Rgba8) and [`Bgra8`](Self::Bgra8), 3 for
+    /// [`Rgb8`](Self::Rgb8).
+    pub fn bytes_per_pixel(&self) -> usize {
+        match self {
+            ColorFormat::Rgba8 | ColorFormat::Bgra8 => 4,
+            ColorFormat::Rgb8 => 3,
+        }
+    }
+
+    /// Byte offsets of R, G and B inside one pixel.
+    fn rgb_offsets(&self) -> [usize; 3] {
+        match self {
+            ColorFormat::Rgba8 | ColorFormat::Rgb8 => [0, 1, 2],
+            ColorFormat::Bgra8 => [2, 1, 0],
+        }
+    }
+}
+
+/// Sample format of a phone depth buffer; every format is **little-endian**.
+///
+/// | variant | source | bytes | z in metres |
+/// |---|---|---|---|
+/// | [`MetresF32`](Self::MetresF32) | `AVDepthData` `kCVPixelFormatType_DepthFloat32` | 4 | `v` |
+/// | [`MetresF16`](Self::MetresF16) | `AVDepthData` `kCVPixelFormatType_DepthFloat16` | 2 | `v` |
+/// | [`DisparityF32`](Self::DisparityF32) | `AVDepthData` `kCVPixelFormatType_DisparityFloat32` | 4 | `1/v` (`v` in 1/m) |
+/// | [`DisparityF16`](Self::DisparityF16) | `AVDepthData` `kCVPixelFormatType_DisparityFloat16` | 2 | `1/v` (`v` in 1/m) |
+/// | [`MillimetresU16`](Self::MillimetresU16) | ARCore `Frame.acquireDepthImage16Bits` | 2 | `v/1000` |
+/// | [`Depth16`](Self::Depth16) | Android `ImageFormat.DEPTH16` | 2 | `(v & 0x1FFF)/1000` |
+///
+/// Invalid pixels (never read as near; filled later by [`fill_invalid`]): any sample whose z is 0, NaN,
+/// ±∞ or negative (so a disparity of 0, NaN, ±∞ or negative too), and for [`Depth16`](Self::Depth16) a
+/// confidence code of 1.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+pub enum DepthFormat {
+    /// IEEE 754 binary32 z-depth in metres (iOS `DepthFloat32`).
+    MetresF32,
+    /// IEEE 754 binary16 z-depth in metres (iOS `DepthFloat16`), decoded with the `half` crate.
+    MetresF16,
+    /// IEEE 754 binary32 disparity in 1/m (iOS `DisparityFloat32`): z = 1/v metres.
+    DisparityF32,
+    /// IEEE 754 binary16 disparity in 1/m (iOS `DisparityFloat16`): z = 1/v metres.
+    DisparityF16,
+    /// Unsigned 16-bit z-depth in millimetres (ARCore `acquireDepthImage16Bits`): z = v/1000 m, 0 = no
+    /// depth.
+    MillimetresU16,
+    /// Android `ImageFormat.DEPTH16`: the low 13 bits are the range in millimetres (z = range/1000 m), the
+    /// high 3 bits a confidence code `c`: 0 means 100 % confidence, 1 means 0 %, 2..=7 mean `(c − 1)/7`.
+    /// A pixel with range 0 or confidence code 1 is invalid; every other confidence is accepted.
+    Depth16,
+}
+
+impl DepthFormat {
+    /// Bytes per sample: 4 for the f32 formats, 2 for the others.
+    pub fn bytes_per_pixel(&self) -> usize {
+        match self {
+            DepthFormat::MetresF32 | DepthFormat::DisparityF32 => 4,
+            DepthFormat::MetresF16
+            | DepthFormat::DisparityF16
+            | DepthFormat::MillimetresU16
+            | DepthFormat::Depth16 => 2,
+        }
+    }
+
+    /// Decodes one little-endian sample of `bytes_per_pixel()` bytes to metres; `None` if invalid.
+    fn decode_sample(&self, b: &[u8]) -> Option<f32> {
+        let f32_le = |b: &[u8]| f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+        let f16_le = |b: &[u8]| half::f16::from_le_bytes([b[0], b[1]]).to_f32();
+        let u16_le = |b: &[u8]| u16::from_le_bytes([b[0], b[1]]);
+        let z = match self {
+            DepthFormat::MetresF32 => f32_le(b),
+            DepthFormat::MetresF16 => f16_le(b),
+            DepthFormat::DisparityF32 => 1.0 / f32_le(b),
+            DepthFormat::DisparityF16 => 1.0 / f16_le(b),
+            DepthFormat::MillimetresU16 => {
+                return DepthEncoding::Millimetres16.decode_sample(u16_le(b))
+            }
+            DepthFormat::Depth16 => {
+                let v = u16_le(b);
+                if v >> 13 == 1 {
+                    return None; // confidence 0 %
+                }
+                return DepthEncoding::Millimetres16.decode_sample(v & 0x1FFF);
+            }
+        };
+        // Rejects 0, NaN, ±inf and negatives (for disparity: 1/0 = inf, 1/inf = 0, 1/NaN = NaN).
+        (z.is_finite() && z > 0.0).then_some(z)
+    }
+}
+
+/// Clockwise rotation applied to both buffers to make them upright (phone sensors deliver landscape
+/// buffers; e.g. Android's `SENSOR_ORIENTATION` is the clockwise angle through which the output image
+/// must be rotated to be upright in the device's native orientation).
+///
+/// For a buffer of `H` rows and `W` columns, the buffer pixel at row `y`, column `x` goes to:
+///
+/// | variant | output size | output pixel (row, column) |
+/// |---|---|---|
+/// | [`Deg0`](Self::Deg0) | `H × W` | `(y, x)` |
+/// | [`Deg90`](Self::Deg90) | `W × H` | `(x, H − 1 − y)` |
+/// | [`Deg180`](Self::Deg180) | `H × W` | `(H − 1 − y, W − 1 − x)` |
+/// | [`Deg270`](Self::Deg270) | `W × H` | `(W − 1 − x, y)` |
+///
+/// So after `Deg90` the buffer's top-left pixel is at the top-right, after `Deg180` at the bottom-right and
+/// after `Deg270` at the bottom-left.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize)]
+pub enum Rotation {
+    /// No rotation (default).
+    #[default]
+    Deg0,
+    /// 90° clockwise.
+    Deg90,
+    /// 180°.
+    Deg180,
+    /// 270° clockwise (90° counter-clockwise).
+    Deg270,
+}
+
+impl Rotation {
+    /// `(height, width)` of a `height × width` buffer after this rotation (swapped for 90° and 270°).
+    pub fn rotated_size(&self, height: usize, width: usize) -> (usize, usize) {
+        match self {
+            Rotation::Deg0 | Rotation::Deg180 => (height, width),
+            Rotation::Deg90 | Rotation::Deg270 => (width, height),
+        }
+    }
+
+    /// Buffer pixel `(row, column)` shown at output pixel `(yo, xo)` of a `h × w` buffer (the inverse of
+    /// the table in the type's documentation). Requires `h, w ≥ 1` and `(yo, xo)` inside the output.
+    fn source(&self, yo: usize, xo: usize, h: usize, w: usize) -> (usize, usize) {
+        match self {
+            Rotation::Deg0 => (yo, xo),
+            Rotation::Deg90 => (h - 1 - xo, yo),
+            Rotation::Deg180 => (h - 1 - yo, w - 1 - xo),
+            Rotation::Deg270 => (xo, w - 1 - yo),
+        }
+    }
+}
+
+/// How the (rotated) camera frame is fitted to the hologram's `height × width`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize)]
+pub enum Fit {
+    /// Centred crop to the target aspect ratio (the crop's width or height rounded to whole pixels), then
+    /// resample; fills the hologram, loses the frame's edges (default).
+    #[default]
+    Crop,
+    /// Resample to the largest size with the frame's aspect ratio (rounded to whole pixels) that fits
+    /// inside the target, centred (the extra pixel of an odd margin at the bottom / right); the margins get
+    /// amplitude 0 (black) and depth 1 (far).
+    Letterbox,
+    /// Resample to the target size, ignoring the aspect ratio (exactly [`RgbdFrame::resize`]).
+    Stretch,
+}
+
+/// A borrowed interleaved 8-bit colour buffer, sRGB-encoded, `height` rows of `width` pixels.
+///
+/// Row `y` starts at byte `y · stride`, where `stride = row_stride`, or `width · bytes_per_pixel` when
+/// `row_stride` is 0 (packed). The buffer length must satisfy
+/// `stride · (height − 1) + width · bpp ≤ data.len() ≤ stride · height` (the last row's padding may be
+/// absent); see [`ColorImage::validate`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ColorImage<'a> {
+    /// The pixel bytes.
+    pub data: &'a [u8],
+    /// Byte layout of a pixel.
+    pub format: ColorFormat,
+    /// Pixels per row.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// Bytes from the start of one row to the next; `0` = packed (`width · bytes_per_pixel`).
+    pub row_stride: usize,
+}
+
+/// A borrowed depth buffer, `height` rows of `width` little-endian samples, laid out like
+/// [`ColorImage`] (row stride in bytes, `0` = packed; same length rule, see [`DepthImage::validate`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DepthImage<'a> {
+    /// The sample bytes.
+    pub data: &'a [u8],
+    /// Sample format.
+    pub format: DepthFormat,
+    /// Samples per row.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// Bytes from the start of one row to the next; `0` = packed (`width · bytes_per_pixel`).
+    pub row_stride: usize,
+}
+
+/// Row stride and bytes per row of a validated buffer.
+#[derive(Debug, Clone, Copy)]
+struct Layout {
+    stride: usize,
+    bpp: usize,
+}
+
+/// Checks a buffer's size, stride and length (see [`ColorImage`]); `name` / `stride_name` name it in the
+/// errors ([`HoloError::InvalidParameter`]).
+fn check_layout(
+    name: &'static str,
+    stride_name: &'static str,
+    len: usize,
+    width: usize,
+    height: usize,
+    bpp: usize,
+    row_stride: usize,
+) -> Result<Layout> {
+    if width == 0 || height == 0 {
+        return Err(invalid(
+            name,
+            format!(
+                "the {name} buffer must have a non-zero size, got width {width} x height {height}"
+            ),
+        ));
+    }
+    let row = width.checked_mul(bpp).ok_or_else(|| {
+        invalid(
+            name,
+            format!("width {width} x {bpp} bytes per pixel overflows usize"),
+        )
+    })?;
+    let stride = if row_stride == 0 { row } else { row_stride };
+    if stride < row {
+        return Err(invalid(
+            stride_name,
+            format!(
+                "row stride of {stride} bytes is shorter than one row ({width} pixels x {bpp} bytes = \
+                 {row} bytes)"
+            ),
+        ));
+    }
+    let min_len = stride
+        .checked_mul(height - 1)
+        .and_then(|n| n.checked_add(row))
+        .ok_or_else(|| {
+            invalid(
+                name,
+                format!(
+                    "buffer size stride·(height−1) + width·bpp = {stride}·{} + {row} bytes overflows usize",
+                    height - 1
+                ),
+            )
+        })?;
+    // stride·height overflowing means every representable length is below it.
+    let max_len = stride.saturating_mul(height);
+    if len < min_len {
+        return Err(invalid(
+            name,
+            format!(
+                "{name} buffer too short: {height} rows of stride {stride} bytes ({width} pixels x {bpp} \
+                 bytes) need at least {min_len} bytes (stride·(height−1) + width·bpp), got {len}"
+            ),
+        ));
+    }
+    if len > max_len {
+        return Err(invalid(
+            name,
+            format!(
+                "{name} buffer too long: {height} rows of stride {stride} bytes hold at most {max_len} \
+                 bytes (stride·height), got {len}"
+            ),
+        ));
+    }
+    Ok(Layout { stride, bpp })
+}
+
+/// Calls `f(i, pixel_bytes)` for every output pixel `i` (row-major index in the rotated `[H', W']` frame)
+/// of a validated `height × width` buffer.
+fn for_each_rotated(
+    data: &[u8],
+    layout: Layout,
+    height: usize,
+    width: usize,
+    rotation: Rotation,
+    mut f: impl FnMut(usize, &[u8]),
+) {
+    let (ho, wo) = rotation.rotated_size(height, width);
+    let Layout { stride, bpp } = layout;
+    for yo in 0..ho {
+        for xo in 0..wo {
+            let (y, x) = rotation.source(yo, xo, height, width);
+            // In bounds and without overflow: y·stride + (x+1)·bpp ≤ stride·(height−1) + width·bpp ≤ len.
+            let off = y * stride + x * bpp;
+            f(yo * wo + xo, &data[off..off + bpp]);
+        }
+    }
+}
+
+/// Error for an internal shape inconsistency (cannot happen for validated input).
+fn shape_error(e: ndarray::ShapeError) -> HoloError {
+    HoloError::InvalidData(format!("internal shape error: {e}"))
+}
+
+impl ColorImage<'_> {
+    /// Checks the buffer: non-zero `width` and `height`; `stride ≥ width · bpp`; and
+    /// `stride · (height − 1) + width · bpp ≤ data.len() ≤ stride · height`, all in checked arithmetic.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] with name `color` (zero size, size overflow, buffer too
+    /// short or too long, giving the expected and actual byte counts) or `color_row_stride` (stride shorter
+    /// than a row).
+    pub fn validate(&self) -> Result<()> {
+        self.layout().map(|_| ())
+    }
+
+    fn layout(&self) -> Result<Layout> {
+        check_layout(
+            "color",
+            "color_row_stride",
+            self.data.len(),
+            self.width,
+            self.height,
+            self.format.bytes_per_pixel(),
+            self.row_stride,
+        )
+    }
+
+    /// Decodes to linear amplitude `[3, H', W']`, channels R, G, B (whatever the byte order), each value
+    /// [`srgb8_to_amplitude`] of its byte (`√(linear intensity)` in `[0, 1]`); alpha is ignored. The
+    /// `rotation` is applied while decoding, so `(H', W') = rotation.rotated_size(height, width)`.
+    ///
+    /// Errors: those of [`ColorImage::validate`], checked before allocating.
+    pub fn to_amplitude(&self, rotation: Rotation) -> Result<Array3<f32>> {
+        let layout = self.layout()?;
+        let lut: [f32; 256] = std::array::from_fn(|c| srgb8_to_amplitude(c as u8));
+        let (ho, wo) = rotation.rotated_size(self.height, self.width);
+        // ho·wo ≤ data.len() and the output is 3·ho·wo f32 values: bounded by the input's size.
+        let plane = ho * wo;
+        let mut flat = vec![0.0f32; 3 * plane];
+        let [r, g, b] = self.format.rgb_offsets();
+        for_each_rotated(
+            self.data,
+            layout,
+            self.height,
+            self.width,
+            rotation,
+            |i, px| {
+                flat[i] = lut[px[r] as usize];
+                flat[plane + i] = lut[px[g] as usize];
+                flat[2 * plane + i] = lut[px[b] as usize];
+            },
+        );
+        Array3::from_shape_vec((3, ho, wo), flat).map_err(shape_error)
+    }
+}
+
+impl DepthImage<'_> {
+    /// Checks the buffer like [`ColorImage::validate`].
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] with name `depth` (zero size, size overflow, buffer too
+    /// short or too long, giving the expected and actual byte counts) or `depth_row_stride`.
+    pub fn validate(&self) -> Result<()> {
+        self.layout().map(|_| ())
+    }
+
+    fn layout(&self) -> Result<Layout> {
+        check_layout(
+            "depth",
+            "depth_row_stride",
+            self.data.len(),
+            self.width,
+            self.height,
+            self.format.bytes_per_pixel(),
+            self.row_stride,
+        )
+    }
+
+    /// Decodes to metric depth `[H', W']` with its validity mask (a [`DecodedDepth`] with
+    /// `metric = true`: valid values are z-depths in metres > 0, invalid ones `0.0`), using the formulas of
+    /// [`DepthFormat`]. The `rotation` is applied while decoding, so
+    /// `(H', W') = rotation.rotated_size(height, width)`.
+    ///
+    /// Errors: those of [`DepthImage::validate`], checked before allocating. A buffer without any valid
+    /// pixel decodes fine (all `valid` false).
+    pub fn decode(&self, rotation: Rotation) -> Result<DecodedDepth> {
+        let layout = self.layout()?;
+        let (ho, wo) = rotation.rotated_size(self.height, self.width);
+        let mut values = vec![0.0f32; ho * wo];
+        let mut valid = vec![false; ho * wo];
+        let format = self.format;
+        for_each_rotated(
+            self.data,
+            layout,
+            self.height,
+            self.width,
+            rotation,
+            |i, px| {
+                if let Some(z) = format.decode_sample(px) {
+                    values[i] = z;
+                    valid[i] = true;
+                }
+            },
+        );
+        Ok(DecodedDepth {
+            values: Array2::from_shape_vec((ho, wo), values).map_err(shape_error)?,
+            valid: Array2::from_shape_vec((ho, wo), valid).map_err(shape_error)?,
+            metric: true,
+        })
+    }
+}
+
+/// One phone camera frame, borrowed: a colour buffer, a depth buffer covering the same field of view (at
+/// any resolution), and the clockwise rotation that makes both upright. Convert with
+/// [`CameraFrame::to_rgbd`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CameraFrame<'a> {
+    /// The colour buffer.
+    pub color: ColorImage<'a>,
+    /// The depth buffer (same field of view as `color`).
+    pub depth: DepthImage<'a>,
+    /// Clockwise rotation applied to both buffers.
+    pub rotation: Rotation,
+}
+
+/// An owned colour buffer: the fields of [`ColorImage`] with a `Vec<u8>`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ColorImageBuf {
+    /// The pixel bytes.
+    pub data: Vec<u8>,
+    /// Byte layout of a pixel.
+    pub format: ColorFormat,
+    /// Pixels per row.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// Bytes from the start of one row to the next; `0` = packed.
+    pub row_stride: usize,
+}
+
+impl ColorImageBuf {
+    /// Borrows as a [`ColorImage`].
+    pub fn view(&self) -> ColorImage<'_> {
+        ColorImage {
+            data: &self.data,
+            format: self.format,
+            width: self.width,
+            height: self.height,
+            row_stride: self.row_stride,
+        }
+    }
+}
+
+/// An owned depth buffer: the fields of [`DepthImage`] with a `Vec<u8>`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DepthImageBuf {
+    /// The sample bytes (little-endian).
+    pub data: Vec<u8>,
+    /// Sample format.
+    pub format: DepthFormat,
+    /// Samples per row.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// Bytes from the start of one row to the next; `0` = packed.
+    pub row_stride: usize,
+}
+
+impl DepthImageBuf {
+    /// Borrows as a [`DepthImage`].
+    pub fn view(&self) -> DepthImage<'_> {
+        DepthImage {
+            data: &self.data,
+            format: self.format,
+            width: self.width,
+            height: self.height,
+            row_stride: self.row_stride,
+        }
+    }
+}
+
+/// An owned [`CameraFrame`] (e.g. to keep a frame after the camera has recycled its buffers).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CameraFrameBuf {
+    /// The colour buffer.
+    pub color: ColorImageBuf,
+    /// The depth buffer (same field of view as `color`).
+    pub depth: DepthImageBuf,
+    /// Clockwise rotation applied to both buffers.
+    pub rotation: Rotation,
+}
+
+impl CameraFrameBuf {
+    /// Borrows as a [`CameraFrame`].
+    pub fn view(&self) -> CameraFrame<'_> {
+        CameraFrame {
+            color: self.color.view(),
+            depth: self.depth.view(),
+            rotation: self.rotation,
+        }
+    }
+}
+
+/// Options of [`CameraFrame::to_rgbd`]. `Default`: [`Fit::Crop`], automatic range (1st/99th percentiles
+/// of the valid depths, as [`normalise_depth`]), linear in diopters.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FrameOptions {
+    /// How the frame fits the hologram's size.
+    pub fit: Fit,
+    /// Metric range mapped to `d ∈ [0,1]`; `None` = 1st/99th percentiles of the valid depths (computed
+    /// over the whole rotated frame at colour resolution, before the fit).
+    pub range: Option<DepthRange>,
+    /// Metric → `d` mapping ([`DepthMapping::LinearDiopters`] by default).
+    pub mapping: DepthMapping,
+}
+
+/// What [`CameraFrame::to_rgbd`] found, for logs and app diagnostics (serialisable to JSON).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CameraFrameReport {
+    /// Metric range mapped to `d ∈ [0,1]` (given or automatic). Always `Some` for the metric
+    /// [`DepthFormat`]s.
+    pub range_used: Option<DepthRange>,
+    /// Fraction of the depth buffer's pixels (at its own resolution) that were invalid and were filled.
+    pub invalid_fraction: f32,
+    /// `(height, width)` of the colour buffer as delivered (before rotation).
+    pub color_size: (usize, usize),
+    /// `(height, width)` of the depth buffer as delivered (before rotation).
+    pub depth_size: (usize, usize),
+}
+
+/// Checks a target `height × width` for an [`RgbdFrame`] (non-zero, `3 · H · W` f32 values addressable).
+fn check_target(height: usize, width: usize) -> Result<()> {
+    if height == 0 {
+        return Err(invalid("height", "target height must be non-zero, got 0"));
+    }
+    if width == 0 {
+        return Err(invalid("width", "target width must be non-zero, got 0"));
+    }
+    let bytes = height
+        .checked_mul(width)
+        .and_then(|n| n.checked_mul(3 * std::mem::size_of::<f32>()));
+    if bytes.is_none_or(|b| b > isize::MAX as usize) {
+        return Err(invalid(
+            "size",
+            format!(
+                "target size {height}x{width} is too large: [3, {height}, {width}] f32 overflows"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// `round(num / den)` for positive `den`, in `u128`, clamped to `[1, max]`.
+fn rounded_ratio(num: u128, den: u128, max: usize) -> usize {
+    let r = (2 * num + den) / (2 * den);
+    r.clamp(1, max as u128) as usize
+}
+
+/// Centred crop window `(y0, x0, height, width)` of an `h × w` frame with the aspect ratio of `th × tw`.
+fn crop_window(h: usize, w: usize, th: usize, tw: usize) -> (usize, usize, usize, usize) {
+    let (h128, w128, th128, tw128) = (h as u128, w as u128, th as u128, tw as u128);
+    let (ch, cw) = if w128 * th128 > tw128 * h128 {
+        // Wider than the target: keep the height, crop the width to h·tw/th.
+        (h, rounded_ratio(h128 * tw128, th128, w))
+    } else {
+        (rounded_ratio(w128 * th128, tw128, h), w)
+    };
+    ((h - ch) / 2, (w - cw) / 2, ch, cw)
+}
+
+/// Size `(height, width)` of an `h × w` frame scaled to fit inside `th × tw` with its aspect ratio.
+fn letterbox_size(h: usize, w: usize, th: usize, tw: usize) -> (usize, usize) {
+    let (h128, w128, th128, tw128) = (h as u128, w as u128, th as u128, tw as u128);
+    if w128 * th128 >= tw128 * h128 {
+        // At least as wide as the target: full width.
+        (rounded_ratio(h128 * tw128, w128, th), tw)
+    } else {
+        (th, rounded_ratio(w128 * th128, h128, tw))
+    }
+}
+
+/// [`RgbdFrame::resize`] without the copy when the size is already right.
+fn resize_owned(frame: RgbdFrame, height: usize, width: usize) -> Result<RgbdFrame> {
+    if (frame.height(), frame.width()) == (height, width) {
+        Ok(frame)
+    } else {
+        frame.resize(height, width)
+    }
+}
+
+/// Step 6 of [`CameraFrame::to_rgbd`]: fits `frame` to `height × width` with `fit`.
+fn fit_frame(frame: RgbdFrame, height: usize, width: usize, fit: Fit) -> Result<RgbdFrame> {
+    match fit {
+        Fit::Stretch => resize_owned(frame, height, width),
+        Fit::Crop => {
+            let (y0, x0, ch, cw) = crop_window(frame.height(), frame.width(), height, width);
+            if (ch, cw) == (frame.height(), frame.width()) {
+                return resize_owned(frame, height, width);
+            }
+            let cropped = RgbdFrame {
+                amplitude: frame
+                    .amplitude
+                    .slice(s![.., y0..y0 + ch, x0..x0 + cw])
+                    .to_owned(),
+                depth: frame.depth.slice(s![y0..y0 + ch, x0..x0 + cw]).to_owned(),
+            };
+            drop(frame);
+            resize_owned(cropped, height, width)
+        }
+        Fit::Letterbox => {
+            let (ih, iw) = letterbox_size(frame.height(), frame.width(), height, width);
+            let inner = resize_owned(frame, ih, iw)?;
+            if (ih, iw) == (height, width) {
+                return Ok(inner);
+            }
+            let (y0, x0) = ((height - ih) / 2, (width - iw) / 2);
+            let mut amplitude = Array3::<f32>::zeros((3, height, width));
+            let mut depth = Array2::<f32>::ones((height, width));
+            amplitude
+                .slice_mut(s![.., y0..y0 + ih, x0..x0 + iw])
+                .assign(&inner.amplitude);
+            depth
+                .slice_mut(s![y0..y0 + ih, x0..x0 + iw])
+                .assign(&inner.depth);
+            Ok(RgbdFrame { amplitude, depth })
+        }
+    }
+}
+
+impl CameraFrame<'_> {
+    /// Copies the buffers into an owned [`CameraFrameBuf`].
+    pub fn to_buf(&self) -> CameraFrameBuf {
+        CameraFrameBuf {
+            color: ColorImageBuf {
+                data: self.color.data.to_vec(),
+                format: self.color.format,
+                width: self.color.width,
+                height: self.color.height,
+                row_stride: self.color.row_stride,
+            },
+            depth: DepthImageBuf {
+                data: self.depth.data.to_vec(),
+                format: self.depth.format,
+                width: self.depth.width,
+                height: self.depth.height,
+                row_stride: self.depth.row_stride,
+            },
+            rotation: self.rotation,
+        }
+    }
+
+    /// Converts the camera frame to an [`RgbdFrame`] of `height × width` pixels (`amplitude` `[3, height,
+    /// width]` linear, R, G, B; `depth` `[height, width]`, `d ∈ [0,1]`, 0 = near) and a report, following
+    /// the steps of the [module documentation](self): validate → decode → rotate → nearest-neighbour depth
+    /// to colour resolution → [`normalise_depth`] + [`fill_invalid`] → [`Fit`] with
+    /// [`RgbdFrame::resize`].
+    ///
+    /// With [`Fit::Stretch`] at the colour buffer's own (rotated) size, and a depth buffer of that size,
+    /// the result equals [`crate::scene::load_rgbd`] on the same pixels.
+    ///
+    /// Errors, all before any allocation except the last: [`HoloError::InvalidParameter`] for a target
+    /// `height` or `width` of 0 (`height` / `width`) or too large (`size`), an invalid
+    /// [`FrameOptions::range`] (`depth_range`), or a bad buffer (`color`, `color_row_stride`, `depth`,
+    /// `depth_row_stride`; see [`ColorImage::validate`]); [`HoloError::InvalidDepth`] when every depth
+    /// pixel is invalid (or, after a downsampling of depth to colour resolution, no valid one is left).
+    pub fn to_rgbd(
+        &self,
+        height: usize,
+        width: usize,
+        options: &FrameOptions,
+    ) -> Result<(RgbdFrame, CameraFrameReport)> {
+        // 1. Validation, before allocating anything.
+        check_target(height, width)?;
+        if let Some(r) = options.range {
+            r.validate()?;
+        }
+        self.color.validate()?;
+        self.depth.validate()?;
+
+        // 2 + 3. Decode with the rotation; depth first (small, and all-invalid fails early).
+        let decoded = self.depth.decode(self.rotation)?;
+        let invalid_fraction = decoded.invalid_fraction();
+        if decoded.valid.iter().all(|&v| !v) {
+            return Err(HoloError::InvalidDepth(format!(
+                "all {} pixels of the {}x{} {:?} depth buffer are invalid (0, NaN, ±inf, negative{})",
+                decoded.valid.len(),
+                self.depth.height,
+                self.depth.width,
+                self.depth.format,
+                if self.depth.format == DepthFormat::Depth16 {
+                    " or confidence 0 %"
+                } else {
+                    ""
+                }
+            )));
+        }
+        let amplitude = self.color.to_amplitude(self.rotation)?;
+        let (_, hc, wc) = amplitude.dim();
+
+        // 4. Depth to colour resolution, nearest neighbour (values and validity alike).
+        let (hd, wd) = decoded.values.dim();
+        let decoded = if (hd, wd) == (hc, wc) {
+            decoded
+        } else {
+            // Aspect ratios differing by more than 2 %: the depth map is stretched (same field of view).
+            let (a, b) = (hd as f64 * wc as f64, hc as f64 * wd as f64);
+            if (a / b - 1.0).abs() > 0.02 {
+                log::warn!(
+                    "depth buffer {hd}x{wd} and colour buffer {hc}x{wc} (after rotation) differ in aspect \
+                     ratio; the depth map is stretched onto the colour frame (same field of view assumed)"
+                );
+            }
+            DecodedDepth {
+                values: resize_nearest(&decoded.values, hc, wc),
+                valid: resize_nearest(&decoded.valid, hc, wc),
+                metric: true,
+            }
+        };
+
+        // 5. Normalise, then fill holes (never read as near).
+        let (d, range_used) = normalise_depth(&decoded, options.range, options.mapping)?;
+        let filled = fill_invalid(&d, &decoded.valid)?;
+        drop((d, decoded));
+        let frame = RgbdFrame::new(amplitude, filled)?;
+
+        // 6. Fit to the hologram's size.
+        let frame = fit_frame(frame, height, width, options.fit)?;
+        let report = CameraFrameReport {
+            range_used,
+            invalid_fraction,
+            color_size: (self.color.height, self.color.width),
+            depth_size: (self.depth.height, self.depth.width),
+        };
+        log::debug!(
+            "camera frame {}x{} colour + {}x{} {:?} depth ({:.1} % invalid), {:?} -> {height}x{width} ({:?})",
+            self.color.height,
+            self.color.width,
+            self.depth.height,
+            self.depth.width,
+            self.depth.format,
+            100.0 * invalid_fraction,
+            self.rotation,
+            options.fit
+        );
+        Ok((frame, report))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rotation_source_inverts_the_documented_mapping() {
+        let (h, w) = (3usize, 5usize);
+        for rot in [
+            Rotation::Deg0,
+            Rotation::Deg90,
+            Rotation::Deg180,
+            Rotation::Deg270,
+        ] {
+            // The documented forward mapping, written independently.
+            let forward = |y: usize, x: usize| match rot {
+                Rotation::Deg0 => (y, x),
+                Rotation::Deg90 => (x, h - 1 - y),
+                Rotation::Deg180 => (h - 1 - y, w - 1 - x),
+                Rotation::Deg270 => (w - 1 - x, y),
+            };
+            let (ho, wo) = rot.rotated_size(h, w);
+            let mut seen = vec![false; h * w];
+            for yo in 0..ho {
+                for xo in 0..wo {
+                    let (y, x) = rot.source(yo, xo, h, w);
+                    assert!(y < h && x < w, "{rot:?}");
+                    assert_eq!(forward(y, x), (yo, xo), "{rot:?}");
+                    assert!(!seen[y * w + x], "{rot:?}: not a bijection");
+                    seen[y * w + x] = true;
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn depth16_range_and_confidence() {
+        let dec = |v: u16| DepthFormat::Depth16.decode_sample(&v.to_le_bytes());
+        assert_eq!(dec(500), Some(0.5)); // confidence code 0 = 100 %
+        assert_eq!(dec(500 | 1 << 13), None); // code 1 = 0 %
+        for c in 2..8u16 {
+            assert_eq!(dec(500 | c << 13), Some(0.5), "confidence code {c}");
+        }
+        assert_eq!(dec(0x1FFF), Some(8.191));
+        assert_eq!(dec(0), None);
+        assert_eq!(dec(7 << 13), None); // range 0 whatever the confidence
+    }
+
+    #[test]
+    fn float_formats_reject_non_physical_values() {
+        for v in [
+            0.0f32,
+            -0.0,
+            -1.0,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+        ] {
+            for f in [DepthFormat::MetresF32, DepthFormat::DisparityF32] {
+                assert_eq!(f.decode_sample(&v.to_le_bytes()), None, "{f:?} {v}");
+            }
+            let h = half::f16::from_f32(v).to_le_bytes();
+            for f in [DepthFormat::MetresF16, DepthFormat::DisparityF16] {
+                assert_eq!(f.decode_sample(&h), None, "{f:?} {v}");
+            }
+        }
+        // Disparity so small that 1/v overflows f32: invalid, not infinitely far.
+        assert_eq!(
+            DepthFormat::DisparityF32.decode_sample(&1e-40f32.to_le_bytes()),
+            None
+        );
+        assert_eq!(
+            DepthFormat::DisparityF32.decode_sample(&4.0f32.to_le_bytes()),
+            Some(0.25)
+        );
+    }
+
+    #[test]
+    fn crop_and_letterbox_geometry() {
+        // 480x640 (4:3 landscape) into a square: crop the centre 480x480; letterbox to 480x480 in 640.
+        assert_eq!(crop_window(480, 640, 100, 100), (0, 80, 480, 480));
+        assert_eq!(letterbox_size(480, 640, 100, 100), (75, 100));
+        // Portrait target from a landscape frame.
+        assert_eq!(crop_window(480, 640, 200, 100), (0, 200, 480, 240));
+        assert_eq!(letterbox_size(480, 640, 200, 100), (75, 100));
+        // Taller than the target: crop rows.
+        assert_eq!(crop_window(640, 480, 100, 100), (80, 0, 480, 480));
+        assert_eq!(letterbox_size(640, 480, 100, 100), (100, 75));
+        // Same aspect: nothing cropped, full target.
+        assert_eq!(crop_window(480, 640, 3, 4), (0, 0, 480, 640));
+        assert_eq!(letterbox_size(480, 640, 3, 4), (3, 4));
+        // Extreme ratios never give an empty window.
+        assert_eq!(crop_window(1, 1000, 1000, 1), (0, 499, 1, 1));
+        assert_eq!(letterbox_size(1, 1000, 1000, 1), (1, 1));
+        // Huge sizes do not overflow.
+        let big = usize::MAX / 2;
+        assert_eq!(crop_window(big, big, 1, 1), (0, 0, big, big));
+    }
+}
