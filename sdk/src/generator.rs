@@ -28,8 +28,7 @@ use crate::error::{invalid, HoloError, Result};
 use crate::model::{CnnLayout, PlanReport, Precision, ThreadCount};
 use crate::optics::{focal_stack, post_encoding_midpoint, OpticalSetup, PropagationOptions};
 use crate::pipeline::{
-    FrameTimings, HologramPipeline, HologramSession, ModelSelection, PipelineConfig, PrefilterMode,
-    SlmFrame,
+    FrameTimings, HologramPipeline, HologramSession, ModelSelection, PipelineConfig, SlmFrame,
 };
 use crate::scene::{
     CameraFrame, CameraFrameBuf, CameraFrameReport, DepthMapping, DepthRange, Fit, FrameOptions,
@@ -106,10 +105,16 @@ impl GeneratorConfig {
         if self.width == 0 || self.height == 0 {
             return Err(invalid(
                 "width/height",
-                format!("the hologram needs a non-zero size, got {}×{}", self.width, self.height),
+                format!(
+                    "the hologram needs a non-zero size, got {}×{}",
+                    self.width, self.height
+                ),
             ));
         }
-        let pixels = self.width.checked_mul(self.height).filter(|&p| p <= MAX_HOLOGRAM_PIXELS);
+        let pixels = self
+            .width
+            .checked_mul(self.height)
+            .filter(|&p| p <= MAX_HOLOGRAM_PIXELS);
         let rgba_fits = pixels
             .and_then(|p| p.checked_mul(4))
             .is_some_and(|b| b <= u32::MAX as usize);
@@ -295,7 +300,7 @@ impl HologramGenerator {
     /// for `config.height × config.width` (autotuning the CNN plan: see [`PlanReport`]).
     ///
     /// Errors: [`HoloError::InvalidParameter`] for an invalid configuration ([`GeneratorConfig::validate`]),
-    /// a layer count other than 8/15/30, [`PrefilterMode::Required`] at an offset without a shipped
+    /// a layer count other than 8/15/30, [`crate::pipeline::PrefilterMode::Required`] at an offset without a shipped
     /// pre-filter; model errors as [`HologramPipeline::embedded`].
     #[cfg(feature = "embedded-models")]
     pub fn new(config: GeneratorConfig) -> Result<Self> {
@@ -473,7 +478,9 @@ impl HologramGenerator {
         if capacity == 0 {
             return Err(invalid("capacity", "a stream queue holds at least 1 frame"));
         }
-        let session = self.pipeline.session(self.config.height, self.config.width)?;
+        let session = self
+            .pipeline
+            .session(self.config.height, self.config.width)?;
         HologramStream::start(session, self.config, listener, capacity)
     }
 }
@@ -552,9 +559,7 @@ impl HologramStream {
                     let frames = std::iter::from_fn(|| {
                         let (index, buf) = source.pop()?;
                         let t = Instant::now();
-                        let converted =
-                            buf.view()
-                                .to_rgbd(config.height, config.width, &options);
+                        let converted = buf.view().to_rgbd(config.height, config.width, &options);
                         let convert_s = t.elapsed().as_secs_f64();
                         let frame = converted.map(|(frame, report)| {
                             if options.range.is_none() {
@@ -635,11 +640,7 @@ impl HologramStream {
     pub fn close(&self) {
         self.shared.lock().closed = true;
         self.shared.ready.notify_all();
-        let handle = self
-            .worker
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .take();
+        let handle = self.worker.lock().unwrap_or_else(|p| p.into_inner()).take();
         if let Some(h) = handle {
             // The worker catches its own panics; a join error cannot carry anything more.
             let _ = h.join();
@@ -695,13 +696,19 @@ mod tests {
         assert_eq!(name(bad(|c| c.width = 40_000)), "width/height");
         assert_eq!(name(bad(|c| c.offset_m = f64::NAN)), "offset_m");
         assert_eq!(name(bad(|c| c.offset_m = -1e-3)), "offset_m");
-        assert_eq!(name(bad(|c| c.threads = ThreadCount::Fixed(100_000))), "threads");
+        assert_eq!(
+            name(bad(|c| c.threads = ThreadCount::Fixed(100_000))),
+            "threads"
+        );
         assert!(matches!(
             bad(|c| c.optics.pixel_pitch_m = f64::NAN),
             HoloError::InvalidParameter { .. }
         ));
         assert!(matches!(
-            bad(|c| c.depth_range = Some(DepthRange { z_near_m: 2.0, z_far_m: 1.0 })),
+            bad(|c| c.depth_range = Some(DepthRange {
+                z_near_m: 2.0,
+                z_far_m: 1.0
+            })),
             HoloError::InvalidParameter { .. }
         ));
     }

@@ -28,6 +28,7 @@ pub mod dataset;
 pub mod encoding;
 pub mod error;
 pub mod evaluation;
+pub mod generator;
 pub mod io;
 pub mod metrics;
 pub mod model;

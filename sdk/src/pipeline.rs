@@ -936,7 +936,8 @@ impl HologramSession {
             let mut count = 0;
             let mut last = Instant::now();
             for (tag, item) in rx {
-                let encoded = item.and_then(|(heads, cnn_s)| self.encode_heads(heads, cnn_s).map(drop));
+                let encoded =
+                    item.and_then(|(heads, cnn_s)| self.encode_heads(heads, cnn_s).map(drop));
                 count += 1;
                 match encoded {
                     Ok(()) => {

@@ -1,0 +1,406 @@
+//! The app-facing API (`tensorholo::generator`) with the shipped CNNs: camera buffers in, SLM patterns out;
+//! model choice by name; thread safety; streams (order, drops, errors, the locked depth range); previews.
+#![cfg(feature = "embedded-models")]
+
+use std::sync::{Arc, Mutex};
+
+use tensorholo::color::amplitude_to_srgb8;
+use tensorholo::generator::{
+    pack_rgba, GeneratorConfig, HologramGenerator, SlmPatterns, StreamListener,
+};
+use tensorholo::metrics::psnr;
+use tensorholo::model::{CnnLayout, PlanRequest, ThreadCount};
+use tensorholo::pipeline::{HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
+use tensorholo::scene::{
+    procedural, CameraFrameBuf, ColorFormat, ColorImageBuf, DepthFormat, DepthImageBuf, DepthRange,
+    Fit, Rotation,
+};
+use tensorholo::HoloError;
+
+const H: usize = 48;
+const W: usize = 64;
+
+/// The built-in scene as phone buffers: BGRA8 colour and f32 metres, depth `d` mapped linearly in
+/// diopters onto `[0.5, 2] m`.
+fn camera_frame(h: usize, w: usize, shift: f32) -> CameraFrameBuf {
+    let scene = procedural::default_scene(h, w).unwrap();
+    let mut bgra = vec![0u8; h * w * 4];
+    for y in 0..h {
+        for x in 0..w {
+            let px = &mut bgra[(y * w + x) * 4..][..4];
+            for (c, slot) in [2usize, 1, 0].into_iter().zip(0..3) {
+                px[slot] = amplitude_to_srgb8(scene.amplitude[[c, y, x]]);
+            }
+            px[3] = 255;
+        }
+    }
+    let (near, far) = (0.5f32, 2.0f32);
+    let mut depth = Vec::with_capacity(h * w * 4);
+    for &d in scene.depth.iter() {
+        let dioptre = 1.0 / near - d * (1.0 / near - 1.0 / far);
+        depth.extend_from_slice(&(shift / dioptre).to_le_bytes());
+    }
+    CameraFrameBuf {
+        color: ColorImageBuf {
+            data: bgra,
+            format: ColorFormat::Bgra8,
+            width: w,
+            height: h,
+            row_stride: 0,
+        },
+        depth: DepthImageBuf {
+            data: depth,
+            format: DepthFormat::MetresF32,
+            width: w,
+            height: h,
+            row_stride: 0,
+        },
+        rotation: Rotation::Deg0,
+    }
+}
+
+fn config() -> GeneratorConfig {
+    let mut c = GeneratorConfig::new(W, H);
+    c.fit = Fit::Stretch;
+    c.threads = ThreadCount::Fixed(1);
+    c
+}
+
+fn generator() -> HologramGenerator {
+    HologramGenerator::new(config()).unwrap()
+}
+
+#[test]
+fn generator_is_send_and_sync_and_renders_like_its_session() {
+    fn assert_send_sync<T: Send + Sync>() {}
+    assert_send_sync::<HologramGenerator>();
+    let g = generator();
+    let frame = camera_frame(H, W, 1.0);
+    let out = g.render(&frame.view()).unwrap();
+    assert_eq!((out.width, out.height), (W, H));
+    assert_eq!(out.codes.dim(), (3, H, W));
+    // The same conversion through a fresh pipeline and session gives the same codes bit for bit.
+    let (rgbd, _) = g.convert(&frame.view()).unwrap();
+    let pipeline =
+        HologramPipeline::embedded(&ModelSelection::default(), config().pipeline_config()).unwrap();
+    let mut session = pipeline.session(H, W).unwrap();
+    assert_eq!(session.render(&rgbd).unwrap().codes, out.codes);
+    // Two threads at once: both get the single-threaded answer.
+    let g = Arc::new(g);
+    let handles: Vec<_> = (0..2)
+        .map(|_| {
+            let (g, f) = (Arc::clone(&g), frame.clone());
+            std::thread::spawn(move || g.render(&f.view()).unwrap().codes)
+        })
+        .collect();
+    for h in handles {
+        assert_eq!(h.join().unwrap(), out.codes);
+    }
+    let info = g.info().unwrap();
+    assert_eq!((info.layers, info.width, info.height), (8, W, H));
+    assert!(info.prefilter_model.is_some(), "{}", info.prefilter_reason);
+    assert!(info.plan.layout != CnnLayout::Auto);
+}
+
+#[test]
+fn rgba_frame_carries_the_three_lasers() {
+    let out = generator().render(&camera_frame(H, W, 1.0).view()).unwrap();
+    let rgba = out.to_rgba();
+    assert_eq!(rgba, pack_rgba(out.codes.view()));
+    assert_eq!(rgba.len(), W * H * 4);
+    let (y, x) = (H / 2, W / 3);
+    let px = &rgba[(y * W + x) * 4..][..4];
+    assert_eq!(
+        px,
+        [
+            out.codes[[0, y, x]],
+            out.codes[[1, y, x]],
+            out.codes[[2, y, x]],
+            255
+        ]
+    );
+}
+
+#[test]
+fn prefilter_rule_is_the_sdks() {
+    let pipe = |layers, prefilter, offset_m| {
+        HologramPipeline::embedded(
+            &ModelSelection {
+                layers,
+                prefilter,
+                ..ModelSelection::default()
+            },
+            PipelineConfig {
+                offset_m,
+                ..PipelineConfig::default()
+            },
+        )
+    };
+    // Auto: the shipped pre-filters were trained with the 8-layer CNN.
+    assert!(pipe(8, PrefilterMode::Auto, 6e-3)
+        .unwrap()
+        .prefilter_model()
+        .is_some());
+    assert!(pipe(8, PrefilterMode::Auto, 12e-3)
+        .unwrap()
+        .prefilter_model()
+        .is_some());
+    let p30 = pipe(30, PrefilterMode::Auto, 6e-3).unwrap();
+    assert!(p30.prefilter_model().is_none());
+    assert!(
+        p30.prefilter_reason().contains("8-layer"),
+        "{}",
+        p30.prefilter_reason()
+    );
+    assert!(pipe(8, PrefilterMode::Auto, 0.0)
+        .unwrap()
+        .prefilter_model()
+        .is_none());
+    assert!(pipe(8, PrefilterMode::Auto, 7e-3)
+        .unwrap()
+        .prefilter_model()
+        .is_none());
+    assert!(pipe(8, PrefilterMode::Off, 6e-3)
+        .unwrap()
+        .prefilter_model()
+        .is_none());
+    // Required: whatever the depth, an error where none is shipped.
+    assert!(pipe(30, PrefilterMode::Required, 6e-3)
+        .unwrap()
+        .prefilter_model()
+        .is_some());
+    for offset in [0.0, 7e-3] {
+        match pipe(8, PrefilterMode::Required, offset).unwrap_err() {
+            HoloError::InvalidParameter { name, .. } => assert_eq!(name, "prefilter"),
+            e => panic!("unexpected {e}"),
+        }
+    }
+    assert!(matches!(
+        pipe(9, PrefilterMode::Auto, 6e-3).unwrap_err(),
+        HoloError::InvalidParameter { name: "layers", .. }
+    ));
+}
+
+#[test]
+fn bad_frames_are_errors_and_the_generator_goes_on() {
+    let g = generator();
+    let good = camera_frame(H, W, 1.0);
+    let reference = g.render(&good.view()).unwrap().codes;
+    let mut short = good.clone();
+    short.color.data.truncate(100);
+    let mut all_invalid = good.clone();
+    all_invalid.depth.data.iter_mut().for_each(|b| *b = 0);
+    let mut nan = good.clone();
+    nan.depth.data = f32::NAN
+        .to_le_bytes()
+        .repeat(all_invalid.depth.data.len() / 4);
+    let mut narrow_stride = good.clone();
+    narrow_stride.color.row_stride = 4 * W - 1;
+    let mut empty = good.clone();
+    empty.color.width = 0;
+    let mut huge = good.clone();
+    huge.color.width = usize::MAX / 2;
+    for (what, bad) in [
+        ("short buffer", short),
+        ("all depth invalid", all_invalid),
+        ("all depth NaN", nan),
+        ("stride shorter than a row", narrow_stride),
+        ("zero width", empty),
+        ("overflowing size", huge),
+    ] {
+        let e = g.render(&bad.view()).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                HoloError::InvalidParameter { .. } | HoloError::InvalidDepth(_)
+            ),
+            "{what}: {e}"
+        );
+        assert_eq!(g.render(&good.view()).unwrap().codes, reference, "{what}");
+    }
+    assert!(g.preview(&good.view(), 1.5).is_err());
+    assert!(g.preview(&good.view(), f32::NAN).is_err());
+}
+
+#[test]
+fn preview_is_sharpest_at_the_scene_depth() {
+    // A flat textured scene at d = 0.5: the reconstruction focused there resembles the target more than one
+    // focused at the front or the back of the volume.
+    let (h, w) = (64, 64);
+    let mut c = GeneratorConfig::new(w, h);
+    c.fit = Fit::Stretch;
+    c.threads = ThreadCount::Fixed(1);
+    c.depth_range = Some(DepthRange::new(0.5, 2.0).unwrap());
+    let g = HologramGenerator::new(c).unwrap();
+    let mut frame = camera_frame(h, w, 1.0);
+    let mid = 1.0 / (1.0 / 0.5 - 0.5 * (1.0 / 0.5 - 1.0 / 2.0)) as f32;
+    frame.depth.data = mid.to_le_bytes().repeat(h * w);
+    let (rgbd, _) = g.convert(&frame.view()).unwrap();
+    assert!(rgbd.depth.iter().all(|d| (d - 0.5).abs() < 1e-4));
+    let target = rgbd
+        .amplitude
+        .mapv(|a| amplitude_to_srgb8(a) as f32 / 255.0);
+    let patterns = g.render(&frame.view()).unwrap();
+    let score = |focus: f32| {
+        let p = g.preview_patterns(&patterns, focus).unwrap();
+        assert_eq!((p.width, p.height, p.rgba.len()), (w, h, w * h * 4));
+        assert!(p.rgba.chunks_exact(4).all(|px| px[3] == 255));
+        let img = ndarray::Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+            p.rgba[(y * w + x) * 4 + c] as f32 / 255.0
+        });
+        psnr(img.view(), target.view(), 1.0).unwrap()
+    };
+    let (at, near, far) = (score(0.5), score(0.0), score(1.0));
+    assert!(at > near + 1.0 && at > far + 1.0, "{at} vs {near}, {far}");
+}
+
+#[derive(Default)]
+struct Recorder {
+    patterns: Vec<(u64, SlmPatterns)>,
+    errors: Vec<(u64, String)>,
+}
+
+struct Shared(Arc<Mutex<Recorder>>);
+
+impl StreamListener for Shared {
+    fn on_patterns(&mut self, index: u64, patterns: SlmPatterns) {
+        self.0.lock().unwrap().patterns.push((index, patterns));
+    }
+    fn on_error(&mut self, index: u64, error: HoloError) {
+        self.0
+            .lock()
+            .unwrap()
+            .errors
+            .push((index, error.to_string()));
+    }
+}
+
+#[test]
+fn stream_delivers_in_order_with_errors_in_place() {
+    let g = generator();
+    let rec = Arc::new(Mutex::new(Recorder::default()));
+    let stream = g.stream(Box::new(Shared(Arc::clone(&rec))), 8).unwrap();
+    let good = camera_frame(H, W, 1.0);
+    let mut bad = good.clone();
+    bad.depth.data.truncate(10);
+    for i in 0..5u64 {
+        let f = if i == 2 { bad.clone() } else { good.clone() };
+        assert_eq!(stream.push(f).unwrap(), i);
+    }
+    stream.close();
+    assert!(stream.push(good.clone()).is_err(), "push after close");
+    let rec = rec.lock().unwrap();
+    let indices: Vec<u64> = rec.patterns.iter().map(|(i, _)| *i).collect();
+    assert_eq!(indices, vec![0, 1, 3, 4]);
+    assert_eq!(rec.errors.len(), 1);
+    assert_eq!(rec.errors[0].0, 2);
+    assert!(rec.errors[0].1.contains("depth"), "{}", rec.errors[0].1);
+    assert_eq!(stream.dropped_frames(), 0);
+    // Streamed frames equal single renders bit for bit.
+    let single = g.render(&good.view()).unwrap();
+    for (_, p) in rec.patterns.iter() {
+        assert_eq!(p.codes, single.codes);
+    }
+}
+
+#[test]
+fn stream_keeps_the_first_frames_depth_range() {
+    let g = generator();
+    let rec = Arc::new(Mutex::new(Recorder::default()));
+    let stream = g.stream(Box::new(Shared(Arc::clone(&rec))), 4).unwrap();
+    // The second frame is the first one 1.5× farther away: alone it would get its own range.
+    let (first, second) = (camera_frame(H, W, 1.0), camera_frame(H, W, 1.5));
+    let own = g.render(&second.view()).unwrap().depth_range.unwrap();
+    stream.push(first.clone()).unwrap();
+    stream.push(second).unwrap();
+    stream.close();
+    let rec = rec.lock().unwrap();
+    assert_eq!(rec.patterns.len(), 2, "errors: {:?}", rec.errors);
+    let r0 = rec.patterns[0].1.depth_range.unwrap();
+    let r1 = rec.patterns[1].1.depth_range.unwrap();
+    assert_eq!(r0, r1);
+    assert!(
+        (own.z_near_m / r0.z_near_m - 1.5).abs() < 0.01,
+        "{own} vs {r0}"
+    );
+}
+
+#[test]
+fn a_full_stream_queue_drops_the_oldest_frames() {
+    let g = generator();
+    let rec = Arc::new(Mutex::new(Recorder::default()));
+    let stream = g.stream(Box::new(Shared(Arc::clone(&rec))), 1).unwrap();
+    let frame = camera_frame(H, W, 1.0);
+    let n = 12u64;
+    for _ in 0..n {
+        stream.push(frame.clone()).unwrap();
+    }
+    stream.close();
+    let rec = rec.lock().unwrap();
+    let delivered = rec.patterns.len() as u64;
+    assert!(rec.errors.is_empty(), "{:?}", rec.errors);
+    assert!(
+        stream.dropped_frames() > 0,
+        "pushing 12 frames at once into a 1-frame queue"
+    );
+    assert_eq!(delivered + stream.dropped_frames(), n);
+    assert!(rec.patterns.windows(2).all(|w| w[0].0 < w[1].0));
+    // The newest frame is never dropped.
+    assert_eq!(rec.patterns.last().unwrap().0, n - 1);
+}
+
+#[test]
+fn autotuned_plans_report_their_candidates_and_agree_with_the_file_layout() {
+    use tensorholo::model::{embedded, ModelConfig, Precision};
+    let cfg = ModelConfig {
+        offset_m: 0.0,
+        ..ModelConfig::default()
+    };
+    for precision in [Precision::F32, Precision::Int8QOperator] {
+        let m = embedded::hologram_model(8, precision, &cfg).unwrap();
+        let request = PlanRequest {
+            layout: CnnLayout::Auto,
+            threads: ThreadCount::Auto,
+        };
+        let (plan, report) = m.tuned_plan(24, 40, request).unwrap();
+        assert!(report.autotuned);
+        let threads = tensorholo::model::auto_thread_candidates();
+        assert_eq!(report.candidates.len(), 2 * threads.len());
+        let timed: Vec<_> = report
+            .candidates
+            .iter()
+            .filter(|c| c.seconds.is_some())
+            .collect();
+        let best = timed
+            .iter()
+            .min_by(|a, b| a.seconds.unwrap().total_cmp(&b.seconds.unwrap()))
+            .unwrap();
+        assert_eq!((plan.layout(), plan.threads()), (best.layout, best.threads));
+        assert_eq!((report.layout, report.threads), (best.layout, best.threads));
+        if precision == Precision::Int8QOperator {
+            // tract cannot move QLinearConv channels-last: skipped with the reason.
+            assert!(report
+                .candidates
+                .iter()
+                .filter(|c| c.layout == CnnLayout::ChannelsLast)
+                .all(|c| c.seconds.is_none() && c.skipped.is_some()));
+        } else {
+            assert_eq!(timed.len(), report.candidates.len());
+        }
+        let input = ndarray::Array3::from_shape_fn((4, 24, 40), |(c, y, x)| {
+            ((c * 3 + y * 5 + x * 7) % 11) as f32 / 10.0
+        });
+        let (a, _) = plan.run_outputs(input.view()).unwrap();
+        let (b, _) = m.plan(24, 40).unwrap().run_outputs(input.view()).unwrap();
+        let err = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max);
+        assert!(err < 1e-4, "{precision}: {err}");
+        // The second request comes from the cache.
+        let (_, again) = m.tuned_plan(24, 40, request).unwrap();
+        assert_eq!(again.tuning_s, 0.0);
+        assert_eq!(again.layout, report.layout);
+    }
+}
