@@ -61,8 +61,8 @@ impl From<LayoutArg> for CnnLayout {
     }
 }
 
-/// The int8 form `--int8` selects: the fastest one that loses at most 0.5 dB (docs/BENCHMARKS.md).
-pub const DEFAULT_INT8: Precision = Precision::Int8Qdq;
+/// The int8 form `--int8` selects: the SDK's ([`tensorholo::model::DEFAULT_INT8`]).
+pub const DEFAULT_INT8: Precision = tensorholo::model::DEFAULT_INT8;
 
 fn parse_layers(s: &str) -> std::result::Result<usize, String> {
     match s.trim().parse::<usize>() {

@@ -64,6 +64,11 @@ impl Precision {
     }
 }
 
+/// The int8 form apps get when they ask for "int8": the QDQ form, the fastest int8 form that loses at most
+/// 0.5 dB against f32 (`docs/BENCHMARKS.md`, `models/MODEL_CARD.md`). `holo --int8` and the bindings'
+/// `Precision.Int8` both mean this.
+pub const DEFAULT_INT8: Precision = Precision::Int8Qdq;
+
 impl std::fmt::Display for Precision {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
