@@ -33,6 +33,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{invalid, HoloError, Result};
 use crate::io::{ensure_not_input, save_amplitude_png};
 use crate::scene::{LayeredDepthImage, LdiLayer, RandomSceneConfig, RandomSceneGenerator};
+use crate::splitmix::splitmix64;
 use crate::synthesis::{ldi_layers, SmLbm};
 
 /// Value of the manifest's `format` field.
@@ -75,14 +76,6 @@ impl Split {
             Split::Test => 2,
         }
     }
-}
-
-/// SplitMix64 finaliser (Steele, Lea, Flood 2014).
-fn splitmix64(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 /// The scene seed of sample `index` of `split` in a dataset of base seed `base_seed`:

@@ -35,6 +35,7 @@ pub mod optics;
 pub mod pipeline;
 pub mod reference;
 pub mod scene;
+mod splitmix;
 pub mod synthesis;
 
 pub use error::{HoloError, Result};
