@@ -16,14 +16,22 @@
 //! - [`pipeline`]: the real-time pipeline: [`pipeline::HologramSession`] turns RGB-D frames into SLM codes
 //!   with the CNNs (hologram CNN → offset → pre-filter CNN → double phase → LUT), frame by frame or streamed.
 //! - [`io`]: PNG and `.npy` input/output.
-//! - [`dataset`]: the training dataset (MIT-CGH-4K-V2 style): random LDIs + SM-LBM midpoint holograms in
-//!   `.npz` shards with a `manifest.json`.
+#![cfg_attr(
+    feature = "research",
+    doc = "- [`dataset`] (feature `research`): the training dataset (MIT-CGH-4K-V2 style): random LDIs + \
+           SM-LBM midpoint holograms in `.npz` shards with a `manifest.json`."
+)]
+#![cfg_attr(
+    not(feature = "research"),
+    doc = "- `dataset` (feature `research`, off in this build): the training dataset."
+)]
 //!
 //! Conventions (`DESIGN.md` §2): SI units, channel order R, G, B, normalised depth `d ∈ [0,1]` with
 //! 0 = near, a point at `d` lies at `z(d) = (0.5 − d)·volume_depth` from the midpoint plane, `+z` along the
 //! light (toward the viewer).
 
 pub mod color;
+#[cfg(feature = "research")]
 pub mod dataset;
 pub mod encoding;
 pub mod error;

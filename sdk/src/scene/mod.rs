@@ -9,13 +9,23 @@
 //!   in diopters by default) → [`fill_invalid`] (holes take the farthest neighbouring depth, before any
 //!   resizing, never read as near) → [`RgbdFrame::resize`].
 //! * [`procedural`]: a deterministic test scene with near, mid and far textured objects and occlusions.
-//! * [`random`]: random textured scenes as LDIs ([`random_ldi`]), the input side of the training dataset
-//!   (paper section "MIT-CGH-4K-V2"), built by per-pixel depth sorting ([`ldi_from_fragments`]).
+#![cfg_attr(
+    feature = "research",
+    doc = "* [`random`] (feature `research`): random textured scenes as LDIs ([`random_ldi`]), the input \
+           side of the training dataset (paper section \"MIT-CGH-4K-V2\"), built by per-pixel depth \
+           sorting ([`ldi_from_fragments`])."
+)]
+#![cfg_attr(
+    not(feature = "research"),
+    doc = "* `random` (feature `research`, off in this build): random textured scenes for the training \
+           dataset."
+)]
 
 mod depth;
 mod frame;
 mod load;
 pub mod procedural;
+#[cfg(feature = "research")]
 pub mod random;
 
 pub use depth::{
@@ -25,6 +35,7 @@ pub use depth::{
 pub use frame::{LayeredDepthImage, LdiLayer, RgbdFrame};
 pub use load::{load_rgb, load_rgbd, DepthReport, LoadOptions};
 pub use procedural::{default_scene, default_scene_ldi};
+#[cfg(feature = "research")]
 pub use random::{
     ldi_from_fragments, list_photos, random_ldi, Fragment, RandomSceneConfig, RandomSceneGenerator,
 };
