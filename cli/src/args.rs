@@ -11,7 +11,7 @@ use tensorholo::scene::{
     load_rgbd, procedural, DepthEncoding, DepthMapping, DepthRange, LoadOptions, RgbdFrame,
 };
 
-/// Display geometry and angular-spectrum options (`DESIGN.md` §2), shared by `reference`, `encode` and
+/// Display geometry and angular-spectrum options (`docs/CONVENTIONS.md` §3, §5.1), shared by `reference`, `encode` and
 /// `dataset`.
 #[derive(Debug, Args)]
 pub struct OpticsArgs {

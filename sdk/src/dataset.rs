@@ -281,7 +281,7 @@ impl SampleGenerator {
 /// The network-input tensor of an LDI: `ldi` `[4·L, H, W]` f32 (per layer R, G, B amplitude then depth;
 /// invalid pixels amplitude 0 and depth 1) and `valid` `[L, H, W]` u8 (1 = point present). This is one
 /// sample of the shard arrays `ldi` and `ldi_valid`, and the hologram CNN's input layout
-/// (`DESIGN.md` §3).
+/// (`docs/CONVENTIONS.md` §7.1).
 pub fn ldi_tensor(ldi: &LayeredDepthImage) -> (Array3<f32>, Array3<u8>) {
     let (l, h, w) = (ldi.num_layers(), ldi.height(), ldi.width());
     let mut x = Array3::<f32>::zeros((4 * l, h, w));
@@ -552,7 +552,7 @@ pub struct SynthesisInfo {
     pub initial_phase: String,
 }
 
-/// Display geometry (`DESIGN.md` §2).
+/// Display geometry (`docs/CONVENTIONS.md` §3).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct OpticsInfo {
     /// R, G, B wavelengths in metres.

@@ -26,7 +26,7 @@
     doc = "- `dataset` (feature `research`, off in this build): the training dataset."
 )]
 //!
-//! Conventions (`DESIGN.md` §2): SI units, channel order R, G, B, normalised depth `d ∈ [0,1]` with
+//! Conventions (`docs/CONVENTIONS.md` in the repository, §2–§4): SI units, channel order R, G, B, normalised depth `d ∈ [0,1]` with
 //! 0 = near, a point at `d` lies at `z(d) = (0.5 − d)·volume_depth` from the midpoint plane, `+z` along the
 //! light (toward the viewer).
 

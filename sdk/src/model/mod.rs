@@ -1,4 +1,4 @@
-//! The CNNs of Tensor Holography V2 run with tract (`DESIGN.md` §3, paper Fig. 3): the hologram CNN
+//! The CNNs of Tensor Holography V2 run with tract (`docs/CONVENTIONS.md` §7, paper Fig. 3): the hologram CNN
 //! (RGB-D or LDI → midpoint hologram) and the DDPM pre-filter CNN (offset hologram → filtered offset
 //! hologram, Eq. 6).
 //!
@@ -25,7 +25,7 @@ mod metadata;
 mod network;
 
 /// How a model file stores its weights (`training/tensorholo_training/export.py`). All forms take and
-/// return f32 at the boundary (`DESIGN.md` §3).
+/// return f32 at the boundary (`docs/CONVENTIONS.md` §7).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Precision {
@@ -69,7 +69,7 @@ impl std::fmt::Display for Precision {
 }
 
 /// The memory layout tract runs a CNN in. The ONNX files are always channels-first `[1, C, H, W]`
-/// (`DESIGN.md` §3) and a plan takes and returns `[C, H, W]` arrays in both layouts; only tract's internal
+/// (`docs/CONVENTIONS.md` §7) and a plan takes and returns `[C, H, W]` arrays in both layouts; only tract's internal
 /// graph differs ([`HologramModel::plan_with_layout`]).
 ///
 /// Measured with `holo bench --layout nchw,nhwc` (docs/BENCHMARKS.md, "tract speed study"): neither layout wins

@@ -1,5 +1,5 @@
 //! [`HologramModel`]: one ONNX CNN loaded with tract, checked against the I/O contract and metadata of
-//! `DESIGN.md` §3, with one optimised [`ModelPlan`] per resolution.
+//! `docs/CONVENTIONS.md` §7, with one optimised [`ModelPlan`] per resolution.
 
 use std::collections::{BTreeMap, HashMap};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -22,7 +22,7 @@ use crate::scene::RgbdFrame;
 /// ONNX `TensorProto.DataType.FLOAT`.
 const ONNX_FLOAT: i32 = 1;
 
-/// Converts the CNN heads to a complex field (`DESIGN.md` §3): `A · exp(i·(p − 0.5)·2π)`.
+/// Converts the CNN heads to a complex field (`docs/CONVENTIONS.md` §7.1): `A · exp(i·(p − 0.5)·2π)`.
 ///
 /// `amplitude` (in `[0, √2]`) and `phase` (in `[0, 1]`) are `[3, H, W]`; the result is `[3, H, W]`
 /// (R, G, B). Errors: [`HoloError::ShapeMismatch`] if the two shapes differ.
@@ -205,7 +205,7 @@ fn check_value(
     Ok(())
 }
 
-/// Checks the graph's inputs and outputs against `DESIGN.md` §3 for `metadata.kind`.
+/// Checks the graph's inputs and outputs against `docs/CONVENTIONS.md` §7 for `metadata.kind`.
 fn check_contract(graph: &pb::GraphProto, md: &ModelMetadata) -> std::result::Result<(), String> {
     let initialisers: std::collections::HashSet<&str> =
         graph.initializer.iter().map(|t| t.name.as_str()).collect();
@@ -238,7 +238,7 @@ fn check_contract(graph: &pb::GraphProto, md: &ModelMetadata) -> std::result::Re
     Ok(())
 }
 
-/// A hologram or pre-filter CNN loaded from ONNX (`DESIGN.md` §3, paper Fig. 3), ready to be planned per
+/// A hologram or pre-filter CNN loaded from ONNX (`docs/CONVENTIONS.md` §7, paper Fig. 3), ready to be planned per
 /// resolution.
 ///
 /// Holds the decluttered tract graph with symbolic `H`, `W` and a cache of optimised [`ModelPlan`]s, one per
@@ -643,7 +643,7 @@ impl ModelPlan {
     }
 
     /// Runs the network on `input` `[C, H, W]` and returns its two outputs, each `[3, H, W]`, in the
-    /// contract's order (`DESIGN.md` §3, [`ModelKind::output_names`]): for a hologram CNN the heads
+    /// contract's order (`docs/CONVENTIONS.md` §7, [`ModelKind::output_names`]): for a hologram CNN the heads
     /// `(amplitude, phase)`, amplitude in `[0, √2]`, phase in `[0, 1]` meaning `(p − 0.5)·2π` rad; for a
     /// pre-filter `(real, imag)` of the filtered SLM-plane field.
     ///

@@ -299,7 +299,7 @@ impl TransferFunction {
 /// An angular spectrum propagator (paper Eq. 2) for one field size, pixel pitch and wavelength, planned once.
 ///
 /// `ASM(u, z) = F⁻¹{F{u} · exp(i·2π·z·√(λ⁻² − fx² − fy²))}` with `fx = kx / (N·p)` the spatial frequency in
-/// cycles per metre; positive `z` travels with the light (`DESIGN.md` §2). Fields are `[height, width]`
+/// cycles per metre; positive `z` travels with the light (`docs/CONVENTIONS.md` §5.1). Fields are `[height, width]`
 /// row-major `Complex32`; distances in metres.
 #[derive(Debug, Clone)]
 pub struct Propagator {
