@@ -9,7 +9,8 @@
 //! - [`encoding`]: double phase encoding (Eq. 7), AA-DPM, BL-DPM, phase wrapping and 8-bit codes.
 //! - [`synthesis`]: silhouette-mask layer-based method (SM-LBM, Eq. 1–4) for reference holograms.
 //! - [`scene`]: RGB-D frames, layered depth images, depth decoders, the built-in procedural scene.
-//! - [`reference`](mod@reference): the non-learned pipeline (SM-LBM → offset → double phase → SLM codes → previews).
+//! - [`reference`](mod@reference): the non-learned pipeline (SM-LBM → offset → double phase → SLM codes →
+//!   previews).
 //! - [`metrics`]: PSNR and SSIM.
 //! - [`evaluation`]: the paper's Table 2 protocol (amplitude and focal-stack PSNR/SSIM against SM-LBM).
 //! - [`model`]: the hologram and pre-filter CNNs (ONNX, run with tract), metadata and I/O contract checks.
@@ -26,9 +27,9 @@
     doc = "- `dataset` (feature `research`, off in this build): the training dataset."
 )]
 //!
-//! Conventions (`docs/CONVENTIONS.md` in the repository, §2–§4): SI units, channel order R, G, B, normalised depth `d ∈ [0,1]` with
-//! 0 = near, a point at `d` lies at `z(d) = (0.5 − d)·volume_depth` from the midpoint plane, `+z` along the
-//! light (toward the viewer).
+//! Conventions (`docs/CONVENTIONS.md` in the repository, §2–§4): SI units, channel order R, G, B, normalised
+//! depth `d ∈ [0,1]` with 0 = near, a point at `d` lies at `z(d) = (0.5 − d)·volume_depth` from the midpoint
+//! plane, `+z` along the light (toward the viewer).
 
 pub mod color;
 #[cfg(feature = "research")]

@@ -1,5 +1,5 @@
-//! The `tensorholo.*` ONNX `metadata_props` of an exported CNN (`docs/CONVENTIONS.md` §7.3) and their check against the
-//! SDK's configuration.
+//! The `tensorholo.*` ONNX `metadata_props` of an exported CNN (`docs/CONVENTIONS.md` §7.3) and their check
+//! against the SDK's configuration.
 //!
 //! Written by `training/tensorholo_training/export.py` (`model_metadata`): `kind` (`hologram-cnn` or
 //! `prefilter-cnn`), `layers`, `wavelengths_m` (comma-separated R,G,B), `pixel_pitch_m`, `volume_depth_m`,
@@ -112,7 +112,8 @@ impl Default for ModelConfig {
 pub struct ModelMetadata {
     /// `tensorholo.kind`.
     pub kind: ModelKind,
-    /// `tensorholo.layers`: number of convolution layers (8, 15 or 30 for the hologram CNN, 8 for the pre-filter).
+    /// `tensorholo.layers`: number of convolution layers (8, 15 or 30 for the hologram CNN, 8 for the
+    /// pre-filter).
     pub layers: usize,
     /// `tensorholo.channels`: filters per hidden layer (24 / 8), if present.
     pub channels: Option<usize>,
@@ -276,11 +277,11 @@ impl ModelMetadata {
         Ok(Self { raw, ..md })
     }
 
-    /// Multiply-accumulates per output pixel of the residual CNN of `docs/CONVENTIONS.md` §7.1 (3×3 convolutions: input →
-    /// `channels`, `layers − 2` hidden `channels → channels`, and the last layer from `channels` plus the
-    /// network input to 6 outputs): 147,528 for the 30-layer RGB-D hologram CNN, 33,480 for 8 layers, 4,644
-    /// for the pre-filter's correction CNN (its fixed AA-DPM blur adds `6 · taps²`, 150 with 5 taps, not
-    /// counted). `None` without `tensorholo.channels`. FLOPs per frame = `2 · MAC · H · W`.
+    /// Multiply-accumulates per output pixel of the residual CNN of `docs/CONVENTIONS.md` §7.1 (3×3
+    /// convolutions: input → `channels`, `layers − 2` hidden `channels → channels`, and the last layer from
+    /// `channels` plus the network input to 6 outputs): 147,528 for the 30-layer RGB-D hologram CNN, 33,480
+    /// for 8 layers, 4,644 for the pre-filter's correction CNN (its fixed AA-DPM blur adds `6 · taps²`, 150
+    /// with 5 taps, not counted). `None` without `tensorholo.channels`. FLOPs per frame = `2 · MAC · H · W`.
     pub fn macs_per_pixel(&self) -> Option<u64> {
         let c = self.channels? as u64;
         let i = self.input_channels() as u64;

@@ -69,8 +69,8 @@ impl std::fmt::Display for Precision {
 }
 
 /// The memory layout tract runs a CNN in. The ONNX files are always channels-first `[1, C, H, W]`
-/// (`docs/CONVENTIONS.md` §7) and a plan takes and returns `[C, H, W]` arrays in both layouts; only tract's internal
-/// graph differs ([`HologramModel::plan_with_layout`]).
+/// (`docs/CONVENTIONS.md` §7) and a plan takes and returns `[C, H, W]` arrays in both layouts; only tract's
+/// internal graph differs ([`HologramModel::plan_with_layout`]).
 ///
 /// Measured with `holo bench --layout nchw,nhwc` (docs/BENCHMARKS.md, "tract speed study"): neither layout wins
 /// everywhere, so the default stays the file's.

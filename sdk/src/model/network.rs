@@ -238,8 +238,8 @@ fn check_contract(graph: &pb::GraphProto, md: &ModelMetadata) -> std::result::Re
     Ok(())
 }
 
-/// A hologram or pre-filter CNN loaded from ONNX (`docs/CONVENTIONS.md` §7, paper Fig. 3), ready to be planned per
-/// resolution.
+/// A hologram or pre-filter CNN loaded from ONNX (`docs/CONVENTIONS.md` §7, paper Fig. 3), ready to be
+/// planned per resolution.
 ///
 /// Holds the decluttered tract graph with symbolic `H`, `W` and a cache of optimised [`ModelPlan`]s, one per
 /// `(height, width)`. `Send + Sync`: plans can be built and run from several threads; a failed plan or run

@@ -1,5 +1,5 @@
-//! Depth decoders for the sensor and file formats of `docs/CONVENTIONS.md` §6, the mapping from metric
-//! depth to TensorHolo's normalised depth `d ∈ [0,1]` (0 = near, `docs/CONVENTIONS.md` §4), and the invalid-pixel
+//! Depth decoders for the sensor and file formats of `docs/CONVENTIONS.md` §6, the mapping from metric depth
+//! to TensorHolo's normalised depth `d ∈ [0,1]` (0 = near, `docs/CONVENTIONS.md` §4), and the invalid-pixel
 //! fill policy.
 //!
 //! The steps are separate and individually testable:

@@ -5,9 +5,9 @@
 //!   0 = near (`docs/CONVENTIONS.md` §4).
 //! * [`LayeredDepthImage`] / [`LdiLayer`]: Shade et al. 1998, the LDI input of the paper's Fig. 1.
 //! * Depth from files ([`load_rgbd`]): [`decode_depth_file`] with a [`DepthEncoding`] (one per row of the
-//!   encoding table, `docs/CONVENTIONS.md` §6) → [`normalise_depth`] with a [`DepthRange`] and a [`DepthMapping`] (linear
-//!   in diopters by default) → [`fill_invalid`] (holes take the farthest neighbouring depth, before any
-//!   resizing, never read as near) → [`RgbdFrame::resize`].
+//!   encoding table, `docs/CONVENTIONS.md` §6) → [`normalise_depth`] with a [`DepthRange`] and a
+//!   [`DepthMapping`] (linear in diopters by default) → [`fill_invalid`] (holes take the farthest
+//!   neighbouring depth, before any resizing, never read as near) → [`RgbdFrame::resize`].
 //! * [`procedural`]: a deterministic test scene with near, mid and far textured objects and occlusions.
 #![cfg_attr(
     feature = "research",
