@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """NumPy reference for the angular spectrum method (ASM): benchmark and interop check.
 
-ASM (DESIGN.md §2, paper Eq. 2):
+ASM (docs/CONVENTIONS.md §5.1, paper Eq. 2):
 
     ASM(u, z) = ifft2( fft2(u) · exp(i·2π·z·sqrt(λ⁻² − fx² − fy²)) ),   evanescent (λ⁻² < fx² + fy²) zeroed,
 

@@ -11,8 +11,8 @@ use tensorholo::scene::{
     load_rgbd, procedural, DepthEncoding, DepthMapping, DepthRange, LoadOptions, RgbdFrame,
 };
 
-/// Display geometry and angular-spectrum options (`DESIGN.md` §2), shared by `reference`, `encode` and
-/// `dataset`.
+/// Display geometry and angular-spectrum options (`docs/CONVENTIONS.md` §3, §5.1), shared by `reference`,
+/// `encode` and `dataset`.
 #[derive(Debug, Args)]
 pub struct OpticsArgs {
     /// Zero-pad propagations to 2H x 2W (linear convolution; 4x slower).

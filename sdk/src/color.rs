@@ -1,5 +1,5 @@
 //! sRGB transfer functions (IEC 61966-2-1) between 8-bit display values and linear intensity, and the
-//! amplitude convention of `DESIGN.md` §2: amplitude = √(linear intensity), per colour.
+//! amplitude convention of `docs/CONVENTIONS.md` §5.5: amplitude = √(linear intensity), per colour.
 
 /// sRGB-encoded value in `[0, 1]` → linear intensity in `[0, 1]` (IEC 61966-2-1 piecewise curve).
 /// Values outside `[0, 1]` are clamped first.

@@ -33,6 +33,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{invalid, HoloError, Result};
 use crate::io::{ensure_not_input, save_amplitude_png};
 use crate::scene::{LayeredDepthImage, LdiLayer, RandomSceneConfig, RandomSceneGenerator};
+use crate::splitmix::splitmix64;
 use crate::synthesis::{ldi_layers, SmLbm};
 
 /// Value of the manifest's `format` field.
@@ -75,14 +76,6 @@ impl Split {
             Split::Test => 2,
         }
     }
-}
-
-/// SplitMix64 finaliser (Steele, Lea, Flood 2014).
-fn splitmix64(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 /// The scene seed of sample `index` of `split` in a dataset of base seed `base_seed`:
@@ -288,7 +281,7 @@ impl SampleGenerator {
 /// The network-input tensor of an LDI: `ldi` `[4·L, H, W]` f32 (per layer R, G, B amplitude then depth;
 /// invalid pixels amplitude 0 and depth 1) and `valid` `[L, H, W]` u8 (1 = point present). This is one
 /// sample of the shard arrays `ldi` and `ldi_valid`, and the hologram CNN's input layout
-/// (`DESIGN.md` §3).
+/// (`docs/CONVENTIONS.md` §7.1).
 pub fn ldi_tensor(ldi: &LayeredDepthImage) -> (Array3<f32>, Array3<u8>) {
     let (l, h, w) = (ldi.num_layers(), ldi.height(), ldi.width());
     let mut x = Array3::<f32>::zeros((4 * l, h, w));
@@ -551,7 +544,7 @@ pub struct SynthesisInfo {
     pub initial_phase: String,
 }
 
-/// Display geometry (`DESIGN.md` §2).
+/// Display geometry (`docs/CONVENTIONS.md` §3).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct OpticsInfo {
     /// R, G, B wavelengths in metres.

@@ -54,8 +54,8 @@ pub enum HoloError {
         /// What went wrong.
         reason: String,
     },
-    /// A CNN file (`DESIGN.md` §3) could not be decoded or compiled: truncated or corrupt protobuf, an
-    /// operator tract cannot run, a graph that does not type-check.
+    /// A CNN file (`docs/CONVENTIONS.md` §7) could not be decoded or compiled: truncated or corrupt protobuf,
+    /// an operator tract cannot run, a graph that does not type-check.
     #[error("cannot load model `{source_name}`: {reason}")]
     ModelLoad {
         /// The file path, or `<bytes>` for an in-memory model.
@@ -63,9 +63,12 @@ pub enum HoloError {
         /// What went wrong (tract's message chain).
         reason: String,
     },
-    /// A CNN file decodes but its inputs/outputs are not the contract's (`DESIGN.md` §3: input `rgbd`
-    /// `[1,4L,H,W]` or `slm_field` `[1,6,H,W]`, outputs `amplitude` and `phase` `[1,3,H,W]`, f32).
-    #[error("model `{source_name}` does not follow the I/O contract (DESIGN §3): {reason}")]
+    /// A CNN file decodes but its inputs/outputs are not the contract's (`docs/CONVENTIONS.md` §7: input
+    /// `rgbd` `[1,4L,H,W]` or `slm_field` `[1,6,H,W]`, outputs `amplitude` and `phase` or `real` and `imag`
+    /// `[1,3,H,W]`, f32).
+    #[error(
+        "model `{source_name}` does not follow the I/O contract (docs/CONVENTIONS.md §7): {reason}"
+    )]
     ModelContract {
         /// The file path, or `<bytes>`.
         source_name: String,

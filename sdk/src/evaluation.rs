@@ -2,21 +2,21 @@
 //! hologram's amplitude against the ground truth (SM-LBM), and averaged over a focal stack of the 15 most
 //! frequent depths of the scene plus 5 random ones (the dynamic focal stack of TensorHolo V1/V2).
 //! The same protocol runs in `training/tensorholo_training/evaluate.py`; the 5 random depths come from
-//! different random generators there (torch) and here (ChaCha8), so per-scene figures differ slightly.
-
-use ndarray::{ArrayView2, ArrayView3};
-use num_complex::Complex32;
-use rand::{RngExt, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+//! different random generators there (torch) and here (SplitMix64, Steele et al. 2014, whose outputs are
+//! fixed by the algorithm), so per-scene figures differ slightly.
 
 use crate::error::{invalid, Result};
 use crate::metrics::{psnr, ssim_multichannel};
 use crate::optics::{focal_stack, OpticalSetup, PropagationOptions};
+use crate::splitmix::SplitMix64;
+use ndarray::{ArrayView2, ArrayView3};
+use num_complex::Complex32;
 
 /// Focal depths of a scene: a histogram of the normalised depth `depth` `[H, W]` in `bins` bins over
 /// `[0, 1]`, bins sorted by count (descending, stable), one uniform jitter `u ∈ [0, 1)` for all bin
 /// centres (`(index + u)/bins`), the `top` most populated bins plus `random` others drawn without
-/// replacement from the rest (seeded by `seed`). Paper: 200 bins, 15 + 5.
+/// replacement from the rest (a partial Fisher–Yates shuffle). The jitter and the draws come from one
+/// SplitMix64 stream seeded with `seed`, in that order. Paper: 200 bins, 15 + 5.
 ///
 /// Returns `top + random` normalised depths in `[0, 1)`.
 ///
@@ -29,7 +29,7 @@ pub fn focal_depths(
     random: usize,
     seed: u64,
 ) -> Result<Vec<f64>> {
-    if bins == 0 || top + random > bins {
+    if bins == 0 || top.checked_add(random).is_none_or(|n| n > bins) {
         return Err(invalid(
             "bins",
             format!("need 0 < top + random ≤ bins, got {top} + {random} of {bins}"),
@@ -49,11 +49,11 @@ pub fn focal_depths(
     }
     let mut order: Vec<usize> = (0..bins).collect();
     order.sort_by(|a, b| hist[*b].cmp(&hist[*a])); // stable
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let u: f64 = rng.random();
+    let mut rng = SplitMix64::new(seed);
+    let u = rng.next_f64();
     let mut rest = order.split_off(top);
     for i in 0..random {
-        let j = rng.random_range(i..rest.len());
+        let j = rng.below(i, rest.len());
         rest.swap(i, j);
     }
     Ok(order
@@ -137,6 +137,9 @@ mod tests {
         assert!(rest.iter().all(|b| ![50, 151, 180].contains(b)));
         assert_eq!(d, focal_depths(depth.view(), 200, 3, 5, 7).unwrap());
         assert!(focal_depths(depth.view(), 10, 8, 5, 0).is_err());
+        // A caller's counts that overflow when added are an error, not a wrap-around.
+        assert!(focal_depths(depth.view(), 10, usize::MAX, 2, 0).is_err());
+        assert!(focal_depths(depth.view(), 0, 0, 0, 0).is_err());
     }
 
     #[test]

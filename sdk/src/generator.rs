@@ -1,4 +1,4 @@
-//! The SDK as a phone app calls it (`docs/CONVENTIONS.md`; paper Fig. 3): camera-buffer frames in, SLM
+//! The SDK as a phone app calls it (`docs/CONVENTIONS.md` §7; paper Fig. 3): camera-buffer frames in, SLM
 //! patterns out, through one thread-safe [`HologramGenerator`].
 //!
 //! - [`GeneratorConfig`]: the hologram (SLM) resolution, the shipped CNNs by name ([`ModelSelection`]), the

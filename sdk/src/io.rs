@@ -85,7 +85,7 @@ pub fn write_f32_npy<D: Dimension>(path: &Path, a: ArrayView<f32, D>) -> Result<
 }
 
 /// Saves an amplitude image as an 8-bit sRGB PNG. `amplitude` is `[3, H, W]` (R, G, B → RGB PNG) or
-/// `[1, H, W]` (→ greyscale PNG), with amplitude ≥ 0 and `1` = white (`DESIGN.md` §2: amplitude =
+/// `[1, H, W]` (→ greyscale PNG), with amplitude ≥ 0 and `1` = white (`docs/CONVENTIONS.md` §5.5: amplitude =
 /// √linear intensity). Each value is multiplied by `scale`, then encoded by
 /// [`crate::color::amplitude_to_srgb8`]: intensity `amplitude²`, clamped to `[0, 1]`, sRGB transfer
 /// curve, rounded. Negative amplitudes and NaN are written as 0 (black). The file is written as PNG

@@ -9,21 +9,30 @@
 //! - [`encoding`]: double phase encoding (Eq. 7), AA-DPM, BL-DPM, phase wrapping and 8-bit codes.
 //! - [`synthesis`]: silhouette-mask layer-based method (SM-LBM, Eq. 1–4) for reference holograms.
 //! - [`scene`]: RGB-D frames, layered depth images, depth decoders, the built-in procedural scene.
-//! - [`reference`](mod@reference): the non-learned pipeline (SM-LBM → offset → double phase → SLM codes → previews).
+//! - [`reference`](mod@reference): the non-learned pipeline (SM-LBM → offset → double phase → SLM codes →
+//!   previews).
 //! - [`metrics`]: PSNR and SSIM.
 //! - [`evaluation`]: the paper's Table 2 protocol (amplitude and focal-stack PSNR/SSIM against SM-LBM).
 //! - [`model`]: the hologram and pre-filter CNNs (ONNX, run with tract), metadata and I/O contract checks.
 //! - [`pipeline`]: the real-time pipeline: [`pipeline::HologramSession`] turns RGB-D frames into SLM codes
 //!   with the CNNs (hologram CNN → offset → pre-filter CNN → double phase → LUT), frame by frame or streamed.
 //! - [`io`]: PNG and `.npy` input/output.
-//! - [`dataset`]: the training dataset (MIT-CGH-4K-V2 style): random LDIs + SM-LBM midpoint holograms in
-//!   `.npz` shards with a `manifest.json`.
+#![cfg_attr(
+    feature = "research",
+    doc = "- [`dataset`] (feature `research`): the training dataset (MIT-CGH-4K-V2 style): random LDIs + \
+           SM-LBM midpoint holograms in `.npz` shards with a `manifest.json`."
+)]
+#![cfg_attr(
+    not(feature = "research"),
+    doc = "- `dataset` (feature `research`, off in this build): the training dataset."
+)]
 //!
-//! Conventions (`DESIGN.md` §2): SI units, channel order R, G, B, normalised depth `d ∈ [0,1]` with
-//! 0 = near, a point at `d` lies at `z(d) = (0.5 − d)·volume_depth` from the midpoint plane, `+z` along the
-//! light (toward the viewer).
+//! Conventions (`docs/CONVENTIONS.md` in the repository, §2–§4): SI units, channel order R, G, B, normalised
+//! depth `d ∈ [0,1]` with 0 = near, a point at `d` lies at `z(d) = (0.5 − d)·volume_depth` from the midpoint
+//! plane, `+z` along the light (toward the viewer).
 
 pub mod color;
+#[cfg(feature = "research")]
 pub mod dataset;
 pub mod encoding;
 pub mod error;
@@ -36,6 +45,7 @@ pub mod optics;
 pub mod pipeline;
 pub mod reference;
 pub mod scene;
+mod splitmix;
 pub mod synthesis;
 
 pub use error::{HoloError, Result};

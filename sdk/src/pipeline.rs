@@ -1,6 +1,6 @@
-//! The real-time hologram pipeline (`DESIGN.md` §4, paper Fig. 3): RGB-D frame (or layered depth image) →
-//! hologram CNN (tract) → midpoint hologram → offset propagation (Eq. 6) → pre-filter CNN (DDPM) → double
-//! phase encoding (Eq. 7) → look-up table → three 8-bit SLM planes.
+//! The real-time hologram pipeline (`docs/CONVENTIONS.md` §8, paper Fig. 3): RGB-D frame (or layered depth
+//! image) → hologram CNN (tract) → midpoint hologram → offset propagation (Eq. 6) → pre-filter CNN (DDPM) →
+//! double phase encoding (Eq. 7) → look-up table → three 8-bit SLM planes.
 //!
 //! - [`HologramPipeline`] holds the loaded CNNs and the display configuration, checked against each other
 //!   once.
@@ -348,7 +348,7 @@ impl HologramPipeline {
 }
 
 /// The CNN heads of the midpoint hologram, `[3, H, W]` each: amplitude in `[0, √2]`, phase in `[0, 1]`
-/// meaning `(p − 0.5)·2π` rad (`DESIGN.md` §3).
+/// meaning `(p − 0.5)·2π` rad (`docs/CONVENTIONS.md` §7.1).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Heads {
     /// Amplitude head `[3, H, W]`.
@@ -438,7 +438,8 @@ impl ColourState {
                     self.plan.apply(&mut self.field, t, &mut self.scratch)?;
                 }
                 if prefilter {
-                    // Pre-filter input (DESIGN §3, format 2): Re H and Im H, into the two planes.
+                    // Pre-filter input (docs/CONVENTIONS.md §7.2, format 2): Re H and Im H, into the two
+                    // planes.
                     let [re, im] = &mut self.planes;
                     for ((r, i), v) in re.iter_mut().zip(im.iter_mut()).zip(&self.field) {
                         *r = v.re;
@@ -844,9 +845,9 @@ impl HologramSession {
     }
 
     /// Stage 3 on its own: the pre-filter CNN (allocates inside tract), if the session has one: packs
-    /// `[Re H, Im H]` of the offset hologram (`DESIGN.md` §3, format 2), runs it and lets the workers turn
-    /// its outputs `(Re H', Im H')` into the filtered field and run pass 1 of the encoding. A no-op without a
-    /// pre-filter.
+    /// `[Re H, Im H]` of the offset hologram (`docs/CONVENTIONS.md` §7.2, format 2), runs it and lets the
+    /// workers turn its outputs `(Re H', Im H')` into the filtered field and run pass 1 of the encoding. A
+    /// no-op without a pre-filter.
     ///
     /// Errors: tract failures ([`HoloError::ModelRun`]); call after [`HologramSession::propagate_to_slm`].
     pub fn run_prefilter(&mut self) -> Result<()> {

@@ -17,8 +17,8 @@ use crate::synthesis::{SceneLayer, SmLbm};
 pub struct ReferencePipeline {
     /// Midpoint hologram synthesis (levels, display geometry, propagation options).
     pub synthesis: SmLbm,
-    /// Signed distance `s` in metres from the midpoint plane to the SLM plane (`DESIGN.md` §2; the paper uses 0,
-    /// 6 and 12 mm; `s > 0` puts the 3D image behind the hologram).
+    /// Signed distance `s` in metres from the midpoint plane to the SLM plane (`docs/CONVENTIONS.md` §4; the
+    /// paper uses 0, 6 and 12 mm; `s > 0` puts the 3D image behind the hologram).
     pub offset_m: f64,
     /// Phase-only encoding.
     pub encoding: DoublePhaseMethod,

@@ -1,5 +1,5 @@
-//! The CNN loader and runner (`tensorholo::model`, DESIGN §3) on the tiny random-init fixtures written by
-//! `fixtures/models/make_models.py` with the training package's own ONNX export.
+//! The CNN loader and runner (`tensorholo::model`, docs/CONVENTIONS.md §7) on the tiny random-init fixtures
+//! written by `fixtures/models/make_models.py` with the training package's own ONNX export.
 
 use std::path::{Path, PathBuf};
 

@@ -1,5 +1,6 @@
-//! The real-time pipeline (`tensorholo::pipeline`, DESIGN §4) on the random-init fixture CNNs: the session
-//! against a naive composition of the SDK's stand-alone stages, streaming vs single frames, and bad input.
+//! The real-time pipeline (`tensorholo::pipeline`, docs/CONVENTIONS.md §8) on the random-init fixture CNNs:
+//! the session against a naive composition of the SDK's stand-alone stages, streaming vs single frames, and
+//! bad input.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

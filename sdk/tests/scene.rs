@@ -1,5 +1,6 @@
 //! Scene loading against the real third-party RGB-D files of `shared/data` (read in place, never copied),
-//! checking the documented facts of `shared/data/README.md`, plus error paths and properties.
+//! checking the documented facts of the encoding table (`docs/CONVENTIONS.md` §6), plus error paths and
+//! properties.
 
 use std::path::{Path, PathBuf};
 
@@ -15,7 +16,7 @@ fn data(rel: &str) -> PathBuf {
     assert!(
         p.is_file(),
         "shared test data file missing: {} (tests read third-party RGB-D data in place from \
-         `../shared/data` next to the workspace; see shared/data/README.md)",
+         `../shared/data` next to the workspace; see docs/CONVENTIONS.md §6.2 and NOTICE)",
         p.display()
     );
     p
@@ -25,7 +26,7 @@ fn decode(rel: &str, enc: DepthEncoding) -> DecodedDepth {
     decode_depth_file(&data(rel), enc).unwrap_or_else(|e| panic!("decoding {rel} as {enc}: {e}"))
 }
 
-/// Checks size, invalid fraction and valid min/max against the README table.
+/// Checks size, invalid fraction and valid min/max against the data table (`docs/CONVENTIONS.md` §6.2).
 #[track_caller]
 fn check(
     d: &DecodedDepth,
@@ -42,8 +43,8 @@ fn check(
         "invalid fraction {inv} not in {invalid:?}"
     );
     let (lo, hi) = d.valid_min_max().expect("some valid pixels");
-    assert!((lo - min).abs() <= tol, "min {lo} vs README {min}");
-    assert!((hi - max).abs() <= tol, "max {hi} vs README {max}");
+    assert!((lo - min).abs() <= tol, "min {lo} vs documented {min}");
+    assert!((hi - max).abs() <= tol, "max {hi} vs documented {max}");
     assert!(d.values.iter().zip(d.valid.iter()).all(|(&v, &ok)| if ok {
         v.is_finite() && v > 0.0
     } else {
@@ -52,8 +53,8 @@ fn check(
 }
 
 #[test]
-fn redwood_sequence_mm16_matches_readme() {
-    // README: 0.96–2.70 m, 12–13 % invalid, 640×480, 5 frames.
+fn redwood_sequence_mm16_matches_data_table() {
+    // docs/CONVENTIONS.md §6.2: 0.96–2.70 m, 12–13 % invalid, 640×480, 5 frames.
     for i in 0..5 {
         let d = decode(
             &format!("redwood_livingroom_seq/depth/0000{i}.png"),
@@ -75,8 +76,9 @@ fn redwood_sequence_mm16_matches_readme() {
 }
 
 #[test]
-fn nyu_raw_kinect_disparity_matches_readme() {
-    // README: little-endian 16-bit PGM, 351.3/(1092.5 − raw), 1.39–6.69 m, raw ≥ 1092 invalid, 7 %.
+fn nyu_raw_kinect_disparity_matches_data_table() {
+    // docs/CONVENTIONS.md §6.2: little-endian 16-bit PGM, 351.3/(1092.5 − raw), 1.39–6.69 m, raw ≥ 1092
+    // invalid, 7 %.
     let d = decode("nyu/NYU_depth.pgm", DepthEncoding::KinectDisparity);
     check(&d, (480, 640), (0.065, 0.08), 1.39, 6.69, 0.01);
 }
@@ -114,8 +116,8 @@ fn nyu_raw_and_derived_mm_agree() {
 }
 
 #[test]
-fn sun_rotated_matches_readme_and_derived() {
-    // README: bits rotated left by 3 on disk, 1.06–9.87 m, 18 % invalid.
+fn sun_rotated_matches_data_table_and_derived() {
+    // docs/CONVENTIONS.md §6.2: bits rotated left by 3 on disk, 1.06–9.87 m, 18 % invalid.
     let raw = decode("sun/SUN_depth.png", DepthEncoding::SunRotated);
     check(&raw, (480, 640), (0.175, 0.19), 1.06, 9.87, 0.01);
     let mm = decode(
@@ -132,15 +134,16 @@ fn sun_rotated_matches_readme_and_derived() {
 }
 
 #[test]
-fn tum_matches_readme() {
-    // README: v/5000, 1.46–9.33 m, 19 % invalid.
+fn tum_matches_data_table() {
+    // docs/CONVENTIONS.md §6.2: v/5000, 1.46–9.33 m, 19 % invalid.
     let d = decode("tum/TUM_depth.png", DepthEncoding::Tum5000);
     check(&d, (480, 640), (0.185, 0.2), 1.46, 9.33, 0.01);
 }
 
 #[test]
-fn iphone_disparity_matches_readme() {
-    // README: 8-bit JPEG, 576×768 (W×H), 1/(0.650879 + v/255·1.858887), 0.40–1.54 m, none invalid.
+fn iphone_disparity_matches_data_table() {
+    // docs/CONVENTIONS.md §6.2: 8-bit JPEG, 576×768 (W×H), 1/(0.650879 + v/255·1.858887), 0.40–1.54 m, none
+    // invalid.
     let d = decode(
         "iphone_portrait_vase/disparity_aux_576x768.jpg",
         DepthEncoding::IphoneDisparity,
@@ -149,8 +152,9 @@ fn iphone_disparity_matches_readme() {
 }
 
 #[test]
-fn odak_relative_near_bright_matches_readme() {
-    // README: 1600×900, 8-bit ×3 channels, relative, larger = nearer, 0 = empty background (71 %).
+fn odak_relative_near_bright_matches_data_table() {
+    // docs/CONVENTIONS.md §6.2: 1600×900, 8-bit ×3 channels, relative, larger = nearer, 0 = empty background
+    // (71 %).
     let d = decode(
         "odak_dragonbunny/DragonBunny_depthmap.png",
         DepthEncoding::RelativeNearBright,

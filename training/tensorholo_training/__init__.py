@@ -10,7 +10,7 @@ Modules:
 - :mod:`.train`    two-stage training CLI; :mod:`.export` ONNX export and int8 quantisation;
 - :mod:`.evaluate` the paper's Table 2 protocol; :mod:`.metrics` PSNR and SSIM.
 
-Conventions are those of the SDK (``DESIGN.md``): SI units, channel order R, G, B, normalised depth 0 = near,
+Conventions are those of the SDK (``docs/CONVENTIONS.md``): SI units, channel order R, G, B, normalised depth 0 = near,
 ``z(d) = (0.5 − d)·volume_depth``.
 """
 

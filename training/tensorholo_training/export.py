@@ -1,4 +1,4 @@
-"""ONNX export of trained CNNs (``DESIGN.md`` §3) and int8 static quantisation.
+"""ONNX export of trained CNNs (``docs/CONVENTIONS.md`` §7) and int8 static quantisation.
 
 ``python -m tensorholo_training.export --checkpoint RUN/final.pt --out-dir models --name NAME
 [--int8 --calib-dataset DIR]``
@@ -69,7 +69,7 @@ def model_metadata(
     precision: str = "f32",
     hologram_layers: int | None = None,
 ) -> dict[str, str]:
-    """The ``metadata_props`` of an exported CNN (``DESIGN.md`` §3), keys prefixed ``tensorholo.``.
+    """The ``metadata_props`` of an exported CNN (``docs/CONVENTIONS.md`` §7.3), keys prefixed ``tensorholo.``.
 
     Args:
         kind: ``"hologram-cnn"`` or ``"prefilter-cnn"``.

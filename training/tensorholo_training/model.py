@@ -1,4 +1,4 @@
-"""The CNNs of Tensor Holography V2 (paper "Details of training", ``DESIGN.md`` §3).
+"""The CNNs of Tensor Holography V2 (paper "Details of training", ``docs/CONVENTIONS.md`` §7).
 
 Hologram CNN: ``num_layers`` 3×3 convolutions (8, 15 or 30) with 24 filters, ReLU, a residual connection every
 two layers, and a last layer that sees the network input again (the input is concatenated to its input). The
@@ -211,7 +211,7 @@ def prefilter_cnn(num_layers: int = 8, channels: int = 8, base: str = "aa-dpm", 
 
 
 def prefilter_input(slm_field: torch.Tensor) -> torch.Tensor:
-    """Pre-filter CNN input from the SLM-plane field (DESIGN §3 as amended, Eq. 6): ``[Re H, Im H]``.
+    """Pre-filter CNN input from the SLM-plane field (``docs/CONVENTIONS.md`` §7.2, Eq. 6): ``[Re H, Im H]``.
 
     Args:
         slm_field: complex64 ``[B, 3, H, W]`` after offset propagation with the carrier removed (amplitude in

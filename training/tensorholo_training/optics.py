@@ -35,7 +35,7 @@ TAU = 2.0 * math.pi
 
 @dataclass(frozen=True)
 class Display:
-    """Display geometry of ``DESIGN.md`` §2 (the paper's setup by default).
+    """Display geometry of ``docs/CONVENTIONS.md`` §3 (the paper's setup by default).
 
     Attributes:
         wavelengths_m: laser wavelengths in metres, R, G, B.
@@ -437,7 +437,7 @@ def anti_alias_blur(field: torch.Tensor, sigma_px: float = 0.7, size: int = 5) -
 
 
 def amp_phase_to_complex(amplitude: torch.Tensor, phase01: torch.Tensor) -> torch.Tensor:
-    """Complex field from the CNN heads (``DESIGN.md`` §3): ``A·exp(i·(p − 0.5)·2π)``.
+    """Complex field from the CNN heads (``docs/CONVENTIONS.md`` §7.1): ``A·exp(i·(p − 0.5)·2π)``.
 
     Args:
         amplitude: float ``[..., 3, H, W]`` in ``[0, √2]``.

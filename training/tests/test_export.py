@@ -1,4 +1,4 @@
-"""ONNX export round trip (f32 and int8) and metadata (DESIGN.md §3)."""
+"""ONNX export round trip (f32 and int8) and metadata (docs/CONVENTIONS.md §7)."""
 import numpy as np
 import onnx
 import pytest

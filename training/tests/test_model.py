@@ -1,4 +1,4 @@
-"""Model shapes, parameter counts, head ranges and residual wiring (paper / DESIGN.md §3)."""
+"""Model shapes, parameter counts, head ranges and residual wiring (paper / docs/CONVENTIONS.md §7)."""
 import math
 
 import pytest
@@ -24,7 +24,7 @@ def test_parameter_counts():
     assert abs(counts[(30, 1)] - 150_000) / 150_000 < 0.02
     assert counts[(8, 1)] < counts[(15, 1)] < counts[(30, 1)] < counts[(30, 5)]
     assert pre == 9 * 6 * 8 + 8 + 6 * (9 * 8 * 8 + 8) + 9 * 14 * 6 + 6 == 4706
-    assert macs_per_pixel(hologram_cnn(30, 1)) == 147_528  # DESIGN.md §7: ~147.5k MAC per pixel
+    assert macs_per_pixel(hologram_cnn(30, 1)) == 147_528  # ~147.5k MAC per pixel (the paper's 30-layer CNN; docs/BENCHMARKS.md)
 
 
 @pytest.mark.parametrize("layers,inputs", [(8, 1), (15, 1), (30, 1), (8, 5)])

@@ -85,7 +85,8 @@ pub struct DoublePhase {
     pub mean_phase: [f32; 3],
 }
 
-/// Double phase encoding of a complex hologram `field` `[3, H, W]` (R, G, B), paper Eq. 7 (`DESIGN.md` §2):
+/// Double phase encoding of a complex hologram `field` `[3, H, W]` (R, G, B), paper Eq. 7
+/// (`docs/CONVENTIONS.md` §5.3):
 ///
 /// 1. optional pre-filter (`method`);
 /// 2. amplitude normalised by one global maximum `a` over all colours: `Ã = A / a ∈ [0, 1]`;
@@ -266,9 +267,10 @@ impl BandLimit {
 /// Allocation-free double phase encoding of one colour channel `[H, W]` for real-time sessions: everything
 /// it needs (blur buffer, BL-DPM plan, mask and scratch) is allocated once in [`ChannelEncoder::new`].
 ///
-/// Encoding is two passes around the global normaliser, which couples the colours (Eq. 7, `DESIGN.md` §2):
-/// [`ChannelEncoder::analyse`] on each channel, [`normaliser`] over the three [`ChannelStats`], then
-/// [`ChannelEncoder::encode`] on each channel. The result equals [`double_phase_encode`]'s (same row kernels).
+/// Encoding is two passes around the global normaliser, which couples the colours (Eq. 7,
+/// `docs/CONVENTIONS.md` §5.3): [`ChannelEncoder::analyse`] on each channel, [`normaliser`] over the three
+/// [`ChannelStats`], then [`ChannelEncoder::encode`] on each channel. The result equals
+/// [`double_phase_encode`]'s (same row kernels).
 #[derive(Debug)]
 pub struct ChannelEncoder {
     height: usize,

@@ -1,4 +1,4 @@
-//! The model I/O contract in one place (`docs/CONVENTIONS.md`, "Model I/O contract"; paper Fig. 3): how the
+//! The model I/O contract in one place (`docs/CONVENTIONS.md` §7; paper Fig. 3): how the
 //! SDK packs a scene into a CNN input, what an invalid pixel becomes, how the hologram CNN's heads become a
 //! complex field, and how the offset hologram enters the pre-filter CNN. The pipeline, the model loader and the
 //! training-dataset writer all call these functions; nothing else packs a network input.

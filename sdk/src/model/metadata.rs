@@ -1,5 +1,5 @@
-//! The `tensorholo.*` ONNX `metadata_props` of an exported CNN (`DESIGN.md` §3) and their check against the
-//! SDK's configuration.
+//! The `tensorholo.*` ONNX `metadata_props` of an exported CNN (`docs/CONVENTIONS.md` §7.3) and their check
+//! against the SDK's configuration.
 //!
 //! Written by `training/tensorholo_training/export.py` (`model_metadata`): `kind` (`hologram-cnn` or
 //! `prefilter-cnn`), `layers`, `wavelengths_m` (comma-separated R,G,B), `pixel_pitch_m`, `volume_depth_m`,
@@ -28,7 +28,7 @@ pub const PREFILTER_FORMAT_VERSION: u32 = 2;
 /// the exporter writes Python `repr(float)` (exact round trip), so only decimal-input noise is tolerated.
 const REL_TOL: f64 = 1e-6;
 
-/// Which of the two CNNs of the pipeline (`DESIGN.md` §3, paper Fig. 3) a file holds.
+/// Which of the two CNNs of the pipeline (`docs/CONVENTIONS.md` §7, paper Fig. 3) a file holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum ModelKind {
     /// The hologram CNN: input `rgbd` `[1, 4·L, H, W]`, outputs the midpoint hologram as `amplitude` and
@@ -107,12 +107,13 @@ impl Default for ModelConfig {
     }
 }
 
-/// The parsed `tensorholo.*` metadata of one CNN file (`DESIGN.md` §3).
+/// The parsed `tensorholo.*` metadata of one CNN file (`docs/CONVENTIONS.md` §7.3).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ModelMetadata {
     /// `tensorholo.kind`.
     pub kind: ModelKind,
-    /// `tensorholo.layers`: number of convolution layers (8, 15 or 30 for the hologram CNN, 8 for the pre-filter).
+    /// `tensorholo.layers`: number of convolution layers (8, 15 or 30 for the hologram CNN, 8 for the
+    /// pre-filter).
     pub layers: usize,
     /// `tensorholo.channels`: filters per hidden layer (24 / 8), if present.
     pub channels: Option<usize>,
@@ -276,11 +277,11 @@ impl ModelMetadata {
         Ok(Self { raw, ..md })
     }
 
-    /// Multiply-accumulates per output pixel of the residual CNN of `DESIGN.md` §3 (3×3 convolutions: input →
-    /// `channels`, `layers − 2` hidden `channels → channels`, and the last layer from `channels` plus the
-    /// network input to 6 outputs): 147,528 for the 30-layer RGB-D hologram CNN, 33,480 for 8 layers, 4,644
-    /// for the pre-filter's correction CNN (its fixed AA-DPM blur adds `6 · taps²`, 150 with 5 taps, not
-    /// counted). `None` without `tensorholo.channels`. FLOPs per frame = `2 · MAC · H · W`.
+    /// Multiply-accumulates per output pixel of the residual CNN of `docs/CONVENTIONS.md` §7.1 (3×3
+    /// convolutions: input → `channels`, `layers − 2` hidden `channels → channels`, and the last layer from
+    /// `channels` plus the network input to 6 outputs): 147,528 for the 30-layer RGB-D hologram CNN, 33,480
+    /// for 8 layers, 4,644 for the pre-filter's correction CNN (its fixed AA-DPM blur adds `6 · taps²`, 150
+    /// with 5 taps, not counted). `None` without `tensorholo.channels`. FLOPs per frame = `2 · MAC · H · W`.
     pub fn macs_per_pixel(&self) -> Option<u64> {
         let c = self.channels? as u64;
         let i = self.input_channels() as u64;
@@ -288,7 +289,7 @@ impl ModelMetadata {
         Some(9 * (i * c + (l - 2) * c * c + (c + i) * 6))
     }
 
-    /// Channels of the network input: `4·L` for a hologram CNN, 6 for a pre-filter (`DESIGN.md` §3).
+    /// Channels of the network input: `4·L` for a hologram CNN, 6 for a pre-filter (`docs/CONVENTIONS.md` §7).
     pub fn input_channels(&self) -> usize {
         match self.kind {
             ModelKind::Hologram => 4 * self.input_layers,

@@ -1,4 +1,4 @@
-//! The CNNs of Tensor Holography V2 run with tract (`DESIGN.md` §3, paper Fig. 3): the hologram CNN
+//! The CNNs of Tensor Holography V2 run with tract (`docs/CONVENTIONS.md` §7, paper Fig. 3): the hologram CNN
 //! (RGB-D or LDI → midpoint hologram) and the DDPM pre-filter CNN (offset hologram → filtered offset
 //! hologram, Eq. 6).
 //!
@@ -27,7 +27,7 @@ mod network;
 mod tuning;
 
 /// How a model file stores its weights (`training/tensorholo_training/export.py`). All forms take and
-/// return f32 at the boundary (`DESIGN.md` §3).
+/// return f32 at the boundary (`docs/CONVENTIONS.md` §7).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Precision {
@@ -76,7 +76,7 @@ impl std::fmt::Display for Precision {
 }
 
 /// The memory layout tract runs a CNN in. The ONNX files are always channels-first `[1, C, H, W]`
-/// (`docs/CONVENTIONS.md`) and a plan takes and returns `[C, H, W]` arrays in every layout; only tract's
+/// (`docs/CONVENTIONS.md` §7) and a plan takes and returns `[C, H, W]` arrays in every layout; only tract's
 /// internal graph differs ([`HologramModel::plan_with_layout`]).
 ///
 /// Which layout is faster depends on the CPU and the frame size (`docs/BENCHMARKS.md`: on one 2-core Xeon

@@ -1,5 +1,5 @@
 //! [`HologramModel`]: one ONNX CNN loaded with tract, checked against the I/O contract and metadata of
-//! `DESIGN.md` §3, with one optimised [`ModelPlan`] per resolution.
+//! `docs/CONVENTIONS.md` §7, with one optimised [`ModelPlan`] per resolution.
 
 use std::collections::{BTreeMap, HashMap};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -182,7 +182,7 @@ fn check_value(
     Ok(())
 }
 
-/// Checks the graph's inputs and outputs against `DESIGN.md` §3 for `metadata.kind`.
+/// Checks the graph's inputs and outputs against `docs/CONVENTIONS.md` §7 for `metadata.kind`.
 fn check_contract(graph: &pb::GraphProto, md: &ModelMetadata) -> std::result::Result<(), String> {
     let initialisers: std::collections::HashSet<&str> =
         graph.initializer.iter().map(|t| t.name.as_str()).collect();
@@ -215,8 +215,8 @@ fn check_contract(graph: &pb::GraphProto, md: &ModelMetadata) -> std::result::Re
     Ok(())
 }
 
-/// A hologram or pre-filter CNN loaded from ONNX (`DESIGN.md` §3, paper Fig. 3), ready to be planned per
-/// resolution.
+/// A hologram or pre-filter CNN loaded from ONNX (`docs/CONVENTIONS.md` §7, paper Fig. 3), ready to be
+/// planned per resolution.
 ///
 /// Holds the decluttered tract graph with symbolic `H`, `W` and a cache of optimised [`ModelPlan`]s, one per
 /// `(height, width)`. `Send + Sync`: plans can be built and run from several threads; a failed plan or run
@@ -714,7 +714,7 @@ impl ModelPlan {
     }
 
     /// Runs the network on `input` `[C, H, W]` and returns its two outputs, each `[3, H, W]`, in the
-    /// contract's order (`DESIGN.md` §3, [`ModelKind::output_names`]): for a hologram CNN the heads
+    /// contract's order (`docs/CONVENTIONS.md` §7, [`ModelKind::output_names`]): for a hologram CNN the heads
     /// `(amplitude, phase)`, amplitude in `[0, √2]`, phase in `[0, 1]` meaning `(p − 0.5)·2π` rad; for a
     /// pre-filter `(real, imag)` of the filtered SLM-plane field.
     ///

@@ -8,7 +8,7 @@ use crate::error::Result;
 
 /// Circular Fourier-plane aperture (Eq. 9): `M(kx, ky) = 1` where `kx² + ky² ≤ r²`, else 0, with `kx, ky` the
 /// signed frequency indices of the unpadded `[height, width]` grid (centred spectrum) and
-/// `r = min(height, width)/2` (`DESIGN.md` §2: the paper's "half of the image resolution").
+/// `r = min(height, width)/2` (`docs/CONVENTIONS.md` §5.4: the paper's "half of the image resolution").
 ///
 /// On a padded plan the indices are rescaled to the unpadded grid, so the aperture is the same physical
 /// filter.

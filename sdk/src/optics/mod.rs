@@ -22,8 +22,8 @@ pub use reconstruct::{focal_stack, post_encoding_midpoint, simulate_phase_only};
 use crate::error::{invalid, HoloError, Result};
 use propagation::check_positive;
 
-/// The display geometry of `DESIGN.md` §2: laser wavelengths, SLM pixel pitch and the depth of the 3D volume
-/// centred on the midpoint hologram. `Default` is the paper's setup (638/520/450 nm, 8 µm, 6 mm).
+/// The display geometry of `docs/CONVENTIONS.md` §3: laser wavelengths, SLM pixel pitch and the depth of the
+/// 3D volume centred on the midpoint hologram. `Default` is the paper's setup (638/520/450 nm, 8 µm, 6 mm).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct OpticalSetup {
     /// Wavelengths in metres of the R, G, B lasers.
@@ -57,7 +57,8 @@ impl OpticalSetup {
     }
 
     /// Axial position in metres, relative to the midpoint plane, of normalised depth `d` (0 = near):
-    /// `z(d) = (0.5 − d) · volume_depth` (`DESIGN.md` §2; near points are on the viewer's side, `z > 0`).
+    /// `z(d) = (0.5 − d) · volume_depth` (`docs/CONVENTIONS.md` §4; near points are on the viewer's side,
+    /// `z > 0`).
     pub fn depth_to_z(&self, d: f64) -> f64 {
         (0.5 - d) * self.volume_depth_m
     }
@@ -124,7 +125,7 @@ pub(crate) fn par_channels<T: Send + Sync>(
 /// method (Eq. 2), one colour per thread, each at its own wavelength of `setup`.
 ///
 /// With [`Carrier::Remove`] this is the offset propagation of Eq. 6 (`distance_m = s`, midpoint → SLM) and
-/// its inverse of Eq. 10 (`distance_m = −s`, SLM → midpoint), `DESIGN.md` §2.
+/// its inverse of Eq. 10 (`distance_m = −s`, SLM → midpoint), `docs/CONVENTIONS.md` §5.2.
 ///
 /// Allocating convenience: plans and transfer functions are built per call. Hot paths keep [`Propagator`]s,
 /// [`TransferFunction`]s and [`Scratch`] instead.

@@ -299,8 +299,8 @@ impl TransferFunction {
 /// An angular spectrum propagator (paper Eq. 2) for one field size, pixel pitch and wavelength, planned once.
 ///
 /// `ASM(u, z) = F⁻¹{F{u} · exp(i·2π·z·√(λ⁻² − fx² − fy²))}` with `fx = kx / (N·p)` the spatial frequency in
-/// cycles per metre; positive `z` travels with the light (`DESIGN.md` §2). Fields are `[height, width]`
-/// row-major `Complex32`; distances in metres.
+/// cycles per metre; positive `z` travels with the light (`docs/CONVENTIONS.md` §5.1). Fields are
+/// `[height, width]` row-major `Complex32`; distances in metres.
 #[derive(Debug, Clone)]
 pub struct Propagator {
     plan: SpectralPlan,
@@ -323,7 +323,8 @@ pub(crate) fn check_positive(name: &'static str, value: f64) -> Result<()> {
 impl Propagator {
     /// Plans a propagator for `[height, width]` fields sampled at `pixel_pitch_m` with light of `wavelength_m`.
     ///
-    /// Errors: [`HoloError::InvalidParameter`] for a zero size or a non-positive / non-finite pitch or wavelength.
+    /// Errors: [`HoloError::InvalidParameter`] for a zero size or a non-positive / non-finite pitch or
+    /// wavelength.
     pub fn new(
         height: usize,
         width: usize,

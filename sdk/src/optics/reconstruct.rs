@@ -90,7 +90,7 @@ pub fn focal_stack(
 
 /// What a phase-only SLM pattern `phase` `[3, H, W]` (radians, R, G, B) shows after the display's Fourier
 /// filter (Eq. 8–9), expressed at the midpoint plane: `ASM(F⁻¹{F{e^{iP}}·M}, −s) · e^{+i2πs/λ}` (Eq. 10),
-/// with `s = offset_m` the SLM's distance from the midpoint plane (`DESIGN.md` §2).
+/// with `s = offset_m` the SLM's distance from the midpoint plane (`docs/CONVENTIONS.md` §4).
 ///
 /// For a double-phase pattern this is the post-encoding midpoint hologram, whose amplitude approximates the
 /// encoded amplitude divided by its global maximum ([`crate::encoding::DoublePhase`]).

@@ -1,5 +1,5 @@
-//! Depth decoders for the sensor and file formats of `shared/data/README.md`, the mapping from metric
-//! depth to TensorHolo's normalised depth `d ∈ [0,1]` (0 = near, `DESIGN.md` §2), and the invalid-pixel
+//! Depth decoders for the sensor and file formats of `docs/CONVENTIONS.md` §6, the mapping from metric depth
+//! to TensorHolo's normalised depth `d ∈ [0,1]` (0 = near, `docs/CONVENTIONS.md` §4), and the invalid-pixel
 //! fill policy.
 //!
 //! The steps are separate and individually testable:
@@ -19,7 +19,7 @@ use serde::Serialize;
 use crate::error::{invalid, HoloError, Result};
 
 /// How depth is stored in a file. Each variant is one row of the encoding table in
-/// `shared/data/README.md`; its kebab-case name (see [`DepthEncoding::name`], [`fmt::Display`] and
+/// `docs/CONVENTIONS.md` §6; its kebab-case name (see [`DepthEncoding::name`], [`fmt::Display`] and
 /// [`FromStr`]) is what the CLI accepts.
 ///
 /// | variant | name | bits | to metres / relative | invalid |
@@ -65,7 +65,8 @@ pub enum DepthEncoding {
 }
 
 impl DepthEncoding {
-    /// Every encoding, in the order of the README table (for CLI `--help` and exhaustive tests).
+    /// Every encoding, in the order of the encoding table (`docs/CONVENTIONS.md` §6.1; for CLI `--help` and
+    /// exhaustive tests).
     pub const ALL: [DepthEncoding; 7] = [
         DepthEncoding::Millimetres16,
         DepthEncoding::Tum5000,
@@ -137,7 +138,7 @@ impl DepthEncoding {
 
     /// Decodes one stored sample: `Some(metres)` (metric encodings) or `Some(d)` (relative encodings,
     /// `d ∈ [0,1]`, 0 = near), `None` when the sample is invalid. Samples above 255 are invalid for the
-    /// 8-bit encodings. Formulas: `shared/data/README.md`.
+    /// 8-bit encodings. Formulas: `docs/CONVENTIONS.md` §6.
     pub fn decode_sample(&self, v: u16) -> Option<f32> {
         match self {
             DepthEncoding::Millimetres16 => (v != 0).then(|| v as f32 / 1000.0),
@@ -227,7 +228,7 @@ impl DecodedDepth {
 }
 
 /// Decodes raw samples `[H, W]` with `encoding`, pixel by pixel ([`DepthEncoding::decode_sample`]; formulas
-/// from `shared/data/README.md`). Pure and infallible: out-of-range samples (e.g. > 255 for an 8-bit
+/// from `docs/CONVENTIONS.md` §6). Pure and infallible: out-of-range samples (e.g. > 255 for an 8-bit
 /// encoding) are marked invalid.
 pub fn decode_depth(raw: &Array2<u16>, encoding: DepthEncoding) -> DecodedDepth {
     let mut values = Array2::<f32>::zeros(raw.raw_dim());
@@ -496,7 +497,7 @@ fn percentile_sorted(sorted: &[f32], p: f32) -> f32 {
     sorted[idx.min(sorted.len() - 1)]
 }
 
-/// Converts decoded depth to normalised depth `d ∈ [0,1]` (0 = near, `DESIGN.md` §2), `[H, W]`.
+/// Converts decoded depth to normalised depth `d ∈ [0,1]` (0 = near, `docs/CONVENTIONS.md` §4), `[H, W]`.
 ///
 /// * Metric input: `d = mapping.apply(z, range)` ([`DepthMapping`]; default linear in diopters,
 ///   `d = (1/z_near − 1/z)/(1/z_near − 1/z_far)`, clamped). With `range = None` the range is the 1st and
@@ -727,13 +728,13 @@ mod tests {
     }
 
     #[test]
-    fn sample_formulas_follow_the_data_readme() {
+    fn sample_formulas_follow_the_encoding_table() {
         use DepthEncoding::*;
         assert_eq!(Millimetres16.decode_sample(1500), Some(1.5));
         assert_eq!(Millimetres16.decode_sample(0), None);
         assert_eq!(Tum5000.decode_sample(5000), Some(1.0));
         assert_eq!(Tum5000.decode_sample(0), None);
-        // SUN: the README's formula, literally, against the rotate.
+        // SUN: the table's formula, literally, against the rotate.
         for v in [1u16, 7, 8, 1234, 0x8001, 0xFFFF, 12000] {
             let mm = ((((v as u32) >> 3) | ((v as u32) << 13)) & 0xFFFF) as f32;
             assert_eq!(SunRotated.decode_sample(v), Some(mm / 1000.0));
@@ -764,9 +765,9 @@ mod tests {
             } else {
                 (e.decode_sample(100).unwrap(), e.decode_sample(200).unwrap())
             };
-            // Kinect raw "disparity" grows with distance under the README's own formula
-            // (351.3/(1092.5 − v)), although the README table's last column says "nearer"; the formula
-            // is the one confirmed by nyu/derived (see tests/scene.rs).
+            // Kinect raw "disparity" grows with distance under its formula (351.3/(1092.5 − v)),
+            // although a disparity would shrink; the formula is the one confirmed by nyu/derived (see
+            // tests/scene.rs).
             let larger_is_nearer = matches!(e, IphoneDisparity | RelativeNearBright);
             assert_eq!(b < a, larger_is_nearer, "{e}");
         }

@@ -5,7 +5,7 @@ use ndarray::{Array2, Array3, Axis, Zip};
 
 use crate::error::{invalid, HoloError, Result};
 
-/// An RGB-D frame, the SDK's input (`DESIGN.md` §2).
+/// An RGB-D frame, the SDK's input (`docs/CONVENTIONS.md` §2, §4).
 ///
 /// * `amplitude`: `[3, H, W]`, channels R, G, B; field amplitude = √(linear intensity) after sRGB decoding
 ///   (see [`crate::color::srgb8_to_amplitude`]), nominally in `[0, 1]`.
@@ -147,7 +147,7 @@ pub struct LdiLayer {
 }
 
 /// A layered depth image: per pixel, up to `L` scene points sorted front to back (layer 0 = what an
-/// RGB-D camera sees). The TensorHolo CNN takes `L = 5` for LDI input (`DESIGN.md` §3).
+/// RGB-D camera sees). The TensorHolo CNN takes `L = 5` for LDI input (`docs/CONVENTIONS.md` §7.1).
 #[derive(Debug, Clone, PartialEq)]
 pub struct LayeredDepthImage {
     layers: Vec<LdiLayer>,

@@ -2,24 +2,34 @@
 //! and a built-in procedural scene.
 //!
 //! * [`RgbdFrame`]: `[3, H, W]` linear amplitude (R, G, B) + `[H, W]` normalised depth `d ∈ [0,1]`,
-//!   0 = near (`DESIGN.md` §2).
+//!   0 = near (`docs/CONVENTIONS.md` §4).
 //! * [`LayeredDepthImage`] / [`LdiLayer`]: Shade et al. 1998, the LDI input of the paper's Fig. 1.
-//! * Depth from files ([`load_rgbd`]): [`decode_depth_file`] with a [`DepthEncoding`] (one per row of
-//!   `shared/data/README.md`) → [`normalise_depth`] with a [`DepthRange`] and a [`DepthMapping`] (linear
-//!   in diopters by default) → [`fill_invalid`] (holes take the farthest neighbouring depth, before any
-//!   resizing, never read as near) → [`RgbdFrame::resize`].
+//! * Depth from files ([`load_rgbd`]): [`decode_depth_file`] with a [`DepthEncoding`] (one per row of the
+//!   encoding table, `docs/CONVENTIONS.md` §6) → [`normalise_depth`] with a [`DepthRange`] and a
+//!   [`DepthMapping`] (linear in diopters by default) → [`fill_invalid`] (holes take the farthest
+//!   neighbouring depth, before any resizing, never read as near) → [`RgbdFrame::resize`].
 //! * Phone camera buffers ([`CameraFrame::to_rgbd`]): an interleaved 8-bit colour buffer ([`ColorFormat`])
 //!   and a depth buffer in the sensor's format ([`DepthFormat`]: AVDepthData, ARCore, `DEPTH16`), with row
 //!   strides, a [`Rotation`] and a [`Fit`] to the hologram resolution.
 //! * [`procedural`]: a deterministic test scene with near, mid and far textured objects and occlusions.
-//! * [`random`]: random textured scenes as LDIs ([`random_ldi`]), the input side of the training dataset
-//!   (paper section "MIT-CGH-4K-V2"), built by per-pixel depth sorting ([`ldi_from_fragments`]).
+#![cfg_attr(
+    feature = "research",
+    doc = "* [`random`] (feature `research`): random textured scenes as LDIs ([`random_ldi`]), the input \
+           side of the training dataset (paper section \"MIT-CGH-4K-V2\"), built by per-pixel depth \
+           sorting ([`ldi_from_fragments`])."
+)]
+#![cfg_attr(
+    not(feature = "research"),
+    doc = "* `random` (feature `research`, off in this build): random textured scenes for the training \
+           dataset."
+)]
 
 mod camera;
 mod depth;
 mod frame;
 mod load;
 pub mod procedural;
+#[cfg(feature = "research")]
 pub mod random;
 
 pub use camera::{
@@ -33,6 +43,7 @@ pub use depth::{
 pub use frame::{LayeredDepthImage, LdiLayer, RgbdFrame};
 pub use load::{load_rgb, load_rgbd, DepthReport, LoadOptions};
 pub use procedural::{default_scene, default_scene_ldi};
+#[cfg(feature = "research")]
 pub use random::{
     ldi_from_fragments, list_photos, random_ldi, Fragment, RandomSceneConfig, RandomSceneGenerator,
 };

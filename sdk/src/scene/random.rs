@@ -16,7 +16,7 @@
 //! linear colour gradients, stripes (square or sinusoidal, optionally warped by noise), checkers,
 //! mixtures of two patterns through a noise mask, multiplicative noise shading, and optionally random
 //! crops of photos from a folder. Colours are drawn in sRGB and stored as amplitude = √(linear
-//! intensity) in `[0, 1]` (`DESIGN.md` §2).
+//! intensity) in `[0, 1]` (`docs/CONVENTIONS.md` §5.5).
 //!
 //! Everything is a pure function of ([`RandomSceneConfig`], seed): one [`ChaCha8Rng`] per scene, seeded
 //! with [`SeedableRng::seed_from_u64`]. Scenes can therefore be generated in parallel and any single one
@@ -40,7 +40,7 @@ use crate::error::{invalid, HoloError, Result};
 ///
 /// Lengths marked "fraction" are relative to the short image side `s = min(height, width)`, so a scene
 /// looks the same at any resolution; thin-structure widths are in pixels. Depths are normalised
-/// (`d ∈ [0, 1]`, 0 = near, `DESIGN.md` §2). Ranges are `[min, max]`, inclusive.
+/// (`d ∈ [0, 1]`, 0 = near, `docs/CONVENTIONS.md` §4). Ranges are `[min, max]`, inclusive.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RandomSceneConfig {
