@@ -373,10 +373,10 @@ fn rotations_turn_colour_and_depth_together_as_documented() {
     for (k, rot) in ALL_ROT.into_iter().enumerate() {
         let f = native(&frame(color.clone(), depth.clone(), rot), &options);
         assert_eq!(f.depth, expected_d, "{rot:?} depth");
-        for c in 0..3 {
+        for (c, expected) in expected_a.iter().enumerate() {
             assert_eq!(
                 f.amplitude.index_axis(Axis(0), c),
-                expected_a[c],
+                expected,
                 "{rot:?} channel {c}"
             );
         }

@@ -686,10 +686,23 @@ impl CameraFrame<'_> {
     }
 
     /// Converts the camera frame to an [`RgbdFrame`] of `height × width` pixels (`amplitude` `[3, height,
-    /// width]` linear, R, G, B; `depth` `[height, width]`, `d ∈ [0,1]`, 0 = near) and a report, following
-    /// the steps of the [module documentation](self): validate → decode → rotate → nearest-neighbour depth
-    /// to colour resolution → [`normalise_depth`] + [`fill_invalid`] → [`Fit`] with
-    /// [`RgbdFrame::resize`].
+    /// width]` linear, R, G, B; `depth` `[height, width]`, `d ∈ [0,1]`, 0 = near) and a report:
+    /// 1. validates the target size, [`FrameOptions::range`] and both buffers ([`ColorImage::validate`],
+    ///    [`DepthImage::validate`]) before allocating anything;
+    /// 2. + 3. decodes both buffers with the [`Rotation`] applied ([`ColorImage::to_amplitude`],
+    ///    [`DepthImage::decode`]);
+    /// 4. resamples depth (values and validity) to the colour resolution by nearest neighbour, never
+    ///    mixing depths across an edge. Both buffers must cover the same field of view (as `AVDepthData`
+    ///    and ARCore's depth image do): the depth map is stretched onto the colour frame, whatever its
+    ///    aspect ratio (a mismatch over 2 % is logged as a warning);
+    /// 5. [`normalise_depth`] with `options.range` (automatic: 1st/99th percentiles of the valid depths of
+    ///    the whole rotated frame) and `options.mapping`, then [`fill_invalid`] (holes take the farthest
+    ///    neighbouring depth, never near);
+    /// 6. fits to `height × width` with `options.fit` ([`Fit`]), resampling with [`RgbdFrame::resize`]
+    ///    (Catmull-Rom in intensity for amplitude, nearest for depth).
+    ///
+    /// Memory: the decoded colour and depth at colour resolution, the output, and for [`Fit::Crop`] one
+    /// copy of the cropped region.
     ///
     /// With [`Fit::Stretch`] at the colour buffer's own (rotated) size, and a depth buffer of that size,
     /// the result equals [`crate::scene::load_rgbd`] on the same pixels.
