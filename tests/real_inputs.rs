@@ -4,6 +4,9 @@
 //! A near-focused reconstruction must be sharper on the near object than a far-focused one, and the reverse on
 //! the background, where "sharper" means a smaller gradient-domain error against the input
 //! ([`detail_error`]).
+//!
+//! Also: phone-style camera buffers (`scene::CameraFrame`) built from a real RGB-D frame give exactly the
+//! frame `load_rgbd` reads from the files.
 
 use std::path::Path;
 
@@ -11,7 +14,10 @@ use ndarray::{Array2, Array3};
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
 use tensorholo::reference::ReferencePipeline;
-use tensorholo::scene::{load_rgbd, DepthEncoding, LoadOptions, RgbdFrame};
+use tensorholo::scene::{
+    load_rgbd, CameraFrame, ColorFormat, ColorImage, DepthEncoding, DepthFormat, DepthImage, Fit,
+    FrameOptions, LoadOptions, RgbdFrame, Rotation,
+};
 use tensorholo::synthesis::{SceneLayer, SmLbm};
 use tensorholo_integration_tests::{detail_error, shared_data};
 
@@ -157,4 +163,89 @@ fn shipped_cnn_near_focus_sharpens_the_redwood_foreground_far_focus_the_backgrou
         (240, 320),
         shipped_cnn,
     );
+}
+
+/// The Redwood frame as raw camera buffers (packed RGB8 + little-endian `MillimetresU16`), stretched at
+/// its native 480×640, equals `load_rgbd` with `mm16` exactly (same automatic range, same hole filling);
+/// as BGRA with padded rows and a 90° rotation it equals that frame rotated clockwise.
+#[test]
+fn redwood_camera_buffers_equal_load_rgbd() {
+    let rgb_path = shared_data("redwood_livingroom_seq/color/00000.jpg");
+    let depth_path = shared_data("redwood_livingroom_seq/depth/00000.png");
+    let (expected, load_report) = load_rgbd(
+        &rgb_path,
+        &depth_path,
+        DepthEncoding::Millimetres16,
+        &LoadOptions::default(),
+    )
+    .expect("load_rgbd");
+    let rgb = image::open(&rgb_path).expect("jpeg").to_rgb8();
+    let depth = match image::open(&depth_path).expect("png") {
+        image::DynamicImage::ImageLuma16(d) => d,
+        other => panic!("expected 16-bit grey depth, got {:?}", other.color()),
+    };
+    let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+    assert_eq!((h, w), (480, 640));
+    assert_eq!((depth.height() as usize, depth.width() as usize), (h, w));
+    let depth_bytes: Vec<u8> = depth
+        .as_raw()
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let frame = CameraFrame {
+        color: ColorImage {
+            data: rgb.as_raw(),
+            format: ColorFormat::Rgb8,
+            width: w,
+            height: h,
+            row_stride: 0,
+        },
+        depth: DepthImage {
+            data: &depth_bytes,
+            format: DepthFormat::MillimetresU16,
+            width: w,
+            height: h,
+            row_stride: 0,
+        },
+        rotation: Rotation::Deg0,
+    };
+    let options = FrameOptions {
+        fit: Fit::Stretch,
+        ..FrameOptions::default()
+    };
+    let (got, report) = frame.to_rgbd(h, w, &options).expect("camera frame");
+    assert_eq!(got, expected);
+    assert_eq!(report.range_used, load_report.range_used);
+    assert_eq!(report.invalid_fraction, load_report.invalid_fraction);
+    assert!(
+        report.invalid_fraction > 0.05,
+        "the frame has holes to fill"
+    );
+
+    // BGRA with 24 bytes of row padding (no padding after the last row), rotated 90° clockwise.
+    let stride = 4 * w + 24;
+    let mut bgra = vec![0u8; stride * (h - 1) + 4 * w];
+    for (i, p) in rgb.pixels().enumerate() {
+        let o = (i / w) * stride + (i % w) * 4;
+        bgra[o..o + 4].copy_from_slice(&[p[2], p[1], p[0], 255]);
+    }
+    let rotated = CameraFrame {
+        color: ColorImage {
+            data: &bgra,
+            format: ColorFormat::Bgra8,
+            width: w,
+            height: h,
+            row_stride: stride,
+        },
+        rotation: Rotation::Deg90,
+        ..frame
+    };
+    let (got, report) = rotated.to_rgbd(w, h, &options).expect("rotated frame");
+    assert_eq!(report.range_used, load_report.range_used);
+    // Clockwise: output (y, x) shows buffer pixel (h − 1 − x, y).
+    let mut turned = expected.clone();
+    turned.depth = Array2::from_shape_fn((w, h), |(y, x)| expected.depth[[h - 1 - x, y]]);
+    turned.amplitude =
+        Array3::from_shape_fn((3, w, h), |(c, y, x)| expected.amplitude[[c, h - 1 - x, y]]);
+    assert_eq!(got, turned);
 }

@@ -23,6 +23,8 @@
 //! Memory: the decoded colour `[3, H, W]` f32 and depth at colour resolution, the fitted output, and for
 //! [`Fit::Crop`] one copy of the cropped region; nothing else at full resolution.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use ndarray::{s, Array2, Array3};
 use serde::Serialize;
 
@@ -564,6 +566,9 @@ pub struct CameraFrameReport {
     pub depth_size: (usize, usize),
 }
 
+/// Set once the aspect-ratio mismatch of step 4 has been logged (once per process, not per frame).
+static ASPECT_WARNED: AtomicBool = AtomicBool::new(false);
+
 /// Checks a target `height × width` for an [`RgbdFrame`] (non-zero, `3 · H · W` f32 values addressable).
 fn check_target(height: usize, width: usize) -> Result<()> {
     if height == 0 {
@@ -686,10 +691,23 @@ impl CameraFrame<'_> {
     }
 
     /// Converts the camera frame to an [`RgbdFrame`] of `height × width` pixels (`amplitude` `[3, height,
-    /// width]` linear, R, G, B; `depth` `[height, width]`, `d ∈ [0,1]`, 0 = near) and a report, following
-    /// the steps of the [module documentation](self): validate → decode → rotate → nearest-neighbour depth
-    /// to colour resolution → [`normalise_depth`] + [`fill_invalid`] → [`Fit`] with
-    /// [`RgbdFrame::resize`].
+    /// width]` linear, R, G, B; `depth` `[height, width]`, `d ∈ [0,1]`, 0 = near) and a report:
+    /// 1. validates the target size, [`FrameOptions::range`] and both buffers ([`ColorImage::validate`],
+    ///    [`DepthImage::validate`]) before allocating anything;
+    /// 2. decodes both buffers ([`ColorImage::to_amplitude`], [`DepthImage::decode`]),
+    /// 3. applying the [`Rotation`] to both while decoding (no extra copy);
+    /// 4. resamples depth (values and validity) to the colour resolution by nearest neighbour, never
+    ///    mixing depths across an edge. Both buffers must cover the same field of view (as `AVDepthData`
+    ///    and ARCore's depth image do): the depth map is stretched onto the colour frame, whatever its
+    ///    aspect ratio (a mismatch over 2 % is logged as a warning, once per process);
+    /// 5. [`normalise_depth`] with `options.range` (automatic: 1st/99th percentiles of the valid depths of
+    ///    the whole rotated frame) and `options.mapping`, then [`fill_invalid`] (holes take the farthest
+    ///    neighbouring depth, never near);
+    /// 6. fits to `height × width` with `options.fit` ([`Fit`]), resampling with [`RgbdFrame::resize`]
+    ///    (Catmull-Rom in intensity for amplitude, nearest for depth).
+    ///
+    /// Memory: the decoded colour and depth at colour resolution, the output, and for [`Fit::Crop`] one
+    /// copy of the cropped region.
     ///
     /// With [`Fit::Stretch`] at the colour buffer's own (rotated) size, and a depth buffer of that size,
     /// the result equals [`crate::scene::load_rgbd`] on the same pixels.
@@ -740,10 +758,10 @@ impl CameraFrame<'_> {
         } else {
             // Aspect ratios differing by more than 2 %: the depth map is stretched (same field of view).
             let (a, b) = (hd as f64 * wc as f64, hc as f64 * wd as f64);
-            if (a / b - 1.0).abs() > 0.02 {
+            if (a / b - 1.0).abs() > 0.02 && !ASPECT_WARNED.swap(true, Ordering::Relaxed) {
                 log::warn!(
                     "depth buffer {hd}x{wd} and colour buffer {hc}x{wc} (after rotation) differ in aspect \
-                     ratio; the depth map is stretched onto the colour frame (same field of view assumed)"
+                     ratio; the depth map is stretched onto the colour frame (same field of view assumed); warned once"
                 );
             }
             DecodedDepth {
@@ -755,8 +773,9 @@ impl CameraFrame<'_> {
 
         // 5. Normalise, then fill holes (never read as near).
         let (d, range_used) = normalise_depth(&decoded, options.range, options.mapping)?;
-        let filled = fill_invalid(&d, &decoded.valid)?;
-        drop((d, decoded));
+        let DecodedDepth { valid, .. } = decoded; // the metric values are no longer needed
+        let filled = fill_invalid(&d, &valid)?;
+        drop((d, valid));
         let frame = RgbdFrame::new(amplitude, filled)?;
 
         // 6. Fit to the hologram's size.
