@@ -338,7 +338,7 @@ fn for_each_rotated(
 
 /// Error for an internal shape inconsistency (cannot happen for validated input).
 fn shape_error(e: ndarray::ShapeError) -> HoloError {
-    HoloError::InvalidData(format!("internal shape error: {e}"))
+    HoloError::Internal(format!("shape error on validated input: {e}"))
 }
 
 impl ColorImage<'_> {
