@@ -47,8 +47,10 @@ pub fn version() -> String {
 /// Every failure reported to an app. Each variant carries a human-readable `message` naming the offending
 /// input (the core's [`tensorholo::HoloError`] text); the variant says what the app can do about it.
 ///
-/// Foreign names: Python `tensorholo.TensorholoError.InvalidInput` (etc., subclasses of `Exception`), Kotlin
-/// `tensorholo.TensorholoException.InvalidInput`, Swift `TensorholoError.InvalidInput(message:)`.
+/// Foreign names: Python `tensorholo.TensorholoError.InvalidInput` (etc., subclasses of `Exception`, text in
+/// `e.message`), Kotlin `tensorholo.TensorholoException.InvalidInput` (text in `e.reason`: a Kotlin exception
+/// cannot have a `message` field, see `uniffi.toml`), Swift `TensorholoError.InvalidInput(message:)`.
+/// A new variant needs its Kotlin rename line in `uniffi.toml`.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, uniffi::Error)]
 pub enum TensorholoError {
     /// A parameter, buffer or file passed by the caller is unusable (wrong size or range, unreadable file…):

@@ -1108,8 +1108,10 @@ public func FfiConverterTypeBytes8Demo_lower(_ value: Bytes8Demo) -> RustBuffer 
  * Every failure reported to an app. Each variant carries a human-readable `message` naming the offending
  * input (the core's [`tensorholo::HoloError`] text); the variant says what the app can do about it.
  *
- * Foreign names: Python `tensorholo.TensorholoError.InvalidInput` (etc., subclasses of `Exception`), Kotlin
- * `tensorholo.TensorholoException.InvalidInput`, Swift `TensorholoError.InvalidInput(message:)`.
+ * Foreign names: Python `tensorholo.TensorholoError.InvalidInput` (etc., subclasses of `Exception`, text in
+ * `e.message`), Kotlin `tensorholo.TensorholoException.InvalidInput` (text in `e.reason`: a Kotlin exception
+ * cannot have a `message` field, see `uniffi.toml`), Swift `TensorholoError.InvalidInput(message:)`.
+ * A new variant needs its Kotlin rename line in `uniffi.toml`.
  */
 public 
 enum TensorholoError: Swift.Error, Equatable, Hashable, Foundation.LocalizedError {
