@@ -1,21 +1,33 @@
+# shellcheck shell=bash
 # Helpers shared by the binding checks (sourced, not run).
 #
-#   bindings_dir [DIR]   echo the directory of generated bindings to test: DIR if given, else
-#                        $TENSORHOLO_BINDINGS_DIR, else a fresh temp dir filled by bindings/generate.sh
+#   use_bindings [DIR]   set $dir to the directory of generated bindings to test: DIR if given, else
+#                        $TENSORHOLO_BINDINGS_DIR, else a temp dir filled now by bindings/generate.sh
+#   tmp_dir NAME         set $tmp to a new temp dir, removed when the script exits
 #   ensure_apt PKG...    install Debian packages if missing (quiet, idempotent); return 1 if impossible
 #   skip MESSAGE         print a clear SKIPPED line and exit 0 (only where a tool cannot be installed)
 
 BINDINGS_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+# shellcheck disable=SC2034 # used by the check scripts
 REPO_ROOT="$(cd "$BINDINGS_ROOT/.." && pwd)"
 
-bindings_dir() {
-  local dir="${1:-${TENSORHOLO_BINDINGS_DIR:-}}"
+CLEANUP=()
+trap 'rm -rf "${CLEANUP[@]}"' EXIT
+
+tmp_dir() {
+  tmp="$(mktemp -d "${TMPDIR:-/tmp}/tensorholo-$1.XXXXXX")"
+  CLEANUP+=("$tmp")
+}
+
+use_bindings() {
+  dir="${1:-${TENSORHOLO_BINDINGS_DIR:-}}"
   if [ -z "$dir" ]; then
-    dir="$(mktemp -d "${TMPDIR:-/tmp}/tensorholo-bindings.XXXXXX")"
-    "$BINDINGS_ROOT/generate.sh" "$dir" >&2
+    tmp_dir bindings
+    dir="$tmp"
+    "$BINDINGS_ROOT/generate.sh" "$dir"
   fi
   [ -f "$dir/python/tensorholo.py" ] || { echo "no generated bindings in $dir (run bindings/generate.sh)" >&2; return 1; }
-  (cd "$dir" && pwd)
+  dir="$(cd "$dir" && pwd)"
 }
 
 ensure_apt() {

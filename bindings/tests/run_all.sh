@@ -28,9 +28,9 @@ step() {
   line="$(printf '%-16s %4ds  %s' "$name" $((SECONDS - start)) "$result")"
   summary+=("$line")
   echo "-- bindings: $line"
-  if [ $status != 0 ]; then
+  if [ "$status" != 0 ]; then
     printf '%s\n' "== bindings summary" "${summary[@]}"
-    exit $status
+    exit "$status"
   fi
 }
 

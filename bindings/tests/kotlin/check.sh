@@ -8,10 +8,10 @@
 # BINDINGS_DIR: output of bindings/generate.sh (default $TENSORHOLO_BINDINGS_DIR, else generated now).
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
-# shellcheck source=../lib.sh
+# shellcheck source=bindings/tests/lib.sh
 . "$here/../lib.sh"
 
-dir="$(bindings_dir "${1:-}")"
+use_bindings "${1:-}"
 
 command -v java >/dev/null 2>&1 || ensure_apt default-jre-headless ||
   skip "kotlin bindings: no java and it cannot be installed"
@@ -27,8 +27,8 @@ if [ ! -x "$kotlinc" ] || [ "$installed" != "$wanted" ]; then
   (cd "$here" && npm ci --no-audit --no-fund --loglevel=error >/dev/null)
 fi
 
-build="$(mktemp -d "${TMPDIR:-/tmp}/tensorholo-kotlin.XXXXXX")"
-trap 'rm -rf "$build"' EXIT
+tmp_dir kotlin
+build="$tmp"
 # -include-runtime: the Kotlin standard library goes into the jar; JNA stays on the class path.
 "$kotlinc" -nowarn -include-runtime -cp "$jna" -d "$build/check.jar" \
   "$dir/kotlin/tensorholo/tensorholo.kt" "$here/Main.kt" 2>&1 | grep -v '^info: ' || true

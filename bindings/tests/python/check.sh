@@ -6,10 +6,10 @@
 # BINDINGS_DIR: output of bindings/generate.sh (default $TENSORHOLO_BINDINGS_DIR, else generated now).
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
-# shellcheck source=../lib.sh
+# shellcheck source=bindings/tests/lib.sh
 . "$here/../lib.sh"
 
-dir="$(bindings_dir "${1:-}")"
+use_bindings "${1:-}"
 venv="${TENSORHOLO_BINDINGS_VENV:-$here/.venv}"
 
 command -v python3 >/dev/null 2>&1 || ensure_apt python3 || skip "python bindings: no python3 and it cannot be installed"

@@ -63,6 +63,7 @@ def test_wrong_size_raises_invalid_input():
         echo.invert(tensorholo.Bytes8Demo(width=3, height=2, data=bytes(5)))
     assert isinstance(e.value, tensorholo.TensorholoError)
     assert isinstance(e.value, Exception)
+    assert e.value.message == "image data has 5 bytes, expected width * height = 3 * 2 = 6"
     assert "5 bytes" in str(e.value)
     with pytest.raises(tensorholo.TensorholoError.InvalidInput, match="at most 100"):
         echo.invert(tensorholo.Bytes8Demo(width=20, height=20, data=bytes(400)))

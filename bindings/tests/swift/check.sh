@@ -17,10 +17,10 @@
 # check use exactly the compiler's target-aware headers.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
-# shellcheck source=../lib.sh
+# shellcheck source=bindings/tests/lib.sh
 . "$here/../lib.sh"
 
-dir="$(bindings_dir "${1:-}")"
+use_bindings "${1:-}"
 swift_dir="$dir/swift"
 swift="$swift_dir/Tensorholo.swift"
 header="$swift_dir/TensorholoFFI.h"
@@ -34,8 +34,8 @@ command -v clang >/dev/null 2>&1 || ensure_apt clang || skip "swift bindings: no
 command -v nm >/dev/null 2>&1 || ensure_apt binutils || skip "swift bindings: no nm and it cannot be installed"
 command -v python3 >/dev/null 2>&1 || ensure_apt python3 || skip "swift bindings: no python3 and it cannot be installed"
 
-work="$(mktemp -d "${TMPDIR:-/tmp}/tensorholo-swift.XXXXXX")"
-trap 'rm -rf "$work"' EXIT
+tmp_dir swift
+work="$tmp"
 cflags=(-ffreestanding -nostdlibinc -fsyntax-only -std=c11 -Wall -Wextra -Werror -I "$swift_dir")
 
 # 1. The header alone, included from a C file (as a bridging header or the module would include it).
@@ -62,8 +62,8 @@ echo "  module TensorholoFFI imports (arm64-apple-ios) and declares all $n_swift
 # 3. Exported by the library (dynamic symbol table, defined) both ways.
 nm -D --defined-only "$lib" | awk '{print $NF}' | grep -E '^(uniffi|ffi)_tensorholo_ffi_' | sort -u >"$work/lib.syms"
 grep -oE '\b(uniffi|ffi)_tensorholo_ffi_[A-Za-z0-9_]+' "$header" | sort -u >"$work/header.syms"
-missing="$(comm -23 "$work/swift.syms" "$work/lib.syms")"
-[ -z "$missing" ] || { echo "swift check: called by Tensorholo.swift but not exported by $lib:" >&2; echo "$missing" >&2; exit 1; }
+not_exported="$(comm -23 "$work/swift.syms" "$work/lib.syms")"
+[ -z "$not_exported" ] || { echo "swift check: called by Tensorholo.swift but not exported by $lib:" >&2; echo "$not_exported" >&2; exit 1; }
 undeclared="$(comm -13 "$work/header.syms" "$work/lib.syms")"
 [ -z "$undeclared" ] || { echo "swift check: exported by $lib but not in the header (stale bindings?):" >&2; echo "$undeclared" >&2; exit 1; }
 echo "  $lib exports all $n_swift symbols; the header declares all $(wc -l <"$work/lib.syms") it exports"
