@@ -6,7 +6,8 @@
 #   OUT_DIR/python/  tensorholo.py + the library beside it (PYTHONPATH=OUT_DIR/python python3 -c 'import tensorholo')
 #   OUT_DIR/kotlin/  tensorholo/tensorholo.kt (package tensorholo; needs JNA at run time)
 #   OUT_DIR/swift/   Tensorholo.swift, TensorholoFFI.h, TensorholoFFI.modulemap
-# Honours CARGO_TARGET_DIR. Output is not formatted (--no-format), so it is byte-for-byte reproducible
+# Honours CARGO_TARGET_DIR, and TENSORHOLO_PROFILE=debug (default release) to reuse a debug build, as CI
+# does after `cargo test` (the bindings are the same; only the library's speed differs). Output is not formatted (--no-format), so it is byte-for-byte reproducible
 # whatever formatters are installed (bindings/check-generated.sh compares it with bindings/generated/).
 set -euo pipefail
 
@@ -28,10 +29,15 @@ esac
 
 # One build for both: the `cli` feature only adds the generator binary; the library's exported symbols and
 # uniffi metadata are the same as without it.
-cargo build --release --locked --quiet -p tensorholo-ffi --features cli --lib --bin uniffi-bindgen
+profile="${TENSORHOLO_PROFILE:-release}"
+case "$profile" in
+  release) cargo build --release --locked --quiet -p tensorholo-ffi --features cli --lib --bin uniffi-bindgen ;;
+  debug) cargo build --locked --quiet -p tensorholo-ffi --features cli --lib --bin uniffi-bindgen ;;
+  *) echo "generate.sh: TENSORHOLO_PROFILE is release or debug, not $profile" >&2; exit 2 ;;
+esac
 
-lib="$target/release/$lib_file"
-bindgen="$target/release/uniffi-bindgen"
+lib="$target/$profile/$lib_file"
+bindgen="$target/$profile/uniffi-bindgen"
 for f in "$lib" "$bindgen"; do
   [ -f "$f" ] || { echo "generate.sh: $f was not built" >&2; exit 1; }
 done

@@ -13,15 +13,16 @@
 //! `Vec<u8>` (Python `bytes`, Kotlin `ByteArray`, Swift `Data`), row-major, with its `width`/`height`
 //! beside it. Do not export `async` functions: the Kotlin bindings would then need `kotlinx.coroutines`.
 //!
-//! The `demo` module is a placeholder surface proving the byte path, errors and callbacks from a Rust
-//! thread in every language (`bindings/tests/`); it goes once the real API is exported.
+//! The exported API ([`api`]): `HologramGenerator` (camera frames → `SlmPatterns`, `preview`, `info`,
+//! `benchmark`, `stream`), `HologramStream`, the `PatternsListener` apps implement, `pack_rgba`, `version`,
+//! and `TensorholoError`.
 
 // uniffi's `setup_scaffolding!` and `#[uniffi::export]` macros expand to `extern "C"` functions with
 // `#[no_mangle]` and raw-pointer handling, which the workspace-wide `unsafe_code = "deny"` would reject.
 // Everything this crate writes by hand is safe code.
 #![allow(unsafe_code)]
 
-mod demo;
+pub mod api;
 
 // `guard` is useless without unwinding: refuse to build (any profile, or `-C panic=abort` in RUSTFLAGS)
 // rather than ship a library whose bugs kill the app's process.
@@ -30,7 +31,7 @@ compile_error!(
     "tensorholo-ffi needs panic = \"unwind\" (see `guard`); do not set panic = \"abort\""
 );
 
-pub use demo::{demo_panic, Bytes8Demo, DemoListener, Echo};
+pub use api::*;
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
@@ -83,7 +84,6 @@ pub enum TensorholoError {
 impl From<tensorholo::HoloError> for TensorholoError {
     /// Maps every core error to the variant an app acts on; the message is the core's full text.
     /// The match is exhaustive on purpose: a new core variant must be classified here.
-    /// (If the core gains an `Internal` variant, map it to [`TensorholoError::Internal`].)
     fn from(error: tensorholo::HoloError) -> Self {
         use tensorholo::HoloError as E;
         let message = error.to_string();
@@ -99,7 +99,7 @@ impl From<tensorholo::HoloError> for TensorholoError {
             E::ModelLoad { .. } | E::ModelContract { .. } | E::ModelMetadata { .. } => {
                 Self::InvalidModel { message }
             }
-            E::ModelRun(_) => Self::Internal { message },
+            E::ModelRun(_) | E::Internal(_) => Self::Internal { message },
         }
     }
 }
@@ -247,6 +247,7 @@ mod tests {
                 "InvalidModel",
             ),
             (HoloError::ModelRun("tract failed".into()), "Internal"),
+            (HoloError::Internal("a worker stopped".into()), "Internal"),
         ]
     }
 

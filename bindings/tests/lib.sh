@@ -5,6 +5,9 @@
 #                        $TENSORHOLO_BINDINGS_DIR, else a temp dir filled now by bindings/generate.sh
 #   tmp_dir NAME         set $tmp to a new temp dir, removed when the script exits
 #   ensure_apt PKG...    install Debian packages if missing (quiet, idempotent); return 1 if impossible
+#   py_venv              set $py to the python of the checks' venv (bindings/tests/python/.venv, or
+#                        $TENSORHOLO_BINDINGS_VENV), created from python/requirements.txt when missing
+#   holo_binary          print the path of the holo binary to compare with ($HOLO, else target/{release,debug})
 #   skip MESSAGE         print a clear SKIPPED line and exit 0 (only where a tool cannot be installed)
 
 BINDINGS_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -64,4 +67,34 @@ ensure_apt() {
 skip() {
   echo "SKIPPED: $*"
   exit 0
+}
+
+py_venv() {
+  local venv="${TENSORHOLO_BINDINGS_VENV:-$BINDINGS_ROOT/tests/python/.venv}"
+  local req="$BINDINGS_ROOT/tests/python/requirements.txt"
+  command -v python3 >/dev/null 2>&1 || ensure_apt python3 || skip "python: no python3 and it cannot be installed"
+  if [ ! -x "$venv/bin/python" ]; then
+    if ! python3 -m venv "$venv" >/dev/null 2>&1; then
+      rm -rf "$venv"
+      ensure_apt python3-venv || skip "python: python3 has no venv module and python3-venv cannot be installed"
+      python3 -m venv "$venv"
+    fi
+  fi
+  # Install only when requirements.txt changed since the last install (idempotent and quiet).
+  if ! cmp -s "$req" "$venv/.tensorholo-requirements.txt"; then
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$req"
+    cp "$req" "$venv/.tensorholo-requirements.txt"
+  fi
+  py="$venv/bin/python"
+}
+
+holo_binary() {
+  if [ -n "${HOLO:-}" ]; then echo "$HOLO"; return; fi
+  local target="${CARGO_TARGET_DIR:-$REPO_ROOT/target}" newest=""
+  case "$target" in /*) ;; *) target="$REPO_ROOT/$target" ;; esac
+  for f in "$target/release/holo" "$target/debug/holo"; do
+    if [ -x "$f" ] && { [ -z "$newest" ] || [ "$f" -nt "$newest" ]; }; then newest="$f"; fi
+  done
+  [ -n "$newest" ] || { echo "no holo binary in $target: build it (cargo build -p holo) or set HOLO" >&2; return 1; }
+  echo "$newest"
 }

@@ -503,6 +503,38 @@ fileprivate struct FfiConverterUInt64: FfiConverterPrimitive {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterFloat: FfiConverterPrimitive {
+    typealias FfiType = Float
+    typealias SwiftType = Float
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Float {
+        return try lift(readFloat(&buf))
+    }
+
+    public static func write(_ value: Float, into buf: inout [UInt8]) {
+        writeFloat(&buf, lower(value))
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterDouble: FfiConverterPrimitive {
+    typealias FfiType = Double
+    typealias SwiftType = Double
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Double {
+        return try lift(readDouble(&buf))
+    }
+
+    public static func write(_ value: Double, into buf: inout [UInt8]) {
+        writeDouble(&buf, lower(value))
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterBool : FfiConverter {
     typealias FfiType = Int8
     typealias SwiftType = Bool
@@ -592,27 +624,52 @@ fileprivate struct FfiConverterData: FfiConverterRustBuffer {
 
 
 /**
- * Receives the values of [`Echo::stream`], implemented in the foreign language. Its methods are called
- * from a Rust thread that is not the caller's, one call at a time, in order.
+ * RGB-D camera frames → SLM patterns with the shipped CNNs. Any thread may call it; calls run one at a time.
  */
-public protocol DemoListener: AnyObject, Sendable {
+public protocol HologramGeneratorProtocol: AnyObject, Sendable {
     
     /**
-     * The `index`-th value (0-based): an 8 x 1 image whose bytes are `index` in little-endian order.
+     * Renders the built-in test scene `frames` times (after one warm-up) at this generator's resolution and
+     * returns the median stage timings, so an app can show what its device does.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for 0 frames.
      */
-    func onValue(index: UInt64, value: Bytes8Demo) 
+    func benchmark(frames: UInt32) throws  -> BenchmarkReport
     
     /**
-     * Called once after the values when the stream was asked to end with an error.
+     * The models, precision, pre-filter and CNN plan this generator runs.
      */
-    func onError(error: TensorholoError) 
+    func info() throws  -> GeneratorInfo
+    
+    /**
+     * Renders `frame` and returns what a viewer sees focused at normalised depth `focus` ∈ [0, 1]
+     * (0 = near), for the phone's screen.
+     *
+     * Errors: as [`HologramGenerator::render`], and for a focus outside [0, 1].
+     */
+    func preview(frame: RgbdFrame, focus: Float) throws  -> Preview
+    
+    /**
+     * Renders one camera frame into SLM patterns.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for buffers that do not match their sizes, strides and
+     * formats, or a depth map without one valid pixel; the generator stays usable.
+     */
+    func render(frame: RgbdFrame) throws  -> SlmPatterns
+    
+    /**
+     * Starts a video stream: [`HologramStream::push`] frames, results reach `listener` in frame order on a
+     * background thread. The queue holds 2 frames and drops the oldest when full.
+     *
+     * Errors: [`TensorholoError::Internal`] if the worker thread cannot start.
+     */
+    func stream(listener: PatternsListener) throws  -> HologramStream
     
 }
 /**
- * Receives the values of [`Echo::stream`], implemented in the foreign language. Its methods are called
- * from a Rust thread that is not the caller's, one call at a time, in order.
+ * RGB-D camera frames → SLM patterns with the shipped CNNs. Any thread may call it; calls run one at a time.
  */
-open class DemoListenerImpl: DemoListener, @unchecked Sendable {
+open class HologramGenerator: HologramGeneratorProtocol, @unchecked Sendable {
     fileprivate let handle: UInt64
 
     /// Used to instantiate a [FFIObject] without an actual handle, for fakes in tests, mostly.
@@ -649,7 +706,232 @@ open class DemoListenerImpl: DemoListener, @unchecked Sendable {
     @_documentation(visibility: private)
 #endif
     public func uniffiCloneHandle() -> UInt64 {
-        return try! rustCall { uniffi_tensorholo_ffi_fn_clone_demolistener(self.handle, $0) }
+        return try! rustCall { uniffi_tensorholo_ffi_fn_clone_hologramgenerator(self.handle, $0) }
+    }
+    /**
+     * Loads the shipped CNNs and prepares everything for `config.width × config.height` frames (this times
+     * the CNN plans on the device: up to a few seconds).
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for a bad configuration (sizes, NaN or negative numbers,
+     * layers other than 8/15/30, a required pre-filter that is not shipped for the offset);
+     * [`TensorholoError::InvalidModel`] if an embedded model fails its checks.
+     */
+public convenience init(config: GeneratorConfig)throws  {
+    let handle =
+        try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_constructor_hologramgenerator_new(
+        FfiConverterTypeGeneratorConfig_lower(config),uniffiCallStatus
+    )
+}
+    self.init(unsafeFromHandle: handle)
+}
+
+    deinit {
+        if handle == 0 {
+            // Mock objects have handle=0 don't try to free them
+            return
+        }
+
+        try! rustCall { uniffi_tensorholo_ffi_fn_free_hologramgenerator(handle, $0) }
+    }
+
+    
+
+    
+    /**
+     * Renders the built-in test scene `frames` times (after one warm-up) at this generator's resolution and
+     * returns the median stage timings, so an app can show what its device does.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for 0 frames.
+     */
+open func benchmark(frames: UInt32)throws  -> BenchmarkReport  {
+    return try  FfiConverterTypeBenchmarkReport_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_hologramgenerator_benchmark(
+            self.uniffiCloneHandle(),
+        FfiConverterUInt32.lower(frames),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * The models, precision, pre-filter and CNN plan this generator runs.
+     */
+open func info()throws  -> GeneratorInfo  {
+    return try  FfiConverterTypeGeneratorInfo_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_hologramgenerator_info(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Renders `frame` and returns what a viewer sees focused at normalised depth `focus` ∈ [0, 1]
+     * (0 = near), for the phone's screen.
+     *
+     * Errors: as [`HologramGenerator::render`], and for a focus outside [0, 1].
+     */
+open func preview(frame: RgbdFrame, focus: Float)throws  -> Preview  {
+    return try  FfiConverterTypePreview_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_hologramgenerator_preview(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeRgbdFrame_lower(frame),
+        FfiConverterFloat.lower(focus),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Renders one camera frame into SLM patterns.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for buffers that do not match their sizes, strides and
+     * formats, or a depth map without one valid pixel; the generator stays usable.
+     */
+open func render(frame: RgbdFrame)throws  -> SlmPatterns  {
+    return try  FfiConverterTypeSlmPatterns_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_hologramgenerator_render(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeRgbdFrame_lower(frame),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Starts a video stream: [`HologramStream::push`] frames, results reach `listener` in frame order on a
+     * background thread. The queue holds 2 frames and drops the oldest when full.
+     *
+     * Errors: [`TensorholoError::Internal`] if the worker thread cannot start.
+     */
+open func stream(listener: PatternsListener)throws  -> HologramStream  {
+    return try  FfiConverterTypeHologramStream_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_hologramgenerator_stream(
+            self.uniffiCloneHandle(),
+        FfiConverterTypePatternsListener_lower(listener),uniffiCallStatus
+    )
+})
+}
+    
+
+    
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeHologramGenerator: FfiConverter {
+    typealias FfiType = UInt64
+    typealias SwiftType = HologramGenerator
+
+    public static func lift(_ handle: UInt64) throws -> HologramGenerator {
+        return HologramGenerator(unsafeFromHandle: handle)
+    }
+
+    public static func lower(_ value: HologramGenerator) -> UInt64 {
+        return value.uniffiCloneHandle()
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> HologramGenerator {
+        let handle: UInt64 = try readInt(&buf)
+        return try lift(handle)
+    }
+
+    public static func write(_ value: HologramGenerator, into buf: inout [UInt8]) {
+        writeInt(&buf, lower(value))
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeHologramGenerator_lift(_ handle: UInt64) throws -> HologramGenerator {
+    return try FfiConverterTypeHologramGenerator.lift(handle)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeHologramGenerator_lower(_ value: HologramGenerator) -> UInt64 {
+    return FfiConverterTypeHologramGenerator.lower(value)
+}
+
+
+
+
+
+
+/**
+ * A video stream ([`HologramGenerator::stream`]).
+ */
+public protocol HologramStreamProtocol: AnyObject, Sendable {
+    
+    /**
+     * Stops accepting frames, finishes the queued ones and waits: afterwards the listener is called no
+     * more. Calling it again does nothing.
+     */
+    func close() 
+    
+    /**
+     * Frames dropped so far because the queue was full.
+     */
+    func droppedFrames()  -> UInt64
+    
+    /**
+     * Queues a frame without waiting for the hologram and returns its index (0, 1, 2… in push order); when
+     * the queue is full the oldest waiting frame is dropped.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] after [`HologramStream::close`].
+     */
+    func push(frame: RgbdFrame) throws  -> UInt64
+    
+}
+/**
+ * A video stream ([`HologramGenerator::stream`]).
+ */
+open class HologramStream: HologramStreamProtocol, @unchecked Sendable {
+    fileprivate let handle: UInt64
+
+    /// Used to instantiate a [FFIObject] without an actual handle, for fakes in tests, mostly.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public struct NoHandle {
+        public init() {}
+    }
+
+    // TODO: We'd like this to be `private` but for Swifty reasons,
+    // we can't implement `FfiConverter` without making this `required` and we can't
+    // make it `required` without making it `public`.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    required public init(unsafeFromHandle handle: UInt64) {
+        self.handle = handle
+    }
+
+    // This constructor can be used to instantiate a fake object.
+    // - Parameter noHandle: Placeholder value so we can have a constructor separate from the default empty one that may be implemented for classes extending [FFIObject].
+    //
+    // - Warning:
+    //     Any object instantiated with this constructor cannot be passed to an actual Rust-backed object. Since there isn't a backing handle the FFI lower functions will crash.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public init(noHandle: NoHandle) {
+        self.handle = 0
+    }
+
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public func uniffiCloneHandle() -> UInt64 {
+        return try! rustCall { uniffi_tensorholo_ffi_fn_clone_hologramstream(self.handle, $0) }
     }
     // No primary constructor declared for this class.
 
@@ -659,31 +941,195 @@ open class DemoListenerImpl: DemoListener, @unchecked Sendable {
             return
         }
 
-        try! rustCall { uniffi_tensorholo_ffi_fn_free_demolistener(handle, $0) }
+        try! rustCall { uniffi_tensorholo_ffi_fn_free_hologramstream(handle, $0) }
     }
 
     
 
     
     /**
-     * The `index`-th value (0-based): an 8 x 1 image whose bytes are `index` in little-endian order.
+     * Stops accepting frames, finishes the queued ones and waits: afterwards the listener is called no
+     * more. Calling it again does nothing.
      */
-open func onValue(index: UInt64, value: Bytes8Demo)  {try! rustCall() {
+open func close()  {try! rustCall() {
         uniffiCallStatus in
-    uniffi_tensorholo_ffi_fn_method_demolistener_on_value(
-            self.uniffiCloneHandle(),
-        FfiConverterUInt64.lower(index),
-        FfiConverterTypeBytes8Demo_lower(value),uniffiCallStatus
+    uniffi_tensorholo_ffi_fn_method_hologramstream_close(
+            self.uniffiCloneHandle(),uniffiCallStatus
     )
 }
 }
     
     /**
-     * Called once after the values when the stream was asked to end with an error.
+     * Frames dropped so far because the queue was full.
+     */
+open func droppedFrames() -> UInt64  {
+    return try!  FfiConverterUInt64.lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_hologramstream_dropped_frames(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Queues a frame without waiting for the hologram and returns its index (0, 1, 2… in push order); when
+     * the queue is full the oldest waiting frame is dropped.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] after [`HologramStream::close`].
+     */
+open func push(frame: RgbdFrame)throws  -> UInt64  {
+    return try  FfiConverterUInt64.lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_hologramstream_push(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeRgbdFrame_lower(frame),uniffiCallStatus
+    )
+})
+}
+    
+
+    
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeHologramStream: FfiConverter {
+    typealias FfiType = UInt64
+    typealias SwiftType = HologramStream
+
+    public static func lift(_ handle: UInt64) throws -> HologramStream {
+        return HologramStream(unsafeFromHandle: handle)
+    }
+
+    public static func lower(_ value: HologramStream) -> UInt64 {
+        return value.uniffiCloneHandle()
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> HologramStream {
+        let handle: UInt64 = try readInt(&buf)
+        return try lift(handle)
+    }
+
+    public static func write(_ value: HologramStream, into buf: inout [UInt8]) {
+        writeInt(&buf, lower(value))
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeHologramStream_lift(_ handle: UInt64) throws -> HologramStream {
+    return try FfiConverterTypeHologramStream.lift(handle)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeHologramStream_lower(_ value: HologramStream) -> UInt64 {
+    return FfiConverterTypeHologramStream.lower(value)
+}
+
+
+
+
+
+
+/**
+ * Receives a [`HologramStream`]'s results, implemented by the app (Kotlin/Swift/Python). Called on the
+ * stream's background thread, in frame order.
+ */
+public protocol PatternsListener: AnyObject, Sendable {
+    
+    /**
+     * The patterns of frame `index` (the number [`HologramStream::push`] returned for it).
+     */
+    func onPatterns(index: UInt64, patterns: SlmPatterns) 
+    
+    /**
+     * A frame failed (its message starts with `frame <index>:`); the stream goes on.
+     */
+    func onError(error: TensorholoError) 
+    
+}
+/**
+ * Receives a [`HologramStream`]'s results, implemented by the app (Kotlin/Swift/Python). Called on the
+ * stream's background thread, in frame order.
+ */
+open class PatternsListenerImpl: PatternsListener, @unchecked Sendable {
+    fileprivate let handle: UInt64
+
+    /// Used to instantiate a [FFIObject] without an actual handle, for fakes in tests, mostly.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public struct NoHandle {
+        public init() {}
+    }
+
+    // TODO: We'd like this to be `private` but for Swifty reasons,
+    // we can't implement `FfiConverter` without making this `required` and we can't
+    // make it `required` without making it `public`.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    required public init(unsafeFromHandle handle: UInt64) {
+        self.handle = handle
+    }
+
+    // This constructor can be used to instantiate a fake object.
+    // - Parameter noHandle: Placeholder value so we can have a constructor separate from the default empty one that may be implemented for classes extending [FFIObject].
+    //
+    // - Warning:
+    //     Any object instantiated with this constructor cannot be passed to an actual Rust-backed object. Since there isn't a backing handle the FFI lower functions will crash.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public init(noHandle: NoHandle) {
+        self.handle = 0
+    }
+
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public func uniffiCloneHandle() -> UInt64 {
+        return try! rustCall { uniffi_tensorholo_ffi_fn_clone_patternslistener(self.handle, $0) }
+    }
+    // No primary constructor declared for this class.
+
+    deinit {
+        if handle == 0 {
+            // Mock objects have handle=0 don't try to free them
+            return
+        }
+
+        try! rustCall { uniffi_tensorholo_ffi_fn_free_patternslistener(handle, $0) }
+    }
+
+    
+
+    
+    /**
+     * The patterns of frame `index` (the number [`HologramStream::push`] returned for it).
+     */
+open func onPatterns(index: UInt64, patterns: SlmPatterns)  {try! rustCall() {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_patternslistener_on_patterns(
+            self.uniffiCloneHandle(),
+        FfiConverterUInt64.lower(index),
+        FfiConverterTypeSlmPatterns_lower(patterns),uniffiCallStatus
+    )
+}
+}
+    
+    /**
+     * A frame failed (its message starts with `frame <index>:`); the stream goes on.
      */
 open func onError(error: TensorholoError)  {try! rustCall() {
         uniffiCallStatus in
-    uniffi_tensorholo_ffi_fn_method_demolistener_on_error(
+    uniffi_tensorholo_ffi_fn_method_patternslistener_on_error(
             self.uniffiCloneHandle(),
         FfiConverterTypeTensorholoError_lower(error),uniffiCallStatus
     )
@@ -697,42 +1143,42 @@ open func onError(error: TensorholoError)  {try! rustCall() {
 
 
 // Put the implementation in a struct so we don't pollute the top-level namespace
-fileprivate struct UniffiCallbackInterfaceDemoListener {
+fileprivate struct UniffiCallbackInterfacePatternsListener {
 
     // Create the VTable using a series of closures.
     // Swift automatically converts these into C callback functions.
     //
     // Store the vtable directly.
-    static let vtable: UniffiVTableCallbackInterfaceDemoListener = UniffiVTableCallbackInterfaceDemoListener(
+    static let vtable: UniffiVTableCallbackInterfacePatternsListener = UniffiVTableCallbackInterfacePatternsListener(
         uniffiFree: { (uniffiHandle: UInt64) -> () in
             do {
-                try FfiConverterTypeDemoListener.handleMap.remove(handle: uniffiHandle)
+                try FfiConverterTypePatternsListener.handleMap.remove(handle: uniffiHandle)
             } catch {
-                print("Uniffi callback interface DemoListener: handle missing in uniffiFree")
+                print("Uniffi callback interface PatternsListener: handle missing in uniffiFree")
             }
         },
         uniffiClone: { (uniffiHandle: UInt64) -> UInt64 in
             do {
-                return try FfiConverterTypeDemoListener.handleMap.clone(handle: uniffiHandle)
+                return try FfiConverterTypePatternsListener.handleMap.clone(handle: uniffiHandle)
             } catch {
-                fatalError("Uniffi callback interface DemoListener: handle missing in uniffiClone")
+                fatalError("Uniffi callback interface PatternsListener: handle missing in uniffiClone")
             }
         },
-        onValue: { (
+        onPatterns: { (
             uniffiHandle: UInt64,
             index: UInt64,
-            value: RustBuffer,
+            patterns: RustBuffer,
             uniffiOutReturn: UnsafeMutableRawPointer,
             uniffiCallStatus: UnsafeMutablePointer<RustCallStatus>
         ) in
             let makeCall = {
                 () throws -> () in
-                guard let uniffiObj = try? FfiConverterTypeDemoListener.handleMap.get(handle: uniffiHandle) else {
+                guard let uniffiObj = try? FfiConverterTypePatternsListener.handleMap.get(handle: uniffiHandle) else {
                     throw UniffiInternalError.unexpectedStaleHandle
                 }
-                return uniffiObj.onValue(
+                return uniffiObj.onPatterns(
                      index: try FfiConverterUInt64.lift(index),
-                     value: try FfiConverterTypeBytes8Demo_lift(value)
+                     patterns: try FfiConverterTypeSlmPatterns_lift(patterns)
                 )
             }
 
@@ -752,7 +1198,7 @@ fileprivate struct UniffiCallbackInterfaceDemoListener {
         ) in
             let makeCall = {
                 () throws -> () in
-                guard let uniffiObj = try? FfiConverterTypeDemoListener.handleMap.get(handle: uniffiHandle) else {
+                guard let uniffiObj = try? FfiConverterTypePatternsListener.handleMap.get(handle: uniffiHandle) else {
                     throw UniffiInternalError.unexpectedStaleHandle
                 }
                 return uniffiObj.onError(
@@ -776,39 +1222,39 @@ fileprivate struct UniffiCallbackInterfaceDemoListener {
     // `nonisolated(unsafe)` is needed under Swift 6 strict concurrency.
     // This is safe because the pointee is initialized once during static init
     // and never mutated by either side of the FFI.  Its fields are C function pointers.
-    nonisolated(unsafe) static let vtablePtr: UnsafePointer<UniffiVTableCallbackInterfaceDemoListener> = {
-        let ptr = UnsafeMutablePointer<UniffiVTableCallbackInterfaceDemoListener>.allocate(capacity: 1)
+    nonisolated(unsafe) static let vtablePtr: UnsafePointer<UniffiVTableCallbackInterfacePatternsListener> = {
+        let ptr = UnsafeMutablePointer<UniffiVTableCallbackInterfacePatternsListener>.allocate(capacity: 1)
         ptr.initialize(to: vtable)
         return UnsafePointer(ptr)
     }()
 }
 
-private func uniffiCallbackInitDemoListener() {
-    uniffi_tensorholo_ffi_fn_init_callback_vtable_demolistener(UniffiCallbackInterfaceDemoListener.vtablePtr)
+private func uniffiCallbackInitPatternsListener() {
+    uniffi_tensorholo_ffi_fn_init_callback_vtable_patternslistener(UniffiCallbackInterfacePatternsListener.vtablePtr)
 }
 
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
-public struct FfiConverterTypeDemoListener: FfiConverter {
-    fileprivate static let handleMap = UniffiHandleMap<DemoListener>()
+public struct FfiConverterTypePatternsListener: FfiConverter {
+    fileprivate static let handleMap = UniffiHandleMap<PatternsListener>()
 
     typealias FfiType = UInt64
-    typealias SwiftType = DemoListener
+    typealias SwiftType = PatternsListener
 
-    public static func lift(_ handle: UInt64) throws -> DemoListener {
+    public static func lift(_ handle: UInt64) throws -> PatternsListener {
         if ((handle & 1) == 0) {
             // Rust-generated handle, construct a new class that uses the handle to implement the
             // interface
-            return DemoListenerImpl(unsafeFromHandle: handle)
+            return PatternsListenerImpl(unsafeFromHandle: handle)
         } else {
             // Swift-generated handle, get the object from the handle map
             return try handleMap.remove(handle: handle)
         }
     }
 
-    public static func lower(_ value: DemoListener) -> UInt64 {
-         if let rustImpl = value as? DemoListenerImpl {
+    public static func lower(_ value: PatternsListener) -> UInt64 {
+         if let rustImpl = value as? PatternsListenerImpl {
              // Rust-implemented object.  Clone the handle and return it
             return rustImpl.uniffiCloneHandle()
          } else {
@@ -817,12 +1263,12 @@ public struct FfiConverterTypeDemoListener: FfiConverter {
          }
     }
 
-    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> DemoListener {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> PatternsListener {
         let handle: UInt64 = try readInt(&buf)
         return try lift(handle)
     }
 
-    public static func write(_ value: DemoListener, into buf: inout [UInt8]) {
+    public static func write(_ value: PatternsListener, into buf: inout [UInt8]) {
         writeInt(&buf, lower(value))
     }
 }
@@ -831,204 +1277,477 @@ public struct FfiConverterTypeDemoListener: FfiConverter {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
-public func FfiConverterTypeDemoListener_lift(_ handle: UInt64) throws -> DemoListener {
-    return try FfiConverterTypeDemoListener.lift(handle)
+public func FfiConverterTypePatternsListener_lift(_ handle: UInt64) throws -> PatternsListener {
+    return try FfiConverterTypePatternsListener.lift(handle)
 }
 
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
-public func FfiConverterTypeDemoListener_lower(_ value: DemoListener) -> UInt64 {
-    return FfiConverterTypeDemoListener.lower(value)
-}
-
-
-
-
-
-
-/**
- * A stateless demo object with a fallible constructor and a size limit.
- */
-public protocol EchoProtocol: AnyObject, Sendable {
-    
-    /**
-     * The photographic negative of `image`: every byte `v` becomes `255 - v`, same size.
-     *
-     * Errors: [`TensorholoError::InvalidInput`] if `data.len() != width * height` or the image has more
-     * than `max_pixels` pixels.
-     */
-    func invert(image: Bytes8Demo) throws  -> Bytes8Demo
-    
-    /**
-     * Sends `count` values to `listener` from a newly spawned Rust thread, in order (`on_value(i, …)` for
-     * `i = 0..count`), then `on_error(InvalidInput)` once if `then_error`; returns when that thread is done.
-     *
-     * Errors: [`TensorholoError::InvalidInput`] if `count` > 2^20; [`TensorholoError::Internal`] if the
-     * thread cannot be started or a listener call failed (raised an exception: uniffi turns it into a panic
-     * of that thread).
-     */
-    func stream(listener: DemoListener, count: UInt64, thenError: Bool) throws 
-    
-}
-/**
- * A stateless demo object with a fallible constructor and a size limit.
- */
-open class Echo: EchoProtocol, @unchecked Sendable {
-    fileprivate let handle: UInt64
-
-    /// Used to instantiate a [FFIObject] without an actual handle, for fakes in tests, mostly.
-#if swift(>=5.8)
-    @_documentation(visibility: private)
-#endif
-    public struct NoHandle {
-        public init() {}
-    }
-
-    // TODO: We'd like this to be `private` but for Swifty reasons,
-    // we can't implement `FfiConverter` without making this `required` and we can't
-    // make it `required` without making it `public`.
-#if swift(>=5.8)
-    @_documentation(visibility: private)
-#endif
-    required public init(unsafeFromHandle handle: UInt64) {
-        self.handle = handle
-    }
-
-    // This constructor can be used to instantiate a fake object.
-    // - Parameter noHandle: Placeholder value so we can have a constructor separate from the default empty one that may be implemented for classes extending [FFIObject].
-    //
-    // - Warning:
-    //     Any object instantiated with this constructor cannot be passed to an actual Rust-backed object. Since there isn't a backing handle the FFI lower functions will crash.
-#if swift(>=5.8)
-    @_documentation(visibility: private)
-#endif
-    public init(noHandle: NoHandle) {
-        self.handle = 0
-    }
-
-#if swift(>=5.8)
-    @_documentation(visibility: private)
-#endif
-    public func uniffiCloneHandle() -> UInt64 {
-        return try! rustCall { uniffi_tensorholo_ffi_fn_clone_echo(self.handle, $0) }
-    }
-    /**
-     * An echo accepting images of at most `max_pixels` pixels.
-     *
-     * Errors: [`TensorholoError::InvalidInput`] if `max_pixels` is 0.
-     */
-public convenience init(maxPixels: UInt64)throws  {
-    let handle =
-        try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
-        uniffiCallStatus in
-    uniffi_tensorholo_ffi_fn_constructor_echo_new(
-        FfiConverterUInt64.lower(maxPixels),uniffiCallStatus
-    )
-}
-    self.init(unsafeFromHandle: handle)
-}
-
-    deinit {
-        if handle == 0 {
-            // Mock objects have handle=0 don't try to free them
-            return
-        }
-
-        try! rustCall { uniffi_tensorholo_ffi_fn_free_echo(handle, $0) }
-    }
-
-    
-
-    
-    /**
-     * The photographic negative of `image`: every byte `v` becomes `255 - v`, same size.
-     *
-     * Errors: [`TensorholoError::InvalidInput`] if `data.len() != width * height` or the image has more
-     * than `max_pixels` pixels.
-     */
-open func invert(image: Bytes8Demo)throws  -> Bytes8Demo  {
-    return try  FfiConverterTypeBytes8Demo_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
-        uniffiCallStatus in
-    uniffi_tensorholo_ffi_fn_method_echo_invert(
-            self.uniffiCloneHandle(),
-        FfiConverterTypeBytes8Demo_lower(image),uniffiCallStatus
-    )
-})
-}
-    
-    /**
-     * Sends `count` values to `listener` from a newly spawned Rust thread, in order (`on_value(i, …)` for
-     * `i = 0..count`), then `on_error(InvalidInput)` once if `then_error`; returns when that thread is done.
-     *
-     * Errors: [`TensorholoError::InvalidInput`] if `count` > 2^20; [`TensorholoError::Internal`] if the
-     * thread cannot be started or a listener call failed (raised an exception: uniffi turns it into a panic
-     * of that thread).
-     */
-open func stream(listener: DemoListener, count: UInt64, thenError: Bool)throws   {try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
-        uniffiCallStatus in
-    uniffi_tensorholo_ffi_fn_method_echo_stream(
-            self.uniffiCloneHandle(),
-        FfiConverterTypeDemoListener_lower(listener),
-        FfiConverterUInt64.lower(count),
-        FfiConverterBool.lower(thenError),uniffiCallStatus
-    )
-}
-}
-    
-
-    
-}
-
-
-#if swift(>=5.8)
-@_documentation(visibility: private)
-#endif
-public struct FfiConverterTypeEcho: FfiConverter {
-    typealias FfiType = UInt64
-    typealias SwiftType = Echo
-
-    public static func lift(_ handle: UInt64) throws -> Echo {
-        return Echo(unsafeFromHandle: handle)
-    }
-
-    public static func lower(_ value: Echo) -> UInt64 {
-        return value.uniffiCloneHandle()
-    }
-
-    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Echo {
-        let handle: UInt64 = try readInt(&buf)
-        return try lift(handle)
-    }
-
-    public static func write(_ value: Echo, into buf: inout [UInt8]) {
-        writeInt(&buf, lower(value))
-    }
-}
-
-
-#if swift(>=5.8)
-@_documentation(visibility: private)
-#endif
-public func FfiConverterTypeEcho_lift(_ handle: UInt64) throws -> Echo {
-    return try FfiConverterTypeEcho.lift(handle)
-}
-
-#if swift(>=5.8)
-@_documentation(visibility: private)
-#endif
-public func FfiConverterTypeEcho_lower(_ value: Echo) -> UInt64 {
-    return FfiConverterTypeEcho.lower(value)
+public func FfiConverterTypePatternsListener_lower(_ value: PatternsListener) -> UInt64 {
+    return FfiConverterTypePatternsListener.lower(value)
 }
 
 
 
 
 /**
- * An 8-bit single-channel image, row-major: pixel `(x, y)` is `data[y * width + x]`, `data.len() ==
- * width * height`. Crosses as Python `bytes`, Kotlin `ByteArray`, Swift `Data`.
+ * Median per-stage timings of [`HologramGenerator::benchmark`].
  */
-public struct Bytes8Demo: Equatable, Hashable {
+public struct BenchmarkReport: Equatable, Hashable {
+    /**
+     * Frames timed (after one warm-up frame).
+     */
+    public var frames: UInt32
+    /**
+     * Median stage timings.
+     */
+    public var median: StageTimings
+    /**
+     * Frames per second of the median frame (`1000 / (convert_ms + total_ms)`).
+     */
+    public var fps: Double
+    /**
+     * The generator's [`GeneratorInfo`] (chosen plan, threads).
+     */
+    public var info: GeneratorInfo
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Frames timed (after one warm-up frame).
+         */frames: UInt32, 
+        /**
+         * Median stage timings.
+         */median: StageTimings, 
+        /**
+         * Frames per second of the median frame (`1000 / (convert_ms + total_ms)`).
+         */fps: Double, 
+        /**
+         * The generator's [`GeneratorInfo`] (chosen plan, threads).
+         */info: GeneratorInfo) {
+        self.frames = frames
+        self.median = median
+        self.fps = fps
+        self.info = info
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension BenchmarkReport: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeBenchmarkReport: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> BenchmarkReport {
+        return
+            try BenchmarkReport(
+                frames: FfiConverterUInt32.read(from: &buf), 
+                median: FfiConverterTypeStageTimings.read(from: &buf), 
+                fps: FfiConverterDouble.read(from: &buf), 
+                info: FfiConverterTypeGeneratorInfo.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: BenchmarkReport, into buf: inout [UInt8]) {
+        FfiConverterUInt32.write(value.frames, into: &buf)
+        FfiConverterTypeStageTimings.write(value.median, into: &buf)
+        FfiConverterDouble.write(value.fps, into: &buf)
+        FfiConverterTypeGeneratorInfo.write(value.info, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBenchmarkReport_lift(_ buf: RustBuffer) throws -> BenchmarkReport {
+    return try FfiConverterTypeBenchmarkReport.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBenchmarkReport_lower(_ value: BenchmarkReport) -> RustBuffer {
+    return FfiConverterTypeBenchmarkReport.lower(value)
+}
+
+
+/**
+ * Everything a [`HologramGenerator`] needs. Only `width` and `height` (the SLM's resolution in pixels) are
+ * required; every other field has the default named in its comment.
+ */
+public struct GeneratorConfig: Equatable, Hashable {
+    /**
+     * Hologram (SLM) width in pixels.
+     */
+    public var width: UInt32
+    /**
+     * Hologram (SLM) height in pixels.
+     */
+    public var height: UInt32
+    /**
+     * Hologram CNN depth: 8 (default), 15 or 30 layers.
+     */
+    public var layers: UInt32
+    /**
+     * Weight format; `None` = [`Precision::F32`].
+     */
+    public var precision: Precision?
+    /**
+     * Distance from the midpoint hologram to the SLM in millimetres (default 6; pre-filters are shipped for
+     * 6 and 12).
+     */
+    public var offsetMm: Double
+    /**
+     * Pre-filter CNN; `None` = [`PrefilterMode::Auto`].
+     */
+    public var prefilter: PrefilterMode?
+    /**
+     * CNN threads; 0 (default) = time 1, half and all cores at creation and keep the fastest.
+     */
+    public var threads: UInt32
+    /**
+     * How camera frames fit the hologram; `None` = [`Fit::Crop`].
+     */
+    public var fit: Fit?
+    /**
+     * SLM pixel pitch in metres (default 8e-6).
+     */
+    public var pixelPitchM: Double
+    /**
+     * Laser wavelengths in metres, red, green, blue; empty (default) = 638e-9, 520e-9, 450e-9.
+     */
+    public var wavelengthsM: [Double]
+    /**
+     * Depth of the 3D volume in metres, centred on the midpoint hologram (default 6e-3).
+     */
+    public var volumeDepthM: Double
+    /**
+     * Nearest scene depth in metres mapped to the front of the volume; `None` (default, with `z_far_m`) =
+     * 1st percentile of each frame's valid depths (a stream keeps its first frame's range).
+     */
+    public var zNearM: Double?
+    /**
+     * Farthest scene depth in metres mapped to the back of the volume; give both or neither.
+     */
+    public var zFarM: Double?
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Hologram (SLM) width in pixels.
+         */width: UInt32, 
+        /**
+         * Hologram (SLM) height in pixels.
+         */height: UInt32, 
+        /**
+         * Hologram CNN depth: 8 (default), 15 or 30 layers.
+         */layers: UInt32 = UInt32(8), 
+        /**
+         * Weight format; `None` = [`Precision::F32`].
+         */precision: Precision? = nil, 
+        /**
+         * Distance from the midpoint hologram to the SLM in millimetres (default 6; pre-filters are shipped for
+         * 6 and 12).
+         */offsetMm: Double = Double(6.0), 
+        /**
+         * Pre-filter CNN; `None` = [`PrefilterMode::Auto`].
+         */prefilter: PrefilterMode? = nil, 
+        /**
+         * CNN threads; 0 (default) = time 1, half and all cores at creation and keep the fastest.
+         */threads: UInt32 = UInt32(0), 
+        /**
+         * How camera frames fit the hologram; `None` = [`Fit::Crop`].
+         */fit: Fit? = nil, 
+        /**
+         * SLM pixel pitch in metres (default 8e-6).
+         */pixelPitchM: Double = Double(8e-6), 
+        /**
+         * Laser wavelengths in metres, red, green, blue; empty (default) = 638e-9, 520e-9, 450e-9.
+         */wavelengthsM: [Double] = [], 
+        /**
+         * Depth of the 3D volume in metres, centred on the midpoint hologram (default 6e-3).
+         */volumeDepthM: Double = Double(6e-3), 
+        /**
+         * Nearest scene depth in metres mapped to the front of the volume; `None` (default, with `z_far_m`) =
+         * 1st percentile of each frame's valid depths (a stream keeps its first frame's range).
+         */zNearM: Double? = nil, 
+        /**
+         * Farthest scene depth in metres mapped to the back of the volume; give both or neither.
+         */zFarM: Double? = nil) {
+        self.width = width
+        self.height = height
+        self.layers = layers
+        self.precision = precision
+        self.offsetMm = offsetMm
+        self.prefilter = prefilter
+        self.threads = threads
+        self.fit = fit
+        self.pixelPitchM = pixelPitchM
+        self.wavelengthsM = wavelengthsM
+        self.volumeDepthM = volumeDepthM
+        self.zNearM = zNearM
+        self.zFarM = zFarM
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension GeneratorConfig: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> GeneratorConfig {
+        return
+            try GeneratorConfig(
+                width: FfiConverterUInt32.read(from: &buf), 
+                height: FfiConverterUInt32.read(from: &buf), 
+                layers: FfiConverterUInt32.read(from: &buf), 
+                precision: FfiConverterOptionTypePrecision.read(from: &buf), 
+                offsetMm: FfiConverterDouble.read(from: &buf), 
+                prefilter: FfiConverterOptionTypePrefilterMode.read(from: &buf), 
+                threads: FfiConverterUInt32.read(from: &buf), 
+                fit: FfiConverterOptionTypeFit.read(from: &buf), 
+                pixelPitchM: FfiConverterDouble.read(from: &buf), 
+                wavelengthsM: FfiConverterSequenceDouble.read(from: &buf), 
+                volumeDepthM: FfiConverterDouble.read(from: &buf), 
+                zNearM: FfiConverterOptionDouble.read(from: &buf), 
+                zFarM: FfiConverterOptionDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: GeneratorConfig, into buf: inout [UInt8]) {
+        FfiConverterUInt32.write(value.width, into: &buf)
+        FfiConverterUInt32.write(value.height, into: &buf)
+        FfiConverterUInt32.write(value.layers, into: &buf)
+        FfiConverterOptionTypePrecision.write(value.precision, into: &buf)
+        FfiConverterDouble.write(value.offsetMm, into: &buf)
+        FfiConverterOptionTypePrefilterMode.write(value.prefilter, into: &buf)
+        FfiConverterUInt32.write(value.threads, into: &buf)
+        FfiConverterOptionTypeFit.write(value.fit, into: &buf)
+        FfiConverterDouble.write(value.pixelPitchM, into: &buf)
+        FfiConverterSequenceDouble.write(value.wavelengthsM, into: &buf)
+        FfiConverterDouble.write(value.volumeDepthM, into: &buf)
+        FfiConverterOptionDouble.write(value.zNearM, into: &buf)
+        FfiConverterOptionDouble.write(value.zFarM, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGeneratorConfig_lift(_ buf: RustBuffer) throws -> GeneratorConfig {
+    return try FfiConverterTypeGeneratorConfig.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGeneratorConfig_lower(_ value: GeneratorConfig) -> RustBuffer {
+    return FfiConverterTypeGeneratorConfig.lower(value)
+}
+
+
+/**
+ * What a generator runs.
+ */
+public struct GeneratorInfo: Equatable, Hashable {
+    /**
+     * Library version.
+     */
+    public var version: String
+    /**
+     * Hologram width in pixels.
+     */
+    public var width: UInt32
+    /**
+     * Hologram height in pixels.
+     */
+    public var height: UInt32
+    /**
+     * Hologram CNN depth.
+     */
+    public var layers: UInt32
+    /**
+     * Weight format (`f32`, `int8-qdq`, …).
+     */
+    public var precision: String
+    /**
+     * Hologram CNN (embedded file name).
+     */
+    public var hologramModel: String
+    /**
+     * Pre-filter CNN, if one runs.
+     */
+    public var prefilterModel: String?
+    /**
+     * Why a pre-filter runs or not.
+     */
+    public var prefilterReason: String
+    /**
+     * SLM offset in millimetres.
+     */
+    public var offsetMm: Double
+    /**
+     * Chosen CNN memory layout (`nchw` or `nhwc`).
+     */
+    public var cnnLayout: String
+    /**
+     * Chosen CNN threads.
+     */
+    public var cnnThreads: UInt32
+    /**
+     * Whether the plan was chosen by timing candidates on this device.
+     */
+    public var autotuned: Bool
+    /**
+     * Everything above and the autotuning timings, as JSON.
+     */
+    public var json: String
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Library version.
+         */version: String, 
+        /**
+         * Hologram width in pixels.
+         */width: UInt32, 
+        /**
+         * Hologram height in pixels.
+         */height: UInt32, 
+        /**
+         * Hologram CNN depth.
+         */layers: UInt32, 
+        /**
+         * Weight format (`f32`, `int8-qdq`, …).
+         */precision: String, 
+        /**
+         * Hologram CNN (embedded file name).
+         */hologramModel: String, 
+        /**
+         * Pre-filter CNN, if one runs.
+         */prefilterModel: String?, 
+        /**
+         * Why a pre-filter runs or not.
+         */prefilterReason: String, 
+        /**
+         * SLM offset in millimetres.
+         */offsetMm: Double, 
+        /**
+         * Chosen CNN memory layout (`nchw` or `nhwc`).
+         */cnnLayout: String, 
+        /**
+         * Chosen CNN threads.
+         */cnnThreads: UInt32, 
+        /**
+         * Whether the plan was chosen by timing candidates on this device.
+         */autotuned: Bool, 
+        /**
+         * Everything above and the autotuning timings, as JSON.
+         */json: String) {
+        self.version = version
+        self.width = width
+        self.height = height
+        self.layers = layers
+        self.precision = precision
+        self.hologramModel = hologramModel
+        self.prefilterModel = prefilterModel
+        self.prefilterReason = prefilterReason
+        self.offsetMm = offsetMm
+        self.cnnLayout = cnnLayout
+        self.cnnThreads = cnnThreads
+        self.autotuned = autotuned
+        self.json = json
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension GeneratorInfo: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> GeneratorInfo {
+        return
+            try GeneratorInfo(
+                version: FfiConverterString.read(from: &buf), 
+                width: FfiConverterUInt32.read(from: &buf), 
+                height: FfiConverterUInt32.read(from: &buf), 
+                layers: FfiConverterUInt32.read(from: &buf), 
+                precision: FfiConverterString.read(from: &buf), 
+                hologramModel: FfiConverterString.read(from: &buf), 
+                prefilterModel: FfiConverterOptionString.read(from: &buf), 
+                prefilterReason: FfiConverterString.read(from: &buf), 
+                offsetMm: FfiConverterDouble.read(from: &buf), 
+                cnnLayout: FfiConverterString.read(from: &buf), 
+                cnnThreads: FfiConverterUInt32.read(from: &buf), 
+                autotuned: FfiConverterBool.read(from: &buf), 
+                json: FfiConverterString.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: GeneratorInfo, into buf: inout [UInt8]) {
+        FfiConverterString.write(value.version, into: &buf)
+        FfiConverterUInt32.write(value.width, into: &buf)
+        FfiConverterUInt32.write(value.height, into: &buf)
+        FfiConverterUInt32.write(value.layers, into: &buf)
+        FfiConverterString.write(value.precision, into: &buf)
+        FfiConverterString.write(value.hologramModel, into: &buf)
+        FfiConverterOptionString.write(value.prefilterModel, into: &buf)
+        FfiConverterString.write(value.prefilterReason, into: &buf)
+        FfiConverterDouble.write(value.offsetMm, into: &buf)
+        FfiConverterString.write(value.cnnLayout, into: &buf)
+        FfiConverterUInt32.write(value.cnnThreads, into: &buf)
+        FfiConverterBool.write(value.autotuned, into: &buf)
+        FfiConverterString.write(value.json, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGeneratorInfo_lift(_ buf: RustBuffer) throws -> GeneratorInfo {
+    return try FfiConverterTypeGeneratorInfo.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGeneratorInfo_lower(_ value: GeneratorInfo) -> RustBuffer {
+    return FfiConverterTypeGeneratorInfo.lower(value)
+}
+
+
+/**
+ * A simulated view of the hologram for the phone's screen: `width · height · 4` sRGB bytes (RGBA, alpha
+ * 255), row-major.
+ */
+public struct Preview: Equatable, Hashable {
     /**
      * Width in pixels.
      */
@@ -1038,9 +1757,9 @@ public struct Bytes8Demo: Equatable, Hashable {
      */
     public var height: UInt32
     /**
-     * The pixels, row-major, `width * height` bytes.
+     * RGBA8 bytes.
      */
-    public var data: Data
+    public var rgba: Data
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -1052,11 +1771,11 @@ public struct Bytes8Demo: Equatable, Hashable {
          * Height in pixels.
          */height: UInt32, 
         /**
-         * The pixels, row-major, `width * height` bytes.
-         */data: Data) {
+         * RGBA8 bytes.
+         */rgba: Data) {
         self.width = width
         self.height = height
-        self.data = data
+        self.rgba = rgba
     }
 
     
@@ -1065,26 +1784,26 @@ public struct Bytes8Demo: Equatable, Hashable {
 }
 
 #if compiler(>=6)
-extension Bytes8Demo: Sendable {}
+extension Preview: Sendable {}
 #endif
 
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
-public struct FfiConverterTypeBytes8Demo: FfiConverterRustBuffer {
-    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Bytes8Demo {
+public struct FfiConverterTypePreview: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Preview {
         return
-            try Bytes8Demo(
+            try Preview(
                 width: FfiConverterUInt32.read(from: &buf), 
                 height: FfiConverterUInt32.read(from: &buf), 
-                data: FfiConverterData.read(from: &buf)
+                rgba: FfiConverterData.read(from: &buf)
         )
     }
 
-    public static func write(_ value: Bytes8Demo, into buf: inout [UInt8]) {
+    public static func write(_ value: Preview, into buf: inout [UInt8]) {
         FfiConverterUInt32.write(value.width, into: &buf)
         FfiConverterUInt32.write(value.height, into: &buf)
-        FfiConverterData.write(value.data, into: &buf)
+        FfiConverterData.write(value.rgba, into: &buf)
     }
 }
 
@@ -1092,16 +1811,955 @@ public struct FfiConverterTypeBytes8Demo: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
-public func FfiConverterTypeBytes8Demo_lift(_ buf: RustBuffer) throws -> Bytes8Demo {
-    return try FfiConverterTypeBytes8Demo.lift(buf)
+public func FfiConverterTypePreview_lift(_ buf: RustBuffer) throws -> Preview {
+    return try FfiConverterTypePreview.lift(buf)
 }
 
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
-public func FfiConverterTypeBytes8Demo_lower(_ value: Bytes8Demo) -> RustBuffer {
-    return FfiConverterTypeBytes8Demo.lower(value)
+public func FfiConverterTypePreview_lower(_ value: Preview) -> RustBuffer {
+    return FfiConverterTypePreview.lower(value)
 }
+
+
+/**
+ * One camera frame as the phone delivers it: an interleaved 8-bit colour buffer and a depth buffer of the
+ * same field of view, each at its own resolution with its own row stride (bytes; 0 = packed).
+ */
+public struct RgbdFrame: Equatable, Hashable {
+    /**
+     * Colour bytes (`color_format`), rows `color_row_stride` apart.
+     */
+    public var color: Data
+    /**
+     * Colour pixel layout.
+     */
+    public var colorFormat: ColorFormat
+    /**
+     * Colour width in pixels.
+     */
+    public var colorWidth: UInt32
+    /**
+     * Colour height in pixels.
+     */
+    public var colorHeight: UInt32
+    /**
+     * Depth bytes (`depth_format`, little-endian), rows `depth_row_stride` apart.
+     */
+    public var depth: Data
+    /**
+     * Depth sample format.
+     */
+    public var depthFormat: DepthFormat
+    /**
+     * Depth width in pixels.
+     */
+    public var depthWidth: UInt32
+    /**
+     * Depth height in pixels.
+     */
+    public var depthHeight: UInt32
+    /**
+     * Bytes from one colour row to the next; 0 (default) = packed.
+     */
+    public var colorRowStride: UInt32
+    /**
+     * Bytes from one depth row to the next; 0 (default) = packed.
+     */
+    public var depthRowStride: UInt32
+    /**
+     * Clockwise rotation making both buffers upright; `None` (default) = none.
+     */
+    public var rotation: Rotation?
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Colour bytes (`color_format`), rows `color_row_stride` apart.
+         */color: Data, 
+        /**
+         * Colour pixel layout.
+         */colorFormat: ColorFormat, 
+        /**
+         * Colour width in pixels.
+         */colorWidth: UInt32, 
+        /**
+         * Colour height in pixels.
+         */colorHeight: UInt32, 
+        /**
+         * Depth bytes (`depth_format`, little-endian), rows `depth_row_stride` apart.
+         */depth: Data, 
+        /**
+         * Depth sample format.
+         */depthFormat: DepthFormat, 
+        /**
+         * Depth width in pixels.
+         */depthWidth: UInt32, 
+        /**
+         * Depth height in pixels.
+         */depthHeight: UInt32, 
+        /**
+         * Bytes from one colour row to the next; 0 (default) = packed.
+         */colorRowStride: UInt32 = UInt32(0), 
+        /**
+         * Bytes from one depth row to the next; 0 (default) = packed.
+         */depthRowStride: UInt32 = UInt32(0), 
+        /**
+         * Clockwise rotation making both buffers upright; `None` (default) = none.
+         */rotation: Rotation? = nil) {
+        self.color = color
+        self.colorFormat = colorFormat
+        self.colorWidth = colorWidth
+        self.colorHeight = colorHeight
+        self.depth = depth
+        self.depthFormat = depthFormat
+        self.depthWidth = depthWidth
+        self.depthHeight = depthHeight
+        self.colorRowStride = colorRowStride
+        self.depthRowStride = depthRowStride
+        self.rotation = rotation
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension RgbdFrame: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeRgbdFrame: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> RgbdFrame {
+        return
+            try RgbdFrame(
+                color: FfiConverterData.read(from: &buf), 
+                colorFormat: FfiConverterTypeColorFormat.read(from: &buf), 
+                colorWidth: FfiConverterUInt32.read(from: &buf), 
+                colorHeight: FfiConverterUInt32.read(from: &buf), 
+                depth: FfiConverterData.read(from: &buf), 
+                depthFormat: FfiConverterTypeDepthFormat.read(from: &buf), 
+                depthWidth: FfiConverterUInt32.read(from: &buf), 
+                depthHeight: FfiConverterUInt32.read(from: &buf), 
+                colorRowStride: FfiConverterUInt32.read(from: &buf), 
+                depthRowStride: FfiConverterUInt32.read(from: &buf), 
+                rotation: FfiConverterOptionTypeRotation.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: RgbdFrame, into buf: inout [UInt8]) {
+        FfiConverterData.write(value.color, into: &buf)
+        FfiConverterTypeColorFormat.write(value.colorFormat, into: &buf)
+        FfiConverterUInt32.write(value.colorWidth, into: &buf)
+        FfiConverterUInt32.write(value.colorHeight, into: &buf)
+        FfiConverterData.write(value.depth, into: &buf)
+        FfiConverterTypeDepthFormat.write(value.depthFormat, into: &buf)
+        FfiConverterUInt32.write(value.depthWidth, into: &buf)
+        FfiConverterUInt32.write(value.depthHeight, into: &buf)
+        FfiConverterUInt32.write(value.colorRowStride, into: &buf)
+        FfiConverterUInt32.write(value.depthRowStride, into: &buf)
+        FfiConverterOptionTypeRotation.write(value.rotation, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRgbdFrame_lift(_ buf: RustBuffer) throws -> RgbdFrame {
+    return try FfiConverterTypeRgbdFrame.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRgbdFrame_lower(_ value: RgbdFrame) -> RustBuffer {
+    return FfiConverterTypeRgbdFrame.lower(value)
+}
+
+
+/**
+ * One frame's SLM patterns: three 8-bit planes, one per laser (field-sequential colour), `width · height`
+ * codes each, row-major; code `c` displays phase `2π·c/256`.
+ */
+public struct SlmPatterns: Equatable, Hashable {
+    /**
+     * Width in pixels.
+     */
+    public var width: UInt32
+    /**
+     * Height in pixels.
+     */
+    public var height: UInt32
+    /**
+     * Red laser's pattern.
+     */
+    public var red: Data
+    /**
+     * Green laser's pattern.
+     */
+    public var green: Data
+    /**
+     * Blue laser's pattern.
+     */
+    public var blue: Data
+    /**
+     * Nearest scene depth (metres) mapped to the volume in this frame, if the depth was metric.
+     */
+    public var zNearM: Double?
+    /**
+     * Farthest scene depth (metres) mapped to the volume in this frame.
+     */
+    public var zFarM: Double?
+    /**
+     * Stage timings.
+     */
+    public var timings: StageTimings
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Width in pixels.
+         */width: UInt32, 
+        /**
+         * Height in pixels.
+         */height: UInt32, 
+        /**
+         * Red laser's pattern.
+         */red: Data, 
+        /**
+         * Green laser's pattern.
+         */green: Data, 
+        /**
+         * Blue laser's pattern.
+         */blue: Data, 
+        /**
+         * Nearest scene depth (metres) mapped to the volume in this frame, if the depth was metric.
+         */zNearM: Double?, 
+        /**
+         * Farthest scene depth (metres) mapped to the volume in this frame.
+         */zFarM: Double?, 
+        /**
+         * Stage timings.
+         */timings: StageTimings) {
+        self.width = width
+        self.height = height
+        self.red = red
+        self.green = green
+        self.blue = blue
+        self.zNearM = zNearM
+        self.zFarM = zFarM
+        self.timings = timings
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension SlmPatterns: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeSlmPatterns: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SlmPatterns {
+        return
+            try SlmPatterns(
+                width: FfiConverterUInt32.read(from: &buf), 
+                height: FfiConverterUInt32.read(from: &buf), 
+                red: FfiConverterData.read(from: &buf), 
+                green: FfiConverterData.read(from: &buf), 
+                blue: FfiConverterData.read(from: &buf), 
+                zNearM: FfiConverterOptionDouble.read(from: &buf), 
+                zFarM: FfiConverterOptionDouble.read(from: &buf), 
+                timings: FfiConverterTypeStageTimings.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: SlmPatterns, into buf: inout [UInt8]) {
+        FfiConverterUInt32.write(value.width, into: &buf)
+        FfiConverterUInt32.write(value.height, into: &buf)
+        FfiConverterData.write(value.red, into: &buf)
+        FfiConverterData.write(value.green, into: &buf)
+        FfiConverterData.write(value.blue, into: &buf)
+        FfiConverterOptionDouble.write(value.zNearM, into: &buf)
+        FfiConverterOptionDouble.write(value.zFarM, into: &buf)
+        FfiConverterTypeStageTimings.write(value.timings, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSlmPatterns_lift(_ buf: RustBuffer) throws -> SlmPatterns {
+    return try FfiConverterTypeSlmPatterns.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSlmPatterns_lower(_ value: SlmPatterns) -> RustBuffer {
+    return FfiConverterTypeSlmPatterns.lower(value)
+}
+
+
+/**
+ * Milliseconds of each stage of one frame.
+ */
+public struct StageTimings: Equatable, Hashable {
+    /**
+     * Camera buffers → the CNN's input (decode, rotate, fill holes, fit).
+     */
+    public var convertMs: Double
+    /**
+     * Hologram CNN.
+     */
+    public var cnnMs: Double
+    /**
+     * Offset propagation to the SLM (Eq. 6).
+     */
+    public var offsetMs: Double
+    /**
+     * Pre-filter CNN (0 without one).
+     */
+    public var prefilterMs: Double
+    /**
+     * Double phase encoding and look-up table (Eq. 7).
+     */
+    public var encodingMs: Double
+    /**
+     * CNN to codes (in a stream: the frame period).
+     */
+    public var totalMs: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Camera buffers → the CNN's input (decode, rotate, fill holes, fit).
+         */convertMs: Double, 
+        /**
+         * Hologram CNN.
+         */cnnMs: Double, 
+        /**
+         * Offset propagation to the SLM (Eq. 6).
+         */offsetMs: Double, 
+        /**
+         * Pre-filter CNN (0 without one).
+         */prefilterMs: Double, 
+        /**
+         * Double phase encoding and look-up table (Eq. 7).
+         */encodingMs: Double, 
+        /**
+         * CNN to codes (in a stream: the frame period).
+         */totalMs: Double) {
+        self.convertMs = convertMs
+        self.cnnMs = cnnMs
+        self.offsetMs = offsetMs
+        self.prefilterMs = prefilterMs
+        self.encodingMs = encodingMs
+        self.totalMs = totalMs
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension StageTimings: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeStageTimings: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> StageTimings {
+        return
+            try StageTimings(
+                convertMs: FfiConverterDouble.read(from: &buf), 
+                cnnMs: FfiConverterDouble.read(from: &buf), 
+                offsetMs: FfiConverterDouble.read(from: &buf), 
+                prefilterMs: FfiConverterDouble.read(from: &buf), 
+                encodingMs: FfiConverterDouble.read(from: &buf), 
+                totalMs: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: StageTimings, into buf: inout [UInt8]) {
+        FfiConverterDouble.write(value.convertMs, into: &buf)
+        FfiConverterDouble.write(value.cnnMs, into: &buf)
+        FfiConverterDouble.write(value.offsetMs, into: &buf)
+        FfiConverterDouble.write(value.prefilterMs, into: &buf)
+        FfiConverterDouble.write(value.encodingMs, into: &buf)
+        FfiConverterDouble.write(value.totalMs, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeStageTimings_lift(_ buf: RustBuffer) throws -> StageTimings {
+    return try FfiConverterTypeStageTimings.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeStageTimings_lower(_ value: StageTimings) -> RustBuffer {
+    return FfiConverterTypeStageTimings.lower(value)
+}
+
+
+/**
+ * Byte layout of an interleaved 8-bit sRGB colour pixel.
+ */
+
+public enum ColorFormat: Equatable, Hashable {
+    
+    /**
+     * R, G, B, A (Android `Bitmap.Config.ARGB_8888` bytes).
+     */
+    case rgba8
+    /**
+     * B, G, R, A (iOS `kCVPixelFormatType_32BGRA`).
+     */
+    case bgra8
+    /**
+     * R, G, B.
+     */
+    case rgb8
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension ColorFormat: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeColorFormat: FfiConverterRustBuffer {
+    typealias SwiftType = ColorFormat
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> ColorFormat {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .rgba8
+        
+        case 2: return .bgra8
+        
+        case 3: return .rgb8
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: ColorFormat, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .rgba8:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .bgra8:
+            writeInt(&buf, Int32(2))
+        
+        
+        case .rgb8:
+            writeInt(&buf, Int32(3))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeColorFormat_lift(_ buf: RustBuffer) throws -> ColorFormat {
+    return try FfiConverterTypeColorFormat.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeColorFormat_lower(_ value: ColorFormat) -> RustBuffer {
+    return FfiConverterTypeColorFormat.lower(value)
+}
+
+
+
+/**
+ * Depth sample format, little-endian.
+ */
+
+public enum DepthFormat: Equatable, Hashable {
+    
+    /**
+     * f32 metres (AVDepthData `DepthFloat32`).
+     */
+    case metresF32
+    /**
+     * f16 metres (AVDepthData `DepthFloat16`).
+     */
+    case metresF16
+    /**
+     * f32 disparity in 1/m (AVDepthData `DisparityFloat32`).
+     */
+    case disparityF32
+    /**
+     * f16 disparity in 1/m (AVDepthData `DisparityFloat16`).
+     */
+    case disparityF16
+    /**
+     * u16 millimetres (ARCore `acquireDepthImage16Bits`).
+     */
+    case millimetresU16
+    /**
+     * Android `ImageFormat.DEPTH16`: low 13 bits millimetres, high 3 bits confidence.
+     */
+    case depth16
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension DepthFormat: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeDepthFormat: FfiConverterRustBuffer {
+    typealias SwiftType = DepthFormat
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> DepthFormat {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .metresF32
+        
+        case 2: return .metresF16
+        
+        case 3: return .disparityF32
+        
+        case 4: return .disparityF16
+        
+        case 5: return .millimetresU16
+        
+        case 6: return .depth16
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: DepthFormat, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .metresF32:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .metresF16:
+            writeInt(&buf, Int32(2))
+        
+        
+        case .disparityF32:
+            writeInt(&buf, Int32(3))
+        
+        
+        case .disparityF16:
+            writeInt(&buf, Int32(4))
+        
+        
+        case .millimetresU16:
+            writeInt(&buf, Int32(5))
+        
+        
+        case .depth16:
+            writeInt(&buf, Int32(6))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeDepthFormat_lift(_ buf: RustBuffer) throws -> DepthFormat {
+    return try FfiConverterTypeDepthFormat.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeDepthFormat_lower(_ value: DepthFormat) -> RustBuffer {
+    return FfiConverterTypeDepthFormat.lower(value)
+}
+
+
+
+/**
+ * How the camera frame fits the hologram's size.
+ */
+
+public enum Fit: Equatable, Hashable {
+    
+    /**
+     * Centred crop to the hologram's aspect ratio (the default).
+     */
+    case crop
+    /**
+     * Fit inside, black (and far) margins.
+     */
+    case letterbox
+    /**
+     * Resample ignoring the aspect ratio.
+     */
+    case stretch
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension Fit: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeFit: FfiConverterRustBuffer {
+    typealias SwiftType = Fit
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Fit {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .crop
+        
+        case 2: return .letterbox
+        
+        case 3: return .stretch
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: Fit, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .crop:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .letterbox:
+            writeInt(&buf, Int32(2))
+        
+        
+        case .stretch:
+            writeInt(&buf, Int32(3))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeFit_lift(_ buf: RustBuffer) throws -> Fit {
+    return try FfiConverterTypeFit.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeFit_lower(_ value: Fit) -> RustBuffer {
+    return FfiConverterTypeFit.lower(value)
+}
+
+
+
+/**
+ * Weight format of the shipped CNNs.
+ */
+
+public enum Precision: Equatable, Hashable {
+    
+    /**
+     * 32-bit float (the default).
+     */
+    case f32
+    /**
+     * 8-bit integer weights (the int8 form that loses at most 0.5 dB; see the model card).
+     */
+    case int8
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension Precision: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypePrecision: FfiConverterRustBuffer {
+    typealias SwiftType = Precision
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Precision {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .f32
+        
+        case 2: return .int8
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: Precision, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .f32:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .int8:
+            writeInt(&buf, Int32(2))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypePrecision_lift(_ buf: RustBuffer) throws -> Precision {
+    return try FfiConverterTypePrecision.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypePrecision_lower(_ value: Precision) -> RustBuffer {
+    return FfiConverterTypePrecision.lower(value)
+}
+
+
+
+/**
+ * Whether the DDPM pre-filter CNN runs (paper Eq. 6).
+ */
+
+public enum PrefilterMode: Equatable, Hashable {
+    
+    /**
+     * Where one is shipped for the offset (6 or 12 mm) and was trained with this CNN depth (the default).
+     */
+    case auto
+    /**
+     * Never: AA-DPM encoding.
+     */
+    case off
+    /**
+     * Always; an error at an offset without a shipped pre-filter.
+     */
+    case required
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension PrefilterMode: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypePrefilterMode: FfiConverterRustBuffer {
+    typealias SwiftType = PrefilterMode
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> PrefilterMode {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .auto
+        
+        case 2: return .off
+        
+        case 3: return .required
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: PrefilterMode, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .auto:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .off:
+            writeInt(&buf, Int32(2))
+        
+        
+        case .required:
+            writeInt(&buf, Int32(3))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypePrefilterMode_lift(_ buf: RustBuffer) throws -> PrefilterMode {
+    return try FfiConverterTypePrefilterMode.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypePrefilterMode_lower(_ value: PrefilterMode) -> RustBuffer {
+    return FfiConverterTypePrefilterMode.lower(value)
+}
+
+
+
+/**
+ * Clockwise rotation that makes the camera buffers upright.
+ */
+
+public enum Rotation: Equatable, Hashable {
+    
+    /**
+     * None.
+     */
+    case deg0
+    /**
+     * 90° clockwise.
+     */
+    case deg90
+    /**
+     * 180°.
+     */
+    case deg180
+    /**
+     * 270° clockwise.
+     */
+    case deg270
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension Rotation: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeRotation: FfiConverterRustBuffer {
+    typealias SwiftType = Rotation
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Rotation {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .deg0
+        
+        case 2: return .deg90
+        
+        case 3: return .deg180
+        
+        case 4: return .deg270
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: Rotation, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .deg0:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .deg90:
+            writeInt(&buf, Int32(2))
+        
+        
+        case .deg180:
+            writeInt(&buf, Int32(3))
+        
+        
+        case .deg270:
+            writeInt(&buf, Int32(4))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRotation_lift(_ buf: RustBuffer) throws -> Rotation {
+    return try FfiConverterTypeRotation.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRotation_lower(_ value: Rotation) -> RustBuffer {
+    return FfiConverterTypeRotation.lower(value)
+}
+
 
 
 /**
@@ -1241,6 +2899,175 @@ public func FfiConverterTypeTensorholoError_lift(_ buf: RustBuffer) throws -> Te
 public func FfiConverterTypeTensorholoError_lower(_ value: TensorholoError) -> RustBuffer {
     return FfiConverterTypeTensorholoError.lower(value)
 }
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionDouble: FfiConverterRustBuffer {
+    typealias SwiftType = Double?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterDouble.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterDouble.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionString: FfiConverterRustBuffer {
+    typealias SwiftType = String?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterString.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterString.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionTypeFit: FfiConverterRustBuffer {
+    typealias SwiftType = Fit?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeFit.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeFit.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionTypePrecision: FfiConverterRustBuffer {
+    typealias SwiftType = Precision?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypePrecision.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypePrecision.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionTypePrefilterMode: FfiConverterRustBuffer {
+    typealias SwiftType = PrefilterMode?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypePrefilterMode.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypePrefilterMode.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionTypeRotation: FfiConverterRustBuffer {
+    typealias SwiftType = Rotation?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeRotation.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeRotation.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceDouble: FfiConverterRustBuffer {
+    typealias SwiftType = [Double]
+
+    public static func write(_ value: [Double], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterDouble.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [Double] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [Double]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterDouble.read(from: &buf))
+        }
+        return seq
+    }
+}
 /**
  * The version of the `tensorholo` core this library was built from (semver, e.g. `"0.1.0"`).
  *
@@ -1254,17 +3081,18 @@ public func version() -> String  {
 })
 }
 /**
- * Panics with `message` inside [`guard`]: proves that a bug comes back as
- * [`TensorholoError::Internal`] in the foreign language, not as an untyped error or a crash.
+ * The 32-bit frame colour-sequential SLM drivers take over HDMI: `width · height · 4` bytes, row-major, the
+ * red laser's pattern in R, green in G, blue in B, alpha 255.
  *
- * Errors: always [`TensorholoError::Internal`].
+ * Errors: [`TensorholoError::InvalidInput`] if a plane does not hold `width · height` codes.
  */
-public func demoPanic(message: String)throws   {try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+public func packRgba(patterns: SlmPatterns)throws  -> Data  {
+    return try  FfiConverterData.lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
         uniffiCallStatus in
-    uniffi_tensorholo_ffi_fn_func_demo_panic(
-        FfiConverterString.lower(message),uniffiCallStatus
+    uniffi_tensorholo_ffi_fn_func_pack_rgba(
+        FfiConverterTypeSlmPatterns_lower(patterns),uniffiCallStatus
     )
-}
+})
 }
 
 private enum InitializationResult {
@@ -1285,26 +3113,44 @@ private let initializationResult: InitializationResult = {
     if (uniffi_tensorholo_ffi_checksum_func_version() != 14763) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_func_demo_panic() != 49511) {
+    if (uniffi_tensorholo_ffi_checksum_func_pack_rgba() != 54530) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_demolistener_on_value() != 14259) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_benchmark() != 9343) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_demolistener_on_error() != 50024) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_info() != 31754) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_echo_invert() != 19674) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_preview() != 40025) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_echo_stream() != 53606) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render() != 59945) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_constructor_echo_new() != 13892) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream() != 44735) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_method_hologramstream_close() != 56790) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_method_hologramstream_dropped_frames() != 31345) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_method_hologramstream_push() != 34294) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_method_patternslistener_on_patterns() != 9565) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_method_patternslistener_on_error() != 41699) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new() != 59040) {
         return InitializationResult.apiChecksumMismatch
     }
 
-    uniffiCallbackInitDemoListener()
+    uniffiCallbackInitPatternsListener()
     return InitializationResult.ok
 }()
 

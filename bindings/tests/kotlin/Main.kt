@@ -1,14 +1,22 @@
 // Checks of the generated Kotlin bindings (package tensorholo) on the JVM, run by check.sh:
-// `java -Djna.library.path=<dir of libtensorholo_ffi.so> -cp check.jar:jna.jar MainKt <workspace version>`.
-// Plain `fun main` with checks that throw (no JUnit). The demo items (Echo, Bytes8Demo, DemoListener,
-// demoPanic) are placeholders proving the FFI paths; replace these checks together with them.
+// `java -Djna.library.path=<dir of libtensorholo_ffi.so> -cp check.jar:jna.jar MainKt <version> <cases dir>`.
+// <cases dir> is written by `python3 bindings/tests/frames.py DIR`: per real frame, the phone buffers
+// (color.raw, depth.raw), their layout (case.json) and holo render's SLM patterns of the same scene
+// (holo/phase_{r,g,b}.png). Plain `fun main` with checks that throw (no JUnit).
 
+import java.io.File
 import java.util.Collections
-import tensorholo.Bytes8Demo
-import tensorholo.DemoListener
-import tensorholo.Echo
+import javax.imageio.ImageIO
+import tensorholo.ColorFormat
+import tensorholo.DepthFormat
+import tensorholo.GeneratorConfig
+import tensorholo.HologramGenerator
+import tensorholo.PatternsListener
+import tensorholo.RgbdFrame
+import tensorholo.Rotation
+import tensorholo.SlmPatterns
 import tensorholo.TensorholoException
-import tensorholo.demoPanic
+import tensorholo.packRgba
 import tensorholo.version
 
 var checks = 0
@@ -31,18 +39,49 @@ inline fun <reified E : Throwable> expectThrows(block: () -> Unit): E {
     throw AssertionError("expected ${E::class.qualifiedName}, nothing was thrown")
 }
 
-class Recorder : DemoListener {
-    val indices: MutableList<ULong> = Collections.synchronizedList(mutableListOf())
-    val values: MutableList<Bytes8Demo> = Collections.synchronizedList(mutableListOf())
-    val threads: MutableSet<Long> = Collections.synchronizedSet(mutableSetOf())
-    val errors: MutableList<TensorholoException> = Collections.synchronizedList(mutableListOf())
-    var failAt: ULong? = null
+/** A flat JSON object of strings and numbers (frames.py's case.json), as a map of raw values. */
+fun readCase(file: File): Map<String, String> =
+    Regex("\"(\\w+)\": *(\"[^\"]*\"|[0-9.eE+-]+)").findAll(file.readText())
+        .associate { it.groupValues[1] to it.groupValues[2].trim('"') }
 
-    override fun onValue(index: ULong, value: Bytes8Demo) {
+fun frameOf(dir: File, case: Map<String, String>): RgbdFrame = RgbdFrame(
+    color = File(dir, "color.raw").readBytes(),
+    colorFormat = ColorFormat.valueOf(case.getValue("color_format")),
+    colorWidth = case.getValue("color_width").toUInt(),
+    colorHeight = case.getValue("color_height").toUInt(),
+    depth = File(dir, "depth.raw").readBytes(),
+    depthFormat = DepthFormat.valueOf(case.getValue("depth_format")),
+    depthWidth = case.getValue("depth_width").toUInt(),
+    depthHeight = case.getValue("depth_height").toUInt(),
+    colorRowStride = case.getValue("color_row_stride").toUInt(),
+    depthRowStride = case.getValue("depth_row_stride").toUInt(),
+    rotation = Rotation.valueOf(case.getValue("rotation")),
+)
+
+/** Circular code differences (255 and 0 are one code apart) against holo's grey PNG of one laser. */
+fun compare(name: String, got: ByteArray, png: File, w: Int, h: Int): Pair<Double, Double> {
+    val img = ImageIO.read(png)
+    check(img.width == w && img.height == h) { "$name: holo wrote ${img.width}x${img.height}, expected ${w}x$h" }
+    var sum = 0L
+    var withinOne = 0
+    for (y in 0 until h) for (x in 0 until w) {
+        val a = got[y * w + x].toInt() and 0xFF
+        val b = img.raster.getSample(x, y, 0)
+        val d = Math.abs(a - b).let { minOf(it, 256 - it) }
+        sum += d
+        if (d <= 1) withinOne++
+    }
+    return Pair(sum.toDouble() / (w * h), withinOne.toDouble() / (w * h))
+}
+
+class Recorder : PatternsListener {
+    val indices: MutableList<ULong> = Collections.synchronizedList(mutableListOf())
+    val errors: MutableList<TensorholoException> = Collections.synchronizedList(mutableListOf())
+    val threads: MutableSet<Long> = Collections.synchronizedSet(mutableSetOf())
+
+    override fun onPatterns(index: ULong, patterns: SlmPatterns) {
         threads.add(Thread.currentThread().id)
         indices.add(index)
-        values.add(value)
-        if (index == failAt) throw IllegalStateException("listener broke at $index")
     }
 
     override fun onError(error: TensorholoException) {
@@ -50,75 +89,58 @@ class Recorder : DemoListener {
     }
 }
 
-fun littleEndian(i: ULong): ByteArray = ByteArray(8) { k -> (i shr (8 * k)).toByte() }
-
 fun main(args: Array<String>) {
-    val expectedVersion = args.getOrNull(0) ?: throw IllegalArgumentException("usage: MainKt <workspace version>")
-    check(version() == expectedVersion) { "version() = ${version()}, workspace says $expectedVersion" }
+    if (args.size != 2) throw IllegalArgumentException("usage: MainKt <workspace version> <cases dir>")
+    check(version() == args[0]) { "version() = ${version()}, workspace says ${args[0]}" }
+    val cases = File(args[1]).listFiles { f -> File(f, "case.json").exists() }!!.sortedBy { it.name }
+    check(cases.isNotEmpty()) { "no case in ${args[1]}" }
+    for (dir in cases) {
+        val case = readCase(File(dir, "case.json"))
+        val (w, h) = Pair(case.getValue("out_width").toInt(), case.getValue("out_height").toInt())
+        val frame = frameOf(dir, case)
+        HologramGenerator(GeneratorConfig(width = w.toUInt(), height = h.toUInt())).use { gen ->
+            val out = gen.render(frame)
+            check(out.width == w.toUInt() && out.height == h.toUInt()) { "${dir.name}: size ${out.width}x${out.height}" }
+            for ((plane, laser) in listOf(out.red to "r", out.green to "g", out.blue to "b")) {
+                val (mean, within) = compare(dir.name, plane, File(dir, "holo/phase_$laser.png"), w, h)
+                println("${dir.name} $laser: vs holo render mean circular difference $mean, within ±1: $within")
+                // The tolerance of frames.compare_codes.
+                check(mean <= 0.02 && within >= 0.999) { "${dir.name} $laser: $mean, $within" }
+            }
+            val rgba = packRgba(out)
+            check(rgba.size == w * h * 4 && rgba[3] == 255.toByte() && rgba[0] == out.red[0]) { "packRgba" }
+            check(gen.info().layers == 8u) { "info: ${gen.info()}" }
 
-    Echo(1000uL).use { echo ->
-        // Byte round trip: random bytes come back as their negative, and twice as themselves.
-        val rnd = java.util.Random(7)
-        val data = ByteArray(35).also { rnd.nextBytes(it) }
-        val out = echo.invert(Bytes8Demo(7u, 5u, data))
-        check(out.width == 7u && out.height == 5u) { "size ${out.width} x ${out.height}" }
-        for (i in data.indices) {
-            val a = data[i].toInt() and 0xff
-            val b = out.data[i].toInt() and 0xff
-            check(a + b == 255) { "byte $i: $a and $b do not add up to 255" }
-        }
-        check(echo.invert(out).data.contentEquals(data)) { "inverting twice is not the identity" }
-        // Every byte value crosses unchanged (signed Kotlin bytes included).
-        val all = ByteArray(256) { it.toByte() }
-        val inv = echo.invert(Bytes8Demo(16u, 16u, all)).data
-        check(inv.contentEquals(ByteArray(256) { (255 - it).toByte() })) { "0..255 not inverted" }
+            // Bad input: a typed exception, and the generator goes on.
+            val short = expectThrows<TensorholoException.InvalidInput> {
+                gen.render(frame.copy(depth = frame.depth.copyOf(frame.depth.size - 2)))
+            }
+            check(short.reason.contains("depth")) { "message names the buffer: ${short.reason}" }
+            expectThrows<TensorholoException.InvalidInput> { gen.render(frame.copy(colorWidth = 0u)) }
+            expectThrows<TensorholoException.InvalidInput> {
+                gen.render(frame.copy(depth = ByteArray(frame.depth.size)))
+            }
+            check(gen.render(frame).green.contentEquals(out.green)) { "${dir.name}: generator after errors" }
 
-        // Errors arrive as the typed exception with the Rust message.
-        val e = expectThrows<TensorholoException.InvalidInput> { echo.invert(Bytes8Demo(3u, 2u, ByteArray(5))) }
-        check(e.reason.contains("5 bytes")) { "reason: ${e.reason}" }
-        // Caught as the sealed base class: the variant is still the specific one.
-        val big = expectThrows<TensorholoException> { echo.invert(Bytes8Demo(40u, 30u, ByteArray(1200))) }
-        check(big is TensorholoException.InvalidInput && big.reason.contains("at most 1000")) { "unexpected $big" }
-    }
-    val ctor = expectThrows<TensorholoException.InvalidInput> { Echo(0uL) }
-    check(ctor.reason.contains("max_pixels")) { "reason: ${ctor.reason}" }
-
-    // A Rust panic comes back as Internal, and the library stays usable.
-    val panic = expectThrows<TensorholoException.Internal> { demoPanic("boom") }
-    check(panic.reason.contains("panicked: boom")) { "reason: ${panic.reason}" }
-    check(version() == expectedVersion) { "library unusable after a panic" }
-
-    // A listener implemented in Kotlin, called from a Rust thread, in order.
-    Echo(1uL).use { echo ->
-        val n = 500
-        val rec = Recorder()
-        echo.stream(rec, n.toULong(), true)
-        check(rec.indices == (0 until n).map { it.toULong() }) { "indices ${rec.indices.take(10)}…" }
-        for ((i, v) in rec.values.withIndex()) {
-            check(v.width == 8u && v.height == 1u && v.data.contentEquals(littleEndian(i.toULong()))) {
-                "value $i: $v"
+            // A listener implemented in Kotlin, called from the stream's thread in frame order.
+            val rec = Recorder()
+            gen.stream(rec).use { stream ->
+                for (i in 0 until 3) {
+                    check(stream.push(frame) == i.toULong()) { "push index" }
+                    while (rec.indices.size + rec.errors.size <= i) Thread.sleep(10)
+                }
+                stream.finish()
+                check(rec.indices == listOf(0uL, 1uL, 2uL) && rec.errors.isEmpty()) { "stream: ${rec.indices} ${rec.errors}" }
+                check(Thread.currentThread().id !in rec.threads) { "listener ran on the caller's thread" }
+                expectThrows<TensorholoException.InvalidInput> { stream.push(frame) }
             }
         }
-        // JNA attaches the Rust thread to the JVM anew for each call, so the Java thread ids differ from call to
-        // call; what matters is that none is the caller's.
-        check(rec.threads.isNotEmpty() && Thread.currentThread().id !in rec.threads) {
-            "called from threads ${rec.threads.take(5)}…, caller is ${Thread.currentThread().id}"
-        }
-        check(rec.errors.size == 1) { "errors ${rec.errors}" }
-        val err = rec.errors[0]
-        check(err is TensorholoException.InvalidInput && err.reason.contains("after $n values")) { "error $err" }
-
-        val quiet = Recorder()
-        echo.stream(quiet, 0uL, false)
-        check(quiet.indices.isEmpty() && quiet.errors.isEmpty()) { "calls without values" }
-
-        // An exception thrown by the listener stops the stream and comes back as Internal.
-        val failing = Recorder().apply { failAt = 2uL }
-        expectThrows<TensorholoException.Internal> { echo.stream(failing, 10uL, true) }
-        check(failing.indices == listOf(0uL, 1uL, 2uL) && failing.errors.isEmpty()) {
-            "after a listener exception: ${failing.indices}, ${failing.errors}"
-        }
     }
-
-    println("kotlin bindings: $checks checks passed")
+    expectThrows<TensorholoException.InvalidInput> {
+        HologramGenerator(GeneratorConfig(width = 64u, height = 64u, layers = 9u))
+    }
+    expectThrows<TensorholoException.InvalidInput> {
+        HologramGenerator(GeneratorConfig(width = 64u, height = 64u, offsetMm = Double.NaN))
+    }
+    println("kotlin bindings: $checks checks passed on ${cases.size} real frames")
 }

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Usage: bindings/tests/kotlin/check.sh [BINDINGS_DIR]
 #
-# Compiles the generated Kotlin (JVM) with Main.kt and runs it against the built library through JNA.
+# Compiles the generated Kotlin (JVM) with Main.kt and runs it against the built library through JNA, on the
+# real frames of bindings/tests/frames.py compared with `holo render` ($HOLO, as python/check.sh).
 # Tools, installed here when missing (quietly, once): kotlinc from the npm package `kotlin-compiler` pinned
 # in package.json/package-lock.json (into bindings/tests/kotlin/node_modules, git-ignored; a JVM kotlinc
 # despite the package's name), JNA from Debian's libjna-java, a JRE (Debian's default-jre-headless).
@@ -34,5 +35,9 @@ build="$tmp"
   "$dir/kotlin/tensorholo/tensorholo.kt" "$here/Main.kt" 2>&1 | grep -v '^info: ' || true
 [ -f "$build/check.jar" ] || { echo "kotlin bindings: compilation failed" >&2; exit 1; }
 
+# The real frames and holo render's patterns of the same scenes (bindings/tests/frames.py).
+py_venv
+HOLO="${HOLO:-$(holo_binary)}" "$py" "$here/../frames.py" "$build/cases" >/dev/null
+
 version="$(sed -n '/^\[workspace.package\]/,/^\[/s/^version *= *"\([^"]*\)".*/\1/p' "$REPO_ROOT/Cargo.toml")"
-java -Djna.library.path="$dir/python" -cp "$build/check.jar:$jna" MainKt "$version"
+java -Djna.library.path="$dir/python" -cp "$build/check.jar:$jna" MainKt "$version" "$build/cases"

@@ -2,7 +2,8 @@
 # Usage: bindings/tests/python/check.sh [BINDINGS_DIR]
 #
 # Runs the pytest checks of the generated Python bindings (test_bindings.py) in a small venv
-# (bindings/tests/python/.venv, or $TENSORHOLO_BINDINGS_VENV) with the pinned requirements.txt.
+# (bindings/tests/python/.venv, or $TENSORHOLO_BINDINGS_VENV) with the pinned requirements.txt, on real frames
+# compared with `holo render` ($HOLO, default: the newest holo binary of the target dir).
 # BINDINGS_DIR: output of bindings/generate.sh (default $TENSORHOLO_BINDINGS_DIR, else generated now).
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
@@ -10,20 +11,7 @@ here="$(cd "$(dirname "$0")" && pwd)"
 . "$here/../lib.sh"
 
 use_bindings "${1:-}"
-venv="${TENSORHOLO_BINDINGS_VENV:-$here/.venv}"
+py_venv
 
-command -v python3 >/dev/null 2>&1 || ensure_apt python3 || skip "python bindings: no python3 and it cannot be installed"
-if [ ! -x "$venv/bin/python" ]; then
-  if ! python3 -m venv "$venv" >/dev/null 2>&1; then
-    rm -rf "$venv"
-    ensure_apt python3-venv || skip "python bindings: python3 has no venv module and python3-venv cannot be installed"
-    python3 -m venv "$venv"
-  fi
-fi
-# Install only when requirements.txt changed since the last install (idempotent and quiet).
-if ! cmp -s "$here/requirements.txt" "$venv/.tensorholo-requirements.txt"; then
-  "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$here/requirements.txt"
-  cp "$here/requirements.txt" "$venv/.tensorholo-requirements.txt"
-fi
-
-PYTHONPATH="$dir/python" "$venv/bin/python" -m pytest -q -p no:cacheprovider "$here"
+export HOLO="${HOLO:-$(holo_binary)}"
+PYTHONPATH="$dir/python" "$py" -m pytest -q -p no:cacheprovider "$here"

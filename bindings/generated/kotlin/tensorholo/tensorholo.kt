@@ -650,30 +650,30 @@ internal open class UniffiForeignFutureResultVoid(
 internal interface UniffiForeignFutureCompleteVoid : com.sun.jna.Callback {
     fun callback(`callbackData`: Long,`result`: UniffiForeignFutureResultVoid.UniffiByValue,)
 }
-internal interface UniffiCallbackInterfaceDemoListenerMethod0 : com.sun.jna.Callback {
-    fun callback(`uniffiHandle`: Long,`index`: Long,`value`: RustBuffer.ByValue,`uniffiOutReturn`: Pointer,uniffiCallStatus: UniffiRustCallStatus,)
+internal interface UniffiCallbackInterfacePatternsListenerMethod0 : com.sun.jna.Callback {
+    fun callback(`uniffiHandle`: Long,`index`: Long,`patterns`: RustBuffer.ByValue,`uniffiOutReturn`: Pointer,uniffiCallStatus: UniffiRustCallStatus,)
 }
-internal interface UniffiCallbackInterfaceDemoListenerMethod1 : com.sun.jna.Callback {
+internal interface UniffiCallbackInterfacePatternsListenerMethod1 : com.sun.jna.Callback {
     fun callback(`uniffiHandle`: Long,`error`: RustBuffer.ByValue,`uniffiOutReturn`: Pointer,uniffiCallStatus: UniffiRustCallStatus,)
 }
-@Structure.FieldOrder("uniffiFree", "uniffiClone", "onValue", "onError")
-internal open class UniffiVTableCallbackInterfaceDemoListener(
+@Structure.FieldOrder("uniffiFree", "uniffiClone", "onPatterns", "onError")
+internal open class UniffiVTableCallbackInterfacePatternsListener(
     @JvmField internal var `uniffiFree`: UniffiCallbackInterfaceFree? = null,
     @JvmField internal var `uniffiClone`: UniffiCallbackInterfaceClone? = null,
-    @JvmField internal var `onValue`: UniffiCallbackInterfaceDemoListenerMethod0? = null,
-    @JvmField internal var `onError`: UniffiCallbackInterfaceDemoListenerMethod1? = null,
+    @JvmField internal var `onPatterns`: UniffiCallbackInterfacePatternsListenerMethod0? = null,
+    @JvmField internal var `onError`: UniffiCallbackInterfacePatternsListenerMethod1? = null,
 ) : Structure() {
     class UniffiByValue(
         `uniffiFree`: UniffiCallbackInterfaceFree? = null,
         `uniffiClone`: UniffiCallbackInterfaceClone? = null,
-        `onValue`: UniffiCallbackInterfaceDemoListenerMethod0? = null,
-        `onError`: UniffiCallbackInterfaceDemoListenerMethod1? = null,
-    ): UniffiVTableCallbackInterfaceDemoListener(`uniffiFree`,`uniffiClone`,`onValue`,`onError`,), Structure.ByValue
+        `onPatterns`: UniffiCallbackInterfacePatternsListenerMethod0? = null,
+        `onError`: UniffiCallbackInterfacePatternsListenerMethod1? = null,
+    ): UniffiVTableCallbackInterfacePatternsListener(`uniffiFree`,`uniffiClone`,`onPatterns`,`onError`,), Structure.ByValue
 
-   internal fun uniffiSetValue(other: UniffiVTableCallbackInterfaceDemoListener) {
+   internal fun uniffiSetValue(other: UniffiVTableCallbackInterfacePatternsListener) {
         `uniffiFree` = other.`uniffiFree`
         `uniffiClone` = other.`uniffiClone`
-        `onValue` = other.`onValue`
+        `onPatterns` = other.`onPatterns`
         `onError` = other.`onError`
     }
 
@@ -705,17 +705,29 @@ internal object IntegrityCheckingUniffiLib {
     internal fun ensureInitialized() = Unit
     external fun uniffi_tensorholo_ffi_checksum_func_version(
     ): Int
-    external fun uniffi_tensorholo_ffi_checksum_func_demo_panic(
+    external fun uniffi_tensorholo_ffi_checksum_func_pack_rgba(
     ): Int
-    external fun uniffi_tensorholo_ffi_checksum_method_demolistener_on_value(
+    external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_benchmark(
     ): Int
-    external fun uniffi_tensorholo_ffi_checksum_method_demolistener_on_error(
+    external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_info(
     ): Int
-    external fun uniffi_tensorholo_ffi_checksum_method_echo_invert(
+    external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_preview(
     ): Int
-    external fun uniffi_tensorholo_ffi_checksum_method_echo_stream(
+    external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render(
     ): Int
-    external fun uniffi_tensorholo_ffi_checksum_constructor_echo_new(
+    external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream(
+    ): Int
+    external fun uniffi_tensorholo_ffi_checksum_method_hologramstream_close(
+    ): Int
+    external fun uniffi_tensorholo_ffi_checksum_method_hologramstream_dropped_frames(
+    ): Int
+    external fun uniffi_tensorholo_ffi_checksum_method_hologramstream_push(
+    ): Int
+    external fun uniffi_tensorholo_ffi_checksum_method_patternslistener_on_patterns(
+    ): Int
+    external fun uniffi_tensorholo_ffi_checksum_method_patternslistener_on_error(
+    ): Int
+    external fun uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new(
     ): Int
     external fun ffi_tensorholo_ffi_uniffi_contract_version(
     ): Int
@@ -733,35 +745,51 @@ internal object UniffiLib {
 
     init {
         Native.register(UniffiLib::class.java, findLibraryName(componentName = "tensorholo"))
-        uniffiCallbackInterfaceDemoListener.register(this)
+        uniffiCallbackInterfacePatternsListener.register(this)
         
     }
 
     internal fun ensureInitialized() = Unit
-    external fun uniffi_tensorholo_ffi_fn_clone_demolistener(`handle`: Long,uniffi_out_err: UniffiRustCallStatus, 
+    external fun uniffi_tensorholo_ffi_fn_clone_hologramgenerator(`handle`: Long,uniffi_out_err: UniffiRustCallStatus, 
     ): Long
-    external fun uniffi_tensorholo_ffi_fn_free_demolistener(`handle`: Long,uniffi_out_err: UniffiRustCallStatus, 
+    external fun uniffi_tensorholo_ffi_fn_free_hologramgenerator(`handle`: Long,uniffi_out_err: UniffiRustCallStatus, 
     ): Unit
-    external fun uniffi_tensorholo_ffi_fn_init_callback_vtable_demolistener(`vtable`: UniffiVTableCallbackInterfaceDemoListener,
-    ): Unit
-    external fun uniffi_tensorholo_ffi_fn_method_demolistener_on_value(`ptr`: Long,`index`: Long,`value`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
-    ): Unit
-    external fun uniffi_tensorholo_ffi_fn_method_demolistener_on_error(`ptr`: Long,`error`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
-    ): Unit
-    external fun uniffi_tensorholo_ffi_fn_clone_echo(`handle`: Long,uniffi_out_err: UniffiRustCallStatus, 
+    external fun uniffi_tensorholo_ffi_fn_constructor_hologramgenerator_new(`config`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): Long
-    external fun uniffi_tensorholo_ffi_fn_free_echo(`handle`: Long,uniffi_out_err: UniffiRustCallStatus, 
-    ): Unit
-    external fun uniffi_tensorholo_ffi_fn_constructor_echo_new(`maxPixels`: Long,uniffi_out_err: UniffiRustCallStatus, 
-    ): Long
-    external fun uniffi_tensorholo_ffi_fn_method_echo_invert(`ptr`: Long,`image`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_benchmark(`ptr`: Long,`frames`: Int,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
-    external fun uniffi_tensorholo_ffi_fn_method_echo_stream(`ptr`: Long,`listener`: Long,`count`: Long,`thenError`: Byte,uniffi_out_err: UniffiRustCallStatus, 
+    external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_info(`ptr`: Long,uniffi_out_err: UniffiRustCallStatus, 
+    ): RustBuffer.ByValue
+    external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_preview(`ptr`: Long,`frame`: RustBuffer.ByValue,`focus`: Float,uniffi_out_err: UniffiRustCallStatus, 
+    ): RustBuffer.ByValue
+    external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_render(`ptr`: Long,`frame`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    ): RustBuffer.ByValue
+    external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_stream(`ptr`: Long,`listener`: Long,uniffi_out_err: UniffiRustCallStatus, 
+    ): Long
+    external fun uniffi_tensorholo_ffi_fn_clone_hologramstream(`handle`: Long,uniffi_out_err: UniffiRustCallStatus, 
+    ): Long
+    external fun uniffi_tensorholo_ffi_fn_free_hologramstream(`handle`: Long,uniffi_out_err: UniffiRustCallStatus, 
+    ): Unit
+    external fun uniffi_tensorholo_ffi_fn_method_hologramstream_close(`ptr`: Long,uniffi_out_err: UniffiRustCallStatus, 
+    ): Unit
+    external fun uniffi_tensorholo_ffi_fn_method_hologramstream_dropped_frames(`ptr`: Long,uniffi_out_err: UniffiRustCallStatus, 
+    ): Long
+    external fun uniffi_tensorholo_ffi_fn_method_hologramstream_push(`ptr`: Long,`frame`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    ): Long
+    external fun uniffi_tensorholo_ffi_fn_clone_patternslistener(`handle`: Long,uniffi_out_err: UniffiRustCallStatus, 
+    ): Long
+    external fun uniffi_tensorholo_ffi_fn_free_patternslistener(`handle`: Long,uniffi_out_err: UniffiRustCallStatus, 
+    ): Unit
+    external fun uniffi_tensorholo_ffi_fn_init_callback_vtable_patternslistener(`vtable`: UniffiVTableCallbackInterfacePatternsListener,
+    ): Unit
+    external fun uniffi_tensorholo_ffi_fn_method_patternslistener_on_patterns(`ptr`: Long,`index`: Long,`patterns`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    ): Unit
+    external fun uniffi_tensorholo_ffi_fn_method_patternslistener_on_error(`ptr`: Long,`error`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): Unit
     external fun uniffi_tensorholo_ffi_fn_func_version(uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
-    external fun uniffi_tensorholo_ffi_fn_func_demo_panic(`message`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
-    ): Unit
+    external fun uniffi_tensorholo_ffi_fn_func_pack_rgba(`patterns`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    ): RustBuffer.ByValue
     external fun ffi_tensorholo_ffi_rustbuffer_alloc(`size`: Long,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
     external fun ffi_tensorholo_ffi_rustbuffer_from_bytes(`bytes`: ForeignBytes.ByValue,uniffi_out_err: UniffiRustCallStatus, 
@@ -884,22 +912,40 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
     if ((lib.uniffi_tensorholo_ffi_checksum_func_version() and 0xFFFF) != 14763) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_func_demo_panic() and 0xFFFF) != 49511) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_func_pack_rgba() and 0xFFFF) != 54530) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_demolistener_on_value() and 0xFFFF) != 14259) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_benchmark() and 0xFFFF) != 9343) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_demolistener_on_error() and 0xFFFF) != 50024) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_info() and 0xFFFF) != 31754) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_echo_invert() and 0xFFFF) != 19674) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_preview() and 0xFFFF) != 40025) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_echo_stream() and 0xFFFF) != 53606) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render() and 0xFFFF) != 59945) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_constructor_echo_new() and 0xFFFF) != 13892) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream() and 0xFFFF) != 44735) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramstream_close() and 0xFFFF) != 56790) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramstream_dropped_frames() and 0xFFFF) != 31345) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramstream_push() and 0xFFFF) != 34294) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_patternslistener_on_patterns() and 0xFFFF) != 9565) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_patternslistener_on_error() and 0xFFFF) != 41699) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new() and 0xFFFF) != 59040) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
 }
@@ -1139,6 +1185,52 @@ public object FfiConverterULong: FfiConverter<ULong, Long> {
 /**
  * @suppress
  */
+public object FfiConverterFloat: FfiConverter<Float, Float> {
+    override fun lift(value: Float): Float {
+        return value
+    }
+
+    override fun read(buf: ByteBuffer): Float {
+        return buf.getFloat()
+    }
+
+    override fun lower(value: Float): Float {
+        return value
+    }
+
+    override fun allocationSize(value: Float) = 4UL
+
+    override fun write(value: Float, buf: ByteBuffer) {
+        buf.putFloat(value)
+    }
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterDouble: FfiConverter<Double, Double> {
+    override fun lift(value: Double): Double {
+        return value
+    }
+
+    override fun read(buf: ByteBuffer): Double {
+        return buf.getDouble()
+    }
+
+    override fun lower(value: Double): Double {
+        return value
+    }
+
+    override fun allocationSize(value: Double) = 8UL
+
+    override fun write(value: Double, buf: ByteBuffer) {
+        buf.putDouble(value)
+    }
+}
+
+/**
+ * @suppress
+ */
 public object FfiConverterBoolean: FfiConverter<Boolean, Byte> {
     override fun lift(value: Byte): Boolean {
         return value.toInt() != 0
@@ -1332,29 +1424,54 @@ public object FfiConverterByteArray: FfiConverterRustBuffer<ByteArray> {
 
 
 /**
- * Receives the values of [`Echo::stream`], implemented in the foreign language. Its methods are called
- * from a Rust thread that is not the caller's, one call at a time, in order.
+ * RGB-D camera frames → SLM patterns with the shipped CNNs. Any thread may call it; calls run one at a time.
  */
-public interface DemoListener {
+public interface HologramGeneratorInterface {
     
     /**
-     * The `index`-th value (0-based): an 8 x 1 image whose bytes are `index` in little-endian order.
+     * Renders the built-in test scene `frames` times (after one warm-up) at this generator's resolution and
+     * returns the median stage timings, so an app can show what its device does.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for 0 frames.
      */
-    fun `onValue`(`index`: kotlin.ULong, `value`: Bytes8Demo)
+    fun `benchmark`(`frames`: kotlin.UInt): BenchmarkReport
     
     /**
-     * Called once after the values when the stream was asked to end with an error.
+     * The models, precision, pre-filter and CNN plan this generator runs.
      */
-    fun `onError`(`error`: TensorholoException)
+    fun `info`(): GeneratorInfo
+    
+    /**
+     * Renders `frame` and returns what a viewer sees focused at normalised depth `focus` ∈ [0, 1]
+     * (0 = near), for the phone's screen.
+     *
+     * Errors: as [`HologramGenerator::render`], and for a focus outside [0, 1].
+     */
+    fun `preview`(`frame`: RgbdFrame, `focus`: kotlin.Float): Preview
+    
+    /**
+     * Renders one camera frame into SLM patterns.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for buffers that do not match their sizes, strides and
+     * formats, or a depth map without one valid pixel; the generator stays usable.
+     */
+    fun `render`(`frame`: RgbdFrame): SlmPatterns
+    
+    /**
+     * Starts a video stream: [`HologramStream::push`] frames, results reach `listener` in frame order on a
+     * background thread. The queue holds 2 frames and drops the oldest when full.
+     *
+     * Errors: [`TensorholoError::Internal`] if the worker thread cannot start.
+     */
+    fun `stream`(`listener`: PatternsListener): HologramStream
     
     companion object
 }
 
 /**
- * Receives the values of [`Echo::stream`], implemented in the foreign language. Its methods are called
- * from a Rust thread that is not the caller's, one call at a time, in order.
+ * RGB-D camera frames → SLM patterns with the shipped CNNs. Any thread may call it; calls run one at a time.
  */
-open class DemoListenerImpl: Disposable, AutoCloseable, DemoListener
+open class HologramGenerator: Disposable, AutoCloseable, HologramGeneratorInterface
 {
 
     @Suppress("UNUSED_PARAMETER")
@@ -1378,6 +1495,23 @@ open class DemoListenerImpl: Disposable, AutoCloseable, DemoListener
         this.handle = 0
         this.cleanable = null
     }
+    /**
+     * Loads the shipped CNNs and prepares everything for `config.width × config.height` frames (this times
+     * the CNN plans on the device: up to a few seconds).
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for a bad configuration (sizes, NaN or negative numbers,
+     * layers other than 8/15/30, a required pre-filter that is not shipped for the offset);
+     * [`TensorholoError::InvalidModel`] if an embedded model fails its checks.
+     */
+    constructor(`config`: GeneratorConfig) :
+        this(UniffiWithHandle, 
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_constructor_hologramgenerator_new(
+    
+        
+        FfiConverterTypeGeneratorConfig.lower(`config`),_status)
+}
+    )
 
     protected val handle: Long
     protected val cleanable: UniffiCleaner.Cleanable?
@@ -1438,7 +1572,7 @@ open class DemoListenerImpl: Disposable, AutoCloseable, DemoListener
                 return;
             }
             uniffiRustCall { status ->
-                UniffiLib.uniffi_tensorholo_ffi_fn_free_demolistener(handle, status)
+                UniffiLib.uniffi_tensorholo_ffi_fn_free_hologramgenerator(handle, status)
             }
         }
     }
@@ -1451,41 +1585,110 @@ open class DemoListenerImpl: Disposable, AutoCloseable, DemoListener
             throw InternalException("uniffiCloneHandle() called on NoHandle object");
         }
         return uniffiRustCall() { status ->
-            UniffiLib.uniffi_tensorholo_ffi_fn_clone_demolistener(handle, status)
+            UniffiLib.uniffi_tensorholo_ffi_fn_clone_hologramgenerator(handle, status)
         }
     }
 
     
     /**
-     * The `index`-th value (0-based): an 8 x 1 image whose bytes are `index` in little-endian order.
-     */override fun `onValue`(`index`: kotlin.ULong, `value`: Bytes8Demo)
-        = 
+     * Renders the built-in test scene `frames` times (after one warm-up) at this generator's resolution and
+     * returns the median stage timings, so an app can show what its device does.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for 0 frames.
+     */
+    @Throws(TensorholoException::class)override fun `benchmark`(`frames`: kotlin.UInt): BenchmarkReport {
+            return FfiConverterTypeBenchmarkReport.lift(
     callWithHandle {
-    uniffiRustCall() { _status ->
-    UniffiLib.uniffi_tensorholo_ffi_fn_method_demolistener_on_value(
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_hologramgenerator_benchmark(
         it,
         
-        FfiConverterULong.lower(`index`),
-        FfiConverterTypeBytes8Demo.lower(`value`),_status)
+        FfiConverterUInt.lower(`frames`),_status)
 }
     }
-    
+    )
+    }
     
 
     
     /**
-     * Called once after the values when the stream was asked to end with an error.
-     */override fun `onError`(`error`: TensorholoException)
-        = 
+     * The models, precision, pre-filter and CNN plan this generator runs.
+     */
+    @Throws(TensorholoException::class)override fun `info`(): GeneratorInfo {
+            return FfiConverterTypeGeneratorInfo.lift(
     callWithHandle {
-    uniffiRustCall() { _status ->
-    UniffiLib.uniffi_tensorholo_ffi_fn_method_demolistener_on_error(
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_hologramgenerator_info(
         it,
-        
-        FfiConverterTypeTensorholoError.lower(`error`),_status)
+        _status)
 }
     }
+    )
+    }
     
+
+    
+    /**
+     * Renders `frame` and returns what a viewer sees focused at normalised depth `focus` ∈ [0, 1]
+     * (0 = near), for the phone's screen.
+     *
+     * Errors: as [`HologramGenerator::render`], and for a focus outside [0, 1].
+     */
+    @Throws(TensorholoException::class)override fun `preview`(`frame`: RgbdFrame, `focus`: kotlin.Float): Preview {
+            return FfiConverterTypePreview.lift(
+    callWithHandle {
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_hologramgenerator_preview(
+        it,
+        
+        FfiConverterTypeRgbdFrame.lower(`frame`),
+        FfiConverterFloat.lower(`focus`),_status)
+}
+    }
+    )
+    }
+    
+
+    
+    /**
+     * Renders one camera frame into SLM patterns.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for buffers that do not match their sizes, strides and
+     * formats, or a depth map without one valid pixel; the generator stays usable.
+     */
+    @Throws(TensorholoException::class)override fun `render`(`frame`: RgbdFrame): SlmPatterns {
+            return FfiConverterTypeSlmPatterns.lift(
+    callWithHandle {
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_hologramgenerator_render(
+        it,
+        
+        FfiConverterTypeRgbdFrame.lower(`frame`),_status)
+}
+    }
+    )
+    }
+    
+
+    
+    /**
+     * Starts a video stream: [`HologramStream::push`] frames, results reach `listener` in frame order on a
+     * background thread. The queue holds 2 frames and drops the oldest when full.
+     *
+     * Errors: [`TensorholoError::Internal`] if the worker thread cannot start.
+     */
+    @Throws(TensorholoException::class)override fun `stream`(`listener`: PatternsListener): HologramStream {
+            return FfiConverterTypeHologramStream.lift(
+    callWithHandle {
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_hologramgenerator_stream(
+        it,
+        
+        FfiConverterTypePatternsListener.lower(`listener`),_status)
+}
+    }
+    )
+    }
     
 
     
@@ -1503,95 +1706,25 @@ open class DemoListenerImpl: Disposable, AutoCloseable, DemoListener
 }
 
 
-
-// Put the implementation in an object so we don't pollute the top-level namespace
-internal object uniffiCallbackInterfaceDemoListener {
-    internal object `onValue`: UniffiCallbackInterfaceDemoListenerMethod0 {
-        override fun callback(`uniffiHandle`: Long,`index`: Long,`value`: RustBuffer.ByValue,`uniffiOutReturn`: Pointer,uniffiCallStatus: UniffiRustCallStatus,) {
-            val uniffiObj = FfiConverterTypeDemoListener.handleMap.get(uniffiHandle)
-            val makeCall = { ->
-                uniffiObj.`onValue`(
-                    FfiConverterULong.lift(`index`),
-                    FfiConverterTypeBytes8Demo.lift(`value`),
-                )
-            }
-            val writeReturn = { _: Unit -> Unit }
-            uniffiTraitInterfaceCall(uniffiCallStatus, makeCall, writeReturn)
-        }
-    }
-    internal object `onError`: UniffiCallbackInterfaceDemoListenerMethod1 {
-        override fun callback(`uniffiHandle`: Long,`error`: RustBuffer.ByValue,`uniffiOutReturn`: Pointer,uniffiCallStatus: UniffiRustCallStatus,) {
-            val uniffiObj = FfiConverterTypeDemoListener.handleMap.get(uniffiHandle)
-            val makeCall = { ->
-                uniffiObj.`onError`(
-                    FfiConverterTypeTensorholoError.lift(`error`),
-                )
-            }
-            val writeReturn = { _: Unit -> Unit }
-            uniffiTraitInterfaceCall(uniffiCallStatus, makeCall, writeReturn)
-        }
-    }
-
-    internal object uniffiFree: UniffiCallbackInterfaceFree {
-        override fun callback(handle: Long) {
-            FfiConverterTypeDemoListener.handleMap.remove(handle)
-        }
-    }
-
-    internal object uniffiClone: UniffiCallbackInterfaceClone {
-        override fun callback(handle: Long): Long {
-            return FfiConverterTypeDemoListener.handleMap.clone(handle)
-        }
-    }
-
-    internal var vtable = UniffiVTableCallbackInterfaceDemoListener.UniffiByValue(
-        uniffiFree,
-        uniffiClone,
-        `onValue`,
-        `onError`,
-    )
-
-    // Registers the foreign callback with the Rust side.
-    // This method is generated for each callback interface.
-    internal fun register(lib: UniffiLib) {
-        lib.uniffi_tensorholo_ffi_fn_init_callback_vtable_demolistener(vtable)
-    }
-}
-
 /**
  * @suppress
  */
-public object FfiConverterTypeDemoListener: FfiConverter<DemoListener, Long> {
-    internal val handleMap = UniffiHandleMap<DemoListener>()
-
-    override fun lower(value: DemoListener): Long {
-        if (value is DemoListenerImpl) {
-             // Rust-implemented object.  Clone the handle and return it
-            return value.uniffiCloneHandle()
-         } else {
-            // Kotlin object, generate a new vtable handle and return that.
-            return handleMap.insert(value)
-         }
+public object FfiConverterTypeHologramGenerator: FfiConverter<HologramGenerator, Long> {
+    override fun lower(value: HologramGenerator): Long {
+        return value.uniffiCloneHandle()
     }
 
-    override fun lift(value: Long): DemoListener {
-        if ((value and 1.toLong()) == 0.toLong()) {
-            // Rust-generated handle, construct a new class that uses the handle to implement the
-            // interface
-            return DemoListenerImpl(UniffiWithHandle, value)
-        } else {
-            // Kotlin-generated handle, get the object from the handle map
-            return handleMap.remove(value)
-        }
+    override fun lift(value: Long): HologramGenerator {
+        return HologramGenerator(UniffiWithHandle, value)
     }
 
-    override fun read(buf: ByteBuffer): DemoListener {
+    override fun read(buf: ByteBuffer): HologramGenerator {
         return lift(buf.getLong())
     }
 
-    override fun allocationSize(value: DemoListener) = 8UL
+    override fun allocationSize(value: HologramGenerator) = 8UL
 
-    override fun write(value: DemoListener, buf: ByteBuffer) {
+    override fun write(value: HologramGenerator, buf: ByteBuffer) {
         buf.putLong(lower(value))
     }
 }
@@ -1693,35 +1826,36 @@ public object FfiConverterTypeDemoListener: FfiConverter<DemoListener, Long> {
 
 
 /**
- * A stateless demo object with a fallible constructor and a size limit.
+ * A video stream ([`HologramGenerator::stream`]).
  */
-public interface EchoInterface {
+public interface HologramStreamInterface {
     
     /**
-     * The photographic negative of `image`: every byte `v` becomes `255 - v`, same size.
-     *
-     * Errors: [`TensorholoError::InvalidInput`] if `data.len() != width * height` or the image has more
-     * than `max_pixels` pixels.
+     * Stops accepting frames, finishes the queued ones and waits: afterwards the listener is called no
+     * more. Calling it again does nothing.
      */
-    fun `invert`(`image`: Bytes8Demo): Bytes8Demo
+    fun `finish`()
     
     /**
-     * Sends `count` values to `listener` from a newly spawned Rust thread, in order (`on_value(i, …)` for
-     * `i = 0..count`), then `on_error(InvalidInput)` once if `then_error`; returns when that thread is done.
-     *
-     * Errors: [`TensorholoError::InvalidInput`] if `count` > 2^20; [`TensorholoError::Internal`] if the
-     * thread cannot be started or a listener call failed (raised an exception: uniffi turns it into a panic
-     * of that thread).
+     * Frames dropped so far because the queue was full.
      */
-    fun `stream`(`listener`: DemoListener, `count`: kotlin.ULong, `thenError`: kotlin.Boolean)
+    fun `droppedFrames`(): kotlin.ULong
+    
+    /**
+     * Queues a frame without waiting for the hologram and returns its index (0, 1, 2… in push order); when
+     * the queue is full the oldest waiting frame is dropped.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] after [`HologramStream::close`].
+     */
+    fun `push`(`frame`: RgbdFrame): kotlin.ULong
     
     companion object
 }
 
 /**
- * A stateless demo object with a fallible constructor and a size limit.
+ * A video stream ([`HologramGenerator::stream`]).
  */
-open class Echo: Disposable, AutoCloseable, EchoInterface
+open class HologramStream: Disposable, AutoCloseable, HologramStreamInterface
 {
 
     @Suppress("UNUSED_PARAMETER")
@@ -1745,20 +1879,6 @@ open class Echo: Disposable, AutoCloseable, EchoInterface
         this.handle = 0
         this.cleanable = null
     }
-    /**
-     * An echo accepting images of at most `max_pixels` pixels.
-     *
-     * Errors: [`TensorholoError::InvalidInput`] if `max_pixels` is 0.
-     */
-    constructor(`maxPixels`: kotlin.ULong) :
-        this(UniffiWithHandle, 
-    uniffiRustCallWithError(TensorholoException) { _status ->
-    UniffiLib.uniffi_tensorholo_ffi_fn_constructor_echo_new(
-    
-        
-        FfiConverterULong.lower(`maxPixels`),_status)
-}
-    )
 
     protected val handle: Long
     protected val cleanable: UniffiCleaner.Cleanable?
@@ -1819,7 +1939,7 @@ open class Echo: Disposable, AutoCloseable, EchoInterface
                 return;
             }
             uniffiRustCall { status ->
-                UniffiLib.uniffi_tensorholo_ffi_fn_free_echo(handle, status)
+                UniffiLib.uniffi_tensorholo_ffi_fn_free_hologramstream(handle, status)
             }
         }
     }
@@ -1832,25 +1952,36 @@ open class Echo: Disposable, AutoCloseable, EchoInterface
             throw InternalException("uniffiCloneHandle() called on NoHandle object");
         }
         return uniffiRustCall() { status ->
-            UniffiLib.uniffi_tensorholo_ffi_fn_clone_echo(handle, status)
+            UniffiLib.uniffi_tensorholo_ffi_fn_clone_hologramstream(handle, status)
         }
     }
 
     
     /**
-     * The photographic negative of `image`: every byte `v` becomes `255 - v`, same size.
-     *
-     * Errors: [`TensorholoError::InvalidInput`] if `data.len() != width * height` or the image has more
-     * than `max_pixels` pixels.
-     */
-    @Throws(TensorholoException::class)override fun `invert`(`image`: Bytes8Demo): Bytes8Demo {
-            return FfiConverterTypeBytes8Demo.lift(
+     * Stops accepting frames, finishes the queued ones and waits: afterwards the listener is called no
+     * more. Calling it again does nothing.
+     */override fun `finish`()
+        = 
     callWithHandle {
-    uniffiRustCallWithError(TensorholoException) { _status ->
-    UniffiLib.uniffi_tensorholo_ffi_fn_method_echo_invert(
+    uniffiRustCall() { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_hologramstream_close(
         it,
-        
-        FfiConverterTypeBytes8Demo.lower(`image`),_status)
+        _status)
+}
+    }
+    
+    
+
+    
+    /**
+     * Frames dropped so far because the queue was full.
+     */override fun `droppedFrames`(): kotlin.ULong {
+            return FfiConverterULong.lift(
+    callWithHandle {
+    uniffiRustCall() { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_hologramstream_dropped_frames(
+        it,
+        _status)
 }
     }
     )
@@ -1859,26 +1990,23 @@ open class Echo: Disposable, AutoCloseable, EchoInterface
 
     
     /**
-     * Sends `count` values to `listener` from a newly spawned Rust thread, in order (`on_value(i, …)` for
-     * `i = 0..count`), then `on_error(InvalidInput)` once if `then_error`; returns when that thread is done.
+     * Queues a frame without waiting for the hologram and returns its index (0, 1, 2… in push order); when
+     * the queue is full the oldest waiting frame is dropped.
      *
-     * Errors: [`TensorholoError::InvalidInput`] if `count` > 2^20; [`TensorholoError::Internal`] if the
-     * thread cannot be started or a listener call failed (raised an exception: uniffi turns it into a panic
-     * of that thread).
+     * Errors: [`TensorholoError::InvalidInput`] after [`HologramStream::close`].
      */
-    @Throws(TensorholoException::class)override fun `stream`(`listener`: DemoListener, `count`: kotlin.ULong, `thenError`: kotlin.Boolean)
-        = 
+    @Throws(TensorholoException::class)override fun `push`(`frame`: RgbdFrame): kotlin.ULong {
+            return FfiConverterULong.lift(
     callWithHandle {
     uniffiRustCallWithError(TensorholoException) { _status ->
-    UniffiLib.uniffi_tensorholo_ffi_fn_method_echo_stream(
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_hologramstream_push(
         it,
         
-        FfiConverterTypeDemoListener.lower(`listener`),
-        FfiConverterULong.lower(`count`),
-        FfiConverterBoolean.lower(`thenError`),_status)
+        FfiConverterTypeRgbdFrame.lower(`frame`),_status)
 }
     }
-    
+    )
+    }
     
 
     
@@ -1899,22 +2027,383 @@ open class Echo: Disposable, AutoCloseable, EchoInterface
 /**
  * @suppress
  */
-public object FfiConverterTypeEcho: FfiConverter<Echo, Long> {
-    override fun lower(value: Echo): Long {
+public object FfiConverterTypeHologramStream: FfiConverter<HologramStream, Long> {
+    override fun lower(value: HologramStream): Long {
         return value.uniffiCloneHandle()
     }
 
-    override fun lift(value: Long): Echo {
-        return Echo(UniffiWithHandle, value)
+    override fun lift(value: Long): HologramStream {
+        return HologramStream(UniffiWithHandle, value)
     }
 
-    override fun read(buf: ByteBuffer): Echo {
+    override fun read(buf: ByteBuffer): HologramStream {
         return lift(buf.getLong())
     }
 
-    override fun allocationSize(value: Echo) = 8UL
+    override fun allocationSize(value: HologramStream) = 8UL
 
-    override fun write(value: Echo, buf: ByteBuffer) {
+    override fun write(value: HologramStream, buf: ByteBuffer) {
+        buf.putLong(lower(value))
+    }
+}
+
+
+// This template implements a class for working with a Rust struct via a handle
+// to the live Rust struct on the other side of the FFI.
+//
+// There's some subtlety here, because we have to be careful not to operate on a Rust
+// struct after it has been dropped, and because we must expose a public API for freeing
+// theq Kotlin wrapper object in lieu of reliable finalizers. The core requirements are:
+//
+//   * Each instance holds an opaque handle to the underlying Rust struct.
+//     Method calls need to read this handle from the object's state and pass it in to
+//     the Rust FFI.
+//
+//   * When an instance is no longer needed, its handle should be passed to a
+//     special destructor function provided by the Rust FFI, which will drop the
+//     underlying Rust struct.
+//
+//   * Given an instance, calling code is expected to call the special
+//     `destroy` method in order to free it after use, either by calling it explicitly
+//     or by using a higher-level helper like the `use` method. Failing to do so risks
+//     leaking the underlying Rust struct.
+//
+//   * We can't assume that calling code will do the right thing, and must be prepared
+//     to handle Kotlin method calls executing concurrently with or even after a call to
+//     `destroy`, and to handle multiple (possibly concurrent!) calls to `destroy`.
+//
+//   * We must never allow Rust code to operate on the underlying Rust struct after
+//     the destructor has been called, and must never call the destructor more than once.
+//     Doing so may trigger memory unsafety.
+//
+//   * To mitigate many of the risks of leaking memory and use-after-free unsafety, a `Cleaner`
+//     is implemented to call the destructor when the Kotlin object becomes unreachable.
+//     This is done in a background thread. This is not a panacea, and client code should be aware that
+//      1. the thread may starve if some there are objects that have poorly performing
+//     `drop` methods or do significant work in their `drop` methods.
+//      2. the thread is shared across the whole library. This can be tuned by using `android_cleaner = true`,
+//         or `android = true` in the [`kotlin` section of the `uniffi.toml` file](https://mozilla.github.io/uniffi-rs/kotlin/configuration.html).
+//
+// If we try to implement this with mutual exclusion on access to the handle, there is the
+// possibility of a race between a method call and a concurrent call to `destroy`:
+//
+//    * Thread A starts a method call, reads the value of the handle, but is interrupted
+//      before it can pass the handle over the FFI to Rust.
+//    * Thread B calls `destroy` and frees the underlying Rust struct.
+//    * Thread A resumes, passing the already-read handle value to Rust and triggering
+//      a use-after-free.
+//
+// One possible solution would be to use a `ReadWriteLock`, with each method call taking
+// a read lock (and thus allowed to run concurrently) and the special `destroy` method
+// taking a write lock (and thus blocking on live method calls). However, we aim not to
+// generate methods with any hidden blocking semantics, and a `destroy` method that might
+// block if called incorrectly seems to meet that bar.
+//
+// So, we achieve our goals by giving each instance an associated `AtomicLong` counter to track
+// the number of in-flight method calls, and an `AtomicBoolean` flag to indicate whether `destroy`
+// has been called. These are updated according to the following rules:
+//
+//    * The initial value of the counter is 1, indicating a live object with no in-flight calls.
+//      The initial value for the flag is false.
+//
+//    * At the start of each method call, we atomically check the counter.
+//      If it is 0 then the underlying Rust struct has already been destroyed and the call is aborted.
+//      If it is nonzero them we atomically increment it by 1 and proceed with the method call.
+//
+//    * At the end of each method call, we atomically decrement and check the counter.
+//      If it has reached zero then we destroy the underlying Rust struct.
+//
+//    * When `destroy` is called, we atomically flip the flag from false to true.
+//      If the flag was already true we silently fail.
+//      Otherwise we atomically decrement and check the counter.
+//      If it has reached zero then we destroy the underlying Rust struct.
+//
+// Astute readers may observe that this all sounds very similar to the way that Rust's `Arc<T>` works,
+// and indeed it is, with the addition of a flag to guard against multiple calls to `destroy`.
+//
+// The overall effect is that the underlying Rust struct is destroyed only when `destroy` has been
+// called *and* all in-flight method calls have completed, avoiding violating any of the expectations
+// of the underlying Rust code.
+//
+// This makes a cleaner a better alternative to _not_ calling `destroy()` as
+// and when the object is finished with, but the abstraction is not perfect: if the Rust object's `drop`
+// method is slow, and/or there are many objects to cleanup, and it's on a low end Android device, then the cleaner
+// thread may be starved, and the app will leak memory.
+//
+// In this case, `destroy`ing manually may be a better solution.
+//
+// The cleaner can live side by side with the manual calling of `destroy`. In the order of responsiveness, uniffi objects
+// with Rust peers are reclaimed:
+//
+// 1. By calling the `destroy` method of the object, which calls `rustObject.free()`. If that doesn't happen:
+// 2. When the object becomes unreachable, AND the Cleaner thread gets to call `rustObject.free()`. If the thread is starved then:
+// 3. The memory is reclaimed when the process terminates.
+//
+// [1] https://stackoverflow.com/questions/24376768/can-java-finalize-an-object-when-it-is-still-in-scope/24380219
+//
+
+
+/**
+ * Receives a [`HologramStream`]'s results, implemented by the app (Kotlin/Swift/Python). Called on the
+ * stream's background thread, in frame order.
+ */
+public interface PatternsListener {
+    
+    /**
+     * The patterns of frame `index` (the number [`HologramStream::push`] returned for it).
+     */
+    fun `onPatterns`(`index`: kotlin.ULong, `patterns`: SlmPatterns)
+    
+    /**
+     * A frame failed (its message starts with `frame <index>:`); the stream goes on.
+     */
+    fun `onError`(`error`: TensorholoException)
+    
+    companion object
+}
+
+/**
+ * Receives a [`HologramStream`]'s results, implemented by the app (Kotlin/Swift/Python). Called on the
+ * stream's background thread, in frame order.
+ */
+open class PatternsListenerImpl: Disposable, AutoCloseable, PatternsListener
+{
+
+    @Suppress("UNUSED_PARAMETER")
+    /**
+     * @suppress
+     */
+    constructor(withHandle: UniffiWithHandle, handle: Long) {
+        this.handle = handle
+        this.cleanable = UniffiLib.CLEANER.register(this, UniffiCleanAction(handle))
+    }
+
+    /**
+     * @suppress
+     *
+     * This constructor can be used to instantiate a fake object. Only used for tests. Any
+     * attempt to actually use an object constructed this way will fail as there is no
+     * connected Rust object.
+     */
+    @Suppress("UNUSED_PARAMETER")
+    constructor(noHandle: NoHandle) {
+        this.handle = 0
+        this.cleanable = null
+    }
+
+    protected val handle: Long
+    protected val cleanable: UniffiCleaner.Cleanable?
+
+    private val wasDestroyed = AtomicBoolean(false)
+    private val callCounter = AtomicLong(1)
+
+    /**
+     * Whether the current object has been destroyed and its reference is gone in the Rust side.
+     */
+    val uniffiIsDestroyed: Boolean get() = wasDestroyed.get()
+
+    override fun destroy() {
+        // Only allow a single call to this method.
+        // TODO: maybe we should log a warning if called more than once?
+        if (this.wasDestroyed.compareAndSet(false, true)) {
+            // This decrement always matches the initial count of 1 given at creation time.
+            if (this.callCounter.decrementAndGet() == 0L) {
+                cleanable?.clean()
+            }
+        }
+    }
+
+    @Synchronized
+    override fun close() {
+        this.destroy()
+    }
+
+    internal inline fun <R> callWithHandle(block: (handle: Long) -> R): R {
+        // Check and increment the call counter, to keep the object alive.
+        // This needs a compare-and-set retry loop in case of concurrent updates.
+        do {
+            val c = this.callCounter.get()
+            if (c == 0L) {
+                throw IllegalStateException("${this.javaClass.simpleName} object has already been destroyed")
+            }
+            if (c == Long.MAX_VALUE) {
+                throw IllegalStateException("${this.javaClass.simpleName} call counter would overflow")
+            }
+        } while (! this.callCounter.compareAndSet(c, c + 1L))
+        // Now we can safely do the method call without the handle being freed concurrently.
+        try {
+            return block(this.uniffiCloneHandle())
+        } finally {
+            // This decrement always matches the increment we performed above.
+            if (this.callCounter.decrementAndGet() == 0L) {
+                cleanable?.clean()
+            }
+        }
+    }
+
+    // Use a static inner class instead of a closure so as not to accidentally
+    // capture `this` as part of the cleanable's action.
+    private class UniffiCleanAction(private val handle: Long) : Runnable {
+        override fun run() {
+            if (handle == 0.toLong()) {
+                // Fake object created with `NoHandle`, don't try to free.
+                return;
+            }
+            uniffiRustCall { status ->
+                UniffiLib.uniffi_tensorholo_ffi_fn_free_patternslistener(handle, status)
+            }
+        }
+    }
+
+    /**
+     * @suppress
+     */
+    fun uniffiCloneHandle(): Long {
+        if (handle == 0.toLong()) {
+            throw InternalException("uniffiCloneHandle() called on NoHandle object");
+        }
+        return uniffiRustCall() { status ->
+            UniffiLib.uniffi_tensorholo_ffi_fn_clone_patternslistener(handle, status)
+        }
+    }
+
+    
+    /**
+     * The patterns of frame `index` (the number [`HologramStream::push`] returned for it).
+     */override fun `onPatterns`(`index`: kotlin.ULong, `patterns`: SlmPatterns)
+        = 
+    callWithHandle {
+    uniffiRustCall() { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_patternslistener_on_patterns(
+        it,
+        
+        FfiConverterULong.lower(`index`),
+        FfiConverterTypeSlmPatterns.lower(`patterns`),_status)
+}
+    }
+    
+    
+
+    
+    /**
+     * A frame failed (its message starts with `frame <index>:`); the stream goes on.
+     */override fun `onError`(`error`: TensorholoException)
+        = 
+    callWithHandle {
+    uniffiRustCall() { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_patternslistener_on_error(
+        it,
+        
+        FfiConverterTypeTensorholoError.lower(`error`),_status)
+}
+    }
+    
+    
+
+    
+
+    
+
+
+    
+    
+    /**
+     * @suppress
+     */
+    companion object
+    
+}
+
+
+
+// Put the implementation in an object so we don't pollute the top-level namespace
+internal object uniffiCallbackInterfacePatternsListener {
+    internal object `onPatterns`: UniffiCallbackInterfacePatternsListenerMethod0 {
+        override fun callback(`uniffiHandle`: Long,`index`: Long,`patterns`: RustBuffer.ByValue,`uniffiOutReturn`: Pointer,uniffiCallStatus: UniffiRustCallStatus,) {
+            val uniffiObj = FfiConverterTypePatternsListener.handleMap.get(uniffiHandle)
+            val makeCall = { ->
+                uniffiObj.`onPatterns`(
+                    FfiConverterULong.lift(`index`),
+                    FfiConverterTypeSlmPatterns.lift(`patterns`),
+                )
+            }
+            val writeReturn = { _: Unit -> Unit }
+            uniffiTraitInterfaceCall(uniffiCallStatus, makeCall, writeReturn)
+        }
+    }
+    internal object `onError`: UniffiCallbackInterfacePatternsListenerMethod1 {
+        override fun callback(`uniffiHandle`: Long,`error`: RustBuffer.ByValue,`uniffiOutReturn`: Pointer,uniffiCallStatus: UniffiRustCallStatus,) {
+            val uniffiObj = FfiConverterTypePatternsListener.handleMap.get(uniffiHandle)
+            val makeCall = { ->
+                uniffiObj.`onError`(
+                    FfiConverterTypeTensorholoError.lift(`error`),
+                )
+            }
+            val writeReturn = { _: Unit -> Unit }
+            uniffiTraitInterfaceCall(uniffiCallStatus, makeCall, writeReturn)
+        }
+    }
+
+    internal object uniffiFree: UniffiCallbackInterfaceFree {
+        override fun callback(handle: Long) {
+            FfiConverterTypePatternsListener.handleMap.remove(handle)
+        }
+    }
+
+    internal object uniffiClone: UniffiCallbackInterfaceClone {
+        override fun callback(handle: Long): Long {
+            return FfiConverterTypePatternsListener.handleMap.clone(handle)
+        }
+    }
+
+    internal var vtable = UniffiVTableCallbackInterfacePatternsListener.UniffiByValue(
+        uniffiFree,
+        uniffiClone,
+        `onPatterns`,
+        `onError`,
+    )
+
+    // Registers the foreign callback with the Rust side.
+    // This method is generated for each callback interface.
+    internal fun register(lib: UniffiLib) {
+        lib.uniffi_tensorholo_ffi_fn_init_callback_vtable_patternslistener(vtable)
+    }
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypePatternsListener: FfiConverter<PatternsListener, Long> {
+    internal val handleMap = UniffiHandleMap<PatternsListener>()
+
+    override fun lower(value: PatternsListener): Long {
+        if (value is PatternsListenerImpl) {
+             // Rust-implemented object.  Clone the handle and return it
+            return value.uniffiCloneHandle()
+         } else {
+            // Kotlin object, generate a new vtable handle and return that.
+            return handleMap.insert(value)
+         }
+    }
+
+    override fun lift(value: Long): PatternsListener {
+        if ((value and 1.toLong()) == 0.toLong()) {
+            // Rust-generated handle, construct a new class that uses the handle to implement the
+            // interface
+            return PatternsListenerImpl(UniffiWithHandle, value)
+        } else {
+            // Kotlin-generated handle, get the object from the handle map
+            return handleMap.remove(value)
+        }
+    }
+
+    override fun read(buf: ByteBuffer): PatternsListener {
+        return lift(buf.getLong())
+    }
+
+    override fun allocationSize(value: PatternsListener) = 8UL
+
+    override fun write(value: PatternsListener, buf: ByteBuffer) {
         buf.putLong(lower(value))
     }
 }
@@ -1922,24 +2411,28 @@ public object FfiConverterTypeEcho: FfiConverter<Echo, Long> {
 
 
 /**
- * An 8-bit single-channel image, row-major: pixel `(x, y)` is `data[y * width + x]`, `data.len() ==
- * width * height`. Crosses as Python `bytes`, Kotlin `ByteArray`, Swift `Data`.
+ * Median per-stage timings of [`HologramGenerator::benchmark`].
  */
-data class Bytes8Demo (
+data class BenchmarkReport (
     /**
-     * Width in pixels.
+     * Frames timed (after one warm-up frame).
      */
-    var `width`: kotlin.UInt
+    var `frames`: kotlin.UInt
     , 
     /**
-     * Height in pixels.
+     * Median stage timings.
      */
-    var `height`: kotlin.UInt
+    var `median`: StageTimings
     , 
     /**
-     * The pixels, row-major, `width * height` bytes.
+     * Frames per second of the median frame (`1000 / (convert_ms + total_ms)`).
      */
-    var `data`: kotlin.ByteArray
+    var `fps`: kotlin.Double
+    , 
+    /**
+     * The generator's [`GeneratorInfo`] (chosen plan, threads).
+     */
+    var `info`: GeneratorInfo
     
 ){
     
@@ -1953,27 +2446,948 @@ data class Bytes8Demo (
 /**
  * @suppress
  */
-public object FfiConverterTypeBytes8Demo: FfiConverterRustBuffer<Bytes8Demo> {
-    override fun read(buf: ByteBuffer): Bytes8Demo {
-        return Bytes8Demo(
+public object FfiConverterTypeBenchmarkReport: FfiConverterRustBuffer<BenchmarkReport> {
+    override fun read(buf: ByteBuffer): BenchmarkReport {
+        return BenchmarkReport(
+            FfiConverterUInt.read(buf),
+            FfiConverterTypeStageTimings.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterTypeGeneratorInfo.read(buf),
+        )
+    }
+
+    override fun allocationSize(value: BenchmarkReport) = (
+            FfiConverterUInt.allocationSize(value.`frames`) +
+            FfiConverterTypeStageTimings.allocationSize(value.`median`) +
+            FfiConverterDouble.allocationSize(value.`fps`) +
+            FfiConverterTypeGeneratorInfo.allocationSize(value.`info`)
+    )
+
+    override fun write(value: BenchmarkReport, buf: ByteBuffer) {
+            FfiConverterUInt.write(value.`frames`, buf)
+            FfiConverterTypeStageTimings.write(value.`median`, buf)
+            FfiConverterDouble.write(value.`fps`, buf)
+            FfiConverterTypeGeneratorInfo.write(value.`info`, buf)
+    }
+}
+
+
+
+/**
+ * Everything a [`HologramGenerator`] needs. Only `width` and `height` (the SLM's resolution in pixels) are
+ * required; every other field has the default named in its comment.
+ */
+data class GeneratorConfig (
+    /**
+     * Hologram (SLM) width in pixels.
+     */
+    var `width`: kotlin.UInt
+    , 
+    /**
+     * Hologram (SLM) height in pixels.
+     */
+    var `height`: kotlin.UInt
+    , 
+    /**
+     * Hologram CNN depth: 8 (default), 15 or 30 layers.
+     */
+    var `layers`: kotlin.UInt = 8u 
+    , 
+    /**
+     * Weight format; `None` = [`Precision::F32`].
+     */
+    var `precision`: Precision? = null 
+    , 
+    /**
+     * Distance from the midpoint hologram to the SLM in millimetres (default 6; pre-filters are shipped for
+     * 6 and 12).
+     */
+    var `offsetMm`: kotlin.Double = 6.0 
+    , 
+    /**
+     * Pre-filter CNN; `None` = [`PrefilterMode::Auto`].
+     */
+    var `prefilter`: PrefilterMode? = null 
+    , 
+    /**
+     * CNN threads; 0 (default) = time 1, half and all cores at creation and keep the fastest.
+     */
+    var `threads`: kotlin.UInt = 0u 
+    , 
+    /**
+     * How camera frames fit the hologram; `None` = [`Fit::Crop`].
+     */
+    var `fit`: Fit? = null 
+    , 
+    /**
+     * SLM pixel pitch in metres (default 8e-6).
+     */
+    var `pixelPitchM`: kotlin.Double = 8e-6 
+    , 
+    /**
+     * Laser wavelengths in metres, red, green, blue; empty (default) = 638e-9, 520e-9, 450e-9.
+     */
+    var `wavelengthsM`: List<kotlin.Double> = listOf() 
+    , 
+    /**
+     * Depth of the 3D volume in metres, centred on the midpoint hologram (default 6e-3).
+     */
+    var `volumeDepthM`: kotlin.Double = 6e-3 
+    , 
+    /**
+     * Nearest scene depth in metres mapped to the front of the volume; `None` (default, with `z_far_m`) =
+     * 1st percentile of each frame's valid depths (a stream keeps its first frame's range).
+     */
+    var `zNearM`: kotlin.Double? = null 
+    , 
+    /**
+     * Farthest scene depth in metres mapped to the back of the volume; give both or neither.
+     */
+    var `zFarM`: kotlin.Double? = null 
+    
+){
+    
+
+    
+
+    
+    companion object
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorConfig> {
+    override fun read(buf: ByteBuffer): GeneratorConfig {
+        return GeneratorConfig(
+            FfiConverterUInt.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterOptionalTypePrecision.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterOptionalTypePrefilterMode.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterOptionalTypeFit.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterSequenceDouble.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+        )
+    }
+
+    override fun allocationSize(value: GeneratorConfig) = (
+            FfiConverterUInt.allocationSize(value.`width`) +
+            FfiConverterUInt.allocationSize(value.`height`) +
+            FfiConverterUInt.allocationSize(value.`layers`) +
+            FfiConverterOptionalTypePrecision.allocationSize(value.`precision`) +
+            FfiConverterDouble.allocationSize(value.`offsetMm`) +
+            FfiConverterOptionalTypePrefilterMode.allocationSize(value.`prefilter`) +
+            FfiConverterUInt.allocationSize(value.`threads`) +
+            FfiConverterOptionalTypeFit.allocationSize(value.`fit`) +
+            FfiConverterDouble.allocationSize(value.`pixelPitchM`) +
+            FfiConverterSequenceDouble.allocationSize(value.`wavelengthsM`) +
+            FfiConverterDouble.allocationSize(value.`volumeDepthM`) +
+            FfiConverterOptionalDouble.allocationSize(value.`zNearM`) +
+            FfiConverterOptionalDouble.allocationSize(value.`zFarM`)
+    )
+
+    override fun write(value: GeneratorConfig, buf: ByteBuffer) {
+            FfiConverterUInt.write(value.`width`, buf)
+            FfiConverterUInt.write(value.`height`, buf)
+            FfiConverterUInt.write(value.`layers`, buf)
+            FfiConverterOptionalTypePrecision.write(value.`precision`, buf)
+            FfiConverterDouble.write(value.`offsetMm`, buf)
+            FfiConverterOptionalTypePrefilterMode.write(value.`prefilter`, buf)
+            FfiConverterUInt.write(value.`threads`, buf)
+            FfiConverterOptionalTypeFit.write(value.`fit`, buf)
+            FfiConverterDouble.write(value.`pixelPitchM`, buf)
+            FfiConverterSequenceDouble.write(value.`wavelengthsM`, buf)
+            FfiConverterDouble.write(value.`volumeDepthM`, buf)
+            FfiConverterOptionalDouble.write(value.`zNearM`, buf)
+            FfiConverterOptionalDouble.write(value.`zFarM`, buf)
+    }
+}
+
+
+
+/**
+ * What a generator runs.
+ */
+data class GeneratorInfo (
+    /**
+     * Library version.
+     */
+    var `version`: kotlin.String
+    , 
+    /**
+     * Hologram width in pixels.
+     */
+    var `width`: kotlin.UInt
+    , 
+    /**
+     * Hologram height in pixels.
+     */
+    var `height`: kotlin.UInt
+    , 
+    /**
+     * Hologram CNN depth.
+     */
+    var `layers`: kotlin.UInt
+    , 
+    /**
+     * Weight format (`f32`, `int8-qdq`, …).
+     */
+    var `precision`: kotlin.String
+    , 
+    /**
+     * Hologram CNN (embedded file name).
+     */
+    var `hologramModel`: kotlin.String
+    , 
+    /**
+     * Pre-filter CNN, if one runs.
+     */
+    var `prefilterModel`: kotlin.String?
+    , 
+    /**
+     * Why a pre-filter runs or not.
+     */
+    var `prefilterReason`: kotlin.String
+    , 
+    /**
+     * SLM offset in millimetres.
+     */
+    var `offsetMm`: kotlin.Double
+    , 
+    /**
+     * Chosen CNN memory layout (`nchw` or `nhwc`).
+     */
+    var `cnnLayout`: kotlin.String
+    , 
+    /**
+     * Chosen CNN threads.
+     */
+    var `cnnThreads`: kotlin.UInt
+    , 
+    /**
+     * Whether the plan was chosen by timing candidates on this device.
+     */
+    var `autotuned`: kotlin.Boolean
+    , 
+    /**
+     * Everything above and the autotuning timings, as JSON.
+     */
+    var `json`: kotlin.String
+    
+){
+    
+
+    
+
+    
+    companion object
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInfo> {
+    override fun read(buf: ByteBuffer): GeneratorInfo {
+        return GeneratorInfo(
+            FfiConverterString.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterString.read(buf),
+            FfiConverterString.read(buf),
+            FfiConverterOptionalString.read(buf),
+            FfiConverterString.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterString.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterBoolean.read(buf),
+            FfiConverterString.read(buf),
+        )
+    }
+
+    override fun allocationSize(value: GeneratorInfo) = (
+            FfiConverterString.allocationSize(value.`version`) +
+            FfiConverterUInt.allocationSize(value.`width`) +
+            FfiConverterUInt.allocationSize(value.`height`) +
+            FfiConverterUInt.allocationSize(value.`layers`) +
+            FfiConverterString.allocationSize(value.`precision`) +
+            FfiConverterString.allocationSize(value.`hologramModel`) +
+            FfiConverterOptionalString.allocationSize(value.`prefilterModel`) +
+            FfiConverterString.allocationSize(value.`prefilterReason`) +
+            FfiConverterDouble.allocationSize(value.`offsetMm`) +
+            FfiConverterString.allocationSize(value.`cnnLayout`) +
+            FfiConverterUInt.allocationSize(value.`cnnThreads`) +
+            FfiConverterBoolean.allocationSize(value.`autotuned`) +
+            FfiConverterString.allocationSize(value.`json`)
+    )
+
+    override fun write(value: GeneratorInfo, buf: ByteBuffer) {
+            FfiConverterString.write(value.`version`, buf)
+            FfiConverterUInt.write(value.`width`, buf)
+            FfiConverterUInt.write(value.`height`, buf)
+            FfiConverterUInt.write(value.`layers`, buf)
+            FfiConverterString.write(value.`precision`, buf)
+            FfiConverterString.write(value.`hologramModel`, buf)
+            FfiConverterOptionalString.write(value.`prefilterModel`, buf)
+            FfiConverterString.write(value.`prefilterReason`, buf)
+            FfiConverterDouble.write(value.`offsetMm`, buf)
+            FfiConverterString.write(value.`cnnLayout`, buf)
+            FfiConverterUInt.write(value.`cnnThreads`, buf)
+            FfiConverterBoolean.write(value.`autotuned`, buf)
+            FfiConverterString.write(value.`json`, buf)
+    }
+}
+
+
+
+/**
+ * A simulated view of the hologram for the phone's screen: `width · height · 4` sRGB bytes (RGBA, alpha
+ * 255), row-major.
+ */
+data class Preview (
+    /**
+     * Width in pixels.
+     */
+    var `width`: kotlin.UInt
+    , 
+    /**
+     * Height in pixels.
+     */
+    var `height`: kotlin.UInt
+    , 
+    /**
+     * RGBA8 bytes.
+     */
+    var `rgba`: kotlin.ByteArray
+    
+){
+    
+
+    
+
+    
+    companion object
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypePreview: FfiConverterRustBuffer<Preview> {
+    override fun read(buf: ByteBuffer): Preview {
+        return Preview(
             FfiConverterUInt.read(buf),
             FfiConverterUInt.read(buf),
             FfiConverterByteArray.read(buf),
         )
     }
 
-    override fun allocationSize(value: Bytes8Demo) = (
+    override fun allocationSize(value: Preview) = (
             FfiConverterUInt.allocationSize(value.`width`) +
             FfiConverterUInt.allocationSize(value.`height`) +
-            FfiConverterByteArray.allocationSize(value.`data`)
+            FfiConverterByteArray.allocationSize(value.`rgba`)
     )
 
-    override fun write(value: Bytes8Demo, buf: ByteBuffer) {
+    override fun write(value: Preview, buf: ByteBuffer) {
             FfiConverterUInt.write(value.`width`, buf)
             FfiConverterUInt.write(value.`height`, buf)
-            FfiConverterByteArray.write(value.`data`, buf)
+            FfiConverterByteArray.write(value.`rgba`, buf)
     }
 }
+
+
+
+/**
+ * One camera frame as the phone delivers it: an interleaved 8-bit colour buffer and a depth buffer of the
+ * same field of view, each at its own resolution with its own row stride (bytes; 0 = packed).
+ */
+data class RgbdFrame (
+    /**
+     * Colour bytes (`color_format`), rows `color_row_stride` apart.
+     */
+    var `color`: kotlin.ByteArray
+    , 
+    /**
+     * Colour pixel layout.
+     */
+    var `colorFormat`: ColorFormat
+    , 
+    /**
+     * Colour width in pixels.
+     */
+    var `colorWidth`: kotlin.UInt
+    , 
+    /**
+     * Colour height in pixels.
+     */
+    var `colorHeight`: kotlin.UInt
+    , 
+    /**
+     * Depth bytes (`depth_format`, little-endian), rows `depth_row_stride` apart.
+     */
+    var `depth`: kotlin.ByteArray
+    , 
+    /**
+     * Depth sample format.
+     */
+    var `depthFormat`: DepthFormat
+    , 
+    /**
+     * Depth width in pixels.
+     */
+    var `depthWidth`: kotlin.UInt
+    , 
+    /**
+     * Depth height in pixels.
+     */
+    var `depthHeight`: kotlin.UInt
+    , 
+    /**
+     * Bytes from one colour row to the next; 0 (default) = packed.
+     */
+    var `colorRowStride`: kotlin.UInt = 0u 
+    , 
+    /**
+     * Bytes from one depth row to the next; 0 (default) = packed.
+     */
+    var `depthRowStride`: kotlin.UInt = 0u 
+    , 
+    /**
+     * Clockwise rotation making both buffers upright; `None` (default) = none.
+     */
+    var `rotation`: Rotation? = null 
+    
+){
+    
+
+    
+
+    
+    companion object
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeRgbdFrame: FfiConverterRustBuffer<RgbdFrame> {
+    override fun read(buf: ByteBuffer): RgbdFrame {
+        return RgbdFrame(
+            FfiConverterByteArray.read(buf),
+            FfiConverterTypeColorFormat.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterByteArray.read(buf),
+            FfiConverterTypeDepthFormat.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterOptionalTypeRotation.read(buf),
+        )
+    }
+
+    override fun allocationSize(value: RgbdFrame) = (
+            FfiConverterByteArray.allocationSize(value.`color`) +
+            FfiConverterTypeColorFormat.allocationSize(value.`colorFormat`) +
+            FfiConverterUInt.allocationSize(value.`colorWidth`) +
+            FfiConverterUInt.allocationSize(value.`colorHeight`) +
+            FfiConverterByteArray.allocationSize(value.`depth`) +
+            FfiConverterTypeDepthFormat.allocationSize(value.`depthFormat`) +
+            FfiConverterUInt.allocationSize(value.`depthWidth`) +
+            FfiConverterUInt.allocationSize(value.`depthHeight`) +
+            FfiConverterUInt.allocationSize(value.`colorRowStride`) +
+            FfiConverterUInt.allocationSize(value.`depthRowStride`) +
+            FfiConverterOptionalTypeRotation.allocationSize(value.`rotation`)
+    )
+
+    override fun write(value: RgbdFrame, buf: ByteBuffer) {
+            FfiConverterByteArray.write(value.`color`, buf)
+            FfiConverterTypeColorFormat.write(value.`colorFormat`, buf)
+            FfiConverterUInt.write(value.`colorWidth`, buf)
+            FfiConverterUInt.write(value.`colorHeight`, buf)
+            FfiConverterByteArray.write(value.`depth`, buf)
+            FfiConverterTypeDepthFormat.write(value.`depthFormat`, buf)
+            FfiConverterUInt.write(value.`depthWidth`, buf)
+            FfiConverterUInt.write(value.`depthHeight`, buf)
+            FfiConverterUInt.write(value.`colorRowStride`, buf)
+            FfiConverterUInt.write(value.`depthRowStride`, buf)
+            FfiConverterOptionalTypeRotation.write(value.`rotation`, buf)
+    }
+}
+
+
+
+/**
+ * One frame's SLM patterns: three 8-bit planes, one per laser (field-sequential colour), `width · height`
+ * codes each, row-major; code `c` displays phase `2π·c/256`.
+ */
+data class SlmPatterns (
+    /**
+     * Width in pixels.
+     */
+    var `width`: kotlin.UInt
+    , 
+    /**
+     * Height in pixels.
+     */
+    var `height`: kotlin.UInt
+    , 
+    /**
+     * Red laser's pattern.
+     */
+    var `red`: kotlin.ByteArray
+    , 
+    /**
+     * Green laser's pattern.
+     */
+    var `green`: kotlin.ByteArray
+    , 
+    /**
+     * Blue laser's pattern.
+     */
+    var `blue`: kotlin.ByteArray
+    , 
+    /**
+     * Nearest scene depth (metres) mapped to the volume in this frame, if the depth was metric.
+     */
+    var `zNearM`: kotlin.Double?
+    , 
+    /**
+     * Farthest scene depth (metres) mapped to the volume in this frame.
+     */
+    var `zFarM`: kotlin.Double?
+    , 
+    /**
+     * Stage timings.
+     */
+    var `timings`: StageTimings
+    
+){
+    
+
+    
+
+    
+    companion object
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeSlmPatterns: FfiConverterRustBuffer<SlmPatterns> {
+    override fun read(buf: ByteBuffer): SlmPatterns {
+        return SlmPatterns(
+            FfiConverterUInt.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterByteArray.read(buf),
+            FfiConverterByteArray.read(buf),
+            FfiConverterByteArray.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+            FfiConverterTypeStageTimings.read(buf),
+        )
+    }
+
+    override fun allocationSize(value: SlmPatterns) = (
+            FfiConverterUInt.allocationSize(value.`width`) +
+            FfiConverterUInt.allocationSize(value.`height`) +
+            FfiConverterByteArray.allocationSize(value.`red`) +
+            FfiConverterByteArray.allocationSize(value.`green`) +
+            FfiConverterByteArray.allocationSize(value.`blue`) +
+            FfiConverterOptionalDouble.allocationSize(value.`zNearM`) +
+            FfiConverterOptionalDouble.allocationSize(value.`zFarM`) +
+            FfiConverterTypeStageTimings.allocationSize(value.`timings`)
+    )
+
+    override fun write(value: SlmPatterns, buf: ByteBuffer) {
+            FfiConverterUInt.write(value.`width`, buf)
+            FfiConverterUInt.write(value.`height`, buf)
+            FfiConverterByteArray.write(value.`red`, buf)
+            FfiConverterByteArray.write(value.`green`, buf)
+            FfiConverterByteArray.write(value.`blue`, buf)
+            FfiConverterOptionalDouble.write(value.`zNearM`, buf)
+            FfiConverterOptionalDouble.write(value.`zFarM`, buf)
+            FfiConverterTypeStageTimings.write(value.`timings`, buf)
+    }
+}
+
+
+
+/**
+ * Milliseconds of each stage of one frame.
+ */
+data class StageTimings (
+    /**
+     * Camera buffers → the CNN's input (decode, rotate, fill holes, fit).
+     */
+    var `convertMs`: kotlin.Double
+    , 
+    /**
+     * Hologram CNN.
+     */
+    var `cnnMs`: kotlin.Double
+    , 
+    /**
+     * Offset propagation to the SLM (Eq. 6).
+     */
+    var `offsetMs`: kotlin.Double
+    , 
+    /**
+     * Pre-filter CNN (0 without one).
+     */
+    var `prefilterMs`: kotlin.Double
+    , 
+    /**
+     * Double phase encoding and look-up table (Eq. 7).
+     */
+    var `encodingMs`: kotlin.Double
+    , 
+    /**
+     * CNN to codes (in a stream: the frame period).
+     */
+    var `totalMs`: kotlin.Double
+    
+){
+    
+
+    
+
+    
+    companion object
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeStageTimings: FfiConverterRustBuffer<StageTimings> {
+    override fun read(buf: ByteBuffer): StageTimings {
+        return StageTimings(
+            FfiConverterDouble.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterDouble.read(buf),
+        )
+    }
+
+    override fun allocationSize(value: StageTimings) = (
+            FfiConverterDouble.allocationSize(value.`convertMs`) +
+            FfiConverterDouble.allocationSize(value.`cnnMs`) +
+            FfiConverterDouble.allocationSize(value.`offsetMs`) +
+            FfiConverterDouble.allocationSize(value.`prefilterMs`) +
+            FfiConverterDouble.allocationSize(value.`encodingMs`) +
+            FfiConverterDouble.allocationSize(value.`totalMs`)
+    )
+
+    override fun write(value: StageTimings, buf: ByteBuffer) {
+            FfiConverterDouble.write(value.`convertMs`, buf)
+            FfiConverterDouble.write(value.`cnnMs`, buf)
+            FfiConverterDouble.write(value.`offsetMs`, buf)
+            FfiConverterDouble.write(value.`prefilterMs`, buf)
+            FfiConverterDouble.write(value.`encodingMs`, buf)
+            FfiConverterDouble.write(value.`totalMs`, buf)
+    }
+}
+
+
+
+/**
+ * Byte layout of an interleaved 8-bit sRGB colour pixel.
+ */
+
+enum class ColorFormat {
+    
+    /**
+     * R, G, B, A (Android `Bitmap.Config.ARGB_8888` bytes).
+     */
+    RGBA8,
+    /**
+     * B, G, R, A (iOS `kCVPixelFormatType_32BGRA`).
+     */
+    BGRA8,
+    /**
+     * R, G, B.
+     */
+    RGB8;
+
+    
+
+
+    companion object
+}
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeColorFormat: FfiConverterRustBuffer<ColorFormat> {
+    override fun read(buf: ByteBuffer) = try {
+        ColorFormat.values()[buf.getInt() - 1]
+    } catch (e: IndexOutOfBoundsException) {
+        throw RuntimeException("invalid enum value, something is very wrong!!", e)
+    }
+
+    override fun allocationSize(value: ColorFormat) = 4UL
+
+    override fun write(value: ColorFormat, buf: ByteBuffer) {
+        buf.putInt(value.ordinal + 1)
+    }
+}
+
+
+
+
+
+/**
+ * Depth sample format, little-endian.
+ */
+
+enum class DepthFormat {
+    
+    /**
+     * f32 metres (AVDepthData `DepthFloat32`).
+     */
+    METRES_F32,
+    /**
+     * f16 metres (AVDepthData `DepthFloat16`).
+     */
+    METRES_F16,
+    /**
+     * f32 disparity in 1/m (AVDepthData `DisparityFloat32`).
+     */
+    DISPARITY_F32,
+    /**
+     * f16 disparity in 1/m (AVDepthData `DisparityFloat16`).
+     */
+    DISPARITY_F16,
+    /**
+     * u16 millimetres (ARCore `acquireDepthImage16Bits`).
+     */
+    MILLIMETRES_U16,
+    /**
+     * Android `ImageFormat.DEPTH16`: low 13 bits millimetres, high 3 bits confidence.
+     */
+    DEPTH16;
+
+    
+
+
+    companion object
+}
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeDepthFormat: FfiConverterRustBuffer<DepthFormat> {
+    override fun read(buf: ByteBuffer) = try {
+        DepthFormat.values()[buf.getInt() - 1]
+    } catch (e: IndexOutOfBoundsException) {
+        throw RuntimeException("invalid enum value, something is very wrong!!", e)
+    }
+
+    override fun allocationSize(value: DepthFormat) = 4UL
+
+    override fun write(value: DepthFormat, buf: ByteBuffer) {
+        buf.putInt(value.ordinal + 1)
+    }
+}
+
+
+
+
+
+/**
+ * How the camera frame fits the hologram's size.
+ */
+
+enum class Fit {
+    
+    /**
+     * Centred crop to the hologram's aspect ratio (the default).
+     */
+    CROP,
+    /**
+     * Fit inside, black (and far) margins.
+     */
+    LETTERBOX,
+    /**
+     * Resample ignoring the aspect ratio.
+     */
+    STRETCH;
+
+    
+
+
+    companion object
+}
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeFit: FfiConverterRustBuffer<Fit> {
+    override fun read(buf: ByteBuffer) = try {
+        Fit.values()[buf.getInt() - 1]
+    } catch (e: IndexOutOfBoundsException) {
+        throw RuntimeException("invalid enum value, something is very wrong!!", e)
+    }
+
+    override fun allocationSize(value: Fit) = 4UL
+
+    override fun write(value: Fit, buf: ByteBuffer) {
+        buf.putInt(value.ordinal + 1)
+    }
+}
+
+
+
+
+
+/**
+ * Weight format of the shipped CNNs.
+ */
+
+enum class Precision {
+    
+    /**
+     * 32-bit float (the default).
+     */
+    F32,
+    /**
+     * 8-bit integer weights (the int8 form that loses at most 0.5 dB; see the model card).
+     */
+    INT8;
+
+    
+
+
+    companion object
+}
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypePrecision: FfiConverterRustBuffer<Precision> {
+    override fun read(buf: ByteBuffer) = try {
+        Precision.values()[buf.getInt() - 1]
+    } catch (e: IndexOutOfBoundsException) {
+        throw RuntimeException("invalid enum value, something is very wrong!!", e)
+    }
+
+    override fun allocationSize(value: Precision) = 4UL
+
+    override fun write(value: Precision, buf: ByteBuffer) {
+        buf.putInt(value.ordinal + 1)
+    }
+}
+
+
+
+
+
+/**
+ * Whether the DDPM pre-filter CNN runs (paper Eq. 6).
+ */
+
+enum class PrefilterMode {
+    
+    /**
+     * Where one is shipped for the offset (6 or 12 mm) and was trained with this CNN depth (the default).
+     */
+    AUTO,
+    /**
+     * Never: AA-DPM encoding.
+     */
+    OFF,
+    /**
+     * Always; an error at an offset without a shipped pre-filter.
+     */
+    REQUIRED;
+
+    
+
+
+    companion object
+}
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypePrefilterMode: FfiConverterRustBuffer<PrefilterMode> {
+    override fun read(buf: ByteBuffer) = try {
+        PrefilterMode.values()[buf.getInt() - 1]
+    } catch (e: IndexOutOfBoundsException) {
+        throw RuntimeException("invalid enum value, something is very wrong!!", e)
+    }
+
+    override fun allocationSize(value: PrefilterMode) = 4UL
+
+    override fun write(value: PrefilterMode, buf: ByteBuffer) {
+        buf.putInt(value.ordinal + 1)
+    }
+}
+
+
+
+
+
+/**
+ * Clockwise rotation that makes the camera buffers upright.
+ */
+
+enum class Rotation {
+    
+    /**
+     * None.
+     */
+    DEG0,
+    /**
+     * 90° clockwise.
+     */
+    DEG90,
+    /**
+     * 180°.
+     */
+    DEG180,
+    /**
+     * 270° clockwise.
+     */
+    DEG270;
+
+    
+
+
+    companion object
+}
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeRotation: FfiConverterRustBuffer<Rotation> {
+    override fun read(buf: ByteBuffer) = try {
+        Rotation.values()[buf.getInt() - 1]
+    } catch (e: IndexOutOfBoundsException) {
+        throw RuntimeException("invalid enum value, something is very wrong!!", e)
+    }
+
+    override fun allocationSize(value: Rotation) = 4UL
+
+    override fun write(value: Rotation, buf: ByteBuffer) {
+        buf.putInt(value.ordinal + 1)
+    }
+}
+
+
 
 
 
@@ -2133,6 +3547,226 @@ public object FfiConverterTypeTensorholoError : FfiConverterRustBuffer<Tensorhol
     }
 
 }
+
+
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterOptionalDouble: FfiConverterRustBuffer<kotlin.Double?> {
+    override fun read(buf: ByteBuffer): kotlin.Double? {
+        if (buf.get().toInt() == 0) {
+            return null
+        }
+        return FfiConverterDouble.read(buf)
+    }
+
+    override fun allocationSize(value: kotlin.Double?): ULong {
+        if (value == null) {
+            return 1UL
+        } else {
+            return 1UL + FfiConverterDouble.allocationSize(value)
+        }
+    }
+
+    override fun write(value: kotlin.Double?, buf: ByteBuffer) {
+        if (value == null) {
+            buf.put(0)
+        } else {
+            buf.put(1)
+            FfiConverterDouble.write(value, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterOptionalString: FfiConverterRustBuffer<kotlin.String?> {
+    override fun read(buf: ByteBuffer): kotlin.String? {
+        if (buf.get().toInt() == 0) {
+            return null
+        }
+        return FfiConverterString.read(buf)
+    }
+
+    override fun allocationSize(value: kotlin.String?): ULong {
+        if (value == null) {
+            return 1UL
+        } else {
+            return 1UL + FfiConverterString.allocationSize(value)
+        }
+    }
+
+    override fun write(value: kotlin.String?, buf: ByteBuffer) {
+        if (value == null) {
+            buf.put(0)
+        } else {
+            buf.put(1)
+            FfiConverterString.write(value, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterOptionalTypeFit: FfiConverterRustBuffer<Fit?> {
+    override fun read(buf: ByteBuffer): Fit? {
+        if (buf.get().toInt() == 0) {
+            return null
+        }
+        return FfiConverterTypeFit.read(buf)
+    }
+
+    override fun allocationSize(value: Fit?): ULong {
+        if (value == null) {
+            return 1UL
+        } else {
+            return 1UL + FfiConverterTypeFit.allocationSize(value)
+        }
+    }
+
+    override fun write(value: Fit?, buf: ByteBuffer) {
+        if (value == null) {
+            buf.put(0)
+        } else {
+            buf.put(1)
+            FfiConverterTypeFit.write(value, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterOptionalTypePrecision: FfiConverterRustBuffer<Precision?> {
+    override fun read(buf: ByteBuffer): Precision? {
+        if (buf.get().toInt() == 0) {
+            return null
+        }
+        return FfiConverterTypePrecision.read(buf)
+    }
+
+    override fun allocationSize(value: Precision?): ULong {
+        if (value == null) {
+            return 1UL
+        } else {
+            return 1UL + FfiConverterTypePrecision.allocationSize(value)
+        }
+    }
+
+    override fun write(value: Precision?, buf: ByteBuffer) {
+        if (value == null) {
+            buf.put(0)
+        } else {
+            buf.put(1)
+            FfiConverterTypePrecision.write(value, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterOptionalTypePrefilterMode: FfiConverterRustBuffer<PrefilterMode?> {
+    override fun read(buf: ByteBuffer): PrefilterMode? {
+        if (buf.get().toInt() == 0) {
+            return null
+        }
+        return FfiConverterTypePrefilterMode.read(buf)
+    }
+
+    override fun allocationSize(value: PrefilterMode?): ULong {
+        if (value == null) {
+            return 1UL
+        } else {
+            return 1UL + FfiConverterTypePrefilterMode.allocationSize(value)
+        }
+    }
+
+    override fun write(value: PrefilterMode?, buf: ByteBuffer) {
+        if (value == null) {
+            buf.put(0)
+        } else {
+            buf.put(1)
+            FfiConverterTypePrefilterMode.write(value, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterOptionalTypeRotation: FfiConverterRustBuffer<Rotation?> {
+    override fun read(buf: ByteBuffer): Rotation? {
+        if (buf.get().toInt() == 0) {
+            return null
+        }
+        return FfiConverterTypeRotation.read(buf)
+    }
+
+    override fun allocationSize(value: Rotation?): ULong {
+        if (value == null) {
+            return 1UL
+        } else {
+            return 1UL + FfiConverterTypeRotation.allocationSize(value)
+        }
+    }
+
+    override fun write(value: Rotation?, buf: ByteBuffer) {
+        if (value == null) {
+            buf.put(0)
+        } else {
+            buf.put(1)
+            FfiConverterTypeRotation.write(value, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterSequenceDouble: FfiConverterRustBuffer<List<kotlin.Double>> {
+    override fun read(buf: ByteBuffer): List<kotlin.Double> {
+        val len = buf.getInt()
+        return List<kotlin.Double>(len) {
+            FfiConverterDouble.read(buf)
+        }
+    }
+
+    override fun allocationSize(value: List<kotlin.Double>): ULong {
+        val sizeForLength = 4UL
+        val sizeForItems = value.map { FfiConverterDouble.allocationSize(it) }.sum()
+        return sizeForLength + sizeForItems
+    }
+
+    override fun write(value: List<kotlin.Double>, buf: ByteBuffer) {
+        buf.putInt(value.size)
+        value.iterator().forEach {
+            FfiConverterDouble.write(it, buf)
+        }
+    }
+}
         /**
          * The version of the `tensorholo` core this library was built from (semver, e.g. `"0.1.0"`).
          *
@@ -2149,20 +3783,21 @@ public object FfiConverterTypeTensorholoError : FfiConverterRustBuffer<Tensorhol
     
 
         /**
-         * Panics with `message` inside [`guard`]: proves that a bug comes back as
-         * [`TensorholoError::Internal`] in the foreign language, not as an untyped error or a crash.
+         * The 32-bit frame colour-sequential SLM drivers take over HDMI: `width · height · 4` bytes, row-major, the
+         * red laser's pattern in R, green in G, blue in B, alpha 255.
          *
-         * Errors: always [`TensorholoError::Internal`].
+         * Errors: [`TensorholoError::InvalidInput`] if a plane does not hold `width · height` codes.
          */
-    @Throws(TensorholoException::class) fun `demoPanic`(`message`: kotlin.String)
-        = 
+    @Throws(TensorholoException::class) fun `packRgba`(`patterns`: SlmPatterns): kotlin.ByteArray {
+            return FfiConverterByteArray.lift(
     uniffiRustCallWithError(TensorholoException) { _status ->
-    UniffiLib.uniffi_tensorholo_ffi_fn_func_demo_panic(
+    UniffiLib.uniffi_tensorholo_ffi_fn_func_pack_rgba(
     
         
-        FfiConverterString.lower(`message`),_status)
+        FfiConverterTypeSlmPatterns.lower(`patterns`),_status)
 }
-    
+    )
+    }
     
 
 

@@ -1,0 +1,629 @@
+//! The exported API: one thin wrapper per item of [`tensorholo::generator`] (the core owns every rule; this
+//! module converts types and errors, nothing else). Names are the bindings' contract: Python
+//! `tensorholo.HologramGenerator`, Kotlin `tensorholo.HologramGenerator`, Swift `HologramGenerator`.
+
+use std::sync::Arc;
+
+use ndarray::Axis;
+use tensorholo::generator as core;
+use tensorholo::model::{ThreadCount, DEFAULT_INT8};
+use tensorholo::optics::OpticalSetup;
+use tensorholo::pipeline::ModelSelection;
+use tensorholo::scene::{self, DepthRange};
+
+use crate::{guard, TensorholoError};
+
+type Result<T> = std::result::Result<T, TensorholoError>;
+
+fn invalid(message: impl Into<String>) -> TensorholoError {
+    TensorholoError::InvalidInput {
+        message: message.into(),
+    }
+}
+
+/// Weight format of the shipped CNNs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum Precision {
+    /// 32-bit float (the default).
+    F32,
+    /// 8-bit integer weights (the int8 form that loses at most 0.5 dB; see the model card).
+    Int8,
+}
+
+/// Whether the DDPM pre-filter CNN runs (paper Eq. 6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum PrefilterMode {
+    /// Where one is shipped for the offset (6 or 12 mm) and was trained with this CNN depth (the default).
+    Auto,
+    /// Never: AA-DPM encoding.
+    Off,
+    /// Always; an error at an offset without a shipped pre-filter.
+    Required,
+}
+
+/// How the camera frame fits the hologram's size.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum Fit {
+    /// Centred crop to the hologram's aspect ratio (the default).
+    Crop,
+    /// Fit inside, black (and far) margins.
+    Letterbox,
+    /// Resample ignoring the aspect ratio.
+    Stretch,
+}
+
+/// Byte layout of an interleaved 8-bit sRGB colour pixel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum ColorFormat {
+    /// R, G, B, A (Android `Bitmap.Config.ARGB_8888` bytes).
+    Rgba8,
+    /// B, G, R, A (iOS `kCVPixelFormatType_32BGRA`).
+    Bgra8,
+    /// R, G, B.
+    Rgb8,
+}
+
+/// Depth sample format, little-endian.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum DepthFormat {
+    /// f32 metres (AVDepthData `DepthFloat32`).
+    MetresF32,
+    /// f16 metres (AVDepthData `DepthFloat16`).
+    MetresF16,
+    /// f32 disparity in 1/m (AVDepthData `DisparityFloat32`).
+    DisparityF32,
+    /// f16 disparity in 1/m (AVDepthData `DisparityFloat16`).
+    DisparityF16,
+    /// u16 millimetres (ARCore `acquireDepthImage16Bits`).
+    MillimetresU16,
+    /// Android `ImageFormat.DEPTH16`: low 13 bits millimetres, high 3 bits confidence.
+    Depth16,
+}
+
+/// Clockwise rotation that makes the camera buffers upright.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum Rotation {
+    /// None.
+    Deg0,
+    /// 90° clockwise.
+    Deg90,
+    /// 180°.
+    Deg180,
+    /// 270° clockwise.
+    Deg270,
+}
+
+/// Everything a [`HologramGenerator`] needs. Only `width` and `height` (the SLM's resolution in pixels) are
+/// required; every other field has the default named in its comment.
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct GeneratorConfig {
+    /// Hologram (SLM) width in pixels.
+    pub width: u32,
+    /// Hologram (SLM) height in pixels.
+    pub height: u32,
+    /// Hologram CNN depth: 8 (default), 15 or 30 layers.
+    #[uniffi(default = 8)]
+    pub layers: u32,
+    /// Weight format; `None` = [`Precision::F32`].
+    #[uniffi(default = None)]
+    pub precision: Option<Precision>,
+    /// Distance from the midpoint hologram to the SLM in millimetres (default 6; pre-filters are shipped for
+    /// 6 and 12).
+    #[uniffi(default = 6.0)]
+    pub offset_mm: f64,
+    /// Pre-filter CNN; `None` = [`PrefilterMode::Auto`].
+    #[uniffi(default = None)]
+    pub prefilter: Option<PrefilterMode>,
+    /// CNN threads; 0 (default) = time 1, half and all cores at creation and keep the fastest.
+    #[uniffi(default = 0)]
+    pub threads: u32,
+    /// How camera frames fit the hologram; `None` = [`Fit::Crop`].
+    #[uniffi(default = None)]
+    pub fit: Option<Fit>,
+    /// SLM pixel pitch in metres (default 8e-6).
+    #[uniffi(default = 8e-6)]
+    pub pixel_pitch_m: f64,
+    /// Laser wavelengths in metres, red, green, blue; empty (default) = 638e-9, 520e-9, 450e-9.
+    #[uniffi(default = [])]
+    pub wavelengths_m: Vec<f64>,
+    /// Depth of the 3D volume in metres, centred on the midpoint hologram (default 6e-3).
+    #[uniffi(default = 6e-3)]
+    pub volume_depth_m: f64,
+    /// Nearest scene depth in metres mapped to the front of the volume; `None` (default, with `z_far_m`) =
+    /// 1st percentile of each frame's valid depths (a stream keeps its first frame's range).
+    #[uniffi(default = None)]
+    pub z_near_m: Option<f64>,
+    /// Farthest scene depth in metres mapped to the back of the volume; give both or neither.
+    #[uniffi(default = None)]
+    pub z_far_m: Option<f64>,
+}
+
+impl GeneratorConfig {
+    /// The core configuration. Errors: [`TensorholoError::InvalidInput`] for a non-finite or out-of-range
+    /// number, a wavelength list that is neither empty nor 3 long, or only one of `z_near_m`/`z_far_m`.
+    fn to_core(&self) -> Result<core::GeneratorConfig> {
+        let mut c = core::GeneratorConfig::new(self.width as usize, self.height as usize);
+        c.models = ModelSelection {
+            layers: self.layers as usize,
+            precision: match self.precision.unwrap_or(Precision::F32) {
+                Precision::F32 => tensorholo::model::Precision::F32,
+                Precision::Int8 => DEFAULT_INT8,
+            },
+            prefilter: match self.prefilter.unwrap_or(PrefilterMode::Auto) {
+                PrefilterMode::Auto => tensorholo::pipeline::PrefilterMode::Auto,
+                PrefilterMode::Off => tensorholo::pipeline::PrefilterMode::Off,
+                PrefilterMode::Required => tensorholo::pipeline::PrefilterMode::Required,
+            },
+        };
+        c.offset_m = self.offset_mm * 1e-3;
+        c.threads = ThreadCount::from_count(self.threads as usize);
+        c.fit = self.fit.unwrap_or(Fit::Crop).into();
+        let wavelengths_m = match self.wavelengths_m[..] {
+            [] => OpticalSetup::default().wavelengths_m,
+            [r, g, b] => [r, g, b],
+            _ => {
+                return Err(invalid(format!(
+                    "wavelengths_m holds red, green, blue (3 values) or nothing, got {}",
+                    self.wavelengths_m.len()
+                )))
+            }
+        };
+        c.optics = OpticalSetup {
+            wavelengths_m,
+            pixel_pitch_m: self.pixel_pitch_m,
+            volume_depth_m: self.volume_depth_m,
+        };
+        c.depth_range = match (self.z_near_m, self.z_far_m) {
+            (None, None) => None,
+            (Some(n), Some(f)) => Some(DepthRange::new(n as f32, f as f32)?),
+            _ => {
+                return Err(invalid(
+                    "give both z_near_m and z_far_m, or neither (automatic range)",
+                ))
+            }
+        };
+        c.validate()?;
+        Ok(c)
+    }
+}
+
+impl From<Fit> for scene::Fit {
+    fn from(f: Fit) -> Self {
+        match f {
+            Fit::Crop => Self::Crop,
+            Fit::Letterbox => Self::Letterbox,
+            Fit::Stretch => Self::Stretch,
+        }
+    }
+}
+
+impl From<ColorFormat> for scene::ColorFormat {
+    fn from(f: ColorFormat) -> Self {
+        match f {
+            ColorFormat::Rgba8 => Self::Rgba8,
+            ColorFormat::Bgra8 => Self::Bgra8,
+            ColorFormat::Rgb8 => Self::Rgb8,
+        }
+    }
+}
+
+impl From<DepthFormat> for scene::DepthFormat {
+    fn from(f: DepthFormat) -> Self {
+        match f {
+            DepthFormat::MetresF32 => Self::MetresF32,
+            DepthFormat::MetresF16 => Self::MetresF16,
+            DepthFormat::DisparityF32 => Self::DisparityF32,
+            DepthFormat::DisparityF16 => Self::DisparityF16,
+            DepthFormat::MillimetresU16 => Self::MillimetresU16,
+            DepthFormat::Depth16 => Self::Depth16,
+        }
+    }
+}
+
+impl From<Rotation> for scene::Rotation {
+    fn from(r: Rotation) -> Self {
+        match r {
+            Rotation::Deg0 => Self::Deg0,
+            Rotation::Deg90 => Self::Deg90,
+            Rotation::Deg180 => Self::Deg180,
+            Rotation::Deg270 => Self::Deg270,
+        }
+    }
+}
+
+/// One camera frame as the phone delivers it: an interleaved 8-bit colour buffer and a depth buffer of the
+/// same field of view, each at its own resolution with its own row stride (bytes; 0 = packed).
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct RgbdFrame {
+    /// Colour bytes (`color_format`), rows `color_row_stride` apart.
+    pub color: Vec<u8>,
+    /// Colour pixel layout.
+    pub color_format: ColorFormat,
+    /// Colour width in pixels.
+    pub color_width: u32,
+    /// Colour height in pixels.
+    pub color_height: u32,
+    /// Depth bytes (`depth_format`, little-endian), rows `depth_row_stride` apart.
+    pub depth: Vec<u8>,
+    /// Depth sample format.
+    pub depth_format: DepthFormat,
+    /// Depth width in pixels.
+    pub depth_width: u32,
+    /// Depth height in pixels.
+    pub depth_height: u32,
+    /// Bytes from one colour row to the next; 0 (default) = packed.
+    #[uniffi(default = 0)]
+    pub color_row_stride: u32,
+    /// Bytes from one depth row to the next; 0 (default) = packed.
+    #[uniffi(default = 0)]
+    pub depth_row_stride: u32,
+    /// Clockwise rotation making both buffers upright; `None` (default) = none.
+    #[uniffi(default = None)]
+    pub rotation: Option<Rotation>,
+}
+
+impl RgbdFrame {
+    /// The core's owned frame (the byte vectors move, nothing is copied).
+    fn into_core(self) -> scene::CameraFrameBuf {
+        scene::CameraFrameBuf {
+            color: scene::ColorImageBuf {
+                data: self.color,
+                format: self.color_format.into(),
+                width: self.color_width as usize,
+                height: self.color_height as usize,
+                row_stride: self.color_row_stride as usize,
+            },
+            depth: scene::DepthImageBuf {
+                data: self.depth,
+                format: self.depth_format.into(),
+                width: self.depth_width as usize,
+                height: self.depth_height as usize,
+                row_stride: self.depth_row_stride as usize,
+            },
+            rotation: self.rotation.unwrap_or(Rotation::Deg0).into(),
+        }
+    }
+}
+
+/// Milliseconds of each stage of one frame.
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct StageTimings {
+    /// Camera buffers → the CNN's input (decode, rotate, fill holes, fit).
+    pub convert_ms: f64,
+    /// Hologram CNN.
+    pub cnn_ms: f64,
+    /// Offset propagation to the SLM (Eq. 6).
+    pub offset_ms: f64,
+    /// Pre-filter CNN (0 without one).
+    pub prefilter_ms: f64,
+    /// Double phase encoding and look-up table (Eq. 7).
+    pub encoding_ms: f64,
+    /// CNN to codes (in a stream: the frame period).
+    pub total_ms: f64,
+}
+
+/// One frame's SLM patterns: three 8-bit planes, one per laser (field-sequential colour), `width · height`
+/// codes each, row-major; code `c` displays phase `2π·c/256`.
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct SlmPatterns {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Red laser's pattern.
+    pub red: Vec<u8>,
+    /// Green laser's pattern.
+    pub green: Vec<u8>,
+    /// Blue laser's pattern.
+    pub blue: Vec<u8>,
+    /// Nearest scene depth (metres) mapped to the volume in this frame, if the depth was metric.
+    pub z_near_m: Option<f64>,
+    /// Farthest scene depth (metres) mapped to the volume in this frame.
+    pub z_far_m: Option<f64>,
+    /// Stage timings.
+    pub timings: StageTimings,
+}
+
+impl From<core::SlmPatterns> for SlmPatterns {
+    fn from(p: core::SlmPatterns) -> Self {
+        let plane = |c: usize| p.codes.index_axis(Axis(0), c).iter().copied().collect();
+        let t = p.timings;
+        Self {
+            width: p.width as u32,
+            height: p.height as u32,
+            red: plane(0),
+            green: plane(1),
+            blue: plane(2),
+            z_near_m: p.depth_range.map(|r| r.z_near_m as f64),
+            z_far_m: p.depth_range.map(|r| r.z_far_m as f64),
+            timings: StageTimings {
+                convert_ms: t.convert_s * 1e3,
+                cnn_ms: t.frame.cnn_s * 1e3,
+                offset_ms: t.frame.offset_s * 1e3,
+                prefilter_ms: t.frame.prefilter_s * 1e3,
+                encoding_ms: t.frame.encoding_s * 1e3,
+                total_ms: t.frame.total_s * 1e3,
+            },
+        }
+    }
+}
+
+/// The 32-bit frame colour-sequential SLM drivers take over HDMI: `width · height · 4` bytes, row-major, the
+/// red laser's pattern in R, green in G, blue in B, alpha 255.
+///
+/// Errors: [`TensorholoError::InvalidInput`] if a plane does not hold `width · height` codes.
+#[uniffi::export]
+pub fn pack_rgba(patterns: SlmPatterns) -> Result<Vec<u8>> {
+    guard(|| {
+        let n = (patterns.width as usize)
+            .checked_mul(patterns.height as usize)
+            .ok_or_else(|| invalid("width · height overflows"))?;
+        for (name, p) in [
+            ("red", &patterns.red),
+            ("green", &patterns.green),
+            ("blue", &patterns.blue),
+        ] {
+            if p.len() != n {
+                return Err(invalid(format!(
+                    "the {name} plane holds {} codes, expected width · height = {n}",
+                    p.len()
+                )));
+            }
+        }
+        let codes = ndarray::Array3::from_shape_fn(
+            (3, patterns.height as usize, patterns.width as usize),
+            |(c, y, x)| {
+                [&patterns.red, &patterns.green, &patterns.blue][c][y * patterns.width as usize + x]
+            },
+        );
+        Ok(core::pack_rgba(codes.view()))
+    })
+}
+
+/// A simulated view of the hologram for the phone's screen: `width · height · 4` sRGB bytes (RGBA, alpha
+/// 255), row-major.
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct Preview {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// RGBA8 bytes.
+    pub rgba: Vec<u8>,
+}
+
+/// What a generator runs.
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct GeneratorInfo {
+    /// Library version.
+    pub version: String,
+    /// Hologram width in pixels.
+    pub width: u32,
+    /// Hologram height in pixels.
+    pub height: u32,
+    /// Hologram CNN depth.
+    pub layers: u32,
+    /// Weight format (`f32`, `int8-qdq`, …).
+    pub precision: String,
+    /// Hologram CNN (embedded file name).
+    pub hologram_model: String,
+    /// Pre-filter CNN, if one runs.
+    pub prefilter_model: Option<String>,
+    /// Why a pre-filter runs or not.
+    pub prefilter_reason: String,
+    /// SLM offset in millimetres.
+    pub offset_mm: f64,
+    /// Chosen CNN memory layout (`nchw` or `nhwc`).
+    pub cnn_layout: String,
+    /// Chosen CNN threads.
+    pub cnn_threads: u32,
+    /// Whether the plan was chosen by timing candidates on this device.
+    pub autotuned: bool,
+    /// Everything above and the autotuning timings, as JSON.
+    pub json: String,
+}
+
+/// Median per-stage timings of [`HologramGenerator::benchmark`].
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct BenchmarkReport {
+    /// Frames timed (after one warm-up frame).
+    pub frames: u32,
+    /// Median stage timings.
+    pub median: StageTimings,
+    /// Frames per second of the median frame (`1000 / (convert_ms + total_ms)`).
+    pub fps: f64,
+    /// The generator's [`GeneratorInfo`] (chosen plan, threads).
+    pub info: GeneratorInfo,
+}
+
+/// RGB-D camera frames → SLM patterns with the shipped CNNs. Any thread may call it; calls run one at a time.
+#[derive(Debug, uniffi::Object)]
+pub struct HologramGenerator {
+    inner: core::HologramGenerator,
+}
+
+#[uniffi::export]
+impl HologramGenerator {
+    /// Loads the shipped CNNs and prepares everything for `config.width × config.height` frames (this times
+    /// the CNN plans on the device: up to a few seconds).
+    ///
+    /// Errors: [`TensorholoError::InvalidInput`] for a bad configuration (sizes, NaN or negative numbers,
+    /// layers other than 8/15/30, a required pre-filter that is not shipped for the offset);
+    /// [`TensorholoError::InvalidModel`] if an embedded model fails its checks.
+    #[uniffi::constructor]
+    pub fn new(config: GeneratorConfig) -> Result<Arc<Self>> {
+        guard(|| {
+            let inner = core::HologramGenerator::new(config.to_core()?)?;
+            Ok(Arc::new(Self { inner }))
+        })
+    }
+
+    /// Renders one camera frame into SLM patterns.
+    ///
+    /// Errors: [`TensorholoError::InvalidInput`] for buffers that do not match their sizes, strides and
+    /// formats, or a depth map without one valid pixel; the generator stays usable.
+    pub fn render(&self, frame: RgbdFrame) -> Result<SlmPatterns> {
+        guard(|| {
+            let frame = frame.into_core();
+            Ok(self.inner.render(&frame.view())?.into())
+        })
+    }
+
+    /// Renders `frame` and returns what a viewer sees focused at normalised depth `focus` ∈ [0, 1]
+    /// (0 = near), for the phone's screen.
+    ///
+    /// Errors: as [`HologramGenerator::render`], and for a focus outside [0, 1].
+    pub fn preview(&self, frame: RgbdFrame, focus: f32) -> Result<Preview> {
+        guard(|| {
+            let frame = frame.into_core();
+            let p = self.inner.preview(&frame.view(), focus)?;
+            Ok(Preview {
+                width: p.width as u32,
+                height: p.height as u32,
+                rgba: p.rgba,
+            })
+        })
+    }
+
+    /// The models, precision, pre-filter and CNN plan this generator runs.
+    pub fn info(&self) -> Result<GeneratorInfo> {
+        guard(|| info(&self.inner))
+    }
+
+    /// Renders the built-in test scene `frames` times (after one warm-up) at this generator's resolution and
+    /// returns the median stage timings, so an app can show what its device does.
+    ///
+    /// Errors: [`TensorholoError::InvalidInput`] for 0 frames.
+    pub fn benchmark(&self, frames: u32) -> Result<BenchmarkReport> {
+        guard(|| {
+            if frames == 0 {
+                return Err(invalid("benchmark needs at least 1 frame"));
+            }
+            let c = self.inner.config();
+            let scene = tensorholo::scene::procedural::default_scene(c.height, c.width)?;
+            self.inner.render_rgbd(&scene)?;
+            let mut all: Vec<StageTimings> = Vec::new();
+            for _ in 0..frames {
+                all.push(SlmPatterns::from(self.inner.render_rgbd(&scene)?).timings);
+            }
+            let median = |f: fn(&StageTimings) -> f64| {
+                let mut v: Vec<f64> = all.iter().map(f).collect();
+                v.sort_by(f64::total_cmp);
+                v[v.len() / 2]
+            };
+            let m = StageTimings {
+                convert_ms: median(|t| t.convert_ms),
+                cnn_ms: median(|t| t.cnn_ms),
+                offset_ms: median(|t| t.offset_ms),
+                prefilter_ms: median(|t| t.prefilter_ms),
+                encoding_ms: median(|t| t.encoding_ms),
+                total_ms: median(|t| t.total_ms),
+            };
+            let per_frame = m.convert_ms + m.total_ms;
+            Ok(BenchmarkReport {
+                frames,
+                fps: if per_frame > 0.0 {
+                    1e3 / per_frame
+                } else {
+                    0.0
+                },
+                median: m,
+                info: info(&self.inner)?,
+            })
+        })
+    }
+
+    /// Starts a video stream: [`HologramStream::push`] frames, results reach `listener` in frame order on a
+    /// background thread. The queue holds 2 frames and drops the oldest when full.
+    ///
+    /// Errors: [`TensorholoError::Internal`] if the worker thread cannot start.
+    pub fn stream(&self, listener: Arc<dyn PatternsListener>) -> Result<Arc<HologramStream>> {
+        guard(|| {
+            let inner = self.inner.stream(
+                Box::new(ListenerBridge(listener)),
+                core::DEFAULT_STREAM_CAPACITY,
+            )?;
+            Ok(Arc::new(HologramStream { inner }))
+        })
+    }
+}
+
+fn info(g: &core::HologramGenerator) -> Result<GeneratorInfo> {
+    let i = g.info()?;
+    let json = serde_json::to_string(&i).map_err(|e| TensorholoError::Internal {
+        message: format!("cannot serialise the generator info: {e}"),
+    })?;
+    Ok(GeneratorInfo {
+        version: i.version,
+        width: i.width as u32,
+        height: i.height as u32,
+        layers: i.layers as u32,
+        precision: i.precision.to_string(),
+        hologram_model: i.hologram_model,
+        prefilter_model: i.prefilter_model,
+        prefilter_reason: i.prefilter_reason,
+        offset_mm: i.offset_m * 1e3,
+        cnn_layout: i.plan.layout.to_string(),
+        cnn_threads: i.plan.threads.unwrap_or(1) as u32,
+        autotuned: i.plan.autotuned,
+        json,
+    })
+}
+
+/// Receives a [`HologramStream`]'s results, implemented by the app (Kotlin/Swift/Python). Called on the
+/// stream's background thread, in frame order.
+#[uniffi::export(with_foreign)]
+pub trait PatternsListener: Send + Sync {
+    /// The patterns of frame `index` (the number [`HologramStream::push`] returned for it).
+    fn on_patterns(&self, index: u64, patterns: SlmPatterns);
+    /// A frame failed (its message starts with `frame <index>:`); the stream goes on.
+    fn on_error(&self, error: TensorholoError);
+}
+
+struct ListenerBridge(Arc<dyn PatternsListener>);
+
+impl core::StreamListener for ListenerBridge {
+    fn on_patterns(&mut self, index: u64, patterns: core::SlmPatterns) {
+        self.0.on_patterns(index, patterns.into());
+    }
+    fn on_error(&mut self, index: u64, error: tensorholo::HoloError) {
+        let mut e = TensorholoError::from(error);
+        match &mut e {
+            TensorholoError::InvalidInput { message }
+            | TensorholoError::InvalidModel { message }
+            | TensorholoError::Unsupported { message }
+            | TensorholoError::Internal { message } => {
+                *message = format!("frame {index}: {message}")
+            }
+        }
+        self.0.on_error(e);
+    }
+}
+
+/// A video stream ([`HologramGenerator::stream`]).
+#[derive(Debug, uniffi::Object)]
+pub struct HologramStream {
+    inner: core::HologramStream,
+}
+
+#[uniffi::export]
+impl HologramStream {
+    /// Queues a frame without waiting for the hologram and returns its index (0, 1, 2… in push order); when
+    /// the queue is full the oldest waiting frame is dropped.
+    ///
+    /// Errors: [`TensorholoError::InvalidInput`] after [`HologramStream::close`].
+    pub fn push(&self, frame: RgbdFrame) -> Result<u64> {
+        guard(|| Ok(self.inner.push(frame.into_core())?))
+    }
+
+    /// Frames dropped so far because the queue was full.
+    pub fn dropped_frames(&self) -> u64 {
+        self.inner.dropped_frames()
+    }
+
+    /// Stops accepting frames, finishes the queued ones and waits: afterwards the listener is called no
+    /// more. Calling it again does nothing.
+    pub fn close(&self) {
+        self.inner.close()
+    }
+}
