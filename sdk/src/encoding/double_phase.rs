@@ -249,7 +249,7 @@ struct BandLimit {
 
 impl BandLimit {
     fn new(h: usize, w: usize, k: f32) -> Result<Self> {
-        let plan = SpectralPlan::new(h, w, false)?;
+        let plan = SpectralPlan::new(h, w, crate::optics::Padding::None)?;
         let norm = 1.0 / plan.spectrum_len() as f32;
         let (hh, hw) = ((h as f64 / 2.0).max(0.5), (w as f64 / 2.0).max(0.5));
         let mask = plan.build_multiplier(|kx, ky| {

@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 pub use filter::FourierFilter;
 pub use propagation::{
-    Carrier, PropagationOptions, Propagator, Scratch, SpectralPlan, TransferFunction,
+    Carrier, Padding, PropagationOptions, Propagator, Scratch, SpectralPlan, TransferFunction,
 };
 pub use reconstruct::{focal_stack, post_encoding_midpoint, simulate_phase_only};
 

@@ -43,11 +43,34 @@ pub struct SpectralPlan {
     fft: Fft2,
 }
 
+/// Whether a [`SpectralPlan`] works on the field as it is (circular convolution) or zero-padded to
+/// `2H × 2W` (linear convolution; 4× the work).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Padding {
+    /// FFTs of the field's own size.
+    #[default]
+    None,
+    /// FFTs of twice the field's height and width.
+    Double,
+}
+
+impl Padding {
+    /// `Double` when `pad`, as [`PropagationOptions::pad`] says.
+    pub fn from_pad(pad: bool) -> Self {
+        if pad {
+            Self::Double
+        } else {
+            Self::None
+        }
+    }
+}
+
 impl SpectralPlan {
-    /// Plans the FFTs for `[height, width]` fields.
+    /// Plans the FFTs for `[height, width]` fields, zero-padded as `padding` says.
     ///
     /// Errors: [`HoloError::InvalidParameter`] if either size is zero.
-    pub fn new(height: usize, width: usize, pad: bool) -> Result<Self> {
+    pub fn new(height: usize, width: usize, padding: Padding) -> Result<Self> {
+        let pad = padding == Padding::Double;
         if height == 0 || width == 0 {
             return Err(invalid(
                 "field size",
@@ -335,7 +358,7 @@ impl Propagator {
         check_positive("pixel_pitch_m", pixel_pitch_m)?;
         check_positive("wavelength_m", wavelength_m)?;
         Ok(Self {
-            plan: SpectralPlan::new(height, width, options.pad)?,
+            plan: SpectralPlan::new(height, width, Padding::from_pad(options.pad))?,
             pixel_pitch_m,
             wavelength_m,
             options,
