@@ -151,4 +151,7 @@ pub use metadata::{
     PREFILTER_FORMAT_VERSION,
 };
 pub use network::{HologramModel, ModelPlan, NodeTiming, MAX_CNN_THREADS};
-pub use tuning::{auto_thread_candidates, PlanReport, PlanRequest, PlanTiming, ThreadCount};
+pub use tuning::{
+    auto_thread_candidates, timing_resolution, PlanReport, PlanRequest, PlanTiming, ThreadCount,
+    TUNE_MIN_ROWS, TUNE_PIXELS,
+};
