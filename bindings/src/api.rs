@@ -370,13 +370,11 @@ pub fn pack_rgba(patterns: SlmPatterns) -> Result<Vec<u8>> {
                 )));
             }
         }
-        let codes = ndarray::Array3::from_shape_fn(
-            (3, patterns.height as usize, patterns.width as usize),
-            |(c, y, x)| {
-                [&patterns.red, &patterns.green, &patterns.blue][c][y * patterns.width as usize + x]
-            },
-        );
-        Ok(core::pack_rgba(codes.view()))
+        Ok(core::pack_rgba_planes(
+            &patterns.red,
+            &patterns.green,
+            &patterns.blue,
+        )?)
     })
 }
 

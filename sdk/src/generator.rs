@@ -234,11 +234,41 @@ pub fn pack_rgba(codes: ArrayView3<u8>) -> Vec<u8> {
     let mut out = vec![255u8; h * w * 4];
     for ch in 0..c.min(3) {
         let plane = codes.index_axis(Axis(0), ch);
-        for (px, &v) in out.chunks_exact_mut(4).zip(plane.iter()) {
-            px[ch] = v;
+        match plane.as_slice() {
+            Some(src) => interleave(&mut out, ch, src),
+            None => interleave(&mut out, ch, &plane.iter().copied().collect::<Vec<_>>()),
         }
     }
     out
+}
+
+/// As [`pack_rgba`] from three row-major planes of `width · height` codes each (red, green, blue).
+///
+/// Errors: [`HoloError::InvalidParameter`] (`planes`) if the planes differ in length.
+pub fn pack_rgba_planes(red: &[u8], green: &[u8], blue: &[u8]) -> Result<Vec<u8>> {
+    if red.len() != green.len() || red.len() != blue.len() {
+        return Err(invalid(
+            "planes",
+            format!(
+                "the red, green and blue planes hold {}, {} and {} codes; they must be equal",
+                red.len(),
+                green.len(),
+                blue.len()
+            ),
+        ));
+    }
+    let mut out = vec![255u8; red.len() * 4];
+    for (ch, plane) in [red, green, blue].into_iter().enumerate() {
+        interleave(&mut out, ch, plane);
+    }
+    Ok(out)
+}
+
+/// Writes `plane` into byte `ch` of every 4-byte pixel of `out`.
+fn interleave(out: &mut [u8], ch: usize, plane: &[u8]) {
+    for (px, &v) in out.chunks_exact_mut(4).zip(plane) {
+        px[ch] = v;
+    }
 }
 
 /// A simulated view of the SLM patterns ([`HologramGenerator::preview`]): `[H, W, 4]` sRGB bytes, alpha 255.
@@ -668,6 +698,21 @@ mod tests {
         let codes = Array3::from_shape_fn((3, 2, 3), |(c, y, x)| (c * 100 + y * 10 + x) as u8);
         let rgba = pack_rgba(codes.view());
         assert_eq!(rgba.len(), 2 * 3 * 4);
+        let planes: Vec<Vec<u8>> = (0..3)
+            .map(|c| codes.index_axis(Axis(0), c).iter().copied().collect())
+            .collect();
+        assert_eq!(
+            pack_rgba_planes(&planes[0], &planes[1], &planes[2]).unwrap(),
+            rgba
+        );
+        assert!(pack_rgba_planes(&planes[0], &planes[1][1..], &planes[2]).is_err());
+        // A non-contiguous view packs the same codes.
+        let reversed = codes.slice(ndarray::s![.., .., ..;-1]);
+        let packed = pack_rgba(reversed);
+        assert_eq!(
+            &packed[..4],
+            [codes[[0, 0, 2]], codes[[1, 0, 2]], codes[[2, 0, 2]], 255]
+        );
         for y in 0..2 {
             for x in 0..3 {
                 let px = &rgba[(y * 3 + x) * 4..][..4];
