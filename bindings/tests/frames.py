@@ -146,9 +146,9 @@ MIN_WITHIN_ONE = 0.999  # fraction of codes within ±1 (measured here: 1.0)
 
 
 def compare_codes(got: np.ndarray, want: np.ndarray) -> dict:
+    assert got.shape == want.shape, (got.shape, want.shape)
     d = circular_diff(got, want)
     stats = {"mean": float(d.mean()), "within_one": float((d <= 1).mean()), "max": int(d.max())}
-    assert got.shape == want.shape, (got.shape, want.shape)
     assert stats["mean"] <= MAX_MEAN_DIFF and stats["within_one"] >= MIN_WITHIN_ONE, stats
     return stats
 

@@ -23,7 +23,7 @@ use std::time::Instant;
 use ndarray::{Array3, ArrayView3, Axis};
 
 use crate::color::amplitude_to_srgb8;
-use crate::encoding::DoublePhaseMethod;
+use crate::encoding::{DoublePhaseMethod, LinearLut};
 use crate::error::{invalid, HoloError, Result};
 use crate::model::{CnnLayout, PlanReport, Precision, ThreadCount};
 use crate::optics::{focal_stack, post_encoding_midpoint, OpticalSetup, PropagationOptions};
@@ -193,8 +193,6 @@ pub struct SlmPatterns {
     pub height: usize,
     /// `[3, H, W]` codes (R, G, B), row-major.
     pub codes: Array3<u8>,
-    /// The double phase pattern `[3, H, W]` in radians, `[0, 2π)` (what the codes quantise).
-    pub phase: Array3<f32>,
     /// Global amplitude normaliser of Eq. 7 (for simulating what the SLM shows).
     pub amplitude_scale: f32,
     /// Metric depth range used for this frame (`None` for relative depth).
@@ -210,7 +208,6 @@ impl SlmPatterns {
             width,
             height,
             codes: out.codes.clone(),
-            phase: out.phase.clone(),
             amplitude_scale: out.amplitude_scale,
             depth_range,
             timings: PatternTimings {
@@ -407,8 +404,9 @@ impl HologramGenerator {
         Ok(SlmPatterns::from_frame(out, 0.0, None))
     }
 
-    /// What a viewer sees of `patterns` focused at normalised depth `focus` ∈ [0, 1] (0 = near): the SLM's
-    /// phase-only field (Eq. 8–10, no aperture) propagated from the midpoint plane to `z(focus)`, as sRGB.
+    /// What a viewer sees of `patterns` focused at normalised depth `focus` ∈ [0, 1] (0 = near): the phase
+    /// the SLM displays for the 8-bit codes ([`LinearLut::phase`], quantisation included), as a phase-only
+    /// field (Eq. 8–10, no aperture) propagated from the midpoint plane to `z(focus)`, as sRGB.
     ///
     /// Errors: [`HoloError::InvalidParameter`] for a focus outside [0, 1] or NaN; as
     /// [`post_encoding_midpoint`] and [`focal_stack`].
@@ -420,8 +418,9 @@ impl HologramGenerator {
             ));
         }
         let cfg = &self.config;
+        let phase = patterns.codes.mapv(|c| LinearLut.phase(c));
         let shown = post_encoding_midpoint(
-            patterns.phase.view(),
+            phase.view(),
             patterns.amplitude_scale,
             &cfg.optics,
             cfg.offset_m,
@@ -572,46 +571,28 @@ impl HologramStream {
         let worker = std::thread::Builder::new()
             .name("tensorholo-stream".into())
             .spawn(move || {
-                let listener = Mutex::new(listener);
-                let deliver = |index: u64, result: Result<SlmPatterns>| {
-                    let mut l = listener.lock().unwrap_or_else(|p| p.into_inner());
-                    match result {
-                        Ok(p) => l.on_patterns(index, p),
-                        Err(e) => l.on_error(index, e),
-                    }
-                };
+                let mut listener = listener;
                 let mut options = config.frame_options();
-                let mut ranges = VecDeque::new();
                 let run = catch_unwind(AssertUnwindSafe(|| {
-                    // The CNN thread converts frames (the first auto range is locked for the rest); the
-                    // ranges travel to the sink in order beside the frames.
-                    let (range_tx, range_rx) = std::sync::mpsc::channel();
+                    // The CNN thread converts frames (the first auto range is locked for the rest); each
+                    // frame's range and conversion time travel to the sink in its tag.
                     let frames = std::iter::from_fn(|| {
                         let (index, buf) = source.pop()?;
                         let t = Instant::now();
                         let converted = buf.view().to_rgbd(config.height, config.width, &options);
                         let convert_s = t.elapsed().as_secs_f64();
-                        let frame = converted.map(|(frame, report)| {
-                            if options.range.is_none() {
-                                options.range = report.range_used;
-                            }
-                            let _ = range_tx.send((report.range_used, convert_s));
-                            frame
-                        });
-                        if frame.is_err() {
-                            let _ = range_tx.send((None, convert_s));
+                        let range = converted.as_ref().ok().and_then(|(_, r)| r.range_used);
+                        if options.range.is_none() {
+                            options.range = range;
                         }
-                        Some((index, frame))
+                        Some(((index, range, convert_s), converted.map(|(frame, _)| frame)))
                     });
-                    session.render_stream_each(frames, |index, result| {
-                        while let Ok(r) = range_rx.try_recv() {
-                            ranges.push_back(r);
+                    session.render_stream_each(frames, |(index, range, convert_s), result| {
+                        match result {
+                            Ok(out) => listener
+                                .on_patterns(index, SlmPatterns::from_frame(out, convert_s, range)),
+                            Err(e) => listener.on_error(index, e),
                         }
-                        let (range, convert_s) = ranges.pop_front().unwrap_or((None, 0.0));
-                        deliver(
-                            index,
-                            result.map(|out| SlmPatterns::from_frame(out, convert_s, range)),
-                        );
                         Ok(())
                     })
                 }));
@@ -622,7 +603,7 @@ impl HologramStream {
                 };
                 if let Some(e) = failure {
                     let index = source.lock().next_index;
-                    deliver(index, Err(e));
+                    listener.on_error(index, e);
                 }
             })
             .map_err(|e| HoloError::Internal(format!("cannot start the stream's worker: {e}")))?;

@@ -22,6 +22,8 @@ sys.path.insert(0, str(HERE.parent))
 import frames  # noqa: E402
 
 REPO_ROOT = HERE.parents[2]
+# The iPhone photo's multi-picture (MPO) header: Pillow reads its base JPEG, which is all the tests need.
+pytestmark = pytest.mark.filterwarnings("ignore:Image appears to be a malformed MPO file")
 
 
 def workspace_version() -> str:
