@@ -448,10 +448,49 @@ impl HologramGenerator {
     /// Errors: [`TensorholoError::InvalidInput`] for a bad configuration (sizes, NaN or negative numbers,
     /// layers other than 8/15/30, a required pre-filter that is not shipped for the offset);
     /// [`TensorholoError::InvalidModel`] if an embedded model fails its checks.
+    /// [`TensorholoError::Unsupported`] in a library built without the shipped CNNs (cargo feature
+    /// `embedded-models` off): use [`HologramGenerator::with_models`].
     #[uniffi::constructor]
     pub fn new(config: GeneratorConfig) -> Result<Arc<Self>> {
         guard(|| {
-            let inner = core::HologramGenerator::new(config.to_core()?)?;
+            let config = config.to_core()?;
+            #[cfg(feature = "embedded-models")]
+            let inner = core::HologramGenerator::new(config)?;
+            #[cfg(not(feature = "embedded-models"))]
+            let inner: core::HologramGenerator = {
+                let _ = config;
+                Err(TensorholoError::Unsupported {
+                    message: "this library was built without the shipped CNNs (cargo feature \
+                              `embedded-models`); pass ONNX files to HologramGenerator.withModels"
+                        .into(),
+                })?
+            };
+            Ok(Arc::new(Self { inner }))
+        })
+    }
+
+    /// As [`HologramGenerator::new`] with ONNX files instead of the embedded CNNs: the app's own trained
+    /// weights, or the shipped `models/` files downloaded at run time by an app that leaves them out of its
+    /// binary. `hologram_onnx`: an RGB-D hologram CNN (e.g. `holo8_rgbd.onnx`); `prefilter_onnx`: a DDPM
+    /// pre-filter CNN for `config.offset_mm` (e.g. `prefilter_6mm.onnx`), or none for AA-DPM encoding.
+    /// `config.layers`, `precision` and `prefilter` are ignored: the files say what they are.
+    ///
+    /// Errors: [`TensorholoError::InvalidInput`] for a bad configuration; [`TensorholoError::InvalidModel`]
+    /// for bytes that are not such a model, or a model trained for another display (wavelengths, pixel
+    /// pitch, volume depth) or, for the pre-filter, another offset (the message names the key and both
+    /// values).
+    #[uniffi::constructor]
+    pub fn with_models(
+        config: GeneratorConfig,
+        hologram_onnx: Vec<u8>,
+        prefilter_onnx: Option<Vec<u8>>,
+    ) -> Result<Arc<Self>> {
+        guard(|| {
+            let inner = core::HologramGenerator::from_onnx(
+                config.to_core()?,
+                &hologram_onnx,
+                prefilter_onnx.as_deref(),
+            )?;
             Ok(Arc::new(Self { inner }))
         })
     }
@@ -623,5 +662,117 @@ impl HologramStream {
     /// more. Calling it again does nothing.
     pub fn close(&self) {
         self.inner.close()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config(width: u32, height: u32) -> GeneratorConfig {
+        GeneratorConfig {
+            width,
+            height,
+            layers: 8,
+            precision: None,
+            offset_mm: 6.0,
+            prefilter: None,
+            threads: 1,
+            fit: None,
+            pixel_pitch_m: 8e-6,
+            wavelengths_m: vec![],
+            volume_depth_m: 6e-3,
+            z_near_m: None,
+            z_far_m: None,
+        }
+    }
+
+    /// A 48×32 RGB8 frame with metric depth (a ramp from 0.5 m to 1.5 m) and a few texture edges.
+    fn frame() -> RgbdFrame {
+        let (w, h) = (48u32, 32u32);
+        let mut color = Vec::new();
+        let mut depth = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                color.extend([(x * 5) as u8, (y * 7) as u8, ((x ^ y) * 9) as u8]);
+                depth.extend((0.5 + (x as f32) / w as f32).to_le_bytes());
+            }
+        }
+        RgbdFrame {
+            color,
+            color_format: ColorFormat::Rgb8,
+            color_width: w,
+            color_height: h,
+            depth,
+            depth_format: DepthFormat::MetresF32,
+            depth_width: w,
+            depth_height: h,
+            color_row_stride: 0,
+            depth_row_stride: 0,
+            rotation: None,
+        }
+    }
+
+    fn model_file(name: &str) -> Vec<u8> {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../models/").to_string() + name;
+        std::fs::read(&path).unwrap_or_else(|e| panic!("{path}: {e}"))
+    }
+
+    /// The shipped files passed as bytes give the embedded generator's patterns exactly; a pre-filter of
+    /// another offset and bytes that are no model are `InvalidModel`.
+    #[cfg(feature = "embedded-models")]
+    #[test]
+    fn with_models_equals_the_embedded_models_and_checks_the_files() {
+        let embedded = HologramGenerator::new(config(32, 24)).unwrap();
+        let from_files = HologramGenerator::with_models(
+            config(32, 24),
+            model_file("holo8_rgbd.onnx"),
+            Some(model_file("prefilter_6mm.onnx")),
+        )
+        .unwrap();
+        let (a, b) = (
+            embedded.render(frame()).unwrap(),
+            from_files.render(frame()).unwrap(),
+        );
+        assert_eq!((a.red, a.green, a.blue), (b.red, b.green, b.blue));
+
+        let wrong_offset = HologramGenerator::with_models(
+            config(32, 24),
+            model_file("holo8_rgbd.onnx"),
+            Some(model_file("prefilter_12mm.onnx")),
+        );
+        assert!(
+            matches!(&wrong_offset, Err(TensorholoError::InvalidModel { message }) if message.contains("offset")),
+            "{wrong_offset:?}"
+        );
+        let garbage = HologramGenerator::with_models(config(32, 24), vec![7; 100], None);
+        assert!(
+            matches!(garbage, Err(TensorholoError::InvalidModel { .. })),
+            "{garbage:?}"
+        );
+    }
+
+    /// Without a pre-filter file the generator encodes with AA-DPM, unlike the default embedded one.
+    #[test]
+    fn with_models_without_prefilter_runs_none() {
+        let g = HologramGenerator::with_models(config(32, 24), model_file("holo8_rgbd.onnx"), None)
+            .unwrap();
+        let info = g.info().unwrap();
+        assert_eq!(info.prefilter_model, None, "{info:?}");
+        assert_eq!(info.layers, 8);
+        let p = g.render(frame()).unwrap();
+        assert_eq!(p.red.len(), 32 * 24);
+        assert!(p.red.iter().any(|&c| c != p.red[0]), "constant pattern");
+    }
+
+    /// A library without the shipped CNNs says so instead of failing later.
+    #[cfg(not(feature = "embedded-models"))]
+    #[test]
+    fn new_without_embedded_models_is_unsupported() {
+        let e = HologramGenerator::new(config(32, 24)).unwrap_err();
+        assert!(
+            matches!(&e, TensorholoError::Unsupported { message } if message.contains("withModels")),
+            "{e:?}"
+        );
     }
 }

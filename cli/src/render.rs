@@ -199,6 +199,7 @@ impl ModelArgs {
                 "precision": md.precision,
                 "trained_resolution": md.trained_resolution,
                 "training_commit": md.training_commit,
+                "macs_per_pixel": md.macs_per_pixel(),
             })
         };
         let info = json!({

@@ -25,10 +25,13 @@ use ndarray::{Array3, ArrayView3, Axis};
 use crate::color::amplitude_to_srgb8;
 use crate::encoding::{DoublePhaseMethod, LinearLut};
 use crate::error::{invalid, HoloError, Result};
-use crate::model::{CnnLayout, PlanReport, Precision, ThreadCount};
+use crate::model::{
+    CnnLayout, HologramModel, ModelConfig, ModelKind, PlanReport, Precision, ThreadCount,
+};
 use crate::optics::{focal_stack, post_encoding_midpoint, OpticalSetup, PropagationOptions};
 use crate::pipeline::{
-    FrameTimings, HologramPipeline, HologramSession, ModelSelection, PipelineConfig, SlmFrame,
+    FrameTimings, HologramPipeline, HologramSession, ModelSelection, PipelineConfig, PrefilterMode,
+    SlmFrame,
 };
 use crate::scene::{
     CameraFrame, CameraFrameBuf, CameraFrameReport, DepthMapping, DepthRange, Fit, FrameOptions,
@@ -333,6 +336,51 @@ impl HologramGenerator {
     pub fn new(config: GeneratorConfig) -> Result<Self> {
         config.validate()?;
         let pipeline = HologramPipeline::embedded(&config.models, config.pipeline_config())?;
+        Self::with_pipeline(config, pipeline)
+    }
+
+    /// As [`HologramGenerator::new`] with the caller's ONNX files instead of the embedded ones: its own
+    /// trained weights, or the shipped files downloaded by an app built without them (a smaller binary).
+    /// `hologram` is an RGB-D hologram CNN and `prefilter` an optional DDPM pre-filter CNN for
+    /// `config.offset_m`, both checked against the display like the shipped ones (metadata and I/O contract,
+    /// `docs/CONVENTIONS.md` §7). `config.models` is replaced by what the files are (layers, precision); a
+    /// pre-filter runs if and only if one is given.
+    ///
+    /// Errors: as [`GeneratorConfig::validate`]; [`HoloError::ModelLoad`] / [`HoloError::ModelMetadata`] /
+    /// [`HoloError::ModelContract`] for a file that is not such a model or belongs to another display or
+    /// offset (as [`HologramModel::from_bytes`]); as [`HologramPipeline::new`].
+    pub fn from_onnx(
+        mut config: GeneratorConfig,
+        hologram: &[u8],
+        prefilter: Option<&[u8]>,
+    ) -> Result<Self> {
+        config.validate()?;
+        let pipeline_config = config.pipeline_config();
+        let expected = ModelConfig {
+            optics: pipeline_config.optics,
+            offset_m: pipeline_config.offset_m,
+            input_layers: 1,
+        };
+        let load =
+            |bytes, name, kind| HologramModel::from_named_bytes(bytes, name, kind, &expected);
+        let hologram = load(
+            hologram,
+            "hologram CNN (caller's ONNX)",
+            ModelKind::Hologram,
+        )?;
+        let prefilter = prefilter
+            .map(|b| load(b, "pre-filter CNN (caller's ONNX)", ModelKind::PreFilter))
+            .transpose()?;
+        let md = hologram.metadata();
+        config.models.layers = md.layers;
+        config.models.precision = Precision::from_metadata(&md.precision).unwrap_or(Precision::F32);
+        config.models.prefilter = if prefilter.is_some() {
+            PrefilterMode::Required
+        } else {
+            PrefilterMode::Off
+        };
+        let pipeline =
+            HologramPipeline::new(Arc::new(hologram), prefilter.map(Arc::new), pipeline_config)?;
         Self::with_pipeline(config, pipeline)
     }
 

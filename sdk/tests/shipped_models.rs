@@ -66,7 +66,7 @@ fn check(
 #[test]
 fn every_shipped_model_matches_pytorch() {
     let base = ModelConfig::default();
-    for layers in embedded::LAYERS {
+    for &layers in embedded::LAYERS {
         for precision in Precision::ALL {
             let name = embedded::hologram_file(layers, precision);
             // Hologram CNNs predict the midpoint hologram (offset 0 in their metadata) and serve every offset.

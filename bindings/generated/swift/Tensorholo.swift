@@ -715,6 +715,8 @@ open class HologramGenerator: HologramGeneratorProtocol, @unchecked Sendable {
      * Errors: [`TensorholoError::InvalidInput`] for a bad configuration (sizes, NaN or negative numbers,
      * layers other than 8/15/30, a required pre-filter that is not shipped for the offset);
      * [`TensorholoError::InvalidModel`] if an embedded model fails its checks.
+     * [`TensorholoError::Unsupported`] in a library built without the shipped CNNs (cargo feature
+     * `embedded-models` off): use [`HologramGenerator::with_models`].
      */
 public convenience init(config: GeneratorConfig)throws  {
     let handle =
@@ -736,6 +738,29 @@ public convenience init(config: GeneratorConfig)throws  {
         try! rustCall { uniffi_tensorholo_ffi_fn_free_hologramgenerator(handle, $0) }
     }
 
+    
+    /**
+     * As [`HologramGenerator::new`] with ONNX files instead of the embedded CNNs: the app's own trained
+     * weights, or the shipped `models/` files downloaded at run time by an app that leaves them out of its
+     * binary. `hologram_onnx`: an RGB-D hologram CNN (e.g. `holo8_rgbd.onnx`); `prefilter_onnx`: a DDPM
+     * pre-filter CNN for `config.offset_mm` (e.g. `prefilter_6mm.onnx`), or none for AA-DPM encoding.
+     * `config.layers`, `precision` and `prefilter` are ignored: the files say what they are.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for a bad configuration; [`TensorholoError::InvalidModel`]
+     * for bytes that are not such a model, or a model trained for another display (wavelengths, pixel
+     * pitch, volume depth) or, for the pre-filter, another offset (the message names the key and both
+     * values).
+     */
+public static func withModels(config: GeneratorConfig, hologramOnnx: Data, prefilterOnnx: Data?)throws  -> HologramGenerator  {
+    return try  FfiConverterTypeHologramGenerator_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_constructor_hologramgenerator_with_models(
+        FfiConverterTypeGeneratorConfig_lower(config),
+        FfiConverterData.lower(hologramOnnx),
+        FfiConverterOptionData.lower(prefilterOnnx),uniffiCallStatus
+    )
+})
+}
     
 
     
@@ -2951,6 +2976,30 @@ fileprivate struct FfiConverterOptionString: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterOptionData: FfiConverterRustBuffer {
+    typealias SwiftType = Data?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterData.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterData.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterOptionTypeFit: FfiConverterRustBuffer {
     typealias SwiftType = Fit?
 
@@ -3146,7 +3195,10 @@ private let initializationResult: InitializationResult = {
     if (uniffi_tensorholo_ffi_checksum_method_patternslistener_on_error() != 41699) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new() != 59040) {
+    if (uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new() != 45138) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_with_models() != 37417) {
         return InitializationResult.apiChecksumMismatch
     }
 

@@ -1,7 +1,11 @@
-//! The shipped CNNs of `models/` (see `models/MODEL_CARD.md`), compiled into the library behind the default
-//! cargo feature `embedded-models`: RGB-D hologram CNNs with 8, 15 and 30 layers (midpoint hologram, any
-//! SLM offset) and DDPM pre-filter CNNs for offsets of 6 and 12 mm, each in f32 and two int8 forms.
-//! Build with `--no-default-features` to leave them out (≈3 MB) and load files with
+//! The shipped CNNs of `models/` (see `models/MODEL_CARD.md`), compiled into the library, each in f32 and two
+//! int8 forms:
+//! - cargo feature `embedded-models`: the RGB-D hologram CNN with 8 layers (midpoint hologram, any SLM
+//!   offset) and the DDPM pre-filter CNNs for offsets of 6 and 12 mm (0.37 MB in all);
+//! - `models-15` and `models-30`: the 15-layer (0.48 MB) and 30-layer (1.0 MB) hologram CNNs.
+//!
+//! The crate's default features embed all of them; the phone library (`tensorholo-ffi`) embeds only the
+//! first set unless asked. Build with `--no-default-features` to leave them all out and load files with
 //! [`HologramModel::from_path`](super::HologramModel::from_path) instead.
 
 use super::{HologramModel, ModelConfig, ModelKind, Precision};
@@ -13,17 +17,11 @@ macro_rules! shipped {
     };
 }
 
-/// Every embedded file: `(file name in models/, bytes)`.
-pub const FILES: &[(&str, &[u8])] = shipped![
+/// Always embedded (feature `embedded-models`): the 8-layer hologram CNN and the pre-filters.
+const BASE: &[(&str, &[u8])] = shipped![
     "holo8_rgbd.onnx",
     "holo8_rgbd.int8-qop.onnx",
     "holo8_rgbd.int8-qdq.onnx",
-    "holo15_rgbd.onnx",
-    "holo15_rgbd.int8-qop.onnx",
-    "holo15_rgbd.int8-qdq.onnx",
-    "holo30_rgbd.onnx",
-    "holo30_rgbd.int8-qop.onnx",
-    "holo30_rgbd.int8-qdq.onnx",
     "prefilter_6mm.onnx",
     "prefilter_6mm.int8-qop.onnx",
     "prefilter_6mm.int8-qdq.onnx",
@@ -32,13 +30,45 @@ pub const FILES: &[(&str, &[u8])] = shipped![
     "prefilter_12mm.int8-qdq.onnx",
 ];
 
-/// Layer counts of the shipped hologram CNNs.
-pub const LAYERS: [usize; 3] = [8, 15, 30];
+#[cfg(feature = "models-15")]
+const HOLO15: &[(&str, &[u8])] = shipped![
+    "holo15_rgbd.onnx",
+    "holo15_rgbd.int8-qop.onnx",
+    "holo15_rgbd.int8-qdq.onnx",
+];
+#[cfg(not(feature = "models-15"))]
+const HOLO15: &[(&str, &[u8])] = &[];
+
+#[cfg(feature = "models-30")]
+const HOLO30: &[(&str, &[u8])] = shipped![
+    "holo30_rgbd.onnx",
+    "holo30_rgbd.int8-qop.onnx",
+    "holo30_rgbd.int8-qdq.onnx",
+];
+#[cfg(not(feature = "models-30"))]
+const HOLO30: &[(&str, &[u8])] = &[];
+
+/// Every file embedded in this build: `(file name in models/, bytes)`.
+pub fn files() -> impl Iterator<Item = (&'static str, &'static [u8])> {
+    BASE.iter().chain(HOLO15).chain(HOLO30).copied()
+}
+
+/// Layer counts of the hologram CNNs the project ships (`models/`).
+pub const SHIPPED_LAYERS: [usize; 3] = [8, 15, 30];
+
+/// Layer counts of the hologram CNNs embedded in this build (8, plus 15 and 30 with the features
+/// `models-15` and `models-30`).
+pub const LAYERS: &[usize] = match (cfg!(feature = "models-15"), cfg!(feature = "models-30")) {
+    (true, true) => &[8, 15, 30],
+    (true, false) => &[8, 15],
+    (false, true) => &[8, 30],
+    (false, false) => &[8],
+};
 /// SLM offsets (millimetres) of the shipped pre-filter CNNs.
 pub const PREFILTER_OFFSETS_MM: [u32; 2] = [6, 12];
 
 fn find(name: &str) -> Option<&'static [u8]> {
-    FILES.iter().find(|(n, _)| *n == name).map(|(_, b)| *b)
+    files().find(|(n, _)| *n == name).map(|(_, b)| b)
 }
 
 /// File name in `models/` of the shipped RGB-D hologram CNN with `layers` layers in `precision`.
@@ -53,13 +83,19 @@ pub fn prefilter_file(offset_mm: u32, precision: Precision) -> String {
 
 /// The ONNX bytes of the shipped RGB-D hologram CNN with `layers` ∈ {8, 15, 30} layers.
 ///
-/// Errors: [`HoloError::InvalidParameter`](crate::HoloError) for another layer count.
+/// Errors: [`HoloError::InvalidParameter`](crate::HoloError) for another layer count, or for 15 or 30
+/// layers in a build without the feature `models-15` / `models-30` (the message names it).
 pub fn hologram_cnn(layers: usize, precision: Precision) -> Result<&'static [u8]> {
     find(&hologram_file(layers, precision)).ok_or_else(|| {
-        invalid(
-            "layers",
-            format!("the shipped hologram CNNs have {LAYERS:?} layers, not {layers}"),
-        )
+        let why = if SHIPPED_LAYERS.contains(&layers) {
+            format!(
+                "the {layers}-layer hologram CNN is not embedded in this build (cargo feature \
+                 `models-{layers}`; embedded: {LAYERS:?} layers)"
+            )
+        } else {
+            format!("the shipped hologram CNNs have {SHIPPED_LAYERS:?} layers, not {layers}")
+        };
+        invalid("layers", why)
     })
 }
 

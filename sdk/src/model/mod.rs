@@ -54,6 +54,17 @@ impl Precision {
         }
     }
 
+    /// The form a model's `tensorholo.precision` metadata names ([`ModelMetadata::precision`]: `f32`,
+    /// `int8-qoperator-conv`, `int8-qdq-conv`); `None` for another value.
+    pub fn from_metadata(value: &str) -> Option<Self> {
+        match value {
+            "f32" => Some(Self::F32),
+            "int8-qoperator-conv" => Some(Self::Int8QOperator),
+            "int8-qdq-conv" => Some(Self::Int8Qdq),
+            _ => None,
+        }
+    }
+
     /// Short name: `f32`, `int8-qop`, `int8-qdq`.
     pub fn name(self) -> &'static str {
         match self {

@@ -729,6 +729,8 @@ internal object IntegrityCheckingUniffiLib {
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new(
     ): Int
+    external fun uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_with_models(
+    ): Int
     external fun ffi_tensorholo_ffi_uniffi_contract_version(
     ): Int
 
@@ -755,6 +757,8 @@ internal object UniffiLib {
     external fun uniffi_tensorholo_ffi_fn_free_hologramgenerator(`handle`: Long,uniffi_out_err: UniffiRustCallStatus, 
     ): Unit
     external fun uniffi_tensorholo_ffi_fn_constructor_hologramgenerator_new(`config`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    ): Long
+    external fun uniffi_tensorholo_ffi_fn_constructor_hologramgenerator_with_models(`config`: RustBuffer.ByValue,`hologramOnnx`: RustBuffer.ByValue,`prefilterOnnx`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): Long
     external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_benchmark(`ptr`: Long,`frames`: Int,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
@@ -945,7 +949,10 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
     if ((lib.uniffi_tensorholo_ffi_checksum_method_patternslistener_on_error() and 0xFFFF) != 41699) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new() and 0xFFFF) != 59040) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new() and 0xFFFF) != 45138) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_with_models() and 0xFFFF) != 37417) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
 }
@@ -1502,6 +1509,8 @@ open class HologramGenerator: Disposable, AutoCloseable, HologramGeneratorInterf
      * Errors: [`TensorholoError::InvalidInput`] for a bad configuration (sizes, NaN or negative numbers,
      * layers other than 8/15/30, a required pre-filter that is not shipped for the offset);
      * [`TensorholoError::InvalidModel`] if an embedded model fails its checks.
+     * [`TensorholoError::Unsupported`] in a library built without the shipped CNNs (cargo feature
+     * `embedded-models` off): use [`HologramGenerator::with_models`].
      */
     constructor(`config`: GeneratorConfig) :
         this(UniffiWithHandle, 
@@ -1697,11 +1706,36 @@ open class HologramGenerator: Disposable, AutoCloseable, HologramGeneratorInterf
 
 
     
-    
+    companion object {
+        
     /**
-     * @suppress
+     * As [`HologramGenerator::new`] with ONNX files instead of the embedded CNNs: the app's own trained
+     * weights, or the shipped `models/` files downloaded at run time by an app that leaves them out of its
+     * binary. `hologram_onnx`: an RGB-D hologram CNN (e.g. `holo8_rgbd.onnx`); `prefilter_onnx`: a DDPM
+     * pre-filter CNN for `config.offset_mm` (e.g. `prefilter_6mm.onnx`), or none for AA-DPM encoding.
+     * `config.layers`, `precision` and `prefilter` are ignored: the files say what they are.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for a bad configuration; [`TensorholoError::InvalidModel`]
+     * for bytes that are not such a model, or a model trained for another display (wavelengths, pixel
+     * pitch, volume depth) or, for the pre-filter, another offset (the message names the key and both
+     * values).
      */
-    companion object
+    @Throws(TensorholoException::class) fun `withModels`(`config`: GeneratorConfig, `hologramOnnx`: kotlin.ByteArray, `prefilterOnnx`: kotlin.ByteArray?): HologramGenerator {
+            return FfiConverterTypeHologramGenerator.lift(
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_constructor_hologramgenerator_with_models(
+    
+        
+        FfiConverterTypeGeneratorConfig.lower(`config`),
+        FfiConverterByteArray.lower(`hologramOnnx`),
+        FfiConverterOptionalByteArray.lower(`prefilterOnnx`),_status)
+}
+    )
+    }
+    
+
+        
+    }
     
 }
 
@@ -3608,6 +3642,38 @@ public object FfiConverterOptionalString: FfiConverterRustBuffer<kotlin.String?>
         } else {
             buf.put(1)
             FfiConverterString.write(value, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterOptionalByteArray: FfiConverterRustBuffer<kotlin.ByteArray?> {
+    override fun read(buf: ByteBuffer): kotlin.ByteArray? {
+        if (buf.get().toInt() == 0) {
+            return null
+        }
+        return FfiConverterByteArray.read(buf)
+    }
+
+    override fun allocationSize(value: kotlin.ByteArray?): ULong {
+        if (value == null) {
+            return 1UL
+        } else {
+            return 1UL + FfiConverterByteArray.allocationSize(value)
+        }
+    }
+
+    override fun write(value: kotlin.ByteArray?, buf: ByteBuffer) {
+        if (value == null) {
+            buf.put(0)
+        } else {
+            buf.put(1)
+            FfiConverterByteArray.write(value, buf)
         }
     }
 }

@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# Usage: benchmarks/qemu/instructions.sh [HOLO_AARCH64] [SIZE]
+#
+# Guest instructions per frame of the aarch64 build of `holo render`, counted under qemu-aarch64 with this
+# directory's TCG plugin (insn_count.c). A PROXY FOR ARM COST, NOT A TIME: qemu counts the instructions the
+# Arm code executes (NEON kernels included), the same on every x86 machine for the same binary and inputs,
+# so a change to the ARM path (tract, rustfft, our loops) can be compared here before it reaches a phone.
+# It says nothing of caches, memory bandwidth, issue width or the cost of each instruction; time a real
+# device for speed (`holo bench` built for aarch64, README "ARM"; the bindings' benchmark() on a phone).
+#
+# Each case renders the built-in scene at SIZE (default 192x192) with the 8-layer CNN, the 6 mm DDPM
+# pre-filter, one tract thread and a fixed layout, twice: with --repeat 1 and --repeat 3. The difference,
+# halved, is one steady-state frame (loading, plan optimisation and output writing cancel out).
+# HOLO_AARCH64 defaults to target/aarch64-unknown-linux-gnu/release/holo (build it first as README "ARM"
+# says). Prints a Markdown table; needs qemu-user, gcc, python3. Each case takes ~1 min here.
+set -euo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+root="$(cd "$here/../.." && pwd)"
+holo="${1:-$root/target/aarch64-unknown-linux-gnu/release/holo}"
+size="${2:-192x192}"
+[ -x "$holo" ] || { echo "no aarch64 holo at $holo: cargo build --release --target aarch64-unknown-linux-gnu -p holo" >&2; exit 1; }
+command -v qemu-aarch64 >/dev/null || { echo "needs qemu-aarch64 (Debian qemu-user)" >&2; exit 1; }
+
+work="$(mktemp -d)"
+trap 'rm -rf "$work"' EXIT
+gcc -O2 -shared -fPIC -o "$work/libinsn_count.so" "$here/insn_count.c"
+
+count() { # precision layout repeat → instruction count (and report.json in $work/out)
+  qemu-aarch64 -L /usr/aarch64-linux-gnu -plugin "$work/libinsn_count.so" -d plugin -D "$work/plugin.log" \
+    "$holo" render --size "$size" --precision "$1" --layout "$2" --threads 1 --repeat "$3" \
+    --out "$work/out" >/dev/null 2>"$work/holo.log" || { cat "$work/holo.log" >&2; exit 1; }
+  sed -n 's/^insn_count: //p' "$work/plugin.log"
+}
+
+echo "Guest instructions per frame, holo8 + DDPM pre-filter, built-in scene $size, 1 thread (qemu-aarch64 $(qemu-aarch64 --version | head -1 | awk '{print $3}'); a proxy for ARM cost, not a time)"
+echo
+echo "| precision | layout | M instructions / frame | CNN multiply-adds / instruction |"
+echo "|---|---|---:|---:|"
+for case in "f32 nchw" "f32 nhwc" "int8-qop nchw" "int8-qdq nchw" "int8-qdq nhwc"; do
+  read -r precision layout <<<"$case"
+  one="$(count "$precision" "$layout" 1)"
+  three="$(count "$precision" "$layout" 3)"
+  python3 - "$precision" "$layout" "$one" "$three" "$work/out/report.json" <<'PY'
+import json, sys
+precision, layout, one, three, report = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
+r = json.load(open(report))
+h, w = r["size"]
+macs = (r["models"]["hologram_cnn"].get("macs_per_pixel") or 0) * h * w
+per_frame = (three - one) / 2
+print(f"| {precision} | {layout} | {per_frame / 1e6:.0f} | {macs / per_frame:.2f} |")
+PY
+done

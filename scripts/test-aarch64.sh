@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# Usage: scripts/test-aarch64.sh [extra cargo test args…]
+#
+# Runs the SDK's model and pipeline tests compiled for aarch64 (tract's NEON kernels, rustfft's NEON
+# butterflies) on this x86-64 machine, under qemu-user: .cargo/config.toml makes Debian's
+# gcc-aarch64-linux-gnu the linker and the C compiler of tract's assembly, and `qemu-aarch64 -L
+# /usr/aarch64-linux-gnu` the runner. Installs what is missing (apt: gcc-aarch64-linux-gnu,
+# libc6-dev-arm64-cross, qemu-user; rustup: the target).
+#
+# What runs: every shipped CNN (8/15/30 layers, pre-filters; f32, int8 QOperator and QDQ) and the fixture
+# CNNs against their PyTorch outputs with the x86 tolerances (tests model, shipped_models), the pipeline
+# tests (session vs the stand-alone stages, streaming, bad input), and platform_parity: the built-in scene
+# rendered to the same midpoint hologram and SLM codes as the x86-64 reference files, within the tolerances
+# that test states (it prints the differences). A debug build (deps optimised as in the dev profile), so it
+# stays a few minutes on two cores. Emulated timings mean nothing: never read them as phone speed.
+set -euo pipefail
+root="$(cd "$(dirname "$0")/.." && pwd)"
+# shellcheck source=bindings/tests/lib.sh
+. "$root/bindings/tests/lib.sh"
+cd "$root"
+
+target=aarch64-unknown-linux-gnu
+ensure_apt gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user ||
+  { echo "test-aarch64: cannot install the aarch64 cross toolchain and qemu-user" >&2; exit 1; }
+rustup target list --installed | grep -qx "$target" || rustup target add "$target"
+
+cargo test --locked --target "$target" -p tensorholo --no-default-features \
+  --features "embedded-models models-15 models-30" \
+  --test model --test shipped_models --test pipeline --test platform_parity "$@" -- --nocapture 2>&1 |
+  grep -vE '^(running [0-9]+ tests?|)$'

@@ -1,0 +1,182 @@
+//! The same hologram on every CPU: a session renders the built-in scene with the shipped CNNs and its
+//! midpoint hologram and SLM codes are compared with reference files written on x86-64
+//! (`tests/fixtures/parity/`). CI runs this test natively and for aarch64 under `qemu-aarch64` (README
+//! "ARM"), where tract runs its NEON kernels and rustfft its NEON butterflies instead of AVX/FMA ones.
+//!
+//! Where differences come from: the two CPUs sum the same products in another order (tract's matrix-product
+//! tiles, rustfft's radix passes) and fuse multiply-adds differently, so f32 results differ by rounding
+//! (~1e-7 relative); int8 convolutions accumulate exactly in i32, and only the float rescaling rounds
+//! differently. A phase that lands within rounding of a code boundary can then move one code: a handful of
+//! codes change by ±1 (cyclically), never more.
+//!
+//! Regenerate the references (x86-64 only; review the diff): `TENSORHOLO_WRITE_PARITY=1 cargo test -p
+//! tensorholo --test platform_parity`.
+#![cfg(feature = "embedded-models")]
+
+use std::path::PathBuf;
+
+use ndarray::{Array3, Array4, Axis};
+use ndarray_npy::{read_npy, write_npy};
+use num_complex::Complex32;
+use tensorholo::model::{CnnLayout, Precision, ThreadCount};
+use tensorholo::pipeline::{HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
+use tensorholo::scene::procedural::default_scene;
+
+/// Scene size: small enough for an emulated CPU, non-square so that a transposed axis cannot pass.
+const H: usize = 64;
+const W: usize = 96;
+
+struct Case {
+    name: &'static str,
+    precision: Precision,
+    layout: CnnLayout,
+    /// Largest |Δ| of the midpoint hologram over its largest |value|.
+    field_tol: f32,
+    /// Largest fraction of SLM codes allowed to differ (each by ±1 at most).
+    code_fraction_tol: f64,
+}
+
+const CASES: [Case; 4] = [
+    Case {
+        name: "f32_nchw",
+        precision: Precision::F32,
+        layout: CnnLayout::ChannelsFirst,
+        field_tol: 1e-5,
+        code_fraction_tol: 1e-3,
+    },
+    Case {
+        name: "f32_nhwc",
+        precision: Precision::F32,
+        layout: CnnLayout::ChannelsLast,
+        field_tol: 1e-5,
+        code_fraction_tol: 1e-3,
+    },
+    // int8: exact integer accumulation, but a float rescale that rounds an activation the other way moves
+    // it one quantisation step (1/127 of its range); allow a few such steps, and report the actual figure.
+    Case {
+        name: "int8qdq_nchw",
+        precision: Precision::Int8Qdq,
+        layout: CnnLayout::ChannelsFirst,
+        field_tol: 2e-2,
+        code_fraction_tol: 1e-2,
+    },
+    Case {
+        name: "int8qop_nchw",
+        precision: Precision::Int8QOperator,
+        layout: CnnLayout::ChannelsFirst,
+        field_tol: 2e-2,
+        code_fraction_tol: 1e-2,
+    },
+];
+
+fn reference(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/parity")
+        .join(name)
+}
+
+/// The midpoint hologram `[3, H, W]` (complex) and the session's SLM codes `[3, H, W]`.
+fn render(case: &Case) -> (Array3<Complex32>, Array3<u8>) {
+    let selection = ModelSelection {
+        layers: 8,
+        precision: case.precision,
+        prefilter: PrefilterMode::Required,
+    };
+    let config = PipelineConfig {
+        offset_m: 6e-3,
+        cnn_layout: case.layout,
+        cnn_threads: ThreadCount::Fixed(1),
+        ..PipelineConfig::default()
+    };
+    let pipeline = HologramPipeline::embedded(&selection, config).unwrap();
+    let frame = default_scene(H, W).unwrap();
+    let midpoint = pipeline.hologram_model().run_frame(&frame).unwrap();
+    let mut session = pipeline.session(H, W).unwrap();
+    let codes = session.render(&frame).unwrap().codes.clone();
+    (midpoint, codes)
+}
+
+/// `[2, 3, H, W]`: real and imaginary parts.
+fn split(field: &Array3<Complex32>) -> Array4<f32> {
+    ndarray::stack(
+        Axis(0),
+        &[field.mapv(|c| c.re).view(), field.mapv(|c| c.im).view()],
+    )
+    .unwrap()
+}
+
+#[test]
+fn builtin_scene_renders_the_x86_reference_on_this_cpu() {
+    let write = std::env::var_os("TENSORHOLO_WRITE_PARITY").is_some();
+    if write {
+        if std::env::consts::ARCH != "x86_64" {
+            panic!("the references are x86-64 results; write them on an x86-64 machine");
+        }
+        std::fs::create_dir_all(reference("")).unwrap();
+    }
+    println!(
+        "platform parity on {} ({H}×{W} built-in scene, holo8 + DDPM pre-filter, 6 mm):",
+        std::env::consts::ARCH
+    );
+    for case in &CASES {
+        let (midpoint, codes) = render(case);
+        let field_file = reference(&format!("builtin_{}_midpoint.npy", case.name));
+        let codes_file = reference(&format!("builtin_{}_codes.npy", case.name));
+        if write {
+            write_npy(&field_file, &split(&midpoint)).unwrap();
+            write_npy(&codes_file, &codes).unwrap();
+            continue;
+        }
+        let want_field: Array4<f32> =
+            read_npy(&field_file).unwrap_or_else(|e| panic!("{}: {e}", field_file.display()));
+        let want_codes: Array3<u8> =
+            read_npy(&codes_file).unwrap_or_else(|e| panic!("{}: {e}", codes_file.display()));
+        let got_field = split(&midpoint);
+        assert_eq!(got_field.dim(), want_field.dim(), "{}", case.name);
+        assert_eq!(codes.dim(), want_codes.dim(), "{}", case.name);
+
+        let scale = want_field.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        assert!(
+            scale > 0.1,
+            "{}: the reference hologram is empty",
+            case.name
+        );
+        let field_err = got_field
+            .iter()
+            .zip(want_field.iter())
+            .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()))
+            / scale;
+        // Codes are phases modulo 2π: 255 and 0 are neighbours.
+        let steps: Vec<u8> = codes
+            .iter()
+            .zip(want_codes.iter())
+            .map(|(a, b)| a.wrapping_sub(*b).min(b.wrapping_sub(*a)))
+            .collect();
+        let max_step = steps.iter().copied().max().unwrap();
+        let changed = steps.iter().filter(|&&s| s != 0).count();
+        let fraction = changed as f64 / steps.len() as f64;
+        println!(
+            "  {:<13} midpoint hologram max |Δ|/max|h| {field_err:.1e} (tolerance {:.0e}); \
+             SLM codes: {changed} of {} differ ({:.3} %), by at most {max_step}",
+            case.name,
+            case.field_tol,
+            steps.len(),
+            100.0 * fraction
+        );
+        assert!(
+            field_err <= case.field_tol,
+            "{}: midpoint hologram differs from the x86-64 reference by {field_err:e} (relative)",
+            case.name
+        );
+        assert!(
+            max_step <= 1,
+            "{}: an SLM code moved by {max_step} (rounding moves one code by at most 1)",
+            case.name
+        );
+        assert!(
+            fraction <= case.code_fraction_tol,
+            "{}: {changed} SLM codes differ from the x86-64 reference",
+            case.name
+        );
+    }
+}
