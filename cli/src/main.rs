@@ -6,6 +6,7 @@
 mod args;
 mod baselines;
 mod bench;
+mod compare;
 mod dataset;
 mod encode;
 mod output;
@@ -60,6 +61,9 @@ enum Command {
     /// AA-DPM at each SLM offset) from the RGB-D input of every scene of a dataset split, as .npy midpoint
     /// holograms for the Python evaluator (`--baseline NAME=FOLDER`).
     Baselines(Box<baselines::BaselinesArgs>),
+    /// Compare two output folders of `holo render` (e.g. the same command on x86-64 and on aarch64): the
+    /// midpoint hologram, the SLM codes and the simulated reconstructions.
+    Compare(compare::CompareArgs),
 }
 
 fn main() {
@@ -76,6 +80,7 @@ fn main() {
         Command::Dataset(args) => dataset::run(&args),
         Command::Encode(args) => encode::run(&args),
         Command::Baselines(args) => baselines::run(&args),
+        Command::Compare(args) => compare::run(&args),
     };
     if let Err(err) = result {
         eprintln!("error: {err:#}");

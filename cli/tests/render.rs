@@ -237,3 +237,60 @@ fn bench_prints_a_row_per_case() {
     );
     assert!(table.contains("Peak resident memory"), "{table}");
 }
+
+/// `holo compare` finds nothing between two runs of one command, and exactly the SLM code moved by hand
+/// (cyclically: 255 → 0 is one step, 0 → 2 two); `--max-code-fraction` turns that into a failure.
+#[test]
+fn compare_reports_exactly_the_codes_that_differ() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
+    for dir in [&a, &b] {
+        let o = holo(&[
+            "render",
+            "--size",
+            "32x48",
+            "--threads",
+            "1",
+            "--layout",
+            "nchw",
+            "--repeat",
+            "0",
+            "--out",
+            dir.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let run = |extra: &[&str]| {
+        let mut args = vec!["compare", a.to_str().unwrap(), b.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        holo(&args)
+    };
+    let o = run(&["--max-code-fraction", "0"]);
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success(), "{text}{}", stderr(&o));
+    assert!(text.contains("max |Δ| / max |h| = 0.00e0"), "{text}");
+    assert_eq!(
+        text.matches("0 of 1536 differ, by at most 0").count(),
+        3,
+        "{text}"
+    );
+
+    // Move code (0, 0) of the green pattern by one step across the wrap, and (1, 0) by two.
+    let green = b.join("phase_g.png");
+    let mut img = image::open(&green).unwrap().into_luma8();
+    let p = img.get_pixel(0, 0)[0];
+    img.put_pixel(0, 0, image::Luma([p.wrapping_add(1)]));
+    let q = img.get_pixel(1, 0)[0];
+    img.put_pixel(1, 0, image::Luma([q.wrapping_sub(2)]));
+    img.save(&green).unwrap();
+    let o = run(&[]);
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success(), "{text}");
+    assert!(
+        text.contains("phase_g.png: 2 of 1536 differ, by at most 2"),
+        "{text}"
+    );
+    let o = run(&["--max-code-fraction", "0.01"]);
+    assert!(!o.status.success(), "a 2-step code must fail");
+    assert!(stderr(&o).contains("by more than 1 (2)"), "{}", stderr(&o));
+}

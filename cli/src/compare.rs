@@ -1,0 +1,107 @@
+//! `holo compare`: how far apart two output folders of `holo render` / `holo reference` are (the same
+//! command run on two machines, e.g. x86-64 and an aarch64 build under qemu or on a board): the midpoint
+//! hologram, the SLM codes (cyclic: code 255 and 0 are neighbours) and the simulated reconstructions.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use tensorholo::io::read_complex_npy;
+
+use crate::output::FOCUS;
+
+/// Arguments of `holo compare`.
+#[derive(Debug, Args)]
+#[command(
+    after_long_help = "Example (README \"ARM\"): the same render on x86-64 and on aarch64 under qemu:\n  \
+    holo render --rgb c.png --depth d.png --depth-encoding tum --out out/x86\n  \
+    qemu-aarch64 -L /usr/aarch64-linux-gnu target/aarch64-unknown-linux-gnu/release/holo render … --out out/arm\n  \
+    holo compare out/x86 out/arm --max-code-fraction 0.001"
+)]
+pub struct CompareArgs {
+    /// Output folder of the reference run.
+    a: PathBuf,
+    /// Output folder of the other run (same command, same input).
+    b: PathBuf,
+    /// Fail (exit 1) if more than this fraction of SLM codes differ, or any by more than one step.
+    #[arg(long)]
+    max_code_fraction: Option<f64>,
+}
+
+/// One 8-bit image as bytes with its dimensions (colour channels interleaved).
+fn load_png(path: &Path) -> Result<(u32, u32, Vec<u8>)> {
+    let img = image::open(path).with_context(|| format!("reading {}", path.display()))?;
+    let (w, h) = (img.width(), img.height());
+    Ok((w, h, img.into_rgb8().into_raw()))
+}
+
+/// Runs `holo compare`.
+pub fn run(args: &CompareArgs) -> Result<()> {
+    let (ma, mb) = (
+        read_complex_npy(&args.a.join("midpoint.npy"))?,
+        read_complex_npy(&args.b.join("midpoint.npy"))?,
+    );
+    if ma.dim() != mb.dim() {
+        bail!(
+            "midpoint holograms differ in shape: {:?} vs {:?}",
+            ma.dim(),
+            mb.dim()
+        );
+    }
+    let scale = ma.iter().fold(0.0f32, |m, v| m.max(v.norm()));
+    let max_diff = ma
+        .iter()
+        .zip(mb.iter())
+        .fold(0.0f32, |m, (x, y)| m.max((x - y).norm()));
+    println!(
+        "midpoint hologram {:?}: max |Δ| / max |h| = {:.2e}",
+        ma.dim(),
+        max_diff / scale.max(f32::MIN_POSITIVE)
+    );
+
+    let (mut changed, mut total, mut max_step) = (0usize, 0usize, 0u8);
+    for name in ["phase_r.png", "phase_g.png", "phase_b.png"] {
+        let (a, b) = (load_png(&args.a.join(name))?, load_png(&args.b.join(name))?);
+        if (a.0, a.1) != (b.0, b.1) {
+            bail!("{name}: {}×{} vs {}×{}", a.0, a.1, b.0, b.1);
+        }
+        // Grey PNGs expand to equal R, G, B: every third byte is one code.
+        let steps: Vec<u8> =
+            a.2.iter()
+                .zip(&b.2)
+                .step_by(3)
+                .map(|(x, y)| x.wrapping_sub(*y).min(y.wrapping_sub(*x)))
+                .collect();
+        let n = steps.iter().filter(|&&s| s != 0).count();
+        let m = steps.iter().copied().max().unwrap_or(0);
+        println!(
+            "SLM codes {name}: {n} of {} differ, by at most {m}",
+            steps.len()
+        );
+        (changed, total, max_step) = (changed + n, total + steps.len(), max_step.max(m));
+    }
+    for name in FOCUS {
+        let (a, b) = (load_png(&args.a.join(name))?, load_png(&args.b.join(name))?);
+        if (a.0, a.1) != (b.0, b.1) {
+            bail!("{name}: {}×{} vs {}×{}", a.0, a.1, b.0, b.1);
+        }
+        let n = a.2.iter().zip(&b.2).filter(|(x, y)| x != y).count();
+        let m =
+            a.2.iter()
+                .zip(&b.2)
+                .map(|(x, y)| x.abs_diff(*y))
+                .max()
+                .unwrap_or(0);
+        println!(
+            "reconstruction {name}: {n} of {} 8-bit values differ, by at most {m}",
+            a.2.len()
+        );
+    }
+    if let Some(limit) = args.max_code_fraction {
+        let fraction = changed as f64 / total.max(1) as f64;
+        if fraction > limit || max_step > 1 {
+            bail!("{changed} of {total} SLM codes differ ({fraction:.2e} > {limit:e}) or one by more than 1 ({max_step})");
+        }
+    }
+    Ok(())
+}
