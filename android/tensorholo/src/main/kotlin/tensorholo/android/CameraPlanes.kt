@@ -4,8 +4,8 @@
 package tensorholo.android
 
 import java.nio.ByteBuffer
-import tensorholo.DepthFormat
 import tensorholo.ColorFormat
+import tensorholo.DepthFormat
 import tensorholo.RgbdFrame
 import tensorholo.Rotation
 
@@ -123,7 +123,8 @@ object CameraPlanes {
      * SDK decodes them and never reads an invalid pixel as near. Both images cover the same field of view
      * (ARCore aligns its depth image with the camera image); the depth may have a lower resolution.
      *
-     * @param rgba `width · height · 4` bytes, R, G, B, A, row-major (e.g. from [yuv420ToRgba]).
+     * @param rgba `width · height · 4` bytes, R, G, B, A, row-major (e.g. from [yuv420ToRgba]); not copied:
+     *   the frame holds this array (the bindings copy it when the frame is rendered or pushed).
      * @param width colour width in pixels, ≥ 1.
      * @param height colour height in pixels, ≥ 1.
      * @param depth depth buffer; needs `depthRowStride · (depthHeight − 1) + 2 · depthWidth` bytes from its
