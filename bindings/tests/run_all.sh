@@ -3,7 +3,8 @@
 #
 # Every check of the app bindings, in order, one line per step with its duration:
 # generate (release build + uniffi-bindgen, into a temp dir), check-generated (committed Kotlin/Swift up to
-# date), python (pytest), kotlin (JVM + JNA), swift (header, symbols, checksums). Stops at the first failure.
+# date), python (pytest), kotlin (the JUnit tests of android/ on the JVM + JNA), swift (header, symbols,
+# checksums). Stops at the first failure.
 # Tools each step needs are installed by the step itself when missing (see each check.sh).
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"

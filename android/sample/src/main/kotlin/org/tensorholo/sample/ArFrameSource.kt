@@ -1,0 +1,98 @@
+package org.tensorholo.sample
+
+import android.content.Context
+import android.hardware.camera2.CameraCharacteristics
+import android.hardware.camera2.CameraManager
+import android.opengl.GLES11Ext
+import android.opengl.GLES20
+import android.opengl.GLSurfaceView
+import com.google.ar.core.Session
+import com.google.ar.core.TrackingState
+import com.google.ar.core.exceptions.CameraNotAvailableException
+import com.google.ar.core.exceptions.NotYetAvailableException
+import javax.microedition.khronos.egl.EGLConfig
+import javax.microedition.khronos.opengles.GL10
+import tensorholo.DepthFormat
+import tensorholo.Rotation
+import tensorholo.android.CameraPlanes
+import tensorholo.android.RgbdFrames
+
+/**
+ * Runs the ARCore session on the GL thread (ARCore needs a GL context and a camera texture for
+ * `Session.update()`; nothing is drawn, the hologram preview covers the surface) and feeds the pipeline:
+ * for each frame the pipeline wants, the CPU camera image (`YUV_420_888`, sensor orientation) and the Depth
+ * API image (`acquireDepthImage16Bits`: 16-bit millimetres, aligned with it) become an [tensorholo.RgbdFrame]
+ * (a few ms of conversion), both images are closed at once, and the frame is pushed (never blocks).
+ *
+ * @param session the session once made (ARCore may need installing first), else null.
+ * @param displayRotation the display's `Surface.ROTATION_*`.
+ */
+class ArFrameSource(
+    private val context: Context,
+    private val session: () -> Session?,
+    private val displayRotation: () -> Int,
+    private val pipeline: () -> HologramPipeline?,
+) : GLSurfaceView.Renderer {
+    private var textureId = 0
+    private var textureSession: Session? = null
+    private var width = 0
+    private var height = 0
+    private var geometry = -1 // display rotation the session was told, -1 = not yet
+    private var sensorOrientation = 90
+    private var rotation = Rotation.DEG90
+
+    override fun onSurfaceCreated(gl: GL10?, config: EGLConfig?) {
+        GLES20.glClearColor(0f, 0f, 0f, 1f)
+        val names = IntArray(1)
+        GLES20.glGenTextures(1, names, 0)
+        textureId = names[0]
+        GLES20.glBindTexture(GLES11Ext.GL_TEXTURE_EXTERNAL_OES, textureId)
+        GLES20.glTexParameteri(GLES11Ext.GL_TEXTURE_EXTERNAL_OES, GLES20.GL_TEXTURE_MIN_FILTER, GLES20.GL_LINEAR)
+        GLES20.glTexParameteri(GLES11Ext.GL_TEXTURE_EXTERNAL_OES, GLES20.GL_TEXTURE_MAG_FILTER, GLES20.GL_LINEAR)
+        textureSession = null // a new context: tell the session the new texture
+    }
+
+    override fun onSurfaceChanged(gl: GL10?, width: Int, height: Int) {
+        GLES20.glViewport(0, 0, width, height)
+        this.width = width
+        this.height = height
+        geometry = -1
+    }
+
+    override fun onDrawFrame(gl: GL10?) {
+        GLES20.glClear(GLES20.GL_COLOR_BUFFER_BIT)
+        val s = session() ?: return
+        if (textureSession !== s) {
+            s.setCameraTextureNames(intArrayOf(textureId))
+            val characteristics = context.getSystemService(CameraManager::class.java)
+                .getCameraCharacteristics(s.cameraConfig.cameraId)
+            sensorOrientation = characteristics.get(CameraCharacteristics.SENSOR_ORIENTATION) ?: 90
+            textureSession = s
+            geometry = -1
+        }
+        val r = displayRotation()
+        if (r != geometry && width > 0) {
+            s.setDisplayGeometry(r, width, height)
+            rotation = CameraPlanes.rotationFor(sensorOrientation, r * 90, frontFacing = false)
+            geometry = r
+        }
+        val frame = try {
+            s.update()
+        } catch (e: CameraNotAvailableException) {
+            return
+        }
+        if (frame.camera.trackingState != TrackingState.TRACKING) return // depth needs tracking
+        val p = pipeline() ?: return
+        if (!p.wantsFrame()) return
+        val rgbd = try {
+            frame.acquireCameraImage().use { color ->
+                frame.acquireDepthImage16Bits().use { depth ->
+                    RgbdFrames.fromImages(color, depth, rotation, DepthFormat.MILLIMETRES_U16)
+                }
+            }
+        } catch (e: NotYetAvailableException) {
+            return // no depth for this frame yet
+        }
+        p.push(rgbd)
+    }
+}

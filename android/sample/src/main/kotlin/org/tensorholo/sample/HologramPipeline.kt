@@ -1,0 +1,157 @@
+package org.tensorholo.sample
+
+import android.graphics.Bitmap
+import java.util.concurrent.Executors
+import java.util.concurrent.RejectedExecutionException
+import java.util.concurrent.atomic.AtomicBoolean
+import java.util.concurrent.atomic.AtomicLong
+import java.util.concurrent.atomic.AtomicReference
+import tensorholo.GeneratorConfig
+import tensorholo.HologramGenerator
+import tensorholo.HologramStream
+import tensorholo.PatternsListener
+import tensorholo.RgbdFrame
+import tensorholo.SlmPatterns
+import tensorholo.TensorholoException
+import tensorholo.android.previewBitmap
+import tensorholo.android.toBitmap
+
+/**
+ * Camera frames → SLM patterns, off the UI and GL threads.
+ *
+ * A [HologramGenerator] of the SLM's `width × height` is made on a worker thread (it times the CNN plans for
+ * a few seconds), then a [HologramStream]: [push] hands it a frame without blocking, the stream's own thread
+ * renders and calls back [onSlm] with the packed SLM bitmap. Every [PREVIEW_EVERY_MS] (and when [focus]
+ * changes) the worker renders a [HologramGenerator.preview] of the latest frame for [onPreview]; the
+ * generator runs one call at a time, so previews slow the stream a little. Callbacks arrive on background
+ * threads; the caller posts them to the UI thread.
+ */
+class HologramPipeline(
+    width: Int,
+    height: Int,
+    private val onSlm: (Bitmap) -> Unit,
+    private val onPreview: (Bitmap) -> Unit,
+    private val onStatus: (String) -> Unit,
+) : AutoCloseable {
+    private val worker = Executors.newSingleThreadExecutor { Thread(it, "tensorholo-worker") }
+    @Volatile private var generator: HologramGenerator? = null
+    @Volatile private var stream: HologramStream? = null
+    private val closed = AtomicBoolean(false)
+    private val pushed = AtomicLong(0)
+    private val delivered = AtomicLong(0)
+    private val latest = AtomicReference<RgbdFrame?>(null)
+    private val previewQueued = AtomicBoolean(false)
+    @Volatile private var lastPreview = 0L
+
+    /** Focus of the preview's simulated eye, normalised depth in [0, 1] (0 = near). */
+    @Volatile var focus = 0.5f
+        set(value) {
+            field = value.coerceIn(0f, 1f)
+            requestPreview(force = true)
+        }
+
+    private val listener = object : PatternsListener {
+        override fun onPatterns(index: ULong, patterns: SlmPatterns) {
+            delivered.incrementAndGet()
+            if (closed.get()) return
+            onSlm(patterns.toBitmap())
+            requestPreview(force = false)
+        }
+
+        override fun onError(error: TensorholoException) {
+            delivered.incrementAndGet()
+            if (!closed.get()) onStatus("frame skipped: ${error.message}")
+        }
+    }
+
+    init {
+        worker.execute {
+            try {
+                onStatus("preparing the hologram CNN for ${width}x$height…")
+                val gen = HologramGenerator(GeneratorConfig(width = width.toUInt(), height = height.toUInt()))
+                generator = gen
+                stream = gen.stream(listener)
+                val info = gen.info()
+                onStatus("${info.width}x${info.height}, ${info.layers} layers, ${info.cnnLayout} × ${info.cnnThreads} threads")
+            } catch (e: TensorholoException) {
+                onStatus("cannot start: ${e.message}")
+            }
+        }
+    }
+
+    /**
+     * Whether a frame is worth converting now: the stream exists and holds fewer than 2 frames (pushed, not
+     * yet delivered or dropped). Checked on the GL thread before the camera images are converted, so no
+     * conversion is wasted on a frame the stream would drop.
+     */
+    fun wantsFrame(): Boolean {
+        val s = stream ?: return false
+        return try {
+            pushed.get() - delivered.get() - s.droppedFrames().toLong() < 2
+        } catch (e: IllegalStateException) {
+            false // closed meanwhile by close()
+        }
+    }
+
+    /** Queues a frame (never blocks; the stream drops its oldest frame when two are waiting). */
+    fun push(frame: RgbdFrame) {
+        if (closed.get()) return
+        val s = stream ?: return
+        latest.set(frame)
+        try {
+            s.push(frame)
+            pushed.incrementAndGet()
+        } catch (e: TensorholoException) {
+            onStatus("push: ${e.message}")
+        } catch (e: IllegalStateException) {
+            // The stream was closed by close() on the worker meanwhile.
+        }
+    }
+
+    private fun requestPreview(force: Boolean) {
+        val now = System.currentTimeMillis()
+        if (closed.get() || (!force && now - lastPreview < PREVIEW_EVERY_MS)) return
+        if (!previewQueued.compareAndSet(false, true)) return
+        runOnWorker {
+            previewQueued.set(false)
+            val gen = generator ?: return@runOnWorker
+            val frame = latest.get() ?: return@runOnWorker
+            lastPreview = System.currentTimeMillis()
+            try {
+                val bitmap = gen.previewBitmap(frame, focus)
+                if (!closed.get()) onPreview(bitmap)
+            } catch (e: TensorholoException) {
+                onStatus("preview: ${e.message}")
+            }
+        }
+    }
+
+    /** Stops the stream (delivering nothing more to the callbacks) and frees the generator, off the caller's thread. */
+    override fun close() {
+        if (!closed.compareAndSet(false, true)) return
+        // On the worker, after the start-up task: the stream and generator exist by then (or never will).
+        runOnWorker {
+            val s = stream
+            stream = null // wantsFrame() is false from now on
+            s?.let {
+                it.finish()
+                it.close()
+            }
+            generator?.close()
+            generator = null
+        }
+        worker.shutdown()
+    }
+
+    private fun runOnWorker(task: () -> Unit) {
+        try {
+            worker.execute(task)
+        } catch (e: RejectedExecutionException) {
+            // After close(): nothing more to do.
+        }
+    }
+
+    private companion object {
+        const val PREVIEW_EVERY_MS = 500L
+    }
+}

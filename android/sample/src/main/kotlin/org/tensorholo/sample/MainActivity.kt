@@ -1,0 +1,169 @@
+package org.tensorholo.sample
+
+import android.Manifest
+import android.app.Activity
+import android.content.pm.PackageManager
+import android.hardware.display.DisplayManager
+import android.opengl.GLSurfaceView
+import android.os.Bundle
+import android.view.WindowManager
+import android.widget.ImageView
+import android.widget.SeekBar
+import android.widget.TextView
+import com.google.ar.core.ArCoreApk
+import com.google.ar.core.Config
+import com.google.ar.core.Session
+import com.google.ar.core.exceptions.CameraNotAvailableException
+import com.google.ar.core.exceptions.UnavailableException
+
+/**
+ * ARCore depth camera → hologram. The phone shows a simulated view of the hologram (focus slider: 0 = near,
+ * 100 = far); a second display of category `DISPLAY_CATEGORY_PRESENTATION` (the SLM, over HDMI or USB-C)
+ * shows the SLM frames full-screen at its own resolution. Without one, holograms are computed at
+ * [PREVIEW_ONLY_SIZE] for the preview alone.
+ *
+ * Threads: UI (this activity), GL ([ArFrameSource]: ARCore + conversion), the stream's thread (rendering)
+ * and one worker ([HologramPipeline]: generator start-up, previews). Nothing heavy runs on UI or GL.
+ */
+class MainActivity : Activity(), DisplayManager.DisplayListener {
+    private lateinit var surface: GLSurfaceView
+    private lateinit var previewView: ImageView
+    private lateinit var status: TextView
+    private lateinit var focusBar: SeekBar
+    private val displays by lazy { getSystemService(DisplayManager::class.java) }
+
+    @Volatile private var session: Session? = null
+    @Volatile private var pipeline: HologramPipeline? = null
+    private var pipelineSize: Pair<Int, Int>? = null
+    private var presentation: SlmPresentation? = null
+    private var installRequested = false
+
+    override fun onCreate(savedInstanceState: Bundle?) {
+        super.onCreate(savedInstanceState)
+        setContentView(R.layout.activity_main)
+        surface = findViewById(R.id.surface)
+        previewView = findViewById(R.id.preview)
+        status = findViewById(R.id.status)
+        focusBar = findViewById(R.id.focus)
+        focusBar.setOnSeekBarChangeListener(object : SeekBar.OnSeekBarChangeListener {
+            override fun onProgressChanged(bar: SeekBar, progress: Int, fromUser: Boolean) {
+                pipeline?.focus = progress / 100f
+            }
+
+            override fun onStartTrackingTouch(bar: SeekBar) = Unit
+
+            override fun onStopTrackingTouch(bar: SeekBar) = Unit
+        })
+        window.addFlags(WindowManager.LayoutParams.FLAG_KEEP_SCREEN_ON)
+
+        // The renderer is set once, before the surface exists; it waits for the session.
+        surface.preserveEGLContextOnPause = true
+        surface.setEGLContextClientVersion(2)
+        @Suppress("DEPRECATION")
+        surface.setRenderer(ArFrameSource(this, { session }, { windowManager.defaultDisplay.rotation }, { pipeline }))
+        surface.renderMode = GLSurfaceView.RENDERMODE_CONTINUOUSLY
+    }
+
+    override fun onResume() {
+        super.onResume()
+        if (checkSelfPermission(Manifest.permission.CAMERA) != PackageManager.PERMISSION_GRANTED) {
+            requestPermissions(arrayOf(Manifest.permission.CAMERA), CAMERA_REQUEST)
+            return
+        }
+        val s = session ?: createSession() ?: return
+        try {
+            s.resume()
+        } catch (e: CameraNotAvailableException) {
+            status.text = "camera not available: ${e.message}"
+            return
+        }
+        surface.onResume()
+        displays.registerDisplayListener(this, null)
+        updateOutput()
+    }
+
+    override fun onPause() {
+        super.onPause()
+        displays.unregisterDisplayListener(this)
+        surface.onPause() // stops the GL thread before the session pauses
+        session?.pause()
+        presentation?.dismiss()
+        presentation = null
+    }
+
+    override fun onDestroy() {
+        pipeline?.close()
+        pipeline = null
+        session?.close()
+        session = null
+        super.onDestroy()
+    }
+
+    override fun onRequestPermissionsResult(requestCode: Int, permissions: Array<out String>, results: IntArray) {
+        super.onRequestPermissionsResult(requestCode, permissions, results)
+        if (requestCode == CAMERA_REQUEST && results.firstOrNull() != PackageManager.PERMISSION_GRANTED) {
+            status.text = "the camera permission is needed for the depth camera"
+        }
+    }
+
+    /** ARCore installed (or installing: null, resumed later) and a session with the Depth API, else null. */
+    private fun createSession(): Session? {
+        try {
+            if (ArCoreApk.getInstance().requestInstall(this, !installRequested) == ArCoreApk.InstallStatus.INSTALL_REQUESTED) {
+                installRequested = true
+                return null
+            }
+            val s = Session(this)
+            if (!s.isDepthModeSupported(Config.DepthMode.AUTOMATIC)) {
+                status.text = "this device has no ARCore Depth API"
+                s.close()
+                return null
+            }
+            s.configure(Config(s).apply {
+                depthMode = Config.DepthMode.AUTOMATIC
+                focusMode = Config.FocusMode.AUTO
+            })
+            session = s
+            return s
+        } catch (e: UnavailableException) {
+            status.text = "ARCore unavailable: $e"
+            return null
+        }
+    }
+
+    /**
+     * The SLM output for the displays present now: a presentation on the first presentation display and a
+     * pipeline at its size, or a preview-only pipeline. A pipeline is remade only when the size changes.
+     */
+    private fun updateOutput() {
+        val slm = displays.getDisplays(DisplayManager.DISPLAY_CATEGORY_PRESENTATION).firstOrNull()
+        if (presentation?.display?.displayId != slm?.displayId) {
+            presentation?.dismiss()
+            presentation = slm?.let { SlmPresentation(this, it).apply { show() } }
+        }
+        val size = presentation?.let { it.width to it.height } ?: PREVIEW_ONLY_SIZE
+        if (pipeline != null && pipelineSize == size) return
+        pipeline?.close()
+        pipelineSize = size
+        pipeline = HologramPipeline(
+            size.first,
+            size.second,
+            onSlm = { bitmap -> runOnUiThread { presentation?.showPattern(bitmap) } },
+            onPreview = { bitmap -> runOnUiThread { previewView.setImageBitmap(bitmap) } },
+            onStatus = { message -> runOnUiThread { status.text = message } },
+        ).also { it.focus = focusBar.progress / 100f }
+    }
+
+    override fun onDisplayAdded(displayId: Int) = updateOutput()
+
+    override fun onDisplayRemoved(displayId: Int) = updateOutput()
+
+    override fun onDisplayChanged(displayId: Int) = updateOutput()
+
+    private companion object {
+        const val CAMERA_REQUEST = 1
+
+        /** Hologram size when no SLM display is connected (preview only). */
+        val PREVIEW_ONLY_SIZE = 640 to 360
+    }
+}

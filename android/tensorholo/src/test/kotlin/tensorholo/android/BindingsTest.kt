@@ -1,0 +1,245 @@
+// JVM tests of the generated Kotlin bindings (package tensorholo, JNA) against the host library, on real
+// phone frames compared with `holo render`. Run by android/check.sh (kotlinc + JUnitCore, Linux CI) and by
+// Gradle (`gradle :tensorholo:testDebugUnitTest`).
+//
+// System properties:
+//   jna.library.path    directory of libtensorholo_ffi.so (the host build)
+//   tensorholo.cases    directory written by `python3 bindings/tests/frames.py DIR`: per real frame the phone
+//                       buffers (color.raw, depth.raw), their layout (case.json) and holo render's SLM codes
+//                       of the same scene (holo/phase_{r,g,b}.png). Absent: the real-frame tests are skipped.
+//   tensorholo.version  the workspace version (Cargo.toml) that version() must return. Absent: skipped.
+
+package tensorholo.android
+
+import java.io.File
+import java.util.Collections
+import javax.imageio.ImageIO
+import org.junit.AfterClass
+import org.junit.Assert.assertArrayEquals
+import org.junit.Assert.assertEquals
+import org.junit.Assert.assertFalse
+import org.junit.Assert.assertThrows
+import org.junit.Assert.assertTrue
+import org.junit.Assume.assumeTrue
+import org.junit.Test
+import tensorholo.ColorFormat
+import tensorholo.DepthFormat
+import tensorholo.GeneratorConfig
+import tensorholo.HologramGenerator
+import tensorholo.PatternsListener
+import tensorholo.RgbdFrame
+import tensorholo.Rotation
+import tensorholo.SlmPatterns
+import tensorholo.TensorholoException
+import tensorholo.packRgba
+import tensorholo.version
+
+class BindingsTest {
+    /** One real frame of frames.py: its buffers as the phone delivers them and holo's codes of the scene. */
+    class Case(val dir: File) {
+        val name: String = dir.name
+        private val json: Map<String, String> = readCase(File(dir, "case.json"))
+        val width = json.getValue("out_width").toInt()
+        val height = json.getValue("out_height").toInt()
+        val frame = RgbdFrame(
+            color = File(dir, "color.raw").readBytes(),
+            colorFormat = ColorFormat.valueOf(json.getValue("color_format")),
+            colorWidth = json.getValue("color_width").toUInt(),
+            colorHeight = json.getValue("color_height").toUInt(),
+            depth = File(dir, "depth.raw").readBytes(),
+            depthFormat = DepthFormat.valueOf(json.getValue("depth_format")),
+            depthWidth = json.getValue("depth_width").toUInt(),
+            depthHeight = json.getValue("depth_height").toUInt(),
+            colorRowStride = json.getValue("color_row_stride").toUInt(),
+            depthRowStride = json.getValue("depth_row_stride").toUInt(),
+            rotation = Rotation.valueOf(json.getValue("rotation")),
+        )
+
+        /** The case's generator at the hologram size, made once for all tests (autotuning takes seconds). */
+        val generator: HologramGenerator by lazy {
+            HologramGenerator(GeneratorConfig(width = width.toUInt(), height = height.toUInt())).also { opened += it }
+        }
+
+        /** The bindings' patterns of the frame, rendered once. */
+        val patterns: SlmPatterns by lazy { generator.render(frame) }
+
+        /** holo render's code plane of one laser (`r`, `g`, `b`), row-major. */
+        fun holoCodes(laser: String): ByteArray {
+            val img = ImageIO.read(File(dir, "holo/phase_$laser.png"))
+            assertEquals("$name: holo's image size", width to height, img.width to img.height)
+            return ByteArray(width * height) { i -> img.raster.getSample(i % width, i / width, 0).toByte() }
+        }
+    }
+
+    companion object {
+        private val opened = mutableListOf<HologramGenerator>()
+
+        /** The cases of `-Dtensorholo.cases`, or null when the property is absent. */
+        private val cases: List<Case>? by lazy {
+            System.getProperty("tensorholo.cases")?.let { root ->
+                val dirs = File(root).listFiles { f -> File(f, "case.json").exists() }
+                    ?: throw AssertionError("tensorholo.cases=$root is not a directory")
+                assertTrue("no case.json under tensorholo.cases=$root", dirs.isNotEmpty())
+                dirs.sortedBy { it.name }.map(::Case)
+            }
+        }
+
+        /** The real frames; skips the calling test (with the reason) when no cases directory was given. */
+        fun realCases(): List<Case> {
+            val c = cases
+            assumeTrue(
+                "real-frame tests skipped: no -Dtensorholo.cases=DIR (python3 bindings/tests/frames.py DIR)",
+                c != null,
+            )
+            return c!!
+        }
+
+        /** A flat JSON object of strings and numbers (frames.py's case.json), as a map of raw values. */
+        fun readCase(file: File): Map<String, String> =
+            Regex("\"(\\w+)\": *(\"[^\"]*\"|[0-9.eE+-]+)").findAll(file.readText())
+                .associate { it.groupValues[1] to it.groupValues[2].trim('"') }
+
+        /** Circular distance of two codes (255 and 0 are one code apart on the phase circle). */
+        fun circularDiff(a: Byte, b: Byte): Int {
+            val d = Math.abs((a.toInt() and 0xFF) - (b.toInt() and 0xFF))
+            return minOf(d, 256 - d)
+        }
+
+        @AfterClass
+        @JvmStatic
+        fun closeGenerators() {
+            opened.forEach { it.close() }
+            opened.clear()
+        }
+    }
+
+    /** Records what a stream delivers, and on which threads. */
+    class Recorder : PatternsListener {
+        val indices: MutableList<ULong> = Collections.synchronizedList(mutableListOf())
+        val errors: MutableList<TensorholoException> = Collections.synchronizedList(mutableListOf())
+        val threads: MutableSet<Long> = Collections.synchronizedSet(mutableSetOf())
+
+        override fun onPatterns(index: ULong, patterns: SlmPatterns) {
+            threads.add(Thread.currentThread().id)
+            indices.add(index)
+        }
+
+        override fun onError(error: TensorholoException) {
+            errors.add(error)
+        }
+
+        fun delivered() = indices.size + errors.size
+    }
+
+    @Test
+    fun versionIsTheWorkspaceVersion() {
+        val want = System.getProperty("tensorholo.version")
+        assumeTrue("version test skipped: no -Dtensorholo.version", want != null)
+        assertEquals(want, version())
+    }
+
+    /**
+     * The bindings' SLM codes of each real frame (phone buffers: padded BGRA + f16 disparity at half
+     * resolution; RGBA + ARCore millimetres turned 90°) agree with `holo render` on the same scene, with the
+     * tolerance of frames.compare_codes: mean circular difference ≤ 0.02 codes and ≥ 99.9 % within ±1.
+     */
+    @Test
+    fun realFramesMatchHoloRender() {
+        for (case in realCases()) {
+            val out = case.patterns
+            assertEquals("${case.name}: size", case.width.toUInt() to case.height.toUInt(), out.width to out.height)
+            for ((plane, laser) in listOf(out.red to "r", out.green to "g", out.blue to "b")) {
+                val holo = case.holoCodes(laser)
+                assertEquals(holo.size, plane.size)
+                var sum = 0L
+                var withinOne = 0
+                for (i in plane.indices) {
+                    val d = circularDiff(plane[i], holo[i])
+                    sum += d
+                    if (d <= 1) withinOne++
+                }
+                val mean = sum.toDouble() / plane.size
+                val within = withinOne.toDouble() / plane.size
+                println("${case.name} $laser: vs holo render mean circular difference $mean, within ±1: $within")
+                assertTrue("${case.name} $laser: mean $mean > 0.02", mean <= 0.02)
+                assertTrue("${case.name} $laser: within ±1 $within < 0.999", within >= 0.999)
+            }
+        }
+    }
+
+    /** packRgba puts red, green, blue codes in bytes 0, 1, 2 of every pixel and alpha 255 in byte 3. */
+    @Test
+    fun packRgbaInterleavesTheLasers() {
+        for (case in realCases()) {
+            val out = case.patterns
+            val rgba = packRgba(out)
+            val n = case.width * case.height
+            assertEquals(n * 4, rgba.size)
+            assertArrayEquals(out.red, ByteArray(n) { rgba[4 * it] })
+            assertArrayEquals(out.green, ByteArray(n) { rgba[4 * it + 1] })
+            assertArrayEquals(out.blue, ByteArray(n) { rgba[4 * it + 2] })
+            assertTrue(ByteArray(n) { rgba[4 * it + 3] }.all { it == 255.toByte() })
+            // The three lasers differ (different wavelengths): a mix-up of planes would show.
+            assertFalse(out.red.contentEquals(out.green) || out.green.contentEquals(out.blue))
+            assertEquals(8u, case.generator.info().layers)
+        }
+    }
+
+    /** Bad frames raise InvalidInput (naming the buffer where it is one), and the generator goes on. */
+    @Test
+    fun badFramesRaiseInvalidInputAndTheGeneratorGoesOn() {
+        for (case in realCases()) {
+            val gen = case.generator
+            val frame = case.frame
+            val short = assertThrows(TensorholoException.InvalidInput::class.java) {
+                gen.render(frame.copy(depth = frame.depth.copyOf(frame.depth.size - 2)))
+            }
+            assertTrue("message names the buffer: ${short.reason}", short.reason.contains("depth"))
+            assertThrows(TensorholoException.InvalidInput::class.java) { gen.render(frame.copy(colorWidth = 0u)) }
+            // Every depth sample invalid (0 in every format here): no depth range, an error, not a flat scene.
+            assertThrows(TensorholoException.InvalidInput::class.java) {
+                gen.render(frame.copy(depth = ByteArray(frame.depth.size)))
+            }
+            assertArrayEquals("${case.name}: generator after errors", case.patterns.green, gen.render(frame).green)
+        }
+    }
+
+    /** A listener written in Kotlin gets every frame, in order, on the stream's thread; push after finish fails. */
+    @Test
+    fun streamDeliversInOrderOnABackgroundThread() {
+        for (case in realCases()) {
+            val rec = Recorder()
+            case.generator.stream(rec).use { stream ->
+                for (i in 0 until 3) {
+                    assertEquals(i.toULong(), stream.push(case.frame))
+                    // One at a time, so the 2-frame queue never drops one.
+                    val deadline = System.nanoTime() + 120_000_000_000L
+                    while (rec.delivered() <= i) {
+                        assertTrue("${case.name}: frame $i not delivered within 120 s", System.nanoTime() < deadline)
+                        Thread.sleep(10)
+                    }
+                }
+                stream.finish()
+                assertEquals(listOf(0uL, 1uL, 2uL), rec.indices.toList())
+                assertEquals(emptyList<TensorholoException>(), rec.errors.toList())
+                assertFalse("listener ran on the caller's thread", Thread.currentThread().id in rec.threads)
+                assertEquals(0uL, stream.droppedFrames())
+                assertThrows(TensorholoException.InvalidInput::class.java) { stream.push(case.frame) }
+            }
+        }
+    }
+
+    /** Configurations the contract rejects raise InvalidInput at construction. */
+    @Test
+    fun badConfigurationsRaiseInvalidInput() {
+        assertThrows(TensorholoException.InvalidInput::class.java) {
+            HologramGenerator(GeneratorConfig(width = 64u, height = 64u, layers = 9u))
+        }
+        assertThrows(TensorholoException.InvalidInput::class.java) {
+            HologramGenerator(GeneratorConfig(width = 64u, height = 64u, offsetMm = Double.NaN))
+        }
+        assertThrows(TensorholoException.InvalidInput::class.java) {
+            HologramGenerator(GeneratorConfig(width = 0u, height = 64u))
+        }
+    }
+}
