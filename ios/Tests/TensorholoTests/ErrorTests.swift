@@ -21,7 +21,7 @@ final class ErrorTests: XCTestCase {
 
     /// A colour buffer one byte short of `height` rows of `width` RGBA pixels.
     func testShortColorBuffer() throws {
-        let gen = try TestScene.generator.get()
+        let gen = try TestScene.generator()
         var frame = TestScene.referenceFrame()
         frame.color = frame.color.dropLast(1)
         assertInvalidInput(try gen.render(frame: frame), mentioning: "too short")
@@ -31,7 +31,7 @@ final class ErrorTests: XCTestCase {
 
     /// A zero-width colour buffer.
     func testZeroSize() throws {
-        let gen = try TestScene.generator.get()
+        let gen = try TestScene.generator()
         var frame = TestScene.referenceFrame()
         frame.colorWidth = 0
         assertInvalidInput(try gen.render(frame: frame), mentioning: "non-zero size")
@@ -39,7 +39,7 @@ final class ErrorTests: XCTestCase {
 
     /// A stride shorter than one row.
     func testStrideShorterThanARow() throws {
-        let gen = try TestScene.generator.get()
+        let gen = try TestScene.generator()
         var frame = TestScene.referenceFrame()
         frame.colorRowStride = 64 * 4 - 1
         assertInvalidInput(try gen.render(frame: frame), mentioning: "shorter than one row")
@@ -47,7 +47,7 @@ final class ErrorTests: XCTestCase {
 
     /// A depth map without one valid pixel (all NaN).
     func testAllInvalidDepth() throws {
-        let gen = try TestScene.generator.get()
+        let gen = try TestScene.generator()
         var frame = TestScene.referenceFrame()
         frame.depth = Data((0..<(64 * 64)).flatMap { _ in TestScene.bytes(.nan) })
         assertInvalidInput(try gen.render(frame: frame), mentioning: "invalid")
@@ -72,13 +72,13 @@ final class ErrorTests: XCTestCase {
 
     /// A focus outside [0, 1].
     func testFocusOutOfRange() throws {
-        let gen = try TestScene.generator.get()
+        let gen = try TestScene.generator()
         assertInvalidInput(try gen.preview(frame: TestScene.referenceFrame(), focus: 1.5), mentioning: "focus")
     }
 
     /// Patterns whose planes do not hold `width · height` codes cannot be packed or drawn.
     func testPackRgbaShortPlane() throws {
-        let patterns = try TestScene.generator.get().render(frame: TestScene.referenceFrame())
+        let patterns = try TestScene.generator().render(frame: TestScene.referenceFrame())
         var short = patterns
         short.blue = short.blue.dropLast(1)
         assertInvalidInput(try packRgba(patterns: short), mentioning: "blue")

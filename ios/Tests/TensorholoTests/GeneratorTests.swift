@@ -9,7 +9,7 @@ final class GeneratorTests: XCTestCase {
     /// A BGRA + DepthFloat32 pixel-buffer pair renders into three 64 × 64 planes of varying codes, mapped to the
     /// scene's depth range, the same codes on a second render, and different codes per laser.
     func testRenderPixelBufferFrame() throws {
-        let gen = try TestScene.generator.get()
+        let gen = try TestScene.generator()
         let frame = try RgbdFrame(colorBuffer: sceneBGRABuffer(padding: 0), depthBuffer: sceneDepthBuffer())
         let patterns = try gen.render(frame: frame)
 
@@ -32,7 +32,7 @@ final class GeneratorTests: XCTestCase {
     /// Previews focused at the near (0) and far (1) ends of the volume are opaque images of the scene that
     /// differ from each other (the simulated focus moves).
     func testPreviewFocusNearAndFarDiffer() throws {
-        let gen = try TestScene.generator.get()
+        let gen = try TestScene.generator()
         let frame = TestScene.referenceFrame()
         let near = try gen.preview(frame: frame, focus: 0)
         let far = try gen.preview(frame: frame, focus: 1)
@@ -52,7 +52,7 @@ final class GeneratorTests: XCTestCase {
 
     /// What the generator runs: the configured size, 8 layers, a version, and the same facts as JSON.
     func testInfo() throws {
-        let info = try TestScene.generator.get().info()
+        let info = try TestScene.generator().info()
         XCTAssertEqual(info.width, 64)
         XCTAssertEqual(info.height, 64)
         XCTAssertEqual(info.layers, 8)
@@ -65,7 +65,7 @@ final class GeneratorTests: XCTestCase {
 
     /// `benchmark` times the built-in scene: positive frames per second; 0 frames is an input error.
     func testBenchmark() throws {
-        let gen = try TestScene.generator.get()
+        let gen = try TestScene.generator()
         let report = try gen.benchmark(frames: 1)
         XCTAssertEqual(report.frames, 1)
         XCTAssertGreaterThan(report.fps, 0)

@@ -75,7 +75,7 @@ final class StreamTests: XCTestCase {
     /// Three frames pushed one at a time, each awaited: indices 0, 1, 2 delivered in order, none dropped.
     func testFramesPushedOneAtATimeArriveInOrder() throws {
         let listener = CollectingListener()
-        let stream = try TestScene.generator.get().stream(listener: listener)
+        let stream = try TestScene.generator().stream(listener: listener)
         for i in UInt64(0)..<3 {
             let delivered = expectation(description: "frame \(i) delivered")
             listener.expect(frame: i, delivered)
@@ -94,7 +94,7 @@ final class StreamTests: XCTestCase {
     /// counted as dropped, and the 2-frame queue drops at most one of three.
     func testBurstDeliversOrDropsEveryFrame() throws {
         let listener = CollectingListener()
-        let stream = try TestScene.generator.get().stream(listener: listener)
+        let stream = try TestScene.generator().stream(listener: listener)
         let last = expectation(description: "the last frame is delivered")
         listener.expect(frame: 2, last)
         for i in UInt64(0)..<3 {
@@ -115,7 +115,7 @@ final class StreamTests: XCTestCase {
     /// A bad frame in a stream reaches `onError` as `frame <index>: …`; the frames around it still render.
     func testBadFrameReportedInPlace() throws {
         let listener = CollectingListener()
-        let stream = try TestScene.generator.get().stream(listener: listener)
+        let stream = try TestScene.generator().stream(listener: listener)
         var bad = TestScene.referenceFrame()
         bad.color = bad.color.dropLast(1)
         for (i, frame) in [TestScene.referenceFrame(), bad, TestScene.referenceFrame()].enumerated() {
@@ -133,7 +133,7 @@ final class StreamTests: XCTestCase {
     /// After `close()` a push is an input error, and a second `close()` does nothing.
     func testPushAfterClose() throws {
         let listener = CollectingListener()
-        let stream = try TestScene.generator.get().stream(listener: listener)
+        let stream = try TestScene.generator().stream(listener: listener)
         stream.close()
         XCTAssertThrowsError(try stream.push(frame: TestScene.referenceFrame())) { error in
             XCTAssertNotNil(invalidInputMessage(error), "expected InvalidInput, got \(error)")
@@ -150,7 +150,7 @@ final class StreamTests: XCTestCase {
             XCTAssertEqual(patterns.height, 64)
             delivered.fulfill()
         })
-        let stream = try TestScene.generator.get().stream(listener: handler)
+        let stream = try TestScene.generator().stream(listener: handler)
         XCTAssertEqual(try stream.push(frame: TestScene.referenceFrame()), 0)
         wait(for: [delivered], timeout: 120)
         stream.close()

@@ -32,7 +32,7 @@ final class SwiftLayerTests: XCTestCase {
     /// back camera's buffers are in a portrait UI) with orientation `.right` renders exactly like the upright
     /// scene; with `.left` (the opposite turn) it does not.
     func testRotatedBuffersRenderLikeUprightOnes() throws {
-        let gen = try TestScene.generator.get()
+        let gen = try TestScene.generator()
         let upright = try gen.render(frame: TestScene.referenceFrame())
         let n = TestScene.size
         // Stored pixel (x, y) of the image turned 90° counter-clockwise is upright pixel (n − 1 − y, x).
@@ -77,14 +77,14 @@ final class SwiftLayerTests: XCTestCase {
         }
         XCTAssertEqual(bytes[64 * 4], 0xEE, "row padding is copied as it is, not packed away")
 
-        let gen = try TestScene.generator.get()
+        let gen = try TestScene.generator()
         assertSameCodes(try gen.render(frame: frame), try gen.render(frame: TestScene.referenceFrame()), "padded BGRA vs packed RGBA")
     }
 
     /// The four AVDepthData formats map to their `DepthFormat`, and the scene in each renders the same codes:
     /// f16 metres and f32 disparity (1/m) of the same depths, and depth at half the colour's resolution.
     func testDepthFormats() throws {
-        let gen = try TestScene.generator.get()
+        let gen = try TestScene.generator()
         let reference = try gen.render(frame: TestScene.referenceFrame())
         let color = try sceneBGRABuffer(padding: 0)
         let n = TestScene.size
@@ -129,7 +129,7 @@ final class SwiftLayerTests: XCTestCase {
     /// The SLM frame as a CGImage: the patterns' size, 32-bit RGBX without alpha, and pixel (x, y) holds the red,
     /// green and blue lasers' codes of that pixel; one channel as 8-bit gray holds that laser's codes.
     func testSlmCGImage() throws {
-        let patterns = try TestScene.generator.get().render(frame: TestScene.referenceFrame())
+        let patterns = try TestScene.generator().render(frame: TestScene.referenceFrame())
         let image = try patterns.cgImage()
         XCTAssertEqual(image.width, 64)
         XCTAssertEqual(image.height, 64)
@@ -156,7 +156,7 @@ final class SwiftLayerTests: XCTestCase {
 
     /// The preview as a CGImage: its size, opaque, its bytes.
     func testPreviewCGImage() throws {
-        let preview = try TestScene.generator.get().preview(frame: TestScene.referenceFrame(), focus: 0.5)
+        let preview = try TestScene.generator().preview(frame: TestScene.referenceFrame(), focus: 0.5)
         let image = try preview.cgImage()
         XCTAssertEqual(image.width, Int(preview.width))
         XCTAssertEqual(image.height, Int(preview.height))

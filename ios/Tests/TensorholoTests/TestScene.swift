@@ -62,7 +62,12 @@ enum TestScene {
     }
 
     /// The generator every test shares (64 × 64, one CNN thread), created once: creation times the CNN plans.
-    static let generator = Result { try HologramGenerator(config: GeneratorConfig(width: 64, height: 64, threads: 1)) }
+    private static let sharedGenerator = Result { try HologramGenerator(config: GeneratorConfig(width: 64, height: 64, threads: 1)) }
+
+    /// The shared generator; throws the error of its creation, if any (every test that needs it then fails).
+    static func generator() throws -> HologramGenerator {
+        try sharedGenerator.get()
+    }
 }
 
 /// A pixel buffer over memory of its own with exactly `bytesPerRow = width · bytesPerPixel + padding` (the
