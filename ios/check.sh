@@ -71,7 +71,7 @@ injections=(
   "Tests/TensorholoTests/GeneratorTests.swift|gen.render(frame|gen.rendr(frame|HologramGenerator has no member \`rendr\`"
   "Tests/TensorholoTests/SwiftLayerTests.swift|(.right, .deg90, 90)|(.right, .deg91, 90)|\`.deg91\`"
   "Example/Sources/HologramModel.swift|depthData: depth.depthData|depthDat: depth.depthData|(sampleBuffer:depthDat:orientation:)"
-  "Sources/Tensorholo/PatternsHandler.swift|handleError(error)|handleError(error|PatternsHandler.swift:31:26: missing )"
+  "Sources/Tensorholo/PatternsHandler.swift|handleError(error)|handleError(error|missing )"
 )
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
