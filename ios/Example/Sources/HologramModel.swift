@@ -121,16 +121,21 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
         session.addOutput(depthOutput)
         depthOutput.connection(with: .depthData)?.isEnabled = true
 
-        // The largest f32 depth format of the active video format (metres); the library takes f16 and
-        // disparity too.
+        // A video format with depth (the `.photo` preset's may have none, e.g. on the LiDAR camera), then its
+        // largest depth format in metres (the library also takes disparity).
+        try device.lockForConfiguration()
+        defer { device.unlockForConfiguration() }
+        if device.activeFormat.supportedDepthDataFormats.isEmpty,
+           let format = device.formats.last(where: { !$0.supportedDepthDataFormats.isEmpty }) {
+            device.activeFormat = format
+        }
         let depthFormats = device.activeFormat.supportedDepthDataFormats.filter {
-            CMFormatDescriptionGetMediaSubType($0.formatDescription) == kCVPixelFormatType_DepthFloat32
+            let type = CMFormatDescriptionGetMediaSubType($0.formatDescription)
+            return type == kCVPixelFormatType_DepthFloat32 || type == kCVPixelFormatType_DepthFloat16
         }
         let width = { (format: AVCaptureDevice.Format) in CMVideoFormatDescriptionGetDimensions(format.formatDescription).width }
         if let largest = depthFormats.max(by: { width($0) < width($1) }) {
-            try device.lockForConfiguration()
             device.activeDepthDataFormat = largest
-            device.unlockForConfiguration()
         }
 
         let synchronizer = AVCaptureDataOutputSynchronizer(dataOutputs: [videoOutput, depthOutput])
