@@ -151,7 +151,7 @@ function parameters(decl) {
       if (kids[j][1] === 'default_value') hasDefault = true;
     }
     const label = ext ? ext.text : inner ? inner.text : '_';
-    params.push({ label, hasDefault, type: typeName(typeNode), closure: typeNode?.type === 'function_type' || /->/.test(typeNode?.text ?? '') });
+    params.push({ label, hasDefault, type: typeName(typeNode) });
   }
   return params;
 }
@@ -346,7 +346,7 @@ function noteUse(what, origin) {
 const externalUsed = new Set();
 
 /** Whether `labels` (of a call, `_` = unlabeled) fit `params` in order, skipping defaulted parameters;
- *  parameters left unfilled must have defaults or be closures a trailing closure supplies. */
+ *  parameters left unfilled must have defaults, or be as many as the call's trailing closures. */
 function labelsFit(labels, params, trailingClosures) {
   let p = 0;
   for (const label of labels) {
