@@ -1,0 +1,207 @@
+import AVFoundation
+import CoreGraphics
+import Foundation
+import Tensorholo
+
+/// The sample's engine: captures colour + depth with `AVCaptureSession`, streams the frames through a
+/// `HologramGenerator` off the main thread, and publishes the SLM pattern (for the external display) and a
+/// simulated preview at the chosen focus (for the phone's screen). One instance, shared by both scenes.
+final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchronizerDelegate {
+    /// The instance both scenes show.
+    static let shared = HologramModel()
+
+    /// SLM resolution in pixels: the external display's mode (1080p HDMI SLM drivers are common).
+    static let slmWidth: UInt32 = 1920
+    /// SLM height in pixels.
+    static let slmHeight: UInt32 = 1080
+
+    /// What the viewer would see focused at `focus` (RGBA preview of the latest frame).
+    @Published private(set) var previewImage: CGImage?
+    /// The latest HDMI frame for the SLM (`SlmPatterns.cgImage()`: red/green/blue lasers' codes).
+    @Published private(set) var slmImage: CGImage?
+    /// One line for the user: starting, running at N fps, or what failed.
+    @Published private(set) var status = "Starting…"
+    /// Whether an external display (the SLM) is connected.
+    @Published private(set) var externalDisplayConnected = false
+    /// Focus of the preview as normalised depth, 0 = near, 1 = far.
+    @Published var focus: Float = 0.5 {
+        didSet {
+            lock.lock()
+            currentFocus = focus
+            lock.unlock()
+            requestPreview()
+        }
+    }
+
+    private let session = AVCaptureSession()
+    private let videoOutput = AVCaptureVideoDataOutput()
+    private let depthOutput = AVCaptureDepthDataOutput()
+    private var synchronizer: AVCaptureDataOutputSynchronizer?
+    private let captureQueue = DispatchQueue(label: "tensorholo.capture")
+    private let previewQueue = DispatchQueue(label: "tensorholo.preview", qos: .utility)
+
+    // Touched on `captureQueue` (and `previewQueue` under `lock`).
+    private let lock = NSLock()
+    private var generator: HologramGenerator?
+    private var stream: HologramStream?
+    private var latestFrame: RgbdFrame?
+    private var previewInFlight = false
+    private var currentFocus: Float = 0.5
+    private var started = false
+    private var lastDelivery = Date()
+
+    /// Asks for the camera, creates the generator (times the CNN plans: a few seconds) and starts capturing.
+    /// Safe to call again: only the first call starts.
+    func start() {
+        lock.lock()
+        let first = !started
+        started = true
+        lock.unlock()
+        guard first else { return }
+        AVCaptureDevice.requestAccess(for: .video) { granted in
+            guard granted else {
+                return self.publish(status: "Camera access denied: allow it in Settings")
+            }
+            self.captureQueue.async { self.setUp() }
+        }
+    }
+
+    /// Called by the external display's scene when it connects or disconnects.
+    func setExternalDisplayConnected(_ connected: Bool) {
+        DispatchQueue.main.async { self.externalDisplayConnected = connected }
+    }
+
+    private func setUp() {
+        do {
+            let generator = try HologramGenerator(config: GeneratorConfig(width: Self.slmWidth, height: Self.slmHeight))
+            let handler = PatternsHandler(
+                onPatterns: { [weak self] index, patterns in self?.deliver(index: index, patterns: patterns) },
+                onError: { [weak self] error in self?.publish(status: error.description) }
+            )
+            let stream = try generator.stream(listener: handler)
+            lock.lock()
+            self.generator = generator
+            self.stream = stream
+            lock.unlock()
+            try configureSession()
+            session.startRunning()
+            let info = try generator.info()
+            publish(status: "Running: \(Self.slmWidth)×\(Self.slmHeight), \(info.layers) layers, CNN layout \(info.cnnLayout)")
+        } catch {
+            publish(status: "Cannot start: \(error)")
+        }
+    }
+
+    /// Colour (BGRA) + depth from the best depth camera, synchronised.
+    private func configureSession() throws {
+        guard let device = AVCaptureDevice.default(.builtInLiDARDepthCamera, for: .video, position: .back)
+            ?? AVCaptureDevice.default(.builtInDualWideCamera, for: .video, position: .back)
+            ?? AVCaptureDevice.default(.builtInDualCamera, for: .video, position: .back)
+        else {
+            throw TensorholoError.Unsupported(message: "this device has no back depth camera (LiDAR or dual camera)")
+        }
+        session.beginConfiguration()
+        defer { session.commitConfiguration() }
+        session.sessionPreset = .photo
+        let input = try AVCaptureDeviceInput(device: device)
+        guard session.canAddInput(input) else {
+            throw TensorholoError.Unsupported(message: "cannot use the camera as a capture input")
+        }
+        session.addInput(input)
+
+        // The library reads BGRA, not the camera's default YpCbCr 4:2:0.
+        videoOutput.videoSettings = [kCVPixelBufferPixelFormatTypeKey as String: kCVPixelFormatType_32BGRA]
+        videoOutput.alwaysDiscardsLateVideoFrames = true
+        depthOutput.isFilteringEnabled = true
+        depthOutput.alwaysDiscardsLateDepthData = true
+        guard session.canAddOutput(videoOutput), session.canAddOutput(depthOutput) else {
+            throw TensorholoError.Unsupported(message: "cannot capture video and depth together")
+        }
+        session.addOutput(videoOutput)
+        session.addOutput(depthOutput)
+        depthOutput.connection(with: .depthData)?.isEnabled = true
+
+        // A video format with depth (the `.photo` preset's may have none, e.g. on the LiDAR camera), then its
+        // largest depth format in metres (the library also takes disparity).
+        try device.lockForConfiguration()
+        defer { device.unlockForConfiguration() }
+        if device.activeFormat.supportedDepthDataFormats.isEmpty,
+           let format = device.formats.last(where: { !$0.supportedDepthDataFormats.isEmpty }) {
+            device.activeFormat = format
+        }
+        let depthFormats = device.activeFormat.supportedDepthDataFormats.filter {
+            let type = CMFormatDescriptionGetMediaSubType($0.formatDescription)
+            return type == kCVPixelFormatType_DepthFloat32 || type == kCVPixelFormatType_DepthFloat16
+        }
+        let width = { (format: AVCaptureDevice.Format) in CMVideoFormatDescriptionGetDimensions(format.formatDescription).width }
+        if let largest = depthFormats.max(by: { width($0) < width($1) }) {
+            device.activeDepthDataFormat = largest
+        }
+
+        let synchronizer = AVCaptureDataOutputSynchronizer(dataOutputs: [videoOutput, depthOutput])
+        synchronizer.setDelegate(self, queue: captureQueue)
+        self.synchronizer = synchronizer
+    }
+
+    /// `AVCaptureDataOutputSynchronizerDelegate`: one colour + depth pair, on `captureQueue`. Pushing never
+    /// blocks: the stream drops the oldest waiting frame when the CNN falls behind the camera.
+    func dataOutputSynchronizer(
+        _ synchronizer: AVCaptureDataOutputSynchronizer,
+        didOutput synchronizedDataCollection: AVCaptureSynchronizedDataCollection
+    ) {
+        guard let video = synchronizedDataCollection.synchronizedData(for: videoOutput) as? AVCaptureSynchronizedSampleBufferData,
+              let depth = synchronizedDataCollection.synchronizedData(for: depthOutput) as? AVCaptureSynchronizedDepthData,
+              !video.sampleBufferWasDropped, !depth.depthDataWasDropped
+        else { return }
+        do {
+            // Portrait UI, back camera: the buffers are the sensor's landscape, turned 90° counter-clockwise.
+            let frame = try RgbdFrame(sampleBuffer: video.sampleBuffer, depthData: depth.depthData, orientation: .right)
+            lock.lock()
+            latestFrame = frame
+            let stream = self.stream
+            lock.unlock()
+            _ = try stream?.push(frame: frame)
+        } catch {
+            publish(status: error.localizedDescription)
+        }
+    }
+
+    /// The stream's result (its background thread): the SLM image for the external display, then a preview.
+    private func deliver(index: UInt64, patterns: SlmPatterns) {
+        let image = try? patterns.cgImage()
+        let now = Date()
+        lock.lock()
+        let period = now.timeIntervalSince(lastDelivery)
+        lastDelivery = now
+        lock.unlock()
+        DispatchQueue.main.async {
+            self.slmImage = image
+            self.status = String(format: "Frame %llu: %.1f fps, CNN %.0f ms", index, 1 / max(period, 1e-3), patterns.timings.cnnMs)
+        }
+        requestPreview()
+    }
+
+    /// Renders a preview of the latest frame at the current focus on `previewQueue`, one at a time (requests
+    /// while one runs are skipped: the next delivered frame asks again).
+    private func requestPreview() {
+        lock.lock()
+        guard !previewInFlight, let generator = generator, let frame = latestFrame else {
+            lock.unlock()
+            return
+        }
+        previewInFlight = true
+        let focus = currentFocus
+        lock.unlock()
+        previewQueue.async {
+            let image = try? generator.preview(frame: frame, focus: focus).cgImage()
+            self.lock.lock()
+            self.previewInFlight = false
+            self.lock.unlock()
+            DispatchQueue.main.async { self.previewImage = image }
+        }
+    }
+
+    private func publish(status: String) {
+        DispatchQueue.main.async { self.status = status }
+    }
+}
