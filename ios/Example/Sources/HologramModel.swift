@@ -23,6 +23,8 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
     @Published private(set) var status = "Starting…"
     /// Whether an external display (the SLM) is connected.
     @Published private(set) var externalDisplayConnected = false
+    /// The last on-device benchmark (`HologramGenerator.benchmark`), or nil before the first.
+    @Published private(set) var benchmarkText: String?
     /// Focus of the preview as normalised depth, 0 = near, 1 = far.
     @Published var focus: Float = 0.5 {
         didSet {
@@ -198,6 +200,28 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
             self.previewInFlight = false
             self.lock.unlock()
             DispatchQueue.main.async { self.previewImage = image }
+        }
+    }
+
+    /// Times `frames` renders of the library's built-in scene at the SLM's resolution on `previewQueue` (the
+    /// generator runs one call at a time, so the stream pauses meanwhile) and shows the median stage timings
+    /// and the CNN plan this device chose.
+    func runBenchmark(frames: UInt32 = 10) {
+        guard let generator = generator else { return }
+        benchmarkText = "Benchmarking \(frames) frames…"
+        previewQueue.async {
+            let text: String
+            do {
+                let report = try generator.benchmark(frames: frames)
+                let m = report.median
+                text = String(
+                    format: "%.1f fps: CNN %.0f ms, offset %.0f ms, pre-filter %.0f ms, encoding %.0f ms; %@, %u threads",
+                    report.fps, m.cnnMs, m.offsetMs, m.prefilterMs, m.encodingMs,
+                    report.info.cnnLayout, report.info.cnnThreads)
+            } catch {
+                text = "Benchmark failed: \(error)"
+            }
+            DispatchQueue.main.async { self.benchmarkText = text }
         }
     }
 

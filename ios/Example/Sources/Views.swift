@@ -31,6 +31,11 @@ struct ContentView: View {
             Text(model.status)
                 .font(.caption.monospacedDigit())
                 .foregroundColor(.secondary)
+            Button("Benchmark this device") { model.runBenchmark() }
+            if let text = model.benchmarkText {
+                Text(text)
+                    .font(.caption.monospacedDigit())
+            }
         }
         .padding()
         .onAppear { model.start() }

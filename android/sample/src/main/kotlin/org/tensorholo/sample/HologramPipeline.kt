@@ -126,6 +126,27 @@ class HologramPipeline(
         }
     }
 
+    /**
+     * Times [frames] renders of the library's built-in scene at the SLM's resolution on the worker
+     * ([HologramGenerator.benchmark]; the stream waits meanwhile) and reports the median stage timings and the CNN
+     * plan this phone chose through [onStatus].
+     */
+    fun benchmark(frames: UInt = 10u) = runOnWorker {
+        val gen = generator ?: return@runOnWorker
+        onStatus("benchmarking $frames frames…")
+        try {
+            val r = gen.benchmark(frames)
+            val m = r.median
+            onStatus(
+                "%.1f fps: CNN %.0f ms, offset %.0f ms, pre-filter %.0f ms, encoding %.0f ms; %s × %d threads".format(
+                    r.fps, m.cnnMs, m.offsetMs, m.prefilterMs, m.encodingMs, r.info.cnnLayout, r.info.cnnThreads.toInt(),
+                ),
+            )
+        } catch (e: TensorholoException) {
+            onStatus("benchmark: ${e.message}")
+        }
+    }
+
     /** Stops the stream (delivering nothing more to the callbacks) and frees the generator, off the caller's thread. */
     override fun close() {
         if (!closed.compareAndSet(false, true)) return

@@ -7,6 +7,7 @@ import android.hardware.display.DisplayManager
 import android.opengl.GLSurfaceView
 import android.os.Bundle
 import android.view.WindowManager
+import android.widget.Button
 import android.widget.ImageView
 import android.widget.SeekBar
 import android.widget.TextView
@@ -45,6 +46,7 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
         previewView = findViewById(R.id.preview)
         status = findViewById(R.id.status)
         focusBar = findViewById(R.id.focus)
+        findViewById<Button>(R.id.benchmark).setOnClickListener { pipeline?.benchmark() }
         focusBar.setOnSeekBarChangeListener(object : SeekBar.OnSeekBarChangeListener {
             override fun onProgressChanged(bar: SeekBar, progress: Int, fromUser: Boolean) {
                 pipeline?.focus = progress / 100f
