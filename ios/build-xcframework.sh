@@ -73,8 +73,11 @@ rustup target add "${targets[@]}"
 
 cd "$root"
 for t in "${targets[@]}"; do
-  step "cargo build -p tensorholo-ffi --lib --profile $profile --target $t ${TENSORHOLO_FEATURES:+(features: $TENSORHOLO_FEATURES)}"
-  cargo build --locked -p tensorholo-ffi --lib --profile "$profile" --target "$t" ${features[@]+"${features[@]}"}
+  step "cargo rustc -p tensorholo-ffi --lib --crate-type staticlib --profile $profile --target $t ${TENSORHOLO_FEATURES:+(features: $TENSORHOLO_FEATURES)}"
+  # Only the static library: built beside the crate's other types (rlib, cdylib), rustc leaves it one object
+  # per crate without cross-crate LTO (measured 202 MB on aarch64 Linux); alone, it is one LTO'd object.
+  cargo rustc --locked -p tensorholo-ffi --lib --crate-type staticlib --profile "$profile" --target "$t" \
+    ${features[@]+"${features[@]}"}
   [ -f "$target_dir/$t/$profile_dir/libtensorholo_ffi.a" ] || die "$target_dir/$t/$profile_dir/libtensorholo_ffi.a was not built"
 done
 lib() { echo "$target_dir/$1/$profile_dir/libtensorholo_ffi.a"; }
