@@ -33,10 +33,13 @@ for variant in "default:" "no models:--no-default-features" "all models:--featur
   cargo build --locked -q -p tensorholo-ffi --lib --profile mobile --target "$linux" $flags >&2
   out="$target_dir/$linux/mobile"
   echo "| $linux | \`libtensorholo_ffi.so\` (linked) | $name | $(mb "$out/libtensorholo_ffi.so") |"
-  [ "$name" = default ] && echo "| $linux | \`libtensorholo_ffi.a\` | $name | $(mb "$out/libtensorholo_ffi.a") |"
 done
+# Static libraries alone (`cargo rustc --crate-type staticlib`): built beside the rlib and cdylib, rustc keeps
+# one object per crate without cross-crate LTO (202 MB here); alone, the crate graph is one LTO'd object.
+staticlib() {
+  cargo rustc --locked -q -p tensorholo-ffi --lib --crate-type staticlib --profile mobile --target "$1" >&2
+  echo "| $1 | \`libtensorholo_ffi.a\` | default | $(mb "$target_dir/$1/mobile/libtensorholo_ffi.a") |"
+}
+staticlib "$linux"
 mobile_cc_env "${targets[@]}"
-for t in "${targets[@]}"; do
-  cargo rustc --locked -q -p tensorholo-ffi --lib --crate-type staticlib --profile mobile --target "$t" >&2
-  echo "| $t | \`libtensorholo_ffi.a\` | default | $(mb "$target_dir/$t/mobile/libtensorholo_ffi.a") |"
-done
+for t in "${targets[@]}"; do staticlib "$t"; done
