@@ -28,11 +28,31 @@ pub struct CompareArgs {
     max_code_fraction: Option<f64>,
 }
 
-/// One 8-bit image as bytes with its dimensions (colour channels interleaved).
-fn load_png(path: &Path) -> Result<(u32, u32, Vec<u8>)> {
-    let img = image::open(path).with_context(|| format!("reading {}", path.display()))?;
-    let (w, h) = (img.width(), img.height());
-    Ok((w, h, img.into_rgb8().into_raw()))
+/// The 8-bit samples of `name` in both folders (grey for SLM patterns, RGB for reconstructions); an error if
+/// either is unreadable or the two sizes differ.
+fn load_pair(args: &CompareArgs, name: &str, grey: bool) -> Result<(Vec<u8>, Vec<u8>)> {
+    let load = |dir: &Path| -> Result<image::DynamicImage> {
+        let path = dir.join(name);
+        image::open(&path).with_context(|| format!("reading {}", path.display()))
+    };
+    let (a, b) = (load(&args.a)?, load(&args.b)?);
+    if (a.width(), a.height()) != (b.width(), b.height()) {
+        bail!(
+            "{name}: {}×{} vs {}×{}",
+            a.width(),
+            a.height(),
+            b.width(),
+            b.height()
+        );
+    }
+    let samples = |img: image::DynamicImage| {
+        if grey {
+            img.into_luma8().into_raw()
+        } else {
+            img.into_rgb8().into_raw()
+        }
+    };
+    Ok((samples(a), samples(b)))
 }
 
 /// Runs `holo compare`.
@@ -61,17 +81,12 @@ pub fn run(args: &CompareArgs) -> Result<()> {
 
     let (mut changed, mut total, mut max_step) = (0usize, 0usize, 0u8);
     for name in ["phase_r.png", "phase_g.png", "phase_b.png"] {
-        let (a, b) = (load_png(&args.a.join(name))?, load_png(&args.b.join(name))?);
-        if (a.0, a.1) != (b.0, b.1) {
-            bail!("{name}: {}×{} vs {}×{}", a.0, a.1, b.0, b.1);
-        }
-        // Grey PNGs expand to equal R, G, B: every third byte is one code.
-        let steps: Vec<u8> =
-            a.2.iter()
-                .zip(&b.2)
-                .step_by(3)
-                .map(|(x, y)| x.wrapping_sub(*y).min(y.wrapping_sub(*x)))
-                .collect();
+        let (a, b) = load_pair(args, name, true)?;
+        let steps: Vec<u8> = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| x.wrapping_sub(*y).min(y.wrapping_sub(*x)))
+            .collect();
         let n = steps.iter().filter(|&&s| s != 0).count();
         let m = steps.iter().copied().max().unwrap_or(0);
         println!(
@@ -81,20 +96,17 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         (changed, total, max_step) = (changed + n, total + steps.len(), max_step.max(m));
     }
     for name in FOCUS {
-        let (a, b) = (load_png(&args.a.join(name))?, load_png(&args.b.join(name))?);
-        if (a.0, a.1) != (b.0, b.1) {
-            bail!("{name}: {}×{} vs {}×{}", a.0, a.1, b.0, b.1);
-        }
-        let n = a.2.iter().zip(&b.2).filter(|(x, y)| x != y).count();
-        let m =
-            a.2.iter()
-                .zip(&b.2)
-                .map(|(x, y)| x.abs_diff(*y))
-                .max()
-                .unwrap_or(0);
+        let (a, b) = load_pair(args, name, false)?;
+        let n = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+        let m = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| x.abs_diff(*y))
+            .max()
+            .unwrap_or(0);
         println!(
             "reconstruction {name}: {n} of {} 8-bit values differ, by at most {m}",
-            a.2.len()
+            a.len()
         );
     }
     if let Some(limit) = args.max_code_fraction {
