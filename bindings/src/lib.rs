@@ -99,6 +99,7 @@ impl From<tensorholo::HoloError> for TensorholoError {
             E::ModelLoad { .. } | E::ModelContract { .. } | E::ModelMetadata { .. } => {
                 Self::InvalidModel { message }
             }
+            E::Gpu(_) => Self::Unsupported { message },
             E::ModelRun(_) | E::Internal(_) => Self::Internal { message },
         }
     }
@@ -248,6 +249,7 @@ mod tests {
             ),
             (HoloError::ModelRun("tract failed".into()), "Internal"),
             (HoloError::Internal("a worker stopped".into()), "Internal"),
+            (HoloError::Gpu("no adapter".into()), "Unsupported"),
         ]
     }
 

@@ -88,6 +88,10 @@ pub enum HoloError {
     /// Running a CNN failed inside the inference engine (the model stays usable).
     #[error("model inference failed: {0}")]
     ModelRun(String),
+    /// The GPU path failed: no adapter, a shader or buffer the device refuses (with the limit it exceeds), a
+    /// validation error, or a lost device. `Backend::Auto` falls back to the CPU path on it.
+    #[error("GPU: {0}")]
+    Gpu(String),
     /// A failure inside the SDK that no input explains: a worker thread that stopped or panicked, a poisoned
     /// lock, a broken internal invariant. It is a bug (please report it); the message says what failed.
     /// The object that returned it may have to be recreated (the message says so where it applies).

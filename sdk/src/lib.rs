@@ -38,6 +38,8 @@ pub mod encoding;
 pub mod error;
 pub mod evaluation;
 pub mod generator;
+#[cfg(feature = "gpu")]
+pub mod gpu;
 pub mod io;
 pub mod metrics;
 pub mod model;

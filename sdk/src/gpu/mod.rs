@@ -1,0 +1,40 @@
+//! The GPU path (cargo feature `gpu`): the whole frame of [`crate::pipeline`] — hologram CNN, offset
+//! propagation (Eq. 6), pre-filter CNN, double phase encoding (Eq. 7) and look-up table — as WGSL compute
+//! shaders run by wgpu on Metal (iOS, macOS) or Vulkan (Android, Linux). The CPU path stays the reference:
+//! every kernel here is tested against it (`sdk/tests/gpu.rs`), and [`crate::pipeline::Backend::Auto`] falls
+//! back to it when no adapter exists or a first-frame self-check fails.
+//!
+//! - [`context`]: [`GpuContext`] picks the adapter and device once (or adopts the app's), creates every buffer,
+//!   pipeline and bind group (counted, so tests can assert that no frame creates one), and turns wgpu's
+//!   validation errors and device loss into [`crate::HoloError::Gpu`].
+//! - [`kernel`]: one compute pipeline per WGSL entry point, bound by position, dispatched over 1D/2D grids.
+//! - [`shaders`]: every `.wgsl` source by name (the naga test translates each to MSL and SPIR-V).
+//!
+//! Layout convention shared by all kernels: real planes are `array<f32>` `[C, H, W]` row-major (as the CPU
+//! path's `Array3`), complex planes `array<vec2<f32>>` `[C, H, W]` (re, im), codes four per `u32`
+//! little-endian. Each `.wgsl` file starts with a comment listing its bindings and their layouts.
+
+pub mod context;
+pub mod kernel;
+pub mod shaders;
+
+pub use context::{GpuContext, GpuInfo, GpuOptions, ResourceCounts};
+
+/// Tests in this crate: a context on any adapter (lavapipe in CI), or `None` with a message where none exists;
+/// `TENSORHOLO_REQUIRE_GPU=1` (set by `.ci/run`) turns a missing adapter into a failure.
+#[cfg(test)]
+pub(crate) fn test_context() -> Option<GpuContext> {
+    match GpuContext::new(&GpuOptions {
+        allow_software: true,
+        name_contains: None,
+    }) {
+        Ok(ctx) => Some(ctx),
+        Err(e) if std::env::var("TENSORHOLO_REQUIRE_GPU").as_deref() == Ok("1") => {
+            panic!("TENSORHOLO_REQUIRE_GPU=1 but {e}")
+        }
+        Err(e) => {
+            eprintln!("skipping: {e} (install mesa-vulkan-drivers libvulkan1 for lavapipe)");
+            None
+        }
+    }
+}

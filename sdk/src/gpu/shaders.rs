@@ -1,0 +1,30 @@
+//! The WGSL sources of the GPU path, one file per concept under `sdk/src/gpu/shaders/`, compiled into the
+//! library. [`ALL`] lists them for the naga translation test (`sdk/tests/gpu_shaders.rs`), which checks each
+//! against what Metal (MSL) and Vulkan (SPIR-V) accept without a Mac or a phone.
+
+/// One WGSL source file.
+#[derive(Debug, Clone, Copy)]
+pub struct Shader {
+    /// File name under `sdk/src/gpu/shaders/` (also the pipeline label).
+    pub name: &'static str,
+    /// The WGSL source.
+    pub source: &'static str,
+    /// Whether the source uses `enable f16;` (needs the adapter's `SHADER_F16`).
+    pub f16: bool,
+}
+
+macro_rules! shader {
+    ($name:literal) => {
+        Shader {
+            name: $name,
+            source: include_str!(concat!("shaders/", $name)),
+            f16: false,
+        }
+    };
+}
+
+/// Element-wise utilities: fill, copy, scale (`util.wgsl`).
+pub const UTIL: Shader = shader!("util.wgsl");
+
+/// Every shader of the GPU path.
+pub const ALL: &[Shader] = &[UTIL];
