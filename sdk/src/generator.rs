@@ -30,7 +30,7 @@ use crate::model::{
 };
 use crate::optics::{focal_stack, post_encoding_midpoint, OpticalSetup, PropagationOptions};
 use crate::pipeline::{
-    FrameTimings, HologramPipeline, HologramSession, ModelSelection, PipelineConfig, PrefilterMode,
+    Backend, BackendReport, FrameTimings, HologramPipeline, HologramSession, ModelSelection, PipelineConfig, PrefilterMode,
     SlmFrame,
 };
 use crate::scene::{
@@ -76,6 +76,9 @@ pub struct GeneratorConfig {
     pub depth_range: Option<DepthRange>,
     /// Metric depth → normalised depth mapping (linear in diopters by default).
     pub depth_mapping: DepthMapping,
+    /// Where frames are computed ([`Backend::Auto`] by default: the phone's GPU where it passes a
+    /// first-frame self-check against the CPU, else the CPU; [`GeneratorInfo::backend`] says which).
+    pub backend: Backend,
 }
 
 impl GeneratorConfig {
@@ -96,6 +99,7 @@ impl GeneratorConfig {
             encoding: DoublePhaseMethod::default(),
             depth_range: None,
             depth_mapping: DepthMapping::default(),
+            backend: Backend::default(),
         }
     }
 
@@ -163,6 +167,7 @@ impl GeneratorConfig {
             encoding: self.encoding,
             cnn_layout: self.layout,
             cnn_threads: self.threads,
+            backend: self.backend,
         }
     }
 
@@ -307,6 +312,8 @@ pub struct GeneratorInfo {
     pub offset_m: f64,
     /// The chosen CNN plan (layout, threads, autotuning timings).
     pub plan: PlanReport,
+    /// Which backend runs the frames and why (after the first frame: the self-check's result).
+    pub backend: BackendReport,
 }
 
 /// Receives a [`HologramStream`]'s results, in frame order, on the stream's worker thread.
@@ -389,7 +396,7 @@ impl HologramGenerator {
     /// Errors: as [`GeneratorConfig::validate`] and [`HologramPipeline::session`].
     pub fn with_pipeline(config: GeneratorConfig, pipeline: HologramPipeline) -> Result<Self> {
         config.validate()?;
-        let session = pipeline.session(config.height, config.width)?;
+        let session = open_session(&pipeline, &config)?;
         Ok(Self {
             config,
             pipeline,
@@ -408,9 +415,7 @@ impl HologramGenerator {
             Ok(g) => Ok(g),
             Err(poisoned) => {
                 let mut g = poisoned.into_inner();
-                *g = self
-                    .pipeline
-                    .session(self.config.height, self.config.width)?;
+                *g = open_session(&self.pipeline, &self.config)?;
                 self.session.clear_poison();
                 log::warn!("a call panicked while rendering; the session was recreated");
                 Ok(g)
@@ -521,7 +526,10 @@ impl HologramGenerator {
     ///
     /// Errors: [`HoloError::Internal`] only if the session cannot be recreated after a panic.
     pub fn info(&self) -> Result<GeneratorInfo> {
-        let plan = self.session()?.plan_report().clone();
+        let (plan, backend) = {
+            let session = self.session()?;
+            (session.plan_report().clone(), session.backend_report().clone())
+        };
         let md = self.pipeline.hologram_model().metadata();
         Ok(GeneratorInfo {
             version: env!("CARGO_PKG_VERSION").to_string(),
@@ -538,6 +546,7 @@ impl HologramGenerator {
             encoding: self.pipeline.encoding(),
             offset_m: self.config.offset_m,
             plan,
+            backend,
         })
     }
 
@@ -555,11 +564,17 @@ impl HologramGenerator {
         if capacity == 0 {
             return Err(invalid("capacity", "a stream queue holds at least 1 frame"));
         }
-        let session = self
-            .pipeline
-            .session(self.config.height, self.config.width)?;
+        let session = open_session(&self.pipeline, &self.config)?;
         HologramStream::start(session, self.config, listener, capacity)
     }
+}
+
+/// A session for `config`'s size that downloads only what [`SlmPatterns`] holds (codes and normaliser) from the
+/// GPU.
+fn open_session(pipeline: &HologramPipeline, config: &GeneratorConfig) -> Result<HologramSession> {
+    let mut session = pipeline.session(config.height, config.width)?;
+    session.set_full_outputs(false);
+    Ok(session)
 }
 
 /// The queue between [`HologramStream::push`] and the worker.

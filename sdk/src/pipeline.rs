@@ -30,6 +30,59 @@ use crate::model::{
 use crate::optics::{Carrier, OpticalSetup, PropagationOptions, Scratch, SpectralPlan};
 use crate::scene::{LayeredDepthImage, RgbdFrame};
 
+/// Where a [`HologramSession`] computes its frames.
+///
+/// - [`Backend::Cpu`]: tract for the CNNs and rustfft for the optics (the reference).
+/// - [`Backend::Gpu`]: the whole frame in WGSL compute shaders through wgpu (Metal on iOS, Vulkan on Android
+///   and Linux; cargo feature `gpu`, [`crate::gpu`]), any adapter including a software one. Session creation
+///   fails with [`HoloError::Gpu`] where there is none.
+/// - [`Backend::Auto`] (the default): the GPU where a hardware adapter exists, the session can be built on it
+///   and its first frame passes a self-check against the CPU path; otherwise the CPU. The reason is logged and
+///   kept in [`HologramSession::backend_report`].
+///
+/// With [`Backend::Gpu`] or [`Backend::Auto`], a GPU failure mid-stream (a lost device) re-renders that frame
+/// on the CPU and keeps the CPU for later frames: no frame is lost.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Backend {
+    /// The GPU when it is there and agrees with the CPU on the first frame, else the CPU.
+    #[default]
+    Auto,
+    /// Always the CPU.
+    Cpu,
+    /// Always the GPU (an error at session creation without one).
+    Gpu,
+}
+
+impl Backend {
+    /// Short name: `auto`, `cpu`, `gpu`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Cpu => "cpu",
+            Self::Gpu => "gpu",
+        }
+    }
+}
+
+impl std::fmt::Display for Backend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Backend {
+    type Err = HoloError;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "auto" => Ok(Self::Auto),
+            "cpu" => Ok(Self::Cpu),
+            "gpu" => Ok(Self::Gpu),
+            _ => Err(invalid("backend", format!("expected auto, cpu or gpu, got {s:?}"))),
+        }
+    }
+}
+
 /// Display and encoding settings of a [`HologramPipeline`].
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct PipelineConfig {
@@ -51,6 +104,8 @@ pub struct PipelineConfig {
     /// Threads of the CNNs' matrix products ([`ThreadCount::Auto`], the default, times 1, half and all
     /// cores at session creation). The three colours of the optics always run on their own three threads.
     pub cnn_threads: ThreadCount,
+    /// Where sessions compute their frames ([`Backend`]; default [`Backend::Auto`]).
+    pub backend: Backend,
 }
 
 impl Default for PipelineConfig {
@@ -62,6 +117,7 @@ impl Default for PipelineConfig {
             encoding: DoublePhaseMethod::default(),
             cnn_layout: CnnLayout::default(),
             cnn_threads: ThreadCount::default(),
+            backend: Backend::default(),
         }
     }
 }
@@ -204,6 +260,9 @@ pub struct HologramPipeline {
     prefilter: Option<Arc<HologramModel>>,
     /// Why the pipeline runs (or does not run) a pre-filter CNN, for logs and reports.
     prefilter_reason: String,
+    /// The app's own GPU context ([`HologramPipeline::with_gpu_context`]); `None`: the shared one.
+    #[cfg(feature = "gpu")]
+    gpu_context: Option<crate::gpu::GpuContext>,
 }
 
 impl HologramPipeline {
@@ -249,6 +308,8 @@ impl HologramPipeline {
             hologram,
             prefilter,
             prefilter_reason,
+            #[cfg(feature = "gpu")]
+            gpu_context: None,
         })
     }
 
@@ -310,6 +371,14 @@ impl HologramPipeline {
     /// 8-layer hologram CNN, this one has 30 layers").
     pub fn prefilter_reason(&self) -> &str {
         &self.prefilter_reason
+    }
+
+    /// Runs the GPU backend on `ctx` (e.g. [`crate::gpu::GpuContext::from_device`] with the app's own wgpu
+    /// device) instead of the process-wide shared context.
+    #[cfg(feature = "gpu")]
+    pub fn with_gpu_context(mut self, ctx: crate::gpu::GpuContext) -> Self {
+        self.gpu_context = Some(ctx);
+        self
     }
 
     /// The configuration.
@@ -378,6 +447,10 @@ pub struct FrameTimings {
     pub prefilter_s: f64,
     /// Double phase encoding (with its pre-filter, if any) and the look-up table, colours in parallel.
     pub encoding_s: f64,
+    /// On the GPU backend: the GPU's whole frame (both CNNs and the optics in one submission, with the
+    /// downloads); the stage fields above are then 0 but `cnn_s`, which holds the input packing on the CPU.
+    /// `holo bench --backend gpu` times the GPU stages one by one. 0 on the CPU backend.
+    pub gpu_s: f64,
     /// The whole frame (in a stream: from the end of the previous frame, i.e. the frame period).
     pub total_s: f64,
 }
@@ -395,6 +468,65 @@ pub struct SlmFrame {
     pub mean_phase: [f32; 3],
     /// Stage timings.
     pub timings: FrameTimings,
+    /// Which backend computed this frame: [`Backend::Cpu`] or [`Backend::Gpu`].
+    pub backend: Backend,
+}
+
+/// Which backend a [`HologramSession`] runs and why ([`HologramSession::backend_report`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct BackendReport {
+    /// What the configuration asked for.
+    pub requested: Backend,
+    /// What runs the frames now: [`Backend::Cpu`] or [`Backend::Gpu`].
+    pub active: Backend,
+    /// Why, in words (e.g. "no hardware GPU adapter: …", "self-check passed", "GPU failed mid-stream: …").
+    pub reason: String,
+    /// The GPU adapter, "name (api, type)", where one was used or tried.
+    pub adapter: Option<String>,
+    /// The GPU CNNs' arithmetic ("f32" or "f16"), where the GPU runs.
+    pub gpu_precision: Option<String>,
+    /// The first frame's comparison of the GPU against the CPU ([`Backend::Auto`] only).
+    pub self_check: Option<SelfCheck>,
+}
+
+/// The first-frame comparison of [`Backend::Auto`]: the GPU's SLM codes against the CPU's for the same frame.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct SelfCheck {
+    /// Codes compared (`3·H·W`).
+    pub codes: usize,
+    /// Codes whose cyclic difference exceeds 1 (one LUT step, a rounding tie or float rounding).
+    pub codes_off_by_more_than_one: usize,
+    /// Largest cyclic code difference.
+    pub max_code_difference: u8,
+    /// Whether the GPU is kept: at most [`SELF_CHECK_MAX_FRACTION`] of the codes off by more than one.
+    pub passed: bool,
+}
+
+/// The largest fraction of SLM codes that may differ from the CPU's by more than one step in the self-check of
+/// [`Backend::Auto`] (f32 GPUs measure below 1e-3 on real frames, docs/GPU.md).
+pub const SELF_CHECK_MAX_FRACTION: f64 = 0.01;
+
+impl SelfCheck {
+    /// Compares two code planes of the same shape.
+    pub fn compare(gpu: &Array3<u8>, cpu: &Array3<u8>) -> Self {
+        let mut off = 0;
+        let mut max = 0u8;
+        for (&g, &c) in gpu.iter().zip(cpu.iter()) {
+            let d = g.wrapping_sub(c).min(c.wrapping_sub(g));
+            max = max.max(d);
+            if d > 1 {
+                off += 1;
+            }
+        }
+        let codes = cpu.len();
+        Self {
+            codes,
+            codes_off_by_more_than_one: off,
+            max_code_difference: max,
+            passed: gpu.shape() == cpu.shape()
+                && (off as f64) <= SELF_CHECK_MAX_FRACTION * codes as f64,
+        }
+    }
 }
 
 /// What a colour worker does next (see [`ColourState::run`]).
@@ -571,6 +703,12 @@ struct CnnStage {
 impl CnnStage {
     fn run_frame(&mut self, frame: &RgbdFrame) -> Result<(Heads, f64)> {
         let t = Instant::now();
+        self.pack_frame(frame)?;
+        self.run(t)
+    }
+
+    /// Checks `frame` against the CNN and packs it into `self.input`.
+    fn pack_frame(&mut self, frame: &RgbdFrame) -> Result<()> {
         let (c, h, w) = self.plan.input_dim();
         if c != 4 {
             return Err(invalid(
@@ -582,12 +720,17 @@ impl CnnStage {
             ));
         }
         check_size("RGB-D frame", frame.amplitude.dim(), (h, w))?;
-        contract::pack_rgbd(frame, self.input.view_mut())?;
-        self.run(t)
+        contract::pack_rgbd(frame, self.input.view_mut())
     }
 
     fn run_ldi(&mut self, ldi: &LayeredDepthImage) -> Result<(Heads, f64)> {
         let t = Instant::now();
+        self.pack_ldi(ldi)?;
+        self.run(t)
+    }
+
+    /// Checks `ldi` against the CNN and packs it into `self.input`.
+    fn pack_ldi(&mut self, ldi: &LayeredDepthImage) -> Result<()> {
         let (c, h, w) = self.plan.input_dim();
         let want = c / 4;
         if ldi.num_layers() != want {
@@ -600,8 +743,7 @@ impl CnnStage {
             ));
         }
         check_size("LDI", (3, ldi.height(), ldi.width()), (h, w))?;
-        contract::pack_ldi(ldi, self.input.view_mut())?;
-        self.run(t)
+        contract::pack_ldi(ldi, self.input.view_mut())
     }
 
     fn run(&mut self, t: Instant) -> Result<(Heads, f64)> {
@@ -637,10 +779,138 @@ pub struct HologramSession {
     output: SlmFrame,
     last_heads: Option<Heads>,
     plan_report: PlanReport,
+    backend: BackendReport,
+    full_outputs: bool,
+    /// The GPU frame while the GPU backend is active; `pending_check`: the self-check of [`Backend::Auto`]
+    /// has yet to run.
+    #[cfg(feature = "gpu")]
+    gpu: Option<GpuState>,
+}
+
+#[cfg(feature = "gpu")]
+#[derive(Debug)]
+struct GpuState {
+    frame: crate::gpu::session::GpuFrameSession,
+    pending_check: bool,
+}
+
+/// Builds the GPU frame of `pipeline` when its backend asks for one: `(state, report)`.
+fn choose_backend(
+    pipeline: &HologramPipeline,
+    height: usize,
+    width: usize,
+) -> Result<(BackendReportParts, Option<GpuSlot>)> {
+    let requested = pipeline.config.backend;
+    let cpu = |reason: String| BackendReportParts {
+        requested,
+        reason,
+        adapter: None,
+        gpu_precision: None,
+    };
+    if requested == Backend::Cpu {
+        return Ok((cpu("CPU requested".into()), None));
+    }
+    #[cfg(not(feature = "gpu"))]
+    {
+        let _ = (height, width);
+        if requested == Backend::Gpu {
+            return Err(invalid(
+                "backend",
+                "this build has no GPU path (cargo feature `gpu` of tensorholo)",
+            ));
+        }
+        Ok((cpu("this build has no GPU path (cargo feature `gpu`)".into()), None))
+    }
+    #[cfg(feature = "gpu")]
+    {
+        use crate::gpu::{GpuContext, GpuOptions};
+        use crate::gpu::session::GpuFrameSession;
+        let ctx = match &pipeline.gpu_context {
+            Some(ctx) => Ok(ctx.clone()),
+            None => GpuContext::shared(&GpuOptions {
+                allow_software: requested == Backend::Gpu,
+                name_contains: None,
+            }),
+        };
+        let ctx = match (ctx, requested) {
+            (Ok(ctx), _) => ctx,
+            (Err(e), Backend::Gpu) => return Err(e),
+            (Err(e), _) => return Ok((cpu(format!("no hardware GPU: {e}")), None)),
+        };
+        let info = ctx.info();
+        let adapter = Some(format!("{} ({}, {})", info.name, info.backend, info.device_type));
+        let precision = crate::gpu::cnn::GpuPrecision::F32;
+        match GpuFrameSession::new(&ctx, pipeline, height, width, precision) {
+            Ok(frame) => Ok((
+                BackendReportParts {
+                    requested,
+                    reason: if requested == Backend::Gpu {
+                        "GPU requested".into()
+                    } else {
+                        "GPU adapter found; first-frame self-check pending".into()
+                    },
+                    adapter,
+                    gpu_precision: Some(precision.name().into()),
+                },
+                Some(GpuState {
+                    frame,
+                    pending_check: requested == Backend::Auto,
+                }),
+            )),
+            Err(e) if requested == Backend::Gpu => Err(e),
+            Err(e) => {
+                log::info!("GPU backend unavailable for {height}×{width}, using the CPU: {e}");
+                Ok((
+                    BackendReportParts {
+                        adapter,
+                        ..cpu(format!("the GPU path cannot run this session: {e}"))
+                    },
+                    None,
+                ))
+            }
+        }
+    }
+}
+
+#[cfg(feature = "gpu")]
+type GpuSlot = GpuState;
+#[cfg(not(feature = "gpu"))]
+type GpuSlot = std::convert::Infallible;
+
+/// A [`BackendReport`] before the session knows what runs.
+struct BackendReportParts {
+    requested: Backend,
+    reason: String,
+    adapter: Option<String>,
+    gpu_precision: Option<String>,
 }
 
 impl HologramSession {
     fn new(pipeline: &HologramPipeline, height: usize, width: usize) -> Result<Self> {
+        let (parts, gpu) = choose_backend(pipeline, height, width)?;
+        let backend = BackendReport {
+            requested: parts.requested,
+            active: if gpu.is_some() {
+                Backend::Gpu
+            } else {
+                Backend::Cpu
+            },
+            reason: parts.reason,
+            adapter: parts.adapter,
+            gpu_precision: if gpu.is_some() {
+                parts.gpu_precision
+            } else {
+                None
+            },
+            self_check: None,
+        };
+        log::info!(
+            "backend for {height}×{width}: {} ({})",
+            backend.active,
+            backend.reason
+        );
+        #[cfg(not(feature = "gpu"))]
+        let _ = gpu;
         let request = PlanRequest {
             layout: pipeline.config.cnn_layout,
             threads: pipeline.config.cnn_threads,
@@ -707,10 +977,27 @@ impl HologramSession {
                 amplitude_scale: 0.0,
                 mean_phase: [0.0; 3],
                 timings: FrameTimings::default(),
+                backend: Backend::Cpu,
             },
             last_heads: None,
             plan_report,
+            backend,
+            full_outputs: true,
+            #[cfg(feature = "gpu")]
+            gpu,
         })
+    }
+
+    /// Which backend runs this session's frames, and why ([`Backend`]).
+    pub fn backend_report(&self) -> &BackendReport {
+        &self.backend
+    }
+
+    /// Whether GPU frames also download the double phase pattern ([`SlmFrame::phase`]) and the CNN heads
+    /// ([`HologramSession::last_heads`]); on by default. Off, a GPU frame downloads only the codes and the
+    /// normaliser (what an SLM needs): `phase` and `last_heads` then keep older values. No effect on the CPU.
+    pub fn set_full_outputs(&mut self, full: bool) {
+        self.full_outputs = full;
     }
 
     /// How the hologram CNN's plan was chosen: layout, threads, and the autotuning timings
@@ -756,8 +1043,91 @@ impl HologramSession {
     /// non-finite values; [`HoloError::InvalidParameter`] if the CNN takes an LDI; tract failures
     /// ([`HoloError::ModelRun`]). The session stays usable after an error.
     pub fn render(&mut self, frame: &RgbdFrame) -> Result<&SlmFrame> {
+        #[cfg(feature = "gpu")]
+        if self.gpu.is_some() {
+            let t = Instant::now();
+            self.cnn.pack_frame(frame)?;
+            return self.render_packed_on_gpu(t);
+        }
         let (heads, cnn_s) = self.cnn.run_frame(frame)?;
         self.encode_heads(heads, cnn_s)
+    }
+
+    /// The GPU frame of the CNN input packed in `self.cnn.input` (packing started at `t`): runs it on the GPU,
+    /// with the first-frame self-check of [`Backend::Auto`]; on a GPU failure, re-renders it on the CPU and
+    /// stays there.
+    #[cfg(feature = "gpu")]
+    fn render_packed_on_gpu(&mut self, t: Instant) -> Result<&SlmFrame> {
+        let Some(gpu) = self.gpu.as_mut() else {
+            return Err(HoloError::Internal("no GPU state".into()));
+        };
+        let cnn_s = t.elapsed().as_secs_f64();
+        let t_gpu = Instant::now();
+        let full = self.full_outputs || gpu.pending_check;
+        match gpu.frame.run(self.cnn.input.view(), &mut self.output, full) {
+            Ok(heads) => {
+                let gpu_s = t_gpu.elapsed().as_secs_f64();
+                self.output.backend = Backend::Gpu;
+                self.output.timings = FrameTimings {
+                    cnn_s,
+                    gpu_s,
+                    total_s: t.elapsed().as_secs_f64(),
+                    ..FrameTimings::default()
+                };
+                if heads.is_some() {
+                    self.last_heads = heads;
+                }
+                if gpu.pending_check {
+                    self.self_check()?;
+                }
+                Ok(&self.output)
+            }
+            Err(HoloError::Gpu(e)) => {
+                log::warn!("GPU frame failed ({e}); this frame and the next run on the CPU");
+                self.gpu = None;
+                self.backend.active = Backend::Cpu;
+                self.backend.gpu_precision = None;
+                self.backend.reason = format!("GPU failed mid-stream, CPU since: {e}");
+                let (heads, cnn_s) = self.cnn.run(t)?;
+                self.encode_heads(heads, cnn_s)
+            }
+            // Bad data (e.g. a hologram that is zero everywhere) is the frame's fault, not the GPU's.
+            Err(e) => Err(e),
+        }
+    }
+
+    /// The self-check of [`Backend::Auto`] after the GPU rendered the first frame into `self.output`: renders
+    /// it on the CPU too, compares the codes ([`SelfCheck`]), and keeps the GPU (and its output) only if they
+    /// agree; otherwise the CPU's output stands and the session stays on the CPU.
+    #[cfg(feature = "gpu")]
+    fn self_check(&mut self) -> Result<()> {
+        let gpu_output = self.output.clone();
+        let gpu_heads = self.last_heads.take();
+        let (heads, cnn_s) = self.cnn.run(Instant::now())?;
+        self.encode_heads(heads, cnn_s)?;
+        let check = SelfCheck::compare(&gpu_output.codes, &self.output.codes);
+        self.backend.self_check = Some(check);
+        if check.passed {
+            self.backend.reason = format!(
+                "GPU self-check passed ({} of {} codes off by more than one step)",
+                check.codes_off_by_more_than_one, check.codes
+            );
+            self.output = gpu_output;
+            self.last_heads = gpu_heads;
+            if let Some(g) = self.gpu.as_mut() {
+                g.pending_check = false;
+            }
+        } else {
+            self.backend.reason = format!(
+                "GPU self-check failed ({} of {} codes off by more than one step, max {}): CPU",
+                check.codes_off_by_more_than_one, check.codes, check.max_code_difference
+            );
+            self.backend.active = Backend::Cpu;
+            self.backend.gpu_precision = None;
+            self.gpu = None;
+        }
+        log::info!("{}", self.backend.reason);
+        Ok(())
     }
 
     /// Renders a layered depth image (the LDI-input CNN of the paper; layers `[r, g, b, d]` each).
@@ -765,6 +1135,12 @@ impl HologramSession {
     /// Errors: as [`HologramSession::render`], and [`HoloError::InvalidParameter`] if the number of layers is
     /// not the CNN's.
     pub fn render_ldi(&mut self, ldi: &LayeredDepthImage) -> Result<&SlmFrame> {
+        #[cfg(feature = "gpu")]
+        if self.gpu.is_some() {
+            let t = Instant::now();
+            self.cnn.pack_ldi(ldi)?;
+            return self.render_packed_on_gpu(t);
+        }
         let (heads, cnn_s) = self.cnn.run_ldi(ldi)?;
         self.encode_heads(heads, cnn_s)
     }
@@ -793,8 +1169,10 @@ impl HologramSession {
             offset_s,
             prefilter_s,
             encoding_s,
+            gpu_s: 0.0,
             total_s: cnn_s + t0.elapsed().as_secs_f64(),
         };
+        self.output.backend = Backend::Cpu;
         self.last_heads = Some(heads);
         Ok(&self.output)
     }
@@ -923,6 +1301,25 @@ impl HologramSession {
         F: FnMut(T, Result<&SlmFrame>) -> Result<()>,
     {
         let frames = frames.into_iter();
+        #[cfg(feature = "gpu")]
+        if self.gpu.is_some() {
+            // The GPU runs whole frames; the CPU only packs inputs, so frames go one after another.
+            let mut count = 0;
+            let mut last = Instant::now();
+            for (tag, frame) in frames {
+                count += 1;
+                match frame.and_then(|f| self.render(&f).map(drop)) {
+                    Ok(()) => {
+                        let now = Instant::now();
+                        self.output.timings.total_s = (now - last).as_secs_f64();
+                        last = now;
+                        sink(tag, Ok(&self.output))?;
+                    }
+                    Err(e) => sink(tag, Err(e))?,
+                }
+            }
+            return Ok(count);
+        }
         let mut cnn = self.cnn.clone();
         std::thread::scope(|scope| {
             let (tx, rx) = sync_channel::<(T, Result<(Heads, f64)>)>(1);

@@ -9,7 +9,7 @@ use ndarray::{Array2, Array3, Axis};
 use tensorholo::encoding::{double_phase_encode, phase_to_codes};
 use tensorholo::model::{CnnLayout, HologramModel, ModelConfig, ModelKind};
 use tensorholo::optics::{propagate_colour, Carrier};
-use tensorholo::pipeline::{Heads, HologramPipeline, PipelineConfig};
+use tensorholo::pipeline::{Backend, Heads, HologramPipeline, PipelineConfig};
 use tensorholo::scene::RgbdFrame;
 use tensorholo::HoloError;
 
@@ -27,6 +27,8 @@ fn load(name: &str, kind: ModelKind) -> Arc<HologramModel> {
 fn config(offset_m: f64) -> PipelineConfig {
     PipelineConfig {
         offset_m,
+        // These tests pin the CPU path (bit-exact streams, stage by stage); the GPU has gpu_pipeline.rs.
+        backend: Backend::Cpu,
         ..PipelineConfig::default()
     }
 }

@@ -12,7 +12,7 @@ use std::sync::Arc;
 use ndarray::{Array2, Array3};
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
-use tensorholo::pipeline::{Heads, HologramPipeline, PipelineConfig};
+use tensorholo::pipeline::{Backend, Heads, HologramPipeline, PipelineConfig};
 use tensorholo::scene::RgbdFrame;
 
 #[global_allocator]
@@ -49,6 +49,8 @@ fn optics_stages_allocate_nothing_after_warm_up() {
         let pre = prefilter.then(|| load("holo8_rgbd.prefilter.onnx", ModelKind::PreFilter));
         let config = PipelineConfig {
             offset_m: 6e-3,
+            // Allocation counting is about the CPU path's colour workers.
+            backend: Backend::Cpu,
             ..PipelineConfig::default()
         };
         let pipeline =

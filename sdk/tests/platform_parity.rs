@@ -19,7 +19,7 @@ use ndarray::{Array3, Array4, Axis};
 use ndarray_npy::{read_npy, write_npy};
 use num_complex::Complex32;
 use tensorholo::model::{CnnLayout, Precision, ThreadCount};
-use tensorholo::pipeline::{HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
+use tensorholo::pipeline::{Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
 use tensorholo::scene::procedural::default_scene;
 
 /// Scene size: small enough for an emulated CPU, non-square so that a transposed axis cannot pass.
@@ -86,6 +86,8 @@ fn render(case: &Case) -> (Array3<Complex32>, Array3<u8>) {
         offset_m: 6e-3,
         cnn_layout: case.layout,
         cnn_threads: ThreadCount::Fixed(1),
+        // The CPU path's parity across CPUs; the GPU has its own tests (gpu_pipeline.rs).
+        backend: Backend::Cpu,
         ..PipelineConfig::default()
     };
     let pipeline = HologramPipeline::embedded(&selection, config).unwrap();

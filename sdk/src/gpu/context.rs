@@ -189,6 +189,24 @@ impl GpuContext {
         Ok(Self::adopt(device, queue, &adapter.get_info()))
     }
 
+    /// The process-wide context of [`GpuContext::new`] for `options`, created on first use and shared by every
+    /// session that does not bring its own; re-created if its device was lost.
+    ///
+    /// Errors: as [`GpuContext::new`] (not cached: a later call tries again).
+    pub fn shared(options: &GpuOptions) -> Result<Self> {
+        static SHARED: Mutex<Vec<(GpuOptions, GpuContext)>> = Mutex::new(Vec::new());
+        let mut shared = SHARED
+            .lock()
+            .map_err(|_| gpu_err("shared context lock poisoned"))?;
+        shared.retain(|(_, c)| !c.is_lost());
+        if let Some((_, ctx)) = shared.iter().find(|(o, _)| o == options) {
+            return Ok(ctx.clone());
+        }
+        let ctx = Self::new(options)?;
+        shared.push((options.clone(), ctx.clone()));
+        Ok(ctx)
+    }
+
     /// Adopts a device and queue the app already renders with, so that the hologram shares them (and the
     /// output buffers can be drawn without a copy through the CPU). `adapter` describes where they came from
     /// (`wgpu::Adapter::get_info`). The device's features and limits are read from it: f16 kernels run only

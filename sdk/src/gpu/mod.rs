@@ -16,6 +16,7 @@
 
 pub mod context;
 pub mod kernel;
+pub mod session;
 pub mod shaders;
 
 pub use context::{GpuContext, GpuInfo, GpuOptions, ResourceCounts};

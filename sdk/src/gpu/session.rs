@@ -1,0 +1,370 @@
+//! [`GpuFrameSession`]: one resolution's whole frame on the GPU, chained from the kernels of [`super::cnn`],
+//! [`super::fft`] and [`super::encode`] in one command buffer. [`crate::pipeline::HologramSession`] owns one
+//! when its backend is the GPU; everything here is created once, and a frame only uploads the CNN input,
+//! records the same dispatches and downloads the codes (plus, on request, the double-phase pattern and the CNN
+//! heads).
+//!
+//! ```text
+//! input [C,H,W] ─► hologram CNN ─► heads [6,H,W] ─► field [3,H,W] (A·e^{i(p−0.5)2π})
+//!   ─► offset ASM (Eq. 6, carrier removed; skipped at 0 m)
+//!   ─► [pre-filter: field → [Re,Im] planes ─► pre-filter CNN (+ AA-DPM base) ─► field]
+//!   ─► double phase (blur for AA-DPM; pass 1 + reduction; pass 2 + LUT) ─► codes (u8 ×4 per u32), phase, stats
+//! ```
+
+use std::time::Instant;
+
+use ndarray::{Array3, ArrayView3};
+
+use super::cnn::{CnnWeights, GpuCnn, GpuPrecision};
+use super::context::GpuContext;
+use super::encode::{GpuDoublePhase, GpuFieldToPlanes, GpuHeadsToField, GpuPlanesToField};
+use super::fft::{GpuMultiplier, GpuSpectralOp, GpuSpectralPlan, StageCost};
+use crate::error::{invalid, HoloError, Result};
+use crate::optics::Carrier;
+use crate::pipeline::{Heads, HologramPipeline, SlmFrame};
+
+/// The pre-filter stage: field → planes → CNN → field.
+struct Prefilter {
+    to_planes: GpuFieldToPlanes,
+    cnn: GpuCnn,
+    from_planes: GpuPlanesToField,
+}
+
+/// The offset propagation: the plan (scratch buffers), its transfer functions and the bound operation.
+struct Offset {
+    _plan: GpuSpectralPlan,
+    _multiplier: GpuMultiplier,
+    op: GpuSpectralOp,
+}
+
+/// One stage's name, work and traffic per frame, for `holo bench --backend gpu`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct GpuStage {
+    /// Stage name: `hologram_cnn`, `heads_to_field`, `offset_asm`, `prefilter_cnn`, `double_phase`.
+    pub name: &'static str,
+    /// Floating-point operations per frame (a multiply-add counts 2).
+    pub flops: f64,
+    /// Bytes the stage's kernels read and write per frame.
+    pub bytes: f64,
+}
+
+/// The whole frame of one resolution on the GPU (see the [module docs](self)).
+pub struct GpuFrameSession {
+    ctx: GpuContext,
+    height: usize,
+    width: usize,
+    in_channels: usize,
+    precision: GpuPrecision,
+    input: wgpu::Buffer,
+    heads: wgpu::Buffer,
+    cnn: GpuCnn,
+    to_field: GpuHeadsToField,
+    offset: Option<Offset>,
+    prefilter: Option<Prefilter>,
+    dp: GpuDoublePhase,
+    staging_codes: wgpu::Buffer,
+    staging_stats: wgpu::Buffer,
+    staging_phase: wgpu::Buffer,
+    staging_heads: wgpu::Buffer,
+    heads_host: Vec<f32>,
+}
+
+impl std::fmt::Debug for GpuFrameSession {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuFrameSession")
+            .field("size", &(self.height, self.width))
+            .field("precision", &self.precision)
+            .field("adapter", &self.ctx.info().name)
+            .finish()
+    }
+}
+
+fn bytes_of(n: usize, elem: usize, what: &str) -> Result<u64> {
+    n.checked_mul(elem)
+        .map(|b| b as u64)
+        .ok_or_else(|| invalid(what, "frame too large"))
+}
+
+impl GpuFrameSession {
+    /// Builds every buffer, pipeline and bind group of `pipeline`'s frame at `height × width` on `ctx`, with
+    /// the CNNs in `precision`.
+    ///
+    /// Errors: [`HoloError::Gpu`] (a buffer above the device's limits, a shader the device refuses);
+    /// [`HoloError::ModelContract`] for a CNN that is not the TensorHolo architecture;
+    /// [`HoloError::InvalidParameter`] for an FFT size or double phase method the GPU path does not cover
+    /// (the message names it).
+    pub fn new(
+        ctx: &GpuContext,
+        pipeline: &HologramPipeline,
+        height: usize,
+        width: usize,
+        precision: GpuPrecision,
+    ) -> Result<Self> {
+        let cfg = pipeline.config();
+        let n = height
+            .checked_mul(width)
+            .filter(|&n| n > 0)
+            .ok_or_else(|| invalid("size", format!("{height}×{width} is empty or too large")))?;
+        let hologram = CnnWeights::from_model(pipeline.hologram_model())?;
+        let in_channels = pipeline.hologram_model().input_channels();
+        let input = ctx.storage("cnn input", bytes_of(n * in_channels, 4, "size")?)?;
+        let heads = ctx.storage("heads", bytes_of(6 * n, 4, "size")?)?;
+        let cnn = GpuCnn::new(ctx, &hologram, height, width, &input, &heads, precision)?;
+        let field = ctx.storage("field", bytes_of(3 * n, 8, "size")?)?;
+        let to_field = GpuHeadsToField::new(ctx, height, width, &heads, &field)?;
+        let offset = if cfg.offset_m != 0.0 {
+            let props = cfg.optics.propagators(height, width, cfg.options)?;
+            let plan = GpuSpectralPlan::new(ctx, props[0].plan(), 3)?;
+            let mut tfs = Vec::with_capacity(3);
+            for p in &props {
+                tfs.push(p.transfer_function(cfg.offset_m, Carrier::Remove)?);
+            }
+            let values: Vec<&[num_complex::Complex32]> = tfs.iter().map(|t| t.values()).collect();
+            let multiplier = plan.multiplier(ctx, &values)?;
+            let op = plan.bind(ctx, &field, &multiplier)?;
+            Some(Offset {
+                _plan: plan,
+                _multiplier: multiplier,
+                op,
+            })
+        } else {
+            None
+        };
+        let prefilter = match pipeline.prefilter_model() {
+            Some(model) => {
+                let weights = CnnWeights::from_model(model)?;
+                let planes_in = ctx.storage("prefilter input", bytes_of(6 * n, 4, "size")?)?;
+                let planes_out = ctx.storage("prefilter output", bytes_of(6 * n, 4, "size")?)?;
+                Some(Prefilter {
+                    to_planes: GpuFieldToPlanes::new(ctx, height, width, &field, &planes_in)?,
+                    cnn: GpuCnn::new(
+                        ctx,
+                        &weights,
+                        height,
+                        width,
+                        &planes_in,
+                        &planes_out,
+                        precision,
+                    )?,
+                    from_planes: GpuPlanesToField::new(ctx, height, width, &planes_out, &field)?,
+                })
+            }
+            None => None,
+        };
+        let dp = GpuDoublePhase::new(ctx, height, width, &pipeline.encoding(), &field)?;
+        let read = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
+        let staging_codes = ctx.buffer("codes read-back", bytes_of(3 * n, 1, "size")?, read)?;
+        let staging_stats = ctx.buffer("stats read-back", dp.stats_bytes(), read)?;
+        let staging_phase = ctx.buffer("phase read-back", bytes_of(3 * n, 4, "size")?, read)?;
+        let staging_heads = ctx.buffer("heads read-back", bytes_of(6 * n, 4, "size")?, read)?;
+        Ok(Self {
+            ctx: ctx.clone(),
+            height,
+            width,
+            in_channels,
+            precision,
+            input,
+            heads,
+            cnn,
+            to_field,
+            offset,
+            prefilter,
+            dp,
+            staging_codes,
+            staging_stats,
+            staging_phase,
+            staging_heads,
+            heads_host: vec![0.0; 6 * n],
+        })
+    }
+
+    /// The context (adapter) this session runs on.
+    pub fn context(&self) -> &GpuContext {
+        &self.ctx
+    }
+
+    /// The CNNs' arithmetic.
+    pub fn precision(&self) -> GpuPrecision {
+        self.precision
+    }
+
+    /// Records the frame's dispatches (after the input upload) into `encoder`.
+    fn record(&self, encoder: &mut wgpu::CommandEncoder) {
+        self.cnn.record(encoder);
+        self.to_field.record(encoder);
+        if let Some(o) = &self.offset {
+            o.op.record(encoder);
+        }
+        if let Some(p) = &self.prefilter {
+            p.to_planes.record(encoder);
+            p.cnn.record(encoder);
+            p.from_planes.record(encoder);
+        }
+        self.dp.record(encoder);
+    }
+
+    /// Runs one frame: uploads `input` (the CNN input `[C, H, W]` packed by [`crate::model::contract`]), runs
+    /// every stage and downloads the codes and the normaliser into `out`; with `full`, also the double phase
+    /// pattern (`out.phase`) and the CNN heads (returned). `out.timings` is not touched.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for an input of another shape; [`HoloError::Gpu`] for a GPU
+    /// failure (lost device, validation error); [`HoloError::InvalidData`] for a hologram that is zero
+    /// everywhere (as the CPU path).
+    pub fn run(
+        &mut self,
+        input: ArrayView3<f32>,
+        out: &mut SlmFrame,
+        full: bool,
+    ) -> Result<Option<Heads>> {
+        let want = [self.in_channels, self.height, self.width];
+        if input.shape() != want {
+            return Err(HoloError::ShapeMismatch {
+                what: "GPU CNN input vs the session's [C, H, W]".into(),
+                expected: want.to_vec(),
+                got: input.shape().to_vec(),
+            });
+        }
+        let data = input
+            .as_slice()
+            .ok_or_else(|| HoloError::Internal("CNN input not contiguous".into()))?;
+        self.ctx.write(&self.input, 0, bytemuck::cast_slice(data));
+        let mut encoder = self.ctx.encoder("frame");
+        self.record(&mut encoder);
+        let n = self.height * self.width;
+        let codes_bytes = (3 * n) as u64;
+        encoder.copy_buffer_to_buffer(
+            self.dp.codes_buffer(),
+            0,
+            &self.staging_codes,
+            0,
+            codes_bytes.div_ceil(4) * 4,
+        );
+        encoder.copy_buffer_to_buffer(
+            self.dp.stats_buffer(),
+            0,
+            &self.staging_stats,
+            0,
+            self.dp.stats_bytes(),
+        );
+        if full {
+            encoder.copy_buffer_to_buffer(
+                self.dp.phase_buffer(),
+                0,
+                &self.staging_phase,
+                0,
+                (3 * n * 4) as u64,
+            );
+            encoder.copy_buffer_to_buffer(&self.heads, 0, &self.staging_heads, 0, (6 * n * 4) as u64);
+        }
+        self.ctx.submit_and_wait(encoder)?;
+        let mut stats = vec![0u8; self.dp.stats_bytes() as usize];
+        self.ctx.read_staging(&self.staging_stats, &mut stats)?;
+        let (a, mean) = GpuDoublePhase::read_stats(&stats)?;
+        let codes = out
+            .codes
+            .as_slice_mut()
+            .ok_or_else(|| HoloError::Internal("output codes not contiguous".into()))?;
+        self.ctx.read_staging(&self.staging_codes, codes)?;
+        out.amplitude_scale = a;
+        out.mean_phase = mean;
+        if !full {
+            return Ok(None);
+        }
+        let phase = out
+            .phase
+            .as_slice_mut()
+            .ok_or_else(|| HoloError::Internal("output phase not contiguous".into()))?;
+        self.ctx
+            .read_staging(&self.staging_phase, bytemuck::cast_slice_mut(phase))?;
+        self.ctx
+            .read_staging(&self.staging_heads, bytemuck::cast_slice_mut(&mut self.heads_host))?;
+        let amplitude = Array3::from_shape_vec((3, self.height, self.width), self.heads_host[..3 * n].to_vec())
+            .map_err(|e| HoloError::Internal(e.to_string()))?;
+        let phase = Array3::from_shape_vec((3, self.height, self.width), self.heads_host[3 * n..].to_vec())
+            .map_err(|e| HoloError::Internal(e.to_string()))?;
+        Ok(Some(Heads { amplitude, phase }))
+    }
+
+    /// Work and traffic of each stage per frame (for benchmarks: arithmetic intensity = flops / bytes).
+    pub fn stages(&self) -> Vec<GpuStage> {
+        let mut v = Vec::new();
+        let (flops, bytes) = self.cnn.cost();
+        v.push(GpuStage {
+            name: "hologram_cnn",
+            flops,
+            bytes,
+        });
+        let (flops, bytes) = self.to_field.cost();
+        v.push(GpuStage {
+            name: "heads_to_field",
+            flops,
+            bytes,
+        });
+        if let Some(o) = &self.offset {
+            let StageCost { flops, bytes } = o.op.cost();
+            v.push(GpuStage {
+                name: "offset_asm",
+                flops,
+                bytes,
+            });
+        }
+        if let Some(p) = &self.prefilter {
+            let (f1, b1) = p.to_planes.cost();
+            let (f2, b2) = p.cnn.cost();
+            let (f3, b3) = p.from_planes.cost();
+            v.push(GpuStage {
+                name: "prefilter_cnn",
+                flops: f1 + f2 + f3,
+                bytes: b1 + b2 + b3,
+            });
+        }
+        let (flops, bytes) = self.dp.cost();
+        v.push(GpuStage {
+            name: "double_phase",
+            flops,
+            bytes,
+        });
+        v
+    }
+
+    /// Times each stage on its own (one submission and wait per stage, `repeats` times, median seconds), for
+    /// `holo bench --backend gpu`. The input is whatever the last frame uploaded. Slower than a frame (every
+    /// stage waits for the GPU), and allocates nothing on the GPU.
+    ///
+    /// Errors: [`HoloError::Gpu`].
+    pub fn profile(&self, repeats: usize) -> Result<Vec<(&'static str, f64)>> {
+        type Recorder<'a> = Box<dyn Fn(&mut wgpu::CommandEncoder) + 'a>;
+        let mut stages: Vec<(&'static str, Recorder)> = vec![
+            ("hologram_cnn", Box::new(|e| self.cnn.record(e))),
+            ("heads_to_field", Box::new(|e| self.to_field.record(e))),
+        ];
+        if let Some(o) = &self.offset {
+            stages.push(("offset_asm", Box::new(|e| o.op.record(e))));
+        }
+        if let Some(p) = &self.prefilter {
+            stages.push((
+                "prefilter_cnn",
+                Box::new(|e| {
+                    p.to_planes.record(e);
+                    p.cnn.record(e);
+                    p.from_planes.record(e);
+                }),
+            ));
+        }
+        stages.push(("double_phase", Box::new(|e| self.dp.record(e))));
+        let mut out = Vec::new();
+        for (name, rec) in &stages {
+            let mut times = Vec::new();
+            for _ in 0..repeats.max(1) {
+                let mut enc = self.ctx.encoder(name);
+                rec(&mut enc);
+                let t = Instant::now();
+                self.ctx.submit_and_wait(enc)?;
+                times.push(t.elapsed().as_secs_f64());
+            }
+            times.sort_by(f64::total_cmp);
+            out.push((*name, times[times.len() / 2]));
+        }
+        Ok(out)
+    }
+}
