@@ -41,6 +41,17 @@ pub enum PrefilterMode {
     Required,
 }
 
+/// Where frames are computed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum Backend {
+    /// The phone's GPU (Metal, Vulkan) where the first frame agrees with the CPU, else the CPU (the default).
+    Auto,
+    /// The CPU (tract and rustfft), the reference.
+    Cpu,
+    /// The GPU always; an `Unsupported` error at creation where there is none.
+    Gpu,
+}
+
 /// How the camera frame fits the hologram's size.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
 pub enum Fit {
@@ -136,6 +147,9 @@ pub struct GeneratorConfig {
     /// Farthest scene depth in metres mapped to the back of the volume; give both or neither.
     #[uniffi(default = None)]
     pub z_far_m: Option<f64>,
+    /// Where frames are computed; `None` = [`Backend::Auto`] ([`GeneratorInfo::backend`] says which runs).
+    #[uniffi(default = None)]
+    pub backend: Option<Backend>,
 }
 
 impl GeneratorConfig {
@@ -158,6 +172,11 @@ impl GeneratorConfig {
         c.offset_m = self.offset_mm * 1e-3;
         c.threads = ThreadCount::from_count(self.threads as usize);
         c.fit = self.fit.unwrap_or(Fit::Crop).into();
+        c.backend = match self.backend.unwrap_or(Backend::Auto) {
+            Backend::Auto => tensorholo::pipeline::Backend::Auto,
+            Backend::Cpu => tensorholo::pipeline::Backend::Cpu,
+            Backend::Gpu => tensorholo::pipeline::Backend::Gpu,
+        };
         let wavelengths_m = match self.wavelengths_m[..] {
             [] => OpticalSetup::default().wavelengths_m,
             [r, g, b] => [r, g, b],
@@ -298,6 +317,9 @@ pub struct StageTimings {
     pub prefilter_ms: f64,
     /// Double phase encoding and look-up table (Eq. 7).
     pub encoding_ms: f64,
+    /// On the GPU: the whole GPU frame (CNNs and optics; the three stage fields above are then 0 and
+    /// `cnn_ms` is the input packing). 0 on the CPU.
+    pub gpu_ms: f64,
     /// CNN to codes (in a stream: the frame period).
     pub total_ms: f64,
 }
@@ -342,6 +364,7 @@ impl From<core::SlmPatterns> for SlmPatterns {
                 offset_ms: t.frame.offset_s * 1e3,
                 prefilter_ms: t.frame.prefilter_s * 1e3,
                 encoding_ms: t.frame.encoding_s * 1e3,
+                gpu_ms: t.frame.gpu_s * 1e3,
                 total_ms: t.frame.total_s * 1e3,
             },
         }
@@ -417,6 +440,12 @@ pub struct GeneratorInfo {
     pub cnn_threads: u32,
     /// Whether the plan was chosen by timing candidates on this device.
     pub autotuned: bool,
+    /// What computes the frames now: `cpu` or `gpu`.
+    pub backend: String,
+    /// Why (no GPU, the first frame's self-check, a GPU failure mid-stream, …).
+    pub backend_reason: String,
+    /// The GPU adapter, where one was used or tried.
+    pub gpu_adapter: Option<String>,
     /// Everything above and the autotuning timings, as JSON.
     pub json: String,
 }
@@ -554,6 +583,7 @@ impl HologramGenerator {
                 offset_ms: median(|t| t.offset_ms),
                 prefilter_ms: median(|t| t.prefilter_ms),
                 encoding_ms: median(|t| t.encoding_ms),
+                gpu_ms: median(|t| t.gpu_ms),
                 total_ms: median(|t| t.total_ms),
             };
             let per_frame = m.convert_ms + m.total_ms;
@@ -603,6 +633,9 @@ fn info(g: &core::HologramGenerator) -> Result<GeneratorInfo> {
         cnn_layout: i.plan.layout.to_string(),
         cnn_threads: i.plan.threads.unwrap_or(1) as u32,
         autotuned: i.plan.autotuned,
+        backend: i.backend.active.to_string(),
+        backend_reason: i.backend.reason,
+        gpu_adapter: i.backend.adapter,
         json,
     })
 }
@@ -684,6 +717,7 @@ mod tests {
             volume_depth_m: 6e-3,
             z_near_m: None,
             z_far_m: None,
+            backend: None,
         }
     }
 

@@ -5,18 +5,18 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::Args;
 use ndarray::Array3;
 use serde_json::json;
 use tensorholo::model::{
     embedded, CnnLayout, ModelConfig, NodeTiming, PlanRequest, Precision, ThreadCount,
 };
-use tensorholo::pipeline::{HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
+use tensorholo::pipeline::{Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
 use tensorholo::scene::procedural;
 
 use crate::args::parse_size;
-use crate::render::{LayoutArg, PrecisionArg};
+use crate::render::{BackendArg, LayoutArg, PrecisionArg};
 
 /// Arguments of `holo bench`.
 #[derive(Debug, Args)]
@@ -57,6 +57,13 @@ pub struct BenchArgs {
     /// the time per operator kind: where the CNN's time goes (convolution algorithm, adds, activations).
     #[arg(long)]
     profile: bool,
+    /// Backends of the pipeline table: cpu (tract + rustfft) and/or gpu (wgpu; a second table gives each GPU
+    /// stage's time, work, traffic and arithmetic intensity). f32 CNNs only on the GPU.
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [BackendArg::Cpu])]
+    backend: Vec<BackendArg>,
+    /// The GPU's peak f32 throughput in GFLOP/s (from its data sheet), to print each GPU stage's fraction of it.
+    #[arg(long)]
+    gpu_peak_gflops: Option<f64>,
     /// Also write every measurement to this JSON file.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -69,7 +76,9 @@ Examples:
   holo bench --skip-cnn --sizes 1080x1920      post-CNN stages and end-to-end frames only
   holo bench --skip-pipeline --layers 8 --precision f32 --sizes 384x384 --threads 1 --profile
                                                time per tract operator (which convolution algorithm ran)
-  TRACT_DISABLE_DIRECT_SPATIAL=1 holo bench ... tract's own knobs (environment) change what it plans";
+  TRACT_DISABLE_DIRECT_SPATIAL=1 holo bench ... tract's own knobs (environment) change what it plans
+  holo bench --skip-cnn --backend cpu,gpu --sizes 384x384,1080x1920 --layers 8 --precision f32
+                                               CPU against GPU, per GPU stage (--gpu-peak-gflops for % of peak)";
 
 /// Median and count of timed runs of `f` after one warm-up, within `budget` seconds.
 fn time_runs(
@@ -132,6 +141,93 @@ fn print_profiles(profiles: &[(String, Vec<NodeTiming>)], results: &mut Vec<serd
         }
     }
     println!();
+}
+
+/// `--backend gpu`: end-to-end GPU frames, then each GPU stage on its own (one submission and wait each).
+#[cfg(feature = "gpu")]
+fn gpu_tables(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Result<()> {
+    let mut stage_rows = Vec::new();
+    println!("GPU frames (--backend gpu; f32 CNNs; downloads: the three code planes)\n");
+    println!("| CNN | size (HxW) | adapter | frame ms | FPS | runs |");
+    println!("|---|---|---|---:|---:|---:|");
+    for &(h, w) in &args.sizes {
+        let frame = procedural::default_scene(h, w)?;
+        for &layers in &args.layers {
+            let selection = ModelSelection {
+                layers,
+                precision: Precision::F32,
+                prefilter: if args.offset_mm != 0 {
+                    PrefilterMode::Required
+                } else {
+                    PrefilterMode::Off
+                },
+            };
+            let pipeline = HologramPipeline::embedded(
+                &selection,
+                PipelineConfig {
+                    offset_m: args.offset_mm as f64 * 1e-3,
+                    backend: Backend::Gpu,
+                    ..PipelineConfig::default()
+                },
+            )?;
+            let mut session = pipeline.session(h, w)?;
+            session.set_full_outputs(false);
+            let report = session.backend_report().clone();
+            let adapter = report.adapter.clone().unwrap_or_default();
+            let emulated = adapter.contains(", cpu)");
+            let label = if emulated {
+                format!("{adapter} — CPU emulation, not GPU timings")
+            } else {
+                adapter.clone()
+            };
+            let (s, runs) = time_runs(args.repeat, args.max_seconds, || {
+                session.render(&frame)?;
+                Ok(())
+            })?;
+            println!(
+                "| holo{layers} | {h}x{w} | {label} | {:.1} | {:.2} | {runs} |",
+                s * 1e3,
+                1.0 / s
+            );
+            results.push(json!({"kind": "gpu_frame", "layers": layers, "size": [h, w],
+                "adapter": adapter, "software_adapter": emulated, "offset_mm": args.offset_mm,
+                "frame_ms": s * 1e3, "fps": 1.0 / s, "runs": runs}));
+            let gpu = session
+                .gpu_frame()
+                .context("the session fell back to the CPU")?;
+            let times = gpu.profile(args.repeat)?;
+            for (stage, (name, secs)) in gpu.stages().into_iter().zip(times) {
+                stage_rows.push((layers, h, w, label.clone(), stage, name, secs));
+            }
+        }
+    }
+    println!("\nGPU stages, each on its own (median of {} submissions; intensity = FLOP / byte)\n", args.repeat.max(1));
+    println!("| CNN | size (HxW) | stage | ms | GFLOP | MB | FLOP/B | GFLOP/s | % of peak |");
+    println!("|---|---|---|---:|---:|---:|---:|---:|---:|");
+    for (layers, h, w, label, stage, name, secs) in stage_rows {
+        let gflops = stage.flops / secs.max(1e-9) / 1e9;
+        let peak = args
+            .gpu_peak_gflops
+            .map_or("–".to_string(), |p| format!("{:.1}", 100.0 * gflops / p));
+        println!(
+            "| holo{layers} | {h}x{w} | {name} | {:.2} | {:.2} | {:.1} | {:.1} | {:.1} | {peak} |",
+            secs * 1e3,
+            stage.flops / 1e9,
+            stage.bytes / 1e6,
+            stage.flops / stage.bytes.max(1.0),
+            gflops,
+        );
+        results.push(json!({"kind": "gpu_stage", "layers": layers, "size": [h, w], "adapter": label,
+            "stage": name, "ms": secs * 1e3, "flops": stage.flops, "bytes": stage.bytes,
+            "gflops_per_s": gflops, "peak_gflops": args.gpu_peak_gflops}));
+    }
+    println!();
+    Ok(())
+}
+
+#[cfg(not(feature = "gpu"))]
+fn gpu_tables(_: &BenchArgs, _: &mut Vec<serde_json::Value>) -> Result<()> {
+    anyhow::bail!("--backend gpu: this holo was built without the `gpu` feature")
 }
 
 /// The `--layout` values that apply to `precision`: tract 0.23 cannot move QOperator int8 graphs
@@ -227,7 +323,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     if !profiles.is_empty() {
         print_profiles(&profiles, &mut results);
     }
-    if !args.skip_pipeline {
+    if !args.skip_pipeline && args.backend.contains(&BackendArg::Cpu) {
         println!(
             "Pipeline (`HologramSession`, offset {} mm{}): median stage times in ms, end-to-end FPS of single \
              frames and of a stream (CNN of frame n+1 overlapping the optics of frame n)\n",
@@ -258,6 +354,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                                     offset_m: args.offset_mm as f64 * 1e-3,
                                     cnn_layout: layout,
                                     cnn_threads: ThreadCount::Fixed(threads),
+                                    backend: Backend::Cpu,
                                     ..PipelineConfig::default()
                                 },
                             )?;
@@ -301,6 +398,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             }
         }
         println!();
+    }
+    if args.backend.contains(&BackendArg::Gpu) {
+        gpu_tables(args, &mut results)?;
     }
     let peak = peak_rss_mib();
     if let Some(p) = peak {

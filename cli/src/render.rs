@@ -13,7 +13,7 @@ use tensorholo::evaluation::{focal_depths, table2};
 use tensorholo::model::{CnnLayout, HologramModel, ModelConfig, ModelKind, Precision, ThreadCount};
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{
-    FrameTimings, HologramPipeline, HologramSession, PipelineConfig, PrefilterMode,
+    Backend, FrameTimings, HologramPipeline, HologramSession, PipelineConfig, PrefilterMode,
 };
 use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
 use tensorholo::scene::RgbdFrame;
@@ -36,6 +36,27 @@ impl From<PrecisionArg> for Precision {
             PrecisionArg::F32 => Precision::F32,
             PrecisionArg::Int8Qop => Precision::Int8QOperator,
             PrecisionArg::Int8Qdq => Precision::Int8Qdq,
+        }
+    }
+}
+
+/// Where frames are computed ([`Backend`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BackendArg {
+    /// The GPU where a hardware adapter exists and the first frame agrees with the CPU, else the CPU.
+    Auto,
+    /// tract and rustfft on the CPU (the reference).
+    Cpu,
+    /// WGSL compute shaders through wgpu (Vulkan/Metal), any adapter including a software one (lavapipe).
+    Gpu,
+}
+
+impl From<BackendArg> for Backend {
+    fn from(b: BackendArg) -> Self {
+        match b {
+            BackendArg::Auto => Backend::Auto,
+            BackendArg::Cpu => Backend::Cpu,
+            BackendArg::Gpu => Backend::Gpu,
         }
     }
 }
@@ -114,6 +135,10 @@ pub struct ModelArgs {
     /// and the frame size (`holo bench --layout nchw,nhwc,auto`).
     #[arg(long, value_enum, default_value_t = LayoutArg::Auto)]
     pub layout: LayoutArg,
+    /// Where frames are computed: auto uses a hardware GPU (Vulkan, Metal) when the first frame agrees with
+    /// the CPU (a software Vulkan such as lavapipe only with `gpu`); report.json says which ran and why.
+    #[arg(long, value_enum, default_value_t = BackendArg::Auto)]
+    pub backend: BackendArg,
     #[command(flatten)]
     pub encoding: crate::args::EncodingArgs,
     #[command(flatten)]
@@ -159,6 +184,7 @@ impl ModelArgs {
             encoding,
             cnn_layout: self.layout.into(),
             cnn_threads: ThreadCount::from_count(self.threads as usize),
+            backend: self.backend.into(),
         };
         let precision = self.precision();
         let t = Instant::now();
@@ -410,6 +436,9 @@ fn write_outputs(
         "size": [frame.height(), frame.width()],
         "models": models,
         "pipeline": cfg,
+        // Which backend ran the frame (every stage: the GPU path runs the whole frame, or none of it) and why.
+        "backend": session.backend_report(),
+        "frame_backend": out.backend,
         "reconstruction_s": reconstruction_s,
         "statistics": {
             "scene_mean_amplitude_rgb": channel_means(&frame.amplitude),

@@ -993,6 +993,13 @@ impl HologramSession {
         &self.backend
     }
 
+    /// The GPU frame while the GPU backend is active (for `holo bench --backend gpu`: its stages' work and
+    /// timings).
+    #[cfg(feature = "gpu")]
+    pub fn gpu_frame(&self) -> Option<&crate::gpu::session::GpuFrameSession> {
+        self.gpu.as_ref().map(|g| &g.frame)
+    }
+
     /// Whether GPU frames also download the double phase pattern ([`SlmFrame::phase`]) and the CNN heads
     /// ([`HologramSession::last_heads`]); on by default. Off, a GPU frame downloads only the codes and the
     /// normaliser (what an SLM needs): `phase` and `last_heads` then keep older values. No effect on the CPU.
@@ -1061,6 +1068,13 @@ impl HologramSession {
         let Some(gpu) = self.gpu.as_mut() else {
             return Err(HoloError::Internal("no GPU state".into()));
         };
+        // The CPU path catches NaN/∞ in the CNN's heads; a GPU's max() may silently skip NaN, so check the
+        // input here (4 values per pixel, well under a millisecond at 1080p).
+        if self.cnn.input.iter().any(|v| !v.is_finite()) {
+            return Err(HoloError::InvalidData(
+                "the RGB-D frame holds NaN or infinite values".into(),
+            ));
+        }
         let cnn_s = t.elapsed().as_secs_f64();
         let t_gpu = Instant::now();
         let full = self.full_outputs || gpu.pending_check;

@@ -214,10 +214,16 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
             do {
                 let report = try generator.benchmark(frames: frames)
                 let m = report.median
-                text = String(
-                    format: "%.1f fps: CNN %.0f ms, offset %.0f ms, pre-filter %.0f ms, encoding %.0f ms; %@, %u threads",
-                    report.fps, m.cnnMs, m.offsetMs, m.prefilterMs, m.encodingMs,
-                    report.info.cnnLayout, report.info.cnnThreads)
+                if report.info.backend == "gpu" {
+                    text = String(
+                        format: "%.1f fps on the GPU (%@): GPU %.0f ms, input %.0f ms",
+                        report.fps, report.info.gpuAdapter ?? "?", m.gpuMs, m.cnnMs)
+                } else {
+                    text = String(
+                        format: "%.1f fps on the CPU: CNN %.0f ms, offset %.0f ms, pre-filter %.0f ms, encoding %.0f ms; %@, %u threads (%@)",
+                        report.fps, m.cnnMs, m.offsetMs, m.prefilterMs, m.encodingMs,
+                        report.info.cnnLayout, report.info.cnnThreads, report.info.backendReason)
+                }
             } catch {
                 text = "Benchmark failed: \(error)"
             }

@@ -15,8 +15,8 @@
 //! little-endian. Each `.wgsl` file starts with a comment listing its bindings and their layouts.
 
 pub mod context;
+pub mod fft;
 pub mod kernel;
-pub mod session;
 pub mod shaders;
 
 pub use context::{GpuContext, GpuInfo, GpuOptions, ResourceCounts};

@@ -26,5 +26,11 @@ macro_rules! shader {
 /// Element-wise utilities: fill, copy, scale (`util.wgsl`).
 pub const UTIL: Shader = shader!("util.wgsl");
 
+/// Batched Stockham FFT passes along rows and the tiled transpose (`fft.wgsl`).
+pub const FFT: Shader = shader!("fft.wgsl");
+
+/// Embedding in / cropping from the zero-padded grid and the spectral multiply (`spectral.wgsl`).
+pub const SPECTRAL: Shader = shader!("spectral.wgsl");
+
 /// Every shader of the GPU path.
-pub const ALL: &[Shader] = &[UTIL];
+pub const ALL: &[Shader] = &[UTIL, FFT, SPECTRAL];

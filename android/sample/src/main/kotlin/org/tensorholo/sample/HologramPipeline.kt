@@ -138,9 +138,16 @@ class HologramPipeline(
             val r = gen.benchmark(frames)
             val m = r.median
             onStatus(
-                "%.1f fps: CNN %.0f ms, offset %.0f ms, pre-filter %.0f ms, encoding %.0f ms; %s × %d threads".format(
-                    r.fps, m.cnnMs, m.offsetMs, m.prefilterMs, m.encodingMs, r.info.cnnLayout, r.info.cnnThreads.toInt(),
-                ),
+                if (r.info.backend == "gpu") {
+                    "%.1f fps on the GPU (%s): GPU %.0f ms, input %.0f ms".format(
+                        r.fps, r.info.gpuAdapter ?: "?", m.gpuMs, m.cnnMs,
+                    )
+                } else {
+                    "%.1f fps on the CPU: CNN %.0f ms, offset %.0f ms, pre-filter %.0f ms, encoding %.0f ms; %s × %d threads (%s)".format(
+                        r.fps, m.cnnMs, m.offsetMs, m.prefilterMs, m.encodingMs, r.info.cnnLayout, r.info.cnnThreads.toInt(),
+                        r.info.backendReason,
+                    )
+                },
             )
         } catch (e: TensorholoException) {
             onStatus("benchmark: ${e.message}")

@@ -1,0 +1,216 @@
+//! The whole frame on the GPU (`Backend::Gpu`) against the CPU path (`Backend::Cpu`) with the shipped CNNs,
+//! on whatever adapter exists (CI: Mesa's lavapipe); the backend choice of `Backend::Auto` (self-check), the
+//! CPU fallback when the device is lost mid-stream, and that frames create no GPU objects.
+//! Skips with a message where no adapter exists, unless `TENSORHOLO_REQUIRE_GPU=1`.
+
+use ndarray::Array3;
+use tensorholo::gpu::GpuContext;
+use tensorholo::pipeline::{
+    Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode, SelfCheck, SlmFrame,
+};
+use tensorholo::scene::procedural::default_scene;
+use tensorholo::scene::RgbdFrame;
+
+mod gpu_common;
+
+/// Non-square, not a power of two (radix 2·3 and 2·5 FFTs), small enough for a software GPU.
+const H: usize = 48;
+const W: usize = 60;
+
+fn pipeline(
+    ctx: &GpuContext,
+    backend: Backend,
+    offset_m: f64,
+    prefilter: PrefilterMode,
+) -> HologramPipeline {
+    let selection = ModelSelection {
+        layers: 8,
+        prefilter,
+        ..ModelSelection::default()
+    };
+    let config = PipelineConfig {
+        offset_m,
+        backend,
+        ..PipelineConfig::default()
+    };
+    HologramPipeline::embedded(&selection, config)
+        .unwrap()
+        .with_gpu_context(ctx.clone())
+}
+
+/// Cyclic phase distance in radians.
+fn phase_distance(a: f32, b: f32) -> f32 {
+    let d = (a - b).rem_euclid(std::f32::consts::TAU);
+    d.min(std::f32::consts::TAU - d)
+}
+
+fn max_relative(a: &Array3<f32>, b: &Array3<f32>) -> f32 {
+    let scale = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    a.iter()
+        .zip(b.iter())
+        .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()))
+        / scale
+}
+
+/// Compares a GPU frame with the CPU's and prints the figures.
+fn assert_close(what: &str, gpu: &SlmFrame, cpu: &SlmFrame) {
+    assert_eq!(gpu.backend, Backend::Gpu, "{what}");
+    assert_eq!(cpu.backend, Backend::Cpu, "{what}");
+    let check = SelfCheck::compare(&gpu.codes, &cpu.codes);
+    let max_phase = gpu
+        .phase
+        .iter()
+        .zip(cpu.phase.iter())
+        .fold(0.0f32, |m, (&a, &b)| m.max(phase_distance(a, b)));
+    let scale_rel = (gpu.amplitude_scale - cpu.amplitude_scale).abs() / cpu.amplitude_scale;
+    let mean = (0..3)
+        .map(|c| phase_distance(gpu.mean_phase[c], cpu.mean_phase[c]))
+        .fold(0.0f32, f32::max);
+    println!(
+        "{what}: codes off by >1 step {} of {}, max code Δ {}, max phase Δ {max_phase:.2e} rad, \
+         normaliser rel Δ {scale_rel:.1e}, mean phase Δ {mean:.1e} rad",
+        check.codes_off_by_more_than_one, check.codes, check.max_code_difference
+    );
+    assert!(scale_rel < 1e-4, "{what}: normaliser {scale_rel}");
+    assert!(mean < 1e-4, "{what}: mean phase {mean}");
+    assert!(
+        check.codes_off_by_more_than_one as f64 <= 1e-3 * check.codes as f64,
+        "{what}: {check:?}"
+    );
+}
+
+fn frame() -> RgbdFrame {
+    default_scene(H, W).unwrap()
+}
+
+#[test]
+fn gpu_frames_match_the_cpu_with_and_without_offset_and_pre_filter() {
+    let Some(ctx) = gpu_common::context() else {
+        return;
+    };
+    let frame = frame();
+    for (offset_m, prefilter, what) in [
+        (6e-3, PrefilterMode::Required, "6 mm, DDPM pre-filter"),
+        (6e-3, PrefilterMode::Off, "6 mm, AA-DPM"),
+        (0.0, PrefilterMode::Off, "0 mm, AA-DPM"),
+    ] {
+        let mut gpu = pipeline(&ctx, Backend::Gpu, offset_m, prefilter)
+            .session(H, W)
+            .unwrap();
+        let mut cpu = pipeline(&ctx, Backend::Cpu, offset_m, prefilter)
+            .session(H, W)
+            .unwrap();
+        assert_eq!(gpu.backend_report().active, Backend::Gpu);
+        assert_eq!(cpu.backend_report().active, Backend::Cpu);
+        let g = gpu.render(&frame).unwrap().clone();
+        let c = cpu.render(&frame).unwrap().clone();
+        assert_close(what, &g, &c);
+        // The midpoint hologram (CNN heads) the GPU downloads on request.
+        let (gh, ch) = (gpu.last_heads().unwrap(), cpu.last_heads().unwrap());
+        let amp = max_relative(&gh.amplitude, &ch.amplitude);
+        let phs = max_relative(&gh.phase, &ch.phase);
+        println!("{what}: heads max rel Δ amplitude {amp:.1e}, phase {phs:.1e}");
+        assert!(amp < 1e-4 && phs < 1e-4, "{what}: heads {amp} {phs}");
+    }
+}
+
+#[test]
+fn frames_create_no_gpu_objects_and_a_stream_equals_single_frames() {
+    let Some(ctx) = gpu_common::context() else {
+        return;
+    };
+    let frames: Vec<RgbdFrame> = (0..3)
+        .map(|i| {
+            let mut f = frame();
+            f.amplitude.mapv_inplace(|v| v * (1.0 - 0.2 * i as f32));
+            f
+        })
+        .collect();
+    let p = pipeline(&ctx, Backend::Gpu, 6e-3, PrefilterMode::Required);
+    let mut session = p.session(H, W).unwrap();
+    session.render(&frames[0]).unwrap();
+    let before = ctx.resource_counts();
+    let singles: Vec<Array3<u8>> = frames
+        .iter()
+        .map(|f| session.render(f).unwrap().codes.clone())
+        .collect();
+    let mut streamed = Vec::new();
+    session
+        .render_stream(frames.iter().cloned().map(Ok), |_, out| {
+            assert_eq!(out.backend, Backend::Gpu);
+            streamed.push(out.codes.clone());
+            Ok(())
+        })
+        .unwrap();
+    assert_eq!(ctx.resource_counts(), before, "a frame created GPU objects");
+    assert_eq!(streamed, singles);
+    // Different frames give different codes (the comparison above could not pass on stale output).
+    assert_ne!(singles[0], singles[2]);
+}
+
+#[test]
+fn auto_keeps_the_gpu_after_its_self_check() {
+    let Some(ctx) = gpu_common::context() else {
+        return;
+    };
+    // Auto on a context the caller gives (software allowed: it was chosen explicitly).
+    let frame = frame();
+    let mut auto = pipeline(&ctx, Backend::Auto, 6e-3, PrefilterMode::Required)
+        .session(H, W)
+        .unwrap();
+    assert_eq!(auto.backend_report().active, Backend::Gpu);
+    assert!(auto.backend_report().self_check.is_none());
+    let first = auto.render(&frame).unwrap().clone();
+    let report = auto.backend_report().clone();
+    let check = report.self_check.expect("the first frame runs the self-check");
+    assert!(check.passed, "{report:?}");
+    assert_eq!(report.active, Backend::Gpu, "{report:?}");
+    assert!(report.reason.contains("self-check passed"), "{}", report.reason);
+    assert_eq!(first.backend, Backend::Gpu);
+    let second = auto.render(&frame).unwrap();
+    assert_eq!(second.backend, Backend::Gpu);
+    assert_eq!(second.codes, first.codes, "the GPU is deterministic");
+}
+
+#[test]
+fn a_lost_device_falls_back_to_the_cpu_without_losing_the_frame() {
+    // A context of its own: destroying its device must not disturb the other tests.
+    let Some(ctx) = gpu_common::context() else {
+        return;
+    };
+    let frame = frame();
+    let mut gpu = pipeline(&ctx, Backend::Gpu, 6e-3, PrefilterMode::Required)
+        .session(H, W)
+        .unwrap();
+    let mut cpu = pipeline(&ctx, Backend::Cpu, 6e-3, PrefilterMode::Required)
+        .session(H, W)
+        .unwrap();
+    assert_eq!(gpu.render(&frame).unwrap().backend, Backend::Gpu);
+    ctx.device().destroy();
+    let out = gpu.render(&frame).expect("the frame is rendered on the CPU");
+    assert_eq!(out.backend, Backend::Cpu);
+    let expected = cpu.render(&frame).unwrap();
+    assert_eq!(out.codes, expected.codes, "the fallback frame is the CPU's");
+    let report = gpu.backend_report();
+    assert_eq!(report.active, Backend::Cpu);
+    assert!(report.reason.contains("GPU failed"), "{}", report.reason);
+    assert_eq!(gpu.render(&frame).unwrap().backend, Backend::Cpu);
+}
+
+#[test]
+fn bad_frames_are_refused_before_the_gpu_and_the_session_stays_usable() {
+    let Some(ctx) = gpu_common::context() else {
+        return;
+    };
+    let mut session = pipeline(&ctx, Backend::Gpu, 6e-3, PrefilterMode::Required)
+        .session(H, W)
+        .unwrap();
+    let wrong = default_scene(H, W + 2).unwrap();
+    let err = session.render(&wrong).unwrap_err();
+    assert!(err.to_string().contains("shape mismatch"), "{err}");
+    let mut nan = frame();
+    nan.depth[[3, 4]] = f32::NAN;
+    assert!(session.render(&nan).is_err());
+    assert_eq!(session.render(&frame()).unwrap().backend, Backend::Gpu);
+    assert_eq!(session.backend_report().active, Backend::Gpu);
+}
