@@ -394,7 +394,7 @@ impl ChannelEncoder {
 
 impl DoublePhaseMethod {
     /// The Gaussian kernel of AA-DPM (empty for the other methods).
-    fn kernel(&self) -> Vec<f32> {
+    pub(crate) fn kernel(&self) -> Vec<f32> {
         match *self {
             Self::AntiAliased {
                 sigma_px,

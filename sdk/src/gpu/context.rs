@@ -445,12 +445,22 @@ impl GpuContext {
 
     /// A bind group for `kernel` with `buffers[i]` at `@binding(i)` of group 0.
     pub(crate) fn bind(&self, kernel: &Kernel, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
+        let numbered: Vec<(u32, &wgpu::Buffer)> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| (i as u32, *b))
+            .collect();
+        self.bind_at(kernel, &numbered)
+    }
+
+    /// A bind group for `kernel` with each `(binding, buffer)` at `@binding(binding)` of group 0: for entry
+    /// points that use only some of their module's bindings (the layout wgpu derives has only those).
+    pub(crate) fn bind_at(&self, kernel: &Kernel, buffers: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
         self.counters.bind_groups.fetch_add(1, Ordering::Relaxed);
         let entries: Vec<wgpu::BindGroupEntry> = buffers
             .iter()
-            .enumerate()
             .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
+                binding: *i,
                 resource: b.as_entire_binding(),
             })
             .collect();

@@ -15,6 +15,7 @@
 //! little-endian. Each `.wgsl` file starts with a comment listing its bindings and their layouts.
 
 pub mod context;
+pub mod encode;
 pub mod fft;
 pub mod kernel;
 pub mod shaders;

@@ -32,5 +32,14 @@ pub const FFT: Shader = shader!("fft.wgsl");
 /// Embedding in / cropping from the zero-padded grid and the spectral multiply (`spectral.wgsl`).
 pub const SPECTRAL: Shader = shader!("spectral.wgsl");
 
+/// Heads → field and field ↔ `[Re, Im]` planes (`field.wgsl`).
+pub const FIELD: Shader = shader!("field.wgsl");
+
+/// The AA-DPM separable Gaussian blur (`blur.wgsl`).
+pub const BLUR: Shader = shader!("blur.wgsl");
+
+/// Double phase encoding passes, the normaliser reduction and the linear LUT (`double_phase.wgsl`).
+pub const DOUBLE_PHASE: Shader = shader!("double_phase.wgsl");
+
 /// Every shader of the GPU path.
-pub const ALL: &[Shader] = &[UTIL, FFT, SPECTRAL];
+pub const ALL: &[Shader] = &[UTIL, FFT, SPECTRAL, FIELD, BLUR, DOUBLE_PHASE];
