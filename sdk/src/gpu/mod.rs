@@ -14,10 +14,12 @@
 //! path's `Array3`), complex planes `array<vec2<f32>>` `[C, H, W]` (re, im), codes four per `u32`
 //! little-endian. Each `.wgsl` file starts with a comment listing its bindings and their layouts.
 
+pub mod cnn;
 pub mod context;
 pub mod encode;
 pub mod fft;
 pub mod kernel;
+pub mod session;
 pub mod shaders;
 
 pub use context::{GpuContext, GpuInfo, GpuOptions, ResourceCounts};

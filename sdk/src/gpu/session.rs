@@ -79,7 +79,7 @@ impl std::fmt::Debug for GpuFrameSession {
     }
 }
 
-fn bytes_of(n: usize, elem: usize, what: &str) -> Result<u64> {
+fn bytes_of(n: usize, elem: usize, what: &'static str) -> Result<u64> {
     n.checked_mul(elem)
         .map(|b| b as u64)
         .ok_or_else(|| invalid(what, "frame too large"))

@@ -41,5 +41,11 @@ pub const BLUR: Shader = shader!("blur.wgsl");
 /// Double phase encoding passes, the normaliser reduction and the linear LUT (`double_phase.wgsl`).
 pub const DOUBLE_PHASE: Shader = shader!("double_phase.wgsl");
 
+/// One fused layer of the residual CNN: 3×3 convolution, bias, ReLU, residual add, concat (`conv3x3.wgsl`).
+pub const CONV3X3: Shader = shader!("conv3x3.wgsl");
+
+/// The CNNs' output stages: tanh heads, the pre-filter's base filter (`heads.wgsl`).
+pub const HEADS: Shader = shader!("heads.wgsl");
+
 /// Every shader of the GPU path.
-pub const ALL: &[Shader] = &[UTIL, FFT, SPECTRAL, FIELD, BLUR, DOUBLE_PHASE];
+pub const ALL: &[Shader] = &[UTIL, FFT, SPECTRAL, FIELD, BLUR, DOUBLE_PHASE, CONV3X3, HEADS];

@@ -226,6 +226,8 @@ pub struct HologramModel {
     metadata: ModelMetadata,
     source_name: String,
     decluttered: TypedModel,
+    /// The file's ONNX graph as decoded (weights included), for the GPU path's reading of the layers.
+    graph: Arc<pb::GraphProto>,
     /// Symbols of the input's height and width (`None` where the file fixes that dimension).
     dims: [Option<Symbol>; 2],
     /// Fixed input height/width from the file, where not symbolic.
@@ -320,6 +322,7 @@ impl HologramModel {
                 .map_err(|e| format!("cannot type the graph: {}", tract_msg(&e)))
         })
         .map_err(load_err)?;
+        let graph = Arc::new(graph.clone());
         let fact = decluttered
             .input_fact(0)
             .map_err(|e| load_err(tract_msg(&e)))?
@@ -347,11 +350,18 @@ impl HologramModel {
             metadata,
             source_name,
             decluttered,
+            graph,
             dims,
             fixed,
             plans: Mutex::new(HashMap::new()),
             tuned: Mutex::new(HashMap::new()),
         })
+    }
+
+    /// The decoded ONNX graph (nodes and weights) the model was loaded from.
+    #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
+    pub(crate) fn onnx_graph(&self) -> &pb::GraphProto {
+        &self.graph
     }
 
     /// The file's parsed `tensorholo.*` metadata.
