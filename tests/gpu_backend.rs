@@ -63,7 +63,15 @@ fn displayed(
         config.options,
     )
     .unwrap();
-    let stack = focal_stack(shown.view(), &config.optics, 0.0, depths, config.options, false).unwrap();
+    let stack = focal_stack(
+        shown.view(),
+        &config.optics,
+        0.0,
+        depths,
+        config.options,
+        false,
+    )
+    .unwrap();
     (stack, out.codes.clone())
 }
 
@@ -89,7 +97,7 @@ fn gpu_and_cpu_display_the_redwood_frame_equally_well_against_sm_lbm() {
     };
     let hologram = reference.run(&[layer], &|_, _| {}).unwrap();
     let truth = focal_stack(
-        hologram.view(),
+        hologram.midpoint.view(),
         &reference.synthesis.setup,
         0.0,
         &depths,

@@ -12,7 +12,9 @@ use serde_json::json;
 use tensorholo::model::{
     embedded, CnnLayout, ModelConfig, NodeTiming, PlanRequest, Precision, ThreadCount,
 };
-use tensorholo::pipeline::{Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
+use tensorholo::pipeline::{
+    Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode,
+};
 use tensorholo::scene::procedural;
 
 use crate::args::parse_size;
@@ -189,9 +191,11 @@ fn gpu_tables(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Result<
                 s * 1e3,
                 1.0 / s
             );
-            results.push(json!({"kind": "gpu_frame", "layers": layers, "size": [h, w],
+            results.push(
+                json!({"kind": "gpu_frame", "layers": layers, "size": [h, w],
                 "adapter": adapter, "software_adapter": emulated, "offset_mm": args.offset_mm,
-                "frame_ms": s * 1e3, "fps": 1.0 / s, "runs": runs}));
+                "frame_ms": s * 1e3, "fps": 1.0 / s, "runs": runs}),
+            );
             let gpu = session
                 .gpu_frame()
                 .context("the session fell back to the CPU")?;
@@ -201,7 +205,10 @@ fn gpu_tables(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Result<
             }
         }
     }
-    println!("\nGPU stages, each on its own (median of {} submissions; intensity = FLOP / byte)\n", args.repeat.max(1));
+    println!(
+        "\nGPU stages, each on its own (median of {} submissions; intensity = FLOP / byte)\n",
+        args.repeat.max(1)
+    );
     println!("| CNN | size (HxW) | stage | ms | GFLOP | MB | FLOP/B | GFLOP/s | % of peak |");
     println!("|---|---|---|---:|---:|---:|---:|---:|---:|");
     for (layers, h, w, label, stage, name, secs) in stage_rows {
@@ -217,9 +224,11 @@ fn gpu_tables(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Result<
             stage.flops / stage.bytes.max(1.0),
             gflops,
         );
-        results.push(json!({"kind": "gpu_stage", "layers": layers, "size": [h, w], "adapter": label,
+        results.push(
+            json!({"kind": "gpu_stage", "layers": layers, "size": [h, w], "adapter": label,
             "stage": name, "ms": secs * 1e3, "flops": stage.flops, "bytes": stage.bytes,
-            "gflops_per_s": gflops, "peak_gflops": args.gpu_peak_gflops}));
+            "gflops_per_s": gflops, "peak_gflops": args.gpu_peak_gflops}),
+        );
     }
     println!();
     Ok(())

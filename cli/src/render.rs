@@ -299,6 +299,7 @@ pub fn median_timings(timings: &[FrameTimings]) -> FrameTimings {
         offset_s: m(|t| t.offset_s),
         prefilter_s: m(|t| t.prefilter_s),
         encoding_s: m(|t| t.encoding_s),
+        gpu_s: m(|t| t.gpu_s),
         total_s: m(|t| t.total_s),
     }
 }

@@ -8,8 +8,8 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use ndarray::Axis;
 use serde_json::json;
-use tensorholo::pipeline::Backend;
 use tensorholo::io::{ensure_not_input, save_u8_png};
+use tensorholo::pipeline::Backend;
 use tensorholo::scene::{load_rgbd, DepthRange, LoadOptions, RgbdFrame};
 use tensorholo::HoloError;
 

@@ -30,8 +30,8 @@ use crate::model::{
 };
 use crate::optics::{focal_stack, post_encoding_midpoint, OpticalSetup, PropagationOptions};
 use crate::pipeline::{
-    Backend, BackendReport, FrameTimings, HologramPipeline, HologramSession, ModelSelection, PipelineConfig, PrefilterMode,
-    SlmFrame,
+    Backend, BackendReport, FrameTimings, HologramPipeline, HologramSession, ModelSelection,
+    PipelineConfig, PrefilterMode, SlmFrame,
 };
 use crate::scene::{
     CameraFrame, CameraFrameBuf, CameraFrameReport, DepthMapping, DepthRange, Fit, FrameOptions,
@@ -528,7 +528,10 @@ impl HologramGenerator {
     pub fn info(&self) -> Result<GeneratorInfo> {
         let (plan, backend) = {
             let session = self.session()?;
-            (session.plan_report().clone(), session.backend_report().clone())
+            (
+                session.plan_report().clone(),
+                session.backend_report().clone(),
+            )
         };
         let md = self.pipeline.hologram_model().metadata();
         Ok(GeneratorInfo {

@@ -78,7 +78,10 @@ impl std::str::FromStr for Backend {
             "auto" => Ok(Self::Auto),
             "cpu" => Ok(Self::Cpu),
             "gpu" => Ok(Self::Gpu),
-            _ => Err(invalid("backend", format!("expected auto, cpu or gpu, got {s:?}"))),
+            _ => Err(invalid(
+                "backend",
+                format!("expected auto, cpu or gpu, got {s:?}"),
+            )),
         }
     }
 }
@@ -819,12 +822,15 @@ fn choose_backend(
                 "this build has no GPU path (cargo feature `gpu` of tensorholo)",
             ));
         }
-        Ok((cpu("this build has no GPU path (cargo feature `gpu`)".into()), None))
+        Ok((
+            cpu("this build has no GPU path (cargo feature `gpu`)".into()),
+            None,
+        ))
     }
     #[cfg(feature = "gpu")]
     {
-        use crate::gpu::{GpuContext, GpuOptions};
         use crate::gpu::session::GpuFrameSession;
+        use crate::gpu::{GpuContext, GpuOptions};
         let ctx = match &pipeline.gpu_context {
             Some(ctx) => Ok(ctx.clone()),
             None => GpuContext::shared(&GpuOptions {
@@ -838,7 +844,10 @@ fn choose_backend(
             (Err(e), _) => return Ok((cpu(format!("no hardware GPU: {e}")), None)),
         };
         let info = ctx.info();
-        let adapter = Some(format!("{} ({}, {})", info.name, info.backend, info.device_type));
+        let adapter = Some(format!(
+            "{} ({}, {})",
+            info.name, info.backend, info.device_type
+        ));
         let precision = crate::gpu::cnn::GpuPrecision::F32;
         match GpuFrameSession::new(&ctx, pipeline, height, width, precision) {
             Ok(frame) => Ok((

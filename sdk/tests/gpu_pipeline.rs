@@ -162,10 +162,16 @@ fn auto_keeps_the_gpu_after_its_self_check() {
     assert!(auto.backend_report().self_check.is_none());
     let first = auto.render(&frame).unwrap().clone();
     let report = auto.backend_report().clone();
-    let check = report.self_check.expect("the first frame runs the self-check");
+    let check = report
+        .self_check
+        .expect("the first frame runs the self-check");
     assert!(check.passed, "{report:?}");
     assert_eq!(report.active, Backend::Gpu, "{report:?}");
-    assert!(report.reason.contains("self-check passed"), "{}", report.reason);
+    assert!(
+        report.reason.contains("self-check passed"),
+        "{}",
+        report.reason
+    );
     assert_eq!(first.backend, Backend::Gpu);
     let second = auto.render(&frame).unwrap();
     assert_eq!(second.backend, Backend::Gpu);
@@ -187,7 +193,9 @@ fn a_lost_device_falls_back_to_the_cpu_without_losing_the_frame() {
         .unwrap();
     assert_eq!(gpu.render(&frame).unwrap().backend, Backend::Gpu);
     ctx.device().destroy();
-    let out = gpu.render(&frame).expect("the frame is rendered on the CPU");
+    let out = gpu
+        .render(&frame)
+        .expect("the frame is rendered on the CPU");
     assert_eq!(out.backend, Backend::Cpu);
     let expected = cpu.render(&frame).unwrap();
     assert_eq!(out.codes, expected.codes, "the fallback frame is the CPU's");

@@ -19,7 +19,9 @@ use ndarray::{Array3, Array4, Axis};
 use ndarray_npy::{read_npy, write_npy};
 use num_complex::Complex32;
 use tensorholo::model::{CnnLayout, Precision, ThreadCount};
-use tensorholo::pipeline::{Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
+use tensorholo::pipeline::{
+    Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode,
+};
 use tensorholo::scene::procedural::default_scene;
 
 /// Scene size: small enough for an emulated CPU, non-square so that a transposed axis cannot pass.

@@ -230,7 +230,11 @@ impl CnnWeights {
                         let k = ints("kernel_shape").unwrap_or_default();
                         let c = group as usize;
                         let taps = k.first().copied().unwrap_or(0) as usize;
-                        if k.len() != 2 || k[0] != k[1] || taps % 2 == 0 || wv.len() != c * taps * taps {
+                        if k.len() != 2
+                            || k[0] != k[1]
+                            || taps.is_multiple_of(2)
+                            || wv.len() != c * taps * taps
+                        {
                             return Err(err(format!("{}: base filter shape", where_())));
                         }
                         if node.input.len() > 2 {
@@ -243,7 +247,9 @@ impl CnnWeights {
                             .input
                             .get(1)
                             .and_then(|n| inits.get(n.as_str()).cloned())
-                            .ok_or_else(|| err(format!("{}: weights are not f32 initializers", where_())))?;
+                            .ok_or_else(|| {
+                                err(format!("{}: weights are not f32 initializers", where_()))
+                            })?;
                         let bias = node
                             .input
                             .get(2)
@@ -276,7 +282,12 @@ impl CnnWeights {
                 }
                 "Relu" => match ins[0] {
                     Sym::Conv(i) => Sym::Relu(i),
-                    _ => return Err(err(format!("{}: ReLU of something else than a convolution", where_()))),
+                    _ => {
+                        return Err(err(format!(
+                            "{}: ReLU of something else than a convolution",
+                            where_()
+                        )))
+                    }
                 },
                 "Add" if ins.iter().all(is_act) => {
                     let (a, b) = (ins[0].clone(), ins[1].clone());
@@ -288,7 +299,10 @@ impl CnnWeights {
                 }
                 "Concat" => {
                     if ins.len() != 2 || attr(node, "axis").map_or(0, |a| a.i) != 1 {
-                        return Err(err(format!("{}: expected a 2-way channel concat", where_())));
+                        return Err(err(format!(
+                            "{}: expected a 2-way channel concat",
+                            where_()
+                        )));
                     }
                     Sym::Cat(Box::new(ins[0].clone()), Box::new(ins[1].clone()))
                 }
@@ -308,7 +322,12 @@ impl CnnWeights {
                     }
                     Sym::Tail
                 }
-                _ => return Err(err(format!("{}: operator {op} is not part of the architecture", where_()))),
+                _ => {
+                    return Err(err(format!(
+                        "{}: operator {op} is not part of the architecture",
+                        where_()
+                    )))
+                }
             };
             for o in &node.output {
                 syms.insert(o.clone(), out.clone());
@@ -375,8 +394,15 @@ impl CnnWeights {
                 let [one_a, amp, one_p, phs] = tail_consts[..] else {
                     return Err(err(format!("heads: constants {tail_consts:?}, expected 4")));
                 };
-                if tanh_count != 2 || one_a != 1.0 || one_p != 1.0 || last.c_out != 6 || base.is_some() {
-                    return Err(err("heads: expected (tanh + 1)·scale on 2 × 3 channels".into()));
+                if tanh_count != 2
+                    || one_a != 1.0
+                    || one_p != 1.0
+                    || last.c_out != 6
+                    || base.is_some()
+                {
+                    return Err(err(
+                        "heads: expected (tanh + 1)·scale on 2 × 3 channels".into()
+                    ));
                 }
                 CnnOutput::Heads {
                     amplitude_scale: amp,
@@ -384,7 +410,8 @@ impl CnnWeights {
                 }
             }
             ModelKind::PreFilter => {
-                let (taps, base) = base.ok_or_else(|| err("pre-filter without a base filter".into()))?;
+                let (taps, base) =
+                    base.ok_or_else(|| err("pre-filter without a base filter".into()))?;
                 if last.c_out != in_channels || base.len() != in_channels * taps * taps {
                     return Err(err("pre-filter output channels".into()));
                 }
@@ -617,7 +644,10 @@ mod tests {
         let (c, h, w) = input.dim();
         let weights = CnnWeights::from_model(model).unwrap();
         assert_eq!(weights.in_channels, c);
-        assert_eq!(Some(weights.macs_per_pixel() as u64), model.metadata().macs_per_pixel());
+        assert_eq!(
+            Some(weights.macs_per_pixel() as u64),
+            model.metadata().macs_per_pixel()
+        );
         let inbuf = ctx
             .storage_with("input", input.as_slice().unwrap())
             .unwrap();
@@ -651,8 +681,9 @@ mod tests {
         for (name, model, c) in &cases {
             for (h, w) in [(48, 64), (37, 53)] {
                 let scale = if *c == 4 { 1.0 } else { 2.0 };
-                let mut input = Array3::from_shape_vec((*c, h, w), noise(c * h * w, (h + w) as u64, scale))
-                    .unwrap();
+                let mut input =
+                    Array3::from_shape_vec((*c, h, w), noise(c * h * w, (h + w) as u64, scale))
+                        .unwrap();
                 if *c == 6 {
                     input.mapv_inplace(|v| v - 1.0);
                 }
@@ -679,7 +710,13 @@ mod tests {
         let good = f32.onnx_graph().clone();
         // Rewire one residual connection: layer 5 reads y_4 + y_0 instead of y_4 + s_3.
         let mut bad = good.clone();
-        let relu0 = bad.node.iter().find(|n| n.op_type == "Relu").unwrap().output[0].clone();
+        let relu0 = bad
+            .node
+            .iter()
+            .find(|n| n.op_type == "Relu")
+            .unwrap()
+            .output[0]
+            .clone();
         let add1 = bad
             .node
             .iter_mut()
@@ -703,7 +740,11 @@ mod tests {
         assert!(err.contains("padding 1"), "{err}");
         // An operator the architecture does not have.
         let mut bad = good;
-        bad.node.iter_mut().find(|n| n.op_type == "Relu").unwrap().op_type = "Sigmoid".into();
+        bad.node
+            .iter_mut()
+            .find(|n| n.op_type == "Relu")
+            .unwrap()
+            .op_type = "Sigmoid".into();
         let err = CnnWeights::from_graph(&bad, ModelKind::Hologram, "sigmoid")
             .unwrap_err()
             .to_string();

@@ -455,7 +455,11 @@ impl GpuContext {
 
     /// A bind group for `kernel` with each `(binding, buffer)` at `@binding(binding)` of group 0: for entry
     /// points that use only some of their module's bindings (the layout wgpu derives has only those).
-    pub(crate) fn bind_at(&self, kernel: &Kernel, buffers: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
+    pub(crate) fn bind_at(
+        &self,
+        kernel: &Kernel,
+        buffers: &[(u32, &wgpu::Buffer)],
+    ) -> wgpu::BindGroup {
         self.counters.bind_groups.fetch_add(1, Ordering::Relaxed);
         let entries: Vec<wgpu::BindGroupEntry> = buffers
             .iter()

@@ -255,13 +255,11 @@ impl GpuDoublePhase {
                     taps: taps.len(),
                 })
             }
-            DoublePhaseMethod::BandLimited { .. } => {
-                return Err(invalid(
-                    "encoding",
-                    "the GPU path encodes with plain double phase (after a pre-filter CNN) or AA-DPM; \
+            DoublePhaseMethod::BandLimited { .. } => return Err(invalid(
+                "encoding",
+                "the GPU path encodes with plain double phase (after a pre-filter CNN) or AA-DPM; \
                      BL-DPM runs on the CPU backend",
-                ))
-            }
+            )),
         };
         // Enough workgroups per channel to fill a GPU, few enough for one `finish` workgroup to sum.
         let groups = n.div_ceil(256).clamp(1, 1024);
@@ -286,7 +284,13 @@ impl GpuDoublePhase {
             ctx.bind_at(&finish, &[(0, &params), (3, &partials), (4, &stats)]),
             ctx.bind_at(
                 &encode,
-                &[(0, &params), (1, field), (2, &phase), (4, &stats), (5, &codes)],
+                &[
+                    (0, &params),
+                    (1, field),
+                    (2, &phase),
+                    (4, &stats),
+                    (5, &codes),
+                ],
             ),
         ];
         Ok(Self {
@@ -308,8 +312,10 @@ impl GpuDoublePhase {
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
         let mut pass = encoder.begin_compute_pass(&Default::default());
         if let Some(b) = &self.blur {
-            b.rows.dispatch(&mut pass, &b.bind_rows, grid_1d(b.elements));
-            b.cols.dispatch(&mut pass, &b.bind_cols, grid_1d(b.elements));
+            b.rows
+                .dispatch(&mut pass, &b.bind_rows, grid_1d(b.elements));
+            b.cols
+                .dispatch(&mut pass, &b.bind_cols, grid_1d(b.elements));
         }
         self.analyse.dispatch(
             &mut pass,
@@ -318,7 +324,8 @@ impl GpuDoublePhase {
         );
         self.finish.dispatch(&mut pass, &self.binds[1], [1, 1, 1]);
         let words = (CHANNELS * self.height * self.width).div_ceil(4);
-        self.encode.dispatch(&mut pass, &self.binds[2], grid_1d(words));
+        self.encode
+            .dispatch(&mut pass, &self.binds[2], grid_1d(words));
     }
 
     /// The wrapped double phase pattern, f32 `[3, H, W]` in `[0, 2π)` after a frame.
@@ -369,7 +376,10 @@ impl GpuDoublePhase {
     /// (flops, bytes) per frame: atan2 ≈ 20 flops, acos ≈ 15, blur 4 flops per tap and pass per complex value.
     pub fn cost(&self) -> (f64, f64) {
         let e = (CHANNELS * self.height * self.width) as f64;
-        let (mut flops, mut bytes) = (e * 24.0 + e * 30.0, e * (8.0 + 4.0) + e * (8.0 + 4.0 + 4.0 + 1.0));
+        let (mut flops, mut bytes) = (
+            e * 24.0 + e * 30.0,
+            e * (8.0 + 4.0) + e * (8.0 + 4.0 + 4.0 + 1.0),
+        );
         if let Some(b) = &self.blur {
             flops += 2.0 * 4.0 * b.taps as f64 * e;
             bytes += 2.0 * 16.0 * e;
@@ -403,7 +413,8 @@ mod tests {
             .map(|e| {
                 let (c, i) = (e / (h * w), e % (h * w));
                 let (y, x) = ((i / w) as f32, (i % w) as f32);
-                let amp = 0.3 + 0.5 * ((x * 0.21 + c as f32).sin() * (y * 0.13).cos()).abs() + 0.2 * r();
+                let amp =
+                    0.3 + 0.5 * ((x * 0.21 + c as f32).sin() * (y * 0.13).cos()).abs() + 0.2 * r();
                 let ph = 2.0 * (x * 0.05 + y * 0.07 + c as f32) + 1.5 * r();
                 Complex32::from_polar(amp, ph)
             })
@@ -417,7 +428,9 @@ mod tests {
 
     fn download_c(ctx: &GpuContext, b: &wgpu::Buffer, n: usize) -> Vec<Complex32> {
         let v: Vec<[f32; 2]> = ctx.read_buffer(b, n).unwrap();
-        v.into_iter().map(|[re, im]| Complex32::new(re, im)).collect()
+        v.into_iter()
+            .map(|[re, im]| Complex32::new(re, im))
+            .collect()
     }
 
     fn run(ctx: &GpuContext, record: impl FnOnce(&mut wgpu::CommandEncoder)) {
@@ -534,23 +547,42 @@ mod tests {
                     .fold(0.0f32, |m, (x, y)| m.max((x - y).norm()))
                     / scale;
                 assert!(blur_err < 1e-6, "{h}×{w} {method:?}: blur {blur_err}");
-                let stats: Vec<u8> = ctx.read_buffer(dp.stats_buffer(), STATS_BYTES as usize).unwrap();
+                let stats: Vec<u8> = ctx
+                    .read_buffer(dp.stats_buffer(), STATS_BYTES as usize)
+                    .unwrap();
                 let (ga, gmean) = GpuDoublePhase::read_stats(&stats).unwrap();
                 assert!((ga - a).abs() / a < 1e-6, "a {ga} vs {a}");
                 for c in 0..3 {
-                    assert!((gmean[c] - mean[c]).abs() < 1e-5, "mean {c}: {} vs {}", gmean[c], mean[c]);
+                    assert!(
+                        (gmean[c] - mean[c]).abs() < 1e-5,
+                        "mean {c}: {} vs {}",
+                        gmean[c],
+                        mean[c]
+                    );
                 }
                 let gphase: Vec<f32> = ctx.read_buffer(dp.phase_buffer(), 3 * n).unwrap();
                 // GPU atan2/acos are less exact than the CPU's (Vulkan allows 4096 ULP; lavapipe measures ~1e-4
                 // rad), and acos is ill-conditioned where |H| ≈ a (slope 1/√(1 − x²)). One code step is
                 // 2π/256 = 0.0245 rad: bound the worst pixel at 2e-3 rad (8 % of a step), the mean at 1e-4.
-                let deltas: Vec<f32> = gphase.iter().zip(&phase).map(|(&x, &y)| cyclic(x, y)).collect();
+                let deltas: Vec<f32> = gphase
+                    .iter()
+                    .zip(&phase)
+                    .map(|(&x, &y)| cyclic(x, y))
+                    .collect();
                 let max_phase = deltas.iter().fold(0.0f32, |m, &d| m.max(d));
-                let mean_phase = deltas.iter().map(|&d| d as f64).sum::<f64>() / deltas.len() as f64;
+                let mean_phase =
+                    deltas.iter().map(|&d| d as f64).sum::<f64>() / deltas.len() as f64;
                 assert!(max_phase < 2e-3, "{h}×{w} {method:?}: phase {max_phase}");
-                assert!(mean_phase < 1e-4, "{h}×{w} {method:?}: mean phase Δ {mean_phase}");
-                assert!(gphase.iter().all(|p| (0.0..std::f32::consts::TAU).contains(p)));
-                let words: Vec<u32> = ctx.read_buffer(dp.codes_buffer(), (3 * n).div_ceil(4)).unwrap();
+                assert!(
+                    mean_phase < 1e-4,
+                    "{h}×{w} {method:?}: mean phase Δ {mean_phase}"
+                );
+                assert!(gphase
+                    .iter()
+                    .all(|p| (0.0..std::f32::consts::TAU).contains(p)));
+                let words: Vec<u32> = ctx
+                    .read_buffer(dp.codes_buffer(), (3 * n).div_ceil(4))
+                    .unwrap();
                 let gcodes: Vec<u8> = bytemuck::cast_slice(&words)[..3 * n].to_vec();
                 // Codes may differ only where the CPU's value lies within that pixel's phase difference of a
                 // tie (k + ½) of the 256-step table, and then by one step.
@@ -583,7 +615,9 @@ mod tests {
         let buf = upload_c(&ctx, &vec![Complex32::new(0.0, 0.0); 3 * h * w]);
         let dp = GpuDoublePhase::new(&ctx, h, w, &DoublePhaseMethod::Plain, &buf).unwrap();
         run(&ctx, |e| dp.record(e));
-        let stats: Vec<u8> = ctx.read_buffer(dp.stats_buffer(), STATS_BYTES as usize).unwrap();
+        let stats: Vec<u8> = ctx
+            .read_buffer(dp.stats_buffer(), STATS_BYTES as usize)
+            .unwrap();
         let err = GpuDoublePhase::read_stats(&stats).unwrap_err();
         assert!(matches!(err, HoloError::InvalidData(_)), "{err}");
         let err = GpuDoublePhase::new(&ctx, h, w, &DoublePhaseMethod::BandLimited { k: 0.5 }, &buf)

@@ -75,12 +75,12 @@ pub fn radices(n: usize) -> Result<Vec<usize>> {
     }
     let mut rest = n;
     let mut out = Vec::new();
-    while rest % 4 == 0 {
+    while rest.is_multiple_of(4) {
         out.push(4);
         rest /= 4;
     }
     for p in [2, 3, 5, 7, 11, 13] {
-        while rest % p == 0 {
+        while rest.is_multiple_of(p) {
             out.push(p);
             rest /= p;
         }
@@ -89,7 +89,7 @@ pub fn radices(n: usize) -> Result<Vec<usize>> {
         let mut factors = Vec::new();
         let (mut m, mut p) = (n, 2);
         while m > 1 {
-            while m % p == 0 {
+            while m.is_multiple_of(p) {
                 factors.push(p);
                 m /= p;
             }
@@ -184,7 +184,11 @@ impl RowFft {
         inverse: bool,
         mut in_b: bool,
     ) -> bool {
-        for (bgs, groups) in if inverse { &self.inverse } else { &self.forward } {
+        for (bgs, groups) in if inverse {
+            &self.inverse
+        } else {
+            &self.forward
+        } {
             kernel.dispatch(pass, &bgs[usize::from(in_b)], *groups);
             in_b = !in_b;
         }
@@ -446,7 +450,9 @@ mod tests {
 
     /// Seeded complex noise in [−1, 1]².
     fn noise(n: usize, seed: u64) -> Vec<Complex32> {
-        let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        let mut s = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         let mut next = || {
             s = s
                 .wrapping_mul(6364136223846793005)
@@ -463,7 +469,9 @@ mod tests {
 
     fn download(ctx: &GpuContext, b: &wgpu::Buffer, n: usize) -> Vec<Complex32> {
         let v: Vec<[f32; 2]> = ctx.read_buffer(b, n).unwrap();
-        v.into_iter().map(|[re, im]| Complex32::new(re, im)).collect()
+        v.into_iter()
+            .map(|[re, im]| Complex32::new(re, im))
+            .collect()
     }
 
     /// max |a − b| / max |b|.
@@ -558,7 +566,10 @@ mod tests {
         assert!(rel(&out, &wave) < 1e-5, "{}", rel(&out, &wave));
         let other: Vec<Complex32> = wave.iter().map(|v| v * v).collect(); // frequency (6, 4)
         let out = gpu_apply(&ctx, &plan, &other, &[&only]);
-        assert!(out.iter().all(|v| v.norm() < 1e-5), "a foreign frequency leaked");
+        assert!(
+            out.iter().all(|v| v.norm() < 1e-5),
+            "a foreign frequency leaked"
+        );
         // Identity (1/N everywhere) returns random input.
         let ident = vec![Complex32::new(1.0 / n as f32, 0.0); n];
         let x = noise(n, 7);

@@ -254,7 +254,13 @@ impl GpuFrameSession {
                 0,
                 (3 * n * 4) as u64,
             );
-            encoder.copy_buffer_to_buffer(&self.heads, 0, &self.staging_heads, 0, (6 * n * 4) as u64);
+            encoder.copy_buffer_to_buffer(
+                &self.heads,
+                0,
+                &self.staging_heads,
+                0,
+                (6 * n * 4) as u64,
+            );
         }
         self.ctx.submit_and_wait(encoder)?;
         let mut stats = vec![0u8; self.dp.stats_bytes() as usize];
@@ -276,12 +282,20 @@ impl GpuFrameSession {
             .ok_or_else(|| HoloError::Internal("output phase not contiguous".into()))?;
         self.ctx
             .read_staging(&self.staging_phase, bytemuck::cast_slice_mut(phase))?;
-        self.ctx
-            .read_staging(&self.staging_heads, bytemuck::cast_slice_mut(&mut self.heads_host))?;
-        let amplitude = Array3::from_shape_vec((3, self.height, self.width), self.heads_host[..3 * n].to_vec())
-            .map_err(|e| HoloError::Internal(e.to_string()))?;
-        let phase = Array3::from_shape_vec((3, self.height, self.width), self.heads_host[3 * n..].to_vec())
-            .map_err(|e| HoloError::Internal(e.to_string()))?;
+        self.ctx.read_staging(
+            &self.staging_heads,
+            bytemuck::cast_slice_mut(&mut self.heads_host),
+        )?;
+        let amplitude = Array3::from_shape_vec(
+            (3, self.height, self.width),
+            self.heads_host[..3 * n].to_vec(),
+        )
+        .map_err(|e| HoloError::Internal(e.to_string()))?;
+        let phase = Array3::from_shape_vec(
+            (3, self.height, self.width),
+            self.heads_host[3 * n..].to_vec(),
+        )
+        .map_err(|e| HoloError::Internal(e.to_string()))?;
         Ok(Some(Heads { amplitude, phase }))
     }
 

@@ -48,4 +48,13 @@ pub const CONV3X3: Shader = shader!("conv3x3.wgsl");
 pub const HEADS: Shader = shader!("heads.wgsl");
 
 /// Every shader of the GPU path.
-pub const ALL: &[Shader] = &[UTIL, FFT, SPECTRAL, FIELD, BLUR, DOUBLE_PHASE, CONV3X3, HEADS];
+pub const ALL: &[Shader] = &[
+    UTIL,
+    FFT,
+    SPECTRAL,
+    FIELD,
+    BLUR,
+    DOUBLE_PHASE,
+    CONV3X3,
+    HEADS,
+];
