@@ -1464,6 +1464,10 @@ public struct GeneratorConfig: Equatable, Hashable {
      * Farthest scene depth in metres mapped to the back of the volume; give both or neither.
      */
     public var zFarM: Double?
+    /**
+     * Where frames are computed; `None` = [`Backend::Auto`] ([`GeneratorInfo::backend`] says which runs).
+     */
+    public var backend: Backend?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -1508,7 +1512,10 @@ public struct GeneratorConfig: Equatable, Hashable {
          */zNearM: Double? = nil, 
         /**
          * Farthest scene depth in metres mapped to the back of the volume; give both or neither.
-         */zFarM: Double? = nil) {
+         */zFarM: Double? = nil, 
+        /**
+         * Where frames are computed; `None` = [`Backend::Auto`] ([`GeneratorInfo::backend`] says which runs).
+         */backend: Backend? = nil) {
         self.width = width
         self.height = height
         self.layers = layers
@@ -1522,6 +1529,7 @@ public struct GeneratorConfig: Equatable, Hashable {
         self.volumeDepthM = volumeDepthM
         self.zNearM = zNearM
         self.zFarM = zFarM
+        self.backend = backend
     }
 
     
@@ -1552,7 +1560,8 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
                 wavelengthsM: FfiConverterSequenceDouble.read(from: &buf), 
                 volumeDepthM: FfiConverterDouble.read(from: &buf), 
                 zNearM: FfiConverterOptionDouble.read(from: &buf), 
-                zFarM: FfiConverterOptionDouble.read(from: &buf)
+                zFarM: FfiConverterOptionDouble.read(from: &buf), 
+                backend: FfiConverterOptionTypeBackend.read(from: &buf)
         )
     }
 
@@ -1570,6 +1579,7 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
         FfiConverterDouble.write(value.volumeDepthM, into: &buf)
         FfiConverterOptionDouble.write(value.zNearM, into: &buf)
         FfiConverterOptionDouble.write(value.zFarM, into: &buf)
+        FfiConverterOptionTypeBackend.write(value.backend, into: &buf)
     }
 }
 
@@ -1642,6 +1652,18 @@ public struct GeneratorInfo: Equatable, Hashable {
      */
     public var autotuned: Bool
     /**
+     * What computes the frames now: `cpu` or `gpu`.
+     */
+    public var backend: String
+    /**
+     * Why (no GPU, the first frame's self-check, a GPU failure mid-stream, …).
+     */
+    public var backendReason: String
+    /**
+     * The GPU adapter, where one was used or tried.
+     */
+    public var gpuAdapter: String?
+    /**
      * Everything above and the autotuning timings, as JSON.
      */
     public var json: String
@@ -1686,6 +1708,15 @@ public struct GeneratorInfo: Equatable, Hashable {
          * Whether the plan was chosen by timing candidates on this device.
          */autotuned: Bool, 
         /**
+         * What computes the frames now: `cpu` or `gpu`.
+         */backend: String, 
+        /**
+         * Why (no GPU, the first frame's self-check, a GPU failure mid-stream, …).
+         */backendReason: String, 
+        /**
+         * The GPU adapter, where one was used or tried.
+         */gpuAdapter: String?, 
+        /**
          * Everything above and the autotuning timings, as JSON.
          */json: String) {
         self.version = version
@@ -1700,6 +1731,9 @@ public struct GeneratorInfo: Equatable, Hashable {
         self.cnnLayout = cnnLayout
         self.cnnThreads = cnnThreads
         self.autotuned = autotuned
+        self.backend = backend
+        self.backendReason = backendReason
+        self.gpuAdapter = gpuAdapter
         self.json = json
     }
 
@@ -1731,6 +1765,9 @@ public struct FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer {
                 cnnLayout: FfiConverterString.read(from: &buf), 
                 cnnThreads: FfiConverterUInt32.read(from: &buf), 
                 autotuned: FfiConverterBool.read(from: &buf), 
+                backend: FfiConverterString.read(from: &buf), 
+                backendReason: FfiConverterString.read(from: &buf), 
+                gpuAdapter: FfiConverterOptionString.read(from: &buf), 
                 json: FfiConverterString.read(from: &buf)
         )
     }
@@ -1748,6 +1785,9 @@ public struct FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer {
         FfiConverterString.write(value.cnnLayout, into: &buf)
         FfiConverterUInt32.write(value.cnnThreads, into: &buf)
         FfiConverterBool.write(value.autotuned, into: &buf)
+        FfiConverterString.write(value.backend, into: &buf)
+        FfiConverterString.write(value.backendReason, into: &buf)
+        FfiConverterOptionString.write(value.gpuAdapter, into: &buf)
         FfiConverterString.write(value.json, into: &buf)
     }
 }
@@ -2163,6 +2203,11 @@ public struct StageTimings: Equatable, Hashable {
      */
     public var encodingMs: Double
     /**
+     * On the GPU: the whole GPU frame (CNNs and optics; the three stage fields above are then 0 and
+     * `cnn_ms` is the input packing). 0 on the CPU.
+     */
+    public var gpuMs: Double
+    /**
      * CNN to codes (in a stream: the frame period).
      */
     public var totalMs: Double
@@ -2186,6 +2231,10 @@ public struct StageTimings: Equatable, Hashable {
          * Double phase encoding and look-up table (Eq. 7).
          */encodingMs: Double, 
         /**
+         * On the GPU: the whole GPU frame (CNNs and optics; the three stage fields above are then 0 and
+         * `cnn_ms` is the input packing). 0 on the CPU.
+         */gpuMs: Double, 
+        /**
          * CNN to codes (in a stream: the frame period).
          */totalMs: Double) {
         self.convertMs = convertMs
@@ -2193,6 +2242,7 @@ public struct StageTimings: Equatable, Hashable {
         self.offsetMs = offsetMs
         self.prefilterMs = prefilterMs
         self.encodingMs = encodingMs
+        self.gpuMs = gpuMs
         self.totalMs = totalMs
     }
 
@@ -2217,6 +2267,7 @@ public struct FfiConverterTypeStageTimings: FfiConverterRustBuffer {
                 offsetMs: FfiConverterDouble.read(from: &buf), 
                 prefilterMs: FfiConverterDouble.read(from: &buf), 
                 encodingMs: FfiConverterDouble.read(from: &buf), 
+                gpuMs: FfiConverterDouble.read(from: &buf), 
                 totalMs: FfiConverterDouble.read(from: &buf)
         )
     }
@@ -2227,6 +2278,7 @@ public struct FfiConverterTypeStageTimings: FfiConverterRustBuffer {
         FfiConverterDouble.write(value.offsetMs, into: &buf)
         FfiConverterDouble.write(value.prefilterMs, into: &buf)
         FfiConverterDouble.write(value.encodingMs, into: &buf)
+        FfiConverterDouble.write(value.gpuMs, into: &buf)
         FfiConverterDouble.write(value.totalMs, into: &buf)
     }
 }
@@ -2245,6 +2297,91 @@ public func FfiConverterTypeStageTimings_lift(_ buf: RustBuffer) throws -> Stage
 public func FfiConverterTypeStageTimings_lower(_ value: StageTimings) -> RustBuffer {
     return FfiConverterTypeStageTimings.lower(value)
 }
+
+
+/**
+ * Where frames are computed.
+ */
+
+public enum Backend: Equatable, Hashable {
+    
+    /**
+     * The phone's GPU (Metal, Vulkan) where the first frame agrees with the CPU, else the CPU (the default).
+     */
+    case auto
+    /**
+     * The CPU (tract and rustfft), the reference.
+     */
+    case cpu
+    /**
+     * The GPU always; an `Unsupported` error at creation where there is none.
+     */
+    case gpu
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension Backend: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeBackend: FfiConverterRustBuffer {
+    typealias SwiftType = Backend
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Backend {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .auto
+        
+        case 2: return .cpu
+        
+        case 3: return .gpu
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: Backend, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .auto:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .cpu:
+            writeInt(&buf, Int32(2))
+        
+        
+        case .gpu:
+            writeInt(&buf, Int32(3))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBackend_lift(_ buf: RustBuffer) throws -> Backend {
+    return try FfiConverterTypeBackend.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBackend_lower(_ value: Backend) -> RustBuffer {
+    return FfiConverterTypeBackend.lower(value)
+}
+
 
 
 /**
@@ -2992,6 +3129,30 @@ fileprivate struct FfiConverterOptionData: FfiConverterRustBuffer {
         switch try readInt(&buf) as Int8 {
         case 0: return nil
         case 1: return try FfiConverterData.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionTypeBackend: FfiConverterRustBuffer {
+    typealias SwiftType = Backend?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeBackend.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeBackend.read(from: &buf)
         default: throw UniffiInternalError.unexpectedOptionalTag
         }
     }

@@ -2578,6 +2578,11 @@ data class GeneratorConfig (
      * Farthest scene depth in metres mapped to the back of the volume; give both or neither.
      */
     var `zFarM`: kotlin.Double? = null 
+    , 
+    /**
+     * Where frames are computed; `None` = [`Backend::Auto`] ([`GeneratorInfo::backend`] says which runs).
+     */
+    var `backend`: Backend? = null 
     
 ){
     
@@ -2607,6 +2612,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterDouble.read(buf),
             FfiConverterOptionalDouble.read(buf),
             FfiConverterOptionalDouble.read(buf),
+            FfiConverterOptionalTypeBackend.read(buf),
         )
     }
 
@@ -2623,7 +2629,8 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterSequenceDouble.allocationSize(value.`wavelengthsM`) +
             FfiConverterDouble.allocationSize(value.`volumeDepthM`) +
             FfiConverterOptionalDouble.allocationSize(value.`zNearM`) +
-            FfiConverterOptionalDouble.allocationSize(value.`zFarM`)
+            FfiConverterOptionalDouble.allocationSize(value.`zFarM`) +
+            FfiConverterOptionalTypeBackend.allocationSize(value.`backend`)
     )
 
     override fun write(value: GeneratorConfig, buf: ByteBuffer) {
@@ -2640,6 +2647,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterDouble.write(value.`volumeDepthM`, buf)
             FfiConverterOptionalDouble.write(value.`zNearM`, buf)
             FfiConverterOptionalDouble.write(value.`zFarM`, buf)
+            FfiConverterOptionalTypeBackend.write(value.`backend`, buf)
     }
 }
 
@@ -2710,6 +2718,21 @@ data class GeneratorInfo (
     var `autotuned`: kotlin.Boolean
     , 
     /**
+     * What computes the frames now: `cpu` or `gpu`.
+     */
+    var `backend`: kotlin.String
+    , 
+    /**
+     * Why (no GPU, the first frame's self-check, a GPU failure mid-stream, …).
+     */
+    var `backendReason`: kotlin.String
+    , 
+    /**
+     * The GPU adapter, where one was used or tried.
+     */
+    var `gpuAdapter`: kotlin.String?
+    , 
+    /**
      * Everything above and the autotuning timings, as JSON.
      */
     var `json`: kotlin.String
@@ -2742,6 +2765,9 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterUInt.read(buf),
             FfiConverterBoolean.read(buf),
             FfiConverterString.read(buf),
+            FfiConverterString.read(buf),
+            FfiConverterOptionalString.read(buf),
+            FfiConverterString.read(buf),
         )
     }
 
@@ -2758,6 +2784,9 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterString.allocationSize(value.`cnnLayout`) +
             FfiConverterUInt.allocationSize(value.`cnnThreads`) +
             FfiConverterBoolean.allocationSize(value.`autotuned`) +
+            FfiConverterString.allocationSize(value.`backend`) +
+            FfiConverterString.allocationSize(value.`backendReason`) +
+            FfiConverterOptionalString.allocationSize(value.`gpuAdapter`) +
             FfiConverterString.allocationSize(value.`json`)
     )
 
@@ -2774,6 +2803,9 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterString.write(value.`cnnLayout`, buf)
             FfiConverterUInt.write(value.`cnnThreads`, buf)
             FfiConverterBoolean.write(value.`autotuned`, buf)
+            FfiConverterString.write(value.`backend`, buf)
+            FfiConverterString.write(value.`backendReason`, buf)
+            FfiConverterOptionalString.write(value.`gpuAdapter`, buf)
             FfiConverterString.write(value.`json`, buf)
     }
 }
@@ -3082,6 +3114,12 @@ data class StageTimings (
     var `encodingMs`: kotlin.Double
     , 
     /**
+     * On the GPU: the whole GPU frame (CNNs and optics; the three stage fields above are then 0 and
+     * `cnn_ms` is the input packing). 0 on the CPU.
+     */
+    var `gpuMs`: kotlin.Double
+    , 
+    /**
      * CNN to codes (in a stream: the frame period).
      */
     var `totalMs`: kotlin.Double
@@ -3107,6 +3145,7 @@ public object FfiConverterTypeStageTimings: FfiConverterRustBuffer<StageTimings>
             FfiConverterDouble.read(buf),
             FfiConverterDouble.read(buf),
             FfiConverterDouble.read(buf),
+            FfiConverterDouble.read(buf),
         )
     }
 
@@ -3116,6 +3155,7 @@ public object FfiConverterTypeStageTimings: FfiConverterRustBuffer<StageTimings>
             FfiConverterDouble.allocationSize(value.`offsetMs`) +
             FfiConverterDouble.allocationSize(value.`prefilterMs`) +
             FfiConverterDouble.allocationSize(value.`encodingMs`) +
+            FfiConverterDouble.allocationSize(value.`gpuMs`) +
             FfiConverterDouble.allocationSize(value.`totalMs`)
     )
 
@@ -3125,9 +3165,57 @@ public object FfiConverterTypeStageTimings: FfiConverterRustBuffer<StageTimings>
             FfiConverterDouble.write(value.`offsetMs`, buf)
             FfiConverterDouble.write(value.`prefilterMs`, buf)
             FfiConverterDouble.write(value.`encodingMs`, buf)
+            FfiConverterDouble.write(value.`gpuMs`, buf)
             FfiConverterDouble.write(value.`totalMs`, buf)
     }
 }
+
+
+
+/**
+ * Where frames are computed.
+ */
+
+enum class Backend {
+    
+    /**
+     * The phone's GPU (Metal, Vulkan) where the first frame agrees with the CPU, else the CPU (the default).
+     */
+    AUTO,
+    /**
+     * The CPU (tract and rustfft), the reference.
+     */
+    CPU,
+    /**
+     * The GPU always; an `Unsupported` error at creation where there is none.
+     */
+    GPU;
+
+    
+
+
+    companion object
+}
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeBackend: FfiConverterRustBuffer<Backend> {
+    override fun read(buf: ByteBuffer) = try {
+        Backend.values()[buf.getInt() - 1]
+    } catch (e: IndexOutOfBoundsException) {
+        throw RuntimeException("invalid enum value, something is very wrong!!", e)
+    }
+
+    override fun allocationSize(value: Backend) = 4UL
+
+    override fun write(value: Backend, buf: ByteBuffer) {
+        buf.putInt(value.ordinal + 1)
+    }
+}
+
+
 
 
 
@@ -3674,6 +3762,38 @@ public object FfiConverterOptionalByteArray: FfiConverterRustBuffer<kotlin.ByteA
         } else {
             buf.put(1)
             FfiConverterByteArray.write(value, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterOptionalTypeBackend: FfiConverterRustBuffer<Backend?> {
+    override fun read(buf: ByteBuffer): Backend? {
+        if (buf.get().toInt() == 0) {
+            return null
+        }
+        return FfiConverterTypeBackend.read(buf)
+    }
+
+    override fun allocationSize(value: Backend?): ULong {
+        if (value == null) {
+            return 1UL
+        } else {
+            return 1UL + FfiConverterTypeBackend.allocationSize(value)
+        }
+    }
+
+    override fun write(value: Backend?, buf: ByteBuffer) {
+        if (value == null) {
+            buf.put(0)
+        } else {
+            buf.put(1)
+            FfiConverterTypeBackend.write(value, buf)
         }
     }
 }
