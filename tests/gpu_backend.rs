@@ -6,32 +6,16 @@
 //! `TENSORHOLO_REQUIRE_GPU=1`.
 
 use ndarray::Array3;
-use tensorholo::gpu::{GpuContext, GpuOptions};
+use tensorholo::gpu::{test_context as context, GpuContext};
 use tensorholo::metrics::psnr;
-use tensorholo::optics::{focal_stack, post_encoding_midpoint};
+use tensorholo::optics::focal_stack;
 use tensorholo::pipeline::{
     Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode, SelfCheck,
 };
 use tensorholo::reference::ReferencePipeline;
 use tensorholo::scene::{load_rgbd, DepthEncoding, LoadOptions, RgbdFrame};
 use tensorholo::synthesis::SceneLayer;
-use tensorholo_integration_tests::shared_data;
-
-fn context() -> Option<GpuContext> {
-    match GpuContext::new(&GpuOptions {
-        allow_software: true,
-        name_contains: None,
-    }) {
-        Ok(c) => Some(c),
-        Err(e) if std::env::var("TENSORHOLO_REQUIRE_GPU").as_deref() == Ok("1") => {
-            panic!("TENSORHOLO_REQUIRE_GPU=1 but {e}")
-        }
-        Err(e) => {
-            eprintln!("skipping: {e}");
-            None
-        }
-    }
-}
+use tensorholo_integration_tests::{displayed_focal_stack, shared_data};
 
 /// The displayed focal stack (phase-only SLM simulation, Eq. 8–10) of one backend's frame, and its codes.
 fn displayed(
@@ -55,24 +39,10 @@ fn displayed(
     let mut session = pipeline.session(frame.height(), frame.width()).unwrap();
     let out = session.render(frame).unwrap();
     assert_eq!(out.backend, backend);
-    let shown = post_encoding_midpoint(
-        out.phase.view(),
-        out.amplitude_scale,
-        &config.optics,
-        config.offset_m,
-        config.options,
+    (
+        displayed_focal_stack(out, &config, depths),
+        out.codes.clone(),
     )
-    .unwrap();
-    let stack = focal_stack(
-        shown.view(),
-        &config.optics,
-        0.0,
-        depths,
-        config.options,
-        false,
-    )
-    .unwrap();
-    (stack, out.codes.clone())
 }
 
 #[test]

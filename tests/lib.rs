@@ -38,3 +38,31 @@ pub fn detail_error(img: &Array3<f32>, reference: &Array3<f32>, region: &Array2<
     }
     acc / n.max(1) as f64
 }
+
+/// What the SLM displays for one session frame, focused at each normalised depth: the phase-only simulation of
+/// `out`'s double phase pattern brought back to the midpoint plane (Eq. 8–10), then its focal stack.
+///
+/// Panics on an invalid configuration (tests only).
+pub fn displayed_focal_stack(
+    out: &tensorholo::pipeline::SlmFrame,
+    config: &tensorholo::pipeline::PipelineConfig,
+    depths: &[f64],
+) -> Vec<ndarray::Array3<f32>> {
+    let shown = tensorholo::optics::post_encoding_midpoint(
+        out.phase.view(),
+        out.amplitude_scale,
+        &config.optics,
+        config.offset_m,
+        config.options,
+    )
+    .expect("simulation");
+    tensorholo::optics::focal_stack(
+        shown.view(),
+        &config.optics,
+        0.0,
+        depths,
+        config.options,
+        false,
+    )
+    .expect("focal stack")
+}

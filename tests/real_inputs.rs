@@ -11,7 +11,6 @@
 use std::path::Path;
 
 use ndarray::{Array2, Array3};
-use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
 use tensorholo::reference::ReferencePipeline;
 use tensorholo::scene::{
@@ -19,7 +18,7 @@ use tensorholo::scene::{
     FrameOptions, LoadOptions, RgbdFrame, Rotation,
 };
 use tensorholo::synthesis::{SceneLayer, SmLbm};
-use tensorholo_integration_tests::{detail_error, shared_data};
+use tensorholo_integration_tests::{detail_error, displayed_focal_stack, shared_data};
 
 /// Phase-only reconstructions of a frame at normalised depths `[near, far]`.
 type Reconstruct = fn(&RgbdFrame, &[f64]) -> Vec<Array3<f32>>;
@@ -58,23 +57,7 @@ fn shipped_cnn(frame: &RgbdFrame, depths: &[f64]) -> Vec<Array3<f32>> {
         .session(frame.height(), frame.width())
         .expect("session");
     let out = session.render(frame).expect("frame");
-    let shown = post_encoding_midpoint(
-        out.phase.view(),
-        out.amplitude_scale,
-        &config.optics,
-        config.offset_m,
-        config.options,
-    )
-    .expect("simulation");
-    focal_stack(
-        shown.view(),
-        &config.optics,
-        0.0,
-        depths,
-        config.options,
-        false,
-    )
-    .expect("stack")
+    displayed_focal_stack(out, &config, depths)
 }
 
 fn check_near_far_focus(

@@ -145,6 +145,19 @@ fn print_profiles(profiles: &[(String, Vec<NodeTiming>)], results: &mut Vec<serd
     println!();
 }
 
+/// The shipped CNNs of a pipeline row: the pre-filter of `--offset-mm` (required), none at 0 mm.
+fn selection(args: &BenchArgs, layers: usize, precision: Precision) -> ModelSelection {
+    ModelSelection {
+        layers,
+        precision,
+        prefilter: if args.offset_mm != 0 {
+            PrefilterMode::Required
+        } else {
+            PrefilterMode::Off
+        },
+    }
+}
+
 /// `--backend gpu`: end-to-end GPU frames, then each GPU stage on its own (one submission and wait each).
 #[cfg(feature = "gpu")]
 fn gpu_tables(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Result<()> {
@@ -155,17 +168,8 @@ fn gpu_tables(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Result<
     for &(h, w) in &args.sizes {
         let frame = procedural::default_scene(h, w)?;
         for &layers in &args.layers {
-            let selection = ModelSelection {
-                layers,
-                precision: Precision::F32,
-                prefilter: if args.offset_mm != 0 {
-                    PrefilterMode::Required
-                } else {
-                    PrefilterMode::Off
-                },
-            };
             let pipeline = HologramPipeline::embedded(
-                &selection,
+                &selection(args, layers, Precision::F32),
                 PipelineConfig {
                     offset_m: args.offset_mm as f64 * 1e-3,
                     backend: Backend::Gpu,
@@ -348,17 +352,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                     let precision: Precision = p.into();
                     for layout in layouts(args, precision) {
                         for &threads in &args.threads {
-                            let selection = ModelSelection {
-                                layers,
-                                precision,
-                                prefilter: if args.offset_mm != 0 {
-                                    PrefilterMode::Required
-                                } else {
-                                    PrefilterMode::Off
-                                },
-                            };
                             let pipeline = HologramPipeline::embedded(
-                                &selection,
+                                &selection(args, layers, precision),
                                 PipelineConfig {
                                     offset_m: args.offset_mm as f64 * 1e-3,
                                     cnn_layout: layout,

@@ -24,10 +24,11 @@ pub mod shaders;
 
 pub use context::{GpuContext, GpuInfo, GpuOptions, ResourceCounts};
 
-/// Tests in this crate: a context on any adapter (lavapipe in CI), or `None` with a message where none exists;
-/// `TENSORHOLO_REQUIRE_GPU=1` (set by `.ci/run`) turns a missing adapter into a failure.
-#[cfg(test)]
-pub(crate) fn test_context() -> Option<GpuContext> {
+/// For tests (this crate's, the workspace's): a context on any adapter (lavapipe in CI), or `None` with a
+/// message where none exists; `TENSORHOLO_REQUIRE_GPU=1` (set by `.ci/run`) turns a missing adapter into a
+/// panic, so that CI cannot skip the GPU tests silently.
+#[doc(hidden)]
+pub fn test_context() -> Option<GpuContext> {
     match GpuContext::new(&GpuOptions {
         allow_software: true,
         name_contains: None,
