@@ -52,6 +52,17 @@ pub enum Backend {
     Gpu,
 }
 
+/// The GPU CNNs' arithmetic.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum GpuPrecision {
+    /// f16 where the GPU has it, else f32 (the default).
+    Auto,
+    /// f32.
+    F32,
+    /// f16 activations and products, f32 sums: half the GPU memory; f32 where the GPU lacks f16.
+    F16,
+}
+
 /// How the camera frame fits the hologram's size.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
 pub enum Fit {
@@ -150,6 +161,9 @@ pub struct GeneratorConfig {
     /// Where frames are computed; `None` = [`Backend::Auto`] ([`GeneratorInfo::backend`] says which runs).
     #[uniffi(default = None)]
     pub backend: Option<Backend>,
+    /// The GPU CNNs' arithmetic; `None` = [`GpuPrecision::Auto`].
+    #[uniffi(default = None)]
+    pub gpu_precision: Option<GpuPrecision>,
 }
 
 impl GeneratorConfig {
@@ -176,6 +190,11 @@ impl GeneratorConfig {
             Backend::Auto => tensorholo::pipeline::Backend::Auto,
             Backend::Cpu => tensorholo::pipeline::Backend::Cpu,
             Backend::Gpu => tensorholo::pipeline::Backend::Gpu,
+        };
+        c.gpu_precision = match self.gpu_precision.unwrap_or(GpuPrecision::Auto) {
+            GpuPrecision::Auto => tensorholo::pipeline::GpuPrecision::Auto,
+            GpuPrecision::F32 => tensorholo::pipeline::GpuPrecision::F32,
+            GpuPrecision::F16 => tensorholo::pipeline::GpuPrecision::F16,
         };
         let wavelengths_m = match self.wavelengths_m[..] {
             [] => OpticalSetup::default().wavelengths_m,
@@ -718,6 +737,7 @@ mod tests {
             z_near_m: None,
             z_far_m: None,
             backend: None,
+            gpu_precision: None,
         }
     }
 

@@ -18,7 +18,7 @@ use tensorholo::pipeline::{
 use tensorholo::scene::procedural;
 
 use crate::args::parse_size;
-use crate::render::{BackendArg, LayoutArg, PrecisionArg};
+use crate::render::{BackendArg, GpuPrecisionArg, LayoutArg, PrecisionArg};
 
 /// Arguments of `holo bench`.
 #[derive(Debug, Args)]
@@ -63,6 +63,9 @@ pub struct BenchArgs {
     /// stage's time, work, traffic and arithmetic intensity). f32 CNNs only on the GPU.
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [BackendArg::Cpu])]
     backend: Vec<BackendArg>,
+    /// The GPU CNNs' arithmetic in the GPU tables.
+    #[arg(long, value_enum, default_value_t = GpuPrecisionArg::Auto)]
+    gpu_precision: GpuPrecisionArg,
     /// The GPU's peak f32 throughput in GFLOP/s (from its data sheet), to print each GPU stage's fraction of it.
     #[arg(long)]
     gpu_peak_gflops: Option<f64>,
@@ -162,9 +165,9 @@ fn selection(args: &BenchArgs, layers: usize, precision: Precision) -> ModelSele
 #[cfg(feature = "gpu")]
 fn gpu_tables(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Result<()> {
     let mut stage_rows = Vec::new();
-    println!("GPU frames (--backend gpu; f32 CNNs; downloads: the three code planes)\n");
-    println!("| CNN | size (HxW) | adapter | frame ms | FPS | runs |");
-    println!("|---|---|---|---:|---:|---:|");
+    println!("GPU frames (--backend gpu; f32 weights; downloads: the three code planes)\n");
+    println!("| CNN | size (HxW) | adapter | GPU arithmetic | frame ms | FPS | runs |");
+    println!("|---|---|---|---|---:|---:|---:|");
     for &(h, w) in &args.sizes {
         let frame = procedural::default_scene(h, w)?;
         for &layers in &args.layers {
@@ -173,6 +176,7 @@ fn gpu_tables(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Result<
                 PipelineConfig {
                     offset_m: args.offset_mm as f64 * 1e-3,
                     backend: Backend::Gpu,
+                    gpu_precision: args.gpu_precision.into(),
                     ..PipelineConfig::default()
                 },
             )?;
@@ -190,14 +194,16 @@ fn gpu_tables(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Result<
                 session.render(&frame)?;
                 Ok(())
             })?;
+            let arithmetic = report.gpu_precision.clone().unwrap_or_default();
             println!(
-                "| holo{layers} | {h}x{w} | {label} | {:.1} | {:.2} | {runs} |",
+                "| holo{layers} | {h}x{w} | {label} | {arithmetic} | {:.1} | {:.2} | {runs} |",
                 s * 1e3,
                 1.0 / s
             );
             results.push(
                 json!({"kind": "gpu_frame", "layers": layers, "size": [h, w],
                 "adapter": adapter, "software_adapter": emulated, "offset_mm": args.offset_mm,
+                "gpu_precision": report.gpu_precision,
                 "frame_ms": s * 1e3, "fps": 1.0 / s, "runs": runs}),
             );
             let gpu = session

@@ -13,7 +13,8 @@ use tensorholo::evaluation::{focal_depths, table2};
 use tensorholo::model::{CnnLayout, HologramModel, ModelConfig, ModelKind, Precision, ThreadCount};
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{
-    Backend, FrameTimings, HologramPipeline, HologramSession, PipelineConfig, PrefilterMode,
+    Backend, FrameTimings, GpuPrecision, HologramPipeline, HologramSession, PipelineConfig,
+    PrefilterMode,
 };
 use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
 use tensorholo::scene::RgbdFrame;
@@ -57,6 +58,27 @@ impl From<BackendArg> for Backend {
             BackendArg::Auto => Backend::Auto,
             BackendArg::Cpu => Backend::Cpu,
             BackendArg::Gpu => Backend::Gpu,
+        }
+    }
+}
+
+/// GPU CNN arithmetic ([`GpuPrecision`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum GpuPrecisionArg {
+    /// f16 where the adapter has SHADER_F16, else f32.
+    Auto,
+    /// f32 storage and arithmetic.
+    F32,
+    /// f16 activations and products, f32 sums.
+    F16,
+}
+
+impl From<GpuPrecisionArg> for GpuPrecision {
+    fn from(p: GpuPrecisionArg) -> Self {
+        match p {
+            GpuPrecisionArg::Auto => GpuPrecision::Auto,
+            GpuPrecisionArg::F32 => GpuPrecision::F32,
+            GpuPrecisionArg::F16 => GpuPrecision::F16,
         }
     }
 }
@@ -139,6 +161,10 @@ pub struct ModelArgs {
     /// the CPU (a software Vulkan such as lavapipe only with `gpu`); report.json says which ran and why.
     #[arg(long, value_enum, default_value_t = BackendArg::Auto)]
     pub backend: BackendArg,
+    /// The GPU CNNs' arithmetic: auto (f16 where the adapter has it), f32, or f16 activations (half the
+    /// memory; f32 where the adapter lacks f16).
+    #[arg(long, value_enum, default_value_t = GpuPrecisionArg::Auto)]
+    pub gpu_precision: GpuPrecisionArg,
     #[command(flatten)]
     pub encoding: crate::args::EncodingArgs,
     #[command(flatten)]
@@ -185,6 +211,7 @@ impl ModelArgs {
             cnn_layout: self.layout.into(),
             cnn_threads: ThreadCount::from_count(self.threads as usize),
             backend: self.backend.into(),
+            gpu_precision: self.gpu_precision.into(),
         };
         let precision = self.precision();
         let t = Instant::now();

@@ -30,8 +30,8 @@ use crate::model::{
 };
 use crate::optics::{focal_stack, post_encoding_midpoint, OpticalSetup, PropagationOptions};
 use crate::pipeline::{
-    Backend, BackendReport, FrameTimings, HologramPipeline, HologramSession, ModelSelection,
-    PipelineConfig, PrefilterMode, SlmFrame,
+    Backend, BackendReport, FrameTimings, GpuPrecision, HologramPipeline, HologramSession,
+    ModelSelection, PipelineConfig, PrefilterMode, SlmFrame,
 };
 use crate::scene::{
     CameraFrame, CameraFrameBuf, CameraFrameReport, DepthMapping, DepthRange, Fit, FrameOptions,
@@ -79,6 +79,9 @@ pub struct GeneratorConfig {
     /// Where frames are computed ([`Backend::Auto`] by default: the phone's GPU where it passes a
     /// first-frame self-check against the CPU, else the CPU; [`GeneratorInfo::backend`] says which).
     pub backend: Backend,
+    /// The GPU CNNs' arithmetic ([`GpuPrecision::Auto`] by default: f16 where the GPU has it, which halves
+    /// their memory; docs/GPU.md).
+    pub gpu_precision: GpuPrecision,
 }
 
 impl GeneratorConfig {
@@ -100,6 +103,7 @@ impl GeneratorConfig {
             depth_range: None,
             depth_mapping: DepthMapping::default(),
             backend: Backend::default(),
+            gpu_precision: GpuPrecision::default(),
         }
     }
 
@@ -168,6 +172,7 @@ impl GeneratorConfig {
             cnn_layout: self.layout,
             cnn_threads: self.threads,
             backend: self.backend,
+            gpu_precision: self.gpu_precision,
         }
     }
 

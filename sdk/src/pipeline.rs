@@ -86,6 +86,42 @@ impl std::str::FromStr for Backend {
     }
 }
 
+/// The arithmetic of the GPU backend's CNNs ([`Backend::Gpu`]; `crate::gpu::cnn`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum GpuPrecision {
+    /// [`GpuPrecision::F16`] where the adapter has `SHADER_F16`, else [`GpuPrecision::F32`] (the default;
+    /// [`Backend::Auto`]'s first-frame self-check guards the accuracy either way).
+    #[default]
+    Auto,
+    /// f32 storage and arithmetic (within 3e-7 of tract's f32 on lavapipe).
+    F32,
+    /// Hidden activations stored as f16 (half the memory and traffic), products in f16, sums in f32; the
+    /// network's input and output stay f32. Needs the device's `SHADER_F16` (f32 without it). Within 5.1e-4
+    /// of tract's f32 on lavapipe (docs/GPU.md).
+    F16,
+}
+
+impl GpuPrecision {
+    /// `"auto"`, `"f32"` or `"f16"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::F32 => "f32",
+            Self::F16 => "f16",
+        }
+    }
+
+    /// What runs on an adapter with (`shader_f16`) or without f16 shaders: [`GpuPrecision::F32`] or
+    /// [`GpuPrecision::F16`].
+    pub fn resolve(self, shader_f16: bool) -> Self {
+        match self {
+            Self::F16 | Self::Auto if shader_f16 => Self::F16,
+            _ => Self::F32,
+        }
+    }
+}
+
 /// Display and encoding settings of a [`HologramPipeline`].
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct PipelineConfig {
@@ -109,6 +145,9 @@ pub struct PipelineConfig {
     pub cnn_threads: ThreadCount,
     /// Where sessions compute their frames ([`Backend`]; default [`Backend::Auto`]).
     pub backend: Backend,
+    /// The GPU CNNs' arithmetic (default [`GpuPrecision::Auto`]: f16 where the adapter has it); f16 falls back
+    /// to f32 on an adapter without `SHADER_F16` (the backend report says so).
+    pub gpu_precision: GpuPrecision,
 }
 
 impl Default for PipelineConfig {
@@ -121,6 +160,7 @@ impl Default for PipelineConfig {
             cnn_layout: CnnLayout::default(),
             cnn_threads: ThreadCount::default(),
             backend: Backend::default(),
+            gpu_precision: GpuPrecision::default(),
         }
     }
 }
@@ -848,15 +888,23 @@ fn choose_backend(
             "{} ({}, {})",
             info.name, info.backend, info.device_type
         ));
-        let precision = crate::gpu::cnn::GpuPrecision::F32;
+        let wanted = pipeline.config.gpu_precision;
+        let (precision, note) = if wanted == GpuPrecision::F16 && !info.shader_f16 {
+            (
+                GpuPrecision::F32,
+                " (f16 asked, but the adapter has no SHADER_F16: f32)",
+            )
+        } else {
+            (wanted, "")
+        };
         match GpuFrameSession::new(&ctx, pipeline, height, width, precision) {
             Ok(frame) => Ok((
                 BackendReportParts {
                     requested,
                     reason: if requested == Backend::Gpu {
-                        "GPU requested".into()
+                        format!("GPU requested{note}")
                     } else {
-                        "GPU adapter found; first-frame self-check pending".into()
+                        format!("GPU adapter found; first-frame self-check pending{note}")
                     },
                     adapter,
                     gpu_precision: Some(precision.name().into()),

@@ -6,7 +6,8 @@
 use ndarray::Array3;
 use tensorholo::gpu::GpuContext;
 use tensorholo::pipeline::{
-    Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode, SelfCheck, SlmFrame,
+    Backend, GpuPrecision, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode,
+    SelfCheck, SlmFrame,
 };
 use tensorholo::scene::procedural::default_scene;
 use tensorholo::scene::RgbdFrame;
@@ -23,6 +24,16 @@ fn pipeline(
     offset_m: f64,
     prefilter: PrefilterMode,
 ) -> HologramPipeline {
+    pipeline_in(ctx, backend, offset_m, prefilter, GpuPrecision::F32)
+}
+
+fn pipeline_in(
+    ctx: &GpuContext,
+    backend: Backend,
+    offset_m: f64,
+    prefilter: PrefilterMode,
+    gpu_precision: GpuPrecision,
+) -> HologramPipeline {
     let selection = ModelSelection {
         layers: 8,
         prefilter,
@@ -31,6 +42,7 @@ fn pipeline(
     let config = PipelineConfig {
         offset_m,
         backend,
+        gpu_precision,
         ..PipelineConfig::default()
     };
     HologramPipeline::embedded(&selection, config)
@@ -53,7 +65,10 @@ fn max_relative(a: &Array3<f32>, b: &Array3<f32>) -> f32 {
 }
 
 /// Compares a GPU frame with the CPU's and prints the figures.
-fn assert_close(what: &str, gpu: &SlmFrame, cpu: &SlmFrame) {
+/// `f16`: the GPU CNNs ran with f16 activations (looser bounds: 1 % of the codes, 2e-3 on the normaliser and
+/// the mean phase, instead of 0.1 % and 1e-4).
+fn assert_close(what: &str, gpu: &SlmFrame, cpu: &SlmFrame, f16: bool) {
+    let (max_off_fraction, tol) = if f16 { (1e-2, 2e-3) } else { (1e-3, 1e-4) };
     assert_eq!(gpu.backend, Backend::Gpu, "{what}");
     assert_eq!(cpu.backend, Backend::Cpu, "{what}");
     let check = SelfCheck::compare(&gpu.codes, &cpu.codes);
@@ -71,10 +86,10 @@ fn assert_close(what: &str, gpu: &SlmFrame, cpu: &SlmFrame) {
          normaliser rel Δ {scale_rel:.1e}, mean phase Δ {mean:.1e} rad",
         check.codes_off_by_more_than_one, check.codes, check.max_code_difference
     );
-    assert!(scale_rel < 1e-4, "{what}: normaliser {scale_rel}");
-    assert!(mean < 1e-4, "{what}: mean phase {mean}");
+    assert!(scale_rel < tol, "{what}: normaliser {scale_rel}");
+    assert!(mean < tol, "{what}: mean phase {mean}");
     assert!(
-        check.codes_off_by_more_than_one as f64 <= 1e-3 * check.codes as f64,
+        check.codes_off_by_more_than_one as f64 <= max_off_fraction * check.codes as f64,
         "{what}: {check:?}"
     );
 }
@@ -89,14 +104,43 @@ fn gpu_frames_match_the_cpu_with_and_without_offset_and_pre_filter() {
         return;
     };
     let frame = frame();
-    for (offset_m, prefilter, what) in [
-        (6e-3, PrefilterMode::Required, "6 mm, DDPM pre-filter"),
-        (6e-3, PrefilterMode::Off, "6 mm, AA-DPM"),
-        (0.0, PrefilterMode::Off, "0 mm, AA-DPM"),
-    ] {
-        let mut gpu = pipeline(&ctx, Backend::Gpu, offset_m, prefilter)
+    let mut cases = vec![
+        (
+            6e-3,
+            PrefilterMode::Required,
+            GpuPrecision::F32,
+            "6 mm, DDPM pre-filter, f32",
+        ),
+        (
+            6e-3,
+            PrefilterMode::Off,
+            GpuPrecision::F32,
+            "6 mm, AA-DPM, f32",
+        ),
+        (
+            0.0,
+            PrefilterMode::Off,
+            GpuPrecision::F32,
+            "0 mm, AA-DPM, f32",
+        ),
+    ];
+    if ctx.info().shader_f16 {
+        cases.push((
+            6e-3,
+            PrefilterMode::Required,
+            GpuPrecision::F16,
+            "6 mm, DDPM pre-filter, f16",
+        ));
+    }
+    for (offset_m, prefilter, precision, what) in cases {
+        let f16 = precision == GpuPrecision::F16;
+        let mut gpu = pipeline_in(&ctx, Backend::Gpu, offset_m, prefilter, precision)
             .session(H, W)
             .unwrap();
+        assert_eq!(
+            gpu.backend_report().gpu_precision.as_deref(),
+            Some(precision.name())
+        );
         let mut cpu = pipeline(&ctx, Backend::Cpu, offset_m, prefilter)
             .session(H, W)
             .unwrap();
@@ -104,13 +148,14 @@ fn gpu_frames_match_the_cpu_with_and_without_offset_and_pre_filter() {
         assert_eq!(cpu.backend_report().active, Backend::Cpu);
         let g = gpu.render(&frame).unwrap().clone();
         let c = cpu.render(&frame).unwrap().clone();
-        assert_close(what, &g, &c);
+        assert_close(what, &g, &c, f16);
         // The midpoint hologram (CNN heads) the GPU downloads on request.
         let (gh, ch) = (gpu.last_heads().unwrap(), cpu.last_heads().unwrap());
         let amp = max_relative(&gh.amplitude, &ch.amplitude);
         let phs = max_relative(&gh.phase, &ch.phase);
         println!("{what}: heads max rel Δ amplitude {amp:.1e}, phase {phs:.1e}");
-        assert!(amp < 1e-4 && phs < 1e-4, "{what}: heads {amp} {phs}");
+        let bound = if f16 { 2e-3 } else { 1e-4 };
+        assert!(amp < bound && phs < bound, "{what}: heads {amp} {phs}");
     }
 }
 

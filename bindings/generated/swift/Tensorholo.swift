@@ -1468,6 +1468,10 @@ public struct GeneratorConfig: Equatable, Hashable {
      * Where frames are computed; `None` = [`Backend::Auto`] ([`GeneratorInfo::backend`] says which runs).
      */
     public var backend: Backend?
+    /**
+     * The GPU CNNs' arithmetic; `None` = [`GpuPrecision::Auto`].
+     */
+    public var gpuPrecision: GpuPrecision?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -1515,7 +1519,10 @@ public struct GeneratorConfig: Equatable, Hashable {
          */zFarM: Double? = nil, 
         /**
          * Where frames are computed; `None` = [`Backend::Auto`] ([`GeneratorInfo::backend`] says which runs).
-         */backend: Backend? = nil) {
+         */backend: Backend? = nil, 
+        /**
+         * The GPU CNNs' arithmetic; `None` = [`GpuPrecision::Auto`].
+         */gpuPrecision: GpuPrecision? = nil) {
         self.width = width
         self.height = height
         self.layers = layers
@@ -1530,6 +1537,7 @@ public struct GeneratorConfig: Equatable, Hashable {
         self.zNearM = zNearM
         self.zFarM = zFarM
         self.backend = backend
+        self.gpuPrecision = gpuPrecision
     }
 
     
@@ -1561,7 +1569,8 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
                 volumeDepthM: FfiConverterDouble.read(from: &buf), 
                 zNearM: FfiConverterOptionDouble.read(from: &buf), 
                 zFarM: FfiConverterOptionDouble.read(from: &buf), 
-                backend: FfiConverterOptionTypeBackend.read(from: &buf)
+                backend: FfiConverterOptionTypeBackend.read(from: &buf), 
+                gpuPrecision: FfiConverterOptionTypeGpuPrecision.read(from: &buf)
         )
     }
 
@@ -1580,6 +1589,7 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
         FfiConverterOptionDouble.write(value.zNearM, into: &buf)
         FfiConverterOptionDouble.write(value.zFarM, into: &buf)
         FfiConverterOptionTypeBackend.write(value.backend, into: &buf)
+        FfiConverterOptionTypeGpuPrecision.write(value.gpuPrecision, into: &buf)
     }
 }
 
@@ -2670,6 +2680,91 @@ public func FfiConverterTypeFit_lower(_ value: Fit) -> RustBuffer {
 
 
 /**
+ * The GPU CNNs' arithmetic.
+ */
+
+public enum GpuPrecision: Equatable, Hashable {
+    
+    /**
+     * f16 where the GPU has it, else f32 (the default).
+     */
+    case auto
+    /**
+     * f32.
+     */
+    case f32
+    /**
+     * f16 activations and products, f32 sums: half the GPU memory; f32 where the GPU lacks f16.
+     */
+    case f16
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension GpuPrecision: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeGpuPrecision: FfiConverterRustBuffer {
+    typealias SwiftType = GpuPrecision
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> GpuPrecision {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .auto
+        
+        case 2: return .f32
+        
+        case 3: return .f16
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: GpuPrecision, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .auto:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .f32:
+            writeInt(&buf, Int32(2))
+        
+        
+        case .f16:
+            writeInt(&buf, Int32(3))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGpuPrecision_lift(_ buf: RustBuffer) throws -> GpuPrecision {
+    return try FfiConverterTypeGpuPrecision.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGpuPrecision_lower(_ value: GpuPrecision) -> RustBuffer {
+    return FfiConverterTypeGpuPrecision.lower(value)
+}
+
+
+
+/**
  * Weight format of the shipped CNNs.
  */
 
@@ -3177,6 +3272,30 @@ fileprivate struct FfiConverterOptionTypeFit: FfiConverterRustBuffer {
         switch try readInt(&buf) as Int8 {
         case 0: return nil
         case 1: return try FfiConverterTypeFit.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionTypeGpuPrecision: FfiConverterRustBuffer {
+    typealias SwiftType = GpuPrecision?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeGpuPrecision.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeGpuPrecision.read(from: &buf)
         default: throw UniffiInternalError.unexpectedOptionalTag
         }
     }

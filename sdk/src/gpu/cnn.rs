@@ -21,24 +21,7 @@ use super::kernel::{grid_1d, grid_2d, Kernel};
 use super::shaders;
 use crate::error::{HoloError, Result};
 use crate::model::{HologramModel, ModelKind};
-
-/// The arithmetic of the GPU CNNs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum GpuPrecision {
-    /// f32 storage and arithmetic (within 1e-4 of tract's f32).
-    #[default]
-    F32,
-}
-
-impl GpuPrecision {
-    /// `"f32"`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::F32 => "f32",
-        }
-    }
-}
+pub use crate::pipeline::GpuPrecision;
 
 /// One 3×3 convolution of the CNN.
 #[derive(Debug, Clone, PartialEq)]
@@ -449,6 +432,23 @@ struct LayerParams {
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct LayerParams16 {
+    h: u32,
+    w: u32,
+    c_a: u32,
+    c_b: u32,
+    c_out: u32,
+    relu: u32,
+    residual: u32,
+    offset_a: f32,
+    offset_b: f32,
+    a_is_f16: u32,
+    out_is_f16: u32,
+    _pad: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct HeadParams {
     h: u32,
     w: u32,
@@ -457,6 +457,14 @@ struct HeadParams {
     amp_scale: f32,
     phase_scale: f32,
     _pad: [u32; 2],
+}
+
+/// Bytes per stored hidden activation.
+fn activation_bytes(precision: GpuPrecision) -> u64 {
+    match precision {
+        GpuPrecision::F16 => 2,
+        GpuPrecision::F32 | GpuPrecision::Auto => 4,
+    }
 }
 
 /// A [`CnnWeights`] network bound to its input and output buffers at one resolution.
@@ -472,7 +480,8 @@ pub struct GpuCnn {
 }
 
 impl GpuCnn {
-    /// Allocates the activations (a ring of three `[hidden, H, W]` buffers) and binds every layer: `input`
+    /// Allocates the activations (a ring of three `[hidden, H, W]` buffers, f16 where `precision` resolves to
+    /// it on this adapter) and binds every layer: `input`
     /// f32 `[in_channels, H, W]`, `output` f32 `[6, H, W]` (the heads `[amplitude, phase]`, or the pre-filter's
     /// `[Re, Im]`).
     ///
@@ -487,56 +496,91 @@ impl GpuCnn {
         output: &wgpu::Buffer,
         precision: GpuPrecision,
     ) -> Result<Self> {
-        let GpuPrecision::F32 = precision;
+        let precision = precision.resolve(ctx.info().shader_f16);
         let n = height
             .checked_mul(width)
             .filter(|&n| n > 0)
             .ok_or_else(|| crate::error::invalid("size", "empty or too large frame"))?;
         let layers = &weights.layers;
         let hidden = layers[0].c_out;
-        let act_bytes = (hidden as u64) * (n as u64) * 4;
+        let act_bytes = (hidden as u64) * (n as u64) * activation_bytes(precision);
         let ring = [
             ctx.storage("cnn activations 0", act_bytes)?,
             ctx.storage("cnn activations 1", act_bytes)?,
             ctx.storage("cnn activations 2", act_bytes)?,
         ];
-        let conv = ctx.kernel(&shaders::CONV3X3, "conv3x3")?;
+        let f16 = precision == GpuPrecision::F16;
+        let conv = if f16 {
+            ctx.kernel(&shaders::CONV3X3_F16, "conv3x3")?
+        } else {
+            ctx.kernel(&shaders::CONV3X3, "conv3x3")?
+        };
         let mut passes = Vec::new();
         let last = layers.len() - 1;
-        // s_0 = the input (with its offset); s_{i+1} goes to ring[i % 3]; layer i reads s_i.
+        // s_0 = the input (with its offset); s_{i+1} goes to ring[i % 3]; layer i reads s_i and, for the
+        // residual, s_{i−1}: three different buffers.
         let slot = |i: usize| &ring[(i + 2) % 3]; // s_i for i ≥ 1 (s_1 → ring[0])
         for (i, l) in layers.iter().enumerate() {
             let residual = i >= 2 && (i + 1) % 2 == 1 && i != last;
-            let (in_a, c_a, off_a) = if i == 0 {
-                (input, l.c_in, weights.input_offset)
-            } else {
-                (slot(i), layers[i - 1].c_out, 0.0)
-            };
-            let (in_b, c_b) = if i == last {
-                (input, weights.in_channels)
-            } else {
-                (in_a, 0)
-            };
-            let out = if i == last { output } else { slot(i + 1) };
-            let res = if residual { slot(i - 1) } else { in_a };
-            let params = ctx.uniform(
-                "conv layer",
-                &LayerParams {
-                    h: height as u32,
-                    w: width as u32,
-                    c_a: c_a as u32,
-                    c_b: c_b as u32,
-                    c_out: l.c_out as u32,
-                    relu: u32::from(i != last),
-                    residual: u32::from(residual),
-                    offset_a: off_a,
-                    offset_b: weights.input_offset,
-                    _pad: [0; 3],
-                },
-            )?;
+            let c_a = if i == 0 { l.c_in } else { layers[i - 1].c_out };
+            let c_b = if i == last { weights.in_channels } else { 0 };
+            let off_a = if i == 0 { weights.input_offset } else { 0.0 };
             let w = ctx.storage_with("conv weights", &l.weights)?;
             let b = ctx.storage_with("conv bias", &l.bias)?;
-            let bind = ctx.bind(&conv, &[&params, in_a, in_b, &w, &b, res, out]);
+            let bind = match f16 {
+                false => {
+                    let in_a = if i == 0 { input } else { slot(i) };
+                    let in_b = if i == last { input } else { in_a };
+                    let out = if i == last { output } else { slot(i + 1) };
+                    let res = if residual { slot(i - 1) } else { in_a };
+                    let params = ctx.uniform(
+                        "conv layer",
+                        &LayerParams {
+                            h: height as u32,
+                            w: width as u32,
+                            c_a: c_a as u32,
+                            c_b: c_b as u32,
+                            c_out: l.c_out as u32,
+                            relu: u32::from(i != last),
+                            residual: u32::from(residual),
+                            offset_a: off_a,
+                            offset_b: weights.input_offset,
+                            _pad: [0; 3],
+                        },
+                    )?;
+                    ctx.bind(&conv, &[&params, in_a, in_b, &w, &b, res, out])
+                }
+                true => {
+                    // Unused bindings get buffers that cannot alias this layer's writable one.
+                    let (in_a16, res16, out16) = if i == 0 {
+                        (&ring[2], &ring[2], slot(1))
+                    } else {
+                        (slot(i), slot(i - 1), slot(i + 1))
+                    };
+                    let out32 = output;
+                    let params = ctx.uniform(
+                        "conv layer (f16)",
+                        &LayerParams16 {
+                            h: height as u32,
+                            w: width as u32,
+                            c_a: c_a as u32,
+                            c_b: c_b as u32,
+                            c_out: l.c_out as u32,
+                            relu: u32::from(i != last),
+                            residual: u32::from(residual),
+                            offset_a: off_a,
+                            offset_b: weights.input_offset,
+                            a_is_f16: u32::from(i != 0),
+                            out_is_f16: u32::from(i != last),
+                            _pad: 0,
+                        },
+                    )?;
+                    ctx.bind(
+                        &conv,
+                        &[&params, input, in_a16, input, &w, &b, res16, out16, out32],
+                    )
+                }
+            };
             passes.push((bind, grid_2d(width, height, l.c_out.div_ceil(4), [16, 16])));
         }
         let (out_kernel, out_bind) = match &weights.output {
@@ -581,9 +625,12 @@ impl GpuCnn {
         };
         let macs = weights.macs_per_pixel() as f64 * n as f64;
         // Each layer reads its input tiles once per 4 output channels and writes its output once.
+        let elem = activation_bytes(precision) as f64;
         let bytes: f64 = layers
             .iter()
-            .map(|l| 4.0 * n as f64 * (l.c_in as f64 * l.c_out.div_ceil(4) as f64 + l.c_out as f64))
+            .map(|l| {
+                elem * n as f64 * (l.c_in as f64 * l.c_out.div_ceil(4) as f64 + l.c_out as f64)
+            })
             .sum();
         Ok(Self {
             conv,
@@ -639,8 +686,17 @@ mod tests {
             .collect()
     }
 
-    /// Runs `model` on `input` `[C, H, W]` on the GPU and with tract; returns max |Δ| / max |tract|.
+    /// Runs `model` on `input` `[C, H, W]` on the GPU (f32) and with tract; returns max |Δ| / max |tract|.
     fn compare(ctx: &GpuContext, model: &HologramModel, input: &Array3<f32>) -> f32 {
+        compare_in(ctx, model, input, GpuPrecision::F32)
+    }
+
+    fn compare_in(
+        ctx: &GpuContext,
+        model: &HologramModel,
+        input: &Array3<f32>,
+        precision: GpuPrecision,
+    ) -> f32 {
         let (c, h, w) = input.dim();
         let weights = CnnWeights::from_model(model).unwrap();
         assert_eq!(weights.in_channels, c);
@@ -652,7 +708,7 @@ mod tests {
             .storage_with("input", input.as_slice().unwrap())
             .unwrap();
         let out = ctx.storage("out", (6 * h * w * 4) as u64).unwrap();
-        let cnn = GpuCnn::new(ctx, &weights, h, w, &inbuf, &out, GpuPrecision::F32).unwrap();
+        let cnn = GpuCnn::new(ctx, &weights, h, w, &inbuf, &out, precision).unwrap();
         let before = ctx.resource_counts();
         let mut enc = ctx.encoder("cnn");
         cnn.record(&mut enc);
@@ -699,6 +755,33 @@ mod tests {
         let e = compare(&ctx, &cases[0].1, &input);
         println!("holo8 built-in scene: max rel Δ {e:.2e}");
         assert!(e < 1e-4, "{e}");
+    }
+
+    #[test]
+    fn f16_activations_stay_within_a_stated_bound_of_tract_f32() {
+        let Some(ctx) = test_context() else { return };
+        if !ctx.info().shader_f16 {
+            eprintln!("skipping: {} has no SHADER_F16", ctx.info().name);
+            return;
+        }
+        // The built-in scene (real-looking input) through holo8, and random fields through the pre-filter.
+        let frame = crate::scene::procedural::default_scene(48, 64).unwrap();
+        let mut input = Array3::zeros((4, 48, 64));
+        crate::model::contract::pack_rgbd(&frame, input.view_mut()).unwrap();
+        for layers in crate::model::embedded::LAYERS {
+            let m = embedded::hologram_model(*layers, Precision::F32, &config()).unwrap();
+            let e = compare_in(&ctx, &m, &input, GpuPrecision::F16);
+            println!("holo{layers} f16, built-in scene: max rel Δ {e:.2e}");
+            // f16 keeps 11 significant bits (4.9e-4 per rounding); measured 2.8–5.1e-4 on lavapipe.
+            assert!(e < 2e-3, "holo{layers} f16: {e}");
+        }
+        let p = embedded::prefilter_model(6, Precision::F32, &config()).unwrap();
+        let field = Array3::from_shape_vec((6, 48, 64), noise(6 * 48 * 64, 5, 2.0))
+            .unwrap()
+            .mapv(|v| v - 1.0);
+        let e = compare_in(&ctx, &p, &field, GpuPrecision::F16);
+        println!("prefilter 6 mm f16: max rel Δ {e:.2e}");
+        assert!(e < 2e-3, "prefilter f16: {e}");
     }
 
     #[test]

@@ -100,6 +100,7 @@ impl GpuFrameSession {
         width: usize,
         precision: GpuPrecision,
     ) -> Result<Self> {
+        let precision = precision.resolve(ctx.info().shader_f16);
         let cfg = pipeline.config();
         let n = height
             .checked_mul(width)

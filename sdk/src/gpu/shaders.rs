@@ -44,6 +44,13 @@ pub const DOUBLE_PHASE: Shader = shader!("double_phase.wgsl");
 /// One fused layer of the residual CNN: 3×3 convolution, bias, ReLU, residual add, concat (`conv3x3.wgsl`).
 pub const CONV3X3: Shader = shader!("conv3x3.wgsl");
 
+/// [`CONV3X3`] with f16 hidden activations and f16 products, f32 sums (`conv3x3_f16.wgsl`; `SHADER_F16`).
+pub const CONV3X3_F16: Shader = Shader {
+    name: "conv3x3_f16.wgsl",
+    source: include_str!("shaders/conv3x3_f16.wgsl"),
+    f16: true,
+};
+
 /// The CNNs' output stages: tanh heads, the pre-filter's base filter (`heads.wgsl`).
 pub const HEADS: Shader = shader!("heads.wgsl");
 
@@ -56,5 +63,6 @@ pub const ALL: &[Shader] = &[
     BLUR,
     DOUBLE_PHASE,
     CONV3X3,
+    CONV3X3_F16,
     HEADS,
 ];

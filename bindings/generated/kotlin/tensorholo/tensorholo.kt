@@ -2583,6 +2583,11 @@ data class GeneratorConfig (
      * Where frames are computed; `None` = [`Backend::Auto`] ([`GeneratorInfo::backend`] says which runs).
      */
     var `backend`: Backend? = null 
+    , 
+    /**
+     * The GPU CNNs' arithmetic; `None` = [`GpuPrecision::Auto`].
+     */
+    var `gpuPrecision`: GpuPrecision? = null 
     
 ){
     
@@ -2613,6 +2618,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalDouble.read(buf),
             FfiConverterOptionalDouble.read(buf),
             FfiConverterOptionalTypeBackend.read(buf),
+            FfiConverterOptionalTypeGpuPrecision.read(buf),
         )
     }
 
@@ -2630,7 +2636,8 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterDouble.allocationSize(value.`volumeDepthM`) +
             FfiConverterOptionalDouble.allocationSize(value.`zNearM`) +
             FfiConverterOptionalDouble.allocationSize(value.`zFarM`) +
-            FfiConverterOptionalTypeBackend.allocationSize(value.`backend`)
+            FfiConverterOptionalTypeBackend.allocationSize(value.`backend`) +
+            FfiConverterOptionalTypeGpuPrecision.allocationSize(value.`gpuPrecision`)
     )
 
     override fun write(value: GeneratorConfig, buf: ByteBuffer) {
@@ -2648,6 +2655,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalDouble.write(value.`zNearM`, buf)
             FfiConverterOptionalDouble.write(value.`zFarM`, buf)
             FfiConverterOptionalTypeBackend.write(value.`backend`, buf)
+            FfiConverterOptionalTypeGpuPrecision.write(value.`gpuPrecision`, buf)
     }
 }
 
@@ -3373,6 +3381,53 @@ public object FfiConverterTypeFit: FfiConverterRustBuffer<Fit> {
 
 
 /**
+ * The GPU CNNs' arithmetic.
+ */
+
+enum class GpuPrecision {
+    
+    /**
+     * f16 where the GPU has it, else f32 (the default).
+     */
+    AUTO,
+    /**
+     * f32.
+     */
+    F32,
+    /**
+     * f16 activations and products, f32 sums: half the GPU memory; f32 where the GPU lacks f16.
+     */
+    F16;
+
+    
+
+
+    companion object
+}
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeGpuPrecision: FfiConverterRustBuffer<GpuPrecision> {
+    override fun read(buf: ByteBuffer) = try {
+        GpuPrecision.values()[buf.getInt() - 1]
+    } catch (e: IndexOutOfBoundsException) {
+        throw RuntimeException("invalid enum value, something is very wrong!!", e)
+    }
+
+    override fun allocationSize(value: GpuPrecision) = 4UL
+
+    override fun write(value: GpuPrecision, buf: ByteBuffer) {
+        buf.putInt(value.ordinal + 1)
+    }
+}
+
+
+
+
+
+/**
  * Weight format of the shipped CNNs.
  */
 
@@ -3826,6 +3881,38 @@ public object FfiConverterOptionalTypeFit: FfiConverterRustBuffer<Fit?> {
         } else {
             buf.put(1)
             FfiConverterTypeFit.write(value, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterOptionalTypeGpuPrecision: FfiConverterRustBuffer<GpuPrecision?> {
+    override fun read(buf: ByteBuffer): GpuPrecision? {
+        if (buf.get().toInt() == 0) {
+            return null
+        }
+        return FfiConverterTypeGpuPrecision.read(buf)
+    }
+
+    override fun allocationSize(value: GpuPrecision?): ULong {
+        if (value == null) {
+            return 1UL
+        } else {
+            return 1UL + FfiConverterTypeGpuPrecision.allocationSize(value)
+        }
+    }
+
+    override fun write(value: GpuPrecision?, buf: ByteBuffer) {
+        if (value == null) {
+            buf.put(0)
+        } else {
+            buf.put(1)
+            FfiConverterTypeGpuPrecision.write(value, buf)
         }
     }
 }
