@@ -475,6 +475,20 @@ impl HologramGenerator {
                 format!("is a normalised depth in [0, 1] (0 = near), got {focus}"),
             ));
         }
+        #[cfg(feature = "gpu")]
+        {
+            let mut session = self.session()?;
+            let same_size = patterns.codes.dim() == (3, self.config.height, self.config.width);
+            if let (Some(gpu), true) = (session.gpu_frame_mut(), same_size) {
+                match gpu.preview(&patterns.codes, patterns.amplitude_scale, focus as f64) {
+                    Ok(amp) => return Ok(preview_image(&amp)),
+                    Err(HoloError::Gpu(e)) => {
+                        log::warn!("GPU preview failed ({e}); computing it on the CPU")
+                    }
+                    Err(e) => return Err(e),
+                }
+            }
+        }
         let cfg = &self.config;
         let phase = patterns.codes.mapv(|c| LinearLut.phase(c));
         let shown = post_encoding_midpoint(
@@ -495,21 +509,7 @@ impl HologramGenerator {
         let amp = stack
             .first()
             .ok_or_else(|| HoloError::Internal("focal stack returned no image".into()))?;
-        let (_, height, width) = amp.dim();
-        let mut rgba = vec![255u8; height * width * 4];
-        for c in 0..3 {
-            for (px, &a) in rgba
-                .chunks_exact_mut(4)
-                .zip(amp.index_axis(Axis(0), c).iter())
-            {
-                px[c] = amplitude_to_srgb8(a.max(0.0));
-            }
-        }
-        Ok(Preview {
-            width,
-            height,
-            rgba,
-        })
+        Ok(preview_image(amp))
     }
 
     /// Renders `frame` and returns what a viewer sees focused at normalised depth `focus` ∈ [0, 1]
@@ -574,6 +574,25 @@ impl HologramGenerator {
         }
         let session = open_session(&self.pipeline, &self.config)?;
         HologramStream::start(session, self.config, listener, capacity)
+    }
+}
+
+/// An amplitude image `[3, H, W]` as sRGB RGBA8 for the screen.
+fn preview_image(amp: &Array3<f32>) -> Preview {
+    let (_, height, width) = amp.dim();
+    let mut rgba = vec![255u8; height * width * 4];
+    for c in 0..3 {
+        for (px, &a) in rgba
+            .chunks_exact_mut(4)
+            .zip(amp.index_axis(Axis(0), c).iter())
+        {
+            px[c] = amplitude_to_srgb8(a.max(0.0));
+        }
+    }
+    Preview {
+        width,
+        height,
+        rgba,
     }
 }
 

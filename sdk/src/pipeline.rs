@@ -1057,6 +1057,12 @@ impl HologramSession {
         self.gpu.as_ref().map(|g| &g.frame)
     }
 
+    /// The GPU frame, mutable (for [`crate::gpu::session::GpuFrameSession::preview`]).
+    #[cfg(feature = "gpu")]
+    pub fn gpu_frame_mut(&mut self) -> Option<&mut crate::gpu::session::GpuFrameSession> {
+        self.gpu.as_mut().map(|g| &mut g.frame)
+    }
+
     /// Whether GPU frames also download the double phase pattern ([`SlmFrame::phase`]) and the CNN heads
     /// ([`HologramSession::last_heads`]); on by default. Off, a GPU frame downloads only the codes and the
     /// normaliser (what an SLM needs): `phase` and `last_heads` then keep older values. No effect on the CPU.

@@ -267,3 +267,56 @@ fn bad_frames_are_refused_before_the_gpu_and_the_session_stays_usable() {
     assert_eq!(session.render(&frame()).unwrap().backend, Backend::Gpu);
     assert_eq!(session.backend_report().active, Backend::Gpu);
 }
+
+#[test]
+fn gpu_previews_match_the_cpu_simulation_of_the_codes() {
+    use tensorholo::encoding::LinearLut;
+    use tensorholo::optics::{focal_stack, post_encoding_midpoint};
+    let Some(ctx) = gpu_common::context() else {
+        return;
+    };
+    let p = pipeline(&ctx, Backend::Gpu, 6e-3, PrefilterMode::Required);
+    let config = *p.config();
+    let mut session = p.session(H, W).unwrap();
+    let out = session.render(&frame()).unwrap().clone();
+    let shown = post_encoding_midpoint(
+        out.codes.mapv(|c| LinearLut.phase(c)).view(),
+        out.amplitude_scale,
+        &config.optics,
+        config.offset_m,
+        config.options,
+    )
+    .unwrap();
+    let before = ctx.resource_counts();
+    for focus in [0.0, 0.35, 1.0, 0.35] {
+        let cpu = focal_stack(
+            shown.view(),
+            &config.optics,
+            0.0,
+            &[focus],
+            config.options,
+            false,
+        )
+        .unwrap()
+        .remove(0);
+        let gpu = session
+            .gpu_frame_mut()
+            .unwrap()
+            .preview(&out.codes, out.amplitude_scale, focus)
+            .unwrap();
+        let e = max_relative(&gpu, &cpu);
+        println!("preview at d = {focus}: max rel Δ {e:.1e}");
+        assert!(e < 1e-4, "d = {focus}: {e}");
+    }
+    // The first preview builds its buffers and each new focus its transfer functions; a repeated focus
+    // creates nothing.
+    let after = ctx.resource_counts();
+    let gpu = session.gpu_frame_mut().unwrap();
+    gpu.preview(&out.codes, out.amplitude_scale, 0.35).unwrap();
+    assert_eq!(ctx.resource_counts(), after);
+    assert!(after.buffers > before.buffers);
+    let err = gpu
+        .preview(&out.codes, out.amplitude_scale, 1.5)
+        .unwrap_err();
+    assert!(err.to_string().contains("focus"), "{err}");
+}

@@ -19,6 +19,7 @@ use super::cnn::{CnnWeights, GpuCnn, GpuPrecision};
 use super::context::GpuContext;
 use super::encode::{GpuDoublePhase, GpuFieldToPlanes, GpuHeadsToField, GpuPlanesToField};
 use super::fft::{GpuMultiplier, GpuSpectralOp, GpuSpectralPlan, StageCost};
+use super::kernel::Kernel;
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::Carrier;
 use crate::pipeline::{Heads, HologramPipeline, SlmFrame};
@@ -36,6 +37,40 @@ struct Offset {
     _multiplier: GpuMultiplier,
     op: GpuSpectralOp,
 }
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct PreviewParams {
+    n: u32,
+    scale: f32,
+    _pad: [u32; 2],
+}
+
+/// Previews of what the SLM displays (Eq. 8–10): codes → phase-only field × a → Fourier filter →
+/// propagation by −s → (per focus) propagation to z(d) → amplitude. Built on the first request.
+struct Previews {
+    n: usize,
+    codes: wgpu::Buffer,
+    params: wgpu::Buffer,
+    to_field: Kernel,
+    to_field_bind: wgpu::BindGroup,
+    magnitude: Kernel,
+    magnitude_bind: wgpu::BindGroup,
+    /// The displayed midpoint field and a copy propagated to each focus.
+    midpoint: wgpu::Buffer,
+    focused: wgpu::Buffer,
+    amplitude: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    filter: (GpuSpectralPlan, GpuMultiplier, GpuSpectralOp),
+    back: Option<(GpuMultiplier, GpuSpectralOp)>,
+    /// The plan of the propagations (the CPU propagator's padding) and the transfer functions per focus.
+    plan: GpuSpectralPlan,
+    props: Vec<crate::optics::Propagator>,
+    focus: Vec<(u64, GpuMultiplier, GpuSpectralOp)>,
+}
+
+/// Most focus depths whose transfer functions a session keeps on the GPU (the oldest is dropped).
+const MAX_CACHED_FOCUS: usize = 8;
 
 /// One stage's name, work and traffic per frame, for `holo bench --backend gpu`.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -67,6 +102,10 @@ pub struct GpuFrameSession {
     staging_phase: wgpu::Buffer,
     staging_heads: wgpu::Buffer,
     heads_host: Vec<f32>,
+    setup: crate::optics::OpticalSetup,
+    options: crate::optics::PropagationOptions,
+    offset_m: f64,
+    previews: Option<Previews>,
 }
 
 impl std::fmt::Debug for GpuFrameSession {
@@ -176,7 +215,176 @@ impl GpuFrameSession {
             staging_phase,
             staging_heads,
             heads_host: vec![0.0; 6 * n],
+            setup: cfg.optics,
+            options: cfg.options,
+            offset_m: cfg.offset_m,
+            previews: None,
         })
+    }
+
+    fn build_previews(&self) -> Result<Previews> {
+        let ctx = &self.ctx;
+        let (h, w) = (self.height, self.width);
+        let n = 3 * h * w;
+        let codes = ctx.storage("preview codes", n.div_ceil(4) as u64 * 4)?;
+        let params = ctx.uniform(
+            "preview",
+            &PreviewParams {
+                n: n as u32,
+                scale: 1.0,
+                _pad: [0; 2],
+            },
+        )?;
+        let midpoint = ctx.storage("preview midpoint", (n * 8) as u64)?;
+        let focused = ctx.storage("preview focused", (n * 8) as u64)?;
+        let amplitude = ctx.storage("preview amplitude", (n * 4) as u64)?;
+        let read = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
+        let staging = ctx.buffer("preview read-back", (n * 4) as u64, read)?;
+        let to_field = ctx.kernel(&super::shaders::PREVIEW, "codes_to_field")?;
+        let to_field_bind = ctx.bind_at(&to_field, &[(0, &params), (1, &codes), (2, &midpoint)]);
+        let magnitude = ctx.kernel(&super::shaders::PREVIEW, "magnitude")?;
+        let magnitude_bind =
+            ctx.bind_at(&magnitude, &[(0, &params), (2, &focused), (3, &amplitude)]);
+        let fourier = crate::optics::FourierFilter::new(h, w)?;
+        let filter_plan = GpuSpectralPlan::new(ctx, fourier.plan(), 3)?;
+        let m = fourier.multiplier();
+        let filter_mult = filter_plan.multiplier(ctx, &[m, m, m])?;
+        let filter_op = filter_plan.bind(ctx, &midpoint, &filter_mult)?;
+        let props = self.setup.propagators(h, w, self.options)?;
+        let plan = GpuSpectralPlan::new(ctx, props[0].plan(), 3)?;
+        let back = if self.offset_m != 0.0 {
+            let mut tfs = Vec::new();
+            for p in &props {
+                tfs.push(p.transfer_function(-self.offset_m, Carrier::Remove)?);
+            }
+            let values: Vec<&[num_complex::Complex32]> = tfs.iter().map(|t| t.values()).collect();
+            let mult = plan.multiplier(ctx, &values)?;
+            let op = plan.bind(ctx, &midpoint, &mult)?;
+            Some((mult, op))
+        } else {
+            None
+        };
+        Ok(Previews {
+            n,
+            codes,
+            params,
+            to_field,
+            to_field_bind,
+            magnitude,
+            magnitude_bind,
+            midpoint,
+            focused,
+            amplitude,
+            staging,
+            filter: (filter_plan, filter_mult, filter_op),
+            back,
+            plan,
+            props: props.to_vec(),
+            focus: Vec::new(),
+        })
+    }
+
+    /// What a viewer sees of the SLM codes `codes` `[3, H, W]` (linear LUT) with the encoding's normaliser
+    /// `amplitude_scale`, focused at normalised depth `focus` ∈ [0, 1]: the amplitude `[3, H, W]` of the
+    /// phase-only field after the Fourier filter (Eq. 8–9), brought back by −s and propagated to `z(focus)`
+    /// (Eq. 10), as [`crate::optics::post_encoding_midpoint`] then [`crate::optics::focal_stack`] compute on
+    /// the CPU. The first call builds the preview buffers; each new focus uploads its transfer functions once
+    /// (the last 8 are kept).
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for a focus outside [0, 1] or a non-positive scale;
+    /// [`HoloError::ShapeMismatch`] for codes of another size; [`HoloError::Gpu`].
+    pub fn preview(
+        &mut self,
+        codes: &Array3<u8>,
+        amplitude_scale: f32,
+        focus: f64,
+    ) -> Result<Array3<f32>> {
+        if !(0.0..=1.0).contains(&focus) {
+            return Err(invalid(
+                "focus",
+                format!("is a normalised depth in [0, 1] (0 = near), got {focus}"),
+            ));
+        }
+        if !(amplitude_scale > 0.0 && amplitude_scale.is_finite()) {
+            return Err(invalid(
+                "amplitude_scale",
+                format!("must be > 0, got {amplitude_scale}"),
+            ));
+        }
+        let want = [3, self.height, self.width];
+        if codes.shape() != want {
+            return Err(HoloError::ShapeMismatch {
+                what: "preview codes vs the session's [3, H, W]".into(),
+                expected: want.to_vec(),
+                got: codes.shape().to_vec(),
+            });
+        }
+        if self.previews.is_none() {
+            self.previews = Some(self.build_previews()?);
+        }
+        let setup = self.setup;
+        let ctx = self.ctx.clone();
+        let p = self
+            .previews
+            .as_mut()
+            .ok_or_else(|| HoloError::Internal("previews".into()))?;
+        let key = focus.to_bits();
+        if !p.focus.iter().any(|(k, _, _)| *k == key) {
+            let z = setup.depth_to_z(focus);
+            let mut tfs = Vec::new();
+            for prop in &p.props {
+                tfs.push(prop.transfer_function(z, Carrier::Remove)?);
+            }
+            let values: Vec<&[num_complex::Complex32]> = tfs.iter().map(|t| t.values()).collect();
+            let mult = p.plan.multiplier(&ctx, &values)?;
+            let op = p.plan.bind(&ctx, &p.focused, &mult)?;
+            if p.focus.len() == MAX_CACHED_FOCUS {
+                p.focus.remove(0);
+            }
+            p.focus.push((key, mult, op));
+        }
+        let mut bytes = codes
+            .as_slice()
+            .ok_or_else(|| HoloError::Internal("codes not contiguous".into()))?
+            .to_vec();
+        bytes.resize(p.n.div_ceil(4) * 4, 0);
+        ctx.write(&p.codes, 0, &bytes);
+        ctx.write(
+            &p.params,
+            0,
+            bytemuck::bytes_of(&PreviewParams {
+                n: p.n as u32,
+                scale: amplitude_scale,
+                _pad: [0; 2],
+            }),
+        );
+        let mut encoder = ctx.encoder("preview");
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            p.to_field
+                .dispatch(&mut pass, &p.to_field_bind, super::kernel::grid_1d(p.n));
+        }
+        p.filter.2.record(&mut encoder);
+        if let Some((_, op)) = &p.back {
+            op.record(&mut encoder);
+        }
+        encoder.copy_buffer_to_buffer(&p.midpoint, 0, &p.focused, 0, (p.n * 8) as u64);
+        if let Some((_, _, op)) = p.focus.iter().find(|(k, _, _)| *k == key) {
+            op.record(&mut encoder);
+        }
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            p.magnitude
+                .dispatch(&mut pass, &p.magnitude_bind, super::kernel::grid_1d(p.n));
+        }
+        encoder.copy_buffer_to_buffer(&p.amplitude, 0, &p.staging, 0, (p.n * 4) as u64);
+        ctx.submit_and_wait(encoder)?;
+        let mut out = Array3::<f32>::zeros((3, self.height, self.width));
+        let dst = out
+            .as_slice_mut()
+            .ok_or_else(|| HoloError::Internal("fresh array".into()))?;
+        ctx.read_staging(&p.staging, bytemuck::cast_slice_mut(dst))?;
+        Ok(out)
     }
 
     /// The context (adapter) this session runs on.

@@ -54,6 +54,9 @@ pub const CONV3X3_F16: Shader = Shader {
 /// The CNNs' output stages: tanh heads, the pre-filter's base filter (`heads.wgsl`).
 pub const HEADS: Shader = shader!("heads.wgsl");
 
+/// Previews: SLM codes → displayed field, field → amplitude (`preview.wgsl`).
+pub const PREVIEW: Shader = shader!("preview.wgsl");
+
 /// Every shader of the GPU path.
 pub const ALL: &[Shader] = &[
     UTIL,
@@ -65,4 +68,5 @@ pub const ALL: &[Shader] = &[
     CONV3X3,
     CONV3X3_F16,
     HEADS,
+    PREVIEW,
 ];

@@ -50,6 +50,12 @@ impl FourierFilter {
         self.plan.apply(field, &self.multiplier, scratch)
     }
 
+    /// The spectral multiplier [`FourierFilter::apply`] uses: the aperture with the inverse-FFT normalisation,
+    /// in [`SpectralPlan`] layout.
+    pub fn multiplier(&self) -> &[Complex32] {
+        &self.multiplier
+    }
+
     /// The 0/1 aperture in [`SpectralPlan`] layout (transposed, FFT order).
     pub fn mask(&self) -> &[f32] {
         &self.mask
