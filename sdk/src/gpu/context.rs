@@ -70,7 +70,7 @@ struct Counters {
 /// `Send + Sync`.
 ///
 /// wgpu reports validation errors to a callback and would panic by default: the context records them
-/// instead, and [`GpuContext::wait`] returns the first as [`HoloError::Gpu`]. A lost device (driver reset,
+/// instead, and the next submission returns the first as [`HoloError::Gpu`]. A lost device (driver reset,
 /// app backgrounded on iOS) makes every later call fail with [`HoloError::Gpu`]; the pipeline then falls
 /// back to the CPU (`Backend::Auto`).
 #[derive(Clone)]
@@ -542,7 +542,7 @@ impl GpuContext {
     /// Test and debug helper (allocates): the first `len` elements of `buffer` as `T`s, through a new staging
     /// buffer. Frames use preallocated staging buffers instead.
     ///
-    /// Errors: as [`GpuContext::read_staging`].
+    /// Errors: [`HoloError::Gpu`] if the copy or the mapping fails.
     pub fn read_buffer<T: bytemuck::Pod + Default>(
         &self,
         buffer: &wgpu::Buffer,

@@ -7,9 +7,8 @@ pub const WORKGROUP_1D: u32 = 256;
 /// Most workgroups per grid dimension that every adapter accepts (WebGPU's minimum limit).
 pub const MAX_GROUPS_PER_DIM: u32 = 65_535;
 
-/// A compute pipeline built from one WGSL entry point ([`super::GpuContext::kernel`]); its bind group layout
-/// is derived from the shader (`layout: None`), so bindings are set by position
-/// ([`super::GpuContext::bind`]).
+/// A compute pipeline built from one WGSL entry point (made by the context, which counts it); its bind group
+/// layout is derived from the shader (`layout: None`), so bind groups are made by binding number.
 #[derive(Debug, Clone)]
 pub struct Kernel {
     shader: &'static str,
