@@ -360,10 +360,10 @@ impl GpuDoublePhase {
                 bytes.len()
             )));
         }
-        let v: Vec<f32> = bytes
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect();
+        let mut v = [0.0f32; STATS_BYTES as usize / 4];
+        for (x, c) in v.iter_mut().zip(bytes.chunks_exact(4)) {
+            *x = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+        }
         let a = v[0];
         if v[7] != 0.0 || !(a > 0.0 && a.is_finite()) || v[1..4].iter().any(|m| !m.is_finite()) {
             return Err(HoloError::InvalidData(

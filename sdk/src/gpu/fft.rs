@@ -367,6 +367,26 @@ impl GpuSpectralPlan {
         })
     }
 
+    /// Uploads the angular-spectrum transfer functions (Eq. 2, with `carrier`) of `props` (one propagator per
+    /// channel, planned like this plan) for `distance_m` metres: [`crate::optics::Propagator::transfer_function`]
+    /// computed on the CPU, then [`GpuSpectralPlan::multiplier`].
+    ///
+    /// Errors: as [`crate::optics::Propagator::transfer_function`] and [`GpuSpectralPlan::multiplier`].
+    pub fn transfer_functions(
+        &self,
+        ctx: &GpuContext,
+        props: &[crate::optics::Propagator],
+        distance_m: f64,
+        carrier: crate::optics::Carrier,
+    ) -> Result<GpuMultiplier> {
+        let tfs = props
+            .iter()
+            .map(|p| p.transfer_function(distance_m, carrier))
+            .collect::<Result<Vec<_>>>()?;
+        let values: Vec<&[Complex32]> = tfs.iter().map(|t| t.values()).collect();
+        self.multiplier(ctx, &values)
+    }
+
     /// Binds an operation `field ← F⁻¹{F{field}·M}` on `field` (complex `[C, H, W]`) with `multiplier`.
     ///
     /// Errors: [`HoloError::Gpu`].

@@ -155,12 +155,7 @@ impl GpuFrameSession {
         let offset = if cfg.offset_m != 0.0 {
             let props = cfg.optics.propagators(height, width, cfg.options)?;
             let plan = GpuSpectralPlan::new(ctx, props[0].plan(), 3)?;
-            let mut tfs = Vec::with_capacity(3);
-            for p in &props {
-                tfs.push(p.transfer_function(cfg.offset_m, Carrier::Remove)?);
-            }
-            let values: Vec<&[num_complex::Complex32]> = tfs.iter().map(|t| t.values()).collect();
-            let multiplier = plan.multiplier(ctx, &values)?;
+            let multiplier = plan.transfer_functions(ctx, &props, cfg.offset_m, Carrier::Remove)?;
             let op = plan.bind(ctx, &field, &multiplier)?;
             Some(Offset {
                 _plan: plan,
@@ -253,12 +248,7 @@ impl GpuFrameSession {
         let props = self.setup.propagators(h, w, self.options)?;
         let plan = GpuSpectralPlan::new(ctx, props[0].plan(), 3)?;
         let back = if self.offset_m != 0.0 {
-            let mut tfs = Vec::new();
-            for p in &props {
-                tfs.push(p.transfer_function(-self.offset_m, Carrier::Remove)?);
-            }
-            let values: Vec<&[num_complex::Complex32]> = tfs.iter().map(|t| t.values()).collect();
-            let mult = plan.multiplier(ctx, &values)?;
+            let mult = plan.transfer_functions(ctx, &props, -self.offset_m, Carrier::Remove)?;
             let op = plan.bind(ctx, &midpoint, &mult)?;
             Some((mult, op))
         } else {
@@ -331,12 +321,9 @@ impl GpuFrameSession {
         let key = focus.to_bits();
         if !p.focus.iter().any(|(k, _, _)| *k == key) {
             let z = setup.depth_to_z(focus);
-            let mut tfs = Vec::new();
-            for prop in &p.props {
-                tfs.push(prop.transfer_function(z, Carrier::Remove)?);
-            }
-            let values: Vec<&[num_complex::Complex32]> = tfs.iter().map(|t| t.values()).collect();
-            let mult = p.plan.multiplier(&ctx, &values)?;
+            let mult = p
+                .plan
+                .transfer_functions(&ctx, &p.props, z, Carrier::Remove)?;
             let op = p.plan.bind(&ctx, &p.focused, &mult)?;
             if p.focus.len() == MAX_CACHED_FOCUS {
                 p.focus.remove(0);
@@ -472,7 +459,7 @@ impl GpuFrameSession {
             );
         }
         self.ctx.submit_and_wait(encoder)?;
-        let mut stats = vec![0u8; self.dp.stats_bytes() as usize];
+        let mut stats = [0u8; super::encode::STATS_BYTES as usize];
         self.ctx.read_staging(&self.staging_stats, &mut stats)?;
         let (a, mean) = GpuDoublePhase::read_stats(&stats)?;
         let codes = out
