@@ -95,6 +95,7 @@ impl From<tensorholo::HoloError> for TensorholoError {
             | E::Io { .. }
             | E::Image { .. }
             | E::Npy { .. }
+            | E::Calibration { .. }
             | E::WouldOverwriteInput(_) => Self::InvalidInput { message },
             E::ModelLoad { .. } | E::ModelContract { .. } | E::ModelMetadata { .. } => {
                 Self::InvalidModel { message }

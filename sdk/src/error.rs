@@ -97,6 +97,15 @@ pub enum HoloError {
     /// The object that returned it may have to be recreated (the message says so where it applies).
     #[error("internal error (a bug, please report it): {0}")]
     Internal(String),
+    /// A display calibration file (`.holocal`, [`crate::slm::DisplayCalibration`]) is not one, is truncated,
+    /// corrupt (checksum), of another format version or inconsistent.
+    #[error("cannot load display calibration `{source_name}`: {reason}")]
+    Calibration {
+        /// The file path, or `<bytes>` for an in-memory file.
+        source_name: String,
+        /// What is wrong.
+        reason: String,
+    },
     /// Refusing to overwrite a file the user passed in as input.
     #[error("refusing to overwrite input file `{0}`")]
     WouldOverwriteInput(PathBuf),

@@ -303,3 +303,96 @@ pub(crate) fn decode_image(path: &Path, bytes: &[u8]) -> Result<image::DynamicIm
             source,
         })
 }
+
+/// A temporary name beside `path` in the same folder (`.<name>.tmp-<pid>-<n>`), for write-then-rename.
+pub(crate) fn temporary_sibling(path: &Path) -> PathBuf {
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let name = path
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    path.with_file_name(format!(".{name}.tmp-{}-{n}", std::process::id()))
+}
+
+/// Writes `bytes` to `path` atomically: to a temporary file in the same folder, flushed to disk, then renamed
+/// over `path`, so that a reader (or a crash) sees the old file or the new one, never a partial one.
+///
+/// # Errors
+/// [`HoloError::Io`] naming `path` (the temporary file is removed on failure).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let tmp = temporary_sibling(path);
+    let result = (|| {
+        let mut f = File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    result.map_err(|source| {
+        let _ = std::fs::remove_file(&tmp);
+        HoloError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    })
+}
+
+/// Writes a little-endian float32 `.npy` file of `shape` whose C-order data `fill` produces chunk by chunk
+/// (`fill(start, buffer)` writes elements `start..start + buffer.len()`), so that arrays larger than memory
+/// can be written. The file appears atomically (temporary name, then renamed).
+///
+/// # Errors
+/// [`HoloError::Io`] naming `path`; whatever `fill` returns.
+pub fn write_f32_npy_streaming(
+    path: &Path,
+    shape: &[usize],
+    chunk: usize,
+    mut fill: impl FnMut(usize, &mut [f32]) -> Result<()>,
+) -> Result<()> {
+    let total = shape
+        .iter()
+        .try_fold(1usize, |a, &b| a.checked_mul(b))
+        .ok_or_else(|| invalid("shape", format!("{shape:?} overflows")))?;
+    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+    let tuple = if dims.len() == 1 {
+        format!("({},)", dims[0])
+    } else {
+        format!("({})", dims.join(", "))
+    };
+    let mut header =
+        format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {tuple}, }}").into_bytes();
+    // Magic (6) + version (2) + length (2) + header, padded with spaces to a multiple of 64, newline last.
+    let pad = (64 - (10 + header.len() + 1) % 64) % 64;
+    header.extend(std::iter::repeat_n(b' ', pad));
+    header.push(b'\n');
+    let tmp = temporary_sibling(path);
+    let io_err = |source| HoloError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let result = (|| -> Result<()> {
+        let mut w = BufWriter::new(File::create(&tmp).map_err(io_err)?);
+        w.write_all(b"\x93NUMPY\x01\x00").map_err(io_err)?;
+        w.write_all(&(header.len() as u16).to_le_bytes())
+            .map_err(io_err)?;
+        w.write_all(&header).map_err(io_err)?;
+        let mut buf = vec![0f32; chunk.max(1).min(total.max(1))];
+        let mut start = 0;
+        while start < total {
+            let n = buf.len().min(total - start);
+            fill(start, &mut buf[..n])?;
+            for v in &buf[..n] {
+                w.write_all(&v.to_le_bytes()).map_err(io_err)?;
+            }
+            start += n;
+        }
+        w.flush().map_err(io_err)?;
+        w.get_ref().sync_all().map_err(io_err)?;
+        drop(w);
+        std::fs::rename(&tmp, path).map_err(io_err)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}

@@ -17,6 +17,8 @@
 //! - [`pipeline`]: the real-time pipeline: [`pipeline::HologramSession`] turns RGB-D frames into SLM codes
 //!   with the CNNs (hologram CNN → offset → pre-filter CNN → double phase → LUT), frame by frame or streamed.
 //! - [`io`]: PNG and `.npy` input/output.
+//! - [`slm`]: phase look-up tables (global, per-pixel), the display calibration file, calibration from
+//!   captures (Eq. 12–13), the laser intensity map, the deep-black test (Fig. 11), a simulated SLM.
 #![cfg_attr(
     feature = "research",
     doc = "- [`dataset`] (feature `research`): the training dataset (MIT-CGH-4K-V2 style): random LDIs + \
@@ -47,6 +49,7 @@ pub mod optics;
 pub mod pipeline;
 pub mod reference;
 pub mod scene;
+pub mod slm;
 mod splitmix;
 pub mod synthesis;
 
