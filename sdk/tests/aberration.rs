@@ -100,8 +100,7 @@ fn seen(hologram: &Array3<Complex32>, setup: &OpticalSetup, d: f64, lens: bool) 
         .propagators(h, w, PropagationOptions::default())
         .unwrap();
     let mut out = Array3::<f32>::zeros((3, h, w));
-    for c in 0..3 {
-        let prop = &props[c];
+    for (c, prop) in props.iter().enumerate() {
         let plan = prop.plan();
         let mut scratch = plan.scratch();
         let mut spectrum = vec![Complex32::default(); plan.spectrum_len()];

@@ -386,8 +386,7 @@ impl AberrationProfile {
         let s = &self.samples;
         let first = &s[0];
         let last = &s[s.len() - 1];
-        if !(distance_m > first.distance_m) {
-            // Also NaN: the nearest end.
+        if distance_m.is_nan() || distance_m <= first.distance_m {
             return first.coefficients[c];
         }
         if distance_m >= last.distance_m {
@@ -1099,16 +1098,17 @@ mod tests {
         assert!(corrected_subhologram(8, 8, 8e-6, 20e-6, 1e-3, &k).is_err());
     }
 
-    /// A small two-layer scene: a textured far plane and a nearer disc that hides part of it.
-    fn scene(
-        n: usize,
-    ) -> (
+    /// Far amplitude, far depth, near amplitude, near depth, near validity.
+    type Scene = (
         Array3<f32>,
         Array2<f32>,
         Array3<f32>,
         Array2<f32>,
         Array2<bool>,
-    ) {
+    );
+
+    /// A small two-layer scene: a textured far plane and a nearer disc that hides part of it.
+    fn scene(n: usize) -> Scene {
         let far_amp = Array3::from_shape_fn((3, n, n), |(c, y, x)| {
             0.5 + 0.4 * ((x as f32 * 0.7 + c as f32).sin() * (y as f32 * 0.45).cos())
         });
