@@ -13,7 +13,7 @@ use tensorholo::dataset::{
 };
 use tensorholo::io::ensure_not_input;
 use tensorholo::scene::RandomSceneConfig;
-use tensorholo::synthesis::SmLbm;
+use tensorholo::synthesis::{AberrationCorrection, SmLbm};
 
 /// `MIN-MAX` (inclusive) or a single number.
 fn parse_count_range(s: &str) -> std::result::Result<[usize; 2], String> {
@@ -58,9 +58,26 @@ pub struct DatasetArgs {
     /// LDI layers kept per pixel (paper: 5).
     #[arg(long, default_value_t = 5)]
     layers: usize,
-    /// SM-LBM depth planes of the ground-truth hologram (paper: 2048 suffices; 10000 as a showcase).
+    /// SM-LBM depth planes of the ground-truth hologram (paper: 2048 suffices; 10000 as a showcase). With
+    /// --aberration the cost grows as G(G+1)/2 propagations per colour for G non-empty planes
+    /// (e.g. 131,328 for 512 planes): lower it.
     #[arg(long, default_value_t = 2048)]
     levels: usize,
+    /// Aberration profile (JSON, docs/ABERRATION.md): the ground truth is the aberration-corrected SM-LBM of
+    /// Eq. 5 (each depth plane corrected at its distance from the SLM plane, --offset-mm). Costs G(G+1)/2
+    /// propagations per colour instead of G: lower --levels; a --levels whose worst case exceeds 5,000,000
+    /// per colour (above 3161) is refused.
+    #[arg(long, value_name = "FILE")]
+    aberration: Option<PathBuf>,
+    /// With --aberration: distance in millimetres from the midpoint plane to the SLM plane of the display
+    /// the correction is for (a plane at z is corrected with the coefficients at z - offset).
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        allow_hyphen_values = true,
+        requires = "aberration"
+    )]
+    offset_mm: f64,
     /// Base seed; sample i of a split is regenerated exactly from (seed, split, i).
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -105,6 +122,8 @@ Examples:
       the paper's MIT-CGH-4K-V2 configuration
   holo dataset --out data/photos --photos ~/Pictures/textures --photo-probability 0.7
       shapes textured with random crops of your photos
+  holo dataset --out data/corrected --aberration calibration.json --offset-mm 6 --levels 256
+      aberration-corrected ground truth (Eq. 5) for a display whose SLM is 6 mm from the midpoint
 
 Outputs in --out:
   manifest.json            format, generator (version, git commit), seed, splits and shard files,
@@ -175,9 +194,22 @@ fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
         options: args.optics.options(),
         silhouette_masks: true,
     };
+    let aberration = match &args.aberration {
+        Some(path) => {
+            if !args.offset_mm.is_finite() {
+                bail!("--offset-mm must be a finite number of millimetres");
+            }
+            Some(AberrationCorrection {
+                profile: crate::aberration::load(path)?,
+                slm_offset_m: args.offset_mm * 1e-3,
+            })
+        }
+        None => None,
+    };
     let config = DatasetConfig {
         scene,
         synthesis,
+        aberration,
         seed: args.seed,
         train: args.train,
         val: args.val,
@@ -186,6 +218,13 @@ fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
         compress: !args.uncompressed,
     };
     config.validate()?;
+    if let Some(c) = config.corrected_synthesis() {
+        crate::aberration::check_cost(
+            c.worst_case_propagation_count(),
+            args.levels,
+            "worst case of a random scene",
+        )?;
+    }
     Ok(config)
 }
 
@@ -255,6 +294,7 @@ fn run_in_pool(args: &DatasetArgs, config: &DatasetConfig) -> Result<()> {
         overwrite: args.force,
         git_commit: git_commit(),
         command: std::env::args().collect(),
+        aberration_file: args.aberration.clone(),
     };
     let manifest = generate(&args.out, config, &options, &|done, _| {
         bar.set_position(done)

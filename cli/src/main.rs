@@ -3,6 +3,7 @@
 //! Every subcommand is a thin layer over the `tensorholo` public API: argument parsing, progress output and
 //! files. The physics lives in the SDK.
 
+mod aberration;
 mod args;
 mod baselines;
 mod bench;

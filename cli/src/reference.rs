@@ -17,9 +17,17 @@ use tensorholo::synthesis::{ldi_layers, SceneLayer, SmLbm};
 pub struct ReferenceArgs {
     #[command(flatten)]
     scene: crate::args::SceneArgs,
-    /// Number of SM-LBM depth planes (the paper: 2048 suffices, 10000 as a showcase).
+    /// Number of SM-LBM depth planes (the paper: 2048 suffices, 10000 as a showcase). With --aberration the
+    /// cost grows as G(G+1)/2 propagations per colour for G non-empty planes
+    /// (e.g. 131,328 for 512 planes): lower it.
     #[arg(long, default_value_t = 2048)]
     levels: usize,
+    /// Aberration profile (JSON, docs/ABERRATION.md): synthesise with the aberration-corrected SM-LBM of
+    /// Eq. 5, each depth plane corrected with the Zernike coefficients at its distance from the SLM plane
+    /// (--offset-mm). Costs G(G+1)/2 propagations per colour instead of G: lower --levels; runs above
+    /// 5,000,000 per colour are refused.
+    #[arg(long, value_name = "FILE")]
+    aberration: Option<PathBuf>,
     #[command(flatten)]
     encoding: crate::args::EncodingArgs,
     /// Distance from the midpoint hologram to the SLM plane in millimetres (paper: 0, 6 or 12).
@@ -45,7 +53,9 @@ Examples:
   holo reference --rgb photo.png --depth depth.png --depth-encoding mm16 --size 384x512 --out out/photo
       a depth-camera frame; metric range from the 1st/99th percentiles of its depths
   holo reference --rgb derived_rgb_576x768.png --depth disparity_aux_576x768.jpg \\
-      --depth-encoding iphone-disparity --offset-mm 6 --encoding bl-dpm --out out/vase";
+      --depth-encoding iphone-disparity --offset-mm 6 --encoding bl-dpm --out out/vase
+  holo reference --aberration calibration.json --levels 256 --offset-mm 6 --out out/corrected
+      aberration-corrected SM-LBM (Eq. 5): each plane corrected at its distance from the SLM";
 
 /// A progress bar on stderr for long SM-LBM runs.
 fn progress_bar(total: u64) -> ProgressBar {
@@ -79,7 +89,12 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         encoding,
     };
 
-    let inputs = args.scene.inputs();
+    let aberration = match &args.aberration {
+        Some(path) => Some((path, crate::aberration::load(path)?)),
+        None => None,
+    };
+    let mut inputs = args.scene.inputs();
+    inputs.extend(args.aberration.iter().map(PathBuf::as_path));
     crate::output::prepare(&args.out, &inputs)?;
 
     let t = Instant::now();
@@ -104,9 +119,23 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         Some(ldi) => ldi_layers(ldi),
         None => vec![SceneLayer::from(&frame)],
     };
-    let total = 3 * pipeline.synthesis.propagation_count(&layers)? as u64;
-    let bar = progress_bar(total);
-    let hologram = pipeline.run(&layers, &|done, _| bar.set_position(done))?;
+    let corrected = aberration
+        .as_ref()
+        .map(|(_, profile)| pipeline.aberration_corrected(profile));
+    let per_colour = match &corrected {
+        Some(c) => {
+            let n = c.propagation_count(&layers)?;
+            crate::aberration::check_cost(n, args.levels, "this scene")?;
+            n
+        }
+        None => pipeline.synthesis.propagation_count(&layers)?,
+    };
+    let bar = progress_bar(3 * per_colour as u64);
+    let hologram = match &aberration {
+        Some((_, profile)) => pipeline
+            .run_aberration_corrected(&layers, profile, &|done, _| bar.set_position(done))?,
+        None => pipeline.run(&layers, &|done, _| bar.set_position(done))?,
+    };
     bar.finish_and_clear();
     log::info!(
         "SM-LBM {:.2} s, offset {:.3} s, encoding {:.3} s",
@@ -139,6 +168,10 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         "input": source,
         "size": [frame.height(), frame.width()],
         "parameters": pipeline,
+        "aberration": match (&aberration, &corrected) {
+            (Some((path, _)), Some(c)) => crate::aberration::report(path, c, per_colour),
+            _ => serde_json::Value::Null,
+        },
         "timings_s": {
             "load": load_s,
             "synthesis": hologram.timings.synthesis_s,

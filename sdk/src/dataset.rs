@@ -34,7 +34,9 @@ use crate::error::{invalid, HoloError, Result};
 use crate::io::{ensure_not_input, save_amplitude_png};
 use crate::scene::{LayeredDepthImage, LdiLayer, RandomSceneConfig, RandomSceneGenerator};
 use crate::splitmix::splitmix64;
-use crate::synthesis::{ldi_layers, SmLbm};
+use crate::synthesis::{
+    ldi_layers, AberrationCorrectedSmLbm, AberrationCorrection, AberrationProfile, SmLbm,
+};
 
 /// Value of the manifest's `format` field.
 pub const FORMAT_NAME: &str = "tensorholo-ldi-hologram-dataset";
@@ -94,6 +96,9 @@ pub struct DatasetConfig {
     pub scene: RandomSceneConfig,
     /// Ground-truth hologram synthesis: planes (`levels`), optics, propagation options.
     pub synthesis: SmLbm,
+    /// With `Some`, the ground truth is the aberration-corrected SM-LBM of Eq. 5
+    /// ([`AberrationCorrectedSmLbm`], `G·(G + 1)/2` propagations per colour; `docs/ABERRATION.md`).
+    pub aberration: Option<AberrationCorrection>,
     /// Base seed ([`sample_seed`]).
     pub seed: u64,
     /// Training samples (paper: 3800).
@@ -114,6 +119,7 @@ impl Default for DatasetConfig {
         Self {
             scene: RandomSceneConfig::default(),
             synthesis: SmLbm::default(),
+            aberration: None,
             seed: 1,
             train: 8,
             val: 2,
@@ -125,6 +131,13 @@ impl Default for DatasetConfig {
 }
 
 impl DatasetConfig {
+    /// The aberration-corrected synthesis, when [`DatasetConfig::aberration`] is set.
+    pub fn corrected_synthesis(&self) -> Option<AberrationCorrectedSmLbm> {
+        self.aberration
+            .clone()
+            .map(|a| self.synthesis.with_aberration(a))
+    }
+
     /// Number of samples of `split`.
     pub fn count(&self, split: Split) -> usize {
         match split {
@@ -137,11 +150,15 @@ impl DatasetConfig {
     /// Checks the configuration.
     ///
     /// Errors: [`HoloError::InvalidParameter`] for a bad scene configuration
-    /// ([`RandomSceneConfig::validate`]), bad synthesis parameters (`levels`, optics), `shard_size`
+    /// ([`RandomSceneConfig::validate`]), bad synthesis parameters (`levels`, optics; the aberration
+    /// correction's offset and display, [`AberrationCorrectedSmLbm::validate`]), `shard_size`
     /// of 0, or no sample at all (`train + val + test = 0`), or more than 10⁸ samples per split.
     pub fn validate(&self) -> Result<()> {
         self.scene.validate()?;
         self.synthesis.validate()?;
+        if let Some(a) = self.corrected_synthesis() {
+            a.validate()?;
+        }
         if self.shard_size == 0 {
             return Err(invalid("shard_size", "must be at least 1"));
         }
@@ -226,6 +243,7 @@ pub struct Sample {
 pub struct SampleGenerator {
     scenes: RandomSceneGenerator,
     synthesis: SmLbm,
+    corrected: Option<AberrationCorrectedSmLbm>,
     seed: u64,
 }
 
@@ -238,6 +256,7 @@ impl SampleGenerator {
         Ok(Self {
             scenes: RandomSceneGenerator::new(config.scene.clone())?,
             synthesis: config.synthesis,
+            corrected: config.corrected_synthesis(),
             seed: config.seed,
         })
     }
@@ -255,16 +274,21 @@ impl SampleGenerator {
             .generate(sample_seed(self.seed, split, index as u64))
     }
 
-    /// Sample `index` of `split`: its LDI and the SM-LBM midpoint hologram of all its layers.
+    /// Sample `index` of `split`: its LDI and the SM-LBM midpoint hologram of all its layers (aberration
+    /// corrected, Eq. 5, when the configuration says so).
     ///
-    /// Errors: as [`RandomSceneGenerator::generate`] and [`SmLbm::synthesize`].
+    /// Errors: as [`RandomSceneGenerator::generate`], [`SmLbm::synthesize`] and
+    /// [`AberrationCorrectedSmLbm::synthesize`].
     pub fn sample(&self, split: Split, index: usize) -> Result<Sample> {
         let t = Instant::now();
         let seed = sample_seed(self.seed, split, index as u64);
         let ldi = self.scenes.generate(seed)?;
         let layers = ldi_layers(&ldi);
         let nonempty_planes = self.synthesis.propagation_count(&layers)?;
-        let midpoint = self.synthesis.synthesize(&layers, &|_, _| {})?;
+        let midpoint = match &self.corrected {
+            Some(c) => c.synthesize(&layers, &|_, _| {})?,
+            None => self.synthesis.synthesize(&layers, &|_, _| {})?,
+        };
         drop(layers);
         Ok(Sample {
             split,
@@ -542,6 +566,22 @@ pub struct SynthesisInfo {
     pub hologram_plane: String,
     /// Initial phase of the plane fields: Maimone et al., `exp(i·2π·z_n/λ)` (Eq. 1, 4).
     pub initial_phase: String,
+    /// The aberration correction of Eq. 5, if the ground truth has one (absent otherwise, and in manifests
+    /// written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub aberration: Option<AberrationInfo>,
+}
+
+/// The aberration correction recorded in a manifest (`docs/ABERRATION.md`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AberrationInfo {
+    /// The profile file as given ([`GenerateOptions::aberration_file`]), if known.
+    pub file: Option<PathBuf>,
+    /// Signed distance in metres from the midpoint plane to the SLM plane; a plane at `z_N` is corrected with
+    /// the coefficients at `z_N − slm_offset_m`.
+    pub slm_offset_m: f64,
+    /// The coefficients (the file's content, `tensorholo.aberration` format).
+    pub profile: AberrationProfile,
 }
 
 /// Display geometry (`docs/CONVENTIONS.md` §3).
@@ -745,6 +785,8 @@ pub struct GenerateOptions {
     pub git_commit: Option<String>,
     /// Command line recorded in the manifest.
     pub command: Vec<String>,
+    /// The aberration profile's file, recorded in the manifest with [`DatasetConfig::aberration`].
+    pub aberration_file: Option<PathBuf>,
 }
 
 /// Running sums for [`DatasetStatistics`].
@@ -1012,13 +1054,22 @@ pub fn generate(
         resolution: [config.scene.height, config.scene.width],
         ldi_layers: config.scene.layers,
         synthesis: SynthesisInfo {
-            method: "SM-LBM".into(),
+            method: if config.aberration.is_some() {
+                "SM-LBM with aberration correction (Eq. 5)".into()
+            } else {
+                "SM-LBM".into()
+            },
             levels: config.synthesis.levels,
             silhouette_masks: config.synthesis.silhouette_masks,
             pad: config.synthesis.options.pad,
             band_limit: config.synthesis.options.band_limit,
             hologram_plane: "midpoint (z = 0)".into(),
             initial_phase: "exp(i 2 pi z_n / lambda) (Maimone et al.)".into(),
+            aberration: config.aberration.as_ref().map(|a| AberrationInfo {
+                file: options.aberration_file.clone(),
+                slm_offset_m: a.slm_offset_m,
+                profile: a.profile.clone(),
+            }),
         },
         optics: OpticsInfo {
             wavelengths_m: setup.wavelengths_m,

@@ -10,7 +10,9 @@ use num_complex::Complex32;
 use crate::encoding::{double_phase_encode, phase_to_codes, DoublePhase, DoublePhaseMethod};
 use crate::error::{invalid, Result};
 use crate::optics::{focal_stack, post_encoding_midpoint, propagate_colour, Carrier};
-use crate::synthesis::{SceneLayer, SmLbm};
+use crate::synthesis::{
+    AberrationCorrectedSmLbm, AberrationCorrection, AberrationProfile, SceneLayer, SmLbm,
+};
 
 /// Configuration of [`ReferencePipeline::run`].
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -75,7 +77,45 @@ impl ReferencePipeline {
         }
         let t = Instant::now();
         let midpoint = self.synthesis.synthesize(layers, progress)?;
-        let synthesis_s = t.elapsed().as_secs_f64();
+        self.encode_midpoint(midpoint, t.elapsed().as_secs_f64())
+    }
+
+    /// [`ReferencePipeline::run`] with the aberration-corrected SM-LBM of Eq. 5
+    /// ([`AberrationCorrectedSmLbm`], `docs/ABERRATION.md`): `self.synthesis` with `profile`, the SLM plane at
+    /// `self.offset_m`. Costs `G·(G + 1)/2` propagations per colour for `G` non-empty planes
+    /// ([`AberrationCorrectedSmLbm::propagation_count`]); `progress(done, total)` reports them.
+    ///
+    /// Errors: those of [`ReferencePipeline::run`] and [`AberrationCorrectedSmLbm::synthesize`].
+    pub fn run_aberration_corrected(
+        &self,
+        layers: &[SceneLayer],
+        profile: &AberrationProfile,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<ReferenceHologram> {
+        if !self.offset_m.is_finite() {
+            return Err(invalid("offset_m", "must be finite"));
+        }
+        let t = Instant::now();
+        let midpoint = self
+            .aberration_corrected(profile)
+            .synthesize(layers, progress)?;
+        self.encode_midpoint(midpoint, t.elapsed().as_secs_f64())
+    }
+
+    /// The aberration-corrected synthesis [`ReferencePipeline::run_aberration_corrected`] uses.
+    pub fn aberration_corrected(&self, profile: &AberrationProfile) -> AberrationCorrectedSmLbm {
+        self.synthesis.with_aberration(AberrationCorrection {
+            profile: profile.clone(),
+            slm_offset_m: self.offset_m,
+        })
+    }
+
+    /// The stages after synthesis: offset propagation, double phase, LUT.
+    fn encode_midpoint(
+        &self,
+        midpoint: Array3<Complex32>,
+        synthesis_s: f64,
+    ) -> Result<ReferenceHologram> {
         let t = Instant::now();
         let mut slm_field = midpoint.clone();
         if self.offset_m != 0.0 {

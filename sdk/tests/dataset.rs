@@ -385,6 +385,7 @@ fn tiny_config(train: usize, val: usize, test: usize, shard_size: usize) -> Data
             levels: 16,
             ..SmLbm::default()
         },
+        aberration: None,
         seed: 5,
         train,
         val,
@@ -570,6 +571,7 @@ fn generate_writes_consistent_shards_and_manifest_and_refuses_an_existing_datase
         overwrite: true,
         git_commit: Some("abc123".into()),
         command: vec!["holo".into(), "dataset".into()],
+        ..GenerateOptions::default()
     };
     let m2 = generate(&dir, &smaller, &options, &|_, _| {}).unwrap();
     assert_eq!(m2.generator.git_commit, "abc123");
@@ -624,4 +626,60 @@ fn a_shard_with_inconsistent_arrays_is_refused() {
     ));
     fs::write(&path, b"not a zip").unwrap();
     assert!(matches!(read_shard(&path), Err(HoloError::Npy { .. })));
+}
+
+#[test]
+fn an_aberration_corrected_dataset_records_its_correction_and_stores_the_corrected_hologram() {
+    use tensorholo::synthesis::{AberrationCorrection, AberrationProfile, ZernikeCoefficients};
+    let dir = scratch("aberration");
+    let profile = AberrationProfile::uniform(ZernikeCoefficients {
+        astigmatism_vertical: 2.0,
+        ..ZernikeCoefficients::ZERO
+    });
+    let config = DatasetConfig {
+        synthesis: SmLbm {
+            levels: 6,
+            ..SmLbm::default()
+        },
+        aberration: Some(AberrationCorrection {
+            profile: profile.clone(),
+            slm_offset_m: 3e-3,
+        }),
+        ..tiny_config(1, 0, 0, 1)
+    };
+    let options = GenerateOptions {
+        aberration_file: Some(PathBuf::from("calibration/aberration.json")),
+        ..GenerateOptions::default()
+    };
+    let manifest = generate(&dir, &config, &options, &|_, _| {}).unwrap();
+    assert_eq!(read_manifest(&dir).unwrap(), manifest);
+    let info = manifest.synthesis.aberration.as_ref().expect("recorded");
+    assert_eq!(info.profile, profile);
+    assert_eq!(info.slm_offset_m, 3e-3);
+    assert_eq!(
+        info.file.as_deref(),
+        Some(Path::new("calibration/aberration.json"))
+    );
+    assert!(manifest.synthesis.method.contains("aberration"));
+    let shard = read_shard(&dir.join(shard_file_name(Split::Train, 0))).unwrap();
+    let ldi = shard.sample_ldi(0).unwrap();
+    let expected = config
+        .corrected_synthesis()
+        .unwrap()
+        .synthesize(&ldi_layers(&ldi), &|_, _| {})
+        .unwrap();
+    let plain = config
+        .synthesis
+        .synthesize(&ldi_layers(&ldi), &|_, _| {})
+        .unwrap();
+    let stored = shard.midpoint.index_axis(ndarray::Axis(0), 0);
+    let diff = |a: &ndarray::Array3<Complex32>| {
+        stored
+            .iter()
+            .zip(a.iter())
+            .map(|(x, y)| (x - y).norm())
+            .fold(0.0f32, f32::max)
+    };
+    assert!(diff(&expected) < 1e-5, "{}", diff(&expected));
+    assert!(diff(&plain) > 1e-3, "{}", diff(&plain));
 }

@@ -1,8 +1,14 @@
 //! Reference hologram synthesis: the silhouette-mask layer-based method (SM-LBM, paper Eq. 1–4) on RGB-D
-//! images and layered depth images, producing the midpoint hologram that the CNNs learn.
+//! images and layered depth images, producing the midpoint hologram that the CNNs learn, and its
+//! aberration-corrected variant (Eq. 5, Zernike model of Eq. 14–19; `docs/ABERRATION.md`).
 
+pub mod aberration;
 mod sm_lbm;
 
+pub use aberration::{
+    AberrationCorrectedSmLbm, AberrationCorrection, AberrationProfile, AberrationSample,
+    ZernikeCoefficients,
+};
 pub use sm_lbm::{SceneLayer, SmLbm};
 
 use crate::scene::{LayeredDepthImage, LdiLayer, RgbdFrame};

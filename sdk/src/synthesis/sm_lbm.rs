@@ -9,7 +9,9 @@ use ndarray::{Array3, ArrayView2, ArrayView3};
 use num_complex::Complex32;
 
 use crate::error::{invalid, HoloError, Result};
-use crate::optics::{par_channels, Carrier, OpticalSetup, PropagationOptions, TransferFunction};
+use crate::optics::{
+    par_channels, Carrier, OpticalSetup, PropagationOptions, Propagator, Scratch, TransferFunction,
+};
 
 /// One layer of scene points, borrowed: amplitude `[3, H, W]` (R, G, B, linear amplitude ≥ 0), normalised depth
 /// `[H, W]` (`d ∈ [0, 1]`, 0 = near) and, optionally, which pixels hold a point (`[H, W]`; all if `None`).
@@ -60,16 +62,68 @@ impl Default for SmLbm {
     }
 }
 
-/// Scene points bucketed by depth plane, far planes first.
-struct Planes {
+/// Scene points bucketed by depth plane, far planes first (shared with the aberration-corrected variant).
+pub(super) struct Planes {
     /// `(level, first index into points, end)` sorted by decreasing level (back to front).
-    groups: Vec<(usize, usize, usize)>,
+    pub(super) groups: Vec<(usize, usize, usize)>,
     /// `(pixel index, [r, g, b] amplitude)` grouped by plane.
-    points: Vec<(u32, [f32; 3])>,
+    pub(super) points: Vec<(u32, [f32; 3])>,
+}
+
+impl Planes {
+    /// The points `(pixel index, [r, g, b] amplitude)` of group `g` (an index into `groups`).
+    pub(super) fn points_of(&self, g: usize) -> &[(u32, [f32; 3])] {
+        let (_, start, end) = self.groups[g];
+        &self.points[start..end]
+    }
 }
 
 /// Maximum bytes of cached transfer functions per colour.
 const TF_CACHE_BYTES: usize = 64 << 20;
+
+/// Transfer functions between planes `gap` levels apart (`gap · dl` metres toward the viewer), cached up to
+/// [`TF_CACHE_BYTES`] per colour and built on the fly beyond that.
+pub(super) struct GapPropagation<'a> {
+    prop: &'a Propagator,
+    dl: f64,
+    cache: HashMap<usize, TransferFunction>,
+    capacity: usize,
+}
+
+impl<'a> GapPropagation<'a> {
+    /// A cache for `prop` with plane spacing `dl` metres.
+    pub(super) fn new(prop: &'a Propagator, dl: f64) -> Self {
+        let capacity = TF_CACHE_BYTES / (prop.plan().spectrum_len() * 8).max(1);
+        Self {
+            prop,
+            dl,
+            cache: HashMap::new(),
+            capacity,
+        }
+    }
+
+    /// Propagates `field` from one plane to the plane `gap` levels nearer the viewer (Eq. 2).
+    pub(super) fn propagate(
+        &mut self,
+        field: &mut [Complex32],
+        gap: usize,
+        scratch: &mut Scratch,
+    ) -> Result<()> {
+        let distance = gap as f64 * self.dl;
+        if !self.cache.contains_key(&gap) && self.cache.len() < self.capacity {
+            self.cache
+                .insert(gap, self.prop.transfer_function(distance, Carrier::Keep)?);
+        }
+        match self.cache.get(&gap) {
+            Some(tf) => self.prop.propagate(field, tf, scratch),
+            None => self.prop.propagate(
+                field,
+                &self.prop.transfer_function(distance, Carrier::Keep)?,
+                scratch,
+            ),
+        }
+    }
+}
 
 impl SmLbm {
     /// Checks `levels` and the optical setup.
@@ -85,7 +139,7 @@ impl SmLbm {
     }
 
     /// Normalised depth of plane `n`.
-    fn plane_depth(&self, n: usize) -> f64 {
+    pub(super) fn plane_depth(&self, n: usize) -> f64 {
         if self.levels == 1 {
             0.5
         } else {
@@ -98,7 +152,25 @@ impl SmLbm {
         (d as f64 * (self.levels - 1) as f64).round() as usize
     }
 
-    fn bucket(&self, layers: &[SceneLayer]) -> Result<(usize, usize, Planes)> {
+    /// Plane spacing `dl` in metres (0 for a single plane).
+    pub(super) fn plane_spacing_m(&self) -> f64 {
+        if self.levels > 1 {
+            self.setup.volume_depth_m / (self.levels - 1) as f64
+        } else {
+            0.0
+        }
+    }
+
+    /// Eq. 1: the field of plane `level`'s points at wavelength `lambda`, with Maimone et al.'s initial phase
+    /// `exp(i·2π·z_n/λ)` (computed in f64): the factor that multiplies a point's amplitude.
+    pub(super) fn initial_phase(&self, level: usize, lambda: f64) -> Complex32 {
+        let z = self.setup.depth_to_z(self.plane_depth(level));
+        let (s, co) = (TAU * (z / lambda).fract()).sin_cos();
+        Complex32::new(co as f32, s as f32)
+    }
+
+    /// Checks the layers and buckets their points by depth plane; returns `(height, width, planes)`.
+    pub(super) fn bucket(&self, layers: &[SceneLayer]) -> Result<(usize, usize, Planes)> {
         let first = layers
             .first()
             .ok_or_else(|| invalid("layers", "at least one scene layer is needed"))?;
@@ -215,42 +287,22 @@ impl SmLbm {
         let props = self.setup.propagators(h, w, self.options)?;
         let total = 3 * planes.groups.len() as u64;
         let done = AtomicU64::new(0);
-        let dl = if self.levels > 1 {
-            self.setup.volume_depth_m / (self.levels - 1) as f64
-        } else {
-            0.0
-        };
         let mut field = Array3::<Complex32>::zeros((3, h, w));
         par_channels(&mut field, |c, slice| {
             let prop = &props[c];
             let lambda = prop.wavelength_m();
             let mut scratch = prop.plan().scratch();
-            let mut cache: HashMap<usize, TransferFunction> = HashMap::new();
-            let cache_capacity = TF_CACHE_BYTES / (prop.plan().spectrum_len() * 8).max(1);
+            let mut gaps = GapPropagation::new(prop, self.plane_spacing_m());
             let mut prev_level: Option<usize> = None;
-            for &(level, start, end) in &planes.groups {
+            for (g, &(level, _, _)) in planes.groups.iter().enumerate() {
                 if let Some(prev) = prev_level {
                     // Back to front: from plane `prev` (farther) to plane `level`, distance (prev − level)·dl > 0.
-                    let gap = prev - level;
-                    if !cache.contains_key(&gap) && cache.len() < cache_capacity {
-                        cache.insert(gap, prop.transfer_function(gap as f64 * dl, Carrier::Keep)?);
-                    }
-                    match cache.get(&gap) {
-                        Some(tf) => prop.propagate(slice, tf, &mut scratch)?,
-                        None => prop.propagate(
-                            slice,
-                            &prop.transfer_function(gap as f64 * dl, Carrier::Keep)?,
-                            &mut scratch,
-                        )?,
-                    }
+                    gaps.propagate(slice, prev - level, &mut scratch)?;
                     done.fetch_add(1, Ordering::Relaxed);
                     progress(done.load(Ordering::Relaxed), total);
                 }
-                let z = self.setup.depth_to_z(self.plane_depth(level));
-                // Eq. 1: Maimone et al.'s initial phase exp(i·2π·z_n/λ), computed in f64.
-                let (s, co) = (TAU * (z / lambda).fract()).sin_cos();
-                let initial = Complex32::new(co as f32, s as f32);
-                for &(p, a) in &planes.points[start..end] {
+                let initial = self.initial_phase(level, lambda);
+                for &(p, a) in planes.points_of(g) {
                     let p = p as usize;
                     let own = initial * a[c];
                     // Eq. 3–4: silhouette mask then addition of the plane's own field.
