@@ -13,7 +13,7 @@
 //! response varies smoothly (liquid-crystal cell gap, heating), so [`TiledCurves`] stores one curve per tile
 //! of `tile × tile` pixels (16-bit fixed point) and evaluates a pixel's curve by bilinear interpolation
 //! between the four nearest tile centres. At 1080p with 16-pixel tiles, three colours take 12.5 MB
-//! (`docs/CALIBRATION.md` has the measured size/error trade-off). Applying it interpolates the tiles' inverse
+//! (`docs/CALIBRATION.md`). Applying it interpolates the tiles' inverse
 //! tables (fractional codes at 256 phase bins), which is allocation-free and needs no search.
 
 use std::f32::consts::TAU;
