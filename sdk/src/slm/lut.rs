@@ -364,10 +364,17 @@ impl TiledCurves {
                 ),
             ));
         }
-        let (_, cols) = self.grid();
         let wy = Self::axis_weights(self.height, self.tile_height)[y];
         let wx = Self::axis_weights(self.width, self.tile_width)[x];
         let mut out = [0f32; CODES];
+        self.blend(wy, wx, &mut out);
+        Ok(out)
+    }
+
+    /// `out` (256 values) ← the bilinear blend of the four tile curves of row weights `wy`, column weights `wx`.
+    fn blend(&self, wy: (u32, u32, f32), wx: (u32, u32, f32), out: &mut [f32]) {
+        let cols = self.grid().1;
+        out.fill(0.0);
         let corners = [
             (wy.0, wx.0, (1.0 - wy.2) * (1.0 - wx.2)),
             (wy.0, wx.1, (1.0 - wy.2) * wx.2),
@@ -380,7 +387,6 @@ impl TiledCurves {
                 *o += wgt * p;
             }
         }
-        Ok(out)
     }
 
     /// Writes the response curves of rows `rows` of the SLM into `out` (`[rows.len(), width, 256]`
@@ -403,26 +409,15 @@ impl TiledCurves {
                 got: vec![out.len()],
             });
         }
-        let (_, cols) = self.grid();
         let wys = Self::axis_weights(self.height, self.tile_height);
         let wxs = Self::axis_weights(self.width, self.tile_width);
         for (r, y) in rows.enumerate() {
-            let wy = wys[y];
             for (x, wx) in wxs.iter().enumerate() {
-                let o = &mut out[(r * self.width + x) * CODES..][..CODES];
-                o.fill(0.0);
-                let corners = [
-                    (wy.0, wx.0, (1.0 - wy.2) * (1.0 - wx.2)),
-                    (wy.0, wx.1, (1.0 - wy.2) * wx.2),
-                    (wy.1, wx.0, wy.2 * (1.0 - wx.2)),
-                    (wy.1, wx.1, wy.2 * wx.2),
-                ];
-                for (ty, tx, wgt) in corners {
-                    let c = &self.curves[ty as usize * cols + tx as usize];
-                    for (v, &p) in o.iter_mut().zip(c.phases.iter()) {
-                        *v += wgt * p;
-                    }
-                }
+                self.blend(
+                    wys[y],
+                    *wx,
+                    &mut out[(r * self.width + x) * CODES..][..CODES],
+                );
             }
         }
         Ok(())
