@@ -7,6 +7,7 @@ mod aberration;
 mod args;
 mod baselines;
 mod bench;
+mod calibrate;
 mod compare;
 mod dataset;
 mod encode;
@@ -65,6 +66,9 @@ enum Command {
     /// Compare two output folders of `holo render` (e.g. the same command on x86-64 and on aarch64): the
     /// midpoint hologram, the SLM codes and the simulated reconstructions.
     Compare(compare::CompareArgs),
+    /// Calibrate the display (paper Methods, Eq. 12-13): test patterns, a per-pixel phase look-up table from
+    /// camera captures into a .holocal file, its curves as .npy, and a simulated SLM to try it on.
+    Calibrate(calibrate::CalibrateArgs),
 }
 
 fn main() {
@@ -82,6 +86,7 @@ fn main() {
         Command::Encode(args) => encode::run(&args),
         Command::Baselines(args) => baselines::run(&args),
         Command::Compare(args) => compare::run(&args),
+        Command::Calibrate(args) => calibrate::run(&args),
     };
     if let Err(err) = result {
         eprintln!("error: {err:#}");

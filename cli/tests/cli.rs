@@ -346,3 +346,111 @@ fn encode_writes_every_output_and_reproduces_a_smooth_field() {
         stderr(&o)
     );
 }
+
+#[test]
+fn calibrate_simulate_lut_curves_end_to_end() {
+    let dir = std::env::temp_dir().join(format!("holo-calibrate-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    let d = |p: &str| dir.join(p).to_string_lossy().into_owned();
+    let o = holo(&[
+        "calibrate",
+        "simulate",
+        "--size",
+        "16x24",
+        "--out",
+        &d("sim"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = holo(&[
+        "calibrate",
+        "lut",
+        "--green",
+        &d("sim/green"),
+        "--size",
+        "16x24",
+        "--out",
+        &d("d.holocal"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let cal = tensorholo::slm::DisplayCalibration::read(&dir.join("d.holocal")).unwrap();
+    assert_eq!(cal.colours[0].lut.representation().name(), "linear");
+    assert_eq!(cal.colours[1].lut.representation().name(), "tiled");
+    let o = holo(&[
+        "calibrate",
+        "curves",
+        &d("d.holocal"),
+        "--color",
+        "green",
+        "--out",
+        &d("g.npy"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Header (128 bytes) + [16, 24, 256] float32.
+    assert_eq!(
+        std::fs::metadata(dir.join("g.npy")).unwrap().len(),
+        128 + 16 * 24 * 256 * 4
+    );
+    // Another resolution's captures, a missing folder, and a wrong colour are refused by name.
+    let o = holo(&[
+        "calibrate",
+        "lut",
+        "--red",
+        &d("sim/nope"),
+        "--size",
+        "16x24",
+        "--out",
+        &d("x.holocal"),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("sim/nope"),
+        "{}",
+        stderr(&o)
+    );
+    let o = holo(&[
+        "calibrate",
+        "lut",
+        "--red",
+        &d("sim/red"),
+        "--size",
+        "64x64",
+        "--out",
+        &d("x.holocal"),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("smaller than the 64×64 SLM"),
+        "{}",
+        stderr(&o)
+    );
+    let o = holo(&[
+        "calibrate",
+        "curves",
+        &d("d.holocal"),
+        "--color",
+        "purple",
+        "--out",
+        &d("p.npy"),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("purple"),
+        "{}",
+        stderr(&o)
+    );
+    // A truncated calibration file is refused.
+    let bytes = std::fs::read(dir.join("d.holocal")).unwrap();
+    std::fs::write(dir.join("t.holocal"), &bytes[..bytes.len() - 9]).unwrap();
+    let o = holo(&[
+        "calibrate",
+        "curves",
+        &d("t.holocal"),
+        "--color",
+        "green",
+        "--out",
+        &d("t.npy"),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("truncated"),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
