@@ -253,7 +253,7 @@ fn block_average(frame: &mut [f32], clipped: &mut [bool], h: usize, w: usize) {
 /// (`total = 512`).
 ///
 /// Errors: [`HoloError::InvalidParameter`] for bad options; the stack's own errors (missing or mismatched
-/// capture, naming it); [`HoloError::Calibration`]-free [`HoloError::InvalidData`] when the captures cannot
+/// capture, naming it); [`HoloError::InvalidData`] when the captures cannot
 /// calibrate the panel, saying why and where: too many unusable pixels (saturated: the worst captures are
 /// named; dark; not modulating), or a phase range below π (no intensity minimum) over too many tiles, with the
 /// affected pixel region and the fraction of unusable pixels.

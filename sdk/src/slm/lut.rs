@@ -338,17 +338,18 @@ impl TiledCurves {
     /// half tile beyond the outermost tile centres the two outermost tiles extrapolate linearly (weights
     /// outside `[0, 1]`), which follows a smooth response to the panel's edge better than clamping.
     fn axis_weights(len: usize, tile: usize) -> Vec<(u32, u32, f32)> {
+        (0..len).map(|i| Self::axis_weight(i, len, tile)).collect()
+    }
+
+    /// The weights of [`TiledCurves::axis_weights`] for pixel `i` alone.
+    fn axis_weight(i: usize, len: usize, tile: usize) -> (u32, u32, f32) {
         let n = len.div_ceil(tile);
-        (0..len)
-            .map(|i| {
-                if n == 1 {
-                    return (0, 0, 0.0);
-                }
-                let t = ((i as f32 + 0.5) / tile as f32 - 0.5).clamp(-0.5, n as f32 - 0.5);
-                let a = (t.floor().max(0.0) as usize).min(n - 2);
-                (a as u32, a as u32 + 1, t - a as f32)
-            })
-            .collect()
+        if n == 1 {
+            return (0, 0, 0.0);
+        }
+        let t = ((i as f32 + 0.5) / tile as f32 - 0.5).clamp(-0.5, n as f32 - 0.5);
+        let a = (t.floor().max(0.0) as usize).min(n - 2);
+        (a as u32, a as u32 + 1, t - a as f32)
     }
 
     /// The response curve of pixel `(y, x)` (bilinear between tile centres), phases in radians.
@@ -364,8 +365,8 @@ impl TiledCurves {
                 ),
             ));
         }
-        let wy = Self::axis_weights(self.height, self.tile_height)[y];
-        let wx = Self::axis_weights(self.width, self.tile_width)[x];
+        let wy = Self::axis_weight(y, self.height, self.tile_height);
+        let wx = Self::axis_weight(x, self.width, self.tile_width);
         let mut out = [0f32; CODES];
         self.blend(wy, wx, &mut out);
         Ok(out)

@@ -1107,6 +1107,29 @@ mod tests {
         Array2<bool>,
     );
 
+    /// The layers of [`scene`]: the near disc (amplitude `near`, depth `nd`, validity `disc`) in front of the
+    /// far plane (amplitude `far`, depth `fd`).
+    fn two_layers<'a>(
+        near: &'a Array3<f32>,
+        nd: &'a Array2<f32>,
+        disc: &'a Array2<bool>,
+        far: &'a Array3<f32>,
+        fd: &'a Array2<f32>,
+    ) -> [SceneLayer<'a>; 2] {
+        [
+            SceneLayer {
+                amplitude: near.view(),
+                depth: nd.view(),
+                valid: Some(disc.view()),
+            },
+            SceneLayer {
+                amplitude: far.view(),
+                depth: fd.view(),
+                valid: None,
+            },
+        ]
+    }
+
     /// A small two-layer scene: a textured far plane and a nearer disc that hides part of it.
     fn scene(n: usize) -> Scene {
         let far_amp = Array3::from_shape_fn((3, n, n), |(c, y, x)| {
@@ -1164,18 +1187,7 @@ mod tests {
     fn zero_coefficients_give_plain_sm_lbm_band_limited_to_the_pupil() {
         let n = 48;
         let (fa, fd, na, nd, disc) = scene(n);
-        let layers = [
-            SceneLayer {
-                amplitude: na.view(),
-                depth: nd.view(),
-                valid: Some(disc.view()),
-            },
-            SceneLayer {
-                amplitude: fa.view(),
-                depth: fd.view(),
-                valid: None,
-            },
-        ];
+        let layers = two_layers(&na, &nd, &disc, &fa, &fd);
         let sm = base(16);
         let plain = apply_kernel(
             &sm.synthesize(&layers, &|_, _| {}).unwrap(),
@@ -1213,18 +1225,7 @@ mod tests {
             vec![near.clone(), far.clone()]
         };
         let make = |amps: &[Array3<f32>]| -> Array3<Complex32> {
-            let ls = [
-                SceneLayer {
-                    amplitude: amps[0].view(),
-                    depth: nd.view(),
-                    valid: Some(disc.view()),
-                },
-                SceneLayer {
-                    amplitude: amps[1].view(),
-                    depth: fd.view(),
-                    valid: None,
-                },
-            ];
+            let ls = two_layers(&amps[0], &nd, &disc, &amps[1], &fd);
             base(11).synthesize(&ls, &|_, _| {}).unwrap()
         };
         let s = 2e-3;
@@ -1234,18 +1235,7 @@ mod tests {
         let k_of = |z: f64| std::array::from_fn(|c| profile.coefficients(z - s, c));
         let expected = apply_kernel(&make(&layers(&zero_near, &fa)), k_of(z_far))
             + apply_kernel(&make(&layers(&na, &zero_far)), k_of(z_near));
-        let ls = [
-            SceneLayer {
-                amplitude: na.view(),
-                depth: nd.view(),
-                valid: Some(disc.view()),
-            },
-            SceneLayer {
-                amplitude: fa.view(),
-                depth: fd.view(),
-                valid: None,
-            },
-        ];
+        let ls = two_layers(&na, &nd, &disc, &fa, &fd);
         let out = base(11)
             .with_aberration(AberrationCorrection {
                 profile: profile.clone(),
@@ -1265,18 +1255,7 @@ mod tests {
     fn without_masks_planes_are_independent_and_cost_one_propagation_each() {
         let n = 32;
         let (fa, fd, na, nd, disc) = scene(n);
-        let ls = [
-            SceneLayer {
-                amplitude: na.view(),
-                depth: nd.view(),
-                valid: Some(disc.view()),
-            },
-            SceneLayer {
-                amplitude: fa.view(),
-                depth: fd.view(),
-                valid: None,
-            },
-        ];
+        let ls = two_layers(&na, &nd, &disc, &fa, &fd);
         let sm = SmLbm {
             silhouette_masks: false,
             ..base(9)
