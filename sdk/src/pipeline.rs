@@ -29,6 +29,7 @@ use crate::model::{
 };
 use crate::optics::{Carrier, OpticalSetup, PropagationOptions, Scratch, SpectralPlan};
 use crate::scene::{LayeredDepthImage, RgbdFrame};
+use crate::slm::{DisplayCalibration, LutRepresentation, PhaseLut};
 
 /// Where a [`HologramSession`] computes its frames.
 ///
@@ -303,6 +304,8 @@ pub struct HologramPipeline {
     prefilter: Option<Arc<HologramModel>>,
     /// Why the pipeline runs (or does not run) a pre-filter CNN, for logs and reports.
     prefilter_reason: String,
+    /// The display calibration sessions apply ([`HologramPipeline::with_calibration`]); `None`: an ideal SLM.
+    calibration: Option<Arc<DisplayCalibration>>,
     /// The app's own GPU context ([`HologramPipeline::with_gpu_context`]); `None`: the shared one.
     #[cfg(feature = "gpu")]
     gpu_context: Option<crate::gpu::GpuContext>,
@@ -351,6 +354,7 @@ impl HologramPipeline {
             hologram,
             prefilter,
             prefilter_reason,
+            calibration: None,
             #[cfg(feature = "gpu")]
             gpu_context: None,
         })
@@ -424,6 +428,24 @@ impl HologramPipeline {
         self
     }
 
+    /// Applies a display's calibration (`.holocal`, [`DisplayCalibration`]) in every session made from now
+    /// on: its per-colour look-up table turns the double phase pattern into codes (instead of the linear
+    /// one), and its laser intensity scale map, where present, multiplies the target amplitude before the
+    /// hologram CNN (`docs/CALIBRATION.md`). Sessions must then have the calibration's SLM size.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`calibration`) if a colour's wavelength differs from
+    /// the pipeline's optics by more than 1 nm (a look-up table holds for one wavelength only).
+    pub fn with_calibration(mut self, calibration: Arc<DisplayCalibration>) -> Result<Self> {
+        check_calibration_wavelengths(&calibration, &self.config.optics)?;
+        self.calibration = Some(calibration);
+        Ok(self)
+    }
+
+    /// The display calibration sessions apply, if any.
+    pub fn calibration(&self) -> Option<&Arc<DisplayCalibration>> {
+        self.calibration.as_ref()
+    }
+
     /// The configuration.
     pub fn config(&self) -> &PipelineConfig {
         &self.config
@@ -457,6 +479,36 @@ impl HologramPipeline {
     pub fn session(&self, height: usize, width: usize) -> Result<HologramSession> {
         HologramSession::new(self, height, width)
     }
+}
+
+/// Largest wavelength difference (metres) between a display calibration and the pipeline's optics.
+const CALIBRATION_WAVELENGTH_TOLERANCE_M: f64 = 1e-9;
+
+/// Refuses a calibration measured at other wavelengths than `optics` (more than 1 nm apart).
+fn check_calibration_wavelengths(cal: &DisplayCalibration, optics: &OpticalSetup) -> Result<()> {
+    for (c, (col, &want)) in cal.colours.iter().zip(&optics.wavelengths_m).enumerate() {
+        if (col.wavelength_m - want).abs() > CALIBRATION_WAVELENGTH_TOLERANCE_M {
+            return Err(invalid(
+                "calibration",
+                format!(
+                    "the {} look-up table was measured at {:.1} nm, the display's {} laser is {:.1} nm; \
+                     calibrate at the display's wavelengths",
+                    crate::slm::file::COLOUR_NAMES[c],
+                    col.wavelength_m * 1e9,
+                    crate::slm::file::COLOUR_NAMES[c],
+                    want * 1e9
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Colour `c`'s look-up table in `cal`, or `None` where the linear table of the double phase encoder
+/// already gives its codes.
+fn calibrated_lut(cal: Option<&Arc<DisplayCalibration>>, c: usize) -> Option<&PhaseLut> {
+    let lut = &cal?.colours.get(c)?.lut;
+    (!matches!(lut.representation(), LutRepresentation::Linear)).then_some(lut)
 }
 
 /// The CNN heads of the midpoint hologram, `[3, H, W]` each: amplitude in `[0, √2]`, phase in `[0, 1]`
@@ -501,7 +553,8 @@ pub struct FrameTimings {
 /// One frame's SLM patterns, owned by the session and overwritten by the next frame.
 #[derive(Debug, Clone)]
 pub struct SlmFrame {
-    /// 8-bit SLM codes `[3, H, W]` (R, G, B; one plane per laser, field-sequential), linear look-up table.
+    /// 8-bit SLM codes `[3, H, W]` (R, G, B; one plane per laser, field-sequential), through the display
+    /// calibration's look-up tables ([`HologramPipeline::with_calibration`]; the linear one without).
     pub codes: Array3<u8>,
     /// The double phase pattern `[3, H, W]` in radians, `[0, 2π)`.
     pub phase: Array3<f32>,
@@ -602,6 +655,11 @@ struct ColourState {
     phase: Vec<f32>,
     codes: Vec<u8>,
     stats: ChannelStats,
+    /// This colour (0 = R) and the session's `(height, width)`.
+    colour: usize,
+    size: (usize, usize),
+    /// The display calibration whose look-up table turns `phase` into `codes` (`None`: linear).
+    calibration: Option<Arc<DisplayCalibration>>,
 }
 
 impl ColourState {
@@ -636,13 +694,20 @@ impl ColourState {
             Task::Encode {
                 mean_phase,
                 amplitude_scale,
-            } => self.encoder.encode(
-                &self.field,
-                &mut self.phase,
-                &mut self.codes,
-                mean_phase,
-                amplitude_scale,
-            ),
+            } => {
+                self.encoder.encode(
+                    &self.field,
+                    &mut self.phase,
+                    &mut self.codes,
+                    mean_phase,
+                    amplitude_scale,
+                )?;
+                if let Some(lut) = calibrated_lut(self.calibration.as_ref(), self.colour) {
+                    let (h, w) = self.size;
+                    lut.apply(h, w, &self.phase, &mut self.codes)?;
+                }
+                Ok(())
+            }
         }
     }
 
@@ -749,7 +814,7 @@ impl ColourWorkers {
     ) -> Result<()> {
         {
             let mut boxes = self.shared.lock();
-            if boxes.closed || self.handles.len() != 3 {
+            if boxes.closed || self.handles.len() != 3 || states.iter().any(Option::is_none) {
                 return Err(lost_state());
             }
             for (c, slot) in states.iter_mut().enumerate() {
@@ -800,6 +865,8 @@ impl Drop for ColourWorkers {
 struct CnnStage {
     plan: ModelPlan,
     input: Array3<f32>,
+    /// The display calibration whose laser intensity scale maps multiply the packed amplitudes.
+    calibration: Option<Arc<DisplayCalibration>>,
 }
 
 impl CnnStage {
@@ -822,7 +889,28 @@ impl CnnStage {
             ));
         }
         check_size("RGB-D frame", frame.amplitude.dim(), (h, w))?;
-        contract::pack_rgbd(frame, self.input.view_mut())
+        contract::pack_rgbd(frame, self.input.view_mut())?;
+        self.scale_intensity();
+        Ok(())
+    }
+
+    /// Multiplies each layer's colour-`c` amplitude by the calibration's intensity scale map of colour `c`
+    /// (where it has one): the target the CNN sees is what the unevenly lit display can show.
+    fn scale_intensity(&mut self) {
+        let Some(cal) = &self.calibration else {
+            return;
+        };
+        let layers = self.input.dim().0 / 4;
+        for (c, col) in cal.colours.iter().enumerate() {
+            let Some(scale) = &col.intensity_scale else {
+                continue;
+            };
+            for k in 0..layers {
+                // Invalid LDI points hold amplitude 0, which stays 0.
+                let mut plane = self.input.index_axis_mut(Axis(0), 4 * k + c);
+                plane.zip_mut_with(scale, |a, &s| *a *= s);
+            }
+        }
     }
 
     fn run_ldi(&mut self, ldi: &LayeredDepthImage) -> Result<(Heads, f64)> {
@@ -845,7 +933,9 @@ impl CnnStage {
             ));
         }
         check_size("LDI", (3, ldi.height(), ldi.width()), (h, w))?;
-        contract::pack_ldi(ldi, self.input.view_mut())
+        contract::pack_ldi(ldi, self.input.view_mut())?;
+        self.scale_intensity();
+        Ok(())
     }
 
     fn run(&mut self, t: Instant) -> Result<(Heads, f64)> {
@@ -883,6 +973,10 @@ pub struct HologramSession {
     plan_report: PlanReport,
     backend: BackendReport,
     full_outputs: bool,
+    /// The display calibration applied (look-up tables, intensity scale maps), and the wavelengths it must
+    /// match.
+    calibration: Option<Arc<DisplayCalibration>>,
+    wavelengths_m: [f64; 3],
     /// The GPU frame while the GPU backend is active; `pending_check`: the self-check of [`Backend::Auto`]
     /// has yet to run.
     #[cfg(feature = "gpu")]
@@ -1003,6 +1097,10 @@ struct BackendReportParts {
 
 impl HologramSession {
     fn new(pipeline: &HologramPipeline, height: usize, width: usize) -> Result<Self> {
+        let calibration = pipeline.calibration.clone();
+        if let Some(cal) = &calibration {
+            cal.check_size(height, width)?;
+        }
         let (parts, gpu) = choose_backend(pipeline, height, width)?;
         let backend = BackendReport {
             requested: parts.requested,
@@ -1047,7 +1145,7 @@ impl HologramSession {
         let props = cfg.optics.propagators(height, width, cfg.options)?;
         let n = height * width;
         let mut states: [Option<Box<ColourState>>; 3] = [None, None, None];
-        for (slot, prop) in states.iter_mut().zip(&props) {
+        for (colour, (slot, prop)) in states.iter_mut().zip(&props).enumerate() {
             let transfer = if cfg.offset_m != 0.0 {
                 Some(
                     prop.transfer_function(cfg.offset_m, Carrier::Remove)?
@@ -1067,6 +1165,9 @@ impl HologramSession {
                 phase: vec![0.0; n],
                 codes: vec![0; n],
                 stats: ChannelStats::default(),
+                colour,
+                size: (height, width),
+                calibration: calibration.clone(),
             }));
         }
         let (c, _, _) = hologram.input_dim();
@@ -1078,6 +1179,7 @@ impl HologramSession {
             cnn: CnnStage {
                 plan: hologram,
                 input: Array3::zeros((c, height, width)),
+                calibration: calibration.clone(),
             },
             prefilter_input: Array3::zeros((
                 if prefilter.is_some() { 6 } else { 0 },
@@ -1099,9 +1201,40 @@ impl HologramSession {
             plan_report,
             backend,
             full_outputs: true,
+            calibration,
+            wavelengths_m: cfg.optics.wavelengths_m,
             #[cfg(feature = "gpu")]
             gpu,
         })
+    }
+
+    /// Replaces the display calibration of this session's next frames (`None`: an ideal SLM, linear look-up
+    /// tables and no intensity scaling), e.g. after recalibrating the bench, without rebuilding the session.
+    /// See [`HologramPipeline::with_calibration`].
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] if the calibration is for another SLM size;
+    /// [`HoloError::InvalidParameter`] if its wavelengths differ from the display's by more than 1 nm. The
+    /// session keeps its calibration on error.
+    pub fn set_calibration(&mut self, calibration: Option<Arc<DisplayCalibration>>) -> Result<()> {
+        if let Some(cal) = &calibration {
+            cal.check_size(self.height, self.width)?;
+            let optics = OpticalSetup {
+                wavelengths_m: self.wavelengths_m,
+                ..OpticalSetup::default()
+            };
+            check_calibration_wavelengths(cal, &optics)?;
+        }
+        for slot in &mut self.states {
+            slot.as_mut().ok_or_else(lost_state)?.calibration = calibration.clone();
+        }
+        self.cnn.calibration = calibration.clone();
+        self.calibration = calibration;
+        Ok(())
+    }
+
+    /// The display calibration this session applies, if any.
+    pub fn calibration(&self) -> Option<&Arc<DisplayCalibration>> {
+        self.calibration.as_ref()
     }
 
     /// Which backend runs this session's frames, and why ([`Backend`]).
@@ -1199,9 +1332,14 @@ impl HologramSession {
         }
         let cnn_s = t.elapsed().as_secs_f64();
         let t_gpu = Instant::now();
-        let full = self.full_outputs || gpu.pending_check;
+        // A calibrated look-up table runs on the CPU, on the downloaded double phase pattern.
+        let calibrated = (0..3).any(|c| calibrated_lut(self.calibration.as_ref(), c).is_some());
+        let full = self.full_outputs || gpu.pending_check || calibrated;
         match gpu.frame.run(self.cnn.input.view(), &mut self.output, full) {
             Ok(heads) => {
+                if calibrated {
+                    apply_calibrated_luts(self.calibration.as_ref(), &mut self.output)?;
+                }
                 let gpu_s = t_gpu.elapsed().as_secs_f64();
                 self.output.backend = Backend::Gpu;
                 self.output.timings = FrameTimings {
@@ -1486,6 +1624,25 @@ impl HologramSession {
             Ok(count)
         })
     }
+}
+
+/// Replaces `out.codes` by the calibrated look-up tables' codes of `out.phase` (colours with a linear table
+/// keep theirs).
+#[cfg(feature = "gpu")]
+fn apply_calibrated_luts(cal: Option<&Arc<DisplayCalibration>>, out: &mut SlmFrame) -> Result<()> {
+    let (_, h, w) = out.codes.dim();
+    for c in 0..3 {
+        let Some(lut) = calibrated_lut(cal, c) else {
+            continue;
+        };
+        let phase = out.phase.index_axis(Axis(0), c);
+        let mut codes = out.codes.index_axis_mut(Axis(0), c);
+        match (phase.as_slice(), codes.as_slice_mut()) {
+            (Some(p), Some(k)) => lut.apply(h, w, p, k)?,
+            _ => return Err(HoloError::Internal("SLM frame not contiguous".into())),
+        }
+    }
+    Ok(())
 }
 
 /// Copies channel `c` of a `[C, H, W]` array into `out` (`H·W` values).

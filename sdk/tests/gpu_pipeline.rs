@@ -320,3 +320,51 @@ fn gpu_previews_match_the_cpu_simulation_of_the_codes() {
         .unwrap_err();
     assert!(err.to_string().contains("focus"), "{err}");
 }
+
+#[test]
+fn a_display_calibration_applies_on_the_gpu_path_as_on_the_cpu() {
+    use std::sync::Arc;
+    use tensorholo::slm::{
+        DisplayCalibration, LutRepresentation, PhaseCurve, PhaseLut, TiledCurves,
+    };
+    let Some(ctx) = gpu_common::context() else {
+        return;
+    };
+    // Red: a global gamma curve; green: per-pixel tiles and an intensity map; blue: linear.
+    let mut cal = DisplayCalibration::linear(H, W).unwrap();
+    cal.colours[0].lut = PhaseLut::new(LutRepresentation::Global(
+        PhaseCurve::gamma(7.5, 1.3).unwrap(),
+    ));
+    let curves = (0..6 * 8)
+        .map(|t| PhaseCurve::gamma(7.0 + 0.02 * t as f32, 0.9).unwrap())
+        .collect();
+    cal.colours[1].lut = PhaseLut::new(LutRepresentation::Tiled(
+        TiledCurves::new(H, W, 8, 8, curves).unwrap(),
+    ));
+    cal.colours[1].intensity_scale = Some(ndarray::Array2::from_shape_fn((H, W), |(y, x)| {
+        0.5 + 0.5 * ((x + y) % 7) as f32 / 6.0
+    }));
+    let cal = Arc::new(cal);
+    let calibrated = |backend| {
+        pipeline(&ctx, backend, 6e-3, PrefilterMode::Required)
+            .with_calibration(cal.clone())
+            .unwrap()
+    };
+    let mut gpu = calibrated(Backend::Gpu).session(H, W).unwrap();
+    // Only the codes an SLM needs: the look-up tables still get the phase they need.
+    gpu.set_full_outputs(false);
+    let mut cpu = calibrated(Backend::Cpu).session(H, W).unwrap();
+    let g = gpu.render(&frame()).unwrap().clone();
+    let c = cpu.render(&frame()).unwrap().clone();
+    assert_close("6 mm, DDPM, calibrated", &g, &c, false);
+    let uncalibrated = pipeline(&ctx, Backend::Gpu, 6e-3, PrefilterMode::Required)
+        .session(H, W)
+        .unwrap()
+        .render(&frame())
+        .unwrap()
+        .clone();
+    for colour in 0..2 {
+        let lane = |a: &Array3<u8>| a.index_axis(ndarray::Axis(0), colour).to_owned();
+        assert_ne!(lane(&g.codes), lane(&uncalibrated.codes), "colour {colour}");
+    }
+}

@@ -1,5 +1,5 @@
 //! Proves that after warm-up a frame's optics stages (offset propagation, pre-filter input, double phase
-//! encoding, LUT, output copy) perform no heap allocation: a counting global allocator counts every
+//! encoding, the calibrated per-pixel look-up table, output copy) perform no heap allocation: a counting global allocator counts every
 //! allocation of every thread (the colour workers included) around the session's stage methods.
 //! The CNN stages allocate inside tract and are measured separately, as a sanity check that the counter works.
 //!
@@ -14,6 +14,7 @@ use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
 use tensorholo::pipeline::{Backend, Heads, HologramPipeline, PipelineConfig};
 use tensorholo::scene::RgbdFrame;
+use tensorholo::slm::{DisplayCalibration, LutRepresentation, PhaseCurve, PhaseLut, TiledCurves};
 
 #[global_allocator]
 static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
@@ -45,7 +46,17 @@ fn optics_stages_allocate_nothing_after_warm_up() {
             RgbdFrame::new(amp, depth).unwrap()
         })
         .collect();
-    for prefilter in [true, false] {
+    // A per-pixel (tiled) look-up table on every colour.
+    let mut cal = DisplayCalibration::linear(h, w).unwrap();
+    for (c, col) in cal.colours.iter_mut().enumerate() {
+        let curves = (0..4 * 6)
+            .map(|t| PhaseCurve::gamma(7.0 + 0.05 * (t + c) as f32, 1.1).unwrap())
+            .collect();
+        let tiles = TiledCurves::new(h, w, 8, 8, curves).unwrap();
+        col.lut = PhaseLut::new(LutRepresentation::Tiled(tiles));
+    }
+    let cal = Arc::new(cal);
+    for (prefilter, calibrated) in [(true, false), (false, false), (false, true)] {
         let pre = prefilter.then(|| load("holo8_rgbd.prefilter.onnx", ModelKind::PreFilter));
         let config = PipelineConfig {
             offset_m: 6e-3,
@@ -53,9 +64,12 @@ fn optics_stages_allocate_nothing_after_warm_up() {
             backend: Backend::Cpu,
             ..PipelineConfig::default()
         };
-        let pipeline =
+        let mut pipeline =
             HologramPipeline::new(load("holo8_rgbd.onnx", ModelKind::Hologram), pre, config)
                 .unwrap();
+        if calibrated {
+            pipeline = pipeline.with_calibration(cal.clone()).unwrap();
+        }
         let mut session = pipeline.session(h, w).unwrap();
         // Warm-up: thread-local channel contexts, tract's first run.
         session.render(&frames[0]).unwrap();
@@ -86,7 +100,7 @@ fn optics_stages_allocate_nothing_after_warm_up() {
             last = session.output().codes.clone();
         }
         println!(
-            "pre-filter {prefilter}: {optics} allocations in the optics stages of 5 frames, {cnn} in the \
+            "pre-filter {prefilter}, calibrated {calibrated}: {optics} allocations in the optics stages of 5 frames, {cnn} in the \
              pre-filter CNN"
         );
         assert_eq!(optics, 0);
