@@ -465,6 +465,9 @@ pub struct GeneratorInfo {
     pub backend_reason: String,
     /// The GPU adapter, where one was used or tried.
     pub gpu_adapter: Option<String>,
+    /// The display calibration applied ([`HologramGenerator::set_calibration`]), in words, e.g.
+    /// `"1080×1920 SLM: red tiled (16×16 px), green global, blue linear; intensity map: none"`.
+    pub calibration: Option<String>,
     /// Everything above and the autotuning timings, as JSON.
     pub json: String,
 }
@@ -570,6 +573,30 @@ impl HologramGenerator {
         })
     }
 
+    /// Applies a display calibration file (the bytes of a `.holocal` made by `holo calibrate`, e.g. bundled
+    /// with the app or downloaded per device) to the frames rendered from now on and to streams started
+    /// later; `None` returns to an ideal SLM (linear look-up tables, no intensity map). Its per-colour
+    /// look-up tables turn the double phase pattern into the codes this SLM needs, and its laser intensity
+    /// map evens out the illumination (`docs/CALIBRATION.md`).
+    ///
+    /// Errors: [`TensorholoError::InvalidInput`] for bytes that are not a valid `.holocal` file (truncated,
+    /// corrupt, another version: the message says which), a calibration for another SLM size than this
+    /// generator's, or one measured at other wavelengths; the generator keeps its calibration.
+    pub fn set_calibration(&self, calibration: Option<Vec<u8>>) -> Result<()> {
+        guard(|| {
+            let calibration = calibration
+                .map(|bytes| {
+                    tensorholo::slm::DisplayCalibration::from_bytes(
+                        &bytes,
+                        "calibration (.holocal)",
+                    )
+                })
+                .transpose()?
+                .map(Arc::new);
+            Ok(self.inner.set_calibration(calibration)?)
+        })
+    }
+
     /// The models, precision, pre-filter and CNN plan this generator runs.
     pub fn info(&self) -> Result<GeneratorInfo> {
         guard(|| info(&self.inner))
@@ -655,6 +682,7 @@ fn info(g: &core::HologramGenerator) -> Result<GeneratorInfo> {
         backend: i.backend.active.to_string(),
         backend_reason: i.backend.reason,
         gpu_adapter: i.backend.adapter,
+        calibration: i.calibration,
         json,
     })
 }

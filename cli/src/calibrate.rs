@@ -1,17 +1,21 @@
 //! `holo calibrate`: the display calibration of paper Methods (Eq. 12–13) on a bench: the 256 test patterns,
-//! a per-pixel look-up table from the camera captures, its curves for inspection, and a simulated SLM to try
-//! it all without hardware (`docs/CALIBRATION.md`).
+//! a per-pixel look-up table from the camera captures, the laser intensity map from diffuser captures, its
+//! curves for inspection, the deep-black test of Fig. 11, and a simulated SLM to try it all without hardware
+//! (`docs/CALIBRATION.md`).
 
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use tensorholo::slm::calibrate::{calibrate, calibration_pattern, CalibrationOptions};
-use tensorholo::slm::captures::{Crop, PngCaptureDir};
+use tensorholo::slm::captures::{read_png_downsampled, Crop, PngCaptureDir};
 use tensorholo::slm::file::COLOUR_NAMES;
+use tensorholo::slm::intensity::{intensity_scale_map, IntensityFloor};
 use tensorholo::slm::lut::CODES;
-use tensorholo::slm::simulate::SimulatedSlm;
-use tensorholo::slm::{DisplayCalibration, LutRepresentation, PhaseLut};
+use tensorholo::slm::simulate::{write_grey_png, SimulatedSlm};
+use tensorholo::slm::{
+    black_test_codes, filtered_intensity, DisplayCalibration, LutRepresentation, PhaseLut,
+};
 
 use crate::args::parse_size;
 
@@ -59,7 +63,53 @@ enum CalibrateCommand {
         /// `tiled` (per-pixel) or `global` (the panel's mean curve).
         #[arg(long, default_value = "tiled")]
         representation: String,
+        /// The lasers' wavelengths in metres, R,G,B (stored in the file; the pipeline refuses a calibration
+        /// more than 1 nm from its optics).
+        #[arg(long, value_delimiter = ',', default_values_t = [638e-9, 520e-9, 450e-9])]
+        wavelengths_m: Vec<f64>,
         /// Output calibration file (.holocal).
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Add laser intensity maps to a calibration from diffuser captures (the SLM replaced by a diffuser, one
+    /// PNG per laser, 8/16-bit grey or RGB, the beam's peak below full scale): 5×5 median, then the amplitude
+    /// scale that flattens the display's brightness to a floor of the beam (docs/CALIBRATION.md). Writes a
+    /// new file; --base is never modified.
+    Intensity {
+        /// Diffuser capture of the red laser.
+        #[arg(long)]
+        red: Option<PathBuf>,
+        /// Diffuser capture of the green laser.
+        #[arg(long)]
+        green: Option<PathBuf>,
+        /// Diffuser capture of the blue laser.
+        #[arg(long)]
+        blue: Option<PathBuf>,
+        /// The calibration to add the maps to (its look-up tables and other maps are kept).
+        #[arg(long, required_unless_present = "size")]
+        base: Option<PathBuf>,
+        /// SLM size HEIGHTxWIDTH, without --base (linear look-up tables).
+        #[arg(long, value_parser = parse_size, conflicts_with = "base")]
+        size: Option<(usize, usize)>,
+        /// The SLM's area in the captures: x,y,width,height in camera pixels (default: the whole capture).
+        #[arg(long)]
+        crop: Option<String>,
+        /// Flatten the display to this percentile (0–100) of the filtered beam intensity; brighter pixels are
+        /// dimmed to it, dimmer ones keep their amplitude.
+        #[arg(long, default_value_t = 5.0)]
+        floor_percentile: f32,
+        /// Output calibration file (.holocal).
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Write the deep-black test of paper Fig. 11 through a calibration's look-up tables (black_r.png,
+    /// black_g.png, black_b.png: the double phase encoding of a black target, to display and photograph)
+    /// and black.json: the black level and contrast the calibration's own curves predict for it and for the
+    /// linear look-up table.
+    Black {
+        /// Calibration file.
+        file: PathBuf,
+        /// Output folder (created).
         #[arg(long)]
         out: PathBuf,
     },
@@ -76,7 +126,8 @@ enum CalibrateCommand {
         out: PathBuf,
     },
     /// Write the captures of a simulated SLM (spatially varying response, Gaussian beam, noise, dust; camera at
-    /// 2× resolution) into OUT/red, OUT/green, OUT/blue, to try `holo calibrate lut` without hardware.
+    /// 2× resolution) into OUT/red, OUT/green, OUT/blue, and its diffuser captures (the beam alone) as
+    /// OUT/diffuser_red.png …, to try `holo calibrate lut` and `holo calibrate intensity` without hardware.
     Simulate {
         /// SLM size HEIGHTxWIDTH.
         #[arg(long, value_parser = parse_size, default_value = "128x128")]
@@ -122,6 +173,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             crop,
             tile,
             representation,
+            wavelengths_m,
             out,
         } => {
             let crop: Option<Crop> = crop.as_deref().map(str::parse).transpose()?;
@@ -134,6 +186,12 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
                 tensorholo::io::ensure_not_input(out, &[dir.as_path()])?;
             }
             let mut cal = DisplayCalibration::linear(size.0, size.1)?;
+            let [r, g, b] = wavelengths_m[..] else {
+                bail!("--wavelengths-m needs 3 comma-separated values (R,G,B)");
+            };
+            for (col, wl) in cal.colours.iter_mut().zip([r, g, b]) {
+                col.wavelength_m = wl;
+            }
             let options = CalibrationOptions {
                 tile: *tile,
                 ..CalibrationOptions::default()
@@ -174,6 +232,24 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             eprintln!("wrote {}", out.display());
             Ok(())
         }
+        CalibrateCommand::Intensity {
+            red,
+            green,
+            blue,
+            base,
+            size,
+            crop,
+            floor_percentile,
+            out,
+        } => intensity(
+            [red, green, blue],
+            base.as_deref(),
+            *size,
+            crop.as_deref(),
+            *floor_percentile,
+            out,
+        ),
+        CalibrateCommand::Black { file, out } => black(file, out),
         CalibrateCommand::Curves { file, color, out } => {
             let c = colour_index(color)?;
             tensorholo::io::ensure_not_input(out, &[file.as_path()])?;
@@ -201,11 +277,14 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             sim.validate()?;
             for (c, name) in COLOUR_NAMES.iter().enumerate() {
                 sim.write_captures(c, &out.join(name), &|_, _| {})?;
+                let beam = sim.diffuser_capture(c)?;
+                write_grey_png(&out.join(format!("diffuser_{name}.png")), beam.view(), 16)?;
             }
             let json = serde_json::to_string_pretty(&sim)?;
             tensorholo::io::write_atomic(&out.join("simulator.json"), json.as_bytes())?;
             eprintln!(
-                "wrote 3 × 256 captures of a simulated {}×{} SLM to {} (parameters in simulator.json)",
+                "wrote 3 × 256 captures and 3 diffuser captures of a simulated {}×{} SLM to {} (parameters in \
+                 simulator.json)",
                 size.0,
                 size.1,
                 out.display()
@@ -213,4 +292,119 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// `holo calibrate intensity`.
+fn intensity(
+    captures: [&Option<PathBuf>; 3],
+    base: Option<&std::path::Path>,
+    size: Option<(usize, usize)>,
+    crop: Option<&str>,
+    floor_percentile: f32,
+    out: &std::path::Path,
+) -> Result<()> {
+    let crop: Option<Crop> = crop.map(str::parse).transpose()?;
+    if captures.iter().all(|c| c.is_none()) {
+        bail!("give the diffuser capture of at least one colour: --red FILE, --green FILE, --blue FILE");
+    }
+    let inputs: Vec<&std::path::Path> = captures
+        .iter()
+        .filter_map(|c| c.as_deref())
+        .chain(base)
+        .collect();
+    tensorholo::io::ensure_not_input(out, &inputs)?;
+    let mut cal = match (base, size) {
+        (Some(b), _) => DisplayCalibration::read(b)?,
+        (None, Some((h, w))) => DisplayCalibration::linear(h, w)?,
+        (None, None) => bail!("give --base FILE.holocal or --size HEIGHTxWIDTH"),
+    };
+    let (h, w) = (cal.height, cal.width);
+    for (c, capture) in captures.into_iter().enumerate() {
+        let Some(path) = capture else { continue };
+        let mut beam = vec![0f32; h * w];
+        let mut clipped = vec![false; h * w];
+        read_png_downsampled(path, (h, w), crop, &mut beam, &mut clipped)?;
+        let beam = ndarray::Array2::from_shape_vec((h, w), beam)?;
+        let (map, floor) =
+            intensity_scale_map(beam.view(), IntensityFloor::Percentile(floor_percentile))
+                .with_context(|| format!("{} capture {}", COLOUR_NAMES[c], path.display()))?;
+        let kept = map.iter().map(|&s| (s * s) as f64).sum::<f64>() / map.len() as f64;
+        eprintln!(
+            "{}: display flattened to {:.1} % of the beam's peak; {:.0} % of the light kept on a white target",
+            COLOUR_NAMES[c],
+            100.0 * floor,
+            100.0 * kept
+        );
+        cal.colours[c].intensity_scale = Some(map);
+    }
+    cal.write(out)?;
+    eprintln!("wrote {} ({})", out.display(), cal.summary());
+    Ok(())
+}
+
+/// `holo calibrate black`.
+fn black(file: &std::path::Path, out: &std::path::Path) -> Result<()> {
+    tensorholo::io::ensure_not_input(out, &[file])?;
+    let cal = DisplayCalibration::read(file)?;
+    let (h, w) = (cal.height, cal.width);
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let luts = [
+        &cal.colours[0].lut,
+        &cal.colours[1].lut,
+        &cal.colours[2].lut,
+    ];
+    let linear = PhaseLut::linear();
+    let calibrated = black_test_codes(luts, h, w)?;
+    let uncalibrated = black_test_codes([&linear; 3], h, w)?;
+    // What the calibrated panel shows for each set of codes, by its own measured curves.
+    let shown = |codes: &ndarray::Array3<u8>| -> Result<[f64; 3]> {
+        let mut phase = ndarray::Array3::<f32>::zeros((3, h, w));
+        for (c, lut) in luts.iter().enumerate() {
+            let k = codes.index_axis(ndarray::Axis(0), c);
+            let mut p = phase.index_axis_mut(ndarray::Axis(0), c);
+            match (k.as_slice(), p.as_slice_mut()) {
+                (Some(k), Some(p)) => lut.displayed_phases(h, w, k, p)?,
+                _ => bail!("pattern planes are not contiguous"),
+            }
+        }
+        Ok(filtered_intensity(phase.view())?)
+    };
+    let (with, without) = (shown(&calibrated)?, shown(&uncalibrated)?);
+    let mut report = serde_json::Map::new();
+    for (c, name) in COLOUR_NAMES.iter().enumerate() {
+        let file = format!("black_{}.png", &name[..1]);
+        tensorholo::io::save_u8_png(&out.join(&file), calibrated.index_axis(ndarray::Axis(0), c))?;
+        eprintln!(
+            "{name}: predicted black level {:.2e} (contrast {:.0}:1) with the calibration, {:.2e} ({:.0}:1) \
+             with the linear look-up table",
+            with[c],
+            1.0 / with[c],
+            without[c],
+            1.0 / without[c]
+        );
+        report.insert(
+            name.to_string(),
+            serde_json::json!({
+                "pattern": file,
+                "black_level_calibrated": with[c],
+                "black_level_linear_lut": without[c],
+                "contrast_calibrated": 1.0 / with[c],
+                "contrast_linear_lut": 1.0 / without[c],
+            }),
+        );
+    }
+    report.insert("calibration".into(), cal.summary().into());
+    report.insert(
+        "note".into(),
+        "black levels predicted by the calibration's own curves (Eq. 8-9 Fourier filter), relative to a \
+         uniform pattern; photograph the patterns to measure the panel's"
+            .into(),
+    );
+    let json = serde_json::to_string_pretty(&serde_json::Value::Object(report))?;
+    tensorholo::io::write_atomic(&out.join("black.json"), json.as_bytes())?;
+    eprintln!(
+        "wrote black_r.png, black_g.png, black_b.png and black.json to {}",
+        out.display()
+    );
+    Ok(())
 }

@@ -33,7 +33,8 @@ pub const FOCUS: [&str; 3] = ["focus_near.png", "focus_mid.png", "focus_far.png"
 /// The output-file section of `--help`.
 pub const OUTPUTS_HELP: &str = "\
 Outputs in --out:
-  phase_r.png phase_g.png phase_b.png  8-bit SLM patterns, one per laser (linear LUT: code c = 2*pi*c/256 rad)
+  phase_r.png phase_g.png phase_b.png  8-bit SLM patterns, one per laser (linear LUT: code c = 2*pi*c/256 rad;
+                                       with --calibration, its look-up tables)
   midpoint.npy                         complex64 [3, H, W] midpoint hologram (numpy.load reads it)
   focus_near.png focus_mid.png focus_far.png
                                        simulated reconstructions of the SLM patterns (Fourier filter +

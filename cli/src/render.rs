@@ -165,6 +165,11 @@ pub struct ModelArgs {
     /// memory; f32 where the adapter lacks f16).
     #[arg(long, value_enum, default_value_t = GpuPrecisionArg::Auto)]
     pub gpu_precision: GpuPrecisionArg,
+    /// Display calibration file (.holocal, from `holo calibrate lut`): the SLM's per-colour look-up tables
+    /// (phase → code) and laser intensity map (docs/CALIBRATION.md). Frames must have its SLM size; its
+    /// wavelengths must be the optics'. Without it: the linear look-up table of an ideal SLM.
+    #[arg(long, visible_alias = "lut")]
+    pub calibration: Option<PathBuf>,
     #[command(flatten)]
     pub encoding: crate::args::EncodingArgs,
     #[command(flatten)]
@@ -225,7 +230,7 @@ impl ModelArgs {
             None => tensorholo::model::embedded::hologram_model(self.layers, precision, &expected)
                 .context("loading the shipped hologram CNN")?,
         };
-        let pipeline = match &self.prefilter_model {
+        let mut pipeline = match &self.prefilter_model {
             Some(p) if config.offset_m != 0.0 => {
                 let pre = HologramModel::from_path(p, ModelKind::PreFilter, &expected)?;
                 HologramPipeline::new(Arc::new(hologram), Some(Arc::new(pre)), config)?
@@ -237,6 +242,13 @@ impl ModelArgs {
                 config,
             )?,
         };
+        if let Some(path) = &self.calibration {
+            let cal = tensorholo::slm::DisplayCalibration::read(path)?;
+            log::info!("display calibration {}: {}", path.display(), cal.summary());
+            pipeline = pipeline
+                .with_calibration(Arc::new(cal))
+                .with_context(|| format!("--calibration {}", path.display()))?;
+        }
         if pipeline.prefilter_model().is_none() {
             log::info!(
                 "encoding without a pre-filter CNN: {}",
@@ -267,6 +279,10 @@ impl ModelArgs {
             "hologram_cnn": describe(pipeline.hologram_model()),
             "prefilter_cnn": pipeline.prefilter_model().map(describe),
             "encoding": pipeline.encoding(),
+            "calibration": pipeline.calibration().map(|c| json!({
+                "file": self.calibration.as_ref().map(|p| p.display().to_string()),
+                "summary": c.summary(),
+            })),
             "load_s": t.elapsed().as_secs_f64(),
         });
         Ok((pipeline, info))

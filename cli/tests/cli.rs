@@ -390,6 +390,92 @@ fn calibrate_simulate_lut_curves_end_to_end() {
         std::fs::metadata(dir.join("g.npy")).unwrap().len(),
         128 + 16 * 24 * 256 * 4
     );
+    // The intensity map from the diffuser capture, added to a copy; --base is never the output.
+    let o = holo(&[
+        "calibrate",
+        "intensity",
+        "--green",
+        &d("sim/diffuser_green.png"),
+        "--base",
+        &d("d.holocal"),
+        "--out",
+        &d("d.holocal"),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("overwrite"),
+        "{}",
+        stderr(&o)
+    );
+    let o = holo(&[
+        "calibrate",
+        "intensity",
+        "--green",
+        &d("sim/diffuser_green.png"),
+        "--base",
+        &d("d.holocal"),
+        "--out",
+        &d("e.holocal"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e = tensorholo::slm::DisplayCalibration::read(&dir.join("e.holocal")).unwrap();
+    let map = e.colours[1].intensity_scale.as_ref().unwrap();
+    assert!(e.colours[0].intensity_scale.is_none());
+    assert_eq!(e.colours[1].lut.representation().name(), "tiled");
+    // The Gaussian beam is brightest near the centre: dimmed most there, not at all at its floor.
+    let centre = map[[8, 12]];
+    let lo = map.iter().cloned().fold(f32::INFINITY, f32::min);
+    let hi = map.iter().cloned().fold(0.0f32, f32::max);
+    assert!(
+        centre < 0.9 && (lo - centre).abs() < 0.15 && hi == 1.0,
+        "{centre} {lo} {hi}"
+    );
+    // The deep-black test: the calibrated pattern is predicted darker than the linear LUT's.
+    let o = holo(&["calibrate", "black", &d("e.holocal"), "--out", &d("black")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("black/black.json")).unwrap())
+            .unwrap();
+    let g = &report["green"];
+    assert!(
+        g["black_level_calibrated"].as_f64().unwrap()
+            < 0.5 * g["black_level_linear_lut"].as_f64().unwrap(),
+        "{g}"
+    );
+    assert!(dir.join("black/black_g.png").exists());
+    // A render through the calibration: at its size only.
+    let o = holo(&[
+        "render",
+        "--size",
+        "16x24",
+        "--calibration",
+        &d("e.holocal"),
+        "--out",
+        &d("r"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("r/report.json")).unwrap()).unwrap();
+    assert!(
+        report["models"]["calibration"]["summary"]
+            .as_str()
+            .unwrap()
+            .contains("green tiled"),
+        "{report}"
+    );
+    let o = holo(&[
+        "render",
+        "--size",
+        "32x24",
+        "--lut",
+        &d("e.holocal"),
+        "--out",
+        &d("r2"),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("16×24"),
+        "{}",
+        stderr(&o)
+    );
     // Another resolution's captures, a missing folder, and a wrong colour are refused by name.
     let o = holo(&[
         "calibrate",

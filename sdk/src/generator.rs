@@ -37,6 +37,7 @@ use crate::scene::{
     CameraFrame, CameraFrameBuf, CameraFrameReport, DepthMapping, DepthRange, Fit, FrameOptions,
     RgbdFrame,
 };
+use crate::slm::{DisplayCalibration, LutRepresentation};
 
 /// The largest hologram a generator makes, in pixels (`width · height`): 8192 × 8192, four times a 4K SLM.
 /// Above it the buffers of one session (≈ 200 bytes a pixel) would not fit a phone.
@@ -319,6 +320,8 @@ pub struct GeneratorInfo {
     pub plan: PlanReport,
     /// Which backend runs the frames and why (after the first frame: the self-check's result).
     pub backend: BackendReport,
+    /// The display calibration applied, in words ([`DisplayCalibration::summary`]), or `None`.
+    pub calibration: Option<String>,
 }
 
 /// Receives a [`HologramStream`]'s results, in frame order, on the stream's worker thread.
@@ -335,6 +338,8 @@ pub struct HologramGenerator {
     config: GeneratorConfig,
     pipeline: HologramPipeline,
     session: Mutex<HologramSession>,
+    /// The display calibration of new sessions and streams ([`HologramGenerator::set_calibration`]).
+    calibration: Mutex<Option<Arc<DisplayCalibration>>>,
 }
 
 impl HologramGenerator {
@@ -401,12 +406,35 @@ impl HologramGenerator {
     /// Errors: as [`GeneratorConfig::validate`] and [`HologramPipeline::session`].
     pub fn with_pipeline(config: GeneratorConfig, pipeline: HologramPipeline) -> Result<Self> {
         config.validate()?;
-        let session = open_session(&pipeline, &config)?;
+        let calibration = pipeline.calibration().cloned();
+        let session = open_session(&pipeline, &config, calibration.clone())?;
         Ok(Self {
             config,
             pipeline,
             session: Mutex::new(session),
+            calibration: Mutex::new(calibration),
         })
+    }
+
+    /// Applies a display's calibration (`None`: an ideal SLM) to the frames rendered from now on and to
+    /// streams started later (a running stream keeps the one it started with): its per-colour look-up tables
+    /// turn the double phase pattern into codes, and its laser intensity map scales the CNN's target
+    /// (`docs/CALIBRATION.md`; [`HologramPipeline::with_calibration`]). Previews then show what the
+    /// calibrated panel displays.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] if the calibration is for another SLM size than
+    /// `config.height × config.width`; [`HoloError::InvalidParameter`] if its wavelengths differ from
+    /// `config.optics` by more than 1 nm. The generator keeps its calibration on error.
+    pub fn set_calibration(&self, calibration: Option<Arc<DisplayCalibration>>) -> Result<()> {
+        let mut current = lock_calibration(&self.calibration);
+        self.session()?.set_calibration(calibration.clone())?;
+        *current = calibration;
+        Ok(())
+    }
+
+    /// The display calibration applied, if any.
+    pub fn calibration(&self) -> Option<Arc<DisplayCalibration>> {
+        lock_calibration(&self.calibration).clone()
     }
 
     /// The configuration.
@@ -420,7 +448,7 @@ impl HologramGenerator {
             Ok(g) => Ok(g),
             Err(poisoned) => {
                 let mut g = poisoned.into_inner();
-                *g = open_session(&self.pipeline, &self.config)?;
+                *g = open_session(&self.pipeline, &self.config, self.calibration())?;
                 self.session.clear_poison();
                 log::warn!("a call panicked while rendering; the session was recreated");
                 Ok(g)
@@ -463,7 +491,8 @@ impl HologramGenerator {
     }
 
     /// What a viewer sees of `patterns` focused at normalised depth `focus` ∈ [0, 1] (0 = near): the phase
-    /// the SLM displays for the 8-bit codes ([`LinearLut::phase`], quantisation included), as a phase-only
+    /// the SLM displays for the 8-bit codes (through the calibrated curves of
+    /// [`HologramGenerator::set_calibration`], else [`LinearLut::phase`]; quantisation included), as a phase-only
     /// field (Eq. 8–10, no aperture) propagated from the midpoint plane to `z(focus)`, as sRGB.
     ///
     /// Errors: [`HoloError::InvalidParameter`] for a focus outside [0, 1] or NaN; as
@@ -475,8 +504,15 @@ impl HologramGenerator {
                 format!("is a normalised depth in [0, 1] (0 = near), got {focus}"),
             ));
         }
+        let calibration = self.calibration();
+        let calibrated = calibration.as_ref().is_some_and(|cal| {
+            cal.colours
+                .iter()
+                .any(|c| !matches!(c.lut.representation(), LutRepresentation::Linear))
+        });
         #[cfg(feature = "gpu")]
-        {
+        if !calibrated {
+            // The GPU preview reads codes through the linear table; a calibrated panel's runs below.
             let mut session = self.session()?;
             let same_size = patterns.codes.dim() == (3, self.config.height, self.config.width);
             if let (Some(gpu), true) = (session.gpu_frame_mut(), same_size) {
@@ -490,7 +526,10 @@ impl HologramGenerator {
             }
         }
         let cfg = &self.config;
-        let phase = patterns.codes.mapv(|c| LinearLut.phase(c));
+        let phase = match (&calibration, calibrated) {
+            (Some(cal), true) => displayed_phase(cal, &patterns.codes)?,
+            _ => patterns.codes.mapv(|c| LinearLut.phase(c)),
+        };
         let shown = post_encoding_midpoint(
             phase.view(),
             patterns.amplitude_scale,
@@ -555,6 +594,7 @@ impl HologramGenerator {
             offset_m: self.config.offset_m,
             plan,
             backend,
+            calibration: self.calibration().map(|c| c.summary()),
         })
     }
 
@@ -572,9 +612,25 @@ impl HologramGenerator {
         if capacity == 0 {
             return Err(invalid("capacity", "a stream queue holds at least 1 frame"));
         }
-        let session = open_session(&self.pipeline, &self.config)?;
+        let session = open_session(&self.pipeline, &self.config, self.calibration())?;
         HologramStream::start(session, self.config, listener, capacity)
     }
+}
+
+/// The phase `[3, H, W]` (radians) a display with calibration `cal` shows for `codes` `[3, H, W]`.
+fn displayed_phase(cal: &DisplayCalibration, codes: &Array3<u8>) -> Result<Array3<f32>> {
+    let (_, h, w) = codes.dim();
+    let mut phase = Array3::<f32>::zeros((3, h, w));
+    for (c, col) in cal.colours.iter().enumerate() {
+        let k = codes.index_axis(Axis(0), c);
+        let k = k.as_standard_layout();
+        let mut out = phase.index_axis_mut(Axis(0), c);
+        match (k.as_slice(), out.as_slice_mut()) {
+            (Some(k), Some(out)) => col.lut.displayed_phases(h, w, k, out)?,
+            _ => return Err(HoloError::Internal("pattern planes not contiguous".into())),
+        }
+    }
+    Ok(phase)
 }
 
 /// An amplitude image `[3, H, W]` as sRGB RGBA8 for the screen.
@@ -596,12 +652,24 @@ fn preview_image(amp: &Array3<f32>) -> Preview {
     }
 }
 
-/// A session for `config`'s size that downloads only what [`SlmPatterns`] holds (codes and normaliser) from the
-/// GPU.
-fn open_session(pipeline: &HologramPipeline, config: &GeneratorConfig) -> Result<HologramSession> {
+/// A session for `config`'s size with `calibration` that downloads only what [`SlmPatterns`] holds (codes and
+/// normaliser) from the GPU.
+fn open_session(
+    pipeline: &HologramPipeline,
+    config: &GeneratorConfig,
+    calibration: Option<Arc<DisplayCalibration>>,
+) -> Result<HologramSession> {
     let mut session = pipeline.session(config.height, config.width)?;
     session.set_full_outputs(false);
+    session.set_calibration(calibration)?;
     Ok(session)
+}
+
+/// The calibration slot; it holds a plain `Option<Arc>`, consistent whatever a panicking thread did.
+fn lock_calibration(
+    slot: &Mutex<Option<Arc<DisplayCalibration>>>,
+) -> MutexGuard<'_, Option<Arc<DisplayCalibration>>> {
+    slot.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// The queue between [`HologramStream::push`] and the worker.

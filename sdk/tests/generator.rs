@@ -404,3 +404,93 @@ fn autotuned_plans_report_their_candidates_and_agree_with_the_file_layout() {
         assert_eq!(again.layout, report.layout);
     }
 }
+
+/// A panel with a gamma response over 2.5π on every colour, green per pixel (tiles), and a red intensity map.
+fn panel_calibration(h: usize, w: usize) -> tensorholo::slm::DisplayCalibration {
+    use tensorholo::slm::{
+        DisplayCalibration, LutRepresentation, PhaseCurve, PhaseLut, TiledCurves,
+    };
+    let mut cal = DisplayCalibration::linear(h, w).unwrap();
+    let pi = std::f32::consts::PI;
+    for c in [0, 2] {
+        cal.colours[c].lut = PhaseLut::new(LutRepresentation::Global(
+            PhaseCurve::gamma(2.5 * pi, 1.5).unwrap(),
+        ));
+    }
+    let tiles = (h.div_ceil(16)) * (w.div_ceil(16));
+    let curves = (0..tiles)
+        .map(|t| PhaseCurve::gamma((2.4 + 0.02 * t as f32) * pi, 1.4).unwrap())
+        .collect();
+    cal.colours[1].lut = PhaseLut::new(LutRepresentation::Tiled(
+        TiledCurves::new(h, w, 16, 16, curves).unwrap(),
+    ));
+    cal.colours[0].intensity_scale = Some(ndarray::Array2::from_elem((h, w), 0.8));
+    cal
+}
+
+#[test]
+fn a_calibrated_generator_shows_on_its_panel_what_an_ideal_one_shows() {
+    let (h, w) = (64, 64);
+    let mut c = GeneratorConfig::new(w, h);
+    c.fit = Fit::Stretch;
+    c.threads = ThreadCount::Fixed(1);
+    let frame = camera_frame(h, w, 1.0);
+    let ideal = HologramGenerator::new(c).unwrap();
+    let ideal_patterns = ideal.render(&frame.view()).unwrap();
+    let ideal_view = ideal.preview_patterns(&ideal_patterns, 0.5).unwrap();
+
+    let g = HologramGenerator::new(c).unwrap();
+    let mut cal = panel_calibration(h, w);
+    // No intensity map here: the two generators must aim at the same target.
+    cal.colours[0].intensity_scale = None;
+    g.set_calibration(Some(Arc::new(cal))).unwrap();
+    let info = g.info().unwrap();
+    assert_eq!(
+        info.calibration.as_deref(),
+        Some("64×64 SLM: red global, green tiled (16×16 px), blue global; intensity map: none")
+    );
+    let patterns = g.render(&frame.view()).unwrap();
+    assert_ne!(patterns.codes, ideal_patterns.codes);
+    let image = |p: &tensorholo::generator::Preview| {
+        ndarray::Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+            p.rgba[(y * w + x) * 4 + c] as f32 / 255.0
+        })
+    };
+    // The calibrated codes on the calibrated panel ≈ the ideal codes on an ideal panel; the uncalibrated
+    // codes on this panel are far off.
+    let calibrated = psnr(
+        image(&g.preview_patterns(&patterns, 0.5).unwrap()).view(),
+        image(&ideal_view).view(),
+        1.0,
+    )
+    .unwrap();
+    let uncalibrated = psnr(
+        image(&g.preview_patterns(&ideal_patterns, 0.5).unwrap()).view(),
+        image(&ideal_view).view(),
+        1.0,
+    )
+    .unwrap();
+    println!("preview vs the ideal display's: calibrated {calibrated:.1} dB, uncalibrated {uncalibrated:.1} dB");
+    assert!(calibrated > 35.0, "{calibrated}");
+    assert!(
+        calibrated > uncalibrated + 10.0,
+        "{calibrated} vs {uncalibrated}"
+    );
+
+    // A calibration of another size is refused and the generator keeps its own.
+    let other = Arc::new(panel_calibration(h, w + 16));
+    assert!(matches!(
+        g.set_calibration(Some(other)),
+        Err(HoloError::ShapeMismatch { .. })
+    ));
+    assert_eq!(g.render(&frame.view()).unwrap().codes, patterns.codes);
+    // Streams start with the generator's calibration.
+    let rec = Arc::new(Mutex::new(Recorder::default()));
+    let stream = g.stream(Box::new(Shared(rec.clone())), 2).unwrap();
+    stream.push(frame.clone()).unwrap();
+    stream.close();
+    assert_eq!(rec.lock().unwrap().patterns[0].1.codes, patterns.codes);
+    g.set_calibration(None).unwrap();
+    assert_eq!(g.render(&frame.view()).unwrap().codes, ideal_patterns.codes);
+    assert!(g.info().unwrap().calibration.is_none());
+}

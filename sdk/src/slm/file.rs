@@ -120,6 +120,40 @@ impl DisplayCalibration {
         Ok(())
     }
 
+    /// One line for logs and reports, e.g. `"1080×1920 SLM: red tiled (16×16 px), green global, blue linear;
+    /// intensity map: green"`.
+    pub fn summary(&self) -> String {
+        let luts: Vec<String> = self
+            .colours
+            .iter()
+            .zip(COLOUR_NAMES)
+            .map(|(c, name)| match c.lut.representation() {
+                LutRepresentation::Tiled(t) => {
+                    format!("{name} tiled ({}×{} px)", t.tile().0, t.tile().1)
+                }
+                r => format!("{name} {}", r.name()),
+            })
+            .collect();
+        let maps: Vec<&str> = self
+            .colours
+            .iter()
+            .zip(COLOUR_NAMES)
+            .filter(|(c, _)| c.intensity_scale.is_some())
+            .map(|(_, name)| name)
+            .collect();
+        let maps = if maps.is_empty() {
+            "none".to_string()
+        } else {
+            maps.join(", ")
+        };
+        format!(
+            "{}×{} SLM: {}; intensity map: {maps}",
+            self.height,
+            self.width,
+            luts.join(", ")
+        )
+    }
+
     /// Whether any colour has an intensity scale map.
     pub fn has_intensity(&self) -> bool {
         self.colours.iter().any(|c| c.intensity_scale.is_some())

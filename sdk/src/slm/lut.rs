@@ -390,6 +390,17 @@ impl TiledCurves {
         }
     }
 
+    /// The phase code `code` displays under row weights `wy` and column weights `wx` (one value of
+    /// [`TiledCurves::blend`]).
+    fn blend_at(&self, wy: (u32, u32, f32), wx: (u32, u32, f32), code: u8) -> f32 {
+        let cols = self.grid().1;
+        let at =
+            |ty: u32, tx: u32| self.curves[ty as usize * cols + tx as usize].phases[code as usize];
+        let top = at(wy.0, wx.0) * (1.0 - wx.2) + at(wy.0, wx.1) * wx.2;
+        let bottom = at(wy.1, wx.0) * (1.0 - wx.2) + at(wy.1, wx.1) * wx.2;
+        top * (1.0 - wy.2) + bottom * wy.2
+    }
+
     /// Writes the response curves of rows `rows` of the SLM into `out` (`[rows.len(), width, 256]`
     /// row-major, radians).
     ///
@@ -613,6 +624,63 @@ impl PhaseLut {
     }
 }
 
+impl PhaseLut {
+    /// The forward direction of [`PhaseLut::apply`]: the phase in radians (relative to code 0, not wrapped)
+    /// that each code of one colour's pattern `codes` (`[height, width]`, row-major) displays, into `out`
+    /// (same length); allocation-free. What a viewer of a calibrated display sees (the preview).
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] as [`PhaseLut::apply`].
+    pub fn displayed_phases(
+        &self,
+        height: usize,
+        width: usize,
+        codes: &[u8],
+        out: &mut [f32],
+    ) -> Result<()> {
+        let n = height
+            .checked_mul(width)
+            .ok_or_else(|| invalid("size", format!("{height}×{width} overflows")))?;
+        if codes.len() != n || out.len() != n {
+            return Err(HoloError::ShapeMismatch {
+                what: "codes and phases vs the LUT's [H, W]".into(),
+                expected: vec![height, width],
+                got: vec![codes.len(), out.len()],
+            });
+        }
+        match &self.representation {
+            LutRepresentation::Linear => {
+                for (o, &c) in out.iter_mut().zip(codes) {
+                    *o = crate::encoding::LinearLut.phase(c);
+                }
+            }
+            LutRepresentation::Global(curve) => {
+                for (o, &c) in out.iter_mut().zip(codes) {
+                    *o = curve.phases[c as usize];
+                }
+            }
+            LutRepresentation::Tiled(t) => {
+                if t.size() != (height, width) {
+                    return Err(HoloError::ShapeMismatch {
+                        what: "SLM pattern vs the per-pixel look-up table's SLM".into(),
+                        expected: vec![t.height, t.width],
+                        got: vec![height, width],
+                    });
+                }
+                for (y, (orow, crow)) in out
+                    .chunks_exact_mut(width)
+                    .zip(codes.chunks_exact(width))
+                    .enumerate()
+                {
+                    for ((o, &c), &wx) in orow.iter_mut().zip(crow).zip(&self.cols) {
+                        *o = t.blend_at(self.rows[y], wx, c);
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Bin index `j ∈ [0, 255]` and fraction of a phase (wrapped first).
 #[inline]
 fn bin(phase: f32, bins_per_rad: f32) -> (usize, f32) {
@@ -807,6 +875,34 @@ mod tests {
         assert!(tiles.pixel_curve(30, 0).is_err());
         assert!(PhaseLut::new(LutRepresentation::Tiled(tiles))
             .apply(29, 40, &vec![0.0; 29 * 40], &mut vec![0; 29 * 40])
+            .is_err());
+    }
+
+    #[test]
+    fn displayed_phases_are_each_pixels_curve_at_its_code() {
+        let (h, w) = (13, 21);
+        let mut rng = crate::splitmix::SplitMix64::new(5);
+        let codes: Vec<u8> = (0..h * w).map(|_| (rng.next_f64() * 256.0) as u8).collect();
+        for repr in [
+            LutRepresentation::Linear,
+            LutRepresentation::Global(PhaseCurve::gamma(7.2, 1.3).unwrap()),
+            LutRepresentation::Tiled(smooth_tiles(h, w, 4)),
+        ] {
+            let lut = PhaseLut::new(repr);
+            let mut out = vec![0f32; h * w];
+            lut.displayed_phases(h, w, &codes, &mut out).unwrap();
+            for (i, (&c, &p)) in codes.iter().zip(&out).enumerate() {
+                let want = lut.displayed_phase(i / w, i % w, c).unwrap();
+                assert!((p - want).abs() < 1e-5, "pixel {i}: {p} vs {want}");
+            }
+            // Shapes are checked, a per-pixel LUT's size too.
+            assert!(lut
+                .displayed_phases(h, w, &codes[1..], &mut out[1..])
+                .is_err());
+        }
+        let tiled = PhaseLut::new(LutRepresentation::Tiled(smooth_tiles(h, w, 4)));
+        assert!(tiled
+            .displayed_phases(w, h, &codes, &mut vec![0f32; h * w])
             .is_err());
     }
 }
