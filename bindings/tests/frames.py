@@ -121,13 +121,30 @@ def redwood(tmp: Path) -> tuple[Case, bytes, bytes]:
 CASES = {"iphone": iphone, "redwood": redwood}
 
 
-def holo_codes(case: Case, out: Path) -> np.ndarray:
-    """`holo render` of the case's files at its hologram size (defaults otherwise): codes `[3, H, W]`."""
+def holo_codes(case: Case, out: Path, calibration: Path | None = None) -> np.ndarray:
+    """`holo render` of the case's files at its hologram size (defaults otherwise, through `calibration` if
+    given): codes `[3, H, W]`."""
     cmd = [str(holo_binary()), "render", "--rgb", case.holo_rgb, "--depth", case.holo_depth,
            "--depth-encoding", case.holo_encoding, "--size", f"{case.out_height}x{case.out_width}",
            "--repeat", "0", "--out", str(out)]
+    if calibration is not None:
+        cmd += ["--calibration", str(calibration)]
     subprocess.run(cmd, check=True, capture_output=True, text=True)
     return read_codes(out)
+
+
+# The panel of the calibration tests: one gamma curve over 2.4π for every laser.
+PANEL_RANGE_RAD = 7.5398
+PANEL_GAMMA = 1.3
+
+
+def panel_calibration(case: Case, out: Path) -> Path:
+    """`holo calibrate global` of a non-linear panel at the case's hologram size: the .holocal's path."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    cmd = [str(holo_binary()), "calibrate", "global", "--size", f"{case.out_height}x{case.out_width}",
+           "--range-rad", str(PANEL_RANGE_RAD), "--gamma", str(PANEL_GAMMA), "--out", str(out)]
+    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    return out
 
 
 def read_codes(folder: Path) -> np.ndarray:
@@ -154,11 +171,13 @@ def compare_codes(got: np.ndarray, want: np.ndarray) -> dict:
 
 
 def write_case(out: Path, make) -> Case:
-    """Writes a case for the Kotlin test: color.raw, depth.raw, case.json and holo/phase_{r,g,b}.png."""
+    """Writes a case for the Kotlin test: color.raw, depth.raw, case.json, holo/phase_{r,g,b}.png, and
+    panel.holocal with holo's patterns through it in holo_calibrated/."""
     case, color, depth = make(out / "inputs")
     (out / "color.raw").write_bytes(color)
     (out / "depth.raw").write_bytes(depth)
     holo_codes(case, out / "holo")
+    holo_codes(case, out / "holo_calibrated", panel_calibration(case, out / "panel.holocal"))
     (out / "case.json").write_text(json.dumps(asdict(case), indent=1))
     return case
 

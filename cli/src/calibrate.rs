@@ -14,7 +14,8 @@ use tensorholo::slm::intensity::{intensity_scale_map, IntensityFloor};
 use tensorholo::slm::lut::CODES;
 use tensorholo::slm::simulate::{write_grey_png, SimulatedSlm};
 use tensorholo::slm::{
-    black_test_codes, filtered_intensity, DisplayCalibration, LutRepresentation, PhaseLut,
+    black_test_codes, filtered_intensity, DisplayCalibration, LutRepresentation, PhaseCurve,
+    PhaseLut,
 };
 
 use crate::args::parse_size;
@@ -65,6 +66,35 @@ enum CalibrateCommand {
         representation: String,
         /// The lasers' wavelengths in metres, R,G,B (stored in the file; the pipeline refuses a calibration
         /// more than 1 nm from its optics).
+        #[arg(long, value_delimiter = ',', default_values_t = [638e-9, 520e-9, 450e-9])]
+        wavelengths_m: Vec<f64>,
+        /// Output calibration file (.holocal).
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Write a calibration with one look-up table for the whole panel per colour, from the SLM maker's table
+    /// (CSV rows `code,phase_rad`) or the gamma/range model φ(k) = range·(k/255)^gamma; colours without
+    /// either keep the linear table. For panels without a per-pixel calibration yet.
+    Global {
+        /// SLM size HEIGHTxWIDTH.
+        #[arg(long, value_parser = parse_size)]
+        size: (usize, usize),
+        /// CSV tables of the red, green and blue lasers (`code,phase_rad`, 256 rows).
+        #[arg(long)]
+        red_csv: Option<PathBuf>,
+        /// See --red-csv.
+        #[arg(long)]
+        green_csv: Option<PathBuf>,
+        /// See --red-csv.
+        #[arg(long)]
+        blue_csv: Option<PathBuf>,
+        /// The gamma model's phase at code 255 in radians, for the colours without a CSV (with --gamma).
+        #[arg(long, requires = "gamma")]
+        range_rad: Option<f32>,
+        /// The gamma model's exponent (with --range-rad).
+        #[arg(long, requires = "range_rad")]
+        gamma: Option<f32>,
+        /// The lasers' wavelengths in metres, R,G,B.
         #[arg(long, value_delimiter = ',', default_values_t = [638e-9, 520e-9, 450e-9])]
         wavelengths_m: Vec<f64>,
         /// Output calibration file (.holocal).
@@ -186,12 +216,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
                 tensorholo::io::ensure_not_input(out, &[dir.as_path()])?;
             }
             let mut cal = DisplayCalibration::linear(size.0, size.1)?;
-            let [r, g, b] = wavelengths_m[..] else {
-                bail!("--wavelengths-m needs 3 comma-separated values (R,G,B)");
-            };
-            for (col, wl) in cal.colours.iter_mut().zip([r, g, b]) {
-                col.wavelength_m = wl;
-            }
+            set_wavelengths(&mut cal, wavelengths_m)?;
             let options = CalibrationOptions {
                 tile: *tile,
                 ..CalibrationOptions::default()
@@ -250,6 +275,47 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             out,
         ),
         CalibrateCommand::Black { file, out } => black(file, out),
+        CalibrateCommand::Global {
+            size,
+            red_csv,
+            green_csv,
+            blue_csv,
+            range_rad,
+            gamma,
+            wavelengths_m,
+            out,
+        } => {
+            let csvs = [red_csv, green_csv, blue_csv];
+            let inputs: Vec<&std::path::Path> = csvs.iter().filter_map(|c| c.as_deref()).collect();
+            tensorholo::io::ensure_not_input(out, &inputs)?;
+            let mut cal = DisplayCalibration::linear(size.0, size.1)?;
+            set_wavelengths(&mut cal, wavelengths_m)?;
+            let model = match (range_rad, gamma) {
+                (Some(r), Some(g)) => Some(PhaseCurve::gamma(*r, *g)?),
+                _ => None,
+            };
+            for (c, csv) in csvs.into_iter().enumerate() {
+                let curve = match csv {
+                    Some(path) => {
+                        let text = std::fs::read_to_string(path)
+                            .with_context(|| format!("reading {}", path.display()))?;
+                        PhaseCurve::from_csv(&text, &path.display().to_string())?
+                    }
+                    None => match &model {
+                        Some(m) => m.clone(),
+                        None => continue,
+                    },
+                };
+                cal.colours[c].lut = PhaseLut::new(LutRepresentation::Global(curve));
+            }
+            cal.notes = format!(
+                "holo calibrate global, tensorholo {}",
+                env!("CARGO_PKG_VERSION")
+            );
+            cal.write(out)?;
+            eprintln!("wrote {} ({})", out.display(), cal.summary());
+            Ok(())
+        }
         CalibrateCommand::Curves { file, color, out } => {
             let c = colour_index(color)?;
             tensorholo::io::ensure_not_input(out, &[file.as_path()])?;
@@ -406,5 +472,19 @@ fn black(file: &std::path::Path, out: &std::path::Path) -> Result<()> {
         "wrote black_r.png, black_g.png, black_b.png and black.json to {}",
         out.display()
     );
+    Ok(())
+}
+
+/// `--wavelengths-m R,G,B` into `cal`.
+fn set_wavelengths(cal: &mut DisplayCalibration, wavelengths_m: &[f64]) -> Result<()> {
+    let [r, g, b] = wavelengths_m[..] else {
+        bail!("--wavelengths-m needs 3 comma-separated values (R,G,B)");
+    };
+    for (col, wl) in cal.colours.iter_mut().zip([r, g, b]) {
+        if !(wl > 0.0 && wl < 1e-5) {
+            bail!("--wavelengths-m: {wl} m is not a laser wavelength in metres");
+        }
+        col.wavelength_m = wl;
+    }
     Ok(())
 }

@@ -1,6 +1,6 @@
 //! Criterion benchmarks of the optics hot paths (results and the command in `docs/BENCHMARKS.md`):
 //! ASM per colour at 384×384 and 1920×1080 (with and without 2× padding), SM-LBM at 384×384 for 256 and 2048
-//! depth planes on the built-in scene, double phase encoding at 1080p.
+//! depth planes on the built-in scene, double phase encoding at 1080p, the calibrated look-up tables at 1080p.
 //!
 //! Run: `cargo bench -p tensorholo --bench optics`.
 #![allow(missing_docs)] // criterion_group! generates undocumented items
@@ -111,5 +111,46 @@ fn double_phase(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, asm, sm_lbm, double_phase);
+/// The display calibration's phase → code look-up table on one colour of a 1080p frame (the pipeline runs
+/// the three colours on three threads): linear, global (one curve) and per-pixel tiles of 4, 8 and 16 px.
+fn look_up_table(c: &mut Criterion) {
+    use tensorholo::slm::{LutRepresentation, PhaseCurve, PhaseLut, TiledCurves};
+    let (h, w) = (1080, 1920);
+    let mut group = c.benchmark_group("lut_1080p_one_colour");
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(3));
+    let phase: Vec<f32> = (0..h * w)
+        .map(|i| (i % 1009) as f32 * std::f32::consts::TAU / 1009.0)
+        .collect();
+    let mut codes = vec![0u8; h * w];
+    let mut luts = vec![
+        ("linear".to_string(), PhaseLut::linear()),
+        (
+            "global".to_string(),
+            PhaseLut::new(LutRepresentation::Global(
+                PhaseCurve::gamma(7.5, 1.3).expect("valid model"),
+            )),
+        ),
+    ];
+    for tile in [4, 8, 16] {
+        let n = h.div_ceil(tile) * w.div_ceil(tile);
+        let curves = (0..n)
+            .map(|t| PhaseCurve::gamma(7.0 + (t % 50) as f32 * 0.01, 1.2).expect("valid model"))
+            .collect();
+        let tiles = TiledCurves::new(h, w, tile, tile, curves).expect("valid tiles");
+        luts.push((
+            format!("tiled_{tile}px"),
+            PhaseLut::new(LutRepresentation::Tiled(tiles)),
+        ));
+    }
+    for (name, lut) in &luts {
+        group.bench_function(name.as_str(), |b| {
+            b.iter(|| lut.apply(h, w, &phase, &mut codes).expect("sizes match"))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, asm, sm_lbm, double_phase, look_up_table);
 criterion_main!(benches);

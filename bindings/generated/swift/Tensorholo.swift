@@ -658,6 +658,19 @@ public protocol HologramGeneratorProtocol: AnyObject, Sendable {
     func render(frame: RgbdFrame) throws  -> SlmPatterns
     
     /**
+     * Applies a display calibration file (the bytes of a `.holocal` made by `holo calibrate`, e.g. bundled
+     * with the app or downloaded per device) to the frames rendered from now on and to streams started
+     * later; `None` returns to an ideal SLM (linear look-up tables, no intensity map). Its per-colour
+     * look-up tables turn the double phase pattern into the codes this SLM needs, and its laser intensity
+     * map evens out the illumination (`docs/CALIBRATION.md`).
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for bytes that are not a valid `.holocal` file (truncated,
+     * corrupt, another version: the message says which), a calibration for another SLM size than this
+     * generator's, or one measured at other wavelengths; the generator keeps its calibration.
+     */
+    func setCalibration(calibration: Data?) throws 
+    
+    /**
      * Starts a video stream: [`HologramStream::push`] frames, results reach `listener` in frame order on a
      * background thread. The queue holds 2 frames and drops the oldest when full.
      *
@@ -823,6 +836,26 @@ open func render(frame: RgbdFrame)throws  -> SlmPatterns  {
         FfiConverterTypeRgbdFrame_lower(frame),uniffiCallStatus
     )
 })
+}
+    
+    /**
+     * Applies a display calibration file (the bytes of a `.holocal` made by `holo calibrate`, e.g. bundled
+     * with the app or downloaded per device) to the frames rendered from now on and to streams started
+     * later; `None` returns to an ideal SLM (linear look-up tables, no intensity map). Its per-colour
+     * look-up tables turn the double phase pattern into the codes this SLM needs, and its laser intensity
+     * map evens out the illumination (`docs/CALIBRATION.md`).
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for bytes that are not a valid `.holocal` file (truncated,
+     * corrupt, another version: the message says which), a calibration for another SLM size than this
+     * generator's, or one measured at other wavelengths; the generator keeps its calibration.
+     */
+open func setCalibration(calibration: Data?)throws   {try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_hologramgenerator_set_calibration(
+            self.uniffiCloneHandle(),
+        FfiConverterOptionData.lower(calibration),uniffiCallStatus
+    )
+}
 }
     
     /**
@@ -1674,6 +1707,11 @@ public struct GeneratorInfo: Equatable, Hashable {
      */
     public var gpuAdapter: String?
     /**
+     * The display calibration applied ([`HologramGenerator::set_calibration`]), in words, e.g.
+     * `"1080×1920 SLM: red tiled (16×16 px), green global, blue linear; intensity map: none"`.
+     */
+    public var calibration: String?
+    /**
      * Everything above and the autotuning timings, as JSON.
      */
     public var json: String
@@ -1727,6 +1765,10 @@ public struct GeneratorInfo: Equatable, Hashable {
          * The GPU adapter, where one was used or tried.
          */gpuAdapter: String?, 
         /**
+         * The display calibration applied ([`HologramGenerator::set_calibration`]), in words, e.g.
+         * `"1080×1920 SLM: red tiled (16×16 px), green global, blue linear; intensity map: none"`.
+         */calibration: String?, 
+        /**
          * Everything above and the autotuning timings, as JSON.
          */json: String) {
         self.version = version
@@ -1744,6 +1786,7 @@ public struct GeneratorInfo: Equatable, Hashable {
         self.backend = backend
         self.backendReason = backendReason
         self.gpuAdapter = gpuAdapter
+        self.calibration = calibration
         self.json = json
     }
 
@@ -1778,6 +1821,7 @@ public struct FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer {
                 backend: FfiConverterString.read(from: &buf), 
                 backendReason: FfiConverterString.read(from: &buf), 
                 gpuAdapter: FfiConverterOptionString.read(from: &buf), 
+                calibration: FfiConverterOptionString.read(from: &buf), 
                 json: FfiConverterString.read(from: &buf)
         )
     }
@@ -1798,6 +1842,7 @@ public struct FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer {
         FfiConverterString.write(value.backend, into: &buf)
         FfiConverterString.write(value.backendReason, into: &buf)
         FfiConverterOptionString.write(value.gpuAdapter, into: &buf)
+        FfiConverterOptionString.write(value.calibration, into: &buf)
         FfiConverterString.write(value.json, into: &buf)
     }
 }
@@ -3455,6 +3500,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render() != 59945) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration() != 29704) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream() != 44735) {

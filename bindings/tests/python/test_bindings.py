@@ -86,6 +86,31 @@ def test_preview_is_an_image_of_the_scene(case):
         gen.preview(frame, 1.5)
 
 
+def test_a_calibration_file_gives_the_codes_of_holo_render_through_it(case, tmp_path):
+    c, frame, want, gen = case
+    cal = frames.panel_calibration(c, tmp_path / "panel.holocal")
+    want_cal = frames.holo_codes(c, tmp_path / "holo", cal)
+    with pytest.raises(TensorholoError.InvalidInput) as e:
+        gen.set_calibration(b"HOLOCAL\0 but then nothing")
+    assert "calibration" in str(e.value)
+    gen.set_calibration(cal.read_bytes())
+    try:
+        assert "global" in gen.info().calibration
+        got = codes_of(gen.render(frame))
+        stats = frames.compare_codes(got, want_cal)
+        print(f"{c.name}: calibrated vs holo render --calibration {stats}")
+        # The panel shows (nearly) the phase an ideal one shows for the uncalibrated codes.
+        shown = frames.PANEL_RANGE_RAD * (got / 255.0) ** frames.PANEL_GAMMA
+        ideal = 2 * np.pi * want.astype(np.float64) / 256
+        err = np.abs(np.angle(np.exp(1j * (shown - ideal))))
+        assert np.median(err) < 0.05, np.median(err)
+        assert (got != want).mean() > 0.5
+    finally:
+        gen.set_calibration(None)
+    assert gen.info().calibration is None
+    frames.compare_codes(codes_of(gen.render(frame)), want)
+
+
 def _bad_frames(frame: RgbdFrame):
     def with_(**kw):
         d = {k: getattr(frame, k) for k in ("color", "color_format", "color_width", "color_height",

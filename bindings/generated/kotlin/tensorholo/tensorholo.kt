@@ -715,6 +715,8 @@ internal object IntegrityCheckingUniffiLib {
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render(
     ): Int
+    external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration(
+    ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream(
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramstream_close(
@@ -768,6 +770,8 @@ internal object UniffiLib {
     ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_render(`ptr`: Long,`frame`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
+    external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_set_calibration(`ptr`: Long,`calibration`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    ): Unit
     external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_stream(`ptr`: Long,`listener`: Long,uniffi_out_err: UniffiRustCallStatus, 
     ): Long
     external fun uniffi_tensorholo_ffi_fn_clone_hologramstream(`handle`: Long,uniffi_out_err: UniffiRustCallStatus, 
@@ -929,6 +933,9 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render() and 0xFFFF) != 59945) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration() and 0xFFFF) != 29704) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream() and 0xFFFF) != 44735) {
@@ -1465,6 +1472,19 @@ public interface HologramGeneratorInterface {
     fun `render`(`frame`: RgbdFrame): SlmPatterns
     
     /**
+     * Applies a display calibration file (the bytes of a `.holocal` made by `holo calibrate`, e.g. bundled
+     * with the app or downloaded per device) to the frames rendered from now on and to streams started
+     * later; `None` returns to an ideal SLM (linear look-up tables, no intensity map). Its per-colour
+     * look-up tables turn the double phase pattern into the codes this SLM needs, and its laser intensity
+     * map evens out the illumination (`docs/CALIBRATION.md`).
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for bytes that are not a valid `.holocal` file (truncated,
+     * corrupt, another version: the message says which), a calibration for another SLM size than this
+     * generator's, or one measured at other wavelengths; the generator keeps its calibration.
+     */
+    fun `setCalibration`(`calibration`: kotlin.ByteArray?)
+    
+    /**
      * Starts a video stream: [`HologramStream::push`] frames, results reach `listener` in frame order on a
      * background thread. The queue holds 2 frames and drops the oldest when full.
      *
@@ -1677,6 +1697,31 @@ open class HologramGenerator: Disposable, AutoCloseable, HologramGeneratorInterf
     }
     )
     }
+    
+
+    
+    /**
+     * Applies a display calibration file (the bytes of a `.holocal` made by `holo calibrate`, e.g. bundled
+     * with the app or downloaded per device) to the frames rendered from now on and to streams started
+     * later; `None` returns to an ideal SLM (linear look-up tables, no intensity map). Its per-colour
+     * look-up tables turn the double phase pattern into the codes this SLM needs, and its laser intensity
+     * map evens out the illumination (`docs/CALIBRATION.md`).
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for bytes that are not a valid `.holocal` file (truncated,
+     * corrupt, another version: the message says which), a calibration for another SLM size than this
+     * generator's, or one measured at other wavelengths; the generator keeps its calibration.
+     */
+    @Throws(TensorholoException::class)override fun `setCalibration`(`calibration`: kotlin.ByteArray?)
+        = 
+    callWithHandle {
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_hologramgenerator_set_calibration(
+        it,
+        
+        FfiConverterOptionalByteArray.lower(`calibration`),_status)
+}
+    }
+    
     
 
     
@@ -2741,6 +2786,12 @@ data class GeneratorInfo (
     var `gpuAdapter`: kotlin.String?
     , 
     /**
+     * The display calibration applied ([`HologramGenerator::set_calibration`]), in words, e.g.
+     * `"1080×1920 SLM: red tiled (16×16 px), green global, blue linear; intensity map: none"`.
+     */
+    var `calibration`: kotlin.String?
+    , 
+    /**
      * Everything above and the autotuning timings, as JSON.
      */
     var `json`: kotlin.String
@@ -2775,6 +2826,7 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterString.read(buf),
             FfiConverterString.read(buf),
             FfiConverterOptionalString.read(buf),
+            FfiConverterOptionalString.read(buf),
             FfiConverterString.read(buf),
         )
     }
@@ -2795,6 +2847,7 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterString.allocationSize(value.`backend`) +
             FfiConverterString.allocationSize(value.`backendReason`) +
             FfiConverterOptionalString.allocationSize(value.`gpuAdapter`) +
+            FfiConverterOptionalString.allocationSize(value.`calibration`) +
             FfiConverterString.allocationSize(value.`json`)
     )
 
@@ -2814,6 +2867,7 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterString.write(value.`backend`, buf)
             FfiConverterString.write(value.`backendReason`, buf)
             FfiConverterOptionalString.write(value.`gpuAdapter`, buf)
+            FfiConverterOptionalString.write(value.`calibration`, buf)
             FfiConverterString.write(value.`json`, buf)
     }
 }

@@ -63,9 +63,10 @@ class BindingsTest {
         /** The bindings' patterns of the frame, rendered once. */
         val patterns: SlmPatterns by lazy { generator.render(frame) }
 
-        /** holo render's code plane of one laser (`r`, `g`, `b`), row-major. */
-        fun holoCodes(laser: String): ByteArray {
-            val img = ImageIO.read(File(dir, "holo/phase_$laser.png"))
+        /** holo render's code plane of one laser (`r`, `g`, `b`), row-major (`folder`: holo_calibrated for the
+         * patterns through panel.holocal). */
+        fun holoCodes(laser: String, folder: String = "holo"): ByteArray {
+            val img = ImageIO.read(File(dir, "$folder/phase_$laser.png"))
             assertEquals("$name: holo's image size", width to height, img.width to img.height)
             return ByteArray(width * height) { i -> img.raster.getSample(i % width, i / width, 0).toByte() }
         }
@@ -164,6 +165,35 @@ class BindingsTest {
                 assertTrue("${case.name} $laser: mean $mean > 0.02", mean <= 0.02)
                 assertTrue("${case.name} $laser: within ±1 $within < 0.999", within >= 0.999)
             }
+        }
+    }
+
+    /**
+     * A display calibration file (frames.py's panel.holocal, `holo calibrate global`) gives the codes of `holo
+     * render --calibration` through it; bytes that are not such a file raise InvalidInput; null returns to
+     * the ideal panel.
+     */
+    @Test
+    fun aCalibrationFileGivesTheCodesOfHoloRenderThroughIt() {
+        for (case in realCases()) {
+            val gen = case.generator
+            assertThrows(TensorholoException.InvalidInput::class.java) {
+                gen.setCalibration("HOLOCAL but not one".toByteArray())
+            }
+            gen.setCalibration(File(case.dir, "panel.holocal").readBytes())
+            try {
+                assertTrue("${case.name}: info", gen.info().calibration!!.contains("global"))
+                val out = gen.render(case.frame)
+                for ((plane, laser) in listOf(out.red to "r", out.green to "g", out.blue to "b")) {
+                    val holo = case.holoCodes(laser, "holo_calibrated")
+                    val mean = plane.indices.sumOf { circularDiff(plane[it], holo[it]) }.toDouble() / plane.size
+                    println("${case.name} $laser: calibrated vs holo render --calibration mean difference $mean")
+                    assertTrue("${case.name} $laser: mean $mean > 0.02", mean <= 0.02)
+                }
+            } finally {
+                gen.setCalibration(null)
+            }
+            assertEquals(null, gen.info().calibration)
         }
     }
 
