@@ -476,6 +476,45 @@ fn calibrate_simulate_lut_curves_end_to_end() {
         "{}",
         stderr(&o)
     );
+    // A maker's global table: CSV for red, the gamma model for the others; a bad CSV names its line.
+    let csv: String = (0..256)
+        .map(|k| format!("{k},{}\n", 7.0 * k as f32 / 255.0))
+        .collect();
+    std::fs::write(dir.join("red.csv"), csv).unwrap();
+    let o = holo(&[
+        "calibrate",
+        "global",
+        "--size",
+        "16x24",
+        "--red-csv",
+        &d("red.csv"),
+        "--range-rad",
+        "7.2",
+        "--gamma",
+        "1.2",
+        "--out",
+        &d("g.holocal"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let g = tensorholo::slm::DisplayCalibration::read(&dir.join("g.holocal")).unwrap();
+    let phase_255 = |c: usize| g.colours[c].lut.displayed_phase(0, 0, 255).unwrap();
+    assert!((phase_255(0) - 7.0).abs() < 1e-3 && (phase_255(1) - 7.2).abs() < 1e-3);
+    std::fs::write(dir.join("bad.csv"), "0,0\n1,oops\n").unwrap();
+    let o = holo(&[
+        "calibrate",
+        "global",
+        "--size",
+        "16x24",
+        "--red-csv",
+        &d("bad.csv"),
+        "--out",
+        &d("b.holocal"),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("bad.csv"),
+        "{}",
+        stderr(&o)
+    );
     // Another resolution's captures, a missing folder, and a wrong colour are refused by name.
     let o = holo(&[
         "calibrate",

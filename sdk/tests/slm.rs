@@ -297,3 +297,37 @@ fn global_curves_from_csv_and_models_apply_as_luts() {
         codes[2]
     );
 }
+
+#[test]
+fn tile_size_trades_memory_for_accuracy() {
+    // The green panel of a 128×128 simulated SLM calibrated with tiles of 4 to 32 px: RMS from the truth and
+    // the stored size, scaled to a 1080p panel's three colours (docs/CALIBRATION.md's table).
+    let sim = SimulatedSlm::new(128, 128, 3);
+    let stack = sim.stack(1);
+    let mut rms = Vec::new();
+    for tile in [4usize, 8, 16, 32] {
+        let options = CalibrationOptions {
+            tile,
+            ..CalibrationOptions::default()
+        };
+        let (tiles, _) = calibrate(&stack, &options, &quiet).unwrap();
+        let e = rms_error(&tiles, &sim, 1);
+        let mb_1080p = 3 * 1080usize.div_ceil(tile) * 1920usize.div_ceil(tile) * 512;
+        eprintln!(
+            "tile {tile:>2} px: RMS {e:.4} rad, {} B here, {:.1} MB for 1080p × 3 colours",
+            tiles.stored_bytes(),
+            mb_1080p as f64 / 1e6
+        );
+        assert_eq!(tiles.stored_bytes(), 128usize.div_ceil(tile).pow(2) * 512);
+        rms.push(e);
+    }
+    let global = {
+        let (tiles, _) = calibrate(&stack, &CalibrationOptions::default(), &quiet).unwrap();
+        let g = TiledCurves::new(128, 128, 128, 128, vec![tiles.mean_curve()]).unwrap();
+        rms_error(&g, &sim, 1)
+    };
+    eprintln!("global: RMS {global:.4} rad, 512 B");
+    // Tiles too coarse for the panel's variation lose accuracy; every tiling beats the global table.
+    assert!(rms[3] > rms[1], "{rms:?}");
+    assert!(rms.iter().all(|&e| e < 0.5 * global), "{rms:?} vs {global}");
+}
