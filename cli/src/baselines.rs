@@ -413,7 +413,7 @@ pub fn run(args: &BaselinesArgs) -> Result<()> {
         "format": "tensorholo-baselines",
         "format_version": 1,
         "tensorholo_version": env!("CARGO_PKG_VERSION"),
-        "command": std::env::args().collect::<Vec<_>>(),
+        "command": crate::output::command_line(),
         "dataset": args.dataset,
         "dataset_git_commit": manifest.generator.git_commit,
         "split": args.split,

@@ -420,7 +420,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         crate::args::write_json(
             path,
             &json!({"cpu": cpu, "cores": cores, "results": results, "peak_rss_mib": peak,
-                    "command": std::env::args().collect::<Vec<_>>()}),
+                    "command": crate::output::command_line()}),
         )?;
     }
     Ok(())

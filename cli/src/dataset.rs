@@ -293,7 +293,7 @@ fn run_in_pool(args: &DatasetArgs, config: &DatasetConfig) -> Result<()> {
     let options = GenerateOptions {
         overwrite: args.force,
         git_commit: git_commit(),
-        command: std::env::args().collect(),
+        command: crate::output::command_line(),
         aberration_file: args.aberration.clone(),
     };
     let manifest = generate(&args.out, config, &options, &|done, _| {

@@ -109,7 +109,7 @@ pub fn run(args: &EncodeArgs) -> Result<()> {
     )?;
     let report = json!({
         "tensorholo_version": env!("CARGO_PKG_VERSION"),
-        "command": std::env::args().collect::<Vec<_>>(),
+        "command": crate::output::command_line(),
         "input": args.input,
         "size": [h, w],
         "setup": setup,

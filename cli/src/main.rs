@@ -76,7 +76,9 @@ fn main() {
         .format_timestamp(None)
         .init();
     let cli = Cli::parse();
-    let result = match cli.command {
+    // A panic is a bug whatever the input: report it as one (the panic message above says where) with its
+    // own exit code, instead of an abort trace.
+    let outcome = std::panic::catch_unwind(move || match cli.command {
         Command::Render(args) => render::run(&args),
         Command::Video(args) => video::run(&args),
         Command::Bench(args) => bench::run(&args),
@@ -87,9 +89,22 @@ fn main() {
         Command::Baselines(args) => baselines::run(&args),
         Command::Compare(args) => compare::run(&args),
         Command::Calibrate(args) => calibrate::run(&args),
-    };
-    if let Err(err) = result {
-        eprintln!("error: {err:#}");
-        std::process::exit(1);
+    });
+    match outcome {
+        Ok(Ok(())) => {}
+        Ok(Err(err)) => {
+            eprintln!("error: {err:#}");
+            std::process::exit(1);
+        }
+        Err(_) => {
+            eprintln!(
+                "error: holo stopped on an internal error (a panic, reported above). This is a bug in holo, not \
+                 in your input: please report it with the command line. Outputs of this run may be incomplete."
+            );
+            std::process::exit(EXIT_BUG);
+        }
     }
 }
+
+/// Exit code of a panic (`EX_SOFTWARE` of sysexits.h: an internal software error).
+const EXIT_BUG: i32 = 70;

@@ -42,6 +42,14 @@ Outputs in --out:
   target.png depth.png                 the scene amplitude and normalised depth (white = far)
   report.json                          inputs, parameters, timings per stage, image statistics";
 
+/// The command line for reports, each argument as text (a name that is not UTF-8 is written lossily, with
+/// U+FFFD where its bytes are not text; the files themselves keep their exact names).
+pub fn command_line() -> Vec<String> {
+    std::env::args_os()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect()
+}
+
 /// Refuses an output folder whose files would overwrite an input; creates it.
 pub fn prepare(out: &Path, inputs: &[&Path]) -> Result<()> {
     for name in OUTPUTS {

@@ -164,7 +164,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     let amp = hologram.midpoint.mapv(|v| v.norm());
     let report = json!({
         "tensorholo_version": env!("CARGO_PKG_VERSION"),
-        "command": std::env::args().collect::<Vec<_>>(),
+        "command": crate::output::command_line(),
         "input": source,
         "size": [frame.height(), frame.width()],
         "parameters": pipeline,

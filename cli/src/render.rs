@@ -475,7 +475,7 @@ fn write_outputs(
     let amp = midpoint.mapv(|v| v.norm());
     let mut report = json!({
         "tensorholo_version": env!("CARGO_PKG_VERSION"),
-        "command": std::env::args().collect::<Vec<_>>(),
+        "command": crate::output::command_line(),
         "input": source,
         "size": [frame.height(), frame.width()],
         "models": models,

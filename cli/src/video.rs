@@ -215,7 +215,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     };
     let report = json!({
         "tensorholo_version": env!("CARGO_PKG_VERSION"),
-        "command": std::env::args().collect::<Vec<_>>(),
+        "command": crate::output::command_line(),
         "frames": n,
         "size": [h, w],
         "depth_range_m": range.map(|r| [r.z_near_m, r.z_far_m]),

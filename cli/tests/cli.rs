@@ -579,3 +579,35 @@ fn calibrate_simulate_lut_curves_end_to_end() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[cfg(unix)]
+#[test]
+fn paths_that_are_not_utf8_work_and_reports_name_them_lossily() {
+    use std::os::unix::ffi::OsStrExt;
+    let dir = std::env::temp_dir().join(format!("holo-non-utf8-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(&dir).unwrap();
+    // "caf\xe9": Latin-1 é, not UTF-8.
+    let out = dir.join(std::ffi::OsStr::from_bytes(b"caf\xe9"));
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_holo"))
+        .args(["render", "--size", "16x16", "--repeat", "0", "--out"])
+        .arg(&out)
+        .env("RUST_LOG", "warn")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let command: Vec<&str> = report["command"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert!(
+        command.last().unwrap().ends_with("caf\u{fffd}"),
+        "{command:?}"
+    );
+    assert!(out.join("phase_g.png").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

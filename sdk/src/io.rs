@@ -6,11 +6,13 @@
 //! the dtype `numpy.load` gives back as `np.complex64`. Every error names the file.
 
 use std::fs::File;
-use std::io::{BufReader, BufWriter, Write};
+use std::io::{BufWriter, Write};
 use std::path::{Component, Path, PathBuf};
 
-use ndarray::{Array3, ArrayD, ArrayView, ArrayView2, ArrayView3, Axis, Dimension, Ix3};
-use ndarray_npy::{ReadNpyError, ReadNpyExt, WriteNpyExt};
+use ndarray::{
+    Array3, ArrayD, ArrayView, ArrayView2, ArrayView3, ArrayViewD, Axis, Dimension, Ix3,
+};
+use ndarray_npy::{ReadNpyError, ReadNpyExt, ViewNpyError, ViewNpyExt, WriteNpyExt};
 use num_complex::{Complex32, Complex64};
 
 use crate::color::amplitude_to_srgb8;
@@ -227,11 +229,70 @@ fn read_error(path: &Path, e: ReadNpyError) -> HoloError {
     }
 }
 
-fn read_npy_file<T: ndarray_npy::ReadableElement>(
+/// The largest `.npy` file read (bytes, 4 GiB): a 4K complex64 field `[3, 2160, 3840]` is 0.2 GB.
+pub const MAX_NPY_BYTES: u64 = 4 << 30;
+
+/// Reads a `.npy` file whose declared shape is checked against the bytes it holds before the array is
+/// allocated (`ndarray-npy` allocates by the declared shape first, so a 200-byte file declaring a huge shape
+/// would abort): the file (at most [`MAX_NPY_BYTES`]) is read into memory and viewed in place, which checks
+/// the header, the dtype and the data length; only then is the array copied out.
+fn read_npy_file<T: ndarray_npy::ReadableElement + ndarray_npy::ViewElement + Clone>(
     path: &Path,
 ) -> std::result::Result<ArrayD<T>, ReadNpyError> {
-    let file = File::open(path)?;
-    ArrayD::<T>::read_npy(BufReader::new(file))
+    let len = std::fs::metadata(path)?.len();
+    if len > MAX_NPY_BYTES {
+        return Err(ReadNpyError::ParseData(
+            format!("the file is {len} bytes, above the {MAX_NPY_BYTES}-byte limit of .npy inputs")
+                .into(),
+        ));
+    }
+    let mut bytes = std::fs::read(path)?;
+    match ArrayViewD::<T>::view_npy(&bytes) {
+        Ok(view) => return Ok(view.to_owned()),
+        Err(ViewNpyError::NonNativeEndian) => {}
+        Err(e) => return Err(view_to_read_error(e)),
+    }
+    // The other byte order: check the length on the header with its byte order flipped, then let
+    // ndarray-npy convert the data from the original bytes.
+    let at = flip_descr_byte_order(&mut bytes).ok_or_else(|| {
+        ReadNpyError::ParseData("cannot find the byte order of the dtype in the header".into())
+    })?;
+    let checked = ArrayViewD::<T>::view_npy(&bytes)
+        .map(|_| ())
+        .map_err(view_to_read_error);
+    bytes[at] = if bytes[at] == b'<' { b'>' } else { b'<' };
+    checked?;
+    ArrayD::<T>::read_npy(&bytes[..])
+}
+
+/// Flips `<` and `>` of the `'descr'` entry in a `.npy` header held in `bytes`; returns its offset.
+fn flip_descr_byte_order(bytes: &mut [u8]) -> Option<usize> {
+    let key = b"'descr': '";
+    let header = &bytes[..bytes.len().min(1 << 16)];
+    let at = header.windows(key.len()).position(|w| w == key)? + key.len();
+    let c = bytes.get_mut(at)?;
+    *c = match *c {
+        b'<' => b'>',
+        b'>' => b'<',
+        _ => return None,
+    };
+    Some(at)
+}
+
+fn view_to_read_error(e: ViewNpyError) -> ReadNpyError {
+    match e {
+        ViewNpyError::Io(e) => ReadNpyError::Io(e),
+        ViewNpyError::ParseHeader(e) => ReadNpyError::ParseHeader(e),
+        ViewNpyError::InvalidData(e) => ReadNpyError::ParseData(e),
+        ViewNpyError::LengthOverflow => ReadNpyError::LengthOverflow,
+        ViewNpyError::WrongNdim(a, b) => ReadNpyError::WrongNdim(a, b),
+        ViewNpyError::WrongDescriptor(d) => ReadNpyError::WrongDescriptor(d),
+        ViewNpyError::MissingBytes(n) => ReadNpyError::ParseData(
+            format!("the header's shape needs {n} more bytes of data than the file holds").into(),
+        ),
+        ViewNpyError::ExtraBytes(n) => ReadNpyError::ExtraBytes(n),
+        other => ReadNpyError::ParseData(other.to_string().into()),
+    }
 }
 
 /// Writes `a` in C order (copying if its layout is not standard) as `.npy`.

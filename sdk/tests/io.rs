@@ -400,3 +400,27 @@ fn ensure_not_input_sees_through_path_spellings() {
         assert!(ensure_not_input(&hard, &[&input]).is_err());
     }
 }
+
+#[test]
+fn a_huge_declared_shape_is_refused_before_anything_is_allocated() {
+    // A few bytes of data under a header declaring 3·10^15 (or overflowing) elements, in both byte orders:
+    // refused from the bytes the file holds, without allocating the declared array (which would abort).
+    let dir = scratch("huge_shape");
+    for (descr, shape, needle) in [
+        ("<c8", "(3, 1000000, 1000000000)", "more bytes"),
+        (">c8", "(3, 1000000, 1000000000)", "more bytes"),
+        ("<c8", "(3, 18446744073709551615, 2)", "overflow"),
+        (">c16", "(1000000, 1000000)", "more bytes"),
+    ] {
+        let p = dir.join(format!(
+            "huge{}.npy",
+            &descr[..1].replace('<', "le").replace('>', "be")
+        ));
+        fs::write(&p, npy_bytes(descr, false, shape, &[0u8; 16])).unwrap();
+        assert_npy_error(&p, needle);
+    }
+    // One byte short of a valid file: missing data, named.
+    let p = dir.join("short.npy");
+    fs::write(&p, npy_bytes(">c8", false, "(2, 2)", &[0u8; 31])).unwrap();
+    assert_npy_error(&p, "more bytes");
+}

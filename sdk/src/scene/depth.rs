@@ -353,10 +353,24 @@ fn read_kinect_pgm(bytes: &[u8], path: &Path) -> Result<(Array2<u16>, u32)> {
         return Err(bad("PGM maxval out of range"));
     }
     let bps = if maxval > 255 { 2 } else { 1 };
-    let n = w * h;
-    let data = bytes
-        .get(pos..pos + n * bps)
-        .ok_or_else(|| bad("truncated PGM data"))?;
+    if w == 0 || h == 0 {
+        return Err(bad(&format!("PGM of {w}×{h} pixels holds no image")));
+    }
+    // Sizes come from the file: checked arithmetic, and the data must be there before anything is allocated.
+    let n = w
+        .checked_mul(h)
+        .ok_or_else(|| bad(&format!("PGM size {w}×{h} overflows")))?;
+    let end = n
+        .checked_mul(bps)
+        .and_then(|len| pos.checked_add(len))
+        .ok_or_else(|| bad(&format!("PGM size {w}×{h} overflows")))?;
+    let data = bytes.get(pos..end).ok_or_else(|| {
+        bad(&format!(
+            "truncated PGM data: the header declares {w}×{h} samples of {bps} byte(s), the file holds {} bytes \
+             after it",
+            bytes.len() - pos
+        ))
+    })?;
     if bps == 1 {
         return Ok((
             Array2::from_shape_fn((h, w), |(y, x)| data[y * w + x] as u16),
@@ -925,6 +939,23 @@ mod tests {
             fill_invalid(&d, &Array2::from_elem((3, 4), true)),
             Err(HoloError::ShapeMismatch { .. })
         ));
+    }
+
+    #[test]
+    fn kinect_pgm_with_an_overflowing_or_empty_size_is_refused() {
+        let path = Path::new("bad.pgm");
+        for (header, why) in [
+            (
+                &b"P5\n18446744073709551615 18446744073709551615\n65535\n\0\0"[..],
+                "overflows",
+            ),
+            (&b"P5\n4294967296 4294967297\n65535\n\0\0"[..], "overflows"),
+            (&b"P5\n0 5\n255\n\0"[..], "no image"),
+            (&b"P5\n3000 2000\n65535\n\0\0\0\0"[..], "truncated"),
+        ] {
+            let err = read_kinect_pgm(header, path).unwrap_err().to_string();
+            assert!(err.contains(why) && err.contains("bad.pgm"), "{err}");
+        }
     }
 
     #[test]
