@@ -28,6 +28,13 @@ use clap::{Parser, Subcommand};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Largest input image decoded, in pixels (read from the file's header before decoding; a larger one is
+    /// refused naming the limit). The default covers a 48 MP phone photo.
+    #[arg(long, global = true, default_value_t = tensorholo::io::InputLimits::default().max_image_pixels)]
+    max_image_pixels: u64,
+    /// Largest input file read, in bytes (images, depth maps, .npy, models).
+    #[arg(long, global = true, default_value_t = tensorholo::io::InputLimits::default().max_file_bytes)]
+    max_file_bytes: u64,
 }
 
 #[derive(Debug, Subcommand)]
@@ -76,6 +83,13 @@ fn main() {
         .format_timestamp(None)
         .init();
     let cli = Cli::parse();
+    if let Err(err) = tensorholo::io::set_input_limits(tensorholo::io::InputLimits {
+        max_image_pixels: cli.max_image_pixels,
+        max_file_bytes: cli.max_file_bytes,
+    }) {
+        eprintln!("error: {err}");
+        std::process::exit(2);
+    }
     // A panic is a bug whatever the input: report it as one (the panic message above says where) with its
     // own exit code, instead of an abort trace.
     let outcome = std::panic::catch_unwind(move || match cli.command {

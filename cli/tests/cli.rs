@@ -611,3 +611,75 @@ fn paths_that_are_not_utf8_work_and_reports_name_them_lossily() {
     assert!(out.join("phase_g.png").exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn images_above_the_pixel_limit_are_refused_from_their_header() {
+    let dir = std::env::temp_dir().join(format!("holo-image-limit-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(&dir).unwrap();
+    let rgb = dir.join("rgb.png");
+    let depth = dir.join("depth.png");
+    image::RgbImage::new(400, 300).save(&rgb).unwrap();
+    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_pixel(400, 300, image::Luma([1000]))
+        .save(&depth)
+        .unwrap();
+    let before = (std::fs::read(&rgb).unwrap(), std::fs::read(&depth).unwrap());
+    let out = dir.join("out");
+    let args = |limit: &str| {
+        vec![
+            "render".to_string(),
+            "--rgb".into(),
+            rgb.display().to_string(),
+            "--depth".into(),
+            depth.display().to_string(),
+            "--depth-encoding".into(),
+            "mm16".into(),
+            "--size".into(),
+            "16x16".into(),
+            "--repeat".into(),
+            "0".into(),
+            "--max-image-pixels".into(),
+            limit.into(),
+            "--out".into(),
+            out.display().to_string(),
+        ]
+    };
+    let refused = holo(
+        &args("100000")
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+    );
+    let msg = stderr(&refused);
+    assert_eq!(refused.status.code(), Some(1), "{msg}");
+    assert!(
+        msg.contains("rgb.png") && msg.contains("400×300") && msg.contains("100000"),
+        "{msg}"
+    );
+    assert!(!out.join("report.json").exists());
+    // Raised, the same input renders; the inputs are untouched either way.
+    let o = holo(
+        &args("120000")
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        (std::fs::read(&rgb).unwrap(), std::fs::read(&depth).unwrap()),
+        before
+    );
+    let o = holo(&[
+        "render",
+        "--max-image-pixels",
+        "0",
+        "--out",
+        &out.display().to_string(),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("limits"),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -8,6 +8,7 @@
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Component, Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use ndarray::{
     Array3, ArrayD, ArrayView, ArrayView2, ArrayView3, ArrayViewD, Axis, Dimension, Ix3,
@@ -229,21 +230,21 @@ fn read_error(path: &Path, e: ReadNpyError) -> HoloError {
     }
 }
 
-/// The largest `.npy` file read (bytes, 4 GiB): a 4K complex64 field `[3, 2160, 3840]` is 0.2 GB.
-pub const MAX_NPY_BYTES: u64 = 4 << 30;
-
 /// Reads a `.npy` file whose declared shape is checked against the bytes it holds before the array is
 /// allocated (`ndarray-npy` allocates by the declared shape first, so a 200-byte file declaring a huge shape
-/// would abort): the file (at most [`MAX_NPY_BYTES`]) is read into memory and viewed in place, which checks
+/// would abort): the file (at most [`InputLimits::max_file_bytes`]) is read into memory and viewed in place, which checks
 /// the header, the dtype and the data length; only then is the array copied out.
 fn read_npy_file<T: ndarray_npy::ReadableElement + ndarray_npy::ViewElement + Clone>(
     path: &Path,
 ) -> std::result::Result<ArrayD<T>, ReadNpyError> {
     let len = std::fs::metadata(path)?.len();
-    if len > MAX_NPY_BYTES {
+    let max = input_limits().max_file_bytes;
+    if len > max {
         return Err(ReadNpyError::ParseData(
-            format!("the file is {len} bytes, above the {MAX_NPY_BYTES}-byte limit of .npy inputs")
-                .into(),
+            format!(
+                "the file is {len} bytes, above the input limit of {max} bytes (--max-file-bytes)"
+            )
+            .into(),
         ));
     }
     let mut bytes = std::fs::read(path)?;
@@ -341,28 +342,107 @@ fn save_png(
     )
 }
 
-/// Reads a whole file, naming it in the error ([`HoloError::Io`]).
+/// Limits on what an input file may make the SDK allocate, checked before anything is allocated
+/// ([`set_input_limits`] raises them for the whole process; the CLI's `--max-image-pixels` and
+/// `--max-file-bytes` do).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct InputLimits {
+    /// Largest image decoded, in pixels (default 100 M: a 48 MP phone photo, an 8K frame, twice over). Read
+    /// from the file's header first; above it the file is refused naming the limit.
+    pub max_image_pixels: u64,
+    /// Largest input file read whole, in bytes (images, depth maps, `.npy`; default 4 GiB).
+    pub max_file_bytes: u64,
+}
+
+impl Default for InputLimits {
+    fn default() -> Self {
+        Self {
+            max_image_pixels: DEFAULT_MAX_IMAGE_PIXELS,
+            max_file_bytes: DEFAULT_MAX_FILE_BYTES,
+        }
+    }
+}
+
+const DEFAULT_MAX_IMAGE_PIXELS: u64 = 100_000_000;
+const DEFAULT_MAX_FILE_BYTES: u64 = 4 << 30;
+static MAX_IMAGE_PIXELS: AtomicU64 = AtomicU64::new(DEFAULT_MAX_IMAGE_PIXELS);
+static MAX_FILE_BYTES: AtomicU64 = AtomicU64::new(DEFAULT_MAX_FILE_BYTES);
+
+/// The input limits in force ([`InputLimits::default`] unless [`set_input_limits`] changed them).
+pub fn input_limits() -> InputLimits {
+    InputLimits {
+        max_image_pixels: MAX_IMAGE_PIXELS.load(Ordering::Relaxed),
+        max_file_bytes: MAX_FILE_BYTES.load(Ordering::Relaxed),
+    }
+}
+
+/// Sets the input limits of the whole process (e.g. to read a 200 MP panorama).
+///
+/// Errors: [`HoloError::InvalidParameter`] for a limit of 0.
+pub fn set_input_limits(limits: InputLimits) -> Result<()> {
+    if limits.max_image_pixels == 0 || limits.max_file_bytes == 0 {
+        return Err(crate::error::invalid(
+            "input limits",
+            format!("limits must be ≥ 1, got {limits:?}"),
+        ));
+    }
+    MAX_IMAGE_PIXELS.store(limits.max_image_pixels, Ordering::Relaxed);
+    MAX_FILE_BYTES.store(limits.max_file_bytes, Ordering::Relaxed);
+    Ok(())
+}
+
+/// Reads a whole file (at most [`InputLimits::max_file_bytes`], checked from its metadata first), naming it
+/// in the error ([`HoloError::Io`]; [`HoloError::InvalidData`] above the limit).
 pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>> {
-    std::fs::read(path).map_err(|source| HoloError::Io {
+    let io = |source| HoloError::Io {
         path: path.to_path_buf(),
         source,
-    })
+    };
+    let len = std::fs::metadata(path).map_err(io)?.len();
+    let max = input_limits().max_file_bytes;
+    if len > max {
+        return Err(HoloError::InvalidData(format!(
+            "`{}` is {len} bytes, above the input limit of {max} bytes (raise it with --max-file-bytes or \
+             tensorholo::io::set_input_limits)",
+            path.display()
+        )));
+    }
+    std::fs::read(path).map_err(io)
 }
 
 /// Decodes an image file's bytes with the `image` crate (format guessed from the content), naming `path` in
-/// the error ([`HoloError::Image`]).
+/// the error ([`HoloError::Image`]). The size is read from the header first: an image above
+/// [`InputLimits::max_image_pixels`] is refused before it is decoded ([`HoloError::InvalidData`] naming the
+/// limit), and the decoder may allocate no more than that size needs.
 pub(crate) fn decode_image(path: &Path, bytes: &[u8]) -> Result<image::DynamicImage> {
-    image::ImageReader::new(std::io::Cursor::new(bytes))
-        .with_guessed_format()
-        .map_err(|source| HoloError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?
-        .decode()
-        .map_err(|source| HoloError::Image {
-            path: path.to_path_buf(),
-            source,
-        })
+    let reader = || {
+        image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|source| HoloError::Io {
+                path: path.to_path_buf(),
+                source,
+            })
+    };
+    let image_error = |source| HoloError::Image {
+        path: path.to_path_buf(),
+        source,
+    };
+    let (w, h) = reader()?.into_dimensions().map_err(image_error)?;
+    let pixels = w as u64 * h as u64;
+    let max = input_limits().max_image_pixels;
+    if pixels > max {
+        return Err(HoloError::InvalidData(format!(
+            "`{}` is {w}×{h} = {pixels} pixels, above the input limit of {max} (raise it with \
+             --max-image-pixels or tensorholo::io::set_input_limits)",
+            path.display()
+        )));
+    }
+    let mut limits = image::Limits::default();
+    // 16-bit RGBA is 8 bytes a pixel; a decoder's own buffers fit in twice that.
+    limits.max_alloc = Some(pixels.saturating_mul(16).max(1 << 20));
+    let mut r = reader()?;
+    r.limits(limits);
+    r.decode().map_err(image_error)
 }
 
 /// A temporary name beside `path` in the same folder (`.<name>.tmp-<pid>-<n>`), for write-then-rename.

@@ -269,10 +269,7 @@ impl HologramModel {
         expected: &ModelConfig,
     ) -> Result<Self> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|source| HoloError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let bytes = crate::io::read_bytes(path)?;
         Self::load(&bytes, path.display().to_string(), kind, expected)
     }
 
