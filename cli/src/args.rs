@@ -154,6 +154,22 @@ pub struct DepthArgs {
     /// size (384x384 for the built-in scene).
     #[arg(long, value_parser = parse_size)]
     pub size: Option<(usize, usize)>,
+    /// Refuse a depth map with more than this fraction of invalid pixels (a wrong --depth-encoding is the
+    /// usual cause); raise it for a scene that is mostly empty background.
+    #[arg(long, default_value_t = 0.75, value_parser = parse_fraction)]
+    pub max_invalid_depth: f32,
+    /// With --z-near-m/--z-far-m: refuse when more than this fraction of the valid depths lies outside the
+    /// range (they would be clamped onto its ends).
+    #[arg(long, default_value_t = 0.5, value_parser = parse_fraction)]
+    pub max_depth_outside_range: f32,
+}
+
+/// A fraction in [0, 1].
+fn parse_fraction(s: &str) -> std::result::Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(f) if (0.0..=1.0).contains(&f) => Ok(f),
+        _ => Err(format!("expected a fraction between 0 and 1, got `{s}`")),
+    }
 }
 
 impl DepthArgs {
@@ -170,6 +186,8 @@ impl DepthArgs {
                 .parse::<DepthMapping>()
                 .map_err(|e| anyhow::anyhow!("{e}"))?,
             size: self.size,
+            max_invalid_fraction: self.max_invalid_depth,
+            max_outside_range_fraction: self.max_depth_outside_range,
         })
     }
 }

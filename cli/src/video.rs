@@ -30,6 +30,10 @@ pub struct VideoArgs {
     /// Process at most this many frames.
     #[arg(long)]
     limit: Option<usize>,
+    /// Skip RGB frames without a depth frame of the same stem (and depth frames without an RGB one) with a
+    /// warning, instead of refusing the sequence.
+    #[arg(long)]
+    skip_unmatched: bool,
     /// Write each frame's SLM patterns as frames/NNNNN_phase_{r,g,b}.png (inside the timed loop, as a
     /// display would consume them).
     #[arg(long)]
@@ -50,27 +54,75 @@ Outputs in --out:
                 streamed first frame equals a single-frame render of it bit for bit
   frames/       with --save-frames: NNNNN_phase_r.png, _g, _b per frame";
 
-/// Pairs the files of the two folders by stem (sorted by name).
-fn pair_frames(rgb_dir: &Path, depth_dir: &Path) -> Result<Vec<(PathBuf, PathBuf)>> {
+/// Pairs the files of the two folders by stem (sorted by name; hidden files such as `.DS_Store` are ignored).
+/// A file of either folder without a partner is an error naming it, unless `skip_unmatched` (then a warning).
+fn pair_frames(
+    rgb_dir: &Path,
+    depth_dir: &Path,
+    skip_unmatched: bool,
+) -> Result<Vec<(PathBuf, PathBuf)>> {
     let list = |dir: &Path| -> Result<Vec<PathBuf>> {
         let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
             .with_context(|| format!("cannot read folder {}", dir.display()))?
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| p.is_file())
+            .filter(|p| {
+                !p.file_name()
+                    .is_some_and(|n| n.as_encoded_bytes().starts_with(b"."))
+            })
             .collect();
         v.sort();
         Ok(v)
     };
-    let depths = list(depth_dir)?;
-    let mut pairs = Vec::new();
-    for rgb in list(rgb_dir)? {
-        let stem = rgb.file_stem().map(|s| s.to_owned());
-        if let Some(d) = depths
+    let (rgbs, depths) = (list(rgb_dir)?, list(depth_dir)?);
+    let by_stem = |files: &[PathBuf]| -> std::collections::HashMap<std::ffi::OsString, PathBuf> {
+        files
             .iter()
-            .find(|d| d.file_stem().map(|s| s.to_owned()) == stem)
-        {
-            pairs.push((rgb, d.clone()));
+            .filter_map(|p| Some((p.file_stem()?.to_owned(), p.clone())))
+            .collect()
+    };
+    let (rgb_stems, depth_stems) = (by_stem(&rgbs), by_stem(&depths));
+    let mut pairs = Vec::new();
+    let mut unmatched = Vec::new();
+    for rgb in &rgbs {
+        match rgb.file_stem().and_then(|s| depth_stems.get(s)) {
+            Some(d) => pairs.push((rgb.clone(), d.clone())),
+            None => unmatched.push(rgb.clone()),
         }
+    }
+    unmatched.extend(
+        depths
+            .iter()
+            .filter(|d| d.file_stem().is_none_or(|s| !rgb_stems.contains_key(s)))
+            .cloned(),
+    );
+    if !unmatched.is_empty() {
+        let names: Vec<String> = unmatched
+            .iter()
+            .take(5)
+            .map(|p| p.display().to_string())
+            .collect();
+        let more = unmatched.len().saturating_sub(5);
+        let list = format!(
+            "{}{}",
+            names.join(", "),
+            if more > 0 {
+                format!(" and {more} more")
+            } else {
+                String::new()
+            }
+        );
+        if !skip_unmatched {
+            bail!(
+                "{} file(s) have no partner of the same name stem in the other folder: {list}; pair them, or \
+                 pass --skip-unmatched to leave them out",
+                unmatched.len()
+            );
+        }
+        log::warn!(
+            "skipping {} file(s) without a partner: {list}",
+            unmatched.len()
+        );
     }
     if pairs.is_empty() {
         bail!(
@@ -82,6 +134,11 @@ fn pair_frames(rgb_dir: &Path, depth_dir: &Path) -> Result<Vec<(PathBuf, PathBuf
     Ok(pairs)
 }
 
+/// The file `--save-frames` writes for frame `i`, colour `ch` (`r`, `g`, `b`).
+fn frame_file(frames_dir: &Path, i: usize, ch: &str) -> PathBuf {
+    frames_dir.join(format!("{i:05}_phase_{ch}.png"))
+}
+
 /// Runs `holo video`.
 pub fn run(args: &VideoArgs) -> Result<()> {
     let t_all = Instant::now();
@@ -89,7 +146,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         .depth
         .depth_encoding
         .context("--depth-encoding is required (how the depth frames store depth)")?;
-    let mut pairs = pair_frames(&args.rgb_dir, &args.depth_dir)?;
+    let mut pairs = pair_frames(&args.rgb_dir, &args.depth_dir, args.skip_unmatched)?;
     if let Some(n) = args.limit {
         if n == 0 {
             bail!("--limit must be at least 1");
@@ -102,6 +159,14 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         .collect();
     ensure_not_input(&args.out.join("report.json"), &inputs)?;
     let frames_dir = args.out.join("frames");
+    if args.save_frames {
+        // Every frame file is checked before the first is written (the input folder may be --out/frames).
+        for i in 0..pairs.len() {
+            for ch in ["r", "g", "b"] {
+                ensure_not_input(&frame_file(&frames_dir, i, ch), &inputs)?;
+            }
+        }
+    }
     std::fs::create_dir_all(if args.save_frames {
         &frames_dir
     } else {
@@ -180,7 +245,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             if args.save_frames {
                 for (c, ch) in ["r", "g", "b"].iter().enumerate() {
                     save_u8_png(
-                        &frames_dir.join(format!("{i:05}_phase_{ch}.png")),
+                        &frame_file(&frames_dir, i, ch),
                         out.codes.index_axis(Axis(0), c),
                     )?;
                 }

@@ -683,3 +683,78 @@ fn images_above_the_pixel_limit_are_refused_from_their_header() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn video_refuses_unmatched_frames_and_never_saves_over_its_inputs() {
+    let data = common::shared("redwood_livingroom_seq");
+    let dir = std::env::temp_dir().join(format!("holo-video-bad-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    let (rgb, depth) = (dir.join("rgb"), dir.join("depth"));
+    std::fs::create_dir_all(&rgb).unwrap();
+    std::fs::create_dir_all(&depth).unwrap();
+    for n in ["00000", "00001"] {
+        std::fs::copy(
+            data.join(format!("color/{n}.jpg")),
+            rgb.join(format!("{n}.jpg")),
+        )
+        .unwrap();
+    }
+    std::fs::copy(data.join("depth/00000.png"), depth.join("00000.png")).unwrap();
+    std::fs::write(rgb.join(".DS_Store"), b"junk").unwrap(); // hidden files are not frames
+    let video = |rgb: &std::path::Path, depth: &std::path::Path, extra: &[&str], out: &str| {
+        let mut args = vec![
+            "video".to_string(),
+            "--rgb-dir".into(),
+            rgb.display().to_string(),
+            "--depth-dir".into(),
+            depth.display().to_string(),
+            "--depth-encoding".into(),
+            "mm16".into(),
+            "--size".into(),
+            "24x32".into(),
+            "--out".into(),
+            dir.join(out).display().to_string(),
+        ];
+        args.extend(extra.iter().map(|s| s.to_string()));
+        holo(&args.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let o = video(&rgb, &depth, &[], "v1");
+    assert!(
+        !o.status.success()
+            && stderr(&o).contains("00001.jpg")
+            && stderr(&o).contains("--skip-unmatched"),
+        "{}",
+        stderr(&o)
+    );
+    let o = video(&rgb, &depth, &["--skip-unmatched"], "v2");
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Input frames inside the folder --save-frames writes to, under the names it would write: refused
+    // before anything is written, inputs unchanged.
+    let frames = dir.join("v3/frames");
+    let depth3 = dir.join("depth3");
+    std::fs::create_dir_all(&frames).unwrap();
+    std::fs::create_dir_all(&depth3).unwrap();
+    std::fs::copy(
+        data.join("color/00000.jpg"),
+        frames.join("00000_phase_r.png"),
+    )
+    .unwrap();
+    std::fs::copy(
+        data.join("depth/00000.png"),
+        depth3.join("00000_phase_r.png"),
+    )
+    .unwrap();
+    let before = std::fs::read(frames.join("00000_phase_r.png")).unwrap();
+    let o = video(&frames, &depth3, &["--save-frames"], "v3");
+    assert!(
+        !o.status.success() && stderr(&o).contains("overwrite"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(
+        std::fs::read(frames.join("00000_phase_r.png")).unwrap(),
+        before
+    );
+    assert!(!frames.join("00000_phase_g.png").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

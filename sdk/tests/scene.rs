@@ -263,6 +263,7 @@ fn explicit_range_and_resize_are_honoured() {
         range: Some(range),
         mapping: DepthMapping::LinearMetres,
         size: Some((240, 320)),
+        ..LoadOptions::default()
     };
     let (frame, report) = load_rgbd(
         &data("redwood_livingroom_seq/color/00000.jpg"),
@@ -281,6 +282,42 @@ fn explicit_range_and_resize_are_honoured() {
     let json = serde_json::to_value(&report).unwrap();
     assert_eq!(json["encoding"], "mm16");
     assert_eq!(json["source_size"], serde_json::json!([480, 640]));
+}
+
+#[test]
+fn a_wrong_encoding_or_range_is_refused_not_rendered_flat() {
+    let (rgb, depth) = (
+        data("redwood_livingroom_seq/color/00000.jpg"),
+        data("redwood_livingroom_seq/depth/00000.png"),
+    );
+    let load = |encoding, opts: &LoadOptions| load_rgbd(&rgb, &depth, encoding, opts);
+    // Redwood's millimetres read as TUM's 1/5000 m units: most depths fall outside a 1–3 m range.
+    let range = LoadOptions {
+        range: Some(DepthRange::new(1.0, 3.0).unwrap()),
+        ..LoadOptions::default()
+    };
+    let err = load(DepthEncoding::Tum5000, &range)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("outside the range") && err.contains("00000.png"),
+        "{err}"
+    );
+    // The same range on the right encoding holds (a few depths beyond 2.7 m at most).
+    load(DepthEncoding::Millimetres16, &range).unwrap();
+    // A scene that is mostly invalid under the chosen encoding is refused; the limit can be raised.
+    let strict = LoadOptions {
+        max_invalid_fraction: 0.05,
+        ..LoadOptions::default()
+    };
+    let err = load(DepthEncoding::Millimetres16, &strict)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("invalid") && err.contains("--depth-encoding"),
+        "{err}"
+    );
+    load(DepthEncoding::Millimetres16, &LoadOptions::default()).unwrap();
 }
 
 #[test]

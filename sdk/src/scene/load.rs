@@ -7,7 +7,8 @@ use ndarray::Array3;
 use serde::Serialize;
 
 use super::depth::{
-    decode_depth_file, fill_invalid, normalise_depth, DepthEncoding, DepthMapping, DepthRange,
+    decode_depth_file, fill_invalid, normalise_depth, DecodedDepth, DepthEncoding, DepthMapping,
+    DepthRange,
 };
 use super::frame::RgbdFrame;
 use crate::color::{srgb8_to_amplitude, srgb_to_linear};
@@ -52,8 +53,8 @@ pub fn load_rgb(path: &Path) -> Result<Array3<f32>> {
 }
 
 /// Options of [`load_rgbd`]. `Default`: automatic range (1st/99th percentiles), linear in diopters,
-/// native size.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+/// native size, at most 75 % invalid depth pixels and 50 % of the valid ones outside a given range.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LoadOptions {
     /// Metric range mapped to `d ∈ [0,1]`; `None` = 1st/99th percentiles of the valid depths. Ignored for
     /// relative encodings.
@@ -63,6 +64,67 @@ pub struct LoadOptions {
     /// Output size `(height, width)`; `None` keeps the files' size. Resizing happens after hole filling
     /// ([`RgbdFrame::resize`]).
     pub size: Option<(usize, usize)>,
+    /// Largest fraction of invalid depth pixels accepted (default 0.75; a scene on an empty background has
+    /// ~0.7): above it the depth map is refused, since a wrong encoding is the likelier cause.
+    pub max_invalid_fraction: f32,
+    /// Largest fraction of the valid depths that may lie outside an explicit `range` (default 0.5; they are
+    /// clamped to its ends, so beyond that most of the scene would sit on one plane). Ignored without a range.
+    pub max_outside_range_fraction: f32,
+}
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        Self {
+            range: None,
+            mapping: DepthMapping::default(),
+            size: None,
+            max_invalid_fraction: 0.75,
+            max_outside_range_fraction: 0.5,
+        }
+    }
+}
+
+/// The sanity checks of [`load_rgbd`] on a decoded depth map (see [`LoadOptions`]).
+fn check_depth_sanity(
+    decoded: &DecodedDepth,
+    encoding: DepthEncoding,
+    options: &LoadOptions,
+    depth: &Path,
+) -> Result<()> {
+    let invalid = decoded.invalid_fraction();
+    if invalid > options.max_invalid_fraction {
+        return Err(HoloError::InvalidDepth(format!(
+            "{:.0} % of the depth pixels of `{}` are invalid under the {encoding} encoding (limit {:.0} %): \
+             check --depth-encoding; if the scene really is mostly empty, raise --max-invalid-depth",
+            100.0 * invalid,
+            depth.display(),
+            100.0 * options.max_invalid_fraction
+        )));
+    }
+    if let (Some(r), true) = (options.range, decoded.metric) {
+        let (mut valid, mut outside) = (0usize, 0usize);
+        for (&v, &ok) in decoded.values.iter().zip(decoded.valid.iter()) {
+            if ok {
+                valid += 1;
+                if v < r.z_near_m || v > r.z_far_m {
+                    outside += 1;
+                }
+            }
+        }
+        let fraction = outside as f32 / valid.max(1) as f32;
+        if fraction > options.max_outside_range_fraction {
+            let (lo, hi) = decoded.valid_min_max().unwrap_or((f32::NAN, f32::NAN));
+            return Err(HoloError::InvalidDepth(format!(
+                "{:.0} % of the valid depths of `{}` (which span {lo:.3}–{hi:.3} m) lie outside the range {r} \
+                 and would be clamped onto its ends (limit {:.0} %): fix --z-near-m/--z-far-m, or raise \
+                 --max-depth-outside-range",
+                100.0 * fraction,
+                depth.display(),
+                100.0 * options.max_outside_range_fraction
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// What [`load_rgbd`] found in the depth file, for logs and CLI output (serialisable to JSON).
@@ -109,6 +171,7 @@ pub fn load_rgbd(
             got: decoded.values.shape().to_vec(),
         });
     }
+    check_depth_sanity(&decoded, encoding, options, depth)?;
     let (d, range_used) = normalise_depth(&decoded, options.range, options.mapping)?;
     let filled = fill_invalid(&d, &decoded.valid)?;
     let min_max = decoded.valid_min_max().filter(|_| decoded.metric);
