@@ -758,3 +758,36 @@ fn video_refuses_unmatched_frames_and_never_saves_over_its_inputs() {
     assert!(!frames.join("00000_phase_g.png").exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn propagate_refuses_a_field_with_nan_instead_of_spreading_it() {
+    let dir = std::env::temp_dir().join(format!("holo-propagate-nan-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut field = Array3::from_elem((1, 8, 8), Complex32::new(1.0, 0.0));
+    field[[0, 2, 3]] = Complex32::new(f32::NAN, 0.0);
+    field[[0, 5, 5]] = Complex32::new(0.0, f32::INFINITY);
+    let input = dir.join("nan.npy");
+    write_complex_npy(&input, field.view()).unwrap();
+    let output = dir.join("out.npy");
+    let o = holo(&[
+        "propagate",
+        "--input",
+        input.to_str().unwrap(),
+        "--distance-m",
+        "1e-3",
+        "--wavelength-m",
+        "520e-9",
+        "--pitch-m",
+        "8e-6",
+        "--output",
+        output.to_str().unwrap(),
+    ]);
+    let msg = stderr(&o);
+    assert!(
+        !o.status.success() && msg.contains("2 NaN or infinite") && msg.contains("row 2, column 3"),
+        "{msg}"
+    );
+    assert!(!output.exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

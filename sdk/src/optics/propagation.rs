@@ -445,13 +445,25 @@ impl Propagator {
 
     /// Convenience (allocating) form: propagates `field` by `distance_m` with the given carrier handling.
     ///
-    /// Errors: as [`Propagator::transfer_function`] and [`Propagator::propagate`].
+    /// Errors: as [`Propagator::transfer_function`] and [`Propagator::propagate`];
+    /// [`HoloError::InvalidData`] if `field` holds NaN or infinite values (the FFT would spread them over
+    /// the whole field), naming how many and the first.
     pub fn propagate_by(
         &self,
         field: &mut [Complex32],
         distance_m: f64,
         carrier: Carrier,
     ) -> Result<()> {
+        let bad = field.iter().filter(|v| !v.is_finite()).count();
+        if bad > 0 {
+            let first = field.iter().position(|v| !v.is_finite()).unwrap_or(0);
+            return Err(HoloError::InvalidData(format!(
+                "the field holds {bad} NaN or infinite value(s) (the first at element {first}, row {}, column \
+                 {}); propagation would spread them over the whole field",
+                first / self.plan.width().max(1),
+                first % self.plan.width().max(1)
+            )));
+        }
         let tf = self.transfer_function(distance_m, carrier)?;
         let mut scratch = self.plan.scratch();
         self.propagate(field, &tf, &mut scratch)
