@@ -217,6 +217,19 @@ impl SceneArgs {
     /// Loads the RGB-D input or builds the procedural scene (`ldi` only changes the description); returns
     /// it with a JSON description of its source.
     pub fn load(&self, ldi: bool) -> Result<(RgbdFrame, serde_json::Value)> {
+        let (frame, source) = self.load_any(ldi)?;
+        let (h, w) = (frame.height(), frame.width());
+        let min = tensorholo::metrics::SSIM_WINDOW;
+        if h < min || w < min {
+            bail!(
+                "the frame is {h}×{w} pixels: holo needs at least {min}×{min} (the window of the SSIM quality \
+                 scores it reports); render larger with --size"
+            );
+        }
+        Ok((frame, source))
+    }
+
+    fn load_any(&self, ldi: bool) -> Result<(RgbdFrame, serde_json::Value)> {
         match (&self.rgb, &self.depth, self.depth_args.depth_encoding) {
             (Some(rgb), Some(depth), Some(encoding)) => {
                 let options = self.depth_args.load_options()?;

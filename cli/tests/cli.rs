@@ -100,7 +100,7 @@ fn mismatched_rgb_and_depth_sizes_name_both_files() {
 fn bad_parameters_and_files_are_named_in_errors() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().to_str().unwrap();
-    let cases: [(&[&str], &str); 6] = [
+    let cases: [(&[&str], &str); 7] = [
         (
             &["reference", "--pitch-m", "0", "--out", out],
             "pixel_pitch_m",
@@ -130,6 +130,10 @@ fn bad_parameters_and_files_are_named_in_errors() {
         (
             &["reference", "--size", "0x16", "--out", out],
             "positive integer",
+        ),
+        (
+            &["reference", "--size", "8x40", "--out", out],
+            "at least 11×11",
         ),
         (
             &[

@@ -20,6 +20,8 @@ use crate::error::{invalid, HoloError, Result};
 const SSIM_RADIUS: usize = 5;
 /// Side of the SSIM window, `2·SSIM_RADIUS + 1 = 11` pixels.
 const SSIM_WIN: usize = 2 * SSIM_RADIUS + 1;
+/// Smallest image side SSIM accepts (its Gaussian window, 11 pixels).
+pub const SSIM_WINDOW: usize = SSIM_WIN;
 /// Standard deviation of the SSIM Gaussian window, in pixels.
 const SSIM_SIGMA: f64 = 1.5;
 /// SSIM stabilising constant factor for the means: `C1 = (K1·data_range)²`.
