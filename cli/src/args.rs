@@ -257,8 +257,10 @@ impl SceneArgs {
     }
 }
 
-/// Writes `value` as pretty JSON with a trailing newline.
+/// Writes `value` as pretty JSON with a trailing newline, atomically (temporary file, then renamed): a
+/// folder's `report.json`, written last, says its run completed.
 pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
-    std::fs::write(path, serde_json::to_string_pretty(value)? + "\n")
+    let text = serde_json::to_string_pretty(value)? + "\n";
+    tensorholo::io::write_atomic(path, text.as_bytes())
         .with_context(|| format!("cannot write {}", path.display()))
 }

@@ -441,8 +441,7 @@ pub fn run(args: &BaselinesArgs) -> Result<()> {
         "wall_seconds": wall_seconds,
         "threads": threads,
     });
-    std::fs::write(&report_path, serde_json::to_string_pretty(&report)? + "\n")
-        .with_context(|| format!("cannot write {}", report_path.display()))?;
+    crate::args::write_json(&report_path, &report)?;
     log::info!(
         "wrote {} baselines x {count} scenes to {} in {wall_seconds:.1} s: per scene on one worker \
          maimone {maimone_s:.2} s, SM-LBM {smlbm_s:.2} s, AA-DPM chain {} s",

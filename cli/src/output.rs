@@ -51,12 +51,21 @@ pub fn command_line() -> Vec<String> {
 }
 
 /// Refuses an output folder whose files would overwrite an input; creates it.
+///
+/// A previous run's `report.json` there is removed first: the new run writes it last, so a folder holding
+/// one holds a complete run, and a failed re-run does not leave new files beside an old report.
 pub fn prepare(out: &Path, inputs: &[&Path]) -> Result<()> {
     for name in OUTPUTS {
         ensure_not_input(&out.join(name), inputs)?;
     }
     std::fs::create_dir_all(out)
-        .with_context(|| format!("cannot create output folder {}", out.display()))
+        .with_context(|| format!("cannot create output folder {}", out.display()))?;
+    let report = out.join("report.json");
+    match std::fs::remove_file(&report) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(e).with_context(|| format!("cannot remove the old {}", report.display())),
+    }
 }
 
 /// What [`write_images`] writes besides the scene.

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
@@ -192,8 +192,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         },
     });
     let report_path = args.out.join("report.json");
-    std::fs::write(&report_path, serde_json::to_string_pretty(&report)? + "\n")
-        .with_context(|| format!("cannot write {}", report_path.display()))?;
+    crate::args::write_json(&report_path, &report)?;
     log::info!(
         "wrote {} in {:.1} s",
         args.out.display(),

@@ -795,3 +795,53 @@ fn propagate_refuses_a_field_with_nan_instead_of_spreading_it() {
     assert!(!output.exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[cfg(unix)]
+#[test]
+fn outputs_replace_planted_symlinks_and_a_failed_rerun_leaves_no_old_report() {
+    let dir = std::env::temp_dir().join(format!("holo-atomic-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    let out = dir.join("out");
+    std::fs::create_dir_all(&out).unwrap();
+    // A file outside --out, and a symlink to it planted where holo writes a pattern.
+    let victim = dir.join("victim.txt");
+    std::fs::write(&victim, b"keep me").unwrap();
+    std::os::unix::fs::symlink(&victim, out.join("phase_r.png")).unwrap();
+    let o = holo(&[
+        "render",
+        "--size",
+        "16x16",
+        "--repeat",
+        "0",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(std::fs::read(&victim).unwrap(), b"keep me");
+    let meta = std::fs::symlink_metadata(out.join("phase_r.png")).unwrap();
+    assert!(
+        meta.file_type().is_file(),
+        "the symlink must be replaced, not followed"
+    );
+    assert!(out.join("report.json").exists());
+    // No temporary files are left behind.
+    let leftovers: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains(".tmp-"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    // A re-run that fails (a missing model file) leaves no report.json of the earlier run beside it.
+    let o = holo(&[
+        "render",
+        "--size",
+        "16x16",
+        "--model",
+        dir.join("missing.onnx").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(!out.join("report.json").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

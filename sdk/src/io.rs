@@ -306,15 +306,34 @@ where
         path: path.to_path_buf(),
         source,
     };
-    let file = File::create(path).map_err(io_err)?;
-    let mut writer = BufWriter::new(file);
-    a.as_standard_layout()
-        .write_npy(&mut writer)
-        .map_err(|e| match e {
-            ndarray_npy::WriteNpyError::Io(source) => io_err(source),
-            other => npy_error(path, other.to_string()),
-        })?;
-    writer.flush().map_err(io_err)
+    via_temporary(path, |tmp| {
+        let file = File::create(tmp).map_err(io_err)?;
+        let mut writer = BufWriter::new(file);
+        a.as_standard_layout()
+            .write_npy(&mut writer)
+            .map_err(|e| match e {
+                ndarray_npy::WriteNpyError::Io(source) => io_err(source),
+                other => npy_error(path, other.to_string()),
+            })?;
+        writer.flush().map_err(io_err)
+    })
+}
+
+/// Writes `path` through `write(temporary)`: a temporary file in the same folder, renamed over `path` once
+/// complete, removed on error. A failed or interrupted write (a full disk, Ctrl-C) never leaves a truncated
+/// `path`, and a symlink planted at `path` is replaced rather than followed. Errors name `path`.
+fn via_temporary(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let tmp = temporary_sibling(path);
+    let result = write(&tmp).and_then(|()| {
+        std::fs::rename(&tmp, path).map_err(|source| HoloError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
 }
 
 /// PNG sizes are non-zero `u32`s.
@@ -334,12 +353,14 @@ fn save_png(
     h: u32,
     color: image::ExtendedColorType,
 ) -> Result<()> {
-    image::save_buffer_with_format(path, bytes, w, h, color, image::ImageFormat::Png).map_err(
-        |source| HoloError::Image {
-            path: path.to_path_buf(),
-            source,
-        },
-    )
+    via_temporary(path, |tmp| {
+        image::save_buffer_with_format(tmp, bytes, w, h, color, image::ImageFormat::Png).map_err(
+            |source| HoloError::Image {
+                path: path.to_path_buf(),
+                source,
+            },
+        )
+    })
 }
 
 /// Limits on what an input file may make the SDK allocate, checked before anything is allocated
