@@ -14,8 +14,8 @@ use tensorholo::slm::intensity::{intensity_scale_map, IntensityFloor};
 use tensorholo::slm::lut::CODES;
 use tensorholo::slm::simulate::{write_grey_png, SimulatedSlm};
 use tensorholo::slm::{
-    black_test_codes, filtered_intensity, DisplayCalibration, LutRepresentation, PhaseCurve,
-    PhaseLut,
+    black_test_codes, displayed_phase, filtered_intensity, DisplayCalibration, LutRepresentation,
+    PhaseCurve, PhaseLut,
 };
 
 use crate::args::parse_size;
@@ -414,26 +414,15 @@ fn black(file: &std::path::Path, out: &std::path::Path) -> Result<()> {
     let cal = DisplayCalibration::read(file)?;
     let (h, w) = (cal.height, cal.width);
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let luts = [
-        &cal.colours[0].lut,
-        &cal.colours[1].lut,
-        &cal.colours[2].lut,
-    ];
+    let luts = cal.luts();
     let linear = PhaseLut::linear();
     let calibrated = black_test_codes(luts, h, w)?;
     let uncalibrated = black_test_codes([&linear; 3], h, w)?;
     // What the calibrated panel shows for each set of codes, by its own measured curves.
     let shown = |codes: &ndarray::Array3<u8>| -> Result<[f64; 3]> {
-        let mut phase = ndarray::Array3::<f32>::zeros((3, h, w));
-        for (c, lut) in luts.iter().enumerate() {
-            let k = codes.index_axis(ndarray::Axis(0), c);
-            let mut p = phase.index_axis_mut(ndarray::Axis(0), c);
-            match (k.as_slice(), p.as_slice_mut()) {
-                (Some(k), Some(p)) => lut.displayed_phases(h, w, k, p)?,
-                _ => bail!("pattern planes are not contiguous"),
-            }
-        }
-        Ok(filtered_intensity(phase.view())?)
+        Ok(filtered_intensity(
+            displayed_phase(luts, codes.view())?.view(),
+        )?)
     };
     let (with, without) = (shown(&calibrated)?, shown(&uncalibrated)?);
     let mut report = serde_json::Map::new();

@@ -37,7 +37,7 @@ use crate::scene::{
     CameraFrame, CameraFrameBuf, CameraFrameReport, DepthMapping, DepthRange, Fit, FrameOptions,
     RgbdFrame,
 };
-use crate::slm::{DisplayCalibration, LutRepresentation};
+use crate::slm::DisplayCalibration;
 
 /// The largest hologram a generator makes, in pixels (`width · height`): 8192 × 8192, four times a 4K SLM.
 /// Above it the buffers of one session (≈ 200 bytes a pixel) would not fit a phone.
@@ -505,11 +505,9 @@ impl HologramGenerator {
             ));
         }
         let calibration = self.calibration();
-        let calibrated = calibration.as_ref().is_some_and(|cal| {
-            cal.colours
-                .iter()
-                .any(|c| !matches!(c.lut.representation(), LutRepresentation::Linear))
-        });
+        let calibrated = calibration
+            .as_ref()
+            .is_some_and(|cal| cal.has_calibrated_lut());
         #[cfg(feature = "gpu")]
         if !calibrated {
             // The GPU preview reads codes through the linear table; a calibrated panel's runs below.
@@ -527,7 +525,7 @@ impl HologramGenerator {
         }
         let cfg = &self.config;
         let phase = match (&calibration, calibrated) {
-            (Some(cal), true) => displayed_phase(cal, &patterns.codes)?,
+            (Some(cal), true) => crate::slm::displayed_phase(cal.luts(), patterns.codes.view())?,
             _ => patterns.codes.mapv(|c| LinearLut.phase(c)),
         };
         let shown = post_encoding_midpoint(
@@ -615,22 +613,6 @@ impl HologramGenerator {
         let session = open_session(&self.pipeline, &self.config, self.calibration())?;
         HologramStream::start(session, self.config, listener, capacity)
     }
-}
-
-/// The phase `[3, H, W]` (radians) a display with calibration `cal` shows for `codes` `[3, H, W]`.
-fn displayed_phase(cal: &DisplayCalibration, codes: &Array3<u8>) -> Result<Array3<f32>> {
-    let (_, h, w) = codes.dim();
-    let mut phase = Array3::<f32>::zeros((3, h, w));
-    for (c, col) in cal.colours.iter().enumerate() {
-        let k = codes.index_axis(Axis(0), c);
-        let k = k.as_standard_layout();
-        let mut out = phase.index_axis_mut(Axis(0), c);
-        match (k.as_slice(), out.as_slice_mut()) {
-            (Some(k), Some(out)) => col.lut.displayed_phases(h, w, k, out)?,
-            _ => return Err(HoloError::Internal("pattern planes not contiguous".into())),
-        }
-    }
-    Ok(phase)
 }
 
 /// An amplitude image `[3, H, W]` as sRGB RGBA8 for the screen.

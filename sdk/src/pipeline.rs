@@ -436,7 +436,7 @@ impl HologramPipeline {
     /// Errors: [`HoloError::InvalidParameter`] (`calibration`) if a colour's wavelength differs from
     /// the pipeline's optics by more than 1 nm (a look-up table holds for one wavelength only).
     pub fn with_calibration(mut self, calibration: Arc<DisplayCalibration>) -> Result<Self> {
-        check_calibration_wavelengths(&calibration, &self.config.optics)?;
+        check_calibration_wavelengths(&calibration, &self.config.optics.wavelengths_m)?;
         self.calibration = Some(calibration);
         Ok(self)
     }
@@ -484,9 +484,10 @@ impl HologramPipeline {
 /// Largest wavelength difference (metres) between a display calibration and the pipeline's optics.
 const CALIBRATION_WAVELENGTH_TOLERANCE_M: f64 = 1e-9;
 
-/// Refuses a calibration measured at other wavelengths than `optics` (more than 1 nm apart).
-fn check_calibration_wavelengths(cal: &DisplayCalibration, optics: &OpticalSetup) -> Result<()> {
-    for (c, (col, &want)) in cal.colours.iter().zip(&optics.wavelengths_m).enumerate() {
+/// Refuses a calibration measured at other wavelengths than the display's `wavelengths_m` (R, G, B; more
+/// than 1 nm apart).
+fn check_calibration_wavelengths(cal: &DisplayCalibration, wavelengths_m: &[f64; 3]) -> Result<()> {
+    for (c, (col, &want)) in cal.colours.iter().zip(wavelengths_m).enumerate() {
         if (col.wavelength_m - want).abs() > CALIBRATION_WAVELENGTH_TOLERANCE_M {
             return Err(invalid(
                 "calibration",
@@ -1218,11 +1219,7 @@ impl HologramSession {
     pub fn set_calibration(&mut self, calibration: Option<Arc<DisplayCalibration>>) -> Result<()> {
         if let Some(cal) = &calibration {
             cal.check_size(self.height, self.width)?;
-            let optics = OpticalSetup {
-                wavelengths_m: self.wavelengths_m,
-                ..OpticalSetup::default()
-            };
-            check_calibration_wavelengths(cal, &optics)?;
+            check_calibration_wavelengths(cal, &self.wavelengths_m)?;
         }
         for slot in &mut self.states {
             slot.as_mut().ok_or_else(lost_state)?.calibration = calibration.clone();
@@ -1333,7 +1330,10 @@ impl HologramSession {
         let cnn_s = t.elapsed().as_secs_f64();
         let t_gpu = Instant::now();
         // A calibrated look-up table runs on the CPU, on the downloaded double phase pattern.
-        let calibrated = (0..3).any(|c| calibrated_lut(self.calibration.as_ref(), c).is_some());
+        let calibrated = self
+            .calibration
+            .as_ref()
+            .is_some_and(|c| c.has_calibrated_lut());
         let full = self.full_outputs || gpu.pending_check || calibrated;
         match gpu.frame.run(self.cnn.input.view(), &mut self.output, full) {
             Ok(heads) => {

@@ -154,6 +154,22 @@ impl DisplayCalibration {
         )
     }
 
+    /// The three colours' look-up tables (R, G, B).
+    pub fn luts(&self) -> [&PhaseLut; 3] {
+        [
+            &self.colours[0].lut,
+            &self.colours[1].lut,
+            &self.colours[2].lut,
+        ]
+    }
+
+    /// Whether any colour's look-up table is other than the linear one (codes then differ from an ideal SLM's).
+    pub fn has_calibrated_lut(&self) -> bool {
+        self.colours
+            .iter()
+            .any(|c| !matches!(c.lut.representation(), LutRepresentation::Linear))
+    }
+
     /// Whether any colour has an intensity scale map.
     pub fn has_intensity(&self) -> bool {
         self.colours.iter().any(|c| c.intensity_scale.is_some())

@@ -562,25 +562,7 @@ impl PhaseLut {
         phase: &[f32],
         codes: &mut [u8],
     ) -> Result<()> {
-        let n = height
-            .checked_mul(width)
-            .ok_or_else(|| invalid("size", format!("{height}×{width} overflows")))?;
-        if phase.len() != n || codes.len() != n {
-            return Err(HoloError::ShapeMismatch {
-                what: "phase and codes vs the LUT's [H, W]".into(),
-                expected: vec![height, width],
-                got: vec![phase.len(), codes.len()],
-            });
-        }
-        if let Some((h, w)) = self.size() {
-            if (h, w) != (height, width) {
-                return Err(HoloError::ShapeMismatch {
-                    what: "SLM pattern vs the per-pixel look-up table's SLM".into(),
-                    expected: vec![h, w],
-                    got: vec![height, width],
-                });
-            }
-        }
+        self.check_plane(height, width, phase.len(), codes.len())?;
         let bins = INVERSE_BINS as f32 / TAU;
         let stride = INVERSE_BINS + 1;
         match &self.representation {
@@ -625,6 +607,29 @@ impl PhaseLut {
 }
 
 impl PhaseLut {
+    /// Checks one colour's pattern buffers (`a_len`, `b_len` values) against `[height, width]` and a per-pixel
+    /// LUT's SLM size.
+    fn check_plane(&self, height: usize, width: usize, a_len: usize, b_len: usize) -> Result<()> {
+        let n = height
+            .checked_mul(width)
+            .ok_or_else(|| invalid("size", format!("{height}×{width} overflows")))?;
+        if a_len != n || b_len != n {
+            return Err(HoloError::ShapeMismatch {
+                what: "SLM pattern buffers vs the LUT's [H, W]".into(),
+                expected: vec![height, width],
+                got: vec![a_len, b_len],
+            });
+        }
+        match self.size() {
+            Some((h, w)) if (h, w) != (height, width) => Err(HoloError::ShapeMismatch {
+                what: "SLM pattern vs the per-pixel look-up table's SLM".into(),
+                expected: vec![h, w],
+                got: vec![height, width],
+            }),
+            _ => Ok(()),
+        }
+    }
+
     /// The forward direction of [`PhaseLut::apply`]: the phase in radians (relative to code 0, not wrapped)
     /// that each code of one colour's pattern `codes` (`[height, width]`, row-major) displays, into `out`
     /// (same length); allocation-free. What a viewer of a calibrated display sees (the preview).
@@ -637,16 +642,7 @@ impl PhaseLut {
         codes: &[u8],
         out: &mut [f32],
     ) -> Result<()> {
-        let n = height
-            .checked_mul(width)
-            .ok_or_else(|| invalid("size", format!("{height}×{width} overflows")))?;
-        if codes.len() != n || out.len() != n {
-            return Err(HoloError::ShapeMismatch {
-                what: "codes and phases vs the LUT's [H, W]".into(),
-                expected: vec![height, width],
-                got: vec![codes.len(), out.len()],
-            });
-        }
+        self.check_plane(height, width, codes.len(), out.len())?;
         match &self.representation {
             LutRepresentation::Linear => {
                 for (o, &c) in out.iter_mut().zip(codes) {
@@ -659,13 +655,6 @@ impl PhaseLut {
                 }
             }
             LutRepresentation::Tiled(t) => {
-                if t.size() != (height, width) {
-                    return Err(HoloError::ShapeMismatch {
-                        what: "SLM pattern vs the per-pixel look-up table's SLM".into(),
-                        expected: vec![t.height, t.width],
-                        got: vec![height, width],
-                    });
-                }
                 for (y, (orow, crow)) in out
                     .chunks_exact_mut(width)
                     .zip(codes.chunks_exact(width))

@@ -53,6 +53,33 @@ pub fn black_test_codes(luts: [&PhaseLut; 3], height: usize, width: usize) -> Re
     Ok(codes)
 }
 
+/// The phase in radians `[3, H, W]` (relative to code 0) that panels with the look-up tables `luts` (R, G, B)
+/// display for `codes` `[3, H, W]` ([`PhaseLut::displayed_phases`] per colour): what a viewer of the calibrated
+/// display sees.
+///
+/// Errors: [`HoloError::ShapeMismatch`] for codes that are not `[3, H, W]` or a per-pixel LUT of another size.
+pub fn displayed_phase(luts: [&PhaseLut; 3], codes: ArrayView3<u8>) -> Result<Array3<f32>> {
+    let (c, h, w) = codes.dim();
+    if c != 3 {
+        return Err(HoloError::ShapeMismatch {
+            what: "SLM codes".into(),
+            expected: vec![3, h, w],
+            got: codes.shape().to_vec(),
+        });
+    }
+    let mut phase = Array3::<f32>::zeros((3, h, w));
+    for (c, lut) in luts.iter().enumerate() {
+        let k = codes.index_axis(ndarray::Axis(0), c);
+        let k = k.as_standard_layout();
+        let mut p = phase.index_axis_mut(ndarray::Axis(0), c);
+        match (k.as_slice(), p.as_slice_mut()) {
+            (Some(k), Some(p)) => lut.displayed_phases(h, w, k, p)?,
+            _ => return Err(HoloError::Internal("pattern planes not contiguous".into())),
+        }
+    }
+    Ok(phase)
+}
+
 /// Mean intensity per colour that a phase-only SLM showing `phase` `[3, H, W]` (radians, as displayed)
 /// sends through the Fourier filter (Eq. 8–9), relative to a uniform pattern's (which passes whole: 1). On
 /// the [`black_test_codes`] pattern this is the display's black level; its inverse the contrast.
