@@ -100,7 +100,11 @@ fn optics_stages_allocate_nothing_after_warm_up() {
             if calibrated {
                 // The calibrated tables ran: their codes are not the linear table's of the same phase.
                 let linear = tensorholo::encoding::phase_to_codes(session.output().phase.view());
-                assert_ne!(session.output().codes, linear, "the calibration was not applied");
+                assert_ne!(
+                    session.output().codes,
+                    linear,
+                    "the calibration was not applied"
+                );
             }
             last = session.output().codes.clone();
         }
