@@ -38,22 +38,34 @@ pub fn write_complex_npy(path: &Path, field: ArrayView3<Complex32>) -> Result<()
 /// [`HoloError::Io`] if the file cannot be opened; [`HoloError::Npy`] naming `path` if it is not a
 /// valid `.npy` file, its dtype is not complex64/complex128 (e.g. `'<f8'`), or its rank is not 2 or 3.
 pub fn read_complex_npy(path: &Path) -> Result<Array3<Complex32>> {
-    let any: ArrayD<Complex32> = match read_npy_file::<Complex32>(path) {
+    parse_complex_npy(&read_bytes(path)?, path)
+}
+
+/// Parses the bytes of a NumPy `.npy` complex field (the contents of a file, e.g. received over a network),
+/// as [`read_complex_npy`]: shape `[C, H, W]`, or `[H, W]` returned as `[1, H, W]`; `complex64` or
+/// `complex128`, either byte order, C or Fortran order. The header's shape is checked against the bytes
+/// present before the array is allocated, so a short buffer declaring a huge shape is refused, not allocated.
+/// `source` names the data in errors.
+///
+/// # Errors
+/// [`HoloError::Npy`] naming `source`, as [`read_complex_npy`].
+pub fn parse_complex_npy(bytes: &[u8], source: &Path) -> Result<Array3<Complex32>> {
+    let any: ArrayD<Complex32> = match parse_npy::<Complex32>(bytes) {
         Ok(a) => a,
-        Err(ReadNpyError::WrongDescriptor(_)) => match read_npy_file::<Complex64>(path) {
+        Err(ReadNpyError::WrongDescriptor(_)) => match parse_npy::<Complex64>(bytes) {
             Ok(a) => a.mapv(|z| Complex32::new(z.re as f32, z.im as f32)),
             Err(ReadNpyError::WrongDescriptor(descr)) => {
                 return Err(npy_error(
-                    path,
+                    source,
                     format!(
                         "dtype {descr} is not a complex field: expected complex64 ('<c8') or \
                          complex128 ('<c16')"
                     ),
                 ))
             }
-            Err(e) => return Err(read_error(path, e)),
+            Err(e) => return Err(read_error(source, e)),
         },
-        Err(e) => return Err(read_error(path, e)),
+        Err(e) => return Err(read_error(source, e)),
     };
     let shape = any.shape().to_vec();
     let any = match any.ndim() {
@@ -61,7 +73,7 @@ pub fn read_complex_npy(path: &Path) -> Result<Array3<Complex32>> {
         3 => any,
         _ => {
             return Err(npy_error(
-                path,
+                source,
                 format!(
                     "complex field has shape {shape:?}: expected rank 2 [H, W] or rank 3 [C, H, W]"
                 ),
@@ -230,44 +242,51 @@ fn read_error(path: &Path, e: ReadNpyError) -> HoloError {
     }
 }
 
-/// Reads a `.npy` file whose declared shape is checked against the bytes it holds before the array is
-/// allocated (`ndarray-npy` allocates by the declared shape first, so a 200-byte file declaring a huge shape
-/// would abort): the file (at most [`InputLimits::max_file_bytes`]) is read into memory and viewed in place, which checks
-/// the header, the dtype and the data length; only then is the array copied out.
-fn read_npy_file<T: ndarray_npy::ReadableElement + ndarray_npy::ViewElement + Clone>(
-    path: &Path,
+/// Parses `.npy` bytes whose declared shape is checked against the bytes present before the array is
+/// allocated (`ndarray-npy`'s reader allocates by the declared shape first, so a 200-byte file declaring a huge
+/// shape would abort): the bytes are viewed in place, which checks the header, the dtype and the data length;
+/// only then is the array copied out.
+fn parse_npy<T: ndarray_npy::ReadableElement + ndarray_npy::ViewElement + Clone>(
+    bytes: &[u8],
 ) -> std::result::Result<ArrayD<T>, ReadNpyError> {
-    let len = std::fs::metadata(path)?.len();
-    let max = input_limits().max_file_bytes;
-    if len > max {
-        return Err(ReadNpyError::ParseData(
-            format!(
-                "the file is {len} bytes, above the input limit of {max} bytes (--max-file-bytes)"
-            )
-            .into(),
-        ));
-    }
-    let mut bytes = std::fs::read(path)?;
-    match ArrayViewD::<T>::view_npy(&bytes) {
-        Ok(view) => return Ok(view.to_owned()),
+    // Viewing needs the data aligned for `T`. The data of a `.npy` file starts at a multiple of 16 bytes, so
+    // a buffer starting 16-aligned will do; a caller's buffer (a subslice, a fuzzer's input) need not be.
+    let native = if bytes.as_ptr() as usize % 16 == 0 {
+        ArrayViewD::<T>::view_npy(bytes).map(|view| view.to_owned())
+    } else {
+        let (copy, at) = aligned_copy(bytes);
+        ArrayViewD::<T>::view_npy(&copy[at..]).map(|view| view.to_owned())
+    };
+    match native {
+        Ok(array) => return Ok(array),
         Err(ViewNpyError::NonNativeEndian) => {}
         Err(e) => return Err(view_to_read_error(e)),
     }
-    // The other byte order: check the length on the header with its byte order flipped, then let
+    // The other byte order: check the length on a copy with the header's byte order flipped, then let
     // ndarray-npy convert the data from the original bytes.
-    let at = flip_descr_byte_order(&mut bytes).ok_or_else(|| {
+    let (mut copy, at) = aligned_copy(bytes);
+    flip_descr_byte_order(&mut copy[at..]).ok_or_else(|| {
         ReadNpyError::ParseData("cannot find the byte order of the dtype in the header".into())
     })?;
-    let checked = ArrayViewD::<T>::view_npy(&bytes)
+    let checked = ArrayViewD::<T>::view_npy(&copy[at..])
         .map(|_| ())
         .map_err(view_to_read_error);
-    bytes[at] = if bytes[at] == b'<' { b'>' } else { b'<' };
+    drop(copy);
     checked?;
-    ArrayD::<T>::read_npy(&bytes[..])
+    ArrayD::<T>::read_npy(bytes)
 }
 
-/// Flips `<` and `>` of the `'descr'` entry in a `.npy` header held in `bytes`; returns its offset.
-fn flip_descr_byte_order(bytes: &mut [u8]) -> Option<usize> {
+/// A copy of `bytes` in a new buffer, and the offset in it where the copy starts 16-byte aligned.
+fn aligned_copy(bytes: &[u8]) -> (Vec<u8>, usize) {
+    let mut storage = vec![0u8; bytes.len() + 16];
+    let at = (16 - storage.as_ptr() as usize % 16) % 16;
+    storage.truncate(at + bytes.len());
+    storage[at..].copy_from_slice(bytes);
+    (storage, at)
+}
+
+/// Flips `<` and `>` of the `'descr'` entry in a `.npy` header held in `bytes`; `None` if it has none.
+fn flip_descr_byte_order(bytes: &mut [u8]) -> Option<()> {
     let key = b"'descr': '";
     let header = &bytes[..bytes.len().min(1 << 16)];
     let at = header.windows(key.len()).position(|w| w == key)? + key.len();
@@ -277,7 +296,7 @@ fn flip_descr_byte_order(bytes: &mut [u8]) -> Option<usize> {
         b'>' => b'<',
         _ => return None,
     };
-    Some(at)
+    Some(())
 }
 
 fn view_to_read_error(e: ViewNpyError) -> ReadNpyError {
@@ -458,12 +477,62 @@ pub(crate) fn decode_image(path: &Path, bytes: &[u8]) -> Result<image::DynamicIm
             path.display()
         )));
     }
+    if reader()?.format() == Some(image::ImageFormat::Jpeg) {
+        return decode_jpeg_strict(path, bytes);
+    }
     let mut limits = image::Limits::default();
     // 16-bit RGBA is 8 bytes a pixel; a decoder's own buffers fit in twice that.
     limits.max_alloc = Some(pixels.saturating_mul(16).max(1 << 20));
     let mut r = reader()?;
     r.limits(limits);
     r.decode().map_err(image_error)
+}
+
+/// Decodes a JPEG in strict mode: `image` runs zune-jpeg leniently, which completes a truncated or corrupt
+/// entropy-coded stream with grey instead of failing. Output: 8-bit grey (grey JPEGs) or RGB(A).
+fn decode_jpeg_strict(path: &Path, bytes: &[u8]) -> Result<image::DynamicImage> {
+    use zune_core::colorspace::ColorSpace;
+    let fail = |reason: String| HoloError::InvalidData(format!("`{}`: {reason}", path.display()));
+    let options = zune_core::options::DecoderOptions::default()
+        .set_strict_mode(true)
+        .set_max_width(usize::MAX)
+        .set_max_height(usize::MAX);
+    let mut decoder = zune_jpeg::JpegDecoder::new_with_options(
+        zune_core::bytestream::ZCursor::new(bytes),
+        options,
+    );
+    decoder
+        .decode_headers()
+        .map_err(|e| fail(format!("corrupt JPEG header ({e:?})")))?;
+    let input = decoder.input_colorspace().unwrap_or(ColorSpace::RGB);
+    let out = match input {
+        ColorSpace::Luma | ColorSpace::LumaA | ColorSpace::RGB | ColorSpace::RGBA => input,
+        _ => ColorSpace::RGB,
+    };
+    decoder.set_options(decoder.options().jpeg_set_out_colorspace(out));
+    let data = decoder.decode().map_err(|e| {
+        fail(format!(
+            "corrupt or truncated JPEG data ({e:?}); refusing to complete the image with grey"
+        ))
+    })?;
+    let (w, h) = decoder
+        .dimensions()
+        .ok_or_else(|| fail("JPEG without dimensions".into()))?;
+    let (w, h) = (w as u32, h as u32);
+    let short = || fail("the JPEG decoder returned fewer samples than the image has".into());
+    Ok(match decoder.output_colorspace().unwrap_or(out) {
+        ColorSpace::Luma => {
+            image::GrayImage::from_raw(w, h, data).map(image::DynamicImage::ImageLuma8)
+        }
+        ColorSpace::LumaA => {
+            image::GrayAlphaImage::from_raw(w, h, data).map(image::DynamicImage::ImageLumaA8)
+        }
+        ColorSpace::RGBA => {
+            image::RgbaImage::from_raw(w, h, data).map(image::DynamicImage::ImageRgba8)
+        }
+        _ => image::RgbImage::from_raw(w, h, data).map(image::DynamicImage::ImageRgb8),
+    }
+    .ok_or_else(short)?)
 }
 
 /// A temporary name beside `path` in the same folder (`.<name>.tmp-<pid>-<n>`), for write-then-rename.

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use ndarray::{Array2, Array3, Axis, Slice};
 use tensorholo::color::srgb8_to_amplitude;
 use tensorholo::io::{
-    ensure_not_input, read_complex_npy, save_amplitude_png, save_u8_png, write_complex_npy,
+    ensure_not_input, parse_complex_npy, read_complex_npy, save_amplitude_png, save_u8_png, write_complex_npy,
     write_f32_npy,
 };
 use tensorholo::{Complex32, HoloError};
@@ -423,4 +423,40 @@ fn a_huge_declared_shape_is_refused_before_anything_is_allocated() {
     let p = dir.join("short.npy");
     fs::write(&p, npy_bytes(">c8", false, "(2, 2)", &[0u8; 31])).unwrap();
     assert_npy_error(&p, "more bytes");
+}
+
+#[test]
+fn npy_bytes_parse_at_any_alignment_in_both_byte_orders() {
+    // `parse_complex_npy` views the data in place, which needs alignment: a caller's buffer starting at an odd
+    // address (a subslice, a network packet) must give the same field as the file, for either byte order.
+    let vals: Vec<Complex32> = (0..6)
+        .map(|i| Complex32::new(i as f32 + 0.25, -(i as f32)))
+        .collect();
+    for (descr, to_bytes) in [
+        ("<c8", f32::to_le_bytes as fn(f32) -> [u8; 4]),
+        (">c8", f32::to_be_bytes as fn(f32) -> [u8; 4]),
+    ] {
+        let data: Vec<u8> = vals
+            .iter()
+            .flat_map(|z| [to_bytes(z.re), to_bytes(z.im)].concat())
+            .collect();
+        let file = npy_bytes(descr, false, "(1, 2, 3)", &data);
+        for shift in 0..8 {
+            let mut buffer = vec![0xAAu8; shift];
+            buffer.extend_from_slice(&file);
+            let a = parse_complex_npy(&buffer[shift..], Path::new("packet")).unwrap();
+            assert_eq!(a.dim(), (1, 2, 3), "{descr} at +{shift}");
+            assert_eq!(a.iter().copied().collect::<Vec<_>>(), vals, "{descr} +{shift}");
+        }
+        // Truncated by one byte at an odd offset: refused, naming the source.
+        let mut buffer = vec![0u8; 3];
+        buffer.extend_from_slice(&file[..file.len() - 1]);
+        match parse_complex_npy(&buffer[3..], Path::new("packet")) {
+            Err(HoloError::Npy { path, reason }) => {
+                assert_eq!(path, Path::new("packet"));
+                assert!(reason.contains("more bytes"), "{reason}");
+            }
+            other => panic!("{descr}: expected an Npy error, got {other:?}"),
+        }
+    }
 }

@@ -496,3 +496,49 @@ proptest! {
         prop_assert!(RgbdFrame::new(r.amplitude.clone(), r.depth.clone()).is_ok());
     }
 }
+
+#[test]
+fn a_truncated_or_corrupt_image_is_an_error_never_completed_with_grey() {
+    // `image` decodes JPEG leniently (zune-jpeg fills a missing tail with grey); we decode strictly. The full
+    // file must still give exactly what the lenient decoder gives.
+    for rel in ["sun/SUN_color.jpg", "redwood_livingroom_seq/color/00000.jpg"] {
+        let bytes = std::fs::read(data(rel)).unwrap();
+        let full = decode_rgb_bytes(&bytes, Path::new(rel)).unwrap();
+        let lenient = image::load_from_memory(&bytes).unwrap().to_rgb8();
+        assert_eq!(
+            full.dim(),
+            (3, lenient.height() as usize, lenient.width() as usize)
+        );
+        for (x, y, px) in lenient.enumerate_pixels().step_by(997) {
+            for c in 0..3 {
+                assert_eq!(
+                    full[[c, y as usize, x as usize]],
+                    tensorholo::color::srgb8_to_amplitude(px[c]),
+                    "{rel} ({x}, {y})"
+                );
+            }
+        }
+        for keep in [0.6, 0.95] {
+            let cut = &bytes[..(bytes.len() as f64 * keep) as usize];
+            // The lenient decoder accepts the truncated file: this is the case being guarded against.
+            assert!(image::load_from_memory(cut).is_ok(), "{rel} at {keep}");
+            match decode_rgb_bytes(cut, Path::new(rel)) {
+                Err(HoloError::InvalidData(m)) => {
+                    assert!(m.contains(rel) && m.contains("truncated"), "{m}")
+                }
+                other => panic!("{rel} cut at {keep}: expected InvalidData, got {other:?}"),
+            }
+        }
+    }
+    // A truncated 16-bit depth PNG: an error naming the source, for the depth decoder too.
+    let bytes = std::fs::read(data("sun/SUN_depth.png")).unwrap();
+    let cut = &bytes[..bytes.len() * 3 / 4];
+    let err = decode_depth_bytes(cut, Path::new("cut.png"), DepthEncoding::SunRotated).unwrap_err();
+    assert!(err.to_string().contains("cut.png"), "{err}");
+    assert_eq!(
+        decode_depth_bytes(&bytes, Path::new("x"), DepthEncoding::SunRotated)
+            .unwrap()
+            .values,
+        decode("sun/SUN_depth.png", DepthEncoding::SunRotated).values
+    );
+}

@@ -260,11 +260,25 @@ pub fn decode_depth(raw: &Array2<u16>, encoding: DepthEncoding) -> DecodedDepth 
 /// [`HoloError::InvalidDepth`] naming the file and encoding when the bit depth is wrong, the image is
 /// empty or floating-point, or Kinect samples exceed 11 bits in both byte orders.
 pub fn decode_depth_file(path: &Path, encoding: DepthEncoding) -> Result<DecodedDepth> {
-    let bytes = crate::io::read_bytes(path)?;
+    decode_depth_bytes(&crate::io::read_bytes(path)?, path, encoding)
+}
+
+/// As [`decode_depth_file`], on the bytes of a depth file already in memory (PNG, PGM/PPM, JPEG; format
+/// guessed from the content); `source` names it in errors. Shape of the result: `[H, W]`, metres or relative
+/// as the encoding says. The image size is checked against [`crate::io::InputLimits`] from the header before
+/// decoding.
+///
+/// Errors: as [`decode_depth_file`], naming `source`.
+pub fn decode_depth_bytes(
+    bytes: &[u8],
+    source: &Path,
+    encoding: DepthEncoding,
+) -> Result<DecodedDepth> {
+    let path = source;
     let (raw, bits) = if encoding == DepthEncoding::KinectDisparity && bytes.starts_with(b"P5") {
-        read_kinect_pgm(&bytes, path)?
+        read_kinect_pgm(bytes, path)?
     } else {
-        let img = crate::io::decode_image(path, &bytes)?;
+        let img = crate::io::decode_image(path, bytes)?;
         first_channel(&img, path, encoding)?
     };
     if raw.is_empty() {

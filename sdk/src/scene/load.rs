@@ -21,7 +21,18 @@ use crate::error::{HoloError, Result};
 /// Errors: [`HoloError::Io`] (unreadable) or [`HoloError::Image`] (undecodable), naming `path`;
 /// [`HoloError::InvalidData`] for an empty image.
 pub fn load_rgb(path: &Path) -> Result<Array3<f32>> {
-    let img = crate::io::decode_image(path, &crate::io::read_bytes(path)?)?;
+    decode_rgb_bytes(&crate::io::read_bytes(path)?, path)
+}
+
+/// As [`load_rgb`], on the bytes of an image file already in memory (format guessed from the content);
+/// `source` names it in errors. Returns amplitude `[3, H, W]`, channels R, G, B, in `[0, 1]`. The image size is
+/// checked against [`crate::io::InputLimits`] from the header before decoding; a truncated or corrupt file
+/// (JPEG included) is an error, never an image completed with grey.
+///
+/// Errors: as [`load_rgb`], naming `source`.
+pub fn decode_rgb_bytes(bytes: &[u8], source: &Path) -> Result<Array3<f32>> {
+    let path = source;
+    let img = crate::io::decode_image(path, bytes)?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     if w == 0 || h == 0 {
         return Err(HoloError::InvalidData(format!(

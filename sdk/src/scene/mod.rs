@@ -37,11 +37,11 @@ pub use camera::{
     DepthFormat, DepthImage, DepthImageBuf, Fit, FrameOptions, Rotation,
 };
 pub use depth::{
-    decode_depth, decode_depth_file, fill_invalid, normalise_depth, DecodedDepth, DepthEncoding,
-    DepthMapping, DepthRange,
+    decode_depth, decode_depth_bytes, decode_depth_file, fill_invalid, normalise_depth,
+    DecodedDepth, DepthEncoding, DepthMapping, DepthRange,
 };
 pub use frame::{LayeredDepthImage, LdiLayer, RgbdFrame};
-pub use load::{load_rgb, load_rgbd, DepthReport, LoadOptions};
+pub use load::{decode_rgb_bytes, load_rgb, load_rgbd, DepthReport, LoadOptions};
 pub use procedural::{default_scene, default_scene_ldi};
 #[cfg(feature = "research")]
 pub use random::{
