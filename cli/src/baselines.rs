@@ -334,10 +334,11 @@ pub fn run(args: &BaselinesArgs) -> Result<()> {
         let inputs: Vec<&Path> = plan.inputs.iter().map(PathBuf::as_path).collect();
         ensure_not_input(&report_path, &inputs)?;
     }
-    for dir in std::iter::once(&plan.maimone_dir).chain(plan.pipelines.iter().map(|(_, d)| d)) {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("cannot create output folder {}", dir.display()))?;
-    }
+    let subfolders: Vec<&Path> = std::iter::once(&plan.maimone_dir)
+        .chain(plan.pipelines.iter().map(|(_, d)| d))
+        .map(PathBuf::as_path)
+        .collect();
+    crate::output::start_run(&out, &subfolders, Some(&report_path))?;
 
     let pool = {
         let mut b = rayon::ThreadPoolBuilder::new();

@@ -280,6 +280,8 @@ fn run_in_pool(args: &DatasetArgs, config: &DatasetConfig) -> Result<()> {
 
     // Previews first (cheap: scenes only), so that a long run can be checked early.
     let preview_dir = args.out.join("previews");
+    // The manifest is the dataset's report: `generate` replaces it last (and reads the old one under --force).
+    crate::output::start_run(&args.out, &[&preview_dir], None)?;
     for i in 0..args.previews.min(config.train) {
         let stem = format!("train_{i:05}");
         for suffix in ["rgb", "depth", "layers"] {

@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
 use ndarray::{Array4, Axis};
 use serde_json::json;
@@ -96,8 +96,7 @@ pub fn run(args: &EncodeArgs) -> Result<()> {
     let post_stack = focal_stack(post.view(), &setup, 0.0, &args.depths, options, false)?;
     let target_stack = focal_stack(midpoint.view(), &setup, 0.0, &args.depths, options, false)?;
 
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
+    crate::output::start_run(&args.out, &[], Some(&args.out.join("encode.json")))?;
     let path = |name: &str| -> PathBuf { args.out.join(name) };
     write_complex_npy(&path("slm_field.npy"), slm_field.view())?;
     write_f32_npy(&path("phase.npy"), encoded.phase.view())?;

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use ndarray::{Array3, ArrayView3, Axis};
 use num_complex::Complex32;
 use serde_json::json;
@@ -50,22 +50,56 @@ pub fn command_line() -> Vec<String> {
         .collect()
 }
 
-/// Refuses an output folder whose files would overwrite an input; creates it.
-///
-/// A previous run's `report.json` there is removed first: the new run writes it last, so a folder holding
-/// one holds a complete run, and a failed re-run does not leave new files beside an old report.
+/// Refuses an output folder whose files would overwrite an input; creates it and removes a previous run's
+/// `report.json` ([`start_run`]).
 pub fn prepare(out: &Path, inputs: &[&Path]) -> Result<()> {
     for name in OUTPUTS {
         ensure_not_input(&out.join(name), inputs)?;
     }
-    std::fs::create_dir_all(out)
-        .with_context(|| format!("cannot create output folder {}", out.display()))?;
-    let report = out.join("report.json");
-    match std::fs::remove_file(&report) {
+    start_run(out, &[], Some(&out.join("report.json")))
+}
+
+/// Starts a run writing into `out`: creates it and the `subfolders` inside it, then removes a previous run's
+/// `report` if given (the file the run writes last), so that a folder holding a report holds a complete run and a
+/// failed or interrupted re-run does not leave new files beside an old report.
+///
+/// A subfolder that exists as a symbolic link is refused: writing through it would put files outside `out`.
+/// (`out` itself may be a link: the user named it.)
+pub fn start_run(out: &Path, subfolders: &[&Path], report: Option<&Path>) -> Result<()> {
+    create_real_dir(out)?;
+    for dir in subfolders {
+        let mut partial = out.to_path_buf();
+        // Check every component below `out`, so that `out/a` being a link to elsewhere is caught for `out/a/b`.
+        for component in dir.strip_prefix(out).unwrap_or(dir).components() {
+            partial.push(component);
+            if std::fs::symlink_metadata(&partial).is_ok_and(|m| m.file_type().is_symlink()) {
+                bail!(
+                    "`{}` is a symbolic link: refusing to write through it out of the output folder `{}` \
+                     (remove the link or choose another --out)",
+                    partial.display(),
+                    out.display()
+                );
+            }
+        }
+        create_real_dir(dir)?;
+    }
+    let Some(report) = report else {
+        return Ok(());
+    };
+    match std::fs::remove_file(report) {
         Ok(()) => Ok(()),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
         Err(e) => Err(e).with_context(|| format!("cannot remove the old {}", report.display())),
     }
+}
+
+fn create_real_dir(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create output folder {}", dir.display()))?;
+    if !dir.is_dir() {
+        bail!("`{}` is not a folder", dir.display());
+    }
+    Ok(())
 }
 
 /// What [`write_images`] writes besides the scene.

@@ -371,10 +371,18 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let t = Instant::now();
     let mut session = pipeline.session(h, w)?;
     let session_s = t.elapsed().as_secs_f64();
-    let first = session.render(&frame)?.timings;
+    let what = || match args.scene.inputs().as_slice() {
+        [] => "the built-in scene".to_string(),
+        files => files
+            .iter()
+            .map(|f| format!("`{}`", f.display()))
+            .collect::<Vec<_>>()
+            .join(" + "),
+    };
+    let first = session.render(&frame).with_context(what)?.timings;
     let mut timed = Vec::new();
     for _ in 0..args.repeat {
-        timed.push(session.render(&frame)?.timings);
+        timed.push(session.render(&frame).with_context(what)?.timings);
     }
     let med = median_timings(&timed);
     log::info!(

@@ -167,12 +167,12 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             }
         }
     }
-    std::fs::create_dir_all(if args.save_frames {
-        &frames_dir
+    let subfolders: &[&Path] = if args.save_frames {
+        &[&frames_dir]
     } else {
-        &args.out
-    })
-    .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
+        &[]
+    };
+    crate::output::start_run(&args.out, subfolders, Some(&args.out.join("report.json")))?;
 
     // One metric range for the whole sequence (the first frame's percentiles unless given), so that the
     // depth mapping does not flicker from frame to frame.
@@ -213,14 +213,18 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     let mut first_codes = None;
     let t_stream = Instant::now();
     let opts = options;
-    let n = session.render_stream(
-        pairs.iter().map(|p| {
+    // The frame whose error stops the stream, to name its files.
+    let mut failed = None;
+    let streamed = session.render_stream_each(
+        pairs.iter().enumerate().map(|(i, p)| {
             let t = Instant::now();
-            loader(p, &opts).inspect(|_| {
+            let frame = loader(p, &opts).inspect(|_| {
                 log::debug!("loaded {} in {:.1} ms", p.0.display(), t.elapsed().as_secs_f64() * 1e3)
-            })
+            });
+            (i, frame)
         }),
         |i, out| {
+            let out = out.inspect_err(|_| failed = Some(i))?;
             let t = out.timings;
             if out.backend == Backend::Gpu {
                 log::info!(
@@ -260,7 +264,15 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             }));
             Ok(())
         },
-    )?;
+    );
+    let n = streamed.with_context(|| match failed {
+        Some(i) => format!(
+            "frame {i} (`{}` + `{}`)",
+            pairs[i].0.display(),
+            pairs[i].1.display()
+        ),
+        None => "the video stream".to_string(),
+    })?;
     let stream_s = t_stream.elapsed().as_secs_f64();
     // The streamed output must equal a single-frame render of the same frame.
     let single = session.render(&loader(&pairs[0], &options)?)?.codes.clone();

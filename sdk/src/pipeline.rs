@@ -861,6 +861,12 @@ impl Drop for ColourWorkers {
     }
 }
 
+/// The amplitude at or below which a frame counts as black and is refused
+/// ([`HoloError::InvalidData`]): that of sRGB code 1 of 255 (`√(1/255/12.92)` ≈ 0.0175), which the eye cannot
+/// tell from 0. The CNN's hologram of a black frame is its bias, not darkness (see
+/// [`HologramSession::render`]).
+pub const BLACK_FRAME_AMPLITUDE: f32 = 0.0175;
+
 /// Packs frames into the hologram CNN's input and runs it (one per thread in a stream).
 #[derive(Debug, Clone)]
 struct CnnStage {
@@ -892,6 +898,30 @@ impl CnnStage {
         check_size("RGB-D frame", frame.amplitude.dim(), (h, w))?;
         contract::pack_rgbd(frame, self.input.view_mut())?;
         self.scale_intensity();
+        self.check_not_black()
+    }
+
+    /// Refuses a packed input whose amplitudes are all at most [`BLACK_FRAME_AMPLITUDE`]: the CNN's output
+    /// for a black frame is its own bias (a 32×32 black frame gave a midpoint hologram of peak amplitude 0.23,
+    /// not 0), which the encoding's normalisation would then show at full brightness.
+    fn check_not_black(&self) -> Result<()> {
+        let mut brightest = 0.0f32;
+        for (i, plane) in self.input.outer_iter().enumerate() {
+            if i % 4 != 3 {
+                brightest = plane.iter().fold(brightest, |m, &a| m.max(a));
+            }
+        }
+        if brightest <= BLACK_FRAME_AMPLITUDE {
+            return Err(HoloError::InvalidData(format!(
+                "the frame is black (brightest amplitude {brightest:.4}, at most sRGB code 1 of 255{}): there is \
+                 nothing to display, and the CNN's output for it would be noise shown at full brightness",
+                if self.calibration.as_ref().is_some_and(|c| c.has_intensity()) {
+                    ", after the calibration's intensity maps"
+                } else {
+                    ""
+                }
+            )));
+        }
         Ok(())
     }
 
@@ -936,7 +966,7 @@ impl CnnStage {
         check_size("LDI", (3, ldi.height(), ldi.width()), (h, w))?;
         contract::pack_ldi(ldi, self.input.view_mut())?;
         self.scale_intensity();
-        Ok(())
+        self.check_not_black()
     }
 
     fn run(&mut self, t: Instant) -> Result<(Heads, f64)> {
@@ -1299,7 +1329,8 @@ impl HologramSession {
     /// into SLM patterns.
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for a frame of another size; [`HoloError::InvalidData`] for
-    /// non-finite values; [`HoloError::InvalidParameter`] if the CNN takes an LDI; tract failures
+    /// non-finite values or a black frame (every amplitude ≤ [`BLACK_FRAME_AMPLITUDE`]: the CNN would
+    /// only show its bias); [`HoloError::InvalidParameter`] if the CNN takes an LDI; tract failures
     /// ([`HoloError::ModelRun`]). The session stays usable after an error.
     pub fn render(&mut self, frame: &RgbdFrame) -> Result<&SlmFrame> {
         #[cfg(feature = "gpu")]

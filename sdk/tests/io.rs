@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use ndarray::{Array2, Array3, Axis, Slice};
 use tensorholo::color::srgb8_to_amplitude;
 use tensorholo::io::{
-    ensure_not_input, parse_complex_npy, read_complex_npy, save_amplitude_png, save_u8_png, write_complex_npy,
-    write_f32_npy,
+    ensure_not_input, parse_complex_npy, read_complex_npy, save_amplitude_png, save_u8_png,
+    write_complex_npy, write_f32_npy,
 };
 use tensorholo::{Complex32, HoloError};
 
@@ -446,7 +446,11 @@ fn npy_bytes_parse_at_any_alignment_in_both_byte_orders() {
             buffer.extend_from_slice(&file);
             let a = parse_complex_npy(&buffer[shift..], Path::new("packet")).unwrap();
             assert_eq!(a.dim(), (1, 2, 3), "{descr} at +{shift}");
-            assert_eq!(a.iter().copied().collect::<Vec<_>>(), vals, "{descr} +{shift}");
+            assert_eq!(
+                a.iter().copied().collect::<Vec<_>>(),
+                vals,
+                "{descr} +{shift}"
+            );
         }
         // Truncated by one byte at an odd offset: refused, naming the source.
         let mut buffer = vec![0u8; 3];

@@ -236,6 +236,24 @@ fn bad_input_is_refused_and_the_session_stays_usable() {
         Err(HoloError::InvalidData(_))
     ));
 
+    // A black frame: the CNN's output would be its bias (not zero), shown at full brightness. Refused on the
+    // RGB-D path (the LDI path packs through the same check); a frame at sRGB code 2 renders.
+    let mut black = good.clone();
+    black.amplitude.fill(0.0);
+    let e = session.render(&black).unwrap_err();
+    assert!(
+        matches!(&e, HoloError::InvalidData(m) if m.contains("black")),
+        "{e}"
+    );
+    black
+        .amplitude
+        .fill(tensorholo::color::srgb8_to_amplitude(1));
+    assert!(session.render(&black).is_err());
+    black
+        .amplitude
+        .fill(tensorholo::color::srgb8_to_amplitude(2));
+    session.render(&black).unwrap();
+
     assert_eq!(session.render(&good).unwrap().codes, first);
     let mut stream = p.session(16, 20).unwrap();
     let frames = vec![Ok(good.clone()), Ok(frame(8, 8, 0)), Ok(good.clone())];

@@ -111,7 +111,8 @@ impl RgbdFrame {
     /// Resamples to `height × width`.
     ///
     /// Amplitude: separable Catmull-Rom (support widened by the scale factor when shrinking, i.e.
-    /// area-correct antialiasing) applied to linear intensity `amplitude²`, clamped at 0, then `√`.
+    /// area-correct antialiasing) applied to linear intensity `amplitude²`, clamped to `[0, max]` of the
+    /// channel's input intensity (the filter's overshoot at edges), then `√`.
     /// Depth: nearest neighbour, so no "flying pixels" with invented depths appear at occlusion edges.
     /// Error: [`HoloError::InvalidParameter`] if `height` or `width` is 0.
     pub fn resize(&self, height: usize, width: usize) -> Result<Self> {
@@ -362,7 +363,10 @@ pub(crate) fn resize_amplitude(
     let planes: Vec<Array2<f32>> = (0..c)
         .map(|ch| {
             let intensity = amplitude.index_axis(Axis(0), ch).mapv(|a| a * a);
-            resample_plane(intensity.view(), &wy, &wx).mapv(|i| i.max(0.0).sqrt())
+            // Catmull-Rom over- and undershoots at edges: clamp to the plane's own intensity range, so that
+            // an image in [0, 1] stays in [0, 1] (the CNN's training range) and no negative intensity appears.
+            let top = intensity.iter().copied().fold(0.0f32, f32::max);
+            resample_plane(intensity.view(), &wy, &wx).mapv(|i| i.clamp(0.0, top).sqrt())
         })
         .collect();
     for (ch, p) in planes.into_iter().enumerate() {

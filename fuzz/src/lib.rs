@@ -1,0 +1,213 @@
+//! The fuzz harnesses of tensorholo: one function per parser that user input reaches. Each takes arbitrary
+//! bytes, must never panic, abort or allocate beyond the input limits, and checks the invariants of what it
+//! accepts. The cargo-fuzz targets (`fuzz_targets/*.rs`, nightly) call these; the stable regression test
+//! (`tests/fuzz_regressions.rs` of the workspace's integration-test crate) includes this file and replays every
+//! input committed under `tests/fixtures/fuzz/<target>/`. How to run them: `docs/FUZZING.md`.
+//!
+//! Only `tensorholo` is used here, so the file compiles in both places.
+
+use std::path::Path;
+
+use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
+use tensorholo::scene::{
+    decode_depth_bytes, decode_rgb_bytes, CameraFrame, ColorFormat, ColorImage, DepthEncoding,
+    DepthFormat, DepthImage, DepthRange, Fit, FrameOptions, Rotation,
+};
+use tensorholo::slm::DisplayCalibration;
+
+/// Input limits of the harnesses: 4 M pixels a decoded image, 16 MiB a file. Lower than the defaults (100 M,
+/// 4 GiB) so that an input whose header declares a huge image is refused or decoded quickly; the limit logic is
+/// the same.
+pub const FUZZ_LIMITS: tensorholo::io::InputLimits = tensorholo::io::InputLimits {
+    max_image_pixels: 1 << 22,
+    max_file_bytes: 1 << 24,
+};
+
+fn init() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| tensorholo::io::set_input_limits(FUZZ_LIMITS).expect("valid limits"));
+}
+
+/// The harnesses by target name, for the regression test.
+pub const TARGETS: [(&str, fn(&[u8])); 6] = [
+    ("depth_decode", depth_decode),
+    ("rgb_decode", rgb_decode),
+    ("npy", npy),
+    ("holocal", holocal),
+    ("onnx_model", onnx_model),
+    ("camera_frame", camera_frame),
+];
+
+/// Depth decoders (PNG, PGM/PPM with the hand-written Kinect PGM reader, JPEG): byte 0 picks the encoding,
+/// the rest is the file. Accepted maps: valid samples finite and (metric encodings) positive.
+pub fn depth_decode(data: &[u8]) {
+    init();
+    let Some((&pick, file)) = data.split_first() else {
+        return;
+    };
+    let encoding = DepthEncoding::ALL[pick as usize % DepthEncoding::ALL.len()];
+    if let Ok(d) = decode_depth_bytes(file, Path::new("fuzz"), encoding) {
+        assert_eq!(d.values.dim(), d.valid.dim());
+        assert!(d.values.len() > 0);
+        for (&v, &ok) in d.values.iter().zip(d.valid.iter()) {
+            if ok {
+                assert!(v.is_finite(), "{encoding}: valid sample {v}");
+                if d.metric {
+                    assert!(v > 0.0, "{encoding}: valid metric depth {v}");
+                }
+            }
+        }
+    }
+}
+
+/// Colour image decoding (PNG, JPEG strictly, PNM): accepted images are `[3, H, W]` amplitudes in `[0, 1]`.
+pub fn rgb_decode(data: &[u8]) {
+    init();
+    if let Ok(a) = decode_rgb_bytes(data, Path::new("fuzz")) {
+        assert_eq!(a.shape()[0], 3);
+        assert!(a.iter().all(|v| (0.0..=1.0).contains(v)));
+    }
+}
+
+/// The `.npy` complex-field reader: an accepted array holds as many elements as its shape says (the reader
+/// must have checked the declared shape against the bytes before allocating).
+pub fn npy(data: &[u8]) {
+    init();
+    if let Ok(a) = tensorholo::io::parse_complex_npy(data, Path::new("fuzz")) {
+        assert_eq!(a.len(), a.shape().iter().product::<usize>());
+        assert!(a.is_standard_layout());
+    }
+}
+
+/// The `.holocal` display-calibration parser. Byte 0 odd: the harness rewrites the trailing CRC-32 so that
+/// mutations reach the header and payload checks behind the checksum. An accepted file must serialise back to
+/// a file that parses to the same bytes again.
+pub fn holocal(data: &[u8]) {
+    init();
+    let Some((&flags, file)) = data.split_first() else {
+        return;
+    };
+    let mut file = file.to_vec();
+    if flags & 1 == 1 && file.len() >= 4 {
+        let body = file.len() - 4;
+        let crc = crc32(&file[..body]);
+        file[body..].copy_from_slice(&crc.to_le_bytes());
+    }
+    if let Ok(cal) = DisplayCalibration::from_bytes(&file, "fuzz") {
+        let again = cal.to_bytes().expect("a parsed calibration serialises");
+        let reparsed = DisplayCalibration::from_bytes(&again, "again").expect("its bytes parse");
+        assert_eq!(reparsed.to_bytes().expect("serialises"), again);
+    }
+}
+
+/// CRC-32 (IEEE), bitwise: the harness must not depend on anything but `tensorholo`.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in bytes {
+        crc ^= b as u32;
+        for _ in 0..8 {
+            crc = (crc >> 1) ^ (0xEDB8_8320 & (crc & 1).wrapping_neg());
+        }
+    }
+    !crc
+}
+
+/// The ONNX model loader with its metadata and contract checks, as both kinds of CNN with the default display.
+pub fn onnx_model(data: &[u8]) {
+    init();
+    for kind in [ModelKind::Hologram, ModelKind::PreFilter] {
+        let _ = HologramModel::from_bytes(data, kind, &ModelConfig::default());
+    }
+}
+
+/// The camera-frame conversion behind the app bindings (`HologramGenerator.render` of a raw RGBA/BGRA/RGB
+/// buffer and a raw f32/f16/u16 depth buffer with row strides and a rotation). Bytes 0–16 describe the
+/// buffers (formats, sizes up to 255·257 pixels a side, strides, target size, fit, range); the rest is split
+/// between the two buffers. An accepted frame has the target size, amplitudes in `[0, 1]` and depth in
+/// `[0, 1]`, all finite.
+pub fn camera_frame(data: &[u8]) {
+    init();
+    if data.len() < 17 {
+        return;
+    }
+    let (head, rest) = data.split_at(17);
+    let color_format =
+        [ColorFormat::Rgba8, ColorFormat::Bgra8, ColorFormat::Rgb8][head[0] as usize % 3];
+    let depth_format = [
+        DepthFormat::MetresF32,
+        DepthFormat::MetresF16,
+        DepthFormat::DisparityF32,
+        DepthFormat::DisparityF16,
+        DepthFormat::MillimetresU16,
+        DepthFormat::Depth16,
+    ][head[1] as usize % 6];
+    let rotation = [
+        Rotation::Deg0,
+        Rotation::Deg90,
+        Rotation::Deg180,
+        Rotation::Deg270,
+    ][head[2] as usize % 4];
+    let fit = [Fit::Crop, Fit::Letterbox, Fit::Stretch][(head[2] / 4) as usize % 3];
+    // Sizes: mostly small (fast), sometimes huge (which the buffer cannot hold: must be refused unallocated).
+    let side = |b: u8, big: bool| b as usize * if big { 257 } else { 1 };
+    let (cw, ch) = (
+        side(head[3], head[16] & 1 == 1),
+        side(head[4], head[16] & 2 == 2),
+    );
+    let (dw, dh) = (
+        side(head[5], head[16] & 4 == 4),
+        side(head[6], head[16] & 8 == 8),
+    );
+    // Stride: a row plus 0–126 bytes of padding, or (high bit) any value, too short included.
+    let stride = |b: u8, w: usize, bpp: usize| {
+        if b & 0x80 == 0 {
+            w * bpp + b as usize
+        } else {
+            (b & 0x7F) as usize
+        }
+    };
+    let color_stride = stride(head[7], cw, color_format.bytes_per_pixel());
+    let depth_stride = stride(head[8], dw, depth_format.bytes_per_pixel());
+    let (th, tw) = (head[9] as usize, head[10] as usize);
+    let range = (head[11] & 1 == 1).then(|| DepthRange {
+        z_near_m: head[12] as f32 / 16.0,
+        z_far_m: head[13] as f32 / 16.0,
+    });
+    let split = rest.len() * head[14] as usize / 255;
+    let (color, depth) = rest.split_at(split);
+    let frame = CameraFrame {
+        color: ColorImage {
+            data: color,
+            format: color_format,
+            width: cw,
+            height: ch,
+            row_stride: color_stride,
+        },
+        depth: DepthImage {
+            data: depth,
+            format: depth_format,
+            width: dw,
+            height: dh,
+            row_stride: depth_stride,
+        },
+        rotation,
+    };
+    let options = FrameOptions {
+        fit,
+        range,
+        ..FrameOptions::default()
+    };
+    if let Ok((f, _report)) = frame.to_rgbd(th, tw, &options) {
+        assert_eq!((f.height(), f.width()), (th, tw));
+        let bad = f.amplitude.iter().find(|v| !(0.0..=1.0).contains(*v));
+        assert!(
+            bad.is_none(),
+            "amplitude {bad:?} outside [0, 1] ({options:?}, {th}x{tw})"
+        );
+        let bad = f.depth.iter().find(|v| !(0.0..=1.0).contains(*v));
+        assert!(
+            bad.is_none(),
+            "depth {bad:?} outside [0, 1] ({options:?}, {th}x{tw})"
+        );
+    }
+}

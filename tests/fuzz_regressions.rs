@@ -1,0 +1,317 @@
+//! The fuzz harnesses (`fuzz/src/lib.rs`, shared with the cargo-fuzz targets) on stable, in CI:
+//!
+//! 1. every input committed under `tests/fixtures/fuzz/<target>/` (crashes cargo-fuzz found, kept as
+//!    regressions, and hand-made edge cases) is replayed through its harness;
+//! 2. each harness runs on seeds made here from synthetic data (valid files of every format the target parses)
+//!    and on deterministic mutations of them: every truncation length of the small ones, and byte flips;
+//! 3. `write_seed_corpus` (ignored; run by hand, docs/FUZZING.md) writes the same seeds to `fuzz/corpus/`.
+//!
+//! A harness panics on a violated invariant (e.g. an accepted image with an amplitude outside `[0, 1]`), so
+//! each replay is a real check. The seeds are also checked to be accepted where valid, so that a harness that
+//! silently refuses everything is caught.
+
+#[allow(dead_code)]
+#[path = "../fuzz/src/lib.rs"]
+mod harness;
+
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+
+use tensorholo::scene::{decode_depth_bytes, decode_rgb_bytes, DepthEncoding};
+use tensorholo::slm::{DisplayCalibration, LutRepresentation, PhaseCurve, PhaseLut, TiledCurves};
+
+fn fixtures() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/fuzz")
+}
+
+fn encode(img: image::DynamicImage, format: image::ImageFormat) -> Vec<u8> {
+    let mut out = Cursor::new(Vec::new());
+    img.write_to(&mut out, format).expect("encodes");
+    out.into_inner()
+}
+
+/// A 16-bit greyscale ramp with a hole (0 = invalid in most encodings).
+fn depth16(w: u32, h: u32) -> image::DynamicImage {
+    image::DynamicImage::ImageLuma16(image::ImageBuffer::from_fn(w, h, |x, y| {
+        image::Luma([if x == 1 && y == 1 {
+            0
+        } else {
+            (500 + 40 * x + 70 * y) as u16
+        }])
+    }))
+}
+
+fn rgb8(w: u32, h: u32) -> image::DynamicImage {
+    image::DynamicImage::ImageRgb8(image::ImageBuffer::from_fn(w, h, |x, y| {
+        image::Rgb([(x * 20) as u8, (y * 30) as u8, ((x + y) * 9) as u8])
+    }))
+}
+
+/// Kinect PGM, little-endian 16-bit samples ≤ 2047 (the NYU layout).
+fn kinect_pgm(w: usize, h: usize) -> Vec<u8> {
+    let mut out = format!("P5\n# kinect\n{w} {h}\n2047\n").into_bytes();
+    for i in 0..w * h {
+        out.extend_from_slice(&((300 + 7 * i) as u16 % 2048).to_le_bytes());
+    }
+    out
+}
+
+fn npy_c8(descr: &str, shape: &str, values: usize) -> Vec<u8> {
+    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut out = b"\x93NUMPY\x01\x00".to_vec();
+    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    for i in 0..values {
+        let v = i as f32 * 0.5 - 1.0;
+        let b = if descr.starts_with('>') {
+            v.to_be_bytes()
+        } else {
+            v.to_le_bytes()
+        };
+        out.extend_from_slice(&b);
+        out.extend_from_slice(&b);
+    }
+    out
+}
+
+fn holocal_seeds() -> Vec<Vec<u8>> {
+    let mut cal = DisplayCalibration::linear(6, 8).unwrap();
+    let mut out = vec![cal.to_bytes().unwrap()];
+    cal.colours[0].lut = PhaseLut::new(LutRepresentation::Global(
+        PhaseCurve::gamma(2.2 * std::f32::consts::PI, 1.3).unwrap(),
+    ));
+    let tiles = (0..4)
+        .map(|i| PhaseCurve::gamma((2.0 + 0.1 * i as f32) * std::f32::consts::PI, 1.1).unwrap())
+        .collect();
+    cal.colours[1].lut = PhaseLut::new(LutRepresentation::Tiled(
+        TiledCurves::new(6, 8, 3, 4, tiles).unwrap(),
+    ));
+    cal.colours[2].intensity_scale = Some(ndarray::Array2::from_elem((6, 8), 0.75));
+    out.push(cal.to_bytes().unwrap());
+    out
+}
+
+/// A camera-frame harness input: the 17-byte description `harness::camera_frame` reads, then the buffers.
+fn camera_seed(
+    color_format: u8,
+    depth_format: u8,
+    rotation_fit: u8,
+    split: u8,
+    range: bool,
+) -> Vec<u8> {
+    let (cw, ch, dw, dh) = (6u8, 4u8, 3u8, 2u8);
+    let bpp_c = [4usize, 4, 3][color_format as usize % 3];
+    let bpp_d = [4usize, 2, 4, 2, 2, 2][depth_format as usize % 6];
+    let mut out = vec![
+        color_format,
+        depth_format,
+        rotation_fit,
+        cw,
+        ch,
+        dw,
+        dh,
+        0,
+        0,
+        5,
+        7,
+        range as u8,
+        8,
+        48,
+        split,
+        0,
+        0,
+    ];
+    let color: Vec<u8> = (0..cw as usize * ch as usize * bpp_c)
+        .map(|i| (i * 37 % 256) as u8)
+        .collect();
+    let depth: Vec<u8> = (0..dw as usize * dh as usize)
+        .flat_map(|i| {
+            let z = 0.6 + 0.2 * i as f32;
+            match (depth_format % 6, bpp_d) {
+                (0, _) => z.to_le_bytes().to_vec(),
+                (2, _) => (1.0 / z).to_le_bytes().to_vec(),
+                (1, _) => tensorholo_half(z),
+                (3, _) => tensorholo_half(1.0 / z),
+                _ => ((z * 1000.0) as u16).to_le_bytes().to_vec(),
+            }
+        })
+        .collect();
+    // `split` is the fraction of the rest given to colour: pick it so that the seed's split is exact.
+    let rest = color.len() + depth.len();
+    let exact = (color.len() * 255).div_ceil(rest) as u8;
+    out[14] = if split == 0 { exact } else { split };
+    out.extend(color);
+    out.extend(depth);
+    out
+}
+
+/// f16 little-endian bytes of `v` (normal range only), without a half-float dependency in this test.
+fn tensorholo_half(v: f32) -> Vec<u8> {
+    let bits = v.to_bits();
+    let sign = ((bits >> 16) & 0x8000) as u16;
+    let exp = ((bits >> 23) & 0xFF) as i32 - 127 + 15;
+    let mant = ((bits >> 13) & 0x3FF) as u16;
+    (sign | ((exp.clamp(1, 30) as u16) << 10) | mant)
+        .to_le_bytes()
+        .to_vec()
+}
+
+/// Valid inputs of every format each target parses.
+fn seeds(target: &str) -> Vec<Vec<u8>> {
+    use image::ImageFormat::{Jpeg, Png, Pnm};
+    let with = |pick: DepthEncoding, file: Vec<u8>| {
+        let i = DepthEncoding::ALL.iter().position(|&e| e == pick).unwrap() as u8;
+        [vec![i], file].concat()
+    };
+    match target {
+        "depth_decode" => vec![
+            with(DepthEncoding::Millimetres16, encode(depth16(7, 5), Png)),
+            with(DepthEncoding::Tum5000, encode(depth16(4, 9), Png)),
+            with(DepthEncoding::SunRotated, encode(depth16(5, 5), Pnm)),
+            with(DepthEncoding::KinectDisparity, kinect_pgm(5, 3)),
+            with(
+                DepthEncoding::IphoneDisparity,
+                encode(rgb8(8, 8).grayscale(), Jpeg),
+            ),
+            with(
+                DepthEncoding::RelativeNearDark,
+                encode(rgb8(6, 3).grayscale(), Png),
+            ),
+        ],
+        "rgb_decode" => vec![
+            encode(rgb8(7, 5), Png),
+            encode(rgb8(9, 8), Jpeg),
+            encode(rgb8(3, 4), Pnm),
+            encode(depth16(4, 4), Png),
+        ],
+        "npy" => vec![
+            npy_c8("<c8", "(1, 2, 3)", 6),
+            npy_c8(">c8", "(2, 3)", 6),
+            npy_c8("<c8", "(3, 1, 1)", 3),
+        ],
+        "holocal" => holocal_seeds()
+            .into_iter()
+            .map(|f| [vec![0u8], f].concat())
+            .collect(),
+        "onnx_model" => tensorholo::model::embedded::files()
+            .filter(|(name, _)| {
+                name.starts_with("holo8_rgbd.int8-qdq")
+                    || name.starts_with("prefilter_6mm.int8-qdq")
+            })
+            .map(|(_, bytes)| bytes.to_vec())
+            .collect(),
+        "camera_frame" => (0..6u8)
+            .map(|d| camera_seed(d % 3, d, d, 0, d % 2 == 0))
+            .collect(),
+        other => panic!("no seeds for {other}"),
+    }
+}
+
+/// Seeds the harness's parser must accept (so a harness that refuses everything fails this test).
+fn check_seeds_accepted(target: &str, seeds: &[Vec<u8>]) {
+    for (i, s) in seeds.iter().enumerate() {
+        let ok = match target {
+            "depth_decode" => decode_depth_bytes(
+                &s[1..],
+                Path::new("seed"),
+                DepthEncoding::ALL[s[0] as usize],
+            )
+            .map(|_| ())
+            .map_err(|e| e.to_string()),
+            "rgb_decode" => decode_rgb_bytes(s, Path::new("seed"))
+                .map(|_| ())
+                .map_err(|e| e.to_string()),
+            "npy" => tensorholo::io::parse_complex_npy(s, Path::new("seed"))
+                .map(|_| ())
+                .map_err(|e| e.to_string()),
+            "holocal" => DisplayCalibration::from_bytes(&s[1..], "seed")
+                .map(|_| ())
+                .map_err(|e| e.to_string()),
+            _ => Ok(()),
+        };
+        if let Err(e) = ok {
+            panic!("{target} seed {i} is refused: {e}");
+        }
+    }
+}
+
+#[test]
+fn committed_fuzz_findings_replay_without_panic() {
+    let root = fixtures();
+    let mut replayed = 0;
+    for (name, harness) in harness::TARGETS {
+        let dir = root.join(name);
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for entry in entries {
+            let path = entry.unwrap().path();
+            let bytes = std::fs::read(&path).unwrap();
+            eprintln!("{name}: {}", path.display());
+            harness(&bytes);
+            replayed += 1;
+        }
+    }
+    // Every target directory name must be a harness (a typo would silently skip its findings).
+    for entry in std::fs::read_dir(&root).expect("tests/fixtures/fuzz exists") {
+        let name = entry.unwrap().file_name().to_string_lossy().into_owned();
+        assert!(
+            name == "README.md" || harness::TARGETS.iter().any(|(t, _)| *t == name),
+            "tests/fixtures/fuzz/{name} is not a fuzz target"
+        );
+    }
+    assert!(
+        replayed > 0,
+        "no committed fuzz inputs under {}",
+        root.display()
+    );
+}
+
+#[test]
+fn harnesses_hold_on_seeds_truncations_and_byte_flips() {
+    for (name, harness) in harness::TARGETS {
+        let seeds = seeds(name);
+        assert!(!seeds.is_empty());
+        check_seeds_accepted(name, &seeds);
+        for seed in &seeds {
+            harness(seed);
+            // The ONNX files are large and tract's loader slow in a test build: a few cuts and flips.
+            let step = if name == "onnx_model" {
+                seed.len() / 7 + 1
+            } else {
+                1
+            };
+            for len in (0..seed.len()).step_by(step) {
+                harness(&seed[..len]);
+            }
+            let mut flipped = seed.clone();
+            for i in (0..seed.len()).step_by(step.max(3)) {
+                for value in [0x00, 0xFF, flipped[i] ^ 0x01, flipped[i].wrapping_add(0x80)] {
+                    let old = flipped[i];
+                    flipped[i] = value;
+                    harness(&flipped);
+                    flipped[i] = old;
+                }
+            }
+        }
+    }
+}
+
+/// Writes the seeds to `fuzz/corpus/<target>/` for `cargo fuzz run` (docs/FUZZING.md).
+#[test]
+#[ignore = "writes fuzz/corpus; run by hand before fuzzing"]
+fn write_seed_corpus() {
+    for (name, _) in harness::TARGETS {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../fuzz/corpus")
+            .join(name);
+        std::fs::create_dir_all(&dir).unwrap();
+        for (i, seed) in seeds(name).iter().enumerate() {
+            std::fs::write(dir.join(format!("seed-{i}")), seed).unwrap();
+        }
+    }
+}
