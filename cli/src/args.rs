@@ -112,8 +112,22 @@ pub fn parse_depth_encoding(s: &str) -> std::result::Result<DepthEncoding, Strin
     })
 }
 
-/// Parses `HEIGHTxWIDTH` (e.g. `384x512`) or `SIZE` for a square.
+/// Parses `HEIGHTxWIDTH` (e.g. `384x512`) or `SIZE` for a square, of at most
+/// [`tensorholo::generator::MAX_HOLOGRAM_PIXELS`] (8192 × 8192) pixels: refused here, before anything of that
+/// size is allocated.
 pub fn parse_size(s: &str) -> std::result::Result<(usize, usize), String> {
+    let (h, w) = parse_size_unbounded(s)?;
+    let max = tensorholo::generator::MAX_HOLOGRAM_PIXELS;
+    if h.saturating_mul(w) > max {
+        return Err(format!(
+            "{h}x{w} is {} pixels, above the limit of {max} (8192x8192)",
+            h.saturating_mul(w)
+        ));
+    }
+    Ok((h, w))
+}
+
+fn parse_size_unbounded(s: &str) -> std::result::Result<(usize, usize), String> {
     let parse = |v: &str| {
         v.trim()
             .parse::<usize>()
@@ -224,6 +238,16 @@ impl SceneArgs {
             bail!(
                 "the frame is {h}×{w} pixels: holo needs at least {min}×{min} (the window of the SSIM quality \
                  scores it reports); render larger with --size"
+            );
+        }
+        let brightest = frame.amplitude.iter().fold(0.0f32, |m, &a| m.max(a));
+        if brightest <= tensorholo::pipeline::BLACK_FRAME_AMPLITUDE {
+            bail!(
+                "{} is black (brightest amplitude {brightest:.4}, at most sRGB code 1 of 255): there is nothing \
+                 to display",
+                self.rgb
+                    .as_ref()
+                    .map_or("the scene".to_string(), |p| format!("`{}`", p.display()))
             );
         }
         Ok((frame, source))

@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use ndarray::{Array4, Axis};
 use serde_json::json;
@@ -87,11 +87,13 @@ pub fn run(args: &EncodeArgs) -> Result<()> {
             args.input.display()
         );
     }
+    let in_file = || format!("encoding `{}`", args.input.display());
     let mut slm_field = midpoint.clone();
     if offset_m != 0.0 {
-        propagate_colour(&mut slm_field, &setup, offset_m, Carrier::Remove, options)?;
+        propagate_colour(&mut slm_field, &setup, offset_m, Carrier::Remove, options)
+            .with_context(in_file)?;
     }
-    let encoded = double_phase_encode(slm_field.view(), &method)?;
+    let encoded = double_phase_encode(slm_field.view(), &method).with_context(in_file)?;
     let post = simulate_phase_only(encoded.phase.view(), &setup, offset_m, options)?;
     let post_stack = focal_stack(post.view(), &setup, 0.0, &args.depths, options, false)?;
     let target_stack = focal_stack(midpoint.view(), &setup, 0.0, &args.depths, options, false)?;

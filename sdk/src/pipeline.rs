@@ -475,7 +475,9 @@ impl HologramPipeline {
     /// models), plans the FFTs, computes the offset transfer functions and allocates all buffers, and starts
     /// three colour worker threads.
     ///
-    /// Errors: as [`HologramModel::plan`], [`SpectralPlan::new`] and [`ChannelEncoder::new`].
+    /// Errors: [`HoloError::InvalidParameter`] (`size`) for a size of 0 or above
+    /// [`crate::generator::MAX_HOLOGRAM_PIXELS`], checked first; as [`HologramModel::plan`],
+    /// [`SpectralPlan::new`] and [`ChannelEncoder::new`].
     pub fn session(&self, height: usize, width: usize) -> Result<HologramSession> {
         HologramSession::new(self, height, width)
     }
@@ -1128,6 +1130,19 @@ struct BackendReportParts {
 
 impl HologramSession {
     fn new(pipeline: &HologramPipeline, height: usize, width: usize) -> Result<Self> {
+        // Before any allocation: a session holds several [3, H, W] complex fields and the CNN's activations.
+        if height == 0
+            || width == 0
+            || height.saturating_mul(width) > crate::generator::MAX_HOLOGRAM_PIXELS
+        {
+            return Err(invalid(
+                "size",
+                format!(
+                    "{height}×{width}: a session needs 1 to {} pixels (8192×8192)",
+                    crate::generator::MAX_HOLOGRAM_PIXELS
+                ),
+            ));
+        }
         let calibration = pipeline.calibration.clone();
         if let Some(cal) = &calibration {
             cal.check_size(height, width)?;
