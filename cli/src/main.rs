@@ -90,6 +90,23 @@ fn main() {
         eprintln!("error: {err}");
         std::process::exit(2);
     }
+    // Ctrl-C (SIGINT/SIGTERM): remove the temporary file of any write in progress and exit 130. Outputs
+    // already written are complete (written under a temporary name, then renamed), and the run's report, which
+    // every command removes first and writes last, is absent: the folder is visibly an incomplete run.
+    if let Err(e) = ctrlc::set_handler(|| {
+        let n = tensorholo::io::remove_temporary_files();
+        eprintln!(
+            "interrupted: stopped{}; the output folder has no new report, so it holds an incomplete run",
+            if n > 0 {
+                format!(" and removed {n} partly written file(s)")
+            } else {
+                String::new()
+            }
+        );
+        std::process::exit(130);
+    }) {
+        log::warn!("cannot install the Ctrl-C handler: {e}");
+    }
     // A panic is a bug whatever the input: report it as one (the panic message above says where) with its
     // own exit code, instead of an abort trace.
     let outcome = std::panic::catch_unwind(move || match cli.command {

@@ -555,3 +555,47 @@ fn field_commands_video_and_calibrate_refuse_every_bad_input_cleanly() {
     );
     std::fs::remove_dir_all(&ins.dir).unwrap();
 }
+
+#[cfg(unix)]
+#[test]
+fn ctrl_c_exits_130_and_leaves_no_report_and_no_temporary_file() {
+    let dir = std::env::temp_dir().join(format!("holo-ctrl-c-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    let out = dir.join("out");
+    // A previous complete run in the folder: its report must be gone after the interrupted re-run.
+    let o = holo(&[
+        "render",
+        "--size",
+        "16x16",
+        "--repeat",
+        "0",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.join("report.json").exists());
+    // A million timed repetitions of a frame: interrupted while it computes.
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_holo"))
+        .args(["render", "--size", "64x64", "--repeat", "1000000", "--out"])
+        .arg(&out)
+        .env("RUST_LOG", "warn")
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let killed = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    assert!(stderr(&o).contains("interrupted"), "{}", stderr(&o));
+    assert!(!out.join("report.json").exists());
+    let temporaries: Vec<_> = files_under(&out)
+        .into_iter()
+        .filter(|p| p.to_string_lossy().contains(".tmp-"))
+        .collect();
+    assert!(temporaries.is_empty(), "{temporaries:?}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -535,15 +535,63 @@ fn decode_jpeg_strict(path: &Path, bytes: &[u8]) -> Result<image::DynamicImage> 
     .ok_or_else(short)?)
 }
 
-/// A temporary name beside `path` in the same folder (`.<name>.tmp-<pid>-<n>`), for write-then-rename.
-pub(crate) fn temporary_sibling(path: &Path) -> PathBuf {
+/// A temporary file name beside an output (`.<name>.tmp-<pid>-<n>` in the same folder), for write-then-rename.
+/// While it lives it is listed for [`remove_temporary_files`], so that a program interrupted mid-write (Ctrl-C)
+/// can remove what it was writing.
+pub(crate) struct Temporary(PathBuf);
+
+static TEMPORARIES: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+impl std::ops::Deref for Temporary {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for Temporary {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Temporary {
+    fn drop(&mut self) {
+        let mut list = TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(i) = list.iter().position(|p| *p == self.0) {
+            list.swap_remove(i);
+        }
+    }
+}
+
+/// A [`Temporary`] name beside `path`.
+pub(crate) fn temporary_sibling(path: &Path) -> Temporary {
     static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let name = path
         .file_name()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
-    path.with_file_name(format!(".{name}.tmp-{}-{n}", std::process::id()))
+    let tmp = path.with_file_name(format!(".{name}.tmp-{}-{n}", std::process::id()));
+    TEMPORARIES
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .push(tmp.clone());
+    Temporary(tmp)
+}
+
+/// Removes the temporary files of the writes in progress (every output is written to a temporary name and
+/// renamed when complete), returning how many there were. For a program's interrupt handler (the `holo` CLI
+/// calls it on Ctrl-C before exiting), so that an interrupted run leaves no temporary files; the outputs
+/// already complete keep their final names, and none is ever left truncated.
+///
+/// Errors: none (a file that cannot be removed is skipped).
+pub fn remove_temporary_files() -> usize {
+    let list = TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner());
+    for p in list.iter() {
+        let _ = std::fs::remove_file(p);
+    }
+    list.len()
 }
 
 /// Writes `bytes` to `path` atomically: to a temporary file in the same folder, flushed to disk, then renamed
