@@ -19,9 +19,9 @@ for t in "${targets[@]}"; do
     cargo +nightly fuzz run -O "$t" "corpus/$t" -- -max_total_time="$seconds" -timeout=20 \
         -rss_limit_mb=3072 -malloc_limit_mb=2048 -print_final_stats=1 \
         -artifact_prefix="artifacts/$t/" >"logs/$t.log" 2>&1 || true
-    done_line=$(grep -E '^#[0-9]+ +DONE' "logs/$t.log" | tail -1 || true)
-    execs=$(grep -oE 'stat::number_of_executed_units: [0-9]+' "logs/$t.log" | grep -oE '[0-9]+$' || echo "?")
-    rss=$(grep -oE 'stat::peak_rss_mb: [0-9]+' "logs/$t.log" | grep -oE '[0-9]+$' || echo "?")
+    done_line=$(grep -E '^#[0-9]+\s+DONE' "logs/$t.log" | tail -1 || true)
+    execs=$(grep -oE 'stat::number_of_executed_units:\s+[0-9]+' "logs/$t.log" | grep -oE '[0-9]+$' || echo "?")
+    rss=$(grep -oE 'stat::peak_rss_mb:\s+[0-9]+' "logs/$t.log" | grep -oE '[0-9]+$' || echo "?")
     cov=$(grep -oE 'cov: [0-9]+ ft: [0-9]+ corp: [0-9]+/[0-9]+[a-zA-Z]*' <<<"$done_line" || echo "?")
     findings=$(find "artifacts/$t" -type f | wc -l)
     echo "$t: ${seconds} s, ${execs} executions, ${cov}, peak RSS ${rss} MB, findings ${findings}"

@@ -249,6 +249,7 @@ fn read_error(path: &Path, e: ReadNpyError) -> HoloError {
 fn parse_npy<T: ndarray_npy::ReadableElement + ndarray_npy::ViewElement + Clone>(
     bytes: &[u8],
 ) -> std::result::Result<ArrayD<T>, ReadNpyError> {
+    check_npy_header_length(bytes)?;
     // Viewing needs the data aligned for `T`. The data of a `.npy` file starts at a multiple of 16 bytes, so
     // a buffer starting 16-aligned will do; a caller's buffer (a subslice, a fuzzer's input) need not be.
     let native = if bytes.as_ptr() as usize % 16 == 0 {
@@ -274,6 +275,35 @@ fn parse_npy<T: ndarray_npy::ReadableElement + ndarray_npy::ViewElement + Clone>
     drop(copy);
     checked?;
     ArrayD::<T>::read_npy(bytes)
+}
+
+/// Refuses `.npy` bytes whose header length (a `u16` at byte 8 in format version 1, a `u32` in versions 2 and
+/// 3) runs past their end: `ndarray-npy` allocates the declared length before reading the header, so 17 bytes
+/// declaring a 4 GB header made it allocate 4 GB (found by the `npy` fuzz target). Anything else malformed is
+/// left to `ndarray-npy`'s checks.
+fn check_npy_header_length(bytes: &[u8]) -> std::result::Result<(), ReadNpyError> {
+    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
+        return Ok(());
+    }
+    let (start, len) = match bytes[6] {
+        1 => (10, u16::from_le_bytes([bytes[8], bytes[9]]) as u64),
+        2 | 3 if bytes.len() >= 12 => (
+            12,
+            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as u64,
+        ),
+        _ => return Ok(()),
+    };
+    if start + len > bytes.len() as u64 {
+        return Err(ReadNpyError::ParseData(
+            format!(
+                "the header declares {len} bytes, but the file holds {} after its {start}-byte preamble \
+                 (truncated or corrupt)",
+                bytes.len() - start as usize
+            )
+            .into(),
+        ));
+    }
+    Ok(())
 }
 
 /// A copy of `bytes` in a new buffer, and the offset in it where the copy starts 16-byte aligned.

@@ -464,3 +464,31 @@ fn npy_bytes_parse_at_any_alignment_in_both_byte_orders() {
         }
     }
 }
+
+#[test]
+fn a_npy_header_length_beyond_the_file_is_refused_without_allocating_it() {
+    // Found by the `npy` fuzz target: 17 bytes of format version 3 declaring a 4 GB header made ndarray-npy
+    // allocate 4 GB before reading it. Refused from the length, naming the source.
+    let bytes = fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/fixtures/fuzz/npy/oom-v3-header-length-4gb"
+    ))
+    .unwrap();
+    assert_eq!(bytes.len(), 17);
+    match parse_complex_npy(&bytes, Path::new("tiny.npy")) {
+        Err(HoloError::Npy { path, reason }) => {
+            assert_eq!(path, Path::new("tiny.npy"));
+            assert!(reason.contains("header declares"), "{reason}");
+        }
+        other => panic!("expected an Npy error, got {other:?}"),
+    }
+    // Version 1 (u16 length) and 2 (u32) likewise.
+    for (version, len) in [(1u8, vec![0xff, 0x7f]), (2, vec![0xff, 0xff, 0xff, 0x7f])] {
+        let mut b = b"\x93NUMPY".to_vec();
+        b.extend([version, 0]);
+        b.extend(len);
+        b.extend(b"{'descr'");
+        let e = parse_complex_npy(&b, Path::new("v.npy")).unwrap_err();
+        assert!(e.to_string().contains("header declares"), "{e}");
+    }
+}

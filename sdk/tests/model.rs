@@ -425,3 +425,21 @@ fn format_1_prefilters_are_refused_and_format_1_hologram_cnns_load() {
     assert!(with_version(&holo.metadata().raw, Some("2")).is_ok());
     assert!(with_version(&holo.metadata().raw, Some(&newer)).is_err());
 }
+
+#[test]
+fn a_model_that_panics_tract_is_a_load_error_not_a_crash() {
+    // Found by the `onnx_model` fuzz target: a mutated hologram CNN whose convolution has fewer kernel
+    // dimensions than its input makes tract 0.23 panic (index out of bounds in its padding computation) while
+    // typing the graph. The loader runs tract under catch_unwind: the file is refused as malformed.
+    let bytes = std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/fixtures/fuzz/onnx_model/tract-padding-panic"
+    ))
+    .unwrap();
+    let e = HologramModel::from_bytes(&bytes, ModelKind::Hologram, &ModelConfig::default())
+        .unwrap_err();
+    assert!(
+        matches!(&e, HoloError::ModelLoad { reason, .. } if reason.contains("panicked")),
+        "{e}"
+    );
+}
