@@ -24,8 +24,8 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
-use ndarray::{s, Array1, Array3, Array4, ArrayView3, Axis, Zip};
-use ndarray_npy::{NpzReader, NpzWriter};
+use ndarray::{s, Array, Array1, Array3, Array4, ArrayView3, Axis, Ix1, Ix4, Zip};
+use ndarray_npy::NpzWriter;
 use num_complex::Complex32;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -344,6 +344,42 @@ pub fn ldi_from_tensor(ldi: ArrayView3<f32>, valid: ArrayView3<u8>) -> Result<La
     LayeredDepthImage::new(layers)
 }
 
+/// Reads array `name` (`name.npy` in the archive) of a shard with bounded memory: the entry's declared
+/// uncompressed size must be within [`crate::io::InputLimits::max_file_bytes`], at most that many bytes are
+/// decompressed, and the `.npy` header's shape is checked against those bytes before the array is allocated
+/// (`ndarray-npy`'s `NpzReader` allocates by the declared shape first).
+fn shard_array<T, D>(
+    zip: &mut zip::ZipArchive<std::io::BufReader<std::fs::File>>,
+    path: &Path,
+    name: &str,
+) -> Result<Array<T, D>>
+where
+    T: ndarray_npy::ReadableElement + ndarray_npy::ViewElement + Clone,
+    D: ndarray::Dimension,
+{
+    use std::io::Read;
+    let named = |reason: String| npz_error(path, format!("array `{name}`: {reason}"));
+    let mut entry = zip
+        .by_name(&format!("{name}.npy"))
+        .map_err(|e| named(e.to_string()))?;
+    let size = entry.size();
+    let max = crate::io::input_limits().max_file_bytes;
+    if size > max {
+        return Err(named(format!(
+            "{size} bytes uncompressed, above the input limit of {max} bytes (--max-file-bytes)"
+        )));
+    }
+    let mut bytes = Vec::with_capacity(size as usize);
+    (&mut entry)
+        .take(size)
+        .read_to_end(&mut bytes)
+        .map_err(|e| named(e.to_string()))?;
+    let array = crate::io::parse_npy::<T>(&bytes).map_err(|e| named(e.to_string()))?;
+    array
+        .into_dimensionality::<D>()
+        .map_err(|e| named(format!("wrong rank ({e})")))
+}
+
 fn npz_error(path: &Path, reason: impl std::fmt::Display) -> HoloError {
     HoloError::Npy {
         path: path.to_path_buf(),
@@ -482,16 +518,13 @@ impl Shard {
 /// [`HoloError::ShapeMismatch`] if the arrays disagree in `N`, `L`, `H` or `W`.
 pub fn read_shard(path: &Path) -> Result<Shard> {
     let file = std::fs::File::open(path).map_err(io_error(path))?;
-    let mut npz = NpzReader::new(std::io::BufReader::new(file)).map_err(|e| npz_error(path, e))?;
-    let named =
-        |name: &str, e: ndarray_npy::ReadNpzError| npz_error(path, format!("array `{name}`: {e}"));
-    let ldi: Array4<f32> = npz.by_name("ldi").map_err(|e| named("ldi", e))?;
-    let ldi_valid: Array4<u8> = npz
-        .by_name("ldi_valid")
-        .map_err(|e| named("ldi_valid", e))?;
-    let midpoint: Array4<Complex32> = npz.by_name("midpoint").map_err(|e| named("midpoint", e))?;
-    let seed: Array1<u64> = npz.by_name("seed").map_err(|e| named("seed", e))?;
-    let index: Array1<u64> = npz.by_name("index").map_err(|e| named("index", e))?;
+    let mut zip =
+        zip::ZipArchive::new(std::io::BufReader::new(file)).map_err(|e| npz_error(path, e))?;
+    let ldi = shard_array::<f32, Ix4>(&mut zip, path, "ldi")?;
+    let ldi_valid = shard_array::<u8, Ix4>(&mut zip, path, "ldi_valid")?;
+    let midpoint = shard_array::<Complex32, Ix4>(&mut zip, path, "midpoint")?;
+    let seed = shard_array::<u64, Ix1>(&mut zip, path, "seed")?;
+    let index = shard_array::<u64, Ix1>(&mut zip, path, "index")?;
     let (n, c, h, w) = ldi.dim();
     let l = c / 4;
     let mismatch = |what: &str, expected: Vec<usize>, got: &[usize]| HoloError::ShapeMismatch {

@@ -246,7 +246,7 @@ fn read_error(path: &Path, e: ReadNpyError) -> HoloError {
 /// allocated (`ndarray-npy`'s reader allocates by the declared shape first, so a 200-byte file declaring a huge
 /// shape would abort): the bytes are viewed in place, which checks the header, the dtype and the data length;
 /// only then is the array copied out.
-fn parse_npy<T: ndarray_npy::ReadableElement + ndarray_npy::ViewElement + Clone>(
+pub(crate) fn parse_npy<T: ndarray_npy::ReadableElement + ndarray_npy::ViewElement + Clone>(
     bytes: &[u8],
 ) -> std::result::Result<ArrayD<T>, ReadNpyError> {
     check_npy_header_length(bytes)?;

@@ -683,3 +683,46 @@ fn an_aberration_corrected_dataset_records_its_correction_and_stores_the_correct
     assert!(diff(&expected) < 1e-5, "{}", diff(&expected));
     assert!(diff(&plain) > 1e-3, "{}", diff(&plain));
 }
+
+#[test]
+fn a_shard_declaring_a_huge_array_is_refused_before_allocating_it() {
+    // A 300-byte .npz whose `ldi.npy` header declares 4·10^15 floats: ndarray-npy's NpzReader allocates the
+    // declared shape first (an abort); the shard reader checks the header against the entry's bytes.
+    use std::io::Write;
+    let dir = scratch("huge_shard");
+    let path = dir.join("train-00000.npz");
+    let mut zip = zip::ZipWriter::new(fs::File::create(&path).unwrap());
+    let mut header =
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (1000, 20, 1000000, 200000), }"
+            .to_string();
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut npy = b"\x93NUMPY\x01\x00".to_vec();
+    npy.extend((header.len() as u16).to_le_bytes());
+    npy.extend(header.as_bytes());
+    npy.extend([0u8; 64]);
+    zip.start_file("ldi.npy", zip::write::SimpleFileOptions::default())
+        .unwrap();
+    zip.write_all(&npy).unwrap();
+    zip.finish().unwrap();
+    match read_shard(&path) {
+        Err(HoloError::Npy { path: p, reason }) => {
+            assert_eq!(p, path);
+            assert!(
+                reason.contains("`ldi`") && reason.contains("more bytes"),
+                "{reason}"
+            );
+        }
+        other => panic!("expected an Npy error, got {:?}", other.map(|s| s.len())),
+    }
+    // A missing array is named too.
+    let mut zip = zip::ZipWriter::new(fs::File::create(&path).unwrap());
+    zip.start_file("other.npy", zip::write::SimpleFileOptions::default())
+        .unwrap();
+    zip.write_all(&npy).unwrap();
+    zip.finish().unwrap();
+    let e = read_shard(&path).unwrap_err();
+    assert!(e.to_string().contains("`ldi`"), "{e}");
+}
