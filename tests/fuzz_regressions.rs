@@ -58,7 +58,7 @@ fn kinect_pgm(w: usize, h: usize) -> Vec<u8> {
 
 fn npy_c8(descr: &str, shape: &str, values: usize) -> Vec<u8> {
     let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
-    while (10 + header.len() + 1) % 64 != 0 {
+    while !(10 + header.len() + 1).is_multiple_of(64) {
         header.push(' ');
     }
     header.push('\n');

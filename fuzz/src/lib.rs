@@ -28,8 +28,11 @@ fn init() {
     ONCE.call_once(|| tensorholo::io::set_input_limits(FUZZ_LIMITS).expect("valid limits"));
 }
 
+/// A harness: arbitrary bytes in, a panic on a violated invariant.
+pub type Harness = fn(&[u8]);
+
 /// The harnesses by target name, for the regression test.
-pub const TARGETS: [(&str, fn(&[u8])); 6] = [
+pub const TARGETS: [(&str, Harness); 6] = [
     ("depth_decode", depth_decode),
     ("rgb_decode", rgb_decode),
     ("npy", npy),
@@ -48,7 +51,7 @@ pub fn depth_decode(data: &[u8]) {
     let encoding = DepthEncoding::ALL[pick as usize % DepthEncoding::ALL.len()];
     if let Ok(d) = decode_depth_bytes(file, Path::new("fuzz"), encoding) {
         assert_eq!(d.values.dim(), d.valid.dim());
-        assert!(d.values.len() > 0);
+        assert!(!d.values.is_empty());
         for (&v, &ok) in d.values.iter().zip(d.valid.iter()) {
             if ok {
                 assert!(v.is_finite(), "{encoding}: valid sample {v}");

@@ -252,7 +252,7 @@ pub(crate) fn parse_npy<T: ndarray_npy::ReadableElement + ndarray_npy::ViewEleme
     check_npy_header_length(bytes)?;
     // Viewing needs the data aligned for `T`. The data of a `.npy` file starts at a multiple of 16 bytes, so
     // a buffer starting 16-aligned will do; a caller's buffer (a subslice, a fuzzer's input) need not be.
-    let native = if bytes.as_ptr() as usize % 16 == 0 {
+    let native = if (bytes.as_ptr() as usize).is_multiple_of(16) {
         ArrayViewD::<T>::view_npy(bytes).map(|view| view.to_owned())
     } else {
         let (copy, at) = aligned_copy(bytes);
@@ -550,7 +550,7 @@ fn decode_jpeg_strict(path: &Path, bytes: &[u8]) -> Result<image::DynamicImage> 
         .ok_or_else(|| fail("JPEG without dimensions".into()))?;
     let (w, h) = (w as u32, h as u32);
     let short = || fail("the JPEG decoder returned fewer samples than the image has".into());
-    Ok(match decoder.output_colorspace().unwrap_or(out) {
+    match decoder.output_colorspace().unwrap_or(out) {
         ColorSpace::Luma => {
             image::GrayImage::from_raw(w, h, data).map(image::DynamicImage::ImageLuma8)
         }
@@ -562,7 +562,7 @@ fn decode_jpeg_strict(path: &Path, bytes: &[u8]) -> Result<image::DynamicImage> 
         }
         _ => image::RgbImage::from_raw(w, h, data).map(image::DynamicImage::ImageRgb8),
     }
-    .ok_or_else(short)?)
+    .ok_or_else(short)
 }
 
 /// A temporary file name beside an output (`.<name>.tmp-<pid>-<n>` in the same folder), for write-then-rename.

@@ -695,7 +695,7 @@ fn a_shard_declaring_a_huge_array_is_refused_before_allocating_it() {
     let mut header =
         "{'descr': '<f4', 'fortran_order': False, 'shape': (1000, 20, 1000000, 200000), }"
             .to_string();
-    while (10 + header.len() + 1) % 64 != 0 {
+    while !(10 + header.len() + 1).is_multiple_of(64) {
         header.push(' ');
     }
     header.push('\n');
