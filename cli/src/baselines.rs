@@ -76,7 +76,7 @@ pub struct BaselinesArgs {
     levels: Option<usize>,
     /// Worker threads (default: all cores, or RAYON_NUM_THREADS). Scenes run in parallel; each scene's
     /// three colours share the same pool.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::parse_threads)]
     threads: Option<usize>,
 }
 

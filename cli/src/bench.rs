@@ -38,7 +38,7 @@ pub struct BenchArgs {
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [LayoutArg::Auto])]
     layout: Vec<LayoutArg>,
     /// CNN thread counts (each plan's own executor).
-    #[arg(long, value_delimiter = ',', default_values_t = [1, 2])]
+    #[arg(long, value_delimiter = ',', default_values_t = [1, 2], value_parser = crate::args::parse_threads)]
     threads: Vec<usize>,
     /// Timed runs per case after one warm-up run (fewer once --max-seconds is spent; at least one).
     #[arg(long, default_value_t = 3)]

@@ -105,7 +105,7 @@ pub struct DatasetArgs {
     previews: usize,
     /// Worker threads (default: all cores, or RAYON_NUM_THREADS). Samples run in parallel; each
     /// sample's three colours share the same pool.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::parse_threads)]
     threads: Option<usize>,
     #[command(flatten)]
     optics: crate::args::OpticsArgs,
@@ -281,8 +281,10 @@ fn run_in_pool(args: &DatasetArgs, config: &DatasetConfig) -> Result<()> {
     // Previews first (cheap: scenes only), so that a long run can be checked early.
     let preview_dir = args.out.join("previews");
     // The manifest is the dataset's report: `generate` replaces it last (and reads the old one under --force).
-    crate::output::start_run(&args.out, &[&preview_dir], None)?;
-    for i in 0..args.previews.min(config.train) {
+    let previews = args.previews.min(config.train);
+    let subfolders: &[&Path] = if previews > 0 { &[&preview_dir] } else { &[] };
+    crate::output::start_run(&args.out, subfolders, None)?;
+    for i in 0..previews {
         let stem = format!("train_{i:05}");
         for suffix in ["rgb", "depth", "layers"] {
             ensure_not_input(&preview_dir.join(format!("{stem}_{suffix}.png")), &photos)?;

@@ -542,6 +542,16 @@ fn field_commands_video_and_calibrate_refuse_every_bad_input_cleanly() {
                 vec!["threads"],
             ),
             (
+                "bench: absurd thread count",
+                s(&["bench", "--threads", "100000"]),
+                vec!["threads"],
+            ),
+            (
+                "dataset: absurd thread count",
+                s(&["dataset", "--out", &p("ds"), "--threads", "100000"]),
+                vec!["--threads"],
+            ),
+            (
                 "dataset: zero threads",
                 s(&["dataset", "--out", &p("ds"), "--threads", "0"]),
                 vec!["--threads"],

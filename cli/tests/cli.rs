@@ -623,7 +623,9 @@ fn images_above_the_pixel_limit_are_refused_from_their_header() {
     std::fs::create_dir_all(&dir).unwrap();
     let rgb = dir.join("rgb.png");
     let depth = dir.join("depth.png");
-    image::RgbImage::new(400, 300).save(&rgb).unwrap();
+    image::RgbImage::from_pixel(400, 300, image::Rgb([128, 90, 60]))
+        .save(&rgb)
+        .unwrap();
     image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_pixel(400, 300, image::Luma([1000]))
         .save(&depth)
         .unwrap();

@@ -471,7 +471,9 @@ impl HologramGenerator {
     /// Renders one camera frame into SLM patterns.
     ///
     /// Errors: the conversion's ([`CameraFrame::to_rgbd`]: bad buffer sizes or strides, no valid depth…)
-    /// and the session's ([`HologramSession::render`]). The generator stays usable after any error.
+    /// and the session's ([`HologramSession::render`]: among them [`HoloError::InvalidData`] for a black frame,
+    /// e.g. a covered lens, whose hologram would be the CNN's bias shown at full brightness). The generator
+    /// stays usable after any error.
     pub fn render(&self, frame: &CameraFrame) -> Result<SlmPatterns> {
         let t = Instant::now();
         let (rgbd, report) = self.convert(frame)?;
