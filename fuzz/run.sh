@@ -15,6 +15,7 @@ cargo +nightly fuzz build -O
 mkdir -p logs
 for t in "${targets[@]}"; do
     mkdir -p "corpus/$t" "artifacts/$t"
+    touch "logs/$t.start"
     # -malloc_limit_mb: a single allocation above 2 GiB is a finding (the input limits should prevent it).
     cargo +nightly fuzz run -O "$t" "corpus/$t" -- -max_total_time="$seconds" -timeout=20 \
         -rss_limit_mb=3072 -malloc_limit_mb=2048 -print_final_stats=1 \
@@ -23,6 +24,6 @@ for t in "${targets[@]}"; do
     execs=$(grep -oE 'stat::number_of_executed_units:\s+[0-9]+' "logs/$t.log" | grep -oE '[0-9]+$' || echo "?")
     rss=$(grep -oE 'stat::peak_rss_mb:\s+[0-9]+' "logs/$t.log" | grep -oE '[0-9]+$' || echo "?")
     cov=$(grep -oE 'cov: [0-9]+ ft: [0-9]+ corp: [0-9]+/[0-9]+[a-zA-Z]*' <<<"$done_line" || echo "?")
-    findings=$(find "artifacts/$t" -type f | wc -l)
+    findings=$(find "artifacts/$t" -type f -newer "logs/$t.start" | wc -l)
     echo "$t: ${seconds} s, ${execs} executions, ${cov}, peak RSS ${rss} MB, findings ${findings}"
 done
