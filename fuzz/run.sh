@@ -24,6 +24,9 @@ for t in "${targets[@]}"; do
     execs=$(grep -oE 'stat::number_of_executed_units:\s+[0-9]+' "logs/$t.log" | grep -oE '[0-9]+$' || echo "?")
     rss=$(grep -oE 'stat::peak_rss_mb:\s+[0-9]+' "logs/$t.log" | grep -oE '[0-9]+$' || echo "?")
     cov=$(grep -oE 'cov: [0-9]+ ft: [0-9]+ corp: [0-9]+/[0-9]+[a-zA-Z]*' <<<"$done_line" || echo "?")
+    # Coverage when 80 % of the executions had run: how close the target is to a plateau.
+    total=${execs:-0}
+    cov80=$(awk -v T="$total" '/^#[0-9]+/ { n = substr($1, 2) + 0; for (i = 1; i <= NF; i++) if ($i == "cov:") c = $(i + 1); if (n <= 0.8 * T) c80 = c } END { print c80 }' "logs/$t.log")
     findings=$(find "artifacts/$t" -type f -newer "logs/$t.start" | wc -l)
-    echo "$t: ${seconds} s, ${execs} executions, ${cov}, peak RSS ${rss} MB, findings ${findings}"
+    echo "$t: ${seconds} s, ${execs} executions, ${cov} (cov ${cov80} at 80 % of the executions), peak RSS ${rss} MB, findings ${findings}"
 done

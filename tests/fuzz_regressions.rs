@@ -134,8 +134,8 @@ fn camera_seed(
             match (depth_format % 6, bpp_d) {
                 (0, _) => z.to_le_bytes().to_vec(),
                 (2, _) => (1.0 / z).to_le_bytes().to_vec(),
-                (1, _) => tensorholo_half(z),
-                (3, _) => tensorholo_half(1.0 / z),
+                (1, _) => half::f16::from_f32(z).to_le_bytes().to_vec(),
+                (3, _) => half::f16::from_f32(1.0 / z).to_le_bytes().to_vec(),
                 _ => ((z * 1000.0) as u16).to_le_bytes().to_vec(),
             }
         })
@@ -147,17 +147,6 @@ fn camera_seed(
     out.extend(color);
     out.extend(depth);
     out
-}
-
-/// f16 little-endian bytes of `v` (normal range only), without a half-float dependency in this test.
-fn tensorholo_half(v: f32) -> Vec<u8> {
-    let bits = v.to_bits();
-    let sign = ((bits >> 16) & 0x8000) as u16;
-    let exp = ((bits >> 23) & 0xFF) as i32 - 127 + 15;
-    let mant = ((bits >> 13) & 0x3FF) as u16;
-    (sign | ((exp.clamp(1, 30) as u16) << 10) | mant)
-        .to_le_bytes()
-        .to_vec()
 }
 
 /// Valid inputs of every format each target parses.

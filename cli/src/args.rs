@@ -250,16 +250,13 @@ impl SceneArgs {
                  scores it reports); render larger with --size"
             );
         }
+        // Before any work (the reference's SM-LBM takes long), naming the file.
         let brightest = frame.amplitude.iter().fold(0.0f32, |m, &a| m.max(a));
-        if brightest <= tensorholo::pipeline::BLACK_FRAME_AMPLITUDE {
-            bail!(
-                "{} is black (brightest amplitude {brightest:.4}, at most sRGB code 1 of 255): there is nothing \
-                 to display",
-                self.rgb
-                    .as_ref()
-                    .map_or("the scene".to_string(), |p| format!("`{}`", p.display()))
-            );
-        }
+        tensorholo::pipeline::check_not_black(brightest).with_context(|| {
+            self.rgb
+                .as_ref()
+                .map_or("the scene".to_string(), |p| format!("`{}`", p.display()))
+        })?;
         Ok((frame, source))
     }
 

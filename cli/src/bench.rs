@@ -264,13 +264,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     if let Some(path) = &args.json {
         // A stale file from an earlier run must not pass for this one's if the run fails: removed now,
         // written at the end.
-        match std::fs::remove_file(path) {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => {
-                return Err(e).with_context(|| format!("cannot remove the old {}", path.display()))
-            }
-        }
+        crate::output::remove_old_report(path)?;
     }
     let config = ModelConfig {
         offset_m: 0.0,

@@ -66,7 +66,7 @@ pub fn prepare(out: &Path, inputs: &[&Path]) -> Result<()> {
 /// A subfolder that exists as a symbolic link is refused: writing through it would put files outside `out`.
 /// (`out` itself may be a link: the user named it.)
 pub fn start_run(out: &Path, subfolders: &[&Path], report: Option<&Path>) -> Result<()> {
-    create_real_dir(out)?;
+    create_dir(out)?;
     for dir in subfolders {
         let mut partial = out.to_path_buf();
         // Check every component below `out`, so that `out/a` being a link to elsewhere is caught for `out/a/b`.
@@ -81,11 +81,13 @@ pub fn start_run(out: &Path, subfolders: &[&Path], report: Option<&Path>) -> Res
                 );
             }
         }
-        create_real_dir(dir)?;
+        create_dir(dir)?;
     }
-    let Some(report) = report else {
-        return Ok(());
-    };
+    report.map_or(Ok(()), remove_old_report)
+}
+
+/// Removes a previous run's report at `report`, if there is one (the run writes its own last).
+pub fn remove_old_report(report: &Path) -> Result<()> {
     match std::fs::remove_file(report) {
         Ok(()) => Ok(()),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
@@ -93,13 +95,10 @@ pub fn start_run(out: &Path, subfolders: &[&Path], report: Option<&Path>) -> Res
     }
 }
 
-fn create_real_dir(dir: &Path) -> Result<()> {
+/// `create_dir_all`, which fails on an existing file of that name, with the folder named.
+fn create_dir(dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create output folder {}", dir.display()))?;
-    if !dir.is_dir() {
-        bail!("`{}` is not a folder", dir.display());
-    }
-    Ok(())
+        .with_context(|| format!("cannot create output folder {}", dir.display()))
 }
 
 /// What [`write_images`] writes besides the scene.

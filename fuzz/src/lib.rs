@@ -4,7 +4,7 @@
 //! (`tests/fuzz_regressions.rs` of the workspace's integration-test crate) includes this file and replays every
 //! input committed under `tests/fixtures/fuzz/<target>/`. How to run them: `docs/FUZZING.md`.
 //!
-//! Only `tensorholo` is used here, so the file compiles in both places.
+//! Only `tensorholo` and `crc32fast` are used here, so the file compiles in both places.
 
 use std::path::Path;
 
@@ -93,7 +93,7 @@ pub fn holocal(data: &[u8]) {
     let mut file = file.to_vec();
     if flags & 1 == 1 && file.len() >= 4 {
         let body = file.len() - 4;
-        let crc = crc32(&file[..body]);
+        let crc = crc32fast::hash(&file[..body]);
         file[body..].copy_from_slice(&crc.to_le_bytes());
     }
     if let Ok(cal) = DisplayCalibration::from_bytes(&file, "fuzz") {
@@ -101,18 +101,6 @@ pub fn holocal(data: &[u8]) {
         let reparsed = DisplayCalibration::from_bytes(&again, "again").expect("its bytes parse");
         assert_eq!(reparsed.to_bytes().expect("serialises"), again);
     }
-}
-
-/// CRC-32 (IEEE), bitwise: the harness must not depend on anything but `tensorholo`.
-fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = !0u32;
-    for &b in bytes {
-        crc ^= b as u32;
-        for _ in 0..8 {
-            crc = (crc >> 1) ^ (0xEDB8_8320 & (crc & 1).wrapping_neg());
-        }
-    }
-    !crc
 }
 
 /// The ONNX model loader with its metadata and contract checks, as both kinds of CNN with the default display.
@@ -134,16 +122,8 @@ pub fn camera_frame(data: &[u8]) {
         return;
     }
     let (head, rest) = data.split_at(17);
-    let color_format =
-        [ColorFormat::Rgba8, ColorFormat::Bgra8, ColorFormat::Rgb8][head[0] as usize % 3];
-    let depth_format = [
-        DepthFormat::MetresF32,
-        DepthFormat::MetresF16,
-        DepthFormat::DisparityF32,
-        DepthFormat::DisparityF16,
-        DepthFormat::MillimetresU16,
-        DepthFormat::Depth16,
-    ][head[1] as usize % 6];
+    let color_format = ColorFormat::ALL[head[0] as usize % ColorFormat::ALL.len()];
+    let depth_format = DepthFormat::ALL[head[1] as usize % DepthFormat::ALL.len()];
     let rotation = [
         Rotation::Deg0,
         Rotation::Deg90,

@@ -483,7 +483,8 @@ pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>> {
 /// Decodes an image file's bytes with the `image` crate (format guessed from the content), naming `path` in
 /// the error ([`HoloError::Image`]). The size is read from the header first: an image above
 /// [`InputLimits::max_image_pixels`] is refused before it is decoded ([`HoloError::InvalidData`] naming the
-/// limit), and the decoder may allocate no more than that size needs.
+/// limit), and the decoder may allocate no more than that size needs. JPEGs are decoded strictly
+/// ([`decode_jpeg_strict`]).
 pub(crate) fn decode_image(path: &Path, bytes: &[u8]) -> Result<image::DynamicImage> {
     let reader = || {
         image::ImageReader::new(std::io::Cursor::new(bytes))
@@ -497,8 +498,22 @@ pub(crate) fn decode_image(path: &Path, bytes: &[u8]) -> Result<image::DynamicIm
         path: path.to_path_buf(),
         source,
     };
+    if reader()?.format() == Some(image::ImageFormat::Jpeg) {
+        return decode_jpeg_strict(path, bytes);
+    }
     let (w, h) = reader()?.into_dimensions().map_err(image_error)?;
-    let pixels = w as u64 * h as u64;
+    let pixels = check_image_pixels(path, w as u64, h as u64)?;
+    let mut limits = image::Limits::default();
+    // 16-bit RGBA is 8 bytes a pixel; a decoder's own buffers fit in twice that.
+    limits.max_alloc = Some(pixels.saturating_mul(16).max(1 << 20));
+    let mut r = reader()?;
+    r.limits(limits);
+    r.decode().map_err(image_error)
+}
+
+/// The pixel count `w·h` of an image whose header says `w × h`, if within [`InputLimits::max_image_pixels`].
+fn check_image_pixels(path: &Path, w: u64, h: u64) -> Result<u64> {
+    let pixels = w.saturating_mul(h);
     let max = input_limits().max_image_pixels;
     if pixels > max {
         return Err(HoloError::InvalidData(format!(
@@ -507,15 +522,7 @@ pub(crate) fn decode_image(path: &Path, bytes: &[u8]) -> Result<image::DynamicIm
             path.display()
         )));
     }
-    if reader()?.format() == Some(image::ImageFormat::Jpeg) {
-        return decode_jpeg_strict(path, bytes);
-    }
-    let mut limits = image::Limits::default();
-    // 16-bit RGBA is 8 bytes a pixel; a decoder's own buffers fit in twice that.
-    limits.max_alloc = Some(pixels.saturating_mul(16).max(1 << 20));
-    let mut r = reader()?;
-    r.limits(limits);
-    r.decode().map_err(image_error)
+    Ok(pixels)
 }
 
 /// Decodes a JPEG in strict mode: `image` runs zune-jpeg leniently, which completes a truncated or corrupt
@@ -534,6 +541,11 @@ fn decode_jpeg_strict(path: &Path, bytes: &[u8]) -> Result<image::DynamicImage> 
     decoder
         .decode_headers()
         .map_err(|e| fail(format!("corrupt JPEG header ({e:?})")))?;
+    // The size from the header, before the decoder allocates the image.
+    let (w, h) = decoder
+        .dimensions()
+        .ok_or_else(|| fail("JPEG without dimensions".into()))?;
+    check_image_pixels(path, w as u64, h as u64)?;
     let input = decoder.input_colorspace().unwrap_or(ColorSpace::RGB);
     let out = match input {
         ColorSpace::Luma | ColorSpace::LumaA | ColorSpace::RGB | ColorSpace::RGBA => input,
@@ -545,9 +557,6 @@ fn decode_jpeg_strict(path: &Path, bytes: &[u8]) -> Result<image::DynamicImage> 
             "corrupt or truncated JPEG data ({e:?}); refusing to complete the image with grey"
         ))
     })?;
-    let (w, h) = decoder
-        .dimensions()
-        .ok_or_else(|| fail("JPEG without dimensions".into()))?;
     let (w, h) = (w as u32, h as u32);
     let short = || fail("the JPEG decoder returned fewer samples than the image has".into());
     match decoder.output_colorspace().unwrap_or(out) {

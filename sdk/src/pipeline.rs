@@ -864,10 +864,25 @@ impl Drop for ColourWorkers {
 }
 
 /// The amplitude at or below which a frame counts as black and is refused
-/// ([`HoloError::InvalidData`]): that of sRGB code 1 of 255 (`√(1/255/12.92)` ≈ 0.0175), which the eye cannot
-/// tell from 0. The CNN's hologram of a black frame is its bias, not darkness (see
-/// [`HologramSession::render`]).
+/// ([`HoloError::InvalidData`], [`check_not_black`]): that of sRGB code 1 of 255 (`√(1/255/12.92)` ≈ 0.0175), which
+/// the eye cannot tell from 0.
 pub const BLACK_FRAME_AMPLITUDE: f32 = 0.0175;
+
+/// Refuses a frame whose brightest amplitude (over every colour, pixel and layer) is at most
+/// [`BLACK_FRAME_AMPLITUDE`]: the CNN's output for a black frame is its own bias, not darkness (a 32×32 black
+/// frame gives a midpoint hologram of peak amplitude 0.228 with the shipped 8-layer CNN, `sdk/tests/pipeline.rs`), which the double phase
+/// encoding's normalisation (Eq. 7) would then show at full brightness.
+///
+/// Errors: [`HoloError::InvalidData`] saying the frame is black.
+pub fn check_not_black(brightest_amplitude: f32) -> Result<()> {
+    if brightest_amplitude <= BLACK_FRAME_AMPLITUDE {
+        return Err(HoloError::InvalidData(format!(
+            "the frame is black (brightest amplitude {brightest_amplitude:.4}, at most sRGB code 1 of 255): \
+             there is nothing to display, and the CNN's output for it would be noise shown at full brightness"
+        )));
+    }
+    Ok(())
+}
 
 /// Packs frames into the hologram CNN's input and runs it (one per thread in a stream).
 #[derive(Debug, Clone)]
@@ -903,9 +918,8 @@ impl CnnStage {
         self.check_not_black()
     }
 
-    /// Refuses a packed input whose amplitudes are all at most [`BLACK_FRAME_AMPLITUDE`]: the CNN's output
-    /// for a black frame is its own bias (a 32×32 black frame gave a midpoint hologram of peak amplitude 0.23,
-    /// not 0), which the encoding's normalisation would then show at full brightness.
+    /// Refuses a packed input whose amplitudes (every layer, after the intensity maps) are black
+    /// ([`check_not_black`]).
     fn check_not_black(&self) -> Result<()> {
         let mut brightest = 0.0f32;
         for (i, plane) in self.input.outer_iter().enumerate() {
@@ -913,18 +927,7 @@ impl CnnStage {
                 brightest = plane.iter().fold(brightest, |m, &a| m.max(a));
             }
         }
-        if brightest <= BLACK_FRAME_AMPLITUDE {
-            return Err(HoloError::InvalidData(format!(
-                "the frame is black (brightest amplitude {brightest:.4}, at most sRGB code 1 of 255{}): there is \
-                 nothing to display, and the CNN's output for it would be noise shown at full brightness",
-                if self.calibration.as_ref().is_some_and(|c| c.has_intensity()) {
-                    ", after the calibration's intensity maps"
-                } else {
-                    ""
-                }
-            )));
-        }
-        Ok(())
+        check_not_black(brightest)
     }
 
     /// Multiplies each layer's colour-`c` amplitude by the calibration's intensity scale map of colour `c`

@@ -8,15 +8,8 @@ use tensorholo::color::srgb8_to_amplitude;
 use tensorholo::scene::*;
 use tensorholo::HoloError;
 
-const ALL_DEPTH: [DepthFormat; 6] = [
-    DepthFormat::MetresF32,
-    DepthFormat::MetresF16,
-    DepthFormat::DisparityF32,
-    DepthFormat::DisparityF16,
-    DepthFormat::MillimetresU16,
-    DepthFormat::Depth16,
-];
-const ALL_COLOR: [ColorFormat; 3] = [ColorFormat::Rgba8, ColorFormat::Bgra8, ColorFormat::Rgb8];
+const ALL_DEPTH: [DepthFormat; 6] = DepthFormat::ALL;
+const ALL_COLOR: [ColorFormat; 3] = ColorFormat::ALL;
 const ALL_ROT: [Rotation; 4] = [
     Rotation::Deg0,
     Rotation::Deg90,

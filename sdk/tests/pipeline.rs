@@ -285,3 +285,26 @@ fn pipeline_refuses_mismatched_models() {
         Err(HoloError::ModelMetadata { .. })
     ));
 }
+
+#[test]
+fn the_shipped_cnn_does_not_output_darkness_for_a_black_frame() {
+    // Why black frames are refused (`pipeline::check_not_black`): the shipped 8-layer CNN's midpoint hologram
+    // of a black 32×32 frame is its bias, far from 0, and Eq. 7's normalisation would show it at full
+    // brightness. The figure printed here is the one docs/INPUTS.md quotes.
+    let model = tensorholo::model::embedded::hologram_model(
+        8,
+        tensorholo::model::Precision::F32,
+        &tensorholo::model::ModelConfig::default(),
+    )
+    .unwrap();
+    let depth = Array2::from_shape_fn((32, 32), |(_, x)| x as f32 / 31.0);
+    let black = RgbdFrame::new(Array3::zeros((3, 32, 32)), depth).unwrap();
+    let field = model.run_frame(&black).unwrap();
+    let peak = field.iter().fold(0.0f32, |m, z| m.max(z.norm()));
+    println!("peak midpoint amplitude of a black 32x32 frame: {peak:.3}");
+    assert!(peak > 0.05, "{peak}");
+    assert!(matches!(
+        tensorholo::pipeline::check_not_black(0.0),
+        Err(HoloError::InvalidData(_))
+    ));
+}

@@ -48,6 +48,9 @@ pub enum ColorFormat {
 }
 
 impl ColorFormat {
+    /// Every colour format (for exhaustive tests and fuzzing).
+    pub const ALL: [ColorFormat; 3] = [ColorFormat::Rgba8, ColorFormat::Bgra8, ColorFormat::Rgb8];
+
     /// Bytes per pixel: 4 for [`Rgba8`](Self::Rgba8) and [`Bgra8`](Self::Bgra8), 3 for
     /// [`Rgb8`](Self::Rgb8).
     pub fn bytes_per_pixel(&self) -> usize {
@@ -100,6 +103,16 @@ pub enum DepthFormat {
 }
 
 impl DepthFormat {
+    /// Every depth format (for exhaustive tests and fuzzing).
+    pub const ALL: [DepthFormat; 6] = [
+        DepthFormat::MetresF32,
+        DepthFormat::MetresF16,
+        DepthFormat::DisparityF32,
+        DepthFormat::DisparityF16,
+        DepthFormat::MillimetresU16,
+        DepthFormat::Depth16,
+    ];
+
     /// Bytes per sample: 4 for the f32 formats, 2 for the others.
     pub fn bytes_per_pixel(&self) -> usize {
         match self {
