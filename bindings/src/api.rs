@@ -377,15 +377,21 @@ impl From<core::SlmPatterns> for SlmPatterns {
             blue: plane(2),
             z_near_m: p.depth_range.map(|r| r.z_near_m as f64),
             z_far_m: p.depth_range.map(|r| r.z_far_m as f64),
-            timings: StageTimings {
-                convert_ms: t.convert_s * 1e3,
-                cnn_ms: t.frame.cnn_s * 1e3,
-                offset_ms: t.frame.offset_s * 1e3,
-                prefilter_ms: t.frame.prefilter_s * 1e3,
-                encoding_ms: t.frame.encoding_s * 1e3,
-                gpu_ms: t.frame.gpu_s * 1e3,
-                total_ms: t.frame.total_s * 1e3,
-            },
+            timings: t.into(),
+        }
+    }
+}
+
+impl From<core::PatternTimings> for StageTimings {
+    fn from(t: core::PatternTimings) -> Self {
+        Self {
+            convert_ms: t.convert_s * 1e3,
+            cnn_ms: t.frame.cnn_s * 1e3,
+            offset_ms: t.frame.offset_s * 1e3,
+            prefilter_ms: t.frame.prefilter_s * 1e3,
+            encoding_ms: t.frame.encoding_s * 1e3,
+            gpu_ms: t.frame.gpu_s * 1e3,
+            total_ms: t.frame.total_s * 1e3,
         }
     }
 }
@@ -611,36 +617,11 @@ impl HologramGenerator {
             if frames == 0 {
                 return Err(invalid("benchmark needs at least 1 frame"));
             }
-            let c = self.inner.config();
-            let scene = tensorholo::scene::procedural::default_scene(c.height, c.width)?;
-            self.inner.render_rgbd(&scene)?;
-            let mut all: Vec<StageTimings> = Vec::new();
-            for _ in 0..frames {
-                all.push(SlmPatterns::from(self.inner.render_rgbd(&scene)?).timings);
-            }
-            let median = |f: fn(&StageTimings) -> f64| {
-                let mut v: Vec<f64> = all.iter().map(f).collect();
-                v.sort_by(f64::total_cmp);
-                v[v.len() / 2]
-            };
-            let m = StageTimings {
-                convert_ms: median(|t| t.convert_ms),
-                cnn_ms: median(|t| t.cnn_ms),
-                offset_ms: median(|t| t.offset_ms),
-                prefilter_ms: median(|t| t.prefilter_ms),
-                encoding_ms: median(|t| t.encoding_ms),
-                gpu_ms: median(|t| t.gpu_ms),
-                total_ms: median(|t| t.total_ms),
-            };
-            let per_frame = m.convert_ms + m.total_ms;
+            let b = self.inner.benchmark(frames as usize)?;
             Ok(BenchmarkReport {
                 frames,
-                fps: if per_frame > 0.0 {
-                    1e3 / per_frame
-                } else {
-                    0.0
-                },
-                median: m,
+                fps: b.fps,
+                median: b.median.into(),
                 info: info(&self.inner)?,
             })
         })

@@ -385,7 +385,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                                 timings.push(session.render(&frame)?.timings);
                                 Ok(())
                             })?;
-                            let med = crate::render::median_timings(&timings[1..]);
+                            let med = tensorholo::pipeline::FrameTimings::median(&timings[1..]);
                             let n = 4usize;
                             let t = Instant::now();
                             session

@@ -14,7 +14,7 @@ use tensorholo::model::{CnnLayout, HologramModel, ModelConfig, ModelKind, Precis
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{
     Backend, FrameTimings, GpuPrecision, HologramPipeline, HologramSession, PipelineConfig,
-    PrefilterMode,
+    PrefilterMode, PrefilterSource,
 };
 use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
 use tensorholo::scene::RgbdFrame;
@@ -230,18 +230,21 @@ impl ModelArgs {
             None => tensorholo::model::embedded::hologram_model(self.layers, precision, &expected)
                 .context("loading the shipped hologram CNN")?,
         };
-        let mut pipeline = match &self.prefilter_model {
-            Some(p) if config.offset_m != 0.0 => {
-                let pre = HologramModel::from_path(p, ModelKind::PreFilter, &expected)?;
-                HologramPipeline::new(Arc::new(hologram), Some(Arc::new(pre)), config)?
-            }
-            _ => HologramPipeline::with_shipped_prefilter(
-                Arc::new(hologram),
-                self.prefilter_mode(),
-                precision,
-                config,
-            )?,
+        // The SDK's one rule: a given pre-filter is used or refused (e.g. at 0 mm), never dropped.
+        let source = match &self.prefilter_model {
+            Some(p) => PrefilterSource::Given(Arc::new(HologramModel::from_path(
+                p,
+                ModelKind::PreFilter,
+                &expected,
+            )?)),
+            None => PrefilterSource::Shipped(self.prefilter_mode()),
         };
+        let mut pipeline =
+            HologramPipeline::with_prefilter(Arc::new(hologram), source, precision, config)
+                .with_context(|| match &self.prefilter_model {
+                    Some(p) => format!("--prefilter-model {}", p.display()),
+                    None => "the pre-filter CNN".into(),
+                })?;
         if let Some(path) = &self.calibration {
             let cal = tensorholo::slm::DisplayCalibration::read(path)?;
             log::info!("display calibration {}: {}", path.display(), cal.summary());
@@ -325,28 +328,6 @@ Examples:
       --depth-encoding iphone-disparity --out out/vase
   holo render --model my.onnx --prefilter-model my.prefilter.onnx --out out/mine";
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(|a, b| a.total_cmp(b));
-    if v.is_empty() {
-        0.0
-    } else {
-        v[v.len() / 2]
-    }
-}
-
-/// Median of each stage over `timings`.
-pub fn median_timings(timings: &[FrameTimings]) -> FrameTimings {
-    let m = |f: fn(&FrameTimings) -> f64| median(timings.iter().map(f).collect());
-    FrameTimings {
-        cnn_s: m(|t| t.cnn_s),
-        offset_s: m(|t| t.offset_s),
-        prefilter_s: m(|t| t.prefilter_s),
-        encoding_s: m(|t| t.encoding_s),
-        gpu_s: m(|t| t.gpu_s),
-        total_s: m(|t| t.total_s),
-    }
-}
-
 /// Runs `holo render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let t_all = Instant::now();
@@ -384,7 +365,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     for _ in 0..args.repeat {
         timed.push(session.render(&frame).with_context(what)?.timings);
     }
-    let med = median_timings(&timed);
+    let med = FrameTimings::median(&timed);
     log::info!(
         "session {:.0} ms; first frame {:.0} ms; then (median of {}) CNN {:.1} ms, offset {:.1} ms, \
          pre-filter {:.1} ms, encoding {:.1} ms, total {:.1} ms ({:.2} FPS)",

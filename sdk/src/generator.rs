@@ -31,7 +31,7 @@ use crate::model::{
 use crate::optics::{focal_stack, post_encoding_midpoint, OpticalSetup, PropagationOptions};
 use crate::pipeline::{
     Backend, BackendReport, FrameTimings, GpuPrecision, HologramPipeline, HologramSession,
-    ModelSelection, PipelineConfig, PrefilterMode, SlmFrame,
+    ModelSelection, PipelineConfig, PrefilterMode, PrefilterSource, SlmFrame,
 };
 use crate::scene::{
     CameraFrame, CameraFrameBuf, CameraFrameReport, DepthMapping, DepthRange, Fit, FrameOptions,
@@ -39,9 +39,9 @@ use crate::scene::{
 };
 use crate::slm::DisplayCalibration;
 
-/// The largest hologram a generator makes, in pixels (`width · height`): 8192 × 8192, four times a 4K SLM.
-/// Above it the buffers of one session (≈ 200 bytes a pixel) would not fit a phone.
-pub const MAX_HOLOGRAM_PIXELS: usize = 8192 * 8192;
+/// The largest hologram a generator makes: the session's limit, now [`crate::pipeline::MAX_HOLOGRAM_PIXELS`]
+/// (this path is kept for one release).
+pub use crate::pipeline::MAX_HOLOGRAM_PIXELS;
 /// The default capacity of a [`HologramStream`]'s queue: one frame waiting while one is converted and one
 /// runs through the CNN.
 pub const DEFAULT_STREAM_CAPACITY: usize = 2;
@@ -195,6 +195,31 @@ pub struct PatternTimings {
     /// The session's stages (CNN, offset, pre-filter, encoding; `total_s` is their sum, or the frame period in
     /// a stream).
     pub frame: FrameTimings,
+}
+
+impl PatternTimings {
+    /// The median of each stage over `timings` ([`FrameTimings::median`] for the session's stages).
+    pub fn median(timings: &[PatternTimings]) -> PatternTimings {
+        let frames: Vec<FrameTimings> = timings.iter().map(|t| t.frame).collect();
+        let mut convert: Vec<f64> = timings.iter().map(|t| t.convert_s).collect();
+        convert.sort_by(f64::total_cmp);
+        PatternTimings {
+            convert_s: convert.get(convert.len() / 2).copied().unwrap_or(0.0),
+            frame: FrameTimings::median(&frames),
+        }
+    }
+}
+
+/// What [`HologramGenerator::benchmark`] measured.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct GeneratorBenchmark {
+    /// Frames timed (after one warm-up frame).
+    pub frames: usize,
+    /// The median of each stage ([`PatternTimings::median`]).
+    pub median: PatternTimings,
+    /// Frames per second of one frame after another: `1 / (convert_s + total_s)` of the medians; 0 where
+    /// that time is 0.
+    pub fps: f64,
 }
 
 /// One frame's SLM patterns, owned by the caller: three 8-bit planes, one per laser (field-sequential
@@ -396,8 +421,16 @@ impl HologramGenerator {
         } else {
             PrefilterMode::Off
         };
-        let pipeline =
-            HologramPipeline::new(Arc::new(hologram), prefilter.map(Arc::new), pipeline_config)?;
+        let source = match prefilter {
+            Some(p) => PrefilterSource::Given(Arc::new(p)),
+            None => PrefilterSource::Shipped(PrefilterMode::Off),
+        };
+        let pipeline = HologramPipeline::with_prefilter(
+            Arc::new(hologram),
+            source,
+            config.models.precision,
+            pipeline_config,
+        )?;
         Self::with_pipeline(config, pipeline)
     }
 
@@ -435,6 +468,35 @@ impl HologramGenerator {
     /// The display calibration applied, if any.
     pub fn calibration(&self) -> Option<Arc<DisplayCalibration>> {
         lock_calibration(&self.calibration).clone()
+    }
+
+    /// Renders the built-in test scene ([`crate::scene::procedural::default_scene`]) `frames` times after one
+    /// warm-up frame, at this generator's resolution, and returns the median stage timings: what an app shows
+    /// as its device's speed.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`frames`) for 0 frames; as [`HologramGenerator::render_rgbd`].
+    pub fn benchmark(&self, frames: usize) -> Result<GeneratorBenchmark> {
+        if frames == 0 {
+            return Err(invalid("frames", "a benchmark needs at least 1 frame"));
+        }
+        let c = self.config();
+        let scene = crate::scene::procedural::default_scene(c.height, c.width)?;
+        self.render_rgbd(&scene)?;
+        let mut all = Vec::with_capacity(frames);
+        for _ in 0..frames {
+            all.push(self.render_rgbd(&scene)?.timings);
+        }
+        let median = PatternTimings::median(&all);
+        let per_frame = median.convert_s + median.frame.total_s;
+        Ok(GeneratorBenchmark {
+            frames,
+            median,
+            fps: if per_frame > 0.0 {
+                1.0 / per_frame
+            } else {
+                0.0
+            },
+        })
     }
 
     /// The configuration.
@@ -510,18 +572,23 @@ impl HologramGenerator {
         let calibrated = calibration
             .as_ref()
             .is_some_and(|cal| cal.has_calibrated_lut());
-        #[cfg(feature = "gpu")]
         if !calibrated {
-            // The GPU preview reads codes through the linear table; a calibrated panel's runs below.
+            // The accelerator's preview reads codes through the linear table; a calibrated panel's runs below.
             let mut session = self.session()?;
             let same_size = patterns.codes.dim() == (3, self.config.height, self.config.width);
-            if let (Some(gpu), true) = (session.gpu_frame_mut(), same_size) {
-                match gpu.preview(&patterns.codes, patterns.amplitude_scale, focus as f64) {
-                    Ok(amp) => return Ok(preview_image(&amp)),
-                    Err(HoloError::Gpu(e)) => {
+            if same_size {
+                let shown = session.preview_on_accelerator(
+                    &patterns.codes,
+                    patterns.amplitude_scale,
+                    focus as f64,
+                );
+                match shown {
+                    Some(Ok(amp)) => return Ok(preview_image(&amp)),
+                    Some(Err(HoloError::Gpu(e))) => {
                         log::warn!("GPU preview failed ({e}); computing it on the CPU")
                     }
-                    Err(e) => return Err(e),
+                    Some(Err(e)) => return Err(e),
+                    None => {}
                 }
             }
         }

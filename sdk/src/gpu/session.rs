@@ -1,6 +1,7 @@
 //! [`GpuFrameSession`]: one resolution's whole frame on the GPU, chained from the kernels of [`super::cnn`],
 //! [`super::fft`] and [`super::encode`] in one command buffer. [`crate::pipeline::HologramSession`] owns one
-//! when its backend is the GPU; everything here is created once, and a frame only uploads the CNN input,
+//! (as its frame executor) when its backend is the GPU; it is built from the CNN graphs
+//! ([`crate::model::CnnWeights`]) and the [`PipelineConfig`], and imports no session; everything here is created once, and a frame only uploads the CNN input,
 //! records the same dispatches and downloads the codes (plus, on request, the double-phase pattern and the CNN
 //! heads).
 //!
@@ -15,14 +16,17 @@ use std::time::Instant;
 
 use ndarray::{Array3, ArrayView3};
 
-use super::cnn::{CnnWeights, GpuCnn, GpuPrecision};
+use super::cnn::{GpuCnn, GpuPrecision};
 use super::context::GpuContext;
 use super::encode::{GpuDoublePhase, GpuFieldToPlanes, GpuHeadsToField, GpuPlanesToField};
 use super::fft::{GpuMultiplier, GpuSpectralOp, GpuSpectralPlan, StageCost};
 use super::kernel::Kernel;
+use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
+use crate::model::CnnWeights;
 use crate::optics::Carrier;
-use crate::pipeline::{Heads, HologramPipeline, SlmFrame};
+use crate::pipeline::config::PipelineConfig;
+use crate::pipeline::frame::{Heads, SlmFrame};
 
 /// The pre-filter stage: field → planes → CNN → field.
 struct Prefilter {
@@ -125,31 +129,34 @@ fn bytes_of(n: usize, elem: usize, what: &'static str) -> Result<u64> {
 }
 
 impl GpuFrameSession {
-    /// Builds every buffer, pipeline and bind group of `pipeline`'s frame at `height × width` on `ctx`, with
-    /// the CNNs in `precision`.
+    /// Builds every buffer, pipeline and bind group of one frame at `height × width` on `ctx`: the hologram
+    /// CNN `hologram` (input `[hologram.in_channels, H, W]`), the offset propagation of `cfg`, the pre-filter
+    /// CNN `prefilter` if any, and the double phase method `encoding`; the CNNs in `precision`.
     ///
     /// Errors: [`HoloError::Gpu`] (a buffer above the device's limits, a shader the device refuses);
     /// [`HoloError::ModelContract`] for a CNN that is not the TensorHolo architecture;
     /// [`HoloError::InvalidParameter`] for an FFT size or double phase method the GPU path does not cover
     /// (the message names it).
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         ctx: &GpuContext,
-        pipeline: &HologramPipeline,
+        hologram: &CnnWeights,
+        prefilter: Option<&CnnWeights>,
+        cfg: &PipelineConfig,
+        encoding: DoublePhaseMethod,
         height: usize,
         width: usize,
         precision: GpuPrecision,
     ) -> Result<Self> {
         let precision = precision.resolve(ctx.info().shader_f16);
-        let cfg = pipeline.config();
         let n = height
             .checked_mul(width)
             .filter(|&n| n > 0)
             .ok_or_else(|| invalid("size", format!("{height}×{width} is empty or too large")))?;
-        let hologram = CnnWeights::from_model(pipeline.hologram_model())?;
-        let in_channels = pipeline.hologram_model().input_channels();
+        let in_channels = hologram.in_channels;
         let input = ctx.storage("cnn input", bytes_of(n * in_channels, 4, "size")?)?;
         let heads = ctx.storage("heads", bytes_of(6 * n, 4, "size")?)?;
-        let cnn = GpuCnn::new(ctx, &hologram, height, width, &input, &heads, precision)?;
+        let cnn = GpuCnn::new(ctx, hologram, height, width, &input, &heads, precision)?;
         let field = ctx.storage("field", bytes_of(3 * n, 8, "size")?)?;
         let to_field = GpuHeadsToField::new(ctx, height, width, &heads, &field)?;
         let offset = if cfg.offset_m != 0.0 {
@@ -165,16 +172,15 @@ impl GpuFrameSession {
         } else {
             None
         };
-        let prefilter = match pipeline.prefilter_model() {
-            Some(model) => {
-                let weights = CnnWeights::from_model(model)?;
+        let prefilter = match prefilter {
+            Some(weights) => {
                 let planes_in = ctx.storage("prefilter input", bytes_of(6 * n, 4, "size")?)?;
                 let planes_out = ctx.storage("prefilter output", bytes_of(6 * n, 4, "size")?)?;
                 Some(Prefilter {
                     to_planes: GpuFieldToPlanes::new(ctx, height, width, &field, &planes_in)?,
                     cnn: GpuCnn::new(
                         ctx,
-                        &weights,
+                        weights,
                         height,
                         width,
                         &planes_in,
@@ -186,7 +192,7 @@ impl GpuFrameSession {
             }
             None => None,
         };
-        let dp = GpuDoublePhase::new(ctx, height, width, &pipeline.encoding(), &field)?;
+        let dp = GpuDoublePhase::new(ctx, height, width, &encoding, &field)?;
         let read = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
         let staging_codes = ctx.buffer("codes read-back", bytes_of(3 * n, 1, "size")?, read)?;
         let staging_stats = ctx.buffer("stats read-back", dp.stats_bytes(), read)?;

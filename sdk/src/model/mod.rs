@@ -22,6 +22,7 @@
 pub mod contract;
 #[cfg(feature = "embedded-models")]
 pub mod embedded;
+pub mod graph;
 mod metadata;
 mod network;
 mod tuning;
@@ -157,6 +158,7 @@ pub fn set_cnn_threads(threads: usize) -> crate::Result<()> {
 }
 
 pub use contract::{head_to_phasor, heads_to_field};
+pub use graph::{CnnOutput, CnnWeights, ConvLayer};
 pub use metadata::{
     ModelConfig, ModelKind, ModelMetadata, FORMAT_VERSION, METADATA_PREFIX,
     PREFILTER_FORMAT_VERSION,

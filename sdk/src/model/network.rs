@@ -233,6 +233,9 @@ pub struct HologramModel {
     /// Fixed input height/width from the file, where not symbolic.
     fixed: [Option<usize>; 2],
     plans: Mutex<HashMap<(usize, usize, CnnLayout), ModelPlan>>,
+    /// The graph as the TensorHolo residual CNN, read on first use ([`HologramModel::cnn_graph`]).
+    pub(super) cnn_graph:
+        std::sync::OnceLock<std::result::Result<Arc<super::graph::CnnWeights>, String>>,
     /// Autotuning results per `(height, width, request)` ([`HologramModel::tuned_plan`]).
     pub(super) tuned: Mutex<HashMap<(usize, usize, super::PlanRequest), super::PlanReport>>,
 }
@@ -351,6 +354,7 @@ impl HologramModel {
             dims,
             fixed,
             plans: Mutex::new(HashMap::new()),
+            cnn_graph: std::sync::OnceLock::new(),
             tuned: Mutex::new(HashMap::new()),
         })
     }

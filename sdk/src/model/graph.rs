@@ -1,0 +1,501 @@
+//! The TensorHolo residual CNN as a graph of its own ([`CnnWeights`]), read once from the same ONNX file tract
+//! runs and checked against the architecture, so that every executor that is not tract (the GPU path, the
+//! native CPU engine) runs exactly what the file specifies, without a second reader.
+//!
+//! The architecture (training/tensorholo_training/model.py, `ResidualCNN`): N 3×3 convolutions with zero
+//! padding; ReLU after all but the last; with `s_i` the input of layer `i` and `y_i` its output, `s_0 = x`
+//! (the hologram CNN centres its input: `x − 0.5`), `s_i = y_{i−1}` for `i ∈ {1, 2}` or even `i`,
+//! `s_i = y_{i−1} + s_{i−2}` for odd `i ≥ 3`, and the last layer reads `concat(s_{N−1}, x)`. The hologram CNN
+//! ends in tanh heads (amplitude `(tanh + 1)·√2/2`, phase `(tanh + 1)/2`); the pre-filter CNN adds its raw
+//! output to a fixed depthwise filter of its edge-replicated input (the AA-DPM blur).
+
+use std::collections::HashMap;
+
+use tract_onnx::pb;
+
+use super::{HologramModel, ModelKind};
+use crate::error::{HoloError, Result};
+
+/// One 3×3 convolution of the CNN.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ConvLayer {
+    /// Output channels.
+    pub c_out: usize,
+    /// Input channels (for the last layer: the hidden channels plus the network input's).
+    pub c_in: usize,
+    /// Weights `[c_out, c_in, 3, 3]` as in the ONNX file.
+    pub weights: Vec<f32>,
+    /// Bias `[c_out]`.
+    pub bias: Vec<f32>,
+}
+
+/// What follows the last convolution.
+#[derive(Debug, Clone, PartialEq)]
+pub enum CnnOutput {
+    /// Hologram CNN heads: amplitude `(tanh(o) + 1)·amplitude_scale` (channels 0–2), phase
+    /// `(tanh(o) + 1)·phase_scale` (channels 3–5), the scales read from the graph (√2/2 and 1/2).
+    Heads {
+        /// Amplitude head scale.
+        amplitude_scale: f32,
+        /// Phase head scale.
+        phase_scale: f32,
+    },
+    /// Pre-filter CNN: raw output plus a depthwise `taps × taps` filter of the edge-replicated input.
+    Prefilter {
+        /// Kernel width (odd).
+        taps: usize,
+        /// `[channels, taps, taps]` weights.
+        base: Vec<f32>,
+    },
+}
+
+/// A TensorHolo residual CNN read from its ONNX graph ([`CnnWeights::from_model`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CnnWeights {
+    /// Network input channels (`4·L` for the hologram CNN, 6 for the pre-filter).
+    pub in_channels: usize,
+    /// Value subtracted from the input before the first layer and the final concat (0.5 or 0).
+    pub input_offset: f32,
+    /// The convolutions, first to last.
+    pub layers: Vec<ConvLayer>,
+    /// The output stage.
+    pub output: CnnOutput,
+}
+
+/// What a tensor of the graph is, as far as the CNN pattern goes.
+#[derive(Debug, Clone, PartialEq)]
+enum Sym {
+    /// The network input.
+    Input,
+    /// The input minus a constant.
+    Centred(f32),
+    /// `y_i`: ReLU of layer `i`.
+    Relu(usize),
+    /// Raw (pre-activation) output of layer `i`.
+    Conv(usize),
+    /// A sum of two activations.
+    Sum(Box<Sym>, Box<Sym>),
+    /// A channel concatenation.
+    Cat(Box<Sym>, Box<Sym>),
+    /// The edge-replicated input (pre-filter base branch).
+    PaddedInput,
+    /// The base filter of the pre-filter.
+    Base,
+    /// Scalars and shape arithmetic (constants, shapes, pads).
+    Meta,
+    /// Output-stage tensors after the last convolution.
+    Tail,
+}
+
+fn contract_err(source_name: &str, reason: String) -> HoloError {
+    HoloError::ModelContract {
+        source_name: source_name.to_string(),
+        reason: format!(
+            "the GPU path and the native CPU engine run the TensorHolo residual CNN only: {reason}"
+        ),
+    }
+}
+
+/// An f32 tensor of the graph: `(dims, values)`.
+fn f32_tensor(t: &pb::TensorProto) -> Option<(Vec<usize>, Vec<f32>)> {
+    if t.data_type != 1 {
+        return None;
+    }
+    let dims: Vec<usize> = t.dims.iter().map(|&d| d.max(0) as usize).collect();
+    let n: usize = dims.iter().product();
+    let values = if !t.float_data.is_empty() {
+        t.float_data.clone()
+    } else {
+        t.raw_data
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect()
+    };
+    (values.len() == n).then_some((dims, values))
+}
+
+fn attr<'a>(node: &'a pb::NodeProto, name: &str) -> Option<&'a pb::AttributeProto> {
+    node.attribute.iter().find(|a| a.name == name)
+}
+
+impl CnnWeights {
+    /// Reads the layers of `model`'s ONNX graph and checks it is the TensorHolo residual CNN (see the
+    /// [module docs](self)): every convolution 3×3 with padding 1, stride 1, no groups, f32 weights and bias;
+    /// the residual wiring and the final concat exactly as the architecture says; the hologram heads or the
+    /// pre-filter's base filter.
+    ///
+    /// Errors: [`HoloError::ModelContract`] naming the first node that breaks the pattern (int8 files among
+    /// them: the GPU runs the f32 files).
+    ///
+    /// [`HologramModel::cnn_graph`] reads it once per model and shares it.
+    pub fn from_model(model: &HologramModel) -> Result<Self> {
+        Self::from_graph(model.onnx_graph(), model.kind(), model.source_name())
+    }
+
+    /// As [`CnnWeights::from_model`] on a decoded ONNX graph of a CNN of `kind`.
+    pub(crate) fn from_graph(
+        graph: &pb::GraphProto,
+        kind: ModelKind,
+        source_name: &str,
+    ) -> Result<Self> {
+        let err = |r: String| contract_err(source_name, r);
+        let input = graph
+            .input
+            .first()
+            .map(|i| i.name.clone())
+            .ok_or_else(|| err("no graph input".into()))?;
+        let mut inits: HashMap<&str, (Vec<usize>, Vec<f32>)> = HashMap::new();
+        for t in &graph.initializer {
+            if let Some(v) = f32_tensor(t) {
+                inits.insert(t.name.as_str(), v);
+            }
+        }
+        let mut consts: HashMap<String, Vec<f32>> = HashMap::new();
+        let mut syms: HashMap<String, Sym> = HashMap::new();
+        syms.insert(input.clone(), Sym::Input);
+        let mut layers: Vec<ConvLayer> = Vec::new();
+        let mut layer_inputs: Vec<Sym> = Vec::new();
+        let mut base: Option<(usize, Vec<f32>)> = None;
+        let mut tail_consts: Vec<f32> = Vec::new();
+        let mut tanh_count = 0;
+        let sym = |syms: &HashMap<String, Sym>, name: &str| -> Sym {
+            syms.get(name).cloned().unwrap_or(Sym::Meta)
+        };
+        for node in &graph.node {
+            let op = node.op_type.as_str();
+            let where_ = || format!("node `{}` ({op})", node.name);
+            let ins: Vec<Sym> = node.input.iter().map(|i| sym(&syms, i)).collect();
+            let is_act = |s: &Sym| !matches!(s, Sym::Meta);
+            let out = match op {
+                "Constant" => {
+                    if let Some(t) = attr(node, "value").and_then(|a| a.t.as_ref()) {
+                        if let (Some(o), Some((_, v))) = (node.output.first(), f32_tensor(t)) {
+                            consts.insert(o.clone(), v);
+                        }
+                    }
+                    Sym::Meta
+                }
+                "QuantizeLinear" | "DequantizeLinear" | "QLinearConv" | "ConvInteger" => {
+                    return Err(err(format!(
+                        "{} is quantised; the GPU runs the f32 model files (choose precision f32)",
+                        where_()
+                    )))
+                }
+                _ if !ins.iter().any(is_act) && op != "Conv" => Sym::Meta,
+                "Sub" => {
+                    let c = node
+                        .input
+                        .get(1)
+                        .and_then(|n| consts.get(n).or(inits.get(n.as_str()).map(|v| &v.1)));
+                    match (&ins[0], c.map(|v| v.as_slice())) {
+                        (Sym::Input, Some([k])) => Sym::Centred(*k),
+                        _ => return Err(err(format!("{}: expected input − constant", where_()))),
+                    }
+                }
+                "Pad" => {
+                    let edge = attr(node, "mode").is_some_and(|a| a.s == b"edge");
+                    if ins[0] != Sym::Input || !edge {
+                        return Err(err(format!("{}: only an edge pad of the input", where_())));
+                    }
+                    Sym::PaddedInput
+                }
+                "Conv" => {
+                    let ints = |n: &str| attr(node, n).map(|a| a.ints.clone());
+                    let group = attr(node, "group").map_or(1, |a| a.i);
+                    let w = node.input.get(1).and_then(|n| {
+                        inits
+                            .get(n.as_str())
+                            .cloned()
+                            .or_else(|| consts.get(n).map(|v| (Vec::new(), v.clone())))
+                    });
+                    if ins[0] == Sym::PaddedInput {
+                        // The pre-filter's base: depthwise k×k, no padding of its own (the Pad did it).
+                        let (_, wv) = w.ok_or_else(|| err(format!("{}: no weights", where_())))?;
+                        let k = ints("kernel_shape").unwrap_or_default();
+                        let c = group as usize;
+                        let taps = k.first().copied().unwrap_or(0) as usize;
+                        if k.len() != 2
+                            || k[0] != k[1]
+                            || taps.is_multiple_of(2)
+                            || wv.len() != c * taps * taps
+                        {
+                            return Err(err(format!("{}: base filter shape", where_())));
+                        }
+                        if node.input.len() > 2 {
+                            return Err(err(format!("{}: base filter with a bias", where_())));
+                        }
+                        base = Some((taps, wv));
+                        Sym::Base
+                    } else {
+                        let (dims, weights) = node
+                            .input
+                            .get(1)
+                            .and_then(|n| inits.get(n.as_str()).cloned())
+                            .ok_or_else(|| {
+                                err(format!("{}: weights are not f32 initializers", where_()))
+                            })?;
+                        let bias = node
+                            .input
+                            .get(2)
+                            .and_then(|n| inits.get(n.as_str()).map(|v| v.1.clone()))
+                            .ok_or_else(|| err(format!("{}: no f32 bias", where_())))?;
+                        let ok = dims.len() == 4
+                            && dims[2] == 3
+                            && dims[3] == 3
+                            && group == 1
+                            && ints("pads").is_none_or(|p| p == [1, 1, 1, 1])
+                            && ints("strides").is_none_or(|s| s == [1, 1])
+                            && ints("dilations").is_none_or(|d| d == [1, 1])
+                            && bias.len() == dims[0];
+                        if !ok {
+                            return Err(err(format!(
+                                "{}: expected a 3×3 convolution, padding 1, stride 1, one group, with bias \
+                                 (weights {dims:?})",
+                                where_()
+                            )));
+                        }
+                        layers.push(ConvLayer {
+                            c_out: dims[0],
+                            c_in: dims[1],
+                            weights,
+                            bias,
+                        });
+                        layer_inputs.push(ins[0].clone());
+                        Sym::Conv(layers.len() - 1)
+                    }
+                }
+                "Relu" => match ins[0] {
+                    Sym::Conv(i) => Sym::Relu(i),
+                    _ => {
+                        return Err(err(format!(
+                            "{}: ReLU of something else than a convolution",
+                            where_()
+                        )))
+                    }
+                },
+                "Add" if ins.iter().all(is_act) => {
+                    let (a, b) = (ins[0].clone(), ins[1].clone());
+                    match (&a, &b) {
+                        (Sym::Base, Sym::Conv(_)) | (Sym::Conv(_), Sym::Base) => Sym::Tail,
+                        (Sym::Tail, _) | (_, Sym::Tail) => Sym::Tail,
+                        _ => Sym::Sum(Box::new(a), Box::new(b)),
+                    }
+                }
+                "Concat" => {
+                    if ins.len() != 2 || attr(node, "axis").map_or(0, |a| a.i) != 1 {
+                        return Err(err(format!(
+                            "{}: expected a 2-way channel concat",
+                            where_()
+                        )));
+                    }
+                    Sym::Cat(Box::new(ins[0].clone()), Box::new(ins[1].clone()))
+                }
+                "Slice" | "Split" | "Tanh" | "Add" | "Mul" => {
+                    if op == "Tanh" {
+                        tanh_count += 1;
+                    }
+                    if matches!(op, "Add" | "Mul") {
+                        for n in node.input.iter().skip(1) {
+                            if let Some([v]) = consts.get(n).map(|v| v.as_slice()) {
+                                tail_consts.push(*v);
+                            }
+                        }
+                    }
+                    if !ins.iter().any(|s| matches!(s, Sym::Conv(_) | Sym::Tail)) {
+                        return Err(err(format!("{}: unexpected {op}", where_())));
+                    }
+                    Sym::Tail
+                }
+                _ => {
+                    return Err(err(format!(
+                        "{}: operator {op} is not part of the architecture",
+                        where_()
+                    )))
+                }
+            };
+            for o in &node.output {
+                syms.insert(o.clone(), out.clone());
+            }
+        }
+        let n = layers.len();
+        if n < 2 {
+            return Err(err(format!("{n} convolution(s), expected ≥ 2")));
+        }
+        let x = layer_inputs[0].clone();
+        let input_offset = match x {
+            Sym::Input => 0.0,
+            Sym::Centred(k) => k,
+            ref s => return Err(err(format!("layer 0 reads {s:?}, expected the input"))),
+        };
+        // The residual wiring of the architecture, layer by layer.
+        let mut s: Vec<Sym> = vec![x.clone()];
+        for i in 1..n {
+            let y = Sym::Relu(i - 1);
+            let expect = if i >= 3 && i % 2 == 1 {
+                Sym::Sum(Box::new(y), Box::new(s[i - 2].clone()))
+            } else {
+                y
+            };
+            let got = &layer_inputs[i];
+            let swapped = |e: &Sym| match e {
+                Sym::Sum(a, b) => Sym::Sum(b.clone(), a.clone()),
+                other => other.clone(),
+            };
+            let want = if i == n - 1 {
+                Sym::Cat(Box::new(expect.clone()), Box::new(x.clone()))
+            } else {
+                expect.clone()
+            };
+            let ok = *got == want
+                || (i == n - 1
+                    && *got == Sym::Cat(Box::new(swapped(&expect)), Box::new(x.clone())))
+                || *got == swapped(&want);
+            if !ok {
+                return Err(err(format!(
+                    "layer {i} reads {got:?}, the architecture has {want:?}"
+                )));
+            }
+            s.push(expect);
+        }
+        let in_channels = layers[0].c_in;
+        for (i, l) in layers.iter().enumerate() {
+            let want_in = match i {
+                0 => in_channels,
+                _ if i == n - 1 => layers[i - 1].c_out + in_channels,
+                _ => layers[i - 1].c_out,
+            };
+            if l.c_in != want_in || (i > 0 && i < n - 1 && l.c_out != layers[0].c_out) {
+                return Err(err(format!(
+                    "layer {i} has {} → {} channels, the architecture needs {want_in} inputs",
+                    l.c_in, l.c_out
+                )));
+            }
+        }
+        let last = &layers[n - 1];
+        let output = match kind {
+            ModelKind::Hologram => {
+                // tanh heads: Add 1 then Mul by the scale, per head (constants in graph order).
+                let [one_a, amp, one_p, phs] = tail_consts[..] else {
+                    return Err(err(format!("heads: constants {tail_consts:?}, expected 4")));
+                };
+                if tanh_count != 2
+                    || one_a != 1.0
+                    || one_p != 1.0
+                    || last.c_out != 6
+                    || base.is_some()
+                {
+                    return Err(err(
+                        "heads: expected (tanh + 1)·scale on 2 × 3 channels".into()
+                    ));
+                }
+                CnnOutput::Heads {
+                    amplitude_scale: amp,
+                    phase_scale: phs,
+                }
+            }
+            ModelKind::PreFilter => {
+                let (taps, base) =
+                    base.ok_or_else(|| err("pre-filter without a base filter".into()))?;
+                if last.c_out != in_channels || base.len() != in_channels * taps * taps {
+                    return Err(err("pre-filter output channels".into()));
+                }
+                CnnOutput::Prefilter { taps, base }
+            }
+        };
+        Ok(Self {
+            in_channels,
+            input_offset,
+            layers,
+            output,
+        })
+    }
+
+    /// Multiply-adds per output pixel of the convolutions.
+    pub fn macs_per_pixel(&self) -> usize {
+        self.layers.iter().map(|l| l.c_out * l.c_in * 9).sum()
+    }
+}
+
+impl HologramModel {
+    /// This model's graph as the TensorHolo residual CNN ([`CnnWeights::from_model`]), read from the ONNX
+    /// file on the first call and shared by every executor after it (the GPU path, the native engine).
+    ///
+    /// Errors: [`HoloError::ModelContract`] (every call, the same reason) where the graph is not the
+    /// architecture; such a model runs on tract only.
+    pub fn cnn_graph(&self) -> Result<std::sync::Arc<CnnWeights>> {
+        let cached = self
+            .cnn_graph
+            .get_or_init(|| match CnnWeights::from_model(self) {
+                Ok(w) => Ok(std::sync::Arc::new(w)),
+                Err(HoloError::ModelContract { reason, .. }) => Err(reason),
+                Err(e) => Err(e.to_string()),
+            });
+        cached.clone().map_err(|reason| HoloError::ModelContract {
+            source_name: self.source_name().to_string(),
+            reason,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{embedded, ModelConfig, Precision};
+
+    fn config() -> ModelConfig {
+        ModelConfig {
+            offset_m: 6e-3,
+            ..ModelConfig::default()
+        }
+    }
+
+    #[test]
+    fn other_graphs_are_refused_naming_the_node() {
+        let qdq = embedded::hologram_model(8, Precision::Int8Qdq, &config()).unwrap();
+        let err = CnnWeights::from_model(&qdq).unwrap_err().to_string();
+        assert!(err.contains("quantised") && err.contains("f32"), "{err}");
+        let f32 = embedded::hologram_model(8, Precision::F32, &config()).unwrap();
+        let good = f32.onnx_graph().clone();
+        // Rewire one residual connection: layer 5 reads y_4 + y_0 instead of y_4 + s_3.
+        let mut bad = good.clone();
+        let relu0 = bad
+            .node
+            .iter()
+            .find(|n| n.op_type == "Relu")
+            .unwrap()
+            .output[0]
+            .clone();
+        let add1 = bad
+            .node
+            .iter_mut()
+            .filter(|n| n.op_type == "Add")
+            .nth(1)
+            .unwrap();
+        add1.input[1] = relu0;
+        let err = CnnWeights::from_graph(&bad, ModelKind::Hologram, "rewired")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("layer 5 reads"), "{err}");
+        // A 5×5 convolution.
+        let mut bad = good.clone();
+        let conv = bad.node.iter_mut().find(|n| n.op_type == "Conv").unwrap();
+        for a in conv.attribute.iter_mut().filter(|a| a.name == "pads") {
+            a.ints = vec![0, 0, 0, 0];
+        }
+        let err = CnnWeights::from_graph(&bad, ModelKind::Hologram, "unpadded")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("padding 1"), "{err}");
+        // An operator the architecture does not have.
+        let mut bad = good;
+        bad.node
+            .iter_mut()
+            .find(|n| n.op_type == "Relu")
+            .unwrap()
+            .op_type = "Sigmoid".into();
+        let err = CnnWeights::from_graph(&bad, ModelKind::Hologram, "sigmoid")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("Sigmoid"), "{err}");
+    }
+}

@@ -1,0 +1,132 @@
+//! [`CnnStage`]: packs RGB-D frames or LDIs into the hologram CNN's input (with the display calibration's
+//! intensity maps and the black-frame check) and runs it on a [`CnnPlan`] (tract or the native engine).
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use ndarray::{Array3, Axis};
+
+use super::frame::{check_not_black, Heads};
+use crate::cnn::CnnPlan;
+use crate::error::{invalid, HoloError, Result};
+use crate::model::contract;
+use crate::scene::{LayeredDepthImage, RgbdFrame};
+use crate::slm::DisplayCalibration;
+
+/// Packs frames into the hologram CNN's input and runs it (one per thread in a stream).
+#[derive(Debug)]
+pub(super) struct CnnStage {
+    /// The hologram CNN's plan (tract's or the native engine's).
+    pub(super) plan: Box<dyn CnnPlan>,
+    /// The packed input `[4·L, H, W]` of the last frame.
+    pub(super) input: Array3<f32>,
+    /// The display calibration whose laser intensity scale maps multiply the packed amplitudes.
+    pub(super) calibration: Option<Arc<DisplayCalibration>>,
+}
+
+impl CnnStage {
+    /// A stage for another thread (a stream's CNN thread): the same plan's network, its own input buffer.
+    pub(super) fn spawn(&self) -> Self {
+        Self {
+            plan: self.plan.spawn(),
+            input: self.input.clone(),
+            calibration: self.calibration.clone(),
+        }
+    }
+
+    pub(super) fn run_frame(&mut self, frame: &RgbdFrame) -> Result<(Heads, f64)> {
+        let t = Instant::now();
+        self.pack_frame(frame)?;
+        self.run(t)
+    }
+
+    /// Checks `frame` against the CNN and packs it into `self.input`.
+    pub(super) fn pack_frame(&mut self, frame: &RgbdFrame) -> Result<()> {
+        let (c, h, w) = self.plan.input_dim();
+        if c != 4 {
+            return Err(invalid(
+                "frame",
+                format!(
+                    "this hologram CNN takes a {}-layer LDI, not an RGB-D frame",
+                    c / 4
+                ),
+            ));
+        }
+        check_size("RGB-D frame", frame.amplitude.dim(), (h, w))?;
+        contract::pack_rgbd(frame, self.input.view_mut())?;
+        self.scale_intensity();
+        self.check_not_black()
+    }
+
+    /// Refuses a packed input whose amplitudes (every layer, after the intensity maps) are black
+    /// ([`check_not_black`]).
+    fn check_not_black(&self) -> Result<()> {
+        let mut brightest = 0.0f32;
+        for (i, plane) in self.input.outer_iter().enumerate() {
+            if i % 4 != 3 {
+                brightest = plane.iter().fold(brightest, |m, &a| m.max(a));
+            }
+        }
+        check_not_black(brightest)
+    }
+
+    /// Multiplies each layer's colour-`c` amplitude by the calibration's intensity scale map of colour `c`
+    /// (where it has one): the target the CNN sees is what the unevenly lit display can show.
+    fn scale_intensity(&mut self) {
+        let Some(cal) = &self.calibration else {
+            return;
+        };
+        let layers = self.input.dim().0 / 4;
+        for (c, col) in cal.colours.iter().enumerate() {
+            let Some(scale) = &col.intensity_scale else {
+                continue;
+            };
+            for k in 0..layers {
+                // Invalid LDI points hold amplitude 0, which stays 0.
+                let mut plane = self.input.index_axis_mut(Axis(0), 4 * k + c);
+                plane.zip_mut_with(scale, |a, &s| *a *= s);
+            }
+        }
+    }
+
+    pub(super) fn run_ldi(&mut self, ldi: &LayeredDepthImage) -> Result<(Heads, f64)> {
+        let t = Instant::now();
+        self.pack_ldi(ldi)?;
+        self.run(t)
+    }
+
+    /// Checks `ldi` against the CNN and packs it into `self.input`.
+    pub(super) fn pack_ldi(&mut self, ldi: &LayeredDepthImage) -> Result<()> {
+        let (c, h, w) = self.plan.input_dim();
+        let want = c / 4;
+        if ldi.num_layers() != want {
+            return Err(invalid(
+                "ldi",
+                format!(
+                    "this hologram CNN takes {want} layer(s), the LDI has {}",
+                    ldi.num_layers()
+                ),
+            ));
+        }
+        check_size("LDI", (3, ldi.height(), ldi.width()), (h, w))?;
+        contract::pack_ldi(ldi, self.input.view_mut())?;
+        self.scale_intensity();
+        self.check_not_black()
+    }
+
+    pub(super) fn run(&mut self, t: Instant) -> Result<(Heads, f64)> {
+        let (amplitude, phase) = self.plan.run_outputs(self.input.view())?;
+        Ok((Heads { amplitude, phase }, t.elapsed().as_secs_f64()))
+    }
+}
+
+fn check_size(what: &str, got: (usize, usize, usize), want: (usize, usize)) -> Result<()> {
+    if (got.1, got.2) != want {
+        return Err(HoloError::ShapeMismatch {
+            what: format!("{what} vs the session's [H, W]"),
+            expected: vec![want.0, want.1],
+            got: vec![got.1, got.2],
+        });
+    }
+    Ok(())
+}

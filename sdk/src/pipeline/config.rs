@@ -1,0 +1,148 @@
+//! The pipeline's configuration: display and encoding settings ([`PipelineConfig`]), where frames run
+//! ([`Backend`], [`GpuPrecision`]) and the size limit of a session ([`MAX_HOLOGRAM_PIXELS`]). Imports nothing
+//! of the pipeline: every executor may read it.
+
+use crate::encoding::DoublePhaseMethod;
+use crate::error::{invalid, HoloError, Result};
+use crate::model::{CnnLayout, ThreadCount};
+use crate::optics::{OpticalSetup, PropagationOptions};
+
+/// The largest hologram a session (and so a generator) makes, in pixels (`width · height`): 8192 × 8192, four
+/// times a 4K SLM. Above it the buffers of one session (≈ 200 bytes a pixel) would not fit a phone. Checked
+/// before anything is allocated ([`super::HologramPipeline::session`]).
+pub const MAX_HOLOGRAM_PIXELS: usize = 8192 * 8192;
+
+/// Where a [`HologramSession`] computes its frames.
+///
+/// - [`Backend::Cpu`]: tract for the CNNs and rustfft for the optics (the reference).
+/// - [`Backend::Gpu`]: the whole frame in WGSL compute shaders through wgpu (Metal on iOS, Vulkan on Android
+///   and Linux; cargo feature `gpu`, [`crate::gpu`]), any adapter including a software one. Session creation
+///   fails with [`HoloError::Gpu`] where there is none.
+/// - [`Backend::Auto`] (the default): the GPU where a hardware adapter exists, the session can be built on it
+///   and its first frame passes a self-check against the CPU path; otherwise the CPU. The reason is logged and
+///   kept in [`HologramSession::backend_report`].
+///
+/// With [`Backend::Gpu`] or [`Backend::Auto`], a GPU failure mid-stream (a lost device) re-renders that frame
+/// on the CPU and keeps the CPU for later frames: no frame is lost.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Backend {
+    /// The GPU when it is there and agrees with the CPU on the first frame, else the CPU.
+    #[default]
+    Auto,
+    /// Always the CPU.
+    Cpu,
+    /// Always the GPU (an error at session creation without one).
+    Gpu,
+}
+
+impl Backend {
+    /// Short name: `auto`, `cpu`, `gpu`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Cpu => "cpu",
+            Self::Gpu => "gpu",
+        }
+    }
+}
+
+impl std::fmt::Display for Backend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Backend {
+    type Err = HoloError;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "auto" => Ok(Self::Auto),
+            "cpu" => Ok(Self::Cpu),
+            "gpu" => Ok(Self::Gpu),
+            _ => Err(invalid(
+                "backend",
+                format!("expected auto, cpu or gpu, got {s:?}"),
+            )),
+        }
+    }
+}
+
+/// The arithmetic of the GPU backend's CNNs ([`Backend::Gpu`]; `crate::gpu::cnn`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum GpuPrecision {
+    /// [`GpuPrecision::F16`] where the adapter has `SHADER_F16`, else [`GpuPrecision::F32`] (the default;
+    /// [`Backend::Auto`]'s first-frame self-check guards the accuracy either way).
+    #[default]
+    Auto,
+    /// f32 storage and arithmetic (within 3e-7 of tract's f32 on lavapipe).
+    F32,
+    /// Hidden activations stored as f16 (half the memory and traffic), products in f16, sums in f32; the
+    /// network's input and output stay f32. Needs the device's `SHADER_F16` (f32 without it). Within 5.1e-4
+    /// of tract's f32 on lavapipe (docs/GPU.md).
+    F16,
+}
+
+impl GpuPrecision {
+    /// `"auto"`, `"f32"` or `"f16"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::F32 => "f32",
+            Self::F16 => "f16",
+        }
+    }
+
+    /// What runs on an adapter with (`shader_f16`) or without f16 shaders: [`GpuPrecision::F32`] or
+    /// [`GpuPrecision::F16`].
+    pub fn resolve(self, shader_f16: bool) -> Self {
+        match self {
+            Self::F16 | Self::Auto if shader_f16 => Self::F16,
+            _ => Self::F32,
+        }
+    }
+}
+
+/// Display and encoding settings of a [`HologramPipeline`].
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct PipelineConfig {
+    /// Wavelengths, pixel pitch and volume depth (must match the models' metadata).
+    pub optics: OpticalSetup,
+    /// Angular spectrum options of the offset propagation.
+    pub options: PropagationOptions,
+    /// Signed distance `s` in metres from the midpoint plane to the SLM (Eq. 6; the paper uses 0, 6e-3 and
+    /// 12e-3). A pre-filter CNN, if given, must be trained for this offset.
+    pub offset_m: f64,
+    /// Double phase method used *without* a pre-filter CNN (with one, DDPM encodes with plain Eq. 7).
+    pub encoding: DoublePhaseMethod,
+    /// Memory layout tract runs the hologram CNN in ([`CnnLayout`]; results agree to float rounding);
+    /// [`CnnLayout::Auto`] (the default) times both at session creation and keeps the faster. The
+    /// pre-filter CNN always runs channels-first: with its 8 filters the channels-last matrix product has
+    /// only 8 rows, and it measured 2.1× slower (`holo bench --skip-cnn --layout nchw,nhwc`, 384², 1
+    /// thread: 89 ms against 42 ms); tract 0.23 cannot move its graph channels-last anyway.
+    pub cnn_layout: CnnLayout,
+    /// Threads of the CNNs' matrix products ([`ThreadCount::Auto`], the default, times 1, half and all
+    /// cores at session creation). The three colours of the optics always run on their own three threads.
+    pub cnn_threads: ThreadCount,
+    /// Where sessions compute their frames ([`Backend`]; default [`Backend::Auto`]).
+    pub backend: Backend,
+    /// The GPU CNNs' arithmetic (default [`GpuPrecision::Auto`]: f16 where the adapter has it); f16 falls back
+    /// to f32 on an adapter without `SHADER_F16` (the backend report says so).
+    pub gpu_precision: GpuPrecision,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> Self {
+        Self {
+            optics: OpticalSetup::default(),
+            options: PropagationOptions::default(),
+            offset_m: 0.0,
+            encoding: DoublePhaseMethod::default(),
+            cnn_layout: CnnLayout::default(),
+            cnn_threads: ThreadCount::default(),
+            backend: Backend::default(),
+            gpu_precision: GpuPrecision::default(),
+        }
+    }
+}

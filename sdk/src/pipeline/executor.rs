@@ -1,0 +1,119 @@
+//! Frame executors: what computes a whole frame from the packed CNN input.
+//!
+//! The CPU frame (the session's [`super::cnn_stage::CnnStage`] on a [`crate::cnn::CnnPlan`], the colour
+//! workers, the pre-filter plan) is always built: it is the reference, the first-frame self-check of
+//! [`Backend::Auto`] and the fallback. An accelerator, a [`FrameExecutor`], may run the frames instead: the
+//! GPU today (`gpu_frame.rs`, cargo feature `gpu`). The session holds `Option<Accelerator>` and never asks
+//! which one it is, so an executor is a file plus one arm in [`choose_backend`].
+
+use ndarray::{Array3, ArrayView3};
+
+use super::config::Backend;
+use super::frame::{Heads, SlmFrame};
+use super::models::HologramPipeline;
+#[cfg(not(feature = "gpu"))]
+use crate::error::invalid;
+use crate::error::Result;
+
+/// A whole frame on an accelerator: packed CNN input in, SLM patterns out.
+pub(crate) trait FrameExecutor: std::fmt::Debug + Send {
+    /// Runs one frame of the packed CNN input `input` (`[C, H, W]`, `docs/CONVENTIONS.md` §7) into `out`:
+    /// the codes and the normaliser always; the double phase pattern (`out.phase`) and the heads (returned)
+    /// only when `full` (otherwise `out.phase` keeps older values and `None` is returned). Timings and
+    /// `out.backend` are the caller's.
+    ///
+    /// Errors: [`crate::HoloError::Gpu`] when the device fails (the session then falls back to the CPU);
+    /// any other error is the frame's fault (e.g. a hologram that is zero everywhere).
+    fn run(
+        &mut self,
+        input: ArrayView3<f32>,
+        out: &mut SlmFrame,
+        full: bool,
+    ) -> Result<Option<Heads>>;
+
+    /// What a viewer sees focused at normalised depth `focus` (`[0, 1]`, 0 = near) from `codes` `[3, H, W]`
+    /// shown with normaliser `amplitude_scale` (Eq. 8–10), as amplitudes `[3, H, W]`.
+    ///
+    /// Errors: as the executor's preview ([`crate::HoloError::InvalidParameter`],
+    /// [`crate::HoloError::ShapeMismatch`], [`crate::HoloError::Gpu`]).
+    fn preview(
+        &mut self,
+        codes: &Array3<u8>,
+        amplitude_scale: f32,
+        focus: f64,
+    ) -> Result<Array3<f32>>;
+
+    /// The executor as `Any` (typed access for benchmarks: `HologramSession::gpu_frame`).
+    #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
+    fn as_any(&self) -> &dyn std::any::Any;
+
+    /// The executor as `Any`, mutable.
+    #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
+    fn as_any_mut(&mut self) -> &mut dyn std::any::Any;
+}
+
+/// The accelerator a session runs on, and whether the self-check of [`Backend::Auto`] has yet to run.
+#[derive(Debug)]
+pub(super) struct Accelerator {
+    pub(super) executor: Box<dyn FrameExecutor>,
+    pub(super) pending_check: bool,
+}
+
+/// A [`super::BackendReport`] before the session knows what runs.
+pub(super) struct BackendReportParts {
+    pub(super) requested: Backend,
+    pub(super) reason: String,
+    pub(super) adapter: Option<String>,
+    pub(super) gpu_precision: Option<String>,
+}
+
+impl BackendReportParts {
+    /// The CPU runs, for `reason`.
+    pub(super) fn cpu(requested: Backend, reason: String) -> Self {
+        Self {
+            requested,
+            reason,
+            adapter: None,
+            gpu_precision: None,
+        }
+    }
+}
+
+/// Builds the accelerator of `pipeline`'s sessions at `height × width` when its backend asks for one:
+/// `(report, accelerator)`; `None` runs the CPU frame.
+///
+/// Errors: with [`Backend::Gpu`], the GPU's errors ([`crate::HoloError::Gpu`], or
+/// [`crate::HoloError::InvalidParameter`] in a build without the `gpu` feature); with [`Backend::Auto`], none
+/// (the CPU runs and the report says why).
+pub(super) fn choose_backend(
+    pipeline: &HologramPipeline,
+    height: usize,
+    width: usize,
+) -> Result<(BackendReportParts, Option<Accelerator>)> {
+    let requested = pipeline.config().backend;
+    if requested == Backend::Cpu {
+        return Ok((
+            BackendReportParts::cpu(requested, "CPU requested".into()),
+            None,
+        ));
+    }
+    #[cfg(not(feature = "gpu"))]
+    {
+        let _ = (height, width);
+        if requested == Backend::Gpu {
+            return Err(invalid(
+                "backend",
+                "this build has no GPU path (cargo feature `gpu` of tensorholo)",
+            ));
+        }
+        Ok((
+            BackendReportParts::cpu(
+                requested,
+                "this build has no GPU path (cargo feature `gpu`)".into(),
+            ),
+            None,
+        ))
+    }
+    #[cfg(feature = "gpu")]
+    super::gpu_frame::build(pipeline, height, width)
+}

@@ -1,0 +1,131 @@
+//! The types every executor produces or consumes: the CNN heads ([`Heads`]), one frame's SLM patterns
+//! ([`SlmFrame`]) and its stage timings ([`FrameTimings`]), and the black-frame rule ([`check_not_black`]).
+//! They sit below the executors: `gpu/` and the CPU frame import them, never the session.
+
+use ndarray::Array3;
+use num_complex::Complex32;
+
+use super::config::Backend;
+use crate::error::{HoloError, Result};
+use crate::model::contract;
+
+/// The CNN heads of the midpoint hologram, `[3, H, W]` each: amplitude in `[0, √2]`, phase in `[0, 1]`
+/// meaning `(p − 0.5)·2π` rad (`docs/CONVENTIONS.md` §7.1).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Heads {
+    /// Amplitude head `[3, H, W]`.
+    pub amplitude: Array3<f32>,
+    /// Phase head `[3, H, W]`.
+    pub phase: Array3<f32>,
+}
+
+impl Heads {
+    /// The complex midpoint hologram `[3, H, W]` (R, G, B): `A·e^{i(p − 0.5)2π}`
+    /// ([`contract::heads_to_field`]).
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] if the two heads differ in shape.
+    pub fn to_field(&self) -> Result<Array3<Complex32>> {
+        contract::heads_to_field(self.amplitude.view(), self.phase.view())
+    }
+}
+
+/// Wall-clock seconds of each stage of one frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct FrameTimings {
+    /// Hologram CNN (input packing + tract).
+    pub cnn_s: f64,
+    /// Heads → field and offset propagation (Eq. 6), colours in parallel.
+    pub offset_s: f64,
+    /// Pre-filter CNN (0 without one).
+    pub prefilter_s: f64,
+    /// Double phase encoding (with its pre-filter, if any) and the look-up table, colours in parallel.
+    pub encoding_s: f64,
+    /// On the GPU backend: the GPU's whole frame (both CNNs and the optics in one submission, with the
+    /// downloads); the stage fields above are then 0 but `cnn_s`, which holds the input packing on the CPU.
+    /// `holo bench --backend gpu` times the GPU stages one by one. 0 on the CPU backend.
+    pub gpu_s: f64,
+    /// The whole frame (in a stream: from the end of the previous frame, i.e. the frame period).
+    pub total_s: f64,
+}
+
+/// The median of `values` (the upper middle of an even count); 0 for none.
+fn median(mut values: Vec<f64>) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values.get(values.len() / 2).copied().unwrap_or(0.0)
+}
+
+impl FrameTimings {
+    /// The median of each stage over `timings`, stage by stage (so the stages need not add up to
+    /// `total_s`); for an even count the upper of the two middle values. All zero for no frames. The one
+    /// median of `holo render`, `holo bench` and [`crate::generator::HologramGenerator::benchmark`].
+    pub fn median(timings: &[FrameTimings]) -> FrameTimings {
+        let m = |f: fn(&FrameTimings) -> f64| median(timings.iter().map(f).collect());
+        FrameTimings {
+            cnn_s: m(|t| t.cnn_s),
+            offset_s: m(|t| t.offset_s),
+            prefilter_s: m(|t| t.prefilter_s),
+            encoding_s: m(|t| t.encoding_s),
+            gpu_s: m(|t| t.gpu_s),
+            total_s: m(|t| t.total_s),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn median_is_taken_stage_by_stage() {
+        let t = |cnn_s, total_s| FrameTimings {
+            cnn_s,
+            total_s,
+            ..FrameTimings::default()
+        };
+        // Stage by stage: the cnn median (2) and the total median (30) come from different frames.
+        let m = FrameTimings::median(&[t(3.0, 10.0), t(1.0, 30.0), t(2.0, 40.0)]);
+        assert_eq!((m.cnn_s, m.total_s), (2.0, 30.0));
+        // An even count takes the upper middle value; none gives zeros.
+        assert_eq!(FrameTimings::median(&[t(1.0, 1.0), t(5.0, 2.0)]).cnn_s, 5.0);
+        assert_eq!(FrameTimings::median(&[]), FrameTimings::default());
+    }
+}
+
+/// One frame's SLM patterns, owned by the session and overwritten by the next frame.
+#[derive(Debug, Clone)]
+pub struct SlmFrame {
+    /// 8-bit SLM codes `[3, H, W]` (R, G, B; one plane per laser, field-sequential), through the display
+    /// calibration's look-up tables ([`HologramPipeline::with_calibration`]; the linear one without).
+    pub codes: Array3<u8>,
+    /// The double phase pattern `[3, H, W]` in radians, `[0, 2π)`.
+    pub phase: Array3<f32>,
+    /// The global amplitude normaliser `a` of Eq. 7 (see [`crate::encoding::DoublePhase`]).
+    pub amplitude_scale: f32,
+    /// Per-channel mean phase removed before encoding (radians).
+    pub mean_phase: [f32; 3],
+    /// Stage timings.
+    pub timings: FrameTimings,
+    /// Which backend computed this frame: [`Backend::Cpu`] or [`Backend::Gpu`].
+    pub backend: Backend,
+}
+
+/// The amplitude at or below which a frame counts as black and is refused
+/// ([`HoloError::InvalidData`], [`check_not_black`]): that of sRGB code 1 of 255 (`√(1/255/12.92)` ≈ 0.0175), which
+/// the eye cannot tell from 0.
+pub const BLACK_FRAME_AMPLITUDE: f32 = 0.0175;
+
+/// Refuses a frame whose brightest amplitude (over every colour, pixel and layer) is at most
+/// [`BLACK_FRAME_AMPLITUDE`]: the CNN's output for a black frame is its own bias, not darkness (a 32×32 black
+/// frame gives a midpoint hologram of peak amplitude 0.228 with the shipped 8-layer CNN, `sdk/tests/pipeline.rs`), which the double phase
+/// encoding's normalisation (Eq. 7) would then show at full brightness.
+///
+/// Errors: [`HoloError::InvalidData`] saying the frame is black.
+pub fn check_not_black(brightest_amplitude: f32) -> Result<()> {
+    if brightest_amplitude <= BLACK_FRAME_AMPLITUDE {
+        return Err(HoloError::InvalidData(format!(
+            "the frame is black (brightest amplitude {brightest_amplitude:.4}, at most sRGB code 1 of 255): \
+             there is nothing to display, and the CNN's output for it would be noise shown at full brightness"
+        )));
+    }
+    Ok(())
+}

@@ -1,0 +1,124 @@
+//! The GPU as a frame executor (cargo feature `gpu`): [`GpuFrameSession`] behind [`FrameExecutor`], and how a
+//! session gets one ([`build`]: the adapter, the precision, the fallback reasons).
+
+use ndarray::{Array3, ArrayView3};
+
+use super::config::{Backend, GpuPrecision};
+use super::executor::{Accelerator, BackendReportParts, FrameExecutor};
+use super::frame::{Heads, SlmFrame};
+use super::models::HologramPipeline;
+use crate::error::Result;
+use crate::gpu::session::GpuFrameSession;
+use crate::gpu::{GpuContext, GpuOptions};
+
+impl FrameExecutor for GpuFrameSession {
+    fn run(
+        &mut self,
+        input: ArrayView3<f32>,
+        out: &mut SlmFrame,
+        full: bool,
+    ) -> Result<Option<Heads>> {
+        GpuFrameSession::run(self, input, out, full)
+    }
+
+    fn preview(
+        &mut self,
+        codes: &Array3<u8>,
+        amplitude_scale: f32,
+        focus: f64,
+    ) -> Result<Array3<f32>> {
+        GpuFrameSession::preview(self, codes, amplitude_scale, focus)
+    }
+
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+
+    fn as_any_mut(&mut self) -> &mut dyn std::any::Any {
+        self
+    }
+}
+
+/// The GPU frame of `pipeline` at `height × width` ([`super::executor::choose_backend`] with the `gpu`
+/// feature): on the app's context or the shared one (a software adapter only for [`Backend::Gpu`]), the CNN
+/// graphs read once by the models ([`crate::model::HologramModel::cnn_graph`]).
+pub(super) fn build(
+    pipeline: &HologramPipeline,
+    height: usize,
+    width: usize,
+) -> Result<(BackendReportParts, Option<Accelerator>)> {
+    let requested = pipeline.config().backend;
+    let cpu = |reason: String| BackendReportParts::cpu(requested, reason);
+    let ctx = match pipeline.gpu_context() {
+        Some(ctx) => Ok(ctx.clone()),
+        None => GpuContext::shared(&GpuOptions {
+            allow_software: requested == Backend::Gpu,
+            name_contains: None,
+        }),
+    };
+    let ctx = match (ctx, requested) {
+        (Ok(ctx), _) => ctx,
+        (Err(e), Backend::Gpu) => return Err(e),
+        (Err(e), _) => return Ok((cpu(format!("no hardware GPU: {e}")), None)),
+    };
+    let info = ctx.info();
+    let adapter = Some(format!(
+        "{} ({}, {})",
+        info.name, info.backend, info.device_type
+    ));
+    let wanted = pipeline.config().gpu_precision;
+    let (precision, note) = if wanted == GpuPrecision::F16 && !info.shader_f16 {
+        (
+            GpuPrecision::F32,
+            " (f16 asked, but the adapter has no SHADER_F16: f32)",
+        )
+    } else {
+        (wanted, "")
+    };
+    let frame = (|| {
+        let hologram = pipeline.hologram_model().cnn_graph()?;
+        let prefilter = match pipeline.prefilter_model() {
+            Some(p) => Some(p.cnn_graph()?),
+            None => None,
+        };
+        GpuFrameSession::new(
+            &ctx,
+            &hologram,
+            prefilter.as_deref(),
+            pipeline.config(),
+            pipeline.encoding(),
+            height,
+            width,
+            precision,
+        )
+    })();
+    match frame {
+        Ok(frame) => Ok((
+            BackendReportParts {
+                requested,
+                reason: if requested == Backend::Gpu {
+                    format!("GPU requested{note}")
+                } else {
+                    format!("GPU adapter found; first-frame self-check pending{note}")
+                },
+                adapter,
+                gpu_precision: Some(precision.name().into()),
+            },
+            Some(Accelerator {
+                executor: Box::new(frame),
+                pending_check: requested == Backend::Auto,
+            }),
+        )),
+        Err(e) if requested == Backend::Gpu => Err(e),
+        Err(e) => {
+            log::info!("GPU backend unavailable for {height}×{width}, using the CPU: {e}");
+            Ok((
+                BackendReportParts {
+                    adapter,
+                    ..cpu(format!("the GPU path cannot run this session: {e}"))
+                },
+                None,
+            ))
+        }
+    }
+}

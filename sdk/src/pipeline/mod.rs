@@ -1,0 +1,46 @@
+//! The real-time hologram pipeline (`docs/CONVENTIONS.md` §8, paper Fig. 3): RGB-D frame (or layered depth
+//! image) → hologram CNN (tract) → midpoint hologram → offset propagation (Eq. 6) → pre-filter CNN (DDPM) →
+//! double phase encoding (Eq. 7) → look-up table → three 8-bit SLM planes.
+//!
+//! - [`HologramPipeline`] holds the loaded CNNs and the display configuration, checked against each other
+//!   once.
+//! - [`HologramSession`] (one per resolution) owns everything a frame reuses: the tract plans, FFT plans,
+//!   transfer functions, double-phase encoders and scratch buffers, and three colour worker threads. After
+//!   the first frame, the optics stages (offset propagation, pre-filter input, double phase, LUT) perform no
+//!   heap allocation (`sdk/tests/pipeline_alloc.rs` counts); the CNN stages allocate inside tract.
+//! - [`HologramSession::render_stream`] overlaps the hologram CNN of frame `n + 1` with the optics of frame
+//!   `n` (two threads); its output equals [`HologramSession::render`]'s bit for bit.
+//!
+//! One concept per file, lower files first (a file imports only those above it in this list, and the
+//! executors below the session import only the first three):
+//!
+//! - `config`: [`PipelineConfig`], [`Backend`], [`GpuPrecision`], [`MAX_HOLOGRAM_PIXELS`];
+//! - `frame`: [`Heads`], [`SlmFrame`], [`FrameTimings`], [`check_not_black`] (what every executor produces);
+//! - `report`: [`BackendReport`], [`SelfCheck`];
+//! - `selection`: [`ModelSelection`], [`PrefilterMode`] and the one rule pairing a CNN with a pre-filter;
+//! - `models`: [`HologramPipeline`] (models + display configuration + calibration);
+//! - `colour`, `workers`: one colour's optics and the three allocation-free worker threads;
+//! - `cnn_stage`: input packing and the hologram CNN on a `CnnPlan` (tract, or the native engine);
+//! - `executor` (+ `gpu_frame`): whole-frame accelerators behind one trait;
+//! - `session`, `stream`: [`HologramSession`] and its streams.
+
+mod cnn_stage;
+mod colour;
+pub(crate) mod config;
+mod executor;
+pub(crate) mod frame;
+#[cfg(feature = "gpu")]
+mod gpu_frame;
+mod models;
+mod report;
+mod selection;
+mod session;
+mod stream;
+mod workers;
+
+pub use config::{Backend, GpuPrecision, PipelineConfig, MAX_HOLOGRAM_PIXELS};
+pub use frame::{check_not_black, FrameTimings, Heads, SlmFrame, BLACK_FRAME_AMPLITUDE};
+pub use models::HologramPipeline;
+pub use report::{BackendReport, SelfCheck, SELF_CHECK_MAX_FRACTION};
+pub use selection::{ModelSelection, PrefilterMode, PrefilterSource};
+pub use session::HologramSession;

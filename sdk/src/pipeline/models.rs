@@ -1,0 +1,254 @@
+//! [`HologramPipeline`]: the loaded CNNs plus the display configuration and calibration, checked against
+//! each other once; a factory of sessions (`HologramPipeline::session`, in `session.rs`). Imports no executor
+//! and no session.
+
+use std::sync::Arc;
+
+use super::config::PipelineConfig;
+use super::selection::{shipped_prefilter, ModelSelection, PrefilterMode, PrefilterSource};
+use crate::encoding::DoublePhaseMethod;
+#[cfg(doc)]
+use crate::error::HoloError;
+use crate::error::{invalid, Result};
+use crate::model::{HologramModel, ModelConfig, ModelKind, Precision};
+use crate::slm::{DisplayCalibration, LutRepresentation, PhaseLut};
+
+/// The loaded CNNs plus their configuration: a factory of [`super::HologramSession`]s.
+#[derive(Debug, Clone)]
+pub struct HologramPipeline {
+    config: PipelineConfig,
+    hologram: Arc<HologramModel>,
+    prefilter: Option<Arc<HologramModel>>,
+    /// Why the pipeline runs (or does not run) a pre-filter CNN, for logs and reports.
+    prefilter_reason: String,
+    /// The display calibration sessions apply ([`HologramPipeline::with_calibration`]); `None`: an ideal SLM.
+    calibration: Option<Arc<DisplayCalibration>>,
+    /// The app's own GPU context ([`HologramPipeline::with_gpu_context`]); `None`: the shared one.
+    #[cfg(feature = "gpu")]
+    gpu_context: Option<crate::gpu::GpuContext>,
+}
+
+impl HologramPipeline {
+    /// Combines a hologram CNN with an optional pre-filter CNN (DDPM) under `config`.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for an invalid setup or offset, a pre-filter with a 0 m offset,
+    /// or models of the wrong kind; [`HoloError::ModelMetadata`] if a model's metadata does not match
+    /// `config` (optics; the pre-filter's offset).
+    pub fn new(
+        hologram: Arc<HologramModel>,
+        prefilter: Option<Arc<HologramModel>>,
+        config: PipelineConfig,
+    ) -> Result<Self> {
+        config.optics.validate()?;
+        if !config.offset_m.is_finite() {
+            return Err(invalid("offset_m", "must be finite"));
+        }
+        let expected = ModelConfig {
+            optics: config.optics,
+            offset_m: config.offset_m,
+            input_layers: hologram.metadata().input_layers,
+        };
+        hologram.metadata().check(ModelKind::Hologram, &expected)?;
+        if let Some(p) = &prefilter {
+            if config.offset_m == 0.0 {
+                return Err(invalid(
+                    "prefilter",
+                    "a pre-filter CNN belongs to a non-zero SLM offset (DDPM, Eq. 6); none is used at 0 m",
+                ));
+            }
+            p.metadata().check(ModelKind::PreFilter, &expected)?;
+        }
+        let prefilter_reason = if prefilter.is_some() {
+            "pre-filter CNN given by the caller"
+        } else if config.offset_m == 0.0 {
+            "no pre-filter at a 0 mm offset"
+        } else {
+            "no pre-filter CNN given"
+        }
+        .to_string();
+        Ok(Self {
+            config,
+            hologram,
+            prefilter,
+            prefilter_reason,
+            calibration: None,
+            #[cfg(feature = "gpu")]
+            gpu_context: None,
+        })
+    }
+
+    /// The shipped models (`models/`, feature `embedded-models`) chosen by name: the RGB-D hologram CNN with
+    /// `selection.layers` ∈ {8, 15, 30} layers in `selection.precision`, and the DDPM pre-filter CNN of
+    /// `config.offset_m` as `selection.prefilter` says ([`HologramPipeline::with_shipped_prefilter`]).
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for a layer count or (with [`PrefilterMode::Required`]) an
+    /// offset without a shipped model; as [`HologramModel::from_bytes`] and [`HologramPipeline::new`].
+    #[cfg(feature = "embedded-models")]
+    pub fn embedded(selection: &ModelSelection, config: PipelineConfig) -> Result<Self> {
+        let expected = ModelConfig {
+            optics: config.optics,
+            offset_m: config.offset_m,
+            input_layers: 1,
+        };
+        let hologram = crate::model::embedded::hologram_model(
+            selection.layers,
+            selection.precision,
+            &expected,
+        )?;
+        Self::with_prefilter(
+            Arc::new(hologram),
+            PrefilterSource::Shipped(selection.prefilter),
+            selection.precision,
+            config,
+        )
+    }
+
+    /// Combines `hologram` with the shipped pre-filter CNN of `config.offset_m` (in `precision`) as `mode`
+    /// says; the rule the CLI and the bindings share:
+    /// - [`PrefilterMode::Off`], or a 0 m offset: none (encoding with `config.encoding`);
+    /// - [`PrefilterMode::Required`]: the shipped pre-filter of the offset (6 or 12 mm), whatever the CNN;
+    /// - [`PrefilterMode::Auto`]: the shipped pre-filter of the offset only where one exists and it was trained
+    ///   on holograms of a CNN of this depth (`tensorholo.hologram_layers`): the shipped pre-filters display
+    ///   1.2 dB above AA-DPM with the 8-layer CNN they were trained with, 0.8 dB above with 15 layers and
+    ///   0.3–0.7 dB below with 30 (`models/MODEL_CARD.md`). Otherwise none, and
+    ///   [`HologramPipeline::prefilter_reason`] says why.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`prefilter`) for [`PrefilterMode::Required`] at 0 m or at an
+    /// offset without a shipped pre-filter; [`HoloError::InvalidParameter`] (`prefilter`) without the
+    /// `embedded-models` feature unless the mode resolves to none; as [`HologramPipeline::new`].
+    pub fn with_shipped_prefilter(
+        hologram: Arc<HologramModel>,
+        mode: PrefilterMode,
+        precision: Precision,
+        config: PipelineConfig,
+    ) -> Result<Self> {
+        if !config.offset_m.is_finite() {
+            return Err(invalid("offset_m", "must be finite"));
+        }
+        let (prefilter, reason) = shipped_prefilter(&hologram, mode, precision, &config)?;
+        let mut pipeline = Self::new(hologram, prefilter.map(Arc::new), config)?;
+        pipeline.prefilter_reason = reason;
+        Ok(pipeline)
+    }
+
+    /// Combines `hologram` with its pre-filter CNN from `source`: the one rule that decides which CNNs run,
+    /// used by [`HologramPipeline::embedded`], `HologramGenerator::from_onnx` and `holo render`.
+    /// - [`PrefilterSource::Shipped`]: as [`HologramPipeline::with_shipped_prefilter`] (shipped pre-filters in
+    ///   `precision`);
+    /// - [`PrefilterSource::Given`]: the caller's pre-filter, as [`HologramPipeline::new`] (refused at a 0 m
+    ///   offset, never silently dropped).
+    ///
+    /// Errors: as [`HologramPipeline::with_shipped_prefilter`] and [`HologramPipeline::new`].
+    pub fn with_prefilter(
+        hologram: Arc<HologramModel>,
+        source: PrefilterSource,
+        precision: Precision,
+        config: PipelineConfig,
+    ) -> Result<Self> {
+        match source {
+            PrefilterSource::Shipped(mode) => {
+                Self::with_shipped_prefilter(hologram, mode, precision, config)
+            }
+            PrefilterSource::Given(p) => Self::new(hologram, Some(p), config),
+        }
+    }
+
+    /// Why this pipeline runs a pre-filter CNN or not (e.g. "the shipped 6 mm pre-filter was trained with the
+    /// 8-layer hologram CNN, this one has 30 layers").
+    pub fn prefilter_reason(&self) -> &str {
+        &self.prefilter_reason
+    }
+
+    /// Runs the GPU backend on `ctx` (e.g. [`crate::gpu::GpuContext::from_device`] with the app's own wgpu
+    /// device) instead of the process-wide shared context.
+    #[cfg(feature = "gpu")]
+    pub fn with_gpu_context(mut self, ctx: crate::gpu::GpuContext) -> Self {
+        self.gpu_context = Some(ctx);
+        self
+    }
+
+    /// Applies a display's calibration (`.holocal`, [`DisplayCalibration`]) in every session made from now
+    /// on: its per-colour look-up table turns the double phase pattern into codes (instead of the linear
+    /// one), and its laser intensity scale map, where present, multiplies the target amplitude before the
+    /// hologram CNN (`docs/CALIBRATION.md`). Sessions must then have the calibration's SLM size.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`calibration`) if a colour's wavelength differs from
+    /// the pipeline's optics by more than 1 nm (a look-up table holds for one wavelength only).
+    pub fn with_calibration(mut self, calibration: Arc<DisplayCalibration>) -> Result<Self> {
+        check_calibration_wavelengths(&calibration, &self.config.optics.wavelengths_m)?;
+        self.calibration = Some(calibration);
+        Ok(self)
+    }
+
+    /// The display calibration sessions apply, if any.
+    pub fn calibration(&self) -> Option<&Arc<DisplayCalibration>> {
+        self.calibration.as_ref()
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &PipelineConfig {
+        &self.config
+    }
+
+    /// The hologram CNN.
+    pub fn hologram_model(&self) -> &HologramModel {
+        &self.hologram
+    }
+
+    /// The pre-filter CNN, if any.
+    pub fn prefilter_model(&self) -> Option<&HologramModel> {
+        self.prefilter.as_deref()
+    }
+
+    /// The double phase method this pipeline encodes with: [`DoublePhaseMethod::Plain`] after a pre-filter
+    /// CNN (DDPM), otherwise the configured one.
+    pub fn encoding(&self) -> DoublePhaseMethod {
+        if self.prefilter.is_some() {
+            DoublePhaseMethod::Plain
+        } else {
+            self.config.encoding
+        }
+    }
+}
+
+/// The app's GPU context, if it gave one ([`HologramPipeline::with_gpu_context`]).
+#[cfg(feature = "gpu")]
+impl HologramPipeline {
+    pub(super) fn gpu_context(&self) -> Option<&crate::gpu::GpuContext> {
+        self.gpu_context.as_ref()
+    }
+}
+
+/// Largest wavelength difference (metres) between a display calibration and the pipeline's optics.
+const CALIBRATION_WAVELENGTH_TOLERANCE_M: f64 = 1e-9;
+
+/// Refuses a calibration measured at other wavelengths than the display's `wavelengths_m` (R, G, B; more
+/// than 1 nm apart).
+pub(super) fn check_calibration_wavelengths(
+    cal: &DisplayCalibration,
+    wavelengths_m: &[f64; 3],
+) -> Result<()> {
+    for (c, (col, &want)) in cal.colours.iter().zip(wavelengths_m).enumerate() {
+        if (col.wavelength_m - want).abs() > CALIBRATION_WAVELENGTH_TOLERANCE_M {
+            return Err(invalid(
+                "calibration",
+                format!(
+                    "the {} look-up table was measured at {:.1} nm, the display's {} laser is {:.1} nm; \
+                     calibrate at the display's wavelengths",
+                    crate::slm::file::COLOUR_NAMES[c],
+                    col.wavelength_m * 1e9,
+                    crate::slm::file::COLOUR_NAMES[c],
+                    want * 1e9
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Colour `c`'s look-up table in `cal`, or `None` where the linear table of the double phase encoder
+/// already gives its codes.
+pub(super) fn calibrated_lut(cal: Option<&Arc<DisplayCalibration>>, c: usize) -> Option<&PhaseLut> {
+    let lut = &cal?.colours.get(c)?.lut;
+    (!matches!(lut.representation(), LutRepresentation::Linear)).then_some(lut)
+}

@@ -1,0 +1,150 @@
+//! Which CNNs run: the shipped models by name ([`ModelSelection`], [`PrefilterMode`]) and the one rule that
+//! pairs a hologram CNN with a shipped pre-filter ([`shipped_prefilter`], used by
+//! [`super::HologramPipeline::with_shipped_prefilter`], and through it by the CLI and the bindings).
+
+use std::sync::Arc;
+
+use super::config::PipelineConfig;
+use crate::error::{invalid, Result};
+use crate::model::{HologramModel, ModelConfig, Precision};
+
+/// Whether the DDPM pre-filter CNN runs between offset propagation and double phase encoding (paper Eq. 6),
+/// chosen by name ([`HologramPipeline::with_shipped_prefilter`] has the rule).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PrefilterMode {
+    /// The shipped pre-filter where one exists for the offset and was trained with this CNN depth.
+    #[default]
+    Auto,
+    /// Never: encode with the configured double phase method (AA-DPM by default).
+    Off,
+    /// Always the shipped pre-filter of the offset; an error where none is shipped.
+    Required,
+}
+
+impl PrefilterMode {
+    /// Short name: `auto`, `off`, `required`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Off => "off",
+            Self::Required => "required",
+        }
+    }
+}
+
+/// The shipped CNNs by name ([`HologramPipeline::embedded`]). `Default`: 8 layers, f32, pre-filter
+/// [`PrefilterMode::Auto`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+pub struct ModelSelection {
+    /// Hologram CNN depth: 8, 15 or 30 convolution layers.
+    pub layers: usize,
+    /// Weight format of both CNNs.
+    pub precision: Precision,
+    /// Whether the DDPM pre-filter CNN runs.
+    pub prefilter: PrefilterMode,
+}
+
+impl Default for ModelSelection {
+    fn default() -> Self {
+        Self {
+            layers: 8,
+            precision: Precision::F32,
+            prefilter: PrefilterMode::Auto,
+        }
+    }
+}
+
+/// Where a pipeline's pre-filter CNN comes from ([`super::HologramPipeline::with_prefilter`], the one rule
+/// the CLI, the generator and the bindings share).
+#[derive(Debug, Clone)]
+pub enum PrefilterSource {
+    /// The shipped pre-filter of the offset, as the mode says ([`super::HologramPipeline::with_shipped_prefilter`]).
+    Shipped(PrefilterMode),
+    /// The caller's own pre-filter CNN (e.g. `holo render --prefilter-model`): always used, and refused
+    /// where it cannot be (a 0 m offset, metadata of another display or offset).
+    Given(Arc<HologramModel>),
+}
+
+/// The rule of [`HologramPipeline::with_shipped_prefilter`]: the pre-filter to run (if any) and why.
+pub(super) fn shipped_prefilter(
+    hologram: &HologramModel,
+    mode: PrefilterMode,
+    precision: Precision,
+    config: &PipelineConfig,
+) -> Result<(Option<HologramModel>, String)> {
+    let mm = config.offset_m * 1e3;
+    if mode == PrefilterMode::Off {
+        return Ok((None, "pre-filter off".into()));
+    }
+    if config.offset_m == 0.0 {
+        return match mode {
+            PrefilterMode::Required => Err(invalid(
+                "prefilter",
+                "a pre-filter CNN belongs to a non-zero SLM offset (DDPM, Eq. 6); none exists at 0 mm",
+            )),
+            _ => Ok((None, "no pre-filter at a 0 mm offset".into())),
+        };
+    }
+    #[cfg(feature = "embedded-models")]
+    {
+        use crate::model::embedded::{prefilter_model, PREFILTER_OFFSETS_MM};
+        let shipped = PREFILTER_OFFSETS_MM
+            .into_iter()
+            .find(|&o| (o as f64 - mm).abs() < 1e-6);
+        let Some(offset_mm) = shipped else {
+            return match mode {
+                PrefilterMode::Required => Err(invalid(
+                    "prefilter",
+                    format!(
+                        "no shipped pre-filter CNN for a {mm} mm offset (shipped: {PREFILTER_OFFSETS_MM:?} \
+                         mm); use one of those offsets, or the pre-filter off"
+                    ),
+                )),
+                _ => Ok((
+                    None,
+                    format!("no shipped pre-filter for {mm} mm (shipped: {PREFILTER_OFFSETS_MM:?} mm)"),
+                )),
+            };
+        };
+        let expected = ModelConfig {
+            optics: config.optics,
+            offset_m: config.offset_m,
+            input_layers: hologram.metadata().input_layers,
+        };
+        let p = prefilter_model(offset_mm, precision, &expected)?;
+        let layers = hologram.metadata().layers;
+        let trained = p.metadata().hologram_layers;
+        if mode == PrefilterMode::Required || trained == Some(layers) {
+            let why = format!(
+                "shipped {offset_mm} mm pre-filter ({}, trained with the {} hologram CNN)",
+                if mode == PrefilterMode::Required {
+                    "required"
+                } else {
+                    "auto"
+                },
+                trained.map_or("unknown".to_string(), |l| format!("{l}-layer"))
+            );
+            return Ok((Some(p), why));
+        }
+        Ok((
+            None,
+            format!(
+                "the shipped {offset_mm} mm pre-filter was trained with the {} hologram CNN, this one has \
+                 {layers} layers: encoding without it (require it to force it)",
+                trained.map_or("unknown".to_string(), |l| format!("{l}-layer"))
+            ),
+        ))
+    }
+    #[cfg(not(feature = "embedded-models"))]
+    {
+        let _ = (hologram, precision);
+        match mode {
+            PrefilterMode::Required => Err(invalid(
+                "prefilter",
+                "this build has no embedded models (feature `embedded-models`); pass a pre-filter file",
+            )),
+            _ => Ok((None, format!("no embedded pre-filter in this build ({mm} mm)"))),
+        }
+    }
+}

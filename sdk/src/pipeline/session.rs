@@ -1,0 +1,557 @@
+//! [`HologramSession`]: one resolution's frames. It owns everything a frame reuses (the CNN plans, FFT plans,
+//! transfer functions, double phase encoders, scratch buffers and three colour worker threads) and, where
+//! the backend asks for one, an accelerator ([`super::executor`]) that runs whole frames instead, with the
+//! CPU frame as its self-check and fallback.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use ndarray::{Array3, ArrayView3, Axis};
+use num_complex::Complex32;
+
+use super::cnn_stage::CnnStage;
+use super::colour::{copy_channel, fill_channel, ColourState, Task};
+use super::config::{Backend, MAX_HOLOGRAM_PIXELS};
+use super::executor::{choose_backend, Accelerator};
+use super::frame::{FrameTimings, Heads, SlmFrame};
+use super::models::{calibrated_lut, check_calibration_wavelengths, HologramPipeline};
+use super::report::{BackendReport, SelfCheck};
+use super::workers::{lost_state, ColourWorkers};
+use crate::cnn::CnnPlan;
+use crate::encoding::{normaliser, ChannelEncoder, ChannelStats, DoublePhaseMethod};
+use crate::error::{invalid, HoloError, Result};
+use crate::model::{contract, PlanReport, PlanRequest};
+use crate::optics::Carrier;
+use crate::scene::{LayeredDepthImage, RgbdFrame};
+use crate::slm::DisplayCalibration;
+
+/// A hologram session for one resolution (see the [module docs](self)). Not `Sync`: one frame at a time;
+/// a failed frame (wrong size, NaN) leaves the session usable.
+#[derive(Debug)]
+pub struct HologramSession {
+    pub(super) height: usize,
+    pub(super) width: usize,
+    encoding: DoublePhaseMethod,
+    offset_m: f64,
+    pub(super) cnn: CnnStage,
+    prefilter: Option<Box<dyn CnnPlan>>,
+    prefilter_input: Array3<f32>,
+    states: [Option<Box<ColourState>>; 3],
+    workers: ColourWorkers,
+    pub(super) output: SlmFrame,
+    last_heads: Option<Heads>,
+    plan_report: PlanReport,
+    backend: BackendReport,
+    full_outputs: bool,
+    /// The display calibration applied (look-up tables, intensity scale maps), and the wavelengths it must
+    /// match.
+    calibration: Option<Arc<DisplayCalibration>>,
+    wavelengths_m: [f64; 3],
+    /// The accelerator (the GPU frame) while it runs the frames; `None`: the CPU frame does.
+    pub(super) accelerator: Option<Accelerator>,
+}
+
+impl HologramPipeline {
+    /// Prepares a session for `height × width` frames: optimises the CNNs for that size (cached in the
+    /// models), plans the FFTs, computes the offset transfer functions and allocates all buffers, and starts
+    /// three colour worker threads.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`size`) for a size of 0 or above
+    /// [`super::MAX_HOLOGRAM_PIXELS`], checked first; as [`crate::model::HologramModel::plan`],
+    /// [`crate::optics::SpectralPlan::new`] and [`ChannelEncoder::new`].
+    pub fn session(&self, height: usize, width: usize) -> Result<HologramSession> {
+        HologramSession::new(self, height, width)
+    }
+}
+
+impl HologramSession {
+    pub(super) fn new(pipeline: &HologramPipeline, height: usize, width: usize) -> Result<Self> {
+        // Before any allocation: a session holds several [3, H, W] complex fields and the CNN's activations.
+        if height == 0 || width == 0 || height.saturating_mul(width) > MAX_HOLOGRAM_PIXELS {
+            return Err(invalid(
+                "size",
+                format!(
+                    "{height}×{width}: a session needs 1 to {} pixels (8192×8192)",
+                    MAX_HOLOGRAM_PIXELS
+                ),
+            ));
+        }
+        let calibration = pipeline.calibration().cloned();
+        if let Some(cal) = &calibration {
+            cal.check_size(height, width)?;
+        }
+        let (parts, accelerator) = choose_backend(pipeline, height, width)?;
+        let backend = BackendReport {
+            requested: parts.requested,
+            active: if accelerator.is_some() {
+                Backend::Gpu
+            } else {
+                Backend::Cpu
+            },
+            reason: parts.reason,
+            adapter: parts.adapter,
+            gpu_precision: if accelerator.is_some() {
+                parts.gpu_precision
+            } else {
+                None
+            },
+            self_check: None,
+        };
+        log::info!(
+            "backend for {height}×{width}: {} ({})",
+            backend.active,
+            backend.reason
+        );
+        let request = PlanRequest {
+            layout: pipeline.config().cnn_layout,
+            threads: pipeline.config().cnn_threads,
+        };
+        let (hologram, plan_report) = pipeline
+            .hologram_model()
+            .tuned_plan(height, width, request)?;
+        let prefilter: Option<Box<dyn CnnPlan>> = match pipeline.prefilter_model() {
+            Some(p) => {
+                let plan = p.plan(height, width)?;
+                Some(Box::new(match plan_report.threads {
+                    Some(t) => plan.with_threads(t)?,
+                    None => plan,
+                }))
+            }
+            None => None,
+        };
+        let cfg = pipeline.config();
+        let encoding = pipeline.encoding();
+        let props = cfg.optics.propagators(height, width, cfg.options)?;
+        let n = height * width;
+        let mut states: [Option<Box<ColourState>>; 3] = [None, None, None];
+        for (colour, (slot, prop)) in states.iter_mut().zip(&props).enumerate() {
+            let transfer = if cfg.offset_m != 0.0 {
+                Some(
+                    prop.transfer_function(cfg.offset_m, Carrier::Remove)?
+                        .values()
+                        .to_vec(),
+                )
+            } else {
+                None
+            };
+            *slot = Some(Box::new(ColourState {
+                planes: [vec![0.0; n], vec![0.0; n]],
+                field: vec![Complex32::default(); n],
+                plan: prop.plan().clone(),
+                transfer,
+                scratch: prop.plan().scratch(),
+                encoder: ChannelEncoder::new(height, width, encoding)?,
+                phase: vec![0.0; n],
+                codes: vec![0; n],
+                stats: ChannelStats::default(),
+                colour,
+                size: (height, width),
+                calibration: calibration.clone(),
+            }));
+        }
+        let (c, _, _) = hologram.input_dim();
+        Ok(Self {
+            height,
+            width,
+            encoding,
+            offset_m: cfg.offset_m,
+            cnn: CnnStage {
+                plan: Box::new(hologram),
+                input: Array3::zeros((c, height, width)),
+                calibration: calibration.clone(),
+            },
+            prefilter_input: Array3::zeros((
+                if prefilter.is_some() { 6 } else { 0 },
+                height,
+                width,
+            )),
+            prefilter,
+            states,
+            workers: ColourWorkers::start()?,
+            output: SlmFrame {
+                codes: Array3::zeros((3, height, width)),
+                phase: Array3::zeros((3, height, width)),
+                amplitude_scale: 0.0,
+                mean_phase: [0.0; 3],
+                timings: FrameTimings::default(),
+                backend: Backend::Cpu,
+            },
+            last_heads: None,
+            plan_report,
+            backend,
+            full_outputs: true,
+            calibration,
+            wavelengths_m: cfg.optics.wavelengths_m,
+            accelerator,
+        })
+    }
+
+    /// Replaces the display calibration of this session's next frames (`None`: an ideal SLM, linear look-up
+    /// tables and no intensity scaling), e.g. after recalibrating the bench, without rebuilding the session.
+    /// See [`HologramPipeline::with_calibration`].
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] if the calibration is for another SLM size;
+    /// [`HoloError::InvalidParameter`] if its wavelengths differ from the display's by more than 1 nm. The
+    /// session keeps its calibration on error.
+    pub fn set_calibration(&mut self, calibration: Option<Arc<DisplayCalibration>>) -> Result<()> {
+        if let Some(cal) = &calibration {
+            cal.check_size(self.height, self.width)?;
+            check_calibration_wavelengths(cal, &self.wavelengths_m)?;
+        }
+        for slot in &mut self.states {
+            slot.as_mut().ok_or_else(lost_state)?.calibration = calibration.clone();
+        }
+        self.cnn.calibration = calibration.clone();
+        self.calibration = calibration;
+        Ok(())
+    }
+
+    /// The display calibration this session applies, if any.
+    pub fn calibration(&self) -> Option<&Arc<DisplayCalibration>> {
+        self.calibration.as_ref()
+    }
+
+    /// Which backend runs this session's frames, and why ([`Backend`]).
+    pub fn backend_report(&self) -> &BackendReport {
+        &self.backend
+    }
+
+    /// The GPU frame while the GPU backend is active (for `holo bench --backend gpu`: its stages' work and
+    /// timings).
+    #[cfg(feature = "gpu")]
+    pub fn gpu_frame(&self) -> Option<&crate::gpu::session::GpuFrameSession> {
+        let a = self.accelerator.as_ref()?;
+        a.executor.as_any().downcast_ref()
+    }
+
+    /// The GPU frame, mutable (for [`crate::gpu::session::GpuFrameSession::preview`]).
+    #[cfg(feature = "gpu")]
+    pub fn gpu_frame_mut(&mut self) -> Option<&mut crate::gpu::session::GpuFrameSession> {
+        let a = self.accelerator.as_mut()?;
+        a.executor.as_any_mut().downcast_mut()
+    }
+
+    /// What a viewer sees focused at `focus` (normalised depth) from `codes` `[3, H, W]` shown with normaliser
+    /// `amplitude_scale`, computed by the accelerator that runs this session's frames (amplitudes
+    /// `[3, H, W]`, Eq. 8–10); `None` where the CPU runs them (the caller computes it on the CPU).
+    pub(crate) fn preview_on_accelerator(
+        &mut self,
+        codes: &Array3<u8>,
+        amplitude_scale: f32,
+        focus: f64,
+    ) -> Option<Result<Array3<f32>>> {
+        let a = self.accelerator.as_mut()?;
+        Some(a.executor.preview(codes, amplitude_scale, focus))
+    }
+
+    /// Whether GPU frames also download the double phase pattern ([`SlmFrame::phase`]) and the CNN heads
+    /// ([`HologramSession::last_heads`]); on by default. Off, a GPU frame downloads only the codes and the
+    /// normaliser (what an SLM needs): `phase` and `last_heads` then keep older values. No effect on the CPU.
+    pub fn set_full_outputs(&mut self, full: bool) {
+        self.full_outputs = full;
+    }
+
+    /// How the hologram CNN's plan was chosen: layout, threads, and the autotuning timings
+    /// ([`HologramModel::tuned_plan`]). The pre-filter CNN runs channels-first with the same threads.
+    pub fn plan_report(&self) -> &PlanReport {
+        &self.plan_report
+    }
+
+    /// `(height, width)` of this session's frames.
+    pub fn size(&self) -> (usize, usize) {
+        (self.height, self.width)
+    }
+
+    /// The SLM offset `s` in metres.
+    pub fn offset_m(&self) -> f64 {
+        self.offset_m
+    }
+
+    /// The double phase method (plain after a pre-filter CNN).
+    pub fn encoding(&self) -> DoublePhaseMethod {
+        self.encoding
+    }
+
+    /// Whether a pre-filter CNN runs between offset propagation and double phase encoding (DDPM).
+    pub fn has_prefilter(&self) -> bool {
+        self.prefilter.is_some()
+    }
+
+    /// The output of the last successful frame (codes all zero before the first).
+    pub fn output(&self) -> &SlmFrame {
+        &self.output
+    }
+
+    /// The hologram CNN heads of the last successful frame (the midpoint hologram; [`Heads::to_field`]).
+    pub fn last_heads(&self) -> Option<&Heads> {
+        self.last_heads.as_ref()
+    }
+
+    /// Renders one RGB-D frame (`[3, H, W]` amplitude and `[H, W]` normalised depth at the session's size)
+    /// into SLM patterns.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for a frame of another size; [`HoloError::InvalidData`] for
+    /// non-finite values or a black frame (every amplitude ≤ [`BLACK_FRAME_AMPLITUDE`]: the CNN would
+    /// only show its bias); [`HoloError::InvalidParameter`] if the CNN takes an LDI; tract failures
+    /// ([`HoloError::ModelRun`]). The session stays usable after an error.
+    pub fn render(&mut self, frame: &RgbdFrame) -> Result<&SlmFrame> {
+        if self.accelerator.is_some() {
+            let t = Instant::now();
+            self.cnn.pack_frame(frame)?;
+            return self.render_packed_on_accelerator(t);
+        }
+        let (heads, cnn_s) = self.cnn.run_frame(frame)?;
+        self.encode_heads(heads, cnn_s)
+    }
+
+    /// The GPU frame of the CNN input packed in `self.cnn.input` (packing started at `t`): runs it on the GPU,
+    /// with the first-frame self-check of [`Backend::Auto`]; on a GPU failure, re-renders it on the CPU and
+    /// stays there.
+    pub(super) fn render_packed_on_accelerator(&mut self, t: Instant) -> Result<&SlmFrame> {
+        let Some(gpu) = self.accelerator.as_mut() else {
+            return Err(HoloError::Internal("no accelerator".into()));
+        };
+        // The CPU path catches NaN/∞ in the CNN's heads; a GPU's max() may silently skip NaN, so check the
+        // input here (4 values per pixel, well under a millisecond at 1080p).
+        if self.cnn.input.iter().any(|v| !v.is_finite()) {
+            return Err(HoloError::InvalidData(
+                "the RGB-D frame holds NaN or infinite values".into(),
+            ));
+        }
+        let cnn_s = t.elapsed().as_secs_f64();
+        let t_gpu = Instant::now();
+        // A calibrated look-up table runs on the CPU, on the downloaded double phase pattern.
+        let calibrated = self
+            .calibration
+            .as_ref()
+            .is_some_and(|c| c.has_calibrated_lut());
+        let full = self.full_outputs || gpu.pending_check || calibrated;
+        match gpu
+            .executor
+            .run(self.cnn.input.view(), &mut self.output, full)
+        {
+            Ok(heads) => {
+                if calibrated {
+                    apply_calibrated_luts(self.calibration.as_ref(), &mut self.output)?;
+                }
+                let gpu_s = t_gpu.elapsed().as_secs_f64();
+                self.output.backend = Backend::Gpu;
+                self.output.timings = FrameTimings {
+                    cnn_s,
+                    gpu_s,
+                    total_s: t.elapsed().as_secs_f64(),
+                    ..FrameTimings::default()
+                };
+                if heads.is_some() {
+                    self.last_heads = heads;
+                }
+                if gpu.pending_check {
+                    self.self_check()?;
+                }
+                Ok(&self.output)
+            }
+            Err(HoloError::Gpu(e)) => {
+                log::warn!("GPU frame failed ({e}); this frame and the next run on the CPU");
+                self.accelerator = None;
+                self.backend.active = Backend::Cpu;
+                self.backend.gpu_precision = None;
+                self.backend.reason = format!("GPU failed mid-stream, CPU since: {e}");
+                let (heads, cnn_s) = self.cnn.run(t)?;
+                self.encode_heads(heads, cnn_s)
+            }
+            // Bad data (e.g. a hologram that is zero everywhere) is the frame's fault, not the GPU's.
+            Err(e) => Err(e),
+        }
+    }
+
+    /// The self-check of [`Backend::Auto`] after the GPU rendered the first frame into `self.output`: renders
+    /// it on the CPU too, compares the codes ([`SelfCheck`]), and keeps the GPU (and its output) only if they
+    /// agree; otherwise the CPU's output stands and the session stays on the CPU.
+    fn self_check(&mut self) -> Result<()> {
+        let gpu_output = self.output.clone();
+        let gpu_heads = self.last_heads.take();
+        let (heads, cnn_s) = self.cnn.run(Instant::now())?;
+        self.encode_heads(heads, cnn_s)?;
+        let check = SelfCheck::compare(&gpu_output.codes, &self.output.codes);
+        self.backend.self_check = Some(check);
+        if check.passed {
+            self.backend.reason = format!(
+                "GPU self-check passed ({} of {} codes off by more than one step)",
+                check.codes_off_by_more_than_one, check.codes
+            );
+            self.output = gpu_output;
+            self.last_heads = gpu_heads;
+            if let Some(g) = self.accelerator.as_mut() {
+                g.pending_check = false;
+            }
+        } else {
+            self.backend.reason = format!(
+                "GPU self-check failed ({} of {} codes off by more than one step, max {}): CPU",
+                check.codes_off_by_more_than_one, check.codes, check.max_code_difference
+            );
+            self.backend.active = Backend::Cpu;
+            self.backend.gpu_precision = None;
+            self.accelerator = None;
+        }
+        log::info!("{}", self.backend.reason);
+        Ok(())
+    }
+
+    /// Renders a layered depth image (the LDI-input CNN of the paper; layers `[r, g, b, d]` each).
+    ///
+    /// Errors: as [`HologramSession::render`], and [`HoloError::InvalidParameter`] if the number of layers is
+    /// not the CNN's.
+    pub fn render_ldi(&mut self, ldi: &LayeredDepthImage) -> Result<&SlmFrame> {
+        if self.accelerator.is_some() {
+            let t = Instant::now();
+            self.cnn.pack_ldi(ldi)?;
+            return self.render_packed_on_accelerator(t);
+        }
+        let (heads, cnn_s) = self.cnn.run_ldi(ldi)?;
+        self.encode_heads(heads, cnn_s)
+    }
+
+    /// Runs the stages after the hologram CNN on `heads` (midpoint hologram): offset propagation, pre-filter
+    /// CNN, double phase encoding and LUT. `cnn_s` is recorded as the CNN time of this frame.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for heads of another size; [`HoloError::InvalidData`] for
+    /// non-finite heads or a hologram that is zero everywhere.
+    pub fn encode_heads(&mut self, heads: Heads, cnn_s: f64) -> Result<&SlmFrame> {
+        let t0 = Instant::now();
+        self.propagate_to_slm(&heads)?;
+        let offset_s = t0.elapsed().as_secs_f64();
+        let t = Instant::now();
+        self.run_prefilter()?;
+        let prefilter_s = if self.prefilter.is_some() {
+            t.elapsed().as_secs_f64()
+        } else {
+            0.0
+        };
+        let t = Instant::now();
+        self.encode()?;
+        let encoding_s = t.elapsed().as_secs_f64();
+        self.output.timings = FrameTimings {
+            cnn_s,
+            offset_s,
+            prefilter_s,
+            encoding_s,
+            gpu_s: 0.0,
+            total_s: cnn_s + t0.elapsed().as_secs_f64(),
+        };
+        self.output.backend = Backend::Cpu;
+        self.last_heads = Some(heads);
+        Ok(&self.output)
+    }
+
+    /// Stage 2 on its own (no heap allocation after the first frame): copies the midpoint `heads` into the
+    /// colour states; the workers convert them to the field, propagate it to the SLM (Eq. 6, carrier removed)
+    /// and either prepare the pre-filter input or run pass 1 of the double phase encoding. Follow with
+    /// [`HologramSession::run_prefilter`] and [`HologramSession::encode`] ([`HologramSession::encode_heads`]
+    /// does all three).
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for heads of another size; [`HoloError::InvalidData`] for
+    /// non-finite values.
+    pub fn propagate_to_slm(&mut self, heads: &Heads) -> Result<()> {
+        let want = [3, self.height, self.width];
+        for head in [&heads.amplitude, &heads.phase] {
+            if head.shape() != want {
+                return Err(HoloError::ShapeMismatch {
+                    what: "midpoint heads vs the session's [3, H, W]".into(),
+                    expected: want.to_vec(),
+                    got: head.shape().to_vec(),
+                });
+            }
+        }
+        let non_finite = heads
+            .amplitude
+            .iter()
+            .chain(heads.phase.iter())
+            .any(|v| !v.is_finite());
+        if non_finite {
+            return Err(HoloError::InvalidData(
+                "midpoint heads hold NaN or infinite values".into(),
+            ));
+        }
+        self.load_planes(heads.amplitude.view(), heads.phase.view())?;
+        let prefilter = self.prefilter.is_some();
+        self.workers
+            .run(&mut self.states, |_| Task::Midpoint { prefilter })
+    }
+
+    /// Copies channel `c` of `first` and `second` (`[3, H, W]`) into colour `c`'s two planes.
+    fn load_planes(&mut self, first: ArrayView3<f32>, second: ArrayView3<f32>) -> Result<()> {
+        for (c, slot) in self.states.iter_mut().enumerate() {
+            let st = slot.as_mut().ok_or_else(lost_state)?;
+            copy_channel(first, c, &mut st.planes[0]);
+            copy_channel(second, c, &mut st.planes[1]);
+        }
+        Ok(())
+    }
+
+    /// Stage 3 on its own: the pre-filter CNN (allocates inside tract), if the session has one: packs
+    /// `[Re H, Im H]` of the offset hologram (`docs/CONVENTIONS.md` §7.2, format 2), runs it and lets the
+    /// workers turn its outputs `(Re H', Im H')` into the filtered field and run pass 1 of the encoding. A
+    /// no-op without a pre-filter.
+    ///
+    /// Errors: tract failures ([`HoloError::ModelRun`]); call after [`HologramSession::propagate_to_slm`].
+    pub fn run_prefilter(&mut self) -> Result<()> {
+        let Some(plan) = &mut self.prefilter else {
+            return Ok(());
+        };
+        for (c, slot) in self.states.iter().enumerate() {
+            let st = slot.as_ref().ok_or_else(lost_state)?;
+            contract::pack_prefilter_colour(
+                c,
+                &st.planes[0],
+                &st.planes[1],
+                self.prefilter_input.view_mut(),
+            )?;
+        }
+        let (real, imag) = plan.run_outputs(self.prefilter_input.view())?;
+        self.load_planes(real.view(), imag.view())?;
+        self.workers.run(&mut self.states, |_| Task::Filtered)
+    }
+
+    /// Stage 4 on its own (no heap allocation after the first frame): the global normaliser, pass 2 of the
+    /// double phase encoding (Eq. 7) and the LUT on the workers; the colour planes are copied into
+    /// [`HologramSession::output`] (timings are not updated).
+    ///
+    /// Errors: [`HoloError::InvalidData`] if the hologram is zero everywhere.
+    pub fn encode(&mut self) -> Result<&SlmFrame> {
+        let mut stats = [ChannelStats::default(); 3];
+        for (s, slot) in stats.iter_mut().zip(&self.states) {
+            *s = slot.as_ref().ok_or_else(lost_state)?.stats;
+        }
+        let (a, mean) = normaliser(&stats, self.height * self.width)?;
+        self.workers.run(&mut self.states, |c| Task::Encode {
+            mean_phase: mean[c],
+            amplitude_scale: a,
+        })?;
+        for (c, slot) in self.states.iter().enumerate() {
+            let st = slot.as_ref().ok_or_else(lost_state)?;
+            fill_channel(&mut self.output.phase, c, &st.phase);
+            fill_channel(&mut self.output.codes, c, &st.codes);
+        }
+        self.output.amplitude_scale = a;
+        self.output.mean_phase = mean;
+        Ok(&self.output)
+    }
+}
+
+/// Replaces `out.codes` by the calibrated look-up tables' codes of `out.phase` (colours with a linear table
+/// keep theirs).
+fn apply_calibrated_luts(cal: Option<&Arc<DisplayCalibration>>, out: &mut SlmFrame) -> Result<()> {
+    let (_, h, w) = out.codes.dim();
+    for c in 0..3 {
+        let Some(lut) = calibrated_lut(cal, c) else {
+            continue;
+        };
+        let phase = out.phase.index_axis(Axis(0), c);
+        let mut codes = out.codes.index_axis_mut(Axis(0), c);
+        match (phase.as_slice(), codes.as_slice_mut()) {
+            (Some(p), Some(k)) => lut.apply(h, w, p, k)?,
+            _ => return Err(HoloError::Internal("SLM frame not contiguous".into())),
+        }
+    }
+    Ok(())
+}
