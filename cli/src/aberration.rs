@@ -36,7 +36,7 @@ pub fn check_cost(propagations: usize, levels: usize, what: &str) -> Result<()> 
 /// The report/manifest entry of a correction: the file, the offset, the coefficients.
 pub fn report(path: &Path, synthesis: &AberrationCorrectedSmLbm, propagations: usize) -> Value {
     json!({
-        "file": path,
+        "file": crate::output::path_text(path),
         "slm_offset_m": synthesis.correction.slm_offset_m,
         "profile": synthesis.correction.profile,
         "propagations_per_colour": propagations,

@@ -238,6 +238,14 @@ impl SceneArgs {
             .collect()
     }
 
+    /// The input files for the output guard ([`crate::output::guard`]), with their flags.
+    pub fn guard_inputs(&self) -> Vec<crate::output::Input<'_>> {
+        [("--rgb", &self.rgb), ("--depth", &self.depth)]
+            .into_iter()
+            .filter_map(|(flag, p)| Some(crate::output::Input::file(flag, p.as_deref()?)))
+            .collect()
+    }
+
     /// Loads the RGB-D input or builds the procedural scene (`ldi` only changes the description); returns
     /// it with a JSON description of its source.
     pub fn load(&self, ldi: bool) -> Result<(RgbdFrame, serde_json::Value)> {
@@ -267,7 +275,12 @@ impl SceneArgs {
                 let (frame, report) = load_rgbd(rgb, depth, encoding, &options)?;
                 Ok((
                     frame,
-                    json!({"kind": "rgbd-files", "rgb": rgb, "depth": depth, "depth_report": report}),
+                    json!({
+                        "kind": "rgbd-files",
+                        "rgb": crate::output::path_text(rgb),
+                        "depth": crate::output::path_text(depth),
+                        "depth_report": report,
+                    }),
                 ))
             }
             (None, None, _) => {

@@ -278,12 +278,6 @@ pub fn run(args: &BaselinesArgs) -> Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| args.dataset.join("baselines"));
-    if ensure_not_input(&out, &[&args.dataset]).is_err() {
-        bail!(
-            "--out `{}` is the dataset folder itself; choose another folder (default: DATASET/baselines)",
-            out.display()
-        );
-    }
 
     let setup = OpticalSetup {
         wavelengths_m: manifest.optics.wavelengths_m,
@@ -329,6 +323,19 @@ pub fn run(args: &BaselinesArgs) -> Result<()> {
         maimone_dir: out.join(MAIMONE_FOLDER),
         inputs,
     };
+    // The output may lie inside the dataset folder (the default, DATASET/baselines) but be neither the
+    // folder nor hold it or any of its files.
+    let mut guarded = vec![crate::output::Input {
+        flag: "--dataset",
+        path: &args.dataset,
+        kind: crate::output::InputKind::FolderMayHoldOut,
+    }];
+    guarded.extend(
+        plan.inputs
+            .iter()
+            .map(|p| crate::output::Input::file("--dataset", p)),
+    );
+    crate::output::guard("--out", &out, &guarded)?;
     let report_path = out.join(REPORT_FILE);
     {
         let inputs: Vec<&Path> = plan.inputs.iter().map(PathBuf::as_path).collect();
@@ -415,7 +422,7 @@ pub fn run(args: &BaselinesArgs) -> Result<()> {
         "format_version": 1,
         "tensorholo_version": env!("CARGO_PKG_VERSION"),
         "command": crate::output::command_line(),
-        "dataset": args.dataset,
+        "dataset": crate::output::path_text(&args.dataset),
         "dataset_git_commit": manifest.generator.git_commit,
         "split": args.split,
         "count": count,

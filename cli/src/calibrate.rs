@@ -19,6 +19,25 @@ use tensorholo::slm::{
 };
 
 use crate::args::parse_size;
+use crate::output::{guard, Input};
+
+/// The `--red`, `--green`, `--blue` inputs that are given, as guard inputs of `kind`.
+fn colour_inputs<'a>(
+    paths: [&'a Option<PathBuf>; 3],
+    folder: bool,
+) -> impl Iterator<Item = Input<'a>> {
+    ["--red", "--green", "--blue"]
+        .into_iter()
+        .zip(paths)
+        .filter_map(move |(flag, p)| {
+            let p = p.as_deref()?;
+            Some(if folder {
+                Input::folder(flag, p)
+            } else {
+                Input::file(flag, p)
+            })
+        })
+}
 
 /// `holo calibrate` subcommands.
 #[derive(Debug, Args)]
@@ -212,9 +231,9 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
                     "give the captures of at least one colour: --red DIR, --green DIR, --blue DIR"
                 );
             }
-            for dir in [red, green, blue].into_iter().flatten() {
-                tensorholo::io::ensure_not_input(out, &[dir.as_path()])?;
-            }
+            // Captures are folders: the calibration file may be neither one nor inside one.
+            let inputs: Vec<Input> = colour_inputs([red, green, blue], true).collect();
+            guard("--out", out, &inputs)?;
             let mut cal = DisplayCalibration::linear(size.0, size.1)?;
             set_wavelengths(&mut cal, wavelengths_m)?;
             let options = CalibrationOptions {
@@ -286,8 +305,12 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             out,
         } => {
             let csvs = [red_csv, green_csv, blue_csv];
-            let inputs: Vec<&std::path::Path> = csvs.iter().filter_map(|c| c.as_deref()).collect();
-            tensorholo::io::ensure_not_input(out, &inputs)?;
+            let inputs: Vec<Input> = ["--red-csv", "--green-csv", "--blue-csv"]
+                .into_iter()
+                .zip(csvs)
+                .filter_map(|(flag, c)| Some(Input::file(flag, c.as_deref()?)))
+                .collect();
+            guard("--out", out, &inputs)?;
             let mut cal = DisplayCalibration::linear(size.0, size.1)?;
             set_wavelengths(&mut cal, wavelengths_m)?;
             let model = match (range_rad, gamma) {
@@ -318,7 +341,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         }
         CalibrateCommand::Curves { file, color, out } => {
             let c = colour_index(color)?;
-            tensorholo::io::ensure_not_input(out, &[file.as_path()])?;
+            guard("--out", out, &[Input::file("FILE", file)])?;
             let cal = DisplayCalibration::read(file)?;
             let (h, w) = (cal.height, cal.width);
             let lut = &cal.colours[c].lut;
@@ -369,16 +392,13 @@ fn intensity(
     floor_percentile: f32,
     out: &std::path::Path,
 ) -> Result<()> {
+    let mut inputs: Vec<Input> = colour_inputs(captures, false).collect();
+    inputs.extend(base.map(|b| Input::file("--base", b)));
+    guard("--out", out, &inputs)?;
     let crop: Option<Crop> = crop.map(str::parse).transpose()?;
     if captures.iter().all(|c| c.is_none()) {
         bail!("give the diffuser capture of at least one colour: --red FILE, --green FILE, --blue FILE");
     }
-    let inputs: Vec<&std::path::Path> = captures
-        .iter()
-        .filter_map(|c| c.as_deref())
-        .chain(base)
-        .collect();
-    tensorholo::io::ensure_not_input(out, &inputs)?;
     let mut cal = match (base, size) {
         (Some(b), _) => DisplayCalibration::read(b)?,
         (None, Some((h, w))) => DisplayCalibration::linear(h, w)?,
@@ -410,7 +430,7 @@ fn intensity(
 
 /// `holo calibrate black`.
 fn black(file: &std::path::Path, out: &std::path::Path) -> Result<()> {
-    tensorholo::io::ensure_not_input(out, &[file])?;
+    guard("--out", out, &[Input::file("FILE", file)])?;
     let cal = DisplayCalibration::read(file)?;
     let (h, w) = (cal.height, cal.width);
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;

@@ -230,6 +230,18 @@ fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
 
 /// Runs `holo dataset`.
 pub fn run(args: &DatasetArgs) -> Result<()> {
+    let inputs: Vec<crate::output::Input> = [
+        args.photos
+            .as_deref()
+            .map(|p| crate::output::Input::folder("--photos", p)),
+        args.aberration
+            .as_deref()
+            .map(|p| crate::output::Input::file("--aberration", p)),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    crate::output::guard("--out", &args.out, &inputs)?;
     let config = config(args)?;
     if args.out.join(MANIFEST_FILE).exists() && !args.force {
         bail!(

@@ -65,6 +65,11 @@ fn stack(planes: &[ndarray::Array3<f32>]) -> Result<Array4<f32>> {
 
 /// Runs `holo encode`.
 pub fn run(args: &EncodeArgs) -> Result<()> {
+    crate::output::guard(
+        "--out",
+        &args.out,
+        &[crate::output::Input::file("--input", &args.input)],
+    )?;
     if !args.offset_mm.is_finite() {
         bail!("--offset-mm must be a finite number of millimetres");
     }
@@ -111,7 +116,7 @@ pub fn run(args: &EncodeArgs) -> Result<()> {
     let report = json!({
         "tensorholo_version": env!("CARGO_PKG_VERSION"),
         "command": crate::output::command_line(),
-        "input": args.input,
+        "input": crate::output::path_text(&args.input),
         "size": [h, w],
         "setup": setup,
         "offset_m": offset_m,

@@ -125,7 +125,10 @@ fn main() {
         Ok(Ok(())) => {}
         Ok(Err(err)) => {
             eprintln!("error: {err:#}");
-            std::process::exit(1);
+            // The output guard's refusal is a usage error (the command line names an output among its
+            // inputs), like the argument parser's: exit code 2. Every other refusal: 1.
+            let usage = err.chain().any(|e| e.is::<output::OutputGuard>());
+            std::process::exit(if usage { output::EXIT_USAGE } else { 1 });
         }
         Err(_) => {
             eprintln!(

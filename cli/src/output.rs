@@ -1,13 +1,15 @@
 //! The files `holo reference` and `holo render` both write: SLM patterns, midpoint hologram, focal previews,
 //! the scene itself and a report.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use ndarray::{Array3, ArrayView3, Axis};
 use num_complex::Complex32;
 use serde_json::json;
-use tensorholo::io::{ensure_not_input, save_amplitude_png, save_u8_png, write_complex_npy};
+use tensorholo::io::{
+    ensure_not_input, resolve, save_amplitude_png, save_u8_png, write_complex_npy,
+};
 use tensorholo::metrics::{psnr, ssim_multichannel};
 use tensorholo::optics::OpticalSetup;
 use tensorholo::reference::channel_means;
@@ -50,11 +52,142 @@ pub fn command_line() -> Vec<String> {
         .collect()
 }
 
-/// Refuses an output folder whose files would overwrite an input; creates it and removes a previous run's
-/// `report.json` ([`start_run`]).
-pub fn prepare(out: &Path, inputs: &[&Path]) -> Result<()> {
+/// A path as report text: lossy where it is not UTF-8 (U+FFFD where its bytes are not text), never a panic
+/// (`serde_json::json!` on a `Path` panics on such a name).
+pub fn path_text(path: &Path) -> String {
+    path.to_string_lossy().into_owned()
+}
+
+/// The output guard's refusal: `--out` is, lies inside or holds an input. A usage error, like the argument
+/// parser's: `main` exits with code 2 on it ([`EXIT_USAGE`]).
+#[derive(Debug)]
+pub struct OutputGuard(pub String);
+
+impl std::fmt::Display for OutputGuard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for OutputGuard {}
+
+/// Exit code of a usage error: the argument parser's, and the output guard's ([`OutputGuard`]).
+pub const EXIT_USAGE: i32 = 2;
+
+/// What an input path is to the output guard ([`guard`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InputKind {
+    /// A file (image, depth map, `.npy`, model, calibration, CSV, capture).
+    File,
+    /// A folder whose files are inputs (`--rgb-dir`, `--photos`, calibration captures): the output may be
+    /// neither it, nor inside it, nor a folder holding it.
+    Folder,
+    /// A folder that the output may lie inside but not be or hold (`baselines`' dataset folder, whose default
+    /// output is `DATASET/baselines`; its files are given to the guard as [`InputKind::File`]s).
+    FolderMayHoldOut,
+}
+
+/// One input path of a command, with the flag that named it.
+#[derive(Debug, Clone, Copy)]
+pub struct Input<'a> {
+    /// The flag (`--rgb`, `--rgb-dir`, `FILE`), for the message.
+    pub flag: &'a str,
+    /// The path as given.
+    pub path: &'a Path,
+    /// File or folder.
+    pub kind: InputKind,
+}
+
+impl<'a> Input<'a> {
+    /// An input file.
+    pub fn file(flag: &'a str, path: &'a Path) -> Self {
+        Self {
+            flag,
+            path,
+            kind: InputKind::File,
+        }
+    }
+
+    /// An input folder.
+    pub fn folder(flag: &'a str, path: &'a Path) -> Self {
+        Self {
+            flag,
+            path,
+            kind: InputKind::Folder,
+        }
+    }
+}
+
+/// Where the entry `path` itself lives: its parent resolved, then its own name. Unlike [`resolve`] this does
+/// not follow a final symbolic link, so an input that is a link inside `--out` counts as inside it.
+fn resolve_entry(path: &Path) -> PathBuf {
+    match (path.parent(), path.file_name()) {
+        (Some(parent), Some(name)) => {
+            let parent = if parent.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                parent
+            };
+            resolve(parent).join(name)
+        }
+        _ => resolve(path),
+    }
+}
+
+/// The output guard of every `holo` command: refuses an output (`--out` folder or output file, flag
+/// `out_flag`) that
+///
+/// - is an input (file or folder),
+/// - lies inside an input folder (the run would write among the inputs), or
+/// - holds an input, file or folder, anywhere below it (the run writes beside the input and could replace it).
+///
+/// Paths are compared resolved ([`resolve`]: symbolic links, `.`/`..`, relative spellings; an output that
+/// does not exist yet through its nearest existing ancestor). Call it first, before anything is created or
+/// written. The refusal is an [`OutputGuard`] naming both paths (exit code 2).
+pub fn guard(out_flag: &str, out: &Path, inputs: &[Input]) -> Result<()> {
+    let out_resolved = resolve(out);
+    let refuse = |what: String, input: &Input| -> Result<()> {
+        Err(OutputGuard(format!(
+            "{out_flag} `{}` {what} `{}` ({}): refusing to overwrite inputs or write among them; choose an \
+             output outside every input",
+            out.display(),
+            input.path.display(),
+            input.flag
+        ))
+        .into())
+    };
+    for input in inputs {
+        let resolved = resolve(input.path);
+        let entry = resolve_entry(input.path);
+        let is_folder = input.kind == InputKind::Folder || resolved.is_dir();
+        let noun = if is_folder || input.kind == InputKind::FolderMayHoldOut {
+            "input folder"
+        } else {
+            "input"
+        };
+        if resolved == out_resolved || entry == out_resolved {
+            return refuse(format!("is the {noun}"), input);
+        }
+        if is_folder
+            && input.kind != InputKind::FolderMayHoldOut
+            && out_resolved.starts_with(&resolved)
+        {
+            return refuse("lies inside the input folder".into(), input);
+        }
+        if resolved.starts_with(&out_resolved) || entry.starts_with(&out_resolved) {
+            return refuse(format!("holds the {noun}"), input);
+        }
+    }
+    Ok(())
+}
+
+/// Refuses an output folder that is, lies inside or holds an input ([`guard`]) or whose files would overwrite
+/// an input; creates it and removes a previous run's `report.json` ([`start_run`]).
+pub fn prepare(out: &Path, inputs: &[Input]) -> Result<()> {
+    guard("--out", out, inputs)?;
+    let paths: Vec<&Path> = inputs.iter().map(|i| i.path).collect();
     for name in OUTPUTS {
-        ensure_not_input(&out.join(name), inputs)?;
+        ensure_not_input(&out.join(name), &paths)?;
     }
     start_run(out, &[], Some(&out.join("report.json")))
 }

@@ -39,6 +39,11 @@ pub struct PropagateArgs {
 
 /// Runs `holo propagate`.
 pub fn run(args: &PropagateArgs) -> Result<()> {
+    crate::output::guard(
+        "--output",
+        &args.output,
+        &[crate::output::Input::file("--input", &args.input)],
+    )?;
     ensure_not_input(&args.output, &[&args.input])?;
     let mut field = read_complex_npy(&args.input)?;
     let (c, h, w) = field.dim();

@@ -89,12 +89,17 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         encoding,
     };
 
+    let mut inputs = args.scene.guard_inputs();
+    inputs.extend(
+        args.aberration
+            .as_deref()
+            .map(|p| crate::output::Input::file("--aberration", p)),
+    );
+    crate::output::guard("--out", &args.out, &inputs)?;
     let aberration = match &args.aberration {
         Some(path) => Some((path, crate::aberration::load(path)?)),
         None => None,
     };
-    let mut inputs = args.scene.inputs();
-    inputs.extend(args.aberration.iter().map(PathBuf::as_path));
     crate::output::prepare(&args.out, &inputs)?;
 
     let t = Instant::now();

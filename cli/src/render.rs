@@ -177,6 +177,19 @@ pub struct ModelArgs {
 }
 
 impl ModelArgs {
+    /// The input files (`--model`, `--prefilter-model`, `--calibration`) for the output guard
+    /// ([`crate::output::guard`]).
+    pub fn guard_inputs(&self) -> Vec<crate::output::Input<'_>> {
+        [
+            ("--model", &self.model),
+            ("--prefilter-model", &self.prefilter_model),
+            ("--calibration", &self.calibration),
+        ]
+        .into_iter()
+        .filter_map(|(flag, p)| Some(crate::output::Input::file(flag, p.as_deref()?)))
+        .collect()
+    }
+
     /// The selected weight format.
     pub fn precision(&self) -> Precision {
         match (self.int8, self.precision) {
@@ -273,7 +286,12 @@ impl ModelArgs {
         let info = json!({
             "source": match (&self.model, &self.prefilter_model) {
                 (None, None) => "shipped (embedded)".to_string(),
-                (m, p) => format!("files: {:?} {:?}", m, p),
+                (m, p) => {
+                    let name = |f: &Option<PathBuf>| {
+                        f.as_deref().map_or("none".to_string(), crate::output::path_text)
+                    };
+                    format!("files: {} {}", name(m), name(p))
+                }
             },
             "precision": precision,
             "prefilter_reason": pipeline.prefilter_reason(),
@@ -283,7 +301,7 @@ impl ModelArgs {
             "prefilter_cnn": pipeline.prefilter_model().map(describe),
             "encoding": pipeline.encoding(),
             "calibration": pipeline.calibration().map(|c| json!({
-                "file": self.calibration.as_ref().map(|p| p.display().to_string()),
+                "file": self.calibration.as_deref().map(crate::output::path_text),
                 "summary": c.summary(),
             })),
             "load_s": t.elapsed().as_secs_f64(),
@@ -331,7 +349,9 @@ Examples:
 /// Runs `holo render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let t_all = Instant::now();
-    crate::output::prepare(&args.out, &args.scene.inputs())?;
+    let mut inputs = args.scene.guard_inputs();
+    inputs.extend(args.model.guard_inputs());
+    crate::output::prepare(&args.out, &inputs)?;
     let t = Instant::now();
     let (frame, source) = args.scene.load(false)?;
     let load_s = t.elapsed().as_secs_f64();

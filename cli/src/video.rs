@@ -142,6 +142,12 @@ fn frame_file(frames_dir: &Path, i: usize, ch: &str) -> PathBuf {
 /// Runs `holo video`.
 pub fn run(args: &VideoArgs) -> Result<()> {
     let t_all = Instant::now();
+    let mut guarded = vec![
+        crate::output::Input::folder("--rgb-dir", &args.rgb_dir),
+        crate::output::Input::folder("--depth-dir", &args.depth_dir),
+    ];
+    guarded.extend(args.model.guard_inputs());
+    crate::output::guard("--out", &args.out, &guarded)?;
     let encoding = args
         .depth
         .depth_encoding
@@ -256,8 +262,8 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             }
             rows.push(json!({
                 "index": i,
-                "rgb": pairs[i].0,
-                "depth": pairs[i].1,
+                "rgb": crate::output::path_text(&pairs[i].0),
+                "depth": crate::output::path_text(&pairs[i].1),
                 "timings_s": t,
                 "backend": out.backend,
                 "amplitude_scale": out.amplitude_scale,

@@ -247,7 +247,7 @@ fn baselines_arguments_are_checked() {
         ),
         (
             &["baselines", "--dataset", ds, "--out", ds],
-            "dataset folder itself",
+            "is the input folder",
         ),
     ];
     for (args, needle) in cases {

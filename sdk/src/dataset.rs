@@ -608,7 +608,9 @@ pub struct SynthesisInfo {
 /// The aberration correction recorded in a manifest (`docs/ABERRATION.md`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AberrationInfo {
-    /// The profile file as given ([`GenerateOptions::aberration_file`]), if known.
+    /// The profile file as given ([`GenerateOptions::aberration_file`]), if known (written lossily if its
+    /// name is not UTF-8).
+    #[serde(serialize_with = "crate::io::lossy_path::option")]
     pub file: Option<PathBuf>,
     /// Signed distance in metres from the midpoint plane to the SLM plane; a plane at `z_N` is corrected with
     /// the coefficients at `z_N − slm_offset_m`.
@@ -721,7 +723,8 @@ pub struct Manifest {
     pub optics: OpticsInfo,
     /// Random-scene configuration.
     pub scene: RandomSceneConfig,
-    /// Photos used for textures (paths as given), empty without a photo folder.
+    /// Photos used for textures (paths as given, written lossily if not UTF-8), empty without a photo folder.
+    #[serde(serialize_with = "crate::io::lossy_path::list")]
     pub photos: Vec<PathBuf>,
     /// Samples per shard.
     pub shard_size: usize,

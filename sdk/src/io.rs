@@ -173,8 +173,9 @@ pub fn ensure_not_input(output: &Path, inputs: &[&Path]) -> Result<()> {
 }
 
 /// Best-effort absolute, normalised form of `p`: canonicalise the longest existing prefix, then append
-/// the rest with `.` dropped and `..` popped lexically.
-fn resolve(p: &Path) -> PathBuf {
+/// the rest with `.` dropped and `..` popped lexically. The form [`ensure_not_input`] compares; also what
+/// `holo`'s output guard compares folders in (an output folder inside, equal to or holding an input).
+pub fn resolve(p: &Path) -> PathBuf {
     if let Ok(c) = p.canonicalize() {
         return c;
     }
@@ -713,4 +714,34 @@ pub fn write_f32_npy_streaming(
         let _ = std::fs::remove_file(&tmp);
     }
     result
+}
+
+/// Serde helpers that write paths as text, lossily: a name that is not UTF-8 is written with U+FFFD where its
+/// bytes are not text, instead of failing (serde's own `Path` serialisation refuses such a name). For report
+/// and manifest fields (`#[serde(serialize_with = "...")]`); reading them back gives the lossy text as a path.
+pub mod lossy_path {
+    use std::path::{Path, PathBuf};
+
+    use serde::Serializer;
+
+    /// One path.
+    pub fn serialize<S: Serializer>(path: &Path, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.serialize_str(&path.to_string_lossy())
+    }
+
+    /// An optional path (`null` when absent).
+    pub fn option<S: Serializer>(
+        path: &Option<PathBuf>,
+        s: S,
+    ) -> std::result::Result<S::Ok, S::Error> {
+        match path {
+            Some(p) => s.serialize_some(&p.to_string_lossy()),
+            None => s.serialize_none(),
+        }
+    }
+
+    /// A list of paths.
+    pub fn list<S: Serializer>(paths: &[PathBuf], s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.collect_seq(paths.iter().map(|p| p.to_string_lossy()))
+    }
 }

@@ -74,7 +74,9 @@ pub struct RandomSceneConfig {
     pub background_tilt_probability: f32,
     /// Largest depth change of a tilted background across the image diagonal.
     pub max_background_tilt: f32,
-    /// Optional folder of photos (PNG, JPEG, PPM/PGM): textures may then be random crops of them.
+    /// Optional folder of photos (PNG, JPEG, PPM/PGM): textures may then be random crops of them. (Serialised
+    /// lossily if its name is not UTF-8.)
+    #[serde(serialize_with = "crate::io::lossy_path::option")]
     pub photo_folder: Option<PathBuf>,
     /// Probability that a texture is a photo crop when [`Self::photo_folder`] is set.
     pub photo_probability: f32,
