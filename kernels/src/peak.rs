@@ -1,0 +1,47 @@
+//! Measured single-thread peaks, to report kernels as a fraction of what the core can do.
+
+use crate::{conv3x3::registry, Isa, KernelError};
+use std::time::Instant;
+
+/// Measures the f32 FMA peak of one thread with the widest FMA of `isa`: independent FMA chains in registers,
+/// timed for about `millis` ms. Returns GFLOP/s (an FMA counts 2 FLOPs). Errors: `isa` not available.
+pub fn f32_fma_gflops(isa: Isa, millis: u64) -> Result<f64, KernelError> {
+    measure(millis, |iters| registry::run_peak_f32(isa, iters))
+}
+
+fn measure(
+    millis: u64,
+    mut run: impl FnMut(u64) -> Result<(f64, f32), KernelError>,
+) -> Result<f64, KernelError> {
+    let mut iters = 1u64 << 10;
+    let target = millis.max(1) as f64 / 1000.0;
+    loop {
+        let t = Instant::now();
+        let (ops, sink) = run(iters)?;
+        std::hint::black_box(sink);
+        let dt = t.elapsed().as_secs_f64();
+        if dt >= target || iters >= 1 << 40 {
+            return Ok(ops / dt / 1e9);
+        }
+        iters = (iters as f64 * (target / dt.max(1e-6)).clamp(2.0, 100.0) * 1.1) as u64;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn peaks_are_positive() {
+        for isa in Isa::available() {
+            let g = f32_fma_gflops(isa, 5).unwrap();
+            println!("f32 FMA peak {isa}: {g:.1} GFLOP/s");
+            assert!(g > 0.0);
+        }
+        for isa in Isa::ALL {
+            if !isa.is_available() {
+                assert!(f32_fma_gflops(isa, 1).is_err());
+            }
+        }
+    }
+}
