@@ -40,6 +40,17 @@ fn f32_rows(c: &mut Criterion) {
             println!("peak f32 FMA {isa}: {g:.1} GFLOP/s (1 thread)");
         }
     }
+    // The peak measured with the same harness, right before the kernels (same machine load).
+    let mut group = c.benchmark_group("peak_f32_fma");
+    for isa in Isa::available() {
+        let iters = 1 << 20;
+        let flops = peak::f32_fma_loop(isa, 1).expect("available") * iters as f64;
+        group.throughput(Throughput::Elements(flops as u64));
+        group.bench_function(isa.name(), |bch| {
+            bch.iter(|| peak::f32_fma_loop(isa, iters))
+        });
+    }
+    group.finish();
     let mut group = c.benchmark_group("conv3x3_f32_384x384");
     for info in registry::f32_kernels() {
         if !info.is_available() {

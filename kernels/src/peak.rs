@@ -9,6 +9,14 @@ pub fn f32_fma_gflops(isa: Isa, millis: u64) -> Result<f64, KernelError> {
     measure(millis, |iters| registry::run_peak_f32(isa, iters))
 }
 
+/// Runs the f32 FMA peak loop of `isa` for `iters` iterations (for benchmark harnesses that time it
+/// themselves); returns the FLOPs done. Errors: `isa` not available.
+pub fn f32_fma_loop(isa: Isa, iters: u64) -> Result<f64, KernelError> {
+    let (flops, sink) = registry::run_peak_f32(isa, iters)?;
+    std::hint::black_box(sink);
+    Ok(flops)
+}
+
 fn measure(
     millis: u64,
     mut run: impl FnMut(u64) -> Result<(f64, f32), KernelError>,

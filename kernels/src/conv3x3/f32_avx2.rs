@@ -2,8 +2,9 @@
 //!
 //! Register tile: 6 output channels × 2 ymm (16 pixels) = 12 accumulators, + 2 input vectors + 1 broadcast
 //! weight = 15 of the 16 ymm registers. Per reduction step: 2 loads + 6 broadcasts for 12 FMAs, within the
-//! two load ports' budget while the two FMA pipes stay busy. 8 × 1 or 4 × 3 tiles leave fewer accumulators
-//! (more load/broadcast per FMA); 6 × 2 measured best (README).
+//! load ports' budget while the two FMA pipes stay busy. The kernel is load-bound on Zen 3 (loads per FMA:
+//! 6 × 2 → 0.67, 3 × 3 → 0.67, 2 × 4 → 0.75; 4 × 3 → 0.58 needs all 16 registers and spills): measured on
+//! the 24→24 layer at 384×384, 6 × 2 57.6 GFLOP/s, 3 × 3 53.3, 4 × 3 43.7, 2 × 4 40.3 (README).
 
 use super::simd_f32::{conv as generic_conv, SimdF32};
 use super::{F32Job, F32Out};

@@ -31,9 +31,10 @@ pub(crate) trait SimdF32: Copy {
 
 /// Computes rows `[job.y0, job.y1)` of the convolution.
 ///
-/// Loop order: output row, pixel tile, output-channel group, then the `9·C_in` reduction with the
-/// `G × NV` accumulators in registers. The input of one pixel tile (`C_in × 3 × (tile + 2)` values) and all
-/// packed weights (`9·C_in·C_out` values: 20 KiB for 24→24) stay in L1 while the groups are computed.
+/// Loop order: output row, output-channel group, pixel tile, then the `9·C_in` reduction with the
+/// `G × NV` accumulators in registers. One group's packed weights (`9·C_in·G` values: 5 KiB for 24→24 with
+/// G = 6) stay in L1 while the row's tiles stream the three input rows from L2 (measured ~7 % faster than
+/// pixel tile outside the groups, where all 20 KiB of weights and the tile's inputs compete for L1).
 ///
 /// # Safety
 /// The CPU has the ISA of `V`; `job` was checked by the safe API (sources of `ca`/`cb` channels and `h × w`
@@ -53,9 +54,9 @@ pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
     debug_assert!(job.weights.len() == groups * cin * 9 * G && job.bias.len() == groups * G);
     let srcs = [(job.a.as_ptr(), job.ca), (job.b.as_ptr(), job.cb)];
     for y in job.y0..job.y1 {
-        let mut x0 = 0;
-        while x0 < w {
-            for grp in 0..groups {
+        for grp in 0..groups {
+            let mut x0 = 0;
+            while x0 < w {
                 // SAFETY: the caller guarantees the ISA; the accumulators are plain registers.
                 let mut acc = [[unsafe { V::zero() }; NV]; G];
                 // SAFETY: `grp < groups`, so the group's `cin·9·G` weights are inside `job.weights`.
@@ -87,10 +88,13 @@ pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
                         }
                     }
                 }
+                // A copy for the epilogue (which may index it with run-time values) keeps `acc` itself
+                // accessed only at constant indices, so the compiler keeps it in registers.
+                let tile_acc = acc;
                 // SAFETY: the caller's guarantees (see `epilogue`).
-                unsafe { epilogue::<V, G, NV>(job, out, &acc, y, x0, grp) };
+                unsafe { epilogue::<V, G, NV>(job, out, &tile_acc, y, x0, grp) };
+                x0 += tile;
             }
-            x0 += tile;
         }
     }
 }
@@ -113,7 +117,7 @@ unsafe fn epilogue<V: SimdF32, const G: usize, const NV: usize>(
     for (g, accg) in acc.iter().enumerate() {
         let o = grp * G + g;
         if o >= cout {
-            break;
+            continue;
         }
         // Column of the tile's first pixel in a `[H+2][C_out][Wp]` buffer.
         let row_at = ((y + 1) * cout + o) * wp + 1 + x0;
