@@ -41,8 +41,8 @@ mod pack;
 pub mod peak;
 
 pub use buffer::{Affine, RowPlanar};
-pub use conv3x3::registry::{self, DType, KernelInfo};
-pub use conv3x3::{Conv3x3F32, Inputs};
+pub use conv3x3::registry::{self, DType, KernelInfo, PackKind};
+pub use conv3x3::{Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, QuantU8};
 pub use depthwise::depthwise;
 pub use error::KernelError;
 pub use isa::Isa;

@@ -17,6 +17,24 @@ pub fn f32_fma_loop(isa: Isa, iters: u64) -> Result<f64, KernelError> {
     Ok(flops)
 }
 
+/// Measures the int8 multiply-accumulate peak of one thread with the best int8 instruction of `isa`
+/// (`vpdpbusd` for the VNNI levels, `vpmaddwd`+`vpaddd` for AVX2, `USDOT`/`SDOT`/`SMLAL` on aarch64, i32
+/// multiply-add for scalar), timed for about `millis` ms. Returns GOP/s (a multiply-add counts 2).
+/// Errors: `isa` not available.
+pub fn int8_dot_gops(isa: Isa, millis: u64) -> Result<f64, KernelError> {
+    measure(millis, |iters| {
+        registry::run_peak_u8(isa, iters).map(|(ops, s)| (ops, s as f32))
+    })
+}
+
+/// Runs the int8 peak loop of `isa` for `iters` iterations; returns the operations done. Errors: `isa` not
+/// available.
+pub fn int8_dot_loop(isa: Isa, iters: u64) -> Result<f64, KernelError> {
+    let (ops, sink) = registry::run_peak_u8(isa, iters)?;
+    std::hint::black_box(sink);
+    Ok(ops)
+}
+
 fn measure(
     millis: u64,
     mut run: impl FnMut(u64) -> Result<(f64, f32), KernelError>,
@@ -45,10 +63,14 @@ mod tests {
             let g = f32_fma_gflops(isa, 5).unwrap();
             println!("f32 FMA peak {isa}: {g:.1} GFLOP/s");
             assert!(g > 0.0);
+            let q = int8_dot_gops(isa, 5).unwrap();
+            println!("int8 peak {isa}: {q:.1} GOP/s");
+            assert!(q > 0.0);
         }
         for isa in Isa::ALL {
             if !isa.is_available() {
                 assert!(f32_fma_gflops(isa, 1).is_err());
+                assert!(int8_dot_gops(isa, 1).is_err());
             }
         }
     }

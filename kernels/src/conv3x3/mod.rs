@@ -13,6 +13,14 @@ pub mod registry;
 mod f32_scalar;
 #[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
 mod simd_f32;
+#[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
+mod simd_u8;
+mod u8s8;
+#[cfg(target_arch = "aarch64")]
+mod u8s8_neon;
+mod u8s8_scalar;
+#[cfg(target_arch = "x86_64")]
+mod u8s8_x86;
 
 #[cfg(target_arch = "x86_64")]
 mod f32_avx2;
@@ -31,6 +39,7 @@ use crate::pack;
 use crate::{Isa, KernelError};
 use registry::{F32Row, KernelInfo};
 use std::ops::Range;
+pub use u8s8::{Conv3x3U8, Conv3x3U8Spec, QuantU8};
 
 /// The inputs of one convolution call: source `a`, an optional second source `b` concatenated after `a`'s
 /// channels, and an optional residual added after the ReLU (same shape as the output).
@@ -143,6 +152,38 @@ pub(crate) struct F32Job<'a> {
 /// `[C_out][H][W]` slice.
 pub(crate) enum F32Out<'a> {
     Rows(&'a mut [f32]),
+    Planar(&'a mut [f32]),
+}
+
+/// Everything an int8 kernel needs, checked by the safe API: sources `a`/`b` in the u8 layout with `ga`/`gb`
+/// channel groups of 4, packed weights (bytes; i8 or i16 per the row's [`registry::PackKind`]), per output
+/// channel (padded to the tile) the i32 accumulator start (zero-point corrections), the f32 multiplier and
+/// bias; the residual `(buffer, zero point, scale)`; the output quantisation `1/scale` and zero point.
+pub(crate) struct U8Job<'a> {
+    pub a: &'a [u8],
+    pub ga: usize,
+    pub b: &'a [u8],
+    pub gb: usize,
+    pub h: usize,
+    pub w: usize,
+    pub wp: usize,
+    pub weights: &'a [u8],
+    pub init: &'a [i32],
+    pub mult: &'a [f32],
+    pub bias: &'a [f32],
+    pub cout: usize,
+    pub relu: bool,
+    pub residual: Option<(&'a [u8], f32, f32)>,
+    pub out_inv: f32,
+    pub out_zp: f32,
+    pub out_zp_u8: u8,
+    pub y0: usize,
+    pub y1: usize,
+}
+
+/// Where an int8 kernel writes: a u8 [`RowPlanar`] (`[H+2][C_out/4][Wp][4]`) or planar `[C_out][H][W]` f32.
+pub(crate) enum U8Out<'a> {
+    Rows(&'a mut [u8]),
     Planar(&'a mut [f32]),
 }
 

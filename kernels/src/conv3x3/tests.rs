@@ -1,8 +1,8 @@
 //! Every available kernel row against the reference; row bands; the zero border; dispatch; errors.
 
-use super::reference;
-use super::registry::{self, F32_ROWS};
-use super::{Conv3x3F32, Inputs};
+use super::reference::{self, RefU8Params};
+use super::registry::{self, F32_ROWS, U8_ROWS};
+use super::{Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, QuantU8};
 use crate::{Isa, KernelError, RowPlanar};
 
 /// xorshift64*: deterministic test data without dependencies.
@@ -376,6 +376,445 @@ fn f32_bad_input_is_an_error_not_a_panic() {
     assert!(plan.run(Inputs::new(&a), &mut out, 0..3).is_ok());
 }
 
+/// int8 rows this CPU can run; prints the ones it skips.
+pub(crate) fn u8_rows() -> Vec<&'static str> {
+    let mut names = Vec::new();
+    for r in U8_ROWS {
+        if r.info.is_available() {
+            names.push(r.info.name);
+        } else {
+            println!("SKIPPED {}: this CPU lacks {}", r.info.name, r.info.isa);
+        }
+    }
+    names
+}
+
+#[derive(Clone, Copy, Debug)]
+struct QCase {
+    ca: usize,
+    cb: usize,
+    cout: usize,
+    h: usize,
+    w: usize,
+    relu: bool,
+    residual: bool,
+    u8_out: bool,
+}
+
+/// Random u8 data, weights over the whole s8 range, zero points ≠ 0 (different per buffer).
+struct QData {
+    a: Vec<u8>,
+    b: Vec<u8>,
+    r: Vec<u8>,
+    wt: Vec<i8>,
+    wscale: Vec<f32>,
+    bias: Vec<f32>,
+    zp: [u8; 4],
+}
+
+fn qdata(case: QCase, seed: u64) -> QData {
+    let QCase {
+        ca, cb, cout, h, w, ..
+    } = case;
+    let mut rng = Rng::new(seed);
+    let mut bytes = |n: usize| {
+        (0..n)
+            .map(|_| (rng.next() >> 56) as u8)
+            .collect::<Vec<u8>>()
+    };
+    let a = bytes(ca * h * w);
+    let b = bytes(cb * h * w);
+    let r = bytes(cout * h * w);
+    let wt = bytes(cout * (ca + cb) * 9)
+        .into_iter()
+        .map(|v| v as i8)
+        .collect();
+    let z = bytes(4);
+    let zp = [z[0] | 1, z[1] | 2, z[2], z[3] | 4];
+    let mut rng = Rng::new(seed ^ 0xABCD);
+    let wscale = (0..cout).map(|_| (1.0 + 0.5 * rng.f()) * 0.002).collect();
+    let bias = rng.vec(cout);
+    QData {
+        a,
+        b,
+        r,
+        wt,
+        wscale,
+        bias,
+        zp,
+    }
+}
+
+const IN_SCALE: f32 = 1.0 / 255.0;
+const RES_SCALE: f32 = 0.02;
+const OUT_SCALE: f32 = 0.01;
+
+fn spec<'a>(case: QCase, d: &'a QData) -> Conv3x3U8Spec<'a> {
+    Conv3x3U8Spec {
+        weights: &d.wt,
+        weight_scales: &d.wscale,
+        bias: &d.bias,
+        c_in_a: case.ca,
+        c_in_b: case.cb,
+        c_out: case.cout,
+        input_scale: IN_SCALE,
+        input_zero_point_a: d.zp[0],
+        input_zero_point_b: d.zp[1],
+        relu: case.relu,
+        residual: case.residual.then_some(QuantU8 {
+            scale: RES_SCALE,
+            zero_point: d.zp[2],
+        }),
+        output: case.u8_out.then_some(QuantU8 {
+            scale: OUT_SCALE,
+            zero_point: d.zp[3],
+        }),
+    }
+}
+
+/// Runs `row` on `case` and requires bit-exact agreement with the reference; checks the border. Returns the
+/// output (planar f32; u8 values as integers).
+fn check_u8_data(row: &str, case: QCase, d: &QData) -> Vec<f32> {
+    let QCase {
+        ca,
+        cb,
+        cout,
+        h,
+        w,
+        relu,
+        residual,
+        u8_out,
+    } = case;
+    let sp = spec(case, d);
+    let plan = Conv3x3U8::with_kernel(&sp, row).unwrap();
+    assert_eq!(plan.kernel().name, row);
+    let mult: Vec<f32> = d.wscale.iter().map(|s| IN_SCALE * s).collect();
+    let params = RefU8Params {
+        weights: &d.wt,
+        mult: &mult,
+        bias: &d.bias,
+        zp_a: d.zp[0],
+        zp_b: d.zp[1],
+        relu,
+        residual: residual.then_some((&d.r[..], d.zp[2], RES_SCALE)),
+        output: u8_out.then_some((1.0 / OUT_SCALE, d.zp[3])),
+    };
+    let want = reference::conv_u8(&d.a, ca, &d.b, cb, h, w, cout, &params);
+    let ba = RowPlanar::from_planar_u8(&d.a, ca, h, w, d.zp[0]).unwrap();
+    let bb = (cb > 0).then(|| RowPlanar::from_planar_u8(&d.b, cb, h, w, d.zp[1]).unwrap());
+    let br = RowPlanar::from_planar_u8(&d.r, cout, h, w, d.zp[2]).unwrap();
+    let mut inputs = Inputs::new(&ba);
+    if let Some(bb) = &bb {
+        inputs = inputs.concat(bb);
+    }
+    if residual {
+        inputs = inputs.residual(&br);
+    }
+    let got: Vec<f32> = if u8_out {
+        let mut out = RowPlanar::new_quantized(cout, h, w, d.zp[3]).unwrap();
+        plan.run(inputs, &mut out, 0..h).unwrap();
+        assert!(
+            out.border_is_clean(),
+            "{row} {case:?}: border or padding channels not the zero point"
+        );
+        out.to_planar().into_iter().map(f32::from).collect()
+    } else {
+        let mut out = vec![f32::NAN; cout * h * w];
+        plan.run_planar(inputs, &mut out, 0..h).unwrap();
+        out
+    };
+    for (k, (&g, &r)) in got.iter().zip(&want).enumerate() {
+        assert!(
+            g.to_bits() == r.to_bits() || (g == 0.0 && r == 0.0),
+            "{row} {case:?}: value {k} (o {}, y {}, x {}) = {g}, reference {r}",
+            k / (h * w),
+            k / w % h,
+            k % w
+        );
+    }
+    got
+}
+
+fn check_u8(row: &str, case: QCase, seed: u64) -> Vec<f32> {
+    check_u8_data(row, case, &qdata(case, seed))
+}
+
+#[test]
+fn u8_rows_bit_exact_with_reference_on_layer_shapes() {
+    let mut n = 0;
+    for row in u8_rows() {
+        for (i, &(ca, cb)) in C_INS.iter().enumerate() {
+            for (j, &cout) in C_OUTS.iter().enumerate() {
+                for (k, &h) in HS.iter().enumerate() {
+                    let idx = i * 12 + j * 4 + k;
+                    let case = QCase {
+                        ca,
+                        cb,
+                        cout,
+                        h,
+                        w: WS[(idx + 5) % WS.len()],
+                        relu: idx % 2 == 1,
+                        residual: (idx / 2) % 2 == 1,
+                        u8_out: idx % 3 != 0,
+                    };
+                    check_u8(row, case, idx as u64 + 100);
+                    n += 1;
+                }
+            }
+        }
+    }
+    println!("{n} cases");
+}
+
+#[test]
+fn u8_rows_bit_exact_on_every_width_to_66() {
+    for row in u8_rows() {
+        for w in 1..=66 {
+            for u8_out in [false, true] {
+                let case = QCase {
+                    ca: 5,
+                    cb: 3,
+                    cout: 6,
+                    h: 2,
+                    w,
+                    relu: true,
+                    residual: true,
+                    u8_out,
+                };
+                check_u8(row, case, w as u64);
+            }
+        }
+    }
+}
+
+#[test]
+fn u8_rows_do_not_saturate_at_extreme_values() {
+    // 255 × 127 (and × −128) summed over 28·9 taps: 8.2 M, far beyond i16; zero points 0 and 255.
+    let (ca, cb, cout, h, w) = (24, 4, 8, 3, 19);
+    for (x, wv, zp) in [
+        (255u8, 127i8, 0u8),
+        (255, -128, 0),
+        (0, -128, 255),
+        (255, 127, 255),
+    ] {
+        let case = QCase {
+            ca,
+            cb,
+            cout,
+            h,
+            w,
+            relu: false,
+            residual: false,
+            u8_out: false,
+        };
+        let mut d = qdata(case, 1);
+        d.a.fill(x);
+        d.b.fill(x);
+        d.wt.fill(wv);
+        d.zp = [zp, zp, 0, 0];
+        for row in u8_rows() {
+            let got = check_u8_data(row, case, &d);
+            assert!(
+                got.iter().any(|&v| v != got[0]) || x == zp,
+                "{row}: border pixels must differ"
+            );
+        }
+    }
+}
+
+#[test]
+fn u8_rows_agree_with_scalar_bit_exactly() {
+    let case = QCase {
+        ca: 24,
+        cb: 0,
+        cout: 24,
+        h: 5,
+        w: 53,
+        relu: true,
+        residual: true,
+        u8_out: true,
+    };
+    let outs: Vec<Vec<f32>> = u8_rows().iter().map(|r| check_u8(r, case, 77)).collect();
+    let scalar = outs.last().unwrap();
+    for o in &outs {
+        assert_eq!(o, scalar);
+    }
+}
+
+#[test]
+fn u8_row_bands_are_bit_identical_and_touch_only_their_rows() {
+    let case = QCase {
+        ca: 14,
+        cb: 0,
+        cout: 24,
+        h: 7,
+        w: 37,
+        relu: true,
+        residual: true,
+        u8_out: true,
+    };
+    let d = qdata(case, 3);
+    let sp = spec(case, &d);
+    let (h, w, cout) = (case.h, case.w, case.cout);
+    let a = RowPlanar::from_planar_u8(&d.a, case.ca, h, w, d.zp[0]).unwrap();
+    let r = RowPlanar::from_planar_u8(&d.r, cout, h, w, d.zp[2]).unwrap();
+    for row in u8_rows() {
+        let plan = Conv3x3U8::with_kernel(&sp, row).unwrap();
+        let inputs = Inputs::new(&a).residual(&r);
+        let mut whole = RowPlanar::new_quantized(cout, h, w, d.zp[3]).unwrap();
+        plan.run(inputs, &mut whole, 0..h).unwrap();
+        let whole = whole.to_planar();
+        let mut whole_f = vec![0.0; cout * h * w];
+        plan.run_planar(inputs, &mut whole_f, 0..h).unwrap();
+        for bands in [vec![0, 1, 3, 7], vec![0, 5, 6, 7]] {
+            let sentinel = vec![201u8; cout * h * w];
+            let mut out = RowPlanar::from_planar_u8(&sentinel, cout, h, w, d.zp[3]).unwrap();
+            let mut planar = vec![7.5f32; cout * h * w];
+            for win in bands.windows(2) {
+                plan.run(inputs, &mut out, win[0]..win[1]).unwrap();
+                plan.run_planar(inputs, &mut planar, win[0]..win[1])
+                    .unwrap();
+                let done = out.to_planar();
+                for k in 0..cout * h * w {
+                    let in_done = (k / w) % h < win[1];
+                    assert_eq!(
+                        done[k],
+                        if in_done { whole[k] } else { 201 },
+                        "{row} {bands:?}"
+                    );
+                    let want = if in_done { whole_f[k] } else { 7.5 };
+                    assert_eq!(planar[k].to_bits(), want.to_bits(), "{row} {bands:?}");
+                }
+                assert!(out.border_is_clean());
+            }
+        }
+    }
+}
+
+#[test]
+fn u8_dispatch_selects_the_named_row() {
+    #[cfg(target_arch = "x86_64")]
+    let expected = [
+        (Isa::Scalar, "conv3x3.u8s8.8x8.scalar"),
+        (Isa::Avx2Fma, "conv3x3.u8s8.4x1.avx2"),
+        (Isa::AvxVnni, "conv3x3.u8s8.4x2.avxvnni"),
+        (Isa::Avx512, "conv3x3.u8s8.4x1.avx2"),
+        (Isa::Avx512Vnni, "conv3x3.u8s8.8x3.avx512vnni"),
+    ];
+    #[cfg(target_arch = "aarch64")]
+    let expected = [
+        (Isa::Scalar, "conv3x3.u8s8.8x8.scalar"),
+        (Isa::Neon, "conv3x3.u8s8.4x1.neon"),
+        (Isa::NeonDot, "conv3x3.u8s8.8x3.neondot"),
+        (Isa::NeonI8mm, "conv3x3.u8s8.8x3.neoni8mm"),
+    ];
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+    let expected = [(Isa::Scalar, "conv3x3.u8s8.8x8.scalar")];
+    let case = QCase {
+        ca: 4,
+        cb: 0,
+        cout: 8,
+        h: 1,
+        w: 1,
+        relu: false,
+        residual: false,
+        u8_out: true,
+    };
+    let d = qdata(case, 0);
+    for (isa, name) in expected {
+        assert_eq!(registry::selected_u8(isa).name, name);
+        let plan = Conv3x3U8::new(&spec(case, &d), isa);
+        if isa.is_available() {
+            assert_eq!(plan.unwrap().kernel().name, name);
+            println!("{isa}: available, int8 selects {name}");
+        } else {
+            assert!(matches!(plan, Err(KernelError::Isa { .. })));
+            println!("{isa}: not available on this CPU, refused");
+        }
+    }
+}
+
+#[test]
+fn u8_bad_input_is_an_error_not_a_panic() {
+    let case = QCase {
+        ca: 4,
+        cb: 0,
+        cout: 8,
+        h: 3,
+        w: 5,
+        relu: true,
+        residual: false,
+        u8_out: true,
+    };
+    let d = qdata(case, 0);
+    let sp = spec(case, &d);
+    let plan = Conv3x3U8::new(&sp, Isa::Scalar).unwrap();
+    let a = RowPlanar::from_planar_u8(&d.a, 4, 3, 5, d.zp[0]).unwrap();
+    let a_wrong_zp = RowPlanar::from_planar_u8(&d.a, 4, 3, 5, d.zp[0].wrapping_add(1)).unwrap();
+    let mut out = RowPlanar::new_quantized(8, 3, 5, d.zp[3]).unwrap();
+    let mut out_wrong_zp = RowPlanar::new_quantized(8, 3, 5, d.zp[3].wrapping_add(1)).unwrap();
+    assert!(plan.run(Inputs::new(&a), &mut out, 0..3).is_ok());
+    assert!(matches!(
+        plan.run(Inputs::new(&a_wrong_zp), &mut out, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+    assert!(matches!(
+        plan.run(Inputs::new(&a), &mut out_wrong_zp, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+    assert!(matches!(
+        plan.run(Inputs::new(&a).residual(&out.clone()), &mut out, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+    assert!(matches!(
+        plan.run(Inputs::new(&a), &mut out, 2..9),
+        Err(KernelError::Rows { .. })
+    ));
+    let mut planar = vec![0.0; 8 * 3 * 5 + 1];
+    assert!(matches!(
+        plan.run_planar(Inputs::new(&a), &mut planar, 0..3),
+        Err(KernelError::Length { .. })
+    ));
+    let f32_plan = Conv3x3U8::new(&Conv3x3U8Spec { output: None, ..sp }, Isa::Scalar).unwrap();
+    assert!(matches!(
+        f32_plan.run(Inputs::new(&a), &mut out, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+    let mut bad = sp;
+    bad.input_scale = f32::NAN;
+    assert!(matches!(
+        Conv3x3U8::new(&bad, Isa::Scalar),
+        Err(KernelError::Parameter { .. })
+    ));
+    let mut bad = sp;
+    bad.weights = &d.wt[1..];
+    assert!(matches!(
+        Conv3x3U8::new(&bad, Isa::Scalar),
+        Err(KernelError::Length { .. })
+    ));
+    let mut bad = sp;
+    bad.weight_scales = &[0.0; 8];
+    assert!(matches!(
+        Conv3x3U8::new(&bad, Isa::Scalar),
+        Err(KernelError::Parameter { .. })
+    ));
+    let needs_res = Conv3x3U8::new(
+        &Conv3x3U8Spec {
+            residual: Some(QuantU8 {
+                scale: 1.0,
+                zero_point: 3,
+            }),
+            ..sp
+        },
+        Isa::Scalar,
+    )
+    .unwrap();
+    assert!(matches!(
+        needs_res.run(Inputs::new(&a), &mut out, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+}
+
 mod prop {
     use super::*;
     use proptest::prelude::*;
@@ -387,6 +826,14 @@ mod prop {
                              w in 1usize..70, relu: bool, residual: bool, planar: bool, seed: u64) {
             for row in f32_rows() {
                 check_f32(row, Case { ca, cb, cout, h, w, relu, residual, planar }, seed);
+            }
+        }
+
+        #[test]
+        fn u8_random_shapes(ca in 1usize..12, cb in 0usize..7, cout in 1usize..26, h in 1usize..5,
+                            w in 1usize..70, relu: bool, residual: bool, u8_out: bool, seed: u64) {
+            for row in u8_rows() {
+                check_u8(row, QCase { ca, cb, cout, h, w, relu, residual, u8_out }, seed);
             }
         }
     }
