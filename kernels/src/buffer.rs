@@ -55,14 +55,26 @@ impl Element for u8 {
 
 /// An activation buffer `[H+2][ceil(C/K)][Wp][K]` with a one-pixel border (K = 1 for `f32`, 4 for `u8`); see
 /// the [module documentation](self) for the layout and its invariants.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct RowPlanar<T: Element> {
     c: usize,
     h: usize,
     w: usize,
     wp: usize,
     border: T,
+    /// Storage with up to 64 bytes of slack in front: the buffer starts at `data[off]`, chosen so that
+    /// column 1 of every row lies on a 64-byte boundary (fewer cache-line-splitting loads and stores). A
+    /// clone may have another alignment; only speed depends on it.
     data: Vec<T>,
+    off: usize,
+    len: usize,
+}
+
+impl<T: Element> PartialEq for RowPlanar<T> {
+    fn eq(&self, other: &Self) -> bool {
+        (self.c, self.h, self.w, self.border) == (other.c, other.h, other.w, other.border)
+            && self.as_slice() == other.as_slice()
+    }
 }
 
 pub(crate) fn check_dims(c: usize, h: usize, w: usize) -> Result<(), KernelError> {
@@ -91,13 +103,20 @@ impl<T: Element> RowPlanar<T> {
         let wp = padded_width(w);
         let groups = c.div_ceil(T::INTERLEAVE);
         let len = (h + 2) * groups * wp * T::INTERLEAVE;
+        let size = std::mem::size_of::<T>();
+        let data = vec![border; len + 64 / size];
+        // Column 1 is 4 bytes into a row in both layouts (one f32, or one pixel of 4 u8).
+        let addr = data.as_ptr() as usize;
+        let off = (64 - (addr + 4) % 64) % 64 / size;
         Ok(Self {
             c,
             h,
             w,
             wp,
             border,
-            data: vec![border; len],
+            data,
+            off,
+            len,
         })
     }
 
@@ -119,10 +138,10 @@ impl<T: Element> RowPlanar<T> {
     }
     /// The raw storage, `[H+2][ceil(C/K)][Wp][K]` elements.
     pub fn as_slice(&self) -> &[T] {
-        &self.data
+        &self.data[self.off..self.off + self.len]
     }
     pub(crate) fn as_mut_slice(&mut self) -> &mut [T] {
-        &mut self.data
+        &mut self.data[self.off..self.off + self.len]
     }
     /// Channel groups `ceil(C/K)` stored per buffer row.
     pub(crate) fn groups(&self) -> usize {
@@ -138,7 +157,8 @@ impl<T: Element> RowPlanar<T> {
 
     /// The value of channel `c` at pixel `(y, x)` (frame coordinates, without the border); `None` outside.
     pub fn get(&self, c: usize, y: usize, x: usize) -> Option<T> {
-        (c < self.c && y < self.h && x < self.w).then(|| self.data[self.index(c, y + 1, x + 1)])
+        (c < self.c && y < self.h && x < self.w)
+            .then(|| self.as_slice()[self.index(c, y + 1, x + 1)])
     }
 
     /// True when every element outside the interior (rows 0 and `H+1`, column 0, columns past `W`, padding
@@ -153,7 +173,8 @@ impl<T: Element> RowPlanar<T> {
                         let c = g * k + l;
                         let inside = r >= 1 && r <= self.h && j >= 1 && j <= self.w && c < self.c;
                         if !inside
-                            && self.data[((r * groups + g) * self.wp + j) * k + l] != self.border
+                            && self.as_slice()[((r * groups + g) * self.wp + j) * k + l]
+                                != self.border
                         {
                             return false;
                         }
@@ -183,7 +204,7 @@ impl<T: Element> RowPlanar<T> {
         for c in 0..self.c {
             for y in 0..h {
                 for x in 0..w {
-                    out[(c * h + y) * w + x] = self.data[self.index(c, y + 1, x + 1)];
+                    out[(c * h + y) * w + x] = self.as_slice()[self.index(c, y + 1, x + 1)];
                 }
             }
         }
@@ -210,7 +231,7 @@ impl<T: Element> RowPlanar<T> {
             for y in 0..h {
                 for x in 0..w {
                     let i = self.index(c, y + 1, x + 1);
-                    self.data[i] = f(c, src[(c * h + y) * w + x]);
+                    self.as_mut_slice()[i] = f(c, src[(c * h + y) * w + x]);
                 }
             }
         }
@@ -392,11 +413,13 @@ mod tests {
         let b = RowPlanar::from_planar_u8(&src, c, h, w, 17).unwrap();
         assert_eq!(b.to_planar(), src);
         assert!(b.border_is_clean());
+        // Column 1 of every row is 64-byte aligned.
+        assert_eq!((b.as_slice().as_ptr() as usize + 4) % 64, 0);
         // Padding channels 6, 7 hold the zero point.
         assert_eq!(b.as_slice().len(), (h + 2) * 2 * b.padded_width() * 4);
         let mut corrupt = b.clone();
         let i = corrupt.index(6, 1, 1);
-        corrupt.data[i] = 0;
+        corrupt.as_mut_slice()[i] = 0;
         assert!(!corrupt.border_is_clean());
     }
 
