@@ -55,6 +55,11 @@ impl SimdF32 for __m256 {
         unsafe { _mm256_max_ps(v, _mm256_setzero_ps()) }
     }
     #[inline(always)]
+    unsafe fn prefetch(p: *const f32) {
+        // SAFETY: `prefetcht0` never faults.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) }
+    }
+    #[inline(always)]
     unsafe fn keep_first(v: Self, n: usize) -> Self {
         debug_assert!(n < 8);
         // SAFETY: the caller guarantees AVX; `8 − n ∈ 1..=8`, so the 8 mask values read are inside MASK.

@@ -52,6 +52,11 @@ impl SimdF32 for __m512 {
         unsafe { _mm512_max_ps(v, _mm512_setzero_ps()) }
     }
     #[inline(always)]
+    unsafe fn prefetch(p: *const f32) {
+        // SAFETY: `prefetcht0` never faults.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) }
+    }
+    #[inline(always)]
     unsafe fn keep_first(v: Self, n: usize) -> Self {
         debug_assert!(n < 16);
         let m: __mmask16 = ((1u32 << n) - 1) as u16;
