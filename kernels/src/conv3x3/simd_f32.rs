@@ -95,7 +95,6 @@ unsafe fn tile_at<V: SimdF32, const G: usize, const NV: usize>(
                 // the source of `(h + 2)·cs·wp` values.
                 let row = unsafe { src.add(((y + ky) * cs + ic) * wp + x0) };
                 // The line the next tile but one starts on (measured +2 % on 24→24, +5 % on 4→24 with AVX2).
-                // The line that the tile after next starts on (A/B: +2 % on 24→24, +5 % on 4→24 with AVX2).
                 // SAFETY: a prefetch never faults; the address is computed with wrapping arithmetic.
                 unsafe { V::prefetch(row.wrapping_add(2 * l * NV)) };
                 for kx in 0..3 {
