@@ -39,7 +39,7 @@ use crate::pack;
 use crate::{Isa, KernelError};
 use registry::{F32Row, KernelInfo};
 use std::ops::Range;
-pub use u8s8::{Conv3x3U8, Conv3x3U8Spec, QuantU8};
+pub use u8s8::{Conv3x3U8, Conv3x3U8Spec, QuantU8, MAX_C_IN_U8};
 
 /// The inputs of one convolution call: source `a`, an optional second source `b` concatenated after `a`'s
 /// channels, and an optional residual added after the ReLU (same shape as the output).

@@ -798,6 +798,14 @@ fn u8_bad_input_is_an_error_not_a_panic() {
         Conv3x3U8::new(&bad, Isa::Scalar),
         Err(KernelError::Parameter { .. })
     ));
+    let wide = vec![0i8; 8 * 4097 * 9];
+    let mut bad = sp;
+    bad.weights = &wide;
+    bad.c_in_a = 4097;
+    assert!(matches!(
+        Conv3x3U8::new(&bad, Isa::Scalar),
+        Err(KernelError::Dimension { .. })
+    ));
     let needs_res = Conv3x3U8::new(
         &Conv3x3U8Spec {
             residual: Some(QuantU8 {

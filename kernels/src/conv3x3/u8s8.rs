@@ -17,6 +17,9 @@ use crate::pack::{check_channels, check_len};
 use crate::{Isa, KernelError};
 use std::ops::Range;
 
+/// Largest int8 `C_in`: the i32 accumulator holds at least `255·128·9·4096 < 2³¹`.
+pub const MAX_C_IN_U8: usize = 4096;
+
 /// Scale and zero point of a u8 tensor: `real = (q − zero_point)·scale`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct QuantU8 {
@@ -75,7 +78,7 @@ pub struct Conv3x3U8 {
 
 impl Conv3x3U8 {
     /// Plans with the best int8 row for `isa`. Errors: `isa` not available ([`KernelError::Isa`]), bad
-    /// channel counts ([`KernelError::Dimension`]), slice lengths ([`KernelError::Length`]), scales not finite
+    /// channel counts (0, or `C_in >` [`MAX_C_IN_U8`]: [`KernelError::Dimension`]), slice lengths ([`KernelError::Length`]), scales not finite
     /// and positive ([`KernelError::Parameter`]).
     pub fn new(spec: &Conv3x3U8Spec<'_>, isa: Isa) -> Result<Self, KernelError> {
         if !isa.is_available() {
@@ -106,6 +109,13 @@ impl Conv3x3U8 {
             });
         }
         check_channels(ca + cb, c_out)?;
+        // |acc| ≤ 255·128·9·C_in must stay inside i32.
+        if ca + cb > MAX_C_IN_U8 {
+            return Err(KernelError::Dimension {
+                what: "int8 C_in (at most 4096)",
+                value: ca + cb,
+            });
+        }
         check_len(
             "weights [C_out][C_in][3][3]",
             s.weights.len(),
