@@ -63,7 +63,9 @@ pub(crate) fn conv(job: &U8Job<'_>, out: &mut U8Out<'_>) {
                     }
                 }
                 let valid = P.min(w - x0);
-                for (g, a) in acc.iter().enumerate() {
+                // A copy for the epilogue keeps `acc` at constant indices (registers).
+                let tile_acc = acc;
+                for (g, a) in tile_acc.iter().enumerate() {
                     let o = grp * G + g;
                     if o >= c4 * 4 {
                         break;
