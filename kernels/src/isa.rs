@@ -197,3 +197,48 @@ fn detect_features() -> u32 {
 fn detect_features() -> u32 {
     0
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn env_override_can_only_lower() {
+        // The only test that reads or writes TENSORHOLO_ISA (Isa::active is not called by other tests).
+        let saved = std::env::var(ISA_ENV).ok();
+        std::env::set_var(ISA_ENV, "scalar");
+        assert_eq!(Isa::active(), Ok(Isa::Scalar));
+        for isa in Isa::ALL {
+            std::env::set_var(ISA_ENV, isa.name().to_uppercase());
+            let got = Isa::active();
+            if isa.is_available() {
+                assert_eq!(got, Ok(isa));
+            } else {
+                assert!(
+                    matches!(got, Err(KernelError::Isa { .. })),
+                    "{isa} must be refused"
+                );
+            }
+        }
+        std::env::set_var(ISA_ENV, "sse9");
+        assert!(matches!(Isa::active(), Err(KernelError::Isa { .. })));
+        std::env::set_var(ISA_ENV, "");
+        assert_eq!(Isa::active(), Ok(Isa::detect()));
+        match saved {
+            Some(v) => std::env::set_var(ISA_ENV, v),
+            None => std::env::remove_var(ISA_ENV),
+        }
+    }
+
+    #[test]
+    fn levels_include_their_subsets() {
+        assert!(Isa::Avx512Vnni.includes(Isa::Avx512));
+        assert!(Isa::Avx512.includes(Isa::Avx2Fma));
+        assert!(!Isa::Avx512.includes(Isa::AvxVnni));
+        assert!(!Isa::Avx2Fma.includes(Isa::Avx512));
+        assert!(Isa::NeonI8mm.includes(Isa::NeonDot));
+        assert!(!Isa::Neon.includes(Isa::NeonDot));
+        assert!(Isa::ALL.iter().all(|i| i.includes(Isa::Scalar)));
+        assert!(Isa::Scalar.is_available());
+    }
+}
