@@ -104,3 +104,77 @@ pub(crate) unsafe fn peak(iters: u64) -> f32 {
     unsafe { _mm256_storeu_ps(out.as_mut_ptr(), s) };
     out.iter().sum()
 }
+
+/// Tests only: two ymm registers acting as one 16-lane register, so that the generic loop runs the
+/// AVX-512 row's tile geometry (8 output channels × 3 vectors of 16 lanes = 48 pixels, masks up to 16
+/// lanes) on a CPU without AVX-512. Only the register operations of `f32_avx512.rs` remain untested here.
+#[cfg(test)]
+#[derive(Clone, Copy)]
+pub(crate) struct Ymm2(__m256, __m256);
+
+#[cfg(test)]
+impl SimdF32 for Ymm2 {
+    const LANES: usize = 16;
+    #[inline(always)]
+    unsafe fn zero() -> Self {
+        // SAFETY: the caller guarantees AVX.
+        unsafe { Ymm2(__m256::zero(), __m256::zero()) }
+    }
+    #[inline(always)]
+    unsafe fn splat(p: *const f32) -> Self {
+        // SAFETY: the caller guarantees AVX and a valid `p`.
+        unsafe { Ymm2(__m256::splat(p), __m256::splat(p)) }
+    }
+    #[inline(always)]
+    unsafe fn load(p: *const f32) -> Self {
+        // SAFETY: the caller guarantees 16 readable values at `p`.
+        unsafe { Ymm2(__m256::load(p), __m256::load(p.add(8))) }
+    }
+    #[inline(always)]
+    unsafe fn store(p: *mut f32, v: Self) {
+        // SAFETY: the caller guarantees 16 writable values at `p`.
+        unsafe {
+            __m256::store(p, v.0);
+            __m256::store(p.add(8), v.1)
+        }
+    }
+    #[inline(always)]
+    unsafe fn fma(acc: Self, a: Self, b: Self) -> Self {
+        // SAFETY: the caller guarantees FMA.
+        unsafe { Ymm2(__m256::fma(acc.0, a.0, b.0), __m256::fma(acc.1, a.1, b.1)) }
+    }
+    #[inline(always)]
+    unsafe fn add(a: Self, b: Self) -> Self {
+        // SAFETY: the caller guarantees AVX.
+        unsafe { Ymm2(__m256::add(a.0, b.0), __m256::add(a.1, b.1)) }
+    }
+    #[inline(always)]
+    unsafe fn relu(v: Self) -> Self {
+        // SAFETY: the caller guarantees AVX.
+        unsafe { Ymm2(__m256::relu(v.0), __m256::relu(v.1)) }
+    }
+    #[inline(always)]
+    unsafe fn keep_first(v: Self, n: usize) -> Self {
+        // SAFETY: the caller guarantees AVX; `n < 16`, so each half gets `n < 8` or `n − 8 < 8`.
+        unsafe {
+            if n < 8 {
+                Ymm2(__m256::keep_first(v.0, n), __m256::zero())
+            } else if n == 8 {
+                Ymm2(v.0, __m256::zero())
+            } else {
+                Ymm2(v.0, __m256::keep_first(v.1, n - 8))
+            }
+        }
+    }
+}
+
+/// Tests only: the AVX-512 tile geometry (8 × 3 × 16 lanes) on AVX2 registers.
+///
+/// # Safety
+/// As [`conv`].
+#[cfg(test)]
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn conv_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: as `conv`; 48-pixel tile ≤ MAX_TILE.
+    unsafe { generic_conv::<Ymm2, 8, 3>(job, out) }
+}

@@ -90,6 +90,12 @@ pub(crate) static F32_ROWS: &[F32Row] = &[
         ),
         run: super::f32_avx2::conv,
     },
+    // Tests only: the AVX-512 row's tile geometry emulated on AVX2 (after the real rows: never dispatched).
+    #[cfg(test)]
+    F32Row {
+        info: f32_info("test.f32.8x3.avx512-geometry-on-avx2", Isa::Avx2Fma, 8, 48),
+        run: super::f32_avx2::conv_avx512_geometry,
+    },
     SCALAR_F32,
 ];
 
@@ -257,6 +263,29 @@ pub(crate) static U8_ROWS: &[U8Row] = &[
         info: u8_info("conv3x3.u8s8.4x1.avx2", Isa::Avx2Fma, 4, 8),
         pack: PackKind::I16,
         run: super::u8s8_x86::conv_avx2,
+    },
+    // Tests only: the VNNI rows' tile geometries emulated on AVX2 (after the real rows: never dispatched).
+    #[cfg(test)]
+    U8Row {
+        info: u8_info(
+            "test.u8s8.4x2.avxvnni-geometry-on-avx2",
+            Isa::Avx2Fma,
+            4,
+            16,
+        ),
+        pack: PackKind::I16,
+        run: super::u8s8_x86::conv_avxvnni_geometry,
+    },
+    #[cfg(test)]
+    U8Row {
+        info: u8_info(
+            "test.u8s8.8x3.avx512vnni-geometry-on-avx2",
+            Isa::Avx2Fma,
+            8,
+            48,
+        ),
+        pack: PackKind::I16,
+        run: super::u8s8_x86::conv_avx512vnni_geometry,
     },
     SCALAR_U8,
 ];

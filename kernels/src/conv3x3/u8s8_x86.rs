@@ -383,3 +383,129 @@ pub(crate) unsafe fn peak_avx512vnni(iters: u64) -> i32 {
     }
     _mm512_reduce_add_epi32(s)
 }
+
+/// Tests only: two AVX2 widening units acting as one 16-pixel unit, so that the generic loop runs the
+/// AVX-512 VNNI row's tile geometry (8 output channels × 3 units of 16 pixels, 16-lane masks) on a CPU
+/// without AVX-512; the epilogue operations are the 256-bit ones applied to each half.
+#[cfg(test)]
+#[derive(Clone, Copy)]
+pub(crate) struct Wide16(Avx2Wide, Avx2Wide);
+
+#[cfg(test)]
+impl SimdQ for Wide16 {
+    const PX: usize = 16;
+    const WB: usize = 8;
+    type X = ((__m256i, __m256i), (__m256i, __m256i));
+    type W = __m256i;
+    type F = (__m256, __m256);
+    #[inline(always)]
+    unsafe fn init(v: i32) -> Self {
+        // SAFETY: the caller guarantees AVX2.
+        unsafe { Wide16(Avx2Wide::init(v), Avx2Wide::init(v)) }
+    }
+    #[inline(always)]
+    unsafe fn load_x(p: *const u8) -> Self::X {
+        // SAFETY: the caller guarantees 64 readable bytes at `p`.
+        unsafe { (Avx2Wide::load_x(p), Avx2Wide::load_x(p.add(32))) }
+    }
+    #[inline(always)]
+    unsafe fn load_w(p: *const u8) -> Self::W {
+        // SAFETY: the caller guarantees 8 readable bytes at `p`.
+        unsafe { Avx2Wide::load_w(p) }
+    }
+    #[inline(always)]
+    unsafe fn dot(self, x: Self::X, w: Self::W) -> Self {
+        // SAFETY: the caller guarantees AVX2.
+        unsafe { Wide16(self.0.dot(x.0, w), self.1.dot(x.1, w)) }
+    }
+    #[inline(always)]
+    unsafe fn to_f32(self) -> Self::F {
+        // SAFETY: the caller guarantees AVX2.
+        unsafe { (self.0.to_f32(), self.1.to_f32()) }
+    }
+    #[inline(always)]
+    unsafe fn splat(v: f32) -> Self::F {
+        // SAFETY: the caller guarantees AVX2.
+        unsafe { (Avx2Wide::splat(v), Avx2Wide::splat(v)) }
+    }
+    #[inline(always)]
+    unsafe fn mul(a: Self::F, b: Self::F) -> Self::F {
+        // SAFETY: the caller guarantees AVX2.
+        unsafe { (Avx2Wide::mul(a.0, b.0), Avx2Wide::mul(a.1, b.1)) }
+    }
+    #[inline(always)]
+    unsafe fn add(a: Self::F, b: Self::F) -> Self::F {
+        // SAFETY: the caller guarantees AVX2.
+        unsafe { (Avx2Wide::add(a.0, b.0), Avx2Wide::add(a.1, b.1)) }
+    }
+    #[inline(always)]
+    unsafe fn sub(a: Self::F, b: Self::F) -> Self::F {
+        // SAFETY: the caller guarantees AVX2.
+        unsafe { (Avx2Wide::sub(a.0, b.0), Avx2Wide::sub(a.1, b.1)) }
+    }
+    #[inline(always)]
+    unsafe fn relu(v: Self::F) -> Self::F {
+        // SAFETY: the caller guarantees AVX2.
+        unsafe { (Avx2Wide::relu(v.0), Avx2Wide::relu(v.1)) }
+    }
+    #[inline(always)]
+    unsafe fn load_byte(p: *const u8, lane: usize) -> Self::F {
+        // SAFETY: the caller guarantees 64 readable bytes at `p`.
+        unsafe {
+            (
+                Avx2Wide::load_byte(p, lane),
+                Avx2Wide::load_byte(p.add(32), lane),
+            )
+        }
+    }
+    #[inline(always)]
+    unsafe fn quant(v: Self::F, inv: Self::F, zp: Self::F) -> Self::F {
+        // SAFETY: the caller guarantees AVX2.
+        unsafe {
+            (
+                Avx2Wide::quant(v.0, inv.0, zp.0),
+                Avx2Wide::quant(v.1, inv.1, zp.1),
+            )
+        }
+    }
+    #[inline(always)]
+    unsafe fn store_u8x4(p: *mut u8, q: [Self::F; 4], valid: usize, border: u8) {
+        // SAFETY: the caller guarantees 64 writable bytes at `p`; each half gets its own valid count.
+        unsafe {
+            Avx2Wide::store_u8x4(p, q.map(|f| f.0), valid.min(8), border);
+            Avx2Wide::store_u8x4(p.add(32), q.map(|f| f.1), valid.saturating_sub(8), border);
+        }
+    }
+    #[inline(always)]
+    unsafe fn store_f32(p: *mut f32, v: Self::F, valid: usize) {
+        // SAFETY: the caller guarantees `valid` writable values at `p`.
+        unsafe {
+            Avx2Wide::store_f32(p, v.0, valid.min(8));
+            if valid > 8 {
+                Avx2Wide::store_f32(p.add(8), v.1, valid - 8);
+            }
+        }
+    }
+}
+
+/// Tests only: the AVX-VNNI row's tile geometry (4 × 2 units of 8 pixels) with the AVX2 widening dot.
+///
+/// # Safety
+/// As [`conv_avx2`].
+#[cfg(test)]
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn conv_avxvnni_geometry(job: &U8Job<'_>, out: &mut U8Out<'_>) {
+    // SAFETY: as `conv_avx2`.
+    unsafe { conv::<Avx2Wide, 4, 2>(job, out) }
+}
+
+/// Tests only: the AVX-512 VNNI row's tile geometry (8 × 3 units of 16 pixels) with the AVX2 widening dot.
+///
+/// # Safety
+/// As [`conv_avx2`].
+#[cfg(test)]
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn conv_avx512vnni_geometry(job: &U8Job<'_>, out: &mut U8Out<'_>) {
+    // SAFETY: as `conv_avx2`.
+    unsafe { conv::<Wide16, 8, 3>(job, out) }
+}
