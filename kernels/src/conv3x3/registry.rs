@@ -1,7 +1,7 @@
-//! The kernel registry: one list of rows (name, ISA, register tile, function) per element type, in order of
-//! preference. Dispatch ([`select_f32`]), the tests and the benchmarks all iterate these lists, and
-//! [`run_f32`] is the single place where a kernel function is called (the one `unsafe` call site outside
-//! the ISA files).
+//! The kernel registry: one list of rows (name, ISA, register tile, function) per element type, in order
+//! of preference. Dispatch ([`selected_f32`], [`selected_u8`]), the tests and the benchmarks all iterate
+//! these lists, and `run_f32` / `run_u8` are the single place where a kernel function is called (the
+//! `unsafe` call sites outside the ISA files).
 //!
 //! Names: `conv3x3.<dtype>.<G>x<V>.<isa>`, `G` output channels × `V` vector registers of pixels per tile
 //! (for the scalar row, `V` counts pixels).
@@ -132,7 +132,7 @@ pub(crate) fn select_f32(isa: Isa) -> &'static F32Row {
         .unwrap_or(&F32_ROWS[F32_ROWS.len() - 1])
 }
 
-/// The name of the f32 row dispatch picks under `isa` (see [`select_f32`]).
+/// The f32 row dispatch picks under `isa`: the first row (best first) whose ISA `isa` includes.
 pub fn selected_f32(isa: Isa) -> &'static KernelInfo {
     &select_f32(isa).info
 }
