@@ -36,7 +36,7 @@ pub(crate) trait SimdF32: Copy {
 ///
 /// Loop order: output row, output-channel group, pixel tile, then the `9·C_in` reduction with the
 /// `G × NV` accumulators in registers. One group's packed weights (`9·C_in·G` values: 5 KiB for 24→24 with
-/// G = 6) stay in L1 while the row's tiles stream the three input rows from L2 (measured 7–25 % faster than
+/// G = 6) stay in L1 while the row's tiles stream the three input rows from L2 (measured 6–25 % faster than
 /// the pixel tile outside the groups, where all 20 KiB of weights and the tile's inputs compete for L1).
 ///
 /// # Safety
@@ -98,6 +98,7 @@ unsafe fn tile_at<V: SimdF32, const G: usize, const NV: usize>(
                 // SAFETY: a prefetch never faults; the address is computed with wrapping arithmetic.
                 unsafe { V::prefetch(row.wrapping_add(2 * l * NV)) };
                 for kx in 0..3 {
+                    // Any initial value: every element is loaded just below.
                     let mut xv = acc[0];
                     for (v, x) in xv.iter_mut().enumerate() {
                         // SAFETY: column `x0 + kx + v·l + lane ≤ w − 1 + 2 + tile − 1 < wp`
