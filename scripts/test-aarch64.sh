@@ -7,7 +7,7 @@
 # /usr/aarch64-linux-gnu` the runner. Installs what is missing (apt: gcc-aarch64-linux-gnu,
 # libc6-dev-arm64-cross, qemu-user; rustup: the target).
 #
-# What runs: every shipped CNN (8/15/30 layers, pre-filters; f32, int8 QOperator and QDQ) and the fixture
+# What runs: the kernels crate under three emulated CPUs (see the end), and every shipped CNN (8/15/30 layers, pre-filters; f32, int8 QOperator and QDQ) and the fixture
 # CNNs against their PyTorch outputs with the x86 tolerances (tests model, shipped_models), the pipeline
 # tests (session vs the stand-alone stages, streaming, bad input), and platform_parity: the built-in scene
 # rendered to the same midpoint hologram and SLM codes as the x86-64 reference files, within the tolerances
@@ -28,3 +28,13 @@ cargo test --locked --target "$target" -p tensorholo --no-default-features \
   --features "embedded-models models-15 models-30" \
   --test model --test shipped_models --test pipeline --test platform_parity "$@" -- --nocapture 2>&1 |
   grep -vE '^(running [0-9]+ tests?|)$'
+
+# The kernels crate (kernels/, tensorholo-kernels) under three emulated CPUs, so that every aarch64 kernel row
+# runs: `max` has dot product and i8mm (rows neon, neondot, neoni8mm), `cortex-a76` dot product only (neon,
+# neondot), `cortex-a53` neither (neon and the widening int8 path). qemu-user reads QEMU_CPU; the tests print
+# the rows they skip for want of a feature.
+for cpu in max cortex-a76 cortex-a53; do
+  echo "== tensorholo-kernels, QEMU_CPU=$cpu"
+  QEMU_CPU=$cpu cargo test --locked --target "$target" -p tensorholo-kernels "$@" -- --nocapture 2>&1 |
+    grep -vE '^(running [0-9]+ tests?|)$'
+done

@@ -1,0 +1,434 @@
+//! Activation buffers with a one-pixel border: [`RowPlanar`].
+//!
+//! # Layout and invariants
+//!
+//! A `RowPlanar<T>` of `C` channels and `H × W` pixels stores `H + 2` buffer rows; buffer row `r` holds frame
+//! row `r − 1` (rows 0 and `H + 1` are the top and bottom border). Each buffer row holds, for each channel
+//! group, `Wp` columns; column 0 is the left border, columns `1..=W` the pixels, columns `W+1..Wp` the right
+//! border. `Wp = padded_width(W) = round_up(W + 2 + MAX_TILE, 16)`, so a kernel may load up to [`MAX_TILE`]
+//! pixels past the last tile start without leaving the row, and store whole vectors of up to `MAX_TILE`
+//! pixels (with the lanes past `W` set to the border value).
+//!
+//! * `f32`: logical shape `[H+2][C][Wp]`, one value per element; the border is `0.0`.
+//! * `u8`: logical shape `[H+2][ceil(C/4)][Wp][4]`: four consecutive input channels of one pixel are
+//!   adjacent, so one 32-bit lane holds the four `u8` inputs of a dot-product instruction (`vpdpbusd`,
+//!   `UDOT`/`USDOT`). `C` is padded up to a multiple of 4 with channels that hold the zero point. The border
+//!   (and the padding channels) hold the buffer's **zero point** `zp`, the quantised value of real 0, so
+//!   zero padding of the convolution is exact for asymmetric activations; the packing code folds the
+//!   constant `−zp·Σw` into the accumulator's start value.
+//!
+//! Kernels write only the interior (rows `1..=H`, columns `1..=W`) plus the right border of the rows they
+//! compute, which they rewrite with the border value; rows 0 and `H + 1` and column 0 are never written.
+//! [`RowPlanar::border_is_clean`] checks the invariant.
+
+use crate::KernelError;
+
+/// The widest pixel tile a kernel may use (pixels along a row); [`padded_width`] leaves this much slack.
+pub const MAX_TILE: usize = 64;
+
+/// Largest height, width or channel count accepted (keeps every index computation far from overflow).
+pub const MAX_DIM: usize = 1 << 16;
+
+/// The padded row length `Wp` used for a frame of width `w`: `round_up(w + 2 + MAX_TILE, 16)` elements
+/// (pixels).
+pub fn padded_width(w: usize) -> usize {
+    (w + 2 + MAX_TILE).next_multiple_of(16)
+}
+
+mod sealed {
+    pub trait Sealed {}
+    impl Sealed for f32 {}
+    impl Sealed for u8 {}
+}
+
+/// An element type of a [`RowPlanar`] buffer (`f32` or `u8`); sealed.
+pub trait Element: sealed::Sealed + Copy + Default + PartialEq + std::fmt::Debug + 'static {
+    /// Channels interleaved per pixel: 1 for `f32`, 4 for `u8`.
+    const INTERLEAVE: usize;
+}
+impl Element for f32 {
+    const INTERLEAVE: usize = 1;
+}
+impl Element for u8 {
+    const INTERLEAVE: usize = 4;
+}
+
+/// An activation buffer `[H+2][ceil(C/K)][Wp][K]` with a one-pixel border (K = 1 for `f32`, 4 for `u8`); see
+/// the [module documentation](self) for the layout and its invariants.
+#[derive(Clone, Debug)]
+pub struct RowPlanar<T: Element> {
+    c: usize,
+    h: usize,
+    w: usize,
+    wp: usize,
+    border: T,
+    /// Storage with up to 64 bytes of slack in front: the buffer starts at `data[off]`, chosen so that
+    /// column 1 of every row lies on a 64-byte boundary (fewer cache-line-splitting loads and stores). A
+    /// clone may have another alignment; only speed depends on it.
+    data: Vec<T>,
+    off: usize,
+    len: usize,
+}
+
+impl<T: Element> PartialEq for RowPlanar<T> {
+    fn eq(&self, other: &Self) -> bool {
+        (self.c, self.h, self.w, self.border) == (other.c, other.h, other.w, other.border)
+            && self.as_slice() == other.as_slice()
+    }
+}
+
+pub(crate) fn check_dims(c: usize, h: usize, w: usize) -> Result<(), KernelError> {
+    for (what, value) in [("channels", c), ("height", h), ("width", w)] {
+        if value == 0 || value > MAX_DIM {
+            return Err(KernelError::Dimension { what, value });
+        }
+    }
+    let groups = c.div_ceil(4) * 4;
+    let total = (h + 2)
+        .checked_mul(groups)
+        .and_then(|x| x.checked_mul(padded_width(w)))
+        .filter(|&n| n <= (isize::MAX as usize) / 8);
+    if total.is_none() {
+        return Err(KernelError::Dimension {
+            what: "channels × height × width",
+            value: c * h,
+        });
+    }
+    Ok(())
+}
+
+impl<T: Element> RowPlanar<T> {
+    fn with_border(c: usize, h: usize, w: usize, border: T) -> Result<Self, KernelError> {
+        check_dims(c, h, w)?;
+        let wp = padded_width(w);
+        let groups = c.div_ceil(T::INTERLEAVE);
+        let len = (h + 2) * groups * wp * T::INTERLEAVE;
+        let size = std::mem::size_of::<T>();
+        let data = vec![border; len + 64 / size];
+        // Column 1 is 4 bytes into a row in both layouts (one f32, or one pixel of 4 u8).
+        let addr = data.as_ptr() as usize;
+        let off = (64 - (addr + 4) % 64) % 64 / size;
+        Ok(Self {
+            c,
+            h,
+            w,
+            wp,
+            border,
+            data,
+            off,
+            len,
+        })
+    }
+
+    /// Channels `C` (not counting padding channels).
+    pub fn channels(&self) -> usize {
+        self.c
+    }
+    /// Frame height `H` in pixels (without the border).
+    pub fn height(&self) -> usize {
+        self.h
+    }
+    /// Frame width `W` in pixels (without the border).
+    pub fn width(&self) -> usize {
+        self.w
+    }
+    /// The padded row length `Wp` in pixels ([`padded_width`]).
+    pub fn padded_width(&self) -> usize {
+        self.wp
+    }
+    /// The raw storage, `[H+2][ceil(C/K)][Wp][K]` elements.
+    pub fn as_slice(&self) -> &[T] {
+        &self.data[self.off..self.off + self.len]
+    }
+    pub(crate) fn as_mut_slice(&mut self) -> &mut [T] {
+        &mut self.data[self.off..self.off + self.len]
+    }
+    /// Channel groups `ceil(C/K)` stored per buffer row.
+    pub(crate) fn groups(&self) -> usize {
+        self.c.div_ceil(T::INTERLEAVE)
+    }
+
+    /// Index in [`as_slice`](Self::as_slice) of channel `c`, buffer row `r` (0..H+2), buffer column `j`
+    /// (0..Wp).
+    fn index(&self, c: usize, r: usize, j: usize) -> usize {
+        let k = T::INTERLEAVE;
+        ((r * self.groups() + c / k) * self.wp + j) * k + c % k
+    }
+
+    /// The value of channel `c` at pixel `(y, x)` (frame coordinates, without the border); `None` outside.
+    pub fn get(&self, c: usize, y: usize, x: usize) -> Option<T> {
+        (c < self.c && y < self.h && x < self.w)
+            .then(|| self.as_slice()[self.index(c, y + 1, x + 1)])
+    }
+
+    /// True when every element outside the interior (rows 0 and `H+1`, column 0, columns past `W`, padding
+    /// channels) holds the border value (0 for `f32`, the zero point for `u8`). For tests and debug checks.
+    pub fn border_is_clean(&self) -> bool {
+        let k = T::INTERLEAVE;
+        let groups = self.groups();
+        for r in 0..self.h + 2 {
+            for g in 0..groups {
+                for j in 0..self.wp {
+                    for l in 0..k {
+                        let c = g * k + l;
+                        let inside = r >= 1 && r <= self.h && j >= 1 && j <= self.w && c < self.c;
+                        if !inside
+                            && self.as_slice()[((r * groups + g) * self.wp + j) * k + l]
+                                != self.border
+                        {
+                            return false;
+                        }
+                    }
+                }
+            }
+        }
+        true
+    }
+
+    fn check_planar(&self, len: usize) -> Result<(), KernelError> {
+        let expected = self.c * self.h * self.w;
+        if len != expected {
+            return Err(KernelError::Length {
+                what: "planar [C][H][W] slice",
+                expected,
+                got: len,
+            });
+        }
+        Ok(())
+    }
+
+    /// Copies the interior out to a planar `[C][H][W]` slice. Errors: `out.len() != C·H·W`.
+    pub fn read_planar(&self, out: &mut [T]) -> Result<(), KernelError> {
+        self.check_planar(out.len())?;
+        let (h, w) = (self.h, self.w);
+        for c in 0..self.c {
+            for y in 0..h {
+                for x in 0..w {
+                    out[(c * h + y) * w + x] = self.as_slice()[self.index(c, y + 1, x + 1)];
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The interior as a planar `[C][H][W]` vector.
+    pub fn to_planar(&self) -> Vec<T> {
+        let mut out = vec![T::default(); self.c * self.h * self.w];
+        // The length is right by construction.
+        let _ = self.read_planar(&mut out);
+        out
+    }
+
+    /// Fills the interior from a planar `[C][H][W]` slice, converting each value with `f(channel, value)`.
+    fn fill_with<S: Copy>(
+        &mut self,
+        src: &[S],
+        f: impl Fn(usize, S) -> T,
+    ) -> Result<(), KernelError> {
+        self.check_planar(src.len())?;
+        let (h, w) = (self.h, self.w);
+        for c in 0..self.c {
+            for y in 0..h {
+                for x in 0..w {
+                    let i = self.index(c, y + 1, x + 1);
+                    self.as_mut_slice()[i] = f(c, src[(c * h + y) * w + x]);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A per-channel affine map `x·scale[c] + offset[c]` applied while filling a buffer (e.g. input centring
+/// `x − 0.5`: scale 1, offset −0.5). Both slices have one value per channel.
+#[derive(Clone, Copy, Debug)]
+pub struct Affine<'a> {
+    /// Multiplier per channel.
+    pub scale: &'a [f32],
+    /// Offset per channel, added after the multiplication.
+    pub offset: &'a [f32],
+}
+
+impl RowPlanar<f32> {
+    /// A zeroed buffer of `c` channels and `h × w` pixels. Errors: a zero or too large dimension
+    /// ([`KernelError::Dimension`]).
+    pub fn new(c: usize, h: usize, w: usize) -> Result<Self, KernelError> {
+        Self::with_border(c, h, w, 0.0)
+    }
+
+    /// A buffer filled from a planar `[c][h][w]` slice, with an optional per-channel affine map. Errors: as
+    /// [`new`](Self::new) and [`fill_from_planar`](Self::fill_from_planar).
+    pub fn from_planar(
+        src: &[f32],
+        c: usize,
+        h: usize,
+        w: usize,
+        affine: Option<Affine<'_>>,
+    ) -> Result<Self, KernelError> {
+        let mut b = Self::new(c, h, w)?;
+        b.fill_from_planar(src, affine)?;
+        Ok(b)
+    }
+
+    /// Overwrites the interior from a planar `[C][H][W]` slice, applying `x·scale[c] + offset[c]` when
+    /// `affine` is given. Errors: `src.len() != C·H·W` or an affine slice whose length is not `C`
+    /// ([`KernelError::Length`]).
+    pub fn fill_from_planar(
+        &mut self,
+        src: &[f32],
+        affine: Option<Affine<'_>>,
+    ) -> Result<(), KernelError> {
+        match affine {
+            None => self.fill_with(src, |_, v| v),
+            Some(a) => {
+                for (what, s) in [("affine scale", a.scale), ("affine offset", a.offset)] {
+                    if s.len() != self.c {
+                        return Err(KernelError::Length {
+                            what,
+                            expected: self.c,
+                            got: s.len(),
+                        });
+                    }
+                }
+                self.fill_with(src, |c, v| v * a.scale[c] + a.offset[c])
+            }
+        }
+    }
+}
+
+impl RowPlanar<u8> {
+    /// A buffer of `c` channels and `h × w` pixels whose every element (border, padding channels, interior)
+    /// holds the zero point `zp`. Errors: a zero or too large dimension.
+    pub fn new_quantized(c: usize, h: usize, w: usize, zp: u8) -> Result<Self, KernelError> {
+        Self::with_border(c, h, w, zp)
+    }
+
+    /// The zero point: the value of the border and of the padding channels.
+    pub fn zero_point(&self) -> u8 {
+        self.border
+    }
+
+    /// A buffer filled from a planar `[c][h][w]` slice of quantised values with zero point `zp`.
+    pub fn from_planar_u8(
+        src: &[u8],
+        c: usize,
+        h: usize,
+        w: usize,
+        zp: u8,
+    ) -> Result<Self, KernelError> {
+        let mut b = Self::new_quantized(c, h, w, zp)?;
+        b.fill_with(src, |_, v| v)?;
+        Ok(b)
+    }
+
+    /// A buffer quantised from a planar `[c][h][w]` f32 slice: `q = clamp(round_ties_even(x / scale) + zp,
+    /// 0, 255)`. Errors: dimensions, length, a scale that is not finite and positive.
+    pub fn quantize_from_planar(
+        src: &[f32],
+        c: usize,
+        h: usize,
+        w: usize,
+        scale: f32,
+        zp: u8,
+    ) -> Result<Self, KernelError> {
+        check_scale("quantisation scale", scale)?;
+        let mut b = Self::new_quantized(c, h, w, zp)?;
+        let inv = 1.0 / scale;
+        b.fill_with(src, |_, v| quantize(v * inv, zp))?;
+        Ok(b)
+    }
+
+    /// The interior dequantised to a planar `[C][H][W]` vector: `(q − zp)·scale`.
+    pub fn dequantize_to_planar(&self, scale: f32) -> Vec<f32> {
+        let zp = self.border as f32;
+        self.to_planar()
+            .into_iter()
+            .map(|q| (q as f32 - zp) * scale)
+            .collect()
+    }
+}
+
+/// `clamp(round_ties_even(x) + zp, 0, 255)`, computed in f32 exactly as every int8 kernel does.
+pub(crate) fn quantize(x: f32, zp: u8) -> u8 {
+    let y = x.round_ties_even() + zp as f32;
+    // `max`/`min` in this order match `maxps`/`minps` with the constant second (also for NaN → 0).
+    let y = if y > 0.0 { y } else { 0.0 };
+    let y = if y < 255.0 { y } else { 255.0 };
+    y as u8
+}
+
+pub(crate) fn check_scale(what: &str, s: f32) -> Result<(), KernelError> {
+    if s.is_finite() && s > 0.0 {
+        Ok(())
+    } else {
+        Err(KernelError::Parameter {
+            what: format!("{what} = {s} is not finite and positive"),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn roundtrip_and_border() {
+        let (c, h, w) = (3, 4, 5);
+        let src: Vec<f32> = (0..c * h * w).map(|i| i as f32 + 1.0).collect();
+        let scale = [1.0, 2.0, 1.0];
+        let offset = [-0.5, 0.0, 1.0];
+        let b = RowPlanar::from_planar(
+            &src,
+            c,
+            h,
+            w,
+            Some(Affine {
+                scale: &scale,
+                offset: &offset,
+            }),
+        )
+        .unwrap();
+        assert!(b.border_is_clean());
+        let back = b.to_planar();
+        for ch in 0..c {
+            for i in 0..h * w {
+                let k = ch * h * w + i;
+                assert_eq!(back[k], src[k] * scale[ch] + offset[ch]);
+            }
+        }
+        assert_eq!(b.get(1, 2, 3), Some(src[(h + 2) * w + 3] * 2.0));
+        assert!(b.padded_width() >= w + 2 + MAX_TILE);
+        let mut bad = vec![0.0; 3];
+        assert!(matches!(
+            b.read_planar(&mut bad),
+            Err(KernelError::Length { .. })
+        ));
+        assert!(RowPlanar::<f32>::new(0, 1, 1).is_err());
+    }
+
+    #[test]
+    fn u8_roundtrip_zero_point_border() {
+        let (c, h, w) = (6, 3, 7);
+        let src: Vec<u8> = (0..c * h * w).map(|i| (i * 7 % 251) as u8).collect();
+        let b = RowPlanar::from_planar_u8(&src, c, h, w, 17).unwrap();
+        assert_eq!(b.to_planar(), src);
+        assert!(b.border_is_clean());
+        // Column 1 of every row is 64-byte aligned.
+        assert_eq!((b.as_slice().as_ptr() as usize + 4) % 64, 0);
+        // Padding channels 6, 7 hold the zero point.
+        assert_eq!(b.as_slice().len(), (h + 2) * 2 * b.padded_width() * 4);
+        let mut corrupt = b.clone();
+        let i = corrupt.index(6, 1, 1);
+        corrupt.as_mut_slice()[i] = 0;
+        assert!(!corrupt.border_is_clean());
+    }
+
+    #[test]
+    fn quantize_rounds_ties_to_even_and_clamps() {
+        assert_eq!(quantize(2.5, 0), 2);
+        assert_eq!(quantize(3.5, 0), 4);
+        assert_eq!(quantize(-300.0, 10), 0);
+        assert_eq!(quantize(1e30, 10), 255);
+        assert_eq!(quantize(-0.5, 3), 3);
+    }
+}

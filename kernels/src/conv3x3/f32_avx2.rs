@@ -1,0 +1,180 @@
+//! `conv3x3.f32.6x2.avx2`: AVX2 + FMA, 256-bit registers.
+//!
+//! Register tile: 6 output channels × 2 ymm (16 pixels) = 12 accumulators, + 2 input vectors + 1 broadcast
+//! weight = 15 of the 16 ymm registers. Per reduction step: 2 loads + 6 broadcasts for 12 FMAs, within the
+//! load ports' budget while the two FMA pipes stay busy. The kernel is load-bound on Zen 3 (loads per FMA:
+//! 6 × 2 → 0.67, 3 × 3 → 0.67, 2 × 4 → 0.75; 4 × 3 → 0.58 needs all 16 registers and spills): measured on
+//! the 24→24 layer at 384×384, 6 × 2 57.6 GFLOP/s, 3 × 3 53.3, 4 × 3 43.7, 2 × 4 40.3 (README).
+
+use super::simd_f32::{conv as generic_conv, SimdF32};
+use super::{F32Job, F32Out};
+use std::arch::x86_64::*;
+
+/// Output-channel tile.
+pub(crate) const G: usize = 6;
+/// ymm vectors of pixels per tile.
+pub(crate) const NV: usize = 2;
+
+static MASK: [i32; 16] = [-1, -1, -1, -1, -1, -1, -1, -1, 0, 0, 0, 0, 0, 0, 0, 0];
+
+impl SimdF32 for __m256 {
+    const LANES: usize = 8;
+    #[inline(always)]
+    unsafe fn zero() -> Self {
+        // SAFETY: the caller guarantees AVX.
+        unsafe { _mm256_setzero_ps() }
+    }
+    #[inline(always)]
+    unsafe fn splat(p: *const f32) -> Self {
+        // SAFETY: the caller guarantees AVX and a valid `p`.
+        unsafe { _mm256_broadcast_ss(&*p) }
+    }
+    #[inline(always)]
+    unsafe fn load(p: *const f32) -> Self {
+        // SAFETY: the caller guarantees AVX and 8 readable values at `p`.
+        unsafe { _mm256_loadu_ps(p) }
+    }
+    #[inline(always)]
+    unsafe fn store(p: *mut f32, v: Self) {
+        // SAFETY: the caller guarantees AVX and 8 writable values at `p`.
+        unsafe { _mm256_storeu_ps(p, v) }
+    }
+    #[inline(always)]
+    unsafe fn fma(acc: Self, a: Self, b: Self) -> Self {
+        // SAFETY: the caller guarantees FMA.
+        unsafe { _mm256_fmadd_ps(a, b, acc) }
+    }
+    #[inline(always)]
+    unsafe fn add(a: Self, b: Self) -> Self {
+        // SAFETY: the caller guarantees AVX.
+        unsafe { _mm256_add_ps(a, b) }
+    }
+    #[inline(always)]
+    unsafe fn relu(v: Self) -> Self {
+        // SAFETY: the caller guarantees AVX. `maxps(v, 0)` returns the second operand for NaN and ±0.
+        unsafe { _mm256_max_ps(v, _mm256_setzero_ps()) }
+    }
+    #[inline(always)]
+    unsafe fn prefetch(p: *const f32) {
+        // SAFETY: `prefetcht0` never faults.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) }
+    }
+    #[inline(always)]
+    unsafe fn keep_first(v: Self, n: usize) -> Self {
+        debug_assert!(n < 8);
+        // SAFETY: the caller guarantees AVX; `8 − n ∈ 1..=8`, so the 8 mask values read are inside MASK.
+        unsafe {
+            let m = _mm256_loadu_si256(MASK.as_ptr().add(8 - n).cast());
+            _mm256_and_ps(v, _mm256_castsi256_ps(m))
+        }
+    }
+}
+
+/// The registry entry.
+///
+/// # Safety
+/// The CPU has AVX2 and FMA; `job` was checked by the safe API.
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn conv(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: AVX2 + FMA enabled here; 16-pixel tile ≤ MAX_TILE; the job was checked by the caller.
+    unsafe { generic_conv::<__m256, G, NV>(job, out) }
+}
+
+/// FMA peak loop: `iters` × 12 independent 8-lane FMAs; returns a value derived from the result (to keep the
+/// loop alive). FLOPs = `iters · 12 · 8 · 2`.
+///
+/// # Safety
+/// The CPU has AVX2 and FMA.
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn peak(iters: u64) -> f32 {
+    let mut acc = [_mm256_set1_ps(1.0); 12];
+    let a = _mm256_set1_ps(0.999_999);
+    let b = _mm256_set1_ps(1e-7);
+    for _ in 0..iters {
+        for x in acc.iter_mut() {
+            *x = _mm256_fmadd_ps(*x, a, b);
+        }
+    }
+    let mut s = _mm256_setzero_ps();
+    for x in acc {
+        s = _mm256_add_ps(s, x);
+    }
+    let mut out = [0.0f32; 8];
+    // SAFETY: `out` holds 8 values.
+    unsafe { _mm256_storeu_ps(out.as_mut_ptr(), s) };
+    out.iter().sum()
+}
+
+/// Tests only: two ymm registers acting as one 16-lane register, so that the generic loop runs the
+/// AVX-512 row's tile geometry (8 output channels × 3 vectors of 16 lanes = 48 pixels, masks up to 16
+/// lanes) on a CPU without AVX-512. Only the register operations of `f32_avx512.rs` remain untested here.
+#[cfg(test)]
+#[derive(Clone, Copy)]
+pub(crate) struct Ymm2(__m256, __m256);
+
+#[cfg(test)]
+impl SimdF32 for Ymm2 {
+    const LANES: usize = 16;
+    #[inline(always)]
+    unsafe fn zero() -> Self {
+        // SAFETY: the caller guarantees AVX.
+        unsafe { Ymm2(__m256::zero(), __m256::zero()) }
+    }
+    #[inline(always)]
+    unsafe fn splat(p: *const f32) -> Self {
+        // SAFETY: the caller guarantees AVX and a valid `p`.
+        unsafe { Ymm2(__m256::splat(p), __m256::splat(p)) }
+    }
+    #[inline(always)]
+    unsafe fn load(p: *const f32) -> Self {
+        // SAFETY: the caller guarantees 16 readable values at `p`.
+        unsafe { Ymm2(__m256::load(p), __m256::load(p.add(8))) }
+    }
+    #[inline(always)]
+    unsafe fn store(p: *mut f32, v: Self) {
+        // SAFETY: the caller guarantees 16 writable values at `p`.
+        unsafe {
+            __m256::store(p, v.0);
+            __m256::store(p.add(8), v.1)
+        }
+    }
+    #[inline(always)]
+    unsafe fn fma(acc: Self, a: Self, b: Self) -> Self {
+        // SAFETY: the caller guarantees FMA.
+        unsafe { Ymm2(__m256::fma(acc.0, a.0, b.0), __m256::fma(acc.1, a.1, b.1)) }
+    }
+    #[inline(always)]
+    unsafe fn add(a: Self, b: Self) -> Self {
+        // SAFETY: the caller guarantees AVX.
+        unsafe { Ymm2(__m256::add(a.0, b.0), __m256::add(a.1, b.1)) }
+    }
+    #[inline(always)]
+    unsafe fn relu(v: Self) -> Self {
+        // SAFETY: the caller guarantees AVX.
+        unsafe { Ymm2(__m256::relu(v.0), __m256::relu(v.1)) }
+    }
+    #[inline(always)]
+    unsafe fn keep_first(v: Self, n: usize) -> Self {
+        // SAFETY: the caller guarantees AVX; `n < 16`, so each half gets `n < 8` or `n − 8 < 8`.
+        unsafe {
+            if n < 8 {
+                Ymm2(__m256::keep_first(v.0, n), __m256::zero())
+            } else if n == 8 {
+                Ymm2(v.0, __m256::zero())
+            } else {
+                Ymm2(v.0, __m256::keep_first(v.1, n - 8))
+            }
+        }
+    }
+}
+
+/// Tests only: the AVX-512 tile geometry (8 × 3 × 16 lanes) on AVX2 registers.
+///
+/// # Safety
+/// As [`conv`].
+#[cfg(test)]
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn conv_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: as `conv`; 48-pixel tile ≤ MAX_TILE.
+    unsafe { generic_conv::<Ymm2, 8, 3>(job, out) }
+}

@@ -1,0 +1,97 @@
+//! `conv3x3.f32.8x3.avx512`: AVX-512F, 512-bit registers.
+//!
+//! Register tile: 8 output channels × 3 zmm (48 pixels) = 24 accumulators, + 3 input vectors + 1 broadcast
+//! weight = 28 of the 32 zmm registers. Per reduction step: 3 loads + 8 broadcasts for 24 FMAs. The loop and
+//! index code is the generic [`simd_f32::conv`](super::simd_f32::conv) shared with the tested AVX2 and NEON
+//! rows; only the register operations below are specific (the test machine has no AVX-512).
+
+use super::simd_f32::{conv as generic_conv, SimdF32};
+use super::{F32Job, F32Out};
+use std::arch::x86_64::*;
+
+/// Output-channel tile.
+pub(crate) const G: usize = 8;
+/// zmm vectors of pixels per tile.
+pub(crate) const NV: usize = 3;
+
+impl SimdF32 for __m512 {
+    const LANES: usize = 16;
+    #[inline(always)]
+    unsafe fn zero() -> Self {
+        // SAFETY: the caller guarantees AVX-512F.
+        unsafe { _mm512_setzero_ps() }
+    }
+    #[inline(always)]
+    unsafe fn splat(p: *const f32) -> Self {
+        // SAFETY: the caller guarantees AVX-512F and a valid `p`.
+        unsafe { _mm512_set1_ps(*p) }
+    }
+    #[inline(always)]
+    unsafe fn load(p: *const f32) -> Self {
+        // SAFETY: the caller guarantees AVX-512F and 16 readable values at `p`.
+        unsafe { _mm512_loadu_ps(p) }
+    }
+    #[inline(always)]
+    unsafe fn store(p: *mut f32, v: Self) {
+        // SAFETY: the caller guarantees AVX-512F and 16 writable values at `p`.
+        unsafe { _mm512_storeu_ps(p, v) }
+    }
+    #[inline(always)]
+    unsafe fn fma(acc: Self, a: Self, b: Self) -> Self {
+        // SAFETY: the caller guarantees AVX-512F.
+        unsafe { _mm512_fmadd_ps(a, b, acc) }
+    }
+    #[inline(always)]
+    unsafe fn add(a: Self, b: Self) -> Self {
+        // SAFETY: the caller guarantees AVX-512F.
+        unsafe { _mm512_add_ps(a, b) }
+    }
+    #[inline(always)]
+    unsafe fn relu(v: Self) -> Self {
+        // SAFETY: the caller guarantees AVX-512F. `vmaxps(v, 0)` returns the second operand for NaN and ±0.
+        unsafe { _mm512_max_ps(v, _mm512_setzero_ps()) }
+    }
+    #[inline(always)]
+    unsafe fn prefetch(p: *const f32) {
+        // SAFETY: `prefetcht0` never faults.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) }
+    }
+    #[inline(always)]
+    unsafe fn keep_first(v: Self, n: usize) -> Self {
+        debug_assert!(n < 16);
+        let m: __mmask16 = ((1u32 << n) - 1) as u16;
+        // SAFETY: the caller guarantees AVX-512F.
+        unsafe { _mm512_maskz_mov_ps(m, v) }
+    }
+}
+
+/// The registry entry.
+///
+/// # Safety
+/// The CPU has AVX-512F (and AVX2, FMA); `job` was checked by the safe API.
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub(crate) unsafe fn conv(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: AVX-512F enabled here; 48-pixel tile ≤ MAX_TILE; the job was checked by the caller.
+    unsafe { generic_conv::<__m512, G, NV>(job, out) }
+}
+
+/// FMA peak loop: `iters` × 24 independent 16-lane FMAs. FLOPs = `iters · 24 · 16 · 2`.
+///
+/// # Safety
+/// The CPU has AVX-512F.
+#[target_feature(enable = "avx512f")]
+pub(crate) unsafe fn peak(iters: u64) -> f32 {
+    let mut acc = [_mm512_set1_ps(1.0); 24];
+    let a = _mm512_set1_ps(0.999_999);
+    let b = _mm512_set1_ps(1e-7);
+    for _ in 0..iters {
+        for x in acc.iter_mut() {
+            *x = _mm512_fmadd_ps(*x, a, b);
+        }
+    }
+    let mut s = _mm512_setzero_ps();
+    for x in acc {
+        s = _mm512_add_ps(s, x);
+    }
+    _mm512_reduce_add_ps(s)
+}

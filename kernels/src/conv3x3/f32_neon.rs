@@ -1,0 +1,95 @@
+//! `conv3x3.f32.8x3.neon`: aarch64 Advanced SIMD, 128-bit registers.
+//!
+//! Register tile: 8 output channels × 3 q registers (12 pixels) = 24 accumulators, + 3 input vectors + 1
+//! broadcast weight (`ld1r`) = 28 of the 32 q registers. Per reduction step: 3 loads + 8 broadcast loads for
+//! 24 FMAs. Shares the generic loop [`simd_f32::conv`](super::simd_f32::conv) with the x86 rows.
+
+use super::simd_f32::{conv as generic_conv, SimdF32};
+use super::{F32Job, F32Out};
+use std::arch::aarch64::*;
+
+/// Output-channel tile.
+pub(crate) const G: usize = 8;
+/// q vectors of pixels per tile.
+pub(crate) const NV: usize = 3;
+
+static MASK: [u32; 8] = [u32::MAX, u32::MAX, u32::MAX, u32::MAX, 0, 0, 0, 0];
+
+impl SimdF32 for float32x4_t {
+    const LANES: usize = 4;
+    #[inline(always)]
+    unsafe fn zero() -> Self {
+        // SAFETY: NEON is part of every aarch64 target.
+        unsafe { vdupq_n_f32(0.0) }
+    }
+    #[inline(always)]
+    unsafe fn splat(p: *const f32) -> Self {
+        // SAFETY: NEON; the caller guarantees a valid `p`.
+        unsafe { vld1q_dup_f32(p) }
+    }
+    #[inline(always)]
+    unsafe fn load(p: *const f32) -> Self {
+        // SAFETY: NEON; the caller guarantees 4 readable values at `p`.
+        unsafe { vld1q_f32(p) }
+    }
+    #[inline(always)]
+    unsafe fn store(p: *mut f32, v: Self) {
+        // SAFETY: NEON; the caller guarantees 4 writable values at `p`.
+        unsafe { vst1q_f32(p, v) }
+    }
+    #[inline(always)]
+    unsafe fn fma(acc: Self, a: Self, b: Self) -> Self {
+        // SAFETY: NEON.
+        unsafe { vfmaq_f32(acc, a, b) }
+    }
+    #[inline(always)]
+    unsafe fn add(a: Self, b: Self) -> Self {
+        // SAFETY: NEON.
+        unsafe { vaddq_f32(a, b) }
+    }
+    #[inline(always)]
+    unsafe fn relu(v: Self) -> Self {
+        // SAFETY: NEON.
+        unsafe { vmaxq_f32(v, vdupq_n_f32(0.0)) }
+    }
+    #[inline(always)]
+    unsafe fn keep_first(v: Self, n: usize) -> Self {
+        debug_assert!(n < 4);
+        // SAFETY: NEON; `4 − n ∈ 1..=4`, so the 4 mask values read are inside MASK.
+        unsafe {
+            let m = vld1q_u32(MASK.as_ptr().add(4 - n));
+            vreinterpretq_f32_u32(vandq_u32(vreinterpretq_u32_f32(v), m))
+        }
+    }
+}
+
+/// The registry entry.
+///
+/// # Safety
+/// `job` was checked by the safe API (NEON is always present on aarch64).
+#[target_feature(enable = "neon")]
+pub(crate) unsafe fn conv(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: NEON enabled; 12-pixel tile ≤ MAX_TILE; the job was checked by the caller.
+    unsafe { generic_conv::<float32x4_t, G, NV>(job, out) }
+}
+
+/// FMA peak loop: `iters` × 24 independent 4-lane FMAs. FLOPs = `iters · 24 · 4 · 2`.
+///
+/// # Safety
+/// None beyond NEON, which every aarch64 CPU has.
+#[target_feature(enable = "neon")]
+pub(crate) unsafe fn peak(iters: u64) -> f32 {
+    let mut acc = [vdupq_n_f32(1.0); 24];
+    let a = vdupq_n_f32(0.999_999);
+    let b = vdupq_n_f32(1e-7);
+    for _ in 0..iters {
+        for x in acc.iter_mut() {
+            *x = vfmaq_f32(b, *x, a);
+        }
+    }
+    let mut s = vdupq_n_f32(0.0);
+    for x in acc {
+        s = vaddq_f32(s, x);
+    }
+    vaddvq_f32(s)
+}

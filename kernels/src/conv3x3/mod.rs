@@ -1,0 +1,340 @@
+//! Direct 3×3 convolutions (stride 1, zero padding 1, no groups) on [`RowPlanar`] buffers.
+//!
+//! A plan ([`Conv3x3F32`]) packs the weights once for the kernel row it selected (see [`registry`]) and
+//! then runs any row band `[y0, y1)` of a frame: every output pixel is computed by the same instruction
+//! sequence whatever the band, so any split of the rows (over threads, say) gives bit-identical frames.
+//!
+//! Epilogue per output value: `v = conv + bias`; `v = max(v, 0)` when the plan has ReLU; `v += residual`
+//! when a residual buffer is given (after the ReLU). Inputs may come from two buffers (channel
+//! concatenation: channels `[0, Ca)` from `a`, `[Ca, Ca + Cb)` from `b`) so no copy is needed.
+
+pub mod registry;
+
+mod f32_scalar;
+#[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
+mod simd_f32;
+#[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
+mod simd_u8;
+mod u8s8;
+#[cfg(target_arch = "aarch64")]
+mod u8s8_neon;
+mod u8s8_scalar;
+#[cfg(target_arch = "x86_64")]
+mod u8s8_x86;
+
+#[cfg(target_arch = "x86_64")]
+mod f32_avx2;
+#[cfg(target_arch = "x86_64")]
+mod f32_avx512;
+#[cfg(target_arch = "aarch64")]
+mod f32_neon;
+
+#[cfg(test)]
+mod reference;
+#[cfg(test)]
+pub(crate) mod tests;
+
+use crate::buffer::{Element, RowPlanar};
+use crate::pack;
+use crate::{Isa, KernelError};
+use registry::{F32Row, KernelInfo};
+use std::ops::Range;
+pub use u8s8::{Conv3x3U8, Conv3x3U8Spec, QuantU8, MAX_C_IN_U8};
+
+/// The inputs of one convolution call: source `a`, an optional second source `b` concatenated after `a`'s
+/// channels, and an optional residual added after the ReLU (same shape as the output).
+#[derive(Clone, Copy, Debug)]
+pub struct Inputs<'a, T: Element> {
+    /// First source: channels `[0, Ca)` of the convolution input.
+    pub a: &'a RowPlanar<T>,
+    /// Second source: channels `[Ca, Ca + Cb)`; `None` when the input is `a` alone.
+    pub b: Option<&'a RowPlanar<T>>,
+    /// Residual `[C_out][H][W]` added after the ReLU; `None` for no residual.
+    pub residual: Option<&'a RowPlanar<T>>,
+}
+
+impl<'a, T: Element> Inputs<'a, T> {
+    /// One source, no residual.
+    pub fn new(a: &'a RowPlanar<T>) -> Self {
+        Self {
+            a,
+            b: None,
+            residual: None,
+        }
+    }
+    /// Adds a second source concatenated after `a`'s channels.
+    pub fn concat(mut self, b: &'a RowPlanar<T>) -> Self {
+        self.b = Some(b);
+        self
+    }
+    /// Adds a residual.
+    pub fn residual(mut self, r: &'a RowPlanar<T>) -> Self {
+        self.residual = Some(r);
+        self
+    }
+
+    /// Checks the shapes against a plan of `c_in → c_out` and an output of `h × w`, and the row band.
+    pub(crate) fn check(
+        &self,
+        c_in: usize,
+        c_out: usize,
+        h: usize,
+        w: usize,
+        rows: &Range<usize>,
+    ) -> Result<(), KernelError> {
+        let same = |what: &str, b: &RowPlanar<T>| -> Result<(), KernelError> {
+            if b.height() != h || b.width() != w {
+                return Err(KernelError::Shape {
+                    what: format!("{what} is {}×{}, output is {h}×{w}", b.height(), b.width()),
+                });
+            }
+            Ok(())
+        };
+        same("source a", self.a)?;
+        let cb = match self.b {
+            Some(b) => {
+                same("source b", b)?;
+                b.channels()
+            }
+            None => 0,
+        };
+        if self.a.channels() + cb != c_in {
+            return Err(KernelError::Shape {
+                what: format!(
+                    "input channels {} + {cb} != plan's C_in {c_in}",
+                    self.a.channels()
+                ),
+            });
+        }
+        if let Some(r) = self.residual {
+            same("residual", r)?;
+            if r.channels() != c_out {
+                return Err(KernelError::Shape {
+                    what: format!(
+                        "residual has {} channels, plan's C_out is {c_out}",
+                        r.channels()
+                    ),
+                });
+            }
+        }
+        if rows.start >= rows.end || rows.end > h {
+            return Err(KernelError::Rows {
+                start: rows.start,
+                end: rows.end,
+                height: h,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Everything an f32 kernel needs, checked by the safe API: the sources (`a` with `ca` channels, `b` with `cb`,
+/// possibly 0), the frame `h × w` with padded row `wp`, the packed weights `[group][C_in][3][3][G]` and bias
+/// `[group·G]` of the kernel's `G`, and the output rows `[y0, y1)`.
+pub(crate) struct F32Job<'a> {
+    pub a: &'a [f32],
+    pub ca: usize,
+    pub b: &'a [f32],
+    pub cb: usize,
+    pub h: usize,
+    pub w: usize,
+    pub wp: usize,
+    pub weights: &'a [f32],
+    pub bias: &'a [f32],
+    pub cout: usize,
+    pub relu: bool,
+    pub residual: Option<&'a [f32]>,
+    pub y0: usize,
+    pub y1: usize,
+}
+
+/// Where an f32 kernel writes: a [`RowPlanar`] buffer of `C_out` channels (`[H+2][C_out][Wp]`) or a planar
+/// `[C_out][H][W]` slice.
+pub(crate) enum F32Out<'a> {
+    Rows(&'a mut [f32]),
+    Planar(&'a mut [f32]),
+}
+
+/// Everything an int8 kernel needs, checked by the safe API: sources `a`/`b` in the u8 layout with `ga`/`gb`
+/// channel groups of 4, packed weights (bytes; i8 or i16 per the row's [`registry::PackKind`]), per output
+/// channel (padded to the tile) the i32 accumulator start (zero-point corrections), the f32 multiplier and
+/// bias; the residual `(buffer, zero point, scale)`; the output quantisation `1/scale` and zero point.
+pub(crate) struct U8Job<'a> {
+    pub a: &'a [u8],
+    pub ga: usize,
+    pub b: &'a [u8],
+    pub gb: usize,
+    pub h: usize,
+    pub w: usize,
+    pub wp: usize,
+    pub weights: &'a [u8],
+    pub init: &'a [i32],
+    pub mult: &'a [f32],
+    pub bias: &'a [f32],
+    pub cout: usize,
+    pub relu: bool,
+    pub residual: Option<(&'a [u8], f32, f32)>,
+    pub out_inv: f32,
+    pub out_zp: f32,
+    pub out_zp_u8: u8,
+    pub y0: usize,
+    pub y1: usize,
+}
+
+/// Where an int8 kernel writes: a u8 [`RowPlanar`] (`[H+2][C_out/4][Wp][4]`) or planar `[C_out][H][W]` f32.
+pub(crate) enum U8Out<'a> {
+    Rows(&'a mut [u8]),
+    Planar(&'a mut [f32]),
+}
+
+/// A planned f32 3×3 convolution `C_in → C_out` with bias and optional ReLU, packed for one kernel row.
+#[derive(Clone, Debug)]
+pub struct Conv3x3F32 {
+    row: &'static F32Row,
+    c_in: usize,
+    c_out: usize,
+    relu: bool,
+    weights: Vec<f32>,
+    bias: Vec<f32>,
+}
+
+impl Conv3x3F32 {
+    /// Plans a convolution with the best f32 kernel row for `isa`.
+    ///
+    /// `weights` is `[C_out][C_in][3][3]` (PyTorch/ONNX OIHW order), `bias` is `[C_out]`; `relu` applies
+    /// `max(·, 0)` after the bias. Errors: `isa` not available on this CPU ([`KernelError::Isa`]), a zero or
+    /// too large channel count ([`KernelError::Dimension`]), wrong slice lengths ([`KernelError::Length`]).
+    pub fn new(
+        weights: &[f32],
+        bias: &[f32],
+        c_in: usize,
+        c_out: usize,
+        relu: bool,
+        isa: Isa,
+    ) -> Result<Self, KernelError> {
+        if !isa.is_available() {
+            return Err(KernelError::Isa {
+                name: isa.name().into(),
+                why: "not available on this CPU",
+            });
+        }
+        Self::with_row(weights, bias, c_in, c_out, relu, registry::select_f32(isa))
+    }
+
+    /// Plans a convolution with the kernel row named `name` (e.g. `conv3x3.f32.6x2.avx2`, see
+    /// [`registry::f32_kernels`]). Errors: as [`new`](Self::new), and [`KernelError::Kernel`] for an unknown
+    /// name or a row this CPU cannot run.
+    pub fn with_kernel(
+        weights: &[f32],
+        bias: &[f32],
+        c_in: usize,
+        c_out: usize,
+        relu: bool,
+        name: &str,
+    ) -> Result<Self, KernelError> {
+        let row = registry::F32_ROWS
+            .iter()
+            .find(|r| r.info.name == name && r.info.isa.is_available())
+            .ok_or_else(|| KernelError::Kernel { name: name.into() })?;
+        Self::with_row(weights, bias, c_in, c_out, relu, row)
+    }
+
+    fn with_row(
+        weights: &[f32],
+        bias: &[f32],
+        c_in: usize,
+        c_out: usize,
+        relu: bool,
+        row: &'static F32Row,
+    ) -> Result<Self, KernelError> {
+        let (weights, bias) = pack::pack_f32(weights, bias, c_in, c_out, row.info.oc_tile)?;
+        Ok(Self {
+            row,
+            c_in,
+            c_out,
+            relu,
+            weights,
+            bias,
+        })
+    }
+
+    /// The kernel row this plan runs.
+    pub fn kernel(&self) -> &'static KernelInfo {
+        &self.row.info
+    }
+    /// Input channels `C_in` (sum over both sources).
+    pub fn c_in(&self) -> usize {
+        self.c_in
+    }
+    /// Output channels `C_out`.
+    pub fn c_out(&self) -> usize {
+        self.c_out
+    }
+
+    fn job<'a>(&'a self, inputs: &Inputs<'a, f32>, rows: &Range<usize>) -> F32Job<'a> {
+        let a = inputs.a;
+        F32Job {
+            a: a.as_slice(),
+            ca: a.channels(),
+            b: inputs.b.map_or(&[][..], |b| b.as_slice()),
+            cb: inputs.b.map_or(0, |b| b.channels()),
+            h: a.height(),
+            w: a.width(),
+            wp: a.padded_width(),
+            weights: &self.weights,
+            bias: &self.bias,
+            cout: self.c_out,
+            relu: self.relu,
+            residual: inputs.residual.map(|r| r.as_slice()),
+            y0: rows.start,
+            y1: rows.end,
+        }
+    }
+
+    /// Computes output rows `rows` (frame rows, `0 ≤ start < end ≤ H`) into `out`, a [`RowPlanar`] of `C_out`
+    /// channels and the inputs' `H × W`. Only the interior of those rows is written (and their right border
+    /// rewritten with zeros). Errors: shape mismatches ([`KernelError::Shape`]), a bad row band
+    /// ([`KernelError::Rows`]).
+    pub fn run(
+        &self,
+        inputs: Inputs<'_, f32>,
+        out: &mut RowPlanar<f32>,
+        rows: Range<usize>,
+    ) -> Result<(), KernelError> {
+        let (h, w) = (out.height(), out.width());
+        if out.channels() != self.c_out {
+            return Err(KernelError::Shape {
+                what: format!(
+                    "output has {} channels, plan's C_out is {}",
+                    out.channels(),
+                    self.c_out
+                ),
+            });
+        }
+        inputs.check(self.c_in, self.c_out, h, w, &rows)?;
+        let job = self.job(&inputs, &rows);
+        registry::run_f32(self.row, &job, F32Out::Rows(out.as_mut_slice()))
+    }
+
+    /// Computes output rows `rows` into a planar `[C_out][H][W]` f32 slice (the last layer: raw values, no
+    /// border). Errors: as [`run`](Self::run), and `out.len() != C_out·H·W` ([`KernelError::Length`]).
+    pub fn run_planar(
+        &self,
+        inputs: Inputs<'_, f32>,
+        out: &mut [f32],
+        rows: Range<usize>,
+    ) -> Result<(), KernelError> {
+        let (h, w) = (inputs.a.height(), inputs.a.width());
+        let expected = self.c_out * h * w;
+        if out.len() != expected {
+            return Err(KernelError::Length {
+                what: "planar output",
+                expected,
+                got: out.len(),
+            });
+        }
+        inputs.check(self.c_in, self.c_out, h, w, &rows)?;
+        let job = self.job(&inputs, &rows);
+        registry::run_f32(self.row, &job, F32Out::Planar(out))
+    }
+}

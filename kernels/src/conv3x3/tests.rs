@@ -1,0 +1,848 @@
+//! Every available kernel row against the reference; row bands; the zero border; dispatch; errors.
+
+use super::reference::{self, RefU8Params};
+use super::registry::{self, F32_ROWS, U8_ROWS};
+use super::{Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, QuantU8};
+use crate::{Isa, KernelError, RowPlanar};
+
+/// xorshift64*: deterministic test data without dependencies.
+pub(crate) struct Rng(u64);
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Self(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+    }
+    pub fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    /// Uniform in [-1, 1).
+    pub fn f(&mut self) -> f32 {
+        (self.next() >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+    }
+    pub fn vec(&mut self, n: usize) -> Vec<f32> {
+        (0..n).map(|_| self.f()).collect()
+    }
+}
+
+/// f32 rows this CPU can run; prints the ones it skips.
+pub(crate) fn f32_rows() -> Vec<&'static str> {
+    let mut names = Vec::new();
+    for r in F32_ROWS {
+        if r.info.is_available() {
+            names.push(r.info.name);
+        } else {
+            println!("SKIPPED {}: this CPU lacks {}", r.info.name, r.info.isa);
+        }
+    }
+    names
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Case {
+    ca: usize,
+    cb: usize,
+    cout: usize,
+    h: usize,
+    w: usize,
+    relu: bool,
+    residual: bool,
+    planar: bool,
+}
+
+/// Runs `row` on `case` (whole frame) and compares with the reference within 1e-5 of Σ|w·x|; checks the
+/// border. Returns the output (planar) for further comparisons.
+fn check_f32(row: &str, case: Case, seed: u64) -> Vec<f32> {
+    let Case {
+        ca,
+        cb,
+        cout,
+        h,
+        w,
+        relu,
+        residual,
+        planar,
+    } = case;
+    let mut rng = Rng::new(seed);
+    let cin = ca + cb;
+    let a = rng.vec(ca * h * w);
+    let b = rng.vec(cb * h * w);
+    let wt = rng.vec(cout * cin * 9);
+    let bias = rng.vec(cout);
+    let res = rng.vec(cout * h * w);
+    let want = reference::conv_f32(
+        &a,
+        ca,
+        &b,
+        cb,
+        h,
+        w,
+        &wt,
+        &bias,
+        cout,
+        relu,
+        residual.then_some(&res[..]),
+    );
+    let plan = Conv3x3F32::with_kernel(&wt, &bias, cin, cout, relu, row).unwrap();
+    assert_eq!(plan.kernel().name, row);
+    let ba = RowPlanar::from_planar(&a, ca, h, w, None).unwrap();
+    let bb = (cb > 0).then(|| RowPlanar::from_planar(&b, cb, h, w, None).unwrap());
+    let br = RowPlanar::from_planar(&res, cout, h, w, None).unwrap();
+    let mut inputs = Inputs::new(&ba);
+    if let Some(bb) = &bb {
+        inputs = inputs.concat(bb);
+    }
+    if residual {
+        inputs = inputs.residual(&br);
+    }
+    let got = if planar {
+        let mut out = vec![f32::NAN; cout * h * w];
+        plan.run_planar(inputs, &mut out, 0..h).unwrap();
+        out
+    } else {
+        let mut out = RowPlanar::new(cout, h, w).unwrap();
+        plan.run(inputs, &mut out, 0..h).unwrap();
+        assert!(out.border_is_clean(), "{row} {case:?}: border written");
+        out.to_planar()
+    };
+    for (k, (&g, &r)) in got.iter().zip(&want.out).enumerate() {
+        let tol = 1e-5 * want.mag[k] + 1e-30;
+        assert!(
+            ((g - r) as f64).abs() <= tol,
+            "{row} {case:?}: value {k} (o {}, y {}, x {}) = {g}, reference {r}, tolerance {tol}",
+            k / (h * w),
+            k / w % h,
+            k % w
+        );
+    }
+    got
+}
+
+const C_INS: [(usize, usize); 9] = [
+    (4, 0),
+    (6, 0),
+    (8, 0),
+    (14, 0),
+    (20, 0),
+    (24, 0),
+    (28, 0),
+    (24, 4),
+    (8, 6),
+];
+const C_OUTS: [usize; 3] = [6, 8, 24];
+const HS: [usize; 4] = [1, 2, 3, 7];
+const WS: [usize; 12] = [1, 5, 7, 11, 15, 16, 17, 33, 47, 48, 49, 53];
+
+#[test]
+fn f32_rows_match_reference_on_layer_shapes() {
+    let mut n = 0;
+    for row in f32_rows() {
+        for (i, &(ca, cb)) in C_INS.iter().enumerate() {
+            for (j, &cout) in C_OUTS.iter().enumerate() {
+                for (k, &h) in HS.iter().enumerate() {
+                    let idx = i * 12 + j * 4 + k;
+                    let case = Case {
+                        ca,
+                        cb,
+                        cout,
+                        h,
+                        w: WS[idx % WS.len()],
+                        relu: idx % 2 == 0,
+                        residual: (idx / 2) % 2 == 0,
+                        planar: idx % 3 == 0,
+                    };
+                    check_f32(row, case, idx as u64);
+                    n += 1;
+                }
+            }
+        }
+    }
+    println!("{n} cases");
+}
+
+#[test]
+fn f32_rows_match_reference_on_every_width_to_66() {
+    for row in f32_rows() {
+        for w in 1..=66 {
+            for planar in [false, true] {
+                let case = Case {
+                    ca: 5,
+                    cb: 3,
+                    cout: 6,
+                    h: 2,
+                    w,
+                    relu: true,
+                    residual: true,
+                    planar,
+                };
+                check_f32(row, case, w as u64);
+            }
+        }
+    }
+}
+
+#[test]
+fn f32_rows_agree_with_each_other_and_scalar() {
+    // Not bit-exact (different summation order is allowed in f32), but close.
+    let case = Case {
+        ca: 24,
+        cb: 0,
+        cout: 24,
+        h: 5,
+        w: 41,
+        relu: true,
+        residual: true,
+        planar: true,
+    };
+    let outs: Vec<Vec<f32>> = f32_rows().iter().map(|r| check_f32(r, case, 9)).collect();
+    for o in &outs[1..] {
+        for (a, b) in o.iter().zip(&outs[0]) {
+            assert!((a - b).abs() <= 1e-4 * (1.0 + b.abs()));
+        }
+    }
+}
+
+#[test]
+fn f32_row_bands_are_bit_identical_and_touch_only_their_rows() {
+    let (ca, cb, cout, h, w) = (14, 0, 24, 7, 37);
+    let mut rng = Rng::new(5);
+    let a = RowPlanar::from_planar(&rng.vec(ca * h * w), ca, h, w, None).unwrap();
+    let res = RowPlanar::from_planar(&rng.vec(cout * h * w), cout, h, w, None).unwrap();
+    let wt = rng.vec(cout * (ca + cb) * 9);
+    let bias = rng.vec(cout);
+    for row in f32_rows() {
+        let plan = Conv3x3F32::with_kernel(&wt, &bias, ca + cb, cout, true, row).unwrap();
+        let inputs = Inputs::new(&a).residual(&res);
+        let mut whole = RowPlanar::new(cout, h, w).unwrap();
+        plan.run(inputs, &mut whole, 0..h).unwrap();
+        let mut whole_planar = vec![0.0; cout * h * w];
+        plan.run_planar(inputs, &mut whole_planar, 0..h).unwrap();
+        for bands in [vec![0, 1, 3, 7], vec![0, 4, 5, 6, 7], vec![0, 2, 7]] {
+            let sentinel = vec![7.5f32; cout * h * w];
+            let mut out = RowPlanar::from_planar(&sentinel, cout, h, w, None).unwrap();
+            let mut planar = sentinel.clone();
+            for win in bands.windows(2) {
+                // Before the band runs, its rows still hold the sentinel and the others are untouched.
+                plan.run(inputs, &mut out, win[0]..win[1]).unwrap();
+                plan.run_planar(inputs, &mut planar, win[0]..win[1])
+                    .unwrap();
+                let done = out.to_planar();
+                for o in 0..cout {
+                    for y in 0..h {
+                        for x in 0..w {
+                            let k = (o * h + y) * w + x;
+                            let expect_done = y < win[1];
+                            let want = if expect_done {
+                                whole.to_planar()[k]
+                            } else {
+                                7.5
+                            };
+                            assert_eq!(done[k].to_bits(), want.to_bits(), "{row} bands {bands:?}");
+                            let want_p = if expect_done { whole_planar[k] } else { 7.5 };
+                            assert_eq!(
+                                planar[k].to_bits(),
+                                want_p.to_bits(),
+                                "{row} planar bands {bands:?}"
+                            );
+                        }
+                    }
+                }
+                assert!(out.border_is_clean());
+            }
+        }
+    }
+}
+
+#[test]
+fn dispatch_selects_the_named_row_and_refuses_unavailable_isas() {
+    #[cfg(target_arch = "x86_64")]
+    let expected = [
+        (Isa::Scalar, "conv3x3.f32.8x8.scalar"),
+        (Isa::Avx2Fma, "conv3x3.f32.6x2.avx2"),
+        (Isa::AvxVnni, "conv3x3.f32.6x2.avx2"),
+        (Isa::Avx512, "conv3x3.f32.8x3.avx512"),
+        (Isa::Avx512Vnni, "conv3x3.f32.8x3.avx512"),
+    ];
+    #[cfg(target_arch = "aarch64")]
+    let expected = [
+        (Isa::Scalar, "conv3x3.f32.8x8.scalar"),
+        (Isa::Neon, "conv3x3.f32.8x3.neon"),
+        (Isa::NeonDot, "conv3x3.f32.8x3.neon"),
+        (Isa::NeonI8mm, "conv3x3.f32.8x3.neon"),
+    ];
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+    let expected = [(Isa::Scalar, "conv3x3.f32.8x8.scalar")];
+    let wt = vec![0.5; 8 * 4 * 9];
+    for (isa, name) in expected {
+        assert_eq!(registry::selected_f32(isa).name, name);
+        let from_name = Isa::from_name(isa.name());
+        let plan = Conv3x3F32::new(&wt, &[0.0; 8], 4, 8, false, isa);
+        if isa.is_available() {
+            assert_eq!(from_name, Ok(isa));
+            assert_eq!(plan.unwrap().kernel().name, name, "forced {isa}");
+            println!("{isa}: available, selects {name}");
+        } else {
+            assert!(
+                matches!(from_name, Err(KernelError::Isa { .. })),
+                "{isa} should be refused"
+            );
+            assert!(matches!(plan, Err(KernelError::Isa { .. })));
+            assert!(
+                matches!(
+                    Conv3x3F32::with_kernel(&wt, &[0.0; 8], 4, 8, false, name),
+                    Err(KernelError::Kernel { .. })
+                ) || registry::f32_kernels().any(|k| k.name == name && k.is_available())
+            );
+            println!("{isa}: not available on this CPU, refused");
+        }
+    }
+    assert!(Isa::from_name("scalar").is_ok());
+    assert!(matches!(
+        Isa::from_name("sse9"),
+        Err(KernelError::Isa { .. })
+    ));
+    let best = Isa::detect();
+    assert!(best.is_available());
+    for isa in Isa::available() {
+        assert!(best.includes(isa) || isa == Isa::Scalar || !isa.includes(best));
+    }
+    assert!(matches!(
+        Conv3x3F32::with_kernel(&wt, &[0.0; 8], 4, 8, false, "nope"),
+        Err(KernelError::Kernel { .. })
+    ));
+}
+
+#[test]
+fn f32_bad_input_is_an_error_not_a_panic() {
+    let wt = vec![0.1; 8 * 4 * 9];
+    let plan = Conv3x3F32::new(&wt, &[0.0; 8], 4, 8, true, Isa::Scalar).unwrap();
+    let a = RowPlanar::new(4, 3, 5).unwrap();
+    let a6 = RowPlanar::new(6, 3, 5).unwrap();
+    let small = RowPlanar::new(4, 3, 4).unwrap();
+    let mut out = RowPlanar::new(8, 3, 5).unwrap();
+    let mut out6 = RowPlanar::new(6, 3, 5).unwrap();
+    assert!(matches!(
+        plan.run(Inputs::new(&a6), &mut out, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+    assert!(matches!(
+        plan.run(Inputs::new(&a).concat(&a), &mut out, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+    assert!(matches!(
+        plan.run(Inputs::new(&small), &mut out, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+    assert!(matches!(
+        plan.run(Inputs::new(&a), &mut out6, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+    assert!(matches!(
+        plan.run(Inputs::new(&a).residual(&a), &mut out, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+    assert!(matches!(
+        plan.run(Inputs::new(&a), &mut out, 0..4),
+        Err(KernelError::Rows { .. })
+    ));
+    #[allow(clippy::reversed_empty_ranges)]
+    let reversed = 2..1;
+    assert!(matches!(
+        plan.run(Inputs::new(&a), &mut out, reversed),
+        Err(KernelError::Rows { .. })
+    ));
+    assert!(matches!(
+        plan.run(Inputs::new(&a), &mut out, 1..1),
+        Err(KernelError::Rows { .. })
+    ));
+    let mut planar = vec![0.0; 8 * 3 * 5 - 1];
+    assert!(matches!(
+        plan.run_planar(Inputs::new(&a), &mut planar, 0..3),
+        Err(KernelError::Length { .. })
+    ));
+    assert!(matches!(
+        Conv3x3F32::new(&wt[1..], &[0.0; 8], 4, 8, true, Isa::Scalar),
+        Err(KernelError::Length { .. })
+    ));
+    assert!(matches!(
+        Conv3x3F32::new(&wt, &[0.0; 7], 4, 8, true, Isa::Scalar),
+        Err(KernelError::Length { .. })
+    ));
+    assert!(matches!(
+        Conv3x3F32::new(&[], &[], 0, 8, true, Isa::Scalar),
+        Err(KernelError::Dimension { .. })
+    ));
+    assert!(plan.run(Inputs::new(&a), &mut out, 0..3).is_ok());
+}
+
+/// int8 rows this CPU can run; prints the ones it skips.
+pub(crate) fn u8_rows() -> Vec<&'static str> {
+    let mut names = Vec::new();
+    for r in U8_ROWS {
+        if r.info.is_available() {
+            names.push(r.info.name);
+        } else {
+            println!("SKIPPED {}: this CPU lacks {}", r.info.name, r.info.isa);
+        }
+    }
+    names
+}
+
+#[derive(Clone, Copy, Debug)]
+struct QCase {
+    ca: usize,
+    cb: usize,
+    cout: usize,
+    h: usize,
+    w: usize,
+    relu: bool,
+    residual: bool,
+    u8_out: bool,
+}
+
+/// Random u8 data, weights over the whole s8 range, zero points ≠ 0 (different per buffer).
+struct QData {
+    a: Vec<u8>,
+    b: Vec<u8>,
+    r: Vec<u8>,
+    wt: Vec<i8>,
+    wscale: Vec<f32>,
+    bias: Vec<f32>,
+    zp: [u8; 4],
+}
+
+fn qdata(case: QCase, seed: u64) -> QData {
+    let QCase {
+        ca, cb, cout, h, w, ..
+    } = case;
+    let mut rng = Rng::new(seed);
+    let mut bytes = |n: usize| {
+        (0..n)
+            .map(|_| (rng.next() >> 56) as u8)
+            .collect::<Vec<u8>>()
+    };
+    let a = bytes(ca * h * w);
+    let b = bytes(cb * h * w);
+    let r = bytes(cout * h * w);
+    let wt = bytes(cout * (ca + cb) * 9)
+        .into_iter()
+        .map(|v| v as i8)
+        .collect();
+    let z = bytes(4);
+    let zp = [z[0] | 1, z[1] | 2, z[2], z[3] | 4];
+    let mut rng = Rng::new(seed ^ 0xABCD);
+    let wscale = (0..cout).map(|_| (1.0 + 0.5 * rng.f()) * 0.002).collect();
+    let bias = rng.vec(cout);
+    QData {
+        a,
+        b,
+        r,
+        wt,
+        wscale,
+        bias,
+        zp,
+    }
+}
+
+const IN_SCALE: f32 = 1.0 / 255.0;
+const RES_SCALE: f32 = 0.02;
+const OUT_SCALE: f32 = 0.01;
+
+fn spec<'a>(case: QCase, d: &'a QData) -> Conv3x3U8Spec<'a> {
+    Conv3x3U8Spec {
+        weights: &d.wt,
+        weight_scales: &d.wscale,
+        bias: &d.bias,
+        c_in_a: case.ca,
+        c_in_b: case.cb,
+        c_out: case.cout,
+        input_scale: IN_SCALE,
+        input_zero_point_a: d.zp[0],
+        input_zero_point_b: d.zp[1],
+        relu: case.relu,
+        residual: case.residual.then_some(QuantU8 {
+            scale: RES_SCALE,
+            zero_point: d.zp[2],
+        }),
+        output: case.u8_out.then_some(QuantU8 {
+            scale: OUT_SCALE,
+            zero_point: d.zp[3],
+        }),
+    }
+}
+
+/// Runs `row` on `case` and requires bit-exact agreement with the reference; checks the border. Returns the
+/// output (planar f32; u8 values as integers).
+fn check_u8_data(row: &str, case: QCase, d: &QData) -> Vec<f32> {
+    let QCase {
+        ca,
+        cb,
+        cout,
+        h,
+        w,
+        relu,
+        residual,
+        u8_out,
+    } = case;
+    let sp = spec(case, d);
+    let plan = Conv3x3U8::with_kernel(&sp, row).unwrap();
+    assert_eq!(plan.kernel().name, row);
+    let mult: Vec<f32> = d.wscale.iter().map(|s| IN_SCALE * s).collect();
+    let params = RefU8Params {
+        weights: &d.wt,
+        mult: &mult,
+        bias: &d.bias,
+        zp_a: d.zp[0],
+        zp_b: d.zp[1],
+        relu,
+        residual: residual.then_some((&d.r[..], d.zp[2], RES_SCALE)),
+        output: u8_out.then_some((1.0 / OUT_SCALE, d.zp[3])),
+    };
+    let want = reference::conv_u8(&d.a, ca, &d.b, cb, h, w, cout, &params);
+    let ba = RowPlanar::from_planar_u8(&d.a, ca, h, w, d.zp[0]).unwrap();
+    let bb = (cb > 0).then(|| RowPlanar::from_planar_u8(&d.b, cb, h, w, d.zp[1]).unwrap());
+    let br = RowPlanar::from_planar_u8(&d.r, cout, h, w, d.zp[2]).unwrap();
+    let mut inputs = Inputs::new(&ba);
+    if let Some(bb) = &bb {
+        inputs = inputs.concat(bb);
+    }
+    if residual {
+        inputs = inputs.residual(&br);
+    }
+    let got: Vec<f32> = if u8_out {
+        let mut out = RowPlanar::new_quantized(cout, h, w, d.zp[3]).unwrap();
+        plan.run(inputs, &mut out, 0..h).unwrap();
+        assert!(
+            out.border_is_clean(),
+            "{row} {case:?}: border or padding channels not the zero point"
+        );
+        out.to_planar().into_iter().map(f32::from).collect()
+    } else {
+        let mut out = vec![f32::NAN; cout * h * w];
+        plan.run_planar(inputs, &mut out, 0..h).unwrap();
+        out
+    };
+    for (k, (&g, &r)) in got.iter().zip(&want).enumerate() {
+        assert!(
+            g.to_bits() == r.to_bits() || (g == 0.0 && r == 0.0),
+            "{row} {case:?}: value {k} (o {}, y {}, x {}) = {g}, reference {r}",
+            k / (h * w),
+            k / w % h,
+            k % w
+        );
+    }
+    got
+}
+
+fn check_u8(row: &str, case: QCase, seed: u64) -> Vec<f32> {
+    check_u8_data(row, case, &qdata(case, seed))
+}
+
+#[test]
+fn u8_rows_bit_exact_with_reference_on_layer_shapes() {
+    let mut n = 0;
+    for row in u8_rows() {
+        for (i, &(ca, cb)) in C_INS.iter().enumerate() {
+            for (j, &cout) in C_OUTS.iter().enumerate() {
+                for (k, &h) in HS.iter().enumerate() {
+                    let idx = i * 12 + j * 4 + k;
+                    let case = QCase {
+                        ca,
+                        cb,
+                        cout,
+                        h,
+                        w: WS[(idx + 5) % WS.len()],
+                        relu: idx % 2 == 1,
+                        residual: (idx / 2) % 2 == 1,
+                        u8_out: idx % 3 != 0,
+                    };
+                    check_u8(row, case, idx as u64 + 100);
+                    n += 1;
+                }
+            }
+        }
+    }
+    println!("{n} cases");
+}
+
+#[test]
+fn u8_rows_bit_exact_on_every_width_to_66() {
+    for row in u8_rows() {
+        for w in 1..=66 {
+            for u8_out in [false, true] {
+                let case = QCase {
+                    ca: 5,
+                    cb: 3,
+                    cout: 6,
+                    h: 2,
+                    w,
+                    relu: true,
+                    residual: true,
+                    u8_out,
+                };
+                check_u8(row, case, w as u64);
+            }
+        }
+    }
+}
+
+#[test]
+fn u8_rows_do_not_saturate_at_extreme_values() {
+    // 255 × 127 (and × −128) summed over 28·9 taps: 8.2 M, far beyond i16; zero points 0 and 255.
+    let (ca, cb, cout, h, w) = (24, 4, 8, 3, 19);
+    for (x, wv, zp) in [
+        (255u8, 127i8, 0u8),
+        (255, -128, 0),
+        (0, -128, 255),
+        (255, 127, 255),
+    ] {
+        let case = QCase {
+            ca,
+            cb,
+            cout,
+            h,
+            w,
+            relu: false,
+            residual: false,
+            u8_out: false,
+        };
+        let mut d = qdata(case, 1);
+        d.a.fill(x);
+        d.b.fill(x);
+        d.wt.fill(wv);
+        d.zp = [zp, zp, 0, 0];
+        for row in u8_rows() {
+            let got = check_u8_data(row, case, &d);
+            assert!(
+                got.iter().any(|&v| v != got[0]) || x == zp,
+                "{row}: border pixels must differ"
+            );
+        }
+    }
+}
+
+#[test]
+fn u8_rows_agree_with_scalar_bit_exactly() {
+    let case = QCase {
+        ca: 24,
+        cb: 0,
+        cout: 24,
+        h: 5,
+        w: 53,
+        relu: true,
+        residual: true,
+        u8_out: true,
+    };
+    let outs: Vec<Vec<f32>> = u8_rows().iter().map(|r| check_u8(r, case, 77)).collect();
+    let scalar = outs.last().unwrap();
+    for o in &outs {
+        assert_eq!(o, scalar);
+    }
+}
+
+#[test]
+fn u8_row_bands_are_bit_identical_and_touch_only_their_rows() {
+    let case = QCase {
+        ca: 14,
+        cb: 0,
+        cout: 24,
+        h: 7,
+        w: 37,
+        relu: true,
+        residual: true,
+        u8_out: true,
+    };
+    let d = qdata(case, 3);
+    let sp = spec(case, &d);
+    let (h, w, cout) = (case.h, case.w, case.cout);
+    let a = RowPlanar::from_planar_u8(&d.a, case.ca, h, w, d.zp[0]).unwrap();
+    let r = RowPlanar::from_planar_u8(&d.r, cout, h, w, d.zp[2]).unwrap();
+    for row in u8_rows() {
+        let plan = Conv3x3U8::with_kernel(&sp, row).unwrap();
+        let inputs = Inputs::new(&a).residual(&r);
+        let mut whole = RowPlanar::new_quantized(cout, h, w, d.zp[3]).unwrap();
+        plan.run(inputs, &mut whole, 0..h).unwrap();
+        let whole = whole.to_planar();
+        let mut whole_f = vec![0.0; cout * h * w];
+        plan.run_planar(inputs, &mut whole_f, 0..h).unwrap();
+        for bands in [vec![0, 1, 3, 7], vec![0, 5, 6, 7]] {
+            let sentinel = vec![201u8; cout * h * w];
+            let mut out = RowPlanar::from_planar_u8(&sentinel, cout, h, w, d.zp[3]).unwrap();
+            let mut planar = vec![7.5f32; cout * h * w];
+            for win in bands.windows(2) {
+                plan.run(inputs, &mut out, win[0]..win[1]).unwrap();
+                plan.run_planar(inputs, &mut planar, win[0]..win[1])
+                    .unwrap();
+                let done = out.to_planar();
+                for k in 0..cout * h * w {
+                    let in_done = (k / w) % h < win[1];
+                    assert_eq!(
+                        done[k],
+                        if in_done { whole[k] } else { 201 },
+                        "{row} {bands:?}"
+                    );
+                    let want = if in_done { whole_f[k] } else { 7.5 };
+                    assert_eq!(planar[k].to_bits(), want.to_bits(), "{row} {bands:?}");
+                }
+                assert!(out.border_is_clean());
+            }
+        }
+    }
+}
+
+#[test]
+fn u8_dispatch_selects_the_named_row() {
+    #[cfg(target_arch = "x86_64")]
+    let expected = [
+        (Isa::Scalar, "conv3x3.u8s8.8x8.scalar"),
+        (Isa::Avx2Fma, "conv3x3.u8s8.4x1.avx2"),
+        (Isa::AvxVnni, "conv3x3.u8s8.4x2.avxvnni"),
+        (Isa::Avx512, "conv3x3.u8s8.4x1.avx2"),
+        (Isa::Avx512Vnni, "conv3x3.u8s8.8x3.avx512vnni"),
+    ];
+    #[cfg(target_arch = "aarch64")]
+    let expected = [
+        (Isa::Scalar, "conv3x3.u8s8.8x8.scalar"),
+        (Isa::Neon, "conv3x3.u8s8.4x1.neon"),
+        (Isa::NeonDot, "conv3x3.u8s8.8x3.neondot"),
+        (Isa::NeonI8mm, "conv3x3.u8s8.8x3.neoni8mm"),
+    ];
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+    let expected = [(Isa::Scalar, "conv3x3.u8s8.8x8.scalar")];
+    let case = QCase {
+        ca: 4,
+        cb: 0,
+        cout: 8,
+        h: 1,
+        w: 1,
+        relu: false,
+        residual: false,
+        u8_out: true,
+    };
+    let d = qdata(case, 0);
+    for (isa, name) in expected {
+        assert_eq!(registry::selected_u8(isa).name, name);
+        let plan = Conv3x3U8::new(&spec(case, &d), isa);
+        if isa.is_available() {
+            assert_eq!(plan.unwrap().kernel().name, name);
+            println!("{isa}: available, int8 selects {name}");
+        } else {
+            assert!(matches!(plan, Err(KernelError::Isa { .. })));
+            println!("{isa}: not available on this CPU, refused");
+        }
+    }
+}
+
+#[test]
+fn u8_bad_input_is_an_error_not_a_panic() {
+    let case = QCase {
+        ca: 4,
+        cb: 0,
+        cout: 8,
+        h: 3,
+        w: 5,
+        relu: true,
+        residual: false,
+        u8_out: true,
+    };
+    let d = qdata(case, 0);
+    let sp = spec(case, &d);
+    let plan = Conv3x3U8::new(&sp, Isa::Scalar).unwrap();
+    let a = RowPlanar::from_planar_u8(&d.a, 4, 3, 5, d.zp[0]).unwrap();
+    let a_wrong_zp = RowPlanar::from_planar_u8(&d.a, 4, 3, 5, d.zp[0].wrapping_add(1)).unwrap();
+    let mut out = RowPlanar::new_quantized(8, 3, 5, d.zp[3]).unwrap();
+    let mut out_wrong_zp = RowPlanar::new_quantized(8, 3, 5, d.zp[3].wrapping_add(1)).unwrap();
+    assert!(plan.run(Inputs::new(&a), &mut out, 0..3).is_ok());
+    assert!(matches!(
+        plan.run(Inputs::new(&a_wrong_zp), &mut out, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+    assert!(matches!(
+        plan.run(Inputs::new(&a), &mut out_wrong_zp, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+    assert!(matches!(
+        plan.run(Inputs::new(&a).residual(&out.clone()), &mut out, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+    assert!(matches!(
+        plan.run(Inputs::new(&a), &mut out, 2..9),
+        Err(KernelError::Rows { .. })
+    ));
+    let mut planar = vec![0.0; 8 * 3 * 5 + 1];
+    assert!(matches!(
+        plan.run_planar(Inputs::new(&a), &mut planar, 0..3),
+        Err(KernelError::Length { .. })
+    ));
+    let f32_plan = Conv3x3U8::new(&Conv3x3U8Spec { output: None, ..sp }, Isa::Scalar).unwrap();
+    assert!(matches!(
+        f32_plan.run(Inputs::new(&a), &mut out, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+    let mut bad = sp;
+    bad.input_scale = f32::NAN;
+    assert!(matches!(
+        Conv3x3U8::new(&bad, Isa::Scalar),
+        Err(KernelError::Parameter { .. })
+    ));
+    let mut bad = sp;
+    bad.weights = &d.wt[1..];
+    assert!(matches!(
+        Conv3x3U8::new(&bad, Isa::Scalar),
+        Err(KernelError::Length { .. })
+    ));
+    let mut bad = sp;
+    bad.weight_scales = &[0.0; 8];
+    assert!(matches!(
+        Conv3x3U8::new(&bad, Isa::Scalar),
+        Err(KernelError::Parameter { .. })
+    ));
+    let wide = vec![0i8; 8 * 4097 * 9];
+    let mut bad = sp;
+    bad.weights = &wide;
+    bad.c_in_a = 4097;
+    assert!(matches!(
+        Conv3x3U8::new(&bad, Isa::Scalar),
+        Err(KernelError::Dimension { .. })
+    ));
+    let needs_res = Conv3x3U8::new(
+        &Conv3x3U8Spec {
+            residual: Some(QuantU8 {
+                scale: 1.0,
+                zero_point: 3,
+            }),
+            ..sp
+        },
+        Isa::Scalar,
+    )
+    .unwrap();
+    assert!(matches!(
+        needs_res.run(Inputs::new(&a), &mut out, 0..3),
+        Err(KernelError::Shape { .. })
+    ));
+}
+
+mod prop {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+        #[test]
+        fn f32_random_shapes(ca in 1usize..12, cb in 0usize..5, cout in 1usize..26, h in 1usize..5,
+                             w in 1usize..70, relu: bool, residual: bool, planar: bool, seed: u64) {
+            for row in f32_rows() {
+                check_f32(row, Case { ca, cb, cout, h, w, relu, residual, planar }, seed);
+            }
+        }
+
+        #[test]
+        fn u8_random_shapes(ca in 1usize..12, cb in 0usize..7, cout in 1usize..26, h in 1usize..5,
+                            w in 1usize..70, relu: bool, residual: bool, u8_out: bool, seed: u64) {
+            for row in u8_rows() {
+                check_u8(row, QCase { ca, cb, cout, h, w, relu, residual, u8_out }, seed);
+            }
+        }
+    }
+}

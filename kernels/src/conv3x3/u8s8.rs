@@ -1,0 +1,323 @@
+//! The int8 plan: u8 activations, s8 weights (one scale per output channel), i32 accumulation,
+//! requantisation fused into the epilogue.
+//!
+//! # Zero points
+//! Activation buffers are asymmetric u8 (`real = (q − zp)·scale`), and their border and padding channels hold
+//! `zp` (see [`buffer`](crate::buffer)), so the kernels accumulate `acc = Σ w·q` over the raw u8 values,
+//! padding included, and the correction `−Σ_s zp_s·Σ w_s` (per output channel, per source `s`) is constant:
+//! the packing code folds it into the accumulator's start value (exact i32). Rows that feed SDOT with
+//! `q ⊕ 0x80 = q − 128` (NEON dot product without i8mm) also fold `+128·Σw` into it. Both sources of a
+//! concatenation must share one scale (the f32 multiplier is per output channel); their zero points may
+//! differ.
+
+use super::registry::{self, KernelInfo, PackKind, U8Row};
+use super::{Inputs, U8Job, U8Out};
+use crate::buffer::{check_scale, RowPlanar};
+use crate::pack::{check_channels, check_len};
+use crate::{Isa, KernelError};
+use std::ops::Range;
+
+/// Largest int8 `C_in`: the i32 accumulator holds at least `255·128·9·4096 < 2³¹`.
+pub const MAX_C_IN_U8: usize = 4096;
+
+/// Scale and zero point of a u8 tensor: `real = (q − zero_point)·scale`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct QuantU8 {
+    /// Real units per step (finite, > 0).
+    pub scale: f32,
+    /// The u8 value of real 0.
+    pub zero_point: u8,
+}
+
+/// Everything an int8 convolution plan needs.
+#[derive(Debug, Clone, Copy)]
+pub struct Conv3x3U8Spec<'a> {
+    /// Weights `[C_out][C_in][3][3]` (OIHW), symmetric s8.
+    pub weights: &'a [i8],
+    /// Weight scale per output channel, `[C_out]`.
+    pub weight_scales: &'a [f32],
+    /// Bias per output channel, `[C_out]`, in real (output) units.
+    pub bias: &'a [f32],
+    /// Channels of source `a` (`C_in = c_in_a + c_in_b`).
+    pub c_in_a: usize,
+    /// Channels of source `b` (0 when there is one source).
+    pub c_in_b: usize,
+    /// Output channels.
+    pub c_out: usize,
+    /// Scale shared by both sources.
+    pub input_scale: f32,
+    /// Zero point of source `a`.
+    pub input_zero_point_a: u8,
+    /// Zero point of source `b` (ignored when `c_in_b == 0`).
+    pub input_zero_point_b: u8,
+    /// ReLU after the bias.
+    pub relu: bool,
+    /// Quantisation of the residual buffer, when the layer adds one (after the ReLU).
+    pub residual: Option<QuantU8>,
+    /// Quantisation of the u8 output; `None` for a layer whose output is raw f32 ([`Conv3x3U8::run_planar`]).
+    pub output: Option<QuantU8>,
+}
+
+/// A planned int8 3×3 convolution, packed for one kernel row.
+#[derive(Clone, Debug)]
+pub struct Conv3x3U8 {
+    row: &'static U8Row,
+    ca: usize,
+    cb: usize,
+    c_out: usize,
+    zp_a: u8,
+    zp_b: u8,
+    relu: bool,
+    residual: Option<QuantU8>,
+    output: Option<QuantU8>,
+    weights: Vec<u8>,
+    init: Vec<i32>,
+    mult: Vec<f32>,
+    bias: Vec<f32>,
+}
+
+impl Conv3x3U8 {
+    /// Plans with the best int8 row for `isa`. Errors: `isa` not available ([`KernelError::Isa`]), bad
+    /// channel counts (0, or `C_in >` [`MAX_C_IN_U8`]: [`KernelError::Dimension`]), slice lengths ([`KernelError::Length`]), scales not finite
+    /// and positive ([`KernelError::Parameter`]).
+    pub fn new(spec: &Conv3x3U8Spec<'_>, isa: Isa) -> Result<Self, KernelError> {
+        if !isa.is_available() {
+            return Err(KernelError::Isa {
+                name: isa.name().into(),
+                why: "not available on this CPU",
+            });
+        }
+        Self::with_row(spec, registry::select_u8(isa))
+    }
+
+    /// Plans with the int8 row named `name` (see [`registry::u8_kernels`]). Errors: as [`new`](Self::new),
+    /// and [`KernelError::Kernel`] for an unknown name or a row this CPU cannot run.
+    pub fn with_kernel(spec: &Conv3x3U8Spec<'_>, name: &str) -> Result<Self, KernelError> {
+        let row = registry::U8_ROWS
+            .iter()
+            .find(|r| r.info.name == name && r.info.isa.is_available())
+            .ok_or_else(|| KernelError::Kernel { name: name.into() })?;
+        Self::with_row(spec, row)
+    }
+
+    fn with_row(s: &Conv3x3U8Spec<'_>, row: &'static U8Row) -> Result<Self, KernelError> {
+        let (ca, cb, c_out) = (s.c_in_a, s.c_in_b, s.c_out);
+        if ca == 0 {
+            return Err(KernelError::Dimension {
+                what: "C_in of source a",
+                value: 0,
+            });
+        }
+        check_channels(ca + cb, c_out)?;
+        // |acc| ≤ 255·128·9·C_in must stay inside i32.
+        if ca + cb > MAX_C_IN_U8 {
+            return Err(KernelError::Dimension {
+                what: "int8 C_in (at most 4096)",
+                value: ca + cb,
+            });
+        }
+        check_len(
+            "weights [C_out][C_in][3][3]",
+            s.weights.len(),
+            c_out * (ca + cb) * 9,
+        )?;
+        check_len("weight scales [C_out]", s.weight_scales.len(), c_out)?;
+        check_len("bias [C_out]", s.bias.len(), c_out)?;
+        check_scale("input scale", s.input_scale)?;
+        for (o, &ws) in s.weight_scales.iter().enumerate() {
+            check_scale(&format!("weight scale [{o}]"), ws)?;
+        }
+        if let Some(b) = s.bias.iter().find(|b| !b.is_finite()) {
+            return Err(KernelError::Parameter {
+                what: format!("bias {b} is not finite"),
+            });
+        }
+        for q in [s.residual, s.output].into_iter().flatten() {
+            check_scale("residual/output scale", q.scale)?;
+        }
+        let g = row.info.oc_tile;
+        let zp_b = if cb == 0 { 0 } else { s.input_zero_point_b };
+        let (ga, gb) = (ca.div_ceil(4), cb.div_ceil(4));
+        let groups = c_out.div_ceil(g);
+        let cin = ca + cb;
+        let wb = match row.pack {
+            PackKind::I16 => 8,
+            PackKind::I8 | PackKind::I8Xor128 => 4,
+        };
+        let mut weights = vec![0u8; groups * (ga + gb) * 9 * g * wb];
+        let mut init = vec![0i32; groups * g];
+        let mut mult = vec![0.0f32; groups * g];
+        let mut bias = vec![0.0f32; groups * g];
+        for o in 0..c_out {
+            let (grp, lane) = (o / g, o % g);
+            let mut corr: i64 = 0;
+            for (gi, (src_first, src_c, zp)) in (0..ga)
+                .map(|j| (j * 4, ca, s.input_zero_point_a))
+                .chain((0..gb).map(|j| (ca + j * 4, ca + cb, zp_b)))
+                .enumerate()
+            {
+                for t in 0..9 {
+                    for l in 0..4 {
+                        let ic = src_first + l;
+                        if ic >= src_c {
+                            continue;
+                        }
+                        let wv = s.weights[(o * cin + ic) * 9 + t];
+                        corr += wv as i64 * zp as i64;
+                        if row.pack == PackKind::I8Xor128 {
+                            corr -= wv as i64 * 128;
+                        }
+                        let step = (grp * (ga + gb) + gi) * 9 + t;
+                        let at = (step * g + lane) * wb;
+                        match row.pack {
+                            PackKind::I16 => weights[at + 2 * l..at + 2 * l + 2]
+                                .copy_from_slice(&(wv as i16).to_le_bytes()),
+                            _ => weights[at + l] = wv as u8,
+                        }
+                    }
+                }
+            }
+            // |corr| ≤ 255·127·9·C_in, far inside i32 for C_in ≤ MAX_DIM.
+            init[o] = -(corr as i32);
+            mult[o] = s.input_scale * s.weight_scales[o];
+            bias[o] = s.bias[o];
+        }
+        Ok(Self {
+            row,
+            ca,
+            cb,
+            c_out,
+            zp_a: s.input_zero_point_a,
+            zp_b,
+            relu: s.relu,
+            residual: s.residual,
+            output: s.output,
+            weights,
+            init,
+            mult,
+            bias,
+        })
+    }
+
+    /// The kernel row this plan runs.
+    pub fn kernel(&self) -> &'static KernelInfo {
+        &self.row.info
+    }
+
+    fn check(
+        &self,
+        inputs: &Inputs<'_, u8>,
+        h: usize,
+        w: usize,
+        rows: &Range<usize>,
+    ) -> Result<(), KernelError> {
+        inputs.check(self.ca + self.cb, self.c_out, h, w, rows)?;
+        let mismatch = |what: &str, got: u8, want: u8| KernelError::Shape {
+            what: format!("{what} has zero point {got}, the plan expects {want}"),
+        };
+        if inputs.a.channels() != self.ca {
+            return Err(KernelError::Shape {
+                what: format!(
+                    "source a has {} channels, the plan {}",
+                    inputs.a.channels(),
+                    self.ca
+                ),
+            });
+        }
+        if inputs.a.zero_point() != self.zp_a {
+            return Err(mismatch("source a", inputs.a.zero_point(), self.zp_a));
+        }
+        if let Some(b) = inputs.b {
+            if b.zero_point() != self.zp_b {
+                return Err(mismatch("source b", b.zero_point(), self.zp_b));
+            }
+        }
+        match (inputs.residual, self.residual) {
+            (Some(r), Some(q)) if r.zero_point() != q.zero_point => {
+                Err(mismatch("residual", r.zero_point(), q.zero_point))
+            }
+            (Some(_), None) => Err(KernelError::Shape {
+                what: "residual given, the plan has none".into(),
+            }),
+            (None, Some(_)) => Err(KernelError::Shape {
+                what: "the plan needs a residual".into(),
+            }),
+            _ => Ok(()),
+        }
+    }
+
+    fn job<'a>(&'a self, inputs: &Inputs<'a, u8>, rows: &Range<usize>) -> U8Job<'a> {
+        let a = inputs.a;
+        let out = self.output.unwrap_or(QuantU8 {
+            scale: 1.0,
+            zero_point: 0,
+        });
+        U8Job {
+            a: a.as_slice(),
+            ga: a.groups(),
+            b: inputs.b.map_or(&[][..], |b| b.as_slice()),
+            gb: inputs.b.map_or(0, |b| b.groups()),
+            h: a.height(),
+            w: a.width(),
+            wp: a.padded_width(),
+            weights: &self.weights,
+            init: &self.init,
+            mult: &self.mult,
+            bias: &self.bias,
+            cout: self.c_out,
+            relu: self.relu,
+            residual: inputs
+                .residual
+                .zip(self.residual)
+                .map(|(r, q)| (r.as_slice(), q.zero_point as f32, q.scale)),
+            out_inv: 1.0 / out.scale,
+            out_zp: out.zero_point as f32,
+            out_zp_u8: out.zero_point,
+            y0: rows.start,
+            y1: rows.end,
+        }
+    }
+
+    /// Computes output rows `rows` into `out`, a u8 [`RowPlanar`] of `C_out` channels whose zero point is the
+    /// plan's output zero point. Errors: the plan has no u8 output, shapes or zero points that do not match
+    /// ([`KernelError::Shape`]), a bad row band ([`KernelError::Rows`]).
+    pub fn run(
+        &self,
+        inputs: Inputs<'_, u8>,
+        out: &mut RowPlanar<u8>,
+        rows: Range<usize>,
+    ) -> Result<(), KernelError> {
+        let q = self.output.ok_or_else(|| KernelError::Shape {
+            what: "the plan has f32 output (output: None); use run_planar".into(),
+        })?;
+        if out.channels() != self.c_out || out.zero_point() != q.zero_point {
+            return Err(KernelError::Shape {
+                what: format!(
+                    "output has {} channels and zero point {}, the plan {} and {}",
+                    out.channels(),
+                    out.zero_point(),
+                    self.c_out,
+                    q.zero_point
+                ),
+            });
+        }
+        self.check(&inputs, out.height(), out.width(), &rows)?;
+        let job = self.job(&inputs, &rows);
+        registry::run_u8(self.row, &job, U8Out::Rows(out.as_mut_slice()))
+    }
+
+    /// Computes output rows `rows` as raw f32 (dequantised, before any output quantisation) into a planar
+    /// `[C_out][H][W]` slice. Errors: as [`run`](Self::run), and `out.len() != C_out·H·W`.
+    pub fn run_planar(
+        &self,
+        inputs: Inputs<'_, u8>,
+        out: &mut [f32],
+        rows: Range<usize>,
+    ) -> Result<(), KernelError> {
+        let (h, w) = (inputs.a.height(), inputs.a.width());
+        check_len("planar output [C_out][H][W]", out.len(), self.c_out * h * w)?;
+        self.check(&inputs, h, w, &rows)?;
+        let job = self.job(&inputs, &rows);
+        registry::run_u8(self.row, &job, U8Out::Planar(out))
+    }
+}

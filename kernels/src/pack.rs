@@ -1,0 +1,85 @@
+//! Weight packing at plan time.
+//!
+//! Kernels keep a tile of `G` output channels in registers and, at each of the `9·C_in` reduction steps,
+//! broadcast one weight per output channel. The packed order is therefore `[oc-group][ic][ky][kx][G]`: the
+//! `G` weights of one step are adjacent, and a group's steps follow each other in the order the kernel reads
+//! them. `C_out` is padded up to a multiple of `G` with zero weights and zero bias; the kernels compute those
+//! channels and do not store them.
+
+use crate::buffer::MAX_DIM;
+use crate::KernelError;
+
+pub(crate) fn check_channels(c_in: usize, c_out: usize) -> Result<(), KernelError> {
+    for (what, value) in [("C_in", c_in), ("C_out", c_out)] {
+        if value == 0 || value > MAX_DIM {
+            return Err(KernelError::Dimension { what, value });
+        }
+    }
+    Ok(())
+}
+
+pub(crate) fn check_len(
+    what: &'static str,
+    got: usize,
+    expected: usize,
+) -> Result<(), KernelError> {
+    if got != expected {
+        return Err(KernelError::Length {
+            what,
+            expected,
+            got,
+        });
+    }
+    Ok(())
+}
+
+/// Packs OIHW `[C_out][C_in][3][3]` weights and `[C_out]` bias for a kernel with an output-channel tile `g`:
+/// returns weights `[ceil(C_out/g)][C_in][3][3][g]` and bias `[ceil(C_out/g)·g]`, zero-padded.
+pub(crate) fn pack_f32(
+    weights: &[f32],
+    bias: &[f32],
+    c_in: usize,
+    c_out: usize,
+    g: usize,
+) -> Result<(Vec<f32>, Vec<f32>), KernelError> {
+    check_channels(c_in, c_out)?;
+    check_len(
+        "weights [C_out][C_in][3][3]",
+        weights.len(),
+        c_out * c_in * 9,
+    )?;
+    check_len("bias [C_out]", bias.len(), c_out)?;
+    let groups = c_out.div_ceil(g);
+    let mut packed = vec![0.0; groups * c_in * 9 * g];
+    for o in 0..c_out {
+        let (grp, lane) = (o / g, o % g);
+        for i in 0..c_in {
+            for t in 0..9 {
+                packed[((grp * c_in + i) * 9 + t) * g + lane] = weights[(o * c_in + i) * 9 + t];
+            }
+        }
+    }
+    let mut b = vec![0.0; groups * g];
+    b[..c_out].copy_from_slice(bias);
+    Ok((packed, b))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pack_order_and_padding() {
+        let (c_in, c_out, g) = (2, 3, 2);
+        let w: Vec<f32> = (0..c_out * c_in * 9).map(|i| i as f32 + 1.0).collect();
+        let (p, b) = pack_f32(&w, &[1.0, 2.0, 3.0], c_in, c_out, g).unwrap();
+        assert_eq!(p.len(), 2 * c_in * 9 * g);
+        // group 0, ic 1, tap 4, lane 1 = o 1.
+        assert_eq!(p[(9 + 4) * g + 1], w[(c_in + 1) * 9 + 4]);
+        // group 1 lane 1 = o 3: padding.
+        assert_eq!(p[(c_in * 9 + 5) * g + 1], 0.0);
+        assert_eq!(b, vec![1.0, 2.0, 3.0, 0.0]);
+        assert!(pack_f32(&w[1..], &[0.0; 3], c_in, c_out, g).is_err());
+        assert!(pack_f32(&w, &[0.0; 2], c_in, c_out, g).is_err());
+    }
+}
