@@ -2,6 +2,8 @@
 //! ([`Backend`], [`GpuPrecision`]) and the size limit of a session ([`MAX_HOLOGRAM_PIXELS`]). Imports nothing
 //! of the pipeline: every executor may read it.
 
+#[cfg(doc)]
+use super::{HologramPipeline, HologramSession};
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
 use crate::model::{CnnLayout, ThreadCount};

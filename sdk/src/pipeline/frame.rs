@@ -6,6 +6,8 @@ use ndarray::Array3;
 use num_complex::Complex32;
 
 use super::config::Backend;
+#[cfg(doc)]
+use super::HologramPipeline;
 use crate::error::{HoloError, Result};
 use crate::model::contract;
 

@@ -4,6 +4,8 @@
 use ndarray::Array3;
 
 use super::config::Backend;
+#[cfg(doc)]
+use super::HologramSession;
 
 /// Which backend a [`HologramSession`] runs and why ([`HologramSession::backend_report`]).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]

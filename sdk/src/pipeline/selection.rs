@@ -5,6 +5,8 @@
 use std::sync::Arc;
 
 use super::config::PipelineConfig;
+#[cfg(doc)]
+use super::HologramPipeline;
 use crate::error::{invalid, Result};
 use crate::model::{HologramModel, ModelConfig, Precision};
 

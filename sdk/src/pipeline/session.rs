@@ -17,15 +17,19 @@ use super::frame::{FrameTimings, Heads, SlmFrame};
 use super::models::{calibrated_lut, check_calibration_wavelengths, HologramPipeline};
 use super::report::{BackendReport, SelfCheck};
 use super::workers::{lost_state, ColourWorkers};
+#[cfg(doc)]
+use super::BLACK_FRAME_AMPLITUDE;
 use crate::cnn::CnnPlan;
 use crate::encoding::{normaliser, ChannelEncoder, ChannelStats, DoublePhaseMethod};
 use crate::error::{invalid, HoloError, Result};
+#[cfg(doc)]
+use crate::model::HologramModel;
 use crate::model::{contract, PlanReport, PlanRequest};
 use crate::optics::Carrier;
 use crate::scene::{LayeredDepthImage, RgbdFrame};
 use crate::slm::DisplayCalibration;
 
-/// A hologram session for one resolution (see the [module docs](self)). Not `Sync`: one frame at a time;
+/// A hologram session for one resolution (see the [module docs](crate::pipeline)). Not `Sync`: one frame at a time;
 /// a failed frame (wrong size, NaN) leaves the session usable.
 #[derive(Debug)]
 pub struct HologramSession {
