@@ -4,15 +4,12 @@
 //! workers, the pre-filter plan) is always built: it is the reference, the first-frame self-check of
 //! [`Backend::Auto`] and the fallback. An accelerator, a [`FrameExecutor`], may run the frames instead: the
 //! GPU today (`gpu_frame.rs`, cargo feature `gpu`). The session holds `Option<Accelerator>` and never asks
-//! which one it is, so an executor is a file plus one arm in [`choose_backend`].
+//! which one it is, so an executor is a file plus one arm in `backend::choose_backend`.
 
 use ndarray::{Array3, ArrayView3};
 
 use super::config::Backend;
 use super::frame::{Heads, SlmFrame};
-use super::models::HologramPipeline;
-#[cfg(not(feature = "gpu"))]
-use crate::error::invalid;
 use crate::error::Result;
 
 /// A whole frame on an accelerator: packed CNN input in, SLM patterns out.
@@ -77,43 +74,4 @@ impl BackendReportParts {
             gpu_precision: None,
         }
     }
-}
-
-/// Builds the accelerator of `pipeline`'s sessions at `height × width` when its backend asks for one:
-/// `(report, accelerator)`; `None` runs the CPU frame.
-///
-/// Errors: with [`Backend::Gpu`], the GPU's errors ([`crate::HoloError::Gpu`], or
-/// [`crate::HoloError::InvalidParameter`] in a build without the `gpu` feature); with [`Backend::Auto`], none
-/// (the CPU runs and the report says why).
-pub(super) fn choose_backend(
-    pipeline: &HologramPipeline,
-    height: usize,
-    width: usize,
-) -> Result<(BackendReportParts, Option<Accelerator>)> {
-    let requested = pipeline.config().backend;
-    if requested == Backend::Cpu {
-        return Ok((
-            BackendReportParts::cpu(requested, "CPU requested".into()),
-            None,
-        ));
-    }
-    #[cfg(not(feature = "gpu"))]
-    {
-        let _ = (height, width);
-        if requested == Backend::Gpu {
-            return Err(invalid(
-                "backend",
-                "this build has no GPU path (cargo feature `gpu` of tensorholo)",
-            ));
-        }
-        Ok((
-            BackendReportParts::cpu(
-                requested,
-                "this build has no GPU path (cargo feature `gpu`)".into(),
-            ),
-            None,
-        ))
-    }
-    #[cfg(feature = "gpu")]
-    super::gpu_frame::build(pipeline, height, width)
 }

@@ -21,9 +21,10 @@
 //! - `models`: [`HologramPipeline`] (models + display configuration + calibration);
 //! - `colour`, `workers`: one colour's optics and the three allocation-free worker threads;
 //! - `cnn_stage`: input packing and the hologram CNN on a `CnnPlan` (tract, or the native engine);
-//! - `executor` (+ `gpu_frame`): whole-frame accelerators behind one trait;
+//! - `executor` (+ `gpu_frame`, `backend`): whole-frame accelerators behind one trait, and the choice of one;
 //! - `session`, `stream`: [`HologramSession`] and its streams.
 
+mod backend;
 mod cnn_stage;
 mod colour;
 pub(crate) mod config;

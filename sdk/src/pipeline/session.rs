@@ -9,10 +9,11 @@ use std::time::Instant;
 use ndarray::{Array3, ArrayView3, Axis};
 use num_complex::Complex32;
 
+use super::backend::choose_backend;
 use super::cnn_stage::CnnStage;
 use super::colour::{copy_channel, fill_channel, ColourState, Task};
 use super::config::{Backend, MAX_HOLOGRAM_PIXELS};
-use super::executor::{choose_backend, Accelerator};
+use super::executor::Accelerator;
 use super::frame::{FrameTimings, Heads, SlmFrame};
 use super::models::{calibrated_lut, check_calibration_wavelengths, HologramPipeline};
 use super::report::{BackendReport, SelfCheck};
