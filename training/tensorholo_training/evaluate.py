@@ -65,17 +65,15 @@ def cnn_predictor(net, prefilter=None, offset_m: float = 0.0, display: Display =
 
 def onnx_predictor(path: str, prefilter_path: str | None = None, offset_m: float = 0.0,
                    display: Display = Display(), phase_only: bool = False,
-                   options=PropagationOptions(), threads: int = 1, aa_dpm: bool = False) -> Predictor:
-    """Like :func:`cnn_predictor` for exported ONNX files run by onnxruntime (f32 or int8). With ``aa_dpm``
+                   options=PropagationOptions(), threads: int = 1, aa_dpm: bool = False, exact: bool = True) -> Predictor:
+    """Like :func:`cnn_predictor` for exported ONNX files run by onnxruntime (f32 or int8). ``exact`` (the
+    default) evaluates int8 arithmetic exactly whatever the CPU (see :func:`.export.run_onnx`). With ``aa_dpm``
     (and no ``prefilter_path``) the pre-filter is the non-learned AA-DPM blur: an untrained
     :class:`.model.PrefilterCNN` on the AA-DPM base, whose correction is zero."""
-    import onnxruntime as ort
+    from .export import onnx_session
 
     def session(p):
-        so = ort.SessionOptions()
-        so.intra_op_num_threads = threads
-        so.log_severity_level = 3
-        return ort.InferenceSession(p, so, providers=["CPUExecutionProvider"])
+        return onnx_session(p, threads, exact)
 
     s_net = session(path)
     s_pre = session(prefilter_path) if prefilter_path else None
