@@ -21,6 +21,8 @@
 //! compute, which they rewrite with the border value; rows 0 and `H + 1` and column 0 are never written.
 //! [`RowPlanar::border_is_clean`] checks the invariant.
 
+use std::ops::Range;
+
 use crate::KernelError;
 
 /// The widest pixel tile a kernel may use (pixels along a row); [`padded_width`] leaves this much slack.
@@ -143,6 +145,65 @@ impl<T: Element> RowPlanar<T> {
     pub(crate) fn as_mut_slice(&mut self) -> &mut [T] {
         &mut self.data[self.off..self.off + self.len]
     }
+    /// Elements of one buffer row: `ceil(C/K) · Wp · K`.
+    fn row_stride(&self) -> usize {
+        self.groups() * self.wp * T::INTERLEAVE
+    }
+
+    /// Frame rows `rows` as a mutable band, for a kernel to write ([`Conv3x3F32::run_band`]).
+    /// Errors: an empty band or one past `H` ([`KernelError::Rows`]).
+    ///
+    /// [`Conv3x3F32::run_band`]: crate::Conv3x3F32::run_band
+    pub fn band_mut(&mut self, rows: Range<usize>) -> Result<RowBand<'_, T>, KernelError> {
+        if rows.start >= rows.end || rows.end > self.h {
+            return Err(KernelError::Rows {
+                start: rows.start,
+                end: rows.end,
+                height: self.h,
+            });
+        }
+        let stride = self.row_stride();
+        let (c, h, w) = (self.c, self.h, self.w);
+        let base = (rows.start + 1) * stride;
+        let data = &mut self.as_mut_slice()[base..(rows.end + 1) * stride];
+        Ok(RowBand {
+            data,
+            base,
+            rows,
+            c,
+            h,
+            w,
+        })
+    }
+
+    /// The frame's rows split into at most `n` disjoint bands of near-equal height (fewer when `H < n`; at
+    /// least one), top to bottom: one per thread, so that threads write one buffer at the same time.
+    pub fn bands_mut(&mut self, n: usize) -> Vec<RowBand<'_, T>> {
+        let h = self.h;
+        let n = n.clamp(1, h);
+        let stride = self.row_stride();
+        let (c, w) = (self.c, self.w);
+        // Skip the top border row; the bottom border row is never handed out.
+        let (_, mut rest) = self.as_mut_slice().split_at_mut(stride);
+        let mut bands = Vec::with_capacity(n);
+        let mut y0 = 0;
+        for i in 0..n {
+            let y1 = h * (i + 1) / n;
+            let (band, tail) = rest.split_at_mut((y1 - y0) * stride);
+            bands.push(RowBand {
+                data: band,
+                base: (y0 + 1) * stride,
+                rows: y0..y1,
+                c,
+                h,
+                w,
+            });
+            rest = tail;
+            y0 = y1;
+        }
+        bands
+    }
+
     /// Channel groups `ceil(C/K)` stored per buffer row.
     pub(crate) fn groups(&self) -> usize {
         self.c.div_ceil(T::INTERLEAVE)
@@ -236,6 +297,28 @@ impl<T: Element> RowPlanar<T> {
             }
         }
         Ok(())
+    }
+}
+
+/// Frame rows `rows` of a [`RowPlanar`] buffer, borrowed mutably ([`RowPlanar::band_mut`],
+/// [`RowPlanar::bands_mut`]): what a kernel writes. Bands of one buffer never overlap, so each may go to its
+/// own thread.
+#[derive(Debug)]
+pub struct RowBand<'a, T: Element> {
+    /// Buffer rows `rows.start + 1 .. rows.end + 1`.
+    pub(crate) data: &'a mut [T],
+    /// Index of `data[0]` in the whole buffer's storage.
+    pub(crate) base: usize,
+    pub(crate) rows: Range<usize>,
+    pub(crate) c: usize,
+    pub(crate) h: usize,
+    pub(crate) w: usize,
+}
+
+impl<T: Element> RowBand<'_, T> {
+    /// The frame rows of the band.
+    pub fn rows(&self) -> Range<usize> {
+        self.rows.clone()
     }
 }
 

@@ -42,7 +42,7 @@ pub mod isa;
 mod pack;
 pub mod peak;
 
-pub use buffer::{Affine, RowPlanar};
+pub use buffer::{Affine, RowBand, RowPlanar};
 pub use conv3x3::registry::{self, DType, KernelInfo, PackKind};
 pub use conv3x3::{Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, QuantU8};
 pub use depthwise::depthwise;

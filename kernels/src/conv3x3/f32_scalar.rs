@@ -66,7 +66,9 @@ pub(crate) fn conv_t<const G: usize, const P: usize>(job: &F32Job<'_>, out: &mut
                         v[p] = if p < n { t } else { 0.0 };
                     }
                     match out {
-                        F32Out::Rows(d) => d[res_row..res_row + P].copy_from_slice(&v),
+                        F32Out::Rows { data, base } => {
+                            data[res_row - *base..res_row - *base + P].copy_from_slice(&v)
+                        }
                         F32Out::Planar(d) => {
                             let i = (o * h + y) * w + x0;
                             d[i..i + n].copy_from_slice(&v[..n]);

@@ -34,7 +34,7 @@ mod reference;
 #[cfg(test)]
 pub(crate) mod tests;
 
-use crate::buffer::{Element, RowPlanar};
+use crate::buffer::{Element, RowBand, RowPlanar};
 use crate::pack;
 use crate::{Isa, KernelError};
 use registry::{F32Row, KernelInfo};
@@ -151,7 +151,9 @@ pub(crate) struct F32Job<'a> {
 /// Where an f32 kernel writes: a [`RowPlanar`] buffer of `C_out` channels (`[H+2][C_out][Wp]`) or a planar
 /// `[C_out][H][W]` slice.
 pub(crate) enum F32Out<'a> {
-    Rows(&'a mut [f32]),
+    /// Buffer rows of a `[H+2][C_out][Wp]` buffer: `data[0]` is element `base` of the whole buffer (a band of
+    /// rows, [`RowBand`]); the kernel writes only rows `y0..y1`, which lie inside it.
+    Rows { data: &'a mut [f32], base: usize },
     Planar(&'a mut [f32]),
 }
 
@@ -301,19 +303,33 @@ impl Conv3x3F32 {
         out: &mut RowPlanar<f32>,
         rows: Range<usize>,
     ) -> Result<(), KernelError> {
-        let (h, w) = (out.height(), out.width());
-        if out.channels() != self.c_out {
+        self.run_band(inputs, &mut out.band_mut(rows)?)
+    }
+
+    /// Computes the rows of `band` (of a [`RowPlanar`] of `C_out` channels and the inputs' `H × W`, from
+    /// [`RowPlanar::bands_mut`]): as [`run`](Self::run), for one thread's share of a layer. Errors: as `run`.
+    pub fn run_band(
+        &self,
+        inputs: Inputs<'_, f32>,
+        band: &mut RowBand<'_, f32>,
+    ) -> Result<(), KernelError> {
+        let (h, w) = (band.h, band.w);
+        if band.c != self.c_out {
             return Err(KernelError::Shape {
                 what: format!(
                     "output has {} channels, plan's C_out is {}",
-                    out.channels(),
-                    self.c_out
+                    band.c, self.c_out
                 ),
             });
         }
+        let rows = band.rows();
         inputs.check(self.c_in, self.c_out, h, w, &rows)?;
         let job = self.job(&inputs, &rows);
-        registry::run_f32(self.row, &job, F32Out::Rows(out.as_mut_slice()))
+        let out = F32Out::Rows {
+            data: band.data,
+            base: band.base,
+        };
+        registry::run_f32(self.row, &job, out)
     }
 
     /// Computes output rows `rows` into a planar `[C_out][H][W]` f32 slice (the last layer: raw values, no

@@ -166,15 +166,16 @@ unsafe fn epilogue<V: SimdF32, const G: usize, const NV: usize>(
             let px = x0 + v * l;
             let valid = w.saturating_sub(px).min(l);
             match out {
-                F32Out::Rows(d) => {
+                F32Out::Rows { data, base } => {
                     if valid < l {
                         // SAFETY: register arithmetic; `valid < LANES`.
                         r = unsafe { V::keep_first(r, valid) };
                     }
-                    debug_assert!(at + l <= d.len());
+                    debug_assert!(at >= *base && at - *base + l <= data.len());
                     // SAFETY: as for the residual: the vector ends before the row's `wp` columns end; lanes
-                    // past `w` are stored as 0, which keeps the right border zero.
-                    unsafe { V::store(d.as_mut_ptr().add(at), r) };
+                    // past `w` are stored as 0, which keeps the right border zero. Row `y` lies in the band
+                    // (`y0 ≤ y < y1`, checked by `run_band`), which starts at element `base`.
+                    unsafe { V::store(data.as_mut_ptr().add(at - *base), r) };
                 }
                 F32Out::Planar(d) => {
                     if valid == 0 {

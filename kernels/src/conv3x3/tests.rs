@@ -255,6 +255,46 @@ fn f32_row_bands_are_bit_identical_and_touch_only_their_rows() {
 }
 
 #[test]
+fn f32_bands_written_by_threads_equal_one_run() {
+    // Every split of the rows into `bands_mut(n)` (n past H included), each band run on its own thread,
+    // gives the bit-identical buffer of one whole-frame run, borders clean; `band_mut` refuses bad bands.
+    let (ca, cb, cout, h, w) = (5, 3, 9, 5, 29);
+    let mut rng = Rng::new(11);
+    let a = RowPlanar::from_planar(&rng.vec(ca * h * w), ca, h, w, None).unwrap();
+    let b = RowPlanar::from_planar(&rng.vec(cb * h * w), cb, h, w, None).unwrap();
+    let res = RowPlanar::from_planar(&rng.vec(cout * h * w), cout, h, w, None).unwrap();
+    let wt = rng.vec(cout * (ca + cb) * 9);
+    let bias = rng.vec(cout);
+    for row in f32_rows() {
+        let plan = Conv3x3F32::with_kernel(&wt, &bias, ca + cb, cout, true, row).unwrap();
+        let inputs = Inputs::new(&a).concat(&b).residual(&res);
+        let mut whole = RowPlanar::new(cout, h, w).unwrap();
+        plan.run(inputs, &mut whole, 0..h).unwrap();
+        for n in 1..=h + 2 {
+            let mut out = RowPlanar::new(cout, h, w).unwrap();
+            let bands = out.bands_mut(n);
+            assert_eq!(bands.len(), n.min(h));
+            let covered: Vec<usize> = bands.iter().flat_map(|b| b.rows()).collect();
+            assert_eq!(covered, (0..h).collect::<Vec<_>>());
+            std::thread::scope(|s| {
+                for mut band in bands {
+                    let plan = &plan;
+                    s.spawn(move || plan.run_band(inputs, &mut band).unwrap());
+                }
+            });
+            assert!(out == whole, "{row}: {n} bands");
+            assert!(out.border_is_clean());
+        }
+        let mut out = RowPlanar::new(cout, h, w).unwrap();
+        assert!(matches!(out.band_mut(2..2), Err(KernelError::Rows { .. })));
+        assert!(matches!(out.band_mut(3..h + 1), Err(KernelError::Rows { .. })));
+        let mut other = RowPlanar::new(cout + 1, h, w).unwrap();
+        let mut band = other.band_mut(0..h).unwrap();
+        assert!(matches!(plan.run_band(inputs, &mut band), Err(KernelError::Shape { .. })));
+    }
+}
+
+#[test]
 fn dispatch_selects_the_named_row_and_refuses_unavailable_isas() {
     #[cfg(target_arch = "x86_64")]
     let expected = [
