@@ -25,6 +25,7 @@ use ndarray::{Array3, ArrayView3, Axis};
 use crate::color::amplitude_to_srgb8;
 use crate::encoding::{DoublePhaseMethod, LinearLut};
 use crate::error::{invalid, HoloError, Result};
+use crate::cnn::CnnEngine;
 use crate::model::{
     CnnLayout, HologramModel, ModelConfig, ModelKind, PlanReport, Precision, ThreadCount,
 };
@@ -63,6 +64,9 @@ pub struct GeneratorConfig {
     pub threads: ThreadCount,
     /// CNN memory layout ([`CnnLayout::Auto`] by default: timed at creation).
     pub layout: CnnLayout,
+    /// CPU CNN engine ([`CnnEngine::Auto`] by default: for the f32 models the native kernels and tract are
+    /// timed at creation and the faster runs).
+    pub engine: CnnEngine,
     /// How camera frames fit the hologram ([`Fit::Crop`] by default).
     pub fit: Fit,
     /// Wavelengths (R, G, B), pixel pitch and volume depth, all in metres (the paper's display: 638, 520,
@@ -97,6 +101,7 @@ impl GeneratorConfig {
             offset_m: 6e-3,
             threads: ThreadCount::Auto,
             layout: CnnLayout::Auto,
+            engine: CnnEngine::Auto,
             fit: Fit::default(),
             optics: OpticalSetup::default(),
             options: PropagationOptions::default(),
@@ -171,6 +176,7 @@ impl GeneratorConfig {
             offset_m: self.offset_m,
             encoding: self.encoding,
             cnn_layout: self.layout,
+            cnn_engine: self.engine,
             cnn_threads: self.threads,
             backend: self.backend,
             gpu_precision: self.gpu_precision,

@@ -33,7 +33,7 @@
 //! depth `d ∈ [0,1]` with 0 = near, a point at `d` lies at `z(d) = (0.5 − d)·volume_depth` from the midpoint
 //! plane, `+z` along the light (toward the viewer).
 
-mod cnn;
+pub mod cnn;
 pub mod color;
 #[cfg(feature = "research")]
 pub mod dataset;

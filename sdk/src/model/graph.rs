@@ -177,7 +177,7 @@ impl CnnWeights {
                 }
                 "QuantizeLinear" | "DequantizeLinear" | "QLinearConv" | "ConvInteger" => {
                     return Err(err(format!(
-                        "{} is quantised; the GPU runs the f32 model files (choose precision f32)",
+                        "{} is quantised; the GPU and the native CPU engine run the f32 model files (choose precision f32)",
                         where_()
                     )))
                 }

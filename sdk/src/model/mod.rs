@@ -25,7 +25,7 @@ pub mod embedded;
 pub mod graph;
 mod metadata;
 mod network;
-mod tuning;
+pub(crate) mod tuning;
 
 /// How a model file stores its weights (`training/tensorholo_training/export.py`). All forms take and
 /// return f32 at the boundary (`docs/CONVENTIONS.md` §7).

@@ -12,6 +12,7 @@ use std::time::Instant;
 use ndarray::Array3;
 
 use super::{CnnLayout, HologramModel, ModelPlan, MAX_CNN_THREADS};
+use crate::cnn::CnnEngine;
 use crate::error::{invalid, HoloError, Result};
 
 /// Frames above this many pixels are timed on a full-width strip of about this many pixels (at least
@@ -22,7 +23,7 @@ pub const TUNE_PIXELS: usize = 256 * 1024;
 /// The fewest rows of a timing strip ([`TUNE_PIXELS`]).
 pub const TUNE_MIN_ROWS: usize = 64;
 /// A candidate whose first run takes less than this (seconds) is run twice more and its fastest run kept.
-const REPEAT_BELOW_S: f64 = 0.25;
+pub(crate) const REPEAT_BELOW_S: f64 = 0.25;
 
 /// How many threads a CNN plan uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
@@ -62,6 +63,8 @@ pub struct PlanRequest {
 /// One candidate's timing.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct PlanTiming {
+    /// The engine that ran it ([`CnnEngine::Tract`] or [`CnnEngine::Native`]).
+    pub engine: CnnEngine,
     /// Its layout.
     pub layout: CnnLayout,
     /// Its threads (`None`: tract's process-wide executor).
@@ -73,14 +76,24 @@ pub struct PlanTiming {
     pub skipped: Option<String>,
 }
 
-/// What [`HologramModel::tuned_plan`] chose and why.
+/// What [`HologramModel::tuned_plan`] (tract's layouts and threads) and a session's engine choice
+/// ([`crate::pipeline::PipelineConfig::cnn_engine`]) chose and why.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct PlanReport {
     /// `[height, width]` the plan runs at.
     pub resolution: [usize; 2],
     /// What was asked for.
     pub request: PlanRequest,
-    /// The chosen layout (concrete).
+    /// The engine that runs the CNNs on the CPU ([`CnnEngine::Tract`] or [`CnnEngine::Native`]).
+    pub engine: CnnEngine,
+    /// Why that engine (e.g. "faster on this CPU", "requested", or why the native engine cannot run the
+    /// file).
+    pub engine_reason: String,
+    /// The native engine's kernel row and the CPU features it uses (e.g. `conv3x3.f32.6x2.avx2`); `None`
+    /// for tract.
+    pub kernel: Option<String>,
+    /// The chosen tract layout (concrete); the native engine reports [`CnnLayout::ChannelsFirst`] (its
+    /// buffers are channel-major within each row).
     pub layout: CnnLayout,
     /// The chosen thread count (`None`: tract's process-wide executor).
     pub threads: Option<usize>,
@@ -205,6 +218,9 @@ impl HologramModel {
             return Ok(PlanReport {
                 resolution: [height, width],
                 request,
+                engine: CnnEngine::Tract,
+                engine_reason: "tract's plan".into(),
+                kernel: None,
                 layout: layouts[0],
                 threads: threads[0],
                 autotuned: false,
@@ -230,6 +246,7 @@ impl HologramModel {
                     reason,
                 }) => {
                     candidates.extend(threads.iter().map(|&t| PlanTiming {
+                        engine: CnnEngine::Tract,
                         layout,
                         threads: t,
                         seconds: None,
@@ -251,6 +268,7 @@ impl HologramModel {
                     }
                 }
                 candidates.push(PlanTiming {
+                    engine: CnnEngine::Tract,
                     layout,
                     threads: t,
                     seconds: Some(best),
@@ -276,6 +294,9 @@ impl HologramModel {
         Ok(PlanReport {
             resolution: [height, width],
             request,
+            engine: CnnEngine::Tract,
+            engine_reason: "tract's plan".into(),
+            kernel: None,
             layout: best.0,
             threads: best.1,
             autotuned: true,

@@ -6,6 +6,7 @@
 use super::{HologramPipeline, HologramSession};
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
+use crate::cnn::CnnEngine;
 use crate::model::{CnnLayout, ThreadCount};
 use crate::optics::{OpticalSetup, PropagationOptions};
 
@@ -124,6 +125,9 @@ pub struct PipelineConfig {
     /// only 8 rows, and it measured 2.1× slower (`holo bench --skip-cnn --layout nchw,nhwc`, 384², 1
     /// thread: 89 ms against 42 ms); tract 0.23 cannot move its graph channels-last anyway.
     pub cnn_layout: CnnLayout,
+    /// The engine of the CPU CNNs ([`CnnEngine::Auto`], the default: for an f32 model, the native kernels
+    /// and tract are timed at session creation and the faster runs; int8 files run on tract).
+    pub cnn_engine: CnnEngine,
     /// Threads of the CNNs' matrix products ([`ThreadCount::Auto`], the default, times 1, half and all
     /// cores at session creation). The three colours of the optics always run on their own three threads.
     pub cnn_threads: ThreadCount,
@@ -142,6 +146,7 @@ impl Default for PipelineConfig {
             offset_m: 0.0,
             encoding: DoublePhaseMethod::default(),
             cnn_layout: CnnLayout::default(),
+            cnn_engine: CnnEngine::default(),
             cnn_threads: ThreadCount::default(),
             backend: Backend::default(),
             gpu_precision: GpuPrecision::default(),

@@ -39,6 +39,7 @@ mod session;
 mod stream;
 mod workers;
 
+pub use crate::cnn::CnnEngine;
 pub use config::{Backend, GpuPrecision, PipelineConfig, MAX_HOLOGRAM_PIXELS};
 pub use frame::{check_not_black, FrameTimings, Heads, SlmFrame, BLACK_FRAME_AMPLITUDE};
 pub use models::HologramPipeline;

@@ -25,6 +25,7 @@ use crate::encoding::{normaliser, ChannelEncoder, ChannelStats, DoublePhaseMetho
 use crate::error::{invalid, HoloError, Result};
 #[cfg(doc)]
 use crate::model::HologramModel;
+use crate::cnn::CnnPlans;
 use crate::model::{contract, PlanReport, PlanRequest};
 use crate::optics::Carrier;
 use crate::scene::{LayeredDepthImage, RgbdFrame};
@@ -111,19 +112,18 @@ impl HologramSession {
             layout: pipeline.config().cnn_layout,
             threads: pipeline.config().cnn_threads,
         };
-        let (hologram, plan_report) = pipeline
-            .hologram_model()
-            .tuned_plan(height, width, request)?;
-        let prefilter: Option<Box<dyn CnnPlan>> = match pipeline.prefilter_model() {
-            Some(p) => {
-                let plan = p.plan(height, width)?;
-                Some(Box::new(match plan_report.threads {
-                    Some(t) => plan.with_threads(t)?,
-                    None => plan,
-                }))
-            }
-            None => None,
-        };
+        let CnnPlans {
+            hologram,
+            prefilter,
+            report: plan_report,
+        } = crate::cnn::select(
+            pipeline.hologram_model(),
+            pipeline.prefilter_model(),
+            height,
+            width,
+            pipeline.config().cnn_engine,
+            request,
+        )?;
         let cfg = pipeline.config();
         let encoding = pipeline.encoding();
         let props = cfg.optics.propagators(height, width, cfg.options)?;
@@ -161,7 +161,7 @@ impl HologramSession {
             encoding,
             offset_m: cfg.offset_m,
             cnn: CnnStage {
-                plan: Box::new(hologram),
+                plan: hologram,
                 input: Array3::zeros((c, height, width)),
                 calibration: calibration.clone(),
             },

@@ -1,0 +1,264 @@
+//! The native engine: a TensorHolo CNN ([`CnnWeights`], read once by [`crate::model::graph`]) on the direct
+//! 3×3 convolution kernels of `tensorholo-kernels` (f32; the kernel row is chosen at run time from the CPU's
+//! instruction set, [`Isa::active`]).
+//!
+//! One frame, for `N` layers (`s_0` = the centred input `x − input_offset`, kept for the final concat):
+//!
+//! ```text
+//! layer i < N−1:  s_{i+1} = ReLU(conv_i(s_i) + b_i) (+ s_{i−1} where i+1 is odd and ≥ 3)   ring of 3 buffers
+//! layer N−1:      o = conv_{N−1}(concat(s_{N−1}, s_0)) + b                                 raw [6, H, W]
+//! heads:          amplitude (tanh(o) + 1)·a, phase (tanh(o) + 1)·p                          hologram CNN
+//! pre-filter:     o + depthwise_k×k(edge-replicated x)                                     [Re, Im]
+//! ```
+//!
+//! Threads: each layer's output rows are split into one band per thread ([`RowPlanar::bands_mut`]); the
+//! bands of a layer run in parallel on the plan's own rayon pool (created once with the plan), and the next
+//! layer starts when all are done (a 3×3 convolution reads one row above and below its band).
+//!
+//! Every activation buffer is allocated when the plan is built; a run allocates only its two output arrays
+//! (the [`CnnPlan`] contract returns owned arrays) and the few-element list of bands per layer.
+
+use std::sync::Arc;
+
+use ndarray::{Array3, ArrayView3};
+use rayon::prelude::*;
+use tensorholo_kernels::{depthwise, Affine, Conv3x3F32, Inputs, Isa, KernelError, RowPlanar};
+
+use super::CnnPlan;
+use crate::error::{HoloError, Result};
+use crate::model::{CnnOutput, CnnWeights};
+
+/// The network's packed layers, shared by every plan of it (and by a stream's spawned plan).
+#[derive(Debug)]
+struct Network {
+    graph: Arc<CnnWeights>,
+    layers: Vec<Conv3x3F32>,
+    /// Per input channel: the affine map of the input (scale 1, offset `−input_offset`).
+    scale: Vec<f32>,
+    offset: Vec<f32>,
+}
+
+/// A native plan: one network at one resolution, with its buffers and threads.
+#[derive(Debug)]
+pub(crate) struct NativePlan {
+    net: Arc<Network>,
+    height: usize,
+    width: usize,
+    threads: usize,
+    /// The plan's worker threads (`None` with one thread: the caller's thread runs every band).
+    pool: Option<Arc<rayon::ThreadPool>>,
+    /// `s_0`: the centred input.
+    x: RowPlanar<f32>,
+    /// `s_1 …`: `s_k` lives in `ring[(k − 1) % 3]`.
+    ring: [RowPlanar<f32>; 3],
+    /// The last layer's raw output, `C_out` channels.
+    raw: RowPlanar<f32>,
+}
+
+fn kernel_err(e: KernelError) -> HoloError {
+    HoloError::ModelRun(format!("native CNN engine: {e}"))
+}
+
+impl NativePlan {
+    /// Packs `graph`'s layers for the best kernels of `isa` and allocates the buffers of `height × width`
+    /// frames, run on `threads` threads (≥ 1).
+    ///
+    /// Errors: [`HoloError::InvalidData`] for non-finite weights; [`HoloError::InvalidParameter`] for 0
+    /// threads; [`HoloError::ModelRun`] for an ISA this CPU lacks, a size the kernels refuse or a thread
+    /// pool the OS will not start.
+    pub(crate) fn new(
+        graph: Arc<CnnWeights>,
+        height: usize,
+        width: usize,
+        threads: usize,
+        isa: Isa,
+    ) -> Result<Self> {
+        if threads == 0 {
+            return Err(crate::error::invalid(
+                "threads",
+                "the native CNN engine needs at least one thread",
+            ));
+        }
+        let n = graph.layers.len();
+        let mut layers = Vec::with_capacity(n);
+        for (i, l) in graph.layers.iter().enumerate() {
+            if l.weights.iter().chain(&l.bias).any(|v| !v.is_finite()) {
+                return Err(HoloError::InvalidData(format!(
+                    "CNN layer {i} holds NaN or infinite weights"
+                )));
+            }
+            layers.push(
+                Conv3x3F32::new(&l.weights, &l.bias, l.c_in, l.c_out, i + 1 < n, isa)
+                    .map_err(kernel_err)?,
+            );
+        }
+        let c = graph.in_channels;
+        let hidden = graph.layers[0].c_out;
+        let c_out = graph.layers[n - 1].c_out;
+        let net = Network {
+            scale: vec![1.0; c],
+            offset: vec![-graph.input_offset; c],
+            graph,
+            layers,
+        };
+        let buf = |ch| RowPlanar::new(ch, height, width).map_err(kernel_err);
+        Ok(Self {
+            x: buf(c)?,
+            ring: [buf(hidden)?, buf(hidden)?, buf(hidden)?],
+            raw: buf(c_out)?,
+            height,
+            width,
+            threads,
+            pool: pool(threads)?,
+            net: Arc::new(net),
+        })
+    }
+
+    /// The kernel row every layer runs (e.g. `conv3x3.f32.6x2.avx2`).
+    pub(crate) fn kernel_name(&self) -> &'static str {
+        self.net.layers[0].kernel().name
+    }
+
+    /// Threads a run uses.
+    pub(crate) fn threads(&self) -> usize {
+        self.threads
+    }
+
+    /// Runs the convolutions of one frame whose input is already in `self.x`; the raw output lands in
+    /// `self.raw`.
+    fn forward(&mut self) -> Result<()> {
+        let n = self.net.layers.len();
+        let (threads, pool) = (self.threads, self.pool.as_deref());
+        for (i, conv) in self.net.layers.iter().enumerate().take(n - 1) {
+            // Layer i reads s_i (the input for i = 0), adds s_{i−1} where i + 1 is odd and ≥ 3, writes s_{i+1}.
+            let out = i % 3;
+            let residual = (i + 1 >= 3 && (i + 1) % 2 == 1).then_some((i + 1) % 3);
+            let [a, b, c] = &mut self.ring;
+            let (dst, others): (&mut RowPlanar<f32>, [&RowPlanar<f32>; 2]) = match out {
+                0 => (a, [b, c]),
+                1 => (b, [a, c]),
+                _ => (c, [a, b]),
+            };
+            // The ring slot k (≠ out) among the two others, in slot order.
+            let slot = |k: usize| if k < out { others[k] } else { others[k - 1] };
+            let src = if i == 0 { &self.x } else { slot((i + 2) % 3) };
+            let mut inputs = Inputs::new(src);
+            if let Some(r) = residual {
+                inputs = inputs.residual(slot(r));
+            }
+            run_layer(conv, inputs, dst, threads, pool)?;
+        }
+        let last = if n >= 2 {
+            &self.ring[(n - 2) % 3]
+        } else {
+            &self.x
+        };
+        let inputs = Inputs::new(last).concat(&self.x);
+        run_layer(&self.net.layers[n - 1], inputs, &mut self.raw, threads, pool)
+    }
+}
+
+/// One layer on `threads` row bands of `dst`, in parallel on `pool`.
+fn run_layer(
+    conv: &Conv3x3F32,
+    inputs: Inputs<'_, f32>,
+    dst: &mut RowPlanar<f32>,
+    threads: usize,
+    pool: Option<&rayon::ThreadPool>,
+) -> Result<()> {
+    let bands = dst.bands_mut(threads);
+    let run = |mut band: tensorholo_kernels::RowBand<'_, f32>| conv.run_band(inputs, &mut band);
+    match pool {
+        Some(pool) if bands.len() > 1 => pool.install(|| bands.into_par_iter().try_for_each(run)),
+        _ => bands.into_iter().try_for_each(run),
+    }
+    .map_err(kernel_err)
+}
+
+/// A rayon pool of `threads` workers, or `None` for one thread.
+fn pool(threads: usize) -> Result<Option<Arc<rayon::ThreadPool>>> {
+    if threads == 1 {
+        return Ok(None);
+    }
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("tensorholo-cnn-{i}"))
+        .build()
+        .map(|p| Some(Arc::new(p)))
+        .map_err(|e| HoloError::ModelRun(format!("native CNN engine: thread pool: {e}")))
+}
+
+impl CnnPlan for NativePlan {
+    fn input_dim(&self) -> (usize, usize, usize) {
+        (self.net.graph.in_channels, self.height, self.width)
+    }
+
+    fn run_outputs(&mut self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
+        let want = self.input_dim();
+        if input.dim() != want {
+            return Err(HoloError::ShapeMismatch {
+                what: "CNN input [C, H, W]".into(),
+                expected: vec![want.0, want.1, want.2],
+                got: input.shape().to_vec(),
+            });
+        }
+        let standard = input.as_standard_layout();
+        let planar = standard
+            .as_slice()
+            .ok_or_else(|| HoloError::Internal("native CNN: standard layout".into()))?;
+        let affine = Affine {
+            scale: &self.net.scale,
+            offset: &self.net.offset,
+        };
+        self.x
+            .fill_from_planar(planar, Some(affine))
+            .map_err(kernel_err)?;
+        self.forward()?;
+        let (h, w) = (self.height, self.width);
+        let mut raw = self.raw.to_planar();
+        let plane = 3 * h * w;
+        let map = |v: &mut [f32], f: &(dyn Fn(f32) -> f32 + Sync)| match self.pool.as_deref() {
+            Some(pool) => pool.install(|| {
+                v.par_chunks_mut(w.max(1024))
+                    .for_each(|c| c.iter_mut().for_each(|o| *o = f(*o)))
+            }),
+            None => v.iter_mut().for_each(|o| *o = f(*o)),
+        };
+        match &self.net.graph.output {
+            CnnOutput::Heads {
+                amplitude_scale,
+                phase_scale,
+            } => {
+                let (a, p) = (*amplitude_scale, *phase_scale);
+                let (amp, phs) = raw.split_at_mut(plane);
+                map(amp, &|o| (o.tanh() + 1.0) * a);
+                map(phs, &|o| (o.tanh() + 1.0) * p);
+            }
+            CnnOutput::Prefilter { taps, base } => {
+                let c = self.net.graph.in_channels;
+                depthwise(planar, c, h, w, base, *taps, &mut raw, true).map_err(kernel_err)?;
+            }
+        }
+        let imag = raw.split_off(plane);
+        let shape_err = |_| HoloError::Internal("native CNN: output shape".into());
+        Ok((
+            Array3::from_shape_vec((3, h, w), raw).map_err(shape_err)?,
+            Array3::from_shape_vec((3, h, w), imag).map_err(shape_err)?,
+        ))
+    }
+
+    fn spawn(&self) -> Box<dyn CnnPlan> {
+        Box::new(Self {
+            net: self.net.clone(),
+            height: self.height,
+            width: self.width,
+            threads: self.threads,
+            // Threads of a stream run at the same time: each plan gets its own workers (a failed pool
+            // start leaves the copy on the caller's thread, which still computes the same frames).
+            pool: pool(self.threads).ok().flatten(),
+            x: self.x.clone(),
+            ring: self.ring.clone(),
+            raw: self.raw.clone(),
+        })
+    }
+}

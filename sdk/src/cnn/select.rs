@@ -1,0 +1,273 @@
+//! [`select`]: the CNN plans of one session, on the engine [`CnnEngine`] asks for or, for
+//! [`CnnEngine::Auto`], on the engine that ran faster on this machine at session creation.
+//!
+//! The timing follows tract's own tuning ([`HologramModel::tuned_plan`]): the same input (a constant 0.5), the
+//! same resolution ([`timing_resolution`]: the frame, or a full-width strip of a large one), one run or the
+//! fastest of three when a run is short. tract's candidates are its layouts × thread counts; the native
+//! engine's are the thread counts.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use ndarray::Array3;
+use tensorholo_kernels::Isa;
+
+use super::native::NativePlan;
+use super::{CnnEngine, CnnPlan};
+use crate::error::{invalid, HoloError, Result};
+use crate::model::tuning::REPEAT_BELOW_S;
+use crate::model::{
+    auto_thread_candidates, timing_resolution, CnnLayout, CnnWeights, HologramModel, PlanReport,
+    PlanRequest, PlanTiming, ThreadCount,
+};
+
+/// The plans of one session: the hologram CNN's, the pre-filter CNN's (if any), and how they were chosen.
+#[derive(Debug)]
+pub(crate) struct CnnPlans {
+    pub(crate) hologram: Box<dyn CnnPlan>,
+    pub(crate) prefilter: Option<Box<dyn CnnPlan>>,
+    pub(crate) report: PlanReport,
+}
+
+/// The plans for `height × width` frames of `hologram` (and `prefilter`) on `engine`, with tract's layout
+/// and threads from `request` (the native engine uses `request.threads`).
+///
+/// Errors: [`HoloError::InvalidParameter`] (`engine`) for [`CnnEngine::Native`] with a file it cannot run
+/// (int8, or a graph that is not the architecture: the reason is given); as
+/// [`HologramModel::tuned_plan`] and [`HologramModel::plan`].
+pub(crate) fn select(
+    hologram: &HologramModel,
+    prefilter: Option<&HologramModel>,
+    height: usize,
+    width: usize,
+    engine: CnnEngine,
+    request: PlanRequest,
+) -> Result<CnnPlans> {
+    let graphs = native_graphs(hologram, prefilter);
+    match (engine, graphs) {
+        (CnnEngine::Tract, _) => tract_plans(hologram, prefilter, height, width, request, "requested"),
+        (CnnEngine::Native, Err(e)) => Err(invalid(
+            "engine",
+            format!("the native CNN engine cannot run this model: {e}; use the tract engine"),
+        )),
+        (CnnEngine::Auto, Err(e)) => {
+            let why = format!("the native engine cannot run this model ({e})");
+            tract_plans(hologram, prefilter, height, width, request, &why)
+        }
+        (CnnEngine::Native, Ok((graph, pre))) => {
+            let (threads, candidates, tuning_s) = tune_native(&graph, height, width, request.threads)?;
+            let plans = native_plans(&graph, pre, height, width, threads)?;
+            Ok(CnnPlans {
+                report: native_report(&plans, request, "requested", candidates, tuning_s),
+                ..plans
+            })
+        }
+        (CnnEngine::Auto, Ok((graph, pre))) => {
+            let (threads, native_timings, native_s) =
+                tune_native(&graph, height, width, request.threads)?;
+            let (tract_plan, tract_report) = hologram.tuned_plan(height, width, request)?;
+            let best = |c: &[PlanTiming]| {
+                c.iter()
+                    .filter_map(|t| t.seconds)
+                    .min_by(|a, b| a.total_cmp(b))
+            };
+            let native_best = best(&native_timings);
+            let tract_best = best(&tract_report.candidates);
+            let mut candidates = tract_report.candidates.clone();
+            candidates.extend(native_timings);
+            let tuning_s = tract_report.tuning_s + native_s;
+            // tract with a single candidate was not timed: time it now, on the same input.
+            let tract_best = match tract_best {
+                Some(s) => s,
+                None => {
+                    let s = time_plan(&mut tract_plan.clone(), hologram.input_channels(), height, width)?;
+                    candidates.push(PlanTiming {
+                        engine: CnnEngine::Tract,
+                        layout: tract_report.layout,
+                        threads: tract_report.threads,
+                        seconds: Some(s),
+                        skipped: None,
+                    });
+                    s
+                }
+            };
+            let native_best = native_best.unwrap_or(f64::INFINITY);
+            let ratio = tract_best / native_best;
+            if native_best <= tract_best {
+                let plans = native_plans(&graph, pre, height, width, threads)?;
+                let why = format!("faster on this CPU ({ratio:.2}× tract's best)");
+                let mut report =
+                    native_report(&plans, request, &why, candidates, tuning_s);
+                report.autotuned = true;
+                log::info!("CNN engine for {height}×{width}: native, {why}");
+                Ok(CnnPlans { report, ..plans })
+            } else {
+                let why = format!("faster on this CPU ({:.2}× the native engine)", 1.0 / ratio);
+                log::info!("CNN engine for {height}×{width}: tract, {why}");
+                let mut plans = tract_with(prefilter, height, width, tract_plan, tract_report)?;
+                plans.report.engine_reason = why;
+                plans.report.candidates = candidates;
+                plans.report.tuning_s = tuning_s;
+                plans.report.autotuned = true;
+                Ok(plans)
+            }
+        }
+    }
+}
+
+/// The graphs the native engine would run, or why it cannot.
+fn native_graphs(
+    hologram: &HologramModel,
+    prefilter: Option<&HologramModel>,
+) -> Result<(Arc<CnnWeights>, Option<Arc<CnnWeights>>)> {
+    let graph = hologram.cnn_graph()?;
+    let pre = prefilter.map(|p| p.cnn_graph()).transpose()?;
+    Isa::active().map_err(|e| HoloError::ModelRun(format!("native CNN engine: {e}")))?;
+    Ok((graph, pre))
+}
+
+fn tract_plans(
+    hologram: &HologramModel,
+    prefilter: Option<&HologramModel>,
+    height: usize,
+    width: usize,
+    request: PlanRequest,
+    why: &str,
+) -> Result<CnnPlans> {
+    let (plan, report) = hologram.tuned_plan(height, width, request)?;
+    let mut plans = tract_with(prefilter, height, width, plan, report)?;
+    plans.report.engine_reason = why.to_string();
+    Ok(plans)
+}
+
+fn tract_with(
+    prefilter: Option<&HologramModel>,
+    height: usize,
+    width: usize,
+    plan: crate::model::ModelPlan,
+    report: PlanReport,
+) -> Result<CnnPlans> {
+    let prefilter: Option<Box<dyn CnnPlan>> = match prefilter {
+        Some(p) => {
+            // The pre-filter always runs channels-first (PipelineConfig::cnn_layout), with the same threads.
+            let plan = p.plan(height, width)?;
+            Some(Box::new(match report.threads {
+                Some(t) => plan.with_threads(t)?,
+                None => plan,
+            }))
+        }
+        None => None,
+    };
+    Ok(CnnPlans {
+        hologram: Box::new(plan),
+        prefilter,
+        report,
+    })
+}
+
+/// The native engine's thread count for `request`: timed among [`auto_thread_candidates`] for
+/// [`ThreadCount::Auto`] (with the timings and the seconds spent), else the count asked for (1 for
+/// [`ThreadCount::ProcessDefault`], tract's process-wide setting, which the native engine does not share).
+fn tune_native(
+    graph: &Arc<CnnWeights>,
+    height: usize,
+    width: usize,
+    threads: ThreadCount,
+) -> Result<(usize, Vec<PlanTiming>, f64)> {
+    let counts = match threads {
+        ThreadCount::Auto => auto_thread_candidates(),
+        ThreadCount::Fixed(n) => vec![n],
+        ThreadCount::ProcessDefault => vec![1],
+    };
+    let [th, tw] = timing_resolution(height, width);
+    let start = Instant::now();
+    let mut timings = Vec::new();
+    let isa = Isa::active().map_err(|e| HoloError::ModelRun(format!("native CNN engine: {e}")))?;
+    for &t in &counts {
+        let mut plan = NativePlan::new(graph.clone(), th, tw, t, isa)?;
+        let s = time_plan(&mut plan, graph.in_channels, th, tw)?;
+        timings.push(PlanTiming {
+            engine: CnnEngine::Native,
+            layout: CnnLayout::ChannelsFirst,
+            threads: Some(t),
+            seconds: Some(s),
+            skipped: None,
+        });
+    }
+    let best = timings
+        .iter()
+        .min_by(|a, b| a.seconds.unwrap_or(f64::INFINITY).total_cmp(&b.seconds.unwrap_or(f64::INFINITY)))
+        .and_then(|t| t.threads)
+        .unwrap_or(1);
+    Ok((best, timings, start.elapsed().as_secs_f64()))
+}
+
+/// Fastest wall-clock seconds of one run of `plan` on a constant `[c, h, w]` input (three runs when the first
+/// is under [`REPEAT_BELOW_S`]).
+fn time_plan(plan: &mut dyn CnnPlan, c: usize, h: usize, w: usize) -> Result<f64> {
+    let input = Array3::<f32>::from_elem((c, h, w), 0.5);
+    let mut run = || -> Result<f64> {
+        let t = Instant::now();
+        plan.run_outputs(input.view())?;
+        Ok(t.elapsed().as_secs_f64())
+    };
+    let mut best = run()?;
+    if best < REPEAT_BELOW_S {
+        for _ in 0..2 {
+            best = best.min(run()?);
+        }
+    }
+    Ok(best)
+}
+
+/// Native plans for both CNNs on `threads` threads.
+fn native_plans(
+    graph: &Arc<CnnWeights>,
+    pre: Option<Arc<CnnWeights>>,
+    height: usize,
+    width: usize,
+    threads: usize,
+) -> Result<CnnPlans> {
+    let isa = Isa::active().map_err(|e| HoloError::ModelRun(format!("native CNN engine: {e}")))?;
+    let hologram = NativePlan::new(graph.clone(), height, width, threads, isa)?;
+    let kernel = hologram.kernel_name();
+    let prefilter = match pre {
+        Some(p) => Some(Box::new(NativePlan::new(p, height, width, threads, isa)?) as Box<dyn CnnPlan>),
+        None => None,
+    };
+    Ok(CnnPlans {
+        report: PlanReport {
+            resolution: [height, width],
+            request: PlanRequest::default(),
+            engine: CnnEngine::Native,
+            engine_reason: String::new(),
+            kernel: Some(kernel.to_string()),
+            layout: CnnLayout::ChannelsFirst,
+            threads: Some(hologram.threads()),
+            autotuned: false,
+            timed_resolution: timing_resolution(height, width),
+            candidates: Vec::new(),
+            tuning_s: 0.0,
+        },
+        hologram: Box::new(hologram),
+        prefilter,
+    })
+}
+
+/// `plans.report` completed with what was asked, why, and the timings.
+fn native_report(
+    plans: &CnnPlans,
+    request: PlanRequest,
+    why: &str,
+    candidates: Vec<PlanTiming>,
+    tuning_s: f64,
+) -> PlanReport {
+    PlanReport {
+        request,
+        engine_reason: why.to_string(),
+        autotuned: candidates.len() > 1,
+        candidates,
+        tuning_s,
+        ..plans.report.clone()
+    }
+}

@@ -1,0 +1,184 @@
+//! The native engine against tract on every shipped f32 CNN, on random inputs; threads, ISAs, `spawn`, bad
+//! input and the engine choice.
+
+use std::sync::Arc;
+
+use ndarray::Array3;
+use tensorholo_kernels::Isa;
+
+use super::native::NativePlan;
+use super::{select, CnnEngine, CnnPlan};
+use crate::error::HoloError;
+use crate::model::{embedded, HologramModel, ModelConfig, PlanRequest, Precision, ThreadCount};
+
+/// Deterministic input in [0, 1) (xorshift), with a few exact 0s and 1s (invalid LDI points, clipped depth).
+fn input(c: usize, h: usize, w: usize, seed: u64) -> Array3<f32> {
+    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    Array3::from_shape_fn((c, h, w), |_| {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        match s % 23 {
+            0 => 0.0,
+            1 => 1.0,
+            _ => (s >> 40) as f32 / (1u64 << 24) as f32,
+        }
+    })
+}
+
+fn shipped() -> Vec<HologramModel> {
+    let cfg = |offset_m| ModelConfig {
+        offset_m,
+        ..ModelConfig::default()
+    };
+    let mut v = Vec::new();
+    for layers in [8, 15, 30] {
+        if let Ok(m) = embedded::hologram_model(layers, Precision::F32, &cfg(0.0)) {
+            v.push(m);
+        }
+    }
+    for mm in [6, 12] {
+        v.push(embedded::prefilter_model(mm, Precision::F32, &cfg(mm as f64 * 1e-3)).unwrap());
+    }
+    v
+}
+
+/// Largest |a − b| over both outputs, and the largest |b|.
+fn diff(a: &(Array3<f32>, Array3<f32>), b: &(Array3<f32>, Array3<f32>)) -> (f32, f32) {
+    let mut d = 0.0f32;
+    let mut m = 0.0f32;
+    for (x, y) in [(&a.0, &b.0), (&a.1, &b.1)] {
+        assert_eq!(x.dim(), y.dim());
+        for (p, q) in x.iter().zip(y) {
+            d = d.max((p - q).abs());
+            m = m.max(q.abs());
+        }
+    }
+    (d, m)
+}
+
+#[test]
+fn native_matches_tract_on_every_shipped_f32_model() {
+    let (h, w) = (23, 37);
+    for model in shipped() {
+        let graph = model.cnn_graph().unwrap();
+        let x = input(graph.in_channels, h, w, 7);
+        let tract = model.plan(h, w).unwrap().run_outputs(x.view()).unwrap();
+        let isas: Vec<Isa> = [Isa::Scalar, Isa::active().unwrap()].into();
+        for isa in isas {
+            for threads in [1, 3] {
+                let mut plan = NativePlan::new(graph.clone(), h, w, threads, isa).unwrap();
+                let native = plan.run_outputs(x.view()).unwrap();
+                let (d, m) = diff(&native, &tract);
+                println!(
+                    "{} {} ×{threads}: max |native − tract| {d:.2e} (max |tract| {m:.2})",
+                    model.source_name(),
+                    plan.kernel_name()
+                );
+                assert!(d <= 2e-5 * m.max(1.0), "{}: {d}", model.source_name());
+                // Non-trivial outputs: a broken engine returning zeros would fail above, not pass here.
+                assert!(m > 0.1);
+            }
+        }
+    }
+}
+
+#[test]
+fn threads_and_spawned_plans_give_bit_identical_frames() {
+    let model = &shipped()[0];
+    let graph = model.cnn_graph().unwrap();
+    let (h, w) = (19, 70);
+    let isa = Isa::active().unwrap();
+    let x = input(graph.in_channels, h, w, 3);
+    let mut one = NativePlan::new(graph.clone(), h, w, 1, isa).unwrap();
+    let a = one.run_outputs(x.view()).unwrap();
+    for threads in [2, 4, 40] {
+        let mut many = NativePlan::new(graph.clone(), h, w, threads, isa).unwrap();
+        assert_eq!(many.run_outputs(x.view()).unwrap(), a, "{threads} threads");
+        let mut copy = many.spawn();
+        assert_eq!(copy.run_outputs(x.view()).unwrap(), a);
+    }
+    // A second frame through the same plan: no state leaks from the first.
+    let y = input(graph.in_channels, h, w, 4);
+    let b = one.run_outputs(y.view()).unwrap();
+    let mut fresh = NativePlan::new(graph, h, w, 1, isa).unwrap();
+    assert_eq!(fresh.run_outputs(y.view()).unwrap(), b);
+    assert_ne!(a, b);
+}
+
+#[test]
+fn bad_input_and_bad_weights_are_errors() {
+    let model = &shipped()[0];
+    let graph = model.cnn_graph().unwrap();
+    let isa = Isa::active().unwrap();
+    let mut plan = NativePlan::new(graph.clone(), 8, 9, 1, isa).unwrap();
+    let wrong = Array3::<f32>::zeros((graph.in_channels, 8, 10));
+    assert!(matches!(
+        plan.run_outputs(wrong.view()),
+        Err(HoloError::ShapeMismatch { .. })
+    ));
+    // A transposed (non-standard layout) view of the right shape is read correctly.
+    let x = input(graph.in_channels, 8, 9, 5);
+    let t = x.clone().reversed_axes().as_standard_layout().into_owned();
+    let back = t.view().reversed_axes();
+    assert_eq!(
+        plan.run_outputs(back).unwrap(),
+        plan.run_outputs(x.view()).unwrap()
+    );
+    assert!(matches!(
+        NativePlan::new(graph.clone(), 8, 9, 0, isa),
+        Err(HoloError::InvalidParameter { name: "threads", .. })
+    ));
+    let mut nan = (*graph).clone();
+    nan.layers[2].weights[5] = f32::NAN;
+    assert!(matches!(
+        NativePlan::new(Arc::new(nan), 8, 9, 1, isa),
+        Err(HoloError::InvalidData(_))
+    ));
+}
+
+#[test]
+fn engine_choice_follows_the_request_and_the_file() {
+    let cfg = ModelConfig {
+        offset_m: 0.0,
+        ..ModelConfig::default()
+    };
+    let f32_model = embedded::hologram_model(8, Precision::F32, &cfg).unwrap();
+    let int8 = embedded::hologram_model(8, Precision::Int8QOperator, &cfg).unwrap();
+    let request = PlanRequest {
+        threads: ThreadCount::Fixed(1),
+        ..PlanRequest::default()
+    };
+    let x = input(4, 16, 24, 9);
+    let native = select(&f32_model, None, 16, 24, CnnEngine::Native, request).unwrap();
+    assert_eq!(native.report.engine, CnnEngine::Native);
+    assert!(native.report.kernel.as_deref().unwrap().starts_with("conv3x3.f32."));
+    let tract = select(&f32_model, None, 16, 24, CnnEngine::Tract, request).unwrap();
+    assert_eq!(tract.report.engine, CnnEngine::Tract);
+    let (mut a, mut b) = (native.hologram, tract.hologram);
+    let (d, m) = diff(&a.run_outputs(x.view()).unwrap(), &b.run_outputs(x.view()).unwrap());
+    assert!(d <= 2e-5 * m.max(1.0));
+    // Auto times both and reports each timing; the winner is the faster one.
+    let auto = select(&f32_model, None, 16, 24, CnnEngine::Auto, request).unwrap();
+    let best = |e: CnnEngine| {
+        auto.report
+            .candidates
+            .iter()
+            .filter(|c| c.engine == e)
+            .filter_map(|c| c.seconds)
+            .fold(f64::INFINITY, f64::min)
+    };
+    let (n, t) = (best(CnnEngine::Native), best(CnnEngine::Tract));
+    assert!(n.is_finite() && t.is_finite(), "{:?}", auto.report.candidates);
+    let want = if n <= t { CnnEngine::Native } else { CnnEngine::Tract };
+    assert_eq!(auto.report.engine, want);
+    // int8 files: Native is refused with the reason, Auto runs tract and says why.
+    let err = select(&int8, None, 16, 24, CnnEngine::Native, request).unwrap_err();
+    assert!(matches!(err, HoloError::InvalidParameter { name: "engine", .. }));
+    assert!(err.to_string().contains("quantised"), "{err}");
+    let auto8 = select(&int8, None, 16, 24, CnnEngine::Auto, request).unwrap();
+    assert_eq!(auto8.report.engine, CnnEngine::Tract);
+    assert!(auto8.report.engine_reason.contains("quantised"));
+    assert_eq!(CnnEngine::parse("native").unwrap(), CnnEngine::Native);
+    assert!(CnnEngine::parse("onnx").is_err());
+}
