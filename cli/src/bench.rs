@@ -9,6 +9,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use ndarray::Array3;
 use serde_json::json;
+use tensorholo::cnn::CnnEngine;
 use tensorholo::model::{
     embedded, CnnLayout, ModelConfig, NodeTiming, PlanRequest, Precision, ThreadCount,
 };
@@ -18,7 +19,7 @@ use tensorholo::pipeline::{
 use tensorholo::scene::procedural;
 
 use crate::args::parse_size;
-use crate::render::{BackendArg, GpuPrecisionArg, LayoutArg, PrecisionArg};
+use crate::render::{BackendArg, EngineArg, GpuPrecisionArg, LayoutArg, PrecisionArg};
 
 /// Arguments of `holo bench`.
 #[derive(Debug, Args)]
@@ -37,6 +38,14 @@ pub struct BenchArgs {
     /// auto times both at plan creation, the tuning cost is the `plan ms` column).
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [LayoutArg::Auto])]
     layout: Vec<LayoutArg>,
+    /// CPU CNN engines, timed alternately case by case in the CNN table (native: f32 models only; auto: as a
+    /// session chooses); the pipeline table uses the first.
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [EngineArg::Native, EngineArg::Tract])]
+    engine: Vec<EngineArg>,
+    /// Measure this machine's f32 FMA peak per thread count first (a register-only loop on every thread,
+    /// about 0.3 s) and give each CNN row's share of it.
+    #[arg(long)]
+    peak: bool,
     /// CNN thread counts (each plan's own executor).
     #[arg(long, value_delimiter = ',', default_values_t = [1, 2], value_parser = crate::args::parse_threads)]
     threads: Vec<usize>,
@@ -259,6 +268,166 @@ fn layouts(args: &BenchArgs, precision: Precision) -> Vec<CnnLayout> {
         .collect()
 }
 
+/// Median seconds and run count of each of `fs`, timed alternately (one run of each per round, after one
+/// warm-up round) so that a machine's drift hits every case alike; at most `repeat` rounds, fewer once
+/// `budget` seconds are spent (at least one).
+fn time_alternating(
+    repeat: usize,
+    budget: f64,
+    fs: &mut [Box<dyn FnMut() -> Result<()> + '_>],
+) -> Result<Vec<(f64, usize)>> {
+    for f in fs.iter_mut() {
+        f()?;
+    }
+    let start = Instant::now();
+    let mut v = vec![Vec::new(); fs.len()];
+    for _ in 0..repeat.max(1) {
+        for (f, times) in fs.iter_mut().zip(&mut v) {
+            let t = Instant::now();
+            f()?;
+            times.push(t.elapsed().as_secs_f64());
+        }
+        if start.elapsed().as_secs_f64() > budget {
+            break;
+        }
+    }
+    Ok(v.into_iter()
+        .map(|mut t| {
+            t.sort_by(|a, b| a.total_cmp(b));
+            (t[t.len() / 2], t.len())
+        })
+        .collect())
+}
+
+/// The CNN table: every size × depth × precision × threads case on every `--engine` (and tract `--layout`),
+/// the engines of one case timed alternately.
+fn cnn_table(
+    args: &BenchArgs,
+    config: &ModelConfig,
+    results: &mut Vec<serde_json::Value>,
+    profiles: &mut Vec<(String, Vec<NodeTiming>)>,
+) -> Result<()> {
+    let mut peaks = std::collections::BTreeMap::new();
+    if args.peak {
+        for &t in &args.threads {
+            let g = tensorholo::cnn::f32_peak_gflops(t, 300)?;
+            println!(
+                "f32 peak, {t} thread(s): {g:.1} GFLOP/s (FMA loop in registers, {})",
+                tensorholo::cnn::native_isa()?
+            );
+            results.push(json!({"kind": "peak", "threads": t, "gflops": g}));
+            peaks.insert(t, g);
+        }
+        println!();
+    }
+    println!(
+        "| CNN | precision | engine | layout / kernel | size (HxW) | threads | ms | FPS | GFLOP/s | % peak | runs | plan ms |"
+    );
+    println!("|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    for &(h, w) in &args.sizes {
+        for &layers in &args.layers {
+            for &p in &args.precision {
+                let precision: Precision = p.into();
+                let model = embedded::hologram_model(layers, precision, config)?;
+                let macs = model.metadata().macs_per_pixel().unwrap_or(0);
+                let input = Array3::<f32>::from_shape_fn((4, h, w), |(c, y, x)| {
+                    ((x * 7 + y * 3 + c) % 13) as f32 / 12.0
+                });
+                for &threads in &args.threads {
+                    // (engine label, layout or kernel label, plan, plan ms)
+                    let mut cases = Vec::new();
+                    for &e in &args.engine {
+                        let engine = CnnEngine::from(e);
+                        if engine == CnnEngine::Native && precision != Precision::F32 {
+                            continue;
+                        }
+                        let layouts = match engine {
+                            CnnEngine::Native => vec![CnnLayout::ChannelsFirst],
+                            _ => layouts(args, precision),
+                        };
+                        for requested in layouts {
+                            let t = Instant::now();
+                            let request = PlanRequest {
+                                layout: requested,
+                                threads: ThreadCount::Fixed(threads),
+                            };
+                            let (plan, report) =
+                                tensorholo::cnn::cnn_plan(&model, h, w, engine, request)?;
+                            let plan_ms = t.elapsed().as_secs_f64() * 1e3;
+                            let engine_label = match engine {
+                                CnnEngine::Auto => format!("auto → {}", report.engine),
+                                e => e.to_string(),
+                            };
+                            let detail = match (&report.kernel, requested) {
+                                (Some(k), _) => k.clone(),
+                                (None, CnnLayout::Auto) => format!("auto → {}", report.layout),
+                                (None, l) => l.to_string(),
+                            };
+                            cases.push((engine_label, detail, report, plan, plan_ms));
+                        }
+                    }
+                    let times = {
+                        let input = &input;
+                        let mut fs: Vec<Box<dyn FnMut() -> Result<()>>> = cases
+                            .iter_mut()
+                            .map(|c| {
+                                let plan = &mut c.3;
+                                Box::new(move || {
+                                    plan.run_outputs(input.view())?;
+                                    Ok(())
+                                }) as Box<dyn FnMut() -> Result<()>>
+                            })
+                            .collect();
+                        time_alternating(args.repeat, args.max_seconds, &mut fs)?
+                    };
+                    for ((engine, detail, report, _, plan_ms), (s, runs)) in cases.iter().zip(times)
+                    {
+                        let gflops = 2.0 * macs as f64 * (h * w) as f64 / s / 1e9;
+                        let peak = peaks.get(&threads).map_or("–".to_string(), |p| {
+                            format!("{:.0} %", 100.0 * gflops / p)
+                        });
+                        println!(
+                            "| holo{layers} | {precision} | {engine} | {detail} | {h}x{w} | {threads} | {:.1} | {:.2} | {:.1} | {peak} | {runs} | {plan_ms:.0} |",
+                            s * 1e3,
+                            1.0 / s,
+                            gflops,
+                        );
+                        results.push(
+                            json!({"kind": "cnn", "layers": layers, "precision": precision,
+                            "engine": engine, "layout": report.layout, "kernel": report.kernel,
+                            "size": [h, w], "threads": threads, "ms": s * 1e3, "fps": 1.0 / s,
+                            "gflops": gflops, "peak_gflops": peaks.get(&threads),
+                            "runs": runs, "macs_per_pixel": macs, "plan_ms": plan_ms}),
+                        );
+                        if args.profile && report.engine == CnnEngine::Tract {
+                            let case = format!(
+                                "holo{layers} | {precision} | {detail} | {h}x{w} | {threads}"
+                            );
+                            let request = PlanRequest {
+                                layout: report.layout,
+                                threads: ThreadCount::Fixed(threads),
+                            };
+                            let (plan, _) = model.tuned_plan(h, w, request)?;
+                            profiles.push((case, plan.profile(input.view())?));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    println!();
+    Ok(())
+}
+
+/// The pipeline table's engine: the first `--engine`, with tract for the int8 files the native engine does
+/// not run.
+fn pipeline_engine(args: &BenchArgs, precision: Precision) -> CnnEngine {
+    match args.engine.first().map_or(CnnEngine::Auto, |&e| e.into()) {
+        CnnEngine::Native if precision != Precision::F32 => CnnEngine::Tract,
+        e => e,
+    }
+}
+
 /// Runs `holo bench`.
 pub fn run(args: &BenchArgs) -> Result<()> {
     if let Some(path) = &args.json {
@@ -290,59 +459,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let mut results = Vec::new();
     let mut profiles = Vec::new();
     if !args.skip_cnn {
-        println!(
-            "| CNN | precision | layout | size (HxW) | threads | ms | FPS | GFLOP/s | runs | plan ms |"
-        );
-        println!("|---|---|---|---|---:|---:|---:|---:|---:|---:|");
-        for &(h, w) in &args.sizes {
-            for &layers in &args.layers {
-                for &p in &args.precision {
-                    let precision: Precision = p.into();
-                    let model = embedded::hologram_model(layers, precision, &config)?;
-                    let macs = model.metadata().macs_per_pixel().unwrap_or(0);
-                    let input = Array3::<f32>::from_shape_fn((4, h, w), |(c, y, x)| {
-                        ((x * 7 + y * 3 + c) % 13) as f32 / 12.0
-                    });
-                    for requested in layouts(args, precision) {
-                        for &threads in &args.threads {
-                            let t = Instant::now();
-                            let request = PlanRequest {
-                                layout: requested,
-                                threads: ThreadCount::Fixed(threads),
-                            };
-                            let (plan, _) = model.tuned_plan(h, w, request)?;
-                            let plan_ms = t.elapsed().as_secs_f64() * 1e3;
-                            let layout = match requested {
-                                CnnLayout::Auto => format!("auto → {}", plan.layout()),
-                                l => l.to_string(),
-                            };
-                            let (s, runs) = time_runs(args.repeat, args.max_seconds, || {
-                                plan.run_outputs(input.view())?;
-                                Ok(())
-                            })?;
-                            let gflops = 2.0 * macs as f64 * (h * w) as f64 / s / 1e9;
-                            println!(
-                            "| holo{layers} | {precision} | {layout} | {h}x{w} | {threads} | {:.1} | {:.2} | {:.1} | {runs} | {:.0} |",
-                            s * 1e3,
-                            1.0 / s,
-                            gflops,
-                            plan_ms
-                        );
-                            results.push(json!({"kind": "cnn", "layers": layers, "precision": precision,
-                            "layout": layout, "size": [h, w], "threads": threads, "ms": s * 1e3, "fps": 1.0 / s,
-                            "gflops": gflops, "runs": runs, "macs_per_pixel": macs, "plan_ms": plan_ms}));
-                            if args.profile {
-                                let case = format!(
-                                    "holo{layers} | {precision} | {layout} | {h}x{w} | {threads}"
-                                );
-                                profiles.push((case, plan.profile(input.view())?));
-                            }
-                        }
-                    }
-                }
-            }
-        }
-        println!();
+        cnn_table(args, &config, &mut results, &mut profiles)?;
     }
     if !profiles.is_empty() {
         print_profiles(&profiles, &mut results);
@@ -361,13 +478,20 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             for &layers in &args.layers {
                 for &p in &args.precision {
                     let precision: Precision = p.into();
-                    for layout in layouts(args, precision) {
+                    let engine = pipeline_engine(args, precision);
+                    // The native engine has one layout of its own; tract's --layout values apply to tract.
+                    let pipeline_layouts = match engine {
+                        CnnEngine::Native => vec![CnnLayout::ChannelsFirst],
+                        _ => layouts(args, precision),
+                    };
+                    for layout in pipeline_layouts {
                         for &threads in &args.threads {
                             let pipeline = HologramPipeline::embedded(
                                 &selection(args, layers, precision),
                                 PipelineConfig {
                                     offset_m: args.offset_mm as f64 * 1e-3,
                                     cnn_layout: layout,
+                                    cnn_engine: engine,
                                     cnn_threads: ThreadCount::Fixed(threads),
                                     backend: Backend::Cpu,
                                     ..PipelineConfig::default()
@@ -379,6 +503,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                                     format!("auto → {}", session.plan_report().layout)
                                 }
                                 l => l.to_string(),
+                            };
+                            let layout = match &session.plan_report().kernel {
+                                Some(k) => format!("native {k}"),
+                                None => format!("tract {layout}"),
                             };
                             let mut timings = Vec::new();
                             let (s, runs) = time_runs(args.repeat, args.max_seconds, || {

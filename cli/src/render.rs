@@ -9,6 +9,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
+use tensorholo::cnn::CnnEngine;
 use tensorholo::evaluation::{focal_depths, table2};
 use tensorholo::model::{CnnLayout, HologramModel, ModelConfig, ModelKind, Precision, ThreadCount};
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
@@ -104,6 +105,27 @@ impl From<LayoutArg> for CnnLayout {
     }
 }
 
+/// CPU CNN engines selectable on the command line ([`CnnEngine`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum EngineArg {
+    /// For f32 models time both engines when the session is created and keep the faster; int8 runs on tract.
+    Auto,
+    /// tensorholo's own direct 3×3 convolution kernels (f32 models; SIMD chosen from the CPU at run time).
+    Native,
+    /// tract (every model file, int8 included).
+    Tract,
+}
+
+impl From<EngineArg> for CnnEngine {
+    fn from(e: EngineArg) -> Self {
+        match e {
+            EngineArg::Auto => CnnEngine::Auto,
+            EngineArg::Native => CnnEngine::Native,
+            EngineArg::Tract => CnnEngine::Tract,
+        }
+    }
+}
+
 /// The int8 form `--int8` selects: the SDK's ([`tensorholo::model::DEFAULT_INT8`]).
 pub const DEFAULT_INT8: Precision = tensorholo::model::DEFAULT_INT8;
 
@@ -148,10 +170,15 @@ pub struct ModelArgs {
     /// Encode the CNN's hologram with --encoding (AA-DPM by default) instead of the DDPM pre-filter CNN.
     #[arg(long)]
     pub no_prefilter: bool,
-    /// Threads for the CNN's matrix products (tract); 0 = time 1, half and all cores when the session is
-    /// created and keep the fastest. The three colours of the optics always run in parallel.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=256))]
+    /// Threads of the CNNs; 0 (the default) = time 1, half and all cores when the session is created and
+    /// keep the fastest. The three colours of the optics always run in parallel.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=256))]
     pub threads: u32,
+    /// Engine of the CPU CNNs: auto times the native kernels and tract when the session is created and keeps
+    /// the faster (f32 models; int8 runs on tract); report.json's cnn_plan gives the choice, the kernel and
+    /// every timing.
+    #[arg(long, value_enum, default_value_t = EngineArg::Auto)]
+    pub engine: EngineArg,
     /// Memory layout tract runs the hologram CNN in: auto times both when the session is created (the
     /// choice and timings go to report.json); nhwc is not for int8-qop. Which is faster depends on the CPU
     /// and the frame size (`holo bench --layout nchw,nhwc,auto`).
@@ -227,6 +254,7 @@ impl ModelArgs {
             offset_m: self.offset_mm * 1e-3,
             encoding,
             cnn_layout: self.layout.into(),
+            cnn_engine: self.engine.into(),
             cnn_threads: ThreadCount::from_count(self.threads as usize),
             backend: self.backend.into(),
             gpu_precision: self.gpu_precision.into(),
@@ -297,6 +325,7 @@ impl ModelArgs {
             "prefilter_reason": pipeline.prefilter_reason(),
             "cnn_threads": self.threads,
             "cnn_layout": pipeline.config().cnn_layout,
+            "cnn_engine": pipeline.config().cnn_engine,
             "hologram_cnn": describe(pipeline.hologram_model()),
             "prefilter_cnn": pipeline.prefilter_model().map(describe),
             "encoding": pipeline.encoding(),

@@ -216,16 +216,33 @@ fn bench_prints_a_row_per_case() {
             })
             .count()
     };
-    // CNN table and pipeline table: both layouts for f32, channels-first only for int8-qop (tract cannot
-    // move QLinearConv); the profile table has one row per tract operator kind of each CNN case.
-    assert_eq!(rows("| holo8 | f32 | nchw | 24x32 | 1 | "), 2, "{table}");
-    assert_eq!(rows("| holo8 | f32 | nhwc | 24x32 | 1 | "), 2, "{table}");
+    // CNN table: the native engine (f32 only) and tract in both layouts for f32, channels-first only for
+    // int8-qop (tract cannot move QLinearConv). Pipeline table: the first --engine (native) for f32, tract
+    // for int8. The profile table has one row per tract operator kind of each tract CNN case.
+    assert_eq!(rows("| holo8 | f32 | native | conv3x3.f32."), 1, "{table}");
     assert_eq!(
-        rows("| holo8 | int8-qop | nchw | 24x32 | 1 | "),
-        2,
+        rows("| holo8 | f32 | tract | nchw | 24x32 | 1 | "),
+        1,
         "{table}"
     );
-    assert_eq!(rows("| holo8 | int8-qop | nhwc |"), 0, "{table}");
+    assert_eq!(
+        rows("| holo8 | f32 | tract | nhwc | 24x32 | 1 | "),
+        1,
+        "{table}"
+    );
+    assert_eq!(
+        rows("| holo8 | int8-qop | tract | nchw | 24x32 | 1 | "),
+        1,
+        "{table}"
+    );
+    assert_eq!(rows("| holo8 | int8-qop | native"), 0, "{table}");
+    assert_eq!(rows("| holo8 | int8-qop | tract | nhwc |"), 0, "{table}");
+    assert_eq!(rows("| holo8 | f32 | native conv3x3.f32."), 1, "{table}");
+    assert_eq!(
+        rows("| holo8 | int8-qop | tract nchw | 24x32 | 1 | "),
+        1,
+        "{table}"
+    );
     assert!(table.contains("Time per tract operator"), "{table}");
     assert!(
         table.contains("| holo8 | f32 | nhwc | 24x32 | 1 | Pad | 8 |"),

@@ -22,10 +22,10 @@ use std::time::Instant;
 
 use ndarray::{Array3, ArrayView3, Axis};
 
+use crate::cnn::CnnEngine;
 use crate::color::amplitude_to_srgb8;
 use crate::encoding::{DoublePhaseMethod, LinearLut};
 use crate::error::{invalid, HoloError, Result};
-use crate::cnn::CnnEngine;
 use crate::model::{
     CnnLayout, HologramModel, ModelConfig, ModelKind, PlanReport, Precision, ThreadCount,
 };

@@ -153,7 +153,10 @@ pub(crate) struct F32Job<'a> {
 pub(crate) enum F32Out<'a> {
     /// Buffer rows of a `[H+2][C_out][Wp]` buffer: `data[0]` is element `base` of the whole buffer (a band of
     /// rows, [`RowBand`]); the kernel writes only rows `y0..y1`, which lie inside it.
-    Rows { data: &'a mut [f32], base: usize },
+    Rows {
+        data: &'a mut [f32],
+        base: usize,
+    },
     Planar(&'a mut [f32]),
 }
 
@@ -177,6 +180,11 @@ pub(crate) struct U8Job<'a> {
     pub relu: bool,
     pub residual: Option<(&'a [u8], f32, f32)>,
     pub out_inv: f32,
+    /// Read by the SIMD rows only (none on other architectures).
+    #[cfg_attr(
+        not(any(target_arch = "x86_64", target_arch = "aarch64")),
+        allow(dead_code)
+    )]
     pub out_zp: f32,
     pub out_zp_u8: u8,
     pub y0: usize,

@@ -287,10 +287,16 @@ fn f32_bands_written_by_threads_equal_one_run() {
         }
         let mut out = RowPlanar::new(cout, h, w).unwrap();
         assert!(matches!(out.band_mut(2..2), Err(KernelError::Rows { .. })));
-        assert!(matches!(out.band_mut(3..h + 1), Err(KernelError::Rows { .. })));
+        assert!(matches!(
+            out.band_mut(3..h + 1),
+            Err(KernelError::Rows { .. })
+        ));
         let mut other = RowPlanar::new(cout + 1, h, w).unwrap();
         let mut band = other.band_mut(0..h).unwrap();
-        assert!(matches!(plan.run_band(inputs, &mut band), Err(KernelError::Shape { .. })));
+        assert!(matches!(
+            plan.run_band(inputs, &mut band),
+            Err(KernelError::Shape { .. })
+        ));
     }
 }
 

@@ -1,13 +1,14 @@
-//! The CNN engines behind one interface: a [`CnnPlan`] runs one CNN (hologram or pre-filter) at one resolution
-//! on the CPU, whatever computes it. The session's CNN stage ([`crate::pipeline`]) holds a `Box<dyn CnnPlan>`
-//! and never asks which engine it is, so adding an engine is a file here, not branches in the session.
+//! The CNN engines behind one interface: a crate-private `CnnPlan` runs one CNN (hologram or pre-filter) at one
+//! resolution on the CPU, whatever computes it. The session's CNN stage ([`crate::pipeline`]) holds a
+//! `Box<dyn CnnPlan>` and never asks which engine it is, so adding an engine is a file here, not branches in
+//! the session.
 //!
-//! - [`tract`](self::tract): tract's optimised plan ([`crate::model::ModelPlan`]), which runs any ONNX graph
-//!   that passes the contract (`docs/CONVENTIONS.md` §7).
-//! - [`native`](self::native): our direct 3×3 convolutions (`tensorholo-kernels`, SIMD rows chosen at run
-//!   time) over the graph read by [`crate::model::graph`]; f32 files.
-//!
-//! [`select`](self::select) picks the engine of a session ([`CnnEngine`]).
+//! - `cnn/tract.rs`: tract's optimised plan ([`crate::model::ModelPlan`]), which runs any ONNX graph that
+//!   passes the contract (`docs/CONVENTIONS.md` §7).
+//! - `cnn/native.rs`: our direct 3×3 convolutions (`tensorholo-kernels`, SIMD rows chosen at run time) over
+//!   the graph read by [`crate::model::graph`]; f32 files.
+//! - `cnn/select.rs` picks the engine of a session ([`CnnEngine`]); [`cnn_plan`] does the same for one CNN
+//!   (what `holo bench` times).
 //!
 //! The GPU runs whole frames, not CNNs alone: it is a frame executor of the pipeline
 //! (`pipeline/executor.rs`), not an engine here.
@@ -91,6 +92,68 @@ pub(crate) trait CnnPlan: std::fmt::Debug + Send {
 
     /// The same network for another thread (a stream's CNN thread): weights shared, run state its own.
     fn spawn(&self) -> Box<dyn CnnPlan>;
+}
+
+/// One CNN at one resolution on the engine [`cnn_plan`] chose: what `holo bench` times, engine against
+/// engine. A session builds its own plans; this is for measuring the CNN alone.
+#[derive(Debug)]
+pub struct CpuCnnPlan(Box<dyn CnnPlan>);
+
+impl CpuCnnPlan {
+    /// `(channels, height, width)` of the input `[C, H, W]`.
+    pub fn input_dim(&self) -> (usize, usize, usize) {
+        self.0.input_dim()
+    }
+
+    /// Runs the CNN on `input` `[C, H, W]`: its two outputs `[3, H, W]` (amplitude and phase of a hologram
+    /// CNN; `Re`, `Im` of a pre-filter). Errors: [`crate::HoloError::ShapeMismatch`]; the engine's run
+    /// errors.
+    pub fn run_outputs(&mut self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
+        self.0.run_outputs(input)
+    }
+}
+
+/// `model`'s CNN for `height × width` inputs on `engine` (tract's layout and threads from `request`; the
+/// native engine uses `request.threads`), and how it was chosen, as a session chooses
+/// ([`PipelineConfig::cnn_engine`](crate::pipeline::PipelineConfig::cnn_engine)).
+///
+/// Errors: [`crate::HoloError::InvalidParameter`] (`engine`) for [`CnnEngine::Native`] with a file it
+/// cannot run (int8); as [`crate::model::HologramModel::tuned_plan`].
+pub fn cnn_plan(
+    model: &crate::model::HologramModel,
+    height: usize,
+    width: usize,
+    engine: CnnEngine,
+    request: crate::model::PlanRequest,
+) -> Result<(CpuCnnPlan, crate::model::PlanReport)> {
+    let plans = select(model, None, height, width, engine, request)?;
+    Ok((CpuCnnPlan(plans.hologram), plans.report))
+}
+
+/// The CPU features the native engine's kernels use on this machine (`avx2`, `avx512`, `neondot`, …;
+/// lowered by the `TENSORHOLO_ISA` environment variable), or why it cannot run.
+pub fn native_isa() -> Result<&'static str> {
+    tensorholo_kernels::Isa::active()
+        .map(|i| i.name())
+        .map_err(|e| crate::HoloError::ModelRun(format!("native CNN engine: {e}")))
+}
+
+/// This machine's measured f32 peak in GFLOP/s for `threads` threads: one FMA loop per thread in registers
+/// (the widest FMA of [`native_isa`]), about `millis` ms, all threads at once: the denominator of "% of
+/// peak" in `holo bench --peak`. Errors: as [`native_isa`].
+pub fn f32_peak_gflops(threads: usize, millis: u64) -> Result<f64> {
+    let isa = tensorholo_kernels::Isa::active()
+        .map_err(|e| crate::HoloError::ModelRun(format!("native CNN engine: {e}")))?;
+    let per: Vec<f64> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads.max(1))
+            .map(|_| s.spawn(move || tensorholo_kernels::peak::f32_fma_gflops(isa, millis)))
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().ok().and_then(|r| r.ok()).unwrap_or(0.0))
+            .collect()
+    });
+    Ok(per.iter().sum())
 }
 
 #[cfg(all(test, feature = "embedded-models"))]

@@ -154,7 +154,13 @@ impl NativePlan {
             &self.x
         };
         let inputs = Inputs::new(last).concat(&self.x);
-        run_layer(&self.net.layers[n - 1], inputs, &mut self.raw, threads, pool)
+        run_layer(
+            &self.net.layers[n - 1],
+            inputs,
+            &mut self.raw,
+            threads,
+            pool,
+        )
     }
 }
 

@@ -45,7 +45,9 @@ pub(crate) fn select(
 ) -> Result<CnnPlans> {
     let graphs = native_graphs(hologram, prefilter);
     match (engine, graphs) {
-        (CnnEngine::Tract, _) => tract_plans(hologram, prefilter, height, width, request, "requested"),
+        (CnnEngine::Tract, _) => {
+            tract_plans(hologram, prefilter, height, width, request, "requested")
+        }
         (CnnEngine::Native, Err(e)) => Err(invalid(
             "engine",
             format!("the native CNN engine cannot run this model: {e}; use the tract engine"),
@@ -55,7 +57,8 @@ pub(crate) fn select(
             tract_plans(hologram, prefilter, height, width, request, &why)
         }
         (CnnEngine::Native, Ok((graph, pre))) => {
-            let (threads, candidates, tuning_s) = tune_native(&graph, height, width, request.threads)?;
+            let (threads, candidates, tuning_s) =
+                tune_native(&graph, height, width, request.threads, false)?;
             let plans = native_plans(&graph, pre, height, width, threads)?;
             Ok(CnnPlans {
                 report: native_report(&plans, request, "requested", candidates, tuning_s),
@@ -64,7 +67,7 @@ pub(crate) fn select(
         }
         (CnnEngine::Auto, Ok((graph, pre))) => {
             let (threads, native_timings, native_s) =
-                tune_native(&graph, height, width, request.threads)?;
+                tune_native(&graph, height, width, request.threads, true)?;
             let (tract_plan, tract_report) = hologram.tuned_plan(height, width, request)?;
             let best = |c: &[PlanTiming]| {
                 c.iter()
@@ -80,7 +83,12 @@ pub(crate) fn select(
             let tract_best = match tract_best {
                 Some(s) => s,
                 None => {
-                    let s = time_plan(&mut tract_plan.clone(), hologram.input_channels(), height, width)?;
+                    let s = time_plan(
+                        &mut tract_plan.clone(),
+                        hologram.input_channels(),
+                        height,
+                        width,
+                    )?;
                     candidates.push(PlanTiming {
                         engine: CnnEngine::Tract,
                         layout: tract_report.layout,
@@ -96,8 +104,7 @@ pub(crate) fn select(
             if native_best <= tract_best {
                 let plans = native_plans(&graph, pre, height, width, threads)?;
                 let why = format!("faster on this CPU ({ratio:.2}× tract's best)");
-                let mut report =
-                    native_report(&plans, request, &why, candidates, tuning_s);
+                let mut report = native_report(&plans, request, &why, candidates, tuning_s);
                 report.autotuned = true;
                 log::info!("CNN engine for {height}×{width}: native, {why}");
                 Ok(CnnPlans { report, ..plans })
@@ -168,17 +175,22 @@ fn tract_with(
 /// The native engine's thread count for `request`: timed among [`auto_thread_candidates`] for
 /// [`ThreadCount::Auto`] (with the timings and the seconds spent), else the count asked for (1 for
 /// [`ThreadCount::ProcessDefault`], tract's process-wide setting, which the native engine does not share).
+/// A single count is timed only when `time_single` (to compare with tract).
 fn tune_native(
     graph: &Arc<CnnWeights>,
     height: usize,
     width: usize,
     threads: ThreadCount,
+    time_single: bool,
 ) -> Result<(usize, Vec<PlanTiming>, f64)> {
     let counts = match threads {
         ThreadCount::Auto => auto_thread_candidates(),
         ThreadCount::Fixed(n) => vec![n],
         ThreadCount::ProcessDefault => vec![1],
     };
+    if counts.len() == 1 && !time_single {
+        return Ok((counts[0], Vec::new(), 0.0));
+    }
     let [th, tw] = timing_resolution(height, width);
     let start = Instant::now();
     let mut timings = Vec::new();
@@ -196,7 +208,11 @@ fn tune_native(
     }
     let best = timings
         .iter()
-        .min_by(|a, b| a.seconds.unwrap_or(f64::INFINITY).total_cmp(&b.seconds.unwrap_or(f64::INFINITY)))
+        .min_by(|a, b| {
+            a.seconds
+                .unwrap_or(f64::INFINITY)
+                .total_cmp(&b.seconds.unwrap_or(f64::INFINITY))
+        })
         .and_then(|t| t.threads)
         .unwrap_or(1);
     Ok((best, timings, start.elapsed().as_secs_f64()))
@@ -232,7 +248,9 @@ fn native_plans(
     let hologram = NativePlan::new(graph.clone(), height, width, threads, isa)?;
     let kernel = hologram.kernel_name();
     let prefilter = match pre {
-        Some(p) => Some(Box::new(NativePlan::new(p, height, width, threads, isa)?) as Box<dyn CnnPlan>),
+        Some(p) => {
+            Some(Box::new(NativePlan::new(p, height, width, threads, isa)?) as Box<dyn CnnPlan>)
+        }
         None => None,
     };
     Ok(CnnPlans {

@@ -127,7 +127,10 @@ fn bad_input_and_bad_weights_are_errors() {
     );
     assert!(matches!(
         NativePlan::new(graph.clone(), 8, 9, 0, isa),
-        Err(HoloError::InvalidParameter { name: "threads", .. })
+        Err(HoloError::InvalidParameter {
+            name: "threads",
+            ..
+        })
     ));
     let mut nan = (*graph).clone();
     nan.layers[2].weights[5] = f32::NAN;
@@ -152,11 +155,19 @@ fn engine_choice_follows_the_request_and_the_file() {
     let x = input(4, 16, 24, 9);
     let native = select(&f32_model, None, 16, 24, CnnEngine::Native, request).unwrap();
     assert_eq!(native.report.engine, CnnEngine::Native);
-    assert!(native.report.kernel.as_deref().unwrap().starts_with("conv3x3.f32."));
+    assert!(native
+        .report
+        .kernel
+        .as_deref()
+        .unwrap()
+        .starts_with("conv3x3.f32."));
     let tract = select(&f32_model, None, 16, 24, CnnEngine::Tract, request).unwrap();
     assert_eq!(tract.report.engine, CnnEngine::Tract);
     let (mut a, mut b) = (native.hologram, tract.hologram);
-    let (d, m) = diff(&a.run_outputs(x.view()).unwrap(), &b.run_outputs(x.view()).unwrap());
+    let (d, m) = diff(
+        &a.run_outputs(x.view()).unwrap(),
+        &b.run_outputs(x.view()).unwrap(),
+    );
     assert!(d <= 2e-5 * m.max(1.0));
     // Auto times both and reports each timing; the winner is the faster one.
     let auto = select(&f32_model, None, 16, 24, CnnEngine::Auto, request).unwrap();
@@ -169,12 +180,23 @@ fn engine_choice_follows_the_request_and_the_file() {
             .fold(f64::INFINITY, f64::min)
     };
     let (n, t) = (best(CnnEngine::Native), best(CnnEngine::Tract));
-    assert!(n.is_finite() && t.is_finite(), "{:?}", auto.report.candidates);
-    let want = if n <= t { CnnEngine::Native } else { CnnEngine::Tract };
+    assert!(
+        n.is_finite() && t.is_finite(),
+        "{:?}",
+        auto.report.candidates
+    );
+    let want = if n <= t {
+        CnnEngine::Native
+    } else {
+        CnnEngine::Tract
+    };
     assert_eq!(auto.report.engine, want);
     // int8 files: Native is refused with the reason, Auto runs tract and says why.
     let err = select(&int8, None, 16, 24, CnnEngine::Native, request).unwrap_err();
-    assert!(matches!(err, HoloError::InvalidParameter { name: "engine", .. }));
+    assert!(matches!(
+        err,
+        HoloError::InvalidParameter { name: "engine", .. }
+    ));
     assert!(err.to_string().contains("quantised"), "{err}");
     let auto8 = select(&int8, None, 16, 24, CnnEngine::Auto, request).unwrap();
     assert_eq!(auto8.report.engine, CnnEngine::Tract);

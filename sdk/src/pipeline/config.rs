@@ -4,9 +4,9 @@
 
 #[cfg(doc)]
 use super::{HologramPipeline, HologramSession};
+use crate::cnn::CnnEngine;
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
-use crate::cnn::CnnEngine;
 use crate::model::{CnnLayout, ThreadCount};
 use crate::optics::{OpticalSetup, PropagationOptions};
 

@@ -21,11 +21,11 @@ use super::workers::{lost_state, ColourWorkers};
 #[cfg(doc)]
 use super::BLACK_FRAME_AMPLITUDE;
 use crate::cnn::CnnPlan;
+use crate::cnn::CnnPlans;
 use crate::encoding::{normaliser, ChannelEncoder, ChannelStats, DoublePhaseMethod};
 use crate::error::{invalid, HoloError, Result};
 #[cfg(doc)]
 use crate::model::HologramModel;
-use crate::cnn::CnnPlans;
 use crate::model::{contract, PlanReport, PlanRequest};
 use crate::optics::Carrier;
 use crate::scene::{LayeredDepthImage, RgbdFrame};
