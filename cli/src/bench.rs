@@ -42,8 +42,8 @@ pub struct BenchArgs {
     /// session chooses); the pipeline table uses the first.
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [EngineArg::Native, EngineArg::Tract])]
     engine: Vec<EngineArg>,
-    /// Measure this machine's f32 FMA peak per thread count first (a register-only loop on every thread,
-    /// about 0.3 s) and give each CNN row's share of it.
+    /// Measure this machine's f32 FMA and int8 dot-product peaks per thread count first (register-only loops
+    /// on every thread, about 0.3 s each) and give each CNN row's share of the f32 peak.
     #[arg(long)]
     peak: bool,
     /// CNN thread counts (each plan's own executor).
@@ -311,11 +311,12 @@ fn cnn_table(
     if args.peak {
         for &t in &args.threads {
             let g = tensorholo::cnn::f32_peak_gflops(t, 300)?;
+            let q = tensorholo::cnn::int8_peak_gops(t, 300)?;
             println!(
-                "f32 peak, {t} thread(s): {g:.1} GFLOP/s (FMA loop in registers, {})",
+                "peak, {t} thread(s): f32 {g:.1} GFLOP/s, int8 {q:.1} GOP/s (register loops, {})",
                 tensorholo::cnn::native_isa()?
             );
-            results.push(json!({"kind": "peak", "threads": t, "gflops": g}));
+            results.push(json!({"kind": "peak", "threads": t, "gflops": g, "int8_gops": q}));
             peaks.insert(t, g);
         }
         println!();

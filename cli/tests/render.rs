@@ -201,6 +201,7 @@ fn bench_prints_a_row_per_case() {
         "--layout",
         "nchw,nhwc",
         "--profile",
+        "--peak",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let table = String::from_utf8_lossy(&o.stdout);
@@ -253,6 +254,14 @@ fn bench_prints_a_row_per_case() {
         "{table}"
     );
     assert!(table.contains("Peak resident memory"), "{table}");
+    // --peak: the measured peaks, and each CNN row's share of the f32 one.
+    assert!(table.contains("peak, 1 thread(s): f32 "), "{table}");
+    let share = table
+        .lines()
+        .find(|l| l.starts_with("| holo8 | f32 | native |"))
+        .and_then(|l| l.split('|').nth(10))
+        .map(|f| f.trim().to_string());
+    assert!(share.as_deref().is_some_and(|f| f.ends_with(" %")), "{table}");
 }
 
 /// `holo compare` finds nothing between two runs of one command, and exactly the SLM code moved by hand

@@ -353,6 +353,14 @@ impl RowPlanar<f32> {
         Ok(b)
     }
 
+    /// The `W` interior values of channel `c` on frame row `y`; `None` outside the buffer.
+    pub fn row(&self, c: usize, y: usize) -> Option<&[f32]> {
+        (c < self.c && y < self.h).then(|| {
+            let at = self.index(c, y + 1, 1);
+            &self.as_slice()[at..at + self.w]
+        })
+    }
+
     /// Overwrites the interior from a planar `[C][H][W]` slice, applying `x·scale[c] + offset[c]` when
     /// `affine` is given. Errors: `src.len() != C·H·W` or an affine slice whose length is not `C`
     /// ([`KernelError::Length`]).
@@ -480,6 +488,14 @@ mod tests {
             }
         }
         assert_eq!(b.get(1, 2, 3), Some(src[(h + 2) * w + 3] * 2.0));
+        for ch in 0..c {
+            for y in 0..h {
+                let k = (ch * h + y) * w;
+                assert_eq!(b.row(ch, y).unwrap(), &back[k..k + w]);
+            }
+        }
+        assert_eq!(b.row(c, 0), None);
+        assert_eq!(b.row(0, h), None);
         assert!(b.padded_width() >= w + 2 + MAX_TILE);
         let mut bad = vec![0.0; 3];
         assert!(matches!(

@@ -142,11 +142,33 @@ pub fn native_isa() -> Result<&'static str> {
 /// (the widest FMA of [`native_isa`]), about `millis` ms, all threads at once: the denominator of "% of
 /// peak" in `holo bench --peak`. Errors: as [`native_isa`].
 pub fn f32_peak_gflops(threads: usize, millis: u64) -> Result<f64> {
+    on_threads(threads, |isa| {
+        tensorholo_kernels::peak::f32_fma_gflops(isa, millis)
+    })
+}
+
+/// This machine's measured int8 multiply-accumulate peak in GOP/s (a multiply-add counts 2) for `threads`
+/// threads: the best int8 dot-product instruction of [`native_isa`] (`vpdpbusd` with VNNI, `vpmaddwd` on
+/// AVX2, `USDOT`/`SDOT`/`SMLAL` on aarch64) in a register loop on every thread, about `millis` ms.
+/// Errors: as [`native_isa`].
+pub fn int8_peak_gops(threads: usize, millis: u64) -> Result<f64> {
+    on_threads(threads, |isa| {
+        tensorholo_kernels::peak::int8_dot_gops(isa, millis)
+    })
+}
+
+/// Runs `f` on `threads` threads at once and sums what they measured.
+fn on_threads(
+    threads: usize,
+    f: impl Fn(tensorholo_kernels::Isa) -> std::result::Result<f64, tensorholo_kernels::KernelError>
+        + Sync,
+) -> Result<f64> {
     let isa = tensorholo_kernels::Isa::active()
         .map_err(|e| crate::HoloError::ModelRun(format!("native CNN engine: {e}")))?;
+    let f = &f;
     let per: Vec<f64> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..threads.max(1))
-            .map(|_| s.spawn(move || tensorholo_kernels::peak::f32_fma_gflops(isa, millis)))
+            .map(|_| s.spawn(move || f(isa)))
             .collect();
         handles
             .into_iter()

@@ -221,29 +221,38 @@ impl CnnPlan for NativePlan {
             .map_err(kernel_err)?;
         self.forward()?;
         let (h, w) = (self.height, self.width);
-        let mut raw = self.raw.to_planar();
         let plane = 3 * h * w;
-        let map = |v: &mut [f32], f: &(dyn Fn(f32) -> f32 + Sync)| match self.pool.as_deref() {
-            Some(pool) => pool.install(|| {
-                v.par_chunks_mut(w.max(1024))
-                    .for_each(|c| c.iter_mut().for_each(|o| *o = f(*o)))
-            }),
-            None => v.iter_mut().for_each(|o| *o = f(*o)),
-        };
-        match &self.net.graph.output {
+        // The raw output, rows in parallel, through the heads (hologram CNN) or as is (pre-filter).
+        let heads = match &self.net.graph.output {
             CnnOutput::Heads {
                 amplitude_scale,
                 phase_scale,
-            } => {
-                let (a, p) = (*amplitude_scale, *phase_scale);
-                let (amp, phs) = raw.split_at_mut(plane);
-                map(amp, &|o| (o.tanh() + 1.0) * a);
-                map(phs, &|o| (o.tanh() + 1.0) * p);
+            } => Some((*amplitude_scale, *phase_scale)),
+            CnnOutput::Prefilter { .. } => None,
+        };
+        let mut raw = vec![0.0f32; 2 * plane];
+        let src = &self.raw;
+        let row = |(i, out): (usize, &mut [f32])| {
+            let (c, y) = (i / h, i % h);
+            if let Some(r) = src.row(c, y) {
+                match heads {
+                    Some((a, p)) => {
+                        let s = if c < 3 { a } else { p };
+                        out.iter_mut()
+                            .zip(r)
+                            .for_each(|(o, &v)| *o = (v.tanh() + 1.0) * s);
+                    }
+                    None => out.copy_from_slice(r),
+                }
             }
-            CnnOutput::Prefilter { taps, base } => {
-                let c = self.net.graph.in_channels;
-                depthwise(planar, c, h, w, base, *taps, &mut raw, true).map_err(kernel_err)?;
-            }
+        };
+        match self.pool.as_deref() {
+            Some(pool) => pool.install(|| raw.par_chunks_mut(w).enumerate().for_each(row)),
+            None => raw.chunks_mut(w).enumerate().for_each(row),
+        }
+        if let CnnOutput::Prefilter { taps, base } = &self.net.graph.output {
+            let c = self.net.graph.in_channels;
+            depthwise(planar, c, h, w, base, *taps, &mut raw, true).map_err(kernel_err)?;
         }
         let imag = raw.split_off(plane);
         let shape_err = |_| HoloError::Internal("native CNN: output shape".into());
