@@ -7,7 +7,8 @@
 # /usr/aarch64-linux-gnu` the runner. Installs what is missing (apt: gcc-aarch64-linux-gnu,
 # libc6-dev-arm64-cross, qemu-user; rustup: the target).
 #
-# What runs: the kernels crate under three emulated CPUs (see the end), and every shipped CNN (8/15/30 layers, pre-filters; f32, int8 QOperator and QDQ) and the fixture
+# What runs: the kernels crate under three emulated CPUs (see the end), the native CNN engine against tract
+# (the `cnn::` unit tests), and every shipped CNN (8/15/30 layers, pre-filters; f32, int8 QOperator and QDQ) and the fixture
 # CNNs against their PyTorch outputs with the x86 tolerances (tests model, shipped_models), the pipeline
 # tests (session vs the stand-alone stages, streaming, bad input), and platform_parity: the built-in scene
 # rendered to the same midpoint hologram and SLM codes as the x86-64 reference files, within the tolerances
@@ -27,6 +28,12 @@ rustup target list --installed | grep -qx "$target" || rustup target add "$targe
 cargo test --locked --target "$target" -p tensorholo --no-default-features \
   --features "embedded-models models-15 models-30" \
   --test model --test shipped_models --test pipeline --test platform_parity "$@" -- --nocapture 2>&1 |
+  grep -vE '^(running [0-9]+ tests?|)$'
+
+# The native CNN engine (NEON kernel rows) against tract on every shipped f32 CNN, threads and bad input: the
+# SDK's unit tests of `cnn` (sdk/src/cnn/tests.rs), same features as above.
+cargo test --locked --target "$target" -p tensorholo --no-default-features \
+  --features "embedded-models models-15 models-30" --lib "$@" -- --nocapture cnn:: 2>&1 |
   grep -vE '^(running [0-9]+ tests?|)$'
 
 # The kernels crate (kernels/, tensorholo-kernels) under three emulated CPUs, so that every aarch64 kernel row

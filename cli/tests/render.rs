@@ -261,7 +261,10 @@ fn bench_prints_a_row_per_case() {
         .find(|l| l.starts_with("| holo8 | f32 | native |"))
         .and_then(|l| l.split('|').nth(10))
         .map(|f| f.trim().to_string());
-    assert!(share.as_deref().is_some_and(|f| f.ends_with(" %")), "{table}");
+    assert!(
+        share.as_deref().is_some_and(|f| f.ends_with(" %")),
+        "{table}"
+    );
 }
 
 /// `holo compare` finds nothing between two runs of one command, and exactly the SLM code moved by hand

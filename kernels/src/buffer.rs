@@ -315,10 +315,45 @@ pub struct RowBand<'a, T: Element> {
     pub(crate) w: usize,
 }
 
-impl<T: Element> RowBand<'_, T> {
+impl<'a, T: Element> RowBand<'a, T> {
     /// The frame rows of the band.
     pub fn rows(&self) -> Range<usize> {
         self.rows.clone()
+    }
+
+    /// Splits the band at frame row `y` into rows `start..y` and `y..end`, for two threads (no allocation:
+    /// recursive splitting feeds a fork-join pool). Errors: `y` not strictly inside the band
+    /// ([`KernelError::Rows`]).
+    pub fn split_at(self, y: usize) -> Result<(Self, Self), KernelError> {
+        let Range { start, end } = self.rows;
+        if y <= start || y >= end {
+            return Err(KernelError::Rows {
+                start: y,
+                end: y,
+                height: self.h,
+            });
+        }
+        let stride = self.data.len() / (end - start);
+        let (top, bottom) = self.data.split_at_mut((y - start) * stride);
+        let (c, h, w, base) = (self.c, self.h, self.w, self.base);
+        Ok((
+            RowBand {
+                data: top,
+                base,
+                rows: start..y,
+                c,
+                h,
+                w,
+            },
+            RowBand {
+                data: bottom,
+                base: base + (y - start) * stride,
+                rows: y..end,
+                c,
+                h,
+                w,
+            },
+        ))
     }
 }
 

@@ -1,7 +1,8 @@
 //! Proves that after warm-up a frame's optics stages (offset propagation, pre-filter input, double phase
 //! encoding, the calibrated per-pixel look-up table, output copy) perform no heap allocation: a counting global allocator counts every
 //! allocation of every thread (the colour workers included) around the session's stage methods.
-//! The CNN stages allocate inside tract and are measured separately, as a sanity check that the counter works.
+//! The CNN stages allocate inside tract and are measured separately, as a sanity check that the counter works;
+//! the native CNN engine allocates only the two output arrays of a run.
 //!
 //! This binary holds a single test so that no other test allocates concurrently.
 
@@ -11,7 +12,8 @@ use std::sync::Arc;
 
 use ndarray::{Array2, Array3};
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
-use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
+use tensorholo::cnn::{cnn_plan, CnnEngine};
+use tensorholo::model::{HologramModel, ModelConfig, ModelKind, PlanRequest, ThreadCount};
 use tensorholo::pipeline::{Backend, Heads, HologramPipeline, PipelineConfig};
 use tensorholo::scene::RgbdFrame;
 use tensorholo::slm::{DisplayCalibration, LutRepresentation, PhaseCurve, PhaseLut, TiledCurves};
@@ -116,5 +118,27 @@ fn optics_stages_allocate_nothing_after_warm_up() {
         if prefilter {
             assert!(cnn > 0, "the counter must see tract's allocations");
         }
+    }
+
+    // The native CNN engine, 1 and 2 threads: after warm-up a run allocates exactly its two output arrays
+    // (the plan's contract returns owned arrays); every activation buffer and the thread pool are the plan's.
+    let model = load("holo8_rgbd.onnx", ModelKind::Hologram);
+    let input = Array3::from_shape_fn((4, h, w), |(c, y, x)| {
+        ((c + 2 * y + 3 * x) % 10) as f32 / 9.0
+    });
+    for threads in [1, 2] {
+        let request = PlanRequest {
+            threads: ThreadCount::Fixed(threads),
+            ..PlanRequest::default()
+        };
+        let (mut plan, _) = cnn_plan(&model, h, w, CnnEngine::Native, request).unwrap();
+        plan.run_outputs(input.view()).unwrap();
+        let (n, _) = allocations_during(|| {
+            for _ in 0..5 {
+                plan.run_outputs(input.view()).unwrap();
+            }
+        });
+        println!("native engine, {threads} thread(s): {n} allocations in 5 runs");
+        assert_eq!(n, 5 * 2, "{threads} threads");
     }
 }

@@ -285,7 +285,21 @@ fn f32_bands_written_by_threads_equal_one_run() {
             assert!(out == whole, "{row}: {n} bands");
             assert!(out.border_is_clean());
         }
+        // split_at: both halves run separately give the same buffer; rows outside are refused.
+        for y in 1..h {
+            let mut out = RowPlanar::new(cout, h, w).unwrap();
+            let band = out.band_mut(0..h).unwrap();
+            let (mut top, mut bottom) = band.split_at(y).unwrap();
+            assert_eq!((top.rows(), bottom.rows()), (0..y, y..h));
+            plan.run_band(inputs, &mut bottom).unwrap();
+            plan.run_band(inputs, &mut top).unwrap();
+            assert!(out == whole, "{row}: split at {y}");
+        }
         let mut out = RowPlanar::new(cout, h, w).unwrap();
+        let band = out.band_mut(1..3).unwrap();
+        assert!(matches!(band.split_at(1), Err(KernelError::Rows { .. })));
+        let band = out.band_mut(1..3).unwrap();
+        assert!(matches!(band.split_at(3), Err(KernelError::Rows { .. })));
         assert!(matches!(out.band_mut(2..2), Err(KernelError::Rows { .. })));
         assert!(matches!(
             out.band_mut(3..h + 1),

@@ -11,18 +11,21 @@
 //! pre-filter:     o + depthwise_k×k(edge-replicated x)                                     [Re, Im]
 //! ```
 //!
-//! Threads: each layer's output rows are split into one band per thread ([`RowPlanar::bands_mut`]); the
-//! bands of a layer run in parallel on the plan's own rayon pool (created once with the plan), and the next
-//! layer starts when all are done (a 3×3 convolution reads one row above and below its band).
+//! Threads: each layer's output rows are split into one band per thread (halved recursively with
+//! [`RowBand::split_at`] under `rayon::join`); the bands of a layer run in parallel on the plan's own rayon
+//! pool (created once with the plan), and the next layer starts when all are done (a 3×3 convolution reads
+//! one row above and below its band).
 //!
 //! Every activation buffer is allocated when the plan is built; a run allocates only its two output arrays
-//! (the [`CnnPlan`] contract returns owned arrays) and the few-element list of bands per layer.
+//! (the [`CnnPlan`] contract returns owned arrays).
 
 use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3};
 use rayon::prelude::*;
-use tensorholo_kernels::{depthwise, Affine, Conv3x3F32, Inputs, Isa, KernelError, RowPlanar};
+use tensorholo_kernels::{
+    depthwise, Affine, Conv3x3F32, Inputs, Isa, KernelError, RowBand, RowPlanar,
+};
 
 use super::CnnPlan;
 use crate::error::{HoloError, Result};
@@ -172,13 +175,35 @@ fn run_layer(
     threads: usize,
     pool: Option<&rayon::ThreadPool>,
 ) -> Result<()> {
-    let bands = dst.bands_mut(threads);
-    let run = |mut band: tensorholo_kernels::RowBand<'_, f32>| conv.run_band(inputs, &mut band);
+    let h = dst.height();
+    let band = dst.band_mut(0..h).map_err(kernel_err)?;
     match pool {
-        Some(pool) if bands.len() > 1 => pool.install(|| bands.into_par_iter().try_for_each(run)),
-        _ => bands.into_iter().try_for_each(run),
+        Some(pool) if threads > 1 => pool.install(|| split_run(conv, inputs, band, threads)),
+        _ => split_run(conv, inputs, band, 1),
     }
     .map_err(kernel_err)
+}
+
+/// Runs `band` as `parts` near-equal bands: halves recursively through `rayon::join`, so that nothing is
+/// allocated per layer.
+fn split_run(
+    conv: &Conv3x3F32,
+    inputs: Inputs<'_, f32>,
+    mut band: RowBand<'_, f32>,
+    parts: usize,
+) -> std::result::Result<(), KernelError> {
+    let rows = band.rows();
+    if parts <= 1 || rows.len() < 2 {
+        return conv.run_band(inputs, &mut band);
+    }
+    let left = parts / 2;
+    let mid = (rows.start + rows.len() * left / parts).clamp(rows.start + 1, rows.end - 1);
+    let (top, bottom) = band.split_at(mid)?;
+    let (a, b) = rayon::join(
+        || split_run(conv, inputs, top, left),
+        || split_run(conv, inputs, bottom, parts - left),
+    );
+    a.and(b)
 }
 
 /// A rayon pool of `threads` workers, or `None` for one thread.
