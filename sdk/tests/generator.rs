@@ -63,6 +63,8 @@ fn config() -> GeneratorConfig {
     let mut c = GeneratorConfig::new(W, H);
     c.fit = Fit::Stretch;
     c.threads = ThreadCount::Fixed(1);
+    // One engine for every generator and session the tests compare bit for bit (`Auto` picks by timing).
+    c.engine = tensorholo::cnn::CnnEngine::Native;
     c
 }
 

@@ -9,7 +9,7 @@ use ndarray::{Array2, Array3, Axis};
 use tensorholo::encoding::{double_phase_encode, phase_to_codes};
 use tensorholo::model::{CnnLayout, HologramModel, ModelConfig, ModelKind};
 use tensorholo::optics::{propagate_colour, Carrier};
-use tensorholo::pipeline::{Backend, Heads, HologramPipeline, PipelineConfig};
+use tensorholo::pipeline::{Backend, CnnEngine, Heads, HologramPipeline, PipelineConfig};
 use tensorholo::scene::RgbdFrame;
 use tensorholo::HoloError;
 
@@ -29,6 +29,9 @@ fn config(offset_m: f64) -> PipelineConfig {
         offset_m,
         // These tests pin the CPU path (bit-exact streams, stage by stage); the GPU has gpu_pipeline.rs.
         backend: Backend::Cpu,
+        // and tract, which the naive composition runs (`CnnEngine::Auto` could pick either engine by timing;
+        // the native engine agrees with tract to ~1e-7, not bit for bit: src/cnn/tests.rs).
+        cnn_engine: CnnEngine::Tract,
         ..PipelineConfig::default()
     }
 }
