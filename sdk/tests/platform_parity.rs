@@ -20,7 +20,7 @@ use ndarray_npy::{read_npy, write_npy};
 use num_complex::Complex32;
 use tensorholo::model::{CnnLayout, Precision, ThreadCount};
 use tensorholo::pipeline::{
-    Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode,
+    Backend, CnnEngine, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode,
 };
 use tensorholo::scene::procedural::default_scene;
 
@@ -30,7 +30,11 @@ const W: usize = 96;
 
 struct Case {
     name: &'static str,
+    /// The case whose reference files it is compared with (its own, or the tract case of its precision).
+    reference: &'static str,
     precision: Precision,
+    /// The session's CPU CNN engine (pinned: `Auto` picks by timing).
+    engine: CnnEngine,
     layout: CnnLayout,
     /// Largest |Δ| of the midpoint hologram over its largest |value|.
     field_tol: f32,
@@ -38,9 +42,11 @@ struct Case {
     code_fraction_tol: f64,
 }
 
-const CASES: [Case; 4] = [
+const CASES: [Case; 5] = [
     Case {
         name: "f32_nchw",
+        reference: "f32_nchw",
+        engine: CnnEngine::Tract,
         precision: Precision::F32,
         layout: CnnLayout::ChannelsFirst,
         field_tol: 1e-5,
@@ -48,6 +54,8 @@ const CASES: [Case; 4] = [
     },
     Case {
         name: "f32_nhwc",
+        reference: "f32_nhwc",
+        engine: CnnEngine::Tract,
         precision: Precision::F32,
         layout: CnnLayout::ChannelsLast,
         field_tol: 1e-5,
@@ -57,6 +65,8 @@ const CASES: [Case; 4] = [
     // it one quantisation step (1/127 of its range); allow a few such steps, and report the actual figure.
     Case {
         name: "int8qdq_nchw",
+        reference: "int8qdq_nchw",
+        engine: CnnEngine::Tract,
         precision: Precision::Int8Qdq,
         layout: CnnLayout::ChannelsFirst,
         field_tol: 2e-2,
@@ -64,10 +74,22 @@ const CASES: [Case; 4] = [
     },
     Case {
         name: "int8qop_nchw",
+        reference: "int8qop_nchw",
+        engine: CnnEngine::Tract,
         precision: Precision::Int8QOperator,
         layout: CnnLayout::ChannelsFirst,
         field_tol: 2e-2,
         code_fraction_tol: 1e-2,
+    },
+    // The native engine (this CPU's SIMD kernel row) against the tract reference: its SLM codes.
+    Case {
+        name: "f32_native",
+        reference: "f32_nchw",
+        precision: Precision::F32,
+        engine: CnnEngine::Native,
+        layout: CnnLayout::ChannelsFirst,
+        field_tol: 1e-5,
+        code_fraction_tol: 1e-3,
     },
 ];
 
@@ -87,6 +109,7 @@ fn render(case: &Case) -> (Array3<Complex32>, Array3<u8>) {
     let config = PipelineConfig {
         offset_m: 6e-3,
         cnn_layout: case.layout,
+        cnn_engine: case.engine,
         cnn_threads: ThreadCount::Fixed(1),
         // The CPU path's parity across CPUs; the GPU has its own tests (gpu_pipeline.rs).
         backend: Backend::Cpu,
@@ -124,9 +147,12 @@ fn builtin_scene_renders_the_x86_reference_on_this_cpu() {
     );
     for case in &CASES {
         let (midpoint, codes) = render(case);
-        let field_file = reference(&format!("builtin_{}_midpoint.npy", case.name));
-        let codes_file = reference(&format!("builtin_{}_codes.npy", case.name));
+        let field_file = reference(&format!("builtin_{}_midpoint.npy", case.reference));
+        let codes_file = reference(&format!("builtin_{}_codes.npy", case.reference));
         if write {
+            if case.reference != case.name {
+                continue;
+            }
             write_npy(&field_file, &split(&midpoint)).unwrap();
             write_npy(&codes_file, &codes).unwrap();
             continue;
