@@ -17,64 +17,12 @@ mod native;
 mod select;
 mod tract;
 
+pub use crate::model::CnnEngine;
 pub(crate) use select::{select, CnnPlans};
 
 use ndarray::{Array3, ArrayView3};
 
-use crate::error::{invalid, Result};
-
-/// The engine that runs a session's CNNs on the CPU
-/// ([`PipelineConfig::cnn_engine`](crate::pipeline::PipelineConfig::cnn_engine)).
-///
-/// - [`CnnEngine::Native`]: our direct 3×3 convolution kernels (`tensorholo-kernels`: AVX-512, AVX2+FMA,
-///   NEON or portable scalar rows, chosen at run time from the CPU's features), row bands on the plan's own
-///   threads. f32 model files; agrees with tract to float rounding (tests/native_engine.rs).
-/// - [`CnnEngine::Tract`]: tract's optimised plans (any file that passes the contract, int8 included).
-/// - [`CnnEngine::Auto`] (the default): for an f32 file, both are timed at session creation on this
-///   machine ([`crate::model::timing_resolution`]) and the faster runs; other files run on tract. The
-///   choice and the timings are in [`PlanReport`](crate::model::PlanReport).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum CnnEngine {
-    /// Time both engines where the native one can run the file; keep the faster.
-    #[default]
-    Auto,
-    /// Our direct-convolution kernels (an error at session creation for a file they cannot run).
-    Native,
-    /// tract.
-    Tract,
-}
-
-impl CnnEngine {
-    /// Short name: `auto`, `native`, `tract`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Auto => "auto",
-            Self::Native => "native",
-            Self::Tract => "tract",
-        }
-    }
-
-    /// Parses [`CnnEngine::name`]. Errors: [`crate::HoloError::InvalidParameter`] (`engine`) naming the
-    /// choices.
-    pub fn parse(name: &str) -> Result<Self> {
-        match name {
-            "auto" => Ok(Self::Auto),
-            "native" => Ok(Self::Native),
-            "tract" => Ok(Self::Tract),
-            other => Err(invalid(
-                "engine",
-                format!("unknown CNN engine `{other}` (auto, native or tract)"),
-            )),
-        }
-    }
-}
-
-impl std::fmt::Display for CnnEngine {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
+use crate::error::Result;
 
 /// One CNN at one resolution, ready to run on the CPU (after tract's `Runtime → Runnable → State`: the plan
 /// owns what a run reuses; [`CnnPlan::spawn`] gives another thread its own).

@@ -133,6 +133,59 @@ impl std::fmt::Display for CnnLayout {
     }
 }
 
+/// The engine that runs a session's CNNs on the CPU
+/// ([`PipelineConfig::cnn_engine`](crate::pipeline::PipelineConfig::cnn_engine)).
+///
+/// - [`CnnEngine::Native`]: our direct 3×3 convolution kernels (`tensorholo-kernels`: AVX-512, AVX2+FMA,
+///   NEON or portable scalar rows, chosen at run time from the CPU's features), row bands on the plan's own
+///   threads. f32 model files; agrees with tract to float rounding (tests/native_engine.rs).
+/// - [`CnnEngine::Tract`]: tract's optimised plans (any file that passes the contract, int8 included).
+/// - [`CnnEngine::Auto`] (the default): for an f32 file, both are timed at session creation on this
+///   machine ([`timing_resolution`]) and the faster runs; other files run on tract. The
+///   choice and the timings are in [`PlanReport`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CnnEngine {
+    /// Time both engines where the native one can run the file; keep the faster.
+    #[default]
+    Auto,
+    /// Our direct-convolution kernels (an error at session creation for a file they cannot run).
+    Native,
+    /// tract.
+    Tract,
+}
+
+impl CnnEngine {
+    /// Short name: `auto`, `native`, `tract`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Native => "native",
+            Self::Tract => "tract",
+        }
+    }
+
+    /// Parses [`CnnEngine::name`]. Errors: [`crate::HoloError::InvalidParameter`] (`engine`) naming the
+    /// choices.
+    pub fn parse(name: &str) -> crate::error::Result<Self> {
+        match name {
+            "auto" => Ok(Self::Auto),
+            "native" => Ok(Self::Native),
+            "tract" => Ok(Self::Tract),
+            other => Err(crate::error::invalid(
+                "engine",
+                format!("unknown CNN engine `{other}` (auto, native or tract)"),
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for CnnEngine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// Sets how many threads tract uses for the matrix products and convolutions of every CNN run afterwards
 /// (process-wide; tract's default executor). `1` (the default) runs on the calling thread; `n > 1` starts a
 /// private `n`-thread pool. Only matmul, direct convolution and element-wise ops run in parallel.

@@ -11,8 +11,7 @@ use std::time::Instant;
 
 use ndarray::Array3;
 
-use super::{CnnLayout, HologramModel, ModelPlan, MAX_CNN_THREADS};
-use crate::cnn::CnnEngine;
+use super::{CnnEngine, CnnLayout, HologramModel, ModelPlan, MAX_CNN_THREADS};
 use crate::error::{invalid, HoloError, Result};
 
 /// Frames above this many pixels are timed on a full-width strip of about this many pixels (at least
