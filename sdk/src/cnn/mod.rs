@@ -81,9 +81,17 @@ pub fn cnn_plan(
 /// The CPU features the native engine's kernels use on this machine (`avx2`, `avx512`, `neondot`, …;
 /// lowered by the `TENSORHOLO_ISA` environment variable), or why it cannot run.
 pub fn native_isa() -> Result<&'static str> {
-    tensorholo_kernels::Isa::active()
-        .map(|i| i.name())
-        .map_err(|e| crate::HoloError::ModelRun(format!("native CNN engine: {e}")))
+    active_isa().map(|i| i.name())
+}
+
+/// [`tensorholo_kernels::Isa::active`] with its error as the SDK's ([`kernel_err`]).
+pub(crate) fn active_isa() -> Result<tensorholo_kernels::Isa> {
+    tensorholo_kernels::Isa::active().map_err(kernel_err)
+}
+
+/// A kernel-crate error as [`crate::HoloError::ModelRun`], naming the native engine.
+pub(crate) fn kernel_err(e: tensorholo_kernels::KernelError) -> crate::HoloError {
+    crate::HoloError::ModelRun(format!("native CNN engine: {e}"))
 }
 
 /// This machine's measured f32 peak in GFLOP/s for `threads` threads: one FMA loop per thread in registers
@@ -111,8 +119,7 @@ fn on_threads(
     f: impl Fn(tensorholo_kernels::Isa) -> std::result::Result<f64, tensorholo_kernels::KernelError>
         + Sync,
 ) -> Result<f64> {
-    let isa = tensorholo_kernels::Isa::active()
-        .map_err(|e| crate::HoloError::ModelRun(format!("native CNN engine: {e}")))?;
+    let isa = active_isa()?;
     let f = &f;
     let per: Vec<f64> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..threads.max(1))

@@ -27,7 +27,7 @@ use tensorholo_kernels::{
     depthwise, Affine, Conv3x3F32, Inputs, Isa, KernelError, RowBand, RowPlanar,
 };
 
-use super::CnnPlan;
+use super::{kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnWeights};
 
@@ -56,10 +56,6 @@ pub(crate) struct NativePlan {
     ring: [RowPlanar<f32>; 3],
     /// The last layer's raw output, `C_out` channels.
     raw: RowPlanar<f32>,
-}
-
-fn kernel_err(e: KernelError) -> HoloError {
-    HoloError::ModelRun(format!("native CNN engine: {e}"))
 }
 
 impl NativePlan {
@@ -120,11 +116,6 @@ impl NativePlan {
     /// The kernel row every layer runs (e.g. `conv3x3.f32.6x2.avx2`).
     pub(crate) fn kernel_name(&self) -> &'static str {
         self.net.layers[0].kernel().name
-    }
-
-    /// Threads a run uses.
-    pub(crate) fn threads(&self) -> usize {
-        self.threads
     }
 
     /// Runs the convolutions of one frame whose input is already in `self.x`; the raw output lands in

@@ -10,12 +10,11 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use ndarray::Array3;
-use tensorholo_kernels::Isa;
 
 use super::native::NativePlan;
-use super::{CnnEngine, CnnPlan};
-use crate::error::{invalid, HoloError, Result};
-use crate::model::tuning::REPEAT_BELOW_S;
+use super::{active_isa, CnnEngine, CnnPlan};
+use crate::error::{invalid, Result};
+use crate::model::tuning::fastest_run;
 use crate::model::{
     auto_thread_candidates, timing_resolution, CnnLayout, CnnWeights, HologramModel, PlanReport,
     PlanRequest, PlanTiming, ThreadCount,
@@ -32,7 +31,7 @@ pub(crate) struct CnnPlans {
 /// The plans for `height × width` frames of `hologram` (and `prefilter`) on `engine`, with tract's layout
 /// and threads from `request` (the native engine uses `request.threads`).
 ///
-/// Errors: [`HoloError::InvalidParameter`] (`engine`) for [`CnnEngine::Native`] with a file it cannot run
+/// Errors: [`crate::HoloError::InvalidParameter`] (`engine`) for [`CnnEngine::Native`] with a file it cannot run
 /// (int8, or a graph that is not the architecture: the reason is given); as
 /// [`HologramModel::tuned_plan`] and [`HologramModel::plan`].
 pub(crate) fn select(
@@ -57,28 +56,22 @@ pub(crate) fn select(
             tract_plans(hologram, prefilter, height, width, request, &why)
         }
         (CnnEngine::Native, Ok((graph, pre))) => {
-            let (threads, candidates, tuning_s) =
-                tune_native(&graph, height, width, request.threads, false)?;
-            let plans = native_plans(&graph, pre, height, width, threads)?;
-            Ok(CnnPlans {
-                report: native_report(&plans, request, "requested", candidates, tuning_s),
-                ..plans
-            })
+            let tuning = tune_native(&graph, height, width, request.threads, false)?;
+            native_plans(&graph, pre, [height, width], request, "requested", tuning)
         }
         (CnnEngine::Auto, Ok((graph, pre))) => {
-            let (threads, native_timings, native_s) =
-                tune_native(&graph, height, width, request.threads, true)?;
+            let native = tune_native(&graph, height, width, request.threads, true)?;
             let (tract_plan, tract_report) = hologram.tuned_plan(height, width, request)?;
             let best = |c: &[PlanTiming]| {
                 c.iter()
                     .filter_map(|t| t.seconds)
                     .min_by(|a, b| a.total_cmp(b))
             };
-            let native_best = best(&native_timings);
+            let native_best = best(&native.candidates);
             let tract_best = best(&tract_report.candidates);
             let mut candidates = tract_report.candidates.clone();
-            candidates.extend(native_timings);
-            let tuning_s = tract_report.tuning_s + native_s;
+            candidates.extend(native.candidates.iter().cloned());
+            let tuning_s = tract_report.tuning_s + native.seconds;
             // tract with a single candidate was not timed: time it now, on the same input.
             let tract_best = match tract_best {
                 Some(s) => s,
@@ -102,12 +95,16 @@ pub(crate) fn select(
             let native_best = native_best.unwrap_or(f64::INFINITY);
             let ratio = tract_best / native_best;
             if native_best <= tract_best {
-                let plans = native_plans(&graph, pre, height, width, threads)?;
                 let why = format!("faster on this CPU ({ratio:.2}× tract's best)");
-                let mut report = native_report(&plans, request, &why, candidates, tuning_s);
-                report.autotuned = true;
                 log::info!("CNN engine for {height}×{width}: native, {why}");
-                Ok(CnnPlans { report, ..plans })
+                let tuning = NativeTuning {
+                    threads: native.threads,
+                    candidates,
+                    seconds: tuning_s,
+                };
+                let mut plans = native_plans(&graph, pre, [height, width], request, &why, tuning)?;
+                plans.report.autotuned = true;
+                Ok(plans)
             } else {
                 let why = format!("faster on this CPU ({:.2}× the native engine)", 1.0 / ratio);
                 log::info!("CNN engine for {height}×{width}: tract, {why}");
@@ -129,7 +126,7 @@ fn native_graphs(
 ) -> Result<(Arc<CnnWeights>, Option<Arc<CnnWeights>>)> {
     let graph = hologram.cnn_graph()?;
     let pre = prefilter.map(|p| p.cnn_graph()).transpose()?;
-    Isa::active().map_err(|e| HoloError::ModelRun(format!("native CNN engine: {e}")))?;
+    active_isa()?;
     Ok((graph, pre))
 }
 
@@ -172,6 +169,13 @@ fn tract_with(
     })
 }
 
+/// What [`tune_native`] chose: the thread count, the candidates' timings and the seconds the timing took.
+struct NativeTuning {
+    threads: usize,
+    candidates: Vec<PlanTiming>,
+    seconds: f64,
+}
+
 /// The native engine's thread count for `request`: timed among [`auto_thread_candidates`] for
 /// [`ThreadCount::Auto`] (with the timings and the seconds spent), else the count asked for (1 for
 /// [`ThreadCount::ProcessDefault`], tract's process-wide setting, which the native engine does not share).
@@ -182,19 +186,23 @@ fn tune_native(
     width: usize,
     threads: ThreadCount,
     time_single: bool,
-) -> Result<(usize, Vec<PlanTiming>, f64)> {
+) -> Result<NativeTuning> {
     let counts = match threads {
         ThreadCount::Auto => auto_thread_candidates(),
         ThreadCount::Fixed(n) => vec![n],
         ThreadCount::ProcessDefault => vec![1],
     };
     if counts.len() == 1 && !time_single {
-        return Ok((counts[0], Vec::new(), 0.0));
+        return Ok(NativeTuning {
+            threads: counts[0],
+            candidates: Vec::new(),
+            seconds: 0.0,
+        });
     }
     let [th, tw] = timing_resolution(height, width);
     let start = Instant::now();
     let mut timings = Vec::new();
-    let isa = Isa::active().map_err(|e| HoloError::ModelRun(format!("native CNN engine: {e}")))?;
+    let isa = active_isa()?;
     for &t in &counts {
         let mut plan = NativePlan::new(graph.clone(), th, tw, t, isa)?;
         let s = time_plan(&mut plan, graph.in_channels, th, tw)?;
@@ -215,38 +223,37 @@ fn tune_native(
         })
         .and_then(|t| t.threads)
         .unwrap_or(1);
-    Ok((best, timings, start.elapsed().as_secs_f64()))
+    Ok(NativeTuning {
+        threads: best,
+        candidates: timings,
+        seconds: start.elapsed().as_secs_f64(),
+    })
 }
 
-/// Fastest wall-clock seconds of one run of `plan` on a constant `[c, h, w]` input (three runs when the first
-/// is under [`REPEAT_BELOW_S`]).
+/// Fastest wall-clock seconds of one run of `plan` on a constant `[c, h, w]` input (tract's rule,
+/// [`fastest_run`]).
 fn time_plan(plan: &mut dyn CnnPlan, c: usize, h: usize, w: usize) -> Result<f64> {
     let input = Array3::<f32>::from_elem((c, h, w), 0.5);
-    let mut run = || -> Result<f64> {
+    fastest_run(|| {
         let t = Instant::now();
         plan.run_outputs(input.view())?;
         Ok(t.elapsed().as_secs_f64())
-    };
-    let mut best = run()?;
-    if best < REPEAT_BELOW_S {
-        for _ in 0..2 {
-            best = best.min(run()?);
-        }
-    }
-    Ok(best)
+    })
 }
 
-/// Native plans for both CNNs on `threads` threads.
+/// Native plans for both CNNs at `[height, width]` on `tuning.threads` threads, reported with what was asked
+/// (`request`), why (`why`), the timings and their cost.
 fn native_plans(
     graph: &Arc<CnnWeights>,
     pre: Option<Arc<CnnWeights>>,
-    height: usize,
-    width: usize,
-    threads: usize,
+    [height, width]: [usize; 2],
+    request: PlanRequest,
+    why: &str,
+    tuning: NativeTuning,
 ) -> Result<CnnPlans> {
-    let isa = Isa::active().map_err(|e| HoloError::ModelRun(format!("native CNN engine: {e}")))?;
+    let isa = active_isa()?;
+    let threads = tuning.threads;
     let hologram = NativePlan::new(graph.clone(), height, width, threads, isa)?;
-    let kernel = hologram.kernel_name();
     let prefilter = match pre {
         Some(p) => {
             Some(Box::new(NativePlan::new(p, height, width, threads, isa)?) as Box<dyn CnnPlan>)
@@ -256,36 +263,18 @@ fn native_plans(
     Ok(CnnPlans {
         report: PlanReport {
             resolution: [height, width],
-            request: PlanRequest::default(),
+            request,
             engine: CnnEngine::Native,
-            engine_reason: String::new(),
-            kernel: Some(kernel.to_string()),
+            engine_reason: why.to_string(),
+            kernel: Some(hologram.kernel_name().to_string()),
             layout: CnnLayout::ChannelsFirst,
-            threads: Some(hologram.threads()),
-            autotuned: false,
+            threads: Some(threads),
+            autotuned: tuning.candidates.len() > 1,
             timed_resolution: timing_resolution(height, width),
-            candidates: Vec::new(),
-            tuning_s: 0.0,
+            candidates: tuning.candidates,
+            tuning_s: tuning.seconds,
         },
         hologram: Box::new(hologram),
         prefilter,
     })
-}
-
-/// `plans.report` completed with what was asked, why, and the timings.
-fn native_report(
-    plans: &CnnPlans,
-    request: PlanRequest,
-    why: &str,
-    candidates: Vec<PlanTiming>,
-    tuning_s: f64,
-) -> PlanReport {
-    PlanReport {
-        request,
-        engine_reason: why.to_string(),
-        autotuned: candidates.len() > 1,
-        candidates,
-        tuning_s,
-        ..plans.report.clone()
-    }
 }

@@ -138,7 +138,7 @@ impl std::fmt::Display for CnnLayout {
 ///
 /// - [`CnnEngine::Native`]: our direct 3×3 convolution kernels (`tensorholo-kernels`: AVX-512, AVX2+FMA,
 ///   NEON or portable scalar rows, chosen at run time from the CPU's features), row bands on the plan's own
-///   threads. f32 model files; agrees with tract to float rounding (tests/native_engine.rs).
+///   threads. f32 model files; agrees with tract to float rounding (`sdk/src/cnn/tests.rs`).
 /// - [`CnnEngine::Tract`]: tract's optimised plans (any file that passes the contract, int8 included).
 /// - [`CnnEngine::Auto`] (the default): for an f32 file, both are timed at session creation on this
 ///   machine ([`timing_resolution`]) and the faster runs; other files run on tract. The

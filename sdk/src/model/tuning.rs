@@ -22,7 +22,7 @@ pub const TUNE_PIXELS: usize = 256 * 1024;
 /// The fewest rows of a timing strip ([`TUNE_PIXELS`]).
 pub const TUNE_MIN_ROWS: usize = 64;
 /// A candidate whose first run takes less than this (seconds) is run twice more and its fastest run kept.
-pub(crate) const REPEAT_BELOW_S: f64 = 0.25;
+const REPEAT_BELOW_S: f64 = 0.25;
 
 /// How many threads a CNN plan uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
@@ -260,12 +260,7 @@ impl HologramModel {
                     Some(n) => base.with_threads(n)?,
                     None => base.clone(),
                 };
-                let mut best = time_run(&plan, &input)?;
-                if best < REPEAT_BELOW_S {
-                    for _ in 0..2 {
-                        best = best.min(time_run(&plan, &input)?);
-                    }
-                }
+                let best = fastest_run(|| time_run(&plan, &input))?;
                 candidates.push(PlanTiming {
                     engine: CnnEngine::Tract,
                     layout,
@@ -304,6 +299,19 @@ impl HologramModel {
             tuning_s: start.elapsed().as_secs_f64(),
         })
     }
+}
+
+/// The timing rule of every autotuner (tract's layouts and threads here, the native engine's in
+/// `cnn::select`): one run of `run` (which returns its seconds), or the fastest of three when the first is
+/// under [`REPEAT_BELOW_S`].
+pub(crate) fn fastest_run(mut run: impl FnMut() -> Result<f64>) -> Result<f64> {
+    let mut best = run()?;
+    if best < REPEAT_BELOW_S {
+        for _ in 0..2 {
+            best = best.min(run()?);
+        }
+    }
+    Ok(best)
 }
 
 /// Seconds of one run of `plan` on `input`.
