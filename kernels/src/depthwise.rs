@@ -7,7 +7,9 @@ use crate::KernelError;
 /// `out[c][y][x] (+)= Σ_{ky,kx} kernel[c][ky][kx] · in[c][clamp(y+ky−r)][clamp(x+kx−r)]`, `r = k/2`.
 ///
 /// `kernel` is `[C][k][k]`. With `accumulate` the result is added to `out` (e.g. to the last layer's output),
-/// otherwise `out` is overwritten. Portable code written so that the inner loop over `x` auto-vectorises.
+/// otherwise `out` is overwritten. `scratch` holds two rows (`2·w + k − 1` values); it grows on the first call
+/// and is reused after, so a caller that keeps it allocates nothing per frame. Portable code written so that
+/// the inner loop over `x` auto-vectorises.
 /// Errors: `k` even or zero ([`KernelError::Parameter`]), a zero dimension, wrong slice lengths
 /// ([`KernelError::Length`]).
 #[allow(clippy::too_many_arguments)]
@@ -20,6 +22,7 @@ pub fn depthwise(
     k: usize,
     out: &mut [f32],
     accumulate: bool,
+    scratch: &mut Vec<f32>,
 ) -> Result<(), KernelError> {
     check_dims(c, h, w)?;
     if k.is_multiple_of(2) || k > 63 {
@@ -33,8 +36,8 @@ pub fn depthwise(
     crate::pack::check_len("depthwise kernel [C][k][k]", kernel.len(), c * k * k)?;
     let r = k / 2;
     // One edge-replicated row: `r` copies of the first pixel, the row, `r` copies of the last.
-    let mut padded = vec![0.0f32; w + 2 * r];
-    let mut acc = vec![0.0f32; w];
+    scratch.resize(2 * w + 2 * r, 0.0);
+    let (padded, acc) = scratch.split_at_mut(w + 2 * r);
     for ch in 0..c {
         let plane = &input[ch * h * w..(ch + 1) * h * w];
         let taps = &kernel[ch * k * k..(ch + 1) * k * k];
@@ -55,9 +58,9 @@ pub fn depthwise(
             }
             let o = &mut out[(ch * h + y) * w..(ch * h + y + 1) * w];
             if accumulate {
-                o.iter_mut().zip(&acc).for_each(|(o, a)| *o += a);
+                o.iter_mut().zip(acc.iter()).for_each(|(o, a)| *o += a);
             } else {
-                o.copy_from_slice(&acc);
+                o.copy_from_slice(acc);
             }
         }
     }
@@ -112,10 +115,21 @@ mod tests {
             let kernel = rng.vec(c * k * k);
             let want = reference(&input, c, h, w, &kernel, k);
             let mut out = vec![f32::NAN; c * h * w];
-            depthwise(&input, c, h, w, &kernel, k, &mut out, false).unwrap();
+            depthwise(
+                &input,
+                c,
+                h,
+                w,
+                &kernel,
+                k,
+                &mut out,
+                false,
+                &mut Vec::new(),
+            )
+            .unwrap();
             let base = rng.vec(c * h * w);
             let mut acc = base.clone();
-            depthwise(&input, c, h, w, &kernel, k, &mut acc, true).unwrap();
+            depthwise(&input, c, h, w, &kernel, k, &mut acc, true, &mut Vec::new()).unwrap();
             for i in 0..c * h * w {
                 assert!(
                     (out[i] as f64 - want[i]).abs() < 1e-5,
@@ -128,16 +142,71 @@ mod tests {
         let input = vec![2.0f32; 2 * 4 * 6];
         let kernel = vec![1.0 / 25.0; 2 * 25];
         let mut out = vec![0.0; 2 * 4 * 6];
-        depthwise(&input, 2, 4, 6, &kernel, 5, &mut out, false).unwrap();
+        depthwise(
+            &input,
+            2,
+            4,
+            6,
+            &kernel,
+            5,
+            &mut out,
+            false,
+            &mut Vec::new(),
+        )
+        .unwrap();
         assert!(out.iter().all(|&v| (v - 2.0).abs() < 1e-5));
     }
 
     #[test]
     fn bad_input_is_an_error() {
         let mut out = vec![0.0; 12];
-        assert!(depthwise(&[0.0; 12], 1, 3, 4, &[0.0; 16], 4, &mut out, false).is_err());
-        assert!(depthwise(&[0.0; 11], 1, 3, 4, &[0.0; 9], 3, &mut out, false).is_err());
-        assert!(depthwise(&[0.0; 12], 1, 3, 4, &[0.0; 8], 3, &mut out, false).is_err());
-        assert!(depthwise(&[0.0; 12], 1, 3, 4, &[0.0; 9], 3, &mut out[1..], false).is_err());
+        assert!(depthwise(
+            &[0.0; 12],
+            1,
+            3,
+            4,
+            &[0.0; 16],
+            4,
+            &mut out,
+            false,
+            &mut Vec::new()
+        )
+        .is_err());
+        assert!(depthwise(
+            &[0.0; 11],
+            1,
+            3,
+            4,
+            &[0.0; 9],
+            3,
+            &mut out,
+            false,
+            &mut Vec::new()
+        )
+        .is_err());
+        assert!(depthwise(
+            &[0.0; 12],
+            1,
+            3,
+            4,
+            &[0.0; 8],
+            3,
+            &mut out,
+            false,
+            &mut Vec::new()
+        )
+        .is_err());
+        assert!(depthwise(
+            &[0.0; 12],
+            1,
+            3,
+            4,
+            &[0.0; 9],
+            3,
+            &mut out[1..],
+            false,
+            &mut Vec::new()
+        )
+        .is_err());
     }
 }

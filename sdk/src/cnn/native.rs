@@ -56,6 +56,8 @@ pub(crate) struct NativePlan {
     ring: [RowPlanar<f32>; 3],
     /// The last layer's raw output, `C_out` channels.
     raw: RowPlanar<f32>,
+    /// Two rows of scratch for the pre-filter's depthwise base filter (grown on the first run).
+    depthwise_scratch: Vec<f32>,
 }
 
 impl NativePlan {
@@ -105,6 +107,7 @@ impl NativePlan {
             x: buf(c)?,
             ring: [buf(hidden)?, buf(hidden)?, buf(hidden)?],
             raw: buf(c_out)?,
+            depthwise_scratch: Vec::new(),
             height,
             width,
             threads,
@@ -268,7 +271,18 @@ impl CnnPlan for NativePlan {
         }
         if let CnnOutput::Prefilter { taps, base } = &self.net.graph.output {
             let c = self.net.graph.in_channels;
-            depthwise(planar, c, h, w, base, *taps, &mut raw, true).map_err(kernel_err)?;
+            depthwise(
+                planar,
+                c,
+                h,
+                w,
+                base,
+                *taps,
+                &mut raw,
+                true,
+                &mut self.depthwise_scratch,
+            )
+            .map_err(kernel_err)?;
         }
         let imag = raw.split_off(plane);
         let shape_err = |_| HoloError::Internal("native CNN: output shape".into());
@@ -290,6 +304,7 @@ impl CnnPlan for NativePlan {
             x: self.x.clone(),
             ring: self.ring.clone(),
             raw: self.raw.clone(),
+            depthwise_scratch: Vec::new(),
         })
     }
 }

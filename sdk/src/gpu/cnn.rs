@@ -9,9 +9,10 @@ use super::context::GpuContext;
 use super::kernel::{grid_1d, grid_2d, Kernel};
 use super::shaders;
 use crate::error::Result;
-pub use crate::model::graph::{CnnOutput, CnnWeights, ConvLayer};
+use crate::model::graph::{CnnOutput, CnnWeights};
 pub use crate::pipeline::config::GpuPrecision;
 
+/// `Layer` of `conv3x3.wgsl` (both precisions).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct LayerParams {
@@ -24,26 +25,12 @@ struct LayerParams {
     residual: u32,
     offset_a: f32,
     offset_b: f32,
-    _pad: [u32; 3],
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct LayerParams16 {
-    h: u32,
-    w: u32,
-    c_a: u32,
-    c_b: u32,
-    c_out: u32,
-    relu: u32,
-    residual: u32,
-    offset_a: f32,
-    offset_b: f32,
-    a_is_f16: u32,
-    out_is_f16: u32,
+    a_hidden: u32,
+    out_hidden: u32,
     _pad: u32,
 }
 
+/// `Heads` of `heads.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct HeadParams {
@@ -106,8 +93,7 @@ impl GpuCnn {
             ctx.storage("cnn activations 1", act_bytes)?,
             ctx.storage("cnn activations 2", act_bytes)?,
         ];
-        let f16 = precision == GpuPrecision::F16;
-        let conv = if f16 {
+        let conv = if precision == GpuPrecision::F16 {
             ctx.kernel(&shaders::CONV3X3_F16, "conv3x3")?
         } else {
             ctx.kernel(&shaders::CONV3X3, "conv3x3")?
@@ -124,60 +110,33 @@ impl GpuCnn {
             let off_a = if i == 0 { weights.input_offset } else { 0.0 };
             let w = ctx.storage_with("conv weights", &l.weights)?;
             let b = ctx.storage_with("conv bias", &l.bias)?;
-            let bind = match f16 {
-                false => {
-                    let in_a = if i == 0 { input } else { slot(i) };
-                    let in_b = if i == last { input } else { in_a };
-                    let out = if i == last { output } else { slot(i + 1) };
-                    let res = if residual { slot(i - 1) } else { in_a };
-                    let params = ctx.uniform(
-                        "conv layer",
-                        &LayerParams {
-                            h: height as u32,
-                            w: width as u32,
-                            c_a: c_a as u32,
-                            c_b: c_b as u32,
-                            c_out: l.c_out as u32,
-                            relu: u32::from(i != last),
-                            residual: u32::from(residual),
-                            offset_a: off_a,
-                            offset_b: weights.input_offset,
-                            _pad: [0; 3],
-                        },
-                    )?;
-                    ctx.bind(&conv, &[&params, in_a, in_b, &w, &b, res, out])
-                }
-                true => {
-                    // Unused bindings get buffers that cannot alias this layer's writable one.
-                    let (in_a16, res16, out16) = if i == 0 {
-                        (&ring[2], &ring[2], slot(1))
-                    } else {
-                        (slot(i), slot(i - 1), slot(i + 1))
-                    };
-                    let out32 = output;
-                    let params = ctx.uniform(
-                        "conv layer (f16)",
-                        &LayerParams16 {
-                            h: height as u32,
-                            w: width as u32,
-                            c_a: c_a as u32,
-                            c_b: c_b as u32,
-                            c_out: l.c_out as u32,
-                            relu: u32::from(i != last),
-                            residual: u32::from(residual),
-                            offset_a: off_a,
-                            offset_b: weights.input_offset,
-                            a_is_f16: u32::from(i != 0),
-                            out_is_f16: u32::from(i != last),
-                            _pad: 0,
-                        },
-                    )?;
-                    ctx.bind(
-                        &conv,
-                        &[&params, input, in_a16, input, &w, &b, res16, out16, out32],
-                    )
-                }
+            // Unused bindings get buffers that cannot alias this layer's writable one.
+            let (in_s, res, out_s) = if i == 0 {
+                (&ring[2], &ring[2], slot(1))
+            } else {
+                (slot(i), slot(i - 1), slot(i + 1))
             };
+            let params = ctx.uniform(
+                "conv layer",
+                &LayerParams {
+                    h: height as u32,
+                    w: width as u32,
+                    c_a: c_a as u32,
+                    c_b: c_b as u32,
+                    c_out: l.c_out as u32,
+                    relu: u32::from(i != last),
+                    residual: u32::from(residual),
+                    offset_a: off_a,
+                    offset_b: weights.input_offset,
+                    a_hidden: u32::from(i != 0),
+                    out_hidden: u32::from(i != last),
+                    _pad: 0,
+                },
+            )?;
+            let bind = ctx.bind(
+                &conv,
+                &[&params, input, in_s, input, &w, &b, res, out_s, output],
+            );
             passes.push((bind, grid_2d(width, height, l.c_out.div_ceil(4), [16, 16])));
         }
         let (out_kernel, out_bind) = match &weights.output {
@@ -255,6 +214,48 @@ impl GpuCnn {
     pub fn cost(&self) -> (f64, f64) {
         (self.flops, self.bytes)
     }
+}
+
+/// The uniform structs of this module beside their WGSL twins (checked in `shader_tests`).
+#[cfg(test)]
+pub(super) fn uniform_layouts() -> Vec<super::shader_tests::UniformLayout> {
+    use super::shader_tests::uniform_layout;
+    use super::shaders::{CONV3X3, CONV3X3_F16, HEADS};
+    let layer = |shader: &'static super::shaders::Shader| {
+        uniform_layout!(
+            shader,
+            "Layer",
+            LayerParams {
+                h,
+                w,
+                c_a,
+                c_b,
+                c_out,
+                relu,
+                residual,
+                offset_a,
+                offset_b,
+                a_hidden,
+                out_hidden
+            }
+        )
+    };
+    vec![
+        layer(&CONV3X3),
+        layer(&CONV3X3_F16),
+        uniform_layout!(
+            &HEADS,
+            "Heads",
+            HeadParams {
+                h,
+                w,
+                channels,
+                taps,
+                amp_scale,
+                phase_scale
+            }
+        ),
+    ]
 }
 
 #[cfg(test)]

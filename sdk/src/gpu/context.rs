@@ -440,7 +440,7 @@ impl GpuContext {
             });
         self.take_error()
             .map_err(|e| gpu_err(format!("{}::{entry}: {e}", shader.name)))?;
-        Ok(Kernel::new(shader.name, entry, pipeline))
+        Ok(Kernel::new(entry, pipeline))
     }
 
     /// A bind group for `kernel` with `buffers[i]` at `@binding(i)` of group 0.
@@ -564,7 +564,7 @@ impl GpuContext {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::gpu::kernel::grid_1d;
     use crate::gpu::shaders;
@@ -576,6 +576,16 @@ mod tests {
         n: u32,
         value: f32,
         _pad: [u32; 2],
+    }
+
+    /// `util.wgsl`'s uniform beside its WGSL twin (checked in `shader_tests`).
+    pub(in crate::gpu) fn uniform_layouts() -> Vec<crate::gpu::shader_tests::UniformLayout> {
+        use crate::gpu::shader_tests::uniform_layout;
+        vec![uniform_layout!(
+            &shaders::UTIL,
+            "Params",
+            UtilParams { n, value }
+        )]
     }
 
     #[test]

@@ -388,6 +388,36 @@ impl GpuDoublePhase {
     }
 }
 
+/// The uniform structs of this module beside their WGSL twins (checked in `shader_tests`).
+#[cfg(test)]
+pub(super) fn uniform_layouts() -> Vec<super::shader_tests::UniformLayout> {
+    use super::shader_tests::uniform_layout;
+    use super::shaders::{BLUR, DOUBLE_PHASE, FIELD};
+    vec![
+        uniform_layout!(&FIELD, "Planes", PlaneParams { n, channels }),
+        uniform_layout!(
+            &BLUR,
+            "Blur",
+            BlurParams {
+                h,
+                w,
+                channels,
+                taps
+            }
+        ),
+        uniform_layout!(
+            &DOUBLE_PHASE,
+            "Dims",
+            DpParams {
+                h,
+                w,
+                channels,
+                groups_per_channel
+            }
+        ),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -462,6 +462,41 @@ impl GpuSpectralOp {
     }
 }
 
+/// The uniform structs of this module beside their WGSL twins (checked in `shader_tests`).
+#[cfg(test)]
+pub(super) fn uniform_layouts() -> Vec<super::shader_tests::UniformLayout> {
+    use super::shader_tests::uniform_layout;
+    use super::shaders::{FFT, SPECTRAL};
+    vec![
+        uniform_layout!(
+            &FFT,
+            "Pass",
+            PassParams {
+                n,
+                rows,
+                ns,
+                radix,
+                twiddle_stride,
+                sign
+            }
+        ),
+        uniform_layout!(&FFT, "Shape", ShapeParams { rows, cols, planes }),
+        uniform_layout!(
+            &SPECTRAL,
+            "Grid",
+            GridParams {
+                h,
+                w,
+                hc,
+                wc,
+                oy,
+                ox,
+                channels
+            }
+        ),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

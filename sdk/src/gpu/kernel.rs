@@ -11,27 +11,13 @@ pub const MAX_GROUPS_PER_DIM: u32 = 65_535;
 /// layout is derived from the shader (`layout: None`), so bind groups are made by binding number.
 #[derive(Debug, Clone)]
 pub struct Kernel {
-    shader: &'static str,
     entry: &'static str,
     pipeline: wgpu::ComputePipeline,
 }
 
 impl Kernel {
-    pub(crate) fn new(
-        shader: &'static str,
-        entry: &'static str,
-        pipeline: wgpu::ComputePipeline,
-    ) -> Self {
-        Self {
-            shader,
-            entry,
-            pipeline,
-        }
-    }
-
-    /// The `.wgsl` file name.
-    pub fn shader(&self) -> &'static str {
-        self.shader
+    pub(crate) fn new(entry: &'static str, pipeline: wgpu::ComputePipeline) -> Self {
+        Self { entry, pipeline }
     }
 
     /// The entry point.

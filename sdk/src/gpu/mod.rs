@@ -1,28 +1,36 @@
 //! The GPU path (cargo feature `gpu`): the whole frame of [`crate::pipeline`] — hologram CNN, offset
 //! propagation (Eq. 6), pre-filter CNN, double phase encoding (Eq. 7) and look-up table — as WGSL compute
 //! shaders run by wgpu on Metal (iOS, macOS) or Vulkan (Android, Linux). The CPU path stays the reference:
-//! every kernel here is tested against it (`sdk/tests/gpu.rs`), and [`crate::pipeline::Backend::Auto`] falls
-//! back to it when no adapter exists or a first-frame self-check fails.
+//! every kernel here is tested against it (the unit tests of each module, `sdk/tests/gpu_pipeline.rs`), and
+//! [`crate::pipeline::Backend::Auto`] falls back to it when no adapter exists or a first-frame self-check
+//! fails. Apps see the [`GpuContext`] (to share their own device) and its reports; the executors are
+//! crate-private, reached through [`crate::pipeline::Backend`].
 //!
-//! - [`context`]: [`GpuContext`] picks the adapter and device once (or adopts the app's), creates every buffer,
+//! - `context`: [`GpuContext`] picks the adapter and device once (or adopts the app's), creates every buffer,
 //!   pipeline and bind group (counted, so tests can assert that no frame creates one), and turns wgpu's
 //!   validation errors and device loss into [`crate::HoloError::Gpu`].
-//! - [`kernel`]: one compute pipeline per WGSL entry point, bound by position, dispatched over 1D/2D grids.
-//! - [`shaders`]: every `.wgsl` source by name (the naga test translates each to MSL and SPIR-V).
+//! - `kernel`: one compute pipeline per WGSL entry point, bound by position, dispatched over 1D/2D grids.
+//! - `shaders`: every `.wgsl` source by name; `shader_tests` translates each to MSL and SPIR-V with naga and
+//!   checks every uniform struct against its `#[repr(C)]` Rust twin.
+//! - `fft`, `encode`, `cnn`, `session`: the optics, the encoding, the CNNs and one whole frame.
 //!
 //! Layout convention shared by all kernels: real planes are `array<f32>` `[C, H, W]` row-major (as the CPU
 //! path's `Array3`), complex planes `array<vec2<f32>>` `[C, H, W]` (re, im), codes four per `u32`
 //! little-endian. Each `.wgsl` file starts with a comment listing its bindings and their layouts.
 
-pub mod cnn;
-pub mod context;
-pub mod encode;
-pub mod fft;
-pub mod kernel;
-pub mod session;
-pub mod shaders;
+pub(crate) mod cnn;
+pub(crate) mod context;
+pub(crate) mod encode;
+pub(crate) mod fft;
+pub(crate) mod kernel;
+pub(crate) mod session;
+pub(crate) mod shaders;
 
 pub use context::{GpuContext, GpuInfo, GpuOptions, ResourceCounts};
+pub use session::{GpuFrameSession, GpuStage};
+
+#[cfg(test)]
+mod shader_tests;
 
 /// For tests (this crate's, the workspace's): a context on any adapter (lavapipe in CI), or `None` with a
 /// message where none exists; `TENSORHOLO_REQUIRE_GPU=1` (set by `.ci/run`) turns a missing adapter into a

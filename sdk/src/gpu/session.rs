@@ -87,7 +87,10 @@ pub struct GpuStage {
     pub bytes: f64,
 }
 
-/// The whole frame of one resolution on the GPU (see the [module docs](self)).
+/// The whole frame of one resolution on the GPU: hologram CNN → heads → field → offset propagation (Eq. 6) →
+/// optional pre-filter CNN → double phase encoding (Eq. 7) and look-up table, recorded once into one command
+/// buffer; a frame uploads the CNN input `[C, H, W]` and downloads the codes `[3, H, W]`. Reached through
+/// [`crate::pipeline::HologramSession::gpu_frame`] while the GPU backend is active.
 pub struct GpuFrameSession {
     ctx: GpuContext,
     height: usize,
@@ -583,4 +586,15 @@ impl GpuFrameSession {
         }
         Ok(out)
     }
+}
+
+/// The uniform structs of this module beside their WGSL twins (checked in `shader_tests`).
+#[cfg(test)]
+pub(super) fn uniform_layouts() -> Vec<super::shader_tests::UniformLayout> {
+    use super::shader_tests::uniform_layout;
+    vec![uniform_layout!(
+        &super::shaders::PREVIEW,
+        "Preview",
+        PreviewParams { n, scale }
+    )]
 }

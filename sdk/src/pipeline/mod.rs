@@ -7,7 +7,8 @@
 //! - [`HologramSession`] (one per resolution) owns everything a frame reuses: the tract plans, FFT plans,
 //!   transfer functions, double-phase encoders and scratch buffers, and three colour worker threads. After
 //!   the first frame, the optics stages (offset propagation, pre-filter input, double phase, LUT) perform no
-//!   heap allocation (`sdk/tests/pipeline_alloc.rs` counts); the CNN stages allocate inside tract.
+//!   heap allocation: with the native CNN engine a frame allocates only the CNNs' output arrays
+//!   (`sdk/tests/pipeline_alloc.rs` counts); tract allocates inside its plans.
 //! - [`HologramSession::render_stream`] overlaps the hologram CNN of frame `n + 1` with the optics of frame
 //!   `n` (two threads); its output equals [`HologramSession::render`]'s bit for bit.
 //!

@@ -224,14 +224,14 @@ impl HologramSession {
     /// The GPU frame while the GPU backend is active (for `holo bench --backend gpu`: its stages' work and
     /// timings).
     #[cfg(feature = "gpu")]
-    pub fn gpu_frame(&self) -> Option<&crate::gpu::session::GpuFrameSession> {
+    pub fn gpu_frame(&self) -> Option<&crate::gpu::GpuFrameSession> {
         let a = self.accelerator.as_ref()?;
         a.executor.as_any().downcast_ref()
     }
 
-    /// The GPU frame, mutable (for [`crate::gpu::session::GpuFrameSession::preview`]).
+    /// The GPU frame, mutable (for [`crate::gpu::GpuFrameSession::preview`]).
     #[cfg(feature = "gpu")]
-    pub fn gpu_frame_mut(&mut self) -> Option<&mut crate::gpu::session::GpuFrameSession> {
+    pub fn gpu_frame_mut(&mut self) -> Option<&mut crate::gpu::GpuFrameSession> {
         let a = self.accelerator.as_mut()?;
         a.executor.as_any_mut().downcast_mut()
     }
@@ -421,7 +421,7 @@ impl HologramSession {
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for heads of another size; [`HoloError::InvalidData`] for
     /// non-finite heads or a hologram that is zero everywhere.
-    pub fn encode_heads(&mut self, heads: Heads, cnn_s: f64) -> Result<&SlmFrame> {
+    pub(crate) fn encode_heads(&mut self, heads: Heads, cnn_s: f64) -> Result<&SlmFrame> {
         let t0 = Instant::now();
         self.propagate_to_slm(&heads)?;
         let offset_s = t0.elapsed().as_secs_f64();
@@ -456,7 +456,7 @@ impl HologramSession {
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for heads of another size; [`HoloError::InvalidData`] for
     /// non-finite values.
-    pub fn propagate_to_slm(&mut self, heads: &Heads) -> Result<()> {
+    pub(crate) fn propagate_to_slm(&mut self, heads: &Heads) -> Result<()> {
         let want = [3, self.height, self.width];
         for head in [&heads.amplitude, &heads.phase] {
             if head.shape() != want {
@@ -499,7 +499,7 @@ impl HologramSession {
     /// no-op without a pre-filter.
     ///
     /// Errors: tract failures ([`HoloError::ModelRun`]); call after [`HologramSession::propagate_to_slm`].
-    pub fn run_prefilter(&mut self) -> Result<()> {
+    pub(crate) fn run_prefilter(&mut self) -> Result<()> {
         let Some(plan) = &mut self.prefilter else {
             return Ok(());
         };
@@ -522,7 +522,7 @@ impl HologramSession {
     /// [`HologramSession::output`] (timings are not updated).
     ///
     /// Errors: [`HoloError::InvalidData`] if the hologram is zero everywhere.
-    pub fn encode(&mut self) -> Result<&SlmFrame> {
+    pub(crate) fn encode(&mut self) -> Result<&SlmFrame> {
         let mut stats = [ChannelStats::default(); 3];
         for (s, slot) in stats.iter_mut().zip(&self.states) {
             *s = slot.as_ref().ok_or_else(lost_state)?.stats;
@@ -559,4 +559,69 @@ fn apply_calibrated_luts(cal: Option<&Arc<DisplayCalibration>>, out: &mut SlmFra
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    //! The stage methods on bad heads (they are crate-private; the public path, `render`, is tested in
+    //! `sdk/tests/pipeline.rs`).
+
+    use std::path::Path;
+    use std::sync::Arc;
+
+    use ndarray::Array3;
+
+    use crate::error::HoloError;
+    use crate::model::{HologramModel, ModelConfig, ModelKind};
+    use crate::pipeline::{Backend, CnnEngine, Heads, HologramPipeline, PipelineConfig};
+
+    fn pipeline(prefilter: bool) -> HologramPipeline {
+        let load = |name: &str, kind| {
+            let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("tests/fixtures/models")
+                .join(name);
+            Arc::new(HologramModel::from_path(path, kind, &ModelConfig::default()).unwrap())
+        };
+        let pre = prefilter.then(|| load("holo8_rgbd.prefilter.onnx", ModelKind::PreFilter));
+        let config = PipelineConfig {
+            // The fixtures are trained for a 6 mm offset.
+            offset_m: 6e-3,
+            backend: Backend::Cpu,
+            cnn_engine: CnnEngine::Tract,
+            ..PipelineConfig::default()
+        };
+        HologramPipeline::new(load("holo8_rgbd.onnx", ModelKind::Hologram), pre, config).unwrap()
+    }
+
+    fn heads(h: usize, w: usize, amplitude: f32) -> Heads {
+        Heads {
+            amplitude: Array3::from_elem((3, h, w), amplitude),
+            phase: Array3::from_elem((3, h, w), 0.5),
+        }
+    }
+
+    #[test]
+    fn bad_heads_are_refused_and_the_session_stays_usable() {
+        let mut session = pipeline(true).session(16, 20).unwrap();
+        let good = session
+            .encode_heads(heads(16, 20, 0.5), 0.0)
+            .unwrap()
+            .codes
+            .clone();
+
+        let mut nan = heads(16, 20, 0.5);
+        nan.phase[[1, 2, 3]] = f32::NAN;
+        let e = session.encode_heads(nan, 0.0).unwrap_err();
+        assert!(matches!(e, HoloError::InvalidData(_)), "{e}");
+        let e = session.encode_heads(heads(8, 20, 0.0), 0.0).unwrap_err();
+        assert!(matches!(e, HoloError::ShapeMismatch { .. }), "{e}");
+        // A zero hologram cannot be encoded (without pre-filter: the pre-filter may make it non-zero).
+        let mut plain = pipeline(false).session(16, 20).unwrap();
+        let e = plain.encode_heads(heads(16, 20, 0.0), 0.0).unwrap_err();
+        assert!(matches!(e, HoloError::InvalidData(_)), "{e}");
+
+        // After the refusals the same heads give the same codes.
+        let again = session.encode_heads(heads(16, 20, 0.5), 0.0).unwrap();
+        assert_eq!(again.codes, good);
+    }
 }
