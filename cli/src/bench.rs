@@ -38,8 +38,8 @@ pub struct BenchArgs {
     /// auto times both at plan creation, the tuning cost is the `plan ms` column).
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [LayoutArg::Auto])]
     layout: Vec<LayoutArg>,
-    /// CPU CNN engines, timed alternately case by case in the CNN table (native: f32 models only; auto: as a
-    /// session chooses); the pipeline table uses the first.
+    /// CPU CNN engines, timed alternately case by case in the CNN table (native: f32 and int8 QDQ models;
+    /// auto: as a session chooses); the pipeline table uses the first.
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [EngineArg::Native, EngineArg::Tract])]
     engine: Vec<EngineArg>,
     /// Measure this machine's f32 FMA and int8 dot-product peaks per thread count first (register-only loops
@@ -317,12 +317,12 @@ fn cnn_table(
                 tensorholo::cnn::native_isa()?
             );
             results.push(json!({"kind": "peak", "threads": t, "gflops": g, "int8_gops": q}));
-            peaks.insert(t, g);
+            peaks.insert(t, (g, q));
         }
         println!();
     }
     println!(
-        "| CNN | precision | engine | layout / kernel | size (HxW) | threads | ms | FPS | GFLOP/s | % peak | runs | plan ms |"
+        "| CNN | precision | engine | layout / kernel | size (HxW) | threads | ms | FPS | GFLOP/s (int8: GOP/s) | % peak (f32 or int8) | runs | plan ms |"
     );
     println!("|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|");
     for &(h, w) in &args.sizes {
@@ -339,7 +339,7 @@ fn cnn_table(
                     let mut cases = Vec::new();
                     for &e in &args.engine {
                         let engine = CnnEngine::from(e);
-                        if engine == CnnEngine::Native && precision != Precision::F32 {
+                        if engine == CnnEngine::Native && precision == Precision::Int8QOperator {
                             continue;
                         }
                         let layouts = match engine {
@@ -384,8 +384,13 @@ fn cnn_table(
                     for ((engine, detail, report, _, plan_ms), (s, runs)) in cases.iter().zip(times)
                     {
                         let gflops = 2.0 * macs as f64 * (h * w) as f64 / s / 1e9;
+                        // int8 rows against the int8 dot-product peak, f32 rows against the FMA peak.
+                        let peak_of = |&(f, q): &(f64, f64)| match precision {
+                            Precision::F32 => f,
+                            _ => q,
+                        };
                         let peak = peaks.get(&threads).map_or("–".to_string(), |p| {
-                            format!("{:.0} %", 100.0 * gflops / p)
+                            format!("{:.0} %", 100.0 * gflops / peak_of(p))
                         });
                         println!(
                             "| holo{layers} | {precision} | {engine} | {detail} | {h}x{w} | {threads} | {:.1} | {:.2} | {:.1} | {peak} | {runs} | {plan_ms:.0} |",
@@ -397,7 +402,7 @@ fn cnn_table(
                             json!({"kind": "cnn", "layers": layers, "precision": precision,
                             "engine": engine, "layout": report.layout, "kernel": report.kernel,
                             "size": [h, w], "threads": threads, "ms": s * 1e3, "fps": 1.0 / s,
-                            "gflops": gflops, "peak_gflops": peaks.get(&threads),
+                            "gflops": gflops, "peak_gflops": peaks.get(&threads).map(peak_of),
                             "runs": runs, "macs_per_pixel": macs, "plan_ms": plan_ms}),
                         );
                         if args.profile && report.engine == CnnEngine::Tract {
@@ -420,11 +425,11 @@ fn cnn_table(
     Ok(())
 }
 
-/// The pipeline table's engine: the first `--engine`, with tract for the int8 files the native engine does
-/// not run.
+/// The pipeline table's engine: the first `--engine`, with tract for the int8 QOperator files the native
+/// engine does not run.
 fn pipeline_engine(args: &BenchArgs, precision: Precision) -> CnnEngine {
     match args.engine.first().map_or(CnnEngine::Auto, |&e| e.into()) {
-        CnnEngine::Native if precision != Precision::F32 => CnnEngine::Tract,
+        CnnEngine::Native if precision == Precision::Int8QOperator => CnnEngine::Tract,
         e => e,
     }
 }

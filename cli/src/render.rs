@@ -108,9 +108,10 @@ impl From<LayoutArg> for CnnLayout {
 /// CPU CNN engines selectable on the command line ([`CnnEngine`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum EngineArg {
-    /// For f32 models time both engines when the session is created and keep the faster; int8 runs on tract.
+    /// Time both engines when the session is created and keep the faster (int8 QOperator files: tract).
     Auto,
-    /// tensorholo's own direct 3×3 convolution kernels (f32 models; SIMD chosen from the CPU at run time).
+    /// tensorholo's own direct 3×3 convolution kernels (f32 and int8 QDQ models; SIMD chosen from the CPU at
+    /// run time).
     Native,
     /// tract (every model file, int8 included).
     Tract,
@@ -175,8 +176,8 @@ pub struct ModelArgs {
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=256))]
     pub threads: u32,
     /// Engine of the CPU CNNs: auto times the native kernels and tract when the session is created and keeps
-    /// the faster (f32 models; int8 runs on tract); report.json's cnn_plan gives the choice, the kernel and
-    /// every timing.
+    /// the faster (f32 and int8 QDQ models; int8 QOperator files run on tract); report.json's cnn_plan gives
+    /// the choice, the kernel and every timing.
     #[arg(long, value_enum, default_value_t = EngineArg::Auto)]
     pub engine: EngineArg,
     /// Memory layout tract runs the hologram CNN in: auto times both when the session is created (the

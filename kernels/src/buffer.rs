@@ -163,7 +163,7 @@ impl<T: Element> RowPlanar<T> {
             });
         }
         let stride = self.row_stride();
-        let (c, h, w) = (self.c, self.h, self.w);
+        let (c, h, w, border) = (self.c, self.h, self.w, self.border);
         let base = (rows.start + 1) * stride;
         let data = &mut self.as_mut_slice()[base..(rows.end + 1) * stride];
         Ok(RowBand {
@@ -173,6 +173,7 @@ impl<T: Element> RowPlanar<T> {
             c,
             h,
             w,
+            border,
         })
     }
 
@@ -182,7 +183,7 @@ impl<T: Element> RowPlanar<T> {
         let h = self.h;
         let n = n.clamp(1, h);
         let stride = self.row_stride();
-        let (c, w) = (self.c, self.w);
+        let (c, w, border) = (self.c, self.w, self.border);
         // Skip the top border row; the bottom border row is never handed out.
         let (_, mut rest) = self.as_mut_slice().split_at_mut(stride);
         let mut bands = Vec::with_capacity(n);
@@ -197,6 +198,7 @@ impl<T: Element> RowPlanar<T> {
                 c,
                 h,
                 w,
+                border,
             });
             rest = tail;
             y0 = y1;
@@ -313,6 +315,8 @@ pub struct RowBand<'a, T: Element> {
     pub(crate) c: usize,
     pub(crate) h: usize,
     pub(crate) w: usize,
+    /// The buffer's border value (the zero point of a u8 buffer).
+    pub(crate) border: T,
 }
 
 impl<'a, T: Element> RowBand<'a, T> {
@@ -335,7 +339,7 @@ impl<'a, T: Element> RowBand<'a, T> {
         }
         let stride = self.data.len() / (end - start);
         let (top, bottom) = self.data.split_at_mut((y - start) * stride);
-        let (c, h, w, base) = (self.c, self.h, self.w, self.base);
+        let (c, h, w, base, border) = (self.c, self.h, self.w, self.base, self.border);
         Ok((
             RowBand {
                 data: top,
@@ -344,6 +348,7 @@ impl<'a, T: Element> RowBand<'a, T> {
                 c,
                 h,
                 w,
+                border,
             },
             RowBand {
                 data: bottom,
@@ -352,6 +357,7 @@ impl<'a, T: Element> RowBand<'a, T> {
                 c,
                 h,
                 w,
+                border,
             },
         ))
     }
@@ -462,6 +468,82 @@ impl RowPlanar<u8> {
         let inv = 1.0 / scale;
         b.fill_with(src, |_, v| quantize(v * inv, zp))?;
         Ok(b)
+    }
+
+    /// Makes `zp` the buffer's zero point: every element outside the interior (border rows and columns,
+    /// padding channels) is rewritten with it, the interior is left as it is (a layer overwrites it next). A
+    /// ring of buffers reused by layers whose outputs have different zero points calls this before each
+    /// layer; it writes only the border (no work when the zero point does not change).
+    pub fn set_zero_point(&mut self, zp: u8) {
+        if zp == self.border {
+            return;
+        }
+        self.border = zp;
+        let (h, w, wp, groups, c) = (self.h, self.w, self.wp, self.groups(), self.c);
+        let data = self.as_mut_slice();
+        let row = groups * wp * 4;
+        data[..row].fill(zp);
+        data[(h + 1) * row..(h + 2) * row].fill(zp);
+        for r in 1..=h {
+            for g in 0..groups {
+                let at = (r * groups + g) * wp * 4;
+                data[at..at + 4].fill(zp);
+                data[at + (w + 1) * 4..at + wp * 4].fill(zp);
+                // Padding channels of the last group (C not a multiple of 4).
+                if g == groups - 1 && c % 4 != 0 {
+                    for j in 1..=w {
+                        data[at + j * 4 + c % 4..at + j * 4 + 4].fill(zp);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Overwrites the interior from a planar `[C][H][W]` f32 slice, quantised as ONNX `QuantizeLinear`
+    /// does: `q = clamp(round_ties_even((x + offset) / scale) + zp, 0, 255)` with the buffer's zero point.
+    /// Errors: `src.len() != C·H·W` ([`KernelError::Length`]), a scale that is not finite and positive.
+    pub fn quantize_fill(
+        &mut self,
+        src: &[f32],
+        offset: f32,
+        scale: f32,
+    ) -> Result<(), KernelError> {
+        check_scale("quantisation scale", scale)?;
+        let zp = self.border;
+        self.fill_with(src, |_, v| quantize((v + offset) / scale, zp))
+    }
+
+    /// Overwrites the interior with `other`'s values moved to this buffer's grid: `q = clamp(round_ties_even(
+    /// (q_other − zp_other)·scale_other / scale) + zp, 0, 255)` (ONNX `DequantizeLinear` then
+    /// `QuantizeLinear`). Errors: another shape ([`KernelError::Shape`]), scales not finite and positive.
+    pub fn requantize_from(
+        &mut self,
+        other: &RowPlanar<u8>,
+        other_scale: f32,
+        scale: f32,
+    ) -> Result<(), KernelError> {
+        check_scale("quantisation scale", scale)?;
+        check_scale("source scale", other_scale)?;
+        if (other.c, other.h, other.w) != (self.c, self.h, self.w) {
+            return Err(KernelError::Shape {
+                what: format!(
+                    "requantise a {}×{}×{} buffer into a {}×{}×{} one",
+                    other.c, other.h, other.w, self.c, self.h, self.w
+                ),
+            });
+        }
+        let (zp, zo) = (self.border, other.border as f32);
+        let (h, w) = (self.h, self.w);
+        for c in 0..self.c {
+            for y in 0..h {
+                for x in 0..w {
+                    let i = self.index(c, y + 1, x + 1);
+                    let real = (other.as_slice()[i] as f32 - zo) * other_scale;
+                    self.as_mut_slice()[i] = quantize(real / scale, zp);
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The interior dequantised to a planar `[C][H][W]` vector: `(q − zp)·scale`.

@@ -11,7 +11,8 @@
 //!   residual after the ReLU, optional second source, output to a buffer or to planar `[C][H][W]` f32, any
 //!   row band.
 //! * [`Conv3x3U8`]: the int8 plan (u8 activations with zero points, s8 weights with per-channel scales, i32
-//!   accumulation, requantisation fused into the epilogue; every path bit-exact with the scalar one).
+//!   accumulation, requantisation fused into the epilogue; every path bit-exact with the scalar one), any
+//!   row band; u8 buffers are filled as ONNX `QuantizeLinear` does and take a new zero point when reused.
 //! * [`Isa`]: detection and the `TENSORHOLO_ISA` override; [`registry`]: the kernel rows.
 //! * [`depthwise()`]: the pre-filter's fixed depthwise filter; [`peak`]: measured FMA / dot-product peaks.
 //!

@@ -193,7 +193,12 @@ pub(crate) struct U8Job<'a> {
 
 /// Where an int8 kernel writes: a u8 [`RowPlanar`] (`[H+2][C_out/4][Wp][4]`) or planar `[C_out][H][W]` f32.
 pub(crate) enum U8Out<'a> {
-    Rows(&'a mut [u8]),
+    /// Buffer rows of a u8 buffer: `data[0]` is element `base` of the whole buffer (a band of rows,
+    /// [`RowBand`]); the kernel writes only rows `y0..y1`, which lie inside it.
+    Rows {
+        data: &'a mut [u8],
+        base: usize,
+    },
     Planar(&'a mut [f32]),
 }
 

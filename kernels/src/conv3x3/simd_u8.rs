@@ -178,7 +178,7 @@ unsafe fn epilogue<Q: SimdQ, const G: usize, const NV: usize>(
                     };
                 }
                 match out {
-                    U8Out::Rows(_) => {
+                    U8Out::Rows { .. } => {
                         // SAFETY: register arithmetic.
                         *val = unsafe { Q::quant(r, Q::splat(job.out_inv), Q::splat(job.out_zp)) };
                     }
@@ -193,11 +193,19 @@ unsafe fn epilogue<Q: SimdQ, const G: usize, const NV: usize>(
                     }
                 }
             }
-            if let U8Out::Rows(d) = out {
-                debug_assert!(at + px * 4 <= d.len());
+            if let U8Out::Rows { data, base } = out {
+                debug_assert!(at >= *base && at - *base + px * 4 <= data.len());
                 // SAFETY: as for the residual; words of pixels past `w` (right border) and the bytes of
-                // padding channels get the zero point, which keeps the border invariant.
-                unsafe { Q::store_u8x4(d.as_mut_ptr().add(at), vals, valid, job.out_zp_u8) };
+                // padding channels get the zero point, which keeps the border invariant. Row `y` lies in the
+                // band (`y0 ≤ y < y1`, checked by the safe API), which starts at element `base`.
+                unsafe {
+                    Q::store_u8x4(
+                        data.as_mut_ptr().add(at - *base),
+                        vals,
+                        valid,
+                        job.out_zp_u8,
+                    )
+                };
             }
         }
     }

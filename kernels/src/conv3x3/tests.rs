@@ -752,6 +752,113 @@ fn u8_row_bands_are_bit_identical_and_touch_only_their_rows() {
 }
 
 #[test]
+fn u8_bands_written_by_threads_equal_one_run() {
+    // Every split into `bands_mut(n)`, each band on its own thread, gives the bit-identical buffer of one
+    // whole-frame run; a band of a buffer with another zero point is refused.
+    let case = QCase {
+        ca: 24,
+        cb: 0,
+        cout: 24,
+        h: 9,
+        w: 29,
+        relu: true,
+        residual: true,
+        u8_out: true,
+    };
+    let d = qdata(case, 11);
+    let sp = spec(case, &d);
+    let (h, w, cout) = (case.h, case.w, case.cout);
+    let a = RowPlanar::from_planar_u8(&d.a, case.ca, h, w, d.zp[0]).unwrap();
+    let r = RowPlanar::from_planar_u8(&d.r, cout, h, w, d.zp[2]).unwrap();
+    for row in u8_rows() {
+        let plan = &Conv3x3U8::with_kernel(&sp, row).unwrap();
+        let inputs = Inputs::new(&a).residual(&r);
+        let mut whole = RowPlanar::new_quantized(cout, h, w, d.zp[3]).unwrap();
+        plan.run(inputs, &mut whole, 0..h).unwrap();
+        for n in [1, 2, 3, 5, h + 2] {
+            let mut out = RowPlanar::new_quantized(cout, h, w, d.zp[3]).unwrap();
+            std::thread::scope(|s| {
+                for mut band in out.bands_mut(n) {
+                    s.spawn(move || plan.run_band(inputs, &mut band).unwrap());
+                }
+            });
+            assert!(out == whole, "{row}: {n} bands");
+            assert!(out.border_is_clean());
+        }
+        let mut other = RowPlanar::new_quantized(cout, h, w, d.zp[3] ^ 1).unwrap();
+        let mut band = other.band_mut(0..h).unwrap();
+        assert!(matches!(
+            plan.run_band(inputs, &mut band),
+            Err(KernelError::Shape { .. })
+        ));
+    }
+}
+
+#[test]
+fn a_reused_u8_buffer_takes_a_new_zero_point() {
+    // A buffer that held another layer's output (zero point 9), moved to zero point 200, gives the same
+    // convolution output as a fresh buffer, and its border is clean; 6 channels leave 2 padding channels.
+    let case = QCase {
+        ca: 6,
+        cb: 0,
+        cout: 6,
+        h: 5,
+        w: 13,
+        relu: false,
+        residual: false,
+        u8_out: true,
+    };
+    let mut d = qdata(case, 5);
+    d.zp[3] = 200;
+    let sp = spec(case, &d);
+    let a = RowPlanar::from_planar_u8(&d.a, 6, 5, 13, d.zp[0]).unwrap();
+    let plan = Conv3x3U8::new(&sp, Isa::active().unwrap()).unwrap();
+    let mut fresh = RowPlanar::new_quantized(6, 5, 13, 200).unwrap();
+    plan.run(Inputs::new(&a), &mut fresh, 0..5).unwrap();
+    let old: Vec<u8> = (0..6 * 5 * 13).map(|i| (i * 7 % 251) as u8).collect();
+    let mut reused = RowPlanar::from_planar_u8(&old, 6, 5, 13, 9).unwrap();
+    reused.set_zero_point(200);
+    assert_eq!(reused.zero_point(), 200);
+    assert!(reused.border_is_clean());
+    plan.run(Inputs::new(&a), &mut reused, 0..5).unwrap();
+    assert!(reused == fresh);
+}
+
+#[test]
+fn quantize_fill_and_requantize_follow_onnx() {
+    // ONNX QuantizeLinear: round half to even of x / scale, plus the zero point, saturated.
+    let (c, h, w) = (5, 3, 4);
+    let src: Vec<f32> = (0..c * h * w).map(|i| i as f32 * 0.0125 - 0.4).collect();
+    let (offset, scale, zp) = (-0.1f32, 0.025f32, 17u8);
+    let mut b = RowPlanar::new_quantized(c, h, w, zp).unwrap();
+    b.quantize_fill(&src, offset, scale).unwrap();
+    assert!(b.border_is_clean());
+    let got = b.to_planar();
+    for (i, (&x, &q)) in src.iter().zip(&got).enumerate() {
+        let want = (((x + offset) / scale).round_ties_even() + zp as f32).clamp(0.0, 255.0) as u8;
+        assert_eq!(q, want, "element {i}: {x}");
+    }
+    // Ties go to even: (x + offset) / scale = 2.5 exactly → 2.
+    let mut t = RowPlanar::new_quantized(1, 1, 1, 0).unwrap();
+    t.quantize_fill(&[0.0625], 0.0, 0.025).unwrap();
+    assert_eq!(t.get(0, 0, 0), Some(2));
+    // Requantising: dequantise with the source grid, quantise with the target's.
+    let (scale2, zp2) = (0.04f32, 3u8);
+    let mut r = RowPlanar::new_quantized(c, h, w, zp2).unwrap();
+    r.requantize_from(&b, scale, scale2).unwrap();
+    assert!(r.border_is_clean());
+    for (&q, &q2) in got.iter().zip(&r.to_planar()) {
+        let real = (q as f32 - zp as f32) * scale;
+        let want = ((real / scale2).round_ties_even() + zp2 as f32).clamp(0.0, 255.0) as u8;
+        assert_eq!(q2, want);
+    }
+    assert!(b.quantize_fill(&src[1..], 0.0, scale).is_err());
+    assert!(b.quantize_fill(&src, 0.0, 0.0).is_err());
+    let other = RowPlanar::new_quantized(c, h, w + 1, 0).unwrap();
+    assert!(r.requantize_from(&other, scale, scale2).is_err());
+}
+
+#[test]
 fn u8_dispatch_selects_the_named_row() {
     #[cfg(target_arch = "x86_64")]
     let expected = [

@@ -12,7 +12,7 @@
 
 use super::registry::{self, KernelInfo, PackKind, U8Row};
 use super::{Inputs, U8Job, U8Out};
-use crate::buffer::{check_scale, RowPlanar};
+use crate::buffer::{check_scale, RowBand, RowPlanar};
 use crate::pack::{check_channels, check_len};
 use crate::{Isa, KernelError};
 use std::ops::Range;
@@ -303,7 +303,40 @@ impl Conv3x3U8 {
         }
         self.check(&inputs, out.height(), out.width(), &rows)?;
         let job = self.job(&inputs, &rows);
-        registry::run_u8(self.row, &job, U8Out::Rows(out.as_mut_slice()))
+        let out = U8Out::Rows {
+            data: out.as_mut_slice(),
+            base: 0,
+        };
+        registry::run_u8(self.row, &job, out)
+    }
+
+    /// Computes the rows of `band` (of a u8 [`RowPlanar`] of `C_out` channels whose zero point is the plan's
+    /// output zero point, from [`RowPlanar::band_mut`]): as [`run`](Self::run), for one thread's share of a
+    /// layer. Errors: as `run`.
+    pub fn run_band(
+        &self,
+        inputs: Inputs<'_, u8>,
+        band: &mut RowBand<'_, u8>,
+    ) -> Result<(), KernelError> {
+        let q = self.output.ok_or_else(|| KernelError::Shape {
+            what: "the plan has f32 output (output: None); use run_planar".into(),
+        })?;
+        if band.c != self.c_out || band.border != q.zero_point {
+            return Err(KernelError::Shape {
+                what: format!(
+                    "output has {} channels and zero point {}, the plan {} and {}",
+                    band.c, band.border, self.c_out, q.zero_point
+                ),
+            });
+        }
+        let rows = band.rows();
+        self.check(&inputs, band.h, band.w, &rows)?;
+        let job = self.job(&inputs, &rows);
+        let out = U8Out::Rows {
+            data: band.data,
+            base: band.base,
+        };
+        registry::run_u8(self.row, &job, out)
     }
 
     /// Computes output rows `rows` as raw f32 (dequantised, before any output quantisation) into a planar

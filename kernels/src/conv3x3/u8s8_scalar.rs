@@ -74,15 +74,17 @@ pub(crate) fn conv(job: &U8Job<'_>, out: &mut U8Out<'_>) {
                     for p in 0..P {
                         let i = at + p * 4;
                         if o >= cout || p >= valid {
-                            if let U8Out::Rows(d) = out {
-                                d[i] = job.out_zp_u8;
+                            if let U8Out::Rows { data, base } = out {
+                                data[i - *base] = job.out_zp_u8;
                             }
                             continue;
                         }
                         let res = job.residual.map(|(r, zp, s)| (r[i], zp, s));
                         let v = epilogue_value(a[p], job.mult[o], job.bias[o], job.relu, res);
                         match out {
-                            U8Out::Rows(d) => d[i] = quantize(v * job.out_inv, job.out_zp_u8),
+                            U8Out::Rows { data, base } => {
+                                data[i - *base] = quantize(v * job.out_inv, job.out_zp_u8)
+                            }
                             U8Out::Planar(d) => d[(o * h + y) * w + x0 + p] = v,
                         }
                     }

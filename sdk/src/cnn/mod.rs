@@ -14,6 +14,7 @@
 //! (`pipeline/executor.rs`), not an engine here.
 
 mod native;
+mod native_int8;
 mod select;
 mod tract;
 
@@ -66,7 +67,8 @@ impl CpuCnnPlan {
 /// ([`PipelineConfig::cnn_engine`](crate::pipeline::PipelineConfig::cnn_engine)).
 ///
 /// Errors: [`crate::HoloError::InvalidParameter`] (`engine`) for [`CnnEngine::Native`] with a file it
-/// cannot run (int8); as [`crate::model::HologramModel::tuned_plan`].
+/// cannot run (int8 QOperator, or a graph that is not the TensorHolo CNN); as
+/// [`crate::model::HologramModel::tuned_plan`].
 pub fn cnn_plan(
     model: &crate::model::HologramModel,
     height: usize,
@@ -82,6 +84,27 @@ pub fn cnn_plan(
 /// lowered by the `TENSORHOLO_ISA` environment variable), or why it cannot run.
 pub fn native_isa() -> Result<&'static str> {
     active_isa().map(|i| i.name())
+}
+
+/// A native plan for `graph` at `height × width` on `threads` threads: the int8 engine for an int8 (QDQ)
+/// file, the f32 engine otherwise; with the name of the kernel row its layers run. Errors: as
+/// `NativePlan::new` / `NativeInt8Plan::new`.
+pub(crate) fn native_plan(
+    graph: std::sync::Arc<crate::model::CnnWeights>,
+    height: usize,
+    width: usize,
+    threads: usize,
+    isa: tensorholo_kernels::Isa,
+) -> Result<(Box<dyn CnnPlan>, &'static str)> {
+    if graph.quant.is_some() {
+        let p = native_int8::NativeInt8Plan::new(graph, height, width, threads, isa)?;
+        let k = p.kernel_name();
+        Ok((Box::new(p), k))
+    } else {
+        let p = native::NativePlan::new(graph, height, width, threads, isa)?;
+        let k = p.kernel_name();
+        Ok((Box::new(p), k))
+    }
 }
 
 /// [`tensorholo_kernels::Isa::active`] with its error as the SDK's ([`kernel_err`]).

@@ -23,13 +23,14 @@ use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3};
 use rayon::prelude::*;
+use tensorholo_kernels::buffer::Element;
 use tensorholo_kernels::{
-    depthwise, Affine, Conv3x3F32, Inputs, Isa, KernelError, RowBand, RowPlanar,
+    depthwise, Affine, Conv3x3F32, Conv3x3U8, Inputs, Isa, KernelError, RowBand, RowPlanar,
 };
 
 use super::{kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
-use crate::model::{CnnOutput, CnnWeights};
+use crate::model::{CnnOutput, CnnWeights, QuantGrid};
 
 /// The network's packed layers, shared by every plan of it (and by a stream's spawned plan).
 #[derive(Debug)]
@@ -65,7 +66,7 @@ impl NativePlan {
     /// frames, run on `threads` threads (≥ 1).
     ///
     /// Errors: [`HoloError::InvalidData`] for non-finite weights; [`HoloError::InvalidParameter`] for 0
-    /// threads; [`HoloError::ModelRun`] for an ISA this CPU lacks, a size the kernels refuse or a thread
+    /// threads; [`HoloError::Internal`] for an int8 graph (`NativeInt8Plan` runs those); [`HoloError::ModelRun`] for an ISA this CPU lacks, a size the kernels refuse or a thread
     /// pool the OS will not start.
     pub(crate) fn new(
         graph: Arc<CnnWeights>,
@@ -78,6 +79,11 @@ impl NativePlan {
             return Err(crate::error::invalid(
                 "threads",
                 "the native CNN engine needs at least one thread",
+            ));
+        }
+        if graph.quant.is_some() {
+            return Err(HoloError::Internal(
+                "an int8 graph runs on the int8 native plan, not in f32".into(),
             ));
         }
         let n = graph.layers.len();
@@ -161,11 +167,41 @@ impl NativePlan {
     }
 }
 
+/// A planned convolution that writes row bands (f32 or u8 activations).
+pub(super) trait BandConv<T: Element>: Sync {
+    /// Computes the rows of `band` (see `Conv3x3F32::run_band`, `Conv3x3U8::run_band`).
+    fn run_band(
+        &self,
+        inputs: Inputs<'_, T>,
+        band: &mut RowBand<'_, T>,
+    ) -> std::result::Result<(), KernelError>;
+}
+
+impl BandConv<f32> for Conv3x3F32 {
+    fn run_band(
+        &self,
+        inputs: Inputs<'_, f32>,
+        band: &mut RowBand<'_, f32>,
+    ) -> std::result::Result<(), KernelError> {
+        Conv3x3F32::run_band(self, inputs, band)
+    }
+}
+
+impl BandConv<u8> for Conv3x3U8 {
+    fn run_band(
+        &self,
+        inputs: Inputs<'_, u8>,
+        band: &mut RowBand<'_, u8>,
+    ) -> std::result::Result<(), KernelError> {
+        Conv3x3U8::run_band(self, inputs, band)
+    }
+}
+
 /// One layer on `threads` row bands of `dst`, in parallel on `pool`.
-fn run_layer(
-    conv: &Conv3x3F32,
-    inputs: Inputs<'_, f32>,
-    dst: &mut RowPlanar<f32>,
+pub(super) fn run_layer<T: Element + Send + Sync, K: BandConv<T>>(
+    conv: &K,
+    inputs: Inputs<'_, T>,
+    dst: &mut RowPlanar<T>,
     threads: usize,
     pool: Option<&rayon::ThreadPool>,
 ) -> Result<()> {
@@ -180,10 +216,10 @@ fn run_layer(
 
 /// Runs `band` as `parts` near-equal bands: halves recursively through `rayon::join`, so that nothing is
 /// allocated per layer.
-fn split_run(
-    conv: &Conv3x3F32,
-    inputs: Inputs<'_, f32>,
-    mut band: RowBand<'_, f32>,
+fn split_run<T: Element + Send + Sync, K: BandConv<T>>(
+    conv: &K,
+    inputs: Inputs<'_, T>,
+    mut band: RowBand<'_, T>,
     parts: usize,
 ) -> std::result::Result<(), KernelError> {
     let rows = band.rows();
@@ -201,7 +237,7 @@ fn split_run(
 }
 
 /// A rayon pool of `threads` workers, or `None` for one thread.
-fn pool(threads: usize) -> Result<Option<Arc<rayon::ThreadPool>>> {
+pub(super) fn pool(threads: usize) -> Result<Option<Arc<rayon::ThreadPool>>> {
     if threads == 1 {
         return Ok(None);
     }
@@ -211,6 +247,76 @@ fn pool(threads: usize) -> Result<Option<Arc<rayon::ThreadPool>>> {
         .build()
         .map(|p| Some(Arc::new(p)))
         .map_err(|e| HoloError::ModelRun(format!("native CNN engine: thread pool: {e}")))
+}
+
+/// The network's two outputs from the last layer's raw output `o` (`raw_row(c, y)`: channel `c`, frame row
+/// `y`, `W` values): the hologram CNN's heads `(tanh(o) + 1)·scale`, or the pre-filter's `o` plus its
+/// depthwise base filter of `base_input` (`[C][H][W]`, the input as the base branch sees it). `grid`, for an
+/// int8 file, rounds `o` to the u8 grid the file quantises the last convolution's output to (ONNX
+/// `QuantizeLinear` then `DequantizeLinear`). Rows run in parallel on `pool`; allocates only the two arrays.
+pub(super) fn finish_outputs<'r>(
+    graph: &CnnWeights,
+    raw_row: &(dyn Fn(usize, usize) -> &'r [f32] + Sync),
+    grid: Option<QuantGrid>,
+    base_input: &[f32],
+    [h, w]: [usize; 2],
+    pool: Option<&rayon::ThreadPool>,
+    depthwise_scratch: &mut Vec<f32>,
+) -> Result<(Array3<f32>, Array3<f32>)> {
+    let plane = 3 * h * w;
+    let heads = match &graph.output {
+        CnnOutput::Heads {
+            amplitude_scale,
+            phase_scale,
+        } => Some((*amplitude_scale, *phase_scale)),
+        CnnOutput::Prefilter { .. } => None,
+    };
+    let round = |v: f32| match grid {
+        Some(g) => {
+            let q = ((v / g.scale).round_ties_even() + g.zero_point as f32).clamp(0.0, 255.0);
+            (q - g.zero_point as f32) * g.scale
+        }
+        None => v,
+    };
+    let mut out = vec![0.0f32; 2 * plane];
+    let row = |(i, o): (usize, &mut [f32])| {
+        let (c, y) = (i / h, i % h);
+        let r = raw_row(c, y);
+        match heads {
+            Some((a, p)) => {
+                let s = if c < 3 { a } else { p };
+                o.iter_mut()
+                    .zip(r)
+                    .for_each(|(o, &v)| *o = (round(v).tanh() + 1.0) * s);
+            }
+            None => o.iter_mut().zip(r).for_each(|(o, &v)| *o = round(v)),
+        }
+    };
+    match pool {
+        Some(pool) => pool.install(|| out.par_chunks_mut(w).enumerate().for_each(row)),
+        None => out.chunks_mut(w).enumerate().for_each(row),
+    }
+    if let CnnOutput::Prefilter { taps, base } = &graph.output {
+        let c = graph.in_channels;
+        depthwise(
+            base_input,
+            c,
+            h,
+            w,
+            base,
+            *taps,
+            &mut out,
+            true,
+            depthwise_scratch,
+        )
+        .map_err(kernel_err)?;
+    }
+    let imag = out.split_off(plane);
+    let shape_err = |_| HoloError::Internal("native CNN: output shape".into());
+    Ok((
+        Array3::from_shape_vec((3, h, w), out).map_err(shape_err)?,
+        Array3::from_shape_vec((3, h, w), imag).map_err(shape_err)?,
+    ))
 }
 
 impl CnnPlan for NativePlan {
@@ -240,56 +346,17 @@ impl CnnPlan for NativePlan {
             .map_err(kernel_err)?;
         self.forward()?;
         let (h, w) = (self.height, self.width);
-        let plane = 3 * h * w;
-        // The raw output, rows in parallel, through the heads (hologram CNN) or as is (pre-filter).
-        let heads = match &self.net.graph.output {
-            CnnOutput::Heads {
-                amplitude_scale,
-                phase_scale,
-            } => Some((*amplitude_scale, *phase_scale)),
-            CnnOutput::Prefilter { .. } => None,
-        };
-        let mut raw = vec![0.0f32; 2 * plane];
         let src = &self.raw;
-        let row = |(i, out): (usize, &mut [f32])| {
-            let (c, y) = (i / h, i % h);
-            if let Some(r) = src.row(c, y) {
-                match heads {
-                    Some((a, p)) => {
-                        let s = if c < 3 { a } else { p };
-                        out.iter_mut()
-                            .zip(r)
-                            .for_each(|(o, &v)| *o = (v.tanh() + 1.0) * s);
-                    }
-                    None => out.copy_from_slice(r),
-                }
-            }
-        };
-        match self.pool.as_deref() {
-            Some(pool) => pool.install(|| raw.par_chunks_mut(w).enumerate().for_each(row)),
-            None => raw.chunks_mut(w).enumerate().for_each(row),
-        }
-        if let CnnOutput::Prefilter { taps, base } = &self.net.graph.output {
-            let c = self.net.graph.in_channels;
-            depthwise(
-                planar,
-                c,
-                h,
-                w,
-                base,
-                *taps,
-                &mut raw,
-                true,
-                &mut self.depthwise_scratch,
-            )
-            .map_err(kernel_err)?;
-        }
-        let imag = raw.split_off(plane);
-        let shape_err = |_| HoloError::Internal("native CNN: output shape".into());
-        Ok((
-            Array3::from_shape_vec((3, h, w), raw).map_err(shape_err)?,
-            Array3::from_shape_vec((3, h, w), imag).map_err(shape_err)?,
-        ))
+        let raw_row = |c: usize, y: usize| src.row(c, y).unwrap_or(&[]);
+        finish_outputs(
+            &self.net.graph,
+            &raw_row,
+            None,
+            planar,
+            [h, w],
+            self.pool.as_deref(),
+            &mut self.depthwise_scratch,
+        )
     }
 
     fn spawn(&self) -> Box<dyn CnnPlan> {

@@ -11,8 +11,7 @@ use std::time::Instant;
 
 use ndarray::Array3;
 
-use super::native::NativePlan;
-use super::{active_isa, CnnEngine, CnnPlan};
+use super::{active_isa, native_plan, CnnEngine, CnnPlan};
 use crate::error::{invalid, Result};
 use crate::model::tuning::fastest_run;
 use crate::model::{
@@ -204,8 +203,8 @@ fn tune_native(
     let mut timings = Vec::new();
     let isa = active_isa()?;
     for &t in &counts {
-        let mut plan = NativePlan::new(graph.clone(), th, tw, t, isa)?;
-        let s = time_plan(&mut plan, graph.in_channels, th, tw)?;
+        let (mut plan, _) = native_plan(graph.clone(), th, tw, t, isa)?;
+        let s = time_plan(plan.as_mut(), graph.in_channels, th, tw)?;
         timings.push(PlanTiming {
             engine: CnnEngine::Native,
             layout: CnnLayout::ChannelsFirst,
@@ -253,11 +252,9 @@ fn native_plans(
 ) -> Result<CnnPlans> {
     let isa = active_isa()?;
     let threads = tuning.threads;
-    let hologram = NativePlan::new(graph.clone(), height, width, threads, isa)?;
+    let (hologram, kernel) = native_plan(graph.clone(), height, width, threads, isa)?;
     let prefilter = match pre {
-        Some(p) => {
-            Some(Box::new(NativePlan::new(p, height, width, threads, isa)?) as Box<dyn CnnPlan>)
-        }
+        Some(p) => Some(native_plan(p, height, width, threads, isa)?.0),
         None => None,
     };
     Ok(CnnPlans {
@@ -266,7 +263,7 @@ fn native_plans(
             request,
             engine: CnnEngine::Native,
             engine_reason: why.to_string(),
-            kernel: Some(hologram.kernel_name().to_string()),
+            kernel: Some(kernel.to_string()),
             layout: CnnLayout::ChannelsFirst,
             threads: Some(threads),
             autotuned: tuning.candidates.len() > 1,
@@ -274,7 +271,7 @@ fn native_plans(
             candidates: tuning.candidates,
             tuning_s: tuning.seconds,
         },
-        hologram: Box::new(hologram),
+        hologram,
         prefilter,
     })
 }

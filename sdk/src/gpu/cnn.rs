@@ -69,8 +69,9 @@ impl GpuCnn {
     /// f32 `[in_channels, H, W]`, `output` f32 `[6, H, W]` (the heads `[amplitude, phase]`, or the pre-filter's
     /// `[Re, Im]`).
     ///
-    /// Errors: [`crate::HoloError::Gpu`] for activations above the device's storage-binding limit (the message
-    /// names the size) or a shader the device refuses.
+    /// Errors: [`crate::HoloError::ModelContract`] for an int8 (QDQ) graph (the GPU runs the f32 files);
+    /// [`crate::HoloError::Gpu`] for activations above the device's storage-binding limit (the message names
+    /// the size) or a shader the device refuses.
     pub fn new(
         ctx: &GpuContext,
         weights: &CnnWeights,
@@ -80,6 +81,13 @@ impl GpuCnn {
         output: &wgpu::Buffer,
         precision: GpuPrecision,
     ) -> Result<Self> {
+        if weights.quant.is_some() {
+            return Err(crate::HoloError::ModelContract {
+                source_name: "CNN graph".into(),
+                reason: "an int8 (QDQ) file: the GPU path runs the f32 model files (choose precision f32)"
+                    .into(),
+            });
+        }
         let precision = precision.resolve(ctx.info().shader_f16);
         let n = height
             .checked_mul(width)

@@ -49,6 +49,39 @@ pub enum CnnOutput {
     },
 }
 
+/// The grid of a u8 tensor of a QDQ file: `real = (q − zero_point)·scale` (ONNX `QuantizeLinear`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct QuantGrid {
+    /// Real units per step (finite, > 0).
+    pub scale: f32,
+    /// The u8 code of real 0.
+    pub zero_point: u8,
+}
+
+/// The int8 form of one convolution of a QDQ file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LayerQuant {
+    /// Symmetric s8 weights `[c_out, c_in, 3, 3]` (the f32 [`ConvLayer::weights`] are these times their scale).
+    pub weights: Vec<i8>,
+    /// Weight scale per output channel, `[c_out]` (a per-tensor scale is repeated).
+    pub weight_scales: Vec<f32>,
+    /// Grid of the layer's input `s_i` (for the last layer: of the concat).
+    pub input: QuantGrid,
+    /// Grid the file rounds the layer's result to before the next layer reads it: `s_{i+1}` (for the
+    /// second-to-last layer the concat's; for the last layer its raw output before the heads).
+    pub output: QuantGrid,
+}
+
+/// The quantisation of an int8 QDQ file (`models/*.int8-qdq.onnx`): every convolution's s8 weights and the u8
+/// grid of every activation a convolution reads. An engine that fuses a layer's convolution, ReLU and
+/// residual add rounds once, to [`LayerQuant::output`]; the file also rounds the convolution's raw output
+/// before its ReLU (a second rounding, of at most half a step, that such an engine skips).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CnnQuant {
+    /// One entry per [`CnnWeights::layers`] entry.
+    pub layers: Vec<LayerQuant>,
+}
+
 /// A TensorHolo residual CNN read from its ONNX graph ([`CnnWeights::from_model`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CnnWeights {
@@ -60,6 +93,9 @@ pub struct CnnWeights {
     pub layers: Vec<ConvLayer>,
     /// The output stage.
     pub output: CnnOutput,
+    /// The int8 quantisation of a QDQ file (then [`ConvLayer::weights`] and `bias` hold the dequantised
+    /// values); `None` for an f32 file.
+    pub quant: Option<CnnQuant>,
 }
 
 /// What a tensor of the graph is, as far as the CNN pattern goes.
@@ -114,6 +150,38 @@ fn f32_tensor(t: &pb::TensorProto) -> Option<(Vec<usize>, Vec<f32>)> {
     (values.len() == n).then_some((dims, values))
 }
 
+/// An int8 (`INT8`, data type 3) tensor: `(dims, values)`.
+fn i8_tensor(t: &pb::TensorProto) -> Option<(Vec<usize>, Vec<i8>)> {
+    if t.data_type != 3 {
+        return None;
+    }
+    let dims: Vec<usize> = t.dims.iter().map(|&d| d.max(0) as usize).collect();
+    let n: usize = dims.iter().product();
+    let values: Vec<i8> = if !t.int32_data.is_empty() {
+        t.int32_data.iter().map(|&v| v as i8).collect()
+    } else {
+        t.raw_data.iter().map(|&b| b as i8).collect()
+    };
+    (values.len() == n).then_some((dims, values))
+}
+
+/// An integer tensor (`UINT8` 2, `INT8` 3, `INT32` 6) as i64 values.
+fn int_tensor(t: &pb::TensorProto) -> Option<Vec<i64>> {
+    let n: usize = t.dims.iter().map(|&d| d.max(0) as usize).product();
+    let values: Vec<i64> = match t.data_type {
+        2 | 3 | 6 if !t.int32_data.is_empty() => t.int32_data.iter().map(|&v| v as i64).collect(),
+        2 => t.raw_data.iter().map(|&b| b as i64).collect(),
+        3 => t.raw_data.iter().map(|&b| b as i8 as i64).collect(),
+        6 => t
+            .raw_data
+            .chunks_exact(4)
+            .map(|c| i32::from_le_bytes([c[0], c[1], c[2], c[3]]) as i64)
+            .collect(),
+        _ => return None,
+    };
+    (values.len() == n).then_some(values)
+}
+
 fn attr<'a>(node: &'a pb::NodeProto, name: &str) -> Option<&'a pb::AttributeProto> {
     node.attribute.iter().find(|a| a.name == name)
 }
@@ -144,19 +212,30 @@ impl CnnWeights {
             .first()
             .map(|i| i.name.clone())
             .ok_or_else(|| err("no graph input".into()))?;
-        let mut inits: HashMap<&str, (Vec<usize>, Vec<f32>)> = HashMap::new();
+        let mut inits: HashMap<String, (Vec<usize>, Vec<f32>)> = HashMap::new();
+        let mut raw: HashMap<&str, &pb::TensorProto> = HashMap::new();
         for t in &graph.initializer {
+            raw.insert(t.name.as_str(), t);
             if let Some(v) = f32_tensor(t) {
-                inits.insert(t.name.as_str(), v);
+                inits.insert(t.name.clone(), v);
             }
         }
+        // QDQ files: the s8 weights behind each dequantised weight tensor, the u8 grid of each rounded
+        // activation, and per layer the grid of its input, its weights and the grid of its raw output.
+        let mut saw_qdq = false;
+        let mut qweights: HashMap<String, (Vec<i8>, Vec<f32>)> = HashMap::new();
+        let mut grids: HashMap<String, QuantGrid> = HashMap::new();
+        let mut layer_in_grid: Vec<Option<QuantGrid>> = Vec::new();
+        let mut layer_qw: Vec<Option<(Vec<i8>, Vec<f32>)>> = Vec::new();
+        let mut conv_out_grid: HashMap<usize, QuantGrid> = HashMap::new();
         let mut consts: HashMap<String, Vec<f32>> = HashMap::new();
         let mut syms: HashMap<String, Sym> = HashMap::new();
         syms.insert(input.clone(), Sym::Input);
         let mut layers: Vec<ConvLayer> = Vec::new();
         let mut layer_inputs: Vec<Sym> = Vec::new();
         let mut base: Option<(usize, Vec<f32>)> = None;
-        let mut tail_consts: Vec<f32> = Vec::new();
+        // (operator, output tensor, constant) of each Add/Mul of the heads.
+        let mut tail_consts: Vec<(&str, &str, f32)> = Vec::new();
         let mut tanh_count = 0;
         let sym = |syms: &HashMap<String, Sym>, name: &str| -> Sym {
             syms.get(name).cloned().unwrap_or(Sym::Meta)
@@ -175,11 +254,94 @@ impl CnnWeights {
                     }
                     Sym::Meta
                 }
-                "QuantizeLinear" | "DequantizeLinear" | "QLinearConv" | "ConvInteger" => {
+                "QLinearConv" | "ConvInteger" => {
                     return Err(err(format!(
-                        "{} is quantised; the GPU and the native CPU engine run the f32 model files (choose precision f32)",
+                        "{} is a QOperator int8 convolution; the native CPU engine runs the f32 and int8 QDQ \
+                         files",
                         where_()
                     )))
+                }
+                "QuantizeLinear" | "DequantizeLinear" => {
+                    saw_qdq = true;
+                    let x = node.input.first().map(String::as_str).unwrap_or_default();
+                    let out_name = node.output.first().cloned().unwrap_or_default();
+                    let scale = node
+                        .input
+                        .get(1)
+                        .and_then(|n| inits.get(n.as_str()))
+                        .map(|v| v.1.clone())
+                        .ok_or_else(|| err(format!("{}: no f32 scale", where_())))?;
+                    let zp = match node.input.get(2).filter(|n| !n.is_empty()) {
+                        Some(n) => Some(
+                            raw.get(n.as_str())
+                                .copied()
+                                .ok_or_else(|| err(format!("{}: zero point", where_())))?,
+                        ),
+                        None => None,
+                    };
+                    if let (true, Some(t)) = (op == "DequantizeLinear", raw.get(x).copied()) {
+                        // A constant: s8 weights or i32 bias.
+                        let zps = zp.and_then(int_tensor).unwrap_or_default();
+                        let dims: Vec<usize> = t.dims.iter().map(|&d| d.max(0) as usize).collect();
+                        if let Some((dims, q)) = i8_tensor(t) {
+                            let c_out = dims.first().copied().unwrap_or(0);
+                            let per = q.len() / c_out.max(1);
+                            let scales: Vec<f32> = match scale.len() {
+                                1 => vec![scale[0]; c_out],
+                                n if n == c_out => scale.clone(),
+                                _ => return Err(err(format!("{}: weight scales", where_()))),
+                            };
+                            if zps.iter().any(|&z| z != 0) || dims.len() != 4 {
+                                return Err(err(format!(
+                                    "{}: expected symmetric s8 weights [O, I, kH, kW]",
+                                    where_()
+                                )));
+                            }
+                            let f: Vec<f32> = q
+                                .iter()
+                                .enumerate()
+                                .map(|(i, &v)| v as f32 * scales[i / per.max(1)])
+                                .collect();
+                            inits.insert(out_name.clone(), (dims, f));
+                            qweights.insert(out_name, (q, scales));
+                        } else if let (6, Some(q), [sc]) = (t.data_type, int_tensor(t), &scale[..]) {
+                            let z = zps.first().copied().unwrap_or(0);
+                            let f = q.iter().map(|&v| (v - z) as f32 * sc).collect();
+                            inits.insert(out_name, (dims, f));
+                        } else {
+                            return Err(err(format!(
+                                "{}: dequantised constant of type {}",
+                                where_(),
+                                t.data_type
+                            )));
+                        }
+                        Sym::Meta
+                    } else {
+                        // An activation rounded to a u8 grid: the same tensor for the pattern.
+                        let grid = match (op, grids.get(x)) {
+                            ("DequantizeLinear", Some(g)) => *g,
+                            _ => {
+                                let z = zp.filter(|t| t.data_type == 2).and_then(int_tensor);
+                                match (&scale[..], z.as_deref()) {
+                                    ([s], Some([z])) if s.is_finite() && *s > 0.0 => QuantGrid {
+                                        scale: *s,
+                                        zero_point: *z as u8,
+                                    },
+                                    _ => {
+                                        return Err(err(format!(
+                                            "{}: expected a per-tensor u8 activation grid",
+                                            where_()
+                                        )))
+                                    }
+                                }
+                            }
+                        };
+                        if let (Some(Sym::Conv(i)), "QuantizeLinear") = (ins.first(), op) {
+                            conv_out_grid.insert(*i, grid);
+                        }
+                        grids.insert(out_name, grid);
+                        ins.first().cloned().unwrap_or(Sym::Meta)
+                    }
                 }
                 _ if !ins.iter().any(is_act) && op != "Conv" => Sym::Meta,
                 "Sub" => {
@@ -260,6 +422,8 @@ impl CnnWeights {
                             weights,
                             bias,
                         });
+                        layer_in_grid.push(grids.get(&node.input[0]).copied());
+                        layer_qw.push(node.input.get(1).and_then(|n| qweights.get(n)).cloned());
                         layer_inputs.push(ins[0].clone());
                         Sym::Conv(layers.len() - 1)
                     }
@@ -296,8 +460,13 @@ impl CnnWeights {
                     }
                     if matches!(op, "Add" | "Mul") {
                         for n in node.input.iter().skip(1) {
-                            if let Some([v]) = consts.get(n).map(|v| v.as_slice()) {
-                                tail_consts.push(*v);
+                            if let Some([v]) = consts
+                                .get(n)
+                                .or(inits.get(n.as_str()).map(|v| &v.1))
+                                .map(|v| v.as_slice())
+                            {
+                                let out = node.output.first().map_or("", String::as_str);
+                                tail_consts.push((op, out, *v));
                             }
                         }
                     }
@@ -375,12 +544,28 @@ impl CnnWeights {
         let output = match kind {
             ModelKind::Hologram => {
                 // tanh heads: Add 1 then Mul by the scale, per head (constants in graph order).
-                let [one_a, amp, one_p, phs] = tail_consts[..] else {
-                    return Err(err(format!("heads: constants {tail_consts:?}, expected 4")));
+                // Each head is (tanh + 1)·scale; the Mul of a head writes the graph output of its name
+                // (amplitude first, phase second), in whatever order the file lists the nodes.
+                let outputs: Vec<&str> = graph.output.iter().map(|o| o.name.as_str()).collect();
+                let scale_of = |name: Option<&&str>| {
+                    tail_consts
+                        .iter()
+                        .find(|(op, out, _)| *op == "Mul" && Some(out) == name)
+                        .map(|t| t.2)
+                };
+                let ones = tail_consts
+                    .iter()
+                    .filter(|(op, _, v)| *op == "Add" && *v == 1.0)
+                    .count();
+                let (Some(amp), Some(phs)) = (scale_of(outputs.first()), scale_of(outputs.get(1)))
+                else {
+                    return Err(err(format!(
+                        "heads: constants {tail_consts:?}, expected a scale for each of {outputs:?}"
+                    )));
                 };
                 if tanh_count != 2
-                    || one_a != 1.0
-                    || one_p != 1.0
+                    || ones != 2
+                    || tail_consts.len() != 4
                     || last.c_out != 6
                     || base.is_some()
                 {
@@ -402,11 +587,35 @@ impl CnnWeights {
                 CnnOutput::Prefilter { taps, base }
             }
         };
+        let quant = if saw_qdq {
+            let mut q = Vec::with_capacity(n);
+            for i in 0..n {
+                let missing = |what: &str| err(format!("int8 file: layer {i} has no {what}"));
+                let (weights, weight_scales) =
+                    layer_qw[i].clone().ok_or_else(|| missing("s8 weights"))?;
+                let input = layer_in_grid[i].ok_or_else(|| missing("u8 input grid"))?;
+                let output = match i + 1 < n {
+                    true => layer_in_grid[i + 1],
+                    false => conv_out_grid.get(&i).copied(),
+                }
+                .ok_or_else(|| missing("u8 output grid"))?;
+                q.push(LayerQuant {
+                    weights,
+                    weight_scales,
+                    input,
+                    output,
+                });
+            }
+            Some(CnnQuant { layers: q })
+        } else {
+            None
+        };
         Ok(Self {
             in_channels,
             input_offset,
             layers,
             output,
+            quant,
         })
     }
 
@@ -451,9 +660,9 @@ mod tests {
 
     #[test]
     fn other_graphs_are_refused_naming_the_node() {
-        let qdq = embedded::hologram_model(8, Precision::Int8Qdq, &config()).unwrap();
-        let err = CnnWeights::from_model(&qdq).unwrap_err().to_string();
-        assert!(err.contains("quantised") && err.contains("f32"), "{err}");
+        let qop = embedded::hologram_model(8, Precision::Int8QOperator, &config()).unwrap();
+        let err = CnnWeights::from_model(&qop).unwrap_err().to_string();
+        assert!(err.contains("QOperator"), "{err}");
         let f32 = embedded::hologram_model(8, Precision::F32, &config()).unwrap();
         let good = f32.onnx_graph().clone();
         // Rewire one residual connection: layer 5 reads y_4 + y_0 instead of y_4 + s_3.
@@ -497,5 +706,68 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("Sigmoid"), "{err}");
+    }
+
+    #[test]
+    fn a_qdq_file_reads_as_the_f32_network_with_its_int8_grids() {
+        for (kind, qdq, f32) in [
+            (
+                ModelKind::Hologram,
+                embedded::hologram_model(8, Precision::Int8Qdq, &config()).unwrap(),
+                embedded::hologram_model(8, Precision::F32, &config()).unwrap(),
+            ),
+            (
+                ModelKind::PreFilter,
+                embedded::prefilter_model(6, Precision::Int8Qdq, &config()).unwrap(),
+                embedded::prefilter_model(6, Precision::F32, &config()).unwrap(),
+            ),
+        ] {
+            let q = CnnWeights::from_model(&qdq).unwrap();
+            let f = CnnWeights::from_model(&f32).unwrap();
+            assert!(f.quant.is_none());
+            let quant = q.quant.as_ref().expect("QDQ grids");
+            assert_eq!(quant.layers.len(), f.layers.len(), "{kind:?}");
+            assert_eq!(
+                (q.in_channels, q.input_offset),
+                (f.in_channels, f.input_offset)
+            );
+            for (i, ((lq, lf), g)) in q
+                .layers
+                .iter()
+                .zip(&f.layers)
+                .zip(&quant.layers)
+                .enumerate()
+            {
+                assert_eq!((lq.c_in, lq.c_out), (lf.c_in, lf.c_out));
+                // The dequantised weights are the s8 codes times their scale, and within half a step of the
+                // f32 file's weights (the file was quantised from them).
+                let per = lq.c_in * 9;
+                for (j, (&wq, &wf)) in lq.weights.iter().zip(&lf.weights).enumerate() {
+                    let s = g.weight_scales[j / per];
+                    assert_eq!(wq, g.weights[j] as f32 * s);
+                    assert!(
+                        (wq - wf).abs() <= 0.5 * s * 1.001,
+                        "{kind:?} layer {i}: {wq} vs {wf}"
+                    );
+                }
+                for (bq, bf) in lq.bias.iter().zip(&lf.bias) {
+                    assert!((bq - bf).abs() < 1e-3 * bf.abs().max(1.0), "{bq} vs {bf}");
+                }
+                // Layer i writes what layer i + 1 reads.
+                if let Some(next) = quant.layers.get(i + 1) {
+                    assert_eq!(g.output, next.input);
+                }
+            }
+            // Hidden activations after a ReLU are ≥ 0: their grids start at code 0.
+            assert_eq!(quant.layers[1].input.zero_point, 0, "{kind:?}");
+        }
+        // The hologram CNN's centred input x − 0.5 spans [−0.5, 0.5]: zero point 128, 1/255 per step.
+        let q = CnnWeights::from_model(
+            &embedded::hologram_model(8, Precision::Int8Qdq, &config()).unwrap(),
+        )
+        .unwrap();
+        let g0 = q.quant.unwrap().layers[0].input;
+        assert_eq!(g0.zero_point, 128);
+        assert!((g0.scale - 1.0 / 255.0).abs() < 1e-6, "{g0:?}");
     }
 }

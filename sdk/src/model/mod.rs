@@ -138,11 +138,13 @@ impl std::fmt::Display for CnnLayout {
 ///
 /// - [`CnnEngine::Native`]: our direct 3×3 convolution kernels (`tensorholo-kernels`: AVX-512, AVX2+FMA,
 ///   NEON or portable scalar rows, chosen at run time from the CPU's features), row bands on the plan's own
-///   threads. f32 model files; agrees with tract to float rounding (`sdk/src/cnn/tests.rs`).
+///   threads. f32 files (agree with tract to float rounding) and int8 QDQ files (u8 × s8 kernels, each layer's
+///   convolution, ReLU, residual and requantisation fused: within the models' int8 tolerance of tract's
+///   node-by-node execution; `sdk/src/cnn/tests.rs`).
 /// - [`CnnEngine::Tract`]: tract's optimised plans (any file that passes the contract, int8 included).
-/// - [`CnnEngine::Auto`] (the default): for an f32 file, both are timed at session creation on this
-///   machine ([`timing_resolution`]) and the faster runs; other files run on tract. The
-///   choice and the timings are in [`PlanReport`].
+/// - [`CnnEngine::Auto`] (the default): where the native engine can run the file, both are timed at session
+///   creation on this machine ([`timing_resolution`]) and the faster runs; int8 QOperator files run on
+///   tract. The choice and the timings are in [`PlanReport`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum CnnEngine {
@@ -211,7 +213,7 @@ pub fn set_cnn_threads(threads: usize) -> crate::Result<()> {
 }
 
 pub use contract::{head_to_phasor, heads_to_field};
-pub use graph::{CnnOutput, CnnWeights, ConvLayer};
+pub use graph::{CnnOutput, CnnQuant, CnnWeights, ConvLayer, LayerQuant, QuantGrid};
 pub use metadata::{
     ModelConfig, ModelKind, ModelMetadata, FORMAT_VERSION, METADATA_PREFIX,
     PREFILTER_FORMAT_VERSION,
