@@ -232,3 +232,51 @@ fn redwood_camera_buffers_equal_load_rgbd() {
         Array3::from_shape_fn((3, w, h), |(c, y, x)| expected.amplitude[[c, h - 1 - x, y]]);
     assert_eq!(got, turned);
 }
+
+/// The native engine's int8 path on a real photo loses no more against f32 than tract's execution of the same
+/// int8 QDQ file: the PSNR of each int8 engine's CNN output (amplitude and phase heads of the hologram CNN)
+/// against the f32 CNN's, native within 0.1 dB of tract (or better).
+#[test]
+fn native_int8_is_as_close_to_f32_as_tract_int8_on_a_real_photo() {
+    use tensorholo::cnn::{cnn_plan, CnnEngine};
+    use tensorholo::model::{embedded, ModelConfig, PlanRequest, Precision, ThreadCount};
+    let options = LoadOptions {
+        size: Some((256, 192)),
+        ..LoadOptions::default()
+    };
+    let (frame, _) = load_rgbd(
+        &shared_data("iphone_portrait_vase/derived_rgb_576x768.png"),
+        &shared_data("iphone_portrait_vase/disparity_aux_576x768.jpg"),
+        DepthEncoding::IphoneDisparity,
+        &options,
+    )
+    .expect("loads");
+    let (h, w) = (frame.height(), frame.width());
+    let mut input = Array3::zeros((4, h, w));
+    tensorholo::model::contract::pack_rgbd(&frame, input.view_mut()).unwrap();
+    let cfg = ModelConfig::default();
+    let request = PlanRequest {
+        threads: ThreadCount::Fixed(2),
+        ..PlanRequest::default()
+    };
+    let run = |precision, engine| {
+        let model = embedded::hologram_model(8, precision, &cfg).unwrap();
+        let (mut plan, report) = cnn_plan(&model, h, w, engine, request).unwrap();
+        assert_eq!(report.engine, engine);
+        let (a, p) = plan.run_outputs(input.view()).unwrap();
+        ndarray::concatenate![ndarray::Axis(0), a, p]
+    };
+    let f32_out = run(Precision::F32, CnnEngine::Native);
+    let psnr = |x: &Array3<f32>| {
+        let range = std::f32::consts::SQRT_2;
+        tensorholo::metrics::psnr(f32_out.view(), x.view(), range).unwrap()
+    };
+    let native = psnr(&run(Precision::Int8Qdq, CnnEngine::Native));
+    let tract = psnr(&run(Precision::Int8Qdq, CnnEngine::Tract));
+    println!("int8 QDQ heads vs f32: native {native:.2} dB, tract {tract:.2} dB");
+    assert!(native.is_finite() && native > 25.0, "{native}");
+    assert!(
+        native >= tract - 0.1,
+        "native {native} dB, tract {tract} dB"
+    );
+}
