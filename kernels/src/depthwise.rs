@@ -160,53 +160,17 @@ mod tests {
     #[test]
     fn bad_input_is_an_error() {
         let mut out = vec![0.0; 12];
-        assert!(depthwise(
-            &[0.0; 12],
-            1,
-            3,
-            4,
-            &[0.0; 16],
-            4,
-            &mut out,
-            false,
-            &mut Vec::new()
-        )
-        .is_err());
-        assert!(depthwise(
-            &[0.0; 11],
-            1,
-            3,
-            4,
-            &[0.0; 9],
-            3,
-            &mut out,
-            false,
-            &mut Vec::new()
-        )
-        .is_err());
-        assert!(depthwise(
-            &[0.0; 12],
-            1,
-            3,
-            4,
-            &[0.0; 8],
-            3,
-            &mut out,
-            false,
-            &mut Vec::new()
-        )
-        .is_err());
-        assert!(depthwise(
-            &[0.0; 12],
-            1,
-            3,
-            4,
-            &[0.0; 9],
-            3,
-            &mut out[1..],
-            false,
-            &mut Vec::new()
-        )
-        .is_err());
+        // A 1×3×4 image: (input, kernel, k, output) with one thing wrong each.
+        let refused = |input: &[f32], kernel: &[f32], k: usize, out: &mut [f32]| {
+            depthwise(input, 1, 3, 4, kernel, k, out, false, &mut Vec::new()).is_err()
+        };
+        assert!(refused(&[0.0; 12], &[0.0; 16], 4, &mut out), "even k");
+        assert!(refused(&[0.0; 11], &[0.0; 9], 3, &mut out), "short input");
+        assert!(refused(&[0.0; 12], &[0.0; 8], 3, &mut out), "short kernel");
+        assert!(
+            refused(&[0.0; 12], &[0.0; 9], 3, &mut out.clone()[1..]),
+            "short output"
+        );
+        assert!(!refused(&[0.0; 12], &[0.0; 9], 3, &mut out), "a good call");
     }
 }

@@ -21,7 +21,7 @@
 
 use std::sync::Arc;
 
-use ndarray::{Array3, ArrayView3};
+use ndarray::{Array3, ArrayView3, CowArray, Ix3};
 use rayon::prelude::*;
 use tensorholo_kernels::buffer::Element;
 use tensorholo_kernels::{
@@ -136,14 +136,7 @@ impl NativePlan {
             // Layer i reads s_i (the input for i = 0), adds s_{i−1} where i + 1 is odd and ≥ 3, writes s_{i+1}.
             let out = i % 3;
             let residual = (i + 1 >= 3 && (i + 1) % 2 == 1).then_some((i + 1) % 3);
-            let [a, b, c] = &mut self.ring;
-            let (dst, others): (&mut RowPlanar<f32>, [&RowPlanar<f32>; 2]) = match out {
-                0 => (a, [b, c]),
-                1 => (b, [a, c]),
-                _ => (c, [a, b]),
-            };
-            // The ring slot k (≠ out) among the two others, in slot order.
-            let slot = |k: usize| if k < out { others[k] } else { others[k - 1] };
+            let (dst, slot) = ring_slots(&mut self.ring, out);
             let src = if i == 0 { &self.x } else { slot((i + 2) % 3) };
             let mut inputs = Inputs::new(src);
             if let Some(r) = residual {
@@ -165,6 +158,52 @@ impl NativePlan {
             pool,
         )
     }
+}
+
+/// The ring slot `out` to write, and a reader of the other slots by index (`slot(k)`, `k ≠ out`).
+pub(super) fn ring_slots<'a, T: Element>(
+    ring: &'a mut [RowPlanar<T>; 3],
+    out: usize,
+) -> (
+    &'a mut RowPlanar<T>,
+    impl Fn(usize) -> &'a RowPlanar<T> + 'a,
+) {
+    let [a, b, c] = ring;
+    let (dst, others): (&mut RowPlanar<T>, [&RowPlanar<T>; 2]) = match out {
+        0 => (a, [b, c]),
+        1 => (b, [a, c]),
+        _ => (c, [a, b]),
+    };
+    (
+        dst,
+        move |k: usize| if k < out { others[k] } else { others[k - 1] },
+    )
+}
+
+/// `input` in standard layout (a view when it already is), checked against the plan's `[C, H, W]`.
+/// Errors: [`HoloError::ShapeMismatch`].
+pub(super) fn standard_input(
+    input: ArrayView3<'_, f32>,
+    want: (usize, usize, usize),
+) -> Result<CowArray<'_, f32, Ix3>> {
+    if input.dim() != want {
+        return Err(HoloError::ShapeMismatch {
+            what: "CNN input [C, H, W]".into(),
+            expected: vec![want.0, want.1, want.2],
+            got: input.shape().to_vec(),
+        });
+    }
+    Ok(if input.is_standard_layout() {
+        CowArray::from(input)
+    } else {
+        CowArray::from(input.as_standard_layout().into_owned())
+    })
+}
+
+/// The planar `[C][H][W]` slice of a standard-layout array.
+pub(super) fn planar_slice<'a>(a: &'a CowArray<'_, f32, Ix3>) -> Result<&'a [f32]> {
+    a.as_slice()
+        .ok_or_else(|| HoloError::Internal("native CNN: standard layout".into()))
 }
 
 /// A planned convolution that writes row bands (f32 or u8 activations).
@@ -325,18 +364,8 @@ impl CnnPlan for NativePlan {
     }
 
     fn run_outputs(&mut self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
-        let want = self.input_dim();
-        if input.dim() != want {
-            return Err(HoloError::ShapeMismatch {
-                what: "CNN input [C, H, W]".into(),
-                expected: vec![want.0, want.1, want.2],
-                got: input.shape().to_vec(),
-            });
-        }
-        let standard = input.as_standard_layout();
-        let planar = standard
-            .as_slice()
-            .ok_or_else(|| HoloError::Internal("native CNN: standard layout".into()))?;
+        let standard = standard_input(input, self.input_dim())?;
+        let planar = planar_slice(&standard)?;
         let affine = Affine {
             scale: &self.net.scale,
             offset: &self.net.offset,

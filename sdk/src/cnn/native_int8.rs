@@ -25,7 +25,7 @@ use std::sync::Arc;
 use ndarray::{Array3, ArrayView3};
 use tensorholo_kernels::{Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, QuantU8, RowPlanar};
 
-use super::native::{finish_outputs, pool, run_layer};
+use super::native::{finish_outputs, planar_slice, pool, ring_slots, run_layer, standard_input};
 use super::{kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnQuant, CnnWeights, QuantGrid};
@@ -165,14 +165,8 @@ impl NativeInt8Plan {
         for (i, conv) in net.layers.iter().enumerate().take(n - 1) {
             let out = i % 3;
             let residual = (i + 1 >= 3 && (i + 1) % 2 == 1).then_some((i + 1) % 3);
-            let [a, b, c] = &mut self.ring;
-            let (dst, others): (&mut RowPlanar<u8>, [&RowPlanar<u8>; 2]) = match out {
-                0 => (a, [b, c]),
-                1 => (b, [a, c]),
-                _ => (c, [a, b]),
-            };
+            let (dst, slot) = ring_slots(&mut self.ring, out);
             dst.set_zero_point(quant.layers[i].output.zero_point);
-            let slot = |k: usize| if k < out { others[k] } else { others[k - 1] };
             let src = if i == 0 { &self.x } else { slot((i + 2) % 3) };
             let mut inputs = Inputs::new(src);
             if let Some(r) = residual {
@@ -194,18 +188,8 @@ impl CnnPlan for NativeInt8Plan {
     }
 
     fn run_outputs(&mut self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
-        let want = self.input_dim();
-        if input.dim() != want {
-            return Err(HoloError::ShapeMismatch {
-                what: "CNN input [C, H, W]".into(),
-                expected: vec![want.0, want.1, want.2],
-                got: input.shape().to_vec(),
-            });
-        }
-        let standard = input.as_standard_layout();
-        let planar = standard
-            .as_slice()
-            .ok_or_else(|| HoloError::Internal("native CNN: standard layout".into()))?;
+        let standard = standard_input(input, self.input_dim())?;
+        let planar = planar_slice(&standard)?;
         let net = self.net.clone();
         let quant = net.quant()?;
         let n = net.layers.len();
