@@ -280,3 +280,74 @@ fn native_int8_is_as_close_to_f32_as_tract_int8_on_a_real_photo() {
         "native {native} dB, tract {tract} dB"
     );
 }
+
+/// The paper's quality protocol (Table 2: amplitude and dynamic focal stack against the SM-LBM ground truth) on
+/// what the SLM displays for a real photo, with both CNNs (hologram + 6 mm pre-filter) in f32 and in int8 QDQ
+/// on the native engine: int8 within 0.1 dB of f32.
+#[test]
+fn native_int8_displayed_hologram_is_within_a_tenth_of_a_db_of_f32() {
+    use tensorholo::cnn::CnnEngine;
+    use tensorholo::evaluation::{focal_depths, table2};
+    use tensorholo::model::Precision;
+    let options = LoadOptions {
+        size: Some((192, 256)),
+        ..LoadOptions::default()
+    };
+    let (frame, _) = load_rgbd(
+        &shared_data("redwood_livingroom_seq/color/00000.jpg"),
+        &shared_data("redwood_livingroom_seq/depth/00000.png"),
+        DepthEncoding::Millimetres16,
+        &options,
+    )
+    .expect("loads");
+    let layer = SceneLayer {
+        amplitude: frame.amplitude.view(),
+        depth: frame.depth.view(),
+        valid: None,
+    };
+    let gt = ReferencePipeline::default()
+        .run(&[layer], &|_, _| {})
+        .expect("SM-LBM")
+        .midpoint;
+    let depths = focal_depths(frame.depth.view(), 200, 15, 5, 3).unwrap();
+    let config = PipelineConfig {
+        offset_m: 6e-3,
+        cnn_engine: CnnEngine::Native,
+        backend: tensorholo::pipeline::Backend::Cpu,
+        ..PipelineConfig::default()
+    };
+    let score = |precision| {
+        let selection = ModelSelection {
+            precision,
+            prefilter: PrefilterMode::Required,
+            ..ModelSelection::default()
+        };
+        let pipeline = HologramPipeline::embedded(&selection, config).expect("models");
+        let mut session = pipeline
+            .session(frame.height(), frame.width())
+            .expect("session");
+        let out = session.render(&frame).expect("frame");
+        let shown = tensorholo::optics::post_encoding_midpoint(
+            out.phase.view(),
+            out.amplitude_scale,
+            &config.optics,
+            config.offset_m,
+            config.options,
+        )
+        .unwrap();
+        table2(
+            shown.view(),
+            gt.view(),
+            &config.optics,
+            config.options,
+            &depths,
+        )
+        .unwrap()
+    };
+    let f32_scores = score(Precision::F32);
+    let int8_scores = score(Precision::Int8Qdq);
+    println!("displayed, f32: {f32_scores:?}\ndisplayed, int8 QDQ (native): {int8_scores:?}");
+    assert!(f32_scores.psnr_fs > 15.0, "{f32_scores:?}");
+    assert!((int8_scores.psnr_amp - f32_scores.psnr_amp).abs() <= 0.1);
+    assert!((int8_scores.psnr_fs - f32_scores.psnr_fs).abs() <= 0.1);
+}
