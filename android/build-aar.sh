@@ -28,6 +28,13 @@ die() {
   exit 1
 }
 
+# -- The JNA the .aar is built against (tensorholo/build.gradle.kts): 16 KB-aligned libjnidispatch.so from
+# 5.17.0, and 5.18.1 fixes a deadlock (#1681) and a race (#1686) seen with multi-threaded uniffi callbacks.
+jna="$(sed -n 's/^val jnaVersion = "\([0-9.]*\)".*/\1/p' "$here/tensorholo/build.gradle.kts")"
+[ -n "$jna" ] || die "no 'val jnaVersion = \"…\"' in tensorholo/build.gradle.kts"
+[ "$(printf '%s\n' 5.18.1 "$jna" | sort -V | head -1)" = 5.18.1 ] ||
+  die "JNA $jna in tensorholo/build.gradle.kts is older than 5.18.1 (deadlock #1681, race #1686; 16 KB pages need >= 5.17.0)"
+
 # -- Tools first: fail before any build.
 command -v rustup >/dev/null 2>&1 || die "rustup not found (https://rustup.rs)"
 cargo ndk --version >/dev/null 2>&1 || die "cargo-ndk not found: cargo install cargo-ndk"

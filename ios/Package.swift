@@ -24,10 +24,20 @@ let package = Package(
         // checksum: "<swift package compute-checksum TensorholoFFI.xcframework.zip>")`.
         .binaryTarget(name: "TensorholoFFI", path: "TensorholoFFI.xcframework"),
         // The generated bindings (Generated/Tensorholo.swift) and the hand-written Swift layer beside them.
+        // linkerSettings: the system frameworks the static Rust library calls. wgpu's Metal back end (the GPU
+        // path, cargo feature `gpu`, on by default) uses Metal and QuartzCore (CAMetalLayer); a static library
+        // carries no link commands of its own, so without these an app fails to link with undefined Metal / CA
+        // symbols. The rest of the library needs libSystem only (`cargo rustc … --print native-static-libs`).
         .target(
             name: "Tensorholo",
             dependencies: ["TensorholoFFI"],
-            path: "Sources/Tensorholo"
+            path: "Sources/Tensorholo",
+            linkerSettings: [
+                .linkedFramework("Metal"),
+                .linkedFramework("QuartzCore"),
+                .linkedFramework("CoreGraphics"),
+                .linkedFramework("Foundation"),
+            ]
         ),
         .testTarget(
             name: "TensorholoTests",

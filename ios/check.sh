@@ -7,9 +7,14 @@
 #     by them (or by the Swift layer): types, argument labels of initialisers/methods/functions, enum cases,
 #     members of binding-typed values, free functions; other names must be the platform's
 #     (ios/ci/platform-names.txt);
-#  3. self-test: the same check on temporary copies with one wrong name injected (a member, an enum case of
+#  3. the sample's external display (ios/ci/check-scenes.py, python3, Info.plist read as XML with plistlib): the
+#     scene manifest declares the role UIWindowSceneSessionRoleExternalDisplayNonInteractive (configuration name
+#     used by the Swift, delegate class declared as a UIWindowSceneDelegate) with multiple scenes on, and the
+#     Swift sets `overscanCompensation = .none`;
+#  4. self-test: the same checks on temporary copies with one wrong name injected (a member, an enum case of
 #     the wrong enum, an argument label, a free function, a type, a method, a case in a tuple, a label in the
-#     sample app) and one syntax error must fail, naming the wrong name.
+#     sample app), one syntax error, a scene manifest without the external-display role, multiple scenes off
+#     and the overscan left at `.scale` must fail, naming the problem.
 # The C header and module map of the bindings are checked by bindings/tests/swift/check.sh; compiling the Swift,
 # the XCFramework, the XCTests and the sample need a Mac (ios/README.md, ios/ci/macos-workflow.yml).
 #
@@ -54,9 +59,13 @@ if ! (cd "$ci" && node --input-type=module -e "import 'tree-sitter'; import 'tre
   skip_or_fail "the tree-sitter native addons do not load on $(uname -sm) with node $(node --version) (no prebuilt binary?)"
 fi
 
-check() { node "$ci/check-swift.mjs" --ios "$1" --generated "$generated" --platform-names "$ci/platform-names.txt"; }
+command -v python3 >/dev/null 2>&1 || skip_or_fail "python3 is not installed (Info.plist check)"
+check() {
+  node "$ci/check-swift.mjs" --ios "$1" --generated "$generated" --platform-names "$ci/platform-names.txt" &&
+    python3 "$ci/check-scenes.py" "$1"
+}
 
-echo "== Swift sources: parse + binding names"
+echo "== Swift sources: parse + binding names; the sample's external-display scene and overscan"
 check "$here"
 
 # Self-test: each line is FILE|TEXT|REPLACEMENT|what the failure must mention. TEXT must occur in FILE (this
@@ -64,7 +73,7 @@ check "$here"
 echo "== self-test: injected mistakes must fail"
 injections=(
   "Tests/TensorholoTests/SwiftLayerTests.swift|frame.colorRowStride|frame.colorRowStrid|RgbdFrame has no member \`colorRowStrid\`"
-  "Sources/Tensorholo/RgbdFrame+ARKit.swift|colorFormat: .rgba8|colorFormat: .metresF32|\`.metresF32\` is not a case or static member of ColorFormat"
+  "Sources/Tensorholo/RgbdFrame+ARKit.swift|colorFormat: .bgra8|colorFormat: .metresF32|\`.metresF32\` is not a case or static member of ColorFormat"
   "Tests/TensorholoTests/ErrorTests.swift|offsetMm: .nan|offsetMM: .nan|(width:height:offsetMM:)"
   "Sources/Tensorholo/SlmPatterns+CoreGraphics.swift|try packRgba(|try packRGBA(|function \`packRGBA\`"
   "Tests/TensorholoTests/GeneratorTests.swift|try RgbdFrame(colorBuffer|try RgbFrame(colorBuffer|type \`RgbFrame\`"
@@ -72,6 +81,10 @@ injections=(
   "Tests/TensorholoTests/SwiftLayerTests.swift|(.right, .deg90, 90)|(.right, .deg91, 90)|\`.deg91\`"
   "Example/Sources/HologramModel.swift|depthData: depth.depthData|depthDat: depth.depthData|(sampleBuffer:depthDat:orientation:)"
   "Sources/Tensorholo/PatternsHandler.swift|handleError(error)|handleError(error|missing )"
+  "Example/Info.plist|<key>UIWindowSceneSessionRoleExternalDisplayNonInteractive</key>|<key>UIWindowSceneSessionRoleApplication</key>|declares no UIWindowSceneSessionRoleExternalDisplayNonInteractive"
+  "Example/Info.plist|<key>UIApplicationSupportsMultipleScenes</key>|<key>UIApplicationSupportsMultipleScenesOff</key>|UIApplicationSupportsMultipleScenes must be true"
+  "Example/Info.plist|.ExternalDisplaySceneDelegate</string>|.ExternalDisplayDelegate</string>|declares no class ExternalDisplayDelegate"
+  "Example/Sources/TensorholoSampleApp.swift|screen.overscanCompensation = .none|screen.overscanCompensation = .scale|no \`overscanCompensation = .none\`"
 )
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT

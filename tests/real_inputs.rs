@@ -191,6 +191,7 @@ fn redwood_camera_buffers_equal_load_rgbd() {
             row_stride: 0,
         },
         rotation: Rotation::Deg0,
+        color_crop: None,
     };
     let options = FrameOptions {
         fit: Fit::Stretch,

@@ -9,7 +9,8 @@ plugins {
 
 android {
     namespace = "org.tensorholo.sample"
-    compileSdk = 35
+    // 36: ARCore 1.57's compileSdk (Google's ARCore samples use 36 since 1.50); Display.isInternal is API 36.
+    compileSdk = 36
 
     defaultConfig {
         applicationId = "org.tensorholo.sample"
@@ -17,6 +18,12 @@ android {
         targetSdk = 35
         versionCode = 1
         versionName = "1.0"
+        // libtensorholo_ffi.so exists for these ABIs only (../build-aar.sh): without the filter the APK would
+        // also carry JNA's 32-bit libjnidispatch.so and install on 32-bit devices, then fail to load the
+        // library at run time. With it, Play serves the app to 64-bit devices (and x86_64 emulators) only.
+        ndk {
+            abiFilters += listOf("arm64-v8a", "x86_64")
+        }
     }
 
     buildTypes {

@@ -16,14 +16,22 @@ val workspaceVersion: String =
         .find(repoRoot.resolve("Cargo.toml").readText())?.groupValues?.get(1)
         ?: error("no version in [workspace.package] of ${repoRoot.resolve("Cargo.toml")}")
 
-// JNA: 5.17.0 is the first release whose libjnidispatch.so is 16 KB-page aligned on Android (Android 15+
-// devices with 16 KB pages; Google Play requires it for apps targeting SDK 35+). Linux CI runs the same
-// JVM tests with Debian's JNA 5.13 (bindings/tests/kotlin/check.sh); uniffi's bindings use no API newer.
-val jnaVersion = "5.17.0"
+// JNA: 5.17.0 was the first release whose libjnidispatch.so is 16 KB-page aligned on Android (Android 15+
+// devices with 16 KB pages; Google Play requires it for apps targeting SDK 35+); 5.18.1 keeps that and fixes
+// a deadlock (#1681) and a race (#1686) reported from multi-threaded use such as uniffi's (a stream's
+// thread calling back into Kotlin while the app calls the generator). Linux CI runs the same JVM tests with
+// Debian's JNA (bindings/tests/kotlin/check.sh); uniffi's bindings use no API newer than 5.x.
+val jnaVersion = "5.18.1"
+
+// ARCore: only for RgbdFrames.fromArFrame (ArCoreFrames.kt), compileOnly: an app that calls it has ARCore
+// itself; the others never load that class. The version the sample uses.
+val arcoreVersion = "1.57.0"
 
 android {
     namespace = "org.tensorholo"
-    compileSdk = 35
+    // 36: ARCore 1.57's own compileSdk (Google's ARCore samples build with 36 since 1.50) and the API 36
+    // names the sample uses behind version checks. minSdk stays 26.
+    compileSdk = 36
 
     defaultConfig {
         minSdk = 26
@@ -75,6 +83,7 @@ kotlin {
 dependencies {
     // The @aar carries libjnidispatch.so for every Android ABI.
     implementation("net.java.dev.jna:jna:$jnaVersion@aar")
+    compileOnly("com.google.ar:core:$arcoreVersion")
 
     // JVM unit tests: the plain jar (with the desktop libjnidispatch) instead of the aar's natives.
     testImplementation("junit:junit:4.13.2")

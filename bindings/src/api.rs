@@ -298,6 +298,38 @@ pub struct RgbdFrame {
     /// Clockwise rotation making both buffers upright; `None` (default) = none.
     #[uniffi(default = None)]
     pub rotation: Option<Rotation>,
+    /// The rectangle of the colour buffer (colour pixels, before the rotation) that covers the depth
+    /// buffer's field of view; `None` (default) = the whole colour buffer. ARCore needs it: its depth covers
+    /// the GPU texture's field of view (usually 16:9), a band of the 4:3 CPU image (Android:
+    /// `RgbdFrames.fromArFrame` fills it). Errors: [`TensorholoError::InvalidInput`] when it is empty or not
+    /// inside the colour buffer.
+    #[uniffi(default = None)]
+    pub color_crop: Option<CropRect>,
+}
+
+/// A rectangle of a colour buffer in pixels, before any rotation: columns `x .. x + width`, rows
+/// `y .. y + height` (`(x, y)` = its top-left pixel).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Record)]
+pub struct CropRect {
+    /// First column.
+    pub x: u32,
+    /// First row.
+    pub y: u32,
+    /// Columns (≥ 1).
+    pub width: u32,
+    /// Rows (≥ 1).
+    pub height: u32,
+}
+
+impl From<CropRect> for scene::CropRect {
+    fn from(c: CropRect) -> Self {
+        Self {
+            x: c.x as usize,
+            y: c.y as usize,
+            width: c.width as usize,
+            height: c.height as usize,
+        }
+    }
 }
 
 impl RgbdFrame {
@@ -319,8 +351,63 @@ impl RgbdFrame {
                 row_stride: self.depth_row_stride as usize,
             },
             rotation: self.rotation.unwrap_or(Rotation::Deg0).into(),
+            color_crop: self.color_crop.map(Into::into),
         }
     }
+}
+
+/// A camera frame as the CNN receives it ([`convert_frame`]): `width × height` pixels, upright, registered
+/// and fitted.
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct ConvertedFrame {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Linear amplitude (√ of the linear intensity, in [0, 1]): three planes R, G, B of `width · height`
+    /// values each, row-major (`3 · width · height` values).
+    pub amplitude: Vec<f32>,
+    /// Normalised depth `d` in [0, 1], 0 = near, row-major (`width · height` values); holes filled with
+    /// the farthest neighbouring depth.
+    pub depth: Vec<f32>,
+    /// Nearest depth in metres mapped to `d = 0` (the 1st percentile of the frame's valid depths).
+    pub z_near_m: Option<f64>,
+    /// Farthest depth in metres mapped to `d = 1` (the 99th percentile).
+    pub z_far_m: Option<f64>,
+}
+
+/// Converts a camera frame the way a generator does before its CNN (crop, rotation, depth to the colour
+/// grid, automatic depth range, hole filling, `fit` to `width × height`; `fit` `None` = [`Fit::Crop`]),
+/// without rendering: to check the orientation and the depth–colour registration on a device, e.g. by
+/// drawing `depth` over `amplitude`.
+///
+/// Errors: [`TensorholoError::InvalidInput`] for a `width` or `height` of 0, buffers that do not match
+/// their sizes, strides and formats, a bad `color_crop`, or a depth map without one valid pixel.
+#[uniffi::export]
+pub fn convert_frame(
+    frame: RgbdFrame,
+    width: u32,
+    height: u32,
+    fit: Option<Fit>,
+) -> Result<ConvertedFrame> {
+    guard(|| {
+        let frame = frame.into_core();
+        let options = scene::FrameOptions {
+            fit: fit.unwrap_or(Fit::Crop).into(),
+            ..scene::FrameOptions::default()
+        };
+        let (rgbd, report) = frame
+            .view()
+            .to_rgbd(height as usize, width as usize, &options)?;
+        Ok(ConvertedFrame {
+            width,
+            height,
+            amplitude: rgbd.amplitude.iter().copied().collect(),
+            depth: rgbd.depth.iter().copied().collect(),
+            z_near_m: report.range_used.map(|r| r.z_near_m as f64),
+            z_far_m: report.range_used.map(|r| r.z_far_m as f64),
+        })
+    })
 }
 
 /// Milliseconds of each stage of one frame.
@@ -773,6 +860,60 @@ mod tests {
             color_row_stride: 0,
             depth_row_stride: 0,
             rotation: None,
+            color_crop: None,
+        }
+    }
+
+    /// The crop reaches the core: the right half of a frame whose left half is black converts to a
+    /// bright frame; a crop outside the buffer is `InvalidInput` naming it.
+    #[test]
+    fn convert_frame_applies_the_colour_crop() {
+        let mut f = frame();
+        for (i, px) in f.color.chunks_mut(3).enumerate() {
+            let v = if i % 48 < 24 { 0 } else { 255 };
+            px.copy_from_slice(&[v; 3]);
+        }
+        let whole = convert_frame(f.clone(), 24, 32, Some(Fit::Stretch)).unwrap();
+        assert_eq!(
+            (whole.amplitude.len(), whole.depth.len()),
+            (3 * 24 * 32, 24 * 32)
+        );
+        assert_eq!(whole.amplitude[0], 0.0);
+        let crop = CropRect {
+            x: 24,
+            y: 0,
+            width: 24,
+            height: 32,
+        };
+        let right = convert_frame(
+            RgbdFrame {
+                color_crop: Some(crop),
+                ..f.clone()
+            },
+            24,
+            32,
+            Some(Fit::Stretch),
+        )
+        .unwrap();
+        assert!(right.amplitude.iter().all(|&a| a == 1.0));
+        // The depth ramp (0.5 → 1.5 m across the width) is untouched by the colour crop.
+        assert!(
+            (right.z_near_m.unwrap() - 0.51).abs() < 0.02,
+            "{:?}",
+            right.z_near_m
+        );
+        let bad = RgbdFrame {
+            color_crop: Some(CropRect { x: 25, ..crop }),
+            ..f
+        };
+        match convert_frame(bad, 24, 32, None) {
+            Err(TensorholoError::InvalidInput { message }) => {
+                assert!(
+                    message.contains("color_crop") && message.contains("48x32"),
+                    "{message}"
+                )
+            }
+            other => panic!("expected InvalidInput, got {other:?}"),
         }
     }
 

@@ -174,6 +174,7 @@ pub fn camera_frame(data: &[u8]) {
             row_stride: depth_stride,
         },
         rotation,
+        color_crop: None,
     };
     let options = FrameOptions {
         fit,

@@ -142,6 +142,7 @@ fn frame(color: ColorImageBuf, depth: DepthImageBuf, rotation: Rotation) -> Came
         color,
         depth,
         rotation,
+        color_crop: None,
     }
 }
 
@@ -439,6 +440,7 @@ fn crop_keeps_the_centre_at_the_target_aspect() {
             ..full.depth.view()
         },
         rotation: Rotation::Deg0,
+        color_crop: None,
     };
     let stretched = cropped
         .to_rgbd(
@@ -839,6 +841,7 @@ proptest! {
             color: ColorImage { data: &data, format, width: w, height: h, row_stride: stride },
             depth: depth.view(),
             rotation: Rotation::Deg90,
+            color_crop: None,
         };
         let ok = length_rule(len, w, h, format.bytes_per_pixel(), stride);
         let r = f.to_rgbd(3, 2, &FrameOptions::default());
@@ -871,6 +874,7 @@ proptest! {
             color: color.view(),
             depth: DepthImage { data: &data, format, width: w, height: h, row_stride: stride },
             rotation: Rotation::Deg270,
+            color_crop: None,
         };
         let ok = length_rule(len, w, h, format.bytes_per_pixel(), stride);
         prop_assert_eq!(f.depth.validate().is_ok(), ok);

@@ -56,6 +56,7 @@ fn camera_frame(h: usize, w: usize, shift: f32) -> CameraFrameBuf {
             row_stride: 0,
         },
         rotation: Rotation::Deg0,
+        color_crop: None,
     }
 }
 

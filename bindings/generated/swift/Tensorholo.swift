@@ -1439,6 +1439,210 @@ public func FfiConverterTypeBenchmarkReport_lower(_ value: BenchmarkReport) -> R
 
 
 /**
+ * A camera frame as the CNN receives it ([`convert_frame`]): `width × height` pixels, upright, registered
+ * and fitted.
+ */
+public struct ConvertedFrame: Equatable, Hashable {
+    /**
+     * Width in pixels.
+     */
+    public var width: UInt32
+    /**
+     * Height in pixels.
+     */
+    public var height: UInt32
+    /**
+     * Linear amplitude (√ of the linear intensity, in [0, 1]): three planes R, G, B of `width · height`
+     * values each, row-major (`3 · width · height` values).
+     */
+    public var amplitude: [Float]
+    /**
+     * Normalised depth `d` in [0, 1], 0 = near, row-major (`width · height` values); holes filled with
+     * the farthest neighbouring depth.
+     */
+    public var depth: [Float]
+    /**
+     * Nearest depth in metres mapped to `d = 0` (the 1st percentile of the frame's valid depths).
+     */
+    public var zNearM: Double?
+    /**
+     * Farthest depth in metres mapped to `d = 1` (the 99th percentile).
+     */
+    public var zFarM: Double?
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Width in pixels.
+         */width: UInt32, 
+        /**
+         * Height in pixels.
+         */height: UInt32, 
+        /**
+         * Linear amplitude (√ of the linear intensity, in [0, 1]): three planes R, G, B of `width · height`
+         * values each, row-major (`3 · width · height` values).
+         */amplitude: [Float], 
+        /**
+         * Normalised depth `d` in [0, 1], 0 = near, row-major (`width · height` values); holes filled with
+         * the farthest neighbouring depth.
+         */depth: [Float], 
+        /**
+         * Nearest depth in metres mapped to `d = 0` (the 1st percentile of the frame's valid depths).
+         */zNearM: Double?, 
+        /**
+         * Farthest depth in metres mapped to `d = 1` (the 99th percentile).
+         */zFarM: Double?) {
+        self.width = width
+        self.height = height
+        self.amplitude = amplitude
+        self.depth = depth
+        self.zNearM = zNearM
+        self.zFarM = zFarM
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension ConvertedFrame: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeConvertedFrame: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> ConvertedFrame {
+        return
+            try ConvertedFrame(
+                width: FfiConverterUInt32.read(from: &buf), 
+                height: FfiConverterUInt32.read(from: &buf), 
+                amplitude: FfiConverterSequenceFloat.read(from: &buf), 
+                depth: FfiConverterSequenceFloat.read(from: &buf), 
+                zNearM: FfiConverterOptionDouble.read(from: &buf), 
+                zFarM: FfiConverterOptionDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: ConvertedFrame, into buf: inout [UInt8]) {
+        FfiConverterUInt32.write(value.width, into: &buf)
+        FfiConverterUInt32.write(value.height, into: &buf)
+        FfiConverterSequenceFloat.write(value.amplitude, into: &buf)
+        FfiConverterSequenceFloat.write(value.depth, into: &buf)
+        FfiConverterOptionDouble.write(value.zNearM, into: &buf)
+        FfiConverterOptionDouble.write(value.zFarM, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeConvertedFrame_lift(_ buf: RustBuffer) throws -> ConvertedFrame {
+    return try FfiConverterTypeConvertedFrame.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeConvertedFrame_lower(_ value: ConvertedFrame) -> RustBuffer {
+    return FfiConverterTypeConvertedFrame.lower(value)
+}
+
+
+/**
+ * A rectangle of a colour buffer in pixels, before any rotation: columns `x .. x + width`, rows
+ * `y .. y + height` (`(x, y)` = its top-left pixel).
+ */
+public struct CropRect: Equatable, Hashable {
+    /**
+     * First column.
+     */
+    public var x: UInt32
+    /**
+     * First row.
+     */
+    public var y: UInt32
+    /**
+     * Columns (≥ 1).
+     */
+    public var width: UInt32
+    /**
+     * Rows (≥ 1).
+     */
+    public var height: UInt32
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * First column.
+         */x: UInt32, 
+        /**
+         * First row.
+         */y: UInt32, 
+        /**
+         * Columns (≥ 1).
+         */width: UInt32, 
+        /**
+         * Rows (≥ 1).
+         */height: UInt32) {
+        self.x = x
+        self.y = y
+        self.width = width
+        self.height = height
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension CropRect: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeCropRect: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> CropRect {
+        return
+            try CropRect(
+                x: FfiConverterUInt32.read(from: &buf), 
+                y: FfiConverterUInt32.read(from: &buf), 
+                width: FfiConverterUInt32.read(from: &buf), 
+                height: FfiConverterUInt32.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: CropRect, into buf: inout [UInt8]) {
+        FfiConverterUInt32.write(value.x, into: &buf)
+        FfiConverterUInt32.write(value.y, into: &buf)
+        FfiConverterUInt32.write(value.width, into: &buf)
+        FfiConverterUInt32.write(value.height, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeCropRect_lift(_ buf: RustBuffer) throws -> CropRect {
+    return try FfiConverterTypeCropRect.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeCropRect_lower(_ value: CropRect) -> RustBuffer {
+    return FfiConverterTypeCropRect.lower(value)
+}
+
+
+/**
  * Everything a [`HologramGenerator`] needs. Only `width` and `height` (the SLM's resolution in pixels) are
  * required; every other field has the default named in its comment.
  */
@@ -1992,6 +2196,14 @@ public struct RgbdFrame: Equatable, Hashable {
      * Clockwise rotation making both buffers upright; `None` (default) = none.
      */
     public var rotation: Rotation?
+    /**
+     * The rectangle of the colour buffer (colour pixels, before the rotation) that covers the depth
+     * buffer's field of view; `None` (default) = the whole colour buffer. ARCore needs it: its depth covers
+     * the GPU texture's field of view (usually 16:9), a band of the 4:3 CPU image (Android:
+     * `RgbdFrames.fromArFrame` fills it). Errors: [`TensorholoError::InvalidInput`] when it is empty or not
+     * inside the colour buffer.
+     */
+    public var colorCrop: CropRect?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -2028,7 +2240,14 @@ public struct RgbdFrame: Equatable, Hashable {
          */depthRowStride: UInt32 = UInt32(0), 
         /**
          * Clockwise rotation making both buffers upright; `None` (default) = none.
-         */rotation: Rotation? = nil) {
+         */rotation: Rotation? = nil, 
+        /**
+         * The rectangle of the colour buffer (colour pixels, before the rotation) that covers the depth
+         * buffer's field of view; `None` (default) = the whole colour buffer. ARCore needs it: its depth covers
+         * the GPU texture's field of view (usually 16:9), a band of the 4:3 CPU image (Android:
+         * `RgbdFrames.fromArFrame` fills it). Errors: [`TensorholoError::InvalidInput`] when it is empty or not
+         * inside the colour buffer.
+         */colorCrop: CropRect? = nil) {
         self.color = color
         self.colorFormat = colorFormat
         self.colorWidth = colorWidth
@@ -2040,6 +2259,7 @@ public struct RgbdFrame: Equatable, Hashable {
         self.colorRowStride = colorRowStride
         self.depthRowStride = depthRowStride
         self.rotation = rotation
+        self.colorCrop = colorCrop
     }
 
     
@@ -2068,7 +2288,8 @@ public struct FfiConverterTypeRgbdFrame: FfiConverterRustBuffer {
                 depthHeight: FfiConverterUInt32.read(from: &buf), 
                 colorRowStride: FfiConverterUInt32.read(from: &buf), 
                 depthRowStride: FfiConverterUInt32.read(from: &buf), 
-                rotation: FfiConverterOptionTypeRotation.read(from: &buf)
+                rotation: FfiConverterOptionTypeRotation.read(from: &buf), 
+                colorCrop: FfiConverterOptionTypeCropRect.read(from: &buf)
         )
     }
 
@@ -2084,6 +2305,7 @@ public struct FfiConverterTypeRgbdFrame: FfiConverterRustBuffer {
         FfiConverterUInt32.write(value.colorRowStride, into: &buf)
         FfiConverterUInt32.write(value.depthRowStride, into: &buf)
         FfiConverterOptionTypeRotation.write(value.rotation, into: &buf)
+        FfiConverterOptionTypeCropRect.write(value.colorCrop, into: &buf)
     }
 }
 
@@ -3277,6 +3499,30 @@ fileprivate struct FfiConverterOptionData: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterOptionTypeCropRect: FfiConverterRustBuffer {
+    typealias SwiftType = CropRect?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeCropRect.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeCropRect.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterOptionTypeBackend: FfiConverterRustBuffer {
     typealias SwiftType = Backend?
 
@@ -3421,6 +3667,31 @@ fileprivate struct FfiConverterOptionTypeRotation: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterSequenceFloat: FfiConverterRustBuffer {
+    typealias SwiftType = [Float]
+
+    public static func write(_ value: [Float], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterFloat.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [Float] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [Float]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterFloat.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterSequenceDouble: FfiConverterRustBuffer {
     typealias SwiftType = [Double]
 
@@ -3455,6 +3726,26 @@ public func version() -> String  {
 })
 }
 /**
+ * Converts a camera frame the way a generator does before its CNN (crop, rotation, depth to the colour
+ * grid, automatic depth range, hole filling, `fit` to `width × height`; `fit` `None` = [`Fit::Crop`]),
+ * without rendering: to check the orientation and the depth–colour registration on a device, e.g. by
+ * drawing `depth` over `amplitude`.
+ *
+ * Errors: [`TensorholoError::InvalidInput`] for a `width` or `height` of 0, buffers that do not match
+ * their sizes, strides and formats, a bad `color_crop`, or a depth map without one valid pixel.
+ */
+public func convertFrame(frame: RgbdFrame, width: UInt32, height: UInt32, fit: Fit?)throws  -> ConvertedFrame  {
+    return try  FfiConverterTypeConvertedFrame_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_func_convert_frame(
+        FfiConverterTypeRgbdFrame_lower(frame),
+        FfiConverterUInt32.lower(width),
+        FfiConverterUInt32.lower(height),
+        FfiConverterOptionTypeFit.lower(fit),uniffiCallStatus
+    )
+})
+}
+/**
  * The 32-bit frame colour-sequential SLM drivers take over HDMI: `width · height · 4` bytes, row-major, the
  * red laser's pattern in R, green in G, blue in B, alpha 255.
  *
@@ -3485,6 +3776,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.contractVersionMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_func_version() != 14763) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_func_convert_frame() != 5569) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_func_pack_rgba() != 54530) {

@@ -373,6 +373,11 @@ RustBuffer uniffi_tensorholo_ffi_fn_func_version(RustCallStatus *_Nonnull out_st
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_CONVERT_FRAME
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_CONVERT_FRAME
+RustBuffer uniffi_tensorholo_ffi_fn_func_convert_frame(RustBuffer frame, uint32_t width, uint32_t height, RustBuffer fit, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_PACK_RGBA
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_PACK_RGBA
 RustBuffer uniffi_tensorholo_ffi_fn_func_pack_rgba(RustBuffer patterns, RustCallStatus *_Nonnull out_status
@@ -641,6 +646,12 @@ void ffi_tensorholo_ffi_rust_future_complete_void(uint64_t handle, RustCallStatu
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_VERSION
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_VERSION
 uint16_t uniffi_tensorholo_ffi_checksum_func_version(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_CONVERT_FRAME
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_CONVERT_FRAME
+uint16_t uniffi_tensorholo_ffi_checksum_func_convert_frame(void
     
 );
 #endif

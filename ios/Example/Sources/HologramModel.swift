@@ -10,10 +10,8 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
     /// The instance both scenes show.
     static let shared = HologramModel()
 
-    /// SLM resolution in pixels: the external display's mode (1080p HDMI SLM drivers are common).
-    static let slmWidth: UInt32 = 1920
-    /// SLM height in pixels.
-    static let slmHeight: UInt32 = 1080
+    /// Hologram size while no external display is connected (the preview alone), width × height in pixels.
+    static let previewOnlySize = (width: UInt32(640), height: UInt32(360))
 
     /// What the viewer would see focused at `focus` (RGBA preview of the latest frame).
     @Published private(set) var previewImage: CGImage?
@@ -23,6 +21,9 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
     @Published private(set) var status = "Starting…"
     /// Whether an external display (the SLM) is connected.
     @Published private(set) var externalDisplayConnected = false
+    /// The hologram size in pixels: the external display's current mode when one is connected (its
+    /// `UIScreen.currentMode.size`, whatever it is: 1920 × 1080, 3840 × 2160, …), else `previewOnlySize`.
+    @Published private(set) var slmSize = HologramModel.previewOnlySize
     /// The last on-device benchmark (`HologramGenerator.benchmark`), or nil before the first.
     @Published private(set) var benchmarkText: String?
     /// Focus of the preview as normalised depth, 0 = near, 1 = far.
@@ -51,6 +52,10 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
     private var currentFocus: Float = 0.5
     private var started = false
     private var lastDelivery = Date()
+    /// Whether the relative depth accuracy was reported (on `captureQueue`).
+    private var relativeDepthReported = false
+    /// The size the generator on `captureQueue` was made for.
+    private var generatorSize = HologramModel.previewOnlySize
 
     /// Asks for the camera, creates the generator (times the CNN plans: a few seconds) and starts capturing.
     /// Safe to call again: only the first call starts.
@@ -68,27 +73,56 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
         }
     }
 
-    /// Called by the external display's scene when it connects or disconnects.
-    func setExternalDisplayConnected(_ connected: Bool) {
-        DispatchQueue.main.async { self.externalDisplayConnected = connected }
+    /// Called by the external display's scene: the display's mode in pixels when it connects, nil when it
+    /// disconnects. The generator is remade at that size (a few seconds, off the main thread) when it changes.
+    func setExternalDisplay(width: Int?, height: Int?) {
+        let size: (width: UInt32, height: UInt32)
+        if let width = width, let height = height, let w = UInt32(exactly: width), let h = UInt32(exactly: height), w > 0, h > 0 {
+            size = (w, h)
+        } else {
+            size = Self.previewOnlySize
+        }
+        let connected = width != nil
+        DispatchQueue.main.async {
+            self.externalDisplayConnected = connected
+            self.slmSize = size
+        }
+        captureQueue.async {
+            guard self.generator != nil, size != self.generatorSize else { return }
+            do {
+                try self.makeGenerator(size: size)
+            } catch {
+                self.publish(status: "Cannot render at \(size.width)×\(size.height): \(error)")
+            }
+        }
+    }
+
+    /// A generator and its stream for `size` (on `captureQueue`); the previous stream finishes its frames first.
+    private func makeGenerator(size: (width: UInt32, height: UInt32)) throws {
+        publish(status: "Preparing the hologram CNN for \(size.width)×\(size.height)…")
+        let generator = try HologramGenerator(config: GeneratorConfig(width: size.width, height: size.height))
+        let handler = PatternsHandler(
+            onPatterns: { [weak self] index, patterns in self?.deliver(index: index, patterns: patterns) },
+            onError: { [weak self] error in self?.publish(status: error.description) }
+        )
+        let stream = try generator.stream(listener: handler)
+        lock.lock()
+        let old = self.stream
+        self.generator = generator
+        self.stream = stream
+        generatorSize = size
+        lock.unlock()
+        old?.close()
+        let info = try generator.info()
+        publish(status: "Running: \(size.width)×\(size.height), \(info.layers) layers, CNN layout \(info.cnnLayout)")
     }
 
     private func setUp() {
         do {
-            let generator = try HologramGenerator(config: GeneratorConfig(width: Self.slmWidth, height: Self.slmHeight))
-            let handler = PatternsHandler(
-                onPatterns: { [weak self] index, patterns in self?.deliver(index: index, patterns: patterns) },
-                onError: { [weak self] error in self?.publish(status: error.description) }
-            )
-            let stream = try generator.stream(listener: handler)
-            lock.lock()
-            self.generator = generator
-            self.stream = stream
-            lock.unlock()
+            let size = DispatchQueue.main.sync { slmSize }
+            try makeGenerator(size: size)
             try configureSession()
             session.startRunning()
-            let info = try generator.info()
-            publish(status: "Running: \(Self.slmWidth)×\(Self.slmHeight), \(info.layers) layers, CNN layout \(info.cnnLayout)")
         } catch {
             publish(status: "Cannot start: \(error)")
         }
@@ -157,6 +191,11 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
         else { return }
         do {
             // Portrait UI, back camera: the buffers are the sensor's landscape, turned 90° counter-clockwise.
+            // Relative depth (not metres) is fine with the automatic depth range this sample uses; say so once.
+            if depth.depthData.isRelativeDepth && !relativeDepthReported {
+                relativeDepthReported = true
+                publish(status: "Depth accuracy is relative (not metres): the automatic depth range still applies")
+            }
             let frame = try RgbdFrame(sampleBuffer: video.sampleBuffer, depthData: depth.depthData, orientation: .right)
             lock.lock()
             latestFrame = frame

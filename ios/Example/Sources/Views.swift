@@ -25,8 +25,8 @@ struct ContentView: View {
                 Text("far")
             }
             Text(model.externalDisplayConnected
-                ? "SLM pattern on the external display"
-                : "Connect the SLM (external display) to show the pattern")
+                ? "SLM pattern on the external display (\(model.slmSize.width)×\(model.slmSize.height))"
+                : "Connect the SLM (USB-C DisplayPort / HDMI) to show the pattern")
                 .font(.footnote)
             Text(model.status)
                 .font(.caption.monospacedDigit())
@@ -42,15 +42,16 @@ struct ContentView: View {
     }
 }
 
-/// The external display's content: the SLM's HDMI frame, black around it, drawn at one image pixel per display
-/// pixel (`scale` = the screen's) and never interpolated, so that each code reaches the SLM unchanged.
+/// The external display's content: the SLM's HDMI frame, black around it, drawn from the top-left corner at one
+/// image pixel per display pixel (`scale` = the screen's) and never interpolated, so that each code reaches the
+/// SLM unchanged (with `overscanCompensation = .none` on the screen, set by `ExternalDisplaySceneDelegate`).
 struct SlmDisplayView: View {
     @ObservedObject var model: HologramModel
     /// The external screen's points-to-pixels scale (`UIScreen.scale`, usually 1).
     let displayScale: CGFloat
 
     var body: some View {
-        ZStack {
+        ZStack(alignment: .topLeading) {
             Color.black
             if let image = model.slmImage {
                 Image(decorative: image, scale: displayScale)

@@ -5,13 +5,20 @@ import CoreVideo
 import ImageIO
 
 extension RgbdFrame {
-    /// One frame of an ARKit session with LiDAR depth: `frame.capturedImage` converted to RGBA8 and
+    /// One frame of an ARKit session with LiDAR depth: `frame.capturedImage` converted to BGRA8 and
     /// `frame.sceneDepth.depthMap` (f32 metres, 256 × 192 on current devices) copied with its row stride.
     ///
     /// `capturedImage` is YpCbCr 4:2:0 (`kCVPixelFormatType_420YpCbCr8BiPlanarFullRange`), which the library does
-    /// not read: Core Image converts it to 8-bit sRGB with the colour matrix attached to the buffer, rendering
-    /// straight into the frame's colour bytes (one GPU pass and no intermediate pixel buffer; the colour data is
-    /// `width · height · 4` bytes).
+    /// not read: Core Image converts it to 8-bit sRGB with the colour matrix attached to the buffer, rendering into
+    /// a BGRA `CVPixelBuffer` of the same size (`CIContext.render(_:to:bounds:colorSpace:)`, as Apple's AVCamFilter
+    /// sample does), whose rows are then copied once. Rendering pixel buffer to pixel buffer keeps CoreVideo's row
+    /// order (row 0 = the buffer's top row) whatever Core Image's bottom-left working origin; `SwiftLayerTests`
+    /// checks it (a bright top half gives a bright row 0).
+    ///
+    /// Registration: ARKit's `sceneDepth` is aligned with `capturedImage` and covers the same field of view, at a
+    /// lower resolution with the same aspect ratio (1920 × 1440 and 256 × 192 are both 4:3). This initialiser
+    /// checks that promise (`checkSameFieldOfView`) instead of trusting it: depth with another aspect ratio
+    /// would be stretched onto the colour.
     ///
     /// - Parameters:
     ///   - frame: an `ARFrame` of a session whose configuration has `frameSemantics` containing `.sceneDepth`
@@ -21,8 +28,10 @@ extension RgbdFrame {
     ///   - smoothedDepth: read `frame.smoothedSceneDepth` (temporally smoothed) instead of `frame.sceneDepth`.
     ///   - context: the Core Image context that converts the colour; pass one kept for the session (a context
     ///     is costly to create), or `nil` for one shared by every call.
-    /// - Throws: `TensorholoError.Unsupported` if the frame has no (smoothed) scene depth or the orientation is
-    ///   mirrored; `TensorholoError.InvalidInput` for an empty image or an unexpected depth format.
+    /// - Throws: `TensorholoError.Unsupported` if the frame has no (smoothed) scene depth, the orientation is
+    ///   mirrored, or depth and colour differ in aspect ratio (not one field of view); `TensorholoError.InvalidInput`
+    ///   for an empty image or an unexpected depth format; `TensorholoError.Internal` if CoreVideo cannot make the
+    ///   colour buffer.
     public init(
         frame: ARFrame,
         orientation: CGImagePropertyOrientation,
@@ -39,57 +48,34 @@ extension RgbdFrame {
         let rotation = try Rotation(orientation: orientation)
         let colorWidth = CVPixelBufferGetWidth(frame.capturedImage)
         let colorHeight = CVPixelBufferGetHeight(frame.capturedImage)
-        let color = try RgbdFrame.renderRGBA(
+        try RgbdFrame.checkSameFieldOfView(
+            colorWidth: colorWidth,
+            colorHeight: colorHeight,
+            depthWidth: CVPixelBufferGetWidth(depthMap),
+            depthHeight: CVPixelBufferGetHeight(depthMap)
+        )
+        let bgra = try RgbdFrame.renderBGRA(
             CIImage(cvPixelBuffer: frame.capturedImage),
             width: colorWidth,
             height: colorHeight,
             context: context ?? RgbdFrame.sharedCIContext
         )
+        let color = try PixelBufferCopy(bgra, bytesPerPixel: 4, name: "colour")
         let depthFormat = try DepthFormat(pixelFormat: CVPixelBufferGetPixelFormatType(depthMap))
         let depth = try PixelBufferCopy(depthMap, bytesPerPixel: depthFormat.bytesPerSample, name: "depth")
         self.init(
-            color: color,
-            colorFormat: .rgba8,
-            colorWidth: UInt32(colorWidth),
-            colorHeight: UInt32(colorHeight),
+            color: color.data,
+            colorFormat: .bgra8,
+            colorWidth: color.width,
+            colorHeight: color.height,
             depth: depth.data,
             depthFormat: depthFormat,
             depthWidth: depth.width,
             depthHeight: depth.height,
-            colorRowStride: 0,
+            colorRowStride: color.rowStride,
             depthRowStride: depth.rowStride,
             rotation: rotation
         )
-    }
-
-    /// The Core Image context of `init(frame:orientation:smoothedDepth:context:)` when none is given.
-    static let sharedCIContext = CIContext(options: [.cacheIntermediates: false])
-
-    /// Renders `image` (its extent is `width × height` pixels at the origin) into packed 8-bit sRGB RGBA bytes,
-    /// row 0 at the top. Throws `TensorholoError.InvalidInput` for an empty or oversized image.
-    static func renderRGBA(_ image: CIImage, width: Int, height: Int, context: CIContext) throws -> Data {
-        let (rowBytes, rowOverflow) = width.multipliedReportingOverflow(by: 4)
-        let (count, countOverflow) = rowBytes.multipliedReportingOverflow(by: height)
-        guard width > 0, height > 0, !rowOverflow, !countOverflow,
-              UInt32(exactly: width) != nil, UInt32(exactly: height) != nil
-        else {
-            throw TensorholoError.InvalidInput(message: "ARFrame.capturedImage has size \(width) x \(height)")
-        }
-        var rgba = Data(count: count)
-        let sRGB = CGColorSpace(name: CGColorSpace.sRGB)
-        rgba.withUnsafeMutableBytes { bytes in
-            if let base = bytes.baseAddress {
-                context.render(
-                    image,
-                    toBitmap: base,
-                    rowBytes: rowBytes,
-                    bounds: CGRect(x: 0, y: 0, width: width, height: height),
-                    format: .RGBA8,
-                    colorSpace: sRGB
-                )
-            }
-        }
-        return rgba
     }
 }
 #endif

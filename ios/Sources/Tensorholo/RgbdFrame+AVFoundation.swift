@@ -18,10 +18,26 @@ extension RgbdFrame {
     ///     connections' orientations at their defaults, or set both alike); its resolution may be lower.
     ///   - orientation: the EXIF orientation of the buffers relative to the upright scene (`Rotation(orientation:)`;
     ///     for the back camera in a portrait UI, `.right`).
+    ///   - requireAbsoluteDepth: refuse depth whose `depthDataAccuracy` is `.relative`. Relative depth (dual
+    ///     cameras without calibration, some portrait-effect depth) orders near and far correctly but its values
+    ///     are not metres: fine with the automatic depth range (the default: the 1st–99th percentiles, and the
+    ///     diopter mapping does not change when every depth is scaled alike), wrong with a fixed `z_near_m` /
+    ///     `z_far_m` in the generator's configuration: pass `true` there. `depthData.isRelativeDepth` tells.
     /// - Throws: `TensorholoError.InvalidInput` for an unsupported pixel format or an empty buffer;
-    ///   `TensorholoError.Unsupported` for a mirrored orientation; `TensorholoError.Internal` if a buffer cannot
-    ///   be locked.
-    public init(pixelBuffer: CVPixelBuffer, depthData: AVDepthData, orientation: CGImagePropertyOrientation = .up) throws {
+    ///   `TensorholoError.Unsupported` for a mirrored orientation, or relative depth with `requireAbsoluteDepth`;
+    ///   `TensorholoError.Internal` if a buffer cannot be locked.
+    public init(
+        pixelBuffer: CVPixelBuffer,
+        depthData: AVDepthData,
+        orientation: CGImagePropertyOrientation = .up,
+        requireAbsoluteDepth: Bool = false
+    ) throws {
+        if requireAbsoluteDepth && depthData.isRelativeDepth {
+            throw TensorholoError.Unsupported(
+                message: "the depth data's accuracy is relative (AVDepthData.Accuracy.relative): its values are not metres, "
+                    + "so a fixed z_near_m/z_far_m range does not apply; use the automatic range or a camera with absolute depth (LiDAR)"
+            )
+        }
         try self.init(
             colorBuffer: pixelBuffer,
             depthBuffer: depthData.depthDataMap,
@@ -33,11 +49,26 @@ extension RgbdFrame {
     ///
     /// - Throws: as `init(pixelBuffer:depthData:orientation:)`, and `TensorholoError.InvalidInput` for a sample
     ///   buffer without an image buffer.
-    public init(sampleBuffer: CMSampleBuffer, depthData: AVDepthData, orientation: CGImagePropertyOrientation = .up) throws {
+    public init(
+        sampleBuffer: CMSampleBuffer,
+        depthData: AVDepthData,
+        orientation: CGImagePropertyOrientation = .up,
+        requireAbsoluteDepth: Bool = false
+    ) throws {
         guard let pixelBuffer = CMSampleBufferGetImageBuffer(sampleBuffer) else {
             throw TensorholoError.InvalidInput(message: "the colour sample buffer holds no image buffer")
         }
-        try self.init(pixelBuffer: pixelBuffer, depthData: depthData, orientation: orientation)
+        try self.init(
+            pixelBuffer: pixelBuffer, depthData: depthData, orientation: orientation, requireAbsoluteDepth: requireAbsoluteDepth
+        )
+    }
+}
+
+extension AVDepthData {
+    /// Whether the depth values are only relative (`depthDataAccuracy == .relative`): right in order, not in metres.
+    /// See `RgbdFrame(pixelBuffer:depthData:orientation:requireAbsoluteDepth:)`.
+    public var isRelativeDepth: Bool {
+        depthDataAccuracy == .relative
     }
 }
 #endif

@@ -2,18 +2,22 @@
 //! depth map in the sensor's own format and resolution → [`RgbdFrame`] at the hologram resolution.
 //!
 //! [`CameraFrame::to_rgbd`] runs, in this order:
-//! 1. validation of both buffers (sizes, row stride, buffer length, all with checked arithmetic) and of the
-//!    target size, before anything is allocated;
+//! 1. validation of both buffers (sizes, row stride, buffer length, all with checked arithmetic), of the
+//!    colour crop ([`CameraFrame::color_crop`], a [`CropRect`]) and of the target size, before anything is
+//!    allocated; the crop, when given, replaces the colour buffer by its sub-rectangle (no copy), so that
+//!    colour and depth cover the same field of view (registration: ARCore's depth covers the GPU texture's
+//!    16:9 field of view, a band of its 4:3 CPU image);
 //! 2. decoding: colour ([`ColorFormat`], sRGB 8-bit) → `[3, H, W]` amplitude with
 //!    [`crate::color::srgb8_to_amplitude`], channels R, G, B whatever the byte order; depth
 //!    ([`DepthFormat`], little-endian) → metres + validity mask ([`DecodedDepth`], metric);
 //! 3. the clockwise [`Rotation`] that makes both buffers upright (fused with step 2: each output pixel reads
 //!    its source pixel, no extra copy);
 //! 4. depth (values and validity) resampled to the colour resolution by **nearest neighbour**, so no depth
-//!    is ever mixed across an occlusion edge. Both buffers are assumed to cover the same field of view, as
-//!    AVFoundation's `AVDepthData` (delivered alongside the photo / video frame) and ARCore's depth image
-//!    (aligned with the camera image) do: the depth map is stretched onto the colour frame, so a depth map
-//!    with another aspect ratio is stretched too (logged as a warning);
+//!    is ever mixed across an occlusion edge. The (cropped) colour and the depth are assumed to cover the
+//!    same field of view, as AVFoundation's `AVDepthData` (delivered alongside the photo / video frame) and
+//!    ARKit's `sceneDepth` do, and ARCore's depth image does after the crop of step 1: the depth map is
+//!    stretched onto the colour frame, so a depth map with another aspect ratio is stretched too (logged as
+//!    a warning);
 //! 5. [`normalise_depth`] with [`FrameOptions::range`] / [`FrameOptions::mapping`] (automatic range = 1st /
 //!    99th percentiles of the valid depths), then [`fill_invalid`]: invalid pixels take the farthest
 //!    neighbouring depth and are never read as near;
@@ -250,6 +254,82 @@ pub struct DepthImage<'a> {
     pub row_stride: usize,
 }
 
+/// A rectangle of a colour buffer in colour pixels, in the buffer as delivered (before the [`Rotation`]):
+/// columns `x .. x + width`, rows `y .. y + height`; `(x, y)` is its top-left pixel (column, row as in
+/// `docs/CONVENTIONS.md` §2).
+///
+/// [`CameraFrame::color_crop`] registers colour with depth when the depth buffer covers only part of the
+/// colour buffer's field of view. ARCore is the case in point: its depth image covers the field of view of
+/// the GPU camera texture (usually 16:9), not that of the 640 × 480 (4:3) CPU image; the CPU image's
+/// rectangle seen by the texture is what `Frame.transformCoordinates2d` maps the texture's corners to
+/// (`TEXTURE_NORMALIZED` → `IMAGE_PIXELS`), e.g. `x 0, y 60, width 640, height 360` for a 16:9 texture on a
+/// 640 × 480 image. The Android helpers compute it (`RgbdFrames.fromArFrame`, `CameraPlanes.cropForTexture`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+pub struct CropRect {
+    /// First column (pixels from the left edge of the buffer).
+    pub x: usize,
+    /// First row (pixels from the top edge of the buffer).
+    pub y: usize,
+    /// Columns, ≥ 1.
+    pub width: usize,
+    /// Rows, ≥ 1.
+    pub height: usize,
+}
+
+impl CropRect {
+    /// The whole of a `width × height` buffer (`x = y = 0`): cropping with it changes nothing.
+    pub fn full(width: usize, height: usize) -> Self {
+        CropRect {
+            x: 0,
+            y: 0,
+            width,
+            height,
+        }
+    }
+
+    /// Checks that the rectangle is non-empty and lies inside a `buffer_width × buffer_height` buffer:
+    /// `width ≥ 1`, `height ≥ 1`, `x + width ≤ buffer_width`, `y + height ≤ buffer_height` (checked
+    /// arithmetic, so no sum overflows).
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] named `color_crop`, giving the rectangle and the buffer's size.
+    pub fn validate(&self, buffer_width: usize, buffer_height: usize) -> Result<()> {
+        let CropRect {
+            x,
+            y,
+            width,
+            height,
+        } = *self;
+        let describe = || {
+            format!(
+                "colour crop x {x}, y {y}, width {width}, height {height} (columns {x}..{x}+{width}, \
+                 rows {y}..{y}+{height})"
+            )
+        };
+        if width == 0 || height == 0 {
+            return Err(invalid(
+                "color_crop",
+                format!(
+                    "{} is empty: width and height must be at least 1",
+                    describe()
+                ),
+            ));
+        }
+        let inside = |start: usize, len: usize, limit: usize| {
+            start.checked_add(len).is_some_and(|end| end <= limit)
+        };
+        if !inside(x, width, buffer_width) || !inside(y, height, buffer_height) {
+            return Err(invalid(
+                "color_crop",
+                format!(
+                    "{} does not lie inside the {buffer_width}x{buffer_height} colour buffer",
+                    describe()
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Row stride and bytes per row of a validated buffer.
 #[derive(Debug, Clone, Copy)]
 struct Layout {
@@ -354,7 +434,7 @@ fn shape_error(e: ndarray::ShapeError) -> HoloError {
     HoloError::Internal(format!("shape error on validated input: {e}"))
 }
 
-impl ColorImage<'_> {
+impl<'a> ColorImage<'a> {
     /// Checks the buffer: non-zero `width` and `height`; `stride ≥ width · bpp`; and
     /// `stride · (height − 1) + width · bpp ≤ data.len() ≤ stride · height`, all in checked arithmetic.
     ///
@@ -363,6 +443,27 @@ impl ColorImage<'_> {
     /// than a row).
     pub fn validate(&self) -> Result<()> {
         self.layout().map(|_| ())
+    }
+
+    /// The sub-image `crop` of this buffer: the same bytes (no copy), format and row stride, `crop.width ×
+    /// crop.height` pixels starting at column `crop.x` of row `crop.y` (before any rotation).
+    ///
+    /// Errors: those of [`ColorImage::validate`] for this buffer, then those of [`CropRect::validate`]
+    /// (`color_crop`: empty, or not inside the buffer).
+    pub fn crop(&self, crop: CropRect) -> Result<ColorImage<'a>> {
+        let Layout { stride, bpp } = self.layout()?;
+        crop.validate(self.width, self.height)?;
+        // Inside the validated buffer: start + stride·(h−1) + w·bpp = stride·(y+h−1) + (x+w)·bpp
+        //   ≤ stride·(height−1) + width·bpp ≤ data.len().
+        let start = crop.y * stride + crop.x * bpp;
+        let end = start + stride * (crop.height - 1) + crop.width * bpp;
+        Ok(ColorImage {
+            data: &self.data[start..end],
+            format: self.format,
+            width: crop.width,
+            height: crop.height,
+            row_stride: stride,
+        })
     }
 
     fn layout(&self) -> Result<Layout> {
@@ -461,17 +562,21 @@ impl DepthImage<'_> {
     }
 }
 
-/// One phone camera frame, borrowed: a colour buffer, a depth buffer covering the same field of view (at
-/// any resolution), and the clockwise rotation that makes both upright. Convert with
-/// [`CameraFrame::to_rgbd`].
+/// One phone camera frame, borrowed: a colour buffer, a depth buffer covering the same field of view as the
+/// colour (or as its [`color_crop`](Self::color_crop)) at any resolution, and the clockwise rotation that
+/// makes both upright. Convert with [`CameraFrame::to_rgbd`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct CameraFrame<'a> {
     /// The colour buffer.
     pub color: ColorImage<'a>,
-    /// The depth buffer (same field of view as `color`).
+    /// The depth buffer (same field of view as `color`, or as `color_crop` when given).
     pub depth: DepthImage<'a>,
-    /// Clockwise rotation applied to both buffers.
+    /// Clockwise rotation applied to both buffers (after the crop).
     pub rotation: Rotation,
+    /// The rectangle of `color`, in colour pixels before the rotation, that covers the depth buffer's field
+    /// of view; `None` = the whole colour buffer. Applied before the rotation and the fit, so that colour
+    /// and depth are registered (see [`CropRect`]; ARCore needs it).
+    pub color_crop: Option<CropRect>,
 }
 
 /// An owned colour buffer: the fields of [`ColorImage`] with a `Vec<u8>`.
@@ -535,10 +640,12 @@ impl DepthImageBuf {
 pub struct CameraFrameBuf {
     /// The colour buffer.
     pub color: ColorImageBuf,
-    /// The depth buffer (same field of view as `color`).
+    /// The depth buffer (same field of view as `color`, or as `color_crop` when given).
     pub depth: DepthImageBuf,
-    /// Clockwise rotation applied to both buffers.
+    /// Clockwise rotation applied to both buffers (after the crop).
     pub rotation: Rotation,
+    /// The rectangle of `color` covering the depth's field of view ([`CameraFrame::color_crop`]).
+    pub color_crop: Option<CropRect>,
 }
 
 impl CameraFrameBuf {
@@ -548,6 +655,7 @@ impl CameraFrameBuf {
             color: self.color.view(),
             depth: self.depth.view(),
             rotation: self.rotation,
+            color_crop: self.color_crop,
         }
     }
 }
@@ -577,6 +685,8 @@ pub struct CameraFrameReport {
     pub color_size: (usize, usize),
     /// `(height, width)` of the depth buffer as delivered (before rotation).
     pub depth_size: (usize, usize),
+    /// The colour crop applied ([`CameraFrame::color_crop`]), `None` when the whole colour buffer was used.
+    pub color_crop: Option<CropRect>,
 }
 
 /// Set once the aspect-ratio mismatch of step 4 has been logged (once per process, not per frame).
@@ -700,19 +810,23 @@ impl CameraFrame<'_> {
                 row_stride: self.depth.row_stride,
             },
             rotation: self.rotation,
+            color_crop: self.color_crop,
         }
     }
 
     /// Converts the camera frame to an [`RgbdFrame`] of `height × width` pixels (`amplitude` `[3, height,
     /// width]` linear, R, G, B; `depth` `[height, width]`, `d ∈ [0,1]`, 0 = near) and a report:
-    /// 1. validates the target size, [`FrameOptions::range`] and both buffers ([`ColorImage::validate`],
-    ///    [`DepthImage::validate`]) before allocating anything;
+    /// 1. validates the target size, [`FrameOptions::range`], both buffers ([`ColorImage::validate`],
+    ///    [`DepthImage::validate`]) and the colour crop ([`CropRect::validate`]) before allocating anything;
+    ///    with a [`color_crop`](Self::color_crop) the rest sees only that rectangle of the colour buffer
+    ///    ([`ColorImage::crop`], no copy);
     /// 2. decodes both buffers ([`ColorImage::to_amplitude`], [`DepthImage::decode`]),
     /// 3. applying the [`Rotation`] to both while decoding (no extra copy);
-    /// 4. resamples depth (values and validity) to the colour resolution by nearest neighbour, never
-    ///    mixing depths across an edge. Both buffers must cover the same field of view (as `AVDepthData`
-    ///    and ARCore's depth image do): the depth map is stretched onto the colour frame, whatever its
-    ///    aspect ratio (a mismatch over 2 % is logged as a warning, once per process);
+    /// 4. resamples depth (values and validity) to the (cropped) colour resolution by nearest neighbour,
+    ///    never mixing depths across an edge. Depth and (cropped) colour must cover the same field of view
+    ///    (as `AVDepthData` and ARKit's `sceneDepth` do, and ARCore's depth image with the crop of its
+    ///    texture's field of view): the depth map is stretched onto the colour frame, whatever its aspect
+    ///    ratio (a mismatch over 2 % is logged as a warning, once per process);
     /// 5. [`normalise_depth`] with `options.range` (automatic: 1st/99th percentiles of the valid depths of
     ///    the whole rotated frame) and `options.mapping`, then [`fill_invalid`] (holes take the farthest
     ///    neighbouring depth, never near);
@@ -722,13 +836,14 @@ impl CameraFrame<'_> {
     /// Memory: the decoded colour and depth at colour resolution, the output, and for [`Fit::Crop`] one
     /// copy of the cropped region.
     ///
-    /// With [`Fit::Stretch`] at the colour buffer's own (rotated) size, and a depth buffer of that size,
-    /// the result equals [`crate::scene::load_rgbd`] on the same pixels.
+    /// With [`Fit::Stretch`] at the colour buffer's own (rotated) size, no crop, and a depth buffer of that
+    /// size, the result equals [`crate::scene::load_rgbd`] on the same pixels.
     ///
     /// Errors, all before any allocation except the last: [`HoloError::InvalidParameter`] for a target
     /// `height` or `width` of 0 (`height` / `width`) or too large (`size`), an invalid
     /// [`FrameOptions::range`] (`depth_range`), or a bad buffer (`color`, `color_row_stride`, `depth`,
-    /// `depth_row_stride`; see [`ColorImage::validate`]); [`HoloError::InvalidDepth`] when every depth
+    /// `depth_row_stride`; see [`ColorImage::validate`]), or a crop that is empty or outside the colour
+    /// buffer (`color_crop`); [`HoloError::InvalidDepth`] when every depth
     /// pixel is invalid (or, after a downsampling of depth to colour resolution, no valid one is left).
     pub fn to_rgbd(
         &self,
@@ -743,6 +858,10 @@ impl CameraFrame<'_> {
         }
         self.color.validate()?;
         self.depth.validate()?;
+        let color = match self.color_crop {
+            Some(crop) => self.color.crop(crop)?,
+            None => self.color,
+        };
 
         // 2 + 3. Decode with the rotation; depth first (small, and all-invalid fails early).
         let decoded = self.depth.decode(self.rotation)?;
@@ -761,7 +880,7 @@ impl CameraFrame<'_> {
                 }
             )));
         }
-        let amplitude = self.color.to_amplitude(self.rotation)?;
+        let amplitude = color.to_amplitude(self.rotation)?;
         let (_, hc, wc) = amplitude.dim();
 
         // 4. Depth to colour resolution, nearest neighbour (values and validity alike).
@@ -773,8 +892,9 @@ impl CameraFrame<'_> {
             let (a, b) = (hd as f64 * wc as f64, hc as f64 * wd as f64);
             if (a / b - 1.0).abs() > 0.02 && !ASPECT_WARNED.swap(true, Ordering::Relaxed) {
                 log::warn!(
-                    "depth buffer {hd}x{wd} and colour buffer {hc}x{wc} (after rotation) differ in aspect \
-                     ratio; the depth map is stretched onto the colour frame (same field of view assumed); warned once"
+                    "depth buffer {hd}x{wd} and colour buffer {hc}x{wc} (after crop and rotation) differ in \
+                     aspect ratio; the depth map is stretched onto the colour frame (same field of view \
+                     assumed; ARCore needs color_crop); warned once"
                 );
             }
             DecodedDepth {
@@ -798,11 +918,13 @@ impl CameraFrame<'_> {
             invalid_fraction,
             color_size: (self.color.height, self.color.width),
             depth_size: (self.depth.height, self.depth.width),
+            color_crop: self.color_crop,
         };
         log::debug!(
-            "camera frame {}x{} colour + {}x{} {:?} depth ({:.1} % invalid), {:?} -> {height}x{width} ({:?})",
+            "camera frame {}x{} colour (crop {:?}) + {}x{} {:?} depth ({:.1} % invalid), {:?} -> {height}x{width} ({:?})",
             self.color.height,
             self.color.width,
+            self.color_crop,
             self.depth.height,
             self.depth.width,
             self.depth.format,
@@ -910,5 +1032,299 @@ mod tests {
         // Huge sizes do not overflow.
         let big = usize::MAX / 2;
         assert_eq!(crop_window(big, big, 1, 1), (0, 0, big, big));
+    }
+
+    /// An RGB8 `h × w` buffer (packed) whose pixel `(y, x)` is `px(y, x)`.
+    fn rgb8(h: usize, w: usize, px: impl Fn(usize, usize) -> [u8; 3]) -> Vec<u8> {
+        let mut v = Vec::with_capacity(h * w * 3);
+        for y in 0..h {
+            for x in 0..w {
+                v.extend_from_slice(&px(y, x));
+            }
+        }
+        v
+    }
+
+    #[test]
+    fn crop_rect_is_validated_with_a_typed_error() {
+        let ok = |c: CropRect| c.validate(640, 480);
+        assert!(ok(CropRect::full(640, 480)).is_ok());
+        assert!(ok(CropRect {
+            x: 0,
+            y: 60,
+            width: 640,
+            height: 360
+        })
+        .is_ok());
+        assert!(ok(CropRect {
+            x: 639,
+            y: 479,
+            width: 1,
+            height: 1
+        })
+        .is_ok());
+        for (bad, needle) in [
+            (
+                CropRect {
+                    x: 0,
+                    y: 0,
+                    width: 0,
+                    height: 10,
+                },
+                "is empty",
+            ),
+            (
+                CropRect {
+                    x: 0,
+                    y: 0,
+                    width: 10,
+                    height: 0,
+                },
+                "is empty",
+            ),
+            (
+                CropRect {
+                    x: 1,
+                    y: 0,
+                    width: 640,
+                    height: 480,
+                },
+                "inside the 640x480",
+            ),
+            (
+                CropRect {
+                    x: 0,
+                    y: 121,
+                    width: 640,
+                    height: 360,
+                },
+                "inside the 640x480",
+            ),
+            (
+                CropRect {
+                    x: usize::MAX,
+                    y: 0,
+                    width: 2,
+                    height: 1,
+                },
+                "inside",
+            ),
+            (
+                CropRect {
+                    x: 0,
+                    y: usize::MAX,
+                    width: 1,
+                    height: usize::MAX,
+                },
+                "inside",
+            ),
+        ] {
+            match ok(bad) {
+                Err(HoloError::InvalidParameter { name, reason }) => {
+                    assert_eq!(name, "color_crop", "{reason}");
+                    assert!(reason.contains(needle), "{bad:?}: {reason}");
+                }
+                other => panic!("{bad:?}: expected InvalidParameter, got {other:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn crop_takes_the_rectangle_through_the_row_stride() {
+        // 6 × 5 RGB8 with 7 bytes of row padding; pixel (y, x) = [10y + x, 100 + x, 200 − y].
+        let (h, w, stride) = (5usize, 6usize, 6 * 3 + 7);
+        let mut data = vec![0xEEu8; stride * h];
+        for y in 0..h {
+            for x in 0..w {
+                data[y * stride + 3 * x..][..3].copy_from_slice(&[
+                    (10 * y + x) as u8,
+                    100 + x as u8,
+                    200 - y as u8,
+                ]);
+            }
+        }
+        let image = ColorImage {
+            data: &data,
+            format: ColorFormat::Rgb8,
+            width: w,
+            height: h,
+            row_stride: stride,
+        };
+        let crop = CropRect {
+            x: 2,
+            y: 1,
+            width: 3,
+            height: 4,
+        }; // columns 2..5, rows 1..5 (the last row)
+        let sub = image.crop(crop).unwrap();
+        assert_eq!((sub.width, sub.height, sub.row_stride), (3, 4, stride));
+        // The last row's padding is not needed: 3·stride + 3·3 bytes from row 1, column 2.
+        assert_eq!(sub.data.len(), 3 * stride + 9);
+        let amp = sub.to_amplitude(Rotation::Deg0).unwrap();
+        for ((c, y, x), &a) in amp.indexed_iter() {
+            let (by, bx) = (y + 1, x + 2);
+            let byte = [(10 * by + bx) as u8, 100 + bx as u8, 200 - by as u8][c];
+            assert_eq!(a, srgb8_to_amplitude(byte), "({c},{y},{x})");
+        }
+        // Out of the buffer, or on a bad buffer: typed errors, no panic.
+        let err = image
+            .crop(CropRect {
+                x: 4,
+                y: 0,
+                width: 3,
+                height: 1,
+            })
+            .unwrap_err();
+        assert!(
+            matches!(
+                err,
+                HoloError::InvalidParameter {
+                    name: "color_crop",
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        let short = ColorImage {
+            data: &data[..10],
+            ..image
+        };
+        let err = short.crop(CropRect::full(1, 1)).unwrap_err();
+        assert!(
+            matches!(err, HoloError::InvalidParameter { name: "color", .. }),
+            "{err}"
+        );
+    }
+
+    /// The ARCore case, computed by hand: a 640 × 480 CPU image whose depth (160 × 90) covers the 16:9
+    /// texture's field of view, rows 60..420 of the CPU image (`transformCoordinates2d`). A horizontal edge
+    /// of the scene at 37 % of that field of view lies at CPU row 60 + 0.37·360 = 193.2 (rows 0..=192 are
+    /// bright, near) and at depth row 0.37·90 = 33.3 (rows 0..=32 near). Portrait (`Deg90`) turns it into a
+    /// vertical edge.
+    fn arcore_edge_frame(crop: Option<CropRect>) -> (RgbdFrame, CameraFrameReport) {
+        let color = rgb8(480, 640, |y, _| if y <= 192 { [230; 3] } else { [20; 3] });
+        let depth: Vec<u8> = (0..90usize)
+            .flat_map(|y| {
+                let mm: u16 = if y <= 32 { 500 } else { 2000 };
+                (0..160).flat_map(move |_| mm.to_le_bytes())
+            })
+            .collect();
+        let frame = CameraFrame {
+            color: ColorImage {
+                data: &color,
+                format: ColorFormat::Rgb8,
+                width: 640,
+                height: 480,
+                row_stride: 0,
+            },
+            depth: DepthImage {
+                data: &depth,
+                format: DepthFormat::MillimetresU16,
+                width: 160,
+                height: 90,
+                row_stride: 0,
+            },
+            rotation: Rotation::Deg90,
+            color_crop: crop,
+        };
+        let (ho, wo) = match crop {
+            Some(c) => (c.width, c.height),
+            None => (640, 480),
+        };
+        let options = FrameOptions {
+            fit: Fit::Stretch,
+            ..FrameOptions::default()
+        };
+        frame.to_rgbd(ho, wo, &options).unwrap()
+    }
+
+    /// Last column (from the left) of row 0 where `bright` holds, in a frame whose left part holds it.
+    fn last_column(row: impl Iterator<Item = bool>) -> usize {
+        let v: Vec<bool> = row.collect();
+        let n = v.iter().take_while(|&&b| b).count();
+        assert!(v[n..].iter().all(|&b| !b), "one edge only");
+        n - 1
+    }
+
+    #[test]
+    fn crop_registers_arcore_colour_with_its_texture_field_of_view() {
+        let crop = CropRect {
+            x: 0,
+            y: 60,
+            width: 640,
+            height: 360,
+        };
+        let (f, report) = arcore_edge_frame(Some(crop));
+        assert_eq!((f.height(), f.width()), (640, 360));
+        assert_eq!(report.color_crop, Some(crop));
+        assert_eq!(report.color_size, (480, 640));
+        // After Deg90, buffer row r is output column 359 − r. Colour: cropped rows 133.. (CPU rows 193..) are
+        // dark → columns 0..=226 dark; depth: 90 → 360 rows by nearest (row o reads ⌊(o + ½)/4⌋), rows
+        // 132.. far → columns 0..=227 far.
+        for y in [0, 320, 639] {
+            let dark = last_column((0..360).map(|x| f.amplitude[[1, y, x]] < 0.5));
+            let far = last_column((0..360).map(|x| f.depth[[y, x]] > 0.5));
+            assert_eq!((dark, far), (226, 227), "row {y}");
+        }
+        // Without the crop the depth is stretched over all 480 CPU rows: colour edge at column 479 − 193 =
+        // 286, depth's at 479 − 176 = 303 (row o reads ⌊(o + ½)·90/480⌋ ≥ 33 from o = 176): 17 pixels apart.
+        let (f, report) = arcore_edge_frame(None);
+        assert_eq!(report.color_crop, None);
+        let dark = last_column((0..480).map(|x| f.amplitude[[1, 0, x]] < 0.5));
+        let far = last_column((0..480).map(|x| f.depth[[0, x]] > 0.5));
+        assert_eq!((dark, far), (286, 303));
+    }
+
+    #[test]
+    fn a_bad_crop_fails_the_conversion_before_decoding() {
+        let color = rgb8(4, 4, |_, _| [9; 3]);
+        let depth = 1000u16.to_le_bytes().repeat(4);
+        let frame = CameraFrame {
+            color: ColorImage {
+                data: &color,
+                format: ColorFormat::Rgb8,
+                width: 4,
+                height: 4,
+                row_stride: 0,
+            },
+            depth: DepthImage {
+                data: &depth,
+                format: DepthFormat::MillimetresU16,
+                width: 2,
+                height: 2,
+                row_stride: 0,
+            },
+            rotation: Rotation::Deg0,
+            color_crop: Some(CropRect {
+                x: 2,
+                y: 2,
+                width: 3,
+                height: 2,
+            }),
+        };
+        match frame.to_rgbd(2, 2, &FrameOptions::default()) {
+            Err(HoloError::InvalidParameter { name, reason }) => {
+                assert_eq!(name, "color_crop");
+                assert!(
+                    reason.contains("x 2, y 2, width 3, height 2") && reason.contains("4x4"),
+                    "{reason}"
+                );
+            }
+            other => panic!("expected color_crop error, got {other:?}"),
+        }
+        // The whole buffer as a crop gives exactly the uncropped result.
+        let full = CameraFrame {
+            color_crop: Some(CropRect::full(4, 4)),
+            ..frame
+        };
+        let none = CameraFrame {
+            color_crop: None,
+            ..frame
+        };
+        let opts = FrameOptions::default();
+        assert_eq!(
+            full.to_rgbd(3, 3, &opts).unwrap().0,
+            none.to_rgbd(3, 3, &opts).unwrap().0
+        );
     }
 }

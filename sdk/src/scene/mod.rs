@@ -10,7 +10,8 @@
 //!   neighbouring depth, before any resizing, never read as near) → [`RgbdFrame::resize`].
 //! * Phone camera buffers ([`CameraFrame::to_rgbd`]): an interleaved 8-bit colour buffer ([`ColorFormat`])
 //!   and a depth buffer in the sensor's format ([`DepthFormat`]: AVDepthData, ARCore, `DEPTH16`), with row
-//!   strides, a [`Rotation`] and a [`Fit`] to the hologram resolution.
+//!   strides, a [`Rotation`], a colour [`CropRect`] registering colour with a depth map of a narrower field of
+//!   view (ARCore), and a [`Fit`] to the hologram resolution.
 //! * [`procedural`]: a deterministic test scene with near, mid and far textured objects and occlusions.
 #![cfg_attr(
     feature = "research",
@@ -34,7 +35,7 @@ pub mod random;
 
 pub use camera::{
     CameraFrame, CameraFrameBuf, CameraFrameReport, ColorFormat, ColorImage, ColorImageBuf,
-    DepthFormat, DepthImage, DepthImageBuf, Fit, FrameOptions, Rotation,
+    CropRect, DepthFormat, DepthImage, DepthImageBuf, Fit, FrameOptions, Rotation,
 };
 pub use depth::{
     decode_depth, decode_depth_bytes, decode_depth_file, fill_invalid, normalise_depth,

@@ -705,6 +705,8 @@ internal object IntegrityCheckingUniffiLib {
     internal fun ensureInitialized() = Unit
     external fun uniffi_tensorholo_ffi_checksum_func_version(
     ): Int
+    external fun uniffi_tensorholo_ffi_checksum_func_convert_frame(
+    ): Int
     external fun uniffi_tensorholo_ffi_checksum_func_pack_rgba(
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_benchmark(
@@ -795,6 +797,8 @@ internal object UniffiLib {
     external fun uniffi_tensorholo_ffi_fn_method_patternslistener_on_error(`ptr`: Long,`error`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): Unit
     external fun uniffi_tensorholo_ffi_fn_func_version(uniffi_out_err: UniffiRustCallStatus, 
+    ): RustBuffer.ByValue
+    external fun uniffi_tensorholo_ffi_fn_func_convert_frame(`frame`: RustBuffer.ByValue,`width`: Int,`height`: Int,`fit`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_func_pack_rgba(`patterns`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
@@ -918,6 +922,9 @@ private fun uniffiCheckContractApiVersion(lib: IntegrityCheckingUniffiLib) {
 @Suppress("UNUSED_PARAMETER")
 private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
     if ((lib.uniffi_tensorholo_ffi_checksum_func_version() and 0xFFFF) != 14763) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_func_convert_frame() and 0xFFFF) != 5569) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_func_pack_rgba() and 0xFFFF) != 54530) {
@@ -2553,6 +2560,152 @@ public object FfiConverterTypeBenchmarkReport: FfiConverterRustBuffer<BenchmarkR
 
 
 /**
+ * A camera frame as the CNN receives it ([`convert_frame`]): `width × height` pixels, upright, registered
+ * and fitted.
+ */
+data class ConvertedFrame (
+    /**
+     * Width in pixels.
+     */
+    var `width`: kotlin.UInt
+    , 
+    /**
+     * Height in pixels.
+     */
+    var `height`: kotlin.UInt
+    , 
+    /**
+     * Linear amplitude (√ of the linear intensity, in [0, 1]): three planes R, G, B of `width · height`
+     * values each, row-major (`3 · width · height` values).
+     */
+    var `amplitude`: List<kotlin.Float>
+    , 
+    /**
+     * Normalised depth `d` in [0, 1], 0 = near, row-major (`width · height` values); holes filled with
+     * the farthest neighbouring depth.
+     */
+    var `depth`: List<kotlin.Float>
+    , 
+    /**
+     * Nearest depth in metres mapped to `d = 0` (the 1st percentile of the frame's valid depths).
+     */
+    var `zNearM`: kotlin.Double?
+    , 
+    /**
+     * Farthest depth in metres mapped to `d = 1` (the 99th percentile).
+     */
+    var `zFarM`: kotlin.Double?
+    
+){
+    
+
+    
+
+    
+    companion object
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeConvertedFrame: FfiConverterRustBuffer<ConvertedFrame> {
+    override fun read(buf: ByteBuffer): ConvertedFrame {
+        return ConvertedFrame(
+            FfiConverterUInt.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterSequenceFloat.read(buf),
+            FfiConverterSequenceFloat.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+        )
+    }
+
+    override fun allocationSize(value: ConvertedFrame) = (
+            FfiConverterUInt.allocationSize(value.`width`) +
+            FfiConverterUInt.allocationSize(value.`height`) +
+            FfiConverterSequenceFloat.allocationSize(value.`amplitude`) +
+            FfiConverterSequenceFloat.allocationSize(value.`depth`) +
+            FfiConverterOptionalDouble.allocationSize(value.`zNearM`) +
+            FfiConverterOptionalDouble.allocationSize(value.`zFarM`)
+    )
+
+    override fun write(value: ConvertedFrame, buf: ByteBuffer) {
+            FfiConverterUInt.write(value.`width`, buf)
+            FfiConverterUInt.write(value.`height`, buf)
+            FfiConverterSequenceFloat.write(value.`amplitude`, buf)
+            FfiConverterSequenceFloat.write(value.`depth`, buf)
+            FfiConverterOptionalDouble.write(value.`zNearM`, buf)
+            FfiConverterOptionalDouble.write(value.`zFarM`, buf)
+    }
+}
+
+
+
+/**
+ * A rectangle of a colour buffer in pixels, before any rotation: columns `x .. x + width`, rows
+ * `y .. y + height` (`(x, y)` = its top-left pixel).
+ */
+data class CropRect (
+    /**
+     * First column.
+     */
+    var `x`: kotlin.UInt
+    , 
+    /**
+     * First row.
+     */
+    var `y`: kotlin.UInt
+    , 
+    /**
+     * Columns (≥ 1).
+     */
+    var `width`: kotlin.UInt
+    , 
+    /**
+     * Rows (≥ 1).
+     */
+    var `height`: kotlin.UInt
+    
+){
+    
+
+    
+
+    
+    companion object
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeCropRect: FfiConverterRustBuffer<CropRect> {
+    override fun read(buf: ByteBuffer): CropRect {
+        return CropRect(
+            FfiConverterUInt.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterUInt.read(buf),
+        )
+    }
+
+    override fun allocationSize(value: CropRect) = (
+            FfiConverterUInt.allocationSize(value.`x`) +
+            FfiConverterUInt.allocationSize(value.`y`) +
+            FfiConverterUInt.allocationSize(value.`width`) +
+            FfiConverterUInt.allocationSize(value.`height`)
+    )
+
+    override fun write(value: CropRect, buf: ByteBuffer) {
+            FfiConverterUInt.write(value.`x`, buf)
+            FfiConverterUInt.write(value.`y`, buf)
+            FfiConverterUInt.write(value.`width`, buf)
+            FfiConverterUInt.write(value.`height`, buf)
+    }
+}
+
+
+
+/**
  * Everything a [`HologramGenerator`] needs. Only `width` and `height` (the SLM's resolution in pixels) are
  * required; every other field has the default named in its comment.
  */
@@ -2989,6 +3142,15 @@ data class RgbdFrame (
      * Clockwise rotation making both buffers upright; `None` (default) = none.
      */
     var `rotation`: Rotation? = null 
+    , 
+    /**
+     * The rectangle of the colour buffer (colour pixels, before the rotation) that covers the depth
+     * buffer's field of view; `None` (default) = the whole colour buffer. ARCore needs it: its depth covers
+     * the GPU texture's field of view (usually 16:9), a band of the 4:3 CPU image (Android:
+     * `RgbdFrames.fromArFrame` fills it). Errors: [`TensorholoError::InvalidInput`] when it is empty or not
+     * inside the colour buffer.
+     */
+    var `colorCrop`: CropRect? = null 
     
 ){
     
@@ -3016,6 +3178,7 @@ public object FfiConverterTypeRgbdFrame: FfiConverterRustBuffer<RgbdFrame> {
             FfiConverterUInt.read(buf),
             FfiConverterUInt.read(buf),
             FfiConverterOptionalTypeRotation.read(buf),
+            FfiConverterOptionalTypeCropRect.read(buf),
         )
     }
 
@@ -3030,7 +3193,8 @@ public object FfiConverterTypeRgbdFrame: FfiConverterRustBuffer<RgbdFrame> {
             FfiConverterUInt.allocationSize(value.`depthHeight`) +
             FfiConverterUInt.allocationSize(value.`colorRowStride`) +
             FfiConverterUInt.allocationSize(value.`depthRowStride`) +
-            FfiConverterOptionalTypeRotation.allocationSize(value.`rotation`)
+            FfiConverterOptionalTypeRotation.allocationSize(value.`rotation`) +
+            FfiConverterOptionalTypeCropRect.allocationSize(value.`colorCrop`)
     )
 
     override fun write(value: RgbdFrame, buf: ByteBuffer) {
@@ -3045,6 +3209,7 @@ public object FfiConverterTypeRgbdFrame: FfiConverterRustBuffer<RgbdFrame> {
             FfiConverterUInt.write(value.`colorRowStride`, buf)
             FfiConverterUInt.write(value.`depthRowStride`, buf)
             FfiConverterOptionalTypeRotation.write(value.`rotation`, buf)
+            FfiConverterOptionalTypeCropRect.write(value.`colorCrop`, buf)
     }
 }
 
@@ -3881,6 +4046,38 @@ public object FfiConverterOptionalByteArray: FfiConverterRustBuffer<kotlin.ByteA
 /**
  * @suppress
  */
+public object FfiConverterOptionalTypeCropRect: FfiConverterRustBuffer<CropRect?> {
+    override fun read(buf: ByteBuffer): CropRect? {
+        if (buf.get().toInt() == 0) {
+            return null
+        }
+        return FfiConverterTypeCropRect.read(buf)
+    }
+
+    override fun allocationSize(value: CropRect?): ULong {
+        if (value == null) {
+            return 1UL
+        } else {
+            return 1UL + FfiConverterTypeCropRect.allocationSize(value)
+        }
+    }
+
+    override fun write(value: CropRect?, buf: ByteBuffer) {
+        if (value == null) {
+            buf.put(0)
+        } else {
+            buf.put(1)
+            FfiConverterTypeCropRect.write(value, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
 public object FfiConverterOptionalTypeBackend: FfiConverterRustBuffer<Backend?> {
     override fun read(buf: ByteBuffer): Backend? {
         if (buf.get().toInt() == 0) {
@@ -4073,6 +4270,34 @@ public object FfiConverterOptionalTypeRotation: FfiConverterRustBuffer<Rotation?
 /**
  * @suppress
  */
+public object FfiConverterSequenceFloat: FfiConverterRustBuffer<List<kotlin.Float>> {
+    override fun read(buf: ByteBuffer): List<kotlin.Float> {
+        val len = buf.getInt()
+        return List<kotlin.Float>(len) {
+            FfiConverterFloat.read(buf)
+        }
+    }
+
+    override fun allocationSize(value: List<kotlin.Float>): ULong {
+        val sizeForLength = 4UL
+        val sizeForItems = value.map { FfiConverterFloat.allocationSize(it) }.sum()
+        return sizeForLength + sizeForItems
+    }
+
+    override fun write(value: List<kotlin.Float>, buf: ByteBuffer) {
+        buf.putInt(value.size)
+        value.iterator().forEach {
+            FfiConverterFloat.write(it, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
 public object FfiConverterSequenceDouble: FfiConverterRustBuffer<List<kotlin.Double>> {
     override fun read(buf: ByteBuffer): List<kotlin.Double> {
         val len = buf.getInt()
@@ -4104,6 +4329,30 @@ public object FfiConverterSequenceDouble: FfiConverterRustBuffer<List<kotlin.Dou
     UniffiLib.uniffi_tensorholo_ffi_fn_func_version(
     
         _status)
+}
+    )
+    }
+    
+
+        /**
+         * Converts a camera frame the way a generator does before its CNN (crop, rotation, depth to the colour
+         * grid, automatic depth range, hole filling, `fit` to `width × height`; `fit` `None` = [`Fit::Crop`]),
+         * without rendering: to check the orientation and the depth–colour registration on a device, e.g. by
+         * drawing `depth` over `amplitude`.
+         *
+         * Errors: [`TensorholoError::InvalidInput`] for a `width` or `height` of 0, buffers that do not match
+         * their sizes, strides and formats, a bad `color_crop`, or a depth map without one valid pixel.
+         */
+    @Throws(TensorholoException::class) fun `convertFrame`(`frame`: RgbdFrame, `width`: kotlin.UInt, `height`: kotlin.UInt, `fit`: Fit?): ConvertedFrame {
+            return FfiConverterTypeConvertedFrame.lift(
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_func_convert_frame(
+    
+        
+        FfiConverterTypeRgbdFrame.lower(`frame`),
+        FfiConverterUInt.lower(`width`),
+        FfiConverterUInt.lower(`height`),
+        FfiConverterOptionalTypeFit.lower(`fit`),_status)
 }
     )
     }

@@ -5,6 +5,7 @@ package tensorholo.android
 
 import java.nio.ByteBuffer
 import tensorholo.ColorFormat
+import tensorholo.CropRect
 import tensorholo.DepthFormat
 import tensorholo.RgbdFrame
 import tensorholo.Rotation
@@ -120,8 +121,11 @@ object CameraPlanes {
      * Depth samples are 16-bit little-endian (Android's byte order), taken as they lie in memory:
      * [DepthFormat.MILLIMETRES_U16] = millimetres, 0 invalid (ARCore); [DepthFormat.DEPTH16] = low 13 bits
      * millimetres, high 3 bits confidence (code 1 = 0 % confidence = invalid), Camera2 depth cameras. The
-     * SDK decodes them and never reads an invalid pixel as near. Both images cover the same field of view
-     * (ARCore aligns its depth image with the camera image); the depth may have a lower resolution.
+     * SDK decodes them and never reads an invalid pixel as near. The depth covers the field of view of the
+     * colour, or of `colorCrop` when given; it may have a lower resolution. ARCore's depth covers its GPU
+     * texture's field of view, a band of the CPU image: pass [cropForTexture]'s rectangle (as
+     * `RgbdFrames.fromArFrame` does).
+     *
      *
      * @param rgba `width · height · 4` bytes, R, G, B, A, row-major (e.g. from [yuv420ToRgba]); not copied:
      *   the frame holds this array (the bindings copy it when the frame is rendered or pushed).
@@ -135,11 +139,15 @@ object CameraPlanes {
      *   `2 · depthWidth`.
      * @param depthFormat [DepthFormat.MILLIMETRES_U16] or [DepthFormat.DEPTH16] (the 16-bit formats).
      * @param rotation clockwise rotation making both buffers upright (see [rotationFor]).
-     * @return the frame: colour [ColorFormat.RGBA8] packed, depth packed.
+     * @param colorCrop the rectangle of the colour image (pixels, before the rotation) that the depth
+     *   covers, or null for the whole image; the library crops the colour to it before rotating.
+     * @return the frame: colour [ColorFormat.RGBA8] packed, depth packed, `colorCrop` as given.
      * @throws IllegalArgumentException on a size ≤ 0, `rgba` of the wrong size, a non-16-bit `depthFormat`,
-     *   a stride shorter than one row, or a depth buffer shorter than its layout needs.
+     *   a stride shorter than one row, a depth buffer shorter than its layout needs, or a `colorCrop` that
+     *   is empty or not inside the colour image.
      */
     @JvmStatic
+    @JvmOverloads
     fun rgbdFrame(
         rgba: ByteArray,
         width: Int,
@@ -150,11 +158,13 @@ object CameraPlanes {
         depthRowStride: Int,
         depthFormat: DepthFormat,
         rotation: Rotation,
+        colorCrop: CropRect? = null,
     ): RgbdFrame {
         require(width > 0 && height > 0) { "colour size must be positive, got ${width}x$height" }
         require(rgba.size.toLong() == width.toLong() * height * 4) {
             "rgba has ${rgba.size} bytes, a packed ${width}x$height RGBA8 image has ${width.toLong() * height * 4}"
         }
+        if (colorCrop != null) checkCrop(colorCrop, width, height)
         val packed = depth16Packed(depth, depthWidth, depthHeight, depthRowStride, depthFormat)
         return RgbdFrame(
             color = rgba,
@@ -166,7 +176,100 @@ object CameraPlanes {
             depthWidth = depthWidth.toUInt(),
             depthHeight = depthHeight.toUInt(),
             rotation = rotation,
+            colorCrop = colorCrop,
         )
+    }
+
+    /** `android.graphics.ImageFormat.DEPTH16`: Camera2 depth, and ARCore's deprecated `acquireDepthImage()`. */
+    const val IMAGE_FORMAT_DEPTH16 = 0x44363159
+
+    /** `android.hardware.HardwareBuffer.D_16` (API 28): ARCore's `acquireDepthImage16Bits()` since 1.31. */
+    const val HARDWARE_BUFFER_D_16 = 0x30
+
+    /**
+     * How to read a 16-bit depth `Image`'s samples, from its `Image.getFormat()`:
+     * - `HardwareBuffer.D_16` ([HARDWARE_BUFFER_D_16]) → [DepthFormat.MILLIMETRES_U16]: all 16 bits are
+     *   millimetres (ARCore `acquireDepthImage16Bits()` / `acquireRawDepthImage16Bits()`, up to 65.535 m);
+     * - `ImageFormat.DEPTH16` ([IMAGE_FORMAT_DEPTH16]) → [DepthFormat.DEPTH16]: 13 bits of millimetres and 3
+     *   bits of confidence (Camera2 depth cameras; ARCore's deprecated `acquireDepthImage()` clears the top 3
+     *   bits, i.e. full confidence, and caps the range at 8.191 m, so it reads correctly too).
+     *
+     * Reading a D_16 image as DEPTH16 would wrap every depth past 8.191 m to a near value, and a DEPTH16
+     * image as millimetres would read its confidence bits as metres: the format decides, never the caller.
+     *
+     * @throws IllegalArgumentException for any other format, naming it.
+     */
+    @JvmStatic
+    fun depthFormatOf(imageFormat: Int): DepthFormat = when (imageFormat) {
+        HARDWARE_BUFFER_D_16 -> DepthFormat.MILLIMETRES_U16
+        IMAGE_FORMAT_DEPTH16 -> DepthFormat.DEPTH16
+        else -> throw IllegalArgumentException(
+            "depth image format is $imageFormat (0x${Integer.toHexString(imageFormat)}), expected " +
+                "HardwareBuffer.D_16 ($HARDWARE_BUFFER_D_16) or ImageFormat.DEPTH16 ($IMAGE_FORMAT_DEPTH16)",
+        )
+    }
+
+    /**
+     * The four corners of the GPU camera texture in ARCore's `Coordinates2d.TEXTURE_NORMALIZED`, as
+     * `(x, y)` pairs: (0, 0), (0, 1), (1, 0), (1, 1). Transform them with `Frame.transformCoordinates2d(
+     * TEXTURE_NORMALIZED, textureCorners(), IMAGE_PIXELS, out)` and pass `out` to [cropForTexture]. A new
+     * array on each call (ARCore only reads it).
+     */
+    @JvmStatic
+    fun textureCorners(): FloatArray = floatArrayOf(0f, 0f, 0f, 1f, 1f, 0f, 1f, 1f)
+
+    /**
+     * The rectangle of an ARCore CPU image (`acquireCameraImage()`, e.g. 640 × 480) that the GPU camera
+     * texture sees, which is the field of view of ARCore's depth image (`acquireDepthImage16Bits()` covers
+     * the texture's field of view, usually 16:9, not the 4:3 CPU image's): the bounding box of the texture's
+     * corners in CPU image pixels, its edges rounded to the nearest pixel boundary. Pass it as the frame's
+     * `colorCrop` so that colour and depth are registered (Google's raw-depth sample crops the same way).
+     *
+     * Example: a 16:9 texture on a 640 × 480 image maps its corners to y = 60 and y = 420 → `CropRect(x = 0,
+     * y = 60, width = 640, height = 360)`.
+     *
+     * @param imageCorners the 8 floats `Frame.transformCoordinates2d(TEXTURE_NORMALIZED, textureCorners(),
+     *   IMAGE_PIXELS, imageCorners)` wrote: `(x, y)` in CPU image pixels for each corner of [textureCorners],
+     *   pixel edges (0 = the image's left/top edge, `imageWidth` its right edge).
+     * @param imageWidth CPU image width in pixels (`Image.getWidth()`), ≥ 1.
+     * @param imageHeight CPU image height in pixels, ≥ 1.
+     * @throws IllegalArgumentException when `imageCorners` does not hold 8 finite values, the sizes are not
+     *   positive, the rectangle is empty, or it reaches more than half a pixel outside the image (the depth
+     *   would then see more than the colour: cropping the colour cannot register them).
+     */
+    @JvmStatic
+    fun cropForTexture(imageCorners: FloatArray, imageWidth: Int, imageHeight: Int): CropRect {
+        require(imageWidth > 0 && imageHeight > 0) { "image size must be positive, got ${imageWidth}x$imageHeight" }
+        require(imageCorners.size == 8) { "imageCorners holds ${imageCorners.size} floats, expected 8 (4 corners x, y)" }
+        require(imageCorners.all { it.isFinite() }) {
+            "imageCorners holds a non-finite value: ${imageCorners.joinToString()}"
+        }
+        val xs = (0 until 4).map { imageCorners[2 * it].toDouble() }
+        val ys = (0 until 4).map { imageCorners[2 * it + 1].toDouble() }
+        fun edge(v: Double) = Math.floor(v + 0.5).toLong()
+        val x0 = edge(xs.min())
+        val x1 = edge(xs.max())
+        val y0 = edge(ys.min())
+        val y1 = edge(ys.max())
+        require(x0 >= 0 && y0 >= 0 && x1 <= imageWidth && y1 <= imageHeight) {
+            "the texture's field of view (x ${xs.min()}..${xs.max()}, y ${ys.min()}..${ys.max()} CPU image pixels) " +
+                "reaches outside the ${imageWidth}x$imageHeight CPU image: the depth sees more than the colour"
+        }
+        require(x1 > x0 && y1 > y0) {
+            "the texture's field of view (x ${xs.min()}..${xs.max()}, y ${ys.min()}..${ys.max()}) is empty in pixels"
+        }
+        return CropRect(x = x0.toUInt(), y = y0.toUInt(), width = (x1 - x0).toUInt(), height = (y1 - y0).toUInt())
+    }
+
+    /** Checks that `crop` is non-empty and inside a `width × height` image (as the library does). */
+    private fun checkCrop(crop: CropRect, width: Int, height: Int) {
+        require(
+            crop.width > 0u && crop.height > 0u &&
+                crop.x.toLong() + crop.width.toLong() <= width && crop.y.toLong() + crop.height.toLong() <= height,
+        ) {
+            "colour crop x ${crop.x}, y ${crop.y}, width ${crop.width}, height ${crop.height} is empty or not " +
+                "inside the ${width}x$height colour image"
+        }
     }
 
     /**

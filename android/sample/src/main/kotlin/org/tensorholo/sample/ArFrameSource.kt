@@ -6,33 +6,45 @@ import android.hardware.camera2.CameraManager
 import android.opengl.GLES11Ext
 import android.opengl.GLES20
 import android.opengl.GLSurfaceView
+import android.util.Log
 import com.google.ar.core.Session
 import com.google.ar.core.TrackingState
 import com.google.ar.core.exceptions.CameraNotAvailableException
+import com.google.ar.core.exceptions.DeadlineExceededException
 import com.google.ar.core.exceptions.NotYetAvailableException
+import com.google.ar.core.exceptions.ResourceExhaustedException
 import javax.microedition.khronos.egl.EGLConfig
 import javax.microedition.khronos.opengles.GL10
-import tensorholo.DepthFormat
 import tensorholo.Rotation
 import tensorholo.android.CameraPlanes
 import tensorholo.android.RgbdFrames
+import tensorholo.android.fromArFrame
 
 /**
  * Runs the ARCore session on the GL thread (ARCore needs a GL context and a camera texture for
  * `Session.update()`; nothing is drawn, the hologram preview covers the surface) and feeds the pipeline:
- * for each frame the pipeline wants, the CPU camera image (`YUV_420_888`, sensor orientation) and the Depth
- * API image (`acquireDepthImage16Bits`: 16-bit millimetres, aligned with it) become an [tensorholo.RgbdFrame]
- * (a few ms of conversion), both images are closed at once, and the frame is pushed (never blocks).
+ * for each frame the pipeline wants, `RgbdFrames.fromArFrame` turns the CPU camera image (`YUV_420_888`,
+ * sensor orientation) and the Depth API image (`acquireDepthImage16Bits`: 16-bit millimetres covering the
+ * GPU texture's field of view) into a registered [tensorholo.RgbdFrame] (the CPU image cropped to the depth's
+ * field of view; a few ms of conversion), both images are closed at once, and the frame is pushed (never
+ * blocks).
+ *
+ * No exception escapes to the GL thread (one would kill the app): a frame without depth yet, a frame too old
+ * or too many held images skip the frame; anything else is reported through [onError] once per message and
+ * the next frame is tried.
  *
  * @param session the session once made (ARCore may need installing first), else null.
  * @param displayRotation the display's `Surface.ROTATION_*`.
+ * @param onError a problem for the user (called on the GL thread; post it to the UI thread).
  */
 class ArFrameSource(
     private val context: Context,
     private val session: () -> Session?,
     private val displayRotation: () -> Int,
     private val pipeline: () -> HologramPipeline?,
+    private val onError: (String) -> Unit = {},
 ) : GLSurfaceView.Renderer {
+    private var lastError: String? = null
     private var textureId = 0
     private var textureSession: Session? = null
     private var width = 0
@@ -60,6 +72,19 @@ class ArFrameSource(
     }
 
     override fun onDrawFrame(gl: GL10?) {
+        try {
+            drawFrame()
+        } catch (e: Exception) {
+            // ARCore's other exceptions (SessionPausedException, FatalException, …), a bad image layout
+            // (IllegalArgumentException), a closed stream: reported, never thrown on the GL thread.
+            val message = "${e.javaClass.simpleName}: ${e.message}"
+            Log.w(TAG, "frame skipped", e)
+            if (message != lastError) onError(message)
+            lastError = message
+        }
+    }
+
+    private fun drawFrame() {
         GLES20.glClear(GLES20.GL_COLOR_BUFFER_BIT)
         val s = session() ?: return
         if (textureSession !== s) {
@@ -85,14 +110,19 @@ class ArFrameSource(
         val p = pipeline() ?: return
         if (!p.wantsFrame()) return
         val rgbd = try {
-            frame.acquireCameraImage().use { color ->
-                frame.acquireDepthImage16Bits().use { depth ->
-                    RgbdFrames.fromImages(color, depth, rotation, DepthFormat.MILLIMETRES_U16)
-                }
-            }
+            RgbdFrames.fromArFrame(frame, rotation)
         } catch (e: NotYetAvailableException) {
-            return // no depth for this frame yet
+            return // no camera image or depth for this frame yet
+        } catch (e: DeadlineExceededException) {
+            return // the frame is already too old
+        } catch (e: ResourceExhaustedException) {
+            return // too many images held at once: ARCore frees them as they are closed
         }
         p.push(rgbd)
+        lastError = null
+    }
+
+    private companion object {
+        const val TAG = "tensorholo"
     }
 }

@@ -5,7 +5,10 @@ import android.app.Activity
 import android.content.pm.PackageManager
 import android.hardware.display.DisplayManager
 import android.opengl.GLSurfaceView
+import android.os.Build
 import android.os.Bundle
+import android.util.Log
+import android.view.Display
 import android.view.WindowManager
 import android.widget.Button
 import android.widget.ImageView
@@ -19,8 +22,9 @@ import com.google.ar.core.exceptions.UnavailableException
 
 /**
  * ARCore depth camera → hologram. The phone shows a simulated view of the hologram (focus slider: 0 = near,
- * 100 = far); a second display of category `DISPLAY_CATEGORY_PRESENTATION` (the SLM, over HDMI or USB-C)
- * shows the SLM frames full-screen at its own resolution. Without one, holograms are computed at
+ * 100 = far); a second display of category `DISPLAY_CATEGORY_PRESENTATION` (the SLM, over HDMI or USB-C
+ * DisplayPort; wired displays preferred, see [slmDisplay]) shows the SLM frames full-screen, unscaled, at its
+ * own resolution. Without one, holograms are computed at
  * [PREVIEW_ONLY_SIZE] for the preview alone.
  *
  * Threads: UI (this activity), GL ([ArFrameSource]: ARCore + conversion), the stream's thread (rendering)
@@ -62,7 +66,11 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
         surface.preserveEGLContextOnPause = true
         surface.setEGLContextClientVersion(2)
         @Suppress("DEPRECATION")
-        surface.setRenderer(ArFrameSource(this, { session }, { windowManager.defaultDisplay.rotation }, { pipeline }))
+        surface.setRenderer(
+            ArFrameSource(this, { session }, { windowManager.defaultDisplay.rotation }, { pipeline }) { message ->
+                runOnUiThread { status.text = message }
+            },
+        )
         surface.renderMode = GLSurfaceView.RENDERMODE_CONTINUOUSLY
     }
 
@@ -134,14 +142,39 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
     }
 
     /**
-     * The SLM output for the displays present now: a presentation on the first presentation display and a
-     * pipeline at its size, or a preview-only pipeline. A pipeline is remade only when the size changes.
+     * The display for the SLM among the presentation displays, or null: never this activity's own display
+     * nor a built-in one (Android 16 lets built-in displays carry `FLAG_PRESENTATION` too), never a private
+     * one; among the rest, a display that reported an EDID over its cable (`Display.getDeviceProductInfo()`,
+     * API 31: physical HDMI / DisplayPort displays have one, Wi-Fi displays (Miracast) and virtual or overlay
+     * displays have none) before any other. A wireless display compresses the video, so it is used only when
+     * nothing else is connected, with a warning (Android has no public "is wireless" test).
+     */
+    private fun slmDisplay(): Display? {
+        @Suppress("DEPRECATION")
+        val own = if (Build.VERSION.SDK_INT >= 30) display?.displayId else windowManager.defaultDisplay.displayId
+        val candidates = displays.getDisplays(DisplayManager.DISPLAY_CATEGORY_PRESENTATION).filter { d ->
+            d.displayId != own && d.displayId != Display.DEFAULT_DISPLAY && d.isValid &&
+                (d.flags and Display.FLAG_PRIVATE) == 0 &&
+                !(Build.VERSION.SDK_INT >= 36 && d.isInternal)
+        }
+        if (Build.VERSION.SDK_INT >= 31) {
+            candidates.firstOrNull { it.deviceProductInfo != null }?.let { return it }
+        }
+        return candidates.firstOrNull()?.also {
+            status.text = "warning: cannot tell whether display '${it.name}' is wired; a wireless display " +
+                "compresses the pattern (use USB-C DisplayPort or HDMI)"
+        }
+    }
+
+    /**
+     * The SLM output for the displays present now: a presentation on [slmDisplay] and a pipeline at its size,
+     * or a preview-only pipeline. A pipeline is remade only when the size changes.
      */
     private fun updateOutput() {
-        val slm = displays.getDisplays(DisplayManager.DISPLAY_CATEGORY_PRESENTATION).firstOrNull()
+        val slm = slmDisplay()
         if (presentation?.display?.displayId != slm?.displayId) {
             presentation?.dismiss()
-            presentation = slm?.let { SlmPresentation(this, it).apply { show() } }
+            presentation = slm?.let { showPresentation(it) }
         }
         val size = presentation?.let { it.width to it.height } ?: PREVIEW_ONLY_SIZE
         if (pipeline != null && pipelineSize == size) return
@@ -154,6 +187,20 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
             onPreview = { bitmap -> runOnUiThread { previewView.setImageBitmap(bitmap) } },
             onStatus = { message -> runOnUiThread { status.text = message } },
         ).also { it.focus = focusBar.progress / 100f }
+    }
+
+    /** A shown presentation on `display`, or null when the display went away meanwhile (reported). */
+    private fun showPresentation(display: Display): SlmPresentation? {
+        val p = SlmPresentation(this, display) { problem -> runOnUiThread { status.text = problem } }
+        return try {
+            p.show()
+            p
+        } catch (e: WindowManager.InvalidDisplayException) {
+            // The display was removed between the query and show(): onDisplayRemoved follows.
+            Log.w("tensorholo", "SLM display ${display.displayId} is gone", e)
+            status.text = "the SLM display disconnected: ${e.message}"
+            null
+        }
     }
 
     override fun onDisplayAdded(displayId: Int) = updateOutput()
