@@ -63,6 +63,18 @@ pub enum GpuPrecision {
     F16,
 }
 
+/// The engine that runs the CNNs on the CPU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum CnnEngine {
+    /// Time tensorholo's own kernels and tract when the generator is created and keep the faster (the
+    /// default).
+    Auto,
+    /// tensorholo's own direct 3×3 convolution kernels (f32 and int8 models).
+    Native,
+    /// tract.
+    Tract,
+}
+
 /// How the camera frame fits the hologram's size.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
 pub enum Fit {
@@ -164,6 +176,9 @@ pub struct GeneratorConfig {
     /// The GPU CNNs' arithmetic; `None` = [`GpuPrecision::Auto`].
     #[uniffi(default = None)]
     pub gpu_precision: Option<GpuPrecision>,
+    /// The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`] says which runs).
+    #[uniffi(default = None)]
+    pub engine: Option<CnnEngine>,
 }
 
 impl GeneratorConfig {
@@ -190,6 +205,11 @@ impl GeneratorConfig {
             Backend::Auto => tensorholo::pipeline::Backend::Auto,
             Backend::Cpu => tensorholo::pipeline::Backend::Cpu,
             Backend::Gpu => tensorholo::pipeline::Backend::Gpu,
+        };
+        c.engine = match self.engine.unwrap_or(CnnEngine::Auto) {
+            CnnEngine::Auto => tensorholo::cnn::CnnEngine::Auto,
+            CnnEngine::Native => tensorholo::cnn::CnnEngine::Native,
+            CnnEngine::Tract => tensorholo::cnn::CnnEngine::Tract,
         };
         c.gpu_precision = match self.gpu_precision.unwrap_or(GpuPrecision::Auto) {
             GpuPrecision::Auto => tensorholo::pipeline::GpuPrecision::Auto,
@@ -546,6 +566,12 @@ pub struct GeneratorInfo {
     pub prefilter_reason: String,
     /// SLM offset in millimetres.
     pub offset_mm: f64,
+    /// CPU CNN engine that runs (`native` or `tract`).
+    pub cnn_engine: String,
+    /// Why that engine (e.g. "faster on this CPU (2.41× tract's best)").
+    pub cnn_engine_reason: String,
+    /// The native engine's kernel row (e.g. `conv3x3.f32.6x2.avx2`, `conv3x3.u8s8.4x1.avx2`), if it runs.
+    pub cnn_kernel: Option<String>,
     /// Chosen CNN memory layout (`nchw` or `nhwc`).
     pub cnn_layout: String,
     /// Chosen CNN threads.
@@ -744,6 +770,9 @@ fn info(g: &core::HologramGenerator) -> Result<GeneratorInfo> {
         prefilter_model: i.prefilter_model,
         prefilter_reason: i.prefilter_reason,
         offset_mm: i.offset_m * 1e3,
+        cnn_engine: i.plan.engine.to_string(),
+        cnn_engine_reason: i.plan.engine_reason.clone(),
+        cnn_kernel: i.plan.kernel.clone(),
         cnn_layout: i.plan.layout.to_string(),
         cnn_threads: i.plan.threads.unwrap_or(1) as u32,
         autotuned: i.plan.autotuned,
@@ -834,6 +863,8 @@ mod tests {
             z_far_m: None,
             backend: None,
             gpu_precision: None,
+            // Pinned: `Auto` picks by timing, and the tests compare generators bit for bit.
+            engine: Some(CnnEngine::Native),
         }
     }
 
@@ -953,6 +984,38 @@ mod tests {
         assert!(
             matches!(garbage, Err(TensorholoError::InvalidModel { .. })),
             "{garbage:?}"
+        );
+    }
+
+    /// `engine` reaches the session: each engine runs when asked, the info names it (and the native kernel
+    /// row), and both give nearly the same pattern (they agree to float rounding, not bit for bit).
+    #[test]
+    fn the_engine_choice_reaches_the_session() {
+        let mut patterns = Vec::new();
+        for (engine, name) in [(CnnEngine::Native, "native"), (CnnEngine::Tract, "tract")] {
+            let g = HologramGenerator::new(GeneratorConfig {
+                engine: Some(engine),
+                ..config(32, 24)
+            })
+            .unwrap();
+            let info = g.info().unwrap();
+            assert_eq!(info.cnn_engine, name, "{info:?}");
+            assert_eq!(
+                info.cnn_kernel.is_some(),
+                engine == CnnEngine::Native,
+                "{info:?}"
+            );
+            assert!(info.json.contains("\"engine\""), "{}", info.json);
+            patterns.push(g.render(frame()).unwrap().red);
+        }
+        let differ = patterns[0]
+            .iter()
+            .zip(&patterns[1])
+            .filter(|(a, b)| a.abs_diff(**b) > 1)
+            .count();
+        assert!(
+            differ * 100 <= patterns[0].len(),
+            "{differ} codes differ by more than 1"
         );
     }
 

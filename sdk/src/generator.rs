@@ -64,8 +64,8 @@ pub struct GeneratorConfig {
     pub threads: ThreadCount,
     /// CNN memory layout ([`CnnLayout::Auto`] by default: timed at creation).
     pub layout: CnnLayout,
-    /// CPU CNN engine ([`CnnEngine::Auto`] by default: for the f32 models the native kernels and tract are
-    /// timed at creation and the faster runs).
+    /// CPU CNN engine ([`CnnEngine::Auto`] by default: for the f32 and int8 QDQ models the native kernels
+    /// and tract are timed at creation and the faster runs).
     pub engine: CnnEngine,
     /// How camera frames fit the hologram ([`Fit::Crop`] by default).
     pub fit: Fit,

@@ -1709,6 +1709,10 @@ public struct GeneratorConfig: Equatable, Hashable {
      * The GPU CNNs' arithmetic; `None` = [`GpuPrecision::Auto`].
      */
     public var gpuPrecision: GpuPrecision?
+    /**
+     * The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`] says which runs).
+     */
+    public var engine: CnnEngine?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -1759,7 +1763,10 @@ public struct GeneratorConfig: Equatable, Hashable {
          */backend: Backend? = nil, 
         /**
          * The GPU CNNs' arithmetic; `None` = [`GpuPrecision::Auto`].
-         */gpuPrecision: GpuPrecision? = nil) {
+         */gpuPrecision: GpuPrecision? = nil, 
+        /**
+         * The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`] says which runs).
+         */engine: CnnEngine? = nil) {
         self.width = width
         self.height = height
         self.layers = layers
@@ -1775,6 +1782,7 @@ public struct GeneratorConfig: Equatable, Hashable {
         self.zFarM = zFarM
         self.backend = backend
         self.gpuPrecision = gpuPrecision
+        self.engine = engine
     }
 
     
@@ -1807,7 +1815,8 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
                 zNearM: FfiConverterOptionDouble.read(from: &buf), 
                 zFarM: FfiConverterOptionDouble.read(from: &buf), 
                 backend: FfiConverterOptionTypeBackend.read(from: &buf), 
-                gpuPrecision: FfiConverterOptionTypeGpuPrecision.read(from: &buf)
+                gpuPrecision: FfiConverterOptionTypeGpuPrecision.read(from: &buf), 
+                engine: FfiConverterOptionTypeCnnEngine.read(from: &buf)
         )
     }
 
@@ -1827,6 +1836,7 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
         FfiConverterOptionDouble.write(value.zFarM, into: &buf)
         FfiConverterOptionTypeBackend.write(value.backend, into: &buf)
         FfiConverterOptionTypeGpuPrecision.write(value.gpuPrecision, into: &buf)
+        FfiConverterOptionTypeCnnEngine.write(value.engine, into: &buf)
     }
 }
 
@@ -1886,6 +1896,18 @@ public struct GeneratorInfo: Equatable, Hashable {
      * SLM offset in millimetres.
      */
     public var offsetMm: Double
+    /**
+     * CPU CNN engine that runs (`native` or `tract`).
+     */
+    public var cnnEngine: String
+    /**
+     * Why that engine (e.g. "faster on this CPU (2.41× tract's best)").
+     */
+    public var cnnEngineReason: String
+    /**
+     * The native engine's kernel row (e.g. `conv3x3.f32.6x2.avx2`, `conv3x3.u8s8.4x1.avx2`), if it runs.
+     */
+    public var cnnKernel: String?
     /**
      * Chosen CNN memory layout (`nchw` or `nhwc`).
      */
@@ -1951,6 +1973,15 @@ public struct GeneratorInfo: Equatable, Hashable {
          * SLM offset in millimetres.
          */offsetMm: Double, 
         /**
+         * CPU CNN engine that runs (`native` or `tract`).
+         */cnnEngine: String, 
+        /**
+         * Why that engine (e.g. "faster on this CPU (2.41× tract's best)").
+         */cnnEngineReason: String, 
+        /**
+         * The native engine's kernel row (e.g. `conv3x3.f32.6x2.avx2`, `conv3x3.u8s8.4x1.avx2`), if it runs.
+         */cnnKernel: String?, 
+        /**
          * Chosen CNN memory layout (`nchw` or `nhwc`).
          */cnnLayout: String, 
         /**
@@ -1984,6 +2015,9 @@ public struct GeneratorInfo: Equatable, Hashable {
         self.prefilterModel = prefilterModel
         self.prefilterReason = prefilterReason
         self.offsetMm = offsetMm
+        self.cnnEngine = cnnEngine
+        self.cnnEngineReason = cnnEngineReason
+        self.cnnKernel = cnnKernel
         self.cnnLayout = cnnLayout
         self.cnnThreads = cnnThreads
         self.autotuned = autotuned
@@ -2019,6 +2053,9 @@ public struct FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer {
                 prefilterModel: FfiConverterOptionString.read(from: &buf), 
                 prefilterReason: FfiConverterString.read(from: &buf), 
                 offsetMm: FfiConverterDouble.read(from: &buf), 
+                cnnEngine: FfiConverterString.read(from: &buf), 
+                cnnEngineReason: FfiConverterString.read(from: &buf), 
+                cnnKernel: FfiConverterOptionString.read(from: &buf), 
                 cnnLayout: FfiConverterString.read(from: &buf), 
                 cnnThreads: FfiConverterUInt32.read(from: &buf), 
                 autotuned: FfiConverterBool.read(from: &buf), 
@@ -2040,6 +2077,9 @@ public struct FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer {
         FfiConverterOptionString.write(value.prefilterModel, into: &buf)
         FfiConverterString.write(value.prefilterReason, into: &buf)
         FfiConverterDouble.write(value.offsetMm, into: &buf)
+        FfiConverterString.write(value.cnnEngine, into: &buf)
+        FfiConverterString.write(value.cnnEngineReason, into: &buf)
+        FfiConverterOptionString.write(value.cnnKernel, into: &buf)
         FfiConverterString.write(value.cnnLayout, into: &buf)
         FfiConverterUInt32.write(value.cnnThreads, into: &buf)
         FfiConverterBool.write(value.autotuned, into: &buf)
@@ -2657,6 +2697,92 @@ public func FfiConverterTypeBackend_lift(_ buf: RustBuffer) throws -> Backend {
 #endif
 public func FfiConverterTypeBackend_lower(_ value: Backend) -> RustBuffer {
     return FfiConverterTypeBackend.lower(value)
+}
+
+
+
+/**
+ * The engine that runs the CNNs on the CPU.
+ */
+
+public enum CnnEngine: Equatable, Hashable {
+    
+    /**
+     * Time tensorholo's own kernels and tract when the generator is created and keep the faster (the
+     * default).
+     */
+    case auto
+    /**
+     * tensorholo's own direct 3×3 convolution kernels (f32 and int8 models).
+     */
+    case native
+    /**
+     * tract.
+     */
+    case tract
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension CnnEngine: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeCnnEngine: FfiConverterRustBuffer {
+    typealias SwiftType = CnnEngine
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> CnnEngine {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .auto
+        
+        case 2: return .native
+        
+        case 3: return .tract
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: CnnEngine, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .auto:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .native:
+            writeInt(&buf, Int32(2))
+        
+        
+        case .tract:
+            writeInt(&buf, Int32(3))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeCnnEngine_lift(_ buf: RustBuffer) throws -> CnnEngine {
+    return try FfiConverterTypeCnnEngine.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeCnnEngine_lower(_ value: CnnEngine) -> RustBuffer {
+    return FfiConverterTypeCnnEngine.lower(value)
 }
 
 
@@ -3539,6 +3665,30 @@ fileprivate struct FfiConverterOptionTypeBackend: FfiConverterRustBuffer {
         switch try readInt(&buf) as Int8 {
         case 0: return nil
         case 1: return try FfiConverterTypeBackend.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionTypeCnnEngine: FfiConverterRustBuffer {
+    typealias SwiftType = CnnEngine?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeCnnEngine.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeCnnEngine.read(from: &buf)
         default: throw UniffiInternalError.unexpectedOptionalTag
         }
     }

@@ -2786,6 +2786,11 @@ data class GeneratorConfig (
      * The GPU CNNs' arithmetic; `None` = [`GpuPrecision::Auto`].
      */
     var `gpuPrecision`: GpuPrecision? = null 
+    , 
+    /**
+     * The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`] says which runs).
+     */
+    var `engine`: CnnEngine? = null 
     
 ){
     
@@ -2817,6 +2822,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalDouble.read(buf),
             FfiConverterOptionalTypeBackend.read(buf),
             FfiConverterOptionalTypeGpuPrecision.read(buf),
+            FfiConverterOptionalTypeCnnEngine.read(buf),
         )
     }
 
@@ -2835,7 +2841,8 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalDouble.allocationSize(value.`zNearM`) +
             FfiConverterOptionalDouble.allocationSize(value.`zFarM`) +
             FfiConverterOptionalTypeBackend.allocationSize(value.`backend`) +
-            FfiConverterOptionalTypeGpuPrecision.allocationSize(value.`gpuPrecision`)
+            FfiConverterOptionalTypeGpuPrecision.allocationSize(value.`gpuPrecision`) +
+            FfiConverterOptionalTypeCnnEngine.allocationSize(value.`engine`)
     )
 
     override fun write(value: GeneratorConfig, buf: ByteBuffer) {
@@ -2854,6 +2861,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalDouble.write(value.`zFarM`, buf)
             FfiConverterOptionalTypeBackend.write(value.`backend`, buf)
             FfiConverterOptionalTypeGpuPrecision.write(value.`gpuPrecision`, buf)
+            FfiConverterOptionalTypeCnnEngine.write(value.`engine`, buf)
     }
 }
 
@@ -2907,6 +2915,21 @@ data class GeneratorInfo (
      * SLM offset in millimetres.
      */
     var `offsetMm`: kotlin.Double
+    , 
+    /**
+     * CPU CNN engine that runs (`native` or `tract`).
+     */
+    var `cnnEngine`: kotlin.String
+    , 
+    /**
+     * Why that engine (e.g. "faster on this CPU (2.41× tract's best)").
+     */
+    var `cnnEngineReason`: kotlin.String
+    , 
+    /**
+     * The native engine's kernel row (e.g. `conv3x3.f32.6x2.avx2`, `conv3x3.u8s8.4x1.avx2`), if it runs.
+     */
+    var `cnnKernel`: kotlin.String?
     , 
     /**
      * Chosen CNN memory layout (`nchw` or `nhwc`).
@@ -2974,6 +2997,9 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterString.read(buf),
             FfiConverterDouble.read(buf),
             FfiConverterString.read(buf),
+            FfiConverterString.read(buf),
+            FfiConverterOptionalString.read(buf),
+            FfiConverterString.read(buf),
             FfiConverterUInt.read(buf),
             FfiConverterBoolean.read(buf),
             FfiConverterString.read(buf),
@@ -2994,6 +3020,9 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterOptionalString.allocationSize(value.`prefilterModel`) +
             FfiConverterString.allocationSize(value.`prefilterReason`) +
             FfiConverterDouble.allocationSize(value.`offsetMm`) +
+            FfiConverterString.allocationSize(value.`cnnEngine`) +
+            FfiConverterString.allocationSize(value.`cnnEngineReason`) +
+            FfiConverterOptionalString.allocationSize(value.`cnnKernel`) +
             FfiConverterString.allocationSize(value.`cnnLayout`) +
             FfiConverterUInt.allocationSize(value.`cnnThreads`) +
             FfiConverterBoolean.allocationSize(value.`autotuned`) +
@@ -3014,6 +3043,9 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterOptionalString.write(value.`prefilterModel`, buf)
             FfiConverterString.write(value.`prefilterReason`, buf)
             FfiConverterDouble.write(value.`offsetMm`, buf)
+            FfiConverterString.write(value.`cnnEngine`, buf)
+            FfiConverterString.write(value.`cnnEngineReason`, buf)
+            FfiConverterOptionalString.write(value.`cnnKernel`, buf)
             FfiConverterString.write(value.`cnnLayout`, buf)
             FfiConverterUInt.write(value.`cnnThreads`, buf)
             FfiConverterBoolean.write(value.`autotuned`, buf)
@@ -3438,6 +3470,54 @@ public object FfiConverterTypeBackend: FfiConverterRustBuffer<Backend> {
     override fun allocationSize(value: Backend) = 4UL
 
     override fun write(value: Backend, buf: ByteBuffer) {
+        buf.putInt(value.ordinal + 1)
+    }
+}
+
+
+
+
+
+/**
+ * The engine that runs the CNNs on the CPU.
+ */
+
+enum class CnnEngine {
+    
+    /**
+     * Time tensorholo's own kernels and tract when the generator is created and keep the faster (the
+     * default).
+     */
+    AUTO,
+    /**
+     * tensorholo's own direct 3×3 convolution kernels (f32 and int8 models).
+     */
+    NATIVE,
+    /**
+     * tract.
+     */
+    TRACT;
+
+    
+
+
+    companion object
+}
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeCnnEngine: FfiConverterRustBuffer<CnnEngine> {
+    override fun read(buf: ByteBuffer) = try {
+        CnnEngine.values()[buf.getInt() - 1]
+    } catch (e: IndexOutOfBoundsException) {
+        throw RuntimeException("invalid enum value, something is very wrong!!", e)
+    }
+
+    override fun allocationSize(value: CnnEngine) = 4UL
+
+    override fun write(value: CnnEngine, buf: ByteBuffer) {
         buf.putInt(value.ordinal + 1)
     }
 }
@@ -4100,6 +4180,38 @@ public object FfiConverterOptionalTypeBackend: FfiConverterRustBuffer<Backend?> 
         } else {
             buf.put(1)
             FfiConverterTypeBackend.write(value, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterOptionalTypeCnnEngine: FfiConverterRustBuffer<CnnEngine?> {
+    override fun read(buf: ByteBuffer): CnnEngine? {
+        if (buf.get().toInt() == 0) {
+            return null
+        }
+        return FfiConverterTypeCnnEngine.read(buf)
+    }
+
+    override fun allocationSize(value: CnnEngine?): ULong {
+        if (value == null) {
+            return 1UL
+        } else {
+            return 1UL + FfiConverterTypeCnnEngine.allocationSize(value)
+        }
+    }
+
+    override fun write(value: CnnEngine?, buf: ByteBuffer) {
+        if (value == null) {
+            buf.put(0)
+        } else {
+            buf.put(1)
+            FfiConverterTypeCnnEngine.write(value, buf)
         }
     }
 }
