@@ -49,12 +49,7 @@ pub fn depthwise(
                 padded[..r].fill(row[0]);
                 padded[r..r + w].copy_from_slice(row);
                 padded[r + w..].fill(row[w - 1]);
-                for kx in 0..k {
-                    let t = taps[ky * k + kx];
-                    for (a, &p) in acc.iter_mut().zip(&padded[kx..kx + w]) {
-                        *a += t * p;
-                    }
-                }
+                accumulate_taps(acc, padded, &taps[ky * k..(ky + 1) * k]);
             }
             let o = &mut out[(ch * h + y) * w..(ch * h + y + 1) * w];
             if accumulate {
@@ -65,6 +60,18 @@ pub fn depthwise(
         }
     }
     Ok(())
+}
+
+/// `acc[x] += Σ_kx taps[kx] · padded[x + kx]`: one kernel row over one padded image row. A function of its
+/// own so that `acc` and `padded` (two parts of one scratch buffer) are known not to alias and the loop over
+/// `x` vectorises without run-time checks.
+fn accumulate_taps(acc: &mut [f32], padded: &[f32], taps: &[f32]) {
+    let w = acc.len();
+    for (kx, &t) in taps.iter().enumerate() {
+        for (a, &p) in acc.iter_mut().zip(&padded[kx..kx + w]) {
+            *a += t * p;
+        }
+    }
 }
 
 #[cfg(test)]

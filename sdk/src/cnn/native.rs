@@ -310,25 +310,28 @@ pub(super) fn finish_outputs<'r>(
         } => Some((*amplitude_scale, *phase_scale)),
         CnnOutput::Prefilter { .. } => None,
     };
-    let round = |v: f32| match grid {
-        Some(g) => {
-            let q = ((v / g.scale).round_ties_even() + g.zero_point as f32).clamp(0.0, 255.0);
-            (q - g.zero_point as f32) * g.scale
-        }
-        None => v,
+    // ONNX QuantizeLinear then DequantizeLinear on the grid `g`.
+    let round = |v: f32, g: QuantGrid| {
+        let q = ((v / g.scale).round_ties_even() + g.zero_point as f32).clamp(0.0, 255.0);
+        (q - g.zero_point as f32) * g.scale
     };
     let mut out = vec![0.0f32; 2 * plane];
+    // One loop per case, so that the f32 loops stay as simple as before the int8 grid existed.
     let row = |(i, o): (usize, &mut [f32])| {
         let (c, y) = (i / h, i % h);
         let r = raw_row(c, y);
-        match heads {
-            Some((a, p)) => {
-                let s = if c < 3 { a } else { p };
-                o.iter_mut()
-                    .zip(r)
-                    .for_each(|(o, &v)| *o = (round(v).tanh() + 1.0) * s);
-            }
-            None => o.iter_mut().zip(r).for_each(|(o, &v)| *o = round(v)),
+        let head = heads.map(|(a, p)| if c < 3 { a } else { p });
+        match (head, grid) {
+            (Some(s), None) => o
+                .iter_mut()
+                .zip(r)
+                .for_each(|(o, &v)| *o = (v.tanh() + 1.0) * s),
+            (Some(s), Some(g)) => o
+                .iter_mut()
+                .zip(r)
+                .for_each(|(o, &v)| *o = (round(v, g).tanh() + 1.0) * s),
+            (None, None) => o.copy_from_slice(r),
+            (None, Some(g)) => o.iter_mut().zip(r).for_each(|(o, &v)| *o = round(v, g)),
         }
     };
     match pool {
