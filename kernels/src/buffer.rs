@@ -289,12 +289,15 @@ impl<T: Element> RowPlanar<T> {
         f: impl Fn(usize, S) -> T,
     ) -> Result<(), KernelError> {
         self.check_planar(src.len())?;
-        let (h, w) = (self.h, self.w);
+        let (h, w, k) = (self.h, self.w, T::INTERLEAVE);
         for c in 0..self.c {
             for y in 0..h {
-                for x in 0..w {
-                    let i = self.index(c, y + 1, x + 1);
-                    self.as_mut_slice()[i] = f(c, src[(c * h + y) * w + x]);
+                // Row y of channel c: `w` elements `k` apart from column 1 (one slice, one bounds check).
+                let start = self.index(c, y + 1, 1);
+                let dst = &mut self.as_mut_slice()[start..start + (w - 1) * k + 1];
+                let row = &src[(c * h + y) * w..(c * h + y + 1) * w];
+                for (d, &v) in dst.iter_mut().step_by(k).zip(row) {
+                    *d = f(c, v);
                 }
             }
         }
@@ -533,13 +536,18 @@ impl RowPlanar<u8> {
             });
         }
         let (zp, zo) = (self.border, other.border as f32);
+        // Same shape, so the same layout: only the interior differs in meaning, but the border of `self`
+        // must keep its own zero point, so the interior rows are mapped one by one.
         let (h, w) = (self.h, self.w);
         for c in 0..self.c {
             for y in 0..h {
-                for x in 0..w {
-                    let i = self.index(c, y + 1, x + 1);
-                    let real = (other.as_slice()[i] as f32 - zo) * other_scale;
-                    self.as_mut_slice()[i] = quantize(real / scale, zp);
+                let start = self.index(c, y + 1, 1);
+                let end = start + (w - 1) * 4 + 1;
+                let src = &other.as_slice()[start..end];
+                let dst = &mut self.as_mut_slice()[start..end];
+                for (d, &q) in dst.iter_mut().step_by(4).zip(src.iter().step_by(4)) {
+                    let real = (q as f32 - zo) * other_scale;
+                    *d = quantize(real / scale, zp);
                 }
             }
         }
