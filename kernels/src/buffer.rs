@@ -537,15 +537,16 @@ impl RowPlanar<u8> {
         }
         let (zp, zo) = (self.border, other.border as f32);
         // Same shape, so the same layout: only the interior differs in meaning, but the border of `self`
-        // must keep its own zero point, so the interior rows are mapped one by one.
+        // must keep its own zero point, so the interior rows are mapped one by one, each as one contiguous
+        // run of `4·W` bytes (the padding channels hold `other`'s zero point, real 0, and map to `self`'s).
         let (h, w) = (self.h, self.w);
-        for c in 0..self.c {
+        for g in 0..self.groups() {
             for y in 0..h {
-                let start = self.index(c, y + 1, 1);
-                let end = start + (w - 1) * 4 + 1;
+                let start = self.index(4 * g, y + 1, 1);
+                let end = start + 4 * w;
                 let src = &other.as_slice()[start..end];
                 let dst = &mut self.as_mut_slice()[start..end];
-                for (d, &q) in dst.iter_mut().step_by(4).zip(src.iter().step_by(4)) {
+                for (d, &q) in dst.iter_mut().zip(src) {
                     let real = (q as f32 - zo) * other_scale;
                     *d = quantize(real / scale, zp);
                 }
@@ -565,12 +566,10 @@ impl RowPlanar<u8> {
 }
 
 /// `clamp(round_ties_even(x) + zp, 0, 255)`, computed in f32 exactly as every int8 kernel does.
+/// Branch-free (no libm `rintf` call on SSE2), so the fill loops vectorise.
+#[inline(always)]
 pub(crate) fn quantize(x: f32, zp: u8) -> u8 {
-    let y = x.round_ties_even() + zp as f32;
-    // `max`/`min` in this order match `maxps`/`minps` with the constant second (also for NaN → 0).
-    let y = if y > 0.0 { y } else { 0.0 };
-    let y = if y < 255.0 { y } else { 255.0 };
-    y as u8
+    crate::heads::quantize_f32(x, zp as f32) as u8
 }
 
 pub(crate) fn check_scale(what: &str, s: f32) -> Result<(), KernelError> {

@@ -14,6 +14,7 @@
 //!   accumulation, requantisation fused into the epilogue; every path bit-exact with the scalar one), any
 //!   row band; u8 buffers are filled as ONNX `QuantizeLinear` does and take a new zero point when reused.
 //! * [`Isa`]: detection and the `TENSORHOLO_ISA` override; [`registry`]: the kernel rows.
+//! * [`tanh_heads`], [`fake_quantize`]: the hologram CNN's heads and the int8 output grid, vectorised.
 //! * [`depthwise()`]: the pre-filter's fixed depthwise filter; [`peak`]: measured FMA / dot-product peaks.
 //!
 //! ```
@@ -32,13 +33,14 @@
 //! # Ok::<(), tensorholo_kernels::KernelError>(())
 //! ```
 //!
-//! `unsafe` appears only in the ISA files (`conv3x3/*_{avx2,avx512,neon,…}.rs`, the generic SIMD loop) and in
-//! the single dispatch point ([`registry`]); every public function is safe and checks shapes and lengths.
+//! `unsafe` appears only in the ISA files (`conv3x3/*_{avx2,avx512,neon,…}.rs`, the generic SIMD loop), in
+//! the single dispatch point ([`registry`]) and in [`heads`]' dispatch to its `#[target_feature]` copies; every public function is safe and checks shapes and lengths.
 
 pub mod buffer;
 pub mod conv3x3;
 pub mod depthwise;
 mod error;
+pub mod heads;
 pub mod isa;
 mod pack;
 pub mod peak;
@@ -48,4 +50,5 @@ pub use conv3x3::registry::{self, DType, KernelInfo, PackKind};
 pub use conv3x3::{Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, QuantU8};
 pub use depthwise::depthwise;
 pub use error::KernelError;
+pub use heads::{fake_quantize, tanh_heads};
 pub use isa::Isa;

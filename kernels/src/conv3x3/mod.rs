@@ -169,7 +169,6 @@ pub(crate) struct U8Job<'a> {
     pub ga: usize,
     pub b: &'a [u8],
     pub gb: usize,
-    pub h: usize,
     pub w: usize,
     pub wp: usize,
     pub weights: &'a [u8],
@@ -191,15 +190,35 @@ pub(crate) struct U8Job<'a> {
     pub y1: usize,
 }
 
-/// Where an int8 kernel writes: a u8 [`RowPlanar`] (`[H+2][C_out/4][Wp][4]`) or planar `[C_out][H][W]` f32.
+/// Where an int8 kernel writes: a u8 [`RowPlanar`] (`[H+2][C_out/4][Wp][4]`) or raw f32.
 pub(crate) enum U8Out<'a> {
     /// Buffer rows of a u8 buffer: `data[0]` is element `base` of the whole buffer (a band of rows,
     /// [`RowBand`]); the kernel writes only rows `y0..y1`, which lie inside it.
-    Rows {
-        data: &'a mut [u8],
+    Rows { data: &'a mut [u8], base: usize },
+    /// Raw f32: output channel `o`, row `y`, pixel `x` at `data[o·c_stride + y·y_stride + x − base]`
+    /// (planar `[C_out][H][W]`: `c_stride = H·W`, `y_stride = W`, `base = 0`; a band of rows `y0..` of
+    /// `[H][C_out][W]`: `c_stride = W`, `y_stride = C_out·W`, `base = y0·C_out·W`).
+    F32 {
+        data: &'a mut [f32],
+        c_stride: usize,
+        y_stride: usize,
         base: usize,
     },
-    Planar(&'a mut [f32]),
+}
+
+impl U8Out<'_> {
+    /// Index in `data` of the f32 output `(o, y, x)` (only for [`U8Out::F32`]).
+    #[inline(always)]
+    pub(crate) fn f32_index(
+        c_stride: usize,
+        y_stride: usize,
+        base: usize,
+        o: usize,
+        y: usize,
+        x: usize,
+    ) -> usize {
+        o * c_stride + y * y_stride + x - base
+    }
 }
 
 /// A planned f32 3×3 convolution `C_in → C_out` with bias and optional ReLU, packed for one kernel row.
@@ -214,7 +233,10 @@ pub struct Conv3x3F32 {
 }
 
 impl Conv3x3F32 {
-    /// Plans a convolution with the best f32 kernel row for `isa`.
+    /// Plans a convolution with the best f32 kernel row for `isa` and `c_out`
+    /// ([`registry::selected_f32_for`]: the first row `isa` includes that computes the fewest padding output
+    /// channels, so a 6-channel last layer runs on the 6-channel AVX2 tile rather than the 8-channel AVX-512
+    /// one, which would compute 2 of every 8 channels for nothing).
     ///
     /// `weights` is `[C_out][C_in][3][3]` (PyTorch/ONNX OIHW order), `bias` is `[C_out]`; `relu` applies
     /// `max(·, 0)` after the bias. Errors: `isa` not available on this CPU ([`KernelError::Isa`]), a zero or
@@ -233,7 +255,14 @@ impl Conv3x3F32 {
                 why: "not available on this CPU",
             });
         }
-        Self::with_row(weights, bias, c_in, c_out, relu, registry::select_f32(isa))
+        Self::with_row(
+            weights,
+            bias,
+            c_in,
+            c_out,
+            relu,
+            registry::select_f32_for(isa, c_out),
+        )
     }
 
     /// Plans a convolution with the kernel row named `name` (e.g. `conv3x3.f32.6x2.avx2`, see

@@ -139,7 +139,7 @@ unsafe fn epilogue<Q: SimdQ, const G: usize, const NV: usize>(
     grp: usize,
 ) {
     let px = Q::PX;
-    let (w, h, wp, cout) = (job.w, job.h, job.wp, job.cout);
+    let (w, wp, cout) = (job.w, job.wp, job.cout);
     let c4 = cout.div_ceil(4);
     for v in 0..NV {
         let pxv = x0 + v * px;
@@ -182,13 +182,18 @@ unsafe fn epilogue<Q: SimdQ, const G: usize, const NV: usize>(
                         // SAFETY: register arithmetic.
                         *val = unsafe { Q::quant(r, Q::splat(job.out_inv), Q::splat(job.out_zp)) };
                     }
-                    U8Out::Planar(d) => {
+                    U8Out::F32 {
+                        data,
+                        c_stride,
+                        y_stride,
+                        base,
+                    } => {
                         if valid > 0 {
-                            let i = (o * h + y) * w + pxv;
-                            debug_assert!(i + valid <= d.len());
-                            // SAFETY: pixels `pxv..pxv + valid ≤ w` of row `y`, channel `o` of a
-                            // `[C_out][H][W]` slice.
-                            unsafe { Q::store_f32(d.as_mut_ptr().add(i), r, valid) };
+                            let i = U8Out::f32_index(*c_stride, *y_stride, *base, o, y, pxv);
+                            debug_assert!(i + valid <= data.len());
+                            // SAFETY: pixels `pxv..pxv + valid ≤ w` of row `y`, channel `o`: inside the
+                            // slice, whose strides and base the safe API checked against its length.
+                            unsafe { Q::store_f32(data.as_mut_ptr().add(i), r, valid) };
                         }
                     }
                 }

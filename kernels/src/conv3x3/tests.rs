@@ -334,6 +334,31 @@ fn dispatch_selects_the_named_row_and_refuses_unavailable_isas() {
     #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
     let expected = [(Isa::Scalar, "conv3x3.f32.8x8.scalar")];
     let wt = vec![0.5; 8 * 4 * 9];
+    // Per layer width: the row with the least output-channel padding, the better row on a tie; never the
+    // scalar row under a vector level.
+    #[cfg(target_arch = "x86_64")]
+    let by_width = [
+        (Isa::Avx512, 24, "conv3x3.f32.8x3.avx512"),
+        (Isa::Avx512, 8, "conv3x3.f32.8x3.avx512"),
+        (Isa::Avx512, 6, "conv3x3.f32.6x2.avx2"),
+        (Isa::Avx2Fma, 8, "conv3x3.f32.6x2.avx2"),
+        (Isa::Avx2Fma, 6, "conv3x3.f32.6x2.avx2"),
+        (Isa::Scalar, 6, "conv3x3.f32.8x8.scalar"),
+    ];
+    #[cfg(target_arch = "aarch64")]
+    let by_width = [
+        (Isa::Neon, 6, "conv3x3.f32.8x3.neon"),
+        (Isa::Scalar, 6, "conv3x3.f32.8x8.scalar"),
+    ];
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+    let by_width = [(Isa::Scalar, 6, "conv3x3.f32.8x8.scalar")];
+    for (isa, c_out, name) in by_width {
+        assert_eq!(
+            registry::selected_f32_for(isa, c_out).name,
+            name,
+            "{isa} {c_out}"
+        );
+    }
     for (isa, name) in expected {
         assert_eq!(registry::selected_f32(isa).name, name);
         let from_name = Isa::from_name(isa.name());
@@ -747,7 +772,35 @@ fn u8_row_bands_are_bit_identical_and_touch_only_their_rows() {
                 }
                 assert!(out.border_is_clean());
             }
+            // The same bands as raw f32 rows `[rows][C_out][W]`, each written into its own slice (what
+            // threads do): the whole planar run, transposed, bit for bit.
+            let mut rows_f = vec![7.5f32; h * cout * w];
+            let mut rest = &mut rows_f[..];
+            for win in bands.windows(2) {
+                let (band, tail) = rest.split_at_mut((win[1] - win[0]) * cout * w);
+                plan.run_rows_f32(inputs, band, win[0]..win[1]).unwrap();
+                rest = tail;
+            }
+            for o in 0..cout {
+                for y in 0..h {
+                    for x in 0..w {
+                        let (got, want) =
+                            (rows_f[(y * cout + o) * w + x], whole_f[(o * h + y) * w + x]);
+                        assert_eq!(
+                            got.to_bits(),
+                            want.to_bits(),
+                            "{row} {bands:?} ({o}, {y}, {x})"
+                        );
+                    }
+                }
+            }
         }
+        // A slice that is not the band's `rows·C_out·W` is refused.
+        let mut short = vec![0.0f32; (2 * cout - 1) * w];
+        assert!(matches!(
+            plan.run_rows_f32(inputs, &mut short, 0..2),
+            Err(crate::KernelError::Length { .. })
+        ));
     }
 }
 

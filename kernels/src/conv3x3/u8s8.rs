@@ -204,6 +204,16 @@ impl Conv3x3U8 {
         &self.row.info
     }
 
+    /// Input channels `C_in` (both sources).
+    pub fn c_in(&self) -> usize {
+        self.ca + self.cb
+    }
+
+    /// Output channels `C_out`.
+    pub fn c_out(&self) -> usize {
+        self.c_out
+    }
+
     fn check(
         &self,
         inputs: &Inputs<'_, u8>,
@@ -257,7 +267,6 @@ impl Conv3x3U8 {
             ga: a.groups(),
             b: inputs.b.map_or(&[][..], |b| b.as_slice()),
             gb: inputs.b.map_or(0, |b| b.groups()),
-            h: a.height(),
             w: a.width(),
             wp: a.padded_width(),
             weights: &self.weights,
@@ -351,6 +360,40 @@ impl Conv3x3U8 {
         check_len("planar output [C_out][H][W]", out.len(), self.c_out * h * w)?;
         self.check(&inputs, h, w, &rows)?;
         let job = self.job(&inputs, &rows);
-        registry::run_u8(self.row, &job, U8Out::Planar(out))
+        let out = U8Out::F32 {
+            data: out,
+            c_stride: h * w,
+            y_stride: w,
+            base: 0,
+        };
+        registry::run_u8(self.row, &job, out)
+    }
+
+    /// Computes output rows `rows` as raw f32 (as [`run_planar`](Self::run_planar)) into `out`, which holds
+    /// exactly those rows, each with every channel: `[rows.len()][C_out][W]` (row `y`, channel `o` at
+    /// `((y − rows.start)·C_out + o)·W`). Disjoint row bands of one `[H][C_out][W]` frame are disjoint
+    /// slices, so each may go to its own thread. Errors: as [`run`](Self::run), and `out.len() !=
+    /// rows.len()·C_out·W`.
+    pub fn run_rows_f32(
+        &self,
+        inputs: Inputs<'_, u8>,
+        out: &mut [f32],
+        rows: Range<usize>,
+    ) -> Result<(), KernelError> {
+        let (h, w) = (inputs.a.height(), inputs.a.width());
+        self.check(&inputs, h, w, &rows)?;
+        check_len(
+            "f32 output rows [rows][C_out][W]",
+            out.len(),
+            rows.len() * self.c_out * w,
+        )?;
+        let job = self.job(&inputs, &rows);
+        let out = U8Out::F32 {
+            data: out,
+            c_stride: w,
+            y_stride: self.c_out * w,
+            base: rows.start * self.c_out * w,
+        };
+        registry::run_u8(self.row, &job, out)
     }
 }

@@ -29,7 +29,7 @@ pub(crate) fn epilogue_value(
 }
 
 pub(crate) fn conv(job: &U8Job<'_>, out: &mut U8Out<'_>) {
-    let (w, h, wp, cout) = (job.w, job.h, job.wp, job.cout);
+    let (w, wp, cout) = (job.w, job.wp, job.cout);
     let cg = job.ga + job.gb;
     let groups = cout.div_ceil(G);
     let c4 = cout.div_ceil(4);
@@ -85,7 +85,15 @@ pub(crate) fn conv(job: &U8Job<'_>, out: &mut U8Out<'_>) {
                             U8Out::Rows { data, base } => {
                                 data[i - *base] = quantize(v * job.out_inv, job.out_zp_u8)
                             }
-                            U8Out::Planar(d) => d[(o * h + y) * w + x0 + p] = v,
+                            U8Out::F32 {
+                                data,
+                                c_stride,
+                                y_stride,
+                                base,
+                            } => {
+                                data[U8Out::f32_index(*c_stride, *y_stride, *base, o, y, x0 + p)] =
+                                    v
+                            }
                         }
                     }
                 }

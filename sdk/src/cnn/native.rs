@@ -25,7 +25,8 @@ use ndarray::{Array3, ArrayView3, CowArray, Ix3};
 use rayon::prelude::*;
 use tensorholo_kernels::buffer::Element;
 use tensorholo_kernels::{
-    depthwise, Affine, Conv3x3F32, Conv3x3U8, Inputs, Isa, KernelError, RowBand, RowPlanar,
+    depthwise, fake_quantize, tanh_heads, Affine, Conv3x3F32, Conv3x3U8, Inputs, Isa, KernelError,
+    QuantU8, RowBand, RowPlanar,
 };
 
 use super::{kernel_err, CnnPlan};
@@ -37,6 +38,8 @@ use crate::model::{CnnOutput, CnnWeights, QuantGrid};
 struct Network {
     graph: Arc<CnnWeights>,
     layers: Vec<Conv3x3F32>,
+    /// The level the layers were packed for (also the heads' vector path).
+    isa: Isa,
     /// Per input channel: the affine map of the input (scale 1, offset `−input_offset`).
     scale: Vec<f32>,
     offset: Vec<f32>,
@@ -107,6 +110,7 @@ impl NativePlan {
             offset: vec![-graph.input_offset; c],
             graph,
             layers,
+            isa,
         };
         let buf = |ch| RowPlanar::new(ch, height, width).map_err(kernel_err);
         Ok(Self {
@@ -292,13 +296,16 @@ pub(super) fn pool(threads: usize) -> Result<Option<Arc<rayon::ThreadPool>>> {
 /// `y`, `W` values): the hologram CNN's heads `(tanh(o) + 1)·scale`, or the pre-filter's `o` plus its
 /// depthwise base filter of `base_input` (`[C][H][W]`, the input as the base branch sees it). `grid`, for an
 /// int8 file, rounds `o` to the u8 grid the file quantises the last convolution's output to (ONNX
-/// `QuantizeLinear` then `DequantizeLinear`). Rows run in parallel on `pool`; allocates only the two arrays.
+/// `QuantizeLinear` then `DequantizeLinear`). The heads and the grid run on the kernels' vector code for
+/// `isa` ([`tanh_heads`], [`fake_quantize`]); rows run in parallel on `pool`; allocates only the two arrays.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn finish_outputs<'r>(
     graph: &CnnWeights,
     raw_row: &(dyn Fn(usize, usize) -> &'r [f32] + Sync),
     grid: Option<QuantGrid>,
     base_input: &[f32],
     [h, w]: [usize; 2],
+    isa: Isa,
     pool: Option<&rayon::ThreadPool>,
     depthwise_scratch: &mut Vec<f32>,
 ) -> Result<(Array3<f32>, Array3<f32>)> {
@@ -310,34 +317,27 @@ pub(super) fn finish_outputs<'r>(
         } => Some((*amplitude_scale, *phase_scale)),
         CnnOutput::Prefilter { .. } => None,
     };
-    // ONNX QuantizeLinear then DequantizeLinear on the grid `g`.
-    let round = |v: f32, g: QuantGrid| {
-        let q = ((v / g.scale).round_ties_even() + g.zero_point as f32).clamp(0.0, 255.0);
-        (q - g.zero_point as f32) * g.scale
-    };
+    let grid = grid.map(|g| QuantU8 {
+        scale: g.scale,
+        zero_point: g.zero_point,
+    });
     let mut out = vec![0.0f32; 2 * plane];
-    // One loop per case, so that the f32 loops stay as simple as before the int8 grid existed.
     let row = |(i, o): (usize, &mut [f32])| {
         let (c, y) = (i / h, i % h);
         let r = raw_row(c, y);
-        let head = heads.map(|(a, p)| if c < 3 { a } else { p });
-        match (head, grid) {
-            (Some(s), None) => o
-                .iter_mut()
-                .zip(r)
-                .for_each(|(o, &v)| *o = (v.tanh() + 1.0) * s),
-            (Some(s), Some(g)) => o
-                .iter_mut()
-                .zip(r)
-                .for_each(|(o, &v)| *o = (round(v, g).tanh() + 1.0) * s),
-            (None, None) => o.copy_from_slice(r),
-            (None, Some(g)) => o.iter_mut().zip(r).for_each(|(o, &v)| *o = round(v, g)),
+        match heads {
+            Some((a, p)) => tanh_heads(r, o, if c < 3 { a } else { p }, grid, isa),
+            None => {
+                o.copy_from_slice(r);
+                grid.map_or(Ok(()), |g| fake_quantize(o, g, isa))
+            }
         }
     };
     match pool {
-        Some(pool) => pool.install(|| out.par_chunks_mut(w).enumerate().for_each(row)),
-        None => out.chunks_mut(w).enumerate().for_each(row),
+        Some(pool) => pool.install(|| out.par_chunks_mut(w).enumerate().try_for_each(row)),
+        None => out.chunks_mut(w).enumerate().try_for_each(row),
     }
+    .map_err(kernel_err)?;
     if let CnnOutput::Prefilter { taps, base } = &graph.output {
         let c = graph.in_channels;
         depthwise(
@@ -386,6 +386,7 @@ impl CnnPlan for NativePlan {
             None,
             planar,
             [h, w],
+            self.net.isa,
             self.pool.as_deref(),
             &mut self.depthwise_scratch,
         )

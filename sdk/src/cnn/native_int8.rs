@@ -17,13 +17,15 @@
 //! residual add and the second rounding. The difference is at most half a step of the first grid per layer
 //! (measured against tract's execution of the file in `cnn/tests.rs`).
 //!
-//! Threads: as the f32 engine, each hidden layer's rows in one band per thread; the last layer (6 output
-//! channels) runs on the calling thread.
+//! Threads: as the f32 engine, each layer's rows in one band per thread; the last layer writes raw f32
+//! rows `[H][C_out][W]`, so that each band is a slice of its own.
 
 use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3};
-use tensorholo_kernels::{Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, QuantU8, RowPlanar};
+use tensorholo_kernels::{
+    fake_quantize, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, QuantU8, RowPlanar,
+};
 
 use super::native::{finish_outputs, planar_slice, pool, ring_slots, run_layer, standard_input};
 use super::{kernel_err, CnnPlan};
@@ -35,6 +37,8 @@ use crate::model::{CnnOutput, CnnQuant, CnnWeights, QuantGrid};
 struct Network {
     graph: Arc<CnnWeights>,
     layers: Vec<Conv3x3U8>,
+    /// The level the layers were packed for (also the heads' vector path).
+    isa: Isa,
 }
 
 impl Network {
@@ -67,7 +71,7 @@ pub(crate) struct NativeInt8Plan {
     x_cat: RowPlanar<u8>,
     /// `s_1 …`: `s_k` lives in `ring[(k − 1) % 3]`, its zero point set before the layer that writes it.
     ring: [RowPlanar<u8>; 3],
-    /// The last layer's raw output `[C_out][H][W]`.
+    /// The last layer's raw output, `[H][C_out][W]` (row-major, so that row bands are disjoint slices).
     raw: Vec<f32>,
     /// Pre-filter: the input as the file's base filter reads it (rounded to the input grid), `[C][H][W]`.
     base_input: Vec<f32>,
@@ -146,7 +150,7 @@ impl NativeInt8Plan {
             width,
             threads,
             pool: pool(threads)?,
-            net: Arc::new(Network { graph, layers }),
+            net: Arc::new(Network { graph, layers, isa }),
         })
     }
 
@@ -176,9 +180,15 @@ impl NativeInt8Plan {
         }
         let last = &self.ring[(n - 2) % 3];
         let inputs = Inputs::new(last).concat(&self.x_cat);
-        net.layers[n - 1]
-            .run_planar(inputs, &mut self.raw, 0..self.height)
-            .map_err(kernel_err)
+        let conv = &net.layers[n - 1];
+        let rows = 0..self.height;
+        match pool {
+            Some(pool) if threads > 1 => {
+                pool.install(|| split_rows_f32(conv, inputs, &mut self.raw, rows, threads))
+            }
+            _ => conv.run_rows_f32(inputs, &mut self.raw, rows),
+        }
+        .map_err(kernel_err)
     }
 }
 
@@ -203,22 +213,29 @@ impl CnnPlan for NativeInt8Plan {
             .map_err(kernel_err)?;
         if !self.base_input.is_empty() {
             // The file's base filter reads the input rounded to the input grid (the pre-filter has no offset).
-            let zp = first.zero_point as f32;
             for (b, &v) in self.base_input.iter_mut().zip(planar) {
-                let q = ((v + offset) / first.scale).round_ties_even() + zp;
-                *b = (q.clamp(0.0, 255.0) - zp) * first.scale - offset;
+                *b = v + offset;
+            }
+            let grid = QuantU8 {
+                scale: first.scale,
+                zero_point: first.zero_point,
+            };
+            fake_quantize(&mut self.base_input, grid, net.isa).map_err(kernel_err)?;
+            if offset != 0.0 {
+                self.base_input.iter_mut().for_each(|b| *b -= offset);
             }
         }
         self.forward()?;
         let (h, w) = (self.height, self.width);
-        let raw = &self.raw;
-        let raw_row = |c: usize, y: usize| &raw[(c * h + y) * w..(c * h + y + 1) * w];
+        let (raw, c_out) = (&self.raw, net.layers[n - 1].c_out());
+        let raw_row = |c: usize, y: usize| &raw[(y * c_out + c) * w..(y * c_out + c + 1) * w];
         finish_outputs(
             &net.graph,
             &raw_row,
             Some(quant.layers[n - 1].output),
             &self.base_input,
             [h, w],
+            net.isa,
             self.pool.as_deref(),
             &mut self.depthwise_scratch,
         )
@@ -239,4 +256,27 @@ impl CnnPlan for NativeInt8Plan {
             depthwise_scratch: Vec::new(),
         })
     }
+}
+
+/// Runs the last layer's rows `rows` into `out` (`[rows][C_out][W]`) as `parts` near-equal bands, halved
+/// recursively through `rayon::join` (no allocation).
+fn split_rows_f32(
+    conv: &Conv3x3U8,
+    inputs: Inputs<'_, u8>,
+    out: &mut [f32],
+    rows: std::ops::Range<usize>,
+    parts: usize,
+) -> std::result::Result<(), tensorholo_kernels::KernelError> {
+    if parts <= 1 || rows.len() < 2 {
+        return conv.run_rows_f32(inputs, out, rows);
+    }
+    let left = parts / 2;
+    let mid = (rows.start + rows.len() * left / parts).clamp(rows.start + 1, rows.end - 1);
+    let row_len = out.len() / rows.len();
+    let (top, bottom) = out.split_at_mut((mid - rows.start) * row_len);
+    let (a, b) = rayon::join(
+        || split_rows_f32(conv, inputs, top, rows.start..mid, left),
+        || split_rows_f32(conv, inputs, bottom, mid..rows.end, parts - left),
+    );
+    a.and(b)
 }
