@@ -328,6 +328,14 @@ impl<'a, T: Element> RowBand<'a, T> {
         self.rows.clone()
     }
 
+    /// Index in `data` of channel `c`'s interior column 1 on frame row `y` (inside the band).
+    fn interior_at(&self, c: usize, y: usize) -> usize {
+        let k = T::INTERLEAVE;
+        let row_len = self.data.len() / self.rows.len();
+        let wp = row_len / (self.c.div_ceil(k) * k);
+        (y - self.rows.start) * row_len + ((c / k) * wp + 1) * k + c % k
+    }
+
     /// Splits the band at frame row `y` into rows `start..y` and `y..end`, for two threads (no allocation:
     /// recursive splitting feeds a fork-join pool). Errors: `y` not strictly inside the band
     /// ([`KernelError::Rows`]).
@@ -431,6 +439,72 @@ impl RowPlanar<f32> {
     }
 }
 
+impl RowBand<'_, u8> {
+    /// [`RowPlanar::quantize_fill`] for the band's rows only (`src` is still the whole planar `[C][H][W]`
+    /// frame), so that threads can share the work. Errors: as `quantize_fill`.
+    pub fn quantize_fill(
+        &mut self,
+        src: &[f32],
+        offset: f32,
+        scale: f32,
+    ) -> Result<(), KernelError> {
+        check_scale("quantisation scale", scale)?;
+        crate::pack::check_len(
+            "planar source [C][H][W]",
+            src.len(),
+            self.c * self.h * self.w,
+        )?;
+        let (h, w, zp) = (self.h, self.w, self.border);
+        for c in 0..self.c {
+            for y in self.rows() {
+                let at = self.interior_at(c, y);
+                let dst = &mut self.data[at..at + 4 * (w - 1) + 1];
+                let row = &src[(c * h + y) * w..(c * h + y + 1) * w];
+                for (d, &v) in dst.iter_mut().step_by(4).zip(row) {
+                    *d = quantize((v + offset) / scale, zp);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// [`RowPlanar::requantize_from`] for the band's rows only, so that threads can share the work. Errors:
+    /// as `requantize_from`.
+    pub fn requantize_from(
+        &mut self,
+        other: &RowPlanar<u8>,
+        other_scale: f32,
+        scale: f32,
+    ) -> Result<(), KernelError> {
+        check_scale("quantisation scale", scale)?;
+        check_scale("source scale", other_scale)?;
+        if (other.c, other.h, other.w) != (self.c, self.h, self.w) {
+            return Err(KernelError::Shape {
+                what: format!(
+                    "requantise a {}×{}×{} buffer into a {}×{}×{} one",
+                    other.c, other.h, other.w, self.c, self.h, self.w
+                ),
+            });
+        }
+        let (zp, zo, w) = (self.border, other.border as f32, self.w);
+        // Same shape, so the same layout: only the interior differs in meaning, but the border must keep its
+        // own zero point, so the interior rows are mapped one by one, each as one contiguous run of `4·W`
+        // bytes (the padding channels hold `other`'s zero point, real 0, and map to this zero point).
+        for g in 0..self.c.div_ceil(4) {
+            for y in self.rows() {
+                let at = self.interior_at(4 * g, y);
+                let from = other.index(4 * g, y + 1, 1);
+                let src = &other.as_slice()[from..from + 4 * w];
+                for (d, &q) in self.data[at..at + 4 * w].iter_mut().zip(src) {
+                    let real = (q as f32 - zo) * other_scale;
+                    *d = quantize(real / scale, zp);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 impl RowPlanar<u8> {
     /// A buffer of `c` channels and `h × w` pixels whose every element (border, padding channels, interior)
     /// holds the zero point `zp`. Errors: a zero or too large dimension.
@@ -511,9 +585,8 @@ impl RowPlanar<u8> {
         offset: f32,
         scale: f32,
     ) -> Result<(), KernelError> {
-        check_scale("quantisation scale", scale)?;
-        let zp = self.border;
-        self.fill_with(src, |_, v| quantize((v + offset) / scale, zp))
+        let h = self.h;
+        self.band_mut(0..h)?.quantize_fill(src, offset, scale)
     }
 
     /// Overwrites the interior with `other`'s values moved to this buffer's grid: `q = clamp(round_ties_even(
@@ -525,34 +598,9 @@ impl RowPlanar<u8> {
         other_scale: f32,
         scale: f32,
     ) -> Result<(), KernelError> {
-        check_scale("quantisation scale", scale)?;
-        check_scale("source scale", other_scale)?;
-        if (other.c, other.h, other.w) != (self.c, self.h, self.w) {
-            return Err(KernelError::Shape {
-                what: format!(
-                    "requantise a {}×{}×{} buffer into a {}×{}×{} one",
-                    other.c, other.h, other.w, self.c, self.h, self.w
-                ),
-            });
-        }
-        let (zp, zo) = (self.border, other.border as f32);
-        // Same shape, so the same layout: only the interior differs in meaning, but the border of `self`
-        // must keep its own zero point, so the interior rows are mapped one by one, each as one contiguous
-        // run of `4·W` bytes (the padding channels hold `other`'s zero point, real 0, and map to `self`'s).
-        let (h, w) = (self.h, self.w);
-        for g in 0..self.groups() {
-            for y in 0..h {
-                let start = self.index(4 * g, y + 1, 1);
-                let end = start + 4 * w;
-                let src = &other.as_slice()[start..end];
-                let dst = &mut self.as_mut_slice()[start..end];
-                for (d, &q) in dst.iter_mut().zip(src) {
-                    let real = (q as f32 - zo) * other_scale;
-                    *d = quantize(real / scale, zp);
-                }
-            }
-        }
-        Ok(())
+        let h = self.h;
+        self.band_mut(0..h)?
+            .requantize_from(other, other_scale, scale)
     }
 
     /// The interior dequantised to a planar `[C][H][W]` vector: `(q − zp)·scale`.

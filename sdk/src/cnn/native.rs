@@ -248,33 +248,47 @@ pub(super) fn run_layer<T: Element + Send + Sync, K: BandConv<T>>(
     threads: usize,
     pool: Option<&rayon::ThreadPool>,
 ) -> Result<()> {
+    in_bands(dst, threads, pool, &|band| conv.run_band(inputs, band))
+}
+
+/// `work` on `threads` near-equal row bands of `dst`, in parallel on `pool` (a layer, or the int8 input's
+/// quantisation).
+pub(super) fn in_bands<T: Element + Send + Sync>(
+    dst: &mut RowPlanar<T>,
+    threads: usize,
+    pool: Option<&rayon::ThreadPool>,
+    work: &BandWork<'_, T>,
+) -> Result<()> {
     let h = dst.height();
     let band = dst.band_mut(0..h).map_err(kernel_err)?;
     match pool {
-        Some(pool) if threads > 1 => pool.install(|| split_run(conv, inputs, band, threads)),
-        _ => split_run(conv, inputs, band, 1),
+        Some(pool) if threads > 1 => pool.install(|| split_run(band, threads, work)),
+        _ => split_run(band, 1, work),
     }
     .map_err(kernel_err)
 }
 
-/// Runs `band` as `parts` near-equal bands: halves recursively through `rayon::join`, so that nothing is
-/// allocated per layer.
-fn split_run<T: Element + Send + Sync, K: BandConv<T>>(
-    conv: &K,
-    inputs: Inputs<'_, T>,
+/// What one thread does to its row band.
+pub(super) type BandWork<'w, T> =
+    dyn Fn(&mut RowBand<'_, T>) -> std::result::Result<(), KernelError> + Sync + 'w;
+
+/// Runs `work` on `band` as `parts` near-equal bands: halves recursively through `rayon::join`, so that
+/// nothing is allocated per layer.
+fn split_run<T: Element + Send + Sync>(
     mut band: RowBand<'_, T>,
     parts: usize,
+    work: &BandWork<'_, T>,
 ) -> std::result::Result<(), KernelError> {
     let rows = band.rows();
     if parts <= 1 || rows.len() < 2 {
-        return conv.run_band(inputs, &mut band);
+        return work(&mut band);
     }
     let left = parts / 2;
     let mid = (rows.start + rows.len() * left / parts).clamp(rows.start + 1, rows.end - 1);
     let (top, bottom) = band.split_at(mid)?;
     let (a, b) = rayon::join(
-        || split_run(conv, inputs, top, left),
-        || split_run(conv, inputs, bottom, parts - left),
+        || split_run(top, left, work),
+        || split_run(bottom, parts - left, work),
     );
     a.and(b)
 }

@@ -27,7 +27,9 @@ use tensorholo_kernels::{
     fake_quantize, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, QuantU8, RowPlanar,
 };
 
-use super::native::{finish_outputs, planar_slice, pool, ring_slots, run_layer, standard_input};
+use super::native::{
+    finish_outputs, in_bands, planar_slice, pool, ring_slots, run_layer, standard_input,
+};
 use super::{kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnQuant, CnnWeights, QuantGrid};
@@ -205,12 +207,15 @@ impl CnnPlan for NativeInt8Plan {
         let n = net.layers.len();
         let first = quant.layers[0].input;
         let offset = -net.graph.input_offset;
-        self.x
-            .quantize_fill(planar, offset, first.scale)
-            .map_err(kernel_err)?;
-        self.x_cat
-            .requantize_from(&self.x, first.scale, quant.layers[n - 1].input.scale)
-            .map_err(kernel_err)?;
+        // Both in row bands on the plan's threads (serial, they were a tenth of a 2-thread frame).
+        let (threads, pool) = (self.threads, self.pool.as_deref());
+        in_bands(&mut self.x, threads, pool, &|band| {
+            band.quantize_fill(planar, offset, first.scale)
+        })?;
+        let (x, cat_scale) = (&self.x, quant.layers[n - 1].input.scale);
+        in_bands(&mut self.x_cat, threads, pool, &|band| {
+            band.requantize_from(x, first.scale, cat_scale)
+        })?;
         if !self.base_input.is_empty() {
             // The file's base filter reads the input rounded to the input grid (the pre-filter has no offset).
             for (b, &v) in self.base_input.iter_mut().zip(planar) {
