@@ -9,8 +9,9 @@
 # device for speed (`holo bench` built for aarch64, README "ARM"; the bindings' benchmark() on a phone).
 #
 # Each case renders the built-in scene at SIZE (default 192x192) with the 8-layer CNN, the 6 mm DDPM
-# pre-filter, one tract thread and a fixed layout, twice: with --repeat 1 and --repeat 3. The difference,
-# halved, is one steady-state frame (loading, plan optimisation and output writing cancel out).
+# pre-filter, one thread, a fixed engine (tract with a fixed layout, or the native kernels) and an emulated
+# CPU (qemu's `max`: dot product and i8mm; `cortex-a76`: dot product only), twice: with --repeat 1 and
+# --repeat 3. The difference, halved, is one steady-state frame (loading, plan optimisation and output writing cancel out).
 # HOLO_AARCH64 defaults to target/aarch64-unknown-linux-gnu/release/holo (build it first as README "ARM"
 # says). Prints a Markdown table; needs qemu-user, gcc, python3. Each case takes ~1 min here.
 set -euo pipefail
@@ -25,28 +26,35 @@ work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 gcc -O2 -shared -fPIC -o "$work/libinsn_count.so" "$here/insn_count.c"
 
-count() { # precision layout repeat → instruction count (and report.json in $work/out)
-  qemu-aarch64 -L /usr/aarch64-linux-gnu -plugin "$work/libinsn_count.so" -d plugin -D "$work/plugin.log" \
-    "$holo" render --size "$size" --precision "$1" --layout "$2" --threads 1 --repeat "$3" \
-    --out "$work/out" >/dev/null 2>"$work/holo.log" || { cat "$work/holo.log" >&2; exit 1; }
+count() { # engine precision layout qemu-cpu repeat → instruction count (and report.json in $work/out)
+  QEMU_CPU="$4" qemu-aarch64 -L /usr/aarch64-linux-gnu -plugin "$work/libinsn_count.so" -d plugin \
+    -D "$work/plugin.log" "$holo" render --size "$size" --engine "$1" --precision "$2" --layout "$3" \
+    --threads 1 --repeat "$5" --out "$work/out" >/dev/null 2>"$work/holo.log" ||
+    { cat "$work/holo.log" >&2; exit 1; }
   sed -n 's/^insn_count: //p' "$work/plugin.log"
 }
 
 echo "Guest instructions per frame, holo8 + DDPM pre-filter, built-in scene $size, 1 thread (qemu-aarch64 $(qemu-aarch64 --version | head -1 | awk '{print $3}'); a proxy for ARM cost, not a time)"
 echo
-echo "| precision | layout | M instructions / frame | CNN multiply-adds / instruction |"
-echo "|---|---|---:|---:|"
-for case in "f32 nchw" "f32 nhwc" "int8-qop nchw" "int8-qdq nchw" "int8-qdq nhwc"; do
-  read -r precision layout <<<"$case"
-  one="$(count "$precision" "$layout" 1)"
-  three="$(count "$precision" "$layout" 3)"
-  python3 - "$precision" "$layout" "$one" "$three" "$work/out/report.json" <<'PY'
+echo "| engine | precision | layout | qemu CPU | kernel | M instructions / frame | CNN multiply-adds / instruction |"
+echo "|---|---|---|---|---|---:|---:|"
+# tract's rows (its own NEON kernels), then the native engine's: f32 (NEON row), int8 with i8mm (USDOT, the
+# default CPU `max`) and with dot product only (SDOT, `cortex-a76`). The native rows ignore the layout.
+for case in "tract f32 nchw max" "tract f32 nhwc max" "tract int8-qop nchw max" "tract int8-qdq nchw max" \
+  "tract int8-qdq nhwc max" "native f32 nchw max" "native int8-qdq nchw max" "native int8-qdq nchw cortex-a76"; do
+  read -r engine precision layout cpu <<<"$case"
+  one="$(count "$engine" "$precision" "$layout" "$cpu" 1)"
+  three="$(count "$engine" "$precision" "$layout" "$cpu" 3)"
+  python3 - "$engine" "$precision" "$layout" "$cpu" "$one" "$three" "$work/out/report.json" <<'PY'
 import json, sys
-precision, layout, one, three, report = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
+engine, precision, layout, cpu = sys.argv[1:5]
+one, three, report = int(sys.argv[5]), int(sys.argv[6]), sys.argv[7]
 r = json.load(open(report))
 h, w = r["size"]
 macs = (r["models"]["hologram_cnn"].get("macs_per_pixel") or 0) * h * w
+kernel = r.get("cnn_plan", {}).get("kernel") or "–"
+layout = layout if engine == "tract" else "–"
 per_frame = (three - one) / 2
-print(f"| {precision} | {layout} | {per_frame / 1e6:.0f} | {macs / per_frame:.2f} |")
+print(f"| {engine} | {precision} | {layout} | {cpu} | {kernel} | {per_frame / 1e6:.0f} | {macs / per_frame:.2f} |")
 PY
 done

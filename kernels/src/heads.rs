@@ -40,13 +40,8 @@ pub(crate) fn round_small(x: f32) -> f32 {
 /// clamped to ±1024 first, which changes no result (`zp ≤ 255`) and keeps [`round_small`] exact.
 #[inline(always)]
 pub(crate) fn quantize_f32(x: f32, zp: f32) -> f32 {
-    let x = if x > 1024.0 {
-        1024.0
-    } else if x < -1024.0 {
-        -1024.0
-    } else {
-        x
-    };
+    // `clamp` lets a NaN through.
+    let x = x.clamp(-1024.0, 1024.0);
     let y = round_small(x) + zp;
     // `max`/`min` in this order match `maxps`/`minps` with the constant second (also for NaN → 0).
     let y = if y > 0.0 { y } else { 0.0 };
@@ -85,14 +80,8 @@ fn exp_reduced(t: f32) -> f32 {
 #[inline(always)]
 fn head(v: f32, two_scale: f32) -> f32 {
     let t = -2.0 * v;
-    // Comparisons, not `min`/`max`: a NaN passes through to the result.
-    let t = if t > 88.0 {
-        88.0
-    } else if t < -87.0 {
-        -87.0
-    } else {
-        t
-    };
+    // `clamp`, not `min`/`max`: a NaN passes through to the result.
+    let t = t.clamp(-87.0, 88.0);
     two_scale / (1.0 + exp_reduced(t))
 }
 

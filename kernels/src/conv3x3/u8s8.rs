@@ -356,17 +356,7 @@ impl Conv3x3U8 {
         out: &mut [f32],
         rows: Range<usize>,
     ) -> Result<(), KernelError> {
-        let (h, w) = (inputs.a.height(), inputs.a.width());
-        check_len("planar output [C_out][H][W]", out.len(), self.c_out * h * w)?;
-        self.check(&inputs, h, w, &rows)?;
-        let job = self.job(&inputs, &rows);
-        let out = U8Out::F32 {
-            data: out,
-            c_stride: h * w,
-            y_stride: w,
-            base: 0,
-        };
-        registry::run_u8(self.row, &job, out)
+        self.run_f32(inputs, out, rows, true)
     }
 
     /// Computes output rows `rows` as raw f32 (as [`run_planar`](Self::run_planar)) into `out`, which holds
@@ -380,19 +370,38 @@ impl Conv3x3U8 {
         out: &mut [f32],
         rows: Range<usize>,
     ) -> Result<(), KernelError> {
-        let (h, w) = (inputs.a.height(), inputs.a.width());
+        self.run_f32(inputs, out, rows, false)
+    }
+
+    /// Raw f32 output, planar `[C_out][H][W]` or the rows' `[rows][C_out][W]`.
+    fn run_f32(
+        &self,
+        inputs: Inputs<'_, u8>,
+        out: &mut [f32],
+        rows: Range<usize>,
+        planar: bool,
+    ) -> Result<(), KernelError> {
+        let (h, w, c) = (inputs.a.height(), inputs.a.width(), self.c_out);
         self.check(&inputs, h, w, &rows)?;
-        check_len(
-            "f32 output rows [rows][C_out][W]",
-            out.len(),
-            rows.len() * self.c_out * w,
-        )?;
+        let (what, len, c_stride, y_stride, base) = if planar {
+            ("planar output [C_out][H][W]", c * h * w, h * w, w, 0)
+        } else {
+            let n = rows.len();
+            (
+                "f32 output rows [rows][C_out][W]",
+                n * c * w,
+                w,
+                c * w,
+                rows.start * c * w,
+            )
+        };
+        check_len(what, out.len(), len)?;
         let job = self.job(&inputs, &rows);
         let out = U8Out::F32 {
             data: out,
-            c_stride: w,
-            y_stride: self.c_out * w,
-            base: rows.start * self.c_out * w,
+            c_stride,
+            y_stride,
+            base,
         };
         registry::run_u8(self.row, &job, out)
     }
