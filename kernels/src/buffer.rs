@@ -23,6 +23,7 @@
 
 use std::ops::Range;
 
+pub(crate) use crate::quant::check_scale;
 use crate::KernelError;
 
 /// The widest pixel tile a kernel may use (pixels along a row); [`padded_width`] leaves this much slack.
@@ -449,11 +450,14 @@ impl RowBand<'_, u8> {
         scale: f32,
     ) -> Result<(), KernelError> {
         check_scale("quantisation scale", scale)?;
-        crate::pack::check_len(
-            "planar source [C][H][W]",
-            src.len(),
-            self.c * self.h * self.w,
-        )?;
+        let expected = self.c * self.h * self.w;
+        if src.len() != expected {
+            return Err(KernelError::Length {
+                what: "planar source [C][H][W]",
+                expected,
+                got: src.len(),
+            });
+        }
         let (h, w, zp) = (self.h, self.w, self.border);
         for c in 0..self.c {
             for y in self.rows() {
@@ -617,17 +621,7 @@ impl RowPlanar<u8> {
 /// Branch-free (no libm `rintf` call on SSE2), so the fill loops vectorise.
 #[inline(always)]
 pub(crate) fn quantize(x: f32, zp: u8) -> u8 {
-    crate::heads::quantize_f32(x, zp as f32) as u8
-}
-
-pub(crate) fn check_scale(what: &str, s: f32) -> Result<(), KernelError> {
-    if s.is_finite() && s > 0.0 {
-        Ok(())
-    } else {
-        Err(KernelError::Parameter {
-            what: format!("{what} = {s} is not finite and positive"),
-        })
-    }
+    crate::quant::quantize_f32(x, zp as f32) as u8
 }
 
 #[cfg(test)]

@@ -23,34 +23,8 @@
 //! [`fake_quantize`] is ONNX `QuantizeLinear` then `DequantizeLinear` on a u8 grid: the int8 files round the
 //! last convolution's output to a grid before the heads (or the pre-filter's sum).
 
+use crate::quant::{check_scale, quantize_f32, ROUND_MAGIC};
 use crate::{Isa, KernelError, QuantU8};
-
-/// `1.5·2²³`: adding and subtracting it rounds an f32 of magnitude ≤ 2²² to the nearest integer, ties to
-/// even (the default rounding mode), with plain additions that every vector ISA has.
-const ROUND_MAGIC: f32 = 12_582_912.0;
-
-/// `round_ties_even(x)` for `|x| ≤ 2²²` (exact; NaN stays NaN), branch-free and vectorisable: SSE2, the
-/// x86-64 baseline, has no rounding instruction, so `f32::round_ties_even` is a libm call there.
-#[inline(always)]
-pub(crate) fn round_small(x: f32) -> f32 {
-    (x + ROUND_MAGIC) - ROUND_MAGIC
-}
-
-/// `clamp(round_ties_even(x) + zp, 0, 255)` in f32 (NaN → 0), as every int8 path computes it. `x` is
-/// clamped to ±1024 first, which changes no result (`zp ≤ 255`) and keeps [`round_small`] exact.
-#[inline(always)]
-pub(crate) fn quantize_f32(x: f32, zp: f32) -> f32 {
-    // `clamp` lets a NaN through.
-    let x = x.clamp(-1024.0, 1024.0);
-    let y = round_small(x) + zp;
-    // `max`/`min` in this order match `maxps`/`minps` with the constant second (also for NaN → 0).
-    let y = if y > 0.0 { y } else { 0.0 };
-    if y < 255.0 {
-        y
-    } else {
-        255.0
-    }
-}
 
 /// `exp(t)` for `t ∈ [−87, 88]` (the caller clamps), ≈ 1 ulp.
 #[inline(always)]
@@ -184,7 +158,7 @@ fn check(raw: &[f32], out: &[f32]) -> Result<(), KernelError> {
 
 fn check_grid(g: Option<QuantU8>) -> Result<(), KernelError> {
     match g {
-        Some(g) => crate::buffer::check_scale("output grid scale", g.scale),
+        Some(g) => check_scale("output grid scale", g.scale),
         None => Ok(()),
     }
 }

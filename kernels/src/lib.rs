@@ -44,6 +44,7 @@ pub mod heads;
 pub mod isa;
 mod pack;
 pub mod peak;
+mod quant;
 
 pub use buffer::{Affine, RowBand, RowPlanar};
 pub use conv3x3::registry::{self, DType, KernelInfo, PackKind};

@@ -909,6 +909,30 @@ fn quantize_fill_and_requantize_follow_onnx() {
     assert!(b.quantize_fill(&src, 0.0, 0.0).is_err());
     let other = RowPlanar::new_quantized(c, h, w + 1, 0).unwrap();
     assert!(r.requantize_from(&other, scale, scale2).is_err());
+    // The same two fills done band by band (one band per thread in the int8 engine) give the same buffers,
+    // and a band writes only its own rows.
+    for split in 1..h {
+        let mut b2 = RowPlanar::new_quantized(c, h, w, zp).unwrap();
+        let mut r2 = RowPlanar::new_quantized(c, h, w, zp2).unwrap();
+        let (_top, mut bottom) = b2.band_mut(0..h).unwrap().split_at(split).unwrap();
+        bottom.quantize_fill(&src, offset, scale).unwrap();
+        assert!((0..c).all(|ch| (0..split).all(|y| (0..w).all(|x| b2.get(ch, y, x) == Some(zp)))));
+        b2.band_mut(0..split)
+            .unwrap()
+            .quantize_fill(&src, offset, scale)
+            .unwrap();
+        assert_eq!(b2, b, "split at {split}");
+        for mut band in r2.bands_mut(2) {
+            band.requantize_from(&b2, scale, scale2).unwrap();
+        }
+        assert_eq!(r2, r, "split at {split}");
+        assert!(r2.border_is_clean());
+    }
+    let mut band = b.band_mut(0..1).unwrap();
+    assert!(matches!(
+        band.quantize_fill(&src[1..], 0.0, scale),
+        Err(KernelError::Length { .. })
+    ));
 }
 
 #[test]
