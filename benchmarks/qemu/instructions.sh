@@ -13,7 +13,8 @@
 # CPU (qemu's `max`: dot product and i8mm; `cortex-a76`: dot product only), twice: with --repeat 1 and
 # --repeat 3. The difference, halved, is one steady-state frame (loading, plan optimisation and output writing cancel out).
 # HOLO_AARCH64 defaults to target/aarch64-unknown-linux-gnu/release/holo (build it first as README "ARM"
-# says). Prints a Markdown table; needs qemu-user, gcc, python3. Each case takes ~1 min here.
+# says). Prints two Markdown tables (whole frames, then the hologram CNN alone); needs qemu-user, gcc,
+# python3. Each case takes ~1 min here.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
@@ -57,4 +58,36 @@ layout = layout if engine == "tract" else "–"
 per_frame = (three - one) / 2
 print(f"| {engine} | {precision} | {layout} | {cpu} | {kernel} | {per_frame / 1e6:.0f} | {macs / per_frame:.2f} |")
 PY
+done
+
+# The hologram CNN alone: `holo bench --skip-pipeline` runs one warm-up and then --repeat runs of the CNN, so the
+# difference of --repeat 3 and --repeat 1, halved, is one CNN run (nothing else of a frame). tract's layout is
+# pinned to channels-first (its own tuning would pick by emulated time); the native rows ignore it.
+bench_count() { # engine precision layers qemu-cpu repeat → instruction count (and the table in $work/bench.txt)
+  QEMU_CPU="$4" qemu-aarch64 -L /usr/aarch64-linux-gnu -plugin "$work/libinsn_count.so" -d plugin \
+    -D "$work/plugin.log" "$holo" bench --skip-pipeline --sizes "$size" --layers "$3" --precision "$2" \
+    --threads 1 --engine "$1" --layout nchw --repeat "$5" --max-seconds 100000 >"$work/bench.txt" \
+    2>"$work/holo.log" ||
+    { cat "$work/holo.log" >&2; exit 1; }
+  sed -n 's/^insn_count: //p' "$work/plugin.log"
+}
+
+echo
+echo "Guest instructions of one hologram CNN run alone ($size, 1 thread; \`holo bench --skip-pipeline\`)"
+echo
+echo "| CNN | engine | precision | qemu CPU | kernel / layout | M instructions / run | multiply-adds / instruction |"
+echo "|---|---|---|---|---|---:|---:|"
+h="${size%x*}"
+w="${size#*x}"
+for case in "8 tract f32 max" "8 native f32 max" "8 native int8-qdq max" "8 native int8-qdq cortex-a76" \
+  "8 native int8-qdq cortex-a53" "30 native f32 max" "30 native int8-qdq max" "30 native int8-qdq cortex-a76"; do
+  read -r layers engine precision cpu <<<"$case"
+  one="$(bench_count "$engine" "$precision" "$layers" "$cpu" 1)"
+  three="$(bench_count "$engine" "$precision" "$layers" "$cpu" 3)"
+  kernel="$(awk -F'|' '/^\| holo/ {gsub(/^ +| +$/, "", $5); print $5; exit}' "$work/bench.txt")"
+  macs=$([ "$layers" = 8 ] && echo 33480 || ([ "$layers" = 15 ] && echo 69768 || echo 147528))
+  python3 -c "import sys; one, three, macs = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]) * $h * $w
+per = (three - one) / 2
+print(f'| holo$layers | $engine | $precision | $cpu | \`$kernel\` | {per / 1e6:.0f} | {macs / per:.2f} |')" \
+    "$one" "$three" "$macs"
 done
