@@ -23,7 +23,7 @@
 
 use std::ops::Range;
 
-pub(crate) use crate::quant::check_scale;
+use crate::quant::{check_scale, quantize};
 use crate::KernelError;
 
 /// The widest pixel tile a kernel may use (pixels along a row); [`padded_width`] leaves this much slack.
@@ -615,13 +615,6 @@ impl RowPlanar<u8> {
             .map(|q| (q as f32 - zp) * scale)
             .collect()
     }
-}
-
-/// `clamp(round_ties_even(x) + zp, 0, 255)`, computed in f32 exactly as every int8 kernel does.
-/// Branch-free (no libm `rintf` call on SSE2), so the fill loops vectorise.
-#[inline(always)]
-pub(crate) fn quantize(x: f32, zp: u8) -> u8 {
-    crate::quant::quantize_f32(x, zp as f32) as u8
 }
 
 #[cfg(test)]

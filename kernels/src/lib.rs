@@ -34,7 +34,8 @@
 //! ```
 //!
 //! `unsafe` appears only in the ISA files (`conv3x3/*_{avx2,avx512,neon,…}.rs`, the generic SIMD loop), in
-//! the single dispatch point ([`registry`]) and in [`heads`]' dispatch to its `#[target_feature]` copies; every public function is safe and checks shapes and lengths.
+//! the single dispatch point ([`registry`]) and in [`heads`]' dispatch to its `#[target_feature]` copies;
+//! every public function is safe and checks shapes and lengths.
 
 pub mod buffer;
 pub mod conv3x3;

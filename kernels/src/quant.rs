@@ -10,7 +10,7 @@ pub(crate) const ROUND_MAGIC: f32 = 12_582_912.0;
 /// `round_ties_even(x)` for `|x| ≤ 2²²` (exact; NaN stays NaN), branch-free and vectorisable: SSE2, the
 /// x86-64 baseline, has no rounding instruction, so `f32::round_ties_even` is a libm call there.
 #[inline(always)]
-pub(crate) fn round_small(x: f32) -> f32 {
+fn round_small(x: f32) -> f32 {
     (x + ROUND_MAGIC) - ROUND_MAGIC
 }
 
@@ -28,6 +28,13 @@ pub(crate) fn quantize_f32(x: f32, zp: f32) -> f32 {
     } else {
         255.0
     }
+}
+
+/// `clamp(round_ties_even(x) + zp, 0, 255)` as a u8, computed in f32 exactly as every int8 kernel does
+/// ([`quantize_f32`]); branch-free, so the buffers' fill loops vectorise.
+#[inline(always)]
+pub(crate) fn quantize(x: f32, zp: u8) -> u8 {
+    quantize_f32(x, zp as f32) as u8
 }
 
 pub(crate) fn check_scale(what: &str, s: f32) -> Result<(), KernelError> {

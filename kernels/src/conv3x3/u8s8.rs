@@ -12,8 +12,9 @@
 
 use super::registry::{self, KernelInfo, PackKind, U8Row};
 use super::{Inputs, U8Job, U8Out};
-use crate::buffer::{check_scale, RowBand, RowPlanar};
+use crate::buffer::{RowBand, RowPlanar};
 use crate::pack::{check_channels, check_len};
+use crate::quant::check_scale;
 use crate::{Isa, KernelError};
 use std::ops::Range;
 

@@ -3,7 +3,7 @@
 //! arithmetic of [`simd_u8`](super::simd_u8) written with scalars.
 
 use super::{U8Job, U8Out};
-use crate::buffer::quantize;
+use crate::quant::quantize;
 
 /// Output-channel tile.
 pub(crate) const G: usize = 8;

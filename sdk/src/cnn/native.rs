@@ -19,6 +19,7 @@
 //! Every activation buffer is allocated when the plan is built; a run allocates only its two output arrays
 //! (the [`CnnPlan`] contract returns owned arrays).
 
+use std::ops::Range;
 use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3, CowArray, Ix3};
@@ -257,27 +258,81 @@ pub(super) fn in_bands<T: Element + Send + Sync>(
     dst: &mut RowPlanar<T>,
     threads: usize,
     pool: Option<&rayon::ThreadPool>,
-    work: &BandWork<'_, T>,
+    work: &(dyn Fn(&mut RowBand<'_, T>) -> std::result::Result<(), KernelError> + Sync),
 ) -> Result<()> {
     let h = dst.height();
     let band = dst.band_mut(0..h).map_err(kernel_err)?;
+    on_threads(band, threads, pool, &|b| work(b))
+}
+
+/// What one thread does to its share of the rows.
+pub(super) type BandWork<'w, B> =
+    dyn Fn(&mut B) -> std::result::Result<(), KernelError> + Sync + 'w;
+
+/// Frame rows owned by one thread's work: a [`RowBand`] of an activation buffer, or [`F32Rows`].
+pub(super) trait Rows: Sized + Send {
+    fn rows(&self) -> Range<usize>;
+    /// Rows `start..y` and `y..end` (`start < y < end`).
+    fn split_at(self, y: usize) -> std::result::Result<(Self, Self), KernelError>;
+}
+
+impl<T: Element + Send> Rows for RowBand<'_, T> {
+    fn rows(&self) -> Range<usize> {
+        RowBand::rows(self)
+    }
+    fn split_at(self, y: usize) -> std::result::Result<(Self, Self), KernelError> {
+        RowBand::split_at(self, y)
+    }
+}
+
+/// Rows `rows` of a raw f32 frame `[H][C][W]`: `data` holds exactly those rows.
+pub(super) struct F32Rows<'a> {
+    pub data: &'a mut [f32],
+    pub rows: Range<usize>,
+}
+
+impl Rows for F32Rows<'_> {
+    fn rows(&self) -> Range<usize> {
+        self.rows.clone()
+    }
+    fn split_at(self, y: usize) -> std::result::Result<(Self, Self), KernelError> {
+        let Range { start, end } = self.rows;
+        let row_len = self.data.len() / (end - start);
+        let (top, bottom) = self.data.split_at_mut((y - start) * row_len);
+        Ok((
+            F32Rows {
+                data: top,
+                rows: start..y,
+            },
+            F32Rows {
+                data: bottom,
+                rows: y..end,
+            },
+        ))
+    }
+}
+
+/// `work` on `rows` split into `threads` near-equal bands, in parallel on `pool` (one band, on the calling
+/// thread, without a pool).
+pub(super) fn on_threads<B: Rows>(
+    rows: B,
+    threads: usize,
+    pool: Option<&rayon::ThreadPool>,
+    work: &BandWork<'_, B>,
+) -> Result<()> {
     match pool {
-        Some(pool) if threads > 1 => pool.install(|| split_run(band, threads, work)),
-        _ => split_run(band, 1, work),
+        Some(pool) if threads > 1 => pool.install(|| split_run(rows, threads, work)),
+        _ => split_run(rows, 1, work),
     }
     .map_err(kernel_err)
 }
 
-/// What one thread does to its row band.
-pub(super) type BandWork<'w, T> =
-    dyn Fn(&mut RowBand<'_, T>) -> std::result::Result<(), KernelError> + Sync + 'w;
-
 /// Runs `work` on `band` as `parts` near-equal bands: halves recursively through `rayon::join`, so that
 /// nothing is allocated per layer.
-fn split_run<T: Element + Send + Sync>(
-    mut band: RowBand<'_, T>,
+fn split_run<B: Rows>(
+    mut band: B,
     parts: usize,
-    work: &BandWork<'_, T>,
+    work: &BandWork<'_, B>,
 ) -> std::result::Result<(), KernelError> {
     let rows = band.rows();
     if parts <= 1 || rows.len() < 2 {
@@ -291,6 +346,14 @@ fn split_run<T: Element + Send + Sync>(
         || split_run(bottom, parts - left, work),
     );
     a.and(b)
+}
+
+/// The kernels' u8 grid of a model tensor's grid.
+pub(super) fn u8_grid(g: QuantGrid) -> QuantU8 {
+    QuantU8 {
+        scale: g.scale,
+        zero_point: g.zero_point,
+    }
 }
 
 /// A rayon pool of `threads` workers, or `None` for one thread.
@@ -331,10 +394,7 @@ pub(super) fn finish_outputs<'r>(
         } => Some((*amplitude_scale, *phase_scale)),
         CnnOutput::Prefilter { .. } => None,
     };
-    let grid = grid.map(|g| QuantU8 {
-        scale: g.scale,
-        zero_point: g.zero_point,
-    });
+    let grid = grid.map(u8_grid);
     let mut out = vec![0.0f32; 2 * plane];
     let row = |(i, o): (usize, &mut [f32])| {
         let (c, y) = (i / h, i % h);

@@ -23,16 +23,15 @@
 use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3};
-use tensorholo_kernels::{
-    fake_quantize, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, QuantU8, RowPlanar,
-};
+use tensorholo_kernels::{fake_quantize, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, RowPlanar};
 
 use super::native::{
-    finish_outputs, in_bands, planar_slice, pool, ring_slots, run_layer, standard_input,
+    finish_outputs, in_bands, on_threads, planar_slice, pool, ring_slots, run_layer,
+    standard_input, u8_grid, F32Rows,
 };
 use super::{kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
-use crate::model::{CnnOutput, CnnQuant, CnnWeights, QuantGrid};
+use crate::model::{CnnOutput, CnnQuant, CnnWeights};
 
 /// The network's packed int8 layers, shared by every plan of it.
 #[derive(Debug)]
@@ -49,13 +48,6 @@ impl Network {
             .quant
             .as_ref()
             .ok_or_else(|| HoloError::Internal("native int8 plan without grids".into()))
-    }
-}
-
-fn u8_grid(g: QuantGrid) -> QuantU8 {
-    QuantU8 {
-        scale: g.scale,
-        zero_point: g.zero_point,
     }
 }
 
@@ -183,14 +175,13 @@ impl NativeInt8Plan {
         let last = &self.ring[(n - 2) % 3];
         let inputs = Inputs::new(last).concat(&self.x_cat);
         let conv = &net.layers[n - 1];
-        let rows = 0..self.height;
-        match pool {
-            Some(pool) if threads > 1 => {
-                pool.install(|| split_rows_f32(conv, inputs, &mut self.raw, rows, threads))
-            }
-            _ => conv.run_rows_f32(inputs, &mut self.raw, rows),
-        }
-        .map_err(kernel_err)
+        let raw = F32Rows {
+            data: &mut self.raw,
+            rows: 0..self.height,
+        };
+        on_threads(raw, threads, pool, &|band: &mut F32Rows<'_>| {
+            conv.run_rows_f32(inputs, band.data, band.rows.clone())
+        })
     }
 }
 
@@ -221,11 +212,7 @@ impl CnnPlan for NativeInt8Plan {
             for (b, &v) in self.base_input.iter_mut().zip(planar) {
                 *b = v + offset;
             }
-            let grid = QuantU8 {
-                scale: first.scale,
-                zero_point: first.zero_point,
-            };
-            fake_quantize(&mut self.base_input, grid, net.isa).map_err(kernel_err)?;
+            fake_quantize(&mut self.base_input, u8_grid(first), net.isa).map_err(kernel_err)?;
             if offset != 0.0 {
                 self.base_input.iter_mut().for_each(|b| *b -= offset);
             }
@@ -261,27 +248,4 @@ impl CnnPlan for NativeInt8Plan {
             depthwise_scratch: Vec::new(),
         })
     }
-}
-
-/// Runs the last layer's rows `rows` into `out` (`[rows][C_out][W]`) as `parts` near-equal bands, halved
-/// recursively through `rayon::join` (no allocation).
-fn split_rows_f32(
-    conv: &Conv3x3U8,
-    inputs: Inputs<'_, u8>,
-    out: &mut [f32],
-    rows: std::ops::Range<usize>,
-    parts: usize,
-) -> std::result::Result<(), tensorholo_kernels::KernelError> {
-    if parts <= 1 || rows.len() < 2 {
-        return conv.run_rows_f32(inputs, out, rows);
-    }
-    let left = parts / 2;
-    let mid = (rows.start + rows.len() * left / parts).clamp(rows.start + 1, rows.end - 1);
-    let row_len = out.len() / rows.len();
-    let (top, bottom) = out.split_at_mut((mid - rows.start) * row_len);
-    let (a, b) = rayon::join(
-        || split_rows_f32(conv, inputs, top, rows.start..mid, left),
-        || split_rows_f32(conv, inputs, bottom, mid..rows.end, parts - left),
-    );
-    a.and(b)
 }
