@@ -147,7 +147,7 @@ impl<T: Element> RowPlanar<T> {
         &mut self.data[self.off..self.off + self.len]
     }
     /// Elements of one buffer row: `ceil(C/K) · Wp · K`.
-    fn row_stride(&self) -> usize {
+    pub(crate) fn row_stride(&self) -> usize {
         self.groups() * self.wp * T::INTERLEAVE
     }
 
@@ -205,6 +205,41 @@ impl<T: Element> RowPlanar<T> {
             y0 = y1;
         }
         bands
+    }
+
+    /// Sets interior rows `rows` wholly (every column and channel) to the border value: rows of a window that
+    /// stand for frame rows outside the frame, which the next layer must read as zero padding
+    /// ([`Inputs::shifted`](crate::Inputs::shifted)). Errors: rows past `H` ([`KernelError::Rows`]).
+    pub fn fill_rows_with_border(&mut self, rows: Range<usize>) -> Result<(), KernelError> {
+        if rows.start > rows.end || rows.end > self.h {
+            return Err(KernelError::Rows {
+                start: rows.start,
+                end: rows.end,
+                height: self.h,
+            });
+        }
+        let (stride, border) = (self.row_stride(), self.border);
+        self.as_mut_slice()[(rows.start + 1) * stride..(rows.end + 1) * stride].fill(border);
+        Ok(())
+    }
+
+    /// Copies interior rows `src` (whole rows: every column and channel) to interior rows `dst..`, as
+    /// `copy_within`: a window moving down its frame keeps the rows the next strip still reads. Errors: rows
+    /// past `H` ([`KernelError::Rows`]).
+    pub fn copy_rows(&mut self, src: Range<usize>, dst: usize) -> Result<(), KernelError> {
+        if src.start > src.end || src.end > self.h || dst + src.len() > self.h {
+            return Err(KernelError::Rows {
+                start: src.start,
+                end: src.end,
+                height: self.h,
+            });
+        }
+        let stride = self.row_stride();
+        self.as_mut_slice().copy_within(
+            (src.start + 1) * stride..(src.end + 1) * stride,
+            (dst + 1) * stride,
+        );
+        Ok(())
     }
 
     /// Channel groups `ceil(C/K)` stored per buffer row.
@@ -440,6 +475,71 @@ impl RowPlanar<f32> {
     }
 }
 
+impl RowBand<'_, f32> {
+    /// Overwrites the band's rows from rows `src_y0..` of a planar `[C][src_h][W]` frame (band row `y` takes
+    /// source row `src_y0 + y − rows.start`), applying `x·scale[c] + offset[c]` when `affine` is given: the
+    /// rows of a window ([`Inputs::shifted`](crate::Inputs::shifted)), one thread's share. Errors:
+    /// `src.len() != C·src_h·W`, source rows past `src_h` or an affine slice whose length is not `C`
+    /// ([`KernelError::Length`]).
+    pub fn fill_rows_from_planar(
+        &mut self,
+        src: &[f32],
+        src_h: usize,
+        src_y0: usize,
+        affine: Option<Affine<'_>>,
+    ) -> Result<(), KernelError> {
+        check_source(
+            self.c * src_h * self.w,
+            src.len(),
+            src_y0 + self.rows.len(),
+            src_h,
+        )?;
+        if let Some(a) = affine {
+            for (what, s) in [("affine scale", a.scale), ("affine offset", a.offset)] {
+                if s.len() != self.c {
+                    return Err(KernelError::Length {
+                        what,
+                        expected: self.c,
+                        got: s.len(),
+                    });
+                }
+            }
+        }
+        let (w, y0) = (self.w, self.rows.start);
+        for c in 0..self.c {
+            let (m, b) = affine.map_or((1.0, 0.0), |a| (a.scale[c], a.offset[c]));
+            for y in self.rows() {
+                let at = self.interior_at(c, y);
+                let sy = c * src_h + src_y0 + y - y0;
+                let row = &src[sy * w..(sy + 1) * w];
+                for (d, &v) in self.data[at..at + w].iter_mut().zip(row) {
+                    *d = if affine.is_some() { v * m + b } else { v };
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Checks a planar source: `len == expected` and source rows up to `end ≤ src_h`.
+fn check_source(expected: usize, len: usize, end: usize, src_h: usize) -> Result<(), KernelError> {
+    if len != expected {
+        return Err(KernelError::Length {
+            what: "planar source [C][H][W]",
+            expected,
+            got: len,
+        });
+    }
+    if end > src_h {
+        return Err(KernelError::Length {
+            what: "planar source rows",
+            expected: end,
+            got: src_h,
+        });
+    }
+    Ok(())
+}
+
 impl RowBand<'_, u8> {
     /// [`RowPlanar::quantize_fill`] for the band's rows only (`src` is still the whole planar `[C][H][W]`
     /// frame), so that threads can share the work. Errors: as `quantize_fill`.
@@ -449,21 +549,36 @@ impl RowBand<'_, u8> {
         offset: f32,
         scale: f32,
     ) -> Result<(), KernelError> {
+        let (h, y0) = (self.h, self.rows.start);
+        self.quantize_fill_rows(src, h, y0, offset, scale)
+    }
+
+    /// [`quantize_fill`](Self::quantize_fill) of the band's rows from rows `src_y0..` of a planar
+    /// `[C][src_h][W]` frame: band row `y` takes source row `src_y0 + y − rows.start` (a window of a taller
+    /// frame, [`Inputs::shifted`](crate::Inputs::shifted)). Errors: `src.len() != C·src_h·W` or source rows
+    /// past `src_h` ([`KernelError::Length`]), a scale that is not finite and positive.
+    pub fn quantize_fill_rows(
+        &mut self,
+        src: &[f32],
+        src_h: usize,
+        src_y0: usize,
+        offset: f32,
+        scale: f32,
+    ) -> Result<(), KernelError> {
         check_scale("quantisation scale", scale)?;
-        let expected = self.c * self.h * self.w;
-        if src.len() != expected {
-            return Err(KernelError::Length {
-                what: "planar source [C][H][W]",
-                expected,
-                got: src.len(),
-            });
-        }
-        let (h, w, zp) = (self.h, self.w, self.border);
+        check_source(
+            self.c * src_h * self.w,
+            src.len(),
+            src_y0 + self.rows.len(),
+            src_h,
+        )?;
+        let (w, zp, y0) = (self.w, self.border, self.rows.start);
         for c in 0..self.c {
             for y in self.rows() {
                 let at = self.interior_at(c, y);
                 let dst = &mut self.data[at..at + 4 * (w - 1) + 1];
-                let row = &src[(c * h + y) * w..(c * h + y + 1) * w];
+                let sy = c * src_h + src_y0 + y - y0;
+                let row = &src[sy * w..(sy + 1) * w];
                 for (d, &v) in dst.iter_mut().step_by(4).zip(row) {
                     *d = quantize((v + offset) / scale, zp);
                 }
@@ -480,9 +595,7 @@ impl RowBand<'_, u8> {
         other_scale: f32,
         scale: f32,
     ) -> Result<(), KernelError> {
-        check_scale("quantisation scale", scale)?;
-        check_scale("source scale", other_scale)?;
-        if (other.c, other.h, other.w) != (self.c, self.h, self.w) {
+        if other.h != self.h {
             return Err(KernelError::Shape {
                 what: format!(
                     "requantise a {}×{}×{} buffer into a {}×{}×{} one",
@@ -490,14 +603,45 @@ impl RowBand<'_, u8> {
                 ),
             });
         }
-        let (zp, zo, w) = (self.border, other.border as f32, self.w);
+        let y0 = self.rows.start;
+        self.requantize_rows_from(other, y0, other_scale, scale)
+    }
+
+    /// [`requantize_from`](Self::requantize_from) of the band's rows from interior rows `other_y0..` of
+    /// `other` (band row `y` takes `other`'s row `other_y0 + y − rows.start`; windows of a frame held at
+    /// other rows). Errors: another channel count or width, or rows past `other`'s height
+    /// ([`KernelError::Shape`]); scales not finite and positive.
+    pub fn requantize_rows_from(
+        &mut self,
+        other: &RowPlanar<u8>,
+        other_y0: usize,
+        other_scale: f32,
+        scale: f32,
+    ) -> Result<(), KernelError> {
+        check_scale("quantisation scale", scale)?;
+        check_scale("source scale", other_scale)?;
+        if (other.c, other.w) != (self.c, self.w) || other_y0 + self.rows.len() > other.h {
+            return Err(KernelError::Shape {
+                what: format!(
+                    "requantise rows {other_y0}..{} of a {}×{}×{} buffer into {} rows of a {}×{} one",
+                    other_y0 + self.rows.len(),
+                    other.c,
+                    other.h,
+                    other.w,
+                    self.rows.len(),
+                    self.c,
+                    self.w
+                ),
+            });
+        }
+        let (zp, zo, w, y0) = (self.border, other.border as f32, self.w, self.rows.start);
         // Same shape, so the same layout: only the interior differs in meaning, but the border must keep its
         // own zero point, so the interior rows are mapped one by one, each as one contiguous run of `4·W`
         // bytes (the padding channels hold `other`'s zero point, real 0, and map to this zero point).
         for g in 0..self.c.div_ceil(4) {
             for y in self.rows() {
                 let at = self.interior_at(4 * g, y);
-                let from = other.index(4 * g, y + 1, 1);
+                let from = other.index(4 * g, other_y0 + y - y0 + 1, 1);
                 let src = &other.as_slice()[from..from + 4 * w];
                 for (d, &q) in self.data[at..at + 4 * w].iter_mut().zip(src) {
                     let real = (q as f32 - zo) * other_scale;

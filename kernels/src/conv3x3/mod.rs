@@ -51,6 +51,9 @@ pub struct Inputs<'a, T: Element> {
     pub b: Option<&'a RowPlanar<T>>,
     /// Residual `[C_out][H][W]` added after the ReLU; `None` for no residual.
     pub residual: Option<&'a RowPlanar<T>>,
+    /// Row offsets `[a, b, residual]` of the operands from the output ([`Inputs::shifted`]); `None`: every
+    /// buffer holds the whole frame.
+    pub shift: Option<[isize; 3]>,
 }
 
 impl<'a, T: Element> Inputs<'a, T> {
@@ -60,6 +63,7 @@ impl<'a, T: Element> Inputs<'a, T> {
             a,
             b: None,
             residual: None,
+            shift: None,
         }
     }
     /// Adds a second source concatenated after `a`'s channels.
@@ -73,7 +77,43 @@ impl<'a, T: Element> Inputs<'a, T> {
         self
     }
 
-    /// Checks the shapes against a plan of `c_in → c_out` and an output of `h × w`, and the row band.
+    /// Makes the buffers **windows** of a taller frame, each holding other frame rows (a network run a strip
+    /// of rows at a time, every layer a few rows behind the one before): interior row `i` of operand `x`
+    /// holds the frame row of the output's interior row `i + d_x`, for `d = [a, b, residual]` (0 for an
+    /// operand that is absent). The buffers' heights are then free: every row a call reads must lie inside
+    /// its operand (rows `r − d − 1 ..= r + 1 − d` of the sources, buffer border rows included, and row `r −
+    /// d` of the residual, for each output row `r`), which the call checks. The caller keeps the rows that
+    /// stand for frame rows outside the frame at the border value (the zero padding).
+    pub fn shifted(mut self, a: isize, b: isize, residual: isize) -> Self {
+        self.shift = Some([a, b, residual]);
+        self
+    }
+
+    /// The kernel's row origin `k` (output row `r` is kernel row `r − k`; 0 without [`shifted`](Self::shifted))
+    /// and the three operands' storage from that origin on: source rows are read at kernel rows `y..=y + 2`
+    /// and the residual at `y + 1`, as in a whole-frame buffer. Call after [`check`](Self::check).
+    pub(crate) fn kernel_view(&self) -> (usize, [&'a [T]; 3]) {
+        let d = self.shift.unwrap_or([0; 3]);
+        let k = d.iter().copied().max().unwrap_or(0).max(0);
+        let from = |b: Option<&'a RowPlanar<T>>, d: isize| -> &'a [T] {
+            b.map_or(&[][..], |b| {
+                // `k ≥ d`, so the offset is ≥ 0; `check` kept it inside the buffer.
+                let rows = (k - d) as usize;
+                &b.as_slice()[rows * b.row_stride()..]
+            })
+        };
+        (
+            k as usize,
+            [
+                from(Some(self.a), d[0]),
+                from(self.b, d[1]),
+                from(self.residual, d[2]),
+            ],
+        )
+    }
+
+    /// Checks the shapes against a plan of `c_in → c_out` and an output of `h × w`, and the row band; with
+    /// [`shifted`](Self::shifted) operands, that every row the band reads lies inside its operand.
     pub(crate) fn check(
         &self,
         c_in: usize,
@@ -82,6 +122,9 @@ impl<'a, T: Element> Inputs<'a, T> {
         w: usize,
         rows: &Range<usize>,
     ) -> Result<(), KernelError> {
+        if let Some(d) = self.shift {
+            return self.check_shifted(c_in, c_out, h, w, rows, d);
+        }
         let same = |what: &str, b: &RowPlanar<T>| -> Result<(), KernelError> {
             if b.height() != h || b.width() != w {
                 return Err(KernelError::Shape {
@@ -123,6 +166,73 @@ impl<'a, T: Element> Inputs<'a, T> {
                 end: rows.end,
                 height: h,
             });
+        }
+        Ok(())
+    }
+
+    /// [`check`](Self::check) for windows: widths and channels as there; heights free, every row read inside
+    /// its operand.
+    fn check_shifted(
+        &self,
+        c_in: usize,
+        c_out: usize,
+        h: usize,
+        w: usize,
+        rows: &Range<usize>,
+        d: [isize; 3],
+    ) -> Result<(), KernelError> {
+        if rows.start >= rows.end || rows.end > h {
+            return Err(KernelError::Rows {
+                start: rows.start,
+                end: rows.end,
+                height: h,
+            });
+        }
+        let (r0, r1) = (rows.start as isize, rows.end as isize);
+        // Buffer rows (border rows included: 0..H+2) of `b` that the band reads, `lo..hi`.
+        let inside = |what: &str, b: &RowPlanar<T>, lo: isize, hi: isize| {
+            if b.width() != w {
+                return Err(KernelError::Shape {
+                    what: format!("{what} is {} wide, output is {w}", b.width()),
+                });
+            }
+            if lo < 0 || hi > b.height() as isize + 2 {
+                return Err(KernelError::Shape {
+                    what: format!(
+                        "{what} holds buffer rows 0..{}, the band reads {lo}..{hi}",
+                        b.height() + 2
+                    ),
+                });
+            }
+            Ok(())
+        };
+        inside("source a", self.a, r0 - d[0], r1 - d[0] + 2)?;
+        let cb = match self.b {
+            Some(b) => {
+                inside("source b", b, r0 - d[1], r1 - d[1] + 2)?;
+                b.channels()
+            }
+            None => 0,
+        };
+        if self.a.channels() + cb != c_in {
+            return Err(KernelError::Shape {
+                what: format!(
+                    "input channels {} + {cb} != plan's C_in {c_in}",
+                    self.a.channels()
+                ),
+            });
+        }
+        if let Some(r) = self.residual {
+            // Interior rows only (the kernel row origin must not pass the band's first row).
+            inside("residual", r, r0 - d[2], r1 - d[2] + 2)?;
+            if r.channels() != c_out {
+                return Err(KernelError::Shape {
+                    what: format!(
+                        "residual has {} channels, plan's C_out is {c_out}",
+                        r.channels()
+                    ),
+                });
+            }
         }
         Ok(())
     }
@@ -315,12 +425,15 @@ impl Conv3x3F32 {
         self.c_out
     }
 
-    fn job<'a>(&'a self, inputs: &Inputs<'a, f32>, rows: &Range<usize>) -> F32Job<'a> {
+    /// The job of output rows `rows` (checked by the caller) and its kernel row origin `k` (kernel row `y` is
+    /// output row `y + k`; 0 unless the inputs are [`shifted`](Inputs::shifted)).
+    fn job<'a>(&'a self, inputs: &Inputs<'a, f32>, rows: &Range<usize>) -> (F32Job<'a>, usize) {
         let a = inputs.a;
-        F32Job {
-            a: a.as_slice(),
+        let (k, [sa, sb, sr]) = inputs.kernel_view();
+        let job = F32Job {
+            a: sa,
             ca: a.channels(),
-            b: inputs.b.map_or(&[][..], |b| b.as_slice()),
+            b: sb,
             cb: inputs.b.map_or(0, |b| b.channels()),
             h: a.height(),
             w: a.width(),
@@ -329,10 +442,11 @@ impl Conv3x3F32 {
             bias: &self.bias,
             cout: self.c_out,
             relu: self.relu,
-            residual: inputs.residual.map(|r| r.as_slice()),
-            y0: rows.start,
-            y1: rows.end,
-        }
+            residual: inputs.residual.map(|_| sr),
+            y0: rows.start - k,
+            y1: rows.end - k,
+        };
+        (job, k)
     }
 
     /// Computes output rows `rows` (frame rows, `0 ≤ start < end ≤ H`) into `out`, a [`RowPlanar`] of `C_out`
@@ -366,10 +480,13 @@ impl Conv3x3F32 {
         }
         let rows = band.rows();
         inputs.check(self.c_in, self.c_out, h, w, &rows)?;
-        let job = self.job(&inputs, &rows);
+        let (job, k) = self.job(&inputs, &rows);
+        // The kernel writes kernel row `y` at output row `y + k`: the band, seen from the kernel, starts `k`
+        // rows earlier (`band.base ≥ (rows.start + 1)·stride ≥ k·stride`: `check` keeps `k ≤ rows.start`).
+        let stride = band.data.len() / rows.len();
         let out = F32Out::Rows {
             data: band.data,
-            base: band.base,
+            base: band.base - k * stride,
         };
         registry::run_f32(self.row, &job, out)
     }
@@ -391,8 +508,13 @@ impl Conv3x3F32 {
                 got: out.len(),
             });
         }
+        if inputs.shift.is_some() {
+            return Err(KernelError::Shape {
+                what: "a planar output takes whole-frame inputs, not shifted windows".into(),
+            });
+        }
         inputs.check(self.c_in, self.c_out, h, w, &rows)?;
-        let job = self.job(&inputs, &rows);
+        let (job, _) = self.job(&inputs, &rows);
         registry::run_f32(self.row, &job, F32Out::Planar(out))
     }
 }

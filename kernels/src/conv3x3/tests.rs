@@ -1090,3 +1090,229 @@ mod prop {
         }
     }
 }
+
+/// Frame rows `first..first + rows` of a planar `[c][h][w]` frame as a planar `[c][rows][w]` window; rows
+/// outside the frame hold `pad` (the zero padding's value).
+fn window_of<T: Copy>(
+    frame: &[T],
+    c: usize,
+    h: usize,
+    w: usize,
+    first: isize,
+    rows: usize,
+    pad: T,
+) -> Vec<T> {
+    let mut out = vec![pad; c * rows * w];
+    for ch in 0..c {
+        for i in 0..rows {
+            let f = first + i as isize;
+            if (0..h as isize).contains(&f) {
+                let src = (ch * h + f as usize) * w;
+                out[(ch * rows + i) * w..(ch * rows + i + 1) * w]
+                    .copy_from_slice(&frame[src..src + w]);
+            }
+        }
+    }
+    out
+}
+
+/// Output rows `f0..f1` and, for the output, `a`, `b` and the residual, `(first frame row, interior rows)`.
+type WindowCase = (usize, usize, [(isize, usize); 4]);
+
+/// Window layouts for [`Inputs::shifted`] tests on a frame of `h` rows: output rows `f0..f1`, and for the
+/// output and each operand the frame row of its interior row 0 and its height (operands hold the rows the
+/// band reads and a few more, on either side; the output window starts earlier than the band).
+fn window_cases(h: usize) -> Vec<WindowCase> {
+    let mut cases = Vec::new();
+    let mut rng = Rng::new(77);
+    for (f0, f1) in [(0, h), (0, 3), (4, 9), (h - 2, h), (5, 6)] {
+        // Interior rows: frame rows `f0 − halo − before .. f1 + halo + after`.
+        let mut pick = |halo: isize| {
+            let before = (rng.next() % 3) as isize;
+            let after = (rng.next() % 3) as isize;
+            let first = f0 as isize - halo - before;
+            (first, (f1 as isize + halo + after - first) as usize)
+        };
+        let out = pick(0);
+        let a = pick(1);
+        let b = pick(1);
+        let r = pick(0);
+        cases.push((f0, f1, [out, a, b, r]));
+    }
+    cases
+}
+
+#[test]
+fn f32_shifted_windows_equal_the_whole_frame() {
+    // A layer computed on windows (each buffer holding other frame rows, rows outside the frame zero) writes
+    // the bit-identical rows of the whole-frame run, for every row, with a concat and a residual; a window
+    // that misses a row the band reads is refused.
+    let (ca, cb, cout, h, w) = (14, 4, 24, 13, 37);
+    let mut rng = Rng::new(9);
+    let (fa, fb, fr) = (
+        rng.vec(ca * h * w),
+        rng.vec(cb * h * w),
+        rng.vec(cout * h * w),
+    );
+    let wt = rng.vec(cout * (ca + cb) * 9);
+    let bias = rng.vec(cout);
+    let whole_bufs = [
+        RowPlanar::from_planar(&fa, ca, h, w, None).unwrap(),
+        RowPlanar::from_planar(&fb, cb, h, w, None).unwrap(),
+        RowPlanar::from_planar(&fr, cout, h, w, None).unwrap(),
+    ];
+    for row in f32_rows() {
+        let plan = Conv3x3F32::with_kernel(&wt, &bias, ca + cb, cout, true, row).unwrap();
+        let mut whole = RowPlanar::new(cout, h, w).unwrap();
+        let inputs = Inputs::new(&whole_bufs[0])
+            .concat(&whole_bufs[1])
+            .residual(&whole_bufs[2]);
+        plan.run(inputs, &mut whole, 0..h).unwrap();
+        let whole = whole.to_planar();
+        for (f0, f1, [(fo, ho), (fa0, ha), (fb0, hb), (fr0, hr)]) in window_cases(h) {
+            let win = |src: &[f32], c, first, rows| {
+                RowPlanar::from_planar(&window_of(src, c, h, w, first, rows, 0.0), c, rows, w, None)
+                    .unwrap()
+            };
+            let (a, b, r) = (
+                win(&fa, ca, fa0, ha),
+                win(&fb, cb, fb0, hb),
+                win(&fr, cout, fr0, hr),
+            );
+            let mut out = RowPlanar::new(cout, ho, w).unwrap();
+            let inputs =
+                Inputs::new(&a)
+                    .concat(&b)
+                    .residual(&r)
+                    .shifted(fa0 - fo, fb0 - fo, fr0 - fo);
+            let band = (f0 as isize - fo) as usize..(f1 as isize - fo) as usize;
+            plan.run(inputs, &mut out, band.clone()).unwrap();
+            let got = out.to_planar();
+            for o in 0..cout {
+                for i in 0..ho {
+                    let f = fo + i as isize;
+                    for x in 0..w {
+                        let g = got[(o * ho + i) * w + x];
+                        let want = if band.contains(&i) {
+                            whole[(o * h + f as usize) * w + x]
+                        } else {
+                            0.0
+                        };
+                        assert_eq!(
+                            g.to_bits(),
+                            want.to_bits(),
+                            "{row} rows {f0}..{f1} ({o}, {f}, {x})"
+                        );
+                    }
+                }
+            }
+            assert!(out.border_is_clean());
+            // One row too few above the band in source a: refused, nothing written.
+            let short = Inputs::new(&a).concat(&b).residual(&r).shifted(
+                fa0 - fo + (band.start as isize - (fa0 - fo)) + 1,
+                fb0 - fo,
+                fr0 - fo,
+            );
+            assert!(matches!(
+                plan.run(short, &mut out, band.clone()),
+                Err(KernelError::Shape { .. })
+            ));
+        }
+    }
+}
+
+#[test]
+fn u8_shifted_windows_equal_the_whole_frame() {
+    // As the f32 test, bit-exact, for u8 outputs and for raw f32 rows (the last layer's), windows padded
+    // with each buffer's zero point.
+    let case = QCase {
+        ca: 14,
+        cb: 4,
+        cout: 24,
+        h: 13,
+        w: 37,
+        relu: true,
+        residual: true,
+        u8_out: true,
+    };
+    let d = qdata(case, 21);
+    let sp = spec(case, &d);
+    let (ca, cb, cout, h, w) = (case.ca, case.cb, case.cout, case.h, case.w);
+    let whole_bufs = [
+        RowPlanar::from_planar_u8(&d.a, ca, h, w, d.zp[0]).unwrap(),
+        RowPlanar::from_planar_u8(&d.b, cb, h, w, d.zp[1]).unwrap(),
+        RowPlanar::from_planar_u8(&d.r, cout, h, w, d.zp[2]).unwrap(),
+    ];
+    for row in u8_rows() {
+        let plan = Conv3x3U8::with_kernel(&sp, row).unwrap();
+        let inputs = Inputs::new(&whole_bufs[0])
+            .concat(&whole_bufs[1])
+            .residual(&whole_bufs[2]);
+        let mut whole = RowPlanar::new_quantized(cout, h, w, d.zp[3]).unwrap();
+        plan.run(inputs, &mut whole, 0..h).unwrap();
+        let whole = whole.to_planar();
+        let mut whole_f = vec![0.0; cout * h * w];
+        plan.run_planar(inputs, &mut whole_f, 0..h).unwrap();
+        for (f0, f1, [(fo, ho), (fa0, ha), (fb0, hb), (fr0, hr)]) in window_cases(h) {
+            let win = |src: &[u8], c, first, rows, zp| {
+                RowPlanar::from_planar_u8(&window_of(src, c, h, w, first, rows, zp), c, rows, w, zp)
+                    .unwrap()
+            };
+            let a = win(&d.a, ca, fa0, ha, d.zp[0]);
+            let b = win(&d.b, cb, fb0, hb, d.zp[1]);
+            let r = win(&d.r, cout, fr0, hr, d.zp[2]);
+            let mut out = RowPlanar::new_quantized(cout, ho, w, d.zp[3]).unwrap();
+            let inputs =
+                Inputs::new(&a)
+                    .concat(&b)
+                    .residual(&r)
+                    .shifted(fa0 - fo, fb0 - fo, fr0 - fo);
+            let band = (f0 as isize - fo) as usize..(f1 as isize - fo) as usize;
+            plan.run(inputs, &mut out, band.clone()).unwrap();
+            let got = out.to_planar();
+            let mut rows_f = vec![7.5f32; band.len() * cout * w];
+            plan.run_rows_f32(inputs, &mut rows_f, band.clone())
+                .unwrap();
+            for o in 0..cout {
+                for i in 0..ho {
+                    let f = fo + i as isize;
+                    for x in 0..w {
+                        let want = if band.contains(&i) {
+                            whole[(o * h + f as usize) * w + x]
+                        } else {
+                            d.zp[3]
+                        };
+                        assert_eq!(
+                            got[(o * ho + i) * w + x],
+                            want,
+                            "{row} rows {f0}..{f1} ({o}, {f}, {x})"
+                        );
+                        if band.contains(&i) {
+                            let g = rows_f[((i - band.start) * cout + o) * w + x];
+                            let want = whole_f[(o * h + f as usize) * w + x];
+                            assert_eq!(
+                                g.to_bits(),
+                                want.to_bits(),
+                                "{row} raw rows ({o}, {f}, {x})"
+                            );
+                        }
+                    }
+                }
+            }
+            assert!(out.border_is_clean());
+            // A residual window that misses the band's last row: refused.
+            let short = Inputs::new(&a).concat(&b).residual(&r).shifted(
+                fa0 - fo,
+                fb0 - fo,
+                band.end as isize - hr as isize - 1,
+            );
+            assert!(matches!(
+                plan.run(short, &mut out, band.clone()),
+                Err(KernelError::Shape { .. })
+            ));
+            // A planar output takes whole frames only.
+            let mut planar = vec![0.0; cout * ho * w];
+            assert!(plan.run_planar(inputs, &mut planar, band.clone()).is_err());
+        }
+    }
+}

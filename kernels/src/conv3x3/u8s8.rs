@@ -257,16 +257,19 @@ impl Conv3x3U8 {
         }
     }
 
-    fn job<'a>(&'a self, inputs: &Inputs<'a, u8>, rows: &Range<usize>) -> U8Job<'a> {
+    /// The job of output rows `rows` (checked by the caller) and its kernel row origin `k` (kernel row `y` is
+    /// output row `y + k`; 0 unless the inputs are [`shifted`](Inputs::shifted)).
+    fn job<'a>(&'a self, inputs: &Inputs<'a, u8>, rows: &Range<usize>) -> (U8Job<'a>, usize) {
         let a = inputs.a;
         let out = self.output.unwrap_or(QuantU8 {
             scale: 1.0,
             zero_point: 0,
         });
-        U8Job {
-            a: a.as_slice(),
+        let (k, [sa, sb, sr]) = inputs.kernel_view();
+        let job = U8Job {
+            a: sa,
             ga: a.groups(),
-            b: inputs.b.map_or(&[][..], |b| b.as_slice()),
+            b: sb,
             gb: inputs.b.map_or(0, |b| b.groups()),
             w: a.width(),
             wp: a.padded_width(),
@@ -279,13 +282,14 @@ impl Conv3x3U8 {
             residual: inputs
                 .residual
                 .zip(self.residual)
-                .map(|(r, q)| (r.as_slice(), q.zero_point as f32, q.scale)),
+                .map(|(_, q)| (sr, q.zero_point as f32, q.scale)),
             out_inv: 1.0 / out.scale,
             out_zp: out.zero_point as f32,
             out_zp_u8: out.zero_point,
-            y0: rows.start,
-            y1: rows.end,
-        }
+            y0: rows.start - k,
+            y1: rows.end - k,
+        };
+        (job, k)
     }
 
     /// Computes output rows `rows` into `out`, a u8 [`RowPlanar`] of `C_out` channels whose zero point is the
@@ -297,27 +301,7 @@ impl Conv3x3U8 {
         out: &mut RowPlanar<u8>,
         rows: Range<usize>,
     ) -> Result<(), KernelError> {
-        let q = self.output.ok_or_else(|| KernelError::Shape {
-            what: "the plan has f32 output (output: None); use run_planar".into(),
-        })?;
-        if out.channels() != self.c_out || out.zero_point() != q.zero_point {
-            return Err(KernelError::Shape {
-                what: format!(
-                    "output has {} channels and zero point {}, the plan {} and {}",
-                    out.channels(),
-                    out.zero_point(),
-                    self.c_out,
-                    q.zero_point
-                ),
-            });
-        }
-        self.check(&inputs, out.height(), out.width(), &rows)?;
-        let job = self.job(&inputs, &rows);
-        let out = U8Out::Rows {
-            data: out.as_mut_slice(),
-            base: 0,
-        };
-        registry::run_u8(self.row, &job, out)
+        self.run_band(inputs, &mut out.band_mut(rows)?)
     }
 
     /// Computes the rows of `band` (of a u8 [`RowPlanar`] of `C_out` channels whose zero point is the plan's
@@ -341,10 +325,12 @@ impl Conv3x3U8 {
         }
         let rows = band.rows();
         self.check(&inputs, band.h, band.w, &rows)?;
-        let job = self.job(&inputs, &rows);
+        let (job, k) = self.job(&inputs, &rows);
+        // As `Conv3x3F32::run_band`: seen from the kernel, the band starts `k ≤ rows.start` rows earlier.
+        let stride = band.data.len() / rows.len();
         let out = U8Out::Rows {
             data: band.data,
-            base: band.base,
+            base: band.base - k * stride,
         };
         registry::run_u8(self.row, &job, out)
     }
@@ -382,22 +368,34 @@ impl Conv3x3U8 {
         rows: Range<usize>,
         planar: bool,
     ) -> Result<(), KernelError> {
-        let (h, w, c) = (inputs.a.height(), inputs.a.width(), self.c_out);
+        let (w, c) = (inputs.a.width(), self.c_out);
+        // Shifted windows have no output buffer: the rows are in the output's frame, whose height only the
+        // operands bound (checked there).
+        let h = match inputs.shift {
+            Some(_) if planar => {
+                return Err(KernelError::Shape {
+                    what: "a planar output takes whole-frame inputs, not shifted windows".into(),
+                })
+            }
+            Some(_) => rows.end,
+            None => inputs.a.height(),
+        };
         self.check(&inputs, h, w, &rows)?;
+        let (job, _) = self.job(&inputs, &rows);
         let (what, len, c_stride, y_stride, base) = if planar {
             ("planar output [C_out][H][W]", c * h * w, h * w, w, 0)
         } else {
             let n = rows.len();
+            // Kernel rows `y0 = rows.start − k ..`: `data[0]` is kernel row `y0`.
             (
                 "f32 output rows [rows][C_out][W]",
                 n * c * w,
                 w,
                 c * w,
-                rows.start * c * w,
+                job.y0 * c * w,
             )
         };
         check_len(what, out.len(), len)?;
-        let job = self.job(&inputs, &rows);
         let out = U8Out::F32 {
             data: out,
             c_stride,

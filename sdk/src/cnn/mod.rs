@@ -16,6 +16,7 @@
 mod native;
 mod native_int8;
 mod select;
+mod strips;
 mod tract;
 
 pub use crate::model::CnnEngine;

@@ -5,19 +5,22 @@
 //! One frame, for `N` layers (`s_0` = the centred input `x − input_offset`, kept for the final concat):
 //!
 //! ```text
-//! layer i < N−1:  s_{i+1} = ReLU(conv_i(s_i) + b_i) (+ s_{i−1} where i+1 is odd and ≥ 3)   ring of 3 buffers
+//! layer i < N−1:  s_{i+1} = ReLU(conv_i(s_i) + b_i) (+ s_{i−1} where i+1 is odd and ≥ 3)
 //! layer N−1:      o = conv_{N−1}(concat(s_{N−1}, s_0)) + b                                 raw [6, H, W]
 //! heads:          amplitude (tanh(o) + 1)·a, phase (tanh(o) + 1)·p                          hologram CNN
 //! pre-filter:     o + depthwise_k×k(edge-replicated x)                                     [Re, Im]
 //! ```
 //!
-//! Threads: each layer's output rows are split into one band per thread (halved recursively with
-//! [`RowBand::split_at`] under `rayon::join`); the bands of a layer run in parallel on the plan's own rayon
-//! pool (created once with the plan), and the next layer starts when all are done (a 3×3 convolution reads
-//! one row above and below its band).
+//! The frame runs in strips of rows, each layer a row behind the one before, every activation in a window
+//! of a few rows ([`super::strips`]): a plan's activations take about 32 MB whatever the frame size.
 //!
-//! Every activation buffer is allocated when the plan is built; a run allocates only its two output arrays
-//! (the [`CnnPlan`] contract returns owned arrays).
+//! Threads: each layer's strip is split into one band per thread (halved recursively with
+//! [`RowBand::split_at`] under `rayon::join`); the bands of a layer run in parallel on the plan's own rayon
+//! pool (created once with the plan, installed once per frame), and the next layer starts when all are done
+//! (a 3×3 convolution reads one row above and below its band).
+//!
+//! Every activation window is allocated when the plan is built; a run allocates only its output (the
+//! [`CnnPlan`] contract returns owned arrays).
 
 use std::ops::Range;
 use std::sync::Arc;
@@ -26,10 +29,11 @@ use ndarray::{Array3, ArrayView3, CowArray, Ix3};
 use rayon::prelude::*;
 use tensorholo_kernels::buffer::Element;
 use tensorholo_kernels::{
-    depthwise, fake_quantize, tanh_heads, Affine, Conv3x3F32, Conv3x3U8, Inputs, Isa, KernelError,
-    QuantU8, RowBand, RowPlanar,
+    depthwise, fake_quantize, tanh_heads, Affine, Conv3x3F32, Inputs, Isa, KernelError, QuantU8,
+    RowBand, RowPlanar,
 };
 
+use super::strips::{row_bytes, strip_rows, Strips, Window};
 use super::{kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnWeights, QuantGrid};
@@ -46,7 +50,7 @@ struct Network {
     offset: Vec<f32>,
 }
 
-/// A native plan: one network at one resolution, with its buffers and threads.
+/// A native plan: one network at one resolution, with its activation windows and threads.
 #[derive(Debug)]
 pub(crate) struct NativePlan {
     net: Arc<Network>,
@@ -55,19 +59,20 @@ pub(crate) struct NativePlan {
     threads: usize,
     /// The plan's worker threads (`None` with one thread: the caller's thread runs every band).
     pool: Option<Arc<rayon::ThreadPool>>,
-    /// `s_0`: the centred input.
-    x: RowPlanar<f32>,
-    /// `s_1 …`: `s_k` lives in `ring[(k − 1) % 3]`.
-    ring: [RowPlanar<f32>; 3],
+    strips: Strips,
+    /// `s_0`: the centred input (read by the first layer and by the last layer's concat).
+    x: Window<f32>,
+    /// `s_1 … s_{N−1}`.
+    s: Vec<Window<f32>>,
     /// The last layer's raw output, `C_out` channels.
-    raw: RowPlanar<f32>,
+    raw: Window<f32>,
     /// Two rows of scratch for the pre-filter's depthwise base filter (grown on the first run).
     depthwise_scratch: Vec<f32>,
 }
 
 impl NativePlan {
-    /// Packs `graph`'s layers for the best kernels of `isa` and allocates the buffers of `height × width`
-    /// frames, run on `threads` threads (≥ 1).
+    /// Packs `graph`'s layers for the best kernels of `isa` and allocates the activation windows of
+    /// `height × width` frames (strips of [`strip_rows`]), run on `threads` threads (≥ 1).
     ///
     /// Errors: [`HoloError::InvalidData`] for non-finite weights; [`HoloError::InvalidParameter`] for 0
     /// threads; [`HoloError::Internal`] for an int8 graph (`NativeInt8Plan` runs those); [`HoloError::ModelRun`] for an ISA this CPU lacks, a size the kernels refuse or a thread
@@ -78,6 +83,19 @@ impl NativePlan {
         width: usize,
         threads: usize,
         isa: Isa,
+    ) -> Result<Self> {
+        Self::with_strip(graph, height, width, threads, isa, None)
+    }
+
+    /// [`new`](Self::new) with strips of `strip` rows (`None`: [`strip_rows`]; more than `H + N` rows: one
+    /// strip). Errors: as `new`.
+    pub(crate) fn with_strip(
+        graph: Arc<CnnWeights>,
+        height: usize,
+        width: usize,
+        threads: usize,
+        isa: Isa,
+        strip: Option<usize>,
     ) -> Result<Self> {
         if threads == 0 {
             return Err(crate::error::invalid(
@@ -113,11 +131,29 @@ impl NativePlan {
             layers,
             isa,
         };
-        let buf = |ch| RowPlanar::new(ch, height, width).map_err(kernel_err);
+        // Windows: the input (carry N + 1: the concat reads it N rows later), s_1 … s_{N−1} (carry 2), the
+        // raw output (no carry).
+        let (xb, hb, ob) = (
+            row_bytes::<f32>(c, width),
+            row_bytes::<f32>(hidden, width),
+            row_bytes::<f32>(c_out, width),
+        );
+        let per_row = xb + (n - 1) * hb + ob;
+        let fixed = (n + 3) * xb + 4 * (n - 1) * hb + 2 * ob;
+        let rows = strip.unwrap_or_else(|| strip_rows(height, n, per_row, fixed, threads));
+        let strips = Strips::new(rows.min(height + n), height, n);
+        let window = |ch, lag, carry| -> Result<Window<f32>> {
+            let buf = RowPlanar::new(ch, Window::<f32>::height(strips, carry), width)
+                .map_err(kernel_err)?;
+            Ok(Window::new(buf, lag, carry))
+        };
         Ok(Self {
-            x: buf(c)?,
-            ring: [buf(hidden)?, buf(hidden)?, buf(hidden)?],
-            raw: buf(c_out)?,
+            x: window(c, 0, n + 1)?,
+            s: (1..n)
+                .map(|k| window(hidden, k, 2))
+                .collect::<Result<_>>()?,
+            raw: window(c_out, n, 0)?,
+            strips,
             depthwise_scratch: Vec::new(),
             height,
             width,
@@ -132,57 +168,94 @@ impl NativePlan {
         self.net.layers[0].kernel().name
     }
 
-    /// Runs the convolutions of one frame whose input is already in `self.x`; the raw output lands in
-    /// `self.raw`.
-    fn forward(&mut self) -> Result<()> {
-        let n = self.net.layers.len();
-        let (threads, pool) = (self.threads, self.pool.as_deref());
-        for (i, conv) in self.net.layers.iter().enumerate().take(n - 1) {
-            // Layer i reads s_i (the input for i = 0), adds s_{i−1} where i + 1 is odd and ≥ 3, writes s_{i+1}.
-            let out = i % 3;
-            let residual = (i + 1 >= 3 && (i + 1) % 2 == 1).then_some((i + 1) % 3);
-            let (dst, slot) = ring_slots(&mut self.ring, out);
-            let src = if i == 0 { &self.x } else { slot((i + 2) % 3) };
-            let mut inputs = Inputs::new(src);
-            if let Some(r) = residual {
-                inputs = inputs.residual(slot(r));
-            }
-            run_layer(conv, inputs, dst, threads, pool)?;
-        }
-        let last = if n >= 2 {
-            &self.ring[(n - 2) % 3]
-        } else {
-            &self.x
-        };
-        let inputs = Inputs::new(last).concat(&self.x);
-        run_layer(
-            &self.net.layers[n - 1],
-            inputs,
-            &mut self.raw,
-            threads,
-            pool,
-        )
+    /// Frame rows per strip.
+    #[cfg(test)]
+    pub(crate) fn strip_rows(&self) -> usize {
+        self.strips.rows
     }
-}
 
-/// The ring slot `out` to write, and a reader of the other slots by index (`slot(k)`, `k ≠ out`).
-pub(super) fn ring_slots<'a, T: Element>(
-    ring: &'a mut [RowPlanar<T>; 3],
-    out: usize,
-) -> (
-    &'a mut RowPlanar<T>,
-    impl Fn(usize) -> &'a RowPlanar<T> + 'a,
-) {
-    let [a, b, c] = ring;
-    let (dst, others): (&mut RowPlanar<T>, [&RowPlanar<T>; 2]) = match out {
-        0 => (a, [b, c]),
-        1 => (b, [a, c]),
-        _ => (c, [a, b]),
-    };
-    (
-        dst,
-        move |k: usize| if k < out { others[k] } else { others[k - 1] },
-    )
+    /// One frame, strip by strip, on the plan's threads: the input `planar` `[C][H][W]` centred into the
+    /// input window, every layer's strip, the heads (or the pre-filter's raw output) into `out`
+    /// (`[6][H][W]`).
+    fn forward(&mut self, planar: &[f32], out: &mut [f32]) -> Result<()> {
+        let net = self.net.clone();
+        let n = net.layers.len();
+        let (threads, strips, [h, w]) = (self.threads, self.strips, [self.height, self.width]);
+        let affine = Affine {
+            scale: &net.scale,
+            offset: &net.offset,
+        };
+        self.x.start_frame()?;
+        for s in &mut self.s {
+            s.start_frame()?;
+        }
+        let heads = heads_of(&net.graph);
+        let pool = self.pool.clone();
+        let mut frame = || -> Result<()> {
+            for m in 0..strips.steps {
+                if let Some((rows, f0)) = self.x.new_rows(strips, m)? {
+                    let band = self.x.buf.band_mut(rows.clone()).map_err(kernel_err)?;
+                    let y0 = rows.start;
+                    bands(band, threads, &|b| {
+                        let f = f0 + b.rows().start - y0;
+                        b.fill_rows_from_planar(planar, h, f, Some(affine))
+                    })?;
+                }
+                for (i, conv) in net.layers.iter().enumerate().take(n - 1) {
+                    // Layer i reads s_i, adds s_{i−1} where i + 1 is odd and ≥ 3, writes s_{i+1}.
+                    let (done, rest) = self.s.split_at_mut(i);
+                    let dst = &mut rest[0];
+                    let Some((rows, _)) = dst.new_rows(strips, m)? else {
+                        continue;
+                    };
+                    let src = if i == 0 { &self.x } else { &done[i - 1] };
+                    let residual = (i + 1 >= 3 && (i + 1) % 2 == 1).then(|| &done[i - 2]);
+                    let mut inputs = Inputs::new(&src.buf);
+                    let mut d_r = 0;
+                    if let Some(r) = residual {
+                        inputs = inputs.residual(&r.buf);
+                        d_r = dst.shift_from(r);
+                    }
+                    let inputs = inputs.shifted(dst.shift_from(src), 0, d_r);
+                    let band = dst.buf.band_mut(rows).map_err(kernel_err)?;
+                    bands(band, threads, &|b| conv.run_band(inputs, b))?;
+                }
+                if let Some((rows, f0)) = self.raw.new_rows(strips, m)? {
+                    let last = if n >= 2 { &self.s[n - 2] } else { &self.x };
+                    let inputs = Inputs::new(&last.buf).concat(&self.x.buf).shifted(
+                        self.raw.shift_from(last),
+                        self.raw.shift_from(&self.x),
+                        0,
+                    );
+                    let band = self.raw.buf.band_mut(rows.clone()).map_err(kernel_err)?;
+                    bands(band, threads, &|b| net.layers[n - 1].run_band(inputs, b))?;
+                    let raw = &self.raw.buf;
+                    let raw_row =
+                        |c: usize, y: usize| raw.row(c, y - f0 + rows.start).unwrap_or(&[]);
+                    let frame_rows = f0..f0 + rows.len();
+                    heads_rows(
+                        heads,
+                        &raw_row,
+                        None,
+                        [h, w],
+                        frame_rows,
+                        net.isa,
+                        threads,
+                        out,
+                    )?;
+                }
+                self.x.advance(strips)?;
+                for s in &mut self.s {
+                    s.advance(strips)?;
+                }
+            }
+            Ok(())
+        };
+        match pool.as_deref() {
+            Some(pool) if threads > 1 => pool.install(frame),
+            _ => frame(),
+        }
+    }
 }
 
 /// `input` in standard layout (a view when it already is), checked against the plan's `[C, H, W]`.
@@ -211,58 +284,10 @@ pub(super) fn planar_slice<'a>(a: &'a CowArray<'_, f32, Ix3>) -> Result<&'a [f32
         .ok_or_else(|| HoloError::Internal("native CNN: standard layout".into()))
 }
 
-/// A planned convolution that writes row bands (f32 or u8 activations).
-pub(super) trait BandConv<T: Element>: Sync {
-    /// Computes the rows of `band` (see `Conv3x3F32::run_band`, `Conv3x3U8::run_band`).
-    fn run_band(
-        &self,
-        inputs: Inputs<'_, T>,
-        band: &mut RowBand<'_, T>,
-    ) -> std::result::Result<(), KernelError>;
-}
-
-impl BandConv<f32> for Conv3x3F32 {
-    fn run_band(
-        &self,
-        inputs: Inputs<'_, f32>,
-        band: &mut RowBand<'_, f32>,
-    ) -> std::result::Result<(), KernelError> {
-        Conv3x3F32::run_band(self, inputs, band)
-    }
-}
-
-impl BandConv<u8> for Conv3x3U8 {
-    fn run_band(
-        &self,
-        inputs: Inputs<'_, u8>,
-        band: &mut RowBand<'_, u8>,
-    ) -> std::result::Result<(), KernelError> {
-        Conv3x3U8::run_band(self, inputs, band)
-    }
-}
-
-/// One layer on `threads` row bands of `dst`, in parallel on `pool`.
-pub(super) fn run_layer<T: Element + Send + Sync, K: BandConv<T>>(
-    conv: &K,
-    inputs: Inputs<'_, T>,
-    dst: &mut RowPlanar<T>,
-    threads: usize,
-    pool: Option<&rayon::ThreadPool>,
-) -> Result<()> {
-    in_bands(dst, threads, pool, &|band| conv.run_band(inputs, band))
-}
-
-/// `work` on `threads` near-equal row bands of `dst`, in parallel on `pool` (a layer, or the int8 input's
-/// quantisation).
-pub(super) fn in_bands<T: Element + Send + Sync>(
-    dst: &mut RowPlanar<T>,
-    threads: usize,
-    pool: Option<&rayon::ThreadPool>,
-    work: &(dyn Fn(&mut RowBand<'_, T>) -> std::result::Result<(), KernelError> + Sync),
-) -> Result<()> {
-    let h = dst.height();
-    let band = dst.band_mut(0..h).map_err(kernel_err)?;
-    on_threads(band, threads, pool, &|b| work(b))
+/// `work` on `rows` split into `threads` near-equal bands, in parallel on the current rayon pool (the plan's,
+/// installed around the frame; one band on the calling thread for one thread).
+pub(super) fn bands<B: Rows>(rows: B, threads: usize, work: &BandWork<'_, B>) -> Result<()> {
+    split_run(rows, threads, work).map_err(kernel_err)
 }
 
 /// What one thread does to its share of the rows.
@@ -312,21 +337,6 @@ impl Rows for F32Rows<'_> {
     }
 }
 
-/// `work` on `rows` split into `threads` near-equal bands, in parallel on `pool` (one band, on the calling
-/// thread, without a pool).
-pub(super) fn on_threads<B: Rows>(
-    rows: B,
-    threads: usize,
-    pool: Option<&rayon::ThreadPool>,
-    work: &BandWork<'_, B>,
-) -> Result<()> {
-    match pool {
-        Some(pool) if threads > 1 => pool.install(|| split_run(rows, threads, work)),
-        _ => split_run(rows, 1, work),
-    }
-    .map_err(kernel_err)
-}
-
 /// Runs `work` on `band` as `parts` near-equal bands: halves recursively through `rayon::join`, so that
 /// nothing is allocated per layer.
 fn split_run<B: Rows>(
@@ -369,49 +379,71 @@ pub(super) fn pool(threads: usize) -> Result<Option<Arc<rayon::ThreadPool>>> {
         .map_err(|e| HoloError::ModelRun(format!("native CNN engine: thread pool: {e}")))
 }
 
-/// The network's two outputs from the last layer's raw output `o` (`raw_row(c, y)`: channel `c`, frame row
-/// `y`, `W` values): the hologram CNN's heads `(tanh(o) + 1)·scale`, or the pre-filter's `o` plus its
-/// depthwise base filter of `base_input` (`[C][H][W]`, the input as the base branch sees it). `grid`, for an
-/// int8 file, rounds `o` to the u8 grid the file quantises the last convolution's output to (ONNX
-/// `QuantizeLinear` then `DequantizeLinear`). The heads and the grid run on the kernels' vector code for
-/// `isa` ([`tanh_heads`], [`fake_quantize`]); rows run in parallel on `pool`; allocates only the two arrays.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn finish_outputs<'r>(
-    graph: &CnnWeights,
-    raw_row: &(dyn Fn(usize, usize) -> &'r [f32] + Sync),
-    grid: Option<QuantGrid>,
-    base_input: &[f32],
-    [h, w]: [usize; 2],
-    isa: Isa,
-    pool: Option<&rayon::ThreadPool>,
-    depthwise_scratch: &mut Vec<f32>,
-) -> Result<(Array3<f32>, Array3<f32>)> {
-    let plane = 3 * h * w;
-    let heads = match &graph.output {
+/// The heads' scales `(amplitude, phase)` of a hologram CNN; `None` for a pre-filter (raw output).
+pub(super) fn heads_of(graph: &CnnWeights) -> Option<(f32, f32)> {
+    match &graph.output {
         CnnOutput::Heads {
             amplitude_scale,
             phase_scale,
         } => Some((*amplitude_scale, *phase_scale)),
         CnnOutput::Prefilter { .. } => None,
-    };
+    }
+}
+
+/// Frame rows `rows` of the network's two outputs, written into `out` (`[6][H][W]`: the two `[3, H, W]`
+/// outputs back to back) from the last layer's raw output `o` (`raw_row(c, y)`: channel `c`, frame row `y`,
+/// `W` values): the hologram CNN's heads `(tanh(o) + 1)·scale` (`heads`, [`heads_of`]) or the pre-filter's
+/// `o`. `grid`, for an int8 file, rounds `o` to the u8 grid the file quantises the last convolution's output
+/// to (ONNX `QuantizeLinear` then `DequantizeLinear`). On the kernels' vector code for `isa`
+/// ([`tanh_heads`], [`fake_quantize`]); the six channels in parallel on the current rayon pool when
+/// `threads > 1`.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn heads_rows<'r>(
+    heads: Option<(f32, f32)>,
+    raw_row: &(dyn Fn(usize, usize) -> &'r [f32] + Sync),
+    grid: Option<QuantGrid>,
+    [h, w]: [usize; 2],
+    rows: Range<usize>,
+    isa: Isa,
+    threads: usize,
+    out: &mut [f32],
+) -> Result<()> {
     let grid = grid.map(u8_grid);
-    let mut out = vec![0.0f32; 2 * plane];
-    let row = |(i, o): (usize, &mut [f32])| {
-        let (c, y) = (i / h, i % h);
-        let r = raw_row(c, y);
-        match heads {
-            Some((a, p)) => tanh_heads(r, o, if c < 3 { a } else { p }, grid, isa),
-            None => {
-                o.copy_from_slice(r);
-                grid.map_or(Ok(()), |g| fake_quantize(o, g, isa))
+    let channel = |(c, plane): (usize, &mut [f32])| {
+        for y in rows.clone() {
+            let o = &mut plane[y * w..(y + 1) * w];
+            let r = raw_row(c, y);
+            match heads {
+                Some((a, p)) => tanh_heads(r, o, if c < 3 { a } else { p }, grid, isa)?,
+                None => {
+                    o.copy_from_slice(r);
+                    if let Some(g) = grid {
+                        fake_quantize(o, g, isa)?;
+                    }
+                }
             }
         }
+        Ok(())
     };
-    match pool {
-        Some(pool) => pool.install(|| out.par_chunks_mut(w).enumerate().try_for_each(row)),
-        None => out.chunks_mut(w).enumerate().try_for_each(row),
+    if threads > 1 {
+        out.par_chunks_mut(h * w).enumerate().try_for_each(channel)
+    } else {
+        out.chunks_mut(h * w).enumerate().try_for_each(channel)
     }
-    .map_err(kernel_err)?;
+    .map_err(kernel_err)
+}
+
+/// The network's two `[3, H, W]` outputs from `out` (`[6][H][W]`, [`heads_rows`] of every row): for a
+/// pre-filter, first adds its depthwise base filter of `base_input` (`[C][H][W]`, the input as the base
+/// branch sees it).
+pub(super) fn finish_outputs(
+    graph: &CnnWeights,
+    mut out: Vec<f32>,
+    base_input: &[f32],
+    [h, w]: [usize; 2],
+    depthwise_scratch: &mut Vec<f32>,
+) -> Result<(Array3<f32>, Array3<f32>)> {
+    let plane = 3 * h * w;
     if let CnnOutput::Prefilter { taps, base } = &graph.output {
         let c = graph.in_channels;
         depthwise(
@@ -443,25 +475,14 @@ impl CnnPlan for NativePlan {
     fn run_outputs(&mut self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
         let standard = standard_input(input, self.input_dim())?;
         let planar = planar_slice(&standard)?;
-        let affine = Affine {
-            scale: &self.net.scale,
-            offset: &self.net.offset,
-        };
-        self.x
-            .fill_from_planar(planar, Some(affine))
-            .map_err(kernel_err)?;
-        self.forward()?;
         let (h, w) = (self.height, self.width);
-        let src = &self.raw;
-        let raw_row = |c: usize, y: usize| src.row(c, y).unwrap_or(&[]);
+        let mut out = vec![0.0f32; 6 * h * w];
+        self.forward(planar, &mut out)?;
         finish_outputs(
             &self.net.graph,
-            &raw_row,
-            None,
+            out,
             planar,
             [h, w],
-            self.net.isa,
-            self.pool.as_deref(),
             &mut self.depthwise_scratch,
         )
     }
@@ -475,8 +496,9 @@ impl CnnPlan for NativePlan {
             // Threads of a stream run at the same time: each plan gets its own workers (a failed pool
             // start leaves the copy on the caller's thread, which still computes the same frames).
             pool: pool(self.threads).ok().flatten(),
+            strips: self.strips,
             x: self.x.clone(),
-            ring: self.ring.clone(),
+            s: self.s.clone(),
             raw: self.raw.clone(),
             depthwise_scratch: Vec::new(),
         })

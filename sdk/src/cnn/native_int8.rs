@@ -6,7 +6,7 @@
 //!
 //! ```text
 //! s_0 = Q(x − input_offset) on layer 0's input grid             (ONNX QuantizeLinear, in the input copy)
-//! layer i < N−1:  s_{i+1} = Q(ReLU(conv_i(s_i) + b_i) (+ s_{i−1}))   ring of 3 buffers, each layer's grid
+//! layer i < N−1:  s_{i+1} = Q(ReLU(conv_i(s_i) + b_i) (+ s_{i−1}))   each on its layer's grid
 //! x_cat = s_0 moved to the concat's grid                       (the file: DequantizeLinear, Concat, Quantize)
 //! layer N−1:      o = conv_{N−1}(concat(s_{N−1}, x_cat)) + b     raw f32 [C_out, H, W]
 //! o rounded to the file's output grid, then the heads or the pre-filter's base filter, as the f32 engine
@@ -17,8 +17,9 @@
 //! residual add and the second rounding. The difference is at most half a step of the first grid per layer
 //! (measured against tract's execution of the file in `cnn/tests.rs`).
 //!
-//! Threads: as the f32 engine, each layer's rows in one band per thread; the last layer writes raw f32
-//! rows `[H][C_out][W]`, so that each band is a slice of its own.
+//! Strips and threads: as the f32 engine (windows of a few rows, [`super::strips`]; each layer's strip in one
+//! band per thread); the last layer writes a strip of raw f32 rows `[S][C_out][W]`, so that each band is a
+//! slice of its own.
 
 use std::sync::Arc;
 
@@ -26,9 +27,10 @@ use ndarray::{Array3, ArrayView3};
 use tensorholo_kernels::{fake_quantize, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, RowPlanar};
 
 use super::native::{
-    finish_outputs, in_bands, on_threads, planar_slice, pool, ring_slots, run_layer,
-    standard_input, u8_grid, F32Rows,
+    bands, finish_outputs, heads_of, heads_rows, planar_slice, pool, standard_input, u8_grid,
+    F32Rows,
 };
+use super::strips::{row_bytes, strip_rows, Strips, Window};
 use super::{kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnQuant, CnnWeights};
@@ -51,7 +53,7 @@ impl Network {
     }
 }
 
-/// An int8 native plan: one network at one resolution, with its buffers and threads.
+/// An int8 native plan: one network at one resolution, with its activation windows and threads.
 #[derive(Debug)]
 pub(crate) struct NativeInt8Plan {
     net: Arc<Network>,
@@ -59,22 +61,26 @@ pub(crate) struct NativeInt8Plan {
     width: usize,
     threads: usize,
     pool: Option<Arc<rayon::ThreadPool>>,
+    strips: Strips,
     /// `s_0` on layer 0's input grid.
-    x: RowPlanar<u8>,
-    /// `s_0` on the concat's grid: the last layer's second source.
-    x_cat: RowPlanar<u8>,
-    /// `s_1 …`: `s_k` lives in `ring[(k − 1) % 3]`, its zero point set before the layer that writes it.
-    ring: [RowPlanar<u8>; 3],
-    /// The last layer's raw output, `[H][C_out][W]` (row-major, so that row bands are disjoint slices).
+    x: Window<u8>,
+    /// `s_0` on the concat's grid: the last layer's second source (carried `N + 1` rows).
+    x_cat: Window<u8>,
+    /// `s_1 … s_{N−1}`, each on the grid of the layer that writes it.
+    s: Vec<Window<u8>>,
+    /// The last layer's raw output of one strip, `[S][C_out][W]` (row-major, so that row bands are
+    /// disjoint slices).
     raw: Vec<f32>,
+    /// Frame-row bookkeeping of `raw` (lag `N`, no carry; its buffer is a placeholder of one row).
+    raw_window: Window<u8>,
     /// Pre-filter: the input as the file's base filter reads it (rounded to the input grid), `[C][H][W]`.
     base_input: Vec<f32>,
     depthwise_scratch: Vec<f32>,
 }
 
 impl NativeInt8Plan {
-    /// Packs `graph`'s int8 layers for the best int8 kernels of `isa` and allocates the buffers of
-    /// `height × width` frames, run on `threads` threads (≥ 1).
+    /// Packs `graph`'s int8 layers for the best int8 kernels of `isa` and allocates the activation windows
+    /// of `height × width` frames (strips of [`strip_rows`]), run on `threads` threads (≥ 1).
     ///
     /// Errors: [`HoloError::InvalidParameter`] for 0 threads; [`HoloError::InvalidData`] for non-finite
     /// scales or biases; [`HoloError::ModelRun`] for a graph without int8 grids, an ISA this CPU lacks, a
@@ -85,6 +91,18 @@ impl NativeInt8Plan {
         width: usize,
         threads: usize,
         isa: Isa,
+    ) -> Result<Self> {
+        Self::with_strip(graph, height, width, threads, isa, None)
+    }
+
+    /// [`new`](Self::new) with strips of `strip` rows (`None`: [`strip_rows`]). Errors: as `new`.
+    pub(crate) fn with_strip(
+        graph: Arc<CnnWeights>,
+        height: usize,
+        width: usize,
+        threads: usize,
+        isa: Isa,
+        strip: Option<usize>,
     ) -> Result<Self> {
         if threads == 0 {
             return Err(crate::error::invalid(
@@ -127,13 +145,32 @@ impl NativeInt8Plan {
         let c_out = graph.layers[n - 1].c_out;
         let first = quant.layers[0].input;
         let cat = quant.layers[n - 1].input;
-        let buf = |ch, zp| RowPlanar::new_quantized(ch, height, width, zp).map_err(kernel_err);
+        // Windows: s_0 on layer 0's grid (carry 2), on the concat's (carry N + 1), s_1 … (carry 2), raw f32.
+        let (xb, hb) = (row_bytes::<u8>(c, width), row_bytes::<u8>(hidden, width));
+        let ob = c_out * width * std::mem::size_of::<f32>();
+        let per_row = 2 * xb + (n - 1) * hb + ob;
+        let fixed = (n + 7) * xb + 4 * (n - 1) * hb;
+        let rows = strip.unwrap_or_else(|| strip_rows(height, n, per_row, fixed, threads));
+        let strips = Strips::new(rows.min(height + n), height, n);
+        let window = |ch, zp, lag, carry| -> Result<Window<u8>> {
+            let rows = Window::<u8>::height(strips, carry);
+            let buf = RowPlanar::new_quantized(ch, rows, width, zp).map_err(kernel_err)?;
+            Ok(Window::new(buf, lag, carry))
+        };
         let prefilter = matches!(graph.output, CnnOutput::Prefilter { .. });
         Ok(Self {
-            x: buf(c, first.zero_point)?,
-            x_cat: buf(c, cat.zero_point)?,
-            ring: [buf(hidden, 0)?, buf(hidden, 0)?, buf(hidden, 0)?],
-            raw: vec![0.0; c_out * height * width],
+            x: window(c, first.zero_point, 0, 2)?,
+            x_cat: window(c, cat.zero_point, 0, n + 1)?,
+            s: (1..n)
+                .map(|k| window(hidden, quant.layers[k - 1].output.zero_point, k, 2))
+                .collect::<Result<_>>()?,
+            raw: vec![0.0; strips.rows * c_out * width],
+            raw_window: Window::new(
+                RowPlanar::new_quantized(1, strips.rows, 1, 0).map_err(kernel_err)?,
+                n,
+                0,
+            ),
+            strips,
             base_input: if prefilter {
                 vec![0.0; c * height * width]
             } else {
@@ -153,35 +190,111 @@ impl NativeInt8Plan {
         self.net.layers[0].kernel().name
     }
 
-    /// Runs the convolutions of one frame whose input is already in `self.x`; the raw output lands in
-    /// `self.raw`.
-    fn forward(&mut self) -> Result<()> {
+    /// One frame, strip by strip, on the plan's threads: the input `planar` `[C][H][W]` quantised into its two
+    /// windows, every layer's strip, the last layer's raw rows rounded to the file's output grid and turned
+    /// into the heads (or the pre-filter's raw output) in `out` (`[6][H][W]`).
+    fn forward(&mut self, planar: &[f32], out: &mut [f32]) -> Result<()> {
         let net = self.net.clone();
         let quant = net.quant()?;
         let n = net.layers.len();
-        let (threads, pool) = (self.threads, self.pool.as_deref());
-        for (i, conv) in net.layers.iter().enumerate().take(n - 1) {
-            let out = i % 3;
-            let residual = (i + 1 >= 3 && (i + 1) % 2 == 1).then_some((i + 1) % 3);
-            let (dst, slot) = ring_slots(&mut self.ring, out);
-            dst.set_zero_point(quant.layers[i].output.zero_point);
-            let src = if i == 0 { &self.x } else { slot((i + 2) % 3) };
-            let mut inputs = Inputs::new(src);
-            if let Some(r) = residual {
-                inputs = inputs.residual(slot(r));
-            }
-            run_layer(conv, inputs, dst, threads, pool)?;
+        let (threads, strips, [h, w]) = (self.threads, self.strips, [self.height, self.width]);
+        let first = quant.layers[0].input;
+        let (cat_scale, out_grid) = (quant.layers[n - 1].input.scale, quant.layers[n - 1].output);
+        let offset = -net.graph.input_offset;
+        let c_out = net.layers[n - 1].c_out();
+        self.x.start_frame()?;
+        self.x_cat.start_frame()?;
+        for s in &mut self.s {
+            s.start_frame()?;
         }
-        let last = &self.ring[(n - 2) % 3];
-        let inputs = Inputs::new(last).concat(&self.x_cat);
-        let conv = &net.layers[n - 1];
-        let raw = F32Rows {
-            data: &mut self.raw,
-            rows: 0..self.height,
+        let heads = heads_of(&net.graph);
+        let pool = self.pool.clone();
+        let mut frame = || -> Result<()> {
+            for m in 0..strips.steps {
+                // s_0 on both grids, in row bands (they were a tenth of a 2-thread frame when serial).
+                if let Some((rows, f0)) = self.x.new_rows(strips, m)? {
+                    let y0 = rows.start;
+                    let band = self.x.buf.band_mut(rows).map_err(kernel_err)?;
+                    bands(band, threads, &|b| {
+                        let f = f0 + b.rows().start - y0;
+                        b.quantize_fill_rows(planar, h, f, offset, first.scale)
+                    })?;
+                }
+                if let Some((rows, f0)) = self.x_cat.new_rows(strips, m)? {
+                    let (x, y0) = (&self.x, rows.start);
+                    let x_first = x.first_row(strips, m);
+                    let band = self.x_cat.buf.band_mut(rows).map_err(kernel_err)?;
+                    bands(band, threads, &|b| {
+                        let f = (f0 + b.rows().start - y0) as isize;
+                        let from = (f - x_first) as usize;
+                        b.requantize_rows_from(&x.buf, from, first.scale, cat_scale)
+                    })?;
+                }
+                for (i, conv) in net.layers.iter().enumerate().take(n - 1) {
+                    let (done, rest) = self.s.split_at_mut(i);
+                    let dst = &mut rest[0];
+                    let Some((rows, _)) = dst.new_rows(strips, m)? else {
+                        continue;
+                    };
+                    let src = if i == 0 { &self.x } else { &done[i - 1] };
+                    let residual = (i + 1 >= 3 && (i + 1) % 2 == 1).then(|| &done[i - 2]);
+                    let mut inputs = Inputs::new(&src.buf);
+                    let mut d_r = 0;
+                    if let Some(r) = residual {
+                        inputs = inputs.residual(&r.buf);
+                        d_r = dst.shift_from(r);
+                    }
+                    let inputs = inputs.shifted(dst.shift_from(src), 0, d_r);
+                    let band = dst.buf.band_mut(rows).map_err(kernel_err)?;
+                    bands(band, threads, &|b| conv.run_band(inputs, b))?;
+                }
+                if let Some((rows, f0)) = self.raw_window.new_rows(strips, m)? {
+                    let o = &self.raw_window;
+                    let last = &self.s[n - 2];
+                    let inputs = Inputs::new(&last.buf).concat(&self.x_cat.buf).shifted(
+                        o.shift_from(last),
+                        o.shift_from(&self.x_cat),
+                        0,
+                    );
+                    let conv = &net.layers[n - 1];
+                    let rw = c_out * w;
+                    let raw = F32Rows {
+                        data: &mut self.raw[rows.start * rw..rows.end * rw],
+                        rows: rows.clone(),
+                    };
+                    bands(raw, threads, &|band: &mut F32Rows<'_>| {
+                        conv.run_rows_f32(inputs, band.data, band.rows.clone())
+                    })?;
+                    let raw = &self.raw;
+                    let raw_row = |c: usize, y: usize| {
+                        let r = y - f0 + rows.start;
+                        &raw[(r * c_out + c) * w..(r * c_out + c + 1) * w]
+                    };
+                    let frame_rows = f0..f0 + rows.len();
+                    let grid = Some(out_grid);
+                    heads_rows(
+                        heads,
+                        &raw_row,
+                        grid,
+                        [h, w],
+                        frame_rows,
+                        net.isa,
+                        threads,
+                        out,
+                    )?;
+                }
+                self.x.advance(strips)?;
+                self.x_cat.advance(strips)?;
+                for s in &mut self.s {
+                    s.advance(strips)?;
+                }
+            }
+            Ok(())
         };
-        on_threads(raw, threads, pool, &|band: &mut F32Rows<'_>| {
-            conv.run_rows_f32(inputs, band.data, band.rows.clone())
-        })
+        match pool.as_deref() {
+            Some(pool) if threads > 1 => pool.install(frame),
+            _ => frame(),
+        }
     }
 }
 
@@ -195,18 +308,8 @@ impl CnnPlan for NativeInt8Plan {
         let planar = planar_slice(&standard)?;
         let net = self.net.clone();
         let quant = net.quant()?;
-        let n = net.layers.len();
         let first = quant.layers[0].input;
         let offset = -net.graph.input_offset;
-        // Both in row bands on the plan's threads (serial, they were a tenth of a 2-thread frame).
-        let (threads, pool) = (self.threads, self.pool.as_deref());
-        in_bands(&mut self.x, threads, pool, &|band| {
-            band.quantize_fill(planar, offset, first.scale)
-        })?;
-        let (x, cat_scale) = (&self.x, quant.layers[n - 1].input.scale);
-        in_bands(&mut self.x_cat, threads, pool, &|band| {
-            band.requantize_from(x, first.scale, cat_scale)
-        })?;
         if !self.base_input.is_empty() {
             // The file's base filter reads the input rounded to the input grid (the pre-filter has no offset).
             for (b, &v) in self.base_input.iter_mut().zip(planar) {
@@ -217,18 +320,14 @@ impl CnnPlan for NativeInt8Plan {
                 self.base_input.iter_mut().for_each(|b| *b -= offset);
             }
         }
-        self.forward()?;
         let (h, w) = (self.height, self.width);
-        let (raw, c_out) = (&self.raw, net.layers[n - 1].c_out());
-        let raw_row = |c: usize, y: usize| &raw[(y * c_out + c) * w..(y * c_out + c + 1) * w];
+        let mut out = vec![0.0f32; 6 * h * w];
+        self.forward(planar, &mut out)?;
         finish_outputs(
             &net.graph,
-            &raw_row,
-            Some(quant.layers[n - 1].output),
+            out,
             &self.base_input,
             [h, w],
-            net.isa,
-            self.pool.as_deref(),
             &mut self.depthwise_scratch,
         )
     }
@@ -240,10 +339,12 @@ impl CnnPlan for NativeInt8Plan {
             width: self.width,
             threads: self.threads,
             pool: pool(self.threads).ok().flatten(),
+            strips: self.strips,
             x: self.x.clone(),
             x_cat: self.x_cat.clone(),
-            ring: self.ring.clone(),
+            s: self.s.clone(),
             raw: self.raw.clone(),
+            raw_window: self.raw_window.clone(),
             base_input: self.base_input.clone(),
             depthwise_scratch: Vec::new(),
         })

@@ -289,3 +289,62 @@ fn native_int8_matches_tract_on_every_shipped_qdq_model() {
         assert!(m > 0.05, "non-trivial output");
     }
 }
+
+#[test]
+fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
+    // The strip-mined run (windows of a few rows, each layer a row behind the one before) computes every
+    // pixel with the same instructions as one strip covering the whole frame: any strip height, with 1 or 3
+    // threads, gives the bit-identical frame, f32 and int8, hologram CNN and pre-filter (its concat reads the
+    // input N rows later, and the frame's top and bottom edges fall inside strips).
+    use super::native_int8::NativeInt8Plan;
+    let (h, w) = (17, 29);
+    let isa = Isa::active().unwrap();
+    let (mut f32s, mut int8s) = (shipped(), shipped_qdq());
+    let models = [
+        f32s.swap_remove(0),
+        f32s.pop().unwrap(),
+        int8s.swap_remove(0),
+        int8s.pop().unwrap(),
+    ];
+    for model in models {
+        let graph = model.cnn_graph().unwrap();
+        let n = graph.layers.len();
+        let x = input(graph.in_channels, h, w, 11).mapv(|v| 0.75 * v - 0.05);
+        let y = input(graph.in_channels, h, w, 12);
+        let plan = |strip: usize, threads: usize| -> Box<dyn CnnPlan> {
+            let g = graph.clone();
+            if graph.quant.is_some() {
+                Box::new(NativeInt8Plan::with_strip(g, h, w, threads, isa, Some(strip)).unwrap())
+            } else {
+                Box::new(NativePlan::with_strip(g, h, w, threads, isa, Some(strip)).unwrap())
+            }
+        };
+        let mut whole = plan(h + n, 1);
+        let (a, b) = (
+            whole.run_outputs(x.view()).unwrap(),
+            whole.run_outputs(y.view()).unwrap(),
+        );
+        for strip in [1, 2, 3, 5, 8, h - 1, h + n - 1] {
+            for threads in [1, 3] {
+                let mut p = plan(strip, threads);
+                let name = format!("{} strip {strip} ×{threads}", model.source_name());
+                assert!(p.run_outputs(x.view()).unwrap() == a, "{name}");
+                // A second frame through the same windows: nothing carried over from the first.
+                assert!(p.run_outputs(y.view()).unwrap() == b, "{name}, 2nd frame");
+            }
+        }
+        assert!(a != b);
+    }
+}
+
+#[test]
+fn a_1080p_plan_keeps_its_activations_to_a_few_rows() {
+    // The strip height follows the window budget: at 1080p the 8-layer network's windows (24 channels,
+    // 0.19 MB a row in f32) hold tens of rows, not the frame's 1080.
+    let model = &shipped()[0];
+    let graph = model.cnn_graph().unwrap();
+    let isa = Isa::active().unwrap();
+    let plan = NativePlan::new(graph, 1080, 1920, 2, isa).unwrap();
+    let rows = plan.strip_rows();
+    assert!((8..=40).contains(&rows), "{rows} rows per strip");
+}

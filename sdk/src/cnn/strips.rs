@@ -1,0 +1,163 @@
+//! Strip-mined execution of a native plan: the network runs a strip of `S` frame rows at a time, every layer
+//! a row behind the layer before it, so that each activation lives in a **window** of a few rows instead of a
+//! whole frame (a line buffer; no row is computed twice).
+//!
+//! At strip `m`, the layer that writes `s_k` (lag `k`: the input `s_0` has lag 0, the last layer's raw output
+//! lag `N`) computes frame rows `mS − k .. (m+1)S − k`. A 3×3 convolution of `s_k` reads one row above and
+//! below; the rows below are the ones the layer before wrote in this strip (it is one row ahead), the rows
+//! above come from earlier strips: each window keeps `carry` rows of the previous strip at its top (2 for a
+//! layer read by the next one and by a residual two layers on, `N + 1` for the input the final concat
+//! reads). A window of `carry + S` interior rows therefore holds, at strip `m`, frame rows from `mS − lag −
+//! carry` on; between two strips its last `carry` rows move to its top ([`Window::advance`]).
+//!
+//! Operands of one convolution sit at different frame rows in their windows; the kernels take the offsets
+//! ([`tensorholo_kernels::Inputs::shifted`], [`Window::shift_from`]). Rows that stand for frame rows outside
+//! the frame hold the border value (zero padding): the carried rows at the start of a frame
+//! ([`Window::start_frame`]) and the new rows past the frame's edges ([`Window::new_rows`]).
+//!
+//! Memory: `Σ (carry + S + 2)·row` per plan instead of three whole frames: at 1080p, the 8-layer network's
+//! 24-channel f32 activations take 0.19 MB a row, so 623 MB of whole-frame buffers become about 32 MB.
+
+use std::ops::Range;
+
+use tensorholo_kernels::buffer::{padded_width, Element};
+use tensorholo_kernels::RowPlanar;
+
+use super::kernel_err;
+use crate::error::Result;
+
+/// Bytes the activation windows of one plan may take; the strip height is the largest that fits (see
+/// [`strip_rows`]).
+pub(super) const WINDOW_BUDGET_BYTES: usize = 32 << 20;
+
+/// The fewest rows a strip has per thread (each thread computes a band of every layer's strip).
+const MIN_ROWS_PER_THREAD: usize = 4;
+
+/// How a plan's frames are cut: strips of `rows` frame rows, `steps` of them for a frame of `height` rows
+/// and a network of `lag` layers (the last strip reaches frame row `height − 1` of the last layer).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Strips {
+    pub rows: usize,
+    pub height: usize,
+    pub steps: usize,
+}
+
+impl Strips {
+    pub fn new(rows: usize, height: usize, lag: usize) -> Self {
+        let rows = rows.max(1);
+        Self {
+            rows,
+            height,
+            steps: (height + lag).div_ceil(rows),
+        }
+    }
+}
+
+/// Bytes of one buffer row (every channel, padded width) of a `c`-channel window of width `w`.
+pub(super) fn row_bytes<T: Element>(c: usize, w: usize) -> usize {
+    c.div_ceil(T::INTERLEAVE) * T::INTERLEAVE * padded_width(w) * std::mem::size_of::<T>()
+}
+
+/// The strip height for a plan whose windows take `per_row` bytes per strip row and `fixed` bytes besides
+/// (carried and border rows): the most rows within [`WINDOW_BUDGET_BYTES`], at least
+/// `MIN_ROWS_PER_THREAD·threads`, at most `height + lag` (one strip for the whole frame).
+/// `TENSORHOLO_STRIP_ROWS` overrides it (for benchmarks of the strip height).
+pub(super) fn strip_rows(
+    height: usize,
+    lag: usize,
+    per_row: usize,
+    fixed: usize,
+    threads: usize,
+) -> usize {
+    let whole = height + lag;
+    if let Some(rows) = std::env::var("TENSORHOLO_STRIP_ROWS")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+        .filter(|&r| r > 0)
+    {
+        return rows.min(whole);
+    }
+    let fit = WINDOW_BUDGET_BYTES.saturating_sub(fixed) / per_row.max(1);
+    fit.max(MIN_ROWS_PER_THREAD * threads).min(whole).max(1)
+}
+
+/// One activation of a strip-mined network: a [`RowPlanar`] of `carry + S` interior rows.
+#[derive(Clone, Debug)]
+pub(super) struct Window<T: Element> {
+    pub buf: RowPlanar<T>,
+    /// Layers between the network input and this activation: frame rows it is behind the strip.
+    lag: usize,
+    /// Rows of the previous strip kept at the top.
+    carry: usize,
+}
+
+impl<T: Element> Window<T> {
+    /// A window holding `buf` (whose height must be `carry + strip rows`).
+    pub fn new(buf: RowPlanar<T>, lag: usize, carry: usize) -> Self {
+        Self { buf, lag, carry }
+    }
+
+    /// Interior rows of a window of `carry` carried rows for strips of `strips.rows` rows.
+    pub fn height(strips: Strips, carry: usize) -> usize {
+        carry + strips.rows
+    }
+
+    /// `lag + carry`: interior row 0 holds frame row `mS − (lag + carry)` at strip `m`.
+    fn behind(&self) -> isize {
+        (self.lag + self.carry) as isize
+    }
+
+    /// The row offset of `operand` from this window (the output), for [`tensorholo_kernels::Inputs::shifted`]:
+    /// interior row `i` of `operand` holds this window's frame row of interior row `i + d`.
+    pub fn shift_from<U: Element>(&self, operand: &Window<U>) -> isize {
+        self.behind() - operand.behind()
+    }
+
+    /// At the start of a frame: the carried rows stand for frame rows above the frame, so they hold the
+    /// border value.
+    pub fn start_frame(&mut self) -> Result<()> {
+        self.buf
+            .fill_rows_with_border(0..self.carry)
+            .map_err(kernel_err)
+    }
+
+    /// The new rows of strip `m` (interior rows `carry .. carry + S`): those that stand for frame rows
+    /// outside the frame are set to the border value; returns the interior rows inside the frame, and the
+    /// frame row of the first (`None` when the strip has none: this layer has not reached the frame yet or
+    /// has passed it).
+    pub fn new_rows(&mut self, strips: Strips, m: usize) -> Result<Option<(Range<usize>, usize)>> {
+        let s = strips.rows as isize;
+        let first = m as isize * s - self.lag as isize;
+        let lo = first.max(0);
+        let hi = (first + s).min(strips.height as isize);
+        let to_row = |f: isize| (f - first) as usize + self.carry;
+        let new = self.carry..self.carry + strips.rows;
+        if lo >= hi {
+            self.buf.fill_rows_with_border(new).map_err(kernel_err)?;
+            return Ok(None);
+        }
+        let (a, b) = (to_row(lo), to_row(hi));
+        self.buf
+            .fill_rows_with_border(new.start..a)
+            .map_err(kernel_err)?;
+        self.buf
+            .fill_rows_with_border(b..new.end)
+            .map_err(kernel_err)?;
+        Ok(Some((a..b, lo as usize)))
+    }
+
+    /// After strip `m`: moves the last `carry` rows to the top for the next strip.
+    pub fn advance(&mut self, strips: Strips) -> Result<()> {
+        if self.carry == 0 {
+            return Ok(());
+        }
+        self.buf
+            .copy_rows(strips.rows..strips.rows + self.carry, 0)
+            .map_err(kernel_err)
+    }
+
+    /// The frame row held by interior row 0 at strip `m` (may be negative: above the frame).
+    pub fn first_row(&self, strips: Strips, m: usize) -> isize {
+        m as isize * strips.rows as isize - self.behind()
+    }
+}
