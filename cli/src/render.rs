@@ -14,8 +14,8 @@ use tensorholo::evaluation::{focal_depths, table2};
 use tensorholo::model::{CnnLayout, HologramModel, ModelConfig, ModelKind, Precision, ThreadCount};
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{
-    Backend, FrameTimings, GpuPrecision, HologramPipeline, HologramSession, PipelineConfig,
-    PrefilterMode, PrefilterSource,
+    Backend, BackendReport, FrameTimings, GpuPrecision, Heads, HologramPipeline, PipelineConfig,
+    PrefilterMode, PrefilterSource, SlmFrame,
 };
 use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
 use tensorholo::scene::RgbdFrame;
@@ -429,15 +429,26 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         med.total_s * 1e3,
         if med.total_s > 0.0 { 1.0 / med.total_s } else { 0.0 }
     );
+    // The previews and reconstructions below need only the last frame: the session's buffers go first.
+    let (plan_report, backend_report) = (
+        session.plan_report().clone(),
+        session.backend_report().clone(),
+    );
+    let (out, heads) = session.into_last_frame();
+    let heads = heads.context("no frame rendered")?;
     write_outputs(
         args,
         &pipeline,
-        &session,
+        LastFrame {
+            out: &out,
+            heads,
+            backend: &backend_report,
+        },
         &frame,
         source,
         models,
         |report| {
-            report["cnn_plan"] = json!(session.plan_report());
+            report["cnn_plan"] = json!(plan_report);
             report["timings_s"] = json!({
                 "load": load_s,
                 "session_setup": session_s,
@@ -456,22 +467,27 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     Ok(())
 }
 
+/// What [`write_outputs`] needs of a session that has ended ([`HologramSession::into_last_frame`]).
+struct LastFrame<'a> {
+    out: &'a SlmFrame,
+    heads: Heads,
+    backend: &'a BackendReport,
+}
+
 /// Previews, midpoint, codes, optional evaluation and report.json of the session's last frame.
 fn write_outputs(
     args: &RenderArgs,
     pipeline: &HologramPipeline,
-    session: &HologramSession,
+    last: LastFrame<'_>,
     frame: &RgbdFrame,
     source: serde_json::Value,
     models: serde_json::Value,
     add: impl FnOnce(&mut serde_json::Value),
 ) -> Result<()> {
     let cfg = pipeline.config();
-    let out = session.output();
-    let midpoint = session
-        .last_heads()
-        .context("no frame rendered")?
-        .to_field()?;
+    let out = last.out;
+    let midpoint = last.heads.to_field()?;
+    drop(last.heads);
     let t = Instant::now();
     let displayed = post_encoding_midpoint(
         out.phase.view(),
@@ -520,7 +536,7 @@ fn write_outputs(
         "models": models,
         "pipeline": cfg,
         // Which backend ran the frame (every stage: the GPU path runs the whole frame, or none of it) and why.
-        "backend": session.backend_report(),
+        "backend": last.backend,
         "frame_backend": out.backend,
         "reconstruction_s": reconstruction_s,
         "statistics": {

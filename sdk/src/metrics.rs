@@ -10,7 +10,7 @@
 //!
 //! All statistics are accumulated in `f64`; the inputs are `f32` as everywhere in the SDK.
 
-use ndarray::{Array2, ArrayView, ArrayView2, ArrayView3, Axis, Dimension};
+use ndarray::{ArrayView, ArrayView2, ArrayView3, Axis, Dimension};
 use rayon::prelude::*;
 
 use crate::error::{invalid, HoloError, Result};
@@ -199,53 +199,46 @@ fn gaussian_taps() -> [f64; SSIM_WIN] {
     w
 }
 
-/// Separable "valid" Gaussian filter: output `[H − 10, W − 10]`, element `(i, j)` is the window
-/// centred on input pixel `(i + 5, j + 5)`. Vertical pass first (scipy filters axis 0 first).
-fn gaussian_valid(input: &Array2<f64>, w: &[f64; SSIM_WIN]) -> Array2<f64> {
-    let (h, wd) = input.dim();
-    let (oh, ow) = (h - 2 * SSIM_RADIUS, wd - 2 * SSIM_RADIUS);
-    // Vertical: row i of `vert` = Σ_k w[k]·input[i + k, :].
-    let mut vert = Array2::<f64>::zeros((oh, wd));
-    for (i, mut out_row) in vert.outer_iter_mut().enumerate() {
-        for (k, &wk) in w.iter().enumerate() {
-            out_row.scaled_add(wk, &input.row(i + k));
-        }
+/// One row of the horizontal pass: `out[j] = Σ_k w[k]·vert[j + k]`.
+fn horizontal(out: &mut [f64], vert: &[f64], w: &[f64; SSIM_WIN]) {
+    for (j, o) in out.iter_mut().enumerate() {
+        *o = w
+            .iter()
+            .zip(&vert[j..j + SSIM_WIN])
+            .map(|(wk, v)| wk * v)
+            .sum();
     }
-    // Horizontal: out[i, j] = Σ_k w[k]·vert[i, j + k].
-    let mut out = Array2::<f64>::zeros((oh, ow));
-    for (mut out_row, in_row) in out.outer_iter_mut().zip(vert.outer_iter()) {
-        let in_row = in_row.as_slice().expect("freshly allocated, contiguous");
-        for (j, o) in out_row.iter_mut().enumerate() {
-            *o = w
-                .iter()
-                .zip(&in_row[j..j + SSIM_WIN])
-                .map(|(wk, v)| wk * v)
-                .sum();
-        }
-    }
-    out
 }
 
-/// Mean SSIM of one validated plane pair, in `f64`.
+/// Mean SSIM of one validated plane pair, in `f64`, one output row at a time: the five Gaussian-filtered
+/// maps (means of x, y, x², y², xy) are never held whole, so a 1080p plane takes a few rows of memory
+/// rather than ~150 MB.
 fn ssim_plane(x: ArrayView2<f32>, y: ArrayView2<f32>, data_range: f64) -> f64 {
     let w = gaussian_taps();
-    let x = x.mapv(f64::from);
-    let y = y.mapv(f64::from);
-    let ux = gaussian_valid(&x, &w);
-    let uy = gaussian_valid(&y, &w);
-    let uxx = gaussian_valid(&(&x * &x), &w);
-    let uyy = gaussian_valid(&(&y * &y), &w);
-    let uxy = gaussian_valid(&(&x * &y), &w);
+    let (h, wd) = x.dim();
+    let (oh, ow) = (h - 2 * SSIM_RADIUS, wd - 2 * SSIM_RADIUS);
     let c1 = (SSIM_K1 * data_range).powi(2);
     let c2 = (SSIM_K2 * data_range).powi(2);
-
+    let mut vert = vec![0.0f64; wd];
+    // The five filtered rows: μx, μy, E[x²], E[y²], E[xy].
+    let mut rows = [(); 5].map(|_| vec![0.0f64; ow]);
     let mut sum = 0.0f64;
-    ndarray::Zip::from(&ux)
-        .and(&uy)
-        .and(&uxx)
-        .and(&uyy)
-        .and(&uxy)
-        .for_each(|&mx, &my, &mxx, &myy, &mxy| {
+    let maps: [fn(f64, f64) -> f64; 5] =
+        [|a, _| a, |_, b| b, |a, _| a * a, |_, b| b * b, |a, b| a * b];
+    for i in 0..oh {
+        for (row, map) in rows.iter_mut().zip(maps) {
+            vert.fill(0.0);
+            for (k, &wk) in w.iter().enumerate() {
+                let (xr, yr) = (x.row(i + k), y.row(i + k));
+                for (v, (&a, &b)) in vert.iter_mut().zip(xr.iter().zip(yr.iter())) {
+                    *v += wk * map(f64::from(a), f64::from(b));
+                }
+            }
+            horizontal(row, &vert, &w);
+        }
+        let [ux, uy, uxx, uyy, uxy] = &rows;
+        for j in 0..ow {
+            let (mx, my, mxx, myy, mxy) = (ux[j], uy[j], uxx[j], uyy[j], uxy[j]);
             let vx = mxx - mx * mx;
             let vy = myy - my * my;
             let vxy = mxy - mx * my;
@@ -254,13 +247,35 @@ fn ssim_plane(x: ArrayView2<f32>, y: ArrayView2<f32>, data_range: f64) -> f64 {
             let b1 = mx * mx + my * my + c1;
             let b2 = vx + vy + c2;
             sum += (a1 * a2) / (b1 * b2);
-        });
-    sum / ux.len() as f64
+        }
+    }
+    sum / (oh * ow) as f64
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ndarray::Array2;
+
+    /// Separable "valid" Gaussian filter: output `[H − 10, W − 10]`, element `(i, j)` is the window
+    /// centred on input pixel `(i + 5, j + 5)`. Vertical pass first (scipy filters axis 0 first): the
+    /// passes `ssim_plane` runs row by row, on a whole array.
+    fn gaussian_valid(input: &Array2<f64>, w: &[f64; SSIM_WIN]) -> Array2<f64> {
+        let (h, wd) = input.dim();
+        let (oh, ow) = (h - 2 * SSIM_RADIUS, wd - 2 * SSIM_RADIUS);
+        let mut out = Array2::<f64>::zeros((oh, ow));
+        let mut vert = vec![0.0f64; wd];
+        for (i, mut out_row) in out.outer_iter_mut().enumerate() {
+            vert.fill(0.0);
+            for (k, &wk) in w.iter().enumerate() {
+                for (v, &x) in vert.iter_mut().zip(input.row(i + k)) {
+                    *v += wk * x;
+                }
+            }
+            horizontal(out_row.as_slice_mut().unwrap(), &vert, w);
+        }
+        out
+    }
 
     #[test]
     fn gaussian_taps_are_normalised_and_symmetric() {

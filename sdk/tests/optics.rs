@@ -8,7 +8,8 @@ use common::{energy, rel_error, Rng};
 use ndarray::Array3;
 use num_complex::{Complex32, Complex64};
 use tensorholo::optics::{
-    propagate_colour, Carrier, FourierFilter, OpticalSetup, PropagationOptions, Propagator,
+    propagate_colour, Carrier, EvenMultiplier, FourierFilter, OpticalSetup, PropagationOptions,
+    Propagator,
 };
 use tensorholo::HoloError;
 
@@ -406,4 +407,39 @@ fn focal_stack_with_aperture_removes_the_checkerboard_term_at_the_field_plane() 
         max_dev > 1.0,
         "without the aperture the checkerboard stays: {max_dev}"
     );
+}
+
+#[test]
+fn even_transfer_function_quarter_applies_bit_identically() {
+    // The offset transfer function (Eq. 6, carrier removed, band limit on) depends on the frequency radius
+    // only: its quarter (a fourth of the memory) applies the bit-identical propagation, for odd and even
+    // sizes, padded or not. A multiplier that is not even has no quarter form.
+    for (h, w, pad) in [(16, 24, false), (17, 13, false), (9, 20, true)] {
+        let opts = PropagationOptions {
+            pad,
+            ..PropagationOptions::default()
+        };
+        let prop = Propagator::new(h, w, PITCH, GREEN, opts).unwrap();
+        let tf = prop.transfer_function(6e-3, Carrier::Remove).unwrap();
+        let plan = prop.plan();
+        let even = EvenMultiplier::from_full(plan, tf.values())
+            .unwrap()
+            .expect("the offset transfer function is even");
+        assert!(even.bytes() * 3 <= tf.values().len() * 8 + 64 * (h + w));
+        let field = band_limited_field(h, w, 5);
+        let (mut a, mut b) = (field.clone(), field.clone());
+        let mut scratch = plan.scratch();
+        plan.apply(&mut a, tf.values(), &mut scratch).unwrap();
+        plan.apply_even(&mut b, &even, &mut scratch).unwrap();
+        assert!(a.iter().zip(&b).all(|(x, y)| x == y), "{h}×{w} pad {pad}");
+        assert!(
+            rel_error(&a, &field) > 1e-3,
+            "the propagation changed the field"
+        );
+        // One value off its mirror: not even.
+        let mut odd = tf.values().to_vec();
+        odd[1] *= 1.5;
+        assert!(EvenMultiplier::from_full(plan, &odd).unwrap().is_none());
+        assert!(EvenMultiplier::from_full(plan, &odd[1..]).is_err());
+    }
 }

@@ -12,7 +12,7 @@
 //! ```
 //!
 //! The frame runs in strips of rows, each layer a row behind the one before, every activation in a window
-//! of a few rows ([`super::strips`]): a plan's activations take about 32 MB whatever the frame size.
+//! of a few rows ([`super::strips`]): a plan's activations take at most about 32 MB whatever the frame size.
 //!
 //! Threads: each layer's strip is split into one band per thread (halved recursively with
 //! [`RowBand::split_at`] under `rayon::join`); the bands of a layer run in parallel on the plan's own rayon

@@ -31,6 +31,55 @@ pub struct Scratch {
     fft: Vec<Complex32>,
 }
 
+/// A spectral multiplier that is even in both frequencies, `M(−u, v) = M(u, −v) = M(u, v)` (a transfer
+/// function of the frequency radius, as the offset propagation's, Eq. 6), stored as the quarter of the
+/// spectrum with non-negative frequencies: `(rows/2 + 1) × (cols/2 + 1)` values instead of `rows × cols`
+/// (at 1080p, 4.2 MB instead of 16.6 MB per colour). Made from the full multiplier by
+/// [`EvenMultiplier::from_full`], which checks the symmetry; applied by [`SpectralPlan::apply_even`].
+#[derive(Debug, Clone)]
+pub struct EvenMultiplier {
+    /// The full spectrum's rows and columns (the plan's transposed layout).
+    rows: usize,
+    cols: usize,
+    /// `[rows/2 + 1][cols/2 + 1]`.
+    values: Vec<Complex32>,
+}
+
+impl EvenMultiplier {
+    /// The compact form of `full`, a multiplier in `plan`'s spectrum layout, or `None` if `full` is not
+    /// exactly (bit for bit) even in both frequencies. Errors: [`HoloError::ShapeMismatch`] for a length
+    /// other than [`SpectralPlan::spectrum_len`].
+    pub fn from_full(plan: &SpectralPlan, full: &[Complex32]) -> Result<Option<Self>> {
+        plan.check_multiplier(full.len())?;
+        let (rows, cols) = plan.spectrum_layout();
+        let at = |r: usize, c: usize| full[r * cols + c];
+        for r in 0..rows {
+            for c in 0..cols {
+                let (mr, mc) = (r.min(rows - r), c.min(cols - c));
+                let (a, b) = (at(r, c), at(mr, mc));
+                if a.re.to_bits() != b.re.to_bits() || a.im.to_bits() != b.im.to_bits() {
+                    return Ok(None);
+                }
+            }
+        }
+        let qc = cols / 2 + 1;
+        let mut values = Vec::with_capacity((rows / 2 + 1) * qc);
+        for r in 0..=rows / 2 {
+            values.extend_from_slice(&full[r * cols..r * cols + qc]);
+        }
+        Ok(Some(Self { rows, cols, values }))
+    }
+
+    fn quarter_cols(&self) -> usize {
+        self.cols / 2 + 1
+    }
+
+    /// Bytes of the stored values.
+    pub fn bytes(&self) -> usize {
+        self.values.len() * std::mem::size_of::<Complex32>()
+    }
+}
+
 /// A planned spectral (Fourier-domain) operation for fields of one size `[height, width]`, optionally with 2×
 /// zero padding: `u ↦ F⁻¹{F{u} · M}` for a multiplier `M` given in the plan's spectrum layout
 /// (transposed: `[comp_width, comp_height]`, FFT bin order, with the `1/(comp_height·comp_width)` inverse-FFT
@@ -201,6 +250,63 @@ impl SpectralPlan {
             self.crop(work, field);
         }
         Ok(())
+    }
+
+    /// [`apply`](Self::apply) with a multiplier stored in its compact even form ([`EvenMultiplier`]: a
+    /// quarter of the values). Bit-identical to `apply` with the full multiplier it was made from.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] if `field` has the wrong length or the multiplier was made for
+    /// another computational grid.
+    pub fn apply_even(
+        &self,
+        field: &mut [Complex32],
+        multiplier: &EvenMultiplier,
+        scratch: &mut Scratch,
+    ) -> Result<()> {
+        self.check_field(field.len())?;
+        let (rows, cols) = self.spectrum_layout();
+        if (multiplier.rows, multiplier.cols) != (rows, cols) {
+            return Err(HoloError::ShapeMismatch {
+                what: "even spectral multiplier (spectrum rows, columns)".into(),
+                expected: vec![rows, cols],
+                got: vec![multiplier.rows, multiplier.cols],
+            });
+        }
+        let Scratch {
+            work,
+            spectrum,
+            fft,
+            ..
+        } = scratch;
+        let spatial: &mut [Complex32] = if self.pad {
+            self.embed(field, work);
+            work
+        } else {
+            field
+        };
+        self.fft.forward(spatial, spectrum, fft);
+        let qc = multiplier.quarter_cols();
+        for (r, row) in spectrum.chunks_exact_mut(cols).enumerate() {
+            let q = &multiplier.values[r.min(rows - r) * qc..][..qc];
+            let (low, high) = row.split_at_mut(qc);
+            for (s, m) in low.iter_mut().zip(q) {
+                *s *= m;
+            }
+            // Column c ≥ qc mirrors column cols − c, from cols − qc down to 1.
+            for (s, m) in high.iter_mut().zip(q[1..=cols - qc].iter().rev()) {
+                *s *= m;
+            }
+        }
+        self.fft.inverse(spectrum, spatial, fft);
+        if self.pad {
+            self.crop(work, field);
+        }
+        Ok(())
+    }
+
+    /// The spectrum layout `(rows, columns)`: transposed, `(comp_width, comp_height)`.
+    fn spectrum_layout(&self) -> (usize, usize) {
+        (self.fft.width(), self.fft.height())
     }
 
     /// Forward transform of a `[height, width]` field into `spectrum` (this plan's layout, unnormalised),

@@ -11,7 +11,7 @@ use super::models::calibrated_lut;
 use crate::encoding::{ChannelEncoder, ChannelStats};
 use crate::error::Result;
 use crate::model::contract::head_to_phasor;
-use crate::optics::{Scratch, SpectralPlan};
+use crate::optics::{EvenMultiplier, Scratch, SpectralPlan};
 use crate::slm::DisplayCalibration;
 
 /// What a colour worker does next (see [`ColourState::run`]).
@@ -28,6 +28,25 @@ pub(super) enum Task {
     },
 }
 
+/// The offset transfer function as stored: its even quarter (a function of the frequency radius: a quarter
+/// of the memory, [`EvenMultiplier`]) or, should it not be even, in full.
+#[derive(Debug)]
+pub(super) enum Transfer {
+    Even(EvenMultiplier),
+    Full(Vec<Complex32>),
+}
+
+impl Transfer {
+    /// The compact form of `full` (in `plan`'s spectrum layout) where it is even, else `full` itself.
+    /// Errors: as [`EvenMultiplier::from_full`].
+    pub(super) fn new(plan: &SpectralPlan, full: &[Complex32]) -> Result<Self> {
+        Ok(match EvenMultiplier::from_full(plan, full)? {
+            Some(even) => Self::Even(even),
+            None => Self::Full(full.to_vec()),
+        })
+    }
+}
+
 /// Everything one colour channel reuses between frames.
 #[derive(Debug)]
 pub(super) struct ColourState {
@@ -38,7 +57,7 @@ pub(super) struct ColourState {
     pub(super) field: Vec<Complex32>,
     pub(super) plan: SpectralPlan,
     /// Offset transfer function with the carrier removed (Eq. 6); `None` at 0 m.
-    pub(super) transfer: Option<Vec<Complex32>>,
+    pub(super) transfer: Option<Transfer>,
     pub(super) scratch: Scratch,
     pub(super) encoder: ChannelEncoder,
     pub(super) phase: Vec<f32>,
@@ -56,8 +75,15 @@ impl ColourState {
         match task {
             Task::Midpoint { prefilter } => {
                 self.heads_to_field();
-                if let Some(t) = &self.transfer {
-                    self.plan.apply(&mut self.field, t, &mut self.scratch)?;
+                match &self.transfer {
+                    Some(Transfer::Even(t)) => {
+                        self.plan
+                            .apply_even(&mut self.field, t, &mut self.scratch)?
+                    }
+                    Some(Transfer::Full(t)) => {
+                        self.plan.apply(&mut self.field, t, &mut self.scratch)?
+                    }
+                    None => {}
                 }
                 if prefilter {
                     // Pre-filter input (docs/CONVENTIONS.md §7.2, format 2): Re H and Im H, into the two

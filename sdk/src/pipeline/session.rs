@@ -11,7 +11,7 @@ use num_complex::Complex32;
 
 use super::backend::choose_backend;
 use super::cnn_stage::CnnStage;
-use super::colour::{copy_channel, fill_channel, ColourState, Task};
+use super::colour::{copy_channel, fill_channel, ColourState, Task, Transfer};
 use super::config::{Backend, MAX_HOLOGRAM_PIXELS};
 use super::executor::Accelerator;
 use super::frame::{FrameTimings, Heads, SlmFrame};
@@ -131,11 +131,8 @@ impl HologramSession {
         let mut states: [Option<Box<ColourState>>; 3] = [None, None, None];
         for (colour, (slot, prop)) in states.iter_mut().zip(&props).enumerate() {
             let transfer = if cfg.offset_m != 0.0 {
-                Some(
-                    prop.transfer_function(cfg.offset_m, Carrier::Remove)?
-                        .values()
-                        .to_vec(),
-                )
+                let tf = prop.transfer_function(cfg.offset_m, Carrier::Remove)?;
+                Some(Transfer::new(prop.plan(), tf.values())?)
             } else {
                 None
             };
@@ -287,9 +284,22 @@ impl HologramSession {
         &self.output
     }
 
-    /// The hologram CNN heads of the last successful frame (the midpoint hologram; [`Heads::to_field`]).
+    /// The hologram CNN heads of the last successful frame (the midpoint hologram; [`Heads::to_field`]);
+    /// `None` before the first frame and after a CPU frame that failed (a frame frees the previous heads
+    /// before its CNN runs, so that two frames' heads are never held at once).
     pub fn last_heads(&self) -> Option<&Heads> {
         self.last_heads.as_ref()
+    }
+
+    /// Ends the session and keeps the last frame: its output and the hologram CNN heads (`None` before the
+    /// first frame). Every other buffer (CNN windows, the colour workers' fields, transfer functions) is freed
+    /// first, so that work on the frame afterwards (previews, reconstructions, evaluation) does not stack on
+    /// top of the session's memory: at 1080p the session holds about 0.5 GB.
+    pub fn into_last_frame(self) -> (SlmFrame, Option<Heads>) {
+        let Self {
+            output, last_heads, ..
+        } = self;
+        (output, last_heads)
     }
 
     /// Renders one RGB-D frame (`[3, H, W]` amplitude and `[H, W]` normalised depth at the session's size)
@@ -305,6 +315,8 @@ impl HologramSession {
             self.cnn.pack_frame(frame)?;
             return self.render_packed_on_accelerator(t);
         }
+        // The previous frame's heads go before this frame's arrive (at 1080p, 50 MB less at the peak).
+        self.last_heads = None;
         let (heads, cnn_s) = self.cnn.run_frame(frame)?;
         self.encode_heads(heads, cnn_s)
     }
@@ -412,6 +424,7 @@ impl HologramSession {
             self.cnn.pack_ldi(ldi)?;
             return self.render_packed_on_accelerator(t);
         }
+        self.last_heads = None;
         let (heads, cnn_s) = self.cnn.run_ldi(ldi)?;
         self.encode_heads(heads, cnn_s)
     }
@@ -422,6 +435,7 @@ impl HologramSession {
     /// Errors: [`HoloError::ShapeMismatch`] for heads of another size; [`HoloError::InvalidData`] for
     /// non-finite heads or a hologram that is zero everywhere.
     pub(crate) fn encode_heads(&mut self, heads: Heads, cnn_s: f64) -> Result<&SlmFrame> {
+        self.last_heads = None;
         let t0 = Instant::now();
         self.propagate_to_slm(&heads)?;
         let offset_s = t0.elapsed().as_secs_f64();
