@@ -505,6 +505,8 @@ fn write_outputs(
         cfg.options,
         false,
     )?;
+    // The displayed field is kept only for the evaluation (50 MB at 1080p).
+    let displayed = args.evaluate.then_some(displayed);
     let ideal = focal_stack(
         midpoint.view(),
         &cfg.optics,
@@ -522,10 +524,9 @@ fn write_outputs(
         depths: &depths,
     };
     let focus_stats = crate::output::write_images(&args.out, &images, &cfg.optics, frame)?;
-    let evaluation = if args.evaluate {
-        Some(evaluate(args, pipeline, frame, &midpoint, &displayed)?)
-    } else {
-        None
+    let evaluation = match &displayed {
+        Some(displayed) => Some(evaluate(args, pipeline, frame, &midpoint, displayed)?),
+        None => None,
     };
     let amp = midpoint.mapv(|v| v.norm());
     let mut report = json!({

@@ -505,20 +505,57 @@ impl RowBand<'_, f32> {
                 }
             }
         }
-        let (w, y0) = (self.w, self.rows.start);
+        let plane = src_h * self.w;
         for c in 0..self.c {
-            let (m, b) = affine.map_or((1.0, 0.0), |a| (a.scale[c], a.offset[c]));
-            for y in self.rows() {
-                let at = self.interior_at(c, y);
-                let sy = c * src_h + src_y0 + y - y0;
-                let row = &src[sy * w..(sy + 1) * w];
-                for (d, &v) in self.data[at..at + w].iter_mut().zip(row) {
-                    *d = if affine.is_some() { v * m + b } else { v };
-                }
+            let map = affine.map(|a| (a.scale[c], a.offset[c]));
+            self.fill_channel_rows(c, &src[c * plane..(c + 1) * plane], src_y0, map)?;
+        }
+        Ok(())
+    }
+
+    /// Channel `c` of the band's rows from rows `src_y0..` of one plane `[src_h][W]` (`plane.len()` a
+    /// multiple of `W`), as `x·m + b` when `affine = Some((m, b))`: [`fill_rows_from_planar`](
+    /// Self::fill_rows_from_planar) for an input held plane by plane. Errors: `c ≥ C`, a plane whose length
+    /// is not a multiple of `W` or rows past its end ([`KernelError::Length`]).
+    pub fn fill_channel_rows(
+        &mut self,
+        c: usize,
+        plane: &[f32],
+        src_y0: usize,
+        affine: Option<(f32, f32)>,
+    ) -> Result<(), KernelError> {
+        let (w, y0) = (self.w, self.rows.start);
+        check_plane(c, self.c, plane.len(), w, src_y0 + self.rows.len())?;
+        for y in self.rows() {
+            let at = self.interior_at(c, y);
+            let sy = src_y0 + y - y0;
+            let row = &plane[sy * w..(sy + 1) * w];
+            let dst = &mut self.data[at..at + w];
+            match affine {
+                Some((m, b)) => dst.iter_mut().zip(row).for_each(|(d, &v)| *d = v * m + b),
+                None => dst.copy_from_slice(row),
             }
         }
         Ok(())
     }
+}
+
+/// Checks one channel plane of a source: `c < channels`, a whole number of rows of `w`, at least `end` rows.
+fn check_plane(
+    c: usize,
+    channels: usize,
+    len: usize,
+    w: usize,
+    end: usize,
+) -> Result<(), KernelError> {
+    if c >= channels || !len.is_multiple_of(w) || len / w < end {
+        return Err(KernelError::Length {
+            what: "source channel plane [H][W] (channel, rows)",
+            expected: end * w,
+            got: len,
+        });
+    }
+    Ok(())
 }
 
 /// Checks a planar source: `len == expected` and source rows up to `end ≤ src_h`.
@@ -572,16 +609,35 @@ impl RowBand<'_, u8> {
             src_y0 + self.rows.len(),
             src_h,
         )?;
-        let (w, zp, y0) = (self.w, self.border, self.rows.start);
+        let plane = src_h * self.w;
         for c in 0..self.c {
-            for y in self.rows() {
-                let at = self.interior_at(c, y);
-                let dst = &mut self.data[at..at + 4 * (w - 1) + 1];
-                let sy = c * src_h + src_y0 + y - y0;
-                let row = &src[sy * w..(sy + 1) * w];
-                for (d, &v) in dst.iter_mut().step_by(4).zip(row) {
-                    *d = quantize((v + offset) / scale, zp);
-                }
+            let p = &src[c * plane..(c + 1) * plane];
+            self.quantize_fill_channel_rows(c, p, src_y0, offset, scale)?;
+        }
+        Ok(())
+    }
+
+    /// Channel `c` of [`quantize_fill_rows`](Self::quantize_fill_rows) from one plane `[src_h][W]`: for an
+    /// input held plane by plane. Errors: as [`RowBand::fill_channel_rows`], and a scale that is not finite
+    /// and positive.
+    pub fn quantize_fill_channel_rows(
+        &mut self,
+        c: usize,
+        plane: &[f32],
+        src_y0: usize,
+        offset: f32,
+        scale: f32,
+    ) -> Result<(), KernelError> {
+        check_scale("quantisation scale", scale)?;
+        let (w, zp, y0) = (self.w, self.border, self.rows.start);
+        check_plane(c, self.c, plane.len(), w, src_y0 + self.rows.len())?;
+        for y in self.rows() {
+            let at = self.interior_at(c, y);
+            let dst = &mut self.data[at..at + 4 * (w - 1) + 1];
+            let sy = src_y0 + y - y0;
+            let row = &plane[sy * w..(sy + 1) * w];
+            for (d, &v) in dst.iter_mut().step_by(4).zip(row) {
+                *d = quantize((v + offset) / scale, zp);
             }
         }
         Ok(())
@@ -832,5 +888,92 @@ mod tests {
         assert_eq!(quantize(-300.0, 10), 0);
         assert_eq!(quantize(1e30, 10), 255);
         assert_eq!(quantize(-0.5, 3), 3);
+    }
+
+    #[test]
+    fn window_rows_fill_copy_and_map_frame_rows() {
+        // Rows of a window: border fill, copy (the carry between strips), and fills from other rows of a
+        // taller frame, whole planar or plane by plane, agree with the whole-frame fills row for row.
+        let (c, h, w, fh) = (5, 6, 9, 11);
+        let src: Vec<f32> = (0..c * fh * w)
+            .map(|i| (i % 97) as f32 * 0.25 - 3.0)
+            .collect();
+        let (scale, offset) = ([1.0, 2.0, 0.5, 1.0, -1.0], [0.0, -0.5, 0.25, 1.0, 0.0]);
+        let affine = Affine {
+            scale: &scale,
+            offset: &offset,
+        };
+        let whole = RowPlanar::from_planar(&src, c, fh, w, Some(affine)).unwrap();
+        let mut win = RowPlanar::new(c, h, w).unwrap();
+        // Window rows 1..5 take frame rows 4..8: once from the planar frame, once plane by plane.
+        win.band_mut(1..5)
+            .unwrap()
+            .fill_rows_from_planar(&src, fh, 4, Some(affine))
+            .unwrap();
+        let mut per_plane = RowPlanar::new(c, h, w).unwrap();
+        for ch in 0..c {
+            let plane = &src[ch * fh * w..(ch + 1) * fh * w];
+            let mut band = per_plane.band_mut(1..5).unwrap();
+            band.fill_channel_rows(ch, plane, 4, Some((scale[ch], offset[ch])))
+                .unwrap();
+        }
+        assert_eq!(win, per_plane);
+        for ch in 0..c {
+            for i in 1..5 {
+                assert_eq!(win.row(ch, i), whole.row(ch, i + 3), "({ch}, {i})");
+            }
+        }
+        // Rows past the plane's end are refused, as is a channel past C.
+        let mut band = per_plane.band_mut(0..6).unwrap();
+        assert!(band.fill_channel_rows(0, &src[..fh * w], 6, None).is_err());
+        assert!(band.fill_channel_rows(c, &src[..fh * w], 0, None).is_err());
+        // Carry: rows 3..5 move to 0..2; then rows 2..6 are set to the border (zero), borders stay clean.
+        let before = win.clone();
+        win.copy_rows(3..5, 0).unwrap();
+        win.fill_rows_with_border(2..6).unwrap();
+        for ch in 0..c {
+            assert_eq!(win.row(ch, 0), before.row(ch, 3));
+            assert_eq!(win.row(ch, 1), before.row(ch, 4));
+            for i in 2..6 {
+                assert!(win.row(ch, i).unwrap().iter().all(|&v| v == 0.0));
+            }
+        }
+        assert!(win.border_is_clean());
+        assert!(win.copy_rows(3..6, 4).is_err());
+        assert!(win.fill_rows_with_border(2..7).is_err());
+
+        // u8: quantised rows of a taller frame, then requantised from other rows of another window.
+        let q = RowPlanar::quantize_from_planar(&src, c, fh, w, 0.05, 7).unwrap();
+        let mut qa = RowPlanar::new_quantized(c, h, w, 7).unwrap();
+        qa.band_mut(0..6)
+            .unwrap()
+            .quantize_fill_rows(&src, fh, 5, 0.0, 0.05)
+            .unwrap();
+        let mut qb = RowPlanar::new_quantized(c, h, w, 7).unwrap();
+        for ch in 0..c {
+            let plane = &src[ch * fh * w..(ch + 1) * fh * w];
+            qb.band_mut(0..6)
+                .unwrap()
+                .quantize_fill_channel_rows(ch, plane, 5, 0.0, 0.05)
+                .unwrap();
+        }
+        assert_eq!(qa, qb);
+        let mut cat = RowPlanar::new_quantized(c, 3, w, 200).unwrap();
+        cat.band_mut(1..3)
+            .unwrap()
+            .requantize_rows_from(&qa, 2, 0.05, 0.1)
+            .unwrap();
+        for ch in 0..c {
+            for x in 0..w {
+                for (i, f) in [(1, 7), (2, 8)] {
+                    let real = (q.get(ch, f, x).unwrap() as f32 - 7.0) * 0.05;
+                    assert_eq!(cat.get(ch, i, x), Some(quantize(real / 0.1, 200)));
+                }
+                assert_eq!(cat.get(ch, 0, x), Some(200));
+            }
+        }
+        assert!(cat.border_is_clean());
+        let mut band = cat.band_mut(0..3).unwrap();
+        assert!(band.requantize_rows_from(&qa, 4, 0.05, 0.1).is_err());
     }
 }

@@ -40,8 +40,43 @@ pub(crate) trait CnnPlan: std::fmt::Debug + Send {
     /// ([`crate::HoloError::ModelRun`]).
     fn run_outputs(&mut self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)>;
 
+    /// [`run_outputs`](Self::run_outputs) on an input held plane by plane (`planes[c]`: channel `c`, `H·W`
+    /// values, row-major), so that a caller whose channels live apart (the pre-filter's input, one colour per
+    /// worker) need not gather them into a `[C, H, W]` array first. The native plans read the planes in
+    /// place; the default gathers them (one allocation per call, as tract allocates anyway).
+    ///
+    /// Errors: [`crate::HoloError::ShapeMismatch`] for a plane count other than `C` or a plane of other than
+    /// `H·W` values; as `run_outputs`.
+    fn run_planes(&mut self, planes: &[&[f32]]) -> Result<(Array3<f32>, Array3<f32>)> {
+        let dim = self.input_dim();
+        check_planes(planes, dim)?;
+        let (c, h, w) = dim;
+        let mut input = Array3::<f32>::zeros((c, h, w));
+        for (mut lane, p) in input.outer_iter_mut().zip(planes) {
+            for (o, v) in lane.iter_mut().zip(p.iter()) {
+                *o = *v;
+            }
+        }
+        self.run_outputs(input.view())
+    }
+
     /// The same network for another thread (a stream's CNN thread): weights shared, run state its own.
     fn spawn(&self) -> Box<dyn CnnPlan>;
+}
+
+/// Checks an input given plane by plane against `(C, H, W)`. Errors: [`crate::HoloError::ShapeMismatch`].
+pub(crate) fn check_planes(planes: &[&[f32]], (c, h, w): (usize, usize, usize)) -> Result<()> {
+    if planes.len() != c || planes.iter().any(|p| p.len() != h * w) {
+        return Err(crate::HoloError::ShapeMismatch {
+            what: "CNN input planes (count, values per plane)".into(),
+            expected: vec![c, h * w],
+            got: vec![
+                planes.len(),
+                planes.iter().map(|p| p.len()).max().unwrap_or(0),
+            ],
+        });
+    }
+    Ok(())
 }
 
 /// One CNN at one resolution on the engine [`cnn_plan`] chose: what `holo bench` times, engine against

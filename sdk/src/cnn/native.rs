@@ -29,12 +29,12 @@ use ndarray::{Array3, ArrayView3, CowArray, Ix3};
 use rayon::prelude::*;
 use tensorholo_kernels::buffer::Element;
 use tensorholo_kernels::{
-    depthwise, fake_quantize, tanh_heads, Affine, Conv3x3F32, Inputs, Isa, KernelError, QuantU8,
-    RowBand, RowPlanar,
+    depthwise, fake_quantize, tanh_heads, Conv3x3F32, Inputs, Isa, KernelError, QuantU8, RowBand,
+    RowPlanar,
 };
 
 use super::strips::{row_bytes, strip_rows, Strips, Window};
-use super::{kernel_err, CnnPlan};
+use super::{check_planes, kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnWeights, QuantGrid};
 
@@ -168,6 +168,20 @@ impl NativePlan {
         self.net.layers[0].kernel().name
     }
 
+    /// One frame of a checked input.
+    fn run(&mut self, input: Planes<'_>) -> Result<(Array3<f32>, Array3<f32>)> {
+        let (h, w) = (self.height, self.width);
+        let mut out = Outputs::new(h, w);
+        self.forward(input, &mut out)?;
+        finish_outputs(
+            &self.net.graph,
+            out,
+            BaseInput::Planar(input),
+            [h, w],
+            &mut self.depthwise_scratch,
+        )
+    }
+
     /// Frame rows per strip.
     #[cfg(test)]
     pub(crate) fn strip_rows(&self) -> usize {
@@ -175,16 +189,11 @@ impl NativePlan {
     }
 
     /// One frame, strip by strip, on the plan's threads: the input `planar` `[C][H][W]` centred into the
-    /// input window, every layer's strip, the heads (or the pre-filter's raw output) into `out`
-    /// (`[6][H][W]`).
-    fn forward(&mut self, planar: &[f32], out: &mut [f32]) -> Result<()> {
+    /// input window, every layer's strip, the heads (or the pre-filter's raw output) into `out`.
+    fn forward(&mut self, input: Planes<'_>, out: &mut Outputs) -> Result<()> {
         let net = self.net.clone();
         let n = net.layers.len();
         let (threads, strips, [h, w]) = (self.threads, self.strips, [self.height, self.width]);
-        let affine = Affine {
-            scale: &net.scale,
-            offset: &net.offset,
-        };
         self.x.start_frame()?;
         for s in &mut self.s {
             s.start_frame()?;
@@ -198,7 +207,11 @@ impl NativePlan {
                     let y0 = rows.start;
                     bands(band, threads, &|b| {
                         let f = f0 + b.rows().start - y0;
-                        b.fill_rows_from_planar(planar, h, f, Some(affine))
+                        for c in 0..net.scale.len() {
+                            let affine = Some((net.scale[c], net.offset[c]));
+                            b.fill_channel_rows(c, input.plane(c), f, affine)?;
+                        }
+                        Ok(())
                     })?;
                 }
                 for (i, conv) in net.layers.iter().enumerate().take(n - 1) {
@@ -254,6 +267,24 @@ impl NativePlan {
         match pool.as_deref() {
             Some(pool) if threads > 1 => pool.install(frame),
             _ => frame(),
+        }
+    }
+}
+
+/// A CNN input `[C][H][W]`: one planar slice, or one slice per channel plane ([`CnnPlan::run_planes`]).
+#[derive(Clone, Copy)]
+pub(super) enum Planes<'a> {
+    /// `[C][H][W]` in one slice, `H·W` values per plane.
+    Planar(&'a [f32], usize),
+    Each(&'a [&'a [f32]]),
+}
+
+impl<'a> Planes<'a> {
+    /// Channel `c`'s plane (`H·W` values; empty past the last channel).
+    pub fn plane(&self, c: usize) -> &'a [f32] {
+        match *self {
+            Planes::Planar(p, hw) => p.get(c * hw..(c + 1) * hw).unwrap_or(&[]),
+            Planes::Each(ps) => ps.get(c).copied().unwrap_or(&[]),
         }
     }
 }
@@ -390,13 +421,36 @@ pub(super) fn heads_of(graph: &CnnWeights) -> Option<(f32, f32)> {
     }
 }
 
-/// Frame rows `rows` of the network's two outputs, written into `out` (`[6][H][W]`: the two `[3, H, W]`
-/// outputs back to back) from the last layer's raw output `o` (`raw_row(c, y)`: channel `c`, frame row `y`,
-/// `W` values): the hologram CNN's heads `(tanh(o) + 1)·scale` (`heads`, [`heads_of`]) or the pre-filter's
-/// `o`. `grid`, for an int8 file, rounds `o` to the u8 grid the file quantises the last convolution's output
-/// to (ONNX `QuantizeLinear` then `DequantizeLinear`). On the kernels' vector code for `isa`
-/// ([`tanh_heads`], [`fake_quantize`]); the six channels in parallel on the current rayon pool when
-/// `threads > 1`.
+/// The network's two outputs `[3, H, W]` as they are written: `re` (amplitude heads, or `Re` of a
+/// pre-filter) and `im` (phase heads, or `Im`), `3·H·W` values each; channel `c` of the last layer lands in
+/// plane `c` of `re` for `c < 3`, plane `c − 3` of `im` otherwise.
+pub(super) struct Outputs {
+    pub re: Vec<f32>,
+    pub im: Vec<f32>,
+}
+
+impl Outputs {
+    /// Zeroed outputs for `h × w` frames (the only allocation of a native run: the [`CnnPlan`] contract
+    /// returns owned arrays).
+    pub fn new(h: usize, w: usize) -> Self {
+        Self {
+            re: vec![0.0; 3 * h * w],
+            im: vec![0.0; 3 * h * w],
+        }
+    }
+
+    /// The six channel planes (`H·W` values each), in the last layer's channel order.
+    fn planes_mut(&mut self, hw: usize) -> impl Iterator<Item = &mut [f32]> {
+        self.re.chunks_mut(hw).chain(self.im.chunks_mut(hw))
+    }
+}
+
+/// Frame rows `rows` of the network's two outputs, written into `out` from the last layer's raw output `o`
+/// (`raw_row(c, y)`: channel `c`, frame row `y`, `W` values): the hologram CNN's heads `(tanh(o) + 1)·scale`
+/// (`heads`, [`heads_of`]) or the pre-filter's `o`. `grid`, for an int8 file, rounds `o` to the u8 grid the
+/// file quantises the last convolution's output to (ONNX `QuantizeLinear` then `DequantizeLinear`). On the
+/// kernels' vector code for `isa` ([`tanh_heads`], [`fake_quantize`]); the six channels in parallel on the
+/// current rayon pool when `threads > 1`.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn heads_rows<'r>(
     heads: Option<(f32, f32)>,
@@ -406,7 +460,7 @@ pub(super) fn heads_rows<'r>(
     rows: Range<usize>,
     isa: Isa,
     threads: usize,
-    out: &mut [f32],
+    out: &mut Outputs,
 ) -> Result<()> {
     let grid = grid.map(u8_grid);
     let channel = |(c, plane): (usize, &mut [f32])| {
@@ -425,45 +479,84 @@ pub(super) fn heads_rows<'r>(
         }
         Ok(())
     };
+    let hw = h * w;
     if threads > 1 {
-        out.par_chunks_mut(h * w).enumerate().try_for_each(channel)
+        let Outputs { re, im } = out;
+        re.par_chunks_mut(hw)
+            .chain(im.par_chunks_mut(hw))
+            .enumerate()
+            .try_for_each(channel)
     } else {
-        out.chunks_mut(h * w).enumerate().try_for_each(channel)
+        out.planes_mut(hw).enumerate().try_for_each(channel)
     }
     .map_err(kernel_err)
 }
 
-/// The network's two `[3, H, W]` outputs from `out` (`[6][H][W]`, [`heads_rows`] of every row): for a
-/// pre-filter, first adds its depthwise base filter of `base_input` (`[C][H][W]`, the input as the base
-/// branch sees it).
+/// The input as a pre-filter's base branch reads it: the planar input `[C][H][W]`, or (int8 files) the input
+/// rounded to the first layer's u8 grid, one channel at a time into `plane` (`H·W` values; the file's
+/// `QuantizeLinear`/`DequantizeLinear` of `x + offset`, then `− offset`).
+pub(super) enum BaseInput<'a> {
+    Planar(Planes<'a>),
+    Rounded {
+        planar: Planes<'a>,
+        offset: f32,
+        grid: QuantGrid,
+        isa: Isa,
+        plane: &'a mut Vec<f32>,
+    },
+}
+
+/// The network's two `[3, H, W]` outputs from `out` ([`heads_rows`] of every row): for a pre-filter,
+/// first adds its depthwise base filter of `base`, channel by channel.
 pub(super) fn finish_outputs(
     graph: &CnnWeights,
-    mut out: Vec<f32>,
-    base_input: &[f32],
+    mut out: Outputs,
+    mut base: BaseInput<'_>,
     [h, w]: [usize; 2],
     depthwise_scratch: &mut Vec<f32>,
 ) -> Result<(Array3<f32>, Array3<f32>)> {
-    let plane = 3 * h * w;
-    if let CnnOutput::Prefilter { taps, base } = &graph.output {
-        let c = graph.in_channels;
-        depthwise(
-            base_input,
-            c,
-            h,
-            w,
-            base,
-            *taps,
-            &mut out,
-            true,
-            depthwise_scratch,
-        )
-        .map_err(kernel_err)?;
+    if let CnnOutput::Prefilter { taps, base: kernel } = &graph.output {
+        let (k2, hw) = (taps * taps, h * w);
+        for (c, out_plane) in out.planes_mut(hw).enumerate() {
+            let kernel = kernel.get(c * k2..(c + 1) * k2).ok_or_else(|| {
+                HoloError::Internal("native CNN: pre-filter base kernel per channel".into())
+            })?;
+            let input = match &mut base {
+                BaseInput::Planar(p) => p.plane(c),
+                BaseInput::Rounded {
+                    planar,
+                    offset,
+                    grid,
+                    isa,
+                    plane,
+                } => {
+                    plane.clear();
+                    plane.extend(planar.plane(c).iter().map(|v| v + *offset));
+                    fake_quantize(plane, u8_grid(*grid), *isa).map_err(kernel_err)?;
+                    if *offset != 0.0 {
+                        plane.iter_mut().for_each(|b| *b -= *offset);
+                    }
+                    &plane[..]
+                }
+            };
+            depthwise(
+                input,
+                1,
+                h,
+                w,
+                kernel,
+                *taps,
+                out_plane,
+                true,
+                depthwise_scratch,
+            )
+            .map_err(kernel_err)?;
+        }
     }
-    let imag = out.split_off(plane);
     let shape_err = |_| HoloError::Internal("native CNN: output shape".into());
     Ok((
-        Array3::from_shape_vec((3, h, w), out).map_err(shape_err)?,
-        Array3::from_shape_vec((3, h, w), imag).map_err(shape_err)?,
+        Array3::from_shape_vec((3, h, w), out.re).map_err(shape_err)?,
+        Array3::from_shape_vec((3, h, w), out.im).map_err(shape_err)?,
     ))
 }
 
@@ -475,16 +568,12 @@ impl CnnPlan for NativePlan {
     fn run_outputs(&mut self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
         let standard = standard_input(input, self.input_dim())?;
         let planar = planar_slice(&standard)?;
-        let (h, w) = (self.height, self.width);
-        let mut out = vec![0.0f32; 6 * h * w];
-        self.forward(planar, &mut out)?;
-        finish_outputs(
-            &self.net.graph,
-            out,
-            planar,
-            [h, w],
-            &mut self.depthwise_scratch,
-        )
+        self.run(Planes::Planar(planar, self.height * self.width))
+    }
+
+    fn run_planes(&mut self, planes: &[&[f32]]) -> Result<(Array3<f32>, Array3<f32>)> {
+        check_planes(planes, self.input_dim())?;
+        self.run(Planes::Each(planes))
     }
 
     fn spawn(&self) -> Box<dyn CnnPlan> {

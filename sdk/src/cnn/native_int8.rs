@@ -24,16 +24,16 @@
 use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3};
-use tensorholo_kernels::{fake_quantize, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, RowPlanar};
+use tensorholo_kernels::{Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, RowPlanar};
 
 use super::native::{
     bands, finish_outputs, heads_of, heads_rows, planar_slice, pool, standard_input, u8_grid,
-    F32Rows,
+    BaseInput, F32Rows, Outputs, Planes,
 };
 use super::strips::{row_bytes, strip_rows, Strips, Window};
-use super::{kernel_err, CnnPlan};
+use super::{check_planes, kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
-use crate::model::{CnnOutput, CnnQuant, CnnWeights};
+use crate::model::{CnnQuant, CnnWeights};
 
 /// The network's packed int8 layers, shared by every plan of it.
 #[derive(Debug)]
@@ -73,8 +73,9 @@ pub(crate) struct NativeInt8Plan {
     raw: Vec<f32>,
     /// Frame-row bookkeeping of `raw` (lag `N`, no carry; its buffer is a placeholder of one row).
     raw_window: Window<u8>,
-    /// Pre-filter: the input as the file's base filter reads it (rounded to the input grid), `[C][H][W]`.
-    base_input: Vec<f32>,
+    /// Pre-filter: one channel of the input as the file's base filter reads it (rounded to the input grid),
+    /// `H·W` values (grown on the first run).
+    base_plane: Vec<f32>,
     depthwise_scratch: Vec<f32>,
 }
 
@@ -157,7 +158,6 @@ impl NativeInt8Plan {
             let buf = RowPlanar::new_quantized(ch, rows, width, zp).map_err(kernel_err)?;
             Ok(Window::new(buf, lag, carry))
         };
-        let prefilter = matches!(graph.output, CnnOutput::Prefilter { .. });
         Ok(Self {
             x: window(c, first.zero_point, 0, 2)?,
             x_cat: window(c, cat.zero_point, 0, n + 1)?,
@@ -171,11 +171,7 @@ impl NativeInt8Plan {
                 0,
             ),
             strips,
-            base_input: if prefilter {
-                vec![0.0; c * height * width]
-            } else {
-                Vec::new()
-            },
+            base_plane: Vec::new(),
             depthwise_scratch: Vec::new(),
             height,
             width,
@@ -190,10 +186,28 @@ impl NativeInt8Plan {
         self.net.layers[0].kernel().name
     }
 
+    /// One frame of a checked input.
+    fn run(&mut self, input: Planes<'_>) -> Result<(Array3<f32>, Array3<f32>)> {
+        let net = self.net.clone();
+        let quant = net.quant()?;
+        let (h, w) = (self.height, self.width);
+        let mut out = Outputs::new(h, w);
+        self.forward(input, &mut out)?;
+        let base = BaseInput::Rounded {
+            planar: input,
+            // The pre-filter has no offset; the rounding is the file's QuantizeLinear of the input.
+            offset: -net.graph.input_offset,
+            grid: quant.layers[0].input,
+            isa: net.isa,
+            plane: &mut self.base_plane,
+        };
+        finish_outputs(&net.graph, out, base, [h, w], &mut self.depthwise_scratch)
+    }
+
     /// One frame, strip by strip, on the plan's threads: the input `planar` `[C][H][W]` quantised into its two
     /// windows, every layer's strip, the last layer's raw rows rounded to the file's output grid and turned
-    /// into the heads (or the pre-filter's raw output) in `out` (`[6][H][W]`).
-    fn forward(&mut self, planar: &[f32], out: &mut [f32]) -> Result<()> {
+    /// into the heads (or the pre-filter's raw output) in `out`.
+    fn forward(&mut self, input: Planes<'_>, out: &mut Outputs) -> Result<()> {
         let net = self.net.clone();
         let quant = net.quant()?;
         let n = net.layers.len();
@@ -217,7 +231,16 @@ impl NativeInt8Plan {
                     let band = self.x.buf.band_mut(rows).map_err(kernel_err)?;
                     bands(band, threads, &|b| {
                         let f = f0 + b.rows().start - y0;
-                        b.quantize_fill_rows(planar, h, f, offset, first.scale)
+                        for c in 0..net.graph.in_channels {
+                            b.quantize_fill_channel_rows(
+                                c,
+                                input.plane(c),
+                                f,
+                                offset,
+                                first.scale,
+                            )?;
+                        }
+                        Ok(())
                     })?;
                 }
                 if let Some((rows, f0)) = self.x_cat.new_rows(strips, m)? {
@@ -306,30 +329,12 @@ impl CnnPlan for NativeInt8Plan {
     fn run_outputs(&mut self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
         let standard = standard_input(input, self.input_dim())?;
         let planar = planar_slice(&standard)?;
-        let net = self.net.clone();
-        let quant = net.quant()?;
-        let first = quant.layers[0].input;
-        let offset = -net.graph.input_offset;
-        if !self.base_input.is_empty() {
-            // The file's base filter reads the input rounded to the input grid (the pre-filter has no offset).
-            for (b, &v) in self.base_input.iter_mut().zip(planar) {
-                *b = v + offset;
-            }
-            fake_quantize(&mut self.base_input, u8_grid(first), net.isa).map_err(kernel_err)?;
-            if offset != 0.0 {
-                self.base_input.iter_mut().for_each(|b| *b -= offset);
-            }
-        }
-        let (h, w) = (self.height, self.width);
-        let mut out = vec![0.0f32; 6 * h * w];
-        self.forward(planar, &mut out)?;
-        finish_outputs(
-            &net.graph,
-            out,
-            &self.base_input,
-            [h, w],
-            &mut self.depthwise_scratch,
-        )
+        self.run(Planes::Planar(planar, self.height * self.width))
+    }
+
+    fn run_planes(&mut self, planes: &[&[f32]]) -> Result<(Array3<f32>, Array3<f32>)> {
+        check_planes(planes, self.input_dim())?;
+        self.run(Planes::Each(planes))
     }
 
     fn spawn(&self) -> Box<dyn CnnPlan> {
@@ -345,7 +350,7 @@ impl CnnPlan for NativeInt8Plan {
             s: self.s.clone(),
             raw: self.raw.clone(),
             raw_window: self.raw_window.clone(),
-            base_input: self.base_input.clone(),
+            base_plane: Vec::new(),
             depthwise_scratch: Vec::new(),
         })
     }

@@ -348,3 +348,40 @@ fn a_1080p_plan_keeps_its_activations_to_a_few_rows() {
     let rows = plan.strip_rows();
     assert!((8..=16).contains(&rows), "{rows} rows per strip");
 }
+
+#[test]
+fn an_input_given_plane_by_plane_gives_the_same_frame() {
+    // `run_planes` (the pre-filter's input read in place from the colour workers' planes) equals
+    // `run_outputs` on the same values gathered into `[C, H, W]`, bit for bit, on the native engine (f32
+    // and int8, whose base filter reads the planes too) and on tract; a wrong plane count or length is a
+    // shape error.
+    let (h, w) = (13, 21);
+    let isa = Isa::active().unwrap();
+    for model in [shipped().pop().unwrap(), shipped_qdq().pop().unwrap()] {
+        let graph = model.cnn_graph().unwrap();
+        let x = input(graph.in_channels, h, w, 5).mapv(|v| 0.75 * v - 0.05);
+        let planes: Vec<Vec<f32>> = x
+            .outer_iter()
+            .map(|p| p.iter().copied().collect())
+            .collect();
+        let refs: Vec<&[f32]> = planes.iter().map(|p| &p[..]).collect();
+        let mut plans: Vec<Box<dyn CnnPlan>> = vec![
+            super::native_plan(graph.clone(), h, w, 2, isa).unwrap().0,
+            Box::new(model.plan(h, w).unwrap()),
+        ];
+        for plan in &mut plans {
+            let whole = plan.run_outputs(x.view()).unwrap();
+            assert!(
+                plan.run_planes(&refs).unwrap() == whole,
+                "{}",
+                model.source_name()
+            );
+            assert!(matches!(
+                plan.run_planes(&refs[1..]),
+                Err(HoloError::ShapeMismatch { .. })
+            ));
+            let short = [&refs[0][1..]; 6];
+            assert!(plan.run_planes(&short[..graph.in_channels]).is_err());
+        }
+    }
+}

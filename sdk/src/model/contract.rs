@@ -99,6 +99,14 @@ pub fn pack_ldi(ldi: &LayeredDepthImage, mut out: ArrayViewMut3<f32>) -> Result<
     Ok(())
 }
 
+/// The pre-filter input (format 2) as six channel planes, without copying them: `[Re H_R, Re H_G, Re H_B,
+/// Im H_R, Im H_G, Im H_B]` from the three colours' `(Re, Im)` planes (`H·W` values each, row-major): the
+/// channel order [`pack_prefilter_colour`] writes.
+pub fn prefilter_planes<'a>(colours: [(&'a [f32], &'a [f32]); 3]) -> [&'a [f32]; 6] {
+    let [(r0, i0), (r1, i1), (r2, i2)] = colours;
+    [r0, r1, r2, i0, i1, i2]
+}
+
 /// Writes colour `c` (0 = R, 1 = G, 2 = B) of the offset hologram `H` into the pre-filter input `out`
 /// `[6, H, W]` (format 2): `re` (`H·W` values, row-major) into channel `c`, `im` into channel `3 + c`.
 ///
