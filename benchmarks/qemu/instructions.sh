@@ -23,6 +23,10 @@ size="${2:-192x192}"
 [ -x "$holo" ] || { echo "no aarch64 holo at $holo: cargo build --release --target aarch64-unknown-linux-gnu -p holo" >&2; exit 1; }
 command -v qemu-aarch64 >/dev/null || { echo "needs qemu-aarch64 (Debian qemu-user)" >&2; exit 1; }
 
+# holo re-executes itself once to set glibc's mmap threshold unless the variable is set already; set it here, so
+# that the counted process is the one that runs the frames (a re-executed guest would escape the plugin).
+export MALLOC_MMAP_THRESHOLD_=1048576
+
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 gcc -O2 -shared -fPIC -o "$work/libinsn_count.so" "$here/insn_count.c"

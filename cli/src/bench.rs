@@ -115,6 +115,12 @@ fn time_runs(
     Ok((v[v.len() / 2], v.len()))
 }
 
+/// Resets this process's peak resident memory to what is resident now (Linux: `5` into
+/// `/proc/self/clear_refs`), so that [`peak_rss_mib`] measures the case that follows; false where it cannot.
+fn reset_peak_rss() -> bool {
+    std::fs::write("/proc/self/clear_refs", "5").is_ok()
+}
+
 /// Peak resident memory of this process (Linux `VmHWM`), in MiB.
 fn peak_rss_mib() -> Option<f64> {
     let s = std::fs::read_to_string("/proc/self/status").ok()?;
@@ -477,8 +483,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             args.offset_mm,
             if args.offset_mm == 0 { ", AA-DPM" } else { ", pre-filter CNN + DPM" }
         );
-        println!("| CNN | precision | layout | size (HxW) | threads | CNN | offset | pre-filter | DPM + LUT | frame | FPS | stream FPS |");
-        println!("|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+        println!("| CNN | precision | layout | size (HxW) | threads | CNN | offset | pre-filter | DPM + LUT | frame | FPS | stream FPS | peak MiB |");
+        println!("|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
         for &(h, w) in &args.sizes {
             let frame = procedural::default_scene(h, w)?;
             for &layers in &args.layers {
@@ -492,6 +498,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                     };
                     for layout in pipeline_layouts {
                         for &threads in &args.threads {
+                            // Peak resident memory of this case: from here (the previous case's
+                            // session is gone) to its last frame.
+                            let reset = reset_peak_rss();
                             let pipeline = HologramPipeline::embedded(
                                 &selection(args, layers, precision),
                                 PipelineConfig {
@@ -525,8 +534,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                             session
                                 .render_stream((0..n).map(|_| Ok(frame.clone())), |_, _| Ok(()))?;
                             let stream_fps = n as f64 / t.elapsed().as_secs_f64();
+                            let peak = peak_rss_mib().filter(|_| reset);
+                            let peak_cell = peak.map_or("–".to_string(), |p| format!("{p:.0}"));
                             println!(
-                            "| holo{layers} | {precision} | {layout} | {h}x{w} | {threads} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} |",
+                            "| holo{layers} | {precision} | {layout} | {h}x{w} | {threads} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {peak_cell} |",
                             med.cnn_s * 1e3,
                             med.offset_s * 1e3,
                             med.prefilter_s * 1e3,
@@ -539,7 +550,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                             json!({"kind": "pipeline", "layers": layers, "precision": precision,
                             "layout": layout, "size": [h, w], "threads": threads, "offset_mm": args.offset_mm,
                             "median_stages_s": med, "frame_ms": s * 1e3, "fps": 1.0 / s,
-                            "stream_fps": stream_fps, "runs": runs}),
+                            "stream_fps": stream_fps, "runs": runs, "peak_rss_mib": peak}),
                         );
                         }
                     }

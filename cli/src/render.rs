@@ -467,7 +467,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     Ok(())
 }
 
-/// What [`write_outputs`] needs of a session that has ended ([`HologramSession::into_last_frame`]).
+/// What [`write_outputs`] needs of a session that has ended ([`tensorholo::pipeline::HologramSession::into_last_frame`]).
 struct LastFrame<'a> {
     out: &'a SlmFrame,
     heads: Heads,

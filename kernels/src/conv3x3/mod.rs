@@ -122,56 +122,30 @@ impl<'a, T: Element> Inputs<'a, T> {
         w: usize,
         rows: &Range<usize>,
     ) -> Result<(), KernelError> {
-        if let Some(d) = self.shift {
-            return self.check_shifted(c_in, c_out, h, w, rows, d);
-        }
-        let same = |what: &str, b: &RowPlanar<T>| -> Result<(), KernelError> {
-            if b.height() != h || b.width() != w {
-                return Err(KernelError::Shape {
-                    what: format!("{what} is {}×{}, output is {h}×{w}", b.height(), b.width()),
-                });
+        let d = match self.shift {
+            Some(d) => d,
+            None => {
+                // Whole frames: every operand has the output's height and width.
+                let operands = [("source a", Some(self.a)), ("source b", self.b)];
+                for (what, b) in operands.into_iter().chain([("residual", self.residual)]) {
+                    if let Some(b) = b.filter(|b| b.height() != h || b.width() != w) {
+                        return Err(KernelError::Shape {
+                            what: format!(
+                                "{what} is {}×{}, output is {h}×{w}",
+                                b.height(),
+                                b.width()
+                            ),
+                        });
+                    }
+                }
+                [0; 3]
             }
-            Ok(())
         };
-        same("source a", self.a)?;
-        let cb = match self.b {
-            Some(b) => {
-                same("source b", b)?;
-                b.channels()
-            }
-            None => 0,
-        };
-        if self.a.channels() + cb != c_in {
-            return Err(KernelError::Shape {
-                what: format!(
-                    "input channels {} + {cb} != plan's C_in {c_in}",
-                    self.a.channels()
-                ),
-            });
-        }
-        if let Some(r) = self.residual {
-            same("residual", r)?;
-            if r.channels() != c_out {
-                return Err(KernelError::Shape {
-                    what: format!(
-                        "residual has {} channels, plan's C_out is {c_out}",
-                        r.channels()
-                    ),
-                });
-            }
-        }
-        if rows.start >= rows.end || rows.end > h {
-            return Err(KernelError::Rows {
-                start: rows.start,
-                end: rows.end,
-                height: h,
-            });
-        }
-        Ok(())
+        self.check_shifted(c_in, c_out, h, w, rows, d)
     }
 
-    /// [`check`](Self::check) for windows: widths and channels as there; heights free, every row read inside
-    /// its operand.
+    /// What [`check`](Self::check) checks of every call: widths, channels, the row band, and every row the band
+    /// reads inside its operand (with whole frames, `rows.end ≤ H`).
     fn check_shifted(
         &self,
         c_in: usize,

@@ -15,7 +15,7 @@
 //! of a few rows ([`super::strips`]): a plan's activations take at most about 32 MB whatever the frame size.
 //!
 //! Threads: each layer's strip is split into one band per thread (halved recursively with
-//! [`RowBand::split_at`] under `rayon::join`); the bands of a layer run in parallel on the plan's own rayon
+//! [`tensorholo_kernels::RowBand::split_at`] under `rayon::join`); the bands of a layer run in parallel on the plan's own rayon
 //! pool (created once with the plan, installed once per frame), and the next layer starts when all are done
 //! (a 3×3 convolution reads one row above and below its band).
 //!
@@ -27,13 +27,11 @@ use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3, CowArray, Ix3};
 use rayon::prelude::*;
-use tensorholo_kernels::buffer::Element;
 use tensorholo_kernels::{
-    depthwise, fake_quantize, tanh_heads, Conv3x3F32, Inputs, Isa, KernelError, QuantU8, RowBand,
-    RowPlanar,
+    depthwise, fake_quantize, tanh_heads, Conv3x3F32, Inputs, Isa, QuantU8, RowPlanar,
 };
 
-use super::strips::{row_bytes, strip_rows, Strips, Window};
+use super::strips::{bands, hidden_layers, installed, row_bytes, strip_rows, Strips, Window};
 use super::{check_planes, kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnWeights, QuantGrid};
@@ -200,7 +198,7 @@ impl NativePlan {
         }
         let heads = heads_of(&net.graph);
         let pool = self.pool.clone();
-        let mut frame = || -> Result<()> {
+        let frame = || -> Result<()> {
             for m in 0..strips.steps {
                 if let Some((rows, f0)) = self.x.new_rows(strips, m)? {
                     let band = self.x.buf.band_mut(rows.clone()).map_err(kernel_err)?;
@@ -214,25 +212,14 @@ impl NativePlan {
                         Ok(())
                     })?;
                 }
-                for (i, conv) in net.layers.iter().enumerate().take(n - 1) {
-                    // Layer i reads s_i, adds s_{i−1} where i + 1 is odd and ≥ 3, writes s_{i+1}.
-                    let (done, rest) = self.s.split_at_mut(i);
-                    let dst = &mut rest[0];
-                    let Some((rows, _)) = dst.new_rows(strips, m)? else {
-                        continue;
-                    };
-                    let src = if i == 0 { &self.x } else { &done[i - 1] };
-                    let residual = (i + 1 >= 3 && (i + 1) % 2 == 1).then(|| &done[i - 2]);
-                    let mut inputs = Inputs::new(&src.buf);
-                    let mut d_r = 0;
-                    if let Some(r) = residual {
-                        inputs = inputs.residual(&r.buf);
-                        d_r = dst.shift_from(r);
-                    }
-                    let inputs = inputs.shifted(dst.shift_from(src), 0, d_r);
-                    let band = dst.buf.band_mut(rows).map_err(kernel_err)?;
-                    bands(band, threads, &|b| conv.run_band(inputs, b))?;
-                }
+                hidden_layers(
+                    &net.layers[..n - 1],
+                    &self.x,
+                    &mut self.s,
+                    strips,
+                    m,
+                    threads,
+                )?;
                 if let Some((rows, f0)) = self.raw.new_rows(strips, m)? {
                     let last = if n >= 2 { &self.s[n - 2] } else { &self.x };
                     let inputs = Inputs::new(&last.buf).concat(&self.x.buf).shifted(
@@ -264,10 +251,7 @@ impl NativePlan {
             }
             Ok(())
         };
-        match pool.as_deref() {
-            Some(pool) if threads > 1 => pool.install(frame),
-            _ => frame(),
-        }
+        installed(pool.as_deref(), threads, frame)
     }
 }
 
@@ -313,80 +297,6 @@ pub(super) fn standard_input(
 pub(super) fn planar_slice<'a>(a: &'a CowArray<'_, f32, Ix3>) -> Result<&'a [f32]> {
     a.as_slice()
         .ok_or_else(|| HoloError::Internal("native CNN: standard layout".into()))
-}
-
-/// `work` on `rows` split into `threads` near-equal bands, in parallel on the current rayon pool (the plan's,
-/// installed around the frame; one band on the calling thread for one thread).
-pub(super) fn bands<B: Rows>(rows: B, threads: usize, work: &BandWork<'_, B>) -> Result<()> {
-    split_run(rows, threads, work).map_err(kernel_err)
-}
-
-/// What one thread does to its share of the rows.
-pub(super) type BandWork<'w, B> =
-    dyn Fn(&mut B) -> std::result::Result<(), KernelError> + Sync + 'w;
-
-/// Frame rows owned by one thread's work: a [`RowBand`] of an activation buffer, or [`F32Rows`].
-pub(super) trait Rows: Sized + Send {
-    fn rows(&self) -> Range<usize>;
-    /// Rows `start..y` and `y..end` (`start < y < end`).
-    fn split_at(self, y: usize) -> std::result::Result<(Self, Self), KernelError>;
-}
-
-impl<T: Element + Send> Rows for RowBand<'_, T> {
-    fn rows(&self) -> Range<usize> {
-        RowBand::rows(self)
-    }
-    fn split_at(self, y: usize) -> std::result::Result<(Self, Self), KernelError> {
-        RowBand::split_at(self, y)
-    }
-}
-
-/// Rows `rows` of a raw f32 frame `[H][C][W]`: `data` holds exactly those rows.
-pub(super) struct F32Rows<'a> {
-    pub data: &'a mut [f32],
-    pub rows: Range<usize>,
-}
-
-impl Rows for F32Rows<'_> {
-    fn rows(&self) -> Range<usize> {
-        self.rows.clone()
-    }
-    fn split_at(self, y: usize) -> std::result::Result<(Self, Self), KernelError> {
-        let Range { start, end } = self.rows;
-        let row_len = self.data.len() / (end - start);
-        let (top, bottom) = self.data.split_at_mut((y - start) * row_len);
-        Ok((
-            F32Rows {
-                data: top,
-                rows: start..y,
-            },
-            F32Rows {
-                data: bottom,
-                rows: y..end,
-            },
-        ))
-    }
-}
-
-/// Runs `work` on `band` as `parts` near-equal bands: halves recursively through `rayon::join`, so that
-/// nothing is allocated per layer.
-fn split_run<B: Rows>(
-    mut band: B,
-    parts: usize,
-    work: &BandWork<'_, B>,
-) -> std::result::Result<(), KernelError> {
-    let rows = band.rows();
-    if parts <= 1 || rows.len() < 2 {
-        return work(&mut band);
-    }
-    let left = parts / 2;
-    let mid = (rows.start + rows.len() * left / parts).clamp(rows.start + 1, rows.end - 1);
-    let (top, bottom) = band.split_at(mid)?;
-    let (a, b) = rayon::join(
-        || split_run(top, left, work),
-        || split_run(bottom, parts - left, work),
-    );
-    a.and(b)
 }
 
 /// The kernels' u8 grid of a model tensor's grid.

@@ -27,10 +27,12 @@ use ndarray::{Array3, ArrayView3};
 use tensorholo_kernels::{Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, RowPlanar};
 
 use super::native::{
-    bands, finish_outputs, heads_of, heads_rows, planar_slice, pool, standard_input, u8_grid,
-    BaseInput, F32Rows, Outputs, Planes,
+    finish_outputs, heads_of, heads_rows, planar_slice, pool, standard_input, u8_grid, BaseInput,
+    Outputs, Planes,
 };
-use super::strips::{row_bytes, strip_rows, Strips, Window};
+use super::strips::{
+    bands, hidden_layers, installed, row_bytes, strip_rows, F32Rows, Strips, Window,
+};
 use super::{check_planes, kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnQuant, CnnWeights};
@@ -223,7 +225,7 @@ impl NativeInt8Plan {
         }
         let heads = heads_of(&net.graph);
         let pool = self.pool.clone();
-        let mut frame = || -> Result<()> {
+        let frame = || -> Result<()> {
             for m in 0..strips.steps {
                 // s_0 on both grids, in row bands (they were a tenth of a 2-thread frame when serial).
                 if let Some((rows, f0)) = self.x.new_rows(strips, m)? {
@@ -253,24 +255,14 @@ impl NativeInt8Plan {
                         b.requantize_rows_from(&x.buf, from, first.scale, cat_scale)
                     })?;
                 }
-                for (i, conv) in net.layers.iter().enumerate().take(n - 1) {
-                    let (done, rest) = self.s.split_at_mut(i);
-                    let dst = &mut rest[0];
-                    let Some((rows, _)) = dst.new_rows(strips, m)? else {
-                        continue;
-                    };
-                    let src = if i == 0 { &self.x } else { &done[i - 1] };
-                    let residual = (i + 1 >= 3 && (i + 1) % 2 == 1).then(|| &done[i - 2]);
-                    let mut inputs = Inputs::new(&src.buf);
-                    let mut d_r = 0;
-                    if let Some(r) = residual {
-                        inputs = inputs.residual(&r.buf);
-                        d_r = dst.shift_from(r);
-                    }
-                    let inputs = inputs.shifted(dst.shift_from(src), 0, d_r);
-                    let band = dst.buf.band_mut(rows).map_err(kernel_err)?;
-                    bands(band, threads, &|b| conv.run_band(inputs, b))?;
-                }
+                hidden_layers(
+                    &net.layers[..n - 1],
+                    &self.x,
+                    &mut self.s,
+                    strips,
+                    m,
+                    threads,
+                )?;
                 if let Some((rows, f0)) = self.raw_window.new_rows(strips, m)? {
                     let o = &self.raw_window;
                     let last = &self.s[n - 2];
@@ -314,10 +306,7 @@ impl NativeInt8Plan {
             }
             Ok(())
         };
-        match pool.as_deref() {
-            Some(pool) if threads > 1 => pool.install(frame),
-            _ => frame(),
-        }
+        installed(pool.as_deref(), threads, frame)
     }
 }
 

@@ -22,7 +22,7 @@
 use std::ops::Range;
 
 use tensorholo_kernels::buffer::{padded_width, Element};
-use tensorholo_kernels::RowPlanar;
+use tensorholo_kernels::{Conv3x3F32, Conv3x3U8, Inputs, KernelError, RowBand, RowPlanar};
 
 use super::kernel_err;
 use crate::error::Result;
@@ -170,4 +170,155 @@ impl<T: Element> Window<T> {
     pub fn first_row(&self, strips: Strips, m: usize) -> isize {
         m as isize * strips.rows as isize - self.behind()
     }
+}
+
+/// A planned convolution that writes row bands of a window (f32 or u8 activations).
+pub(super) trait BandConv<T: Element>: Sync {
+    /// Computes the rows of `band` (`Conv3x3F32::run_band`, `Conv3x3U8::run_band`).
+    fn run_band(
+        &self,
+        inputs: Inputs<'_, T>,
+        band: &mut RowBand<'_, T>,
+    ) -> std::result::Result<(), KernelError>;
+}
+
+impl BandConv<f32> for Conv3x3F32 {
+    fn run_band(
+        &self,
+        inputs: Inputs<'_, f32>,
+        band: &mut RowBand<'_, f32>,
+    ) -> std::result::Result<(), KernelError> {
+        Conv3x3F32::run_band(self, inputs, band)
+    }
+}
+
+impl BandConv<u8> for Conv3x3U8 {
+    fn run_band(
+        &self,
+        inputs: Inputs<'_, u8>,
+        band: &mut RowBand<'_, u8>,
+    ) -> std::result::Result<(), KernelError> {
+        Conv3x3U8::run_band(self, inputs, band)
+    }
+}
+
+/// Strip `m` of the hidden layers (every layer but the last): layer `i` reads `s_i` (`x` for `i = 0`, else
+/// `s[i − 1]`), adds `s_{i−1}` where `i + 1` is odd and ≥ 3 (the architecture's residual every two
+/// layers), writes `s_{i+1}` = `s[i]`; each layer's strip in `threads` bands on the current rayon pool.
+pub(super) fn hidden_layers<T: Element + Send + Sync, K: BandConv<T>>(
+    layers: &[K],
+    x: &Window<T>,
+    s: &mut [Window<T>],
+    strips: Strips,
+    m: usize,
+    threads: usize,
+) -> Result<()> {
+    for (i, conv) in layers.iter().enumerate() {
+        let (done, rest) = s.split_at_mut(i);
+        let Some(dst) = rest.first_mut() else {
+            break;
+        };
+        let Some((rows, _)) = dst.new_rows(strips, m)? else {
+            continue;
+        };
+        let src = if i == 0 { x } else { &done[i - 1] };
+        let residual = (i + 1 >= 3 && (i + 1) % 2 == 1).then(|| &done[i - 2]);
+        let mut inputs = Inputs::new(&src.buf);
+        let mut d_r = 0;
+        if let Some(r) = residual {
+            inputs = inputs.residual(&r.buf);
+            d_r = dst.shift_from(r);
+        }
+        let inputs = inputs.shifted(dst.shift_from(src), 0, d_r);
+        let band = dst.buf.band_mut(rows).map_err(kernel_err)?;
+        bands(band, threads, &|b| conv.run_band(inputs, b))?;
+    }
+    Ok(())
+}
+
+/// Runs `frame` with `pool` installed (its bands then run on the pool's threads), or on the calling thread for
+/// one thread.
+pub(super) fn installed<R: Send>(
+    pool: Option<&rayon::ThreadPool>,
+    threads: usize,
+    frame: impl FnOnce() -> R + Send,
+) -> R {
+    match pool {
+        Some(pool) if threads > 1 => pool.install(frame),
+        _ => frame(),
+    }
+}
+
+/// `work` on `rows` split into `threads` near-equal bands, in parallel on the current rayon pool (the plan's,
+/// installed around the frame; one band on the calling thread for one thread).
+pub(super) fn bands<B: Rows>(rows: B, threads: usize, work: &BandWork<'_, B>) -> Result<()> {
+    split_run(rows, threads, work).map_err(kernel_err)
+}
+
+/// What one thread does to its share of the rows.
+pub(super) type BandWork<'w, B> =
+    dyn Fn(&mut B) -> std::result::Result<(), KernelError> + Sync + 'w;
+
+/// Frame rows owned by one thread's work: a [`RowBand`] of an activation buffer, or [`F32Rows`].
+pub(super) trait Rows: Sized + Send {
+    fn rows(&self) -> Range<usize>;
+    /// Rows `start..y` and `y..end` (`start < y < end`).
+    fn split_at(self, y: usize) -> std::result::Result<(Self, Self), KernelError>;
+}
+
+impl<T: Element + Send> Rows for RowBand<'_, T> {
+    fn rows(&self) -> Range<usize> {
+        RowBand::rows(self)
+    }
+    fn split_at(self, y: usize) -> std::result::Result<(Self, Self), KernelError> {
+        RowBand::split_at(self, y)
+    }
+}
+
+/// Rows `rows` of a raw f32 frame `[H][C][W]`: `data` holds exactly those rows.
+pub(super) struct F32Rows<'a> {
+    pub data: &'a mut [f32],
+    pub rows: Range<usize>,
+}
+
+impl Rows for F32Rows<'_> {
+    fn rows(&self) -> Range<usize> {
+        self.rows.clone()
+    }
+    fn split_at(self, y: usize) -> std::result::Result<(Self, Self), KernelError> {
+        let Range { start, end } = self.rows;
+        let row_len = self.data.len() / (end - start);
+        let (top, bottom) = self.data.split_at_mut((y - start) * row_len);
+        Ok((
+            F32Rows {
+                data: top,
+                rows: start..y,
+            },
+            F32Rows {
+                data: bottom,
+                rows: y..end,
+            },
+        ))
+    }
+}
+
+/// Runs `work` on `band` as `parts` near-equal bands: halves recursively through `rayon::join`, so that
+/// nothing is allocated per layer.
+fn split_run<B: Rows>(
+    mut band: B,
+    parts: usize,
+    work: &BandWork<'_, B>,
+) -> std::result::Result<(), KernelError> {
+    let rows = band.rows();
+    if parts <= 1 || rows.len() < 2 {
+        return work(&mut band);
+    }
+    let left = parts / 2;
+    let mid = (rows.start + rows.len() * left / parts).clamp(rows.start + 1, rows.end - 1);
+    let (top, bottom) = band.split_at(mid)?;
+    let (a, b) = rayon::join(
+        || split_run(top, left, work),
+        || split_run(bottom, parts - left, work),
+    );
+    a.and(b)
 }

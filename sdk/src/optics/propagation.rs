@@ -229,6 +229,21 @@ impl SpectralPlan {
     ) -> Result<()> {
         self.check_field(field.len())?;
         self.check_multiplier(multiplier.len())?;
+        self.filter_with(field, scratch, |spectrum| {
+            for (s, m) in spectrum.iter_mut().zip(multiplier) {
+                *s *= m;
+            }
+        });
+        Ok(())
+    }
+
+    /// `field ← F⁻¹{multiply(F{field})}` in place, padded as planned (lengths checked by the caller).
+    fn filter_with(
+        &self,
+        field: &mut [Complex32],
+        scratch: &mut Scratch,
+        multiply: impl FnOnce(&mut [Complex32]),
+    ) {
         let Scratch {
             work,
             spectrum,
@@ -242,14 +257,11 @@ impl SpectralPlan {
             field
         };
         self.fft.forward(spatial, spectrum, fft);
-        for (s, m) in spectrum.iter_mut().zip(multiplier) {
-            *s *= m;
-        }
+        multiply(spectrum);
         self.fft.inverse(spectrum, spatial, fft);
         if self.pad {
             self.crop(work, field);
         }
-        Ok(())
     }
 
     /// [`apply`](Self::apply) with a multiplier stored in its compact even form ([`EvenMultiplier`]: a
@@ -272,35 +284,20 @@ impl SpectralPlan {
                 got: vec![multiplier.rows, multiplier.cols],
             });
         }
-        let Scratch {
-            work,
-            spectrum,
-            fft,
-            ..
-        } = scratch;
-        let spatial: &mut [Complex32] = if self.pad {
-            self.embed(field, work);
-            work
-        } else {
-            field
-        };
-        self.fft.forward(spatial, spectrum, fft);
         let qc = multiplier.quarter_cols();
-        for (r, row) in spectrum.chunks_exact_mut(cols).enumerate() {
-            let q = &multiplier.values[r.min(rows - r) * qc..][..qc];
-            let (low, high) = row.split_at_mut(qc);
-            for (s, m) in low.iter_mut().zip(q) {
-                *s *= m;
+        self.filter_with(field, scratch, |spectrum| {
+            for (r, row) in spectrum.chunks_exact_mut(cols).enumerate() {
+                let q = &multiplier.values[r.min(rows - r) * qc..][..qc];
+                let (low, high) = row.split_at_mut(qc);
+                for (s, m) in low.iter_mut().zip(q) {
+                    *s *= m;
+                }
+                // Column c ≥ qc mirrors column cols − c, from cols − qc down to 1.
+                for (s, m) in high.iter_mut().zip(q[1..=cols - qc].iter().rev()) {
+                    *s *= m;
+                }
             }
-            // Column c ≥ qc mirrors column cols − c, from cols − qc down to 1.
-            for (s, m) in high.iter_mut().zip(q[1..=cols - qc].iter().rev()) {
-                *s *= m;
-            }
-        }
-        self.fft.inverse(spectrum, spatial, fft);
-        if self.pad {
-            self.crop(work, field);
-        }
+        });
         Ok(())
     }
 
