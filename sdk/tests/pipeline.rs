@@ -284,3 +284,30 @@ fn the_shipped_cnn_does_not_output_darkness_for_a_black_frame() {
         Err(HoloError::InvalidData(_))
     ));
 }
+
+#[test]
+fn sessions_without_full_outputs_keep_no_heads_and_the_same_codes() {
+    // What an app's generator runs (`set_full_outputs(false)`): the heads are freed once the colour workers
+    // hold them, so `last_heads` stays `None`, and the SLM codes are those of a full-output session; a
+    // session that is ended keeps its last frame (`into_last_frame`).
+    let (h, w) = (24, 40);
+    for prefilter in [true, false] {
+        let p = pipeline(prefilter);
+        let (mut full, mut lean) = (p.session(h, w).unwrap(), p.session(h, w).unwrap());
+        lean.set_full_outputs(false);
+        for seed in 0..2 {
+            let f = frame(h, w, seed);
+            let a = full.render(&f).unwrap().codes.clone();
+            let b = lean.render(&f).unwrap().codes.clone();
+            assert_eq!(a, b, "pre-filter {prefilter}, frame {seed}");
+            assert!(full.last_heads().is_some());
+            assert!(lean.last_heads().is_none());
+        }
+        let codes = full.output().codes.clone();
+        let (out, heads) = full.into_last_frame();
+        assert_eq!(out.codes, codes);
+        assert_eq!(heads.unwrap().amplitude.dim(), (3, h, w));
+        let (_, none) = lean.into_last_frame();
+        assert!(none.is_none());
+    }
+}
