@@ -199,6 +199,27 @@ fn gaussian_taps() -> [f64; SSIM_WIN] {
     w
 }
 
+/// Output row `i` of the Gaussian filter of `map(x, y)` (vertical pass over input rows `i .. i + 11` into
+/// `vert`, then [`horizontal`] into `out`). Generic over the map, so that each product gets its own loop.
+fn filtered_row<F: Fn(f64, f64) -> f64>(
+    x: ArrayView2<f32>,
+    y: ArrayView2<f32>,
+    i: usize,
+    w: &[f64; SSIM_WIN],
+    vert: &mut [f64],
+    out: &mut [f64],
+    map: F,
+) {
+    vert.fill(0.0);
+    for (k, &wk) in w.iter().enumerate() {
+        let (xr, yr) = (x.row(i + k), y.row(i + k));
+        for (v, (&a, &b)) in vert.iter_mut().zip(xr.iter().zip(yr.iter())) {
+            *v += wk * map(f64::from(a), f64::from(b));
+        }
+    }
+    horizontal(out, vert, w);
+}
+
 /// One row of the horizontal pass: `out[j] = Σ_k w[k]·vert[j + k]`.
 fn horizontal(out: &mut [f64], vert: &[f64], w: &[f64; SSIM_WIN]) {
     for (j, o) in out.iter_mut().enumerate() {
@@ -223,19 +244,13 @@ fn ssim_plane(x: ArrayView2<f32>, y: ArrayView2<f32>, data_range: f64) -> f64 {
     // The five filtered rows: μx, μy, E[x²], E[y²], E[xy].
     let mut rows = [(); 5].map(|_| vec![0.0f64; ow]);
     let mut sum = 0.0f64;
-    let maps: [fn(f64, f64) -> f64; 5] =
-        [|a, _| a, |_, b| b, |a, _| a * a, |_, b| b * b, |a, b| a * b];
     for i in 0..oh {
-        for (row, map) in rows.iter_mut().zip(maps) {
-            vert.fill(0.0);
-            for (k, &wk) in w.iter().enumerate() {
-                let (xr, yr) = (x.row(i + k), y.row(i + k));
-                for (v, (&a, &b)) in vert.iter_mut().zip(xr.iter().zip(yr.iter())) {
-                    *v += wk * map(f64::from(a), f64::from(b));
-                }
-            }
-            horizontal(row, &vert, &w);
-        }
+        let [r0, r1, r2, r3, r4] = &mut rows;
+        filtered_row(x, y, i, &w, &mut vert, r0, |a, _| a);
+        filtered_row(x, y, i, &w, &mut vert, r1, |_, b| b);
+        filtered_row(x, y, i, &w, &mut vert, r2, |a, _| a * a);
+        filtered_row(x, y, i, &w, &mut vert, r3, |_, b| b * b);
+        filtered_row(x, y, i, &w, &mut vert, r4, |a, b| a * b);
         let [ux, uy, uxx, uyy, uxy] = &rows;
         for j in 0..ow {
             let (mx, my, mxx, myy, mxy) = (ux[j], uy[j], uxx[j], uyy[j], uxy[j]);

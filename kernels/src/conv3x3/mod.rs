@@ -79,7 +79,7 @@ impl<'a, T: Element> Inputs<'a, T> {
 
     /// Makes the buffers **windows** of a taller frame, each holding other frame rows (a network run a strip
     /// of rows at a time, every layer a few rows behind the one before): interior row `i` of operand `x`
-    /// holds the frame row of the output's interior row `i + d_x`, for `d = [a, b, residual]` (0 for an
+    /// holds the frame row of the output's interior row `i + d_x`, for `d = [a, b, residual]` (ignored for an
     /// operand that is absent). The buffers' heights are then free: every row a call reads must lie inside
     /// its operand (rows `r − d − 1 ..= r + 1 − d` of the sources, buffer border rows included, and row `r −
     /// d` of the residual, for each output row `r`), which the call checks. The caller keeps the rows that
@@ -93,7 +93,7 @@ impl<'a, T: Element> Inputs<'a, T> {
     /// and the three operands' storage from that origin on: source rows are read at kernel rows `y..=y + 2`
     /// and the residual at `y + 1`, as in a whole-frame buffer. Call after [`check`](Self::check).
     pub(crate) fn kernel_view(&self) -> (usize, [&'a [T]; 3]) {
-        let d = self.shift.unwrap_or([0; 3]);
+        let d = self.shifts();
         let k = d.iter().copied().max().unwrap_or(0).max(0);
         let from = |b: Option<&'a RowPlanar<T>>, d: isize| -> &'a [T] {
             b.map_or(&[][..], |b| {
@@ -112,6 +112,18 @@ impl<'a, T: Element> Inputs<'a, T> {
         )
     }
 
+    /// The row offsets `[a, b, residual]` that apply: 0 without [`shifted`](Self::shifted), and 0 for an
+    /// absent operand whatever was given (only the operands a call reads are checked, so only theirs may move
+    /// the kernel's row origin).
+    fn shifts(&self) -> [isize; 3] {
+        let d = self.shift.unwrap_or([0; 3]);
+        [
+            d[0],
+            self.b.map_or(0, |_| d[1]),
+            self.residual.map_or(0, |_| d[2]),
+        ]
+    }
+
     /// Checks the shapes against a plan of `c_in → c_out` and an output of `h × w`, and the row band; with
     /// [`shifted`](Self::shifted) operands, that every row the band reads lies inside its operand.
     pub(crate) fn check(
@@ -123,7 +135,7 @@ impl<'a, T: Element> Inputs<'a, T> {
         rows: &Range<usize>,
     ) -> Result<(), KernelError> {
         let d = match self.shift {
-            Some(d) => d,
+            Some(_) => self.shifts(),
             None => {
                 // Whole frames: every operand has the output's height and width.
                 let operands = [("source a", Some(self.a)), ("source b", self.b)];

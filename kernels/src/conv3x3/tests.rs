@@ -1316,3 +1316,61 @@ fn u8_shifted_windows_equal_the_whole_frame() {
         }
     }
 }
+
+#[test]
+fn shifts_of_absent_operands_are_ignored() {
+    // A plan that reads only `a`: whatever offsets are given for the absent concat and residual, the call
+    // is checked and computed on `a`'s offset alone (they must not move the kernel's row origin past the
+    // band, which would read outside `a`), f32 and u8 alike.
+    let (ca, cout, h, w) = (8, 8, 9, 21);
+    let mut rng = Rng::new(4);
+    let src = rng.vec(ca * h * w);
+    let a = RowPlanar::from_planar(&src, ca, h, w, None).unwrap();
+    let (wt, bias) = (rng.vec(cout * ca * 9), rng.vec(cout));
+    let q = Conv3x3U8::new(
+        &Conv3x3U8Spec {
+            weights: &(0..cout * ca * 9)
+                .map(|i| (i % 7) as i8 - 3)
+                .collect::<Vec<_>>(),
+            weight_scales: &vec![0.01; cout],
+            bias: &bias,
+            c_in_a: ca,
+            c_in_b: 0,
+            c_out: cout,
+            input_scale: 0.02,
+            input_zero_point_a: 9,
+            input_zero_point_b: 9,
+            relu: true,
+            residual: None,
+            output: Some(QuantU8 {
+                scale: 0.05,
+                zero_point: 3,
+            }),
+        },
+        Isa::active().unwrap(),
+    )
+    .unwrap();
+    let qa = RowPlanar::quantize_from_planar(&src, ca, h, w, 0.02, 9).unwrap();
+    for row in f32_rows() {
+        let plan = Conv3x3F32::with_kernel(&wt, &bias, ca, cout, true, row).unwrap();
+        let (mut want, mut got) = (
+            RowPlanar::new(cout, h, w).unwrap(),
+            RowPlanar::new(cout, h, w).unwrap(),
+        );
+        plan.run(Inputs::new(&a), &mut want, 0..3).unwrap();
+        plan.run(Inputs::new(&a).shifted(0, 50, -50), &mut got, 0..3)
+            .unwrap();
+        assert_eq!(got, want, "{row}");
+    }
+    let (mut want, mut got) = (
+        RowPlanar::new_quantized(cout, h, w, 3).unwrap(),
+        RowPlanar::new_quantized(cout, h, w, 3).unwrap(),
+    );
+    q.run(Inputs::new(&qa), &mut want, 0..3).unwrap();
+    q.run(Inputs::new(&qa).shifted(0, 50, 50), &mut got, 0..3)
+        .unwrap();
+    assert_eq!(got, want);
+    assert!(q
+        .run(Inputs::new(&qa).shifted(1, 0, 0), &mut got, 0..3)
+        .is_err());
+}

@@ -12,7 +12,8 @@
 //! ```
 //!
 //! The frame runs in strips of rows, each layer a row behind the one before, every activation in a window
-//! of a few rows ([`super::strips`]): a plan's activations take at most about 32 MB whatever the frame size.
+//! of a few rows ([`super::strips`]): a plan's activations take a budget of 32 MB whatever the frame size,
+//! or what the minimum strip needs where that is more (30 layers at 1080p: 66 MB).
 //!
 //! Threads: each layer's strip is split into one band per thread (halved recursively with
 //! [`tensorholo_kernels::RowBand::split_at`] under `rayon::join`); the bands of a layer run in parallel on the plan's own rayon
@@ -31,7 +32,7 @@ use tensorholo_kernels::{
     depthwise, fake_quantize, tanh_heads, Conv3x3F32, Inputs, Isa, QuantU8, RowPlanar,
 };
 
-use super::strips::{bands, hidden_layers, installed, row_bytes, strip_rows, Strips, Window};
+use super::strips::{bands, hidden_layers, installed, row_bytes, Place, Strips, Window};
 use super::{check_planes, kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnWeights, QuantGrid};
@@ -70,7 +71,7 @@ pub(crate) struct NativePlan {
 
 impl NativePlan {
     /// Packs `graph`'s layers for the best kernels of `isa` and allocates the activation windows of
-    /// `height × width` frames (strips of [`strip_rows`]), run on `threads` threads (≥ 1).
+    /// `height × width` frames (strips of `strips::strip_rows`), run on `threads` threads (≥ 1).
     ///
     /// Errors: [`HoloError::InvalidData`] for non-finite weights; [`HoloError::InvalidParameter`] for 0
     /// threads; [`HoloError::Internal`] for an int8 graph (`NativeInt8Plan` runs those); [`HoloError::ModelRun`] for an ISA this CPU lacks, a size the kernels refuse or a thread
@@ -85,8 +86,8 @@ impl NativePlan {
         Self::with_strip(graph, height, width, threads, isa, None)
     }
 
-    /// [`new`](Self::new) with strips of `strip` rows (`None`: [`strip_rows`]; more than `H + N` rows: one
-    /// strip). Errors: as `new`.
+    /// [`new`](Self::new) with strips of `strip` rows (`None`: `strips::strip_rows`; more than `H + N` rows:
+    /// one strip). Errors: as `new`.
     pub(crate) fn with_strip(
         graph: Arc<CnnWeights>,
         height: usize,
@@ -138,12 +139,11 @@ impl NativePlan {
         );
         let per_row = xb + (n - 1) * hb + ob;
         let fixed = (n + 3) * xb + 4 * (n - 1) * hb + 2 * ob;
-        let rows = strip.unwrap_or_else(|| strip_rows(height, n, per_row, fixed, threads));
-        let strips = Strips::new(rows.min(height + n), height, n);
-        let window = |ch, lag, carry| -> Result<Window<f32>> {
-            let buf = RowPlanar::new(ch, Window::<f32>::height(strips, carry), width)
-                .map_err(kernel_err)?;
-            Ok(Window::new(buf, lag, carry))
+        let strips = Strips::for_plan(strip, height, n, [per_row, fixed], threads);
+        let window = |ch, lag, carry| {
+            Window::new(Place::new(lag, carry), strips, |rows| {
+                RowPlanar::new(ch, rows, width)
+            })
         };
         Ok(Self {
             x: window(c, 0, n + 1)?,

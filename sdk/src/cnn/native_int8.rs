@@ -30,9 +30,7 @@ use super::native::{
     finish_outputs, heads_of, heads_rows, planar_slice, pool, standard_input, u8_grid, BaseInput,
     Outputs, Planes,
 };
-use super::strips::{
-    bands, hidden_layers, installed, row_bytes, strip_rows, F32Rows, Strips, Window,
-};
+use super::strips::{bands, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window};
 use super::{check_planes, kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnQuant, CnnWeights};
@@ -73,8 +71,8 @@ pub(crate) struct NativeInt8Plan {
     /// The last layer's raw output of one strip, `[S][C_out][W]` (row-major, so that row bands are
     /// disjoint slices).
     raw: Vec<f32>,
-    /// Frame-row bookkeeping of `raw` (lag `N`, no carry; its buffer is a placeholder of one row).
-    raw_window: Window<u8>,
+    /// Where `raw`'s rows sit in the frame (lag `N`, no carry).
+    raw_place: Place,
     /// Pre-filter: one channel of the input as the file's base filter reads it (rounded to the input grid),
     /// `H·W` values (grown on the first run).
     base_plane: Vec<f32>,
@@ -83,7 +81,7 @@ pub(crate) struct NativeInt8Plan {
 
 impl NativeInt8Plan {
     /// Packs `graph`'s int8 layers for the best int8 kernels of `isa` and allocates the activation windows
-    /// of `height × width` frames (strips of [`strip_rows`]), run on `threads` threads (≥ 1).
+    /// of `height × width` frames (strips of `strips::strip_rows`), run on `threads` threads (≥ 1).
     ///
     /// Errors: [`HoloError::InvalidParameter`] for 0 threads; [`HoloError::InvalidData`] for non-finite
     /// scales or biases; [`HoloError::ModelRun`] for a graph without int8 grids, an ISA this CPU lacks, a
@@ -98,7 +96,7 @@ impl NativeInt8Plan {
         Self::with_strip(graph, height, width, threads, isa, None)
     }
 
-    /// [`new`](Self::new) with strips of `strip` rows (`None`: [`strip_rows`]). Errors: as `new`.
+    /// [`new`](Self::new) with strips of `strip` rows (`None`: `strips::strip_rows`). Errors: as `new`.
     pub(crate) fn with_strip(
         graph: Arc<CnnWeights>,
         height: usize,
@@ -153,12 +151,11 @@ impl NativeInt8Plan {
         let ob = c_out * width * std::mem::size_of::<f32>();
         let per_row = 2 * xb + (n - 1) * hb + ob;
         let fixed = (n + 7) * xb + 4 * (n - 1) * hb;
-        let rows = strip.unwrap_or_else(|| strip_rows(height, n, per_row, fixed, threads));
-        let strips = Strips::new(rows.min(height + n), height, n);
-        let window = |ch, zp, lag, carry| -> Result<Window<u8>> {
-            let rows = Window::<u8>::height(strips, carry);
-            let buf = RowPlanar::new_quantized(ch, rows, width, zp).map_err(kernel_err)?;
-            Ok(Window::new(buf, lag, carry))
+        let strips = Strips::for_plan(strip, height, n, [per_row, fixed], threads);
+        let window = |ch, zp, lag, carry| {
+            Window::new(Place::new(lag, carry), strips, |rows| {
+                RowPlanar::new_quantized(ch, rows, width, zp)
+            })
         };
         Ok(Self {
             x: window(c, first.zero_point, 0, 2)?,
@@ -167,11 +164,7 @@ impl NativeInt8Plan {
                 .map(|k| window(hidden, quant.layers[k - 1].output.zero_point, k, 2))
                 .collect::<Result<_>>()?,
             raw: vec![0.0; strips.rows * c_out * width],
-            raw_window: Window::new(
-                RowPlanar::new_quantized(1, strips.rows, 1, 0).map_err(kernel_err)?,
-                n,
-                0,
-            ),
+            raw_place: Place::new(n, 0),
             strips,
             base_plane: Vec::new(),
             depthwise_scratch: Vec::new(),
@@ -247,7 +240,7 @@ impl NativeInt8Plan {
                 }
                 if let Some((rows, f0)) = self.x_cat.new_rows(strips, m)? {
                     let (x, y0) = (&self.x, rows.start);
-                    let x_first = x.first_row(strips, m);
+                    let x_first = x.place.first_row(strips, m);
                     let band = self.x_cat.buf.band_mut(rows).map_err(kernel_err)?;
                     bands(band, threads, &|b| {
                         let f = (f0 + b.rows().start - y0) as isize;
@@ -263,12 +256,12 @@ impl NativeInt8Plan {
                     m,
                     threads,
                 )?;
-                if let Some((rows, f0)) = self.raw_window.new_rows(strips, m)? {
-                    let o = &self.raw_window;
+                if let Some((rows, f0)) = self.raw_place.new_rows(strips, m).valid {
+                    let o = self.raw_place;
                     let last = &self.s[n - 2];
                     let inputs = Inputs::new(&last.buf).concat(&self.x_cat.buf).shifted(
-                        o.shift_from(last),
-                        o.shift_from(&self.x_cat),
+                        o.shift_from(last.place),
+                        o.shift_from(self.x_cat.place),
                         0,
                     );
                     let conv = &net.layers[n - 1];
@@ -338,7 +331,7 @@ impl CnnPlan for NativeInt8Plan {
             x_cat: self.x_cat.clone(),
             s: self.s.clone(),
             raw: self.raw.clone(),
-            raw_window: self.raw_window.clone(),
+            raw_place: self.raw_place,
             base_plane: Vec::new(),
             depthwise_scratch: Vec::new(),
         })

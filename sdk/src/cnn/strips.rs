@@ -16,7 +16,7 @@
 //! ([`Window::start_frame`]) and the new rows past the frame's edges ([`Window::new_rows`]).
 //!
 //! Memory: `Σ (carry + S + 2)·row` per plan instead of three whole frames: at 1080p, the 8-layer network's
-//! 24-channel f32 activations take 0.19 MB a row, so 623 MB of whole-frame buffers become 26 MB (strips of
+//! 24-channel f32 activations take 0.19 MB a row, so 623 MB of whole-frame buffers become 29 MB (strips of
 //! 16 rows).
 
 use std::ops::Range;
@@ -51,12 +51,25 @@ pub(super) struct Strips {
 
 impl Strips {
     pub fn new(rows: usize, height: usize, lag: usize) -> Self {
-        let rows = rows.max(1);
+        let rows = rows.max(1).min(height + lag);
         Self {
             rows,
             height,
             steps: (height + lag).div_ceil(rows),
         }
+    }
+
+    /// The strips of a plan of `layers` layers for frames of `height` rows: `strip` rows when given, else
+    /// [`strip_rows`] for windows of `per_row` bytes per strip row and `fixed` bytes besides.
+    pub fn for_plan(
+        strip: Option<usize>,
+        height: usize,
+        layers: usize,
+        [per_row, fixed]: [usize; 2],
+        threads: usize,
+    ) -> Self {
+        let rows = strip.unwrap_or_else(|| strip_rows(height, layers, per_row, fixed, threads));
+        Self::new(rows, height, layers)
     }
 }
 
@@ -91,84 +104,115 @@ pub(super) fn strip_rows(
         .max(1)
 }
 
-/// One activation of a strip-mined network: a [`RowPlanar`] of `carry + S` interior rows.
-#[derive(Clone, Debug)]
-pub(super) struct Window<T: Element> {
-    pub buf: RowPlanar<T>,
-    /// Layers between the network input and this activation: frame rows it is behind the strip.
+/// Where an activation's rows sit in the frame: `lag` rows behind the strip (the layers between the network
+/// input and it), with `carry` rows of the previous strip kept above its new rows.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Place {
     lag: usize,
-    /// Rows of the previous strip kept at the top.
     carry: usize,
 }
 
-impl<T: Element> Window<T> {
-    /// A window holding `buf` (whose height must be `carry + strip rows`).
-    pub fn new(buf: RowPlanar<T>, lag: usize, carry: usize) -> Self {
-        Self { buf, lag, carry }
-    }
+/// The new rows of one strip in a window ([`Place::new_rows`]): all of them (interior rows `carry .. carry +
+/// S`), and those inside the frame with the frame row of the first (`None` when this activation has not
+/// reached the frame yet or has passed it).
+pub(super) struct NewRows {
+    pub all: Range<usize>,
+    pub valid: Option<(Range<usize>, usize)>,
+}
 
-    /// Interior rows of a window of `carry` carried rows for strips of `strips.rows` rows.
-    pub fn height(strips: Strips, carry: usize) -> usize {
-        carry + strips.rows
+impl Place {
+    pub fn new(lag: usize, carry: usize) -> Self {
+        Self { lag, carry }
     }
 
     /// `lag + carry`: interior row 0 holds frame row `mS − (lag + carry)` at strip `m`.
-    fn behind(&self) -> isize {
+    fn behind(self) -> isize {
         (self.lag + self.carry) as isize
     }
 
-    /// The row offset of `operand` from this window (the output), for [`tensorholo_kernels::Inputs::shifted`]:
-    /// interior row `i` of `operand` holds this window's frame row of interior row `i + d`.
-    pub fn shift_from<U: Element>(&self, operand: &Window<U>) -> isize {
+    /// The row offset of `operand` from this activation (the output), for
+    /// [`tensorholo_kernels::Inputs::shifted`]: interior row `i` of `operand` holds this activation's frame
+    /// row of interior row `i + d`.
+    pub fn shift_from(self, operand: Place) -> isize {
         self.behind() - operand.behind()
+    }
+
+    /// The frame row held by interior row 0 at strip `m` (may be negative: above the frame).
+    pub fn first_row(self, strips: Strips, m: usize) -> isize {
+        m as isize * strips.rows as isize - self.behind()
+    }
+
+    /// The new rows of strip `m`: frame rows `mS − lag .. (m+1)S − lag`, at interior rows `carry ..`.
+    pub fn new_rows(self, strips: Strips, m: usize) -> NewRows {
+        let s = strips.rows as isize;
+        let first = m as isize * s - self.lag as isize;
+        let lo = first.max(0);
+        let hi = (first + s).min(strips.height as isize);
+        let to_row = |f: isize| (f - first) as usize + self.carry;
+        NewRows {
+            all: self.carry..self.carry + strips.rows,
+            valid: (lo < hi).then(|| (to_row(lo)..to_row(hi), lo as usize)),
+        }
+    }
+}
+
+/// One activation of a strip-mined network: a [`RowPlanar`] of `carry + S` interior rows at its [`Place`].
+#[derive(Clone, Debug)]
+pub(super) struct Window<T: Element> {
+    pub buf: RowPlanar<T>,
+    pub place: Place,
+}
+
+impl<T: Element> Window<T> {
+    /// A window at `place` for `strips`, its buffer made by `buffer(interior rows)`.
+    pub fn new(
+        place: Place,
+        strips: Strips,
+        buffer: impl FnOnce(usize) -> std::result::Result<RowPlanar<T>, KernelError>,
+    ) -> Result<Self> {
+        let buf = buffer(place.carry + strips.rows).map_err(kernel_err)?;
+        Ok(Self { buf, place })
+    }
+
+    /// [`Place::shift_from`] of two windows.
+    pub fn shift_from<U: Element>(&self, operand: &Window<U>) -> isize {
+        self.place.shift_from(operand.place)
     }
 
     /// At the start of a frame: the carried rows stand for frame rows above the frame, so they hold the
     /// border value.
     pub fn start_frame(&mut self) -> Result<()> {
         self.buf
-            .fill_rows_with_border(0..self.carry)
+            .fill_rows_with_border(0..self.place.carry)
             .map_err(kernel_err)
     }
 
-    /// The new rows of strip `m` (interior rows `carry .. carry + S`): those that stand for frame rows
-    /// outside the frame are set to the border value; returns the interior rows inside the frame, and the
-    /// frame row of the first (`None` when the strip has none: this layer has not reached the frame yet or
-    /// has passed it).
+    /// The new rows of strip `m` ([`Place::new_rows`]): those that stand for frame rows outside the frame
+    /// are set to the border value (the next layer reads them as zero padding); returns the rows inside the
+    /// frame and the frame row of the first.
     pub fn new_rows(&mut self, strips: Strips, m: usize) -> Result<Option<(Range<usize>, usize)>> {
-        let s = strips.rows as isize;
-        let first = m as isize * s - self.lag as isize;
-        let lo = first.max(0);
-        let hi = (first + s).min(strips.height as isize);
-        let to_row = |f: isize| (f - first) as usize + self.carry;
-        let new = self.carry..self.carry + strips.rows;
-        if lo >= hi {
-            self.buf.fill_rows_with_border(new).map_err(kernel_err)?;
-            return Ok(None);
+        let NewRows { all, valid } = self.place.new_rows(strips, m);
+        let (a, b) = match &valid {
+            Some((rows, _)) => (rows.start, rows.end),
+            None => (all.end, all.end),
+        };
+        for outside in [all.start..a, b..all.end] {
+            self.buf
+                .fill_rows_with_border(outside)
+                .map_err(kernel_err)?;
         }
-        let (a, b) = (to_row(lo), to_row(hi));
-        self.buf
-            .fill_rows_with_border(new.start..a)
-            .map_err(kernel_err)?;
-        self.buf
-            .fill_rows_with_border(b..new.end)
-            .map_err(kernel_err)?;
-        Ok(Some((a..b, lo as usize)))
+        Ok(valid)
     }
 
-    /// After strip `m`: moves the last `carry` rows to the top for the next strip.
+    /// After a strip: moves the last `carry` rows to the top for the next strip.
     pub fn advance(&mut self, strips: Strips) -> Result<()> {
-        if self.carry == 0 {
+        let carry = self.place.carry;
+        if carry == 0 {
             return Ok(());
         }
         self.buf
-            .copy_rows(strips.rows..strips.rows + self.carry, 0)
+            .copy_rows(strips.rows..strips.rows + carry, 0)
             .map_err(kernel_err)
-    }
-
-    /// The frame row held by interior row 0 at strip `m` (may be negative: above the frame).
-    pub fn first_row(&self, strips: Strips, m: usize) -> isize {
-        m as isize * strips.rows as isize - self.behind()
     }
 }
 

@@ -99,12 +99,22 @@ pub fn pack_ldi(ldi: &LayeredDepthImage, mut out: ArrayViewMut3<f32>) -> Result<
     Ok(())
 }
 
+/// The pre-filter input channels (format 2) of colour `c` (0 = R, 1 = G, 2 = B): `Re H` in channel `c`,
+/// `Im H` in channel `3 + c`. The one place that says so.
+const fn prefilter_channels(c: usize) -> [usize; 2] {
+    [c, 3 + c]
+}
+
 /// The pre-filter input (format 2) as six channel planes, without copying them: `[Re H_R, Re H_G, Re H_B,
-/// Im H_R, Im H_G, Im H_B]` from the three colours' `(Re, Im)` planes (`H·W` values each, row-major): the
+/// Im H_R, Im H_G, Im H_B]` from the three colours' `(Re, Im)` planes (`H·W` values each, row-major), the
 /// channel order [`pack_prefilter_colour`] writes.
 pub fn prefilter_planes<'a>(colours: [(&'a [f32], &'a [f32]); 3]) -> [&'a [f32]; 6] {
-    let [(r0, i0), (r1, i1), (r2, i2)] = colours;
-    [r0, r1, r2, i0, i1, i2]
+    let mut planes: [&[f32]; 6] = [&[]; 6];
+    for (c, (re, im)) in colours.into_iter().enumerate() {
+        let [a, b] = prefilter_channels(c);
+        (planes[a], planes[b]) = (re, im);
+    }
+    planes
 }
 
 /// Writes colour `c` (0 = R, 1 = G, 2 = B) of the offset hologram `H` into the pre-filter input `out`
@@ -132,7 +142,8 @@ pub fn pack_prefilter_colour(
             got: vec![ch, re.len(), im.len()],
         });
     }
-    for (plane, src) in [(c, re), (3 + c, im)] {
+    let [a, b] = prefilter_channels(c);
+    for (plane, src) in [(a, re), (b, im)] {
         let mut lane = out.index_axis_mut(Axis(0), plane);
         match lane.as_slice_mut() {
             Some(dst) => dst.copy_from_slice(src),
@@ -202,5 +213,21 @@ mod tests {
         assert_eq!(out.iter().filter(|v| **v != 0.0).count(), 4);
         assert!(pack_prefilter_colour(3, &[0.0; 2], &[0.0; 2], out.view_mut()).is_err());
         assert!(pack_prefilter_colour(0, &[0.0; 3], &[0.0; 2], out.view_mut()).is_err());
+        // The planes in place follow the same order as the packed array.
+        let (re, im): (Vec<Vec<f32>>, Vec<Vec<f32>>) = (0..3)
+            .map(|c| (vec![c as f32; 2], vec![10.0 + c as f32; 2]))
+            .unzip();
+        let mut packed = Array3::<f32>::zeros((6, 1, 2));
+        for c in 0..3 {
+            pack_prefilter_colour(c, &re[c], &im[c], packed.view_mut()).unwrap();
+        }
+        let planes = prefilter_planes([0, 1, 2].map(|c| (&re[c][..], &im[c][..])));
+        for (ch, plane) in planes.iter().enumerate() {
+            assert_eq!(
+                packed.slice(s![ch, 0, ..]).to_vec(),
+                plane.to_vec(),
+                "channel {ch}"
+            );
+        }
     }
 }

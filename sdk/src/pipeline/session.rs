@@ -289,7 +289,7 @@ impl HologramSession {
     /// Ends the session and keeps the last frame: its output and the hologram CNN heads (`None` before the
     /// first frame). Every other buffer (CNN windows, the colour workers' fields, transfer functions) is freed
     /// first, so that work on the frame afterwards (previews, reconstructions, evaluation) does not stack on
-    /// top of the session's memory: at 1080p the session holds about 0.5 GB.
+    /// top of the session's memory: at 1080p the session holds about 0.35 GB (docs/BENCHMARKS.md, "Memory").
     pub fn into_last_frame(self) -> (SlmFrame, Option<Heads>) {
         let Self {
             output, last_heads, ..
