@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Usage: scripts/check-mobile.sh [target…]
 #
-# `cargo check` of the app library (tensorholo-ffi: the core, tract, the bindings) for the phone targets:
+# `cargo check` of the app library (tensorholo-ffi: the core, tract, the bindings; and again without tract) for
+# the phone targets:
 # aarch64-apple-ios, aarch64-linux-android, x86_64-linux-android, armv7-linux-androideabi (default: all four).
 # It proves the Rust compiles for them; it builds no library (no Xcode or NDK here: ios/build-xcframework.sh
 # and android/build-aar.sh do that on a Mac / with Android Studio).
@@ -20,4 +21,6 @@ mobile_cc_env "${targets[@]}"
 args=()
 for t in "${targets[@]}"; do args+=(--target "$t"); done
 cargo check --locked -p tensorholo-ffi "${args[@]}"
-echo "check-mobile: tensorholo-ffi checks for ${targets[*]}"
+# The small app library: no tract (README "Size on a phone"), the native engine and the GPU only.
+cargo check --locked -p tensorholo-ffi --no-default-features --features embedded-models,gpu "${args[@]}"
+echo "check-mobile: tensorholo-ffi checks for ${targets[*]}, with and without tract"

@@ -1,14 +1,20 @@
 #!/usr/bin/env bash
-# Usage: scripts/mobile-sizes.sh [TARGET…]
+# Usage: scripts/mobile-sizes.sh [--static] [TARGET…]
 #
-# Builds the app library (tensorholo-ffi) with the `mobile` profile (LTO, one codegen unit, stripped) and
-# prints the sizes of README "Size on a phone" as a Markdown table:
+# Builds the app library (tensorholo-ffi) with the `mobile` profile (LTO, one codegen unit, stripped; the GPU
+# stack optimised for size, Cargo.toml) and prints the sizes of README "Size on a phone" as a Markdown table:
 #  - aarch64-unknown-linux-gnu: the linked shared library (libtensorholo_ffi.so, the closest thing to what an
-#    Android or iOS app links that can be linked here) with the default models (8 layers + pre-filters), with
-#    no models, with all models, and with the core's `research` feature; and its static library;
-#  - the other TARGETs (default: aarch64-apple-ios aarch64-linux-android): the static library only (no Xcode
-#    or NDK linker here; scripts/mobile-cc.sh has the compile-only C settings).
-# Slow: every target is a full release build of tract with LTO (about 10-20 min each on two cores).
+#    Android or iOS app links that can be linked here: the same arm64 code as aarch64-linux-android), for
+#    `gpu` on/off × `tract` on/off with the default models, and with every model. Linked with 16 KB pages
+#    (`-z max-page-size=16384`, the alignment Android 15's 16 KB-page devices need and the NDK's default;
+#    GNU ld's own 64 KB default pads the file by up to 64 KB more);
+#  - with --static, the TARGETs (default: aarch64-apple-ios aarch64-linux-android x86_64-linux-android
+#    armv7-linux-androideabi): the static library with and without tract (no Xcode or NDK linker here;
+#    scripts/mobile-cc.sh has the compile-only C settings). A static library is what the app's linker reads,
+#    not what it ships.
+# Also prints what each crate adds to the default linked library (symbol sizes by crate, before stripping).
+# Builds in target/mobile-sizes (its own flags would rebuild the main target dir). Slow: every row is a full
+# LTO build (2-4 min without tract, 10-20 min with it, on two cores).
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 # shellcheck source=bindings/tests/lib.sh
@@ -16,30 +22,69 @@ root="$(cd "$(dirname "$0")/.." && pwd)"
 # shellcheck source=scripts/mobile-cc.sh
 . "$root/scripts/mobile-cc.sh"
 cd "$root"
+static=0
+if [ "${1:-}" = "--static" ]; then
+  static=1
+  shift
+fi
 targets=("$@")
-[ ${#targets[@]} -gt 0 ] || targets=(aarch64-apple-ios aarch64-linux-android)
-target_dir="${CARGO_TARGET_DIR:-target}"
-mb() { python3 -c "import os,sys; print(f'{os.path.getsize(sys.argv[1]) / 1e6:.1f} MB')" "$1"; }
+[ ${#targets[@]} -gt 0 ] || targets=(aarch64-apple-ios aarch64-linux-android x86_64-linux-android armv7-linux-androideabi)
+export CARGO_TARGET_DIR="$root/target/mobile-sizes"
+export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUSTFLAGS="-C link-arg=-Wl,-z,max-page-size=16384"
+mb() { python3 -c "import os,sys; print(f'{os.path.getsize(sys.argv[1]) / 1e6:.2f} MB')" "$1"; }
 
-echo "| target | what | features | size |"
-echo "|---|---|---|---:|"
+echo "| target | library | gpu | tract | embedded CNNs | size |"
+echo "|---|---|---|---|---|---:|"
 linux=aarch64-unknown-linux-gnu
 rustup target list --installed | grep -qx "$linux" || rustup target add "$linux" >&2
-for variant in "default:" "no models:--no-default-features" "all models:--features models-15,models-30" \
-  "default + research:--features tensorholo/research"; do
-  name="${variant%%:*}"
-  flags="${variant#*:}"
+out="$CARGO_TARGET_DIR/$linux/mobile"
+for variant in "on:on:default:" "on:off:default:--no-default-features --features embedded-models,gpu" \
+  "off:on:default:--no-default-features --features embedded-models,tract" \
+  "off:off:default:--no-default-features --features embedded-models" \
+  "on:off:all:--no-default-features --features gpu,models-15,models-30" \
+  "on:on:all:--features models-15,models-30"; do
+  IFS=: read -r gpu tract models flags <<<"$variant"
   # shellcheck disable=SC2086 # flags are words
   cargo build --locked -q -p tensorholo-ffi --lib --profile mobile --target "$linux" $flags >&2
-  out="$target_dir/$linux/mobile"
-  echo "| $linux | \`libtensorholo_ffi.so\` (linked) | $name | $(mb "$out/libtensorholo_ffi.so") |"
+  echo "| $linux | \`libtensorholo_ffi.so\` (linked) | $gpu | $tract | $models | $(mb "$out/libtensorholo_ffi.so") |"
+  if [ "$gpu:$tract:$models" = "on:on:default" ]; then
+    # What each crate adds: one unstripped link of the default library, symbol sizes summed by crate.
+    CARGO_PROFILE_MOBILE_STRIP=none cargo build --locked -q -p tensorholo-ffi --lib --profile mobile \
+      --target "$linux" >&2
+    cp "$out/libtensorholo_ffi.so" "$CARGO_TARGET_DIR/unstripped.so"
+  fi
 done
-# Static libraries alone (`cargo rustc --crate-type staticlib`): built beside the rlib and cdylib, rustc keeps
-# one object per crate without cross-crate LTO (202 MB here); alone, the crate graph is one LTO'd object.
-staticlib() {
-  cargo rustc --locked -q -p tensorholo-ffi --lib --crate-type staticlib --profile mobile --target "$1" >&2
-  echo "| $1 | \`libtensorholo_ffi.a\` | default | $(mb "$target_dir/$1/mobile/libtensorholo_ffi.a") |"
-}
-staticlib "$linux"
-mobile_cc_env "${targets[@]}"
-for t in "${targets[@]}"; do staticlib "$t"; done
+if [ "$static" = 1 ]; then
+  # Static libraries alone (`cargo rustc --crate-type staticlib`): built beside the rlib and cdylib, rustc
+  # keeps one object per crate without cross-crate LTO; alone, the crate graph is one LTO'd object.
+  mobile_cc_env "${targets[@]}"
+  for t in "${targets[@]}"; do
+    for tract in on off; do
+      flags=()
+      [ "$tract" = on ] || flags=(--no-default-features --features embedded-models,gpu)
+      cargo rustc --locked -q -p tensorholo-ffi --lib --crate-type staticlib --profile mobile --target "$t" \
+        "${flags[@]}" >&2
+      echo "| $t | \`libtensorholo_ffi.a\` | on | $tract | default | $(mb "$CARGO_TARGET_DIR/$t/mobile/libtensorholo_ffi.a") |"
+    done
+  done
+fi
+echo
+echo "What each crate adds to the default linked library (symbols before stripping, by the crate of the"
+echo "demangled name: generic code instantiated elsewhere counts under its defining crate):"
+echo
+aarch64-linux-gnu-nm -C --size-sort -S "$CARGO_TARGET_DIR/unstripped.so" | python3 -c '
+import collections, re, sys
+sizes = collections.Counter()
+for line in sys.stdin:
+    parts = line.split(" ", 3)
+    if len(parts) < 4:
+        continue
+    name = parts[3].lstrip("<&*( ")
+    m = re.match(r"([A-Za-z_][A-Za-z0-9_]*)::", name)
+    sizes[m.group(1) if m else "(other)"] += int(parts[1], 16)
+total = sum(sizes.values())
+print("| crate | MB |\n|---|---:|")
+for crate, size in sizes.most_common(15):
+    print(f"| {crate} | {size / 1e6:.2f} |")
+print(f"| all symbols | {total / 1e6:.2f} |")
+'

@@ -1,5 +1,7 @@
 //! The CNN loader and runner (`tensorholo::model`, docs/CONVENTIONS.md §7) on the tiny random-init fixtures
 //! written by `fixtures/models/make_models.py` with the training package's own ONNX export.
+// Some helpers and imports serve only the tests that compare with tract (cargo feature `tract`).
+#![cfg_attr(not(feature = "tract"), allow(unused_imports, dead_code))]
 
 use std::path::{Path, PathBuf};
 
@@ -41,6 +43,7 @@ fn prefilter() -> HologramModel {
 }
 
 /// Runs `model` on `io_{prefix}_{HxW}_input.npy` and compares both heads with the reference outputs.
+#[cfg(feature = "tract")]
 fn compare(
     model: &HologramModel,
     prefix: &str,
@@ -59,6 +62,7 @@ fn compare(
 }
 
 /// [`compare`] with a plan in `layout`.
+#[cfg(feature = "tract")]
 fn compare_in(
     model: &HologramModel,
     layout: CnnLayout,
@@ -98,6 +102,7 @@ fn compare_in(
 }
 
 #[test]
+#[cfg(feature = "tract")]
 fn f32_hologram_cnn_matches_pytorch_at_two_resolutions_from_one_file() {
     let m = hologram("holo8_rgbd.onnx");
     assert_eq!(m.kind(), ModelKind::Hologram);
@@ -115,6 +120,7 @@ fn f32_hologram_cnn_matches_pytorch_at_two_resolutions_from_one_file() {
 }
 
 #[test]
+#[cfg(feature = "tract")]
 fn f32_prefilter_cnn_matches_pytorch() {
     let m = prefilter();
     assert_eq!(m.input_channels(), 6);
@@ -123,6 +129,7 @@ fn f32_prefilter_cnn_matches_pytorch() {
 }
 
 #[test]
+#[cfg(feature = "tract")]
 fn field_is_amplitude_times_centred_phase() {
     let a = Array3::from_elem((3, 1, 2), 1.0f32);
     let mut p = Array3::from_elem((3, 1, 2), 0.5f32);
@@ -133,6 +140,7 @@ fn field_is_amplitude_times_centred_phase() {
 }
 
 #[test]
+#[cfg(feature = "tract")]
 fn run_frame_feeds_amplitude_then_depth() {
     let m = hologram("holo8_rgbd.onnx");
     let x = npy("io_holo_16x20_input.npy");
@@ -253,6 +261,7 @@ fn onnx_with_other_inputs_is_refused() {
 }
 
 #[test]
+#[cfg(feature = "tract")]
 fn wrong_input_size_is_an_error_and_the_model_stays_usable() {
     let m = hologram("holo8_rgbd.onnx");
     let plan = m.plan(24, 32).unwrap();
@@ -284,6 +293,7 @@ fn wrong_input_size_is_an_error_and_the_model_stays_usable() {
 /// values), while int8 vs f32 differ by up to 5e-3; the tolerance allows about one output quantum of
 /// rounding difference on other CPUs.
 #[test]
+#[cfg(feature = "tract")]
 fn int8_qoperator_and_qdq_files_load_and_run() {
     for (file, tag) in [
         ("holo8_rgbd.int8-qop.onnx", "holo_int8-qop"),
@@ -318,6 +328,7 @@ fn int8_qoperator_and_qdq_files_load_and_run() {
 /// PyTorch reference like the channels-first plan, at two sizes, for the hologram CNN, while taking and
 /// returning `[C, H, W]` arrays. Both plans of one resolution live side by side in the model's cache.
 #[test]
+#[cfg(feature = "tract")]
 fn channels_last_plans_match_pytorch_with_the_same_chw_interface() {
     let m = hologram("holo8_rgbd.onnx");
     for size in ["24x32", "16x20"] {
@@ -357,6 +368,7 @@ fn channels_last_plans_match_pytorch_with_the_same_chw_interface() {
 
 /// `ModelPlan::profile` times every evaluated operator of the plan once, and its operators are the plan's.
 #[test]
+#[cfg(feature = "tract")]
 fn profile_times_each_operator_of_the_plan() {
     let m = hologram("holo8_rgbd.onnx");
     let x = npy("io_holo_24x32_input.npy");
@@ -427,6 +439,7 @@ fn format_1_prefilters_are_refused_and_format_1_hologram_cnns_load() {
 }
 
 #[test]
+#[cfg(feature = "tract")]
 fn a_model_that_panics_tract_is_a_load_error_not_a_crash() {
     // Found by the `onnx_model` fuzz target: a mutated hologram CNN whose convolution has fewer kernel
     // dimensions than its input makes tract 0.23 panic (index out of bounds in its padding computation) while

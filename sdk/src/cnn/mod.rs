@@ -3,8 +3,8 @@
 //! `Box<dyn CnnPlan>` and never asks which engine it is, so adding an engine is a file here, not branches in
 //! the session.
 //!
-//! - `cnn/tract.rs`: tract's optimised plan ([`crate::model::ModelPlan`]), which runs any ONNX graph that
-//!   passes the contract (`docs/CONVENTIONS.md` §7).
+//! - `cnn/tract.rs` (cargo feature `tract`): tract's optimised plan (`crate::model::ModelPlan`), which runs
+//!   any ONNX graph that passes the contract (`docs/CONVENTIONS.md` §7).
 //! - `cnn/native.rs`: our direct 3×3 convolutions (`tensorholo-kernels`, SIMD rows chosen at run time) over
 //!   the graph read by [`crate::model::graph`]; f32 files.
 //! - `cnn/select.rs` picks the engine of a session ([`CnnEngine`]); [`cnn_plan`] does the same for one CNN
@@ -17,6 +17,7 @@ mod native;
 mod native_int8;
 mod select;
 mod strips;
+#[cfg(feature = "tract")]
 mod tract;
 
 pub use crate::model::CnnEngine;
@@ -58,6 +59,33 @@ pub(crate) trait CnnPlan: std::fmt::Debug + Send {
             }
         }
         self.run_outputs(input.view())
+    }
+
+    /// [`run_planes`](Self::run_planes) writing the two outputs into the caller's six planes (`H·W` values
+    /// each): `outputs[0..3]` the first output's channels (amplitude heads, or `Re`), `outputs[3..6]` the
+    /// second's (phase heads, or `Im`), so that a session's CNN writes straight into its colour workers'
+    /// planes (at 1080p, no 50 MB of output arrays per frame). The native plans write in place; the default
+    /// copies `run_planes`' arrays.
+    ///
+    /// Errors: as `run_planes`; [`crate::HoloError::ShapeMismatch`] for an output plane of other than `H·W`
+    /// values.
+    fn run_planes_into(&mut self, planes: &[&[f32]], outputs: [&mut [f32]; 6]) -> Result<()> {
+        let (_, h, w) = self.input_dim();
+        if let Some(p) = outputs.iter().find(|p| p.len() != h * w) {
+            return Err(crate::HoloError::ShapeMismatch {
+                what: "CNN output plane (values)".into(),
+                expected: vec![h * w],
+                got: vec![p.len()],
+            });
+        }
+        let (first, second) = self.run_planes(planes)?;
+        let channels = first.outer_iter().chain(second.outer_iter());
+        for (o, c) in outputs.into_iter().zip(channels) {
+            for (d, v) in o.iter_mut().zip(c.iter()) {
+                *d = *v;
+            }
+        }
+        Ok(())
     }
 
     /// The same network for another thread (a stream's CNN thread): weights shared, run state its own.

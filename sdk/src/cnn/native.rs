@@ -166,11 +166,10 @@ impl NativePlan {
         self.net.layers[0].kernel().name
     }
 
-    /// One frame of a checked input.
-    fn run(&mut self, input: Planes<'_>) -> Result<(Array3<f32>, Array3<f32>)> {
+    /// One frame of a checked input into `out`.
+    fn run(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
         let (h, w) = (self.height, self.width);
-        let mut out = Outputs::new(h, w);
-        self.forward(input, &mut out)?;
+        self.forward(input, out)?;
         finish_outputs(
             &self.net.graph,
             out,
@@ -188,7 +187,7 @@ impl NativePlan {
 
     /// One frame, strip by strip, on the plan's threads: the input `planar` `[C][H][W]` centred into the
     /// input window, every layer's strip, the heads (or the pre-filter's raw output) into `out`.
-    fn forward(&mut self, input: Planes<'_>, out: &mut Outputs) -> Result<()> {
+    fn forward(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
         let net = self.net.clone();
         let n = net.layers.len();
         let (threads, strips, [h, w]) = (self.threads, self.strips, [self.height, self.width]);
@@ -331,28 +330,55 @@ pub(super) fn heads_of(graph: &CnnWeights) -> Option<(f32, f32)> {
     }
 }
 
-/// The network's two outputs `[3, H, W]` as they are written: `re` (amplitude heads, or `Re` of a
-/// pre-filter) and `im` (phase heads, or `Im`), `3·H·W` values each; channel `c` of the last layer lands in
-/// plane `c` of `re` for `c < 3`, plane `c − 3` of `im` otherwise.
-pub(super) struct Outputs {
-    pub re: Vec<f32>,
-    pub im: Vec<f32>,
+/// Where the network's six output channels are written, `H·W` values each: channel `c` of the last layer
+/// (after the heads) lands in `planes[c]`, i.e. channels 0–2 are the first output `[3, H, W]` (amplitude heads,
+/// or `Re` of a pre-filter) and 3–5 the second (phase heads, or `Im`). The caller's buffers
+/// ([`CnnPlan::run_planes_into`]: a session's colour planes) or two owned arrays ([`owned_outputs`]).
+pub(super) struct Outputs<'a> {
+    planes: [&'a mut [f32]; 6],
 }
 
-impl Outputs {
-    /// Zeroed outputs for `h × w` frames (the only allocation of a native run: the [`CnnPlan`] contract
-    /// returns owned arrays).
-    pub fn new(h: usize, w: usize) -> Self {
-        Self {
-            re: vec![0.0; 3 * h * w],
-            im: vec![0.0; 3 * h * w],
+impl<'a> Outputs<'a> {
+    /// The six planes, checked to hold `hw` values each. Errors: [`HoloError::ShapeMismatch`].
+    pub fn new(planes: [&'a mut [f32]; 6], hw: usize) -> Result<Self> {
+        if let Some(p) = planes.iter().find(|p| p.len() != hw) {
+            return Err(HoloError::ShapeMismatch {
+                what: "CNN output plane (values)".into(),
+                expected: vec![hw],
+                got: vec![p.len()],
+            });
         }
+        Ok(Self { planes })
     }
 
-    /// The six channel planes (`H·W` values each), in the last layer's channel order.
-    fn planes_mut(&mut self, hw: usize) -> impl Iterator<Item = &mut [f32]> {
-        self.re.chunks_mut(hw).chain(self.im.chunks_mut(hw))
+    /// The six channel planes, in the last layer's channel order.
+    fn planes_mut(&mut self) -> impl Iterator<Item = &mut [f32]> + use<'_, 'a> {
+        self.planes.iter_mut().map(|p| &mut **p)
     }
+}
+
+/// Runs `run` on two zeroed `[3, h, w]` arrays as its [`Outputs`] and returns them (what
+/// [`CnnPlan::run_outputs`] returns; [`CnnPlan::run_planes_into`] writes into the caller's planes instead).
+pub(super) fn owned_outputs(
+    h: usize,
+    w: usize,
+    run: impl FnOnce(&mut Outputs<'_>) -> Result<()>,
+) -> Result<(Array3<f32>, Array3<f32>)> {
+    let hw = h * w;
+    let mut first = Array3::<f32>::zeros((3, h, w));
+    let mut second = Array3::<f32>::zeros((3, h, w));
+    {
+        let (a, b) = match (first.as_slice_mut(), second.as_slice_mut()) {
+            (Some(a), Some(b)) => (a, b),
+            _ => return Err(HoloError::Internal("native CNN: output layout".into())),
+        };
+        let (a0, a12) = a.split_at_mut(hw);
+        let (a1, a2) = a12.split_at_mut(hw);
+        let (b0, b12) = b.split_at_mut(hw);
+        let (b1, b2) = b12.split_at_mut(hw);
+        run(&mut Outputs::new([a0, a1, a2, b0, b1, b2], hw)?)?;
+    }
+    Ok((first, second))
 }
 
 /// Frame rows `rows` of the network's two outputs, written into `out` from the last layer's raw output `o`
@@ -370,7 +396,7 @@ pub(super) fn heads_rows<'r>(
     rows: Range<usize>,
     isa: Isa,
     threads: usize,
-    out: &mut Outputs,
+    out: &mut Outputs<'_>,
 ) -> Result<()> {
     let grid = grid.map(u8_grid);
     let channel = |(c, plane): (usize, &mut [f32])| {
@@ -389,15 +415,14 @@ pub(super) fn heads_rows<'r>(
         }
         Ok(())
     };
-    let hw = h * w;
+    let _ = h;
     if threads > 1 {
-        let Outputs { re, im } = out;
-        re.par_chunks_mut(hw)
-            .chain(im.par_chunks_mut(hw))
+        out.planes
+            .par_iter_mut()
             .enumerate()
-            .try_for_each(channel)
+            .try_for_each(|(c, p)| channel((c, &mut **p)))
     } else {
-        out.planes_mut(hw).enumerate().try_for_each(channel)
+        out.planes_mut().enumerate().try_for_each(channel)
     }
     .map_err(kernel_err)
 }
@@ -416,18 +441,18 @@ pub(super) enum BaseInput<'a> {
     },
 }
 
-/// The network's two `[3, H, W]` outputs from `out` ([`heads_rows`] of every row): for a pre-filter,
-/// first adds its depthwise base filter of `base`, channel by channel.
+/// Completes the network's outputs in `out` ([`heads_rows`] of every row written): for a pre-filter, adds
+/// its depthwise base filter of `base`, channel by channel; nothing for a hologram CNN.
 pub(super) fn finish_outputs(
     graph: &CnnWeights,
-    mut out: Outputs,
+    out: &mut Outputs<'_>,
     mut base: BaseInput<'_>,
     [h, w]: [usize; 2],
     depthwise_scratch: &mut Vec<f32>,
-) -> Result<(Array3<f32>, Array3<f32>)> {
+) -> Result<()> {
     if let CnnOutput::Prefilter { taps, base: kernel } = &graph.output {
-        let (k2, hw) = (taps * taps, h * w);
-        for (c, out_plane) in out.planes_mut(hw).enumerate() {
+        let k2 = taps * taps;
+        for (c, out_plane) in out.planes_mut().enumerate() {
             let kernel = kernel.get(c * k2..(c + 1) * k2).ok_or_else(|| {
                 HoloError::Internal("native CNN: pre-filter base kernel per channel".into())
             })?;
@@ -463,11 +488,7 @@ pub(super) fn finish_outputs(
             .map_err(kernel_err)?;
         }
     }
-    let shape_err = |_| HoloError::Internal("native CNN: output shape".into());
-    Ok((
-        Array3::from_shape_vec((3, h, w), out.re).map_err(shape_err)?,
-        Array3::from_shape_vec((3, h, w), out.im).map_err(shape_err)?,
-    ))
+    Ok(())
 }
 
 impl CnnPlan for NativePlan {
@@ -478,12 +499,23 @@ impl CnnPlan for NativePlan {
     fn run_outputs(&mut self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
         let standard = standard_input(input, self.input_dim())?;
         let planar = planar_slice(&standard)?;
-        self.run(Planes::Planar(planar, self.height * self.width))
+        let hw = self.height * self.width;
+        owned_outputs(self.height, self.width, |out| {
+            self.run(Planes::Planar(planar, hw), out)
+        })
     }
 
     fn run_planes(&mut self, planes: &[&[f32]]) -> Result<(Array3<f32>, Array3<f32>)> {
         check_planes(planes, self.input_dim())?;
-        self.run(Planes::Each(planes))
+        owned_outputs(self.height, self.width, |out| {
+            self.run(Planes::Each(planes), out)
+        })
+    }
+
+    fn run_planes_into(&mut self, planes: &[&[f32]], outputs: [&mut [f32]; 6]) -> Result<()> {
+        check_planes(planes, self.input_dim())?;
+        let mut out = Outputs::new(outputs, self.height * self.width)?;
+        self.run(Planes::Each(planes), &mut out)
     }
 
     fn spawn(&self) -> Box<dyn CnnPlan> {

@@ -27,8 +27,8 @@ use ndarray::{Array3, ArrayView3};
 use tensorholo_kernels::{Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, RowPlanar};
 
 use super::native::{
-    finish_outputs, heads_of, heads_rows, planar_slice, pool, standard_input, u8_grid, BaseInput,
-    Outputs, Planes,
+    finish_outputs, heads_of, heads_rows, owned_outputs, planar_slice, pool, standard_input,
+    u8_grid, BaseInput, Outputs, Planes,
 };
 use super::strips::{bands, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window};
 use super::{check_planes, kernel_err, CnnPlan};
@@ -181,13 +181,12 @@ impl NativeInt8Plan {
         self.net.layers[0].kernel().name
     }
 
-    /// One frame of a checked input.
-    fn run(&mut self, input: Planes<'_>) -> Result<(Array3<f32>, Array3<f32>)> {
+    /// One frame of a checked input into `out`.
+    fn run(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
         let net = self.net.clone();
         let quant = net.quant()?;
         let (h, w) = (self.height, self.width);
-        let mut out = Outputs::new(h, w);
-        self.forward(input, &mut out)?;
+        self.forward(input, out)?;
         let base = BaseInput::Rounded {
             planar: input,
             // The pre-filter has no offset; the rounding is the file's QuantizeLinear of the input.
@@ -202,7 +201,7 @@ impl NativeInt8Plan {
     /// One frame, strip by strip, on the plan's threads: the input `planar` `[C][H][W]` quantised into its two
     /// windows, every layer's strip, the last layer's raw rows rounded to the file's output grid and turned
     /// into the heads (or the pre-filter's raw output) in `out`.
-    fn forward(&mut self, input: Planes<'_>, out: &mut Outputs) -> Result<()> {
+    fn forward(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
         let net = self.net.clone();
         let quant = net.quant()?;
         let n = net.layers.len();
@@ -311,12 +310,20 @@ impl CnnPlan for NativeInt8Plan {
     fn run_outputs(&mut self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
         let standard = standard_input(input, self.input_dim())?;
         let planar = planar_slice(&standard)?;
-        self.run(Planes::Planar(planar, self.height * self.width))
+        let (h, w) = (self.height, self.width);
+        owned_outputs(h, w, |out| self.run(Planes::Planar(planar, h * w), out))
     }
 
     fn run_planes(&mut self, planes: &[&[f32]]) -> Result<(Array3<f32>, Array3<f32>)> {
         check_planes(planes, self.input_dim())?;
-        self.run(Planes::Each(planes))
+        let (h, w) = (self.height, self.width);
+        owned_outputs(h, w, |out| self.run(Planes::Each(planes), out))
+    }
+
+    fn run_planes_into(&mut self, planes: &[&[f32]], outputs: [&mut [f32]; 6]) -> Result<()> {
+        check_planes(planes, self.input_dim())?;
+        let mut out = Outputs::new(outputs, self.height * self.width)?;
+        self.run(Planes::Each(planes), &mut out)
     }
 
     fn spawn(&self) -> Box<dyn CnnPlan> {

@@ -41,80 +41,119 @@ pub(crate) fn select(
     engine: CnnEngine,
     request: PlanRequest,
 ) -> Result<CnnPlans> {
+    hologram.check_fixed_size(height, width)?;
     let graphs = native_graphs(hologram, prefilter);
     match (engine, graphs) {
+        #[cfg(feature = "tract")]
         (CnnEngine::Tract, _) => {
             tract_plans(hologram, prefilter, height, width, request, "requested")
         }
+        #[cfg(not(feature = "tract"))]
+        (CnnEngine::Tract, _) => Err(invalid("engine", NO_TRACT)),
         (CnnEngine::Native, Err(e)) => Err(invalid(
             "engine",
-            format!("the native CNN engine cannot run this model: {e}; use the tract engine"),
+            format!("the native CNN engine cannot run this model: {e}{USE_TRACT}"),
         )),
+        #[cfg(feature = "tract")]
         (CnnEngine::Auto, Err(e)) => {
             let why = format!("the native engine cannot run this model ({e})");
             tract_plans(hologram, prefilter, height, width, request, &why)
         }
+        #[cfg(not(feature = "tract"))]
+        (CnnEngine::Auto, Err(e)) => Err(e),
         (CnnEngine::Native, Ok((graph, pre))) => {
             let tuning = tune_native(&graph, height, width, request.threads, false)?;
             native_plans(&graph, pre, [height, width], request, "requested", tuning)
         }
+        #[cfg(feature = "tract")]
         (CnnEngine::Auto, Ok((graph, pre))) => {
-            let native = tune_native(&graph, height, width, request.threads, true)?;
-            let (tract_plan, tract_report) = hologram.tuned_plan(height, width, request)?;
-            let best = |c: &[PlanTiming]| {
-                c.iter()
-                    .filter_map(|t| t.seconds)
-                    .min_by(|a, b| a.total_cmp(b))
-            };
-            let native_best = best(&native.candidates);
-            let tract_best = best(&tract_report.candidates);
-            let mut candidates = tract_report.candidates.clone();
-            candidates.extend(native.candidates.iter().cloned());
-            let tuning_s = tract_report.tuning_s + native.seconds;
-            // tract with a single candidate was not timed: time it now, on the same input.
-            let tract_best = match tract_best {
-                Some(s) => s,
-                None => {
-                    let s = time_plan(
-                        &mut tract_plan.clone(),
-                        hologram.input_channels(),
-                        height,
-                        width,
-                    )?;
-                    candidates.push(PlanTiming {
-                        engine: CnnEngine::Tract,
-                        layout: tract_report.layout,
-                        threads: tract_report.threads,
-                        seconds: Some(s),
-                        skipped: None,
-                    });
-                    s
-                }
-            };
-            let native_best = native_best.unwrap_or(f64::INFINITY);
-            let ratio = tract_best / native_best;
-            if native_best <= tract_best {
-                let why = format!("faster on this CPU ({ratio:.2}× tract's best)");
-                log::info!("CNN engine for {height}×{width}: native, {why}");
-                let tuning = NativeTuning {
-                    threads: native.threads,
-                    candidates,
-                    seconds: tuning_s,
-                };
-                let mut plans = native_plans(&graph, pre, [height, width], request, &why, tuning)?;
-                plans.report.autotuned = true;
-                Ok(plans)
-            } else {
-                let why = format!("faster on this CPU ({:.2}× the native engine)", 1.0 / ratio);
-                log::info!("CNN engine for {height}×{width}: tract, {why}");
-                let mut plans = tract_with(prefilter, height, width, tract_plan, tract_report)?;
-                plans.report.engine_reason = why;
-                plans.report.candidates = candidates;
-                plans.report.tuning_s = tuning_s;
-                plans.report.autotuned = true;
-                Ok(plans)
-            }
+            faster_engine(hologram, prefilter, &graph, pre, [height, width], request)
         }
+        #[cfg(not(feature = "tract"))]
+        (CnnEngine::Auto, Ok((graph, pre))) => {
+            let tuning = tune_native(&graph, height, width, request.threads, false)?;
+            let why = "the only CPU engine of this build (no cargo feature `tract`)";
+            native_plans(&graph, pre, [height, width], request, why, tuning)
+        }
+    }
+}
+
+/// What to do when the native engine cannot run a file.
+const USE_TRACT: &str = if cfg!(feature = "tract") {
+    "; use the tract engine"
+} else {
+    ""
+};
+
+/// Why [`CnnEngine::Tract`] is refused in a build without the `tract` feature.
+#[cfg(not(feature = "tract"))]
+const NO_TRACT: &str = "this build has no tract engine (cargo feature `tract` of tensorholo and \
+                        tensorholo-ffi, on by default); use the native engine";
+
+/// [`CnnEngine::Auto`] where both engines can run the files: each timed on this machine, the faster kept.
+#[cfg(feature = "tract")]
+fn faster_engine(
+    hologram: &HologramModel,
+    prefilter: Option<&HologramModel>,
+    graph: &Arc<CnnWeights>,
+    pre: Option<Arc<CnnWeights>>,
+    [height, width]: [usize; 2],
+    request: PlanRequest,
+) -> Result<CnnPlans> {
+    let native = tune_native(graph, height, width, request.threads, true)?;
+    let (tract_plan, tract_report) = hologram.tuned_plan(height, width, request)?;
+    let best = |c: &[PlanTiming]| {
+        c.iter()
+            .filter_map(|t| t.seconds)
+            .min_by(|a, b| a.total_cmp(b))
+    };
+    let native_best = best(&native.candidates);
+    let tract_best = best(&tract_report.candidates);
+    let mut candidates = tract_report.candidates.clone();
+    candidates.extend(native.candidates.iter().cloned());
+    let tuning_s = tract_report.tuning_s + native.seconds;
+    // tract with a single candidate was not timed: time it now, on the same input.
+    let tract_best = match tract_best {
+        Some(s) => s,
+        None => {
+            let s = time_plan(
+                &mut tract_plan.clone(),
+                hologram.input_channels(),
+                height,
+                width,
+            )?;
+            candidates.push(PlanTiming {
+                engine: CnnEngine::Tract,
+                layout: tract_report.layout,
+                threads: tract_report.threads,
+                seconds: Some(s),
+                skipped: None,
+            });
+            s
+        }
+    };
+    let native_best = native_best.unwrap_or(f64::INFINITY);
+    let ratio = tract_best / native_best;
+    if native_best <= tract_best {
+        let why = format!("faster on this CPU ({ratio:.2}× tract's best)");
+        log::info!("CNN engine for {height}×{width}: native, {why}");
+        let tuning = NativeTuning {
+            threads: native.threads,
+            candidates,
+            seconds: tuning_s,
+        };
+        let mut plans = native_plans(graph, pre, [height, width], request, &why, tuning)?;
+        plans.report.autotuned = true;
+        Ok(plans)
+    } else {
+        let why = format!("faster on this CPU ({:.2}× the native engine)", 1.0 / ratio);
+        log::info!("CNN engine for {height}×{width}: tract, {why}");
+        let mut plans = tract_with(prefilter, height, width, tract_plan, tract_report)?;
+        plans.report.engine_reason = why;
+        plans.report.candidates = candidates;
+        plans.report.tuning_s = tuning_s;
+        plans.report.autotuned = true;
+        Ok(plans)
     }
 }
 
@@ -129,6 +168,7 @@ fn native_graphs(
     Ok((graph, pre))
 }
 
+#[cfg(feature = "tract")]
 fn tract_plans(
     hologram: &HologramModel,
     prefilter: Option<&HologramModel>,
@@ -143,6 +183,7 @@ fn tract_plans(
     Ok(plans)
 }
 
+#[cfg(feature = "tract")]
 fn tract_with(
     prefilter: Option<&HologramModel>,
     height: usize,

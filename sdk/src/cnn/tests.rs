@@ -44,6 +44,7 @@ fn shipped() -> Vec<HologramModel> {
 }
 
 /// Largest |a − b| over both outputs, and the largest |b|.
+#[cfg(feature = "tract")]
 fn diff(a: &(Array3<f32>, Array3<f32>), b: &(Array3<f32>, Array3<f32>)) -> (f32, f32) {
     let mut d = 0.0f32;
     let mut m = 0.0f32;
@@ -58,6 +59,7 @@ fn diff(a: &(Array3<f32>, Array3<f32>), b: &(Array3<f32>, Array3<f32>)) -> (f32,
 }
 
 #[test]
+#[cfg(feature = "tract")]
 fn native_matches_tract_on_every_shipped_f32_model() {
     let (h, w) = (23, 37);
     for model in shipped() {
@@ -141,6 +143,7 @@ fn bad_input_and_bad_weights_are_errors() {
 }
 
 #[test]
+#[cfg(feature = "tract")]
 fn engine_choice_follows_the_request_and_the_file() {
     let cfg = ModelConfig {
         offset_m: 0.0,
@@ -211,6 +214,53 @@ fn engine_choice_follows_the_request_and_the_file() {
     assert!(CnnEngine::parse("onnx").is_err());
 }
 
+#[test]
+#[cfg(not(feature = "tract"))]
+fn without_tract_the_native_engine_runs_everything_it_can_and_the_rest_is_refused() {
+    let cfg = ModelConfig {
+        offset_m: 0.0,
+        ..ModelConfig::default()
+    };
+    let f32_model = embedded::hologram_model(8, Precision::F32, &cfg).unwrap();
+    let request = PlanRequest {
+        threads: ThreadCount::Fixed(1),
+        ..PlanRequest::default()
+    };
+    // Auto is the native engine, and says why.
+    let auto = select(&f32_model, None, 16, 24, CnnEngine::Auto, request).unwrap();
+    assert_eq!(auto.report.engine, CnnEngine::Native);
+    assert!(
+        auto.report.engine_reason.contains("`tract`"),
+        "{}",
+        auto.report.engine_reason
+    );
+    // Asking for tract is an error naming the feature.
+    let err = select(&f32_model, None, 16, 24, CnnEngine::Tract, request).unwrap_err();
+    assert!(matches!(
+        err,
+        HoloError::InvalidParameter { name: "engine", .. }
+    ));
+    assert!(err.to_string().contains("cargo feature `tract`"), "{err}");
+    // The int8 QOperator form is not embedded, and asking for it says why.
+    let err = embedded::hologram_cnn(8, Precision::Int8QOperator).unwrap_err();
+    assert!(err.to_string().contains("cargo feature `tract`"), "{err}");
+    // The same file, once not the TensorHolo CNN (one convolution unpadded), is refused at load, naming the
+    // feature.
+    use crate::model::{HologramModel, ModelKind};
+    use prost::Message;
+    let bytes = embedded::hologram_cnn(8, Precision::F32).unwrap();
+    let mut proto = crate::model::onnx::decode_model(bytes).unwrap();
+    let graph = proto.graph.as_mut().unwrap();
+    let conv = graph.node.iter_mut().find(|n| n.op_type == "Conv").unwrap();
+    for a in conv.attribute.iter_mut().filter(|a| a.name == "pads") {
+        a.ints = vec![0, 0, 0, 0];
+    }
+    let err =
+        HologramModel::from_bytes(&proto.encode_to_vec(), ModelKind::Hologram, &cfg).unwrap_err();
+    assert!(matches!(err, HoloError::ModelContract { .. }), "{err}");
+    assert!(err.to_string().contains("cargo feature `tract`"), "{err}");
+}
+
 fn shipped_qdq() -> Vec<HologramModel> {
     let cfg = |offset_m| ModelConfig {
         offset_m,
@@ -229,6 +279,7 @@ fn shipped_qdq() -> Vec<HologramModel> {
 }
 
 /// Mean and max |a − b| over both outputs.
+#[cfg(feature = "tract")]
 fn mean_max(a: &(Array3<f32>, Array3<f32>), b: &(Array3<f32>, Array3<f32>)) -> (f32, f32) {
     let d: Vec<f32> =
         a.0.iter()
@@ -241,6 +292,7 @@ fn mean_max(a: &(Array3<f32>, Array3<f32>), b: &(Array3<f32>, Array3<f32>)) -> (
 }
 
 #[test]
+#[cfg(feature = "tract")]
 fn native_int8_matches_tract_on_every_shipped_qdq_model() {
     // tract executes the file node by node (every QuantizeLinear/DequantizeLinear); the native engine fuses
     // each layer and rounds once where the file rounds twice. Both stay within the models' int8 tolerance
@@ -365,10 +417,11 @@ fn an_input_given_plane_by_plane_gives_the_same_frame() {
             .map(|p| p.iter().copied().collect())
             .collect();
         let refs: Vec<&[f32]> = planes.iter().map(|p| &p[..]).collect();
-        let mut plans: Vec<Box<dyn CnnPlan>> = vec![
-            super::native_plan(graph.clone(), h, w, 2, isa).unwrap().0,
-            Box::new(model.plan(h, w).unwrap()),
-        ];
+        #[allow(unused_mut)]
+        let mut plans: Vec<Box<dyn CnnPlan>> =
+            vec![super::native_plan(graph.clone(), h, w, 2, isa).unwrap().0];
+        #[cfg(feature = "tract")]
+        plans.push(Box::new(model.plan(h, w).unwrap()));
         for plan in &mut plans {
             let whole = plan.run_outputs(x.view()).unwrap();
             assert!(

@@ -4,6 +4,9 @@
 //!   offset) and the DDPM pre-filter CNNs for offsets of 6 and 12 mm (0.37 MB in all);
 //! - `models-15` and `models-30`: the 15-layer (0.48 MB) and 30-layer (1.0 MB) hologram CNNs.
 //!
+//! The int8 QOperator forms run on tract only and are embedded only with the `tract` feature; without it,
+//! asking for one is an error naming the feature.
+//!
 //! The crate's default features embed all of them; the phone library (`tensorholo-ffi`) embeds only the
 //! first set unless asked. Build with `--no-default-features` to leave them all out and load files with
 //! [`HologramModel::from_path`](super::HologramModel::from_path) instead.
@@ -17,40 +20,55 @@ macro_rules! shipped {
     };
 }
 
-/// Always embedded (feature `embedded-models`): the 8-layer hologram CNN and the pre-filters.
+/// Always embedded (feature `embedded-models`): the 8-layer hologram CNN and the pre-filters, f32 and int8 QDQ.
 const BASE: &[(&str, &[u8])] = shipped![
     "holo8_rgbd.onnx",
-    "holo8_rgbd.int8-qop.onnx",
     "holo8_rgbd.int8-qdq.onnx",
     "prefilter_6mm.onnx",
-    "prefilter_6mm.int8-qop.onnx",
     "prefilter_6mm.int8-qdq.onnx",
     "prefilter_12mm.onnx",
-    "prefilter_12mm.int8-qop.onnx",
     "prefilter_12mm.int8-qdq.onnx",
 ];
 
-#[cfg(feature = "models-15")]
-const HOLO15: &[(&str, &[u8])] = shipped![
-    "holo15_rgbd.onnx",
-    "holo15_rgbd.int8-qop.onnx",
-    "holo15_rgbd.int8-qdq.onnx",
+/// The int8 QOperator forms of [`BASE`]: tract runs them (feature `tract`), no other engine does.
+#[cfg(feature = "tract")]
+const BASE_QOP: &[(&str, &[u8])] = shipped![
+    "holo8_rgbd.int8-qop.onnx",
+    "prefilter_6mm.int8-qop.onnx",
+    "prefilter_12mm.int8-qop.onnx",
 ];
+#[cfg(not(feature = "tract"))]
+const BASE_QOP: &[(&str, &[u8])] = &[];
+
+#[cfg(feature = "models-15")]
+const HOLO15: &[(&str, &[u8])] = shipped!["holo15_rgbd.onnx", "holo15_rgbd.int8-qdq.onnx"];
 #[cfg(not(feature = "models-15"))]
 const HOLO15: &[(&str, &[u8])] = &[];
 
+#[cfg(all(feature = "models-15", feature = "tract"))]
+const HOLO15_QOP: &[(&str, &[u8])] = shipped!["holo15_rgbd.int8-qop.onnx"];
+#[cfg(not(all(feature = "models-15", feature = "tract")))]
+const HOLO15_QOP: &[(&str, &[u8])] = &[];
+
 #[cfg(feature = "models-30")]
-const HOLO30: &[(&str, &[u8])] = shipped![
-    "holo30_rgbd.onnx",
-    "holo30_rgbd.int8-qop.onnx",
-    "holo30_rgbd.int8-qdq.onnx",
-];
+const HOLO30: &[(&str, &[u8])] = shipped!["holo30_rgbd.onnx", "holo30_rgbd.int8-qdq.onnx"];
 #[cfg(not(feature = "models-30"))]
 const HOLO30: &[(&str, &[u8])] = &[];
 
+#[cfg(all(feature = "models-30", feature = "tract"))]
+const HOLO30_QOP: &[(&str, &[u8])] = shipped!["holo30_rgbd.int8-qop.onnx"];
+#[cfg(not(all(feature = "models-30", feature = "tract")))]
+const HOLO30_QOP: &[(&str, &[u8])] = &[];
+
 /// Every file embedded in this build: `(file name in models/, bytes)`.
 pub fn files() -> impl Iterator<Item = (&'static str, &'static [u8])> {
-    BASE.iter().chain(HOLO15).chain(HOLO30).copied()
+    BASE.iter()
+        .chain(BASE_QOP)
+        .chain(HOLO15)
+        .chain(HOLO15_QOP)
+        .chain(HOLO30)
+        .chain(HOLO30_QOP)
+        .copied()
 }
 
 /// Layer counts of the hologram CNNs the project ships (`models/`).
@@ -66,6 +84,22 @@ pub const LAYERS: &[usize] = match (cfg!(feature = "models-15"), cfg!(feature = 
 };
 /// SLM offsets (millimetres) of the shipped pre-filter CNNs.
 pub const PREFILTER_OFFSETS_MM: [u32; 2] = [6, 12];
+
+/// Errors: [`HoloError::InvalidParameter`](crate::HoloError) (`precision`) for the int8 QOperator form in a
+/// build without tract, the only engine that runs it.
+fn check_engine(precision: Precision) -> Result<()> {
+    if precision == Precision::Int8QOperator && !cfg!(feature = "tract") {
+        return Err(invalid(
+            "precision",
+            format!(
+                "the int8 QOperator form ({precision}) runs on tract only, and this build has no tract \
+                 engine (cargo feature `tract`); the default int8 form ({}) runs on the native engine",
+                super::DEFAULT_INT8
+            ),
+        ));
+    }
+    Ok(())
+}
 
 fn find(name: &str) -> Option<&'static [u8]> {
     files().find(|(n, _)| *n == name).map(|(_, b)| b)
@@ -84,8 +118,10 @@ pub fn prefilter_file(offset_mm: u32, precision: Precision) -> String {
 /// The ONNX bytes of the shipped RGB-D hologram CNN with `layers` ∈ {8, 15, 30} layers.
 ///
 /// Errors: [`HoloError::InvalidParameter`](crate::HoloError) for another layer count, or for 15 or 30
-/// layers in a build without the feature `models-15` / `models-30` (the message names it).
+/// layers in a build without the feature `models-15` / `models-30` (the message names it); `precision`
+/// for the int8 QOperator form in a build without `tract`.
 pub fn hologram_cnn(layers: usize, precision: Precision) -> Result<&'static [u8]> {
+    check_engine(precision)?;
     find(&hologram_file(layers, precision)).ok_or_else(|| {
         let why = if SHIPPED_LAYERS.contains(&layers) {
             format!(
@@ -101,8 +137,10 @@ pub fn hologram_cnn(layers: usize, precision: Precision) -> Result<&'static [u8]
 
 /// The ONNX bytes of the shipped pre-filter CNN for an SLM offset of `offset_mm` ∈ {6, 12} millimetres.
 ///
-/// Errors: [`HoloError::InvalidParameter`](crate::HoloError) for another offset.
+/// Errors: [`HoloError::InvalidParameter`](crate::HoloError) for another offset; `precision` for the int8
+/// QOperator form in a build without `tract`.
 pub fn prefilter_cnn(offset_mm: u32, precision: Precision) -> Result<&'static [u8]> {
+    check_engine(precision)?;
     find(&prefilter_file(offset_mm, precision)).ok_or_else(|| {
         invalid(
             "offset_mm",

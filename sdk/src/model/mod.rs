@@ -1,22 +1,28 @@
-//! The CNNs of Tensor Holography V2 run with tract (`docs/CONVENTIONS.md` §7, paper Fig. 3): the hologram CNN
-//! (RGB-D or LDI → midpoint hologram) and the DDPM pre-filter CNN (offset hologram → filtered offset
-//! hologram, Eq. 6).
+//! The CNNs of Tensor Holography V2 (`docs/CONVENTIONS.md` §7, paper Fig. 3): the hologram CNN (RGB-D or
+//! LDI → midpoint hologram) and the DDPM pre-filter CNN (offset hologram → filtered offset hologram, Eq. 6).
 //!
 //! A [`HologramModel`] is loaded once from an ONNX file written by `training/tensorholo_training/export.py`:
 //!
-//! 1. the protobuf is decoded (a truncated or corrupt file → [`HoloError::ModelLoad`](crate::HoloError));
+//! 1. the protobuf is decoded with the SDK's own reader of the ONNX schema (`model/onnx.rs`; a truncated or
+//!    corrupt file → [`HoloError::ModelLoad`](crate::HoloError));
 //! 2. its `tensorholo.*` `metadata_props` are parsed into [`ModelMetadata`] and checked against a
 //!    [`ModelConfig`] (wavelengths, pitch, volume depth, offset, input layers → a mismatch is
 //!    [`HoloError::ModelMetadata`](crate::HoloError) naming the key, the file's value and the expected one);
 //! 3. its graph inputs/outputs are checked against the contract (hologram CNN: `rgbd` `[1,4L,H,W]` →
 //!    `amplitude`, `phase` `[1,3,H,W]`; pre-filter (format 2): `slm_field` `[1,6,H,W]` = `[Re H, Im H]` →
 //!    `real`, `imag` `[1,3,H,W]`; f32 → otherwise [`HoloError::ModelContract`](crate::HoloError));
-//! 4. tract types it and declutters it once, keeping `H`, `W` symbolic.
+//! 4. the engines read it: the native CPU engine and the GPU path through [`CnnWeights`] (the graph read as
+//!    the TensorHolo residual CNN, `model/graph.rs`); with the cargo feature `tract` (on by default), tract
+//!    also types and declutters it once, keeping `H`, `W` symbolic (`model/tract.rs`).
 //!
-//! [`HologramModel::plan`] then binds `H`, `W` to one resolution and optimises (codegen) the graph for it;
-//! plans are cached per resolution inside the model, because tract's symbolic plan runs 6–11× slower than a
-//! concretised one. int8 files: QOperator (`QLinearConv`, conv-only) and QDQ (`QuantizeLinear`/
-//! `DequantizeLinear` around float `Conv`) both load; value-info hints are ignored when parsing because
+//! Without `tract`, a file that is not the TensorHolo residual CNN (and every int8 QOperator file) is refused
+//! at load with a [`HoloError::ModelContract`](crate::HoloError) naming the feature: the native engine and the
+//! GPU run the shipped models and any file of their architecture.
+//!
+//! With `tract`, `HologramModel::plan` binds `H`, `W` to one resolution and optimises (codegen) the graph for
+//! it; plans are cached per resolution inside the model, because tract's symbolic plan runs 6–11× slower than
+//! a concretised one. int8 files: QOperator (`QLinearConv`, conv-only) and QDQ (`QuantizeLinear`/
+//! `DequantizeLinear` around float `Conv`) both load; value-info hints are ignored when tract parses because
 //! tract 0.23 refuses the QDQ file's quantised value infos otherwise.
 
 pub mod contract;
@@ -25,6 +31,9 @@ pub mod embedded;
 pub mod graph;
 mod metadata;
 mod network;
+pub(crate) mod onnx;
+#[cfg(feature = "tract")]
+mod tract;
 pub(crate) mod tuning;
 
 /// How a model file stores its weights (`training/tensorholo_training/export.py`). All forms take and
@@ -188,37 +197,15 @@ impl std::fmt::Display for CnnEngine {
     }
 }
 
-/// Sets how many threads tract uses for the matrix products and convolutions of every CNN run afterwards
-/// (process-wide; tract's default executor). `1` (the default) runs on the calling thread; `n > 1` starts a
-/// private `n`-thread pool. Only matmul, direct convolution and element-wise ops run in parallel.
-///
-/// Errors: [`HoloError::InvalidParameter`](crate::HoloError) for `threads == 0`.
-pub fn set_cnn_threads(threads: usize) -> crate::Result<()> {
-    use tract_linalg::multithread::{set_default_executor, Executor};
-    match threads {
-        0 => Err(crate::error::invalid("threads", "must be ≥ 1")),
-        n if n > MAX_CNN_THREADS => Err(crate::error::invalid(
-            "threads",
-            format!("at most {MAX_CNN_THREADS} CNN threads, got {n}"),
-        )),
-        1 => {
-            set_default_executor(Executor::SingleThread);
-            Ok(())
-        }
-        n => {
-            set_default_executor(Executor::multithread(n));
-            Ok(())
-        }
-    }
-}
-
 pub use contract::{head_to_phasor, heads_to_field};
 pub use graph::{CnnOutput, CnnQuant, CnnWeights, ConvLayer, LayerQuant, QuantGrid};
 pub use metadata::{
     ModelConfig, ModelKind, ModelMetadata, FORMAT_VERSION, METADATA_PREFIX,
     PREFILTER_FORMAT_VERSION,
 };
-pub use network::{HologramModel, ModelPlan, NodeTiming, MAX_CNN_THREADS};
+pub use network::{HologramModel, MAX_CNN_THREADS};
+#[cfg(feature = "tract")]
+pub use tract::{set_cnn_threads, ModelPlan, NodeTiming};
 pub use tuning::{
     auto_thread_candidates, timing_resolution, PlanReport, PlanRequest, PlanTiming, ThreadCount,
     TUNE_MIN_ROWS, TUNE_PIXELS,

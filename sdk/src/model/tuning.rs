@@ -3,16 +3,15 @@
 //! candidates are timed on the machine, at the session's resolution, when a session is created
 //! (`docs/BENCHMARKS.md`, "Autotuned plans").
 //!
-//! [`HologramModel::tuned_plan`] times every candidate (layout × thread count) of a [`PlanRequest`], keeps the
-//! fastest, and returns a [`PlanReport`] with every timing and what the tuning cost. Results are cached in
-//! the model per resolution and request, so a second session of the same size starts at once.
+//! This module holds what every engine's tuning shares: the request ([`PlanRequest`], [`ThreadCount`]), the
+//! report ([`PlanReport`], [`PlanTiming`]), the candidates' resolution and thread counts, and the timing rule.
+//! With the `tract` feature, `HologramModel::tuned_plan` (`model/tract.rs`) times every tract candidate
+//! (layout × thread count) of a [`PlanRequest`], keeps the fastest, and caches the report in the model per
+//! resolution and request, so a second session of the same size starts at once; the native engine's thread
+//! count is timed in `cnn/select.rs`.
 
-use std::time::Instant;
-
-use ndarray::Array3;
-
-use super::{CnnEngine, CnnLayout, HologramModel, ModelPlan, MAX_CNN_THREADS};
-use crate::error::{invalid, HoloError, Result};
+use super::{CnnEngine, CnnLayout, MAX_CNN_THREADS};
+use crate::error::Result;
 
 /// Frames above this many pixels are timed on a full-width strip of about this many pixels (at least
 /// [`TUNE_MIN_ROWS`] rows) instead of the whole frame: the convolutions' cost is linear in the rows, and the
@@ -33,8 +32,8 @@ pub enum ThreadCount {
     Auto,
     /// Exactly this many threads (≥ 1) in the plan's own executor.
     Fixed(usize),
-    /// tract's process-wide executor ([`super::set_cnn_threads`]), as plans made by
-    /// [`HologramModel::plan`] use.
+    /// tract's process-wide executor (`set_cnn_threads`), as plans made by
+    /// `HologramModel::plan` use.
     ProcessDefault,
 }
 
@@ -49,7 +48,7 @@ impl ThreadCount {
     }
 }
 
-/// What [`HologramModel::tuned_plan`] may choose from: [`CnnLayout::Auto`] tries both layouts, a concrete
+/// What `HologramModel::tuned_plan` may choose from: [`CnnLayout::Auto`] tries both layouts, a concrete
 /// layout only itself; [`ThreadCount::Auto`] tries [`auto_thread_candidates`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
 pub struct PlanRequest {
@@ -75,7 +74,7 @@ pub struct PlanTiming {
     pub skipped: Option<String>,
 }
 
-/// What [`HologramModel::tuned_plan`] (tract's layouts and threads) and a session's engine choice
+/// What `HologramModel::tuned_plan` (tract's layouts and threads) and a session's engine choice
 /// ([`crate::pipeline::PipelineConfig::cnn_engine`]) chose and why.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct PlanReport {
@@ -130,177 +129,6 @@ pub fn timing_resolution(height: usize, width: usize) -> [usize; 2] {
     [rows, width]
 }
 
-impl HologramModel {
-    /// The fastest plan of `request` for `height × width` inputs, and the report of how it was chosen.
-    ///
-    /// Every candidate (layouts × thread counts; a layout tract cannot apply to this graph is skipped with
-    /// the reason) runs on a constant input at [`timing_resolution`]: once, or three times when a run takes
-    /// under 0.25 s (the fastest run counts). The winner's plan is then built at the real resolution (cached
-    /// like [`HologramModel::plan_with_layout`]'s) with its thread count ([`ModelPlan::with_threads`]).
-    /// With a single candidate nothing is timed. Results are cached per `(height, width, request)`.
-    ///
-    /// Errors: as [`HologramModel::plan_with_layout`] and [`ModelPlan::with_threads`];
-    /// [`HoloError::InvalidParameter`] if no candidate can run.
-    pub fn tuned_plan(
-        &self,
-        height: usize,
-        width: usize,
-        request: PlanRequest,
-    ) -> Result<(ModelPlan, PlanReport)> {
-        if height == 0 || width == 0 {
-            return Err(invalid(
-                "height/width",
-                format!("a CNN plan needs a non-empty resolution, got {height}×{width}"),
-            ));
-        }
-        self.check_fixed_size(height, width)?;
-        let key = (height, width, request);
-        let cached = self.tuned_lock().get(&key).cloned();
-        let report = match cached {
-            Some(mut r) => {
-                r.tuning_s = 0.0;
-                r
-            }
-            None => {
-                let r = self.tune(height, width, request)?;
-                if r.autotuned {
-                    log::info!(
-                        "CNN plan for {height}×{width}: {} with {} thread(s), chosen in {:.2} s from {}",
-                        r.layout,
-                        r.threads.map_or("default".into(), |t| t.to_string()),
-                        r.tuning_s,
-                        r.candidates
-                            .iter()
-                            .map(|c| format!(
-                                "{}/{}: {}",
-                                c.layout,
-                                c.threads.map_or("default".into(), |t| t.to_string()),
-                                c.seconds
-                                    .map_or("skipped".into(), |s| format!("{:.1} ms", s * 1e3))
-                            ))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    );
-                }
-                self.tuned_lock().insert(key, r.clone());
-                r
-            }
-        };
-        let plan = self.plan_with_layout(height, width, report.layout)?;
-        let plan = match report.threads {
-            Some(t) => plan.with_threads(t)?,
-            None => plan,
-        };
-        Ok((plan, report))
-    }
-
-    fn tuned_lock(
-        &self,
-    ) -> std::sync::MutexGuard<'_, std::collections::HashMap<(usize, usize, PlanRequest), PlanReport>>
-    {
-        // Nothing panics while holding the lock; recover the map rather than propagate poison.
-        self.tuned.lock().unwrap_or_else(|p| p.into_inner())
-    }
-
-    fn tune(&self, height: usize, width: usize, request: PlanRequest) -> Result<PlanReport> {
-        let layouts: Vec<CnnLayout> = match request.layout {
-            CnnLayout::Auto => CnnLayout::ALL.to_vec(),
-            l => vec![l],
-        };
-        let threads: Vec<Option<usize>> = match request.threads {
-            ThreadCount::Auto => auto_thread_candidates().into_iter().map(Some).collect(),
-            ThreadCount::Fixed(n) => vec![Some(n)],
-            ThreadCount::ProcessDefault => vec![None],
-        };
-        let timed_resolution = timing_resolution(height, width);
-        if layouts.len() * threads.len() == 1 {
-            return Ok(PlanReport {
-                resolution: [height, width],
-                request,
-                engine: CnnEngine::Tract,
-                engine_reason: "tract's plan".into(),
-                kernel: None,
-                layout: layouts[0],
-                threads: threads[0],
-                autotuned: false,
-                timed_resolution,
-                candidates: Vec::new(),
-                tuning_s: 0.0,
-            });
-        }
-        let start = Instant::now();
-        let [th, tw] = timed_resolution;
-        let input = Array3::<f32>::from_elem((self.input_channels(), th, tw), 0.5);
-        let mut candidates = Vec::new();
-        for &layout in &layouts {
-            let base = if [th, tw] == [height, width] {
-                self.plan_with_layout(height, width, layout)
-            } else {
-                self.build_plan(th, tw, layout)
-            };
-            let base = match base {
-                Ok(p) => p,
-                Err(HoloError::InvalidParameter {
-                    name: "layout",
-                    reason,
-                }) => {
-                    candidates.extend(threads.iter().map(|&t| PlanTiming {
-                        engine: CnnEngine::Tract,
-                        layout,
-                        threads: t,
-                        seconds: None,
-                        skipped: Some(reason.clone()),
-                    }));
-                    continue;
-                }
-                Err(e) => return Err(e),
-            };
-            for &t in &threads {
-                let plan = match t {
-                    Some(n) => base.with_threads(n)?,
-                    None => base.clone(),
-                };
-                let best = fastest_run(|| time_run(&plan, &input))?;
-                candidates.push(PlanTiming {
-                    engine: CnnEngine::Tract,
-                    layout,
-                    threads: t,
-                    seconds: Some(best),
-                    skipped: None,
-                });
-            }
-        }
-        let best = candidates
-            .iter()
-            .filter_map(|c| c.seconds.map(|s| (s, c)))
-            .min_by(|a, b| a.0.total_cmp(&b.0))
-            .map(|(_, c)| (c.layout, c.threads))
-            .ok_or_else(|| {
-                invalid(
-                    "layout",
-                    format!(
-                        "no CNN plan candidate can run `{}`: {:?}",
-                        self.source_name(),
-                        candidates
-                    ),
-                )
-            })?;
-        Ok(PlanReport {
-            resolution: [height, width],
-            request,
-            engine: CnnEngine::Tract,
-            engine_reason: "tract's plan".into(),
-            kernel: None,
-            layout: best.0,
-            threads: best.1,
-            autotuned: true,
-            timed_resolution,
-            candidates,
-            tuning_s: start.elapsed().as_secs_f64(),
-        })
-    }
-}
-
 /// The timing rule of every autotuner (tract's layouts and threads here, the native engine's in
 /// `cnn::select`): one run of `run` (which returns its seconds), or the fastest of three when the first is
 /// under [`REPEAT_BELOW_S`].
@@ -312,13 +140,6 @@ pub(crate) fn fastest_run(mut run: impl FnMut() -> Result<f64>) -> Result<f64> {
         }
     }
     Ok(best)
-}
-
-/// Seconds of one run of `plan` on `input`.
-fn time_run(plan: &ModelPlan, input: &Array3<f32>) -> Result<f64> {
-    let t = Instant::now();
-    plan.run_outputs(input.view())?;
-    Ok(t.elapsed().as_secs_f64())
 }
 
 #[cfg(test)]

@@ -31,6 +31,23 @@ pub struct Scratch {
     fft: Vec<Complex32>,
 }
 
+impl Scratch {
+    /// The spectrum buffer's memory as two f32 planes of `n` values each, for a caller to park real data in
+    /// between transforms (a session's pre-filter input, `n = H·W`); `None` if it holds fewer than `2n` f32
+    /// (a scratch of a smaller plan). Its contents are overwritten by the next transform.
+    pub(crate) fn planes_mut(&mut self, n: usize) -> Option<(&mut [f32], &mut [f32])> {
+        let flat = bytemuck::cast_slice_mut::<Complex32, f32>(&mut self.spectrum);
+        let (a, rest) = flat.split_at_mut_checked(n)?;
+        Some((a, rest.get_mut(..n)?))
+    }
+
+    /// The two planes [`Scratch::planes_mut`] gave, read-only.
+    pub(crate) fn planes(&self, n: usize) -> Option<(&[f32], &[f32])> {
+        let flat = bytemuck::cast_slice::<Complex32, f32>(&self.spectrum);
+        Some((flat.get(..n)?, flat.get(n..2 * n)?))
+    }
+}
+
 /// A spectral multiplier that is even in both frequencies, `M(−u, v) = M(u, −v) = M(u, v)` (a transfer
 /// function of the frequency radius, as the offset propagation's, Eq. 6), stored as the quarter of the
 /// spectrum with non-negative frequencies: `(rows/2 + 1) × (cols/2 + 1)` values instead of `rows × cols`

@@ -40,53 +40,59 @@ pub fn focal_stack(
     }
     let props = setup.propagators(h, w, options)?;
     let field = field.as_standard_layout();
-    // per colour: Vec over depths of [H*W] amplitudes
-    let per_colour: Vec<Vec<Vec<f32>>> = (0..3)
-        .into_par_iter()
-        .map(|c| -> Result<Vec<Vec<f32>>> {
-            let prop = &props[c];
-            let plan = prop.plan();
-            let mut scratch = plan.scratch();
-            let mut spectrum = vec![Complex32::default(); plan.spectrum_len()];
-            let lane = field.index_axis(Axis(0), c);
-            let src = lane
-                .as_slice()
-                .ok_or_else(|| HoloError::InvalidData("layout".into()))?;
-            plan.forward(src, &mut spectrum, &mut scratch)?;
-            let mask: Option<Vec<Complex32>> = aperture.then(|| {
-                aperture_mask(plan)
-                    .into_iter()
-                    .map(|v| Complex32::new(v, 0.0))
-                    .collect()
-            });
-            let mut out_field = vec![Complex32::default(); h * w];
-            depths
-                .iter()
-                .map(|&d| {
-                    let mut tf =
-                        prop.transfer_function(setup.depth_to_z(d) - plane_z_m, Carrier::Remove)?;
-                    if let Some(m) = &mask {
-                        tf.multiply(m)?;
-                    }
-                    plan.inverse(&spectrum, tf.values(), &mut out_field, &mut scratch)?;
-                    Ok(out_field.iter().map(|v| v.norm()).collect())
-                })
-                .collect()
-        })
-        .collect::<Result<_>>()?;
-    Ok((0..depths.len())
-        .map(|k| {
-            let mut a = Array3::<f32>::zeros((3, h, w));
-            for (c, colour) in per_colour.iter().enumerate() {
-                a.index_axis_mut(Axis(0), c)
-                    .as_slice_mut()
-                    .expect("fresh array is contiguous")
-                    .copy_from_slice(&colour[k]);
+    // The stack is allocated once; each colour writes its channel of every depth in place (no per-colour
+    // copies to gather: at 1080p with three depths, 75 MB less at the peak of `holo render`'s previews).
+    let mut stack: Vec<Array3<f32>> = depths.iter().map(|_| Array3::zeros((3, h, w))).collect();
+    let mut lanes: Vec<Vec<&mut [f32]>> = (0..3).map(|_| Vec::new()).collect();
+    for a in &mut stack {
+        let flat = a
+            .as_slice_mut()
+            .ok_or_else(|| HoloError::Internal("fresh array is contiguous".into()))?;
+        for (lane, c) in lanes.iter_mut().zip(flat.chunks_exact_mut(h * w)) {
+            lane.push(c);
+        }
+    }
+    let colour = |(c, outs): (usize, Vec<&mut [f32]>)| -> Result<()> {
+        let prop = &props[c];
+        let plan = prop.plan();
+        let mut scratch = plan.scratch();
+        let mut spectrum = vec![Complex32::default(); plan.spectrum_len()];
+        let lane = field.index_axis(Axis(0), c);
+        let src = lane
+            .as_slice()
+            .ok_or_else(|| HoloError::InvalidData("layout".into()))?;
+        plan.forward(src, &mut spectrum, &mut scratch)?;
+        if aperture {
+            // The aperture is 0 or 1: applied to the spectrum once, it gives the same values as applied
+            // to every depth's transfer function.
+            for (s, m) in spectrum.iter_mut().zip(aperture_mask(plan)) {
+                *s *= m;
             }
-            a
-        })
-        .collect())
+        }
+        let mut out_field = vec![Complex32::default(); h * w];
+        for (&d, out) in depths.iter().zip(outs) {
+            let tf = prop.transfer_function(setup.depth_to_z(d) - plane_z_m, Carrier::Remove)?;
+            plan.inverse(&spectrum, tf.values(), &mut out_field, &mut scratch)?;
+            for (o, v) in out.iter_mut().zip(&out_field) {
+                *o = v.norm();
+            }
+        }
+        Ok(())
+    };
+    // Each colour's working set is six complex planes (spectrum, scratch, output, transfer function): 100 MB at
+    // 1080p. Large frames run their colours one after the other, small ones in parallel.
+    if h * w <= PARALLEL_COLOURS_MAX_PIXELS {
+        lanes.into_par_iter().enumerate().try_for_each(colour)?;
+    } else {
+        lanes.into_iter().enumerate().try_for_each(colour)?;
+    }
+    Ok(stack)
 }
+
+/// The largest frame (pixels) whose colours [`focal_stack`] reconstructs in parallel: 1 Mpixel, 540×960 and
+/// below (at most 3 × 50 MB of working set); larger frames run one colour at a time (`holo render`'s 1080p
+/// previews peak 100 MB lower).
+const PARALLEL_COLOURS_MAX_PIXELS: usize = 1 << 20;
 
 /// What a phase-only SLM pattern `phase` `[3, H, W]` (radians, R, G, B) shows after the display's Fourier
 /// filter (Eq. 8–9), expressed at the midpoint plane: `ASM(F⁻¹{F{e^{iP}}·M}, −s) · e^{+i2πs/λ}` (Eq. 10),
@@ -148,4 +154,49 @@ pub fn post_encoding_midpoint(
         simulate_phase_only(phase, setup, offset_m, options)?
             * Complex32::new(amplitude_scale, 0.0),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The aperture applied once to the spectrum gives, bit for bit, what the per-depth product of the
+    /// transfer function and the aperture gave (the former implementation), on a random field.
+    #[test]
+    fn focal_stack_with_the_aperture_equals_the_per_depth_product() {
+        let (h, w) = (18, 26);
+        let field = Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+            let t = (c * 131 + y * 31 + x * 7) as f32;
+            Complex32::new((t * 0.37).sin(), (t * 0.11).cos())
+        });
+        let setup = OpticalSetup::default();
+        let depths = [0.1, 0.55, 0.9];
+        let options = PropagationOptions::default();
+        let stack = focal_stack(field.view(), &setup, 6e-3, &depths, options, true).unwrap();
+        let props = setup.propagators(h, w, options).unwrap();
+        for (c, prop) in props.iter().enumerate() {
+            let plan = prop.plan();
+            let mut scratch = plan.scratch();
+            let mut spectrum = vec![Complex32::default(); plan.spectrum_len()];
+            let src: Vec<Complex32> = field.index_axis(Axis(0), c).iter().copied().collect();
+            plan.forward(&src, &mut spectrum, &mut scratch).unwrap();
+            let mask: Vec<Complex32> = aperture_mask(plan)
+                .into_iter()
+                .map(|v| Complex32::new(v, 0.0))
+                .collect();
+            assert!(mask.iter().any(|m| m.re == 0.0) && mask.iter().any(|m| m.re == 1.0));
+            for (k, &d) in depths.iter().enumerate() {
+                let mut tf = prop
+                    .transfer_function(setup.depth_to_z(d) - 6e-3, Carrier::Remove)
+                    .unwrap();
+                tf.multiply(&mask).unwrap();
+                let mut out = vec![Complex32::default(); h * w];
+                plan.inverse(&spectrum, tf.values(), &mut out, &mut scratch)
+                    .unwrap();
+                let want: Vec<f32> = out.iter().map(|v| v.norm()).collect();
+                let got: Vec<f32> = stack[k].index_axis(Axis(0), c).iter().copied().collect();
+                assert_eq!(got, want, "colour {c}, depth {d}");
+            }
+        }
+    }
 }

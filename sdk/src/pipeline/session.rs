@@ -136,7 +136,6 @@ impl HologramSession {
                 None
             };
             *slot = Some(Box::new(ColourState {
-                planes: [vec![0.0; n], vec![0.0; n]],
                 field: vec![Complex32::default(); n],
                 plan: prop.plan().clone(),
                 transfer,
@@ -150,7 +149,6 @@ impl HologramSession {
                 calibration: calibration.clone(),
             }));
         }
-        let (c, _, _) = hologram.input_dim();
         Ok(Self {
             height,
             width,
@@ -158,7 +156,7 @@ impl HologramSession {
             offset_m: cfg.offset_m,
             cnn: CnnStage {
                 plan: hologram,
-                input: Array3::zeros((c, height, width)),
+                input: Array3::zeros((0, 0, 0)),
                 calibration: calibration.clone(),
             },
             prefilter,
@@ -243,7 +241,9 @@ impl HologramSession {
     /// Whether GPU frames also download the double phase pattern ([`SlmFrame::phase`]) and the CNN heads
     /// ([`HologramSession::last_heads`]); on by default. Off, a GPU frame downloads only the codes and the
     /// normaliser (what an SLM needs): `phase` and `last_heads` then keep older values. On the CPU, off, the
-    /// heads are not kept after a frame (`last_heads` is `None`; two `[3, H, W]` f32 arrays, 50 MB at 1080p).
+    /// heads are not kept after a frame (`last_heads` is `None`; two `[3, H, W]` f32 arrays, 50 MB at 1080p)
+    /// and `phase` is not filled (it keeps older values, zeros in a new session, whose pages then never
+    /// become resident: 25 MB at 1080p).
     pub fn set_full_outputs(&mut self, full: bool) {
         self.full_outputs = full;
     }
@@ -312,8 +312,16 @@ impl HologramSession {
         }
         // The previous frame's heads go before this frame's arrive (at 1080p, 50 MB less at the peak).
         self.last_heads = None;
-        let (heads, cnn_s) = self.cnn.run_frame(frame)?;
-        self.encode_heads(heads, cnn_s)
+        // The CNN writes its heads straight into the colour workers' planes (no per-frame output arrays).
+        let [r, g, b] = &mut self.states;
+        let (Some(r), Some(g), Some(b)) = (r.as_deref_mut(), g.as_deref_mut(), b.as_deref_mut())
+        else {
+            return Err(lost_state());
+        };
+        let [(a0, p0), (a1, p1), (a2, p2)] = [r, g, b].map(ColourState::planes);
+        let heads = [a0, a1, a2, p0, p1, p2];
+        let cnn_s = self.cnn.run_frame_into(frame, heads)?;
+        self.encode_loaded(cnn_s)
     }
 
     /// The GPU frame of the CNN input packed in `self.cnn.input` (packing started at `t`): runs it on the GPU,
@@ -436,6 +444,52 @@ impl HologramSession {
         // The colour workers hold the heads now; without full outputs nobody reads them again, so they go
         // before the pre-filter's outputs arrive (50 MB less at the 1080p peak).
         let heads = self.full_outputs.then_some(heads);
+        self.encode_from_midpoint(t0, cnn_s, heads)
+    }
+
+    /// [`HologramSession::encode_heads`] for heads the CNN wrote into the colour planes
+    /// ([`CnnStage::run_frame_into`]): checks them, keeps a copy as [`HologramSession::last_heads`] when the
+    /// session has full outputs, and runs the rest of the frame.
+    ///
+    /// Errors: [`HoloError::InvalidData`] for non-finite heads; as [`HologramSession::encode_heads`].
+    fn encode_loaded(&mut self, cnn_s: f64) -> Result<&SlmFrame> {
+        let t0 = Instant::now();
+        let (h, w) = (self.height, self.width);
+        let mut heads = self.full_outputs.then(|| Heads {
+            amplitude: Array3::zeros((3, h, w)),
+            phase: Array3::zeros((3, h, w)),
+        });
+        for (c, slot) in self.states.iter_mut().enumerate() {
+            let (first, second) = slot.as_deref_mut().ok_or_else(lost_state)?.planes();
+            if first.iter().chain(second.iter()).any(|v| !v.is_finite()) {
+                return Err(HoloError::InvalidData(
+                    "midpoint heads hold NaN or infinite values".into(),
+                ));
+            }
+            if let Some(hd) = &mut heads {
+                let planes: [&[f32]; 2] = [first, second];
+                for (dst, src) in [&mut hd.amplitude, &mut hd.phase].into_iter().zip(planes) {
+                    let mut plane = dst.index_axis_mut(Axis(0), c);
+                    for (d, v) in plane.iter_mut().zip(src) {
+                        *d = *v;
+                    }
+                }
+            }
+        }
+        let prefilter = self.prefilter.is_some();
+        self.workers
+            .run(&mut self.states, |_| Task::Midpoint { prefilter })?;
+        self.encode_from_midpoint(t0, cnn_s, heads)
+    }
+
+    /// The rest of a frame once the colour workers propagated the midpoint hologram (started at `t0`): the
+    /// pre-filter, the encoding, the timings; `heads` becomes [`HologramSession::last_heads`].
+    fn encode_from_midpoint(
+        &mut self,
+        t0: Instant,
+        cnn_s: f64,
+        heads: Option<Heads>,
+    ) -> Result<&SlmFrame> {
         let offset_s = t0.elapsed().as_secs_f64();
         let t = Instant::now();
         self.run_prefilter()?;
@@ -498,9 +552,9 @@ impl HologramSession {
     /// Copies channel `c` of `first` and `second` (`[3, H, W]`) into colour `c`'s two planes.
     fn load_planes(&mut self, first: ArrayView3<f32>, second: ArrayView3<f32>) -> Result<()> {
         for (c, slot) in self.states.iter_mut().enumerate() {
-            let st = slot.as_mut().ok_or_else(lost_state)?;
-            copy_channel(first, c, &mut st.planes[0]);
-            copy_channel(second, c, &mut st.planes[1]);
+            let (a, b) = slot.as_deref_mut().ok_or_else(lost_state)?.planes();
+            copy_channel(first, c, a);
+            copy_channel(second, c, b);
         }
         Ok(())
     }
@@ -515,20 +569,26 @@ impl HologramSession {
         let Some(plan) = &mut self.prefilter else {
             return Ok(());
         };
-        let mut colours: [(&[f32], &[f32]); 3] = [(&[], &[]); 3];
-        for (c, slot) in colours.iter_mut().zip(&self.states) {
-            let st = slot.as_ref().ok_or_else(lost_state)?;
-            *c = (&st.planes[0], &st.planes[1]);
-        }
-        // The colour planes in place, no [6, H, W] copy (50 MB at 1080p).
-        let (real, imag) = plan.run_planes(&contract::prefilter_planes(colours))?;
-        self.load_planes(real.view(), imag.view())?;
+        let [r, g, b] = &mut self.states;
+        let (Some(r), Some(g), Some(b)) = (r.as_deref_mut(), g.as_deref_mut(), b.as_deref_mut())
+        else {
+            return Err(lost_state());
+        };
+        // The input: each colour's (Re H, Im H) where Task::Midpoint left them, read in place (no [6, H, W]
+        // copy, 50 MB at 1080p). The output: each colour's field memory, idle until Task::Filtered turns it
+        // into the filtered field (no output arrays, 50 MB).
+        let [(ri, ro), (gi, go), (bi, bo)] =
+            [r.prefilter_io()?, g.prefilter_io()?, b.prefilter_io()?];
+        plan.run_planes_into(
+            &contract::prefilter_planes([ri, gi, bi]),
+            [ro.0, go.0, bo.0, ro.1, go.1, bo.1],
+        )?;
         self.workers.run(&mut self.states, |_| Task::Filtered)
     }
 
     /// Stage 4 on its own (no heap allocation after the first frame): the global normaliser, pass 2 of the
     /// double phase encoding (Eq. 7) and the LUT on the workers; the colour planes are copied into
-    /// [`HologramSession::output`] (timings are not updated).
+    /// [`HologramSession::output`] (the phase only with full outputs; timings are not updated).
     ///
     /// Errors: [`HoloError::InvalidData`] if the hologram is zero everywhere.
     pub(crate) fn encode(&mut self) -> Result<&SlmFrame> {
@@ -543,7 +603,9 @@ impl HologramSession {
         })?;
         for (c, slot) in self.states.iter().enumerate() {
             let st = slot.as_ref().ok_or_else(lost_state)?;
-            fill_channel(&mut self.output.phase, c, &st.phase);
+            if self.full_outputs {
+                fill_channel(&mut self.output.phase, c, &st.phase);
+            }
             fill_channel(&mut self.output.codes, c, &st.codes);
         }
         self.output.amplitude_scale = a;
@@ -596,7 +658,7 @@ mod tests {
             // The fixtures are trained for a 6 mm offset.
             offset_m: 6e-3,
             backend: Backend::Cpu,
-            cnn_engine: CnnEngine::Tract,
+            cnn_engine: CnnEngine::Native,
             ..PipelineConfig::default()
         };
         HologramPipeline::new(load("holo8_rgbd.onnx", ModelKind::Hologram), pre, config).unwrap()
