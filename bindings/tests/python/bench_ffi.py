@@ -40,6 +40,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=3)
     ap.add_argument("--threads", type=int, default=0)
+    ap.add_argument("--backend", choices=["auto", "cpu", "gpu"], default="auto",
+                    help="GeneratorConfig.backend (auto, the default, probes the GPU)")
     args = ap.parse_args()
     rgb = np.asarray(Image.open(SHARED / "bbb_frame" / "bbb_frame_1920x1080.png").convert("RGB"))
     h, w = rgb.shape[:2]
@@ -54,7 +56,8 @@ def main() -> None:
                          color_row_stride=stride, depth=depth, depth_format=th.DepthFormat.METRES_F16,
                          depth_width=dw, depth_height=dh)
     t = time.perf_counter()
-    gen = th.HologramGenerator(th.GeneratorConfig(width=1920, height=1080, threads=args.threads))
+    backend = getattr(th.Backend, args.backend.upper())
+    gen = th.HologramGenerator(th.GeneratorConfig(width=1920, height=1080, threads=args.threads, backend=backend))
     created = time.perf_counter() - t
     info = gen.info()
     print(f"{cpu_name()}, {os.cpu_count()} logical cores; generator created in {created:.1f} s "

@@ -132,7 +132,7 @@ impl CpuCnnPlan {
 ///
 /// Errors: [`crate::HoloError::InvalidParameter`] (`engine`) for [`CnnEngine::Native`] with a file it
 /// cannot run (int8 QOperator, or a graph that is not the TensorHolo CNN); as
-/// [`crate::model::HologramModel::tuned_plan`].
+/// `HologramModel::tuned_plan` (feature `tract`).
 pub fn cnn_plan(
     model: &crate::model::HologramModel,
     height: usize,

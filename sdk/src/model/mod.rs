@@ -98,17 +98,17 @@ impl std::fmt::Display for Precision {
 
 /// The memory layout tract runs a CNN in. The ONNX files are always channels-first `[1, C, H, W]`
 /// (`docs/CONVENTIONS.md` §7) and a plan takes and returns `[C, H, W]` arrays in every layout; only tract's
-/// internal graph differs ([`HologramModel::plan_with_layout`]).
+/// internal graph differs (`HologramModel::plan_with_layout` (feature `tract`)).
 ///
 /// Which layout is faster depends on the CPU and the frame size (`docs/BENCHMARKS.md`: on one 2-core Xeon
 /// channels-first won at large frames, on another channels-last was 2.2× faster at 384×384), so the default
 /// is [`CnnLayout::Auto`]: the candidates are timed on the machine at session creation
-/// ([`HologramModel::tuned_plan`]).
+/// (`HologramModel::tuned_plan` (feature `tract`)).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum CnnLayout {
     /// Time both layouts on this machine at the real resolution and keep the faster
-    /// ([`HologramModel::tuned_plan`]); a plan never runs in `Auto` itself.
+    /// (`HologramModel::tuned_plan` (feature `tract`)); a plan never runs in `Auto` itself.
     #[default]
     Auto,
     /// Channels first (NCHW), as in the file. tract 0.23 runs the 3×3 convolutions as its direct spatial

@@ -80,7 +80,11 @@ impl ColourState {
     pub(super) fn run(&mut self, task: Task) -> Result<()> {
         match task {
             Task::Midpoint { prefilter } => {
-                self.planes_to_field(head_to_phasor);
+                if !self.planes_to_field(head_to_phasor) {
+                    return Err(HoloError::InvalidData(
+                        "midpoint heads hold NaN or infinite values".into(),
+                    ));
+                }
                 match &self.transfer {
                     Some(Transfer::Even(t)) => {
                         self.plan
@@ -106,7 +110,8 @@ impl ColourState {
                 Ok(())
             }
             Task::Filtered => {
-                self.planes_to_field(Complex32::new);
+                // The pre-filter's outputs are not checked here (the encoder's analysis sees the field).
+                let _ = self.planes_to_field(Complex32::new);
                 self.stats = self.encoder.analyse(&mut self.field, &mut self.phase)?;
                 Ok(())
             }
@@ -152,17 +157,23 @@ impl ColourState {
     /// `field[i] = f(first[i], second[i])`. The second plane is copied into `phase` first (the encoder's
     /// next pass overwrites it); then pixels run from last to first, so that writing pixel `i` (values
     /// `2i`, `2i + 1`) never overwrites a first-plane value still to be read (value `j < i` is written
-    /// at pixel `⌊j/2⌋`, after pixel `j`).
-    fn planes_to_field(&mut self, f: impl Fn(f32, f32) -> Complex32) {
+    /// at pixel `⌊j/2⌋`, after pixel `j`). Returns whether every value of both planes was finite (the
+    /// session's check of the CNN's heads, here on the workers' threads rather than a pass of its own).
+    #[must_use]
+    fn planes_to_field(&mut self, f: impl Fn(f32, f32) -> Complex32) -> bool {
         let n = self.field.len();
         self.phase
             .copy_from_slice(&bytemuck::cast_slice::<Complex32, f32>(&self.field)[n..]);
         let flat = bytemuck::cast_slice_mut::<Complex32, f32>(&mut self.field);
+        let mut finite = true;
         for (i, &second) in self.phase.iter().enumerate().rev() {
-            let z = f(flat[i], second);
+            let first = flat[i];
+            finite &= first.is_finite() & second.is_finite();
+            let z = f(first, second);
             flat[2 * i] = z.re;
             flat[2 * i + 1] = z.im;
         }
+        finite
     }
 }
 

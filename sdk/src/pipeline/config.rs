@@ -17,9 +17,10 @@ pub const MAX_HOLOGRAM_PIXELS: usize = 8192 * 8192;
 
 /// Where a [`HologramSession`] computes its frames.
 ///
-/// - [`Backend::Cpu`]: tract for the CNNs and rustfft for the optics (the reference).
+/// - [`Backend::Cpu`]: the CPU CNN engine (native or tract, [`crate::cnn`]) and rustfft for the optics (the
+///   reference).
 /// - [`Backend::Gpu`]: the whole frame in WGSL compute shaders through wgpu (Metal on iOS, Vulkan on Android
-///   and Linux; cargo feature `gpu`, [`crate::gpu`]), any adapter including a software one. Session creation
+///   and Linux; cargo feature `gpu`, module `gpu`), any adapter including a software one. Session creation
 ///   fails with [`HoloError::Gpu`] where there is none.
 /// - [`Backend::Auto`] (the default): the GPU where a hardware adapter exists, the session can be built on it
 ///   and its first frame passes a self-check against the CPU path; otherwise the CPU. The reason is logged and

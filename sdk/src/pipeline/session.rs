@@ -62,7 +62,7 @@ impl HologramPipeline {
     /// three colour worker threads.
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`size`) for a size of 0 or above
-    /// [`super::MAX_HOLOGRAM_PIXELS`], checked first; as [`crate::model::HologramModel::plan`],
+    /// [`super::MAX_HOLOGRAM_PIXELS`], checked first; as `HologramModel::plan` (feature `tract`),
     /// [`crate::optics::SpectralPlan::new`] and [`ChannelEncoder::new`].
     pub fn session(&self, height: usize, width: usize) -> Result<HologramSession> {
         HologramSession::new(self, height, width)
@@ -249,7 +249,7 @@ impl HologramSession {
     }
 
     /// How the hologram CNN's plan was chosen: layout, threads, and the autotuning timings
-    /// ([`HologramModel::tuned_plan`]). The pre-filter CNN runs channels-first with the same threads.
+    /// (`HologramModel::tuned_plan` (feature `tract`)). The pre-filter CNN runs channels-first with the same threads.
     pub fn plan_report(&self) -> &PlanReport {
         &self.plan_report
     }
@@ -448,11 +448,13 @@ impl HologramSession {
     }
 
     /// [`HologramSession::encode_heads`] for heads the CNN wrote into the colour planes
-    /// ([`CnnStage::run_frame_into`]): checks them, keeps a copy as [`HologramSession::last_heads`] when the
-    /// session has full outputs, and runs the rest of the frame.
+    /// ([`CnnStage::run_frame_into`]): keeps a copy as [`HologramSession::last_heads`] when the session has
+    /// full outputs, and runs the rest of the frame (the colour workers check the heads are finite as they
+    /// turn them into fields).
     ///
     /// Errors: [`HoloError::InvalidData`] for non-finite heads; as [`HologramSession::encode_heads`].
     fn encode_loaded(&mut self, cnn_s: f64) -> Result<&SlmFrame> {
+        self.last_heads = None;
         let t0 = Instant::now();
         let (h, w) = (self.height, self.width);
         let mut heads = self.full_outputs.then(|| Heads {
@@ -461,11 +463,6 @@ impl HologramSession {
         });
         for (c, slot) in self.states.iter_mut().enumerate() {
             let (first, second) = slot.as_deref_mut().ok_or_else(lost_state)?.planes();
-            if first.iter().chain(second.iter()).any(|v| !v.is_finite()) {
-                return Err(HoloError::InvalidData(
-                    "midpoint heads hold NaN or infinite values".into(),
-                ));
-            }
             if let Some(hd) = &mut heads {
                 let planes: [&[f32]; 2] = [first, second];
                 for (dst, src) in [&mut hd.amplitude, &mut hd.phase].into_iter().zip(planes) {
@@ -694,5 +691,35 @@ mod tests {
         // After the refusals the same heads give the same codes.
         let again = session.encode_heads(heads(16, 20, 0.5), 0.0).unwrap();
         assert_eq!(again.codes, good);
+    }
+
+    #[test]
+    fn non_finite_heads_written_in_place_are_refused_by_the_workers() {
+        // The render path: the CNN writes its heads into the colour workers' field memory and the workers
+        // check them as they turn them into fields.
+        let mut session = pipeline(true).session(16, 20).unwrap();
+        let good = session
+            .encode_heads(heads(16, 20, 0.5), 0.0)
+            .unwrap()
+            .codes
+            .clone();
+        for (c, slot) in session.states.iter_mut().enumerate() {
+            let (amplitude, phase) = slot.as_deref_mut().unwrap().planes();
+            amplitude.fill(0.5);
+            phase.fill(0.5);
+            if c == 1 {
+                phase[7] = f32::INFINITY;
+            }
+        }
+        let e = session.encode_loaded(0.0).unwrap_err();
+        assert!(matches!(e, HoloError::InvalidData(_)), "{e}");
+        assert!(session.last_heads().is_none());
+        // The same heads, finite, through the same path: the codes of `encode_heads`.
+        for slot in session.states.iter_mut() {
+            let (amplitude, phase) = slot.as_deref_mut().unwrap().planes();
+            amplitude.fill(0.5);
+            phase.fill(0.5);
+        }
+        assert_eq!(session.encode_loaded(0.0).unwrap().codes, good);
     }
 }
