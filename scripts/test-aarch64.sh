@@ -26,14 +26,14 @@ ensure_apt gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user ||
 rustup target list --installed | grep -qx "$target" || rustup target add "$target"
 
 cargo test --locked --target "$target" -p tensorholo --no-default-features \
-  --features "embedded-models models-15 models-30" \
+  --features "embedded-models models-15 models-30 tract" \
   --test model --test shipped_models --test pipeline --test platform_parity "$@" -- --nocapture 2>&1 |
   grep -vE '^(running [0-9]+ tests?|)$'
 
 # The native CNN engine (NEON kernel rows) against tract on every shipped f32 CNN, threads and bad input: the
 # SDK's unit tests of `cnn` (sdk/src/cnn/tests.rs), same features as above.
 cargo test --locked --target "$target" -p tensorholo --no-default-features \
-  --features "embedded-models models-15 models-30" --lib "$@" -- --nocapture cnn:: 2>&1 |
+  --features "embedded-models models-15 models-30 tract" --lib "$@" -- --nocapture cnn:: 2>&1 |
   grep -vE '^(running [0-9]+ tests?|)$'
 
 # The kernels crate (kernels/, tensorholo-kernels) under three emulated CPUs, so that every aarch64 kernel row

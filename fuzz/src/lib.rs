@@ -103,11 +103,15 @@ pub fn holocal(data: &[u8]) {
     }
 }
 
-/// The ONNX model loader with its metadata and contract checks, as both kinds of CNN with the default display.
+/// The ONNX model loader with its metadata and contract checks, as both kinds of CNN with the default display,
+/// and, for a file that loads, the SDK's own reading of its layers (`HologramModel::cnn_graph`, what the native
+/// engine and the GPU run; the load itself in a build without tract).
 pub fn onnx_model(data: &[u8]) {
     init();
     for kind in [ModelKind::Hologram, ModelKind::PreFilter] {
-        let _ = HologramModel::from_bytes(data, kind, &ModelConfig::default());
+        if let Ok(model) = HologramModel::from_bytes(data, kind, &ModelConfig::default()) {
+            let _ = model.cnn_graph();
+        }
     }
 }
 

@@ -631,13 +631,21 @@ impl HologramModel {
     /// Errors: [`HoloError::ModelContract`] (every call, the same reason) where the graph is not the
     /// architecture; such a model runs on tract only.
     pub fn cnn_graph(&self) -> Result<std::sync::Arc<CnnWeights>> {
-        let cached = self
-            .cnn_graph
-            .get_or_init(|| match CnnWeights::from_model(self) {
-                Ok(w) => Ok(std::sync::Arc::new(w)),
-                Err(HoloError::ModelContract { reason, .. }) => Err(reason),
-                Err(e) => Err(e.to_string()),
-            });
+        let cached = self.cnn_graph.get_or_init(|| {
+            // The reader walks an untrusted graph: a bug that panics on some file must refuse it, not
+            // crash the app.
+            let read = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                CnnWeights::from_model(self)
+            }));
+            match read {
+                Ok(Ok(w)) => Ok(std::sync::Arc::new(w)),
+                Ok(Err(HoloError::ModelContract { reason, .. })) => Err(reason),
+                Ok(Err(e)) => Err(e.to_string()),
+                Err(_) => Err(
+                    "reading the graph's layers panicked (a bug: please report the file)".into(),
+                ),
+            }
+        });
         cached.clone().map_err(|reason| HoloError::ModelContract {
             source_name: self.source_name().to_string(),
             reason,
