@@ -71,13 +71,7 @@ pub(crate) trait CnnPlan: std::fmt::Debug + Send {
     /// values.
     fn run_planes_into(&mut self, planes: &[&[f32]], outputs: [&mut [f32]; 6]) -> Result<()> {
         let (_, h, w) = self.input_dim();
-        if let Some(p) = outputs.iter().find(|p| p.len() != h * w) {
-            return Err(crate::HoloError::ShapeMismatch {
-                what: "CNN output plane (values)".into(),
-                expected: vec![h * w],
-                got: vec![p.len()],
-            });
-        }
+        check_output_planes(&outputs, h * w)?;
         let (first, second) = self.run_planes(planes)?;
         let channels = first.outer_iter().chain(second.outer_iter());
         for (o, c) in outputs.into_iter().zip(channels) {
@@ -105,6 +99,19 @@ pub(crate) fn check_planes(planes: &[&[f32]], (c, h, w): (usize, usize, usize)) 
         });
     }
     Ok(())
+}
+
+/// Checks six output planes hold `hw` values each ([`CnnPlan::run_planes_into`]). Errors:
+/// [`crate::HoloError::ShapeMismatch`].
+pub(crate) fn check_output_planes(outputs: &[&mut [f32]; 6], hw: usize) -> Result<()> {
+    match outputs.iter().find(|p| p.len() != hw) {
+        Some(p) => Err(crate::HoloError::ShapeMismatch {
+            what: "CNN output plane (values)".into(),
+            expected: vec![hw],
+            got: vec![p.len()],
+        }),
+        None => Ok(()),
+    }
 }
 
 /// One CNN at one resolution on the engine [`cnn_plan`] chose: what `holo bench` times, engine against

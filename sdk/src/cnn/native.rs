@@ -33,7 +33,7 @@ use tensorholo_kernels::{
 };
 
 use super::strips::{bands, hidden_layers, installed, row_bytes, Place, Strips, Window};
-use super::{check_planes, kernel_err, CnnPlan};
+use super::{check_output_planes, check_planes, kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnWeights, QuantGrid};
 
@@ -341,13 +341,7 @@ pub(super) struct Outputs<'a> {
 impl<'a> Outputs<'a> {
     /// The six planes, checked to hold `hw` values each. Errors: [`HoloError::ShapeMismatch`].
     pub fn new(planes: [&'a mut [f32]; 6], hw: usize) -> Result<Self> {
-        if let Some(p) = planes.iter().find(|p| p.len() != hw) {
-            return Err(HoloError::ShapeMismatch {
-                what: "CNN output plane (values)".into(),
-                expected: vec![hw],
-                got: vec![p.len()],
-            });
-        }
+        check_output_planes(&planes, hw)?;
         Ok(Self { planes })
     }
 
@@ -392,7 +386,7 @@ pub(super) fn heads_rows<'r>(
     heads: Option<(f32, f32)>,
     raw_row: &(dyn Fn(usize, usize) -> &'r [f32] + Sync),
     grid: Option<QuantGrid>,
-    [h, w]: [usize; 2],
+    [_, w]: [usize; 2],
     rows: Range<usize>,
     isa: Isa,
     threads: usize,
@@ -415,7 +409,6 @@ pub(super) fn heads_rows<'r>(
         }
         Ok(())
     };
-    let _ = h;
     if threads > 1 {
         out.planes
             .par_iter_mut()

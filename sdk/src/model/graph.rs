@@ -631,20 +631,16 @@ impl HologramModel {
     /// Errors: [`HoloError::ModelContract`] (every call, the same reason) where the graph is not the
     /// architecture; such a model runs on tract only.
     pub fn cnn_graph(&self) -> Result<std::sync::Arc<CnnWeights>> {
+        // The reader walks an untrusted graph: a file on which it would panic is refused, not a crash.
         let cached = self.cnn_graph.get_or_init(|| {
-            // The reader walks an untrusted graph: a bug that panics on some file must refuse it, not
-            // crash the app.
-            let read = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                CnnWeights::from_model(self)
-            }));
-            match read {
-                Ok(Ok(w)) => Ok(std::sync::Arc::new(w)),
-                Ok(Err(HoloError::ModelContract { reason, .. })) => Err(reason),
-                Ok(Err(e)) => Err(e.to_string()),
-                Err(_) => Err(
-                    "reading the graph's layers panicked (a bug: please report the file)".into(),
-                ),
-            }
+            super::network::guarded(
+                "reading the graph's layers",
+                || match CnnWeights::from_model(self) {
+                    Ok(w) => Ok(std::sync::Arc::new(w)),
+                    Err(HoloError::ModelContract { reason, .. }) => Err(reason),
+                    Err(e) => Err(e.to_string()),
+                },
+            )
         });
         cached.clone().map_err(|reason| HoloError::ModelContract {
             source_name: self.source_name().to_string(),

@@ -4,7 +4,6 @@
 //! int8 QOperator files included; the native engine and the GPU run the TensorHolo residual CNN only.
 
 use std::collections::HashMap;
-use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -18,6 +17,7 @@ use tract_onnx::prelude::{
 
 use super::contract::heads_to_field;
 use super::metadata::ModelKind;
+use super::network::guarded;
 use super::tuning::{auto_thread_candidates, fastest_run, timing_resolution};
 use super::{
     CnnEngine, CnnLayout, HologramModel, PlanReport, PlanRequest, PlanTiming, ThreadCount,
@@ -129,24 +129,6 @@ pub fn set_cnn_threads(threads: usize) -> Result<()> {
 /// Formats a tract error with its whole context chain on one line.
 fn tract_msg(e: &tract_onnx::prelude::TractError) -> String {
     format!("{e:#}")
-}
-
-/// Runs `f`, turning a panic inside tract into an error (a corrupt file must never panic the caller).
-fn guarded<T, E: From<String>>(
-    what: &str,
-    f: impl FnOnce() -> std::result::Result<T, E>,
-) -> std::result::Result<T, E> {
-    match catch_unwind(AssertUnwindSafe(f)) {
-        Ok(r) => r,
-        Err(p) => {
-            let msg = p
-                .downcast_ref::<String>()
-                .cloned()
-                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-                .unwrap_or_else(|| "unknown panic".into());
-            Err(E::from(format!("{what} panicked: {msg}")))
-        }
-    }
 }
 
 /// Why [`optimise`] failed: the requested layout does not apply to the graph, or tract failed.

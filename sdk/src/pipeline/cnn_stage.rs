@@ -95,11 +95,11 @@ impl CnnStage {
             }
             _ => {
                 self.pack_frame(frame)?;
-                let planes: Vec<&[f32]> = self
-                    .input
-                    .as_slice()
-                    .map(|s| s.chunks_exact(h * w).collect())
-                    .unwrap_or_default();
+                // pack_frame took a 4-channel CNN: its packed input is four planes.
+                let packed = self.input.as_slice().unwrap_or_default();
+                let planes: [&[f32]; 4] = std::array::from_fn(|i| {
+                    packed.get(i * h * w..(i + 1) * h * w).unwrap_or_default()
+                });
                 self.plan.run_planes_into(&planes, heads)?;
             }
         }

@@ -138,8 +138,7 @@ impl ColourState {
     /// The field's memory as two real planes `(first, second)` of `H·W` values each, for the session to
     /// write a frame's heads or the pre-filter's output into.
     pub(super) fn planes(&mut self) -> PlanePairMut<'_> {
-        let n = self.field.len();
-        bytemuck::cast_slice_mut::<Complex32, f32>(&mut self.field).split_at_mut(n)
+        field_planes(&mut self.field)
     }
 
     /// The pre-filter's input `(Re H, Im H)` that [`Task::Midpoint`] left in the spectrum's memory, beside
@@ -149,8 +148,7 @@ impl ColourState {
     pub(super) fn prefilter_io(&mut self) -> Result<(PlanePair<'_>, PlanePairMut<'_>)> {
         let n = self.field.len();
         let input = self.scratch.planes(n).ok_or_else(no_room)?;
-        let output = bytemuck::cast_slice_mut::<Complex32, f32>(&mut self.field).split_at_mut(n);
-        Ok((input, output))
+        Ok((input, field_planes(&mut self.field)))
     }
 
     /// Turns the two planes in the field's memory ([`ColourState::planes`]) into the field in place:
@@ -175,6 +173,12 @@ impl ColourState {
         }
         finite
     }
+}
+
+/// A complex field's memory as two real planes of `field.len()` values each.
+fn field_planes(field: &mut [Complex32]) -> PlanePairMut<'_> {
+    let n = field.len();
+    bytemuck::cast_slice_mut::<Complex32, f32>(field).split_at_mut(n)
 }
 
 /// The error for a scratch without room for the pre-filter's input (an internal inconsistency).

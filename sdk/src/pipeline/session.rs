@@ -313,12 +313,8 @@ impl HologramSession {
         // The previous frame's heads go before this frame's arrive (at 1080p, 50 MB less at the peak).
         self.last_heads = None;
         // The CNN writes its heads straight into the colour workers' planes (no per-frame output arrays).
-        let [r, g, b] = &mut self.states;
-        let (Some(r), Some(g), Some(b)) = (r.as_deref_mut(), g.as_deref_mut(), b.as_deref_mut())
-        else {
-            return Err(lost_state());
-        };
-        let [(a0, p0), (a1, p1), (a2, p2)] = [r, g, b].map(ColourState::planes);
+        let [(a0, p0), (a1, p1), (a2, p2)] =
+            colour_states(&mut self.states)?.map(ColourState::planes);
         let heads = [a0, a1, a2, p0, p1, p2];
         let cnn_s = self.cnn.run_frame_into(frame, heads)?;
         self.encode_loaded(cnn_s)
@@ -566,11 +562,7 @@ impl HologramSession {
         let Some(plan) = &mut self.prefilter else {
             return Ok(());
         };
-        let [r, g, b] = &mut self.states;
-        let (Some(r), Some(g), Some(b)) = (r.as_deref_mut(), g.as_deref_mut(), b.as_deref_mut())
-        else {
-            return Err(lost_state());
-        };
+        let [r, g, b] = colour_states(&mut self.states)?;
         // The input: each colour's (Re H, Im H) where Task::Midpoint left them, read in place (no [6, H, W]
         // copy, 50 MB at 1080p). The output: each colour's field memory, idle until Task::Filtered turns it
         // into the filtered field (no output arrays, 50 MB).
@@ -627,6 +619,15 @@ fn apply_calibrated_luts(cal: Option<&Arc<DisplayCalibration>>, out: &mut SlmFra
         }
     }
     Ok(())
+}
+
+/// The three colour states, each borrowed on its own. Errors: as [`lost_state`] if a worker kept one.
+fn colour_states(states: &mut [Option<Box<ColourState>>; 3]) -> Result<[&mut ColourState; 3]> {
+    let [r, g, b] = states;
+    match (r.as_deref_mut(), g.as_deref_mut(), b.as_deref_mut()) {
+        (Some(r), Some(g), Some(b)) => Ok([r, g, b]),
+        _ => Err(lost_state()),
+    }
 }
 
 #[cfg(test)]
@@ -703,23 +704,19 @@ mod tests {
             .unwrap()
             .codes
             .clone();
-        for (c, slot) in session.states.iter_mut().enumerate() {
-            let (amplitude, phase) = slot.as_deref_mut().unwrap().planes();
-            amplitude.fill(0.5);
-            phase.fill(0.5);
-            if c == 1 {
-                phase[7] = f32::INFINITY;
-            }
-        }
+        let mut bad = heads(16, 20, 0.5);
+        bad.phase[[1, 2, 3]] = f32::INFINITY;
+        session
+            .load_planes(bad.amplitude.view(), bad.phase.view())
+            .unwrap();
         let e = session.encode_loaded(0.0).unwrap_err();
         assert!(matches!(e, HoloError::InvalidData(_)), "{e}");
         assert!(session.last_heads().is_none());
         // The same heads, finite, through the same path: the codes of `encode_heads`.
-        for slot in session.states.iter_mut() {
-            let (amplitude, phase) = slot.as_deref_mut().unwrap().planes();
-            amplitude.fill(0.5);
-            phase.fill(0.5);
-        }
+        let fine = heads(16, 20, 0.5);
+        session
+            .load_planes(fine.amplitude.view(), fine.phase.view())
+            .unwrap();
         assert_eq!(session.encode_loaded(0.0).unwrap().codes, good);
     }
 }
