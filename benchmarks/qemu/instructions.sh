@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Usage: benchmarks/qemu/instructions.sh [HOLO_AARCH64] [SIZE]
+# Usage: benchmarks/qemu/instructions.sh [HOLO_AARCH64] [SIZE] [all|frames|cnn]
 #
 # Guest instructions per frame of the aarch64 build of `holo render`, counted under qemu-aarch64 with this
 # directory's TCG plugin (insn_count.c). A PROXY FOR ARM COST, NOT A TIME: qemu counts the instructions the
@@ -20,6 +20,8 @@ here="$(cd "$(dirname "$0")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
 holo="${1:-$root/target/aarch64-unknown-linux-gnu/release/holo}"
 size="${2:-192x192}"
+part="${3:-all}" # all: both tables; frames: whole frames only; cnn: the hologram CNN alone only
+case "$part" in all | frames | cnn) ;; *) echo "third argument: all, frames or cnn (got '$part')" >&2; exit 1 ;; esac
 [ -x "$holo" ] || { echo "no aarch64 holo at $holo: cargo build --release --target aarch64-unknown-linux-gnu -p holo" >&2; exit 1; }
 command -v qemu-aarch64 >/dev/null || { echo "needs qemu-aarch64 (Debian qemu-user)" >&2; exit 1; }
 
@@ -39,6 +41,7 @@ count() { # engine precision layout qemu-cpu repeat → instruction count (and r
   sed -n 's/^insn_count: //p' "$work/plugin.log"
 }
 
+if [ "$part" != cnn ]; then
 echo "Guest instructions per frame, holo8 + DDPM pre-filter, built-in scene $size, 1 thread (qemu-aarch64 $(qemu-aarch64 --version | head -1 | awk '{print $3}'); a proxy for ARM cost, not a time)"
 echo
 echo "| engine | precision | layout | qemu CPU | kernel | M instructions / frame | CNN multiply-adds / instruction |"
@@ -63,6 +66,8 @@ per_frame = (three - one) / 2
 print(f"| {engine} | {precision} | {layout} | {cpu} | {kernel} | {per_frame / 1e6:.0f} | {macs / per_frame:.2f} |")
 PY
 done
+fi
+[ "$part" = frames ] && exit 0
 
 # The hologram CNN alone: `holo bench --skip-pipeline` runs one warm-up and then --repeat runs of the CNN, so the
 # difference of --repeat 3 and --repeat 1, halved, is one CNN run (nothing else of a frame). tract's layout is
@@ -76,7 +81,7 @@ bench_count() { # engine precision layers qemu-cpu repeat → instruction count 
   sed -n 's/^insn_count: //p' "$work/plugin.log"
 }
 
-echo
+[ "$part" = all ] && echo
 echo "Guest instructions of one hologram CNN run alone ($size, 1 thread; \`holo bench --skip-pipeline\`)"
 echo
 echo "| CNN | engine | precision | qemu CPU | kernel / layout | M instructions / run | multiply-adds / instruction |"

@@ -439,9 +439,10 @@ pub struct StageTimings {
     pub cnn_ms: f64,
     /// Offset propagation to the SLM (Eq. 6).
     pub offset_ms: f64,
-    /// Pre-filter CNN (0 without one).
+    /// Pre-filter CNN alone (0 without one).
     pub prefilter_ms: f64,
-    /// Double phase encoding and look-up table (Eq. 7).
+    /// Double phase encoding and look-up table (Eq. 7), with turning the pre-filter CNN's output into the
+    /// field where there is one.
     pub encoding_ms: f64,
     /// On the GPU: the whole GPU frame (CNNs and optics; the three stage fields above are then 0 and
     /// `cnn_ms` is the input packing). 0 on the CPU.

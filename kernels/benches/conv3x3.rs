@@ -1,4 +1,5 @@
-//! Every available kernel row × the TensorHolo layer shapes at 384×384, one thread.
+//! Every available kernel row × the TensorHolo layer shapes at 384×384, one thread; the pre-filter's
+//! depthwise base filter on every path.
 //!
 //! Throughput is reported in "elements" = operations (2 per multiply-add, `2·9·C_in·C_out·H·W` per layer),
 //! so criterion's `Gelem/s` reads as GFLOP/s (f32) or GOP/s (int8). The peaks of each ISA are measured with
@@ -9,7 +10,8 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::hint::black_box;
 use tensorholo_kernels::{
-    peak, registry, Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, QuantU8, RowPlanar,
+    depthwise, peak, registry, Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, QuantU8,
+    RowPlanar,
 };
 
 const H: usize = 384;
@@ -179,11 +181,31 @@ fn u8_rows(c: &mut Criterion) {
     group.finish();
 }
 
+/// The pre-filter's 5×5 base filter of 6 channels at 384² (one thread), on every available path
+/// (`depthwise.<isa>`; throughput in FLOP, 2 per tap).
+fn depthwise_paths(c: &mut Criterion) {
+    let (ch, k) = (6, 5);
+    let input = data(ch * H * W, 7);
+    let kernel = data(ch * k * k, 8);
+    let mut out = data(ch * H * W, 9);
+    let mut group = c.benchmark_group("depthwise_6ch_5x5_384x384");
+    group.throughput(Throughput::Elements((2 * k * k * ch * H * W) as u64));
+    for isa in Isa::available() {
+        group.bench_function(isa.name(), |bch| {
+            bch.iter(|| {
+                depthwise(&input, ch, H, W, &kernel, k, &mut out, true, isa).expect("run");
+                black_box(&out);
+            })
+        });
+    }
+    group.finish();
+}
+
 // criterion_group! generates an undocumented function.
 #[allow(missing_docs)]
 mod group {
     use super::*;
-    criterion_group!(benches, f32_rows, u8_rows);
+    criterion_group!(benches, f32_rows, u8_rows, depthwise_paths);
 }
 use group::benches;
 criterion_main!(benches);

@@ -23,6 +23,7 @@
 //! [`fake_quantize`] is ONNX `QuantizeLinear` then `DequantizeLinear` on a u8 grid: the int8 files round the
 //! last convolution's output to a grid before the heads (or the pre-filter's sum).
 
+use crate::isa::recompiled_path;
 use crate::quant::{check_scale, quantize_f32, ROUND_MAGIC};
 use crate::{Isa, KernelError, QuantU8};
 
@@ -88,17 +89,6 @@ fn grid_body(values: &mut [f32], grid: QuantU8) {
     values.iter_mut().for_each(|v| *v = grid_round(*v, s, zp));
 }
 
-/// The code paths of this module: `(name, ISA)`, best first (the tests run every available one).
-#[cfg(target_arch = "x86_64")]
-pub(crate) const PATHS: [(&str, Isa); 3] = [
-    ("heads.avx512", Isa::Avx512),
-    ("heads.avx2", Isa::Avx2Fma),
-    ("heads.portable", Isa::Scalar),
-];
-/// The code paths of this module: `(name, ISA)`, best first (the tests run every available one).
-#[cfg(not(target_arch = "x86_64"))]
-pub(crate) const PATHS: [(&str, Isa); 1] = [("heads.portable", Isa::Scalar)];
-
 #[cfg(target_arch = "x86_64")]
 mod x86 {
     use super::{grid_body, heads_body};
@@ -128,21 +118,6 @@ mod x86 {
     pub(super) unsafe fn grid_avx512(values: &mut [f32], g: QuantU8) {
         grid_body(values, g)
     }
-}
-
-/// The widest path `isa` allows. Errors: `isa` not available on this CPU.
-fn path(isa: Isa) -> Result<Isa, KernelError> {
-    if !isa.is_available() {
-        return Err(KernelError::Isa {
-            name: isa.name().into(),
-            why: "not available on this CPU",
-        });
-    }
-    Ok(PATHS
-        .iter()
-        .map(|&(_, i)| i)
-        .find(|&i| isa.includes(i))
-        .unwrap_or(Isa::Scalar))
 }
 
 fn check(raw: &[f32], out: &[f32]) -> Result<(), KernelError> {
@@ -179,7 +154,7 @@ pub fn tanh_heads(
 ) -> Result<(), KernelError> {
     check(raw, out)?;
     check_grid(grid)?;
-    match path(isa)? {
+    match recompiled_path(isa)? {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `path` returned a level this CPU has (AVX-512F).
         Isa::Avx512 => unsafe { x86::heads_avx512(raw, out, scale, grid) },
@@ -198,7 +173,7 @@ pub fn tanh_heads(
 /// ([`KernelError::Parameter`]).
 pub fn fake_quantize(values: &mut [f32], grid: QuantU8, isa: Isa) -> Result<(), KernelError> {
     check_grid(Some(grid))?;
-    match path(isa)? {
+    match recompiled_path(isa)? {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `path` returned a level this CPU has (AVX-512F).
         Isa::Avx512 => unsafe { x86::grid_avx512(values, grid) },
@@ -252,18 +227,8 @@ mod tests {
         v
     }
 
-    fn available_paths() -> Vec<(&'static str, Isa)> {
-        PATHS
-            .iter()
-            .copied()
-            .filter(|&(name, i)| {
-                let ok = i.is_available();
-                if !ok {
-                    println!("SKIPPED {name}: this CPU lacks {i}");
-                }
-                ok
-            })
-            .collect()
+    fn available_paths() -> Vec<(String, Isa)> {
+        crate::isa::available_recompiled("heads")
     }
 
     #[test]

@@ -15,7 +15,8 @@
 //!   row band; u8 buffers are filled as ONNX `QuantizeLinear` does and take a new zero point when reused.
 //! * [`Isa`]: detection and the `TENSORHOLO_ISA` override; [`registry`]: the kernel rows.
 //! * [`tanh_heads`], [`fake_quantize`]: the hologram CNN's heads and the int8 output grid, vectorised.
-//! * [`depthwise()`]: the pre-filter's fixed depthwise filter; [`peak`]: measured FMA / dot-product peaks.
+//! * [`depthwise()`], [`depthwise_rows`]: the pre-filter's fixed depthwise filter, register-tiled; [`peak`]:
+//!   measured FMA / dot-product peaks.
 //!
 //! ```
 //! use tensorholo_kernels::{Conv3x3F32, Inputs, Isa, RowPlanar};
@@ -34,7 +35,8 @@
 //! ```
 //!
 //! `unsafe` appears only in the ISA files (`conv3x3/*_{avx2,avx512,neon,…}.rs`, the generic SIMD loop), in
-//! the single dispatch point ([`registry`]) and in [`heads`]' dispatch to its `#[target_feature]` copies;
+//! the single dispatch point ([`registry`]) and in [`heads`]' and [`depthwise`](mod@depthwise)'s dispatch to their
+//! `#[target_feature]` copies (`isa::RECOMPILED`);
 //! every public function is safe and checks shapes and lengths.
 
 pub mod buffer;
@@ -50,7 +52,7 @@ mod quant;
 pub use buffer::{Affine, RowBand, RowPlanar};
 pub use conv3x3::registry::{self, DType, KernelInfo, PackKind};
 pub use conv3x3::{Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, QuantU8};
-pub use depthwise::depthwise;
+pub use depthwise::{depthwise, depthwise_rows};
 pub use error::KernelError;
 pub use heads::{fake_quantize, tanh_heads};
 pub use isa::Isa;

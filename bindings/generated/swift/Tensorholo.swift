@@ -2512,11 +2512,12 @@ public struct StageTimings: Equatable, Hashable {
      */
     public var offsetMs: Double
     /**
-     * Pre-filter CNN (0 without one).
+     * Pre-filter CNN alone (0 without one).
      */
     public var prefilterMs: Double
     /**
-     * Double phase encoding and look-up table (Eq. 7).
+     * Double phase encoding and look-up table (Eq. 7), with turning the pre-filter CNN's output into the
+     * field where there is one.
      */
     public var encodingMs: Double
     /**
@@ -2542,10 +2543,11 @@ public struct StageTimings: Equatable, Hashable {
          * Offset propagation to the SLM (Eq. 6).
          */offsetMs: Double, 
         /**
-         * Pre-filter CNN (0 without one).
+         * Pre-filter CNN alone (0 without one).
          */prefilterMs: Double, 
         /**
-         * Double phase encoding and look-up table (Eq. 7).
+         * Double phase encoding and look-up table (Eq. 7), with turning the pre-filter CNN's output into the
+         * field where there is one.
          */encodingMs: Double, 
         /**
          * On the GPU: the whole GPU frame (CNNs and optics; the three stage fields above are then 0 and

@@ -34,6 +34,22 @@ pub(crate) trait SimdQ: Copy {
     unsafe fn load_w(p: *const u8) -> Self::W;
     /// `self + Σ_c x[p][c]·w[c]` per pixel (exact i32).
     unsafe fn dot(self, x: Self::X, w: Self::W) -> Self;
+    /// One reduction step of four output channels: `acc[l][v] ← acc[l][v].dot(x[v], w_l)` for `l` in 0..4,
+    /// where `w_l` is channel `l`'s `WB`-byte weight group at `p + l·WB` (`4·WB` readable bytes). The
+    /// default broadcasts each channel's group (`load_w`, then `dot`); a path with a dot product by element
+    /// (NEON `SDOT`/`USDOT … .4b[l]`) loads the four groups in one register instead: 1 load per 4 channels
+    /// rather than 4.
+    #[inline(always)]
+    unsafe fn step4<const NV: usize>(acc: &mut [[Self; NV]], x: &[Self::X; NV], p: *const u8) {
+        for (l, accg) in acc.iter_mut().enumerate().take(4) {
+            // SAFETY: the caller guarantees `4·WB` readable bytes at `p` and the ISA.
+            let wv = unsafe { Self::load_w(p.add(l * Self::WB)) };
+            for (a, &xv) in accg.iter_mut().zip(x.iter()) {
+                // SAFETY: register arithmetic; ISA guaranteed by the caller.
+                *a = unsafe { a.dot(xv, wv) };
+            }
+        }
+    }
     /// Per-pixel sums converted to f32 (round to nearest even, as `i32 as f32`).
     unsafe fn to_f32(self) -> Self::F;
     unsafe fn splat(v: f32) -> Self::F;
@@ -95,13 +111,10 @@ pub(crate) unsafe fn conv<Q: SimdQ, const G: usize, const NV: usize>(
                                     // SAFETY: as above.
                                     *x = unsafe { Q::load_x(row.add((kx + v * px) * 4)) };
                                 }
-                                for (g, accg) in acc.iter_mut().enumerate() {
-                                    // SAFETY: `wptr` walks the group's `cg·9` steps of `G·WB` bytes.
-                                    let wv = unsafe { Q::load_w(wptr.add(g * Q::WB)) };
-                                    for (a, &x) in accg.iter_mut().zip(xv.iter()) {
-                                        // SAFETY: register arithmetic; ISA guaranteed by the caller.
-                                        *a = unsafe { a.dot(x, wv) };
-                                    }
+                                for (q4, acc4) in acc.chunks_exact_mut(4).enumerate() {
+                                    // SAFETY: `wptr` walks the group's `cg·9` steps of `G·WB` bytes; channels
+                                    // `4·q4 … 4·q4 + 3` of this step; ISA guaranteed by the caller.
+                                    unsafe { Q::step4(acc4, &xv, wptr.add(4 * q4 * Q::WB)) };
                                 }
                                 // SAFETY: at most one past the group's last step.
                                 wptr = unsafe { wptr.add(G * Q::WB) };

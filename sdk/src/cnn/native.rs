@@ -29,10 +29,10 @@ use std::sync::Arc;
 use ndarray::{Array3, ArrayView3, CowArray, Ix3};
 use rayon::prelude::*;
 use tensorholo_kernels::{
-    depthwise, fake_quantize, tanh_heads, Conv3x3F32, Inputs, Isa, QuantU8, RowPlanar,
+    depthwise_rows, fake_quantize, tanh_heads, Conv3x3F32, Inputs, Isa, QuantU8, RowPlanar,
 };
 
-use super::strips::{bands, hidden_layers, installed, row_bytes, Place, Strips, Window};
+use super::strips::{bands, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window};
 use super::{check_output_planes, check_planes, kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnWeights, QuantGrid};
@@ -65,8 +65,6 @@ pub(crate) struct NativePlan {
     s: Vec<Window<f32>>,
     /// The last layer's raw output, `C_out` channels.
     raw: Window<f32>,
-    /// Two rows of scratch for the pre-filter's depthwise base filter (grown on the first run).
-    depthwise_scratch: Vec<f32>,
 }
 
 impl NativePlan {
@@ -152,7 +150,6 @@ impl NativePlan {
                 .collect::<Result<_>>()?,
             raw: window(c_out, n, 0)?,
             strips,
-            depthwise_scratch: Vec::new(),
             height,
             width,
             threads,
@@ -175,7 +172,9 @@ impl NativePlan {
             out,
             BaseInput::Planar(input),
             [h, w],
-            &mut self.depthwise_scratch,
+            self.net.isa,
+            self.threads,
+            self.pool.as_deref(),
         )
     }
 
@@ -435,16 +434,22 @@ pub(super) enum BaseInput<'a> {
 }
 
 /// Completes the network's outputs in `out` ([`heads_rows`] of every row written): for a pre-filter, adds
-/// its depthwise base filter of `base`, channel by channel; nothing for a hologram CNN.
+/// its depthwise base filter of `base` ([`depthwise_rows`] on the kernels' vector path for `isa`), channel
+/// by channel, each channel's rows in `threads` bands on `pool`; nothing for a hologram CNN.
 pub(super) fn finish_outputs(
     graph: &CnnWeights,
     out: &mut Outputs<'_>,
     mut base: BaseInput<'_>,
     [h, w]: [usize; 2],
-    depthwise_scratch: &mut Vec<f32>,
+    isa: Isa,
+    threads: usize,
+    pool: Option<&rayon::ThreadPool>,
 ) -> Result<()> {
-    if let CnnOutput::Prefilter { taps, base: kernel } = &graph.output {
-        let k2 = taps * taps;
+    let CnnOutput::Prefilter { taps, base: kernel } = &graph.output else {
+        return Ok(());
+    };
+    let k2 = taps * taps;
+    installed(pool, threads, || {
         for (c, out_plane) in out.planes_mut().enumerate() {
             let kernel = kernel.get(c * k2..(c + 1) * k2).ok_or_else(|| {
                 HoloError::Internal("native CNN: pre-filter base kernel per channel".into())
@@ -467,21 +472,26 @@ pub(super) fn finish_outputs(
                     &plane[..]
                 }
             };
-            depthwise(
-                input,
-                1,
-                h,
-                w,
-                kernel,
-                *taps,
-                out_plane,
-                true,
-                depthwise_scratch,
-            )
-            .map_err(kernel_err)?;
+            let rows = F32Rows {
+                data: out_plane,
+                rows: 0..h,
+            };
+            bands(rows, threads, &|b| {
+                depthwise_rows(
+                    input,
+                    h,
+                    w,
+                    kernel,
+                    *taps,
+                    b.rows.clone(),
+                    b.data,
+                    true,
+                    isa,
+                )
+            })?;
         }
-    }
-    Ok(())
+        Ok(())
+    })
 }
 
 impl CnnPlan for NativePlan {
@@ -524,7 +534,6 @@ impl CnnPlan for NativePlan {
             x: self.x.clone(),
             s: self.s.clone(),
             raw: self.raw.clone(),
-            depthwise_scratch: Vec::new(),
         })
     }
 }

@@ -76,7 +76,6 @@ pub(crate) struct NativeInt8Plan {
     /// Pre-filter: one channel of the input as the file's base filter reads it (rounded to the input grid),
     /// `H·W` values (grown on the first run).
     base_plane: Vec<f32>,
-    depthwise_scratch: Vec<f32>,
 }
 
 impl NativeInt8Plan {
@@ -167,7 +166,6 @@ impl NativeInt8Plan {
             raw_place: Place::new(n, 0),
             strips,
             base_plane: Vec::new(),
-            depthwise_scratch: Vec::new(),
             height,
             width,
             threads,
@@ -195,7 +193,15 @@ impl NativeInt8Plan {
             isa: net.isa,
             plane: &mut self.base_plane,
         };
-        finish_outputs(&net.graph, out, base, [h, w], &mut self.depthwise_scratch)
+        finish_outputs(
+            &net.graph,
+            out,
+            base,
+            [h, w],
+            net.isa,
+            self.threads,
+            self.pool.as_deref(),
+        )
     }
 
     /// One frame, strip by strip, on the plan's threads: the input `planar` `[C][H][W]` quantised into its two
@@ -340,7 +346,6 @@ impl CnnPlan for NativeInt8Plan {
             raw: self.raw.clone(),
             raw_place: self.raw_place,
             base_plane: Vec::new(),
-            depthwise_scratch: Vec::new(),
         })
     }
 }

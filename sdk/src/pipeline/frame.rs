@@ -38,9 +38,10 @@ pub struct FrameTimings {
     pub cnn_s: f64,
     /// Heads → field and offset propagation (Eq. 6), colours in parallel.
     pub offset_s: f64,
-    /// Pre-filter CNN (0 without one).
+    /// Pre-filter CNN alone (0 without one): its run from the offset hologram's planes to its output planes.
     pub prefilter_s: f64,
-    /// Double phase encoding (with its pre-filter, if any) and the look-up table, colours in parallel.
+    /// Double phase encoding (with its pre-filter, if any: AA-DPM's Gaussian, or turning the pre-filter
+    /// CNN's output into the filtered field) and the look-up table, colours in parallel.
     pub encoding_s: f64,
     /// On the GPU backend: the GPU's whole frame (both CNNs and the optics in one submission, with the
     /// downloads); the stage fields above are then 0 but `cnn_s`, which holds the input packing on the CPU.

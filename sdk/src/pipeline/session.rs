@@ -485,13 +485,16 @@ impl HologramSession {
     ) -> Result<&SlmFrame> {
         let offset_s = t0.elapsed().as_secs_f64();
         let t = Instant::now();
-        self.run_prefilter()?;
-        let prefilter_s = if self.prefilter.is_some() {
+        let filtered = self.run_prefilter_cnn()?;
+        let prefilter_s = if filtered {
             t.elapsed().as_secs_f64()
         } else {
             0.0
         };
         let t = Instant::now();
+        if filtered {
+            self.workers.run(&mut self.states, |_| Task::Filtered)?;
+        }
         self.encode()?;
         let encoding_s = t.elapsed().as_secs_f64();
         self.output.timings = FrameTimings {
@@ -510,7 +513,7 @@ impl HologramSession {
     /// Stage 2 on its own (no heap allocation after the first frame): copies the midpoint `heads` into the
     /// colour states; the workers convert them to the field, propagate it to the SLM (Eq. 6, carrier removed)
     /// and either prepare the pre-filter input or run pass 1 of the double phase encoding. Follow with
-    /// [`HologramSession::run_prefilter`] and [`HologramSession::encode`] ([`HologramSession::encode_heads`]
+    /// [`HologramSession::run_prefilter_cnn`] (then the workers' `Task::Filtered`) and [`HologramSession::encode`] ([`HologramSession::encode_heads`]
     /// does all three).
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for heads of another size; [`HoloError::InvalidData`] for
@@ -552,15 +555,17 @@ impl HologramSession {
         Ok(())
     }
 
-    /// Stage 3 on its own: the pre-filter CNN (allocates inside tract), if the session has one: packs
-    /// `[Re H, Im H]` of the offset hologram (`docs/CONVENTIONS.md` §7.2, format 2), runs it and lets the
-    /// workers turn its outputs `(Re H', Im H')` into the filtered field and run pass 1 of the encoding. A
-    /// no-op without a pre-filter.
+    /// Stage 3 on its own: the pre-filter CNN, if the session has one, on `[Re H, Im H]` of the offset
+    /// hologram (`docs/CONVENTIONS.md` §7.2, format 2), its outputs `(Re H', Im H')` written into the colour
+    /// workers' field memory; returns whether it ran. The workers' [`Task::Filtered`] then turns them into
+    /// the filtered field and runs pass 1 of the encoding (timed as encoding: without a pre-filter, pass 1
+    /// runs in [`Task::Midpoint`]).
     ///
-    /// Errors: tract failures ([`HoloError::ModelRun`]); call after [`HologramSession::propagate_to_slm`].
-    pub(crate) fn run_prefilter(&mut self) -> Result<()> {
+    /// Errors: the engine's run errors ([`HoloError::ModelRun`]); call after
+    /// [`HologramSession::propagate_to_slm`].
+    pub(crate) fn run_prefilter_cnn(&mut self) -> Result<bool> {
         let Some(plan) = &mut self.prefilter else {
-            return Ok(());
+            return Ok(false);
         };
         let [r, g, b] = colour_states(&mut self.states)?;
         // The input: each colour's (Re H, Im H) where Task::Midpoint left them, read in place (no [6, H, W]
@@ -572,7 +577,7 @@ impl HologramSession {
             &contract::prefilter_planes([ri, gi, bi]),
             [ro.0, go.0, bo.0, ro.1, go.1, bo.1],
         )?;
-        self.workers.run(&mut self.states, |_| Task::Filtered)
+        Ok(true)
     }
 
     /// Stage 4 on its own (no heap allocation after the first frame): the global normaliser, pass 2 of the

@@ -3363,12 +3363,13 @@ data class StageTimings (
     var `offsetMs`: kotlin.Double
     , 
     /**
-     * Pre-filter CNN (0 without one).
+     * Pre-filter CNN alone (0 without one).
      */
     var `prefilterMs`: kotlin.Double
     , 
     /**
-     * Double phase encoding and look-up table (Eq. 7).
+     * Double phase encoding and look-up table (Eq. 7), with turning the pre-filter CNN's output into the
+     * field where there is one.
      */
     var `encodingMs`: kotlin.Double
     , 
