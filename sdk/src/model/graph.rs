@@ -12,7 +12,7 @@
 use std::collections::HashMap;
 
 use super::onnx as pb;
-use super::{HologramModel, ModelKind};
+use super::ModelKind;
 use crate::error::{HoloError, Result};
 
 /// One 3×3 convolution of the CNN.
@@ -186,20 +186,14 @@ fn attr<'a>(node: &'a pb::NodeProto, name: &str) -> Option<&'a pb::AttributeProt
 }
 
 impl CnnWeights {
-    /// Reads the layers of `model`'s ONNX graph and checks it is the TensorHolo residual CNN (see the
-    /// [module docs](self)): every convolution 3×3 with padding 1, stride 1, no groups, f32 weights and bias;
-    /// the residual wiring and the final concat exactly as the architecture says; the hologram heads or the
-    /// pre-filter's base filter.
+    /// Reads the layers of a decoded ONNX graph of a CNN of `kind` (`source_name` names the file in errors)
+    /// and checks it is the TensorHolo residual CNN (see the [module docs](self)): every convolution 3×3 with
+    /// padding 1, stride 1, no groups, f32 weights and bias; the residual wiring and the final concat exactly
+    /// as the architecture says; the hologram heads or the pre-filter's base filter. A loaded model reads its
+    /// own once and shares it (`HologramModel::cnn_graph`).
     ///
     /// Errors: [`HoloError::ModelContract`] naming the first node that breaks the pattern (int8 files among
     /// them: the GPU runs the f32 files).
-    ///
-    /// [`HologramModel::cnn_graph`] reads it once per model and shares it.
-    pub fn from_model(model: &HologramModel) -> Result<Self> {
-        Self::from_graph(model.onnx_graph(), model.kind(), model.source_name())
-    }
-
-    /// As [`CnnWeights::from_model`] on a decoded ONNX graph of a CNN of `kind`.
     pub(crate) fn from_graph(
         graph: &pb::GraphProto,
         kind: ModelKind,
@@ -621,31 +615,6 @@ impl CnnWeights {
     /// Multiply-adds per output pixel of the convolutions.
     pub fn macs_per_pixel(&self) -> usize {
         self.layers.iter().map(|l| l.c_out * l.c_in * 9).sum()
-    }
-}
-
-impl HologramModel {
-    /// This model's graph as the TensorHolo residual CNN ([`CnnWeights::from_model`]), read from the ONNX
-    /// file on the first call and shared by every executor after it (the GPU path, the native engine).
-    ///
-    /// Errors: [`HoloError::ModelContract`] (every call, the same reason) where the graph is not the
-    /// architecture; such a model runs on tract only.
-    pub fn cnn_graph(&self) -> Result<std::sync::Arc<CnnWeights>> {
-        // The reader walks an untrusted graph: a file on which it would panic is refused, not a crash.
-        let cached = self.cnn_graph.get_or_init(|| {
-            super::network::guarded(
-                "reading the graph's layers",
-                || match CnnWeights::from_model(self) {
-                    Ok(w) => Ok(std::sync::Arc::new(w)),
-                    Err(HoloError::ModelContract { reason, .. }) => Err(reason),
-                    Err(e) => Err(e.to_string()),
-                },
-            )
-        });
-        cached.clone().map_err(|reason| HoloError::ModelContract {
-            source_name: self.source_name().to_string(),
-            reason,
-        })
     }
 }
 

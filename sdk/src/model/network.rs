@@ -7,6 +7,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 
+use super::graph::CnnWeights;
 use super::metadata::{ModelConfig, ModelKind, ModelMetadata};
 use super::onnx as pb;
 use crate::error::{HoloError, Result};
@@ -164,8 +165,7 @@ pub struct HologramModel {
     #[cfg(feature = "tract")]
     pub(super) tract: super::tract::TractGraph,
     /// The graph as the TensorHolo residual CNN, read on first use ([`HologramModel::cnn_graph`]).
-    pub(super) cnn_graph:
-        std::sync::OnceLock<std::result::Result<Arc<super::graph::CnnWeights>, String>>,
+    pub(super) cnn_graph: std::sync::OnceLock<std::result::Result<Arc<CnnWeights>, String>>,
     /// Autotuning results per `(height, width, request)` (tract's `HologramModel::tuned_plan`).
     #[cfg_attr(not(feature = "tract"), allow(dead_code))]
     pub(super) tuned: Mutex<HashMap<(usize, usize, super::PlanRequest), super::PlanReport>>,
@@ -333,5 +333,40 @@ impl HologramModel {
     /// The name of the file (or `<bytes>`) this model was loaded from, as errors name it.
     pub fn source_name(&self) -> &str {
         &self.source_name
+    }
+}
+
+impl CnnWeights {
+    /// [`CnnWeights::from_graph`] on `model`'s ONNX graph: the TensorHolo residual CNN of its layers.
+    /// [`HologramModel::cnn_graph`] reads it once per model and shares it.
+    ///
+    /// Errors: [`HoloError::ModelContract`] naming the first node that breaks the pattern.
+    pub fn from_model(model: &HologramModel) -> Result<Self> {
+        Self::from_graph(model.onnx_graph(), model.kind(), model.source_name())
+    }
+}
+
+impl HologramModel {
+    /// This model's graph as the TensorHolo residual CNN ([`CnnWeights::from_model`]), read from the ONNX
+    /// file on the first call and shared by every executor after it (the GPU path, the native engine).
+    ///
+    /// Errors: [`HoloError::ModelContract`] (every call, the same reason) where the graph is not the
+    /// architecture; such a model runs on tract only.
+    pub fn cnn_graph(&self) -> Result<Arc<CnnWeights>> {
+        // The reader walks an untrusted graph: a file on which it would panic is refused, not a crash.
+        let cached = self.cnn_graph.get_or_init(|| {
+            guarded(
+                "reading the graph's layers",
+                || match CnnWeights::from_model(self) {
+                    Ok(w) => Ok(Arc::new(w)),
+                    Err(HoloError::ModelContract { reason, .. }) => Err(reason),
+                    Err(e) => Err(e.to_string()),
+                },
+            )
+        });
+        cached.clone().map_err(|reason| HoloError::ModelContract {
+            source_name: self.source_name().to_string(),
+            reason,
+        })
     }
 }
