@@ -337,10 +337,14 @@ impl HologramModel {
 }
 
 impl CnnWeights {
-    /// [`CnnWeights::from_graph`] on `model`'s ONNX graph: the TensorHolo residual CNN of its layers.
-    /// [`HologramModel::cnn_graph`] reads it once per model and shares it.
+    /// Reads the layers of `model`'s ONNX graph and checks it is the TensorHolo residual CNN (the
+    /// [`graph`](super::graph) module docs: every convolution 3×3 with padding 1, stride 1, no groups, f32
+    /// weights and bias; the residual wiring and the final concat exactly as the architecture says; the
+    /// hologram heads or the pre-filter's base filter). [`HologramModel::cnn_graph`] reads it once per model
+    /// and shares it.
     ///
-    /// Errors: [`HoloError::ModelContract`] naming the first node that breaks the pattern.
+    /// Errors: [`HoloError::ModelContract`] naming the first node that breaks the pattern (int8 files among
+    /// them: the GPU runs the f32 files).
     pub fn from_model(model: &HologramModel) -> Result<Self> {
         Self::from_graph(model.onnx_graph(), model.kind(), model.source_name())
     }
