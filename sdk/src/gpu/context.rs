@@ -119,6 +119,46 @@ fn describe(info: &wgpu::AdapterInfo, features: wgpu::Features, limits: &wgpu::L
     }
 }
 
+/// Whether a hardware GPU can exist for the drivers to find, by the device nodes the OS shows: on desktop
+/// Linux a Vulkan driver for real hardware opens a DRM render node (`/dev/dri/renderD*`), NVIDIA's
+/// `/dev/nvidia0` or WSL's `/dev/dxg`; without any of them only a software adapter (Mesa's lavapipe) can
+/// answer, which [`Backend::Auto`](crate::pipeline::Backend::Auto) would refuse after loading the Vulkan
+/// loader and every driver (≈ 50 MiB that stays resident: Mesa's drivers are never unloaded). Elsewhere
+/// (Android, Apple, Windows) the drivers are asked: `true`.
+pub(crate) fn hardware_gpu_possible() -> bool {
+    #[cfg(all(target_os = "linux", not(target_os = "android")))]
+    {
+        let dri: Vec<String> = std::fs::read_dir("/dev/dri")
+            .map(|d| {
+                d.filter_map(|e| e.ok())
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .collect()
+            })
+            .unwrap_or_default();
+        let other = ["/dev/nvidia0", "/dev/dxg"]
+            .into_iter()
+            .filter(|p| std::path::Path::new(p).exists());
+        any_gpu_node(&dri, other)
+    }
+    #[cfg(not(all(target_os = "linux", not(target_os = "android"))))]
+    {
+        true
+    }
+}
+
+/// `dri`: the names in `/dev/dri`; `other`: the other GPU device nodes that exist. A render node
+/// (`renderD<N>`) or any other node means a hardware GPU may be there.
+#[cfg_attr(
+    not(all(target_os = "linux", not(target_os = "android"))),
+    allow(dead_code)
+)]
+fn any_gpu_node<'a>(dri: &[String], mut other: impl Iterator<Item = &'a str>) -> bool {
+    dri.iter().any(|n| {
+        n.strip_prefix("renderD")
+            .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
+    }) || other.next().is_some()
+}
+
 impl GpuContext {
     /// Picks an adapter (Vulkan or Metal, high performance first) as `options` say and opens a device with
     /// the adapter's own limits (so 1080p activations fit in one binding where the adapter allows) and
@@ -569,6 +609,22 @@ pub(super) mod tests {
     use crate::gpu::kernel::grid_1d;
     use crate::gpu::shaders;
     use crate::gpu::test_context;
+
+    #[test]
+    fn gpu_device_nodes_decide_whether_to_ask_the_drivers() {
+        let names = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let none = std::iter::empty::<&str>;
+        assert!(super::any_gpu_node(
+            &names(&["card0", "renderD128"]),
+            none()
+        ));
+        assert!(!super::any_gpu_node(
+            &names(&["card0", "by-path", "renderD"]),
+            none()
+        ));
+        assert!(!super::any_gpu_node(&[], none()));
+        assert!(super::any_gpu_node(&[], ["/dev/nvidia0"].into_iter()));
+    }
 
     #[repr(C)]
     #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]

@@ -16,10 +16,12 @@ use crate::error::Result;
 /// Frames above this many pixels are timed on a full-width strip of about this many pixels (at least
 /// [`TUNE_MIN_ROWS`] rows) instead of the whole frame: the convolutions' cost is linear in the rows, and the
 /// layouts' relative speed depends on the row width, which the strip keeps. 1920×1080 is timed on
-/// 1920×136, 384×384 on the whole frame.
-pub const TUNE_PIXELS: usize = 256 * 1024;
+/// 1920×34, 384×384 on 384×170. A small strip also keeps the timing's memory small: tract's whole-frame
+/// timing runs were 42 MiB of a 384² session's 95 MiB peak (`holo render --backend cpu`; 61 MiB with this
+/// strip).
+pub const TUNE_PIXELS: usize = 64 * 1024;
 /// The fewest rows of a timing strip ([`TUNE_PIXELS`]).
-pub const TUNE_MIN_ROWS: usize = 64;
+pub const TUNE_MIN_ROWS: usize = 32;
 /// A candidate whose first run takes less than this (seconds) is run twice more and its fastest run kept.
 const REPEAT_BELOW_S: f64 = 0.25;
 
@@ -148,14 +150,15 @@ mod tests {
 
     #[test]
     fn strips_keep_the_width_and_the_pixel_budget() {
-        assert_eq!(timing_resolution(384, 384), [384, 384]);
-        assert_eq!(timing_resolution(1080, 1920), [136, 1920]);
+        assert_eq!(timing_resolution(256, 256), [256, 256]);
+        assert_eq!(timing_resolution(384, 384), [170, 384]);
+        assert_eq!(timing_resolution(1080, 1920), [34, 1920]);
         // Very wide frames keep at least TUNE_MIN_ROWS rows, never more than the frame has.
-        assert_eq!(timing_resolution(100, 100_000), [64, 100_000]);
-        assert_eq!(timing_resolution(40, 100_000), [40, 100_000]);
-        let [h, w] = timing_resolution(4000, 3000);
-        assert_eq!(w, 3000);
-        assert!(h * w <= TUNE_PIXELS && h * w > TUNE_PIXELS - 3000);
+        assert_eq!(timing_resolution(100, 100_000), [32, 100_000]);
+        assert_eq!(timing_resolution(20, 100_000), [20, 100_000]);
+        let [h, w] = timing_resolution(4000, 1000);
+        assert_eq!(w, 1000);
+        assert!(h * w <= TUNE_PIXELS && h * w > TUNE_PIXELS - 1000);
     }
 
     #[test]

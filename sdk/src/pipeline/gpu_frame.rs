@@ -51,6 +51,16 @@ pub(super) fn build(
     let cpu = |reason: String| BackendReportParts::cpu(requested, reason);
     let ctx = match pipeline.gpu_context() {
         Some(ctx) => Ok(ctx.clone()),
+        None if requested == Backend::Auto && !crate::gpu::context::hardware_gpu_possible() => {
+            return Ok((
+                cpu(
+                    "no hardware GPU: no GPU device node on this system (/dev/dri/renderD*, \
+                     /dev/nvidia0, /dev/dxg), so the GPU drivers were not loaded"
+                        .into(),
+                ),
+                None,
+            ));
+        }
         None => GpuContext::shared(&GpuOptions {
             allow_software: requested == Backend::Gpu,
             name_contains: None,
