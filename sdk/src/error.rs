@@ -121,3 +121,22 @@ pub(crate) fn invalid(name: &'static str, reason: impl Into<String>) -> HoloErro
         reason: reason.into(),
     }
 }
+
+/// Runs `f`, turning a panic inside it into an error `"{what} panicked: …"`: tract and the layer reader
+/// walk untrusted graphs, and a corrupt file must never panic the caller.
+pub(crate) fn guarded<T, E: From<String>>(
+    what: &str,
+    f: impl FnOnce() -> std::result::Result<T, E>,
+) -> std::result::Result<T, E> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
+        Ok(r) => r,
+        Err(p) => {
+            let msg = p
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "unknown panic".into());
+            Err(E::from(format!("{what} panicked: {msg}")))
+        }
+    }
+}

@@ -34,6 +34,8 @@ mod network;
 pub(crate) mod onnx;
 #[cfg(feature = "tract")]
 mod tract;
+#[cfg(feature = "tract")]
+mod tract_model;
 pub(crate) mod tuning;
 
 /// How a model file stores its weights (`training/tensorholo_training/export.py`). All forms take and

@@ -10,31 +10,12 @@ use std::sync::{Arc, Mutex};
 use super::graph::CnnWeights;
 use super::metadata::{ModelConfig, ModelKind, ModelMetadata};
 use super::onnx as pb;
-use crate::error::{HoloError, Result};
+use crate::error::{guarded, HoloError, Result};
 
 /// The most threads a CNN plan may use (tract's `ModelPlan::with_threads`, the native engine's thread
 /// count): far above any phone or desktop core count, low enough that a typo cannot ask the OS for a hundred
 /// thousand threads.
 pub const MAX_CNN_THREADS: usize = 256;
-
-/// Runs `f`, turning a panic inside it into an error `"{what} panicked: …"`: tract and the layer reader
-/// walk untrusted graphs, and a corrupt file must never panic the caller.
-pub(super) fn guarded<T, E: From<String>>(
-    what: &str,
-    f: impl FnOnce() -> std::result::Result<T, E>,
-) -> std::result::Result<T, E> {
-    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
-        Ok(r) => r,
-        Err(p) => {
-            let msg = p
-                .downcast_ref::<String>()
-                .cloned()
-                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-                .unwrap_or_else(|| "unknown panic".into());
-            Err(E::from(format!("{what} panicked: {msg}")))
-        }
-    }
-}
 
 /// ONNX `TensorProto.DataType.FLOAT`.
 const ONNX_FLOAT: i32 = pb::FLOAT;
