@@ -50,6 +50,7 @@ pub fn depthwise(
     isa: Isa,
 ) -> Result<(), KernelError> {
     check_dims(c, h, w)?;
+    check_taps(k)?;
     let n = c * h * w;
     crate::pack::check_len("depthwise input [C][H][W]", input.len(), n)?;
     crate::pack::check_len("depthwise output [C][H][W]", out.len(), n)?;
@@ -81,11 +82,7 @@ pub fn depthwise_rows(
     isa: Isa,
 ) -> Result<(), KernelError> {
     check_dims(1, h, w)?;
-    if k.is_multiple_of(2) || k > MAX_TAPS {
-        return Err(KernelError::Parameter {
-            what: format!("depthwise kernel size {k} must be odd and ≤ {MAX_TAPS}"),
-        });
-    }
+    check_taps(k)?;
     crate::pack::check_len("depthwise input plane [H][W]", plane.len(), h * w)?;
     crate::pack::check_len("depthwise kernel [k][k]", taps.len(), k * k)?;
     if rows.start > rows.end || rows.end > h {
@@ -105,12 +102,22 @@ pub fn depthwise_rows(
     };
     match recompiled_path(isa)? {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `path` returned a level this CPU has (AVX-512F).
+        // SAFETY: `recompiled_path` returned a level this CPU has (AVX-512F).
         Isa::Avx512 => unsafe { x86::rows_avx512(&job, rows, out, accumulate) },
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `path` returned a level this CPU has (AVX2).
+        // SAFETY: `recompiled_path` returned a level this CPU has (AVX2).
         Isa::Avx2Fma => unsafe { x86::rows_avx2(&job, rows, out, accumulate) },
         _ => rows_body::<PORTABLE_TILE>(&job, rows, out, accumulate),
+    }
+    Ok(())
+}
+
+/// Errors: `k` even (0 included) or above [`MAX_TAPS`] ([`KernelError::Parameter`]).
+fn check_taps(k: usize) -> Result<(), KernelError> {
+    if k.is_multiple_of(2) || k > MAX_TAPS {
+        return Err(KernelError::Parameter {
+            what: format!("depthwise kernel size {k} must be odd and ≤ {MAX_TAPS}"),
+        });
     }
     Ok(())
 }
@@ -204,7 +211,8 @@ fn tile<const L: usize>(
 ) {
     let mut acc = [0.0f32; L];
     for (row, t) in src.iter().zip(taps.chunks_exact(k)) {
-        // `k` windows of `L` inputs, one per tap of this kernel row (no index to check per tap).
+        // `k` windows of `L` inputs, one per tap of this kernel row (no index to check per tap; `windows(L)`
+        // yields exactly `L` values, so the conversion never fails).
         for (win, &tv) in row[x0..x0 + L + k - 1].windows(L).zip(t) {
             let Ok(win) = <&[f32; L]>::try_from(win) else {
                 continue;
@@ -389,6 +397,10 @@ mod tests {
             depthwise(input, 1, 3, 4, kernel, k, out, false, Isa::Scalar).is_err()
         };
         assert!(refused(&[0.0; 12], &[0.0; 16], 4, &mut out), "even k");
+        assert!(
+            refused(&[0.0; 12], &[], 0, &mut out),
+            "k = 0 (before any chunking)"
+        );
         assert!(refused(&[0.0; 11], &[0.0; 9], 3, &mut out), "short input");
         assert!(refused(&[0.0; 12], &[0.0; 8], 3, &mut out), "short kernel");
         assert!(

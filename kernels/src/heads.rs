@@ -156,10 +156,10 @@ pub fn tanh_heads(
     check_grid(grid)?;
     match recompiled_path(isa)? {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `path` returned a level this CPU has (AVX-512F).
+        // SAFETY: `recompiled_path` returned a level this CPU has (AVX-512F).
         Isa::Avx512 => unsafe { x86::heads_avx512(raw, out, scale, grid) },
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `path` returned a level this CPU has (AVX2).
+        // SAFETY: `recompiled_path` returned a level this CPU has (AVX2).
         Isa::Avx2Fma => unsafe { x86::heads_avx2(raw, out, scale, grid) },
         _ => heads_body(raw, out, scale, grid),
     }
@@ -175,10 +175,10 @@ pub fn fake_quantize(values: &mut [f32], grid: QuantU8, isa: Isa) -> Result<(), 
     check_grid(Some(grid))?;
     match recompiled_path(isa)? {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `path` returned a level this CPU has (AVX-512F).
+        // SAFETY: `recompiled_path` returned a level this CPU has (AVX-512F).
         Isa::Avx512 => unsafe { x86::grid_avx512(values, grid) },
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `path` returned a level this CPU has (AVX2).
+        // SAFETY: `recompiled_path` returned a level this CPU has (AVX2).
         Isa::Avx2Fma => unsafe { x86::grid_avx2(values, grid) },
         _ => grid_body(values, grid),
     }

@@ -118,7 +118,7 @@ macro_rules! epilogue_neon {
 /// register (one `ldr q`), then `<insn> acc.4s, x.16b, w.4b[l]` per channel `l` and pixel unit: 1 weight
 /// load per 4 output channels instead of 4 broadcasts (`ld1r`).
 macro_rules! step4_by_element {
-    ($acc:ty, $ext:literal, $insn:literal) => {
+    ($ext:literal, $insn:literal) => {
         #[inline(always)]
         unsafe fn step4<const NV: usize>(acc: &mut [[Self; NV]], x: &[Self::X; NV], p: *const u8) {
             // SAFETY: NEON; the caller guarantees 16 readable bytes at `p`.
@@ -148,7 +148,7 @@ macro_rules! step4_by_element {
                             _ => lane!("3"),
                         }
                     }
-                    *a = <$acc>::from_raw(r);
+                    *a = Self(r);
                 }
             }
         }
@@ -209,27 +209,13 @@ impl SimdQ for NeonWide {
     }
 }
 
-impl NeonSdot {
-    #[inline(always)]
-    fn from_raw(r: int32x4_t) -> Self {
-        NeonSdot(r)
-    }
-}
-
-impl NeonUsdot {
-    #[inline(always)]
-    fn from_raw(r: int32x4_t) -> Self {
-        NeonUsdot(r)
-    }
-}
-
 impl SimdQ for NeonSdot {
     const PX: usize = 4;
     const WB: usize = 4;
     type X = int8x16_t;
     type W = int8x16_t;
     epilogue_neon!();
-    step4_by_element!(NeonSdot, "dotprod", "sdot");
+    step4_by_element!("dotprod", "sdot");
     #[inline(always)]
     unsafe fn init(v: i32) -> Self {
         // SAFETY: NEON.
@@ -275,7 +261,7 @@ impl SimdQ for NeonUsdot {
     type X = uint8x16_t;
     type W = int8x16_t;
     epilogue_neon!();
-    step4_by_element!(NeonUsdot, "i8mm", "usdot");
+    step4_by_element!("i8mm", "usdot");
     #[inline(always)]
     unsafe fn init(v: i32) -> Self {
         // SAFETY: NEON.

@@ -16,9 +16,9 @@ use crate::error::Result;
 /// Frames above this many pixels are timed on a full-width strip of about this many pixels (at least
 /// [`TUNE_MIN_ROWS`] rows) instead of the whole frame: the convolutions' cost is linear in the rows, and the
 /// layouts' relative speed depends on the row width, which the strip keeps. 1920×1080 is timed on
-/// 1920×34, 384×384 on 384×170. A small strip also keeps the timing's memory small: tract's whole-frame
-/// timing runs were 42 MiB of a 384² session's 95 MiB peak (`holo render --backend cpu`; 61 MiB with this
-/// strip).
+/// 1920×34, 384×384 on 384×170. A small strip also keeps the timing's memory small: a 384² CPU session
+/// (`holo render --backend cpu`) peaked at 95 MiB with whole-frame timing runs, at 60 MiB with this strip
+/// (53–55 MiB with the native engine alone, no timing).
 pub const TUNE_PIXELS: usize = 64 * 1024;
 /// The fewest rows of a timing strip ([`TUNE_PIXELS`]).
 pub const TUNE_MIN_ROWS: usize = 32;

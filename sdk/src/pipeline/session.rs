@@ -674,14 +674,20 @@ mod tests {
         }
     }
 
-    #[test]
-    fn bad_heads_are_refused_and_the_session_stays_usable() {
+    /// A 16×20 session with the pre-filter and the codes of `heads(16, 20, 0.5)` through `encode_heads`.
+    fn session_and_good_codes() -> (super::HologramSession, Array3<u8>) {
         let mut session = pipeline(true).session(16, 20).unwrap();
         let good = session
             .encode_heads(heads(16, 20, 0.5), 0.0)
             .unwrap()
             .codes
             .clone();
+        (session, good)
+    }
+
+    #[test]
+    fn bad_heads_are_refused_and_the_session_stays_usable() {
+        let (mut session, good) = session_and_good_codes();
 
         let mut nan = heads(16, 20, 0.5);
         nan.phase[[1, 2, 3]] = f32::NAN;
@@ -703,12 +709,7 @@ mod tests {
     fn non_finite_heads_written_in_place_are_refused_by_the_workers() {
         // The render path: the CNN writes its heads into the colour workers' field memory and the workers
         // check them as they turn them into fields.
-        let mut session = pipeline(true).session(16, 20).unwrap();
-        let good = session
-            .encode_heads(heads(16, 20, 0.5), 0.0)
-            .unwrap()
-            .codes
-            .clone();
+        let (mut session, good) = session_and_good_codes();
         let mut bad = heads(16, 20, 0.5);
         bad.phase[[1, 2, 3]] = f32::INFINITY;
         session
