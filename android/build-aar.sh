@@ -3,15 +3,17 @@
 #
 # Builds the Android library (.aar) on a machine with the Android SDK and NDK:
 #  1. libtensorholo_ffi.so for arm64-v8a (phones) and x86_64 (emulators) with cargo-ndk, into
-#     android/tensorholo/src/main/jniLibs/<abi>/ (git-ignored), linked for 16 KB pages (Android 15+);
+#     android/tensorholo/src/main/jniLibs/<abi>/ (git-ignored), linked for 16 KB pages (Android 15+) with
+#     packed relocations;
 #  2. gradle :tensorholo:assembleRelease (./gradlew when a wrapper was made, else gradle on PATH);
 #  3. prints the .aar's path and size.
 #
 # Needs: rustup, cargo-ndk (cargo install cargo-ndk), ANDROID_NDK_HOME (NDK r27 or newer), the Android SDK
 # (ANDROID_HOME, or sdk.dir in android/local.properties), Gradle ≥ 8.13 (or a wrapper: `gradle wrapper` once
 # in android/), JDK 17+.
-# Environment: TENSORHOLO_PROFILE (cargo profile, default `mobile`: LTO, 1 codegen unit, stripped; `release`
-# works too), TENSORHOLO_FEATURES (extra cargo features of tensorholo-ffi, comma-separated), CARGO_TARGET_DIR.
+# Environment: TENSORHOLO_PROFILE (cargo profile, default `mobile`: LTO, 1 codegen unit, stripped, tract
+# optimised for size; `mobile-fast-tract`: the same with tract at full speed, for apps whose own ONNX files only
+# tract runs; `release` works too), TENSORHOLO_FEATURES (extra cargo features of tensorholo-ffi, comma-separated), CARGO_TARGET_DIR.
 set -euo pipefail
 
 here="$(cd "$(dirname "$0")" && pwd)"
@@ -58,10 +60,16 @@ fi
 # -- 1. The native library per ABI.
 rustup target add "${triples[@]}"
 # 16 KB pages: NDK r28+ links so by default; r27 needs the flag (harmless where it is the default).
-page_flags="-C link-arg=-Wl,-z,max-page-size=16384"
-export CARGO_TARGET_AARCH64_LINUX_ANDROID_RUSTFLAGS="$page_flags"
-export CARGO_TARGET_X86_64_LINUX_ANDROID_RUSTFLAGS="$page_flags"
-cargo_args=(build --locked -p tensorholo-ffi --lib --profile "$profile")
+# Packed relative relocations (Android's APS2 format, read by Android 6+; the .aar's minSdk is 26): the NDK's
+# clang packs them by default only from API 28 (RELR), and unpacked they take 24 bytes each, ~1 MB of the
+# library with tract (README "Size on a phone"; scripts/mobile-sizes.sh links the same way).
+link_flags="-C link-arg=-Wl,-z,max-page-size=16384 -C link-arg=-Wl,--pack-dyn-relocs=android"
+export CARGO_TARGET_AARCH64_LINUX_ANDROID_RUSTFLAGS="$link_flags"
+export CARGO_TARGET_X86_64_LINUX_ANDROID_RUSTFLAGS="$link_flags"
+# The shared library alone (`cargo rustc --crate-type cdylib`): `cargo build` would compile the crate's three
+# types (lib, cdylib, staticlib) in one rustc run, whose LTO keeps every public Rust item of the rlib, 3 MB
+# more with tract (README "Size on a phone").
+cargo_args=(rustc --locked -p tensorholo-ffi --lib --crate-type cdylib --profile "$profile")
 [ -n "$features" ] && cargo_args+=(--features "$features")
 ndk_targets=()
 for abi in "${abis[@]}"; do ndk_targets+=(-t "$abi"); done
@@ -88,9 +96,12 @@ for i in "${!abis[@]}"; do
     aligns="$("$readelf" -lW "$lib" | awk '$1 == "LOAD" { print $NF }')"
     [ -n "$aligns" ] || die "llvm-readelf shows no LOAD segment in $lib"
     for a in $aligns; do
-      [ $((a)) -ge 16384 ] || die "$lib has a LOAD segment aligned to $a, below 16 KB (use NDK r27+ and keep $page_flags)"
+      [ $((a)) -ge 16384 ] || die "$lib has a LOAD segment aligned to $a, below 16 KB (use NDK r27+ and keep $link_flags)"
     done
-    echo "${abis[$i]}: libtensorholo_ffi.so $(du -h "$lib" | cut -f1), LOAD segments 16 KB-aligned"
+    # Packed relative relocations: the dynamic section names Android's packed table (DT_ANDROID_RELA).
+    "$readelf" -dW "$lib" | grep -q 'ANDROID_RELA' ||
+      die "$lib has no packed relocations (DT_ANDROID_RELA): the NDK's linker ignored $link_flags"
+    echo "${abis[$i]}: libtensorholo_ffi.so $(du -h "$lib" | cut -f1), LOAD segments 16 KB-aligned, relocations packed"
   fi
 done
 

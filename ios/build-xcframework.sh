@@ -11,7 +11,9 @@
 #
 # Environment:
 #   TENSORHOLO_PROFILE   cargo profile: mobile (default; the workspace's [profile.mobile]: release + LTO,
-#                        one codegen unit, stripped), release, or dev (fast to build, slow to run)
+#                        one codegen unit, stripped, tract optimised for size), mobile-fast-tract (the same with
+#                        tract at full speed: for apps whose own ONNX files only tract runs), release, or dev
+#                        (fast to build, slow to run)
 #   TENSORHOLO_FEATURES  extra cargo features of tensorholo-ffi, space-separated, e.g. "models-15 models-30";
 #                        the names are the [features] of bindings/Cargo.toml
 #   TENSORHOLO_MACOS=1   also build a macOS slice (aarch64 + x86_64), so that `swift build` / `swift test` run on

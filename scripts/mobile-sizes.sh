@@ -2,19 +2,26 @@
 # Usage: scripts/mobile-sizes.sh [--static] [TARGET…]
 #
 # Builds the app library (tensorholo-ffi) with the `mobile` profile (LTO, one codegen unit, stripped; the GPU
-# stack optimised for size, Cargo.toml) and prints the sizes of README "Size on a phone" as a Markdown table:
-#  - aarch64-unknown-linux-gnu: the linked shared library (libtensorholo_ffi.so, the closest thing to what an
-#    Android or iOS app links that can be linked here: the same arm64 code as aarch64-linux-android), for
-#    `gpu` on/off × `tract` on/off with the default models, and with every model. Linked with 16 KB pages
-#    (`-z max-page-size=16384`, the alignment Android 15's 16 KB-page devices need and the NDK's default;
-#    GNU ld's own 64 KB default pads the file by up to 64 KB more);
-#  - with --static, the TARGETs (default: aarch64-apple-ios aarch64-linux-android x86_64-linux-android
-#    armv7-linux-androideabi): the static library with and without tract (no Xcode or NDK linker here;
-#    scripts/mobile-cc.sh has the compile-only C settings). A static library is what the app's linker reads,
-#    not what it ships.
-# Also prints what each crate adds to the default linked library (symbol sizes by crate, before stripping).
-# Builds in target/mobile-sizes (its own flags would rebuild the main target dir). Slow: every row is a full
-# LTO build (2-4 min without tract, 10-20 min with it, on two cores).
+# stack and tract optimised for size, Cargo.toml) and prints the sizes of README "Size on a phone" as a
+# Markdown table:
+#  - the linked shared library (libtensorholo_ffi.so) for the two Android ABIs that android/build-aar.sh ships,
+#    built for their Linux twins, which can be linked here: aarch64-unknown-linux-gnu (the same arm64 code as
+#    aarch64-linux-android: arm64-v8a, phones) for `gpu` on/off × `tract` on/off with the default models, and
+#    with every model; x86_64-unknown-linux-gnu (x86_64, emulators) with the default features, tract on and
+#    off. Linked as the NDK links an app library: by LLVM's lld (here rust-lld, shipped with the Rust
+#    toolchain), with 16 KB pages (`-z max-page-size=16384`, what Android 15's 16 KB-page devices need) and
+#    packed relative relocations (`--pack-dyn-relocs=android`, what android/build-aar.sh passes: Android 6+,
+#    and the .aar's minSdk is 26). GNU ld, without packing, makes the same code 1-2 MB larger. Built as
+#    build-aar.sh builds it, the cdylib alone (`cargo rustc --crate-type cdylib`): `cargo build` compiles the
+#    crate's three types in one rustc run, whose LTO keeps the rlib's public items (3 MB more with tract);
+#  - with --static, the TARGETs (default: the four of scripts/check-mobile.sh: aarch64-apple-ios,
+#    aarch64-linux-android, x86_64-linux-android, armv7-linux-androideabi): the
+#    static library with and without tract (no Xcode or NDK linker here; scripts/mobile-cc.sh has the
+#    compile-only C settings). A static library is what the app's linker reads (an XCFramework ships it),
+#    not what the app carries.
+# Also prints what each crate adds to the default linked arm64 library (symbol sizes by crate, before
+# stripping). Builds in target/mobile-sizes (its own flags would rebuild the main target dir). Slow: every row
+# is a full LTO build (2-6 min each on two cores once the dependencies are built).
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 # shellcheck source=bindings/tests/lib.sh
@@ -30,13 +37,27 @@ fi
 targets=("$@")
 [ ${#targets[@]} -gt 0 ] || targets=(aarch64-apple-ios aarch64-linux-android x86_64-linux-android armv7-linux-androideabi)
 export CARGO_TARGET_DIR="$root/target/mobile-sizes"
-export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUSTFLAGS="-C link-arg=-Wl,-z,max-page-size=16384"
 mb() { python3 -c "import os,sys; print(f'{os.path.getsize(sys.argv[1]) / 1e6:.2f} MB')" "$1"; }
+
+# lld as the NDK runs it: gcc's -fuse-ld=lld looks for `ld.lld` (a cross gcc also for `<triple>-ld.lld`) in
+# its -B folder. A fixed folder, so that the flags (and cargo's fingerprints) stay the same between runs.
+lld="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/rust-lld"
+[ -x "$lld" ] || { echo "mobile-sizes: no rust-lld in the Rust toolchain ($lld)" >&2; exit 1; }
+lld_dir="$CARGO_TARGET_DIR/lld"
+mkdir -p "$lld_dir"
+for name in ld.lld aarch64-linux-gnu-ld.lld x86_64-linux-gnu-ld.lld; do ln -sf "$lld" "$lld_dir/$name"; done
+ndk_link="-C link-arg=-B$lld_dir -C link-arg=-fuse-ld=lld -C link-arg=-Wl,-z,max-page-size=16384"
+ndk_link="$ndk_link -C link-arg=-Wl,--pack-dyn-relocs=android"
+export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUSTFLAGS="$ndk_link"
+export CARGO_TARGET_X86_64_UNKNOWN_LINUX_GNU_RUSTFLAGS="$ndk_link"
+linux=aarch64-unknown-linux-gnu
+x86=x86_64-unknown-linux-gnu
+ensure_apt gcc-aarch64-linux-gnu libc6-dev-arm64-cross binutils-aarch64-linux-gnu ||
+  { echo "mobile-sizes: needs Debian's aarch64 cross toolchain" >&2; exit 1; }
+rustup target list --installed | grep -qx "$linux" || rustup target add "$linux" >&2
 
 echo "| target | library | gpu | tract | embedded CNNs | size |"
 echo "|---|---|---|---|---|---:|"
-linux=aarch64-unknown-linux-gnu
-rustup target list --installed | grep -qx "$linux" || rustup target add "$linux" >&2
 out="$CARGO_TARGET_DIR/$linux/mobile"
 for variant in "on:on:default:" "on:off:default:--no-default-features --features embedded-models,gpu" \
   "off:on:default:--no-default-features --features embedded-models,tract" \
@@ -45,14 +66,21 @@ for variant in "on:on:default:" "on:off:default:--no-default-features --features
   "on:on:all:--features models-15,models-30"; do
   IFS=: read -r gpu tract models flags <<<"$variant"
   # shellcheck disable=SC2086 # flags are words
-  cargo build --locked -q -p tensorholo-ffi --lib --profile mobile --target "$linux" $flags >&2
-  echo "| $linux | \`libtensorholo_ffi.so\` (linked) | $gpu | $tract | $models | $(mb "$out/libtensorholo_ffi.so") |"
+  cargo rustc --locked -q -p tensorholo-ffi --lib --crate-type cdylib --profile mobile --target "$linux" $flags >&2
+  echo "| $linux (arm64-v8a) | \`libtensorholo_ffi.so\` (linked) | $gpu | $tract | $models | $(mb "$out/libtensorholo_ffi.so") |"
   if [ "$gpu:$tract:$models" = "on:on:default" ]; then
     # What each crate adds: one unstripped link of the default library, symbol sizes summed by crate.
-    CARGO_PROFILE_MOBILE_STRIP=none cargo build --locked -q -p tensorholo-ffi --lib --profile mobile \
-      --target "$linux" >&2
+    CARGO_PROFILE_MOBILE_STRIP=none cargo rustc --locked -q -p tensorholo-ffi --lib --crate-type cdylib \
+      --profile mobile --target "$linux" >&2
     cp "$out/libtensorholo_ffi.so" "$CARGO_TARGET_DIR/unstripped.so"
   fi
+done
+for tract in on off; do
+  flags=()
+  [ "$tract" = on ] || flags=(--no-default-features --features "embedded-models,gpu")
+  cargo rustc --locked -q -p tensorholo-ffi --lib --crate-type cdylib --profile mobile --target "$x86" \
+    ${flags[@]+"${flags[@]}"} >&2
+  echo "| $x86 (x86_64) | \`libtensorholo_ffi.so\` (linked) | on | $tract | default | $(mb "$CARGO_TARGET_DIR/$x86/mobile/libtensorholo_ffi.so") |"
 done
 if [ "$static" = 1 ]; then
   # Static libraries alone (`cargo rustc --crate-type staticlib`): built beside the rlib and cdylib, rustc
@@ -61,9 +89,9 @@ if [ "$static" = 1 ]; then
   for t in "${targets[@]}"; do
     for tract in on off; do
       flags=()
-      [ "$tract" = on ] || flags=(--no-default-features --features embedded-models,gpu)
+      [ "$tract" = on ] || flags=(--no-default-features --features "embedded-models,gpu")
       cargo rustc --locked -q -p tensorholo-ffi --lib --crate-type staticlib --profile mobile --target "$t" \
-        "${flags[@]}" >&2
+        ${flags[@]+"${flags[@]}"} >&2
       echo "| $t | \`libtensorholo_ffi.a\` | on | $tract | default | $(mb "$CARGO_TARGET_DIR/$t/mobile/libtensorholo_ffi.a") |"
     done
   done
