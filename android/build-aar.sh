@@ -13,7 +13,8 @@
 # in android/), JDK 17+.
 # Environment: TENSORHOLO_PROFILE (cargo profile, default `mobile`: LTO, 1 codegen unit, stripped, tract
 # optimised for size; `mobile-fast-tract`: the same with tract at full speed, for apps whose own ONNX files only
-# tract runs; `release` works too), TENSORHOLO_FEATURES (extra cargo features of tensorholo-ffi, comma-separated), CARGO_TARGET_DIR.
+# tract runs; `release` works too), TENSORHOLO_FEATURES (extra cargo features of tensorholo-ffi,
+# comma-separated), CARGO_TARGET_DIR.
 set -euo pipefail
 
 here="$(cd "$(dirname "$0")" && pwd)"

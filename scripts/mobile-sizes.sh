@@ -21,7 +21,8 @@
 #    not what the app carries.
 # Also prints what each crate adds to the default linked arm64 library (symbol sizes by crate, before
 # stripping). Builds in target/mobile-sizes (its own flags would rebuild the main target dir). Slow: every row
-# is a full LTO build (2-6 min each on two cores once the dependencies are built).
+# is a full LTO build (2-6 min each on two cores once the dependencies are built; 46 min in all with --static,
+# README "Size on a phone").
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 # shellcheck source=bindings/tests/lib.sh
@@ -75,25 +76,25 @@ for variant in "on:on:default:" "on:off:default:--no-default-features --features
     cp "$out/libtensorholo_ffi.so" "$CARGO_TARGET_DIR/unstripped.so"
   fi
 done
-for tract in on off; do
-  flags=()
-  [ "$tract" = on ] || flags=(--no-default-features --features "embedded-models,gpu")
-  cargo rustc --locked -q -p tensorholo-ffi --lib --crate-type cdylib --profile mobile --target "$x86" \
-    ${flags[@]+"${flags[@]}"} >&2
-  echo "| $x86 (x86_64) | \`libtensorholo_ffi.so\` (linked) | on | $tract | default | $(mb "$CARGO_TARGET_DIR/$x86/mobile/libtensorholo_ffi.so") |"
-done
+# One row per `tract` on/off with the default models and `gpu`: TARGET, crate type (cdylib, staticlib), file
+# name, label of the target column, library column.
+tract_rows() {
+  local tract flags
+  for tract in on off; do
+    flags=()
+    [ "$tract" = on ] || flags=(--no-default-features --features "embedded-models,gpu")
+    cargo rustc --locked -q -p tensorholo-ffi --lib --crate-type "$2" --profile mobile --target "$1" \
+      ${flags[@]+"${flags[@]}"} >&2
+    echo "| $4 | $5 | on | $tract | default | $(mb "$CARGO_TARGET_DIR/$1/mobile/$3") |"
+  done
+}
+tract_rows "$x86" cdylib libtensorholo_ffi.so "$x86 (x86_64)" "\`libtensorholo_ffi.so\` (linked)"
 if [ "$static" = 1 ]; then
   # Static libraries alone (`cargo rustc --crate-type staticlib`): built beside the rlib and cdylib, rustc
   # keeps one object per crate without cross-crate LTO; alone, the crate graph is one LTO'd object.
   mobile_cc_env "${targets[@]}"
   for t in "${targets[@]}"; do
-    for tract in on off; do
-      flags=()
-      [ "$tract" = on ] || flags=(--no-default-features --features "embedded-models,gpu")
-      cargo rustc --locked -q -p tensorholo-ffi --lib --crate-type staticlib --profile mobile --target "$t" \
-        ${flags[@]+"${flags[@]}"} >&2
-      echo "| $t | \`libtensorholo_ffi.a\` | on | $tract | default | $(mb "$CARGO_TARGET_DIR/$t/mobile/libtensorholo_ffi.a") |"
-    done
+    tract_rows "$t" staticlib libtensorholo_ffi.a "$t" "\`libtensorholo_ffi.a\`"
   done
 fi
 echo
