@@ -61,9 +61,10 @@ fi
 # -- 1. The native library per ABI.
 rustup target add "${triples[@]}"
 # 16 KB pages: NDK r28+ links so by default; r27 needs the flag (harmless where it is the default).
-# Packed relative relocations (Android's APS2 format, read by Android 6+; the .aar's minSdk is 26): the NDK's
-# clang packs them by default only from API 28 (RELR), and unpacked they take 24 bytes each, ~1 MB of the
-# library with tract (README "Size on a phone"; scripts/mobile-sizes.sh links the same way).
+# Packed relative relocations (Android's APS2 format, read by Android 6+; the .aar's minSdk is 26): recent
+# NDKs' clang packs them by default only from API 28 (RELR), older ones not at all, and unpacked they take 24
+# bytes each, ~1 MB of the library with tract (README "Size on a phone"; scripts/mobile-sizes.sh links the
+# same way).
 link_flags="-C link-arg=-Wl,-z,max-page-size=16384 -C link-arg=-Wl,--pack-dyn-relocs=android"
 export CARGO_TARGET_AARCH64_LINUX_ANDROID_RUSTFLAGS="$link_flags"
 export CARGO_TARGET_X86_64_LINUX_ANDROID_RUSTFLAGS="$link_flags"
