@@ -85,11 +85,16 @@ pub fn depthwise_rows(
     check_taps(k)?;
     crate::pack::check_len("depthwise input plane [H][W]", plane.len(), h * w)?;
     crate::pack::check_len("depthwise kernel [k][k]", taps.len(), k * k)?;
-    if rows.start > rows.end || rows.end > h {
+    if rows.end > h {
         return Err(KernelError::Length {
             what: "depthwise output rows (end past H)",
             expected: h,
             got: rows.end,
+        });
+    }
+    if rows.start > rows.end {
+        return Err(KernelError::Parameter {
+            what: format!("depthwise output rows {rows:?} start after they end"),
         });
     }
     crate::pack::check_len("depthwise output rows [rows][W]", out.len(), rows.len() * w)?;
@@ -372,6 +377,8 @@ mod tests {
         assert!(rows(2..4, &mut out), "past H");
         assert!(rows(0..2, &mut out[..7]), "short output");
         assert!(!rows(1..3, &mut out), "a good call");
+        let reversed = std::ops::Range { start: 2, end: 1 };
+        assert!(rows(reversed, &mut out[..0]), "start after end");
         assert!(
             depthwise_rows(
                 &plane,

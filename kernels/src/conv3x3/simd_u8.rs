@@ -81,7 +81,10 @@ pub(crate) unsafe fn conv<Q: SimdQ, const G: usize, const NV: usize>(
 ) {
     let px = Q::PX;
     let tile = px * NV;
-    debug_assert!(G.is_multiple_of(4) && tile <= crate::buffer::MAX_TILE);
+    // `step4` takes the group's channels four at a time: a `G` that is not a multiple of 4 would leave
+    // channels unsummed, so it does not compile.
+    const { assert!(G.is_multiple_of(4)) };
+    debug_assert!(tile <= crate::buffer::MAX_TILE);
     let (w, wp) = (job.w, job.wp);
     let cg = job.ga + job.gb;
     let groups = job.cout.div_ceil(G);

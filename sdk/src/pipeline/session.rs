@@ -513,8 +513,8 @@ impl HologramSession {
     /// Stage 2 on its own (no heap allocation after the first frame): copies the midpoint `heads` into the
     /// colour states; the workers convert them to the field, propagate it to the SLM (Eq. 6, carrier removed)
     /// and either prepare the pre-filter input or run pass 1 of the double phase encoding. Follow with
-    /// [`HologramSession::run_prefilter_cnn`] (then the workers' `Task::Filtered`) and [`HologramSession::encode`] ([`HologramSession::encode_heads`]
-    /// does all three).
+    /// [`HologramSession::run_prefilter_cnn`] (then the workers' `Task::Filtered`) and
+    /// [`HologramSession::encode`] ([`HologramSession::encode_heads`] does all three).
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for heads of another size; [`HoloError::InvalidData`] for
     /// non-finite values.
