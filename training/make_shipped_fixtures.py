@@ -2,9 +2,11 @@
 model, a fixed random input and the PyTorch output of the checkpoint it was exported from.
 
     PYTHONPATH=training .venv/bin/python training/make_shipped_fixtures.py [--runs runs/cpu] [--out models/fixtures] \
-        [--dataset data/cpu256]
+        [--dataset data/cpu256] [--ldi-run runs/photo/holo8_ldi_ws] [--only NAME ...]
 
-Files: ``<name>_input.npy`` float32 ``[C, 24, 32]`` (``C`` = 4 for hologram CNNs: random RGB-D in ``[0, 1]``; 6
+Files: ``<name>_input.npy`` float32 ``[C, 24, 32]`` (``C`` = 4 for RGB-D hologram CNNs: random RGB-D in ``[0, 1]``;
+20 for the LDI CNN ``holo8_ldi``: a random 5-layer LDI, layers valid front to back, invalid points amplitude 0 and
+depth 1; 6
 for pre-filters: ``[Re H, Im H]`` of a real offset hologram, the 8-layer CNN's midpoint hologram of a 24×32
 crop of test scene 0 propagated to the pre-filter's offset, i.e. the distribution the pre-filter and its int8
 calibration saw; a random-phase field is far outside it, and int8 pre-filters err by ≈ 0.08 on average there)
@@ -40,11 +42,29 @@ def offset_hologram(dataset: str, holo_ckpt: str, cfg: dict) -> np.ndarray:
     return prefilter_input(slm)[0].numpy().astype(np.float32)
 
 
+def random_ldi(rng: np.random.Generator, layers: int = 5, h: int = 24, w: int = 32) -> np.ndarray:
+    """A random LDI ``[4·layers, h, w]`` as the dataset stores one: layer 0 valid everywhere, each further
+    layer valid only where the one in front is (probability 0.6), never nearer; invalid points amplitude 0 and
+    depth 1."""
+    x = np.zeros((4 * layers, h, w), np.float32)
+    valid = np.ones((h, w), bool)
+    depth = np.zeros((h, w), np.float32)
+    for k in range(layers):
+        if k:
+            valid &= rng.random((h, w)) < 0.6
+        depth = depth + (1 - depth) * rng.random((h, w), dtype=np.float32)
+        x[4 * k:4 * k + 3] = np.where(valid, rng.random((3, h, w), dtype=np.float32), 0)
+        x[4 * k + 3] = np.where(valid, depth, 1)
+    return x
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", default="runs/cpu")
     ap.add_argument("--out", default="models/fixtures")
     ap.add_argument("--dataset", default="data/cpu256", help="holo dataset whose test scene 0 feeds the pre-filters")
+    ap.add_argument("--ldi-run", default="runs/photo/holo8_ldi_ws", help="the run holo8_ldi was exported from")
+    ap.add_argument("--only", nargs="*", help="write only these fixtures (e.g. holo8_ldi)")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     rng = np.random.default_rng(2026)
@@ -52,9 +72,12 @@ def main() -> None:
     best = lambda run: f"{run}/best.pt" if os.path.exists(f"{run}/best.pt") else f"{run}/final.pt"  # noqa: E731
     jobs = [(f"holo{l}_rgbd", best(f"{args.runs}/holo{l}"), "net", 4) for l in (8, 15, 30)]
     jobs += [(f"prefilter_{o}mm", f"{args.runs}/pre{o}/best.pt", "prefilter", 6) for o in (6, 12)]
+    jobs += [("holo8_ldi", best(args.ldi_run), "net", 20)]
     for name, ckpt, key, channels in jobs:
+        if args.only and name not in args.only:
+            continue
         net = load_checkpoint(ckpt)[key].eval()
-        x = rng.random((channels, 24, 32), dtype=np.float32)
+        x = rng.random((channels, 24, 32), dtype=np.float32) if channels != 20 else random_ldi(np.random.default_rng(2027))
         outputs = OUTPUT_NAMES["hologram-cnn" if key == "net" else "prefilter-cnn"]
         if key == "prefilter":
             x = offset_hologram(args.dataset, best(f"{args.runs}/holo8"), load_checkpoint(ckpt)["config"])

@@ -5,10 +5,15 @@
 #   and starts as AA-DPM; the best validation checkpoint best.pt is exported),
 #   each in f32 and int8 (QOperator conv-only and QDQ), then the Table 2 evaluation on the test split.
 #
-#   training/ship_cpu.sh [STEP ...]      STEP: dataset holo8 holo15 holo30 pre6 pre12 export eval (default: all)
+#   the LDI hologram CNN holo8_ldi.onnx (stage 1 on 5-layer LDI input, on the photo-textured dataset),
+#
+#   training/ship_cpu.sh [STEP ...]      STEP: dataset holo8 holo15 holo30 pre6 pre12 photos photo-dataset ldi8
+#                                        export eval (default: all)
 #   then: training/make_shipped_fixtures.py (models/fixtures), holo baselines + evaluate (models/MODEL_CARD.md)
 #
-# Environment: DATA (default data/cpu256), HOLO (holo binary; default target/release/holo, built if missing),
+# Environment: DATA (default data/cpu256), PHOTO_DATA (default data/photo256: 1000/40/40 scenes of 256x256 with
+# 60 % of the textures from the 10 public-domain/CC0 photos of scikit-image 0.26.0 that `photos` extracts into
+# data/photos; models/MODEL_CARD.md lists them), HOLO (holo binary; default target/release/holo, built if missing),
 # PYTHON (default .venv/bin/python), MODELS (default models), RUNS (default runs/cpu),
 # STEPS8/STEPS15/STEPS30 (stage-1 steps, default 4000/4000/5000), PRE_STEPS (stage 2, default 4000),
 # EVAL_LIMIT (test scenes evaluated, default 10).
@@ -18,12 +23,13 @@ root="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$root"
 py="${PYTHON:-$root/.venv/bin/python}"
 data="${DATA:-data/cpu256}"
+photo_data="${PHOTO_DATA:-data/photo256}"
 models="${MODELS:-models}"
 runs="${RUNS:-runs/cpu}"
 holo="${HOLO:-target/release/holo}"
 export PYTHONPATH="$root/training${PYTHONPATH:+:$PYTHONPATH}"
 steps=("$@")
-[ ${#steps[@]} -eq 0 ] && steps=(dataset holo8 holo15 holo30 pre6 pre12 export eval)
+[ ${#steps[@]} -eq 0 ] && steps=(dataset holo8 holo15 holo30 pre6 pre12 photos photo-dataset ldi8 export eval)
 
 stage1() {  # LAYERS STEPS
   "$py" -m tensorholo_training.train --config training/configs/cpu_stage1.json --run-dir "$runs/holo$1" \
@@ -42,6 +48,34 @@ for step in "${steps[@]}"; do
         [ -x "$holo" ] || cargo build --release --locked -p holo
         "$holo" dataset --out "$data" --train 600 --val 40 --test 40 --size 256 --levels 2048 --seed 2026
       fi ;;
+    photos)  # public-domain / CC0 sample images of scikit-image's wheel (sources and licences: MODEL_CARD.md)
+      if [ ! -f data/photos/gravel.png ]; then
+        tmp="$(mktemp -d)"
+        "$py" -m pip download --quiet --no-deps --dest "$tmp" scikit-image==0.26.0
+        mkdir -p data/photos
+        "$py" - "$tmp" <<'PY'
+import sys, zipfile, pathlib
+wheel = next(pathlib.Path(sys.argv[1]).glob("scikit_image-*.whl"))
+names = ["astronaut.png", "chelsea.png", "coffee.png", "rocket.jpg", "hubble_deep_field.jpg", "retina.jpg",
+         "brick.png", "grass.png", "gravel.png", "camera.png"]
+with zipfile.ZipFile(wheel) as z:
+    for n in names:
+        pathlib.Path("data/photos", n).write_bytes(z.read(f"skimage/data/{n}"))
+PY
+        rm -rf "$tmp"
+      fi ;;
+    photo-dataset)
+      if [ ! -f "$photo_data/manifest.json" ]; then
+        [ -x "$holo" ] || cargo build --release --locked -p holo
+        "$holo" dataset --out "$photo_data" --train 1000 --val 40 --test 40 --size 256 --levels 2048 --seed 2027 \
+          --photos data/photos --photo-probability 0.6
+      fi ;;
+    ldi8)  # the LDI hologram CNN, and the RGB-D one of the same schedule on the same data (its comparison)
+      for spec in holo8_ldi:5 holo8:1; do
+        "$py" -m tensorholo_training.train --config training/configs/cpu_stage1.json --run-dir "runs/photo/${spec%:*}" \
+          --set dataset="\"$photo_data\"" --set num_layers=8 --set input_layers="${spec#*:}" \
+          --set stage1_steps="${STEPS_LDI:-4000}"
+      done ;;
     holo8) stage1 8 "${STEPS8:-4000}" ;;
     holo15) stage1 15 "${STEPS15:-4000}" ;;
     holo30) stage1 30 "${STEPS30:-5000}" ;;
@@ -55,6 +89,8 @@ for step in "${steps[@]}"; do
         "$py" -m tensorholo_training.export --checkpoint "$ck" --out-dir "$models" \
           --name "holo${l}_rgbd" --no-prefilter --int8 --calib-dataset "$data" --calib-samples 32 --calib-size 128
       done
+      "$py" -m tensorholo_training.export --checkpoint runs/photo/holo8_ldi/best.pt --out-dir "$models" \
+        --name holo8_ldi --no-prefilter --int8 --calib-dataset "$photo_data" --calib-samples 32 --calib-size 128
       for o in 6 12; do
         "$py" -m tensorholo_training.export --checkpoint "$runs/pre$o/best.pt" --out-dir "$models" \
           --name "prefilter_${o}mm" --prefilter-only --int8 --calib-dataset "$data" --calib-samples 32 --calib-size 128

@@ -30,6 +30,16 @@ pub enum Precision {
     Int8,
 }
 
+/// The scene the hologram CNN takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum SceneInput {
+    /// One RGB-D frame per hologram ([`HologramGenerator::render`]; the default).
+    Rgbd,
+    /// A layered depth image of up to 5 layers front to back ([`HologramGenerator::render_ldi`]; the shipped
+    /// 8-layer LDI CNN, paper Fig. 1). `render` still works: a frame is a one-layer LDI.
+    Ldi,
+}
+
 /// Whether the DDPM pre-filter CNN runs (paper Eq. 6).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
 pub enum PrefilterMode {
@@ -135,9 +145,12 @@ pub struct GeneratorConfig {
     pub width: u32,
     /// Hologram (SLM) height in pixels.
     pub height: u32,
-    /// Hologram CNN depth: 8 (default), 15 or 30 layers.
+    /// Hologram CNN depth: 8 (default), 15 or 30 layers (RGB-D); 8 (LDI).
     #[uniffi(default = 8)]
     pub layers: u32,
+    /// The scene the hologram CNN takes; `None` = [`SceneInput::Rgbd`].
+    #[uniffi(default = None)]
+    pub input: Option<SceneInput>,
     /// Weight format; `None` = [`Precision::F32`].
     #[uniffi(default = None)]
     pub precision: Option<Precision>,
@@ -187,6 +200,10 @@ impl GeneratorConfig {
     fn to_core(&self) -> Result<core::GeneratorConfig> {
         let mut c = core::GeneratorConfig::new(self.width as usize, self.height as usize);
         c.models = ModelSelection {
+            input: match self.input.unwrap_or(SceneInput::Rgbd) {
+                SceneInput::Rgbd => tensorholo::model::SceneInput::Rgbd,
+                SceneInput::Ldi => tensorholo::model::SceneInput::Ldi,
+            },
             layers: self.layers as usize,
             precision: match self.precision.unwrap_or(Precision::F32) {
                 Precision::F32 => tensorholo::model::Precision::F32,
@@ -677,6 +694,27 @@ impl HologramGenerator {
         })
     }
 
+    /// Renders a layered depth image into SLM patterns: one [`RgbdFrame`] per layer, front to back (what a
+    /// renderer's depth-peeling pass gives), each with the buffer rules of [`HologramGenerator::render`]. In
+    /// the layers behind the first, a depth sample of 0 (or NaN, or confidence 0 %) means "no point here"; a
+    /// point may appear only where the layer in front holds one, no nearer than it. All layers share one
+    /// depth range (`z_near_m`/`z_far_m`, or the 1st/99th percentiles of every layer's depths). Needs a
+    /// generator made with `input` = [`SceneInput::Ldi`]; fewer layers than its CNN takes (5) are padded with
+    /// empty ones.
+    ///
+    /// Errors: [`TensorholoError::InvalidInput`] for no layer, more layers than the CNN takes (with an RGB-D
+    /// generator: more than one), layers whose colour sizes differ, a back layer nearer than the one in front
+    /// of it, and as [`HologramGenerator::render`]; the generator stays usable.
+    pub fn render_ldi(&self, layers: Vec<RgbdFrame>) -> Result<SlmPatterns> {
+        guard(|| {
+            let buffers: Vec<scene::CameraFrameBuf> =
+                layers.into_iter().map(RgbdFrame::into_core).collect();
+            let views: Vec<scene::CameraFrame<'_>> =
+                buffers.iter().map(scene::CameraFrameBuf::view).collect();
+            Ok(self.inner.render_ldi(&views)?.into())
+        })
+    }
+
     /// Renders `frame` and returns what a viewer sees focused at normalised depth `focus` ∈ [0, 1]
     /// (0 = near), for the phone's screen.
     ///
@@ -852,6 +890,7 @@ mod tests {
             width,
             height,
             layers: 8,
+            input: None,
             precision: None,
             offset_mm: 6.0,
             prefilter: None,

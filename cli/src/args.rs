@@ -6,10 +6,13 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde_json::json;
 use tensorholo::encoding::DoublePhaseMethod;
+use tensorholo::model::SceneInput;
 use tensorholo::optics::{OpticalSetup, PropagationOptions};
 use tensorholo::scene::{
-    load_rgbd, procedural, DepthEncoding, DepthMapping, DepthRange, LoadOptions, RgbdFrame,
+    load_ldi_dir, load_rgbd, procedural, DepthEncoding, DepthMapping, DepthRange,
+    LayeredDepthImage, LoadOptions, RgbdFrame,
 };
+use tensorholo::synthesis::{ldi_layers, SceneLayer};
 
 /// Display geometry and angular-spectrum options (`docs/CONVENTIONS.md` §3, §5.1), shared by `reference`,
 /// `encode` and `dataset`.
@@ -161,7 +164,8 @@ fn parse_size_unbounded(s: &str) -> std::result::Result<(usize, usize), String> 
 pub struct DepthArgs {
     /// How the depth file stores depth: mm16 (16-bit millimetres: Redwood, derived NYU/SUN), tum (16-bit,
     /// /5000 m), sun (SUN RGB-D bit-rotated mm), kinect-disparity (NYU raw PGM), iphone-disparity (8-bit
-    /// normalised disparity of iPhone portraits), relative-near-bright, relative-near-dark (8-bit unitless).
+    /// normalised disparity of iPhone portraits), relative-near-bright, relative-near-dark (8-bit unitless),
+    /// relative16 (16-bit unitless, 0 = no point: LDI folders).
     #[arg(long, value_parser = parse_depth_encoding)]
     pub depth_encoding: Option<DepthEncoding>,
     /// Nearest metric depth mapped to the front of the 3D volume (metres). Default: 1st percentile of the
@@ -216,41 +220,101 @@ impl DepthArgs {
     }
 }
 
-/// One RGB-D input (files or the built-in scene), shared by `reference` and `render`.
+/// One scene input, shared by `reference` and `render`: an RGB-D pair of files, an LDI folder, or the
+/// built-in scene (as an RGB-D image or a 2-layer LDI).
 #[derive(Debug, Args)]
 pub struct SceneArgs {
     /// RGB image (PNG, JPEG or PPM, sRGB). Omit (with --depth) to use the built-in procedural scene.
-    #[arg(long, requires_all = ["depth", "depth_encoding"])]
+    #[arg(long, requires_all = ["depth", "depth_encoding"], conflicts_with = "ldi")]
     pub rgb: Option<PathBuf>,
     /// Depth map matching the RGB image pixel for pixel.
     #[arg(long, requires = "rgb")]
     pub depth: Option<PathBuf>,
+    /// A layered depth image: a folder of rgb_0.png depth_0.png rgb_1.png depth_1.png …, front layer first
+    /// (what a depth-peeling pass writes; docs/CONVENTIONS.md §6.3), its depths in --depth-encoding; in the
+    /// layers behind the first a stored depth of 0 means "no point here". Without a folder: the built-in
+    /// scene as a 2-layer LDI (the second layer holds what the bar and the disc hide).
+    #[arg(long, value_name = "DIR", num_args = 0..=1)]
+    pub ldi: Option<Option<PathBuf>>,
     #[command(flatten)]
     pub depth_args: DepthArgs,
 }
 
+/// A loaded scene: an RGB-D frame, or a layered depth image.
+#[derive(Debug)]
+pub enum Scene {
+    /// An RGB-D frame.
+    Frame(RgbdFrame),
+    /// A layered depth image (its front layer is the RGB-D frame a camera would see).
+    Ldi(LayeredDepthImage),
+}
+
+impl Scene {
+    /// The RGB-D frame of the front layer (previews, focal depths).
+    pub fn front(&self) -> std::borrow::Cow<'_, RgbdFrame> {
+        match self {
+            Scene::Frame(f) => std::borrow::Cow::Borrowed(f),
+            Scene::Ldi(ldi) => std::borrow::Cow::Owned(ldi.to_rgbd()),
+        }
+    }
+
+    /// The scene's points as SM-LBM layers (every LDI layer).
+    pub fn layers(&self) -> Vec<SceneLayer<'_>> {
+        match self {
+            Scene::Frame(f) => vec![SceneLayer::from(f)],
+            Scene::Ldi(ldi) => ldi_layers(ldi),
+        }
+    }
+
+    /// `(height, width)`.
+    pub fn size(&self) -> (usize, usize) {
+        match self {
+            Scene::Frame(f) => (f.height(), f.width()),
+            Scene::Ldi(ldi) => (ldi.height(), ldi.width()),
+        }
+    }
+
+    /// Which input the hologram CNN needs.
+    pub fn input(&self) -> SceneInput {
+        match self {
+            Scene::Frame(_) => SceneInput::Rgbd,
+            Scene::Ldi(_) => SceneInput::Ldi,
+        }
+    }
+}
+
 impl SceneArgs {
-    /// The input files (never overwritten).
+    /// The input files and folders (never overwritten).
     pub fn inputs(&self) -> Vec<&Path> {
-        [self.rgb.as_deref(), self.depth.as_deref()]
+        [self.rgb.as_deref(), self.depth.as_deref(), self.ldi_dir()]
             .into_iter()
             .flatten()
             .collect()
     }
 
-    /// The input files for the output guard ([`crate::output::guard`]), with their flags.
-    pub fn guard_inputs(&self) -> Vec<crate::output::Input<'_>> {
-        [("--rgb", &self.rgb), ("--depth", &self.depth)]
-            .into_iter()
-            .filter_map(|(flag, p)| Some(crate::output::Input::file(flag, p.as_deref()?)))
-            .collect()
+    /// The LDI folder of `--ldi DIR` (`None` for `--ldi` alone, the built-in LDI).
+    fn ldi_dir(&self) -> Option<&Path> {
+        self.ldi.as_ref().and_then(Option::as_deref)
     }
 
-    /// Loads the RGB-D input or builds the procedural scene (`ldi` only changes the description); returns
-    /// it with a JSON description of its source.
-    pub fn load(&self, ldi: bool) -> Result<(RgbdFrame, serde_json::Value)> {
-        let (frame, source) = self.load_any(ldi)?;
-        let (h, w) = (frame.height(), frame.width());
+    /// The input files for the output guard ([`crate::output::guard`]), with their flags.
+    pub fn guard_inputs(&self) -> Vec<crate::output::Input<'_>> {
+        let mut inputs: Vec<_> = [("--rgb", &self.rgb), ("--depth", &self.depth)]
+            .into_iter()
+            .filter_map(|(flag, p)| Some(crate::output::Input::file(flag, p.as_deref()?)))
+            .collect();
+        inputs.extend(
+            self.ldi_dir()
+                .map(|p| crate::output::Input::folder("--ldi", p)),
+        );
+        inputs
+    }
+
+    /// Loads the scene; returns it with a JSON description of its source. Refuses a scene smaller than the
+    /// SSIM window or black everywhere, naming the input.
+    pub fn load(&self) -> Result<(Scene, serde_json::Value)> {
+        let (scene, source) = self.load_any()?;
+        let (h, w) = scene.size();
         let min = tensorholo::metrics::SSIM_WINDOW;
         if h < min || w < min {
             bail!(
@@ -258,23 +322,46 @@ impl SceneArgs {
                  scores it reports); render larger with --size"
             );
         }
-        // Before any work (the reference's SM-LBM takes long), naming the file.
-        let brightest = frame.amplitude.iter().fold(0.0f32, |m, &a| m.max(a));
+        // Before any work (the reference's SM-LBM takes long), naming the input.
+        let brightest = match &scene {
+            Scene::Frame(f) => f.amplitude.iter().fold(0.0f32, |m, &a| m.max(a)),
+            Scene::Ldi(ldi) => ldi
+                .layers()
+                .iter()
+                .fold(0.0f32, |m, l| l.amplitude.iter().fold(m, |m, &a| m.max(a))),
+        };
         tensorholo::pipeline::check_not_black(brightest).with_context(|| {
-            self.rgb
-                .as_ref()
-                .map_or("the scene".to_string(), |p| format!("`{}`", p.display()))
+            match (self.rgb.as_deref(), self.ldi_dir()) {
+                (Some(p), _) | (None, Some(p)) => format!("`{}`", p.display()),
+                (None, None) => "the scene".to_string(),
+            }
         })?;
-        Ok((frame, source))
+        Ok((scene, source))
     }
 
-    fn load_any(&self, ldi: bool) -> Result<(RgbdFrame, serde_json::Value)> {
-        match (&self.rgb, &self.depth, self.depth_args.depth_encoding) {
+    fn load_any(&self) -> Result<(Scene, serde_json::Value)> {
+        let encoding = self.depth_args.depth_encoding;
+        if let Some(dir) = self.ldi_dir() {
+            let Some(encoding) = encoding else {
+                bail!(
+                    "--ldi {} needs --depth-encoding (the encoding of every depth_K file; relative16 for \
+                     folders written by holo dataset --export-ldi)",
+                    dir.display()
+                );
+            };
+            let options = self.depth_args.load_options()?;
+            let (ldi, report) = load_ldi_dir(dir, encoding, &options)?;
+            return Ok((
+                Scene::Ldi(ldi),
+                json!({"kind": "ldi-folder", "folder": crate::output::path_text(dir), "ldi_report": report}),
+            ));
+        }
+        match (&self.rgb, &self.depth, encoding) {
             (Some(rgb), Some(depth), Some(encoding)) => {
                 let options = self.depth_args.load_options()?;
                 let (frame, report) = load_rgbd(rgb, depth, encoding, &options)?;
                 Ok((
-                    frame,
+                    Scene::Frame(frame),
                     json!({
                         "kind": "rgbd-files",
                         "rgb": crate::output::path_text(rgb),
@@ -285,17 +372,21 @@ impl SceneArgs {
             }
             (None, None, _) => {
                 let (h, w) = self.depth_args.size.unwrap_or((384, 384));
-                Ok((
-                    procedural::default_scene(h, w)?,
-                    json!({"kind": if ldi {
-                        "built-in procedural scene, 2-layer layered depth image"
-                    } else {
-                        "built-in procedural scene"
-                    }}),
-                ))
+                Ok(if self.ldi.is_some() {
+                    (
+                        Scene::Ldi(procedural::default_scene_ldi(h, w)?),
+                        json!({"kind": "built-in procedural scene, 2-layer layered depth image"}),
+                    )
+                } else {
+                    (
+                        Scene::Frame(procedural::default_scene(h, w)?),
+                        json!({"kind": "built-in procedural scene"}),
+                    )
+                })
             }
             _ => bail!(
-                "give --rgb, --depth and --depth-encoding together, or none for the built-in scene"
+                "give --rgb, --depth and --depth-encoding together, --ldi DIR with --depth-encoding, or \
+                 none of them for the built-in scene"
             ),
         }
     }

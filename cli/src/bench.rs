@@ -173,6 +173,7 @@ fn selection(args: &BenchArgs, layers: usize, precision: Precision) -> ModelSele
         } else {
             PrefilterMode::Off
         },
+        ..ModelSelection::default()
     }
 }
 

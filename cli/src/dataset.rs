@@ -12,7 +12,7 @@ use tensorholo::dataset::{
     MANIFEST_FILE,
 };
 use tensorholo::io::ensure_not_input;
-use tensorholo::scene::RandomSceneConfig;
+use tensorholo::scene::{write_ldi_dir, DepthEncoding, RandomSceneConfig};
 use tensorholo::synthesis::{AberrationCorrection, SmLbm};
 
 /// `MIN-MAX` (inclusive) or a single number.
@@ -35,14 +35,38 @@ fn parse_count_range(s: &str) -> std::result::Result<[usize; 2], String> {
     Ok([lo, hi])
 }
 
+/// `SPLIT:INDEX` with SPLIT one of train, val, test.
+fn parse_sample(s: &str) -> std::result::Result<(Split, usize), String> {
+    let (split, index) = s
+        .split_once(':')
+        .ok_or_else(|| format!("`{s}`: expected SPLIT:INDEX, e.g. test:0"))?;
+    let split = match split {
+        "train" => Split::Train,
+        "val" => Split::Val,
+        "test" => Split::Test,
+        _ => return Err(format!("`{split}`: the splits are train, val and test")),
+    };
+    let index = index
+        .parse::<usize>()
+        .map_err(|_| format!("`{index}` is not a sample index (0, 1, …)"))?;
+    Ok((split, index))
+}
+
 /// Arguments of `holo dataset`.
 #[derive(Debug, Args)]
 #[command(after_long_help = EXAMPLES)]
 pub struct DatasetArgs {
     /// Output folder (created if missing). A folder that already holds a dataset (manifest.json) is
-    /// refused unless --force.
+    /// refused unless --force. With --export-ldi: the LDI folder.
     #[arg(long)]
     out: PathBuf,
+    /// Write one sample's layered depth image as an LDI folder into --out instead of a dataset:
+    /// rgb_K.png (8-bit sRGB) and depth_K.png (16-bit, encoding relative16, 0 = no point) for each layer,
+    /// front first, and ldi.json. SPLIT:INDEX (e.g. test:0) is regenerated exactly from --seed and the
+    /// scene flags of the dataset it belongs to; no hologram is computed. Render it with
+    /// `holo render --ldi OUT --depth-encoding relative16`.
+    #[arg(long, value_name = "SPLIT:INDEX", value_parser = parse_sample)]
+    export_ldi: Option<(Split, usize)>,
     /// Training samples (paper: 3800).
     #[arg(long, default_value_t = 8)]
     train: usize,
@@ -124,6 +148,8 @@ Examples:
       shapes textured with random crops of your photos
   holo dataset --out data/corrected --aberration calibration.json --offset-mm 6 --levels 256
       aberration-corrected ground truth (Eq. 5) for a display whose SLM is 6 mm from the midpoint
+  holo dataset --out out/ldi_test0 --export-ldi test:0 --size 256 --seed 2027
+      test sample 0 of that dataset as an LDI folder (rgb_K.png, depth_K.png), for holo render --ldi
 
 Outputs in --out:
   manifest.json            format, generator (version, git commit), seed, splits and shard files,
@@ -243,6 +269,9 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     .collect();
     crate::output::guard("--out", &args.out, &inputs)?;
     let config = config(args)?;
+    if let Some((split, index)) = args.export_ldi {
+        return export_ldi(args, &config, split, index);
+    }
     if args.out.join(MANIFEST_FILE).exists() && !args.force {
         bail!(
             "`{}` already holds a dataset ({MANIFEST_FILE}); pass --force to replace it or choose \
@@ -263,14 +292,80 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     pool.install(|| run_in_pool(args, &config))
 }
 
-fn run_in_pool(args: &DatasetArgs, config: &DatasetConfig) -> Result<()> {
-    let generator = SampleGenerator::new(config)?;
-    let photos: Vec<&Path> = generator
+/// The photos the scenes may be textured with (inputs: never written over).
+fn photo_paths(generator: &SampleGenerator) -> Vec<&Path> {
+    generator
         .scenes()
         .photo_paths()
         .iter()
         .map(PathBuf::as_path)
+        .collect()
+}
+
+/// `--export-ldi SPLIT:INDEX`: the sample's LDI as an LDI folder in `--out`, with `ldi.json` (written last).
+fn export_ldi(
+    args: &DatasetArgs,
+    config: &DatasetConfig,
+    split: Split,
+    index: usize,
+) -> Result<()> {
+    let count = match split {
+        Split::Train => config.train,
+        Split::Val => config.val,
+        Split::Test => config.test,
+    };
+    if index >= count {
+        bail!(
+            "--export-ldi {}:{index}: the {} split has {count} samples (--{}); sample indices start at 0",
+            split.name(),
+            split.name(),
+            split.name()
+        );
+    }
+    let generator = SampleGenerator::new(config)?;
+    let photos = photo_paths(&generator);
+    let ldi = generator.ldi(split, index)?;
+    crate::output::start_run(&args.out, &[], None)?;
+    for k in 0..ldi.num_layers() {
+        for stem in ["rgb", "depth"] {
+            ensure_not_input(&args.out.join(format!("{stem}_{k}.png")), &photos)?;
+        }
+    }
+    let files = write_ldi_dir(&ldi, &args.out)?;
+    let valid: Vec<f64> = ldi
+        .layers()
+        .iter()
+        .map(|l| l.valid.iter().filter(|&&v| v).count() as f64 / l.valid.len() as f64)
         .collect();
+    let report = serde_json::json!({
+        "tensorholo_version": env!("CARGO_PKG_VERSION"),
+        "command": crate::output::command_line(),
+        "sample": {"split": split.name(), "index": index, "seed": config.seed},
+        "size": [ldi.height(), ldi.width()],
+        "layers": ldi.num_layers(),
+        "depth_encoding": DepthEncoding::Relative16,
+        "valid_fraction": valid,
+        "files": files,
+        "render": format!(
+            "holo render --ldi {} --depth-encoding relative16 --out OUT",
+            crate::output::path_text(&args.out)
+        ),
+    });
+    crate::args::write_json(&args.out.join("ldi.json"), &report)?;
+    log::info!(
+        "wrote {} sample {index} as an LDI folder: {} layers of {}x{} in {}",
+        split.name(),
+        ldi.num_layers(),
+        ldi.height(),
+        ldi.width(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn run_in_pool(args: &DatasetArgs, config: &DatasetConfig) -> Result<()> {
+    let generator = SampleGenerator::new(config)?;
+    let photos = photo_paths(&generator);
     let total = (config.train + config.val + config.test) as u64;
     log::info!(
         "{} samples ({}/{}/{}) of {}x{}, {} LDI layers, {} SM-LBM planes, {} threads{}",

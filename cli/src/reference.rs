@@ -8,8 +8,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
-use tensorholo::scene::procedural;
-use tensorholo::synthesis::{ldi_layers, SceneLayer, SmLbm};
+use tensorholo::synthesis::SmLbm;
 
 /// Arguments of `holo reference`.
 #[derive(Debug, Args)]
@@ -35,10 +34,6 @@ pub struct ReferenceArgs {
     offset_mm: f64,
     #[command(flatten)]
     optics: crate::args::OpticsArgs,
-    /// Use the built-in scene as a 2-layer layered depth image (paper Fig. 1: the second layer holds what the
-    /// bar and the disc hide), instead of an RGB-D image.
-    #[arg(long, conflicts_with = "rgb")]
-    ldi: bool,
     /// Output folder (created if missing). Files of the same names in it are replaced; inputs never are.
     #[arg(long)]
     out: PathBuf,
@@ -50,6 +45,8 @@ Examples:
       built-in procedural scene (384x384, occluding bar, disc and textured background)
   holo reference --ldi --out out/ldi
       the same scene as a 2-layer layered depth image (occluded content included)
+  holo reference --ldi out/ldi_test0 --depth-encoding relative16 --out out/ldi_ref
+      an LDI folder (rgb_K.png, depth_K.png front first; e.g. from holo dataset --export-ldi)
   holo reference --rgb photo.png --depth depth.png --depth-encoding mm16 --size 384x512 --out out/photo
       a depth-camera frame; metric range from the 1st/99th percentiles of its depths
   holo reference --rgb derived_rgb_576x768.png --depth disparity_aux_576x768.jpg \\
@@ -103,8 +100,9 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     crate::output::prepare(&args.out, &inputs)?;
 
     let t = Instant::now();
-    let (frame, source) = args.scene.load(args.ldi)?;
+    let (scene, source) = args.scene.load()?;
     let load_s = t.elapsed().as_secs_f64();
+    let frame = scene.front();
     log::info!(
         "scene {}×{} ({}), {} depth planes, {:?}",
         frame.height(),
@@ -114,16 +112,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         encoding_name
     );
 
-    let ldi = if args.ldi {
-        let (h, w) = (frame.height(), frame.width());
-        Some(procedural::default_scene_ldi(h, w)?)
-    } else {
-        None
-    };
-    let layers: Vec<SceneLayer> = match &ldi {
-        Some(ldi) => ldi_layers(ldi),
-        None => vec![SceneLayer::from(&frame)],
-    };
+    let layers = scene.layers();
     let corrected = aberration
         .as_ref()
         .map(|(_, profile)| pipeline.aberration_corrected(profile));

@@ -11,7 +11,9 @@ use clap::{Args, ValueEnum};
 use serde_json::json;
 use tensorholo::cnn::CnnEngine;
 use tensorholo::evaluation::{focal_depths, table2};
-use tensorholo::model::{CnnLayout, HologramModel, ModelConfig, ModelKind, Precision, ThreadCount};
+use tensorholo::model::{
+    CnnLayout, HologramModel, ModelConfig, ModelKind, Precision, SceneInput, ThreadCount,
+};
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{
     Backend, BackendReport, FrameTimings, GpuPrecision, Heads, HologramPipeline, PipelineConfig,
@@ -19,7 +21,9 @@ use tensorholo::pipeline::{
 };
 use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
 use tensorholo::scene::RgbdFrame;
-use tensorholo::synthesis::{SceneLayer, SmLbm};
+use tensorholo::synthesis::SmLbm;
+
+use crate::args::Scene;
 
 /// Weight formats selectable on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -240,11 +244,13 @@ impl ModelArgs {
         }
     }
 
-    /// Loads the models and builds the pipeline; also returns a JSON description of what was loaded.
+    /// Loads the models for scenes of `input` (an RGB-D image or a layered depth image) and builds the
+    /// pipeline; also returns a JSON description of what was loaded.
     ///
-    /// The pre-filter CNN: `--prefilter-model`'s file, or the shipped one as [`ModelArgs::prefilter_mode`]
-    /// says; the rule is the SDK's (the CLI and the bindings share it).
-    pub fn pipeline(&self) -> Result<(HologramPipeline, serde_json::Value)> {
+    /// The hologram CNN: `--model`'s file (it must take `input`), or the shipped one of `--layers` for
+    /// `input`. The pre-filter CNN: `--prefilter-model`'s file, or the shipped one as
+    /// [`ModelArgs::prefilter_mode`] says; the rule is the SDK's (the CLI and the bindings share it).
+    pub fn pipeline(&self, input: SceneInput) -> Result<(HologramPipeline, serde_json::Value)> {
         if !self.offset_mm.is_finite() {
             bail!("--offset-mm must be a finite number of millimetres");
         }
@@ -265,12 +271,17 @@ impl ModelArgs {
         let expected = ModelConfig {
             optics: config.optics,
             offset_m: config.offset_m,
-            input_layers: 1,
+            input_layers: input.input_layers(),
         };
         let hologram = match &self.model {
             Some(p) => HologramModel::from_path(p, ModelKind::Hologram, &expected)?,
-            None => tensorholo::model::embedded::hologram_model(self.layers, precision, &expected)
-                .context("loading the shipped hologram CNN")?,
+            None => tensorholo::model::embedded::scene_hologram_model(
+                input,
+                self.layers,
+                precision,
+                &expected,
+            )
+            .with_context(|| format!("loading the shipped {input} hologram CNN"))?,
         };
         // The SDK's one rule: a given pre-filter is used or refused (e.g. at 0 mm), never dropped.
         let source = match &self.prefilter_model {
@@ -374,6 +385,9 @@ Examples:
       the 30-layer int8 model, scored against the SM-LBM ground truth
   holo render --rgb derived_rgb_576x768.png --depth disparity_aux_576x768.jpg \\
       --depth-encoding iphone-disparity --out out/vase
+  holo render --ldi out/ldi_test0 --depth-encoding relative16 --evaluate --out out/ldi
+      a layered depth image (rgb_K.png, depth_K.png, front first) with the shipped LDI CNN, scored
+      against the SM-LBM of all its layers
   holo render --model my.onnx --prefilter-model my.prefilter.onnx --out out/mine";
 
 /// Runs `holo render`.
@@ -383,14 +397,15 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     inputs.extend(args.model.guard_inputs());
     crate::output::prepare(&args.out, &inputs)?;
     let t = Instant::now();
-    let (frame, source) = args.scene.load(false)?;
+    let (scene, source) = args.scene.load()?;
     let load_s = t.elapsed().as_secs_f64();
-    let (pipeline, models) = args.model.pipeline()?;
-    let (h, w) = (frame.height(), frame.width());
+    let (pipeline, models) = args.model.pipeline(scene.input())?;
+    let (h, w) = scene.size();
     log::info!(
-        "{h}×{w} frame ({}), {}-layer CNN {}, offset {} mm, {}",
+        "{h}×{w} frame ({}), {}-layer {} CNN {}, offset {} mm, {}",
         source["kind"].as_str().unwrap_or("?"),
         args.model.layers,
+        scene.input(),
         args.model.precision(),
         args.model.offset_mm,
         if pipeline.prefilter_model().is_some() {
@@ -410,10 +425,17 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             .collect::<Vec<_>>()
             .join(" + "),
     };
-    let first = session.render(&frame).with_context(what)?.timings;
+    let mut render = || -> Result<FrameTimings> {
+        let out = match &scene {
+            Scene::Frame(frame) => session.render(frame),
+            Scene::Ldi(ldi) => session.render_ldi(ldi),
+        };
+        Ok(out.with_context(what)?.timings)
+    };
+    let first = render()?;
     let mut timed = Vec::new();
     for _ in 0..args.repeat {
-        timed.push(session.render(&frame).with_context(what)?.timings);
+        timed.push(render()?);
     }
     let med = FrameTimings::median(&timed);
     log::info!(
@@ -444,7 +466,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             heads,
             backend: &backend_report,
         },
-        &frame,
+        &scene,
         source,
         models,
         |report| {
@@ -479,13 +501,15 @@ fn write_outputs(
     args: &RenderArgs,
     pipeline: &HologramPipeline,
     last: LastFrame<'_>,
-    frame: &RgbdFrame,
+    scene: &Scene,
     source: serde_json::Value,
     models: serde_json::Value,
     add: impl FnOnce(&mut serde_json::Value),
 ) -> Result<()> {
     let cfg = pipeline.config();
     let out = last.out;
+    let front = scene.front();
+    let frame: &RgbdFrame = &front;
     let midpoint = last.heads.to_field()?;
     drop(last.heads);
     let t = Instant::now();
@@ -525,7 +549,7 @@ fn write_outputs(
     };
     let focus_stats = crate::output::write_images(&args.out, &images, &cfg.optics, frame)?;
     let evaluation = match &displayed {
-        Some(displayed) => Some(evaluate(args, pipeline, frame, &midpoint, displayed)?),
+        Some(displayed) => Some(evaluate(args, pipeline, scene, &midpoint, displayed)?),
         None => None,
     };
     let amp = midpoint.mapv(|v| v.norm());
@@ -555,11 +579,11 @@ fn write_outputs(
 }
 
 /// The Table 2 scores of the CNN midpoint hologram, of what the SLM shows, and of SM-LBM + the same
-/// encoding without CNN, all against the SM-LBM ground truth of the RGB-D input.
+/// encoding without CNN, all against the SM-LBM ground truth of the input (every layer of an LDI).
 fn evaluate(
     args: &RenderArgs,
     pipeline: &HologramPipeline,
-    frame: &RgbdFrame,
+    scene: &Scene,
     midpoint: &ndarray::Array3<num_complex::Complex32>,
     displayed: &ndarray::Array3<num_complex::Complex32>,
 ) -> Result<serde_json::Value> {
@@ -579,7 +603,7 @@ fn evaluate(
         "--evaluate: SM-LBM ground truth with {} planes ...",
         args.levels
     );
-    let gt = reference.run(&[SceneLayer::from(frame)], &|_, _| {})?;
+    let gt = reference.run(&scene.layers(), &|_, _| {})?;
     let reference_displayed = post_encoding_midpoint(
         gt.double_phase.phase.view(),
         gt.double_phase.amplitude_scale,
@@ -587,7 +611,7 @@ fn evaluate(
         cfg.offset_m,
         cfg.options,
     )?;
-    let depths = focal_depths(frame.depth.view(), 200, 15, 5, 0)?;
+    let depths = focal_depths(scene.front().depth.view(), 200, 15, 5, 0)?;
     let score = |pred: &ndarray::Array3<num_complex::Complex32>| {
         table2(
             pred.view(),
@@ -615,7 +639,13 @@ fn evaluate(
         reference_shown.psnr_fs
     );
     Ok(json!({
-        "ground_truth": {"method": "SM-LBM (Eq. 1-4) of the RGB-D input", "levels": args.levels},
+        "ground_truth": {
+            "method": match scene {
+                Scene::Frame(_) => "SM-LBM (Eq. 1-4) of the RGB-D input",
+                Scene::Ldi(_) => "SM-LBM (Eq. 1-4) of every layer of the LDI input",
+            },
+            "levels": args.levels,
+        },
         "focal_depths": depths,
         "cnn_midpoint": cnn,
         "displayed": shown,

@@ -189,7 +189,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     }
     let range: Option<DepthRange> = options.range;
     let (h, w) = (first.height(), first.width());
-    let (pipeline, models) = args.model.pipeline()?;
+    let (pipeline, models) = args.model.pipeline(tensorholo::model::SceneInput::Rgbd)?;
     let t = Instant::now();
     let mut session = pipeline.session(h, w)?;
     let session_s = t.elapsed().as_secs_f64();

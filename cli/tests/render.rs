@@ -323,3 +323,102 @@ fn compare_reports_exactly_the_codes_that_differ() {
     assert!(!o.status.success(), "a 2-step code must fail");
     assert!(stderr(&o).contains("by more than 1 (2)"), "{}", stderr(&o));
 }
+
+#[test]
+fn an_ldi_exported_by_holo_dataset_renders_with_the_ldi_cnn_and_is_refused_when_bad() {
+    let dir = tempfile::tempdir().unwrap();
+    let ldi = dir.path().join("ldi");
+    let o = holo(&[
+        "dataset",
+        "--out",
+        ldi.to_str().unwrap(),
+        "--export-ldi",
+        "test:1",
+        "--size",
+        "48x64",
+        "--seed",
+        "5",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(ldi.join("ldi.json")).unwrap()).unwrap();
+    assert_eq!(meta["layers"], 5);
+    assert_eq!(meta["depth_encoding"], "relative16");
+    assert_eq!(meta["sample"]["split"], "test");
+    for k in 0..5 {
+        for f in [format!("rgb_{k}.png"), format!("depth_{k}.png")] {
+            assert!(ldi.join(&f).exists(), "{f} missing");
+        }
+    }
+    // An index outside the split is refused before anything is written.
+    let o = holo(&[
+        "dataset",
+        "--out",
+        dir.path().join("none").to_str().unwrap(),
+        "--export-ldi",
+        "val:2",
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("the val split has 2 samples"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!dir.path().join("none").exists());
+
+    let out = dir.path().join("r");
+    let o = holo(&[
+        "render",
+        "--ldi",
+        ldi.to_str().unwrap(),
+        "--depth-encoding",
+        "relative16",
+        "--repeat",
+        "0",
+        "--evaluate",
+        "--levels",
+        "128",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = report(&out);
+    assert_eq!(r["input"]["kind"], "ldi-folder");
+    assert_eq!(r["input"]["ldi_report"]["valid_fraction"][0], 1.0);
+    assert_eq!(r["models"]["hologram_cnn"]["input_layers"], 5);
+    let ev = &r["evaluation"];
+    assert!(ev["ground_truth"]["method"]
+        .as_str()
+        .unwrap()
+        .contains("every layer"));
+    let p = ev["cnn_midpoint"]["psnr_amp"].as_f64().unwrap();
+    assert!((15.0..60.0).contains(&p), "{p} dB");
+
+    // The same folder as an SM-LBM reference.
+    let o = holo(&[
+        "reference",
+        "--ldi",
+        ldi.to_str().unwrap(),
+        "--depth-encoding",
+        "relative16",
+        "--levels",
+        "64",
+        "--out",
+        dir.path().join("ref").to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+
+    // Refused: no encoding; an LDI CNN depth that is not shipped.
+    let bad_out = dir.path().join("bad");
+    let bad = |extra: &[&str]| {
+        let mut a = vec!["render", "--ldi", ldi.to_str().unwrap(), "--repeat", "0"];
+        a.extend_from_slice(extra);
+        a.extend_from_slice(&["--out", bad_out.to_str().unwrap()]);
+        let o = holo(&a);
+        assert!(!o.status.success());
+        stderr(&o)
+    };
+    assert!(bad(&[]).contains("needs --depth-encoding"), "{}", bad(&[]));
+    let e = bad(&["--depth-encoding", "relative16", "--layers", "30"]);
+    assert!(e.contains("ldi hologram CNNs have [8] layers"), "{e}");
+}

@@ -35,8 +35,8 @@ use crate::pipeline::{
     ModelSelection, PipelineConfig, PrefilterMode, PrefilterSource, SlmFrame,
 };
 use crate::scene::{
-    CameraFrame, CameraFrameBuf, CameraFrameReport, DepthMapping, DepthRange, Fit, FrameOptions,
-    RgbdFrame,
+    ldi_from_camera_frames, CameraFrame, CameraFrameBuf, CameraFrameReport, DepthMapping,
+    DepthRange, Fit, FrameOptions, LayeredDepthImage, RgbdFrame,
 };
 use crate::slm::DisplayCalibration;
 
@@ -55,7 +55,8 @@ pub struct GeneratorConfig {
     pub width: usize,
     /// Hologram (SLM) height in pixels.
     pub height: usize,
-    /// The shipped CNNs: layers 8/15/30, precision, pre-filter Auto/Off/Required (default 8, f32, Auto).
+    /// The shipped CNNs: RGB-D or LDI input, layers 8/15/30, precision, pre-filter Auto/Off/Required
+    /// (default RGB-D, 8, f32, Auto).
     pub models: ModelSelection,
     /// Distance `s` from the midpoint hologram to the SLM in metres (Eq. 6; default 6e-3; shipped
     /// pre-filters exist for 6e-3 and 12e-3).
@@ -549,6 +550,40 @@ impl HologramGenerator {
         let mut session = self.session()?;
         let out = session.render(&rgbd)?;
         Ok(SlmPatterns::from_frame(out, convert_s, report.range_used))
+    }
+
+    /// Renders a layered depth image delivered as camera frames, one per layer front to back (a renderer's
+    /// depth-peeling pass), with the buffer rules of [`HologramGenerator::render`] for every layer
+    /// ([`ldi_from_camera_frames`]: one depth range for all layers; in the back layers an invalid depth sample,
+    /// e.g. 0, means "no point here"). Needs a generator with an LDI hologram CNN
+    /// (`config.models.input` = [`crate::model::SceneInput::Ldi`]); an LDI of fewer layers than the CNN takes
+    /// is padded with empty layers.
+    ///
+    /// Errors: the conversion's ([`ldi_from_camera_frames`]: buffers, layer sizes, depth order);
+    /// [`HoloError::InvalidParameter`] (`ldi`) for more layers than the CNN takes (with an RGB-D CNN: more than
+    /// one); as [`HologramSession::render_ldi`]. The generator stays usable after any error.
+    pub fn render_ldi(&self, layers: &[CameraFrame]) -> Result<SlmPatterns> {
+        let t = Instant::now();
+        let (ldi, report) = ldi_from_camera_frames(
+            layers,
+            self.config.height,
+            self.config.width,
+            &self.config.frame_options(),
+        )?;
+        let convert_s = t.elapsed().as_secs_f64();
+        let mut session = self.session()?;
+        let out = session.render_ldi(&ldi)?;
+        Ok(SlmPatterns::from_frame(out, convert_s, report.range_used))
+    }
+
+    /// Renders a layered depth image already at the hologram resolution ([`LayeredDepthImage`], e.g. from
+    /// [`crate::scene::load_ldi_dir`]).
+    ///
+    /// Errors: as [`HologramSession::render_ldi`].
+    pub fn render_layered(&self, ldi: &LayeredDepthImage) -> Result<SlmPatterns> {
+        let mut session = self.session()?;
+        let out = session.render_ldi(ldi)?;
+        Ok(SlmPatterns::from_frame(out, 0.0, None))
     }
 
     /// Renders an RGB-D frame already at the hologram resolution (`[3, H, W]` amplitude, `[H, W]` depth).

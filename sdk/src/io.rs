@@ -155,6 +155,20 @@ pub fn save_u8_png(path: &Path, codes: ArrayView2<u8>) -> Result<()> {
     save_png(path, &bytes, w32, h32, image::ExtendedColorType::L8)
 }
 
+/// Saves one 16-bit plane `[H, W]` (e.g. a depth map in the `relative16` encoding) as a greyscale 16-bit
+/// PNG, samples unchanged. The file is written as PNG whatever the extension of `path`.
+///
+/// # Errors
+/// [`HoloError::InvalidData`] if the plane is empty or too large for PNG; [`HoloError::Image`] (with
+/// `path`) if encoding or writing fails.
+pub fn save_u16_png(path: &Path, samples: ArrayView2<u16>) -> Result<()> {
+    let (h, w) = samples.dim();
+    let (w32, h32) = png_dims(w, h)?;
+    // The image crate takes 16-bit samples in native byte order.
+    let bytes: Vec<u8> = samples.iter().flat_map(|v| v.to_ne_bytes()).collect();
+    save_png(path, &bytes, w32, h32, image::ExtendedColorType::L16)
+}
+
 /// Refuses to let `output` be written over one of `inputs`. Paths are compared after resolving them:
 /// a path that exists is canonicalised (symbolic links, `.`/`..`, relative spellings); a path that
 /// does not exist yet is resolved through its nearest existing ancestor. On Unix two existing paths

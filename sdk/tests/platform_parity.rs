@@ -105,6 +105,7 @@ fn render(case: &Case) -> (Array3<Complex32>, Array3<u8>) {
         layers: 8,
         precision: case.precision,
         prefilter: PrefilterMode::Required,
+        ..ModelSelection::default()
     };
     let config = PipelineConfig {
         offset_m: 6e-3,

@@ -574,3 +574,317 @@ fn resizing_never_leaves_the_input_amplitude_range() {
         }
     }
 }
+
+// ---------------------------------------------------------------------------------------------------------
+// Layered depth image folders (`rgb_K.png` + `depth_K.png`, front first; docs/CONVENTIONS.md §6.3).
+
+/// A fresh, empty temporary folder for one test.
+fn ldi_tempdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("tensorholo-ldi-{tag}-{}", std::process::id()));
+    std::fs::remove_dir_all(&d).ok();
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A random `layers`-layer LDI of `h × w`: layer 0 everywhere, each further layer valid only where the one in
+/// front is (with probability 0.6) and never nearer than it.
+fn random_ldi(seed: u64, layers: usize, h: usize, w: usize) -> LayeredDepthImage {
+    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    let mut rnd = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut out: Vec<LdiLayer> = Vec::new();
+    for k in 0..layers {
+        let amplitude = Array3::from_shape_fn((3, h, w), |_| rnd());
+        let mut depth = Array2::zeros((h, w));
+        let mut valid = Array2::from_elem((h, w), false);
+        for y in 0..h {
+            for x in 0..w {
+                let (front_ok, front_d) = match out.last() {
+                    None => (true, 0.0),
+                    Some(p) => (p.valid[[y, x]], p.depth[[y, x]]),
+                };
+                if front_ok && (k == 0 || rnd() < 0.6) {
+                    valid[[y, x]] = true;
+                    depth[[y, x]] = front_d + (1.0 - front_d) * rnd();
+                }
+            }
+        }
+        out.push(LdiLayer {
+            amplitude,
+            depth,
+            valid,
+        });
+    }
+    LayeredDepthImage::new(out).unwrap()
+}
+
+#[test]
+fn an_ldi_folder_round_trips_within_its_quantisation() {
+    let dir = ldi_tempdir("roundtrip");
+    let ldi = random_ldi(7, 4, 9, 13);
+    let files = write_ldi_dir(&ldi, &dir).unwrap();
+    assert_eq!(files.len(), 4);
+    assert_eq!(ldi_files(&dir).unwrap(), files);
+    let (back, report) =
+        load_ldi_dir(&dir, DepthEncoding::Relative16, &LoadOptions::default()).unwrap();
+    assert_eq!(back.num_layers(), 4);
+    assert_eq!(report.range_used, None);
+    assert_eq!(report.front_invalid_fraction, 0.0);
+    for (k, (a, b)) in ldi.layers().iter().zip(back.layers()).enumerate() {
+        assert_eq!(a.valid, b.valid, "layer {k} validity");
+        let frac = a.valid.iter().filter(|&&v| v).count() as f32 / a.valid.len() as f32;
+        assert!((report.valid_fraction[k] - frac).abs() < 1e-6, "layer {k}");
+        for ((y, x), &ok) in a.valid.indexed_iter() {
+            if !ok {
+                continue;
+            }
+            // 16-bit depth: one step of 1/65534; 8-bit sRGB colour: what the code round trip gives.
+            assert!((a.depth[[y, x]] - b.depth[[y, x]]).abs() <= 0.5 / 65534.0 + 1e-7);
+            for c in 0..3 {
+                let code = tensorholo::color::amplitude_to_srgb8(a.amplitude[[c, y, x]]);
+                let want = tensorholo::color::srgb8_to_amplitude(code);
+                assert_eq!(
+                    b.amplitude[[c, y, x]],
+                    want,
+                    "layer {k} colour {c} at {y},{x}"
+                );
+            }
+        }
+    }
+    // --size resizes every layer alike: order and nesting hold (LayeredDepthImage::new checks them).
+    let options = LoadOptions {
+        size: Some((5, 7)),
+        ..LoadOptions::default()
+    };
+    let (small, _) = load_ldi_dir(&dir, DepthEncoding::Relative16, &options).unwrap();
+    assert_eq!((small.height(), small.width()), (5, 7));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Writes a 16-bit greyscale PNG of `samples`.
+fn write_u16(path: &Path, samples: &Array2<u16>) {
+    tensorholo::io::save_u16_png(path, samples.view()).unwrap();
+}
+
+#[test]
+fn a_metric_ldi_shares_one_depth_range_and_fills_only_the_front_layer() {
+    let dir = ldi_tempdir("metric");
+    let (h, w) = (6, 8);
+    let rgb = Array3::from_elem((3, h, w), 0.5f32);
+    for k in 0..2 {
+        tensorholo::io::save_amplitude_png(&dir.join(format!("rgb_{k}.png")), rgb.view(), 1.0)
+            .unwrap();
+    }
+    // Front: a wall at 1 m with one hole (0 = no reading); behind: a wall at 2 m in the left half only.
+    let mut front = Array2::from_elem((h, w), 1000u16);
+    front[[2, 6]] = 0;
+    let back = Array2::from_shape_fn((h, w), |(_, x)| if x < 4 { 2000u16 } else { 0 });
+    write_u16(&dir.join("depth_0.png"), &front);
+    write_u16(&dir.join("depth_1.png"), &back);
+    let (ldi, report) =
+        load_ldi_dir(&dir, DepthEncoding::Millimetres16, &LoadOptions::default()).unwrap();
+    // One range over both layers: 1 m (front) → d = 0, 2 m (back) → d = 1.
+    let r = report.range_used.unwrap();
+    assert_eq!((r.z_near_m, r.z_far_m), (1.0, 2.0));
+    let [l0, l1] = ldi.layers() else {
+        panic!("two layers")
+    };
+    assert!(
+        l0.valid.iter().all(|&v| v),
+        "the front layer is valid everywhere"
+    );
+    assert!(
+        l0.depth.iter().all(|&d| d == 0.0),
+        "its hole takes the wall's depth"
+    );
+    assert!((report.front_invalid_fraction - 1.0 / 48.0).abs() < 1e-6);
+    for ((_, x), &ok) in l1.valid.indexed_iter() {
+        assert_eq!(ok, x < 4, "a stored 0 in a back layer is no point");
+    }
+    assert!(l1
+        .depth
+        .iter()
+        .zip(&l1.valid)
+        .all(|(&d, &ok)| !ok || d == 1.0));
+    assert_eq!(report.valid_fraction, vec![1.0, 0.5]);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn bad_ldi_folders_are_refused_naming_the_files() {
+    let dir = ldi_tempdir("bad");
+    let err = |dir: &Path| {
+        load_ldi_dir(dir, DepthEncoding::Relative16, &LoadOptions::default())
+            .unwrap_err()
+            .to_string()
+    };
+    // Empty.
+    assert!(
+        err(&dir).contains("rgb_0.png and depth_0.png"),
+        "{}",
+        err(&dir)
+    );
+    // A layer whose depth is nearer than the one in front of it.
+    let mut ldi = random_ldi(3, 2, 5, 6).into_layers();
+    ldi[1].valid.fill(true);
+    ldi[0].depth.fill(0.5);
+    ldi[1].depth.fill(0.6);
+    let written = write_ldi_dir(&LayeredDepthImage::new(ldi.clone()).unwrap(), &dir).unwrap();
+    let mut near = Array2::from_elem((5, 6), 1 + (0.6 * 65534.0f32) as u16);
+    near[[3, 4]] = 1 + (0.2 * 65534.0f32) as u16;
+    write_u16(&written[1].depth, &near);
+    let e = err(&dir);
+    assert!(
+        e.contains("layer 1 (`depth_1.png`) is nearer than layer 0 (`depth_0.png`) at 1 pixels")
+            && e.contains("row 3, column 4"),
+        "{e}"
+    );
+    // A point behind a pixel where the layer in front holds none (a gap).
+    write_ldi_dir(&LayeredDepthImage::new(ldi.clone()).unwrap(), &dir).unwrap();
+    let mut third = Array2::from_elem((5, 6), 0u16);
+    third[[1, 2]] = 65535;
+    write_u16(&dir.join("depth_2.png"), &Array2::from_elem((5, 6), 0u16));
+    std::fs::copy(&written[1].rgb, dir.join("rgb_2.png")).unwrap();
+    std::fs::copy(&written[1].rgb, dir.join("rgb_3.png")).unwrap();
+    write_u16(&dir.join("depth_3.png"), &third);
+    let e = err(&dir);
+    assert!(
+        e.contains(
+            "layer 3 (`depth_3.png`) holds a point where layer 2 (`depth_2.png`) holds none"
+        ),
+        "{e}"
+    );
+    // A layer of another size, naming the file.
+    write_u16(&dir.join("depth_3.png"), &Array2::from_elem((4, 6), 0u16));
+    match load_ldi_dir(&dir, DepthEncoding::Relative16, &LoadOptions::default()) {
+        Err(HoloError::ShapeMismatch {
+            what,
+            expected,
+            got,
+        }) => {
+            assert!(what.contains("depth_3.png"), "{what}");
+            assert_eq!((expected, got), (vec![5, 6], vec![4, 6]));
+        }
+        other => panic!("{other:?}"),
+    }
+    // A layer without its depth file, a gap in the numbering, two files for one layer.
+    std::fs::remove_file(dir.join("depth_3.png")).unwrap();
+    assert!(err(&dir).contains("lacks depth_3"), "{}", err(&dir));
+    std::fs::remove_file(dir.join("rgb_3.png")).unwrap();
+    std::fs::copy(&written[1].rgb, dir.join("rgb_5.png")).unwrap();
+    assert!(
+        err(&dir).contains("the numbering has a gap"),
+        "{}",
+        err(&dir)
+    );
+    std::fs::remove_file(dir.join("rgb_5.png")).unwrap();
+    std::fs::copy(&written[1].rgb, dir.join("rgb_1.jpg")).unwrap();
+    assert!(
+        err(&dir).contains("two rgb files for layer 1"),
+        "{}",
+        err(&dir)
+    );
+    std::fs::remove_file(dir.join("rgb_1.jpg")).unwrap();
+    // Files of another pattern are ignored; a wrong bit depth names the file.
+    std::fs::write(dir.join("README.txt"), "notes").unwrap();
+    assert!(load_ldi_dir(&dir, DepthEncoding::Relative16, &LoadOptions::default()).is_ok());
+    let e = load_ldi_dir(
+        &dir,
+        DepthEncoding::RelativeNearDark,
+        &LoadOptions::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("depth_0.png") && e.contains("16-bit"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// One packed camera layer: RGB8 colour and u16 millimetre depth of `h × w`.
+fn camera_layer(
+    h: usize,
+    w: usize,
+    rgb: [u8; 3],
+    mm: impl Fn(usize, usize) -> u16,
+) -> CameraFrameBuf {
+    CameraFrameBuf {
+        color: ColorImageBuf {
+            data: (0..h * w).flat_map(|_| rgb).collect(),
+            format: ColorFormat::Rgb8,
+            width: w,
+            height: h,
+            row_stride: 0,
+        },
+        depth: DepthImageBuf {
+            data: (0..h * w)
+                .flat_map(|i| mm(i / w, i % w).to_le_bytes())
+                .collect(),
+            format: DepthFormat::MillimetresU16,
+            width: w,
+            height: h,
+            row_stride: 0,
+        },
+        rotation: Rotation::Deg0,
+        color_crop: None,
+    }
+}
+
+#[test]
+fn camera_layers_make_one_ldi_with_one_range_and_fit_alike() {
+    let (h, w) = (8, 12);
+    let front = camera_layer(h, w, [200, 40, 40], |_, _| 1000);
+    let back = camera_layer(h, w, [40, 200, 40], |_, x| if x < 6 { 3000 } else { 0 });
+    let views = [front.view(), back.view()];
+    let options = FrameOptions {
+        fit: Fit::Stretch,
+        ..FrameOptions::default()
+    };
+    let (ldi, report) = ldi_from_camera_frames(&views, h, w, &options).unwrap();
+    let r = report.range_used.unwrap();
+    assert_eq!((r.z_near_m, r.z_far_m), (1.0, 3.0));
+    let l1 = &ldi.layers()[1];
+    assert!(l1.valid.indexed_iter().all(|((_, x), &v)| v == (x < 6)));
+    // The front layer alone equals CameraFrame::to_rgbd with the same range.
+    let alone = FrameOptions {
+        range: Some(r),
+        ..options
+    };
+    let (rgbd, _) = front.view().to_rgbd(h, w, &alone).unwrap();
+    assert_eq!(ldi.to_rgbd(), rgbd);
+    // Letterbox into a wider hologram: bars are black and far in front, with no point behind.
+    let letterbox = FrameOptions {
+        fit: Fit::Letterbox,
+        ..options
+    };
+    let (boxed, _) = ldi_from_camera_frames(&views, h, 2 * w, &letterbox).unwrap();
+    let [b0, b1] = boxed.layers() else {
+        panic!("two layers")
+    };
+    assert!(b0.valid.iter().all(|&v| v));
+    assert_eq!(b0.depth[[0, 0]], 1.0);
+    assert_eq!(b0.amplitude[[0, 0, 0]], 0.0);
+    assert!(!b1.valid[[0, 0]] && !b1.valid[[0, 2 * w - 1]]);
+    // Crop to a narrower hologram: the same window in both layers.
+    let crop = FrameOptions {
+        fit: Fit::Crop,
+        ..options
+    };
+    let (cropped, _) = ldi_from_camera_frames(&views, h, h, &crop).unwrap();
+    let c1 = &cropped.layers()[1];
+    assert!(c1.valid.indexed_iter().all(|((_, x), &v)| v == (x < 4)));
+    // Layers of different sizes, a back layer nearer than the front, no layer: refused.
+    let small = camera_layer(h, w / 2, [1, 2, 3], |_, _| 3000);
+    assert!(matches!(
+        ldi_from_camera_frames(&[front.view(), small.view()], h, w, &options),
+        Err(HoloError::ShapeMismatch { .. })
+    ));
+    let nearer = camera_layer(h, w, [1, 2, 3], |_, _| 500);
+    let e = ldi_from_camera_frames(&[front.view(), nearer.view()], h, w, &options)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("buffer 1") && e.contains("nearer"), "{e}");
+    assert!(ldi_from_camera_frames(&[], h, w, &options).is_err());
+}

@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use ndarray::Array3;
-use tensorholo::model::{embedded, HologramModel, ModelConfig, ModelKind, Precision};
+use tensorholo::model::{embedded, HologramModel, ModelConfig, ModelKind, Precision, SceneInput};
 
 fn fixture(name: &str) -> Array3<f32> {
     let path: PathBuf = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -101,6 +101,19 @@ fn every_shipped_model_matches_pytorch() {
             assert!(HologramModel::from_bytes(bytes, ModelKind::PreFilter, &other).is_err());
         }
     }
+    // The LDI CNN: 5 layers of RGB-D in, the midpoint hologram out, for every offset.
+    for precision in Precision::ALL {
+        let name = embedded::scene_hologram_file(SceneInput::Ldi, 8, precision);
+        let config = ModelConfig {
+            input_layers: 5,
+            ..base
+        };
+        let bytes = embedded::scene_hologram_cnn(SceneInput::Ldi, 8, precision).unwrap();
+        check(&name, bytes, ModelKind::Hologram, &config, 8, precision);
+        // Not an RGB-D CNN.
+        assert!(HologramModel::from_bytes(bytes, ModelKind::Hologram, &base).is_err());
+    }
+    assert!(embedded::scene_hologram_cnn(SceneInput::Ldi, 30, Precision::F32).is_err());
     assert!(embedded::hologram_cnn(12, Precision::F32).is_err());
     assert!(embedded::prefilter_cnn(0, Precision::F32).is_err());
 }

@@ -87,7 +87,9 @@ class TrainConfig:
     stage2_epochs: float = 0.0
     lr: float = 1e-4
     betas: list = field(default_factory=lambda: [0.9, 0.99])
-    init_from: str = ""  # checkpoint whose hologram CNN (and pre-filter, if any) initialises this run
+    init_from: str = ""  # checkpoint (.pt) or shipped f32 ONNX file whose CNN(s) initialise this run
+    # checkpoint (.pt) or shipped f32 ONNX file whose pre-filter initialises this run's (after init_from)
+    init_prefilter_from: str = ""
     # stage 2 trains both CNNs (paper); False freezes the hologram CNN so that the pre-filter of one offset
     # serves every hologram CNN trained on the same optics (the SDK pairs any hologram CNN with a pre-filter)
     stage2_train_hologram: bool = True
@@ -216,6 +218,51 @@ def autocast_dtype(cfg: TrainConfig, device: torch.device) -> torch.dtype | None
     return {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}[p]
 
 
+def widen_input_layers(state: dict, net) -> dict:
+    """An RGB-D hologram CNN's weights (``4`` input channels) fitted to an LDI CNN of the same depth
+    (``4·L`` channels): the first layer's and the last layer's input-channel weights for layer 0 are copied,
+    those of the back layers set to zero, so that the LDI CNN starts as the RGB-D CNN exactly (whatever the back
+    layers hold) and training adds what they tell. Any other state is returned unchanged (the same object)."""
+    first, last = "convs.0.weight", f"convs.{net.num_layers - 1}.weight"
+    if first not in state or state[first].shape[1] != 4 or net.in_channels == 4:
+        return state
+    out = dict(state)
+    w0 = torch.zeros_like(net.convs[0].weight)
+    w0[:, :4] = state[first]
+    out[first] = w0
+    wl = torch.zeros_like(net.convs[-1].weight)
+    c = net.channels
+    wl[:, :c] = state[last][:, :c]        # the hidden features
+    wl[:, c:c + 4] = state[last][:, c:]   # the input's layer 0 (the last layer also sees the input)
+    out[last] = wl
+    return out
+
+
+def initial_state(path: str, device) -> dict:
+    """The weights a run starts from: ``{"net": ..., "prefilter": ...}`` (either may be ``None``) from a
+    training checkpoint (``.pt``: ``checkpoint.pt``, ``stage1.pt``, ``best.pt``, ``final.pt``) or from a shipped
+    f32 ONNX file (``models/holo30_rgbd.onnx``, ``models/prefilter_6mm.onnx``), whose initialisers carry the
+    PyTorch parameter names. A run resumed from an ONNX file restarts its optimiser (Adam's moments are not
+    in the file); the int8 files are refused (their weights are quantised)."""
+    if not path.endswith(".onnx"):
+        return torch.load(path, map_location=device, weights_only=False)
+    import onnx
+    from onnx import numpy_helper
+
+    model = onnx.load(path)
+    meta = {p.key: p.value for p in model.metadata_props}
+    if meta.get("tensorholo.precision", "f32") != "f32":
+        raise ValueError(f"{path}: an {meta['tensorholo.precision']} file; initialise from the f32 ONNX file")
+    weights = {i.name: torch.from_numpy(numpy_helper.to_array(i).copy()).to(device)
+               for i in model.graph.initializer}
+    kind = meta.get("tensorholo.kind")
+    if kind == "hologram-cnn":
+        return {"net": weights, "prefilter": None}
+    if kind == "prefilter-cnn":
+        return {"net": None, "prefilter": weights}
+    raise ValueError(f"{path}: tensorholo.kind is {kind!r}, neither hologram-cnn nor prefilter-cnn")
+
+
 class Trainer:
     """Runs the phases of a :class:`TrainConfig` with checkpoints that resume (see the module docstring).
 
@@ -274,11 +321,27 @@ class Trainer:
         if cfg.select_metric not in ("val_psnr_fs", "val_psnr_amp"):
             raise ValueError(f"select_metric must be 'val_psnr_fs' or 'val_psnr_amp', not {cfg.select_metric!r}")
         if cfg.init_from:
-            state = torch.load(cfg.init_from, map_location=self.device, weights_only=False)
-            self.net.load_state_dict(state["net"])
+            state = initial_state(cfg.init_from, self.device)
+            if state.get("net") is None:
+                raise ValueError(f"init_from {cfg.init_from}: holds no hologram CNN (a pre-filter file goes in "
+                                 "init_prefilter_from)")
+            net_state = state["net"]
+            widened = widen_input_layers(net_state, self.net)
+            self.net.load_state_dict(widened)
+            if widened is not net_state:
+                self.log(f"{cfg.init_from}: an RGB-D CNN; the weights of the LDI's back layers start at zero "
+                         "(the network starts as the RGB-D one)")
             if self.prefilter is not None and state.get("prefilter") is not None:
                 load_prefilter_state(self.prefilter, state["prefilter"], cfg.init_from)
             self.log(f"initialised from {cfg.init_from}")
+        if cfg.init_prefilter_from:
+            if self.prefilter is None:
+                raise ValueError("init_prefilter_from needs a run with a pre-filter (stage2 at a non-zero offset)")
+            state = initial_state(cfg.init_prefilter_from, self.device)
+            if state.get("prefilter") is None:
+                raise ValueError(f"init_prefilter_from {cfg.init_prefilter_from}: holds no pre-filter CNN")
+            load_prefilter_state(self.prefilter, state["prefilter"], cfg.init_prefilter_from)
+            self.log(f"pre-filter initialised from {cfg.init_prefilter_from}")
         self.best: dict = {}
         self.phases = self._phases()
         self.phase_index = 0

@@ -160,3 +160,46 @@ def test_cli_exports_hologram_and_prefilter_separately(tmp_path, tiny_dataset):
     assert read_metadata(str(out / "holo8.onnx"))["tensorholo.kind"] == "hologram-cnn"
     pre = read_metadata(str(out / "pre6.onnx"))
     assert pre["tensorholo.kind"] == "prefilter-cnn" and float(pre["tensorholo.offset_m"]) == 6e-3
+
+
+def test_a_run_starts_from_a_shipped_onnx_file_with_the_same_outputs(exported, tmp_path):
+    """train.initial_state reads an f32 ONNX file's weights back into PyTorch (the initialisers carry the
+    parameter names), refuses int8 files, and tells hologram CNNs from pre-filters."""
+    from tensorholo_training.train import initial_state
+
+    net, path, _ = exported
+    state = initial_state(path, "cpu")
+    assert state["prefilter"] is None
+    back = hologram_cnn(8, 1).eval()
+    back.load_state_dict(state["net"])
+    x = np.random.default_rng(3).random((1, 4, 12, 20), dtype=np.float32)
+    with torch.no_grad():
+        for a, b in zip(net(torch.from_numpy(x)), back(torch.from_numpy(x))):
+            assert torch.equal(a, b)
+    pre = trained_like_prefilter()
+    pre_path = export_onnx(pre, str(tmp_path / "pre.onnx"), "prefilter-cnn", meta(pre, "prefilter-cnn"))
+    pre_state = initial_state(pre_path, "cpu")
+    assert pre_state["net"] is None and set(pre_state["prefilter"]) == set(pre.state_dict())
+    q = quantize_int8(path, str(tmp_path / "q.onnx"), [x], "qdq")
+    with pytest.raises(ValueError, match="initialise from the f32 ONNX file"):
+        initial_state(q, "cpu")
+
+
+def test_an_ldi_cnn_widened_from_an_rgbd_one_starts_as_it_whatever_the_back_layers_hold():
+    from tensorholo_training.train import widen_input_layers
+
+    torch.manual_seed(1)
+    rgbd, ldi = hologram_cnn(8, 1).eval(), hologram_cnn(8, 5).eval()
+    ldi.load_state_dict(widen_input_layers(rgbd.state_dict(), ldi))
+    x = torch.rand(2, 4, 10, 14)
+    with torch.no_grad():
+        want = rgbd(x)
+        for back in (torch.zeros(2, 16, 10, 14), torch.rand(2, 16, 10, 14)):
+            got = ldi(torch.cat([x, back], 1))
+            for a, b in zip(want, got):
+                assert (a - b).abs().max() < 1e-6
+    # Anything else is left as it is (an LDI state into an LDI CNN, an RGB-D state into an RGB-D CNN).
+    same = ldi.state_dict()
+    assert widen_input_layers(same, ldi) is same
+    same = rgbd.state_dict()
+    assert widen_input_layers(same, rgbd) is same

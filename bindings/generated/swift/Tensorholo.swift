@@ -658,6 +658,21 @@ public protocol HologramGeneratorProtocol: AnyObject, Sendable {
     func render(frame: RgbdFrame) throws  -> SlmPatterns
     
     /**
+     * Renders a layered depth image into SLM patterns: one [`RgbdFrame`] per layer, front to back (what a
+     * renderer's depth-peeling pass gives), each with the buffer rules of [`HologramGenerator::render`]. In
+     * the layers behind the first, a depth sample of 0 (or NaN, or confidence 0 %) means "no point here"; a
+     * point may appear only where the layer in front holds one, no nearer than it. All layers share one
+     * depth range (`z_near_m`/`z_far_m`, or the 1st/99th percentiles of every layer's depths). Needs a
+     * generator made with `input` = [`SceneInput::Ldi`]; fewer layers than its CNN takes (5) are padded with
+     * empty ones.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for no layer, more layers than the CNN takes (with an RGB-D
+     * generator: more than one), layers whose colour sizes differ, a back layer nearer than the one in front
+     * of it, and as [`HologramGenerator::render`]; the generator stays usable.
+     */
+    func renderLdi(layers: [RgbdFrame]) throws  -> SlmPatterns
+    
+    /**
      * Applies a display calibration file (the bytes of a `.holocal` made by `holo calibrate`, e.g. bundled
      * with the app or downloaded per device) to the frames rendered from now on and to streams started
      * later; `None` returns to an ideal SLM (linear look-up tables, no intensity map). Its per-colour
@@ -834,6 +849,29 @@ open func render(frame: RgbdFrame)throws  -> SlmPatterns  {
     uniffi_tensorholo_ffi_fn_method_hologramgenerator_render(
             self.uniffiCloneHandle(),
         FfiConverterTypeRgbdFrame_lower(frame),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Renders a layered depth image into SLM patterns: one [`RgbdFrame`] per layer, front to back (what a
+     * renderer's depth-peeling pass gives), each with the buffer rules of [`HologramGenerator::render`]. In
+     * the layers behind the first, a depth sample of 0 (or NaN, or confidence 0 %) means "no point here"; a
+     * point may appear only where the layer in front holds one, no nearer than it. All layers share one
+     * depth range (`z_near_m`/`z_far_m`, or the 1st/99th percentiles of every layer's depths). Needs a
+     * generator made with `input` = [`SceneInput::Ldi`]; fewer layers than its CNN takes (5) are padded with
+     * empty ones.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for no layer, more layers than the CNN takes (with an RGB-D
+     * generator: more than one), layers whose colour sizes differ, a back layer nearer than the one in front
+     * of it, and as [`HologramGenerator::render`]; the generator stays usable.
+     */
+open func renderLdi(layers: [RgbdFrame])throws  -> SlmPatterns  {
+    return try  FfiConverterTypeSlmPatterns_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_hologramgenerator_render_ldi(
+            self.uniffiCloneHandle(),
+        FfiConverterSequenceTypeRgbdFrame.lower(layers),uniffiCallStatus
     )
 })
 }
@@ -1656,9 +1694,13 @@ public struct GeneratorConfig: Equatable, Hashable {
      */
     public var height: UInt32
     /**
-     * Hologram CNN depth: 8 (default), 15 or 30 layers.
+     * Hologram CNN depth: 8 (default), 15 or 30 layers (RGB-D); 8 (LDI).
      */
     public var layers: UInt32
+    /**
+     * The scene the hologram CNN takes; `None` = [`SceneInput::Rgbd`].
+     */
+    public var input: SceneInput?
     /**
      * Weight format; `None` = [`Precision::F32`].
      */
@@ -1724,8 +1766,11 @@ public struct GeneratorConfig: Equatable, Hashable {
          * Hologram (SLM) height in pixels.
          */height: UInt32, 
         /**
-         * Hologram CNN depth: 8 (default), 15 or 30 layers.
+         * Hologram CNN depth: 8 (default), 15 or 30 layers (RGB-D); 8 (LDI).
          */layers: UInt32 = UInt32(8), 
+        /**
+         * The scene the hologram CNN takes; `None` = [`SceneInput::Rgbd`].
+         */input: SceneInput? = nil, 
         /**
          * Weight format; `None` = [`Precision::F32`].
          */precision: Precision? = nil, 
@@ -1770,6 +1815,7 @@ public struct GeneratorConfig: Equatable, Hashable {
         self.width = width
         self.height = height
         self.layers = layers
+        self.input = input
         self.precision = precision
         self.offsetMm = offsetMm
         self.prefilter = prefilter
@@ -1804,6 +1850,7 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
                 width: FfiConverterUInt32.read(from: &buf), 
                 height: FfiConverterUInt32.read(from: &buf), 
                 layers: FfiConverterUInt32.read(from: &buf), 
+                input: FfiConverterOptionTypeSceneInput.read(from: &buf), 
                 precision: FfiConverterOptionTypePrecision.read(from: &buf), 
                 offsetMm: FfiConverterDouble.read(from: &buf), 
                 prefilter: FfiConverterOptionTypePrefilterMode.read(from: &buf), 
@@ -1824,6 +1871,7 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
         FfiConverterUInt32.write(value.width, into: &buf)
         FfiConverterUInt32.write(value.height, into: &buf)
         FfiConverterUInt32.write(value.layers, into: &buf)
+        FfiConverterOptionTypeSceneInput.write(value.input, into: &buf)
         FfiConverterOptionTypePrecision.write(value.precision, into: &buf)
         FfiConverterDouble.write(value.offsetMm, into: &buf)
         FfiConverterOptionTypePrefilterMode.write(value.prefilter, into: &buf)
@@ -3415,6 +3463,82 @@ public func FfiConverterTypeRotation_lower(_ value: Rotation) -> RustBuffer {
 
 
 /**
+ * The scene the hologram CNN takes.
+ */
+
+public enum SceneInput: Equatable, Hashable {
+    
+    /**
+     * One RGB-D frame per hologram ([`HologramGenerator::render`]; the default).
+     */
+    case rgbd
+    /**
+     * A layered depth image of up to 5 layers front to back ([`HologramGenerator::render_ldi`]; the shipped
+     * 8-layer LDI CNN, paper Fig. 1). `render` still works: a frame is a one-layer LDI.
+     */
+    case ldi
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension SceneInput: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeSceneInput: FfiConverterRustBuffer {
+    typealias SwiftType = SceneInput
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SceneInput {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .rgbd
+        
+        case 2: return .ldi
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: SceneInput, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .rgbd:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .ldi:
+            writeInt(&buf, Int32(2))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSceneInput_lift(_ buf: RustBuffer) throws -> SceneInput {
+    return try FfiConverterTypeSceneInput.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSceneInput_lower(_ value: SceneInput) -> RustBuffer {
+    return FfiConverterTypeSceneInput.lower(value)
+}
+
+
+
+/**
  * Every failure reported to an app. Each variant carries a human-readable `message` naming the offending
  * input (the core's [`tensorholo::HoloError`] text); the variant says what the app can do about it.
  *
@@ -3819,6 +3943,30 @@ fileprivate struct FfiConverterOptionTypeRotation: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterOptionTypeSceneInput: FfiConverterRustBuffer {
+    typealias SwiftType = SceneInput?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeSceneInput.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeSceneInput.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterSequenceFloat: FfiConverterRustBuffer {
     typealias SwiftType = [Float]
 
@@ -3861,6 +4009,31 @@ fileprivate struct FfiConverterSequenceDouble: FfiConverterRustBuffer {
         seq.reserveCapacity(Int(len))
         for _ in 0 ..< len {
             seq.append(try FfiConverterDouble.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceTypeRgbdFrame: FfiConverterRustBuffer {
+    typealias SwiftType = [RgbdFrame]
+
+    public static func write(_ value: [RgbdFrame], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeRgbdFrame.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [RgbdFrame] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [RgbdFrame]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeRgbdFrame.read(from: &buf))
         }
         return seq
     }
@@ -3946,6 +4119,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render() != 59945) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi() != 11354) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration() != 29704) {

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import tensorholo
-from tensorholo import (ColorFormat, DepthFormat, Fit, GeneratorConfig, HologramGenerator, PatternsListener,
-                        PrefilterMode, RgbdFrame, Rotation, TensorholoError)
+from tensorholo import (CnnEngine, ColorFormat, DepthFormat, Fit, GeneratorConfig, HologramGenerator,
+                        PatternsListener, PrefilterMode, RgbdFrame, Rotation, SceneInput, TensorholoError)
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
@@ -139,6 +139,27 @@ def test_bad_frames_raise_and_the_generator_goes_on(case):
             gen.render(bad)
         assert str(e.value), what
     frames.compare_codes(codes_of(gen.render(frame)), want)
+
+
+def test_an_ldi_generator_renders_layers_and_an_rgbd_one_refuses_them(case):
+    c, frame, _, gen = case
+    ldi_gen = HologramGenerator(GeneratorConfig(width=c.out_width, height=c.out_height, input=SceneInput.LDI,
+                                                threads=1, engine=CnnEngine.NATIVE))
+    assert "holo8_ldi" in ldi_gen.info().hologram_model
+    one = ldi_gen.render_ldi([frame])
+    # A frame is a one-layer LDI: the same codes either way.
+    np.testing.assert_array_equal(codes_of(one), codes_of(ldi_gen.render(frame)))
+    # The same surface twice (a back layer no nearer than the front): five layers at most.
+    two = ldi_gen.render_ldi([frame, frame])
+    assert (two.width, two.height) == (c.out_width, c.out_height)
+    with pytest.raises(TensorholoError.InvalidInput) as e:
+        ldi_gen.render_ldi([frame] * 6)
+    assert "takes 5" in str(e.value)
+    with pytest.raises(TensorholoError.InvalidInput) as e:
+        gen.render_ldi([frame, frame])
+    assert "holo8_ldi" in str(e.value)
+    with pytest.raises(TensorholoError.InvalidInput):
+        ldi_gen.render_ldi([])
 
 
 @pytest.mark.parametrize("kw, field", [

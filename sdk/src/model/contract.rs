@@ -70,19 +70,32 @@ pub fn pack_rgbd(frame: &RgbdFrame, mut out: ArrayViewMut3<f32>) -> Result<()> {
     Ok(())
 }
 
-/// Writes the hologram CNN input of a layered depth image into `out` `[4·L, H, W]`: per layer `k` (front to
-/// back), channels `4k..4k+3` = R, G, B amplitude then depth; where layer `k` holds no point, amplitude
-/// [`INVALID_AMPLITUDE`] and depth [`INVALID_DEPTH`].
+/// Writes the hologram CNN input of a layered depth image into `out` `[4·L', H, W]` for a CNN of `L' ≥ L`
+/// input layers: per layer `k` (front to back), channels `4k..4k+3` = R, G, B amplitude then depth; where
+/// layer `k` holds no point, and in the `L' − L` empty layers that pad an LDI of fewer layers than the CNN
+/// takes, amplitude [`INVALID_AMPLITUDE`] and depth [`INVALID_DEPTH`] (what the training data holds where a
+/// pixel has fewer points than layers).
 ///
-/// Errors: [`HoloError::ShapeMismatch`] if `out` is not `[4·L, H, W]` of the LDI's size.
+/// Errors: [`HoloError::InvalidParameter`] (`ldi`) if the LDI has more layers than `out` holds;
+/// [`HoloError::ShapeMismatch`] if `out` is not `[4·L', H, W]` of the LDI's size.
 pub fn pack_ldi(ldi: &LayeredDepthImage, mut out: ArrayViewMut3<f32>) -> Result<()> {
-    let want = [4 * ldi.num_layers(), ldi.height(), ldi.width()];
-    if out.shape() != want {
+    let (c, h, w) = out.dim();
+    let layers = c / 4;
+    if c % 4 != 0 || (h, w) != (ldi.height(), ldi.width()) {
         return Err(HoloError::ShapeMismatch {
             what: "layered depth image vs the CNN input [4·L, H, W]".into(),
             expected: out.shape().to_vec(),
-            got: want.to_vec(),
+            got: vec![4 * ldi.num_layers(), ldi.height(), ldi.width()],
         });
+    }
+    if ldi.num_layers() > layers {
+        return Err(invalid(
+            "ldi",
+            format!(
+                "the layered depth image has {} layers, the hologram CNN takes at most {layers}",
+                ldi.num_layers()
+            ),
+        ));
     }
     for (k, layer) in ldi.layers().iter().enumerate() {
         for c in 0..3 {
@@ -96,7 +109,19 @@ pub fn pack_ldi(ldi: &LayeredDepthImage, mut out: ArrayViewMut3<f32>) -> Result<
             .and(&layer.valid)
             .for_each(|o, &d, &v| *o = if v { d } else { INVALID_DEPTH });
     }
+    fill_empty_layers(out, ldi.num_layers(), layers);
     Ok(())
+}
+
+/// Writes empty LDI layers `from..to` (no point anywhere: amplitude [`INVALID_AMPLITUDE`], depth
+/// [`INVALID_DEPTH`]) into the CNN input `out` `[4·L, H, W]`, `to ≤ L`: the padding of an LDI (or an RGB-D
+/// frame, `from = 1`) with fewer layers than the CNN takes.
+pub fn fill_empty_layers(mut out: ArrayViewMut3<f32>, from: usize, to: usize) {
+    for k in from..to {
+        out.slice_mut(s![4 * k..4 * k + 3, .., ..])
+            .fill(INVALID_AMPLITUDE);
+        out.index_axis_mut(Axis(0), 4 * k + 3).fill(INVALID_DEPTH);
+    }
 }
 
 /// The pre-filter input channels (format 2) of colour `c` (0 = R, 1 = G, 2 = B): `Re H` in channel `c`,
@@ -202,6 +227,32 @@ mod tests {
         pack_ldi(&LayeredDepthImage::from(f), b.view_mut()).unwrap();
         assert_eq!(a, b);
         assert!(pack_rgbd(&ldi.to_rgbd(), Array3::zeros((4, 2, 2)).view_mut()).is_err());
+    }
+
+    #[test]
+    fn fewer_ldi_layers_pad_with_empty_layers_and_more_are_refused() {
+        let layer = |v: f32, d: f32| LdiLayer {
+            amplitude: Array3::from_elem((3, 2, 2), v),
+            depth: Array2::from_elem((2, 2), d),
+            valid: Array2::from_elem((2, 2), true),
+        };
+        let ldi = LayeredDepthImage::new(vec![layer(0.5, 0.1), layer(0.25, 0.6)]).unwrap();
+        let mut out = Array3::<f32>::from_elem((20, 2, 2), -7.0);
+        pack_ldi(&ldi, out.view_mut()).unwrap();
+        let at = |c: usize| out[[c, 1, 0]];
+        assert_eq!((at(0), at(3), at(4), at(7)), (0.5, 0.1, 0.25, 0.6));
+        for k in 2..5 {
+            for c in 0..3 {
+                assert_eq!(at(4 * k + c), INVALID_AMPLITUDE, "layer {k} channel {c}");
+            }
+            assert_eq!(at(4 * k + 3), INVALID_DEPTH, "layer {k} depth");
+        }
+        // Two layers into a one-layer (RGB-D) CNN input: refused, nothing dropped silently.
+        let err = pack_ldi(&ldi, Array3::zeros((4, 2, 2)).view_mut()).unwrap_err();
+        assert!(err.to_string().contains("at most 1"), "{err}");
+        // An input whose channels are not whole layers, or of another size.
+        assert!(pack_ldi(&ldi, Array3::zeros((10, 2, 2)).view_mut()).is_err());
+        assert!(pack_ldi(&ldi, Array3::zeros((20, 2, 3)).view_mut()).is_err());
     }
 
     #[test]

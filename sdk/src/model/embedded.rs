@@ -1,7 +1,7 @@
 //! The shipped CNNs of `models/` (see `models/MODEL_CARD.md`), compiled into the library, each in f32 and two
 //! int8 forms:
-//! - cargo feature `embedded-models`: the RGB-D hologram CNN with 8 layers (midpoint hologram, any SLM
-//!   offset) and the DDPM pre-filter CNNs for offsets of 6 and 12 mm (0.37 MB in all);
+//! - cargo feature `embedded-models`: the RGB-D and the LDI hologram CNNs with 8 layers (midpoint
+//!   hologram, any SLM offset) and the DDPM pre-filter CNNs for offsets of 6 and 12 mm;
 //! - `models-15` and `models-30`: the 15-layer (0.48 MB) and 30-layer (1.0 MB) hologram CNNs.
 //!
 //! The int8 QOperator forms run on tract only and are embedded only with the `tract` feature; without it,
@@ -11,7 +11,7 @@
 //! first set unless asked. Build with `--no-default-features` to leave them all out and load files with
 //! [`HologramModel::from_path`](super::HologramModel::from_path) instead.
 
-use super::{HologramModel, ModelConfig, ModelKind, Precision};
+use super::{HologramModel, ModelConfig, ModelKind, Precision, SceneInput};
 use crate::error::{invalid, Result};
 
 macro_rules! shipped {
@@ -20,10 +20,13 @@ macro_rules! shipped {
     };
 }
 
-/// Always embedded (feature `embedded-models`): the 8-layer hologram CNN and the pre-filters, f32 and int8 QDQ.
+/// Always embedded (feature `embedded-models`): the 8-layer RGB-D and LDI hologram CNNs and the pre-filters,
+/// f32 and int8 QDQ.
 const BASE: &[(&str, &[u8])] = shipped![
     "holo8_rgbd.onnx",
     "holo8_rgbd.int8-qdq.onnx",
+    "holo8_ldi.onnx",
+    "holo8_ldi.int8-qdq.onnx",
     "prefilter_6mm.onnx",
     "prefilter_6mm.int8-qdq.onnx",
     "prefilter_12mm.onnx",
@@ -34,6 +37,7 @@ const BASE: &[(&str, &[u8])] = shipped![
 #[cfg(feature = "tract")]
 const BASE_QOP: &[(&str, &[u8])] = shipped![
     "holo8_rgbd.int8-qop.onnx",
+    "holo8_ldi.int8-qop.onnx",
     "prefilter_6mm.int8-qop.onnx",
     "prefilter_12mm.int8-qop.onnx",
 ];
@@ -71,8 +75,19 @@ pub fn files() -> impl Iterator<Item = (&'static str, &'static [u8])> {
         .copied()
 }
 
-/// Layer counts of the hologram CNNs the project ships (`models/`).
+/// Layer counts of the RGB-D hologram CNNs the project ships (`models/`).
 pub const SHIPPED_LAYERS: [usize; 3] = [8, 15, 30];
+
+/// Layer counts of the LDI hologram CNNs the project ships (`models/holo8_ldi.onnx`; always embedded).
+pub const SHIPPED_LDI_LAYERS: [usize; 1] = [8];
+
+/// Layer counts of the shipped hologram CNNs taking `input`.
+pub fn shipped_layers(input: SceneInput) -> &'static [usize] {
+    match input {
+        SceneInput::Rgbd => &SHIPPED_LAYERS,
+        SceneInput::Ldi => &SHIPPED_LDI_LAYERS,
+    }
+}
 
 /// Layer counts of the hologram CNNs embedded in this build (8, plus 15 and 30 with the features
 /// `models-15` and `models-30`).
@@ -107,7 +122,13 @@ fn find(name: &str) -> Option<&'static [u8]> {
 
 /// File name in `models/` of the shipped RGB-D hologram CNN with `layers` layers in `precision`.
 pub fn hologram_file(layers: usize, precision: Precision) -> String {
-    format!("holo{layers}_rgbd{}.onnx", precision.file_suffix())
+    scene_hologram_file(SceneInput::Rgbd, layers, precision)
+}
+
+/// File name in `models/` of the shipped hologram CNN taking `input` with `layers` layers in `precision`
+/// (`holo{layers}_{rgbd|ldi}{suffix}.onnx`).
+pub fn scene_hologram_file(input: SceneInput, layers: usize, precision: Precision) -> String {
+    format!("holo{layers}_{input}{}.onnx", precision.file_suffix())
 }
 
 /// File name in `models/` of the shipped pre-filter CNN for an offset of `offset_mm` millimetres.
@@ -121,15 +142,28 @@ pub fn prefilter_file(offset_mm: u32, precision: Precision) -> String {
 /// layers in a build without the feature `models-15` / `models-30` (the message names it); `precision`
 /// for the int8 QOperator form in a build without `tract`.
 pub fn hologram_cnn(layers: usize, precision: Precision) -> Result<&'static [u8]> {
+    scene_hologram_cnn(SceneInput::Rgbd, layers, precision)
+}
+
+/// The ONNX bytes of the shipped hologram CNN taking `input` with `layers` layers ([`shipped_layers`]: 8, 15
+/// or 30 for RGB-D, 8 for LDI).
+///
+/// Errors: as [`hologram_cnn`].
+pub fn scene_hologram_cnn(
+    input: SceneInput,
+    layers: usize,
+    precision: Precision,
+) -> Result<&'static [u8]> {
     check_engine(precision)?;
-    find(&hologram_file(layers, precision)).ok_or_else(|| {
-        let why = if SHIPPED_LAYERS.contains(&layers) {
+    find(&scene_hologram_file(input, layers, precision)).ok_or_else(|| {
+        let shipped = shipped_layers(input);
+        let why = if shipped.contains(&layers) {
             format!(
                 "the {layers}-layer hologram CNN is not embedded in this build (cargo feature \
                  `models-{layers}`; embedded: {LAYERS:?} layers)"
             )
         } else {
-            format!("the shipped hologram CNNs have {SHIPPED_LAYERS:?} layers, not {layers}")
+            format!("the shipped {input} hologram CNNs have {shipped:?} layers, not {layers}")
         };
         invalid("layers", why)
     })
@@ -158,11 +192,28 @@ pub fn hologram_model(
     precision: Precision,
     expected: &ModelConfig,
 ) -> Result<HologramModel> {
+    scene_hologram_model(SceneInput::Rgbd, layers, precision, expected)
+}
+
+/// Loads the shipped hologram CNN taking `input` ([`scene_hologram_cnn`]), checked against `expected` with
+/// its `input_layers` set to `input`'s.
+///
+/// Errors: as [`scene_hologram_cnn`] and [`HologramModel::from_bytes`].
+pub fn scene_hologram_model(
+    input: SceneInput,
+    layers: usize,
+    precision: Precision,
+    expected: &ModelConfig,
+) -> Result<HologramModel> {
+    let expected = ModelConfig {
+        input_layers: input.input_layers(),
+        ..*expected
+    };
     HologramModel::from_named_bytes(
-        hologram_cnn(layers, precision)?,
-        &hologram_file(layers, precision),
+        scene_hologram_cnn(input, layers, precision)?,
+        &scene_hologram_file(input, layers, precision),
         ModelKind::Hologram,
-        expected,
+        &expected,
     )
 }
 

@@ -38,6 +38,45 @@ mod tract;
 mod tract_model;
 pub(crate) mod tuning;
 
+/// The scene representation a hologram CNN takes (`tensorholo.input_layers`, `docs/CONVENTIONS.md` §7.1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SceneInput {
+    /// An RGB-D image, `[4, H, W]` (one layer: R, G, B amplitude, depth).
+    #[default]
+    Rgbd,
+    /// A layered depth image of up to [`LDI_INPUT_LAYERS`] layers front to back, `[4·5, H, W]` (paper Fig. 1;
+    /// fewer layers are padded with empty ones).
+    Ldi,
+}
+
+/// Layers of the LDI input the shipped LDI hologram CNNs take (the paper's 5).
+pub const LDI_INPUT_LAYERS: usize = 5;
+
+impl SceneInput {
+    /// `L` of the CNN input `[4·L, H, W]`: 1 or [`LDI_INPUT_LAYERS`].
+    pub fn input_layers(self) -> usize {
+        match self {
+            Self::Rgbd => 1,
+            Self::Ldi => LDI_INPUT_LAYERS,
+        }
+    }
+
+    /// The name in shipped file names (`holo8_rgbd.onnx`, `holo8_ldi.onnx`): `rgbd` or `ldi`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Rgbd => "rgbd",
+            Self::Ldi => "ldi",
+        }
+    }
+}
+
+impl std::fmt::Display for SceneInput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// How a model file stores its weights (`training/tensorholo_training/export.py`). All forms take and
 /// return f32 at the boundary (`docs/CONVENTIONS.md` §7).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]

@@ -4,7 +4,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use ndarray::{Array3, Axis};
+use ndarray::{s, Array3, Axis};
 
 use super::frame::{check_not_black, Heads};
 use crate::cnn::CnnPlan;
@@ -41,20 +41,14 @@ impl CnnStage {
         self.run(t)
     }
 
-    /// Checks `frame` against the CNN and packs it into `self.input`.
+    /// Checks `frame` against the CNN and packs it into `self.input`; for an LDI CNN, as a one-layer LDI
+    /// (the back layers empty, [`contract::pack_ldi`]).
     pub(super) fn pack_frame(&mut self, frame: &RgbdFrame) -> Result<()> {
         let (c, h, w) = self.plan.input_dim();
-        if c != 4 {
-            return Err(invalid(
-                "frame",
-                format!(
-                    "this hologram CNN takes a {}-layer LDI, not an RGB-D frame",
-                    c / 4
-                ),
-            ));
-        }
         check_size("RGB-D frame", frame.amplitude.dim(), (h, w))?;
-        contract::pack_rgbd(frame, self.input_mut())?;
+        let mut input = self.input_mut();
+        contract::pack_rgbd(frame, input.slice_mut(s![..4, .., ..]))?;
+        contract::fill_empty_layers(input, 1, c / 4);
         self.scale_intensity();
         self.check_not_black()
     }
@@ -95,11 +89,11 @@ impl CnnStage {
             }
             _ => {
                 self.pack_frame(frame)?;
-                // pack_frame took a 4-channel CNN: its packed input is four planes.
+                // The packed input: c planes of H·W values.
                 let packed = self.input.as_slice().unwrap_or_default();
-                let planes: [&[f32]; 4] = std::array::from_fn(|i| {
-                    packed.get(i * h * w..(i + 1) * h * w).unwrap_or_default()
-                });
+                let planes: Vec<&[f32]> = (0..c)
+                    .map(|i| packed.get(i * h * w..(i + 1) * h * w).unwrap_or_default())
+                    .collect();
                 self.plan.run_planes_into(&planes, heads)?;
             }
         }
@@ -147,12 +141,18 @@ impl CnnStage {
     pub(super) fn pack_ldi(&mut self, ldi: &LayeredDepthImage) -> Result<()> {
         let (c, h, w) = self.plan.input_dim();
         let want = c / 4;
-        if ldi.num_layers() != want {
+        if ldi.num_layers() > want {
             return Err(invalid(
                 "ldi",
                 format!(
-                    "this hologram CNN takes {want} layer(s), the LDI has {}",
-                    ldi.num_layers()
+                    "the layered depth image has {} layers, and this hologram CNN takes {want}{}",
+                    ldi.num_layers(),
+                    if want == 1 {
+                        " (an RGB-D network): use an LDI network (e.g. the shipped holo8_ldi) or \
+                         the front layer alone"
+                    } else {
+                        ": merge or drop the back layers"
+                    }
                 ),
             ));
         }

@@ -77,8 +77,9 @@ impl HologramPipeline {
         })
     }
 
-    /// The shipped models (`models/`, feature `embedded-models`) chosen by name: the RGB-D hologram CNN with
-    /// `selection.layers` ∈ {8, 15, 30} layers in `selection.precision`, and the DDPM pre-filter CNN of
+    /// The shipped models (`models/`, feature `embedded-models`) chosen by name: the hologram CNN taking
+    /// `selection.input` with `selection.layers` layers (RGB-D: 8, 15 or 30; LDI: 8) in `selection.precision`,
+    /// and the DDPM pre-filter CNN of
     /// `config.offset_m` as `selection.prefilter` says ([`HologramPipeline::with_shipped_prefilter`]).
     ///
     /// Errors: [`HoloError::InvalidParameter`] for a layer count or (with [`PrefilterMode::Required`]) an
@@ -88,9 +89,10 @@ impl HologramPipeline {
         let expected = ModelConfig {
             optics: config.optics,
             offset_m: config.offset_m,
-            input_layers: 1,
+            input_layers: selection.input.input_layers(),
         };
-        let hologram = crate::model::embedded::hologram_model(
+        let hologram = crate::model::embedded::scene_hologram_model(
+            selection.input,
             selection.layers,
             selection.precision,
             &expected,

@@ -8,7 +8,7 @@ use super::config::PipelineConfig;
 #[cfg(doc)]
 use super::HologramPipeline;
 use crate::error::{invalid, Result};
-use crate::model::{HologramModel, ModelConfig, Precision};
+use crate::model::{HologramModel, ModelConfig, Precision, SceneInput};
 
 /// Whether the DDPM pre-filter CNN runs between offset propagation and double phase encoding (paper Eq. 6),
 /// chosen by name ([`HologramPipeline::with_shipped_prefilter`] has the rule).
@@ -35,11 +35,14 @@ impl PrefilterMode {
     }
 }
 
-/// The shipped CNNs by name ([`HologramPipeline::embedded`]). `Default`: 8 layers, f32, pre-filter
-/// [`PrefilterMode::Auto`].
+/// The shipped CNNs by name ([`HologramPipeline::embedded`]). `Default`: RGB-D input, 8 layers, f32,
+/// pre-filter [`PrefilterMode::Auto`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
 pub struct ModelSelection {
-    /// Hologram CNN depth: 8, 15 or 30 convolution layers.
+    /// The scene the hologram CNN takes: an RGB-D image (default) or a layered depth image
+    /// ([`crate::model::SceneInput`]; sessions then render with `HologramSession::render_ldi`).
+    pub input: SceneInput,
+    /// Hologram CNN depth: 8, 15 or 30 convolution layers (RGB-D), 8 (LDI).
     pub layers: usize,
     /// Weight format of both CNNs.
     pub precision: Precision,
@@ -50,6 +53,7 @@ pub struct ModelSelection {
 impl Default for ModelSelection {
     fn default() -> Self {
         Self {
+            input: SceneInput::Rgbd,
             layers: 8,
             precision: Precision::F32,
             prefilter: PrefilterMode::Auto,

@@ -413,10 +413,12 @@ impl HologramSession {
         Ok(())
     }
 
-    /// Renders a layered depth image (the LDI-input CNN of the paper; layers `[r, g, b, d]` each).
+    /// Renders a layered depth image (the LDI-input CNN of the paper, Fig. 1; layers `[r, g, b, d]` each,
+    /// front to back). An LDI of fewer layers than the CNN takes is padded with empty layers (no point
+    /// anywhere, [`crate::model::contract::pack_ldi`]); a one-layer LDI is an RGB-D frame.
     ///
-    /// Errors: as [`HologramSession::render`], and [`HoloError::InvalidParameter`] if the number of layers is
-    /// not the CNN's.
+    /// Errors: as [`HologramSession::render`], and [`HoloError::InvalidParameter`] (`ldi`) if the LDI has
+    /// more layers than the CNN takes.
     pub fn render_ldi(&mut self, ldi: &LayeredDepthImage) -> Result<&SlmFrame> {
         if self.accelerator.is_some() {
             let t = Instant::now();

@@ -35,7 +35,8 @@ use serde::Serialize;
 use super::depth::{
     fill_invalid, normalise_depth, DecodedDepth, DepthEncoding, DepthMapping, DepthRange,
 };
-use super::frame::{resize_nearest, RgbdFrame};
+use super::frame::{resize_nearest, LayeredDepthImage, LdiLayer, RgbdFrame};
+use super::ldi_files::assemble_layers;
 use crate::color::srgb8_to_amplitude;
 use crate::error::{invalid, HoloError, Result};
 
@@ -851,6 +852,57 @@ impl CameraFrame<'_> {
         width: usize,
         options: &FrameOptions,
     ) -> Result<(RgbdFrame, CameraFrameReport)> {
+        let (amplitude, decoded, invalid_fraction) =
+            self.registered(height, width, options, true)?;
+
+        // 5. Normalise, then fill holes (never read as near).
+        let (d, range_used) = normalise_depth(&decoded, options.range, options.mapping)?;
+        let DecodedDepth { valid, .. } = decoded; // the metric values are no longer needed
+        let filled = fill_invalid(&d, &valid)?;
+        drop((d, valid));
+        let frame = RgbdFrame::new(amplitude, filled)?;
+
+        // 6. Fit to the hologram's size.
+        let frame = fit_frame(frame, height, width, options.fit)?;
+        let report = self.report(range_used, invalid_fraction);
+        log::debug!(
+            "camera frame {}x{} colour (crop {:?}) + {}x{} {:?} depth ({:.1} % invalid), {:?} -> {height}x{width} ({:?})",
+            self.color.height,
+            self.color.width,
+            self.color_crop,
+            self.depth.height,
+            self.depth.width,
+            self.depth.format,
+            100.0 * invalid_fraction,
+            self.rotation,
+            options.fit
+        );
+        Ok((frame, report))
+    }
+
+    /// The report of a conversion of this frame with `range_used` and the depth buffer's `invalid_fraction`.
+    fn report(&self, range_used: Option<DepthRange>, invalid_fraction: f32) -> CameraFrameReport {
+        CameraFrameReport {
+            range_used,
+            invalid_fraction,
+            color_size: (self.color.height, self.color.width),
+            depth_size: (self.depth.height, self.depth.width),
+            color_crop: self.color_crop,
+        }
+    }
+
+    /// Steps 1–4 of [`CameraFrame::to_rgbd`]: validation, decoding with the rotation, depth (values and
+    /// validity) to the (cropped) colour resolution. Returns amplitude `[3, Hc, Wc]`, the decoded depth
+    /// `[Hc, Wc]` and the fraction of invalid pixels of the depth buffer. `need_depth`: refuse a depth buffer
+    /// without one valid pixel (an RGB-D frame, an LDI's front layer), else accept it (an LDI's back layer
+    /// may be empty).
+    fn registered(
+        &self,
+        height: usize,
+        width: usize,
+        options: &FrameOptions,
+        need_depth: bool,
+    ) -> Result<(Array3<f32>, DecodedDepth, f32)> {
         // 1. Validation, before allocating anything.
         check_target(height, width)?;
         if let Some(r) = options.range {
@@ -866,7 +918,7 @@ impl CameraFrame<'_> {
         // 2 + 3. Decode with the rotation; depth first (small, and all-invalid fails early).
         let decoded = self.depth.decode(self.rotation)?;
         let invalid_fraction = decoded.invalid_fraction();
-        if decoded.valid.iter().all(|&v| !v) {
+        if need_depth && decoded.valid.iter().all(|&v| !v) {
             return Err(HoloError::InvalidDepth(format!(
                 "all {} pixels of the {}x{} {:?} depth buffer are invalid (0, NaN, ±inf, negative{})",
                 decoded.valid.len(),
@@ -903,36 +955,131 @@ impl CameraFrame<'_> {
                 metric: true,
             }
         };
+        Ok((amplitude, decoded, invalid_fraction))
+    }
+}
 
-        // 5. Normalise, then fill holes (never read as near).
-        let (d, range_used) = normalise_depth(&decoded, options.range, options.mapping)?;
-        let DecodedDepth { valid, .. } = decoded; // the metric values are no longer needed
-        let filled = fill_invalid(&d, &valid)?;
-        drop((d, valid));
-        let frame = RgbdFrame::new(amplitude, filled)?;
+/// Converts a layered depth image delivered as camera frames, one per layer front to back (what a
+/// renderer's depth-peeling pass or a multi-layer capture gives), to a [`LayeredDepthImage`] of `height ×
+/// width` pixels, with the buffer rules of [`CameraFrame::to_rgbd`] for every layer:
+/// - each layer is validated, decoded, rotated and registered as steps 1–4 of [`CameraFrame::to_rgbd`]; all
+///   must give layer 0's colour size;
+/// - layer 0 is the RGB-D image: at least one valid depth pixel, holes filled ([`fill_invalid`]);
+/// - in layers `K ≥ 1` an invalid depth sample (0, NaN, ±inf, negative, confidence 0 %) means "no point
+///   here"; a point may appear only where layer `K − 1` holds one, no nearer than it;
+/// - the metric depths of all layers map to `d ∈ [0, 1]` with one range: `options.range`, or the 1st/99th
+///   percentiles of every layer's valid depths together;
+/// - fitted to `height × width` with `options.fit` (letterbox bars: black and far in layer 0, no point
+///   behind).
+///
+/// The report is layer 0's, with the common range.
+///
+/// Errors: as [`CameraFrame::to_rgbd`] for each layer; [`HoloError::InvalidParameter`] (`layers`) for no
+/// layer; [`HoloError::ShapeMismatch`] when a layer's (cropped, rotated) colour size differs from layer 0's;
+/// [`HoloError::InvalidDepth`] naming the layers for a violated order or a gap.
+pub fn ldi_from_camera_frames(
+    frames: &[CameraFrame<'_>],
+    height: usize,
+    width: usize,
+    options: &FrameOptions,
+) -> Result<(LayeredDepthImage, CameraFrameReport)> {
+    let Some(front) = frames.first() else {
+        return Err(invalid(
+            "layers",
+            "a layered depth image needs at least one layer",
+        ));
+    };
+    let mut amplitudes: Vec<Array3<f32>> = Vec::with_capacity(frames.len());
+    let mut decoded = Vec::with_capacity(frames.len());
+    let mut invalid_fraction = 0.0;
+    for (k, frame) in frames.iter().enumerate() {
+        let (amplitude, d, invalid) = frame.registered(height, width, options, k == 0)?;
+        if k == 0 {
+            invalid_fraction = invalid;
+        } else if amplitude.dim() != amplitudes[0].dim() {
+            let (_, h0, w0) = amplitudes[0].dim();
+            let (_, h, w) = amplitude.dim();
+            return Err(HoloError::ShapeMismatch {
+                what: format!(
+                    "LDI layer {k}'s colour buffer vs layer 0's (after crop and rotation)"
+                ),
+                expected: vec![h0, w0],
+                got: vec![h, w],
+            });
+        }
+        amplitudes.push(amplitude);
+        decoded.push(d);
+    }
+    let names: Vec<String> = (0..frames.len()).map(|k| format!("buffer {k}")).collect();
+    let (ldi, range_used) =
+        assemble_layers(amplitudes, decoded, &names, options.range, options.mapping)?;
+    let ldi = fit_ldi(ldi, height, width, options.fit)?;
+    Ok((ldi, front.report(range_used, invalid_fraction)))
+}
 
-        // 6. Fit to the hologram's size.
-        let frame = fit_frame(frame, height, width, options.fit)?;
-        let report = CameraFrameReport {
-            range_used,
-            invalid_fraction,
-            color_size: (self.color.height, self.color.width),
-            depth_size: (self.depth.height, self.depth.width),
-            color_crop: self.color_crop,
-        };
-        log::debug!(
-            "camera frame {}x{} colour (crop {:?}) + {}x{} {:?} depth ({:.1} % invalid), {:?} -> {height}x{width} ({:?})",
-            self.color.height,
-            self.color.width,
-            self.color_crop,
-            self.depth.height,
-            self.depth.width,
-            self.depth.format,
-            100.0 * invalid_fraction,
-            self.rotation,
-            options.fit
-        );
-        Ok((frame, report))
+/// [`fit_frame`] for every layer of an LDI: the same crop window or letterbox bars for all, resampled as
+/// [`LayeredDepthImage::resize`]. Letterbox bars are black and far in layer 0 and hold no point behind.
+fn fit_ldi(
+    ldi: LayeredDepthImage,
+    height: usize,
+    width: usize,
+    fit: Fit,
+) -> Result<LayeredDepthImage> {
+    let (h, w) = (ldi.height(), ldi.width());
+    match fit {
+        Fit::Stretch => ldi.resize(height, width),
+        Fit::Crop => {
+            let (y0, x0, ch, cw) = crop_window(h, w, height, width);
+            if (ch, cw) == (h, w) {
+                return ldi.resize(height, width);
+            }
+            let layers = ldi
+                .into_layers()
+                .into_iter()
+                .map(|l| LdiLayer {
+                    amplitude: l
+                        .amplitude
+                        .slice(s![.., y0..y0 + ch, x0..x0 + cw])
+                        .to_owned(),
+                    depth: l.depth.slice(s![y0..y0 + ch, x0..x0 + cw]).to_owned(),
+                    valid: l.valid.slice(s![y0..y0 + ch, x0..x0 + cw]).to_owned(),
+                })
+                .collect();
+            LayeredDepthImage::new(layers)?.resize(height, width)
+        }
+        Fit::Letterbox => {
+            let (ih, iw) = letterbox_size(h, w, height, width);
+            let inner = ldi.resize(ih, iw)?;
+            if (ih, iw) == (height, width) {
+                return Ok(inner);
+            }
+            let (y0, x0) = ((height - ih) / 2, (width - iw) / 2);
+            let layers = inner
+                .into_layers()
+                .into_iter()
+                .enumerate()
+                .map(|(k, l)| {
+                    let mut amplitude = Array3::<f32>::zeros((3, height, width));
+                    let mut depth = Array2::<f32>::ones((height, width));
+                    let mut valid = Array2::from_elem((height, width), k == 0);
+                    amplitude
+                        .slice_mut(s![.., y0..y0 + ih, x0..x0 + iw])
+                        .assign(&l.amplitude);
+                    depth
+                        .slice_mut(s![y0..y0 + ih, x0..x0 + iw])
+                        .assign(&l.depth);
+                    valid
+                        .slice_mut(s![y0..y0 + ih, x0..x0 + iw])
+                        .assign(&l.valid);
+                    LdiLayer {
+                        amplitude,
+                        depth,
+                        valid,
+                    }
+                })
+                .collect();
+            LayeredDepthImage::new(layers)
+        }
     }
 }
 

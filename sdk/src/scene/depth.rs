@@ -31,6 +31,7 @@ use crate::error::{invalid, HoloError, Result};
 /// | [`IphoneDisparity`](Self::IphoneDisparity) | `iphone-disparity` | 8 | `1/(0.650879 + v/255·1.858887)` m | none |
 /// | [`RelativeNearBright`](Self::RelativeNearBright) | `relative-near-bright` | 8 | `d = 1 − v/255` | `v = 0` |
 /// | [`RelativeNearDark`](Self::RelativeNearDark) | `relative-near-dark` | 8 | `d = v/255` | none |
+/// | [`Relative16`](Self::Relative16) | `relative16` | 16 | `d = (v − 1)/65534` | `v = 0` |
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 pub enum DepthEncoding {
     /// `mm16`: 16-bit z-depth in millimetres, `z = v/1000` m, `v = 0` invalid (Redwood, `nyu/derived`,
@@ -62,12 +63,17 @@ pub enum DepthEncoding {
     /// `d = v/255` (0 = near), unitless; no invalid value.
     #[serde(rename = "relative-near-dark")]
     RelativeNearDark,
+    /// `relative16`: 16-bit relative depth, larger = farther, `d = (v − 1)/65534` (0 = near), `v = 0` = no
+    /// point here; unitless. The exchange format of layered depth images (`holo dataset --export-ldi`):
+    /// 65,534 levels, and a 0 that never collides with a depth.
+    #[serde(rename = "relative16")]
+    Relative16,
 }
 
 impl DepthEncoding {
     /// Every encoding, in the order of the encoding table (`docs/CONVENTIONS.md` §6.1; for CLI `--help` and
     /// exhaustive tests).
-    pub const ALL: [DepthEncoding; 7] = [
+    pub const ALL: [DepthEncoding; 8] = [
         DepthEncoding::Millimetres16,
         DepthEncoding::Tum5000,
         DepthEncoding::SunRotated,
@@ -75,6 +81,7 @@ impl DepthEncoding {
         DepthEncoding::IphoneDisparity,
         DepthEncoding::RelativeNearBright,
         DepthEncoding::RelativeNearDark,
+        DepthEncoding::Relative16,
     ];
 
     /// The kebab-case name used by [`fmt::Display`], [`FromStr`] and serde (e.g. `"mm16"`).
@@ -87,6 +94,7 @@ impl DepthEncoding {
             DepthEncoding::IphoneDisparity => "iphone-disparity",
             DepthEncoding::RelativeNearBright => "relative-near-bright",
             DepthEncoding::RelativeNearDark => "relative-near-dark",
+            DepthEncoding::Relative16 => "relative16",
         }
     }
 
@@ -112,6 +120,9 @@ impl DepthEncoding {
             DepthEncoding::RelativeNearDark => {
                 "8-bit relative depth, larger = farther, d = v/255 (TensorHolo convention), unitless"
             }
+            DepthEncoding::Relative16 => {
+                "16-bit relative depth, larger = farther, d = (v-1)/65534, 0 = no point (LDI exchange), unitless"
+            }
         }
     }
 
@@ -121,7 +132,8 @@ impl DepthEncoding {
             DepthEncoding::Millimetres16
             | DepthEncoding::Tum5000
             | DepthEncoding::SunRotated
-            | DepthEncoding::KinectDisparity => 16,
+            | DepthEncoding::KinectDisparity
+            | DepthEncoding::Relative16 => 16,
             DepthEncoding::IphoneDisparity
             | DepthEncoding::RelativeNearBright
             | DepthEncoding::RelativeNearDark => 8,
@@ -132,7 +144,9 @@ impl DepthEncoding {
     pub fn is_metric(&self) -> bool {
         !matches!(
             self,
-            DepthEncoding::RelativeNearBright | DepthEncoding::RelativeNearDark
+            DepthEncoding::RelativeNearBright
+                | DepthEncoding::RelativeNearDark
+                | DepthEncoding::Relative16
         )
     }
 
@@ -156,6 +170,7 @@ impl DepthEncoding {
                 (v != 0 && v <= 255).then(|| 1.0 - v as f32 / 255.0)
             }
             DepthEncoding::RelativeNearDark => (v <= 255).then(|| v as f32 / 255.0),
+            DepthEncoding::Relative16 => (v != 0).then(|| (v - 1) as f32 / 65534.0),
         }
     }
 }
@@ -274,6 +289,21 @@ pub fn decode_depth_bytes(
     source: &Path,
     encoding: DepthEncoding,
 ) -> Result<DecodedDepth> {
+    Ok(decode_depth(
+        &read_depth_samples(bytes, source, encoding)?,
+        encoding,
+    ))
+}
+
+/// The stored samples `[H, W]` of a depth file already in memory, before decoding (the first step of
+/// [`decode_depth_bytes`]; layered depth images read them to tell "no point here", a stored 0).
+///
+/// Errors: as [`decode_depth_file`], naming `source`.
+pub(crate) fn read_depth_samples(
+    bytes: &[u8],
+    source: &Path,
+    encoding: DepthEncoding,
+) -> Result<Array2<u16>> {
     let path = source;
     let (raw, bits) = if encoding == DepthEncoding::KinectDisparity && bytes.starts_with(b"P5") {
         read_kinect_pgm(bytes, path)?
@@ -295,7 +325,7 @@ pub fn decode_depth_bytes(
             encoding.description()
         )));
     }
-    Ok(decode_depth(&raw, encoding))
+    Ok(raw)
 }
 
 /// First channel of a decoded image as `u16` samples, with the image's bits per sample.
@@ -782,6 +812,10 @@ mod tests {
         assert_eq!(RelativeNearBright.decode_sample(255), Some(0.0));
         assert_eq!(RelativeNearDark.decode_sample(0), Some(0.0));
         assert_eq!(RelativeNearDark.decode_sample(255), Some(1.0));
+        assert_eq!(Relative16.decode_sample(0), None);
+        assert_eq!(Relative16.decode_sample(1), Some(0.0));
+        assert_eq!(Relative16.decode_sample(65535), Some(1.0));
+        assert_eq!(Relative16.decode_sample(32768), Some(32767.0 / 65534.0));
         // Larger stored value = nearer for disparity-like encodings, farther for z-depth ones.
         for e in DepthEncoding::ALL {
             // SUN compares decoded millimetres: store 100 and 200 rotated left by 3.

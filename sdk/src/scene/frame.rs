@@ -116,12 +116,7 @@ impl RgbdFrame {
     /// Depth: nearest neighbour, so no "flying pixels" with invented depths appear at occlusion edges.
     /// Error: [`HoloError::InvalidParameter`] if `height` or `width` is 0.
     pub fn resize(&self, height: usize, width: usize) -> Result<Self> {
-        if height == 0 || width == 0 {
-            return Err(invalid(
-                "size",
-                format!("target size must be non-zero, got {height}x{width}"),
-            ));
-        }
+        check_target_size(height, width)?;
         if (height, width) == (self.height(), self.width()) {
             return Ok(self.clone());
         }
@@ -255,6 +250,29 @@ impl LayeredDepthImage {
         self.layers.len()
     }
 
+    /// Resamples every layer to `height × width`, as [`RgbdFrame::resize`]: amplitude by area-correct
+    /// Catmull-Rom on intensity, depth and validity by nearest neighbour. Depth and validity of all layers
+    /// come from the same source pixel, so the front-to-back order and the validity of the input hold in the
+    /// output.
+    ///
+    /// Error: [`HoloError::InvalidParameter`] if `height` or `width` is 0.
+    pub fn resize(&self, height: usize, width: usize) -> Result<Self> {
+        check_target_size(height, width)?;
+        if (height, width) == (self.height(), self.width()) {
+            return Ok(self.clone());
+        }
+        let layers = self
+            .layers
+            .iter()
+            .map(|l| LdiLayer {
+                amplitude: resize_amplitude(&l.amplitude, height, width),
+                depth: resize_nearest(&l.depth, height, width),
+                valid: resize_nearest(&l.valid, height, width),
+            })
+            .collect();
+        Ok(LayeredDepthImage { layers })
+    }
+
     /// The first layer as an RGB-D frame (an RGB-D image is a one-layer LDI). Pixels where the first layer
     /// is invalid get amplitude 0 (black) and depth 1 (far).
     pub fn to_rgbd(&self) -> RgbdFrame {
@@ -286,6 +304,17 @@ impl From<RgbdFrame> for LayeredDepthImage {
             }],
         }
     }
+}
+
+/// Refuses a resize target of zero height or width. Error: [`HoloError::InvalidParameter`] (`size`).
+fn check_target_size(height: usize, width: usize) -> Result<()> {
+    if height == 0 || width == 0 {
+        return Err(invalid(
+            "size",
+            format!("target size must be non-zero, got {height}x{width}"),
+        ));
+    }
+    Ok(())
 }
 
 /// Catmull-Rom cubic (a = −0.5), support 2.

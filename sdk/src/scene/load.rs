@@ -102,6 +102,18 @@ fn check_depth_sanity(
     options: &LoadOptions,
     depth: &Path,
 ) -> Result<()> {
+    check_invalid_fraction(decoded, encoding, options, depth)?;
+    check_outside_range(decoded, options, &format!("`{}`", depth.display()))
+}
+
+/// Refuses a depth map with more invalid pixels than `options.max_invalid_fraction` (a wrong encoding is the
+/// likelier cause), naming the file `depth`.
+pub(super) fn check_invalid_fraction(
+    decoded: &DecodedDepth,
+    encoding: DepthEncoding,
+    options: &LoadOptions,
+    depth: &Path,
+) -> Result<()> {
     let invalid = decoded.invalid_fraction();
     if invalid > options.max_invalid_fraction {
         return Err(HoloError::InvalidDepth(format!(
@@ -112,6 +124,16 @@ fn check_depth_sanity(
             100.0 * options.max_invalid_fraction
         )));
     }
+    Ok(())
+}
+
+/// With an explicit metric `options.range`, refuses depths of which more than
+/// `options.max_outside_range_fraction` of the valid ones lie outside it; `what` names them in the error.
+pub(super) fn check_outside_range(
+    decoded: &DecodedDepth,
+    options: &LoadOptions,
+    what: &str,
+) -> Result<()> {
     if let (Some(r), true) = (options.range, decoded.metric) {
         let (mut valid, mut outside) = (0usize, 0usize);
         for (&v, &ok) in decoded.values.iter().zip(decoded.valid.iter()) {
@@ -126,11 +148,10 @@ fn check_depth_sanity(
         if fraction > options.max_outside_range_fraction {
             let (lo, hi) = decoded.valid_min_max().unwrap_or((f32::NAN, f32::NAN));
             return Err(HoloError::InvalidDepth(format!(
-                "{:.0} % of the valid depths of `{}` (which span {lo:.3}–{hi:.3} m) lie outside the range {r} \
+                "{:.0} % of the valid depths of {what} (which span {lo:.3}–{hi:.3} m) lie outside the range {r} \
                  and would be clamped onto its ends (limit {:.0} %): fix --z-near-m/--z-far-m, or raise \
                  --max-depth-outside-range",
                 100.0 * fraction,
-                depth.display(),
                 100.0 * options.max_outside_range_fraction
             )));
         }

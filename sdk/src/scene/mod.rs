@@ -8,6 +8,8 @@
 //!   encoding table, `docs/CONVENTIONS.md` §6) → [`normalise_depth`] with a [`DepthRange`] and a
 //!   [`DepthMapping`] (linear in diopters by default) → [`fill_invalid`] (holes take the farthest
 //!   neighbouring depth, before any resizing, never read as near) → [`RgbdFrame::resize`].
+//! * LDI folders ([`load_ldi_dir`], [`write_ldi_dir`]): `rgb_K` / `depth_K` image pairs, front layer first,
+//!   what a renderer's depth-peeling pass writes (`docs/CONVENTIONS.md` §6.3).
 //! * Phone camera buffers ([`CameraFrame::to_rgbd`]): an interleaved 8-bit colour buffer ([`ColorFormat`])
 //!   and a depth buffer in the sensor's format ([`DepthFormat`]: AVDepthData, ARCore, `DEPTH16`), with row
 //!   strides, a [`Rotation`], a colour [`CropRect`] registering colour with a depth map of a narrower field of
@@ -28,20 +30,25 @@
 mod camera;
 mod depth;
 mod frame;
+mod ldi_files;
 mod load;
 pub mod procedural;
 #[cfg(feature = "research")]
 pub mod random;
 
 pub use camera::{
-    CameraFrame, CameraFrameBuf, CameraFrameReport, ColorFormat, ColorImage, ColorImageBuf,
-    CropRect, DepthFormat, DepthImage, DepthImageBuf, Fit, FrameOptions, Rotation,
+    ldi_from_camera_frames, CameraFrame, CameraFrameBuf, CameraFrameReport, ColorFormat,
+    ColorImage, ColorImageBuf, CropRect, DepthFormat, DepthImage, DepthImageBuf, Fit, FrameOptions,
+    Rotation,
 };
 pub use depth::{
     decode_depth, decode_depth_bytes, decode_depth_file, fill_invalid, normalise_depth,
     DecodedDepth, DepthEncoding, DepthMapping, DepthRange,
 };
 pub use frame::{LayeredDepthImage, LdiLayer, RgbdFrame};
+pub use ldi_files::{
+    ldi_files, load_ldi_dir, write_ldi_dir, LdiLayerFiles, LdiReport, MAX_LDI_FOLDER_LAYERS,
+};
 pub use load::{decode_rgb_bytes, load_rgb, load_rgbd, DepthReport, LoadOptions};
 pub use procedural::{default_scene, default_scene_ldi};
 #[cfg(feature = "research")]

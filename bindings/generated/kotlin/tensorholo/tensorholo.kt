@@ -717,6 +717,8 @@ internal object IntegrityCheckingUniffiLib {
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render(
     ): Int
+    external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi(
+    ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration(
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream(
@@ -771,6 +773,8 @@ internal object UniffiLib {
     external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_preview(`ptr`: Long,`frame`: RustBuffer.ByValue,`focus`: Float,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_render(`ptr`: Long,`frame`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    ): RustBuffer.ByValue
+    external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_render_ldi(`ptr`: Long,`layers`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_set_calibration(`ptr`: Long,`calibration`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): Unit
@@ -940,6 +944,9 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render() and 0xFFFF) != 59945) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi() and 0xFFFF) != 11354) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration() and 0xFFFF) != 29704) {
@@ -1479,6 +1486,21 @@ public interface HologramGeneratorInterface {
     fun `render`(`frame`: RgbdFrame): SlmPatterns
     
     /**
+     * Renders a layered depth image into SLM patterns: one [`RgbdFrame`] per layer, front to back (what a
+     * renderer's depth-peeling pass gives), each with the buffer rules of [`HologramGenerator::render`]. In
+     * the layers behind the first, a depth sample of 0 (or NaN, or confidence 0 %) means "no point here"; a
+     * point may appear only where the layer in front holds one, no nearer than it. All layers share one
+     * depth range (`z_near_m`/`z_far_m`, or the 1st/99th percentiles of every layer's depths). Needs a
+     * generator made with `input` = [`SceneInput::Ldi`]; fewer layers than its CNN takes (5) are padded with
+     * empty ones.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for no layer, more layers than the CNN takes (with an RGB-D
+     * generator: more than one), layers whose colour sizes differ, a back layer nearer than the one in front
+     * of it, and as [`HologramGenerator::render`]; the generator stays usable.
+     */
+    fun `renderLdi`(`layers`: List<RgbdFrame>): SlmPatterns
+    
+    /**
      * Applies a display calibration file (the bytes of a `.holocal` made by `holo calibrate`, e.g. bundled
      * with the app or downloaded per device) to the frames rendered from now on and to streams started
      * later; `None` returns to an ideal SLM (linear look-up tables, no intensity map). Its per-colour
@@ -1700,6 +1722,34 @@ open class HologramGenerator: Disposable, AutoCloseable, HologramGeneratorInterf
         it,
         
         FfiConverterTypeRgbdFrame.lower(`frame`),_status)
+}
+    }
+    )
+    }
+    
+
+    
+    /**
+     * Renders a layered depth image into SLM patterns: one [`RgbdFrame`] per layer, front to back (what a
+     * renderer's depth-peeling pass gives), each with the buffer rules of [`HologramGenerator::render`]. In
+     * the layers behind the first, a depth sample of 0 (or NaN, or confidence 0 %) means "no point here"; a
+     * point may appear only where the layer in front holds one, no nearer than it. All layers share one
+     * depth range (`z_near_m`/`z_far_m`, or the 1st/99th percentiles of every layer's depths). Needs a
+     * generator made with `input` = [`SceneInput::Ldi`]; fewer layers than its CNN takes (5) are padded with
+     * empty ones.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for no layer, more layers than the CNN takes (with an RGB-D
+     * generator: more than one), layers whose colour sizes differ, a back layer nearer than the one in front
+     * of it, and as [`HologramGenerator::render`]; the generator stays usable.
+     */
+    @Throws(TensorholoException::class)override fun `renderLdi`(`layers`: List<RgbdFrame>): SlmPatterns {
+            return FfiConverterTypeSlmPatterns.lift(
+    callWithHandle {
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_hologramgenerator_render_ldi(
+        it,
+        
+        FfiConverterSequenceTypeRgbdFrame.lower(`layers`),_status)
 }
     }
     )
@@ -2721,9 +2771,14 @@ data class GeneratorConfig (
     var `height`: kotlin.UInt
     , 
     /**
-     * Hologram CNN depth: 8 (default), 15 or 30 layers.
+     * Hologram CNN depth: 8 (default), 15 or 30 layers (RGB-D); 8 (LDI).
      */
     var `layers`: kotlin.UInt = 8u 
+    , 
+    /**
+     * The scene the hologram CNN takes; `None` = [`SceneInput::Rgbd`].
+     */
+    var `input`: SceneInput? = null 
     , 
     /**
      * Weight format; `None` = [`Precision::F32`].
@@ -2810,6 +2865,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterUInt.read(buf),
             FfiConverterUInt.read(buf),
             FfiConverterUInt.read(buf),
+            FfiConverterOptionalTypeSceneInput.read(buf),
             FfiConverterOptionalTypePrecision.read(buf),
             FfiConverterDouble.read(buf),
             FfiConverterOptionalTypePrefilterMode.read(buf),
@@ -2830,6 +2886,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterUInt.allocationSize(value.`width`) +
             FfiConverterUInt.allocationSize(value.`height`) +
             FfiConverterUInt.allocationSize(value.`layers`) +
+            FfiConverterOptionalTypeSceneInput.allocationSize(value.`input`) +
             FfiConverterOptionalTypePrecision.allocationSize(value.`precision`) +
             FfiConverterDouble.allocationSize(value.`offsetMm`) +
             FfiConverterOptionalTypePrefilterMode.allocationSize(value.`prefilter`) +
@@ -2849,6 +2906,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterUInt.write(value.`width`, buf)
             FfiConverterUInt.write(value.`height`, buf)
             FfiConverterUInt.write(value.`layers`, buf)
+            FfiConverterOptionalTypeSceneInput.write(value.`input`, buf)
             FfiConverterOptionalTypePrecision.write(value.`precision`, buf)
             FfiConverterDouble.write(value.`offsetMm`, buf)
             FfiConverterOptionalTypePrefilterMode.write(value.`prefilter`, buf)
@@ -3868,6 +3926,50 @@ public object FfiConverterTypeRotation: FfiConverterRustBuffer<Rotation> {
 
 
 
+/**
+ * The scene the hologram CNN takes.
+ */
+
+enum class SceneInput {
+    
+    /**
+     * One RGB-D frame per hologram ([`HologramGenerator::render`]; the default).
+     */
+    RGBD,
+    /**
+     * A layered depth image of up to 5 layers front to back ([`HologramGenerator::render_ldi`]; the shipped
+     * 8-layer LDI CNN, paper Fig. 1). `render` still works: a frame is a one-layer LDI.
+     */
+    LDI;
+
+    
+
+
+    companion object
+}
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeSceneInput: FfiConverterRustBuffer<SceneInput> {
+    override fun read(buf: ByteBuffer) = try {
+        SceneInput.values()[buf.getInt() - 1]
+    } catch (e: IndexOutOfBoundsException) {
+        throw RuntimeException("invalid enum value, something is very wrong!!", e)
+    }
+
+    override fun allocationSize(value: SceneInput) = 4UL
+
+    override fun write(value: SceneInput, buf: ByteBuffer) {
+        buf.putInt(value.ordinal + 1)
+    }
+}
+
+
+
+
+
 
 
 /**
@@ -4383,6 +4485,38 @@ public object FfiConverterOptionalTypeRotation: FfiConverterRustBuffer<Rotation?
 /**
  * @suppress
  */
+public object FfiConverterOptionalTypeSceneInput: FfiConverterRustBuffer<SceneInput?> {
+    override fun read(buf: ByteBuffer): SceneInput? {
+        if (buf.get().toInt() == 0) {
+            return null
+        }
+        return FfiConverterTypeSceneInput.read(buf)
+    }
+
+    override fun allocationSize(value: SceneInput?): ULong {
+        if (value == null) {
+            return 1UL
+        } else {
+            return 1UL + FfiConverterTypeSceneInput.allocationSize(value)
+        }
+    }
+
+    override fun write(value: SceneInput?, buf: ByteBuffer) {
+        if (value == null) {
+            buf.put(0)
+        } else {
+            buf.put(1)
+            FfiConverterTypeSceneInput.write(value, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
 public object FfiConverterSequenceFloat: FfiConverterRustBuffer<List<kotlin.Float>> {
     override fun read(buf: ByteBuffer): List<kotlin.Float> {
         val len = buf.getInt()
@@ -4429,6 +4563,34 @@ public object FfiConverterSequenceDouble: FfiConverterRustBuffer<List<kotlin.Dou
         buf.putInt(value.size)
         value.iterator().forEach {
             FfiConverterDouble.write(it, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterSequenceTypeRgbdFrame: FfiConverterRustBuffer<List<RgbdFrame>> {
+    override fun read(buf: ByteBuffer): List<RgbdFrame> {
+        val len = buf.getInt()
+        return List<RgbdFrame>(len) {
+            FfiConverterTypeRgbdFrame.read(buf)
+        }
+    }
+
+    override fun allocationSize(value: List<RgbdFrame>): ULong {
+        val sizeForLength = 4UL
+        val sizeForItems = value.map { FfiConverterTypeRgbdFrame.allocationSize(it) }.sum()
+        return sizeForLength + sizeForItems
+    }
+
+    override fun write(value: List<RgbdFrame>, buf: ByteBuffer) {
+        buf.putInt(value.size)
+        value.iterator().forEach {
+            FfiConverterTypeRgbdFrame.write(it, buf)
         }
     }
 }
