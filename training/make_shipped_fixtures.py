@@ -4,6 +4,9 @@ model, a fixed random input and the PyTorch output of the checkpoint it was expo
     PYTHONPATH=training .venv/bin/python training/make_shipped_fixtures.py [--runs runs/cpu] [--out models/fixtures] \
         [--dataset data/cpu256] [--ldi-run runs/photo/holo8_ldi_ws] [--only NAME ...]
 
+The pre-filters of the 15- and 30-layer CNNs (``prefilter_{6,12}mm_holo{15,30}``) see the offset hologram of
+their own CNN (the shipped ONNX file) on test scene 0 of ``--pair-dataset``.
+
 Files: ``<name>_input.npy`` float32 ``[C, 24, 32]`` (``C`` = 4 for RGB-D hologram CNNs: random RGB-D in ``[0, 1]``;
 20 for the LDI CNN ``holo8_ldi``: a random 5-layer LDI, layers valid front to back, invalid points amplitude 0 and
 depth 1; 6
@@ -27,13 +30,27 @@ import torch
 from tensorholo_training.export import OUTPUT_NAMES, load_checkpoint
 
 
-def offset_hologram(dataset: str, holo_ckpt: str, cfg: dict) -> np.ndarray:
+def hologram_net(source: str):
+    """The hologram CNN of a checkpoint (``.pt``) or of a shipped f32 ONNX file."""
+    if not source.endswith(".onnx"):
+        return load_checkpoint(source)["net"].eval()
+    from tensorholo_training.export import read_metadata
+    from tensorholo_training.model import hologram_cnn
+    from tensorholo_training.train import initial_state
+
+    md = read_metadata(source)
+    net = hologram_cnn(int(md["tensorholo.layers"]), int(md["tensorholo.input_layers"]))
+    net.load_state_dict(initial_state(source, "cpu")["net"])
+    return net.eval()
+
+
+def offset_hologram(dataset: str, holo_source: str, cfg: dict) -> np.ndarray:
     """``[Re H, Im H]`` ``[6, 24, 32]`` of the offset hologram of a crop of test scene 0 (see the module docs)."""
     from tensorholo_training.data import LdiDataset
     from tensorholo_training.model import prefilter_input
     from tensorholo_training.optics import Display, amp_phase_to_complex, offset_to_slm
 
-    net = load_checkpoint(holo_ckpt)["net"].eval()
+    net = hologram_net(holo_source)
     rgbd = LdiDataset(dataset, "test", 1)[0]["rgbd"][None, :, 100:124, 100:132]
     display = Display(tuple(cfg["wavelengths_m"]), cfg["pixel_pitch_m"], cfg["volume_depth_m"])
     with torch.no_grad():
@@ -64,6 +81,10 @@ def main() -> None:
     ap.add_argument("--out", default="models/fixtures")
     ap.add_argument("--dataset", default="data/cpu256", help="holo dataset whose test scene 0 feeds the pre-filters")
     ap.add_argument("--ldi-run", default="runs/photo/holo8_ldi_ws", help="the run holo8_ldi was exported from")
+    ap.add_argument("--pair-runs", default="runs/photo",
+                    help="folder of the pre{6,12}_holo{15,30} runs (pre-filters of the 15/30-layer CNNs)")
+    ap.add_argument("--pair-dataset", default="data/photo256",
+                    help="holo dataset whose test scene 0 feeds the 15/30-layer CNNs' pre-filters")
     ap.add_argument("--only", nargs="*", help="write only these fixtures (e.g. holo8_ldi)")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
@@ -73,13 +94,19 @@ def main() -> None:
     jobs = [(f"holo{l}_rgbd", best(f"{args.runs}/holo{l}"), "net", 4) for l in (8, 15, 30)]
     jobs += [(f"prefilter_{o}mm", f"{args.runs}/pre{o}/best.pt", "prefilter", 6) for o in (6, 12)]
     jobs += [("holo8_ldi", best(args.ldi_run), "net", 20)]
+    paired = [(f"prefilter_{o}mm_holo{l}", f"{args.pair_runs}/pre{o}_holo{l}/best.pt", "prefilter", 6)
+              for l in (15, 30) for o in (6, 12)]
+    jobs += paired
     for name, ckpt, key, channels in jobs:
         if args.only and name not in args.only:
             continue
         net = load_checkpoint(ckpt)[key].eval()
         x = rng.random((channels, 24, 32), dtype=np.float32) if channels != 20 else random_ldi(np.random.default_rng(2027))
         outputs = OUTPUT_NAMES["hologram-cnn" if key == "net" else "prefilter-cnn"]
-        if key == "prefilter":
+        if (name, ckpt, key, channels) in paired:  # on the holograms of the shipped CNN they were trained with
+            layers = name.rsplit("_holo", 1)[1]
+            x = offset_hologram(args.pair_dataset, f"models/holo{layers}_rgbd.onnx", load_checkpoint(ckpt)["config"])
+        elif key == "prefilter":
             x = offset_hologram(args.dataset, best(f"{args.runs}/holo8"), load_checkpoint(ckpt)["config"])
         with torch.no_grad():
             a, p = net(torch.from_numpy(x)[None])

@@ -6,9 +6,11 @@
 #   each in f32 and int8 (QOperator conv-only and QDQ), then the Table 2 evaluation on the test split.
 #
 #   the LDI hologram CNN holo8_ldi.onnx (stage 1 on 5-layer LDI input, on the photo-textured dataset),
+#   the pre-filters of the 15- and 30-layer CNNs prefilter_{6,12}mm_holo{15,30}.onnx (DDPM stage 2 with that CNN
+#   frozen, started from the shipped CNN and the 8-layer CNN's pre-filter, on the photo-textured dataset),
 #
 #   training/ship_cpu.sh [STEP ...]      STEP: dataset holo8 holo15 holo30 pre6 pre12 photos photo-dataset ldi8
-#                                        export eval (default: all)
+#                                        pairs export eval eval-pairs (default: all)
 #   then: training/make_shipped_fixtures.py (models/fixtures), holo baselines + evaluate (models/MODEL_CARD.md)
 #
 # Environment: DATA (default data/cpu256), PHOTO_DATA (default data/photo256: 1000/40/40 scenes of 256x256 with
@@ -29,7 +31,8 @@ runs="${RUNS:-runs/cpu}"
 holo="${HOLO:-target/release/holo}"
 export PYTHONPATH="$root/training${PYTHONPATH:+:$PYTHONPATH}"
 steps=("$@")
-[ ${#steps[@]} -eq 0 ] && steps=(dataset holo8 holo15 holo30 pre6 pre12 photos photo-dataset ldi8 export eval)
+[ ${#steps[@]} -eq 0 ] && steps=(dataset holo8 holo15 holo30 pre6 pre12 photos photo-dataset ldi8 pairs export eval
+  eval-pairs)
 
 stage1() {  # LAYERS STEPS
   "$py" -m tensorholo_training.train --config training/configs/cpu_stage1.json --run-dir "$runs/holo$1" \
@@ -70,12 +73,24 @@ PY
         "$holo" dataset --out "$photo_data" --train 1000 --val 40 --test 40 --size 256 --levels 2048 --seed 2027 \
           --photos data/photos --photo-probability 0.6
       fi ;;
-    ldi8)  # the LDI hologram CNN, and the RGB-D one of the same schedule on the same data (its comparison)
-      for spec in holo8_ldi:5 holo8:1; do
-        "$py" -m tensorholo_training.train --config training/configs/cpu_stage1.json --run-dir "runs/photo/${spec%:*}" \
-          --set dataset="\"$photo_data\"" --set num_layers=8 --set input_layers="${spec#*:}" \
-          --set stage1_steps="${STEPS_LDI:-4000}"
+    pairs)  # a pre-filter per CNN depth and offset, from the shipped files (no checkpoint of them is needed)
+      for l in 30 15; do
+        for o in 6 12; do
+          "$py" -m tensorholo_training.train --config training/configs/cpu_prefilter.json \
+            --run-dir "runs/photo/pre${o}_holo$l" --set dataset="\"$photo_data\"" --set num_layers="$l" \
+            --set offset_mm="$o" --set init_from="\"$models/holo${l}_rgbd.onnx\"" \
+            --set init_prefilter_from="\"$models/prefilter_${o}mm.onnx\"" --set stage2_steps="${PAIR_STEPS:-2000}"
+        done
       done ;;
+    ldi8)  # an RGB-D CNN on the photo data, the LDI CNN started from it (holo8_ldi), the RGB-D one continued
+      ldi_stage1() {  # RUN INPUT_LAYERS STEPS [INIT]
+        "$py" -m tensorholo_training.train --config training/configs/cpu_stage1.json --run-dir "runs/photo/$1" \
+          --set dataset="\"$photo_data\"" --set num_layers=8 --set input_layers="$2" --set stage1_steps="$3" \
+          ${4:+--set init_from="\"$4\""}
+      }
+      ldi_stage1 holo8 1 4000
+      ldi_stage1 holo8_ldi_ws 5 4000 runs/photo/holo8/best.pt
+      ldi_stage1 holo8 1 8000 ;;
     holo8) stage1 8 "${STEPS8:-4000}" ;;
     holo15) stage1 15 "${STEPS15:-4000}" ;;
     holo30) stage1 30 "${STEPS30:-5000}" ;;
@@ -89,7 +104,14 @@ PY
         "$py" -m tensorholo_training.export --checkpoint "$ck" --out-dir "$models" \
           --name "holo${l}_rgbd" --no-prefilter --int8 --calib-dataset "$data" --calib-samples 32 --calib-size 128
       done
-      "$py" -m tensorholo_training.export --checkpoint runs/photo/holo8_ldi/best.pt --out-dir "$models" \
+      for l in 15 30; do
+        for o in 6 12; do
+          "$py" -m tensorholo_training.export --checkpoint "runs/photo/pre${o}_holo$l/best.pt" --out-dir "$models" \
+            --name "prefilter_${o}mm_holo$l" --prefilter-only --int8 --calib-dataset "$photo_data" --calib-samples 32 \
+            --calib-size 128
+        done
+      done
+      "$py" -m tensorholo_training.export --checkpoint runs/photo/holo8_ldi_ws/best.pt --out-dir "$models" \
         --name holo8_ldi --no-prefilter --int8 --calib-dataset "$photo_data" --calib-samples 32 --calib-size 128
       for o in 6 12; do
         "$py" -m tensorholo_training.export --checkpoint "$runs/pre$o/best.pt" --out-dir "$models" \
@@ -116,6 +138,27 @@ PY
           "$py" -m tensorholo_training.evaluate --onnx "$models/holo8_rgbd$prec.onnx" \
             --prefilter-onnx "$models/prefilter_${o}mm$prec.onnx" --offset-mm "$o" --phase-only --dataset "$data" \
             --split test --limit "${EVAL_LIMIT:-10}" --out "$models/eval/holo8_rgbd+prefilter_${o}mm$prec.json"
+        done
+      done ;;
+    eval-pairs)  # displayed quality of each CNN depth: AA-DPM, the 8-layer CNN's pre-filter, its own (f32, int8)
+      out="$models/eval/pairs"; mkdir -p "$out"
+      pair_eval() {  # NAME EVALUATE-ARGS...
+        local name=$1; shift
+        "$py" -m tensorholo_training.evaluate "$@" --phase-only --dataset "$photo_data" --split test \
+          --limit "${PAIR_EVAL_LIMIT:-20}" --out "$out/$name.json"
+      }
+      for o in 6 12; do
+        pair_eval "holo8+pre${o}" --onnx "$models/holo8_rgbd.onnx" --prefilter-onnx "$models/prefilter_${o}mm.onnx" \
+          --offset-mm "$o"
+        pair_eval "holo8+aadpm${o}" --onnx "$models/holo8_rgbd.onnx" --aa-dpm --offset-mm "$o"
+        for l in 15 30; do
+          for prec in "" .int8-qdq; do
+            pair_eval "holo$l+own$o$prec" --onnx "$models/holo${l}_rgbd$prec.onnx" \
+              --prefilter-onnx "$models/prefilter_${o}mm_holo$l$prec.onnx" --offset-mm "$o"
+          done
+          pair_eval "holo$l+pre8_$o" --onnx "$models/holo${l}_rgbd.onnx" \
+            --prefilter-onnx "$models/prefilter_${o}mm.onnx" --offset-mm "$o"
+          pair_eval "holo$l+aadpm$o" --onnx "$models/holo${l}_rgbd.onnx" --aa-dpm --offset-mm "$o"
         done
       done ;;
     *) echo "unknown step $step" >&2; exit 2 ;;

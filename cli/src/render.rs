@@ -165,11 +165,11 @@ pub struct ModelArgs {
     /// Pre-filter CNN ONNX file for --offset-mm (implies --prefilter).
     #[arg(long, conflicts_with = "no_prefilter")]
     pub prefilter_model: Option<PathBuf>,
-    /// Require the shipped DDPM pre-filter CNN of --offset-mm (6 or 12 mm; an error otherwise), whatever the
-    /// hologram CNN. By default it runs where one is shipped, no --encoding is given and the hologram CNN has
-    /// the depth it was trained with (8 layers): the CNN's hologram is offset, pre-filtered and encoded with
-    /// plain double phase (paper Eq. 6–7), 1.2 dB above AA-DPM on the test split (with 15 layers +0.8 dB,
-    /// with 30 layers −0.7 dB; models/MODEL_CARD.md).
+    /// Require the shipped DDPM pre-filter CNN of --offset-mm (6 or 12 mm; an error otherwise). By default it
+    /// runs where one is shipped and no --encoding is given, the one trained on the holograms of the chosen CNN
+    /// depth (8, 15 or 30 layers; the LDI CNN takes the 8-layer one): the CNN's hologram is offset,
+    /// pre-filtered and encoded with plain double phase (paper Eq. 6–7), above AA-DPM on the test split
+    /// (models/MODEL_CARD.md).
     #[arg(long, conflicts_with_all = ["no_prefilter", "encoding"])]
     pub prefilter: bool,
     /// Encode the CNN's hologram with --encoding (AA-DPM by default) instead of the DDPM pre-filter CNN.
@@ -321,6 +321,7 @@ impl ModelArgs {
                 "trained_resolution": md.trained_resolution,
                 "training_commit": md.training_commit,
                 "macs_per_pixel": md.macs_per_pixel(),
+                "hologram_layers": md.hologram_layers,
             })
         };
         let info = json!({

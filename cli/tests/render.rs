@@ -79,14 +79,14 @@ fn render_runs_the_shipped_model_on_the_built_in_scene_and_evaluates_it() {
     assert_eq!(r["timings_s"]["median"]["prefilter_s"], 0.0);
     assert_eq!(r["pipeline"]["encoding"]["method"], "anti-aliased");
 
-    // At 6 mm the shipped pre-filter runs by default with the 8-layer CNN it was trained with, not with the
-    // 30-layer one (unless forced); --no-prefilter or an explicit --encoding selects a non-learned encoding.
+    // At 6 mm each CNN runs by default with the shipped pre-filter trained on its own holograms; --no-prefilter
+    // or an explicit --encoding selects a non-learned encoding.
     for (k, (extra, prefilter, method)) in [
         (&[][..], true, "plain"),
         (&["--no-prefilter"][..], false, "anti-aliased"),
         (&["--encoding", "bl-dpm"][..], false, "band-limited"),
-        (&["--layers", "30"][..], false, "anti-aliased"),
-        (&["--layers", "30", "--prefilter"][..], true, "plain"),
+        (&["--layers", "30"][..], true, "plain"),
+        (&["--layers", "15", "--prefilter"][..], true, "plain"),
     ]
     .into_iter()
     .enumerate()
@@ -111,6 +111,14 @@ fn render_runs_the_shipped_model_on_the_built_in_scene_and_evaluates_it() {
             "{extra:?}"
         );
         assert_eq!(r["models"]["encoding"]["method"], method, "{extra:?}");
+        if prefilter {
+            // Trained with the CNN it runs with.
+            let layers = r["models"]["hologram_cnn"]["layers"].clone();
+            assert_eq!(
+                r["models"]["prefilter_cnn"]["hologram_layers"], layers,
+                "{extra:?}"
+            );
+        }
     }
 }
 

@@ -141,22 +141,20 @@ fn prefilter_rule_is_the_sdks() {
             },
         )
     };
-    // Auto: the shipped pre-filters were trained with the 8-layer CNN.
-    assert!(pipe(8, PrefilterMode::Auto, 6e-3)
-        .unwrap()
-        .prefilter_model()
-        .is_some());
-    assert!(pipe(8, PrefilterMode::Auto, 12e-3)
-        .unwrap()
-        .prefilter_model()
-        .is_some());
-    let p30 = pipe(30, PrefilterMode::Auto, 6e-3).unwrap();
-    assert!(p30.prefilter_model().is_none());
-    assert!(
-        p30.prefilter_reason().contains("8-layer"),
-        "{}",
-        p30.prefilter_reason()
-    );
+    // Auto: each CNN depth with the pre-filter trained on its holograms.
+    for layers in [8, 15, 30] {
+        for offset_m in [6e-3, 12e-3] {
+            let p = pipe(layers, PrefilterMode::Auto, offset_m).unwrap();
+            let pre = p.prefilter_model().expect("a pre-filter");
+            assert_eq!(pre.metadata().hologram_layers, Some(layers));
+            assert_eq!(pre.metadata().offset_m, offset_m);
+            assert!(
+                p.prefilter_reason().contains(&format!("{layers}-layer")),
+                "{}",
+                p.prefilter_reason()
+            );
+        }
+    }
     assert!(pipe(8, PrefilterMode::Auto, 0.0)
         .unwrap()
         .prefilter_model()
@@ -169,7 +167,7 @@ fn prefilter_rule_is_the_sdks() {
         .unwrap()
         .prefilter_model()
         .is_none());
-    // Required: whatever the depth, an error where none is shipped.
+    // Required: an error where none is shipped for the offset.
     assert!(pipe(30, PrefilterMode::Required, 6e-3)
         .unwrap()
         .prefilter_model()

@@ -101,6 +101,24 @@ fn every_shipped_model_matches_pytorch() {
             assert!(HologramModel::from_bytes(bytes, ModelKind::PreFilter, &other).is_err());
         }
     }
+    // The pre-filters trained with the 15- and 30-layer CNNs (features models-15 / models-30).
+    for &layers in embedded::LAYERS.iter().filter(|&&l| l != 8) {
+        for mm in embedded::PREFILTER_OFFSETS_MM {
+            let config = ModelConfig {
+                offset_m: mm as f64 * 1e-3,
+                ..base
+            };
+            for precision in Precision::ALL {
+                let name = embedded::paired_prefilter_file(mm, layers, precision);
+                let bytes = embedded::paired_prefilter_cnn(mm, layers, precision).unwrap();
+                check(&name, bytes, ModelKind::PreFilter, &config, 8, precision);
+                let model =
+                    HologramModel::from_bytes(bytes, ModelKind::PreFilter, &config).unwrap();
+                assert_eq!(model.metadata().hologram_layers, Some(layers), "{name}");
+            }
+        }
+    }
+    assert!(embedded::paired_prefilter_cnn(6, 9, Precision::F32).is_err());
     // The LDI CNN: 5 layers of RGB-D in, the midpoint hologram out, for every offset.
     for precision in Precision::ALL {
         let name = embedded::scene_hologram_file(SceneInput::Ldi, 8, precision);

@@ -2,7 +2,8 @@
 //! int8 forms:
 //! - cargo feature `embedded-models`: the RGB-D and the LDI hologram CNNs with 8 layers (midpoint
 //!   hologram, any SLM offset) and the DDPM pre-filter CNNs for offsets of 6 and 12 mm;
-//! - `models-15` and `models-30`: the 15-layer (0.48 MB) and 30-layer (1.0 MB) hologram CNNs.
+//! - `models-15` and `models-30`: the 15-layer and 30-layer hologram CNNs, each with the pre-filter CNNs trained
+//!   on its holograms (6 and 12 mm).
 //!
 //! The int8 QOperator forms run on tract only and are embedded only with the `tract` feature; without it,
 //! asking for one is an error naming the feature.
@@ -45,22 +46,44 @@ const BASE_QOP: &[(&str, &[u8])] = shipped![
 const BASE_QOP: &[(&str, &[u8])] = &[];
 
 #[cfg(feature = "models-15")]
-const HOLO15: &[(&str, &[u8])] = shipped!["holo15_rgbd.onnx", "holo15_rgbd.int8-qdq.onnx"];
+const HOLO15: &[(&str, &[u8])] = shipped![
+    "holo15_rgbd.onnx",
+    "holo15_rgbd.int8-qdq.onnx",
+    "prefilter_6mm_holo15.onnx",
+    "prefilter_6mm_holo15.int8-qdq.onnx",
+    "prefilter_12mm_holo15.onnx",
+    "prefilter_12mm_holo15.int8-qdq.onnx",
+];
 #[cfg(not(feature = "models-15"))]
 const HOLO15: &[(&str, &[u8])] = &[];
 
 #[cfg(all(feature = "models-15", feature = "tract"))]
-const HOLO15_QOP: &[(&str, &[u8])] = shipped!["holo15_rgbd.int8-qop.onnx"];
+const HOLO15_QOP: &[(&str, &[u8])] = shipped![
+    "holo15_rgbd.int8-qop.onnx",
+    "prefilter_6mm_holo15.int8-qop.onnx",
+    "prefilter_12mm_holo15.int8-qop.onnx",
+];
 #[cfg(not(all(feature = "models-15", feature = "tract")))]
 const HOLO15_QOP: &[(&str, &[u8])] = &[];
 
 #[cfg(feature = "models-30")]
-const HOLO30: &[(&str, &[u8])] = shipped!["holo30_rgbd.onnx", "holo30_rgbd.int8-qdq.onnx"];
+const HOLO30: &[(&str, &[u8])] = shipped![
+    "holo30_rgbd.onnx",
+    "holo30_rgbd.int8-qdq.onnx",
+    "prefilter_6mm_holo30.onnx",
+    "prefilter_6mm_holo30.int8-qdq.onnx",
+    "prefilter_12mm_holo30.onnx",
+    "prefilter_12mm_holo30.int8-qdq.onnx",
+];
 #[cfg(not(feature = "models-30"))]
 const HOLO30: &[(&str, &[u8])] = &[];
 
 #[cfg(all(feature = "models-30", feature = "tract"))]
-const HOLO30_QOP: &[(&str, &[u8])] = shipped!["holo30_rgbd.int8-qop.onnx"];
+const HOLO30_QOP: &[(&str, &[u8])] = shipped![
+    "holo30_rgbd.int8-qop.onnx",
+    "prefilter_6mm_holo30.int8-qop.onnx",
+    "prefilter_12mm_holo30.int8-qop.onnx",
+];
 #[cfg(not(all(feature = "models-30", feature = "tract")))]
 const HOLO30_QOP: &[(&str, &[u8])] = &[];
 
@@ -131,9 +154,28 @@ pub fn scene_hologram_file(input: SceneInput, layers: usize, precision: Precisio
     format!("holo{layers}_{input}{}.onnx", precision.file_suffix())
 }
 
-/// File name in `models/` of the shipped pre-filter CNN for an offset of `offset_mm` millimetres.
+/// File name in `models/` of the shipped pre-filter CNN for an offset of `offset_mm` millimetres, trained with
+/// the 8-layer hologram CNN ([`paired_prefilter_file`] with 8 layers).
 pub fn prefilter_file(offset_mm: u32, precision: Precision) -> String {
-    format!("prefilter_{offset_mm}mm{}.onnx", precision.file_suffix())
+    paired_prefilter_file(offset_mm, 8, precision)
+}
+
+/// File name in `models/` of the shipped pre-filter CNN for an offset of `offset_mm` millimetres trained on the
+/// holograms of the `hologram_layers`-layer CNN: `prefilter_{offset}mm{suffix}.onnx` for 8 layers (the first
+/// shipped), `prefilter_{offset}mm_holo{layers}{suffix}.onnx` for the others.
+pub fn paired_prefilter_file(
+    offset_mm: u32,
+    hologram_layers: usize,
+    precision: Precision,
+) -> String {
+    let depth = match hologram_layers {
+        8 => String::new(),
+        l => format!("_holo{l}"),
+    };
+    format!(
+        "prefilter_{offset_mm}mm{depth}{}.onnx",
+        precision.file_suffix()
+    )
 }
 
 /// The ONNX bytes of the shipped RGB-D hologram CNN with `layers` ∈ {8, 15, 30} layers.
@@ -169,16 +211,41 @@ pub fn scene_hologram_cnn(
     })
 }
 
-/// The ONNX bytes of the shipped pre-filter CNN for an SLM offset of `offset_mm` ∈ {6, 12} millimetres.
+/// The ONNX bytes of the shipped pre-filter CNN for an SLM offset of `offset_mm` ∈ {6, 12} millimetres, trained
+/// with the 8-layer hologram CNN.
 ///
 /// Errors: [`HoloError::InvalidParameter`](crate::HoloError) for another offset; `precision` for the int8
 /// QOperator form in a build without `tract`.
 pub fn prefilter_cnn(offset_mm: u32, precision: Precision) -> Result<&'static [u8]> {
+    paired_prefilter_cnn(offset_mm, 8, precision)
+}
+
+/// The ONNX bytes of the shipped pre-filter CNN for an SLM offset of `offset_mm` ∈ {6, 12} millimetres trained
+/// on the holograms of the `hologram_layers`-layer CNN (8, 15 or 30; the 15- and 30-layer ones come with
+/// the features `models-15` / `models-30`, as their CNNs).
+///
+/// Errors: [`HoloError::InvalidParameter`](crate::HoloError) (`offset_mm`) for another offset, (`layers`) for a
+/// depth without a pre-filter in this build; `precision` for the int8 QOperator form in a build without
+/// `tract`.
+pub fn paired_prefilter_cnn(
+    offset_mm: u32,
+    hologram_layers: usize,
+    precision: Precision,
+) -> Result<&'static [u8]> {
     check_engine(precision)?;
-    find(&prefilter_file(offset_mm, precision)).ok_or_else(|| {
-        invalid(
+    if !PREFILTER_OFFSETS_MM.contains(&offset_mm) {
+        return Err(invalid(
             "offset_mm",
             format!("the shipped pre-filter CNNs are for {PREFILTER_OFFSETS_MM:?} mm, not {offset_mm} mm"),
+        ));
+    }
+    find(&paired_prefilter_file(offset_mm, hologram_layers, precision)).ok_or_else(|| {
+        invalid(
+            "layers",
+            format!(
+                "no shipped pre-filter CNN trained with the {hologram_layers}-layer hologram CNN in this \
+                 build (embedded: those of {LAYERS:?} layers)"
+            ),
         )
     })
 }
@@ -217,8 +284,9 @@ pub fn scene_hologram_model(
     )
 }
 
-/// Loads the shipped pre-filter CNN for an SLM offset of `offset_mm` ∈ {6, 12} millimetres in `precision`,
-/// checked against `expected` (its `offset_m` must be that offset); errors name the embedded file.
+/// Loads the shipped pre-filter CNN for an SLM offset of `offset_mm` ∈ {6, 12} millimetres in `precision`
+/// (trained with the 8-layer hologram CNN), checked against `expected` (its `offset_m` must be that offset);
+/// errors name the embedded file.
 ///
 /// Errors: as [`prefilter_cnn`] and [`HologramModel::from_bytes`].
 pub fn prefilter_model(
@@ -226,9 +294,22 @@ pub fn prefilter_model(
     precision: Precision,
     expected: &ModelConfig,
 ) -> Result<HologramModel> {
+    paired_prefilter_model(offset_mm, 8, precision, expected)
+}
+
+/// Loads the shipped pre-filter CNN of `offset_mm` trained with the `hologram_layers`-layer hologram CNN
+/// ([`paired_prefilter_cnn`]), checked against `expected` like any file.
+///
+/// Errors: as [`paired_prefilter_cnn`] and [`HologramModel::from_bytes`].
+pub fn paired_prefilter_model(
+    offset_mm: u32,
+    hologram_layers: usize,
+    precision: Precision,
+    expected: &ModelConfig,
+) -> Result<HologramModel> {
     HologramModel::from_named_bytes(
-        prefilter_cnn(offset_mm, precision)?,
-        &prefilter_file(offset_mm, precision),
+        paired_prefilter_cnn(offset_mm, hologram_layers, precision)?,
+        &paired_prefilter_file(offset_mm, hologram_layers, precision),
         ModelKind::PreFilter,
         expected,
     )

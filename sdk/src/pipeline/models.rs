@@ -108,12 +108,14 @@ impl HologramPipeline {
     /// Combines `hologram` with the shipped pre-filter CNN of `config.offset_m` (in `precision`) as `mode`
     /// says; the rule the CLI and the bindings share:
     /// - [`PrefilterMode::Off`], or a 0 m offset: none (encoding with `config.encoding`);
-    /// - [`PrefilterMode::Required`]: the shipped pre-filter of the offset (6 or 12 mm), whatever the CNN;
-    /// - [`PrefilterMode::Auto`]: the shipped pre-filter of the offset only where one exists and it was trained
-    ///   on holograms of a CNN of this depth (`tensorholo.hologram_layers`): the shipped pre-filters display
-    ///   1.2 dB above AA-DPM with the 8-layer CNN they were trained with, 0.8 dB above with 15 layers and
-    ///   0.3–0.7 dB below with 30 (`models/MODEL_CARD.md`). Otherwise none, and
-    ///   [`HologramPipeline::prefilter_reason`] says why.
+    /// - [`PrefilterMode::Auto`]: the shipped pre-filter of the offset (6 or 12 mm) trained on the holograms of
+    ///   a CNN of this depth (`tensorholo.hologram_layers`): `prefilter_6mm.onnx` for 8 layers (the LDI CNN
+    ///   included), `prefilter_6mm_holo15.onnx` / `_holo30` for 15 / 30 layers (embedded with the features
+    ///   `models-15` / `models-30`, as their CNNs). A pre-filter can fall below AA-DPM with a CNN it was not
+    ///   trained with (`models/MODEL_CARD.md`). Otherwise none, and [`HologramPipeline::prefilter_reason`]
+    ///   says why;
+    /// - [`PrefilterMode::Required`]: as Auto, and where no pre-filter of this depth is embedded, the 8-layer
+    ///   CNN's.
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`prefilter`) for [`PrefilterMode::Required`] at 0 m or at an
     /// offset without a shipped pre-filter; [`HoloError::InvalidParameter`] (`prefilter`) without the
@@ -155,8 +157,8 @@ impl HologramPipeline {
         }
     }
 
-    /// Why this pipeline runs a pre-filter CNN or not (e.g. "the shipped 6 mm pre-filter was trained with the
-    /// 8-layer hologram CNN, this one has 30 layers").
+    /// Why this pipeline runs a pre-filter CNN or not (e.g. "shipped 6 mm pre-filter (auto, trained with the
+    /// 30-layer hologram CNN)").
     pub fn prefilter_reason(&self) -> &str {
         &self.prefilter_reason
     }

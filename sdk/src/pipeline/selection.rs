@@ -94,7 +94,9 @@ pub(super) fn shipped_prefilter(
     }
     #[cfg(feature = "embedded-models")]
     {
-        use crate::model::embedded::{prefilter_model, PREFILTER_OFFSETS_MM};
+        use crate::model::embedded::{
+            paired_prefilter_cnn, paired_prefilter_model, prefilter_model, PREFILTER_OFFSETS_MM,
+        };
         let shipped = PREFILTER_OFFSETS_MM
             .into_iter()
             .find(|&o| (o as f64 - mm).abs() < 1e-6);
@@ -118,27 +120,39 @@ pub(super) fn shipped_prefilter(
             offset_m: config.offset_m,
             input_layers: hologram.metadata().input_layers,
         };
-        let p = prefilter_model(offset_mm, precision, &expected)?;
         let layers = hologram.metadata().layers;
-        let trained = p.metadata().hologram_layers;
-        if mode == PrefilterMode::Required || trained == Some(layers) {
+        // The pre-filter trained on the holograms of a CNN of this depth, where one is embedded.
+        let paired = match paired_prefilter_cnn(offset_mm, layers, precision) {
+            Ok(_) => true,
+            Err(crate::error::HoloError::InvalidParameter { name: "layers", .. }) => false,
+            Err(e) => return Err(e),
+        };
+        if paired {
+            let p = paired_prefilter_model(offset_mm, layers, precision, &expected)?;
             let why = format!(
-                "shipped {offset_mm} mm pre-filter ({}, trained with the {} hologram CNN)",
+                "shipped {offset_mm} mm pre-filter ({}, trained with the {layers}-layer hologram CNN)",
                 if mode == PrefilterMode::Required {
                     "required"
                 } else {
                     "auto"
-                },
-                trained.map_or("unknown".to_string(), |l| format!("{l}-layer"))
+                }
+            );
+            return Ok((Some(p), why));
+        }
+        if mode == PrefilterMode::Required {
+            let p = prefilter_model(offset_mm, precision, &expected)?;
+            let why = format!(
+                "shipped {offset_mm} mm pre-filter (required; trained with the 8-layer hologram CNN, none with \
+                 the {layers}-layer one in this build)"
             );
             return Ok((Some(p), why));
         }
         Ok((
             None,
             format!(
-                "the shipped {offset_mm} mm pre-filter was trained with the {} hologram CNN, this one has \
-                 {layers} layers: encoding without it (require it to force it)",
-                trained.map_or("unknown".to_string(), |l| format!("{l}-layer"))
+                "no shipped {offset_mm} mm pre-filter trained with a {layers}-layer hologram CNN in this build \
+                 (pre-filters of {:?} layers): encoding without one (require it to use the 8-layer CNN's)",
+                crate::model::embedded::LAYERS
             ),
         ))
     }
