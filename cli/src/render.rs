@@ -550,7 +550,9 @@ fn write_outputs(
     };
     let focus_stats = crate::output::write_images(&args.out, &images, &cfg.optics, frame)?;
     let evaluation = match &displayed {
-        Some(displayed) => Some(evaluate(args, pipeline, scene, &midpoint, displayed)?),
+        Some(displayed) => Some(evaluate(
+            args, pipeline, scene, frame, &midpoint, displayed,
+        )?),
         None => None,
     };
     let amp = midpoint.mapv(|v| v.norm());
@@ -580,11 +582,13 @@ fn write_outputs(
 }
 
 /// The Table 2 scores of the CNN midpoint hologram, of what the SLM shows, and of SM-LBM + the same
-/// encoding without CNN, all against the SM-LBM ground truth of the input (every layer of an LDI).
+/// encoding without CNN, all against the SM-LBM ground truth of the input (every layer of an LDI); focal
+/// depths from `front`, the scene's front layer.
 fn evaluate(
     args: &RenderArgs,
     pipeline: &HologramPipeline,
     scene: &Scene,
+    front: &RgbdFrame,
     midpoint: &ndarray::Array3<num_complex::Complex32>,
     displayed: &ndarray::Array3<num_complex::Complex32>,
 ) -> Result<serde_json::Value> {
@@ -612,7 +616,7 @@ fn evaluate(
         cfg.offset_m,
         cfg.options,
     )?;
-    let depths = focal_depths(scene.front().depth.view(), 200, 15, 5, 0)?;
+    let depths = focal_depths(front.depth.view(), 200, 15, 5, 0)?;
     let score = |pred: &ndarray::Array3<num_complex::Complex32>| {
         table2(
             pred.view(),

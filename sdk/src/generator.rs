@@ -36,7 +36,7 @@ use crate::pipeline::{
 };
 use crate::scene::{
     ldi_from_camera_frames, CameraFrame, CameraFrameBuf, CameraFrameReport, DepthMapping,
-    DepthRange, Fit, FrameOptions, LayeredDepthImage, RgbdFrame,
+    DepthRange, Fit, FrameOptions, RgbdFrame,
 };
 use crate::slm::DisplayCalibration;
 
@@ -574,16 +574,6 @@ impl HologramGenerator {
         let mut session = self.session()?;
         let out = session.render_ldi(&ldi)?;
         Ok(SlmPatterns::from_frame(out, convert_s, report.range_used))
-    }
-
-    /// Renders a layered depth image already at the hologram resolution ([`LayeredDepthImage`], e.g. from
-    /// [`crate::scene::load_ldi_dir`]).
-    ///
-    /// Errors: as [`HologramSession::render_ldi`].
-    pub fn render_layered(&self, ldi: &LayeredDepthImage) -> Result<SlmPatterns> {
-        let mut session = self.session()?;
-        let out = session.render_ldi(ldi)?;
-        Ok(SlmPatterns::from_frame(out, 0.0, None))
     }
 
     /// Renders an RGB-D frame already at the hologram resolution (`[3, H, W]` amplitude, `[H, W]` depth).

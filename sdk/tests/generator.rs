@@ -141,8 +141,8 @@ fn prefilter_rule_is_the_sdks() {
             },
         )
     };
-    // Auto: each CNN depth with the pre-filter trained on its holograms.
-    for layers in [8, 15, 30] {
+    // Auto: each CNN depth embedded in this build with the pre-filter trained on its holograms.
+    for &layers in tensorholo::model::embedded::LAYERS {
         for offset_m in [6e-3, 12e-3] {
             let p = pipe(layers, PrefilterMode::Auto, offset_m).unwrap();
             let pre = p.prefilter_model().expect("a pre-filter");

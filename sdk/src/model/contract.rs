@@ -115,8 +115,9 @@ pub fn pack_ldi(ldi: &LayeredDepthImage, mut out: ArrayViewMut3<f32>) -> Result<
 
 /// Writes empty LDI layers `from..to` (no point anywhere: amplitude [`INVALID_AMPLITUDE`], depth
 /// [`INVALID_DEPTH`]) into the CNN input `out` `[4·L, H, W]`, `to ≤ L`: the padding of an LDI (or an RGB-D
-/// frame, `from = 1`) with fewer layers than the CNN takes.
-pub fn fill_empty_layers(mut out: ArrayViewMut3<f32>, from: usize, to: usize) {
+/// frame, `from = 1`) with fewer layers than the CNN takes. The caller checks `from ≤ to ≤ L` (a slice
+/// beyond `out` panics).
+pub(crate) fn fill_empty_layers(mut out: ArrayViewMut3<f32>, from: usize, to: usize) {
     for k in from..to {
         out.slice_mut(s![4 * k..4 * k + 3, .., ..])
             .fill(INVALID_AMPLITUDE);

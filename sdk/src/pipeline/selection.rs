@@ -95,7 +95,8 @@ pub(super) fn shipped_prefilter(
     #[cfg(feature = "embedded-models")]
     {
         use crate::model::embedded::{
-            paired_prefilter_cnn, paired_prefilter_model, prefilter_model, PREFILTER_OFFSETS_MM,
+            files, paired_prefilter_file, paired_prefilter_model, prefilter_model,
+            PREFILTER_OFFSETS_MM,
         };
         let shipped = PREFILTER_OFFSETS_MM
             .into_iter()
@@ -121,13 +122,10 @@ pub(super) fn shipped_prefilter(
             input_layers: hologram.metadata().input_layers,
         };
         let layers = hologram.metadata().layers;
-        // The pre-filter trained on the holograms of a CNN of this depth, where one is embedded.
-        let paired = match paired_prefilter_cnn(offset_mm, layers, precision) {
-            Ok(_) => true,
-            Err(crate::error::HoloError::InvalidParameter { name: "layers", .. }) => false,
-            Err(e) => return Err(e),
-        };
-        if paired {
+        // The pre-filter trained on the holograms of a CNN of this depth, where this build embeds it (its
+        // forms come together with their CNN's feature; the int8 QOperator form's engine is checked on load).
+        let paired = paired_prefilter_file(offset_mm, layers, Precision::F32);
+        if files().any(|(name, _)| name == paired) {
             let p = paired_prefilter_model(offset_mm, layers, precision, &expected)?;
             let why = format!(
                 "shipped {offset_mm} mm pre-filter ({}, trained with the {layers}-layer hologram CNN)",
