@@ -6,8 +6,8 @@ double phase, Fourier filter; ``--phase-only`` evaluation chain).
         --baselines data/cpu256/baselines --out models/model_card_focal_stacks.png
 
 Rows (central 128×128 crops by default): ground truth, Maimone-style, SM-LBM + AA-DPM (6 mm), holo8 f32 +
-AA-DPM (6 mm, the non-learned encoding of the CNN's hologram), then holo8/15/30 + the 6 mm pre-filter (DDPM), f32
-and the default int8 form. Columns: focused at the 10th, 50th and 90th percentile of the scene's depth. A PNG is
+AA-DPM (6 mm, the non-learned encoding of the CNN's hologram), then holo8/15/30 + its own 6 mm pre-filter (DDPM),
+f32 and the default int8 form. Columns: focused at the 10th, 50th and 90th percentile of the scene's depth. A PNG is
 written with zlib only (no imaging library needed).
 """
 from __future__ import annotations
@@ -74,7 +74,8 @@ def main() -> None:
     for layers in (8, 15, 30):
         for suffix in ("", "." + args.int8):
             net = os.path.join(args.models, f"holo{layers}_rgbd{suffix}.onnx")
-            pre = os.path.join(args.models, f"prefilter_6mm{suffix}.onnx")
+            own = "" if layers == 8 else f"_holo{layers}"  # each CNN with the pre-filter trained on its holograms
+            pre = os.path.join(args.models, f"prefilter_6mm{own}{suffix}.onnx")
             predict = onnx_predictor(net, pre, 6e-3, display, True, options)
             rows.append((f"holo{layers}{suffix or ' f32'} + 6 mm pre-filter", predict(args.index, item)))
     tiles = []

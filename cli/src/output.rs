@@ -16,7 +16,7 @@ use tensorholo::reference::channel_means;
 use tensorholo::scene::RgbdFrame;
 
 /// Files written into `--out`.
-pub const OUTPUTS: [&str; 10] = [
+pub const OUTPUTS: [&str; 11] = [
     "phase_r.png",
     "phase_g.png",
     "phase_b.png",
@@ -27,6 +27,7 @@ pub const OUTPUTS: [&str; 10] = [
     "target.png",
     "depth.png",
     "report.json",
+    "cnn_input.npy",
 ];
 
 /// Names of the three focal previews, near to far.
@@ -42,7 +43,8 @@ Outputs in --out:
                                        simulated reconstructions of the SLM patterns (Fourier filter +
                                        propagation) focused at the 5th/50th/95th depth percentiles
   target.png depth.png                 the scene amplitude and normalised depth (white = far)
-  report.json                          inputs, parameters, timings per stage, image statistics";
+  report.json                          inputs, parameters, timings per stage, image statistics
+  cnn_input.npy                        (holo render --save-cnn-input) float32 [4*L, H, W] hologram CNN input";
 
 /// The command line for reports, each argument as text (a name that is not UTF-8 is written lossily, with
 /// U+FFFD where its bytes are not text; the files themselves keep their exact names).

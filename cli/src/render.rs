@@ -12,7 +12,7 @@ use serde_json::json;
 use tensorholo::cnn::CnnEngine;
 use tensorholo::evaluation::{focal_depths, table2};
 use tensorholo::model::{
-    CnnLayout, HologramModel, ModelConfig, ModelKind, Precision, SceneInput, ThreadCount,
+    contract, CnnLayout, HologramModel, ModelConfig, ModelKind, Precision, SceneInput, ThreadCount,
 };
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{
@@ -371,6 +371,11 @@ pub struct RenderArgs {
     /// SM-LBM depth planes of the --evaluate ground truth.
     #[arg(long, default_value_t = 2048)]
     levels: usize,
+    /// Also write cnn_input.npy: the hologram CNN's input, float32 [4·L, H, W] (per input layer R, G, B
+    /// amplitude then normalised depth, 0 = near; docs/CONVENTIONS.md §7), e.g. to calibrate int8 files on
+    /// real frames (`python -m tensorholo_training.export --calib-npy`).
+    #[arg(long)]
+    save_cnn_input: bool,
     /// Output folder (created if missing). Files of the same names in it are replaced; inputs never are.
     #[arg(long)]
     out: PathBuf,
@@ -549,6 +554,16 @@ fn write_outputs(
         depths: &depths,
     };
     let focus_stats = crate::output::write_images(&args.out, &images, &cfg.optics, frame)?;
+    if args.save_cnn_input {
+        let layers = pipeline.hologram_model().metadata().input_layers;
+        let mut x = ndarray::Array3::<f32>::zeros((4 * layers, frame.height(), frame.width()));
+        match scene {
+            Scene::Frame(f) if layers == 1 => contract::pack_rgbd(f, x.view_mut())?,
+            Scene::Frame(f) => contract::pack_ldi(&f.clone().into(), x.view_mut())?,
+            Scene::Ldi(ldi) => contract::pack_ldi(ldi, x.view_mut())?,
+        }
+        tensorholo::io::write_f32_npy(&args.out.join("cnn_input.npy"), x.view())?;
+    }
     let evaluation = match &displayed {
         Some(displayed) => Some(evaluate(
             args, pipeline, scene, frame, &midpoint, displayed,

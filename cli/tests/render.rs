@@ -22,11 +22,13 @@ fn render_runs_the_shipped_model_on_the_built_in_scene_and_evaluates_it() {
         "--levels",
         "128",
         "--prefilter",
+        "--save-cnn-input",
         "--out",
         out.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     for f in [
+        "cnn_input.npy",
         "phase_r.png",
         "phase_g.png",
         "phase_b.png",
@@ -43,6 +45,23 @@ fn render_runs_the_shipped_model_on_the_built_in_scene_and_evaluates_it() {
     let r = report(&out);
     assert_eq!(r["models"]["hologram_cnn"]["layers"], 8);
     assert_eq!(r["models"]["prefilter_cnn"]["offset_m"], 0.006);
+    // The CNN's input: R, G, B amplitude (the report's scene means) then depth in [0, 1].
+    let x: ndarray::Array3<f32> = ndarray_npy::read_npy(out.join("cnn_input.npy")).unwrap();
+    assert_eq!(x.shape(), &[4, 48, 64]);
+    let means = r["statistics"]["scene_mean_amplitude_rgb"]
+        .as_array()
+        .unwrap();
+    assert_eq!(means.len(), 3);
+    for (c, want) in means.iter().enumerate() {
+        let m = x.index_axis(ndarray::Axis(0), c).mean().unwrap() as f64;
+        assert!(
+            (m - want.as_f64().unwrap()).abs() < 1e-5,
+            "channel {c}: {m}"
+        );
+    }
+    let d = x.index_axis(ndarray::Axis(0), 3);
+    assert!(d.iter().all(|v| (0.0..=1.0).contains(v)));
+    assert!(d.iter().fold(0f32, |a, &v| a.max(v)) - d.iter().fold(1f32, |a, &v| a.min(v)) > 0.5);
     assert!(r["timings_s"]["median"]["cnn_s"].as_f64().unwrap() > 0.0);
     assert!(r["timings_s"]["median"]["prefilter_s"].as_f64().unwrap() > 0.0);
     let ev = &r["evaluation"];
@@ -258,7 +277,8 @@ fn bench_prints_a_row_per_case() {
         "{table}"
     );
     assert!(
-        table.contains("| holo8 | int8-qop | nchw | 24x32 | 1 | Im2col | 8 |"),
+        // 7 QLinearConv: the QOperator file keeps its last convolution float (export.py).
+        table.contains("| holo8 | int8-qop | nchw | 24x32 | 1 | Im2col | 7 |"),
         "{table}"
     );
     assert!(table.contains("Peak resident memory"), "{table}");
@@ -386,6 +406,7 @@ fn an_ldi_exported_by_holo_dataset_renders_with_the_ldi_cnn_and_is_refused_when_
         "--evaluate",
         "--levels",
         "128",
+        "--save-cnn-input",
         "--out",
         out.to_str().unwrap(),
     ]);
@@ -394,6 +415,22 @@ fn an_ldi_exported_by_holo_dataset_renders_with_the_ldi_cnn_and_is_refused_when_
     assert_eq!(r["input"]["kind"], "ldi-folder");
     assert_eq!(r["input"]["ldi_report"]["valid_fraction"][0], 1.0);
     assert_eq!(r["models"]["hologram_cnn"]["input_layers"], 5);
+    // The LDI CNN's input: 5 layers of R, G, B, depth; where a back layer holds no point, amplitude 0 and
+    // depth 1 (docs/CONVENTIONS.md §7), as often as the report's valid fractions say.
+    let x: ndarray::Array3<f32> = ndarray_npy::read_npy(out.join("cnn_input.npy")).unwrap();
+    assert_eq!(x.shape(), &[20, 48, 64]);
+    for k in 1..5 {
+        let empty = ndarray::Zip::from(x.index_axis(ndarray::Axis(0), 4 * k))
+            .and(x.index_axis(ndarray::Axis(0), 4 * k + 3))
+            .fold(0usize, |n, &a, &d| n + usize::from(a == 0.0 && d == 1.0));
+        let valid = r["input"]["ldi_report"]["valid_fraction"][k]
+            .as_f64()
+            .unwrap();
+        assert!(
+            (empty as f64 / (48.0 * 64.0) - (1.0 - valid)).abs() < 0.02,
+            "layer {k}: {empty} empty pixels, valid fraction {valid}"
+        );
+    }
     let ev = &r["evaluation"];
     assert!(ev["ground_truth"]["method"]
         .as_str()

@@ -14,8 +14,9 @@ Files (``NAME`` e.g. ``holo30_rgbd_6mm``):
 - with ``--int8``, for each: ``.int8-qop.onnx`` (QOperator: ``QLinearConv``; only ``Conv`` nodes are
   quantised, so residual ``Add``, ``Concat``, ``Relu`` and ``Tanh`` stay float, because tract 0.23 runs
   ``QLinearConv`` but not ``QLinearAdd``) and ``.int8-qdq.onnx`` (QDQ: ``QuantizeLinear``/``DequantizeLinear``
-  pairs around float ``Conv``, which tract folds). Static calibration (MinMax) on training inputs; weights
-  int8 symmetric per tensor, activations uint8. The pre-filter's fixed blur stays float (it is not learned,
+  pairs around float ``Conv``, which tract folds). Static calibration (MinMax) on training inputs and
+  optionally real frames (``--calib-npy``); weights int8 symmetric with one scale per output channel (the native
+  engine's scheme; ``--per-tensor`` for one per tensor), activations uint8 with a zero point. The pre-filter's fixed blur stays float (it is not learned,
   and its output carries the whole field, while the learned correction is small).
 
 Every file carries ``metadata_props`` (all keys prefixed ``tensorholo.``): ``kind`` (``hologram-cnn`` or
@@ -174,14 +175,19 @@ class _Reader:
         return None if x is None else {self.name: x.astype(np.float32)}
 
 
-def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray], fmt: str = "qoperator") -> str:
-    """Static int8 quantisation of the ``Conv`` nodes only (onnxruntime.quantization, MinMax calibration).
+def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray], fmt: str = "qoperator",
+                  per_channel: bool = True) -> str:
+    """Static int8 quantisation of the ``Conv`` nodes only (onnxruntime.quantization, MinMax calibration):
+    symmetric s8 weights, one scale per output channel (``per_channel``, what the native engine's int8 kernels
+    apply; ``axis`` 0 of the weight's ``DequantizeLinear``) or one per tensor; u8 activations with a zero
+    point, one scale per tensor.
 
     Args:
         f32_path: float32 model from :func:`export_onnx`.
         out_path: output path.
-        calibration: inputs ``[1, C, H, W]`` float32 (training crops), e.g. 16–64 of them.
+        calibration: inputs ``[1, C, H, W]`` float32 (training crops, real frames), e.g. 16–64 of them.
         fmt: ``"qoperator"`` (``QLinearConv``) or ``"qdq"`` (Q/DQ pairs around float ``Conv``).
+        per_channel: weight scales per output channel (default) or per tensor.
     Returns:
         ``out_path`` (metadata copied, ``tensorholo.precision`` updated).
     """
@@ -199,20 +205,58 @@ def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray
     from onnxruntime.quantization.shape_inference import quant_pre_process
 
     name = onnx.load(f32_path).graph.input[0].name
+    extra = {"WeightSymmetric": True, "ActivationSymmetric": False}
+    if fmt == "qdq":
+        # A convolution's raw output is not rounded: what the next convolution reads is (after the ReLU and
+        # the residual add), once, as the native engine's fused layers do; the last one's output (the heads'
+        # or the pre-filter's correction) stays float.
+        extra["OpTypesToExcludeOutputQuantization"] = ["Conv"]
     with tempfile.TemporaryDirectory() as tmp:
         prepared = os.path.join(tmp, "prepared.onnx")
         quant_pre_process(f32_path, prepared)
         # Grouped convolutions are the pre-filter's fixed AA-DPM blur: kept in float (see the module docs).
-        fixed = [n.name for n in onnx.load(prepared).graph.node if n.op_type == "Conv"
-                 and any(a.name == "group" and a.i > 1 for a in n.attribute)]
+        convs = [n for n in onnx.load(prepared).graph.node if n.op_type == "Conv"]
+        fixed = [n.name for n in convs if any(a.name == "group" and a.i > 1 for a in n.attribute)]
+        if fmt == "qoperator":
+            # A QLinearConv rounds its output by definition: the last one (the heads' input, the pre-filter's
+            # correction) stays a float Conv, as the QDQ file leaves that output float.
+            fixed.append([n.name for n in convs if n.name not in fixed][-1])
         quantize_static(
             prepared, out_path, _Reader(name, calibration), quant_format=qformat, op_types_to_quantize=["Conv"],
-            per_channel=False, activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
-            nodes_to_exclude=fixed,
+            per_channel=per_channel, activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
+            nodes_to_exclude=fixed, extra_options=extra,
         )
+    if fmt == "qdq":
+        _float_blur_input(out_path)
     meta[METADATA_PREFIX + "precision"] = precision
+    meta[METADATA_PREFIX + "int8_weight_scales"] = "per-output-channel" if per_channel else "per-tensor"
     set_metadata(out_path, meta)
     return out_path
+
+
+def _float_blur_input(path: str) -> None:
+    """Makes the pre-filter's fixed blur (its ``Pad`` → grouped ``Conv``) read the float graph input again.
+
+    The QDQ pass rounds the graph input to u8 for the first learned convolution and hands that rounded tensor
+    to every consumer, the blur's ``Pad`` included, so the whole field (not only the small learned correction)
+    would pass through 8 bits: −0.26 dB displayed for the 30-layer CNN's 6 mm pre-filter. The QOperator form
+    and the SDK's native int8 engine already blur the float input. A hologram CNN has no ``Pad``: unchanged.
+    """
+    import onnx
+
+    model = onnx.load(path)
+    graph_inputs = {i.name for i in model.graph.input}
+    quantised = {n.output[0]: n.input[0] for n in model.graph.node
+                 if n.op_type == "QuantizeLinear" and n.input[0] in graph_inputs}
+    dequantised = {n.output[0]: quantised[n.input[0]] for n in model.graph.node
+                   if n.op_type == "DequantizeLinear" and n.input[0] in quantised}
+    changed = False
+    for n in model.graph.node:
+        if n.op_type == "Pad" and n.input[0] in dequantised:
+            n.input[0] = dequantised[n.input[0]]
+            changed = True
+    if changed:
+        onnx.save(model, path)
 
 
 def run_onnx(path: str, x: np.ndarray, threads: int = 1, exact: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -306,6 +350,40 @@ def calibration_inputs(dataset_root: str, input_layers: int, count: int = 32, si
     return [ds[int(i)]["rgbd"].numpy()[None] for i in idx]
 
 
+def frame_calibration_inputs(paths: Sequence[str], input_layers: int, crops_per_frame: int, size: int | None,
+                             seed: int = 0) -> list[np.ndarray]:
+    """Calibration inputs ``[1, 4·L, h, w]`` from hologram CNN inputs saved by ``holo render --save-cnn-input``
+    (``[4·L, H, W]`` float32 ``.npy``, e.g. the real frames of ``training/real_frames.py inputs``): ``crops_per_frame``
+    random crops of ``size`` each (the whole frame if ``size`` is None or larger than the frame). An RGB-D input
+    ``[4, H, W]`` for an LDI CNN is a one-layer LDI: the layers behind it are empty (amplitude 0, depth 1, what
+    the SDK feeds an LDI CNN for an RGB-D frame, ``docs/CONVENTIONS.md`` §7).
+
+    Raises:
+        ValueError: a file that is neither ``[4·input_layers, H, W]`` nor ``[4, H, W]``.
+    """
+    rng = np.random.default_rng(seed)
+    out = []
+    for p in paths:
+        x = np.load(p).astype(np.float32)
+        if x.ndim == 4 and x.shape[0] == 1:
+            x = x[0]
+        if x.ndim == 3 and x.shape[0] == 4 and input_layers > 1:
+            empty = np.zeros((4 * (input_layers - 1),) + x.shape[1:], np.float32)
+            empty[3::4] = 1.0
+            x = np.concatenate([x, empty])
+        if x.ndim != 3 or x.shape[0] != 4 * input_layers:
+            raise ValueError(f"{p}: shape {x.shape}, expected [{4 * input_layers}, H, W] "
+                             f"(holo render --save-cnn-input with a {input_layers}-layer-input CNN)")
+        _, h, w = x.shape
+        for _ in range(crops_per_frame):
+            if size is None or size >= min(h, w):
+                out.append(x[None])
+                break
+            i, j = int(rng.integers(0, h - size + 1)), int(rng.integers(0, w - size + 1))
+            out.append(np.ascontiguousarray(x[None, :, i:i + size, j:j + size]))
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point (see the module docstring)."""
     ap = argparse.ArgumentParser(prog="python -m tensorholo_training.export", description=__doc__.split("\n\n")[0])
@@ -316,6 +394,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--calib-dataset", help="dataset for int8 calibration (default: the run's dataset)")
     ap.add_argument("--calib-samples", type=int, default=32)
     ap.add_argument("--calib-size", type=int, default=0, help="crop size of calibration inputs (0 = full)")
+    ap.add_argument("--calib-npy", nargs="*", default=[],
+                    help="hologram CNN inputs [4L,H,W] of real frames (holo render --save-cnn-input; "
+                         "training/real_frames.py inputs) added to the calibration set, --calib-crops crops each")
+    ap.add_argument("--calib-crops", type=int, default=4, help="calibration crops per --calib-npy frame")
+    ap.add_argument("--per-tensor", action="store_true",
+                    help="one weight scale per tensor (default: per output channel, the native engine's scheme)")
     only = ap.add_mutually_exclusive_group()
     only.add_argument("--no-prefilter", action="store_true", help="export only the hologram CNN")
     only.add_argument("--prefilter-only", action="store_true",
@@ -346,11 +430,13 @@ def main(argv: list[str] | None = None) -> int:
         if root == "synthetic":
             root = os.path.join(cfg["run_dir"], "synthetic_dataset")
         calib = calibration_inputs(root, cfg["input_layers"], args.calib_samples, args.calib_size or None)
+        calib += frame_calibration_inputs(args.calib_npy, cfg["input_layers"], args.calib_crops,
+                                          args.calib_size or None)
         for fmt, suffix in (("qoperator", "int8-qop"), ("qdq", "int8-qdq")):
             if args.prefilter_only:
                 break
             out = os.path.join(args.out_dir, f"{args.name}.{suffix}.onnx")
-            quantize_int8(path, out, calib, fmt)
+            quantize_int8(path, out, calib, fmt, per_channel=not args.per_tensor)
             written.append(out)
         if pre_path is not None:
             from .model import prefilter_input
@@ -366,7 +452,7 @@ def main(argv: list[str] | None = None) -> int:
             for fmt, suffix in (("qoperator", "int8-qop"), ("qdq", "int8-qdq")):
                 stem = args.name if args.prefilter_only else f"{args.name}.prefilter"
                 out = os.path.join(args.out_dir, f"{stem}.{suffix}.onnx")
-                quantize_int8(pre_path, out, pre_calib, fmt)
+                quantize_int8(pre_path, out, pre_calib, fmt, per_channel=not args.per_tensor)
                 written.append(out)
     print(json.dumps({"written": written, "metadata": read_metadata(path)}, indent=1))
     return 0

@@ -86,6 +86,10 @@ class TrainConfig:
     stage1_epochs: float = 0.0
     stage2_epochs: float = 0.0
     lr: float = 1e-4
+    # learning rate within each phase: "constant" (paper) or "cosine" (from lr down to lr·lr_final_ratio over
+    # the phase's steps: fine-tuning a shipped CNN on a short CPU budget)
+    lr_schedule: str = "constant"
+    lr_final_ratio: float = 0.1
     betas: list = field(default_factory=lambda: [0.9, 0.99])
     init_from: str = ""  # checkpoint (.pt) or shipped f32 ONNX file whose CNN(s) initialise this run
     # checkpoint (.pt) or shipped f32 ONNX file whose pre-filter initialises this run's (after init_from)
@@ -344,6 +348,7 @@ class Trainer:
             self.log(f"pre-filter initialised from {cfg.init_prefilter_from}")
         self.best: dict = {}
         self.phases = self._phases()
+        self.lr_at(0, 1)  # an unknown lr_schedule fails here, not after the first batch
         self.phase_index = 0
         self.phase_step = 0
         self.global_step = 0
@@ -380,6 +385,17 @@ class Trainer:
                 return list(self.prefilter.parameters())
             return list(self.net.parameters()) + list(self.prefilter.parameters())
         return list(self.net.parameters())
+
+    def lr_at(self, phase_step: int, steps: int) -> float:
+        """The learning rate of step ``phase_step`` (0-based) of a phase of ``steps`` steps (``lr_schedule``)."""
+        cfg = self.cfg
+        if cfg.lr_schedule == "constant":
+            return cfg.lr
+        if cfg.lr_schedule != "cosine":
+            raise ValueError(f"unknown lr_schedule {cfg.lr_schedule!r} (constant, cosine)")
+        t = min(max(phase_step / max(steps - 1, 1), 0.0), 1.0)
+        r = cfg.lr_final_ratio
+        return cfg.lr * (r + (1.0 - r) * 0.5 * (1.0 + math.cos(math.pi * t)))
 
     def _new_optimizer(self):
         self.optimizer = torch.optim.Adam(self._params(self.phase), lr=self.cfg.lr, betas=tuple(self.cfg.betas))
@@ -421,6 +437,9 @@ class Trainer:
         phase = self.phase
         self.net.train(phase != "stage2" or self.cfg.stage2_train_hologram)
         out = self.compute_loss(batch, phase, self._generator(self.global_step))
+        lr = self.lr_at(self.phase_step, self.phases[self.phase_index][1])
+        for group in self.optimizer.param_groups:
+            group["lr"] = lr
         self.optimizer.zero_grad(set_to_none=True)
         self.scaler.scale(out["total"]).backward()
         self.scaler.step(self.optimizer)

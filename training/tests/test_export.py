@@ -5,14 +5,14 @@ import pytest
 import torch
 
 from tensorholo_training.export import (
-    export_onnx, model_metadata, quantize_int8, read_metadata, run_onnx,
+    export_onnx, frame_calibration_inputs, model_metadata, quantize_int8, read_metadata, run_onnx,
 )
 from tensorholo_training.model import hologram_cnn, prefilter_cnn, prefilter_input
 
 KEYS = ["kind", "layers", "wavelengths_m", "pixel_pitch_m", "volume_depth_m", "offset_m", "input_layers",
         "trained_resolution", "training_commit"]
 
-# int8 tolerance: weights and activations are quantised per tensor to 8 bits; on random-init networks the heads
+# int8 tolerance: weights (per output channel) and activations (per tensor) are quantised to 8 bits; on random-init networks the heads
 # move by up to a few percent of their range. Mean |error| must stay below 0.01 and max below 0.1 (amplitude
 # range √2, phase range 1); measured ≈0.001 mean, ≈0.05 max.
 INT8_MEAN, INT8_MAX = 0.01, 0.1
@@ -65,11 +65,17 @@ def test_int8_round_trip(exported, fmt):
     rng = np.random.default_rng(1)
     calib = [rng.random((1, 4, 32, 32), dtype=np.float32) for _ in range(8)]
     out = quantize_int8(path, str(d / f"holo8.{fmt}.onnx"), calib, fmt)
-    ops = {n.op_type for n in onnx.load(out).graph.node}
+    nodes = onnx.load(out).graph.node
+    ops = {n.op_type for n in nodes}
+    convs = [n for n in nodes if n.op_type in ("Conv", "QLinearConv")]
     if fmt == "qoperator":
-        assert "QLinearConv" in ops and "Conv" not in ops and "QLinearAdd" not in ops
+        # every convolution int8 but the last, whose output (the heads' input) a QLinearConv would round
+        assert [n.op_type for n in convs] == ["QLinearConv"] * 7 + ["Conv"] and "QLinearAdd" not in ops
     else:
         assert "QuantizeLinear" in ops and "DequantizeLinear" in ops and "QLinearConv" not in ops
+        # activations are rounded where a convolution reads them, never a convolution's raw output
+        quantised = {n.input[0] for n in nodes if n.op_type == "QuantizeLinear"}
+        assert len(convs) == 8 and not quantised & {c.output[0] for c in convs}
     assert "Add" in ops  # residual additions stay float (tract 0.23 has no QLinearAdd)
     md = read_metadata(out)
     assert md["tensorholo.precision"].startswith("int8") and md["tensorholo.kind"] == "hologram-cnn"
@@ -80,6 +86,55 @@ def test_int8_round_trip(exported, fmt):
     errs = np.concatenate([np.abs(oa - a.numpy()).ravel(), np.abs(op - p.numpy()).ravel()])
     print(f"int8 {fmt}: mean abs error {errs.mean():.4f}, max {errs.max():.4f}")
     assert errs.mean() < INT8_MEAN and errs.max() < INT8_MAX
+
+
+@pytest.mark.parametrize("per_channel", [True, False])
+def test_int8_weight_scales_per_output_channel_or_per_tensor(exported, per_channel):
+    net, path, d = exported
+    rng = np.random.default_rng(1)
+    calib = [rng.random((1, 4, 32, 32), dtype=np.float32) for _ in range(4)]
+    out = quantize_int8(path, str(d / f"holo8.pc{per_channel}.onnx"), calib, "qdq", per_channel=per_channel)
+    model = onnx.load(out)
+    inits = {i.name: onnx.numpy_helper.to_array(i) for i in model.graph.initializer}
+    convs = [c for c in net.modules() if isinstance(c, torch.nn.Conv2d)]
+    weights = [n for n in model.graph.node if n.op_type == "DequantizeLinear" and inits.get(n.input[0]) is not None
+               and inits[n.input[0]].dtype == np.int8]
+    assert len(weights) == len(convs)
+    for n, conv in zip(weights, convs):
+        q, scale = inits[n.input[0]], inits[n.input[1]]
+        w = conv.weight.detach().numpy()
+        if per_channel:
+            axis = {a.name: a.i for a in n.attribute}.get("axis", 1)
+            assert axis == 0 and scale.shape == (w.shape[0],)
+            # symmetric MinMax per channel: each channel's largest weight maps to ±127
+            np.testing.assert_allclose(scale, np.abs(w).reshape(w.shape[0], -1).max(1) / 127, rtol=1e-5)
+            assert (np.abs(q).reshape(w.shape[0], -1).max(1) == 127).all()
+        else:
+            assert scale.size == 1
+            np.testing.assert_allclose(scale.item(), np.abs(w).max() / 127, rtol=1e-5)
+        deq = q.astype(np.float32) * (scale.reshape(-1, 1, 1, 1) if per_channel else scale)
+        assert np.abs(deq - w).max() <= 0.5 * scale.max() * 1.001
+    assert read_metadata(out)["tensorholo.int8_weight_scales"] == (
+        "per-output-channel" if per_channel else "per-tensor")
+
+
+def test_frame_calibration_inputs_crop_real_frames_and_pad_an_ldi(tmp_path):
+    rng = np.random.default_rng(3)
+    frame = rng.random((4, 40, 50), dtype=np.float32)
+    np.save(tmp_path / "f.npy", frame)
+    crops = frame_calibration_inputs([str(tmp_path / "f.npy")], 1, 3, 16)
+    assert len(crops) == 3 and all(c.shape == (1, 4, 16, 16) for c in crops)
+    for c in crops:  # each crop is a window of the frame
+        hits = [(i, j) for i in range(25) for j in range(35) if np.array_equal(frame[:, i:i + 16, j:j + 16], c[0])]
+        assert hits
+    whole = frame_calibration_inputs([str(tmp_path / "f.npy")], 1, 3, None)
+    assert len(whole) == 1 and np.array_equal(whole[0][0], frame)
+    ldi = frame_calibration_inputs([str(tmp_path / "f.npy")], 5, 1, None)[0][0]
+    assert ldi.shape == (20, 40, 50) and np.array_equal(ldi[:4], frame)
+    assert (ldi[4:][3::4] == 1).all() and (np.delete(ldi[4:], np.s_[3::4], 0) == 0).all()  # empty layers
+    np.save(tmp_path / "bad.npy", frame[:3])
+    with pytest.raises(ValueError, match="expected \\[4, H, W\\]"):
+        frame_calibration_inputs([str(tmp_path / "bad.npy")], 1, 1, None)
 
 
 def trained_like_prefilter():
@@ -129,8 +184,10 @@ def test_prefilter_int8_keeps_the_blur_in_float(tmp_path, fmt):
     float_convs = [n for n in nodes if n.op_type == "Conv"]
     grouped = [n for n in float_convs if any(a.name == "group" and a.i == 6 for a in n.attribute)]
     assert len(grouped) == 1  # the fixed blur
-    if fmt == "qoperator":
-        assert len(float_convs) == 1 and sum(n.op_type == "QLinearConv" for n in nodes) == 8
+    pad = next(n for n in nodes if n.op_type == "Pad")
+    assert pad.input[0] == "slm_field"  # ... of the float input, not of its u8 rounding (QDQ's first conv reads)
+    if fmt == "qoperator":  # the blur and the last learned convolution (the correction) stay float
+        assert len(float_convs) == 2 and sum(n.op_type == "QLinearConv" for n in nodes) == 7
     x = slm_like(24, 24, 99)
     with torch.no_grad():
         re, im = pre(torch.from_numpy(x))

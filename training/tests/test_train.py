@@ -120,3 +120,17 @@ def test_prefilter_floor_compares_ddpm_with_aa_dpm_and_plain_dpm(tmp_path, tiny_
         assert r["loss_regulariser"] >= 0.0
     # The three encodings are different operations, so they score differently.
     assert len({round(r["val_psnr_fs"], 6) for r in rows.values()}) == 3
+
+
+def test_cosine_schedule_runs_from_lr_to_its_final_ratio_and_is_applied(tmp_path, tiny_dataset):
+    cfg = small_cfg(tmp_path, tiny_dataset, lr=2e-3, lr_schedule="cosine", lr_final_ratio=0.25, stage1_steps=5)
+    tr = Trainer(cfg, log=lambda m: None)
+    assert [tr.lr_at(k, 5) for k in range(5)] == pytest.approx(
+        [2e-3 * (0.25 + 0.75 * 0.5 * (1 + np.cos(np.pi * k / 4))) for k in range(5)])
+    assert tr.lr_at(0, 5) == pytest.approx(2e-3) and tr.lr_at(4, 5) == pytest.approx(5e-4)
+    tr.run(max_steps=3)  # the optimizer ran step 2 (0-based) at its scheduled rate
+    assert tr.optimizer.param_groups[0]["lr"] == pytest.approx(tr.lr_at(2, 5))
+    constant = Trainer(small_cfg(tmp_path / "c", tiny_dataset, lr=2e-3), log=lambda m: None)
+    assert constant.lr_at(0, 5) == constant.lr_at(4, 5) == 2e-3
+    with pytest.raises(ValueError, match="lr_schedule"):
+        Trainer(small_cfg(tmp_path / "x", tiny_dataset, lr_schedule="step"), log=lambda m: None)

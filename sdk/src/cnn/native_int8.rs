@@ -9,13 +9,16 @@
 //! layer i < N−1:  s_{i+1} = Q(ReLU(conv_i(s_i) + b_i) (+ s_{i−1}))   each on its layer's grid
 //! x_cat = s_0 moved to the concat's grid                       (the file: DequantizeLinear, Concat, Quantize)
 //! layer N−1:      o = conv_{N−1}(concat(s_{N−1}, x_cat)) + b     raw f32 [C_out, H, W]
-//! o rounded to the file's output grid, then the heads or the pre-filter's base filter, as the f32 engine
+//! o rounded to the file's output grid where it has one, then the heads or the pre-filter's base filter (of the
+//! float input, or of the input rounded to the first grid where the file's Pad reads its DequantizeLinear), as
+//! the f32 engine
 //! ```
 //!
-//! Where the file rounds twice, this engine rounds once: the file quantises each convolution's raw output
-//! before its ReLU and then the ReLU's (or the residual sum's) result; the kernels fuse convolution, ReLU,
-//! residual add and the second rounding. The difference is at most half a step of the first grid per layer
-//! (measured against tract's execution of the file in `cnn/tests.rs`).
+//! The kernels fuse convolution, ReLU, residual add and the rounding of the result, so each layer rounds once.
+//! Files exported since the exporter stopped rounding convolution outputs round once too, and leave the last
+//! output float; older files quantise each convolution's raw output before its ReLU as well (a second
+//! rounding, at most half a step of that grid per layer, that this engine skips: measured against tract's
+//! execution of such a file in `cnn/tests.rs`).
 //!
 //! Strips and threads: as the f32 engine (windows of a few rows, [`super::strips`]; each layer's strip in one
 //! band per thread); the last layer writes a strip of raw f32 rows `[S][C_out][W]`, so that each band is a
@@ -33,7 +36,7 @@ use super::native::{
 use super::strips::{bands, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window};
 use super::{check_planes, kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
-use crate::model::{CnnQuant, CnnWeights};
+use crate::model::{CnnQuant, CnnWeights, QuantGrid};
 
 /// The network's packed int8 layers, shared by every plan of it.
 #[derive(Debug)]
@@ -73,7 +76,7 @@ pub(crate) struct NativeInt8Plan {
     raw: Vec<f32>,
     /// Where `raw`'s rows sit in the frame (lag `N`, no carry).
     raw_place: Place,
-    /// Pre-filter: one channel of the input as the file's base filter reads it (rounded to the input grid),
+    /// Pre-filter of a file whose base filter reads the rounded input: one channel of that input,
     /// `H·W` values (grown on the first run).
     base_plane: Vec<f32>,
 }
@@ -116,6 +119,16 @@ impl NativeInt8Plan {
         let n = graph.layers.len();
         let hidden = graph.layers[0].c_out;
         let c = graph.in_channels;
+        // The grid of s_{k+1}, k < N − 1 (the graph reader requires one for every hidden layer).
+        let hidden_grids: Vec<QuantGrid> = quant.layers[..n - 1]
+            .iter()
+            .enumerate()
+            .map(|(k, q)| {
+                q.output.ok_or_else(|| {
+                    HoloError::ModelRun(format!("int8 file: layer {k} has no output grid"))
+                })
+            })
+            .collect::<Result<_>>()?;
         let mut layers = Vec::with_capacity(n);
         for (i, (l, q)) in graph.layers.iter().zip(&quant.layers).enumerate() {
             if l.bias.iter().any(|v| !v.is_finite()) {
@@ -138,7 +151,7 @@ impl NativeInt8Plan {
                 relu: !last,
                 // s_{i−1} is on the grid layer i − 1 reads.
                 residual: residual.then(|| u8_grid(quant.layers[i - 1].input)),
-                output: (!last).then(|| u8_grid(q.output)),
+                output: (!last).then(|| u8_grid(hidden_grids[i])),
             };
             layers.push(Conv3x3U8::new(&spec, isa).map_err(kernel_err)?);
         }
@@ -160,7 +173,7 @@ impl NativeInt8Plan {
             x: window(c, first.zero_point, 0, 2)?,
             x_cat: window(c, cat.zero_point, 0, n + 1)?,
             s: (1..n)
-                .map(|k| window(hidden, quant.layers[k - 1].output.zero_point, k, 2))
+                .map(|k| window(hidden, hidden_grids[k - 1].zero_point, k, 2))
                 .collect::<Result<_>>()?,
             raw: vec![0.0; strips.rows * c_out * width],
             raw_place: Place::new(n, 0),
@@ -185,13 +198,17 @@ impl NativeInt8Plan {
         let quant = net.quant()?;
         let (h, w) = (self.height, self.width);
         self.forward(input, out)?;
-        let base = BaseInput::Rounded {
-            planar: input,
-            // The pre-filter has no offset; the rounding is the file's QuantizeLinear of the input.
-            offset: -net.graph.input_offset,
-            grid: quant.layers[0].input,
-            isa: net.isa,
-            plane: &mut self.base_plane,
+        let base = match quant.base_reads_rounded_input {
+            // Older files: the base filter reads the input as the first layer does, rounded.
+            true => BaseInput::Rounded {
+                planar: input,
+                // The pre-filter has no offset; the rounding is the file's QuantizeLinear of the input.
+                offset: -net.graph.input_offset,
+                grid: quant.layers[0].input,
+                isa: net.isa,
+                plane: &mut self.base_plane,
+            },
+            false => BaseInput::Planar(input),
         };
         finish_outputs(
             &net.graph,
@@ -205,8 +222,8 @@ impl NativeInt8Plan {
     }
 
     /// One frame, strip by strip, on the plan's threads: the input `planar` `[C][H][W]` quantised into its two
-    /// windows, every layer's strip, the last layer's raw rows rounded to the file's output grid and turned
-    /// into the heads (or the pre-filter's raw output) in `out`.
+    /// windows, every layer's strip, the last layer's raw rows (rounded to the file's output grid if it has one)
+    /// turned into the heads (or the pre-filter's raw output) in `out`.
     fn forward(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
         let net = self.net.clone();
         let quant = net.quant()?;
@@ -284,7 +301,8 @@ impl NativeInt8Plan {
                         &raw[(r * c_out + c) * w..(r * c_out + c + 1) * w]
                     };
                     let frame_rows = f0..f0 + rows.len();
-                    let grid = Some(out_grid);
+                    // The file's rounding of the last raw output, if it has one.
+                    let grid = out_grid;
                     heads_rows(
                         heads,
                         &raw_row,

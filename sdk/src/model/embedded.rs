@@ -300,17 +300,30 @@ pub fn prefilter_model(
 /// Loads the shipped pre-filter CNN of `offset_mm` trained with the `hologram_layers`-layer hologram CNN
 /// ([`paired_prefilter_cnn`]), checked against `expected` like any file.
 ///
-/// Errors: as [`paired_prefilter_cnn`] and [`HologramModel::from_bytes`].
+/// Errors: as [`paired_prefilter_cnn`] and [`HologramModel::from_bytes`]; [`HoloError::ModelMetadata`](crate::HoloError)
+/// if the file's `tensorholo.hologram_layers` is not `hologram_layers`.
 pub fn paired_prefilter_model(
     offset_mm: u32,
     hologram_layers: usize,
     precision: Precision,
     expected: &ModelConfig,
 ) -> Result<HologramModel> {
-    HologramModel::from_named_bytes(
+    let model = HologramModel::from_named_bytes(
         paired_prefilter_cnn(offset_mm, hologram_layers, precision)?,
         &paired_prefilter_file(offset_mm, hologram_layers, precision),
         ModelKind::PreFilter,
         expected,
-    )
+    )?;
+    // The file's name pairs it; its metadata must agree (a renamed or mis-exported file is refused).
+    match model.metadata().hologram_layers {
+        Some(l) if l != hologram_layers => Err(crate::HoloError::ModelMetadata {
+            key: "tensorholo.hologram_layers".into(),
+            found: l.to_string(),
+            expected: format!(
+                "{hologram_layers} (embedded as {})",
+                paired_prefilter_file(offset_mm, hologram_layers, precision)
+            ),
+        }),
+        _ => Ok(model),
+    }
 }

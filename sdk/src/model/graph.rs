@@ -67,18 +67,24 @@ pub struct LayerQuant {
     /// Grid of the layer's input `s_i` (for the last layer: of the concat).
     pub input: QuantGrid,
     /// Grid the file rounds the layer's result to before the next layer reads it: `s_{i+1}` (for the
-    /// second-to-last layer the concat's; for the last layer its raw output before the heads).
-    pub output: QuantGrid,
+    /// second-to-last layer the concat's), always present for those; for the last layer the grid of its raw
+    /// output before the heads or the pre-filter's sum, `None` where the file leaves that output float (the
+    /// exporter does since it stopped rounding convolution outputs).
+    pub output: Option<QuantGrid>,
 }
 
 /// The quantisation of an int8 QDQ file (`models/*.int8-qdq.onnx`): every convolution's s8 weights and the u8
 /// grid of every activation a convolution reads. An engine that fuses a layer's convolution, ReLU and
-/// residual add rounds once, to [`LayerQuant::output`]; the file also rounds the convolution's raw output
-/// before its ReLU (a second rounding, of at most half a step, that such an engine skips).
+/// residual add rounds once, to [`LayerQuant::output`], as the current exporter's files do; files exported
+/// before it (per-tensor weight scales) also round each convolution's raw output before its ReLU (a second
+/// rounding, of at most half a step, that such an engine skips).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CnnQuant {
     /// One entry per [`CnnWeights::layers`] entry.
     pub layers: Vec<LayerQuant>,
+    /// Pre-filter: whether the file's base filter reads the input rounded to the first layer's grid (files
+    /// exported before the exporter kept the blur's input float) rather than the float input itself.
+    pub base_reads_rounded_input: bool,
 }
 
 /// A TensorHolo residual CNN read from its ONNX graph ([`CnnWeights::from_model`]).
@@ -230,6 +236,7 @@ impl CnnWeights {
         // (operator, output tensor, constant) of each Add/Mul of the heads.
         let mut tail_consts: Vec<(&str, &str, f32)> = Vec::new();
         let mut tanh_count = 0;
+        let mut base_rounded = false;
         let sym = |syms: &HashMap<String, Sym>, name: &str| -> Sym {
             syms.get(name).cloned().unwrap_or(Sym::Meta)
         };
@@ -276,6 +283,14 @@ impl CnnWeights {
                         // A constant: s8 weights or i32 bias.
                         let zps = zp.and_then(int_tensor).unwrap_or_default();
                         let dims: Vec<usize> = t.dims.iter().map(|&d| d.max(0) as usize).collect();
+                        // Per-axis scales must run along the output channels (ONNX's default axis is 1).
+                        let axis = attr(node, "axis").map_or(1, |a| a.i);
+                        if scale.len() > 1 && axis != 0 {
+                            return Err(err(format!(
+                                "{}: per-channel scales along axis {axis} (expected 0, the output channels)",
+                                where_()
+                            )));
+                        }
                         if let Some((dims, q)) = i8_tensor(t) {
                             let c_out = dims.first().copied().unwrap_or(0);
                             let per = q.len() / c_out.max(1);
@@ -297,9 +312,25 @@ impl CnnWeights {
                                 .collect();
                             inits.insert(out_name.clone(), (dims, f));
                             qweights.insert(out_name, (q, scales));
-                        } else if let (6, Some(q), [sc]) = (t.data_type, int_tensor(t), &scale[..]) {
-                            let z = zps.first().copied().unwrap_or(0);
-                            let f = q.iter().map(|&v| (v - z) as f32 * sc).collect();
+                        } else if let (6, Some(q)) = (t.data_type, int_tensor(t)) {
+                            // An i32 bias: one scale (per-tensor weights) or one per output channel
+                            // (input scale × each channel's weight scale).
+                            if scale.len() != 1 && scale.len() != q.len() {
+                                return Err(err(format!(
+                                    "{}: {} bias scales for {} biases",
+                                    where_(),
+                                    scale.len(),
+                                    q.len()
+                                )));
+                            }
+                            let f = q
+                                .iter()
+                                .enumerate()
+                                .map(|(i, &v)| {
+                                    let z = zps.get(i).or(zps.first()).copied().unwrap_or(0);
+                                    (v - z) as f32 * scale[i.min(scale.len() - 1)]
+                                })
+                                .collect();
                             inits.insert(out_name, (dims, f));
                         } else {
                             return Err(err(format!(
@@ -352,6 +383,8 @@ impl CnnWeights {
                     if ins[0] != Sym::Input || !edge {
                         return Err(err(format!("{}: only an edge pad of the input", where_())));
                     }
+                    // The graph input itself, or its DequantizeLinear (the same tensor, rounded).
+                    base_rounded = node.input.first() != Some(&input);
                     Sym::PaddedInput
                 }
                 "Conv" => {
@@ -588,10 +621,9 @@ impl CnnWeights {
                     layer_qw[i].clone().ok_or_else(|| missing("s8 weights"))?;
                 let input = layer_in_grid[i].ok_or_else(|| missing("u8 input grid"))?;
                 let output = match i + 1 < n {
-                    true => layer_in_grid[i + 1],
+                    true => Some(layer_in_grid[i + 1].ok_or_else(|| missing("u8 output grid"))?),
                     false => conv_out_grid.get(&i).copied(),
-                }
-                .ok_or_else(|| missing("u8 output grid"))?;
+                };
                 q.push(LayerQuant {
                     weights,
                     weight_scales,
@@ -599,7 +631,10 @@ impl CnnWeights {
                     output,
                 });
             }
-            Some(CnnQuant { layers: q })
+            Some(CnnQuant {
+                layers: q,
+                base_reads_rounded_input: base_rounded,
+            })
         } else {
             None
         };
@@ -702,6 +737,8 @@ mod tests {
             assert!(f.quant.is_none());
             let quant = q.quant.as_ref().expect("QDQ grids");
             assert_eq!(quant.layers.len(), f.layers.len(), "{kind:?}");
+            // The exporter keeps the pre-filter's blur on the float input (export.py, _float_blur_input).
+            assert!(!quant.base_reads_rounded_input, "{kind:?}");
             assert_eq!(
                 (q.in_channels, q.input_offset),
                 (f.in_channels, f.input_offset)
@@ -729,8 +766,10 @@ mod tests {
                     assert!((bq - bf).abs() < 1e-3 * bf.abs().max(1.0), "{bq} vs {bf}");
                 }
                 // Layer i writes what layer i + 1 reads.
-                if let Some(next) = quant.layers.get(i + 1) {
-                    assert_eq!(g.output, next.input);
+                match quant.layers.get(i + 1) {
+                    Some(next) => assert_eq!(g.output, Some(next.input)),
+                    // The exporter leaves the last convolution's output float (export.py).
+                    None => assert_eq!(g.output, None, "{kind:?}"),
                 }
             }
             // Hidden activations after a ReLU are ≥ 0: their grids start at code 0.
@@ -744,5 +783,40 @@ mod tests {
         let g0 = q.quant.unwrap().layers[0].input;
         assert_eq!(g0.zero_point, 128);
         assert!((g0.scale - 1.0 / 255.0).abs() < 1e-6, "{g0:?}");
+    }
+
+    #[test]
+    fn per_channel_weight_scales_are_read_along_the_output_channels() {
+        let qdq = embedded::hologram_model(8, Precision::Int8Qdq, &config()).unwrap();
+        let good = qdq.onnx_graph().clone();
+        let q = CnnWeights::from_graph(&good, ModelKind::Hologram, "qdq").unwrap();
+        // The shipped QDQ files carry one scale per output channel (training/.../export.py, per_channel):
+        // each channel's largest |code| is 127 (symmetric MinMax), so the scales differ between channels.
+        for (l, g) in q.layers.iter().zip(&q.quant.as_ref().unwrap().layers) {
+            let per = l.c_in * 9;
+            for (c, chunk) in g.weights.chunks(per).enumerate() {
+                let top = chunk.iter().map(|&v| v.unsigned_abs()).max().unwrap();
+                assert!(top >= 126, "channel {c}: largest code {top}");
+            }
+            let (lo, hi) = g
+                .weight_scales
+                .iter()
+                .fold((f32::MAX, 0f32), |(a, b), &s| (a.min(s), b.max(s)));
+            assert!(hi > 1.05 * lo, "scales {lo}..{hi}");
+        }
+        // ONNX's default axis is 1: per-channel scales without `axis = 0` would scale input channels.
+        let mut bad = good;
+        let dq = bad
+            .node
+            .iter_mut()
+            .find(|n| {
+                n.op_type == "DequantizeLinear" && n.attribute.iter().any(|a| a.name == "axis")
+            })
+            .expect("a per-channel DequantizeLinear");
+        dq.attribute.retain(|a| a.name != "axis");
+        let err = CnnWeights::from_graph(&bad, ModelKind::Hologram, "axis")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("axis 1"), "{err}");
     }
 }

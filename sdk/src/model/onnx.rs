@@ -25,9 +25,23 @@ pub struct ModelProto {
     /// `graph` (7).
     #[prost(message, optional, tag = "7")]
     pub graph: Option<GraphProto>,
+    /// `opset_import` (8): the operator set versions (kept so that a re-encoded model stays runnable).
+    #[prost(message, repeated, tag = "8")]
+    pub opset_import: Vec<OperatorSetIdProto>,
     /// `metadata_props` (14): the `tensorholo.*` keys.
     #[prost(message, repeated, tag = "14")]
     pub metadata_props: Vec<StringStringEntryProto>,
+}
+
+/// `OperatorSetIdProto`: one operator set and its version.
+#[derive(Clone, PartialEq, Message)]
+pub struct OperatorSetIdProto {
+    /// `domain` (1): `""` for the default ONNX operators.
+    #[prost(string, tag = "1")]
+    pub domain: String,
+    /// `version` (2).
+    #[prost(int64, tag = "2")]
+    pub version: i64,
 }
 
 /// `StringStringEntryProto`: one metadata key and value.
