@@ -24,30 +24,7 @@ import os
 import numpy as np
 import torch
 
-from tensorholo_training.export import OUTPUT_NAMES
-
-
-def shipped_net(path: str):
-    """The network of a shipped f32 ONNX file, rebuilt in PyTorch: ``(net, metadata)``."""
-    from tensorholo_training.export import read_metadata
-    from tensorholo_training.model import hologram_cnn, load_prefilter_state, prefilter_cnn
-    from tensorholo_training.train import initial_state
-
-    md = read_metadata(path)
-    layers, channels = int(md["tensorholo.layers"]), int(md["tensorholo.channels"])
-    state = initial_state(path, "cpu")
-    if md["tensorholo.kind"] == "hologram-cnn":
-        net = hologram_cnn(layers, int(md["tensorholo.input_layers"]), channels)
-        net.load_state_dict(state["net"])
-        return net.eval(), md
-    base = md.get("tensorholo.prefilter_base", "aa-dpm(sigma_px=0.7,taps=5)")
-    if base.startswith("aa-dpm("):
-        args = dict(kv.split("=") for kv in base[len("aa-dpm("):-1].split(","))
-        net = prefilter_cnn(layers, channels, "aa-dpm", float(args["sigma_px"]), int(args["taps"]))
-    else:
-        net = prefilter_cnn(layers, channels, base)
-    load_prefilter_state(net, state["prefilter"], path)
-    return net.eval(), md
+from tensorholo_training.export import OUTPUT_NAMES, load_onnx_network
 
 
 def offset_hologram(dataset: str, holo_path: str, md: dict) -> np.ndarray:
@@ -57,7 +34,7 @@ def offset_hologram(dataset: str, holo_path: str, md: dict) -> np.ndarray:
     from tensorholo_training.model import prefilter_input
     from tensorholo_training.optics import Display, amp_phase_to_complex, offset_to_slm
 
-    net, _ = shipped_net(holo_path)
+    net, _ = load_onnx_network(holo_path)
     rgbd = LdiDataset(dataset, "test", 1)[0]["rgbd"][None, :, 100:124, 100:132]
     wavelengths = tuple(float(w) for w in md["tensorholo.wavelengths_m"].split(","))
     display = Display(wavelengths, float(md["tensorholo.pixel_pitch_m"]), float(md["tensorholo.volume_depth_m"]))
@@ -99,7 +76,7 @@ def main() -> None:
     rng = np.random.default_rng(2026)
     for name in NAMES:
         path = os.path.join(args.models, f"{name}.onnx")
-        net, md = shipped_net(path)
+        net, md = load_onnx_network(path)
         kind = md["tensorholo.kind"]
         if kind == "prefilter-cnn":
             holo = os.path.join(args.models, f"holo{md['tensorholo.hologram_layers']}_rgbd.onnx")

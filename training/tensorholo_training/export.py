@@ -176,8 +176,9 @@ class _Reader:
 
 
 def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray], fmt: str = "qoperator",
-                  per_channel: bool = True) -> str:
-    """Static int8 quantisation of the ``Conv`` nodes only (onnxruntime.quantization, MinMax calibration):
+                  per_channel: bool = True, calib_method: str = "minmax") -> str:
+    """Static int8 quantisation of the ``Conv`` nodes only (onnxruntime.quantization, MinMax calibration by
+    default):
     symmetric s8 weights, one scale per output channel (``per_channel``, what the native engine's int8 kernels
     apply; ``axis`` 0 of the weight's ``DequantizeLinear``) or one per tensor; u8 activations with a zero
     point, one scale per tensor.
@@ -188,10 +189,16 @@ def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray
         calibration: inputs ``[1, C, H, W]`` float32 (training crops, real frames), e.g. 16–64 of them.
         fmt: ``"qoperator"`` (``QLinearConv``) or ``"qdq"`` (Q/DQ pairs around float ``Conv``).
         per_channel: weight scales per output channel (default) or per tensor.
+        calib_method: ``"minmax"`` (each activation's range over the calibration inputs) or ``"percentile"``
+            (its 99.99th percentile of absolute values, onnxruntime's ``CalibPercentile``).
     Returns:
         ``out_path`` (metadata copied, ``tensorholo.precision`` updated).
     """
-    from onnxruntime.quantization import QuantFormat, QuantType, quantize_static
+    from onnxruntime.quantization import CalibrationMethod, QuantFormat, QuantType, quantize_static
+
+    methods = {"minmax": CalibrationMethod.MinMax, "percentile": CalibrationMethod.Percentile}
+    if calib_method not in methods:
+        raise ValueError(f"calib_method must be one of {sorted(methods)}, got {calib_method!r}")
 
     formats = {"qoperator": (QuantFormat.QOperator, "int8-qoperator-conv"),
                "qdq": (QuantFormat.QDQ, "int8-qdq-conv")}
@@ -205,7 +212,7 @@ def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray
     from onnxruntime.quantization.shape_inference import quant_pre_process
 
     name = onnx.load(f32_path).graph.input[0].name
-    extra = {"WeightSymmetric": True, "ActivationSymmetric": False}
+    extra = {"WeightSymmetric": True, "ActivationSymmetric": False, "CalibPercentile": 99.99}
     if fmt == "qdq":
         # A convolution's raw output is not rounded: what the next convolution reads is (after the ReLU and
         # the residual add), once, as the native engine's fused layers do; the last one's output (the heads'
@@ -224,7 +231,7 @@ def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray
         quantize_static(
             prepared, out_path, _Reader(name, calibration), quant_format=qformat, op_types_to_quantize=["Conv"],
             per_channel=per_channel, activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
-            nodes_to_exclude=fixed, extra_options=extra,
+            nodes_to_exclude=fixed, extra_options=extra, calibrate_method=methods[calib_method],
         )
     if fmt == "qdq":
         _float_blur_input(out_path)
@@ -340,6 +347,36 @@ def load_checkpoint(path: str) -> dict:
             "trained_resolution": s.get("trained_resolution", [0, 0])}
 
 
+def load_onnx_network(path: str) -> tuple[torch.nn.Module, dict[str, str]]:
+    """The network of an exported f32 ONNX file rebuilt in PyTorch, the inverse of :func:`export_onnx` with
+    :func:`model_metadata`: the architecture from ``tensorholo.layers``, ``channels``, ``input_layers`` and
+    ``prefilter_base``, the weights from the initialisers (:func:`.train.initial_state`). Returns ``(net in eval
+    mode, metadata)``.
+
+    Raises:
+        ValueError: an int8 file, an unknown ``tensorholo.kind``, a missing or unknown ``prefilter_base``.
+    """
+    from .train import initial_state
+
+    md = read_metadata(path)
+    layers, channels = int(md[METADATA_PREFIX + "layers"]), int(md[METADATA_PREFIX + "channels"])
+    state = initial_state(path, "cpu")
+    if md[METADATA_PREFIX + "kind"] == "hologram-cnn":
+        net = hologram_cnn(layers, int(md[METADATA_PREFIX + "input_layers"]), channels)
+        net.load_state_dict(state["net"])
+        return net.eval(), md
+    base = md.get(METADATA_PREFIX + "prefilter_base", "<missing>")
+    if base.startswith("aa-dpm(") and base.endswith(")"):  # model_metadata's aa-dpm(sigma_px=…,taps=…)
+        args = dict(kv.split("=", 1) for kv in base[len("aa-dpm("):-1].split(","))
+        pre = prefilter_cnn(layers, channels, "aa-dpm", float(args["sigma_px"]), int(args["taps"]))
+    elif base == "identity":
+        pre = prefilter_cnn(layers, channels, "identity")
+    else:
+        raise ValueError(f"{path}: tensorholo.prefilter_base {base!r}")
+    load_prefilter_state(pre, state["prefilter"], path)
+    return pre.eval(), md
+
+
 def calibration_inputs(dataset_root: str, input_layers: int, count: int = 32, size: int | None = None,
                        split: str = "train", seed: int = 0) -> list[np.ndarray]:
     """Hologram-CNN calibration inputs ``[1, 4·L, h, w]`` from a dataset (random crops of ``size`` if given)."""
@@ -398,6 +435,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="hologram CNN inputs [4L,H,W] of real frames (holo render --save-cnn-input; "
                          "training/real_frames.py inputs) added to the calibration set, --calib-crops crops each")
     ap.add_argument("--calib-crops", type=int, default=4, help="calibration crops per --calib-npy frame")
+    ap.add_argument("--calib-method", choices=["minmax", "percentile"], default="minmax",
+                    help="activation ranges: MinMax (default) or the 99.99th percentile")
     ap.add_argument("--per-tensor", action="store_true",
                     help="one weight scale per tensor (default: per output channel, the native engine's scheme)")
     only = ap.add_mutually_exclusive_group()
@@ -436,7 +475,7 @@ def main(argv: list[str] | None = None) -> int:
             if args.prefilter_only:
                 break
             out = os.path.join(args.out_dir, f"{args.name}.{suffix}.onnx")
-            quantize_int8(path, out, calib, fmt, per_channel=not args.per_tensor)
+            quantize_int8(path, out, calib, fmt, not args.per_tensor, args.calib_method)
             written.append(out)
         if pre_path is not None:
             from .model import prefilter_input
@@ -452,7 +491,7 @@ def main(argv: list[str] | None = None) -> int:
             for fmt, suffix in (("qoperator", "int8-qop"), ("qdq", "int8-qdq")):
                 stem = args.name if args.prefilter_only else f"{args.name}.prefilter"
                 out = os.path.join(args.out_dir, f"{stem}.{suffix}.onnx")
-                quantize_int8(pre_path, out, pre_calib, fmt, per_channel=not args.per_tensor)
+                quantize_int8(pre_path, out, pre_calib, fmt, not args.per_tensor, args.calib_method)
                 written.append(out)
     print(json.dumps({"written": written, "metadata": read_metadata(path)}, indent=1))
     return 0

@@ -5,7 +5,8 @@ import pytest
 import torch
 
 from tensorholo_training.export import (
-    export_onnx, frame_calibration_inputs, model_metadata, quantize_int8, read_metadata, run_onnx,
+    export_onnx, frame_calibration_inputs, load_onnx_network, model_metadata, quantize_int8, read_metadata,
+    run_onnx,
 )
 from tensorholo_training.model import hologram_cnn, prefilter_cnn, prefilter_input
 
@@ -260,3 +261,43 @@ def test_an_ldi_cnn_widened_from_an_rgbd_one_starts_as_it_whatever_the_back_laye
     assert widen_input_layers(same, ldi) is same
     same = rgbd.state_dict()
     assert widen_input_layers(same, rgbd) is same
+
+
+def test_an_exported_file_rebuilds_in_pytorch_with_the_same_outputs(exported, tmp_path):
+    net, path, _ = exported
+    pre = trained_like_prefilter()
+    pre_path = export_onnx(pre, str(tmp_path / "pre.onnx"), "prefilter-cnn", meta(pre, "prefilter-cnn"))
+    rng = np.random.default_rng(5)
+    for original, file, x in ((net, path, rng.random((1, 4, 12, 20), dtype=np.float32)),
+                              (pre, pre_path, slm_like(12, 20, 6))):
+        rebuilt, md = load_onnx_network(file)
+        assert type(rebuilt) is type(original) and md["tensorholo.kind"] in ("hologram-cnn", "prefilter-cnn")
+        with torch.no_grad():
+            for a, b in zip(original(torch.from_numpy(x)), rebuilt(torch.from_numpy(x))):
+                assert torch.equal(a, b)
+    m = onnx.load(pre_path)
+    keep = [p for p in m.metadata_props if p.key != "tensorholo.prefilter_base"]
+    del m.metadata_props[:]
+    m.metadata_props.extend(keep)
+    onnx.save(m, str(tmp_path / "nobase.onnx"))
+    with pytest.raises(ValueError, match="prefilter_base '<missing>'"):
+        load_onnx_network(str(tmp_path / "nobase.onnx"))
+
+
+def test_percentile_calibration_narrows_activation_ranges_and_bad_methods_are_refused(exported):
+    net, path, d = exported
+    rng = np.random.default_rng(2)
+    calib = [rng.random((1, 4, 32, 32), dtype=np.float32) for _ in range(4)]
+
+    def activation_scales(method):
+        out = quantize_int8(path, str(d / f"holo8.{method}.onnx"), calib, "qdq", True, method)
+        m = onnx.load(out)
+        inits = {i.name: onnx.numpy_helper.to_array(i) for i in m.graph.initializer}
+        return {n.input[0]: float(inits[n.input[1]]) for n in m.graph.node if n.op_type == "QuantizeLinear"}
+
+    minmax, pct = activation_scales("minmax"), activation_scales("percentile")
+    assert minmax.keys() == pct.keys()
+    assert all(pct[k] <= minmax[k] * (1 + 1e-6) for k in minmax)  # a percentile never exceeds the maximum
+    assert any(pct[k] < 0.99 * minmax[k] for k in minmax)
+    with pytest.raises(ValueError, match="calib_method"):
+        quantize_int8(path, str(d / "x.onnx"), calib, "qdq", True, "entropy")
