@@ -314,6 +314,14 @@ fn export_ldi(
         Split::Val => config.val,
         Split::Test => config.test,
     };
+    if args.out.join(MANIFEST_FILE).exists() {
+        bail!(
+            "--export-ldi writes an LDI folder, and `{}` holds a dataset ({MANIFEST_FILE}): choose another --out \
+             (the sample is regenerated from --seed and the scene flags, which the dataset's {MANIFEST_FILE} \
+             lists under generator.command)",
+            args.out.display()
+        );
+    }
     if index >= count {
         bail!(
             "--export-ldi {}:{index}: the {} split has {count} samples (--{}); sample indices start at 0",

@@ -407,12 +407,14 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let load_s = t.elapsed().as_secs_f64();
     let (pipeline, models) = args.model.pipeline(scene.input())?;
     let (h, w) = scene.size();
+    // What runs: the model file's own depth and precision (a --model file need not match --layers/--precision).
+    let cnn = pipeline.hologram_model().metadata();
     log::info!(
         "{h}×{w} frame ({}), {}-layer {} CNN {}, offset {} mm, {}",
         source["kind"].as_str().unwrap_or("?"),
-        args.model.layers,
+        cnn.layers,
         scene.input(),
-        args.model.precision(),
+        cnn.precision,
         args.model.offset_mm,
         if pipeline.prefilter_model().is_some() {
             "pre-filter CNN + DPM (DDPM)".to_string()

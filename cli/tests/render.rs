@@ -393,6 +393,20 @@ fn an_ldi_exported_by_holo_dataset_renders_with_the_ldi_cnn_and_is_refused_when_
         stderr(&o)
     );
     assert!(!dir.path().join("none").exists());
+    // Nor is an LDI written into a dataset's folder (a likely slip: --out pointed at the dataset).
+    let dataset = dir.path().join("dataset");
+    std::fs::create_dir(&dataset).unwrap();
+    std::fs::write(dataset.join("manifest.json"), "{}").unwrap();
+    let o = holo(&[
+        "dataset",
+        "--out",
+        dataset.to_str().unwrap(),
+        "--export-ldi",
+        "test:0",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("holds a dataset"), "{}", stderr(&o));
+    assert_eq!(std::fs::read_dir(&dataset).unwrap().count(), 1);
 
     let out = dir.path().join("r");
     let o = holo(&[

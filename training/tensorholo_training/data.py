@@ -181,6 +181,8 @@ class LdiDataset(torch.utils.data.Dataset):
 
     - ``"rgbd"``: float32 ``[4·L_in, h, w]`` network input (``L_in`` = ``input_layers``; per layer r, g, b, d);
     - ``"depth"``: float32 ``[h, w]`` first-layer normalised depth (for the dynamic focal stack);
+    - ``"ldi_depth"``: float32 ``[L, h, w]`` every layer's normalised depth (the focal stack attention of
+      ``fs_attention = "layers"``);
     - ``"valid"``: uint8 ``[L, h, w]``;
     - ``"midpoint"``: complex64 ``[3, h, w]`` ground-truth midpoint hologram.
 
@@ -264,6 +266,7 @@ class LdiDataset(torch.utils.data.Dataset):
         return {
             "rgbd": torch.from_numpy(ldi[: 4 * self.input_layers].copy()),
             "depth": torch.from_numpy(ldi[3].copy()),
+            "ldi_depth": torch.from_numpy(ldi[3::4].copy()),
             "valid": torch.from_numpy(np.ascontiguousarray(valid)),
             "midpoint": torch.from_numpy(np.ascontiguousarray(mid)),
         }

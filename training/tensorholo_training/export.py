@@ -176,7 +176,8 @@ class _Reader:
 
 
 def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray], fmt: str = "qoperator",
-                  per_channel: bool = True, calib_method: str = "minmax") -> str:
+                  per_channel: bool = True, calib_method: str = "minmax", float_convs: Sequence[str] = (),
+                  weights: str = "f32-file") -> str:
     """Static int8 quantisation of the ``Conv`` nodes only (onnxruntime.quantization, MinMax calibration by
     default):
     symmetric s8 weights, one scale per output channel (``per_channel``, what the native engine's int8 kernels
@@ -191,6 +192,10 @@ def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray
         per_channel: weight scales per output channel (default) or per tensor.
         calib_method: ``"minmax"`` (each activation's range over the calibration inputs) or ``"percentile"``
             (its 99.99th percentile of absolute values, onnxruntime's ``CalibPercentile``).
+        float_convs: learned convolutions left in float: ``"first"`` (it reads the float input), ``"last"``
+            (float weights for the heads' input or the pre-filter's correction).
+        weights: metadata ``tensorholo.int8_weights``: ``"f32-file"`` (the weights are the shipped f32 file's) or
+            ``"quantisation-aware"`` (fine-tuned with the int8 roundings, :mod:`.qat`).
     Returns:
         ``out_path`` (metadata copied, ``tensorholo.precision`` updated).
     """
@@ -199,6 +204,10 @@ def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray
     methods = {"minmax": CalibrationMethod.MinMax, "percentile": CalibrationMethod.Percentile}
     if calib_method not in methods:
         raise ValueError(f"calib_method must be one of {sorted(methods)}, got {calib_method!r}")
+    if weights not in ("f32-file", "quantisation-aware"):
+        raise ValueError(f"weights must be 'f32-file' or 'quantisation-aware', got {weights!r}")
+    if set(float_convs) - {"first", "last"}:
+        raise ValueError(f"float_convs may hold 'first' and 'last', got {list(float_convs)}")
 
     formats = {"qoperator": (QuantFormat.QOperator, "int8-qoperator-conv"),
                "qdq": (QuantFormat.QDQ, "int8-qdq-conv")}
@@ -224,10 +233,13 @@ def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray
         # Grouped convolutions are the pre-filter's fixed AA-DPM blur: kept in float (see the module docs).
         convs = [n for n in onnx.load(prepared).graph.node if n.op_type == "Conv"]
         fixed = [n.name for n in convs if any(a.name == "group" and a.i > 1 for a in n.attribute)]
-        if fmt == "qoperator":
+        learned = [n.name for n in convs if n.name not in fixed]
+        fixed += [learned[0]] if "first" in float_convs else []
+        fixed += [learned[-1]] if "last" in float_convs else []
+        if fmt == "qoperator" and learned[-1] not in fixed:
             # A QLinearConv rounds its output by definition: the last one (the heads' input, the pre-filter's
             # correction) stays a float Conv, as the QDQ file leaves that output float.
-            fixed.append([n.name for n in convs if n.name not in fixed][-1])
+            fixed.append(learned[-1])
         quantize_static(
             prepared, out_path, _Reader(name, calibration), quant_format=qformat, op_types_to_quantize=["Conv"],
             per_channel=per_channel, activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
@@ -237,6 +249,7 @@ def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray
         _float_blur_input(out_path)
     meta[METADATA_PREFIX + "precision"] = precision
     meta[METADATA_PREFIX + "int8_weight_scales"] = "per-output-channel" if per_channel else "per-tensor"
+    meta[METADATA_PREFIX + "int8_weights"] = weights
     set_metadata(out_path, meta)
     return out_path
 
@@ -387,6 +400,21 @@ def calibration_inputs(dataset_root: str, input_layers: int, count: int = 32, si
     return [ds[int(i)]["rgbd"].numpy()[None] for i in idx]
 
 
+def prefilter_calibration_inputs(net, calib: Sequence[np.ndarray], offset_m: float, display) -> list[np.ndarray]:
+    """The pre-filter's calibration inputs ``[1, 6, h, w]``: each hologram-CNN calibration input through ``net``
+    (the hologram CNN the pre-filter was trained behind), offset to the SLM plane (Eq. 6, ``offset_m`` metres),
+    as ``[Re, Im]`` channels (:func:`.model.prefilter_input`)."""
+    from .model import prefilter_input
+    from .optics import amp_phase_to_complex, offset_to_slm
+
+    out = []
+    with torch.no_grad():
+        for x in calib:
+            a, p = net(torch.from_numpy(x))
+            out.append(prefilter_input(offset_to_slm(amp_phase_to_complex(a, p), offset_m, display)).numpy())
+    return out
+
+
 def frame_calibration_inputs(paths: Sequence[str], input_layers: int, crops_per_frame: int, size: int | None,
                              seed: int = 0) -> list[np.ndarray]:
     """Calibration inputs ``[1, 4·L, h, w]`` from hologram CNN inputs saved by ``holo render --save-cnn-input``
@@ -437,6 +465,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--calib-crops", type=int, default=4, help="calibration crops per --calib-npy frame")
     ap.add_argument("--calib-method", choices=["minmax", "percentile"], default="minmax",
                     help="activation ranges: MinMax (default) or the 99.99th percentile")
+    ap.add_argument("--float-convs", nargs="*", choices=["first", "last"], default=[],
+                    help="learned convolutions of the int8 files left in float (first: reads the float input; "
+                         "last: float weights for the heads' input or the pre-filter's correction)")
+    ap.add_argument("--int8-only", action="store_true",
+                    help="write only the int8 files (implies --int8), e.g. from a quantisation-aware fine-tuning "
+                         "run (qat_prefilter) whose f32 weights are not the shipped f32 file's")
     ap.add_argument("--per-tensor", action="store_true",
                     help="one weight scale per tensor (default: per output channel, the native engine's scheme)")
     only = ap.add_mutually_exclusive_group()
@@ -452,18 +486,27 @@ def main(argv: list[str] | None = None) -> int:
                   input_layers=cfg["input_layers"], trained_resolution=ck["trained_resolution"],
                   training_commit=ck["training_commit"])
     written = []
-    path = os.path.join(args.out_dir, f"{args.name}.onnx")
+    os.makedirs(args.out_dir, exist_ok=True)
+    int8_weights = "quantisation-aware" if cfg.get("qat_prefilter") else "f32-file"
+    if args.int8_only:
+        args.int8 = True
+    import tempfile
+
+    scratch = tempfile.TemporaryDirectory()
+    # --int8-only: the f32 files (what the int8 ones are quantised from) are not kept
+    f32_dir = scratch.name if args.int8_only else args.out_dir
+    path = os.path.join(f32_dir, f"{args.name}.onnx")
     if args.prefilter_only and ck["prefilter"] is None:
         ap.error(f"{args.checkpoint} holds no pre-filter CNN (a 0 mm run?)")
     if not args.prefilter_only:
         export_onnx(ck["net"], path, "hologram-cnn", model_metadata("hologram-cnn", ck["net"], **common))
-        written.append(path)
+        written += [] if args.int8_only else [path]
     pre_path = None
     if ck["prefilter"] is not None and not args.no_prefilter:
-        pre_path = path if args.prefilter_only else os.path.join(args.out_dir, f"{args.name}.prefilter.onnx")
+        pre_path = path if args.prefilter_only else os.path.join(f32_dir, f"{args.name}.prefilter.onnx")
         export_onnx(ck["prefilter"], pre_path, "prefilter-cnn",
                     model_metadata("prefilter-cnn", ck["prefilter"], **common, hologram_layers=cfg["num_layers"]))
-        written.append(pre_path)
+        written += [] if args.int8_only else [pre_path]
     if args.int8:
         root = args.calib_dataset or cfg["dataset"]
         if root == "synthetic":
@@ -475,25 +518,22 @@ def main(argv: list[str] | None = None) -> int:
             if args.prefilter_only:
                 break
             out = os.path.join(args.out_dir, f"{args.name}.{suffix}.onnx")
-            quantize_int8(path, out, calib, fmt, not args.per_tensor, args.calib_method)
+            quantize_int8(path, out, calib, fmt, not args.per_tensor, args.calib_method, args.float_convs,
+                          "f32-file")  # a qat run fine-tunes only the pre-filter
             written.append(out)
         if pre_path is not None:
-            from .model import prefilter_input
-            from .optics import Display, amp_phase_to_complex, offset_to_slm
+            from .optics import Display
 
             display = Display(tuple(cfg["wavelengths_m"]), cfg["pixel_pitch_m"], cfg["volume_depth_m"])
-            pre_calib = []
-            with torch.no_grad():
-                for x in calib:
-                    a, p = ck["net"](torch.from_numpy(x))
-                    slm = offset_to_slm(amp_phase_to_complex(a, p), cfg["offset_mm"] * 1e-3, display)
-                    pre_calib.append(prefilter_input(slm).numpy())
+            pre_calib = prefilter_calibration_inputs(ck["net"], calib, cfg["offset_mm"] * 1e-3, display)
             for fmt, suffix in (("qoperator", "int8-qop"), ("qdq", "int8-qdq")):
                 stem = args.name if args.prefilter_only else f"{args.name}.prefilter"
                 out = os.path.join(args.out_dir, f"{stem}.{suffix}.onnx")
-                quantize_int8(pre_path, out, pre_calib, fmt, not args.per_tensor, args.calib_method)
+                quantize_int8(pre_path, out, pre_calib, fmt, not args.per_tensor, args.calib_method,
+                              args.float_convs, int8_weights)
                 written.append(out)
     print(json.dumps({"written": written, "metadata": read_metadata(path)}, indent=1))
+    scratch.cleanup()
     return 0
 
 

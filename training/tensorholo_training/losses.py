@@ -71,6 +71,9 @@ def data_fidelity_loss(pred: torch.Tensor, gt: torch.Tensor, mode: str = "comple
     raise ValueError(f"mode must be 'complex' or 'tensorholo', got {mode!r}")
 
 
+ATTENTION_MODES = ("front", "layers")
+
+
 @dataclass
 class FocalStackLossConfig:
     """Dynamic focal stack loss parameters.
@@ -81,6 +84,11 @@ class FocalStackLossConfig:
         random: extra random bins among the rest (5).
         attention_scale: ``κ`` of the depth attention ``exp(−κ·(|D − d| − min|D − d|))`` (normalised depth
             units); TensorHolo's value is not published, 5 makes content 0.2 away weigh ``e⁻¹``.
+        attention: which depth ``D`` the attention (and the focal depth histogram) reads: ``"front"``, the
+            first LDI layer (the paper's RGB-D depth map), or ``"layers"``, the nearest valid layer of the whole
+            LDI, so that a point hidden behind the front layer counts where the focal plane is at its depth
+            (the light of a hidden wall that passes around a thin bar in front of it; see
+            :func:`attention_masks`).
         kind: ``"l2"`` or ``"l1"``.
         pad: zero-pad the ASM (linear convolution), as TensorHolo does.
         band_limit: Matsushima band limit in the ASM.
@@ -95,6 +103,11 @@ class FocalStackLossConfig:
     pad: bool = True
     band_limit: bool = False
     chunk: int | None = None
+    attention: str = "front"
+
+    def __post_init__(self):
+        if self.attention not in ATTENTION_MODES:
+            raise ValueError(f"attention must be one of {ATTENTION_MODES}, got {self.attention!r}")
 
     @property
     def options(self) -> PropagationOptions:
@@ -103,26 +116,34 @@ class FocalStackLossConfig:
 
 
 def select_focal_depths(
-    depth: torch.Tensor, bins: int = 200, top: int = 15, random: int = 5, generator: torch.Generator | None = None
+    depth: torch.Tensor, bins: int = 200, top: int = 15, random: int = 5, generator: torch.Generator | None = None,
+    valid: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Per-sample focal depths of the dynamic focal stack (TensorHolo V1/V2).
 
-    Histogram of each sample's first-layer depth in ``bins`` bins over ``[0, 1]``; bins sorted by count
+    Histogram of each sample's depth in ``bins`` bins over ``[0, 1]`` (the first layer's, or every valid point
+    of every layer of an LDI depth ``[B, L, H, W]`` with ``valid``); bins sorted by count
     (descending, stable); one uniform jitter ``u ∈ [0, 1)`` per sample moves all centres inside their bins
     (``(index + u)/bins``); the ``top`` most populated plus ``random`` drawn from the remaining bins.
 
     Args:
-        depth: float ``[B, H, W]`` normalised depth.
+        depth: float ``[B, H, W]`` normalised depth, or ``[B, L, H, W]`` that of each LDI layer.
         bins, top, random: see above (``top + random ≤ bins``).
         generator: torch random generator (CPU) for reproducibility.
+        valid: ``[B, L, H, W]`` (bool or 0/1) the LDI's valid points; required with a 4-D ``depth``.
     Returns:
         float32 ``[B, top + random]`` normalised depths in ``[0, 1)``.
     """
     if top + random > bins:
         raise ValueError("top + random must not exceed bins")
+    if depth.ndim == 4 and valid is None:
+        raise ValueError("an LDI depth [B, L, H, W] needs its valid mask")
     out = []
     for b in range(depth.shape[0]):
-        hist = torch.histc(depth[b].detach().float().cpu(), bins=bins, min=0.0, max=1.0)
+        points = depth[b].detach().float().cpu()
+        if depth.ndim == 4:
+            points = points[valid[b].detach().cpu().bool()]
+        hist = torch.histc(points, bins=bins, min=0.0, max=1.0)
         order = torch.argsort(hist, descending=True, stable=True).float()
         u = torch.rand(1, generator=generator)
         idx = (order + u) / bins
@@ -132,15 +153,30 @@ def select_focal_depths(
     return torch.stack(out).to(depth.device)
 
 
-def attention_masks(depth: torch.Tensor, focal: torch.Tensor, scale: float) -> torch.Tensor:
+def attention_masks(
+    depth: torch.Tensor, focal: torch.Tensor, scale: float, valid: torch.Tensor | None = None
+) -> torch.Tensor:
     """Depth attention per focal plane: ``exp(κ·(1 − |D − d|))`` normalised to max 1 per plane.
 
+    With an LDI depth ``[B, L, H, W]``, ``|D − d|`` is that of the pixel's nearest valid layer,
+    ``min_k |D_k − d|``: a pixel counts fully where any of its points, hidden or not, is in focus. With the
+    first layer's depth alone (the paper), a wall hidden behind a near bar weighs ``e^{−κ·Δ}`` in the bar's
+    pixels when the focal plane is on the wall, although the wall's light passes around the bar there.
+
     Args:
-        depth: float ``[B, H, W]``; focal: float ``[B, D]``; scale: ``κ``.
+        depth: float ``[B, H, W]``, or ``[B, L, H, W]`` per LDI layer; focal: float ``[B, D]``; scale: ``κ``.
+        valid: ``[B, L, H, W]`` the LDI's valid points; required with a 4-D ``depth`` (layer 0 should be valid
+            everywhere; a pixel with no valid layer gets the weight of depth distance 1).
     Returns:
         float32 ``[B, D, 1, H, W]`` in ``(0, 1]``.
     """
-    diff = (depth[:, None] - focal[:, :, None, None]).abs()
+    if depth.ndim == 4:
+        if valid is None:
+            raise ValueError("an LDI depth [B, L, H, W] needs its valid mask")
+        diff = (depth[:, None] - focal[:, :, None, None, None]).abs()
+        diff = diff.masked_fill(~valid[:, None].bool(), 1.0).amin(dim=2)
+    else:
+        diff = (depth[:, None] - focal[:, :, None, None]).abs()
     w = torch.exp(scale * (1.0 - diff))
     w = w / w.flatten(2).amax(dim=2)[..., None, None]
     return w[:, :, None].float()
@@ -154,6 +190,7 @@ def focal_stack_loss(
     display: Display,
     cfg: FocalStackLossConfig = FocalStackLossConfig(),
     gt_stack: torch.Tensor | None = None,
+    valid: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Dynamic focal stack loss and its total-variation term.
 
@@ -163,10 +200,12 @@ def focal_stack_loss(
 
     Args:
         pred, gt: complex64 ``[B, 3, H, W]`` midpoint holograms.
-        depth: float ``[B, H, W]`` first-layer normalised depth.
+        depth: float ``[B, H, W]`` first-layer normalised depth, or ``[B, L, H, W]`` per LDI layer (with
+            ``valid``; :func:`attention_masks`).
         focal: float ``[B, D]`` focal depths (:func:`select_focal_depths`).
         display: geometry; cfg: see :class:`FocalStackLossConfig`.
         gt_stack: precomputed ``|ASM(gt, z(d))|`` ``[B, D, 3, H, W]`` (optional).
+        valid: ``[B, L, H, W]`` the LDI's valid points (with a 4-D ``depth``).
     Returns:
         ``(focal_stack_loss, tv_loss)`` scalars.
     """
@@ -176,7 +215,7 @@ def focal_stack_loss(
     if gt_stack is None:
         with torch.no_grad():
             gt_stack = optics.focal_stack(gt, focal, display, 0.0, opts, chunk=cfg.chunk)
-    w = attention_masks(depth, focal, cfg.attention_scale)
+    w = attention_masks(depth, focal, cfg.attention_scale, valid)
     wp, wg = img_pred * w, gt_stack * w
     loss = op(wp, wg)
     tv = 0.5 * op(wp[..., :, 1:] - wp[..., :, :-1], wg[..., :, 1:] - wg[..., :, :-1]) + 0.5 * op(
@@ -263,13 +302,15 @@ def stage1_loss(
     fs: FocalStackLossConfig = FocalStackLossConfig(),
     data_mode: str = "complex",
     generator: torch.Generator | None = None,
+    valid: torch.Tensor | None = None,
 ) -> dict[str, torch.Tensor]:
     """Stage-1 loss: data fidelity + dynamic focal stack + TV.
 
     Args:
         amplitude, phase01: hologram CNN outputs ``[B, 3, H, W]``.
         gt: complex64 ``[B, 3, H, W]`` ground-truth midpoint.
-        depth: float ``[B, H, W]`` first-layer depth.
+        depth: float ``[B, H, W]`` first-layer depth, or ``[B, L, H, W]`` per LDI layer with ``valid``
+            ``[B, L, H, W]`` (``fs.attention = "layers"``; :func:`attention_masks`).
         display, weights, fs, data_mode: see the respective functions/classes.
         generator: random generator of the focal depth selection.
     Returns:
@@ -277,8 +318,8 @@ def stage1_loss(
     """
     pred = optics.amp_phase_to_complex(amplitude, phase01)
     data = data_fidelity_loss(pred, gt, data_mode, fs.kind)
-    focal = select_focal_depths(depth, fs.bins, fs.top, fs.random, generator)
-    fsl, tv = focal_stack_loss(pred, gt, depth, focal, display, fs)
+    focal = select_focal_depths(depth, fs.bins, fs.top, fs.random, generator, valid)
+    fsl, tv = focal_stack_loss(pred, gt, depth, focal, display, fs, valid=valid)
     total = weights.data * data + weights.focal_stack * fsl + weights.focal_stack_tv * tv
     return {"total": total, "data": data, "focal_stack": fsl, "focal_stack_tv": tv}
 
@@ -291,17 +332,19 @@ def stage2_loss(
     weights: LossWeights = LossWeights(),
     fs: FocalStackLossConfig = FocalStackLossConfig(),
     generator: torch.Generator | None = None,
+    valid: torch.Tensor | None = None,
 ) -> dict[str, torch.Tensor]:
     """Stage-2 loss: focal stack of the post-encoding midpoint vs GT, its TV, and Eq. 11 on the pre-encoding
     phase. No direct supervision by the GT hologram (paper: "intentionally ablated").
 
     Args:
-        out: :func:`ddpm_forward` output; gt: complex64 ``[B, 3, H, W]``; depth: ``[B, H, W]``.
+        out: :func:`ddpm_forward` output; gt: complex64 ``[B, 3, H, W]``; depth: ``[B, H, W]``, or
+        ``[B, L, H, W]`` with ``valid`` (as :func:`stage1_loss`).
     Returns:
         dict with ``"total"``, ``"focal_stack"``, ``"focal_stack_tv"``, ``"regulariser"`` scalars.
     """
-    focal = select_focal_depths(depth, fs.bins, fs.top, fs.random, generator)
-    fsl, tv = focal_stack_loss(out.post_midpoint, gt, depth, focal, display, fs)
+    focal = select_focal_depths(depth, fs.bins, fs.top, fs.random, generator, valid)
+    fsl, tv = focal_stack_loss(out.post_midpoint, gt, depth, focal, display, fs, valid=valid)
     reg = phase_regulariser(out.pre_phase01)
     total = weights.focal_stack * fsl + weights.focal_stack_tv * tv + weights.regulariser * reg
     return {"total": total, "focal_stack": fsl, "focal_stack_tv": tv, "regulariser": reg}

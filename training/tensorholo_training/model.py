@@ -69,6 +69,10 @@ class ResidualCNN(nn.Module):
         convs += [nn.Conv2d(channels, channels, 3, padding=1) for _ in range(num_layers - 2)]
         convs.append(nn.Conv2d(channels + in_channels, out_channels, 3, padding=1))
         self.convs = nn.ModuleList(convs)
+        # Rounding of each convolution's input ``s_i`` (and of the last one's concat), ``(i, tensor) -> tensor``,
+        # where every reader of ``s_i`` sees it (its convolution, a later residual add, the concat): the int8
+        # scheme, set by :func:`.qat.fake_quantise`. ``None``: float.
+        self.activation_quant = None
 
     def layer_inputs_are_residual(self) -> list[bool]:
         """For each layer, whether its input is ``y_{i−1} + s_{i−2}`` (a residual connection)."""
@@ -88,6 +92,7 @@ class ResidualCNN(nn.Module):
         residual = self.layer_inputs_are_residual()
         inputs: list[torch.Tensor] = []
         y = xin
+        q = self.activation_quant
         for i, conv in enumerate(self.convs):
             if i == 0:
                 s = xin
@@ -95,9 +100,11 @@ class ResidualCNN(nn.Module):
                 s = y + inputs[i - 2]
             else:
                 s = y
-            inputs.append(s)
             if i == self.num_layers - 1:
-                return conv(torch.cat([s, xin], dim=1))
+                cat = torch.cat([s, inputs[0]], dim=1)
+                return conv(q(i, cat) if q is not None else cat)
+            s = q(i, s) if q is not None else s
+            inputs.append(s)
             y = torch.relu(conv(s))
         raise AssertionError("unreachable")
 

@@ -108,6 +108,19 @@ class TrainConfig:
     fs_top: int = 15
     fs_random: int = 5
     fs_attention_scale: float = 5.0
+    # the depth the focal stack's attention and focal depths read: "front" (first layer, the paper) or
+    # "layers" (nearest valid layer of the LDI: hidden points count where in focus; losses.attention_masks)
+    fs_attention: str = "front"
+    # quantisation-aware fine-tuning of the pre-filter for the int8 files (tensorholo_training.qat): its learned
+    # convolutions read their inputs rounded to the u8 grids the exporter calibrates (the same inputs: these
+    # dataset crops and the real frames' CNN inputs, through the frozen hologram CNN) and use s8 weights
+    qat_prefilter: bool = False
+    qat_calib_dataset: str = ""  # "" = the run's dataset
+    qat_calib_samples: int = 32
+    qat_calib_size: int = 128
+    qat_calib_npy: list = field(default_factory=list)
+    qat_calib_crops: int = 4
+    qat_calib_method: str = "minmax"  # as export --calib-method: "minmax" or "percentile"
     asm_pad: bool | None = None  # None: as the dataset's synthesis.pad (manifest), else False
     asm_band_limit: bool | None = None  # None: as the dataset's synthesis.band_limit, else False
     fs_chunk: int = 0
@@ -151,7 +164,7 @@ class TrainConfig:
         """The focal stack loss configuration."""
         return L.FocalStackLossConfig(
             self.fs_bins, self.fs_top, self.fs_random, self.fs_attention_scale, self.loss_kind,
-            bool(self.asm_pad), bool(self.asm_band_limit), self.fs_chunk or None,
+            bool(self.asm_pad), bool(self.asm_band_limit), self.fs_chunk or None, self.fs_attention,
         )
 
     def weights(self) -> L.LossWeights:
@@ -346,9 +359,12 @@ class Trainer:
                 raise ValueError(f"init_prefilter_from {cfg.init_prefilter_from}: holds no pre-filter CNN")
             load_prefilter_state(self.prefilter, state["prefilter"], cfg.init_prefilter_from)
             self.log(f"pre-filter initialised from {cfg.init_prefilter_from}")
+        if cfg.qat_prefilter:
+            self._fake_quantise_prefilter()
         self.best: dict = {}
         self.phases = self._phases()
         self.lr_at(0, 1)  # an unknown lr_schedule fails here, not after the first batch
+        cfg.fs_config()  # so does an unknown fs_attention
         self.phase_index = 0
         self.phase_step = 0
         self.global_step = 0
@@ -356,6 +372,37 @@ class Trainer:
         self.scaler = None
         self._new_optimizer()
         self.commit = git_commit()
+
+    def _fake_quantise_prefilter(self) -> None:
+        """``qat_prefilter``: the pre-filter's u8 grids (those the exporter gives the initial weights, on its
+        calibration inputs, :func:`.qat.exporter_grids`; kept in ``run_dir/qat_grids.json`` so that a resumed
+        run uses the same), then its fake quantisation (:func:`.qat.fake_quantise`)."""
+        from . import qat
+        from .export import calibration_inputs, frame_calibration_inputs, prefilter_calibration_inputs
+
+        cfg = self.cfg
+        if self.prefilter is None:
+            raise ValueError("qat_prefilter needs a pre-filter (stage2 at a non-zero offset)")
+        path = os.path.join(cfg.run_dir, "qat_grids.json")
+        if os.path.exists(path):
+            with open(path) as f:
+                grids = [qat.Grid(**g) for g in json.load(f)["grids"]]
+        else:
+            size = cfg.qat_calib_size or None
+            calib = calibration_inputs(cfg.qat_calib_dataset or self.dataset_root, cfg.input_layers,
+                                       cfg.qat_calib_samples, size)
+            calib += frame_calibration_inputs(cfg.qat_calib_npy, cfg.input_layers, cfg.qat_calib_crops, size)
+            self.net.eval()
+            inputs = prefilter_calibration_inputs(self.net.cpu(), calib, cfg.offset_m, self.display)
+            self.net.to(self.device)
+            grids = qat.exporter_grids(self.prefilter, "prefilter-cnn", inputs, cfg.qat_calib_method)
+            os.makedirs(cfg.run_dir, exist_ok=True)
+            with open(path, "w") as f:
+                json.dump({"calibration_inputs": len(inputs), "calib_method": cfg.qat_calib_method,
+                           "grids": [dataclasses.asdict(g) for g in grids]}, f, indent=1)
+        self.prefilter.to(self.device)
+        qat.fake_quantise(self.prefilter, grids)
+        self.log(f"pre-filter fake-quantised on {len(grids)} u8 grids ({path})")
 
     # -- schedule -----------------------------------------------------------------------------------------
     def _phases(self) -> list[tuple[str, int]]:
@@ -410,25 +457,32 @@ class Trainer:
     def _generator(self, step: int, salt: int = 0) -> torch.Generator:
         return torch.Generator().manual_seed(self.cfg.seed * 1_000_003 + step * 7 + salt)
 
+    def attention_depth(self, batch: dict) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The depth the focal stack's attention reads (``cfg.fs_attention``): the first layer's ``[B, H, W]``
+        and ``None``, or every LDI layer's ``[B, L, H, W]`` and their valid mask ``[B, L, H, W]``."""
+        if self.cfg.fs_attention == "layers":
+            return batch["ldi_depth"].to(self.device), batch["valid"].to(self.device)
+        return batch["depth"].to(self.device), None
+
     def compute_loss(self, batch: dict, phase: str, generator: torch.Generator) -> dict:
         """Losses of one batch for ``phase`` (see :mod:`.losses`); also ``"pred"`` (complex midpoint used
         for PSNR: the CNN output in stage 1, the post-encoding hologram in stage 2)."""
         cfg = self.cfg
         rgbd = batch["rgbd"].to(self.device)
         gt = batch["midpoint"].to(self.device)
-        depth = batch["depth"].to(self.device)
+        depth, valid = self.attention_depth(batch)
         frozen = phase == "stage2" and not cfg.stage2_train_hologram
         with self._autocast(), torch.set_grad_enabled(torch.is_grad_enabled() and not frozen):
             amp, phs = self.net(rgbd)
         amp, phs = amp.float(), phs.float()
         if phase == "stage1":
             out = L.stage1_loss(amp, phs, gt, depth, self.display, cfg.weights(), cfg.fs_config(),
-                                cfg.data_mode, generator)
+                                cfg.data_mode, generator, valid)
             out["pred"] = optics.amp_phase_to_complex(amp, phs)
             return out
         with self._autocast():
             dd = L.ddpm_forward(amp, phs, self.prefilter, cfg.offset_m, self.display, cfg.options)
-        out = L.stage2_loss(dd, gt, depth, self.display, cfg.weights(), cfg.fs_config(), generator)
+        out = L.stage2_loss(dd, gt, depth, self.display, cfg.weights(), cfg.fs_config(), generator, valid)
         out["pred"] = dd.post_midpoint
         return out
 
@@ -478,9 +532,9 @@ class Trainer:
             gt = batch["midpoint"].to(self.device)
             pred = out["pred"]
             amp_psnr += psnr(gt.abs(), pred.abs()).tolist()
-            depth = batch["depth"].to(self.device)
+            depth, valid = self.attention_depth(batch)
             focal = L.select_focal_depths(depth, self.cfg.fs_bins, self.cfg.fs_top, self.cfg.fs_random,
-                                          self._generator(k, salt=2))
+                                          self._generator(k, salt=2), valid)
             opts = self.cfg.options
             s_gt = optics.focal_stack(gt, focal, self.display, 0.0, opts, chunk=self.cfg.fs_chunk or None)
             s_pr = optics.focal_stack(pred, focal, self.display, 0.0, opts, chunk=self.cfg.fs_chunk or None)

@@ -23,6 +23,12 @@ def meta(net, kind="hologram-cnn"):
     return model_metadata(kind, net, [638e-9, 520e-9, 450e-9], 8e-6, 6e-3, 6e-3, 1, [384, 384], "abc123")
 
 
+def rgbd_calib(seed, count=4):
+    """``count`` random RGB-D calibration inputs ``[1, 4, 32, 32]``."""
+    rng = np.random.default_rng(seed)
+    return [rng.random((1, 4, 32, 32), dtype=np.float32) for _ in range(count)]
+
+
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory):
     torch.manual_seed(0)
@@ -92,9 +98,7 @@ def test_int8_round_trip(exported, fmt):
 @pytest.mark.parametrize("per_channel", [True, False])
 def test_int8_weight_scales_per_output_channel_or_per_tensor(exported, per_channel):
     net, path, d = exported
-    rng = np.random.default_rng(1)
-    calib = [rng.random((1, 4, 32, 32), dtype=np.float32) for _ in range(4)]
-    out = quantize_int8(path, str(d / f"holo8.pc{per_channel}.onnx"), calib, "qdq", per_channel=per_channel)
+    out = quantize_int8(path, str(d / f"holo8.pc{per_channel}.onnx"), rgbd_calib(1), "qdq", per_channel=per_channel)
     model = onnx.load(out)
     inits = {i.name: onnx.numpy_helper.to_array(i) for i in model.graph.initializer}
     convs = [c for c in net.modules() if isinstance(c, torch.nn.Conv2d)]
@@ -301,3 +305,17 @@ def test_percentile_calibration_narrows_activation_ranges_and_bad_methods_are_re
     assert any(pct[k] < 0.99 * minmax[k] for k in minmax)
     with pytest.raises(ValueError, match="calib_method"):
         quantize_int8(path, str(d / "x.onnx"), calib, "qdq", True, "entropy")
+
+
+@pytest.mark.parametrize("which", [["first"], ["last"], ["first", "last"]])
+def test_float_convs_leave_the_named_learned_convolutions_float(exported, which):
+    net, path, d = exported
+    calib = rgbd_calib(5)
+    out = quantize_int8(path, str(d / f"holo8.{'_'.join(which)}.onnx"), calib, "qdq", float_convs=which)
+    model = onnx.load(out)
+    made_by = {o: n.op_type for n in model.graph.node for o in n.output}
+    convs = [n for n in model.graph.node if n.op_type == "Conv"]
+    float_weights = [made_by.get(c.input[1]) != "DequantizeLinear" for c in convs]
+    assert float_weights == [("first" in which and i == 0) or ("last" in which and i == 7) for i in range(8)]
+    with pytest.raises(ValueError, match="float_convs"):
+        quantize_int8(path, str(d / "x.onnx"), calib, "qdq", float_convs=["middle"])

@@ -77,6 +77,46 @@ def test_attention_mask_peaks_at_the_focal_plane():
     assert float(row[-1]) == pytest.approx(math.exp(-5 * (1 - 15 / 49)), rel=1e-3)
 
 
+def test_layered_attention_counts_a_hidden_point_where_it_is_in_focus():
+    # A near bar (depth 0.1, columns 4..8) in front of a wall (0.9) that the LDI's second layer holds behind it.
+    front = torch.full((1, 6, 12), 0.9)
+    front[..., 4:8] = 0.1
+    depth = torch.stack([front, torch.full((1, 6, 12), 0.9)], dim=1)  # [B, L, H, W]
+    valid = torch.zeros(1, 2, 6, 12, dtype=torch.uint8)
+    valid[:, 0] = 1
+    valid[:, 1, :, 4:8] = 1
+    focal = torch.tensor([[0.9, 0.1]])
+    layered = L.attention_masks(depth, focal, 5.0, valid)
+    paper = L.attention_masks(front, focal, 5.0)
+    # focused on the wall: the paper's mask gives the bar's pixels e^(-5·0.8); the layered one counts the
+    # wall hidden there fully
+    assert float(paper[0, 0, 0, 0, 5]) == pytest.approx(math.exp(-4.0), rel=1e-5)
+    assert float(layered[0, 0, 0, 0, 5]) == pytest.approx(1.0)
+    # focused on the bar, both masks agree: the wall beside the bar is 0.8 away either way
+    assert torch.allclose(layered[:, 1], paper[:, 1])
+    # invalid points are ignored: with the second layer invalid everywhere the masks are the paper's
+    assert torch.allclose(L.attention_masks(depth, focal, 5.0, valid * torch.tensor([1, 0]).view(1, 2, 1, 1)),
+                          paper)
+    with pytest.raises(ValueError, match="valid"):
+        L.attention_masks(depth, focal, 5.0)
+
+
+def test_layered_focal_depths_come_from_every_valid_point():
+    front = torch.full((1, 10, 10), 0.3)
+    depth = torch.stack([front, torch.full((1, 10, 10), 0.7), torch.full((1, 10, 10), 0.95)], dim=1)
+    valid = torch.ones(1, 3, 10, 10, dtype=torch.uint8)
+    valid[:, 1, :, 5:] = 0  # the middle layer holds half the pixels
+    valid[:, 2] = 0  # the back layer none: its depth never counts
+    f = L.select_focal_depths(depth, bins=100, top=2, random=0, generator=torch.Generator().manual_seed(0),
+                              valid=valid)
+    assert sorted(int(v * 100) for v in f[0]) == [30, 70]  # the front's bin first, then the hidden layer's
+    assert int(f[0, 0] * 100) == 30
+    with pytest.raises(ValueError, match="valid"):
+        L.select_focal_depths(depth)
+    with pytest.raises(ValueError, match="attention"):
+        L.FocalStackLossConfig(attention="hidden")
+
+
 def test_phase_regulariser():
     flat = torch.full((1, 3, 8, 8), 0.5)
     assert float(L.phase_regulariser(flat)) < 1e-5

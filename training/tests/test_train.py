@@ -134,3 +134,23 @@ def test_cosine_schedule_runs_from_lr_to_its_final_ratio_and_is_applied(tmp_path
     assert constant.lr_at(0, 5) == constant.lr_at(4, 5) == 2e-3
     with pytest.raises(ValueError, match="lr_schedule"):
         Trainer(small_cfg(tmp_path / "x", tiny_dataset, lr_schedule="step"), log=lambda m: None)
+
+
+def test_layered_attention_reads_every_ldi_layer_and_changes_only_the_focal_stack_terms(tmp_path, tiny_dataset):
+    front = Trainer(small_cfg(tmp_path / "f", tiny_dataset, input_layers=2), log=lambda m: None)
+    layers = Trainer(small_cfg(tmp_path / "l", tiny_dataset, input_layers=2, fs_attention="layers"),
+                     log=lambda m: None)
+    layers.net.load_state_dict(front.net.state_dict())
+    batch = next(iter(front.val_batches()))[2]
+    depth, valid = layers.attention_depth(batch)
+    assert depth.shape == valid.shape and depth.ndim == 4 and torch.equal(depth[:, 0], batch["depth"])
+    assert bool(valid[:, 1:].any())  # the tiny dataset has hidden points
+    assert front.attention_depth(batch)[1] is None
+    with torch.no_grad():
+        a = front.compute_loss(batch, "stage1", torch.Generator().manual_seed(3))
+        b = layers.compute_loss(batch, "stage1", torch.Generator().manual_seed(3))
+    assert float(a["data"]) == pytest.approx(float(b["data"]))
+    assert float(a["focal_stack"]) != pytest.approx(float(b["focal_stack"]), rel=1e-4)
+    layers.run(max_steps=2)
+    with pytest.raises(ValueError, match="attention"):
+        Trainer(small_cfg(tmp_path / "x", tiny_dataset, fs_attention="hidden"), log=lambda m: None)
