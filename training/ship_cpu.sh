@@ -12,11 +12,9 @@
 #   the photo-trained CNNs: holo30 and holo15 continued on the photo-textured dataset (holo8's photo run is
 #   ldi8's RGB-D one), and a pre-filter per offset for each of them (their CNN frozen),
 #
-#   each of those pre-filters fine-tuned for its int8 files (qat: quantisation-aware, their CNN frozen),
-#
 #   training/ship_cpu.sh [STEP ...]      STEP: dataset holo8 holo15 holo30 pre6 pre12 photos photo-dataset ldi8
-#                                        pairs photo-cnn photo-pairs real-inputs qat export eval eval-pairs
-#                                        eval-real
+#                                        pairs photo-cnn photo-pairs real-inputs export eval eval-pairs
+#                                        eval-real; qat (an experiment, not in the default list)
 #                                        (default: all)
 #   then: training/make_shipped_fixtures.py (models/fixtures), holo baselines + evaluate (models/MODEL_CARD.md)
 #
@@ -44,7 +42,7 @@ SHIPPED_BEFORE="${SHIPPED_BEFORE:-c2e4cdb}"
 export PYTHONPATH="$root/training${PYTHONPATH:+:$PYTHONPATH}"
 steps=("$@")
 [ ${#steps[@]} -eq 0 ] && steps=(dataset holo8 holo15 holo30 pre6 pre12 photos photo-dataset ldi8 pairs photo-cnn
-  photo-pairs real-inputs qat export eval eval-pairs eval-real)
+  photo-pairs real-inputs export eval eval-pairs eval-real)
 
 stage1() {  # LAYERS STEPS
   "$py" -m tensorholo_training.train --config training/configs/cpu_stage1.json --run-dir "$runs/holo$1" \
@@ -140,9 +138,9 @@ PY
     holo30) stage1 30 "${STEPS30:-5000}" ;;
     pre6) prefilter 6 ;;
     pre12) prefilter 12 ;;
-    qat)  # each pre-filter fine-tuned for its int8 files (tensorholo_training.qat): its convolutions read u8-rounded
-      # inputs on the exporter's grids (same calibration inputs and percentile method as export) with s8 weights,
-      # CNN frozen, 600 steps
+    qat)  # an experiment, not shipped (models/MODEL_CARD.md, "int8: what did not help"): each pre-filter fine-tuned
+      # with its int8 roundings in the loop (tensorholo_training.qat): its convolutions read u8-rounded inputs on
+      # the exporter's grids (same calibration inputs, percentile method) with s8 weights, CNN frozen, 600 steps
       npy=$(printf '"%s",' runs/real_inputs/rgbd/*.npy)
       for l in 8 15 30; do
         for o in 6 12; do
@@ -165,19 +163,8 @@ PY
           --name "holo${l}_rgbd" --no-prefilter "${calib[@]}" --calib-npy runs/real_inputs/rgbd/*.npy
         for o in 6 12; do
           name="prefilter_${o}mm_holo$l"; [ "$l" = 8 ] && name="prefilter_${o}mm"
-          case "$o:$l" in
-            12:8|6:30)  # f32 and int8 (MinMax) from the pre-filter's run: its qat run lost as much or more
-              # (models/MODEL_CARD.md, "int8 pre-filters fine-tuned for their 8 bits")
-              "$py" -m tensorholo_training.export --checkpoint "runs/photo/pre${o}_photo$l/best.pt" \
-                --out-dir "$models" --name "$name" --prefilter-only "${calib[@]}" \
-                --calib-npy runs/real_inputs/rgbd/*.npy ;;
-            *)  # f32 from the pre-filter's run, int8 from its quantisation-aware fine-tuning (qat), percentile
-              "$py" -m tensorholo_training.export --checkpoint "runs/photo/pre${o}_photo$l/best.pt" \
-                --out-dir "$models" --name "$name" --prefilter-only
-              "$py" -m tensorholo_training.export --checkpoint "runs/photo/qat_pre${o}_photo$l/best.pt" \
-                --out-dir "$models" --name "$name" --prefilter-only --int8-only "${calib[@]}" \
-                --calib-npy runs/real_inputs/rgbd/*.npy --calib-method percentile ;;
-          esac
+          "$py" -m tensorholo_training.export --checkpoint "runs/photo/pre${o}_photo$l/best.pt" --out-dir "$models" \
+            --name "$name" --prefilter-only "${calib[@]}" --calib-npy runs/real_inputs/rgbd/*.npy
         done
       done
       "$py" -m tensorholo_training.export --checkpoint runs/photo/holo8_ldi_v2/best.pt --out-dir "$models" \

@@ -124,3 +124,4 @@ def remove_fake_quantisation(net: nn.Module) -> None:
     for conv in learned_convs(net):
         if "forward" in conv.__dict__:
             del conv.forward
+

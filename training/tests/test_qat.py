@@ -128,3 +128,4 @@ def test_a_qat_run_fine_tunes_the_fake_quantised_prefilter_and_exports_int8_file
     with pytest.raises(ValueError, match="qat_prefilter needs a pre-filter"):
         Trainer(TrainConfig(run_dir=str(tmp_path / "x"), stages=["stage1"], qat_prefilter=True,
                             **{**base, "offset_mm": 0.0}), log=lambda m: None)
+
