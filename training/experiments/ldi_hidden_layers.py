@@ -7,7 +7,8 @@ shipped ``holo8_rgbd``, step 7500) on ``data/photo256`` for STEPS steps (cosine 
 
 - ``attention``: that alone;
 - ``input-scale``: the back layers' inputs multiplied by 10 before the network (the same function as weights
-  10× larger: Adam then moves those weights 10× faster);
+  10× larger: Adam then moves those weights 10× faster); the saved checkpoints have the 10 folded into the
+  weights;
 - ``occlusion-weight``: the data and focal-stack losses weighted ``1 + 4·M`` (normalised to mean 1), ``M`` the
   pixels within 12 px of a front-layer point with a hidden point behind it near the edge of what it hides;
 - ``sum-init``: the back layers' first-layer weights start equal to the front layer's (the network first sees
@@ -96,6 +97,30 @@ def train(variant: str, run_dir: str, steps: int) -> None:
     elif variant != "attention":
         raise SystemExit(f"variant must be one of {VARIANTS}")
     tr.run()
+    if variant == "input-scale":
+        fold_input_scale(run_dir, 10.0)
+
+
+def fold_input_scale(run_dir: str, scale: float) -> None:
+    """Multiplies the back layers' input weights of the run's ``best.pt`` and ``final.pt`` by ``scale`` (the
+    first convolution's and the last one's input part), so that the saved networks compute what the run did
+    without the scaled input (``ldi_probe.py``, export)."""
+    import os
+
+    for name in ("best.pt", "final.pt"):
+        path = os.path.join(run_dir, name)
+        if not os.path.exists(path):
+            continue
+        st = torch.load(path, map_location="cpu", weights_only=False)
+        net = st["net"]
+        c = st["config"].get("channels", 24)
+        # the network centres its input (x − 0.5) after the scaling: conv(W, s·x − 0.5) =
+        # conv(s·W, x − 0.5) + (s − 1)·0.5·ΣW, a bias (exact away from the zero-padded border)
+        for conv, first_back in ((0, 4), (st["config"]["num_layers"] - 1, c + 4)):
+            w, b = net[f"convs.{conv}.weight"], net[f"convs.{conv}.bias"]
+            b += (scale - 1) * 0.5 * w[:, first_back:].sum(dim=(1, 2, 3))
+            w[:, first_back:] *= scale
+        torch.save(st, path)
 
 
 def oracle(root: str, scenes: int) -> None:
