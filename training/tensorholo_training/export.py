@@ -175,6 +175,10 @@ class _Reader:
         return None if x is None else {self.name: x.astype(np.float32)}
 
 
+#: values of the ``tensorholo.int8_weights`` metadata (docs/CONVENTIONS.md §7)
+INT8_WEIGHTS = ("f32-file", "bias-corrected", "quantisation-aware")
+
+
 def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray], fmt: str = "qoperator",
                   per_channel: bool = True, calib_method: str = "minmax", float_convs: Sequence[str] = (),
                   weights: str = "f32-file") -> str:
@@ -194,7 +198,8 @@ def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray
             (its 99.99th percentile of absolute values, onnxruntime's ``CalibPercentile``).
         float_convs: learned convolutions left in float: ``"first"`` (it reads the float input), ``"last"``
             (float weights for the heads' input or the pre-filter's correction).
-        weights: metadata ``tensorholo.int8_weights``: ``"f32-file"`` (the weights are the shipped f32 file's) or
+        weights: metadata ``tensorholo.int8_weights``: ``"f32-file"`` (the weights are the shipped f32 file's),
+            ``"bias-corrected"`` (its weights, biases corrected, :func:`.qat.bias_correction`) or
             ``"quantisation-aware"`` (fine-tuned with the int8 roundings, :mod:`.qat`).
     Returns:
         ``out_path`` (metadata copied, ``tensorholo.precision`` updated).
@@ -204,8 +209,8 @@ def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray
     methods = {"minmax": CalibrationMethod.MinMax, "percentile": CalibrationMethod.Percentile}
     if calib_method not in methods:
         raise ValueError(f"calib_method must be one of {sorted(methods)}, got {calib_method!r}")
-    if weights not in ("f32-file", "quantisation-aware"):
-        raise ValueError(f"weights must be 'f32-file' or 'quantisation-aware', got {weights!r}")
+    if weights not in INT8_WEIGHTS:
+        raise ValueError(f"weights must be one of {INT8_WEIGHTS}, got {weights!r}")
     if set(float_convs) - {"first", "last"}:
         raise ValueError(f"float_convs may hold 'first' and 'last', got {list(float_convs)}")
 
@@ -468,6 +473,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--float-convs", nargs="*", choices=["first", "last"], default=[],
                     help="learned convolutions of the int8 files left in float (first: reads the float input; "
                          "last: float weights for the heads' input or the pre-filter's correction)")
+    ap.add_argument("--bias-correction", action="store_true",
+                    help="int8 files quantised from the network with each convolution's bias corrected for the mean "
+                         "error its rounding adds, measured on the calibration inputs (qat.bias_correction)")
     ap.add_argument("--int8-only", action="store_true",
                     help="write only the int8 files (implies --int8), e.g. from a quantisation-aware fine-tuning "
                          "run (qat_prefilter) whose f32 weights are not the shipped f32 file's")
@@ -495,6 +503,18 @@ def main(argv: list[str] | None = None) -> int:
     scratch = tempfile.TemporaryDirectory()
     # --int8-only: the f32 files (what the int8 ones are quantised from) are not kept
     f32_dir = scratch.name if args.int8_only else args.out_dir
+
+    def int8_source(net, kind: str, inputs, f32_path: str) -> tuple[str, str]:
+        """The f32 file the int8 files are quantised from and their ``int8_weights``: ``f32_path``, or with
+        --bias-correction the network with corrected biases (qat.bias_correction), in the scratch folder."""
+        if not args.bias_correction:
+            return f32_path, "f32-file"
+        from . import qat
+
+        grids = qat.exporter_grids(net, kind, inputs, args.calib_method)
+        corrected = qat.bias_correction(net, grids, inputs)
+        out = os.path.join(scratch.name, f"bias-corrected-{kind}.onnx")
+        return export_onnx(corrected, out, kind, read_metadata(f32_path)), "bias-corrected"
     path = os.path.join(f32_dir, f"{args.name}.onnx")
     if args.prefilter_only and ck["prefilter"] is None:
         ap.error(f"{args.checkpoint} holds no pre-filter CNN (a 0 mm run?)")
@@ -518,8 +538,9 @@ def main(argv: list[str] | None = None) -> int:
             if args.prefilter_only:
                 break
             out = os.path.join(args.out_dir, f"{args.name}.{suffix}.onnx")
-            quantize_int8(path, out, calib, fmt, not args.per_tensor, args.calib_method, args.float_convs,
-                          "f32-file")  # a qat run fine-tunes only the pre-filter
+            source, weights = int8_source(ck["net"], "hologram-cnn", calib, path)
+            # (a qat run fine-tunes only the pre-filter: its hologram CNN's weights are the f32 file's)
+            quantize_int8(source, out, calib, fmt, not args.per_tensor, args.calib_method, args.float_convs, weights)
             written.append(out)
         if pre_path is not None:
             from .optics import Display
@@ -529,8 +550,9 @@ def main(argv: list[str] | None = None) -> int:
             for fmt, suffix in (("qoperator", "int8-qop"), ("qdq", "int8-qdq")):
                 stem = args.name if args.prefilter_only else f"{args.name}.prefilter"
                 out = os.path.join(args.out_dir, f"{stem}.{suffix}.onnx")
-                quantize_int8(pre_path, out, pre_calib, fmt, not args.per_tensor, args.calib_method,
-                              args.float_convs, int8_weights)
+                source, weights = int8_source(ck["prefilter"], "prefilter-cnn", pre_calib, pre_path)
+                quantize_int8(source, out, pre_calib, fmt, not args.per_tensor, args.calib_method,
+                              args.float_convs, int8_weights if weights == "f32-file" else weights)
                 written.append(out)
     print(json.dumps({"written": written, "metadata": read_metadata(path)}, indent=1))
     scratch.cleanup()

@@ -129,3 +129,54 @@ def test_a_qat_run_fine_tunes_the_fake_quantised_prefilter_and_exports_int8_file
         Trainer(TrainConfig(run_dir=str(tmp_path / "x"), stages=["stage1"], qat_prefilter=True,
                             **{**base, "offset_mm": 0.0}), log=lambda m: None)
 
+
+
+def test_bias_correction_brings_the_int8_network_closer_to_the_f32_one_on_other_inputs():
+    net = trained_like_prefilter()
+    calib = [slm_like(24, 24, 40 + i) for i in range(8)]
+    held_out = [slm_like(24, 24, 80 + i) for i in range(8)]
+    grids = qat.exporter_grids(net, "prefilter-cnn", calib)
+    corrected = qat.bias_correction(net, grids, calib)
+    # only biases change, and the returned network is float
+    assert corrected.net.activation_quant is None
+    for c, f in zip(qat.learned_convs(corrected), qat.learned_convs(net)):
+        assert torch.equal(c.weight, f.weight)
+    assert any(not torch.equal(c.bias, f.bias) for c, f in zip(qat.learned_convs(corrected), qat.learned_convs(net)))
+
+    def int8_error(candidate):
+        import copy
+
+        q = copy.deepcopy(candidate)
+        qat.fake_quantise(q, grids)
+        with torch.no_grad():
+            return float(np.mean([(torch.cat(q(torch.from_numpy(x)), 1) - torch.cat(net(torch.from_numpy(x)), 1))
+                                  .pow(2).mean() for x in held_out]))
+
+    before, after = int8_error(net), int8_error(corrected)
+    print(f"int8 vs f32 on held-out inputs, mse: rounded {before:.3e}, bias-corrected {after:.3e}")
+    assert after < 0.9 * before
+
+
+def test_export_bias_correction_changes_only_the_biases_of_the_int8_files(tmp_path, tiny_dataset):
+    from tensorholo_training.export import main, read_metadata
+    from tensorholo_training.train import TrainConfig, Trainer
+
+    cfg = TrainConfig(run_dir=str(tmp_path / "run"), dataset=tiny_dataset, num_layers=8, channels=12, crop=[16, 16],
+                      fs_top=3, fs_random=2, stages=["stage1", "stage2"], stage1_steps=1, stage2_steps=1,
+                      offset_mm=6.0, stage2_train_hologram=False, val_every=100, ckpt_every=100)
+    Trainer(cfg, log=lambda m: None).run()
+    common = ["--checkpoint", str(tmp_path / "run" / "final.pt"), "--name", "pre6", "--prefilter-only",
+              "--int8-only", "--calib-samples", "4", "--calib-size", "16"]
+    assert main([*common, "--out-dir", str(tmp_path / "plain")]) == 0
+    assert main([*common, "--out-dir", str(tmp_path / "bc"), "--bias-correction"]) == 0
+
+    def inits(path):
+        return {i.name: numpy_helper.to_array(i) for i in onnx.load(path).graph.initializer}
+
+    plain, bc = inits(str(tmp_path / "plain" / "pre6.int8-qdq.onnx")), inits(str(tmp_path / "bc" / "pre6.int8-qdq.onnx"))
+    assert plain.keys() == bc.keys()
+    changed = {k for k in plain if plain[k].shape != bc[k].shape or not np.array_equal(plain[k], bc[k])}
+    assert changed and all("bias" in k or "scale" in k or "zero_point" in k for k in changed)
+    assert not any("weight_quantized" in k for k in changed)  # the s8 weight codes are the same
+    assert read_metadata(str(tmp_path / "bc" / "pre6.int8-qdq.onnx"))["tensorholo.int8_weights"] == "bias-corrected"
+    assert read_metadata(str(tmp_path / "plain" / "pre6.int8-qdq.onnx"))["tensorholo.int8_weights"] == "f32-file"

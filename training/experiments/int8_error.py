@@ -1,0 +1,72 @@
+"""How far a pre-filter's int8 form is from its f32 output (issue 23; models/MODEL_CARD.md, "int8: what did not
+help"): mean squared error of the fake-quantised pre-filter (tensorholo_training.qat: the exporter's grids and
+roundings) against the f32 one, on crops it was not calibrated on (40 validation-split crops, 8 crops of each
+real frame), through its frozen hologram CNN and the offset propagation.
+
+    PYTHONPATH=training python training/experiments/int8_error.py runs/photo/pre6_photo30/best.pt \\
+        [--retrained runs/photo/qat_pre6_photo30/best.pt] [--calib-method percentile]
+
+prints, per set of crops: the f32 weights rounded as the exporter does, the same with bias correction
+(qat.bias_correction), and a retrained checkpoint's pre-filter (quantisation-aware fine-tuning or
+distillation) rounded on its own grids.
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import glob
+
+import numpy as np
+import torch
+
+from tensorholo_training import qat
+from tensorholo_training.export import (
+    calibration_inputs, frame_calibration_inputs, load_checkpoint, prefilter_calibration_inputs,
+)
+from tensorholo_training.optics import Display
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("checkpoint", help="the pre-filter's run (its best.pt: f32 teacher and hologram CNN)")
+    ap.add_argument("--retrained", help="a checkpoint whose pre-filter was retrained for int8")
+    ap.add_argument("--dataset", default="data/photo256")
+    ap.add_argument("--frames", default="runs/real_inputs/rgbd/*.npy")
+    ap.add_argument("--calib-method", default="minmax", choices=["minmax", "percentile"])
+    args = ap.parse_args()
+    ck = load_checkpoint(args.checkpoint)
+    cfg = ck["config"]
+    display = Display(tuple(cfg["wavelengths_m"]), cfg["pixel_pitch_m"], cfg["volume_depth_m"])
+    offset = cfg["offset_mm"] * 1e-3
+    frames = sorted(glob.glob(args.frames))
+
+    def pre_inputs(xs):
+        return prefilter_calibration_inputs(ck["net"], xs, offset, display)
+
+    # the exporter's calibration inputs (export: --calib-samples 32 --calib-size 128 --calib-crops 4)
+    calib = pre_inputs(calibration_inputs(args.dataset, 1, 32, 128) + frame_calibration_inputs(frames, 1, 4, 128))
+    teacher = ck["prefilter"]
+
+    def rounded(net):
+        q = copy.deepcopy(net)
+        qat.fake_quantise(q, qat.exporter_grids(net, "prefilter-cnn", calib, args.calib_method))
+        return q
+
+    grids = qat.exporter_grids(teacher, "prefilter-cnn", calib, args.calib_method)
+    candidates = {"rounded": rounded(teacher),
+                  "bias-corrected": rounded(qat.bias_correction(teacher, grids, calib))}
+    if args.retrained:
+        candidates["retrained"] = rounded(load_checkpoint(args.retrained)["prefilter"])
+    held_out = {"validation crops": calibration_inputs(args.dataset, 1, 40, 128, split="val", seed=7),
+                "real-frame crops": frame_calibration_inputs(frames, 1, 8, 128, seed=9)}
+    for name, xs in held_out.items():
+        inputs = [torch.from_numpy(x) for x in pre_inputs(xs)]
+        with torch.no_grad():
+            target = [torch.cat(teacher(x), 1) for x in inputs]
+            errors = {k: float(np.mean([(torch.cat(q(x), 1) - t).pow(2).mean() for x, t in zip(inputs, target)]))
+                      for k, q in candidates.items()}
+        print(f"{name}: " + ", ".join(f"{k} {v:.3e}" for k, v in errors.items()))
+
+
+if __name__ == "__main__":
+    main()
