@@ -139,17 +139,19 @@ PY
     pre6) prefilter 6 ;;
     pre12) prefilter 12 ;;
     qat)  # an experiment, not shipped (models/MODEL_CARD.md, "int8: what did not help"): each pre-filter fine-tuned
-      # with its int8 roundings in the loop (tensorholo_training.qat): its convolutions read u8-rounded inputs on
-      # the exporter's grids (same calibration inputs, percentile method) with s8 weights, CNN frozen, 600 steps
-      npy=$(printf '"%s",' runs/real_inputs/rgbd/*.npy)
+      # with its int8 roundings in the loop (tensorholo_training.qat), CNN frozen, 600 steps: its convolutions read
+      # u8-rounded inputs on the grids of its own int8 file (exported first, percentile calibration) with s8 weights
       for l in 8 15 30; do
         for o in 6 12; do
-          "$py" -m tensorholo_training.train --config training/configs/cpu_prefilter.json \
-            --run-dir "runs/photo/qat_pre${o}_photo$l" --set dataset="\"$photo_data\"" --set num_layers="$l" \
-            --set offset_mm="$o" --set init_from="\"runs/photo/pre${o}_photo$l/best.pt\"" \
-            --set stage2_steps="${QAT_STEPS:-600}" --set lr=5e-5 --set lr_schedule='"cosine"' --set val_every=100 \
-            --set qat_prefilter=true --set qat_calib_method='"percentile"' --set qat_calib_dataset="\"$photo_data\"" \
-            --set qat_calib_npy="[${npy%,}]"
+          run="runs/photo/qat_pre${o}_photo$l"
+          "$py" -m tensorholo_training.export --checkpoint "runs/photo/pre${o}_photo$l/best.pt" --out-dir "$run" \
+            --name grids --prefilter-only --int8-only --calib-dataset "$photo_data" --calib-samples 32 \
+            --calib-size 128 --calib-npy runs/real_inputs/rgbd/*.npy --calib-method percentile
+          "$py" -m tensorholo_training.train --config training/configs/cpu_prefilter.json --run-dir "$run" \
+            --set dataset="\"$photo_data\"" --set num_layers="$l" --set offset_mm="$o" \
+            --set init_from="\"runs/photo/pre${o}_photo$l/best.pt\"" --set stage2_steps="${QAT_STEPS:-600}" \
+            --set lr=5e-5 --set lr_schedule='"cosine"' --set val_every=100 \
+            --set qat_grids_from="\"$run/grids.int8-qdq.onnx\""
         done
       done ;;
     real-inputs)  # the hologram CNN inputs of the real frames of ../shared/data (int8 calibration)

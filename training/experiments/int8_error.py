@@ -21,7 +21,7 @@ import torch
 
 from tensorholo_training import qat
 from tensorholo_training.export import (
-    calibration_inputs, frame_calibration_inputs, load_checkpoint, prefilter_calibration_inputs,
+    calibration_inputs, exporter_grids, frame_calibration_inputs, load_checkpoint, prefilter_calibration_inputs,
 )
 from tensorholo_training.optics import Display
 
@@ -49,10 +49,10 @@ def main() -> None:
 
     def rounded(net):
         q = copy.deepcopy(net)
-        qat.fake_quantise(q, qat.exporter_grids(net, "prefilter-cnn", calib, args.calib_method))
+        qat.fake_quantise(q, exporter_grids(net, "prefilter-cnn", calib, args.calib_method))
         return q
 
-    grids = qat.exporter_grids(teacher, "prefilter-cnn", calib, args.calib_method)
+    grids = exporter_grids(teacher, "prefilter-cnn", calib, args.calib_method)
     candidates = {"rounded": rounded(teacher),
                   "bias-corrected": rounded(qat.bias_correction(teacher, grids, calib))}
     if args.retrained:

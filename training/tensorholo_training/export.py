@@ -405,6 +405,28 @@ def calibration_inputs(dataset_root: str, input_layers: int, count: int = 32, si
     return [ds[int(i)]["rgbd"].numpy()[None] for i in idx]
 
 
+def exporter_grids(net: torch.nn.Module, kind: str, inputs: Sequence[np.ndarray], calib_method: str = "minmax"
+                   ) -> list:
+    """The grids :func:`quantize_int8` gives ``net`` (a copy of it exported to a temporary QDQ file)
+    calibrated on ``inputs`` (each ``[1, C, h, w]``) with ``calib_method``: the rounding a fine-tuning should
+    learn, exactly as the int8 file written from the same weights will have it.
+
+    Args:
+        net: a hologram CNN or a pre-filter CNN; kind: ``"hologram-cnn"`` or ``"prefilter-cnn"``.
+    Returns:
+        one :class:`.qat.Grid` per convolution of :func:`.qat.learned_convs`.
+    """
+    import copy
+    import tempfile
+
+    from . import qat
+
+    with tempfile.TemporaryDirectory() as tmp:
+        f32 = export_onnx(copy.deepcopy(net), os.path.join(tmp, "f32.onnx"), kind, {})
+        q = quantize_int8(f32, os.path.join(tmp, "q.onnx"), list(inputs), "qdq", calib_method=calib_method)
+        return qat.file_grids(q)
+
+
 def prefilter_calibration_inputs(net, calib: Sequence[np.ndarray], offset_m: float, display) -> list[np.ndarray]:
     """The pre-filter's calibration inputs ``[1, 6, h, w]``: each hologram-CNN calibration input through ``net``
     (the hologram CNN the pre-filter was trained behind), offset to the SLM plane (Eq. 6, ``offset_m`` metres),
@@ -478,7 +500,7 @@ def main(argv: list[str] | None = None) -> int:
                          "error its rounding adds, measured on the calibration inputs (qat.bias_correction)")
     ap.add_argument("--int8-only", action="store_true",
                     help="write only the int8 files (implies --int8), e.g. from a quantisation-aware fine-tuning "
-                         "run (qat_prefilter) whose f32 weights are not the shipped f32 file's")
+                         "run (qat_grids_from) whose f32 weights are not the shipped f32 file's")
     ap.add_argument("--per-tensor", action="store_true",
                     help="one weight scale per tensor (default: per output channel, the native engine's scheme)")
     only = ap.add_mutually_exclusive_group()
@@ -495,7 +517,7 @@ def main(argv: list[str] | None = None) -> int:
                   training_commit=ck["training_commit"])
     written = []
     os.makedirs(args.out_dir, exist_ok=True)
-    int8_weights = "quantisation-aware" if cfg.get("qat_prefilter") else "f32-file"
+    int8_weights = "quantisation-aware" if cfg.get("qat_grids_from") else "f32-file"
     if args.int8_only:
         args.int8 = True
     import tempfile
@@ -511,7 +533,7 @@ def main(argv: list[str] | None = None) -> int:
             return f32_path, "f32-file"
         from . import qat
 
-        grids = qat.exporter_grids(net, kind, inputs, args.calib_method)
+        grids = exporter_grids(net, kind, inputs, args.calib_method)
         corrected = qat.bias_correction(net, grids, inputs)
         out = os.path.join(scratch.name, f"bias-corrected-{kind}.onnx")
         return export_onnx(corrected, out, kind, read_metadata(f32_path)), "bias-corrected"

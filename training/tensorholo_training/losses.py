@@ -71,9 +71,6 @@ def data_fidelity_loss(pred: torch.Tensor, gt: torch.Tensor, mode: str = "comple
     raise ValueError(f"mode must be 'complex' or 'tensorholo', got {mode!r}")
 
 
-ATTENTION_MODES = ("front", "layers")
-
-
 @dataclass
 class FocalStackLossConfig:
     """Dynamic focal stack loss parameters.
@@ -84,11 +81,6 @@ class FocalStackLossConfig:
         random: extra random bins among the rest (5).
         attention_scale: ``κ`` of the depth attention ``exp(−κ·(|D − d| − min|D − d|))`` (normalised depth
             units); TensorHolo's value is not published, 5 makes content 0.2 away weigh ``e⁻¹``.
-        attention: which depth ``D`` the attention (and the focal depth histogram) reads: ``"front"``, the
-            first LDI layer (the paper's RGB-D depth map), or ``"layers"``, the nearest valid layer of the whole
-            LDI, so that a point hidden behind the front layer counts where the focal plane is at its depth
-            (the light of a hidden wall that passes around a thin bar in front of it; see
-            :func:`attention_masks`).
         kind: ``"l2"`` or ``"l1"``.
         pad: zero-pad the ASM (linear convolution), as TensorHolo does.
         band_limit: Matsushima band limit in the ASM.
@@ -103,11 +95,6 @@ class FocalStackLossConfig:
     pad: bool = True
     band_limit: bool = False
     chunk: int | None = None
-    attention: str = "front"
-
-    def __post_init__(self):
-        if self.attention not in ATTENTION_MODES:
-            raise ValueError(f"attention must be one of {ATTENTION_MODES}, got {self.attention!r}")
 
     @property
     def options(self) -> PropagationOptions:

@@ -1,20 +1,23 @@
-"""Quantisation-aware fine-tuning for the native engine's int8 scheme (the SDK's ``cnn::native_int8``).
+"""The native engine's int8 scheme (the SDK's ``cnn::native_int8``) in PyTorch: fake quantisation for
+quantisation-aware fine-tuning, and bias correction.
 
 :func:`.export.quantize_int8` rounds, in every int8 file: each learned convolution's weights to s8, one
 symmetric scale per output channel (``max|w| / 127``), and each activation a convolution reads to u8 on one
 affine grid per tensor (calibrated over the calibration inputs: MinMax, ``scale = (max − min) / 255`` with
-``0`` on the grid, or a percentile), once, where the convolution reads it. The last output (the heads' input, the pre-filter's correction)
-and the pre-filter's fixed blur stay float.
+``0`` on the grid, or a percentile), once, where the convolution reads it. The last output (the heads' input,
+the pre-filter's correction) and the pre-filter's fixed blur stay float.
 
-:func:`fake_quantise` makes a network compute exactly those roundings in training (PyTorch's fake quantisation,
-straight-through gradients), on the grids the exporter gives the starting weights (:func:`exporter_grids`,
-from the same calibration inputs), so that a short fine-tuning lets the weights adapt to the 8-bit grids before the
-int8 files are written from them. The network's parameters and ``state_dict`` are unchanged in form: the
-roundings are a wrapper around each convolution's ``forward``, not parameters.
+- :func:`fake_quantise` makes a network compute exactly those roundings (PyTorch's fake quantisation,
+  straight-through gradients) on the grids of an int8 file (:func:`file_grids`;
+  :func:`.export.exporter_grids` makes them without keeping a file), for a fine-tuning with the roundings in
+  the loop (``train`` option ``qat_grids_from``). The parameters and ``state_dict`` keep their form: the
+  roundings wrap each convolution's ``forward``. Measured on the shipped pre-filters: it did not bring the int8
+  output closer to f32 (models/MODEL_CARD.md, "int8: what did not help").
+- :func:`bias_correction` lowers each bias by the mean error its convolution's rounding adds
+  (``export --bias-correction``): closer to f32 on held-out crops for every shipped pre-filter, not shipped.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -61,28 +64,6 @@ def file_grids(path: str) -> list[Grid]:
             raise ValueError(f"{path}: convolution {n.name} reads {n.input[0]}, not a dequantised tensor")
         grids.append(Grid(float(inits[dq.input[1]]), int(inits[dq.input[2]])))
     return grids
-
-
-def exporter_grids(net: nn.Module, kind: str, inputs: Sequence[np.ndarray], calib_method: str = "minmax"
-                   ) -> list[Grid]:
-    """The grids :func:`.export.quantize_int8` gives ``net`` (a copy of it exported to a temporary QDQ file)
-    calibrated on ``inputs`` (each ``[1, C, h, w]``) with ``calib_method``: the rounding a fine-tuning should
-    learn, exactly as the int8 file written from the same weights will have it.
-
-    Args:
-        net: a hologram CNN or a pre-filter CNN; kind: ``"hologram-cnn"`` or ``"prefilter-cnn"``.
-    Returns:
-        one :class:`Grid` per convolution of :func:`learned_convs`.
-    """
-    import copy
-    import tempfile
-
-    from .export import export_onnx, quantize_int8
-
-    with tempfile.TemporaryDirectory() as tmp:
-        f32 = export_onnx(copy.deepcopy(net), os.path.join(tmp, "f32.onnx"), kind, {})
-        q = quantize_int8(f32, os.path.join(tmp, "q.onnx"), list(inputs), "qdq", calib_method=calib_method)
-        return file_grids(q)
 
 
 def fake_quantised_weight(w: torch.Tensor) -> torch.Tensor:

@@ -111,16 +111,10 @@ class TrainConfig:
     # the depth the focal stack's attention and focal depths read: "front" (first layer, the paper) or
     # "layers" (nearest valid layer of the LDI: hidden points count where in focus; losses.attention_masks)
     fs_attention: str = "front"
-    # quantisation-aware fine-tuning of the pre-filter for the int8 files (tensorholo_training.qat): its learned
-    # convolutions read their inputs rounded to the u8 grids the exporter calibrates (the same inputs: these
-    # dataset crops and the real frames' CNN inputs, through the frozen hologram CNN) and use s8 weights
-    qat_prefilter: bool = False
-    qat_calib_dataset: str = ""  # "" = the run's dataset
-    qat_calib_samples: int = 32
-    qat_calib_size: int = 128
-    qat_calib_npy: list = field(default_factory=list)
-    qat_calib_crops: int = 4
-    qat_calib_method: str = "minmax"  # as export --calib-method: "minmax" or "percentile"
+    # quantisation-aware fine-tuning of the pre-filter (tensorholo_training.qat): its learned convolutions read
+    # their inputs rounded to the u8 grids of this int8 QDQ pre-filter file (the exporter's, e.g.
+    # `export --prefilter-only --int8` of the starting checkpoint) and use s8 weights; "" = off
+    qat_grids_from: str = ""
     asm_pad: bool | None = None  # None: as the dataset's synthesis.pad (manifest), else False
     asm_band_limit: bool | None = None  # None: as the dataset's synthesis.band_limit, else False
     fs_chunk: int = 0
@@ -164,7 +158,7 @@ class TrainConfig:
         """The focal stack loss configuration."""
         return L.FocalStackLossConfig(
             self.fs_bins, self.fs_top, self.fs_random, self.fs_attention_scale, self.loss_kind,
-            bool(self.asm_pad), bool(self.asm_band_limit), self.fs_chunk or None, self.fs_attention,
+            bool(self.asm_pad), bool(self.asm_band_limit), self.fs_chunk or None,
         )
 
     def weights(self) -> L.LossWeights:
@@ -359,12 +353,13 @@ class Trainer:
                 raise ValueError(f"init_prefilter_from {cfg.init_prefilter_from}: holds no pre-filter CNN")
             load_prefilter_state(self.prefilter, state["prefilter"], cfg.init_prefilter_from)
             self.log(f"pre-filter initialised from {cfg.init_prefilter_from}")
-        if cfg.qat_prefilter:
+        if cfg.qat_grids_from:
             self._fake_quantise_prefilter()
         self.best: dict = {}
         self.phases = self._phases()
         self.lr_at(0, 1)  # an unknown lr_schedule fails here, not after the first batch
-        cfg.fs_config()  # so does an unknown fs_attention
+        if cfg.fs_attention not in ("front", "layers"):  # so does an unknown attention depth
+            raise ValueError(f"fs_attention must be 'front' or 'layers', got {cfg.fs_attention!r}")
         self.phase_index = 0
         self.phase_step = 0
         self.global_step = 0
@@ -374,35 +369,15 @@ class Trainer:
         self.commit = git_commit()
 
     def _fake_quantise_prefilter(self) -> None:
-        """``qat_prefilter``: the pre-filter's u8 grids (those the exporter gives the initial weights, on its
-        calibration inputs, :func:`.qat.exporter_grids`; kept in ``run_dir/qat_grids.json`` so that a resumed
-        run uses the same), then its fake quantisation (:func:`.qat.fake_quantise`)."""
+        """``qat_grids_from``: the pre-filter rounds its convolutions' inputs on that int8 file's grids, with s8
+        weights (:func:`.qat.fake_quantise`)."""
         from . import qat
-        from .export import calibration_inputs, frame_calibration_inputs, prefilter_calibration_inputs
 
-        cfg = self.cfg
         if self.prefilter is None:
-            raise ValueError("qat_prefilter needs a pre-filter (stage2 at a non-zero offset)")
-        path = os.path.join(cfg.run_dir, "qat_grids.json")
-        if os.path.exists(path):
-            with open(path) as f:
-                grids = [qat.Grid(**g) for g in json.load(f)["grids"]]
-        else:
-            size = cfg.qat_calib_size or None
-            calib = calibration_inputs(cfg.qat_calib_dataset or self.dataset_root, cfg.input_layers,
-                                       cfg.qat_calib_samples, size)
-            calib += frame_calibration_inputs(cfg.qat_calib_npy, cfg.input_layers, cfg.qat_calib_crops, size)
-            self.net.eval()
-            inputs = prefilter_calibration_inputs(self.net.cpu(), calib, cfg.offset_m, self.display)
-            self.net.to(self.device)
-            grids = qat.exporter_grids(self.prefilter, "prefilter-cnn", inputs, cfg.qat_calib_method)
-            os.makedirs(cfg.run_dir, exist_ok=True)
-            with open(path, "w") as f:
-                json.dump({"calibration_inputs": len(inputs), "calib_method": cfg.qat_calib_method,
-                           "grids": [dataclasses.asdict(g) for g in grids]}, f, indent=1)
-        self.prefilter.to(self.device)
+            raise ValueError("qat_grids_from needs a pre-filter (stage2 at a non-zero offset)")
+        grids = qat.file_grids(self.cfg.qat_grids_from)
         qat.fake_quantise(self.prefilter, grids)
-        self.log(f"pre-filter fake-quantised on {len(grids)} u8 grids ({path})")
+        self.log(f"pre-filter fake-quantised on the {len(grids)} u8 grids of {self.cfg.qat_grids_from}")
 
     # -- schedule -----------------------------------------------------------------------------------------
     def _phases(self) -> list[tuple[str, int]]:

@@ -113,8 +113,6 @@ def test_layered_focal_depths_come_from_every_valid_point():
     assert int(f[0, 0] * 100) == 30
     with pytest.raises(ValueError, match="valid"):
         L.select_focal_depths(depth)
-    with pytest.raises(ValueError, match="attention"):
-        L.FocalStackLossConfig(attention="hidden")
 
 
 def test_phase_regulariser():

@@ -6,7 +6,7 @@ import torch
 from onnx import numpy_helper
 
 from tensorholo_training import qat
-from tensorholo_training.export import export_onnx, quantize_int8, run_onnx
+from tensorholo_training.export import export_onnx, exporter_grids, quantize_int8, run_onnx
 
 from test_export import meta, slm_like, trained_like_prefilter
 
@@ -31,7 +31,7 @@ def test_file_grids_follow_each_convolution_and_refuse_a_float_file(tmp_path):
     with pytest.raises(ValueError, match="not a dequantised tensor"):
         qat.file_grids(path)
     # the grids of a percentile calibration are the file's of that method, and no wider than MinMax's
-    pct = qat.exporter_grids(net, "prefilter-cnn", calib, "percentile")
+    pct = exporter_grids(net, "prefilter-cnn", calib, "percentile")
     q_pct = quantize_int8(path, str(tmp_path / "p.onnx"), calib, "qdq", calib_method="percentile")
     assert [(g.scale, g.zero_point) for g in pct] == file_grids(q_pct)
     assert all(p.scale <= s * (1 + 1e-6) for p, (s, _) in zip(pct, file_grids(q)))
@@ -56,7 +56,7 @@ def test_fake_quantisation_computes_the_exporters_int8_file(tmp_path, kind):
     name = f"{kind}-cnn" if kind == "hologram" else "prefilter-cnn"
     path = export_onnx(net, str(tmp_path / "f32.onnx"), name, meta(net, name))
     q = quantize_int8(path, str(tmp_path / "q.onnx"), calib, "qdq")
-    grids = qat.exporter_grids(net, name, calib)
+    grids = exporter_grids(net, name, calib)
     assert len(grids) == len(qat.learned_convs(net)) and [(g.scale, g.zero_point) for g in grids] == file_grids(q)
     state = {k: v.clone() for k, v in net.state_dict().items()}
     t = torch.from_numpy(x)
@@ -90,10 +90,7 @@ def test_fake_quantised_weights_are_s8_per_output_channel_with_straight_through_
     assert torch.equal(w.grad, torch.ones_like(w))
 
 
-def test_a_qat_run_fine_tunes_the_fake_quantised_prefilter_and_exports_int8_files_only(tmp_path, tiny_dataset):
-    import json
-    import os
-
+def test_a_qat_run_rounds_on_the_grids_of_an_exported_int8_file_and_exports_int8_files_only(tmp_path, tiny_dataset):
     from tensorholo_training.export import main, read_metadata
     from tensorholo_training.train import TrainConfig, Trainer
 
@@ -102,40 +99,33 @@ def test_a_qat_run_fine_tunes_the_fake_quantised_prefilter_and_exports_int8_file
     first = TrainConfig(run_dir=str(tmp_path / "f32"), stages=["stage1", "stage2"], stage1_steps=2,
                         stage2_steps=1, **base)
     Trainer(first, log=lambda m: None).run()
-    cfg = TrainConfig(run_dir=str(tmp_path / "qat"), stages=["stage2"], stage2_steps=3,
-                      init_from=str(tmp_path / "f32" / "final.pt"), qat_prefilter=True, qat_calib_samples=4,
-                      qat_calib_size=16, **base)
+    calib = ["--calib-samples", "4", "--calib-size", "16"]
+    grids_file = tmp_path / "grids" / "pre6.int8-qdq.onnx"
+    assert main(["--checkpoint", str(tmp_path / "f32" / "final.pt"), "--out-dir", str(tmp_path / "grids"),
+                 "--name", "pre6", "--prefilter-only", "--int8-only", *calib]) == 0
+    cfg = TrainConfig(run_dir=str(tmp_path / "qat"), stages=["stage2"], stage2_steps=2,
+                      init_from=str(tmp_path / "f32" / "final.pt"), qat_grids_from=str(grids_file), **base)
     tr = Trainer(cfg, log=lambda m: None)
     assert tr.prefilter.net.activation_quant is not None  # the pre-filter computes the int8 roundings
     assert tr.net.activation_quant is None  # the frozen hologram CNN stays float
-    grids = json.load(open(tmp_path / "qat" / "qat_grids.json"))
-    assert grids["calibration_inputs"] == 4 and len(grids["grids"]) == 8
-    tr.run(max_steps=1)
-    # a resumed run rounds on the grids of the first start, not on grids of its current weights
-    os.utime(tmp_path / "qat" / "qat_grids.json")
-    again = Trainer(cfg, log=lambda m: None)
-    assert json.load(open(tmp_path / "qat" / "qat_grids.json")) == grids
-    again.run()
+    tr.run()
     out = tmp_path / "models"
     assert main(["--checkpoint", str(tmp_path / "qat" / "final.pt"), "--out-dir", str(out), "--name", "pre6",
-                 "--prefilter-only", "--int8-only", "--calib-samples", "4", "--calib-size", "16"]) == 0
+                 "--prefilter-only", "--int8-only", *calib]) == 0
     assert sorted(p.name for p in out.iterdir()) == ["pre6.int8-qdq.onnx", "pre6.int8-qop.onnx"]
-    assert read_metadata(str(out / "pre6.int8-qdq.onnx"))["tensorholo.kind"] == "prefilter-cnn"
-    # the exporter calibrates the file's input grid on the same inputs the run rounded to
-    g0 = grids["grids"][0]
-    assert file_grids(str(out / "pre6.int8-qdq.onnx"))[0] == pytest.approx((g0["scale"], g0["zero_point"]),
-                                                                          rel=1e-5)
-    with pytest.raises(ValueError, match="qat_prefilter needs a pre-filter"):
-        Trainer(TrainConfig(run_dir=str(tmp_path / "x"), stages=["stage1"], qat_prefilter=True,
+    meta = read_metadata(str(out / "pre6.int8-qdq.onnx"))
+    assert meta["tensorholo.kind"] == "prefilter-cnn" and meta["tensorholo.int8_weights"] == "quantisation-aware"
+    # the input grid does not depend on the pre-filter's weights: the run rounded on the file's own
+    assert file_grids(str(out / "pre6.int8-qdq.onnx"))[0] == pytest.approx(file_grids(str(grids_file))[0], rel=1e-5)
+    with pytest.raises(ValueError, match="qat_grids_from needs a pre-filter"):
+        Trainer(TrainConfig(run_dir=str(tmp_path / "x"), stages=["stage1"], qat_grids_from=str(grids_file),
                             **{**base, "offset_mm": 0.0}), log=lambda m: None)
-
-
 
 def test_bias_correction_brings_the_int8_network_closer_to_the_f32_one_on_other_inputs():
     net = trained_like_prefilter()
     calib = [slm_like(24, 24, 40 + i) for i in range(8)]
     held_out = [slm_like(24, 24, 80 + i) for i in range(8)]
-    grids = qat.exporter_grids(net, "prefilter-cnn", calib)
+    grids = exporter_grids(net, "prefilter-cnn", calib)
     corrected = qat.bias_correction(net, grids, calib)
     # only biases change, and the returned network is float
     assert corrected.net.activation_quant is None

@@ -288,20 +288,16 @@ fn rounded_base_prefilter() -> HologramModel {
     let mut proto = crate::model::onnx::decode_model(bytes).unwrap();
     let graph = proto.graph.as_mut().unwrap();
     let input = graph.input[0].name.clone();
-    let q = graph
-        .node
-        .iter()
-        .find(|n| n.op_type == "QuantizeLinear" && n.input[0] == input)
-        .unwrap()
-        .output[0]
-        .clone();
-    let dq = graph
-        .node
-        .iter()
-        .find(|n| n.op_type == "DequantizeLinear" && n.input[0] == q)
-        .unwrap()
-        .output[0]
-        .clone();
+    // The output of the node of type `op` that reads `tensor`.
+    let read_by = |op: &str, tensor: &str| {
+        let node = graph
+            .node
+            .iter()
+            .find(|n| n.op_type == op && n.input[0] == tensor);
+        node.unwrap().output[0].clone()
+    };
+    let q = read_by("QuantizeLinear", &input);
+    let dq = read_by("DequantizeLinear", &q);
     let pad = graph.node.iter_mut().find(|n| n.op_type == "Pad").unwrap();
     assert_eq!(
         pad.input[0], input,
