@@ -41,7 +41,7 @@ def main() -> None:
             for m, label, delta in precisions(d, f"holo{layers}_rgbd+prefilter_{o}mm{{}}.json", "f32"):
                 if not delta and aa is not None:
                     delta = difference(m, aa, "AA-DPM")
-                both = " (both CNNs int8)" if label != "f32" else ""
+                both = " (both CNNs int8; pre-filter mixed precision)" if label != "f32" else ""
                 print(row(f"holo{layers} {label} + pre-filter {o} mm{both}", "displayed (phase-only, DDPM"
                           + (f"; {delta}" if delta else "") + ")", m))
 

@@ -157,7 +157,8 @@ PY
     real-inputs)  # the hologram CNN inputs of the real frames of ../shared/data (int8 calibration)
       [ -x "$holo" ] || cargo build --release --locked -p holo
       HOLO="$holo" "$py" training/real_frames.py inputs --dir runs/real_inputs/rgbd -- --layers 8 ;;
-    export)  # best.pt of each photo run; int8: 32 dataset crops + 4 crops of each real frame, per-channel weights
+    export)  # best.pt of each photo run; int8: 32 dataset crops + 4 crops of each real frame, per-channel weights;
+      # the pre-filters' int8 files in mixed precision (first and last convolutions float, MODEL_CARD.md)
       mkdir -p "$models"
       calib=(--int8 --calib-dataset "$photo_data" --calib-samples 32 --calib-size 128)
       for l in 8 15 30; do
@@ -166,7 +167,8 @@ PY
         for o in 6 12; do
           name="prefilter_${o}mm_holo$l"; [ "$l" = 8 ] && name="prefilter_${o}mm"
           "$py" -m tensorholo_training.export --checkpoint "runs/photo/pre${o}_photo$l/best.pt" --out-dir "$models" \
-            --name "$name" --prefilter-only "${calib[@]}" --calib-npy runs/real_inputs/rgbd/*.npy
+            --name "$name" --prefilter-only "${calib[@]}" --calib-npy runs/real_inputs/rgbd/*.npy \
+            --float-convs first last
         done
       done
       "$py" -m tensorholo_training.export --checkpoint runs/photo/holo8_ldi_v2/best.pt --out-dir "$models" \

@@ -540,6 +540,63 @@ impl RowBand<'_, f32> {
     }
 }
 
+impl RowBand<'_, f32> {
+    /// Overwrites the band's rows with `other`'s values dequantised (ONNX `DequantizeLinear`): `(q − zp)·scale`,
+    /// `zp` being `other`'s zero point. Band row `y` takes `other`'s interior row `other_y0 + y − rows.start`
+    /// (windows of a frame held at other rows). The f32 input of a float layer that reads a u8 activation (the
+    /// native engine's mixed-precision last layer). Errors: another channel count or width, or rows past
+    /// `other`'s height ([`KernelError::Shape`]); a scale that is not finite and positive.
+    pub fn dequantize_rows_from(
+        &mut self,
+        other: &RowPlanar<u8>,
+        other_y0: usize,
+        scale: f32,
+    ) -> Result<(), KernelError> {
+        check_scale("dequantisation scale", scale)?;
+        let zp = other.border as f32;
+        self.map_rows_from(other, other_y0, |q| (q as f32 - zp) * scale)
+    }
+}
+
+impl<T: Element> RowBand<'_, T> {
+    /// Overwrites the band's rows with `f` of `other`'s values, element by element: band row `y` takes `other`'s
+    /// interior row `other_y0 + y − rows.start`. Errors: as [`RowBand::dequantize_rows_from`].
+    fn map_rows_from<S: Element>(
+        &mut self,
+        other: &RowPlanar<S>,
+        other_y0: usize,
+        f: impl Fn(S) -> T,
+    ) -> Result<(), KernelError> {
+        let rows = self.rows.len();
+        if (other.c, other.w) != (self.c, self.w) || other_y0 + rows > other.h {
+            return Err(KernelError::Shape {
+                what: format!(
+                    "convert rows {other_y0}..{} of a {}×{}×{} buffer into {rows} rows of a {}×{} one",
+                    other_y0 + rows,
+                    other.c,
+                    other.h,
+                    other.w,
+                    self.c,
+                    self.w
+                ),
+            });
+        }
+        let (w, y0, ks, kd) = (self.w, self.rows.start, S::INTERLEAVE, T::INTERLEAVE);
+        for c in 0..self.c {
+            for y in self.rows() {
+                let at = self.interior_at(c, y);
+                let from = other.index(c, other_y0 + y - y0 + 1, 1);
+                let src = &other.as_slice()[from..from + ks * (w - 1) + 1];
+                let dst = &mut self.data[at..at + kd * (w - 1) + 1];
+                for (d, &v) in dst.iter_mut().step_by(kd).zip(src.iter().step_by(ks)) {
+                    *d = f(v);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Checks one channel plane of a source: `c < channels`, a whole number of rows of `w`, at least `end` rows.
 fn check_plane(
     c: usize,
@@ -706,6 +763,23 @@ impl RowBand<'_, u8> {
             }
         }
         Ok(())
+    }
+}
+
+impl RowBand<'_, u8> {
+    /// Overwrites the band's rows with `other`'s f32 values quantised to this buffer's grid (ONNX
+    /// `QuantizeLinear`): `q = clamp(round_ties_even(x / scale) + zp, 0, 255)`. Band row `y` takes `other`'s
+    /// interior row `other_y0 + y − rows.start`. The u8 output of a float layer that an int8 layer reads (the
+    /// native engine's mixed-precision first layer). Errors: as [`RowBand::dequantize_rows_from`].
+    pub fn quantize_rows_from(
+        &mut self,
+        other: &RowPlanar<f32>,
+        other_y0: usize,
+        scale: f32,
+    ) -> Result<(), KernelError> {
+        check_scale("quantisation scale", scale)?;
+        let zp = self.border;
+        self.map_rows_from(other, other_y0, |v| quantize(v / scale, zp))
     }
 }
 
@@ -975,5 +1049,52 @@ mod tests {
         assert!(cat.border_is_clean());
         let mut band = cat.band_mut(0..3).unwrap();
         assert!(band.requantize_rows_from(&qa, 4, 0.05, 0.1).is_err());
+    }
+
+    #[test]
+    fn rows_convert_between_f32_and_u8_as_onnx_quantize_and_dequantize() {
+        // The mixed-precision layers' conversions: other rows of a window, element by element against the
+        // ONNX definitions, borders untouched; mismatched shapes and rows past the source refused.
+        let (c, h, w) = (6, 5, 7);
+        let src: Vec<f32> = (0..c * h * w)
+            .map(|i| ((i * 37) % 101) as f32 * 0.031 - 1.2)
+            .collect();
+        let f = RowPlanar::from_planar(&src, c, h, w, None).unwrap();
+        let (scale, zp) = (0.0123, 97);
+        let mut q = RowPlanar::new_quantized(c, 3, w, zp).unwrap();
+        q.band_mut(1..3)
+            .unwrap()
+            .quantize_rows_from(&f, 2, scale)
+            .unwrap();
+        let mut back = RowPlanar::new(c, 4, w).unwrap();
+        back.band_mut(2..4)
+            .unwrap()
+            .dequantize_rows_from(&q, 1, scale)
+            .unwrap();
+        for ch in 0..c {
+            for x in 0..w {
+                assert_eq!(q.get(ch, 0, x), Some(zp));
+                for (i, fy) in [(1, 2), (2, 3)] {
+                    let v = f.get(ch, fy, x).unwrap();
+                    let want = (v / scale)
+                        .round_ties_even()
+                        .clamp(-(zp as f32), 255.0 - zp as f32);
+                    let got = q.get(ch, i, x).unwrap();
+                    assert_eq!(got as f32 - zp as f32, want, "({ch}, {i}, {x})");
+                    let deq = back.get(ch, i + 1, x).unwrap();
+                    assert_eq!(deq, (got as f32 - zp as f32) * scale);
+                    assert!((deq - v).abs() <= scale * 0.5 + 1e-6 || !(-1.19..=1.9).contains(&v));
+                }
+                assert_eq!(back.get(ch, 0, x), Some(0.0));
+            }
+        }
+        assert!(q.border_is_clean() && back.border_is_clean());
+        let mut band = q.band_mut(0..3).unwrap();
+        assert!(band.quantize_rows_from(&f, 3, scale).is_err());
+        assert!(band.quantize_rows_from(&f, 0, 0.0).is_err());
+        let narrow = RowPlanar::new(c, h, w - 1).unwrap();
+        assert!(band.quantize_rows_from(&narrow, 0, scale).is_err());
+        let mut band = back.band_mut(0..4).unwrap();
+        assert!(band.dequantize_rows_from(&q, 0, scale).is_err());
     }
 }

@@ -7,8 +7,11 @@ real frame), through its frozen hologram CNN and the offset propagation.
         [--retrained runs/photo/qat_pre6_photo30/best.pt] [--calib-method percentile]
 
 prints, per set of crops: the f32 weights rounded as the exporter does, the same with bias correction
-(qat.bias_correction), and a retrained checkpoint's pre-filter (quantisation-aware fine-tuning or
-distillation) rounded on its own grids.
+(qat.bias_correction), mixed precision (the shipped int8 pre-filters, export --float-convs first last: the first
+and last convolutions float on the float input, the last hidden state on a MinMax grid of its own), and a
+retrained checkpoint's pre-filter (quantisation-aware fine-tuning or distillation) rounded on its own grids.
+With --ablation, which rounding costs most: each of the input, the hidden states, the concat and the weights
+left float in turn.
 """
 from __future__ import annotations
 
@@ -33,6 +36,7 @@ def main() -> None:
     ap.add_argument("--dataset", default="data/photo256")
     ap.add_argument("--frames", default="runs/real_inputs/rgbd/*.npy")
     ap.add_argument("--calib-method", default="minmax", choices=["minmax", "percentile"])
+    ap.add_argument("--ablation", action="store_true", help="also each rounding left out in turn")
     args = ap.parse_args()
     ck = load_checkpoint(args.checkpoint)
     cfg = ck["config"]
@@ -53,8 +57,45 @@ def main() -> None:
         return q
 
     grids = exporter_grids(teacher, "prefilter-cnn", calib, args.calib_method)
+    n = len(grids)
+
+    def variant(float_inputs=(), float_weights=(), hidden_grid=None):
+        """The rounded pre-filter with the inputs of the convolutions ``float_inputs`` and the weights of
+        ``float_weights`` left float; ``hidden_grid``: the last layer's concat reads its hidden part on that grid
+        and its input part float (mixed precision)."""
+        q = rounded(teacher)
+        inner, c = q.net, q.net.channels
+        base = inner.activation_quant
+
+        def round_input(i, t):
+            if i == n - 1 and hidden_grid is not None:
+                h = torch.fake_quantize_per_tensor_affine(t[:, :c], hidden_grid.scale, hidden_grid.zero_point, 0, 255)
+                return torch.cat([h, t[:, c:]], 1)
+            return t if i in float_inputs else base(i, t)
+        inner.activation_quant = round_input
+        for i in float_weights:
+            del qat.learned_convs(q)[i].__dict__["forward"]
+        return q
+
+    # the last hidden state's own MinMax grid (export._round_concat_hidden_input)
+    top = 0.0
+    with torch.no_grad():
+        def keep(i, t):
+            nonlocal top
+            if i == n - 1:
+                top = max(top, float(t[:, :teacher.net.channels].max()))
+            return t
+        teacher.net.activation_quant = keep
+        for x in calib:
+            teacher(torch.from_numpy(x))
+        teacher.net.activation_quant = None
     candidates = {"rounded": rounded(teacher),
-                  "bias-corrected": rounded(qat.bias_correction(teacher, grids, calib))}
+                  "bias-corrected": rounded(qat.bias_correction(teacher, grids, calib)),
+                  "mixed precision": variant((0,), (0, n - 1), qat.Grid(top / 255, 0))}
+    if args.ablation:
+        candidates |= {"input float": variant((0,)), "hidden states float": variant(tuple(range(1, n - 1))),
+                       "concat float": variant((n - 1,)), "all activations float": variant(tuple(range(n))),
+                       "all weights float": variant((), tuple(range(n)))}
     if args.retrained:
         candidates["retrained"] = rounded(load_checkpoint(args.retrained)["prefilter"])
     held_out = {"validation crops": calibration_inputs(args.dataset, 1, 40, 128, split="val", seed=7),

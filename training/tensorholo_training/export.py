@@ -197,7 +197,10 @@ def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray
         calib_method: ``"minmax"`` (each activation's range over the calibration inputs) or ``"percentile"``
             (its 99.99th percentile of absolute values, onnxruntime's ``CalibPercentile``).
         float_convs: learned convolutions left in float: ``"first"`` (it reads the float input), ``"last"``
-            (float weights for the heads' input or the pre-filter's correction).
+            (float weights for the heads' input or the pre-filter's correction, reading the float input and, in
+            the QDQ file, the last hidden state rounded to a grid of its own). Both is the native engine's mixed
+            precision (the shipped int8 pre-filters); either alone runs on tract only. Metadata
+            ``tensorholo.int8_float_convs``.
         weights: metadata ``tensorholo.int8_weights``: ``"f32-file"`` (the weights are the shipped f32 file's),
             ``"bias-corrected"`` (its weights, biases corrected, :func:`.qat.bias_correction`) or
             ``"quantisation-aware"`` (fine-tuned with the int8 roundings, :mod:`.qat`).
@@ -250,13 +253,66 @@ def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray
             per_channel=per_channel, activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
             nodes_to_exclude=fixed, extra_options=extra, calibrate_method=methods[calib_method],
         )
+        if fmt == "qdq" and "last" in float_convs:
+            _round_concat_hidden_input(out_path, prepared, calibration, calib_method)
     if fmt == "qdq":
         _float_blur_input(out_path)
     meta[METADATA_PREFIX + "precision"] = precision
     meta[METADATA_PREFIX + "int8_weight_scales"] = "per-output-channel" if per_channel else "per-tensor"
     meta[METADATA_PREFIX + "int8_weights"] = weights
+    meta[METADATA_PREFIX + "int8_float_convs"] = " ".join(c for c in ("first", "last") if c in float_convs) or "none"
     set_metadata(out_path, meta)
     return out_path
+
+
+def _round_concat_hidden_input(path: str, f32_path: str, calibration: Sequence[np.ndarray],
+                               calib_method: str) -> None:
+    """Rounds the last convolution's hidden input ``s_{N−1}`` (the concat's first input) to a u8 grid of its own
+    in a QDQ file whose last convolution is float (``float_convs`` holds ``"last"``): the native engine's
+    mixed-precision layout (``docs/CONVENTIONS.md`` §7), where the int8 layer before writes ``s_{N−1}`` in u8
+    and the f32 last layer reads it dequantised, beside the float input. Without it the file would read
+    ``s_{N−1}`` unrounded, which no int8 engine computes. The grid is calibrated as the exporter's others, on
+    ``calibration`` through the f32 graph ``f32_path``: MinMax, or the 99.99th percentile as the top of the
+    range (``s_{N−1}`` is a sum of ReLU outputs, ≥ 0), with 0 on the grid.
+    """
+    import onnx
+    import onnxruntime as ort
+    from onnx import helper, numpy_helper
+
+    model = onnx.load(path)
+    graph = model.graph
+    made_by = {o: n for n in graph.node for o in n.output}
+    learned = [n for n in graph.node
+               if n.op_type == "Conv" and not any(a.name == "group" and a.i > 1 for a in n.attribute)]
+    cat = made_by.get(learned[-1].input[0])
+    if cat is None or cat.op_type != "Concat":
+        raise ValueError(f"{path}: the last convolution does not read a concat")
+    hidden = cat.input[0]
+    probe = onnx.load(f32_path)
+    probe.graph.output.append(helper.make_tensor_value_info(hidden, onnx.TensorProto.FLOAT, None))
+    session = ort.InferenceSession(probe.SerializeToString(), providers=["CPUExecutionProvider"])
+    name = session.get_inputs()[0].name
+    values = [session.run([hidden], {name: x.astype(np.float32)})[0] for x in calibration]
+    lo = min(0.0, min(float(v.min()) for v in values))
+    if calib_method == "percentile":
+        hi = float(np.percentile(np.concatenate([v.ravel() for v in values]), 99.99))
+    else:
+        hi = float(max(v.max() for v in values))
+    hi = max(hi, 0.0)
+    scale = np.float32((hi - lo) / 255.0 if hi > lo else 1.0)
+    zero = np.uint8(np.clip(round(-lo / float(scale)), 0, 255))
+    tag = hidden + "_concat_u8"
+    graph.initializer.extend([numpy_helper.from_array(np.array(scale, np.float32), tag + "_scale"),
+                              numpy_helper.from_array(np.array(zero, np.uint8), tag + "_zero_point")])
+    q = helper.make_node("QuantizeLinear", [hidden, tag + "_scale", tag + "_zero_point"], [tag + "_q"],
+                         name=tag + "_QuantizeLinear")
+    dq = helper.make_node("DequantizeLinear", [tag + "_q", tag + "_scale", tag + "_zero_point"], [tag],
+                          name=tag + "_DequantizeLinear")
+    at = list(graph.node).index(cat)
+    graph.node.insert(at, dq)
+    graph.node.insert(at, q)
+    cat.input[0] = tag
+    onnx.save(model, path)
 
 
 def _float_blur_input(path: str) -> None:
@@ -494,7 +550,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="activation ranges: MinMax (default) or the 99.99th percentile")
     ap.add_argument("--float-convs", nargs="*", choices=["first", "last"], default=[],
                     help="learned convolutions of the int8 files left in float (first: reads the float input; "
-                         "last: float weights for the heads' input or the pre-filter's correction)")
+                         "last: float weights for the heads' input or the pre-filter's correction); both: the "
+                         "native engine's mixed precision (the shipped int8 pre-filters); either alone: tract only")
     ap.add_argument("--bias-correction", action="store_true",
                     help="int8 files quantised from the network with each convolution's bias corrected for the mean "
                          "error its rounding adds, measured on the calibration inputs (qat.bias_correction)")

@@ -319,3 +319,46 @@ def test_float_convs_leave_the_named_learned_convolutions_float(exported, which)
     assert float_weights == [("first" in which and i == 0) or ("last" in which and i == 7) for i in range(8)]
     with pytest.raises(ValueError, match="float_convs"):
         quantize_int8(path, str(d / "x.onnx"), calib, "qdq", float_convs=["middle"])
+
+
+def test_mixed_precision_rounds_the_last_hidden_state_on_its_own_grid_and_errs_less(exported):
+    # export --float-convs first last (the shipped int8 pre-filters' layout, the native engine's mixed
+    # precision): the concat reads the float input and the last hidden state rounded to a grid calibrated on it
+    # (>= 0: zero point 0, its maximum over the calibration inputs at code 255); on other inputs the file is
+    # closer to the f32 network than the all-int8 file of the same calibration.
+    net, path, d = exported
+    calib = rgbd_calib(6, 8)
+    mixed = quantize_int8(path, str(d / "holo8.mixed.onnx"), calib, "qdq", float_convs=["first", "last"])
+    int8 = quantize_int8(path, str(d / "holo8.all.onnx"), calib, "qdq")
+    assert read_metadata(mixed)["tensorholo.int8_float_convs"] == "first last"
+    assert read_metadata(int8)["tensorholo.int8_float_convs"] == "none"
+    model = onnx.load(mixed)
+    inits = {i.name: onnx.numpy_helper.to_array(i) for i in model.graph.initializer}
+    made_by = {o: n for n in model.graph.node for o in n.output}
+    cat = next(n for n in model.graph.node if n.op_type == "Concat")
+    dq = made_by[cat.input[0]]
+    q = made_by[dq.input[0]]
+    assert (dq.op_type, q.op_type) == ("DequantizeLinear", "QuantizeLinear")
+    assert made_by[cat.input[1]].op_type == "Sub"  # the centred input x − 0.5, float
+    scale, zero = float(inits[q.input[1]]), int(inits[q.input[2]])
+    hidden = []
+    with torch.no_grad():
+        def keep(i, t):
+            if i == net.num_layers - 1:
+                hidden.append(t[:, :net.channels])
+            return t
+        net.activation_quant = keep
+        for x in calib:
+            net(torch.from_numpy(x))
+        net.activation_quant = None
+    top = max(float(h.max()) for h in hidden)
+    assert zero == 0 and scale == pytest.approx(top / 255, rel=1e-5)
+    errors = {}
+    for name, p in (("mixed", mixed), ("int8", int8)):
+        e = []
+        for x in rgbd_calib(11, 4):
+            with torch.no_grad():
+                ref = [t.numpy() for t in net(torch.from_numpy(x))]
+            e += [np.abs(a - r).mean() for a, r in zip(run_onnx(p, x, exact=True), ref)]
+        errors[name] = float(np.mean(e))
+    assert errors["mixed"] < 0.9 * errors["int8"], errors

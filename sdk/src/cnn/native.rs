@@ -44,9 +44,6 @@ struct Network {
     layers: Vec<Conv3x3F32>,
     /// The level the layers were packed for (also the heads' vector path).
     isa: Isa,
-    /// Per input channel: the affine map of the input (scale 1, offset `−input_offset`).
-    scale: Vec<f32>,
-    offset: Vec<f32>,
 }
 
 /// A native plan: one network at one resolution, with its activation windows and threads.
@@ -121,13 +118,7 @@ impl NativePlan {
         let c = graph.in_channels;
         let hidden = graph.layers[0].c_out;
         let c_out = graph.layers[n - 1].c_out;
-        let net = Network {
-            scale: vec![1.0; c],
-            offset: vec![-graph.input_offset; c],
-            graph,
-            layers,
-            isa,
-        };
+        let net = Network { graph, layers, isa };
         // Windows: the input (carry N + 1: the concat reads it N rows later), s_1 … s_{N−1} (carry 2), the
         // raw output (no carry).
         let (xb, hb, ob) = (
@@ -198,50 +189,20 @@ impl NativePlan {
         let pool = self.pool.clone();
         let frame = || -> Result<()> {
             for m in 0..strips.steps {
-                if let Some((rows, f0)) = self.x.new_rows(strips, m)? {
-                    let band = self.x.buf.band_mut(rows.clone()).map_err(kernel_err)?;
-                    let y0 = rows.start;
-                    bands(band, threads, &|b| {
-                        let f = f0 + b.rows().start - y0;
-                        for c in 0..net.scale.len() {
-                            let affine = Some((net.scale[c], net.offset[c]));
-                            b.fill_channel_rows(c, input.plane(c), f, affine)?;
-                        }
-                        Ok(())
-                    })?;
-                }
+                let offset = -net.graph.input_offset;
+                input_rows(&mut self.x, input, offset, strips, m, threads)?;
                 hidden_layers(
                     &net.layers[..n - 1],
-                    &self.x,
+                    0,
+                    Some(&self.x),
                     &mut self.s,
                     strips,
                     m,
                     threads,
                 )?;
-                if let Some((rows, f0)) = self.raw.new_rows(strips, m)? {
-                    let last = if n >= 2 { &self.s[n - 2] } else { &self.x };
-                    let inputs = Inputs::new(&last.buf).concat(&self.x.buf).shifted(
-                        self.raw.shift_from(last),
-                        self.raw.shift_from(&self.x),
-                        0,
-                    );
-                    let band = self.raw.buf.band_mut(rows.clone()).map_err(kernel_err)?;
-                    bands(band, threads, &|b| net.layers[n - 1].run_band(inputs, b))?;
-                    let raw = &self.raw.buf;
-                    let raw_row =
-                        |c: usize, y: usize| raw.row(c, y - f0 + rows.start).unwrap_or(&[]);
-                    let frame_rows = f0..f0 + rows.len();
-                    heads_rows(
-                        heads,
-                        &raw_row,
-                        None,
-                        [h, w],
-                        frame_rows,
-                        net.isa,
-                        threads,
-                        out,
-                    )?;
-                }
+                let last = if n >= 2 { &self.s[n - 2] } else { &self.x };
+                let ctx = (heads, [h, w], net.isa, strips, m, threads);
+                last_layer_rows(&net.layers[n - 1], last, &self.x, &mut self.raw, ctx, out)?;
                 self.x.advance(strips)?;
                 for s in &mut self.s {
                     s.advance(strips)?;
@@ -251,6 +212,61 @@ impl NativePlan {
         };
         installed(pool.as_deref(), threads, frame)
     }
+}
+
+/// Strip `m`'s new rows of the f32 input window `x`: `s_0 = x + offset` (`offset = −input_offset`) of the
+/// planar input, in `threads` row bands.
+pub(super) fn input_rows(
+    x: &mut Window<f32>,
+    input: Planes<'_>,
+    offset: f32,
+    strips: Strips,
+    m: usize,
+    threads: usize,
+) -> Result<()> {
+    let Some((rows, f0)) = x.new_rows(strips, m)? else {
+        return Ok(());
+    };
+    let c = x.buf.channels();
+    let y0 = rows.start;
+    let band = x.buf.band_mut(rows).map_err(kernel_err)?;
+    bands(band, threads, &|b| {
+        let f = f0 + b.rows().start - y0;
+        for ch in 0..c {
+            b.fill_channel_rows(ch, input.plane(ch), f, Some((1.0, offset)))?;
+        }
+        Ok(())
+    })
+}
+
+/// What [`last_layer_rows`] needs of the plan: the heads ([`heads_of`]), the frame `[H, W]`, the vector
+/// level, the strips, the strip index and the threads.
+pub(super) type LastLayerCtx = (Option<(f32, f32)>, [usize; 2], Isa, Strips, usize, usize);
+
+/// Strip `m` of the f32 last layer: `o = conv(concat(s_{N−1}, s_0))` into the raw window, then its rows
+/// through [`heads_rows`] (the raw output stays float) into `out`. `last` holds `s_{N−1}` in f32 (the f32
+/// engine's own, or the mixed-precision int8 engine's dequantised copy), `x` the f32 input window.
+pub(super) fn last_layer_rows(
+    conv: &Conv3x3F32,
+    last: &Window<f32>,
+    x: &Window<f32>,
+    raw: &mut Window<f32>,
+    (heads, hw, isa, strips, m, threads): LastLayerCtx,
+    out: &mut Outputs<'_>,
+) -> Result<()> {
+    let Some((rows, f0)) = raw.new_rows(strips, m)? else {
+        return Ok(());
+    };
+    let inputs =
+        Inputs::new(&last.buf)
+            .concat(&x.buf)
+            .shifted(raw.shift_from(last), raw.shift_from(x), 0);
+    let band = raw.buf.band_mut(rows.clone()).map_err(kernel_err)?;
+    bands(band, threads, &|b| conv.run_band(inputs, b))?;
+    let raw = &raw.buf;
+    let raw_row = |c: usize, y: usize| raw.row(c, y - f0 + rows.start).unwrap_or(&[]);
+    let frame_rows = f0..f0 + rows.len();
+    heads_rows(heads, &raw_row, None, hw, frame_rows, isa, threads, out)
 }
 
 /// A CNN input `[C][H][W]`: one planar slice, or one slice per channel plane ([`CnnPlan::run_planes`]).

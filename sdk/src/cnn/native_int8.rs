@@ -20,29 +20,46 @@
 //! rounding, at most half a step of that grid per layer, that this engine skips: measured against tract's
 //! execution of such a file in `cnn/tests.rs`).
 //!
+//! **Mixed precision** (files of `export --float-convs first last`, [`CnnQuant`]): the first and the last
+//! layer run the f32 kernels ([`Conv3x3F32`]) on the float input, the layers between on the int8 ones:
+//!
+//! ```text
+//! s_0 = x − input_offset in f32
+//! layer 0:        s_1 = Q(ReLU(conv_0(s_0) + b_0))                f32 weights, rounded to s_1's grid
+//! layers 1 … N−2: as above, u8 × s8
+//! layer N−1:      o = conv_{N−1}(concat(DQ(s_{N−1}), s_0)) + b       f32 weights, s_{N−1} on its own grid
+//! ```
+//!
+//! The rounding of the input (for the first layer and for the concat) is where most of a pre-filter's int8
+//! error came from (models/MODEL_CARD.md, "int8: mixed precision"); the two float layers hold a small share
+//! of the multiply-adds.
+//!
 //! Strips and threads: as the f32 engine (windows of a few rows, [`super::strips`]; each layer's strip in one
-//! band per thread); the last layer writes a strip of raw f32 rows `[S][C_out][W]`, so that each band is a
-//! slice of its own.
+//! band per thread); the int8 last layer writes a strip of raw f32 rows `[S][C_out][W]`, so that each band is
+//! a slice of its own; the f32 last layer writes a window, as the f32 engine's.
 
 use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3};
-use tensorholo_kernels::{Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, RowPlanar};
+use tensorholo_kernels::{Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, RowPlanar};
 
 use super::native::{
-    finish_outputs, heads_of, heads_rows, owned_outputs, planar_slice, pool, standard_input,
-    u8_grid, BaseInput, Outputs, Planes,
+    finish_outputs, heads_of, heads_rows, input_rows, last_layer_rows, owned_outputs, planar_slice,
+    pool, standard_input, u8_grid, BaseInput, Outputs, Planes,
 };
 use super::strips::{bands, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window};
 use super::{check_planes, kernel_err, CnnPlan};
 use crate::error::{HoloError, Result};
-use crate::model::{CnnQuant, CnnWeights, QuantGrid};
+use crate::model::{CnnQuant, CnnWeights, LayerQuant, QuantGrid};
 
-/// The network's packed int8 layers, shared by every plan of it.
+/// The network's packed layers, shared by every plan of it.
 #[derive(Debug)]
 struct Network {
     graph: Arc<CnnWeights>,
+    /// The int8 layers: all `N`, or layers `1 … N−2` of a mixed-precision file.
     layers: Vec<Conv3x3U8>,
+    /// Mixed precision: the f32 first and last layers.
+    float_ends: Option<[Conv3x3F32; 2]>,
     /// The level the layers were packed for (also the heads' vector path).
     isa: Isa,
 }
@@ -56,6 +73,44 @@ impl Network {
     }
 }
 
+/// Layer `i`'s int8 form. Errors: a float layer ([`HoloError::ModelRun`]).
+fn int8_layer(quant: &CnnQuant, i: usize) -> Result<&LayerQuant> {
+    quant.layers.get(i).and_then(Option::as_ref).ok_or_else(|| {
+        HoloError::ModelRun(format!(
+            "int8 file: layer {i} is float; the native engine runs files whose learned convolutions are all \
+             int8, or all but the first and the last (export --float-convs first last)"
+        ))
+    })
+}
+
+/// The activations at the two ends of the network, by the precision of its first and last layers.
+#[derive(Clone, Debug)]
+enum Ends {
+    /// Every layer int8.
+    Int8 {
+        /// `s_0` on layer 0's input grid.
+        x: Window<u8>,
+        /// `s_0` on the concat's grid: the last layer's second source (carried `N + 1` rows).
+        x_cat: Window<u8>,
+        /// The last layer's raw output of one strip, `[S][C_out][W]` (row-major, so that row bands are
+        /// disjoint slices).
+        raw: Vec<f32>,
+        /// Where `raw`'s rows sit in the frame (lag `N`, no carry).
+        raw_place: Place,
+    },
+    /// Mixed precision: float first and last layers.
+    Float {
+        /// `s_0` in f32, read by both float layers (carried `N + 1` rows).
+        x: Window<f32>,
+        /// Layer 0's f32 output, before it is rounded into `s_1`.
+        y0: Window<f32>,
+        /// `s_{N−1}` dequantised, the last layer's first source.
+        last: Window<f32>,
+        /// The last layer's raw output.
+        raw: Window<f32>,
+    },
+}
+
 /// An int8 native plan: one network at one resolution, with its activation windows and threads.
 #[derive(Debug)]
 pub(crate) struct NativeInt8Plan {
@@ -65,29 +120,23 @@ pub(crate) struct NativeInt8Plan {
     threads: usize,
     pool: Option<Arc<rayon::ThreadPool>>,
     strips: Strips,
-    /// `s_0` on layer 0's input grid.
-    x: Window<u8>,
-    /// `s_0` on the concat's grid: the last layer's second source (carried `N + 1` rows).
-    x_cat: Window<u8>,
+    ends: Ends,
     /// `s_1 … s_{N−1}`, each on the grid of the layer that writes it.
     s: Vec<Window<u8>>,
-    /// The last layer's raw output of one strip, `[S][C_out][W]` (row-major, so that row bands are
-    /// disjoint slices).
-    raw: Vec<f32>,
-    /// Where `raw`'s rows sit in the frame (lag `N`, no carry).
-    raw_place: Place,
     /// Pre-filter of a file whose base filter reads the rounded input: one channel of that input,
     /// `H·W` values (grown on the first run).
     base_plane: Vec<f32>,
 }
 
 impl NativeInt8Plan {
-    /// Packs `graph`'s int8 layers for the best int8 kernels of `isa` and allocates the activation windows
-    /// of `height × width` frames (strips of `strips::strip_rows`), run on `threads` threads (≥ 1).
+    /// Packs `graph`'s int8 layers (and the f32 first and last layers of a mixed-precision file) for the best
+    /// kernels of `isa` and allocates the activation windows of `height × width` frames (strips of
+    /// `strips::strip_rows`), run on `threads` threads (≥ 1).
     ///
     /// Errors: [`HoloError::InvalidParameter`] for 0 threads; [`HoloError::InvalidData`] for non-finite
-    /// scales or biases; [`HoloError::ModelRun`] for a graph without int8 grids, an ISA this CPU lacks, a
-    /// size the kernels refuse or a thread pool the OS will not start.
+    /// scales, weights or biases; [`HoloError::ModelRun`] for a graph without int8 grids, float layers other
+    /// than the first and the last together, an ISA this CPU lacks, a size the kernels refuse or a thread
+    /// pool the OS will not start.
     pub(crate) fn new(
         graph: Arc<CnnWeights>,
         height: usize,
@@ -119,23 +168,28 @@ impl NativeInt8Plan {
         let n = graph.layers.len();
         let hidden = graph.layers[0].c_out;
         let c = graph.in_channels;
-        // The grid of s_{k+1}, k < N − 1 (the graph reader requires one for every hidden layer).
-        let hidden_grids: Vec<QuantGrid> = quant.layers[..n - 1]
-            .iter()
-            .enumerate()
-            .map(|(k, q)| {
-                q.output.ok_or_else(|| {
-                    HoloError::ModelRun(format!("int8 file: layer {k} has no output grid"))
-                })
-            })
-            .collect::<Result<_>>()?;
-        let mut layers = Vec::with_capacity(n);
-        for (i, (l, q)) in graph.layers.iter().zip(&quant.layers).enumerate() {
-            if l.bias.iter().any(|v| !v.is_finite()) {
+        // Mixed precision: float first and last layers (the graph reader allows no other float layers).
+        let mixed = n >= 3 && quant.layers[0].is_none() && quant.layers[n - 1].is_none();
+        let int8 = if mixed { 1..n - 1 } else { 0..n };
+        for (i, l) in graph.layers.iter().enumerate() {
+            if l.bias.iter().chain(&l.weights).any(|v| !v.is_finite()) {
                 return Err(HoloError::InvalidData(format!(
-                    "CNN layer {i} holds a NaN or infinite bias"
+                    "CNN layer {i} holds a NaN or infinite weight or bias"
                 )));
             }
+        }
+        // The grid of s_{k+1}, k < N − 1: what layer k writes (layer 1's input grid after a float layer 0).
+        let hidden_grids: Vec<QuantGrid> = (0..n - 1)
+            .map(|k| match (mixed, k) {
+                (true, 0) => Ok(int8_layer(quant, 1)?.input),
+                _ => int8_layer(quant, k)?.output.ok_or_else(|| {
+                    HoloError::ModelRun(format!("int8 file: layer {k} has no output grid"))
+                }),
+            })
+            .collect::<Result<_>>()?;
+        let mut layers = Vec::with_capacity(int8.len());
+        for i in int8 {
+            let (l, q) = (&graph.layers[i], int8_layer(quant, i)?);
             let last = i + 1 == n;
             let residual = i + 1 >= 3 && (i + 1) % 2 == 1 && !last;
             let spec = Conv3x3U8Spec {
@@ -149,47 +203,98 @@ impl NativeInt8Plan {
                 input_zero_point_a: q.input.zero_point,
                 input_zero_point_b: q.input.zero_point,
                 relu: !last,
-                // s_{i−1} is on the grid layer i − 1 reads.
-                residual: residual.then(|| u8_grid(quant.layers[i - 1].input)),
+                // s_{i−1} is on the grid layer i − 1 writes it to.
+                residual: residual.then(|| u8_grid(hidden_grids[i - 2])),
                 output: (!last).then(|| u8_grid(hidden_grids[i])),
             };
             layers.push(Conv3x3U8::new(&spec, isa).map_err(kernel_err)?);
         }
         let c_out = graph.layers[n - 1].c_out;
-        let first = quant.layers[0].input;
-        let cat = quant.layers[n - 1].input;
-        // Windows: s_0 on layer 0's grid (carry 2), on the concat's (carry N + 1), s_1 … (carry 2), raw f32.
-        let (xb, hb) = (row_bytes::<u8>(c, width), row_bytes::<u8>(hidden, width));
-        let ob = c_out * width * std::mem::size_of::<f32>();
-        let per_row = 2 * xb + (n - 1) * hb + ob;
-        let fixed = (n + 7) * xb + 4 * (n - 1) * hb;
+        let float_ends = match mixed {
+            true => {
+                let (l0, ln) = (&graph.layers[0], &graph.layers[n - 1]);
+                let f = |l: &crate::model::ConvLayer, relu| {
+                    Conv3x3F32::new(&l.weights, &l.bias, l.c_in, l.c_out, relu, isa)
+                        .map_err(kernel_err)
+                };
+                Some([f(l0, true)?, f(ln, false)?])
+            }
+            false => None,
+        };
+        let hb = row_bytes::<u8>(hidden, width);
+        let (per_row, fixed) = match mixed {
+            false => {
+                let xb = row_bytes::<u8>(c, width);
+                let ob = c_out * width * std::mem::size_of::<f32>();
+                (2 * xb + (n - 1) * hb + ob, (n + 7) * xb + 4 * (n - 1) * hb)
+            }
+            true => {
+                let (xb, fb) = (row_bytes::<f32>(c, width), row_bytes::<f32>(hidden, width));
+                let ob = row_bytes::<f32>(c_out, width);
+                (
+                    xb + (n - 1) * hb + 2 * fb + ob,
+                    (n + 3) * xb + 4 * (n - 1) * hb + 6 * fb + 2 * ob,
+                )
+            }
+        };
         let strips = Strips::for_plan(strip, height, n, [per_row, fixed], threads);
         let window = |ch, zp, lag, carry| {
             Window::new(Place::new(lag, carry), strips, |rows| {
                 RowPlanar::new_quantized(ch, rows, width, zp)
             })
         };
+        let window_f32 = |ch, lag, carry| {
+            Window::new(Place::new(lag, carry), strips, |rows| {
+                RowPlanar::new(ch, rows, width)
+            })
+        };
+        let ends = match mixed {
+            false => {
+                let first = int8_layer(quant, 0)?.input;
+                let cat = int8_layer(quant, n - 1)?.input;
+                Ends::Int8 {
+                    x: window(c, first.zero_point, 0, 2)?,
+                    x_cat: window(c, cat.zero_point, 0, n + 1)?,
+                    raw: vec![0.0; strips.rows * c_out * width],
+                    raw_place: Place::new(n, 0),
+                }
+            }
+            true => Ends::Float {
+                x: window_f32(c, 0, n + 1)?,
+                y0: window_f32(hidden, 1, 0)?,
+                last: window_f32(hidden, n - 1, 2)?,
+                raw: window_f32(c_out, n, 0)?,
+            },
+        };
         Ok(Self {
-            x: window(c, first.zero_point, 0, 2)?,
-            x_cat: window(c, cat.zero_point, 0, n + 1)?,
+            ends,
             s: (1..n)
                 .map(|k| window(hidden, hidden_grids[k - 1].zero_point, k, 2))
                 .collect::<Result<_>>()?,
-            raw: vec![0.0; strips.rows * c_out * width],
-            raw_place: Place::new(n, 0),
             strips,
             base_plane: Vec::new(),
             height,
             width,
             threads,
             pool: pool(threads)?,
-            net: Arc::new(Network { graph, layers, isa }),
+            net: Arc::new(Network {
+                graph,
+                layers,
+                float_ends,
+                isa,
+            }),
         })
     }
 
-    /// The kernel row every layer runs (e.g. `conv3x3.u8s8.4x1.avx2`).
+    /// The kernel row the hidden layers run (e.g. `conv3x3.u8s8.4x1.avx2`).
     pub(crate) fn kernel_name(&self) -> &'static str {
         self.net.layers[0].kernel().name
+    }
+
+    /// Whether the first and last layers run in f32 (a mixed-precision file).
+    #[cfg(test)]
+    pub(crate) fn is_mixed(&self) -> bool {
+        self.net.float_ends.is_some()
     }
 
     /// One frame of a checked input into `out`.
@@ -197,14 +302,17 @@ impl NativeInt8Plan {
         let net = self.net.clone();
         let quant = net.quant()?;
         let (h, w) = (self.height, self.width);
-        self.forward(input, out)?;
+        match &mut self.ends {
+            Ends::Int8 { .. } => self.forward_int8(input, out)?,
+            Ends::Float { .. } => self.forward_mixed(input, out)?,
+        }
         let base = match quant.base_reads_rounded_input {
             // Older files: the base filter reads the input as the first layer does, rounded.
             true => BaseInput::Rounded {
                 planar: input,
                 // The pre-filter has no offset; the rounding is the file's QuantizeLinear of the input.
                 offset: -net.graph.input_offset,
-                grid: quant.layers[0].input,
+                grid: int8_layer(quant, 0)?.input,
                 isa: net.isa,
                 plane: &mut self.base_plane,
             },
@@ -221,21 +329,32 @@ impl NativeInt8Plan {
         )
     }
 
-    /// One frame, strip by strip, on the plan's threads: the input `planar` `[C][H][W]` quantised into its two
-    /// windows, every layer's strip, the last layer's raw rows (rounded to the file's output grid if it has one)
-    /// turned into the heads (or the pre-filter's raw output) in `out`.
-    fn forward(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
+    /// One frame of an all-int8 network, strip by strip, on the plan's threads: the input `planar` `[C][H][W]`
+    /// quantised into its two windows, every layer's strip, the last layer's raw rows (rounded to the file's
+    /// output grid if it has one) turned into the heads (or the pre-filter's raw output) in `out`.
+    fn forward_int8(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
         let net = self.net.clone();
         let quant = net.quant()?;
         let n = net.layers.len();
         let (threads, strips, [h, w]) = (self.threads, self.strips, [self.height, self.width]);
-        let first = quant.layers[0].input;
-        let (cat_scale, out_grid) = (quant.layers[n - 1].input.scale, quant.layers[n - 1].output);
+        let first = int8_layer(quant, 0)?.input;
+        let last_q = int8_layer(quant, n - 1)?;
+        let (cat_scale, out_grid) = (last_q.input.scale, last_q.output);
         let offset = -net.graph.input_offset;
         let c_out = net.layers[n - 1].c_out();
-        self.x.start_frame()?;
-        self.x_cat.start_frame()?;
-        for s in &mut self.s {
+        let Ends::Int8 {
+            x,
+            x_cat,
+            raw,
+            raw_place,
+        } = &mut self.ends
+        else {
+            return Err(HoloError::Internal("int8 forward of a mixed plan".into()));
+        };
+        let s = &mut self.s;
+        x.start_frame()?;
+        x_cat.start_frame()?;
+        for s in s.iter_mut() {
             s.start_frame()?;
         }
         let heads = heads_of(&net.graph);
@@ -243,9 +362,9 @@ impl NativeInt8Plan {
         let frame = || -> Result<()> {
             for m in 0..strips.steps {
                 // s_0 on both grids, in row bands (they were a tenth of a 2-thread frame when serial).
-                if let Some((rows, f0)) = self.x.new_rows(strips, m)? {
+                if let Some((rows, f0)) = x.new_rows(strips, m)? {
                     let y0 = rows.start;
-                    let band = self.x.buf.band_mut(rows).map_err(kernel_err)?;
+                    let band = x.buf.band_mut(rows).map_err(kernel_err)?;
                     bands(band, threads, &|b| {
                         let f = f0 + b.rows().start - y0;
                         for c in 0..net.graph.in_channels {
@@ -260,53 +379,45 @@ impl NativeInt8Plan {
                         Ok(())
                     })?;
                 }
-                if let Some((rows, f0)) = self.x_cat.new_rows(strips, m)? {
-                    let (x, y0) = (&self.x, rows.start);
+                if let Some((rows, f0)) = x_cat.new_rows(strips, m)? {
+                    let (x, y0) = (&*x, rows.start);
                     let x_first = x.place.first_row(strips, m);
-                    let band = self.x_cat.buf.band_mut(rows).map_err(kernel_err)?;
+                    let band = x_cat.buf.band_mut(rows).map_err(kernel_err)?;
                     bands(band, threads, &|b| {
                         let f = (f0 + b.rows().start - y0) as isize;
                         let from = (f - x_first) as usize;
                         b.requantize_rows_from(&x.buf, from, first.scale, cat_scale)
                     })?;
                 }
-                hidden_layers(
-                    &net.layers[..n - 1],
-                    &self.x,
-                    &mut self.s,
-                    strips,
-                    m,
-                    threads,
-                )?;
-                if let Some((rows, f0)) = self.raw_place.new_rows(strips, m).valid {
-                    let o = self.raw_place;
-                    let last = &self.s[n - 2];
-                    let inputs = Inputs::new(&last.buf).concat(&self.x_cat.buf).shifted(
+                hidden_layers(&net.layers[..n - 1], 0, Some(&*x), s, strips, m, threads)?;
+                if let Some((rows, f0)) = raw_place.new_rows(strips, m).valid {
+                    let o = *raw_place;
+                    let last = &s[n - 2];
+                    let inputs = Inputs::new(&last.buf).concat(&x_cat.buf).shifted(
                         o.shift_from(last.place),
-                        o.shift_from(self.x_cat.place),
+                        o.shift_from(x_cat.place),
                         0,
                     );
                     let conv = &net.layers[n - 1];
                     let rw = c_out * w;
-                    let raw = F32Rows {
-                        data: &mut self.raw[rows.start * rw..rows.end * rw],
+                    let band = F32Rows {
+                        data: &mut raw[rows.start * rw..rows.end * rw],
                         rows: rows.clone(),
                     };
-                    bands(raw, threads, &|band: &mut F32Rows<'_>| {
+                    bands(band, threads, &|band: &mut F32Rows<'_>| {
                         conv.run_rows_f32(inputs, band.data, band.rows.clone())
                     })?;
-                    let raw = &self.raw;
+                    let raw = &*raw;
                     let raw_row = |c: usize, y: usize| {
                         let r = y - f0 + rows.start;
                         &raw[(r * c_out + c) * w..(r * c_out + c + 1) * w]
                     };
                     let frame_rows = f0..f0 + rows.len();
                     // The file's rounding of the last raw output, if it has one.
-                    let grid = out_grid;
                     heads_rows(
                         heads,
                         &raw_row,
-                        grid,
+                        out_grid,
                         [h, w],
                         frame_rows,
                         net.isa,
@@ -314,9 +425,81 @@ impl NativeInt8Plan {
                         out,
                     )?;
                 }
-                self.x.advance(strips)?;
-                self.x_cat.advance(strips)?;
-                for s in &mut self.s {
+                x.advance(strips)?;
+                x_cat.advance(strips)?;
+                for s in s.iter_mut() {
+                    s.advance(strips)?;
+                }
+            }
+            Ok(())
+        };
+        installed(pool.as_deref(), threads, frame)
+    }
+
+    /// One frame of a mixed-precision network (see the module docs), strip by strip, on the plan's threads:
+    /// the f32 input window, the f32 first layer rounded into `s_1`, the int8 layers, `s_{N−1}` dequantised,
+    /// the f32 last layer into `out`.
+    fn forward_mixed(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
+        let net = self.net.clone();
+        let quant = net.quant()?;
+        let n = net.graph.layers.len();
+        let (threads, strips, hw) = (self.threads, self.strips, [self.height, self.width]);
+        let (Some([first, last_conv]), Ends::Float { x, y0, last, raw }) =
+            (&net.float_ends, &mut self.ends)
+        else {
+            return Err(HoloError::Internal("mixed forward of an int8 plan".into()));
+        };
+        let s1_scale = int8_layer(quant, 1)?.input.scale;
+        let last_scale = int8_layer(quant, n - 2)?
+            .output
+            .ok_or_else(|| {
+                HoloError::ModelRun(format!("int8 file: layer {} has no output grid", n - 2))
+            })?
+            .scale;
+        let s = &mut self.s;
+        for win in [&mut *x, &mut *y0, &mut *last, &mut *raw] {
+            win.start_frame()?;
+        }
+        for s in s.iter_mut() {
+            s.start_frame()?;
+        }
+        let heads = heads_of(&net.graph);
+        let offset = -net.graph.input_offset;
+        let pool = self.pool.clone();
+        let frame = || -> Result<()> {
+            for m in 0..strips.steps {
+                input_rows(x, input, offset, strips, m, threads)?;
+                // Layer 0 in f32, its output rounded into s_1 (the same frame rows, at another carry).
+                if let Some((rows, _)) = y0.new_rows(strips, m)? {
+                    let inputs = Inputs::new(&x.buf).shifted(y0.shift_from(x), 0, 0);
+                    let band = y0.buf.band_mut(rows).map_err(kernel_err)?;
+                    bands(band, threads, &|b| first.run_band(inputs, b))?;
+                }
+                if let Some((rows, _)) = s[0].new_rows(strips, m)? {
+                    let d = s[0].shift_from(y0);
+                    let (y0, band) = (&*y0, s[0].buf.band_mut(rows).map_err(kernel_err)?);
+                    bands(band, threads, &|b| {
+                        let from = (b.rows().start as isize - d) as usize;
+                        b.quantize_rows_from(&y0.buf, from, s1_scale)
+                    })?;
+                }
+                hidden_layers(&net.layers, 1, None, s, strips, m, threads)?;
+                // s_{N−1} dequantised for the f32 last layer.
+                if let Some((rows, _)) = last.new_rows(strips, m)? {
+                    let src = &s[n - 2];
+                    let d = last.shift_from(src);
+                    let band = last.buf.band_mut(rows).map_err(kernel_err)?;
+                    bands(band, threads, &|b| {
+                        let from = (b.rows().start as isize - d) as usize;
+                        b.dequantize_rows_from(&src.buf, from, last_scale)
+                    })?;
+                }
+                let ctx = (heads, hw, net.isa, strips, m, threads);
+                last_layer_rows(last_conv, last, x, raw, ctx, out)?;
+                for win in [&mut *x, &mut *y0, &mut *last, &mut *raw] {
+                    win.advance(strips)?;
+                }
+                for s in s.iter_mut() {
                     s.advance(strips)?;
                 }
             }
@@ -358,11 +541,8 @@ impl CnnPlan for NativeInt8Plan {
             threads: self.threads,
             pool: pool(self.threads).ok().flatten(),
             strips: self.strips,
-            x: self.x.clone(),
-            x_cat: self.x_cat.clone(),
+            ends: self.ends.clone(),
             s: self.s.clone(),
-            raw: self.raw.clone(),
-            raw_place: self.raw_place,
             base_plane: Vec::new(),
         })
     }

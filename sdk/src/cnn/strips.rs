@@ -25,7 +25,7 @@ use tensorholo_kernels::buffer::{padded_width, Element};
 use tensorholo_kernels::{Conv3x3F32, Conv3x3U8, Inputs, KernelError, RowBand, RowPlanar};
 
 use super::kernel_err;
-use crate::error::Result;
+use crate::error::{HoloError, Result};
 
 /// Bytes the activation windows of one plan may take; the strip height is the largest that fits (see
 /// [`strip_rows`]).
@@ -246,18 +246,22 @@ impl BandConv<u8> for Conv3x3U8 {
     }
 }
 
-/// Strip `m` of the hidden layers (every layer but the last): layer `i` reads `s_i` (`x` for `i = 0`, else
-/// `s[i − 1]`), adds `s_{i−1}` where `i + 1` is odd and ≥ 3 (the architecture's residual every two
+/// Strip `m` of hidden layers: `layers[j]` is layer `i = first + j` (`first = 1` where the first layer runs
+/// elsewhere: the mixed-precision int8 engine's float first layer). Layer `i` reads `s_i` (`x` for `i = 0`,
+/// else `s[i − 1]`), adds `s_{i−1}` where `i + 1` is odd and ≥ 3 (the architecture's residual every two
 /// layers), writes `s_{i+1}` = `s[i]`; each layer's strip in `threads` bands on the current rayon pool.
+/// Errors: layer 0 without `x` ([`HoloError::Internal`]), the kernels' errors.
 pub(super) fn hidden_layers<T: Element + Send + Sync, K: BandConv<T>>(
     layers: &[K],
-    x: &Window<T>,
+    first: usize,
+    x: Option<&Window<T>>,
     s: &mut [Window<T>],
     strips: Strips,
     m: usize,
     threads: usize,
 ) -> Result<()> {
-    for (i, conv) in layers.iter().enumerate() {
+    for (j, conv) in layers.iter().enumerate() {
+        let i = first + j;
         let (done, rest) = s.split_at_mut(i);
         let Some(dst) = rest.first_mut() else {
             break;
@@ -265,7 +269,15 @@ pub(super) fn hidden_layers<T: Element + Send + Sync, K: BandConv<T>>(
         let Some((rows, _)) = dst.new_rows(strips, m)? else {
             continue;
         };
-        let src = if i == 0 { x } else { &done[i - 1] };
+        let src = match (i, x) {
+            (0, Some(x)) => x,
+            (0, None) => {
+                return Err(HoloError::Internal(
+                    "hidden layer 0 without its input".into(),
+                ))
+            }
+            _ => &done[i - 1],
+        };
         let residual = (i + 1 >= 3 && (i + 1) % 2 == 1).then(|| &done[i - 2]);
         let mut inputs = Inputs::new(&src.buf);
         let mut d_r = 0;

@@ -275,17 +275,31 @@ fn shipped_qdq() -> Vec<HologramModel> {
     for mm in [6, 12] {
         v.push(embedded::prefilter_model(mm, Precision::Int8Qdq, &cfg(mm as f64 * 1e-3)).unwrap());
     }
-    v.push(rounded_base_prefilter());
+    let model = |bytes: &[u8]| {
+        HologramModel::from_bytes(bytes, crate::model::ModelKind::PreFilter, &cfg(6e-3)).unwrap()
+    };
+    v.push(model(&all_int8_prefilter()));
+    v.push(model(&rounded_base_prefilter()));
     v
 }
 
-/// The 6 mm int8 QDQ pre-filter as files exported before the blur kept its float input: its `Pad` reads the
+/// The 6 mm int8 QDQ pre-filter as shipped before the pre-filters went mixed precision (every learned
+/// convolution int8; `models/fixtures/prefilter_6mm_all_int8.int8-qdq.onnx`): the layout the hologram CNNs
+/// still have, in a pre-filter.
+fn all_int8_prefilter() -> Vec<u8> {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../models/fixtures/prefilter_6mm_all_int8.int8-qdq.onnx"
+    );
+    std::fs::read(path).unwrap()
+}
+
+/// [`all_int8_prefilter`] as files exported before the blur kept its float input: its `Pad` reads the
 /// input's `DequantizeLinear` (the input rounded to the first layer's grid).
-fn rounded_base_prefilter() -> HologramModel {
-    use crate::model::ModelKind;
+fn rounded_base_prefilter() -> Vec<u8> {
     use prost::Message;
-    let bytes = embedded::prefilter_cnn(6, Precision::Int8Qdq).unwrap();
-    let mut proto = crate::model::onnx::decode_model(bytes).unwrap();
+    let bytes = all_int8_prefilter();
+    let mut proto = crate::model::onnx::decode_model(&bytes).unwrap();
     let graph = proto.graph.as_mut().unwrap();
     let input = graph.input[0].name.clone();
     // The output of the node of type `op` that reads `tensor`.
@@ -304,22 +318,7 @@ fn rounded_base_prefilter() -> HologramModel {
         "the shipped file's blur reads the float input"
     );
     pad.input[0] = dq;
-    let cfg = ModelConfig {
-        offset_m: 6e-3,
-        ..ModelConfig::default()
-    };
-    let model =
-        HologramModel::from_bytes(&proto.encode_to_vec(), ModelKind::PreFilter, &cfg).unwrap();
-    assert!(
-        model
-            .cnn_graph()
-            .unwrap()
-            .quant
-            .as_ref()
-            .unwrap()
-            .base_reads_rounded_input
-    );
-    model
+    proto.encode_to_vec()
 }
 
 /// Mean and max |a − b| over both outputs.
@@ -343,11 +342,19 @@ fn native_int8_matches_tract_on_every_shipped_qdq_model() {
     // order of sums still differ). Both stay within the models' int8 tolerance of PyTorch
     // (models/MODEL_CARD.md: hologram CNNs mean ≤ 2.7e-3, max ≤ 2.2e-2; pre-filters mean ≤ 2.2e-3, max ≤
     // 1.0e-2), so they must agree within twice that. Every ISA and thread count gives the
-    // bit-identical frame (the int8 kernels are exact).
+    // bit-identical frame of an all-int8 file (the int8 kernels are exact).
     let (h, w) = (21, 35);
+    // Every layout is covered: all-int8 (the hologram CNNs, the earlier pre-filter), mixed precision (the
+    // shipped pre-filters: f32 first and last layers), the blur on the rounded input (older files).
+    let mut layouts = std::collections::BTreeSet::new();
     for model in shipped_qdq() {
         let graph = model.cnn_graph().unwrap();
-        assert!(graph.quant.is_some());
+        let quant = graph.quant.as_ref().unwrap();
+        layouts.insert(match quant.layers[0] {
+            None => "mixed",
+            Some(_) if quant.base_reads_rounded_input => "rounded base",
+            Some(_) => "int8",
+        });
         let x = match model.kind() {
             crate::model::ModelKind::Hologram => input(graph.in_channels, h, w, 7),
             // A field of the pre-filter's range (about −0.05 … 0.7).
@@ -362,6 +369,11 @@ fn native_int8_matches_tract_on_every_shipped_qdq_model() {
         };
         let mut first: Option<(Array3<f32>, Array3<f32>)> = None;
         for isa in [Isa::Scalar, Isa::active().unwrap()] {
+            // The f32 first and last layers of a mixed-precision file sum in another order on each ISA: its
+            // frames are bit-identical across thread counts, and within the tolerance across ISAs.
+            if quant.layers[0].is_none() {
+                first = None;
+            }
             for threads in [1, 3] {
                 let (mut plan, kernel) =
                     super::native_plan(graph.clone(), h, w, threads, isa).unwrap();
@@ -385,6 +397,7 @@ fn native_int8_matches_tract_on_every_shipped_qdq_model() {
         let (_, m) = diff(first.as_ref().unwrap(), &tract);
         assert!(m > 0.05, "non-trivial output");
     }
+    assert_eq!(layouts.len(), 3, "{layouts:?}");
 }
 
 #[test]
@@ -397,9 +410,13 @@ fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
     let (h, w) = (17, 29);
     let isa = Isa::active().unwrap();
     let (mut f32s, mut int8s) = (shipped(), shipped_qdq());
+    // f32: a hologram CNN and a pre-filter; int8: an all-int8 hologram CNN, a mixed-precision pre-filter (the
+    // last shipped one) and an all-int8 pre-filter (the earlier shipped one).
+    let mixed = int8s.len() - 3;
     let models = [
         f32s.swap_remove(0),
         f32s.pop().unwrap(),
+        int8s.remove(mixed),
         int8s.swap_remove(0),
         int8s.pop().unwrap(),
     ];
@@ -416,6 +433,12 @@ fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
                 Box::new(NativePlan::with_strip(g, h, w, threads, isa, Some(strip)).unwrap())
             }
         };
+        if let Some(q) = &graph.quant {
+            let mixed = NativeInt8Plan::new(graph.clone(), h, w, 1, isa)
+                .unwrap()
+                .is_mixed();
+            assert_eq!(mixed, q.layers[0].is_none(), "{}", model.source_name());
+        }
         let mut whole = plan(h + n, 1);
         let (a, b) = (
             whole.run_outputs(x.view()).unwrap(),

@@ -67,21 +67,28 @@ pub struct LayerQuant {
     /// Grid of the layer's input `s_i` (for the last layer: of the concat).
     pub input: QuantGrid,
     /// Grid the file rounds the layer's result to before the next layer reads it: `s_{i+1}` (for the
-    /// second-to-last layer the concat's), always present for those; for the last layer the grid of its raw
+    /// second-to-last layer the concat's, or in a mixed-precision file the grid `s_{N−1}` enters the float
+    /// concat on), always present for those; for the last layer the grid of its raw
     /// output before the heads or the pre-filter's sum, `None` where the file leaves that output float (the
     /// exporter does since it stopped rounding convolution outputs).
     pub output: Option<QuantGrid>,
 }
 
-/// The quantisation of an int8 QDQ file (`models/*.int8-qdq.onnx`): every convolution's s8 weights and the u8
-/// grid of every activation a convolution reads. An engine that fuses a layer's convolution, ReLU and
+/// The quantisation of an int8 QDQ file (`models/*.int8-qdq.onnx`): every int8 convolution's s8 weights and
+/// the u8 grid of every activation a convolution reads. An engine that fuses a layer's convolution, ReLU and
 /// residual add rounds once, to [`LayerQuant::output`], as the current exporter's files do; files exported
 /// before it (per-tensor weight scales) also round each convolution's raw output before its ReLU (a second
 /// rounding, of at most half a step, that such an engine skips).
+///
+/// Two layouts are read: every learned convolution int8, or **mixed precision** (`export --float-convs first
+/// last`): the first and the last convolution keep f32 weights and read the float input (the first reads it
+/// alone, the last in its concat), the hidden layers between are int8, `s_1` and `s_{N−1}` are rounded to
+/// their own grids. Any other placement of float layers is refused (tract runs such files).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CnnQuant {
-    /// One entry per [`CnnWeights::layers`] entry.
-    pub layers: Vec<LayerQuant>,
+    /// One entry per [`CnnWeights::layers`] entry; `None` for a float layer (the first and the last of a
+    /// mixed-precision file, whose [`ConvLayer::weights`] are the file's f32 ones).
+    pub layers: Vec<Option<LayerQuant>>,
     /// Pre-filter: whether the file's base filter reads the input rounded to the first layer's grid (files
     /// exported before the exporter kept the blur's input float) rather than the float input itself.
     pub base_reads_rounded_input: bool,
@@ -237,6 +244,8 @@ impl CnnWeights {
         let mut tail_consts: Vec<(&str, &str, f32)> = Vec::new();
         let mut tanh_count = 0;
         let mut base_rounded = false;
+        // The grids of the final concat's two inputs (hidden state, network input) where they are rounded.
+        let mut cat_grids: (Option<QuantGrid>, Option<QuantGrid>) = (None, None);
         let sym = |syms: &HashMap<String, Sym>, name: &str| -> Sym {
             syms.get(name).cloned().unwrap_or(Sym::Meta)
         };
@@ -478,6 +487,7 @@ impl CnnWeights {
                             where_()
                         )));
                     }
+                    cat_grids = (grids.get(&node.input[0]).copied(), grids.get(&node.input[1]).copied());
                     Sym::Cat(Box::new(ins[0].clone()), Box::new(ins[1].clone()))
                 }
                 "Slice" | "Split" | "Tanh" | "Add" | "Mul" => {
@@ -614,22 +624,47 @@ impl CnnWeights {
             }
         };
         let quant = if saw_qdq {
+            // Mixed precision: the first and the last layer float, both reading the float input.
+            let mixed = n >= 3 && layer_qw[0].is_none() && layer_qw[n - 1].is_none();
+            if mixed {
+                let float_input = layer_in_grid[0].is_none() && cat_grids.1.is_none();
+                if !float_input || layer_in_grid[n - 1].is_some() || cat_grids.0.is_none() {
+                    return Err(err(
+                        "mixed-precision int8 file: the float first and last layers must read the float \
+                         input, and the last its hidden input rounded to a grid of its own (export \
+                         --float-convs first last)"
+                            .into(),
+                    ));
+                }
+            }
             let mut q = Vec::with_capacity(n);
             for i in 0..n {
                 let missing = |what: &str| err(format!("int8 file: layer {i} has no {what}"));
-                let (weights, weight_scales) =
-                    layer_qw[i].clone().ok_or_else(|| missing("s8 weights"))?;
+                if mixed && (i == 0 || i == n - 1) {
+                    q.push(None);
+                    continue;
+                }
+                let (weights, weight_scales) = layer_qw[i].clone().ok_or_else(|| {
+                    missing(
+                        "s8 weights (a float layer: the native engine runs int8 files whose first and \
+                         last layers are both int8 or both float)",
+                    )
+                })?;
                 let input = layer_in_grid[i].ok_or_else(|| missing("u8 input grid"))?;
+                let next = match mixed && i + 2 == n {
+                    true => cat_grids.0,
+                    false => layer_in_grid.get(i + 1).copied().flatten(),
+                };
                 let output = match i + 1 < n {
-                    true => Some(layer_in_grid[i + 1].ok_or_else(|| missing("u8 output grid"))?),
+                    true => Some(next.ok_or_else(|| missing("u8 output grid"))?),
                     false => conv_out_grid.get(&i).copied(),
                 };
-                q.push(LayerQuant {
+                q.push(Some(LayerQuant {
                     weights,
                     weight_scales,
                     input,
                     output,
-                });
+                }));
             }
             Some(CnnQuant {
                 layers: q,
@@ -751,6 +786,12 @@ mod tests {
                 .enumerate()
             {
                 assert_eq!((lq.c_in, lq.c_out), (lf.c_in, lf.c_out));
+                let Some(g) = g else {
+                    // A float layer of a mixed-precision file: the f32 file's weights.
+                    assert!(i == 0 || i + 1 == quant.layers.len(), "{kind:?} layer {i}");
+                    assert_eq!((&lq.weights, &lq.bias), (&lf.weights, &lf.bias));
+                    continue;
+                };
                 // The dequantised weights are the s8 codes times their scale, and within half a step of the
                 // f32 file's weights (the file was quantised from them).
                 let per = lq.c_in * 9;
@@ -767,22 +808,57 @@ mod tests {
                 }
                 // Layer i writes what layer i + 1 reads.
                 match quant.layers.get(i + 1) {
-                    Some(next) => assert_eq!(g.output, Some(next.input)),
+                    Some(Some(next)) => assert_eq!(g.output, Some(next.input)),
+                    // The float last layer of a mixed-precision file reads s_{N−1} on a grid of its own.
+                    Some(None) => assert!(g.output.is_some(), "{kind:?}"),
                     // The exporter leaves the last convolution's output float (export.py).
                     None => assert_eq!(g.output, None, "{kind:?}"),
                 }
             }
             // Hidden activations after a ReLU are ≥ 0: their grids start at code 0.
-            assert_eq!(quant.layers[1].input.zero_point, 0, "{kind:?}");
+            let second = quant.layers[1].as_ref().expect("an int8 second layer");
+            assert_eq!(second.input.zero_point, 0, "{kind:?}");
         }
         // The hologram CNN's centred input x − 0.5 spans [−0.5, 0.5]: zero point 128, 1/255 per step.
         let q = CnnWeights::from_model(
             &embedded::hologram_model(8, Precision::Int8Qdq, &config()).unwrap(),
         )
         .unwrap();
-        let g0 = q.quant.unwrap().layers[0].input;
+        let g0 = q.quant.unwrap().layers[0]
+            .clone()
+            .expect("an int8 first layer")
+            .input;
         assert_eq!(g0.zero_point, 128);
         assert!((g0.scale - 1.0 / 255.0).abs() < 1e-6, "{g0:?}");
+    }
+
+    #[test]
+    fn a_mixed_precision_file_has_float_ends_and_its_concat_must_read_a_rounded_hidden_state() {
+        // The shipped int8 pre-filters (export --float-convs first last): f32 first and last layers, int8
+        // between, s_{N−1} rounded to a grid of its own before the concat.
+        let qdq = embedded::prefilter_model(6, Precision::Int8Qdq, &config()).unwrap();
+        let good = qdq.onnx_graph().clone();
+        let q = CnnWeights::from_graph(&good, ModelKind::PreFilter, "mixed").unwrap();
+        let quant = q.quant.as_ref().unwrap();
+        let n = quant.layers.len();
+        assert!(quant.layers[0].is_none() && quant.layers[n - 1].is_none());
+        assert!(quant.layers[1..n - 1].iter().all(Option::is_some));
+        // s_{N−1} is a sum of ReLU outputs: its own grid starts at code 0.
+        let hidden = quant.layers[n - 2].as_ref().unwrap().output.unwrap();
+        assert_eq!(hidden.zero_point, 0);
+        // A concat of the unrounded hidden state is not what the native engine computes: refused.
+        let mut bad = good;
+        let cat = bad.node.iter().position(|n| n.op_type == "Concat").unwrap();
+        let made_by = |g: &pb::GraphProto, t: &str| {
+            g.node.iter().find(|n| n.output[0] == t).unwrap().input[0].clone()
+        };
+        let q_out = made_by(&bad, &bad.node[cat].input[0]);
+        let unrounded = made_by(&bad, &q_out);
+        bad.node[cat].input[0] = unrounded;
+        let err = CnnWeights::from_graph(&bad, ModelKind::PreFilter, "unrounded")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("mixed-precision"), "{err}");
     }
 
     #[test]
@@ -793,6 +869,7 @@ mod tests {
         // The shipped QDQ files carry one scale per output channel (training/.../export.py, per_channel):
         // each channel's largest |code| is 127 (symmetric MinMax), so the scales differ between channels.
         for (l, g) in q.layers.iter().zip(&q.quant.as_ref().unwrap().layers) {
+            let Some(g) = g else { continue };
             let per = l.c_in * 9;
             for (c, chunk) in g.weights.chunks(per).enumerate() {
                 let top = chunk.iter().map(|&v| v.unsigned_abs()).max().unwrap();
