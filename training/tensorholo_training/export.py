@@ -261,6 +261,7 @@ def quantize_int8(f32_path: str, out_path: str, calibration: Sequence[np.ndarray
     meta[METADATA_PREFIX + "int8_weight_scales"] = "per-output-channel" if per_channel else "per-tensor"
     meta[METADATA_PREFIX + "int8_weights"] = weights
     meta[METADATA_PREFIX + "int8_float_convs"] = " ".join(c for c in ("first", "last") if c in float_convs) or "none"
+    meta[METADATA_PREFIX + "int8_calibration"] = {"minmax": "minmax", "percentile": "percentile-99.99"}[calib_method]
     set_metadata(out_path, meta)
     return out_path
 

@@ -295,6 +295,8 @@ def test_percentile_calibration_narrows_activation_ranges_and_bad_methods_are_re
 
     def activation_scales(method):
         out = quantize_int8(path, str(d / f"holo8.{method}.onnx"), calib, "qdq", True, method)
+        want = {"minmax": "minmax", "percentile": "percentile-99.99"}[method]
+        assert read_metadata(out)["tensorholo.int8_calibration"] == want
         m = onnx.load(out)
         inits = {i.name: onnx.numpy_helper.to_array(i) for i in m.graph.initializer}
         return {n.input[0]: float(inits[n.input[1]]) for n in m.graph.node if n.op_type == "QuantizeLinear"}
