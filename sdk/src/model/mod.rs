@@ -88,7 +88,9 @@ pub enum Precision {
     /// (`NAME.int8-qop.onnx`; tract runs real int8 kernels).
     Int8QOperator,
     /// int8 QDQ form: `QuantizeLinear`/`DequantizeLinear` pairs around float `Conv` (`NAME.int8-qdq.onnx`;
-    /// tract 0.23 computes in f32 with the quantisation error).
+    /// tract 0.23 computes in f32 with the quantisation error). The shipped pre-filters' are mixed precision:
+    /// their first and last convolutions keep f32 weights (metadata `tensorholo.int8_float_convs`,
+    /// `docs/CONVENTIONS.md` §7).
     Int8Qdq,
 }
 
@@ -189,8 +191,9 @@ impl std::fmt::Display for CnnLayout {
 /// - [`CnnEngine::Native`]: our direct 3×3 convolution kernels (`tensorholo-kernels`: AVX-512, AVX2+FMA,
 ///   NEON or portable scalar rows, chosen at run time from the CPU's features), row bands on the plan's own
 ///   threads. f32 files (agree with tract to float rounding) and int8 QDQ files (u8 × s8 kernels, each layer's
-///   convolution, ReLU, residual and requantisation fused: within the models' int8 tolerance of tract's
-///   node-by-node execution; `sdk/src/cnn/tests.rs`).
+///   convolution, ReLU, residual and requantisation fused; a mixed-precision file's f32 first and last layers
+///   on the f32 kernels: within the models' int8 tolerance of tract's node-by-node execution;
+///   `sdk/src/cnn/tests.rs`).
 /// - [`CnnEngine::Tract`]: tract's optimised plans (any file that passes the contract, int8 included).
 /// - [`CnnEngine::Auto`] (the default): where the native engine can run the file, both are timed at session
 ///   creation on this machine ([`timing_resolution`]) and the faster runs; int8 QOperator files run on
