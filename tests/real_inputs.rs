@@ -239,8 +239,8 @@ fn redwood_camera_buffers_equal_load_rgbd() {
 /// against the f32 CNN's, native within 0.1 dB of tract (or better).
 #[test]
 fn native_int8_is_as_close_to_f32_as_tract_int8_on_a_real_photo() {
-    use tensorholo::cnn::{cnn_plan, CnnEngine};
-    use tensorholo::model::{embedded, ModelConfig, PlanRequest, Precision, ThreadCount};
+    use tensorholo::cnn::{cnn_plan, CnnEngine, PlanRequest, ThreadCount};
+    use tensorholo::model::{embedded, ModelConfig, Precision};
     let options = LoadOptions {
         size: Some((256, 192)),
         ..LoadOptions::default()
@@ -261,7 +261,7 @@ fn native_int8_is_as_close_to_f32_as_tract_int8_on_a_real_photo() {
         ..PlanRequest::default()
     };
     let run = |precision, engine| {
-        let model = embedded::hologram_model(8, precision, &cfg).unwrap();
+        let model = std::sync::Arc::new(embedded::hologram_model(8, precision, &cfg).unwrap());
         let (mut plan, report) = cnn_plan(&model, h, w, engine, request).unwrap();
         assert_eq!(report.engine, engine);
         let (a, p) = plan.run_outputs(input.view()).unwrap();

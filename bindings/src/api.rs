@@ -5,8 +5,9 @@
 use std::sync::Arc;
 
 use ndarray::Axis;
+use tensorholo::cnn::ThreadCount;
 use tensorholo::generator as core;
-use tensorholo::model::{ThreadCount, DEFAULT_INT8};
+use tensorholo::model::DEFAULT_INT8;
 use tensorholo::optics::OpticalSetup;
 use tensorholo::pipeline::ModelSelection;
 use tensorholo::scene::{self, DepthRange};
@@ -198,43 +199,57 @@ impl GeneratorConfig {
     /// The core configuration. Errors: [`TensorholoError::InvalidInput`] for a non-finite or out-of-range
     /// number, a wavelength list that is neither empty nor 3 long, or only one of `z_near_m`/`z_far_m`.
     fn to_core(&self) -> Result<core::GeneratorConfig> {
+        // Every field left `None` keeps the core's default (`core::GeneratorConfig::new`); the numeric
+        // fields' uniffi defaults restate the core's, which `tests::uniffi_defaults_are_the_cores` pins.
         let mut c = core::GeneratorConfig::new(self.width as usize, self.height as usize);
-        c.models = ModelSelection {
-            input: match self.input.unwrap_or(SceneInput::Rgbd) {
+        if let Some(input) = self.input {
+            c.models.input = match input {
                 SceneInput::Rgbd => tensorholo::model::SceneInput::Rgbd,
                 SceneInput::Ldi => tensorholo::model::SceneInput::Ldi,
-            },
-            layers: self.layers as usize,
-            precision: match self.precision.unwrap_or(Precision::F32) {
+            };
+        }
+        c.models.layers = self.layers as usize;
+        if let Some(precision) = self.precision {
+            c.models.precision = match precision {
                 Precision::F32 => tensorholo::model::Precision::F32,
                 Precision::Int8 => DEFAULT_INT8,
-            },
-            prefilter: match self.prefilter.unwrap_or(PrefilterMode::Auto) {
+            };
+        }
+        if let Some(prefilter) = self.prefilter {
+            c.models.prefilter = match prefilter {
                 PrefilterMode::Auto => tensorholo::pipeline::PrefilterMode::Auto,
                 PrefilterMode::Off => tensorholo::pipeline::PrefilterMode::Off,
                 PrefilterMode::Required => tensorholo::pipeline::PrefilterMode::Required,
-            },
-        };
+            };
+        }
         c.offset_m = self.offset_mm * 1e-3;
         c.threads = ThreadCount::from_count(self.threads as usize);
-        c.fit = self.fit.unwrap_or(Fit::Crop).into();
-        c.backend = match self.backend.unwrap_or(Backend::Auto) {
-            Backend::Auto => tensorholo::pipeline::Backend::Auto,
-            Backend::Cpu => tensorholo::pipeline::Backend::Cpu,
-            Backend::Gpu => tensorholo::pipeline::Backend::Gpu,
-        };
-        c.engine = match self.engine.unwrap_or(CnnEngine::Auto) {
-            CnnEngine::Auto => tensorholo::cnn::CnnEngine::Auto,
-            CnnEngine::Native => tensorholo::cnn::CnnEngine::Native,
-            CnnEngine::Tract => tensorholo::cnn::CnnEngine::Tract,
-        };
-        c.gpu_precision = match self.gpu_precision.unwrap_or(GpuPrecision::Auto) {
-            GpuPrecision::Auto => tensorholo::pipeline::GpuPrecision::Auto,
-            GpuPrecision::F32 => tensorholo::pipeline::GpuPrecision::F32,
-            GpuPrecision::F16 => tensorholo::pipeline::GpuPrecision::F16,
-        };
+        if let Some(fit) = self.fit {
+            c.fit = fit.into();
+        }
+        if let Some(backend) = self.backend {
+            c.backend = match backend {
+                Backend::Auto => tensorholo::pipeline::Backend::Auto,
+                Backend::Cpu => tensorholo::pipeline::Backend::Cpu,
+                Backend::Gpu => tensorholo::pipeline::Backend::Gpu,
+            };
+        }
+        if let Some(engine) = self.engine {
+            c.engine = match engine {
+                CnnEngine::Auto => tensorholo::cnn::CnnEngine::Auto,
+                CnnEngine::Native => tensorholo::cnn::CnnEngine::Native,
+                CnnEngine::Tract => tensorholo::cnn::CnnEngine::Tract,
+            };
+        }
+        if let Some(precision) = self.gpu_precision {
+            c.gpu_precision = match precision {
+                GpuPrecision::Auto => tensorholo::pipeline::GpuPrecision::Auto,
+                GpuPrecision::F32 => tensorholo::pipeline::GpuPrecision::F32,
+                GpuPrecision::F16 => tensorholo::pipeline::GpuPrecision::F16,
+            };
+        }
         let wavelengths_m = match self.wavelengths_m[..] {
-            [] => OpticalSetup::default().wavelengths_m,
+            [] => c.optics.wavelengths_m,
             [r, g, b] => [r, g, b],
             _ => {
                 return Err(invalid(format!(
@@ -884,6 +899,80 @@ impl HologramStream {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The default a generated binding gives `field` (`name: Type = value` in Kotlin, `name: Type =
+    /// Type(value)` in Swift), as a number.
+    fn generated_default(source: &str, field: &str) -> f64 {
+        let at = source
+            .find(&format!("{field}`: kotlin."))
+            .or_else(|| source.find(&format!("*/{field}: ")))
+            .unwrap_or_else(|| panic!("no field {field} in the generated binding"));
+        let rest = &source[at..];
+        let value = rest[rest.find('=').unwrap() + 1..]
+            .split([',', '\n'])
+            .next()
+            .unwrap()
+            .trim();
+        let value = value
+            .trim_start_matches("UInt32(")
+            .trim_start_matches("Double(")
+            .trim_end_matches(')')
+            .trim_end_matches('u');
+        value
+            .parse()
+            .unwrap_or_else(|e| panic!("{field} = {value:?}: {e}"))
+    }
+
+    /// The numeric defaults uniffi writes into Kotlin and Swift (literals in `GeneratorConfig`'s
+    /// `#[uniffi(default = …)]`) are the core's: a change on either side fails here. The generated files are
+    /// the ones `check-generated.sh` keeps equal to this crate's source.
+    #[test]
+    fn uniffi_defaults_are_the_cores() {
+        let core = core::GeneratorConfig::new(1, 1);
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("generated");
+        for file in ["kotlin/tensorholo/tensorholo.kt", "swift/Tensorholo.swift"] {
+            let source = std::fs::read_to_string(dir.join(file)).unwrap();
+            let field = |kotlin: &str, swift: &str| {
+                let name = if file.ends_with(".kt") { kotlin } else { swift };
+                generated_default(&source, name)
+            };
+            assert_eq!(
+                field("layers", "layers") as usize,
+                core.models.layers,
+                "{file}"
+            );
+            assert_eq!(
+                field("offsetMm", "offsetMm") * 1e-3,
+                core.offset_m,
+                "{file}"
+            );
+            assert_eq!(
+                field("pixelPitchM", "pixelPitchM"),
+                core.optics.pixel_pitch_m,
+                "{file}"
+            );
+            assert_eq!(
+                field("volumeDepthM", "volumeDepthM"),
+                core.optics.volume_depth_m,
+                "{file}"
+            );
+            assert_eq!(
+                ThreadCount::from_count(field("threads", "threads") as usize),
+                core.threads,
+                "{file}"
+            );
+        }
+        // And the fields the tests' config leaves `None` (or at the literal default) are the core's.
+        let c = config(64, 48).to_core().unwrap();
+        let want = core::GeneratorConfig::new(64, 48);
+        assert_eq!(c.models, want.models);
+        assert_eq!(c.optics, want.optics);
+        assert_eq!(c.offset_m, want.offset_m);
+        assert_eq!(
+            (c.fit, c.backend, c.gpu_precision),
+            (want.fit, want.backend, want.gpu_precision)
+        );
+    }
 
     fn config(width: u32, height: u32) -> GeneratorConfig {
         GeneratorConfig {

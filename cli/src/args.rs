@@ -115,10 +115,10 @@ pub fn parse_depth_encoding(s: &str) -> std::result::Result<DepthEncoding, Strin
     })
 }
 
-/// Parses a worker thread count: 1 to [`tensorholo::model::MAX_CNN_THREADS`] (256), refused before any
+/// Parses a worker thread count: 1 to [`tensorholo::cnn::MAX_CNN_THREADS`] (256), refused before any
 /// thread is started (`--threads 100000` would otherwise try to start them all).
 pub fn parse_threads(s: &str) -> std::result::Result<usize, String> {
-    let max = tensorholo::model::MAX_CNN_THREADS;
+    let max = tensorholo::cnn::MAX_CNN_THREADS;
     match s.trim().parse::<usize>() {
         Ok(n) if (1..=max).contains(&n) => Ok(n),
         _ => Err(format!("`{s}` is not a thread count in 1..={max}")),

@@ -9,10 +9,9 @@ use anyhow::{Context, Result};
 use clap::Args;
 use ndarray::Array3;
 use serde_json::json;
-use tensorholo::cnn::CnnEngine;
-use tensorholo::model::{
-    embedded, CnnLayout, ModelConfig, NodeTiming, PlanRequest, Precision, ThreadCount,
-};
+use tensorholo::cnn::tract::{NodeTiming, TractModel};
+use tensorholo::cnn::{CnnEngine, CnnLayout, PlanRequest, ThreadCount};
+use tensorholo::model::{embedded, ModelConfig, Precision};
 use tensorholo::pipeline::{
     Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode,
 };
@@ -222,12 +221,11 @@ fn gpu_tables(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Result<
                 "gpu_precision": report.gpu_precision,
                 "frame_ms": s * 1e3, "fps": 1.0 / s, "runs": runs}),
             );
-            let gpu = session
-                .gpu_frame()
-                .context("the session fell back to the CPU")?;
-            let times = gpu.profile(args.repeat)?;
-            for (stage, (name, secs)) in gpu.stages().into_iter().zip(times) {
-                stage_rows.push((layers, h, w, label.clone(), stage, name, secs));
+            let stages = session
+                .accelerator_stages(args.repeat)
+                .context("the session fell back to the CPU")??;
+            for stage in stages {
+                stage_rows.push((layers, h, w, label.clone(), stage));
             }
         }
     }
@@ -237,7 +235,8 @@ fn gpu_tables(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Result<
     );
     println!("| CNN | size (HxW) | stage | ms | GFLOP | MB | FLOP/B | GFLOP/s | % of peak |");
     println!("|---|---|---|---:|---:|---:|---:|---:|---:|");
-    for (layers, h, w, label, stage, name, secs) in stage_rows {
+    for (layers, h, w, label, stage) in stage_rows {
+        let (name, secs) = (stage.name, stage.seconds);
         let gflops = stage.flops / secs.max(1e-9) / 1e9;
         let peak = args
             .gpu_peak_gflops
@@ -336,7 +335,8 @@ fn cnn_table(
         for &layers in &args.layers {
             for &p in &args.precision {
                 let precision: Precision = p.into();
-                let model = embedded::hologram_model(layers, precision, config)?;
+                let model =
+                    std::sync::Arc::new(embedded::hologram_model(layers, precision, config)?);
                 let macs = model.metadata().macs_per_pixel().unwrap_or(0);
                 let input = Array3::<f32>::from_shape_fn((4, h, w), |(c, y, x)| {
                     ((x * 7 + y * 3 + c) % 13) as f32 / 12.0
@@ -420,7 +420,7 @@ fn cnn_table(
                                 layout: report.layout,
                                 threads: ThreadCount::Fixed(threads),
                             };
-                            let (plan, _) = model.tuned_plan(h, w, request)?;
+                            let (plan, _) = TractModel::of(&model)?.tuned_plan(h, w, request)?;
                             profiles.push((case, plan.profile(input.view())?));
                         }
                     }

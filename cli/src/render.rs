@@ -9,11 +9,9 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
-use tensorholo::cnn::CnnEngine;
+use tensorholo::cnn::{CnnEngine, CnnLayout, ThreadCount};
 use tensorholo::evaluation::{focal_depths, table2};
-use tensorholo::model::{
-    contract, CnnLayout, HologramModel, ModelConfig, ModelKind, Precision, SceneInput, ThreadCount,
-};
+use tensorholo::model::{contract, HologramModel, ModelConfig, ModelKind, Precision, SceneInput};
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{
     Backend, BackendReport, FrameTimings, GpuPrecision, Heads, HologramPipeline, PipelineConfig,
@@ -311,7 +309,7 @@ impl ModelArgs {
                 pipeline.prefilter_reason()
             );
         }
-        let describe = |m: &HologramModel| {
+        let describe = |m: &std::sync::Arc<HologramModel>| {
             let md = m.metadata();
             json!({
                 "layers": md.layers,

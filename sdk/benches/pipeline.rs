@@ -12,7 +12,8 @@ use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use ndarray::Array3;
-use tensorholo::model::{embedded, CnnLayout, ModelConfig, Precision};
+use tensorholo::cnn::CnnLayout;
+use tensorholo::model::{embedded, ModelConfig, Precision};
 use tensorholo::pipeline::{HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
 use tensorholo::scene::procedural;
 
@@ -32,6 +33,7 @@ fn cnn(c: &mut Criterion) {
         },
     )
     .expect("shipped model loads");
+    let model = tensorholo::cnn::tract::TractModel::new(&model).expect("tract reads it");
     let (h, w) = SIZE;
     let input = Array3::<f32>::from_shape_fn((4, h, w), |(c, y, x)| {
         ((x * 7 + y * 3 + c) % 13) as f32 / 12.0

@@ -22,13 +22,11 @@ use std::time::Instant;
 
 use ndarray::{Array3, ArrayView3, Axis};
 
-use crate::cnn::CnnEngine;
+use crate::cnn::{CnnEngine, CnnLayout, PlanReport, ThreadCount, MAX_CNN_THREADS};
 use crate::color::amplitude_to_srgb8;
 use crate::encoding::{DoublePhaseMethod, LinearLut};
 use crate::error::{invalid, HoloError, Result};
-use crate::model::{
-    CnnLayout, HologramModel, ModelConfig, ModelKind, PlanReport, Precision, ThreadCount,
-};
+use crate::model::{HologramModel, ModelConfig, ModelKind, Precision};
 use crate::optics::{focal_stack, post_encoding_midpoint, OpticalSetup, PropagationOptions};
 use crate::pipeline::{
     Backend, BackendReport, FrameTimings, GpuPrecision, HologramPipeline, HologramSession,
@@ -116,7 +114,7 @@ impl GeneratorConfig {
 
     /// Checks everything that needs no model: non-zero sizes within [`MAX_HOLOGRAM_PIXELS`] whose RGBA
     /// outputs (`width · height · 4` bytes) fit in a `u32`, a finite non-negative offset, valid optics and
-    /// depth range, and a thread count within [`crate::model::MAX_CNN_THREADS`].
+    /// depth range, and a thread count within [`MAX_CNN_THREADS`].
     ///
     /// Errors: [`HoloError::InvalidParameter`] naming the field.
     pub fn validate(&self) -> Result<()> {
@@ -156,13 +154,10 @@ impl GeneratorConfig {
             r.validate()?;
         }
         if let ThreadCount::Fixed(n) = self.threads {
-            if n == 0 || n > crate::model::MAX_CNN_THREADS {
+            if n == 0 || n > MAX_CNN_THREADS {
                 return Err(invalid(
                     "threads",
-                    format!(
-                        "0 (automatic) to {} threads, got {n}",
-                        crate::model::MAX_CNN_THREADS
-                    ),
+                    format!("0 (automatic) to {} threads, got {n}", MAX_CNN_THREADS),
                 ));
             }
         }
@@ -608,7 +603,7 @@ impl HologramGenerator {
             let mut session = self.session()?;
             let same_size = patterns.codes.dim() == (3, self.config.height, self.config.width);
             if same_size {
-                let shown = session.preview_on_accelerator(
+                let shown = session.accelerator_preview(
                     &patterns.codes,
                     patterns.amplitude_scale,
                     focus as f64,

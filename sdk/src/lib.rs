@@ -13,9 +13,13 @@
 //!   previews).
 //! - [`metrics`]: PSNR and SSIM.
 //! - [`evaluation`]: the paper's Table 2 protocol (amplitude and focal-stack PSNR/SSIM against SM-LBM).
-//! - [`model`]: the hologram and pre-filter CNNs (ONNX, run with tract), metadata and I/O contract checks.
+//! - [`model`]: the hologram and pre-filter CNNs as files (ONNX), engine-neutral: metadata, I/O contract,
+//!   the TensorHolo residual graph, the embedded shipped models.
+//! - [`cnn`]: the CPU CNN engines behind one interface: tensorholo's own kernels (`native`) and, with the
+//!   cargo feature `tract`, tract; their plans, thread and layout tuning and the choice between them.
 //! - [`pipeline`]: the real-time pipeline: [`pipeline::HologramSession`] turns RGB-D frames into SLM codes
 //!   with the CNNs (hologram CNN → offset → pre-filter CNN → double phase → LUT), frame by frame or streamed.
+//! - [`generator`]: the app-facing API the bindings wrap (camera buffers in, SLM patterns out).
 //! - [`io`]: PNG and `.npy` input/output.
 //! - [`slm`]: phase look-up tables (global, per-pixel), the display calibration file, calibration from
 //!   captures (Eq. 12–13), the laser intensity map, the deep-black test (Fig. 11), a simulated SLM.
@@ -23,6 +27,15 @@
     feature = "research",
     doc = "- [`dataset`] (feature `research`): the training dataset (MIT-CGH-4K-V2 style): random LDIs + \
            SM-LBM midpoint holograms in `.npz` shards with a `manifest.json`."
+)]
+#![cfg_attr(
+    feature = "gpu",
+    doc = "- [`gpu`] (feature `gpu`): the whole frame as WGSL compute shaders on wgpu (Metal, Vulkan), below \
+           the pipeline, which runs it as one of its frame executors."
+)]
+#![cfg_attr(
+    not(feature = "gpu"),
+    doc = "- `gpu` (feature `gpu`, off in this build): the whole frame on the GPU (wgpu)."
 )]
 #![cfg_attr(
     not(feature = "research"),

@@ -6,12 +6,12 @@
 
 use std::sync::{Arc, Mutex};
 
+use tensorholo::cnn::{CnnLayout, PlanRequest, ThreadCount};
 use tensorholo::color::amplitude_to_srgb8;
 use tensorholo::generator::{
     pack_rgba, GeneratorConfig, HologramGenerator, SlmPatterns, StreamListener,
 };
 use tensorholo::metrics::psnr;
-use tensorholo::model::{CnnLayout, PlanRequest, ThreadCount};
 use tensorholo::pipeline::{HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
 use tensorholo::scene::{
     procedural, CameraFrameBuf, ColorFormat, ColorImageBuf, DepthFormat, DepthImageBuf, DepthRange,
@@ -361,14 +361,17 @@ fn autotuned_plans_report_their_candidates_and_agree_with_the_file_layout() {
         ..ModelConfig::default()
     };
     for precision in [Precision::F32, Precision::Int8QOperator] {
-        let m = embedded::hologram_model(8, precision, &cfg).unwrap();
+        let m = tensorholo::cnn::tract::TractModel::new(
+            &embedded::hologram_model(8, precision, &cfg).unwrap(),
+        )
+        .unwrap();
         let request = PlanRequest {
             layout: CnnLayout::Auto,
             threads: ThreadCount::Auto,
         };
         let (plan, report) = m.tuned_plan(24, 40, request).unwrap();
         assert!(report.autotuned);
-        let threads = tensorholo::model::auto_thread_candidates();
+        let threads = tensorholo::cnn::auto_thread_candidates();
         assert_eq!(report.candidates.len(), 2 * threads.len());
         let timed: Vec<_> = report
             .candidates

@@ -300,9 +300,8 @@ fn gpu_previews_match_the_cpu_simulation_of_the_codes() {
         .unwrap()
         .remove(0);
         let gpu = session
-            .gpu_frame_mut()
-            .unwrap()
-            .preview(&out.codes, out.amplitude_scale, focus)
+            .accelerator_preview(&out.codes, out.amplitude_scale, focus)
+            .expect("the GPU runs the session")
             .unwrap();
         let e = max_relative(&gpu, &cpu);
         println!("preview at d = {focus}: max rel Δ {e:.1e}");
@@ -311,12 +310,15 @@ fn gpu_previews_match_the_cpu_simulation_of_the_codes() {
     // The first preview builds its buffers and each new focus its transfer functions; a repeated focus
     // creates nothing.
     let after = ctx.resource_counts();
-    let gpu = session.gpu_frame_mut().unwrap();
-    gpu.preview(&out.codes, out.amplitude_scale, 0.35).unwrap();
+    session
+        .accelerator_preview(&out.codes, out.amplitude_scale, 0.35)
+        .unwrap()
+        .unwrap();
     assert_eq!(ctx.resource_counts(), after);
     assert!(after.buffers > before.buffers);
-    let err = gpu
-        .preview(&out.codes, out.amplitude_scale, 1.5)
+    let err = session
+        .accelerator_preview(&out.codes, out.amplitude_scale, 1.5)
+        .unwrap()
         .unwrap_err();
     assert!(err.to_string().contains("focus"), "{err}");
 }

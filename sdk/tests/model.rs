@@ -6,7 +6,10 @@
 use std::path::{Path, PathBuf};
 
 use ndarray::{Array3, ArrayView3};
-use tensorholo::model::{heads_to_field, CnnLayout, HologramModel, ModelConfig, ModelKind};
+#[cfg(feature = "tract")]
+use tensorholo::cnn::tract::TractModel;
+use tensorholo::cnn::CnnLayout;
+use tensorholo::model::{heads_to_field, HologramModel, ModelConfig, ModelKind};
 use tensorholo::scene::RgbdFrame;
 use tensorholo::HoloError;
 
@@ -42,15 +45,15 @@ fn prefilter() -> HologramModel {
     .unwrap()
 }
 
+/// tract's side of `model` (its plans, cached in the returned value).
+#[cfg(feature = "tract")]
+fn tract(model: &HologramModel) -> TractModel {
+    TractModel::new(model).unwrap_or_else(|e| panic!("{}: {e}", model.source_name()))
+}
+
 /// Runs `model` on `io_{prefix}_{HxW}_input.npy` and compares both heads with the reference outputs.
 #[cfg(feature = "tract")]
-fn compare(
-    model: &HologramModel,
-    prefix: &str,
-    size: &str,
-    reference: &str,
-    tol: f32,
-) -> (f32, f32) {
+fn compare(model: &TractModel, prefix: &str, size: &str, reference: &str, tol: f32) -> (f32, f32) {
     compare_in(
         model,
         CnnLayout::ChannelsFirst,
@@ -64,7 +67,7 @@ fn compare(
 /// [`compare`] with a plan in `layout`.
 #[cfg(feature = "tract")]
 fn compare_in(
-    model: &HologramModel,
+    model: &TractModel,
     layout: CnnLayout,
     prefix: &str,
     size: &str,
@@ -112,11 +115,12 @@ fn f32_hologram_cnn_matches_pytorch_at_two_resolutions_from_one_file() {
     assert_eq!(m.metadata().trained_resolution, [384, 384]);
     assert_eq!(m.metadata().training_commit, "fixture");
     assert_eq!(m.metadata().precision, "f32");
-    compare(&m, "holo", "24x32", "holo", 1e-4);
-    compare(&m, "holo", "16x20", "holo", 1e-4);
+    let t = tract(&m);
+    compare(&t, "holo", "24x32", "holo", 1e-4);
+    compare(&t, "holo", "16x20", "holo", 1e-4);
     // Second time: cached plans, same answer.
-    compare(&m, "holo", "24x32", "holo", 1e-4);
-    assert_eq!(m.planned_resolutions(), vec![(16, 20), (24, 32)]);
+    compare(&t, "holo", "24x32", "holo", 1e-4);
+    assert_eq!(t.planned_resolutions(), vec![(16, 20), (24, 32)]);
 }
 
 #[test]
@@ -124,8 +128,9 @@ fn f32_hologram_cnn_matches_pytorch_at_two_resolutions_from_one_file() {
 fn f32_prefilter_cnn_matches_pytorch() {
     let m = prefilter();
     assert_eq!(m.input_channels(), 6);
-    compare(&m, "pre", "24x32", "pre", 1e-4);
-    compare(&m, "pre", "16x20", "pre", 1e-4);
+    let t = tract(&m);
+    compare(&t, "pre", "24x32", "pre", 1e-4);
+    compare(&t, "pre", "16x20", "pre", 1e-4);
 }
 
 #[test]
@@ -142,7 +147,7 @@ fn field_is_amplitude_times_centred_phase() {
 #[test]
 #[cfg(feature = "tract")]
 fn run_frame_feeds_amplitude_then_depth() {
-    let m = hologram("holo8_rgbd.onnx");
+    let m = tract(&hologram("holo8_rgbd.onnx"));
     let x = npy("io_holo_16x20_input.npy");
     let frame = RgbdFrame::new(
         x.slice(ndarray::s![..3, .., ..]).to_owned(),
@@ -150,7 +155,7 @@ fn run_frame_feeds_amplitude_then_depth() {
     )
     .unwrap();
     assert_eq!(m.run_frame(&frame).unwrap(), m.run(x.view()).unwrap());
-    let pre = prefilter();
+    let pre = tract(&prefilter());
     assert!(matches!(
         pre.run_frame(&frame),
         Err(HoloError::InvalidParameter { .. })
@@ -263,7 +268,7 @@ fn onnx_with_other_inputs_is_refused() {
 #[test]
 #[cfg(feature = "tract")]
 fn wrong_input_size_is_an_error_and_the_model_stays_usable() {
-    let m = hologram("holo8_rgbd.onnx");
+    let m = tract(&hologram("holo8_rgbd.onnx"));
     let plan = m.plan(24, 32).unwrap();
     assert_eq!(plan.input_dim(), (4, 24, 32));
     let small = npy("io_holo_16x20_input.npy");
@@ -299,8 +304,9 @@ fn int8_qoperator_and_qdq_files_load_and_run() {
         ("holo8_rgbd.int8-qop.onnx", "holo_int8-qop"),
         ("holo8_rgbd.int8-qdq.onnx", "holo_int8-qdq"),
     ] {
-        let m = hologram(file);
-        assert!(m.metadata().precision.starts_with("int8-"), "{file}");
+        let model = hologram(file);
+        assert!(model.metadata().precision.starts_with("int8-"), "{file}");
+        let m = tract(&model);
         let (da, dp) = compare(&m, "holo", "24x32", tag, 0.02);
         eprintln!("{file}: tract vs onnxruntime max |Δamplitude| {da:.2e}, |Δphase| {dp:.2e}");
         let x = npy("io_holo_16x20_input.npy");
@@ -330,13 +336,13 @@ fn int8_qoperator_and_qdq_files_load_and_run() {
 #[test]
 #[cfg(feature = "tract")]
 fn channels_last_plans_match_pytorch_with_the_same_chw_interface() {
-    let m = hologram("holo8_rgbd.onnx");
+    let m = tract(&hologram("holo8_rgbd.onnx"));
     for size in ["24x32", "16x20"] {
         compare_in(&m, CnnLayout::ChannelsLast, "holo", size, "holo", 1e-4);
         compare_in(&m, CnnLayout::ChannelsFirst, "holo", size, "holo", 1e-4);
     }
     assert_eq!(m.planned_resolutions(), vec![(16, 20), (24, 32)]);
-    let pre = prefilter();
+    let pre = tract(&prefilter());
     // The pre-filter's graph (format 2: residual on the fixed blur, outputs split into real and imaginary
     // parts) does not move to channels-last in tract 0.23: refused clearly, and the model stays usable.
     // The pipeline runs it channels-first anyway (it measured 2.1× slower channels-last in format 1).
@@ -370,7 +376,7 @@ fn channels_last_plans_match_pytorch_with_the_same_chw_interface() {
 #[test]
 #[cfg(feature = "tract")]
 fn profile_times_each_operator_of_the_plan() {
-    let m = hologram("holo8_rgbd.onnx");
+    let m = tract(&hologram("holo8_rgbd.onnx"));
     let x = npy("io_holo_24x32_input.npy");
     let plan = m.plan(24, 32).unwrap();
     let timings = plan.profile(x.view()).unwrap();
@@ -443,16 +449,23 @@ fn format_1_prefilters_are_refused_and_format_1_hologram_cnns_load() {
 fn a_model_that_panics_tract_is_a_load_error_not_a_crash() {
     // Found by the `onnx_model` fuzz target: a mutated hologram CNN whose convolution has fewer kernel
     // dimensions than its input makes tract 0.23 panic (index out of bounds in its padding computation) while
-    // typing the graph. The loader runs tract under catch_unwind: the file is refused as malformed.
+    // typing the graph. tract runs under catch_unwind: the file is refused as malformed, by tract's side of
+    // the model and when a pipeline is made (the file is not the TensorHolo CNN, so no other engine runs it).
     let bytes = std::fs::read(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../tests/fixtures/fuzz/onnx_model/tract-padding-panic"
     ))
     .unwrap();
-    let e = HologramModel::from_bytes(&bytes, ModelKind::Hologram, &ModelConfig::default())
-        .unwrap_err();
-    assert!(
-        matches!(&e, HoloError::ModelLoad { reason, .. } if reason.contains("panicked")),
-        "{e}"
+    let model = std::sync::Arc::new(
+        HologramModel::from_bytes(&bytes, ModelKind::Hologram, &ModelConfig::default()).unwrap(),
     );
+    for e in [
+        TractModel::new(&model).unwrap_err(),
+        tensorholo::cnn::check_runnable(&model).unwrap_err(),
+    ] {
+        assert!(
+            matches!(&e, HoloError::ModelLoad { reason, .. } if reason.contains("panicked")),
+            "{e}"
+        );
+    }
 }

@@ -8,10 +8,13 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use ndarray::{Array2, Array3, Axis};
+#[cfg(feature = "tract")]
+use tensorholo::cnn::tract::TractModel;
+use tensorholo::cnn::{CnnEngine, CnnLayout};
 use tensorholo::encoding::{double_phase_encode, phase_to_codes};
-use tensorholo::model::{CnnLayout, HologramModel, ModelConfig, ModelKind};
+use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
 use tensorholo::optics::{propagate_colour, Carrier};
-use tensorholo::pipeline::{Backend, CnnEngine, HologramPipeline, PipelineConfig};
+use tensorholo::pipeline::{Backend, HologramPipeline, PipelineConfig};
 use tensorholo::scene::RgbdFrame;
 use tensorholo::HoloError;
 
@@ -66,7 +69,10 @@ fn frame(h: usize, w: usize, seed: usize) -> RgbdFrame {
 #[cfg(feature = "tract")]
 fn naive(p: &HologramPipeline, f: &RgbdFrame) -> (Array3<f32>, Array3<u8>) {
     let cfg = p.config();
-    let mut field = p.hologram_model().run_frame(f).unwrap();
+    let mut field = TractModel::new(p.hologram_model())
+        .unwrap()
+        .run_frame(f)
+        .unwrap();
     propagate_colour(
         &mut field,
         &cfg.optics,
@@ -84,7 +90,7 @@ fn naive(p: &HologramPipeline, f: &RgbdFrame) -> (Array3<f32>, Array3<u8>) {
                 input[[3 + c, y, x]] = v.im;
             }
         }
-        field = pre.run(input.view()).unwrap();
+        field = TractModel::new(pre).unwrap().run(input.view()).unwrap();
     }
     let dp = double_phase_encode(field.view(), &p.encoding()).unwrap();
     let codes = phase_to_codes(dp.phase.view());
@@ -287,7 +293,7 @@ fn the_shipped_cnn_does_not_output_darkness_for_a_black_frame() {
     .unwrap();
     let depth = Array2::from_shape_fn((32, 32), |(_, x)| x as f32 / 31.0);
     let black = RgbdFrame::new(Array3::zeros((3, 32, 32)), depth).unwrap();
-    let field = model.run_frame(&black).unwrap();
+    let field = TractModel::new(&model).unwrap().run_frame(&black).unwrap();
     let peak = field.iter().fold(0.0f32, |m, z| m.max(z.norm()));
     println!("peak midpoint amplitude of a black 32x32 frame: {peak:.3}");
     assert!(peak > 0.05, "{peak}");

@@ -16,8 +16,8 @@ use std::sync::Arc;
 
 use ndarray::{Array2, Array3};
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
-use tensorholo::cnn::{cnn_plan, CnnEngine};
-use tensorholo::model::{HologramModel, ModelConfig, ModelKind, PlanRequest, ThreadCount};
+use tensorholo::cnn::{cnn_plan, CnnEngine, PlanRequest, ThreadCount};
+use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
 use tensorholo::pipeline::{Backend, HologramPipeline, PipelineConfig};
 use tensorholo::scene::RgbdFrame;
 use tensorholo::slm::{DisplayCalibration, LutRepresentation, PhaseCurve, PhaseLut, TiledCurves};

@@ -18,9 +18,11 @@ use std::path::PathBuf;
 use ndarray::{Array3, Array4, Axis};
 use ndarray_npy::{read_npy, write_npy};
 use num_complex::Complex32;
-use tensorholo::model::{CnnLayout, Precision, ThreadCount};
+use tensorholo::cnn::tract::TractModel;
+use tensorholo::cnn::{CnnEngine, CnnLayout, ThreadCount};
+use tensorholo::model::Precision;
 use tensorholo::pipeline::{
-    Backend, CnnEngine, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode,
+    Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode,
 };
 use tensorholo::scene::procedural::default_scene;
 
@@ -118,7 +120,11 @@ fn render(case: &Case) -> (Array3<Complex32>, Array3<u8>) {
     };
     let pipeline = HologramPipeline::embedded(&selection, config).unwrap();
     let frame = default_scene(H, W).unwrap();
-    let midpoint = pipeline.hologram_model().run_frame(&frame).unwrap();
+    // The midpoint of tract's channels-first plan, as the references were written.
+    let midpoint = TractModel::new(pipeline.hologram_model())
+        .unwrap()
+        .run_frame(&frame)
+        .unwrap();
     let mut session = pipeline.session(H, W).unwrap();
     let codes = session.render(&frame).unwrap().codes.clone();
     (midpoint, codes)

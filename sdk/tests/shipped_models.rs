@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use ndarray::Array3;
+use tensorholo::cnn::tract::TractModel;
 use tensorholo::model::{embedded, HologramModel, ModelConfig, ModelKind, Precision, SceneInput};
 
 fn fixture(name: &str) -> Array3<f32> {
@@ -37,7 +38,8 @@ fn check(
     assert_ne!(md.training_commit, "fixture", "{name}");
     let stem = name.split('.').next().unwrap();
     let input = fixture(&format!("{stem}_input.npy"));
-    let (a, p) = model
+    let (a, p) = TractModel::new(&model)
+        .unwrap()
         .plan(input.dim().1, input.dim().2)
         .unwrap()
         .run_outputs(input.view())

@@ -1,23 +1,23 @@
 //! [`select`]: the CNN plans of one session, on the engine [`CnnEngine`] asks for or, for
-//! [`CnnEngine::Auto`], on the engine that ran faster on this machine at session creation.
+//! [`CnnEngine::Auto`], on the engine of this build that ran fastest on this machine at session creation;
+//! [`cnn_plan`] does the same for one CNN (what `holo bench` times), and [`check_runnable`] refuses, when a
+//! pipeline is made, a model no engine of this build can run.
 //!
-//! The timing follows tract's own tuning ([`HologramModel::tuned_plan`]): the same input (a constant 0.5), the
-//! same resolution ([`timing_resolution`]: the frame, or a full-width strip of a large one), one run or the
-//! fastest of three when a run is short. tract's candidates are its layouts × thread counts; the native
-//! engine's are the thread counts.
+//! The timing rule is the same for every engine ([`crate::cnn::tuning`]): the same input (a constant 0.5),
+//! the same resolution ([`timing_resolution`]: the frame, or a full-width strip of a large one), one run or
+//! the fastest of three when a run is short. Each engine times its own candidates (tract: layouts × thread
+//! counts; native: thread counts); this file compares the engines' best.
 
 use std::sync::Arc;
-use std::time::Instant;
 
-use ndarray::Array3;
+use ndarray::{Array3, ArrayView3};
 
-use super::{active_isa, native_plan, CnnEngine, CnnPlan};
-use crate::error::{invalid, Result};
-use crate::model::tuning::fastest_run;
-use crate::model::{
-    auto_thread_candidates, timing_resolution, CnnLayout, CnnWeights, HologramModel, PlanReport,
-    PlanRequest, PlanTiming, ThreadCount,
-};
+use super::engine::{Engine, Networks, Tuning};
+use super::plan::CnnPlan;
+use super::registry::engines;
+use super::tuning::{timing_resolution, CnnEngine, PlanReport, PlanRequest};
+use crate::error::{invalid, HoloError, Result};
+use crate::model::HologramModel;
 
 /// The plans of one session: the hologram CNN's, the pre-filter CNN's (if any), and how they were chosen.
 #[derive(Debug)]
@@ -30,289 +30,260 @@ pub(crate) struct CnnPlans {
 /// The plans for `height × width` frames of `hologram` (and `prefilter`) on `engine`, with tract's layout
 /// and threads from `request` (the native engine uses `request.threads`).
 ///
-/// Errors: [`crate::HoloError::InvalidParameter`] (`engine`) for [`CnnEngine::Native`] with a file it cannot run
-/// (int8, or a graph that is not the architecture: the reason is given); as
-/// [`HologramModel::tuned_plan`] and [`HologramModel::plan`].
+/// Errors: [`HoloError::InvalidParameter`] (`engine`) for an engine this build lacks (naming its cargo
+/// feature) or one that cannot run the file (the reason is given); [`HoloError::ShapeMismatch`] if the file
+/// fixes another size; the engines' plan and run errors.
 pub(crate) fn select(
-    hologram: &HologramModel,
-    prefilter: Option<&HologramModel>,
+    hologram: &Arc<HologramModel>,
+    prefilter: Option<&Arc<HologramModel>>,
     height: usize,
     width: usize,
     engine: CnnEngine,
     request: PlanRequest,
 ) -> Result<CnnPlans> {
     hologram.check_fixed_size(height, width)?;
-    let graphs = native_graphs(hologram, prefilter);
-    match (engine, graphs) {
-        #[cfg(feature = "tract")]
-        (CnnEngine::Tract, _) => {
-            tract_plans(hologram, prefilter, height, width, request, "requested")
+    let nets = Networks {
+        hologram,
+        prefilter,
+    };
+    if engine != CnnEngine::Auto {
+        let chosen = find(engine)?;
+        if let Err(e) = chosen.supports(nets) {
+            return Err(invalid(
+                "engine",
+                format!(
+                    "the {engine} CNN engine cannot run this model: {e}{}",
+                    others(engine)
+                ),
+            ));
         }
-        #[cfg(not(feature = "tract"))]
-        (CnnEngine::Tract, _) => Err(invalid("engine", NO_TRACT)),
-        (CnnEngine::Native, Err(e)) => Err(invalid(
-            "engine",
-            format!("the native CNN engine cannot run this model: {e}{USE_TRACT}"),
-        )),
-        #[cfg(feature = "tract")]
-        (CnnEngine::Auto, Err(e)) => {
-            let why = format!("the native engine cannot run this model ({e})");
-            tract_plans(hologram, prefilter, height, width, request, &why)
+        let tuning = chosen.tune(nets, height, width, request, false)?;
+        return build(chosen, nets, [height, width], request, "requested", tuning);
+    }
+    let mut able = Vec::new();
+    let mut unable = Vec::new();
+    for e in engines() {
+        match e.supports(nets) {
+            Ok(()) => able.push(*e),
+            Err(err) => unable.push((e.id(), err)),
         }
-        #[cfg(not(feature = "tract"))]
-        (CnnEngine::Auto, Err(e)) => Err(e),
-        (CnnEngine::Native, Ok((graph, pre))) => {
-            let tuning = tune_native(&graph, height, width, request.threads, false)?;
-            native_plans(&graph, pre, [height, width], request, "requested", tuning)
+    }
+    match able.as_slice() {
+        [] => Err(unable
+            .pop()
+            .map(|(_, e)| e)
+            .unwrap_or_else(|| HoloError::Internal("no CNN engine is registered".into()))),
+        [only] => {
+            let why = if unable.is_empty() {
+                format!("the only CPU engine of this build{}", missing_features())
+            } else {
+                unable
+                    .iter()
+                    .map(|(id, e)| format!("the {id} engine cannot run this model ({e})"))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            };
+            let tuning = only.tune(nets, height, width, request, false)?;
+            build(*only, nets, [height, width], request, &why, tuning)
         }
-        #[cfg(feature = "tract")]
-        (CnnEngine::Auto, Ok((graph, pre))) => {
-            faster_engine(hologram, prefilter, &graph, pre, [height, width], request)
-        }
-        #[cfg(not(feature = "tract"))]
-        (CnnEngine::Auto, Ok((graph, pre))) => {
-            let tuning = tune_native(&graph, height, width, request.threads, false)?;
-            let why = "the only CPU engine of this build (no cargo feature `tract`)";
-            native_plans(&graph, pre, [height, width], request, why, tuning)
-        }
+        several => fastest(several, nets, [height, width], request),
     }
 }
 
-/// What to do when the native engine cannot run a file.
-const USE_TRACT: &str = if cfg!(feature = "tract") {
-    "; use the tract engine"
-} else {
-    ""
-};
-
-/// Why [`CnnEngine::Tract`] is refused in a build without the `tract` feature.
-#[cfg(not(feature = "tract"))]
-const NO_TRACT: &str = "this build has no tract engine (cargo feature `tract` of tensorholo and \
-                        tensorholo-ffi, on by default); use the native engine";
-
-/// [`CnnEngine::Auto`] where both engines can run the files: each timed on this machine, the faster kept.
-#[cfg(feature = "tract")]
-fn faster_engine(
-    hologram: &HologramModel,
-    prefilter: Option<&HologramModel>,
-    graph: &Arc<CnnWeights>,
-    pre: Option<Arc<CnnWeights>>,
+/// [`CnnEngine::Auto`] where several engines can run the files: each timed on this machine, the fastest
+/// kept.
+fn fastest(
+    able: &[&dyn Engine],
+    nets: Networks<'_>,
     [height, width]: [usize; 2],
     request: PlanRequest,
 ) -> Result<CnnPlans> {
-    let native = tune_native(graph, height, width, request.threads, true)?;
-    let (tract_plan, tract_report) = hologram.tuned_plan(height, width, request)?;
-    let best = |c: &[PlanTiming]| {
-        c.iter()
-            .filter_map(|t| t.seconds)
-            .min_by(|a, b| a.total_cmp(b))
-    };
-    let native_best = best(&native.candidates);
-    let tract_best = best(&tract_report.candidates);
-    let mut candidates = tract_report.candidates.clone();
-    candidates.extend(native.candidates.iter().cloned());
-    let tuning_s = tract_report.tuning_s + native.seconds;
-    // tract with a single candidate was not timed: time it now, on the same input.
-    let tract_best = match tract_best {
-        Some(s) => s,
-        None => {
-            let s = time_plan(
-                &mut tract_plan.clone(),
-                hologram.input_channels(),
-                height,
-                width,
-            )?;
-            candidates.push(PlanTiming {
-                engine: CnnEngine::Tract,
-                layout: tract_report.layout,
-                threads: tract_report.threads,
-                seconds: Some(s),
-                skipped: None,
-            });
-            s
-        }
-    };
-    let native_best = native_best.unwrap_or(f64::INFINITY);
-    let ratio = tract_best / native_best;
-    if native_best <= tract_best {
-        let why = format!("faster on this CPU ({ratio:.2}× tract's best)");
-        log::info!("CNN engine for {height}×{width}: native, {why}");
-        let tuning = NativeTuning {
-            threads: native.threads,
-            candidates,
-            seconds: tuning_s,
-        };
-        let mut plans = native_plans(graph, pre, [height, width], request, &why, tuning)?;
-        plans.report.autotuned = true;
-        Ok(plans)
-    } else {
-        let why = format!("faster on this CPU ({:.2}× the native engine)", 1.0 / ratio);
-        log::info!("CNN engine for {height}×{width}: tract, {why}");
-        let mut plans = tract_with(prefilter, height, width, tract_plan, tract_report)?;
-        plans.report.engine_reason = why;
-        plans.report.candidates = candidates;
-        plans.report.tuning_s = tuning_s;
-        plans.report.autotuned = true;
-        Ok(plans)
+    let mut timed = Vec::new();
+    for e in able {
+        let tuning = e.tune(nets, height, width, request, true)?;
+        let best = tuning.best_seconds().unwrap_or(f64::INFINITY);
+        timed.push((*e, tuning, best));
     }
-}
-
-/// The graphs the native engine would run, or why it cannot.
-fn native_graphs(
-    hologram: &HologramModel,
-    prefilter: Option<&HologramModel>,
-) -> Result<(Arc<CnnWeights>, Option<Arc<CnnWeights>>)> {
-    let graph = hologram.cnn_graph()?;
-    let pre = prefilter.map(|p| p.cnn_graph()).transpose()?;
-    active_isa()?;
-    Ok((graph, pre))
-}
-
-#[cfg(feature = "tract")]
-fn tract_plans(
-    hologram: &HologramModel,
-    prefilter: Option<&HologramModel>,
-    height: usize,
-    width: usize,
-    request: PlanRequest,
-    why: &str,
-) -> Result<CnnPlans> {
-    let (plan, report) = hologram.tuned_plan(height, width, request)?;
-    let mut plans = tract_with(prefilter, height, width, plan, report)?;
-    plans.report.engine_reason = why.to_string();
+    timed.sort_by(|a, b| a.2.total_cmp(&b.2));
+    let candidates: Vec<_> = timed
+        .iter()
+        .flat_map(|(_, t, _)| t.candidates.iter().cloned())
+        .collect();
+    let seconds = timed.iter().map(|(_, t, _)| t.seconds).sum();
+    let mut ranked = timed.into_iter();
+    let (winner, tuning, best) = ranked
+        .next()
+        .ok_or_else(|| HoloError::Internal("no engine timed".into()))?;
+    let runner_up = ranked.next();
+    let why = match &runner_up {
+        Some((other, _, s)) => format!(
+            "faster on this CPU ({:.2}× {}'s best)",
+            s / best,
+            other.id()
+        ),
+        None => "faster on this CPU".into(),
+    };
+    log::info!("CNN engine for {height}×{width}: {}, {why}", winner.id());
+    let tuning = Tuning {
+        candidates,
+        seconds,
+        ..tuning
+    };
+    let mut plans = build(winner, nets, [height, width], request, &why, tuning)?;
+    plans.report.autotuned = true;
     Ok(plans)
 }
 
-#[cfg(feature = "tract")]
-fn tract_with(
-    prefilter: Option<&HologramModel>,
-    height: usize,
-    width: usize,
-    plan: crate::model::ModelPlan,
-    report: PlanReport,
-) -> Result<CnnPlans> {
-    let prefilter: Option<Box<dyn CnnPlan>> = match prefilter {
-        Some(p) => {
-            // The pre-filter always runs channels-first (PipelineConfig::cnn_layout), with the same threads.
-            let plan = p.plan(height, width)?;
-            Some(Box::new(match report.threads {
-                Some(t) => plan.with_threads(t)?,
-                None => plan,
-            }))
-        }
-        None => None,
-    };
-    Ok(CnnPlans {
-        hologram: Box::new(plan),
-        prefilter,
-        report,
-    })
-}
-
-/// What [`tune_native`] chose: the thread count, the candidates' timings and the seconds the timing took.
-struct NativeTuning {
-    threads: usize,
-    candidates: Vec<PlanTiming>,
-    seconds: f64,
-}
-
-/// The native engine's thread count for `request`: timed among [`auto_thread_candidates`] for
-/// [`ThreadCount::Auto`] (with the timings and the seconds spent), else the count asked for (1 for
-/// [`ThreadCount::ProcessDefault`], tract's process-wide setting, which the native engine does not share).
-/// A single count is timed only when `time_single` (to compare with tract).
-fn tune_native(
-    graph: &Arc<CnnWeights>,
-    height: usize,
-    width: usize,
-    threads: ThreadCount,
-    time_single: bool,
-) -> Result<NativeTuning> {
-    let counts = match threads {
-        ThreadCount::Auto => auto_thread_candidates(),
-        ThreadCount::Fixed(n) => vec![n],
-        ThreadCount::ProcessDefault => vec![1],
-    };
-    if counts.len() == 1 && !time_single {
-        return Ok(NativeTuning {
-            threads: counts[0],
-            candidates: Vec::new(),
-            seconds: 0.0,
-        });
-    }
-    let [th, tw] = timing_resolution(height, width);
-    let start = Instant::now();
-    let mut timings = Vec::new();
-    let isa = active_isa()?;
-    for &t in &counts {
-        let (mut plan, _) = native_plan(graph.clone(), th, tw, t, isa)?;
-        let s = time_plan(plan.as_mut(), graph.in_channels, th, tw)?;
-        timings.push(PlanTiming {
-            engine: CnnEngine::Native,
-            layout: CnnLayout::ChannelsFirst,
-            threads: Some(t),
-            seconds: Some(s),
-            skipped: None,
-        });
-    }
-    let best = timings
-        .iter()
-        .min_by(|a, b| {
-            a.seconds
-                .unwrap_or(f64::INFINITY)
-                .total_cmp(&b.seconds.unwrap_or(f64::INFINITY))
-        })
-        .and_then(|t| t.threads)
-        .unwrap_or(1);
-    Ok(NativeTuning {
-        threads: best,
-        candidates: timings,
-        seconds: start.elapsed().as_secs_f64(),
-    })
-}
-
-/// Fastest wall-clock seconds of one run of `plan` on a constant `[c, h, w]` input (tract's rule,
-/// [`fastest_run`]).
-fn time_plan(plan: &mut dyn CnnPlan, c: usize, h: usize, w: usize) -> Result<f64> {
-    let input = Array3::<f32>::from_elem((c, h, w), 0.5);
-    fastest_run(|| {
-        let t = Instant::now();
-        plan.run_outputs(input.view())?;
-        Ok(t.elapsed().as_secs_f64())
-    })
-}
-
-/// Native plans for both CNNs at `[height, width]` on `tuning.threads` threads, reported with what was asked
-/// (`request`), why (`why`), the timings and their cost.
-fn native_plans(
-    graph: &Arc<CnnWeights>,
-    pre: Option<Arc<CnnWeights>>,
+/// The plans of `engine` for `tuning`, reported with what was asked (`request`), why (`why`), the timings
+/// and their cost.
+fn build(
+    engine: &dyn Engine,
+    nets: Networks<'_>,
     [height, width]: [usize; 2],
     request: PlanRequest,
     why: &str,
-    tuning: NativeTuning,
+    tuning: Tuning,
 ) -> Result<CnnPlans> {
-    let isa = active_isa()?;
-    let threads = tuning.threads;
-    let (hologram, kernel) = native_plan(graph.clone(), height, width, threads, isa)?;
-    let prefilter = match pre {
-        Some(p) => Some(native_plan(p, height, width, threads, isa)?.0),
-        None => None,
-    };
+    let plans = engine.plans(nets, height, width, &tuning)?;
     Ok(CnnPlans {
+        hologram: plans.hologram,
+        prefilter: plans.prefilter,
         report: PlanReport {
             resolution: [height, width],
             request,
-            engine: CnnEngine::Native,
+            engine: engine.id(),
             engine_reason: why.to_string(),
-            kernel: Some(kernel.to_string()),
-            layout: CnnLayout::ChannelsFirst,
-            threads: Some(threads),
+            kernel: plans.kernel,
+            layout: tuning.layout,
+            threads: tuning.threads,
             autotuned: tuning.candidates.len() > 1,
             timed_resolution: timing_resolution(height, width),
             candidates: tuning.candidates,
             tuning_s: tuning.seconds,
         },
-        hologram,
-        prefilter,
     })
+}
+
+/// The registered engine `id`. Errors: [`HoloError::InvalidParameter`] (`engine`) for one this build lacks,
+/// naming its cargo feature.
+fn find(id: CnnEngine) -> Result<&'static dyn Engine> {
+    engines()
+        .iter()
+        .copied()
+        .find(|e| e.id() == id)
+        .ok_or_else(|| {
+            let feature = id.cargo_feature().unwrap_or("?");
+            invalid(
+                "engine",
+                format!(
+                    "this build has no {id} engine (cargo feature `{feature}` of tensorholo and \
+                 tensorholo-ffi, on by default){}",
+                    others(id)
+                ),
+            )
+        })
+}
+
+/// "; use the X engine" naming the other engines of this build, or nothing.
+fn others(id: CnnEngine) -> String {
+    let names: Vec<&str> = engines()
+        .iter()
+        .map(|e| e.id())
+        .filter(|&e| e != id)
+        .map(CnnEngine::name)
+        .collect();
+    match names.as_slice() {
+        [] => String::new(),
+        n => format!("; use the {} engine", n.join(" or ")),
+    }
+}
+
+/// " (no cargo feature `tract`)" for the engines this build leaves out, or nothing.
+fn missing_features() -> String {
+    let missing: Vec<String> = CnnEngine::ENGINES
+        .iter()
+        .filter(|id| engines().iter().all(|e| e.id() != **id))
+        .filter_map(|id| id.cargo_feature())
+        .map(|f| format!("`{f}`"))
+        .collect();
+    if missing.is_empty() {
+        String::new()
+    } else {
+        format!(" (no cargo feature {})", missing.join(", "))
+    }
+}
+
+/// Refuses a model that no CPU engine of this build can run, when a pipeline is made (so that a phone build
+/// without tract refuses such a file before any session): `Ok` where one engine runs it.
+///
+/// Errors: [`HoloError::ModelContract`] naming why each engine cannot run it and the cargo features this
+/// build leaves out; [`HoloError::ModelLoad`] where the last engine tried cannot read the file at all.
+pub fn check_runnable(model: &Arc<HologramModel>) -> Result<()> {
+    let nets = Networks {
+        hologram: model,
+        prefilter: None,
+    };
+    let mut reasons = Vec::new();
+    for e in engines() {
+        match e.supports(nets) {
+            Ok(()) => return Ok(()),
+            Err(err) => reasons.push((e.id(), err)),
+        }
+    }
+    let missing = missing_features();
+    if missing.is_empty() {
+        if let Some((_, last)) = reasons.pop() {
+            return Err(last);
+        }
+    }
+    let why: Vec<String> = reasons
+        .into_iter()
+        .map(|(id, e)| match e {
+            HoloError::ModelContract { reason, .. } => format!("{reason} ({id} engine)"),
+            other => format!("{other} ({id} engine)"),
+        })
+        .collect();
+    Err(HoloError::ModelContract {
+        source_name: model.source_name().to_string(),
+        reason: format!(
+            "{}. This build has no other CPU CNN engine{missing}: tract runs any other graph that \
+             passes the contract",
+            why.join("; ")
+        ),
+    })
+}
+
+/// One CNN at one resolution on the engine [`cnn_plan`] chose: what `holo bench` times, engine against
+/// engine. A session builds its own plans; this is for measuring the CNN alone.
+#[derive(Debug)]
+pub struct CpuCnnPlan(Box<dyn CnnPlan>);
+
+impl CpuCnnPlan {
+    /// `(channels, height, width)` of the input `[C, H, W]`.
+    pub fn input_dim(&self) -> (usize, usize, usize) {
+        self.0.input_dim()
+    }
+
+    /// Runs the CNN on `input` `[C, H, W]`: its two outputs `[3, H, W]` (amplitude and phase of a hologram
+    /// CNN; `Re`, `Im` of a pre-filter). Errors: [`HoloError::ShapeMismatch`]; the engine's run errors.
+    pub fn run_outputs(&mut self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
+        self.0.run_outputs(input)
+    }
+}
+
+/// `model`'s CNN for `height × width` inputs on `engine` (tract's layout and threads from `request`; the
+/// native engine uses `request.threads`), and how it was chosen, as a session chooses
+/// ([`PipelineConfig::cnn_engine`](crate::pipeline::PipelineConfig::cnn_engine)).
+///
+/// Errors: as the session's choice: [`HoloError::InvalidParameter`] (`engine`) for an engine this build
+/// lacks or one that cannot run the file; the engine's plan errors.
+pub fn cnn_plan(
+    model: &Arc<HologramModel>,
+    height: usize,
+    width: usize,
+    engine: CnnEngine,
+    request: PlanRequest,
+) -> Result<(CpuCnnPlan, PlanReport)> {
+    let plans = select(model, None, height, width, engine, request)?;
+    Ok((CpuCnnPlan(plans.hologram), plans.report))
 }

@@ -6,10 +6,11 @@ use std::sync::Arc;
 use ndarray::Array3;
 use tensorholo_kernels::Isa;
 
-use super::native::NativePlan;
+use super::native::{native_plan, NativeInt8Plan, NativePlan};
 use super::{select, CnnEngine, CnnPlan};
+use crate::cnn::{PlanRequest, ThreadCount};
 use crate::error::HoloError;
-use crate::model::{embedded, HologramModel, ModelConfig, PlanRequest, Precision, ThreadCount};
+use crate::model::{embedded, HologramModel, ModelConfig, Precision};
 
 /// Deterministic input in [0, 1) (xorshift), with a few exact 0s and 1s (invalid LDI points, clipped depth).
 fn input(c: usize, h: usize, w: usize, seed: u64) -> Array3<f32> {
@@ -65,7 +66,12 @@ fn native_matches_tract_on_every_shipped_f32_model() {
     for model in shipped() {
         let graph = model.cnn_graph().unwrap();
         let x = input(graph.in_channels, h, w, 7);
-        let tract = model.plan(h, w).unwrap().run_outputs(x.view()).unwrap();
+        let tract = crate::cnn::tract::TractModel::new(&model)
+            .unwrap()
+            .plan(h, w)
+            .unwrap()
+            .run_outputs(x.view())
+            .unwrap();
         let isas: Vec<Isa> = [Isa::Scalar, Isa::active().unwrap()].into();
         for isa in isas {
             for threads in [1, 3] {
@@ -149,8 +155,8 @@ fn engine_choice_follows_the_request_and_the_file() {
         offset_m: 0.0,
         ..ModelConfig::default()
     };
-    let f32_model = embedded::hologram_model(8, Precision::F32, &cfg).unwrap();
-    let int8 = embedded::hologram_model(8, Precision::Int8QOperator, &cfg).unwrap();
+    let f32_model = Arc::new(embedded::hologram_model(8, Precision::F32, &cfg).unwrap());
+    let int8 = Arc::new(embedded::hologram_model(8, Precision::Int8QOperator, &cfg).unwrap());
     let request = PlanRequest {
         threads: ThreadCount::Fixed(1),
         ..PlanRequest::default()
@@ -205,7 +211,7 @@ fn engine_choice_follows_the_request_and_the_file() {
     assert_eq!(auto8.report.engine, CnnEngine::Tract);
     assert!(auto8.report.engine_reason.contains("QOperator"));
     // int8 QDQ files run natively, on the int8 kernels.
-    let qdq = embedded::hologram_model(8, Precision::Int8Qdq, &cfg).unwrap();
+    let qdq = Arc::new(embedded::hologram_model(8, Precision::Int8Qdq, &cfg).unwrap());
     let native8 = select(&qdq, None, 16, 24, CnnEngine::Native, request).unwrap();
     assert_eq!(native8.report.engine, CnnEngine::Native);
     let kernel = native8.report.kernel.as_deref().unwrap();
@@ -221,7 +227,7 @@ fn without_tract_the_native_engine_runs_everything_it_can_and_the_rest_is_refuse
         offset_m: 0.0,
         ..ModelConfig::default()
     };
-    let f32_model = embedded::hologram_model(8, Precision::F32, &cfg).unwrap();
+    let f32_model = Arc::new(embedded::hologram_model(8, Precision::F32, &cfg).unwrap());
     let request = PlanRequest {
         threads: ThreadCount::Fixed(1),
         ..PlanRequest::default()
@@ -244,9 +250,10 @@ fn without_tract_the_native_engine_runs_everything_it_can_and_the_rest_is_refuse
     // The int8 QOperator form is not embedded, and asking for it says why.
     let err = embedded::hologram_cnn(8, Precision::Int8QOperator).unwrap_err();
     assert!(err.to_string().contains("cargo feature `tract`"), "{err}");
-    // The same file, once not the TensorHolo CNN (one convolution unpadded), is refused at load, naming the
-    // feature.
-    use crate::model::{HologramModel, ModelKind};
+    // The same file, once not the TensorHolo CNN (one convolution unpadded), still loads (the model
+    // layer is engine-neutral) but no engine of this build runs it: a pipeline refuses it up front,
+    // naming the feature that would.
+    use crate::model::ModelKind;
     use prost::Message;
     let bytes = embedded::hologram_cnn(8, Precision::F32).unwrap();
     let mut proto = crate::model::onnx::decode_model(bytes).unwrap();
@@ -255,9 +262,12 @@ fn without_tract_the_native_engine_runs_everything_it_can_and_the_rest_is_refuse
     for a in conv.attribute.iter_mut().filter(|a| a.name == "pads") {
         a.ints = vec![0, 0, 0, 0];
     }
-    let err =
-        HologramModel::from_bytes(&proto.encode_to_vec(), ModelKind::Hologram, &cfg).unwrap_err();
+    let model = Arc::new(
+        HologramModel::from_bytes(&proto.encode_to_vec(), ModelKind::Hologram, &cfg).unwrap(),
+    );
+    let err = super::check_runnable(&model).unwrap_err();
     assert!(matches!(err, HoloError::ModelContract { .. }), "{err}");
+    super::check_runnable(&f32_model).expect("the unmodified file runs natively");
     assert!(err.to_string().contains("cargo feature `tract`"), "{err}");
 }
 
@@ -362,7 +372,12 @@ fn native_int8_matches_tract_on_every_shipped_qdq_model() {
                 input(graph.in_channels, h, w, 7).mapv(|v| 0.75 * v - 0.05)
             }
         };
-        let tract = model.plan(h, w).unwrap().run_outputs(x.view()).unwrap();
+        let tract = crate::cnn::tract::TractModel::new(&model)
+            .unwrap()
+            .plan(h, w)
+            .unwrap()
+            .run_outputs(x.view())
+            .unwrap();
         let (limit_mean, limit_max) = match model.kind() {
             crate::model::ModelKind::Hologram => (2.0 * 2.7e-3, 2.0 * 2.2e-2),
             crate::model::ModelKind::PreFilter => (2.0 * 2.2e-3, 2.0 * 1.0e-2),
@@ -375,8 +390,7 @@ fn native_int8_matches_tract_on_every_shipped_qdq_model() {
                 first = None;
             }
             for threads in [1, 3] {
-                let (mut plan, kernel) =
-                    super::native_plan(graph.clone(), h, w, threads, isa).unwrap();
+                let (mut plan, kernel) = native_plan(graph.clone(), h, w, threads, isa).unwrap();
                 let native = plan.run_outputs(x.view()).unwrap();
                 let (mean, max) = mean_max(&native, &tract);
                 println!(
@@ -406,7 +420,6 @@ fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
     // pixel with the same instructions as one strip covering the whole frame: any strip height, with 1 or 3
     // threads, gives the bit-identical frame, f32 and int8, hologram CNN and pre-filter (its concat reads the
     // input N rows later, and the frame's top and bottom edges fall inside strips).
-    use super::native_int8::NativeInt8Plan;
     let (h, w) = (17, 29);
     let isa = Isa::active().unwrap();
     let (mut f32s, mut int8s) = (shipped(), shipped_qdq());
@@ -487,9 +500,14 @@ fn an_input_given_plane_by_plane_gives_the_same_frame() {
         let refs: Vec<&[f32]> = planes.iter().map(|p| &p[..]).collect();
         #[allow(unused_mut)]
         let mut plans: Vec<Box<dyn CnnPlan>> =
-            vec![super::native_plan(graph.clone(), h, w, 2, isa).unwrap().0];
+            vec![native_plan(graph.clone(), h, w, 2, isa).unwrap().0];
         #[cfg(feature = "tract")]
-        plans.push(Box::new(model.plan(h, w).unwrap()));
+        plans.push(Box::new(
+            crate::cnn::tract::TractModel::new(&model)
+                .unwrap()
+                .plan(h, w)
+                .unwrap(),
+        ));
         for plan in &mut plans {
             let whole = plan.run_outputs(x.view()).unwrap();
             assert!(

@@ -10,7 +10,26 @@ use super::kernel::{grid_1d, grid_2d, Kernel};
 use super::shaders;
 use crate::error::Result;
 use crate::model::graph::{CnnOutput, CnnWeights};
-pub use crate::pipeline::config::GpuPrecision;
+
+/// How the hidden activations are stored and multiplied (resolved: the caller has checked the adapter's
+/// `SHADER_F16` for [`GpuStorage::F16`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum GpuStorage {
+    /// f32 storage and arithmetic.
+    F32,
+    /// f16 storage and products, f32 sums; the network's input and output stay f32.
+    F16,
+}
+
+impl GpuStorage {
+    /// `"f32"` or `"f16"`.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Self::F32 => "f32",
+            Self::F16 => "f16",
+        }
+    }
+}
 
 /// `Layer` of `conv3x3.wgsl` (both precisions).
 #[repr(C)]
@@ -44,10 +63,10 @@ struct HeadParams {
 }
 
 /// Bytes per stored hidden activation.
-fn activation_bytes(precision: GpuPrecision) -> u64 {
-    match precision {
-        GpuPrecision::F16 => 2,
-        GpuPrecision::F32 | GpuPrecision::Auto => 4,
+fn activation_bytes(storage: GpuStorage) -> u64 {
+    match storage {
+        GpuStorage::F16 => 2,
+        GpuStorage::F32 => 4,
     }
 }
 
@@ -64,22 +83,22 @@ pub struct GpuCnn {
 }
 
 impl GpuCnn {
-    /// Allocates the activations (a ring of three `[hidden, H, W]` buffers, f16 where `precision` resolves to
-    /// it on this adapter) and binds every layer: `input`
+    /// Allocates the activations (a ring of three `[hidden, H, W]` buffers, f16 with [`GpuStorage::F16`;
+    /// f32 where the adapter lacks `SHADER_F16`) and binds every layer: `input`
     /// f32 `[in_channels, H, W]`, `output` f32 `[6, H, W]` (the heads `[amplitude, phase]`, or the pre-filter's
     /// `[Re, Im]`).
     ///
     /// Errors: [`crate::HoloError::ModelContract`] for an int8 (QDQ) graph (the GPU runs the f32 files);
     /// [`crate::HoloError::Gpu`] for activations above the device's storage-binding limit (the message names
     /// the size) or a shader the device refuses.
-    pub fn new(
+    pub(crate) fn new(
         ctx: &GpuContext,
         weights: &CnnWeights,
         height: usize,
         width: usize,
         input: &wgpu::Buffer,
         output: &wgpu::Buffer,
-        precision: GpuPrecision,
+        storage: GpuStorage,
     ) -> Result<Self> {
         if weights.quant.is_some() {
             return Err(crate::HoloError::ModelContract {
@@ -88,20 +107,24 @@ impl GpuCnn {
                     .into(),
             });
         }
-        let precision = precision.resolve(ctx.info().shader_f16);
+        let storage = if ctx.info().shader_f16 {
+            storage
+        } else {
+            GpuStorage::F32
+        };
         let n = height
             .checked_mul(width)
             .filter(|&n| n > 0)
             .ok_or_else(|| crate::error::invalid("size", "empty or too large frame"))?;
         let layers = &weights.layers;
         let hidden = layers[0].c_out;
-        let act_bytes = (hidden as u64) * (n as u64) * activation_bytes(precision);
+        let act_bytes = (hidden as u64) * (n as u64) * activation_bytes(storage);
         let ring = [
             ctx.storage("cnn activations 0", act_bytes)?,
             ctx.storage("cnn activations 1", act_bytes)?,
             ctx.storage("cnn activations 2", act_bytes)?,
         ];
-        let conv = if precision == GpuPrecision::F16 {
+        let conv = if storage == GpuStorage::F16 {
             ctx.kernel(&shaders::CONV3X3_F16, "conv3x3")?
         } else {
             ctx.kernel(&shaders::CONV3X3, "conv3x3")?
@@ -189,7 +212,7 @@ impl GpuCnn {
         };
         let macs = weights.macs_per_pixel() as f64 * n as f64;
         // Each layer reads its input tiles once per 4 output channels and writes its output once.
-        let elem = activation_bytes(precision) as f64;
+        let elem = activation_bytes(storage) as f64;
         let bytes: f64 = layers
             .iter()
             .map(|l| {
@@ -208,7 +231,7 @@ impl GpuCnn {
     }
 
     /// Records the layers and the output stage.
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
+    pub(crate) fn record(&self, encoder: &mut wgpu::CommandEncoder) {
         let mut pass = encoder.begin_compute_pass(&Default::default());
         for (bind, groups) in &self.passes {
             self.conv.dispatch(&mut pass, bind, *groups);
@@ -219,7 +242,7 @@ impl GpuCnn {
 
     /// (flops, bytes) per frame: 2 per multiply-add of the convolutions (+ the output stage), and the bytes
     /// the passes read and write.
-    pub fn cost(&self) -> (f64, f64) {
+    pub(crate) fn cost(&self) -> (f64, f64) {
         (self.flops, self.bytes)
     }
 }
@@ -295,14 +318,14 @@ mod tests {
 
     /// Runs `model` on `input` `[C, H, W]` on the GPU (f32) and with tract; returns max |Δ| / max |tract|.
     fn compare(ctx: &GpuContext, model: &HologramModel, input: &Array3<f32>) -> f32 {
-        compare_in(ctx, model, input, GpuPrecision::F32)
+        compare_in(ctx, model, input, GpuStorage::F32)
     }
 
     fn compare_in(
         ctx: &GpuContext,
         model: &HologramModel,
         input: &Array3<f32>,
-        precision: GpuPrecision,
+        precision: GpuStorage,
     ) -> f32 {
         let (c, h, w) = input.dim();
         let weights = CnnWeights::from_model(model).unwrap();
@@ -322,7 +345,12 @@ mod tests {
         ctx.submit_and_wait(enc).unwrap();
         assert_eq!(ctx.resource_counts(), before, "record created GPU objects");
         let gpu: Vec<f32> = ctx.read_buffer(&out, 6 * h * w).unwrap();
-        let (a, b) = model.plan(h, w).unwrap().run_outputs(input.view()).unwrap();
+        let (a, b) = crate::cnn::tract::TractModel::new(model)
+            .unwrap()
+            .plan(h, w)
+            .unwrap()
+            .run_outputs(input.view())
+            .unwrap();
         let cpu: Vec<f32> = a.iter().chain(b.iter()).copied().collect();
         let scale = cpu.iter().fold(0.0f32, |m, v| m.max(v.abs()));
         gpu.iter()
@@ -377,7 +405,7 @@ mod tests {
         crate::model::contract::pack_rgbd(&frame, input.view_mut()).unwrap();
         for layers in crate::model::embedded::LAYERS {
             let m = embedded::hologram_model(*layers, Precision::F32, &config()).unwrap();
-            let e = compare_in(&ctx, &m, &input, GpuPrecision::F16);
+            let e = compare_in(&ctx, &m, &input, GpuStorage::F16);
             println!("holo{layers} f16, built-in scene: max rel Δ {e:.2e}");
             // f16 keeps 11 significant bits (4.9e-4 per rounding); measured 2.8–5.1e-4 on lavapipe.
             assert!(e < 2e-3, "holo{layers} f16: {e}");
@@ -386,7 +414,7 @@ mod tests {
         let field = Array3::from_shape_vec((6, 48, 64), noise(6 * 48 * 64, 5, 2.0))
             .unwrap()
             .mapv(|v| v - 1.0);
-        let e = compare_in(&ctx, &p, &field, GpuPrecision::F16);
+        let e = compare_in(&ctx, &p, &field, GpuStorage::F16);
         println!("prefilter 6 mm f16: max rel Δ {e:.2e}");
         assert!(e < 2e-3, "prefilter f16: {e}");
     }

@@ -99,7 +99,7 @@ impl GpuHeadsToField {
     /// Binds `heads` (f32 `[6, H, W]`) and `field` (complex `[3, H, W]`).
     ///
     /// Errors: [`HoloError::InvalidParameter`] for an empty or oversized frame; [`HoloError::Gpu`].
-    pub fn new(
+    pub(crate) fn new(
         ctx: &GpuContext,
         height: usize,
         width: usize,
@@ -110,12 +110,12 @@ impl GpuHeadsToField {
     }
 
     /// Records the conversion.
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
+    pub(crate) fn record(&self, encoder: &mut wgpu::CommandEncoder) {
         self.0.record(encoder)
     }
 
     /// (flops, bytes) per frame (sin and cos counted as 10 flops each).
-    pub fn cost(&self) -> (f64, f64) {
+    pub(crate) fn cost(&self) -> (f64, f64) {
         self.0.cost(24.0)
     }
 }
@@ -129,7 +129,7 @@ impl GpuFieldToPlanes {
     /// Binds `field` (complex `[3, H, W]`) and `planes` (f32 `[6, H, W]`).
     ///
     /// Errors: as [`GpuHeadsToField::new`].
-    pub fn new(
+    pub(crate) fn new(
         ctx: &GpuContext,
         height: usize,
         width: usize,
@@ -140,12 +140,12 @@ impl GpuFieldToPlanes {
     }
 
     /// Records the conversion.
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
+    pub(crate) fn record(&self, encoder: &mut wgpu::CommandEncoder) {
         self.0.record(encoder)
     }
 
     /// (flops, bytes) per frame.
-    pub fn cost(&self) -> (f64, f64) {
+    pub(crate) fn cost(&self) -> (f64, f64) {
         self.0.cost(0.0)
     }
 }
@@ -158,7 +158,7 @@ impl GpuPlanesToField {
     /// Binds `planes` (f32 `[6, H, W]`) and `field` (complex `[3, H, W]`).
     ///
     /// Errors: as [`GpuHeadsToField::new`].
-    pub fn new(
+    pub(crate) fn new(
         ctx: &GpuContext,
         height: usize,
         width: usize,
@@ -169,12 +169,12 @@ impl GpuPlanesToField {
     }
 
     /// Records the conversion.
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
+    pub(crate) fn record(&self, encoder: &mut wgpu::CommandEncoder) {
         self.0.record(encoder)
     }
 
     /// (flops, bytes) per frame.
-    pub fn cost(&self) -> (f64, f64) {
+    pub(crate) fn cost(&self) -> (f64, f64) {
         self.0.cost(0.0)
     }
 }
@@ -218,7 +218,7 @@ impl GpuDoublePhase {
     /// Errors: [`HoloError::InvalidParameter`] for [`DoublePhaseMethod::BandLimited`] (the GPU path covers plain
     /// double phase, used after the pre-filter CNN, and AA-DPM) or an empty/oversized frame;
     /// [`HoloError::Gpu`].
-    pub fn new(
+    pub(crate) fn new(
         ctx: &GpuContext,
         height: usize,
         width: usize,
@@ -309,7 +309,7 @@ impl GpuDoublePhase {
     }
 
     /// Records blur (AA-DPM), pass 1, the normaliser and pass 2 with the look-up table.
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
+    pub(crate) fn record(&self, encoder: &mut wgpu::CommandEncoder) {
         let mut pass = encoder.begin_compute_pass(&Default::default());
         if let Some(b) = &self.blur {
             b.rows
@@ -329,22 +329,22 @@ impl GpuDoublePhase {
     }
 
     /// The wrapped double phase pattern, f32 `[3, H, W]` in `[0, 2π)` after a frame.
-    pub fn phase_buffer(&self) -> &wgpu::Buffer {
+    pub(crate) fn phase_buffer(&self) -> &wgpu::Buffer {
         &self.phase
     }
 
     /// The 8-bit codes, four per `u32` little-endian (`[3, H, W]` order), `ceil(3·H·W / 4)` words.
-    pub fn codes_buffer(&self) -> &wgpu::Buffer {
+    pub(crate) fn codes_buffer(&self) -> &wgpu::Buffer {
         &self.codes
     }
 
     /// The statistics (8 f32, [`GpuDoublePhase::read_stats`]).
-    pub fn stats_buffer(&self) -> &wgpu::Buffer {
+    pub(crate) fn stats_buffer(&self) -> &wgpu::Buffer {
         &self.stats
     }
 
     /// Bytes of [`GpuDoublePhase::stats_buffer`].
-    pub fn stats_bytes(&self) -> u64 {
+    pub(crate) fn stats_bytes(&self) -> u64 {
         STATS_BYTES
     }
 
@@ -353,7 +353,7 @@ impl GpuDoublePhase {
     ///
     /// Errors: [`HoloError::InvalidData`] (as [`crate::encoding::normaliser`]) if the hologram is zero
     /// everywhere or not finite; [`HoloError::Internal`] for a wrong length.
-    pub fn read_stats(bytes: &[u8]) -> Result<(f32, [f32; 3])> {
+    pub(crate) fn read_stats(bytes: &[u8]) -> Result<(f32, [f32; 3])> {
         if bytes.len() != STATS_BYTES as usize {
             return Err(HoloError::Internal(format!(
                 "double phase statistics: {} bytes, expected {STATS_BYTES}",
@@ -374,7 +374,7 @@ impl GpuDoublePhase {
     }
 
     /// (flops, bytes) per frame: atan2 ≈ 20 flops, acos ≈ 15, blur 4 flops per tap and pass per complex value.
-    pub fn cost(&self) -> (f64, f64) {
+    pub(crate) fn cost(&self) -> (f64, f64) {
         let e = (CHANNELS * self.height * self.width) as f64;
         let (mut flops, mut bytes) = (
             e * 24.0 + e * 30.0,

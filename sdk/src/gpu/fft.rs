@@ -69,7 +69,7 @@ struct GridParams {
 ///
 /// Errors: [`HoloError::InvalidParameter`] naming `n` and its prime factors if one exceeds
 /// [`MAX_PRIME_FACTOR`].
-pub fn radices(n: usize) -> Result<Vec<usize>> {
+pub(crate) fn radices(n: usize) -> Result<Vec<usize>> {
     if n == 0 {
         return Err(invalid("FFT size", "must be ≥ 1"));
     }
@@ -268,7 +268,7 @@ impl GpuSpectralPlan {
     ///
     /// Errors: [`HoloError::InvalidParameter`] for an FFT length with a prime factor above
     /// [`MAX_PRIME_FACTOR`] or zero channels; [`HoloError::Gpu`] for buffers above the device's limits.
-    pub fn new(ctx: &GpuContext, plan: &SpectralPlan, channels: usize) -> Result<Self> {
+    pub(crate) fn new(ctx: &GpuContext, plan: &SpectralPlan, channels: usize) -> Result<Self> {
         if channels == 0 {
             return Err(invalid("channels", "a spectral plan needs ≥ 1 channel"));
         }
@@ -344,7 +344,7 @@ impl GpuSpectralPlan {
     /// [`crate::optics::TransferFunction::values`]).
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for a wrong count or length; [`HoloError::Gpu`].
-    pub fn multiplier(
+    pub(crate) fn multiplier(
         &self,
         ctx: &GpuContext,
         per_channel: &[&[Complex32]],
@@ -372,7 +372,7 @@ impl GpuSpectralPlan {
     /// computed on the CPU, then [`GpuSpectralPlan::multiplier`].
     ///
     /// Errors: as [`crate::optics::Propagator::transfer_function`] and [`GpuSpectralPlan::multiplier`].
-    pub fn transfer_functions(
+    pub(crate) fn transfer_functions(
         &self,
         ctx: &GpuContext,
         props: &[crate::optics::Propagator],
@@ -390,7 +390,7 @@ impl GpuSpectralPlan {
     /// Binds an operation `field ← F⁻¹{F{field}·M}` on `field` (complex `[C, H, W]`) with `multiplier`.
     ///
     /// Errors: [`HoloError::Gpu`].
-    pub fn bind(
+    pub(crate) fn bind(
         &self,
         ctx: &GpuContext,
         field: &wgpu::Buffer,
@@ -415,7 +415,7 @@ impl GpuSpectralPlan {
 impl GpuSpectralOp {
     /// Records `field ← F⁻¹{F{field}·M}` into `encoder`: embed (zero padding) → FFT along rows → transpose →
     /// FFT along columns → multiply → inverse along columns → transpose back → inverse along rows → crop.
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
+    pub(crate) fn record(&self, encoder: &mut wgpu::CommandEncoder) {
         let p = &*self.plan;
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("spectral op"),
@@ -448,7 +448,7 @@ impl GpuSpectralOp {
     }
 
     /// Work and traffic per [`GpuSpectralOp::record`].
-    pub fn cost(&self) -> StageCost {
+    pub(crate) fn cost(&self) -> StageCost {
         let p = &*self.plan;
         let (hc, wc) = p.comp;
         let n = (p.channels * hc * wc) as f64;

@@ -21,17 +21,17 @@ impl Kernel {
     }
 
     /// The entry point.
-    pub fn entry(&self) -> &'static str {
+    pub(crate) fn entry(&self) -> &'static str {
         self.entry
     }
 
     /// The wgpu pipeline.
-    pub fn pipeline(&self) -> &wgpu::ComputePipeline {
+    pub(crate) fn pipeline(&self) -> &wgpu::ComputePipeline {
         &self.pipeline
     }
 
     /// Records one dispatch of this kernel with `bind_group` over `groups` workgroups into `pass`.
-    pub fn dispatch(
+    pub(crate) fn dispatch(
         &self,
         pass: &mut wgpu::ComputePass<'_>,
         bind_group: &wgpu::BindGroup,
@@ -46,7 +46,7 @@ impl Kernel {
 /// Workgroups for `n` elements at [`WORKGROUP_1D`] per group, spread over x and y so that no dimension
 /// exceeds [`MAX_GROUPS_PER_DIM`]. The shader recovers the element index as
 /// `gid.x + gid.y · num_workgroups.x · 256` and skips indices `≥ n`.
-pub fn grid_1d(n: usize) -> [u32; 3] {
+pub(crate) fn grid_1d(n: usize) -> [u32; 3] {
     let groups = n.div_ceil(WORKGROUP_1D as usize).max(1);
     if groups <= MAX_GROUPS_PER_DIM as usize {
         [groups as u32, 1, 1]
@@ -58,7 +58,7 @@ pub fn grid_1d(n: usize) -> [u32; 3] {
 }
 
 /// Workgroups covering a `width × height (× depth)` grid with `tile = [tx, ty]` invocations per group.
-pub fn grid_2d(width: usize, height: usize, depth: usize, tile: [u32; 2]) -> [u32; 3] {
+pub(crate) fn grid_2d(width: usize, height: usize, depth: usize, tile: [u32; 2]) -> [u32; 3] {
     [
         width.div_ceil(tile[0] as usize).max(1) as u32,
         height.div_ceil(tile[1] as usize).max(1) as u32,

@@ -1,9 +1,9 @@
 //! [`GpuFrameSession`]: one resolution's whole frame on the GPU, chained from the kernels of [`super::cnn`],
-//! [`super::fft`] and [`super::encode`] in one command buffer. [`crate::pipeline::HologramSession`] owns one
-//! (as its frame executor) when its backend is the GPU; it is built from the CNN graphs
-//! ([`crate::model::CnnWeights`]) and the [`PipelineConfig`], and imports no session; everything here is created once, and a frame only uploads the CNN input,
-//! records the same dispatches and downloads the codes (plus, on request, the double-phase pattern and the CNN
-//! heads).
+//! [`super::fft`] and [`super::encode`] in one command buffer. The pipeline wraps one as a session's frame
+//! executor when its backend is the GPU; it is built from the CNN graphs ([`crate::model::CnnWeights`]) and
+//! plain numbers (display, offset, encoding, size), and knows nothing of the pipeline above it. Everything is
+//! created once; a frame only uploads the CNN input, records the same dispatches and downloads the codes (plus,
+//! on request, the double-phase pattern and the CNN heads).
 //!
 //! ```text
 //! input [C,H,W] ─► hologram CNN ─► heads [6,H,W] ─► field [3,H,W] (A·e^{i(p−0.5)2π})
@@ -16,7 +16,7 @@ use std::time::Instant;
 
 use ndarray::{Array3, ArrayView3};
 
-use super::cnn::{GpuCnn, GpuPrecision};
+use super::cnn::{GpuCnn, GpuStorage};
 use super::context::GpuContext;
 use super::encode::{GpuDoublePhase, GpuFieldToPlanes, GpuHeadsToField, GpuPlanesToField};
 use super::fft::{GpuMultiplier, GpuSpectralOp, GpuSpectralPlan, StageCost};
@@ -24,9 +24,7 @@ use super::kernel::Kernel;
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
 use crate::model::CnnWeights;
-use crate::optics::Carrier;
-use crate::pipeline::config::PipelineConfig;
-use crate::pipeline::frame::{Heads, SlmFrame};
+use crate::optics::{Carrier, OpticalSetup, PropagationOptions};
 
 /// The pre-filter stage: field → planes → CNN → field.
 struct Prefilter {
@@ -77,8 +75,8 @@ struct Previews {
 const MAX_CACHED_FOCUS: usize = 8;
 
 /// One stage's name, work and traffic per frame, for `holo bench --backend gpu`.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct GpuStage {
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct GpuStage {
     /// Stage name: `hologram_cnn`, `heads_to_field`, `offset_asm`, `prefilter_cnn`, `double_phase`.
     pub name: &'static str,
     /// Floating-point operations per frame (a multiply-add counts 2).
@@ -89,14 +87,13 @@ pub struct GpuStage {
 
 /// The whole frame of one resolution on the GPU: hologram CNN → heads → field → offset propagation (Eq. 6) →
 /// optional pre-filter CNN → double phase encoding (Eq. 7) and look-up table, recorded once into one command
-/// buffer; a frame uploads the CNN input `[C, H, W]` and downloads the codes `[3, H, W]`. Reached through
-/// [`crate::pipeline::HologramSession::gpu_frame`] while the GPU backend is active.
-pub struct GpuFrameSession {
+/// buffer; a frame uploads the CNN input `[C, H, W]` and downloads the codes `[3, H, W]`.
+pub(crate) struct GpuFrameSession {
     ctx: GpuContext,
     height: usize,
     width: usize,
     in_channels: usize,
-    precision: GpuPrecision,
+    storage: GpuStorage,
     input: wgpu::Buffer,
     heads: wgpu::Buffer,
     cnn: GpuCnn,
@@ -119,10 +116,19 @@ impl std::fmt::Debug for GpuFrameSession {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("GpuFrameSession")
             .field("size", &(self.height, self.width))
-            .field("precision", &self.precision)
+            .field("storage", &self.storage)
             .field("adapter", &self.ctx.info().name)
             .finish()
     }
+}
+
+/// What a frame returns besides the codes: Eq. 7's normaliser, the per-colour mean phase removed before
+/// encoding (radians), and with a full read-back the CNN heads (amplitude, phase `[3, H, W]`).
+#[derive(Debug)]
+pub(crate) struct GpuFrameOutput {
+    pub(crate) amplitude_scale: f32,
+    pub(crate) mean_phase: [f32; 3],
+    pub(crate) heads: Option<(Array3<f32>, Array3<f32>)>,
 }
 
 fn bytes_of(n: usize, elem: usize, what: &'static str) -> Result<u64> {
@@ -133,25 +139,33 @@ fn bytes_of(n: usize, elem: usize, what: &'static str) -> Result<u64> {
 
 impl GpuFrameSession {
     /// Builds every buffer, pipeline and bind group of one frame at `height × width` on `ctx`: the hologram
-    /// CNN `hologram` (input `[hologram.in_channels, H, W]`), the offset propagation of `cfg`, the pre-filter
-    /// CNN `prefilter` if any, and the double phase method `encoding`; the CNNs in `precision`.
+    /// CNN `hologram` (input `[hologram.in_channels, H, W]`), the offset propagation by `offset_m` metres
+    /// (Eq. 6; none at 0) on the display `optics` with `options`, the pre-filter CNN `prefilter` if any, and
+    /// the double phase method `encoding`; the CNNs' activations in `storage` (f32 where the adapter has no
+    /// f16 shaders).
     ///
     /// Errors: [`HoloError::Gpu`] (a buffer above the device's limits, a shader the device refuses);
     /// [`HoloError::ModelContract`] for a CNN that is not the TensorHolo architecture;
     /// [`HoloError::InvalidParameter`] for an FFT size or double phase method the GPU path does not cover
     /// (the message names it).
     #[allow(clippy::too_many_arguments)]
-    pub fn new(
+    pub(crate) fn new(
         ctx: &GpuContext,
         hologram: &CnnWeights,
         prefilter: Option<&CnnWeights>,
-        cfg: &PipelineConfig,
+        optics: &OpticalSetup,
+        options: PropagationOptions,
+        offset_m: f64,
         encoding: DoublePhaseMethod,
         height: usize,
         width: usize,
-        precision: GpuPrecision,
+        storage: GpuStorage,
     ) -> Result<Self> {
-        let precision = precision.resolve(ctx.info().shader_f16);
+        let storage = if ctx.info().shader_f16 {
+            storage
+        } else {
+            GpuStorage::F32
+        };
         let n = height
             .checked_mul(width)
             .filter(|&n| n > 0)
@@ -159,13 +173,13 @@ impl GpuFrameSession {
         let in_channels = hologram.in_channels;
         let input = ctx.storage("cnn input", bytes_of(n * in_channels, 4, "size")?)?;
         let heads = ctx.storage("heads", bytes_of(6 * n, 4, "size")?)?;
-        let cnn = GpuCnn::new(ctx, hologram, height, width, &input, &heads, precision)?;
+        let cnn = GpuCnn::new(ctx, hologram, height, width, &input, &heads, storage)?;
         let field = ctx.storage("field", bytes_of(3 * n, 8, "size")?)?;
         let to_field = GpuHeadsToField::new(ctx, height, width, &heads, &field)?;
-        let offset = if cfg.offset_m != 0.0 {
-            let props = cfg.optics.propagators(height, width, cfg.options)?;
+        let offset = if offset_m != 0.0 {
+            let props = optics.propagators(height, width, options)?;
             let plan = GpuSpectralPlan::new(ctx, props[0].plan(), 3)?;
-            let multiplier = plan.transfer_functions(ctx, &props, cfg.offset_m, Carrier::Remove)?;
+            let multiplier = plan.transfer_functions(ctx, &props, offset_m, Carrier::Remove)?;
             let op = plan.bind(ctx, &field, &multiplier)?;
             Some(Offset {
                 _plan: plan,
@@ -188,7 +202,7 @@ impl GpuFrameSession {
                         width,
                         &planes_in,
                         &planes_out,
-                        precision,
+                        storage,
                     )?,
                     from_planes: GpuPlanesToField::new(ctx, height, width, &planes_out, &field)?,
                 })
@@ -206,7 +220,7 @@ impl GpuFrameSession {
             height,
             width,
             in_channels,
-            precision,
+            storage,
             input,
             heads,
             cnn,
@@ -219,9 +233,9 @@ impl GpuFrameSession {
             staging_phase,
             staging_heads,
             heads_host: vec![0.0; 6 * n],
-            setup: cfg.optics,
-            options: cfg.options,
-            offset_m: cfg.offset_m,
+            setup: *optics,
+            options,
+            offset_m,
             previews: None,
         })
     }
@@ -292,7 +306,7 @@ impl GpuFrameSession {
     ///
     /// Errors: [`HoloError::InvalidParameter`] for a focus outside [0, 1] or a non-positive scale;
     /// [`HoloError::ShapeMismatch`] for codes of another size; [`HoloError::Gpu`].
-    pub fn preview(
+    pub(crate) fn preview(
         &mut self,
         codes: &Array3<u8>,
         amplitude_scale: f32,
@@ -383,14 +397,9 @@ impl GpuFrameSession {
         Ok(out)
     }
 
-    /// The context (adapter) this session runs on.
-    pub fn context(&self) -> &GpuContext {
-        &self.ctx
-    }
-
-    /// The CNNs' arithmetic.
-    pub fn precision(&self) -> GpuPrecision {
-        self.precision
+    /// The CNNs' activation storage (what runs: f32 where the adapter has no f16 shaders).
+    pub(crate) fn storage(&self) -> GpuStorage {
+        self.storage
     }
 
     /// Records the frame's dispatches (after the input upload) into `encoder`.
@@ -409,18 +418,19 @@ impl GpuFrameSession {
     }
 
     /// Runs one frame: uploads `input` (the CNN input `[C, H, W]` packed by [`crate::model::contract`]), runs
-    /// every stage and downloads the codes and the normaliser into `out`; with `full`, also the double phase
-    /// pattern (`out.phase`) and the CNN heads (returned). `out.timings` is not touched.
+    /// every stage and downloads the codes `[3, H, W]` into `codes`; with `phase`, also the double phase
+    /// pattern `[3, H, W]` (radians) into it and the CNN heads (amplitude, phase `[3, H, W]`, returned).
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for an input of another shape; [`HoloError::Gpu`] for a GPU
     /// failure (lost device, validation error); [`HoloError::InvalidData`] for a hologram that is zero
     /// everywhere (as the CPU path).
-    pub fn run(
+    pub(crate) fn run(
         &mut self,
         input: ArrayView3<f32>,
-        out: &mut SlmFrame,
-        full: bool,
-    ) -> Result<Option<Heads>> {
+        codes: &mut Array3<u8>,
+        phase: Option<&mut Array3<f32>>,
+    ) -> Result<GpuFrameOutput> {
+        let full = phase.is_some();
         let want = [self.in_channels, self.height, self.width];
         if input.shape() != want {
             return Err(HoloError::ShapeMismatch {
@@ -470,19 +480,20 @@ impl GpuFrameSession {
         self.ctx.submit_and_wait(encoder)?;
         let mut stats = [0u8; super::encode::STATS_BYTES as usize];
         self.ctx.read_staging(&self.staging_stats, &mut stats)?;
-        let (a, mean) = GpuDoublePhase::read_stats(&stats)?;
-        let codes = out
-            .codes
+        let (amplitude_scale, mean_phase) = GpuDoublePhase::read_stats(&stats)?;
+        let codes = codes
             .as_slice_mut()
             .ok_or_else(|| HoloError::Internal("output codes not contiguous".into()))?;
         self.ctx.read_staging(&self.staging_codes, codes)?;
-        out.amplitude_scale = a;
-        out.mean_phase = mean;
-        if !full {
-            return Ok(None);
-        }
-        let phase = out
-            .phase
+        let mut out = GpuFrameOutput {
+            amplitude_scale,
+            mean_phase,
+            heads: None,
+        };
+        let Some(phase) = phase else {
+            return Ok(out);
+        };
+        let phase = phase
             .as_slice_mut()
             .ok_or_else(|| HoloError::Internal("output phase not contiguous".into()))?;
         self.ctx
@@ -501,11 +512,12 @@ impl GpuFrameSession {
             self.heads_host[3 * n..].to_vec(),
         )
         .map_err(|e| HoloError::Internal(e.to_string()))?;
-        Ok(Some(Heads { amplitude, phase }))
+        out.heads = Some((amplitude, phase));
+        Ok(out)
     }
 
     /// Work and traffic of each stage per frame (for benchmarks: arithmetic intensity = flops / bytes).
-    pub fn stages(&self) -> Vec<GpuStage> {
+    pub(crate) fn stages(&self) -> Vec<GpuStage> {
         let mut v = Vec::new();
         let (flops, bytes) = self.cnn.cost();
         v.push(GpuStage {
@@ -551,7 +563,7 @@ impl GpuFrameSession {
     /// stage waits for the GPU), and allocates nothing on the GPU.
     ///
     /// Errors: [`HoloError::Gpu`].
-    pub fn profile(&self, repeats: usize) -> Result<Vec<(&'static str, f64)>> {
+    pub(crate) fn profile(&self, repeats: usize) -> Result<Vec<(&'static str, f64)>> {
         type Recorder<'a> = Box<dyn Fn(&mut wgpu::CommandEncoder) + 'a>;
         let mut stages: Vec<(&'static str, Recorder)> = vec![
             ("hologram_cnn", Box::new(|e| self.cnn.record(e))),

@@ -5,8 +5,8 @@
 //! - `models-15` and `models-30`: the 15-layer and 30-layer hologram CNNs, each with the pre-filter CNNs trained
 //!   on its holograms (6 and 12 mm).
 //!
-//! The int8 QOperator forms run on tract only and are embedded only with the `tract` feature; without it,
-//! asking for one is an error naming the feature.
+//! The int8 QOperator forms run on tract only and are embedded only with the cargo feature `qop-models`,
+//! which the `tract` feature turns on; without it, asking for one is an error naming the feature.
 //!
 //! The crate's default features embed all of them; the phone library (`tensorholo-ffi`) embeds only the
 //! first set unless asked. Build with `--no-default-features` to leave them all out and load files with
@@ -34,15 +34,16 @@ const BASE: &[(&str, &[u8])] = shipped![
     "prefilter_12mm.int8-qdq.onnx",
 ];
 
-/// The int8 QOperator forms of [`BASE`]: tract runs them (feature `tract`), no other engine does.
-#[cfg(feature = "tract")]
+/// The int8 QOperator forms of [`BASE`]: tract runs them (feature `tract`, which turns on `qop-models`), no
+/// other engine does.
+#[cfg(feature = "qop-models")]
 const BASE_QOP: &[(&str, &[u8])] = shipped![
     "holo8_rgbd.int8-qop.onnx",
     "holo8_ldi.int8-qop.onnx",
     "prefilter_6mm.int8-qop.onnx",
     "prefilter_12mm.int8-qop.onnx",
 ];
-#[cfg(not(feature = "tract"))]
+#[cfg(not(feature = "qop-models"))]
 const BASE_QOP: &[(&str, &[u8])] = &[];
 
 #[cfg(feature = "models-15")]
@@ -57,13 +58,13 @@ const HOLO15: &[(&str, &[u8])] = shipped![
 #[cfg(not(feature = "models-15"))]
 const HOLO15: &[(&str, &[u8])] = &[];
 
-#[cfg(all(feature = "models-15", feature = "tract"))]
+#[cfg(all(feature = "models-15", feature = "qop-models"))]
 const HOLO15_QOP: &[(&str, &[u8])] = shipped![
     "holo15_rgbd.int8-qop.onnx",
     "prefilter_6mm_holo15.int8-qop.onnx",
     "prefilter_12mm_holo15.int8-qop.onnx",
 ];
-#[cfg(not(all(feature = "models-15", feature = "tract")))]
+#[cfg(not(all(feature = "models-15", feature = "qop-models")))]
 const HOLO15_QOP: &[(&str, &[u8])] = &[];
 
 #[cfg(feature = "models-30")]
@@ -78,13 +79,13 @@ const HOLO30: &[(&str, &[u8])] = shipped![
 #[cfg(not(feature = "models-30"))]
 const HOLO30: &[(&str, &[u8])] = &[];
 
-#[cfg(all(feature = "models-30", feature = "tract"))]
+#[cfg(all(feature = "models-30", feature = "qop-models"))]
 const HOLO30_QOP: &[(&str, &[u8])] = shipped![
     "holo30_rgbd.int8-qop.onnx",
     "prefilter_6mm_holo30.int8-qop.onnx",
     "prefilter_12mm_holo30.int8-qop.onnx",
 ];
-#[cfg(not(all(feature = "models-30", feature = "tract")))]
+#[cfg(not(all(feature = "models-30", feature = "qop-models")))]
 const HOLO30_QOP: &[(&str, &[u8])] = &[];
 
 /// Every file embedded in this build: `(file name in models/, bytes)`.
@@ -124,9 +125,9 @@ pub const LAYERS: &[usize] = match (cfg!(feature = "models-15"), cfg!(feature = 
 pub const PREFILTER_OFFSETS_MM: [u32; 2] = [6, 12];
 
 /// Errors: [`HoloError::InvalidParameter`](crate::HoloError) (`precision`) for the int8 QOperator form in a
-/// build without tract, the only engine that runs it.
+/// build that does not embed it (no tract, the only engine that runs it).
 fn check_engine(precision: Precision) -> Result<()> {
-    if precision == Precision::Int8QOperator && !cfg!(feature = "tract") {
+    if precision == Precision::Int8QOperator && !cfg!(feature = "qop-models") {
         return Err(invalid(
             "precision",
             format!(

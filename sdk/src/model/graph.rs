@@ -11,8 +11,8 @@
 
 use std::collections::HashMap;
 
+use super::metadata::ModelKind;
 use super::onnx as pb;
-use super::ModelKind;
 use crate::error::{HoloError, Result};
 
 /// One 3×3 convolution of the CNN.
@@ -702,7 +702,7 @@ mod tests {
 
     #[test]
     fn other_graphs_are_refused_naming_the_node() {
-        #[cfg(feature = "tract")]
+        #[cfg(feature = "qop-models")]
         {
             let qop = embedded::hologram_model(8, Precision::Int8QOperator, &config()).unwrap();
             let err = CnnWeights::from_model(&qop).unwrap_err().to_string();

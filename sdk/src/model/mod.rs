@@ -1,5 +1,6 @@
-//! The CNNs of Tensor Holography V2 (`docs/CONVENTIONS.md` §7, paper Fig. 3): the hologram CNN (RGB-D or
-//! LDI → midpoint hologram) and the DDPM pre-filter CNN (offset hologram → filtered offset hologram, Eq. 6).
+//! The CNNs of Tensor Holography V2 as files (`docs/CONVENTIONS.md` §7, paper Fig. 3): the hologram CNN
+//! (RGB-D or LDI → midpoint hologram) and the DDPM pre-filter CNN (offset hologram → filtered offset hologram,
+//! Eq. 6). Engine-neutral: what runs them is [`crate::cnn`] (the CPU engines) or the GPU.
 //!
 //! A [`HologramModel`] is loaded once from an ONNX file written by `training/tensorholo_training/export.py`:
 //!
@@ -12,31 +13,24 @@
 //!    `amplitude`, `phase` `[1,3,H,W]`; pre-filter (format 2): `slm_field` `[1,6,H,W]` = `[Re H, Im H]` →
 //!    `real`, `imag` `[1,3,H,W]`; f32 → otherwise [`HoloError::ModelContract`](crate::HoloError));
 //! 4. the engines read it: the native CPU engine and the GPU path through [`CnnWeights`] (the graph read as
-//!    the TensorHolo residual CNN, `model/graph.rs`); with the cargo feature `tract` (on by default), tract
-//!    also types and declutters it once, keeping `H`, `W` symbolic (`model/tract.rs`).
+//!    the TensorHolo residual CNN, `model/graph.rs`, cached in the model); tract (cargo feature `tract`) from
+//!    the file's bytes, in its own per-model cache (`cnn/tract/`).
 //!
-//! Without `tract`, a file that is not the TensorHolo residual CNN (and every int8 QOperator file) is refused
-//! at load with a [`HoloError::ModelContract`](crate::HoloError) naming the feature: the native engine and the
-//! GPU run the shipped models and any file of their architecture.
+//! Which engine can run a file is the engines' answer, asked when a pipeline is made
+//! ([`crate::cnn::check_runnable`]): a build without tract refuses there a file that is not the TensorHolo
+//! residual CNN (and every int8 QOperator file), naming the feature.
 //!
-//! With `tract`, `HologramModel::plan` binds `H`, `W` to one resolution and optimises (codegen) the graph for
-//! it; plans are cached per resolution inside the model, because tract's symbolic plan runs 6–11× slower than
-//! a concretised one. int8 files: QOperator (`QLinearConv`, conv-only) and QDQ (`QuantizeLinear`/
-//! `DequantizeLinear` around float `Conv`) both load; value-info hints are ignored when tract parses because
-//! tract 0.23 refuses the QDQ file's quantised value infos otherwise.
+//! Files: `onnx` (the schema's fields the SDK reads), `metadata` (the `tensorholo.*` keys and the display
+//! check), `network` ([`HologramModel`]), `graph` ([`CnnWeights`]), `contract` (input packing, heads → field),
+//! `embedded` (the shipped files).
 
 pub mod contract;
 #[cfg(feature = "embedded-models")]
 pub mod embedded;
 pub mod graph;
 mod metadata;
-mod network;
+pub(crate) mod network;
 pub(crate) mod onnx;
-#[cfg(feature = "tract")]
-mod tract;
-#[cfg(feature = "tract")]
-mod tract_model;
-pub(crate) mod tuning;
 
 /// The scene representation a hologram CNN takes (`tensorholo.input_layers`, `docs/CONVENTIONS.md` §7.1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
@@ -139,118 +133,10 @@ impl std::fmt::Display for Precision {
     }
 }
 
-/// The memory layout tract runs a CNN in. The ONNX files are always channels-first `[1, C, H, W]`
-/// (`docs/CONVENTIONS.md` §7) and a plan takes and returns `[C, H, W]` arrays in every layout; only tract's
-/// internal graph differs (`HologramModel::plan_with_layout` (feature `tract`)).
-///
-/// Which layout is faster depends on the CPU and the frame size (`docs/BENCHMARKS.md`: on one 2-core Xeon
-/// channels-first won at large frames, on another channels-last was 2.2× faster at 384×384), so the default
-/// is [`CnnLayout::Auto`]: the candidates are timed on the machine at session creation
-/// (`HologramModel::tuned_plan` (feature `tract`)).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum CnnLayout {
-    /// Time both layouts on this machine at the real resolution and keep the faster
-    /// (`HologramModel::tuned_plan` (feature `tract`)); a plan never runs in `Auto` itself.
-    #[default]
-    Auto,
-    /// Channels first (NCHW), as in the file. tract 0.23 runs the 3×3 convolutions as its direct spatial
-    /// convolution (a filter along W, four output channels at a time) where the rows are ≥ 128 pixels wide.
-    ChannelsFirst,
-    /// Channels last (NHWC): the whole graph is moved by tract's axis-change propagation, and the
-    /// convolutions run as a lazy im2col (one gather per output pixel of 3 contiguous runs of 3·C values)
-    /// feeding tract's matrix-product kernels, after an explicit zero `Pad`. f32 and int8 QDQ files (float
-    /// convolutions); tract 0.23 does not move a quantised `QLinearConv` nor the pre-filter graph, so those
-    /// files in this layout are an error (and `Auto` skips it for them).
-    ChannelsLast,
-}
-
-impl CnnLayout {
-    /// The two concrete layouts, channels-first first.
-    pub const ALL: [CnnLayout; 2] = [Self::ChannelsFirst, Self::ChannelsLast];
-
-    /// Short name: `auto`, `nchw`, `nhwc`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Auto => "auto",
-            Self::ChannelsFirst => "nchw",
-            Self::ChannelsLast => "nhwc",
-        }
-    }
-}
-
-impl std::fmt::Display for CnnLayout {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// The engine that runs a session's CNNs on the CPU
-/// ([`PipelineConfig::cnn_engine`](crate::pipeline::PipelineConfig::cnn_engine)).
-///
-/// - [`CnnEngine::Native`]: our direct 3×3 convolution kernels (`tensorholo-kernels`: AVX-512, AVX2+FMA,
-///   NEON or portable scalar rows, chosen at run time from the CPU's features), row bands on the plan's own
-///   threads. f32 files (agree with tract to float rounding) and int8 QDQ files (u8 × s8 kernels, each layer's
-///   convolution, ReLU, residual and requantisation fused; a mixed-precision file's f32 first and last layers
-///   on the f32 kernels: within the models' int8 tolerance of tract's node-by-node execution;
-///   `sdk/src/cnn/tests.rs`).
-/// - [`CnnEngine::Tract`]: tract's optimised plans (any file that passes the contract, int8 included).
-/// - [`CnnEngine::Auto`] (the default): where the native engine can run the file, both are timed at session
-///   creation on this machine ([`timing_resolution`]) and the faster runs; int8 QOperator files run on
-///   tract. The choice and the timings are in [`PlanReport`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum CnnEngine {
-    /// Time both engines where the native one can run the file; keep the faster.
-    #[default]
-    Auto,
-    /// Our direct-convolution kernels (an error at session creation for a file they cannot run).
-    Native,
-    /// tract.
-    Tract,
-}
-
-impl CnnEngine {
-    /// Short name: `auto`, `native`, `tract`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Auto => "auto",
-            Self::Native => "native",
-            Self::Tract => "tract",
-        }
-    }
-
-    /// Parses [`CnnEngine::name`]. Errors: [`crate::HoloError::InvalidParameter`] (`engine`) naming the
-    /// choices.
-    pub fn parse(name: &str) -> crate::error::Result<Self> {
-        match name {
-            "auto" => Ok(Self::Auto),
-            "native" => Ok(Self::Native),
-            "tract" => Ok(Self::Tract),
-            other => Err(crate::error::invalid(
-                "engine",
-                format!("unknown CNN engine `{other}` (auto, native or tract)"),
-            )),
-        }
-    }
-}
-
-impl std::fmt::Display for CnnEngine {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
 pub use contract::{head_to_phasor, heads_to_field};
 pub use graph::{CnnOutput, CnnQuant, CnnWeights, ConvLayer, LayerQuant, QuantGrid};
 pub use metadata::{
     ModelConfig, ModelKind, ModelMetadata, FORMAT_VERSION, METADATA_PREFIX,
     PREFILTER_FORMAT_VERSION,
 };
-pub use network::{HologramModel, MAX_CNN_THREADS};
-#[cfg(feature = "tract")]
-pub use tract::{set_cnn_threads, ModelPlan, NodeTiming};
-pub use tuning::{
-    auto_thread_candidates, timing_resolution, PlanReport, PlanRequest, PlanTiming, ThreadCount,
-    TUNE_MIN_ROWS, TUNE_PIXELS,
-};
+pub use network::HologramModel;

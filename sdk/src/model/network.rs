@@ -1,21 +1,16 @@
 //! [`HologramModel`]: one ONNX CNN, decoded ([`super::onnx`]) and checked against the I/O contract and
 //! metadata of `docs/CONVENTIONS.md` §7. The engines run it: the native CPU engine and the GPU path through
-//! [`HologramModel::cnn_graph`]; tract (cargo feature `tract`) through one optimised plan per resolution
-//! (`model/tract.rs`).
+//! [`HologramModel::cnn_graph`]; tract (cargo feature `tract`) from [`HologramModel::file_bytes`], in its own
+//! cache (`cnn/tract/`). The model holds no engine's state.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::path::Path;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use super::graph::CnnWeights;
 use super::metadata::{ModelConfig, ModelKind, ModelMetadata};
 use super::onnx as pb;
 use crate::error::{guarded, HoloError, Result};
-
-/// The most threads a CNN plan may use (tract's `ModelPlan::with_threads`, the native engine's thread
-/// count): far above any phone or desktop core count, low enough that a typo cannot ask the OS for a hundred
-/// thousand threads.
-pub const MAX_CNN_THREADS: usize = 256;
 
 /// ONNX `TensorProto.DataType.FLOAT`.
 const ONNX_FLOAT: i32 = pb::FLOAT;
@@ -128,28 +123,22 @@ fn check_contract(graph: &pb::GraphProto, md: &ModelMetadata) -> std::result::Re
 }
 
 /// A hologram or pre-filter CNN loaded from ONNX (`docs/CONVENTIONS.md` §7, paper Fig. 3), ready to be
-/// planned per resolution by an engine.
+/// planned per resolution by an engine ([`crate::cnn`], the GPU).
 ///
-/// Holds the file's decoded graph and metadata; the graph read as the TensorHolo residual CNN
-/// ([`HologramModel::cnn_graph`], for the native engine and the GPU); with the `tract` feature, tract's
-/// decluttered graph with symbolic `H`, `W` and a cache of optimised `ModelPlan`s, one per
-/// `(height, width, layout)`. `Send + Sync`: plans can be built and run from several threads; a failed plan
-/// or run leaves the model usable.
+/// Holds the file (its bytes, for engines that read it themselves), its decoded graph and metadata, and the
+/// graph read as the TensorHolo residual CNN ([`HologramModel::cnn_graph`], for the native engine and the
+/// GPU). `Send + Sync`: engines plan and run it from several threads.
 pub struct HologramModel {
     metadata: ModelMetadata,
     source_name: String,
+    /// The ONNX file as loaded.
+    bytes: Arc<[u8]>,
     /// The file's ONNX graph as decoded (weights included), read by [`super::graph`].
     graph: Arc<pb::GraphProto>,
     /// Fixed input height/width from the file, where not symbolic.
     fixed: [Option<usize>; 2],
-    /// tract's graph and plans.
-    #[cfg(feature = "tract")]
-    pub(super) tract: super::tract::TractGraph,
     /// The graph as the TensorHolo residual CNN, read on first use ([`HologramModel::cnn_graph`]).
-    pub(super) cnn_graph: std::sync::OnceLock<std::result::Result<Arc<CnnWeights>, String>>,
-    /// Autotuning results per `(height, width, request)` (tract's `HologramModel::tuned_plan`).
-    #[cfg_attr(not(feature = "tract"), allow(dead_code))]
-    pub(super) tuned: Mutex<HashMap<(usize, usize, super::PlanRequest), super::PlanReport>>,
+    cnn_graph: std::sync::OnceLock<std::result::Result<Arc<CnnWeights>, String>>,
 }
 
 impl std::fmt::Debug for HologramModel {
@@ -160,8 +149,6 @@ impl std::fmt::Debug for HologramModel {
             .field("metadata", &self.metadata)
             .field("fixed", &self.fixed)
             .field("nodes", &self.graph.node.len());
-        #[cfg(feature = "tract")]
-        d.field("tract", &self.tract);
         d.finish_non_exhaustive()
     }
 }
@@ -172,7 +159,9 @@ impl HologramModel {
     /// * `kind`: which CNN the caller expects (`tensorholo.kind` must agree);
     /// * `expected`: the display and pipeline settings the file's metadata must match.
     ///
-    /// Errors: [`HoloError::ModelLoad`] (not an ONNX protobuf, truncated, an operator tract cannot type),
+    /// Which engine can run the file is asked when a pipeline is made ([`crate::cnn::check_runnable`]).
+    ///
+    /// Errors: [`HoloError::ModelLoad`] (not an ONNX protobuf, truncated, no graph),
     /// [`HoloError::ModelMetadata`] (missing/unparsable key or mismatch with `expected`, naming the key, the
     /// file's value and the expected one), [`HoloError::ModelContract`] (inputs/outputs not the contract's).
     pub fn from_bytes(bytes: &[u8], kind: ModelKind, expected: &ModelConfig) -> Result<Self> {
@@ -246,30 +235,25 @@ impl HologramModel {
                 }
             }
         }
-        #[cfg(feature = "tract")]
-        let tract = super::tract::TractGraph::load(bytes, &source_name)?;
-        let model = Self {
+        Ok(Self {
             metadata,
             source_name,
+            bytes: bytes.into(),
             graph: Arc::new(graph),
             fixed,
-            #[cfg(feature = "tract")]
-            tract,
             cnn_graph: std::sync::OnceLock::new(),
-            tuned: Mutex::new(HashMap::new()),
-        };
-        // Without tract, only the native engine and the GPU can run a model: refuse at load what they cannot.
-        #[cfg(not(feature = "tract"))]
-        if let Err(HoloError::ModelContract { reason, .. }) = model.cnn_graph() {
-            return Err(HoloError::ModelContract {
-                source_name: model.source_name,
-                reason: format!(
-                    "{reason}. This build has no tract engine (cargo feature `tract` of tensorholo and \
-                     tensorholo-ffi, on by default), which runs any other graph that passes the contract"
-                ),
-            });
-        }
-        Ok(model)
+        })
+    }
+
+    /// The ONNX file's bytes, as loaded (what an engine that parses the file itself reads, e.g. tract).
+    pub fn file_bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+
+    /// The input's `[height, width]` where the file fixes them (`None` where symbolic, as the shipped files
+    /// leave both).
+    pub fn fixed_size(&self) -> [Option<usize>; 2] {
+        self.fixed
     }
 
     /// The decoded ONNX graph (nodes and weights) the model was loaded from.
@@ -294,21 +278,7 @@ impl HologramModel {
 
     /// Errors: [`HoloError::ShapeMismatch`] if the file fixes a size other than `height × width`.
     pub(crate) fn check_fixed_size(&self, height: usize, width: usize) -> Result<()> {
-        for (i, &n) in [height, width].iter().enumerate() {
-            if let Some(f) = self.fixed[i] {
-                if f != n {
-                    return Err(HoloError::ShapeMismatch {
-                        what: format!("model input size (fixed in `{}`)", self.source_name),
-                        expected: vec![
-                            self.fixed[0].unwrap_or(height),
-                            self.fixed[1].unwrap_or(width),
-                        ],
-                        got: vec![height, width],
-                    });
-                }
-            }
-        }
-        Ok(())
+        check_fixed_size(&self.fixed, &self.source_name, height, width)
     }
 
     /// The name of the file (or `<bytes>`) this model was loaded from, as errors name it.
@@ -354,4 +324,26 @@ impl HologramModel {
             reason,
         })
     }
+}
+
+/// Checks `height × width` against the sizes a file fixes (`fixed`, `None` where symbolic; `source_name` for
+/// the message). Errors: [`HoloError::ShapeMismatch`].
+pub(crate) fn check_fixed_size(
+    fixed: &[Option<usize>; 2],
+    source_name: &str,
+    height: usize,
+    width: usize,
+) -> Result<()> {
+    for (i, &n) in [height, width].iter().enumerate() {
+        if let Some(f) = fixed[i] {
+            if f != n {
+                return Err(HoloError::ShapeMismatch {
+                    what: format!("model input size (fixed in `{source_name}`)"),
+                    expected: vec![fixed[0].unwrap_or(height), fixed[1].unwrap_or(width)],
+                    got: vec![height, width],
+                });
+            }
+        }
+    }
+    Ok(())
 }

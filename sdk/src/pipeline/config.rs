@@ -2,12 +2,9 @@
 //! ([`Backend`], [`GpuPrecision`]) and the size limit of a session ([`MAX_HOLOGRAM_PIXELS`]). Imports nothing
 //! of the pipeline: every executor may read it.
 
-#[cfg(doc)]
-use super::{HologramPipeline, HologramSession};
-use crate::cnn::CnnEngine;
+use crate::cnn::{CnnEngine, CnnLayout, ThreadCount};
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
-use crate::model::{CnnLayout, ThreadCount};
 use crate::optics::{OpticalSetup, PropagationOptions};
 
 /// The largest hologram a session (and so a generator) makes, in pixels (`width · height`): 8192 × 8192, four
@@ -15,7 +12,7 @@ use crate::optics::{OpticalSetup, PropagationOptions};
 /// before anything is allocated ([`super::HologramPipeline::session`]).
 pub const MAX_HOLOGRAM_PIXELS: usize = 8192 * 8192;
 
-/// Where a [`HologramSession`] computes its frames.
+/// Where a [`HologramSession`](crate::pipeline::HologramSession) computes its frames.
 ///
 /// - [`Backend::Cpu`]: the CPU CNN engine (native or tract, [`crate::cnn`]) and rustfft for the optics (the
 ///   reference).
@@ -24,7 +21,7 @@ pub const MAX_HOLOGRAM_PIXELS: usize = 8192 * 8192;
 ///   fails with [`HoloError::Gpu`] where there is none.
 /// - [`Backend::Auto`] (the default): the GPU where a hardware adapter exists, the session can be built on it
 ///   and its first frame passes a self-check against the CPU path; otherwise the CPU. The reason is logged and
-///   kept in [`HologramSession::backend_report`]. On desktop Linux without a GPU device node (`/dev/dri/
+///   kept in [`HologramSession::backend_report`](crate::pipeline::HologramSession::backend_report). On desktop Linux without a GPU device node (`/dev/dri/
 ///   renderD*`, `/dev/nvidia0`, `/dev/dxg`) the drivers are not even loaded: only a software adapter could
 ///   answer, and loading Mesa's costs about 50 MiB that stays resident.
 ///
@@ -110,7 +107,7 @@ impl GpuPrecision {
     }
 }
 
-/// Display and encoding settings of a [`HologramPipeline`].
+/// Display and encoding settings of a [`HologramPipeline`](crate::pipeline::HologramPipeline).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct PipelineConfig {
     /// Wavelengths, pixel pitch and volume depth (must match the models' metadata).

@@ -4,16 +4,20 @@
 //! workers, the pre-filter plan) is always built: it is the reference, the first-frame self-check of
 //! [`Backend::Auto`] and the fallback. An accelerator, a [`FrameExecutor`], may run the frames instead: the
 //! GPU today (`gpu_frame.rs`, cargo feature `gpu`). The session holds `Option<Accelerator>` and never asks
-//! which one it is, so an executor is a file plus one arm in `backend::choose_backend`.
+//! which one it is: an executor is a file plus one arm in `setup.rs`'s `choose_backend`.
 
 use ndarray::{Array3, ArrayView3};
 
 use super::config::Backend;
 use super::frame::{Heads, SlmFrame};
+use super::report::StageProfile;
 use crate::error::Result;
 
 /// A whole frame on an accelerator: packed CNN input in, SLM patterns out.
-pub(crate) trait FrameExecutor: std::fmt::Debug + Send {
+pub(super) trait FrameExecutor: std::fmt::Debug + Send {
+    /// The backend this executor is ([`Backend::Gpu`] today), as sessions report it.
+    fn backend(&self) -> Backend;
+
     /// Runs one frame of the packed CNN input `input` (`[C, H, W]`, `docs/CONVENTIONS.md` §7) into `out`:
     /// the codes and the normaliser always; the double phase pattern (`out.phase`) and the heads (returned)
     /// only when `full` (otherwise `out.phase` keeps older values and `None` is returned). Timings and
@@ -40,13 +44,10 @@ pub(crate) trait FrameExecutor: std::fmt::Debug + Send {
         focus: f64,
     ) -> Result<Array3<f32>>;
 
-    /// The executor as `Any` (typed access for benchmarks: `HologramSession::gpu_frame`).
-    #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
-    fn as_any(&self) -> &dyn std::any::Any;
-
-    /// The executor as `Any`, mutable.
-    #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
-    fn as_any_mut(&mut self) -> &mut dyn std::any::Any;
+    /// Each stage of the last frame timed on its own (median of `repeats`), with its work and traffic.
+    ///
+    /// Errors: [`crate::HoloError::Gpu`].
+    fn stages(&self, repeats: usize) -> Result<Vec<StageProfile>>;
 }
 
 /// The accelerator a session runs on, and whether the self-check of [`Backend::Auto`] has yet to run.

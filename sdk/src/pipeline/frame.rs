@@ -6,8 +6,6 @@ use ndarray::Array3;
 use num_complex::Complex32;
 
 use super::config::Backend;
-#[cfg(doc)]
-use super::HologramPipeline;
 use crate::error::{HoloError, Result};
 use crate::model::contract;
 
@@ -98,7 +96,7 @@ mod tests {
 #[derive(Debug, Clone)]
 pub struct SlmFrame {
     /// 8-bit SLM codes `[3, H, W]` (R, G, B; one plane per laser, field-sequential), through the display
-    /// calibration's look-up tables ([`HologramPipeline::with_calibration`]; the linear one without).
+    /// calibration's look-up tables ([`HologramPipeline::with_calibration`](crate::pipeline::HologramPipeline::with_calibration); the linear one without).
     pub codes: Array3<u8>,
     /// The double phase pattern `[3, H, W]` in radians, `[0, 2π)`.
     pub phase: Array3<f32>,

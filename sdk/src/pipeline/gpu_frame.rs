@@ -1,5 +1,6 @@
-//! The GPU as a frame executor (cargo feature `gpu`): [`GpuFrameSession`] behind [`FrameExecutor`], and how a
-//! session gets one ([`build`]: the adapter, the precision, the fallback reasons).
+//! The GPU as a frame executor (cargo feature `gpu`): the GPU module's whole frame behind [`FrameExecutor`]
+//! (its outputs put into [`SlmFrame`] and [`Heads`]), and how a session gets one ([`build`]: the adapter, the
+//! precision, the fallback reasons).
 
 use ndarray::{Array3, ArrayView3};
 
@@ -7,18 +8,30 @@ use super::config::{Backend, GpuPrecision};
 use super::executor::{Accelerator, BackendReportParts, FrameExecutor};
 use super::frame::{Heads, SlmFrame};
 use super::models::HologramPipeline;
+use super::report::StageProfile;
 use crate::error::Result;
+use crate::gpu::cnn::GpuStorage;
 use crate::gpu::session::GpuFrameSession;
 use crate::gpu::{GpuContext, GpuOptions};
 
 impl FrameExecutor for GpuFrameSession {
+    fn backend(&self) -> Backend {
+        Backend::Gpu
+    }
+
     fn run(
         &mut self,
         input: ArrayView3<f32>,
         out: &mut SlmFrame,
         full: bool,
     ) -> Result<Option<Heads>> {
-        GpuFrameSession::run(self, input, out, full)
+        let phase = full.then_some(&mut out.phase);
+        let frame = GpuFrameSession::run(self, input, &mut out.codes, phase)?;
+        out.amplitude_scale = frame.amplitude_scale;
+        out.mean_phase = frame.mean_phase;
+        Ok(frame
+            .heads
+            .map(|(amplitude, phase)| Heads { amplitude, phase }))
     }
 
     fn preview(
@@ -30,17 +43,22 @@ impl FrameExecutor for GpuFrameSession {
         GpuFrameSession::preview(self, codes, amplitude_scale, focus)
     }
 
-    fn as_any(&self) -> &dyn std::any::Any {
-        self
-    }
-
-    fn as_any_mut(&mut self) -> &mut dyn std::any::Any {
-        self
+    fn stages(&self, repeats: usize) -> Result<Vec<StageProfile>> {
+        let times = self.profile(repeats)?;
+        Ok(GpuFrameSession::stages(self)
+            .into_iter()
+            .zip(times)
+            .map(|(stage, (_, seconds))| StageProfile {
+                name: stage.name,
+                flops: stage.flops,
+                bytes: stage.bytes,
+                seconds,
+            })
+            .collect())
     }
 }
 
-/// The GPU frame of `pipeline` at `height × width` ([`super::executor::choose_backend`] with the `gpu`
-/// feature): on the app's context or the shared one (a software adapter only for [`Backend::Gpu`]), the CNN
+/// The GPU frame of `pipeline` at `height × width` (`setup.rs`'s `choose_backend` with the `gpu` feature): on the app's context or the shared one (a software adapter only for [`Backend::Gpu`]), the CNN
 /// graphs read once by the models ([`crate::model::HologramModel::cnn_graph`]).
 pub(super) fn build(
     pipeline: &HologramPipeline,
@@ -77,13 +95,14 @@ pub(super) fn build(
         info.name, info.backend, info.device_type
     ));
     let wanted = pipeline.config().gpu_precision;
-    let (precision, note) = if wanted == GpuPrecision::F16 && !info.shader_f16 {
-        (
-            GpuPrecision::F32,
-            " (f16 asked, but the adapter has no SHADER_F16: f32)",
-        )
+    let note = if wanted == GpuPrecision::F16 && !info.shader_f16 {
+        " (f16 asked, but the adapter has no SHADER_F16: f32)"
     } else {
-        (wanted, "")
+        ""
+    };
+    let storage = match wanted.resolve(info.shader_f16) {
+        GpuPrecision::F16 => GpuStorage::F16,
+        GpuPrecision::F32 | GpuPrecision::Auto => GpuStorage::F32,
     };
     let frame = (|| {
         let hologram = pipeline.hologram_model().cnn_graph()?;
@@ -91,15 +110,18 @@ pub(super) fn build(
             Some(p) => Some(p.cnn_graph()?),
             None => None,
         };
+        let cfg = pipeline.config();
         GpuFrameSession::new(
             &ctx,
             &hologram,
             prefilter.as_deref(),
-            pipeline.config(),
+            &cfg.optics,
+            cfg.options,
+            cfg.offset_m,
             pipeline.encoding(),
             height,
             width,
-            precision,
+            storage,
         )
     })();
     match frame {
@@ -112,7 +134,7 @@ pub(super) fn build(
                     format!("GPU adapter found; first-frame self-check pending{note}")
                 },
                 adapter,
-                gpu_precision: Some(precision.name().into()),
+                gpu_precision: Some(frame.storage().name().into()),
             },
             Some(Accelerator {
                 executor: Box::new(frame),

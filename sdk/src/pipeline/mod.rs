@@ -22,10 +22,12 @@
 //! - `models`: [`HologramPipeline`] (models + display configuration + calibration);
 //! - `colour`, `workers`: one colour's optics and the three allocation-free worker threads;
 //! - `cnn_stage`: input packing and the hologram CNN on a `CnnPlan` (tract, or the native engine);
-//! - `executor` (+ `gpu_frame`, `backend`): whole-frame accelerators behind one trait, and the choice of one;
-//! - `session`, `stream`: [`HologramSession`] and its streams.
+//! - `executor`, `gpu_frame`: whole-frame accelerators behind one trait, and the GPU's;
+//! - `session`: [`HologramSession`] and its CPU frame; `setup`: how a session is built (checks, the choice of
+//!   an executor, the CNN plans, the colour states); `accelerated`: its frames on an accelerator (fallback,
+//!   first-frame self-check, previews, stage timings); `stream`: its streams.
 
-mod backend;
+mod accelerated;
 mod cnn_stage;
 mod colour;
 pub(crate) mod config;
@@ -37,13 +39,16 @@ mod models;
 mod report;
 mod selection;
 mod session;
+mod setup;
 mod stream;
+#[cfg(all(test, feature = "tract"))]
+mod suite;
 mod workers;
 
 pub use crate::cnn::CnnEngine;
 pub use config::{Backend, GpuPrecision, PipelineConfig, MAX_HOLOGRAM_PIXELS};
 pub use frame::{check_not_black, FrameTimings, Heads, SlmFrame, BLACK_FRAME_AMPLITUDE};
 pub use models::HologramPipeline;
-pub use report::{BackendReport, SelfCheck, SELF_CHECK_MAX_FRACTION};
+pub use report::{BackendReport, SelfCheck, StageProfile, SELF_CHECK_MAX_FRACTION};
 pub use selection::{ModelSelection, PrefilterMode, PrefilterSource};
 pub use session::HologramSession;

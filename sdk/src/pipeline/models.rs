@@ -13,7 +13,7 @@ use crate::error::{invalid, Result};
 use crate::model::{HologramModel, ModelConfig, ModelKind, Precision};
 use crate::slm::{DisplayCalibration, LutRepresentation, PhaseLut};
 
-/// The loaded CNNs plus their configuration: a factory of [`super::HologramSession`]s.
+/// The loaded CNNs plus their configuration: a factory of [`HologramSession`](crate::pipeline::HologramSession)s.
 #[derive(Debug, Clone)]
 pub struct HologramPipeline {
     config: PipelineConfig,
@@ -33,7 +33,9 @@ impl HologramPipeline {
     ///
     /// Errors: [`HoloError::InvalidParameter`] for an invalid setup or offset, a pre-filter with a 0 m offset,
     /// or models of the wrong kind; [`HoloError::ModelMetadata`] if a model's metadata does not match
-    /// `config` (optics; the pre-filter's offset).
+    /// `config` (optics; the pre-filter's offset); [`HoloError::ModelContract`] for a model no CPU CNN engine
+    /// of this build runs ([`crate::cnn::check_runnable`]: e.g. a graph only tract runs, in a build without
+    /// the `tract` feature).
     pub fn new(
         hologram: Arc<HologramModel>,
         prefilter: Option<Arc<HologramModel>>,
@@ -57,6 +59,10 @@ impl HologramPipeline {
                 ));
             }
             p.metadata().check(ModelKind::PreFilter, &expected)?;
+        }
+        crate::cnn::check_runnable(&hologram)?;
+        if let Some(p) = &prefilter {
+            crate::cnn::check_runnable(p)?;
         }
         let prefilter_reason = if prefilter.is_some() {
             "pre-filter CNN given by the caller"
@@ -195,13 +201,13 @@ impl HologramPipeline {
     }
 
     /// The hologram CNN.
-    pub fn hologram_model(&self) -> &HologramModel {
+    pub fn hologram_model(&self) -> &Arc<HologramModel> {
         &self.hologram
     }
 
     /// The pre-filter CNN, if any.
-    pub fn prefilter_model(&self) -> Option<&HologramModel> {
-        self.prefilter.as_deref()
+    pub fn prefilter_model(&self) -> Option<&Arc<HologramModel>> {
+        self.prefilter.as_ref()
     }
 
     /// The double phase method this pipeline encodes with: [`DoublePhaseMethod::Plain`] after a pre-filter

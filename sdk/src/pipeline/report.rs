@@ -1,13 +1,11 @@
-//! Which backend a session runs and why ([`BackendReport`]), and the first-frame self-check of
-//! [`Backend::Auto`] ([`SelfCheck`]).
+//! Which backend a session runs and why ([`BackendReport`]), an accelerator's stages ([`StageProfile`]), and
+//! the first-frame self-check of [`Backend::Auto`] ([`SelfCheck`]).
 
 use ndarray::Array3;
 
 use super::config::Backend;
-#[cfg(doc)]
-use super::HologramSession;
 
-/// Which backend a [`HologramSession`] runs and why ([`HologramSession::backend_report`]).
+/// Which backend a [`HologramSession`](crate::pipeline::HologramSession) runs and why ([`HologramSession::backend_report`](crate::pipeline::HologramSession::backend_report)).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct BackendReport {
     /// What the configuration asked for.
@@ -62,4 +60,18 @@ impl SelfCheck {
                 && (off as f64) <= SELF_CHECK_MAX_FRACTION * codes as f64,
         }
     }
+}
+
+/// One stage of an accelerator's frame, timed on its own ([`HologramSession::accelerator_stages`](crate::pipeline::HologramSession::accelerator_stages),
+/// what `holo bench --backend gpu` prints): its work, traffic and time per frame.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct StageProfile {
+    /// Stage name: `hologram_cnn`, `heads_to_field`, `offset_asm`, `prefilter_cnn`, `double_phase`.
+    pub name: &'static str,
+    /// Floating-point operations per frame (a multiply-add counts 2).
+    pub flops: f64,
+    /// Bytes the stage's kernels read and write per frame.
+    pub bytes: f64,
+    /// Median seconds of the stage on its own (one submission and wait each).
+    pub seconds: f64,
 }

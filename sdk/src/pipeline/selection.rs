@@ -5,13 +5,11 @@
 use std::sync::Arc;
 
 use super::config::PipelineConfig;
-#[cfg(doc)]
-use super::HologramPipeline;
 use crate::error::{invalid, Result};
 use crate::model::{HologramModel, ModelConfig, Precision, SceneInput};
 
 /// Whether the DDPM pre-filter CNN runs between offset propagation and double phase encoding (paper Eq. 6),
-/// chosen by name ([`HologramPipeline::with_shipped_prefilter`] has the rule).
+/// chosen by name ([`HologramPipeline::with_shipped_prefilter`](crate::pipeline::HologramPipeline::with_shipped_prefilter) has the rule).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum PrefilterMode {
@@ -35,7 +33,7 @@ impl PrefilterMode {
     }
 }
 
-/// The shipped CNNs by name ([`HologramPipeline::embedded`]). `Default`: RGB-D input, 8 layers, f32,
+/// The shipped CNNs by name ([`HologramPipeline::embedded`](crate::pipeline::HologramPipeline::embedded)). `Default`: RGB-D input, 8 layers, f32,
 /// pre-filter [`PrefilterMode::Auto`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
 pub struct ModelSelection {
@@ -72,7 +70,7 @@ pub enum PrefilterSource {
     Given(Arc<HologramModel>),
 }
 
-/// The rule of [`HologramPipeline::with_shipped_prefilter`]: the pre-filter to run (if any) and why.
+/// The rule of [`HologramPipeline::with_shipped_prefilter`](crate::pipeline::HologramPipeline::with_shipped_prefilter): the pre-filter to run (if any) and why.
 pub(super) fn shipped_prefilter(
     hologram: &HologramModel,
     mode: PrefilterMode,

@@ -7,27 +7,20 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use ndarray::{Array3, ArrayView3, Axis};
-use num_complex::Complex32;
 
-use super::backend::choose_backend;
 use super::cnn_stage::CnnStage;
-use super::colour::{copy_channel, fill_channel, ColourState, Task, Transfer};
-use super::config::{Backend, MAX_HOLOGRAM_PIXELS};
+use super::colour::{copy_channel, fill_channel, ColourState, Task};
+use super::config::Backend;
 use super::executor::Accelerator;
 use super::frame::{FrameTimings, Heads, SlmFrame};
-use super::models::{calibrated_lut, check_calibration_wavelengths, HologramPipeline};
-use super::report::{BackendReport, SelfCheck};
+use super::models::{calibrated_lut, check_calibration_wavelengths};
+use super::report::BackendReport;
 use super::workers::{lost_state, ColourWorkers};
-#[cfg(doc)]
-use super::BLACK_FRAME_AMPLITUDE;
 use crate::cnn::CnnPlan;
-use crate::cnn::CnnPlans;
-use crate::encoding::{normaliser, ChannelEncoder, ChannelStats, DoublePhaseMethod};
-use crate::error::{invalid, HoloError, Result};
-#[cfg(doc)]
-use crate::model::HologramModel;
-use crate::model::{contract, PlanReport, PlanRequest};
-use crate::optics::Carrier;
+use crate::cnn::PlanReport;
+use crate::encoding::{normaliser, ChannelStats, DoublePhaseMethod};
+use crate::error::{HoloError, Result};
+use crate::model::contract;
 use crate::scene::{LayeredDepthImage, RgbdFrame};
 use crate::slm::DisplayCalibration;
 
@@ -37,149 +30,26 @@ use crate::slm::DisplayCalibration;
 pub struct HologramSession {
     pub(super) height: usize,
     pub(super) width: usize,
-    encoding: DoublePhaseMethod,
-    offset_m: f64,
+    pub(super) encoding: DoublePhaseMethod,
+    pub(super) offset_m: f64,
     pub(super) cnn: CnnStage,
-    prefilter: Option<Box<dyn CnnPlan>>,
-    states: [Option<Box<ColourState>>; 3],
-    workers: ColourWorkers,
+    pub(super) prefilter: Option<Box<dyn CnnPlan>>,
+    pub(super) states: [Option<Box<ColourState>>; 3],
+    pub(super) workers: ColourWorkers,
     pub(super) output: SlmFrame,
-    last_heads: Option<Heads>,
-    plan_report: PlanReport,
-    backend: BackendReport,
-    full_outputs: bool,
+    pub(super) last_heads: Option<Heads>,
+    pub(super) plan_report: PlanReport,
+    pub(super) backend: BackendReport,
+    pub(super) full_outputs: bool,
     /// The display calibration applied (look-up tables, intensity scale maps), and the wavelengths it must
     /// match.
-    calibration: Option<Arc<DisplayCalibration>>,
-    wavelengths_m: [f64; 3],
+    pub(super) calibration: Option<Arc<DisplayCalibration>>,
+    pub(super) wavelengths_m: [f64; 3],
     /// The accelerator (the GPU frame) while it runs the frames; `None`: the CPU frame does.
     pub(super) accelerator: Option<Accelerator>,
 }
 
-impl HologramPipeline {
-    /// Prepares a session for `height × width` frames: optimises the CNNs for that size (cached in the
-    /// models), plans the FFTs, computes the offset transfer functions and allocates all buffers, and starts
-    /// three colour worker threads.
-    ///
-    /// Errors: [`HoloError::InvalidParameter`] (`size`) for a size of 0 or above
-    /// [`super::MAX_HOLOGRAM_PIXELS`], checked first; as `HologramModel::plan` (feature `tract`),
-    /// [`crate::optics::SpectralPlan::new`] and [`ChannelEncoder::new`].
-    pub fn session(&self, height: usize, width: usize) -> Result<HologramSession> {
-        HologramSession::new(self, height, width)
-    }
-}
-
 impl HologramSession {
-    pub(super) fn new(pipeline: &HologramPipeline, height: usize, width: usize) -> Result<Self> {
-        // Before any allocation: a session holds several [3, H, W] complex fields and the CNN's activations.
-        if height == 0 || width == 0 || height.saturating_mul(width) > MAX_HOLOGRAM_PIXELS {
-            return Err(invalid(
-                "size",
-                format!(
-                    "{height}×{width}: a session needs 1 to {} pixels (8192×8192)",
-                    MAX_HOLOGRAM_PIXELS
-                ),
-            ));
-        }
-        let calibration = pipeline.calibration().cloned();
-        if let Some(cal) = &calibration {
-            cal.check_size(height, width)?;
-        }
-        let (parts, accelerator) = choose_backend(pipeline, height, width)?;
-        let backend = BackendReport {
-            requested: parts.requested,
-            active: if accelerator.is_some() {
-                Backend::Gpu
-            } else {
-                Backend::Cpu
-            },
-            reason: parts.reason,
-            adapter: parts.adapter,
-            gpu_precision: if accelerator.is_some() {
-                parts.gpu_precision
-            } else {
-                None
-            },
-            self_check: None,
-        };
-        log::info!(
-            "backend for {height}×{width}: {} ({})",
-            backend.active,
-            backend.reason
-        );
-        let request = PlanRequest {
-            layout: pipeline.config().cnn_layout,
-            threads: pipeline.config().cnn_threads,
-        };
-        let CnnPlans {
-            hologram,
-            prefilter,
-            report: plan_report,
-        } = crate::cnn::select(
-            pipeline.hologram_model(),
-            pipeline.prefilter_model(),
-            height,
-            width,
-            pipeline.config().cnn_engine,
-            request,
-        )?;
-        let cfg = pipeline.config();
-        let encoding = pipeline.encoding();
-        let props = cfg.optics.propagators(height, width, cfg.options)?;
-        let n = height * width;
-        let mut states: [Option<Box<ColourState>>; 3] = [None, None, None];
-        for (colour, (slot, prop)) in states.iter_mut().zip(&props).enumerate() {
-            let transfer = if cfg.offset_m != 0.0 {
-                let tf = prop.transfer_function(cfg.offset_m, Carrier::Remove)?;
-                Some(Transfer::new(prop.plan(), tf.values())?)
-            } else {
-                None
-            };
-            *slot = Some(Box::new(ColourState {
-                field: vec![Complex32::default(); n],
-                plan: prop.plan().clone(),
-                transfer,
-                scratch: prop.plan().scratch(),
-                encoder: ChannelEncoder::new(height, width, encoding)?,
-                phase: vec![0.0; n],
-                codes: vec![0; n],
-                stats: ChannelStats::default(),
-                colour,
-                size: (height, width),
-                calibration: calibration.clone(),
-            }));
-        }
-        Ok(Self {
-            height,
-            width,
-            encoding,
-            offset_m: cfg.offset_m,
-            cnn: CnnStage {
-                plan: hologram,
-                input: Array3::zeros((0, 0, 0)),
-                calibration: calibration.clone(),
-            },
-            prefilter,
-            states,
-            workers: ColourWorkers::start()?,
-            output: SlmFrame {
-                codes: Array3::zeros((3, height, width)),
-                phase: Array3::zeros((3, height, width)),
-                amplitude_scale: 0.0,
-                mean_phase: [0.0; 3],
-                timings: FrameTimings::default(),
-                backend: Backend::Cpu,
-            },
-            last_heads: None,
-            plan_report,
-            backend,
-            full_outputs: true,
-            calibration,
-            wavelengths_m: cfg.optics.wavelengths_m,
-            accelerator,
-        })
-    }
-
     /// Replaces the display calibration of this session's next frames (`None`: an ideal SLM, linear look-up
     /// tables and no intensity scaling), e.g. after recalibrating the bench, without rebuilding the session.
     /// See [`HologramPipeline::with_calibration`].
@@ -210,34 +80,6 @@ impl HologramSession {
         &self.backend
     }
 
-    /// The GPU frame while the GPU backend is active (for `holo bench --backend gpu`: its stages' work and
-    /// timings).
-    #[cfg(feature = "gpu")]
-    pub fn gpu_frame(&self) -> Option<&crate::gpu::GpuFrameSession> {
-        let a = self.accelerator.as_ref()?;
-        a.executor.as_any().downcast_ref()
-    }
-
-    /// The GPU frame, mutable (for [`crate::gpu::GpuFrameSession::preview`]).
-    #[cfg(feature = "gpu")]
-    pub fn gpu_frame_mut(&mut self) -> Option<&mut crate::gpu::GpuFrameSession> {
-        let a = self.accelerator.as_mut()?;
-        a.executor.as_any_mut().downcast_mut()
-    }
-
-    /// What a viewer sees focused at `focus` (normalised depth) from `codes` `[3, H, W]` shown with normaliser
-    /// `amplitude_scale`, computed by the accelerator that runs this session's frames (amplitudes
-    /// `[3, H, W]`, Eq. 8–10); `None` where the CPU runs them (the caller computes it on the CPU).
-    pub(crate) fn preview_on_accelerator(
-        &mut self,
-        codes: &Array3<u8>,
-        amplitude_scale: f32,
-        focus: f64,
-    ) -> Option<Result<Array3<f32>>> {
-        let a = self.accelerator.as_mut()?;
-        Some(a.executor.preview(codes, amplitude_scale, focus))
-    }
-
     /// Whether GPU frames also download the double phase pattern ([`SlmFrame::phase`]) and the CNN heads
     /// ([`HologramSession::last_heads`]); on by default. Off, a GPU frame downloads only the codes and the
     /// normaliser (what an SLM needs): `phase` and `last_heads` then keep older values. On the CPU, off, the
@@ -248,8 +90,8 @@ impl HologramSession {
         self.full_outputs = full;
     }
 
-    /// How the hologram CNN's plan was chosen: layout, threads, and the autotuning timings
-    /// (`HologramModel::tuned_plan` (feature `tract`)). The pre-filter CNN runs channels-first with the same threads.
+    /// How the hologram CNN's plan was chosen: the engine and why, layout, threads, and the autotuning
+    /// timings ([`crate::cnn::select`]). The pre-filter CNN runs on the same engine with the same threads.
     pub fn plan_report(&self) -> &PlanReport {
         &self.plan_report
     }
@@ -298,12 +140,13 @@ impl HologramSession {
     }
 
     /// Renders one RGB-D frame (`[3, H, W]` amplitude and `[H, W]` normalised depth at the session's size)
-    /// into SLM patterns.
+    /// into SLM patterns. An LDI CNN takes the frame as a one-layer LDI (its back layers empty).
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for a frame of another size; [`HoloError::InvalidData`] for
-    /// non-finite values or a black frame (every amplitude ≤ [`BLACK_FRAME_AMPLITUDE`]: the CNN would
-    /// only show its bias); [`HoloError::InvalidParameter`] if the CNN takes an LDI; tract failures
-    /// ([`HoloError::ModelRun`]). The session stays usable after an error.
+    /// non-finite values or a black frame (every amplitude ≤
+    /// [`BLACK_FRAME_AMPLITUDE`](crate::pipeline::BLACK_FRAME_AMPLITUDE): the CNN would only show its bias);
+    /// the CNN engine's run errors ([`HoloError::ModelRun`]); [`HoloError::Gpu`] never (a GPU failure
+    /// re-renders the frame on the CPU). The session stays usable after an error.
     pub fn render(&mut self, frame: &RgbdFrame) -> Result<&SlmFrame> {
         if self.accelerator.is_some() {
             let t = Instant::now();
@@ -318,99 +161,6 @@ impl HologramSession {
         let heads = [a0, a1, a2, p0, p1, p2];
         let cnn_s = self.cnn.run_frame_into(frame, heads)?;
         self.encode_loaded(cnn_s)
-    }
-
-    /// The GPU frame of the CNN input packed in `self.cnn.input` (packing started at `t`): runs it on the GPU,
-    /// with the first-frame self-check of [`Backend::Auto`]; on a GPU failure, re-renders it on the CPU and
-    /// stays there.
-    pub(super) fn render_packed_on_accelerator(&mut self, t: Instant) -> Result<&SlmFrame> {
-        let Some(gpu) = self.accelerator.as_mut() else {
-            return Err(HoloError::Internal("no accelerator".into()));
-        };
-        // The CPU path catches NaN/∞ in the CNN's heads; a GPU's max() may silently skip NaN, so check the
-        // input here (4 values per pixel, well under a millisecond at 1080p).
-        if self.cnn.input.iter().any(|v| !v.is_finite()) {
-            return Err(HoloError::InvalidData(
-                "the RGB-D frame holds NaN or infinite values".into(),
-            ));
-        }
-        let cnn_s = t.elapsed().as_secs_f64();
-        let t_gpu = Instant::now();
-        // A calibrated look-up table runs on the CPU, on the downloaded double phase pattern.
-        let calibrated = self
-            .calibration
-            .as_ref()
-            .is_some_and(|c| c.has_calibrated_lut());
-        let full = self.full_outputs || gpu.pending_check || calibrated;
-        match gpu
-            .executor
-            .run(self.cnn.input.view(), &mut self.output, full)
-        {
-            Ok(heads) => {
-                if calibrated {
-                    apply_calibrated_luts(self.calibration.as_ref(), &mut self.output)?;
-                }
-                let gpu_s = t_gpu.elapsed().as_secs_f64();
-                self.output.backend = Backend::Gpu;
-                self.output.timings = FrameTimings {
-                    cnn_s,
-                    gpu_s,
-                    total_s: t.elapsed().as_secs_f64(),
-                    ..FrameTimings::default()
-                };
-                if heads.is_some() {
-                    self.last_heads = heads;
-                }
-                if gpu.pending_check {
-                    self.self_check()?;
-                }
-                Ok(&self.output)
-            }
-            Err(HoloError::Gpu(e)) => {
-                log::warn!("GPU frame failed ({e}); this frame and the next run on the CPU");
-                self.accelerator = None;
-                self.backend.active = Backend::Cpu;
-                self.backend.gpu_precision = None;
-                self.backend.reason = format!("GPU failed mid-stream, CPU since: {e}");
-                let (heads, cnn_s) = self.cnn.run(t)?;
-                self.encode_heads(heads, cnn_s)
-            }
-            // Bad data (e.g. a hologram that is zero everywhere) is the frame's fault, not the GPU's.
-            Err(e) => Err(e),
-        }
-    }
-
-    /// The self-check of [`Backend::Auto`] after the GPU rendered the first frame into `self.output`: renders
-    /// it on the CPU too, compares the codes ([`SelfCheck`]), and keeps the GPU (and its output) only if they
-    /// agree; otherwise the CPU's output stands and the session stays on the CPU.
-    fn self_check(&mut self) -> Result<()> {
-        let gpu_output = self.output.clone();
-        let gpu_heads = self.last_heads.take();
-        let (heads, cnn_s) = self.cnn.run(Instant::now())?;
-        self.encode_heads(heads, cnn_s)?;
-        let check = SelfCheck::compare(&gpu_output.codes, &self.output.codes);
-        self.backend.self_check = Some(check);
-        if check.passed {
-            self.backend.reason = format!(
-                "GPU self-check passed ({} of {} codes off by more than one step)",
-                check.codes_off_by_more_than_one, check.codes
-            );
-            self.output = gpu_output;
-            self.last_heads = gpu_heads;
-            if let Some(g) = self.accelerator.as_mut() {
-                g.pending_check = false;
-            }
-        } else {
-            self.backend.reason = format!(
-                "GPU self-check failed ({} of {} codes off by more than one step, max {}): CPU",
-                check.codes_off_by_more_than_one, check.codes, check.max_code_difference
-            );
-            self.backend.active = Backend::Cpu;
-            self.backend.gpu_precision = None;
-            self.accelerator = None;
-        }
-        log::info!("{}", self.backend.reason);
-        Ok(())
     }
 
     /// Renders a layered depth image (the LDI-input CNN of the paper, Fig. 1; layers `[r, g, b, d]` each,
@@ -612,7 +362,10 @@ impl HologramSession {
 
 /// Replaces `out.codes` by the calibrated look-up tables' codes of `out.phase` (colours with a linear table
 /// keep theirs).
-fn apply_calibrated_luts(cal: Option<&Arc<DisplayCalibration>>, out: &mut SlmFrame) -> Result<()> {
+pub(super) fn apply_calibrated_luts(
+    cal: Option<&Arc<DisplayCalibration>>,
+    out: &mut SlmFrame,
+) -> Result<()> {
     let (_, h, w) = out.codes.dim();
     for c in 0..3 {
         let Some(lut) = calibrated_lut(cal, c) else {
@@ -647,9 +400,10 @@ mod tests {
 
     use ndarray::Array3;
 
+    use crate::cnn::CnnEngine;
     use crate::error::HoloError;
     use crate::model::{HologramModel, ModelConfig, ModelKind};
-    use crate::pipeline::{Backend, CnnEngine, Heads, HologramPipeline, PipelineConfig};
+    use crate::pipeline::{Backend, Heads, HologramPipeline, PipelineConfig};
 
     fn pipeline(prefilter: bool) -> HologramPipeline {
         let load = |name: &str, kind| {

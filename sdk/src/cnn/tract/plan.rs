@@ -1,123 +1,18 @@
-//! tract's side of a [`HologramModel`] (cargo feature `tract`): the decluttered graph with symbolic `H`, `W`,
-//! one optimised [`ModelPlan`] per resolution and layout, and tract's process-wide thread setting
-//! ([`set_cnn_threads`]). tract runs any ONNX graph that passes the contract (`docs/CONVENTIONS.md` §7),
-//! int8 QOperator files included; the native engine and the GPU run the TensorHolo residual CNN only.
+//! tract's plans: [`ModelPlan`] (one model's graph optimised for one resolution and layout, a
+//! [`CnnPlan`] of the session's CNN stage), how a graph is optimised for a layout, per-operator profiling
+//! ([`NodeTiming`]).
 
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3, Zip};
 use num_complex::Complex32;
 use tract_linalg::multithread::{multithread_tract_scope, Executor};
-use tract_onnx::prelude::{
-    tvec, Framework, InferenceModelExt, IntoTValue, Symbol, TDim, Tensor, TypedModel,
-    TypedSimplePlan,
-};
+use tract_onnx::prelude::{tvec, IntoTValue, Tensor, TypedModel, TypedSimplePlan};
 
-use super::contract::heads_to_field;
-use super::metadata::ModelKind;
-use super::{CnnLayout, MAX_CNN_THREADS};
+use crate::cnn::plan::CnnPlan;
+use crate::cnn::tuning::{CnnLayout, MAX_CNN_THREADS};
 use crate::error::{guarded, HoloError, Result};
-
-/// tract's graph of one model: typed and decluttered once at load, `H` and `W` symbolic.
-pub(crate) struct TractGraph {
-    pub(super) decluttered: TypedModel,
-    /// Symbols of the input's height and width (`None` where the file fixes that dimension).
-    pub(super) dims: [Option<Symbol>; 2],
-    pub(super) plans: Mutex<HashMap<(usize, usize, CnnLayout), ModelPlan>>,
-}
-
-impl std::fmt::Debug for TractGraph {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let plans = self.plans.lock().map(|p| p.len()).unwrap_or(0);
-        f.debug_struct("TractGraph")
-            .field("nodes", &self.decluttered.nodes.len())
-            .field("dims", &self.dims)
-            .field("plans", &plans)
-            .finish()
-    }
-}
-
-impl TractGraph {
-    /// Parses, types and declutters the ONNX file `bytes` (already decoded and checked against the contract
-    /// by [`HologramModel`]'s loader). Errors: [`HoloError::ModelLoad`] where tract cannot parse or type the
-    /// graph (also a panic inside tract), [`HoloError::ModelContract`] for an input dimension that is neither
-    /// a symbol nor a positive size.
-    pub(crate) fn load(bytes: &[u8], source_name: &str) -> Result<Self> {
-        let load_err = |reason: String| HoloError::ModelLoad {
-            source_name: source_name.to_string(),
-            reason,
-        };
-        // Value infos are hints on intermediate tensors; tract 0.23 rejects the QDQ exporter's, and the
-        // graph's own ops determine every type anyway.
-        let onnx = tract_onnx::onnx().with_ignore_value_info(true);
-        let decluttered = guarded("typing the graph", || {
-            let proto = onnx
-                .proto_model_for_read(&mut &bytes[..])
-                .map_err(|e| format!("not a valid ONNX protobuf ({})", tract_msg(&e)))?;
-            let model = onnx
-                .model_for_proto_model(&proto)
-                .map_err(|e| format!("cannot parse the graph: {}", tract_msg(&e)))?;
-            model
-                .into_typed()
-                .and_then(|m| m.into_decluttered())
-                .map_err(|e| format!("cannot type the graph: {}", tract_msg(&e)))
-        })
-        .map_err(load_err)?;
-        let fact = decluttered
-            .input_fact(0)
-            .map_err(|e| load_err(tract_msg(&e)))?
-            .clone();
-        let mut dims = [None, None];
-        for (i, d) in fact.shape.iter().skip(2).take(2).enumerate() {
-            match d {
-                TDim::Sym(s) => dims[i] = Some(s.clone()),
-                _ => match d.to_i64() {
-                    Ok(v) if v > 0 => {}
-                    _ => {
-                        return Err(HoloError::ModelContract {
-                            source_name: source_name.to_string(),
-                            reason: format!(
-                                "input dimension {} is `{d}`, expected a symbol or a positive size",
-                                i + 2
-                            ),
-                        })
-                    }
-                },
-            }
-        }
-        Ok(Self {
-            decluttered,
-            dims,
-            plans: Mutex::new(HashMap::new()),
-        })
-    }
-}
-
-/// Sets how many threads tract uses for the matrix products and convolutions of every CNN run afterwards
-/// (process-wide; tract's default executor). `1` (the default) runs on the calling thread; `n > 1` starts a
-/// private `n`-thread pool. Only matmul, direct convolution and element-wise ops run in parallel. The native
-/// engine does not read it (its threads are the plan's, `PipelineConfig::cnn_threads`).
-///
-/// Errors: [`HoloError::InvalidParameter`] for `threads == 0` or more than [`MAX_CNN_THREADS`].
-pub fn set_cnn_threads(threads: usize) -> Result<()> {
-    use tract_linalg::multithread::set_default_executor;
-    match threads {
-        0 => Err(crate::error::invalid("threads", "must be ≥ 1")),
-        n if n > MAX_CNN_THREADS => Err(crate::error::invalid(
-            "threads",
-            format!("at most {MAX_CNN_THREADS} CNN threads, got {n}"),
-        )),
-        1 => {
-            set_default_executor(Executor::SingleThread);
-            Ok(())
-        }
-        n => {
-            set_default_executor(Executor::multithread(n));
-            Ok(())
-        }
-    }
-}
+use crate::model::{heads_to_field, ModelKind};
 
 /// Formats a tract error with its whole context chain on one line.
 pub(super) fn tract_msg(e: &tract_onnx::prelude::TractError) -> String {
@@ -192,7 +87,8 @@ pub struct NodeTiming {
     pub seconds: f64,
 }
 
-/// A tract plan for one resolution of a [`HologramModel`](super::HologramModel) (graph with `H`, `W` bound and optimised).
+/// A tract plan for one resolution of a model ([`super::TractModel::plan`]: the graph with `H`, `W` bound and
+/// optimised).
 ///
 /// Cloning is cheap (shared plan and thread pool). Each [`ModelPlan::run`] spawns its own tract state, so one
 /// plan may run from several threads.
@@ -204,7 +100,7 @@ pub struct ModelPlan {
     pub(super) height: usize,
     pub(super) width: usize,
     pub(super) layout: CnnLayout,
-    /// Threads of this plan's own executor; `None`: tract's process-wide default ([`super::set_cnn_threads`]).
+    /// Threads of this plan's own executor; `None`: tract's process-wide default executor (one thread).
     pub(super) threads: Option<usize>,
     pub(super) executor: Option<Executor>,
 }
@@ -424,5 +320,20 @@ impl ModelPlan {
                 Ok(out)
             }
         }
+    }
+}
+
+impl CnnPlan for ModelPlan {
+    fn input_dim(&self) -> (usize, usize, usize) {
+        ModelPlan::input_dim(self)
+    }
+
+    fn run_outputs(&mut self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
+        ModelPlan::run_outputs(self, input)
+    }
+
+    fn spawn(&self) -> Box<dyn CnnPlan> {
+        // A tract plan is an `Arc` of the optimised graph: a clone shares it, and each run makes its state.
+        Box::new(self.clone())
     }
 }

@@ -50,7 +50,7 @@ pub(super) struct Strips {
 }
 
 impl Strips {
-    pub fn new(rows: usize, height: usize, lag: usize) -> Self {
+    pub(crate) fn new(rows: usize, height: usize, lag: usize) -> Self {
         let rows = rows.max(1).min(height + lag);
         Self {
             rows,
@@ -61,7 +61,7 @@ impl Strips {
 
     /// The strips of a plan of `layers` layers for frames of `height` rows: `strip` rows when given, else
     /// [`strip_rows`] for windows of `per_row` bytes per strip row and `fixed` bytes besides.
-    pub fn for_plan(
+    pub(crate) fn for_plan(
         strip: Option<usize>,
         height: usize,
         layers: usize,
@@ -121,7 +121,7 @@ pub(super) struct NewRows {
 }
 
 impl Place {
-    pub fn new(lag: usize, carry: usize) -> Self {
+    pub(crate) fn new(lag: usize, carry: usize) -> Self {
         Self { lag, carry }
     }
 
@@ -133,17 +133,17 @@ impl Place {
     /// The row offset of `operand` from this activation (the output), for
     /// [`tensorholo_kernels::Inputs::shifted`]: interior row `i` of `operand` holds this activation's frame
     /// row of interior row `i + d`.
-    pub fn shift_from(self, operand: Place) -> isize {
+    pub(crate) fn shift_from(self, operand: Place) -> isize {
         self.behind() - operand.behind()
     }
 
     /// The frame row held by interior row 0 at strip `m` (may be negative: above the frame).
-    pub fn first_row(self, strips: Strips, m: usize) -> isize {
+    pub(crate) fn first_row(self, strips: Strips, m: usize) -> isize {
         m as isize * strips.rows as isize - self.behind()
     }
 
     /// The new rows of strip `m`: frame rows `mS − lag .. (m+1)S − lag`, at interior rows `carry ..`.
-    pub fn new_rows(self, strips: Strips, m: usize) -> NewRows {
+    pub(crate) fn new_rows(self, strips: Strips, m: usize) -> NewRows {
         let s = strips.rows as isize;
         let first = m as isize * s - self.lag as isize;
         let lo = first.max(0);
@@ -165,7 +165,7 @@ pub(super) struct Window<T: Element> {
 
 impl<T: Element> Window<T> {
     /// A window at `place` for `strips`, its buffer made by `buffer(interior rows)`.
-    pub fn new(
+    pub(crate) fn new(
         place: Place,
         strips: Strips,
         buffer: impl FnOnce(usize) -> std::result::Result<RowPlanar<T>, KernelError>,
@@ -175,13 +175,13 @@ impl<T: Element> Window<T> {
     }
 
     /// [`Place::shift_from`] of two windows.
-    pub fn shift_from<U: Element>(&self, operand: &Window<U>) -> isize {
+    pub(crate) fn shift_from<U: Element>(&self, operand: &Window<U>) -> isize {
         self.place.shift_from(operand.place)
     }
 
     /// At the start of a frame: the carried rows stand for frame rows above the frame, so they hold the
     /// border value.
-    pub fn start_frame(&mut self) -> Result<()> {
+    pub(crate) fn start_frame(&mut self) -> Result<()> {
         self.buf
             .fill_rows_with_border(0..self.place.carry)
             .map_err(kernel_err)
@@ -190,7 +190,11 @@ impl<T: Element> Window<T> {
     /// The new rows of strip `m` ([`Place::new_rows`]): those that stand for frame rows outside the frame
     /// are set to the border value (the next layer reads them as zero padding); returns the rows inside the
     /// frame and the frame row of the first.
-    pub fn new_rows(&mut self, strips: Strips, m: usize) -> Result<Option<(Range<usize>, usize)>> {
+    pub(crate) fn new_rows(
+        &mut self,
+        strips: Strips,
+        m: usize,
+    ) -> Result<Option<(Range<usize>, usize)>> {
         let NewRows { all, valid } = self.place.new_rows(strips, m);
         let (a, b) = match &valid {
             Some((rows, _)) => (rows.start, rows.end),
@@ -205,7 +209,7 @@ impl<T: Element> Window<T> {
     }
 
     /// After a strip: moves the last `carry` rows to the top for the next strip.
-    pub fn advance(&mut self, strips: Strips) -> Result<()> {
+    pub(crate) fn advance(&mut self, strips: Strips) -> Result<()> {
         let carry = self.place.carry;
         if carry == 0 {
             return Ok(());

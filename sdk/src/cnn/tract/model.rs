@@ -1,26 +1,139 @@
-//! The tract engine's methods of a [`HologramModel`] (cargo feature `tract`): its plans per resolution and
-//! layout ([`HologramModel::plan`], [`HologramModel::tuned_plan`]), tract's autotuning and runs. The graph and
-//! the plans themselves are `model/tract.rs`, which does not know the model: this file ties the two, so that
-//! neither imports the other in a circle.
+//! [`TractModel`]: tract's side of one model (cargo feature `tract`): its graph parsed, typed and decluttered
+//! once with symbolic `H`, `W`, one optimised [`ModelPlan`] per resolution and layout, and the autotuning of
+//! layouts × thread counts ([`TractModel::tuned_plan`]), cached per resolution and request.
 
 use std::collections::HashMap;
+use std::sync::Mutex;
 use std::time::Instant;
 
 use ndarray::{Array3, ArrayView3};
 use num_complex::Complex32;
-use tract_onnx::prelude::{IntoRunnable, Symbol, TDim};
+use tract_onnx::prelude::{Framework, InferenceModelExt, IntoRunnable, Symbol, TDim, TypedModel};
 
-use super::metadata::ModelKind;
-use super::tract::{optimise, tract_msg, PlanFailure};
-use super::tuning::{auto_thread_candidates, fastest_run, timing_resolution};
-use super::{
-    CnnEngine, CnnLayout, HologramModel, ModelPlan, PlanReport, PlanRequest, PlanTiming,
-    ThreadCount,
+use super::plan::{optimise, tract_msg, ModelPlan, PlanFailure};
+use crate::cnn::tuning::{
+    auto_thread_candidates, fastest_run, timing_resolution, CnnEngine, CnnLayout, PlanReport,
+    PlanRequest, PlanTiming, ThreadCount,
 };
 use crate::error::{guarded, invalid, HoloError, Result};
+use crate::model::network::check_fixed_size;
+use crate::model::{contract, HologramModel, ModelKind};
 use crate::scene::RgbdFrame;
 
-impl HologramModel {
+/// tract's graph of one [`HologramModel`], typed and decluttered once, with its optimised plans per
+/// resolution and layout and its autotuning results. `Send + Sync`: plans can be built and run from several
+/// threads; a failed plan or run leaves it usable.
+///
+/// Sessions find it in the tract engine's cache (one per model, dropped with the model); [`TractModel::new`]
+/// makes one of its own (e.g. to plan a layout or profile the operators).
+pub struct TractModel {
+    decluttered: TypedModel,
+    /// Symbols of the input's height and width (`None` where the file fixes that dimension).
+    dims: [Option<Symbol>; 2],
+    plans: Mutex<HashMap<(usize, usize, CnnLayout), ModelPlan>>,
+    tuned: Mutex<HashMap<(usize, usize, PlanRequest), PlanReport>>,
+    kind: ModelKind,
+    channels: usize,
+    input_layers: usize,
+    source_name: String,
+    fixed: [Option<usize>; 2],
+}
+
+impl std::fmt::Debug for TractModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let plans = self.plans.lock().map(|p| p.len()).unwrap_or(0);
+        f.debug_struct("TractModel")
+            .field("source_name", &self.source_name)
+            .field("nodes", &self.decluttered.nodes.len())
+            .field("dims", &self.dims)
+            .field("plans", &plans)
+            .finish()
+    }
+}
+
+impl TractModel {
+    /// Parses, types and declutters `model`'s ONNX file with tract (the file was decoded and checked against
+    /// the contract by [`HologramModel`]'s loader).
+    ///
+    /// Errors: [`HoloError::ModelLoad`] where tract cannot parse or type the graph (also a panic inside
+    /// tract), [`HoloError::ModelContract`] for an input dimension that is neither a symbol nor a positive
+    /// size.
+    pub fn new(model: &HologramModel) -> Result<Self> {
+        let source_name = model.source_name();
+        let load_err = |reason: String| HoloError::ModelLoad {
+            source_name: source_name.to_string(),
+            reason,
+        };
+        let bytes = model.file_bytes();
+        // Value infos are hints on intermediate tensors; tract 0.23 rejects the QDQ exporter's, and the
+        // graph's own ops determine every type anyway.
+        let onnx = tract_onnx::onnx().with_ignore_value_info(true);
+        let decluttered = guarded("typing the graph", || {
+            let proto = onnx
+                .proto_model_for_read(&mut &bytes[..])
+                .map_err(|e| format!("not a valid ONNX protobuf ({})", tract_msg(&e)))?;
+            let model = onnx
+                .model_for_proto_model(&proto)
+                .map_err(|e| format!("cannot parse the graph: {}", tract_msg(&e)))?;
+            model
+                .into_typed()
+                .and_then(|m| m.into_decluttered())
+                .map_err(|e| format!("cannot type the graph: {}", tract_msg(&e)))
+        })
+        .map_err(load_err)?;
+        let fact = decluttered
+            .input_fact(0)
+            .map_err(|e| load_err(tract_msg(&e)))?
+            .clone();
+        let mut dims = [None, None];
+        for (i, d) in fact.shape.iter().skip(2).take(2).enumerate() {
+            match d {
+                TDim::Sym(s) => dims[i] = Some(s.clone()),
+                _ => match d.to_i64() {
+                    Ok(v) if v > 0 => {}
+                    _ => {
+                        return Err(HoloError::ModelContract {
+                            source_name: source_name.to_string(),
+                            reason: format!(
+                                "input dimension {} is `{d}`, expected a symbol or a positive size",
+                                i + 2
+                            ),
+                        })
+                    }
+                },
+            }
+        }
+        Ok(Self {
+            decluttered,
+            dims,
+            plans: Mutex::new(HashMap::new()),
+            tuned: Mutex::new(HashMap::new()),
+            kind: model.kind(),
+            channels: model.input_channels(),
+            input_layers: model.metadata().input_layers,
+            source_name: source_name.to_string(),
+            fixed: model.fixed_size(),
+        })
+    }
+
+    /// Hologram CNN or pre-filter.
+    pub fn kind(&self) -> ModelKind {
+        self.kind
+    }
+
+    /// Channels of the network input `[C, H, W]`.
+    pub fn input_channels(&self) -> usize {
+        self.channels
+    }
+
+    /// The model file's name, as errors name it.
+    pub fn source_name(&self) -> &str {
+        &self.source_name
+    }
+
+    fn check_fixed_size(&self, height: usize, width: usize) -> Result<()> {
+        check_fixed_size(&self.fixed, &self.source_name, height, width)
+    }
     /// The resolutions planned so far, sorted (`[height, width]` pairs).
     pub fn planned_resolutions(&self) -> Vec<(usize, usize)> {
         let mut v: Vec<_> = self.lock().keys().map(|&(h, w, _)| (h, w)).collect();
@@ -29,11 +142,9 @@ impl HologramModel {
         v
     }
 
-    pub(super) fn lock(
-        &self,
-    ) -> std::sync::MutexGuard<'_, HashMap<(usize, usize, CnnLayout), ModelPlan>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<(usize, usize, CnnLayout), ModelPlan>> {
         // No code panics while holding the lock; recover the map anyway rather than propagate poison.
-        self.tract.plans.lock().unwrap_or_else(|p| p.into_inner())
+        self.plans.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     /// The runnable plan for `height × width` inputs, optimised for that resolution (the graph with `H`, `W`
@@ -46,12 +157,12 @@ impl HologramModel {
         self.plan_with_layout(height, width, CnnLayout::ChannelsFirst)
     }
 
-    /// As [`HologramModel::plan`], run in `layout` (see [`CnnLayout`]); plans are cached per resolution and
+    /// As [`TractModel::plan`], run in `layout` (see [`CnnLayout`]); plans are cached per resolution and
     /// layout. Inputs and outputs of the returned plan stay `[C, H, W]` / `[3, H, W]` whatever the layout.
     /// [`CnnLayout::Auto`] times both layouts with tract's process-wide executor and returns the faster
-    /// ([`HologramModel::tuned_plan`], which also reports the timings).
+    /// ([`TractModel::tuned_plan`], which also reports the timings).
     ///
-    /// Errors: as [`HologramModel::plan`]; [`HoloError::InvalidParameter`] if tract cannot move this graph
+    /// Errors: as [`TractModel::plan`]; [`HoloError::InvalidParameter`] if tract cannot move this graph
     /// channels-last (int8 QOperator files: tract 0.23's quantised convolution takes no axis change).
     pub fn plan_with_layout(
         &self,
@@ -60,9 +171,9 @@ impl HologramModel {
         layout: CnnLayout,
     ) -> Result<ModelPlan> {
         if layout == CnnLayout::Auto {
-            let request = super::PlanRequest {
+            let request = PlanRequest {
                 layout,
-                threads: super::ThreadCount::ProcessDefault,
+                threads: ThreadCount::ProcessDefault,
             };
             return self.tuned_plan(height, width, request).map(|(p, _)| p);
         }
@@ -78,12 +189,7 @@ impl HologramModel {
     }
 
     /// Builds (without caching) the plan for `height × width` in a concrete `layout`.
-    pub(super) fn build_plan(
-        &self,
-        height: usize,
-        width: usize,
-        layout: CnnLayout,
-    ) -> Result<ModelPlan> {
+    fn build_plan(&self, height: usize, width: usize, layout: CnnLayout) -> Result<ModelPlan> {
         if height == 0 || width == 0 {
             return Err(crate::error::invalid(
                 "height/width",
@@ -97,7 +203,6 @@ impl HologramModel {
         }
         self.check_fixed_size(height, width)?;
         let subs: HashMap<Symbol, TDim> = self
-            .tract
             .dims
             .iter()
             .zip([height, width])
@@ -105,7 +210,6 @@ impl HologramModel {
             .collect();
         let plan = guarded("optimising", || {
             let model = self
-                .tract
                 .decluttered
                 .set_symbols(&subs)
                 .map_err(|e| PlanFailure::Tract(tract_msg(&e)))?;
@@ -135,14 +239,14 @@ impl HologramModel {
         })
     }
 
-    /// Runs the network on one input `[C, H, W]` (`C` = [`HologramModel::input_channels`]; hologram CNN:
+    /// Runs the network on one input `[C, H, W]` (`C` = [`TractModel::input_channels`]; hologram CNN:
     /// per layer `r, g, b` amplitude then depth `d`, all in `[0, 1]`; pre-filter: `Re H` then `Im H` of the
     /// offset hologram), planning `H × W` if needed.
     ///
     /// Returns the complex field `[3, H, W]` (R, G, B): the midpoint hologram for the hologram CNN
-    /// ([`heads_to_field`](super::heads_to_field)), the filtered SLM-plane hologram `Re + i·Im` for the pre-filter.
+    /// ([`crate::model::heads_to_field`]), the filtered SLM-plane hologram `Re + i·Im` for the pre-filter.
     ///
-    /// Errors: as [`HologramModel::plan`] and [`ModelPlan::run`].
+    /// Errors: as [`TractModel::plan`] and [`ModelPlan::run`].
     pub fn run(&self, input: ArrayView3<f32>) -> Result<Array3<Complex32>> {
         let (_, h, w) = input.dim();
         self.plan(h, w)?.run(input)
@@ -153,34 +257,32 @@ impl HologramModel {
     /// `[3, H, W]`.
     ///
     /// Errors: [`HoloError::InvalidParameter`] if the model is a pre-filter or takes `L ≠ 1` layers; as
-    /// [`HologramModel::run`] otherwise.
+    /// [`TractModel::run`] otherwise.
     pub fn run_frame(&self, frame: &RgbdFrame) -> Result<Array3<Complex32>> {
-        if self.kind() != ModelKind::Hologram || self.metadata().input_layers != 1 {
+        if self.kind() != ModelKind::Hologram || self.input_layers != 1 {
             return Err(crate::error::invalid(
                 "model",
                 format!(
                     "run_frame needs an RGB-D hologram CNN (L = 1); this file is a {} with L = {}",
                     self.kind(),
-                    self.metadata().input_layers
+                    self.input_layers
                 ),
             ));
         }
         let mut input = Array3::<f32>::zeros((4, frame.height(), frame.width()));
-        super::contract::pack_rgbd(frame, input.view_mut())?;
+        contract::pack_rgbd(frame, input.view_mut())?;
         self.run(input.view())
     }
-}
 
-impl HologramModel {
     /// The fastest plan of `request` for `height × width` inputs, and the report of how it was chosen.
     ///
     /// Every candidate (layouts × thread counts; a layout tract cannot apply to this graph is skipped with
     /// the reason) runs on a constant input at [`timing_resolution`]: once, or three times when a run takes
     /// under 0.25 s (the fastest run counts). The winner's plan is then built at the real resolution (cached
-    /// like [`HologramModel::plan_with_layout`]'s) with its thread count ([`ModelPlan::with_threads`]).
+    /// like [`TractModel::plan_with_layout`]'s) with its thread count ([`ModelPlan::with_threads`]).
     /// With a single candidate nothing is timed. Results are cached per `(height, width, request)`.
     ///
-    /// Errors: as [`HologramModel::plan_with_layout`] and [`ModelPlan::with_threads`];
+    /// Errors: as [`TractModel::plan_with_layout`] and [`ModelPlan::with_threads`];
     /// [`HoloError::InvalidParameter`] if no candidate can run.
     pub fn tuned_plan(
         &self,
@@ -237,8 +339,7 @@ impl HologramModel {
 
     fn tuned_lock(
         &self,
-    ) -> std::sync::MutexGuard<'_, std::collections::HashMap<(usize, usize, PlanRequest), PlanReport>>
-    {
+    ) -> std::sync::MutexGuard<'_, HashMap<(usize, usize, PlanRequest), PlanReport>> {
         // Nothing panics while holding the lock; recover the map rather than propagate poison.
         self.tuned.lock().unwrap_or_else(|p| p.into_inner())
     }

@@ -44,12 +44,13 @@ use std::sync::Arc;
 use ndarray::{Array3, ArrayView3};
 use tensorholo_kernels::{Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, RowPlanar};
 
-use super::native::{
+use super::f32::{
     finish_outputs, heads_of, heads_rows, input_rows, last_layer_rows, owned_outputs, planar_slice,
     pool, standard_input, u8_grid, BaseInput, Outputs, Planes,
 };
+use super::kernel_err;
 use super::strips::{bands, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window};
-use super::{check_planes, kernel_err, CnnPlan};
+use crate::cnn::plan::{check_planes, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnQuant, CnnWeights, LayerQuant, QuantGrid};
 

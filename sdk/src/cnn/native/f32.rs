@@ -1,4 +1,4 @@
-//! The native engine: a TensorHolo CNN ([`CnnWeights`], read once by [`crate::model::graph`]) on the direct
+//! The native engine's f32 plan: a TensorHolo CNN ([`CnnWeights`], read once by [`crate::model::graph`]) on the direct
 //! 3×3 convolution kernels of `tensorholo-kernels` (f32; the kernel row is chosen at run time from the CPU's
 //! instruction set, [`Isa::active`]).
 //!
@@ -32,8 +32,9 @@ use tensorholo_kernels::{
     depthwise_rows, fake_quantize, tanh_heads, Conv3x3F32, Inputs, Isa, QuantU8, RowPlanar,
 };
 
+use super::kernel_err;
 use super::strips::{bands, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window};
-use super::{check_output_planes, check_planes, kernel_err, CnnPlan};
+use crate::cnn::plan::{check_output_planes, check_planes, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnWeights, QuantGrid};
 
@@ -279,7 +280,7 @@ pub(super) enum Planes<'a> {
 
 impl<'a> Planes<'a> {
     /// Channel `c`'s plane (`H·W` values; empty past the last channel).
-    pub fn plane(&self, c: usize) -> &'a [f32] {
+    pub(crate) fn plane(&self, c: usize) -> &'a [f32] {
         match *self {
             Planes::Planar(p, hw) => p.get(c * hw..(c + 1) * hw).unwrap_or(&[]),
             Planes::Each(ps) => ps.get(c).copied().unwrap_or(&[]),
@@ -355,7 +356,7 @@ pub(super) struct Outputs<'a> {
 
 impl<'a> Outputs<'a> {
     /// The six planes, checked to hold `hw` values each. Errors: [`HoloError::ShapeMismatch`].
-    pub fn new(planes: [&'a mut [f32]; 6], hw: usize) -> Result<Self> {
+    pub(crate) fn new(planes: [&'a mut [f32]; 6], hw: usize) -> Result<Self> {
         check_output_planes(&planes, hw)?;
         Ok(Self { planes })
     }

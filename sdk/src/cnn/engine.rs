@@ -1,0 +1,92 @@
+//! [`Engine`]: what a CPU CNN engine answers so that a session's engine choice (`cnn/select.rs`) can ask it:
+//! whether it runs a model, its timing, its plans. An engine is a folder under `cnn/` implementing it and one
+//! entry in `cnn/registry.rs`.
+
+use std::sync::Arc;
+
+use super::plan::CnnPlan;
+use super::tuning::{CnnEngine, CnnLayout, PlanRequest, PlanTiming};
+use crate::error::Result;
+use crate::model::HologramModel;
+
+/// The CNNs of one session: the hologram CNN and, where the pipeline has one, the pre-filter CNN.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Networks<'a> {
+    pub(crate) hologram: &'a Arc<HologramModel>,
+    pub(crate) prefilter: Option<&'a Arc<HologramModel>>,
+}
+
+impl Networks<'_> {
+    /// Both networks, hologram CNN first.
+    pub(crate) fn each(&self) -> impl Iterator<Item = &Arc<HologramModel>> {
+        std::iter::once(self.hologram).chain(self.prefilter)
+    }
+}
+
+/// What an engine's timing chose ([`Engine::tune`]): the layout and threads of its fastest candidate, every
+/// candidate's timing, and the seconds the timing took.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Tuning {
+    pub(crate) layout: CnnLayout,
+    /// `None`: tract's process-wide executor.
+    pub(crate) threads: Option<usize>,
+    /// Every candidate timed, in order (empty when nothing was timed).
+    pub(crate) candidates: Vec<PlanTiming>,
+    /// Wall-clock seconds of the timing (plans and runs); 0 when nothing was timed or it came from a cache.
+    pub(crate) seconds: f64,
+}
+
+impl Tuning {
+    /// The fastest candidate's seconds, if any was timed.
+    pub(crate) fn best_seconds(&self) -> Option<f64> {
+        self.candidates
+            .iter()
+            .filter_map(|t| t.seconds)
+            .min_by(|a, b| a.total_cmp(b))
+    }
+}
+
+/// The plans an engine built for one session ([`Engine::plans`]).
+#[derive(Debug)]
+pub(crate) struct EnginePlans {
+    pub(crate) hologram: Box<dyn CnnPlan>,
+    pub(crate) prefilter: Option<Box<dyn CnnPlan>>,
+    /// The kernel row the layers run on (the native engine), for the report.
+    pub(crate) kernel: Option<String>,
+}
+
+/// One CPU CNN engine, as the session's engine choice (`cnn/select.rs`) asks it.
+pub(crate) trait Engine: Sync {
+    /// Which engine this is.
+    fn id(&self) -> CnnEngine;
+
+    /// `Ok` where this engine can run every network of `nets`, otherwise why not (the reason names the
+    /// network and what the engine lacks).
+    fn supports(&self, nets: Networks<'_>) -> Result<()>;
+
+    /// Times this engine's candidates of `request` (layouts × thread counts it has) for `height × width`
+    /// frames of `nets.hologram` and picks the fastest; a single candidate is timed only when `time_single`
+    /// (to compare engines).
+    ///
+    /// Errors: the engine's plan and run errors.
+    fn tune(
+        &self,
+        nets: Networks<'_>,
+        height: usize,
+        width: usize,
+        request: PlanRequest,
+        time_single: bool,
+    ) -> Result<Tuning>;
+
+    /// The plans of `nets` at `height × width` with `tuning`'s layout and threads (the pre-filter runs
+    /// channels-first with the same threads).
+    ///
+    /// Errors: the engine's plan errors.
+    fn plans(
+        &self,
+        nets: Networks<'_>,
+        height: usize,
+        width: usize,
+        tuning: &Tuning,
+    ) -> Result<EnginePlans>;
+}

@@ -1,0 +1,208 @@
+//! The native engine ([`CnnEngine::Native`]): the TensorHolo residual CNN read by [`crate::model::graph`] on
+//! our direct 3×3 convolution kernels (`tensorholo-kernels`, the SIMD row chosen from the CPU at run time).
+//!
+//! - `f32.rs`: f32 files (`NativePlan`): the frame in strips of at most 16 rows, every layer a row behind the
+//!   one before, residual adds and the final concat inside the kernels, row bands on the plan's own threads;
+//! - `int8.rs`: int8 QDQ files (`NativeInt8Plan`): the same plan on u8 activations, each buffer on the grid
+//!   the file gives its tensor; mixed-precision files' f32 first and last layers on the f32 kernels;
+//! - `strips.rs`: the line buffers both plans share (each activation in a window of a few rows).
+//!
+//! Its candidates are thread counts ([`NativeEngine`]'s [`Engine::tune`]); it has no per-model state beyond
+//! the graph the model reads once ([`crate::model::HologramModel::cnn_graph`]).
+
+mod f32;
+mod int8;
+mod strips;
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use super::engine::{Engine, EnginePlans, Networks, Tuning};
+use super::plan::{time_plan, CnnPlan};
+use super::tuning::{
+    auto_thread_candidates, timing_resolution, CnnEngine, CnnLayout, PlanRequest, PlanTiming,
+    ThreadCount,
+};
+use crate::error::{HoloError, Result};
+use crate::model::CnnWeights;
+
+#[cfg(test)]
+pub(super) use {f32::NativePlan, int8::NativeInt8Plan};
+
+/// The native engine (registered in `cnn/mod.rs`).
+pub(crate) struct NativeEngine;
+
+impl Engine for NativeEngine {
+    fn id(&self) -> CnnEngine {
+        CnnEngine::Native
+    }
+
+    fn supports(&self, nets: Networks<'_>) -> Result<()> {
+        for model in nets.each() {
+            model.cnn_graph()?;
+        }
+        active_isa().map(drop)
+    }
+
+    fn tune(
+        &self,
+        nets: Networks<'_>,
+        height: usize,
+        width: usize,
+        request: PlanRequest,
+        time_single: bool,
+    ) -> Result<Tuning> {
+        let graph = nets.hologram.cnn_graph()?;
+        let counts = match request.threads {
+            ThreadCount::Auto => auto_thread_candidates(),
+            ThreadCount::Fixed(n) => vec![n],
+            ThreadCount::ProcessDefault => vec![1],
+        };
+        if counts.len() == 1 && !time_single {
+            return Ok(Tuning {
+                layout: CnnLayout::ChannelsFirst,
+                threads: Some(counts[0]),
+                candidates: Vec::new(),
+                seconds: 0.0,
+            });
+        }
+        let [th, tw] = timing_resolution(height, width);
+        let start = Instant::now();
+        let isa = active_isa()?;
+        let mut candidates = Vec::new();
+        for &t in &counts {
+            let (mut plan, _) = native_plan(graph.clone(), th, tw, t, isa)?;
+            let s = time_plan(plan.as_mut(), graph.in_channels, th, tw)?;
+            candidates.push(PlanTiming {
+                engine: CnnEngine::Native,
+                layout: CnnLayout::ChannelsFirst,
+                threads: Some(t),
+                seconds: Some(s),
+                skipped: None,
+            });
+        }
+        let threads = candidates
+            .iter()
+            .filter_map(|c| Some((c.seconds?, c.threads?)))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map_or(1, |(_, t)| t);
+        Ok(Tuning {
+            layout: CnnLayout::ChannelsFirst,
+            threads: Some(threads),
+            candidates,
+            seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
+    fn plans(
+        &self,
+        nets: Networks<'_>,
+        height: usize,
+        width: usize,
+        tuning: &Tuning,
+    ) -> Result<EnginePlans> {
+        let isa = active_isa()?;
+        let threads = tuning.threads.unwrap_or(1);
+        let (hologram, kernel) =
+            native_plan(nets.hologram.cnn_graph()?, height, width, threads, isa)?;
+        let prefilter = match nets.prefilter {
+            Some(p) => Some(native_plan(p.cnn_graph()?, height, width, threads, isa)?.0),
+            None => None,
+        };
+        Ok(EnginePlans {
+            hologram,
+            prefilter,
+            kernel: Some(kernel.to_string()),
+        })
+    }
+}
+
+/// A native plan for `graph` at `height × width` on `threads` threads: the int8 engine for an int8 (QDQ)
+/// file, the f32 engine otherwise; with the name of the kernel row its layers run. Errors: as
+/// `NativePlan::new` / `NativeInt8Plan::new`.
+pub(super) fn native_plan(
+    graph: Arc<CnnWeights>,
+    height: usize,
+    width: usize,
+    threads: usize,
+    isa: tensorholo_kernels::Isa,
+) -> Result<(Box<dyn CnnPlan>, &'static str)> {
+    if graph.quant.is_some() {
+        let p = int8::NativeInt8Plan::new(graph, height, width, threads, isa)?;
+        let k = p.kernel_name();
+        Ok((Box::new(p), k))
+    } else {
+        let p = f32::NativePlan::new(graph, height, width, threads, isa)?;
+        let k = p.kernel_name();
+        Ok((Box::new(p), k))
+    }
+}
+
+/// `model`'s native plan for `height × width` frames on one thread of `isa`'s kernel rows, whatever the
+/// active ISA (the per-runtime suite, `pipeline/suite.rs`).
+#[cfg(test)]
+pub(crate) fn native_plan_on(
+    model: &crate::model::HologramModel,
+    height: usize,
+    width: usize,
+    isa: tensorholo_kernels::Isa,
+) -> Result<Box<dyn CnnPlan>> {
+    native_plan(model.cnn_graph()?, height, width, 1, isa).map(|(plan, _)| plan)
+}
+
+/// [`tensorholo_kernels::Isa::active`] with its error as the SDK's ([`kernel_err`]).
+fn active_isa() -> Result<tensorholo_kernels::Isa> {
+    tensorholo_kernels::Isa::active().map_err(kernel_err)
+}
+
+/// A kernel-crate error as [`HoloError::ModelRun`], naming the native engine.
+fn kernel_err(e: tensorholo_kernels::KernelError) -> HoloError {
+    HoloError::ModelRun(format!("native CNN engine: {e}"))
+}
+
+/// The CPU features the native engine's kernels use on this machine (`avx2`, `avx512`, `neondot`, …;
+/// lowered by the `TENSORHOLO_ISA` environment variable), or why it cannot run.
+///
+/// Errors: [`HoloError::ModelRun`] where the `TENSORHOLO_ISA` override names an unknown or unavailable ISA.
+pub fn native_isa() -> Result<&'static str> {
+    active_isa().map(|i| i.name())
+}
+
+/// This machine's measured f32 peak in GFLOP/s for `threads` threads: one FMA loop per thread in registers
+/// (the widest FMA of [`native_isa`]), about `millis` ms, all threads at once: the denominator of "% of
+/// peak" in `holo bench --peak`. Errors: as [`native_isa`].
+pub fn f32_peak_gflops(threads: usize, millis: u64) -> Result<f64> {
+    on_threads(threads, |isa| {
+        tensorholo_kernels::peak::f32_fma_gflops(isa, millis)
+    })
+}
+
+/// This machine's measured int8 multiply-accumulate peak in GOP/s (a multiply-add counts 2) for `threads`
+/// threads: the best int8 dot-product instruction of [`native_isa`] (`vpdpbusd` with VNNI, `vpmaddwd` on
+/// AVX2, `USDOT`/`SDOT`/`SMLAL` on aarch64) in a register loop on every thread, about `millis` ms.
+/// Errors: as [`native_isa`].
+pub fn int8_peak_gops(threads: usize, millis: u64) -> Result<f64> {
+    on_threads(threads, |isa| {
+        tensorholo_kernels::peak::int8_dot_gops(isa, millis)
+    })
+}
+
+/// Runs `f` on `threads` threads at once and sums what they measured.
+fn on_threads(
+    threads: usize,
+    f: impl Fn(tensorholo_kernels::Isa) -> std::result::Result<f64, tensorholo_kernels::KernelError>
+        + Sync,
+) -> Result<f64> {
+    let isa = active_isa()?;
+    let f = &f;
+    let per: Vec<f64> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads.max(1))
+            .map(|_| s.spawn(move || f(isa)))
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().ok().and_then(|r| r.ok()).unwrap_or(0.0))
+            .collect()
+    });
+    Ok(per.iter().sum())
+}
