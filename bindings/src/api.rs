@@ -9,7 +9,6 @@ use tensorholo::cnn::ThreadCount;
 use tensorholo::generator as core;
 use tensorholo::model::DEFAULT_INT8;
 use tensorholo::optics::OpticalSetup;
-use tensorholo::pipeline::ModelSelection;
 use tensorholo::scene::{self, DepthRange};
 
 use crate::{guard, TensorholoError};

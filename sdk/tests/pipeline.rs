@@ -1,19 +1,17 @@
 //! The real-time pipeline (`tensorholo::pipeline`, docs/CONVENTIONS.md §8) on the random-init fixture CNNs:
-//! the session against a naive composition of the SDK's stand-alone stages, streaming vs single frames, and
-//! bad input.
+//! layouts, streaming vs single frames, and bad input. The session against a naive composition of the SDK's
+//! stand-alone stages, on every engine and executor, is the per-runtime suite (`sdk/src/pipeline/suite.rs`).
 // Some helpers and imports serve only the tests that compare with tract (cargo feature `tract`).
 #![cfg_attr(not(feature = "tract"), allow(unused_imports, dead_code))]
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use ndarray::{Array2, Array3, Axis};
+use ndarray::{Array2, Array3};
 #[cfg(feature = "tract")]
 use tensorholo::cnn::tract::TractModel;
 use tensorholo::cnn::{CnnEngine, CnnLayout};
-use tensorholo::encoding::{double_phase_encode, phase_to_codes};
 use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
-use tensorholo::optics::{propagate_colour, Carrier};
 use tensorholo::pipeline::{Backend, HologramPipeline, PipelineConfig};
 use tensorholo::scene::RgbdFrame;
 use tensorholo::HoloError;
@@ -62,69 +60,6 @@ fn frame(h: usize, w: usize, seed: usize) -> RgbdFrame {
     });
     let depth = Array2::from_shape_fn((h, w), |(y, x)| ((x + 2 * y + seed) % 11) as f32 / 10.0);
     RgbdFrame::new(amp, depth).unwrap()
-}
-
-/// The same frame through the stand-alone SDK functions, allocating freely: CNN → field → offset
-/// propagation → (pre-filter CNN) → double phase → codes.
-#[cfg(feature = "tract")]
-fn naive(p: &HologramPipeline, f: &RgbdFrame) -> (Array3<f32>, Array3<u8>) {
-    let cfg = p.config();
-    let mut field = TractModel::new(p.hologram_model())
-        .unwrap()
-        .run_frame(f)
-        .unwrap();
-    propagate_colour(
-        &mut field,
-        &cfg.optics,
-        cfg.offset_m,
-        Carrier::Remove,
-        cfg.options,
-    )
-    .unwrap();
-    if let Some(pre) = p.prefilter_model() {
-        let (_, h, w) = field.dim();
-        let mut input = Array3::<f32>::zeros((6, h, w));
-        for c in 0..3 {
-            for ((y, x), v) in field.index_axis(Axis(0), c).indexed_iter() {
-                input[[c, y, x]] = v.re;
-                input[[3 + c, y, x]] = v.im;
-            }
-        }
-        field = TractModel::new(pre).unwrap().run(input.view()).unwrap();
-    }
-    let dp = double_phase_encode(field.view(), &p.encoding()).unwrap();
-    let codes = phase_to_codes(dp.phase.view());
-    (dp.phase, codes)
-}
-
-#[cfg(feature = "tract")]
-fn assert_matches_naive(p: &HologramPipeline, f: &RgbdFrame) {
-    let (phase, codes) = naive(p, f);
-    let mut session = p.session(f.height(), f.width()).unwrap();
-    let out = session.render(f).unwrap();
-    // The same kernels run in the same order (per colour), so the session reproduces the stand-alone stages
-    // exactly, even though its buffers and threads differ.
-    let worst = out
-        .phase
-        .iter()
-        .zip(phase.iter())
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
-    println!(
-        "prefilter {}: max phase difference {worst:.2e} rad",
-        p.prefilter_model().is_some()
-    );
-    assert_eq!(worst, 0.0);
-    assert_eq!(out.codes, codes);
-    assert!(out.timings.cnn_s > 0.0 && out.timings.total_s >= out.timings.cnn_s);
-}
-
-#[test]
-#[cfg(feature = "tract")]
-fn session_equals_the_naive_composition_with_and_without_prefilter() {
-    let f = frame(24, 32, 0);
-    assert_matches_naive(&pipeline(true), &f);
-    assert_matches_naive(&pipeline(false), &f);
 }
 
 /// The hologram CNN run channels-last gives the same hologram as channels-first up to float rounding, so the

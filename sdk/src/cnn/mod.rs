@@ -11,7 +11,7 @@
 //! - `native/`: our direct 3×3 convolutions (`tensorholo-kernels`, SIMD rows chosen at run time) over the
 //!   graph read by [`crate::model::graph`]; f32 and int8 QDQ files;
 //! - `tract/` (cargo feature `tract`): tract's optimised plans, any ONNX graph that passes the contract
-//!   (`docs/CONVENTIONS.md` §7), with its own per-model plan cache ([`tract::TractModel`]);
+//!   (`docs/CONVENTIONS.md` §7), with its own per-model plan cache (`tract::TractModel`);
 //! - `registry`: the engines of this build, the one place an engine is registered;
 //! - `select`: the engine of a session ([`CnnEngine::Auto`] times those that can run the file),
 //!   [`cnn_plan`] for one CNN (what `holo bench` times), [`check_runnable`].
@@ -37,7 +37,7 @@ pub use tuning::{
     MAX_CNN_THREADS,
 };
 
-#[cfg(test)]
+#[cfg(all(test, feature = "tract"))]
 pub(crate) use native::native_plan_on;
 pub(crate) use plan::CnnPlan;
 pub(crate) use select::{select, CnnPlans};

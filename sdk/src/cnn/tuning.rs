@@ -32,7 +32,7 @@ pub const MAX_CNN_THREADS: usize = 256;
 /// - [`CnnEngine::Tract`]: tract's optimised plans (any file that passes the contract, int8 included; cargo
 ///   feature `tract`, [`CnnEngine::cargo_feature`]).
 /// - [`CnnEngine::Auto`] (the default): the engines of this build that can run the file are timed at session
-///   creation on this machine ([`crate::cnn::timing_resolution`]) and the faster runs; int8 QOperator files
+///   creation on this machine (on the frame, or a full-width strip of a large one) and the faster runs; int8 QOperator files
 ///   run on tract. The choice and the timings are in [`crate::cnn::PlanReport`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]

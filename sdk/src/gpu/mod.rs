@@ -1,7 +1,7 @@
 //! The GPU path (cargo feature `gpu`): a whole hologram frame — hologram CNN, offset propagation (Eq. 6),
 //! pre-filter CNN, double phase encoding (Eq. 7) and look-up table — as WGSL compute shaders run by wgpu on
 //! Metal (iOS, macOS) or Vulkan (Android, Linux). It sits below the pipeline and imports nothing of it: the
-//! pipeline wraps [`session`]'s frame as one of its frame executors. The CPU path stays the reference: every
+//! pipeline wraps `session`'s frame as one of its frame executors. The CPU path stays the reference: every
 //! kernel here is tested against it (the unit tests of each module, `sdk/tests/gpu_pipeline.rs`), and the
 //! pipeline's `Backend::Auto` falls back to it when no adapter exists or a first-frame self-check fails. Apps
 //! see the [`GpuContext`] (to share their own device) and its reports; the frame itself is crate-private.

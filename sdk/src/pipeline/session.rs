@@ -52,7 +52,7 @@ pub struct HologramSession {
 impl HologramSession {
     /// Replaces the display calibration of this session's next frames (`None`: an ideal SLM, linear look-up
     /// tables and no intensity scaling), e.g. after recalibrating the bench, without rebuilding the session.
-    /// See [`HologramPipeline::with_calibration`].
+    /// See [`HologramPipeline::with_calibration`](crate::pipeline::HologramPipeline::with_calibration).
     ///
     /// Errors: [`HoloError::ShapeMismatch`] if the calibration is for another SLM size;
     /// [`HoloError::InvalidParameter`] if its wavelengths differ from the display's by more than 1 nm. The
@@ -91,7 +91,7 @@ impl HologramSession {
     }
 
     /// How the hologram CNN's plan was chosen: the engine and why, layout, threads, and the autotuning
-    /// timings ([`crate::cnn::select`]). The pre-filter CNN runs on the same engine with the same threads.
+    /// timings (the session's engine choice, as [`crate::cnn::cnn_plan`] makes it). The pre-filter CNN runs on the same engine with the same threads.
     pub fn plan_report(&self) -> &PlanReport {
         &self.plan_report
     }

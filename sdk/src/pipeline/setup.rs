@@ -30,7 +30,7 @@ impl HologramPipeline {
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`size`) for a size of 0 or above
     /// [`MAX_HOLOGRAM_PIXELS`], checked first; [`HoloError::ShapeMismatch`] for a display calibration of
-    /// another size; as [`crate::cnn::select`] (the CNN engine's plans), [`crate::optics::SpectralPlan::new`]
+    /// another size; as [`crate::cnn::cnn_plan`] (the CNN engine's plans), [`crate::optics::SpectralPlan::new`]
     /// and [`ChannelEncoder::new`]; with [`Backend::Gpu`], the GPU's errors ([`HoloError::Gpu`]).
     pub fn session(&self, height: usize, width: usize) -> Result<HologramSession> {
         HologramSession::new(self, height, width)

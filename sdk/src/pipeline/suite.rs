@@ -111,9 +111,13 @@ fn pipeline(case: &Case, backend: Backend, engine: CnnEngine) -> HologramPipelin
     HologramPipeline::embedded(&selection, config).unwrap()
 }
 
-/// The reference frame of `p`: its CNNs on tract, run stand-alone, and the stand-alone optics; the
-/// heads `[6, H, W]` (amplitude, phase) and the SLM codes `[3, H, W]`.
-fn reference(p: &HologramPipeline, f: &RgbdFrame) -> (Array3<f32>, Array3<u8>) {
+/// What a frame gives: the heads `[6, H, W]` (amplitude, phase), the double phase pattern `[3, H, W]`
+/// (radians) and the SLM codes `[3, H, W]`.
+type Frame = (Array3<f32>, Array3<f32>, Array3<u8>);
+
+/// The reference frame of `p`: its CNNs on tract, run stand-alone, and the stand-alone optics and encoding
+/// functions, allocating freely.
+fn reference(p: &HologramPipeline, f: &RgbdFrame) -> Frame {
     let cfg = p.config();
     let (h, w) = (f.height(), f.width());
     let mut input = Array3::zeros((4, h, w));
@@ -143,12 +147,13 @@ fn reference(p: &HologramPipeline, f: &RgbdFrame) -> (Array3<f32>, Array3<u8>) {
         field = TractModel::new(pre).unwrap().run(planes.view()).unwrap();
     }
     let dp = double_phase_encode(field.view(), &p.encoding()).unwrap();
-    (heads, phase_to_codes(dp.phase.view()))
+    let codes = phase_to_codes(dp.phase.view());
+    (heads, dp.phase, codes)
 }
 
-/// `case` on `runtime`: the heads `[6, H, W]` and codes `[3, H, W]`, or `None` (with the reason printed)
-/// where this machine or this case has no such runtime.
-fn run(case: &Case, runtime: Runtime, f: &RgbdFrame) -> Option<(Array3<f32>, Array3<u8>)> {
+/// `case` on `runtime`, or `None` (with the reason printed) where this machine or this case has no such
+/// runtime.
+fn run(case: &Case, runtime: Runtime, f: &RgbdFrame) -> Option<Frame> {
     let (h, w) = (case.height, case.width);
     let mut session = match runtime {
         Runtime::CpuTract => pipeline(case, Backend::Cpu, CnnEngine::Tract)
@@ -181,11 +186,13 @@ fn run(case: &Case, runtime: Runtime, f: &RgbdFrame) -> Option<(Array3<f32>, Arr
             return None;
         }
     };
-    let out = session.render(f).unwrap().codes.clone();
+    let out = session.render(f).unwrap();
+    assert!(out.timings.total_s > 0.0);
+    let (phase, codes) = (out.phase.clone(), out.codes.clone());
     let heads = session.last_heads().expect("full outputs keep the heads");
     let heads =
         ndarray::concatenate(Axis(0), &[heads.amplitude.view(), heads.phase.view()]).unwrap();
-    Some((heads, out))
+    Some((heads, phase, codes))
 }
 
 /// Codes whose cyclic difference is more than one step (one LUT step is a rounding tie).
@@ -200,11 +207,11 @@ fn codes_off(a: &Array3<u8>, b: &Array3<u8>) -> usize {
 fn every_runtime_renders_every_case_as_the_reference() {
     for case in cases() {
         let f = frame(case.height, case.width);
-        let (ref_heads, ref_codes) =
+        let (ref_heads, ref_phase, ref_codes) =
             reference(&pipeline(&case, Backend::Cpu, CnnEngine::Tract), &f);
         println!("{}:", case.name);
         for runtime in runtimes() {
-            let Some((heads, codes)) = run(&case, runtime, &f) else {
+            let Some((heads, phase, codes)) = run(&case, runtime, &f) else {
                 continue;
             };
             let heads_err = heads
@@ -217,7 +224,12 @@ fn every_runtime_renders_every_case_as_the_reference() {
                 "  {runtime:?}: heads max |Δ| {heads_err:.1e}, {off} of {} codes off by > 1 step",
                 codes.len()
             );
-            // tract in the session is the reference's own CNN: bit for bit. The native kernels sum in
+            // tract in the session is the reference's own CNN, and the session's optics run the same kernels
+            // in the same order per colour as the stand-alone functions: bit for bit.
+            if let Runtime::CpuTract = runtime {
+                assert_eq!(phase, ref_phase, "{}: the double phase pattern", case.name);
+            }
+            // tract in the session: bit for bit (above). The native kernels sum in
             // another order (f32: float rounding; int8: the same integer sums, rounding at the requantised
             // grid points); the GPU in f32 as the self-check of `Backend::Auto` allows.
             let (max_heads, max_off) = match (runtime, case.precision) {

@@ -140,7 +140,7 @@ pub(super) fn native_plan(
 
 /// `model`'s native plan for `height × width` frames on one thread of `isa`'s kernel rows, whatever the
 /// active ISA (the per-runtime suite, `pipeline/suite.rs`).
-#[cfg(test)]
+#[cfg(all(test, feature = "tract"))]
 pub(crate) fn native_plan_on(
     model: &crate::model::HologramModel,
     height: usize,

@@ -277,7 +277,8 @@ impl TractModel {
     /// The fastest plan of `request` for `height × width` inputs, and the report of how it was chosen.
     ///
     /// Every candidate (layouts × thread counts; a layout tract cannot apply to this graph is skipped with
-    /// the reason) runs on a constant input at [`timing_resolution`]: once, or three times when a run takes
+    /// the reason) runs on a constant input at the timing resolution (the frame, or a full-width strip of a frame above
+    /// 64 Ki pixels): once, or three times when a run takes
     /// under 0.25 s (the fastest run counts). The winner's plan is then built at the real resolution (cached
     /// like [`TractModel::plan_with_layout`]'s) with its thread count ([`ModelPlan::with_threads`]).
     /// With a single candidate nothing is timed. Results are cached per `(height, width, request)`.
