@@ -1,6 +1,6 @@
 //! [`Engine`]: what a CPU CNN engine answers so that a session's engine choice (`cnn/select.rs`) can ask it:
 //! whether it runs a model, its timing, its plans. An engine is a folder under `cnn/` implementing it and one
-//! entry in `cnn/registry.rs`.
+//! entry in the registry (`cnn/mod.rs`).
 
 use std::sync::Arc;
 
@@ -56,6 +56,9 @@ pub(crate) struct EnginePlans {
 }
 
 /// One CPU CNN engine, as the session's engine choice (`cnn/select.rs`) asks it.
+/// The engines of a build, best first (`cnn/mod.rs` registers them; `cnn/select.rs` reads them).
+pub(crate) type Registry = &'static [&'static dyn Engine];
+
 pub(crate) trait Engine: Sync {
     /// Which engine this is.
     fn id(&self) -> CnnEngine;

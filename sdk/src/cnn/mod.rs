@@ -12,12 +12,14 @@
 //!   graph read by [`crate::model::graph`]; f32 and int8 QDQ files;
 //! - `tract/` (cargo feature `tract`): tract's optimised plans, any ONNX graph that passes the contract
 //!   (`docs/CONVENTIONS.md` §7), with its own per-model plan cache (`tract::TractModel`);
-//! - `registry`: the engines of this build, the one place an engine is registered;
 //! - `select`: the engine of a session ([`CnnEngine::Auto`] times those that can run the file),
-//!   [`cnn_plan`] for one CNN (what `holo bench` times), [`check_runnable`].
+//!   [`cnn_plan`] for one CNN (what `holo bench` times), [`check_runnable`], over the engines it is given;
+//! - this file: the registry, the engines of this build (`engines`, the one place an engine is registered,
+//!   and the one `cfg(feature = "tract")` outside `tract/`), and the entry points over it.
 //!
 //! A new engine (or a second plan family of the native engine, such as Winograd convolutions) is a folder
-//! here implementing `Engine` plus one entry in `registry.rs`.
+//! here implementing `Engine`, its `mod` line and entry in `engines` here, and its [`CnnEngine`] variant in
+//! `tuning.rs`: three files.
 //!
 //! The GPU runs whole frames, not CNNs alone: it is a frame executor of the pipeline (`pipeline/executor.rs`),
 //! not an engine here.
@@ -25,13 +27,19 @@
 mod engine;
 mod native;
 mod plan;
-mod registry;
 mod select;
 pub mod tract;
 mod tuning;
 
+use std::sync::Arc;
+
+use engine::Registry;
+
+use crate::error::Result;
+use crate::model::HologramModel;
+
 pub use native::{f32_peak_gflops, int8_peak_gops, native_isa};
-pub use select::{check_runnable, cnn_plan, CpuCnnPlan};
+pub use select::CpuCnnPlan;
 pub use tuning::{
     auto_thread_candidates, CnnEngine, CnnLayout, PlanReport, PlanRequest, PlanTiming, ThreadCount,
     MAX_CNN_THREADS,
@@ -40,7 +48,67 @@ pub use tuning::{
 #[cfg(all(test, feature = "tract"))]
 pub(crate) use native::native_plan_on;
 pub(crate) use plan::CnnPlan;
-pub(crate) use select::{select, CnnPlans};
+pub(crate) use select::CnnPlans;
+
+/// The CPU CNN engines compiled into this build, best first: the native engine, and tract with the cargo
+/// feature `tract`. The one place an engine is registered.
+fn engines() -> Registry {
+    &[
+        &native::NativeEngine,
+        #[cfg(feature = "tract")]
+        &tract::TractEngine,
+    ]
+}
+
+/// The plans for `height × width` frames of `hologram` (and `prefilter`) on `engine`, with tract's layout
+/// and threads from `request` (the native engine uses `request.threads`): a session's CNNs.
+///
+/// Errors: [`crate::HoloError::InvalidParameter`] (`engine`) for an engine this build lacks (naming its
+/// cargo feature) or one that cannot run the file (the reason is given);
+/// [`crate::HoloError::ShapeMismatch`] if the file fixes another size; the engines' plan and run errors.
+pub(crate) fn select(
+    hologram: &Arc<HologramModel>,
+    prefilter: Option<&Arc<HologramModel>>,
+    height: usize,
+    width: usize,
+    engine: CnnEngine,
+    request: PlanRequest,
+) -> Result<CnnPlans> {
+    select::select(
+        engines(),
+        hologram,
+        prefilter,
+        height,
+        width,
+        engine,
+        request,
+    )
+}
+
+/// Refuses a model that no CPU engine of this build can run, when a pipeline is made (so that a phone build
+/// without tract refuses such a file before any session): `Ok` where one engine runs it.
+///
+/// Errors: [`HoloError::ModelContract`] naming why each engine cannot run it and the cargo features this
+/// build leaves out; [`HoloError::ModelLoad`] where the last engine tried cannot read the file at all.
+pub fn check_runnable(model: &Arc<HologramModel>) -> Result<()> {
+    select::check_runnable(engines(), model)
+}
+
+/// `model`'s CNN for `height × width` inputs on `engine` (tract's layout and threads from `request`; the
+/// native engine uses `request.threads`), and how it was chosen, as a session chooses
+/// ([`PipelineConfig::cnn_engine`](crate::pipeline::PipelineConfig::cnn_engine)).
+///
+/// Errors: as the session's choice: [`HoloError::InvalidParameter`] (`engine`) for an engine this build
+/// lacks or one that cannot run the file; the engine's plan errors.
+pub fn cnn_plan(
+    model: &Arc<HologramModel>,
+    height: usize,
+    width: usize,
+    engine: CnnEngine,
+    request: PlanRequest,
+) -> Result<(CpuCnnPlan, PlanReport)> {
+    select::cnn_plan(engines(), model, height, width, engine, request)
+}
 
 #[cfg(all(test, feature = "embedded-models"))]
 mod tests;

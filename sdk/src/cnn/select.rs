@@ -1,6 +1,6 @@
 //! [`select`]: the CNN plans of one session, on the engine [`CnnEngine`] asks for or, for
 //! [`CnnEngine::Auto`], on the engine of this build that ran fastest on this machine at session creation;
-//! [`cnn_plan`] does the same for one CNN (what `holo bench` times), and [`check_runnable`] refuses, when a
+//! [`super::cnn_plan`] does the same for one CNN (what `holo bench` times), and [`super::check_runnable`] refuses, when a
 //! pipeline is made, a model no engine of this build can run.
 //!
 //! The timing rule is the same for every engine ([`crate::cnn::tuning`]): the same input (a constant 0.5),
@@ -12,9 +12,8 @@ use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3};
 
-use super::engine::{Engine, Networks, Tuning};
+use super::engine::{Engine, Networks, Registry, Tuning};
 use super::plan::CnnPlan;
-use super::registry::engines;
 use super::tuning::{timing_resolution, CnnEngine, PlanReport, PlanRequest};
 use crate::error::{invalid, HoloError, Result};
 use crate::model::HologramModel;
@@ -33,7 +32,8 @@ pub(crate) struct CnnPlans {
 /// Errors: [`HoloError::InvalidParameter`] (`engine`) for an engine this build lacks (naming its cargo
 /// feature) or one that cannot run the file (the reason is given); [`HoloError::ShapeMismatch`] if the file
 /// fixes another size; the engines' plan and run errors.
-pub(crate) fn select(
+pub(super) fn select(
+    engines: Registry,
     hologram: &Arc<HologramModel>,
     prefilter: Option<&Arc<HologramModel>>,
     height: usize,
@@ -47,13 +47,13 @@ pub(crate) fn select(
         prefilter,
     };
     if engine != CnnEngine::Auto {
-        let chosen = find(engine)?;
+        let chosen = find(engines, engine)?;
         if let Err(e) = chosen.supports(nets) {
             return Err(invalid(
                 "engine",
                 format!(
                     "the {engine} CNN engine cannot run this model: {e}{}",
-                    others(engine)
+                    others(engines, engine)
                 ),
             ));
         }
@@ -62,7 +62,7 @@ pub(crate) fn select(
     }
     let mut able = Vec::new();
     let mut unable = Vec::new();
-    for e in engines() {
+    for e in engines {
         match e.supports(nets) {
             Ok(()) => able.push(*e),
             Err(err) => unable.push((e.id(), err)),
@@ -75,7 +75,10 @@ pub(crate) fn select(
             .unwrap_or_else(|| HoloError::Internal("no CNN engine is registered".into()))),
         [only] => {
             let why = if unable.is_empty() {
-                format!("the only CPU engine of this build{}", missing_features())
+                format!(
+                    "the only CPU engine of this build{}",
+                    missing_features(engines)
+                )
             } else {
                 unable
                     .iter()
@@ -166,8 +169,8 @@ fn build(
 
 /// The registered engine `id`. Errors: [`HoloError::InvalidParameter`] (`engine`) for one this build lacks,
 /// naming its cargo feature.
-fn find(id: CnnEngine) -> Result<&'static dyn Engine> {
-    engines()
+fn find(engines: Registry, id: CnnEngine) -> Result<&'static dyn Engine> {
+    engines
         .iter()
         .copied()
         .find(|e| e.id() == id)
@@ -178,15 +181,15 @@ fn find(id: CnnEngine) -> Result<&'static dyn Engine> {
                 format!(
                     "this build has no {id} engine (cargo feature `{feature}` of tensorholo and \
                  tensorholo-ffi, on by default){}",
-                    others(id)
+                    others(engines, id)
                 ),
             )
         })
 }
 
 /// "; use the X engine" naming the other engines of this build, or nothing.
-fn others(id: CnnEngine) -> String {
-    let names: Vec<&str> = engines()
+fn others(engines: Registry, id: CnnEngine) -> String {
+    let names: Vec<&str> = engines
         .iter()
         .map(|e| e.id())
         .filter(|&e| e != id)
@@ -199,10 +202,10 @@ fn others(id: CnnEngine) -> String {
 }
 
 /// " (no cargo feature `tract`)" for the engines this build leaves out, or nothing.
-fn missing_features() -> String {
+fn missing_features(engines: Registry) -> String {
     let missing: Vec<String> = CnnEngine::ENGINES
         .iter()
-        .filter(|id| engines().iter().all(|e| e.id() != **id))
+        .filter(|id| engines.iter().all(|e| e.id() != **id))
         .filter_map(|id| id.cargo_feature())
         .map(|f| format!("`{f}`"))
         .collect();
@@ -213,24 +216,20 @@ fn missing_features() -> String {
     }
 }
 
-/// Refuses a model that no CPU engine of this build can run, when a pipeline is made (so that a phone build
-/// without tract refuses such a file before any session): `Ok` where one engine runs it.
-///
-/// Errors: [`HoloError::ModelContract`] naming why each engine cannot run it and the cargo features this
-/// build leaves out; [`HoloError::ModelLoad`] where the last engine tried cannot read the file at all.
-pub fn check_runnable(model: &Arc<HologramModel>) -> Result<()> {
+/// [`super::check_runnable`] over `engines`.
+pub(super) fn check_runnable(engines: Registry, model: &Arc<HologramModel>) -> Result<()> {
     let nets = Networks {
         hologram: model,
         prefilter: None,
     };
     let mut reasons = Vec::new();
-    for e in engines() {
+    for e in engines {
         match e.supports(nets) {
             Ok(()) => return Ok(()),
             Err(err) => reasons.push((e.id(), err)),
         }
     }
-    let missing = missing_features();
+    let missing = missing_features(engines);
     if missing.is_empty() {
         if let Some((_, last)) = reasons.pop() {
             return Err(last);
@@ -253,7 +252,7 @@ pub fn check_runnable(model: &Arc<HologramModel>) -> Result<()> {
     })
 }
 
-/// One CNN at one resolution on the engine [`cnn_plan`] chose: what `holo bench` times, engine against
+/// One CNN at one resolution on the engine [`super::cnn_plan`] chose: what `holo bench` times, engine against
 /// engine. A session builds its own plans; this is for measuring the CNN alone.
 #[derive(Debug)]
 pub struct CpuCnnPlan(Box<dyn CnnPlan>);
@@ -271,19 +270,15 @@ impl CpuCnnPlan {
     }
 }
 
-/// `model`'s CNN for `height × width` inputs on `engine` (tract's layout and threads from `request`; the
-/// native engine uses `request.threads`), and how it was chosen, as a session chooses
-/// ([`PipelineConfig::cnn_engine`](crate::pipeline::PipelineConfig::cnn_engine)).
-///
-/// Errors: as the session's choice: [`HoloError::InvalidParameter`] (`engine`) for an engine this build
-/// lacks or one that cannot run the file; the engine's plan errors.
-pub fn cnn_plan(
+/// [`super::cnn_plan`] over `engines`.
+pub(super) fn cnn_plan(
+    engines: Registry,
     model: &Arc<HologramModel>,
     height: usize,
     width: usize,
     engine: CnnEngine,
     request: PlanRequest,
 ) -> Result<(CpuCnnPlan, PlanReport)> {
-    let plans = select(model, None, height, width, engine, request)?;
+    let plans = select(engines, model, None, height, width, engine, request)?;
     Ok((CpuCnnPlan(plans.hologram), plans.report))
 }

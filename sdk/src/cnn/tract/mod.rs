@@ -25,7 +25,7 @@ use super::tuning::{CnnEngine, PlanRequest, PlanTiming};
 use crate::error::Result;
 use crate::model::HologramModel;
 
-/// The tract engine (registered in `cnn/registry.rs`).
+/// The tract engine (registered in `cnn/mod.rs`).
 pub(crate) struct TractEngine;
 
 /// The engine's [`TractModel`]s, one per live model (a model is known by its `Arc`; an entry whose model was
