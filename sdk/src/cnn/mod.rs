@@ -35,6 +35,8 @@ use std::sync::Arc;
 
 use engine::Registry;
 
+#[cfg(doc)]
+use crate::error::HoloError;
 use crate::error::Result;
 use crate::model::HologramModel;
 
