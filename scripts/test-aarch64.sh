@@ -7,7 +7,8 @@
 # /usr/aarch64-linux-gnu` the runner. Installs what is missing (apt: gcc-aarch64-linux-gnu,
 # libc6-dev-arm64-cross, qemu-user; rustup: the target).
 #
-# What runs: the kernels crate under three emulated CPUs (see the end), the native CNN engine against tract
+# What runs: the kernels crate under three emulated CPUs (see the end), the aarch64 `holo render` on a real
+# frame against the x86-64 one (`holo compare`), the native CNN engine against tract
 # (the `cnn::` unit tests), and every shipped CNN (8/15/30 layers, pre-filters; f32, int8 QOperator and QDQ) and the fixture
 # CNNs against their PyTorch outputs with the x86 tolerances (tests model, shipped_models), the pipeline
 # tests (session vs the stand-alone stages, streaming, bad input), and platform_parity: the built-in scene
@@ -31,10 +32,30 @@ cargo test --locked --target "$target" -p tensorholo --no-default-features \
   grep -vE '^(running [0-9]+ tests?|)$'
 
 # The native CNN engine (NEON kernel rows) against tract on every shipped f32 CNN, threads and bad input: the
-# SDK's unit tests of `cnn` (sdk/src/cnn/tests.rs), same features as above.
+# SDK's unit tests of `cnn` (sdk/src/cnn/tests.rs); and the per-runtime suite (sdk/src/pipeline/suite.rs): one
+# list of frames through the session on tract and on the native engine at every NEON row qemu's `max` CPU
+# has, each against the stand-alone reference. Same features as above.
 cargo test --locked --target "$target" -p tensorholo --no-default-features \
-  --features "embedded-models models-15 models-30 tract" --lib "$@" -- --nocapture cnn:: 2>&1 |
+  --features "embedded-models models-15 models-30 tract" --lib "$@" -- --nocapture cnn:: pipeline::suite 2>&1 |
   grep -vE '^(running [0-9]+ tests?|)$'
+
+# The CLI itself on ARM: the aarch64 `holo` (dev profile) starts under qemu-user without binfmt (it sets
+# glibc's mmap threshold in-process, no re-execution) and renders a real RGB-D frame (TUM, ../shared/data),
+# which `holo compare` then holds against the x86-64 render of the same command: at most 0.1 % of the SLM codes
+# may differ, none by more than one step.
+if [ "$#" -eq 0 ]; then
+  frame=(--rgb ../shared/data/tum/TUM_color.png --depth ../shared/data/tum/TUM_depth.png
+    --depth-encoding tum --size 96x128 --backend cpu --engine native --threads 1)
+  out="$(mktemp -d)"
+  trap 'rm -rf "$out"' EXIT
+  # Without the `gpu` feature (wgpu is not what this step tests, and it would double the cross build).
+  cargo build --locked -p holo --no-default-features
+  cargo build --locked --target "$target" -p holo --no-default-features
+  target/debug/holo render "${frame[@]}" --out "$out/x86" >/dev/null
+  echo "== holo render (aarch64, qemu-user)"
+  qemu-aarch64 -L /usr/aarch64-linux-gnu "target/$target/debug/holo" render "${frame[@]}" --out "$out/arm"
+  target/debug/holo compare "$out/x86" "$out/arm" --max-code-fraction 0.001
+fi
 
 # The kernels crate (kernels/, tensorholo-kernels) under three emulated CPUs, so that every aarch64 kernel row
 # runs: `max` has dot product and i8mm (rows neon, neondot, neoni8mm), `cortex-a76` dot product only (neon,

@@ -25,8 +25,8 @@ case "$part" in all | frames | cnn) ;; *) echo "third argument: all, frames or c
 [ -x "$holo" ] || { echo "no aarch64 holo at $holo: cargo build --release --target aarch64-unknown-linux-gnu -p holo" >&2; exit 1; }
 command -v qemu-aarch64 >/dev/null || { echo "needs qemu-aarch64 (Debian qemu-user)" >&2; exit 1; }
 
-# holo re-executes itself once to set glibc's mmap threshold unless the variable is set already; set it here, so
-# that the counted process is the one that runs the frames (a re-executed guest would escape the plugin).
+# holo sets glibc's mmap threshold in-process (1 MiB) unless this variable is set; setting it here keeps older
+# binaries (which re-executed themselves, escaping the plugin) countable too.
 export MALLOC_MMAP_THRESHOLD_=1048576
 
 work="$(mktemp -d)"

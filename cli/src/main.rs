@@ -80,25 +80,25 @@ enum Command {
 
 /// glibc's malloc keeps freed frame-sized buffers in its heaps once a large free has raised its mmap
 /// threshold (up to 32 MB), so a 1080p run would stay ~170 MB above what it uses. A threshold fixed at 1 MB
-/// hands every buffer of a megabyte or more back to the system when freed. glibc reads it only at start-up,
-/// from the environment, so `holo` sets it and re-executes itself once (safe code; if the exec fails, the run
-/// goes on with glibc's defaults). Other C libraries (musl, Apple's, Android's) ignore the variable.
+/// hands every buffer of a megabyte or more back to the system when freed. It is set in-process, first thing
+/// in `main` (before any large allocation), with `mallopt(M_MMAP_THRESHOLD)`, which also turns glibc's dynamic
+/// threshold off, as the environment variable `MALLOC_MMAP_THRESHOLD_` would. An earlier `holo` re-executed
+/// itself with that variable set; under qemu-user without binfmt the exec handed the ELF to `/bin/sh`. A
+/// value the user sets in the environment wins. Other C libraries (musl, Apple's, Android's) have no such
+/// threshold.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn fixed_mmap_threshold() {
-    use std::os::unix::process::CommandExt;
-    const VAR: &str = "MALLOC_MMAP_THRESHOLD_";
-    if std::env::var_os(VAR).is_some() {
+    const THRESHOLD_BYTES: libc::c_int = 1 << 20;
+    if std::env::var_os("MALLOC_MMAP_THRESHOLD_").is_some() {
         return;
     }
-    let Ok(exe) = std::env::current_exe() else {
-        return;
-    };
-    let err = std::process::Command::new(exe)
-        .args(std::env::args_os().skip(1))
-        .env(VAR, "1048576")
-        .exec();
-    // Only reached if the exec failed.
-    eprintln!("note: could not re-execute with {VAR} set ({err}); going on");
+    // SAFETY: `mallopt` only sets a parameter of glibc's allocator; M_MMAP_THRESHOLD takes any value up to
+    // HEAP_MAX/2 (32 MB on 64-bit), and 1 MB is within it. It runs before any other thread exists.
+    #[allow(unsafe_code)]
+    let ok = unsafe { libc::mallopt(libc::M_MMAP_THRESHOLD, THRESHOLD_BYTES) };
+    if ok != 1 {
+        eprintln!("note: mallopt(M_MMAP_THRESHOLD) refused; glibc's default threshold stays");
+    }
 }
 
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
