@@ -45,7 +45,6 @@ mod stream;
 mod suite;
 mod workers;
 
-pub use crate::cnn::CnnEngine;
 pub use config::{Backend, GpuPrecision, PipelineConfig, MAX_HOLOGRAM_PIXELS};
 pub use frame::{check_not_black, FrameTimings, Heads, SlmFrame, BLACK_FRAME_AMPLITUDE};
 pub use models::HologramPipeline;
