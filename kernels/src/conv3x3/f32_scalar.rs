@@ -6,7 +6,7 @@
 //! copy of the tile for the epilogue keeps the accumulators at constant indices: measured 2× faster; a 4 × 8
 //! tile measured the same as 8 × 8 on x86-64 SSE2).
 
-use super::{F32Job, F32Out};
+use super::job::{F32Job, F32Out};
 
 /// Output-channel tile.
 pub(crate) const G: usize = 8;

@@ -6,7 +6,7 @@
 //! Names: `conv3x3.<dtype>.<G>x<V>.<isa>`, `G` output channels × `V` vector registers of pixels per tile
 //! (for the scalar row, `V` counts pixels).
 
-use super::{F32Job, F32Out, U8Job, U8Out};
+use super::job::{F32Job, F32Out, U8Job, U8Out};
 use crate::{Isa, KernelError};
 
 /// Element type of a kernel family.
@@ -275,17 +275,17 @@ pub(crate) static U8_ROWS: &[U8Row] = &[
     U8Row {
         info: u8_info("conv3x3.u8s8.8x3.avx512vnni", Isa::Avx512Vnni, 8, 48),
         pack: PackKind::I8,
-        run: super::u8s8_x86::conv_avx512vnni,
+        run: super::u8s8_avx512vnni::conv_avx512vnni,
     },
     U8Row {
         info: u8_info("conv3x3.u8s8.4x2.avxvnni", Isa::AvxVnni, 4, 16),
         pack: PackKind::I8,
-        run: super::u8s8_x86::conv_avxvnni,
+        run: super::u8s8_avxvnni::conv_avxvnni,
     },
     U8Row {
         info: u8_info("conv3x3.u8s8.4x1.avx2", Isa::Avx2Fma, 4, 8),
         pack: PackKind::I16,
-        run: super::u8s8_x86::conv_avx2,
+        run: super::u8s8_avx2::conv_avx2,
     },
     // Tests only: the VNNI rows' tile geometries emulated on AVX2 (after the real rows: never dispatched).
     #[cfg(test)]
@@ -297,7 +297,7 @@ pub(crate) static U8_ROWS: &[U8Row] = &[
             16,
         ),
         pack: PackKind::I16,
-        run: super::u8s8_x86::conv_avxvnni_geometry,
+        run: super::u8s8_avx2::conv_avxvnni_geometry,
     },
     #[cfg(test)]
     U8Row {
@@ -308,7 +308,7 @@ pub(crate) static U8_ROWS: &[U8Row] = &[
             48,
         ),
         pack: PackKind::I16,
-        run: super::u8s8_x86::conv_avx512vnni_geometry,
+        run: super::u8s8_avx2::conv_avx512vnni_geometry,
     },
     SCALAR_U8,
 ];
@@ -319,12 +319,12 @@ pub(crate) static U8_ROWS: &[U8Row] = &[
     U8Row {
         info: u8_info("conv3x3.u8s8.8x3.neoni8mm", Isa::NeonI8mm, 8, 12),
         pack: PackKind::I8,
-        run: super::u8s8_neon::conv_i8mm,
+        run: super::u8s8_neoni8mm::conv_i8mm,
     },
     U8Row {
         info: u8_info("conv3x3.u8s8.8x3.neondot", Isa::NeonDot, 8, 12),
         pack: PackKind::I8Xor128,
-        run: super::u8s8_neon::conv_dot,
+        run: super::u8s8_neondot::conv_dot,
     },
     U8Row {
         info: u8_info("conv3x3.u8s8.4x1.neon", Isa::Neon, 4, 4),
@@ -384,19 +384,19 @@ pub(crate) fn run_peak_u8(isa: Isa, iters: u64) -> Result<(f64, i32), KernelErro
         if isa.includes(Isa::Avx512Vnni) {
             // SAFETY: `isa` is available and includes AVX-512 VNNI.
             return Ok((it * 24.0 * 64.0 * 2.0, unsafe {
-                super::u8s8_x86::peak_avx512vnni(iters)
+                super::u8s8_avx512vnni::peak_avx512vnni(iters)
             }));
         }
         if isa.includes(Isa::AvxVnni) {
             // SAFETY: `isa` is available and includes AVX-VNNI.
             return Ok((it * 12.0 * 32.0 * 2.0, unsafe {
-                super::u8s8_x86::peak_avxvnni(iters)
+                super::u8s8_avxvnni::peak_avxvnni(iters)
             }));
         }
         if isa.includes(Isa::Avx2Fma) {
             // SAFETY: `isa` is available and includes AVX2.
             return Ok((it * 12.0 * 16.0 * 2.0, unsafe {
-                super::u8s8_x86::peak_avx2(iters)
+                super::u8s8_avx2::peak_avx2(iters)
             }));
         }
     }
@@ -405,13 +405,13 @@ pub(crate) fn run_peak_u8(isa: Isa, iters: u64) -> Result<(f64, i32), KernelErro
         if isa.includes(Isa::NeonI8mm) {
             // SAFETY: `isa` is available and includes i8mm.
             return Ok((it * 24.0 * 16.0 * 2.0, unsafe {
-                super::u8s8_neon::peak_i8mm(iters)
+                super::u8s8_neoni8mm::peak_i8mm(iters)
             }));
         }
         if isa.includes(Isa::NeonDot) {
             // SAFETY: `isa` is available and includes the dot product.
             return Ok((it * 24.0 * 16.0 * 2.0, unsafe {
-                super::u8s8_neon::peak_dot(iters)
+                super::u8s8_neondot::peak_dot(iters)
             }));
         }
         if isa.includes(Isa::Neon) {

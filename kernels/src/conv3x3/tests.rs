@@ -1,8 +1,10 @@
 //! Every available kernel row against the reference; row bands; the zero border; dispatch; errors.
 
+use super::f32::Conv3x3F32;
+use super::inputs::Inputs;
 use super::reference::{self, RefU8Params};
 use super::registry::{self, F32_ROWS, U8_ROWS};
-use super::{Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, QuantU8};
+use super::u8s8::{Conv3x3U8, Conv3x3U8Spec, QuantU8};
 use crate::{Isa, KernelError, RowPlanar};
 
 /// xorshift64*: deterministic test data without dependencies.

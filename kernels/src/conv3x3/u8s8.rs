@@ -10,8 +10,9 @@
 //! concatenation must share one scale (the f32 multiplier is per output channel); their zero points may
 //! differ.
 
+use super::inputs::Inputs;
+use super::job::{U8Job, U8Out};
 use super::registry::{self, KernelInfo, PackKind, U8Row};
-use super::{Inputs, U8Job, U8Out};
 use crate::buffer::{RowBand, RowPlanar};
 use crate::pack::{check_channels, check_len};
 use crate::quant::check_scale;

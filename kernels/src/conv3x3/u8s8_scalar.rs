@@ -2,7 +2,7 @@
 //! i32 accumulators; each step reads 4 interleaved input channels of one tap. The epilogue is the shared
 //! arithmetic of [`simd_u8`](super::simd_u8) written with scalars.
 
-use super::{U8Job, U8Out};
+use super::job::{U8Job, U8Out};
 use crate::quant::quantize;
 
 /// Output-channel tile.
