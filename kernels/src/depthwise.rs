@@ -15,9 +15,10 @@
 
 use std::ops::Range;
 
-use crate::buffer::check_dims;
+use crate::buffer::planar::check_dims;
+use crate::error::KernelError;
 use crate::isa::recompiled_path;
-use crate::{Isa, KernelError};
+use crate::isa::Isa;
 
 /// The largest kernel width taken (odd).
 pub const MAX_TAPS: usize = 63;

@@ -1,6 +1,6 @@
 //! Instruction-set levels, their run-time detection and the `TENSORHOLO_ISA` override.
 
-use crate::KernelError;
+use crate::error::KernelError;
 use std::sync::OnceLock;
 
 /// The levels at which the crate's portable loops (heads, output grid, depthwise) are compiled again inside

@@ -1,6 +1,8 @@
 //! Measured single-thread peaks, to report kernels as a fraction of what the core can do.
 
-use crate::{conv3x3::registry, Isa, KernelError};
+use crate::conv3x3::registry;
+use crate::error::KernelError;
+use crate::isa::Isa;
 use std::time::Instant;
 
 /// Measures the f32 FMA peak of one thread with the widest FMA of `isa`: independent FMA chains in registers,

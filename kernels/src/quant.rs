@@ -1,7 +1,7 @@
 //! The u8 grid's arithmetic, shared by the buffers ([`crate::buffer`]) and the heads ([`crate::heads`]):
 //! rounding to nearest even without a libm call, ONNX `QuantizeLinear`'s clamp, and the scale check.
 
-use crate::KernelError;
+use crate::error::KernelError;
 
 /// `1.5·2²³`: adding and subtracting it rounds an f32 of magnitude ≤ 2²² to the nearest integer, ties to
 /// even (the default rounding mode), with plain additions that every vector ISA has.

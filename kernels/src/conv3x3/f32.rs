@@ -3,9 +3,11 @@
 use super::inputs::Inputs;
 use super::job::{F32Job, F32Out};
 use super::registry::{self, F32Row, KernelInfo};
-use crate::buffer::{RowBand, RowPlanar};
+use crate::buffer::band::RowBand;
+use crate::buffer::planar::RowPlanar;
+use crate::error::KernelError;
+use crate::isa::Isa;
 use crate::pack;
-use crate::{Isa, KernelError};
 use std::ops::Range;
 
 /// A planned f32 3×3 convolution `C_in → C_out` with bias and optional ReLU, packed for one kernel row.

@@ -2,8 +2,8 @@
 //! offsets that make the buffers windows of a taller frame ([`Inputs::shifted`]). Both plans check a call's
 //! operands here and take the kernel's view of them from here.
 
-use crate::buffer::{Element, RowPlanar};
-use crate::KernelError;
+use crate::buffer::planar::{Element, RowPlanar};
+use crate::error::KernelError;
 use std::ops::Range;
 
 /// The inputs of one convolution call: source `a`, an optional second source `b` concatenated after `a`'s

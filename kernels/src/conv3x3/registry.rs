@@ -7,7 +7,8 @@
 //! (for the scalar row, `V` counts pixels).
 
 use super::job::{F32Job, F32Out, U8Job, U8Out};
-use crate::{Isa, KernelError};
+use crate::error::KernelError;
+use crate::isa::Isa;
 
 /// Element type of a kernel family.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

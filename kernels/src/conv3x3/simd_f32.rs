@@ -50,7 +50,7 @@ pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
 ) {
     let l = V::LANES;
     let tile = l * NV;
-    debug_assert!(tile <= crate::buffer::MAX_TILE && l <= 16);
+    debug_assert!(tile <= crate::buffer::planar::MAX_TILE && l <= 16);
     let (w, cout) = (job.w, job.cout);
     let cin = job.ca + job.cb;
     let groups = cout.div_ceil(G);

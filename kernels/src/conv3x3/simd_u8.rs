@@ -84,7 +84,7 @@ pub(crate) unsafe fn conv<Q: SimdQ, const G: usize, const NV: usize>(
     // `step4` takes the group's channels four at a time: a `G` that is not a multiple of 4 would leave
     // channels unsummed, so it does not compile.
     const { assert!(G.is_multiple_of(4)) };
-    debug_assert!(tile <= crate::buffer::MAX_TILE);
+    debug_assert!(tile <= crate::buffer::planar::MAX_TILE);
     let (w, wp) = (job.w, job.wp);
     let cg = job.ga + job.gb;
     let groups = job.cout.div_ceil(G);

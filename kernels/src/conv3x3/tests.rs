@@ -5,7 +5,9 @@ use super::inputs::Inputs;
 use super::reference::{self, RefU8Params};
 use super::registry::{self, F32_ROWS, U8_ROWS};
 use super::u8s8::{Conv3x3U8, Conv3x3U8Spec, QuantU8};
-use crate::{Isa, KernelError, RowPlanar};
+use crate::buffer::planar::RowPlanar;
+use crate::error::KernelError;
+use crate::isa::Isa;
 
 /// xorshift64*: deterministic test data without dependencies.
 pub(crate) struct Rng(u64);
@@ -801,7 +803,7 @@ fn u8_row_bands_are_bit_identical_and_touch_only_their_rows() {
         let mut short = vec![0.0f32; (2 * cout - 1) * w];
         assert!(matches!(
             plan.run_rows_f32(inputs, &mut short, 0..2),
-            Err(crate::KernelError::Length { .. })
+            Err(crate::error::KernelError::Length { .. })
         ));
     }
 }

@@ -13,10 +13,12 @@
 use super::inputs::Inputs;
 use super::job::{U8Job, U8Out};
 use super::registry::{self, KernelInfo, PackKind, U8Row};
-use crate::buffer::{RowBand, RowPlanar};
+use crate::buffer::band::RowBand;
+use crate::buffer::planar::RowPlanar;
+use crate::error::KernelError;
+use crate::isa::Isa;
 use crate::pack::{check_channels, check_len};
 use crate::quant::check_scale;
-use crate::{Isa, KernelError};
 use std::ops::Range;
 
 /// Largest int8 `C_in`: the i32 accumulator holds at least `255·128·9·4096 < 2³¹`.
