@@ -45,6 +45,7 @@ pub mod depthwise;
 mod error;
 pub mod heads;
 pub mod isa;
+mod ops;
 mod pack;
 pub mod peak;
 mod quant;

@@ -2,11 +2,12 @@
 
 use super::inputs::Inputs;
 use super::job::{F32Job, F32Out};
-use super::registry::{self, F32Row, KernelInfo};
+use super::row::{F32Row, KernelInfo};
 use crate::buffer::band::RowBand;
 use crate::buffer::planar::RowPlanar;
 use crate::error::KernelError;
 use crate::isa::Isa;
+use crate::ops;
 use crate::pack;
 use std::ops::Range;
 
@@ -23,7 +24,7 @@ pub struct Conv3x3F32 {
 
 impl Conv3x3F32 {
     /// Plans a convolution with the best f32 kernel row for `isa` and `c_out`
-    /// ([`registry::selected_f32_for`]: the first row `isa` includes that computes the fewest padding output
+    /// ([`registry::selected_f32_for`](crate::registry::selected_f32_for): the first row `isa` includes that computes the fewest padding output
     /// channels, so a 6-channel last layer runs on the 6-channel AVX2 tile rather than the 8-channel AVX-512
     /// one, which would compute 2 of every 8 channels for nothing).
     ///
@@ -50,12 +51,12 @@ impl Conv3x3F32 {
             c_in,
             c_out,
             relu,
-            registry::select_f32_for(isa, c_out),
+            ops::select_f32_for(isa, c_out),
         )
     }
 
     /// Plans a convolution with the kernel row named `name` (e.g. `conv3x3.f32.6x2.avx2`, see
-    /// [`registry::f32_kernels`]). Errors: as [`new`](Self::new), and [`KernelError::Kernel`] for an unknown
+    /// [`registry::f32_kernels`](crate::registry::f32_kernels)). Errors: as [`new`](Self::new), and [`KernelError::Kernel`] for an unknown
     /// name or a row this CPU cannot run.
     pub fn with_kernel(
         weights: &[f32],
@@ -65,8 +66,7 @@ impl Conv3x3F32 {
         relu: bool,
         name: &str,
     ) -> Result<Self, KernelError> {
-        let row = registry::F32_ROWS
-            .iter()
+        let row = ops::f32_rows()
             .find(|r| r.info.name == name && r.info.isa.is_available())
             .ok_or_else(|| KernelError::Kernel { name: name.into() })?;
         Self::with_row(weights, bias, c_in, c_out, relu, row)
@@ -167,7 +167,7 @@ impl Conv3x3F32 {
             data: band.data,
             base: band.base - k * stride,
         };
-        registry::run_f32(self.row, &job, out)
+        ops::run_f32(self.row, &job, out)
     }
 
     /// Computes output rows `rows` into a planar `[C_out][H][W]` f32 slice (the last layer: raw values, no
@@ -194,6 +194,6 @@ impl Conv3x3F32 {
         }
         inputs.check(self.c_in, self.c_out, h, w, &rows)?;
         let (job, _) = self.job(&inputs, &rows);
-        registry::run_f32(self.row, &job, F32Out::Planar(out))
+        ops::run_f32(self.row, &job, F32Out::Planar(out))
     }
 }

@@ -3,11 +3,13 @@
 use super::f32::Conv3x3F32;
 use super::inputs::Inputs;
 use super::reference::{self, RefU8Params};
-use super::registry::{self, F32_ROWS, U8_ROWS};
-use super::u8s8::{Conv3x3U8, Conv3x3U8Spec, QuantU8};
+use super::registry;
+use super::u8s8::{Conv3x3U8, Conv3x3U8Spec};
 use crate::buffer::planar::RowPlanar;
 use crate::error::KernelError;
 use crate::isa::Isa;
+use crate::ops;
+use crate::quant::QuantU8;
 
 /// xorshift64*: deterministic test data without dependencies.
 pub(crate) struct Rng(u64);
@@ -33,7 +35,7 @@ impl Rng {
 /// f32 rows this CPU can run; prints the ones it skips.
 pub(crate) fn f32_rows() -> Vec<&'static str> {
     let mut names = Vec::new();
-    for r in F32_ROWS {
+    for r in ops::f32_rows() {
         if r.info.is_available() {
             names.push(r.info.name);
         } else {
@@ -468,7 +470,7 @@ fn f32_bad_input_is_an_error_not_a_panic() {
 /// int8 rows this CPU can run; prints the ones it skips.
 pub(crate) fn u8_rows() -> Vec<&'static str> {
     let mut names = Vec::new();
-    for r in U8_ROWS {
+    for r in ops::u8_rows() {
         if r.info.is_available() {
             names.push(r.info.name);
         } else {

@@ -1,6 +1,6 @@
 //! `conv3x3.u8s8.8x3.neoni8mm`: `USDOT` (FEAT_I8MM), u8 × s8 directly, on the generic loop
-//! [`simd_u8::conv`](super::simd_u8::conv). 8 output channels × 3 q (12 pixels) = 24 accumulators + 3 inputs
-//! + 2 weight registers of 32 q. The by-element `step4` is the dot-product row's (macro `step4_by_element`
+//! [`simd_u8::conv`](super::simd_u8::conv). 8 output channels × 3 q (12 pixels) = 24 accumulators, 3 inputs
+//! and 2 weight registers of 32 q. The by-element `step4` is the dot-product row's (macro `step4_by_element`
 //! from [`u8s8_neondot`](super::u8s8_neondot), which explains it), the f32 epilogue the NEON row's (macro
 //! `epilogue_neon` from [`u8s8_neon`](super::u8s8_neon)); `USDOT` is written with `asm!` as `SDOT` is there.
 
