@@ -329,11 +329,12 @@ pub(crate) fn select_f32(isa: Isa) -> &'static F32Row {
         .unwrap_or(&portable().f32[0])
 }
 
-/// The f32 row a layer of `c_out` output channels runs under `isa`: among the vector rows `isa` includes
-/// (the scalar row only when there is none), the one that computes the fewest output channels in all
-/// (`c_out` rounded up to its tile `G`), the earlier (better) row on a tie. For 24 and 8 channels that is the first row; for the 6-channel last layers on AVX-512 it is
-/// the AVX2 6 × 16 tile (measured on Zen 4, one thread, 384²: 65 against 56 GFLOP/s for 24+4→6, 89 against
-/// 73 for 8+6→6; the 8-channel tile computes 8 channels for 6).
+/// The f32 row a layer of `c_out` output channels runs under `isa`: among the vector rows `isa` includes (the
+/// scalar row only when there is none), the one that computes the fewest output channels in all (`c_out`
+/// rounded up to its tile `G`), the earlier (better) row on a tie. For 24 and 8 channels that is the first
+/// row; for the 6-channel last layers on AVX-512 it is the AVX2 6 × 16 tile (measured on Zen 4, one thread,
+/// 384²: 65 against 56 GFLOP/s for 24+4→6, 89 against 73 for 8+6→6; the 8-channel tile computes 8 channels
+/// for 6).
 pub(crate) fn select_f32_for(isa: Isa, c_out: usize) -> &'static F32Row {
     let padded = |r: &F32Row| c_out.div_ceil(r.info.oc_tile) * r.info.oc_tile;
     under(isa)

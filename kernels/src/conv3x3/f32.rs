@@ -24,9 +24,9 @@ pub struct Conv3x3F32 {
 
 impl Conv3x3F32 {
     /// Plans a convolution with the best f32 kernel row for `isa` and `c_out`
-    /// ([`registry::selected_f32_for`](crate::registry::selected_f32_for): the first row `isa` includes that computes the fewest padding output
-    /// channels, so a 6-channel last layer runs on the 6-channel AVX2 tile rather than the 8-channel AVX-512
-    /// one, which would compute 2 of every 8 channels for nothing).
+    /// ([`registry::selected_f32_for`](crate::registry::selected_f32_for): the first row `isa` includes that
+    /// computes the fewest padding output channels, so a 6-channel last layer runs on the 6-channel AVX2 tile
+    /// rather than the 8-channel AVX-512 one, which would compute 2 of every 8 channels for nothing).
     ///
     /// `weights` is `[C_out][C_in][3][3]` (PyTorch/ONNX OIHW order), `bias` is `[C_out]`; `relu` applies
     /// `max(·, 0)` after the bias. Errors: `isa` not available on this CPU ([`KernelError::Isa`]), a zero or
@@ -56,8 +56,8 @@ impl Conv3x3F32 {
     }
 
     /// Plans a convolution with the kernel row named `name` (e.g. `conv3x3.f32.6x2.avx2`, see
-    /// [`registry::f32_kernels`](crate::registry::f32_kernels)). Errors: as [`new`](Self::new), and [`KernelError::Kernel`] for an unknown
-    /// name or a row this CPU cannot run.
+    /// [`registry::f32_kernels`](crate::registry::f32_kernels)). Errors: as [`new`](Self::new), and
+    /// [`KernelError::Kernel`] for an unknown name or a row this CPU cannot run.
     pub fn with_kernel(
         weights: &[f32],
         bias: &[f32],

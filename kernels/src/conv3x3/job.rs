@@ -22,8 +22,8 @@ pub(crate) struct F32Job<'a> {
     pub y1: usize,
 }
 
-/// Where an f32 kernel writes: a [`RowPlanar`](crate::buffer::RowPlanar) buffer of `C_out` channels (`[H+2][C_out][Wp]`) or a planar
-/// `[C_out][H][W]` slice.
+/// Where an f32 kernel writes: a [`RowPlanar`](crate::buffer::RowPlanar) buffer of `C_out` channels
+/// (`[H+2][C_out][Wp]`) or a planar `[C_out][H][W]` slice.
 pub(crate) enum F32Out<'a> {
     /// Buffer rows of a `[H+2][C_out][Wp]` buffer: `data[0]` is element `base` of the whole buffer (a band of
     /// rows, [`RowBand`](crate::buffer::RowBand)); the kernel writes only rows `y0..y1`, which lie inside it.
@@ -35,9 +35,10 @@ pub(crate) enum F32Out<'a> {
 }
 
 /// Everything an int8 kernel needs, checked by the safe API: sources `a`/`b` in the u8 layout with `ga`/`gb`
-/// channel groups of 4, packed weights (bytes; i8 or i16 per the row's [`PackKind`](crate::registry::PackKind)), per output
-/// channel (padded to the tile) the i32 accumulator start (zero-point corrections), the f32 multiplier and
-/// bias; the residual `(buffer, zero point, scale)`; the output quantisation `1/scale` and zero point.
+/// channel groups of 4, packed weights (bytes; i8 or i16 per the row's
+/// [`PackKind`](crate::registry::PackKind)), per output channel (padded to the tile) the i32 accumulator
+/// start (zero-point corrections), the f32 multiplier and bias; the residual `(buffer, zero point, scale)`;
+/// the output quantisation `1/scale` and zero point.
 pub(crate) struct U8Job<'a> {
     pub a: &'a [u8],
     pub ga: usize,
@@ -64,7 +65,8 @@ pub(crate) struct U8Job<'a> {
     pub y1: usize,
 }
 
-/// Where an int8 kernel writes: a u8 [`RowPlanar`](crate::buffer::RowPlanar) (`[H+2][C_out/4][Wp][4]`) or raw f32.
+/// Where an int8 kernel writes: a u8 [`RowPlanar`](crate::buffer::RowPlanar) (`[H+2][C_out/4][Wp][4]`) or raw
+/// f32.
 pub(crate) enum U8Out<'a> {
     /// Buffer rows of a u8 buffer: `data[0]` is element `base` of the whole buffer (a band of rows,
     /// [`RowBand`](crate::buffer::RowBand)); the kernel writes only rows `y0..y1`, which lie inside it.

@@ -1,8 +1,9 @@
 //! Direct 3×3 convolutions (stride 1, zero padding 1, no groups) on [`RowPlanar`](crate::RowPlanar) buffers.
 //!
 //! A plan ([`Conv3x3F32`]) packs the weights once for the kernel row it selected (see [`registry`]; the rows
-//! are listed per ISA level in the kernel table, `ops.rs`) and then runs any row band `[y0, y1)` of a frame: every output pixel is computed by the same instruction
-//! sequence whatever the band, so any split of the rows (over threads, say) gives bit-identical frames.
+//! are listed per ISA level in the kernel table, `ops.rs`) and then runs any row band `[y0, y1)` of a frame:
+//! every output pixel is computed by the same instruction sequence whatever the band, so any split of the
+//! rows (over threads, say) gives bit-identical frames.
 //!
 //! Epilogue per output value: `v = conv + bias`; `v = max(v, 0)` when the plan has ReLU; `v += residual`
 //! when a residual buffer is given (after the ReLU). Inputs may come from two buffers (channel

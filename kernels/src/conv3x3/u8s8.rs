@@ -86,8 +86,9 @@ impl Conv3x3U8 {
         Self::with_row(spec, ops::select_u8(isa))
     }
 
-    /// Plans with the int8 row named `name` (see [`registry::u8_kernels`](crate::registry::u8_kernels)). Errors: as [`new`](Self::new),
-    /// and [`KernelError::Kernel`] for an unknown name or a row this CPU cannot run.
+    /// Plans with the int8 row named `name` (see [`registry::u8_kernels`](crate::registry::u8_kernels)).
+    /// Errors: as [`new`](Self::new), and [`KernelError::Kernel`] for an unknown name or a row this CPU
+    /// cannot run.
     pub fn with_kernel(spec: &Conv3x3U8Spec<'_>, name: &str) -> Result<Self, KernelError> {
         let row = ops::u8_rows()
             .find(|r| r.info.name == name && r.info.isa.is_available())

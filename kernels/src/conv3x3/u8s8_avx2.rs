@@ -157,7 +157,8 @@ impl SimdQ for Avx2Wide {
 /// `conv3x3.u8s8.4x1.avx2`.
 ///
 /// # Safety
-/// The CPU has AVX2; the job was checked by the safe API and packed with [`PackKind::I16`](crate::registry::PackKind).
+/// The CPU has AVX2; the job was checked by the safe API and packed with
+/// [`PackKind::I16`](crate::registry::PackKind).
 #[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn conv_avx2(job: &U8Job<'_>, out: &mut U8Out<'_>) {
     // SAFETY: AVX2 enabled; the caller's guarantees.
