@@ -181,8 +181,8 @@ fn u8_rows(c: &mut Criterion) {
     group.finish();
 }
 
-/// The pre-filter's 5×5 base filter of 6 channels at 384² (one thread), on every available path
-/// (`depthwise.<isa>`; throughput in FLOP, 2 per tap).
+/// The pre-filter's 5×5 base filter of 6 channels at 384² (one thread), on every path of the kernel table
+/// that this CPU has (`registry::depthwise_paths`; throughput in FLOP, 2 per tap).
 fn depthwise_paths(c: &mut Criterion) {
     let (ch, k) = (6, 5);
     let input = data(ch * H * W, 7);
@@ -190,7 +190,11 @@ fn depthwise_paths(c: &mut Criterion) {
     let mut out = data(ch * H * W, 9);
     let mut group = c.benchmark_group("depthwise_6ch_5x5_384x384");
     group.throughput(Throughput::Elements((2 * k * k * ch * H * W) as u64));
-    for isa in Isa::available() {
+    for isa in registry::depthwise_paths() {
+        if !isa.is_available() {
+            println!("SKIPPED depthwise.{isa}: this CPU lacks {isa}");
+            continue;
+        }
         group.bench_function(isa.name(), |bch| {
             bch.iter(|| {
                 depthwise(&input, ch, H, W, &kernel, k, &mut out, true, isa).expect("run");

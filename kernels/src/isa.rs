@@ -1,46 +1,7 @@
 //! Instruction-set levels, their run-time detection and the `TENSORHOLO_ISA` override.
 
-use crate::KernelError;
+use crate::error::KernelError;
 use std::sync::OnceLock;
-
-/// The levels at which the crate's portable loops (heads, output grid, depthwise) are compiled again inside
-/// `#[target_feature]` functions, best first; `Scalar` is the portable build itself (SSE2 / NEON).
-#[cfg(target_arch = "x86_64")]
-pub(crate) const RECOMPILED: [Isa; 3] = [Isa::Avx512, Isa::Avx2Fma, Isa::Scalar];
-/// The levels at which the crate's portable loops are compiled again (none beyond the portable build here).
-#[cfg(not(target_arch = "x86_64"))]
-pub(crate) const RECOMPILED: [Isa; 1] = [Isa::Scalar];
-
-/// The widest of [`RECOMPILED`] that `isa` includes. Errors: `isa` not available on this CPU
-/// ([`KernelError::Isa`]).
-pub(crate) fn recompiled_path(isa: Isa) -> Result<Isa, KernelError> {
-    if !isa.is_available() {
-        return Err(KernelError::Isa {
-            name: isa.name().into(),
-            why: "not available on this CPU",
-        });
-    }
-    Ok(RECOMPILED
-        .into_iter()
-        .find(|&i| isa.includes(i))
-        .unwrap_or(Isa::Scalar))
-}
-
-/// Tests: the [`RECOMPILED`] levels this CPU has (a `SKIPPED` line for each it lacks), as `(name, level)`.
-#[cfg(test)]
-pub(crate) fn available_recompiled(module: &str) -> Vec<(String, Isa)> {
-    RECOMPILED
-        .into_iter()
-        .filter(|i| {
-            let ok = i.is_available();
-            if !ok {
-                println!("SKIPPED {module}.{i}: this CPU lacks {i}");
-            }
-            ok
-        })
-        .map(|i| (format!("{module}.{i}"), i))
-        .collect()
-}
 
 /// Name of the environment variable that lowers the ISA the plans use (`scalar`, `avx2`, `avxvnni`, `avx512`,
 /// `avx512vnni`, `neon`, `neondot`, `neoni8mm`). It can only lower: an ISA this CPU lacks is refused.

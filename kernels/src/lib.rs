@@ -13,7 +13,7 @@
 //! * [`Conv3x3U8`]: the int8 plan (u8 activations with zero points, s8 weights with per-channel scales, i32
 //!   accumulation, requantisation fused into the epilogue; every path bit-exact with the scalar one), any
 //!   row band; u8 buffers are filled as ONNX `QuantizeLinear` does and take a new zero point when reused.
-//! * [`Isa`]: detection and the `TENSORHOLO_ISA` override; [`registry`]: the kernel rows.
+//! * [`Isa`]: detection and the `TENSORHOLO_ISA` override; [`registry`]: the kernel rows of the kernel table.
 //! * [`tanh_heads`], [`fake_quantize`]: the hologram CNN's heads and the int8 output grid, vectorised.
 //! * [`depthwise()`], [`depthwise_rows`]: the pre-filter's fixed depthwise filter, register-tiled; [`peak`]:
 //!   measured FMA / dot-product peaks.
@@ -34,10 +34,10 @@
 //! # Ok::<(), tensorholo_kernels::KernelError>(())
 //! ```
 //!
-//! `unsafe` appears only in the ISA files (`conv3x3/*_{avx2,avx512,neon,…}.rs`, the generic SIMD loop), in
-//! the single dispatch point ([`registry`]) and in [`heads`]' and [`depthwise`](mod@depthwise)'s dispatch to their
-//! `#[target_feature]` copies (`isa::RECOMPILED`);
-//! every public function is safe and checks shapes and lengths.
+//! `unsafe` appears only in the ISA files (`conv3x3/*_{avx2,avx512,neon,…}.rs`, the generic SIMD loops, the
+//! `#[target_feature]` copies in `depthwise/body.rs` and `heads/body.rs`) and in the single dispatch point,
+//! the kernel table `ops.rs` (one table per ISA level, which [`registry`] shows); every public function is
+//! safe and checks shapes and lengths. The crate's `README.md` maps the files.
 
 pub mod buffer;
 pub mod conv3x3;
@@ -45,6 +45,7 @@ pub mod depthwise;
 mod error;
 pub mod heads;
 pub mod isa;
+mod ops;
 mod pack;
 pub mod peak;
 mod quant;

@@ -6,8 +6,8 @@
 //! them. `C_out` is padded up to a multiple of `G` with zero weights and zero bias; the kernels compute those
 //! channels and do not store them.
 
-use crate::buffer::MAX_DIM;
-use crate::KernelError;
+use crate::buffer::planar::MAX_DIM;
+use crate::error::KernelError;
 
 pub(crate) fn check_channels(c_in: usize, c_out: usize) -> Result<(), KernelError> {
     for (what, value) in [("C_in", c_in), ("C_out", c_out)] {

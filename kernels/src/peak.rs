@@ -1,18 +1,20 @@
 //! Measured single-thread peaks, to report kernels as a fraction of what the core can do.
 
-use crate::{conv3x3::registry, Isa, KernelError};
+use crate::error::KernelError;
+use crate::isa::Isa;
+use crate::ops;
 use std::time::Instant;
 
 /// Measures the f32 FMA peak of one thread with the widest FMA of `isa`: independent FMA chains in registers,
 /// timed for about `millis` ms. Returns GFLOP/s (an FMA counts 2 FLOPs). Errors: `isa` not available.
 pub fn f32_fma_gflops(isa: Isa, millis: u64) -> Result<f64, KernelError> {
-    measure(millis, |iters| registry::run_peak_f32(isa, iters))
+    measure(millis, |iters| ops::run_peak_f32(isa, iters))
 }
 
 /// Runs the f32 FMA peak loop of `isa` for `iters` iterations (for benchmark harnesses that time it
 /// themselves); returns the FLOPs done. Errors: `isa` not available.
 pub fn f32_fma_loop(isa: Isa, iters: u64) -> Result<f64, KernelError> {
-    let (flops, sink) = registry::run_peak_f32(isa, iters)?;
+    let (flops, sink) = ops::run_peak_f32(isa, iters)?;
     std::hint::black_box(sink);
     Ok(flops)
 }
@@ -23,14 +25,14 @@ pub fn f32_fma_loop(isa: Isa, iters: u64) -> Result<f64, KernelError> {
 /// Errors: `isa` not available.
 pub fn int8_dot_gops(isa: Isa, millis: u64) -> Result<f64, KernelError> {
     measure(millis, |iters| {
-        registry::run_peak_u8(isa, iters).map(|(ops, s)| (ops, s as f32))
+        ops::run_peak_u8(isa, iters).map(|(ops, s)| (ops, s as f32))
     })
 }
 
 /// Runs the int8 peak loop of `isa` for `iters` iterations; returns the operations done. Errors: `isa` not
 /// available.
 pub fn int8_dot_loop(isa: Isa, iters: u64) -> Result<f64, KernelError> {
-    let (ops, sink) = registry::run_peak_u8(isa, iters)?;
+    let (ops, sink) = ops::run_peak_u8(isa, iters)?;
     std::hint::black_box(sink);
     Ok(ops)
 }

@@ -1,7 +1,17 @@
-//! The u8 grid's arithmetic, shared by the buffers ([`crate::buffer`]) and the heads ([`crate::heads`]):
-//! rounding to nearest even without a libm call, ONNX `QuantizeLinear`'s clamp, and the scale check.
+//! The u8 grid ([`QuantU8`]: scale and zero point) and its arithmetic, shared by the buffers
+//! ([`crate::buffer`]), the int8 plan ([`crate::Conv3x3U8`]) and the heads ([`crate::heads`]): rounding to
+//! nearest even without a libm call, ONNX `QuantizeLinear`'s clamp, and the scale check.
 
-use crate::KernelError;
+use crate::error::KernelError;
+
+/// Scale and zero point of a u8 tensor: `real = (q − zero_point)·scale`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct QuantU8 {
+    /// Real units per step (finite, > 0).
+    pub scale: f32,
+    /// The u8 value of real 0.
+    pub zero_point: u8,
+}
 
 /// `1.5·2²³`: adding and subtracting it rounds an f32 of magnitude ≤ 2²² to the nearest integer, ties to
 /// even (the default rounding mode), with plain additions that every vector ISA has.

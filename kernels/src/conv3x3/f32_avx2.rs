@@ -6,8 +6,8 @@
 //! 6 × 2 → 0.67, 3 × 3 → 0.67, 2 × 4 → 0.75; 4 × 3 → 0.58 needs all 16 registers and spills): measured on
 //! the 24→24 layer at 384×384, 6 × 2 57.6 GFLOP/s, 3 × 3 53.3, 4 × 3 43.7, 2 × 4 40.3 (README).
 
+use super::job::{F32Job, F32Out};
 use super::simd_f32::{conv as generic_conv, SimdF32};
-use super::{F32Job, F32Out};
 use std::arch::x86_64::*;
 
 /// Output-channel tile.

@@ -5,8 +5,8 @@
 //! index code is the generic [`simd_f32::conv`](super::simd_f32::conv) shared with the tested AVX2 and NEON
 //! rows; only the register operations below are specific (the test machine has no AVX-512).
 
+use super::job::{F32Job, F32Out};
 use super::simd_f32::{conv as generic_conv, SimdF32};
-use super::{F32Job, F32Out};
 use std::arch::x86_64::*;
 
 /// Output-channel tile.

@@ -4,8 +4,8 @@
 //! broadcast weight (`ld1r`) = 28 of the 32 q registers. Per reduction step: 3 loads + 8 broadcast loads for
 //! 24 FMAs. Shares the generic loop [`simd_f32::conv`](super::simd_f32::conv) with the x86 rows.
 
+use super::job::{F32Job, F32Out};
 use super::simd_f32::{conv as generic_conv, SimdF32};
-use super::{F32Job, F32Out};
 use std::arch::aarch64::*;
 
 /// Output-channel tile.

@@ -6,7 +6,7 @@
 //! copy of the tile for the epilogue keeps the accumulators at constant indices: measured 2× faster; a 4 × 8
 //! tile measured the same as 8 × 8 on x86-64 SSE2).
 
-use super::{F32Job, F32Out};
+use super::job::{F32Job, F32Out};
 
 /// Output-channel tile.
 pub(crate) const G: usize = 8;
@@ -79,4 +79,17 @@ pub(crate) fn conv_t<const G: usize, const P: usize>(job: &F32Job<'_>, out: &mut
             }
         }
     }
+}
+
+/// The portable peak loop: 16 independent multiply-add chains (no FMA); FLOPs = `iters · 16 · 2`.
+pub(crate) fn peak(iters: u64) -> f32 {
+    let mut acc = [1.0f32; 16];
+    let a = std::hint::black_box(0.999_999f32);
+    let b = std::hint::black_box(1e-7f32);
+    for _ in 0..iters {
+        for x in acc.iter_mut() {
+            *x = *x * a + b;
+        }
+    }
+    acc.iter().sum()
 }

@@ -6,7 +6,7 @@
 //! so it is compiled with that function's features. AVX-512 (not available on the machine the tests run on)
 //! thereby shares every line of loop and index logic with the tested AVX2 and NEON instances.
 
-use super::{F32Job, F32Out};
+use super::job::{F32Job, F32Out};
 
 /// One SIMD register of `LANES` f32 values. All methods are `unsafe`: the caller guarantees the CPU has the
 /// ISA of the implementation and that pointers are valid for `LANES` values.
@@ -50,7 +50,7 @@ pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
 ) {
     let l = V::LANES;
     let tile = l * NV;
-    debug_assert!(tile <= crate::buffer::MAX_TILE && l <= 16);
+    debug_assert!(tile <= crate::buffer::planar::MAX_TILE && l <= 16);
     let (w, cout) = (job.w, job.cout);
     let cin = job.ca + job.cb;
     let groups = cout.div_ceil(G);

@@ -11,7 +11,7 @@
 //! `v += (r − r_zp)·r_scale`; then either u8 `clamp(round_ties_even(v·inv_scale) + zp, 0, 255)`, four
 //! output channels packed per 32-bit lane, or raw f32 to a planar `[C_out][H][W]` slice.
 
-use super::{U8Job, U8Out};
+use super::job::{U8Job, U8Out};
 
 /// `PX` pixels of i32 accumulators (`Self`) and the vector operations of the epilogue (`F`: `PX` f32
 /// lanes). All methods are `unsafe`: the caller guarantees the ISA and valid pointers.
@@ -84,7 +84,7 @@ pub(crate) unsafe fn conv<Q: SimdQ, const G: usize, const NV: usize>(
     // `step4` takes the group's channels four at a time: a `G` that is not a multiple of 4 would leave
     // channels unsummed, so it does not compile.
     const { assert!(G.is_multiple_of(4)) };
-    debug_assert!(tile <= crate::buffer::MAX_TILE);
+    debug_assert!(tile <= crate::buffer::planar::MAX_TILE);
     let (w, wp) = (job.w, job.wp);
     let cg = job.ga + job.gb;
     let groups = job.cout.div_ceil(G);

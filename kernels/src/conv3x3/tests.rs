@@ -1,9 +1,15 @@
 //! Every available kernel row against the reference; row bands; the zero border; dispatch; errors.
 
+use super::f32::Conv3x3F32;
+use super::inputs::Inputs;
 use super::reference::{self, RefU8Params};
-use super::registry::{self, F32_ROWS, U8_ROWS};
-use super::{Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, QuantU8};
-use crate::{Isa, KernelError, RowPlanar};
+use super::registry;
+use super::u8s8::{Conv3x3U8, Conv3x3U8Spec};
+use crate::buffer::planar::RowPlanar;
+use crate::error::KernelError;
+use crate::isa::Isa;
+use crate::ops;
+use crate::quant::QuantU8;
 
 /// xorshift64*: deterministic test data without dependencies.
 pub(crate) struct Rng(u64);
@@ -29,7 +35,7 @@ impl Rng {
 /// f32 rows this CPU can run; prints the ones it skips.
 pub(crate) fn f32_rows() -> Vec<&'static str> {
     let mut names = Vec::new();
-    for r in F32_ROWS {
+    for r in ops::f32_rows() {
         if r.info.is_available() {
             names.push(r.info.name);
         } else {
@@ -464,7 +470,7 @@ fn f32_bad_input_is_an_error_not_a_panic() {
 /// int8 rows this CPU can run; prints the ones it skips.
 pub(crate) fn u8_rows() -> Vec<&'static str> {
     let mut names = Vec::new();
-    for r in U8_ROWS {
+    for r in ops::u8_rows() {
         if r.info.is_available() {
             names.push(r.info.name);
         } else {
@@ -799,7 +805,7 @@ fn u8_row_bands_are_bit_identical_and_touch_only_their_rows() {
         let mut short = vec![0.0f32; (2 * cout - 1) * w];
         assert!(matches!(
             plan.run_rows_f32(inputs, &mut short, 0..2),
-            Err(crate::KernelError::Length { .. })
+            Err(crate::error::KernelError::Length { .. })
         ));
     }
 }

@@ -10,25 +10,20 @@
 //! concatenation must share one scale (the f32 multiplier is per output channel); their zero points may
 //! differ.
 
-use super::registry::{self, KernelInfo, PackKind, U8Row};
-use super::{Inputs, U8Job, U8Out};
-use crate::buffer::{RowBand, RowPlanar};
+use super::inputs::Inputs;
+use super::job::{U8Job, U8Out};
+use super::row::{KernelInfo, PackKind, U8Row};
+use crate::buffer::band::RowBand;
+use crate::buffer::planar::RowPlanar;
+use crate::error::KernelError;
+use crate::isa::Isa;
+use crate::ops;
 use crate::pack::{check_channels, check_len};
-use crate::quant::check_scale;
-use crate::{Isa, KernelError};
+use crate::quant::{check_scale, QuantU8};
 use std::ops::Range;
 
 /// Largest int8 `C_in`: the i32 accumulator holds at least `255·128·9·4096 < 2³¹`.
 pub const MAX_C_IN_U8: usize = 4096;
-
-/// Scale and zero point of a u8 tensor: `real = (q − zero_point)·scale`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct QuantU8 {
-    /// Real units per step (finite, > 0).
-    pub scale: f32,
-    /// The u8 value of real 0.
-    pub zero_point: u8,
-}
 
 /// Everything an int8 convolution plan needs.
 #[derive(Debug, Clone, Copy)]
@@ -88,14 +83,14 @@ impl Conv3x3U8 {
                 why: "not available on this CPU",
             });
         }
-        Self::with_row(spec, registry::select_u8(isa))
+        Self::with_row(spec, ops::select_u8(isa))
     }
 
-    /// Plans with the int8 row named `name` (see [`registry::u8_kernels`]). Errors: as [`new`](Self::new),
-    /// and [`KernelError::Kernel`] for an unknown name or a row this CPU cannot run.
+    /// Plans with the int8 row named `name` (see [`registry::u8_kernels`](crate::registry::u8_kernels)).
+    /// Errors: as [`new`](Self::new), and [`KernelError::Kernel`] for an unknown name or a row this CPU
+    /// cannot run.
     pub fn with_kernel(spec: &Conv3x3U8Spec<'_>, name: &str) -> Result<Self, KernelError> {
-        let row = registry::U8_ROWS
-            .iter()
+        let row = ops::u8_rows()
             .find(|r| r.info.name == name && r.info.isa.is_available())
             .ok_or_else(|| KernelError::Kernel { name: name.into() })?;
         Self::with_row(spec, row)
@@ -332,7 +327,7 @@ impl Conv3x3U8 {
             data: band.data,
             base: band.base - k * stride,
         };
-        registry::run_u8(self.row, &job, out)
+        ops::run_u8(self.row, &job, out)
     }
 
     /// Computes output rows `rows` as raw f32 (dequantised, before any output quantisation) into a planar
@@ -402,6 +397,6 @@ impl Conv3x3U8 {
             y_stride,
             base,
         };
-        registry::run_u8(self.row, &job, out)
+        ops::run_u8(self.row, &job, out)
     }
 }

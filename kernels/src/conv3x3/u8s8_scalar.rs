@@ -2,7 +2,7 @@
 //! i32 accumulators; each step reads 4 interleaved input channels of one tap. The epilogue is the shared
 //! arithmetic of [`simd_u8`](super::simd_u8) written with scalars.
 
-use super::{U8Job, U8Out};
+use super::job::{U8Job, U8Out};
 use crate::quant::quantize;
 
 /// Output-channel tile.
@@ -101,4 +101,17 @@ pub(crate) fn conv(job: &U8Job<'_>, out: &mut U8Out<'_>) {
             }
         }
     }
+}
+
+/// The portable int8 peak loop: 16 independent i32 multiply-add chains; ops = `iters · 16 · 2`.
+pub(crate) fn peak(iters: u64) -> i32 {
+    let mut acc = [1i32; 16];
+    let a = std::hint::black_box(3i32);
+    let b = std::hint::black_box(-5i32);
+    for _ in 0..iters {
+        for x in acc.iter_mut() {
+            *x = x.wrapping_mul(a).wrapping_add(b);
+        }
+    }
+    acc.iter().fold(0, |s, &x| s.wrapping_add(x))
 }

@@ -15,18 +15,15 @@
 
 use std::ops::Range;
 
-use crate::buffer::check_dims;
-use crate::isa::recompiled_path;
-use crate::{Isa, KernelError};
+pub(crate) mod body;
 
-/// The largest kernel width taken (odd).
-pub const MAX_TAPS: usize = 63;
+use crate::buffer::planar::check_dims;
+use crate::error::KernelError;
+use crate::isa::Isa;
+use crate::ops;
+use body::Job;
 
-/// Portable tile width: four 128-bit registers on SSE2 (16 registers), eight on NEON (32 registers).
-#[cfg(target_arch = "aarch64")]
-const PORTABLE_TILE: usize = 32;
-#[cfg(not(target_arch = "aarch64"))]
-const PORTABLE_TILE: usize = 16;
+pub use body::MAX_TAPS;
 
 /// Depthwise `k × k` filter (`k` odd, ≤ [`MAX_TAPS`]) of a planar `[C][H][W]` f32 image, edges replicated
 /// (clamp-to-edge): `out[c][y][x] (+)= Σ_{ky,kx} kernel[c][ky][kx] · in[c][clamp(y+ky−r)][clamp(x+kx−r)]`,
@@ -105,16 +102,7 @@ pub fn depthwise_rows(
         taps,
         k,
     };
-    match recompiled_path(isa)? {
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: `recompiled_path` returned a level this CPU has (AVX-512F).
-        Isa::Avx512 => unsafe { x86::rows_avx512(&job, rows, out, accumulate) },
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: `recompiled_path` returned a level this CPU has (AVX2).
-        Isa::Avx2Fma => unsafe { x86::rows_avx2(&job, rows, out, accumulate) },
-        _ => rows_body::<PORTABLE_TILE>(&job, rows, out, accumulate),
-    }
-    Ok(())
+    ops::run_depthwise(isa, &job, rows, out, accumulate)
 }
 
 /// Errors: `k` even (0 included) or above [`MAX_TAPS`] ([`KernelError::Parameter`]).
@@ -125,120 +113,6 @@ fn check_taps(k: usize) -> Result<(), KernelError> {
         });
     }
     Ok(())
-}
-
-/// One checked plane and kernel.
-struct Job<'a> {
-    plane: &'a [f32],
-    h: usize,
-    w: usize,
-    taps: &'a [f32],
-    k: usize,
-}
-
-#[cfg(target_arch = "x86_64")]
-mod x86 {
-    use super::{rows_body, Job};
-    use std::ops::Range;
-
-    /// # Safety
-    /// The CPU has AVX2.
-    #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn rows_avx2(job: &Job<'_>, rows: Range<usize>, out: &mut [f32], acc: bool) {
-        rows_body::<32>(job, rows, out, acc)
-    }
-    /// # Safety
-    /// The CPU has AVX-512F.
-    #[target_feature(enable = "avx512f")]
-    pub(super) unsafe fn rows_avx512(
-        job: &Job<'_>,
-        rows: Range<usize>,
-        out: &mut [f32],
-        acc: bool,
-    ) {
-        rows_body::<64>(job, rows, out, acc)
-    }
-}
-
-/// Output rows `rows` into `out`, tiles of `L` pixels, then of 8, then one at a time (the module docs).
-#[inline(always)]
-fn rows_body<const L: usize>(job: &Job<'_>, rows: Range<usize>, out: &mut [f32], accumulate: bool) {
-    let Job {
-        plane,
-        h,
-        w,
-        taps,
-        k,
-    } = *job;
-    let r = k / 2;
-    // Pixels whose reads all lie inside the row: r ≤ x < w − r.
-    let inner = r..w.saturating_sub(r).max(r);
-    for (y, o) in rows.zip(out.chunks_exact_mut(w)) {
-        let mut src: [&[f32]; MAX_TAPS] = [&[]; MAX_TAPS];
-        for (ky, s) in src[..k].iter_mut().enumerate() {
-            let sy = (y + ky).saturating_sub(r).min(h - 1);
-            *s = &plane[sy * w..(sy + 1) * w];
-        }
-        let src = &src[..k];
-        let mut x = inner.start;
-        while x + L <= inner.end {
-            tile::<L>(src, taps, k, x - r, &mut o[x..x + L], accumulate);
-            x += L;
-        }
-        while x + 8 <= inner.end {
-            tile::<8>(src, taps, k, x - r, &mut o[x..x + 8], accumulate);
-            x += 8;
-        }
-        // The edges and what no tile covered, with clamped reads.
-        let single = (0..inner.start.min(w)).chain(x..w);
-        for x in single {
-            let mut a = 0.0f32;
-            for (row, t) in src.iter().zip(taps.chunks_exact(k)) {
-                for (kx, &tv) in t.iter().enumerate() {
-                    a += tv * row[(x + kx).saturating_sub(r).min(w - 1)];
-                }
-            }
-            store(&mut o[x], a, accumulate);
-        }
-    }
-}
-
-/// `L` output pixels from input column `x0` on (`x0 + L + k − 1 ≤ W`): their sums in registers through
-/// every tap.
-#[inline(always)]
-fn tile<const L: usize>(
-    src: &[&[f32]],
-    taps: &[f32],
-    k: usize,
-    x0: usize,
-    o: &mut [f32],
-    accumulate: bool,
-) {
-    let mut acc = [0.0f32; L];
-    for (row, t) in src.iter().zip(taps.chunks_exact(k)) {
-        // `k` windows of `L` inputs, one per tap of this kernel row (no index to check per tap; `windows(L)`
-        // yields exactly `L` values, so the conversion never fails).
-        for (win, &tv) in row[x0..x0 + L + k - 1].windows(L).zip(t) {
-            let Ok(win) = <&[f32; L]>::try_from(win) else {
-                continue;
-            };
-            for (a, &v) in acc.iter_mut().zip(win) {
-                *a += tv * v;
-            }
-        }
-    }
-    for (o, a) in o.iter_mut().zip(acc) {
-        store(o, a, accumulate);
-    }
-}
-
-#[inline(always)]
-fn store(o: &mut f32, a: f32, accumulate: bool) {
-    if accumulate {
-        *o += a;
-    } else {
-        *o = a;
-    }
 }
 
 #[cfg(test)]
@@ -343,7 +217,9 @@ mod tests {
                 let taps = rng.vec(k * k);
                 let want = same_order_f32(&plane, h, w, &taps, k);
                 let base = rng.vec(h * w);
-                for (name, isa) in crate::isa::available_recompiled("depthwise") {
+                for (name, isa) in
+                    crate::ops::available_paths("depthwise", |t| t.depthwise.is_some())
+                {
                     let mut out = vec![f32::NAN; h * w];
                     depthwise(&plane, 1, h, w, &taps, k, &mut out, false, isa).unwrap();
                     for (i, (a, b)) in out.iter().zip(&want).enumerate() {

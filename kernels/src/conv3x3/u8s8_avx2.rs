@@ -1,33 +1,25 @@
-//! int8 rows for x86-64: AVX2 widening (`vpmaddwd`), AVX-VNNI (256-bit `{vex} vpdpbusd`), AVX-512 VNNI
-//! (512-bit `vpdpbusd`). All three instantiate the generic loop [`simd_u8::conv`](super::simd_u8::conv); the
-//! two 256-bit rows share their epilogue code (macro `epilogue_256`), so the AVX-VNNI row (not testable on the
-//! machine the tests ran on) differs from the tested AVX2 row only in `load_x`/`load_w`/`dot`/`to_f32`.
+//! `conv3x3.u8s8.4x1.avx2`: the int8 row for x86-64 without VNNI, on the generic loop
+//! [`simd_u8::conv`](super::simd_u8::conv). `vpmaddubsw` would saturate (255·127·2 > 32767), so inputs are
+//! zero-extended to i16 (`vpmovzxbw`, 4 pixels × 4 channels per ymm) and multiplied with i16 weights by
+//! `vpmaddwd` (exact): lane `2p` accumulates channels 0–1 of pixel `p`, lane `2p+1` channels 2–3; the two are
+//! added once per tile (`vphaddd` + `vpermq`). An 8-pixel unit is 2 ymm accumulators, so the tile is 4 output
+//! channels × 8 pixels = 8 accumulators + 2 inputs + 1 weight (11 of 16 ymm).
 //!
-//! * `conv3x3.u8s8.4x1.avx2`: no VNNI. `vpmaddubsw` would saturate (255·127·2 > 32767), so inputs are
-//!   zero-extended to i16 (`vpmovzxbw`, 4 pixels × 4 channels per ymm) and multiplied with i16 weights by
-//!   `vpmaddwd` (exact): lane `2p` accumulates channels 0–1 of pixel `p`, lane `2p+1` channels 2–3; the two
-//!   are added once per tile (`vphaddd` + `vpermq`). An 8-pixel unit is 2 ymm accumulators, so the tile is
-//!   4 output channels × 8 pixels = 8 accumulators + 2 inputs + 1 weight (11 of 16 ymm).
-//! * `conv3x3.u8s8.4x2.avxvnni`: 4 output channels × 2 ymm (16 pixels) = 8 accumulators + 2 + 1.
-//! * `conv3x3.u8s8.8x3.avx512vnni`: 8 output channels × 3 zmm (48 pixels) = 24 accumulators + 3 + 1 of 32.
+//! The f32 epilogue on `__m256` (macro `epilogue_256`) is shared with the AVX-VNNI row
+//! ([`u8s8_avxvnni`](super::u8s8_avxvnni)), so that row (not testable on the machine the tests ran on) differs
+//! from this tested one only in `load_x`/`load_w`/`dot`/`to_f32`. In test builds this file also runs the two
+//! VNNI rows' tile geometries on AVX2 registers (`Wide16`, `conv_*_geometry`).
 
+use super::job::{U8Job, U8Out};
 use super::simd_u8::{conv, SimdQ};
-use super::{U8Job, U8Out};
 use std::arch::x86_64::*;
 
-static MASK: [i32; 16] = [-1, -1, -1, -1, -1, -1, -1, -1, 0, 0, 0, 0, 0, 0, 0, 0];
+/// Lane masks of the 256-bit stores: `MASK[8 − valid..]` keeps the first `valid` lanes.
+pub(super) static MASK: [i32; 16] = [-1, -1, -1, -1, -1, -1, -1, -1, 0, 0, 0, 0, 0, 0, 0, 0];
 
 /// AVX2 widening accumulator: pixels 0–3 and 4–7, two i32 lanes (channel pairs) per pixel.
 #[derive(Clone, Copy)]
 pub(crate) struct Avx2Wide(__m256i, __m256i);
-
-/// AVX-VNNI accumulator: 8 pixels.
-#[derive(Clone, Copy)]
-pub(crate) struct AvxVnni(__m256i);
-
-/// AVX-512 VNNI accumulator: 16 pixels.
-#[derive(Clone, Copy)]
-pub(crate) struct Avx512Vnni(__m512i);
 
 /// The f32 epilogue operations on `__m256` shared by the 256-bit rows.
 macro_rules! epilogue_256 {
@@ -111,6 +103,7 @@ macro_rules! epilogue_256 {
         }
     };
 }
+pub(super) use epilogue_256;
 
 impl SimdQ for Avx2Wide {
     const PX: usize = 8;
@@ -161,164 +154,15 @@ impl SimdQ for Avx2Wide {
     }
 }
 
-impl SimdQ for AvxVnni {
-    const PX: usize = 8;
-    const WB: usize = 4;
-    type X = __m256i;
-    type W = __m256i;
-    epilogue_256!();
-    #[inline(always)]
-    unsafe fn init(v: i32) -> Self {
-        // SAFETY: the caller guarantees AVX2.
-        unsafe { AvxVnni(_mm256_set1_epi32(v)) }
-    }
-    #[inline(always)]
-    unsafe fn load_x(p: *const u8) -> Self::X {
-        // SAFETY: the caller guarantees AVX2 and 32 readable bytes at `p`.
-        unsafe { _mm256_loadu_si256(p.cast()) }
-    }
-    #[inline(always)]
-    unsafe fn load_w(p: *const u8) -> Self::W {
-        // SAFETY: the caller guarantees AVX2 and 4 readable bytes at `p`.
-        unsafe { _mm256_set1_epi32(p.cast::<i32>().read_unaligned()) }
-    }
-    #[inline(always)]
-    unsafe fn dot(self, x: Self::X, w: Self::W) -> Self {
-        // SAFETY: the caller guarantees AVX-VNNI. u8 (x) × s8 (w), 4 products per lane, exact.
-        unsafe { AvxVnni(_mm256_dpbusd_avx_epi32(self.0, x, w)) }
-    }
-    #[inline(always)]
-    unsafe fn to_f32(self) -> __m256 {
-        // SAFETY: the caller guarantees AVX2.
-        unsafe { _mm256_cvtepi32_ps(self.0) }
-    }
-}
-
-impl SimdQ for Avx512Vnni {
-    const PX: usize = 16;
-    const WB: usize = 4;
-    type X = __m512i;
-    type W = __m512i;
-    type F = __m512;
-    #[inline(always)]
-    unsafe fn init(v: i32) -> Self {
-        // SAFETY: the caller guarantees AVX-512F.
-        unsafe { Avx512Vnni(_mm512_set1_epi32(v)) }
-    }
-    #[inline(always)]
-    unsafe fn load_x(p: *const u8) -> Self::X {
-        // SAFETY: the caller guarantees AVX-512F and 64 readable bytes at `p`.
-        unsafe { _mm512_loadu_si512(p.cast()) }
-    }
-    #[inline(always)]
-    unsafe fn load_w(p: *const u8) -> Self::W {
-        // SAFETY: the caller guarantees AVX-512F and 4 readable bytes at `p`.
-        unsafe { _mm512_set1_epi32(p.cast::<i32>().read_unaligned()) }
-    }
-    #[inline(always)]
-    unsafe fn dot(self, x: Self::X, w: Self::W) -> Self {
-        // SAFETY: the caller guarantees AVX-512 VNNI.
-        unsafe { Avx512Vnni(_mm512_dpbusd_epi32(self.0, x, w)) }
-    }
-    #[inline(always)]
-    unsafe fn to_f32(self) -> __m512 {
-        // SAFETY: the caller guarantees AVX-512F.
-        unsafe { _mm512_cvtepi32_ps(self.0) }
-    }
-    #[inline(always)]
-    unsafe fn splat(v: f32) -> __m512 {
-        // SAFETY: the caller guarantees AVX-512F.
-        unsafe { _mm512_set1_ps(v) }
-    }
-    #[inline(always)]
-    unsafe fn mul(a: __m512, b: __m512) -> __m512 {
-        // SAFETY: the caller guarantees AVX-512F.
-        unsafe { _mm512_mul_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn add(a: __m512, b: __m512) -> __m512 {
-        // SAFETY: the caller guarantees AVX-512F.
-        unsafe { _mm512_add_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn sub(a: __m512, b: __m512) -> __m512 {
-        // SAFETY: the caller guarantees AVX-512F.
-        unsafe { _mm512_sub_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn relu(v: __m512) -> __m512 {
-        // SAFETY: the caller guarantees AVX-512F. `vmaxps(v, 0)` = `v > 0 ? v : 0`.
-        unsafe { _mm512_max_ps(v, _mm512_setzero_ps()) }
-    }
-    #[inline(always)]
-    unsafe fn load_byte(p: *const u8, lane: usize) -> __m512 {
-        // SAFETY: the caller guarantees AVX-512F and 64 readable bytes at `p`.
-        unsafe {
-            let w = _mm512_loadu_si512(p.cast());
-            let s = _mm512_srl_epi32(w, _mm_cvtsi32_si128(8 * lane as i32));
-            _mm512_cvtepi32_ps(_mm512_and_si512(s, _mm512_set1_epi32(0xFF)))
-        }
-    }
-    #[inline(always)]
-    unsafe fn quant(v: __m512, inv: __m512, zp: __m512) -> __m512 {
-        // SAFETY: the caller guarantees AVX-512F. `vrndscaleps` with 0 fraction bits, nearest even.
-        unsafe {
-            let r = _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(
-                _mm512_mul_ps(v, inv),
-            );
-            let y = _mm512_max_ps(_mm512_add_ps(r, zp), _mm512_setzero_ps());
-            _mm512_min_ps(y, _mm512_set1_ps(255.0))
-        }
-    }
-    #[inline(always)]
-    unsafe fn store_u8x4(p: *mut u8, q: [__m512; 4], valid: usize, border: u8) {
-        // SAFETY: the caller guarantees AVX-512F and 64 writable bytes at `p`.
-        unsafe {
-            let mut word = _mm512_cvttps_epi32(q[0]);
-            word = _mm512_or_si512(word, _mm512_slli_epi32::<8>(_mm512_cvttps_epi32(q[1])));
-            word = _mm512_or_si512(word, _mm512_slli_epi32::<16>(_mm512_cvttps_epi32(q[2])));
-            word = _mm512_or_si512(word, _mm512_slli_epi32::<24>(_mm512_cvttps_epi32(q[3])));
-            let k = ((1u32 << valid) - 1) as __mmask16;
-            let b = _mm512_set1_epi32(i32::from_ne_bytes([border; 4]));
-            _mm512_storeu_si512(p.cast(), _mm512_mask_blend_epi32(k, b, word))
-        }
-    }
-    #[inline(always)]
-    unsafe fn store_f32(p: *mut f32, v: __m512, valid: usize) {
-        // SAFETY: the caller guarantees AVX-512F and `valid` writable values at `p`; the masked store writes
-        // only the first `valid` lanes.
-        unsafe { _mm512_mask_storeu_ps(p, ((1u32 << valid) - 1) as __mmask16, v) }
-    }
-}
-
 /// `conv3x3.u8s8.4x1.avx2`.
 ///
 /// # Safety
-/// The CPU has AVX2; the job was checked by the safe API and packed with [`PackKind::I16`](super::registry::PackKind).
+/// The CPU has AVX2; the job was checked by the safe API and packed with
+/// [`PackKind::I16`](crate::registry::PackKind).
 #[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn conv_avx2(job: &U8Job<'_>, out: &mut U8Out<'_>) {
     // SAFETY: AVX2 enabled; the caller's guarantees.
     unsafe { conv::<Avx2Wide, 4, 1>(job, out) }
-}
-
-/// `conv3x3.u8s8.4x2.avxvnni`.
-///
-/// # Safety
-/// The CPU has AVX2 and AVX-VNNI; the job was checked and packed with `PackKind::I8`.
-#[target_feature(enable = "avx2,fma,avxvnni")]
-pub(crate) unsafe fn conv_avxvnni(job: &U8Job<'_>, out: &mut U8Out<'_>) {
-    // SAFETY: AVX2 + AVX-VNNI enabled; the caller's guarantees.
-    unsafe { conv::<AvxVnni, 4, 2>(job, out) }
-}
-
-/// `conv3x3.u8s8.8x3.avx512vnni`.
-///
-/// # Safety
-/// The CPU has AVX-512F/BW and AVX-512 VNNI; the job was checked and packed with `PackKind::I8`.
-#[target_feature(enable = "avx512f,avx512bw,avx512vnni,avx2,fma")]
-pub(crate) unsafe fn conv_avx512vnni(job: &U8Job<'_>, out: &mut U8Out<'_>) {
-    // SAFETY: AVX-512 + VNNI enabled; the caller's guarantees.
-    unsafe { conv::<Avx512Vnni, 8, 3>(job, out) }
 }
 
 /// `vpmaddwd` + `vpaddd` peak: 12 chains; ops = `iters · 12 · 16 · 2`.
@@ -340,48 +184,6 @@ pub(crate) unsafe fn peak_avx2(iters: u64) -> i32 {
         s = _mm256_add_epi32(s, a);
     }
     _mm256_extract_epi32::<0>(s)
-}
-
-/// 256-bit `vpdpbusd` peak: 12 chains; ops = `iters · 12 · 32 · 2`.
-///
-/// # Safety
-/// The CPU has AVX-VNNI.
-#[target_feature(enable = "avx2,avxvnni")]
-pub(crate) unsafe fn peak_avxvnni(iters: u64) -> i32 {
-    let mut acc = [_mm256_set1_epi32(1); 12];
-    let x = _mm256_set1_epi8(3);
-    let w = _mm256_set1_epi8(-2);
-    for _ in 0..iters {
-        for a in acc.iter_mut() {
-            *a = _mm256_dpbusd_avx_epi32(*a, x, w);
-        }
-    }
-    let mut s = _mm256_setzero_si256();
-    for a in acc {
-        s = _mm256_add_epi32(s, a);
-    }
-    _mm256_extract_epi32::<0>(s)
-}
-
-/// 512-bit `vpdpbusd` peak: 24 chains; ops = `iters · 24 · 64 · 2`.
-///
-/// # Safety
-/// The CPU has AVX-512 VNNI.
-#[target_feature(enable = "avx512f,avx512vnni")]
-pub(crate) unsafe fn peak_avx512vnni(iters: u64) -> i32 {
-    let mut acc = [_mm512_set1_epi32(1); 24];
-    let x = _mm512_set1_epi8(3);
-    let w = _mm512_set1_epi8(-2);
-    for _ in 0..iters {
-        for a in acc.iter_mut() {
-            *a = _mm512_dpbusd_epi32(*a, x, w);
-        }
-    }
-    let mut s = _mm512_setzero_si512();
-    for a in acc {
-        s = _mm512_add_epi32(s, a);
-    }
-    _mm512_reduce_add_epi32(s)
 }
 
 /// Tests only: two AVX2 widening units acting as one 16-pixel unit, so that the generic loop runs the

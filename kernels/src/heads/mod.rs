@@ -23,102 +23,12 @@
 //! [`fake_quantize`] is ONNX `QuantizeLinear` then `DequantizeLinear` on a u8 grid: the int8 files round the
 //! last convolution's output to a grid before the heads (or the pre-filter's sum).
 
-use crate::isa::recompiled_path;
-use crate::quant::{check_scale, quantize_f32, ROUND_MAGIC};
-use crate::{Isa, KernelError, QuantU8};
+pub(crate) mod body;
 
-/// `exp(t)` for `t ∈ [−87, 88]` (the caller clamps), ≈ 1 ulp.
-#[inline(always)]
-fn exp_reduced(t: f32) -> f32 {
-    const LOG2E: f32 = std::f32::consts::LOG2_E;
-    // ln 2 = C1 + C2, C1 exact in 9 bits so that n·C1 is exact for |n| ≤ 2⁷.
-    const C1: f32 = 0.693_359_4;
-    const C2: f32 = -2.121_944_4e-4;
-    let j = t * LOG2E + ROUND_MAGIC;
-    let n = j - ROUND_MAGIC;
-    // The integer n sits in the low mantissa bits of j (offset by the magic's own bits).
-    let ni = (j.to_bits() as i32).wrapping_sub(ROUND_MAGIC.to_bits() as i32);
-    let r = (t - n * C1) - n * C2;
-    let mut p = 1.987_569_1e-4f32;
-    p = p * r + 1.398_199_9e-3;
-    p = p * r + 8.333_452e-3;
-    p = p * r + 4.166_579_6e-2;
-    p = p * r + 0.166_666_65;
-    p = p * r + 0.5;
-    let e = p * (r * r) + r + 1.0;
-    // 2ⁿ for n ∈ [−126, 127] from its exponent bits.
-    let two_n = f32::from_bits((ni.wrapping_add(127) as u32) << 23);
-    e * two_n
-}
-
-/// `(tanh(v) + 1)·scale` as `2·scale / (1 + exp(−2v))`; NaN stays NaN.
-#[inline(always)]
-fn head(v: f32, two_scale: f32) -> f32 {
-    let t = -2.0 * v;
-    // `clamp`, not `min`/`max`: a NaN passes through to the result.
-    let t = t.clamp(-87.0, 88.0);
-    two_scale / (1.0 + exp_reduced(t))
-}
-
-/// ONNX `QuantizeLinear` then `DequantizeLinear`: `(clamp(round_ties_even(v / s) + zp, 0, 255) − zp)·s`.
-#[inline(always)]
-fn grid_round(v: f32, scale: f32, zp: f32) -> f32 {
-    (quantize_f32(v / scale, zp) - zp) * scale
-}
-
-#[inline(always)]
-fn heads_body(raw: &[f32], out: &mut [f32], scale: f32, grid: Option<QuantU8>) {
-    let two = 2.0 * scale;
-    match grid {
-        None => out
-            .iter_mut()
-            .zip(raw)
-            .for_each(|(o, &v)| *o = head(v, two)),
-        Some(g) => {
-            let (s, zp) = (g.scale, g.zero_point as f32);
-            out.iter_mut()
-                .zip(raw)
-                .for_each(|(o, &v)| *o = head(grid_round(v, s, zp), two))
-        }
-    }
-}
-
-#[inline(always)]
-fn grid_body(values: &mut [f32], grid: QuantU8) {
-    let (s, zp) = (grid.scale, grid.zero_point as f32);
-    values.iter_mut().for_each(|v| *v = grid_round(*v, s, zp));
-}
-
-#[cfg(target_arch = "x86_64")]
-mod x86 {
-    use super::{grid_body, heads_body};
-    use crate::QuantU8;
-
-    /// # Safety
-    /// The CPU has AVX2.
-    #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn heads_avx2(raw: &[f32], out: &mut [f32], s: f32, g: Option<QuantU8>) {
-        heads_body(raw, out, s, g)
-    }
-    /// # Safety
-    /// The CPU has AVX-512F.
-    #[target_feature(enable = "avx512f")]
-    pub(super) unsafe fn heads_avx512(raw: &[f32], out: &mut [f32], s: f32, g: Option<QuantU8>) {
-        heads_body(raw, out, s, g)
-    }
-    /// # Safety
-    /// The CPU has AVX2.
-    #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn grid_avx2(values: &mut [f32], g: QuantU8) {
-        grid_body(values, g)
-    }
-    /// # Safety
-    /// The CPU has AVX-512F.
-    #[target_feature(enable = "avx512f")]
-    pub(super) unsafe fn grid_avx512(values: &mut [f32], g: QuantU8) {
-        grid_body(values, g)
-    }
-}
+use crate::error::KernelError;
+use crate::isa::Isa;
+use crate::ops;
+use crate::quant::{check_scale, QuantU8};
 
 fn check(raw: &[f32], out: &[f32]) -> Result<(), KernelError> {
     if raw.len() != out.len() {
@@ -154,16 +64,7 @@ pub fn tanh_heads(
 ) -> Result<(), KernelError> {
     check(raw, out)?;
     check_grid(grid)?;
-    match recompiled_path(isa)? {
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: `recompiled_path` returned a level this CPU has (AVX-512F).
-        Isa::Avx512 => unsafe { x86::heads_avx512(raw, out, scale, grid) },
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: `recompiled_path` returned a level this CPU has (AVX2).
-        Isa::Avx2Fma => unsafe { x86::heads_avx2(raw, out, scale, grid) },
-        _ => heads_body(raw, out, scale, grid),
-    }
-    Ok(())
+    ops::run_heads(isa, raw, out, scale, grid)
 }
 
 /// ONNX `QuantizeLinear` then `DequantizeLinear` on the u8 grid `grid`, in place: `v ← (clamp(
@@ -173,21 +74,13 @@ pub fn tanh_heads(
 /// ([`KernelError::Parameter`]).
 pub fn fake_quantize(values: &mut [f32], grid: QuantU8, isa: Isa) -> Result<(), KernelError> {
     check_grid(Some(grid))?;
-    match recompiled_path(isa)? {
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: `recompiled_path` returned a level this CPU has (AVX-512F).
-        Isa::Avx512 => unsafe { x86::grid_avx512(values, grid) },
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: `recompiled_path` returned a level this CPU has (AVX2).
-        Isa::Avx2Fma => unsafe { x86::grid_avx2(values, grid) },
-        _ => grid_body(values, grid),
-    }
-    Ok(())
+    ops::run_grid(isa, values, grid)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::quant::quantize_f32;
 
     /// Values over the heads' whole range, with the awkward ones: 0, ±tiny, where tanh + 1 underflows, NaN's
     /// neighbours (±∞), and the grid's rounding ties.
@@ -228,7 +121,7 @@ mod tests {
     }
 
     fn available_paths() -> Vec<(String, Isa)> {
-        crate::isa::available_recompiled("heads")
+        crate::ops::available_paths("heads", |t| t.heads.is_some())
     }
 
     #[test]

@@ -1,0 +1,199 @@
+//! The f32 plan: [`Conv3x3F32`] packs the weights once for the kernel row it selected and runs any row band.
+
+use super::inputs::Inputs;
+use super::job::{F32Job, F32Out};
+use super::row::{F32Row, KernelInfo};
+use crate::buffer::band::RowBand;
+use crate::buffer::planar::RowPlanar;
+use crate::error::KernelError;
+use crate::isa::Isa;
+use crate::ops;
+use crate::pack;
+use std::ops::Range;
+
+/// A planned f32 3×3 convolution `C_in → C_out` with bias and optional ReLU, packed for one kernel row.
+#[derive(Clone, Debug)]
+pub struct Conv3x3F32 {
+    row: &'static F32Row,
+    c_in: usize,
+    c_out: usize,
+    relu: bool,
+    weights: Vec<f32>,
+    bias: Vec<f32>,
+}
+
+impl Conv3x3F32 {
+    /// Plans a convolution with the best f32 kernel row for `isa` and `c_out`
+    /// ([`registry::selected_f32_for`](crate::registry::selected_f32_for): the first row `isa` includes that
+    /// computes the fewest padding output channels, so a 6-channel last layer runs on the 6-channel AVX2 tile
+    /// rather than the 8-channel AVX-512 one, which would compute 2 of every 8 channels for nothing).
+    ///
+    /// `weights` is `[C_out][C_in][3][3]` (PyTorch/ONNX OIHW order), `bias` is `[C_out]`; `relu` applies
+    /// `max(·, 0)` after the bias. Errors: `isa` not available on this CPU ([`KernelError::Isa`]), a zero or
+    /// too large channel count ([`KernelError::Dimension`]), wrong slice lengths ([`KernelError::Length`]).
+    pub fn new(
+        weights: &[f32],
+        bias: &[f32],
+        c_in: usize,
+        c_out: usize,
+        relu: bool,
+        isa: Isa,
+    ) -> Result<Self, KernelError> {
+        if !isa.is_available() {
+            return Err(KernelError::Isa {
+                name: isa.name().into(),
+                why: "not available on this CPU",
+            });
+        }
+        Self::with_row(
+            weights,
+            bias,
+            c_in,
+            c_out,
+            relu,
+            ops::select_f32_for(isa, c_out),
+        )
+    }
+
+    /// Plans a convolution with the kernel row named `name` (e.g. `conv3x3.f32.6x2.avx2`, see
+    /// [`registry::f32_kernels`](crate::registry::f32_kernels)). Errors: as [`new`](Self::new), and
+    /// [`KernelError::Kernel`] for an unknown name or a row this CPU cannot run.
+    pub fn with_kernel(
+        weights: &[f32],
+        bias: &[f32],
+        c_in: usize,
+        c_out: usize,
+        relu: bool,
+        name: &str,
+    ) -> Result<Self, KernelError> {
+        let row = ops::f32_rows()
+            .find(|r| r.info.name == name && r.info.isa.is_available())
+            .ok_or_else(|| KernelError::Kernel { name: name.into() })?;
+        Self::with_row(weights, bias, c_in, c_out, relu, row)
+    }
+
+    fn with_row(
+        weights: &[f32],
+        bias: &[f32],
+        c_in: usize,
+        c_out: usize,
+        relu: bool,
+        row: &'static F32Row,
+    ) -> Result<Self, KernelError> {
+        let (weights, bias) = pack::pack_f32(weights, bias, c_in, c_out, row.info.oc_tile)?;
+        Ok(Self {
+            row,
+            c_in,
+            c_out,
+            relu,
+            weights,
+            bias,
+        })
+    }
+
+    /// The kernel row this plan runs.
+    pub fn kernel(&self) -> &'static KernelInfo {
+        &self.row.info
+    }
+    /// Input channels `C_in` (sum over both sources).
+    pub fn c_in(&self) -> usize {
+        self.c_in
+    }
+    /// Output channels `C_out`.
+    pub fn c_out(&self) -> usize {
+        self.c_out
+    }
+
+    /// The job of output rows `rows` (checked by the caller) and its kernel row origin `k` (kernel row `y` is
+    /// output row `y + k`; 0 unless the inputs are [`shifted`](Inputs::shifted)).
+    fn job<'a>(&'a self, inputs: &Inputs<'a, f32>, rows: &Range<usize>) -> (F32Job<'a>, usize) {
+        let a = inputs.a;
+        let (k, [sa, sb, sr]) = inputs.kernel_view();
+        let job = F32Job {
+            a: sa,
+            ca: a.channels(),
+            b: sb,
+            cb: inputs.b.map_or(0, |b| b.channels()),
+            h: a.height(),
+            w: a.width(),
+            wp: a.padded_width(),
+            weights: &self.weights,
+            bias: &self.bias,
+            cout: self.c_out,
+            relu: self.relu,
+            residual: inputs.residual.map(|_| sr),
+            y0: rows.start - k,
+            y1: rows.end - k,
+        };
+        (job, k)
+    }
+
+    /// Computes output rows `rows` (frame rows, `0 ≤ start < end ≤ H`) into `out`, a [`RowPlanar`] of `C_out`
+    /// channels and the inputs' `H × W`. Only the interior of those rows is written (and their right border
+    /// rewritten with zeros). Errors: shape mismatches ([`KernelError::Shape`]), a bad row band
+    /// ([`KernelError::Rows`]).
+    pub fn run(
+        &self,
+        inputs: Inputs<'_, f32>,
+        out: &mut RowPlanar<f32>,
+        rows: Range<usize>,
+    ) -> Result<(), KernelError> {
+        self.run_band(inputs, &mut out.band_mut(rows)?)
+    }
+
+    /// Computes the rows of `band` (of a [`RowPlanar`] of `C_out` channels and the inputs' `H × W`, from
+    /// [`RowPlanar::bands_mut`]): as [`run`](Self::run), for one thread's share of a layer. Errors: as `run`.
+    pub fn run_band(
+        &self,
+        inputs: Inputs<'_, f32>,
+        band: &mut RowBand<'_, f32>,
+    ) -> Result<(), KernelError> {
+        let (h, w) = (band.h, band.w);
+        if band.c != self.c_out {
+            return Err(KernelError::Shape {
+                what: format!(
+                    "output has {} channels, plan's C_out is {}",
+                    band.c, self.c_out
+                ),
+            });
+        }
+        let rows = band.rows();
+        inputs.check(self.c_in, self.c_out, h, w, &rows)?;
+        let (job, k) = self.job(&inputs, &rows);
+        // The kernel writes kernel row `y` at output row `y + k`: the band, seen from the kernel, starts `k`
+        // rows earlier (`band.base ≥ (rows.start + 1)·stride ≥ k·stride`: `check` keeps `k ≤ rows.start`).
+        let stride = band.data.len() / rows.len();
+        let out = F32Out::Rows {
+            data: band.data,
+            base: band.base - k * stride,
+        };
+        ops::run_f32(self.row, &job, out)
+    }
+
+    /// Computes output rows `rows` into a planar `[C_out][H][W]` f32 slice (the last layer: raw values, no
+    /// border). Errors: as [`run`](Self::run), and `out.len() != C_out·H·W` ([`KernelError::Length`]).
+    pub fn run_planar(
+        &self,
+        inputs: Inputs<'_, f32>,
+        out: &mut [f32],
+        rows: Range<usize>,
+    ) -> Result<(), KernelError> {
+        let (h, w) = (inputs.a.height(), inputs.a.width());
+        let expected = self.c_out * h * w;
+        if out.len() != expected {
+            return Err(KernelError::Length {
+                what: "planar output",
+                expected,
+                got: out.len(),
+            });
+        }
+        if inputs.shift.is_some() {
+            return Err(KernelError::Shape {
+                what: "a planar output takes whole-frame inputs, not shifted windows".into(),
+            });
+        }
+        inputs.check(self.c_in, self.c_out, h, w, &rows)?;
+        let (job, _) = self.job(&inputs, &rows);
+        ops::run_f32(self.row, &job, F32Out::Planar(out))
+    }
+}

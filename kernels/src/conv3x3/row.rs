@@ -1,0 +1,103 @@
+//! A kernel row: its public description ([`KernelInfo`]: name, ISA level, register tile, element type), how
+//! an int8 row wants its weights packed ([`PackKind`]), and the function that the kernel table lists with it
+//! (`F32Row`, `U8Row`; the table is `ops.rs`).
+//!
+//! Names: `conv3x3.<dtype>.<G>x<V>.<isa>`, `G` output channels × `V` vector registers of pixels per tile
+//! (for the scalar row, `V` counts pixels).
+
+use super::job::{F32Job, F32Out, U8Job, U8Out};
+use crate::isa::Isa;
+
+/// Element type of a kernel family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DType {
+    /// f32 activations and weights, f32 accumulation.
+    F32,
+    /// u8 activations, s8 weights, i32 accumulation, requantisation in the epilogue.
+    U8S8,
+}
+
+/// Description of one kernel row.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct KernelInfo {
+    /// Unique name, e.g. `conv3x3.f32.6x2.avx2`.
+    pub name: &'static str,
+    /// The ISA level the row needs.
+    pub isa: Isa,
+    /// Element type.
+    pub dtype: DType,
+    /// Output channels per register tile (`G`).
+    pub oc_tile: usize,
+    /// Pixels per register tile.
+    pub px_tile: usize,
+}
+
+impl KernelInfo {
+    /// True when this CPU can run the row.
+    pub fn is_available(&self) -> bool {
+        self.isa.is_available()
+    }
+}
+
+/// How an int8 row wants its weights packed (`[oc-group][ic/4][ky][kx][G][4]`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PackKind {
+    /// 4 × s8 per output channel and step (dot-product instructions, scalar).
+    I8,
+    /// As `I8`, for kernels that feed SDOT with `q ⊕ 0x80 = q − 128`: the packing adds `128·Σw` to the
+    /// accumulator start.
+    I8Xor128,
+    /// 4 × i16 per output channel and step (widening paths: `vpmaddwd`, `smlal`).
+    I16,
+}
+
+pub(crate) type F32Fn = unsafe fn(&F32Job<'_>, &mut F32Out<'_>);
+
+/// A registered f32 kernel.
+#[derive(Debug)]
+pub(crate) struct F32Row {
+    pub info: KernelInfo,
+    pub run: F32Fn,
+}
+
+pub(crate) type U8Fn = unsafe fn(&U8Job<'_>, &mut U8Out<'_>);
+
+/// A registered int8 kernel.
+#[derive(Debug)]
+pub(crate) struct U8Row {
+    pub info: KernelInfo,
+    pub pack: PackKind,
+    pub run: U8Fn,
+}
+
+/// The description of an f32 row.
+pub(crate) const fn f32_info(
+    name: &'static str,
+    isa: Isa,
+    oc_tile: usize,
+    px_tile: usize,
+) -> KernelInfo {
+    KernelInfo {
+        name,
+        isa,
+        dtype: DType::F32,
+        oc_tile,
+        px_tile,
+    }
+}
+
+/// The description of an int8 row.
+pub(crate) const fn u8_info(
+    name: &'static str,
+    isa: Isa,
+    oc_tile: usize,
+    px_tile: usize,
+) -> KernelInfo {
+    KernelInfo {
+        name,
+        isa,
+        dtype: DType::U8S8,
+        oc_tile,
+        px_tile,
+    }
+}
