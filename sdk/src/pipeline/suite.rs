@@ -130,14 +130,18 @@ fn reference(p: &HologramPipeline, f: &RgbdFrame) -> Frame {
         .unwrap();
     let mut field = heads_to_field(amplitude.view(), phase.view()).unwrap();
     let heads = ndarray::concatenate(Axis(0), &[amplitude.view(), phase.view()]).unwrap();
-    propagate_colour(
-        &mut field,
-        &cfg.optics,
-        cfg.offset_m,
-        Carrier::Remove,
-        cfg.options,
-    )
-    .unwrap();
+    // Eq. 6; at 0 m there is nothing to propagate (the session skips the stage, and an FFT round trip
+    // would only add rounding).
+    if cfg.offset_m != 0.0 {
+        propagate_colour(
+            &mut field,
+            &cfg.optics,
+            cfg.offset_m,
+            Carrier::Remove,
+            cfg.options,
+        )
+        .unwrap();
+    }
     if let Some(pre) = p.prefilter_model() {
         let planes = ndarray::concatenate(
             Axis(0),
