@@ -263,6 +263,7 @@ impl ModelArgs {
             cnn_threads: ThreadCount::from_count(self.threads as usize),
             backend: self.backend.into(),
             gpu_precision: self.gpu_precision.into(),
+            wavelength_ratio_tolerance: tensorholo::model::DEFAULT_WAVELENGTH_RATIO_TOLERANCE,
         };
         let precision = self.precision();
         let t = Instant::now();
@@ -270,6 +271,7 @@ impl ModelArgs {
             optics: config.optics,
             offset_m: config.offset_m,
             input_layers: input.input_layers(),
+            wavelength_ratio_tolerance: config.wavelength_ratio_tolerance,
         };
         let hologram = match &self.model {
             Some(p) => HologramModel::from_path(p, ModelKind::Hologram, &expected)?,
