@@ -24,30 +24,43 @@ pub struct OpticsArgs {
     /// Band-limit transfer functions (Matsushima & Shimobaba 2009).
     #[arg(long)]
     pub band_limit: bool,
-    /// SLM pixel pitch in metres.
-    #[arg(long, default_value_t = 8e-6)]
-    pub pitch_m: f64,
-    /// Laser wavelengths in metres, R,G,B.
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_values_t = [638e-9, 520e-9, 450e-9])]
-    pub wavelengths_m: Vec<f64>,
-    /// Depth of the 3D volume in metres, centred on the midpoint hologram.
-    #[arg(long, default_value_t = 6e-3)]
-    pub volume_depth_m: f64,
+    /// SLM pixel pitch in metres [default: 8e-6, or the --display profile's].
+    #[arg(long)]
+    pub pitch_m: Option<f64>,
+    /// Laser wavelengths in metres, R,G,B [default: 6.38e-7,5.2e-7,4.5e-7, or the --display profile's].
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    pub wavelengths_m: Option<Vec<f64>>,
+    /// Depth of the 3D volume in metres, centred on the midpoint hologram [default: 6e-3, or the --display
+    /// profile's].
+    #[arg(long)]
+    pub volume_depth_m: Option<f64>,
 }
 
 impl OpticsArgs {
     /// The validated optical setup. Errors: not exactly 3 wavelengths, or a non-positive value.
     pub fn setup(&self) -> Result<OpticalSetup> {
-        let [r, g, b] = self.wavelengths_m[..] else {
-            bail!(
-                "--wavelengths-m needs 3 comma-separated values (R,G,B), got {}",
-                self.wavelengths_m.len()
-            );
+        self.setup_over(OpticalSetup::default())
+    }
+
+    /// The validated optical setup: `base` (the paper's display, or a display profile's) with the flags
+    /// given on the command line in place of its values. Errors: as [`OpticsArgs::setup`].
+    pub fn setup_over(&self, base: OpticalSetup) -> Result<OpticalSetup> {
+        let wavelengths_m = match &self.wavelengths_m {
+            None => base.wavelengths_m,
+            Some(w) => {
+                let [r, g, b] = w[..] else {
+                    bail!(
+                        "--wavelengths-m needs 3 comma-separated values (R,G,B), got {}",
+                        w.len()
+                    );
+                };
+                [r, g, b]
+            }
         };
         let setup = OpticalSetup {
-            wavelengths_m: [r, g, b],
-            pixel_pitch_m: self.pitch_m,
-            volume_depth_m: self.volume_depth_m,
+            wavelengths_m,
+            pixel_pitch_m: self.pitch_m.unwrap_or(base.pixel_pitch_m),
+            volume_depth_m: self.volume_depth_m.unwrap_or(base.volume_depth_m),
         };
         setup.validate()?;
         Ok(setup)

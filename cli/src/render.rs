@@ -10,9 +10,10 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use tensorholo::cnn::{CnnEngine, CnnLayout, ThreadCount};
+use tensorholo::display::DisplayProfile;
 use tensorholo::evaluation::{focal_depths, table2};
 use tensorholo::model::{contract, HologramModel, ModelConfig, ModelKind, Precision, SceneInput};
-use tensorholo::optics::{focal_stack, post_encoding_midpoint};
+use tensorholo::optics::{focal_stack, post_encoding_midpoint, OpticalSetup};
 use tensorholo::pipeline::{
     Backend, BackendReport, FrameTimings, GpuPrecision, Heads, HologramPipeline, PipelineConfig,
     PrefilterMode, PrefilterSource, SlmFrame,
@@ -148,9 +149,13 @@ pub struct ModelArgs {
     #[arg(long, default_value_t = 8, value_parser = parse_layers)]
     pub layers: usize,
     /// Distance s from the midpoint hologram to the SLM plane in millimetres (paper: 0, 6 or 12; shipped
-    /// pre-filter CNNs exist for 6 and 12).
-    #[arg(long, default_value_t = 6.0, allow_hyphen_values = true)]
-    pub offset_mm: f64,
+    /// pre-filter CNNs exist for 6 and 12) [default: 6, or the first offset of the --display profile].
+    #[arg(long, allow_hyphen_values = true)]
+    pub offset_mm: Option<f64>,
+    /// Display profile (JSON, docs/DISPLAYS.md): SLM pitch, lasers, volume, offsets, calibration. The
+    /// --pitch-m, --wavelengths-m, --volume-depth-m, --offset-mm and --calibration flags override its values.
+    #[arg(long)]
+    pub display: Option<PathBuf>,
     /// Run the int8 models (the form the benchmarks found fastest within 0.5 dB; see --precision).
     #[arg(long, conflicts_with = "precision")]
     pub int8: bool,
@@ -214,10 +219,29 @@ impl ModelArgs {
             ("--model", &self.model),
             ("--prefilter-model", &self.prefilter_model),
             ("--calibration", &self.calibration),
+            ("--display", &self.display),
         ]
         .into_iter()
         .filter_map(|(flag, p)| Some(crate::output::Input::file(flag, p.as_deref()?)))
         .collect()
+    }
+
+    /// The `--display` profile, if given. Errors: the file cannot be read or is not a valid profile (the
+    /// message names the key).
+    pub fn profile(&self) -> Result<Option<DisplayProfile>> {
+        self.display
+            .as_deref()
+            .map(|p| {
+                DisplayProfile::from_path(p).with_context(|| format!("--display {}", p.display()))
+            })
+            .transpose()
+    }
+
+    /// The offset in millimetres: `--offset-mm`, else the profile's first offset, else 6.
+    pub fn offset_mm(&self, profile: Option<&DisplayProfile>) -> f64 {
+        self.offset_mm
+            .or_else(|| profile.map(|p| p.default_offset_m() * 1e3))
+            .unwrap_or(6.0)
     }
 
     /// The selected weight format.
@@ -249,20 +273,27 @@ impl ModelArgs {
     /// `input`. The pre-filter CNN: `--prefilter-model`'s file, or the shipped one as
     /// [`ModelArgs::prefilter_mode`] says; the rule is the SDK's (the CLI and the bindings share it).
     pub fn pipeline(&self, input: SceneInput) -> Result<(HologramPipeline, serde_json::Value)> {
-        if !self.offset_mm.is_finite() {
+        let profile = self.profile()?;
+        let offset_mm = self.offset_mm(profile.as_ref());
+        if !offset_mm.is_finite() {
             bail!("--offset-mm must be a finite number of millimetres");
         }
         let (_, encoding) = self.encoding.method(crate::args::Encoding::AaDpm);
         let config = PipelineConfig {
-            optics: self.optics.setup()?,
+            optics: self.optics.setup_over(
+                profile
+                    .as_ref()
+                    .map_or_else(OpticalSetup::default, DisplayProfile::optics),
+            )?,
             options: self.optics.options(),
-            offset_m: self.offset_mm * 1e-3,
+            offset_m: offset_mm * 1e-3,
             encoding,
             cnn_layout: self.layout.into(),
             cnn_engine: self.engine.into(),
             cnn_threads: ThreadCount::from_count(self.threads as usize),
             backend: self.backend.into(),
             gpu_precision: self.gpu_precision.into(),
+            wavelength_ratio_tolerance: tensorholo::model::DEFAULT_WAVELENGTH_RATIO_TOLERANCE,
         };
         let precision = self.precision();
         let t = Instant::now();
@@ -270,6 +301,7 @@ impl ModelArgs {
             optics: config.optics,
             offset_m: config.offset_m,
             input_layers: input.input_layers(),
+            wavelength_ratio_tolerance: config.wavelength_ratio_tolerance,
         };
         let hologram = match &self.model {
             Some(p) => HologramModel::from_path(p, ModelKind::Hologram, &expected)?,
@@ -296,7 +328,11 @@ impl ModelArgs {
                     Some(p) => format!("--prefilter-model {}", p.display()),
                     None => "the pre-filter CNN".into(),
                 })?;
-        if let Some(path) = &self.calibration {
+        let calibration = self
+            .calibration
+            .clone()
+            .or_else(|| profile.as_ref().and_then(|p| p.calibration.clone()));
+        if let Some(path) = &calibration {
             let cal = tensorholo::slm::DisplayCalibration::read(path)?;
             log::info!("display calibration {}: {}", path.display(), cal.summary());
             pipeline = pipeline
@@ -341,9 +377,12 @@ impl ModelArgs {
             "prefilter_cnn": pipeline.prefilter_model().map(describe),
             "encoding": pipeline.encoding(),
             "calibration": pipeline.calibration().map(|c| json!({
-                "file": self.calibration.as_deref().map(crate::output::path_text),
+                "file": calibration.as_deref().map(crate::output::path_text),
                 "summary": c.summary(),
             })),
+            "display": self.display.as_deref().map(crate::output::path_text),
+            "display_name": profile.as_ref().and_then(|p| p.name.clone()),
+            "display_mapping": pipeline.display_mapping_description(),
             "load_s": t.elapsed().as_secs_f64(),
         });
         Ok((pipeline, info))
@@ -392,13 +431,17 @@ Examples:
   holo render --ldi out/ldi_test0 --depth-encoding relative16 --evaluate --out out/ldi
       a layered depth image (rgb_K.png, depth_K.png, front first) with the shipped LDI CNN, scored
       against the SM-LBM of all its layers
-  holo render --model my.onnx --prefilter-model my.prefilter.onnx --out out/mine";
+  holo render --model my.onnx --prefilter-model my.prefilter.onnx --out out/mine
+  holo render --display lcos_3.74um.json --out out/lcos
+      a display profile (docs/DISPLAYS.md): the shipped 8 µm models serve it at the mapped volume and offset";
 
 /// Runs `holo render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let t_all = Instant::now();
     let mut inputs = args.scene.guard_inputs();
     inputs.extend(args.model.guard_inputs());
+    // A bad display profile stops the command before anything is written.
+    args.model.profile()?;
     crate::output::prepare(&args.out, &inputs)?;
     let t = Instant::now();
     let (scene, source) = args.scene.load()?;
@@ -413,7 +456,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         cnn.layers,
         scene.input(),
         cnn.precision,
-        args.model.offset_mm,
+        pipeline.config().offset_m * 1e3,
         if pipeline.prefilter_model().is_some() {
             "pre-filter CNN + DPM (DDPM)".to_string()
         } else {

@@ -141,6 +141,8 @@ fn frame_file(frames_dir: &Path, i: usize, ch: &str) -> PathBuf {
 
 /// Runs `holo video`.
 pub fn run(args: &VideoArgs) -> Result<()> {
+    // A bad display profile stops the command before anything is written.
+    args.model.profile()?;
     let t_all = Instant::now();
     let mut guarded = vec![
         crate::output::Input::folder("--rgb-dir", &args.rgb_dir),
@@ -199,7 +201,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         range.map(|r| (r.z_near_m, r.z_far_m)),
         args.model.layers,
         args.model.precision(),
-        args.model.offset_mm
+        pipeline.config().offset_m * 1e3
     );
 
     let loader = |(rgb, depth): &(PathBuf, PathBuf),

@@ -485,3 +485,58 @@ fn an_ldi_exported_by_holo_dataset_renders_with_the_ldi_cnn_and_is_refused_when_
     let e = bad(&["--depth-encoding", "relative16", "--layers", "30"]);
     assert!(e.contains("ldi hologram CNNs have [8] layers"), "{e}");
 }
+
+#[test]
+fn render_reads_a_display_profile_and_refuses_a_bad_one_before_writing() {
+    let dir = tempfile::tempdir().unwrap();
+    let profile = dir.path().join("lcos.json");
+    std::fs::write(
+        &profile,
+        r#"{"name": "4 um LCoS", "pixel_pitch_m": 4e-6, "resolution": [48, 64],
+            "wavelengths_m": [638e-9, 520e-9, 450e-9], "volume_depth_m": 1.5e-3, "offsets_m": [1.5e-3]}"#,
+    )
+    .unwrap();
+    let out = dir.path().join("r");
+    let args = |out: &std::path::Path, profile: &std::path::Path| {
+        holo(&[
+            "render",
+            "--size",
+            "48x64",
+            "--repeat",
+            "1",
+            "--display",
+            profile.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    let o = args(&out, &profile);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = report(&out);
+    let mapping = r["models"]["display_mapping"]
+        .as_str()
+        .unwrap_or_default()
+        .to_string();
+    assert!(mapping.contains("serves 4 µm with a 1.5 mm volume"), "{r}");
+    assert!(
+        r["models"]["prefilter_reason"]
+            .as_str()
+            .unwrap_or_default()
+            .contains("6 mm pre-filter"),
+        "{r}"
+    );
+    // A typo in a key: refused, naming it, and nothing is written.
+    let bad = dir.path().join("bad.json");
+    std::fs::write(
+        &bad,
+        std::fs::read_to_string(&profile)
+            .unwrap()
+            .replace("pixel_pitch_m", "pixel_pich_m"),
+    )
+    .unwrap();
+    let out_bad = dir.path().join("bad_out");
+    let o = args(&out_bad, &bad);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("pixel_pich_m"), "{}", stderr(&o));
+    assert!(!out_bad.exists());
+}

@@ -176,6 +176,7 @@ impl GeneratorConfig {
             cnn_threads: self.threads,
             backend: self.backend,
             gpu_precision: self.gpu_precision,
+            wavelength_ratio_tolerance: crate::model::DEFAULT_WAVELENGTH_RATIO_TOLERANCE,
         }
     }
 
@@ -404,6 +405,7 @@ impl HologramGenerator {
             optics: pipeline_config.optics,
             offset_m: pipeline_config.offset_m,
             input_layers: 1,
+            wavelength_ratio_tolerance: pipeline_config.wavelength_ratio_tolerance,
         };
         let load =
             |bytes, name, kind| HologramModel::from_named_bytes(bytes, name, kind, &expected);

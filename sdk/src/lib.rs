@@ -20,6 +20,8 @@
 //! - [`pipeline`]: the real-time pipeline: [`pipeline::HologramSession`] turns RGB-D frames into SLM codes
 //!   with the CNNs (hologram CNN → offset → pre-filter CNN → double phase → LUT), frame by frame or streamed.
 //! - [`generator`]: the app-facing API the bindings wrap (camera buffers in, SLM patterns out).
+//! - [`display`]: display profiles (JSON: SLM pitch and size, lasers, volume, offsets, calibration;
+//!   `docs/DISPLAYS.md`).
 //! - [`io`]: PNG and `.npy` input/output.
 //! - [`slm`]: phase look-up tables (global, per-pixel), the display calibration file, calibration from
 //!   captures (Eq. 12–13), the laser intensity map, the deep-black test (Fig. 11), a simulated SLM.
@@ -50,6 +52,7 @@ pub mod cnn;
 pub mod color;
 #[cfg(feature = "research")]
 pub mod dataset;
+pub mod display;
 pub mod encoding;
 pub mod error;
 pub mod evaluation;

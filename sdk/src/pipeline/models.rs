@@ -10,7 +10,7 @@ use crate::encoding::DoublePhaseMethod;
 #[cfg(doc)]
 use crate::error::HoloError;
 use crate::error::{invalid, Result};
-use crate::model::{HologramModel, ModelConfig, ModelKind, Precision};
+use crate::model::{DisplayMapping, HologramModel, ModelConfig, ModelKind, Precision};
 use crate::slm::{DisplayCalibration, LutRepresentation, PhaseLut};
 
 /// The loaded CNNs plus their configuration: a factory of [`HologramSession`](crate::pipeline::HologramSession)s.
@@ -21,6 +21,8 @@ pub struct HologramPipeline {
     prefilter: Option<Arc<HologramModel>>,
     /// Why the pipeline runs (or does not run) a pre-filter CNN, for logs and reports.
     prefilter_reason: String,
+    /// How the hologram CNN's training display maps onto the configured one.
+    display_mapping: DisplayMapping,
     /// The display calibration sessions apply ([`HologramPipeline::with_calibration`]); `None`: an ideal SLM.
     calibration: Option<Arc<DisplayCalibration>>,
     /// The app's own GPU context ([`HologramPipeline::with_gpu_context`]); `None`: the shared one.
@@ -49,8 +51,9 @@ impl HologramPipeline {
             optics: config.optics,
             offset_m: config.offset_m,
             input_layers: hologram.metadata().input_layers,
+            wavelength_ratio_tolerance: config.wavelength_ratio_tolerance,
         };
-        hologram.metadata().check(ModelKind::Hologram, &expected)?;
+        let display_mapping = hologram.metadata().check(ModelKind::Hologram, &expected)?;
         if let Some(p) = &prefilter {
             if config.offset_m == 0.0 {
                 return Err(invalid(
@@ -72,11 +75,16 @@ impl HologramPipeline {
             "no pre-filter CNN given"
         }
         .to_string();
+        log::info!(
+            "{}",
+            display_mapping.description(&hologram.metadata().describe())
+        );
         Ok(Self {
             config,
             hologram,
             prefilter,
             prefilter_reason,
+            display_mapping,
             calibration: None,
             #[cfg(feature = "gpu")]
             gpu_context: None,
@@ -96,6 +104,7 @@ impl HologramPipeline {
             optics: config.optics,
             offset_m: config.offset_m,
             input_layers: selection.input.input_layers(),
+            wavelength_ratio_tolerance: config.wavelength_ratio_tolerance,
         };
         let hologram = crate::model::embedded::scene_hologram_model(
             selection.input,
@@ -167,6 +176,22 @@ impl HologramPipeline {
     /// 30-layer hologram CNN)").
     pub fn prefilter_reason(&self) -> &str {
         &self.prefilter_reason
+    }
+
+    /// How the hologram CNN's training display maps onto this pipeline's display ([`DisplayMapping`],
+    /// `docs/DISPLAYS.md`): the depth scale `σ` (1 on the paper's display), the per-colour mismatch, the
+    /// non-paraxial residual. [`HologramPipeline::display_mapping_description`] says it in one line.
+    pub fn display_mapping(&self) -> &DisplayMapping {
+        &self.display_mapping
+    }
+
+    /// [`HologramPipeline::display_mapping`] as one line for logs and reports, e.g. "the 8-layer hologram CNN
+    /// (trained at 8 µm, 6 mm volume) serves 4 µm with a 1.5 mm volume (σ = 0.250000); offset 1.5 mm ↔ 6 mm
+    /// trained; wavelength mismatch 0.00 % (tolerance 0.50 %); non-paraxial residual 0.084 rad (bound 0.25
+    /// rad)".
+    pub fn display_mapping_description(&self) -> String {
+        self.display_mapping
+            .description(&self.hologram.metadata().describe())
     }
 
     /// Runs the GPU backend on `ctx` (e.g. [`crate::gpu::GpuContext::from_device`] with the app's own wgpu

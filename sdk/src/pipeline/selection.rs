@@ -1,5 +1,6 @@
 //! Which CNNs run: the shipped models by name ([`ModelSelection`], [`PrefilterMode`]) and the one rule that
-//! pairs a hologram CNN with a shipped pre-filter ([`shipped_prefilter`], used by
+//! pairs a hologram CNN with a shipped pre-filter by the offset mapped onto the training display (`s'/σ`,
+//! [`crate::model::DisplayMapping`]; 1.5 mm at 4 µm ↔ the 6 mm pre-filter) ([`shipped_prefilter`], used by
 //! [`super::HologramPipeline::with_shipped_prefilter`], and through it by the CLI and the bindings).
 
 use std::sync::Arc;
@@ -77,7 +78,25 @@ pub(super) fn shipped_prefilter(
     precision: Precision,
     config: &PipelineConfig,
 ) -> Result<(Option<HologramModel>, String)> {
-    let mm = config.offset_m * 1e3;
+    // The shipped pre-filters are named by their offset on the training display (8 µm): a Fresnel-equivalent
+    // display's offset s' maps to s'/σ there (docs/DISPLAYS.md); σ = 1 on the paper's display.
+    let scale = crate::model::DisplayMapping::compute(
+        &hologram.metadata().optics(),
+        &config.optics,
+        config.offset_m,
+        config.wavelength_ratio_tolerance,
+    )?
+    .scale;
+    let mm = config.offset_m / scale * 1e3;
+    // How the offset reads in messages: "6 mm", or "1.5 mm (6 mm on the training display)".
+    let at = if scale == 1.0 {
+        format!("{mm} mm")
+    } else {
+        format!(
+            "{} mm ({mm} mm on the training display)",
+            config.offset_m * 1e3
+        )
+    };
     if mode == PrefilterMode::Off {
         return Ok((None, "pre-filter off".into()));
     }
@@ -98,19 +117,19 @@ pub(super) fn shipped_prefilter(
         };
         let shipped = PREFILTER_OFFSETS_MM
             .into_iter()
-            .find(|&o| (o as f64 - mm).abs() < 1e-6);
+            .find(|&o| (o as f64 - mm).abs() < 1e-6 * (o as f64).max(1.0));
         let Some(offset_mm) = shipped else {
             return match mode {
                 PrefilterMode::Required => Err(invalid(
                     "prefilter",
                     format!(
-                        "no shipped pre-filter CNN for a {mm} mm offset (shipped: {PREFILTER_OFFSETS_MM:?} \
+                        "no shipped pre-filter CNN for a {at} offset (shipped: {PREFILTER_OFFSETS_MM:?} \
                          mm); use one of those offsets, or the pre-filter off"
                     ),
                 )),
                 _ => Ok((
                     None,
-                    format!("no shipped pre-filter for {mm} mm (shipped: {PREFILTER_OFFSETS_MM:?} mm)"),
+                    format!("no shipped pre-filter for {at} (shipped: {PREFILTER_OFFSETS_MM:?} mm)"),
                 )),
             };
         };
@@ -118,15 +137,21 @@ pub(super) fn shipped_prefilter(
             optics: config.optics,
             offset_m: config.offset_m,
             input_layers: hologram.metadata().input_layers,
+            wavelength_ratio_tolerance: config.wavelength_ratio_tolerance,
         };
         let layers = hologram.metadata().layers;
+        let mapped = if scale == 1.0 {
+            String::new()
+        } else {
+            format!(", serving {} mm on this display", config.offset_m * 1e3)
+        };
         // The pre-filter trained on the holograms of a CNN of this depth, where this build embeds it (its
         // forms come together with their CNN's feature; the int8 QOperator form's engine is checked on load).
         let paired = paired_prefilter_file(offset_mm, layers, Precision::F32);
         if files().any(|(name, _)| name == paired) {
             let p = paired_prefilter_model(offset_mm, layers, precision, &expected)?;
             let why = format!(
-                "shipped {offset_mm} mm pre-filter ({}, trained with the {layers}-layer hologram CNN)",
+                "shipped {offset_mm} mm pre-filter ({}, trained with the {layers}-layer hologram CNN{mapped})",
                 if mode == PrefilterMode::Required {
                     "required"
                 } else {
@@ -138,7 +163,7 @@ pub(super) fn shipped_prefilter(
         if mode == PrefilterMode::Required {
             let p = prefilter_model(offset_mm, precision, &expected)?;
             let why = format!(
-                "shipped {offset_mm} mm pre-filter (required; trained with the 8-layer hologram CNN, none with \
+                "shipped {offset_mm} mm pre-filter (required{mapped}; trained with the 8-layer hologram CNN, none with \
                  the {layers}-layer one in this build)"
             );
             return Ok((Some(p), why));
@@ -160,7 +185,7 @@ pub(super) fn shipped_prefilter(
                 "prefilter",
                 "this build has no embedded models (feature `embedded-models`); pass a pre-filter file",
             )),
-            _ => Ok((None, format!("no embedded pre-filter in this build ({mm} mm)"))),
+            _ => Ok((None, format!("no embedded pre-filter in this build ({at})"))),
         }
     }
 }

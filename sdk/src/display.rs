@@ -1,0 +1,448 @@
+//! Display profiles: one JSON file per holographic display (SLM pitch and resolution, laser wavelengths,
+//! volume, offsets, calibration), read by `holo --display FILE` and by apps (`docs/DISPLAYS.md`).
+//!
+//! ```json
+//! {
+//!   "name": "HOLOEYE PLUTO (paper)",
+//!   "pixel_pitch_m": 8e-6,
+//!   "resolution": [1080, 1920],
+//!   "wavelengths_m": [638e-9, 520e-9, 450e-9],
+//!   "volume_depth_m": 6e-3,
+//!   "offsets_m": [6e-3, 12e-3, 0.0],
+//!   "calibration": "pluto.holocal"
+//! }
+//! ```
+//!
+//! Keys are SI units (`docs/CONVENTIONS.md` §1); unknown keys are refused (a typo never falls back to a
+//! default), and every error names its key.
+
+use std::path::{Path, PathBuf};
+
+use crate::error::{HoloError, Result};
+use crate::optics::OpticalSetup;
+
+/// Shortest laser wavelength a profile may give, metres (the visible band).
+pub const MIN_WAVELENGTH_M: f64 = 380e-9;
+/// Longest laser wavelength a profile may give, metres.
+pub const MAX_WAVELENGTH_M: f64 = 780e-9;
+
+/// Every key of a profile, for messages.
+const KEYS: &str =
+    "name, pixel_pitch_m, resolution, wavelengths_m, volume_depth_m, offsets_m, calibration";
+
+/// A holographic display, as a profile file describes it (`docs/DISPLAYS.md`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct DisplayProfile {
+    /// `name`: free text for reports, if given.
+    pub name: Option<String>,
+    /// `pixel_pitch_m`: SLM pixel pitch in metres (finite, > 0).
+    pub pixel_pitch_m: f64,
+    /// `resolution`: SLM size `[height, width]` in pixels (each ≥ 1).
+    pub resolution: [usize; 2],
+    /// `wavelengths_m`: laser wavelengths R, G, B in metres, each within 380–780 nm.
+    pub wavelengths_m: [f64; 3],
+    /// `volume_depth_m`: depth of the 3D volume in metres (finite, > 0), centred on the midpoint hologram.
+    pub volume_depth_m: f64,
+    /// `offsets_m`: hologram-plane offsets `s` in metres (Eq. 6; finite, non-empty); the first is the default.
+    pub offsets_m: Vec<f64>,
+    /// `calibration`: the display's `.holocal` file ([`crate::slm::DisplayCalibration`]), resolved against
+    /// the profile's folder ([`DisplayProfile::from_path`]); `None` for an ideal SLM.
+    pub calibration: Option<PathBuf>,
+}
+
+/// The file as serde reads it: every key optional and untyped, so that each error can name its key.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawProfile {
+    name: Option<serde_json::Value>,
+    pixel_pitch_m: Option<serde_json::Value>,
+    resolution: Option<serde_json::Value>,
+    wavelengths_m: Option<serde_json::Value>,
+    volume_depth_m: Option<serde_json::Value>,
+    offsets_m: Option<serde_json::Value>,
+    calibration: Option<serde_json::Value>,
+}
+
+fn err(key: &'static str, reason: impl Into<String>) -> HoloError {
+    HoloError::InvalidParameter {
+        name: key,
+        reason: format!("display profile key `{key}`: {}", reason.into()),
+    }
+}
+
+fn required(key: &'static str, v: Option<serde_json::Value>) -> Result<serde_json::Value> {
+    v.filter(|v| !v.is_null())
+        .ok_or_else(|| err(key, "missing (required)"))
+}
+
+fn number(key: &'static str, v: &serde_json::Value) -> Result<f64> {
+    v.as_f64()
+        .ok_or_else(|| err(key, format!("must be a number, got {v}")))
+}
+
+fn positive(key: &'static str, v: &serde_json::Value) -> Result<f64> {
+    let x = number(key, v)?;
+    if !(x.is_finite() && x > 0.0) {
+        return Err(err(
+            key,
+            format!("must be a finite positive number, got {x}"),
+        ));
+    }
+    Ok(x)
+}
+
+fn array<'a>(
+    key: &'static str,
+    v: &'a serde_json::Value,
+    len: Option<usize>,
+    what: &str,
+) -> Result<&'a Vec<serde_json::Value>> {
+    let a = v
+        .as_array()
+        .ok_or_else(|| err(key, format!("must be an array {what}, got {v}")))?;
+    match len {
+        Some(n) if a.len() != n => Err(err(
+            key,
+            format!("must have {n} elements {what}, got {}", a.len()),
+        )),
+        None if a.is_empty() => Err(err(key, format!("must not be empty ({what})"))),
+        _ => Ok(a),
+    }
+}
+
+/// The key whose value is at `line`/`column` (1-based, serde_json's position) of `text`: the last
+/// `"key":` before it, for syntax errors such as a number out of range (`1e999`).
+fn key_before(text: &str, line: usize, column: usize) -> Option<String> {
+    let offset: usize = text
+        .split_inclusive('\n')
+        .take(line.saturating_sub(1))
+        .map(str::len)
+        .sum::<usize>()
+        + column;
+    let head = text.get(..offset.min(text.len()))?;
+    let colon = head.rfind(':')?;
+    let before = head[..colon].trim_end().strip_suffix('"')?;
+    let start = before.rfind('"')?;
+    Some(before[start + 1..].to_string())
+}
+
+impl DisplayProfile {
+    /// Parses a profile from JSON text; a relative `calibration` path stays relative (to the current
+    /// directory). [`DisplayProfile::from_path`] resolves it against the profile's folder instead.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] whose `name` is the key at fault and whose reason says what
+    /// is wrong: a missing key (`pixel_pitch_m`, `resolution`, `wavelengths_m`, `volume_depth_m`,
+    /// `offsets_m`), a non-finite or non-positive pitch, volume or wavelength, a wavelength outside
+    /// 380–780 nm, an array of the wrong length (`resolution`: 2, `wavelengths_m`: 3, `offsets_m`: ≥ 1), a
+    /// non-integer resolution, a non-finite offset, an unknown key (`name` = `display profile`, the reason
+    /// names it), or text that is not a JSON object (`name` = `display profile`, with the line).
+    pub fn from_json_str(text: &str) -> Result<Self> {
+        Self::parse(text, None)
+    }
+
+    /// Reads a profile file (JSON, as [`DisplayProfile::from_json_str`]); a relative `calibration` path is
+    /// resolved against the folder of `path`.
+    ///
+    /// Errors: [`HoloError::Io`] if the file cannot be read; as [`DisplayProfile::from_json_str`], the
+    /// reason prefixed with the file name.
+    pub fn from_path(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| HoloError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let base = path.parent().unwrap_or_else(|| Path::new(""));
+        Self::parse(&text, Some(base)).map_err(|e| match e {
+            HoloError::InvalidParameter { name, reason } => HoloError::InvalidParameter {
+                name,
+                reason: format!("{}: {reason}", path.display()),
+            },
+            other => other,
+        })
+    }
+
+    fn parse(text: &str, base: Option<&Path>) -> Result<Self> {
+        let raw: RawProfile = serde_json::from_str(text).map_err(|e| {
+            let msg = e.to_string();
+            if let Some(rest) = msg.strip_prefix("unknown field ") {
+                return err(
+                    "display profile",
+                    format!("unknown key {rest} (a typo is never read as a default)"),
+                );
+            }
+            match key_before(text, e.line(), e.column()) {
+                Some(k) if e.is_syntax() || e.is_data() => {
+                    let known = KEYS.split(", ").find(|&known| known == k);
+                    match known {
+                        Some(known) => err(known, msg),
+                        None => err("display profile", format!("key `{k}`: {msg}")),
+                    }
+                }
+                _ => err(
+                    "display profile",
+                    format!("not a JSON object of the keys {KEYS}: {msg}"),
+                ),
+            }
+        })?;
+        let name = match raw.name.filter(|v| !v.is_null()) {
+            None => None,
+            Some(v) => Some(
+                v.as_str()
+                    .ok_or_else(|| err("name", format!("must be a string, got {v}")))?
+                    .to_string(),
+            ),
+        };
+        let pixel_pitch_m = positive(
+            "pixel_pitch_m",
+            &required("pixel_pitch_m", raw.pixel_pitch_m)?,
+        )?;
+        let res = required("resolution", raw.resolution)?;
+        let res = array("resolution", &res, Some(2), "[height, width] in pixels")?;
+        let mut resolution = [0usize; 2];
+        for (r, v) in resolution.iter_mut().zip(res) {
+            *r = v
+                .as_u64()
+                .filter(|&n| n >= 1)
+                .and_then(|n| usize::try_from(n).ok())
+                .ok_or_else(|| {
+                    err(
+                        "resolution",
+                        format!("[height, width] must be positive integers, got {v}"),
+                    )
+                })?;
+        }
+        let wl = required("wavelengths_m", raw.wavelengths_m)?;
+        let wl = array("wavelengths_m", &wl, Some(3), "[R, G, B] in metres")?;
+        let mut wavelengths_m = [0.0; 3];
+        for ((w, v), colour) in wavelengths_m.iter_mut().zip(wl).zip(["R", "G", "B"]) {
+            let x = positive("wavelengths_m", v)?;
+            if !(MIN_WAVELENGTH_M..=MAX_WAVELENGTH_M).contains(&x) {
+                return Err(err(
+                    "wavelengths_m",
+                    format!(
+                        "{colour} is {x} m ({:.1} nm), outside 380–780 nm (metres, not nanometres)",
+                        x * 1e9
+                    ),
+                ));
+            }
+            *w = x;
+        }
+        let volume_depth_m = positive(
+            "volume_depth_m",
+            &required("volume_depth_m", raw.volume_depth_m)?,
+        )?;
+        let off = required("offsets_m", raw.offsets_m)?;
+        let offsets_m = array("offsets_m", &off, None, "of offsets in metres")?
+            .iter()
+            .map(|v| {
+                let x = number("offsets_m", v)?;
+                if !x.is_finite() {
+                    return Err(err("offsets_m", format!("must be finite, got {x}")));
+                }
+                Ok(x)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let calibration = match raw.calibration.filter(|v| !v.is_null()) {
+            None => None,
+            Some(v) => {
+                let s = v
+                    .as_str()
+                    .filter(|s| !s.is_empty())
+                    .ok_or_else(|| err("calibration", format!("must be a file path, got {v}")))?;
+                let p = PathBuf::from(s);
+                Some(match base {
+                    Some(b) if p.is_relative() => b.join(p),
+                    _ => p,
+                })
+            }
+        };
+        Ok(Self {
+            name,
+            pixel_pitch_m,
+            resolution,
+            wavelengths_m,
+            volume_depth_m,
+            offsets_m,
+            calibration,
+        })
+    }
+
+    /// The display's optics: wavelengths, pitch and volume depth (metres).
+    pub fn optics(&self) -> OpticalSetup {
+        OpticalSetup {
+            wavelengths_m: self.wavelengths_m,
+            pixel_pitch_m: self.pixel_pitch_m,
+            volume_depth_m: self.volume_depth_m,
+        }
+    }
+
+    /// The default offset `s` in metres: the first of `offsets_m`.
+    pub fn default_offset_m(&self) -> f64 {
+        self.offsets_m.first().copied().unwrap_or(0.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"{
+        "name": "test 4 µm",
+        "pixel_pitch_m": 4e-6,
+        "resolution": [1080, 1920],
+        "wavelengths_m": [638e-9, 520e-9, 450e-9],
+        "volume_depth_m": 1.5e-3,
+        "offsets_m": [1.5e-3, 3e-3],
+        "calibration": "slm.holocal"
+    }"#;
+
+    /// `GOOD` with `key`'s line replaced (or removed where `value` is `None`).
+    fn with(key: &str, value: Option<&str>) -> String {
+        GOOD.lines()
+            .filter_map(|l| {
+                if l.trim_start().starts_with(&format!("\"{key}\"")) {
+                    let comma = if l.trim_end().ends_with(',') { "," } else { "" };
+                    value.map(|v| format!("\"{key}\": {v}{comma}"))
+                } else {
+                    Some(l.to_string())
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+            .replace(",\n    }", "\n    }")
+    }
+
+    /// The error's key and message.
+    fn fails(text: &str) -> (&'static str, String) {
+        match DisplayProfile::from_json_str(text) {
+            Err(e @ HoloError::InvalidParameter { name, .. }) => (name, e.to_string()),
+            other => panic!("expected InvalidParameter, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn good_profile() {
+        let p = DisplayProfile::from_json_str(GOOD).unwrap();
+        assert_eq!(p.name.as_deref(), Some("test 4 µm"));
+        assert_eq!(p.resolution, [1080, 1920]);
+        assert_eq!(p.default_offset_m(), 1.5e-3);
+        assert_eq!(
+            p.optics(),
+            OpticalSetup {
+                wavelengths_m: [638e-9, 520e-9, 450e-9],
+                pixel_pitch_m: 4e-6,
+                volume_depth_m: 1.5e-3
+            }
+        );
+        assert_eq!(p.calibration, Some(PathBuf::from("slm.holocal")));
+    }
+
+    #[test]
+    fn calibration_is_resolved_against_the_profile_folder() {
+        let dir = std::env::temp_dir().join(format!("tensorholo-profile-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("display.json");
+        std::fs::write(&file, GOOD).unwrap();
+        let p = DisplayProfile::from_path(&file).unwrap();
+        assert_eq!(p.calibration, Some(dir.join("slm.holocal")));
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert!(matches!(
+            DisplayProfile::from_path(dir.join("absent.json")),
+            Err(HoloError::Io { .. })
+        ));
+    }
+
+    #[test]
+    fn optional_keys_may_be_absent() {
+        let text = with("calibration", None);
+        let text = text.replace("\"name\": \"test 4 µm\",", "");
+        let p = DisplayProfile::from_json_str(&text).unwrap();
+        assert_eq!((p.name, p.calibration), (None, None));
+    }
+
+    #[test]
+    fn missing_keys_are_named() {
+        for key in [
+            "pixel_pitch_m",
+            "resolution",
+            "wavelengths_m",
+            "volume_depth_m",
+            "offsets_m",
+        ] {
+            let (name, msg) = fails(&with(key, None));
+            assert_eq!(name, key, "{msg}");
+            assert!(msg.contains("missing"), "{msg}");
+        }
+    }
+
+    #[test]
+    fn non_positive_and_non_finite_values_are_named() {
+        for (key, v) in [
+            ("pixel_pitch_m", "0"),
+            ("pixel_pitch_m", "-4e-6"),
+            ("pixel_pitch_m", "1e999"),
+            ("volume_depth_m", "0.0"),
+            ("volume_depth_m", "-1e999"),
+            ("volume_depth_m", "\"1.5e-3\""),
+            ("wavelengths_m", "[638e-9, 0, 450e-9]"),
+            ("wavelengths_m", "[638e-9, 520e-9, 1e999]"),
+            ("offsets_m", "[1e999]"),
+            ("resolution", "[0, 1920]"),
+            ("resolution", "[1080.5, 1920]"),
+        ] {
+            let (name, msg) = fails(&with(key, Some(v)));
+            assert_eq!(name, key, "{key}: {v}: {msg}");
+            assert!(msg.contains(key), "{msg}");
+        }
+    }
+
+    #[test]
+    fn wrong_array_lengths_are_named() {
+        for (key, v) in [
+            ("resolution", "[1080]"),
+            ("resolution", "[1080, 1920, 3]"),
+            ("wavelengths_m", "[638e-9, 520e-9]"),
+            ("wavelengths_m", "[638e-9, 520e-9, 450e-9, 405e-9]"),
+            ("offsets_m", "[]"),
+            ("offsets_m", "1.5e-3"),
+        ] {
+            let (name, msg) = fails(&with(key, Some(v)));
+            assert_eq!(name, key, "{key}: {v}: {msg}");
+        }
+    }
+
+    #[test]
+    fn wavelengths_outside_the_visible_band_are_refused() {
+        for v in [
+            "[638, 520, 450]",
+            "[638e-9, 520e-9, 370e-9]",
+            "[800e-9, 520e-9, 450e-9]",
+        ] {
+            let (name, msg) = fails(&with("wavelengths_m", Some(v)));
+            assert_eq!(name, "wavelengths_m", "{msg}");
+            assert!(msg.contains("380–780 nm"), "{msg}");
+        }
+        // The band's edges are in it.
+        DisplayProfile::from_json_str(&with("wavelengths_m", Some("[780e-9, 520e-9, 380e-9]")))
+            .unwrap();
+    }
+
+    #[test]
+    fn unknown_keys_are_refused_by_name() {
+        let text = GOOD.replace("\"pixel_pitch_m\"", "\"pixel_pich_m\"");
+        let (name, msg) = fails(&text);
+        assert_eq!(name, "display profile");
+        assert!(msg.contains("pixel_pich_m"), "{msg}");
+        let text = GOOD.replace("\"name\":", "\"pitch_um\": 4, \"name\":");
+        let (_, msg) = fails(&text);
+        assert!(msg.contains("pitch_um"), "{msg}");
+    }
+
+    #[test]
+    fn not_an_object_is_an_error() {
+        for text in ["", "[]", "{", "42"] {
+            let (name, _) = fails(text);
+            assert_eq!(name, "display profile");
+        }
+    }
+}
