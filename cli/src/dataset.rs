@@ -8,8 +8,8 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use tensorholo::dataset::{
-    generate, save_ldi_previews, DatasetConfig, GenerateOptions, SampleGenerator, Split,
-    MANIFEST_FILE,
+    generate, save_ldi_previews, DatasetConfig, DisplayInfo, GenerateOptions, SampleGenerator,
+    Split, MANIFEST_FILE,
 };
 use tensorholo::io::ensure_not_input;
 use tensorholo::scene::{write_ldi_dir, DepthEncoding, RandomSceneConfig};
@@ -263,6 +263,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         args.aberration
             .as_deref()
             .map(|p| crate::output::Input::file("--aberration", p)),
+        args.optics.guard_input(),
     ]
     .into_iter()
     .flatten()
@@ -414,6 +415,10 @@ fn run_in_pool(args: &DatasetArgs, config: &DatasetConfig) -> Result<()> {
         git_commit: git_commit(),
         command: crate::output::command_line(),
         aberration_file: args.aberration.clone(),
+        display: args
+            .optics
+            .profile()?
+            .map(|p| DisplayInfo::new(&p, args.optics.display.as_deref())),
     };
     let manifest = generate(&args.out, config, &options, &|done, _| {
         bar.set_position(done)

@@ -632,6 +632,40 @@ pub struct OpticsInfo {
     pub depth_to_z: String,
 }
 
+/// The display profile a dataset was made for (`holo dataset --display FILE`, `docs/DISPLAYS.md`): what
+/// [`OpticsInfo`] does not hold. The optics themselves (the profile's, with any single flag in its place)
+/// are in [`Manifest::optics`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DisplayInfo {
+    /// The profile file as given (written lossily if not UTF-8), `None` when the profile came from code.
+    pub file: Option<String>,
+    /// The profile's `name`.
+    pub name: Option<String>,
+    /// The SLM's `[height, width]` in pixels (the samples have the dataset's own `resolution`).
+    pub slm_resolution: [usize; 2],
+    /// The offsets `s` in metres the display runs at (Eq. 6), the first its default: the offsets to train
+    /// pre-filters for.
+    pub offsets_m: Vec<f64>,
+    /// The profile's `.holocal` calibration (resolved path, lossy UTF-8), if any.
+    pub calibration: Option<String>,
+}
+
+impl DisplayInfo {
+    /// The record of `profile`, read from `file` if given.
+    pub fn new(profile: &crate::display::DisplayProfile, file: Option<&Path>) -> Self {
+        Self {
+            file: file.map(|f| f.to_string_lossy().into_owned()),
+            name: profile.name.clone(),
+            slm_resolution: profile.resolution,
+            offsets_m: profile.offsets_m.clone(),
+            calibration: profile
+                .calibration
+                .as_ref()
+                .map(|c| c.to_string_lossy().into_owned()),
+        }
+    }
+}
+
 /// One shard file of a split.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ShardInfo {
@@ -721,6 +755,9 @@ pub struct Manifest {
     pub synthesis: SynthesisInfo,
     /// Display geometry.
     pub optics: OpticsInfo,
+    /// The display profile the dataset was made for, if one was given (absent in older manifests).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub display: Option<DisplayInfo>,
     /// Random-scene configuration.
     pub scene: RandomSceneConfig,
     /// Photos used for textures (paths as given, written lossily if not UTF-8), empty without a photo folder.
@@ -823,6 +860,10 @@ pub struct GenerateOptions {
     pub command: Vec<String>,
     /// The aberration profile's file, recorded in the manifest with [`DatasetConfig::aberration`].
     pub aberration_file: Option<PathBuf>,
+    /// The display profile the dataset is made for, recorded in the manifest ([`Manifest::display`]). Its
+    /// optics must be [`DatasetConfig::synthesis`]'s unless a single flag overrode them: only the record is
+    /// taken from here.
+    pub display: Option<DisplayInfo>,
 }
 
 /// Running sums for [`DatasetStatistics`].
@@ -1113,6 +1154,7 @@ pub fn generate(
             volume_depth_m: setup.volume_depth_m,
             depth_to_z: "z(d) = (0.5 - d) * volume_depth_m".into(),
         },
+        display: options.display.clone(),
         scene: config.scene.clone(),
         photos: generator.scenes().photo_paths().to_vec(),
         shard_size: config.shard_size,

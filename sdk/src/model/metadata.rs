@@ -185,6 +185,10 @@ pub fn nonparaxial_residual_rad(
     worst
 }
 
+/// The end of every refusal of [`DisplayMapping::refusal`]: where a model for the display as it is comes
+/// from.
+pub const RETRAIN_HINT: &str = "; to serve this display as it is, retrain for it (docs/DISPLAYS.md, \"Retraining for another display\")";
+
 /// How a model trained for one display serves another, Fresnel-equivalent one (`docs/DISPLAYS.md`).
 ///
 /// On the SLM's grid (pitch `p`) the carrier-free angular-spectrum transfer function (Eq. 2, Eq. 6) is
@@ -361,7 +365,7 @@ impl DisplayMapping {
                     self.scale,
                     self.tolerance * 100.0,
                     if self.widened { ", widened" } else { "" }
-                ),
+                ) + RETRAIN_HINT,
             ));
         }
         if self.residual_rad > MAX_NONPARAXIAL_RESIDUAL_RAD {
@@ -380,7 +384,7 @@ impl DisplayMapping {
                     self.colour_residual_rad[c],
                     COLOUR[c],
                     self.max_distance_m * 1e3
-                ),
+                ) + RETRAIN_HINT,
             ));
         }
         let served = self.served_volume_depth_m();
@@ -398,7 +402,7 @@ impl DisplayMapping {
                     sig(served),
                     sig(self.scale),
                     sig(d.volume_depth_m * 1e3)
-                ),
+                ) + RETRAIN_HINT,
             ));
         }
         None
@@ -658,8 +662,14 @@ impl ModelMetadata {
             expected.offset_m,
             expected.wavelength_ratio_tolerance,
         )?;
-        // Lasers that do not scale alike are named first: no volume or offset would fix them.
-        if mapping.spread() > mapping.tolerance * (1.0 + 1e-9) {
+        // Lasers that do not scale alike are named first (no volume or offset would fix them), then a
+        // volume other than σ·V (a pitch changed alone lands here), and only then the offset.
+        if mapping.spread() > mapping.tolerance * (1.0 + 1e-9)
+            || !close(
+                mapping.served_volume_depth_m(),
+                expected.optics.volume_depth_m,
+            )
+        {
             if let Some(e) = mapping.refusal(&self.describe()) {
                 return Err(e);
             }
