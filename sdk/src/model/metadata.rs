@@ -33,8 +33,10 @@ const REL_TOL: f64 = 1e-6;
 /// focuses its depth planes `ε·|z'|` away from the others' (0.5 % of 0.66 mm is 3 µm on a 3.74 µm SLM, a tenth
 /// of its depth of focus `p'²/λ'`); in phase that is `ε·π·λ'·z'/(4·p'²)` rad at the band edge, 0.35 rad for
 /// red at the paper's outermost depth (9 mm at 8 µm). Equal lasers give 0 %; a 532 nm green laser with the
-/// paper's red and blue gives 2.3 % and is refused unless the tolerance is widened
-/// ([`ModelConfig::wavelength_ratio_tolerance`]).
+/// paper's red and blue gives 1.15 % and is refused unless the tolerance is widened
+/// ([`ModelConfig::wavelength_ratio_tolerance`]). Measured (`scripts/display-mismatch.sh`, docs/DISPLAYS.md
+/// "What a laser-ratio mismatch costs"): at 0.5 % a perfect model reaches 51.4 dB through the mapping, 20 dB
+/// above the paper's best CNN (29.6 dB, Table 2), so the mapping adds 0.03 dB of loss.
 pub const DEFAULT_WAVELENGTH_RATIO_TOLERANCE: f64 = 0.005;
 
 /// Largest non-paraxial residual (radians) accepted between a model's training display and a
