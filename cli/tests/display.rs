@@ -403,3 +403,67 @@ fn an_unserved_display_names_the_colour_and_the_retraining_and_a_widened_toleran
         assert_eq!(r.status.success(), accepted, "{name}: {}", stderr(&r));
     }
 }
+
+/// The repository's `displays/*.json`, the worked examples of docs/DISPLAYS.md.
+fn shipped_display(name: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../displays")
+        .join(name)
+}
+
+#[test]
+fn the_shipped_display_profiles_render_the_paper_display_codes() {
+    // Every Fresnel-equivalent display of displays/ shows the paper display's SLM codes, each within one
+    // step of the 8 µm run (`holo compare` fails on any code off by more; about 1 % differ by one step, from
+    // rounding in the offset propagation at the other pitch).
+    let dir = tempfile::tempdir().unwrap();
+    let render = |name: &str| {
+        let out = dir.path().join(name);
+        let o = holo(&[
+            "render",
+            "--size",
+            "96x128",
+            "--repeat",
+            "0",
+            "--display",
+            shipped_display(name).to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        (out, report(&dir.path().join(name)))
+    };
+    let (paper, r) = render("pluto-8um.json");
+    assert!(
+        r["models"]["display_mapping"]
+            .as_str()
+            .unwrap_or_default()
+            .contains("σ = 1.000000"),
+        "{r}"
+    );
+    for (name, pitch, volume) in [
+        ("lcos-3.74um-4k.json", "3.74 µm", "1.3113375 mm volume"),
+        ("slm-4um.json", "4 µm", "1.5 mm volume"),
+        ("slm-6.4um.json", "6.4 µm", "3.84 mm volume"),
+    ] {
+        let (out, r) = render(name);
+        let mapping = r["models"]["display_mapping"].as_str().unwrap_or_default();
+        assert!(
+            mapping.contains(&format!("serves {pitch} with a {volume}")),
+            "{name}: {mapping}"
+        );
+        let c = holo(&[
+            "compare",
+            paper.to_str().unwrap(),
+            out.to_str().unwrap(),
+            "--max-code-fraction",
+            "0.05",
+        ]);
+        assert!(
+            c.status.success(),
+            "{name}: {}{}",
+            stderr(&c),
+            String::from_utf8_lossy(&c.stdout)
+        );
+    }
+}
