@@ -1271,6 +1271,26 @@ mod tests {
         }
     }
 
+    /// The display profiles the iOS and Android samples ship are valid, and the shipped CNNs serve them.
+    #[cfg(feature = "embedded-models")]
+    #[test]
+    fn the_samples_display_profiles_are_served() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        for file in [
+            "ios/Example/Resources/display.json",
+            "android/sample/src/main/assets/display.json",
+        ] {
+            let json = std::fs::read_to_string(root.join(file)).unwrap();
+            let profile = display_profile_from_json(json).unwrap_or_else(|e| panic!("{file}: {e}"));
+            let c = generator_config_for_display(profile)
+                .and_then(|c| c.to_core())
+                .unwrap_or_else(|e| panic!("{file}: {e}"));
+            // The model check alone (no session): the display and offset are served.
+            tensorholo::pipeline::HologramPipeline::embedded(&c.models, c.pipeline_config())
+                .unwrap_or_else(|e| panic!("{file}: {e}"));
+        }
+    }
+
     /// A generator for the 4 µm profile renders and reports σ = 0.25.
     #[cfg(feature = "embedded-models")]
     #[test]
