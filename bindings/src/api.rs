@@ -1271,23 +1271,33 @@ mod tests {
         }
     }
 
-    /// The display profiles the iOS and Android samples ship are valid, and the shipped CNNs serve them.
+    /// The display profiles the iOS and Android samples ship and every JSON profile of `docs/DISPLAYS.md` are
+    /// valid, and the shipped CNNs serve them at their first offset.
     #[cfg(feature = "embedded-models")]
     #[test]
-    fn the_samples_display_profiles_are_served() {
+    fn the_samples_and_documented_display_profiles_are_served() {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-        for file in [
+        let read = |file: &str| std::fs::read_to_string(root.join(file)).unwrap();
+        let mut profiles: Vec<(String, String)> = [
             "ios/Example/Resources/display.json",
             "android/sample/src/main/assets/display.json",
-        ] {
-            let json = std::fs::read_to_string(root.join(file)).unwrap();
-            let profile = display_profile_from_json(json).unwrap_or_else(|e| panic!("{file}: {e}"));
+        ]
+        .map(|f| (f.to_string(), read(f)))
+        .into();
+        let docs = read("docs/DISPLAYS.md");
+        for (i, block) in docs.split("```json\n").skip(1).enumerate() {
+            let json = block.split("```").next().unwrap();
+            profiles.push((format!("docs/DISPLAYS.md profile {}", i + 1), json.to_string()));
+        }
+        assert!(profiles.len() >= 6, "{} profiles", profiles.len());
+        for (what, json) in profiles {
+            let profile = display_profile_from_json(json).unwrap_or_else(|e| panic!("{what}: {e}"));
             let c = generator_config_for_display(profile)
                 .and_then(|c| c.to_core())
-                .unwrap_or_else(|e| panic!("{file}: {e}"));
+                .unwrap_or_else(|e| panic!("{what}: {e}"));
             // The model check alone (no session): the display and offset are served.
             tensorholo::pipeline::HologramPipeline::embedded(&c.models, c.pipeline_config())
-                .unwrap_or_else(|e| panic!("{file}: {e}"));
+                .unwrap_or_else(|e| panic!("{what}: {e}"));
         }
     }
 
