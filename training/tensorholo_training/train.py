@@ -354,7 +354,19 @@ def init_distributed(device_kind: str) -> Dist:
 
     if not dist.is_initialized():
         backend = "nccl" if device_kind == "cuda" else "gloo"
-        dist.init_process_group(backend=backend)
+        restart = os.environ.get("TORCHELASTIC_RESTART_COUNT", "0")
+        if os.environ.get("TORCHELASTIC_USE_AGENT_STORE") == "True":
+            # torchrun's agent keeps one store for all restarts: without a prefix of their own, the workers of
+            # a restart can read the previous generation's gloo addresses and connect to dead processes
+            # (observed with torch 2.15: "Connection reset by peer", or a hang, after --max-restarts restarts)
+            from datetime import timedelta
+
+            store = dist.TCPStore(os.environ["MASTER_ADDR"], int(os.environ["MASTER_PORT"]),
+                                  int(os.environ["WORLD_SIZE"]), is_master=False, timeout=timedelta(minutes=10))
+            dist.init_process_group(backend=backend, store=dist.PrefixStore(f"tensorholo/attempt_{restart}", store),
+                                    rank=int(os.environ["RANK"]), world_size=int(os.environ["WORLD_SIZE"]))
+        else:
+            dist.init_process_group(backend=backend)
     return Dist(dist.get_rank(), dist.get_world_size(), int(os.environ.get("LOCAL_RANK", 0)), True)
 
 
