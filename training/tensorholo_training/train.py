@@ -16,6 +16,16 @@ and PSNRs go to ``<run_dir>/learning_curve.csv`` and stdout. ``<run_dir>/stage1.
 written at the end of stage 1 and of the run (inputs of :mod:`.export`); ``best.pt`` holds the weights of the
 best validation (``select_metric``) seen in the last phase, the checkpoint to export when the learning curve
 is noisy.
+
+The optics (``wavelengths_m``, ``pixel_pitch_m``, ``volume_depth_m``) come from the dataset's
+``manifest.json`` (``optics``); a configuration value that contradicts it is refused (:func:`resolve_optics`).
+
+Under ``torchrun`` (``RANK``/``WORLD_SIZE``/``LOCAL_RANK`` set) every process is a rank of a data-parallel job:
+``init_process_group`` (nccl on CUDA, gloo on CPU), the CNNs wrapped in ``DistributedDataParallel``, each rank
+reading its own part of every epoch (:class:`.data.ShardGroupedBatchSampler`); rank 0 alone writes files and
+logs. The global batch is ``batch_size · world size`` and ``lr`` is scaled to it (``lr_scaling``). The
+checkpoint records the world size; resuming under another one is refused unless ``allow_world_size_change``.
+A restarted job (``torchrun --max-restarts``) resumes from ``checkpoint.pt`` like a rerun (``ckpt_every``).
 """
 from __future__ import annotations
 
@@ -587,6 +597,12 @@ class Trainer:
     def _generator(self, step: int, salt: int = 0) -> torch.Generator:
         return torch.Generator().manual_seed(self.cfg.seed * 1_000_003 + step * 7 + salt)
 
+    def _sample_generator(self, step: int, place: int) -> torch.Generator:
+        """The generator of the focal planes of the sample at ``place`` in the global batch of ``step``: a
+        function of ``(seed, step, place)`` only, so ranks draw what one process with the global batch draws."""
+        state = np.random.SeedSequence([self.cfg.seed, step, place]).generate_state(1, np.uint64)[0]
+        return torch.Generator().manual_seed(int(state) & ((1 << 63) - 1))
+
     def attention_depth(self, batch: dict) -> tuple[torch.Tensor, torch.Tensor | None]:
         """The depth the focal stack's attention reads (``cfg.fs_attention``): the first layer's ``[B, H, W]``
         and ``None``, or every LDI layer's ``[B, L, H, W]`` and their valid mask ``[B, L, H, W]``."""
@@ -594,7 +610,7 @@ class Trainer:
             return batch["ldi_depth"].to(self.device), batch["valid"].to(self.device)
         return batch["depth"].to(self.device), None
 
-    def compute_loss(self, batch: dict, phase: str, generator: torch.Generator) -> dict:
+    def compute_loss(self, batch: dict, phase: str, generator) -> dict:
         """Losses of one batch for ``phase`` (see :mod:`.losses`); also ``"pred"`` (complex midpoint used
         for PSNR: the CNN output in stage 1, the post-encoding hologram in stage 2)."""
         cfg = self.cfg
@@ -622,7 +638,9 @@ class Trainer:
         """One optimizer step of the current phase; returns the loss terms as floats."""
         phase = self.phase
         self.net.train(phase != "stage2" or self.cfg.stage2_train_hologram)
-        out = self.compute_loss(batch, phase, self._generator(self.global_step))
+        first = self.dist.rank * self.cfg.batch_size  # this rank's samples' places in the global batch
+        gens = [self._sample_generator(self.global_step, first + i) for i in range(len(batch["rgbd"]))]
+        out = self.compute_loss(batch, phase, gens)
         lr = self.lr_at(self.phase_step, self.phases[self.phase_index][1])
         for group in self.optimizer.param_groups:
             group["lr"] = lr
