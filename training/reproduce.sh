@@ -8,14 +8,16 @@
 #
 # Environment (defaults = the paper): DATA (dataset folder, generated with `holo dataset` if missing;
 # default data/mit-cgh-4k-v2), DISPLAY_PROFILE (a display profile, docs/DISPLAYS.md: the dataset is made at
-# that display; training always takes the optics from the dataset's manifest), HOLO (holo binary; default:
+# that display; training takes the optics from the dataset's manifest), HOLO (holo binary; default:
 # cargo run --release -p holo), STAGE1_EPOCHS (3000), STAGE2_EPOCHS (1000), PYTHON (default:
-# .venv/bin/python), MODELS (models), RUNS (runs; give each display its own).
+# .venv/bin/python), MODELS (models), RUNS (runs; give each display its own), NPROC (train on NPROC GPUs of
+# this node: torchrun --standalone --nproc-per-node NPROC; the learning rate follows the global batch,
+# training/README.md "Several GPUs or nodes").
 # Runs resume: rerunning the same command continues from the last checkpoint of each step.
 # Outputs: $RUNS/holo${LAYERS}_${INPUT}/stage1 (shared by the offsets), $RUNS/holo${LAYERS}_${INPUT}_${OFFSET}mm,
 # $MODELS/holo${LAYERS}_${INPUT}_${OFFSET}mm{.onnx,.int8-qop.onnx,.int8-qdq.onnx,.prefilter*.onnx,.eval.json}.
 set -euo pipefail
-if [ $# -ne 3 ]; then sed -n '2,17p' "$0"; exit 2; fi
+if [ $# -ne 3 ]; then sed -n '2,18p' "$0"; exit 2; fi
 layers=$1 input=$2 offset=$3
 case "$layers" in 8|15|30) ;; *) echo "LAYERS must be 8, 15 or 30" >&2; exit 2;; esac
 case "$input" in rgbd) il=1;; ldi) il=5;; *) echo "INPUT must be rgbd or ldi" >&2; exit 2;; esac
@@ -34,28 +36,28 @@ if [ ! -f "$data/manifest.json" ]; then
   "${holo[@]}" dataset --out "$data" --train 3800 --val 100 --test 100 --size 384 --layers 5 --levels 10000 \
     ${DISPLAY_PROFILE:+--display "$DISPLAY_PROFILE"}
 fi
-# The display the dataset was made for (manifest.optics) is the one trained for: stated once, in the dataset.
-optics=()
-while read -r kv; do optics+=(--set "$kv"); done < <("$py" -c '
-import json, sys
-o = json.load(open(sys.argv[1]))["optics"]
-print("wavelengths_m=" + json.dumps(o["wavelengths_m"]))
-print("pixel_pitch_m=" + repr(o["pixel_pitch_m"]))
-print("volume_depth_m=" + repr(o["volume_depth_m"]))' "$data/manifest.json")
-echo "== optics of $data: ${optics[*]}"
+# The display the dataset was made for (manifest.json `optics`) is the one trained for: the trainer reads it
+# from the manifest (stated once, in the dataset).
+echo "== optics of $data: $("$py" -c 'import json, sys; print(json.load(open(sys.argv[1]))["optics"])' "$data/manifest.json")"
+
+if [ -n "${NPROC:-}" ]; then
+  train=("$py" -m torch.distributed.run --standalone --nproc-per-node "$NPROC" -m tensorholo_training.train)
+else
+  train=("$py" -m tensorholo_training.train)
+fi
 
 stage1="$runs/holo${layers}_${input}/stage1"
 echo "== stage 1 → $stage1"
-"$py" -m tensorholo_training.train --config training/configs/gpu_stage1.json --run-dir "$stage1" \
+"${train[@]}" --config training/configs/gpu_stage1.json --run-dir "$stage1" \
   --set dataset="\"$data\"" --set num_layers="$layers" --set input_layers="$il" \
-  --set stage1_epochs="${STAGE1_EPOCHS:-3000}" "${optics[@]}"
+  --set stage1_epochs="${STAGE1_EPOCHS:-3000}"
 
 run="$runs/$name"
 echo "== stage 2 (offset $offset mm) → $run"
-"$py" -m tensorholo_training.train --config training/configs/gpu_stage2.json --run-dir "$run" \
+"${train[@]}" --config training/configs/gpu_stage2.json --run-dir "$run" \
   --set dataset="\"$data\"" --set num_layers="$layers" --set input_layers="$il" --set offset_mm="$offset" \
   --set init_from="\"$stage1/stage1.pt\"" \
-  --set stage2_epochs="${STAGE2_EPOCHS:-1000}" "${optics[@]}"
+  --set stage2_epochs="${STAGE2_EPOCHS:-1000}"
 
 echo "== export → $models/$name*.onnx"
 "$py" -m tensorholo_training.export --checkpoint "$run/best.pt" --out-dir "$models" --name "$name" --int8 \
