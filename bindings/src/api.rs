@@ -1290,12 +1290,18 @@ mod tests {
             .collect();
         files.sort();
         for path in files {
-            profiles.push((path.display().to_string(), std::fs::read_to_string(&path).unwrap()));
+            profiles.push((
+                path.display().to_string(),
+                std::fs::read_to_string(&path).unwrap(),
+            ));
         }
         let docs = read("docs/DISPLAYS.md");
         for (i, block) in docs.split("```json\n").skip(1).enumerate() {
             let json = block.split("```").next().unwrap();
-            profiles.push((format!("docs/DISPLAYS.md profile {}", i + 1), json.to_string()));
+            profiles.push((
+                format!("docs/DISPLAYS.md profile {}", i + 1),
+                json.to_string(),
+            ));
         }
         assert!(profiles.len() >= 9, "{} profiles", profiles.len());
         for (what, json) in profiles {
