@@ -251,8 +251,9 @@ impl ModelArgs {
             .as_deref()
             .map_or_else(|| "PROFILE.json".to_string(), crate::output::path_text);
         format!(
-            ": no shipped model serves this display as it is; make its dataset with `holo dataset --display \
-             {profile} --out data/display` and train on it (docs/DISPLAYS.md, \"Retraining for another display\")"
+            ": no shipped model serves this display as it is; retrain for it (dataset, training, exports) with \
+             `training/retrain.sh --display {profile} --out retrain/display` (docs/DISPLAYS.md, \"Retraining for \
+             another display\")"
         )
     }
 

@@ -24,6 +24,7 @@ tiny=(--train 5 --val 2 --test 1 --size 32 --levels 16 --shard-size 2 --previews
 cd "$work"
 read -r array merge < <(HOLO="$holo" SBATCH_ARGS="--cpus-per-task=1" "$here/submit-dataset.sh" 3 \
   "$work/sharded" "${tiny[@]}" | tail -1)
+first_merge=$merge
 echo "test-slurm: array job $array, merge job $merge"
 
 # Wait until both jobs have left the queue; a merge held by a dependency that can never be met fails.
@@ -75,6 +76,32 @@ scancel "$merge" 2>/dev/null || true
 [ "$status" = 3 ] || { echo "test-slurm: the merge of a failed array was not held (status $status)" >&2; exit 1; }
 [ ! -f "$work/failing/manifest.json" ] || { echo "test-slurm: a failed array got a manifest" >&2; exit 1; }
 echo "test-slurm: the merge of a failed array is held (DependencyNeverSatisfied) and writes nothing"
+
+# Training: the shipped torchrun script as a 2-task job (two torchrun agents meeting by c10d rendezvous, one
+# gloo worker each: world size 2) on the merged dataset, then the export of its model, which holo loads.
+py="${PYTHON:-$root/.venv/bin/python}"
+if ! "$py" -c 'import torch' 2>/dev/null; then
+  echo "test-slurm: SKIPPED training: no PYTHON with torch (training/install_ci.sh makes one in .venv)"
+else
+  train=$(RUN_DIR="$work/runs/stage1" PYTHON="$py" PYTHONPATH="$root/training" EXPORT_DIR="$work/models" \
+    EXPORT_NAME=slurm sbatch --parsable --ntasks=2 --cpus-per-task=1 --export=ALL --dependency="afterok:$first_merge" \
+    "$here/train.sbatch" --config "$root/training/configs/smoke.json" --set dataset="\"$work/sharded\"" \
+    --set 'stages=["stage1"]' --set stage1_steps=6 --set val_every=6 --set ckpt_every=6 --set num_workers=0)
+  train="${train%%;*}"
+  echo "test-slurm: training job $train (2 tasks)"
+  wait_jobs "$train"
+  cat "$work"/holo-train-*.out
+  [ -f "$work/models/slurm.onnx" ] || { echo "test-slurm: the training job exported no model" >&2; exit 1; }
+  "$py" - "$work/runs/stage1/final.pt" <<'PY'
+import sys, torch
+ck = torch.load(sys.argv[1], map_location="cpu", weights_only=False)
+assert ck["world_size"] == 2, f"world size {ck['world_size']}, not 2"
+assert ck["global_step"] == 6, f"step {ck['global_step']}"
+PY
+  "$holo" render --model "$work/models/slurm.onnx" --offset-mm 0 --size 32x32 --out "$work/render" 2>/dev/null
+  [ -f "$work/render/report.json" ] || { echo "test-slurm: holo did not render with the trained model" >&2; exit 1; }
+  echo "test-slurm: the 2-task torchrun job trained (world size 2), exported a model, and holo renders with it"
+fi
 cd /
 rm -rf "$work"
 [ "${KEEP_SLURM:-0}" = 1 ] || "${sudo[@]}" "$here/slurm-local.sh" stop
