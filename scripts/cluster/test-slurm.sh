@@ -84,7 +84,7 @@ if ! "$py" -c 'import torch' 2>/dev/null; then
   echo "test-slurm: SKIPPED training: no PYTHON with torch (training/install_ci.sh makes one in .venv)"
 else
   train=$(RUN_DIR="$work/runs/stage1" PYTHON="$py" PYTHONPATH="$root/training" EXPORT_DIR="$work/models" \
-    EXPORT_NAME=slurm sbatch --parsable --ntasks=2 --cpus-per-task=1 --export=ALL --dependency="afterok:$first_merge" \
+    EXPORT_NAME=slurm sbatch --parsable --ntasks=2 --ntasks-per-node=2 --cpus-per-task=1 --export=ALL --dependency="afterok:$first_merge" \
     "$here/train.sbatch" --config "$root/training/configs/smoke.json" --set dataset="\"$work/sharded\"" \
     --set 'stages=["stage1"]' --set stage1_steps=6 --set val_every=6 --set ckpt_every=6 --set num_workers=0)
   train="${train%%;*}"
