@@ -324,7 +324,10 @@ fn an_unserved_display_names_the_colour_and_the_retraining_and_a_widened_toleran
     let e = stderr(&r);
     assert!(!r.status.success());
     assert!(e.contains("green"), "{e}");
-    assert!(e.contains(&format!("training/retrain.sh --display {p} --out")), "{e}");
+    assert!(
+        e.contains(&format!("training/retrain.sh --display {p} --out")),
+        "{e}"
+    );
     assert!(e.contains("Retraining for another display"), "{e}");
     assert!(!out.exists());
 
