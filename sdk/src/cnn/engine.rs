@@ -69,7 +69,9 @@ pub(crate) trait Engine: Sync {
 
     /// Times this engine's candidates of `request` (layouts × thread counts it has) for `height × width`
     /// frames of `nets.hologram` and picks the fastest; a single candidate is timed only when `time_single`
-    /// (to compare engines).
+    /// (to compare engines). `to_beat`: the best seconds of an engine timed before this one (on the same
+    /// input); an engine with several candidates times its likeliest first and may leave the others untimed
+    /// (reported as skipped) when that one is far slower ([`super::tuning::PLAUSIBLE_FACTOR`]).
     ///
     /// Errors: the engine's plan and run errors.
     fn tune(
@@ -79,6 +81,7 @@ pub(crate) trait Engine: Sync {
         width: usize,
         request: PlanRequest,
         time_single: bool,
+        to_beat: Option<f64>,
     ) -> Result<Tuning>;
 
     /// The plans of `nets` at `height × width` with `tuning`'s layout and threads (the pre-filter runs

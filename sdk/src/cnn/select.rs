@@ -57,7 +57,7 @@ pub(super) fn select(
                 ),
             ));
         }
-        let tuning = chosen.tune(nets, height, width, request, false)?;
+        let tuning = chosen.tune(nets, height, width, request, false, None)?;
         return build(chosen, nets, [height, width], request, "requested", tuning);
     }
     let mut able = Vec::new();
@@ -86,15 +86,16 @@ pub(super) fn select(
                     .collect::<Vec<_>>()
                     .join("; ")
             };
-            let tuning = only.tune(nets, height, width, request, false)?;
+            let tuning = only.tune(nets, height, width, request, false, None)?;
             build(*only, nets, [height, width], request, &why, tuning)
         }
         several => fastest(several, nets, [height, width], request),
     }
 }
 
-/// [`CnnEngine::Auto`] where several engines can run the files: each timed on this machine, the fastest
-/// kept.
+/// [`CnnEngine::Auto`] where several engines can run the files: each timed on this machine, in the
+/// registry's order (the native engine first), the fastest kept. Each engine is told the best time so far,
+/// so that one far slower stops after its likeliest candidate (tract: one plan instead of four).
 fn fastest(
     able: &[&dyn Engine],
     nets: Networks<'_>,
@@ -102,9 +103,11 @@ fn fastest(
     request: PlanRequest,
 ) -> Result<CnnPlans> {
     let mut timed = Vec::new();
+    let mut to_beat: Option<f64> = None;
     for e in able {
-        let tuning = e.tune(nets, height, width, request, true)?;
+        let tuning = e.tune(nets, height, width, request, true, to_beat)?;
         let best = tuning.best_seconds().unwrap_or(f64::INFINITY);
+        to_beat = Some(to_beat.map_or(best, |b| b.min(best)));
         timed.push((*e, tuning, best));
     }
     timed.sort_by(|a, b| a.2.total_cmp(&b.2));

@@ -524,3 +524,55 @@ fn an_input_given_plane_by_plane_gives_the_same_frame() {
         }
     }
 }
+
+/// The early stop of [`CnnEngine::Auto`]: tract's likeliest candidate (the most threads, the first layout)
+/// is timed first; against a time it cannot plausibly beat, the others are left untimed with the reason and
+/// the report is not cached, so a later tract request times them all; against a time it can beat, all are
+/// timed.
+#[test]
+#[cfg(feature = "tract")]
+fn tract_stops_after_its_likeliest_candidate_when_another_engine_is_far_faster() {
+    use super::tract::TractModel;
+    use super::tuning::{auto_thread_candidates, CnnLayout, PLAUSIBLE_FACTOR};
+    let m = embedded::hologram_model(8, Precision::F32, &ModelConfig::default()).unwrap();
+    let request = PlanRequest {
+        layout: CnnLayout::Auto,
+        threads: ThreadCount::Auto,
+    };
+    let threads = auto_thread_candidates();
+    let all = CnnLayout::ALL.len() * threads.len();
+
+    let tract = TractModel::new(&m).unwrap();
+    let r = tract.tuning(24, 40, request, Some(1e-9)).unwrap();
+    let timed: Vec<_> = r
+        .candidates
+        .iter()
+        .filter(|c| c.seconds.is_some())
+        .collect();
+    assert_eq!(timed.len(), 1, "{:?}", r.candidates);
+    assert_eq!(
+        (timed[0].layout, timed[0].threads),
+        (CnnLayout::ALL[0], threads.last().copied())
+    );
+    assert_eq!(r.candidates.len(), all);
+    for c in r.candidates.iter().filter(|c| c.seconds.is_none()) {
+        let why = c.skipped.as_deref().unwrap();
+        assert!(
+            why.starts_with("not timed") && why.contains(&format!("{PLAUSIBLE_FACTOR}×")),
+            "{why}"
+        );
+    }
+    // Not cached: without a time to beat every candidate is timed.
+    let r = tract.tuning(24, 40, request, None).unwrap();
+    assert_eq!(
+        r.candidates.iter().filter(|c| c.seconds.is_some()).count(),
+        all
+    );
+
+    let fresh = TractModel::new(&m).unwrap();
+    let r = fresh.tuning(24, 40, request, Some(1e9)).unwrap();
+    assert_eq!(
+        r.candidates.iter().filter(|c| c.seconds.is_some()).count(),
+        all
+    );
+}

@@ -147,6 +147,12 @@ pub(crate) const TUNE_MIN_ROWS: usize = 32;
 /// A candidate whose first run takes less than this (seconds) is run twice more and its fastest run kept.
 const REPEAT_BELOW_S: f64 = 0.25;
 
+/// How much slower than the best engine timed so far an engine's likeliest candidate may be before its
+/// other candidates are left untimed ([`crate::cnn::CnnEngine::Auto`]). Tract's candidates differ from one
+/// another by less than this (layouts by about 10 %, its thread counts: the likeliest is the most threads),
+/// so a first candidate 1.5× slower than the native engine cannot plausibly win with another.
+pub(crate) const PLAUSIBLE_FACTOR: f64 = 1.5;
+
 /// How many threads a CNN plan uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]

@@ -51,6 +51,7 @@ impl Engine for NativeEngine {
         width: usize,
         request: PlanRequest,
         time_single: bool,
+        _to_beat: Option<f64>,
     ) -> Result<Tuning> {
         let graph = nets.hologram.cnn_graph()?;
         let counts = match request.threads {

@@ -78,9 +78,10 @@ impl Engine for TractEngine {
         width: usize,
         request: PlanRequest,
         time_single: bool,
+        to_beat: Option<f64>,
     ) -> Result<Tuning> {
         let model = TractModel::of(nets.hologram)?;
-        let (plan, report) = model.tuned_plan(height, width, request)?;
+        let report = model.tuning(height, width, request, to_beat)?;
         let mut tuning = Tuning {
             layout: report.layout,
             threads: report.threads,
@@ -89,6 +90,11 @@ impl Engine for TractEngine {
         };
         if tuning.candidates.is_empty() && time_single {
             // A single candidate was not timed: time it now, on the same input as the other engines.
+            let plan = model.plan_with_layout(height, width, tuning.layout)?;
+            let plan = match tuning.threads {
+                Some(t) => plan.with_threads(t)?,
+                None => plan,
+            };
             let mut plan: Box<dyn CnnPlan> = Box::new(plan);
             let s = time_plan(plan.as_mut(), model.input_channels(), height, width)?;
             tuning.candidates.push(PlanTiming {

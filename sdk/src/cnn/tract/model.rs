@@ -13,7 +13,7 @@ use tract_onnx::prelude::{Framework, InferenceModelExt, IntoRunnable, Symbol, TD
 use super::plan::{optimise, tract_msg, ModelPlan, PlanFailure};
 use crate::cnn::tuning::{
     auto_thread_candidates, fastest_run, timing_resolution, CnnEngine, CnnLayout, PlanReport,
-    PlanRequest, PlanTiming, ThreadCount,
+    PlanRequest, PlanTiming, ThreadCount, PLAUSIBLE_FACTOR,
 };
 use crate::error::{guarded, invalid, HoloError, Result};
 use crate::model::network::check_fixed_size;
@@ -291,6 +291,29 @@ impl TractModel {
         width: usize,
         request: PlanRequest,
     ) -> Result<(ModelPlan, PlanReport)> {
+        let report = self.tuning(height, width, request, None)?;
+        let plan = self.plan_with_layout(height, width, report.layout)?;
+        let plan = match report.threads {
+            Some(t) => plan.with_threads(t)?,
+            None => plan,
+        };
+        Ok((plan, report))
+    }
+
+    /// How [`TractModel::tuned_plan`] chooses, without building the chosen plan at the real resolution (the
+    /// engine choice builds it only if tract wins). `to_beat`: the best seconds of another engine on the same
+    /// input; the likeliest candidate (the most threads, the first layout) is timed first, and the others
+    /// are skipped, with the reason, when it takes over [`PLAUSIBLE_FACTOR`] times as long. A report with
+    /// skipped candidates is not cached.
+    ///
+    /// Errors: as [`TractModel::tuned_plan`].
+    pub(crate) fn tuning(
+        &self,
+        height: usize,
+        width: usize,
+        request: PlanRequest,
+        to_beat: Option<f64>,
+    ) -> Result<PlanReport> {
         if height == 0 || width == 0 {
             return Err(invalid(
                 "height/width",
@@ -299,43 +322,39 @@ impl TractModel {
         }
         self.check_fixed_size(height, width)?;
         let key = (height, width, request);
-        let cached = self.tuned_lock().get(&key).cloned();
-        let report = match cached {
-            Some(mut r) => {
-                r.tuning_s = 0.0;
-                r
-            }
-            None => {
-                let r = self.tune(height, width, request)?;
-                if r.autotuned {
-                    log::info!(
-                        "CNN plan for {height}×{width}: {} with {} thread(s), chosen in {:.2} s from {}",
-                        r.layout,
-                        r.threads.map_or("default".into(), |t| t.to_string()),
-                        r.tuning_s,
-                        r.candidates
-                            .iter()
-                            .map(|c| format!(
-                                "{}/{}: {}",
-                                c.layout,
-                                c.threads.map_or("default".into(), |t| t.to_string()),
-                                c.seconds
-                                    .map_or("skipped".into(), |s| format!("{:.1} ms", s * 1e3))
-                            ))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    );
-                }
-                self.tuned_lock().insert(key, r.clone());
-                r
-            }
-        };
-        let plan = self.plan_with_layout(height, width, report.layout)?;
-        let plan = match report.threads {
-            Some(t) => plan.with_threads(t)?,
-            None => plan,
-        };
-        Ok((plan, report))
+        if let Some(mut r) = self.tuned_lock().get(&key).cloned() {
+            r.tuning_s = 0.0;
+            return Ok(r);
+        }
+        let r = self.tune(height, width, request, to_beat)?;
+        if r.autotuned {
+            log::info!(
+                "CNN plan for {height}×{width}: {} with {} thread(s), chosen in {:.2} s from {}",
+                r.layout,
+                r.threads.map_or("default".into(), |t| t.to_string()),
+                r.tuning_s,
+                r.candidates
+                    .iter()
+                    .map(|c| format!(
+                        "{}/{}: {}",
+                        c.layout,
+                        c.threads.map_or("default".into(), |t| t.to_string()),
+                        c.seconds
+                            .map_or("skipped".into(), |s| format!("{:.1} ms", s * 1e3))
+                    ))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
+        let pruned = r.candidates.iter().any(|c| {
+            c.skipped
+                .as_deref()
+                .is_some_and(|s| s.starts_with(NOT_TIMED))
+        });
+        if !pruned {
+            self.tuned_lock().insert(key, r.clone());
+        }
+        Ok(r)
     }
 
     fn tuned_lock(
@@ -345,13 +364,24 @@ impl TractModel {
         self.tuned.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    fn tune(&self, height: usize, width: usize, request: PlanRequest) -> Result<PlanReport> {
+    fn tune(
+        &self,
+        height: usize,
+        width: usize,
+        request: PlanRequest,
+        to_beat: Option<f64>,
+    ) -> Result<PlanReport> {
         let layouts: Vec<CnnLayout> = match request.layout {
             CnnLayout::Auto => CnnLayout::ALL.to_vec(),
             l => vec![l],
         };
+        // The most threads first: the likeliest winner, timed before any early stop (`to_beat`).
         let threads: Vec<Option<usize>> = match request.threads {
-            ThreadCount::Auto => auto_thread_candidates().into_iter().map(Some).collect(),
+            ThreadCount::Auto => auto_thread_candidates()
+                .into_iter()
+                .rev()
+                .map(Some)
+                .collect(),
             ThreadCount::Fixed(n) => vec![Some(n)],
             ThreadCount::ProcessDefault => vec![None],
         };
@@ -411,6 +441,31 @@ impl TractModel {
                     seconds: Some(best),
                     skipped: None,
                 });
+                if let Some(other) = to_beat.filter(|&o| best > o * PLAUSIBLE_FACTOR) {
+                    let reason = format!(
+                        "{NOT_TIMED}: {layout}/{} took {:.1} ms, over {PLAUSIBLE_FACTOR}× another engine's {:.1} ms",
+                        t.map_or("default".into(), |n| n.to_string()),
+                        best * 1e3,
+                        other * 1e3
+                    );
+                    for &l in &layouts {
+                        for &u in &threads {
+                            if !candidates.iter().any(|c| c.layout == l && c.threads == u) {
+                                candidates.push(PlanTiming {
+                                    engine: CnnEngine::Tract,
+                                    layout: l,
+                                    threads: u,
+                                    seconds: None,
+                                    skipped: Some(reason.clone()),
+                                });
+                            }
+                        }
+                    }
+                    break;
+                }
+            }
+            if candidates.len() == layouts.len() * threads.len() {
+                break;
             }
         }
         let best = candidates
@@ -443,6 +498,9 @@ impl TractModel {
         })
     }
 }
+
+/// How a candidate left untimed by the early stop ([`PLAUSIBLE_FACTOR`]) starts its `skipped` reason.
+const NOT_TIMED: &str = "not timed";
 
 /// Seconds of one run of `plan` on `input`.
 fn time_run(plan: &ModelPlan, input: &Array3<f32>) -> Result<f64> {
