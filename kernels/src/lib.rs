@@ -42,6 +42,7 @@
 pub mod buffer;
 pub mod conv3x3;
 pub mod depthwise;
+pub mod double_phase;
 mod error;
 pub mod heads;
 pub mod isa;
