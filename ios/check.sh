@@ -12,7 +12,7 @@
 #     used by the Swift, delegate class declared as a UIWindowSceneDelegate) with multiple scenes on, and the
 #     Swift sets `overscanCompensation = .none`;
 #  4. self-test: the same checks on temporary copies with one wrong name injected (a member, an enum case of
-#     the wrong enum, an argument label, a free function, a type, a method, a case in a tuple, a label in the
+#     the wrong enum, an argument label, a free function, a type, a method, a case in a tuple, labels in the
 #     sample app), one syntax error, a scene manifest without the external-display role, multiple scenes off
 #     and the overscan left at `.scale` must fail, naming the problem.
 # The C header and module map of the bindings are checked by bindings/tests/swift/check.sh; compiling the Swift,
@@ -80,6 +80,7 @@ injections=(
   "Tests/TensorholoTests/GeneratorTests.swift|gen.render(frame|gen.rendr(frame|HologramGenerator has no member \`rendr\`"
   "Tests/TensorholoTests/SwiftLayerTests.swift|(.right, .deg90, 90)|(.right, .deg91, 90)|\`.deg91\`"
   "Example/Sources/HologramModel.swift|depthData: depth.depthData|depthDat: depth.depthData|(sampleBuffer:depthDat:orientation:)"
+  "Example/Sources/HologramModel.swift|generatorConfigForDisplay(profile: profile)|generatorConfigForDisplay(profil: profile)|\`generatorConfigForDisplay\` takes the arguments (profil:)"
   "Sources/Tensorholo/PatternsHandler.swift|handleError(error)|handleError(error|missing )"
   "Example/Info.plist|<key>UIWindowSceneSessionRoleExternalDisplayNonInteractive</key>|<key>UIWindowSceneSessionRoleApplication</key>|declares no UIWindowSceneSessionRoleExternalDisplayNonInteractive"
   "Example/Info.plist|<key>UIApplicationSupportsMultipleScenes</key>|<key>UIApplicationSupportsMultipleScenesOff</key>|UIApplicationSupportsMultipleScenes must be true"

@@ -45,11 +45,13 @@ cargo test --locked --target "$target" -p tensorholo --no-default-features \
 # may differ, none by more than one step.
 if [ "$#" -eq 0 ]; then
   frame=(--rgb ../shared/data/tum/TUM_color.png --depth ../shared/data/tum/TUM_depth.png
-    --depth-encoding tum --size 96x128 --backend cpu --engine native --threads 1)
+    --depth-encoding tum --size 96x128 --backend cpu --engine native --threads 1 --repeat 0)
   out="$(mktemp -d)"
   trap 'rm -rf "$out"' EXIT
-  # Without the `gpu` feature (wgpu is not what this step tests, and it would double the cross build).
-  cargo build --locked -p holo --no-default-features
+  # The aarch64 build without the `gpu` feature (wgpu is not what this step tests, and it would double the
+  # cross build). The x86-64 reference is the workspace's own `holo` (what `cargo test` built; the native
+  # engine's frame does not depend on the cargo features).
+  cargo build --locked -p holo
   cargo build --locked --target "$target" -p holo --no-default-features
   target/debug/holo render "${frame[@]}" --out "$out/x86" >/dev/null
   echo "== holo render (aarch64, qemu-user)"

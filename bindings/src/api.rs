@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use ndarray::Axis;
 use tensorholo::cnn::ThreadCount;
+use tensorholo::display as core_display;
 use tensorholo::generator as core;
 use tensorholo::model::DEFAULT_INT8;
 use tensorholo::optics::OpticalSetup;
@@ -192,6 +193,11 @@ pub struct GeneratorConfig {
     /// The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`] says which runs).
     #[uniffi(default = None)]
     pub engine: Option<CnnEngine>,
+    /// Largest relative spread (a fraction: 0.005 = 0.5 %, the default) of the per-colour depth scales
+    /// accepted when the CNNs were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); a
+    /// wider value shows as "widened" in [`GeneratorInfo::display_mapping`].
+    #[uniffi(default = 0.005)]
+    pub wavelength_ratio_tolerance: f64,
 }
 
 impl GeneratorConfig {
@@ -271,9 +277,169 @@ impl GeneratorConfig {
                 ))
             }
         };
+        c.wavelength_ratio_tolerance = self.wavelength_ratio_tolerance;
         c.validate()?;
         Ok(c)
     }
+}
+
+impl From<core::GeneratorConfig> for GeneratorConfig {
+    /// The record of a core configuration (every field the record has; the core's `layout`, `options`,
+    /// `encoding` and `depth_mapping` have no field here and are the defaults on the way back).
+    fn from(c: core::GeneratorConfig) -> Self {
+        Self {
+            width: c.width as u32,
+            height: c.height as u32,
+            layers: c.models.layers as u32,
+            input: Some(match c.models.input {
+                tensorholo::model::SceneInput::Rgbd => SceneInput::Rgbd,
+                tensorholo::model::SceneInput::Ldi => SceneInput::Ldi,
+            }),
+            precision: Some(match c.models.precision {
+                tensorholo::model::Precision::F32 => Precision::F32,
+                tensorholo::model::Precision::Int8QOperator
+                | tensorholo::model::Precision::Int8Qdq => Precision::Int8,
+            }),
+            offset_mm: c.offset_m * 1e3,
+            prefilter: Some(match c.models.prefilter {
+                tensorholo::pipeline::PrefilterMode::Auto => PrefilterMode::Auto,
+                tensorholo::pipeline::PrefilterMode::Off => PrefilterMode::Off,
+                tensorholo::pipeline::PrefilterMode::Required => PrefilterMode::Required,
+            }),
+            threads: match c.threads {
+                ThreadCount::Auto => 0,
+                ThreadCount::Fixed(n) => n as u32,
+                // tract's one-thread default executor: one thread.
+                ThreadCount::ProcessDefault => 1,
+            },
+            fit: Some(match c.fit {
+                scene::Fit::Crop => Fit::Crop,
+                scene::Fit::Letterbox => Fit::Letterbox,
+                scene::Fit::Stretch => Fit::Stretch,
+            }),
+            pixel_pitch_m: c.optics.pixel_pitch_m,
+            wavelengths_m: c.optics.wavelengths_m.to_vec(),
+            volume_depth_m: c.optics.volume_depth_m,
+            z_near_m: c.depth_range.map(|r| r.z_near_m as f64),
+            z_far_m: c.depth_range.map(|r| r.z_far_m as f64),
+            backend: Some(match c.backend {
+                tensorholo::pipeline::Backend::Auto => Backend::Auto,
+                tensorholo::pipeline::Backend::Cpu => Backend::Cpu,
+                tensorholo::pipeline::Backend::Gpu => Backend::Gpu,
+            }),
+            gpu_precision: Some(match c.gpu_precision {
+                tensorholo::pipeline::GpuPrecision::Auto => GpuPrecision::Auto,
+                tensorholo::pipeline::GpuPrecision::F32 => GpuPrecision::F32,
+                tensorholo::pipeline::GpuPrecision::F16 => GpuPrecision::F16,
+            }),
+            engine: Some(match c.engine {
+                tensorholo::cnn::CnnEngine::Auto => CnnEngine::Auto,
+                tensorholo::cnn::CnnEngine::Native => CnnEngine::Native,
+                tensorholo::cnn::CnnEngine::Tract => CnnEngine::Tract,
+            }),
+            wavelength_ratio_tolerance: c.wavelength_ratio_tolerance,
+        }
+    }
+}
+
+/// A holographic display as its profile file describes it (`docs/DISPLAYS.md`): the SLM's pitch and
+/// resolution, the lasers, the volume and the offsets, in SI units (metres). Read one with
+/// [`display_profile_from_json`] or fill the fields; [`generator_config_for_display`] checks it and makes
+/// the [`GeneratorConfig`] for that display. The shipped CNNs (8 µm, 638/520/450 nm, 6 mm volume) serve any
+/// display with one depth scale `σ = (λ/λ')·(p'/8 µm)²` for the three lasers, a volume of `σ`·6 mm and
+/// offsets of `σ`·6 or `σ`·12 mm: at 4 µm, `σ` = 0.25, a 1.5 mm volume and offsets of 1.5 and 3 mm.
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct DisplayProfile {
+    /// `pixel_pitch_m`: SLM pixel pitch in metres (finite, > 0), e.g. 4e-6.
+    pub pixel_pitch_m: f64,
+    /// `resolution`: SLM size `[height, width]` in pixels (2 values, each ≥ 1).
+    pub resolution: Vec<u32>,
+    /// `wavelengths_m`: laser wavelengths `[R, G, B]` in metres (3 values within 380–780 nm), e.g.
+    /// 638e-9, 520e-9, 450e-9.
+    pub wavelengths_m: Vec<f64>,
+    /// `volume_depth_m`: depth of the 3D volume in metres (finite, > 0), centred on the midpoint hologram.
+    pub volume_depth_m: f64,
+    /// `offsets_m`: hologram-plane offsets `s` in metres (finite, at least one); the first is the one
+    /// [`generator_config_for_display`] takes.
+    pub offsets_m: Vec<f64>,
+    /// `name`: free text for reports; `None` (default) = none.
+    #[uniffi(default = None)]
+    pub name: Option<String>,
+    /// `calibration`: the display's `.holocal` file as the profile gives it (a relative path stays relative),
+    /// or `None` (default) for an ideal SLM. Not read by the library: the app loads the file's bytes and
+    /// passes them to [`HologramGenerator::set_calibration`].
+    #[uniffi(default = None)]
+    pub calibration: Option<String>,
+}
+
+impl DisplayProfile {
+    /// The core's profile, checked by the core ([`core_display::DisplayProfile::new`]).
+    ///
+    /// Errors: [`TensorholoError::InvalidInput`] naming the key: as the core's profile rules (e.g.
+    /// `resolution` not 2 values, a non-positive `pixel_pitch_m`, a wavelength outside 380–780 nm).
+    fn to_core(&self) -> Result<core_display::DisplayProfile> {
+        let resolution: Vec<usize> = self.resolution.iter().map(|&n| n as usize).collect();
+        Ok(core_display::DisplayProfile::new(
+            self.name.clone(),
+            self.pixel_pitch_m,
+            &resolution,
+            &self.wavelengths_m,
+            self.volume_depth_m,
+            self.offsets_m.clone(),
+            self.calibration.clone().map(Into::into),
+        )?)
+    }
+
+    /// The record of a core profile.
+    ///
+    /// Errors: [`TensorholoError::InvalidInput`] (`resolution`) for a size beyond `u32`.
+    fn from_core(p: core_display::DisplayProfile) -> Result<Self> {
+        let resolution = p
+            .resolution
+            .iter()
+            .map(|&n| u32::try_from(n))
+            .collect::<std::result::Result<Vec<u32>, _>>()
+            .map_err(|_| {
+                invalid(format!(
+                    "display profile key `resolution`: {:?} exceeds {} pixels",
+                    p.resolution,
+                    u32::MAX
+                ))
+            })?;
+        Ok(Self {
+            pixel_pitch_m: p.pixel_pitch_m,
+            resolution,
+            wavelengths_m: p.wavelengths_m.to_vec(),
+            volume_depth_m: p.volume_depth_m,
+            offsets_m: p.offsets_m,
+            name: p.name,
+            calibration: p.calibration.map(|c| c.to_string_lossy().into_owned()),
+        })
+    }
+}
+
+/// Reads a display profile from its JSON text (a profile file's contents, `docs/DISPLAYS.md`): keys
+/// `pixel_pitch_m`, `resolution`, `wavelengths_m`, `volume_depth_m`, `offsets_m` (SI units), optional `name`
+/// and `calibration`; unknown keys are refused.
+///
+/// Errors: [`TensorholoError::InvalidInput`] whose message names the key at fault (a missing key, a wrong
+/// type or array length, a non-positive pitch or volume, a wavelength outside 380–780 nm, an unknown key) or
+/// says the text is not a JSON object.
+#[uniffi::export]
+pub fn display_profile_from_json(json: String) -> Result<DisplayProfile> {
+    guard(|| DisplayProfile::from_core(core_display::DisplayProfile::from_json_str(&json)?))
+}
+
+/// The [`GeneratorConfig`] for a display: `width`/`height` from its `resolution`, its pitch, lasers and
+/// volume, its first offset; every other field at its default (change them before making the generator).
+///
+/// Errors: [`TensorholoError::InvalidInput`] naming the key for a profile that breaks the profile rules (as
+/// [`display_profile_from_json`]). Whether the CNNs serve the display is checked by [`HologramGenerator::new`]
+/// ([`TensorholoError::InvalidModel`] naming `wavelengths_m` for lasers without one common depth scale,
+/// `volume_depth_m` for a volume other than `σ`·6 mm, `pixel_pitch_m` for a pitch too fine).
+#[uniffi::export]
+pub fn generator_config_for_display(profile: DisplayProfile) -> Result<GeneratorConfig> {
+    guard(|| Ok(core::GeneratorConfig::for_display(&profile.to_core()?).into()))
 }
 
 impl From<Fit> for scene::Fit {
@@ -619,6 +785,11 @@ pub struct GeneratorInfo {
     /// The display calibration applied ([`HologramGenerator::set_calibration`]), in words, e.g.
     /// `"1080×1920 SLM: red tiled (16×16 px), green global, blue linear; intensity map: none"`.
     pub calibration: Option<String>,
+    /// How the hologram CNN's training display maps onto this display, in one line, e.g. "the 8-layer
+    /// hologram CNN (trained at 8 µm, 6 mm volume) serves 4 µm with a 1.5 mm volume (σ = 0.250000); offset
+    /// 1.5 mm ↔ 6 mm trained; wavelength mismatch 0.00 % (tolerance 0.50 %); non-paraxial residual 0.084 rad
+    /// (bound 0.25 rad)" (`docs/DISPLAYS.md`).
+    pub display_mapping: String,
     /// Everything above and the autotuning timings, as JSON.
     pub json: String,
 }
@@ -833,6 +1004,7 @@ fn info(g: &core::HologramGenerator) -> Result<GeneratorInfo> {
         backend_reason: i.backend.reason,
         gpu_adapter: i.backend.adapter,
         calibration: i.calibration,
+        display_mapping: i.display_mapping,
         json,
     })
 }
@@ -899,24 +1071,29 @@ impl HologramStream {
 mod tests {
     use super::*;
 
-    /// The default a generated binding gives `field` (`name: Type = value` in Kotlin, `name: Type =
-    /// Type(value)` in Swift), as a number.
+    /// The default a generated binding gives `GeneratorConfig`'s `field` (`name: Type = value` in Kotlin,
+    /// `name: Type = Type(value)` in Swift), as a number. Other records (`DisplayProfile`) have fields of the
+    /// same names: the search starts at `GeneratorConfig`'s definition.
     fn generated_default(source: &str, field: &str) -> f64 {
+        let start = source
+            .find("data class GeneratorConfig (")
+            .or_else(|| source.find("public struct GeneratorConfig:"))
+            .expect("no GeneratorConfig in the generated binding");
+        let source = &source[start..];
         let at = source
             .find(&format!("{field}`: kotlin."))
             .or_else(|| source.find(&format!("*/{field}: ")))
             .unwrap_or_else(|| panic!("no field {field} in the generated binding"));
         let rest = &source[at..];
         let value = rest[rest.find('=').unwrap() + 1..]
-            .split([',', '\n'])
-            .next()
-            .unwrap()
-            .trim();
-        let value = value
+            .trim_start()
             .trim_start_matches("UInt32(")
-            .trim_start_matches("Double(")
-            .trim_end_matches(')')
-            .trim_end_matches('u');
+            .trim_start_matches("Double(");
+        // The number alone (`8e-6`, `8u`, `0.005)) {` of the last argument in Swift).
+        let end = value
+            .find(|c: char| !(c.is_ascii_digit() || ".eE+-".contains(c)))
+            .unwrap_or(value.len());
+        let value = &value[..end];
         value
             .parse()
             .unwrap_or_else(|e| panic!("{field} = {value:?}: {e}"))
@@ -960,6 +1137,11 @@ mod tests {
                 core.threads,
                 "{file}"
             );
+            assert_eq!(
+                field("wavelengthRatioTolerance", "wavelengthRatioTolerance"),
+                core.wavelength_ratio_tolerance,
+                "{file}"
+            );
         }
         // And the fields the tests' config leaves `None` (or at the literal default) are the core's.
         let c = config(64, 48).to_core().unwrap();
@@ -971,6 +1153,183 @@ mod tests {
             (c.fit, c.backend, c.gpu_precision),
             (want.fit, want.backend, want.gpu_precision)
         );
+        assert_eq!(
+            c.wavelength_ratio_tolerance,
+            want.wavelength_ratio_tolerance
+        );
+    }
+
+    const PROFILE_4UM: &str = r#"{
+        "name": "4 µm SLM",
+        "pixel_pitch_m": 4e-6,
+        "resolution": [24, 32],
+        "wavelengths_m": [638e-9, 520e-9, 450e-9],
+        "volume_depth_m": 1.5e-3,
+        "offsets_m": [1.5e-3, 3e-3],
+        "calibration": "slm.holocal"
+    }"#;
+
+    /// The JSON and the record give the core's profile and the core's `for_display` configuration, through
+    /// the record of the configuration and back.
+    #[test]
+    fn a_display_profile_gives_the_cores_configuration() {
+        let p = display_profile_from_json(PROFILE_4UM.into()).unwrap();
+        let core_profile = core_display::DisplayProfile::from_json_str(PROFILE_4UM).unwrap();
+        assert_eq!(p.to_core().unwrap(), core_profile);
+        assert_eq!(p.resolution, vec![24, 32]);
+        assert_eq!(p.calibration.as_deref(), Some("slm.holocal"));
+        let record = generator_config_for_display(p).unwrap();
+        assert_eq!((record.width, record.height), (32, 24));
+        assert_eq!(record.wavelength_ratio_tolerance, 0.005);
+        let back = record.to_core().unwrap();
+        let want = core::GeneratorConfig::for_display(&core_profile);
+        assert_eq!(
+            (
+                back.width,
+                back.height,
+                back.models,
+                back.optics,
+                back.threads
+            ),
+            (
+                want.width,
+                want.height,
+                want.models,
+                want.optics,
+                want.threads
+            )
+        );
+        assert!((back.offset_m - want.offset_m).abs() < 1e-15);
+        assert_eq!(
+            (back.fit, back.backend, back.gpu_precision, back.engine),
+            (want.fit, want.backend, want.gpu_precision, want.engine)
+        );
+        assert_eq!(
+            back.wavelength_ratio_tolerance,
+            want.wavelength_ratio_tolerance
+        );
+    }
+
+    /// Bad profiles, from JSON or as records, are `InvalidInput` naming the key (the core's rules).
+    #[test]
+    fn bad_display_profiles_name_the_key() {
+        let good = display_profile_from_json(PROFILE_4UM.into()).unwrap();
+        let message = |r: Result<GeneratorConfig>| match r {
+            Err(TensorholoError::InvalidInput { message }) => message,
+            other => panic!("expected InvalidInput, got {other:?}"),
+        };
+        for (key, record) in [
+            (
+                "pixel_pitch_m",
+                DisplayProfile {
+                    pixel_pitch_m: -4e-6,
+                    ..good.clone()
+                },
+            ),
+            (
+                "resolution",
+                DisplayProfile {
+                    resolution: vec![24],
+                    ..good.clone()
+                },
+            ),
+            (
+                "resolution",
+                DisplayProfile {
+                    resolution: vec![24, 0],
+                    ..good.clone()
+                },
+            ),
+            (
+                "wavelengths_m",
+                DisplayProfile {
+                    wavelengths_m: vec![638e-9, 520e-9],
+                    ..good.clone()
+                },
+            ),
+            (
+                "offsets_m",
+                DisplayProfile {
+                    offsets_m: vec![],
+                    ..good.clone()
+                },
+            ),
+        ] {
+            let m = message(generator_config_for_display(record));
+            assert!(m.contains(&format!("`{key}`")), "{key}: {m}");
+        }
+        for (key, json) in [
+            ("pixel_pitch_m", PROFILE_4UM.replace("4e-6", "-4e-6")),
+            ("resolution", PROFILE_4UM.replace("[24, 32]", "[24, 32, 3]")),
+            (
+                "pixel_pich_m",
+                PROFILE_4UM.replace("pixel_pitch_m", "pixel_pich_m"),
+            ),
+        ] {
+            let m = message(display_profile_from_json(json).map(|_| unreachable!()));
+            assert!(m.contains(key), "{key}: {m}");
+        }
+    }
+
+    /// The display profiles the iOS and Android samples ship, the files in `displays/` and every JSON profile of
+    /// `docs/DISPLAYS.md` are valid, and the shipped CNNs serve them at their first offset.
+    #[cfg(feature = "embedded-models")]
+    #[test]
+    fn the_samples_and_documented_display_profiles_are_served() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let read = |file: &str| std::fs::read_to_string(root.join(file)).unwrap();
+        let mut profiles: Vec<(String, String)> = [
+            "ios/Example/Resources/display.json",
+            "android/sample/src/main/assets/display.json",
+        ]
+        .map(|f| (f.to_string(), read(f)))
+        .into();
+        let mut files: Vec<_> = std::fs::read_dir(root.join("displays"))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        files.sort();
+        for path in files {
+            profiles.push((
+                path.display().to_string(),
+                std::fs::read_to_string(&path).unwrap(),
+            ));
+        }
+        let docs = read("docs/DISPLAYS.md");
+        for (i, block) in docs.split("```json\n").skip(1).enumerate() {
+            let json = block.split("```").next().unwrap();
+            profiles.push((
+                format!("docs/DISPLAYS.md profile {}", i + 1),
+                json.to_string(),
+            ));
+        }
+        assert!(profiles.len() >= 9, "{} profiles", profiles.len());
+        for (what, json) in profiles {
+            let profile = display_profile_from_json(json).unwrap_or_else(|e| panic!("{what}: {e}"));
+            let c = generator_config_for_display(profile)
+                .and_then(|c| c.to_core())
+                .unwrap_or_else(|e| panic!("{what}: {e}"));
+            // The model check alone (no session): the display and offset are served.
+            tensorholo::pipeline::HologramPipeline::embedded(&c.models, c.pipeline_config())
+                .unwrap_or_else(|e| panic!("{what}: {e}"));
+        }
+    }
+
+    /// A generator for the 4 µm profile renders and reports σ = 0.25.
+    #[cfg(feature = "embedded-models")]
+    #[test]
+    fn a_generator_for_a_4um_display_reports_its_mapping() {
+        let p = display_profile_from_json(PROFILE_4UM.into()).unwrap();
+        let c = GeneratorConfig {
+            threads: 1,
+            engine: Some(CnnEngine::Native),
+            ..generator_config_for_display(p).unwrap()
+        };
+        let g = HologramGenerator::new(c).unwrap();
+        assert_eq!(g.render(frame()).unwrap().red.len(), 32 * 24);
+        let info = g.info().unwrap();
+        assert!(info.display_mapping.contains("σ = 0.25"), "{info:?}");
+        assert!(info.json.contains("display_mapping"), "{}", info.json);
     }
 
     fn config(width: u32, height: u32) -> GeneratorConfig {
@@ -993,6 +1352,7 @@ mod tests {
             gpu_precision: None,
             // Pinned: `Auto` picks by timing, and the tests compare generators bit for bit.
             engine: Some(CnnEngine::Native),
+            wavelength_ratio_tolerance: 0.005,
         }
     }
 

@@ -15,7 +15,8 @@
 //!
 //! The exported API ([`api`]): `HologramGenerator` (camera frames → `SlmPatterns`, `preview`, `info`,
 //! `benchmark`, `stream`), `HologramStream`, the `PatternsListener` apps implement, `pack_rgba`, `version`,
-//! and `TensorholoError`.
+//! `DisplayProfile` with `display_profile_from_json` and `generator_config_for_display`, and
+//! `TensorholoError`.
 
 // uniffi's `setup_scaffolding!` and `#[uniffi::export]` macros expand to `extern "C"` functions with
 // `#[no_mangle]` and raw-pointer handling, which the workspace-wide `unsafe_code = "deny"` would reject.

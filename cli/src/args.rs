@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde_json::json;
+use tensorholo::display::DisplayProfile;
 use tensorholo::encoding::DoublePhaseMethod;
 use tensorholo::model::SceneInput;
 use tensorholo::optics::{OpticalSetup, PropagationOptions};
@@ -15,9 +16,15 @@ use tensorholo::scene::{
 use tensorholo::synthesis::{ldi_layers, SceneLayer};
 
 /// Display geometry and angular-spectrum options (`docs/CONVENTIONS.md` §3, §5.1), shared by `reference`,
-/// `encode` and `dataset`.
+/// `encode`, `dataset`, `render`, `video` and `bench`: a display profile (`--display`) and the single flags
+/// that override its values.
 #[derive(Debug, Args)]
 pub struct OpticsArgs {
+    /// Display profile (JSON, docs/DISPLAYS.md): SLM pitch and resolution, lasers, volume, offsets,
+    /// calibration. --pitch-m, --wavelengths-m, --volume-depth-m (and, where a command has them, --offset-mm
+    /// and --calibration) override its values.
+    #[arg(long, value_name = "FILE")]
+    pub display: Option<PathBuf>,
     /// Zero-pad propagations to 2H x 2W (linear convolution; 4x slower).
     #[arg(long)]
     pub pad: bool,
@@ -37,9 +44,34 @@ pub struct OpticsArgs {
 }
 
 impl OpticsArgs {
-    /// The validated optical setup. Errors: not exactly 3 wavelengths, or a non-positive value.
+    /// The `--display` profile, if given. Errors: the file cannot be read or is not a valid profile (the
+    /// message names the key).
+    pub fn profile(&self) -> Result<Option<DisplayProfile>> {
+        self.display
+            .as_deref()
+            .map(|p| {
+                DisplayProfile::from_path(p).with_context(|| format!("--display {}", p.display()))
+            })
+            .transpose()
+    }
+
+    /// The `--display` file for the output guard ([`crate::output::guard`]), if given.
+    pub fn guard_input(&self) -> Option<crate::output::Input<'_>> {
+        Some(crate::output::Input::file(
+            "--display",
+            self.display.as_deref()?,
+        ))
+    }
+
+    /// The validated optical setup: the `--display` profile's (the paper's display without one) with the
+    /// single flags in place of its values. Errors: a bad profile (naming its key), not exactly 3
+    /// wavelengths, or a non-positive value.
     pub fn setup(&self) -> Result<OpticalSetup> {
-        self.setup_over(OpticalSetup::default())
+        let base = self
+            .profile()?
+            .as_ref()
+            .map_or_else(OpticalSetup::default, DisplayProfile::optics);
+        self.setup_over(base)
     }
 
     /// The validated optical setup: `base` (the paper's display, or a display profile's) with the flags

@@ -280,18 +280,18 @@ pub fn run(args: &BaselinesArgs) -> Result<()> {
         .unwrap_or_else(|| args.dataset.join("baselines"));
 
     let setup = OpticalSetup {
-        wavelengths_m: manifest.optics.wavelengths_m,
-        pixel_pitch_m: manifest.optics.pixel_pitch_m,
-        volume_depth_m: manifest.optics.volume_depth_m,
+        wavelengths_m: manifest.plan.optics.wavelengths_m,
+        pixel_pitch_m: manifest.plan.optics.pixel_pitch_m,
+        volume_depth_m: manifest.plan.optics.volume_depth_m,
     };
     setup
         .validate()
         .with_context(|| format!("bad optics in `{}`", manifest_path.display()))?;
     let options = PropagationOptions {
-        pad: manifest.synthesis.pad,
-        band_limit: manifest.synthesis.band_limit,
+        pad: manifest.plan.synthesis.pad,
+        band_limit: manifest.plan.synthesis.band_limit,
     };
-    let levels = args.levels.unwrap_or(manifest.synthesis.levels);
+    let levels = args.levels.unwrap_or(manifest.plan.synthesis.levels);
     let smlbm = SmLbm {
         levels,
         setup,
@@ -359,8 +359,8 @@ pub fn run(args: &BaselinesArgs) -> Result<()> {
         "{count} {} scenes of {} ({}x{}): maimone + SM-LBM/AA-DPM at {:?} mm, {levels} planes, {threads} threads",
         args.split.name(),
         args.dataset.display(),
-        manifest.resolution[0],
-        manifest.resolution[1],
+        manifest.plan.resolution[0],
+        manifest.plan.resolution[1],
         args.offsets_mm,
     );
 
@@ -431,11 +431,11 @@ pub fn run(args: &BaselinesArgs) -> Result<()> {
                          index = position of the scene in the split",
         "input": "first LDI layer only (ldi channels 0-3: R, G, B amplitude, depth; every pixel valid), \
                   the RGB-D input of the CNN",
-        "resolution": manifest.resolution,
+        "resolution": manifest.plan.resolution,
         "levels": levels,
-        "dataset_levels": manifest.synthesis.levels,
+        "dataset_levels": manifest.plan.synthesis.levels,
         "offsets_mm": args.offsets_mm,
-        "optics": manifest.optics,
+        "optics": manifest.plan.optics,
         "propagation": options,
         "encoding": DoublePhaseMethod::default(),
         "baselines": baselines,
@@ -468,6 +468,7 @@ pub fn run(args: &BaselinesArgs) -> Result<()> {
 /// splits.
 fn split_files(manifest: &Manifest, dataset: &Path) -> Vec<PathBuf> {
     manifest
+        .plan
         .splits
         .iter()
         .flat_map(|s| s.shards.iter().map(|f| dataset.join(&f.file)))

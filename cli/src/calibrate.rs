@@ -7,6 +7,8 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
+use tensorholo::display::DisplayProfile;
+use tensorholo::optics::OpticalSetup;
 use tensorholo::slm::calibrate::{calibrate, calibration_pattern, CalibrationOptions};
 use tensorholo::slm::captures::{read_png_downsampled, Crop, PngCaptureDir};
 use tensorholo::slm::file::COLOUR_NAMES;
@@ -39,6 +41,59 @@ fn colour_inputs<'a>(
         })
 }
 
+/// The SLM a calibration is for: its size from `--size` or a display profile's `resolution`.
+#[derive(Debug, Args)]
+struct SlmArgs {
+    /// Display profile (JSON, docs/DISPLAYS.md): the SLM size (`resolution`) and, where the command stores
+    /// them, the lasers (`wavelengths_m`); --size and --wavelengths-m override its values.
+    #[arg(long, value_name = "FILE")]
+    display: Option<PathBuf>,
+    /// SLM size HEIGHTxWIDTH (e.g. 1080x1920) [default: the --display profile's resolution].
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(usize, usize)>,
+}
+
+impl SlmArgs {
+    /// The `--display` profile, if given. Errors: unreadable, or a bad profile (naming the key).
+    fn profile(&self) -> Result<Option<DisplayProfile>> {
+        self.display
+            .as_deref()
+            .map(|p| {
+                DisplayProfile::from_path(p).with_context(|| format!("--display {}", p.display()))
+            })
+            .transpose()
+    }
+
+    /// The SLM size: `--size`, else the profile's resolution. Errors: neither given, or a bad profile.
+    fn size(&self) -> Result<(usize, usize)> {
+        // A bad profile is an error even where --size overrides its resolution.
+        let profile = self.profile()?;
+        if let Some(s) = self.size {
+            return Ok(s);
+        }
+        match profile {
+            Some(p) => Ok((p.resolution[0], p.resolution[1])),
+            None => bail!("give the SLM size: --size HEIGHTxWIDTH or --display PROFILE.json"),
+        }
+    }
+
+    /// The lasers: `flag` (`--wavelengths-m`) if given, else the profile's, else the paper's.
+    fn wavelengths_m(&self, flag: &Option<Vec<f64>>) -> Result<Vec<f64>> {
+        if let Some(w) = flag {
+            return Ok(w.clone());
+        }
+        Ok(self.profile()?.map_or_else(
+            || OpticalSetup::default().wavelengths_m.to_vec(),
+            |p| p.wavelengths_m.to_vec(),
+        ))
+    }
+
+    /// The profile file as a guard input (it is read, never written).
+    fn guard_input(&self) -> Option<Input<'_>> {
+        Some(Input::file("--display", self.display.as_deref()?))
+    }
+}
+
 /// `holo calibrate` subcommands.
 #[derive(Debug, Args)]
 pub struct CalibrateArgs {
@@ -51,9 +106,8 @@ enum CalibrateCommand {
     /// Write the 256 calibration patterns pattern_000.png … pattern_255.png: in every 2×2 block, top-left and
     /// bottom-right at code k, the other two at code 0.
     Patterns {
-        /// SLM size HEIGHTxWIDTH (e.g. 1080x1920).
-        #[arg(long, value_parser = parse_size)]
-        size: (usize, usize),
+        #[command(flatten)]
+        slm: SlmArgs,
         /// Output folder (created).
         #[arg(long)]
         out: PathBuf,
@@ -71,9 +125,8 @@ enum CalibrateCommand {
         /// Captures of the blue laser.
         #[arg(long)]
         blue: Option<PathBuf>,
-        /// SLM size HEIGHTxWIDTH.
-        #[arg(long, value_parser = parse_size)]
-        size: (usize, usize),
+        #[command(flatten)]
+        slm: SlmArgs,
         /// The SLM's area in the captures: x,y,width,height in camera pixels (default: the whole capture).
         #[arg(long)]
         crop: Option<String>,
@@ -84,9 +137,9 @@ enum CalibrateCommand {
         #[arg(long, default_value = "tiled")]
         representation: String,
         /// The lasers' wavelengths in metres, R,G,B (stored in the file; the pipeline refuses a calibration
-        /// more than 1 nm from its optics).
-        #[arg(long, value_delimiter = ',', default_values_t = [638e-9, 520e-9, 450e-9])]
-        wavelengths_m: Vec<f64>,
+        /// more than 1 nm from its optics) [default: 6.38e-7,5.2e-7,4.5e-7, or the --display profile's].
+        #[arg(long, value_delimiter = ',')]
+        wavelengths_m: Option<Vec<f64>>,
         /// Output calibration file (.holocal).
         #[arg(long)]
         out: PathBuf,
@@ -95,9 +148,8 @@ enum CalibrateCommand {
     /// (CSV rows `code,phase_rad`) or the gamma/range model φ(k) = range·(k/255)^gamma; colours without
     /// either keep the linear table. For panels without a per-pixel calibration yet.
     Global {
-        /// SLM size HEIGHTxWIDTH.
-        #[arg(long, value_parser = parse_size)]
-        size: (usize, usize),
+        #[command(flatten)]
+        slm: SlmArgs,
         /// CSV tables of the red, green and blue lasers (`code,phase_rad`, 256 rows).
         #[arg(long)]
         red_csv: Option<PathBuf>,
@@ -113,9 +165,10 @@ enum CalibrateCommand {
         /// The gamma model's exponent (with --range-rad).
         #[arg(long, requires = "range_rad")]
         gamma: Option<f32>,
-        /// The lasers' wavelengths in metres, R,G,B.
-        #[arg(long, value_delimiter = ',', default_values_t = [638e-9, 520e-9, 450e-9])]
-        wavelengths_m: Vec<f64>,
+        /// The lasers' wavelengths in metres, R,G,B [default: 6.38e-7,5.2e-7,4.5e-7, or the --display
+        /// profile's].
+        #[arg(long, value_delimiter = ',')]
+        wavelengths_m: Option<Vec<f64>>,
         /// Output calibration file (.holocal).
         #[arg(long)]
         out: PathBuf,
@@ -134,12 +187,12 @@ enum CalibrateCommand {
         /// Diffuser capture of the blue laser.
         #[arg(long)]
         blue: Option<PathBuf>,
-        /// The calibration to add the maps to (its look-up tables and other maps are kept).
-        #[arg(long, required_unless_present = "size")]
+        /// The calibration to add the maps to (its look-up tables and other maps are kept). Without it: linear
+        /// look-up tables of --size or the --display profile's resolution.
+        #[arg(long, required_unless_present_any = ["size", "display"], conflicts_with_all = ["size", "display"])]
         base: Option<PathBuf>,
-        /// SLM size HEIGHTxWIDTH, without --base (linear look-up tables).
-        #[arg(long, value_parser = parse_size, conflicts_with = "base")]
-        size: Option<(usize, usize)>,
+        #[command(flatten)]
+        slm: SlmArgs,
         /// The SLM's area in the captures: x,y,width,height in camera pixels (default: the whole capture).
         #[arg(long)]
         crop: Option<String>,
@@ -200,7 +253,10 @@ fn colour_index(name: &str) -> Result<usize> {
 /// Runs `holo calibrate …`.
 pub fn run(args: &CalibrateArgs) -> Result<()> {
     match &args.command {
-        CalibrateCommand::Patterns { size, out } => {
+        CalibrateCommand::Patterns { slm, out } => {
+            let inputs: Vec<Input> = slm.guard_input().into_iter().collect();
+            guard("--out", out, &inputs)?;
+            let size = slm.size()?;
             std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
             for k in 0..CODES {
                 let p = calibration_pattern(size.0, size.1, k as u8);
@@ -218,13 +274,15 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             red,
             green,
             blue,
-            size,
+            slm,
             crop,
             tile,
             representation,
             wavelengths_m,
             out,
         } => {
+            let size = &slm.size()?;
+            let wavelengths_m = &slm.wavelengths_m(wavelengths_m)?;
             let crop: Option<Crop> = crop.as_deref().map(str::parse).transpose()?;
             if red.is_none() && green.is_none() && blue.is_none() {
                 bail!(
@@ -232,7 +290,9 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
                 );
             }
             // Captures are folders: the calibration file may be neither one nor inside one.
-            let inputs: Vec<Input> = colour_inputs([red, green, blue], true).collect();
+            let inputs: Vec<Input> = colour_inputs([red, green, blue], true)
+                .chain(slm.guard_input())
+                .collect();
             guard("--out", out, &inputs)?;
             let mut cal = DisplayCalibration::linear(size.0, size.1)?;
             set_wavelengths(&mut cal, wavelengths_m)?;
@@ -281,21 +341,21 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             green,
             blue,
             base,
-            size,
+            slm,
             crop,
             floor_percentile,
             out,
         } => intensity(
             [red, green, blue],
             base.as_deref(),
-            *size,
+            slm,
             crop.as_deref(),
             *floor_percentile,
             out,
         ),
         CalibrateCommand::Black { file, out } => black(file, out),
         CalibrateCommand::Global {
-            size,
+            slm,
             red_csv,
             green_csv,
             blue_csv,
@@ -309,10 +369,12 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
                 .into_iter()
                 .zip(csvs)
                 .filter_map(|(flag, c)| Some(Input::file(flag, c.as_deref()?)))
+                .chain(slm.guard_input())
                 .collect();
             guard("--out", out, &inputs)?;
+            let size = slm.size()?;
             let mut cal = DisplayCalibration::linear(size.0, size.1)?;
-            set_wavelengths(&mut cal, wavelengths_m)?;
+            set_wavelengths(&mut cal, &slm.wavelengths_m(wavelengths_m)?)?;
             let model = match (range_rad, gamma) {
                 (Some(r), Some(g)) => Some(PhaseCurve::gamma(*r, *g)?),
                 _ => None,
@@ -387,22 +449,25 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
 fn intensity(
     captures: [&Option<PathBuf>; 3],
     base: Option<&std::path::Path>,
-    size: Option<(usize, usize)>,
+    slm: &SlmArgs,
     crop: Option<&str>,
     floor_percentile: f32,
     out: &std::path::Path,
 ) -> Result<()> {
     let mut inputs: Vec<Input> = colour_inputs(captures, false).collect();
     inputs.extend(base.map(|b| Input::file("--base", b)));
+    inputs.extend(slm.guard_input());
     guard("--out", out, &inputs)?;
     let crop: Option<Crop> = crop.map(str::parse).transpose()?;
     if captures.iter().all(|c| c.is_none()) {
         bail!("give the diffuser capture of at least one colour: --red FILE, --green FILE, --blue FILE");
     }
-    let mut cal = match (base, size) {
-        (Some(b), _) => DisplayCalibration::read(b)?,
-        (None, Some((h, w))) => DisplayCalibration::linear(h, w)?,
-        (None, None) => bail!("give --base FILE.holocal or --size HEIGHTxWIDTH"),
+    let mut cal = match base {
+        Some(b) => DisplayCalibration::read(b)?,
+        None => {
+            let (h, w) = slm.size()?;
+            DisplayCalibration::linear(h, w)?
+        }
     };
     let (h, w) = (cal.height, cal.width);
     for (c, capture) in captures.into_iter().enumerate() {

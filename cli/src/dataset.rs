@@ -8,8 +8,8 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use tensorholo::dataset::{
-    generate, save_ldi_previews, DatasetConfig, GenerateOptions, SampleGenerator, Split,
-    MANIFEST_FILE,
+    generate, generate_shards, merge_shards, save_ldi_previews, DatasetConfig, DisplayInfo,
+    GenerateOptions, SampleGenerator, ShardSelection, Split, MANIFEST_FILE,
 };
 use tensorholo::io::ensure_not_input;
 use tensorholo::scene::{write_ldi_dir, DepthEncoding, RandomSceneConfig};
@@ -134,8 +134,90 @@ pub struct DatasetArgs {
     #[command(flatten)]
     optics: crate::args::OpticsArgs,
     /// Replace a dataset already in --out (manifest, same-named shards, shards the old manifest listed).
+    /// Without it, shards a previous run finished with the same configuration are kept (resume).
     #[arg(long)]
     force: bool,
+    /// Write only part I of N of the shards (0-based): those whose position j in the plan (train shards
+    /// first, then val, then test) has j mod N = I, with no manifest; run every part with the same flags
+    /// (on as many machines as you like), then `holo dataset --merge --out DIR`. The shards are
+    /// byte-identical to a one-process run's. `auto` reads I and N from a Slurm job array
+    /// (SLURM_ARRAY_TASK_ID, _MIN, _STEP, _COUNT) or from a Kubernetes Indexed Job (JOB_COMPLETION_INDEX,
+    /// with --shard-count N).
+    #[arg(long, value_name = "I/N|auto", conflicts_with = "export_ldi")]
+    shard: Option<String>,
+    /// With --shard auto in a Kubernetes Indexed Job: the number of parts (the Job's completions).
+    #[arg(long, value_name = "N", requires = "shard")]
+    shard_count: Option<usize>,
+    /// Finish a sharded dataset: check that --out holds every planned shard once, of one configuration
+    /// (read from the shards' records: no other flag is needed), and write manifest.json. A missing or
+    /// foreign shard is named, with the command that writes it.
+    #[arg(long, conflicts_with_all = ["shard", "export_ldi", "force"])]
+    merge: bool,
+}
+
+/// The part of `--shard` (all shards without it).
+fn shard_selection(shard: Option<&str>, shard_count: Option<usize>) -> Result<ShardSelection> {
+    let env = |k: &str| std::env::var(k).ok().filter(|v| !v.is_empty());
+    let number = |k: &str, v: &str| -> Result<usize> {
+        v.trim()
+            .parse::<usize>()
+            .with_context(|| format!("{k}=`{v}` is not a non-negative integer"))
+    };
+    let selection = match shard {
+        None => return Ok(ShardSelection::ALL),
+        Some("auto") => {
+            if let Some(id) = env("SLURM_ARRAY_TASK_ID") {
+                let id = number("SLURM_ARRAY_TASK_ID", &id)?;
+                let min = env("SLURM_ARRAY_TASK_MIN")
+                    .map(|v| number("SLURM_ARRAY_TASK_MIN", &v))
+                    .transpose()?
+                    .unwrap_or(0);
+                let step = env("SLURM_ARRAY_TASK_STEP")
+                    .map(|v| number("SLURM_ARRAY_TASK_STEP", &v))
+                    .transpose()?
+                    .unwrap_or(1)
+                    .max(1);
+                let count = match (shard_count, env("SLURM_ARRAY_TASK_COUNT")) {
+                    (Some(n), _) => n,
+                    (None, Some(v)) => number("SLURM_ARRAY_TASK_COUNT", &v)?,
+                    (None, None) => bail!(
+                        "--shard auto: SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_COUNT is not;                          pass --shard-count N"
+                    ),
+                };
+                if id < min || (id - min) % step != 0 {
+                    bail!(
+                        "--shard auto: SLURM_ARRAY_TASK_ID {id} is not in the array {min}, {}, …",
+                        min + step
+                    );
+                }
+                ShardSelection::new((id - min) / step, count)
+            } else if let Some(index) = env("JOB_COMPLETION_INDEX") {
+                let index = number("JOB_COMPLETION_INDEX", &index)?;
+                let Some(count) = shard_count else {
+                    bail!(
+                        "--shard auto in a Kubernetes Indexed Job (JOB_COMPLETION_INDEX={index}) needs                          --shard-count N, the Job's completions"
+                    );
+                };
+                ShardSelection::new(index, count)
+            } else {
+                bail!(
+                    "--shard auto: neither a Slurm job array (SLURM_ARRAY_TASK_ID) nor a Kubernetes                      Indexed Job (JOB_COMPLETION_INDEX) is running this; give the part as --shard I/N"
+                );
+            }
+        }
+        Some(text) => {
+            let (i, n) = text
+                .split_once('/')
+                .with_context(|| format!("--shard `{text}`: expected I/N (e.g. 0/8) or auto"))?;
+            if shard_count.is_some() {
+                bail!(
+                    "--shard-count goes with --shard auto; --shard {text} already gives the count"
+                );
+            }
+            ShardSelection::new(number("--shard I", i)?, number("--shard N", n)?)
+        }
+    };
+    Ok(selection?)
 }
 
 const EXAMPLES: &str = "\
@@ -150,11 +232,18 @@ Examples:
       aberration-corrected ground truth (Eq. 5) for a display whose SLM is 6 mm from the midpoint
   holo dataset --out out/ldi_test0 --export-ldi test:0 --size 256 --seed 2027
       test sample 0 of that dataset as an LDI folder (rgb_K.png, depth_K.png), for holo render --ldi
+  holo dataset --out data/big --train 3800 --val 100 --test 100 --shard 3/8
+  holo dataset --out data/big --merge
+      part 3 of 8 (on any machine sharing data/big; the same flags for every part), then the manifest
+  sbatch --array=0-7 scripts/cluster/dataset.sbatch
+      the same on a Slurm job array (--shard auto); scripts/cluster/ also has the Kubernetes Indexed Job
 
 Outputs in --out:
   manifest.json            format, generator (version, git commit), seed, splits and shard files,
                            resolution, LDI layers, SM-LBM levels, optics, scene configuration, array
                            layouts, statistics (non-empty planes, occlusion, timings)
+  train-00000.npz.shard.json ...
+                           each shard's record: its configuration, size and statistics (resume, merge)
   train-00000.npz ...      shards: ldi float32 [N, 4L, H, W] (per layer R, G, B amplitude, depth),
   val-00000.npz ...        ldi_valid uint8 [N, L, H, W], midpoint complex64 [N, 3, H, W] (R, G, B),
   test-00000.npz ...       seed uint64 [N], index uint64 [N]; see docs/DATASET.md
@@ -263,11 +352,16 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         args.aberration
             .as_deref()
             .map(|p| crate::output::Input::file("--aberration", p)),
+        args.optics.guard_input(),
     ]
     .into_iter()
     .flatten()
     .collect();
     crate::output::guard("--out", &args.out, &inputs)?;
+    if args.merge {
+        return merge(args);
+    }
+    let selection = shard_selection(args.shard.as_deref(), args.shard_count)?;
     let config = config(args)?;
     if let Some((split, index)) = args.export_ldi {
         return export_ldi(args, &config, split, index);
@@ -289,7 +383,25 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         }
         b.build().context("cannot start the worker threads")?
     };
-    pool.install(|| run_in_pool(args, &config))
+    pool.install(|| run_in_pool(args, &config, selection))
+}
+
+/// `--merge`: the manifest of a sharded dataset.
+fn merge(args: &DatasetArgs) -> Result<()> {
+    let t = std::time::Instant::now();
+    let manifest = merge_shards(&args.out)?;
+    let st = &manifest.statistics;
+    log::info!(
+        "merged {} ({} shards, {} samples) in {:.1} s: {:.2} s per sample on one worker, {:.1} s of \
+         generation in all",
+        args.out.display(),
+        manifest.plan.splits.iter().map(|s| s.shards.len()).sum::<usize>(),
+        st.samples,
+        t.elapsed().as_secs_f64(),
+        st.mean_sample_seconds,
+        st.wall_seconds
+    );
+    Ok(())
 }
 
 /// The photos the scenes may be textured with (inputs: never written over).
@@ -371,7 +483,11 @@ fn export_ldi(
     Ok(())
 }
 
-fn run_in_pool(args: &DatasetArgs, config: &DatasetConfig) -> Result<()> {
+fn run_in_pool(
+    args: &DatasetArgs,
+    config: &DatasetConfig,
+    selection: ShardSelection,
+) -> Result<()> {
     let generator = SampleGenerator::new(config)?;
     let photos = photo_paths(&generator);
     let total = (config.train + config.val + config.test) as u64;
@@ -396,7 +512,12 @@ fn run_in_pool(args: &DatasetArgs, config: &DatasetConfig) -> Result<()> {
     // Previews first (cheap: scenes only), so that a long run can be checked early.
     let preview_dir = args.out.join("previews");
     // The manifest is the dataset's report: `generate` replaces it last (and reads the old one under --force).
-    let previews = args.previews.min(config.train);
+    // The first part (or the only one) writes them.
+    let previews = if selection.index() == 0 {
+        args.previews.min(config.train)
+    } else {
+        0
+    };
     let subfolders: &[&Path] = if previews > 0 { &[&preview_dir] } else { &[] };
     crate::output::start_run(&args.out, subfolders, None)?;
     for i in 0..previews {
@@ -414,8 +535,33 @@ fn run_in_pool(args: &DatasetArgs, config: &DatasetConfig) -> Result<()> {
         git_commit: git_commit(),
         command: crate::output::command_line(),
         aberration_file: args.aberration.clone(),
+        display: args
+            .optics
+            .profile()?
+            .map(|p| DisplayInfo::new(&p, args.optics.display.as_deref())),
     };
-    let manifest = generate(&args.out, config, &options, &|done, _| {
+    if selection != ShardSelection::ALL {
+        let run = generate_shards(&args.out, config, &options, selection, &|done, total| {
+            bar.set_length(total);
+            bar.set_position(done)
+        })?;
+        bar.finish_and_clear();
+        log::info!(
+            "part {selection}: wrote {} shards ({} samples){}; when every part is done: holo dataset \
+             --merge --out {}",
+            run.written.len(),
+            run.samples,
+            if run.kept.is_empty() {
+                String::new()
+            } else {
+                format!(", kept {} finished earlier", run.kept.len())
+            },
+            crate::output::path_text(&args.out)
+        );
+        return Ok(());
+    }
+    let manifest = generate(&args.out, config, &options, &|done, total| {
+        bar.set_length(total);
         bar.set_position(done)
     })?;
     bar.finish_and_clear();
@@ -424,7 +570,7 @@ fn run_in_pool(args: &DatasetArgs, config: &DatasetConfig) -> Result<()> {
         "wrote {} ({} shards) in {:.1} s: {:.2} s per sample on one worker, {:.0} non-empty SM-LBM \
          planes per sample (min {}, max {}), valid pixels per layer {:?}, {:.0}% of pixels with >= 2 layers",
         args.out.display(),
-        manifest.splits.iter().map(|s| s.shards.len()).sum::<usize>(),
+        manifest.plan.splits.iter().map(|s| s.shards.len()).sum::<usize>(),
         st.wall_seconds,
         st.mean_sample_seconds,
         st.mean_nonempty_planes,

@@ -68,7 +68,9 @@ pub fn run(args: &EncodeArgs) -> Result<()> {
     crate::output::guard(
         "--out",
         &args.out,
-        &[crate::output::Input::file("--input", &args.input)],
+        &std::iter::once(crate::output::Input::file("--input", &args.input))
+            .chain(args.optics.guard_input())
+            .collect::<Vec<_>>(),
     )?;
     if !args.offset_mm.is_finite() {
         bail!("--offset-mm must be a finite number of millimetres");

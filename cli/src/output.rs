@@ -221,6 +221,16 @@ pub fn start_run(out: &Path, subfolders: &[&Path], report: Option<&Path>) -> Res
     report.map_or(Ok(()), remove_old_report)
 }
 
+/// A step that may refuse the run before anything is written (a display no model serves): on its error an
+/// earlier run's `report.json` in `out`, if there is one, is removed so that it is not taken for this run's,
+/// and nothing else is created or touched.
+pub fn before_writing<T>(out: &Path, step: Result<T>) -> Result<T> {
+    if step.is_err() && out.is_dir() {
+        remove_old_report(&out.join("report.json"))?;
+    }
+    step
+}
+
 /// Removes a previous run's report at `report`, if there is one (the run writes its own last).
 pub fn remove_old_report(report: &Path) -> Result<()> {
     match std::fs::remove_file(report) {

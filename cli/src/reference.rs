@@ -29,9 +29,10 @@ pub struct ReferenceArgs {
     aberration: Option<PathBuf>,
     #[command(flatten)]
     encoding: crate::args::EncodingArgs,
-    /// Distance from the midpoint hologram to the SLM plane in millimetres (paper: 0, 6 or 12).
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    offset_mm: f64,
+    /// Distance from the midpoint hologram to the SLM plane in millimetres (paper: 0, 6 or 12) [default: 0,
+    /// or the first offset of the --display profile].
+    #[arg(long, allow_hyphen_values = true)]
+    offset_mm: Option<f64>,
     #[command(flatten)]
     optics: crate::args::OpticsArgs,
     /// Output folder (created if missing). Files of the same names in it are replaced; inputs never are.
@@ -70,9 +71,15 @@ fn progress_bar(total: u64) -> ProgressBar {
 /// Runs `holo reference`.
 pub fn run(args: &ReferenceArgs) -> Result<()> {
     let t_all = Instant::now();
+    // A bad display profile stops the command before anything is written.
+    let profile = args.optics.profile()?;
     let setup = args.optics.setup()?;
     let (encoding_name, encoding) = args.encoding.method(crate::args::Encoding::AaDpm);
-    if !args.offset_mm.is_finite() {
+    let offset_mm = args
+        .offset_mm
+        .or_else(|| profile.as_ref().map(|p| p.default_offset_m() * 1e3))
+        .unwrap_or(0.0);
+    if !offset_mm.is_finite() {
         bail!("--offset-mm must be a finite number of millimetres");
     }
     let pipeline = ReferencePipeline {
@@ -82,11 +89,12 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
             options: args.optics.options(),
             silhouette_masks: true,
         },
-        offset_m: args.offset_mm * 1e-3,
+        offset_m: offset_mm * 1e-3,
         encoding,
     };
 
     let mut inputs = args.scene.guard_inputs();
+    inputs.extend(args.optics.guard_input());
     inputs.extend(
         args.aberration
             .as_deref()
@@ -162,6 +170,8 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         "input": source,
         "size": [frame.height(), frame.width()],
         "parameters": pipeline,
+        "display": args.optics.display.as_deref().map(crate::output::path_text),
+        "display_name": profile.as_ref().and_then(|p| p.name.clone()),
         "aberration": match (&aberration, &corrected) {
             (Some((path, _)), Some(c)) => crate::aberration::report(path, c, per_colour),
             _ => serde_json::Value::Null,

@@ -13,7 +13,7 @@ use tensorholo::cnn::{CnnEngine, CnnLayout, ThreadCount};
 use tensorholo::display::DisplayProfile;
 use tensorholo::evaluation::{focal_depths, table2};
 use tensorholo::model::{contract, HologramModel, ModelConfig, ModelKind, Precision, SceneInput};
-use tensorholo::optics::{focal_stack, post_encoding_midpoint, OpticalSetup};
+use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{
     Backend, BackendReport, FrameTimings, GpuPrecision, Heads, HologramPipeline, PipelineConfig,
     PrefilterMode, PrefilterSource, SlmFrame,
@@ -152,10 +152,6 @@ pub struct ModelArgs {
     /// pre-filter CNNs exist for 6 and 12) [default: 6, or the first offset of the --display profile].
     #[arg(long, allow_hyphen_values = true)]
     pub offset_mm: Option<f64>,
-    /// Display profile (JSON, docs/DISPLAYS.md): SLM pitch, lasers, volume, offsets, calibration. The
-    /// --pitch-m, --wavelengths-m, --volume-depth-m, --offset-mm and --calibration flags override its values.
-    #[arg(long)]
-    pub display: Option<PathBuf>,
     /// Run the int8 models (the form the benchmarks found fastest within 0.5 dB; see --precision).
     #[arg(long, conflicts_with = "precision")]
     pub int8: bool,
@@ -205,6 +201,11 @@ pub struct ModelArgs {
     /// wavelengths must be the optics'. Without it: the linear look-up table of an ideal SLM.
     #[arg(long, visible_alias = "lut")]
     pub calibration: Option<PathBuf>,
+    /// Largest spread of the three colours' depth scales (a fraction: 0.005 = 0.5 %) accepted when the
+    /// models were trained for another, Fresnel-equivalent display (docs/DISPLAYS.md); wider than the
+    /// default, report.json's display_mapping says "widened".
+    #[arg(long, default_value_t = tensorholo::model::DEFAULT_WAVELENGTH_RATIO_TOLERANCE)]
+    pub wavelength_ratio_tolerance: f64,
     #[command(flatten)]
     pub encoding: crate::args::EncodingArgs,
     #[command(flatten)]
@@ -219,22 +220,16 @@ impl ModelArgs {
             ("--model", &self.model),
             ("--prefilter-model", &self.prefilter_model),
             ("--calibration", &self.calibration),
-            ("--display", &self.display),
         ]
         .into_iter()
         .filter_map(|(flag, p)| Some(crate::output::Input::file(flag, p.as_deref()?)))
+        .chain(self.optics.guard_input())
         .collect()
     }
 
-    /// The `--display` profile, if given. Errors: the file cannot be read or is not a valid profile (the
-    /// message names the key).
+    /// The `--display` profile, if given (see [`crate::args::OpticsArgs::profile`]).
     pub fn profile(&self) -> Result<Option<DisplayProfile>> {
-        self.display
-            .as_deref()
-            .map(|p| {
-                DisplayProfile::from_path(p).with_context(|| format!("--display {}", p.display()))
-            })
-            .transpose()
+        self.optics.profile()
     }
 
     /// The offset in millimetres: `--offset-mm`, else the profile's first offset, else 6.
@@ -242,6 +237,23 @@ impl ModelArgs {
         self.offset_mm
             .or_else(|| profile.map(|p| p.default_offset_m() * 1e3))
             .unwrap_or(6.0)
+    }
+
+    /// Where a shipped model refuses the display (a [`tensorholo::model::DisplayMapping`] refusal): how to make
+    /// one for it, naming the `--display` file; empty for any other error.
+    fn retrain_hint(&self, e: &tensorholo::HoloError) -> String {
+        if !e.to_string().contains(tensorholo::model::RETRAIN_HINT) {
+            return String::new();
+        }
+        let profile = self
+            .optics
+            .display
+            .as_deref()
+            .map_or_else(|| "PROFILE.json".to_string(), crate::output::path_text);
+        format!(
+            ": no shipped model serves this display as it is; make its dataset with `holo dataset --display \
+             {profile} --out data/display` and train on it (docs/DISPLAYS.md, \"Retraining for another display\")"
+        )
     }
 
     /// The selected weight format.
@@ -280,11 +292,7 @@ impl ModelArgs {
         }
         let (_, encoding) = self.encoding.method(crate::args::Encoding::AaDpm);
         let config = PipelineConfig {
-            optics: self.optics.setup_over(
-                profile
-                    .as_ref()
-                    .map_or_else(OpticalSetup::default, DisplayProfile::optics),
-            )?,
+            optics: self.optics.setup()?,
             options: self.optics.options(),
             offset_m: offset_mm * 1e-3,
             encoding,
@@ -293,7 +301,7 @@ impl ModelArgs {
             cnn_threads: ThreadCount::from_count(self.threads as usize),
             backend: self.backend.into(),
             gpu_precision: self.gpu_precision.into(),
-            wavelength_ratio_tolerance: tensorholo::model::DEFAULT_WAVELENGTH_RATIO_TOLERANCE,
+            wavelength_ratio_tolerance: self.wavelength_ratio_tolerance,
         };
         let precision = self.precision();
         let t = Instant::now();
@@ -311,7 +319,11 @@ impl ModelArgs {
                 precision,
                 &expected,
             )
-            .with_context(|| format!("loading the shipped {input} hologram CNN"))?,
+            .map_err(|e| {
+                let hint = self.retrain_hint(&e);
+                anyhow::Error::new(e)
+                    .context(format!("loading the shipped {input} hologram CNN{hint}"))
+            })?,
         };
         // The SDK's one rule: a given pre-filter is used or refused (e.g. at 0 mm), never dropped.
         let source = match &self.prefilter_model {
@@ -380,7 +392,7 @@ impl ModelArgs {
                 "file": calibration.as_deref().map(crate::output::path_text),
                 "summary": c.summary(),
             })),
-            "display": self.display.as_deref().map(crate::output::path_text),
+            "display": self.optics.display.as_deref().map(crate::output::path_text),
             "display_name": profile.as_ref().and_then(|p| p.name.clone()),
             "display_mapping": pipeline.display_mapping_description(),
             "load_s": t.elapsed().as_secs_f64(),
@@ -438,15 +450,24 @@ Examples:
 /// Runs `holo render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let t_all = Instant::now();
+    // A bad display profile stops the command before anything is written; its calibration is an input too.
+    let profile_calibration = args.model.profile()?.and_then(|p| p.calibration);
     let mut inputs = args.scene.guard_inputs();
     inputs.extend(args.model.guard_inputs());
-    // A bad display profile stops the command before anything is written.
-    args.model.profile()?;
-    crate::output::prepare(&args.out, &inputs)?;
+    inputs.extend(
+        profile_calibration
+            .as_deref()
+            .map(|c| crate::output::Input::file("--display's calibration", c)),
+    );
+    crate::output::guard("--out", &args.out, &inputs)?;
     let t = Instant::now();
     let (scene, source) = args.scene.load()?;
     let load_s = t.elapsed().as_secs_f64();
-    let (pipeline, models) = args.model.pipeline(scene.input())?;
+    // A display no model serves stops the command before anything is written too; an earlier run's report
+    // in the folder goes, so that it is not taken for this run's.
+    let (pipeline, models) =
+        crate::output::before_writing(&args.out, args.model.pipeline(scene.input()))?;
+    crate::output::prepare(&args.out, &inputs)?;
     let (h, w) = scene.size();
     // What runs: the model file's own depth and precision (a --model file need not match --layers/--precision).
     let cnn = pipeline.hologram_model().metadata();
@@ -687,6 +708,22 @@ fn evaluate(
     let cnn = score(midpoint)?;
     let shown = score(displayed)?;
     let reference_shown = score(&reference_displayed)?;
+    // On another display than the model's own, what the mapping itself costs: SM-LBM of the same scene at
+    // the model's training display (what a perfect model computes; the SDK shows it on this display as
+    // is), scored at this display. The ceiling any mapped model reaches (docs/DISPLAYS.md).
+    let mapping = pipeline.display_mapping();
+    let mapping_ceiling = if mapping.is_identity() {
+        None
+    } else {
+        let trained = SmLbm {
+            levels: args.levels,
+            setup: mapping.trained,
+            options: cfg.options,
+            silhouette_masks: true,
+        }
+        .synthesize(&scene.layers(), &|_, _| {})?;
+        Some(score(&trained)?)
+    };
     log::info!(
         "Table 2 vs SM-LBM ({} planes): CNN midpoint {:.2} dB / SSIM {:.3} (focal stack {:.2} dB / {:.3}); \
          displayed {:.2} dB (focal stack {:.2} dB); SM-LBM + {:?} displayed {:.2} dB (focal stack {:.2} dB)",
@@ -713,6 +750,9 @@ fn evaluate(
         "cnn_midpoint": cnn,
         "displayed": shown,
         "smlbm_encoded_displayed": {"encoding": cfg.encoding, "scores": reference_shown},
+        // Present on another display than the model's training display: SM-LBM at the training display,
+        // shown on this one, against SM-LBM at this one.
+        "mapping_ceiling": mapping_ceiling,
         "seconds": t.elapsed().as_secs_f64(),
     }))
 }

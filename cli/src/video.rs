@@ -141,14 +141,19 @@ fn frame_file(frames_dir: &Path, i: usize, ch: &str) -> PathBuf {
 
 /// Runs `holo video`.
 pub fn run(args: &VideoArgs) -> Result<()> {
-    // A bad display profile stops the command before anything is written.
-    args.model.profile()?;
+    // A bad display profile stops the command before anything is written; its calibration is an input too.
+    let profile_calibration = args.model.profile()?.and_then(|p| p.calibration);
     let t_all = Instant::now();
     let mut guarded = vec![
         crate::output::Input::folder("--rgb-dir", &args.rgb_dir),
         crate::output::Input::folder("--depth-dir", &args.depth_dir),
     ];
     guarded.extend(args.model.guard_inputs());
+    guarded.extend(
+        profile_calibration
+            .as_deref()
+            .map(|c| crate::output::Input::file("--display's calibration", c)),
+    );
     crate::output::guard("--out", &args.out, &guarded)?;
     let encoding = args
         .depth
@@ -180,6 +185,11 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     } else {
         &[]
     };
+    // A display no model serves stops the command before anything is written (an old report goes).
+    let (pipeline, models) = crate::output::before_writing(
+        &args.out,
+        args.model.pipeline(tensorholo::model::SceneInput::Rgbd),
+    )?;
     crate::output::start_run(&args.out, subfolders, Some(&args.out.join("report.json")))?;
 
     // One metric range for the whole sequence (the first frame's percentiles unless given), so that the
@@ -191,7 +201,6 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     }
     let range: Option<DepthRange> = options.range;
     let (h, w) = (first.height(), first.width());
-    let (pipeline, models) = args.model.pipeline(tensorholo::model::SceneInput::Rgbd)?;
     let t = Instant::now();
     let mut session = pipeline.session(h, w)?;
     let session_s = t.elapsed().as_secs_f64();

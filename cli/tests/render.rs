@@ -506,6 +506,9 @@ fn render_reads_a_display_profile_and_refuses_a_bad_one_before_writing() {
             "1",
             "--display",
             profile.to_str().unwrap(),
+            "--evaluate",
+            "--levels",
+            "64",
             "--out",
             out.to_str().unwrap(),
         ])
@@ -518,6 +521,15 @@ fn render_reads_a_display_profile_and_refuses_a_bad_one_before_writing() {
         .unwrap_or_default()
         .to_string();
     assert!(mapping.contains("serves 4 µm with a 1.5 mm volume"), "{r}");
+    // What the mapping costs: SM-LBM at 8 µm, 6 mm shown at 4 µm, 1.5 mm against SM-LBM there. Fresnel
+    // equivalence makes them agree to the non-paraxial residual (0.16 % relative L2 at 384×384).
+    let ceiling = &r["evaluation"]["mapping_ceiling"];
+    let ceiling_db = ceiling["psnr_amp"].as_f64().unwrap_or(0.0);
+    assert!(ceiling_db > 45.0, "{ceiling}");
+    assert!(
+        ceiling["psnr_fs"].as_f64().unwrap_or(0.0) > 45.0,
+        "{ceiling}"
+    );
     assert!(
         r["models"]["prefilter_reason"]
             .as_str()

@@ -80,8 +80,7 @@ fn number(key: &'static str, v: &serde_json::Value) -> Result<f64> {
         .ok_or_else(|| err(key, format!("must be a number, got {v}")))
 }
 
-fn positive(key: &'static str, v: &serde_json::Value) -> Result<f64> {
-    let x = number(key, v)?;
+fn positive(key: &'static str, x: f64) -> Result<f64> {
     if !(x.is_finite() && x > 0.0) {
         return Err(err(
             key,
@@ -94,20 +93,10 @@ fn positive(key: &'static str, v: &serde_json::Value) -> Result<f64> {
 fn array<'a>(
     key: &'static str,
     v: &'a serde_json::Value,
-    len: Option<usize>,
     what: &str,
 ) -> Result<&'a Vec<serde_json::Value>> {
-    let a = v
-        .as_array()
-        .ok_or_else(|| err(key, format!("must be an array {what}, got {v}")))?;
-    match len {
-        Some(n) if a.len() != n => Err(err(
-            key,
-            format!("must have {n} elements {what}, got {}", a.len()),
-        )),
-        None if a.is_empty() => Err(err(key, format!("must not be empty ({what})"))),
-        _ => Ok(a),
-    }
+    v.as_array()
+        .ok_or_else(|| err(key, format!("must be an array {what}, got {v}")))
 }
 
 /// The key whose value is at `line`/`column` (1-based, serde_json's position) of `text`: the last
@@ -192,30 +181,127 @@ impl DisplayProfile {
                     .to_string(),
             ),
         };
-        let pixel_pitch_m = positive(
+        let pixel_pitch_m = number(
             "pixel_pitch_m",
             &required("pixel_pitch_m", raw.pixel_pitch_m)?,
         )?;
         let res = required("resolution", raw.resolution)?;
-        let res = array("resolution", &res, Some(2), "[height, width] in pixels")?;
-        let mut resolution = [0usize; 2];
-        for (r, v) in resolution.iter_mut().zip(res) {
-            *r = v
-                .as_u64()
-                .filter(|&n| n >= 1)
-                .and_then(|n| usize::try_from(n).ok())
-                .ok_or_else(|| {
-                    err(
-                        "resolution",
-                        format!("[height, width] must be positive integers, got {v}"),
-                    )
-                })?;
-        }
+        let resolution = array("resolution", &res, "[height, width] in pixels")?
+            .iter()
+            .map(|v| {
+                v.as_u64()
+                    .and_then(|n| usize::try_from(n).ok())
+                    .ok_or_else(|| {
+                        err(
+                            "resolution",
+                            format!("[height, width] must be positive integers, got {v}"),
+                        )
+                    })
+            })
+            .collect::<Result<Vec<_>>>()?;
         let wl = required("wavelengths_m", raw.wavelengths_m)?;
-        let wl = array("wavelengths_m", &wl, Some(3), "[R, G, B] in metres")?;
-        let mut wavelengths_m = [0.0; 3];
-        for ((w, v), colour) in wavelengths_m.iter_mut().zip(wl).zip(["R", "G", "B"]) {
-            let x = positive("wavelengths_m", v)?;
+        let wavelengths_m = array("wavelengths_m", &wl, "[R, G, B] in metres")?
+            .iter()
+            .map(|v| number("wavelengths_m", v))
+            .collect::<Result<Vec<_>>>()?;
+        let volume_depth_m = number(
+            "volume_depth_m",
+            &required("volume_depth_m", raw.volume_depth_m)?,
+        )?;
+        let off = required("offsets_m", raw.offsets_m)?;
+        let offsets_m = array("offsets_m", &off, "of offsets in metres")?
+            .iter()
+            .map(|v| number("offsets_m", v))
+            .collect::<Result<Vec<_>>>()?;
+        let calibration = match raw.calibration.filter(|v| !v.is_null()) {
+            None => None,
+            Some(v) => {
+                let s = v
+                    .as_str()
+                    .ok_or_else(|| err("calibration", format!("must be a file path, got {v}")))?;
+                let p = PathBuf::from(s);
+                Some(match base {
+                    Some(b) if p.is_relative() && !s.is_empty() => b.join(p),
+                    _ => p,
+                })
+            }
+        };
+        Self::new(
+            name,
+            pixel_pitch_m,
+            &resolution,
+            &wavelengths_m,
+            volume_depth_m,
+            offsets_m,
+            calibration,
+        )
+    }
+
+    /// A profile from its values (what [`DisplayProfile::from_json_str`] reads, for apps and bindings that
+    /// build one in code): the arrays' lengths are checked here, then [`DisplayProfile::validate`].
+    /// Lengths in metres, `resolution` as `[height, width]` pixels, `wavelengths_m` as `[R, G, B]`.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] naming the key: `resolution` not 2 values, `wavelengths_m`
+    /// not 3, `offsets_m` empty; as [`DisplayProfile::validate`].
+    pub fn new(
+        name: Option<String>,
+        pixel_pitch_m: f64,
+        resolution: &[usize],
+        wavelengths_m: &[f64],
+        volume_depth_m: f64,
+        offsets_m: Vec<f64>,
+        calibration: Option<PathBuf>,
+    ) -> Result<Self> {
+        let resolution: [usize; 2] = resolution.try_into().map_err(|_| {
+            err(
+                "resolution",
+                format!(
+                    "must have 2 elements [height, width] in pixels, got {}",
+                    resolution.len()
+                ),
+            )
+        })?;
+        let wavelengths_m: [f64; 3] = wavelengths_m.try_into().map_err(|_| {
+            err(
+                "wavelengths_m",
+                format!(
+                    "must have 3 elements [R, G, B] in metres, got {}",
+                    wavelengths_m.len()
+                ),
+            )
+        })?;
+        let profile = Self {
+            name,
+            pixel_pitch_m,
+            resolution,
+            wavelengths_m,
+            volume_depth_m,
+            offsets_m,
+            calibration,
+        };
+        profile.validate()?;
+        Ok(profile)
+    }
+
+    /// Checks the values (the one place a profile's rules live; [`DisplayProfile::from_json_str`] and
+    /// [`DisplayProfile::new`] call it): a finite positive `pixel_pitch_m` and `volume_depth_m`, a
+    /// `resolution` of at least 1×1, `wavelengths_m` within 380–780 nm (metres, not nanometres), a non-empty
+    /// `offsets_m` of finite values, and a non-empty `calibration` path if one is given.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] whose `name` is the key at fault; the reason names it too.
+    pub fn validate(&self) -> Result<()> {
+        positive("pixel_pitch_m", self.pixel_pitch_m)?;
+        if self.resolution.contains(&0) {
+            return Err(err(
+                "resolution",
+                format!(
+                    "[height, width] must be positive integers, got {:?}",
+                    self.resolution
+                ),
+            ));
+        }
+        for (&x, colour) in self.wavelengths_m.iter().zip(["R", "G", "B"]) {
+            positive("wavelengths_m", x)?;
             if !(MIN_WAVELENGTH_M..=MAX_WAVELENGTH_M).contains(&x) {
                 return Err(err(
                     "wavelengths_m",
@@ -225,46 +311,22 @@ impl DisplayProfile {
                     ),
                 ));
             }
-            *w = x;
         }
-        let volume_depth_m = positive(
-            "volume_depth_m",
-            &required("volume_depth_m", raw.volume_depth_m)?,
-        )?;
-        let off = required("offsets_m", raw.offsets_m)?;
-        let offsets_m = array("offsets_m", &off, None, "of offsets in metres")?
-            .iter()
-            .map(|v| {
-                let x = number("offsets_m", v)?;
-                if !x.is_finite() {
-                    return Err(err("offsets_m", format!("must be finite, got {x}")));
-                }
-                Ok(x)
-            })
-            .collect::<Result<Vec<_>>>()?;
-        let calibration = match raw.calibration.filter(|v| !v.is_null()) {
-            None => None,
-            Some(v) => {
-                let s = v
-                    .as_str()
-                    .filter(|s| !s.is_empty())
-                    .ok_or_else(|| err("calibration", format!("must be a file path, got {v}")))?;
-                let p = PathBuf::from(s);
-                Some(match base {
-                    Some(b) if p.is_relative() => b.join(p),
-                    _ => p,
-                })
-            }
-        };
-        Ok(Self {
-            name,
-            pixel_pitch_m,
-            resolution,
-            wavelengths_m,
-            volume_depth_m,
-            offsets_m,
-            calibration,
-        })
+        positive("volume_depth_m", self.volume_depth_m)?;
+        if self.offsets_m.is_empty() {
+            return Err(err("offsets_m", "must not be empty (of offsets in metres)"));
+        }
+        if let Some(x) = self.offsets_m.iter().find(|x| !x.is_finite()) {
+            return Err(err("offsets_m", format!("must be finite, got {x}")));
+        }
+        if self
+            .calibration
+            .as_ref()
+            .is_some_and(|p| p.as_os_str().is_empty())
+        {
+            return Err(err("calibration", "must be a file path, got an empty one"));
+        }
+        Ok(())
     }
 
     /// The display's optics: wavelengths, pitch and volume depth (metres).
@@ -436,6 +498,53 @@ mod tests {
         let text = GOOD.replace("\"name\":", "\"pitch_um\": 4, \"name\":");
         let (_, msg) = fails(&text);
         assert!(msg.contains("pitch_um"), "{msg}");
+    }
+
+    /// A profile built in code (what the bindings do with a record) follows the file's rules, by key.
+    #[test]
+    fn new_checks_what_the_file_checks() {
+        let good = DisplayProfile::from_json_str(GOOD).unwrap();
+        let built = DisplayProfile::new(
+            good.name.clone(),
+            4e-6,
+            &[1080, 1920],
+            &[638e-9, 520e-9, 450e-9],
+            1.5e-3,
+            vec![1.5e-3, 3e-3],
+            Some(PathBuf::from("slm.holocal")),
+        )
+        .unwrap();
+        assert_eq!(built, good);
+        let key = |r: Result<DisplayProfile>| match r {
+            Err(e @ HoloError::InvalidParameter { name, .. }) => {
+                assert!(e.to_string().contains(name), "{e}");
+                name
+            }
+            other => panic!("expected InvalidParameter, got {other:?}"),
+        };
+        let with = |f: &dyn Fn(&mut DisplayProfile)| {
+            let mut p = good.clone();
+            f(&mut p);
+            key(p.validate().map(|()| p))
+        };
+        assert_eq!(with(&|p| p.pixel_pitch_m = -4e-6), "pixel_pitch_m");
+        assert_eq!(with(&|p| p.pixel_pitch_m = f64::NAN), "pixel_pitch_m");
+        assert_eq!(with(&|p| p.resolution = [0, 1920]), "resolution");
+        assert_eq!(with(&|p| p.wavelengths_m[1] = 520.0), "wavelengths_m");
+        assert_eq!(with(&|p| p.volume_depth_m = 0.0), "volume_depth_m");
+        assert_eq!(with(&|p| p.offsets_m.clear()), "offsets_m");
+        assert_eq!(with(&|p| p.offsets_m[0] = f64::INFINITY), "offsets_m");
+        assert_eq!(
+            with(&|p| p.calibration = Some(PathBuf::new())),
+            "calibration"
+        );
+        let new = |res: &[usize], wl: &[f64]| {
+            DisplayProfile::new(None, 4e-6, res, wl, 1.5e-3, vec![1.5e-3], None)
+        };
+        let rgb = [638e-9, 520e-9, 450e-9];
+        assert_eq!(key(new(&[1080], &rgb)), "resolution");
+        assert_eq!(key(new(&[1080, 1920, 3], &rgb)), "resolution");
+        assert_eq!(key(new(&[1080, 1920], &rgb[..2])), "wavelengths_m");
     }
 
     #[test]

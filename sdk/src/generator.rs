@@ -24,9 +24,12 @@ use ndarray::{Array3, ArrayView3, Axis};
 
 use crate::cnn::{CnnEngine, CnnLayout, PlanReport, ThreadCount, MAX_CNN_THREADS};
 use crate::color::amplitude_to_srgb8;
+use crate::display::DisplayProfile;
 use crate::encoding::{DoublePhaseMethod, LinearLut};
 use crate::error::{invalid, HoloError, Result};
-use crate::model::{HologramModel, ModelConfig, ModelKind, Precision};
+use crate::model::{
+    HologramModel, ModelConfig, ModelKind, Precision, DEFAULT_WAVELENGTH_RATIO_TOLERANCE,
+};
 use crate::optics::{focal_stack, post_encoding_midpoint, OpticalSetup, PropagationOptions};
 use crate::pipeline::{
     Backend, BackendReport, FrameTimings, GpuPrecision, HologramPipeline, HologramSession,
@@ -86,6 +89,11 @@ pub struct GeneratorConfig {
     /// The GPU CNNs' arithmetic ([`GpuPrecision::Auto`] by default: f16 where the GPU has it, which halves
     /// their memory; docs/GPU.md).
     pub gpu_precision: GpuPrecision,
+    /// Largest relative spread (a fraction: 0.005 = 0.5 %) of the per-colour depth scales accepted when the
+    /// CNNs were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`,
+    /// [`crate::model::DisplayMapping`]); default [`DEFAULT_WAVELENGTH_RATIO_TOLERANCE`]. A wider value is
+    /// reported as "widened" in [`GeneratorInfo::display_mapping`].
+    pub wavelength_ratio_tolerance: f64,
 }
 
 impl GeneratorConfig {
@@ -109,12 +117,31 @@ impl GeneratorConfig {
             depth_mapping: DepthMapping::default(),
             backend: Backend::default(),
             gpu_precision: GpuPrecision::default(),
+            wavelength_ratio_tolerance: DEFAULT_WAVELENGTH_RATIO_TOLERANCE,
+        }
+    }
+
+    /// The defaults of [`GeneratorConfig::new`] for the display a profile describes (`docs/DISPLAYS.md`):
+    /// `width`/`height` from its `resolution` (`[height, width]` pixels), `optics` from
+    /// [`DisplayProfile::optics`] (wavelengths, pitch and volume depth in metres) and `offset_m` from
+    /// [`DisplayProfile::default_offset_m`] (the first of `offsets_m`). The profile's `calibration` file is
+    /// not read here: load it and pass it to [`HologramGenerator::set_calibration`].
+    ///
+    /// Errors: none here (a profile from [`DisplayProfile::from_json_str`] or [`DisplayProfile::new`] is
+    /// valid); whether the shipped CNNs serve the display (one depth scale `σ` for the three lasers, volume
+    /// and offsets `σ`·6 mm) is checked when the generator is made, as [`HologramGenerator::new`].
+    pub fn for_display(profile: &DisplayProfile) -> Self {
+        let [height, width] = profile.resolution;
+        Self {
+            optics: profile.optics(),
+            offset_m: profile.default_offset_m(),
+            ..Self::new(width, height)
         }
     }
 
     /// Checks everything that needs no model: non-zero sizes within [`MAX_HOLOGRAM_PIXELS`] whose RGBA
     /// outputs (`width · height · 4` bytes) fit in a `u32`, a finite non-negative offset, valid optics and
-    /// depth range, and a thread count within [`MAX_CNN_THREADS`].
+    /// depth range, a thread count within [`MAX_CNN_THREADS`] and a finite wavelength ratio tolerance ≥ 0.
     ///
     /// Errors: [`HoloError::InvalidParameter`] naming the field.
     pub fn validate(&self) -> Result<()> {
@@ -161,6 +188,13 @@ impl GeneratorConfig {
                 ));
             }
         }
+        let t = self.wavelength_ratio_tolerance;
+        if !(t.is_finite() && t >= 0.0) {
+            return Err(invalid(
+                "wavelength_ratio_tolerance",
+                format!("must be a finite fraction ≥ 0 (0.005 = 0.5 %), got {t}"),
+            ));
+        }
         Ok(())
     }
 
@@ -176,7 +210,7 @@ impl GeneratorConfig {
             cnn_threads: self.threads,
             backend: self.backend,
             gpu_precision: self.gpu_precision,
-            wavelength_ratio_tolerance: crate::model::DEFAULT_WAVELENGTH_RATIO_TOLERANCE,
+            wavelength_ratio_tolerance: self.wavelength_ratio_tolerance,
         }
     }
 
@@ -350,6 +384,10 @@ pub struct GeneratorInfo {
     pub backend: BackendReport,
     /// The display calibration applied, in words ([`DisplayCalibration::summary`]), or `None`.
     pub calibration: Option<String>,
+    /// How the hologram CNN's training display maps onto this display, in one line
+    /// ([`HologramPipeline::display_mapping_description`], [`crate::model::DisplayMapping::description`]),
+    /// e.g. "… serves 4 µm with a 1.5 mm volume (σ = 0.250000); offset 1.5 mm ↔ 6 mm trained; …".
+    pub display_mapping: String,
 }
 
 /// Receives a [`HologramStream`]'s results, in frame order, on the stream's worker thread.
@@ -661,7 +699,8 @@ impl HologramGenerator {
         self.preview_patterns(&patterns, focus)
     }
 
-    /// What this generator runs: models, precision, pre-filter and why, the chosen CNN plan.
+    /// What this generator runs: models, precision, pre-filter and why, the chosen CNN plan, the display
+    /// mapping.
     ///
     /// Errors: [`HoloError::Internal`] only if the session cannot be recreated after a panic.
     pub fn info(&self) -> Result<GeneratorInfo> {
@@ -690,6 +729,7 @@ impl HologramGenerator {
             plan,
             backend,
             calibration: self.calibration().map(|c| c.summary()),
+            display_mapping: self.pipeline.display_mapping_description(),
         })
     }
 
@@ -980,5 +1020,138 @@ mod tests {
             })),
             HoloError::InvalidParameter { .. }
         ));
+    }
+
+    /// A 4 µm SLM at the paper's lasers: σ = (4/8)² = 0.25, so a 1.5 mm volume and 1.5 mm offsets.
+    const PROFILE_4UM: &str = r#"{
+        "name": "4 µm test SLM",
+        "pixel_pitch_m": 4e-6,
+        "resolution": [48, 64],
+        "wavelengths_m": [638e-9, 520e-9, 450e-9],
+        "volume_depth_m": 1.5e-3,
+        "offsets_m": [1.5e-3, 3e-3]
+    }"#;
+
+    #[test]
+    fn for_display_takes_size_optics_and_offset_from_the_profile() {
+        let profile = DisplayProfile::from_json_str(PROFILE_4UM).unwrap();
+        let c = GeneratorConfig::for_display(&profile);
+        assert_eq!((c.width, c.height), (64, 48));
+        assert_eq!(
+            c.optics,
+            OpticalSetup {
+                wavelengths_m: [638e-9, 520e-9, 450e-9],
+                pixel_pitch_m: 4e-6,
+                volume_depth_m: 1.5e-3,
+            }
+        );
+        assert_eq!(c.offset_m, 1.5e-3);
+        assert_eq!(
+            c.wavelength_ratio_tolerance,
+            DEFAULT_WAVELENGTH_RATIO_TOLERANCE
+        );
+        // Everything else is GeneratorConfig::new's.
+        let want = GeneratorConfig {
+            optics: c.optics,
+            offset_m: c.offset_m,
+            ..GeneratorConfig::new(64, 48)
+        };
+        assert_eq!(c, want);
+        c.validate().unwrap();
+        assert_eq!(
+            c.pipeline_config().wavelength_ratio_tolerance,
+            DEFAULT_WAVELENGTH_RATIO_TOLERANCE
+        );
+    }
+
+    #[test]
+    fn a_bad_wavelength_ratio_tolerance_is_named() {
+        for t in [f64::NAN, -0.01, f64::INFINITY] {
+            let mut c = GeneratorConfig::new(64, 48);
+            c.wavelength_ratio_tolerance = t;
+            assert!(
+                matches!(
+                    c.validate(),
+                    Err(HoloError::InvalidParameter {
+                        name: "wavelength_ratio_tolerance",
+                        ..
+                    })
+                ),
+                "{t}"
+            );
+        }
+    }
+
+    /// Small and deterministic: one thread, the native engine, the CPU.
+    #[cfg(feature = "embedded-models")]
+    fn quick(mut c: GeneratorConfig) -> GeneratorConfig {
+        c.threads = ThreadCount::Fixed(1);
+        c.engine = CnnEngine::Native;
+        c.backend = Backend::Cpu;
+        c
+    }
+
+    /// The shipped 8 µm CNNs drive the 4 µm SLM of a profile: a frame renders, the 6 mm pre-filter serves
+    /// the 1.5 mm offset, and the info's display mapping says σ = 0.25.
+    #[cfg(feature = "embedded-models")]
+    #[test]
+    fn a_generator_for_a_4um_profile_renders_and_reports_its_mapping() {
+        let profile = DisplayProfile::from_json_str(PROFILE_4UM).unwrap();
+        let g = HologramGenerator::new(quick(GeneratorConfig::for_display(&profile))).unwrap();
+        let scene = crate::scene::procedural::default_scene(48, 64).unwrap();
+        let out = g.render_rgbd(&scene).unwrap();
+        assert_eq!(out.codes.dim(), (3, 48, 64));
+        assert!(out.codes.iter().any(|&c| c != out.codes[[0, 0, 0]]));
+        let info = g.info().unwrap();
+        assert!(
+            info.display_mapping.contains("σ = 0.25"),
+            "{}",
+            info.display_mapping
+        );
+        assert!(
+            info.display_mapping
+                .contains("serves 4 µm with a 1.5 mm volume"),
+            "{}",
+            info.display_mapping
+        );
+        assert!(
+            info.prefilter_model
+                .as_deref()
+                .is_some_and(|m| m.contains("6mm")),
+            "{:?}: {}",
+            info.prefilter_model,
+            info.prefilter_reason
+        );
+        let json = serde_json::to_string(&info).unwrap();
+        assert!(json.contains("\"display_mapping\""), "{json}");
+    }
+
+    /// The configured tolerance reaches the model check: a 532 nm green laser is refused by default, naming
+    /// the wavelengths, and served (reported "widened") at 3 %.
+    #[cfg(feature = "embedded-models")]
+    #[test]
+    fn the_wavelength_ratio_tolerance_reaches_the_model_check() {
+        let mut c = quick(GeneratorConfig::new(64, 48));
+        c.optics.wavelengths_m = [638e-9, 532e-9, 450e-9];
+        match HologramGenerator::new(c) {
+            Err(HoloError::ModelMetadata { key, .. }) => {
+                assert!(key.ends_with("wavelengths_m"), "{key}")
+            }
+            other => panic!("expected a refusal naming the wavelengths, got {other:?}"),
+        }
+        c.wavelength_ratio_tolerance = 0.03;
+        let sigma =
+            crate::model::DisplayMapping::compute(&OpticalSetup::default(), &c.optics, 0.0, 0.03)
+                .unwrap()
+                .scale;
+        c.optics.volume_depth_m = sigma * 6e-3;
+        c.offset_m = sigma * 6e-3;
+        let g = HologramGenerator::new(c).unwrap();
+        let info = g.info().unwrap();
+        assert!(
+            info.display_mapping.contains("widened"),
+            "{}",
+            info.display_mapping
+        );
     }
 }

@@ -497,15 +497,16 @@ fn generate_writes_consistent_shards_and_manifest_and_refuses_an_existing_datase
         (manifest.format.as_str(), manifest.format_version),
         (FORMAT_NAME, FORMAT_VERSION)
     );
-    assert_eq!(manifest.resolution, [24, 20]);
-    assert_eq!(manifest.ldi_layers, 5);
-    assert_eq!(manifest.synthesis.levels, 16);
-    assert_eq!(manifest.optics.wavelengths_m, [638e-9, 520e-9, 450e-9]);
+    assert_eq!(manifest.plan.resolution, [24, 20]);
+    assert_eq!(manifest.plan.ldi_layers, 5);
+    assert_eq!(manifest.plan.synthesis.levels, 16);
+    assert_eq!(manifest.plan.optics.wavelengths_m, [638e-9, 520e-9, 450e-9]);
     assert_eq!(manifest.generator.git_commit, "unknown");
     assert_eq!(manifest.statistics.samples, 6);
     assert!(manifest.statistics.mean_nonempty_planes >= 1.0);
     assert!(manifest.statistics.max_nonempty_planes <= 16);
     let counts: Vec<(Split, usize, Vec<usize>)> = manifest
+        .plan
         .splits
         .iter()
         .map(|s| {
@@ -525,7 +526,7 @@ fn generate_writes_consistent_shards_and_manifest_and_refuses_an_existing_datase
         ]
     );
     let g = SampleGenerator::new(&config).unwrap();
-    for split in &manifest.splits {
+    for split in &manifest.plan.splits {
         let mut next = 0;
         for (k, f) in split.shards.iter().enumerate() {
             assert_eq!(f.file, shard_file_name(split.name, k));
@@ -653,14 +654,19 @@ fn an_aberration_corrected_dataset_records_its_correction_and_stores_the_correct
     };
     let manifest = generate(&dir, &config, &options, &|_, _| {}).unwrap();
     assert_eq!(read_manifest(&dir).unwrap(), manifest);
-    let info = manifest.synthesis.aberration.as_ref().expect("recorded");
+    let info = manifest
+        .plan
+        .synthesis
+        .aberration
+        .as_ref()
+        .expect("recorded");
     assert_eq!(info.profile, profile);
     assert_eq!(info.slm_offset_m, 3e-3);
     assert_eq!(
         info.file.as_deref(),
         Some(Path::new("calibration/aberration.json"))
     );
-    assert!(manifest.synthesis.method.contains("aberration"));
+    assert!(manifest.plan.synthesis.method.contains("aberration"));
     let shard = read_shard(&dir.join(shard_file_name(Split::Train, 0))).unwrap();
     let ldi = shard.sample_ldi(0).unwrap();
     let expected = config

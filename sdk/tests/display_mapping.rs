@@ -2,10 +2,14 @@
 //! the paper's lasers with the volume and offset scaled by `σ = (p'/p)²`, and give the same SLM codes.
 #![cfg(feature = "embedded-models")]
 
-use tensorholo::model::MAX_NONPARAXIAL_RESIDUAL_RAD;
+use tensorholo::encoding::DoublePhaseMethod;
+use tensorholo::model::{Precision, MAX_NONPARAXIAL_RESIDUAL_RAD};
 use tensorholo::optics::OpticalSetup;
+use tensorholo::optics::PropagationOptions;
 use tensorholo::pipeline::{Backend, HologramPipeline, ModelSelection, PipelineConfig};
+use tensorholo::reference::ReferencePipeline;
 use tensorholo::scene::procedural::default_scene;
+use tensorholo::synthesis::{SceneLayer, SmLbm};
 use tensorholo::HoloError;
 
 const PAPER: [f64; 3] = [638e-9, 520e-9, 450e-9];
@@ -45,7 +49,16 @@ fn within_one_step(a: &ndarray::Array3<u8>, b: &ndarray::Array3<u8>) -> f64 {
 
 #[test]
 fn equivalent_displays_give_the_paper_display_codes() {
-    let sel = ModelSelection::default();
+    for precision in [Precision::F32, Precision::Int8Qdq] {
+        equivalent_displays_give_the_paper_display_codes_in(precision);
+    }
+}
+
+fn equivalent_displays_give_the_paper_display_codes_in(precision: Precision) {
+    let sel = ModelSelection {
+        precision,
+        ..ModelSelection::default()
+    };
     let paper = HologramPipeline::embedded(&sel, config(8e-6, 6e-3, 6e-3)).unwrap();
     assert!(
         paper.prefilter_model().is_some(),
@@ -69,7 +82,7 @@ fn equivalent_displays_give_the_paper_display_codes() {
         assert!(m.residual_rad < MAX_NONPARAXIAL_RESIDUAL_RAD);
         let share = within_one_step(&reference, &codes(&p));
         println!(
-            "{} µm: {:.2} % of codes within one step of the 8 µm run; {}",
+            "{precision:?} {} µm: {:.2} % of codes within one step of the 8 µm run; {}",
             pitch * 1e6,
             share * 100.0,
             p.display_mapping_description()
@@ -104,4 +117,95 @@ fn a_display_outside_the_tolerance_is_refused_naming_the_colour() {
     assert!(p.display_mapping().widened);
     assert!(p.display_mapping_description().contains("widened"));
     println!("{}", p.display_mapping_description());
+}
+
+/// The physics without any CNN: the SM-LBM reference (2048 planes, offset propagation, AA-DPM, linear
+/// look-up table) at 8 µm with a 6 mm volume and a 6 mm offset against 3.74 µm and 4 µm at `σ·6 mm`: the
+/// same input gives the same SLM codes.
+#[test]
+fn smlbm_at_equivalent_displays_gives_the_paper_display_codes() {
+    let frame = default_scene(SIZE.0, SIZE.1).unwrap();
+    let layers = [SceneLayer::from(&frame)];
+    let codes = |pitch: f64| {
+        let s = (pitch / 8e-6f64).powi(2);
+        let reference = ReferencePipeline {
+            synthesis: SmLbm {
+                levels: 2048,
+                setup: OpticalSetup {
+                    wavelengths_m: PAPER,
+                    pixel_pitch_m: pitch,
+                    volume_depth_m: 6e-3 * s,
+                },
+                options: PropagationOptions::default(),
+                silhouette_masks: true,
+            },
+            offset_m: 6e-3 * s,
+            encoding: DoublePhaseMethod::default(),
+        };
+        reference.run(&layers, &|_, _| {}).unwrap().codes
+    };
+    let paper = codes(8e-6);
+    for pitch in [4e-6, 3.74e-6] {
+        let other = codes(pitch);
+        let share = within_one_step(&paper, &other);
+        let equal = paper.iter().zip(&other).filter(|(a, b)| a == b).count();
+        println!(
+            "SM-LBM {} µm: {:.3} % of codes within one step of 8 µm, {:.2} % equal",
+            pitch * 1e6,
+            share * 100.0,
+            100.0 * equal as f64 / paper.len() as f64
+        );
+        assert!(share >= 0.99, "{pitch}: {share}");
+    }
+    // Not a tautology: the same display with the volume left at 6 mm (not mapped) differs.
+    let unmapped = {
+        let reference = ReferencePipeline {
+            synthesis: SmLbm {
+                levels: 2048,
+                setup: OpticalSetup {
+                    wavelengths_m: PAPER,
+                    pixel_pitch_m: 4e-6,
+                    volume_depth_m: 6e-3,
+                },
+                options: PropagationOptions::default(),
+                silhouette_masks: true,
+            },
+            offset_m: 6e-3,
+            encoding: DoublePhaseMethod::default(),
+        };
+        reference.run(&layers, &|_, _| {}).unwrap().codes
+    };
+    let share = within_one_step(&paper, &unmapped);
+    assert!(share < 0.9, "an unmapped 4 µm display agrees {share}");
+}
+
+/// An offset whose mapped value has no shipped pre-filter (1 mm at 4 µm ↔ 4 mm at 8 µm) encodes without
+/// one, and says so with both offsets; `Required` is an error that names them.
+#[test]
+fn a_mapped_offset_without_a_prefilter_falls_back_and_says_so() {
+    let p =
+        HologramPipeline::embedded(&ModelSelection::default(), config(4e-6, 1.5e-3, 1e-3)).unwrap();
+    assert!(p.prefilter_model().is_none());
+    let why = p.prefilter_reason();
+    assert!(
+        why.contains("no shipped pre-filter for 1 mm (4 mm on the training display)"),
+        "{why}"
+    );
+    let required = ModelSelection {
+        prefilter: tensorholo::pipeline::PrefilterMode::Required,
+        ..ModelSelection::default()
+    };
+    let e = HologramPipeline::embedded(&required, config(4e-6, 1.5e-3, 1e-3)).unwrap_err();
+    assert!(
+        e.to_string().contains("4 mm on the training display"),
+        "{e}"
+    );
+    // The 12 mm pre-filter at 3 mm on 4 µm.
+    let p =
+        HologramPipeline::embedded(&ModelSelection::default(), config(4e-6, 1.5e-3, 3e-3)).unwrap();
+    assert!(
+        p.prefilter_reason().contains("12 mm pre-filter"),
+        "{}",
+        p.prefilter_reason()
+    );
 }

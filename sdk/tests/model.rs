@@ -165,8 +165,26 @@ fn run_frame_feeds_amplitude_then_depth() {
 #[test]
 fn metadata_mismatch_is_refused_naming_key_and_values() {
     let bytes = std::fs::read(fixture("holo8_rgbd.onnx")).unwrap();
+    // A pitch changed alone: the 8 µm model serves 6.4 µm only with the volume σ·6 mm = 3.84 mm.
     let mut cfg = ModelConfig::default();
     cfg.optics.pixel_pitch_m = 6.4e-6;
+    let e = HologramModel::from_bytes(&bytes, ModelKind::Hologram, &cfg).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        matches!(&e, HoloError::ModelMetadata { key, .. } if key == "tensorholo.volume_depth_m"),
+        "{msg}"
+    );
+    assert!(
+        msg.contains("0.006") && msg.contains("3.84 mm") && msg.contains("6.4 µm"),
+        "{msg}"
+    );
+    // A pitch so fine that the paraxial mapping no longer holds: refused naming the pitch, whatever
+    // the volume and offset.
+    let mut cfg = ModelConfig::default();
+    let sigma = (2.5e-6f64 / 8e-6).powi(2);
+    cfg.optics.pixel_pitch_m = 2.5e-6;
+    cfg.optics.volume_depth_m = sigma * 6e-3;
+    cfg.offset_m = sigma * 6e-3;
     let e = HologramModel::from_bytes(&bytes, ModelKind::Hologram, &cfg).unwrap_err();
     let msg = e.to_string();
     assert!(
@@ -174,7 +192,7 @@ fn metadata_mismatch_is_refused_naming_key_and_values() {
         "{msg}"
     );
     assert!(
-        msg.contains("0.000008") && msg.contains("0.0000064"),
+        msg.contains("0.000008") && msg.contains("non-paraxial"),
         "{msg}"
     );
 

@@ -27,9 +27,8 @@ import glob
 import json
 import math
 import os
-from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Iterator, Sequence
+from typing import Sequence
 
 import numpy as np
 import torch
@@ -175,7 +174,7 @@ def load_shard(path: str) -> dict[str, np.ndarray]:
 
 
 class LdiDataset(torch.utils.data.Dataset):
-    """Map-style dataset over the shards of one split.
+    """Map-style dataset over the samples of one split (the manifest's shards, read with NumPy).
 
     Each item is a dict:
 
@@ -186,13 +185,20 @@ class LdiDataset(torch.utils.data.Dataset):
     - ``"valid"``: uint8 ``[L, h, w]``;
     - ``"midpoint"``: complex64 ``[3, h, w]`` ground-truth midpoint hologram.
 
+    ``dataset[k]`` crops/flips with ``self.rng``; ``dataset[(k, epoch)]`` (what
+    :class:`ShardGroupedBatchSampler` yields) with a generator seeded by ``(seed, epoch, k)``, so an item's
+    augmentation does not depend on the process, the DataLoader worker or the order that reads it.
+    A shard is decoded whole; the last ``cache_shards`` decoded shards are kept (per process: each DataLoader
+    worker has its own copy). The shard-grouped sampler makes a worker read one shard after another, so the
+    cache needs about one shard per sample of a batch.
+
     Args:
         root: dataset folder (with ``manifest.json``).
         split: ``"train"``, ``"val"`` or ``"test"``.
         input_layers: 1 (RGB-D: the first LDI layer) or the dataset's ``L`` (full LDI).
         augment: crops/flips (``None`` for none; validation should use none).
-        cache_shards: number of decoded shards kept in memory.
-        seed: seed of the augmentation random generator.
+        cache_shards: decoded shards kept in memory per process.
+        seed: seed of the augmentation.
     """
 
     def __init__(
@@ -201,7 +207,7 @@ class LdiDataset(torch.utils.data.Dataset):
         split: str = "train",
         input_layers: int = 1,
         augment: Augment | None = None,
-        cache_shards: int = 4,
+        cache_shards: int = 2,
         seed: int = 0,
     ):
         self.root = root
@@ -213,9 +219,11 @@ class LdiDataset(torch.utils.data.Dataset):
         self.input_layers = input_layers
         self.augment = augment or Augment()
         self.cache_shards = max(1, cache_shards)
-        self._cache: OrderedDict[int, dict] = OrderedDict()
+        self._cache: dict[int, dict] = {}
+        self.seed = seed
         self.rng = np.random.default_rng(seed)
         self.index: list[tuple[int, int]] = []
+        self.shard_sizes: list[int] = []
         self.layers = None
         for s, path in enumerate(self.shards):
             with np.load(path) as z:
@@ -226,23 +234,31 @@ class LdiDataset(torch.utils.data.Dataset):
             self.layers = shape[1] // 4
             self.shape = tuple(shape[2:])
             self.index += [(s, i) for i in range(n)]
+            self.shard_sizes.append(n)
         if input_layers < 1 or input_layers > self.layers:
             raise ValueError(f"input_layers must be in [1, {self.layers}], got {input_layers}")
+        self.decoded = 0  # shards decoded by this process (a DataLoader worker counts its own)
 
     def __len__(self) -> int:
         return len(self.index)
 
     def _shard(self, s: int) -> dict:
         if s in self._cache:
-            self._cache.move_to_end(s)
+            self._cache[s] = self._cache.pop(s)  # most recent last
             return self._cache[s]
         data = load_shard(self.shards[s])
+        self.decoded += 1
         self._cache[s] = data
         while len(self._cache) > self.cache_shards:
-            self._cache.popitem(last=False)
+            self._cache.pop(next(iter(self._cache)))
         return data
 
-    def __getitem__(self, k: int) -> dict:
+    def __getitem__(self, k) -> dict:
+        if isinstance(k, tuple):
+            k, epoch = k
+            rng = np.random.default_rng([self.seed, epoch, k])
+        else:
+            rng = self.rng
         s, i = self.index[k]
         d = self._shard(s)
         ldi = d["ldi"][i]
@@ -254,13 +270,13 @@ class LdiDataset(torch.utils.data.Dataset):
             ch, cw = a.crop
             if ch > h or cw > w:
                 raise ValueError(f"crop {a.crop} larger than the {h}×{w} frames")
-            y0 = int(self.rng.integers(0, h - ch + 1))
-            x0 = int(self.rng.integers(0, w - cw + 1))
+            y0 = int(rng.integers(0, h - ch + 1))
+            x0 = int(rng.integers(0, w - cw + 1))
             sl = (Ellipsis, slice(y0, y0 + ch), slice(x0, x0 + cw))
             ldi, valid, mid = ldi[sl], valid[sl], mid[sl]
-        if a.hflip and self.rng.random() < 0.5:
+        if a.hflip and rng.random() < 0.5:
             ldi, valid, mid = ldi[..., ::-1], valid[..., ::-1], mid[..., ::-1]
-        if a.vflip and self.rng.random() < 0.5:
+        if a.vflip and rng.random() < 0.5:
             ldi, valid, mid = ldi[..., ::-1, :], valid[..., ::-1, :], mid[..., ::-1, :]
         ldi = np.ascontiguousarray(ldi)
         return {
@@ -271,17 +287,82 @@ class LdiDataset(torch.utils.data.Dataset):
             "midpoint": torch.from_numpy(np.ascontiguousarray(mid)),
         }
 
-    def shard_grouped_order(self, rng: np.random.Generator) -> list[int]:
-        """A random epoch order that visits one shard at a time (shards shuffled, items shuffled within),
-        so that only one shard needs decoding at a time."""
-        by_shard: dict[int, list[int]] = {}
-        for k, (s, _) in enumerate(self.index):
-            by_shard.setdefault(s, []).append(k)
+
+class ShardGroupedBatchSampler(torch.utils.data.Sampler):
+    """Batches of one rank for one epoch, shard-grouped, disjoint across ranks (a ``batch_sampler`` of
+    :class:`torch.utils.data.DataLoader` over :class:`LdiDataset`).
+
+    The epoch's order depends only on ``(seed, epoch)`` and the **global batch** ``G = batch_size ·
+    world_size``, never on the rank count alone, the DataLoader workers or the process:
+
+    1. the shards are shuffled, and the samples within each shard (``numpy.random.default_rng([seed,
+       epoch])``), giving one shard-grouped sequence of the ``N`` samples;
+    2. the epoch has ``S = N // G`` steps. The last ``N − S·G`` samples of that sequence are **dropped** for
+       this epoch (fewer than ``G``; they are different samples every epoch, since the order is reshuffled);
+    3. the remaining ``S·G`` samples are cut into ``G`` contiguous **lanes** of ``S`` samples; global batch
+       ``t`` is ``[lane_0[t], …, lane_{G−1}[t]]`` and rank ``r`` takes lanes ``r·b … r·b + b − 1``
+       (``b = batch_size``).
+
+    So each rank's samples are disjoint from the other ranks' and together they cover the epoch (less the
+    dropped tail); a rank reads ``b`` lanes, each a contiguous run of the shard-grouped sequence, so
+    consecutive batches of a rank come from the same ``b`` shards (one shard at a time per lane) and a
+    DataLoader worker decodes each of its rank's shards once per epoch (a cache of ``b + 1`` shards per
+    worker suffices). ``world_size`` ranks × ``batch_size`` see exactly the batches of one process with
+    batch ``G``.
+
+    Items are ``(index, epoch)`` pairs (:meth:`LdiDataset.__getitem__` seeds the augmentation with them).
+    :meth:`set_epoch` chooses the epoch and the first batch (a resumed run starts inside an epoch).
+    """
+
+    def __init__(self, shard_sizes: Sequence[int], batch_size: int, rank: int = 0, world_size: int = 1,
+                 seed: int = 0):
+        if not 0 <= rank < world_size:
+            raise ValueError(f"rank {rank} outside world size {world_size}")
+        self.shard_sizes = list(shard_sizes)
+        self.batch_size = batch_size
+        self.rank = rank
+        self.world_size = world_size
+        self.seed = seed
+        self.global_batch = batch_size * world_size
+        n = sum(self.shard_sizes)
+        if n < self.global_batch:
+            raise ValueError(f"{n} samples cannot fill one global batch of {self.global_batch} "
+                             f"({world_size} ranks × {batch_size})")
+        self.steps_per_epoch = n // self.global_batch
+        self.epoch = 0
+        self.start = 0
+
+    def epoch_order(self, epoch: int) -> list[int]:
+        """The shard-grouped sequence of all samples in epoch ``epoch`` (step 1 above)."""
+        rng = np.random.default_rng([self.seed, epoch])
+        firsts = np.concatenate([[0], np.cumsum(self.shard_sizes)[:-1]]).astype(int)
         order: list[int] = []
-        for s in rng.permutation(len(self.shards)):
-            items = by_shard[int(s)]
-            order += [items[j] for j in rng.permutation(len(items))]
+        for s in rng.permutation(len(self.shard_sizes)):
+            order += [int(firsts[s]) + int(j) for j in rng.permutation(self.shard_sizes[s])]
         return order
+
+    def global_batches(self, epoch: int) -> list[list[int]]:
+        """Every global batch of epoch ``epoch``: ``S`` lists of ``G`` sample indices."""
+        order, steps, g = self.epoch_order(epoch), self.steps_per_epoch, self.global_batch
+        lanes = [order[j * steps:(j + 1) * steps] for j in range(g)]
+        return [[lane[t] for lane in lanes] for t in range(steps)]
+
+    def rank_batches(self, epoch: int) -> list[list[int]]:
+        """This rank's batches of epoch ``epoch`` (``S`` lists of ``batch_size`` indices)."""
+        lo = self.rank * self.batch_size
+        return [b[lo:lo + self.batch_size] for b in self.global_batches(epoch)]
+
+    def set_epoch(self, epoch: int, start: int = 0) -> None:
+        """The epoch the next iteration yields, from its batch ``start`` on."""
+        self.epoch, self.start = epoch, start
+
+    def __len__(self) -> int:
+        return self.steps_per_epoch - self.start
+
+    def __iter__(self):
+        e = self.epoch
+        for batch in self.rank_batches(e)[self.start:]:
+            yield [(k, e) for k in batch]
 
 
 def _npz_shape(z, name: str) -> tuple[int, ...]:
@@ -303,18 +384,6 @@ def _npz_shape(z, name: str) -> tuple[int, ...]:
 def collate(items: Sequence[dict]) -> dict:
     """Stacks dataset items into a batch (``rgbd`` ``[B, 4L, h, w]``, ``midpoint`` ``[B, 3, h, w]``, ...)."""
     return {k: torch.stack([it[k] for it in items]) for k in items[0]}
-
-
-def batches(
-    dataset: LdiDataset, batch_size: int, rng: np.random.Generator, shuffle: bool = True, drop_last: bool = True
-) -> Iterator[dict]:
-    """One epoch of collated batches (shard-grouped random order when ``shuffle``)."""
-    order = dataset.shard_grouped_order(rng) if shuffle else list(range(len(dataset)))
-    stop = len(order) - (len(order) % batch_size if drop_last else 0)
-    for k in range(0, stop, batch_size):
-        chunk = order[k : k + batch_size]
-        if chunk:
-            yield collate([dataset[i] for i in chunk])
 
 
 # --------------------------------------------------------------------------------------------------------------

@@ -116,7 +116,9 @@ def select_focal_depths(
     Args:
         depth: float ``[B, H, W]`` normalised depth, or ``[B, L, H, W]`` that of each LDI layer.
         bins, top, random: see above (``top + random ≤ bins``).
-        generator: torch random generator (CPU) for reproducibility.
+        generator: torch random generator (CPU) for reproducibility, or a list of one per sample (then a
+            sample's planes do not depend on the other samples of its batch: data-parallel ranks draw what one
+            process with the whole batch draws).
         valid: ``[B, L, H, W]`` (bool or 0/1) the LDI's valid points; required with a 4-D ``depth``.
     Returns:
         float32 ``[B, top + random]`` normalised depths in ``[0, 1)``.
@@ -132,10 +134,11 @@ def select_focal_depths(
             points = points[valid[b].detach().cpu().bool()]
         hist = torch.histc(points, bins=bins, min=0.0, max=1.0)
         order = torch.argsort(hist, descending=True, stable=True).float()
-        u = torch.rand(1, generator=generator)
+        g = generator[b] if isinstance(generator, (list, tuple)) else generator
+        u = torch.rand(1, generator=g)
         idx = (order + u) / bins
         rest = idx[top:]
-        pick = rest[torch.randperm(rest.numel(), generator=generator)[:random]]
+        pick = rest[torch.randperm(rest.numel(), generator=g)[:random]]
         out.append(torch.cat([idx[:top], pick]))
     return torch.stack(out).to(depth.device)
 

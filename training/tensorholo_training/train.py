@@ -16,6 +16,16 @@ and PSNRs go to ``<run_dir>/learning_curve.csv`` and stdout. ``<run_dir>/stage1.
 written at the end of stage 1 and of the run (inputs of :mod:`.export`); ``best.pt`` holds the weights of the
 best validation (``select_metric``) seen in the last phase, the checkpoint to export when the learning curve
 is noisy.
+
+The optics (``wavelengths_m``, ``pixel_pitch_m``, ``volume_depth_m``) come from the dataset's
+``manifest.json`` (``optics``); a configuration value that contradicts it is refused (:func:`resolve_optics`).
+
+Under ``torchrun`` (``RANK``/``WORLD_SIZE``/``LOCAL_RANK`` set) every process is a rank of a data-parallel job:
+``init_process_group`` (nccl on CUDA, gloo on CPU), the CNNs wrapped in ``DistributedDataParallel``, each rank
+reading its own part of every epoch (:class:`.data.ShardGroupedBatchSampler`); rank 0 alone writes files and
+logs. The global batch is ``batch_size · world size`` and ``lr`` is scaled to it (``lr_scaling``). The
+checkpoint records the world size; resuming under another one is refused unless ``allow_world_size_change``.
+A restarted job (``torchrun --max-restarts``) resumes from ``checkpoint.pt`` like a rerun (``ckpt_every``).
 """
 from __future__ import annotations
 
@@ -36,8 +46,8 @@ import torch
 from . import losses as L
 from . import optics
 from .data import (
-    Augment, LdiDataset, check_display, collate, manifest_propagation, read_manifest, split_names,
-    write_synthetic_dataset,
+    Augment, LdiDataset, ShardGroupedBatchSampler, collate, manifest_display, manifest_propagation, read_manifest,
+    split_names, write_synthetic_dataset,
 )
 from .metrics import psnr
 from .model import count_parameters, hologram_cnn, load_prefilter_state, prefilter_cnn
@@ -73,10 +83,14 @@ class TrainConfig:
     prefilter_base: str = "aa-dpm"
     aa_sigma_px: float = 0.7
     aa_kernel_size: int = 5
-    # display
-    wavelengths_m: list = field(default_factory=lambda: [638e-9, 520e-9, 450e-9])
-    pixel_pitch_m: float = 8e-6
-    volume_depth_m: float = 6e-3
+    # display: None = the dataset's (manifest.json `optics`), the paper's 638/520/450 nm, 8 µm, 6 mm for a
+    # dataset whose manifest does not say (and for "synthetic"). A value that contradicts the manifest is
+    # refused, naming the key, unless optics_override (then the configuration wins: the focal-stack losses
+    # then assume optics the holograms were not made with)
+    wavelengths_m: list | None = None
+    pixel_pitch_m: float | None = None
+    volume_depth_m: float | None = None
+    optics_override: bool = False
     offset_mm: float = 0.0
     # schedule
     stages: list = field(default_factory=lambda: ["stage1", "stage2"])
@@ -86,6 +100,10 @@ class TrainConfig:
     stage1_epochs: float = 0.0
     stage2_epochs: float = 0.0
     lr: float = 1e-4
+    # learning rate rule for the global batch (batch_size · world size under torchrun): "linear" applies
+    # lr · global_batch / lr_reference_batch (the paper's batch 2); "none" uses lr as given
+    lr_scaling: str = "linear"
+    lr_reference_batch: int = 2
     # learning rate within each phase: "constant" (paper) or "cosine" (from lr down to lr·lr_final_ratio over
     # the phase's steps: fine-tuning a shipped CNN on a short CPU budget)
     lr_schedule: str = "constant"
@@ -122,6 +140,12 @@ class TrainConfig:
     device: str = "auto"  # "auto", "cpu", "cuda", "cuda:1", ...
     precision: str = "auto"  # "auto" (bf16/fp16 autocast on CUDA, fp32 on CPU), "fp32", "bf16", "fp16"
     threads: int = 0  # torch CPU threads (0 = torch's default)
+    # DataLoader worker processes per rank that decode shards and crop/flip (0 = in the training process);
+    # they persist across epochs, each with a cache of batch_size + 1 decoded shards
+    num_workers: int = 2
+    # a checkpoint written under another torchrun world size is refused unless this is true (the global
+    # batch, hence the data order and the scaled learning rate, change with it)
+    allow_world_size_change: bool = False
     seed: int = 0
     log_every: int = 10
     val_every: int = 50
@@ -133,8 +157,14 @@ class TrainConfig:
     # -- derived ------------------------------------------------------------------------------------------
     @property
     def display(self) -> Display:
-        """The display geometry."""
-        return Display(tuple(self.wavelengths_m), self.pixel_pitch_m, self.volume_depth_m)
+        """The display geometry (keys left ``None`` read as the paper's; the :class:`Trainer` first resolves
+        them from the dataset manifest)."""
+        d = Display()
+        return Display(
+            tuple(self.wavelengths_m) if self.wavelengths_m is not None else d.wavelengths_m,
+            d.pixel_pitch_m if self.pixel_pitch_m is None else float(self.pixel_pitch_m),
+            d.volume_depth_m if self.volume_depth_m is None else float(self.volume_depth_m),
+        )
 
     @property
     def offset_m(self) -> float:
@@ -175,7 +205,7 @@ class TrainConfig:
         removed identity pre-training (``identity_steps``, ``identity_epochs``, ``identity_target``), which
         configurations of older runs carry and which are ignored."""
         names = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(d) - names - {"_comment", "training_commit"} - REMOVED_KEYS
+        unknown = set(d) - names - {"_comment", "training_commit", "world_size"} - REMOVED_KEYS
         if unknown:
             raise ValueError(f"unknown configuration keys: {sorted(unknown)}")
         return cls(**{k: v for k, v in d.items() if k in names})
@@ -274,6 +304,109 @@ def initial_state(path: str, device) -> dict:
     raise ValueError(f"{path}: tensorholo.kind is {kind!r}, neither hologram-cnn nor prefilter-cnn")
 
 
+OPTICS_KEYS = ("wavelengths_m", "pixel_pitch_m", "volume_depth_m")
+
+
+def resolve_optics(cfg: TrainConfig, manifest: dict, rel_tol: float = 1e-6) -> TrainConfig:
+    """The configuration with its optics (``wavelengths_m``, ``pixel_pitch_m``, ``volume_depth_m``) taken from
+    the dataset's manifest (``optics``; :func:`.data.manifest_display`), so that the display is stated once,
+    in the dataset. A key the configuration sets is kept if it agrees with the manifest; if it contradicts it,
+    ``ValueError`` names the key, unless ``optics_override``. Without optics in the manifest, keys left
+    ``None`` become the paper's values."""
+    m = manifest_display(manifest)
+    source = m if m is not None else Display()
+    values = {"wavelengths_m": [float(w) for w in source.wavelengths_m], "pixel_pitch_m": source.pixel_pitch_m,
+              "volume_depth_m": source.volume_depth_m}
+    out = {}
+    for key in OPTICS_KEYS:
+        given = getattr(cfg, key)
+        if given is None:
+            out[key] = values[key]
+            continue
+        a = [float(v) for v in given] if key == "wavelengths_m" else [float(given)]
+        b = values[key] if key == "wavelengths_m" else [values[key]]
+        agree = len(a) == len(b) and all(math.isclose(x, y, rel_tol=rel_tol) for x, y in zip(a, b))
+        if m is not None and not agree and not cfg.optics_override:
+            raise ValueError(
+                f"{key}: the configuration says {given}, but the dataset was made for {values[key]} "
+                f"(manifest.json `optics`); training reads the optics from the manifest, so drop `{key}` from the "
+                "configuration, or set optics_override=true to train for other optics than the data's")
+        out[key] = list(given) if key == "wavelengths_m" else float(given)
+    return dataclasses.replace(cfg, **out)
+
+
+@dataclass
+class Dist:
+    """The process's place in a torchrun job (``world_size == 1`` and ``enabled == False`` outside one)."""
+
+    rank: int = 0
+    world_size: int = 1
+    local_rank: int = 0
+    enabled: bool = False
+
+    @property
+    def is_main(self) -> bool:
+        """Rank 0: the only rank that writes files (checkpoints, CSV, config, synthetic data) and logs."""
+        return self.rank == 0
+
+    def barrier(self) -> None:
+        if self.enabled:
+            torch.distributed.barrier()
+
+
+def init_distributed(device_kind: str) -> Dist:
+    """Joins the torchrun job described by ``RANK``, ``WORLD_SIZE``, ``LOCAL_RANK`` (and ``MASTER_ADDR``/
+    ``MASTER_PORT``) with ``torch.distributed.init_process_group`` (nccl on CUDA, gloo on CPU); a no-op outside
+    torchrun. Idempotent (a second Trainer in the same process reuses the group)."""
+    if "RANK" not in os.environ or "WORLD_SIZE" not in os.environ:
+        return Dist()
+    import torch.distributed as dist
+
+    if not dist.is_initialized():
+        backend = "nccl" if device_kind == "cuda" else "gloo"
+        restart = os.environ.get("TORCHELASTIC_RESTART_COUNT", "0")
+        if os.environ.get("TORCHELASTIC_USE_AGENT_STORE") == "True":
+            # torchrun's agent keeps one store for all restarts: without a prefix of their own, the workers of
+            # a restart can read the previous generation's gloo addresses and connect to dead processes
+            # (observed with torch 2.15: "Connection reset by peer", or a hang, after --max-restarts restarts)
+            from datetime import timedelta
+
+            store = dist.TCPStore(os.environ["MASTER_ADDR"], int(os.environ["MASTER_PORT"]),
+                                  int(os.environ["WORLD_SIZE"]), is_master=False, timeout=timedelta(minutes=10))
+            dist.init_process_group(backend=backend, store=dist.PrefixStore(f"tensorholo/attempt_{restart}", store),
+                                    rank=int(os.environ["RANK"]), world_size=int(os.environ["WORLD_SIZE"]))
+        else:
+            dist.init_process_group(backend=backend)
+    return Dist(dist.get_rank(), dist.get_world_size(), int(os.environ.get("LOCAL_RANK", 0)), True)
+
+
+def weights_digest(*modules) -> str:
+    """SHA-256 of the parameters and buffers of ``modules`` (the ranks compare it after training)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for m in modules:
+        if m is None:
+            continue
+        for name, t in sorted(m.state_dict().items()):
+            h.update(name.encode())
+            h.update(t.detach().cpu().contiguous().numpy().tobytes())
+    return h.hexdigest()
+
+
+def _inject_fault(rank: int, step: int) -> None:
+    """Test hook: ``TENSORHOLO_FAULT="RANK:STEP:MARKER"`` makes rank ``RANK`` exit (code 17) after step
+    ``STEP`` once: the first time, it creates the file ``MARKER``; when ``MARKER`` exists it does nothing."""
+    spec = os.environ.get("TENSORHOLO_FAULT")
+    if not spec:
+        return
+    r, k, marker = spec.split(":", 2)
+    if int(r) == rank and int(k) == step and not os.path.exists(marker):
+        open(marker, "w").close()
+        print(f"rank {rank}: injected fault after step {step}", flush=True)
+        os._exit(17)
+
+
 class Trainer:
     """Runs the phases of a :class:`TrainConfig` with checkpoints that resume (see the module docstring).
 
@@ -284,24 +417,33 @@ class Trainer:
 
     def __init__(self, cfg: TrainConfig, log=print):
         self.cfg = cfg
-        self.log = log
-        os.makedirs(cfg.run_dir, exist_ok=True)
         if cfg.threads:
             torch.set_num_threads(cfg.threads)
         torch.manual_seed(cfg.seed)
         self.device = resolve_device(cfg)
+        self.dist = init_distributed(self.device.type)
+        if self.dist.enabled and self.device.type == "cuda":
+            self.device = torch.device("cuda", self.dist.local_rank)
+            torch.cuda.set_device(self.device)
+        self.log = log if self.dist.is_main else (lambda m: None)
+        if self.dist.is_main:
+            os.makedirs(cfg.run_dir, exist_ok=True)
         self.amp_dtype = autocast_dtype(cfg, self.device)
-        self.display = cfg.display
         root = cfg.dataset
         if root == "synthetic":
             root = os.path.join(cfg.run_dir, "synthetic_dataset")
-            if not os.path.exists(os.path.join(root, "manifest.json")):
+            if self.dist.is_main and not os.path.exists(os.path.join(root, "manifest.json")):
                 n = cfg.synthetic_size
                 write_synthetic_dataset(root, dict(cfg.synthetic_counts), n, n, max(2, cfg.input_layers),
-                                        display=self.display, seed=cfg.seed)
+                                        display=cfg.display, seed=cfg.seed)
+            self.dist.barrier()
         self.dataset_root = root
         manifest = read_manifest(root)
-        check_display(manifest, self.display)
+        cfg = self.cfg = resolve_optics(cfg, manifest)
+        self.display = cfg.display
+        if cfg.lr_scaling not in ("linear", "none"):
+            raise ValueError(f"lr_scaling must be 'linear' or 'none', got {cfg.lr_scaling!r}")
+        self.global_batch = cfg.batch_size * self.dist.world_size
         synth = manifest_propagation(manifest) or PropagationOptions()
         if cfg.asm_pad is None or cfg.asm_band_limit is None:
             cfg = dataclasses.replace(
@@ -313,7 +455,12 @@ class Trainer:
         crop = tuple(cfg.crop) if isinstance(cfg.crop, (list, tuple)) else (
             (cfg.crop, cfg.crop) if cfg.crop else None)
         self.train_set = LdiDataset(root, "train", cfg.input_layers, Augment(crop, cfg.hflip, cfg.vflip),
-                                    seed=cfg.seed)
+                                    cache_shards=cfg.batch_size + 1, seed=cfg.seed)
+        self.sampler = ShardGroupedBatchSampler(self.train_set.shard_sizes, cfg.batch_size, self.dist.rank,
+                                                self.dist.world_size, cfg.seed)
+        self.loader = torch.utils.data.DataLoader(
+            self.train_set, batch_sampler=self.sampler, num_workers=cfg.num_workers, collate_fn=collate,
+            persistent_workers=cfg.num_workers > 0, pin_memory=self.device.type == "cuda")
         names = split_names(manifest)
         val_split = next((s for s in ("val", "test") if s in names), None) if names else "val"
         try:
@@ -355,6 +502,16 @@ class Trainer:
             self.log(f"pre-filter initialised from {cfg.init_prefilter_from}")
         if cfg.qat_grids_from:
             self._fake_quantise_prefilter()
+        # the modules the training steps call: DistributedDataParallel wrappers under torchrun (DDP broadcasts
+        # rank 0's weights when it wraps), the modules themselves otherwise
+        self.net_train, self.prefilter_train = self.net, self.prefilter
+        if self.dist.enabled:
+            from torch.nn.parallel import DistributedDataParallel as DDP
+
+            ids = [self.device.index] if self.device.type == "cuda" else None
+            self.net_train = DDP(self.net, device_ids=ids)
+            if self.prefilter is not None:
+                self.prefilter_train = DDP(self.prefilter, device_ids=ids)
         self.best: dict = {}
         self.phases = self._phases()
         self.lr_at(0, 1)  # an unknown lr_schedule fails here, not after the first batch
@@ -382,7 +539,7 @@ class Trainer:
     # -- schedule -----------------------------------------------------------------------------------------
     def _phases(self) -> list[tuple[str, int]]:
         cfg = self.cfg
-        per_epoch = max(1, len(self.train_set) // cfg.batch_size)
+        per_epoch = self.sampler.steps_per_epoch
         out = []
         for name in cfg.stages:
             if name == "identity":
@@ -411,13 +568,21 @@ class Trainer:
     def lr_at(self, phase_step: int, steps: int) -> float:
         """The learning rate of step ``phase_step`` (0-based) of a phase of ``steps`` steps (``lr_schedule``)."""
         cfg = self.cfg
+        base = self.base_lr
         if cfg.lr_schedule == "constant":
-            return cfg.lr
+            return base
         if cfg.lr_schedule != "cosine":
             raise ValueError(f"unknown lr_schedule {cfg.lr_schedule!r} (constant, cosine)")
         t = min(max(phase_step / max(steps - 1, 1), 0.0), 1.0)
         r = cfg.lr_final_ratio
-        return cfg.lr * (r + (1.0 - r) * 0.5 * (1.0 + math.cos(math.pi * t)))
+        return base * (r + (1.0 - r) * 0.5 * (1.0 + math.cos(math.pi * t)))
+
+    @property
+    def base_lr(self) -> float:
+        """``lr`` scaled to the global batch (``lr_scaling``): ``lr · global_batch / lr_reference_batch``."""
+        if self.cfg.lr_scaling == "none":
+            return self.cfg.lr
+        return self.cfg.lr * self.global_batch / self.cfg.lr_reference_batch
 
     def _new_optimizer(self):
         self.optimizer = torch.optim.Adam(self._params(self.phase), lr=self.cfg.lr, betas=tuple(self.cfg.betas))
@@ -432,6 +597,12 @@ class Trainer:
     def _generator(self, step: int, salt: int = 0) -> torch.Generator:
         return torch.Generator().manual_seed(self.cfg.seed * 1_000_003 + step * 7 + salt)
 
+    def _sample_generator(self, step: int, place: int) -> torch.Generator:
+        """The generator of the focal planes of the sample at ``place`` in the global batch of ``step``: a
+        function of ``(seed, step, place)`` only, so ranks draw what one process with the global batch draws."""
+        state = np.random.SeedSequence([self.cfg.seed, step, place]).generate_state(1, np.uint64)[0]
+        return torch.Generator().manual_seed(int(state) & ((1 << 63) - 1))
+
     def attention_depth(self, batch: dict) -> tuple[torch.Tensor, torch.Tensor | None]:
         """The depth the focal stack's attention reads (``cfg.fs_attention``): the first layer's ``[B, H, W]``
         and ``None``, or every LDI layer's ``[B, L, H, W]`` and their valid mask ``[B, L, H, W]``."""
@@ -439,7 +610,7 @@ class Trainer:
             return batch["ldi_depth"].to(self.device), batch["valid"].to(self.device)
         return batch["depth"].to(self.device), None
 
-    def compute_loss(self, batch: dict, phase: str, generator: torch.Generator) -> dict:
+    def compute_loss(self, batch: dict, phase: str, generator) -> dict:
         """Losses of one batch for ``phase`` (see :mod:`.losses`); also ``"pred"`` (complex midpoint used
         for PSNR: the CNN output in stage 1, the post-encoding hologram in stage 2)."""
         cfg = self.cfg
@@ -447,8 +618,10 @@ class Trainer:
         gt = batch["midpoint"].to(self.device)
         depth, valid = self.attention_depth(batch)
         frozen = phase == "stage2" and not cfg.stage2_train_hologram
+        net = self.net_train if torch.is_grad_enabled() else self.net
+        prefilter = self.prefilter_train if torch.is_grad_enabled() else self.prefilter
         with self._autocast(), torch.set_grad_enabled(torch.is_grad_enabled() and not frozen):
-            amp, phs = self.net(rgbd)
+            amp, phs = net(rgbd)
         amp, phs = amp.float(), phs.float()
         if phase == "stage1":
             out = L.stage1_loss(amp, phs, gt, depth, self.display, cfg.weights(), cfg.fs_config(),
@@ -456,7 +629,7 @@ class Trainer:
             out["pred"] = optics.amp_phase_to_complex(amp, phs)
             return out
         with self._autocast():
-            dd = L.ddpm_forward(amp, phs, self.prefilter, cfg.offset_m, self.display, cfg.options)
+            dd = L.ddpm_forward(amp, phs, prefilter, cfg.offset_m, self.display, cfg.options)
         out = L.stage2_loss(dd, gt, depth, self.display, cfg.weights(), cfg.fs_config(), generator, valid)
         out["pred"] = dd.post_midpoint
         return out
@@ -465,7 +638,9 @@ class Trainer:
         """One optimizer step of the current phase; returns the loss terms as floats."""
         phase = self.phase
         self.net.train(phase != "stage2" or self.cfg.stage2_train_hologram)
-        out = self.compute_loss(batch, phase, self._generator(self.global_step))
+        first = self.dist.rank * self.cfg.batch_size  # this rank's samples' places in the global batch
+        gens = [self._sample_generator(self.global_step, first + i) for i in range(len(batch["rgbd"]))]
+        out = self.compute_loss(batch, phase, gens)
         lr = self.lr_at(self.phase_step, self.phases[self.phase_index][1])
         for group in self.optimizer.param_groups:
             group["lr"] = lr
@@ -534,11 +709,15 @@ class Trainer:
             "phases": self.phases,
             "torch_rng": torch.get_rng_state(),
             "best": self.best,
+            "world_size": self.dist.world_size,
+            "global_batch": self.global_batch,
         }
 
     def save(self, name: str = "checkpoint.pt") -> str:
-        """Writes ``<run_dir>/<name>`` atomically; returns its path."""
+        """Writes ``<run_dir>/<name>`` atomically (rank 0 only; the others write nothing); returns its path."""
         path = os.path.join(self.cfg.run_dir, name)
+        if not self.dist.is_main:
+            return path
         tmp = path + ".tmp"
         torch.save(self.state(), tmp)
         os.replace(tmp, path)
@@ -547,6 +726,16 @@ class Trainer:
     def load(self, path: str) -> None:
         """Restores a :meth:`state` written by :meth:`save`."""
         s = torch.load(path, map_location=self.device, weights_only=False)
+        saved_world = int(s.get("world_size", 1))
+        if saved_world != self.dist.world_size:
+            if not self.cfg.allow_world_size_change:
+                raise ValueError(
+                    f"{path} was written by a run of world size {saved_world} (global batch "
+                    f"{s.get('global_batch', '?')}), this one has {self.dist.world_size} (global batch "
+                    f"{self.global_batch}): resuming would change the data order and the scaled learning rate. "
+                    f"Resume with {saved_world} processes, or set allow_world_size_change=true")
+            self.log(f"resuming a world-size-{saved_world} checkpoint with world size {self.dist.world_size} "
+                     "(allow_world_size_change)")
         self.net.load_state_dict(s["net"])
         if self.prefilter is not None and s.get("prefilter") is not None:
             load_prefilter_state(self.prefilter, s["prefilter"], path)
@@ -583,6 +772,8 @@ class Trainer:
 
     # -- the loop -----------------------------------------------------------------------------------------
     def _csv(self, row: dict) -> None:
+        if not self.dist.is_main:
+            return
         path = os.path.join(self.cfg.run_dir, "learning_curve.csv")
         fields = ["global_step", "phase", "phase_step", "train_loss", "val_loss", "val_psnr_amp", "val_psnr_fs",
                   "elapsed_s"]
@@ -596,7 +787,7 @@ class Trainer:
     def _truncate_csv(self) -> None:
         """On resume, drop learning-curve rows written after the checkpoint's step."""
         path = os.path.join(self.cfg.run_dir, "learning_curve.csv")
-        if not os.path.exists(path):
+        if not self.dist.is_main or not os.path.exists(path):
             return
         with open(path) as f:
             rows = list(csv.DictReader(f))
@@ -610,21 +801,14 @@ class Trainer:
             w.writerows(keep)
 
     def _batches(self):
-        """Endless shard-grouped batches; the order of epoch ``e`` depends only on ``(seed, e)`` and the
-        augmentation of item ``k`` only on ``(seed, e, k)``, so a resumed run sees the same data."""
-        bs = self.cfg.batch_size
-        per_epoch = max(1, len(self.train_set) // bs)
-        start = self.global_step
-        epoch, pos = divmod(start, per_epoch)
+        """Endless batches of this rank from the DataLoader (:class:`.data.ShardGroupedBatchSampler`): the
+        batches of epoch ``e`` depend only on ``(seed, e, global batch)`` and the augmentation of item ``k``
+        only on ``(seed, e, k)``, so a resumed run sees the same data; it starts inside the epoch of its
+        global step."""
+        epoch, pos = divmod(self.global_step, self.sampler.steps_per_epoch)
         while True:
-            rng = np.random.default_rng([self.cfg.seed, epoch])
-            order = self.train_set.shard_grouped_order(rng)
-            for b in range(pos, per_epoch):
-                items = []
-                for j in order[b * bs : (b + 1) * bs]:
-                    self.train_set.rng = np.random.default_rng([self.cfg.seed, epoch, j])
-                    items.append(self.train_set[j])
-                yield collate(items)
+            self.sampler.set_epoch(epoch, pos)
+            yield from self.loader
             epoch, pos = epoch + 1, 0
 
     def run(self, max_steps: int | None = None) -> dict:
@@ -639,14 +823,20 @@ class Trainer:
         if os.path.exists(ckpt):
             self.load(ckpt)
             self._truncate_csv()
-            self.log(f"resumed from {ckpt} at step {self.global_step} ({self.phase or 'done'})")
-        config = cfg.to_dict() | {"training_commit": self.commit}
-        with open(os.path.join(cfg.run_dir, "config.json"), "w") as f:
-            json.dump(config, f, indent=1)
+            restarts = os.environ.get("TORCHELASTIC_RESTART_COUNT", "0")
+            self.log(f"resumed from {ckpt} at step {self.global_step} ({self.phase or 'done'})"
+                     + (f" after torchrun restart {restarts}" if restarts != "0" else ""))
+        self.dist.barrier()  # every rank has read the checkpoint before rank 0 writes the next one
+        config = cfg.to_dict() | {"training_commit": self.commit, "world_size": self.dist.world_size}
+        if self.dist.is_main:
+            with open(os.path.join(cfg.run_dir, "config.json"), "w") as f:
+                json.dump(config, f, indent=1)
         self.log(f"device {self.device}, autocast {self.amp_dtype}, hologram CNN {cfg.num_layers} layers "
                  f"({count_parameters(self.net)} parameters)"
                  + (f", pre-filter {count_parameters(self.prefilter)} parameters" if self.prefilter else "")
-                 + f", {len(self.train_set)} training scenes, phases {self.phases}")
+                 + f", {len(self.train_set)} training scenes, phases {self.phases}"
+                 + f"; world size {self.dist.world_size}, global batch {self.global_batch}, lr {self.base_lr:g}"
+                 + f", {cfg.num_workers} DataLoader workers")
         t0 = time.time()
         metrics: dict = {}
         running, count = 0.0, 0
@@ -669,6 +859,7 @@ class Trainer:
                 raise FloatingPointError(f"non-finite loss at step {self.global_step}: {terms}")
             self.phase_step += 1
             self.global_step += 1
+            _inject_fault(self.dist.rank, self.global_step)
             running += terms["total"]
             count += 1
             last = self.phase_step == steps
@@ -676,7 +867,7 @@ class Trainer:
                 msg = " ".join(f"{k} {v:.5f}" for k, v in terms.items())
                 row = {"global_step": self.global_step, "phase": name, "phase_step": self.phase_step,
                        "train_loss": running / count, "elapsed_s": round(time.time() - t0, 2)}
-                if self.global_step % cfg.val_every == 0 or last:
+                if (self.global_step % cfg.val_every == 0 or last) and self.dist.is_main:
                     metrics = self.validate(name)
                     row |= metrics
                     msg += " | " + " ".join(f"{k} {v:.4f}" for k, v in metrics.items())
@@ -688,6 +879,11 @@ class Trainer:
                 self.save()
         self.save()
         self.save("final.pt")
+        if self.dist.enabled:
+            digests = [None] * self.dist.world_size
+            torch.distributed.all_gather_object(digests, weights_digest(self.net, self.prefilter))
+            self.log(f"weights sha256 per rank: {' '.join(digests)}"
+                     + ("" if len(set(digests)) == 1 else "  (the ranks DIFFER)"))
         self.log(f"done in {time.time() - t0:.1f} s; checkpoints in {cfg.run_dir}")
         return metrics
 
@@ -713,12 +909,18 @@ def main(argv: list[str] | None = None) -> int:
                     help="override a configuration key (value parsed as JSON), repeatable")
     ap.add_argument("--run-dir", help="override run_dir")
     ap.add_argument("--print-config", action="store_true", help="print the resolved configuration and exit")
+    ap.add_argument("--max-steps", type=int, help="stop (with a checkpoint) at this global step; rerun to resume")
     args = ap.parse_args(argv)
     cfg = load_config(args.config, args.set, args.run_dir)
     if args.print_config:
         print(json.dumps(cfg.to_dict(), indent=1))
         return 0
-    Trainer(cfg, log=lambda m: print(m, flush=True)).run()
+    trainer = Trainer(cfg, log=lambda m: print(m, flush=True))
+    try:
+        trainer.run(max_steps=args.max_steps)
+    finally:
+        if trainer.dist.enabled and torch.distributed.is_initialized():
+            torch.distributed.destroy_process_group()
     return 0
 
 

@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from tensorholo_training.data import (
-    Augment, LdiDataset, batches, check_display, load_shard, manifest_propagation, read_manifest, split_names,
-    write_synthetic_dataset,
+    Augment, LdiDataset, ShardGroupedBatchSampler, check_display, collate, load_shard, manifest_propagation,
+    read_manifest, split_names, write_synthetic_dataset,
 )
 from tensorholo_training.optics import Display
 
@@ -63,10 +63,19 @@ def test_crop_and_flips_keep_scene_and_hologram_aligned(tiny_dataset):
         assert found, seed
 
 
-def test_batches_cover_an_epoch(tiny_dataset):
-    ds = LdiDataset(tiny_dataset, "train")
-    seen = [b["rgbd"].shape for b in batches(ds, 3, np.random.default_rng(0))]
-    assert seen == [(3, 4, 24, 24)] * 2
+def test_dataloader_batches_cover_an_epoch_with_the_same_data_in_workers(tiny_dataset):
+    ds = LdiDataset(tiny_dataset, "train", augment=Augment((16, 16), hflip=True, vflip=True), seed=5)
+    sampler = ShardGroupedBatchSampler(ds.shard_sizes, 3, seed=2)
+    sampler.set_epoch(4)
+    loaders = [torch.utils.data.DataLoader(ds, batch_sampler=sampler, num_workers=w, collate_fn=collate)
+               for w in (0, 2)]
+    a, b = (list(loader) for loader in loaders)
+    assert [x["rgbd"].shape for x in a] == [(3, 4, 16, 16)] * 2  # 8 scenes, batch 3: the tail of 2 is dropped
+    for x, y in zip(a, b):  # the same crops and flips whichever process reads them
+        assert all(torch.equal(x[k], y[k]) for k in x)
+    # the items are those the sampler names, each augmented by (seed, epoch, index)
+    first = sampler.rank_batches(4)[0]
+    assert torch.equal(a[0]["rgbd"][1], ds[(first[1], 4)]["rgbd"])
 
 
 def test_display_mismatch_is_refused(tiny_dataset):

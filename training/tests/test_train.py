@@ -154,3 +154,37 @@ def test_layered_attention_reads_every_ldi_layer_and_changes_only_the_focal_stac
     layers.run(max_steps=2)
     with pytest.raises(ValueError, match="attention"):
         Trainer(small_cfg(tmp_path / "x", tiny_dataset, fs_attention="hidden"), log=lambda m: None)
+
+
+def test_optics_come_from_the_manifest_and_a_contradiction_is_refused_by_key(tmp_path):
+    from tensorholo_training.data import write_synthetic_dataset
+    from tensorholo_training.optics import Display
+
+    display = Display((640e-9, 532e-9, 450e-9), 6.4e-6, 4e-3)
+    root = write_synthetic_dataset(str(tmp_path / "ds"), {"train": 4, "val": 2}, 16, 16, per_shard=4,
+                                   display=display, seed=2)
+    tr = Trainer(small_cfg(tmp_path / "a", root), log=lambda m: None)  # the config states no optics
+    assert tr.display == display
+    assert tr.cfg.pixel_pitch_m == 6.4e-6 and tr.cfg.wavelengths_m == [640e-9, 532e-9, 450e-9]
+    tr.run(max_steps=1)
+    saved = json.load(open(os.path.join(tr.cfg.run_dir, "config.json")))
+    assert saved["volume_depth_m"] == 4e-3  # the run records what it trained for (export reads it)
+    Trainer(small_cfg(tmp_path / "b", root, pixel_pitch_m=6.4e-6), log=lambda m: None)  # agreeing: fine
+    for key, value in (("pixel_pitch_m", 8e-6), ("wavelengths_m", [638e-9, 520e-9, 450e-9]),
+                       ("volume_depth_m", 6e-3)):
+        with pytest.raises(ValueError, match=f"^{key}: .*manifest.*optics_override"):
+            Trainer(small_cfg(tmp_path / key, root, **{key: value}), log=lambda m: None)
+    over = Trainer(small_cfg(tmp_path / "o", root, pixel_pitch_m=8e-6, optics_override=True), log=lambda m: None)
+    assert over.display.pixel_pitch_m == 8e-6 and over.display.volume_depth_m == 4e-3
+
+
+def test_the_learning_rate_follows_the_global_batch(tmp_path, tiny_dataset):
+    tr = Trainer(small_cfg(tmp_path / "a", tiny_dataset, batch_size=4, lr=1e-3), log=lambda m: None)
+    assert tr.global_batch == 4 and tr.base_lr == pytest.approx(2e-3) and tr.lr_at(0, 5) == pytest.approx(2e-3)
+    tr.run(max_steps=1)
+    assert tr.optimizer.param_groups[0]["lr"] == pytest.approx(2e-3)
+    flat = Trainer(small_cfg(tmp_path / "b", tiny_dataset, batch_size=4, lr=1e-3, lr_scaling="none"),
+                   log=lambda m: None)
+    assert flat.base_lr == 1e-3
+    # the paper's batch (2) keeps lr as given: the shipped configurations are unchanged
+    assert Trainer(small_cfg(tmp_path / "c", tiny_dataset, lr=1e-3), log=lambda m: None).base_lr == 1e-3

@@ -1681,6 +1681,138 @@ public func FfiConverterTypeCropRect_lower(_ value: CropRect) -> RustBuffer {
 
 
 /**
+ * A holographic display as its profile file describes it (`docs/DISPLAYS.md`): the SLM's pitch and
+ * resolution, the lasers, the volume and the offsets, in SI units (metres). Read one with
+ * [`display_profile_from_json`] or fill the fields; [`generator_config_for_display`] checks it and makes
+ * the [`GeneratorConfig`] for that display. The shipped CNNs (8 µm, 638/520/450 nm, 6 mm volume) serve any
+ * display with one depth scale `σ = (λ/λ')·(p'/8 µm)²` for the three lasers, a volume of `σ`·6 mm and
+ * offsets of `σ`·6 or `σ`·12 mm: at 4 µm, `σ` = 0.25, a 1.5 mm volume and offsets of 1.5 and 3 mm.
+ */
+public struct DisplayProfile: Equatable, Hashable {
+    /**
+     * `pixel_pitch_m`: SLM pixel pitch in metres (finite, > 0), e.g. 4e-6.
+     */
+    public var pixelPitchM: Double
+    /**
+     * `resolution`: SLM size `[height, width]` in pixels (2 values, each ≥ 1).
+     */
+    public var resolution: [UInt32]
+    /**
+     * `wavelengths_m`: laser wavelengths `[R, G, B]` in metres (3 values within 380–780 nm), e.g.
+     * 638e-9, 520e-9, 450e-9.
+     */
+    public var wavelengthsM: [Double]
+    /**
+     * `volume_depth_m`: depth of the 3D volume in metres (finite, > 0), centred on the midpoint hologram.
+     */
+    public var volumeDepthM: Double
+    /**
+     * `offsets_m`: hologram-plane offsets `s` in metres (finite, at least one); the first is the one
+     * [`generator_config_for_display`] takes.
+     */
+    public var offsetsM: [Double]
+    /**
+     * `name`: free text for reports; `None` (default) = none.
+     */
+    public var name: String?
+    /**
+     * `calibration`: the display's `.holocal` file as the profile gives it (a relative path stays relative),
+     * or `None` (default) for an ideal SLM. Not read by the library: the app loads the file's bytes and
+     * passes them to [`HologramGenerator::set_calibration`].
+     */
+    public var calibration: String?
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * `pixel_pitch_m`: SLM pixel pitch in metres (finite, > 0), e.g. 4e-6.
+         */pixelPitchM: Double, 
+        /**
+         * `resolution`: SLM size `[height, width]` in pixels (2 values, each ≥ 1).
+         */resolution: [UInt32], 
+        /**
+         * `wavelengths_m`: laser wavelengths `[R, G, B]` in metres (3 values within 380–780 nm), e.g.
+         * 638e-9, 520e-9, 450e-9.
+         */wavelengthsM: [Double], 
+        /**
+         * `volume_depth_m`: depth of the 3D volume in metres (finite, > 0), centred on the midpoint hologram.
+         */volumeDepthM: Double, 
+        /**
+         * `offsets_m`: hologram-plane offsets `s` in metres (finite, at least one); the first is the one
+         * [`generator_config_for_display`] takes.
+         */offsetsM: [Double], 
+        /**
+         * `name`: free text for reports; `None` (default) = none.
+         */name: String? = nil, 
+        /**
+         * `calibration`: the display's `.holocal` file as the profile gives it (a relative path stays relative),
+         * or `None` (default) for an ideal SLM. Not read by the library: the app loads the file's bytes and
+         * passes them to [`HologramGenerator::set_calibration`].
+         */calibration: String? = nil) {
+        self.pixelPitchM = pixelPitchM
+        self.resolution = resolution
+        self.wavelengthsM = wavelengthsM
+        self.volumeDepthM = volumeDepthM
+        self.offsetsM = offsetsM
+        self.name = name
+        self.calibration = calibration
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension DisplayProfile: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeDisplayProfile: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> DisplayProfile {
+        return
+            try DisplayProfile(
+                pixelPitchM: FfiConverterDouble.read(from: &buf), 
+                resolution: FfiConverterSequenceUInt32.read(from: &buf), 
+                wavelengthsM: FfiConverterSequenceDouble.read(from: &buf), 
+                volumeDepthM: FfiConverterDouble.read(from: &buf), 
+                offsetsM: FfiConverterSequenceDouble.read(from: &buf), 
+                name: FfiConverterOptionString.read(from: &buf), 
+                calibration: FfiConverterOptionString.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: DisplayProfile, into buf: inout [UInt8]) {
+        FfiConverterDouble.write(value.pixelPitchM, into: &buf)
+        FfiConverterSequenceUInt32.write(value.resolution, into: &buf)
+        FfiConverterSequenceDouble.write(value.wavelengthsM, into: &buf)
+        FfiConverterDouble.write(value.volumeDepthM, into: &buf)
+        FfiConverterSequenceDouble.write(value.offsetsM, into: &buf)
+        FfiConverterOptionString.write(value.name, into: &buf)
+        FfiConverterOptionString.write(value.calibration, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeDisplayProfile_lift(_ buf: RustBuffer) throws -> DisplayProfile {
+    return try FfiConverterTypeDisplayProfile.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeDisplayProfile_lower(_ value: DisplayProfile) -> RustBuffer {
+    return FfiConverterTypeDisplayProfile.lower(value)
+}
+
+
+/**
  * Everything a [`HologramGenerator`] needs. Only `width` and `height` (the SLM's resolution in pixels) are
  * required; every other field has the default named in its comment.
  */
@@ -1755,6 +1887,12 @@ public struct GeneratorConfig: Equatable, Hashable {
      * The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`] says which runs).
      */
     public var engine: CnnEngine?
+    /**
+     * Largest relative spread (a fraction: 0.005 = 0.5 %, the default) of the per-colour depth scales
+     * accepted when the CNNs were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); a
+     * wider value shows as "widened" in [`GeneratorInfo::display_mapping`].
+     */
+    public var wavelengthRatioTolerance: Double
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -1811,7 +1949,12 @@ public struct GeneratorConfig: Equatable, Hashable {
          */gpuPrecision: GpuPrecision? = nil, 
         /**
          * The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`] says which runs).
-         */engine: CnnEngine? = nil) {
+         */engine: CnnEngine? = nil, 
+        /**
+         * Largest relative spread (a fraction: 0.005 = 0.5 %, the default) of the per-colour depth scales
+         * accepted when the CNNs were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); a
+         * wider value shows as "widened" in [`GeneratorInfo::display_mapping`].
+         */wavelengthRatioTolerance: Double = Double(0.005)) {
         self.width = width
         self.height = height
         self.layers = layers
@@ -1829,6 +1972,7 @@ public struct GeneratorConfig: Equatable, Hashable {
         self.backend = backend
         self.gpuPrecision = gpuPrecision
         self.engine = engine
+        self.wavelengthRatioTolerance = wavelengthRatioTolerance
     }
 
     
@@ -1863,7 +2007,8 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
                 zFarM: FfiConverterOptionDouble.read(from: &buf), 
                 backend: FfiConverterOptionTypeBackend.read(from: &buf), 
                 gpuPrecision: FfiConverterOptionTypeGpuPrecision.read(from: &buf), 
-                engine: FfiConverterOptionTypeCnnEngine.read(from: &buf)
+                engine: FfiConverterOptionTypeCnnEngine.read(from: &buf), 
+                wavelengthRatioTolerance: FfiConverterDouble.read(from: &buf)
         )
     }
 
@@ -1885,6 +2030,7 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
         FfiConverterOptionTypeBackend.write(value.backend, into: &buf)
         FfiConverterOptionTypeGpuPrecision.write(value.gpuPrecision, into: &buf)
         FfiConverterOptionTypeCnnEngine.write(value.engine, into: &buf)
+        FfiConverterDouble.write(value.wavelengthRatioTolerance, into: &buf)
     }
 }
 
@@ -1986,6 +2132,13 @@ public struct GeneratorInfo: Equatable, Hashable {
      */
     public var calibration: String?
     /**
+     * How the hologram CNN's training display maps onto this display, in one line, e.g. "the 8-layer
+     * hologram CNN (trained at 8 µm, 6 mm volume) serves 4 µm with a 1.5 mm volume (σ = 0.250000); offset
+     * 1.5 mm ↔ 6 mm trained; wavelength mismatch 0.00 % (tolerance 0.50 %); non-paraxial residual 0.084 rad
+     * (bound 0.25 rad)" (`docs/DISPLAYS.md`).
+     */
+    public var displayMapping: String
+    /**
      * Everything above and the autotuning timings, as JSON.
      */
     public var json: String
@@ -2052,6 +2205,12 @@ public struct GeneratorInfo: Equatable, Hashable {
          * `"1080×1920 SLM: red tiled (16×16 px), green global, blue linear; intensity map: none"`.
          */calibration: String?, 
         /**
+         * How the hologram CNN's training display maps onto this display, in one line, e.g. "the 8-layer
+         * hologram CNN (trained at 8 µm, 6 mm volume) serves 4 µm with a 1.5 mm volume (σ = 0.250000); offset
+         * 1.5 mm ↔ 6 mm trained; wavelength mismatch 0.00 % (tolerance 0.50 %); non-paraxial residual 0.084 rad
+         * (bound 0.25 rad)" (`docs/DISPLAYS.md`).
+         */displayMapping: String, 
+        /**
          * Everything above and the autotuning timings, as JSON.
          */json: String) {
         self.version = version
@@ -2073,6 +2232,7 @@ public struct GeneratorInfo: Equatable, Hashable {
         self.backendReason = backendReason
         self.gpuAdapter = gpuAdapter
         self.calibration = calibration
+        self.displayMapping = displayMapping
         self.json = json
     }
 
@@ -2111,6 +2271,7 @@ public struct FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer {
                 backendReason: FfiConverterString.read(from: &buf), 
                 gpuAdapter: FfiConverterOptionString.read(from: &buf), 
                 calibration: FfiConverterOptionString.read(from: &buf), 
+                displayMapping: FfiConverterString.read(from: &buf), 
                 json: FfiConverterString.read(from: &buf)
         )
     }
@@ -2135,6 +2296,7 @@ public struct FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer {
         FfiConverterString.write(value.backendReason, into: &buf)
         FfiConverterOptionString.write(value.gpuAdapter, into: &buf)
         FfiConverterOptionString.write(value.calibration, into: &buf)
+        FfiConverterString.write(value.displayMapping, into: &buf)
         FfiConverterString.write(value.json, into: &buf)
     }
 }
@@ -3967,6 +4129,31 @@ fileprivate struct FfiConverterOptionTypeSceneInput: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterSequenceUInt32: FfiConverterRustBuffer {
+    typealias SwiftType = [UInt32]
+
+    public static func write(_ value: [UInt32], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterUInt32.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [UInt32] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [UInt32]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterUInt32.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterSequenceFloat: FfiConverterRustBuffer {
     typealias SwiftType = [Float]
 
@@ -4071,6 +4258,40 @@ public func convertFrame(frame: RgbdFrame, width: UInt32, height: UInt32, fit: F
 })
 }
 /**
+ * Reads a display profile from its JSON text (a profile file's contents, `docs/DISPLAYS.md`): keys
+ * `pixel_pitch_m`, `resolution`, `wavelengths_m`, `volume_depth_m`, `offsets_m` (SI units), optional `name`
+ * and `calibration`; unknown keys are refused.
+ *
+ * Errors: [`TensorholoError::InvalidInput`] whose message names the key at fault (a missing key, a wrong
+ * type or array length, a non-positive pitch or volume, a wavelength outside 380–780 nm, an unknown key) or
+ * says the text is not a JSON object.
+ */
+public func displayProfileFromJson(json: String)throws  -> DisplayProfile  {
+    return try  FfiConverterTypeDisplayProfile_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_func_display_profile_from_json(
+        FfiConverterString.lower(json),uniffiCallStatus
+    )
+})
+}
+/**
+ * The [`GeneratorConfig`] for a display: `width`/`height` from its `resolution`, its pitch, lasers and
+ * volume, its first offset; every other field at its default (change them before making the generator).
+ *
+ * Errors: [`TensorholoError::InvalidInput`] naming the key for a profile that breaks the profile rules (as
+ * [`display_profile_from_json`]). Whether the CNNs serve the display is checked by [`HologramGenerator::new`]
+ * ([`TensorholoError::InvalidModel`] naming `wavelengths_m` for lasers without one common depth scale,
+ * `volume_depth_m` for a volume other than `σ`·6 mm, `pixel_pitch_m` for a pitch too fine).
+ */
+public func generatorConfigForDisplay(profile: DisplayProfile)throws  -> GeneratorConfig  {
+    return try  FfiConverterTypeGeneratorConfig_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_func_generator_config_for_display(
+        FfiConverterTypeDisplayProfile_lower(profile),uniffiCallStatus
+    )
+})
+}
+/**
  * The 32-bit frame colour-sequential SLM drivers take over HDMI: `width · height · 4` bytes, row-major, the
  * red laser's pattern in R, green in G, blue in B, alpha 255.
  *
@@ -4104,6 +4325,12 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_func_convert_frame() != 5569) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_func_display_profile_from_json() != 64012) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_func_generator_config_for_display() != 57792) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_func_pack_rgba() != 54530) {

@@ -5,6 +5,7 @@ binary. Real frames come from ../shared/data through ../frames.py, which also ru
 scene: the bindings must produce the same SLM codes (within frames.compare_codes' tolerance).
 """
 
+import json
 import sys
 import threading
 import tomllib
@@ -14,8 +15,9 @@ import numpy as np
 import pytest
 
 import tensorholo
-from tensorholo import (CnnEngine, ColorFormat, DepthFormat, Fit, GeneratorConfig, HologramGenerator,
-                        PatternsListener, PrefilterMode, RgbdFrame, Rotation, SceneInput, TensorholoError)
+from tensorholo import (CnnEngine, ColorFormat, DepthFormat, DisplayProfile, Fit, GeneratorConfig,
+                        HologramGenerator, PatternsListener, PrefilterMode, RgbdFrame, Rotation, SceneInput,
+                        TensorholoError)
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
@@ -229,3 +231,97 @@ def test_a_stream_burst_drops_the_oldest_and_reports_bad_frames_in_place(case):
     assert delivered + stream.dropped_frames() == 8
     assert rec.indices == sorted(rec.indices) and rec.indices[-1] == 7
     assert all(e.startswith("frame 0:") for e in rec.errors), rec.errors
+
+
+# A 4 µm SLM at the paper's lasers (docs/DISPLAYS.md): σ = (4/8)² = 0.25, so the shipped 8 µm / 6 mm CNNs
+# serve a 1.5 mm volume at offsets of 1.5 and 3 mm. Small, so that a frame renders quickly.
+PROFILE_4UM = {
+    "name": "4 µm SLM",
+    "pixel_pitch_m": 4e-6,
+    "resolution": [48, 64],
+    "wavelengths_m": [638e-9, 520e-9, 450e-9],
+    "volume_depth_m": 1.5e-3,
+    "offsets_m": [1.5e-3, 3e-3],
+}
+
+
+def small_frame(width=64, height=48) -> RgbdFrame:
+    """RGB8 texture with metric depth: a ramp from 0.5 m to 1.5 m across the width."""
+    y, x = np.mgrid[0:height, 0:width]
+    rgb = np.stack([x * 4, y * 5, (x ^ y) * 7], axis=-1).astype(np.uint8)
+    depth = np.broadcast_to(0.5 + x / width, (height, width)).astype("<f4")
+    return RgbdFrame(color=rgb.tobytes(), color_format=ColorFormat.RGB8, color_width=width, color_height=height,
+                     depth=depth.tobytes(), depth_format=DepthFormat.METRES_F32, depth_width=width,
+                     depth_height=height)
+
+
+def profile_record(**changes) -> DisplayProfile:
+    """PROFILE_4UM as a record built field by field, with `changes`."""
+    d = {**PROFILE_4UM, **changes}
+    return DisplayProfile(pixel_pitch_m=d["pixel_pitch_m"], resolution=d["resolution"],
+                          wavelengths_m=d["wavelengths_m"], volume_depth_m=d["volume_depth_m"],
+                          offsets_m=d["offsets_m"], name=d["name"])
+
+
+def test_a_4um_display_profile_renders_with_the_shipped_models_at_sigma_a_quarter():
+    profile = tensorholo.display_profile_from_json(json.dumps(PROFILE_4UM))
+    assert profile == profile_record()
+    assert profile.resolution == [48, 64] and profile.calibration is None
+    config = tensorholo.generator_config_for_display(profile)
+    assert (config.width, config.height) == (64, 48)
+    assert config.pixel_pitch_m == 4e-6 and config.volume_depth_m == 1.5e-3
+    assert config.wavelengths_m == [638e-9, 520e-9, 450e-9]
+    assert config.offset_mm == pytest.approx(1.5)
+    assert config.wavelength_ratio_tolerance == 0.005
+    config.threads, config.engine = 1, CnnEngine.NATIVE
+    gen = HologramGenerator(config)
+    out = gen.render(small_frame())
+    assert (out.width, out.height) == (64, 48)
+    assert len(set(out.red)) > 1
+    info = gen.info()
+    assert "σ = 0.25" in info.display_mapping, info.display_mapping
+    assert "serves 4 µm with a 1.5 mm volume" in info.display_mapping, info.display_mapping
+    assert info.prefilter_model is not None and "6mm" in info.prefilter_model, info.prefilter_reason
+    assert json.loads(info.json)["display_mapping"] == info.display_mapping
+
+
+# Each bad display: the change to PROFILE_4UM, the error class and the key its message must name. The first
+# two break the profile rules (refused when the profile is read or converted); the last two are profiles the
+# shipped CNNs cannot serve (refused when the generator checks its models).
+BAD_DISPLAYS = {
+    "negative pitch": (dict(pixel_pitch_m=-4e-6), TensorholoError.InvalidInput, "pixel_pitch_m"),
+    "resolution not [height, width]": (dict(resolution=[48]), TensorholoError.InvalidInput, "resolution"),
+    "532 nm green laser (not Fresnel-equivalent)": (dict(wavelengths_m=[638e-9, 532e-9, 450e-9]),
+                                                     TensorholoError.InvalidModel, "wavelengths_m"),
+    "2 mm volume (σ·6 mm is 1.5 mm)": (dict(volume_depth_m=2e-3), TensorholoError.InvalidModel,
+                                        "volume_depth_m"),
+}
+
+
+def _generator_for(profile_source):
+    """JSON text or a record → profile → configuration → generator, as an app does."""
+    profile = (tensorholo.display_profile_from_json(profile_source) if isinstance(profile_source, str)
+               else profile_source)
+    config = tensorholo.generator_config_for_display(profile)
+    config.threads, config.engine = 1, CnnEngine.NATIVE
+    return HologramGenerator(config)
+
+
+@pytest.mark.parametrize("what", list(BAD_DISPLAYS))
+@pytest.mark.parametrize("source", ["json", "record"])
+def test_a_bad_display_profile_is_an_error_naming_the_key(what, source):
+    changes, error, key = BAD_DISPLAYS[what]
+    profile = json.dumps({**PROFILE_4UM, **changes}) if source == "json" else profile_record(**changes)
+    with pytest.raises(error) as e:
+        _generator_for(profile)
+    assert key in str(e.value), str(e.value)
+    print(f"{what} ({source}): {e.value}")
+
+
+def test_a_profile_typo_is_refused_by_name():
+    text = json.dumps(PROFILE_4UM).replace("pixel_pitch_m", "pixel_pich_m")
+    with pytest.raises(TensorholoError.InvalidInput) as e:
+        tensorholo.display_profile_from_json(text)
+    assert "pixel_pich_m" in str(e.value)
+    with pytest.raises(TensorholoError.InvalidInput):
+        tensorholo.display_profile_from_json("not json")

@@ -100,7 +100,7 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
     /// A generator and its stream for `size` (on `captureQueue`); the previous stream finishes its frames first.
     private func makeGenerator(size: (width: UInt32, height: UInt32)) throws {
         publish(status: "Preparing the hologram CNN for \(size.width)×\(size.height)…")
-        let generator = try HologramGenerator(config: GeneratorConfig(width: size.width, height: size.height))
+        let generator = try HologramGenerator(config: generatorConfig(size: size))
         let handler = PatternsHandler(
             onPatterns: { [weak self] index, patterns in self?.deliver(index: index, patterns: patterns) },
             onError: { [weak self] error in self?.publish(status: error.description) }
@@ -114,7 +114,22 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
         lock.unlock()
         old?.close()
         let info = try generator.info()
-        publish(status: "Running: \(size.width)×\(size.height), \(info.layers) layers, CNN layout \(info.cnnLayout)")
+        publish(status: "Running: \(size.width)×\(size.height), \(info.layers) layers, CNN layout \(info.cnnLayout); \(info.displayMapping)")
+    }
+
+    /// The generator's configuration for a `size` SLM: the display profile bundled with the app (`display.json`:
+    /// pitch, lasers, volume, offset; docs/DISPLAYS.md) where there is one, else the paper's 8 µm display. The
+    /// display's mode gives the size (it is what the SLM is sent). A profile the shipped CNNs cannot serve fails
+    /// when the generator is made, naming the key (`volume_depth_m`, `wavelengths_m`…).
+    private func generatorConfig(size: (width: UInt32, height: UInt32)) throws -> GeneratorConfig {
+        guard let url = Bundle.main.url(forResource: "display", withExtension: "json") else {
+            return GeneratorConfig(width: size.width, height: size.height)
+        }
+        let profile = try displayProfileFromJson(json: String(contentsOf: url, encoding: .utf8))
+        var config = try generatorConfigForDisplay(profile: profile)
+        config.width = size.width
+        config.height = size.height
+        return config
     }
 
     private func setUp() {

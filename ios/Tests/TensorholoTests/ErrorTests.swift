@@ -53,6 +53,20 @@ final class ErrorTests: XCTestCase {
         assertInvalidInput(try gen.render(frame: frame), mentioning: "invalid")
     }
 
+    /// A display profile with a negative pitch (JSON) or a one-value resolution (a record built field by
+    /// field) is refused naming the key.
+    func testBadDisplayProfile() {
+        let json = """
+            {"pixel_pitch_m": -4e-6, "resolution": [64, 64], "wavelengths_m": [638e-9, 520e-9, 450e-9],
+             "volume_depth_m": 1.5e-3, "offsets_m": [1.5e-3]}
+            """
+        assertInvalidInput(try displayProfileFromJson(json: json), mentioning: "pixel_pitch_m")
+        let record = DisplayProfile(
+            pixelPitchM: 4e-6, resolution: [64], wavelengthsM: [638e-9, 520e-9, 450e-9], volumeDepthM: 1.5e-3,
+            offsetsM: [1.5e-3])
+        assertInvalidInput(try generatorConfigForDisplay(profile: record), mentioning: "resolution")
+    }
+
     /// A NaN SLM offset in the configuration.
     func testNaNOffset() {
         assertInvalidInput(

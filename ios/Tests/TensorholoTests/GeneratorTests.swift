@@ -74,4 +74,23 @@ final class GeneratorTests: XCTestCase {
             XCTAssertNotNil(invalidInputMessage(error), "expected InvalidInput, got \(error)")
         }
     }
+
+    /// A 4 µm SLM's display profile (docs/DISPLAYS.md) → configuration → generator: the shipped 8 µm CNNs serve
+    /// it at σ = 0.25 (a 1.5 mm volume, offsets of 1.5 and 3 mm).
+    func testDisplayProfileOfA4umSlm() throws {
+        let json = """
+            {"pixel_pitch_m": 4e-6, "resolution": [64, 64], "wavelengths_m": [638e-9, 520e-9, 450e-9],
+             "volume_depth_m": 1.5e-3, "offsets_m": [1.5e-3, 3e-3]}
+            """
+        let profile = try displayProfileFromJson(json: json)
+        XCTAssertEqual(profile.resolution, [64, 64])
+        var config = try generatorConfigForDisplay(profile: profile)
+        XCTAssertEqual(config.pixelPitchM, 4e-6)
+        XCTAssertEqual(config.offsetMm, 1.5, accuracy: 1e-12)
+        config.threads = 1
+        let gen = try HologramGenerator(config: config)
+        XCTAssertEqual(try gen.render(frame: TestScene.referenceFrame()).width, 64)
+        let mapping = try gen.info().displayMapping
+        XCTAssertTrue(mapping.contains("σ = 0.25"), mapping)
+    }
 }

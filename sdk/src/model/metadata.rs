@@ -33,8 +33,10 @@ const REL_TOL: f64 = 1e-6;
 /// focuses its depth planes `ε·|z'|` away from the others' (0.5 % of 0.66 mm is 3 µm on a 3.74 µm SLM, a tenth
 /// of its depth of focus `p'²/λ'`); in phase that is `ε·π·λ'·z'/(4·p'²)` rad at the band edge, 0.35 rad for
 /// red at the paper's outermost depth (9 mm at 8 µm). Equal lasers give 0 %; a 532 nm green laser with the
-/// paper's red and blue gives 2.3 % and is refused unless the tolerance is widened
-/// ([`ModelConfig::wavelength_ratio_tolerance`]).
+/// paper's red and blue gives 1.15 % and is refused unless the tolerance is widened
+/// ([`ModelConfig::wavelength_ratio_tolerance`]). Measured (`scripts/display-mismatch.sh`, docs/DISPLAYS.md
+/// "What a laser-ratio mismatch costs"): at 0.5 % a perfect model reaches 51.4 dB through the mapping, 20 dB
+/// above the paper's best CNN (29.6 dB, Table 2), so the mapping adds 0.03 dB of loss.
 pub const DEFAULT_WAVELENGTH_RATIO_TOLERANCE: f64 = 0.005;
 
 /// Largest non-paraxial residual (radians) accepted between a model's training display and a
@@ -184,6 +186,10 @@ pub fn nonparaxial_residual_rad(
     }
     worst
 }
+
+/// The end of every refusal of [`DisplayMapping::refusal`]: where a model for the display as it is comes
+/// from.
+pub const RETRAIN_HINT: &str = "; to serve this display as it is, retrain for it (docs/DISPLAYS.md, \"Retraining for another display\")";
 
 /// How a model trained for one display serves another, Fresnel-equivalent one (`docs/DISPLAYS.md`).
 ///
@@ -361,7 +367,7 @@ impl DisplayMapping {
                     self.scale,
                     self.tolerance * 100.0,
                     if self.widened { ", widened" } else { "" }
-                ),
+                ) + RETRAIN_HINT,
             ));
         }
         if self.residual_rad > MAX_NONPARAXIAL_RESIDUAL_RAD {
@@ -380,7 +386,7 @@ impl DisplayMapping {
                     self.colour_residual_rad[c],
                     COLOUR[c],
                     self.max_distance_m * 1e3
-                ),
+                ) + RETRAIN_HINT,
             ));
         }
         let served = self.served_volume_depth_m();
@@ -398,7 +404,7 @@ impl DisplayMapping {
                     sig(served),
                     sig(self.scale),
                     sig(d.volume_depth_m * 1e3)
-                ),
+                ) + RETRAIN_HINT,
             ));
         }
         None
@@ -658,8 +664,14 @@ impl ModelMetadata {
             expected.offset_m,
             expected.wavelength_ratio_tolerance,
         )?;
-        // Lasers that do not scale alike are named first: no volume or offset would fix them.
-        if mapping.spread() > mapping.tolerance * (1.0 + 1e-9) {
+        // Lasers that do not scale alike are named first (no volume or offset would fix them), then a
+        // volume other than σ·V (a pitch changed alone lands here), and only then the offset.
+        if mapping.spread() > mapping.tolerance * (1.0 + 1e-9)
+            || !close(
+                mapping.served_volume_depth_m(),
+                expected.optics.volume_depth_m,
+            )
+        {
             if let Some(e) = mapping.refusal(&self.describe()) {
                 return Err(e);
             }

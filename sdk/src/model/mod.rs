@@ -138,6 +138,6 @@ pub use graph::{CnnOutput, CnnQuant, CnnWeights, ConvLayer, LayerQuant, QuantGri
 pub use metadata::{
     carrier_free_phase_rad, nonparaxial_residual_rad, DisplayMapping, ModelConfig, ModelKind,
     ModelMetadata, DEFAULT_WAVELENGTH_RATIO_TOLERANCE, FORMAT_VERSION,
-    MAX_NONPARAXIAL_RESIDUAL_RAD, METADATA_PREFIX, PREFILTER_FORMAT_VERSION,
+    MAX_NONPARAXIAL_RESIDUAL_RAD, METADATA_PREFIX, PREFILTER_FORMAT_VERSION, RETRAIN_HINT,
 };
 pub use network::HologramModel;

@@ -707,6 +707,10 @@ internal object IntegrityCheckingUniffiLib {
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_func_convert_frame(
     ): Int
+    external fun uniffi_tensorholo_ffi_checksum_func_display_profile_from_json(
+    ): Int
+    external fun uniffi_tensorholo_ffi_checksum_func_generator_config_for_display(
+    ): Int
     external fun uniffi_tensorholo_ffi_checksum_func_pack_rgba(
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_benchmark(
@@ -803,6 +807,10 @@ internal object UniffiLib {
     external fun uniffi_tensorholo_ffi_fn_func_version(uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_func_convert_frame(`frame`: RustBuffer.ByValue,`width`: Int,`height`: Int,`fit`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    ): RustBuffer.ByValue
+    external fun uniffi_tensorholo_ffi_fn_func_display_profile_from_json(`json`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    ): RustBuffer.ByValue
+    external fun uniffi_tensorholo_ffi_fn_func_generator_config_for_display(`profile`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_func_pack_rgba(`patterns`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
@@ -929,6 +937,12 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_func_convert_frame() and 0xFFFF) != 5569) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_func_display_profile_from_json() and 0xFFFF) != 64012) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_func_generator_config_for_display() and 0xFFFF) != 57792) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_func_pack_rgba() and 0xFFFF) != 54530) {
@@ -2756,6 +2770,102 @@ public object FfiConverterTypeCropRect: FfiConverterRustBuffer<CropRect> {
 
 
 /**
+ * A holographic display as its profile file describes it (`docs/DISPLAYS.md`): the SLM's pitch and
+ * resolution, the lasers, the volume and the offsets, in SI units (metres). Read one with
+ * [`display_profile_from_json`] or fill the fields; [`generator_config_for_display`] checks it and makes
+ * the [`GeneratorConfig`] for that display. The shipped CNNs (8 µm, 638/520/450 nm, 6 mm volume) serve any
+ * display with one depth scale `σ = (λ/λ')·(p'/8 µm)²` for the three lasers, a volume of `σ`·6 mm and
+ * offsets of `σ`·6 or `σ`·12 mm: at 4 µm, `σ` = 0.25, a 1.5 mm volume and offsets of 1.5 and 3 mm.
+ */
+data class DisplayProfile (
+    /**
+     * `pixel_pitch_m`: SLM pixel pitch in metres (finite, > 0), e.g. 4e-6.
+     */
+    var `pixelPitchM`: kotlin.Double
+    , 
+    /**
+     * `resolution`: SLM size `[height, width]` in pixels (2 values, each ≥ 1).
+     */
+    var `resolution`: List<kotlin.UInt>
+    , 
+    /**
+     * `wavelengths_m`: laser wavelengths `[R, G, B]` in metres (3 values within 380–780 nm), e.g.
+     * 638e-9, 520e-9, 450e-9.
+     */
+    var `wavelengthsM`: List<kotlin.Double>
+    , 
+    /**
+     * `volume_depth_m`: depth of the 3D volume in metres (finite, > 0), centred on the midpoint hologram.
+     */
+    var `volumeDepthM`: kotlin.Double
+    , 
+    /**
+     * `offsets_m`: hologram-plane offsets `s` in metres (finite, at least one); the first is the one
+     * [`generator_config_for_display`] takes.
+     */
+    var `offsetsM`: List<kotlin.Double>
+    , 
+    /**
+     * `name`: free text for reports; `None` (default) = none.
+     */
+    var `name`: kotlin.String? = null 
+    , 
+    /**
+     * `calibration`: the display's `.holocal` file as the profile gives it (a relative path stays relative),
+     * or `None` (default) for an ideal SLM. Not read by the library: the app loads the file's bytes and
+     * passes them to [`HologramGenerator::set_calibration`].
+     */
+    var `calibration`: kotlin.String? = null 
+    
+){
+    
+
+    
+
+    
+    companion object
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeDisplayProfile: FfiConverterRustBuffer<DisplayProfile> {
+    override fun read(buf: ByteBuffer): DisplayProfile {
+        return DisplayProfile(
+            FfiConverterDouble.read(buf),
+            FfiConverterSequenceUInt.read(buf),
+            FfiConverterSequenceDouble.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterSequenceDouble.read(buf),
+            FfiConverterOptionalString.read(buf),
+            FfiConverterOptionalString.read(buf),
+        )
+    }
+
+    override fun allocationSize(value: DisplayProfile) = (
+            FfiConverterDouble.allocationSize(value.`pixelPitchM`) +
+            FfiConverterSequenceUInt.allocationSize(value.`resolution`) +
+            FfiConverterSequenceDouble.allocationSize(value.`wavelengthsM`) +
+            FfiConverterDouble.allocationSize(value.`volumeDepthM`) +
+            FfiConverterSequenceDouble.allocationSize(value.`offsetsM`) +
+            FfiConverterOptionalString.allocationSize(value.`name`) +
+            FfiConverterOptionalString.allocationSize(value.`calibration`)
+    )
+
+    override fun write(value: DisplayProfile, buf: ByteBuffer) {
+            FfiConverterDouble.write(value.`pixelPitchM`, buf)
+            FfiConverterSequenceUInt.write(value.`resolution`, buf)
+            FfiConverterSequenceDouble.write(value.`wavelengthsM`, buf)
+            FfiConverterDouble.write(value.`volumeDepthM`, buf)
+            FfiConverterSequenceDouble.write(value.`offsetsM`, buf)
+            FfiConverterOptionalString.write(value.`name`, buf)
+            FfiConverterOptionalString.write(value.`calibration`, buf)
+    }
+}
+
+
+
+/**
  * Everything a [`HologramGenerator`] needs. Only `width` and `height` (the SLM's resolution in pixels) are
  * required; every other field has the default named in its comment.
  */
@@ -2846,6 +2956,13 @@ data class GeneratorConfig (
      * The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`] says which runs).
      */
     var `engine`: CnnEngine? = null 
+    , 
+    /**
+     * Largest relative spread (a fraction: 0.005 = 0.5 %, the default) of the per-colour depth scales
+     * accepted when the CNNs were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); a
+     * wider value shows as "widened" in [`GeneratorInfo::display_mapping`].
+     */
+    var `wavelengthRatioTolerance`: kotlin.Double = 0.005 
     
 ){
     
@@ -2879,6 +2996,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalTypeBackend.read(buf),
             FfiConverterOptionalTypeGpuPrecision.read(buf),
             FfiConverterOptionalTypeCnnEngine.read(buf),
+            FfiConverterDouble.read(buf),
         )
     }
 
@@ -2899,7 +3017,8 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalDouble.allocationSize(value.`zFarM`) +
             FfiConverterOptionalTypeBackend.allocationSize(value.`backend`) +
             FfiConverterOptionalTypeGpuPrecision.allocationSize(value.`gpuPrecision`) +
-            FfiConverterOptionalTypeCnnEngine.allocationSize(value.`engine`)
+            FfiConverterOptionalTypeCnnEngine.allocationSize(value.`engine`) +
+            FfiConverterDouble.allocationSize(value.`wavelengthRatioTolerance`)
     )
 
     override fun write(value: GeneratorConfig, buf: ByteBuffer) {
@@ -2920,6 +3039,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalTypeBackend.write(value.`backend`, buf)
             FfiConverterOptionalTypeGpuPrecision.write(value.`gpuPrecision`, buf)
             FfiConverterOptionalTypeCnnEngine.write(value.`engine`, buf)
+            FfiConverterDouble.write(value.`wavelengthRatioTolerance`, buf)
     }
 }
 
@@ -3026,6 +3146,14 @@ data class GeneratorInfo (
     var `calibration`: kotlin.String?
     , 
     /**
+     * How the hologram CNN's training display maps onto this display, in one line, e.g. "the 8-layer
+     * hologram CNN (trained at 8 µm, 6 mm volume) serves 4 µm with a 1.5 mm volume (σ = 0.250000); offset
+     * 1.5 mm ↔ 6 mm trained; wavelength mismatch 0.00 % (tolerance 0.50 %); non-paraxial residual 0.084 rad
+     * (bound 0.25 rad)" (`docs/DISPLAYS.md`).
+     */
+    var `displayMapping`: kotlin.String
+    , 
+    /**
      * Everything above and the autotuning timings, as JSON.
      */
     var `json`: kotlin.String
@@ -3065,6 +3193,7 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterOptionalString.read(buf),
             FfiConverterOptionalString.read(buf),
             FfiConverterString.read(buf),
+            FfiConverterString.read(buf),
         )
     }
 
@@ -3088,6 +3217,7 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterString.allocationSize(value.`backendReason`) +
             FfiConverterOptionalString.allocationSize(value.`gpuAdapter`) +
             FfiConverterOptionalString.allocationSize(value.`calibration`) +
+            FfiConverterString.allocationSize(value.`displayMapping`) +
             FfiConverterString.allocationSize(value.`json`)
     )
 
@@ -3111,6 +3241,7 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterString.write(value.`backendReason`, buf)
             FfiConverterOptionalString.write(value.`gpuAdapter`, buf)
             FfiConverterOptionalString.write(value.`calibration`, buf)
+            FfiConverterString.write(value.`displayMapping`, buf)
             FfiConverterString.write(value.`json`, buf)
     }
 }
@@ -4517,6 +4648,34 @@ public object FfiConverterOptionalTypeSceneInput: FfiConverterRustBuffer<SceneIn
 /**
  * @suppress
  */
+public object FfiConverterSequenceUInt: FfiConverterRustBuffer<List<kotlin.UInt>> {
+    override fun read(buf: ByteBuffer): List<kotlin.UInt> {
+        val len = buf.getInt()
+        return List<kotlin.UInt>(len) {
+            FfiConverterUInt.read(buf)
+        }
+    }
+
+    override fun allocationSize(value: List<kotlin.UInt>): ULong {
+        val sizeForLength = 4UL
+        val sizeForItems = value.map { FfiConverterUInt.allocationSize(it) }.sum()
+        return sizeForLength + sizeForItems
+    }
+
+    override fun write(value: List<kotlin.UInt>, buf: ByteBuffer) {
+        buf.putInt(value.size)
+        value.iterator().forEach {
+            FfiConverterUInt.write(it, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
 public object FfiConverterSequenceFloat: FfiConverterRustBuffer<List<kotlin.Float>> {
     override fun read(buf: ByteBuffer): List<kotlin.Float> {
         val len = buf.getInt()
@@ -4628,6 +4787,48 @@ public object FfiConverterSequenceTypeRgbdFrame: FfiConverterRustBuffer<List<Rgb
         FfiConverterUInt.lower(`width`),
         FfiConverterUInt.lower(`height`),
         FfiConverterOptionalTypeFit.lower(`fit`),_status)
+}
+    )
+    }
+    
+
+        /**
+         * Reads a display profile from its JSON text (a profile file's contents, `docs/DISPLAYS.md`): keys
+         * `pixel_pitch_m`, `resolution`, `wavelengths_m`, `volume_depth_m`, `offsets_m` (SI units), optional `name`
+         * and `calibration`; unknown keys are refused.
+         *
+         * Errors: [`TensorholoError::InvalidInput`] whose message names the key at fault (a missing key, a wrong
+         * type or array length, a non-positive pitch or volume, a wavelength outside 380–780 nm, an unknown key) or
+         * says the text is not a JSON object.
+         */
+    @Throws(TensorholoException::class) fun `displayProfileFromJson`(`json`: kotlin.String): DisplayProfile {
+            return FfiConverterTypeDisplayProfile.lift(
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_func_display_profile_from_json(
+    
+        
+        FfiConverterString.lower(`json`),_status)
+}
+    )
+    }
+    
+
+        /**
+         * The [`GeneratorConfig`] for a display: `width`/`height` from its `resolution`, its pitch, lasers and
+         * volume, its first offset; every other field at its default (change them before making the generator).
+         *
+         * Errors: [`TensorholoError::InvalidInput`] naming the key for a profile that breaks the profile rules (as
+         * [`display_profile_from_json`]). Whether the CNNs serve the display is checked by [`HologramGenerator::new`]
+         * ([`TensorholoError::InvalidModel`] naming `wavelengths_m` for lasers without one common depth scale,
+         * `volume_depth_m` for a volume other than `σ`·6 mm, `pixel_pitch_m` for a pitch too fine).
+         */
+    @Throws(TensorholoException::class) fun `generatorConfigForDisplay`(`profile`: DisplayProfile): GeneratorConfig {
+            return FfiConverterTypeGeneratorConfig.lift(
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_func_generator_config_for_display(
+    
+        
+        FfiConverterTypeDisplayProfile.lower(`profile`),_status)
 }
     )
     }

@@ -12,6 +12,8 @@
 package tensorholo.android
 
 import java.io.File
+import java.nio.ByteBuffer
+import java.nio.ByteOrder
 import java.util.Collections
 import javax.imageio.ImageIO
 import org.junit.AfterClass
@@ -22,8 +24,10 @@ import org.junit.Assert.assertThrows
 import org.junit.Assert.assertTrue
 import org.junit.Assume.assumeTrue
 import org.junit.Test
+import tensorholo.CnnEngine
 import tensorholo.ColorFormat
 import tensorholo.DepthFormat
+import tensorholo.DisplayProfile
 import tensorholo.GeneratorConfig
 import tensorholo.HologramGenerator
 import tensorholo.PatternsListener
@@ -31,6 +35,8 @@ import tensorholo.RgbdFrame
 import tensorholo.Rotation
 import tensorholo.SlmPatterns
 import tensorholo.TensorholoException
+import tensorholo.displayProfileFromJson
+import tensorholo.generatorConfigForDisplay
 import tensorholo.packRgba
 import tensorholo.version
 
@@ -271,5 +277,109 @@ class BindingsTest {
         assertThrows(TensorholoException.InvalidInput::class.java) {
             HologramGenerator(GeneratorConfig(width = 0u, height = 64u))
         }
+    }
+
+    /**
+     * A 4 µm SLM at the paper's lasers (docs/DISPLAYS.md): σ = (4/8)² = 0.25, so the shipped 8 µm / 6 mm CNNs
+     * serve a 1.5 mm volume at offsets of 1.5 and 3 mm. Small, so that a frame renders quickly.
+     */
+    private val profile4um = DisplayProfile(
+        pixelPitchM = 4e-6,
+        resolution = listOf(48u, 64u),
+        wavelengthsM = listOf(638e-9, 520e-9, 450e-9),
+        volumeDepthM = 1.5e-3,
+        offsetsM = listOf(1.5e-3, 3e-3),
+        name = "4 µm SLM",
+    )
+
+    /** [profile4um] as a profile file's JSON, with `key` set to the raw JSON `value` where one is given. */
+    private fun profileJson(key: String? = null, value: String? = null): String {
+        val keys = linkedMapOf(
+            "name" to "\"4 µm SLM\"",
+            "pixel_pitch_m" to "4e-6",
+            "resolution" to "[48, 64]",
+            "wavelengths_m" to "[638e-9, 520e-9, 450e-9]",
+            "volume_depth_m" to "1.5e-3",
+            "offsets_m" to "[1.5e-3, 3e-3]",
+        )
+        if (key != null && value != null) keys[key] = value
+        return keys.entries.joinToString(",\n  ", "{\n  ", "\n}") { (k, v) -> "\"$k\": $v" }
+    }
+
+    /** A 64×48 RGB8 texture with metric depth (a ramp from 0.5 m to 1.5 m across the width). */
+    private fun smallFrame(width: Int = 64, height: Int = 48): RgbdFrame {
+        val color = ByteArray(width * height * 3)
+        val depth = ByteBuffer.allocate(width * height * 4).order(ByteOrder.LITTLE_ENDIAN)
+        for (y in 0 until height) {
+            for (x in 0 until width) {
+                val i = (y * width + x) * 3
+                color[i] = (x * 4).toByte()
+                color[i + 1] = (y * 5).toByte()
+                color[i + 2] = ((x xor y) * 7).toByte()
+                depth.putFloat(0.5f + x.toFloat() / width)
+            }
+        }
+        return RgbdFrame(
+            color = color, colorFormat = ColorFormat.RGB8, colorWidth = width.toUInt(), colorHeight = height.toUInt(),
+            depth = depth.array(), depthFormat = DepthFormat.METRES_F32, depthWidth = width.toUInt(),
+            depthHeight = height.toUInt(),
+        )
+    }
+
+    /** Profile → configuration → generator, as an app does (one thread, the native engine: quick and fixed). */
+    private fun generatorFor(profile: DisplayProfile): HologramGenerator =
+        HologramGenerator(generatorConfigForDisplay(profile).copy(threads = 1u, engine = CnnEngine.NATIVE))
+
+    /** The 4 µm profile from JSON is the record built field by field, and the shipped CNNs drive it at σ = 0.25. */
+    @Test
+    fun a4umDisplayProfileRendersWithTheShippedModels() {
+        val profile = displayProfileFromJson(profileJson())
+        assertEquals(profile4um, profile)
+        val config = generatorConfigForDisplay(profile)
+        assertEquals(64u to 48u, config.width to config.height)
+        assertEquals(4e-6, config.pixelPitchM, 0.0)
+        assertEquals(1.5e-3, config.volumeDepthM, 0.0)
+        assertEquals(1.5, config.offsetMm, 1e-12)
+        assertEquals(0.005, config.wavelengthRatioTolerance, 0.0)
+        generatorFor(profile).use { gen ->
+            val out = gen.render(smallFrame())
+            assertEquals(64u to 48u, out.width to out.height)
+            assertTrue("constant pattern", out.red.toSet().size > 1)
+            val info = gen.info()
+            println("4 µm display: ${info.displayMapping}")
+            assertTrue(info.displayMapping, info.displayMapping.contains("σ = 0.25"))
+            assertTrue(info.displayMapping, info.displayMapping.contains("serves 4 µm with a 1.5 mm volume"))
+            assertTrue(info.prefilterReason, info.prefilterModel?.contains("6mm") == true)
+        }
+    }
+
+    /**
+     * Each bad display is an error naming the key, whether it comes as JSON or as a record built field by field:
+     * a negative pitch and a resolution that is not [height, width] break the profile rules (InvalidInput); a
+     * 532 nm green laser (no common depth scale with 638/450 nm) and a volume other than σ·6 mm = 1.5 mm are
+     * displays the shipped CNNs do not serve (InvalidModel, when the generator checks its models).
+     */
+    @Test
+    fun badDisplayProfilesAreErrorsNamingTheKey() {
+        data class Bad(val key: String, val json: String, val record: DisplayProfile, val error: Class<out TensorholoException>)
+        val bad = listOf(
+            Bad("pixel_pitch_m", "-4e-6", profile4um.copy(pixelPitchM = -4e-6), TensorholoException.InvalidInput::class.java),
+            Bad("resolution", "[48]", profile4um.copy(resolution = listOf(48u)), TensorholoException.InvalidInput::class.java),
+            Bad(
+                "wavelengths_m", "[638e-9, 532e-9, 450e-9]", profile4um.copy(wavelengthsM = listOf(638e-9, 532e-9, 450e-9)),
+                TensorholoException.InvalidModel::class.java,
+            ),
+            Bad("volume_depth_m", "2e-3", profile4um.copy(volumeDepthM = 2e-3), TensorholoException.InvalidModel::class.java),
+        )
+        for (b in bad) {
+            val fromJson = assertThrows(b.error) { generatorFor(displayProfileFromJson(profileJson(b.key, b.json))).close() }
+            assertTrue("JSON ${b.key}: ${fromJson.message}", fromJson.message!!.contains(b.key))
+            val fromRecord = assertThrows(b.error) { generatorFor(b.record).close() }
+            assertTrue("record ${b.key}: ${fromRecord.message}", fromRecord.message!!.contains(b.key))
+        }
+        val typo = assertThrows(TensorholoException.InvalidInput::class.java) {
+            displayProfileFromJson(profileJson().replace("pixel_pitch_m", "pixel_pich_m"))
+        }
+        assertTrue(typo.reason, typo.reason.contains("pixel_pich_m"))
     }
 }

@@ -15,20 +15,24 @@ import tensorholo.SlmPatterns
 import tensorholo.TensorholoException
 import tensorholo.android.previewBitmap
 import tensorholo.android.toBitmap
+import tensorholo.displayProfileFromJson
+import tensorholo.generatorConfigForDisplay
 
 /**
  * Camera frames → SLM patterns, off the UI and GL threads.
  *
  * A [HologramGenerator] of the SLM's `width × height` is made on a worker thread (it times the CNN plans for
- * a few seconds), then a [HologramStream]: [push] hands it a frame without blocking, the stream's own thread
- * renders and calls back [onSlm] with the packed SLM bitmap. Every [PREVIEW_EVERY_MS] (and when [focus]
- * changes) the worker renders a [HologramGenerator.preview] of the latest frame for [onPreview]; the
- * generator runs one call at a time, so previews slow the stream a little. Callbacks arrive on background
- * threads; the caller posts them to the UI thread.
+ * a few seconds) for the display that `profileJson` describes ([generatorConfig]), then a [HologramStream]:
+ * [push] hands it a frame without blocking, the stream's own thread renders and calls back [onSlm] with the
+ * packed SLM bitmap. Every [PREVIEW_EVERY_MS] (and when [focus] changes) the worker renders a
+ * [HologramGenerator.preview] of the latest frame for [onPreview]; the generator runs one call at a time, so
+ * previews slow the stream a little. Callbacks arrive on background threads; the caller posts them to the UI
+ * thread.
  */
 class HologramPipeline(
     width: Int,
     height: Int,
+    private val profileJson: String?,
     private val onSlm: (Bitmap) -> Unit,
     private val onPreview: (Bitmap) -> Unit,
     private val onStatus: (String) -> Unit,
@@ -68,15 +72,30 @@ class HologramPipeline(
         worker.execute {
             try {
                 onStatus("preparing the hologram CNN for ${width}x$height…")
-                val gen = HologramGenerator(GeneratorConfig(width = width.toUInt(), height = height.toUInt()))
+                val gen = HologramGenerator(generatorConfig(width, height))
                 generator = gen
                 stream = gen.stream(listener)
                 val info = gen.info()
-                onStatus("${info.width}x${info.height}, ${info.layers} layers, ${info.cnnLayout} × ${info.cnnThreads} threads")
+                onStatus(
+                    "${info.width}x${info.height}, ${info.layers} layers, ${info.cnnLayout} × ${info.cnnThreads} threads; " +
+                        info.displayMapping,
+                )
             } catch (e: TensorholoException) {
                 onStatus("cannot start: ${e.message}")
             }
         }
+    }
+
+    /**
+     * The generator's configuration for a `width × height` SLM: from the display profile (pitch, lasers, volume,
+     * offset; docs/DISPLAYS.md) where the app ships one, else the paper's 8 µm display. The display's mode gives
+     * the size (it is what the SLM is sent). A profile the shipped CNNs cannot serve fails when the generator is
+     * made, naming the key (`volume_depth_m`, `wavelengths_m`…).
+     */
+    private fun generatorConfig(width: Int, height: Int): GeneratorConfig {
+        val json = profileJson ?: return GeneratorConfig(width = width.toUInt(), height = height.toUInt())
+        return generatorConfigForDisplay(displayProfileFromJson(json))
+            .copy(width = width.toUInt(), height = height.toUInt())
     }
 
     /**

@@ -19,6 +19,7 @@ import com.google.ar.core.Config
 import com.google.ar.core.Session
 import com.google.ar.core.exceptions.CameraNotAvailableException
 import com.google.ar.core.exceptions.UnavailableException
+import java.io.IOException
 
 /**
  * ARCore depth camera → hologram. The phone shows a simulated view of the hologram (focus slider: 0 = near,
@@ -36,6 +37,15 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
     private lateinit var status: TextView
     private lateinit var focusBar: SeekBar
     private val displays by lazy { getSystemService(DisplayManager::class.java) }
+
+    /** The SLM's display profile, `assets/display.json` (docs/DISPLAYS.md), or null when the app ships none. */
+    private val displayProfileJson: String? by lazy {
+        try {
+            assets.open(DISPLAY_PROFILE).bufferedReader().use { it.readText() }
+        } catch (e: IOException) {
+            null
+        }
+    }
 
     @Volatile private var session: Session? = null
     @Volatile private var pipeline: HologramPipeline? = null
@@ -183,6 +193,7 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
         pipeline = HologramPipeline(
             size.first,
             size.second,
+            displayProfileJson,
             onSlm = { bitmap -> runOnUiThread { presentation?.showPattern(bitmap) } },
             onPreview = { bitmap -> runOnUiThread { previewView.setImageBitmap(bitmap) } },
             onStatus = { message -> runOnUiThread { status.text = message } },
@@ -211,6 +222,9 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
 
     private companion object {
         const val CAMERA_REQUEST = 1
+
+        /** The SLM's display profile in the app's assets: pitch, lasers, volume, offsets (docs/DISPLAYS.md). */
+        const val DISPLAY_PROFILE = "display.json"
 
         /** Hologram size when no SLM display is connected (preview only). */
         val PREVIEW_ONLY_SIZE = 640 to 360

@@ -21,21 +21,26 @@
 //! pool) and any sample can be regenerated alone ([`SampleGenerator::sample`]).
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 use ndarray::{s, Array, Array1, Array3, Array4, ArrayView3, Axis, Ix1, Ix4, Zip};
 use ndarray_npy::NpzWriter;
 use num_complex::Complex32;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{invalid, HoloError, Result};
-use crate::io::{ensure_not_input, save_amplitude_png};
+use crate::io::save_amplitude_png;
 use crate::scene::{LayeredDepthImage, LdiLayer, RandomSceneConfig, RandomSceneGenerator};
 use crate::splitmix::splitmix64;
 use crate::synthesis::{
     ldi_layers, AberrationCorrectedSmLbm, AberrationCorrection, AberrationProfile, SmLbm,
+};
+
+mod shards;
+
+pub use shards::{
+    generate_shards, merge_shards, DatasetPlan, ShardRecord, ShardRun, ShardSelection,
+    ShardStatistics, SHARD_RECORD_FORMAT, SHARD_RECORD_SUFFIX,
 };
 
 /// Value of the manifest's `format` field.
@@ -632,6 +637,40 @@ pub struct OpticsInfo {
     pub depth_to_z: String,
 }
 
+/// The display profile a dataset was made for (`holo dataset --display FILE`, `docs/DISPLAYS.md`): what
+/// [`OpticsInfo`] does not hold. The optics themselves (the profile's, with any single flag in its place)
+/// are in [`DatasetPlan::optics`] (the manifest's `optics`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DisplayInfo {
+    /// The profile file as given (written lossily if not UTF-8), `None` when the profile came from code.
+    pub file: Option<String>,
+    /// The profile's `name`.
+    pub name: Option<String>,
+    /// The SLM's `[height, width]` in pixels (the samples have the dataset's own `resolution`).
+    pub slm_resolution: [usize; 2],
+    /// The offsets `s` in metres the display runs at (Eq. 6), the first its default: the offsets to train
+    /// pre-filters for.
+    pub offsets_m: Vec<f64>,
+    /// The profile's `.holocal` calibration (resolved path, lossy UTF-8), if any.
+    pub calibration: Option<String>,
+}
+
+impl DisplayInfo {
+    /// The record of `profile`, read from `file` if given.
+    pub fn new(profile: &crate::display::DisplayProfile, file: Option<&Path>) -> Self {
+        Self {
+            file: file.map(|f| f.to_string_lossy().into_owned()),
+            name: profile.name.clone(),
+            slm_resolution: profile.resolution,
+            offsets_m: profile.offsets_m.clone(),
+            calibration: profile
+                .calibration
+                .as_ref()
+                .map(|c| c.to_string_lossy().into_owned()),
+        }
+    }
+}
+
 /// One shard file of a split.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ShardInfo {
@@ -709,31 +748,10 @@ pub struct Manifest {
     pub generator: GeneratorInfo,
     /// Seconds since the Unix epoch when generation finished.
     pub created_unix_s: u64,
-    /// Base seed.
-    pub seed: u64,
-    /// How per-sample seeds derive from the base seed ([`sample_seed`]).
-    pub seed_derivation: String,
-    /// `[H, W]` in pixels.
-    pub resolution: [usize; 2],
-    /// LDI layers `L`.
-    pub ldi_layers: usize,
-    /// Ground-truth synthesis.
-    pub synthesis: SynthesisInfo,
-    /// Display geometry.
-    pub optics: OpticsInfo,
-    /// Random-scene configuration.
-    pub scene: RandomSceneConfig,
-    /// Photos used for textures (paths as given, written lossily if not UTF-8), empty without a photo folder.
-    #[serde(serialize_with = "crate::io::lossy_path::list")]
-    pub photos: Vec<PathBuf>,
-    /// Samples per shard.
-    pub shard_size: usize,
-    /// Whether shard members are deflate-compressed.
-    pub compressed: bool,
-    /// The splits, train, val, test.
-    pub splits: Vec<SplitInfo>,
-    /// Arrays in every shard.
-    pub arrays: Vec<ArrayInfo>,
+    /// What the dataset is (seed, resolution, synthesis, optics, display, scenes, shards, arrays): its keys
+    /// sit at the manifest's top level.
+    #[serde(flatten)]
+    pub plan: DatasetPlan,
     /// Statistics over all samples.
     pub statistics: DatasetStatistics,
 }
@@ -741,7 +759,7 @@ pub struct Manifest {
 impl Manifest {
     /// The entry of `split`.
     pub fn split(&self, split: Split) -> Option<&SplitInfo> {
-        self.splits.iter().find(|s| s.name == split)
+        self.plan.splits.iter().find(|s| s.name == split)
     }
 }
 
@@ -823,238 +841,59 @@ pub struct GenerateOptions {
     pub command: Vec<String>,
     /// The aberration profile's file, recorded in the manifest with [`DatasetConfig::aberration`].
     pub aberration_file: Option<PathBuf>,
+    /// The display profile the dataset is made for, recorded in the manifest ([`DatasetPlan::display`]). Its
+    /// optics must be [`DatasetConfig::synthesis`]'s unless a single flag overrode them: only the record is
+    /// taken from here.
+    pub display: Option<DisplayInfo>,
 }
 
-/// Running sums for [`DatasetStatistics`].
-#[derive(Default)]
-struct Accumulator {
-    samples: usize,
-    planes_sum: f64,
-    planes_min: usize,
-    planes_max: usize,
-    valid_sum: Vec<f64>,
-    multi_sum: f64,
-    multi_min: f64,
-    layers_sum: f64,
-    amp_max: f64,
-    amp_sum: f64,
-    seconds_sum: f64,
-}
-
-impl Accumulator {
-    fn add(&mut self, s: &Sample) {
-        let st = LdiStatistics::of(&s.ldi);
-        if self.samples == 0 {
-            self.planes_min = usize::MAX;
-            self.multi_min = f64::INFINITY;
-            self.valid_sum = vec![0.0; st.valid_fraction.len()];
-        }
-        self.samples += 1;
-        self.planes_sum += s.nonempty_planes as f64;
-        self.planes_min = self.planes_min.min(s.nonempty_planes);
-        self.planes_max = self.planes_max.max(s.nonempty_planes);
-        for (a, v) in self.valid_sum.iter_mut().zip(&st.valid_fraction) {
-            *a += v;
-        }
-        self.multi_sum += st.multi_layer_fraction;
-        self.multi_min = self.multi_min.min(st.multi_layer_fraction);
-        self.layers_sum += st.mean_valid_layers;
-        let (mut mx, mut sum) = (0.0f64, 0.0f64);
-        for v in &s.midpoint {
-            let a = f64::from(v.norm());
-            mx = mx.max(a);
-            sum += a;
-        }
-        self.amp_max = self.amp_max.max(mx);
-        self.amp_sum += sum / s.midpoint.len() as f64;
-        self.seconds_sum += s.seconds;
-    }
-
-    fn finish(&self, wall_seconds: f64) -> DatasetStatistics {
-        let n = self.samples.max(1) as f64;
-        DatasetStatistics {
-            samples: self.samples,
-            mean_nonempty_planes: self.planes_sum / n,
-            min_nonempty_planes: if self.samples == 0 {
-                0
-            } else {
-                self.planes_min
-            },
-            max_nonempty_planes: self.planes_max,
-            mean_valid_fraction: self.valid_sum.iter().map(|v| v / n).collect(),
-            mean_multi_layer_fraction: self.multi_sum / n,
-            min_multi_layer_fraction: if self.samples == 0 {
-                0.0
-            } else {
-                self.multi_min
-            },
-            mean_valid_layers: self.layers_sum / n,
-            max_midpoint_amplitude: self.amp_max,
-            mean_midpoint_amplitude: self.amp_sum / n,
-            mean_sample_seconds: self.seconds_sum / n,
-            wall_seconds,
-            threads: rayon::current_num_threads(),
-        }
-    }
-}
-
-/// A shard to produce: split, shard number, first index, sample count.
-#[derive(Debug, Clone, Copy)]
-struct ShardJob {
-    split: Split,
-    shard: usize,
-    first: usize,
-    samples: usize,
-}
-
-/// Generates a whole dataset into `out_dir`: every sample of every split (in parallel on the current
-/// rayon pool), the `.npz` shards (see [`write_shard`]; each written while the next ones compute) and
-/// finally `manifest.json` (see [`Manifest`]). `progress(done, total)` is called after every sample
-/// (from worker threads). Returns the manifest written.
+/// Generates a whole dataset into `out_dir` in this process: every shard of every split
+/// ([`generate_shards`] with [`ShardSelection::ALL`]: samples in parallel on the current rayon pool, each
+/// shard and its record written while the next ones compute), then `manifest.json` ([`merge_shards`],
+/// see [`Manifest`]). `progress(done, total)` is called after every sample (from worker threads). Returns
+/// the manifest written.
 ///
 /// Nothing is written unless the configuration is valid. A folder that already holds a
 /// `manifest.json` is refused unless [`GenerateOptions::overwrite`]. Photos (inputs) are never
 /// overwritten. Files appear atomically; an interrupted run leaves no manifest, so the folder is not
-/// mistaken for a dataset.
+/// mistaken for a dataset, and a rerun keeps the shards it had finished (`shards` module docs).
 ///
-/// Errors: as [`SampleGenerator::new`] and [`SampleGenerator::sample`];
-/// [`HoloError::InvalidParameter`] (`out_dir`) if a dataset exists there and `overwrite` is false;
-/// [`HoloError::WouldOverwriteInput`] if an output file would replace a photo; [`HoloError::Io`] /
-/// [`HoloError::Npy`] for write failures.
+/// Errors: as [`generate_shards`] and [`merge_shards`].
 pub fn generate(
     out_dir: &Path,
     config: &DatasetConfig,
     options: &GenerateOptions,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<Manifest> {
-    let t_all = Instant::now();
-    let generator = SampleGenerator::new(config)?;
-    let manifest_path = out_dir.join(MANIFEST_FILE);
-    let mut stale: Vec<String> = Vec::new();
-    if manifest_path.exists() {
-        if !options.overwrite {
-            return Err(invalid(
-                "out_dir",
-                format!(
-                    "`{}` already holds a dataset ({MANIFEST_FILE}); choose another folder or allow \
-                     overwriting it",
-                    out_dir.display()
-                ),
-            ));
-        }
-        if let Ok(old) = read_manifest(out_dir) {
-            stale = old
-                .splits
-                .iter()
-                .flat_map(|s| s.shards.iter().map(|f| f.file.clone()))
-                .collect();
-        }
-    }
-
-    // Plan the shards.
-    let mut jobs = Vec::new();
-    let mut splits = Vec::new();
-    for split in Split::ALL {
-        let count = config.count(split);
-        let mut shards = Vec::new();
-        for (shard, first) in (0..count).step_by(config.shard_size).enumerate() {
-            let samples = config.shard_size.min(count - first);
-            jobs.push(ShardJob {
-                split,
-                shard,
-                first,
-                samples,
-            });
-            shards.push(ShardInfo {
-                file: shard_file_name(split, shard),
-                samples,
-                first_index: first,
-            });
-        }
-        splits.push(SplitInfo {
-            name: split,
-            samples: count,
-            shards,
-        });
-    }
-    let photos: Vec<&Path> = generator
-        .scenes()
-        .photo_paths()
-        .iter()
-        .map(PathBuf::as_path)
-        .collect();
-    ensure_not_input(&manifest_path, &photos)?;
-    for split in &splits {
-        for shard in &split.shards {
-            ensure_not_input(&out_dir.join(&shard.file), &photos)?;
-        }
-    }
-    std::fs::create_dir_all(out_dir).map_err(io_error(out_dir))?;
-
-    // Compute groups of shards with at least two samples per worker thread in flight; write each group
-    // on a background thread while the next one computes.
-    let total: u64 = jobs.iter().map(|j| j.samples as u64).sum();
-    let done = AtomicU64::new(0);
-    let target = 2 * rayon::current_num_threads().max(1);
-    let mut groups: Vec<Vec<ShardJob>> = Vec::new();
-    let mut in_group = 0;
-    for job in jobs {
-        if in_group >= target || groups.is_empty() {
-            groups.push(Vec::new());
-            in_group = 0;
-        }
-        in_group += job.samples;
-        groups.last_mut().expect("pushed above").push(job);
-    }
-    let mut acc = Accumulator::default();
-    std::thread::scope(|scope| -> Result<()> {
-        let mut writer: Option<std::thread::ScopedJoinHandle<'_, Result<()>>> = None;
-        let join = |h: std::thread::ScopedJoinHandle<'_, Result<()>>| {
-            h.join().unwrap_or_else(|_| {
-                Err(HoloError::Internal(
-                    "the shard writer thread panicked".into(),
-                ))
+    // Shards of a replaced dataset that the new one does not have go, with their records.
+    let stale: Vec<String> = if options.overwrite {
+        let mut files: Vec<String> = read_manifest(out_dir)
+            .map(|old| {
+                old.plan
+                    .splits
+                    .iter()
+                    .flat_map(|s| s.shards.iter().map(|f| f.file.clone()))
+                    .collect()
             })
-        };
-        for group in groups {
-            let items: Vec<(Split, usize)> = group
-                .iter()
-                .flat_map(|j| (j.first..j.first + j.samples).map(move |i| (j.split, i)))
-                .collect();
-            let mut samples: Vec<Sample> = items
-                .par_iter()
-                .map(|&(split, index)| {
-                    let s = generator.sample(split, index)?;
-                    progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
-                    Ok(s)
-                })
-                .collect::<Result<_>>()?;
-            for s in &samples {
-                acc.add(s);
-            }
-            if let Some(h) = writer.take() {
-                join(h)?;
-            }
-            let compress = config.compress;
-            writer = Some(scope.spawn(move || {
-                for job in group.iter().rev() {
-                    let rest = samples.split_off(samples.len() - job.samples);
-                    let path = out_dir.join(shard_file_name(job.split, job.shard));
-                    write_shard(&path, &rest, compress)?;
-                }
-                Ok(())
+            .unwrap_or_default();
+        if let Ok(entries) = std::fs::read_dir(out_dir) {
+            files.extend(entries.flatten().filter_map(|e| {
+                e.file_name()
+                    .to_str()
+                    .and_then(|n| n.strip_suffix(SHARD_RECORD_SUFFIX))
+                    .map(str::to_string)
             }));
         }
-        if let Some(h) = writer.take() {
-            join(h)?;
-        }
-        Ok(())
-    })?;
-
-    // Shards of a replaced dataset that the new one does not have.
-    let current: std::collections::HashSet<&str> = splits
+        files
+    } else {
+        Vec::new()
+    };
+    let run = generate_shards(out_dir, config, options, ShardSelection::ALL, progress)?;
+    let current: std::collections::HashSet<&str> = run
+        .written
         .iter()
-        .flat_map(|s| s.shards.iter().map(|f| f.file.as_str()))
+        .chain(&run.kept)
+        .map(String::as_str)
         .collect();
     for file in &stale {
         let plain = Path::new(file)
@@ -1062,71 +901,10 @@ pub fn generate(
             .is_some_and(|n| n == file.as_str());
         if plain && file.ends_with(".npz") && !current.contains(file.as_str()) {
             let _ = std::fs::remove_file(out_dir.join(file));
+            let _ = std::fs::remove_file(out_dir.join(format!("{file}{SHARD_RECORD_SUFFIX}")));
         }
     }
-
-    let setup = config.synthesis.setup;
-    let manifest = Manifest {
-        format: FORMAT_NAME.into(),
-        format_version: FORMAT_VERSION,
-        generator: GeneratorInfo {
-            name: "tensorholo".into(),
-            version: env!("CARGO_PKG_VERSION").into(),
-            git_commit: options
-                .git_commit
-                .clone()
-                .unwrap_or_else(|| "unknown".into()),
-            command: options.command.clone(),
-        },
-        created_unix_s: std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_secs())
-            .unwrap_or(0),
-        seed: config.seed,
-        seed_derivation: "seed(split, i) = m(m(m(base_seed) ^ split_id) ^ i), m = SplitMix64 \
-                          finaliser, split_id train 0 / val 1 / test 2; scene RNG = \
-                          ChaCha8Rng::seed_from_u64(seed)"
-            .into(),
-        resolution: [config.scene.height, config.scene.width],
-        ldi_layers: config.scene.layers,
-        synthesis: SynthesisInfo {
-            method: if config.aberration.is_some() {
-                "SM-LBM with aberration correction (Eq. 5)".into()
-            } else {
-                "SM-LBM".into()
-            },
-            levels: config.synthesis.levels,
-            silhouette_masks: config.synthesis.silhouette_masks,
-            pad: config.synthesis.options.pad,
-            band_limit: config.synthesis.options.band_limit,
-            hologram_plane: "midpoint (z = 0)".into(),
-            initial_phase: "exp(i 2 pi z_n / lambda) (Maimone et al.)".into(),
-            aberration: config.aberration.as_ref().map(|a| AberrationInfo {
-                file: options.aberration_file.clone(),
-                slm_offset_m: a.slm_offset_m,
-                profile: a.profile.clone(),
-            }),
-        },
-        optics: OpticsInfo {
-            wavelengths_m: setup.wavelengths_m,
-            pixel_pitch_m: setup.pixel_pitch_m,
-            volume_depth_m: setup.volume_depth_m,
-            depth_to_z: "z(d) = (0.5 - d) * volume_depth_m".into(),
-        },
-        scene: config.scene.clone(),
-        photos: generator.scenes().photo_paths().to_vec(),
-        shard_size: config.shard_size,
-        compressed: config.compress,
-        splits,
-        arrays: array_infos(),
-        statistics: acc.finish(t_all.elapsed().as_secs_f64()),
-    };
-    let json = serde_json::to_string_pretty(&manifest)
-        .map_err(|e| HoloError::InvalidData(format!("cannot serialise the manifest: {e}")))?;
-    write_atomic(&manifest_path, |tmp| {
-        std::fs::write(tmp, json + "\n").map_err(io_error(tmp))
-    })?;
-    Ok(manifest)
+    merge_shards(out_dir)
 }
 
 /// Saves previews of an LDI into `dir`: `<stem>_rgb.png` (layer 0 amplitude, sRGB), `<stem>_depth.png`
