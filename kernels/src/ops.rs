@@ -21,6 +21,8 @@ use crate::conv3x3::{f32_avx2, f32_avx512, u8s8_avx2, u8s8_avx512vnni, u8s8_avxv
 use crate::conv3x3::{f32_neon, u8s8_neon, u8s8_neondot, u8s8_neoni8mm};
 use crate::conv3x3::{f32_scalar, u8s8_scalar};
 use crate::depthwise::body::{self as depthwise, Job as DepthwiseJob, PORTABLE_TILE};
+#[cfg(target_arch = "x86_64")]
+use crate::double_phase::avx2 as dpm_avx2;
 use crate::double_phase::body::{self as dpm, EncodeParams};
 use crate::error::KernelError;
 use crate::heads::body as heads;
@@ -228,8 +230,8 @@ static OPS: [Ops; 5] = [
         depthwise: Some(depthwise::x86::rows_avx2),
         heads: Some(heads::x86::heads_avx2),
         grid: Some(heads::x86::grid_avx2),
-        dpm_analyse: Some(dpm::x86::analyse_avx2),
-        dpm_encode: Some(dpm::x86::encode_avx2),
+        dpm_analyse: Some(dpm_avx2::analyse_avx2),
+        dpm_encode: Some(dpm_avx2::encode_avx2),
         peak_f32: Some(Peak {
             ops_per_iter: 12.0 * 8.0 * 2.0,
             run: f32_avx2::peak,

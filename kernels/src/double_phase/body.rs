@@ -1,8 +1,8 @@
 //! The double phase rows' portable bodies ([`crate::double_phase`] gives the method and the error bounds):
-//! plain safe Rust on chunks of [`LANES`] pixels held in fixed-size arrays, branch-free (selects only), so
-//! that the compiler vectorises every step (SSE2 / NEON as it is; AVX2 ymm inside the `#[target_feature]`
-//! copies of [`x86`]). Rust never contracts `a·b + c` into an FMA and never reorders float arithmetic, so
-//! every path computes bit-identical values (tested).
+//! plain safe Rust on chunks of [`LANES`] pixels held in fixed-size arrays, branch-free (selects only), which
+//! the compiler vectorises as far as it can (SSE2 on x86-64, NEON on aarch64). The AVX2 path
+//! (`super::avx2`) writes the same operations out in intrinsics. Rust never contracts `a·b + c` into an
+//! FMA and never reorders float arithmetic, so every path computes bit-identical values (tested).
 
 use std::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI, TAU};
 
@@ -10,10 +10,29 @@ use std::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI, TAU};
 pub(crate) const LANES: usize = 8;
 
 /// `tan(π/8)`: above it, `atan(t) = π/4 + atan((t − 1)/(t + 1))`.
-const TAN_PI_8: f32 = 0.414_213_57;
+pub(crate) const TAN_PI_8: f32 = 0.414_213_57;
 
 /// Above this magnitude `n + d` could overflow: both are scaled by 1/4 first (the ratio is unchanged).
-const HUGE: f32 = 1.0e37;
+pub(crate) const HUGE: f32 = 1.0e37;
+
+/// The Cephes `atanf` polynomial, highest power first: `atan(t) ≈ t + t·z·(((P0·z + P1)·z + P2)·z + P3)`,
+/// `z = t²`, on `|t| ≤ tan(π/8)`.
+pub(crate) const ATAN_P: [f32; 4] = [
+    8.053_744_5e-2,
+    -1.387_768_5e-1,
+    1.997_771_1e-1,
+    -3.333_295e-1,
+];
+
+/// The Cephes `asinf` polynomial, highest power first: `asin(s) ≈ s + s·z·((((P0·z + P1)·z + P2)·z + P3)·z
+/// + P4)`, `z = s²`, on `s ∈ [0, 1/2]`.
+pub(crate) const ASIN_P: [f32; 5] = [
+    4.216_32e-2,
+    2.418_131_1e-2,
+    4.547_002_6e-2,
+    7.495_300_3e-2,
+    1.666_675_2e-1,
+];
 
 /// `atan2(y, x)` in radians, `[−π, π]`, with the signs of zeros and infinities as IEEE `atan2`: `(±0, +0)`
 /// → ±0, `(±0, −0)` → ±π, `(±∞, ±∞)` → ±π/4 or ±3π/4; NaN in, NaN out.
@@ -29,14 +48,15 @@ pub fn atan2(y: f32, x: f32) -> f32 {
     let d = if swap { ay } else { ax };
     let s = if d > HUGE { 0.25 } else { 1.0 };
     let (n, d) = (n * s, d * s);
-    let upper = n > TAN_PI_8 * d;
+    // Both infinite: `n > tan(π/8)·d` is false (∞ > ∞); the upper branch gives π/4 as IEEE wants.
+    let upper = n > TAN_PI_8 * d || n == f32::INFINITY;
     let num = if upper { n - d } else { n };
     let den = if upper { n + d } else { d };
     let t = num / den;
     // 0/0 (both zero) and ∞/∞ (both infinite); a NaN input is restored below.
     let t = if t.is_nan() { 0.0 } else { t };
     let z = t * t;
-    let p = (((8.053_744_5e-2 * z - 1.387_768_5e-1) * z + 1.997_771_1e-1) * z - 3.333_295e-1) * z * t + t;
+    let p = (((ATAN_P[0] * z + ATAN_P[1]) * z + ATAN_P[2]) * z + ATAN_P[3]) * z * t + t;
     let r = if upper { p + FRAC_PI_4 } else { p };
     let r = if swap { FRAC_PI_2 - r } else { r };
     let r = if x.is_sign_negative() { PI - r } else { r };
@@ -57,11 +77,9 @@ pub fn acos_unit(x: f32) -> f32 {
     let big = x > 0.5;
     let z = if big { (1.0 - x) * 0.5 } else { x * x };
     let s = if big { z.sqrt() } else { x };
-    let p = ((((4.216_32e-2 * z + 2.418_131_1e-2) * z + 4.547_002_6e-2) * z + 7.495_300_3e-2) * z
-        + 1.666_675_2e-1)
-        * z
-        * s
-        + s;
+    let p =
+        ((((ASIN_P[0] * z + ASIN_P[1]) * z + ASIN_P[2]) * z + ASIN_P[3]) * z + ASIN_P[4]) * z * s
+            + s;
     if big {
         2.0 * p
     } else {
@@ -89,11 +107,12 @@ pub fn wrap_phase(phase: f32) -> f32 {
 /// [`wrap_phase`] for `phase ∈ [−4π, 4π)`, branch-free (also NaN → NaN).
 #[inline(always)]
 fn wrap_near(phase: f32) -> f32 {
+    // Selects, not `w + 0`: that would turn −0 into +0 (the scalar wrap keeps −0).
     let mut w = phase;
-    w += if w < 0.0 { TAU } else { 0.0 };
-    w += if w < 0.0 { TAU } else { 0.0 };
-    w -= if w >= TAU { TAU } else { 0.0 };
-    w -= if w >= TAU { TAU } else { 0.0 };
+    w = if w < 0.0 { w + TAU } else { w };
+    w = if w < 0.0 { w + TAU } else { w };
+    w = if w >= TAU { w - TAU } else { w };
+    w = if w >= TAU { w - TAU } else { w };
     // Adding 2π to a tiny negative value can round up to exactly 2π.
     if w >= TAU || w < 0.0 {
         0.0
@@ -259,28 +278,4 @@ fn encode_tail(field: &[f32], phase: &mut [f32], codes: &mut [u8; LANES], prm: &
     p[..n].copy_from_slice(phase);
     *codes = encode_chunk(&f, &mut p, prm);
     phase.copy_from_slice(&p[..n]);
-}
-
-#[cfg(target_arch = "x86_64")]
-pub(crate) mod x86 {
-    use super::{analyse_body, encode_body, EncodeParams};
-
-    /// # Safety
-    /// The CPU has AVX2 and FMA.
-    #[target_feature(enable = "avx2,fma")]
-    pub(crate) unsafe fn analyse_avx2(field: &[f32], phase: &mut [f32]) -> (f32, f64) {
-        analyse_body(field, phase)
-    }
-
-    /// # Safety
-    /// The CPU has AVX2 and FMA.
-    #[target_feature(enable = "avx2,fma")]
-    pub(crate) unsafe fn encode_avx2(
-        field: &[f32],
-        phase: &mut [f32],
-        codes: Option<&mut [u8]>,
-        prm: &EncodeParams,
-    ) {
-        encode_body(field, phase, codes, prm)
-    }
 }

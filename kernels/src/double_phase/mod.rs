@@ -29,6 +29,8 @@
 //! within 1.2e-6 rad of a rounding boundary between two codes: on random fields about 1 pixel in 10⁴ at
 //! most (`tests`; the SDK counts the real frames).
 
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod avx2;
 pub(crate) mod body;
 
 pub use body::{acos_unit, atan2, linear_code_wrapped, wrap_phase};
@@ -62,7 +64,11 @@ fn check(what: &'static str, expected: usize, got: usize) -> Result<(), KernelEr
 /// apart, then together). A NaN `|H|²` is skipped by the maximum, as `f32::max` does. Errors: lengths
 /// ([`KernelError::Length`]), `isa` not available ([`KernelError::Isa`]).
 pub fn analyse_row(field: &[f32], phase: &mut [f32], isa: Isa) -> Result<(f32, f64), KernelError> {
-    check("double phase field (2 values per pixel)", 2 * phase.len(), field.len())?;
+    check(
+        "double phase field (2 values per pixel)",
+        2 * phase.len(),
+        field.len(),
+    )?;
     ops::run_dpm_analyse(isa, field, phase)
 }
 
@@ -80,7 +86,11 @@ pub fn encode_row(
     inv_a: f32,
     isa: Isa,
 ) -> Result<(), KernelError> {
-    check("double phase field (2 values per pixel)", 2 * phase.len(), field.len())?;
+    check(
+        "double phase field (2 values per pixel)",
+        2 * phase.len(),
+        field.len(),
+    )?;
     if let Some(c) = &codes {
         check("double phase codes", phase.len(), c.len())?;
     }

@@ -137,7 +137,8 @@ fn atan2_special_values_follow_ieee() {
         let got = atan2(y, x);
         let want = y.atan2(x);
         assert!(
-            (got - want).abs() <= ATAN2_MAX_ERROR && got.is_sign_negative() == want.is_sign_negative(),
+            (got - want).abs() <= ATAN2_MAX_ERROR
+                && got.is_sign_negative() == want.is_sign_negative(),
             "atan2({y}, {x}) = {got}, libm {want}"
         );
     }
@@ -202,7 +203,9 @@ fn double_phase_exhaustive_bounds() {
         let (y, x) = (rng.any_finite(), rng.any_finite());
         worst = worst.max(atan2_err(y, x, atan2(y, x)));
     }
-    println!("atan2 worst error (exhaustive y, x ∈ ±{{0, 1, 1.7}}, 10⁷ random pairs): {worst:e} rad");
+    println!(
+        "atan2 worst error (exhaustive y, x ∈ ±{{0, 1, 1.7}}, 10⁷ random pairs): {worst:e} rad"
+    );
     assert!(worst <= ATAN2_MAX_ERROR as f64);
     let mut worst = 0.0f64;
     for bits in 0..=1.0f32.to_bits() {
@@ -223,9 +226,22 @@ fn double_phase_exhaustive_bounds() {
 #[test]
 fn wrap_and_codes_equal_the_scalar_definitions() {
     let mut rng = Rng(77);
-    let mut values: Vec<f32> = (0..200_000).map(|_| (rng.unit() - 0.5) * 8.0 * TAU).collect();
+    let mut values: Vec<f32> = (0..200_000)
+        .map(|_| (rng.unit() - 0.5) * 8.0 * TAU)
+        .collect();
     values.extend((0..200_000).map(|_| (rng.unit() - 0.5) * 2e4));
-    values.extend([0.0, -0.0, -1e-9, -1e-30, TAU, -TAU, 2.0 * TAU, -2.0 * TAU, 1e30, -1e30]);
+    values.extend([
+        0.0,
+        -0.0,
+        -1e-9,
+        -1e-30,
+        TAU,
+        -TAU,
+        2.0 * TAU,
+        -2.0 * TAU,
+        1e30,
+        -1e30,
+    ]);
     // Every code boundary k + ½ (ties, away from zero) and its f32 neighbours.
     for k in 0..256 {
         let b = (k as f32 + 0.5) * (TAU / 256.0);
@@ -252,7 +268,16 @@ fn every_path_is_bit_identical_with_the_portable_body() {
         let stats = analyse_row(&f, &mut want, Isa::Scalar).unwrap();
         let mut want_codes = vec![0u8; n];
         let mut want_enc = want.clone();
-        encode_row(&f, &mut want_enc, Some(&mut want_codes), n % 2 == 1, 0.3, 1.0, Isa::Scalar).unwrap();
+        encode_row(
+            &f,
+            &mut want_enc,
+            Some(&mut want_codes),
+            n % 2 == 1,
+            0.3,
+            1.0,
+            Isa::Scalar,
+        )
+        .unwrap();
         for (name, isa) in paths() {
             let mut p = vec![f32::NAN; n];
             let s = analyse_row(&f, &mut p, isa).unwrap();
@@ -262,7 +287,10 @@ fn every_path_is_bit_identical_with_the_portable_body() {
             assert!(same, "{name} n {n}");
             let mut c = vec![0u8; n];
             encode_row(&f, &mut p, Some(&mut c), n % 2 == 1, 0.3, 1.0, isa).unwrap();
-            let same = p.iter().zip(&want_enc).all(|(a, b)| a.to_bits() == b.to_bits());
+            let same = p
+                .iter()
+                .zip(&want_enc)
+                .all(|(a, b)| a.to_bits() == b.to_bits());
             assert!(same && c == want_codes, "{name} n {n}");
         }
     }
@@ -288,7 +316,10 @@ fn rows_match_libm_within_the_phase_bound_and_one_code_step() {
                     want_sum += im.atan2(re) as f64;
                 }
                 assert_eq!(max, want_max);
-                assert!((sum - want_sum).abs() <= 1e-6 * (1.0 + n as f64), "{sum} {want_sum}");
+                assert!(
+                    (sum - want_sum).abs() <= 1e-6 * (1.0 + n as f64),
+                    "{sum} {want_sum}"
+                );
                 let inv_a = 1.0 / want_max.sqrt().max(1e-30);
                 let mut c = vec![0u8; n];
                 encode_row(&f, &mut p, Some(&mut c), y % 2 == 1, mean, inv_a, isa).unwrap();
@@ -297,7 +328,11 @@ fn rows_match_libm_within_the_phase_bound_and_one_code_step() {
                     let d = (p[x] - want).abs();
                     let d = d.min(TAU - d);
                     worst = worst.max(d);
-                    assert!(d <= PHASE_MAX_ERROR, "n {n} x {x} y {y}: {} vs {want}", p[x]);
+                    assert!(
+                        d <= PHASE_MAX_ERROR,
+                        "n {n} x {x} y {y}: {} vs {want}",
+                        p[x]
+                    );
                     let (a, b) = (c[x], libm_code(want));
                     let step = a.wrapping_sub(b).min(b.wrapping_sub(a));
                     assert!(step <= 1, "code {a} vs {b}");
@@ -323,7 +358,12 @@ fn a_mean_far_outside_the_circle_still_wraps() {
         for x in 0..3 {
             let want = libm_phase(f[2 * x], f[2 * x + 1], 0, x, 1000.0, 1.0);
             let d = (p[x] - want).abs();
-            assert!(d.min(TAU - d) <= 1e-3, "{} vs {want} (arg {})", p[x], arg[x]);
+            assert!(
+                d.min(TAU - d) <= 1e-3,
+                "{} vs {want} (arg {})",
+                p[x],
+                arg[x]
+            );
             assert!((0.0..TAU).contains(&p[x]));
         }
     }
@@ -333,7 +373,10 @@ fn a_mean_far_outside_the_circle_still_wraps() {
 fn bad_lengths_are_refused() {
     let f = [0.0f32; 6];
     let mut p = [0.0f32; 2];
-    assert!(matches!(analyse_row(&f, &mut p, Isa::Scalar), Err(KernelError::Length { .. })));
+    assert!(matches!(
+        analyse_row(&f, &mut p, Isa::Scalar),
+        Err(KernelError::Length { .. })
+    ));
     let mut p = [0.0f32; 3];
     let mut c = [0u8; 2];
     assert!(matches!(
