@@ -1,13 +1,13 @@
 //! The kernel table: one [`Ops`] per ISA level, listing what that level's instructions compile: its conv3x3
-//! rows (f32 and int8, best first), its copies of the depthwise filter, the heads and the output grid, and
-//! its peak loops. A level's table holds only the kernels that need exactly that level; dispatch under a
+//! rows (f32 and int8, best first), its copies of the depthwise filter, the heads and the output grid, its
+//! double phase rows, and its peak loops. A level's table holds only the kernels that need exactly that level; dispatch under a
 //! selected level `s` reads every table whose level `s` includes, best level first, and takes the first entry
 //! it finds (for conv3x3, the first row: see [`select_f32_for`] for the one refinement). So the f32 rows,
 //! best first, are the tables' rows one after the other, and `avx512vnni` runs the `avx512` table's f32 row
 //! and depthwise copy.
 //!
 //! The plans ([`crate::Conv3x3F32`], [`crate::Conv3x3U8`], [`crate::depthwise()`], [`crate::tanh_heads`],
-//! [`crate::fake_quantize`]), the tests and, through [`crate::registry`], the benchmarks read these tables,
+//! [`crate::fake_quantize`], [`crate::double_phase`]), the tests and, through [`crate::registry`], the benchmarks read these tables,
 //! and the `run_*` functions here are the single dispatch point: the one place outside the ISA files where a
 //! kernel is called through `unsafe`, each after checking that the CPU has the entry's level.
 
@@ -75,7 +75,7 @@ pub(crate) struct Ops {
 }
 
 /// The portable level: safe code, any CPU; every kind of kernel has an entry here, so dispatch always finds
-/// one. The depthwise, heads and grid entries are the portable bodies themselves (SSE2 / NEON).
+/// one. The depthwise, heads, grid and double phase entries are the portable bodies themselves (SSE2 / NEON).
 const SCALAR: Ops = Ops {
     isa: Isa::Scalar,
     f32: &[F32Row {
@@ -245,7 +245,7 @@ static OPS: [Ops; 5] = [
 ];
 
 /// aarch64 levels, best first. NEON is the aarch64 baseline: the portable bodies of the depthwise filter,
-/// the heads and the grid are compiled with it already.
+/// the heads, the grid and the double phase rows are compiled with it already.
 #[cfg(target_arch = "aarch64")]
 static OPS: [Ops; 4] = [
     Ops {

@@ -28,7 +28,7 @@ pub(crate) const ATAN_P: [f32; 4] = [
 /// + P4)`, `z = s²`, on `s ∈ [0, 1/2]`.
 pub(crate) const ASIN_P: [f32; 5] = [
     4.216_32e-2,
-    2.418_131_1e-2,
+    2.418_131e-2,
     4.547_002_6e-2,
     7.495_300_3e-2,
     1.666_675_2e-1,
@@ -113,7 +113,8 @@ fn wrap_near(phase: f32) -> f32 {
     w = if w < 0.0 { w + TAU } else { w };
     w = if w >= TAU { w - TAU } else { w };
     w = if w >= TAU { w - TAU } else { w };
-    // Adding 2π to a tiny negative value can round up to exactly 2π.
+    // Adding 2π to a tiny negative value can round up to exactly 2π. Not `!(0..2π).contains`: NaN stays NaN.
+    #[allow(clippy::manual_range_contains)]
     if w >= TAU || w < 0.0 {
         0.0
     } else {

@@ -187,40 +187,103 @@ fn acos_is_within_its_bound_on_a_dense_grid() {
     assert!(acos_unit(f32::NAN).is_nan());
 }
 
-/// The exhaustive sweeps behind the module's bounds (release build: seconds; debug: many minutes).
+/// Runs `f` on `0..n` split into one contiguous part per thread; returns the parts' results.
+fn split<T: Send>(n: u64, f: impl Fn(std::ops::Range<u64>) -> T + Sync) -> Vec<T> {
+    let threads = std::thread::available_parallelism().map_or(1, |t| t.get()) as u64;
+    let step = n.div_ceil(threads);
+    std::thread::scope(|s| {
+        let parts: Vec<_> = (0..threads)
+            .map(|t| {
+                let f = &f;
+                s.spawn(move || f(t * step..((t + 1) * step).min(n)))
+            })
+            .collect();
+        parts.into_iter().map(|p| p.join().unwrap()).collect()
+    })
+}
+
+/// The exhaustive sweeps behind the module's bounds, on every path (release build, all cores: about a
+/// minute on two; debug: far longer): `cargo test -p tensorholo-kernels --release -- --ignored
+/// double_phase_exhaustive --nocapture`. Prints the worst errors against the exact value and against std's
+/// f32 `atan2`/`acos`.
 #[test]
 #[ignore]
 fn double_phase_exhaustive_bounds() {
-    let mut worst = 0.0f64;
-    for bits in 0..=0x7f80_0000u32 {
-        let y = f32::from_bits(bits);
-        for x in [1.0f32, -1.0, 1.7, -1.7, 0.0, -0.0] {
-            worst = worst.max(atan2_err(y, x, atan2(y, x)));
+    const XS: [f32; 6] = [1.0, -1.0, 1.7, -1.7, 0.0, -0.0];
+    const BLOCK: u64 = 1 << 14;
+    let paths = paths();
+    // Every non-negative y (all 2³¹ of them up to +∞) against each x, through the row kernels of every path.
+    let parts = split((0x7f80_0001u64).div_ceil(BLOCK), |blocks| {
+        let (mut exact, mut std) = (0.0f64, 0.0f32);
+        let mut field = vec![0.0f32; 2 * BLOCK as usize];
+        let (mut want, mut got) = (vec![0.0f32; BLOCK as usize], vec![0.0f32; BLOCK as usize]);
+        for blk in blocks {
+            let lo = blk * BLOCK;
+            let n = (BLOCK).min(0x7f80_0001 - lo) as usize;
+            for x in XS {
+                for i in 0..n {
+                    field[2 * i] = x;
+                    field[2 * i + 1] = f32::from_bits((lo + i as u64) as u32);
+                }
+                analyse_row(&field[..2 * n], &mut want[..n], Isa::Scalar).unwrap();
+                for (name, isa) in &paths {
+                    analyse_row(&field[..2 * n], &mut got[..n], *isa).unwrap();
+                    let same = got[..n]
+                        .iter()
+                        .zip(&want[..n])
+                        .all(|(a, b)| a.to_bits() == b.to_bits());
+                    assert!(same, "{name}: x {x}, y bits from {lo:#x}");
+                }
+                for (i, &p) in want[..n].iter().enumerate() {
+                    let y = field[2 * i + 1];
+                    exact = exact.max(atan2_err(y, x, p));
+                    let d = (p - y.atan2(x)).abs();
+                    std = std.max(d.min(TAU - d));
+                }
+            }
         }
-    }
-    let mut rng = Rng(0x0dd_ba11);
-    for _ in 0..10_000_000 {
-        let (y, x) = (rng.any_finite(), rng.any_finite());
-        worst = worst.max(atan2_err(y, x, atan2(y, x)));
-    }
-    println!(
-        "atan2 worst error (exhaustive y, x ∈ ±{{0, 1, 1.7}}, 10⁷ random pairs): {worst:e} rad"
-    );
-    assert!(worst <= ATAN2_MAX_ERROR as f64);
-    let mut worst = 0.0f64;
-    for bits in 0..=1.0f32.to_bits() {
-        let x = f32::from_bits(bits);
-        worst = worst.max((acos_unit(x) as f64 - (x as f64).acos()).abs());
-    }
-    println!("acos worst error (every f32 in [0, 1]): {worst:e} rad");
+        (exact, std)
+    });
+    let worst = parts.iter().fold(0.0f64, |a, p| a.max(p.0));
+    let worst_std = parts.iter().fold(0.0f32, |a, p| a.max(p.1));
+    let parts = split(10_000_000, |r| {
+        let mut rng = Rng(0x0dd_ba11 + r.start);
+        let (mut exact, mut std) = (0.0f64, 0.0f32);
+        for _ in r {
+            let (y, x) = (rng.any_finite(), rng.any_finite());
+            let p = atan2(y, x);
+            exact = exact.max(atan2_err(y, x, p));
+            let d = (p - y.atan2(x)).abs();
+            std = std.max(d.min(TAU - d));
+        }
+        (exact, std)
+    });
+    let worst_r = parts.iter().fold(0.0f64, |a, p| a.max(p.0));
+    let worst_r_std = parts.iter().fold(0.0f32, |a, p| a.max(p.1));
+    println!("atan2, every y ≥ 0 against x ∈ ±{{0, 1, 1.7}}: worst {worst:e} rad (std atan2f: {worst_std:e})");
+    println!("atan2, 10⁷ random finite pairs: worst {worst_r:e} rad (std atan2f: {worst_r_std:e})");
+    assert!(worst.max(worst_r) <= ATAN2_MAX_ERROR as f64);
+    let parts = split(1.0f32.to_bits() as u64 + 1, |r| {
+        let (mut exact, mut std) = (0.0f64, 0.0f32);
+        for bits in r {
+            let x = f32::from_bits(bits as u32);
+            let a = acos_unit(x);
+            exact = exact.max((a as f64 - (x as f64).acos()).abs());
+            std = std.max((a - x.acos()).abs());
+        }
+        (exact, std)
+    });
+    let worst = parts.iter().fold(0.0f64, |a, p| a.max(p.0));
+    let worst_std = parts.iter().fold(0.0f32, |a, p| a.max(p.1));
+    println!("acos, every f32 in [0, 1]: worst {worst:e} rad (std acosf: {worst_std:e})");
     assert!(worst <= ACOS_MAX_ERROR as f64);
-    let mut differ = 0u64;
-    for bits in 0..TAU.to_bits() {
-        let p = f32::from_bits(bits);
-        assert_eq!(linear_code_wrapped(p), libm_code(p), "{p}");
-        differ += (wrap_phase(p) != p) as u64;
-    }
-    assert_eq!(differ, 0);
+    split(TAU.to_bits() as u64, |r| {
+        for bits in r {
+            let p = f32::from_bits(bits as u32);
+            assert_eq!(linear_code_wrapped(p), libm_code(p), "{p}");
+            assert_eq!(wrap_phase(p).to_bits(), p.to_bits(), "{p}");
+        }
+    });
 }
 
 #[test]
