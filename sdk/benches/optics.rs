@@ -7,12 +7,14 @@
 //! Run: `cargo bench -p tensorholo --bench optics`.
 #![allow(missing_docs)] // criterion_group! generates undocumented items
 
+use criterion::BatchSize;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use ndarray::{Array2, Array3};
 use num_complex::Complex32;
 use std::time::Duration;
-use criterion::BatchSize;
-use tensorholo::encoding::{double_phase_encode, normaliser, ChannelEncoder, DoublePhaseMethod};
+use tensorholo::encoding::{
+    double_phase_encode, normaliser, wrap_phase, ChannelEncoder, DoublePhaseMethod, LinearLut,
+};
 use tensorholo::optics::{Carrier, PropagationOptions, Propagator};
 use tensorholo::scene::procedural;
 use tensorholo::synthesis::{SceneLayer, SmLbm};
@@ -118,7 +120,8 @@ fn double_phase(c: &mut Criterion) {
 /// (what a colour worker of the real-time pipeline runs): pass 1 (`analyse`: `arg H`, max `|H|²`, `Σ arg H`)
 /// and pass 2 (`encode`: `φ − mean ± acos(|H|/a)`, wrap, linear LUT codes). The field is speckle-like
 /// (pseudo-random amplitude and phase per pixel), as a propagated hologram is. Divide by 1080·1920 =
-/// 2 073 600 for ns per pixel.
+/// 2 073 600 for ns per pixel. `TENSORHOLO_ISA=scalar` runs the row kernels' portable path; `*_libm` are the
+/// passes as they were before the row kernels.
 fn encode_rows(c: &mut Criterion) {
     let (h, w) = (1080, 1920);
     let mut group = c.benchmark_group("encode_rows_1080p");
@@ -152,6 +155,39 @@ fn encode_rows(c: &mut Criterion) {
             |p| {
                 enc.encode(&field, p, &mut codes, mean[0], a)
                     .expect("sizes match")
+            },
+            BatchSize::LargeInput,
+        )
+    });
+    // The same two passes as the SDK ran them before the row kernels of `tensorholo-kernels`: libm
+    // `atan2f`/`acosf` per pixel, the scalar wrap, `LinearLut::code` (the "before" of docs/BENCHMARKS.md).
+    group.bench_function("analyse_libm", |b| {
+        b.iter(|| {
+            let (mut max, mut sum) = (0.0f32, 0.0f64);
+            for (p, v) in phase.iter_mut().zip(&field) {
+                *p = v.im.atan2(v.re);
+                max = max.max(v.norm_sqr());
+                sum += *p as f64;
+            }
+            (max, sum)
+        })
+    });
+    let inv_a = 1.0 / a;
+    group.bench_function("encode_libm", |b| {
+        b.iter_batched_ref(
+            || phase.clone(),
+            |p| {
+                for (y, (row, out)) in field.chunks_exact(w).zip(p.chunks_exact_mut(w)).enumerate()
+                {
+                    for (x, (p, v)) in out.iter_mut().zip(row).enumerate() {
+                        let theta = (v.norm_sqr().sqrt() * inv_a).min(1.0).acos();
+                        let sign = if (x + y) % 2 == 1 { -1.0 } else { 1.0 };
+                        *p = wrap_phase(*p - mean[0] + sign * theta);
+                    }
+                }
+                for (c, p) in codes.iter_mut().zip(p.iter()) {
+                    *c = LinearLut.code(*p);
+                }
             },
             BatchSize::LargeInput,
         )
