@@ -17,6 +17,8 @@
 //! * [`tanh_heads`], [`fake_quantize`]: the hologram CNN's heads and the int8 output grid, vectorised.
 //! * [`depthwise()`], [`depthwise_rows`]: the pre-filter's fixed depthwise filter, register-tiled; [`peak`]:
 //!   measured FMA / dot-product peaks.
+//! * [`double_phase`]: the double phase encoding's rows (polynomial `atan2`/`acos`, wrap, linear look-up
+//!   table codes) with documented error bounds, vectorised.
 //!
 //! ```
 //! use tensorholo_kernels::{Conv3x3F32, Inputs, Isa, RowPlanar};
@@ -35,13 +37,15 @@
 //! ```
 //!
 //! `unsafe` appears only in the ISA files (`conv3x3/*_{avx2,avx512,neon,…}.rs`, the generic SIMD loops, the
-//! `#[target_feature]` copies in `depthwise/body.rs` and `heads/body.rs`) and in the single dispatch point,
+//! `#[target_feature]` copies in `depthwise/body.rs` and `heads/body.rs`, the intrinsics of
+//! `double_phase/avx2.rs`) and in the single dispatch point,
 //! the kernel table `ops.rs` (one table per ISA level, which [`registry`] shows); every public function is
 //! safe and checks shapes and lengths. The crate's `README.md` maps the files.
 
 pub mod buffer;
 pub mod conv3x3;
 pub mod depthwise;
+pub mod double_phase;
 mod error;
 pub mod heads;
 pub mod isa;

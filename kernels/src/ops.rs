@@ -1,13 +1,13 @@
 //! The kernel table: one [`Ops`] per ISA level, listing what that level's instructions compile: its conv3x3
-//! rows (f32 and int8, best first), its copies of the depthwise filter, the heads and the output grid, and
-//! its peak loops. A level's table holds only the kernels that need exactly that level; dispatch under a
+//! rows (f32 and int8, best first), its copies of the depthwise filter, the heads and the output grid, its
+//! double phase rows, and its peak loops. A level's table holds only the kernels that need exactly that level; dispatch under a
 //! selected level `s` reads every table whose level `s` includes, best level first, and takes the first entry
 //! it finds (for conv3x3, the first row: see [`select_f32_for`] for the one refinement). So the f32 rows,
 //! best first, are the tables' rows one after the other, and `avx512vnni` runs the `avx512` table's f32 row
 //! and depthwise copy.
 //!
 //! The plans ([`crate::Conv3x3F32`], [`crate::Conv3x3U8`], [`crate::depthwise()`], [`crate::tanh_heads`],
-//! [`crate::fake_quantize`]), the tests and, through [`crate::registry`], the benchmarks read these tables,
+//! [`crate::fake_quantize`], [`crate::double_phase`]), the tests and, through [`crate::registry`], the benchmarks read these tables,
 //! and the `run_*` functions here are the single dispatch point: the one place outside the ISA files where a
 //! kernel is called through `unsafe`, each after checking that the CPU has the entry's level.
 
@@ -21,6 +21,9 @@ use crate::conv3x3::{f32_avx2, f32_avx512, u8s8_avx2, u8s8_avx512vnni, u8s8_avxv
 use crate::conv3x3::{f32_neon, u8s8_neon, u8s8_neondot, u8s8_neoni8mm};
 use crate::conv3x3::{f32_scalar, u8s8_scalar};
 use crate::depthwise::body::{self as depthwise, Job as DepthwiseJob, PORTABLE_TILE};
+#[cfg(target_arch = "x86_64")]
+use crate::double_phase::avx2 as dpm_avx2;
+use crate::double_phase::body::{self as dpm, EncodeParams};
 use crate::error::KernelError;
 use crate::heads::body as heads;
 use crate::isa::Isa;
@@ -32,6 +35,11 @@ pub(crate) type DepthwiseFn = unsafe fn(&DepthwiseJob<'_>, Range<usize>, &mut [f
 pub(crate) type HeadsFn = unsafe fn(&[f32], &mut [f32], f32, Option<QuantU8>);
 /// The output grid (`QuantizeLinear` then `DequantizeLinear`) in place.
 pub(crate) type GridFn = unsafe fn(&mut [f32], QuantU8);
+
+/// Pass 1 of the double phase encoding on a row: interleaved `(re, im)` in, `arg H` out; `(max |H|², Σ arg)`.
+pub(crate) type DpmAnalyseFn = unsafe fn(&[f32], &mut [f32]) -> (f32, f64);
+/// Pass 2 of the double phase encoding on a row: the wrapped double phase in place, codes if asked.
+pub(crate) type DpmEncodeFn = unsafe fn(&[f32], &mut [f32], Option<&mut [u8]>, &EncodeParams);
 
 /// A peak loop: operations per iteration (a multiply-add counts 2) and the loop, which returns a value to
 /// keep its chains alive.
@@ -56,6 +64,10 @@ pub(crate) struct Ops {
     pub heads: Option<HeadsFn>,
     /// The output grid ([`crate::fake_quantize`]).
     pub grid: Option<GridFn>,
+    /// Pass 1 of the double phase encoding on a row ([`crate::double_phase::analyse_row`]).
+    pub dpm_analyse: Option<DpmAnalyseFn>,
+    /// Pass 2 of the double phase encoding on a row ([`crate::double_phase::encode_row`]).
+    pub dpm_encode: Option<DpmEncodeFn>,
     /// The f32 FMA peak ([`crate::peak::f32_fma_gflops`]).
     pub peak_f32: Option<Peak<f32>>,
     /// The int8 dot-product peak ([`crate::peak::int8_dot_gops`]).
@@ -63,7 +75,7 @@ pub(crate) struct Ops {
 }
 
 /// The portable level: safe code, any CPU; every kind of kernel has an entry here, so dispatch always finds
-/// one. The depthwise, heads and grid entries are the portable bodies themselves (SSE2 / NEON).
+/// one. The depthwise, heads, grid and double phase entries are the portable bodies themselves (SSE2 / NEON).
 const SCALAR: Ops = Ops {
     isa: Isa::Scalar,
     f32: &[F32Row {
@@ -88,6 +100,8 @@ const SCALAR: Ops = Ops {
     depthwise: Some(depthwise::rows_body::<PORTABLE_TILE>),
     heads: Some(heads::heads_body),
     grid: Some(heads::grid_body),
+    dpm_analyse: Some(dpm::analyse_body),
+    dpm_encode: Some(dpm::encode_body),
     peak_f32: Some(Peak {
         ops_per_iter: 16.0 * 2.0,
         run: f32_scalar::peak,
@@ -112,6 +126,8 @@ static OPS: [Ops; 5] = [
         depthwise: None,
         heads: None,
         grid: None,
+        dpm_analyse: None,
+        dpm_encode: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 24.0 * 64.0 * 2.0,
@@ -133,6 +149,8 @@ static OPS: [Ops; 5] = [
         depthwise: Some(depthwise::x86::rows_avx512),
         heads: Some(heads::x86::heads_avx512),
         grid: Some(heads::x86::grid_avx512),
+        dpm_analyse: None,
+        dpm_encode: None,
         peak_f32: Some(Peak {
             ops_per_iter: 24.0 * 16.0 * 2.0,
             run: f32_avx512::peak,
@@ -150,6 +168,8 @@ static OPS: [Ops; 5] = [
         depthwise: None,
         heads: None,
         grid: None,
+        dpm_analyse: None,
+        dpm_encode: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 12.0 * 32.0 * 2.0,
@@ -210,6 +230,8 @@ static OPS: [Ops; 5] = [
         depthwise: Some(depthwise::x86::rows_avx2),
         heads: Some(heads::x86::heads_avx2),
         grid: Some(heads::x86::grid_avx2),
+        dpm_analyse: Some(dpm_avx2::analyse_avx2),
+        dpm_encode: Some(dpm_avx2::encode_avx2),
         peak_f32: Some(Peak {
             ops_per_iter: 12.0 * 8.0 * 2.0,
             run: f32_avx2::peak,
@@ -223,7 +245,7 @@ static OPS: [Ops; 5] = [
 ];
 
 /// aarch64 levels, best first. NEON is the aarch64 baseline: the portable bodies of the depthwise filter,
-/// the heads and the grid are compiled with it already.
+/// the heads, the grid and the double phase rows are compiled with it already.
 #[cfg(target_arch = "aarch64")]
 static OPS: [Ops; 4] = [
     Ops {
@@ -237,6 +259,8 @@ static OPS: [Ops; 4] = [
         depthwise: None,
         heads: None,
         grid: None,
+        dpm_analyse: None,
+        dpm_encode: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 24.0 * 16.0 * 2.0,
@@ -254,6 +278,8 @@ static OPS: [Ops; 4] = [
         depthwise: None,
         heads: None,
         grid: None,
+        dpm_analyse: None,
+        dpm_encode: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 24.0 * 16.0 * 2.0,
@@ -279,6 +305,8 @@ static OPS: [Ops; 4] = [
         depthwise: None,
         heads: None,
         grid: None,
+        dpm_analyse: None,
+        dpm_encode: None,
         peak_f32: Some(Peak {
             ops_per_iter: 24.0 * 4.0 * 2.0,
             run: f32_neon::peak,
@@ -436,6 +464,33 @@ pub(crate) fn run_grid(isa: Isa, values: &mut [f32], grid: QuantU8) -> Result<()
     Ok(())
 }
 
+/// Pass 1 of the double phase encoding on one checked row under `isa`. Errors: `isa` not available.
+pub(crate) fn run_dpm_analyse(
+    isa: Isa,
+    field: &[f32],
+    phase: &mut [f32],
+) -> Result<(f32, f64), KernelError> {
+    let run = entry(isa, |t| t.dpm_analyse)?;
+    // SAFETY: `entry` returned the entry of a level that `isa` includes, and `isa` is available on this CPU;
+    // the safe API checked the lengths.
+    Ok(unsafe { run(field, phase) })
+}
+
+/// Pass 2 of the double phase encoding on one checked row under `isa`. Errors: `isa` not available.
+pub(crate) fn run_dpm_encode(
+    isa: Isa,
+    field: &[f32],
+    phase: &mut [f32],
+    codes: Option<&mut [u8]>,
+    params: &EncodeParams,
+) -> Result<(), KernelError> {
+    let run = entry(isa, |t| t.dpm_encode)?;
+    // SAFETY: `entry` returned the entry of a level that `isa` includes, and `isa` is available on this CPU;
+    // the safe API checked the lengths.
+    unsafe { run(field, phase, codes, params) };
+    Ok(())
+}
+
 /// Runs the f32 FMA peak loop of `isa` (its widest FMA) for `iters` iterations; returns the FLOPs done and a
 /// value to keep the loop alive. Errors: `isa` not available.
 pub(crate) fn run_peak_f32(isa: Isa, iters: u64) -> Result<(f64, f32), KernelError> {
@@ -495,6 +550,7 @@ mod tests {
         assert_eq!(p.isa, Isa::Scalar);
         assert!(!p.f32.is_empty() && !p.u8.is_empty());
         assert!(p.depthwise.is_some() && p.heads.is_some() && p.grid.is_some());
+        assert!(p.dpm_analyse.is_some() && p.dpm_encode.is_some());
         assert!(p.peak_f32.is_some() && p.peak_u8.is_some());
     }
 

@@ -1,15 +1,20 @@
 //! Criterion benchmarks of the optics hot paths (results and the command in `docs/BENCHMARKS.md`):
 //! ASM per colour at 384×384 and 1920×1080 (with and without 2× padding), SM-LBM at 384×384 for 256 and 2048
-//! depth planes on the built-in scene, double phase encoding at 1080p, the calibrated look-up tables at 1080p.
+//! depth planes on the built-in scene, double phase encoding at 1080p (three colours, and the real-time
+//! pipeline's per-colour passes one thread per pixel: `encode_rows_1080p`), the calibrated look-up tables at
+//! 1080p.
 //!
 //! Run: `cargo bench -p tensorholo --bench optics`.
 #![allow(missing_docs)] // criterion_group! generates undocumented items
 
+use criterion::BatchSize;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use ndarray::{Array2, Array3};
 use num_complex::Complex32;
 use std::time::Duration;
-use tensorholo::encoding::{double_phase_encode, DoublePhaseMethod};
+use tensorholo::encoding::{
+    double_phase_encode, normaliser, wrap_phase, ChannelEncoder, DoublePhaseMethod, LinearLut,
+};
 use tensorholo::optics::{Carrier, PropagationOptions, Propagator};
 use tensorholo::scene::procedural;
 use tensorholo::synthesis::{SceneLayer, SmLbm};
@@ -111,6 +116,85 @@ fn double_phase(c: &mut Criterion) {
     group.finish();
 }
 
+/// The two passes of the double phase encoding on one colour of a 1080p frame, one thread, no pre-filter
+/// (what a colour worker of the real-time pipeline runs): pass 1 (`analyse`: `arg H`, max `|H|²`, `Σ arg H`)
+/// and pass 2 (`encode`: `φ − mean ± acos(|H|/a)`, wrap, linear LUT codes). The field is speckle-like
+/// (pseudo-random amplitude and phase per pixel), as a propagated hologram is. Divide by 1080·1920 =
+/// 2 073 600 for ns per pixel. `TENSORHOLO_ISA=scalar` runs the row kernels' portable path; `*_libm` are the
+/// passes as they were before the row kernels.
+fn encode_rows(c: &mut Criterion) {
+    let (h, w) = (1080, 1920);
+    let mut group = c.benchmark_group("encode_rows_1080p");
+    group
+        .sample_size(20)
+        .measurement_time(Duration::from_secs(4));
+    let mut s = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut field: Vec<Complex32> = (0..h * w)
+        .map(|_| {
+            let a = next();
+            Complex32::from_polar(a, (next() - 0.5) * std::f32::consts::TAU)
+        })
+        .collect();
+    let mut enc = ChannelEncoder::new(h, w, DoublePhaseMethod::Plain).expect("valid size");
+    let mut phase = vec![0.0f32; h * w];
+    let mut codes = vec![0u8; h * w];
+    group.bench_function("analyse", |b| {
+        b.iter(|| enc.analyse(&mut field, &mut phase).expect("sizes match"))
+    });
+    let stats = enc.analyse(&mut field, &mut phase).expect("sizes match");
+    let (a, mean) = normaliser(&[stats; 3], h * w).expect("non-zero field");
+    group.bench_function("encode", |b| {
+        b.iter_batched_ref(
+            || phase.clone(),
+            |p| {
+                enc.encode(&field, p, &mut codes, mean[0], a)
+                    .expect("sizes match")
+            },
+            BatchSize::LargeInput,
+        )
+    });
+    // The same two passes as the SDK ran them before the row kernels of `tensorholo-kernels`: libm
+    // `atan2f`/`acosf` per pixel, the scalar wrap, `LinearLut::code` (the "before" of docs/BENCHMARKS.md).
+    group.bench_function("analyse_libm", |b| {
+        b.iter(|| {
+            let (mut max, mut sum) = (0.0f32, 0.0f64);
+            for (p, v) in phase.iter_mut().zip(&field) {
+                *p = v.im.atan2(v.re);
+                max = max.max(v.norm_sqr());
+                sum += *p as f64;
+            }
+            (max, sum)
+        })
+    });
+    let inv_a = 1.0 / a;
+    group.bench_function("encode_libm", |b| {
+        b.iter_batched_ref(
+            || phase.clone(),
+            |p| {
+                for (y, (row, out)) in field.chunks_exact(w).zip(p.chunks_exact_mut(w)).enumerate()
+                {
+                    for (x, (p, v)) in out.iter_mut().zip(row).enumerate() {
+                        let theta = (v.norm_sqr().sqrt() * inv_a).min(1.0).acos();
+                        let sign = if (x + y) % 2 == 1 { -1.0 } else { 1.0 };
+                        *p = wrap_phase(*p - mean[0] + sign * theta);
+                    }
+                }
+                for (c, p) in codes.iter_mut().zip(p.iter()) {
+                    *c = LinearLut.code(*p);
+                }
+            },
+            BatchSize::LargeInput,
+        )
+    });
+    group.finish();
+}
+
 /// The display calibration's phase → code look-up table on one colour of a 1080p frame (the pipeline runs
 /// the three colours on three threads): linear, global (one curve) and per-pixel tiles of 4, 8 and 16 px.
 fn look_up_table(c: &mut Criterion) {
@@ -152,5 +236,12 @@ fn look_up_table(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, asm, sm_lbm, double_phase, look_up_table);
+criterion_group!(
+    benches,
+    asm,
+    sm_lbm,
+    double_phase,
+    encode_rows,
+    look_up_table
+);
 criterion_main!(benches);

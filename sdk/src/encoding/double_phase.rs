@@ -5,8 +5,8 @@ use std::f32::consts::TAU;
 use ndarray::{Array3, ArrayView3, CowArray, Ix3};
 use num_complex::Complex32;
 use rayon::prelude::*;
+use tensorholo_kernels::{double_phase as kernel, Isa};
 
-use super::lut::wrap_phase;
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::{check_colour_stack, check_finite_field, par_channels, Scratch, SpectralPlan};
 
@@ -96,8 +96,14 @@ pub struct DoublePhase {
 ///
 /// The scale `0.5·a` of Eq. 7 cannot be shown by a phase-only SLM; it is returned as `amplitude_scale`.
 ///
+/// The per-pixel arithmetic runs in the vectorised row kernels of `tensorholo-kernels`
+/// ([`tensorholo_kernels::double_phase`]: polynomial `atan2` and `acos`, within 1.2·10⁻⁶ rad of libm's
+/// `atan2f`/`acosf`, so an 8-bit code equals libm's or, within that distance of a rounding boundary, differs
+/// by one step), on bands of rows on rayon's threads.
+///
 /// Errors: a field that is not `[3, H, W]` ([`HoloError::ShapeMismatch`]), non-finite values or an all-zero
-/// field ([`HoloError::InvalidData`]), invalid method parameters ([`HoloError::InvalidParameter`]).
+/// field ([`HoloError::InvalidData`]), invalid method parameters or a `TENSORHOLO_ISA` override naming an
+/// unknown or unavailable ISA ([`HoloError::InvalidParameter`]).
 pub fn double_phase_encode(
     field: ArrayView3<Complex32>,
     method: &DoublePhaseMethod,
@@ -105,6 +111,7 @@ pub fn double_phase_encode(
     let (h, w) = check_colour_stack("hologram", &field)?;
     check_finite_field("hologram", &field)?;
     method.validate()?;
+    let isa = encoding_isa()?;
     let filtered: CowArray<Complex32, Ix3> = match *method {
         DoublePhaseMethod::Plain => field.as_standard_layout(),
         _ => {
@@ -127,22 +134,24 @@ pub fn double_phase_encode(
             owned.into()
         }
     };
-    // Pass 1 (rows in parallel): phase φ = arg H into the output, per-row max |H|² and Σφ.
+    // Pass 1 (bands of rows in parallel): phase φ = arg H into the output, per-row max |H|² and Σφ.
     let mut phase = Array3::<f32>::zeros((3, h, w));
     let src = filtered.as_slice().expect("standard layout");
+    let band = band_rows(w);
     let rows: Vec<ChannelStats> = phase
         .as_slice_mut()
         .expect("fresh array")
         .par_chunks_mut(w)
         .zip(src.par_chunks(w))
-        .map(|(out, row)| analyse_row(row, out))
-        .collect();
+        .with_min_len(band)
+        .map(|(out, row)| analyse_row(row, out, isa))
+        .collect::<Result<_>>()?;
     let stats: Vec<ChannelStats> = rows
         .chunks(h)
         .map(|c| c.iter().fold(ChannelStats::default(), |a, b| a.merge(*b)))
         .collect();
     let (a, mean_phase) = normaliser(&stats, h * w)?;
-    // Pass 2 (rows in parallel): P = φ − mean ∓ acos(Ã), checkerboard by x + y parity (Eq. 7).
+    // Pass 2 (bands of rows in parallel): P = φ − mean ∓ acos(Ã), checkerboard by x + y parity (Eq. 7).
     let inv_a = 1.0 / a;
     phase
         .as_slice_mut()
@@ -150,9 +159,10 @@ pub fn double_phase_encode(
         .par_chunks_mut(w)
         .zip(src.par_chunks(w))
         .enumerate()
-        .for_each(|(r, (out, row))| {
-            encode_row(row, out, None, r % h, mean_phase[r / h], inv_a);
-        });
+        .with_min_len(band)
+        .try_for_each(|(r, (out, row))| {
+            encode_row(row, out, None, r % h, mean_phase[r / h], inv_a, isa)
+        })?;
     debug_assert!(phase.iter().all(|p| (0.0..TAU).contains(p)));
     Ok(DoublePhase {
         phase,
@@ -202,15 +212,32 @@ pub fn normaliser(stats: &[ChannelStats], pixels: usize) -> Result<(f32, [f32; 3
     Ok((a, mean))
 }
 
+/// The instruction set of the row kernels: [`Isa::active`] (this CPU's best, lowered by `TENSORHOLO_ISA`).
+///
+/// Errors: [`HoloError::InvalidParameter`] where `TENSORHOLO_ISA` names an unknown or unavailable ISA.
+fn encoding_isa() -> Result<Isa> {
+    Isa::active().map_err(|e| invalid("TENSORHOLO_ISA", e.to_string()))
+}
+
+/// Rows per band of [`double_phase_encode`]'s passes on rayon's threads: about 64k pixels, enough to
+/// amortise a task, few enough to balance `3·H` rows over the threads.
+fn band_rows(width: usize) -> usize {
+    (65_536 / width.max(1)).max(1)
+}
+
+/// A row kernel's error: the lengths are equal by construction and the ISA was checked, so never.
+fn kernel_err(e: tensorholo_kernels::KernelError) -> HoloError {
+    HoloError::Internal(format!("double phase row kernel: {e}"))
+}
+
 /// Pass 1 on one row: `out ← arg H`, returns the row's statistics.
-fn analyse_row(row: &[Complex32], out: &mut [f32]) -> ChannelStats {
-    let mut st = ChannelStats::default();
-    for (p, v) in out.iter_mut().zip(row) {
-        *p = v.im.atan2(v.re);
-        st.max_amplitude_sq = st.max_amplitude_sq.max(v.norm_sqr());
-        st.phase_sum += *p as f64;
-    }
-    st
+fn analyse_row(row: &[Complex32], out: &mut [f32], isa: Isa) -> Result<ChannelStats> {
+    let (max_amplitude_sq, phase_sum) =
+        kernel::analyse_row(bytemuck::cast_slice(row), out, isa).map_err(kernel_err)?;
+    Ok(ChannelStats {
+        max_amplitude_sq,
+        phase_sum,
+    })
 }
 
 /// Pass 2 on row `y`: `out` holds `arg H` from pass 1 and becomes the wrapped double phase
@@ -223,21 +250,10 @@ fn encode_row(
     y: usize,
     mean: f32,
     inv_a: f32,
-) {
-    for (x, (p, v)) in out.iter_mut().zip(row).enumerate() {
-        let theta = (v.norm_sqr().sqrt() * inv_a).min(1.0).acos();
-        let value = if (x + y) % 2 == 1 {
-            *p - mean - theta
-        } else {
-            *p - mean + theta
-        };
-        *p = wrap_phase(value);
-    }
-    if let Some(codes) = codes {
-        for (c, p) in codes.iter_mut().zip(out.iter()) {
-            *c = super::LinearLut.code(*p);
-        }
-    }
+    isa: Isa,
+) -> Result<()> {
+    let field = bytemuck::cast_slice(row);
+    kernel::encode_row(field, out, codes, y % 2 == 1, mean, inv_a, isa).map_err(kernel_err)
 }
 
 /// The diamond band limit of BL-DPM for one field size: plan, mask (with the inverse-FFT normalisation).
@@ -279,14 +295,18 @@ pub struct ChannelEncoder {
     kernel: Vec<f32>,
     tmp: Vec<Complex32>,
     band: Option<(BandLimit, Scratch)>,
+    /// The row kernels' instruction set.
+    isa: Isa,
 }
 
 impl ChannelEncoder {
     /// Prepares the encoder for `[height, width]` channels.
     ///
-    /// Errors: [`HoloError::InvalidParameter`] for invalid method parameters or an empty size.
+    /// Errors: [`HoloError::InvalidParameter`] for invalid method parameters, an empty size, or a
+    /// `TENSORHOLO_ISA` override naming an unknown or unavailable ISA.
     pub fn new(height: usize, width: usize, method: DoublePhaseMethod) -> Result<Self> {
         method.validate()?;
+        let isa = encoding_isa()?;
         if height == 0 || width == 0 {
             return Err(invalid(
                 "channel size",
@@ -312,6 +332,7 @@ impl ChannelEncoder {
             kernel: method.kernel(),
             tmp,
             band,
+            isa,
         })
     }
 
@@ -348,12 +369,11 @@ impl ChannelEncoder {
             _ => {}
         }
         let w = self.width;
-        Ok(field
-            .chunks_exact(w)
-            .zip(phase.chunks_exact_mut(w))
-            .fold(ChannelStats::default(), |acc, (row, out)| {
-                acc.merge(analyse_row(row, out))
-            }))
+        let mut stats = ChannelStats::default();
+        for (row, out) in field.chunks_exact(w).zip(phase.chunks_exact_mut(w)) {
+            stats = stats.merge(analyse_row(row, out, self.isa)?);
+        }
+        Ok(stats)
     }
 
     /// Pass 2: turns `phase` (from [`ChannelEncoder::analyse`] on the same `field`) into the wrapped double
@@ -386,7 +406,7 @@ impl ChannelEncoder {
             .zip(codes.chunks_exact_mut(w))
             .enumerate()
         {
-            encode_row(row, out, Some(c), y, mean_phase, inv_a);
+            encode_row(row, out, Some(c), y, mean_phase, inv_a, self.isa)?;
         }
         Ok(())
     }
@@ -451,6 +471,7 @@ fn blur_separable(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::encoding::LinearLut;
 
     #[test]
     fn checkerboard_pairs_sum_to_the_encoded_complex_value() {
@@ -571,6 +592,75 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Pass 2 as the SDK computed it before the row kernels (libm `atan2f` and `acosf`, the scalar wrap).
+    fn libm_phase(v: Complex32, y: usize, x: usize, mean: f32, inv_a: f32) -> f32 {
+        let theta = (v.norm_sqr().sqrt() * inv_a).min(1.0).acos();
+        let p = v.im.atan2(v.re) - mean;
+        super::super::wrap_phase(if (x + y) % 2 == 1 {
+            p - theta
+        } else {
+            p + theta
+        })
+    }
+
+    #[test]
+    fn the_row_kernels_match_libm_within_their_bound_and_one_code_step() {
+        // A speckle-like field (uniform phase, amplitude in [0, 1)), odd width so that rows end in a tail.
+        let (h, w) = (96, 203);
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let field = Array3::from_shape_simple_fn((3, h, w), || {
+            let a = next();
+            Complex32::from_polar(a, (next() - 0.5) * TAU)
+        });
+        let dp = double_phase_encode(field.view(), &DoublePhaseMethod::Plain).unwrap();
+        let inv_a = 1.0 / dp.amplitude_scale;
+        let (mut worst, mut differ, mut pixels) = (0.0f32, 0usize, 0usize);
+        for c in 0..3 {
+            let libm_mean = field
+                .index_axis(ndarray::Axis(0), c)
+                .iter()
+                .map(|v| v.im.atan2(v.re) as f64)
+                .sum::<f64>()
+                / (h * w) as f64;
+            assert!(
+                (dp.mean_phase[c] as f64 - libm_mean).abs() < 1e-6,
+                "mean {c}"
+            );
+            for y in 0..h {
+                for x in 0..w {
+                    let want = libm_phase(field[[c, y, x]], y, x, dp.mean_phase[c], inv_a);
+                    let got = dp.phase[[c, y, x]];
+                    let d = (got - want).abs();
+                    let d = d.min(TAU - d);
+                    worst = worst.max(d);
+                    assert!(
+                        d <= kernel::PHASE_MAX_ERROR,
+                        "c{c} y{y} x{x}: {got} vs {want}"
+                    );
+                    let (a, b) = (LinearLut.code(got), LinearLut.code(want));
+                    let step = a.wrapping_sub(b).min(b.wrapping_sub(a));
+                    assert!(step <= 1, "c{c} y{y} x{x}: code {a} vs {b}");
+                    differ += (step != 0) as usize;
+                    pixels += 1;
+                }
+            }
+        }
+        println!(
+            "row kernels vs libm: worst phase {worst:e} rad, codes differing {differ} of {pixels}"
+        );
+        // 2·1.2e-6 rad of the 0.0245 rad step: about 1e-4 of the pixels could differ; allow 1e-3.
+        assert!(
+            differ * 1000 <= pixels,
+            "{differ} of {pixels} codes differ by one step"
+        );
     }
 
     #[test]

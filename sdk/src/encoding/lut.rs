@@ -4,33 +4,11 @@ use std::f32::consts::TAU;
 
 use ndarray::{Array, ArrayView, Dimension};
 
-/// Wraps a phase in radians to `[0, 2π)`. NaN stays NaN (callers validate their inputs).
+/// Wraps a phase in radians to `[0, 2π)`. NaN stays NaN (callers validate their inputs). For the usual
+/// few-cycle range (double phase values lie within ±3π) it adds or subtracts `2π` at most twice, beyond it
+/// takes `rem_euclid`: [`tensorholo_kernels::double_phase::wrap_phase`], which the double phase rows use.
 pub fn wrap_phase(phase: f32) -> f32 {
-    // Fast path for the usual few-cycle range (double phase values lie within ±3π).
-    if (-2.0 * TAU..2.0 * TAU).contains(&phase) {
-        let mut w = phase;
-        if w < 0.0 {
-            w += TAU;
-        }
-        if w < 0.0 {
-            w += TAU;
-        }
-        if w >= TAU {
-            w -= TAU;
-        }
-        if w >= TAU {
-            w -= TAU;
-        }
-        // Adding 2π to a tiny negative value can round up to exactly 2π.
-        return if (0.0..TAU).contains(&w) { w } else { 0.0 };
-    }
-    let w = phase.rem_euclid(TAU);
-    // rem_euclid can round up to exactly 2π for tiny negative inputs.
-    if w >= TAU {
-        0.0
-    } else {
-        w
-    }
+    tensorholo_kernels::double_phase::wrap_phase(phase)
 }
 
 /// The identity look-up table of an ideal SLM with a linear response over one `2π` cycle: code `c ∈ 0..=255`
