@@ -39,7 +39,7 @@ pub(crate) const ASIN_P: [f32; 5] = [
 ///
 /// Method: `n = min(|x|, |y|)`, `d = max(|x|, |y|)`, `t = n/d ∈ [0, 1]` (or `(n − d)/(n + d)` when
 /// `n > tan(π/8)·d`, adding π/4: one division either way), then the Cephes `atanf` polynomial on
-/// `|t| ≤ tan(π/8)` ([`ATAN_P`], degree 9 in `t`), then the octant: `π/2 − r` where `|y| > |x|`, `π − r`
+/// `|t| ≤ tan(π/8)` (`ATAN_P`, degree 9 in `t`), then the octant: `π/2 − r` where `|y| > |x|`, `π − r`
 /// where `x < 0`, the sign of `y`. Error: at most [`super::ATAN2_MAX_ERROR`] = 4.8e-7 rad (2·10⁻⁵ of an SLM
 /// code step) from the exact value.
 #[inline(always)]
@@ -73,7 +73,7 @@ pub fn atan2(y: f32, x: f32) -> f32 {
 /// `acos(x)` in radians for `x ∈ [0, 1]` (the caller clamps; NaN in, NaN out).
 ///
 /// Method: `acos(x) = π/2 − asin(x)` for `x ≤ 1/2`, `2·asin(√((1 − x)/2))` above (`1 − x` is exact there),
-/// with the Cephes `asinf` polynomial on `[0, 1/2]` ([`ASIN_P`], degree 11 in `s`). Error: at most
+/// with the Cephes `asinf` polynomial on `[0, 1/2]` (`ASIN_P`, degree 11 in `s`). Error: at most
 /// [`super::ACOS_MAX_ERROR`] = 2.4e-7 rad (10⁻⁵ of an SLM code step) from the exact value.
 #[inline(always)]
 pub fn acos_unit(x: f32) -> f32 {

@@ -71,7 +71,7 @@ pub(crate) trait Engine: Sync {
     /// frames of `nets.hologram` and picks the fastest; a single candidate is timed only when `time_single`
     /// (to compare engines). `to_beat`: the best seconds of an engine timed before this one (on the same
     /// input); an engine with several candidates times its likeliest first and may leave the others untimed
-    /// (reported as skipped) when that one is far slower ([`super::tuning::PLAUSIBLE_FACTOR`]).
+    /// (reported as skipped) when that one is far slower (tract: 1.5×, its `PLAUSIBLE_FACTOR`).
     ///
     /// Errors: the engine's plan and run errors.
     fn tune(

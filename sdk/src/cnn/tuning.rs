@@ -151,6 +151,7 @@ const REPEAT_BELOW_S: f64 = 0.25;
 /// other candidates are left untimed ([`crate::cnn::CnnEngine::Auto`]). Tract's candidates differ from one
 /// another by less than this (layouts by about 10 %, its thread counts: the likeliest is the most threads),
 /// so a first candidate 1.5× slower than the native engine cannot plausibly win with another.
+#[cfg(feature = "tract")]
 pub(crate) const PLAUSIBLE_FACTOR: f64 = 1.5;
 
 /// How many threads a CNN plan uses.
