@@ -232,8 +232,10 @@ def render_line(plan: Plan) -> str:
     pre = os.path.join(plan.models, f"{name}.prefilter.onnx")
     if plan.offsets_mm[0] != 0:
         argv += ["--prefilter-model", pre]
-    if plan.offsets_mm[0] != plan.profile.offsets_m[0] * 1e3:
-        argv += ["--offset-mm", f"{plan.offsets_mm[0]:g}"]
+    # The profile's first offset is holo's default; another one is passed exactly (repr, not rounded: the
+    # model's metadata must match it to a relative 1e-6).
+    if not math.isclose(plan.offsets_mm[0], plan.profile.offsets_m[0] * 1e3, rel_tol=1e-9, abs_tol=1e-12):
+        argv += ["--offset-mm", repr(plan.offsets_mm[0])]
     return shlex.join(argv + ["--out", "out/retrained"])
 
 

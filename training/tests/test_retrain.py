@@ -138,3 +138,15 @@ def test_a_dataset_of_another_display_is_refused(tmp_path):
     with open(os.path.join(plan.data, "manifest.json"), "w") as f:
         json.dump({"optics": plan.profile.display.to_dict()}, f)
     retrain.check_manifest(plan.data, plan.profile)
+
+
+def test_the_render_line_keeps_the_profile_offset_and_passes_another_exactly(tmp_path):
+    # 3.74 µm: offsets 1.3113375 and 2.622675 mm; six significant digits would miss holo's 1e-6 match.
+    path = os.path.join(ROOT, "displays", "lcos-3.74um-4k.json")
+    args = retrain.parse_args(["--display", path, "--out", str(tmp_path), "--holo", "holo", "--root", ROOT])
+    plan = retrain.build_plan(args, retrain.read_profile(path))
+    assert "--offset-mm" not in retrain.render_line(plan)
+    args = retrain.parse_args(["--display", path, "--out", str(tmp_path), "--holo", "holo", "--root", ROOT,
+                               "--offsets-mm", "2.622675"])
+    line = retrain.render_line(retrain.build_plan(args, retrain.read_profile(path)))
+    assert "--offset-mm 2.622675 " in line and "holo8_rgbd_2.62268mm.prefilter.onnx" in line
