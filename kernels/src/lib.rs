@@ -55,7 +55,7 @@ pub mod peak;
 mod quant;
 
 pub use buffer::{Affine, RowBand, RowPlanar};
-pub use conv3x3::registry::{self, DType, KernelInfo, PackKind};
+pub use conv3x3::registry::{self, Algorithm, DType, KernelInfo, PackKind};
 pub use conv3x3::{Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, QuantU8};
 pub use depthwise::{depthwise, depthwise_rows};
 pub use error::KernelError;

@@ -14,7 +14,7 @@
 use std::ops::Range;
 
 use crate::conv3x3::job::{F32Job, F32Out, U8Job, U8Out};
-use crate::conv3x3::row::{f32_info, u8_info, F32Row, PackKind, U8Row};
+use crate::conv3x3::row::{f32_info, u8_info, winograd_info, Algorithm, F32Row, PackKind, U8Row};
 #[cfg(target_arch = "x86_64")]
 use crate::conv3x3::{f32_avx2, f32_avx512, u8s8_avx2, u8s8_avx512vnni, u8s8_avxvnni};
 #[cfg(target_arch = "aarch64")]
@@ -78,15 +78,27 @@ pub(crate) struct Ops {
 /// one. The depthwise, heads, grid and double phase entries are the portable bodies themselves (SSE2 / NEON).
 const SCALAR: Ops = Ops {
     isa: Isa::Scalar,
-    f32: &[F32Row {
-        info: f32_info(
-            "conv3x3.f32.8x8.scalar",
-            Isa::Scalar,
-            f32_scalar::G,
-            f32_scalar::P,
-        ),
-        run: f32_scalar::conv,
-    }],
+    f32: &[
+        F32Row {
+            info: f32_info(
+                "conv3x3.f32.8x8.scalar",
+                Isa::Scalar,
+                f32_scalar::G,
+                f32_scalar::P,
+            ),
+            run: f32_scalar::conv,
+        },
+        F32Row {
+            info: winograd_info(
+                "conv3x3.f32.wino2x2.4x4.scalar",
+                Isa::Scalar,
+                f32_scalar::WINO_G,
+                1,
+                f32_scalar::WINO_NV,
+            ),
+            run: f32_scalar::winograd,
+        },
+    ],
     u8: &[U8Row {
         info: u8_info(
             "conv3x3.u8s8.8x8.scalar",
@@ -136,15 +148,27 @@ static OPS: [Ops; 5] = [
     },
     Ops {
         isa: Isa::Avx512,
-        f32: &[F32Row {
-            info: f32_info(
-                "conv3x3.f32.8x3.avx512",
-                Isa::Avx512,
-                f32_avx512::G,
-                16 * f32_avx512::NV,
-            ),
-            run: f32_avx512::conv,
-        }],
+        f32: &[
+            F32Row {
+                info: f32_info(
+                    "conv3x3.f32.8x3.avx512",
+                    Isa::Avx512,
+                    f32_avx512::G,
+                    16 * f32_avx512::NV,
+                ),
+                run: f32_avx512::conv,
+            },
+            F32Row {
+                info: winograd_info(
+                    "conv3x3.f32.wino2x2.8x2.avx512",
+                    Isa::Avx512,
+                    f32_avx512::G,
+                    16,
+                    f32_avx512::WINO_NV,
+                ),
+                run: f32_avx512::winograd,
+            },
+        ],
         u8: &[],
         depthwise: Some(depthwise::x86::rows_avx512),
         heads: Some(heads::x86::heads_avx512),
@@ -190,10 +214,31 @@ static OPS: [Ops; 5] = [
             },
             // Tests only: the AVX-512 row's tile geometry emulated on AVX2 (after the real rows: never
             // dispatched).
+            F32Row {
+                info: winograd_info(
+                    "conv3x3.f32.wino2x2.6x2.avx2",
+                    Isa::Avx2Fma,
+                    f32_avx2::G,
+                    8,
+                    f32_avx2::NV,
+                ),
+                run: f32_avx2::winograd,
+            },
             #[cfg(test)]
             F32Row {
                 info: f32_info("test.f32.8x3.avx512-geometry-on-avx2", Isa::Avx2Fma, 8, 48),
                 run: f32_avx2::conv_avx512_geometry,
+            },
+            #[cfg(test)]
+            F32Row {
+                info: winograd_info(
+                    "test.f32.wino2x2.8x2.avx512-geometry-on-avx2",
+                    Isa::Avx2Fma,
+                    8,
+                    16,
+                    2,
+                ),
+                run: f32_avx2::winograd_avx512_geometry,
             },
         ],
         u8: &[
@@ -288,15 +333,27 @@ static OPS: [Ops; 4] = [
     },
     Ops {
         isa: Isa::Neon,
-        f32: &[F32Row {
-            info: f32_info(
-                "conv3x3.f32.8x3.neon",
-                Isa::Neon,
-                f32_neon::G,
-                4 * f32_neon::NV,
-            ),
-            run: f32_neon::conv,
-        }],
+        f32: &[
+            F32Row {
+                info: f32_info(
+                    "conv3x3.f32.8x3.neon",
+                    Isa::Neon,
+                    f32_neon::G,
+                    4 * f32_neon::NV,
+                ),
+                run: f32_neon::conv,
+            },
+            F32Row {
+                info: winograd_info(
+                    "conv3x3.f32.wino2x2.8x3.neon",
+                    Isa::Neon,
+                    f32_neon::G,
+                    4,
+                    f32_neon::NV,
+                ),
+                run: f32_neon::winograd,
+            },
+        ],
         u8: &[U8Row {
             info: u8_info("conv3x3.u8s8.4x1.neon", Isa::Neon, 4, 4),
             pack: PackKind::I16,
@@ -353,7 +410,7 @@ pub(crate) fn u8_rows() -> impl Iterator<Item = &'static U8Row> {
 pub(crate) fn select_f32(isa: Isa) -> &'static F32Row {
     under(isa)
         .flat_map(|t| t.f32)
-        .next()
+        .find(|r| r.info.algorithm == Algorithm::Direct)
         .unwrap_or(&portable().f32[0])
 }
 
@@ -364,13 +421,25 @@ pub(crate) fn select_f32(isa: Isa) -> &'static F32Row {
 /// 384²: 65 against 56 GFLOP/s for 24+4→6, 89 against 73 for 8+6→6; the 8-channel tile computes 8 channels
 /// for 6).
 pub(crate) fn select_f32_for(isa: Isa, c_out: usize) -> &'static F32Row {
+    select_f32_algorithm(isa, c_out, Algorithm::Direct)
+}
+
+/// As [`select_f32_for`], among the rows of `algorithm` (the portable row of it when no vector row has one).
+pub(crate) fn select_f32_algorithm(
+    isa: Isa,
+    c_out: usize,
+    algorithm: Algorithm,
+) -> &'static F32Row {
     let padded = |r: &F32Row| c_out.div_ceil(r.info.oc_tile) * r.info.oc_tile;
+    let of_kind = |r: &&F32Row| r.info.algorithm == algorithm;
     under(isa)
         .flat_map(|t| t.f32)
+        .filter(of_kind)
         // Test-only rows (emulated geometries) are never dispatched.
         .filter(|r| !r.info.name.starts_with("test."))
         .filter(|r| r.info.isa != Isa::Scalar || isa == Isa::Scalar)
         .min_by_key(|r| padded(r))
+        .or_else(|| portable().f32.iter().find(of_kind))
         .unwrap_or(&portable().f32[0])
 }
 

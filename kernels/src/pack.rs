@@ -64,6 +64,52 @@ pub(crate) fn pack_f32(
     Ok((packed, b))
 }
 
+/// Packs OIHW `[C_out][C_in][3][3]` weights and `[C_out]` bias for a Winograd F(2×2, 3×3) kernel with an
+/// output-channel tile `g`: each filter `g₃ₓ₃` becomes `U = G g Gᵀ` (4×4; `G` as in `simd_winograd.rs`,
+/// computed in f64 and rounded once), packed `[16][ceil(C_out/g)][C_in][g]` (position `k = 4i + j` of `U`
+/// outermost: one product's weights are adjacent); bias `[ceil(C_out/g)·g]`, zero-padded.
+pub(crate) fn pack_winograd_f32(
+    weights: &[f32],
+    bias: &[f32],
+    c_in: usize,
+    c_out: usize,
+    g: usize,
+) -> Result<(Vec<f32>, Vec<f32>), KernelError> {
+    check_channels(c_in, c_out)?;
+    check_len(
+        "weights [C_out][C_in][3][3]",
+        weights.len(),
+        c_out * c_in * 9,
+    )?;
+    check_len("bias [C_out]", bias.len(), c_out)?;
+    const GM: [[f64; 3]; 4] = [
+        [1.0, 0.0, 0.0],
+        [0.5, 0.5, 0.5],
+        [0.5, -0.5, 0.5],
+        [0.0, 0.0, 1.0],
+    ];
+    let groups = c_out.div_ceil(g);
+    let mut packed = vec![0.0; 16 * groups * c_in * g];
+    for o in 0..c_out {
+        let (grp, lane) = (o / g, o % g);
+        for i in 0..c_in {
+            let f = &weights[(o * c_in + i) * 9..][..9];
+            for (k, u) in (0..16).map(|k| (k, (k / 4, k % 4))) {
+                let mut s = 0.0f64;
+                for a in 0..3 {
+                    for b in 0..3 {
+                        s += GM[u.0][a] * f[a * 3 + b] as f64 * GM[u.1][b];
+                    }
+                }
+                packed[((k * groups + grp) * c_in + i) * g + lane] = s as f32;
+            }
+        }
+    }
+    let mut b = vec![0.0; groups * g];
+    b[..c_out].copy_from_slice(bias);
+    Ok((packed, b))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -2,7 +2,7 @@
 
 use super::inputs::Inputs;
 use super::job::{F32Job, F32Out};
-use super::row::{F32Row, KernelInfo};
+use super::row::{Algorithm, F32Row, KernelInfo};
 use crate::buffer::band::RowBand;
 use crate::buffer::planar::RowPlanar;
 use crate::error::KernelError;
@@ -39,20 +39,29 @@ impl Conv3x3F32 {
         relu: bool,
         isa: Isa,
     ) -> Result<Self, KernelError> {
+        Self::with_algorithm(weights, bias, c_in, c_out, relu, isa, Algorithm::Direct)
+    }
+
+    /// Plans a convolution as [`new`](Self::new) does, with the best row of `algorithm` for `isa` and `c_out`
+    /// ([`registry::selected_f32_algorithm`](crate::registry::selected_f32_algorithm); the portable row of
+    /// that algorithm when `isa` has no vector row of it). Errors: as [`new`](Self::new).
+    pub fn with_algorithm(
+        weights: &[f32],
+        bias: &[f32],
+        c_in: usize,
+        c_out: usize,
+        relu: bool,
+        isa: Isa,
+        algorithm: Algorithm,
+    ) -> Result<Self, KernelError> {
         if !isa.is_available() {
             return Err(KernelError::Isa {
                 name: isa.name().into(),
                 why: "not available on this CPU",
             });
         }
-        Self::with_row(
-            weights,
-            bias,
-            c_in,
-            c_out,
-            relu,
-            ops::select_f32_for(isa, c_out),
-        )
+        let row = ops::select_f32_algorithm(isa, c_out, algorithm);
+        Self::with_row(weights, bias, c_in, c_out, relu, row)
     }
 
     /// Plans a convolution with the kernel row named `name` (e.g. `conv3x3.f32.6x2.avx2`, see
@@ -80,7 +89,11 @@ impl Conv3x3F32 {
         relu: bool,
         row: &'static F32Row,
     ) -> Result<Self, KernelError> {
-        let (weights, bias) = pack::pack_f32(weights, bias, c_in, c_out, row.info.oc_tile)?;
+        let pack = match row.info.algorithm {
+            Algorithm::Direct => pack::pack_f32,
+            Algorithm::Winograd2x2 => pack::pack_winograd_f32,
+        };
+        let (weights, bias) = pack(weights, bias, c_in, c_out, row.info.oc_tile)?;
         Ok(Self {
             row,
             c_in,
@@ -124,6 +137,7 @@ impl Conv3x3F32 {
             residual: inputs.residual.map(|_| sr),
             y0: rows.start - k,
             y1: rows.end - k,
+            parity: inputs.parity(k),
         };
         (job, k)
     }

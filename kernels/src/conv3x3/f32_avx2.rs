@@ -8,6 +8,7 @@
 
 use super::job::{F32Job, F32Out};
 use super::simd_f32::{conv as generic_conv, SimdF32};
+use super::simd_winograd;
 use std::arch::x86_64::*;
 
 /// Output-channel tile.
@@ -55,6 +56,30 @@ impl SimdF32 for __m256 {
         unsafe { _mm256_max_ps(v, _mm256_setzero_ps()) }
     }
     #[inline(always)]
+    unsafe fn sub(a: Self, b: Self) -> Self {
+        // SAFETY: the caller guarantees AVX.
+        unsafe { _mm256_sub_ps(a, b) }
+    }
+    #[inline(always)]
+    unsafe fn load_deinterleaved(p: *const f32) -> (Self, Self) {
+        // SAFETY: the caller guarantees AVX and 16 readable values at `p`. Within 128-bit lanes:
+        // `[p0 p2 p8 p10 | p4 p6 p12 p14]` and the odd ones: pairs (tiles) in the order 0 1 4 5 2 3 6 7, the
+        // same for every `p`, which `interleave` undoes without crossing 128-bit lanes either.
+        unsafe {
+            let (a, b) = (_mm256_loadu_ps(p), _mm256_loadu_ps(p.add(8)));
+            (
+                _mm256_shuffle_ps::<0b10_00_10_00>(a, b),
+                _mm256_shuffle_ps::<0b11_01_11_01>(a, b),
+            )
+        }
+    }
+    #[inline(always)]
+    unsafe fn interleave(e: Self, o: Self) -> (Self, Self) {
+        // SAFETY: the caller guarantees AVX. Lanes hold pairs 0 1 4 5 | 2 3 6 7 (`load_deinterleaved`):
+        // `[e0 o0 e1 o1 | e4 o4 e5 o5]` = pixels 0..8, `[e2 o2 e3 o3 | e6 o6 e7 o7]` = pixels 8..16.
+        unsafe { (_mm256_unpacklo_ps(e, o), _mm256_unpackhi_ps(e, o)) }
+    }
+    #[inline(always)]
     unsafe fn prefetch(p: *const f32) {
         // SAFETY: `prefetcht0` never faults.
         unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) }
@@ -78,6 +103,17 @@ impl SimdF32 for __m256 {
 pub(crate) unsafe fn conv(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: AVX2 + FMA enabled here; 16-pixel tile ≤ MAX_TILE; the job was checked by the caller.
     unsafe { generic_conv::<__m256, G, NV>(job, out) }
+}
+
+/// `conv3x3.f32.wino2x2.6x2.avx2`: Winograd F(2×2, 3×3) with the direct row's 6 × 2 register tile (6
+/// output channels × 16 tiles = 32 output pixels of two rows), for the same reason (load-bound; 15 of 16 ymm).
+///
+/// # Safety
+/// The CPU has AVX2 and FMA; `job` was checked by the safe API and its weights packed for Winograd.
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: AVX2 + FMA enabled here; 32-pixel tile ≤ MAX_TILE; the job was checked by the caller.
+    unsafe { simd_winograd::conv::<__m256, G, NV>(job, out) }
 }
 
 /// FMA peak loop: `iters` × 12 independent 8-lane FMAs; returns a value derived from the result (to keep the
@@ -154,6 +190,29 @@ impl SimdF32 for Ymm2 {
         unsafe { Ymm2(__m256::relu(v.0), __m256::relu(v.1)) }
     }
     #[inline(always)]
+    unsafe fn sub(a: Self, b: Self) -> Self {
+        // SAFETY: the caller guarantees AVX.
+        unsafe { Ymm2(__m256::sub(a.0, b.0), __m256::sub(a.1, b.1)) }
+    }
+    #[inline(always)]
+    unsafe fn load_deinterleaved(p: *const f32) -> (Self, Self) {
+        // SAFETY: the caller guarantees AVX2 and 32 readable values at `p`.
+        unsafe {
+            let (e0, o0) = __m256::load_deinterleaved(p);
+            let (e1, o1) = __m256::load_deinterleaved(p.add(16));
+            (Ymm2(e0, e1), Ymm2(o0, o1))
+        }
+    }
+    #[inline(always)]
+    unsafe fn interleave(e: Self, o: Self) -> (Self, Self) {
+        // SAFETY: the caller guarantees AVX.
+        unsafe {
+            let (p0, p1) = __m256::interleave(e.0, o.0);
+            let (p2, p3) = __m256::interleave(e.1, o.1);
+            (Ymm2(p0, p1), Ymm2(p2, p3))
+        }
+    }
+    #[inline(always)]
     unsafe fn keep_first(v: Self, n: usize) -> Self {
         // SAFETY: the caller guarantees AVX; `n < 16`, so each half gets `n < 8` or `n − 8 < 8`.
         unsafe {
@@ -177,4 +236,16 @@ impl SimdF32 for Ymm2 {
 pub(crate) unsafe fn conv_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: as `conv`; 48-pixel tile ≤ MAX_TILE.
     unsafe { generic_conv::<Ymm2, 8, 3>(job, out) }
+}
+
+/// Tests only: the AVX-512 Winograd geometry (8 channels × 2 vectors of 16 lanes = 32 tiles) on AVX2
+/// registers.
+///
+/// # Safety
+/// As [`winograd`].
+#[cfg(test)]
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn winograd_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: as `winograd`; 64-pixel tile ≤ MAX_TILE.
+    unsafe { simd_winograd::conv::<Ymm2, 8, 2>(job, out) }
 }

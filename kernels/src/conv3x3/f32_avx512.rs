@@ -7,6 +7,7 @@
 
 use super::job::{F32Job, F32Out};
 use super::simd_f32::{conv as generic_conv, SimdF32};
+use super::simd_winograd;
 use std::arch::x86_64::*;
 
 /// Output-channel tile.
@@ -52,6 +53,38 @@ impl SimdF32 for __m512 {
         unsafe { _mm512_max_ps(v, _mm512_setzero_ps()) }
     }
     #[inline(always)]
+    unsafe fn sub(a: Self, b: Self) -> Self {
+        // SAFETY: the caller guarantees AVX-512F.
+        unsafe { _mm512_sub_ps(a, b) }
+    }
+    #[inline(always)]
+    unsafe fn load_deinterleaved(p: *const f32) -> (Self, Self) {
+        // SAFETY: the caller guarantees AVX-512F and 32 readable values at `p`. Indices 0..16 pick from `a`,
+        // 16..32 from `b`.
+        unsafe {
+            let (a, b) = (_mm512_loadu_ps(p), _mm512_loadu_ps(p.add(16)));
+            let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
+            let odd = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
+            (
+                _mm512_permutex2var_ps(a, even, b),
+                _mm512_permutex2var_ps(a, odd, b),
+            )
+        }
+    }
+    #[inline(always)]
+    unsafe fn interleave(e: Self, o: Self) -> (Self, Self) {
+        // SAFETY: the caller guarantees AVX-512F. Indices 0..16 pick from `e`, 16..32 from `o`.
+        unsafe {
+            let lo = _mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
+            let hi =
+                _mm512_setr_epi32(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31);
+            (
+                _mm512_permutex2var_ps(e, lo, o),
+                _mm512_permutex2var_ps(e, hi, o),
+            )
+        }
+    }
+    #[inline(always)]
     unsafe fn prefetch(p: *const f32) {
         // SAFETY: `prefetcht0` never faults.
         unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) }
@@ -73,6 +106,20 @@ impl SimdF32 for __m512 {
 pub(crate) unsafe fn conv(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: AVX-512F enabled here; 48-pixel tile ≤ MAX_TILE; the job was checked by the caller.
     unsafe { generic_conv::<__m512, G, NV>(job, out) }
+}
+
+/// Vectors of tiles per Winograd register tile (8 channels × 2 × 16 = 32 tiles, 64 output pixels: the
+/// most `MAX_TILE` allows).
+pub(crate) const WINO_NV: usize = 2;
+
+/// `conv3x3.f32.wino2x2.8x2.avx512`: Winograd F(2×2, 3×3), 8 output channels × 2 zmm of tiles.
+///
+/// # Safety
+/// The CPU has AVX-512F; `job` was checked by the safe API and its weights packed for Winograd.
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: AVX-512F enabled here; 64-pixel tile ≤ MAX_TILE; the job was checked by the caller.
+    unsafe { simd_winograd::conv::<__m512, G, WINO_NV>(job, out) }
 }
 
 /// FMA peak loop: `iters` × 24 independent 16-lane FMAs. FLOPs = `iters · 24 · 16 · 2`.

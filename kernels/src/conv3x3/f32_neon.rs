@@ -6,6 +6,7 @@
 
 use super::job::{F32Job, F32Out};
 use super::simd_f32::{conv as generic_conv, SimdF32};
+use super::simd_winograd;
 use std::arch::aarch64::*;
 
 /// Output-channel tile.
@@ -48,6 +49,24 @@ impl SimdF32 for float32x4_t {
         unsafe { vaddq_f32(a, b) }
     }
     #[inline(always)]
+    unsafe fn sub(a: Self, b: Self) -> Self {
+        // SAFETY: NEON is baseline on aarch64.
+        unsafe { vsubq_f32(a, b) }
+    }
+    #[inline(always)]
+    unsafe fn load_deinterleaved(p: *const f32) -> (Self, Self) {
+        // SAFETY: the caller guarantees 8 readable values at `p`; `ld2` deinterleaves pairs.
+        unsafe {
+            let v = vld2q_f32(p);
+            (v.0, v.1)
+        }
+    }
+    #[inline(always)]
+    unsafe fn interleave(e: Self, o: Self) -> (Self, Self) {
+        // SAFETY: NEON is baseline on aarch64.
+        unsafe { (vzip1q_f32(e, o), vzip2q_f32(e, o)) }
+    }
+    #[inline(always)]
     unsafe fn relu(v: Self) -> Self {
         // SAFETY: NEON.
         unsafe { vmaxq_f32(v, vdupq_n_f32(0.0)) }
@@ -71,6 +90,17 @@ impl SimdF32 for float32x4_t {
 pub(crate) unsafe fn conv(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: NEON enabled; 12-pixel tile ≤ MAX_TILE; the job was checked by the caller.
     unsafe { generic_conv::<float32x4_t, G, NV>(job, out) }
+}
+
+/// `conv3x3.f32.wino2x2.8x3.neon`: Winograd F(2×2, 3×3) with the direct row's 8 × 3 register tile (8
+/// output channels × 12 tiles = 24 output pixels of two rows).
+///
+/// # Safety
+/// `job` was checked by the safe API and its weights packed for Winograd.
+#[target_feature(enable = "neon")]
+pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: NEON is baseline on aarch64; 24-pixel tile ≤ MAX_TILE; the job was checked by the caller.
+    unsafe { simd_winograd::conv::<float32x4_t, G, NV>(job, out) }
 }
 
 /// FMA peak loop: `iters` × 24 independent 4-lane FMAs. FLOPs = `iters · 24 · 4 · 2`.

@@ -7,6 +7,13 @@
 //! tile measured the same as 8 × 8 on x86-64 SSE2).
 
 use super::job::{F32Job, F32Out};
+use super::simd_f32::SimdF32;
+use super::simd_winograd;
+
+/// Output-channel tile of the portable Winograd row.
+pub(crate) const WINO_G: usize = 4;
+/// Tiles (2 output columns each) per Winograd register tile of the portable row.
+pub(crate) const WINO_NV: usize = 4;
 
 /// Output-channel tile.
 pub(crate) const G: usize = 8;
@@ -92,4 +99,72 @@ pub(crate) fn peak(iters: u64) -> f32 {
         }
     }
     acc.iter().sum()
+}
+
+/// One f32 as a one-lane register: the portable Winograd row is the generic body on it (multiply and add
+/// unfused, as the direct scalar row computes them: no libm `fmaf` on targets without FMA).
+impl SimdF32 for f32 {
+    const LANES: usize = 1;
+    #[inline(always)]
+    unsafe fn zero() -> Self {
+        0.0
+    }
+    #[inline(always)]
+    unsafe fn splat(p: *const f32) -> Self {
+        // SAFETY: the caller guarantees a valid `p`.
+        unsafe { *p }
+    }
+    #[inline(always)]
+    unsafe fn load(p: *const f32) -> Self {
+        // SAFETY: as above.
+        unsafe { *p }
+    }
+    #[inline(always)]
+    unsafe fn store(p: *mut f32, v: Self) {
+        // SAFETY: the caller guarantees a valid `p`.
+        unsafe { *p = v }
+    }
+    #[inline(always)]
+    unsafe fn fma(acc: Self, a: Self, b: Self) -> Self {
+        acc + a * b
+    }
+    #[inline(always)]
+    unsafe fn add(a: Self, b: Self) -> Self {
+        a + b
+    }
+    #[inline(always)]
+    unsafe fn sub(a: Self, b: Self) -> Self {
+        a - b
+    }
+    #[inline(always)]
+    unsafe fn relu(v: Self) -> Self {
+        if v > 0.0 {
+            v
+        } else {
+            0.0
+        }
+    }
+    #[inline(always)]
+    unsafe fn keep_first(_v: Self, n: usize) -> Self {
+        debug_assert!(n == 0);
+        0.0
+    }
+    #[inline(always)]
+    unsafe fn load_deinterleaved(p: *const f32) -> (Self, Self) {
+        // SAFETY: the caller guarantees 2 readable values at `p`.
+        unsafe { (*p, *p.add(1)) }
+    }
+    #[inline(always)]
+    unsafe fn interleave(e: Self, o: Self) -> (Self, Self) {
+        (e, o)
+    }
+}
+
+/// `conv3x3.f32.wino2x2.4x4.scalar`: Winograd F(2×2, 3×3) on any CPU, 4 output channels × 4 tiles.
+///
+/// # Safety
+/// `job` was checked by the safe API and its weights packed for Winograd with `G = 4`.
+pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: the job was checked by the caller; 8-pixel tile ≤ MAX_TILE.
+    unsafe { simd_winograd::conv::<f32, WINO_G, WINO_NV>(job, out) }
 }

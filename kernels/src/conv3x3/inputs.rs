@@ -19,6 +19,9 @@ pub struct Inputs<'a, T: Element> {
     /// Row offsets `[a, b, residual]` of the operands from the output ([`Inputs::shifted`]); `None`: every
     /// buffer holds the whole frame.
     pub shift: Option<[isize; 3]>,
+    /// The frame row of the output's interior row 0 ([`Inputs::frame_row`]; 0 for whole frames). Winograd
+    /// rows pair output rows by frame row, so that every split into bands and windows gives the same bits.
+    pub frame_row: isize,
 }
 
 impl<'a, T: Element> Inputs<'a, T> {
@@ -29,6 +32,7 @@ impl<'a, T: Element> Inputs<'a, T> {
             b: None,
             residual: None,
             shift: None,
+            frame_row: 0,
         }
     }
     /// Adds a second source concatenated after `a`'s channels.
@@ -52,6 +56,21 @@ impl<'a, T: Element> Inputs<'a, T> {
     pub fn shifted(mut self, a: isize, b: isize, residual: isize) -> Self {
         self.shift = Some([a, b, residual]);
         self
+    }
+
+    /// Says which frame row the output's interior row 0 holds (with [`shifted`](Self::shifted) windows: the
+    /// output window's first frame row; default 0, a whole frame). Only Winograd rows read it: they compute
+    /// output rows in pairs `2j, 2j + 1` of frame rows, and a pair split between two calls is computed the
+    /// same way by both, so bands, windows and threads never change a bit of the result.
+    pub fn frame_row(mut self, row: isize) -> Self {
+        self.frame_row = row;
+        self
+    }
+
+    /// The Winograd row pairing of kernel rows from origin `k` ([`kernel_view`](Self::kernel_view)): kernel row
+    /// `y` starts a pair when `y + parity` is even.
+    pub(crate) fn parity(&self, k: usize) -> usize {
+        (k as isize + self.frame_row).rem_euclid(2) as usize
     }
 
     /// The kernel's row origin `k` (output row `r` is kernel row `r − k`; 0 without [`shifted`](Self::shifted))

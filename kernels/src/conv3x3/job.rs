@@ -20,6 +20,10 @@ pub(crate) struct F32Job<'a> {
     pub residual: Option<&'a [f32]>,
     pub y0: usize,
     pub y1: usize,
+    /// Winograd rows: kernel row `y` is the top row of a 2-row output tile when `y + parity` is even (tiles
+    /// pair frame rows `2j, 2j + 1` whatever the band or window, so any split gives the same bits). Direct
+    /// rows ignore it.
+    pub parity: usize,
 }
 
 /// Where an f32 kernel writes: a [`RowPlanar`](crate::buffer::RowPlanar) buffer of `C_out` channels

@@ -28,10 +28,16 @@ pub(crate) mod row;
 mod u8s8;
 
 pub(crate) mod f32_scalar;
-#[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
+// The direct generic loop is instantiated only by the x86-64 and aarch64 rows; the Winograd body by every
+// target (the portable row is the body on one-lane `f32` registers).
+#[cfg_attr(
+    not(any(target_arch = "x86_64", target_arch = "aarch64")),
+    allow(dead_code)
+)]
 mod simd_f32;
 #[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
 mod simd_u8;
+mod simd_winograd;
 pub(crate) mod u8s8_scalar;
 
 #[cfg(target_arch = "x86_64")]

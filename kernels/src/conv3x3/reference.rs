@@ -6,6 +6,38 @@
 pub(crate) struct RefF32 {
     pub out: Vec<f32>,
     pub mag: Vec<f64>,
+    /// Per output value, the scale of a Winograd F(2×2, 3×3) kernel's rounding error:
+    /// `Σ_c (Σ|g_c|)·(Σ_{5×5}|d_c|) + |bias| + |residual|`, `g_c` the 3×3 filter of input channel `c` and
+    /// `d_c` its inputs in the 5×5 neighbourhood (which holds every 4×4 input tile of the pixel).
+    pub wino: Vec<f64>,
+}
+
+/// The error scale of a Winograd F(2×2, 3×3) kernel's output ([`RefF32::wino`]): every intermediate
+/// (`V = Bᵀ d B`: sums of 4 inputs; `U = G g Gᵀ`: at most `Σ|g|`; the output transform: sums of 9 products)
+/// is bounded by these sums. Per output value; `input(c, y, x)` is 0 outside the frame.
+fn winograd_scale(
+    input: &dyn Fn(usize, isize, isize) -> f64,
+    weights: &[f32],
+    cin: usize,
+    o: usize,
+    y: usize,
+    x: usize,
+) -> f64 {
+    let mut m = 0.0;
+    for c in 0..cin {
+        let g: f64 = weights[(o * cin + c) * 9..][..9]
+            .iter()
+            .map(|v| v.abs() as f64)
+            .sum();
+        let mut d = 0.0;
+        for dy in -2..=2 {
+            for dx in -2..=2 {
+                d += input(c, y as isize + dy, x as isize + dx).abs();
+            }
+        }
+        m += g * d;
+    }
+    m
 }
 
 /// `out[o][y][x] = bias[o] + Σ_{i,ky,kx} w[o][i][ky][kx] · in[i][y+ky−1][x+kx−1]` (zero outside), where `in`
@@ -38,6 +70,7 @@ pub(crate) fn conv_f32(
     };
     let mut out = vec![0.0f32; cout * h * w];
     let mut mag = vec![0.0f64; cout * h * w];
+    let mut wino = vec![0.0f64; cout * h * w];
     for o in 0..cout {
         for y in 0..h {
             for x in 0..w {
@@ -62,16 +95,19 @@ pub(crate) fn conv_f32(
                     v = 0.0;
                 }
                 let k = (o * h + y) * w + x;
+                let mut wm = winograd_scale(&input, weights, cin, o, y, x) + bias[o].abs() as f64;
                 if let Some(r) = residual {
                     v += r[k] as f64;
                     m += r[k].abs() as f64;
+                    wm += r[k].abs() as f64;
                 }
                 out[k] = v as f32;
                 mag[k] = m;
+                wino[k] = wm;
             }
         }
     }
-    RefF32 { out, mag }
+    RefF32 { out, mag, wino }
 }
 
 /// Quantisation of the int8 reference layer.

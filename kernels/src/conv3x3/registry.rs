@@ -6,7 +6,7 @@
 //! Names: `conv3x3.<dtype>.<G>x<V>.<isa>`, `G` output channels × `V` vector registers of pixels per tile
 //! (for the scalar row, `V` counts pixels).
 
-pub use super::row::{DType, KernelInfo, PackKind};
+pub use super::row::{Algorithm, DType, KernelInfo, PackKind};
 use crate::isa::Isa;
 use crate::ops;
 
@@ -24,6 +24,12 @@ pub fn selected_f32(isa: Isa) -> &'static KernelInfo {
 /// least channel padding, the better one on a tie).
 pub fn selected_f32_for(isa: Isa, c_out: usize) -> &'static KernelInfo {
     &ops::select_f32_for(isa, c_out).info
+}
+
+/// The f32 row of `algorithm` a layer of `c_out` output channels runs under `isa` (as [`selected_f32_for`]
+/// among that algorithm's rows; the portable one when `isa` has no vector row of it).
+pub fn selected_f32_algorithm(isa: Isa, c_out: usize, algorithm: Algorithm) -> &'static KernelInfo {
+    &ops::select_f32_algorithm(isa, c_out, algorithm).info
 }
 
 /// Every int8 row compiled for this target (available on this CPU or not), best first.

@@ -17,6 +17,28 @@ pub enum DType {
     U8S8,
 }
 
+/// How a row computes the convolution.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Algorithm {
+    /// Direct convolution: `9·C_in` multiply-adds per output value.
+    Direct,
+    /// Winograd's minimal filtering F(2×2, 3×3) (Lavin & Gray 2016, "Fast algorithms for convolutional
+    /// neural networks"): each 2×2 output tile from a 4×4 input tile in `16·C_in` multiply-adds, 2.25× fewer
+    /// than direct, plus the input and output transforms. Not bit-identical with direct (see the crate
+    /// README for the error bound).
+    Winograd2x2,
+}
+
+impl Algorithm {
+    /// `direct` or `winograd2x2` (as in reports and `TENSORHOLO_CONV`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Algorithm::Direct => "direct",
+            Algorithm::Winograd2x2 => "winograd2x2",
+        }
+    }
+}
+
 /// Description of one kernel row.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct KernelInfo {
@@ -28,8 +50,10 @@ pub struct KernelInfo {
     pub dtype: DType,
     /// Output channels per register tile (`G`).
     pub oc_tile: usize,
-    /// Pixels per register tile.
+    /// Pixels per register tile (Winograd rows: output pixels along one row, two tile columns per lane).
     pub px_tile: usize,
+    /// How the row computes the convolution.
+    pub algorithm: Algorithm,
 }
 
 impl KernelInfo {
@@ -83,6 +107,25 @@ pub(crate) const fn f32_info(
         dtype: DType::F32,
         oc_tile,
         px_tile,
+        algorithm: Algorithm::Direct,
+    }
+}
+
+/// The description of an f32 Winograd F(2×2, 3×3) row with `lanes`-wide registers and `nv` of them per tile.
+pub(crate) const fn winograd_info(
+    name: &'static str,
+    isa: Isa,
+    oc_tile: usize,
+    lanes: usize,
+    nv: usize,
+) -> KernelInfo {
+    KernelInfo {
+        name,
+        isa,
+        dtype: DType::F32,
+        oc_tile,
+        px_tile: 2 * lanes * nv,
+        algorithm: Algorithm::Winograd2x2,
     }
 }
 
@@ -99,5 +142,6 @@ pub(crate) const fn u8_info(
         dtype: DType::U8S8,
         oc_tile,
         px_tile,
+        algorithm: Algorithm::Direct,
     }
 }

@@ -23,10 +23,22 @@ pub(crate) trait SimdF32: Copy {
     /// `acc + a·b` (fused).
     unsafe fn fma(acc: Self, a: Self, b: Self) -> Self;
     unsafe fn add(a: Self, b: Self) -> Self;
+    /// `a − b`.
+    unsafe fn sub(a: Self, b: Self) -> Self;
     /// `v > 0 ? v : 0` per lane.
     unsafe fn relu(v: Self) -> Self;
     /// Lanes `n..LANES` set to 0, lanes `0..n` kept (`n < LANES`).
     unsafe fn keep_first(v: Self, n: usize) -> Self;
+    /// Loads the `LANES` pairs `(p[2i], p[2i + 1])` from `p` and returns them deinterleaved: the first
+    /// elements in one register, the second in the other, lane `j` holding pair `π(j)` for a permutation `π`
+    /// of the implementation's choosing (the identity, or what its shuffles give without crossing 128-bit
+    /// lanes), the same for every `p` (the Winograd input transform's even and odd columns: lane `j` of the
+    /// loads at `p` and at `p + 2` then belong to the same tile).
+    unsafe fn load_deinterleaved(p: *const f32) -> (Self, Self);
+    /// The inverse of [`load_deinterleaved`](Self::load_deinterleaved) on registers: the `LANES` pairs
+    /// `(e[j], o[j])` back in memory order, as two registers (the Winograd output transform's columns back
+    /// to pixels).
+    unsafe fn interleave(e: Self, o: Self) -> (Self, Self);
     /// Hint: fetch the cache line of `p` into L1 (never faults). Default: nothing.
     #[inline(always)]
     unsafe fn prefetch(_p: *const f32) {}
@@ -145,59 +157,75 @@ unsafe fn epilogue<V: SimdF32, const G: usize, const NV: usize>(
     grp: usize,
 ) {
     let l = V::LANES;
-    let (w, h, wp, cout) = (job.w, job.h, job.wp, job.cout);
     for (g, accg) in acc.iter().enumerate() {
         let o = grp * G + g;
-        if o >= cout {
+        if o >= job.cout {
             continue;
         }
-        // Column of the tile's first pixel in a `[H+2][C_out][Wp]` buffer.
-        let row_at = ((y + 1) * cout + o) * wp + 1 + x0;
         // SAFETY: `o < groups·G = bias.len()`.
         let b = unsafe { V::splat(job.bias.as_ptr().add(o)) };
         for (v, &a) in accg.iter().enumerate() {
-            // SAFETY: register arithmetic, ISA guaranteed by the caller.
-            let mut r = unsafe { V::add(a, b) };
-            if job.relu {
-                // SAFETY: as above.
-                r = unsafe { V::relu(r) };
+            // SAFETY: register arithmetic, ISA guaranteed by the caller; pixels `x0 + v·l ..` of row `y`.
+            unsafe { store_pixels(job, out, V::add(a, b), o, y, x0 + v * l) };
+        }
+    }
+}
+
+/// The epilogue of one register of pixels `px..px + LANES` of output channel `o`, row `y`, with the bias
+/// added: ReLU when the plan has it, the residual, and the store (lanes past `w` stored as 0 into a
+/// [`RowPlanar`](crate::RowPlanar) buffer, which keeps its right border zero; not stored into a planar
+/// slice). Shared by the direct and the Winograd kernels.
+///
+/// # Safety
+/// As [`conv`]; `o < C_out`, row `y` inside the band, `px < w + MAX_TILE − LANES` (inside the padded row).
+#[inline(always)]
+pub(crate) unsafe fn store_pixels<V: SimdF32>(
+    job: &F32Job<'_>,
+    out: &mut F32Out<'_>,
+    mut r: V,
+    o: usize,
+    y: usize,
+    px: usize,
+) {
+    let l = V::LANES;
+    let (w, h, wp, cout) = (job.w, job.h, job.wp, job.cout);
+    if job.relu {
+        // SAFETY: register arithmetic, ISA guaranteed by the caller.
+        r = unsafe { V::relu(r) };
+    }
+    // Column `1 + px` of row `y + 1` in a `[H+2][C_out][Wp]` buffer.
+    let at = ((y + 1) * cout + o) * wp + 1 + px;
+    if let Some(res) = job.residual {
+        // SAFETY: the residual is a `[H+2][C_out][Wp]` buffer; `at + l` stays before the end of its row
+        // (`wp ≥ w + 2 + MAX_TILE`). Lanes past `w` read its zero border.
+        r = unsafe { V::add(r, V::load(res.as_ptr().add(at))) };
+    }
+    let valid = w.saturating_sub(px).min(l);
+    match out {
+        F32Out::Rows { data, base } => {
+            if valid < l {
+                // SAFETY: register arithmetic; `valid < LANES`.
+                r = unsafe { V::keep_first(r, valid) };
             }
-            let at = row_at + v * l;
-            if let Some(res) = job.residual {
-                // SAFETY: the residual is a `[H+2][C_out][Wp]` buffer; `at + l ≤ (y+1)·…·wp + w + tile < end`
-                // of its row (`wp ≥ w + 2 + MAX_TILE`). Lanes past `w` read its zero border.
-                r = unsafe { V::add(r, V::load(res.as_ptr().add(at))) };
+            debug_assert!(at >= *base && at - *base + l <= data.len());
+            // SAFETY: as for the residual: the vector ends before the row's `wp` columns end. Row `y` lies
+            // in the band (`y0 ≤ y < y1`, checked by `run_band`), which starts at element `base`.
+            unsafe { V::store(data.as_mut_ptr().add(at - *base), r) };
+        }
+        F32Out::Planar(d) => {
+            if valid == 0 {
+                return;
             }
-            let px = x0 + v * l;
-            let valid = w.saturating_sub(px).min(l);
-            match out {
-                F32Out::Rows { data, base } => {
-                    if valid < l {
-                        // SAFETY: register arithmetic; `valid < LANES`.
-                        r = unsafe { V::keep_first(r, valid) };
-                    }
-                    debug_assert!(at >= *base && at - *base + l <= data.len());
-                    // SAFETY: as for the residual: the vector ends before the row's `wp` columns end; lanes
-                    // past `w` are stored as 0, which keeps the right border zero. Row `y` lies in the band
-                    // (`y0 ≤ y < y1`, checked by `run_band`), which starts at element `base`.
-                    unsafe { V::store(data.as_mut_ptr().add(at - *base), r) };
-                }
-                F32Out::Planar(d) => {
-                    if valid == 0 {
-                        continue;
-                    }
-                    let i = (o * h + y) * w + px;
-                    if valid == l {
-                        debug_assert!(i + l <= d.len());
-                        // SAFETY: pixels `px..px + l ≤ w` of row `y` of channel `o` of a `[C_out][H][W]` slice.
-                        unsafe { V::store(d.as_mut_ptr().add(i), r) };
-                    } else {
-                        let mut tmp = [0.0f32; 16];
-                        // SAFETY: `tmp` holds 16 ≥ LANES values.
-                        unsafe { V::store(tmp.as_mut_ptr(), r) };
-                        d[i..i + valid].copy_from_slice(&tmp[..valid]);
-                    }
-                }
+            let i = (o * h + y) * w + px;
+            if valid == l {
+                debug_assert!(i + l <= d.len());
+                // SAFETY: pixels `px..px + l ≤ w` of row `y` of channel `o` of a `[C_out][H][W]` slice.
+                unsafe { V::store(d.as_mut_ptr().add(i), r) };
+            } else {
+                let mut tmp = [0.0f32; 16];
+                // SAFETY: `tmp` holds 16 ≥ LANES values.
+                unsafe { V::store(tmp.as_mut_ptr(), r) };
+                d[i..i + valid].copy_from_slice(&tmp[..valid]);
             }
         }
     }

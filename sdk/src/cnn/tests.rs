@@ -4,7 +4,7 @@
 use std::sync::Arc;
 
 use ndarray::Array3;
-use tensorholo_kernels::Isa;
+use tensorholo_kernels::{Algorithm, Isa};
 
 use super::native::{native_plan, NativeInt8Plan, NativePlan};
 use super::{select, CnnEngine, CnnPlan};
@@ -98,6 +98,22 @@ fn threads_and_spawned_plans_give_bit_identical_frames() {
     let (h, w) = (19, 70);
     let isa = Isa::active().unwrap();
     let x = input(graph.in_channels, h, w, 3);
+    for conv in [Algorithm::Direct, Algorithm::Winograd2x2] {
+        let plan = |threads| {
+            NativePlan::with_strip(graph.clone(), h, w, threads, isa, None, Some(conv)).unwrap()
+        };
+        let a = plan(1).run_outputs(x.view()).unwrap();
+        for threads in [2, 3, 4, 40] {
+            let mut many = plan(threads);
+            assert_eq!(
+                many.run_outputs(x.view()).unwrap(),
+                a,
+                "{conv:?} {threads} threads"
+            );
+            let mut copy = many.spawn();
+            assert_eq!(copy.run_outputs(x.view()).unwrap(), a);
+        }
+    }
     let mut one = NativePlan::new(graph.clone(), h, w, 1, isa).unwrap();
     let a = one.run_outputs(x.view()).unwrap();
     for threads in [2, 4, 40] {
@@ -112,6 +128,40 @@ fn threads_and_spawned_plans_give_bit_identical_frames() {
     let mut fresh = NativePlan::new(graph, h, w, 1, isa).unwrap();
     assert_eq!(fresh.run_outputs(y.view()).unwrap(), b);
     assert_ne!(a, b);
+}
+
+#[test]
+fn winograd_matches_direct_on_every_shipped_f32_model() {
+    // Winograd F(2×2, 3×3) against the direct kernels on every shipped f32 network, at the active ISA and
+    // the portable one: the heads (or the pre-filter's raw output) within 2e-5 of the largest value (the bound
+    // the native engine keeps against tract), and not bit-identical (the Winograd rows really ran).
+    let (h, w) = (23, 37);
+    for model in shipped() {
+        let graph = model.cnn_graph().unwrap();
+        let x = input(graph.in_channels, h, w, 21);
+        for isa in [Isa::Scalar, Isa::active().unwrap()] {
+            let run = |conv| {
+                let mut p =
+                    NativePlan::with_strip(graph.clone(), h, w, 1, isa, None, Some(conv)).unwrap();
+                (p.run_outputs(x.view()).unwrap(), p.kernel_name())
+            };
+            let ((d, kd), (wg, kw)) = (run(Algorithm::Direct), run(Algorithm::Winograd2x2));
+            assert!(!kd.contains("wino") && kw.contains("wino"), "{kd} / {kw}");
+            let (mut err, mut m) = (0.0f32, 0.0f32);
+            for (a, b) in [(&wg.0, &d.0), (&wg.1, &d.1)] {
+                for (p, q) in a.iter().zip(b) {
+                    err = err.max((p - q).abs());
+                    m = m.max(q.abs());
+                }
+            }
+            println!(
+                "{} {isa}: max |winograd − direct| {err:.2e} (max {m:.2})",
+                model.source_name()
+            );
+            assert!(err <= 2e-5 * m.max(1.0), "{}: {err}", model.source_name());
+            assert!(err > 0.0 && m > 0.1);
+        }
+    }
 }
 
 #[test]
@@ -433,7 +483,15 @@ fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
         int8s.swap_remove(0),
         int8s.pop().unwrap(),
     ];
-    for model in models {
+    // f32: each convolution algorithm (Winograd pairs rows by frame row, whatever the strip or band).
+    let runs = models.iter().flat_map(|m| {
+        let algs: &[_] = match m.cnn_graph().unwrap().quant {
+            Some(_) => &[None],
+            None => &[Some(Algorithm::Direct), Some(Algorithm::Winograd2x2)],
+        };
+        algs.iter().map(move |&a| (m, a))
+    });
+    for (model, conv) in runs {
         let graph = model.cnn_graph().unwrap();
         let n = graph.layers.len();
         let x = input(graph.in_channels, h, w, 11).mapv(|v| 0.75 * v - 0.05);
@@ -443,7 +501,7 @@ fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
             if graph.quant.is_some() {
                 Box::new(NativeInt8Plan::with_strip(g, h, w, threads, isa, Some(strip)).unwrap())
             } else {
-                Box::new(NativePlan::with_strip(g, h, w, threads, isa, Some(strip)).unwrap())
+                Box::new(NativePlan::with_strip(g, h, w, threads, isa, Some(strip), conv).unwrap())
             }
         };
         if let Some(q) = &graph.quant {
@@ -460,7 +518,7 @@ fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
         for strip in [1, 2, 3, 5, 8, h - 1, h + n - 1] {
             for threads in [1, 3] {
                 let mut p = plan(strip, threads);
-                let name = format!("{} strip {strip} ×{threads}", model.source_name());
+                let name = format!("{} {conv:?} strip {strip} ×{threads}", model.source_name());
                 assert!(p.run_outputs(x.view()).unwrap() == a, "{name}");
                 // A second frame through the same windows: nothing carried over from the first.
                 assert!(p.run_outputs(y.view()).unwrap() == b, "{name}, 2nd frame");

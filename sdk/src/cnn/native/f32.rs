@@ -29,11 +29,12 @@ use std::sync::Arc;
 use ndarray::{Array3, ArrayView3, CowArray, Ix3};
 use rayon::prelude::*;
 use tensorholo_kernels::{
-    depthwise_rows, fake_quantize, tanh_heads, Conv3x3F32, Inputs, Isa, QuantU8, RowPlanar,
+    depthwise_rows, fake_quantize, tanh_heads, Algorithm, Conv3x3F32, Inputs, Isa, QuantU8,
+    RowPlanar,
 };
 
-use super::kernel_err;
 use super::strips::{bands, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window};
+use super::{algorithm, kernel_err};
 use crate::cnn::plan::{check_output_planes, check_planes, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnWeights, QuantGrid};
@@ -79,11 +80,11 @@ impl NativePlan {
         threads: usize,
         isa: Isa,
     ) -> Result<Self> {
-        Self::with_strip(graph, height, width, threads, isa, None)
+        Self::with_strip(graph, height, width, threads, isa, None, None)
     }
 
     /// [`new`](Self::new) with strips of `strip` rows (`None`: `strips::strip_rows`; more than `H + N` rows:
-    /// one strip). Errors: as `new`.
+    /// one strip) and every layer on `conv` (`None`: as `algorithm::plan_layer` chooses). Errors: as `new`.
     pub(crate) fn with_strip(
         graph: Arc<CnnWeights>,
         height: usize,
@@ -91,6 +92,7 @@ impl NativePlan {
         threads: usize,
         isa: Isa,
         strip: Option<usize>,
+        conv: Option<Algorithm>,
     ) -> Result<Self> {
         if threads == 0 {
             return Err(crate::error::invalid(
@@ -111,10 +113,7 @@ impl NativePlan {
                     "CNN layer {i} holds NaN or infinite weights"
                 )));
             }
-            layers.push(
-                Conv3x3F32::new(&l.weights, &l.bias, l.c_in, l.c_out, i + 1 < n, isa)
-                    .map_err(kernel_err)?,
-            );
+            layers.push(algorithm::plan_layer(l, i + 1 < n, isa, conv)?);
         }
         let c = graph.in_channels;
         let hidden = graph.layers[0].c_out;
@@ -150,9 +149,10 @@ impl NativePlan {
         })
     }
 
-    /// The kernel row every layer runs (e.g. `conv3x3.f32.6x2.avx2`).
-    pub(crate) fn kernel_name(&self) -> &'static str {
-        self.net.layers[0].kernel().name
+    /// The kernel rows the layers run, each once in layer order, with how many layers run it (e.g.
+    /// `conv3x3.f32.6x2.avx2 ×2 + conv3x3.f32.wino2x2.6x2.avx2 ×6`; one row alone: its name).
+    pub(crate) fn kernel_name(&self) -> String {
+        kernel_summary(self.net.layers.iter().map(|l| l.kernel().name))
     }
 
     /// One frame of a checked input into `out`.
@@ -215,6 +215,26 @@ impl NativePlan {
     }
 }
 
+/// The kernel rows of a plan's layers (`names`, in layer order) as reports name them: each row once, in
+/// order of first use, with its layer count when the layers run more than one (`a ×2 + b ×6`).
+pub(super) fn kernel_summary<'a>(names: impl Iterator<Item = &'a str>) -> String {
+    let mut rows: Vec<(&str, usize)> = Vec::new();
+    for name in names {
+        match rows.iter_mut().find(|(n, _)| *n == name) {
+            Some((_, count)) => *count += 1,
+            None => rows.push((name, 1)),
+        }
+    }
+    match rows.as_slice() {
+        [(name, _)] => (*name).to_string(),
+        _ => rows
+            .iter()
+            .map(|(n, c)| format!("{n} ×{c}"))
+            .collect::<Vec<_>>()
+            .join(" + "),
+    }
+}
+
 /// Strip `m`'s new rows of the f32 input window `x`: `s_0 = x + offset` (`offset = −input_offset`) of the
 /// planar input, in `threads` row bands.
 pub(super) fn input_rows(
@@ -258,10 +278,10 @@ pub(super) fn last_layer_rows(
     let Some((rows, f0)) = raw.new_rows(strips, m)? else {
         return Ok(());
     };
-    let inputs =
-        Inputs::new(&last.buf)
-            .concat(&x.buf)
-            .shifted(raw.shift_from(last), raw.shift_from(x), 0);
+    let inputs = Inputs::new(&last.buf)
+        .concat(&x.buf)
+        .shifted(raw.shift_from(last), raw.shift_from(x), 0)
+        .frame_row(raw.first_row(strips, m));
     let band = raw.buf.band_mut(rows.clone()).map_err(kernel_err)?;
     bands(band, threads, &|b| conv.run_band(inputs, b))?;
     let raw = &raw.buf;

@@ -10,6 +10,7 @@
 //! Its candidates are thread counts ([`NativeEngine`]'s [`Engine::tune`]); it has no per-model state beyond
 //! the graph the model reads once ([`crate::model::HologramModel::cnn_graph`]).
 
+mod algorithm;
 mod f32;
 mod int8;
 mod strips;
@@ -113,13 +114,13 @@ impl Engine for NativeEngine {
         Ok(EnginePlans {
             hologram,
             prefilter,
-            kernel: Some(kernel.to_string()),
+            kernel: Some(kernel),
         })
     }
 }
 
 /// A native plan for `graph` at `height × width` on `threads` threads: the int8 engine for an int8 (QDQ)
-/// file, the f32 engine otherwise; with the name of the kernel row its layers run. Errors: as
+/// file, the f32 engine otherwise; with the kernel rows its layers run (`NativePlan::kernel_name`). Errors: as
 /// `NativePlan::new` / `NativeInt8Plan::new`.
 pub(super) fn native_plan(
     graph: Arc<CnnWeights>,
@@ -127,10 +128,10 @@ pub(super) fn native_plan(
     width: usize,
     threads: usize,
     isa: tensorholo_kernels::Isa,
-) -> Result<(Box<dyn CnnPlan>, &'static str)> {
+) -> Result<(Box<dyn CnnPlan>, String)> {
     if graph.quant.is_some() {
         let p = int8::NativeInt8Plan::new(graph, height, width, threads, isa)?;
-        let k = p.kernel_name();
+        let k = p.kernel_name().to_string();
         Ok((Box::new(p), k))
     } else {
         let p = f32::NativePlan::new(graph, height, width, threads, isa)?;

@@ -174,6 +174,12 @@ impl<T: Element> Window<T> {
         Ok(Self { buf, place })
     }
 
+    /// The frame row interior row 0 holds at strip `m` ([`Place::first_row`]; for
+    /// [`tensorholo_kernels::Inputs::frame_row`]).
+    pub(crate) fn first_row(&self, strips: Strips, m: usize) -> isize {
+        self.place.first_row(strips, m)
+    }
+
     /// [`Place::shift_from`] of two windows.
     pub(crate) fn shift_from<U: Element>(&self, operand: &Window<U>) -> isize {
         self.place.shift_from(operand.place)
@@ -289,7 +295,9 @@ pub(super) fn hidden_layers<T: Element + Send + Sync, K: BandConv<T>>(
             inputs = inputs.residual(&r.buf);
             d_r = dst.shift_from(r);
         }
-        let inputs = inputs.shifted(dst.shift_from(src), 0, d_r);
+        let inputs = inputs
+            .shifted(dst.shift_from(src), 0, d_r)
+            .frame_row(dst.first_row(strips, m));
         let band = dst.buf.band_mut(rows).map_err(kernel_err)?;
         bands(band, threads, &|b| conv.run_band(inputs, b))?;
     }
