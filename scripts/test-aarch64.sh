@@ -53,6 +53,8 @@ if [ "$#" -eq 0 ]; then
   # engine's frame does not depend on the cargo features).
   cargo build --locked -p holo
   cargo build --locked --target "$target" -p holo --no-default-features
+  # Both on the Winograd rows (AVX2/AVX-512 here, NEON there), the F(2×2, 3×3) path through the CLI on ARM.
+  export TENSORHOLO_CONV=winograd
   target/debug/holo render "${frame[@]}" --out "$out/x86" >/dev/null
   echo "== holo render (aarch64, qemu-user)"
   qemu-aarch64 -L /usr/aarch64-linux-gnu "target/$target/debug/holo" render "${frame[@]}" --out "$out/arm"

@@ -33,6 +33,23 @@ pub(crate) fn check_len(
     Ok(())
 }
 
+/// Checks an f32 layer's channel counts and that `weights` is `[C_out][C_in][3][3]` and `bias` `[C_out]`.
+fn check_layer(
+    weights: &[f32],
+    bias: &[f32],
+    c_in: usize,
+    c_out: usize,
+) -> Result<(), KernelError> {
+    check_channels(c_in, c_out)?;
+    check_len(
+        "weights [C_out][C_in][3][3]",
+        weights.len(),
+        c_out * c_in * 9,
+    )?;
+    check_len("bias [C_out]", bias.len(), c_out)?;
+    Ok(())
+}
+
 /// Packs OIHW `[C_out][C_in][3][3]` weights and `[C_out]` bias for a kernel with an output-channel tile `g`:
 /// returns weights `[ceil(C_out/g)][C_in][3][3][g]` and bias `[ceil(C_out/g)·g]`, zero-padded.
 pub(crate) fn pack_f32(
@@ -42,13 +59,7 @@ pub(crate) fn pack_f32(
     c_out: usize,
     g: usize,
 ) -> Result<(Vec<f32>, Vec<f32>), KernelError> {
-    check_channels(c_in, c_out)?;
-    check_len(
-        "weights [C_out][C_in][3][3]",
-        weights.len(),
-        c_out * c_in * 9,
-    )?;
-    check_len("bias [C_out]", bias.len(), c_out)?;
+    check_layer(weights, bias, c_in, c_out)?;
     let groups = c_out.div_ceil(g);
     let mut packed = vec![0.0; groups * c_in * 9 * g];
     for o in 0..c_out {
@@ -75,13 +86,7 @@ pub(crate) fn pack_winograd_f32(
     c_out: usize,
     g: usize,
 ) -> Result<(Vec<f32>, Vec<f32>), KernelError> {
-    check_channels(c_in, c_out)?;
-    check_len(
-        "weights [C_out][C_in][3][3]",
-        weights.len(),
-        c_out * c_in * 9,
-    )?;
-    check_len("bias [C_out]", bias.len(), c_out)?;
+    check_layer(weights, bias, c_in, c_out)?;
     const GM: [[f64; 3]; 4] = [
         [1.0, 0.0, 0.0],
         [0.5, 0.5, 0.5],

@@ -120,12 +120,9 @@ pub(crate) const fn winograd_info(
     nv: usize,
 ) -> KernelInfo {
     KernelInfo {
-        name,
-        isa,
-        dtype: DType::F32,
-        oc_tile,
         px_tile: 2 * lanes * nv,
         algorithm: Algorithm::Winograd2x2,
+        ..f32_info(name, isa, oc_tile, 0)
     }
 }
 
