@@ -13,7 +13,7 @@ root="$(cd "$here/../.." && pwd)"
 shape=("${1:-24}" "${2:-24}" "${3:-384}" "${4:-16}")
 target=aarch64-unknown-linux-gnu
 (cd "$root" && cargo build --release --locked --target "$target" -p tensorholo-kernels --example conv_best_of >&2)
-bin="$root/target/$target/release/examples/conv_best_of"
+bin="${CARGO_TARGET_DIR:-$root/target}/$target/release/examples/conv_best_of"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 gcc -O2 -shared -fPIC -o "$work/libinsn_count.so" "$here/insn_count.c"

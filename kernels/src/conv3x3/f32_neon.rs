@@ -49,6 +49,39 @@ impl SimdF32 for float32x4_t {
         unsafe { vaddq_f32(a, b) }
     }
     #[inline(always)]
+    unsafe fn fma_step<const G: usize, const NV: usize>(
+        acc: &mut [[Self; NV]; G],
+        x: &[Self; NV],
+        w: *const f32,
+    ) {
+        // Four weights per q register, each used by element. `G` is 8 for every NEON row; another `G`
+        // takes the broadcasts of the default.
+        if !G.is_multiple_of(4) {
+            for (g, accg) in acc.iter_mut().enumerate() {
+                // SAFETY: the caller guarantees `G` readable weights at `w`.
+                let wv = unsafe { vld1q_dup_f32(w.add(g)) };
+                for (a, &xv) in accg.iter_mut().zip(x.iter()) {
+                    // SAFETY: NEON is baseline on aarch64.
+                    *a = unsafe { vfmaq_f32(*a, xv, wv) };
+                }
+            }
+            return;
+        }
+        for q in 0..G / 4 {
+            // SAFETY: weights `4q..4q + 4 ≤ G` at `w`.
+            let wq = unsafe { vld1q_f32(w.add(4 * q)) };
+            for v in 0..NV {
+                // SAFETY: NEON is baseline on aarch64; `4q + 3 < G`.
+                unsafe {
+                    acc[4 * q][v] = vfmaq_laneq_f32::<0>(acc[4 * q][v], x[v], wq);
+                    acc[4 * q + 1][v] = vfmaq_laneq_f32::<1>(acc[4 * q + 1][v], x[v], wq);
+                    acc[4 * q + 2][v] = vfmaq_laneq_f32::<2>(acc[4 * q + 2][v], x[v], wq);
+                    acc[4 * q + 3][v] = vfmaq_laneq_f32::<3>(acc[4 * q + 3][v], x[v], wq);
+                }
+            }
+        }
+    }
+    #[inline(always)]
     unsafe fn sub(a: Self, b: Self) -> Self {
         // SAFETY: NEON is baseline on aarch64.
         unsafe { vsubq_f32(a, b) }

@@ -39,6 +39,25 @@ pub(crate) trait SimdF32: Copy {
     /// `(e[j], o[j])` back in memory order, as two registers (the Winograd output transform's columns back
     /// to pixels).
     unsafe fn interleave(e: Self, o: Self) -> (Self, Self);
+    /// One reduction step of a `G × NV` register tile: `acc[g][v] += x[v]·w[g]` for the `G` weights at `w`.
+    /// Default: one broadcast per weight (`vbroadcastss` folds the load). NEON overrides it with FMAs by
+    /// element (`fmla v.4s, x.4s, w.s[l]`: `G/4` weight loads instead of `G` broadcasts), the same fused
+    /// operation, so the same bits.
+    #[inline(always)]
+    unsafe fn fma_step<const G: usize, const NV: usize>(
+        acc: &mut [[Self; NV]; G],
+        x: &[Self; NV],
+        w: *const f32,
+    ) {
+        for (g, accg) in acc.iter_mut().enumerate() {
+            // SAFETY: the caller guarantees `G` readable weights at `w` and the ISA.
+            let wv = unsafe { Self::splat(w.add(g)) };
+            for (a, &xv) in accg.iter_mut().zip(x.iter()) {
+                // SAFETY: register arithmetic on the caller's ISA.
+                *a = unsafe { Self::fma(*a, xv, wv) };
+            }
+        }
+    }
     /// Hint: fetch the cache line of `p` into L1 (never faults). Default: nothing.
     #[inline(always)]
     unsafe fn prefetch(_p: *const f32) {}
@@ -122,14 +141,9 @@ unsafe fn tile_at<V: SimdF32, const G: usize, const NV: usize>(
                         // (`wp ≥ w + 2 + MAX_TILE`): inside the padded row.
                         *x = unsafe { V::load(row.add(kx + v * l)) };
                     }
-                    for (g, accg) in acc.iter_mut().enumerate() {
-                        // SAFETY: `wptr` walks the group's `cin·9` steps of `G` weights.
-                        let wv = unsafe { V::splat(wptr.add(g)) };
-                        for (a, &x) in accg.iter_mut().zip(xv.iter()) {
-                            // SAFETY: register arithmetic, ISA guaranteed by the caller.
-                            *a = unsafe { V::fma(*a, x, wv) };
-                        }
-                    }
+                    // SAFETY: `wptr` walks the group's `cin·9` steps of `G` weights; ISA guaranteed by the
+                    // caller.
+                    unsafe { V::fma_step(&mut acc, &xv, wptr) };
                     // SAFETY: at most one past the group's last step.
                     wptr = unsafe { wptr.add(G) };
                 }

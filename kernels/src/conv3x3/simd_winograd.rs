@@ -204,14 +204,8 @@ unsafe fn products<V: SimdF32, const G: usize, const NV: usize>(
                 // SAFETY: `v·l + l ≤ T` values of this channel's row of `V_k`.
                 *x = unsafe { V::load(xptr.add(v * l)) };
             }
-            for (g, accg) in acc.iter_mut().enumerate() {
-                // SAFETY: `G` weights of this step.
-                let wv = unsafe { V::splat(wptr.add(g)) };
-                for (a, &x) in accg.iter_mut().zip(xv.iter()) {
-                    // SAFETY: register arithmetic on the caller's ISA.
-                    *a = unsafe { V::fma(*a, x, wv) };
-                }
-            }
+            // SAFETY: `G` weights of this step; the caller's ISA.
+            unsafe { V::fma_step(&mut acc, &xv, wptr) };
             // SAFETY: at most one past the block's (and `V_k`'s) end.
             unsafe {
                 wptr = wptr.add(G);
