@@ -3,6 +3,7 @@
 use super::inputs::Inputs;
 use super::job::{F32Job, F32Out};
 use super::row::{Algorithm, F32Row, KernelInfo};
+use super::simd_winograd;
 use crate::buffer::band::RowBand;
 use crate::buffer::planar::RowPlanar;
 use crate::error::KernelError;
@@ -102,6 +103,21 @@ impl Conv3x3F32 {
             weights,
             bias,
         })
+    }
+
+    /// Prepares the calling thread for this plan: a Winograd plan's rows keep a scratch per thread (`V` and
+    /// `M`, `16·(C_in + G)·tiles` f32 values: 73 KiB for 28 input channels with AVX-512), grown on first use;
+    /// this grows it now, so that frames allocate nothing on any thread that called it. A direct plan needs
+    /// nothing. Call it on every thread that will run the plan (e.g. `rayon::ThreadPool::broadcast`).
+    pub fn reserve_scratch(&self) {
+        if self.row.info.algorithm == Algorithm::Winograd2x2 {
+            let tiles = self.row.info.px_tile / 2;
+            simd_winograd::reserve_scratch(simd_winograd::scratch_len(
+                self.c_in,
+                self.row.info.oc_tile,
+                tiles,
+            ));
+        }
     }
 
     /// The kernel row this plan runs.

@@ -39,6 +39,22 @@ thread_local! {
     static SCRATCH: Cell<Vec<f32>> = const { Cell::new(Vec::new()) };
 }
 
+/// The scratch (f32 values) a Winograd row with a tile of `oc_tile` output channels × `tiles` tiles needs for
+/// `c_in` input channels: `V[16][C_in][tiles]` and `M[G][16][tiles]`.
+pub(crate) fn scratch_len(c_in: usize, oc_tile: usize, tiles: usize) -> usize {
+    16 * tiles * (c_in + oc_tile)
+}
+
+/// Grows the calling thread's scratch to at least `len` values now, so that no later call on this thread
+/// allocates (a thread that first runs a Winograd layer after a plan's warm-up frames would otherwise).
+pub(crate) fn reserve_scratch(len: usize) {
+    let mut scratch = SCRATCH.take();
+    if scratch.len() < len {
+        scratch.resize(len, 0.0);
+    }
+    SCRATCH.set(scratch);
+}
+
 /// Computes rows `[job.y0, job.y1)` of the convolution with F(2×2, 3×3) tiles.
 ///
 /// # Safety
@@ -57,8 +73,9 @@ pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
     debug_assert!(job.weights.len() == 16 * groups * cin * G && job.bias.len() == groups * G);
     let v_len = 16 * cin * t;
     let mut scratch = SCRATCH.take();
-    if scratch.len() < v_len + G * 16 * t {
-        scratch.resize(v_len + G * 16 * t, 0.0);
+    let need = scratch_len(cin, G, t);
+    if scratch.len() < need {
+        scratch.resize(need, 0.0);
     }
     let (vbuf, mbuf) = scratch.split_at_mut(v_len);
     let srcs = [(job.a.as_ptr(), job.ca), (job.b.as_ptr(), job.cb)];

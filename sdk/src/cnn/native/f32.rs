@@ -134,6 +134,8 @@ impl NativePlan {
                 RowPlanar::new(ch, rows, width)
             })
         };
+        let pool = pool(threads)?;
+        reserve_scratch(&net.layers, pool.as_deref());
         Ok(Self {
             x: window(c, 0, n + 1)?,
             s: (1..n)
@@ -144,7 +146,7 @@ impl NativePlan {
             height,
             width,
             threads,
-            pool: pool(threads)?,
+            pool,
             net: Arc::new(net),
         })
     }
@@ -212,6 +214,16 @@ impl NativePlan {
             Ok(())
         };
         installed(pool.as_deref(), threads, frame)
+    }
+}
+
+/// Grows the kernels' per-thread scratch for `layers` on the calling thread and on every thread of `pool`
+/// ([`Conv3x3F32::reserve_scratch`]): a frame then allocates nothing, whichever thread runs which band.
+fn reserve_scratch(layers: &[Conv3x3F32], pool: Option<&rayon::ThreadPool>) {
+    let reserve = || layers.iter().for_each(Conv3x3F32::reserve_scratch);
+    reserve();
+    if let Some(pool) = pool {
+        pool.broadcast(|_| reserve());
     }
 }
 
@@ -566,7 +578,11 @@ impl CnnPlan for NativePlan {
             threads: self.threads,
             // Threads of a stream run at the same time: each plan gets its own workers (a failed pool
             // start leaves the copy on the caller's thread, which still computes the same frames).
-            pool: pool(self.threads).ok().flatten(),
+            pool: {
+                let pool = pool(self.threads).ok().flatten();
+                reserve_scratch(&self.net.layers, pool.as_deref());
+                pool
+            },
             strips: self.strips,
             x: self.x.clone(),
             s: self.s.clone(),
