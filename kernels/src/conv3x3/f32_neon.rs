@@ -54,19 +54,13 @@ impl SimdF32 for float32x4_t {
         x: &[Self; NV],
         w: *const f32,
     ) {
-        // Four weights per q register, each used by element. `G` is 8 for every NEON row; another `G`
-        // takes the broadcasts of the default.
-        if !G.is_multiple_of(4) {
-            for (g, accg) in acc.iter_mut().enumerate() {
-                // SAFETY: the caller guarantees `G` readable weights at `w`.
-                let wv = unsafe { vld1q_dup_f32(w.add(g)) };
-                for (a, &xv) in accg.iter_mut().zip(x.iter()) {
-                    // SAFETY: NEON is baseline on aarch64.
-                    *a = unsafe { vfmaq_f32(*a, xv, wv) };
-                }
-            }
-            return;
-        }
+        // Four weights per q register, each used by element: every NEON row's `G` is a multiple of 4 (8).
+        const {
+            assert!(
+                G.is_multiple_of(4),
+                "NEON f32 tiles take output channels in fours"
+            )
+        };
         for q in 0..G / 4 {
             // SAFETY: weights `4q..4q + 4 ≤ G` at `w`.
             let wq = unsafe { vld1q_f32(w.add(4 * q)) };
