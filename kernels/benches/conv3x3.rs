@@ -1,5 +1,5 @@
 //! Every available kernel row × the TensorHolo layer shapes at 384×384, one thread; the pre-filter's
-//! depthwise base filter on every path.
+//! depthwise base filter on every path; the heads as phasors (`phasors_1080p`: one 1080×1920 plane).
 //!
 //! Throughput is reported in "elements" = operations (2 per multiply-add, `2·9·C_in·C_out·H·W` per layer),
 //! so criterion's `Gelem/s` reads as GFLOP/s (f32) or GOP/s (int8). The peaks of each ISA are measured with
@@ -10,7 +10,7 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::hint::black_box;
 use tensorholo_kernels::{
-    depthwise, peak, registry, Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, QuantU8,
+    depthwise, peak, phasor, registry, Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, QuantU8,
     RowPlanar,
 };
 
@@ -205,11 +205,45 @@ fn depthwise_paths(c: &mut Criterion) {
     group.finish();
 }
 
+fn phasor_paths(c: &mut Criterion) {
+    let n = 1080 * 1920;
+    let amplitude = data(n, 11);
+    let phase = data(n, 12);
+    let mut buf = vec![0.0f32; 2 * n];
+    let mut group = c.benchmark_group("phasors_1080p");
+    group.throughput(Throughput::Elements(n as u64));
+    for isa in registry::phasor_paths() {
+        if !isa.is_available() {
+            println!("SKIPPED phasors.{isa}: this CPU lacks {isa}");
+            continue;
+        }
+        group.bench_function(isa.name(), |bch| {
+            bch.iter(|| {
+                buf[..n].copy_from_slice(&amplitude);
+                phasor::phasors_in_place(&mut buf, &phase, isa).expect("run");
+                black_box(&buf);
+            })
+        });
+    }
+    // The per-pixel libm form it replaces (`Complex32::from_polar(a, (p − 0.5)·2π)`).
+    group.bench_function("libm_sin_cos", |bch| {
+        bch.iter(|| {
+            for ((o, &a), &p) in buf.chunks_exact_mut(2).zip(&amplitude).zip(&phase) {
+                let (s, c) = ((p - 0.5) * std::f32::consts::TAU).sin_cos();
+                o[0] = a * c;
+                o[1] = a * s;
+            }
+            black_box(&buf);
+        })
+    });
+    group.finish();
+}
+
 // criterion_group! generates an undocumented function.
 #[allow(missing_docs)]
 mod group {
     use super::*;
-    criterion_group!(benches, f32_rows, u8_rows, depthwise_paths);
+    criterion_group!(benches, f32_rows, u8_rows, depthwise_paths, phasor_paths);
 }
 use group::benches;
 criterion_main!(benches);

@@ -52,6 +52,7 @@ pub mod isa;
 mod ops;
 mod pack;
 pub mod peak;
+pub mod phasor;
 mod quant;
 
 pub use buffer::{Affine, RowBand, RowPlanar};

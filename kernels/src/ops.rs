@@ -27,6 +27,7 @@ use crate::double_phase::body::{self as dpm, EncodeParams};
 use crate::error::KernelError;
 use crate::heads::body as heads;
 use crate::isa::Isa;
+use crate::phasor::body as phasor;
 use crate::quant::QuantU8;
 
 /// The depthwise filter on output rows `rows` of one checked plane (`accumulate`: add to `out`).
@@ -40,6 +41,11 @@ pub(crate) type GridFn = unsafe fn(&mut [f32], QuantU8);
 pub(crate) type DpmAnalyseFn = unsafe fn(&[f32], &mut [f32]) -> (f32, f64);
 /// Pass 2 of the double phase encoding on a row: the wrapped double phase in place, codes if asked.
 pub(crate) type DpmEncodeFn = unsafe fn(&[f32], &mut [f32], Option<&mut [u8]>, &EncodeParams);
+
+/// The heads as interleaved phasors ([`crate::phasor::phasors`]); whether every input was finite.
+pub(crate) type PhasorsFn = unsafe fn(&[f32], &[f32], &mut [f32]) -> bool;
+/// The same in place ([`crate::phasor::phasors_in_place`]).
+pub(crate) type PhasorsInPlaceFn = unsafe fn(&mut [f32], &[f32]) -> bool;
 
 /// A peak loop: operations per iteration (a multiply-add counts 2) and the loop, which returns a value to
 /// keep its chains alive.
@@ -68,6 +74,10 @@ pub(crate) struct Ops {
     pub dpm_analyse: Option<DpmAnalyseFn>,
     /// Pass 2 of the double phase encoding on a row ([`crate::double_phase::encode_row`]).
     pub dpm_encode: Option<DpmEncodeFn>,
+    /// The heads as phasors ([`crate::phasor::phasors`]).
+    pub phasors: Option<PhasorsFn>,
+    /// The heads as phasors in place ([`crate::phasor::phasors_in_place`]).
+    pub phasors_in_place: Option<PhasorsInPlaceFn>,
     /// The f32 FMA peak ([`crate::peak::f32_fma_gflops`]).
     pub peak_f32: Option<Peak<f32>>,
     /// The int8 dot-product peak ([`crate::peak::int8_dot_gops`]).
@@ -114,6 +124,8 @@ const SCALAR: Ops = Ops {
     grid: Some(heads::grid_body),
     dpm_analyse: Some(dpm::analyse_body),
     dpm_encode: Some(dpm::encode_body),
+    phasors: Some(phasor::polar_body),
+    phasors_in_place: Some(phasor::polar_in_place_body),
     peak_f32: Some(Peak {
         ops_per_iter: 16.0 * 2.0,
         run: f32_scalar::peak,
@@ -140,6 +152,8 @@ static OPS: [Ops; 5] = [
         grid: None,
         dpm_analyse: None,
         dpm_encode: None,
+        phasors: None,
+        phasors_in_place: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 24.0 * 64.0 * 2.0,
@@ -175,6 +189,8 @@ static OPS: [Ops; 5] = [
         grid: Some(heads::x86::grid_avx512),
         dpm_analyse: None,
         dpm_encode: None,
+        phasors: Some(phasor::x86::polar_avx512),
+        phasors_in_place: Some(phasor::x86::polar_in_place_avx512),
         peak_f32: Some(Peak {
             ops_per_iter: 24.0 * 16.0 * 2.0,
             run: f32_avx512::peak,
@@ -194,6 +210,8 @@ static OPS: [Ops; 5] = [
         grid: None,
         dpm_analyse: None,
         dpm_encode: None,
+        phasors: None,
+        phasors_in_place: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 12.0 * 32.0 * 2.0,
@@ -277,6 +295,8 @@ static OPS: [Ops; 5] = [
         grid: Some(heads::x86::grid_avx2),
         dpm_analyse: Some(dpm_avx2::analyse_avx2),
         dpm_encode: Some(dpm_avx2::encode_avx2),
+        phasors: Some(phasor::x86::polar_avx2),
+        phasors_in_place: Some(phasor::x86::polar_in_place_avx2),
         peak_f32: Some(Peak {
             ops_per_iter: 12.0 * 8.0 * 2.0,
             run: f32_avx2::peak,
@@ -306,6 +326,8 @@ static OPS: [Ops; 4] = [
         grid: None,
         dpm_analyse: None,
         dpm_encode: None,
+        phasors: None,
+        phasors_in_place: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 24.0 * 16.0 * 2.0,
@@ -325,6 +347,8 @@ static OPS: [Ops; 4] = [
         grid: None,
         dpm_analyse: None,
         dpm_encode: None,
+        phasors: None,
+        phasors_in_place: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 24.0 * 16.0 * 2.0,
@@ -364,6 +388,8 @@ static OPS: [Ops; 4] = [
         grid: None,
         dpm_analyse: None,
         dpm_encode: None,
+        phasors: None,
+        phasors_in_place: None,
         peak_f32: Some(Peak {
             ops_per_iter: 24.0 * 4.0 * 2.0,
             run: f32_neon::peak,
@@ -558,6 +584,29 @@ pub(crate) fn run_dpm_encode(
     // the safe API checked the lengths.
     unsafe { run(field, phase, codes, params) };
     Ok(())
+}
+
+/// The heads as phasors under `isa` (lengths checked by the caller). Errors: `isa` not available.
+pub(crate) fn run_phasors(
+    isa: Isa,
+    amplitude: &[f32],
+    phase: &[f32],
+    out: &mut [f32],
+) -> Result<bool, KernelError> {
+    let run = entry(isa, |t| t.phasors)?;
+    // SAFETY: `entry` returned the entry of a level that `isa` includes, and `isa` is available on this CPU.
+    Ok(unsafe { run(amplitude, phase, out) })
+}
+
+/// The heads as phasors in place under `isa` (lengths checked by the caller). Errors: `isa` not available.
+pub(crate) fn run_phasors_in_place(
+    isa: Isa,
+    buf: &mut [f32],
+    phase: &[f32],
+) -> Result<bool, KernelError> {
+    let run = entry(isa, |t| t.phasors_in_place)?;
+    // SAFETY: `entry` returned the entry of a level that `isa` includes, and `isa` is available on this CPU.
+    Ok(unsafe { run(buf, phase) })
 }
 
 /// Runs the f32 FMA peak loop of `isa` (its widest FMA) for `iters` iterations; returns the FLOPs done and a

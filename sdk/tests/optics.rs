@@ -443,3 +443,38 @@ fn even_transfer_function_quarter_applies_bit_identically() {
         assert!(EvenMultiplier::from_full(plan, &odd[1..]).is_err());
     }
 }
+
+#[test]
+fn even_transfer_function_computed_on_its_quarter_equals_the_full_ones_quarter() {
+    // A session computes only the quarter (`Propagator::even_transfer_function`): the same values, bit for
+    // bit, as the quarter of the full transfer function, for odd and even sizes, padded or not, with and
+    // without the band limit, both carriers, and both signs of the distance.
+    for (h, w, pad) in [
+        (16, 24, false),
+        (17, 13, false),
+        (9, 20, true),
+        (1, 7, false),
+    ] {
+        for band_limit in [false, true] {
+            let opts = PropagationOptions { pad, band_limit };
+            let prop = Propagator::new(h, w, PITCH, GREEN, opts).unwrap();
+            for carrier in [Carrier::Keep, Carrier::Remove] {
+                for z in [6e-3, -2.5e-3] {
+                    let full = prop.transfer_function(z, carrier).unwrap();
+                    let want = EvenMultiplier::from_full(prop.plan(), full.values())
+                        .unwrap()
+                        .expect("even");
+                    let got = prop.even_transfer_function(z, carrier).unwrap();
+                    assert_eq!(
+                        got, want,
+                        "{h}×{w} pad {pad} band limit {band_limit} {carrier:?} {z}"
+                    );
+                }
+            }
+        }
+    }
+    let prop = Propagator::new(8, 8, PITCH, GREEN, PropagationOptions::default()).unwrap();
+    assert!(prop
+        .even_transfer_function(f64::NAN, Carrier::Remove)
+        .is_err());
+}

@@ -50,3 +50,11 @@ pub fn depthwise_paths() -> impl Iterator<Item = Isa> {
         .filter(|t| t.depthwise.is_some())
         .map(|t| t.isa)
 }
+
+/// The ISA levels with a copy of their own of the phasor rows ([`crate::phasor::phasors`]), portable first.
+pub fn phasor_paths() -> impl Iterator<Item = Isa> {
+    ops::tables()
+        .iter()
+        .filter(|t| t.phasors.is_some())
+        .map(|t| t.isa)
+}

@@ -101,4 +101,4 @@ pub fn encode_row(
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -7,18 +7,18 @@ use std::f32::consts::{PI, TAU};
 
 use super::*;
 
-/// xorshift64: a reproducible stream.
-struct Rng(u64);
+/// xorshift64: a reproducible stream (the phasor tests use it too).
+pub(crate) struct Rng(pub(crate) u64);
 
 impl Rng {
-    fn next(&mut self) -> u64 {
+    pub(crate) fn next(&mut self) -> u64 {
         self.0 ^= self.0 << 13;
         self.0 ^= self.0 >> 7;
         self.0 ^= self.0 << 17;
         self.0
     }
     /// Uniform in [0, 1).
-    fn unit(&mut self) -> f32 {
+    pub(crate) fn unit(&mut self) -> f32 {
         (self.next() >> 40) as f32 / (1u64 << 24) as f32
     }
     /// Any finite f32 of either sign, exponents uniform (denormals and zeros included).

@@ -84,6 +84,13 @@ pub(crate) trait Engine: Sync {
         to_beat: Option<f64>,
     ) -> Result<Tuning>;
 
+    /// `Some(why)` where this engine, able to run the files, is known to outrun every other engine of the
+    /// build on this CPU, so that [`super::CnnEngine::Auto`] does not time the engines after it (tract's
+    /// plan and run cost 0.3–0.4 s of a 1080p session's setup). `None`, the default: they are timed.
+    fn outruns_the_others(&self) -> Option<String> {
+        None
+    }
+
     /// The plans of `nets` at `height × width` with `tuning`'s layout and threads (the pre-filter runs
     /// channels-first with the same threads).
     ///

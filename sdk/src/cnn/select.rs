@@ -14,7 +14,7 @@ use ndarray::{Array3, ArrayView3};
 
 use super::engine::{Engine, Networks, Registry, Tuning};
 use super::plan::CnnPlan;
-use super::tuning::{timing_resolution, CnnEngine, PlanReport, PlanRequest};
+use super::tuning::{timing_resolution, CnnEngine, PlanReport, PlanRequest, PlanTiming, NOT_TIMED};
 use crate::error::{invalid, HoloError, Result};
 use crate::model::HologramModel;
 
@@ -95,7 +95,9 @@ pub(super) fn select(
 
 /// [`CnnEngine::Auto`] where several engines can run the files: each timed on this machine, in the
 /// registry's order (the native engine first), the fastest kept. Each engine is told the best time so far,
-/// so that one far slower stops after its likeliest candidate (tract: one plan instead of four).
+/// so that one far slower stops after its likeliest candidate (tract: one plan instead of four); and an
+/// engine that outruns the others on this CPU ([`Engine::outruns_the_others`]) is kept without timing them
+/// (each is reported as a candidate not timed, with the reason).
 fn fastest(
     able: &[&dyn Engine],
     nets: Networks<'_>,
@@ -103,17 +105,36 @@ fn fastest(
     request: PlanRequest,
 ) -> Result<CnnPlans> {
     let mut timed = Vec::new();
+    let mut untimed = Vec::new();
+    let mut decided: Option<String> = None;
     let mut to_beat: Option<f64> = None;
     for e in able {
+        if let Some(why) = &decided {
+            untimed.push(PlanTiming {
+                engine: e.id(),
+                layout: request.layout,
+                threads: None,
+                seconds: None,
+                skipped: Some(format!(
+                    "{NOT_TIMED}: the {} engine runs {why}",
+                    timed_id(&timed)
+                )),
+            });
+            continue;
+        }
         let tuning = e.tune(nets, height, width, request, true, to_beat)?;
         let best = tuning.best_seconds().unwrap_or(f64::INFINITY);
         to_beat = Some(to_beat.map_or(best, |b| b.min(best)));
         timed.push((*e, tuning, best));
+        if timed.len() == 1 && best.is_finite() {
+            decided = e.outruns_the_others();
+        }
     }
     timed.sort_by(|a, b| a.2.total_cmp(&b.2));
     let candidates: Vec<_> = timed
         .iter()
         .flat_map(|(_, t, _)| t.candidates.iter().cloned())
+        .chain(untimed)
         .collect();
     let seconds = timed.iter().map(|(_, t, _)| t.seconds).sum();
     let mut ranked = timed.into_iter();
@@ -121,13 +142,14 @@ fn fastest(
         .next()
         .ok_or_else(|| HoloError::Internal("no engine timed".into()))?;
     let runner_up = ranked.next();
-    let why = match &runner_up {
-        Some((other, _, s)) => format!(
+    let why = match (&runner_up, &decided) {
+        (Some((other, _, s)), _) => format!(
             "faster on this CPU ({:.2}× {}'s best)",
             s / best,
             other.id()
         ),
-        None => "faster on this CPU".into(),
+        (None, Some(why)) => why.clone(),
+        (None, None) => "faster on this CPU".into(),
     };
     log::info!("CNN engine for {height}×{width}: {}, {why}", winner.id());
     let tuning = Tuning {
@@ -138,6 +160,13 @@ fn fastest(
     let mut plans = build(winner, nets, [height, width], request, &why, tuning)?;
     plans.report.autotuned = true;
     Ok(plans)
+}
+
+/// The id of the engine timed first (for the reason the others were not timed).
+fn timed_id(timed: &[(&dyn Engine, Tuning, f64)]) -> String {
+    timed
+        .first()
+        .map_or_else(|| "first".to_string(), |(e, _, _)| e.id().to_string())
 }
 
 /// The plans of `engine` for `tuning`, reported with what was asked (`request`), why (`why`), the timings

@@ -198,6 +198,66 @@ fn bad_input_and_bad_weights_are_errors() {
     ));
 }
 
+/// The native engine without its claim to outrun the others: `Auto` then times tract too.
+#[cfg(feature = "tract")]
+struct TimedNative;
+
+#[cfg(feature = "tract")]
+impl super::engine::Engine for TimedNative {
+    fn id(&self) -> CnnEngine {
+        super::native::NativeEngine.id()
+    }
+    fn supports(&self, nets: super::engine::Networks<'_>) -> crate::error::Result<()> {
+        super::native::NativeEngine.supports(nets)
+    }
+    fn tune(
+        &self,
+        nets: super::engine::Networks<'_>,
+        height: usize,
+        width: usize,
+        request: PlanRequest,
+        time_single: bool,
+        to_beat: Option<f64>,
+    ) -> crate::error::Result<super::engine::Tuning> {
+        super::native::NativeEngine.tune(nets, height, width, request, time_single, to_beat)
+    }
+    fn plans(
+        &self,
+        nets: super::engine::Networks<'_>,
+        height: usize,
+        width: usize,
+        tuning: &super::engine::Tuning,
+    ) -> crate::error::Result<super::engine::EnginePlans> {
+        super::native::NativeEngine.plans(nets, height, width, tuning)
+    }
+}
+
+/// Both engines timed, each timing reported, the faster one kept.
+#[cfg(feature = "tract")]
+fn assert_auto_keeps_the_faster(report: &super::tuning::PlanReport) {
+    let best = |e: CnnEngine| {
+        report
+            .candidates
+            .iter()
+            .filter(|c| c.engine == e)
+            .filter_map(|c| c.seconds)
+            .fold(f64::INFINITY, f64::min)
+    };
+    let (n, t) = (best(CnnEngine::Native), best(CnnEngine::Tract));
+    assert!(n.is_finite() && t.is_finite(), "{:?}", report.candidates);
+    let want = if n <= t {
+        CnnEngine::Native
+    } else {
+        CnnEngine::Tract
+    };
+    assert_eq!(report.engine, want);
+    assert!(
+        report.engine_reason.starts_with("faster on this CPU"),
+        "{}",
+        report.engine_reason
+    );
+}
+
 #[test]
 #[cfg(feature = "tract")]
 fn engine_choice_follows_the_request_and_the_file() {
@@ -228,28 +288,35 @@ fn engine_choice_follows_the_request_and_the_file() {
         &b.run_outputs(x.view()).unwrap(),
     );
     assert!(d <= 2e-5 * m.max(1.0));
-    // Auto times both and reports each timing; the winner is the faster one.
+    // Auto times the native engine first. Where it outruns tract on this CPU (its x86-64 SIMD rows), tract
+    // is not timed and the report says why; otherwise both are timed and the faster one is kept. Both rules
+    // run here: the second through a registry whose native engine does not claim to outrun the others.
     let auto = select(&f32_model, None, 16, 24, CnnEngine::Auto, request).unwrap();
-    let best = |e: CnnEngine| {
-        auto.report
-            .candidates
-            .iter()
-            .filter(|c| c.engine == e)
-            .filter_map(|c| c.seconds)
-            .fold(f64::INFINITY, f64::min)
-    };
-    let (n, t) = (best(CnnEngine::Native), best(CnnEngine::Tract));
-    assert!(
-        n.is_finite() && t.is_finite(),
-        "{:?}",
-        auto.report.candidates
-    );
-    let want = if n <= t {
-        CnnEngine::Native
-    } else {
-        CnnEngine::Tract
-    };
-    assert_eq!(auto.report.engine, want);
+    use super::engine::Engine;
+    match super::native::NativeEngine.outruns_the_others() {
+        Some(why) => {
+            assert_eq!(auto.report.engine, CnnEngine::Native);
+            assert_eq!(auto.report.engine_reason, why);
+            let tract: Vec<_> = auto
+                .report
+                .candidates
+                .iter()
+                .filter(|c| c.engine == CnnEngine::Tract)
+                .collect();
+            assert_eq!(tract.len(), 1, "{:?}", auto.report.candidates);
+            assert!(tract[0].seconds.is_none());
+            let skipped = tract[0].skipped.as_deref().unwrap();
+            assert!(
+                skipped.starts_with("not timed: the native engine runs its "),
+                "{skipped}"
+            );
+        }
+        None => assert_auto_keeps_the_faster(&auto.report),
+    }
+    let both: super::engine::Registry = &[&TimedNative, &super::tract::TractEngine];
+    let timed =
+        super::select::select(both, &f32_model, None, 16, 24, CnnEngine::Auto, request).unwrap();
+    assert_auto_keeps_the_faster(&timed.report);
     // int8 files: Native is refused with the reason, Auto runs tract and says why.
     let err = select(&int8, None, 16, 24, CnnEngine::Native, request).unwrap_err();
     assert!(matches!(

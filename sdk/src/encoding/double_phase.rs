@@ -7,7 +7,7 @@ use num_complex::Complex32;
 use rayon::prelude::*;
 use tensorholo_kernels::{double_phase as kernel, Isa};
 
-use crate::error::{invalid, HoloError, Result};
+use crate::error::{invalid, kernel_isa, HoloError, Result};
 use crate::optics::{check_colour_stack, check_finite_field, par_channels, Scratch, SpectralPlan};
 
 /// Which low-pass pre-filter, if any, to apply to the complex hologram before double phase encoding.
@@ -111,7 +111,7 @@ pub fn double_phase_encode(
     let (h, w) = check_colour_stack("hologram", &field)?;
     check_finite_field("hologram", &field)?;
     method.validate()?;
-    let isa = encoding_isa()?;
+    let isa = kernel_isa()?;
     let filtered: CowArray<Complex32, Ix3> = match *method {
         DoublePhaseMethod::Plain => field.as_standard_layout(),
         _ => {
@@ -212,13 +212,6 @@ pub fn normaliser(stats: &[ChannelStats], pixels: usize) -> Result<(f32, [f32; 3
     Ok((a, mean))
 }
 
-/// The instruction set of the row kernels: [`Isa::active`] (this CPU's best, lowered by `TENSORHOLO_ISA`).
-///
-/// Errors: [`HoloError::InvalidParameter`] where `TENSORHOLO_ISA` names an unknown or unavailable ISA.
-fn encoding_isa() -> Result<Isa> {
-    Isa::active().map_err(|e| invalid("TENSORHOLO_ISA", e.to_string()))
-}
-
 /// Rows per band of [`double_phase_encode`]'s passes on rayon's threads: about 64k pixels, enough to
 /// amortise a task, few enough to balance `3·H` rows over the threads.
 fn band_rows(width: usize) -> usize {
@@ -306,7 +299,7 @@ impl ChannelEncoder {
     /// `TENSORHOLO_ISA` override naming an unknown or unavailable ISA.
     pub fn new(height: usize, width: usize, method: DoublePhaseMethod) -> Result<Self> {
         method.validate()?;
-        let isa = encoding_isa()?;
+        let isa = kernel_isa()?;
         if height == 0 || width == 0 {
             return Err(invalid(
                 "channel size",

@@ -6,11 +6,12 @@ use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3, Axis};
 use num_complex::Complex32;
+use tensorholo_kernels::phasor::phasors_in_place;
+use tensorholo_kernels::Isa;
 
 use super::models::calibrated_lut;
 use crate::encoding::{ChannelEncoder, ChannelStats};
 use crate::error::{HoloError, Result};
-use crate::model::contract::head_to_phasor;
 use crate::optics::{EvenMultiplier, Scratch, SpectralPlan};
 use crate::slm::DisplayCalibration;
 
@@ -28,25 +29,6 @@ pub(super) enum Task {
     },
 }
 
-/// The offset transfer function as stored: its even quarter (a function of the frequency radius: a quarter
-/// of the memory, [`EvenMultiplier`]) or, should it not be even, in full.
-#[derive(Debug)]
-pub(super) enum Transfer {
-    Even(EvenMultiplier),
-    Full(Vec<Complex32>),
-}
-
-impl Transfer {
-    /// The compact form of `full` (in `plan`'s spectrum layout) where it is even, else `full` itself.
-    /// Errors: as [`EvenMultiplier::from_full`].
-    pub(super) fn new(plan: &SpectralPlan, full: &[Complex32]) -> Result<Self> {
-        Ok(match EvenMultiplier::from_full(plan, full)? {
-            Some(even) => Self::Even(even),
-            None => Self::Full(full.to_vec()),
-        })
-    }
-}
-
 /// Two real `[H, W]` planes of one colour, read-only.
 pub(super) type PlanePair<'a> = (&'a [f32], &'a [f32]);
 /// Two real `[H, W]` planes of one colour, to write.
@@ -62,8 +44,9 @@ pub(super) struct ColourState {
     /// ([`ColourState::prefilter_io`]). No buffer of its own for either: 50 MB less at 1080p.
     pub(super) field: Vec<Complex32>,
     pub(super) plan: SpectralPlan,
-    /// Offset transfer function with the carrier removed (Eq. 6); `None` at 0 m.
-    pub(super) transfer: Option<Transfer>,
+    /// Offset transfer function with the carrier removed (Eq. 6), as its even quarter (a function of the
+    /// frequency radius: a quarter of the memory, [`EvenMultiplier`]); `None` at 0 m.
+    pub(super) transfer: Option<EvenMultiplier>,
     pub(super) scratch: Scratch,
     pub(super) encoder: ChannelEncoder,
     pub(super) phase: Vec<f32>,
@@ -74,26 +57,22 @@ pub(super) struct ColourState {
     pub(super) size: (usize, usize),
     /// The display calibration whose look-up table turns `phase` into `codes` (`None`: linear).
     pub(super) calibration: Option<Arc<DisplayCalibration>>,
+    /// The instruction set of the heads-to-phasor rows ([`tensorholo_kernels::phasor`]).
+    pub(super) isa: Isa,
 }
 
 impl ColourState {
     pub(super) fn run(&mut self, task: Task) -> Result<()> {
         match task {
             Task::Midpoint { prefilter } => {
-                if !self.planes_to_field(head_to_phasor) {
+                if !self.heads_to_field()? {
                     return Err(HoloError::InvalidData(
                         "midpoint heads hold NaN or infinite values".into(),
                     ));
                 }
-                match &self.transfer {
-                    Some(Transfer::Even(t)) => {
-                        self.plan
-                            .apply_even(&mut self.field, t, &mut self.scratch)?
-                    }
-                    Some(Transfer::Full(t)) => {
-                        self.plan.apply(&mut self.field, t, &mut self.scratch)?
-                    }
-                    None => {}
+                if let Some(t) = &self.transfer {
+                    self.plan
+                        .apply_even(&mut self.field, t, &mut self.scratch)?;
                 }
                 if prefilter {
                     // Pre-filter input (docs/CONVENTIONS.md §7.2, format 2): Re H and Im H, into the two
@@ -149,6 +128,20 @@ impl ColourState {
         let n = self.field.len();
         let input = self.scratch.planes(n).ok_or_else(no_room)?;
         Ok((input, field_planes(&mut self.field)))
+    }
+
+    /// Turns the midpoint heads in the field's memory (amplitude, phase: [`ColourState::planes`]) into the
+    /// field in place, on the vectorised rows ([`tensorholo_kernels::phasor::phasors_in_place`], the same
+    /// values as [`crate::model::contract::head_to_phasor`]). The phase plane is copied into `phase` first
+    /// (the encoder's next pass overwrites it). Returns whether every head was finite.
+    ///
+    /// Errors: [`HoloError::Internal`] if the kernel refuses (lengths equal by construction, ISA checked).
+    fn heads_to_field(&mut self) -> Result<bool> {
+        let n = self.field.len();
+        let flat = bytemuck::cast_slice_mut::<Complex32, f32>(&mut self.field);
+        self.phase.copy_from_slice(&flat[n..]);
+        phasors_in_place(flat, &self.phase, self.isa)
+            .map_err(|e| HoloError::Internal(format!("phasor rows: {e}")))
     }
 
     /// Turns the two planes in the field's memory ([`ColourState::planes`]) into the field in place:

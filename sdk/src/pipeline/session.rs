@@ -205,22 +205,27 @@ impl HologramSession {
         self.last_heads = None;
         let t0 = Instant::now();
         let (h, w) = (self.height, self.width);
-        let mut heads = self.full_outputs.then(|| Heads {
-            amplitude: Array3::zeros((3, h, w)),
-            phase: Array3::zeros((3, h, w)),
-        });
-        for (c, slot) in self.states.iter_mut().enumerate() {
-            let (first, second) = slot.as_deref_mut().ok_or_else(lost_state)?.planes();
-            if let Some(hd) = &mut heads {
-                let planes: [&[f32]; 2] = [first, second];
-                for (dst, src) in [&mut hd.amplitude, &mut hd.phase].into_iter().zip(planes) {
-                    let mut plane = dst.index_axis_mut(Axis(0), c);
-                    for (d, v) in plane.iter_mut().zip(src) {
-                        *d = *v;
-                    }
-                }
+        // The kept heads are built from the planes without zeroing first (one pass over 50 MB at 1080p, not
+        // two).
+        let heads = if self.full_outputs {
+            let n = h * w;
+            let (mut amplitude, mut phase) = (Vec::with_capacity(3 * n), Vec::with_capacity(3 * n));
+            for slot in self.states.iter_mut() {
+                let (first, second) = slot.as_deref_mut().ok_or_else(lost_state)?.planes();
+                amplitude.extend_from_slice(first);
+                phase.extend_from_slice(second);
             }
-        }
+            let shaped = |v| {
+                Array3::from_shape_vec((3, h, w), v)
+                    .map_err(|e| HoloError::Internal(format!("kept heads: {e}")))
+            };
+            Some(Heads {
+                amplitude: shaped(amplitude)?,
+                phase: shaped(phase)?,
+            })
+        } else {
+            None
+        };
         let prefilter = self.prefilter.is_some();
         self.workers
             .run(&mut self.states, |_| Task::Midpoint { prefilter })?;

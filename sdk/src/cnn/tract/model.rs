@@ -13,7 +13,7 @@ use tract_onnx::prelude::{Framework, InferenceModelExt, IntoRunnable, Symbol, TD
 use super::plan::{optimise, tract_msg, ModelPlan, PlanFailure};
 use crate::cnn::tuning::{
     auto_thread_candidates, fastest_run, timing_resolution, CnnEngine, CnnLayout, PlanReport,
-    PlanRequest, PlanTiming, ThreadCount, PLAUSIBLE_FACTOR,
+    PlanRequest, PlanTiming, ThreadCount, NOT_TIMED, PLAUSIBLE_FACTOR,
 };
 use crate::error::{guarded, invalid, HoloError, Result};
 use crate::model::network::check_fixed_size;
@@ -498,9 +498,6 @@ impl TractModel {
         })
     }
 }
-
-/// How a candidate left untimed by the early stop ([`PLAUSIBLE_FACTOR`]) starts its `skipped` reason.
-const NOT_TIMED: &str = "not timed";
 
 /// Seconds of one run of `plan` on `input`.
 fn time_run(plan: &ModelPlan, input: &Array3<f32>) -> Result<f64> {
