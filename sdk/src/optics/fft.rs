@@ -145,23 +145,63 @@ impl Fft2 {
         for x0 in (0..w).step_by(BLOCK_COLUMNS) {
             let bw = BLOCK_COLUMNS.min(w - x0);
             let block = &mut block[..bw * h];
-            for (y, row) in data.chunks_exact(w).enumerate() {
-                for (b, v) in row[x0..x0 + bw].iter().enumerate() {
-                    block[b * h + y] = *v;
-                }
-            }
+            gather(data, w, x0, block, h);
             self.col_forward.process_with_scratch(block, scratch);
             for (b, column) in block.chunks_exact_mut(h).enumerate() {
                 multiply(x0 + b, column);
             }
             self.col_inverse.process_with_scratch(block, scratch);
-            for (y, row) in data.chunks_exact_mut(w).enumerate() {
-                for (b, v) in row[x0..x0 + bw].iter_mut().enumerate() {
-                    *v = block[b * h + y];
-                }
-            }
+            scatter(block, h, data, w, x0);
         }
         self.row_inverse.process_with_scratch(data, scratch);
+    }
+}
+
+/// Rows per tile of [`gather`] and [`scatter`]: a tile's column segment is 8 complex values (64 bytes, one
+/// cache line) written or read at once, instead of 8 values 8 bytes each at a stride of `height`.
+const TILE_ROWS: usize = 8;
+
+/// `block[b·h + y] = data[y·w + x0 + b]` for `b < block.len() / h`, `y < h`: the columns `x0..` of the
+/// row-major `[h, w]` field, transposed into `block`, in tiles of [`TILE_ROWS`] rows.
+fn gather(data: &[Complex32], w: usize, x0: usize, block: &mut [Complex32], h: usize) {
+    let bw = block.len() / h;
+    let mut tile = [[Complex32::default(); TILE_ROWS]; BLOCK_COLUMNS];
+    for y0 in (0..h).step_by(TILE_ROWS) {
+        let rows = TILE_ROWS.min(h - y0);
+        for r in 0..rows {
+            let row = &data[(y0 + r) * w + x0..][..bw];
+            for (b, v) in row.iter().enumerate() {
+                tile[b][r] = *v;
+            }
+        }
+        for (b, column) in block.chunks_exact_mut(h).enumerate() {
+            match column[y0..].first_chunk_mut::<TILE_ROWS>() {
+                // A whole tile: a fixed-size copy (inlined; the general one calls memmove).
+                Some(dst) if rows == TILE_ROWS => *dst = tile[b],
+                _ => column[y0..y0 + rows].copy_from_slice(&tile[b][..rows]),
+            }
+        }
+    }
+}
+
+/// The inverse of [`gather`]: `data[y·w + x0 + b] = block[b·h + y]`.
+fn scatter(block: &[Complex32], h: usize, data: &mut [Complex32], w: usize, x0: usize) {
+    let bw = block.len() / h;
+    let mut tile = [[Complex32::default(); TILE_ROWS]; BLOCK_COLUMNS];
+    for y0 in (0..h).step_by(TILE_ROWS) {
+        let rows = TILE_ROWS.min(h - y0);
+        for (b, column) in block.chunks_exact(h).enumerate() {
+            match column[y0..].first_chunk::<TILE_ROWS>() {
+                Some(src) if rows == TILE_ROWS => tile[b] = *src,
+                _ => tile[b][..rows].copy_from_slice(&column[y0..y0 + rows]),
+            }
+        }
+        for r in 0..rows {
+            let row = &mut data[(y0 + r) * w + x0..][..bw];
+            for (b, v) in row.iter_mut().enumerate() {
+                *v = tile[b][r];
+            }
+        }
     }
 }
 
