@@ -480,12 +480,13 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     if !args.skip_pipeline && args.backend.contains(&BackendArg::Cpu) {
         println!(
             "Pipeline (`HologramSession`, offset {} mm{}): median stage times in ms, end-to-end FPS of single \
-             frames and of a stream (CNN of frame n+1 overlapping the optics of frame n)\n",
+             frames and of a stream (CNN of frame n+1 overlapping the optics of frame n); setup: the session's creation \
+             (CNN plans, transfer functions, encoder) with the row's engine and threads\n",
             args.offset_mm,
             if args.offset_mm == 0 { ", AA-DPM" } else { ", pre-filter CNN + DPM" }
         );
-        println!("| CNN | precision | layout | size (HxW) | threads | CNN | offset | pre-filter | DPM + LUT | frame | FPS | stream FPS | peak MiB |");
-        println!("|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+        println!("| CNN | precision | layout | size (HxW) | threads | CNN | offset | pre-filter | DPM + LUT | frame | FPS | stream FPS | setup ms | peak MiB |");
+        println!("|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
         for &(h, w) in &args.sizes {
             let frame = procedural::default_scene(h, w)?;
             for &layers in &args.layers {
@@ -513,7 +514,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                                     ..PipelineConfig::default()
                                 },
                             )?;
+                            let t = Instant::now();
                             let mut session = pipeline.session(h, w)?;
+                            let setup_s = t.elapsed().as_secs_f64();
                             let layout = match layout {
                                 CnnLayout::Auto => {
                                     format!("auto → {}", session.plan_report().layout)
@@ -538,20 +541,22 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                             let peak = peak_rss_mib().filter(|_| reset);
                             let peak_cell = peak.map_or("–".to_string(), |p| format!("{p:.0}"));
                             println!(
-                            "| holo{layers} | {precision} | {layout} | {h}x{w} | {threads} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {peak_cell} |",
+                            "| holo{layers} | {precision} | {layout} | {h}x{w} | {threads} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {:.0} | {peak_cell} |",
                             med.cnn_s * 1e3,
                             med.offset_s * 1e3,
                             med.prefilter_s * 1e3,
                             med.encoding_s * 1e3,
                             s * 1e3,
                             1.0 / s,
-                            stream_fps
+                            stream_fps,
+                            setup_s * 1e3
                         );
                             results.push(
                             json!({"kind": "pipeline", "layers": layers, "precision": precision,
                             "layout": layout, "size": [h, w], "threads": threads, "offset_mm": args.offset_mm,
                             "median_stages_s": med, "frame_ms": s * 1e3, "fps": 1.0 / s,
-                            "stream_fps": stream_fps, "runs": runs, "peak_rss_mib": peak}),
+                            "stream_fps": stream_fps, "runs": runs, "peak_rss_mib": peak,
+                            "session_setup_s": setup_s}),
                         );
                         }
                     }

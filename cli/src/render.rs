@@ -111,7 +111,7 @@ impl From<LayoutArg> for CnnLayout {
 /// CPU CNN engines selectable on the command line ([`CnnEngine`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum EngineArg {
-    /// Time both engines when the session is created and keep the faster (int8 QOperator files: tract).
+    /// Time the engines when the session is created and keep the faster (tract is not timed where the native engine runs its x86-64 SIMD rows, which outrun it; int8 QOperator files: tract).
     Auto,
     /// tensorholo's own direct 3×3 convolution kernels (f32 and int8 QDQ models; SIMD chosen from the CPU at
     /// run time).

@@ -125,9 +125,10 @@ pub struct PipelineConfig {
     /// only 8 rows, and it measured 2.1× slower (`holo bench --skip-cnn --layout nchw,nhwc`, 384², 1
     /// thread: 89 ms against 42 ms); tract 0.23 cannot move its graph channels-last anyway.
     pub cnn_layout: CnnLayout,
-    /// The engine of the CPU CNNs ([`CnnEngine::Auto`], the default: for an f32 model, the native kernels
-    /// and tract are timed at session creation and the faster runs; the native engine runs the f32 and the
-    /// int8 QDQ files, tract every file, int8 QOperator included).
+    /// The engine of the CPU CNNs ([`CnnEngine::Auto`], the default: the native kernels are timed at session
+    /// creation, and tract too unless the native engine runs its x86-64 SIMD rows, which outrun it; the
+    /// faster runs; the native engine runs the f32 and the int8 QDQ files, tract every file, int8
+    /// QOperator included).
     pub cnn_engine: CnnEngine,
     /// Threads of the CNNs' matrix products ([`ThreadCount::Auto`], the default, times 1, half and all
     /// cores at session creation). The three colours of the optics always run on their own three threads.
