@@ -13,7 +13,10 @@
 # CPU (qemu's `max`: dot product and i8mm; `cortex-a76`: dot product only), twice: with --repeat 1 and
 # --repeat 3. The difference, halved, is one steady-state frame (loading, plan optimisation and output writing cancel out).
 # HOLO_AARCH64 defaults to target/aarch64-unknown-linux-gnu/release/holo (build it first as README "ARM"
-# says). Prints two Markdown tables (whole frames, then the hologram CNN alone); needs qemu-user, gcc,
+# says; a build without tract, `--no-default-features`, runs the native cases: pick them with FRAME_CASES /
+# CNN_CASES, each a `;`-separated list of the cases below). The native f32 engine measures direct against
+# Winograd per layer shape at its first plan, here by emulated time: pin it with TENSORHOLO_CONV=direct or
+# winograd (passed through to holo) to count either. Prints two Markdown tables (whole frames, then the hologram CNN alone); needs qemu-user, gcc,
 # python3. Each case takes ~1 min here.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
@@ -48,8 +51,10 @@ echo "| engine | precision | layout | qemu CPU | kernel | M instructions / frame
 echo "|---|---|---|---|---|---:|---:|"
 # tract's rows (its own NEON kernels), then the native engine's: f32 (NEON row), int8 with i8mm (USDOT, the
 # default CPU `max`) and with dot product only (SDOT, `cortex-a76`). The native rows ignore the layout.
-for case in "tract f32 nchw max" "tract f32 nhwc max" "tract int8-qop nchw max" "tract int8-qdq nchw max" \
-  "tract int8-qdq nhwc max" "native f32 nchw max" "native int8-qdq nchw max" "native int8-qdq nchw cortex-a76"; do
+frame_cases=("tract f32 nchw max" "tract f32 nhwc max" "tract int8-qop nchw max" "tract int8-qdq nchw max"
+  "tract int8-qdq nhwc max" "native f32 nchw max" "native int8-qdq nchw max" "native int8-qdq nchw cortex-a76")
+[ -n "${FRAME_CASES:-}" ] && IFS=';' read -r -a frame_cases <<<"$FRAME_CASES"
+for case in "${frame_cases[@]}"; do
   read -r engine precision layout cpu <<<"$case"
   one="$(count "$engine" "$precision" "$layout" "$cpu" 1)"
   three="$(count "$engine" "$precision" "$layout" "$cpu" 3)"
@@ -88,8 +93,10 @@ echo "| CNN | engine | precision | qemu CPU | kernel / layout | M instructions /
 echo "|---|---|---|---|---|---:|---:|"
 h="${size%x*}"
 w="${size#*x}"
-for case in "8 tract f32 max" "8 native f32 max" "8 native int8-qdq max" "8 native int8-qdq cortex-a76" \
-  "8 native int8-qdq cortex-a53" "30 native f32 max" "30 native int8-qdq max" "30 native int8-qdq cortex-a76"; do
+cnn_cases=("8 tract f32 max" "8 native f32 max" "8 native int8-qdq max" "8 native int8-qdq cortex-a76"
+  "8 native int8-qdq cortex-a53" "30 native f32 max" "30 native int8-qdq max" "30 native int8-qdq cortex-a76")
+[ -n "${CNN_CASES:-}" ] && IFS=';' read -r -a cnn_cases <<<"$CNN_CASES"
+for case in "${cnn_cases[@]}"; do
   read -r layers engine precision cpu <<<"$case"
   one="$(bench_count "$engine" "$precision" "$layers" "$cpu" 1)"
   three="$(bench_count "$engine" "$precision" "$layers" "$cpu" 3)"
