@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use ndarray::Array3;
 use serde_json::json;
@@ -179,6 +179,7 @@ fn selection(args: &BenchArgs, layers: usize, precision: Precision) -> ModelSele
 /// `--backend gpu`: end-to-end GPU frames, then each GPU stage on its own (one submission and wait each).
 #[cfg(feature = "gpu")]
 fn gpu_tables(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Result<()> {
+    use anyhow::Context;
     let mut stage_rows = Vec::new();
     println!("GPU frames (--backend gpu; f32 weights; downloads: the three code planes)\n");
     println!("| CNN | size (HxW) | adapter | GPU arithmetic | frame ms | FPS | runs |");
