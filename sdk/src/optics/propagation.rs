@@ -107,6 +107,21 @@ impl EvenMultiplier {
         self.cols / 2 + 1
     }
 
+    /// Multiplies row `r` of a spectrum (`cols` values, the plan's layout) by this multiplier's row `r`,
+    /// read from the quarter: row `r` mirrors row `rows − r`, column `c ≥ cols/2 + 1` column `cols − c`.
+    fn multiply_row(&self, r: usize, row: &mut [Complex32]) {
+        let (rows, cols, qc) = (self.rows, self.cols, self.quarter_cols());
+        let q = &self.values[r.min(rows - r) * qc..][..qc];
+        let (low, high) = row.split_at_mut(qc);
+        for (s, m) in low.iter_mut().zip(q) {
+            *s *= m;
+        }
+        // Column c ≥ qc mirrors column cols − c, from cols − qc down to 1.
+        for (s, m) in high.iter_mut().zip(q[1..=cols - qc].iter().rev()) {
+            *s *= m;
+        }
+    }
+
     /// Bytes of the stored values.
     pub fn bytes(&self) -> usize {
         self.values.len() * std::mem::size_of::<Complex32>()
@@ -307,6 +322,13 @@ impl SpectralPlan {
         scratch: &mut Scratch,
     ) -> Result<()> {
         self.check_field(field.len())?;
+        self.check_even(multiplier)?;
+        self.filter_with(field, scratch, |r, row| multiplier.multiply_row(r, row));
+        Ok(())
+    }
+
+    /// Errors: [`HoloError::ShapeMismatch`] if `multiplier` was made for another computational grid.
+    fn check_even(&self, multiplier: &EvenMultiplier) -> Result<()> {
         let (rows, cols) = self.spectrum_layout();
         if (multiplier.rows, multiplier.cols) != (rows, cols) {
             return Err(HoloError::ShapeMismatch {
@@ -315,18 +337,6 @@ impl SpectralPlan {
                 got: vec![multiplier.rows, multiplier.cols],
             });
         }
-        let qc = multiplier.quarter_cols();
-        self.filter_with(field, scratch, |r, row| {
-            let q = &multiplier.values[r.min(rows - r) * qc..][..qc];
-            let (low, high) = row.split_at_mut(qc);
-            for (s, m) in low.iter_mut().zip(q) {
-                *s *= m;
-            }
-            // Column c ≥ qc mirrors column cols − c, from cols − qc down to 1.
-            for (s, m) in high.iter_mut().zip(q[1..=cols - qc].iter().rev()) {
-                *s *= m;
-            }
-        });
         Ok(())
     }
 
@@ -371,17 +381,48 @@ impl SpectralPlan {
         self.check_field(field.len())?;
         self.check_multiplier(spectrum.len())?;
         self.check_multiplier(multiplier.len())?;
+        let spare = &mut scratch.spare;
+        spare.clear();
+        spare.extend(spectrum.iter().zip(multiplier).map(|(s, m)| s * m));
+        self.inverse_of_spare(field, scratch);
+        Ok(())
+    }
+
+    /// `field ← F⁻¹{scratch.spare}` (cropped when padded; `spare` is overwritten).
+    fn inverse_of_spare(&self, field: &mut [Complex32], scratch: &mut Scratch) {
         let Scratch {
             work, spare, fft, ..
         } = scratch;
-        spare.clear();
-        spare.extend(spectrum.iter().zip(multiplier).map(|(s, m)| s * m));
         if self.pad {
             self.fft.inverse(spare, work, fft);
             self.crop(work, field);
         } else {
             self.fft.inverse(spare, field, fft);
         }
+    }
+
+    /// [`inverse`](Self::inverse) with a multiplier in its compact even form ([`EvenMultiplier`]):
+    /// bit-identical to `inverse` with the full multiplier it stands for.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] on wrong lengths or a multiplier of another grid.
+    pub fn inverse_even(
+        &self,
+        spectrum: &[Complex32],
+        multiplier: &EvenMultiplier,
+        field: &mut [Complex32],
+        scratch: &mut Scratch,
+    ) -> Result<()> {
+        self.check_field(field.len())?;
+        self.check_multiplier(spectrum.len())?;
+        self.check_even(multiplier)?;
+        let spare = &mut scratch.spare;
+        spare.clear();
+        spare.extend_from_slice(spectrum);
+        let cols = self.spectrum_layout().1;
+        for (r, row) in spare.chunks_exact_mut(cols).enumerate() {
+            multiplier.multiply_row(r, row);
+        }
+        self.inverse_of_spare(field, scratch);
         Ok(())
     }
 

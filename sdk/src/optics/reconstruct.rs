@@ -71,8 +71,10 @@ pub fn focal_stack(
         }
         let mut out_field = vec![Complex32::default(); h * w];
         for (&d, out) in depths.iter().zip(outs) {
-            let tf = prop.transfer_function(setup.depth_to_z(d) - plane_z_m, Carrier::Remove)?;
-            plan.inverse(&spectrum, tf.values(), &mut out_field, &mut scratch)?;
+            // Its even quarter: a fourth of the f64 phases, the same values bit for bit.
+            let tf =
+                prop.even_transfer_function(setup.depth_to_z(d) - plane_z_m, Carrier::Remove)?;
+            plan.inverse_even(&spectrum, &tf, &mut out_field, &mut scratch)?;
             for (o, v) in out.iter_mut().zip(&out_field) {
                 *o = v.norm();
             }
@@ -160,8 +162,9 @@ pub fn post_encoding_midpoint(
 mod tests {
     use super::*;
 
-    /// The aperture applied once to the spectrum gives, bit for bit, what the per-depth product of the
-    /// transfer function and the aperture gave (the former implementation), on a random field.
+    /// The aperture applied once to the spectrum, with the transfer functions' even quarters, gives, bit for
+    /// bit, what the per-depth product of the full transfer function and the aperture gave (the former
+    /// implementation), on a random field.
     #[test]
     fn focal_stack_with_the_aperture_equals_the_per_depth_product() {
         let (h, w) = (18, 26);
