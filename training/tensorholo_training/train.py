@@ -921,6 +921,15 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if trainer.dist.enabled and torch.distributed.is_initialized():
             torch.distributed.destroy_process_group()
+    if trainer.dist.enabled and __name__ == "__main__":
+        # Every file is written and closed and the group is gone; leave without the interpreter's teardown.
+        # Seen once in CI (torch gloo, 2 torchrun agents under Slurm): a c10d store thread destroyed while
+        # joinable during teardown aborted a finished rank ("terminate called without an active exception",
+        # exit -6), which torchrun counts as a failed worker: it restarts the group and waits for the other
+        # agent, already gone, until the rendezvous times out.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)
     return 0
 
 
