@@ -3,9 +3,9 @@
 //! complex f32 (the midpoint hologram the offset propagation transforms, paper Eq. 6).
 //!
 //! libm's `sinf` and `cosf` are two function calls per pixel that the compiler cannot vectorise: at 1080p,
-//! about 15 ns per pixel and a third of the offset stage. Here both come from one branch-free
+//! 10 ns per pixel (one 1080p plane in 21.4 ms, below). Here both come from one branch-free
 //! [`sincos_turns`] on the angle in *turns*: the whole and quarter turns are removed exactly (rounding by
-//! the `1.5·2²³` trick, Sterbenz's lemma for the subtraction), so the only rounding before the polynomials is
+//! the `1.5·2²⁴` and `1.5·2²³` tricks, Sterbenz's lemma for the subtraction), so the only rounding before the polynomials is
 //! `x = r·2π` on `|x| ≤ π/4`, and the Cephes `sinf`/`cosf` polynomials (degree 7 and 8) give the rest; the
 //! quadrant swaps and negates by selects and sign-bit flips. Any finite `p` works (a phase head far outside
 //! `[0, 1]` is reduced exactly); NaN and infinities are reported, not hidden ([`phasors`] returns whether

@@ -106,19 +106,17 @@ fn fastest(
 ) -> Result<CnnPlans> {
     let mut timed = Vec::new();
     let mut untimed = Vec::new();
-    let mut decided: Option<String> = None;
+    // Why the engines after the first one timed are not timed: that engine's reason, with its id.
+    let mut decided: Option<(CnnEngine, String)> = None;
     let mut to_beat: Option<f64> = None;
     for e in able {
-        if let Some(why) = &decided {
+        if let Some((first, why)) = &decided {
             untimed.push(PlanTiming {
                 engine: e.id(),
                 layout: request.layout,
                 threads: None,
                 seconds: None,
-                skipped: Some(format!(
-                    "{NOT_TIMED}: the {} engine runs {why}",
-                    timed_id(&timed)
-                )),
+                skipped: Some(format!("{NOT_TIMED}: the {first} engine runs {why}")),
             });
             continue;
         }
@@ -127,7 +125,7 @@ fn fastest(
         to_beat = Some(to_beat.map_or(best, |b| b.min(best)));
         timed.push((*e, tuning, best));
         if timed.len() == 1 && best.is_finite() {
-            decided = e.outruns_the_others();
+            decided = e.outruns_the_others().map(|why| (e.id(), why));
         }
     }
     timed.sort_by(|a, b| a.2.total_cmp(&b.2));
@@ -148,7 +146,7 @@ fn fastest(
             s / best,
             other.id()
         ),
-        (None, Some(why)) => why.clone(),
+        (None, Some((_, why))) => why.clone(),
         (None, None) => "faster on this CPU".into(),
     };
     log::info!("CNN engine for {height}×{width}: {}, {why}", winner.id());
@@ -160,13 +158,6 @@ fn fastest(
     let mut plans = build(winner, nets, [height, width], request, &why, tuning)?;
     plans.report.autotuned = true;
     Ok(plans)
-}
-
-/// The id of the engine timed first (for the reason the others were not timed).
-fn timed_id(timed: &[(&dyn Engine, Tuning, f64)]) -> String {
-    timed
-        .first()
-        .map_or_else(|| "first".to_string(), |(e, _, _)| e.id().to_string())
 }
 
 /// The plans of `engine` for `tuning`, reported with what was asked (`request`), why (`why`), the timings

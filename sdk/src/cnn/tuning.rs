@@ -34,7 +34,7 @@ pub const MAX_CNN_THREADS: usize = 256;
 /// - [`CnnEngine::Auto`] (the default): the engines of this build that can run the file are timed at session
 ///   creation on this machine (on the frame, or a full-width strip of a large one), the native engine first,
 ///   and the faster runs; int8 QOperator files run on tract. Where the native engine runs its x86-64 SIMD
-///   rows, measured 2.3–18× tract's best on every such CPU tried, tract is not timed (0.3–0.4 s of a 1080p
+///   rows, measured 2.3–20× tract's best on every such CPU tried, tract is not timed (0.3–0.4 s of a 1080p
 ///   setup); on the portable rows and on ARM it is. The choice, the timings and what was not timed (with
 ///   why) are in [`crate::cnn::PlanReport`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]

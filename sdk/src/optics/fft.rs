@@ -131,6 +131,9 @@ impl Fft2 {
     /// field is read and written three times (the forward–multiply–inverse sequence: seven, with a
     /// whole-field spectrum). Bit-identical to that sequence: the same 1D transforms on the same values, and
     /// the transposes only copy (tested).
+    ///
+    /// `data` must hold `height·width` values and `block` at least [`Fft2::block_len`] (as for the other
+    /// methods, the callers' plans size them; a shorter `block` panics).
     pub fn filter(
         &self,
         data: &mut [Complex32],

@@ -26,28 +26,10 @@ pub struct PropagationOptions {
 #[derive(Debug, Clone)]
 pub struct Scratch {
     work: Vec<Complex32>,
-    spectrum: Vec<Complex32>,
     spare: Vec<Complex32>,
     /// The column block of [`Fft2::filter`].
     block: Vec<Complex32>,
     fft: Vec<Complex32>,
-}
-
-impl Scratch {
-    /// The spectrum buffer's memory as two f32 planes of `n` values each, for a caller to park real data in
-    /// between transforms (a session's pre-filter input, `n = H·W`); `None` if it holds fewer than `2n` f32
-    /// (a scratch of a smaller plan). Its contents are overwritten by the next transform.
-    pub(crate) fn planes_mut(&mut self, n: usize) -> Option<(&mut [f32], &mut [f32])> {
-        let flat = bytemuck::cast_slice_mut::<Complex32, f32>(&mut self.spectrum);
-        let (a, rest) = flat.split_at_mut_checked(n)?;
-        Some((a, rest.get_mut(..n)?))
-    }
-
-    /// The two planes [`Scratch::planes_mut`] gave, read-only.
-    pub(crate) fn planes(&self, n: usize) -> Option<(&[f32], &[f32])> {
-        let flat = bytemuck::cast_slice::<Complex32, f32>(&self.spectrum);
-        Some((flat.get(..n)?, flat.get(n..2 * n)?))
-    }
 }
 
 /// A spectral multiplier that is even in both frequencies, `M(−u, v) = M(u, −v) = M(u, v)` (a transfer
@@ -216,7 +198,6 @@ impl SpectralPlan {
         let zero = Complex32::new(0.0, 0.0);
         Scratch {
             work: if self.pad { vec![zero; n] } else { Vec::new() },
-            spectrum: vec![zero; n],
             spare: Vec::new(),
             block: vec![zero; self.fft.block_len()],
             fft: vec![zero; self.fft.scratch_len()],

@@ -40,14 +40,17 @@ pub(super) struct ColourState {
     /// The complex field `[H, W]`. Its memory also holds two real planes (`[H, W]` each, [`ColourState::planes`])
     /// while the session writes them: the midpoint heads (amplitude, phase) before [`Task::Midpoint`] and,
     /// with a pre-filter, its output `(Re H', Im H')` before [`Task::Filtered`]; each task turns them into
-    /// the field in place. The pre-filter's input `(Re H, Im H)` waits in the idle spectrum of `scratch`
-    /// ([`ColourState::prefilter_io`]). No buffer of its own for either: 50 MB less at 1080p.
+    /// the field in place (no buffer of their own: 50 MB less at 1080p). The pre-filter's input `(Re H, Im H)`
+    /// waits in `prefilter_input` ([`ColourState::prefilter_io`]).
     pub(super) field: Vec<Complex32>,
     pub(super) plan: SpectralPlan,
     /// Offset transfer function with the carrier removed (Eq. 6), as its even quarter (a function of the
     /// frequency radius: a quarter of the memory, [`EvenMultiplier`]); `None` at 0 m.
     pub(super) transfer: Option<EvenMultiplier>,
     pub(super) scratch: Scratch,
+    /// The pre-filter's input `(Re H, Im H)`, two `[H, W]` planes one after the other; empty in a session
+    /// without a pre-filter.
+    pub(super) prefilter_input: Vec<f32>,
     pub(super) encoder: ChannelEncoder,
     pub(super) phase: Vec<f32>,
     pub(super) codes: Vec<u8>,
@@ -75,10 +78,13 @@ impl ColourState {
                         .apply_even(&mut self.field, t, &mut self.scratch)?;
                 }
                 if prefilter {
-                    // Pre-filter input (docs/CONVENTIONS.md §7.2, format 2): Re H and Im H, into the two
-                    // planes of the idle spectrum.
+                    // Pre-filter input (docs/CONVENTIONS.md §7.2, format 2): Re H and Im H, two planes.
                     let n = self.field.len();
-                    let (re, im) = self.scratch.planes_mut(n).ok_or_else(no_room)?;
+                    let (re, im) = self
+                        .prefilter_input
+                        .split_at_mut_checked(n)
+                        .filter(|(_, im)| im.len() == n)
+                        .ok_or_else(no_room)?;
                     for ((r, i), v) in re.iter_mut().zip(im.iter_mut()).zip(&self.field) {
                         *r = v.re;
                         *i = v.im;
@@ -120,13 +126,18 @@ impl ColourState {
         field_planes(&mut self.field)
     }
 
-    /// The pre-filter's input `(Re H, Im H)` that [`Task::Midpoint`] left in the spectrum's memory, beside
-    /// the field's memory the pre-filter writes its output into ([`ColourState::planes`]).
+    /// The pre-filter's input `(Re H, Im H)` that [`Task::Midpoint`] left in `prefilter_input`, beside the
+    /// field's memory the pre-filter writes its output into ([`ColourState::planes`]).
     ///
-    /// Errors: [`HoloError::Internal`] if the scratch is too small (never for the session's own plan).
+    /// Errors: [`HoloError::Internal`] if `prefilter_input` does not hold two planes (a session without a
+    /// pre-filter).
     pub(super) fn prefilter_io(&mut self) -> Result<(PlanePair<'_>, PlanePairMut<'_>)> {
         let n = self.field.len();
-        let input = self.scratch.planes(n).ok_or_else(no_room)?;
+        let input = self
+            .prefilter_input
+            .split_at_checked(n)
+            .filter(|(_, im)| im.len() == n)
+            .ok_or_else(no_room)?;
         Ok((input, field_planes(&mut self.field)))
     }
 
@@ -176,7 +187,7 @@ fn field_planes(field: &mut [Complex32]) -> PlanePairMut<'_> {
 
 /// The error for a scratch without room for the pre-filter's input (an internal inconsistency).
 fn no_room() -> HoloError {
-    HoloError::Internal("colour scratch smaller than two planes".into())
+    HoloError::Internal("no room for the pre-filter's input planes".into())
 }
 
 /// Copies channel `c` of a `[C, H, W]` array into `out` (`H·W` values).

@@ -112,6 +112,11 @@ impl HologramSession {
                 plan: prop.plan().clone(),
                 transfer,
                 scratch: prop.plan().scratch(),
+                prefilter_input: if pipeline.prefilter_model().is_some() {
+                    vec![0.0; 2 * n]
+                } else {
+                    Vec::new()
+                },
                 encoder: ChannelEncoder::new(height, width, encoding)?,
                 phase: vec![0.0; n],
                 codes: vec![0; n],

@@ -97,8 +97,9 @@ impl Engine for NativeEngine {
         })
     }
 
-    /// On the x86-64 SIMD levels, where it was measured against tract (docs/BENCHMARKS.md: 2.3–3.5× tract's
-    /// best in f32 and 10–18× in int8, on Xeon, Zen 3 and Zen 4, at 384² and 1080p), and only there: on the
+    /// On the x86-64 SIMD levels, where it was measured against tract (2.3–3.5× tract's best in f32 and
+    /// 11–20× in int8, on Zen 3 and Zen 4, at 384² and 1080p: the "CNN engine for …" line `holo render`
+    /// logs, and docs/BENCHMARKS.md), and only there: on the
     /// portable rows (`TENSORHOLO_ISA=scalar`) and on ARM, measured under emulation only, tract is timed too.
     fn outruns_the_others(&self) -> Option<String> {
         let isa = active_isa().ok()?;
@@ -108,7 +109,7 @@ impl Engine for NativeEngine {
         )
         .then(|| {
             format!(
-                "its {isa} SIMD rows (2.3–18× tract's best wherever measured on x86-64); the other engines \
+                "its {isa} SIMD rows (2.3–20× tract's best wherever measured on x86-64); the other engines \
                  not timed (pin one to compare)"
             )
         })
