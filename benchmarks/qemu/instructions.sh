@@ -15,8 +15,8 @@
 # HOLO_AARCH64 defaults to target/aarch64-unknown-linux-gnu/release/holo (build it first as README "ARM"
 # says; a build without tract, `--no-default-features`, runs the native cases: pick them with FRAME_CASES /
 # CNN_CASES, each a `;`-separated list of the cases below). The native f32 engine measures direct against
-# Winograd per layer shape at its first plan, here by emulated time: pin it with TENSORHOLO_CONV=direct or
-# winograd (passed through to holo) to count either. Prints two Markdown tables (whole frames, then the hologram CNN alone); needs qemu-user, gcc,
+# Winograd F(2×2, 3×3) per layer shape at its first plan, here by emulated time: pin it with
+# TENSORHOLO_CONV=direct, winograd2x2 or winograd4x4 (passed through to holo) to count each. Prints two Markdown tables (whole frames, then the hologram CNN alone); needs qemu-user, gcc,
 # python3. Each case takes ~1 min here.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"

@@ -14,7 +14,9 @@
 use std::ops::Range;
 
 use crate::conv3x3::job::{F32Job, F32Out, U8Job, U8Out};
-use crate::conv3x3::row::{f32_info, u8_info, winograd_info, Algorithm, F32Row, PackKind, U8Row};
+use crate::conv3x3::row::{
+    f32_info, u8_info, winograd4_info, winograd_info, Algorithm, F32Row, PackKind, U8Row,
+};
 #[cfg(target_arch = "x86_64")]
 use crate::conv3x3::{f32_avx2, f32_avx512, u8s8_avx2, u8s8_avx512vnni, u8s8_avxvnni};
 #[cfg(target_arch = "aarch64")]
@@ -108,6 +110,16 @@ const SCALAR: Ops = Ops {
             ),
             run: f32_scalar::winograd,
         },
+        F32Row {
+            info: winograd4_info(
+                "conv3x3.f32.wino4x4.4x4.scalar",
+                Isa::Scalar,
+                f32_scalar::WINO_G,
+                1,
+                f32_scalar::WINO_NV,
+            ),
+            run: f32_scalar::winograd4,
+        },
     ],
     u8: &[U8Row {
         info: u8_info(
@@ -182,6 +194,16 @@ static OPS: [Ops; 5] = [
                 ),
                 run: f32_avx512::winograd,
             },
+            F32Row {
+                info: winograd4_info(
+                    "conv3x3.f32.wino4x4.8x1.avx512",
+                    Isa::Avx512,
+                    f32_avx512::G,
+                    16,
+                    1,
+                ),
+                run: f32_avx512::winograd4,
+            },
         ],
         u8: &[],
         depthwise: Some(depthwise::x86::rows_avx512),
@@ -242,6 +264,16 @@ static OPS: [Ops; 5] = [
                 ),
                 run: f32_avx2::winograd,
             },
+            F32Row {
+                info: winograd4_info(
+                    "conv3x3.f32.wino4x4.6x2.avx2",
+                    Isa::Avx2Fma,
+                    f32_avx2::G,
+                    8,
+                    f32_avx2::NV,
+                ),
+                run: f32_avx2::winograd4,
+            },
             #[cfg(test)]
             F32Row {
                 info: f32_info("test.f32.8x3.avx512-geometry-on-avx2", Isa::Avx2Fma, 8, 48),
@@ -257,6 +289,17 @@ static OPS: [Ops; 5] = [
                     2,
                 ),
                 run: f32_avx2::winograd_avx512_geometry,
+            },
+            #[cfg(test)]
+            F32Row {
+                info: winograd4_info(
+                    "test.f32.wino4x4.8x1.avx512-geometry-on-avx2",
+                    Isa::Avx2Fma,
+                    8,
+                    16,
+                    1,
+                ),
+                run: f32_avx2::winograd4_avx512_geometry,
             },
         ],
         u8: &[
@@ -376,6 +419,16 @@ static OPS: [Ops; 4] = [
                     f32_neon::NV,
                 ),
                 run: f32_neon::winograd,
+            },
+            F32Row {
+                info: winograd4_info(
+                    "conv3x3.f32.wino4x4.8x3.neon",
+                    Isa::Neon,
+                    f32_neon::G,
+                    4,
+                    f32_neon::NV,
+                ),
+                run: f32_neon::winograd4,
             },
         ],
         u8: &[U8Row {

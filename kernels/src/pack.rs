@@ -86,24 +86,59 @@ pub(crate) fn pack_winograd_f32(
     c_out: usize,
     g: usize,
 ) -> Result<(Vec<f32>, Vec<f32>), KernelError> {
-    check_layer(weights, bias, c_in, c_out)?;
     const GM: [[f64; 3]; 4] = [
         [1.0, 0.0, 0.0],
         [0.5, 0.5, 0.5],
         [0.5, -0.5, 0.5],
         [0.0, 0.0, 1.0],
     ];
+    pack_winograd(weights, bias, c_in, c_out, g, &GM)
+}
+
+/// Packs OIHW `[C_out][C_in][3][3]` weights and `[C_out]` bias for a Winograd F(4×4, 3×3) kernel with an
+/// output-channel tile `g`: each filter becomes `U = G g Gᵀ` (6×6; `G` as in `simd_winograd4.rs`, computed in
+/// f64 and rounded once), packed `[36][ceil(C_out/g)][C_in][g]`; bias `[ceil(C_out/g)·g]`, zero-padded.
+pub(crate) fn pack_winograd4_f32(
+    weights: &[f32],
+    bias: &[f32],
+    c_in: usize,
+    c_out: usize,
+    g: usize,
+) -> Result<(Vec<f32>, Vec<f32>), KernelError> {
+    const GM: [[f64; 3]; 6] = [
+        [1.0 / 4.0, 0.0, 0.0],
+        [-1.0 / 6.0, -1.0 / 6.0, -1.0 / 6.0],
+        [-1.0 / 6.0, 1.0 / 6.0, -1.0 / 6.0],
+        [1.0 / 24.0, 1.0 / 12.0, 1.0 / 6.0],
+        [1.0 / 24.0, -1.0 / 12.0, 1.0 / 6.0],
+        [0.0, 0.0, 1.0],
+    ];
+    pack_winograd(weights, bias, c_in, c_out, g, &GM)
+}
+
+/// `U = G g Gᵀ` of every filter for the `n × 3` matrix `gm` (`n²` points), packed `[n²][groups][C_in][g]`.
+fn pack_winograd(
+    weights: &[f32],
+    bias: &[f32],
+    c_in: usize,
+    c_out: usize,
+    g: usize,
+    gm: &[[f64; 3]],
+) -> Result<(Vec<f32>, Vec<f32>), KernelError> {
+    check_layer(weights, bias, c_in, c_out)?;
+    let n = gm.len();
     let groups = c_out.div_ceil(g);
-    let mut packed = vec![0.0; 16 * groups * c_in * g];
+    let mut packed = vec![0.0; n * n * groups * c_in * g];
     for o in 0..c_out {
         let (grp, lane) = (o / g, o % g);
         for i in 0..c_in {
             let f = &weights[(o * c_in + i) * 9..][..9];
-            for (k, u) in (0..16).map(|k| (k, (k / 4, k % 4))) {
+            for k in 0..n * n {
+                let (u, v) = (k / n, k % n);
                 let mut s = 0.0f64;
                 for a in 0..3 {
                     for b in 0..3 {
-                        s += GM[u.0][a] * f[a * 3 + b] as f64 * GM[u.1][b];
+                        s += gm[u][a] * f[a * 3 + b] as f64 * gm[v][b];
                     }
                 }
                 packed[((k * groups + grp) * c_in + i) * g + lane] = s as f32;

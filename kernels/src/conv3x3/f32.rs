@@ -93,6 +93,7 @@ impl Conv3x3F32 {
         let pack = match row.info.algorithm {
             Algorithm::Direct => pack::pack_f32,
             Algorithm::Winograd2x2 => pack::pack_winograd_f32,
+            Algorithm::Winograd4x4 => pack::pack_winograd4_f32,
         };
         let (weights, bias) = pack(weights, bias, c_in, c_out, row.info.oc_tile)?;
         Ok(Self {
@@ -106,18 +107,22 @@ impl Conv3x3F32 {
     }
 
     /// Prepares the calling thread for this plan: a Winograd plan's rows keep a scratch per thread (`V` and
-    /// `M`, `16·(C_in + G)·tiles` f32 values: 73 KiB for 28 input channels with AVX-512), grown on first use;
+    /// `M`, `P·(C_in + G)·tiles` f32 values, `P` = 16 or 36 points: 73 KiB for F(2×2, 3×3) and 28 input
+    /// channels with AVX-512, 83 KiB for F(4×4, 3×3)), grown on first use;
     /// this grows it now, so that frames allocate nothing on any thread that called it. A direct plan needs
     /// nothing. Call it on every thread that will run the plan (e.g. `rayon::ThreadPool::broadcast`).
     pub fn reserve_scratch(&self) {
-        if self.row.info.algorithm == Algorithm::Winograd2x2 {
-            let tiles = self.row.info.px_tile / 2;
-            simd_winograd::reserve_scratch(simd_winograd::scratch_len(
-                self.c_in,
-                self.row.info.oc_tile,
-                tiles,
-            ));
-        }
+        let (points, tile_columns) = match self.row.info.algorithm {
+            Algorithm::Direct => return,
+            Algorithm::Winograd2x2 => (16, 2),
+            Algorithm::Winograd4x4 => (36, 4),
+        };
+        simd_winograd::reserve_scratch(simd_winograd::scratch_len(
+            points,
+            self.c_in,
+            self.row.info.oc_tile,
+            self.row.info.px_tile / tile_columns,
+        ));
     }
 
     /// The kernel row this plan runs.
@@ -153,7 +158,7 @@ impl Conv3x3F32 {
             residual: inputs.residual.map(|_| sr),
             y0: rows.start - k,
             y1: rows.end - k,
-            parity: inputs.parity(k),
+            phase: inputs.phase(k),
         };
         (job, k)
     }
@@ -188,7 +193,14 @@ impl Conv3x3F32 {
             });
         }
         let rows = band.rows();
-        inputs.check(self.c_in, self.c_out, h, w, &rows)?;
+        inputs.check_grouped(
+            self.c_in,
+            self.c_out,
+            h,
+            w,
+            &rows,
+            self.row.info.row_group(),
+        )?;
         let (job, k) = self.job(&inputs, &rows);
         // The kernel writes kernel row `y` at output row `y + k`: the band, seen from the kernel, starts `k`
         // rows earlier (`band.base ≥ (rows.start + 1)·stride ≥ k·stride`: `check` keeps `k ≤ rows.start`).
@@ -222,7 +234,14 @@ impl Conv3x3F32 {
                 what: "a planar output takes whole-frame inputs, not shifted windows".into(),
             });
         }
-        inputs.check(self.c_in, self.c_out, h, w, &rows)?;
+        inputs.check_grouped(
+            self.c_in,
+            self.c_out,
+            h,
+            w,
+            &rows,
+            self.row.info.row_group(),
+        )?;
         let (job, _) = self.job(&inputs, &rows);
         ops::run_f32(self.row, &job, F32Out::Planar(out))
     }

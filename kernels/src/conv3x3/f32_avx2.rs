@@ -8,7 +8,7 @@
 
 use super::job::{F32Job, F32Out};
 use super::simd_f32::{conv as generic_conv, SimdF32};
-use super::simd_winograd;
+use super::{simd_winograd, simd_winograd4};
 use std::arch::x86_64::*;
 
 /// Output-channel tile.
@@ -80,6 +80,25 @@ impl SimdF32 for __m256 {
         unsafe { (_mm256_unpacklo_ps(e, o), _mm256_unpackhi_ps(e, o)) }
     }
     #[inline(always)]
+    unsafe fn load_stride4(p: *const f32) -> [Self; 4] {
+        // SAFETY: the caller guarantees AVX and 32 readable values at `p`. A 4×4 transpose inside each
+        // 128-bit lane (one quadruple per lane of each load): quadruples in the order 0 2 4 6 | 1 3 5 7, the
+        // same for every `p`; the transpose is its own inverse (`interleave4`).
+        unsafe {
+            transpose4_in_lanes([
+                _mm256_loadu_ps(p),
+                _mm256_loadu_ps(p.add(8)),
+                _mm256_loadu_ps(p.add(16)),
+                _mm256_loadu_ps(p.add(24)),
+            ])
+        }
+    }
+    #[inline(always)]
+    unsafe fn interleave4(c: [Self; 4]) -> [Self; 4] {
+        // SAFETY: the caller guarantees AVX.
+        unsafe { transpose4_in_lanes(c) }
+    }
+    #[inline(always)]
     unsafe fn prefetch(p: *const f32) {
         // SAFETY: `prefetcht0` never faults.
         unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) }
@@ -92,6 +111,28 @@ impl SimdF32 for __m256 {
             let m = _mm256_loadu_si256(MASK.as_ptr().add(8 - n).cast());
             _mm256_and_ps(v, _mm256_castsi256_ps(m))
         }
+    }
+}
+
+/// The 4×4 transpose inside every 128-bit lane of four registers: lane half `h` of result `j` holds element
+/// `j` of lane half `h` of `r[0]`, `r[1]`, `r[2]`, `r[3]`.
+///
+/// # Safety
+/// The CPU has AVX.
+#[inline(always)]
+unsafe fn transpose4_in_lanes(r: [__m256; 4]) -> [__m256; 4] {
+    // SAFETY: the caller guarantees AVX.
+    unsafe {
+        let t0 = _mm256_unpacklo_ps(r[0], r[1]);
+        let t1 = _mm256_unpackhi_ps(r[0], r[1]);
+        let t2 = _mm256_unpacklo_ps(r[2], r[3]);
+        let t3 = _mm256_unpackhi_ps(r[2], r[3]);
+        [
+            _mm256_shuffle_ps::<0b01_00_01_00>(t0, t2),
+            _mm256_shuffle_ps::<0b11_10_11_10>(t0, t2),
+            _mm256_shuffle_ps::<0b01_00_01_00>(t1, t3),
+            _mm256_shuffle_ps::<0b11_10_11_10>(t1, t3),
+        ]
     }
 }
 
@@ -213,6 +254,29 @@ impl SimdF32 for Ymm2 {
         }
     }
     #[inline(always)]
+    unsafe fn load_stride4(p: *const f32) -> [Self; 4] {
+        // SAFETY: the caller guarantees AVX and 64 readable values at `p`.
+        unsafe {
+            let lo = __m256::load_stride4(p);
+            let hi = __m256::load_stride4(p.add(32));
+            [0, 1, 2, 3].map(|j| Ymm2(lo[j], hi[j]))
+        }
+    }
+    #[inline(always)]
+    unsafe fn interleave4(c: [Self; 4]) -> [Self; 4] {
+        // SAFETY: the caller guarantees AVX.
+        unsafe {
+            let lo = __m256::interleave4(c.map(|v| v.0));
+            let hi = __m256::interleave4(c.map(|v| v.1));
+            [
+                Ymm2(lo[0], lo[1]),
+                Ymm2(lo[2], lo[3]),
+                Ymm2(hi[0], hi[1]),
+                Ymm2(hi[2], hi[3]),
+            ]
+        }
+    }
+    #[inline(always)]
     unsafe fn keep_first(v: Self, n: usize) -> Self {
         // SAFETY: the caller guarantees AVX; `n < 16`, so each half gets `n < 8` or `n − 8 < 8`.
         unsafe {
@@ -248,4 +312,27 @@ pub(crate) unsafe fn conv_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out<'_>
 pub(crate) unsafe fn winograd_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: as `winograd`; 64-pixel tile ≤ MAX_TILE.
     unsafe { simd_winograd::conv::<Ymm2, 8, 2>(job, out) }
+}
+
+/// `conv3x3.f32.wino4x4.6x2.avx2`: Winograd F(4×4, 3×3) with the direct row's 6 × 2 register tile (6 output
+/// channels × 2 ymm of tiles: 16 tiles, 64 output pixels, the most `MAX_TILE` allows).
+///
+/// # Safety
+/// The CPU has AVX2 and FMA; `job` was checked by the safe API and its weights packed for F(4×4, 3×3).
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn winograd4(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: AVX2 + FMA enabled here; 64-pixel tile ≤ MAX_TILE; the job was checked by the caller.
+    unsafe { simd_winograd4::conv::<__m256, G, NV>(job, out) }
+}
+
+/// Tests only: the AVX-512 F(4×4, 3×3) geometry (8 channels × 1 vector of 16 lanes = 16 tiles) on AVX2
+/// registers.
+///
+/// # Safety
+/// As [`winograd4`].
+#[cfg(test)]
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn winograd4_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: as `winograd4`; 64-pixel tile ≤ MAX_TILE.
+    unsafe { simd_winograd4::conv::<Ymm2, 8, 1>(job, out) }
 }

@@ -7,7 +7,7 @@
 
 use super::job::{F32Job, F32Out};
 use super::simd_f32::{conv as generic_conv, SimdF32};
-use super::simd_winograd;
+use super::{simd_winograd, simd_winograd4};
 use std::arch::x86_64::*;
 
 /// Output-channel tile.
@@ -85,6 +85,25 @@ impl SimdF32 for __m512 {
         }
     }
     #[inline(always)]
+    unsafe fn load_stride4(p: *const f32) -> [Self; 4] {
+        // SAFETY: the caller guarantees AVX-512F and 64 readable values at `p`. A 4×4 transpose inside each
+        // 128-bit lane: lane `4q + k` holds quadruple `q + 4k`, the same for every `p`; the transpose is its
+        // own inverse (`interleave4`).
+        unsafe {
+            transpose4_in_lanes([
+                _mm512_loadu_ps(p),
+                _mm512_loadu_ps(p.add(16)),
+                _mm512_loadu_ps(p.add(32)),
+                _mm512_loadu_ps(p.add(48)),
+            ])
+        }
+    }
+    #[inline(always)]
+    unsafe fn interleave4(c: [Self; 4]) -> [Self; 4] {
+        // SAFETY: the caller guarantees AVX-512F.
+        unsafe { transpose4_in_lanes(c) }
+    }
+    #[inline(always)]
     unsafe fn prefetch(p: *const f32) {
         // SAFETY: `prefetcht0` never faults.
         unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) }
@@ -95,6 +114,27 @@ impl SimdF32 for __m512 {
         let m: __mmask16 = ((1u32 << n) - 1) as u16;
         // SAFETY: the caller guarantees AVX-512F.
         unsafe { _mm512_maskz_mov_ps(m, v) }
+    }
+}
+
+/// The 4×4 transpose inside every 128-bit lane of four registers (as the AVX2 row's).
+///
+/// # Safety
+/// The CPU has AVX-512F.
+#[inline(always)]
+unsafe fn transpose4_in_lanes(r: [__m512; 4]) -> [__m512; 4] {
+    // SAFETY: the caller guarantees AVX-512F.
+    unsafe {
+        let t0 = _mm512_unpacklo_ps(r[0], r[1]);
+        let t1 = _mm512_unpackhi_ps(r[0], r[1]);
+        let t2 = _mm512_unpacklo_ps(r[2], r[3]);
+        let t3 = _mm512_unpackhi_ps(r[2], r[3]);
+        [
+            _mm512_shuffle_ps::<0b01_00_01_00>(t0, t2),
+            _mm512_shuffle_ps::<0b11_10_11_10>(t0, t2),
+            _mm512_shuffle_ps::<0b01_00_01_00>(t1, t3),
+            _mm512_shuffle_ps::<0b11_10_11_10>(t1, t3),
+        ]
     }
 }
 
@@ -120,6 +160,17 @@ pub(crate) const WINO_NV: usize = 2;
 pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: AVX-512F enabled here; 64-pixel tile ≤ MAX_TILE; the job was checked by the caller.
     unsafe { simd_winograd::conv::<__m512, G, WINO_NV>(job, out) }
+}
+
+/// `conv3x3.f32.wino4x4.8x1.avx512`: Winograd F(4×4, 3×3), 8 output channels × 1 zmm of tiles (16 tiles, 64
+/// output pixels: the most `MAX_TILE` allows; 8 accumulators, one load and 8 broadcasts per step).
+///
+/// # Safety
+/// The CPU has AVX-512F; `job` was checked by the safe API and its weights packed for F(4×4, 3×3).
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub(crate) unsafe fn winograd4(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: AVX-512F enabled here; 64-pixel tile ≤ MAX_TILE; the job was checked by the caller.
+    unsafe { simd_winograd4::conv::<__m512, G, 1>(job, out) }
 }
 
 /// FMA peak loop: `iters` × 24 independent 16-lane FMAs. FLOPs = `iters · 24 · 16 · 2`.

@@ -6,7 +6,7 @@
 
 use super::job::{F32Job, F32Out};
 use super::simd_f32::{conv as generic_conv, SimdF32};
-use super::simd_winograd;
+use super::{simd_winograd, simd_winograd4};
 use std::arch::aarch64::*;
 
 /// Output-channel tile.
@@ -94,6 +94,29 @@ impl SimdF32 for float32x4_t {
         unsafe { (vzip1q_f32(e, o), vzip2q_f32(e, o)) }
     }
     #[inline(always)]
+    unsafe fn load_stride4(p: *const f32) -> [Self; 4] {
+        // SAFETY: NEON; the caller guarantees 16 readable values at `p`. `ld4`: lane `i` of register `j` is
+        // `p[4i + j]` (the identity permutation).
+        unsafe {
+            let q = vld4q_f32(p);
+            [q.0, q.1, q.2, q.3]
+        }
+    }
+    #[inline(always)]
+    unsafe fn interleave4(c: [Self; 4]) -> [Self; 4] {
+        // SAFETY: NEON. The 4×4 transpose: register `i` = lane `i` of `c[0..4]`.
+        unsafe {
+            let (x0, x1) = (vzip1q_f32(c[0], c[2]), vzip2q_f32(c[0], c[2]));
+            let (y0, y1) = (vzip1q_f32(c[1], c[3]), vzip2q_f32(c[1], c[3]));
+            [
+                vzip1q_f32(x0, y0),
+                vzip2q_f32(x0, y0),
+                vzip1q_f32(x1, y1),
+                vzip2q_f32(x1, y1),
+            ]
+        }
+    }
+    #[inline(always)]
     unsafe fn relu(v: Self) -> Self {
         // SAFETY: NEON.
         unsafe { vmaxq_f32(v, vdupq_n_f32(0.0)) }
@@ -149,4 +172,14 @@ pub(crate) unsafe fn peak(iters: u64) -> f32 {
         s = vaddq_f32(s, x);
     }
     vaddvq_f32(s)
+}
+
+/// `conv3x3.f32.wino4x4.8x3.neon`: Winograd F(4×4, 3×3) with the direct row's 8 × 3 register tile (8 output
+/// channels × 3 q registers of tiles: 12 tiles, 48 output pixels).
+///
+/// # Safety
+/// `job` was checked by the safe API and its weights packed for F(4×4, 3×3).
+pub(crate) unsafe fn winograd4(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: NEON is baseline on aarch64; 48-pixel tile ≤ MAX_TILE; the job was checked by the caller.
+    unsafe { simd_winograd4::conv::<float32x4_t, G, NV>(job, out) }
 }

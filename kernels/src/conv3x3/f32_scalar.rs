@@ -8,7 +8,7 @@
 
 use super::job::{F32Job, F32Out};
 use super::simd_f32::SimdF32;
-use super::simd_winograd;
+use super::{simd_winograd, simd_winograd4};
 
 /// Output-channel tile of the portable Winograd row.
 pub(crate) const WINO_G: usize = 4;
@@ -158,6 +158,15 @@ impl SimdF32 for f32 {
     unsafe fn interleave(e: Self, o: Self) -> (Self, Self) {
         (e, o)
     }
+    #[inline(always)]
+    unsafe fn load_stride4(p: *const f32) -> [Self; 4] {
+        // SAFETY: the caller guarantees 4 readable values at `p`.
+        unsafe { [*p, *p.add(1), *p.add(2), *p.add(3)] }
+    }
+    #[inline(always)]
+    unsafe fn interleave4(c: [Self; 4]) -> [Self; 4] {
+        c
+    }
 }
 
 /// `conv3x3.f32.wino2x2.4x4.scalar`: Winograd F(2×2, 3×3) on any CPU, 4 output channels × 4 tiles.
@@ -167,4 +176,13 @@ impl SimdF32 for f32 {
 pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: the job was checked by the caller; 8-pixel tile ≤ MAX_TILE.
     unsafe { simd_winograd::conv::<f32, WINO_G, WINO_NV>(job, out) }
+}
+
+/// `conv3x3.f32.wino4x4.4x4.scalar`: Winograd F(4×4, 3×3) on any CPU, 4 output channels × 4 tiles.
+///
+/// # Safety
+/// `job` was checked by the safe API and its weights packed for F(4×4, 3×3) with `G = 4`.
+pub(crate) unsafe fn winograd4(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: the job was checked by the caller; 16-pixel tile ≤ MAX_TILE.
+    unsafe { simd_winograd4::conv::<f32, WINO_G, WINO_NV>(job, out) }
 }

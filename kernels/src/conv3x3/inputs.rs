@@ -67,10 +67,10 @@ impl<'a, T: Element> Inputs<'a, T> {
         self
     }
 
-    /// The Winograd row pairing of kernel rows from origin `k` ([`kernel_view`](Self::kernel_view)): kernel row
-    /// `y` starts a pair when `y + parity` is even.
-    pub(crate) fn parity(&self, k: usize) -> usize {
-        (k as isize + self.frame_row).rem_euclid(2) as usize
+    /// The frame row of kernel row 0 from origin `k` ([`kernel_view`](Self::kernel_view)), modulo 4: the
+    /// Winograd rows' tile rows start where `y + phase` is a multiple of the tile's height (2 or 4).
+    pub(crate) fn phase(&self, k: usize) -> usize {
+        (k as isize + self.frame_row).rem_euclid(4) as usize
     }
 
     /// The kernel's row origin `k` (output row `r` is kernel row `r − k`; 0 without [`shifted`](Self::shifted))
@@ -118,6 +118,22 @@ impl<'a, T: Element> Inputs<'a, T> {
         w: usize,
         rows: &Range<usize>,
     ) -> Result<(), KernelError> {
+        self.check_grouped(c_in, c_out, h, w, rows, 1)
+    }
+
+    /// [`check`](Self::check) for a row whose tiles span `group` frame rows
+    /// ([`KernelInfo::row_group`](crate::KernelInfo::row_group)): with [`shifted`](Self::shifted) windows, the
+    /// band also starts at a group's first frame row, and the sources hold every row the band's last group
+    /// reads (to one row past the group's end). Whole frames take any band.
+    pub(crate) fn check_grouped(
+        &self,
+        c_in: usize,
+        c_out: usize,
+        h: usize,
+        w: usize,
+        rows: &Range<usize>,
+        group: usize,
+    ) -> Result<(), KernelError> {
         let d = match self.shift {
             Some(_) => self.shifts(),
             None => {
@@ -137,11 +153,27 @@ impl<'a, T: Element> Inputs<'a, T> {
                 [0; 3]
             }
         };
-        self.check_shifted(c_in, c_out, h, w, rows, d)
+        let mut reads_to = rows.end as isize;
+        if group > 1 && self.shift.is_some() && !rows.is_empty() {
+            let g = group as isize;
+            let first = rows.start as isize + self.frame_row;
+            if first.rem_euclid(g) != 0 {
+                return Err(KernelError::Shape {
+                    what: format!(
+                        "the band starts at frame row {first}: a row whose tiles span {group} rows runs on \
+                         windows only from a multiple of {group}"
+                    ),
+                });
+            }
+            reads_to = (rows.start + rows.len().div_ceil(group) * group) as isize;
+        }
+        self.check_shifted(c_in, c_out, h, w, rows, d, reads_to)
     }
 
     /// What [`check`](Self::check) checks of every call: widths, channels, the row band, and every row the band
-    /// reads inside its operand (with whole frames, `rows.end ≤ H`).
+    /// reads inside its operand (with whole frames, `rows.end ≤ H`); the sources are read for output rows
+    /// `rows.start..reads_to`.
+    #[allow(clippy::too_many_arguments)]
     fn check_shifted(
         &self,
         c_in: usize,
@@ -150,6 +182,7 @@ impl<'a, T: Element> Inputs<'a, T> {
         w: usize,
         rows: &Range<usize>,
         d: [isize; 3],
+        reads_to: isize,
     ) -> Result<(), KernelError> {
         if rows.start >= rows.end || rows.end > h {
             return Err(KernelError::Rows {
@@ -176,10 +209,10 @@ impl<'a, T: Element> Inputs<'a, T> {
             }
             Ok(())
         };
-        inside("source a", self.a, r0 - d[0], r1 - d[0] + 2)?;
+        inside("source a", self.a, r0 - d[0], reads_to - d[0] + 2)?;
         let cb = match self.b {
             Some(b) => {
-                inside("source b", b, r0 - d[1], r1 - d[1] + 2)?;
+                inside("source b", b, r0 - d[1], reads_to - d[1] + 2)?;
                 b.channels()
             }
             None => 0,

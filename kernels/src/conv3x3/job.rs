@@ -20,10 +20,11 @@ pub(crate) struct F32Job<'a> {
     pub residual: Option<&'a [f32]>,
     pub y0: usize,
     pub y1: usize,
-    /// Winograd rows: kernel row `y` is the top row of a 2-row output tile when `y + parity` is even (tiles
-    /// pair frame rows `2j, 2j + 1` whatever the band or window, so any split gives the same bits). Direct
-    /// rows ignore it.
-    pub parity: usize,
+    /// Winograd rows: the frame row of kernel row 0, modulo 4. Kernel row `y` is the top row of an F(2×2, 3×3)
+    /// tile when `y + phase` is even, of an F(4×4, 3×3) tile when it is a multiple of 4 (tiles hold frame rows
+    /// `2j, 2j + 1`, or `4j .. 4j + 4`, whatever the band or window, so any split gives the same bits).
+    /// Direct rows ignore it.
+    pub phase: usize,
 }
 
 /// Where an f32 kernel writes: a [`RowPlanar`](crate::buffer::RowPlanar) buffer of `C_out` channels

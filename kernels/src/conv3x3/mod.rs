@@ -38,6 +38,7 @@ mod simd_f32;
 #[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
 mod simd_u8;
 mod simd_winograd;
+mod simd_winograd4;
 pub(crate) mod u8s8_scalar;
 
 #[cfg(target_arch = "x86_64")]

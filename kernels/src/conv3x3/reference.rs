@@ -10,18 +10,22 @@ pub(crate) struct RefF32 {
     /// `Σ_c (Σ|g_c|)·(Σ_{5×5}|d_c|) + |bias| + |residual|`, `g_c` the 3×3 filter of input channel `c` and
     /// `d_c` its inputs in the 5×5 neighbourhood (which holds every 4×4 input tile of the pixel).
     pub wino: Vec<f64>,
+    /// The same for a Winograd F(4×4, 3×3) kernel: the inputs in the 9×9 neighbourhood, which holds every
+    /// 6×6 input tile of the pixel.
+    pub wino4: Vec<f64>,
 }
 
-/// The error scale of a Winograd F(2×2, 3×3) kernel's output ([`RefF32::wino`]): every intermediate
-/// (`V = Bᵀ d B`: sums of 4 inputs; `U = G g Gᵀ`: at most `Σ|g|`; the output transform: sums of 9 products)
-/// is bounded by these sums. Per output value; `input(c, y, x)` is 0 outside the frame.
+/// The error scale of a Winograd kernel's output ([`RefF32::wino`], [`RefF32::wino4`]): every intermediate
+/// (`V = Bᵀ d B`: sums of the tile's inputs; `U = G g Gᵀ`: at most `Σ|g|`; the output transform: sums of
+/// products) is bounded by these sums, the inputs taken in the `(2r + 1)²` neighbourhood that holds every
+/// input tile of the pixel (`r` = 2 for F(2×2, 3×3), 4 for F(4×4, 3×3)). Per output value; `input(c, y, x)`
+/// is 0 outside the frame.
 fn winograd_scale(
     input: &dyn Fn(usize, isize, isize) -> f64,
     weights: &[f32],
     cin: usize,
-    o: usize,
-    y: usize,
-    x: usize,
+    (o, y, x): (usize, usize, usize),
+    r: isize,
 ) -> f64 {
     let mut m = 0.0;
     for c in 0..cin {
@@ -30,8 +34,8 @@ fn winograd_scale(
             .map(|v| v.abs() as f64)
             .sum();
         let mut d = 0.0;
-        for dy in -2..=2 {
-            for dx in -2..=2 {
+        for dy in -r..=r {
+            for dx in -r..=r {
                 d += input(c, y as isize + dy, x as isize + dx).abs();
             }
         }
@@ -71,6 +75,7 @@ pub(crate) fn conv_f32(
     let mut out = vec![0.0f32; cout * h * w];
     let mut mag = vec![0.0f64; cout * h * w];
     let mut wino = vec![0.0f64; cout * h * w];
+    let mut wino4 = vec![0.0f64; cout * h * w];
     for o in 0..cout {
         for y in 0..h {
             for x in 0..w {
@@ -95,19 +100,26 @@ pub(crate) fn conv_f32(
                     v = 0.0;
                 }
                 let k = (o * h + y) * w + x;
-                let mut wm = winograd_scale(&input, weights, cin, o, y, x) + bias[o].abs() as f64;
+                let other = bias[o].abs() as f64 + residual.map_or(0.0, |r| r[k].abs() as f64);
+                let wm = winograd_scale(&input, weights, cin, (o, y, x), 2) + other;
+                let wm4 = winograd_scale(&input, weights, cin, (o, y, x), 4) + other;
                 if let Some(r) = residual {
                     v += r[k] as f64;
                     m += r[k].abs() as f64;
-                    wm += r[k].abs() as f64;
                 }
                 out[k] = v as f32;
                 mag[k] = m;
                 wino[k] = wm;
+                wino4[k] = wm4;
             }
         }
     }
-    RefF32 { out, mag, wino }
+    RefF32 {
+        out,
+        mag,
+        wino,
+        wino4,
+    }
 }
 
 /// Quantisation of the int8 reference layer.

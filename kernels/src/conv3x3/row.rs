@@ -27,6 +27,10 @@ pub enum Algorithm {
     /// than direct, plus the input and output transforms. Not bit-identical with direct (see the crate
     /// README for the error bound).
     Winograd2x2,
+    /// Winograd's F(4×4, 3×3): each 4×4 output tile from a 6×6 input tile in `36·C_in` multiply-adds, 4×
+    /// fewer than direct, with larger transforms and a larger rounding error than F(2×2, 3×3) (see the crate
+    /// README). Its tiles span 4 frame rows ([`KernelInfo::row_group`]).
+    Winograd4x4,
 }
 
 impl Algorithm {
@@ -35,6 +39,7 @@ impl Algorithm {
         match self {
             Algorithm::Direct => "direct",
             Algorithm::Winograd2x2 => "winograd2x2",
+            Algorithm::Winograd4x4 => "winograd4x4",
         }
     }
 }
@@ -60,6 +65,18 @@ impl KernelInfo {
     /// True when this CPU can run the row.
     pub fn is_available(&self) -> bool {
         self.isa.is_available()
+    }
+
+    /// The frame rows one tile spans: 4 for F(4×4, 3×3), else 1 (a direct row computes any row on its own;
+    /// an F(2×2, 3×3) row computes any band from the rows around it, bit-identically). Tiles start at frame
+    /// rows that are multiples of it; a caller that runs a layer on windows of a taller frame
+    /// ([`Inputs::shifted`](crate::Inputs::shifted)) makes every band start at such a row, and end at one or at
+    /// the frame's last row, so that a band never reads rows the window does not hold yet.
+    pub fn row_group(&self) -> usize {
+        match self.algorithm {
+            Algorithm::Winograd4x4 => 4,
+            Algorithm::Direct | Algorithm::Winograd2x2 => 1,
+        }
     }
 }
 
@@ -123,6 +140,21 @@ pub(crate) const fn winograd_info(
         px_tile: 2 * lanes * nv,
         algorithm: Algorithm::Winograd2x2,
         ..f32_info(name, isa, oc_tile, 0)
+    }
+}
+
+/// The description of an f32 Winograd F(4×4, 3×3) row with `lanes`-wide registers and `nv` of them per tile.
+pub(crate) const fn winograd4_info(
+    name: &'static str,
+    isa: Isa,
+    oc_tile: usize,
+    lanes: usize,
+    nv: usize,
+) -> KernelInfo {
+    KernelInfo {
+        px_tile: 4 * lanes * nv,
+        algorithm: Algorithm::Winograd4x4,
+        ..winograd_info(name, isa, oc_tile, lanes, nv)
     }
 }
 

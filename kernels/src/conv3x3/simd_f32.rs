@@ -39,6 +39,15 @@ pub(crate) trait SimdF32: Copy {
     /// `(e[j], o[j])` back in memory order, as two registers (the Winograd output transform's columns back
     /// to pixels).
     unsafe fn interleave(e: Self, o: Self) -> (Self, Self);
+    /// Loads the `LANES` quadruples `p[4i .. 4i + 4]` from `p` and returns them transposed: register `j`
+    /// holds element `j` of every quadruple, lane `l` holding quadruple `π(l)` for a permutation `π` of the
+    /// implementation's choosing, the same for every `p` (the F(4×4, 3×3) input transform's columns: lane `l`
+    /// of the loads at `p` and at `p + 2` then belong to the same tile).
+    unsafe fn load_stride4(p: *const f32) -> [Self; 4];
+    /// The inverse of [`load_stride4`](Self::load_stride4) on registers: the `LANES` quadruples
+    /// `(c[0][l], c[1][l], c[2][l], c[3][l])` back in memory order, as four registers of consecutive values
+    /// (the F(4×4, 3×3) output transform's four columns back to pixels).
+    unsafe fn interleave4(c: [Self; 4]) -> [Self; 4];
     /// One reduction step of a `G × NV` register tile: `acc[g][v] += x[v]·w[g]` for the `G` weights at `w`.
     /// Default: one broadcast per weight (`vbroadcastss` folds the load). NEON overrides it with FMAs by
     /// element (`fmla v.4s, x.4s, w.s[l]`: `G/4` weight loads instead of `G` broadcasts), the same fused

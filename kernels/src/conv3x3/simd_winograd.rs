@@ -39,10 +39,26 @@ thread_local! {
     static SCRATCH: Cell<Vec<f32>> = const { Cell::new(Vec::new()) };
 }
 
-/// The scratch (f32 values) a Winograd row with a tile of `oc_tile` output channels × `tiles` tiles needs for
-/// `c_in` input channels: `V[16][C_in][tiles]` and `M[G][16][tiles]`.
-pub(crate) fn scratch_len(c_in: usize, oc_tile: usize, tiles: usize) -> usize {
-    16 * tiles * (c_in + oc_tile)
+/// The scratch (f32 values) a Winograd row with `points` products per tile (16 for F(2×2, 3×3), 36 for
+/// F(4×4, 3×3)) and a tile of `oc_tile` output channels × `tiles` tiles needs for `c_in` input channels:
+/// `V[points][C_in][tiles]` and `M[G][points][tiles]`.
+pub(crate) fn scratch_len(points: usize, c_in: usize, oc_tile: usize, tiles: usize) -> usize {
+    points * tiles * (c_in + oc_tile)
+}
+
+/// The calling thread's scratch, at least `need` values long (grown if not); hand it back with
+/// [`put_scratch`].
+pub(super) fn take_scratch(need: usize) -> Vec<f32> {
+    let mut scratch = SCRATCH.take();
+    if scratch.len() < need {
+        scratch.resize(need, 0.0);
+    }
+    scratch
+}
+
+/// Gives the scratch back to the calling thread, for its next call.
+pub(super) fn put_scratch(scratch: Vec<f32>) {
+    SCRATCH.set(scratch);
 }
 
 /// Grows the calling thread's scratch to at least `len` values now, so that no later call on this thread
@@ -72,18 +88,14 @@ pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
     let groups = job.cout.div_ceil(G);
     debug_assert!(job.weights.len() == 16 * groups * cin * G && job.bias.len() == groups * G);
     let v_len = 16 * cin * t;
-    let mut scratch = SCRATCH.take();
-    let need = scratch_len(cin, G, t);
-    if scratch.len() < need {
-        scratch.resize(need, 0.0);
-    }
+    let mut scratch = take_scratch(scratch_len(16, cin, G, t));
     let (vbuf, mbuf) = scratch.split_at_mut(v_len);
     let srcs = [(job.a.as_ptr(), job.ca), (job.b.as_ptr(), job.cb)];
     let tiles = job.w.div_ceil(2);
     let (y0, y1) = (job.y0 as isize, job.y1 as isize);
     let mut y = y0;
     while y < y1 {
-        let top = if (y as usize + job.parity).is_multiple_of(2) {
+        let top = if (y as usize + job.phase).is_multiple_of(2) {
             y
         } else {
             y - 1
@@ -105,7 +117,7 @@ pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
             for grp in 0..groups {
                 // SAFETY: as above; `grp < groups`.
                 unsafe {
-                    products::<V, G, NV>(job, vbuf, mbuf, grp);
+                    products::<V, G, NV, 16>(job, vbuf, mbuf, grp);
                     output_transform::<V, G, NV>(job, out, mbuf, grp, top, write, t0);
                 }
             }
@@ -113,7 +125,7 @@ pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
         }
         y = top + 2;
     }
-    SCRATCH.set(scratch);
+    put_scratch(scratch);
 }
 
 /// `V = Bᵀ d B` of every input channel for tiles `t0..t0 + T` of the row pair whose input buffer rows are
@@ -192,13 +204,14 @@ unsafe fn row_transform<V: SimdF32>(p: *const f32) -> [V; 4] {
     }
 }
 
-/// The 16 products `M_k[g] = Σ_c U_k[grp·G + g][c]·V_k[c]` of output-channel group `grp`, into
-/// `mbuf[G][16][T]`.
+/// The `P` products `M_k[g] = Σ_c U_k[grp·G + g][c]·V_k[c]` of output-channel group `grp` (`P` = 16 for
+/// F(2×2, 3×3), 36 for F(4×4, 3×3)), into `mbuf[G][P][T]`.
 ///
 /// # Safety
-/// As [`conv`]; `grp < groups`; `vbuf` holds this chunk's transformed inputs.
+/// As [`conv`]; `grp < groups`; `vbuf` holds this chunk's transformed inputs `V[P][C_in][T]` and the
+/// weights are packed `[P][groups][C_in][G]`.
 #[inline(always)]
-unsafe fn products<V: SimdF32, const G: usize, const NV: usize>(
+pub(super) unsafe fn products<V: SimdF32, const G: usize, const NV: usize, const P: usize>(
     job: &F32Job<'_>,
     vbuf: &[f32],
     mbuf: &mut [f32],
@@ -208,7 +221,7 @@ unsafe fn products<V: SimdF32, const G: usize, const NV: usize>(
     let t = l * NV;
     let cin = job.ca + job.cb;
     let groups = job.cout.div_ceil(G);
-    for k in 0..16 {
+    for k in 0..P {
         // SAFETY: the caller guarantees the ISA; the accumulators are plain registers.
         let mut acc = [[unsafe { V::zero() }; NV]; G];
         // SAFETY: `U` is `[16][groups][C_in][G]`: this (k, grp) block's `C_in·G` weights are inside.
@@ -231,8 +244,8 @@ unsafe fn products<V: SimdF32, const G: usize, const NV: usize>(
         }
         for (g, accg) in acc.iter().enumerate() {
             for (v, &a) in accg.iter().enumerate() {
-                // SAFETY: `mbuf` holds `G·16·T` values.
-                unsafe { V::store(mbuf.as_mut_ptr().add((g * 16 + k) * t + v * l), a) };
+                // SAFETY: `mbuf` holds `G·P·T` values.
+                unsafe { V::store(mbuf.as_mut_ptr().add((g * P + k) * t + v * l), a) };
             }
         }
     }
@@ -318,7 +331,7 @@ unsafe fn output_columns<V: SimdF32>(r: [V; 4], b: V) -> (V, V) {
 /// # Safety
 /// The ISA of `V` (a prefetch never faults; `p` is computed with wrapping arithmetic).
 #[inline(always)]
-unsafe fn prefetch_lines<V: SimdF32>(p: *const f32, n: usize) {
+pub(super) unsafe fn prefetch_lines<V: SimdF32>(p: *const f32, n: usize) {
     for line in (0..n).step_by(16) {
         // SAFETY: a prefetch never faults.
         unsafe { V::prefetch(p.wrapping_add(line)) };

@@ -112,12 +112,12 @@ fn check_f32(row: &str, case: Case, seed: u64) -> Vec<f32> {
         assert!(out.border_is_clean(), "{row} {case:?}: border written");
         out.to_planar()
     };
-    let winograd = plan.kernel().algorithm == Algorithm::Winograd2x2;
+    let algorithm = plan.kernel().algorithm;
     for (k, (&g, &r)) in got.iter().zip(&want.out).enumerate() {
-        let tol = if winograd {
-            winograd_tolerance(cin, want.wino[k])
-        } else {
-            1e-5 * want.mag[k] + 1e-30
+        let tol = match algorithm {
+            Algorithm::Direct => 1e-5 * want.mag[k] + 1e-30,
+            Algorithm::Winograd2x2 => winograd_tolerance(cin, want.wino[k]),
+            Algorithm::Winograd4x4 => winograd_tolerance(cin, want.wino4[k]),
         };
         assert!(
             ((g - r) as f64).abs() <= tol,
@@ -1139,22 +1139,31 @@ type WindowCase = (usize, usize, [(isize, usize); 4]);
 
 /// Window layouts for [`Inputs::shifted`] tests on a frame of `h` rows: output rows `f0..f1`, and for the
 /// output and each operand the frame row of its interior row 0 and its height (operands hold the rows the
-/// band reads and a few more, on either side; the output window starts earlier than the band).
-fn window_cases(h: usize) -> Vec<WindowCase> {
+/// band reads and a few more, on either side; the output window starts earlier than the band). For rows whose
+/// tiles span `group` = 4 rows ([`KernelInfo::row_group`](crate::KernelInfo::row_group)): bands that start at a
+/// group, the sources holding the rows to one past the last group's end (frame rows past the frame included,
+/// as the SDK's strips hold them).
+fn window_cases(h: usize, group: usize) -> Vec<WindowCase> {
     let mut cases = Vec::new();
     let mut rng = Rng::new(77);
-    for (f0, f1) in [(0, h), (0, 3), (4, 9), (h - 2, h), (5, 6)] {
-        // Interior rows: frame rows `f0 − halo − before .. f1 + halo + after`.
-        let mut pick = |halo: isize| {
+    let bands: &[(usize, usize)] = if group == 1 {
+        &[(0, h), (0, 3), (4, 9), (h - 2, h), (5, 6)]
+    } else {
+        &[(0, h), (0, 4), (4, 12), (8, h), (4, 9), (12, h), (0, 1)]
+    };
+    for &(f0, f1) in bands {
+        let below = (f1 - f0).div_ceil(group) * group + f0 - f1 + 1;
+        // Interior rows: frame rows `f0 − above − before .. f1 + below + after`.
+        let mut pick = |above: isize, below: isize| {
             let before = (rng.next() % 3) as isize;
             let after = (rng.next() % 3) as isize;
-            let first = f0 as isize - halo - before;
-            (first, (f1 as isize + halo + after - first) as usize)
+            let first = f0 as isize - above - before;
+            (first, (f1 as isize + below + after - first) as usize)
         };
-        let out = pick(0);
-        let a = pick(1);
-        let b = pick(1);
-        let r = pick(0);
+        let out = pick(0, 0);
+        let a = pick(1, below as isize);
+        let b = pick(1, below as isize);
+        let r = pick(0, 0);
         cases.push((f0, f1, [out, a, b, r]));
     }
     cases
@@ -1187,7 +1196,9 @@ fn f32_shifted_windows_equal_the_whole_frame() {
             .residual(&whole_bufs[2]);
         plan.run(inputs, &mut whole, 0..h).unwrap();
         let whole = whole.to_planar();
-        for (f0, f1, [(fo, ho), (fa0, ha), (fb0, hb), (fr0, hr)]) in window_cases(h) {
+        for (f0, f1, [(fo, ho), (fa0, ha), (fb0, hb), (fr0, hr)]) in
+            window_cases(h, plan.kernel().row_group())
+        {
             let win = |src: &[f32], c, first, rows| {
                 RowPlanar::from_planar(&window_of(src, c, h, w, first, rows, 0.0), c, rows, w, None)
                     .unwrap()
@@ -1235,6 +1246,30 @@ fn f32_shifted_windows_equal_the_whole_frame() {
                 plan.run(short, &mut out, band.clone()),
                 Err(KernelError::Shape { .. })
             ));
+            if plan.kernel().row_group() > 1 && band.len() > 1 {
+                // A band that starts inside a group: refused.
+                let inside = band.start + 1..band.end;
+                assert!(matches!(
+                    plan.run(inputs, &mut out, inside),
+                    Err(KernelError::Shape { .. })
+                ));
+            }
+            if plan.kernel().row_group() > 1 {
+                // Source a one row short of the row below the last group (its bottom border row standing for
+                // the last group's last row): refused.
+                let g = plan.kernel().row_group();
+                let need_end = f0 + (f1 - f0).div_ceil(g) * g + 1;
+                let a_short = win(&fa, ca, fa0, (need_end as isize - fa0 - 2) as usize);
+                let short = Inputs::new(&a_short)
+                    .concat(&b)
+                    .residual(&r)
+                    .shifted(fa0 - fo, fb0 - fo, fr0 - fo)
+                    .frame_row(fo);
+                assert!(matches!(
+                    plan.run(short, &mut out, band.clone()),
+                    Err(KernelError::Shape { .. })
+                ));
+            }
         }
     }
 }
@@ -1271,7 +1306,7 @@ fn u8_shifted_windows_equal_the_whole_frame() {
         let whole = whole.to_planar();
         let mut whole_f = vec![0.0; cout * h * w];
         plan.run_planar(inputs, &mut whole_f, 0..h).unwrap();
-        for (f0, f1, [(fo, ho), (fa0, ha), (fb0, hb), (fr0, hr)]) in window_cases(h) {
+        for (f0, f1, [(fo, ho), (fa0, ha), (fb0, hb), (fr0, hr)]) in window_cases(h, 1) {
             let win = |src: &[u8], c, first, rows, zp| {
                 RowPlanar::from_planar_u8(&window_of(src, c, h, w, first, rows, zp), c, rows, w, zp)
                     .unwrap()

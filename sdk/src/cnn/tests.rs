@@ -98,7 +98,11 @@ fn threads_and_spawned_plans_give_bit_identical_frames() {
     let (h, w) = (19, 70);
     let isa = Isa::active().unwrap();
     let x = input(graph.in_channels, h, w, 3);
-    for conv in [Algorithm::Direct, Algorithm::Winograd2x2] {
+    for conv in [
+        Algorithm::Direct,
+        Algorithm::Winograd2x2,
+        Algorithm::Winograd4x4,
+    ] {
         let plan = |threads| {
             NativePlan::with_strip(graph.clone(), h, w, threads, isa, None, Some(conv)).unwrap()
         };
@@ -132,21 +136,30 @@ fn threads_and_spawned_plans_give_bit_identical_frames() {
 
 #[test]
 fn winograd_matches_direct_on_every_shipped_f32_model() {
-    // Winograd F(2×2, 3×3) against the direct kernels on every shipped f32 network, at the active ISA and
-    // the portable one: the heads (or the pre-filter's raw output) within 2e-5 of the largest value (the bound
-    // the native engine keeps against tract), and not bit-identical (the Winograd rows really ran).
+    // Winograd F(2×2, 3×3) and F(4×4, 3×3) against the direct kernels on every shipped f32 network, at the
+    // active ISA and the portable one: the heads (or the pre-filter's raw output) within 2e-5 of the largest
+    // value (the bound the native engine keeps against tract), and not bit-identical (the Winograd rows
+    // really ran).
     let (h, w) = (23, 37);
     for model in shipped() {
         let graph = model.cnn_graph().unwrap();
         let x = input(graph.in_channels, h, w, 21);
-        for isa in [Isa::Scalar, Isa::active().unwrap()] {
+        for (isa, winograd) in [Isa::Scalar, Isa::active().unwrap()]
+            .into_iter()
+            .flat_map(|i| [(i, Algorithm::Winograd2x2), (i, Algorithm::Winograd4x4)])
+        {
             let run = |conv| {
                 let mut p =
                     NativePlan::with_strip(graph.clone(), h, w, 1, isa, None, Some(conv)).unwrap();
                 (p.run_outputs(x.view()).unwrap(), p.kernel_name())
             };
-            let ((d, kd), (wg, kw)) = (run(Algorithm::Direct), run(Algorithm::Winograd2x2));
-            assert!(!kd.contains("wino") && kw.contains("wino"), "{kd} / {kw}");
+            let ((d, kd), (wg, kw)) = (run(Algorithm::Direct), run(winograd));
+            let tag = if winograd == Algorithm::Winograd4x4 {
+                "wino4x4"
+            } else {
+                "wino2x2"
+            };
+            assert!(!kd.contains("wino") && kw.contains(tag), "{kd} / {kw}");
             let (mut err, mut m) = (0.0f32, 0.0f32);
             for (a, b) in [(&wg.0, &d.0), (&wg.1, &d.1)] {
                 for (p, q) in a.iter().zip(b) {
@@ -155,7 +168,7 @@ fn winograd_matches_direct_on_every_shipped_f32_model() {
                 }
             }
             println!(
-                "{} {isa}: max |winograd − direct| {err:.2e} (max {m:.2})",
+                "{} {isa} {tag}: max |winograd − direct| {err:.2e} (max {m:.2})",
                 model.source_name()
             );
             assert!(err <= 2e-5 * m.max(1.0), "{}: {err}", model.source_name());
@@ -536,7 +549,8 @@ fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
     // The strip-mined run (windows of a few rows, each layer a row behind the one before) computes every
     // pixel with the same instructions as one strip covering the whole frame: any strip height, with 1 or 3
     // threads, gives the bit-identical frame, f32 and int8, hologram CNN and pre-filter (its concat reads the
-    // input N rows later, and the frame's top and bottom edges fall inside strips).
+    // input N rows later, and the frame's top and bottom edges fall inside strips). F(4×4, 3×3) puts each
+    // layer 4 rows behind the one before and rounds the strips up to its 4-row tiles.
     let (h, w) = (17, 29);
     let isa = Isa::active().unwrap();
     let (mut f32s, mut int8s) = (shipped(), shipped_qdq());
@@ -550,11 +564,15 @@ fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
         int8s.swap_remove(0),
         int8s.pop().unwrap(),
     ];
-    // f32: each convolution algorithm (Winograd pairs rows by frame row, whatever the strip or band).
+    // f32: each convolution algorithm (Winograd tiles rows by frame row, whatever the strip or band).
     let runs = models.iter().flat_map(|m| {
         let algs: &[_] = match m.cnn_graph().unwrap().quant {
             Some(_) => &[None],
-            None => &[Some(Algorithm::Direct), Some(Algorithm::Winograd2x2)],
+            None => &[
+                Some(Algorithm::Direct),
+                Some(Algorithm::Winograd2x2),
+                Some(Algorithm::Winograd4x4),
+            ],
         };
         algs.iter().map(move |&a| (m, a))
     });
@@ -577,12 +595,12 @@ fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
                 .is_mixed();
             assert_eq!(mixed, q.layers[0].is_none(), "{}", model.source_name());
         }
-        let mut whole = plan(h + n, 1);
+        let mut whole = plan(h + 4 * n, 1);
         let (a, b) = (
             whole.run_outputs(x.view()).unwrap(),
             whole.run_outputs(y.view()).unwrap(),
         );
-        for strip in [1, 2, 3, 5, 8, h - 1, h + n - 1] {
+        for strip in [1, 2, 3, 5, 8, h - 1, h + n - 1, h + 4 * n - 5] {
             for threads in [1, 3] {
                 let mut p = plan(strip, threads);
                 let name = format!("{} {conv:?} strip {strip} ×{threads}", model.source_name());

@@ -1,16 +1,24 @@
 //! Direct or Winograd, per layer shape and CPU, chosen by measurement.
 //!
 //! The f32 kernels compute a 3×3 convolution directly (`9·C_in` multiply-adds per output value) or with
-//! Winograd's F(2×2, 3×3) minimal filtering (`4·C_in` plus the tile transforms; not bit-identical with direct,
-//! within the bound the kernels crate states). Which is faster depends on the layer's channels and the CPU:
-//! the transforms cost relatively more where `C_in` or `C_out` is small. The first plan of a layer shape
-//! `(ISA, C_in, C_out)` in a process times both on a sample band ([`SAMPLE_ROWS`] × [`SAMPLE_WIDTH`], one
-//! thread, best of [`ROUNDS`] alternating runs) and keeps the faster; later plans of that shape, whatever their
-//! size or thread count, reuse the choice, so every plan of a process computes a shape the same way.
-//! Winograd must win by [`MARGIN`]: a near tie stays direct (the reference path), so that the choice does not
-//! flip between processes on noise.
+//! Winograd's minimal filtering, F(2×2, 3×3) (`4·C_in` plus the tile transforms) or F(4×4, 3×3) (`2.25·C_in`,
+//! larger transforms; not bit-identical with direct, within the bounds the kernels crate states). Which is
+//! fastest depends on the layer's channels and the CPU: the transforms cost relatively more where `C_in` or
+//! `C_out` is small. The first plan of a layer shape `(ISA, C_in, C_out)` in a process times direct and
+//! F(2×2, 3×3) on a sample band ([`SAMPLE_ROWS`] × [`SAMPLE_WIDTH`], one thread, best of [`ROUNDS`]
+//! alternating runs) and keeps the faster; later plans of that shape, whatever their size or thread count,
+//! reuse the choice, so every plan of a process computes a shape the same way. Winograd must beat direct by
+//! [`MARGIN`]: a near tie stays direct (the reference path), so that the choice does not flip between
+//! processes on noise.
 //!
-//! `TENSORHOLO_CONV=direct|winograd` pins the algorithm for every f32 layer (`auto`, or unset: measure).
+//! F(4×4, 3×3) runs only where pinned: one layer on its own runs 1.1–1.3× faster than F(2×2, 3×3), but its
+//! 4-row tiles put every layer of the plan 4 rows behind the one before (strips a tile apart,
+//! [`super::strips::Strips`]), and the larger windows cost the 30-layer network more than the kernels save
+//! (docs/BENCHMARKS.md, "Winograd F(4×4, 3×3)"): the choice is a whole plan's, which a per-shape timing does
+//! not see.
+//!
+//! `TENSORHOLO_CONV=direct|winograd2x2|winograd4x4` pins the algorithm for every f32 layer (`winograd` is
+//! F(2×2, 3×3); `auto`, or unset: measure).
 
 use std::collections::HashMap;
 use std::sync::{Mutex, OnceLock};
@@ -19,7 +27,7 @@ use std::time::Instant;
 use tensorholo_kernels::{Algorithm, Conv3x3F32, Inputs, Isa, RowPlanar};
 
 use super::kernel_err;
-use crate::error::{invalid, Result};
+use crate::error::{invalid, HoloError, Result};
 use crate::model::graph::ConvLayer;
 
 /// Rows of the sample band (8 Winograd row pairs; the strips of a plan have up to 16 rows).
@@ -53,9 +61,10 @@ fn parse(value: Option<&str>) -> Result<Option<Algorithm>> {
         None | Some("") | Some("auto") => Ok(None),
         Some("direct") => Ok(Some(Algorithm::Direct)),
         Some("winograd") | Some("winograd2x2") => Ok(Some(Algorithm::Winograd2x2)),
+        Some("winograd4x4") => Ok(Some(Algorithm::Winograd4x4)),
         Some(other) => Err(invalid(
             "TENSORHOLO_CONV",
-            format!("`{other}` is not one of direct, winograd, auto"),
+            format!("`{other}` is not one of direct, winograd2x2 (or winograd), winograd4x4, auto"),
         )),
     }
 }
@@ -89,38 +98,32 @@ pub(crate) fn plan_layer(
     if let Some(alg) = known {
         return plan(alg);
     }
-    let direct = plan(Algorithm::Direct)?;
-    let winograd = plan(Algorithm::Winograd2x2)?;
-    let [t_direct, t_winograd] = best_times([&direct, &winograd])?;
-    let alg = if winograd.kernel().algorithm == Algorithm::Winograd2x2
-        && t_winograd * MARGIN < t_direct
-    {
-        Algorithm::Winograd2x2
-    } else {
-        Algorithm::Direct
-    };
+    let candidates = [plan(Algorithm::Direct)?, plan(Algorithm::Winograd2x2)?];
+    let times = best_times(&candidates)?;
+    // (A CPU without a vector Winograd row runs the portable one: timed all the same.)
+    let chosen_index = usize::from(times[1] * MARGIN < times[0]);
+    let alg = candidates[chosen_index].kernel().algorithm;
     log::debug!(
-        "conv {}→{} on {}: direct {:.3} ms, winograd {:.3} ms: {}",
+        "conv {}→{} on {}: direct {:.3} ms, winograd2x2 {:.3} ms: {}",
         layer.c_in,
         layer.c_out,
         isa.name(),
-        t_direct * 1e3,
-        t_winograd * 1e3,
+        times[0] * 1e3,
+        times[1] * 1e3,
         alg.name()
     );
     if let Ok(mut m) = chosen().lock() {
         m.insert(key, alg);
     }
-    Ok(if alg == Algorithm::Direct {
-        direct
-    } else {
-        winograd
-    })
+    candidates
+        .into_iter()
+        .nth(chosen_index)
+        .ok_or_else(|| HoloError::Internal("the chosen convolution plan is missing".into()))
 }
 
-/// The best of [`ROUNDS`] alternating timings (seconds) of each plan on the sample band (both see the same
+/// The best of [`ROUNDS`] alternating timings (seconds) of each plan on the sample band (all see the same
 /// cache and clock state).
-fn best_times(plans: [&Conv3x3F32; 2]) -> Result<[f64; 2]> {
+fn best_times<const N: usize>(plans: &[Conv3x3F32; N]) -> Result<[f64; N]> {
     let (c_in, c_out) = (plans[0].c_in(), plans[0].c_out());
     let (h, w) = (SAMPLE_ROWS, SAMPLE_WIDTH);
     // Deterministic values in [−0.5, 0.5): the timing does not depend on them, only the work.
@@ -133,7 +136,7 @@ fn best_times(plans: [&Conv3x3F32; 2]) -> Result<[f64; 2]> {
     for p in plans {
         p.run(Inputs::new(&a), &mut out, 0..h).map_err(kernel_err)?;
     }
-    let mut best = [f64::INFINITY; 2];
+    let mut best = [f64::INFINITY; N];
     for _ in 0..ROUNDS {
         for (b, p) in best.iter_mut().zip(plans) {
             let t = Instant::now();
@@ -147,7 +150,6 @@ fn best_times(plans: [&Conv3x3F32; 2]) -> Result<[f64; 2]> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::error::HoloError;
 
     #[test]
     fn the_pin_names_an_algorithm_or_is_refused() {
@@ -161,6 +163,10 @@ mod tests {
         assert_eq!(
             parse(Some("winograd2x2")).unwrap(),
             Some(Algorithm::Winograd2x2)
+        );
+        assert_eq!(
+            parse(Some("winograd4x4")).unwrap(),
+            Some(Algorithm::Winograd4x4)
         );
         let e = parse(Some("fft")).unwrap_err();
         assert!(matches!(

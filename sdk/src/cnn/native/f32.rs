@@ -33,7 +33,9 @@ use tensorholo_kernels::{
     RowPlanar,
 };
 
-use super::strips::{bands, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window};
+use super::strips::{
+    bands, bands_aligned, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window,
+};
 use super::{algorithm, kernel_err};
 use crate::cnn::plan::{check_output_planes, check_planes, CnnPlan};
 use crate::error::{HoloError, Result};
@@ -118,28 +120,35 @@ impl NativePlan {
         let c = graph.in_channels;
         let hidden = graph.layers[0].c_out;
         let c_out = graph.layers[n - 1].c_out;
+        // Each layer `step` rows behind the one before: 4 where a layer's tiles span 4 rows (F(4×4, 3×3)).
+        let step = layers
+            .iter()
+            .map(|l| l.kernel().row_group())
+            .max()
+            .unwrap_or(1);
         let net = Network { graph, layers, isa };
-        // Windows: the input (carry N + 1: the concat reads it N rows later), s_1 … s_{N−1} (carry 2), the
-        // raw output (no carry).
+        // Windows: the input (carry N·step + 1: the concat reads it N·step rows later, one above), s_1 …
+        // s_{N−1} (carry 2·step: the next layer reads one row above its strip, the residual two layers on
+        // its strip), the raw output (no carry).
         let (xb, hb, ob) = (
             row_bytes::<f32>(c, width),
             row_bytes::<f32>(hidden, width),
             row_bytes::<f32>(c_out, width),
         );
         let per_row = xb + (n - 1) * hb + ob;
-        let fixed = (n + 3) * xb + 4 * (n - 1) * hb + 2 * ob;
-        let strips = Strips::for_plan(strip, height, n, [per_row, fixed], threads);
-        let window = |ch, lag, carry| {
-            Window::new(Place::new(lag, carry), strips, |rows| {
+        let fixed = (n * step + 3) * xb + (2 * step + 2) * (n - 1) * hb + 2 * ob;
+        let strips = Strips::for_plan(strip, height, (n, step), [per_row, fixed], threads);
+        let window = |ch, k: usize, carry| {
+            Window::new(Place::new(strips.lag(k), carry), strips, |rows| {
                 RowPlanar::new(ch, rows, width)
             })
         };
         let pool = pool(threads)?;
         reserve_scratch(&net.layers, pool.as_deref());
         Ok(Self {
-            x: window(c, 0, n + 1)?,
+            x: window(c, 0, n * step + 1)?,
             s: (1..n)
-                .map(|k| window(hidden, k, 2))
+                .map(|k| window(hidden, k, 2 * step))
                 .collect::<Result<_>>()?,
             raw: window(c_out, n, 0)?,
             strips,
@@ -295,7 +304,7 @@ pub(super) fn last_layer_rows(
         .shifted(raw.shift_from(last), raw.shift_from(x), 0)
         .frame_row(raw.first_row(strips, m));
     let band = raw.buf.band_mut(rows.clone()).map_err(kernel_err)?;
-    bands(band, threads, &|b| conv.run_band(inputs, b))?;
+    bands_aligned(band, threads, strips.step, &|b| conv.run_band(inputs, b))?;
     let raw = &raw.buf;
     let raw_row = |c: usize, y: usize| raw.row(c, y - f0 + rows.start).unwrap_or(&[]);
     let frame_rows = f0..f0 + rows.len();

@@ -239,7 +239,8 @@ impl NativeInt8Plan {
                 )
             }
         };
-        let strips = Strips::for_plan(strip, height, n, [per_row, fixed], threads);
+        // Every layer one row behind the one before: the f32 ends run direct convolutions.
+        let strips = Strips::for_plan(strip, height, (n, 1), [per_row, fixed], threads);
         let window = |ch, zp, lag, carry| {
             Window::new(Place::new(lag, carry), strips, |rows| {
                 RowPlanar::new_quantized(ch, rows, width, zp)

@@ -41,35 +41,69 @@ const MIN_ROWS_PER_THREAD: usize = 4;
 const MAX_ROWS: usize = 16;
 
 /// How a plan's frames are cut: strips of `rows` frame rows, `steps` of them for a frame of `height` rows
-/// and a network of `lag` layers (the last strip reaches frame row `height − 1` of the last layer).
+/// and a network of `layers` layers, each layer `step` rows behind the one before (the last strip reaches
+/// frame row `height − 1` of the last layer).
+///
+/// `step` is the most frame rows a layer's kernel computes as one tile
+/// ([`tensorholo_kernels::KernelInfo::row_group`]): 1, or 4 where a layer runs Winograd F(4×4, 3×3). Strip
+/// heights and lags are then multiples of it, so every layer's strip, and every thread's band of it (see
+/// [`bands_aligned`]), starts at a tile's first row, and the rows a tile reads below its band are already in
+/// the window.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Strips {
     pub rows: usize,
     pub height: usize,
     pub steps: usize,
+    pub step: usize,
 }
 
 impl Strips {
-    pub(crate) fn new(rows: usize, height: usize, lag: usize) -> Self {
-        let rows = rows.max(1).min(height + lag);
+    pub(crate) fn new(rows: usize, height: usize, layers: usize, step: usize) -> Self {
+        let step = step.max(1);
+        let lag = layers * step;
+        let rows = rows
+            .max(1)
+            .next_multiple_of(step)
+            .min((height + lag).next_multiple_of(step));
         Self {
             rows,
             height,
             steps: (height + lag).div_ceil(rows),
+            step,
         }
     }
 
-    /// The strips of a plan of `layers` layers for frames of `height` rows: `strip` rows when given, else
-    /// [`strip_rows`] for windows of `per_row` bytes per strip row and `fixed` bytes besides.
+    /// The strips of a plan of `layers` layers a `step` apart for frames of `height` rows: `strip` rows when
+    /// given, else [`strip_rows`] for windows of `per_row` bytes per strip row and `fixed` bytes besides.
     pub(crate) fn for_plan(
         strip: Option<usize>,
         height: usize,
-        layers: usize,
+        (layers, step): (usize, usize),
         [per_row, fixed]: [usize; 2],
         threads: usize,
     ) -> Self {
-        let rows = strip.unwrap_or_else(|| strip_rows(height, layers, per_row, fixed, threads));
-        Self::new(rows, height, layers)
+        let step = step.max(1);
+        let lag = layers * step;
+        let rows = strip.unwrap_or_else(|| {
+            // Every thread's band a whole number of tiles: a multiple of `step·threads` rows (12 rows on 2
+            // threads would split 8 + 4), rounded down (within the budget; at 1080p the 8-layer network on 2
+            // threads ran 313–321 ms in strips of 8 rows, 369–377 ms in 16: Zen 5, `holo bench`,
+            // `TENSORHOLO_STRIP_ROWS`).
+            let rows = strip_rows(height, lag, per_row, fixed, threads);
+            match step {
+                1 => rows,
+                _ => {
+                    let unit = step * threads.max(1);
+                    (rows / unit).max(1) * unit
+                }
+            }
+        });
+        Self::new(rows, height, layers, step)
+    }
+
+    /// The lag of the activation `k` layers after the input: `k·step` rows.
+    pub(crate) fn lag(&self, k: usize) -> usize {
+        k * self.step
     }
 }
 
@@ -299,7 +333,7 @@ pub(super) fn hidden_layers<T: Element + Send + Sync, K: BandConv<T>>(
             .shifted(dst.shift_from(src), 0, d_r)
             .frame_row(dst.first_row(strips, m));
         let band = dst.buf.band_mut(rows).map_err(kernel_err)?;
-        bands(band, threads, &|b| conv.run_band(inputs, b))?;
+        bands_aligned(band, threads, strips.step, &|b| conv.run_band(inputs, b))?;
     }
     Ok(())
 }
@@ -320,7 +354,19 @@ pub(super) fn installed<R: Send>(
 /// `work` on `rows` split into `threads` near-equal bands, in parallel on the current rayon pool (the plan's,
 /// installed around the frame; one band on the calling thread for one thread).
 pub(super) fn bands<B: Rows>(rows: B, threads: usize, work: &BandWork<'_, B>) -> Result<()> {
-    split_run(rows, threads, work).map_err(kernel_err)
+    split_run(rows, threads, 1, work).map_err(kernel_err)
+}
+
+/// [`bands`], each band but the first starting at a multiple of `align` (a window's interior rows; the
+/// windows a convolution writes keep their frame rows aligned to [`Strips::step`] there): rows that cannot
+/// be split so run in fewer bands.
+pub(super) fn bands_aligned<B: Rows>(
+    rows: B,
+    threads: usize,
+    align: usize,
+    work: &BandWork<'_, B>,
+) -> Result<()> {
+    split_run(rows, threads, align.max(1), work).map_err(kernel_err)
 }
 
 /// What one thread does to its share of the rows.
@@ -370,11 +416,12 @@ impl Rows for F32Rows<'_> {
     }
 }
 
-/// Runs `work` on `band` as `parts` near-equal bands: halves recursively through `rayon::join`, so that
-/// nothing is allocated per layer.
+/// Runs `work` on `band` as `parts` near-equal bands split at multiples of `align`: halves recursively
+/// through `rayon::join`, so that nothing is allocated per layer.
 fn split_run<B: Rows>(
     mut band: B,
     parts: usize,
+    align: usize,
     work: &BandWork<'_, B>,
 ) -> std::result::Result<(), KernelError> {
     let rows = band.rows();
@@ -382,11 +429,18 @@ fn split_run<B: Rows>(
         return work(&mut band);
     }
     let left = parts / 2;
-    let mid = (rows.start + rows.len() * left / parts).clamp(rows.start + 1, rows.end - 1);
+    let mut mid = (rows.start + rows.len() * left / parts).clamp(rows.start + 1, rows.end - 1);
+    if align > 1 {
+        mid = (mid + align / 2) / align * align;
+        if mid <= rows.start || mid >= rows.end {
+            // Too few rows to split at a multiple of `align`.
+            return work(&mut band);
+        }
+    }
     let (top, bottom) = band.split_at(mid)?;
     let (a, b) = rayon::join(
-        || split_run(top, left, work),
-        || split_run(bottom, parts - left, work),
+        || split_run(top, left, align, work),
+        || split_run(bottom, parts - left, align, work),
     );
     a.and(b)
 }
