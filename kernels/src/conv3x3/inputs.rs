@@ -60,7 +60,8 @@ impl<'a, T: Element> Inputs<'a, T> {
 
     /// Says which frame row the output's interior row 0 holds (with [`shifted`](Self::shifted) windows: the
     /// output window's first frame row; default 0, a whole frame). Only Winograd rows read it: they compute
-    /// output rows in pairs `2j, 2j + 1` of frame rows, and a pair split between two calls is computed the
+    /// output rows in tiles of frame rows (`2j, 2j + 1` for F(2×2, 3×3); `4j .. 4j + 4` for F(4×4, 3×3),
+    /// whose bands on windows must start at such a row), and a tile split between two calls is computed the
     /// same way by both, so bands, windows and threads never change a bit of the result.
     pub fn frame_row(mut self, row: isize) -> Self {
         self.frame_row = row;

@@ -156,7 +156,8 @@ unsafe fn input_transform<V: SimdF32, const NV: usize>(
         if cs == 0 {
             continue;
         }
-        let rows = [0, 1, 2, 3, 4, 5].map(|i| (top + i).clamp(0, avail as isize - 1) as usize);
+        // (`avail ≥ 3`: the view holds the band's own rows, checked; `min` before `max` never panics.)
+        let rows = [0, 1, 2, 3, 4, 5].map(|i| (top + i).min(avail as isize - 1).max(0) as usize);
         for ic in 0..cs {
             // SAFETY: buffer rows `rows[i] < avail` of channel `ic < cs` of the source's view.
             let row = rows.map(|r| unsafe { src.add((r * cs + ic) * wp + 4 * t0) });
