@@ -107,8 +107,8 @@ impl Conv3x3F32 {
     }
 
     /// Prepares the calling thread for this plan: a Winograd plan's rows keep a scratch per thread (`V` and
-    /// `M`, `P·(C_in + G)·tiles` f32 values, `P` = 16 or 36 points: 73 KiB for F(2×2, 3×3) and 28 input
-    /// channels with AVX-512, 83 KiB for F(4×4, 3×3)), grown on first use;
+    /// `M`, `P·(C_in + G)·tiles` f32 values, `P` = 16 or 36 points: 72 KiB for F(2×2, 3×3) and 28 input
+    /// channels with AVX-512, 81 KiB for F(4×4, 3×3)), grown on first use;
     /// this grows it now, so that frames allocate nothing on any thread that called it. A direct plan needs
     /// nothing. Call it on every thread that will run the plan (e.g. `rayon::ThreadPool::broadcast`).
     pub fn reserve_scratch(&self) {
@@ -165,8 +165,9 @@ impl Conv3x3F32 {
 
     /// Computes output rows `rows` (frame rows, `0 ≤ start < end ≤ H`) into `out`, a [`RowPlanar`] of `C_out`
     /// channels and the inputs' `H × W`. Only the interior of those rows is written (and their right border
-    /// rewritten with zeros). Errors: shape mismatches ([`KernelError::Shape`]), a bad row band
-    /// ([`KernelError::Rows`]).
+    /// rewritten with zeros). Errors: shape mismatches ([`KernelError::Shape`]; also an F(4×4, 3×3) row's
+    /// band on [`shifted`](Inputs::shifted) windows that does not start at a multiple of 4 frame rows,
+    /// [`KernelInfo::row_group`]), a bad row band ([`KernelError::Rows`]).
     pub fn run(
         &self,
         inputs: Inputs<'_, f32>,

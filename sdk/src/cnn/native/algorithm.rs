@@ -11,7 +11,7 @@
 //! [`MARGIN`]: a near tie stays direct (the reference path), so that the choice does not flip between
 //! processes on noise.
 //!
-//! F(4×4, 3×3) runs only where pinned: one layer on its own runs 1.1–1.3× faster than F(2×2, 3×3), but its
+//! F(4×4, 3×3) runs only where pinned: one layer on its own runs 1.19–1.37× faster than F(2×2, 3×3), but its
 //! 4-row tiles put every layer of the plan 4 rows behind the one before (strips a tile apart,
 //! [`super::strips::Strips`]), and the larger windows cost the 30-layer network more than the kernels save
 //! (docs/BENCHMARKS.md, "Winograd F(4×4, 3×3)"): the choice is a whole plan's, which a per-shape timing does

@@ -87,8 +87,7 @@ impl Strips {
         let rows = strip.unwrap_or_else(|| {
             // Every thread's band a whole number of tiles: a multiple of `step·threads` rows (12 rows on 2
             // threads would split 8 + 4), rounded down (within the budget; at 1080p the 8-layer network on 2
-            // threads ran 313–321 ms in strips of 8 rows, 369–377 ms in 16: Zen 5, `holo bench`,
-            // `TENSORHOLO_STRIP_ROWS`).
+            // threads ran faster in strips of 8 rows than in 16: docs/BENCHMARKS.md, "Winograd F(4×4, 3×3)").
             let rows = strip_rows(height, lag, per_row, fixed, threads);
             match step {
                 1 => rows,
