@@ -496,11 +496,29 @@ pub(crate) fn select_f32(isa: Isa) -> &'static F32Row {
 /// The f32 row a layer of `c_out` output channels runs under `isa`: among the vector rows `isa` includes (the
 /// scalar row only when there is none), the one that computes the fewest output channels in all (`c_out`
 /// rounded up to its tile `G`), the earlier (better) row on a tie. For 24 and 8 channels that is the first
-/// row; for the 6-channel last layers on AVX-512 it is the AVX2 6 × 16 tile (measured on Zen 4, one thread,
+/// row; for the 6-channel last layers on AVX-512 it is the AVX2 6 × 16 tile (faster on Zen 4, one thread,
 /// 384²: 65 against 56 GFLOP/s for 24+4→6, 89 against 73 for 8+6→6; the 8-channel tile computes 8 channels
-/// for 6).
+/// for 6; slower on Zen 5, so callers time [`f32_rows_of`]).
 pub(crate) fn select_f32_for(isa: Isa, c_out: usize) -> &'static F32Row {
     select_f32_algorithm(isa, c_out, Algorithm::Direct)
+}
+
+/// The f32 rows of `algorithm` a plan under `isa` may run: the vector rows `isa` includes (the scalar row
+/// only when `isa` is [`Isa::Scalar`] or no vector row has the algorithm), never a test-only row;
+/// [`select_f32_algorithm`]'s row for `c_out` first, then the others best first.
+pub(crate) fn f32_rows_of(
+    isa: Isa,
+    c_out: usize,
+    algorithm: Algorithm,
+) -> impl Iterator<Item = &'static F32Row> {
+    let first = select_f32_algorithm(isa, c_out, algorithm);
+    let others = under(isa)
+        .flat_map(|t| t.f32)
+        .filter(move |r| r.info.algorithm == algorithm)
+        .filter(|r| !r.info.name.starts_with("test."))
+        .filter(move |r| r.info.isa != Isa::Scalar || isa == Isa::Scalar)
+        .filter(move |r| r.info.name != first.info.name);
+    std::iter::once(first).chain(others)
 }
 
 /// As [`select_f32_for`], among the rows of `algorithm` (the portable row of it when no vector row has one).

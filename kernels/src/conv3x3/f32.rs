@@ -27,7 +27,9 @@ impl Conv3x3F32 {
     /// Plans a convolution with the best f32 kernel row for `isa` and `c_out`
     /// ([`registry::selected_f32_for`](crate::registry::selected_f32_for): the first row `isa` includes that
     /// computes the fewest padding output channels, so a 6-channel last layer runs on the 6-channel AVX2 tile
-    /// rather than the 8-channel AVX-512 one, which would compute 2 of every 8 channels for nothing).
+    /// rather than the 8-channel AVX-512 one, which computes 2 of every 8 channels for nothing; which is
+    /// faster depends on the CPU: [`registry::f32_rows_of`](crate::registry::f32_rows_of) lists both for a
+    /// caller that times them).
     ///
     /// `weights` is `[C_out][C_in][3][3]` (PyTorch/ONNX OIHW order), `bias` is `[C_out]`; `relu` applies
     /// `max(·, 0)` after the bias. Errors: `isa` not available on this CPU ([`KernelError::Isa`]), a zero or

@@ -32,6 +32,19 @@ pub fn selected_f32_algorithm(isa: Isa, c_out: usize, algorithm: Algorithm) -> &
     &ops::select_f32_algorithm(isa, c_out, algorithm).info
 }
 
+/// Every f32 row of `algorithm` a plan under `isa` may run ([`Conv3x3F32::with_kernel`](crate::Conv3x3F32::with_kernel)):
+/// [`selected_f32_algorithm`]'s row for `c_out` first, then the other vector rows `isa` includes, best first
+/// (e.g. under AVX-512 the 8-channel AVX-512 row and the 6-channel AVX2 row; which is faster for a layer
+/// depends on the CPU, so callers time them). Never a test-only row; the scalar row only under
+/// [`Isa::Scalar`] or where no vector row has the algorithm.
+pub fn f32_rows_of(
+    isa: Isa,
+    c_out: usize,
+    algorithm: Algorithm,
+) -> impl Iterator<Item = &'static KernelInfo> {
+    ops::f32_rows_of(isa, c_out, algorithm).map(|r| &r.info)
+}
+
 /// Every int8 row compiled for this target (available on this CPU or not), best first.
 pub fn u8_kernels() -> impl Iterator<Item = &'static KernelInfo> {
     ops::u8_rows().map(|r| &r.info)

@@ -42,14 +42,17 @@
 use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3};
-use tensorholo_kernels::{Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, RowPlanar};
+use tensorholo_kernels::{Algorithm, Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, RowPlanar};
 
+use super::algorithm::{self, Choice};
 use super::f32::{
     finish_outputs, heads_of, heads_rows, input_rows, last_layer_rows, owned_outputs, planar_slice,
     pool, standard_input, u8_grid, BaseInput, Outputs, Planes,
 };
 use super::kernel_err;
-use super::strips::{bands, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window};
+use super::strips::{
+    advance_all, bands, both, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window,
+};
 use crate::cnn::plan::{check_planes, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnQuant, CnnWeights, LayerQuant, QuantGrid};
@@ -215,9 +218,9 @@ impl NativeInt8Plan {
         let float_ends = match mixed {
             true => {
                 let (l0, ln) = (&graph.layers[0], &graph.layers[n - 1]);
+                // Direct (the strips are one row apart), on the row measured fastest for the shape.
                 let f = |l: &crate::model::ConvLayer, relu| {
-                    Conv3x3F32::new(&l.weights, &l.bias, l.c_in, l.c_out, relu, isa)
-                        .map_err(kernel_err)
+                    algorithm::plan_layer(l, relu, isa, Choice::Among(&[Algorithm::Direct]))
                 };
                 Some([f(l0, true)?, f(ln, false)?])
             }
@@ -428,11 +431,11 @@ impl NativeInt8Plan {
                         out,
                     )?;
                 }
-                x.advance(strips)?;
-                x_cat.advance(strips)?;
-                for s in s.iter_mut() {
-                    s.advance(strips)?;
-                }
+                both(
+                    threads,
+                    || x.advance(strips).and_then(|()| x_cat.advance(strips)),
+                    || advance_all(s, strips, threads),
+                )?;
             }
             Ok(())
         };
@@ -499,12 +502,12 @@ impl NativeInt8Plan {
                 }
                 let ctx = (heads, hw, net.isa, strips, m, threads);
                 last_layer_rows(last_conv, last, x, raw, ctx, out)?;
-                for win in [&mut *x, &mut *y0, &mut *last, &mut *raw] {
-                    win.advance(strips)?;
-                }
-                for s in s.iter_mut() {
-                    s.advance(strips)?;
-                }
+                let ends = [&mut *x, &mut *y0, &mut *last, &mut *raw];
+                both(
+                    threads,
+                    || ends.into_iter().try_for_each(|w| w.advance(strips)),
+                    || advance_all(s, strips, threads),
+                )?;
             }
             Ok(())
         };

@@ -259,6 +259,44 @@ impl<T: Element> Window<T> {
     }
 }
 
+/// [`Window::advance`] of every window in `windows`, in parallel on the current rayon pool
+/// when `threads > 1` (the copies are independent; halved recursively with `rayon::join`, nothing
+/// allocated).
+pub(super) fn advance_all<T: Element + Send>(
+    windows: &mut [Window<T>],
+    strips: Strips,
+    threads: usize,
+) -> Result<()> {
+    match windows {
+        [] => Ok(()),
+        [w] => w.advance(strips),
+        _ if threads <= 1 => windows.iter_mut().try_for_each(|w| w.advance(strips)),
+        _ => {
+            let (a, b) = windows.split_at_mut(windows.len() / 2);
+            both(
+                threads,
+                || advance_all(a, strips, threads),
+                || advance_all(b, strips, threads),
+            )
+        }
+    }
+}
+
+/// `a` and `b`, at once on the current rayon pool when `threads > 1` (`rayon::join`), else one after the
+/// other on the calling thread (no pool is entered).
+pub(super) fn both(
+    threads: usize,
+    a: impl FnOnce() -> Result<()> + Send,
+    b: impl FnOnce() -> Result<()> + Send,
+) -> Result<()> {
+    if threads > 1 {
+        let (ra, rb) = rayon::join(a, b);
+        ra.and(rb)
+    } else {
+        a().and_then(|()| b())
+    }
+}
+
 /// A planned convolution that writes row bands of a window (f32 or u8 activations).
 pub(super) trait BandConv<T: Element>: Sync {
     /// Computes the rows of `band` (`Conv3x3F32::run_band`, `Conv3x3U8::run_band`).
