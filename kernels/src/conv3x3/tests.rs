@@ -376,7 +376,39 @@ fn dispatch_selects_the_named_row_and_refuses_unavailable_isas() {
             name,
             "{isa} {c_out}"
         );
+        // The rows a plan may time: the selected one first, each once, of the algorithm, none a test row,
+        // no scalar row under a vector level, every one under `isa`.
+        for alg in [
+            Algorithm::Direct,
+            Algorithm::Winograd2x2,
+            Algorithm::Winograd4x4,
+        ] {
+            let rows: Vec<_> = registry::f32_rows_of(isa, c_out, alg).collect();
+            assert_eq!(
+                rows[0].name,
+                registry::selected_f32_algorithm(isa, c_out, alg).name
+            );
+            for (i, r) in rows.iter().enumerate() {
+                assert_eq!(r.algorithm, alg, "{}", r.name);
+                assert!(isa.includes(r.isa), "{isa}: {}", r.name);
+                assert!(!r.name.starts_with("test."), "{}", r.name);
+                assert!(
+                    r.isa != Isa::Scalar || isa == Isa::Scalar,
+                    "{isa}: {}",
+                    r.name
+                );
+                assert!(rows[..i].iter().all(|o| o.name != r.name), "{}", r.name);
+            }
+        }
     }
+    // Under AVX-512 a 6-channel layer may time both tiles (the 6-channel AVX2 one first).
+    #[cfg(target_arch = "x86_64")]
+    assert_eq!(
+        registry::f32_rows_of(Isa::Avx512, 6, Algorithm::Direct)
+            .map(|r| r.name)
+            .collect::<Vec<_>>(),
+        ["conv3x3.f32.6x2.avx2", "conv3x3.f32.8x3.avx512"]
+    );
     for (isa, name) in expected {
         assert_eq!(registry::selected_f32(isa).name, name);
         let from_name = Isa::from_name(isa.name());
