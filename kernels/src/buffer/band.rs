@@ -218,12 +218,33 @@ impl RowBand<'_, f32> {
         src_y0: usize,
         affine: Option<(f32, f32)>,
     ) -> Result<(), KernelError> {
+        self.fill_channel_rows_at(c, plane, [self.w, 0], src_y0, affine)
+    }
+
+    /// [`fill_channel_rows`](Self::fill_channel_rows) from columns `x0 .. x0 + W` of a wider plane whose rows
+    /// hold `stride` values (`[stride, x0]`): a column slab of a frame. Errors: as `fill_channel_rows`, and
+    /// `x0 + W > stride` ([`KernelError::Length`]).
+    pub fn fill_channel_rows_at(
+        &mut self,
+        c: usize,
+        plane: &[f32],
+        [stride, x0]: [usize; 2],
+        src_y0: usize,
+        affine: Option<(f32, f32)>,
+    ) -> Result<(), KernelError> {
         let (w, y0) = (self.w, self.rows.start);
-        check_plane(c, self.c, plane.len(), w, src_y0 + self.rows.len())?;
+        if x0 + w > stride {
+            return Err(KernelError::Length {
+                what: "source plane row (columns of the band past the row's end)",
+                expected: x0 + w,
+                got: stride,
+            });
+        }
+        check_plane(c, self.c, plane.len(), stride, src_y0 + self.rows.len())?;
         for y in self.rows() {
             let at = self.interior_at(c, y);
             let sy = src_y0 + y - y0;
-            let row = &plane[sy * w..(sy + 1) * w];
+            let row = &plane[sy * stride + x0..sy * stride + x0 + w];
             let dst = &mut self.data[at..at + w];
             match affine {
                 Some((m, b)) => dst.iter_mut().zip(row).for_each(|(d, &v)| *d = v * m + b),

@@ -614,6 +614,60 @@ fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
 }
 
 #[test]
+fn column_slabs_give_the_whole_frame_bit_for_bit() {
+    // A frame run as column slabs side by side (each as if it were the frame, its edges spoiling the columns
+    // within its halo, which it does not keep) gives the whole frame's bits: the f32 hologram CNN and
+    // pre-filter, each algorithm (the Winograd tiles of slab and frame coincide), frames whose width is and
+    // is not a multiple of 4, 1 and 3 threads, two frames through the same windows.
+    let isa = Isa::active().unwrap();
+    let mut f32s = shipped();
+    let models = [f32s.swap_remove(0), f32s.pop().unwrap()];
+    for model in &models {
+        let graph = model.cnn_graph().unwrap();
+        for conv in [
+            Algorithm::Direct,
+            Algorithm::Winograd2x2,
+            Algorithm::Winograd4x4,
+        ] {
+            for (h, w) in [(13, 301), (9, 298)] {
+                let x = input(graph.in_channels, h, w, 21).mapv(|v| 0.75 * v - 0.05);
+                let y = input(graph.in_channels, h, w, 22);
+                let plan = |slabs: usize, threads: usize| {
+                    NativePlan::with_slabs(
+                        graph.clone(),
+                        h,
+                        w,
+                        threads,
+                        isa,
+                        (None, Some(slabs)),
+                        Some(conv),
+                    )
+                    .unwrap()
+                };
+                let mut whole = plan(1, 1);
+                assert_eq!(whole.slab_count(), 1);
+                let (a, b) = (
+                    whole.run_outputs(x.view()).unwrap(),
+                    whole.run_outputs(y.view()).unwrap(),
+                );
+                for slabs in [2, 3, 4] {
+                    for threads in [1, 3] {
+                        let mut p = plan(slabs, threads);
+                        let name = format!(
+                            "{} {conv:?} {h}×{w}, {slabs} slabs ×{threads}",
+                            model.source_name()
+                        );
+                        assert_eq!(p.slab_count(), slabs, "{name}");
+                        assert!(p.run_outputs(x.view()).unwrap() == a, "{name}");
+                        assert!(p.run_outputs(y.view()).unwrap() == b, "{name}, 2nd frame");
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
 fn a_1080p_plan_keeps_its_activations_to_a_few_rows() {
     // The strip height follows the window budget: at 1080p the 8-layer network's windows (24 channels,
     // 0.19 MB a row in f32) hold 8–16 rows, not the frame's 1080.

@@ -35,6 +35,7 @@ use tensorholo_kernels::{
 
 use super::algorithm::{self, Choice};
 use super::kernel_err;
+use super::slabs::{self, column_group, Cols, Slabs};
 use super::strips::{
     advance_all, bands, bands_aligned, both, hidden_layers, installed, row_bytes, F32Rows, Place,
     Strips, Window,
@@ -62,6 +63,8 @@ pub(crate) struct NativePlan {
     /// The plan's worker threads (`None` with one thread: the caller's thread runs every band).
     pool: Option<Arc<rayon::ThreadPool>>,
     strips: Strips,
+    /// The frame's column slabs (one: the whole frame), run one after the other on the same windows.
+    slabs: Arc<Slabs>,
     /// `s_0`: the centred input (read by the first layer and by the last layer's concat).
     x: Window<f32>,
     /// `s_1 … s_{N−1}`.
@@ -98,6 +101,20 @@ impl NativePlan {
         strip: Option<usize>,
         conv: Option<Algorithm>,
     ) -> Result<Self> {
+        Self::with_slabs(graph, height, width, threads, isa, (strip, None), conv)
+    }
+
+    /// [`with_strip`](Self::with_strip) with the frame in `slabs` column slabs (`None`: as
+    /// `Slabs::count_for` chooses; [`super::slabs`]). Errors: as `new`.
+    pub(crate) fn with_slabs(
+        graph: Arc<CnnWeights>,
+        height: usize,
+        width: usize,
+        threads: usize,
+        isa: Isa,
+        (strip, slabs): (Option<usize>, Option<usize>),
+        conv: Option<Algorithm>,
+    ) -> Result<Self> {
         if threads == 0 {
             return Err(crate::error::invalid(
                 "threads",
@@ -130,6 +147,16 @@ impl NativePlan {
             .max()
             .unwrap_or(1);
         let net = Network { graph, layers, isa };
+        // Column slabs, all `slabs.width` columns wide: the windows are that wide.
+        let halo = slabs::halo(
+            net.layers
+                .iter()
+                .map(|l| column_group(l.kernel().algorithm)),
+        );
+        let count = slabs
+            .unwrap_or_else(|| Slabs::count_for(width, hidden * std::mem::size_of::<f32>(), halo));
+        let slabs = Slabs::new(width, halo, count);
+        let width = slabs.width;
         // Windows: the input (carry N·step + 1: the concat reads it N·step rows later, one above), s_1 …
         // s_{N−1} (carry 2·step: the next layer reads one row above its strip, the residual two layers on
         // its strip), the raw output (no carry).
@@ -156,7 +183,8 @@ impl NativePlan {
             raw: window(c_out, n, 0)?,
             strips,
             height,
-            width,
+            width: slabs.frame_width,
+            slabs: Arc::new(slabs),
             threads,
             pool,
             net: Arc::new(net),
@@ -184,6 +212,12 @@ impl NativePlan {
         )
     }
 
+    /// Column slabs per frame ([`super::slabs`]).
+    #[cfg(test)]
+    pub(crate) fn slab_count(&self) -> usize {
+        self.slabs.slabs.len()
+    }
+
     /// Frame rows per strip.
     #[cfg(test)]
     pub(crate) fn strip_rows(&self) -> usize {
@@ -195,37 +229,43 @@ impl NativePlan {
     fn forward(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
         let net = self.net.clone();
         let n = net.layers.len();
-        let (threads, strips, [h, w]) = (self.threads, self.strips, [self.height, self.width]);
-        self.x.start_frame()?;
-        for s in &mut self.s {
-            s.start_frame()?;
-        }
+        let (threads, strips, h) = (self.threads, self.strips, self.height);
         let heads = heads_of(&net.graph);
-        let pool = self.pool.clone();
+        let (pool, slabs) = (self.pool.clone(), self.slabs.clone());
         let frame = || -> Result<()> {
-            for m in 0..strips.steps {
-                let offset = -net.graph.input_offset;
-                input_rows(&mut self.x, input, offset, strips, m, threads)?;
-                hidden_layers(
-                    &net.layers[..n - 1],
-                    0,
-                    Some(&self.x),
-                    &mut self.s,
-                    strips,
-                    m,
-                    threads,
-                )?;
-                let last = if n >= 2 { &self.s[n - 2] } else { &self.x };
-                let ctx = (heads, [h, w], net.isa, strips, m, threads);
-                last_layer_rows(&net.layers[n - 1], last, &self.x, &mut self.raw, ctx, out)?;
-                // The windows' carried rows to their tops, the copies in parallel (serial, they were 9 % of
-                // a 1080p frame's samples with F(4×4, 3×3) on 2 threads).
-                let (x, s) = (&mut self.x, &mut self.s);
-                both(
-                    threads,
-                    || x.advance(strips),
-                    || advance_all(s, strips, threads),
-                )?;
+            for slab in slabs.iter() {
+                let cols = Cols {
+                    frame_width: slabs.frame_width,
+                    slab,
+                };
+                self.x.start_frame()?;
+                for s in &mut self.s {
+                    s.start_frame()?;
+                }
+                for m in 0..strips.steps {
+                    let offset = -net.graph.input_offset;
+                    input_rows(&mut self.x, input, offset, (strips, m, threads), cols)?;
+                    hidden_layers(
+                        &net.layers[..n - 1],
+                        0,
+                        Some(&self.x),
+                        &mut self.s,
+                        strips,
+                        m,
+                        threads,
+                    )?;
+                    let last = if n >= 2 { &self.s[n - 2] } else { &self.x };
+                    let ctx = (heads, (h, cols), net.isa, strips, m, threads);
+                    last_layer_rows(&net.layers[n - 1], last, &self.x, &mut self.raw, ctx, out)?;
+                    // The windows' carried rows to their tops, the copies in parallel (serial, they were
+                    // 9 % of a 1080p frame's samples with F(4×4, 3×3) on 2 threads).
+                    let (x, s) = (&mut self.x, &mut self.s);
+                    both(
+                        threads,
+                        || x.advance(strips),
+                        || advance_all(s, strips, threads),
+                    )?;
+                }
             }
             Ok(())
         };
@@ -264,14 +304,13 @@ pub(super) fn kernel_summary<'a>(names: impl Iterator<Item = &'a str>) -> String
 }
 
 /// Strip `m`'s new rows of the f32 input window `x`: `s_0 = x + offset` (`offset = −input_offset`) of the
-/// planar input, in `threads` row bands.
+/// planar input's columns of the slab `cols`, in `threads` row bands.
 pub(super) fn input_rows(
     x: &mut Window<f32>,
     input: Planes<'_>,
     offset: f32,
-    strips: Strips,
-    m: usize,
-    threads: usize,
+    (strips, m, threads): (Strips, usize, usize),
+    cols: Cols<'_>,
 ) -> Result<()> {
     let Some((rows, f0)) = x.new_rows(strips, m)? else {
         return Ok(());
@@ -282,15 +321,23 @@ pub(super) fn input_rows(
     bands(band, threads, &|b| {
         let f = f0 + b.rows().start - y0;
         for ch in 0..c {
-            b.fill_channel_rows(ch, input.plane(ch), f, Some((1.0, offset)))?;
+            let at = [cols.frame_width, cols.slab.start];
+            b.fill_channel_rows_at(ch, input.plane(ch), at, f, Some((1.0, offset)))?;
         }
         Ok(())
     })
 }
 
-/// What [`last_layer_rows`] needs of the plan: the heads ([`heads_of`]), the frame `[H, W]`, the vector
-/// level, the strips, the strip index and the threads.
-pub(super) type LastLayerCtx = (Option<(f32, f32)>, [usize; 2], Isa, Strips, usize, usize);
+/// What [`last_layer_rows`] needs of the plan: the heads ([`heads_of`]), the frame's height and the slab's
+/// columns, the vector level, the strips, the strip index and the threads.
+pub(super) type LastLayerCtx<'a> = (
+    Option<(f32, f32)>,
+    (usize, Cols<'a>),
+    Isa,
+    Strips,
+    usize,
+    usize,
+);
 
 /// Strip `m` of the f32 last layer: `o = conv(concat(s_{N−1}, s_0))` into the raw window, then its rows
 /// through [`heads_rows`] (the raw output stays float) into `out`. `last` holds `s_{N−1}` in f32 (the f32
@@ -300,7 +347,7 @@ pub(super) fn last_layer_rows(
     last: &Window<f32>,
     x: &Window<f32>,
     raw: &mut Window<f32>,
-    (heads, hw, isa, strips, m, threads): LastLayerCtx,
+    (heads, hw, isa, strips, m, threads): LastLayerCtx<'_>,
     out: &mut Outputs<'_>,
 ) -> Result<()> {
     let Some((rows, f0)) = raw.new_rows(strips, m)? else {
@@ -440,7 +487,8 @@ pub(super) fn owned_outputs(
 }
 
 /// Frame rows `rows` of the network's two outputs, written into `out` from the last layer's raw output `o`
-/// (`raw_row(c, y)`: channel `c`, frame row `y`, `W` values): the hologram CNN's heads `(tanh(o) + 1)·scale`
+/// (`raw_row(c, y)`: channel `c`, frame row `y`, the slab's columns of `cols`; the kept ones are written):
+/// the hologram CNN's heads `(tanh(o) + 1)·scale`
 /// (`heads`, [`heads_of`]) or the pre-filter's `o`. `grid`, for an int8 file, rounds `o` to the u8 grid the
 /// file quantises the last convolution's output to (ONNX `QuantizeLinear` then `DequantizeLinear`). On the
 /// kernels' vector code for `isa` ([`tanh_heads`], [`fake_quantize`]); the six channels in parallel on the
@@ -450,17 +498,19 @@ pub(super) fn heads_rows<'r>(
     heads: Option<(f32, f32)>,
     raw_row: &(dyn Fn(usize, usize) -> &'r [f32] + Sync),
     grid: Option<QuantGrid>,
-    [_, w]: [usize; 2],
+    (_, cols): (usize, Cols<'_>),
     rows: Range<usize>,
     isa: Isa,
     threads: usize,
     out: &mut Outputs<'_>,
 ) -> Result<()> {
     let grid = grid.map(u8_grid);
+    let (w, keep) = (cols.frame_width, cols.slab.keep.clone());
+    let from = keep.start - cols.slab.start..keep.end - cols.slab.start;
     let channel = |(c, plane): (usize, &mut [f32])| {
         for y in rows.clone() {
-            let o = &mut plane[y * w..(y + 1) * w];
-            let r = raw_row(c, y);
+            let o = &mut plane[y * w + keep.start..y * w + keep.end];
+            let r = raw_row(c, y).get(from.clone()).unwrap_or(&[]);
             match heads {
                 Some((a, p)) => tanh_heads(r, o, if c < 3 { a } else { p }, grid, isa)?,
                 None => {
@@ -600,6 +650,7 @@ impl CnnPlan for NativePlan {
                 pool
             },
             strips: self.strips,
+            slabs: self.slabs.clone(),
             x: self.x.clone(),
             s: self.s.clone(),
             raw: self.raw.clone(),

@@ -50,6 +50,7 @@ use super::f32::{
     pool, standard_input, u8_grid, BaseInput, Outputs, Planes,
 };
 use super::kernel_err;
+use super::slabs::{Cols, Slab};
 use super::strips::{
     advance_all, bands, both, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window,
 };
@@ -343,6 +344,15 @@ impl NativeInt8Plan {
         let quant = net.quant()?;
         let n = net.layers.len();
         let (threads, strips, [h, w]) = (self.threads, self.strips, [self.height, self.width]);
+        // The int8 plan runs the whole frame as one slab.
+        let whole = Slab {
+            start: 0,
+            keep: 0..w,
+        };
+        let cols = Cols {
+            frame_width: w,
+            slab: &whole,
+        };
         let first = int8_layer(quant, 0)?.input;
         let last_q = int8_layer(quant, n - 1)?;
         let (cat_scale, out_grid) = (last_q.input.scale, last_q.output);
@@ -424,7 +434,7 @@ impl NativeInt8Plan {
                         heads,
                         &raw_row,
                         out_grid,
-                        [h, w],
+                        (h, cols),
                         frame_rows,
                         net.isa,
                         threads,
@@ -449,7 +459,15 @@ impl NativeInt8Plan {
         let net = self.net.clone();
         let quant = net.quant()?;
         let n = net.graph.layers.len();
-        let (threads, strips, hw) = (self.threads, self.strips, [self.height, self.width]);
+        let (threads, strips, h) = (self.threads, self.strips, self.height);
+        let whole = Slab {
+            start: 0,
+            keep: 0..self.width,
+        };
+        let cols = Cols {
+            frame_width: self.width,
+            slab: &whole,
+        };
         let (Some([first, last_conv]), Ends::Float { x, y0, last, raw }) =
             (&net.float_ends, &mut self.ends)
         else {
@@ -474,7 +492,7 @@ impl NativeInt8Plan {
         let pool = self.pool.clone();
         let frame = || -> Result<()> {
             for m in 0..strips.steps {
-                input_rows(x, input, offset, strips, m, threads)?;
+                input_rows(x, input, offset, (strips, m, threads), cols)?;
                 // Layer 0 in f32, its output rounded into s_1 (the same frame rows, at another carry).
                 if let Some((rows, _)) = y0.new_rows(strips, m)? {
                     let inputs = Inputs::new(&x.buf).shifted(y0.shift_from(x), 0, 0);
@@ -500,7 +518,7 @@ impl NativeInt8Plan {
                         b.dequantize_rows_from(&src.buf, from, last_scale)
                     })?;
                 }
-                let ctx = (heads, hw, net.isa, strips, m, threads);
+                let ctx = (heads, (h, cols), net.isa, strips, m, threads);
                 last_layer_rows(last_conv, last, x, raw, ctx, out)?;
                 let ends = [&mut *x, &mut *y0, &mut *last, &mut *raw];
                 both(

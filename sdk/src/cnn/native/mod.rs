@@ -13,6 +13,7 @@
 mod algorithm;
 mod f32;
 mod int8;
+mod slabs;
 mod strips;
 
 use std::sync::Arc;

@@ -1,0 +1,189 @@
+//! Column slabs: a wide frame computed as a few narrower ones, side by side, so that a layer's rows stay in
+//! the core's L2 cache (a 24-channel f32 row of a 1080p frame is 184 KiB; of a 544-column slab, 52 KiB).
+//!
+//! Each slab is a full-height strip of frame columns `start .. start + width` that the plan runs as if it
+//! were the whole frame (zero padding at its left and right edges), writing out only the columns it
+//! `keep`s; the kept columns of the slabs tile the frame. A 3×3 layer computed with a wrong column at a slab
+//! edge spoils the columns next to it: one column per direct layer, and up to a whole Winograd tile
+//! (2 columns for F(2×2, 3×3), 4 for F(4×4, 3×3)) since a tile's rounding depends on every input column of it.
+//! So every slab reaches `halo` (the sum over the layers, [`halo`]) columns past its kept columns, or to the
+//! frame's edge, and starts at a multiple of 4 columns (the Winograd tiles of the frame and of the slab then
+//! coincide): the kept columns are **bit-identical** with the whole frame's (tested). Slabs never reach past
+//! the frame's edges (a layer would compute values there that the whole frame keeps at zero).
+//!
+//! All slabs have the same width, so one set of activation windows serves them one after the other.
+
+use std::ops::Range;
+
+use tensorholo_kernels::Algorithm;
+
+/// Columns of one slab: the frame columns `start .. start + width` it computes (`width` is the plan's
+/// [`Slabs::width`]) and the frame columns `keep` it writes out.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(super) struct Slab {
+    pub start: usize,
+    pub keep: Range<usize>,
+}
+
+/// The columns a pass over one slab reads and writes: the frame's width (the row stride of the input and
+/// output planes) and the slab.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Cols<'a> {
+    pub frame_width: usize,
+    pub slab: &'a Slab,
+}
+
+/// How a plan cuts a frame of `frame_width` columns into slabs `width` columns wide.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(super) struct Slabs {
+    pub frame_width: usize,
+    pub width: usize,
+    pub slabs: Vec<Slab>,
+}
+
+impl Slabs {
+    /// One slab: the whole frame.
+    pub(crate) fn whole(frame_width: usize) -> Self {
+        Self {
+            frame_width,
+            width: frame_width,
+            slabs: vec![Slab {
+                start: 0,
+                keep: 0..frame_width,
+            }],
+        }
+    }
+
+    /// `count` slabs (or fewer; one where they would not be narrower than the frame) of a frame
+    /// `frame_width` columns wide for a network whose spoiled columns reach `halo` columns (see the module
+    /// docs): the kept columns split near-equally at multiples of 4, every slab the same width, congruent to
+    /// the frame's modulo 4, so that the last slab ends at the frame's edge and starts at a multiple of 4.
+    pub(crate) fn new(frame_width: usize, halo: usize, count: usize) -> Self {
+        let count = count.max(1);
+        let bounds: Vec<usize> = (0..=count)
+            .map(|k| match k {
+                0 => 0,
+                k if k == count => frame_width,
+                k => (k * frame_width / count) / 4 * 4,
+            })
+            .collect();
+        let widest = bounds.windows(2).map(|b| b[1] - b[0]).max().unwrap_or(0);
+        // Kept columns, the halo on both sides and 3 columns for rounding the starts down to a multiple of 4;
+        // then up to the frame's width modulo 4.
+        let mut width = widest + 2 * halo + 3;
+        width += (frame_width + 4 - width % 4) % 4;
+        if count == 1 || width >= frame_width || bounds.windows(2).any(|b| b[0] >= b[1]) {
+            return Self::whole(frame_width);
+        }
+        let last_start = frame_width - width;
+        let slabs = bounds
+            .windows(2)
+            .map(|b| Slab {
+                start: (b[0].saturating_sub(halo) / 4 * 4).min(last_start),
+                keep: b[0]..b[1],
+            })
+            .collect();
+        Self {
+            frame_width,
+            width,
+            slabs,
+        }
+    }
+
+    /// How many slabs a plan of a frame `frame_width` columns wide, with hidden activations of `row_bytes`
+    /// bytes per frame column (every channel) and spoiled columns reaching `halo`, uses: enough that a
+    /// slab's hidden row fits [`SLAB_ROW_BYTES`], no more than keeps the recomputed columns (`2·halo` per
+    /// slab boundary) within an eighth of the frame. `TENSORHOLO_SLABS` overrides it (for benchmarks).
+    pub(crate) fn count_for(frame_width: usize, row_bytes: usize, halo: usize) -> usize {
+        if let Some(k) = std::env::var("TENSORHOLO_SLABS")
+            .ok()
+            .and_then(|v| v.parse::<usize>().ok())
+            .filter(|&k| k > 0)
+        {
+            return k;
+        }
+        let by_bytes = (frame_width * row_bytes).div_ceil(SLAB_ROW_BYTES).max(1);
+        let by_halo = 1 + frame_width / 8 / (2 * halo).max(1);
+        by_bytes.min(by_halo)
+    }
+
+    /// The slabs' columns, one after the other.
+    pub(crate) fn iter(&self) -> impl Iterator<Item = &Slab> {
+        self.slabs.iter()
+    }
+}
+
+/// The most bytes a slab's widest activation row (every channel) should take: 48 KiB, 480 columns of a
+/// 24-channel f32 network (measured on Zen 5, holo8 at 1080p, 2 threads: four slabs of 544 columns 60–63 ms
+/// each against 289–296 ms for the whole 1920-column frame; docs/BENCHMARKS.md).
+pub(super) const SLAB_ROW_BYTES: usize = 48 << 10;
+
+/// The columns one tile of `algorithm` spans along a row: 1 (direct), 2 (F(2×2, 3×3)), 4 (F(4×4, 3×3)).
+pub(super) fn column_group(algorithm: Algorithm) -> usize {
+    match algorithm {
+        Algorithm::Direct => 1,
+        Algorithm::Winograd2x2 => 2,
+        Algorithm::Winograd4x4 => 4,
+    }
+}
+
+/// The columns a wrong column at a slab's edge spoils through layers whose tiles span `groups` columns each
+/// (1 direct, 2 F(2×2, 3×3), 4 F(4×4, 3×3)): their sum.
+pub(super) fn halo(groups: impl Iterator<Item = usize>) -> usize {
+    groups.sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slabs_tile_the_frame_with_their_halo_inside_it() {
+        for w in [
+            97, 128, 383, 384, 511, 1000, 1917, 1918, 1919, 1920, 2001, 4096,
+        ] {
+            for halo in [0, 1, 8, 16, 32, 120] {
+                for count in 1..=6 {
+                    let s = Slabs::new(w, halo, count);
+                    assert_eq!(s.frame_width, w);
+                    // Kept columns tile 0..w in order.
+                    let mut next = 0;
+                    for slab in s.iter() {
+                        assert_eq!(slab.keep.start, next, "w {w} halo {halo} count {count}");
+                        assert!(slab.keep.end > slab.keep.start);
+                        next = slab.keep.end;
+                        // Inside the frame, a multiple of 4 from its start, the halo covered (or the edge).
+                        assert!(slab.start + s.width <= w);
+                        assert_eq!(slab.start % 4, 0, "{s:?}");
+                        assert!(slab.start <= slab.keep.start.saturating_sub(halo));
+                        let end = slab.start + s.width;
+                        assert!(end >= (slab.keep.end + halo).min(w), "{s:?}");
+                    }
+                    assert_eq!(next, w);
+                    if s.slabs.len() > 1 {
+                        assert!(s.width < w);
+                        assert_eq!(s.width % 4, w % 4);
+                        assert!(s.slabs.len() <= count);
+                    } else {
+                        assert_eq!(s, Slabs::whole(w));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_count_keeps_rows_small_and_the_recomputed_columns_few() {
+        if std::env::var("TENSORHOLO_SLABS").is_ok() {
+            println!("SKIPPED: TENSORHOLO_SLABS pins the count");
+            return;
+        }
+        // holo8 at 1080p, 24 f32 channels, F(4×4, 3×3) everywhere (halo 32): 4 slabs of 480 kept columns.
+        assert_eq!(Slabs::count_for(1920, 96, 32), 4);
+        // At 384 columns: one.
+        assert_eq!(Slabs::count_for(384, 96, 32), 1);
+        // holo30 (halo 120): the recomputed columns limit it to 2.
+        assert_eq!(Slabs::count_for(1920, 96, 120), 2);
+        assert_eq!(halo([1, 2, 4, 4].into_iter()), 11);
+    }
+}
