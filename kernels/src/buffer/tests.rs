@@ -108,6 +108,24 @@ fn window_rows_fill_copy_and_map_frame_rows() {
     let mut band = per_plane.band_mut(0..6).unwrap();
     assert!(band.fill_channel_rows(0, &src[..fh * w], 6, None).is_err());
     assert!(band.fill_channel_rows(c, &src[..fh * w], 0, None).is_err());
+    // A column slab of a wider plane: columns x0 .. x0 + w of rows `stride` values long.
+    let (stride, x0) = (w + 7, 5);
+    let wide: Vec<f32> = (0..fh * stride).map(|i| (i % 89) as f32 - 40.0).collect();
+    let mut slab = RowPlanar::new(1, h, w).unwrap();
+    slab.band_mut(1..5)
+        .unwrap()
+        .fill_channel_rows_at(0, &wide, [stride, x0], 4, Some((2.0, 1.0)))
+        .unwrap();
+    for i in 1..5 {
+        let from = &wide[(i + 3) * stride + x0..(i + 3) * stride + x0 + w];
+        let want: Vec<f32> = from.iter().map(|v| v * 2.0 + 1.0).collect();
+        assert_eq!(slab.row(0, i), Some(&want[..]), "slab row {i}");
+    }
+    // Columns past the row's end are refused.
+    let mut band = slab.band_mut(1..5).unwrap();
+    assert!(band
+        .fill_channel_rows_at(0, &wide, [stride, stride - w + 1], 4, None)
+        .is_err());
     // Carry: rows 3..5 move to 0..2; then rows 2..6 are set to the border (zero), borders stay clean.
     let before = win.clone();
     win.copy_rows(3..5, 0).unwrap();

@@ -13,7 +13,9 @@
 //!
 //! The frame runs in strips of rows, each layer a row behind the one before, every activation in a window
 //! of a few rows ([`super::strips`]): a plan's activations take a budget of 32 MB whatever the frame size,
-//! or what the minimum strip needs where that is more (30 layers at 1080p: 66 MB).
+//! or what the minimum strip needs where that is more (30 layers at 1080p: 66 MB). A wide frame runs as a
+//! few column slabs one after the other, through windows as wide as a slab ([`super::slabs`]: the 8-layer
+//! network at 1080p in four slabs of 548 columns, bit-identical with the whole frame).
 //!
 //! Threads: each layer's strip is split into one band per thread (halved recursively with
 //! [`tensorholo_kernels::RowBand::split_at`] under `rayon::join`); the bands of a layer run in parallel on the plan's own rayon

@@ -5,7 +5,10 @@
 //!   one before, residual adds and the final concat inside the kernels, row bands on the plan's own threads;
 //! - `int8.rs`: int8 QDQ files (`NativeInt8Plan`): the same plan on u8 activations, each buffer on the grid
 //!   the file gives its tensor; mixed-precision files' f32 first and last layers on the f32 kernels;
-//! - `strips.rs`: the line buffers both plans share (each activation in a window of a few rows).
+//! - `strips.rs`: the line buffers both plans share (each activation in a window of a few rows);
+//! - `slabs.rs`: column slabs, a wide frame run as a few narrower ones so a layer's rows stay in L2 (the f32
+//!   plan);
+//! - `algorithm.rs`: direct or Winograd, and which kernel row, per layer shape (measured).
 //!
 //! Its candidates are thread counts ([`NativeEngine`]'s [`Engine::tune`]); it has no per-model state beyond
 //! the graph the model reads once ([`crate::model::HologramModel::cnn_graph`]).

@@ -91,9 +91,10 @@ impl Slabs {
     }
 
     /// How many slabs a plan of a frame `frame_width` columns wide, with hidden activations of `row_bytes`
-    /// bytes per frame column (every channel) and spoiled columns reaching `halo`, uses: enough that a
-    /// slab's hidden row fits [`SLAB_ROW_BYTES`], no more than keeps the recomputed columns (`2·halo` per
-    /// slab boundary) within an eighth of the frame. `TENSORHOLO_SLABS` overrides it (for benchmarks).
+    /// bytes per frame column (every channel) and spoiled columns reaching `halo`, uses: one where the
+    /// frame's hidden row fits [`SLAB_MIN_ROW_BYTES`], else enough that a slab's fits [`SLAB_ROW_BYTES`],
+    /// unless that recomputes (`2·halo` columns per slab boundary) more than an eighth of the frame: then
+    /// one. `TENSORHOLO_SLABS` overrides it (for benchmarks).
     pub(crate) fn count_for(frame_width: usize, row_bytes: usize, halo: usize) -> usize {
         if let Some(k) = std::env::var("TENSORHOLO_SLABS")
             .ok()
@@ -102,9 +103,17 @@ impl Slabs {
         {
             return k;
         }
-        let by_bytes = (frame_width * row_bytes).div_ceil(SLAB_ROW_BYTES).max(1);
-        let by_halo = 1 + frame_width / 8 / (2 * halo).max(1);
-        by_bytes.min(by_halo)
+        let row = frame_width * row_bytes;
+        if row <= SLAB_MIN_ROW_BYTES {
+            return 1;
+        }
+        let count = row.div_ceil(SLAB_ROW_BYTES).max(1);
+        // Slabs that would recompute more than an eighth of the frame do not pay (the 30-layer network at
+        // 1080p, halo 120: two slabs ran 1.2× slower than one).
+        if 8 * 2 * halo * (count - 1) > frame_width {
+            return 1;
+        }
+        count
     }
 
     /// The slabs' columns, one after the other.
@@ -114,9 +123,14 @@ impl Slabs {
 }
 
 /// The most bytes a slab's widest activation row (every channel) should take: 48 KiB, 480 columns of a
-/// 24-channel f32 network (measured on Zen 5, holo8 at 1080p, 2 threads: four slabs of 544 columns 60–63 ms
-/// each against 289–296 ms for the whole 1920-column frame; docs/BENCHMARKS.md).
+/// 24-channel f32 network (holo8 at 1080p on Zen 5, four slabs against the whole frame: 400–405 against
+/// 574–629 ms on one thread, 243–247 against 263–296 on two; docs/BENCHMARKS.md).
 pub(super) const SLAB_ROW_BYTES: usize = 48 << 10;
+
+/// Frames whose widest activation row takes at most this many bytes (64 KiB) run as one slab: the
+/// pre-filters' 8-channel rows at 1920 columns (60 KiB) ran faster whole (Zen 5, one thread: 127–129 ms
+/// against 134 in two slabs).
+pub(super) const SLAB_MIN_ROW_BYTES: usize = 64 << 10;
 
 /// The columns one tile of `algorithm` spans along a row: 1 (direct), 2 (F(2×2, 3×3)), 4 (F(4×4, 3×3)).
 pub(super) fn column_group(algorithm: Algorithm) -> usize {
@@ -180,10 +194,13 @@ mod tests {
         }
         // holo8 at 1080p, 24 f32 channels, F(4×4, 3×3) everywhere (halo 32): 4 slabs of 480 kept columns.
         assert_eq!(Slabs::count_for(1920, 96, 32), 4);
-        // At 384 columns: one.
+        // At 384 columns, and the pre-filter's 8 channels at 1920: one.
         assert_eq!(Slabs::count_for(384, 96, 32), 1);
-        // holo30 (halo 120): the recomputed columns limit it to 2.
-        assert_eq!(Slabs::count_for(1920, 96, 120), 2);
+        assert_eq!(Slabs::count_for(1920, 32, 32), 1);
+        // holo30 (halo 120): four slabs would recompute 37 % of the frame: one.
+        assert_eq!(Slabs::count_for(1920, 96, 120), 1);
+        // Direct layers only (halo 8): four.
+        assert_eq!(Slabs::count_for(1920, 96, 8), 4);
         assert_eq!(halo([1, 2, 4, 4].into_iter()), 11);
     }
 }

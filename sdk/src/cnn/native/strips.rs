@@ -17,7 +17,7 @@
 //!
 //! Memory: `Σ (carry + S + 2)·row` per plan instead of three whole frames: at 1080p, the 8-layer network's
 //! 24-channel f32 activations take 0.19 MB a row, so 623 MB of whole-frame buffers become 29 MB (strips of
-//! 16 rows).
+//! 16 rows; the f32 plan's column slabs make the rows narrower still: [`super::slabs`]).
 
 use std::ops::Range;
 
