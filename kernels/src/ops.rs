@@ -512,13 +512,18 @@ pub(crate) fn f32_rows_of(
     algorithm: Algorithm,
 ) -> impl Iterator<Item = &'static F32Row> {
     let first = select_f32_algorithm(isa, c_out, algorithm);
-    let others = under(isa)
+    let others = dispatchable_f32(isa, algorithm).filter(move |r| r.info.name != first.info.name);
+    std::iter::once(first).chain(others)
+}
+
+/// The vector f32 rows of `algorithm` that `isa` includes, best first (the scalar row too under
+/// [`Isa::Scalar`]), never a test-only row (emulated geometries).
+fn dispatchable_f32(isa: Isa, algorithm: Algorithm) -> impl Iterator<Item = &'static F32Row> {
+    under(isa)
         .flat_map(|t| t.f32)
         .filter(move |r| r.info.algorithm == algorithm)
         .filter(|r| !r.info.name.starts_with("test."))
         .filter(move |r| r.info.isa != Isa::Scalar || isa == Isa::Scalar)
-        .filter(move |r| r.info.name != first.info.name);
-    std::iter::once(first).chain(others)
 }
 
 /// As [`select_f32_for`], among the rows of `algorithm` (the portable row of it when no vector row has one).
@@ -528,15 +533,14 @@ pub(crate) fn select_f32_algorithm(
     algorithm: Algorithm,
 ) -> &'static F32Row {
     let padded = |r: &F32Row| c_out.div_ceil(r.info.oc_tile) * r.info.oc_tile;
-    let of_kind = |r: &&F32Row| r.info.algorithm == algorithm;
-    under(isa)
-        .flat_map(|t| t.f32)
-        .filter(of_kind)
-        // Test-only rows (emulated geometries) are never dispatched.
-        .filter(|r| !r.info.name.starts_with("test."))
-        .filter(|r| r.info.isa != Isa::Scalar || isa == Isa::Scalar)
+    dispatchable_f32(isa, algorithm)
         .min_by_key(|r| padded(r))
-        .or_else(|| portable().f32.iter().find(of_kind))
+        .or_else(|| {
+            portable()
+                .f32
+                .iter()
+                .find(|r| r.info.algorithm == algorithm)
+        })
         .unwrap_or(&portable().f32[0])
 }
 

@@ -78,6 +78,19 @@ impl KernelInfo {
             Algorithm::Direct | Algorithm::Winograd2x2 => 1,
         }
     }
+
+    /// The frame columns one tile's output spans, all of whose rounding depends on every input column of the
+    /// tile: 1 (direct: each output its own sum), 2 (F(2×2, 3×3)), 4 (F(4×4, 3×3)). Tiles start at columns
+    /// that are multiples of it. A caller that computes a frame in column slabs (zero padding at a slab's
+    /// edges where the frame has values) gets the whole frame's bits at least the sum of this over the
+    /// layers away from a slab's edge, when slabs start at multiples of 4.
+    pub fn column_group(&self) -> usize {
+        match self.algorithm {
+            Algorithm::Direct => 1,
+            Algorithm::Winograd2x2 => 2,
+            Algorithm::Winograd4x4 => 4,
+        }
+    }
 }
 
 /// How an int8 row wants its weights packed (`[oc-group][ic/4][ky][kx][G][4]`).

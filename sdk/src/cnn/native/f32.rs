@@ -37,7 +37,7 @@ use tensorholo_kernels::{
 
 use super::algorithm::{self, Choice};
 use super::kernel_err;
-use super::slabs::{self, column_group, Cols, Slabs};
+use super::slabs::{Cols, Slabs};
 use super::strips::{
     advance_all, bands, bands_aligned, both, hidden_layers, installed, row_bytes, F32Rows, Place,
     Strips, Window,
@@ -60,7 +60,6 @@ struct Network {
 pub(crate) struct NativePlan {
     net: Arc<Network>,
     height: usize,
-    width: usize,
     threads: usize,
     /// The plan's worker threads (`None` with one thread: the caller's thread runs every band).
     pool: Option<Arc<rayon::ThreadPool>>,
@@ -150,11 +149,8 @@ impl NativePlan {
             .unwrap_or(1);
         let net = Network { graph, layers, isa };
         // Column slabs, all `slabs.width` columns wide: the windows are that wide.
-        let halo = slabs::halo(
-            net.layers
-                .iter()
-                .map(|l| column_group(l.kernel().algorithm)),
-        );
+        // A wrong column at a slab's edge spoils one tile's columns per layer (see `slabs`).
+        let halo = net.layers.iter().map(|l| l.kernel().column_group()).sum();
         let count = slabs
             .unwrap_or_else(|| Slabs::count_for(width, hidden * std::mem::size_of::<f32>(), halo));
         let slabs = Slabs::new(width, halo, count);
@@ -185,7 +181,6 @@ impl NativePlan {
             raw: window(c_out, n, 0)?,
             strips,
             height,
-            width: slabs.frame_width,
             slabs: Arc::new(slabs),
             threads,
             pool,
@@ -201,7 +196,7 @@ impl NativePlan {
 
     /// One frame of a checked input into `out`.
     fn run(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
-        let (h, w) = (self.height, self.width);
+        let (h, w) = (self.height, self.frame_width());
         self.forward(input, out)?;
         finish_outputs(
             &self.net.graph,
@@ -212,6 +207,11 @@ impl NativePlan {
             self.threads,
             self.pool.as_deref(),
         )
+    }
+
+    /// The frame's width in columns.
+    fn frame_width(&self) -> usize {
+        self.slabs.frame_width
     }
 
     /// Column slabs per frame ([`super::slabs`]).
@@ -231,7 +231,7 @@ impl NativePlan {
     fn forward(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
         let net = self.net.clone();
         let n = net.layers.len();
-        let (threads, strips, h) = (self.threads, self.strips, self.height);
+        let (threads, strips) = (self.threads, self.strips);
         let heads = heads_of(&net.graph);
         let (pool, slabs) = (self.pool.clone(), self.slabs.clone());
         let frame = || -> Result<()> {
@@ -257,7 +257,7 @@ impl NativePlan {
                         threads,
                     )?;
                     let last = if n >= 2 { &self.s[n - 2] } else { &self.x };
-                    let ctx = (heads, (h, cols), net.isa, strips, m, threads);
+                    let ctx = (heads, cols, net.isa, strips, m, threads);
                     last_layer_rows(&net.layers[n - 1], last, &self.x, &mut self.raw, ctx, out)?;
                     // The windows' carried rows to their tops, the copies in parallel (serial, they were
                     // 9 % of a 1080p frame's samples with F(4×4, 3×3) on 2 threads).
@@ -330,16 +330,9 @@ pub(super) fn input_rows(
     })
 }
 
-/// What [`last_layer_rows`] needs of the plan: the heads ([`heads_of`]), the frame's height and the slab's
-/// columns, the vector level, the strips, the strip index and the threads.
-pub(super) type LastLayerCtx<'a> = (
-    Option<(f32, f32)>,
-    (usize, Cols<'a>),
-    Isa,
-    Strips,
-    usize,
-    usize,
-);
+/// What [`last_layer_rows`] needs of the plan: the heads ([`heads_of`]), the slab's columns, the vector
+/// level, the strips, the strip index and the threads.
+pub(super) type LastLayerCtx<'a> = (Option<(f32, f32)>, Cols<'a>, Isa, Strips, usize, usize);
 
 /// Strip `m` of the f32 last layer: `o = conv(concat(s_{N−1}, s_0))` into the raw window, then its rows
 /// through [`heads_rows`] (the raw output stays float) into `out`. `last` holds `s_{N−1}` in f32 (the f32
@@ -349,7 +342,7 @@ pub(super) fn last_layer_rows(
     last: &Window<f32>,
     x: &Window<f32>,
     raw: &mut Window<f32>,
-    (heads, hw, isa, strips, m, threads): LastLayerCtx<'_>,
+    (heads, cols, isa, strips, m, threads): LastLayerCtx<'_>,
     out: &mut Outputs<'_>,
 ) -> Result<()> {
     let Some((rows, f0)) = raw.new_rows(strips, m)? else {
@@ -364,7 +357,7 @@ pub(super) fn last_layer_rows(
     let raw = &raw.buf;
     let raw_row = |c: usize, y: usize| raw.row(c, y - f0 + rows.start).unwrap_or(&[]);
     let frame_rows = f0..f0 + rows.len();
-    heads_rows(heads, &raw_row, None, hw, frame_rows, isa, threads, out)
+    heads_rows(heads, &raw_row, None, cols, frame_rows, isa, threads, out)
 }
 
 /// A CNN input `[C][H][W]`: one planar slice, or one slice per channel plane ([`CnnPlan::run_planes`]).
@@ -500,7 +493,7 @@ pub(super) fn heads_rows<'r>(
     heads: Option<(f32, f32)>,
     raw_row: &(dyn Fn(usize, usize) -> &'r [f32] + Sync),
     grid: Option<QuantGrid>,
-    (_, cols): (usize, Cols<'_>),
+    cols: Cols<'_>,
     rows: Range<usize>,
     isa: Isa,
     threads: usize,
@@ -613,28 +606,28 @@ pub(super) fn finish_outputs(
 
 impl CnnPlan for NativePlan {
     fn input_dim(&self) -> (usize, usize, usize) {
-        (self.net.graph.in_channels, self.height, self.width)
+        (self.net.graph.in_channels, self.height, self.frame_width())
     }
 
     fn run_outputs(&mut self, input: ArrayView3<f32>) -> Result<(Array3<f32>, Array3<f32>)> {
         let standard = standard_input(input, self.input_dim())?;
         let planar = planar_slice(&standard)?;
-        let hw = self.height * self.width;
-        owned_outputs(self.height, self.width, |out| {
+        let hw = self.height * self.frame_width();
+        owned_outputs(self.height, self.frame_width(), |out| {
             self.run(Planes::Planar(planar, hw), out)
         })
     }
 
     fn run_planes(&mut self, planes: &[&[f32]]) -> Result<(Array3<f32>, Array3<f32>)> {
         check_planes(planes, self.input_dim())?;
-        owned_outputs(self.height, self.width, |out| {
+        owned_outputs(self.height, self.frame_width(), |out| {
             self.run(Planes::Each(planes), out)
         })
     }
 
     fn run_planes_into(&mut self, planes: &[&[f32]], outputs: [&mut [f32]; 6]) -> Result<()> {
         check_planes(planes, self.input_dim())?;
-        let mut out = Outputs::new(outputs, self.height * self.width)?;
+        let mut out = Outputs::new(outputs, self.height * self.frame_width())?;
         self.run(Planes::Each(planes), &mut out)
     }
 
@@ -642,7 +635,6 @@ impl CnnPlan for NativePlan {
         Box::new(Self {
             net: self.net.clone(),
             height: self.height,
-            width: self.width,
             threads: self.threads,
             // Threads of a stream run at the same time: each plan gets its own workers (a failed pool
             // start leaves the copy on the caller's thread, which still computes the same frames).

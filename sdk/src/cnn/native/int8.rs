@@ -343,12 +343,9 @@ impl NativeInt8Plan {
         let net = self.net.clone();
         let quant = net.quant()?;
         let n = net.layers.len();
-        let (threads, strips, [h, w]) = (self.threads, self.strips, [self.height, self.width]);
+        let (threads, strips, w) = (self.threads, self.strips, self.width);
         // The int8 plan runs the whole frame as one slab.
-        let whole = Slab {
-            start: 0,
-            keep: 0..w,
-        };
+        let whole = Slab::whole(w);
         let cols = Cols {
             frame_width: w,
             slab: &whole,
@@ -431,14 +428,7 @@ impl NativeInt8Plan {
                     let frame_rows = f0..f0 + rows.len();
                     // The file's rounding of the last raw output, if it has one.
                     heads_rows(
-                        heads,
-                        &raw_row,
-                        out_grid,
-                        (h, cols),
-                        frame_rows,
-                        net.isa,
-                        threads,
-                        out,
+                        heads, &raw_row, out_grid, cols, frame_rows, net.isa, threads, out,
                     )?;
                 }
                 both(
@@ -459,11 +449,8 @@ impl NativeInt8Plan {
         let net = self.net.clone();
         let quant = net.quant()?;
         let n = net.graph.layers.len();
-        let (threads, strips, h) = (self.threads, self.strips, self.height);
-        let whole = Slab {
-            start: 0,
-            keep: 0..self.width,
-        };
+        let (threads, strips) = (self.threads, self.strips);
+        let whole = Slab::whole(self.width);
         let cols = Cols {
             frame_width: self.width,
             slab: &whole,
@@ -518,7 +505,7 @@ impl NativeInt8Plan {
                         b.dequantize_rows_from(&src.buf, from, last_scale)
                     })?;
                 }
-                let ctx = (heads, (h, cols), net.isa, strips, m, threads);
+                let ctx = (heads, cols, net.isa, strips, m, threads);
                 last_layer_rows(last_conv, last, x, raw, ctx, out)?;
                 let ends = [&mut *x, &mut *y0, &mut *last, &mut *raw];
                 both(

@@ -1,12 +1,13 @@
 //! Column slabs: a wide frame computed as a few narrower ones, side by side, so that a layer's rows stay in
-//! the core's L2 cache (a 24-channel f32 row of a 1080p frame is 184 KiB; of a 544-column slab, 52 KiB).
+//! the core's L2 cache (a 24-channel f32 row of a 1080p frame is 180 KiB; of a 548-column slab, 51 KiB).
 //!
 //! Each slab is a full-height strip of frame columns `start .. start + width` that the plan runs as if it
 //! were the whole frame (zero padding at its left and right edges), writing out only the columns it
 //! `keep`s; the kept columns of the slabs tile the frame. A 3×3 layer computed with a wrong column at a slab
 //! edge spoils the columns next to it: one column per direct layer, and up to a whole Winograd tile
 //! (2 columns for F(2×2, 3×3), 4 for F(4×4, 3×3)) since a tile's rounding depends on every input column of it.
-//! So every slab reaches `halo` (the sum over the layers, [`halo`]) columns past its kept columns, or to the
+//! So every slab reaches `halo` (the sum over the layers of
+//! [`KernelInfo::column_group`](tensorholo_kernels::KernelInfo::column_group)) columns past its kept columns, or to the
 //! frame's edge, and starts at a multiple of 4 columns (the Winograd tiles of the frame and of the slab then
 //! coincide): the kept columns are **bit-identical** with the whole frame's (tested). Slabs never reach past
 //! the frame's edges (a layer would compute values there that the whole frame keeps at zero).
@@ -15,14 +16,22 @@
 
 use std::ops::Range;
 
-use tensorholo_kernels::Algorithm;
-
 /// Columns of one slab: the frame columns `start .. start + width` it computes (`width` is the plan's
 /// [`Slabs::width`]) and the frame columns `keep` it writes out.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub(super) struct Slab {
     pub start: usize,
     pub keep: Range<usize>,
+}
+
+impl Slab {
+    /// The whole frame, `frame_width` columns, as one slab.
+    pub(crate) fn whole(frame_width: usize) -> Self {
+        Self {
+            start: 0,
+            keep: 0..frame_width,
+        }
+    }
 }
 
 /// The columns a pass over one slab reads and writes: the frame's width (the row stride of the input and
@@ -47,10 +56,7 @@ impl Slabs {
         Self {
             frame_width,
             width: frame_width,
-            slabs: vec![Slab {
-                start: 0,
-                keep: 0..frame_width,
-            }],
+            slabs: vec![Slab::whole(frame_width)],
         }
     }
 
@@ -123,29 +129,14 @@ impl Slabs {
 }
 
 /// The most bytes a slab's widest activation row (every channel) should take: 48 KiB, 480 columns of a
-/// 24-channel f32 network (holo8 at 1080p on Zen 5, four slabs against the whole frame: 400–405 against
-/// 574–629 ms on one thread, 243–247 against 263–296 on two; docs/BENCHMARKS.md).
+/// 24-channel f32 network (holo8 at 1080p on Zen 5, four slabs against the whole frame: 394–404 against
+/// 535–561 ms on one thread, 243–247 against 263–296 on two; docs/BENCHMARKS.md, "Column slabs").
 pub(super) const SLAB_ROW_BYTES: usize = 48 << 10;
 
 /// Frames whose widest activation row takes at most this many bytes (64 KiB) run as one slab: the
 /// pre-filters' 8-channel rows at 1920 columns (60 KiB) ran faster whole (Zen 5, one thread: 127–129 ms
 /// against 134 in two slabs).
 pub(super) const SLAB_MIN_ROW_BYTES: usize = 64 << 10;
-
-/// The columns one tile of `algorithm` spans along a row: 1 (direct), 2 (F(2×2, 3×3)), 4 (F(4×4, 3×3)).
-pub(super) fn column_group(algorithm: Algorithm) -> usize {
-    match algorithm {
-        Algorithm::Direct => 1,
-        Algorithm::Winograd2x2 => 2,
-        Algorithm::Winograd4x4 => 4,
-    }
-}
-
-/// The columns a wrong column at a slab's edge spoils through layers whose tiles span `groups` columns each
-/// (1 direct, 2 F(2×2, 3×3), 4 F(4×4, 3×3)): their sum.
-pub(super) fn halo(groups: impl Iterator<Item = usize>) -> usize {
-    groups.sum()
-}
 
 #[cfg(test)]
 mod tests {
@@ -201,6 +192,5 @@ mod tests {
         assert_eq!(Slabs::count_for(1920, 96, 120), 1);
         // Direct layers only (halo 8): four.
         assert_eq!(Slabs::count_for(1920, 96, 8), 4);
-        assert_eq!(halo([1, 2, 4, 4].into_iter()), 11);
     }
 }
