@@ -70,7 +70,7 @@ pub enum GpuPrecision {
     Auto,
     /// f32.
     F32,
-    /// f16 activations and products, f32 sums: half the GPU memory; f32 where the GPU lacks f16.
+    /// f16 activations, f32 products and sums: half the GPU memory; f32 where the GPU lacks f16.
     F16,
 }
 
@@ -642,7 +642,7 @@ pub struct StageTimings {
     /// field where there is one.
     pub encoding_ms: f64,
     /// On the GPU: the whole GPU frame (CNNs and optics; the three stage fields above are then 0 and
-    /// `cnn_ms` is the input packing). 0 on the CPU.
+    /// `cnn_ms` is the CPU's input checks and packing). 0 on the CPU.
     pub gpu_ms: f64,
     /// CNN to codes (in a stream: the frame period).
     pub total_ms: f64,

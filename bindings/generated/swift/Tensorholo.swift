@@ -2732,7 +2732,7 @@ public struct StageTimings: Equatable, Hashable {
     public var encodingMs: Double
     /**
      * On the GPU: the whole GPU frame (CNNs and optics; the three stage fields above are then 0 and
-     * `cnn_ms` is the input packing). 0 on the CPU.
+     * `cnn_ms` is the CPU's input checks and packing). 0 on the CPU.
      */
     public var gpuMs: Double
     /**
@@ -2761,7 +2761,7 @@ public struct StageTimings: Equatable, Hashable {
          */encodingMs: Double, 
         /**
          * On the GPU: the whole GPU frame (CNNs and optics; the three stage fields above are then 0 and
-         * `cnn_ms` is the input packing). 0 on the CPU.
+         * `cnn_ms` is the CPU's input checks and packing). 0 on the CPU.
          */gpuMs: Double, 
         /**
          * CNN to codes (in a stream: the frame period).
@@ -3299,7 +3299,7 @@ public enum GpuPrecision: Equatable, Hashable {
      */
     case f32
     /**
-     * f16 activations and products, f32 sums: half the GPU memory; f32 where the GPU lacks f16.
+     * f16 activations, f32 products and sums: half the GPU memory; f32 where the GPU lacks f16.
      */
     case f16
 

@@ -14,7 +14,7 @@
 
 use std::time::Instant;
 
-use ndarray::{Array3, ArrayView3};
+use ndarray::Array3;
 
 use super::cnn::{GpuCnn, GpuStorage};
 use super::context::GpuContext;
@@ -417,35 +417,35 @@ impl GpuFrameSession {
         self.dp.record(encoder);
     }
 
-    /// Runs one frame: uploads `input` (the CNN input `[C, H, W]` packed by [`crate::model::contract`]), runs
-    /// every stage and downloads the codes `[3, H, W]` into `codes`; with `phase`, also the double phase
-    /// pattern `[3, H, W]` (radians) into it and the CNN heads (amplitude, phase `[3, H, W]`, returned).
+    /// Runs one frame: uploads `input` (the CNN input's `C` planes of `H·W` values each, as
+    /// [`crate::model::contract`] packs them, or an RGB-D frame's own planes), runs every stage and downloads
+    /// the codes `[3, H, W]` into `codes`; with `phase`, also the double phase pattern `[3, H, W]` (radians)
+    /// into it and the CNN heads (amplitude, phase `[3, H, W]`, returned).
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for an input of another shape; [`HoloError::Gpu`] for a GPU
     /// failure (lost device, validation error); [`HoloError::InvalidData`] for a hologram that is zero
     /// everywhere (as the CPU path).
     pub(crate) fn run(
         &mut self,
-        input: ArrayView3<f32>,
+        input: &[&[f32]],
         codes: &mut Array3<u8>,
         phase: Option<&mut Array3<f32>>,
     ) -> Result<GpuFrameOutput> {
         let full = phase.is_some();
-        let want = [self.in_channels, self.height, self.width];
-        if input.shape() != want {
+        let n = self.height * self.width;
+        if input.len() != self.in_channels || input.iter().any(|p| p.len() != n) {
             return Err(HoloError::ShapeMismatch {
-                what: "GPU CNN input vs the session's [C, H, W]".into(),
-                expected: want.to_vec(),
-                got: input.shape().to_vec(),
+                what: "GPU CNN input planes vs the session's [C, H·W]".into(),
+                expected: vec![self.in_channels, n],
+                got: vec![input.len(), input.first().map_or(0, |p| p.len())],
             });
         }
-        let data = input
-            .as_slice()
-            .ok_or_else(|| HoloError::Internal("CNN input not contiguous".into()))?;
-        self.ctx.write(&self.input, 0, bytemuck::cast_slice(data));
+        for (i, plane) in input.iter().enumerate() {
+            self.ctx
+                .write(&self.input, (i * n * 4) as u64, bytemuck::cast_slice(plane));
+        }
         let mut encoder = self.ctx.encoder("frame");
         self.record(&mut encoder);
-        let n = self.height * self.width;
         let codes_bytes = (3 * n) as u64;
         encoder.copy_buffer_to_buffer(
             self.dp.codes_buffer(),

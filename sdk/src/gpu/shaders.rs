@@ -58,7 +58,8 @@ pub(crate) const DOUBLE_PHASE: Shader = shader!("double_phase.wgsl");
 /// hidden activations in f32.
 pub(crate) const CONV3X3: Shader = shader!("conv3x3.wgsl", "f32", "alias act = f32;", false);
 
-/// [`CONV3X3`] from the same file with f16 hidden activations and f16 products, f32 sums (`SHADER_F16`).
+/// [`CONV3X3`] from the same file with f16 hidden activations (stored and staged), f32 products and sums
+/// (`SHADER_F16`).
 pub(crate) const CONV3X3_F16: Shader =
     shader!("conv3x3.wgsl", "f16", "enable f16; alias act = f16;", true);
 

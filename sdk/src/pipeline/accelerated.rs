@@ -8,7 +8,7 @@ use std::time::Instant;
 use ndarray::Array3;
 
 use super::config::Backend;
-use super::frame::{FrameTimings, SlmFrame};
+use super::frame::{max_and_finite, FrameTimings, SlmFrame};
 use super::report::{SelfCheck, StageProfile};
 use super::session::{apply_calibrated_luts, HologramSession};
 use crate::error::{HoloError, Result};
@@ -43,20 +43,34 @@ impl HologramSession {
         Some(a.executor.stages(repeats))
     }
 
-    /// The GPU frame of the CNN input packed in `self.cnn.input` (packing started at `t`): runs it on the GPU,
+    /// The GPU frame of the CNN input `planes` (R, G, B, depth of an RGB-D frame, read in place), or of the
+    /// input packed in `self.cnn.input` where `planes` is `None` (packing started at `t`): runs it on the GPU,
     /// with the first-frame self-check of [`Backend::Auto`]; on a GPU failure, re-renders it on the CPU and
     /// stays there.
-    pub(super) fn render_packed_on_accelerator(&mut self, t: Instant) -> Result<&SlmFrame> {
+    pub(super) fn render_on_accelerator(
+        &mut self,
+        planes: Option<[&[f32]; 4]>,
+        t: Instant,
+    ) -> Result<&SlmFrame> {
         let Some(gpu) = self.accelerator.as_mut() else {
             return Err(HoloError::Internal("no accelerator".into()));
         };
-        // The CPU path catches NaN/∞ in the CNN's heads; a GPU's max() may silently skip NaN, so check the
-        // input here (4 values per pixel, well under a millisecond at 1080p).
-        if self.cnn.input.iter().any(|v| !v.is_finite()) {
-            return Err(HoloError::InvalidData(
-                "the RGB-D frame holds NaN or infinite values".into(),
-            ));
-        }
+        let packed;
+        let input: &[&[f32]] = match &planes {
+            // Checked for NaN and infinities by `CnnStage::frame_planes`.
+            Some(p) => p,
+            None => {
+                packed = super::cnn_stage::CnnStage::planes_of(&self.cnn.input);
+                // The CPU path catches NaN/∞ in the CNN's heads; a GPU's max() may silently skip NaN, so
+                // check the input here.
+                if packed.iter().any(|p| !max_and_finite(p).1) {
+                    return Err(HoloError::InvalidData(
+                        "the RGB-D frame holds NaN or infinite values".into(),
+                    ));
+                }
+                &packed
+            }
+        };
         let cnn_s = t.elapsed().as_secs_f64();
         let t_gpu = Instant::now();
         // A calibrated look-up table runs on the CPU, on the downloaded double phase pattern.
@@ -66,10 +80,7 @@ impl HologramSession {
             .is_some_and(|c| c.has_calibrated_lut());
         let full = self.full_outputs || gpu.pending_check || calibrated;
         let backend = gpu.executor.backend();
-        match gpu
-            .executor
-            .run(self.cnn.input.view(), &mut self.output, full)
-        {
+        match gpu.executor.run(input, &mut self.output, full) {
             Ok(heads) => {
                 if calibrated {
                     apply_calibrated_luts(self.calibration.as_ref(), &mut self.output)?;
@@ -86,6 +97,10 @@ impl HologramSession {
                     self.last_heads = heads;
                 }
                 if gpu.pending_check {
+                    // The self-check renders the frame on the CPU too, from the packed input.
+                    if let Some(p) = &planes {
+                        self.cnn.pack_planes(p);
+                    }
                     self.self_check()?;
                 }
                 Ok(&self.output)
@@ -96,6 +111,9 @@ impl HologramSession {
                 self.backend.active = Backend::Cpu;
                 self.backend.gpu_precision = None;
                 self.backend.reason = format!("GPU failed mid-stream, CPU since: {e}");
+                if let Some(p) = &planes {
+                    self.cnn.pack_planes(p);
+                }
                 let (heads, cnn_s) = self.cnn.run(t)?;
                 self.encode_heads(heads, cnn_s)
             }

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use ndarray::{s, Array3, Axis};
 
-use super::frame::{check_not_black, Heads};
+use super::frame::{check_not_black, max_and_finite, Heads};
 use crate::cnn::CnnPlan;
 use crate::error::{invalid, HoloError, Result};
 use crate::model::contract;
@@ -74,30 +74,76 @@ impl CnnStage {
         heads: [&mut [f32]; 6],
     ) -> Result<f64> {
         let t = Instant::now();
+        if let Some(planes) = self.frame_planes(frame, false)? {
+            self.plan.run_planes_into(&planes, heads)?;
+        } else {
+            self.pack_frame(frame)?;
+            self.plan
+                .run_planes_into(&Self::planes_of(&self.input), heads)?;
+        }
+        Ok(t.elapsed().as_secs_f64())
+    }
+
+    /// The planes R, G, B, depth (`H·W` values each) of `frame`, checked as [`CnnStage::pack_frame`] checks
+    /// them, where the hologram CNN can read them in place: an RGB-D CNN, no intensity maps, contiguous
+    /// planes. `None` where the frame must be packed ([`CnnStage::pack_frame`]). With `check_finite` (the
+    /// accelerator's frames: a GPU's `max` may skip NaN), it also refuses NaN and infinite values, in the
+    /// same pass over the amplitudes.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for a frame of another size, [`HoloError::InvalidData`] for a
+    /// black one (or, with `check_finite`, one holding NaN or infinite values).
+    pub(super) fn frame_planes<'f>(
+        &self,
+        frame: &'f RgbdFrame,
+        check_finite: bool,
+    ) -> Result<Option<[&'f [f32]; 4]>> {
         let scaled = self
             .calibration
             .as_ref()
             .is_some_and(|cal| cal.colours.iter().any(|c| c.intensity_scale.is_some()));
         let (c, h, w) = self.plan.input_dim();
-        match (scaled, frame.amplitude.as_slice(), frame.depth.as_slice()) {
-            (false, Some(amplitude), Some(depth)) if c == 4 => {
-                check_size("RGB-D frame", frame.amplitude.dim(), (h, w))?;
-                check_not_black(amplitude.iter().fold(0.0f32, |m, &a| m.max(a)))?;
-                let (r, gb) = amplitude.split_at(h * w);
-                let (g, b) = gb.split_at(h * w);
-                self.plan.run_planes_into(&[r, g, b, depth], heads)?;
-            }
-            _ => {
-                self.pack_frame(frame)?;
-                // The packed input: c planes of H·W values.
-                let packed = self.input.as_slice().unwrap_or_default();
-                let planes: Vec<&[f32]> = (0..c)
-                    .map(|i| packed.get(i * h * w..(i + 1) * h * w).unwrap_or_default())
-                    .collect();
-                self.plan.run_planes_into(&planes, heads)?;
+        let (false, Some(amplitude), Some(depth), 4) = (
+            scaled,
+            frame.amplitude.as_slice(),
+            frame.depth.as_slice(),
+            c,
+        ) else {
+            return Ok(None);
+        };
+        check_size("RGB-D frame", frame.amplitude.dim(), (h, w))?;
+        let (brightest, mut finite) = max_and_finite(amplitude);
+        if check_finite {
+            finite &= max_and_finite(depth).1;
+            if !finite {
+                return Err(HoloError::InvalidData(
+                    "the RGB-D frame holds NaN or infinite values".into(),
+                ));
             }
         }
-        Ok(t.elapsed().as_secs_f64())
+        check_not_black(brightest)?;
+        let (r, gb) = amplitude.split_at(h * w);
+        let (g, b) = gb.split_at(h * w);
+        Ok(Some([r, g, b, depth]))
+    }
+
+    /// Packs the planes of [`CnnStage::frame_planes`] into `self.input` (for the CPU frame of a frame the
+    /// accelerator read in place: its self-check, its fallback).
+    pub(super) fn pack_planes(&mut self, planes: &[&[f32]; 4]) {
+        let mut input = self.input_mut();
+        for (mut dst, src) in input.outer_iter_mut().zip(planes) {
+            if let Some(d) = dst.as_slice_mut() {
+                d.copy_from_slice(src);
+            }
+        }
+    }
+
+    /// The `C` planes of `H·W` values of a packed input `[C, H, W]` (`CnnStage::input`).
+    pub(super) fn planes_of(input: &Array3<f32>) -> Vec<&[f32]> {
+        let (c, h, w) = input.dim();
+        let packed = input.as_slice().unwrap_or_default();
+        (0..c)
+            .map(|i| packed.get(i * h * w..(i + 1) * h * w).unwrap_or_default())
+            .collect()
     }
 
     /// Refuses a packed input whose amplitudes (every layer, after the intensity maps) are black
@@ -106,7 +152,11 @@ impl CnnStage {
         let mut brightest = 0.0f32;
         for (i, plane) in self.input.outer_iter().enumerate() {
             if i % 4 != 3 {
-                brightest = plane.iter().fold(brightest, |m, &a| m.max(a));
+                let m = match plane.as_slice() {
+                    Some(values) => max_and_finite(values).0,
+                    None => plane.iter().fold(0.0f32, |m, &a| m.max(a)),
+                };
+                brightest = brightest.max(m);
             }
         }
         check_not_black(brightest)

@@ -81,8 +81,8 @@ pub enum GpuPrecision {
     Auto,
     /// f32 storage and arithmetic (within 3e-7 of tract's f32 on lavapipe).
     F32,
-    /// Hidden activations stored as f16 (half the memory and traffic), products in f16, sums in f32; the
-    /// network's input and output stay f32. Needs the device's `SHADER_F16` (f32 without it). Within 5.1e-4
+    /// Hidden activations stored as f16 (half the memory and traffic), products and sums in f32; the
+    /// network's input and output stay f32. Needs the device's `SHADER_F16` (f32 without it). Within 4.1e-4
     /// of tract's f32 on lavapipe (docs/GPU.md).
     F16,
 }

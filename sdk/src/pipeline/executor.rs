@@ -1,4 +1,4 @@
-//! Frame executors: what computes a whole frame from the packed CNN input.
+//! Frame executors: what computes a whole frame from the CNN input planes.
 //!
 //! The CPU frame (the session's [`super::cnn_stage::CnnStage`] on a [`crate::cnn::CnnPlan`], the colour
 //! workers, the pre-filter plan) is always built: it is the reference, the first-frame self-check of
@@ -6,31 +6,27 @@
 //! GPU today (`gpu_frame.rs`, cargo feature `gpu`). The session holds `Option<Accelerator>` and never asks
 //! which one it is: an executor is a file plus one arm in `setup.rs`'s `choose_backend`.
 
-use ndarray::{Array3, ArrayView3};
+use ndarray::Array3;
 
 use super::config::Backend;
 use super::frame::{Heads, SlmFrame};
 use super::report::StageProfile;
 use crate::error::Result;
 
-/// A whole frame on an accelerator: packed CNN input in, SLM patterns out.
+/// A whole frame on an accelerator: the CNN input planes in, SLM patterns out.
 pub(super) trait FrameExecutor: std::fmt::Debug + Send {
     /// The backend this executor is ([`Backend::Gpu`] today), as sessions report it.
     fn backend(&self) -> Backend;
 
-    /// Runs one frame of the packed CNN input `input` (`[C, H, W]`, `docs/CONVENTIONS.md` §7) into `out`:
+    /// Runs one frame of the CNN input `input` (its `C` planes of `H·W` values, `docs/CONVENTIONS.md` §7) into
+    /// `out`:
     /// the codes and the normaliser always; the double phase pattern (`out.phase`) and the heads (returned)
     /// only when `full` (otherwise `out.phase` keeps older values and `None` is returned). Timings and
     /// `out.backend` are the caller's.
     ///
     /// Errors: [`crate::HoloError::Gpu`] when the device fails (the session then falls back to the CPU);
     /// any other error is the frame's fault (e.g. a hologram that is zero everywhere).
-    fn run(
-        &mut self,
-        input: ArrayView3<f32>,
-        out: &mut SlmFrame,
-        full: bool,
-    ) -> Result<Option<Heads>>;
+    fn run(&mut self, input: &[&[f32]], out: &mut SlmFrame, full: bool) -> Result<Option<Heads>>;
 
     /// What a viewer sees focused at normalised depth `focus` (`[0, 1]`, 0 = near) from `codes` `[3, H, W]`
     /// shown with normaliser `amplitude_scale` (Eq. 8–10), as amplitudes `[3, H, W]`.

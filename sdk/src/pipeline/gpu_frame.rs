@@ -2,7 +2,7 @@
 //! (its outputs put into [`SlmFrame`] and [`Heads`]), and how a session gets one ([`build`]: the adapter, the
 //! precision, the fallback reasons).
 
-use ndarray::{Array3, ArrayView3};
+use ndarray::Array3;
 
 use super::config::{Backend, GpuPrecision};
 use super::executor::{Accelerator, BackendReportParts, FrameExecutor};
@@ -19,12 +19,7 @@ impl FrameExecutor for GpuFrameSession {
         Backend::Gpu
     }
 
-    fn run(
-        &mut self,
-        input: ArrayView3<f32>,
-        out: &mut SlmFrame,
-        full: bool,
-    ) -> Result<Option<Heads>> {
+    fn run(&mut self, input: &[&[f32]], out: &mut SlmFrame, full: bool) -> Result<Option<Heads>> {
         let phase = full.then_some(&mut out.phase);
         let frame = GpuFrameSession::run(self, input, &mut out.codes, phase)?;
         out.amplitude_scale = frame.amplitude_scale;

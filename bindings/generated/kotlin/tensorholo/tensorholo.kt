@@ -3564,7 +3564,7 @@ data class StageTimings (
     , 
     /**
      * On the GPU: the whole GPU frame (CNNs and optics; the three stage fields above are then 0 and
-     * `cnn_ms` is the input packing). 0 on the CPU.
+     * `cnn_ms` is the CPU's input checks and packing). 0 on the CPU.
      */
     var `gpuMs`: kotlin.Double
     , 
@@ -3884,7 +3884,7 @@ enum class GpuPrecision {
      */
     F32,
     /**
-     * f16 activations and products, f32 sums: half the GPU memory; f32 where the GPU lacks f16.
+     * f16 activations, f32 products and sums: half the GPU memory; f32 where the GPU lacks f16.
      */
     F16;
 

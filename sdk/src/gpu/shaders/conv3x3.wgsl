@@ -9,11 +9,12 @@
 // where `residual` = 1 (the layer then writes s_{i+1} = y_i + s_{i−1} directly, so no separate add pass).
 //
 // One source, two precisions (GpuPrecision; src/gpu/shaders.rs prepends the line that picks one):
-//   CONV3X3:     `alias act = f32;`                  hidden activations and products in f32;
-//   CONV3X3_F16: `enable f16; alias act = f16;`      hidden activations stored as f16, products in f16, sums in
-//                                                    f32 (needs the device's SHADER_F16).
-// `act` is the type of the hidden activations s_1 … s_{N−1} and of the products. The network input x and the
-// last layer's output stay f32 (they come from the CPU-packed input and go to the f32 heads).
+//   CONV3X3:     `alias act = f32;`                  hidden activations stored as f32;
+//   CONV3X3_F16: `enable f16; alias act = f16;`      hidden activations stored as f16 (half the memory traffic
+//                                                    and workgroup memory; needs the device's SHADER_F16).
+// `act` is the type of the stored hidden activations s_1 … s_{N−1} and of the staged input tile. Products and
+// sums are f32 in both. The network input x and the last layer's output stay f32 (they come from the CPU-packed
+// input and go to the f32 heads).
 //
 // Bindings (group 0); which of the f32/act variants a layer reads and writes is set by its uniform:
 //   0: uniform Layer { h, w, c_a, c_b, c_out, relu, residual, offset_a, offset_b, a_hidden, out_hidden }
@@ -27,10 +28,22 @@
 //   8: storage write out_y: array<f32>, [c_out, H, W] (out_hidden = 0: the last layer)
 // Unused bindings take any buffer that does not alias the layer's written one.
 //
-// Tiling: a workgroup is a 16×16 block of pixels and a block of 4 output channels (grid: ceil(W/16),
-// ceil(H/16), ceil(c_out/4)). For each input channel the workgroup stages the 18×18 input tile (the block and
-// its 1-pixel halo) in workgroup memory, once, and every invocation reuses each staged value for 9 taps × 4
-// output channels (vec4 accumulator): 36 multiply-adds per value read from memory instead of 1.
+// Tiling (register blocking, as a GEMM micro-kernel): a workgroup of 16×8 invocations computes a block of
+// 8 rows × 64 columns of pixels for 8 output channels (grid: ceil(W/64), ceil(H/8), ceil(c_out/8)). Each
+// invocation holds 4 adjacent pixels of one row × 8 output channels: 32 f32 sums in eight vec4 registers.
+// The input channels go through in rounds of 4: the workgroup stages the 4 channels' 10×66 input tile (the
+// block and its 1-pixel halo) and their 4 × 9 × 8 weights in workgroup memory, once per round. Per input
+// channel an invocation then reads one 3×6 patch (18 values) and 18 vec4 weights (the same address for the
+// whole workgroup: a broadcast) for 288 multiply-adds: 8 per value read from workgroup memory, against 1 read
+// per multiply-add untiled, and two barriers per 4 channels. Channels past c_a + c_b and output channels past
+// c_out are staged as zeros (the pre-filter's 6 input channels take two rounds). Workgroup memory: 11.7 KB
+// with f32 tiles, 6.4 KB with f16, within WebGPU's 16 KB default.
+//
+// Why this shape (docs/GPU.md, "Speed"; NVIDIA H200 through Vulkan, one run each, 1080p holo8): 16×8
+// invocations ran the hologram CNN in 9.3 ms (f16) and 13.7 ms (f32), against 10.4/15.3 ms for 8×8, 10.2/13.4
+// for 8×16, 12.2–21.7 ms for two rows per invocation (64 sums: fewer workgroups in flight), 16.5/30.9 ms for
+// rounds of 8 channels, and 53.6/55.4 ms for the previous kernel (one pixel × 4 output channels per
+// invocation, 16×16 pixels per workgroup).
 
 struct Layer {
     h: u32,
@@ -56,14 +69,26 @@ struct Layer {
 @group(0) @binding(7) var<storage, read_write> out_s: array<act>;
 @group(0) @binding(8) var<storage, read_write> out_y: array<f32>;
 
-const TILE: u32 = 16u;
-const HALO: u32 = 18u;
+const WG_X: u32 = 16u;
+const WG_Y: u32 = 8u;
+const PX: u32 = 4u; // pixels per invocation, adjacent in a row (the unrolled sums below hold 4)
+const OUT: u32 = 8u; // output channels per workgroup (the unrolled sums below hold 8)
+const ROUND: u32 = 4u; // input channels staged per round
+const BLOCK_W: u32 = WG_X * PX;
+const BLOCK_H: u32 = WG_Y;
+const HALO_W: u32 = BLOCK_W + 2u;
+const HALO_H: u32 = BLOCK_H + 2u;
+const PLANE: u32 = HALO_W * HALO_H;
 
-var<workgroup> tile: array<act, 324>;
+// [ROUND, HALO_H, HALO_W]: the round's input tiles.
+var<workgroup> tile: array<act, ROUND * PLANE>;
+// [ROUND, 9, 2]: the round's weights, output channels o0..o0+3 then o0+4..o0+7 per (channel, tap).
+var<workgroup> wtile: array<vec4<f32>, ROUND * 18u>;
 
-// Input channel c at (y, x), shifted by its offset; 0 outside the frame (zero padding of the centred input).
+// Input channel c at (y, x), shifted by its offset; 0 outside the frame (zero padding of the centred input) and
+// past the last channel (a round's padding).
 fn load(c: u32, y: i32, x: i32) -> act {
-    if (y < 0 || x < 0 || y >= i32(layer.h) || x >= i32(layer.w)) {
+    if (c >= layer.c_a + layer.c_b || y < 0 || x < 0 || y >= i32(layer.h) || x >= i32(layer.w)) {
         return act(0.0);
     }
     let p = u32(y) * layer.w + u32(x);
@@ -77,58 +102,120 @@ fn load(c: u32, y: i32, x: i32) -> act {
     return act(in_b[(c - layer.c_a) * n + p] - layer.offset_b);
 }
 
-fn weight(o: u32, c: u32, k: u32) -> act {
-    if (o >= layer.c_out) {
-        return act(0.0);
+// Weight of output channel o, input channel c, tap k (row-major 3×3); 0 past either's last channel.
+fn weight(o: u32, c: u32, k: u32) -> f32 {
+    let channels = layer.c_a + layer.c_b;
+    if (o >= layer.c_out || c >= channels) {
+        return 0.0;
     }
-    return act(weights[(o * (layer.c_a + layer.c_b) + c) * 9u + k]);
+    return weights[(o * channels + c) * 9u + k];
 }
 
-@compute @workgroup_size(16, 16)
-fn conv3x3(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>,
-           @builtin(local_invocation_index) li: u32) {
-    let x0 = i32(wg.x * TILE) - 1;
-    let y0 = i32(wg.y * TILE) - 1;
-    let o0 = wg.z * 4u;
-    let channels = layer.c_a + layer.c_b;
-    var acc = vec4<f32>(0.0);
-    for (var c = 0u; c < channels; c++) {
-        // Stage the 18×18 tile of channel c (324 values, 256 invocations: two rounds).
-        for (var t = li; t < HALO * HALO; t += 256u) {
-            tile[t] = load(c, y0 + i32(t / HALO), x0 + i32(t % HALO));
-        }
-        workgroupBarrier();
-        for (var k = 0u; k < 9u; k++) {
-            let v = tile[(lid.y + k / 3u) * HALO + lid.x + k % 3u];
-            let wv = vec4<act>(weight(o0, c, k), weight(o0 + 1u, c, k), weight(o0 + 2u, c, k),
-                               weight(o0 + 3u, c, k));
-            // Products in act, sums in f32.
-            acc += vec4<f32>(v * wv);
-        }
-        workgroupBarrier();
-    }
-    let x = wg.x * TILE + lid.x;
-    let y = wg.y * TILE + lid.y;
+// Bias, ReLU, residual add and store of output channels o0..o0+7 (`lo`, `hi`) at pixel (x, y).
+fn finish(x: u32, y: u32, o0: u32, lo: vec4<f32>, hi: vec4<f32>) {
     if (x >= layer.w || y >= layer.h) {
         return;
     }
     let n = layer.h * layer.w;
     let p = y * layer.w + x;
-    for (var j = 0u; j < 4u; j++) {
+    for (var j = 0u; j < OUT; j++) {
         let o = o0 + j;
-        if (o < layer.c_out) {
-            var v = acc[j] + bias[o];
-            if (layer.relu == 1u) {
-                v = max(v, 0.0);
-            }
-            if (layer.residual == 1u) {
-                v += f32(res[o * n + p]);
-            }
-            if (layer.out_hidden == 1u) {
-                out_s[o * n + p] = act(v);
-            } else {
-                out_y[o * n + p] = v;
-            }
+        if (o >= layer.c_out) {
+            return;
+        }
+        var v = select(hi[j & 3u], lo[j & 3u], j < 4u) + bias[o];
+        if (layer.relu == 1u) {
+            v = max(v, 0.0);
+        }
+        if (layer.residual == 1u) {
+            v += f32(res[o * n + p]);
+        }
+        if (layer.out_hidden == 1u) {
+            out_s[o * n + p] = act(v);
+        } else {
+            out_y[o * n + p] = v;
         }
     }
+}
+
+@compute @workgroup_size(WG_X, WG_Y)
+fn conv3x3(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>,
+           @builtin(local_invocation_index) li: u32) {
+    let x0 = i32(wg.x * BLOCK_W) - 1;
+    let y0 = i32(wg.y * BLOCK_H) - 1;
+    let o0 = wg.z * OUT;
+    let channels = layer.c_a + layer.c_b;
+    // Sums: a_p for output channels o0..o0+3 at pixel p of the invocation, b_p for o0+4..o0+7.
+    var a0 = vec4<f32>(0.0);
+    var a1 = vec4<f32>(0.0);
+    var a2 = vec4<f32>(0.0);
+    var a3 = vec4<f32>(0.0);
+    var b0 = vec4<f32>(0.0);
+    var b1 = vec4<f32>(0.0);
+    var b2 = vec4<f32>(0.0);
+    var b3 = vec4<f32>(0.0);
+    for (var c0 = 0u; c0 < channels; c0 += ROUND) {
+        // Stage the round: ROUND · PLANE input values and ROUND · 18 weight vectors.
+        for (var t = li; t < ROUND * PLANE; t += WG_X * WG_Y) {
+            let r = t % PLANE;
+            tile[t] = load(c0 + t / PLANE, y0 + i32(r / HALO_W), x0 + i32(r % HALO_W));
+        }
+        for (var t = li; t < ROUND * 18u; t += WG_X * WG_Y) {
+            let c = c0 + t / 18u;
+            let k = (t % 18u) / 2u;
+            let o = o0 + 4u * (t % 2u);
+            wtile[t] = vec4<f32>(weight(o, c, k), weight(o + 1u, c, k), weight(o + 2u, c, k),
+                                 weight(o + 3u, c, k));
+        }
+        workgroupBarrier();
+        for (var cc = 0u; cc < ROUND; cc++) {
+            for (var dy = 0u; dy < 3u; dy++) {
+                let at = cc * PLANE + (lid.y + dy) * HALO_W + lid.x * PX;
+                let i0 = f32(tile[at]);
+                let i1 = f32(tile[at + 1u]);
+                let i2 = f32(tile[at + 2u]);
+                let i3 = f32(tile[at + 3u]);
+                let i4 = f32(tile[at + 4u]);
+                let i5 = f32(tile[at + 5u]);
+                let wk = (cc * 9u + dy * 3u) * 2u;
+                var lo = wtile[wk];
+                var hi = wtile[wk + 1u];
+                a0 += i0 * lo;
+                b0 += i0 * hi;
+                a1 += i1 * lo;
+                b1 += i1 * hi;
+                a2 += i2 * lo;
+                b2 += i2 * hi;
+                a3 += i3 * lo;
+                b3 += i3 * hi;
+                lo = wtile[wk + 2u];
+                hi = wtile[wk + 3u];
+                a0 += i1 * lo;
+                b0 += i1 * hi;
+                a1 += i2 * lo;
+                b1 += i2 * hi;
+                a2 += i3 * lo;
+                b2 += i3 * hi;
+                a3 += i4 * lo;
+                b3 += i4 * hi;
+                lo = wtile[wk + 4u];
+                hi = wtile[wk + 5u];
+                a0 += i2 * lo;
+                b0 += i2 * hi;
+                a1 += i3 * lo;
+                b1 += i3 * hi;
+                a2 += i4 * lo;
+                b2 += i4 * hi;
+                a3 += i5 * lo;
+                b3 += i5 * hi;
+            }
+        }
+        workgroupBarrier();
+    }
+    let x = wg.x * BLOCK_W + lid.x * PX;
+    let y = wg.y * BLOCK_H + lid.y;
+    finish(x, y, o0, a0, b0);
+    finish(x + 1u, y, o0, a1, b1);
+    finish(x + 2u, y, o0, a2, b2);
+    finish(x + 3u, y, o0, a3, b3);
 }
