@@ -44,7 +44,10 @@ pub(crate) fn quantize_f32(x: f32, zp: f32) -> f32 {
 /// ([`quantize_f32`]); branch-free, so the buffers' fill loops vectorise.
 #[inline(always)]
 pub(crate) fn quantize(x: f32, zp: u8) -> u8 {
-    quantize_f32(x, zp as f32) as u8
+    // The value is a whole number in [0, 255]. Adding 2²³ puts it, exactly, in the low bits of the
+    // mantissa, read back as an integer: plain vector additions, where a float-to-int conversion (`as u8`
+    // or `as i32`, saturating) is compiled one value at a time.
+    (quantize_f32(x, zp as f32) + 8_388_608.0).to_bits() as u8
 }
 
 pub(crate) fn check_scale(what: &str, s: f32) -> Result<(), KernelError> {

@@ -69,6 +69,28 @@ fn quantize_rounds_ties_to_even_and_clamps() {
     assert_eq!(quantize(-300.0, 10), 0);
     assert_eq!(quantize(1e30, 10), 255);
     assert_eq!(quantize(-0.5, 3), 3);
+    // Against the definition, clamp(round_ties_even(x) + zp, 0, 255) with NaN → 0, on a sweep through every
+    // half step of [-300, 600], the integers' neighbours, and the non-finite values.
+    let mut xs: Vec<f32> = (-600..=1200).map(|i| i as f32 * 0.5).collect();
+    xs.extend((-300..=600).flat_map(|i| [i as f32 - 1e-4, i as f32 + 1e-4]));
+    xs.extend([
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        1e30,
+        -1e30,
+        4194304.5,
+    ]);
+    for zp in [0u8, 3, 127, 200, 255] {
+        for &x in &xs {
+            let want = if x.is_nan() {
+                0
+            } else {
+                (x.round_ties_even() + zp as f32).clamp(0.0, 255.0) as u8
+            };
+            assert_eq!(quantize(x, zp), want, "x {x}, zp {zp}");
+        }
+    }
 }
 
 #[test]

@@ -380,16 +380,7 @@ impl NativeInt8Plan {
                     let band = x.buf.band_mut(rows).map_err(kernel_err)?;
                     bands(band, threads, &|b| {
                         let f = f0 + b.rows().start - y0;
-                        for c in 0..net.graph.in_channels {
-                            b.quantize_fill_channel_rows(
-                                c,
-                                input.plane(c),
-                                f,
-                                offset,
-                                first.scale,
-                            )?;
-                        }
-                        Ok(())
+                        b.quantize_fill_planes_rows(|c| input.plane(c), f, offset, first.scale)
                     })?;
                 }
                 if let Some((rows, f0)) = x_cat.new_rows(strips, m)? {
