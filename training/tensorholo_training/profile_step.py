@@ -24,6 +24,10 @@ import torch
 from .train import Trainer, load_config
 
 
+# The small CPU run's configuration (training/configs/), found from this file: any working directory will do.
+SMALL_CPU = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "configs", "small_cpu.json")
+
+
 def _sync(device: str) -> None:
     if device.startswith("cuda"):
         torch.cuda.synchronize()
@@ -56,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
         sets = [f'device="{args.device}"', f"num_layers={args.layers}", f"synthetic_size={args.size}",
                 'synthetic_counts={"train":16,"val":2}', "stage1_steps=1000000", "stage2_steps=1000000",
                 "log_every=1000000", "val_every=1000000", "ckpt_every=1000000"]
-        trainer = Trainer(load_config("training/configs/small_cpu.json", sets, run_dir), log=lambda m: None)
+        trainer = Trainer(load_config(SMALL_CPU, sets, run_dir), log=lambda m: None)
         batches = trainer._batches()
         for index, name in enumerate(["stage1", "stage2"]):
             if index:

@@ -62,6 +62,12 @@ struct HeadParams {
     _pad: [u32; 2],
 }
 
+/// `conv3x3.wgsl`'s block: `WG_X · PX` columns, `WG_Y` rows and `OUT` output channels per workgroup (the
+/// shader's constants; a smaller grid leaves pixels uncomputed, which `shipped_cnns_match_tract_f32` catches).
+const BLOCK_COLUMNS: usize = 64;
+const BLOCK_ROWS: usize = 8;
+const BLOCK_CHANNELS: usize = 8;
+
 /// Bytes per stored hidden activation.
 fn activation_bytes(storage: GpuStorage) -> u64 {
     match storage {
@@ -168,8 +174,15 @@ impl GpuCnn {
                 &conv,
                 &[&params, input, in_s, input, &w, &b, res, out_s, output],
             );
-            // conv3x3.wgsl: blocks of 64 columns × 8 rows × 8 output channels.
-            passes.push((bind, grid_2d(width, height, l.c_out.div_ceil(8), [64, 8])));
+            passes.push((
+                bind,
+                grid_2d(
+                    width,
+                    height,
+                    l.c_out.div_ceil(BLOCK_CHANNELS),
+                    [BLOCK_COLUMNS as u32, BLOCK_ROWS as u32],
+                ),
+            ));
         }
         let (out_kernel, out_bind) = match &weights.output {
             CnnOutput::Heads {
@@ -212,14 +225,17 @@ impl GpuCnn {
             }
         };
         let macs = weights.macs_per_pixel() as f64 * n as f64;
-        // Each layer reads its input tiles once per 8 output channels (66×10 staged per 64×8 block: 1.29×
-        // its pixels, the halo included) and writes its output once.
+        // Each layer reads its input tiles once per block of output channels (the block and its 1-pixel halo)
+        // and writes its output once.
+        let halo =
+            ((BLOCK_COLUMNS + 2) * (BLOCK_ROWS + 2)) as f64 / (BLOCK_COLUMNS * BLOCK_ROWS) as f64;
         let elem = activation_bytes(storage) as f64;
         let bytes: f64 = layers
             .iter()
             .map(|l| {
                 elem * n as f64
-                    * (l.c_in as f64 * l.c_out.div_ceil(8) as f64 * 660.0 / 512.0 + l.c_out as f64)
+                    * (l.c_in as f64 * l.c_out.div_ceil(BLOCK_CHANNELS) as f64 * halo
+                        + l.c_out as f64)
             })
             .sum();
         Ok(Self {

@@ -39,11 +39,8 @@
 // c_out are staged as zeros (the pre-filter's 6 input channels take two rounds). Workgroup memory: 11.7 KB
 // with f32 tiles, 6.4 KB with f16, within WebGPU's 16 KB default.
 //
-// Why this shape (docs/GPU.md, "Speed"; NVIDIA H200 through Vulkan, one run each, 1080p holo8): 16×8
-// invocations ran the hologram CNN in 9.3 ms (f16) and 13.7 ms (f32), against 10.4/15.3 ms for 8×8, 10.2/13.4
-// for 8×16, 12.2–21.7 ms for two rows per invocation (64 sums: fewer workgroups in flight), 16.5/30.9 ms for
-// rounds of 8 channels, and 53.6/55.4 ms for the previous kernel (one pixel × 4 output channels per
-// invocation, 16×16 pixels per workgroup).
+// Why this shape: docs/GPU.md, "Speed" (nine shapes timed on an NVIDIA H200). The grid in src/gpu/cnn.rs
+// (BLOCK_COLUMNS, BLOCK_ROWS, BLOCK_CHANNELS) follows WG_X·PX, WG_Y and OUT below.
 
 struct Layer {
     h: u32,
