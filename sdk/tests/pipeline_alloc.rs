@@ -1,9 +1,9 @@
-//! Proves that after warm-up a CPU frame allocates nothing on the heap but the arrays it hands out: a counting
-//! global allocator counts every allocation of every thread (the colour workers included) around
-//! `HologramSession::render`. With the native CNN engine the hologram CNN writes its heads straight into the
-//! colour workers' planes and the pre-filter into their idle complex fields, so a frame allocates only the
-//! two heads arrays a session with full outputs keeps (`last_heads`): a lean session
-//! (`set_full_outputs(false)`, as the app library's generator runs) allocates nothing.
+//! Proves that after warm-up a CPU frame allocates nothing on the heap: a counting global allocator counts
+//! every allocation of every thread (the colour workers included) around `HologramSession::render`. With the
+//! native CNN engine the hologram CNN writes its heads straight into the colour workers' planes (a lean
+//! session, `set_full_outputs(false)`, as the app library's generator runs) or into the two heads arrays a
+//! session with full outputs keeps (`last_heads`, reused from frame to frame and read by the colour workers
+//! where they are), and the pre-filter into the workers' idle complex fields.
 //! Everything else (the CNN input read in place, offset propagation, double phase encoding, the calibrated
 //! per-pixel look-up table, the output copy) runs in the session's own buffers. A tract session is counted
 //! too, as a check that the counter sees the CNNs.
@@ -70,7 +70,7 @@ fn load(name: &str, kind: ModelKind) -> Arc<HologramModel> {
 }
 
 #[test]
-fn cpu_frames_allocate_only_the_kept_heads_after_warm_up() {
+fn cpu_frames_allocate_nothing_after_warm_up() {
     let (h, w) = (32, 48);
     let frames: Vec<RgbdFrame> = (0..6)
         .map(|i| {
@@ -142,15 +142,12 @@ fn cpu_frames_allocate_only_the_kept_heads_after_warm_up() {
             );
             match engine {
                 CnnEngine::Native => {
-                    // The kept heads: amplitude and phase, `[3, H, W]` f32 each.
-                    let per_frame = 2 * usize::from(full);
-                    let heads_bytes = 5 * per_frame * 3 * h * w * 4;
-                    assert_only(
-                        (allocations, bytes),
-                        5 * per_frame,
-                        heads_bytes,
-                        "only the kept heads",
-                    );
+                    assert_only((allocations, bytes), 0, 0, "nothing");
+                    if full {
+                        // The kept heads are this frame's: the midpoint hologram of the last frame's codes.
+                        let heads = session.last_heads().expect("full outputs keep the heads");
+                        assert!(heads.amplitude.iter().any(|&a| a > 0.0));
+                    }
                 }
                 _ => assert!(
                     allocations > 5 * 2,

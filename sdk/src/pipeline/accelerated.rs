@@ -93,8 +93,8 @@ impl HologramSession {
                     total_s: t.elapsed().as_secs_f64(),
                     ..FrameTimings::default()
                 };
-                if heads.is_some() {
-                    self.last_heads = heads;
+                if let Some(heads) = heads {
+                    self.last_heads = Some(std::sync::Arc::new(heads));
                 }
                 if gpu.pending_check {
                     // The self-check renders the frame on the CPU too, from the packed input.

@@ -4,11 +4,12 @@
 
 use std::sync::Arc;
 
-use ndarray::{Array3, ArrayView3, Axis};
+use ndarray::{Array3, Axis};
 use num_complex::Complex32;
-use tensorholo_kernels::phasor::phasors_in_place;
+use tensorholo_kernels::phasor::{phasors, phasors_in_place};
 use tensorholo_kernels::Isa;
 
+use super::frame::Heads;
 use super::models::calibrated_lut;
 use crate::encoding::{ChannelEncoder, ChannelStats};
 use crate::error::{HoloError, Result};
@@ -16,10 +17,16 @@ use crate::optics::{EvenMultiplier, Scratch, SpectralPlan};
 use crate::slm::DisplayCalibration;
 
 /// What a colour worker does next (see [`ColourState::run`]).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub(super) enum Task {
-    /// Heads → field, offset propagation, then the pre-filter input or pass 1 of the encoding.
-    Midpoint { prefilter: bool },
+    /// Heads → field, offset propagation, then the pre-filter input or pass 1 of the encoding. The heads
+    /// are read from `heads` (the session's `[3, H, W]` arrays, shared read-only with the other colours:
+    /// no copy into the field's memory, 50 MB at 1080p) or, with `None`, from the field's memory
+    /// ([`ColourState::planes`], where the CNN wrote them).
+    Midpoint {
+        prefilter: bool,
+        heads: Option<Arc<Heads>>,
+    },
     /// Pre-filter output `(Re, Im)` → field, then pass 1 of the encoding.
     Filtered,
     /// Pass 2 of the encoding and the LUT.
@@ -67,8 +74,12 @@ pub(super) struct ColourState {
 impl ColourState {
     pub(super) fn run(&mut self, task: Task) -> Result<()> {
         match task {
-            Task::Midpoint { prefilter } => {
-                if !self.heads_to_field()? {
+            Task::Midpoint { prefilter, heads } => {
+                let finite = match heads {
+                    Some(heads) => self.shared_heads_to_field(&heads)?,
+                    None => self.heads_to_field()?,
+                };
+                if !finite {
                     return Err(HoloError::InvalidData(
                         "midpoint heads hold NaN or infinite values".into(),
                     ));
@@ -155,6 +166,25 @@ impl ColourState {
             .map_err(|e| HoloError::Internal(format!("phasor rows: {e}")))
     }
 
+    /// Turns this colour's planes of the session's heads (`[3, H, W]` each, standard layout) into the field,
+    /// on the same rows as [`ColourState::heads_to_field`] (bit-identical: the same phasor per pixel).
+    /// Returns whether every head was finite.
+    ///
+    /// Errors: [`HoloError::Internal`] if a plane is not contiguous or not `H·W` values (the session makes
+    /// them so) or the kernel refuses.
+    fn shared_heads_to_field(&mut self, heads: &Heads) -> Result<bool> {
+        let c = self.colour;
+        let (Some(amplitude), Some(phase)) = (
+            heads.amplitude.index_axis(Axis(0), c).to_slice(),
+            heads.phase.index_axis(Axis(0), c).to_slice(),
+        ) else {
+            return Err(HoloError::Internal("shared heads not contiguous".into()));
+        };
+        let flat = bytemuck::cast_slice_mut::<Complex32, f32>(&mut self.field);
+        phasors(amplitude, phase, flat, self.isa)
+            .map_err(|e| HoloError::Internal(format!("phasor rows: {e}")))
+    }
+
     /// Turns the two planes in the field's memory ([`ColourState::planes`]) into the field in place:
     /// `field[i] = f(first[i], second[i])`. The second plane is copied into `phase` first (the encoder's
     /// next pass overwrites it); then pixels run from last to first, so that writing pixel `i` (values
@@ -188,15 +218,6 @@ fn field_planes(field: &mut [Complex32]) -> PlanePairMut<'_> {
 /// The error for a scratch without room for the pre-filter's input (an internal inconsistency).
 fn no_room() -> HoloError {
     HoloError::Internal("no room for the pre-filter's input planes".into())
-}
-
-/// Copies channel `c` of a `[C, H, W]` array into `out` (`H·W` values).
-pub(super) fn copy_channel(a: ArrayView3<f32>, c: usize, out: &mut [f32]) {
-    let lane = a.index_axis(Axis(0), c);
-    match lane.as_slice() {
-        Some(src) => out.copy_from_slice(src),
-        None => out.iter_mut().zip(lane.iter()).for_each(|(o, v)| *o = *v),
-    }
 }
 
 /// Writes `src` (`H·W` values) into channel `c` of a standard-layout `[C, H, W]` array.

@@ -6,10 +6,10 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use ndarray::{Array3, ArrayView3, Axis};
+use ndarray::{Array3, Axis};
 
 use super::cnn_stage::CnnStage;
-use super::colour::{copy_channel, fill_channel, ColourState, Task};
+use super::colour::{fill_channel, ColourState, Task};
 use super::config::Backend;
 use super::executor::Accelerator;
 use super::frame::{FrameTimings, Heads, SlmFrame};
@@ -37,7 +37,7 @@ pub struct HologramSession {
     pub(super) states: [Option<Box<ColourState>>; 3],
     pub(super) workers: ColourWorkers,
     pub(super) output: SlmFrame,
-    pub(super) last_heads: Option<Heads>,
+    pub(super) last_heads: Option<Arc<Heads>>,
     pub(super) plan_report: PlanReport,
     pub(super) backend: BackendReport,
     pub(super) full_outputs: bool,
@@ -125,7 +125,7 @@ impl HologramSession {
     /// `None` before the first frame and after a CPU frame that failed (a frame frees the previous heads
     /// before its CNN runs, so that two frames' heads are never held at once).
     pub fn last_heads(&self) -> Option<&Heads> {
-        self.last_heads.as_ref()
+        self.last_heads.as_deref()
     }
 
     /// Ends the session and keeps the last frame: its output and the hologram CNN heads (`None` before the
@@ -136,7 +136,9 @@ impl HologramSession {
         let Self {
             output, last_heads, ..
         } = self;
-        (output, last_heads)
+        // The colour workers let go of the heads before a frame ends: the session's handle is the only one.
+        let heads = last_heads.map(|h| Arc::try_unwrap(h).unwrap_or_else(|h| (*h).clone()));
+        (output, heads)
     }
 
     /// Renders one RGB-D frame (`[3, H, W]` amplitude and `[H, W]` normalised depth at the session's size)
@@ -157,8 +159,41 @@ impl HologramSession {
             self.cnn.pack_frame(frame)?;
             return self.render_on_accelerator(None, t);
         }
-        // The previous frame's heads go before this frame's arrive (at 1080p, 50 MB less at the peak).
-        self.last_heads = None;
+        // The previous frame's heads are this frame's arrays (or go before this frame's arrive: at 1080p,
+        // 50 MB less at the peak).
+        let previous = self.last_heads.take();
+        if self.full_outputs {
+            // The CNN writes its heads into the arrays the session keeps, and the colour workers read them
+            // there (no copy: 50 MB at 1080p). The previous frame's arrays are reused (no allocation; written
+            // pages: fresh arrays cost the CNN 5–10 % at 1080p in page faults).
+            let (h, w) = (self.height, self.width);
+            let fits = |a: &Array3<f32>| a.dim() == (3, h, w) && a.is_standard_layout();
+            let mut shared = match previous {
+                Some(p) if Arc::strong_count(&p) == 1 && fits(&p.amplitude) && fits(&p.phase) => p,
+                _ => Arc::new(Heads {
+                    amplitude: Array3::zeros((3, h, w)),
+                    phase: Array3::zeros((3, h, w)),
+                }),
+            };
+            let cnn_s = {
+                let heads = Arc::get_mut(&mut shared);
+                let Some((Some(a), Some(p))) =
+                    heads.map(|h| (h.amplitude.as_slice_mut(), h.phase.as_slice_mut()))
+                else {
+                    return Err(HoloError::Internal(
+                        "the kept heads are not writable".into(),
+                    ));
+                };
+                let n = h * w;
+                let (a0, a12) = a.split_at_mut(n);
+                let (a1, a2) = a12.split_at_mut(n);
+                let (p0, p12) = p.split_at_mut(n);
+                let (p1, p2) = p12.split_at_mut(n);
+                self.cnn.run_frame_into(frame, [a0, a1, a2, p0, p1, p2])?
+            };
+            return self.encode_shared(shared, cnn_s);
+        }
+        drop(previous);
         // The CNN writes its heads straight into the colour workers' planes (no per-frame output arrays).
         let [(a0, p0), (a1, p1), (a2, p2)] =
             colour_states(&mut self.states)?.map(ColourState::planes);
@@ -191,49 +226,46 @@ impl HologramSession {
     /// non-finite heads or a hologram that is zero everywhere.
     pub(crate) fn encode_heads(&mut self, heads: Heads, cnn_s: f64) -> Result<&SlmFrame> {
         self.last_heads = None;
+        let standard = |a: Array3<f32>| {
+            if a.is_standard_layout() {
+                a
+            } else {
+                a.as_standard_layout().into_owned()
+            }
+        };
+        let heads = Heads {
+            amplitude: standard(heads.amplitude),
+            phase: standard(heads.phase),
+        };
+        self.encode_shared(Arc::new(heads), cnn_s)
+    }
+
+    /// [`HologramSession::encode_heads`] for heads in standard layout, shared with the colour workers (no
+    /// copy); they become [`HologramSession::last_heads`] with full outputs.
+    fn encode_shared(&mut self, heads: Arc<Heads>, cnn_s: f64) -> Result<&SlmFrame> {
+        self.last_heads = None;
         let t0 = Instant::now();
         self.propagate_to_slm(&heads)?;
-        // The colour workers hold the heads now; without full outputs nobody reads them again, so they go
-        // before the pre-filter's outputs arrive (50 MB less at the 1080p peak).
+        // Without full outputs nobody reads the heads again: they go before the pre-filter's outputs arrive
+        // (50 MB less at the 1080p peak).
         let heads = self.full_outputs.then_some(heads);
         self.encode_from_midpoint(t0, cnn_s, heads)
     }
 
     /// [`HologramSession::encode_heads`] for heads the CNN wrote into the colour planes
-    /// ([`CnnStage::run_frame_into`]): keeps a copy as [`HologramSession::last_heads`] when the session has
-    /// full outputs, and runs the rest of the frame (the colour workers check the heads are finite as they
-    /// turn them into fields).
+    /// ([`CnnStage::run_frame_into`]) of a session without full outputs: runs the rest of the frame (the
+    /// colour workers check the heads are finite as they turn them into fields); no heads are kept.
     ///
     /// Errors: [`HoloError::InvalidData`] for non-finite heads; as [`HologramSession::encode_heads`].
     fn encode_loaded(&mut self, cnn_s: f64) -> Result<&SlmFrame> {
         self.last_heads = None;
         let t0 = Instant::now();
-        let (h, w) = (self.height, self.width);
-        // The kept heads are built from the planes without zeroing first (one pass over 50 MB at 1080p, not
-        // two).
-        let heads = if self.full_outputs {
-            let n = h * w;
-            let (mut amplitude, mut phase) = (Vec::with_capacity(3 * n), Vec::with_capacity(3 * n));
-            for slot in self.states.iter_mut() {
-                let (first, second) = slot.as_deref_mut().ok_or_else(lost_state)?.planes();
-                amplitude.extend_from_slice(first);
-                phase.extend_from_slice(second);
-            }
-            let shaped = |v| {
-                Array3::from_shape_vec((3, h, w), v)
-                    .map_err(|e| HoloError::Internal(format!("kept heads: {e}")))
-            };
-            Some(Heads {
-                amplitude: shaped(amplitude)?,
-                phase: shaped(phase)?,
-            })
-        } else {
-            None
-        };
         let prefilter = self.prefilter.is_some();
-        self.workers
-            .run(&mut self.states, |_| Task::Midpoint { prefilter })?;
-        self.encode_from_midpoint(t0, cnn_s, heads)
+        self.workers.run(&mut self.states, |_| Task::Midpoint {
+            prefilter,
+            heads: None,
+        })?;
+        self.encode_from_midpoint(t0, cnn_s, None)
     }
 
     /// The rest of a frame once the colour workers propagated the midpoint hologram (started at `t0`): the
@@ -242,7 +274,7 @@ impl HologramSession {
         &mut self,
         t0: Instant,
         cnn_s: f64,
-        heads: Option<Heads>,
+        heads: Option<Arc<Heads>>,
     ) -> Result<&SlmFrame> {
         let offset_s = t0.elapsed().as_secs_f64();
         let t = Instant::now();
@@ -271,15 +303,15 @@ impl HologramSession {
         Ok(&self.output)
     }
 
-    /// Stage 2 on its own (no heap allocation after the first frame): copies the midpoint `heads` into the
-    /// colour states; the workers convert them to the field, propagate it to the SLM (Eq. 6, carrier removed)
-    /// and either prepare the pre-filter input or run pass 1 of the double phase encoding. Follow with
-    /// [`HologramSession::run_prefilter_cnn`] (then the workers' `Task::Filtered`) and
-    /// [`HologramSession::encode`] ([`HologramSession::encode_heads`] does all three).
+    /// Stage 2 on its own: the colour workers read the midpoint `heads` (`[3, H, W]` each, standard layout)
+    /// where they are (shared read-only: no copy), turn them into fields, propagate them to the SLM (Eq. 6,
+    /// carrier removed) and either prepare the pre-filter input or run pass 1 of the double phase encoding.
+    /// Follow with [`HologramSession::run_prefilter_cnn`] (then the workers' `Task::Filtered`) and
+    /// [`HologramSession::encode`] ([`HologramSession::encode_heads`] does all three). No heap allocation.
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for heads of another size; [`HoloError::InvalidData`] for
-    /// non-finite values.
-    pub(crate) fn propagate_to_slm(&mut self, heads: &Heads) -> Result<()> {
+    /// non-finite values (found by the workers as they read them).
+    pub(crate) fn propagate_to_slm(&mut self, heads: &Arc<Heads>) -> Result<()> {
         let want = [3, self.height, self.width];
         for head in [&heads.amplitude, &heads.phase] {
             if head.shape() != want {
@@ -290,30 +322,11 @@ impl HologramSession {
                 });
             }
         }
-        let non_finite = heads
-            .amplitude
-            .iter()
-            .chain(heads.phase.iter())
-            .any(|v| !v.is_finite());
-        if non_finite {
-            return Err(HoloError::InvalidData(
-                "midpoint heads hold NaN or infinite values".into(),
-            ));
-        }
-        self.load_planes(heads.amplitude.view(), heads.phase.view())?;
         let prefilter = self.prefilter.is_some();
-        self.workers
-            .run(&mut self.states, |_| Task::Midpoint { prefilter })
-    }
-
-    /// Copies channel `c` of `first` and `second` (`[3, H, W]`) into colour `c`'s two planes.
-    fn load_planes(&mut self, first: ArrayView3<f32>, second: ArrayView3<f32>) -> Result<()> {
-        for (c, slot) in self.states.iter_mut().enumerate() {
-            let (a, b) = slot.as_deref_mut().ok_or_else(lost_state)?.planes();
-            copy_channel(first, c, a);
-            copy_channel(second, c, b);
-        }
-        Ok(())
+        self.workers.run(&mut self.states, |_| Task::Midpoint {
+            prefilter,
+            heads: Some(heads.clone()),
+        })
     }
 
     /// Stage 3 on its own: the pre-filter CNN, if the session has one, on `[Re H, Im H]` of the offset
@@ -407,7 +420,7 @@ mod tests {
     use std::path::Path;
     use std::sync::Arc;
 
-    use ndarray::Array3;
+    use ndarray::{Array3, Axis};
 
     use crate::cnn::CnnEngine;
     use crate::error::HoloError;
@@ -430,6 +443,18 @@ mod tests {
             ..PipelineConfig::default()
         };
         HologramPipeline::new(load("holo8_rgbd.onnx", ModelKind::Hologram), pre, config).unwrap()
+    }
+
+    /// Copies `heads` into the colour workers' planes, as the CNN writes them there in a session without
+    /// full outputs.
+    fn load_planes(session: &mut super::HologramSession, heads: &Heads) {
+        for (c, slot) in session.states.iter_mut().enumerate() {
+            let (a, p) = slot.as_deref_mut().unwrap().planes();
+            let plane =
+                |x: &Array3<f32>| x.index_axis(Axis(0), c).iter().copied().collect::<Vec<_>>();
+            a.copy_from_slice(&plane(&heads.amplitude));
+            p.copy_from_slice(&plane(&heads.phase));
+        }
     }
 
     fn heads(h: usize, w: usize, amplitude: f32) -> Heads {
@@ -477,17 +502,14 @@ mod tests {
         let (mut session, good) = session_and_good_codes();
         let mut bad = heads(16, 20, 0.5);
         bad.phase[[1, 2, 3]] = f32::INFINITY;
-        session
-            .load_planes(bad.amplitude.view(), bad.phase.view())
-            .unwrap();
+        session.set_full_outputs(false);
+        load_planes(&mut session, &bad);
         let e = session.encode_loaded(0.0).unwrap_err();
         assert!(matches!(e, HoloError::InvalidData(_)), "{e}");
         assert!(session.last_heads().is_none());
         // The same heads, finite, through the same path: the codes of `encode_heads`.
         let fine = heads(16, 20, 0.5);
-        session
-            .load_planes(fine.amplitude.view(), fine.phase.view())
-            .unwrap();
+        load_planes(&mut session, &fine);
         assert_eq!(session.encode_loaded(0.0).unwrap().codes, good);
     }
 }
