@@ -308,6 +308,37 @@ impl SpectralPlan {
         Ok(())
     }
 
+    /// [`apply_even`](Self::apply_even) with a pass of the caller's fused into each end ([`Fft2::filter_rows`]):
+    /// `before(field, rows)` makes or changes the field's rows `rows` just before they are transformed (chunks
+    /// of [`crate::optics::fft::ROW_CHUNK`] rows, last chunk first, each starting at a multiple of it; the
+    /// whole field is passed, rows `≥ rows.end` already transformed), and `after(field, rows)` reads rows
+    /// `rows` of the result (first chunk first). With padding the hooks run on the whole field, before the
+    /// embedding and after the crop. Bit-identical to `before` on the whole field, `apply_even`, then `after`.
+    ///
+    /// Errors: as [`apply_even`](Self::apply_even).
+    pub fn apply_even_rows(
+        &self,
+        field: &mut [Complex32],
+        multiplier: &EvenMultiplier,
+        scratch: &mut Scratch,
+        mut before: impl FnMut(&mut [Complex32], std::ops::Range<usize>),
+        mut after: impl FnMut(&[Complex32], std::ops::Range<usize>),
+    ) -> Result<()> {
+        self.check_field(field.len())?;
+        self.check_even(multiplier)?;
+        let multiply = |r: usize, row: &mut [Complex32]| multiplier.multiply_row(r, row);
+        if self.pad {
+            before(field, 0..self.height);
+            self.filter_with(field, scratch, multiply);
+            after(field, 0..self.height);
+        } else {
+            let Scratch { block, fft, .. } = scratch;
+            self.fft
+                .filter_rows(field, block, fft, before, multiply, after);
+        }
+        Ok(())
+    }
+
     /// Errors: [`HoloError::ShapeMismatch`] if `multiplier` was made for another computational grid.
     fn check_even(&self, multiplier: &EvenMultiplier) -> Result<()> {
         let (rows, cols) = self.spectrum_layout();

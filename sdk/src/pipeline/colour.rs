@@ -75,32 +75,27 @@ impl ColourState {
     pub(super) fn run(&mut self, task: Task) -> Result<()> {
         match task {
             Task::Midpoint { prefilter, heads } => {
-                let finite = match heads {
-                    Some(heads) => self.shared_heads_to_field(&heads)?,
-                    None => self.heads_to_field()?,
+                let finite = match (&heads, &self.transfer) {
+                    (Some(heads), Some(_)) => self.propagate_shared_heads(heads, prefilter)?,
+                    (Some(heads), None) => self.shared_heads_to_field(heads)?,
+                    (None, _) => self.heads_to_field()?,
                 };
                 if !finite {
                     return Err(HoloError::InvalidData(
                         "midpoint heads hold NaN or infinite values".into(),
                     ));
                 }
-                if let Some(t) = &self.transfer {
+                if let (None, Some(t)) = (&heads, &self.transfer) {
                     self.plan
                         .apply_even(&mut self.field, t, &mut self.scratch)?;
                 }
-                if prefilter {
+                let propagated = heads.is_some() && self.transfer.is_some();
+                if prefilter && !propagated {
                     // Pre-filter input (docs/CONVENTIONS.md §7.2, format 2): Re H and Im H, two planes.
                     let n = self.field.len();
-                    let (re, im) = self
-                        .prefilter_input
-                        .split_at_mut_checked(n)
-                        .filter(|(_, im)| im.len() == n)
-                        .ok_or_else(no_room)?;
-                    for ((r, i), v) in re.iter_mut().zip(im.iter_mut()).zip(&self.field) {
-                        *r = v.re;
-                        *i = v.im;
-                    }
-                } else {
+                    let (re, im) = prefilter_planes(&mut self.prefilter_input, n)?;
+                    split_planes(&self.field, re, im);
+                } else if !prefilter {
                     self.stats = self.encoder.analyse(&mut self.field, &mut self.phase)?;
                 }
                 Ok(())
@@ -166,6 +161,61 @@ impl ColourState {
             .map_err(|e| HoloError::Internal(format!("phasor rows: {e}")))
     }
 
+    /// The offset propagation of this colour's planes of the session's heads (`[3, H, W]` each, standard
+    /// layout) with both ends fused into the row transforms ([`SpectralPlan::apply_even_rows`]): each chunk
+    /// of rows is made from the heads just before its forward row transforms, and, with `prefilter`, split
+    /// into the pre-filter's input planes `(Re H, Im H)` just after its inverse ones, while the rows are in
+    /// cache (two passes over the field fewer; bit-identical to the passes apart). Returns whether every
+    /// head was finite.
+    ///
+    /// Errors: as [`ColourState::shared_heads_to_field`]; [`HoloError::Internal`] without a transfer
+    /// function or, with `prefilter`, without room for the pre-filter's input.
+    fn propagate_shared_heads(&mut self, heads: &Heads, prefilter: bool) -> Result<bool> {
+        let c = self.colour;
+        let (Some(amplitude), Some(phase)) = (
+            heads.amplitude.index_axis(Axis(0), c).to_slice(),
+            heads.phase.index_axis(Axis(0), c).to_slice(),
+        ) else {
+            return Err(HoloError::Internal("shared heads not contiguous".into()));
+        };
+        let Some(transfer) = &self.transfer else {
+            return Err(HoloError::Internal("no transfer function to apply".into()));
+        };
+        let n = self.field.len();
+        let mut planes = if prefilter {
+            Some(prefilter_planes(&mut self.prefilter_input, n)?)
+        } else {
+            None
+        };
+        let (width, isa) = (self.size.1, self.isa);
+        let (mut finite, mut failure) = (true, None);
+        self.plan.apply_even_rows(
+            &mut self.field,
+            transfer,
+            &mut self.scratch,
+            |field, rows| {
+                let px = rows.start * width..rows.end * width;
+                let out = bytemuck::cast_slice_mut::<Complex32, f32>(&mut field[px.clone()]);
+                match phasors(&amplitude[px.clone()], &phase[px], out, isa) {
+                    Ok(f) => finite &= f,
+                    Err(e) => {
+                        failure.get_or_insert(e);
+                    }
+                }
+            },
+            |field, rows| {
+                if let Some((re, im)) = &mut planes {
+                    let px = rows.start * width..rows.end * width;
+                    split_planes(&field[px.clone()], &mut re[px.clone()], &mut im[px]);
+                }
+            },
+        )?;
+        match failure {
+            Some(e) => Err(HoloError::Internal(format!("phasor rows: {e}"))),
+            None => Ok(finite),
+        }
+    }
+
     /// Turns this colour's planes of the session's heads (`[3, H, W]` each, standard layout) into the field,
     /// on the same rows as [`ColourState::heads_to_field`] (bit-identical: the same phasor per pixel).
     /// Returns whether every head was finite.
@@ -213,6 +263,25 @@ impl ColourState {
 fn field_planes(field: &mut [Complex32]) -> PlanePairMut<'_> {
     let n = field.len();
     bytemuck::cast_slice_mut::<Complex32, f32>(field).split_at_mut(n)
+}
+
+/// The pre-filter's input planes `(Re H, Im H)` (docs/CONVENTIONS.md §7.2, format 2), `n` values each, in
+/// `prefilter_input`.
+///
+/// Errors: [`HoloError::Internal`] if it does not hold two planes (a session without a pre-filter).
+fn prefilter_planes(prefilter_input: &mut [f32], n: usize) -> Result<PlanePairMut<'_>> {
+    prefilter_input
+        .split_at_mut_checked(n)
+        .filter(|(_, im)| im.len() == n)
+        .ok_or_else(no_room)
+}
+
+/// `re[i], im[i] ← field[i]`.
+fn split_planes(field: &[Complex32], re: &mut [f32], im: &mut [f32]) {
+    for ((r, i), v) in re.iter_mut().zip(im.iter_mut()).zip(field) {
+        *r = v.re;
+        *i = v.im;
+    }
 }
 
 /// The error for a scratch without room for the pre-filter's input (an internal inconsistency).

@@ -512,4 +512,38 @@ mod tests {
         load_planes(&mut session, &fine);
         assert_eq!(session.encode_loaded(0.0).unwrap().codes, good);
     }
+
+    #[test]
+    fn fused_offset_propagation_is_bit_identical_to_the_passes_apart() {
+        // Shared heads (full outputs) take the fused path: phasors made in the forward row transforms'
+        // chunks, the pre-filter's input split off in the inverse ones. Heads in the workers' planes (a lean
+        // session) take the passes one after the other. The pre-filter's inputs must agree bit for bit.
+        let (h, w) = (16, 20);
+        let varied = Heads {
+            amplitude: Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+                ((x * 7 + y * 3 + c) % 13) as f32 / 9.0
+            }),
+            phase: Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+                ((x * 5 + y * 11 + 2 * c) % 17) as f32 / 16.0
+            }),
+        };
+        let mut fused = pipeline(true).session(h, w).unwrap();
+        let fused_codes = fused
+            .encode_heads(varied.clone(), 0.0)
+            .unwrap()
+            .codes
+            .clone();
+        let mut apart = pipeline(true).session(h, w).unwrap();
+        apart.set_full_outputs(false);
+        load_planes(&mut apart, &varied);
+        assert_eq!(apart.encode_loaded(0.0).unwrap().codes, fused_codes);
+        for (a, b) in fused.states.iter().zip(&apart.states) {
+            let bits = |s: &Option<Box<super::ColourState>>| {
+                let input = &s.as_ref().unwrap().prefilter_input;
+                assert_eq!(input.len(), 2 * h * w);
+                input.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+            };
+            assert_eq!(bits(a), bits(b));
+        }
+    }
 }
