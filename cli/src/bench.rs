@@ -63,6 +63,10 @@ pub struct BenchArgs {
     /// Skip the pipeline table (post-CNN stages and end-to-end frames).
     #[arg(long)]
     skip_pipeline: bool,
+    /// CPU pipeline sessions without full outputs, as an app's generator runs them: the SLM codes only (no
+    /// kept heads, no copy of the double phase pattern). By default the sessions keep them, as `holo render`.
+    #[arg(long)]
+    lean: bool,
     /// After the CNN table, time every tract operator of each CNN case once (one extra run per case) and print
     /// the time per operator kind: where the CNN's time goes (convolution algorithm, adds, activations).
     #[arg(long)]
@@ -518,6 +522,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                             let t = Instant::now();
                             let mut session = pipeline.session(h, w)?;
                             let setup_s = t.elapsed().as_secs_f64();
+                            session.set_full_outputs(!args.lean);
                             let layout = match layout {
                                 CnnLayout::Auto => {
                                     format!("auto → {}", session.plan_report().layout)

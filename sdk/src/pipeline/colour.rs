@@ -75,27 +75,27 @@ impl ColourState {
     pub(super) fn run(&mut self, task: Task) -> Result<()> {
         match task {
             Task::Midpoint { prefilter, heads } => {
-                let finite = match (&heads, &self.transfer) {
-                    (Some(heads), Some(_)) => self.propagate_shared_heads(heads, prefilter)?,
-                    (Some(heads), None) => self.shared_heads_to_field(heads)?,
-                    (None, _) => self.heads_to_field()?,
+                let finite = if self.transfer.is_some() {
+                    self.propagate(heads.as_deref(), prefilter)?
+                } else {
+                    let finite = match &heads {
+                        Some(heads) => self.shared_heads_to_field(heads)?,
+                        None => self.heads_to_field()?,
+                    };
+                    if prefilter {
+                        // Pre-filter input (docs/CONVENTIONS.md §7.2, format 2): Re H and Im H, two planes.
+                        let n = self.field.len();
+                        let (re, im) = prefilter_planes(&mut self.prefilter_input, n)?;
+                        split_planes(&self.field, re, im);
+                    }
+                    finite
                 };
                 if !finite {
                     return Err(HoloError::InvalidData(
                         "midpoint heads hold NaN or infinite values".into(),
                     ));
                 }
-                if let (None, Some(t)) = (&heads, &self.transfer) {
-                    self.plan
-                        .apply_even(&mut self.field, t, &mut self.scratch)?;
-                }
-                let propagated = heads.is_some() && self.transfer.is_some();
-                if prefilter && !propagated {
-                    // Pre-filter input (docs/CONVENTIONS.md §7.2, format 2): Re H and Im H, two planes.
-                    let n = self.field.len();
-                    let (re, im) = prefilter_planes(&mut self.prefilter_input, n)?;
-                    split_planes(&self.field, re, im);
-                } else if !prefilter {
+                if !prefilter {
                     self.stats = self.encoder.analyse(&mut self.field, &mut self.phase)?;
                 }
                 Ok(())
@@ -161,22 +161,35 @@ impl ColourState {
             .map_err(|e| HoloError::Internal(format!("phasor rows: {e}")))
     }
 
-    /// The offset propagation of this colour's planes of the session's heads (`[3, H, W]` each, standard
-    /// layout) with both ends fused into the row transforms ([`SpectralPlan::apply_even_rows`]): each chunk
-    /// of rows is made from the heads just before its forward row transforms, and, with `prefilter`, split
-    /// into the pre-filter's input planes `(Re H, Im H)` just after its inverse ones, while the rows are in
-    /// cache (two passes over the field fewer; bit-identical to the passes apart). Returns whether every
-    /// head was finite.
+    /// Heads → field and the offset propagation (Eq. 6, carrier removed) with both ends fused into the row
+    /// transforms ([`SpectralPlan::apply_even_rows`]): each chunk of rows is made from the heads just before
+    /// its forward row transforms and, with `prefilter`, split into the pre-filter's input planes
+    /// `(Re H, Im H)` (docs/CONVENTIONS.md §7.2, format 2) just after its inverse ones, while the rows are in
+    /// cache: two passes over the field fewer, bit-identical to the passes apart (tested). The heads are
+    /// this colour's planes of `heads` (the session's `[3, H, W]` arrays, standard layout) or, with `None`,
+    /// the field's memory ([`ColourState::planes`]; its phase plane is copied into `phase` first, and
+    /// [`phasor_rows`] makes the chunks in place). Returns whether every head was finite.
     ///
-    /// Errors: as [`ColourState::shared_heads_to_field`]; [`HoloError::Internal`] without a transfer
-    /// function or, with `prefilter`, without room for the pre-filter's input.
-    fn propagate_shared_heads(&mut self, heads: &Heads, prefilter: bool) -> Result<bool> {
-        let c = self.colour;
-        let (Some(amplitude), Some(phase)) = (
-            heads.amplitude.index_axis(Axis(0), c).to_slice(),
-            heads.phase.index_axis(Axis(0), c).to_slice(),
-        ) else {
-            return Err(HoloError::Internal("shared heads not contiguous".into()));
+    /// Errors: [`HoloError::Internal`] for shared heads that are not contiguous, without a transfer function
+    /// or, with `prefilter`, without room for the pre-filter's input, or if the phasor kernel refuses.
+    fn propagate(&mut self, heads: Option<&Heads>, prefilter: bool) -> Result<bool> {
+        let shared = match heads {
+            Some(heads) => {
+                let c = self.colour;
+                let (Some(amplitude), Some(phase)) = (
+                    heads.amplitude.index_axis(Axis(0), c).to_slice(),
+                    heads.phase.index_axis(Axis(0), c).to_slice(),
+                ) else {
+                    return Err(HoloError::Internal("shared heads not contiguous".into()));
+                };
+                Some((amplitude, phase))
+            }
+            None => {
+                let n = self.field.len();
+                self.phase
+                    .copy_from_slice(&bytemuck::cast_slice::<Complex32, f32>(&self.field)[n..]);
+                None
+            }
         };
         let Some(transfer) = &self.transfer else {
             return Err(HoloError::Internal("no transfer function to apply".into()));
@@ -187,16 +200,24 @@ impl ColourState {
         } else {
             None
         };
-        let (width, isa) = (self.size.1, self.isa);
+        let (width, isa, own_phase) = (self.size.1, self.isa, &self.phase);
         let (mut finite, mut failure) = (true, None);
         self.plan.apply_even_rows(
             &mut self.field,
             transfer,
             &mut self.scratch,
             |field, rows| {
-                let px = rows.start * width..rows.end * width;
-                let out = bytemuck::cast_slice_mut::<Complex32, f32>(&mut field[px.clone()]);
-                match phasors(&amplitude[px.clone()], &phase[px], out, isa) {
+                let made = match shared {
+                    Some((amplitude, phase)) => {
+                        let px = rows.start * width..rows.end * width;
+                        let out =
+                            bytemuck::cast_slice_mut::<Complex32, f32>(&mut field[px.clone()]);
+                        phasors(&amplitude[px.clone()], &phase[px], out, isa)
+                            .map_err(|e| HoloError::Internal(format!("phasor rows: {e}")))
+                    }
+                    None => phasor_rows(field, own_phase, rows, width, isa),
+                };
+                match made {
                     Ok(f) => finite &= f,
                     Err(e) => {
                         failure.get_or_insert(e);
@@ -210,10 +231,7 @@ impl ColourState {
                 }
             },
         )?;
-        match failure {
-            Some(e) => Err(HoloError::Internal(format!("phasor rows: {e}"))),
-            None => Ok(finite),
-        }
+        failure.map_or(Ok(finite), Err)
     }
 
     /// Turns this colour's planes of the session's heads (`[3, H, W]` each, standard layout) into the field,
@@ -259,6 +277,41 @@ impl ColourState {
     }
 }
 
+/// The phasors of rows `rows` of a `[H, width]` field whose memory holds the amplitude head in its first
+/// half (pixel `i` at value `i`, as [`ColourState::planes`] gives it to the CNN) and whose phase head is in
+/// `phase`, for the chunks of [`SpectralPlan::apply_even_rows`] (last first, each starting at a multiple of
+/// its row count): a chunk from row `y0 > 0` reads values up to `y1·width ≤ 2·y0·width`, below the values
+/// `2·y0·width..` it writes, so the out-of-place rows apply; the first chunk runs in place. The same values
+/// as [`ColourState::heads_to_field`] on the whole field. Returns whether every head was finite.
+///
+/// Errors: [`HoloError::Internal`] for a chunk that breaks that order, or if the kernel refuses.
+fn phasor_rows(
+    field: &mut [Complex32],
+    phase: &[f32],
+    rows: std::ops::Range<usize>,
+    width: usize,
+    isa: Isa,
+) -> Result<bool> {
+    let flat = bytemuck::cast_slice_mut::<Complex32, f32>(field);
+    let (p0, p1) = (rows.start * width, rows.end * width);
+    let run = if p0 == 0 {
+        phasors_in_place(&mut flat[..2 * p1], &phase[..p1], isa)
+    } else if p1 <= 2 * p0 {
+        let (amplitude, out) = flat.split_at_mut(2 * p0);
+        phasors(
+            &amplitude[p0..p1],
+            &phase[p0..p1],
+            &mut out[..2 * (p1 - p0)],
+            isa,
+        )
+    } else {
+        return Err(HoloError::Internal(format!(
+            "phasor rows {rows:?} would overwrite amplitudes still to be read"
+        )));
+    };
+    run.map_err(|e| HoloError::Internal(format!("phasor rows: {e}")))
+}
+
 /// A complex field's memory as two real planes of `field.len()` values each.
 fn field_planes(field: &mut [Complex32]) -> PlanePairMut<'_> {
     let n = field.len();
@@ -295,5 +348,44 @@ pub(super) fn fill_channel<T: Copy>(a: &mut Array3<T>, c: usize, src: &[T]) {
     match lane.as_slice_mut() {
         Some(dst) => dst.copy_from_slice(src),
         None => lane.iter_mut().zip(src).for_each(|(o, v)| *o = *v),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Phasors made chunk by chunk in the order of the offset propagation's row hooks (last chunk first,
+    /// starts at multiples of 8) are the whole-field in-place phasors, bit for bit, on every ISA; a chunk
+    /// order that would read overwritten amplitudes is refused, not computed.
+    #[test]
+    fn phasor_rows_in_chunk_order_equal_the_whole_field() {
+        let (h, w) = (37usize, 6usize);
+        let n = h * w;
+        let amplitude: Vec<f32> = (0..n)
+            .map(|i| 0.1 + (i as f32 * 0.31).sin().abs())
+            .collect();
+        let phase: Vec<f32> = (0..n).map(|i| (i as f32 * 0.077).fract()).collect();
+        for isa in Isa::available() {
+            let mut whole = vec![0.0f32; 2 * n];
+            whole[..n].copy_from_slice(&amplitude);
+            assert!(phasors_in_place(&mut whole, &phase, isa).unwrap());
+
+            let mut field = vec![Complex32::default(); n];
+            bytemuck::cast_slice_mut::<Complex32, f32>(&mut field)[..n].copy_from_slice(&amplitude);
+            for y0 in (0..h).step_by(crate::optics::fft::ROW_CHUNK).rev() {
+                let rows = y0..(y0 + crate::optics::fft::ROW_CHUNK).min(h);
+                assert!(phasor_rows(&mut field, &phase, rows, w, isa).unwrap());
+            }
+            let got = bytemuck::cast_slice::<Complex32, f32>(&field);
+            assert!(
+                got.iter()
+                    .zip(&whole)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{isa:?}"
+            );
+            // Rows 1..9 before row 0 (y1 = 9 > 2·y0 = 2) would read amplitudes the chunk overwrites.
+            assert!(phasor_rows(&mut field, &phase, 1..9, w, isa).is_err());
+        }
     }
 }

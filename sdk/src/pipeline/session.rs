@@ -514,10 +514,11 @@ mod tests {
     }
 
     #[test]
-    fn fused_offset_propagation_is_bit_identical_to_the_passes_apart() {
-        // Shared heads (full outputs) take the fused path: phasors made in the forward row transforms'
-        // chunks, the pre-filter's input split off in the inverse ones. Heads in the workers' planes (a lean
-        // session) take the passes one after the other. The pre-filter's inputs must agree bit for bit.
+    fn shared_heads_and_heads_in_the_planes_give_the_same_prefilter_input() {
+        // Shared heads (full outputs): phasors made from the session's arrays in the forward row transforms'
+        // chunks. Heads in the workers' planes (a lean session): the same chunks made in place. The
+        // pre-filter's inputs must agree bit for bit (the fused passes against the passes apart: the FFT's
+        // and `phasor_rows`' own tests).
         let (h, w) = (16, 20);
         let varied = Heads {
             amplitude: Array3::from_shape_fn((3, h, w), |(c, y, x)| {
