@@ -25,6 +25,8 @@ use crate::conv3x3::{f32_scalar, u8s8_scalar};
 use crate::depthwise::body::{self as depthwise, Job as DepthwiseJob, PORTABLE_TILE};
 #[cfg(target_arch = "x86_64")]
 use crate::double_phase::avx2 as dpm_avx2;
+#[cfg(target_arch = "x86_64")]
+use crate::double_phase::avx512 as dpm_avx512;
 use crate::double_phase::body::{self as dpm, EncodeParams};
 use crate::error::KernelError;
 use crate::heads::body as heads;
@@ -209,8 +211,8 @@ static OPS: [Ops; 5] = [
         depthwise: Some(depthwise::x86::rows_avx512),
         heads: Some(heads::x86::heads_avx512),
         grid: Some(heads::x86::grid_avx512),
-        dpm_analyse: None,
-        dpm_encode: None,
+        dpm_analyse: Some(dpm_avx512::analyse_avx512),
+        dpm_encode: Some(dpm_avx512::encode_avx512),
         phasors: Some(phasor::x86::polar_avx512),
         phasors_in_place: Some(phasor::x86::polar_in_place_avx512),
         peak_f32: Some(Peak {

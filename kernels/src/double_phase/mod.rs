@@ -7,10 +7,12 @@
 //! branchy wrap they cost about 29 ns per pixel (1080p, one thread). Here `atan2` and `acos` are
 //! polynomials with branch-free range reduction ([`atan2`], [`acos_unit`]: the Cephes `atanf`/`asinf`
 //! polynomials), the wrap adds or subtracts `2π` by selects, and the code rounds by truncation and a
-//! compare (`f32::round` is a libm call on SSE2). Two paths: the portable body (`body.rs`, plain safe Rust
+//! compare (`f32::round` is a libm call on SSE2). Three paths: the portable body (`body.rs`, plain safe Rust
 //! on chunks of 8 pixels in fixed-size arrays, which the compiler vectorises as far as it can: SSE2 on
-//! x86-64, NEON on aarch64) and, on x86-64, the same operations in AVX2 intrinsics (`avx2.rs`, ymm: the
-//! compiler's vectorisation of the body stayed at xmm width with spills, 2–3× slower). Neither uses FMA
+//! x86-64, NEON on aarch64) and, on x86-64, the same operations in AVX2 intrinsics (`avx2.rs`, ymm, 8 pixels
+//! per step: the compiler's vectorisation of the body stayed at xmm width with spills, 2–3× slower) and in
+//! AVX-512F intrinsics (`avx512.rs`, zmm, 16 pixels per step, mask blends: 1.8× the AVX2 rows on Zen 5,
+//! `docs/BENCHMARKS.md`). None uses FMA
 //! (Rust does not contract `a·b + c`, and the intrinsics multiply and add apart), so every path is
 //! bit-identical (tested on rows and on the exhaustive sweep).
 //!
@@ -33,6 +35,8 @@
 
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod avx2;
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod avx512;
 pub(crate) mod body;
 
 pub use body::{acos_unit, atan2, linear_code_wrapped, wrap_phase};
