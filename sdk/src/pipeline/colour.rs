@@ -45,10 +45,11 @@ pub(super) type PlanePairMut<'a> = (&'a mut [f32], &'a mut [f32]);
 #[derive(Debug)]
 pub(super) struct ColourState {
     /// The complex field `[H, W]`. Its memory also holds two real planes (`[H, W]` each, [`ColourState::planes`])
-    /// while the session writes them: the midpoint heads (amplitude, phase) before [`Task::Midpoint`] and,
-    /// with a pre-filter, its output `(Re H', Im H')` before [`Task::Filtered`]; each task turns them into
-    /// the field in place (no buffer of their own: 50 MB less at 1080p). The pre-filter's input `(Re H, Im H)`
-    /// waits in `prefilter_input` ([`ColourState::prefilter_io`]).
+    /// while the session writes them: the midpoint heads (amplitude, phase) before [`Task::Midpoint`] in a
+    /// session without full outputs and, with a pre-filter, its output `Re H'` before [`Task::Filtered`]
+    /// (`Im H'` in `phase`); each task turns them into the field in place (no buffer of their own: 50 MB less
+    /// at 1080p). The pre-filter's input `(Re H, Im H)` waits in `prefilter_input`
+    /// ([`ColourState::prefilter_io`]).
     pub(super) field: Vec<Complex32>,
     pub(super) plan: SpectralPlan,
     /// Offset transfer function with the carrier removed (Eq. 6), as its even quarter (a function of the
@@ -133,7 +134,8 @@ impl ColourState {
     }
 
     /// The pre-filter's input `(Re H, Im H)` that [`Task::Midpoint`] left in `prefilter_input`, beside the
-    /// field's memory the pre-filter writes its output into ([`ColourState::planes`]).
+    /// planes the pre-filter writes its output `(Re H', Im H')` into: the first half of the field's memory and
+    /// `phase` (so that [`Task::Filtered`] interleaves them into the field without copying a plane aside).
     ///
     /// Errors: [`HoloError::Internal`] if `prefilter_input` does not hold two planes (a session without a
     /// pre-filter).
@@ -144,7 +146,8 @@ impl ColourState {
             .split_at_checked(n)
             .filter(|(_, im)| im.len() == n)
             .ok_or_else(no_room)?;
-        Ok((input, field_planes(&mut self.field)))
+        let (re, _) = field_planes(&mut self.field);
+        Ok((input, (re, &mut self.phase[..])))
     }
 
     /// Turns the midpoint heads in the field's memory (amplitude, phase: [`ColourState::planes`]) into the
@@ -253,13 +256,10 @@ impl ColourState {
             .map_err(|e| HoloError::Internal(format!("phasor rows: {e}")))
     }
 
-    /// Turns the two planes in the field's memory ([`ColourState::planes`]: the pre-filter's `Re H'` and
-    /// `Im H'`) into the field in place: `field[i] = first[i] + i·second[i]`. The second plane is copied into
-    /// `phase` first (the encoder's next pass overwrites it), then [`interleave_in_place`].
+    /// Turns the pre-filter's output planes ([`ColourState::prefilter_io`]: `Re H'` in the first half of the
+    /// field's memory, `Im H'` in `phase`) into the field in place: `field[i] = Re H'[i] + i·Im H'[i]`
+    /// ([`interleave_in_place`]; the encoder's next pass overwrites `phase`).
     fn filtered_planes_to_field(&mut self) {
-        let n = self.field.len();
-        self.phase
-            .copy_from_slice(&bytemuck::cast_slice::<Complex32, f32>(&self.field)[n..]);
         interleave_in_place(
             bytemuck::cast_slice_mut::<Complex32, f32>(&mut self.field),
             &self.phase,
