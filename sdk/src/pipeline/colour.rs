@@ -45,10 +45,10 @@ pub(super) type PlanePairMut<'a> = (&'a mut [f32], &'a mut [f32]);
 #[derive(Debug)]
 pub(super) struct ColourState {
     /// The complex field `[H, W]`. Its memory also holds two real planes (`[H, W]` each, [`ColourState::planes`])
-    /// while the session writes them: the midpoint heads (amplitude, phase) before [`Task::Midpoint`] in a
-    /// session without full outputs and, with a pre-filter, its output `Re H'` before [`Task::Filtered`]
-    /// (`Im H'` in `phase`); each task turns them into the field in place (no buffer of their own: 50 MB less
-    /// at 1080p). The pre-filter's input `(Re H, Im H)` waits in `prefilter_input`
+    /// while the session writes them: the midpoint amplitude head before [`Task::Midpoint`] in a session
+    /// without full outputs and, with a pre-filter, its output `Re H'` before [`Task::Filtered`] (the phase
+    /// head and `Im H'` in `phase`); each task turns them into the field in place (no buffer of their own:
+    /// 50 MB less at 1080p). The pre-filter's input `(Re H, Im H)` waits in `prefilter_input`
     /// ([`ColourState::prefilter_io`]).
     pub(super) field: Vec<Complex32>,
     pub(super) plan: SpectralPlan,
@@ -127,10 +127,12 @@ impl ColourState {
         }
     }
 
-    /// The field's memory as two real planes `(first, second)` of `H·W` values each, for the session to
-    /// write a frame's heads or the pre-filter's output into.
+    /// The two real planes `(amplitude, phase)` of `H·W` values each the CNN writes a frame's heads into in
+    /// a session without full outputs: the first half of the field's memory and `phase` (which
+    /// [`Task::Midpoint`] reads in place: no plane copied aside).
     pub(super) fn planes(&mut self) -> PlanePairMut<'_> {
-        field_planes(&mut self.field)
+        let (amplitude, _) = field_planes(&mut self.field);
+        (amplitude, &mut self.phase[..])
     }
 
     /// The pre-filter's input `(Re H, Im H)` that [`Task::Midpoint`] left in `prefilter_input`, beside the
@@ -150,16 +152,13 @@ impl ColourState {
         Ok((input, (re, &mut self.phase[..])))
     }
 
-    /// Turns the midpoint heads in the field's memory (amplitude, phase: [`ColourState::planes`]) into the
-    /// field in place, on the vectorised rows ([`tensorholo_kernels::phasor::phasors_in_place`], the same
-    /// values as [`crate::model::contract::head_to_phasor`]). The phase plane is copied into `phase` first
-    /// (the encoder's next pass overwrites it). Returns whether every head was finite.
+    /// Turns the midpoint heads of [`ColourState::planes`] (amplitude in the field's memory, phase in `phase`)
+    /// into the field in place, on the vectorised rows ([`tensorholo_kernels::phasor::phasors_in_place`], the
+    /// same values as [`crate::model::contract::head_to_phasor`]). Returns whether every head was finite.
     ///
     /// Errors: [`HoloError::Internal`] if the kernel refuses (lengths equal by construction, ISA checked).
     fn heads_to_field(&mut self) -> Result<bool> {
-        let n = self.field.len();
         let flat = bytemuck::cast_slice_mut::<Complex32, f32>(&mut self.field);
-        self.phase.copy_from_slice(&flat[n..]);
         phasors_in_place(flat, &self.phase, self.isa)
             .map_err(|e| HoloError::Internal(format!("phasor rows: {e}")))
     }
@@ -170,8 +169,8 @@ impl ColourState {
     /// `(Re H, Im H)` (docs/CONVENTIONS.md §7.2, format 2) just after its inverse ones, while the rows are in
     /// cache: two passes over the field fewer, bit-identical to the passes apart (tested). The heads are
     /// this colour's planes of `heads` (the session's `[3, H, W]` arrays, standard layout) or, with `None`,
-    /// the field's memory ([`ColourState::planes`]; its phase plane is copied into `phase` first, and
-    /// [`phasor_rows`] makes the chunks in place). Returns whether every head was finite.
+    /// [`ColourState::planes`] ([`phasor_rows`] makes the chunks in place). Returns whether every head was
+    /// finite.
     ///
     /// Errors: [`HoloError::Internal`] for shared heads that are not contiguous, without a transfer function
     /// or, with `prefilter`, without room for the pre-filter's input, or if the phasor kernel refuses.
@@ -187,12 +186,7 @@ impl ColourState {
                 };
                 Some((amplitude, phase))
             }
-            None => {
-                let n = self.field.len();
-                self.phase
-                    .copy_from_slice(&bytemuck::cast_slice::<Complex32, f32>(&self.field)[n..]);
-                None
-            }
+            None => None,
         };
         let Some(transfer) = &self.transfer else {
             return Err(HoloError::Internal("no transfer function to apply".into()));
