@@ -176,16 +176,7 @@ impl ColourState {
     /// or, with `prefilter`, without room for the pre-filter's input, or if the phasor kernel refuses.
     fn propagate(&mut self, heads: Option<&Heads>, prefilter: bool) -> Result<bool> {
         let shared = match heads {
-            Some(heads) => {
-                let c = self.colour;
-                let (Some(amplitude), Some(phase)) = (
-                    heads.amplitude.index_axis(Axis(0), c).to_slice(),
-                    heads.phase.index_axis(Axis(0), c).to_slice(),
-                ) else {
-                    return Err(HoloError::Internal("shared heads not contiguous".into()));
-                };
-                Some((amplitude, phase))
-            }
+            Some(heads) => Some(colour_planes(heads, self.colour)?),
             None => None,
         };
         let Some(transfer) = &self.transfer else {
@@ -238,13 +229,7 @@ impl ColourState {
     /// Errors: [`HoloError::Internal`] if a plane is not contiguous or not `H·W` values (the session makes
     /// them so) or the kernel refuses.
     fn shared_heads_to_field(&mut self, heads: &Heads) -> Result<bool> {
-        let c = self.colour;
-        let (Some(amplitude), Some(phase)) = (
-            heads.amplitude.index_axis(Axis(0), c).to_slice(),
-            heads.phase.index_axis(Axis(0), c).to_slice(),
-        ) else {
-            return Err(HoloError::Internal("shared heads not contiguous".into()));
-        };
+        let (amplitude, phase) = colour_planes(heads, self.colour)?;
         let flat = bytemuck::cast_slice_mut::<Complex32, f32>(&mut self.field);
         phasors(amplitude, phase, flat, self.isa)
             .map_err(|e| HoloError::Internal(format!("phasor rows: {e}")))
@@ -330,6 +315,19 @@ fn phasor_rows(
 fn field_planes(field: &mut [Complex32]) -> PlanePairMut<'_> {
     let n = field.len();
     bytemuck::cast_slice_mut::<Complex32, f32>(field).split_at_mut(n)
+}
+
+/// Colour `c`'s amplitude and phase planes of `heads` (`H·W` values each).
+///
+/// Errors: [`HoloError::Internal`] if either is not contiguous (the session keeps them in standard layout).
+fn colour_planes(heads: &Heads, c: usize) -> Result<PlanePair<'_>> {
+    match (
+        heads.amplitude.index_axis(Axis(0), c).to_slice(),
+        heads.phase.index_axis(Axis(0), c).to_slice(),
+    ) {
+        (Some(amplitude), Some(phase)) => Ok((amplitude, phase)),
+        _ => Err(HoloError::Internal("shared heads not contiguous".into())),
+    }
 }
 
 /// The pre-filter's input planes `(Re H, Im H)` (docs/CONVENTIONS.md §7.2, format 2), `n` values each, in
