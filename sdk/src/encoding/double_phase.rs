@@ -249,6 +249,42 @@ fn encode_row(
     kernel::encode_row(field, out, codes, y % 2 == 1, mean, inv_a, isa).map_err(kernel_err)
 }
 
+/// Rows per chunk of [`ChannelEncoder::analyse_planes`]: 8 rows of 1920 pixels are 123 KB of field and
+/// 61 KB of phase, inside a core's L2 between the interleave and the analysis.
+const ANALYSE_ROWS: usize = 8;
+
+/// Pixels per block of [`interleave_in_place`].
+const INTERLEAVE_BLOCK: usize = 16;
+
+/// `buf[2i], buf[2i + 1] ← buf[i], second[i]` for the pixels `i` in `pixels` (`buf` holds `2n` values, the
+/// first plane in its first half, `n = second.len()`), where the pixels from `pixels.end` on are already
+/// interleaved and those below `pixels.start` not yet (so a whole field goes as one range or as ranges from
+/// the last to the first). Blocks of [`INTERLEAVE_BLOCK`] pixels run from last to first, each read whole
+/// before it is written, so that writing block `[i, i + B)` (values `2i..2i + 2B`) never overwrites a
+/// first-plane value still to be read (those are below `i ≤ 2i`); the pixels after the range's last whole
+/// block go first, one by one from the last. The fixed-size blocks compile to vector shuffles (a
+/// pixel-by-pixel loop does not vectorise).
+pub(crate) fn interleave_in_place(buf: &mut [f32], second: &[f32], pixels: std::ops::Range<usize>) {
+    const B: usize = INTERLEAVE_BLOCK;
+    debug_assert_eq!(buf.len(), 2 * second.len());
+    let (p0, p1) = (pixels.start, pixels.end);
+    let whole = p0 + (p1 - p0) / B * B;
+    for i in (whole..p1).rev() {
+        buf[2 * i] = buf[i];
+        buf[2 * i + 1] = second[i];
+    }
+    for i in (p0..whole).step_by(B).rev() {
+        let mut first = [0.0f32; B];
+        first.copy_from_slice(&buf[i..i + B]);
+        let mut pairs = [0.0f32; 2 * B];
+        for ((pair, re), im) in pairs.chunks_exact_mut(2).zip(first).zip(&second[i..i + B]) {
+            pair[0] = re;
+            pair[1] = *im;
+        }
+        buf[2 * i..2 * (i + B)].copy_from_slice(&pairs);
+    }
+}
+
 /// The diamond band limit of BL-DPM for one field size: plan, mask (with the inverse-FFT normalisation).
 #[derive(Debug, Clone)]
 struct BandLimit {
@@ -288,6 +324,8 @@ pub struct ChannelEncoder {
     kernel: Vec<f32>,
     tmp: Vec<Complex32>,
     band: Option<(BandLimit, Scratch)>,
+    /// Each row's statistics of [`ChannelEncoder::analyse_planes`] (`H` entries), merged in row order.
+    row_stats: Vec<ChannelStats>,
     /// The row kernels' instruction set.
     isa: Isa,
 }
@@ -325,6 +363,7 @@ impl ChannelEncoder {
             kernel: method.kernel(),
             tmp,
             band,
+            row_stats: vec![ChannelStats::default(); height],
             isa,
         })
     }
@@ -367,6 +406,42 @@ impl ChannelEncoder {
             stats = stats.merge(analyse_row(row, out, self.isa)?);
         }
         Ok(stats)
+    }
+
+    /// Pass 1 on a field still held as two real planes (the pre-filter's output): `Re H` in the first half of
+    /// `field`'s memory (`H·W` values) and `Im H` in `phase`. Interleaves them into `field` and writes `arg H`
+    /// into `phase`: the values and statistics of [`interleave_in_place`] on the whole field then
+    /// [`ChannelEncoder::analyse`], bit for bit. With the plain method, chunks of [`ANALYSE_ROWS`] rows are
+    /// interleaved and analysed in turn, last chunk first, while they are in cache (one pass over the field
+    /// fewer); each row's statistics are kept and merged in row order afterwards, as `analyse` merges them.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for wrong lengths.
+    pub(crate) fn analyse_planes(
+        &mut self,
+        field: &mut [Complex32],
+        phase: &mut [f32],
+    ) -> Result<ChannelStats> {
+        self.check("field", field.len())?;
+        self.check("phase", phase.len())?;
+        let (h, w) = (self.height, self.width);
+        if !matches!(self.method, DoublePhaseMethod::Plain) {
+            interleave_in_place(bytemuck::cast_slice_mut(field), phase, 0..h * w);
+            return self.analyse(field, phase);
+        }
+        for y0 in (0..h).step_by(ANALYSE_ROWS).rev() {
+            let y1 = (y0 + ANALYSE_ROWS).min(h);
+            interleave_in_place(bytemuck::cast_slice_mut(field), phase, y0 * w..y1 * w);
+            let rows = field[y0 * w..y1 * w]
+                .chunks_exact(w)
+                .zip(phase[y0 * w..y1 * w].chunks_exact_mut(w));
+            for ((row, out), stats) in rows.zip(&mut self.row_stats[y0..y1]) {
+                *stats = analyse_row(row, out, self.isa)?;
+            }
+        }
+        Ok(self
+            .row_stats
+            .iter()
+            .fold(ChannelStats::default(), |s, r| s.merge(*r)))
     }
 
     /// Pass 2: turns `phase` (from [`ChannelEncoder::analyse`] on the same `field`) into the wrapped double
@@ -661,5 +736,78 @@ mod tests {
         let k = gaussian_kernel(1.0, 7);
         assert!((k.iter().sum::<f32>() - 1.0).abs() < 1e-6);
         assert!((k[0] - k[6]).abs() < 1e-9 && k[3] > k[2]);
+    }
+
+    /// The in-place interleave against the definition, as one range and as ranges from the last to the
+    /// first (chunks of rows), on sizes under one block, whole blocks and partial ones, with distinct values
+    /// everywhere (a value read after it was overwritten shows).
+    #[test]
+    fn interleave_in_place_equals_the_definition() {
+        for n in (0..=40).chain([63, 64, 65, 1920 * 3 + 7]) {
+            let first: Vec<f32> = (0..n).map(|i| i as f32 + 0.25).collect();
+            let second: Vec<f32> = (0..n).map(|i| -(i as f32) - 0.5).collect();
+            let want: Vec<f32> = first
+                .iter()
+                .zip(&second)
+                .flat_map(|(a, b)| [*a, *b])
+                .collect();
+            for chunk in [n.max(1), 5, 16, 17, 1920] {
+                let mut buf = vec![f32::NAN; 2 * n];
+                buf[..n].copy_from_slice(&first);
+                let starts: Vec<usize> = (0..n).step_by(chunk).collect();
+                for &p0 in starts.iter().rev() {
+                    interleave_in_place(&mut buf, &second, p0..(p0 + chunk).min(n));
+                }
+                assert_eq!(buf, want, "n {n}, chunks of {chunk}");
+            }
+        }
+    }
+
+    /// Pass 1 on the two planes (chunk by chunk for the plain method) gives the field, phases and statistics
+    /// of the interleave then `analyse`, bit for bit, for every method, on sizes with a partial last chunk.
+    #[test]
+    fn analyse_planes_equals_interleave_then_analyse() {
+        let methods = [
+            DoublePhaseMethod::Plain,
+            DoublePhaseMethod::AntiAliased {
+                sigma_px: 0.8,
+                kernel_size: 3,
+            },
+            DoublePhaseMethod::BandLimited { k: 0.7 },
+        ];
+        for (h, w) in [(1, 1), (7, 5), (19, 33), (64, 40)] {
+            let n = h * w;
+            let re: Vec<f32> = (0..n).map(|i| (i as f32 * 0.37).sin()).collect();
+            let im: Vec<f32> = (0..n).map(|i| (i as f32 * 0.11).cos() - 0.3).collect();
+            for method in methods {
+                let mut enc = ChannelEncoder::new(h, w, method).unwrap();
+                let mut want_field: Vec<Complex32> = re
+                    .iter()
+                    .zip(&im)
+                    .map(|(&a, &b)| Complex32::new(a, b))
+                    .collect();
+                let mut want_phase = vec![0.0f32; n];
+                let want = enc.analyse(&mut want_field, &mut want_phase).unwrap();
+
+                let mut field = vec![Complex32::new(f32::NAN, f32::NAN); n];
+                bytemuck::cast_slice_mut::<Complex32, f32>(&mut field)[..n].copy_from_slice(&re);
+                let mut phase = im.clone();
+                let got = enc.analyse_planes(&mut field, &mut phase).unwrap();
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                let what = format!("{h}×{w} {method:?}");
+                assert_eq!(
+                    got.max_amplitude_sq.to_bits(),
+                    want.max_amplitude_sq.to_bits(),
+                    "{what}"
+                );
+                assert_eq!(got.phase_sum.to_bits(), want.phase_sum.to_bits(), "{what}");
+                assert_eq!(bits(&phase), bits(&want_phase), "{what}");
+                assert_eq!(
+                    bits(bytemuck::cast_slice(&field)),
+                    bits(bytemuck::cast_slice(&want_field)),
+                    "{what}"
+                );
+            }
+        }
     }
 }

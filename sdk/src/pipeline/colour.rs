@@ -102,9 +102,11 @@ impl ColourState {
                 Ok(())
             }
             Task::Filtered => {
-                // The pre-filter's outputs are not checked here (the encoder's analysis sees the field).
-                self.filtered_planes_to_field();
-                self.stats = self.encoder.analyse(&mut self.field, &mut self.phase)?;
+                // The pre-filter's outputs (Re H' in the field's memory, Im H' in `phase`: `prefilter_io`)
+                // become the field as pass 1 reads them; they are not checked here (the analysis sees them).
+                self.stats = self
+                    .encoder
+                    .analyse_planes(&mut self.field, &mut self.phase)?;
                 Ok(())
             }
             Task::Encode {
@@ -234,47 +236,7 @@ impl ColourState {
         phasors(amplitude, phase, flat, self.isa)
             .map_err(|e| HoloError::Internal(format!("phasor rows: {e}")))
     }
-
-    /// Turns the pre-filter's output planes ([`ColourState::prefilter_io`]: `Re H'` in the first half of the
-    /// field's memory, `Im H'` in `phase`) into the field in place: `field[i] = Re H'[i] + i·Im H'[i]`
-    /// ([`interleave_in_place`]; the encoder's next pass overwrites `phase`).
-    fn filtered_planes_to_field(&mut self) {
-        interleave_in_place(
-            bytemuck::cast_slice_mut::<Complex32, f32>(&mut self.field),
-            &self.phase,
-        );
-    }
 }
-
-/// `buf[2i], buf[2i + 1] ← buf[i], second[i]` for every `i < n = second.len()` (`buf` holds `2n` values, the
-/// first plane in its first half). Blocks of [`INTERLEAVE_BLOCK`] pixels run from last to first, each read
-/// whole before it is written, so that writing block `[i, i + B)` (values `2i..2i + 2B`) never overwrites a
-/// first-plane value still to be read (those are below `i ≤ 2i`); the pixels after the last whole block go
-/// first, one by one from the last. The fixed-size blocks compile to vector shuffles (a pixel-by-pixel loop
-/// does not vectorise).
-fn interleave_in_place(buf: &mut [f32], second: &[f32]) {
-    const B: usize = INTERLEAVE_BLOCK;
-    let n = second.len();
-    debug_assert_eq!(buf.len(), 2 * n);
-    let full = n / B * B;
-    for i in (full..n).rev() {
-        buf[2 * i] = buf[i];
-        buf[2 * i + 1] = second[i];
-    }
-    for i in (0..full).step_by(B).rev() {
-        let mut first = [0.0f32; B];
-        first.copy_from_slice(&buf[i..i + B]);
-        let mut pairs = [0.0f32; 2 * B];
-        for ((pair, re), im) in pairs.chunks_exact_mut(2).zip(first).zip(&second[i..i + B]) {
-            pair[0] = re;
-            pair[1] = *im;
-        }
-        buf[2 * i..2 * (i + B)].copy_from_slice(&pairs);
-    }
-}
-
-/// Pixels per block of [`interleave_in_place`].
-const INTERLEAVE_BLOCK: usize = 16;
 
 /// The phasors of rows `rows` of a `[H, width]` field whose memory holds the amplitude head in its first
 /// half (pixel `i` at value `i`, as [`ColourState::planes`] gives it to the CNN) and whose phase head is in
@@ -398,25 +360,6 @@ mod tests {
             );
             // Rows 1..9 before row 0 (y1 = 9 > 2·y0 = 2) would read amplitudes the chunk overwrites.
             assert!(phasor_rows(&mut field, &phase, 1..9, w, isa).is_err());
-        }
-    }
-
-    /// The in-place interleave against the definition, on sizes under one block, whole blocks and partial
-    /// ones, with distinct values everywhere (a value read after it was overwritten shows).
-    #[test]
-    fn interleave_in_place_equals_the_definition() {
-        for n in (0..=40).chain([63, 64, 65, 1920 * 3 + 7]) {
-            let first: Vec<f32> = (0..n).map(|i| i as f32 + 0.25).collect();
-            let second: Vec<f32> = (0..n).map(|i| -(i as f32) - 0.5).collect();
-            let mut buf = vec![f32::NAN; 2 * n];
-            buf[..n].copy_from_slice(&first);
-            interleave_in_place(&mut buf, &second);
-            let want: Vec<f32> = first
-                .iter()
-                .zip(&second)
-                .flat_map(|(a, b)| [*a, *b])
-                .collect();
-            assert_eq!(buf, want, "n {n}");
         }
     }
 }
