@@ -8,11 +8,14 @@
 //! per-pixel look-up table, the output copy) runs in the session's own buffers. A tract session is counted
 //! too, as a check that the counter sees the CNNs.
 //!
-//! One allocation is allowed besides, in 5 frames, of at most 2 KiB: rayon's job queue. A call into a thread
-//! pool from outside it (the CNN plan's pool, once per frame) pushes one job onto the pool's injector queue
-//! (crossbeam-deque's `Injector`), which allocates its next block of 63 slots (1,520 bytes on x86-64) when one
-//! fills: one block every 63 frames, whose turn may fall in the frames counted (it did in CI, after the
-//! session's setup had timed its thread counts on the pool).
+//! Two allocations are allowed besides, in 5 frames, of at most 4,120 bytes each: rayon's job queues. A call
+//! into a thread pool from outside it (the CNN plan's pool, once per frame) pushes one job onto the pool's
+//! injector queue (crossbeam-deque's `Injector`), which allocates its next block of 63 slots (1,520 bytes on
+//! x86-64) when one fills: one block every 63 frames, whose turn may fall in the frames counted (it did in CI,
+//! after the session's setup had timed its thread counts on the pool). And a pool thread's own deque
+//! (crossbeam-deque's `Worker`) doubles its buffer when jobs queue up faster than the other thread steals
+//! them, and halves it again later: on a loaded machine, 64 → 128 slots of 16 bytes (2,072 bytes with the
+//! header; seen with two busy loops beside the test), 4,120 bytes for 256.
 //!
 //! This binary holds a single test so that no other test allocates concurrently.
 
@@ -45,16 +48,19 @@ fn allocations_during<T>(f: impl FnOnce() -> T) -> ((usize, usize), T) {
     )
 }
 
-/// The most bytes of rayon's injector block (see the module docs).
-const QUEUE_BLOCK_BYTES: usize = 2048;
+/// The most bytes of one of rayon's queue allocations: an injector block or a deque buffer of 256 slots (see
+/// the module docs).
+const QUEUE_BLOCK_BYTES: usize = 4120;
+/// The most queue allocations in the frames counted (see the module docs).
+const QUEUE_BLOCKS: usize = 2;
 
 /// Checks that `(count, bytes)` allocations are the `expected` ones of `expected_bytes` in all, or those and
-/// one rayon queue block.
+/// at most [`QUEUE_BLOCKS`] of rayon's queue allocations.
 fn assert_only((count, bytes): (usize, usize), expected: usize, expected_bytes: usize, what: &str) {
     let queue = count.saturating_sub(expected);
     assert!(
-        count >= expected && queue <= 1,
-        "{what}: {count} allocations, expected {expected} (and at most one rayon queue block)"
+        count >= expected && queue <= QUEUE_BLOCKS,
+        "{what}: {count} allocations, expected {expected} (and at most {QUEUE_BLOCKS} rayon queue blocks)"
     );
     assert!(
         bytes >= expected_bytes && bytes <= expected_bytes + queue * QUEUE_BLOCK_BYTES,
