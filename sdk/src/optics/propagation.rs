@@ -302,14 +302,12 @@ impl SpectralPlan {
         multiplier: &EvenMultiplier,
         scratch: &mut Scratch,
     ) -> Result<()> {
-        self.check_field(field.len())?;
-        self.check_even(multiplier)?;
-        self.filter_with(field, scratch, |r, row| multiplier.multiply_row(r, row));
-        Ok(())
+        self.apply_even_rows(field, multiplier, scratch, |_, _| {}, |_, _| {})
     }
 
-    /// [`apply_even`](Self::apply_even) with a pass of the caller's fused into each end ([`Fft2::filter_rows`]):
-    /// `before(field, rows)` makes or changes the field's rows `rows` just before they are transformed (chunks
+    /// [`apply_even`](Self::apply_even) (the angular spectrum method's spectral multiply, Eq. 2; the offset
+    /// propagation, Eq. 6, with its transfer function) on `field`, row-major `[height, width]`, with a pass of
+    /// the caller's fused into each end ([`Fft2::filter_rows`]): `before(field, rows)` makes or changes the field's rows `rows` just before they are transformed (chunks
     /// of [`crate::optics::fft::ROW_CHUNK`] rows, last chunk first, each starting at a multiple of it; the
     /// whole field is passed, rows `≥ rows.end` already transformed), and `after(field, rows)` reads rows
     /// `rows` of the result (first chunk first). With padding the hooks run on the whole field, before the

@@ -21,8 +21,8 @@ use crate::slm::DisplayCalibration;
 pub(super) enum Task {
     /// Heads → field, offset propagation, then the pre-filter input or pass 1 of the encoding. The heads
     /// are read from `heads` (the session's `[3, H, W]` arrays, shared read-only with the other colours:
-    /// no copy into the field's memory, 50 MB at 1080p) or, with `None`, from the field's memory
-    /// ([`ColourState::planes`], where the CNN wrote them).
+    /// no copy into the field's memory, 50 MB at 1080p) or, with `None`, from [`ColourState::planes`]
+    /// (where the CNN wrote them).
     Midpoint {
         prefilter: bool,
         heads: Option<Arc<Heads>>,

@@ -122,8 +122,8 @@ impl HologramSession {
     }
 
     /// The hologram CNN heads of the last successful frame (the midpoint hologram; [`Heads::to_field`]);
-    /// `None` before the first frame and after a CPU frame that failed (a frame frees the previous heads
-    /// before its CNN runs, so that two frames' heads are never held at once).
+    /// `None` before the first frame and after a CPU frame that failed (two frames' heads are never held at
+    /// once: with full outputs a frame's CNN writes into the last frame's arrays, without them none are kept).
     pub fn last_heads(&self) -> Option<&Heads> {
         self.last_heads.as_deref()
     }
@@ -225,7 +225,6 @@ impl HologramSession {
     /// Errors: [`HoloError::ShapeMismatch`] for heads of another size; [`HoloError::InvalidData`] for
     /// non-finite heads or a hologram that is zero everywhere.
     pub(crate) fn encode_heads(&mut self, heads: Heads, cnn_s: f64) -> Result<&SlmFrame> {
-        self.last_heads = None;
         let standard = |a: Array3<f32>| {
             if a.is_standard_layout() {
                 a
@@ -528,17 +527,17 @@ mod tests {
                 ((x * 5 + y * 11 + 2 * c) % 17) as f32 / 16.0
             }),
         };
-        let mut fused = pipeline(true).session(h, w).unwrap();
-        let fused_codes = fused
+        let mut shared = pipeline(true).session(h, w).unwrap();
+        let shared_codes = shared
             .encode_heads(varied.clone(), 0.0)
             .unwrap()
             .codes
             .clone();
-        let mut apart = pipeline(true).session(h, w).unwrap();
-        apart.set_full_outputs(false);
-        load_planes(&mut apart, &varied);
-        assert_eq!(apart.encode_loaded(0.0).unwrap().codes, fused_codes);
-        for (a, b) in fused.states.iter().zip(&apart.states) {
+        let mut in_planes = pipeline(true).session(h, w).unwrap();
+        in_planes.set_full_outputs(false);
+        load_planes(&mut in_planes, &varied);
+        assert_eq!(in_planes.encode_loaded(0.0).unwrap().codes, shared_codes);
+        for (a, b) in shared.states.iter().zip(&in_planes.states) {
             let bits = |s: &Option<Box<super::ColourState>>| {
                 let input = &s.as_ref().unwrap().prefilter_input;
                 assert_eq!(input.len(), 2 * h * w);
