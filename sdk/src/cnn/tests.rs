@@ -614,6 +614,82 @@ fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
 }
 
 #[test]
+fn the_prefilter_base_is_added_once_to_every_row_as_the_rows_are_written() {
+    // The pre-filter's depthwise base filter is added to each strip's rows as the last layer writes them
+    // (FusedBase), not in a pass over the whole output afterwards. Its frame must be the same network with a
+    // zero base, plus the base filter applied to the whole input afterwards (`depthwise_rows`, accumulating:
+    // the separate pass's operations), bit for bit: for the f32 pre-filter and the mixed-precision int8 one,
+    // any strip height and thread count, so that a row missed or added twice at a strip's or the frame's edge,
+    // or a channel's base on another, shows. (A frame of several column slabs takes the separate pass:
+    // `column_slabs_give_the_whole_frame_bit_for_bit` holds it to the fused one.)
+    let (h, w) = (19, 27);
+    let isa = Isa::active().unwrap();
+    let (mut f32s, mut int8s) = (shipped(), shipped_qdq());
+    let mixed = int8s.len() - 3;
+    for model in [f32s.pop().unwrap(), int8s.remove(mixed)] {
+        let graph = model.cnn_graph().unwrap();
+        let crate::model::CnnOutput::Prefilter { taps, base } = &graph.output else {
+            panic!("{}: not a pre-filter", model.source_name());
+        };
+        let (taps, base) = (*taps, base.clone());
+        assert!(base.iter().any(|&v| v != 0.0));
+        let mut zero = (*graph).clone();
+        if let crate::model::CnnOutput::Prefilter { base, .. } = &mut zero.output {
+            base.fill(0.0);
+        }
+        let zero = Arc::new(zero);
+        let x = input(graph.in_channels, h, w, 21).mapv(|v| 0.75 * v - 0.05);
+        let plan = |g: &Arc<crate::model::CnnWeights>, strip: usize, threads: usize| {
+            let g = g.clone();
+            let p: Box<dyn CnnPlan> = if g.quant.is_some() {
+                Box::new(NativeInt8Plan::with_strip(g, h, w, threads, isa, Some(strip)).unwrap())
+            } else {
+                Box::new(
+                    NativePlan::with_strip(
+                        g,
+                        h,
+                        w,
+                        threads,
+                        isa,
+                        Some(strip),
+                        Some(Algorithm::Direct),
+                    )
+                    .unwrap(),
+                )
+            };
+            p
+        };
+        let (mut re0, mut im0) = plan(&zero, h, 1).run_outputs(x.view()).unwrap();
+        // The separate pass: channel c of the six outputs (Re planes, then Im) gets the base of input c.
+        let k2 = taps * taps;
+        for c in 0..6 {
+            let out = if c < 3 { &mut re0 } else { &mut im0 };
+            let mut plane = out.index_axis_mut(ndarray::Axis(0), c % 3);
+            let input_plane = x.index_axis(ndarray::Axis(0), c);
+            tensorholo_kernels::depthwise_rows(
+                input_plane.as_slice().unwrap(),
+                h,
+                w,
+                &base[c * k2..(c + 1) * k2],
+                taps,
+                0..h,
+                plane.as_slice_mut().unwrap(),
+                true,
+                isa,
+            )
+            .unwrap();
+        }
+        for strip in [1, 4, 7, h + 3] {
+            for threads in [1, 3] {
+                let name = format!("{} strip {strip} ×{threads}", model.source_name());
+                let (re, im) = plan(&graph, strip, threads).run_outputs(x.view()).unwrap();
+                assert!(re == re0 && im == im0, "{name}");
+            }
+        }
+    }
+}
+
+#[test]
 fn column_slabs_give_the_whole_frame_bit_for_bit() {
     // A frame run as column slabs side by side (each as if it were the frame, its edges spoiling the columns
     // within its halo, which it does not keep) gives the whole frame's bits: the f32 hologram CNN and

@@ -31,8 +31,8 @@ use std::sync::Arc;
 use ndarray::{Array3, ArrayView3, CowArray, Ix3};
 use rayon::prelude::*;
 use tensorholo_kernels::{
-    depthwise_rows, fake_quantize, tanh_heads, Algorithm, Conv3x3F32, Inputs, Isa, QuantU8,
-    RowPlanar,
+    depthwise_rows, fake_quantize, tanh_heads, Algorithm, Conv3x3F32, Inputs, Isa, KernelError,
+    QuantU8, RowPlanar,
 };
 
 use super::algorithm::{self, Choice};
@@ -197,7 +197,9 @@ impl NativePlan {
     /// One frame of a checked input into `out`.
     fn run(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
         let (h, w) = (self.height, self.frame_width());
-        self.forward(input, out)?;
+        if self.forward(input, out)? {
+            return Ok(());
+        }
         finish_outputs(
             &self.net.graph,
             out,
@@ -227,13 +229,19 @@ impl NativePlan {
     }
 
     /// One frame, strip by strip, on the plan's threads: the input `planar` `[C][H][W]` centred into the
-    /// input window, every layer's strip, the heads (or the pre-filter's raw output) into `out`.
-    fn forward(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
+    /// input window, every layer's strip, the heads (or the pre-filter's raw output) into `out`. A
+    /// pre-filter's base filter is added to each strip's rows as they are written where the frame is one slab
+    /// ([`FusedBase`]); returns whether it was.
+    fn forward(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<bool> {
         let net = self.net.clone();
         let n = net.layers.len();
         let (threads, strips) = (self.threads, self.strips);
         let heads = heads_of(&net.graph);
         let (pool, slabs) = (self.pool.clone(), self.slabs.clone());
+        let base = match slabs.slabs.len() {
+            1 => FusedBase::of(&net.graph, input, self.height),
+            _ => None,
+        };
         let frame = || -> Result<()> {
             for slab in slabs.iter() {
                 let cols = Cols {
@@ -257,7 +265,7 @@ impl NativePlan {
                         threads,
                     )?;
                     let last = if n >= 2 { &self.s[n - 2] } else { &self.x };
-                    let ctx = (heads, cols, net.isa, strips, m, threads);
+                    let ctx = (heads, cols, net.isa, strips, m, threads, base);
                     last_layer_rows(&net.layers[n - 1], last, &self.x, &mut self.raw, ctx, out)?;
                     // The windows' carried rows to their tops, the copies in parallel (serial, they were
                     // 9 % of a 1080p frame's samples with F(4×4, 3×3) on 2 threads).
@@ -271,7 +279,8 @@ impl NativePlan {
             }
             Ok(())
         };
-        installed(pool.as_deref(), threads, frame)
+        installed(pool.as_deref(), threads, frame)?;
+        Ok(base.is_some())
     }
 }
 
@@ -332,7 +341,15 @@ pub(super) fn input_rows(
 
 /// What [`last_layer_rows`] needs of the plan: the heads ([`heads_of`]), the slab's columns, the vector
 /// level, the strips, the strip index and the threads.
-pub(super) type LastLayerCtx<'a> = (Option<(f32, f32)>, Cols<'a>, Isa, Strips, usize, usize);
+pub(super) type LastLayerCtx<'a> = (
+    Option<(f32, f32)>,
+    Cols<'a>,
+    Isa,
+    Strips,
+    usize,
+    usize,
+    Option<FusedBase<'a>>,
+);
 
 /// Strip `m` of the f32 last layer: `o = conv(concat(s_{N−1}, s_0))` into the raw window, then its rows
 /// through [`heads_rows`] (the raw output stays float) into `out`. `last` holds `s_{N−1}` in f32 (the f32
@@ -342,7 +359,7 @@ pub(super) fn last_layer_rows(
     last: &Window<f32>,
     x: &Window<f32>,
     raw: &mut Window<f32>,
-    (heads, cols, isa, strips, m, threads): LastLayerCtx<'_>,
+    (heads, cols, isa, strips, m, threads, base): LastLayerCtx<'_>,
     out: &mut Outputs<'_>,
 ) -> Result<()> {
     let Some((rows, f0)) = raw.new_rows(strips, m)? else {
@@ -357,7 +374,9 @@ pub(super) fn last_layer_rows(
     let raw = &raw.buf;
     let raw_row = |c: usize, y: usize| raw.row(c, y - f0 + rows.start).unwrap_or(&[]);
     let frame_rows = f0..f0 + rows.len();
-    heads_rows(heads, &raw_row, None, cols, frame_rows, isa, threads, out)
+    heads_rows(
+        heads, &raw_row, None, base, cols, frame_rows, isa, threads, out,
+    )
 }
 
 /// A CNN input `[C][H][W]`: one planar slice, or one slice per channel plane ([`CnnPlan::run_planes`]).
@@ -485,7 +504,9 @@ pub(super) fn owned_outputs(
 /// (`raw_row(c, y)`: channel `c`, frame row `y`, the slab's columns of `cols`; the kept ones are written):
 /// the hologram CNN's heads `(tanh(o) + 1)·scale`
 /// (`heads`, [`heads_of`]) or the pre-filter's `o`. `grid`, for an int8 file, rounds `o` to the u8 grid the
-/// file quantises the last convolution's output to (ONNX `QuantizeLinear` then `DequantizeLinear`). On the
+/// file quantises the last convolution's output to (ONNX `QuantizeLinear` then `DequantizeLinear`); `base`,
+/// for a pre-filter, adds its base filter to the rows written (after that rounding, as [`finish_outputs`]
+/// does). On the
 /// kernels' vector code for `isa` ([`tanh_heads`], [`fake_quantize`]); the six channels in parallel on the
 /// current rayon pool when `threads > 1`.
 #[allow(clippy::too_many_arguments)]
@@ -493,6 +514,7 @@ pub(super) fn heads_rows<'r>(
     heads: Option<(f32, f32)>,
     raw_row: &(dyn Fn(usize, usize) -> &'r [f32] + Sync),
     grid: Option<QuantGrid>,
+    base: Option<FusedBase<'_>>,
     cols: Cols<'_>,
     rows: Range<usize>,
     isa: Isa,
@@ -501,6 +523,11 @@ pub(super) fn heads_rows<'r>(
 ) -> Result<()> {
     let grid = grid.map(u8_grid);
     let (w, keep) = (cols.frame_width, cols.slab.keep.clone());
+    if base.is_some() && keep != (0..w) {
+        return Err(HoloError::Internal(
+            "native CNN: a base filter fused into a slab narrower than the frame".into(),
+        ));
+    }
     let from = keep.start - cols.slab.start..keep.end - cols.slab.start;
     let channel = |(c, plane): (usize, &mut [f32])| {
         for y in rows.clone() {
@@ -516,7 +543,10 @@ pub(super) fn heads_rows<'r>(
                 }
             }
         }
-        Ok(())
+        match &base {
+            Some(b) => b.add_rows(c, plane, rows.clone(), w, isa),
+            None => Ok(()),
+        }
     };
     if threads > 1 {
         out.planes
@@ -527,6 +557,67 @@ pub(super) fn heads_rows<'r>(
         out.planes_mut().enumerate().try_for_each(channel)
     }
     .map_err(kernel_err)
+}
+
+/// A pre-filter's depthwise base filter (what [`finish_outputs`] adds to the whole output planes) added by
+/// [`heads_rows`] to each strip's rows just after it writes them, while they are in cache: the separate pass
+/// reads and writes the six output planes once more (100 MB at 1080p). The same [`depthwise_rows`] on the
+/// same rows, so bit-identical. Only where one slab keeps every column and the base reads the planar input.
+#[derive(Clone, Copy)]
+pub(super) struct FusedBase<'a> {
+    input: Planes<'a>,
+    /// `[C][taps][taps]`.
+    kernel: &'a [f32],
+    taps: usize,
+    height: usize,
+}
+
+impl<'a> FusedBase<'a> {
+    /// The base filter of `graph` on `input` (`height` rows), or `None` for a hologram CNN.
+    pub(super) fn of(graph: &'a CnnWeights, input: Planes<'a>, height: usize) -> Option<Self> {
+        match &graph.output {
+            CnnOutput::Prefilter { taps, base } => Some(Self {
+                input,
+                kernel: base,
+                taps: *taps,
+                height,
+            }),
+            _ => None,
+        }
+    }
+
+    /// `plane[y] += base(input channel c)[y]` for frame rows `rows` of the `[H][w]` output plane `plane`.
+    /// Errors: the kernels' ([`depthwise_rows`]), a kernel without channel `c`.
+    fn add_rows(
+        &self,
+        c: usize,
+        plane: &mut [f32],
+        rows: Range<usize>,
+        w: usize,
+        isa: Isa,
+    ) -> std::result::Result<(), KernelError> {
+        let k2 = self.taps * self.taps;
+        let kernel = self
+            .kernel
+            .get(c * k2..(c + 1) * k2)
+            .ok_or(KernelError::Length {
+                what: "pre-filter base kernel [C][taps][taps]",
+                expected: (c + 1) * k2,
+                got: self.kernel.len(),
+            })?;
+        let out = &mut plane[rows.start * w..rows.end * w];
+        depthwise_rows(
+            self.input.plane(c),
+            self.height,
+            w,
+            kernel,
+            self.taps,
+            rows,
+            out,
+            true,
+            isa,
+        )
+    }
 }
 
 /// The input as a pre-filter's base branch reads it: the planar input `[C][H][W]`, or (int8 files) the input

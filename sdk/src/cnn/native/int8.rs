@@ -47,7 +47,7 @@ use tensorholo_kernels::{Algorithm, Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs
 use super::algorithm::{self, Choice};
 use super::f32::{
     finish_outputs, heads_of, heads_rows, input_rows, last_layer_rows, owned_outputs, planar_slice,
-    pool, standard_input, u8_grid, BaseInput, Outputs, Planes,
+    pool, standard_input, u8_grid, BaseInput, FusedBase, Outputs, Planes,
 };
 use super::kernel_err;
 use super::slabs::{Cols, Slab};
@@ -309,9 +309,17 @@ impl NativeInt8Plan {
         let net = self.net.clone();
         let quant = net.quant()?;
         let (h, w) = (self.height, self.width);
+        // A base filter on the planar input is added to the rows as they are written (FusedBase).
+        let fused = match quant.base_reads_rounded_input {
+            true => None,
+            false => FusedBase::of(&net.graph, input, h),
+        };
         match &mut self.ends {
-            Ends::Int8 { .. } => self.forward_int8(input, out)?,
-            Ends::Float { .. } => self.forward_mixed(input, out)?,
+            Ends::Int8 { .. } => self.forward_int8(input, out, fused)?,
+            Ends::Float { .. } => self.forward_mixed(input, out, fused)?,
+        }
+        if fused.is_some() {
+            return Ok(());
         }
         let base = match quant.base_reads_rounded_input {
             // Older files: the base filter reads the input as the first layer does, rounded.
@@ -339,7 +347,12 @@ impl NativeInt8Plan {
     /// One frame of an all-int8 network, strip by strip, on the plan's threads: the input `planar` `[C][H][W]`
     /// quantised into its two windows, every layer's strip, the last layer's raw rows (rounded to the file's
     /// output grid if it has one) turned into the heads (or the pre-filter's raw output) in `out`.
-    fn forward_int8(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
+    fn forward_int8(
+        &mut self,
+        input: Planes<'_>,
+        out: &mut Outputs<'_>,
+        base: Option<FusedBase<'_>>,
+    ) -> Result<()> {
         let net = self.net.clone();
         let quant = net.quant()?;
         let n = net.layers.len();
@@ -419,7 +432,7 @@ impl NativeInt8Plan {
                     let frame_rows = f0..f0 + rows.len();
                     // The file's rounding of the last raw output, if it has one.
                     heads_rows(
-                        heads, &raw_row, out_grid, cols, frame_rows, net.isa, threads, out,
+                        heads, &raw_row, out_grid, base, cols, frame_rows, net.isa, threads, out,
                     )?;
                 }
                 both(
@@ -436,7 +449,12 @@ impl NativeInt8Plan {
     /// One frame of a mixed-precision network (see the module docs), strip by strip, on the plan's threads:
     /// the f32 input window, the f32 first layer rounded into `s_1`, the int8 layers, `s_{N−1}` dequantised,
     /// the f32 last layer into `out`.
-    fn forward_mixed(&mut self, input: Planes<'_>, out: &mut Outputs<'_>) -> Result<()> {
+    fn forward_mixed(
+        &mut self,
+        input: Planes<'_>,
+        out: &mut Outputs<'_>,
+        base: Option<FusedBase<'_>>,
+    ) -> Result<()> {
         let net = self.net.clone();
         let quant = net.quant()?;
         let n = net.graph.layers.len();
@@ -496,7 +514,7 @@ impl NativeInt8Plan {
                         b.dequantize_rows_from(&src.buf, from, last_scale)
                     })?;
                 }
-                let ctx = (heads, cols, net.isa, strips, m, threads);
+                let ctx = (heads, cols, net.isa, strips, m, threads, base);
                 last_layer_rows(last_conv, last, x, raw, ctx, out)?;
                 let ends = [&mut *x, &mut *y0, &mut *last, &mut *raw];
                 both(
