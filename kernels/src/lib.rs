@@ -37,8 +37,8 @@
 //! ```
 //!
 //! `unsafe` appears only in the ISA files (`conv3x3/*_{avx2,avx512,neon,…}.rs`, the generic SIMD loops, the
-//! `#[target_feature]` copies in `depthwise/body.rs` and `heads/body.rs`, the intrinsics of
-//! `double_phase/avx2.rs`) and in the single dispatch point,
+//! `#[target_feature]` copies in `depthwise/body.rs`, `heads/body.rs`, `phasor/body.rs` and `buffer/rows.rs`,
+//! the intrinsics of `double_phase/avx2.rs` and `avx512.rs`) and in the single dispatch point,
 //! the kernel table `ops.rs` (one table per ISA level, which [`registry`] shows); every public function is
 //! safe and checks shapes and lengths. The crate's `README.md` maps the files.
 

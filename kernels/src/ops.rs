@@ -13,6 +13,7 @@
 
 use std::ops::Range;
 
+use crate::buffer::rows;
 use crate::conv3x3::job::{F32Job, F32Out, U8Job, U8Out};
 use crate::conv3x3::row::{
     f32_info, u8_info, winograd4_info, winograd_info, Algorithm, F32Row, PackKind, U8Row,
@@ -51,6 +52,21 @@ pub(crate) type PhasorsFn = unsafe fn(&[f32], &[f32], &mut [f32]) -> bool;
 /// The same in place ([`crate::phasor::phasors_in_place`]).
 pub(crate) type PhasorsInPlaceFn = unsafe fn(&mut [f32], &[f32]) -> bool;
 
+/// The conversion rows of the quantised fills ([`crate::buffer`]'s `rows.rs`): quantise four f32 rows into
+/// one interleaved u8 row (`zp`, `offset`, `scale`), dequantise one back (`zp`, `scale`), requantise a u8
+/// row (`zo`, `other_scale`, `zp`, `scale`).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct ConvertFns {
+    pub quantize: QuantizeRowFn,
+    pub dequantize: DequantizeRowFn,
+    pub requantize: unsafe fn(&mut [u8], &[u8], f32, f32, u8, f32),
+}
+
+/// [`ConvertFns::quantize`]: `(dst, rows, zp, offset, scale)`.
+pub(crate) type QuantizeRowFn = unsafe fn(&mut [u8], [&[f32]; 4], u8, f32, f32);
+/// [`ConvertFns::dequantize`]: `(src, rows, zp, scale)`.
+pub(crate) type DequantizeRowFn = unsafe fn(&[u8], [&mut [f32]; 4], f32, f32);
+
 /// A peak loop: operations per iteration (a multiply-add counts 2) and the loop, which returns a value to
 /// keep its chains alive.
 #[derive(Debug)]
@@ -82,6 +98,8 @@ pub(crate) struct Ops {
     pub phasors: Option<PhasorsFn>,
     /// The heads as phasors in place ([`crate::phasor::phasors_in_place`]).
     pub phasors_in_place: Option<PhasorsInPlaceFn>,
+    /// The quantised fills' conversion rows ([`ConvertFns`]).
+    pub convert: Option<ConvertFns>,
     /// The f32 FMA peak ([`crate::peak::f32_fma_gflops`]).
     pub peak_f32: Option<Peak<f32>>,
     /// The int8 dot-product peak ([`crate::peak::int8_dot_gops`]).
@@ -140,6 +158,11 @@ const SCALAR: Ops = Ops {
     dpm_encode: Some(dpm::encode_body),
     phasors: Some(phasor::polar_body),
     phasors_in_place: Some(phasor::polar_in_place_body),
+    convert: Some(ConvertFns {
+        quantize: rows::quantize_body,
+        dequantize: rows::dequantize_body,
+        requantize: rows::requantize_body,
+    }),
     peak_f32: Some(Peak {
         ops_per_iter: 16.0 * 2.0,
         run: f32_scalar::peak,
@@ -168,6 +191,7 @@ static OPS: [Ops; 5] = [
         dpm_encode: None,
         phasors: None,
         phasors_in_place: None,
+        convert: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 24.0 * 64.0 * 2.0,
@@ -215,6 +239,11 @@ static OPS: [Ops; 5] = [
         dpm_encode: Some(dpm_avx512::encode_avx512),
         phasors: Some(phasor::x86::polar_avx512),
         phasors_in_place: Some(phasor::x86::polar_in_place_avx512),
+        convert: Some(ConvertFns {
+            quantize: rows::x86::quantize_avx512,
+            dequantize: rows::x86::dequantize_avx512,
+            requantize: rows::x86::requantize_avx512,
+        }),
         peak_f32: Some(Peak {
             ops_per_iter: 24.0 * 16.0 * 2.0,
             run: f32_avx512::peak,
@@ -236,6 +265,7 @@ static OPS: [Ops; 5] = [
         dpm_encode: None,
         phasors: None,
         phasors_in_place: None,
+        convert: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 12.0 * 32.0 * 2.0,
@@ -342,6 +372,11 @@ static OPS: [Ops; 5] = [
         dpm_encode: Some(dpm_avx2::encode_avx2),
         phasors: Some(phasor::x86::polar_avx2),
         phasors_in_place: Some(phasor::x86::polar_in_place_avx2),
+        convert: Some(ConvertFns {
+            quantize: rows::x86::quantize_avx2,
+            dequantize: rows::x86::dequantize_avx2,
+            requantize: rows::x86::requantize_avx2,
+        }),
         peak_f32: Some(Peak {
             ops_per_iter: 12.0 * 8.0 * 2.0,
             run: f32_avx2::peak,
@@ -373,6 +408,7 @@ static OPS: [Ops; 4] = [
         dpm_encode: None,
         phasors: None,
         phasors_in_place: None,
+        convert: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 24.0 * 16.0 * 2.0,
@@ -394,6 +430,7 @@ static OPS: [Ops; 4] = [
         dpm_encode: None,
         phasors: None,
         phasors_in_place: None,
+        convert: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 24.0 * 16.0 * 2.0,
@@ -445,6 +482,7 @@ static OPS: [Ops; 4] = [
         dpm_encode: None,
         phasors: None,
         phasors_in_place: None,
+        convert: None,
         peak_f32: Some(Peak {
             ops_per_iter: 24.0 * 4.0 * 2.0,
             run: f32_neon::peak,
@@ -611,6 +649,52 @@ pub(crate) fn run_depthwise(
     // SAFETY: `entry` returned the entry of a level that `isa` includes, and `isa` is available on this CPU;
     // the safe API checked the plane, the kernel and the rows.
     unsafe { run(job, rows, out, accumulate) };
+    Ok(())
+}
+
+/// One interleaved u8 row of a channel group quantised from its four f32 rows under `isa`
+/// ([`ConvertFns::quantize`]; the pixels all slices hold). Errors: `isa` not available.
+pub(crate) fn run_quantize_row(
+    isa: Isa,
+    dst: &mut [u8],
+    rows: [&[f32]; 4],
+    zp: u8,
+    offset: f32,
+    scale: f32,
+) -> Result<(), KernelError> {
+    let run = entry(isa, |t| t.convert.map(|c| c.quantize))?;
+    // SAFETY: `entry` returned the entry of a level that `isa` includes, and `isa` is available on this CPU;
+    // the body is safe code on any lengths.
+    unsafe { run(dst, rows, zp, offset, scale) };
+    Ok(())
+}
+
+/// One interleaved u8 row dequantised into its group's four f32 rows under `isa` ([`ConvertFns::dequantize`]).
+/// Errors: `isa` not available.
+pub(crate) fn run_dequantize_row(
+    isa: Isa,
+    src: &[u8],
+    rows: [&mut [f32]; 4],
+    zp: f32,
+    scale: f32,
+) -> Result<(), KernelError> {
+    let run = entry(isa, |t| t.convert.map(|c| c.dequantize))?;
+    // SAFETY: as in `run_quantize_row`.
+    unsafe { run(src, rows, zp, scale) };
+    Ok(())
+}
+
+/// A u8 row requantised under `isa` ([`ConvertFns::requantize`]). Errors: `isa` not available.
+pub(crate) fn run_requantize_row(
+    isa: Isa,
+    dst: &mut [u8],
+    src: &[u8],
+    (zo, other_scale): (f32, f32),
+    (zp, scale): (u8, f32),
+) -> Result<(), KernelError> {
+    let run = entry(isa, |t| t.convert.map(|c| c.requantize))?;
+    // SAFETY: as in `run_quantize_row`.
+    unsafe { run(dst, src, zo, other_scale, zp, scale) };
     Ok(())
 }
 

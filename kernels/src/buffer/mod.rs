@@ -24,6 +24,7 @@
 pub(crate) mod band;
 pub(crate) mod planar;
 mod quant_fill;
+pub(crate) mod rows;
 #[cfg(test)]
 mod tests;
 

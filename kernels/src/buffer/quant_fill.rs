@@ -3,7 +3,9 @@
 
 use super::band::{check_plane, check_source, RowBand};
 use super::planar::{Element, RowPlanar};
+use super::rows::level;
 use crate::error::KernelError;
+use crate::ops::{run_dequantize_row, run_quantize_row, run_requantize_row};
 use crate::quant::{check_scale, quantize};
 
 impl RowBand<'_, f32> {
@@ -28,7 +30,13 @@ impl RowBand<'_, f32> {
                 let from = other.index(4 * g, other_y0 + y - y0 + 1, 1);
                 let at = [0, 1, 2, 3].map(|k| self.interior_at(4 * g + k, y));
                 let rows = four_rows_mut(self.data, at, w);
-                dequantize_group_row(&other.as_slice()[from..from + 4 * w], rows, zp, scale);
+                run_dequantize_row(
+                    level(),
+                    &other.as_slice()[from..from + 4 * w],
+                    rows,
+                    zp,
+                    scale,
+                )?;
             }
         }
         self.map_rows_from(other, other_y0, 4 * full..self.c, |q| {
@@ -85,52 +93,6 @@ impl<T: Element> RowBand<'_, T> {
                 }
             }
         }
-    }
-}
-
-/// One interleaved u8 row of a channel group (`4·W` bytes: pixel `x`'s four channels at `4x..4x + 4`) from the
-/// group's four f32 rows: `dst[4x + k] = quantize(q(rows[k][x]), zp)`. Whole 4-byte pixels at a time, so the
-/// compiler vectorises it; a channel at a time stores every fourth byte and stays scalar (a tenth of an int8
-/// pre-filter at 1080p, before).
-#[inline(always)]
-fn quantize_group_row(dst: &mut [u8], rows: [&[f32]; 4], zp: u8, q: impl Fn(f32) -> f32) {
-    let [r0, r1, r2, r3] = rows;
-    let pixels = dst.chunks_exact_mut(4).zip(r0).zip(r1).zip(r2).zip(r3);
-    for ((((d, &a), &b), &c), &e) in pixels {
-        d.copy_from_slice(&[
-            quantize(q(a), zp),
-            quantize(q(b), zp),
-            quantize(q(c), zp),
-            quantize(q(e), zp),
-        ]);
-    }
-}
-
-/// The inverse of [`quantize_group_row`]'s layout: `rows[k][x] = (src[4x + k] − zp)·scale` (ONNX
-/// `DequantizeLinear`), whole 4-byte pixels at a time.
-#[inline(always)]
-fn dequantize_group_row(src: &[u8], rows: [&mut [f32]; 4], zp: f32, scale: f32) {
-    let [r0, r1, r2, r3] = rows;
-    let n = (src.len() / 4)
-        .min(r0.len())
-        .min(r1.len())
-        .min(r2.len())
-        .min(r3.len());
-    let (src, r0, r1, r2, r3) = (
-        &src[..4 * n],
-        &mut r0[..n],
-        &mut r1[..n],
-        &mut r2[..n],
-        &mut r3[..n],
-    );
-    for x in 0..n {
-        // The pixel as one 32-bit word, its bytes shifted out.
-        let p = u32::from_le_bytes([src[4 * x], src[4 * x + 1], src[4 * x + 2], src[4 * x + 3]]);
-        let q = |k: u32| ((p >> (8 * k)) & 0xff) as i32 as f32;
-        r0[x] = (q(0) - zp) * scale;
-        r1[x] = (q(1) - zp) * scale;
-        r2[x] = (q(2) - zp) * scale;
-        r3[x] = (q(3) - zp) * scale;
     }
 }
 
@@ -206,9 +168,14 @@ impl RowBand<'_, u8> {
                 let at = self.interior_at(4 * g, y);
                 let sy = src_y0 + y - y0;
                 let rows = planes.map(|p| &p[sy * w..(sy + 1) * w]);
-                quantize_group_row(&mut self.data[at..at + 4 * w], rows, zp, |v| {
-                    (v + offset) / scale
-                });
+                run_quantize_row(
+                    level(),
+                    &mut self.data[at..at + 4 * w],
+                    rows,
+                    zp,
+                    offset,
+                    scale,
+                )?;
             }
         }
         for c in 4 * full..self.c {
@@ -299,10 +266,8 @@ impl RowBand<'_, u8> {
                 let at = self.interior_at(4 * g, y);
                 let from = other.index(4 * g, other_y0 + y - y0 + 1, 1);
                 let src = &other.as_slice()[from..from + 4 * w];
-                for (d, &q) in self.data[at..at + 4 * w].iter_mut().zip(src) {
-                    let real = (q as f32 - zo) * other_scale;
-                    *d = quantize(real / scale, zp);
-                }
+                let dst = &mut self.data[at..at + 4 * w];
+                run_requantize_row(level(), dst, src, (zo, other_scale), (zp, scale))?;
             }
         }
         Ok(())
@@ -332,7 +297,15 @@ impl RowBand<'_, u8> {
                     let from = other.index(4 * g + k, other_y0 + y - y0 + 1, 1);
                     &src[from..from + w]
                 });
-                quantize_group_row(&mut self.data[at..at + 4 * w], rows, zp, |v| v / scale);
+                // `(v + 0)/scale` is `v/scale` but for −0, which quantises as +0 does.
+                run_quantize_row(
+                    level(),
+                    &mut self.data[at..at + 4 * w],
+                    rows,
+                    zp,
+                    0.0,
+                    scale,
+                )?;
             }
         }
         self.map_rows_from(other, other_y0, 4 * full..self.c, |v| {

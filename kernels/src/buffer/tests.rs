@@ -244,3 +244,74 @@ fn rows_convert_between_f32_and_u8_as_onnx_quantize_and_dequantize() {
     let mut band = back.band_mut(0..4).unwrap();
     assert!(band.dequantize_rows_from(&q, 0, scale).is_err());
 }
+
+/// The conversion rows (`rows.rs`) under every level this CPU has against the portable body, bit for bit, on
+/// random values and the edges of the grids: ties, values past either end of `[0, 255]`, ±0, ±∞ and NaN,
+/// a length that is not a whole number of vectors, and slices of unequal length (the shortest counts).
+#[test]
+fn conversion_rows_on_every_level_equal_the_portable_body() {
+    use crate::isa::Isa;
+    use crate::ops::{run_dequantize_row, run_quantize_row, run_requantize_row};
+    let n = 203;
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let special = [
+        0.0,
+        -0.0,
+        0.5,
+        1.5,
+        -0.5,
+        2.5,
+        1e9,
+        -1e9,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+        127.5,
+        -128.5,
+    ];
+    let f32s: Vec<Vec<f32>> = (0..4)
+        .map(|k| {
+            (0..n + k)
+                .map(|i| match i % 7 {
+                    0 => special[(i / 7) % special.len()] * 0.05,
+                    _ => ((next() >> 40) as f32 / (1u64 << 24) as f32 - 0.5) * 20.0,
+                })
+                .collect()
+        })
+        .collect();
+    let bytes: Vec<u8> = (0..4 * n + 3).map(|_| next() as u8).collect();
+    let rows = [&f32s[0][..], &f32s[1][..], &f32s[2][..], &f32s[3][..]];
+    let run_all = |isa: Isa| {
+        let mut q = vec![7u8; 4 * n + 5];
+        run_quantize_row(isa, &mut q, rows, 131, 0.25, 0.05).unwrap();
+        let mut d: Vec<Vec<f32>> = (0..4).map(|k| vec![-1.0; n + 2 - k]).collect();
+        let [d0, d1, d2, d3] = &mut d[..] else {
+            unreachable!()
+        };
+        run_dequantize_row(isa, &bytes, [d0, d1, d2, d3], 17.0, 0.031).unwrap();
+        let mut r = vec![9u8; 4 * n + 1];
+        run_requantize_row(isa, &mut r, &bytes, (131.0, 0.05), (3, 0.07)).unwrap();
+        let d: Vec<u32> = d.iter().flatten().map(|v| v.to_bits()).collect();
+        (q, d, r)
+    };
+    let want = run_all(Isa::Scalar);
+    // The edges are reached: codes 0 and 255, and every pixel of the shortest row written, no more.
+    assert!(want.0.contains(&0) && want.0.contains(&255));
+    assert_eq!(want.0[4 * n..], [7; 5]);
+    // Dequantised: the shortest row (n − 1 values) bounds every row; the values past it keep −1.
+    let first_row = &want.1[..n + 2];
+    assert_eq!(
+        first_row[n - 2],
+        ((bytes[4 * (n - 2)] as f32 - 17.0) * 0.031).to_bits()
+    );
+    assert_eq!(first_row[n - 1], (-1.0f32).to_bits());
+    for isa in Isa::available() {
+        assert!(run_all(isa) == want, "{isa:?}");
+    }
+}
