@@ -433,29 +433,29 @@ fn even_transfer_function_quarter_applies_bit_identically() {
         plan.apply_even(&mut b, &even, &mut scratch).unwrap();
         assert!(a.iter().zip(&b).all(|(x, y)| x == y), "{h}×{w} pad {pad}");
         // With row hooks: the field made by `before` (from nothing) and read back by `after`, chunk by chunk
-        // or whole when padded, is the same propagation.
-        let (mut c, mut seen) = (
-            vec![Complex32::new(f32::NAN, f32::NAN); h * w],
-            vec![Complex32::default(); h * w],
-        );
-        plan.apply_even_rows(
-            &mut c,
-            &even,
-            &mut scratch,
-            |f, rows| {
-                f[rows.start * w..rows.end * w]
-                    .copy_from_slice(&field[rows.start * w..rows.end * w])
-            },
-            |f, rows| {
-                seen[rows.start * w..rows.end * w].copy_from_slice(&f[rows.start * w..rows.end * w])
-            },
-        )
-        .unwrap();
-        assert!(a.iter().zip(&c).all(|(x, y)| x == y), "{h}×{w} pad {pad}");
-        assert!(
-            a.iter().zip(&seen).all(|(x, y)| x == y),
-            "{h}×{w} pad {pad}"
-        );
+        // or whole when padded, is the same propagation; kept in the field, or (unpadded) seen by `after`
+        // alone, the field left with the column pass's values.
+        for keep in [true, false] {
+            let (mut c, mut seen) = (
+                vec![Complex32::new(f32::NAN, f32::NAN); h * w],
+                vec![Complex32::default(); h * w],
+            );
+            plan.apply_even_rows(
+                &mut c,
+                &even,
+                &mut scratch,
+                |f, rows| {
+                    f[rows.start * w..rows.end * w]
+                        .copy_from_slice(&field[rows.start * w..rows.end * w])
+                },
+                keep,
+                |chunk, rows| seen[rows.start * w..rows.end * w].copy_from_slice(chunk),
+            )
+            .unwrap();
+            let same = |v: &[Complex32]| a.iter().zip(v).all(|(x, y)| x == y);
+            assert!(same(&seen), "{h}×{w} pad {pad} keep {keep}");
+            assert_eq!(same(&c), keep || pad, "{h}×{w} pad {pad} keep {keep}");
+        }
         assert!(
             rel_error(&a, &field) > 1e-3,
             "the propagation changed the field"

@@ -214,10 +214,12 @@ impl ColourState {
                     }
                 }
             },
-            |field, rows| {
+            // With the pre-filter the field is read only here (the pre-filter's output replaces it).
+            !prefilter,
+            |chunk, rows| {
                 if let Some((re, im)) = &mut planes {
                     let px = rows.start * width..rows.end * width;
-                    split_planes(&field[px.clone()], &mut re[px.clone()], &mut im[px]);
+                    split_planes(chunk, &mut re[px.clone()], &mut im[px]);
                 }
             },
         )?;
