@@ -169,7 +169,9 @@ impl ColourState {
     /// transforms ([`SpectralPlan::apply_even_rows`]): each chunk of rows is made from the heads just before
     /// its forward row transforms and, with `prefilter`, split into the pre-filter's input planes
     /// `(Re H, Im H)` (docs/CONVENTIONS.md §7.2, format 2) just after its inverse ones, while the rows are in
-    /// cache: two passes over the field fewer, bit-identical to the passes apart (tested). The heads are
+    /// cache: two passes over the field fewer, bit-identical to the passes apart (tested); with `prefilter`
+    /// the last row transforms run on a copy of each chunk (`keep = false`), so the field is left with the
+    /// column pass's values (the pre-filter's output replaces them) and not written a third time. The heads are
     /// this colour's planes of `heads` (the session's `[3, H, W]` arrays, standard layout) or, with `None`,
     /// [`ColourState::planes`] ([`phasor_rows`] makes the chunks in place). Returns whether every head was
     /// finite.
