@@ -9,9 +9,10 @@
 //! too, as a check that the counter sees the CNNs.
 //!
 //! Two allocations are allowed besides, in 5 frames, of at most 4,120 bytes each: rayon's job queues. A call
-//! into a thread pool from outside it (the CNN plan's pool, once per frame) pushes one job onto the pool's
-//! injector queue (crossbeam-deque's `Injector`), which allocates its next block of 63 slots (1,520 bytes on
-//! x86-64) when one fills: one block every 63 frames, whose turn may fall in the frames counted (it did in CI,
+//! into a thread pool from outside it (each CNN plan's pool once per frame, the session's optics pool twice:
+//! the encoding's two passes) pushes one job onto the pool's injector queue (crossbeam-deque's `Injector`),
+//! which allocates its next block of 63 slots (1,520 bytes on x86-64) when one fills: a block every 63 frames
+//! of a CNN pool, every 32 of the optics pool, whose turn may fall in the frames counted (it did in CI,
 //! after the session's setup had timed its thread counts on the pool). And a pool thread's own deque
 //! (crossbeam-deque's `Worker`) doubles its buffer when jobs queue up faster than the other thread steals
 //! them, and halves it again later: on a loaded machine, 64 → 128 slots of 16 bytes (2,072 bytes with the

@@ -256,6 +256,31 @@ const ANALYSE_ROWS: usize = 8;
 /// Pixels per block of [`interleave_in_place`].
 const INTERLEAVE_BLOCK: usize = 16;
 
+/// `out[2i], out[2i + 1] ← first[i], second[i]` (the same values as [`interleave_in_place`], out of place), in
+/// blocks of [`INTERLEAVE_BLOCK`] pixels (fixed-size blocks compile to vector shuffles), for the pixels all
+/// three hold.
+fn interleave_into(out: &mut [f32], first: &[f32], second: &[f32]) {
+    const B: usize = INTERLEAVE_BLOCK;
+    let n = first.len().min(second.len()).min(out.len() / 2);
+    let whole = n / B * B;
+    for ((pairs, re), im) in out[..2 * whole]
+        .chunks_exact_mut(2 * B)
+        .zip(first[..whole].chunks_exact(B))
+        .zip(second[..whole].chunks_exact(B))
+    {
+        let mut block = [0.0f32; 2 * B];
+        for ((pair, r), i) in block.chunks_exact_mut(2).zip(re).zip(im) {
+            pair[0] = *r;
+            pair[1] = *i;
+        }
+        pairs.copy_from_slice(&block);
+    }
+    for i in whole..n {
+        out[2 * i] = first[i];
+        out[2 * i + 1] = second[i];
+    }
+}
+
 /// `buf[2i], buf[2i + 1] ← buf[i], second[i]` for the pixels `i` in `pixels` (`buf` holds `2n` values, the
 /// first plane in its first half, `n = second.len()`), where the pixels from `pixels.end` on are already
 /// interleaved and those below `pixels.start` not yet (so a whole field goes as one range or as ranges from
@@ -442,6 +467,97 @@ impl ChannelEncoder {
             .row_stats
             .iter()
             .fold(ChannelStats::default(), |s, r| s.merge(*r)))
+    }
+
+    /// [`ChannelEncoder::analyse_planes`] with its chunks of rows on the current rayon pool's threads (the
+    /// pipeline's optics pool), bit for bit: each chunk interleaves `Re H` and `Im H` out of place into the
+    /// field's rows and analyses them; the rows go in levels from the bottom up (level `[a, b)`, `b ≤ 2a`,
+    /// reads the first plane's values `a·W..b·W` and writes the field's rows `a..b`, values `2a·W..2b·W`: no
+    /// overlap, and no later level reads what it writes), row 0 last; the rows' statistics are merged in row
+    /// order as before. Other methods than the plain one run `analyse_planes` as it is.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for wrong lengths.
+    pub(crate) fn analyse_planes_par(
+        &mut self,
+        field: &mut [Complex32],
+        phase: &mut [f32],
+    ) -> Result<ChannelStats> {
+        self.check("field", field.len())?;
+        self.check("phase", phase.len())?;
+        if !matches!(self.method, DoublePhaseMethod::Plain) {
+            return self.analyse_planes(field, phase);
+        }
+        let (h, w, isa) = (self.height, self.width, self.isa);
+        let flat = bytemuck::cast_slice_mut::<Complex32, f32>(field);
+        let chunk = ANALYSE_ROWS * w;
+        let mut b = h;
+        while b > 1 {
+            let a = b.div_ceil(2);
+            let (below, above) = flat.split_at_mut(2 * a * w);
+            let re = &below[a * w..b * w];
+            let out = &mut above[..2 * (b - a) * w];
+            out.par_chunks_mut(2 * chunk)
+                .zip(re.par_chunks(chunk))
+                .zip(phase[a * w..b * w].par_chunks_mut(chunk))
+                .zip(self.row_stats[a..b].par_chunks_mut(ANALYSE_ROWS))
+                .try_for_each(|(((out, re), phase), stats)| -> Result<()> {
+                    interleave_into(out, re, phase);
+                    let rows = bytemuck::cast_slice::<f32, Complex32>(out).chunks_exact(w);
+                    for ((row, arg), s) in rows.zip(phase.chunks_exact_mut(w)).zip(stats) {
+                        *s = analyse_row(row, arg, isa)?;
+                    }
+                    Ok(())
+                })?;
+            b = a;
+        }
+        interleave_in_place(flat, phase, 0..w);
+        let row = &bytemuck::cast_slice::<f32, Complex32>(flat)[..w];
+        self.row_stats[0] = analyse_row(row, &mut phase[..w], isa)?;
+        Ok(self
+            .row_stats
+            .iter()
+            .fold(ChannelStats::default(), |s, r| s.merge(*r)))
+    }
+
+    /// [`ChannelEncoder::encode`] with chunks of rows on the current rayon pool's threads, bit for bit (each
+    /// row's values depend on the row alone).
+    ///
+    /// Errors: as `encode`.
+    pub(crate) fn encode_par(
+        &self,
+        field: &[Complex32],
+        phase: &mut [f32],
+        codes: &mut [u8],
+        mean_phase: f32,
+        amplitude_scale: f32,
+    ) -> Result<()> {
+        self.check("field", field.len())?;
+        self.check("phase", phase.len())?;
+        self.check("codes", codes.len())?;
+        if !(amplitude_scale > 0.0 && amplitude_scale.is_finite()) {
+            return Err(invalid(
+                "amplitude_scale",
+                format!("must be > 0, got {amplitude_scale}"),
+            ));
+        }
+        let (w, inv_a, isa) = (self.width, 1.0 / amplitude_scale, self.isa);
+        let chunk = ANALYSE_ROWS * w;
+        field
+            .par_chunks(chunk)
+            .zip(phase.par_chunks_mut(chunk))
+            .zip(codes.par_chunks_mut(chunk))
+            .enumerate()
+            .try_for_each(|(i, ((field, phase), codes))| {
+                let rows = field
+                    .chunks_exact(w)
+                    .zip(phase.chunks_exact_mut(w))
+                    .zip(codes.chunks_exact_mut(w));
+                for (j, ((row, out), c)) in rows.enumerate() {
+                    let y = i * ANALYSE_ROWS + j;
+                    encode_row(row, out, Some(c), y, mean_phase, inv_a, isa)?;
+                }
+                Ok(())
+            })
     }
 
     /// Pass 2: turns `phase` (from [`ChannelEncoder::analyse`] on the same `field`) into the wrapped double
@@ -789,25 +905,75 @@ mod tests {
                 let mut want_phase = vec![0.0f32; n];
                 let want = enc.analyse(&mut want_field, &mut want_phase).unwrap();
 
-                let mut field = vec![Complex32::new(f32::NAN, f32::NAN); n];
-                bytemuck::cast_slice_mut::<Complex32, f32>(&mut field)[..n].copy_from_slice(&re);
-                let mut phase = im.clone();
-                let got = enc.analyse_planes(&mut field, &mut phase).unwrap();
-                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                let what = format!("{h}×{w} {method:?}");
-                assert_eq!(
-                    got.max_amplitude_sq.to_bits(),
-                    want.max_amplitude_sq.to_bits(),
-                    "{what}"
-                );
-                assert_eq!(got.phase_sum.to_bits(), want.phase_sum.to_bits(), "{what}");
-                assert_eq!(bits(&phase), bits(&want_phase), "{what}");
-                assert_eq!(
-                    bits(bytemuck::cast_slice(&field)),
-                    bits(bytemuck::cast_slice(&want_field)),
-                    "{what}"
-                );
+                // Serial, then in parallel on pools of 1 to 3 threads (the rows in levels, out of place).
+                for threads in [0, 1, 2, 3] {
+                    let mut field = vec![Complex32::new(f32::NAN, f32::NAN); n];
+                    bytemuck::cast_slice_mut::<Complex32, f32>(&mut field)[..n]
+                        .copy_from_slice(&re);
+                    let mut phase = im.clone();
+                    let got = match threads {
+                        0 => enc.analyse_planes(&mut field, &mut phase).unwrap(),
+                        t => rayon::ThreadPoolBuilder::new()
+                            .num_threads(t)
+                            .build()
+                            .unwrap()
+                            .install(|| enc.analyse_planes_par(&mut field, &mut phase))
+                            .unwrap(),
+                    };
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    let what = format!("{h}×{w} {method:?} ×{threads}");
+                    assert_eq!(
+                        got.max_amplitude_sq.to_bits(),
+                        want.max_amplitude_sq.to_bits(),
+                        "{what}"
+                    );
+                    assert_eq!(got.phase_sum.to_bits(), want.phase_sum.to_bits(), "{what}");
+                    assert_eq!(bits(&phase), bits(&want_phase), "{what}");
+                    assert_eq!(
+                        bits(bytemuck::cast_slice(&field)),
+                        bits(bytemuck::cast_slice(&want_field)),
+                        "{what}"
+                    );
+                }
             }
+        }
+    }
+
+    /// Pass 2 with its rows on a pool's threads is pass 2, bit for bit (phase and codes), on odd sizes and
+    /// pools of 1 to 3 threads; a bad scale is refused as `encode` refuses it.
+    #[test]
+    fn encode_par_equals_encode() {
+        for (h, w) in [(1, 1), (9, 7), (37, 20), (64, 33)] {
+            let n = h * w;
+            let field: Vec<Complex32> = (0..n)
+                .map(|i| Complex32::from_polar(0.2 + (i as f32 * 0.07).sin().abs(), i as f32 * 0.3))
+                .collect();
+            let mut enc = ChannelEncoder::new(h, w, DoublePhaseMethod::Plain).unwrap();
+            let (mut f, mut arg) = (field.clone(), vec![0.0f32; n]);
+            let stats = enc.analyse(&mut f, &mut arg).unwrap();
+            let (a, mean) = normaliser(&[stats; 3], n).unwrap();
+            let (mut want_phase, mut want_codes) = (arg.clone(), vec![0u8; n]);
+            enc.encode(&f, &mut want_phase, &mut want_codes, mean[0], a)
+                .unwrap();
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let (mut phase, mut codes) = (arg.clone(), vec![0u8; n]);
+                pool.install(|| enc.encode_par(&f, &mut phase, &mut codes, mean[0], a))
+                    .unwrap();
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&phase), bits(&want_phase), "{h}×{w} ×{threads}");
+                assert_eq!(codes, want_codes, "{h}×{w} ×{threads}");
+                assert!(enc
+                    .encode_par(&f, &mut phase, &mut codes, mean[0], 0.0)
+                    .is_err());
+            }
+            assert!(
+                n == 1 || want_codes.iter().any(|&c| c != want_codes[0]),
+                "{h}×{w}"
+            );
         }
     }
 }

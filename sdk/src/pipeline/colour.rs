@@ -1,20 +1,19 @@
-//! One colour channel's optics on its worker thread ([`ColourState`]): heads → field, the offset propagation
-//! (Eq. 6, carrier removed), the pre-filter's planes, the two passes of the double phase encoding (Eq. 7) and
-//! the look-up table. Allocation-free after the first frame.
+//! One colour channel's optics ([`ColourState`]): on its worker thread, heads → field, the offset propagation
+//! (Eq. 6, carrier removed) and the pre-filter's planes (or, without a pre-filter, pass 1 of the double phase
+//! encoding); the buffers the session's encoding stage then runs over its pool (pass 1 on the pre-filter's
+//! output, pass 2 of Eq. 7 and the look-up table). Allocation-free after the first frame.
 
 use std::sync::Arc;
 
-use ndarray::{Array3, Axis};
+use ndarray::Axis;
 use num_complex::Complex32;
 use tensorholo_kernels::phasor::{phasors, phasors_in_place};
 use tensorholo_kernels::Isa;
 
 use super::frame::Heads;
-use super::models::calibrated_lut;
 use crate::encoding::{ChannelEncoder, ChannelStats};
 use crate::error::{HoloError, Result};
 use crate::optics::{EvenMultiplier, Scratch, SpectralPlan};
-use crate::slm::DisplayCalibration;
 
 /// What a colour worker does next (see [`ColourState::run`]).
 #[derive(Debug, Clone)]
@@ -26,13 +25,6 @@ pub(super) enum Task {
     Midpoint {
         prefilter: bool,
         heads: Option<Arc<Heads>>,
-    },
-    /// Pre-filter output `(Re, Im)` → field, then pass 1 of the encoding.
-    Filtered,
-    /// Pass 2 of the encoding and the LUT.
-    Encode {
-        mean_phase: f32,
-        amplitude_scale: f32,
     },
 }
 
@@ -46,7 +38,7 @@ pub(super) type PlanePairMut<'a> = (&'a mut [f32], &'a mut [f32]);
 pub(super) struct ColourState {
     /// The complex field `[H, W]`. Its memory also holds two real planes (`[H, W]` each, [`ColourState::planes`])
     /// while the session writes them: the midpoint amplitude head before [`Task::Midpoint`] in a session
-    /// without full outputs and, with a pre-filter, its output `Re H'` before [`Task::Filtered`] (the phase
+    /// without full outputs and, with a pre-filter, its output `Re H'` before the encoding's pass 1 (the phase
     /// head and `Im H'` in `phase`); each task turns them into the field in place (no buffer of their own:
     /// 50 MB less at 1080p). The pre-filter's input `(Re H, Im H)` waits in `prefilter_input`
     /// ([`ColourState::prefilter_io`]).
@@ -66,8 +58,6 @@ pub(super) struct ColourState {
     /// This colour (0 = R) and the session's `(height, width)`.
     pub(super) colour: usize,
     pub(super) size: (usize, usize),
-    /// The display calibration whose look-up table turns `phase` into `codes` (`None`: linear).
-    pub(super) calibration: Option<Arc<DisplayCalibration>>,
     /// The instruction set of the heads-to-phasor rows ([`tensorholo_kernels::phasor`]).
     pub(super) isa: Isa,
 }
@@ -101,31 +91,6 @@ impl ColourState {
                 }
                 Ok(())
             }
-            Task::Filtered => {
-                // The pre-filter's outputs (Re H' in the field's memory, Im H' in `phase`: `prefilter_io`)
-                // become the field as pass 1 reads them; they are not checked here (the analysis sees them).
-                self.stats = self
-                    .encoder
-                    .analyse_planes(&mut self.field, &mut self.phase)?;
-                Ok(())
-            }
-            Task::Encode {
-                mean_phase,
-                amplitude_scale,
-            } => {
-                self.encoder.encode(
-                    &self.field,
-                    &mut self.phase,
-                    &mut self.codes,
-                    mean_phase,
-                    amplitude_scale,
-                )?;
-                if let Some(lut) = calibrated_lut(self.calibration.as_ref(), self.colour) {
-                    let (h, w) = self.size;
-                    lut.apply(h, w, &self.phase, &mut self.codes)?;
-                }
-                Ok(())
-            }
         }
     }
 
@@ -139,7 +104,7 @@ impl ColourState {
 
     /// The pre-filter's input `(Re H, Im H)` that [`Task::Midpoint`] left in `prefilter_input`, beside the
     /// planes the pre-filter writes its output `(Re H', Im H')` into: the first half of the field's memory and
-    /// `phase` (so that [`Task::Filtered`] interleaves them into the field without copying a plane aside).
+    /// `phase` (so that the encoding's pass 1 interleaves them into the field without copying a plane aside).
     ///
     /// Errors: [`HoloError::Internal`] if `prefilter_input` does not hold two planes (a session without a
     /// pre-filter).
@@ -318,15 +283,6 @@ fn split_planes(field: &[Complex32], re: &mut [f32], im: &mut [f32]) {
 /// The error for a scratch without room for the pre-filter's input (an internal inconsistency).
 fn no_room() -> HoloError {
     HoloError::Internal("no room for the pre-filter's input planes".into())
-}
-
-/// Writes `src` (`H·W` values) into channel `c` of a standard-layout `[C, H, W]` array.
-pub(super) fn fill_channel<T: Copy>(a: &mut Array3<T>, c: usize, src: &[T]) {
-    let mut lane = a.index_axis_mut(Axis(0), c);
-    match lane.as_slice_mut() {
-        Some(dst) => dst.copy_from_slice(src),
-        None => lane.iter_mut().zip(src).for_each(|(o, v)| *o = *v),
-    }
 }
 
 #[cfg(test)]

@@ -131,7 +131,8 @@ pub struct PipelineConfig {
     /// QOperator included).
     pub cnn_engine: CnnEngine,
     /// Threads of the CNNs' matrix products ([`ThreadCount::Auto`], the default, times 1, half and all
-    /// cores at session creation). The three colours of the optics always run on their own three threads.
+    /// cores at session creation). The optics run on their own threads (the offset propagation one thread per colour, the encoding on a
+    /// pool of all the cores).
     pub cnn_threads: ThreadCount,
     /// Where sessions compute their frames ([`Backend`]; default [`Backend::Auto`]).
     pub backend: Backend,

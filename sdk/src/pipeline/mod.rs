@@ -36,6 +36,7 @@ pub(crate) mod frame;
 #[cfg(feature = "gpu")]
 mod gpu_frame;
 mod models;
+mod pool;
 mod report;
 mod selection;
 mod session;

@@ -7,13 +7,15 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use ndarray::{Array3, Axis};
+use rayon::prelude::*;
 
 use super::cnn_stage::CnnStage;
-use super::colour::{fill_channel, ColourState, Task};
+use super::colour::{ColourState, Task};
 use super::config::Backend;
 use super::executor::Accelerator;
 use super::frame::{FrameTimings, Heads, SlmFrame};
 use super::models::{calibrated_lut, check_calibration_wavelengths};
+use super::pool::OpticsPool;
 use super::report::BackendReport;
 use super::workers::{lost_state, ColourWorkers};
 use crate::cnn::CnnPlan;
@@ -36,6 +38,8 @@ pub struct HologramSession {
     pub(super) prefilter: Option<Box<dyn CnnPlan>>,
     pub(super) states: [Option<Box<ColourState>>; 3],
     pub(super) workers: ColourWorkers,
+    /// The encoding stage's threads ([`OpticsPool`]).
+    pub(super) optics: OpticsPool,
     pub(super) output: SlmFrame,
     pub(super) last_heads: Option<Arc<Heads>>,
     pub(super) plan_report: PlanReport,
@@ -61,9 +65,6 @@ impl HologramSession {
         if let Some(cal) = &calibration {
             cal.check_size(self.height, self.width)?;
             check_calibration_wavelengths(cal, &self.wavelengths_m)?;
-        }
-        for slot in &mut self.states {
-            slot.as_mut().ok_or_else(lost_state)?.calibration = calibration.clone();
         }
         self.cnn.calibration = calibration.clone();
         self.calibration = calibration;
@@ -285,7 +286,7 @@ impl HologramSession {
         };
         let t = Instant::now();
         if filtered {
-            self.workers.run(&mut self.states, |_| Task::Filtered)?;
+            self.filtered()?;
         }
         self.encode()?;
         let encoding_s = t.elapsed().as_secs_f64();
@@ -305,7 +306,7 @@ impl HologramSession {
     /// Stage 2 on its own: the colour workers read the midpoint `heads` (`[3, H, W]` each, standard layout)
     /// where they are (shared read-only: no copy), turn them into fields, propagate them to the SLM (Eq. 6,
     /// carrier removed) and either prepare the pre-filter input or run pass 1 of the double phase encoding.
-    /// Follow with [`HologramSession::run_prefilter_cnn`] (then the workers' `Task::Filtered`) and
+    /// Follow with [`HologramSession::run_prefilter_cnn`] (then pass 1 on its output) and
     /// [`HologramSession::encode`] ([`HologramSession::encode_heads`] does all three). No heap allocation.
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for heads of another size; [`HoloError::InvalidData`] for
@@ -330,9 +331,9 @@ impl HologramSession {
 
     /// Stage 3 on its own: the pre-filter CNN, if the session has one, on `[Re H, Im H]` of the offset
     /// hologram (`docs/CONVENTIONS.md` §7.2, format 2), its outputs `(Re H', Im H')` written into the colour
-    /// workers' field memory; returns whether it ran. The workers' [`Task::Filtered`] then turns them into
-    /// the filtered field and runs pass 1 of the encoding (timed as encoding: without a pre-filter, pass 1
-    /// runs in [`Task::Midpoint`]).
+    /// workers' field memory; returns whether it ran. Pass 1 of the encoding then turns them into the
+    /// filtered field on the optics pool (timed as encoding: without a pre-filter, pass 1 runs in
+    /// [`Task::Midpoint`]).
     ///
     /// Errors: the engine's run errors ([`HoloError::ModelRun`]); call after
     /// [`HologramSession::propagate_to_slm`].
@@ -342,8 +343,8 @@ impl HologramSession {
         };
         let [r, g, b] = colour_states(&mut self.states)?;
         // The input: each colour's (Re H, Im H) where Task::Midpoint left them, read in place (no [6, H, W]
-        // copy, 50 MB at 1080p). The output: each colour's field memory, idle until Task::Filtered turns it
-        // into the filtered field (no output arrays, 50 MB).
+        // copy, 50 MB at 1080p). The output: each colour's field memory, idle until pass 1 turns it into the
+        // filtered field (no output arrays, 50 MB).
         let [(ri, ro), (gi, go), (bi, bo)] =
             [r.prefilter_io()?, g.prefilter_io()?, b.prefilter_io()?];
         plan.run_planes_into(
@@ -354,8 +355,10 @@ impl HologramSession {
     }
 
     /// Stage 4 on its own (no heap allocation after the first frame): the global normaliser, pass 2 of the
-    /// double phase encoding (Eq. 7) and the LUT on the workers; the colour planes are copied into
-    /// [`HologramSession::output`] (the phase only with full outputs; timings are not updated).
+    /// double phase encoding (Eq. 7) and the LUT, each colour's rows over the optics pool's threads
+    /// ([`crate::encoding::ChannelEncoder::encode_par`], bit-identical to one thread per colour), and the
+    /// colour planes copied into [`HologramSession::output`] the same way (the phase only with full outputs;
+    /// timings are not updated).
     ///
     /// Errors: [`HoloError::InvalidData`] if the hologram is zero everywhere.
     pub(crate) fn encode(&mut self) -> Result<&SlmFrame> {
@@ -363,21 +366,69 @@ impl HologramSession {
         for (s, slot) in stats.iter_mut().zip(&self.states) {
             *s = slot.as_ref().ok_or_else(lost_state)?.stats;
         }
-        let (a, mean) = normaliser(&stats, self.height * self.width)?;
-        self.workers.run(&mut self.states, |c| Task::Encode {
-            mean_phase: mean[c],
-            amplitude_scale: a,
+        let (h, w) = (self.height, self.width);
+        let (a, mean) = normaliser(&stats, h * w)?;
+        let (full, calibration, optics) = (self.full_outputs, &self.calibration, &self.optics);
+        let states = colour_states(&mut self.states)?;
+        let (Some(phase_out), Some(codes_out)) = (
+            self.output.phase.as_slice_mut(),
+            self.output.codes.as_slice_mut(),
+        ) else {
+            return Err(HoloError::Internal("SLM frame not contiguous".into()));
+        };
+        // Pass 2 on each colour's rows over the optics pool's threads, the colours side by side; the
+        // colour planes copied into the frame the same way (the phase only with full outputs).
+        let chunk = ENCODE_COPY_ROWS * w;
+        let colours = states
+            .into_par_iter()
+            .zip(phase_out.par_chunks_mut(h * w))
+            .zip(codes_out.par_chunks_mut(h * w))
+            .enumerate();
+        optics.run(|| {
+            colours.try_for_each(|(c, ((st, phase_out), codes_out))| -> Result<()> {
+                st.encoder
+                    .encode_par(&st.field, &mut st.phase, &mut st.codes, mean[c], a)?;
+                if let Some(lut) = calibrated_lut(calibration.as_ref(), c) {
+                    lut.apply(h, w, &st.phase, &mut st.codes)?;
+                }
+                if full {
+                    phase_out
+                        .par_chunks_mut(chunk)
+                        .zip(st.phase.par_chunks(chunk))
+                        .for_each(|(o, v)| o.copy_from_slice(v));
+                }
+                codes_out
+                    .par_chunks_mut(chunk)
+                    .zip(st.codes.par_chunks(chunk))
+                    .for_each(|(o, v)| o.copy_from_slice(v));
+                Ok(())
+            })
         })?;
-        for (c, slot) in self.states.iter().enumerate() {
-            let st = slot.as_ref().ok_or_else(lost_state)?;
-            if self.full_outputs {
-                fill_channel(&mut self.output.phase, c, &st.phase);
-            }
-            fill_channel(&mut self.output.codes, c, &st.codes);
-        }
         self.output.amplitude_scale = a;
         self.output.mean_phase = mean;
         Ok(&self.output)
+    }
+}
+
+/// Rows per chunk of the encoding stage's copies into the SLM frame.
+const ENCODE_COPY_ROWS: usize = 16;
+
+impl HologramSession {
+    /// Pass 1 of the encoding on the pre-filter's output (the colours' planes: `Re H'` in the field's memory,
+    /// `Im H'` in `phase`), each colour's rows over the optics pool's threads
+    /// ([`crate::encoding::ChannelEncoder::analyse_planes_par`]), the colours side by side.
+    ///
+    /// Errors: [`HoloError::Internal`] if a colour's state is lost or a thread panicked.
+    fn filtered(&mut self) -> Result<()> {
+        let states = colour_states(&mut self.states)?;
+        self.optics.run(|| {
+            states.into_par_iter().try_for_each(|st| {
+                st.stats = st
+                    .encoder
+                    .analyse_planes_par(&mut st.field, &mut st.phase)?;
+                Ok(())
+            })
+        })
     }
 }
 

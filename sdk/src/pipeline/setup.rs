@@ -12,6 +12,7 @@ use super::config::{Backend, MAX_HOLOGRAM_PIXELS};
 use super::executor::{Accelerator, BackendReportParts};
 use super::frame::{FrameTimings, SlmFrame};
 use super::models::HologramPipeline;
+use super::pool::OpticsPool;
 use super::report::BackendReport;
 use super::session::HologramSession;
 use super::workers::ColourWorkers;
@@ -123,7 +124,6 @@ impl HologramSession {
                 stats: ChannelStats::default(),
                 colour,
                 size: (height, width),
-                calibration: calibration.clone(),
                 isa: kernel_isa()?,
             }));
         }
@@ -140,6 +140,7 @@ impl HologramSession {
             prefilter,
             states,
             workers: ColourWorkers::start()?,
+            optics: OpticsPool::start()?,
             output: SlmFrame {
                 codes: Array3::zeros((3, height, width)),
                 phase: Array3::zeros((3, height, width)),

@@ -1,5 +1,6 @@
 //! [`ColourWorkers`]: three persistent threads, one per colour, that run a [`Task`] on each colour's state
-//! without allocating. Knows no optics: it moves [`ColourState`]s and results.
+//! without allocating (the offset stage; the encoding stage runs on the session's optics pool,
+//! `pipeline/pool.rs`). Knows no optics: it moves [`ColourState`]s and results.
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
