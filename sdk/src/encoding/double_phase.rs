@@ -482,11 +482,11 @@ impl ChannelEncoder {
         field: &mut [Complex32],
         phase: &mut [f32],
     ) -> Result<ChannelStats> {
-        self.check("field", field.len())?;
-        self.check("phase", phase.len())?;
         if !matches!(self.method, DoublePhaseMethod::Plain) {
             return self.analyse_planes(field, phase);
         }
+        self.check("field", field.len())?;
+        self.check("phase", phase.len())?;
         let (h, w, isa) = (self.height, self.width, self.isa);
         let flat = bytemuck::cast_slice_mut::<Complex32, f32>(field);
         let chunk = ANALYSE_ROWS * w;
@@ -519,47 +519,6 @@ impl ChannelEncoder {
             .fold(ChannelStats::default(), |s, r| s.merge(*r)))
     }
 
-    /// [`ChannelEncoder::encode`] with chunks of rows on the current rayon pool's threads, bit for bit (each
-    /// row's values depend on the row alone).
-    ///
-    /// Errors: as `encode`.
-    pub(crate) fn encode_par(
-        &self,
-        field: &[Complex32],
-        phase: &mut [f32],
-        codes: &mut [u8],
-        mean_phase: f32,
-        amplitude_scale: f32,
-    ) -> Result<()> {
-        self.check("field", field.len())?;
-        self.check("phase", phase.len())?;
-        self.check("codes", codes.len())?;
-        if !(amplitude_scale > 0.0 && amplitude_scale.is_finite()) {
-            return Err(invalid(
-                "amplitude_scale",
-                format!("must be > 0, got {amplitude_scale}"),
-            ));
-        }
-        let (w, inv_a, isa) = (self.width, 1.0 / amplitude_scale, self.isa);
-        let chunk = ANALYSE_ROWS * w;
-        field
-            .par_chunks(chunk)
-            .zip(phase.par_chunks_mut(chunk))
-            .zip(codes.par_chunks_mut(chunk))
-            .enumerate()
-            .try_for_each(|(i, ((field, phase), codes))| {
-                let rows = field
-                    .chunks_exact(w)
-                    .zip(phase.chunks_exact_mut(w))
-                    .zip(codes.chunks_exact_mut(w));
-                for (j, ((row, out), c)) in rows.enumerate() {
-                    let y = i * ANALYSE_ROWS + j;
-                    encode_row(row, out, Some(c), y, mean_phase, inv_a, isa)?;
-                }
-                Ok(())
-            })
-    }
-
     /// Pass 2: turns `phase` (from [`ChannelEncoder::analyse`] on the same `field`) into the wrapped double
     /// phase pattern in `[0, 2π)` (Eq. 7) with the channel's `mean_phase` and the global `amplitude_scale`
     /// from [`normaliser`], and writes the 8-bit codes of the linear look-up table into `codes`.
@@ -574,6 +533,22 @@ impl ChannelEncoder {
         mean_phase: f32,
         amplitude_scale: f32,
     ) -> Result<()> {
+        self.encode_on(field, phase, codes, (mean_phase, amplitude_scale), false)
+    }
+
+    /// [`ChannelEncoder::encode`] with `(mean_phase, amplitude_scale)`, its chunks of rows on the current
+    /// rayon pool's threads with `pool` (the pipeline's optics pool), else one after the other: bit for bit
+    /// the same (each row's values depend on the row alone).
+    ///
+    /// Errors: as `encode`.
+    pub(crate) fn encode_on(
+        &self,
+        field: &[Complex32],
+        phase: &mut [f32],
+        codes: &mut [u8],
+        (mean_phase, amplitude_scale): (f32, f32),
+        pool: bool,
+    ) -> Result<()> {
         self.check("field", field.len())?;
         self.check("phase", phase.len())?;
         self.check("codes", codes.len())?;
@@ -583,16 +558,35 @@ impl ChannelEncoder {
                 format!("must be > 0, got {amplitude_scale}"),
             ));
         }
-        let (w, inv_a) = (self.width, 1.0 / amplitude_scale);
-        for (y, ((row, out), c)) in field
-            .chunks_exact(w)
-            .zip(phase.chunks_exact_mut(w))
-            .zip(codes.chunks_exact_mut(w))
-            .enumerate()
-        {
-            encode_row(row, out, Some(c), y, mean_phase, inv_a, self.isa)?;
+        let (w, inv_a, isa) = (self.width, 1.0 / amplitude_scale, self.isa);
+        let chunk = ANALYSE_ROWS * w;
+        type Chunk<'a> = (usize, ((&'a [Complex32], &'a mut [f32]), &'a mut [u8]));
+        let rows = |(i, ((field, phase), codes)): Chunk<'_>| -> Result<()> {
+            let rows = field
+                .chunks_exact(w)
+                .zip(phase.chunks_exact_mut(w))
+                .zip(codes.chunks_exact_mut(w));
+            for (j, ((row, out), c)) in rows.enumerate() {
+                let y = i * ANALYSE_ROWS + j;
+                encode_row(row, out, Some(c), y, mean_phase, inv_a, isa)?;
+            }
+            Ok(())
+        };
+        if pool {
+            field
+                .par_chunks(chunk)
+                .zip(phase.par_chunks_mut(chunk))
+                .zip(codes.par_chunks_mut(chunk))
+                .enumerate()
+                .try_for_each(rows)
+        } else {
+            field
+                .chunks(chunk)
+                .zip(phase.chunks_mut(chunk))
+                .zip(codes.chunks_mut(chunk))
+                .enumerate()
+                .try_for_each(rows)
         }
-        Ok(())
     }
 }
 
@@ -942,7 +936,7 @@ mod tests {
     /// Pass 2 with its rows on a pool's threads is pass 2, bit for bit (phase and codes), on odd sizes and
     /// pools of 1 to 3 threads; a bad scale is refused as `encode` refuses it.
     #[test]
-    fn encode_par_equals_encode() {
+    fn encode_on_the_pool_equals_encode() {
         for (h, w) in [(1, 1), (9, 7), (37, 20), (64, 33)] {
             let n = h * w;
             let field: Vec<Complex32> = (0..n)
@@ -961,13 +955,13 @@ mod tests {
                     .build()
                     .unwrap();
                 let (mut phase, mut codes) = (arg.clone(), vec![0u8; n]);
-                pool.install(|| enc.encode_par(&f, &mut phase, &mut codes, mean[0], a))
+                pool.install(|| enc.encode_on(&f, &mut phase, &mut codes, (mean[0], a), true))
                     .unwrap();
                 let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&phase), bits(&want_phase), "{h}×{w} ×{threads}");
                 assert_eq!(codes, want_codes, "{h}×{w} ×{threads}");
                 assert!(enc
-                    .encode_par(&f, &mut phase, &mut codes, mean[0], 0.0)
+                    .encode_on(&f, &mut phase, &mut codes, (mean[0], 0.0), true)
                     .is_err());
             }
             assert!(

@@ -356,7 +356,7 @@ impl HologramSession {
 
     /// Stage 4 on its own (no heap allocation after the first frame): the global normaliser, pass 2 of the
     /// double phase encoding (Eq. 7) and the LUT, each colour's rows over the optics pool's threads
-    /// ([`crate::encoding::ChannelEncoder::encode_par`], bit-identical to one thread per colour), and the
+    /// ([`crate::encoding::ChannelEncoder::encode_on`], bit-identical to one thread per colour), and the
     /// colour planes copied into [`HologramSession::output`] the same way (the phase only with full outputs;
     /// timings are not updated).
     ///
@@ -386,8 +386,9 @@ impl HologramSession {
             .enumerate();
         optics.run(|| {
             colours.try_for_each(|(c, ((st, phase_out), codes_out))| -> Result<()> {
+                let (field, params) = (&st.field, (mean[c], a));
                 st.encoder
-                    .encode_par(&st.field, &mut st.phase, &mut st.codes, mean[c], a)?;
+                    .encode_on(field, &mut st.phase, &mut st.codes, params, true)?;
                 if let Some(lut) = calibrated_lut(calibration.as_ref(), c) {
                     lut.apply(h, w, &st.phase, &mut st.codes)?;
                 }
