@@ -59,13 +59,15 @@ pub(crate) type PhasorsInPlaceFn = unsafe fn(&mut [f32], &[f32]) -> bool;
 pub(crate) struct ConvertFns {
     pub quantize: QuantizeRowFn,
     pub dequantize: DequantizeRowFn,
-    pub requantize: unsafe fn(&mut [u8], &[u8], f32, f32, u8, f32),
+    pub requantize: RequantizeRowFn,
 }
 
 /// [`ConvertFns::quantize`]: `(dst, rows, zp, offset, scale)`.
 pub(crate) type QuantizeRowFn = unsafe fn(&mut [u8], [&[f32]; 4], u8, f32, f32);
 /// [`ConvertFns::dequantize`]: `(src, rows, zp, scale)`.
 pub(crate) type DequantizeRowFn = unsafe fn(&[u8], [&mut [f32]; 4], f32, f32);
+/// [`ConvertFns::requantize`]: `(dst, src, zo, other_scale, zp, scale)`.
+pub(crate) type RequantizeRowFn = unsafe fn(&mut [u8], &[u8], f32, f32, u8, f32);
 
 /// A peak loop: operations per iteration (a multiply-add counts 2) and the loop, which returns a value to
 /// keep its chains alive.

@@ -437,77 +437,60 @@ impl ChannelEncoder {
     /// `field`'s memory (`H·W` values) and `Im H` in `phase`. Interleaves them into `field` and writes `arg H`
     /// into `phase`: the values and statistics of [`interleave_in_place`] on the whole field then
     /// [`ChannelEncoder::analyse`], bit for bit. With the plain method, chunks of [`ANALYSE_ROWS`] rows are
-    /// interleaved and analysed in turn, last chunk first, while they are in cache (one pass over the field
-    /// fewer); each row's statistics are kept and merged in row order afterwards, as `analyse` merges them.
+    /// interleaved (out of place) and analysed in turn while in cache, one pass over the field fewer, on the
+    /// current rayon pool's threads with `pool` (the pipeline's optics pool), else one after the other. The
+    /// rows go in levels from the bottom up: level `[a, b)`, `b ≤ 2a`, reads the first plane's values
+    /// `a·W..b·W` and writes the field's rows `a..b`, values `2a·W..2b·W` (no overlap, and no later level reads
+    /// what it writes), row 0 last, in place; each row's statistics are kept and merged in row order
+    /// afterwards, as `analyse` merges them.
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for wrong lengths.
     pub(crate) fn analyse_planes(
         &mut self,
         field: &mut [Complex32],
         phase: &mut [f32],
+        pool: bool,
     ) -> Result<ChannelStats> {
         self.check("field", field.len())?;
         self.check("phase", phase.len())?;
-        let (h, w) = (self.height, self.width);
+        let (h, w, isa) = (self.height, self.width, self.isa);
         if !matches!(self.method, DoublePhaseMethod::Plain) {
             interleave_in_place(bytemuck::cast_slice_mut(field), phase, 0..h * w);
             return self.analyse(field, phase);
         }
-        for y0 in (0..h).step_by(ANALYSE_ROWS).rev() {
-            let y1 = (y0 + ANALYSE_ROWS).min(h);
-            interleave_in_place(bytemuck::cast_slice_mut(field), phase, y0 * w..y1 * w);
-            let rows = field[y0 * w..y1 * w]
-                .chunks_exact(w)
-                .zip(phase[y0 * w..y1 * w].chunks_exact_mut(w));
-            for ((row, out), stats) in rows.zip(&mut self.row_stats[y0..y1]) {
-                *stats = analyse_row(row, out, self.isa)?;
-            }
-        }
-        Ok(self
-            .row_stats
-            .iter()
-            .fold(ChannelStats::default(), |s, r| s.merge(*r)))
-    }
-
-    /// [`ChannelEncoder::analyse_planes`] with its chunks of rows on the current rayon pool's threads (the
-    /// pipeline's optics pool), bit for bit: each chunk interleaves `Re H` and `Im H` out of place into the
-    /// field's rows and analyses them; the rows go in levels from the bottom up (level `[a, b)`, `b ≤ 2a`,
-    /// reads the first plane's values `a·W..b·W` and writes the field's rows `a..b`, values `2a·W..2b·W`: no
-    /// overlap, and no later level reads what it writes), row 0 last; the rows' statistics are merged in row
-    /// order as before. Other methods than the plain one run `analyse_planes` as it is.
-    ///
-    /// Errors: [`HoloError::ShapeMismatch`] for wrong lengths.
-    pub(crate) fn analyse_planes_par(
-        &mut self,
-        field: &mut [Complex32],
-        phase: &mut [f32],
-    ) -> Result<ChannelStats> {
-        if !matches!(self.method, DoublePhaseMethod::Plain) {
-            return self.analyse_planes(field, phase);
-        }
-        self.check("field", field.len())?;
-        self.check("phase", phase.len())?;
-        let (h, w, isa) = (self.height, self.width, self.isa);
         let flat = bytemuck::cast_slice_mut::<Complex32, f32>(field);
         let chunk = ANALYSE_ROWS * w;
+        type Chunk<'a> = (
+            ((&'a mut [f32], &'a [f32]), &'a mut [f32]),
+            &'a mut [ChannelStats],
+        );
+        let rows = |(((out, re), phase), stats): Chunk<'_>| -> Result<()> {
+            interleave_into(out, re, phase);
+            let rows = bytemuck::cast_slice::<f32, Complex32>(out).chunks_exact(w);
+            for ((row, arg), s) in rows.zip(phase.chunks_exact_mut(w)).zip(stats) {
+                *s = analyse_row(row, arg, isa)?;
+            }
+            Ok(())
+        };
         let mut b = h;
         while b > 1 {
             let a = b.div_ceil(2);
             let (below, above) = flat.split_at_mut(2 * a * w);
-            let re = &below[a * w..b * w];
-            let out = &mut above[..2 * (b - a) * w];
-            out.par_chunks_mut(2 * chunk)
-                .zip(re.par_chunks(chunk))
-                .zip(phase[a * w..b * w].par_chunks_mut(chunk))
-                .zip(self.row_stats[a..b].par_chunks_mut(ANALYSE_ROWS))
-                .try_for_each(|(((out, re), phase), stats)| -> Result<()> {
-                    interleave_into(out, re, phase);
-                    let rows = bytemuck::cast_slice::<f32, Complex32>(out).chunks_exact(w);
-                    for ((row, arg), s) in rows.zip(phase.chunks_exact_mut(w)).zip(stats) {
-                        *s = analyse_row(row, arg, isa)?;
-                    }
-                    Ok(())
-                })?;
+            let (re, out) = (&below[a * w..b * w], &mut above[..2 * (b - a) * w]);
+            let (phase, stats) = (&mut phase[a * w..b * w], &mut self.row_stats[a..b]);
+            if pool {
+                out.par_chunks_mut(2 * chunk)
+                    .zip(re.par_chunks(chunk))
+                    .zip(phase.par_chunks_mut(chunk))
+                    .zip(stats.par_chunks_mut(ANALYSE_ROWS))
+                    .try_for_each(rows)?;
+            } else {
+                out.chunks_mut(2 * chunk)
+                    .zip(re.chunks(chunk))
+                    .zip(phase.chunks_mut(chunk))
+                    .zip(stats.chunks_mut(ANALYSE_ROWS))
+                    .try_for_each(rows)?;
+            }
             b = a;
         }
         interleave_in_place(flat, phase, 0..w);
@@ -906,12 +889,12 @@ mod tests {
                         .copy_from_slice(&re);
                     let mut phase = im.clone();
                     let got = match threads {
-                        0 => enc.analyse_planes(&mut field, &mut phase).unwrap(),
+                        0 => enc.analyse_planes(&mut field, &mut phase, false).unwrap(),
                         t => rayon::ThreadPoolBuilder::new()
                             .num_threads(t)
                             .build()
                             .unwrap()
-                            .install(|| enc.analyse_planes_par(&mut field, &mut phase))
+                            .install(|| enc.analyse_planes(&mut field, &mut phase, true))
                             .unwrap(),
                     };
                     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();

@@ -417,7 +417,7 @@ const ENCODE_COPY_ROWS: usize = 16;
 impl HologramSession {
     /// Pass 1 of the encoding on the pre-filter's output (the colours' planes: `Re H'` in the field's memory,
     /// `Im H'` in `phase`), each colour's rows over the optics pool's threads
-    /// ([`crate::encoding::ChannelEncoder::analyse_planes_par`]), the colours side by side.
+    /// ([`crate::encoding::ChannelEncoder::analyse_planes`] on the pool), the colours side by side.
     ///
     /// Errors: [`HoloError::Internal`] if a colour's state is lost or a thread panicked.
     fn filtered(&mut self) -> Result<()> {
@@ -426,7 +426,7 @@ impl HologramSession {
             states.into_par_iter().try_for_each(|st| {
                 st.stats = st
                     .encoder
-                    .analyse_planes_par(&mut st.field, &mut st.phase)?;
+                    .analyse_planes(&mut st.field, &mut st.phase, true)?;
                 Ok(())
             })
         })

@@ -596,28 +596,39 @@ impl<'a> FusedBase<'a> {
         w: usize,
         isa: Isa,
     ) -> std::result::Result<(), KernelError> {
-        let k2 = self.taps * self.taps;
-        let kernel = self
-            .kernel
-            .get(c * k2..(c + 1) * k2)
-            .ok_or(KernelError::Length {
-                what: "pre-filter base kernel [C][taps][taps]",
-                expected: (c + 1) * k2,
-                got: self.kernel.len(),
-            })?;
         let out = &mut plane[rows.start * w..rows.end * w];
-        depthwise_rows(
+        let hw = [self.height, w];
+        add_base_rows(
+            (self.kernel, self.taps, c),
             self.input.plane(c),
-            self.height,
-            w,
-            kernel,
-            self.taps,
+            hw,
             rows,
             out,
-            true,
             isa,
         )
     }
+}
+
+/// `out += base(input)` on frame rows `rows` (`out`: exactly those rows of an `[h][w]` plane): channel `c` of
+/// the pre-filter's depthwise base filter `(kernel [C][taps][taps], taps, c)` on that channel's input plane
+/// ([`depthwise_rows`], edges replicated). Errors: the kernels', a kernel without channel `c`.
+fn add_base_rows(
+    (kernel, taps, c): (&[f32], usize, usize),
+    input: &[f32],
+    [h, w]: [usize; 2],
+    rows: Range<usize>,
+    out: &mut [f32],
+    isa: Isa,
+) -> std::result::Result<(), KernelError> {
+    let k2 = taps * taps;
+    let channel = kernel
+        .get(c * k2..(c + 1) * k2)
+        .ok_or(KernelError::Length {
+            what: "pre-filter base kernel [C][taps][taps]",
+            expected: (c + 1) * k2,
+            got: kernel.len(),
+        })?;
+    depthwise_rows(input, h, w, channel, taps, rows, out, true, isa)
 }
 
 /// The input as a pre-filter's base branch reads it: the planar input `[C][H][W]`, or (int8 files) the input
@@ -649,12 +660,8 @@ pub(super) fn finish_outputs(
     let CnnOutput::Prefilter { taps, base: kernel } = &graph.output else {
         return Ok(());
     };
-    let k2 = taps * taps;
     installed(pool, threads, || {
         for (c, out_plane) in out.planes_mut().enumerate() {
-            let kernel = kernel.get(c * k2..(c + 1) * k2).ok_or_else(|| {
-                HoloError::Internal("native CNN: pre-filter base kernel per channel".into())
-            })?;
             let input = match &mut base {
                 BaseInput::Planar(p) => p.plane(c),
                 BaseInput::Rounded {
@@ -678,17 +685,8 @@ pub(super) fn finish_outputs(
                 rows: 0..h,
             };
             bands(rows, threads, &|b| {
-                depthwise_rows(
-                    input,
-                    h,
-                    w,
-                    kernel,
-                    *taps,
-                    b.rows.clone(),
-                    b.data,
-                    true,
-                    isa,
-                )
+                let k = (&kernel[..], *taps, c);
+                add_base_rows(k, input, [h, w], b.rows.clone(), b.data, isa)
             })?;
         }
         Ok(())

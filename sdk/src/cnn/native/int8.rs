@@ -309,29 +309,26 @@ impl NativeInt8Plan {
         let net = self.net.clone();
         let quant = net.quant()?;
         let (h, w) = (self.height, self.width);
-        // A base filter on the planar input is added to the rows as they are written (FusedBase).
-        let fused = match quant.base_reads_rounded_input {
-            true => None,
-            false => FusedBase::of(&net.graph, input, h),
-        };
+        // A base filter on the planar input is added to the rows as they are written (FusedBase); older files'
+        // base filter reads the input as the first layer does, rounded, and runs after the frame.
+        let rounded = quant.base_reads_rounded_input;
+        let fused = (!rounded)
+            .then(|| FusedBase::of(&net.graph, input, h))
+            .flatten();
         match &mut self.ends {
             Ends::Int8 { .. } => self.forward_int8(input, out, fused)?,
             Ends::Float { .. } => self.forward_mixed(input, out, fused)?,
         }
-        if fused.is_some() {
+        if !rounded {
             return Ok(());
         }
-        let base = match quant.base_reads_rounded_input {
-            // Older files: the base filter reads the input as the first layer does, rounded.
-            true => BaseInput::Rounded {
-                planar: input,
-                // The pre-filter has no offset; the rounding is the file's QuantizeLinear of the input.
-                offset: -net.graph.input_offset,
-                grid: int8_layer(quant, 0)?.input,
-                isa: net.isa,
-                plane: &mut self.base_plane,
-            },
-            false => BaseInput::Planar(input),
+        let base = BaseInput::Rounded {
+            planar: input,
+            // The pre-filter has no offset; the rounding is the file's QuantizeLinear of the input.
+            offset: -net.graph.input_offset,
+            grid: int8_layer(quant, 0)?.input,
+            isa: net.isa,
+            plane: &mut self.base_plane,
         };
         finish_outputs(
             &net.graph,
