@@ -224,6 +224,16 @@ static OPS: [Ops; 5] = [
             },
             F32Row {
                 info: winograd4_info(
+                    "conv3x3.f32.wino4x4.24x1.avx512",
+                    Isa::Avx512,
+                    f32_avx512::WINO4_G,
+                    16,
+                    1,
+                ),
+                run: f32_avx512::winograd4_wide,
+            },
+            F32Row {
+                info: winograd4_info(
                     "conv3x3.f32.wino4x4.8x1.avx512",
                     Isa::Avx512,
                     f32_avx512::G,
@@ -334,6 +344,17 @@ static OPS: [Ops; 5] = [
                     1,
                 ),
                 run: f32_avx2::winograd4_avx512_geometry,
+            },
+            #[cfg(test)]
+            F32Row {
+                info: winograd4_info(
+                    "test.f32.wino4x4.24x1.avx512-geometry-on-avx2",
+                    Isa::Avx2Fma,
+                    24,
+                    16,
+                    1,
+                ),
+                run: f32_avx2::winograd4_wide_avx512_geometry,
             },
         ],
         u8: &[

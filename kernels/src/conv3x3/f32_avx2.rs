@@ -336,3 +336,15 @@ pub(crate) unsafe fn winograd4_avx512_geometry(job: &F32Job<'_>, out: &mut F32Ou
     // SAFETY: as `winograd4`; 64-pixel tile ≤ MAX_TILE.
     unsafe { simd_winograd4::conv::<Ymm2, 8, 1>(job, out) }
 }
+
+/// Tests only: the wide AVX-512 F(4×4, 3×3) geometry (24 channels × 1 vector of 16 lanes = 16 tiles) on AVX2
+/// registers (they spill: correctness only).
+///
+/// # Safety
+/// As [`winograd4`].
+#[cfg(test)]
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn winograd4_wide_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: as `winograd4`; 64-pixel tile ≤ MAX_TILE.
+    unsafe { simd_winograd4::conv::<Ymm2, 24, 1>(job, out) }
+}

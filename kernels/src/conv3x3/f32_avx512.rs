@@ -173,6 +173,31 @@ pub(crate) unsafe fn winograd4(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     unsafe { simd_winograd4::conv::<__m512, G, 1>(job, out) }
 }
 
+/// Output channels of the wide F(4×4, 3×3) register tile: a whole 24-channel layer in one group.
+pub(crate) const WINO4_G: usize = 24;
+
+/// `conv3x3.f32.wino4x4.24x1.avx512`: Winograd F(4×4, 3×3), 24 output channels × 1 zmm of tiles (16 tiles,
+/// 64 output pixels).
+///
+/// Register tile: 24 accumulators + 1 vector of transformed inputs, the 24 weights broadcast from memory by
+/// the multiply-adds themselves (`vfmadd231ps m32{1to16}`): 25 of the 32 zmm registers, 24 independent FMA
+/// chains per reduction step (the 8-channel tile's 8 chains are just the latency × throughput of two FMA
+/// pipes: any stall shows) and one load of `V` per 24 multiply-adds instead of per 8. A 24-channel layer is
+/// one group, so each chunk's `V` (54 KiB, more than L1) is read once instead of three times. Measured on
+/// Zen 5 (docs/BENCHMARKS.md): the f32 8-layer CNN at 1080p on 2 threads 7–10 % faster than with the 8 × 1
+/// tile; layers of fewer channels keep the 8 × 1 row (the least padding, [`selected_f32_for`]).
+///
+/// [`selected_f32_for`]: crate::registry::selected_f32_for
+///
+/// # Safety
+/// The CPU has AVX-512F; `job` was checked by the safe API and its weights packed for F(4×4, 3×3) with
+/// [`WINO4_G`] channels per group.
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub(crate) unsafe fn winograd4_wide(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: AVX-512F enabled here; 64-pixel tile ≤ MAX_TILE; the job was checked by the caller.
+    unsafe { simd_winograd4::conv::<__m512, WINO4_G, 1>(job, out) }
+}
+
 /// FMA peak loop: `iters` × 24 independent 16-lane FMAs. FLOPs = `iters · 24 · 16 · 2`.
 ///
 /// # Safety
