@@ -516,18 +516,22 @@ impl ChannelEncoder {
         mean_phase: f32,
         amplitude_scale: f32,
     ) -> Result<()> {
-        self.encode_on(field, phase, codes, (mean_phase, amplitude_scale), false)
+        let params = (mean_phase, amplitude_scale);
+        self.encode_on(field, (None, phase), codes, params, false)
     }
 
     /// [`ChannelEncoder::encode`] with `(mean_phase, amplitude_scale)`, its chunks of rows on the current
     /// rayon pool's threads with `pool` (the pipeline's optics pool), else one after the other: bit for bit
-    /// the same (each row's values depend on the row alone).
+    /// the same (each row's values depend on the row alone). With `(Some(arg), phase)`, pass 1's `arg H` is
+    /// read from `arg` (left as it is) and the pattern written into `phase`: each row copied there just
+    /// before it is encoded, while it is in cache (a frame's output plane, instead of a copy of the encoded
+    /// plane afterwards); with `(None, phase)`, `phase` holds `arg H` and is encoded in place.
     ///
-    /// Errors: as `encode`.
+    /// Errors: as `encode` (`arg` checked as `phase`).
     pub(crate) fn encode_on(
         &self,
         field: &[Complex32],
-        phase: &mut [f32],
+        (arg, phase): (Option<&[f32]>, &mut [f32]),
         codes: &mut [u8],
         (mean_phase, amplitude_scale): (f32, f32),
         pool: bool,
@@ -535,6 +539,9 @@ impl ChannelEncoder {
         self.check("field", field.len())?;
         self.check("phase", phase.len())?;
         self.check("codes", codes.len())?;
+        if let Some(arg) = arg {
+            self.check("arg", arg.len())?;
+        }
         if !(amplitude_scale > 0.0 && amplitude_scale.is_finite()) {
             return Err(invalid(
                 "amplitude_scale",
@@ -551,6 +558,9 @@ impl ChannelEncoder {
                 .zip(codes.chunks_exact_mut(w));
             for (j, ((row, out), c)) in rows.enumerate() {
                 let y = i * ANALYSE_ROWS + j;
+                if let Some(arg) = arg {
+                    out.copy_from_slice(&arg[y * w..(y + 1) * w]);
+                }
                 encode_row(row, out, Some(c), y, mean_phase, inv_a, isa)?;
             }
             Ok(())
@@ -916,8 +926,9 @@ mod tests {
         }
     }
 
-    /// Pass 2 with its rows on a pool's threads is pass 2, bit for bit (phase and codes), on odd sizes and
-    /// pools of 1 to 3 threads; a bad scale is refused as `encode` refuses it.
+    /// Pass 2 with its rows on a pool's threads is pass 2, bit for bit (phase and codes), in place and out of
+    /// place (pass 1's phase read from its own plane), on odd sizes and pools of 1 to 3 threads; a bad scale
+    /// and a short `arg` are refused.
     #[test]
     fn encode_on_the_pool_equals_encode() {
         for (h, w) in [(1, 1), (9, 7), (37, 20), (64, 33)] {
@@ -938,13 +949,30 @@ mod tests {
                     .build()
                     .unwrap();
                 let (mut phase, mut codes) = (arg.clone(), vec![0u8; n]);
-                pool.install(|| enc.encode_on(&f, &mut phase, &mut codes, (mean[0], a), true))
+                let io = (None, &mut phase[..]);
+                pool.install(|| enc.encode_on(&f, io, &mut codes, (mean[0], a), true))
                     .unwrap();
                 let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&phase), bits(&want_phase), "{h}×{w} ×{threads}");
                 assert_eq!(codes, want_codes, "{h}×{w} ×{threads}");
+                // Out of place: `arg` kept, every row of the output written.
+                let (mut out, mut codes) = (vec![f32::NAN; n], vec![0u8; n]);
+                let io = (Some(&arg[..]), &mut out[..]);
+                pool.install(|| enc.encode_on(&f, io, &mut codes, (mean[0], a), true))
+                    .unwrap();
+                assert_eq!(
+                    bits(&out),
+                    bits(&want_phase),
+                    "{h}×{w} ×{threads} out of place"
+                );
+                assert_eq!(codes, want_codes, "{h}×{w} ×{threads} out of place");
+                let io = (None, &mut phase[..]);
                 assert!(enc
-                    .encode_on(&f, &mut phase, &mut codes, (mean[0], 0.0), true)
+                    .encode_on(&f, io, &mut codes, (mean[0], 0.0), true)
+                    .is_err());
+                let io = (Some(&arg[..n - 1]), &mut out[..]);
+                assert!(enc
+                    .encode_on(&f, io, &mut codes, (mean[0], a), true)
                     .is_err());
             }
             assert!(

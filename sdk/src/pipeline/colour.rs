@@ -53,7 +53,6 @@ pub(super) struct ColourState {
     pub(super) prefilter_input: Vec<f32>,
     pub(super) encoder: ChannelEncoder,
     pub(super) phase: Vec<f32>,
-    pub(super) codes: Vec<u8>,
     pub(super) stats: ChannelStats,
     /// This colour (0 = R) and the session's `(height, width)`.
     pub(super) colour: usize,

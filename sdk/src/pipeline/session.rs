@@ -356,9 +356,10 @@ impl HologramSession {
 
     /// Stage 4 on its own (no heap allocation after the first frame): the global normaliser, pass 2 of the
     /// double phase encoding (Eq. 7) and the LUT, each colour's rows over the optics pool's threads
-    /// ([`crate::encoding::ChannelEncoder::encode_on`], bit-identical to one thread per colour), and the
-    /// colour planes copied into [`HologramSession::output`] the same way (the phase only with full outputs;
-    /// timings are not updated).
+    /// ([`crate::encoding::ChannelEncoder::encode_on`], bit-identical to one thread per colour), writing
+    /// the codes straight into [`HologramSession::output`], and the phase too with full outputs (each row
+    /// copied from pass 1's plane as it is encoded, instead of a pass over the planes afterwards; timings are
+    /// not updated).
     ///
     /// Errors: [`HoloError::InvalidData`] if the hologram is zero everywhere.
     pub(crate) fn encode(&mut self) -> Result<&SlmFrame> {
@@ -376,9 +377,7 @@ impl HologramSession {
         ) else {
             return Err(HoloError::Internal("SLM frame not contiguous".into()));
         };
-        // Pass 2 on each colour's rows over the optics pool's threads, the colours side by side; the
-        // colour planes copied into the frame the same way (the phase only with full outputs).
-        let chunk = ENCODE_COPY_ROWS * w;
+        // Pass 2 on each colour's rows over the optics pool's threads, the colours side by side.
         let colours = states
             .into_par_iter()
             .zip(phase_out.par_chunks_mut(h * w))
@@ -387,21 +386,21 @@ impl HologramSession {
         optics.run(|| {
             colours.try_for_each(|(c, ((st, phase_out), codes_out))| -> Result<()> {
                 let (field, params) = (&st.field, (mean[c], a));
-                st.encoder
-                    .encode_on(field, &mut st.phase, &mut st.codes, params, true)?;
-                if let Some(lut) = calibrated_lut(calibration.as_ref(), c) {
-                    lut.apply(h, w, &st.phase, &mut st.codes)?;
-                }
-                if full {
+                // The pattern straight into the frame's phase plane with full outputs (each row copied
+                // there from pass 1's plane just before it is encoded), else in place; the codes straight
+                // into the frame.
+                let phase: &[f32] = if full {
+                    let io = (Some(&st.phase[..]), &mut *phase_out);
+                    st.encoder.encode_on(field, io, codes_out, params, true)?;
                     phase_out
-                        .par_chunks_mut(chunk)
-                        .zip(st.phase.par_chunks(chunk))
-                        .for_each(|(o, v)| o.copy_from_slice(v));
+                } else {
+                    let io = (None, &mut st.phase[..]);
+                    st.encoder.encode_on(field, io, codes_out, params, true)?;
+                    &st.phase
+                };
+                if let Some(lut) = calibrated_lut(calibration.as_ref(), c) {
+                    lut.apply(h, w, phase, codes_out)?;
                 }
-                codes_out
-                    .par_chunks_mut(chunk)
-                    .zip(st.codes.par_chunks(chunk))
-                    .for_each(|(o, v)| o.copy_from_slice(v));
                 Ok(())
             })
         })?;
@@ -410,9 +409,6 @@ impl HologramSession {
         Ok(&self.output)
     }
 }
-
-/// Rows per chunk of the encoding stage's copies into the SLM frame.
-const ENCODE_COPY_ROWS: usize = 16;
 
 impl HologramSession {
     /// Pass 1 of the encoding on the pre-filter's output (the colours' planes: `Re H'` in the field's memory,

@@ -120,7 +120,6 @@ impl HologramSession {
                 },
                 encoder: ChannelEncoder::new(height, width, encoding)?,
                 phase: vec![0.0; n],
-                codes: vec![0; n],
                 stats: ChannelStats::default(),
                 colour,
                 size: (height, width),
