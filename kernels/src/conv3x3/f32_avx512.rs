@@ -99,6 +99,20 @@ impl SimdF32 for __m512 {
         }
     }
     #[inline(always)]
+    unsafe fn next_columns(p: *const f32, c0: Self, c1: Self) -> [Self; 2] {
+        // SAFETY: the caller guarantees AVX-512F and `66` readable values at `p`. `load_stride4` puts
+        // quadruple `q + 4j` in lane `4q + j`: the next quadruple's lane is `4q + 4 + j` for `q < 3`, `j + 1`
+        // for `q = 3`, and quadruple 16 (lane 15's next) is not in `c0`, `c1`: index 16 picks `p[64]`,
+        // `p[65]` from the second operand.
+        unsafe {
+            let next = _mm512_setr_epi32(4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 1, 2, 3, 16);
+            [
+                _mm512_permutex2var_ps(c0, next, _mm512_set1_ps(*p.add(64))),
+                _mm512_permutex2var_ps(c1, next, _mm512_set1_ps(*p.add(65))),
+            ]
+        }
+    }
+    #[inline(always)]
     unsafe fn interleave4(c: [Self; 4]) -> [Self; 4] {
         // SAFETY: the caller guarantees AVX-512F.
         unsafe { transpose4_in_lanes(c) }

@@ -103,6 +103,17 @@ impl SimdF32 for float32x4_t {
         }
     }
     #[inline(always)]
+    unsafe fn next_columns(p: *const f32, c0: Self, c1: Self) -> [Self; 2] {
+        // SAFETY: NEON; the caller guarantees 18 readable values at `p`. Lane `i` holds quadruple `i`, so the
+        // next quadruple's values are one lane on (`ext`), the last lane's from `p[16]`, `p[17]`.
+        unsafe {
+            [
+                vextq_f32::<1>(c0, vdupq_n_f32(*p.add(16))),
+                vextq_f32::<1>(c1, vdupq_n_f32(*p.add(17))),
+            ]
+        }
+    }
+    #[inline(always)]
     unsafe fn interleave4(c: [Self; 4]) -> [Self; 4] {
         // SAFETY: NEON. The 4×4 transpose: register `i` = lane `i` of `c[0..4]`.
         unsafe {

@@ -44,6 +44,21 @@ pub(crate) trait SimdF32: Copy {
     /// implementation's choosing, the same for every `p` (the F(4×4, 3×3) input transform's columns: lane `l`
     /// of the loads at `p` and at `p + 2` then belong to the same tile).
     unsafe fn load_stride4(p: *const f32) -> [Self; 4];
+    /// Elements 0 and 1 of the quadruples at `p + 4` (the F(4×4, 3×3) input transform's tile columns 4 and
+    /// 5), in the lanes of [`load_stride4`](Self::load_stride4)`(p)`, given `c0`, `c1` = its registers 0 and 1:
+    /// the same values as registers 2 and 3 of `load_stride4(p + 2)`. Default: that load. An
+    /// implementation may instead move each lane's value from the lane of the next quadruple in `c0`, `c1`
+    /// and read only the last one (`p[4·LANES]`, `p[4·LANES + 1]`), bit for bit the same.
+    ///
+    /// # Safety
+    /// The ISA of `Self`; `4·LANES + 2` readable values at `p`.
+    #[inline(always)]
+    unsafe fn next_columns(p: *const f32, c0: Self, c1: Self) -> [Self; 2] {
+        let _ = (c0, c1);
+        // SAFETY: the caller guarantees `4·LANES + 2` readable values at `p`, so `4·LANES` at `p + 2`.
+        let [_, _, c4, c5] = unsafe { Self::load_stride4(p.add(2)) };
+        [c4, c5]
+    }
     /// The inverse of [`load_stride4`](Self::load_stride4) on registers: the `LANES` quadruples
     /// `(c[0][l], c[1][l], c[2][l], c[3][l])` back in memory order, as four registers of consecutive values
     /// (the F(4×4, 3×3) output transform's four columns back to pixels).

@@ -191,7 +191,8 @@ unsafe fn input_transform<V: SimdF32, const NV: usize>(
 }
 
 /// The row transform `d B` of one input row for `LANES` tiles from `p` (the first tile's first column): the
-/// tiles' six columns (quadruples transposed at `p` and at `p + 2`), then `Bᵀ` on them.
+/// tiles' six columns (quadruples transposed at `p`, columns 4 and 5 from the next quadruples:
+/// [`SimdF32::next_columns`]), then `Bᵀ` on them.
 ///
 /// # Safety
 /// The ISA of `V`; `4·LANES + 2` readable values at `p`.
@@ -200,7 +201,7 @@ unsafe fn row_transform<V: SimdF32>(p: *const f32, k: Consts<V>) -> [V; 6] {
     // SAFETY: the caller's guarantees.
     unsafe {
         let [c0, c1, c2, c3] = V::load_stride4(p);
-        let [_, _, c4, c5] = V::load_stride4(p.add(2));
+        let [c4, c5] = V::next_columns(p, c0, c1);
         bt6([c0, c1, c2, c3, c4, c5], k)
     }
 }
