@@ -18,8 +18,9 @@
 //! against 9 for the direct convolution and 4 for F(2×2, 3×3). The 36 products are small matrix products
 //! computed with the direct kernels' register tile (`G` output channels × `NV` registers of tiles;
 //! [`products`](super::simd_winograd::products), shared with F(2×2, 3×3)). Lanes hold consecutive tiles along
-//! the row: the input transform loads each row transposed by quadruples ([`SimdF32::load_stride4`], at the
-//! tile's columns 0–3 and 2–5) and the output transform transposes its four columns back into pixels
+//! the row: the input transform loads each row transposed by quadruples ([`SimdF32::load_stride4`], the
+//! tile's columns 0–3; columns 4–5 are the next tile's 0–1, [`SimdF32::next_columns`]) and the output
+//! transform transposes its four columns back into pixels
 //! ([`SimdF32::interleave4`]) before the direct kernels' epilogue (bias, ReLU, residual, the zero right
 //! border).
 //!
