@@ -46,6 +46,8 @@ pub(crate) type GridFn = unsafe fn(&mut [f32], QuantU8);
 pub(crate) type DpmAnalyseFn = unsafe fn(&[f32], &mut [f32]) -> (f32, f64);
 /// Pass 2 of the double phase encoding on a row: the wrapped double phase in place, codes if asked.
 pub(crate) type DpmEncodeFn = unsafe fn(&[f32], &mut [f32], Option<&mut [u8]>, &EncodeParams);
+/// Pass 1 on a row held as planes: `re`, `Im H` in place → `arg H`, `|H|` out; `(max |H|², Σ arg H)`.
+pub(crate) type DpmAnalysePlanesFn = unsafe fn(&[f32], &mut [f32], &mut [f32]) -> (f32, f64);
 
 /// The heads as interleaved phasors ([`crate::phasor::phasors`]); whether every input was finite.
 pub(crate) type PhasorsFn = unsafe fn(&[f32], &[f32], &mut [f32]) -> bool;
@@ -96,6 +98,10 @@ pub(crate) struct Ops {
     pub dpm_analyse: Option<DpmAnalyseFn>,
     /// Pass 2 of the double phase encoding on a row ([`crate::double_phase::encode_row`]).
     pub dpm_encode: Option<DpmEncodeFn>,
+    /// Pass 1 on a row held as planes ([`crate::double_phase::analyse_planes_row`]).
+    pub dpm_analyse_planes: Option<DpmAnalysePlanesFn>,
+    /// Pass 2 on a row's magnitudes ([`crate::double_phase::encode_abs_row`]).
+    pub dpm_encode_abs: Option<DpmEncodeFn>,
     /// The heads as phasors ([`crate::phasor::phasors`]).
     pub phasors: Option<PhasorsFn>,
     /// The heads as phasors in place ([`crate::phasor::phasors_in_place`]).
@@ -158,6 +164,8 @@ const SCALAR: Ops = Ops {
     grid: Some(heads::grid_body),
     dpm_analyse: Some(dpm::analyse_body),
     dpm_encode: Some(dpm::encode_body),
+    dpm_analyse_planes: Some(dpm::analyse_planes_body),
+    dpm_encode_abs: Some(dpm::encode_abs_body),
     phasors: Some(phasor::polar_body),
     phasors_in_place: Some(phasor::polar_in_place_body),
     convert: Some(ConvertFns {
@@ -191,6 +199,8 @@ static OPS: [Ops; 5] = [
         grid: None,
         dpm_analyse: None,
         dpm_encode: None,
+        dpm_analyse_planes: None,
+        dpm_encode_abs: None,
         phasors: None,
         phasors_in_place: None,
         convert: None,
@@ -249,6 +259,8 @@ static OPS: [Ops; 5] = [
         grid: Some(heads::x86::grid_avx512),
         dpm_analyse: Some(dpm_avx512::analyse_avx512),
         dpm_encode: Some(dpm_avx512::encode_avx512),
+        dpm_analyse_planes: Some(dpm_avx512::analyse_planes_avx512),
+        dpm_encode_abs: Some(dpm_avx512::encode_abs_avx512),
         phasors: Some(phasor::x86::polar_avx512),
         phasors_in_place: Some(phasor::x86::polar_in_place_avx512),
         convert: Some(ConvertFns {
@@ -275,6 +287,8 @@ static OPS: [Ops; 5] = [
         grid: None,
         dpm_analyse: None,
         dpm_encode: None,
+        dpm_analyse_planes: None,
+        dpm_encode_abs: None,
         phasors: None,
         phasors_in_place: None,
         convert: None,
@@ -393,6 +407,8 @@ static OPS: [Ops; 5] = [
         grid: Some(heads::x86::grid_avx2),
         dpm_analyse: Some(dpm_avx2::analyse_avx2),
         dpm_encode: Some(dpm_avx2::encode_avx2),
+        dpm_analyse_planes: Some(dpm_avx2::analyse_planes_avx2),
+        dpm_encode_abs: Some(dpm_avx2::encode_abs_avx2),
         phasors: Some(phasor::x86::polar_avx2),
         phasors_in_place: Some(phasor::x86::polar_in_place_avx2),
         convert: Some(ConvertFns {
@@ -429,6 +445,8 @@ static OPS: [Ops; 4] = [
         grid: None,
         dpm_analyse: None,
         dpm_encode: None,
+        dpm_analyse_planes: None,
+        dpm_encode_abs: None,
         phasors: None,
         phasors_in_place: None,
         convert: None,
@@ -451,6 +469,8 @@ static OPS: [Ops; 4] = [
         grid: None,
         dpm_analyse: None,
         dpm_encode: None,
+        dpm_analyse_planes: None,
+        dpm_encode_abs: None,
         phasors: None,
         phasors_in_place: None,
         convert: None,
@@ -503,6 +523,8 @@ static OPS: [Ops; 4] = [
         grid: None,
         dpm_analyse: None,
         dpm_encode: None,
+        dpm_analyse_planes: None,
+        dpm_encode_abs: None,
         phasors: None,
         phasors_in_place: None,
         convert: None,
@@ -755,19 +777,39 @@ pub(crate) fn run_dpm_analyse(
     Ok(unsafe { run(field, phase) })
 }
 
-/// Pass 2 of the double phase encoding on one checked row under `isa`. Errors: `isa` not available.
+/// Pass 2 of the double phase encoding on one checked row under `isa`: `field` interleaved pairs, or with
+/// `abs` the magnitudes. Errors: `isa` not available.
 pub(crate) fn run_dpm_encode(
     isa: Isa,
+    abs: bool,
     field: &[f32],
     phase: &mut [f32],
     codes: Option<&mut [u8]>,
     params: &EncodeParams,
 ) -> Result<(), KernelError> {
-    let run = entry(isa, |t| t.dpm_encode)?;
+    let run = if abs {
+        entry(isa, |t| t.dpm_encode_abs)?
+    } else {
+        entry(isa, |t| t.dpm_encode)?
+    };
     // SAFETY: `entry` returned the entry of a level that `isa` includes, and `isa` is available on this CPU;
     // the safe API checked the lengths.
     unsafe { run(field, phase, codes, params) };
     Ok(())
+}
+
+/// Pass 1 of the double phase encoding on one checked row held as planes under `isa`. Errors: `isa` not
+/// available.
+pub(crate) fn run_dpm_analyse_planes(
+    isa: Isa,
+    re: &[f32],
+    im_arg: &mut [f32],
+    abs: &mut [f32],
+) -> Result<(f32, f64), KernelError> {
+    let run = entry(isa, |t| t.dpm_analyse_planes)?;
+    // SAFETY: `entry` returned the entry of a level that `isa` includes, and `isa` is available on this CPU;
+    // the safe API checked the lengths.
+    Ok(unsafe { run(re, im_arg, abs) })
 }
 
 /// The heads as phasors under `isa` (lengths checked by the caller). Errors: `isa` not available.
@@ -853,6 +895,7 @@ mod tests {
         assert!(!p.f32.is_empty() && !p.u8.is_empty());
         assert!(p.depthwise.is_some() && p.heads.is_some() && p.grid.is_some());
         assert!(p.dpm_analyse.is_some() && p.dpm_encode.is_some());
+        assert!(p.dpm_analyse_planes.is_some() && p.dpm_encode_abs.is_some());
         assert!(p.peak_f32.is_some() && p.peak_u8.is_some());
     }
 

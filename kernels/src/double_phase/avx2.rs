@@ -112,21 +112,22 @@ unsafe fn acos_v(x: __m256) -> __m256 {
     }
 }
 
-/// Pass 1 on eight pixels at `f` (16 values): phases to `out` (8 values), running maxima and sums.
+/// Pass 1 on eight pixels given as `(re, im)`: phases to `out` (8 values), running maxima and sums;
+/// returns `|H|²`.
 ///
 /// # Safety
-/// AVX2; `f` has 16 readable and `out` 8 writable f32.
+/// AVX2; `out` has 8 writable f32.
 #[inline(always)]
 unsafe fn analyse8(
-    f: *const f32,
+    re: __m256,
+    im: __m256,
     out: *mut f32,
     max: &mut __m256,
     sum_lo: &mut __m256d,
     sum_hi: &mut __m256d,
-) {
+) -> __m256 {
     // SAFETY: the caller guarantees the memory and AVX2.
     unsafe {
-        let (re, im) = load_pairs(f);
         let p = atan2_v(im, re);
         _mm256_storeu_ps(out, p);
         let n2 = _mm256_add_ps(_mm256_mul_ps(re, re), _mm256_mul_ps(im, im));
@@ -134,7 +135,25 @@ unsafe fn analyse8(
         *max = _mm256_max_ps(n2, *max);
         *sum_lo = _mm256_add_pd(*sum_lo, _mm256_cvtps_pd(_mm256_castps256_ps128(p)));
         *sum_hi = _mm256_add_pd(*sum_hi, _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(p)));
+        n2
     }
+}
+
+/// The row's `(max |H|², Σ arg H)` from the lanes' maxima and the f64 sums.
+///
+/// # Safety
+/// AVX2.
+#[inline(always)]
+unsafe fn row_stats(max: __m256, lo: __m256d, hi: __m256d) -> (f32, f64) {
+    let (mut m, mut s) = ([0.0f32; LANES], [0.0f64; LANES]);
+    // SAFETY: stores into local arrays of 8 values (4 + 4 f64).
+    unsafe {
+        _mm256_storeu_ps(m.as_mut_ptr(), max);
+        _mm256_storeu_pd(s.as_mut_ptr(), lo);
+        _mm256_storeu_pd(s.as_mut_ptr().add(4), hi);
+    }
+    let m = m.iter().fold(0.0f32, |a, &b| if b > a { b } else { a });
+    (m, s.iter().sum())
 }
 
 /// Pass 1 on one row (lengths checked by the caller), as [`super::body::analyse_body`].
@@ -152,14 +171,16 @@ pub(crate) unsafe fn analyse_avx2(field: &[f32], phase: &mut [f32]) -> (f32, f64
     while x < full {
         // SAFETY: x + 8 ≤ n pixels: 16 values of `field` and 8 of `phase` from there.
         unsafe {
+            let (re, im) = load_pairs(field.as_ptr().add(2 * x));
             analyse8(
-                field.as_ptr().add(2 * x),
+                re,
+                im,
                 phase.as_mut_ptr().add(x),
                 &mut max,
                 &mut lo,
                 &mut hi,
-            )
-        };
+            );
+        }
         x += LANES;
     }
     if x < n {
@@ -168,40 +189,89 @@ pub(crate) unsafe fn analyse_avx2(field: &[f32], phase: &mut [f32]) -> (f32, f64
         f[..2 * (n - x)].copy_from_slice(&field[2 * x..]);
         let mut out = [0.0f32; LANES];
         // SAFETY: local arrays of 16 and 8 values.
-        unsafe { analyse8(f.as_ptr(), out.as_mut_ptr(), &mut max, &mut lo, &mut hi) };
+        unsafe {
+            let (re, im) = load_pairs(f.as_ptr());
+            analyse8(re, im, out.as_mut_ptr(), &mut max, &mut lo, &mut hi);
+        }
         phase[x..].copy_from_slice(&out[..n - x]);
     }
-    let (mut m, mut s) = ([0.0f32; LANES], [0.0f64; LANES]);
-    // SAFETY: stores into local arrays of 8 values (4 + 4 f64).
-    unsafe {
-        _mm256_storeu_ps(m.as_mut_ptr(), max);
-        _mm256_storeu_pd(s.as_mut_ptr(), lo);
-        _mm256_storeu_pd(s.as_mut_ptr().add(4), hi);
-    }
-    let m = m.iter().fold(0.0f32, |a, &b| if b > a { b } else { a });
-    (m, s.iter().sum())
+    // SAFETY: AVX2 (this function's feature).
+    unsafe { row_stats(max, lo, hi) }
 }
 
-/// Pass 2 on eight pixels: `phase` (8 values at `p`) becomes the wrapped double phase; returns the codes as
-/// eight i32 lanes.
+/// Pass 1 on one row held as planes (lengths checked by the caller), as
+/// [`super::body::analyse_planes_body`]: `im_arg` from `Im H` to `arg H`, `abs` receives `|H|`.
 ///
 /// # Safety
-/// AVX2; `f` has 16 readable and `p` 8 readable and writable f32.
+/// The CPU has AVX2 and FMA; `re`, `im_arg` and `abs` of one length.
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn analyse_planes_avx2(
+    re: &[f32],
+    im_arg: &mut [f32],
+    abs: &mut [f32],
+) -> (f32, f64) {
+    debug_assert!(re.len() == im_arg.len() && abs.len() == im_arg.len());
+    let n = im_arg.len();
+    let full = n / LANES * LANES;
+    let mut max = _mm256_setzero_ps();
+    let (mut lo, mut hi) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+    let mut x = 0;
+    while x < full {
+        // SAFETY: x + 8 ≤ n: 8 values of each plane from there (`im_arg` read before it is written).
+        unsafe {
+            let out = im_arg.as_mut_ptr().add(x);
+            let (r, i) = (_mm256_loadu_ps(re.as_ptr().add(x)), _mm256_loadu_ps(out));
+            let n2 = analyse8(r, i, out, &mut max, &mut lo, &mut hi);
+            _mm256_storeu_ps(abs.as_mut_ptr().add(x), _mm256_sqrt_ps(n2));
+        }
+        x += LANES;
+    }
+    if x < n {
+        let k = n - x;
+        let (mut r, mut i, mut a) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+        r[..k].copy_from_slice(&re[x..]);
+        i[..k].copy_from_slice(&im_arg[x..]);
+        // SAFETY: local arrays of 8 values; zero padding changes neither statistic.
+        unsafe {
+            let v = (_mm256_loadu_ps(r.as_ptr()), _mm256_loadu_ps(i.as_ptr()));
+            let n2 = analyse8(v.0, v.1, i.as_mut_ptr(), &mut max, &mut lo, &mut hi);
+            _mm256_storeu_ps(a.as_mut_ptr(), _mm256_sqrt_ps(n2));
+        }
+        im_arg[x..].copy_from_slice(&i[..k]);
+        abs[x..].copy_from_slice(&a[..k]);
+    }
+    // SAFETY: AVX2 (this function's feature).
+    unsafe { row_stats(max, lo, hi) }
+}
+
+/// `|H|` of eight pixels at `f`: `W = 2` interleaved `(re, im)` pairs (16 values), `√(re² + im²)`; `W = 1`
+/// the magnitudes themselves (8 values).
+///
+/// # Safety
+/// AVX2; `f` has `8·W` readable f32.
 #[inline(always)]
-unsafe fn encode8(
-    f: *const f32,
-    p: *mut f32,
-    mean: __m256,
-    inv_a: __m256,
-    sign: __m256,
-) -> __m256i {
+unsafe fn magnitude8<const W: usize>(f: *const f32) -> __m256 {
     // SAFETY: the caller guarantees the memory and AVX2.
     unsafe {
-        let (re, im) = load_pairs(f);
-        let r = _mm256_mul_ps(
-            _mm256_sqrt_ps(_mm256_add_ps(_mm256_mul_ps(re, re), _mm256_mul_ps(im, im))),
-            inv_a,
-        );
+        if W == 2 {
+            let (re, im) = load_pairs(f);
+            _mm256_sqrt_ps(_mm256_add_ps(_mm256_mul_ps(re, re), _mm256_mul_ps(im, im)))
+        } else {
+            _mm256_loadu_ps(f)
+        }
+    }
+}
+
+/// Pass 2 on eight pixels of magnitude `mag`: `phase` (8 values at `p`) becomes the wrapped double phase;
+/// returns the codes as eight i32 lanes.
+///
+/// # Safety
+/// AVX2; `p` has 8 readable and writable f32.
+#[inline(always)]
+unsafe fn encode8(mag: __m256, p: *mut f32, mean: __m256, inv_a: __m256, sign: __m256) -> __m256i {
+    // SAFETY: the caller guarantees the memory and AVX2.
+    unsafe {
+        let r = _mm256_mul_ps(mag, inv_a);
         let one = splat(1.0);
         let r = sel(_mm256_cmp_ps::<_CMP_GT_OQ>(r, one), one, r);
         let v = _mm256_add_ps(
@@ -288,26 +358,57 @@ unsafe fn pack_codes(c: __m256i) -> [u8; LANES] {
 pub(crate) unsafe fn encode_avx2(
     field: &[f32],
     phase: &mut [f32],
-    mut codes: Option<&mut [u8]>,
+    codes: Option<&mut [u8]>,
     prm: &EncodeParams,
 ) {
     debug_assert_eq!(field.len(), 2 * phase.len());
+    // SAFETY: AVX2 (this function's feature); the lengths as `encode_row_of` needs.
+    unsafe { encode_row_of::<2>(field, phase, codes, prm) }
+}
+
+/// Pass 2 on one row whose magnitudes are given, as [`super::body::encode_abs_body`].
+///
+/// # Safety
+/// The CPU has AVX2 and FMA; `abs.len() == phase.len()`, `codes` (if any) as long as `phase`.
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn encode_abs_avx2(
+    abs: &[f32],
+    phase: &mut [f32],
+    codes: Option<&mut [u8]>,
+    prm: &EncodeParams,
+) {
+    debug_assert_eq!(abs.len(), phase.len());
+    // SAFETY: AVX2 (this function's feature); the lengths as `encode_row_of` needs.
+    unsafe { encode_row_of::<1>(abs, phase, codes, prm) }
+}
+
+/// Pass 2 on one row of `W` values per pixel ([`magnitude8`]).
+///
+/// # Safety
+/// AVX2; `field.len() == W·phase.len()`, `codes` (if any) as long as `phase`.
+#[inline(always)]
+unsafe fn encode_row_of<const W: usize>(
+    field: &[f32],
+    phase: &mut [f32],
+    mut codes: Option<&mut [u8]>,
+    prm: &EncodeParams,
+) {
     let n = phase.len();
     let full = n / LANES * LANES;
-    let (mean, inv_a) = (_mm256_set1_ps(prm.mean), _mm256_set1_ps(prm.inv_a));
-    // SAFETY: reads 8 values of a local array.
-    let sign = unsafe { _mm256_loadu_ps(prm.sign.as_ptr()) };
+    // SAFETY: AVX2 by the caller; reads 8 values of a local array.
+    let (mean, inv_a, sign) = unsafe {
+        (
+            _mm256_set1_ps(prm.mean),
+            _mm256_set1_ps(prm.inv_a),
+            _mm256_loadu_ps(prm.sign.as_ptr()),
+        )
+    };
     let mut x = 0;
     while x < full {
-        // SAFETY: x + 8 ≤ n pixels: 16 values of `field` and 8 of `phase` from there.
+        // SAFETY: x + 8 ≤ n pixels: 8·W values of `field` and 8 of `phase` from there.
         let c = unsafe {
-            encode8(
-                field.as_ptr().add(2 * x),
-                phase.as_mut_ptr().add(x),
-                mean,
-                inv_a,
-                sign,
-            )
+            let mag = magnitude8::<W>(field.as_ptr().add(W * x));
+            encode8(mag, phase.as_mut_ptr().add(x), mean, inv_a, sign)
         };
         if let Some(codes) = codes.as_deref_mut() {
             // SAFETY: AVX2.
@@ -318,11 +419,14 @@ pub(crate) unsafe fn encode_avx2(
     if x < n {
         let k = n - x;
         let mut f = [0.0f32; 2 * LANES];
-        f[..2 * k].copy_from_slice(&field[2 * x..]);
+        f[..W * k].copy_from_slice(&field[W * x..]);
         let mut p = [0.0f32; LANES];
         p[..k].copy_from_slice(&phase[x..]);
         // SAFETY: local arrays of 16 and 8 values; AVX2.
-        let c = unsafe { pack_codes(encode8(f.as_ptr(), p.as_mut_ptr(), mean, inv_a, sign)) };
+        let c = unsafe {
+            let mag = magnitude8::<W>(f.as_ptr());
+            pack_codes(encode8(mag, p.as_mut_ptr(), mean, inv_a, sign))
+        };
         phase[x..].copy_from_slice(&p[..k]);
         if let Some(codes) = codes {
             codes[x..].copy_from_slice(&c[..k]);

@@ -124,16 +124,21 @@ unsafe fn acos_v(x: __m512) -> __m512 {
     }
 }
 
-/// Pass 1 on sixteen pixels at `f` (32 values): phases to `out` (16 values), running maxima and the eight
-/// f64 sums (first the step's pixels 0–7, then 8–15).
+/// Pass 1 on sixteen pixels given as `(re, im)`: phases to `out` (16 values), running maxima and the eight
+/// f64 sums (first the step's pixels 0–7, then 8–15); returns `|H|²`.
 ///
 /// # Safety
-/// AVX-512F; `f` has 32 readable and `out` 16 writable f32.
+/// AVX-512F; `out` has 16 writable f32.
 #[inline(always)]
-unsafe fn analyse16(f: *const f32, out: *mut f32, max: &mut __m512, sum: &mut __m512d) {
+unsafe fn analyse16(
+    re: __m512,
+    im: __m512,
+    out: *mut f32,
+    max: &mut __m512,
+    sum: &mut __m512d,
+) -> __m512 {
     // SAFETY: the caller guarantees the memory and AVX-512F.
     unsafe {
-        let (re, im) = load_pairs(f);
         let p = atan2_v(im, re);
         _mm512_storeu_ps(out, p);
         let n2 = _mm512_add_ps(_mm512_mul_ps(re, re), _mm512_mul_ps(im, im));
@@ -144,7 +149,24 @@ unsafe fn analyse16(f: *const f32, out: *mut f32, max: &mut __m512, sum: &mut __
         let hi = _mm256_castsi256_ps(_mm512_extracti64x4_epi64::<1>(bits));
         *sum = _mm512_add_pd(*sum, _mm512_cvtps_pd(lo));
         *sum = _mm512_add_pd(*sum, _mm512_cvtps_pd(hi));
+        n2
     }
+}
+
+/// The row's `(max |H|², Σ arg H)` from the lanes' maxima and the eight f64 sums.
+///
+/// # Safety
+/// AVX-512F.
+#[inline(always)]
+unsafe fn row_stats(max: __m512, sum: __m512d) -> (f32, f64) {
+    let (mut m, mut s) = ([0.0f32; STEP], [0.0f64; LANES]);
+    // SAFETY: stores into local arrays of 16 f32 and 8 f64.
+    unsafe {
+        _mm512_storeu_ps(m.as_mut_ptr(), max);
+        _mm512_storeu_pd(s.as_mut_ptr(), sum);
+    }
+    let m = m.iter().fold(0.0f32, |a, &b| if b > a { b } else { a });
+    (m, s.iter().sum())
 }
 
 /// Pass 1 on one row (lengths checked by the caller), as [`super::body::analyse_body`].
@@ -162,13 +184,9 @@ pub(crate) unsafe fn analyse_avx512(field: &[f32], phase: &mut [f32]) -> (f32, f
     while x < full {
         // SAFETY: x + 16 ≤ n pixels: 32 values of `field` and 16 of `phase` from there.
         unsafe {
-            analyse16(
-                field.as_ptr().add(2 * x),
-                phase.as_mut_ptr().add(x),
-                &mut max,
-                &mut sum,
-            )
-        };
+            let (re, im) = load_pairs(field.as_ptr().add(2 * x));
+            analyse16(re, im, phase.as_mut_ptr().add(x), &mut max, &mut sum);
+        }
         x += STEP;
     }
     if x < n {
@@ -178,39 +196,89 @@ pub(crate) unsafe fn analyse_avx512(field: &[f32], phase: &mut [f32]) -> (f32, f
         f[..2 * (n - x)].copy_from_slice(&field[2 * x..]);
         let mut out = [0.0f32; STEP];
         // SAFETY: local arrays of 32 and 16 values.
-        unsafe { analyse16(f.as_ptr(), out.as_mut_ptr(), &mut max, &mut sum) };
+        unsafe {
+            let (re, im) = load_pairs(f.as_ptr());
+            analyse16(re, im, out.as_mut_ptr(), &mut max, &mut sum);
+        }
         phase[x..].copy_from_slice(&out[..n - x]);
     }
-    let (mut m, mut s) = ([0.0f32; STEP], [0.0f64; LANES]);
-    // SAFETY: stores into local arrays of 16 f32 and 8 f64.
-    unsafe {
-        _mm512_storeu_ps(m.as_mut_ptr(), max);
-        _mm512_storeu_pd(s.as_mut_ptr(), sum);
-    }
-    let m = m.iter().fold(0.0f32, |a, &b| if b > a { b } else { a });
-    (m, s.iter().sum())
+    // SAFETY: AVX-512F (this function's feature).
+    unsafe { row_stats(max, sum) }
 }
 
-/// Pass 2 on sixteen pixels: `phase` (16 values at `p`) becomes the wrapped double phase; returns the codes
-/// as sixteen bytes.
+/// Pass 1 on one row held as planes (lengths checked by the caller), as
+/// [`super::body::analyse_planes_body`]: `im_arg` from `Im H` to `arg H`, `abs` receives `|H|`.
 ///
 /// # Safety
-/// AVX-512F; `f` has 32 readable and `p` 16 readable and writable f32.
+/// The CPU has AVX-512F; `re`, `im_arg` and `abs` of one length.
+#[target_feature(enable = "avx512f")]
+pub(crate) unsafe fn analyse_planes_avx512(
+    re: &[f32],
+    im_arg: &mut [f32],
+    abs: &mut [f32],
+) -> (f32, f64) {
+    debug_assert!(re.len() == im_arg.len() && abs.len() == im_arg.len());
+    let n = im_arg.len();
+    let full = n / STEP * STEP;
+    let mut max = _mm512_setzero_ps();
+    let mut sum = _mm512_setzero_pd();
+    let mut x = 0;
+    while x < full {
+        // SAFETY: x + 16 ≤ n: 16 values of each plane from there (`im_arg` read before it is written).
+        unsafe {
+            let out = im_arg.as_mut_ptr().add(x);
+            let (r, i) = (_mm512_loadu_ps(re.as_ptr().add(x)), _mm512_loadu_ps(out));
+            let n2 = analyse16(r, i, out, &mut max, &mut sum);
+            _mm512_storeu_ps(abs.as_mut_ptr().add(x), _mm512_sqrt_ps(n2));
+        }
+        x += STEP;
+    }
+    if x < n {
+        let k = n - x;
+        let (mut r, mut i, mut a) = ([0.0f32; STEP], [0.0f32; STEP], [0.0f32; STEP]);
+        r[..k].copy_from_slice(&re[x..]);
+        i[..k].copy_from_slice(&im_arg[x..]);
+        // SAFETY: local arrays of 16 values; zero padding changes neither statistic.
+        unsafe {
+            let v = (_mm512_loadu_ps(r.as_ptr()), _mm512_loadu_ps(i.as_ptr()));
+            let n2 = analyse16(v.0, v.1, i.as_mut_ptr(), &mut max, &mut sum);
+            _mm512_storeu_ps(a.as_mut_ptr(), _mm512_sqrt_ps(n2));
+        }
+        im_arg[x..].copy_from_slice(&i[..k]);
+        abs[x..].copy_from_slice(&a[..k]);
+    }
+    // SAFETY: AVX-512F (this function's feature).
+    unsafe { row_stats(max, sum) }
+}
+
+/// `|H|` of sixteen pixels at `f`: `W = 2` interleaved `(re, im)` pairs (32 values), `√(re² + im²)`; `W = 1`
+/// the magnitudes themselves (16 values).
+///
+/// # Safety
+/// AVX-512F; `f` has `16·W` readable f32.
 #[inline(always)]
-unsafe fn encode16(
-    f: *const f32,
-    p: *mut f32,
-    mean: __m512,
-    inv_a: __m512,
-    sign: __m512,
-) -> __m128i {
+unsafe fn magnitude16<const W: usize>(f: *const f32) -> __m512 {
     // SAFETY: the caller guarantees the memory and AVX-512F.
     unsafe {
-        let (re, im) = load_pairs(f);
-        let r = _mm512_mul_ps(
-            _mm512_sqrt_ps(_mm512_add_ps(_mm512_mul_ps(re, re), _mm512_mul_ps(im, im))),
-            inv_a,
-        );
+        if W == 2 {
+            let (re, im) = load_pairs(f);
+            _mm512_sqrt_ps(_mm512_add_ps(_mm512_mul_ps(re, re), _mm512_mul_ps(im, im)))
+        } else {
+            _mm512_loadu_ps(f)
+        }
+    }
+}
+
+/// Pass 2 on sixteen pixels of magnitude `mag`: `phase` (16 values at `p`) becomes the wrapped double
+/// phase; returns the codes as sixteen bytes.
+///
+/// # Safety
+/// AVX-512F; `p` has 16 readable and writable f32.
+#[inline(always)]
+unsafe fn encode16(mag: __m512, p: *mut f32, mean: __m512, inv_a: __m512, sign: __m512) -> __m128i {
+    // SAFETY: the caller guarantees the memory and AVX-512F.
+    unsafe {
+        let r = _mm512_mul_ps(mag, inv_a);
         let one = splat(1.0);
         let r = sel(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(r, one), one, r);
         let v = _mm512_add_ps(
@@ -269,30 +337,61 @@ unsafe fn encode16(
 pub(crate) unsafe fn encode_avx512(
     field: &[f32],
     phase: &mut [f32],
-    mut codes: Option<&mut [u8]>,
+    codes: Option<&mut [u8]>,
     prm: &EncodeParams,
 ) {
     debug_assert_eq!(field.len(), 2 * phase.len());
+    // SAFETY: AVX-512F (this function's feature); the lengths as `encode_row_of` needs.
+    unsafe { encode_row_of::<2>(field, phase, codes, prm) }
+}
+
+/// Pass 2 on one row whose magnitudes are given, as [`super::body::encode_abs_body`].
+///
+/// # Safety
+/// The CPU has AVX-512F; `abs.len() == phase.len()`, `codes` (if any) as long as `phase`.
+#[target_feature(enable = "avx512f")]
+pub(crate) unsafe fn encode_abs_avx512(
+    abs: &[f32],
+    phase: &mut [f32],
+    codes: Option<&mut [u8]>,
+    prm: &EncodeParams,
+) {
+    debug_assert_eq!(abs.len(), phase.len());
+    // SAFETY: AVX-512F (this function's feature); the lengths as `encode_row_of` needs.
+    unsafe { encode_row_of::<1>(abs, phase, codes, prm) }
+}
+
+/// Pass 2 on one row of `W` values per pixel ([`magnitude16`]).
+///
+/// # Safety
+/// AVX-512F; `field.len() == W·phase.len()`, `codes` (if any) as long as `phase`.
+#[inline(always)]
+unsafe fn encode_row_of<const W: usize>(
+    field: &[f32],
+    phase: &mut [f32],
+    mut codes: Option<&mut [u8]>,
+    prm: &EncodeParams,
+) {
     let n = phase.len();
     let full = n / STEP * STEP;
-    let (mean, inv_a) = (_mm512_set1_ps(prm.mean), _mm512_set1_ps(prm.inv_a));
     // The sign pattern of eight pixels, twice (LANES is even: pixel parity repeats).
     let mut pattern = [0.0f32; STEP];
     pattern[..LANES].copy_from_slice(&prm.sign);
     pattern[LANES..].copy_from_slice(&prm.sign);
-    // SAFETY: reads 16 values of a local array.
-    let sign = unsafe { _mm512_loadu_ps(pattern.as_ptr()) };
+    // SAFETY: AVX-512F by the caller; reads 16 values of a local array.
+    let (mean, inv_a, sign) = unsafe {
+        (
+            _mm512_set1_ps(prm.mean),
+            _mm512_set1_ps(prm.inv_a),
+            _mm512_loadu_ps(pattern.as_ptr()),
+        )
+    };
     let mut x = 0;
     while x < full {
-        // SAFETY: x + 16 ≤ n pixels: 32 values of `field` and 16 of `phase` from there.
+        // SAFETY: x + 16 ≤ n pixels: 16·W values of `field` and 16 of `phase` from there.
         let c = unsafe {
-            encode16(
-                field.as_ptr().add(2 * x),
-                phase.as_mut_ptr().add(x),
-                mean,
-                inv_a,
-                sign,
-            )
+            let mag = magnitude16::<W>(field.as_ptr().add(W * x));
+            encode16(mag, phase.as_mut_ptr().add(x), mean, inv_a, sign)
         };
         if let Some(codes) = codes.as_deref_mut() {
             // SAFETY: 16 bytes from x (x + 16 ≤ n = codes.len()).
@@ -303,13 +402,19 @@ pub(crate) unsafe fn encode_avx512(
     if x < n {
         let k = n - x;
         let mut f = [0.0f32; 2 * STEP];
-        f[..2 * k].copy_from_slice(&field[2 * x..]);
+        f[..W * k].copy_from_slice(&field[W * x..]);
         let mut p = [0.0f32; STEP];
         p[..k].copy_from_slice(&phase[x..]);
         let mut c = [0u8; STEP];
         // SAFETY: local arrays of 32 and 16 values and 16 bytes.
         unsafe {
-            let v = encode16(f.as_ptr(), p.as_mut_ptr(), mean, inv_a, sign);
+            let v = encode16(
+                magnitude16::<W>(f.as_ptr()),
+                p.as_mut_ptr(),
+                mean,
+                inv_a,
+                sign,
+            );
             _mm_storeu_si128(c.as_mut_ptr().cast(), v);
         }
         phase[x..].copy_from_slice(&p[..k]);

@@ -137,7 +137,29 @@ pub fn linear_code_wrapped(p: f32) -> u8 {
     (c & 255) as u8
 }
 
-/// Pass 1 on `LANES` pixels: phases out, running max of `|H|²` and f64 sums per lane.
+/// Pass 1 on `LANES` pixels given as `(re, im)`: phases out, running max of `|H|²` and f64 sums per lane;
+/// returns each pixel's `|H|²`.
+#[inline(always)]
+fn analyse_lanes(
+    re: &[f32; LANES],
+    im: &[f32; LANES],
+    out: &mut [f32],
+    max: &mut [f32; LANES],
+    sum: &mut [f64; LANES],
+) -> [f32; LANES] {
+    let mut n2 = [0.0f32; LANES];
+    for i in 0..LANES {
+        let p = atan2(im[i], re[i]);
+        out[i] = p;
+        n2[i] = re[i] * re[i] + im[i] * im[i];
+        // As f32::max: a NaN |H|² is skipped.
+        max[i] = if n2[i] > max[i] { n2[i] } else { max[i] };
+        sum[i] += p as f64;
+    }
+    n2
+}
+
+/// Pass 1 on `LANES` pixels of interleaved `(re, im)` pairs.
 #[inline(always)]
 fn analyse_chunk(f: &[f32], out: &mut [f32], max: &mut [f32; LANES], sum: &mut [f64; LANES]) {
     let (mut re, mut im) = ([0.0f32; LANES], [0.0f32; LANES]);
@@ -145,14 +167,14 @@ fn analyse_chunk(f: &[f32], out: &mut [f32], max: &mut [f32; LANES], sum: &mut [
         re[i] = f[2 * i];
         im[i] = f[2 * i + 1];
     }
-    for i in 0..LANES {
-        let p = atan2(im[i], re[i]);
-        out[i] = p;
-        let n2 = re[i] * re[i] + im[i] * im[i];
-        // As f32::max: a NaN |H|² is skipped.
-        max[i] = if n2 > max[i] { n2 } else { max[i] };
-        sum[i] += p as f64;
-    }
+    analyse_lanes(&re, &im, out, max, sum);
+}
+
+/// The row's statistics from the lanes': `(max |H|², Σ arg H)`.
+#[inline(always)]
+fn row_stats(max: &[f32; LANES], sum: &[f64; LANES]) -> (f32, f64) {
+    let m = max.iter().fold(0.0f32, |a, &b| if b > a { b } else { a });
+    (m, sum.iter().sum())
 }
 
 /// Pass 1 on one row: `field` interleaved `(re, im)` pairs, `phase` one value per pixel (lengths checked
@@ -175,8 +197,43 @@ pub(crate) fn analyse_body(field: &[f32], phase: &mut [f32]) -> (f32, f64) {
         analyse_chunk(&f, &mut out, &mut max, &mut sum);
         pt.copy_from_slice(&out[..pt.len()]);
     }
-    let m = max.iter().fold(0.0f32, |a, &b| if b > a { b } else { a });
-    (m, sum.iter().sum())
+    row_stats(&max, &sum)
+}
+
+/// Pass 1 on one row held as planes (lengths checked by the caller): `re`, `im_arg` (`Im H` in, `arg H`
+/// out) and `abs` (receives `|H| = √(Re² + Im²)`, the value pass 2 computes from the pairs). The same
+/// statistics as [`analyse_body`] on the interleaved row, in the same order.
+#[inline(always)]
+pub(crate) fn analyse_planes_body(re: &[f32], im_arg: &mut [f32], abs: &mut [f32]) -> (f32, f64) {
+    let mut max = [0.0f32; LANES];
+    let mut sum = [0.0f64; LANES];
+    let mut rc = re.chunks_exact(LANES);
+    let mut ic = im_arg.chunks_exact_mut(LANES);
+    let mut ac = abs.chunks_exact_mut(LANES);
+    for ((r, i), a) in (&mut rc).zip(&mut ic).zip(&mut ac) {
+        let (mut rv, mut iv) = ([0.0f32; LANES], [0.0f32; LANES]);
+        rv.copy_from_slice(r);
+        iv.copy_from_slice(i);
+        let n2 = analyse_lanes(&rv, &iv, i, &mut max, &mut sum);
+        for (a, n) in a.iter_mut().zip(n2) {
+            *a = n.sqrt();
+        }
+    }
+    let (rt, it, at) = (rc.remainder(), ic.into_remainder(), ac.into_remainder());
+    if !it.is_empty() {
+        // Zero padding, as in `analyse_body`.
+        let (mut rv, mut iv) = ([0.0f32; LANES], [0.0f32; LANES]);
+        rv[..rt.len()].copy_from_slice(rt);
+        iv[..it.len()].copy_from_slice(it);
+        let mut out = [0.0f32; LANES];
+        let n2 = analyse_lanes(&rv, &iv, &mut out, &mut max, &mut sum);
+        let k = it.len();
+        it.copy_from_slice(&out[..k]);
+        for (a, n) in at.iter_mut().zip(n2) {
+            *a = n.sqrt();
+        }
+    }
+    row_stats(&max, &sum)
 }
 
 /// What pass 2 needs besides the row: the mean phase, `1/a`, and the sign of `acos` per lane (`+1` where
@@ -200,19 +257,14 @@ impl EncodeParams {
     }
 }
 
-/// Pass 2 on `LANES` pixels: `phase` (arg H) becomes the wrapped double phase `φ − mean ± acos(|H|/a)`;
-/// returns the linear look-up table's codes.
+/// Pass 2 on `LANES` pixels of magnitude `mag` (`|H|`): `phase` (arg H) becomes the wrapped double phase
+/// `φ − mean ± acos(|H|/a)`; returns the linear look-up table's codes.
 #[inline(always)]
-fn encode_chunk(f: &[f32], phase: &mut [f32], prm: &EncodeParams) -> [u8; LANES] {
-    let (mut re, mut im) = ([0.0f32; LANES], [0.0f32; LANES]);
-    for i in 0..LANES {
-        re[i] = f[2 * i];
-        im[i] = f[2 * i + 1];
-    }
+fn encode_lanes(mag: &[f32; LANES], phase: &mut [f32], prm: &EncodeParams) -> [u8; LANES] {
     let mut v = [0.0f32; LANES];
     let mut near = true;
     for i in 0..LANES {
-        let r = (re[i] * re[i] + im[i] * im[i]).sqrt() * prm.inv_a;
+        let r = mag[i] * prm.inv_a;
         // As f32::min(r, 1.0) but for NaN, whose phase is NaN anyway.
         let r = if r > 1.0 { 1.0 } else { r };
         // a − θ and a + (−1)·θ are the same IEEE operation.
@@ -237,8 +289,56 @@ fn encode_chunk(f: &[f32], phase: &mut [f32], prm: &EncodeParams) -> [u8; LANES]
     codes
 }
 
+/// Pass 2 on `LANES` pixels: `W = 2` values per pixel are interleaved `(re, im)` pairs (`|H| = √(re² +
+/// im²)`), `W = 1` the magnitudes themselves (from [`analyse_planes_body`]).
+#[inline(always)]
+fn encode_chunk<const W: usize>(f: &[f32], phase: &mut [f32], prm: &EncodeParams) -> [u8; LANES] {
+    let mut mag = [0.0f32; LANES];
+    for i in 0..LANES {
+        mag[i] = if W == 2 {
+            let (re, im) = (f[2 * i], f[2 * i + 1]);
+            (re * re + im * im).sqrt()
+        } else {
+            f[i]
+        };
+    }
+    encode_lanes(&mag, phase, prm)
+}
+
 /// Pass 2 on one row (lengths checked by the caller): `phase` holds `arg H` from pass 1 and becomes the
-/// wrapped double phase; `codes`, if given, the linear look-up table's codes.
+/// wrapped double phase; `codes`, if given, the linear look-up table's codes. `field` holds `W` values per
+/// pixel ([`encode_chunk`]): `W = 2` for [`encode_body`], `W = 1` for [`encode_abs_body`].
+#[inline(always)]
+fn encode_row_of<const W: usize>(
+    field: &[f32],
+    phase: &mut [f32],
+    codes: Option<&mut [u8]>,
+    prm: &EncodeParams,
+) {
+    let mut fc = field.chunks_exact(W * LANES);
+    let mut pc = phase.chunks_exact_mut(LANES);
+    let mut tail_codes = [0u8; LANES];
+    match codes {
+        Some(codes) => {
+            let mut cc = codes.chunks_exact_mut(LANES);
+            for ((f, p), c) in (&mut fc).zip(&mut pc).zip(&mut cc) {
+                c.copy_from_slice(&encode_chunk::<W>(f, p, prm));
+            }
+            encode_tail::<W>(fc.remainder(), pc.into_remainder(), &mut tail_codes, prm);
+            let ct = cc.into_remainder();
+            let n = ct.len();
+            ct.copy_from_slice(&tail_codes[..n]);
+        }
+        None => {
+            for (f, p) in (&mut fc).zip(&mut pc) {
+                encode_chunk::<W>(f, p, prm);
+            }
+            encode_tail::<W>(fc.remainder(), pc.into_remainder(), &mut tail_codes, prm);
+        }
+    }
+}
+
+/// Pass 2 on one row of interleaved `(re, im)` pairs ([`encode_row_of`]).
 #[inline(always)]
 pub(crate) fn encode_body(
     field: &[f32],
@@ -246,32 +346,29 @@ pub(crate) fn encode_body(
     codes: Option<&mut [u8]>,
     prm: &EncodeParams,
 ) {
-    let mut fc = field.chunks_exact(2 * LANES);
-    let mut pc = phase.chunks_exact_mut(LANES);
-    let mut tail_codes = [0u8; LANES];
-    match codes {
-        Some(codes) => {
-            let mut cc = codes.chunks_exact_mut(LANES);
-            for ((f, p), c) in (&mut fc).zip(&mut pc).zip(&mut cc) {
-                c.copy_from_slice(&encode_chunk(f, p, prm));
-            }
-            encode_tail(fc.remainder(), pc.into_remainder(), &mut tail_codes, prm);
-            let ct = cc.into_remainder();
-            let n = ct.len();
-            ct.copy_from_slice(&tail_codes[..n]);
-        }
-        None => {
-            for (f, p) in (&mut fc).zip(&mut pc) {
-                encode_chunk(f, p, prm);
-            }
-            encode_tail(fc.remainder(), pc.into_remainder(), &mut tail_codes, prm);
-        }
-    }
+    encode_row_of::<2>(field, phase, codes, prm)
+}
+
+/// Pass 2 on one row whose magnitudes `|H|` are given (`abs`, one value per pixel, from
+/// [`analyse_planes_body`]): bit-identical to [`encode_body`] on the pairs they came from.
+#[inline(always)]
+pub(crate) fn encode_abs_body(
+    abs: &[f32],
+    phase: &mut [f32],
+    codes: Option<&mut [u8]>,
+    prm: &EncodeParams,
+) {
+    encode_row_of::<1>(abs, phase, codes, prm)
 }
 
 /// The last `phase.len() < LANES` pixels of a row, through a zero-padded chunk.
 #[inline(always)]
-fn encode_tail(field: &[f32], phase: &mut [f32], codes: &mut [u8; LANES], prm: &EncodeParams) {
+fn encode_tail<const W: usize>(
+    field: &[f32],
+    phase: &mut [f32],
+    codes: &mut [u8; LANES],
+    prm: &EncodeParams,
+) {
     if phase.is_empty() {
         return;
     }
@@ -280,6 +377,6 @@ fn encode_tail(field: &[f32], phase: &mut [f32], codes: &mut [u8; LANES], prm: &
     f[..field.len()].copy_from_slice(field);
     let mut p = [0.0f32; LANES];
     p[..n].copy_from_slice(phase);
-    *codes = encode_chunk(&f, &mut p, prm);
+    *codes = encode_chunk::<W>(&f[..W * LANES], &mut p, prm);
     phase.copy_from_slice(&p[..n]);
 }

@@ -16,6 +16,12 @@
 //! (Rust does not contract `a·b + c`, and the intrinsics multiply and add apart), so every path is
 //! bit-identical (tested on rows and on the exhaustive sweep).
 //!
+//! A field the pre-filter left as two planes needs no interleaved copy: [`analyse_planes_row`] reads `Re H`
+//! and `Im H` where they are, writes `arg H` over `Im H` and `|H|` into a plane of its own, and
+//! [`encode_abs_row`] runs pass 2 from `|H|` (the value pass 2 computes from the pairs), so pass 2 reads two
+//! planes of one value per pixel instead of the pairs and `arg H`; the same bits as the interleaved rows
+//! on every path (tested).
+//!
 //! # Error bounds (measured, `tests`)
 //!
 //! Against the exact value (f64 `atan2`/`acos` rounded to f32 is within half an f32 ulp of it):
@@ -92,16 +98,64 @@ pub fn encode_row(
     inv_a: f32,
     isa: Isa,
 ) -> Result<(), KernelError> {
-    check(
-        "double phase field (2 values per pixel)",
-        2 * phase.len(),
-        field.len(),
-    )?;
+    let row = (false, field, odd_row);
+    encode_checked(row, phase, codes, mean, inv_a, isa)
+}
+
+/// Pass 1 on one row of `n` pixels held as two planes, as the pre-filter writes them: `re` holds `Re H`,
+/// `im_arg` holds `Im H` and receives `arg H` (as [`analyse_row`]'s `phase`), `abs` receives `|H| =
+/// √(Re² + Im²)` for [`encode_abs_row`]. Returns [`analyse_row`]'s `(max |H|², Σ arg H)` of the interleaved
+/// row, bit for bit (the same lanes in the same order), and writes the same `arg H`; no interleaved copy of the
+/// field is made (pass 2 then reads `|H|` and `arg H`, two planes, instead of the field and `arg H`). Errors:
+/// lengths ([`KernelError::Length`]), `isa` not available ([`KernelError::Isa`]).
+pub fn analyse_planes_row(
+    re: &[f32],
+    im_arg: &mut [f32],
+    abs: &mut [f32],
+    isa: Isa,
+) -> Result<(f32, f64), KernelError> {
+    check("double phase Re H plane", im_arg.len(), re.len())?;
+    check("double phase |H| plane", im_arg.len(), abs.len())?;
+    ops::run_dpm_analyse_planes(isa, re, im_arg, abs)
+}
+
+/// [`encode_row`] on a row whose magnitudes `|H|` are given (`abs`, one value per pixel, from
+/// [`analyse_planes_row`]) instead of its `(Re H, Im H)` pairs: bit-identical to [`encode_row`] on the pairs
+/// they came from (`|H|` is the value [`encode_row`] computes). Errors: as [`encode_row`].
+pub fn encode_abs_row(
+    abs: &[f32],
+    phase: &mut [f32],
+    codes: Option<&mut [u8]>,
+    odd_row: bool,
+    mean: f32,
+    inv_a: f32,
+    isa: Isa,
+) -> Result<(), KernelError> {
+    let row = (true, abs, odd_row);
+    encode_checked(row, phase, codes, mean, inv_a, isa)
+}
+
+/// [`encode_row`] (`magnitudes` false: `values` holds the pairs) or [`encode_abs_row`] (true: `|H|`), the
+/// lengths checked.
+fn encode_checked(
+    (magnitudes, values, odd_row): (bool, &[f32], bool),
+    phase: &mut [f32],
+    codes: Option<&mut [u8]>,
+    mean: f32,
+    inv_a: f32,
+    isa: Isa,
+) -> Result<(), KernelError> {
+    let (what, per_pixel) = if magnitudes {
+        ("double phase |H| plane", 1)
+    } else {
+        ("double phase field (2 values per pixel)", 2)
+    };
+    check(what, per_pixel * phase.len(), values.len())?;
     if let Some(c) = &codes {
         check("double phase codes", phase.len(), c.len())?;
     }
     let params = body::EncodeParams::new(mean, inv_a, odd_row);
-    ops::run_dpm_encode(isa, field, phase, codes, &params)
+    ops::run_dpm_encode(isa, magnitudes, values, phase, codes, &params)
 }
 
 #[cfg(test)]

@@ -432,6 +432,54 @@ fn a_mean_far_outside_the_circle_still_wraps() {
     }
 }
 
+/// Pass 1 on the two planes and pass 2 on the magnitudes give, on every path, the phases, statistics, pattern
+/// and codes of the interleaved rows bit for bit (NaN, ∞, zeros and partial last steps included), and `|H|`
+/// is the value pass 2 computes from the pairs.
+#[test]
+fn planar_rows_equal_the_interleaved_rows_on_every_path() {
+    let mut rng = Rng(0xbead);
+    for n in (0..=40).chain([1920, 1921]) {
+        let mut f = row(&mut rng, n);
+        for (i, v) in [(5, f32::NAN), (9, f32::INFINITY), (12, f32::NEG_INFINITY)] {
+            if i < f.len() {
+                f[i] = v;
+            }
+        }
+        let re: Vec<f32> = f.iter().step_by(2).copied().collect();
+        let im: Vec<f32> = f.iter().skip(1).step_by(2).copied().collect();
+        for (name, isa) in paths() {
+            let mut want = vec![0.0f32; n];
+            let stats = analyse_row(&f, &mut want, isa).unwrap();
+            let (mut arg, mut abs) = (im.clone(), vec![f32::NAN; n]);
+            let s = analyse_planes_row(&re, &mut arg, &mut abs, isa).unwrap();
+            assert_eq!(s.0.to_bits(), stats.0.to_bits(), "{name} n {n}");
+            assert_eq!(s.1.to_bits(), stats.1.to_bits(), "{name} n {n}");
+            let same = arg
+                .iter()
+                .zip(&want)
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+            assert!(same, "{name} n {n}: arg");
+            let mag = re.iter().zip(&im).map(|(r, i)| (r * r + i * i).sqrt());
+            assert!(
+                abs.iter().zip(mag).all(|(a, m)| a.to_bits() == m.to_bits()),
+                "{name} n {n}: |H|"
+            );
+            for (mean, inv_a) in [(0.3, 1.0), (-2.0, 1.7), (40.0, 0.5)] {
+                let (mut p, mut q) = (want.clone(), arg.clone());
+                let (mut c, mut d) = (vec![0u8; n], vec![1u8; n]);
+                let odd = n % 2 == 1;
+                encode_row(&f, &mut p, Some(&mut c), odd, mean, inv_a, isa).unwrap();
+                encode_abs_row(&abs, &mut q, Some(&mut d), odd, mean, inv_a, isa).unwrap();
+                let same = p.iter().zip(&q).all(|(a, b)| a.to_bits() == b.to_bits());
+                assert!(same && c == d, "{name} n {n} mean {mean}");
+                let mut r = arg.clone();
+                encode_abs_row(&abs, &mut r, None, odd, mean, inv_a, isa).unwrap();
+                assert!(r.iter().zip(&q).all(|(a, b)| a.to_bits() == b.to_bits()));
+            }
+        }
+    }
+}
+
 #[test]
 fn bad_lengths_are_refused() {
     let f = [0.0f32; 6];
@@ -444,6 +492,31 @@ fn bad_lengths_are_refused() {
     let mut c = [0u8; 2];
     assert!(matches!(
         encode_row(&f, &mut p, Some(&mut c), false, 0.0, 1.0, Isa::Scalar),
+        Err(KernelError::Length { .. })
+    ));
+    let (re, mut im, mut abs) = ([0.0f32; 3], [0.0f32; 3], [0.0f32; 2]);
+    assert!(matches!(
+        analyse_planes_row(&re, &mut im, &mut abs, Isa::Scalar),
+        Err(KernelError::Length { .. })
+    ));
+    assert!(matches!(
+        analyse_planes_row(&re[..2], &mut im, &mut abs[..], Isa::Scalar),
+        Err(KernelError::Length { .. })
+    ));
+    assert!(matches!(
+        encode_abs_row(&abs, &mut im, None, false, 0.0, 1.0, Isa::Scalar),
+        Err(KernelError::Length { .. })
+    ));
+    assert!(matches!(
+        encode_abs_row(
+            &abs,
+            &mut im[..2],
+            Some(&mut c[..1]),
+            false,
+            0.0,
+            1.0,
+            Isa::Scalar
+        ),
         Err(KernelError::Length { .. })
     ));
 }

@@ -161,7 +161,9 @@ pub fn double_phase_encode(
         .enumerate()
         .with_min_len(band)
         .try_for_each(|(r, (out, row))| {
-            encode_row(row, out, None, r % h, mean_phase[r / h], inv_a, isa)
+            let row = bytemuck::cast_slice(row);
+            let (layout, mean) = (PassOneLayout::Field, mean_phase[r / h]);
+            encode_row(row, layout, out, None, r % h, mean, inv_a, isa)
         })?;
     debug_assert!(phase.iter().all(|p| (0.0..TAU).contains(p)));
     Ok(DoublePhase {
@@ -236,8 +238,13 @@ fn analyse_row(row: &[Complex32], out: &mut [f32], isa: Isa) -> Result<ChannelSt
 /// Pass 2 on row `y`: `out` holds `arg H` from pass 1 and becomes the wrapped double phase
 /// `φ − mean ± acos(|H|/a)` (Eq. 7, `+` where `x + y` is even); `codes`, if given, receives the 8-bit codes of
 /// the [`LinearLut`](super::LinearLut).
+///
+/// `row` holds the row's `(Re H, Im H)` pairs with `layout` [`PassOneLayout::Field`] (`2·W` values), its
+/// magnitudes `|H|` with [`PassOneLayout::Magnitudes`] (`W` values): the same values either way.
+#[allow(clippy::too_many_arguments)]
 fn encode_row(
-    row: &[Complex32],
+    row: &[f32],
+    layout: PassOneLayout,
     out: &mut [f32],
     codes: Option<&mut [u8]>,
     y: usize,
@@ -245,41 +252,51 @@ fn encode_row(
     inv_a: f32,
     isa: Isa,
 ) -> Result<()> {
-    let field = bytemuck::cast_slice(row);
-    kernel::encode_row(field, out, codes, y % 2 == 1, mean, inv_a, isa).map_err(kernel_err)
+    let odd = y % 2 == 1;
+    match layout {
+        PassOneLayout::Field => kernel::encode_row(row, out, codes, odd, mean, inv_a, isa),
+        PassOneLayout::Magnitudes => kernel::encode_abs_row(row, out, codes, odd, mean, inv_a, isa),
+    }
+    .map_err(kernel_err)
 }
 
-/// Rows per chunk of [`ChannelEncoder::analyse_planes`]: 8 rows of 1920 pixels are 123 KB of field and
-/// 61 KB of phase, inside a core's L2 between the interleave and the analysis.
+/// Where pass 2 finds each pixel's `|H|` once pass 1 has run on a channel: what
+/// [`ChannelEncoder::analyse_planes`] returns (the session keeps it beside the field until pass 2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum PassOneLayout {
+    /// The field memory holds `H`, interleaved complex `[H, W]` ([`ChannelEncoder::analyse`], or
+    /// `analyse_planes` with a filtering method).
+    Field,
+    /// The field memory holds two real planes `[H, W]`: `Re H`, then `|H|` (`analyse_planes` with the plain
+    /// method: no interleaved copy of the field is written, and pass 2 reads `|H|` and `arg H` only).
+    Magnitudes,
+}
+
+impl PassOneLayout {
+    /// Values per pixel of the plane pass 2 reads.
+    fn values_per_pixel(self) -> usize {
+        match self {
+            Self::Field => 2,
+            Self::Magnitudes => 1,
+        }
+    }
+
+    /// The values pass 2 reads in a field's memory (`2·H·W` values): all of it, or its second half.
+    fn source(self, field: &[Complex32]) -> &[f32] {
+        let flat: &[f32] = bytemuck::cast_slice(field);
+        match self {
+            Self::Field => flat,
+            Self::Magnitudes => &flat[field.len()..],
+        }
+    }
+}
+
+/// Rows per task of [`ChannelEncoder::analyse_planes`] and [`ChannelEncoder::encode_on`] on a pool: 8 rows of
+/// 1920 pixels are 61 KB of each plane, a few hundred tasks per 1080p colour for the pool's threads to share.
 const ANALYSE_ROWS: usize = 8;
 
 /// Pixels per block of [`interleave_in_place`].
 const INTERLEAVE_BLOCK: usize = 16;
-
-/// `out[2i], out[2i + 1] ← first[i], second[i]` (the same values as [`interleave_in_place`], out of place), in
-/// blocks of [`INTERLEAVE_BLOCK`] pixels (fixed-size blocks compile to vector shuffles), for the pixels all
-/// three hold.
-fn interleave_into(out: &mut [f32], first: &[f32], second: &[f32]) {
-    const B: usize = INTERLEAVE_BLOCK;
-    let n = first.len().min(second.len()).min(out.len() / 2);
-    let whole = n / B * B;
-    for ((pairs, re), im) in out[..2 * whole]
-        .chunks_exact_mut(2 * B)
-        .zip(first[..whole].chunks_exact(B))
-        .zip(second[..whole].chunks_exact(B))
-    {
-        let mut block = [0.0f32; 2 * B];
-        for ((pair, r), i) in block.chunks_exact_mut(2).zip(re).zip(im) {
-            pair[0] = *r;
-            pair[1] = *i;
-        }
-        pairs.copy_from_slice(&block);
-    }
-    for i in whole..n {
-        out[2 * i] = first[i];
-        out[2 * i + 1] = second[i];
-    }
-}
 
 /// `buf[2i], buf[2i + 1] ← buf[i], second[i]` for the pixels `i` in `pixels` (`buf` holds `2n` values, the
 /// first plane in its first half, `n = second.len()`), where the pixels from `pixels.end` on are already
@@ -434,15 +451,16 @@ impl ChannelEncoder {
     }
 
     /// Pass 1 on a field still held as two real planes (the pre-filter's output): `Re H` in the first half of
-    /// `field`'s memory (`H·W` values) and `Im H` in `phase`. Interleaves them into `field` and writes `arg H`
-    /// into `phase`: the values and statistics of [`interleave_in_place`] on the whole field then
-    /// [`ChannelEncoder::analyse`], bit for bit. With the plain method, chunks of [`ANALYSE_ROWS`] rows are
-    /// interleaved (out of place) and analysed in turn while in cache, one pass over the field fewer, on the
-    /// current rayon pool's threads with `pool` (the pipeline's optics pool), else one after the other. The
-    /// rows go in levels from the bottom up: level `[a, b)`, `b ≤ 2a`, reads the first plane's values
-    /// `a·W..b·W` and writes the field's rows `a..b`, values `2a·W..2b·W` (no overlap, and no later level reads
-    /// what it writes), row 0 last, in place; each row's statistics are kept and merged in row order
-    /// afterwards, as `analyse` merges them.
+    /// `field`'s memory (`H·W` values) and `Im H` in `phase`. Writes `arg H` into `phase` and returns the
+    /// statistics of [`interleave_in_place`] on the whole field then [`ChannelEncoder::analyse`], bit for bit,
+    /// with the layout pass 2 must read:
+    /// - the plain method: [`PassOneLayout::Magnitudes`]. Each row's `|H|` goes to the second half of the
+    ///   field's memory ([`kernel::analyse_planes_row`]) and `Re H` stays: no interleaved field is written
+    ///   (at 1080p 16.6 MB less per colour, written here and read back by pass 2). Chunks of
+    ///   [`ANALYSE_ROWS`] rows on the current rayon pool's threads with `pool` (the pipeline's optics pool),
+    ///   else one after the other; each row's statistics are kept and merged in row order afterwards, as
+    ///   `analyse` merges them;
+    /// - a filtering method: [`PassOneLayout::Field`] (the field is interleaved and filtered, as `analyse`).
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for wrong lengths.
     pub(crate) fn analyse_planes(
@@ -450,56 +468,54 @@ impl ChannelEncoder {
         field: &mut [Complex32],
         phase: &mut [f32],
         pool: bool,
-    ) -> Result<ChannelStats> {
+    ) -> Result<(ChannelStats, PassOneLayout)> {
         self.check("field", field.len())?;
         self.check("phase", phase.len())?;
         let (h, w, isa) = (self.height, self.width, self.isa);
         if !matches!(self.method, DoublePhaseMethod::Plain) {
             interleave_in_place(bytemuck::cast_slice_mut(field), phase, 0..h * w);
-            return self.analyse(field, phase);
+            return Ok((self.analyse(field, phase)?, PassOneLayout::Field));
         }
-        let flat = bytemuck::cast_slice_mut::<Complex32, f32>(field);
+        let (re, abs) = bytemuck::cast_slice_mut::<Complex32, f32>(field).split_at_mut(h * w);
         let chunk = ANALYSE_ROWS * w;
         type Chunk<'a> = (
-            ((&'a mut [f32], &'a [f32]), &'a mut [f32]),
+            ((&'a [f32], &'a mut [f32]), &'a mut [f32]),
             &'a mut [ChannelStats],
         );
-        let rows = |(((out, re), phase), stats): Chunk<'_>| -> Result<()> {
-            interleave_into(out, re, phase);
-            let rows = bytemuck::cast_slice::<f32, Complex32>(out).chunks_exact(w);
-            for ((row, arg), s) in rows.zip(phase.chunks_exact_mut(w)).zip(stats) {
-                *s = analyse_row(row, arg, isa)?;
+        let rows = |(((re, phase), abs), stats): Chunk<'_>| -> Result<()> {
+            let rows = re
+                .chunks_exact(w)
+                .zip(phase.chunks_exact_mut(w))
+                .zip(abs.chunks_exact_mut(w));
+            for (((re, arg), abs), s) in rows.zip(stats) {
+                let (max_amplitude_sq, phase_sum) =
+                    kernel::analyse_planes_row(re, arg, abs, isa).map_err(kernel_err)?;
+                *s = ChannelStats {
+                    max_amplitude_sq,
+                    phase_sum,
+                };
             }
             Ok(())
         };
-        let mut b = h;
-        while b > 1 {
-            let a = b.div_ceil(2);
-            let (below, above) = flat.split_at_mut(2 * a * w);
-            let (re, out) = (&below[a * w..b * w], &mut above[..2 * (b - a) * w]);
-            let (phase, stats) = (&mut phase[a * w..b * w], &mut self.row_stats[a..b]);
-            if pool {
-                out.par_chunks_mut(2 * chunk)
-                    .zip(re.par_chunks(chunk))
-                    .zip(phase.par_chunks_mut(chunk))
-                    .zip(stats.par_chunks_mut(ANALYSE_ROWS))
-                    .try_for_each(rows)?;
-            } else {
-                out.chunks_mut(2 * chunk)
-                    .zip(re.chunks(chunk))
-                    .zip(phase.chunks_mut(chunk))
-                    .zip(stats.chunks_mut(ANALYSE_ROWS))
-                    .try_for_each(rows)?;
-            }
-            b = a;
+        let stats = &mut self.row_stats[..];
+        if pool {
+            re.par_chunks(chunk)
+                .zip(phase.par_chunks_mut(chunk))
+                .zip(abs.par_chunks_mut(chunk))
+                .zip(stats.par_chunks_mut(ANALYSE_ROWS))
+                .try_for_each(rows)?;
+        } else {
+            re.chunks(chunk)
+                .zip(phase.chunks_mut(chunk))
+                .zip(abs.chunks_mut(chunk))
+                .zip(stats.chunks_mut(ANALYSE_ROWS))
+                .try_for_each(rows)?;
         }
-        interleave_in_place(flat, phase, 0..w);
-        let row = &bytemuck::cast_slice::<f32, Complex32>(flat)[..w];
-        self.row_stats[0] = analyse_row(row, &mut phase[..w], isa)?;
-        Ok(self
+        let merged = self
             .row_stats
             .iter()
-            .fold(ChannelStats::default(), |s, r| s.merge(*r)))
+            .fold(ChannelStats::default(), |s, r| s.merge(*r));
+        Ok((merged, PassOneLayout::Magnitudes))
     }
 
     /// Pass 2: turns `phase` (from [`ChannelEncoder::analyse`] on the same `field`) into the wrapped double
@@ -517,20 +533,24 @@ impl ChannelEncoder {
         amplitude_scale: f32,
     ) -> Result<()> {
         let params = (mean_phase, amplitude_scale);
-        self.encode_on(field, (None, phase), codes, params, false)
+        let layout = PassOneLayout::Field;
+        self.encode_on(field, layout, (None, phase), codes, params, false)
     }
 
     /// [`ChannelEncoder::encode`] with `(mean_phase, amplitude_scale)`, its chunks of rows on the current
     /// rayon pool's threads with `pool` (the pipeline's optics pool), else one after the other: bit for bit
-    /// the same (each row's values depend on the row alone). With `(Some(arg), phase)`, pass 1's `arg H` is
-    /// read from `arg` (left as it is) and the pattern written into `phase`: each row copied there just
-    /// before it is encoded, while it is in cache (a frame's output plane, instead of a copy of the encoded
-    /// plane afterwards); with `(None, phase)`, `phase` holds `arg H` and is encoded in place.
+    /// the same (each row's values depend on the row alone). `layout` says where pass 1 left each pixel's
+    /// `|H|` in `field`'s memory ([`ChannelEncoder::analyse_planes`]; [`PassOneLayout::Field`] after
+    /// `analyse`): the same values either way. With `(Some(arg), phase)`, pass 1's `arg H` is read from
+    /// `arg` (left as it is) and the pattern written into `phase`: each row copied there just before it is
+    /// encoded, while it is in cache (a frame's output plane, instead of a copy of the encoded plane
+    /// afterwards); with `(None, phase)`, `phase` holds `arg H` and is encoded in place.
     ///
     /// Errors: as `encode` (`arg` checked as `phase`).
     pub(crate) fn encode_on(
         &self,
         field: &[Complex32],
+        layout: PassOneLayout,
         (arg, phase): (Option<&[f32]>, &mut [f32]),
         codes: &mut [u8],
         (mean_phase, amplitude_scale): (f32, f32),
@@ -549,11 +569,12 @@ impl ChannelEncoder {
             ));
         }
         let (w, inv_a, isa) = (self.width, 1.0 / amplitude_scale, self.isa);
+        let (source, k) = (layout.source(field), layout.values_per_pixel());
         let chunk = ANALYSE_ROWS * w;
-        type Chunk<'a> = (usize, ((&'a [Complex32], &'a mut [f32]), &'a mut [u8]));
-        let rows = |(i, ((field, phase), codes)): Chunk<'_>| -> Result<()> {
-            let rows = field
-                .chunks_exact(w)
+        type Chunk<'a> = (usize, ((&'a [f32], &'a mut [f32]), &'a mut [u8]));
+        let rows = |(i, ((source, phase), codes)): Chunk<'_>| -> Result<()> {
+            let rows = source
+                .chunks_exact(k * w)
                 .zip(phase.chunks_exact_mut(w))
                 .zip(codes.chunks_exact_mut(w));
             for (j, ((row, out), c)) in rows.enumerate() {
@@ -561,20 +582,20 @@ impl ChannelEncoder {
                 if let Some(arg) = arg {
                     out.copy_from_slice(&arg[y * w..(y + 1) * w]);
                 }
-                encode_row(row, out, Some(c), y, mean_phase, inv_a, isa)?;
+                encode_row(row, layout, out, Some(c), y, mean_phase, inv_a, isa)?;
             }
             Ok(())
         };
         if pool {
-            field
-                .par_chunks(chunk)
+            source
+                .par_chunks(k * chunk)
                 .zip(phase.par_chunks_mut(chunk))
                 .zip(codes.par_chunks_mut(chunk))
                 .enumerate()
                 .try_for_each(rows)
         } else {
-            field
-                .chunks(chunk)
+            source
+                .chunks(k * chunk)
                 .zip(phase.chunks_mut(chunk))
                 .zip(codes.chunks_mut(chunk))
                 .enumerate()
@@ -866,8 +887,10 @@ mod tests {
         }
     }
 
-    /// Pass 1 on the two planes (chunk by chunk for the plain method) gives the field, phases and statistics
-    /// of the interleave then `analyse`, bit for bit, for every method, on sizes with a partial last chunk.
+    /// Pass 1 on the two planes gives the phases and statistics of the interleave then `analyse`, bit for bit,
+    /// for every method, on sizes with a partial last chunk: the plain method leaves `Re H` and `|H|` (no
+    /// interleaved field), the filtering methods the filtered field; pass 2 from either layout gives the same
+    /// pattern and codes.
     #[test]
     fn analyse_planes_equals_interleave_then_analyse() {
         let methods = [
@@ -892,13 +915,13 @@ mod tests {
                 let mut want_phase = vec![0.0f32; n];
                 let want = enc.analyse(&mut want_field, &mut want_phase).unwrap();
 
-                // Serial, then in parallel on pools of 1 to 3 threads (the rows in levels, out of place).
+                // Serial, then in parallel on pools of 1 to 3 threads.
                 for threads in [0, 1, 2, 3] {
                     let mut field = vec![Complex32::new(f32::NAN, f32::NAN); n];
                     bytemuck::cast_slice_mut::<Complex32, f32>(&mut field)[..n]
                         .copy_from_slice(&re);
                     let mut phase = im.clone();
-                    let got = match threads {
+                    let (got, layout) = match threads {
                         0 => enc.analyse_planes(&mut field, &mut phase, false).unwrap(),
                         t => rayon::ThreadPoolBuilder::new()
                             .num_threads(t)
@@ -916,11 +939,38 @@ mod tests {
                     );
                     assert_eq!(got.phase_sum.to_bits(), want.phase_sum.to_bits(), "{what}");
                     assert_eq!(bits(&phase), bits(&want_phase), "{what}");
-                    assert_eq!(
-                        bits(bytemuck::cast_slice(&field)),
-                        bits(bytemuck::cast_slice(&want_field)),
-                        "{what}"
-                    );
+                    let flat: &[f32] = bytemuck::cast_slice(&field);
+                    if method == DoublePhaseMethod::Plain {
+                        // Re H kept, |H| beside it: no interleaved field.
+                        assert_eq!(layout, PassOneLayout::Magnitudes, "{what}");
+                        assert_eq!(bits(&flat[..n]), bits(&re), "{what}");
+                        let mag: Vec<f32> = re
+                            .iter()
+                            .zip(&im)
+                            .map(|(r, i)| (r * r + i * i).sqrt())
+                            .collect();
+                        assert_eq!(bits(&flat[n..]), bits(&mag), "{what}");
+                    } else {
+                        assert_eq!(layout, PassOneLayout::Field, "{what}");
+                        assert_eq!(
+                            bits(flat),
+                            bits(bytemuck::cast_slice(&want_field)),
+                            "{what}"
+                        );
+                    }
+                    // Pass 2 from either layout: the same pattern and codes.
+                    let (a, mean) = normaliser(&[got; 3], n).unwrap();
+                    let (mut p1, mut c1) = (want_phase.clone(), vec![0u8; n]);
+                    let io = (None, &mut p1[..]);
+                    let field_layout = PassOneLayout::Field;
+                    enc.encode_on(&want_field, field_layout, io, &mut c1, (mean[0], a), false)
+                        .unwrap();
+                    let (mut p2, mut c2) = (phase.clone(), vec![1u8; n]);
+                    let io = (None, &mut p2[..]);
+                    enc.encode_on(&field, layout, io, &mut c2, (mean[0], a), false)
+                        .unwrap();
+                    assert_eq!(bits(&p1), bits(&p2), "{what}: pass 2");
+                    assert_eq!(c1, c2, "{what}: pass 2 codes");
                 }
             }
         }
@@ -950,16 +1000,20 @@ mod tests {
                     .unwrap();
                 let (mut phase, mut codes) = (arg.clone(), vec![0u8; n]);
                 let io = (None, &mut phase[..]);
-                pool.install(|| enc.encode_on(&f, io, &mut codes, (mean[0], a), true))
-                    .unwrap();
+                pool.install(|| {
+                    enc.encode_on(&f, PassOneLayout::Field, io, &mut codes, (mean[0], a), true)
+                })
+                .unwrap();
                 let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&phase), bits(&want_phase), "{h}×{w} ×{threads}");
                 assert_eq!(codes, want_codes, "{h}×{w} ×{threads}");
                 // Out of place: `arg` kept, every row of the output written.
                 let (mut out, mut codes) = (vec![f32::NAN; n], vec![0u8; n]);
                 let io = (Some(&arg[..]), &mut out[..]);
-                pool.install(|| enc.encode_on(&f, io, &mut codes, (mean[0], a), true))
-                    .unwrap();
+                pool.install(|| {
+                    enc.encode_on(&f, PassOneLayout::Field, io, &mut codes, (mean[0], a), true)
+                })
+                .unwrap();
                 assert_eq!(
                     bits(&out),
                     bits(&want_phase),
@@ -968,11 +1022,18 @@ mod tests {
                 assert_eq!(codes, want_codes, "{h}×{w} ×{threads} out of place");
                 let io = (None, &mut phase[..]);
                 assert!(enc
-                    .encode_on(&f, io, &mut codes, (mean[0], 0.0), true)
+                    .encode_on(
+                        &f,
+                        PassOneLayout::Field,
+                        io,
+                        &mut codes,
+                        (mean[0], 0.0),
+                        true
+                    )
                     .is_err());
                 let io = (Some(&arg[..n - 1]), &mut out[..]);
                 assert!(enc
-                    .encode_on(&f, io, &mut codes, (mean[0], a), true)
+                    .encode_on(&f, PassOneLayout::Field, io, &mut codes, (mean[0], a), true)
                     .is_err());
             }
             assert!(

@@ -5,6 +5,7 @@
 mod double_phase;
 mod lut;
 
+pub(crate) use double_phase::PassOneLayout;
 pub use double_phase::{
     double_phase_encode, normaliser, ChannelEncoder, ChannelStats, DoublePhase, DoublePhaseMethod,
 };

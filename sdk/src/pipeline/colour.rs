@@ -11,7 +11,7 @@ use tensorholo_kernels::phasor::{phasors, phasors_in_place};
 use tensorholo_kernels::Isa;
 
 use super::frame::Heads;
-use crate::encoding::{ChannelEncoder, ChannelStats};
+use crate::encoding::{ChannelEncoder, ChannelStats, PassOneLayout};
 use crate::error::{HoloError, Result};
 use crate::optics::{EvenMultiplier, Scratch, SpectralPlan};
 
@@ -39,9 +39,10 @@ pub(super) struct ColourState {
     /// The complex field `[H, W]`. Its memory also holds two real planes (`[H, W]` each, [`ColourState::planes`])
     /// while the session writes them: the midpoint amplitude head before [`Task::Midpoint`] in a session
     /// without full outputs and, with a pre-filter, its output `Re H'` before the encoding's pass 1 (the phase
-    /// head and `Im H'` in `phase`); each task turns them into the field in place (no buffer of their own:
-    /// 50 MB less at 1080p). The pre-filter's input `(Re H, Im H)` waits in `prefilter_input`
-    /// ([`ColourState::prefilter_io`]).
+    /// head and `Im H'` in `phase`); [`Task::Midpoint`] turns the heads into the field in place (no buffer of
+    /// their own: 50 MB less at 1080p), and with the plain method pass 1 leaves `Re H'` and `|H'|` here
+    /// (`layout`) instead of interleaving them. The pre-filter's input `(Re H, Im H)` waits in
+    /// `prefilter_input` ([`ColourState::prefilter_io`]).
     pub(super) field: Vec<Complex32>,
     pub(super) plan: SpectralPlan,
     /// Offset transfer function with the carrier removed (Eq. 6), as its even quarter (a function of the
@@ -54,6 +55,9 @@ pub(super) struct ColourState {
     pub(super) encoder: ChannelEncoder,
     pub(super) phase: Vec<f32>,
     pub(super) stats: ChannelStats,
+    /// Where pass 1 left each pixel's `|H|` for pass 2 (the interleaved field, or with a pre-filter and the
+    /// plain method its own plane in the field's memory: [`ChannelEncoder::analyse_planes`]).
+    pub(super) layout: PassOneLayout,
     /// This colour (0 = R) and the session's `(height, width)`.
     pub(super) colour: usize,
     pub(super) size: (usize, usize),
@@ -87,6 +91,7 @@ impl ColourState {
                 }
                 if !prefilter {
                     self.stats = self.encoder.analyse(&mut self.field, &mut self.phase)?;
+                    self.layout = PassOneLayout::Field;
                 }
                 Ok(())
             }

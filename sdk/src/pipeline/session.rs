@@ -385,17 +385,19 @@ impl HologramSession {
             .enumerate();
         optics.run(|| {
             colours.try_for_each(|(c, ((st, phase_out), codes_out))| -> Result<()> {
-                let (field, params) = (&st.field, (mean[c], a));
+                let (field, layout, params) = (&st.field, st.layout, (mean[c], a));
                 // The pattern straight into the frame's phase plane with full outputs (each row copied
                 // there from pass 1's plane just before it is encoded), else in place; the codes straight
                 // into the frame.
                 let phase: &[f32] = if full {
                     let io = (Some(&st.phase[..]), &mut *phase_out);
-                    st.encoder.encode_on(field, io, codes_out, params, true)?;
+                    st.encoder
+                        .encode_on(field, layout, io, codes_out, params, true)?;
                     phase_out
                 } else {
                     let io = (None, &mut st.phase[..]);
-                    st.encoder.encode_on(field, io, codes_out, params, true)?;
+                    st.encoder
+                        .encode_on(field, layout, io, codes_out, params, true)?;
                     &st.phase
                 };
                 if let Some(lut) = calibrated_lut(calibration.as_ref(), c) {
@@ -420,9 +422,9 @@ impl HologramSession {
         let states = colour_states(&mut self.states)?;
         self.optics.run(|| {
             states.into_par_iter().try_for_each(|st| {
-                st.stats = st
-                    .encoder
-                    .analyse_planes(&mut st.field, &mut st.phase, true)?;
+                (st.stats, st.layout) =
+                    st.encoder
+                        .analyse_planes(&mut st.field, &mut st.phase, true)?;
                 Ok(())
             })
         })

@@ -17,7 +17,7 @@ use super::report::BackendReport;
 use super::session::HologramSession;
 use super::workers::ColourWorkers;
 use crate::cnn::{CnnPlans, PlanRequest};
-use crate::encoding::{ChannelEncoder, ChannelStats};
+use crate::encoding::{ChannelEncoder, ChannelStats, PassOneLayout};
 #[cfg(not(feature = "gpu"))]
 use crate::error::invalid as invalid_backend;
 #[cfg(doc)]
@@ -121,6 +121,7 @@ impl HologramSession {
                 encoder: ChannelEncoder::new(height, width, encoding)?,
                 phase: vec![0.0; n],
                 stats: ChannelStats::default(),
+                layout: PassOneLayout::Field,
                 colour,
                 size: (height, width),
                 isa: kernel_isa()?,
