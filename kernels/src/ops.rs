@@ -223,6 +223,15 @@ static OPS: [Ops; 5] = [
                 run: f32_avx512::conv,
             },
             F32Row {
+                info: f32_info(
+                    "conv3x3.f32.6x4.avx512",
+                    Isa::Avx512,
+                    f32_avx512::G6,
+                    16 * f32_avx512::NV6,
+                ),
+                run: f32_avx512::conv6,
+            },
+            F32Row {
                 info: winograd_info(
                     "conv3x3.f32.wino2x2.8x2.avx512",
                     Isa::Avx512,
@@ -336,6 +345,11 @@ static OPS: [Ops; 5] = [
             F32Row {
                 info: f32_info("test.f32.8x3.avx512-geometry-on-avx2", Isa::Avx2Fma, 8, 48),
                 run: f32_avx2::conv_avx512_geometry,
+            },
+            #[cfg(test)]
+            F32Row {
+                info: f32_info("test.f32.6x4.avx512-geometry-on-avx2", Isa::Avx2Fma, 6, 64),
+                run: f32_avx2::conv6_avx512_geometry,
             },
             #[cfg(test)]
             F32Row {
@@ -581,9 +595,9 @@ pub(crate) fn select_f32(isa: Isa) -> &'static F32Row {
 /// The f32 row a layer of `c_out` output channels runs under `isa`: among the vector rows `isa` includes (the
 /// scalar row only when there is none), the one that computes the fewest output channels in all (`c_out`
 /// rounded up to its tile `G`), the earlier (better) row on a tie. For 24 and 8 channels that is the first
-/// row; for the 6-channel last layers on AVX-512 it is the AVX2 6 × 16 tile (faster on Zen 4, one thread,
-/// 384²: 65 against 56 GFLOP/s for 24+4→6, 89 against 73 for 8+6→6; the 8-channel tile computes 8 channels
-/// for 6; slower on Zen 5, so callers time [`f32_rows_of`]).
+/// row; for the 6-channel last layers on AVX-512 it is the 6-channel AVX-512 tile `conv3x3.f32.6x4.avx512`
+/// (the 8-channel tile computes 8 channels for 6; 1.3× faster than it on Zen 5), under AVX2 the 6 × 16
+/// tile; callers time [`f32_rows_of`] where it matters.
 pub(crate) fn select_f32_for(isa: Isa, c_out: usize) -> &'static F32Row {
     select_f32_algorithm(isa, c_out, Algorithm::Direct)
 }

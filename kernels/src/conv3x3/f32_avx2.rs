@@ -302,6 +302,17 @@ pub(crate) unsafe fn conv_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out<'_>
     unsafe { generic_conv::<Ymm2, 8, 3>(job, out) }
 }
 
+/// Tests only: the geometry of `conv3x3.f32.6x4.avx512` (6 × 4 × 16 lanes) on AVX2 registers.
+///
+/// # Safety
+/// As [`conv`].
+#[cfg(test)]
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn conv6_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: as `conv`; 64-pixel tile ≤ MAX_TILE.
+    unsafe { generic_conv::<Ymm2, 6, 4>(job, out) }
+}
+
 /// Tests only: the AVX-512 Winograd geometry (8 channels × 2 vectors of 16 lanes = 32 tiles) on AVX2
 /// registers.
 ///

@@ -1,4 +1,5 @@
-//! `conv3x3.f32.8x3.avx512`: AVX-512F, 512-bit registers.
+//! `conv3x3.f32.8x3.avx512`: AVX-512F, 512-bit registers (and `conv3x3.f32.6x4.avx512`, the same loop for
+//! 6-channel layers: [`G6`] × [`NV6`]).
 //!
 //! Register tile: 8 output channels × 3 zmm (48 pixels) = 24 accumulators, + 3 input vectors + 1 broadcast
 //! weight = 28 of the 32 zmm registers. Per reduction step: 3 loads + 8 broadcasts for 24 FMAs. The loop and
@@ -160,6 +161,25 @@ unsafe fn transpose4_in_lanes(r: [__m512; 4]) -> [__m512; 4] {
 pub(crate) unsafe fn conv(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: AVX-512F enabled here; 48-pixel tile ≤ MAX_TILE; the job was checked by the caller.
     unsafe { generic_conv::<__m512, G, NV>(job, out) }
+}
+
+/// Output-channel tile of `conv3x3.f32.6x4.avx512`: the 6-channel last layers (the hologram CNN's 24 + 4 → 6,
+/// the pre-filter's 8 + 6 → 6). The 8 × 3 tile computes 8 channels for their 6: a quarter of its
+/// multiply-adds are wasted.
+pub(crate) const G6: usize = 6;
+/// zmm vectors of pixels per `conv3x3.f32.6x4.avx512` tile: 6 channels × 4 zmm (64 pixels) = 24
+/// accumulators, + 4 input vectors + 1 broadcast weight = 29 of the 32 zmm registers; per reduction step 4
+/// loads + 6 broadcasts for 24 multiply-adds, every one of them useful at 6 channels.
+pub(crate) const NV6: usize = 4;
+
+/// The registry entry of `conv3x3.f32.6x4.avx512` (the generic direct loop at [`G6`] × [`NV6`]).
+///
+/// # Safety
+/// The CPU has AVX-512F (and AVX2, FMA); `job` was checked by the safe API.
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub(crate) unsafe fn conv6(job: &F32Job<'_>, out: &mut F32Out<'_>) {
+    // SAFETY: AVX-512F enabled here; 64-pixel tile ≤ MAX_TILE; the job was checked by the caller.
+    unsafe { generic_conv::<__m512, G6, NV6>(job, out) }
 }
 
 /// Vectors of tiles per Winograd register tile (8 channels × 2 × 16 = 32 tiles, 64 output pixels: the

@@ -358,7 +358,7 @@ fn dispatch_selects_the_named_row_and_refuses_unavailable_isas() {
     let by_width = [
         (Isa::Avx512, 24, "conv3x3.f32.8x3.avx512"),
         (Isa::Avx512, 8, "conv3x3.f32.8x3.avx512"),
-        (Isa::Avx512, 6, "conv3x3.f32.6x2.avx2"),
+        (Isa::Avx512, 6, "conv3x3.f32.6x4.avx512"),
         (Isa::Avx2Fma, 8, "conv3x3.f32.6x2.avx2"),
         (Isa::Avx2Fma, 6, "conv3x3.f32.6x2.avx2"),
         (Isa::Scalar, 6, "conv3x3.f32.8x8.scalar"),
@@ -401,13 +401,17 @@ fn dispatch_selects_the_named_row_and_refuses_unavailable_isas() {
             }
         }
     }
-    // Under AVX-512 a 6-channel layer may time both tiles (the 6-channel AVX2 one first).
+    // Under AVX-512 a 6-channel layer may time all three tiles (the 6-channel AVX-512 one first).
     #[cfg(target_arch = "x86_64")]
     assert_eq!(
         registry::f32_rows_of(Isa::Avx512, 6, Algorithm::Direct)
             .map(|r| r.name)
             .collect::<Vec<_>>(),
-        ["conv3x3.f32.6x2.avx2", "conv3x3.f32.8x3.avx512"]
+        [
+            "conv3x3.f32.6x4.avx512",
+            "conv3x3.f32.8x3.avx512",
+            "conv3x3.f32.6x2.avx2"
+        ]
     );
     for (isa, name) in expected {
         assert_eq!(registry::selected_f32(isa).name, name);

@@ -4,9 +4,9 @@
 //! Winograd's minimal filtering, F(2×2, 3×3) (`4·C_in` plus the tile transforms) or F(4×4, 3×3) (`2.25·C_in`,
 //! larger transforms; neither bit-identical with direct, within the bounds the kernels crate states). Which
 //! is fastest depends on the layer's channels and the CPU: the transforms cost relatively more where `C_in`
-//! or `C_out` is small. So does the row: under AVX-512, a 6-channel layer runs on the 8-channel AVX-512 tile
-//! (a quarter of it wasted) or the 6-channel AVX2 tile, and which wins differs between CPUs (the AVX2 tile
-//! on Zen 4, the AVX-512 one on Zen 5: docs/BENCHMARKS.md).
+//! or `C_out` is small. So does the row: under AVX-512, a 6-channel layer may run on the 6-channel AVX-512
+//! tile, the 8-channel one (a quarter of it wasted) or the 6-channel AVX2 tile, and which wins can differ
+//! between CPUs (of the last two, the AVX2 tile on Zen 4, the AVX-512 one on Zen 5: docs/BENCHMARKS.md).
 //!
 //! The first plan of a layer shape `(ISA, C_in, C_out)` in a process times every candidate row
 //! ([`tensorholo_kernels::registry::f32_rows_of`]: each algorithm's rows under the ISA) on a sample band
