@@ -27,25 +27,24 @@ for r in 1 2; do
       --repeat 10 --max-seconds 4 --gpu-precision auto 2>&1 | grep -E "^\| holo" | tee -a "$OUT/gpu.txt"
   done
 done
-for r in 1 2; do
-  for p in int8-qdq f32; do
-    for b in "$OLD" "$NEW"; do
-      echo -n "CPU, 2 cores, round $r, $p, $b: "
-      timeout 120 taskset -c 0,1 "$b" bench --skip-cnn --sizes 1080x1920 --layers 8 --precision "$p" \
-        --threads 2 --repeat 7 2>&1 | grep "^| holo8" | cut -d'|' -f7-14 | tee -a "$OUT/cpu2.txt"
+# cpu_rounds LABEL LOG FIELDS PREFIX ARGS: two rounds of int8 and f32, old and new alternated; each run's
+# `holo bench` rows (columns FIELDS) appended to $OUT/LOG. PREFIX (e.g. taskset) and ARGS are word lists.
+cpu_rounds() {
+  local label=$1 log=$2 fields=$3 prefix=$4 args=$5
+  for r in 1 2; do
+    for p in int8-qdq f32; do
+      for b in "$OLD" "$NEW"; do
+        echo -n "CPU, $label, round $r, $p, $b: "
+        # shellcheck disable=SC2086
+        timeout 120 $prefix "$b" bench --skip-cnn --layers 8 --precision "$p" $args 2>&1 | grep "^| holo8" \
+          | cut -d'|' -f"$fields" | tr '\n' ' ' | tee -a "$OUT/$log"
+        echo
+      done
     done
   done
-done
-for r in 1 2; do
-  for p in int8-qdq f32; do
-    for b in "$OLD" "$NEW"; do
-      echo -n "CPU, $N threads, round $r, $p, $b: "
-      timeout 120 "$b" bench --skip-cnn --sizes 1080x1920,384x384 --layers 8 --precision "$p" --threads "$N" \
-        --repeat 9 2>&1 | grep "^| holo8" | cut -d'|' -f5-14 | tr '\n' ' ' | tee -a "$OUT/cpuN.txt"
-      echo
-    done
-  done
-done
+}
+cpu_rounds "2 cores" cpu2.txt 7-14 "taskset -c 0,1" "--sizes 1080x1920 --threads 2 --repeat 7"
+cpu_rounds "$N threads" cpuN.txt 5-14 "" "--sizes 1080x1920,384x384 --threads $N --repeat 9"
 RUST_LOG=tensorholo::cnn::native::algorithm=debug timeout 60 "$NEW" bench --skip-cnn --sizes 1080x1920 \
   --layers 8 --precision f32 --threads "$N" --repeat 1 2>&1 | grep -E "conv [0-9]" | tee "$OUT/choices.txt"
 for r in 1 2; do
