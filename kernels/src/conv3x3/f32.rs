@@ -142,16 +142,29 @@ impl Conv3x3F32 {
 
     /// The job of output rows `rows` (checked by the caller) and its kernel row origin `k` (kernel row `y` is
     /// output row `y + k`; 0 unless the inputs are [`shifted`](Inputs::shifted)).
-    fn job<'a>(&'a self, inputs: &Inputs<'a, f32>, rows: &Range<usize>) -> (F32Job<'a>, usize) {
+    ///
+    /// `cols` (checked by the caller) are the output columns computed: the kernel sees the buffers from column
+    /// `cols.start` on (each operand's slice and the output's base moved on by that many values, the row
+    /// stride unchanged) as a frame `cols.len()` columns wide, so its reads stay inside `cols.start − 1 ..
+    /// cols.end + 1` for the columns it keeps, and it writes columns `cols` and zeros after them as far as its
+    /// last vector reaches.
+    fn job<'a>(
+        &'a self,
+        inputs: &Inputs<'a, f32>,
+        rows: &Range<usize>,
+        cols: &Range<usize>,
+    ) -> (F32Job<'a>, usize) {
         let a = inputs.a;
-        let (k, [sa, sb, sr]) = inputs.kernel_view();
+        let (k, views) = inputs.kernel_view();
+        // An absent operand's view is empty: it stays empty.
+        let [sa, sb, sr] = views.map(|s| s.get(cols.start..).unwrap_or(&[]));
         let job = F32Job {
             a: sa,
             ca: a.channels(),
             b: sb,
             cb: inputs.b.map_or(0, |b| b.channels()),
             h: a.height(),
-            w: a.width(),
+            w: cols.len(),
             wp: a.padded_width(),
             weights: &self.weights,
             bias: &self.bias,
@@ -186,7 +199,36 @@ impl Conv3x3F32 {
         inputs: Inputs<'_, f32>,
         band: &mut RowBand<'_, f32>,
     ) -> Result<(), KernelError> {
+        let w = band.w;
+        self.run_band_columns(inputs, band, 0..w)
+    }
+
+    /// [`run_band`](Self::run_band) for output columns `cols` only (`0 ≤ start < end ≤ W`, `start` a multiple
+    /// of [`KernelInfo::column_group`], so that the tiles are the whole row's): each computed column gets the
+    /// bits the whole row's run gives it, from input columns `start − 1 .. end + 1` (the tiles of a Winograd
+    /// row: up to the end of the tile holding column `end − 1`, plus one); columns before `start` are left
+    /// as they are, and columns from `end` on up to the kernel's last vector (at most
+    /// [`MAX_TILE`](crate::buffer::planar::MAX_TILE) past `end`, within the padded row) are set to zero. For
+    /// a caller that computes a frame in column slabs and needs fewer columns of each layer than the one
+    /// before. Errors: as `run_band`, and a column range that is empty, past `W` or not so aligned
+    /// ([`KernelError::Shape`]).
+    pub fn run_band_columns(
+        &self,
+        inputs: Inputs<'_, f32>,
+        band: &mut RowBand<'_, f32>,
+        cols: Range<usize>,
+    ) -> Result<(), KernelError> {
         let (h, w) = (band.h, band.w);
+        let group = self.row.info.column_group();
+        if cols.start >= cols.end || cols.end > w || !cols.start.is_multiple_of(group) {
+            return Err(KernelError::Shape {
+                what: format!(
+                    "output columns {cols:?} of a {w}-column row: not a non-empty range inside it \
+                     starting at a multiple of {group} ({})",
+                    self.row.info.name
+                ),
+            });
+        }
         if band.c != self.c_out {
             return Err(KernelError::Shape {
                 what: format!(
@@ -204,13 +246,15 @@ impl Conv3x3F32 {
             &rows,
             self.row.info.row_group(),
         )?;
-        let (job, k) = self.job(&inputs, &rows);
+        let (job, k) = self.job(&inputs, &rows, &cols);
         // The kernel writes kernel row `y` at output row `y + k`: the band, seen from the kernel, starts `k`
-        // rows earlier (`band.base ≥ (rows.start + 1)·stride ≥ k·stride`: `check` keeps `k ≤ rows.start`).
+        // rows earlier (`band.base ≥ (rows.start + 1)·stride ≥ k·stride`: `check` keeps `k ≤ rows.start`),
+        // and its column 0 is the row's column `cols.start` (`< stride`: the band's first row, one row past
+        // `base`'s, starts after it).
         let stride = band.data.len() / rows.len();
         let out = F32Out::Rows {
             data: band.data,
-            base: band.base - k * stride,
+            base: band.base - k * stride - cols.start,
         };
         ops::run_f32(self.row, &job, out)
     }
@@ -245,7 +289,7 @@ impl Conv3x3F32 {
             &rows,
             self.row.info.row_group(),
         )?;
-        let (job, _) = self.job(&inputs, &rows);
+        let (job, _) = self.job(&inputs, &rows, &(0..w));
         ops::run_f32(self.row, &job, F32Out::Planar(out))
     }
 }

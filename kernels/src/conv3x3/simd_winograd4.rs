@@ -94,12 +94,13 @@ pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
     let mut scratch = take_scratch(super::simd_winograd::scratch_len(POINTS, cin, G, t));
     let (vbuf, mbuf) = scratch.split_at_mut(v_len);
     // Each source with the number of buffer rows its view holds from kernel row 0 (the view runs to the end
-    // of the operand's buffer).
+    // of the operand's buffer, from its first row's column `cols.start` on, fewer than a row's values:
+    // `Conv3x3F32::run_band_columns`; rounded up, those rows still count).
     let rows_of = |s: &[f32], cs: usize| {
         if cs == 0 {
             0
         } else {
-            s.len() / (cs * job.wp)
+            s.len().div_ceil(cs * job.wp)
         }
     };
     let srcs = [

@@ -272,17 +272,121 @@ fn f32_row_bands_are_bit_identical_and_touch_only_their_rows() {
     }
 }
 
+/// A layer with two sources and a residual: `a` (`ca` channels), `b` (`cb`), `res` (`cout`), all `h × w`,
+/// and its weights `[cout][ca + cb][3][3]` and bias, random from `seed`.
+struct TwoSources {
+    a: RowPlanar<f32>,
+    b: RowPlanar<f32>,
+    res: RowPlanar<f32>,
+    wt: Vec<f32>,
+    bias: Vec<f32>,
+}
+
+impl TwoSources {
+    fn new([ca, cb, cout, h, w]: [usize; 5], seed: u64) -> Self {
+        let mut rng = Rng::new(seed);
+        let mut planes =
+            |c: usize| RowPlanar::from_planar(&rng.vec(c * h * w), c, h, w, None).unwrap();
+        let (a, b, res) = (planes(ca), planes(cb), planes(cout));
+        Self {
+            a,
+            b,
+            res,
+            wt: rng.vec(cout * (ca + cb) * 9),
+            bias: rng.vec(cout),
+        }
+    }
+}
+
+#[test]
+fn f32_column_ranges_give_the_whole_rows_bits_and_touch_only_their_columns() {
+    // `run_band_columns` (a column slab's layers, each computing fewer columns than the one before): the
+    // computed columns bit-identical with the whole row's run, the columns before the range untouched, those
+    // after it untouched or zero within one tile of its end; ranges that start off a tile, are empty or run
+    // past the row are errors. Two sources and a residual; the row wide enough for several tiles of every
+    // row (64 pixels at most).
+    let (ca, cb, cout, h, w) = (9, 5, 8, 9, 203);
+    let TwoSources {
+        a,
+        b,
+        res,
+        wt,
+        bias,
+    } = TwoSources::new([ca, cb, cout, h, w], 11);
+    let max_tile = crate::buffer::planar::MAX_TILE;
+    for row in f32_rows() {
+        let plan = Conv3x3F32::with_kernel(&wt, &bias, ca + cb, cout, true, row).unwrap();
+        let g = plan.kernel().column_group();
+        let inputs = Inputs::new(&a).concat(&b).residual(&res);
+        let mut whole = RowPlanar::new(cout, h, w).unwrap();
+        plan.run(inputs, &mut whole, 0..h).unwrap();
+        let whole = whole.to_planar();
+        for cols in [
+            0..w,
+            0..17,
+            4..w,
+            8..150,
+            64..129,
+            12..13,
+            196..203,
+            132..200,
+        ] {
+            let sentinel = vec![7.5f32; cout * h * w];
+            let mut out = RowPlanar::from_planar(&sentinel, cout, h, w, None).unwrap();
+            for rows in [0..3, 3..h] {
+                let mut band = out.band_mut(rows).unwrap();
+                plan.run_band_columns(inputs, &mut band, cols.clone())
+                    .unwrap();
+            }
+            let got = out.to_planar();
+            for o in 0..cout {
+                for y in 0..h {
+                    for x in 0..w {
+                        let k = (o * h + y) * w + x;
+                        let v = got[k];
+                        let at =
+                            format!("{row} columns {cols:?}: channel {o}, row {y}, column {x}");
+                        if cols.contains(&x) {
+                            assert_eq!(v.to_bits(), whole[k].to_bits(), "{at}");
+                        } else if x >= cols.end && x < cols.end + max_tile {
+                            assert!(v == 7.5 || v.to_bits() == 0, "{at}: {v}");
+                        } else {
+                            assert_eq!(v, 7.5, "{at}");
+                        }
+                    }
+                }
+            }
+            assert!(out.border_is_clean());
+        }
+        let mut out = RowPlanar::new(cout, h, w).unwrap();
+        let mut band = out.band_mut(0..h).unwrap();
+        let mut bad = vec![3..3, 0..w + 1, 200..w + 4];
+        if g > 1 {
+            bad.push(1..40);
+            bad.push(g + 1..w);
+        }
+        for cols in bad {
+            let e = plan.run_band_columns(inputs, &mut band, cols.clone());
+            assert!(
+                matches!(e, Err(KernelError::Shape { .. })),
+                "{row} {cols:?}: {e:?}"
+            );
+        }
+    }
+}
+
 #[test]
 fn f32_bands_written_by_threads_equal_one_run() {
     // Every split of the rows into `bands_mut(n)` (n past H included), each band run on its own thread,
     // gives the bit-identical buffer of one whole-frame run, borders clean; `band_mut` refuses bad bands.
     let (ca, cb, cout, h, w) = (5, 3, 9, 5, 29);
-    let mut rng = Rng::new(11);
-    let a = RowPlanar::from_planar(&rng.vec(ca * h * w), ca, h, w, None).unwrap();
-    let b = RowPlanar::from_planar(&rng.vec(cb * h * w), cb, h, w, None).unwrap();
-    let res = RowPlanar::from_planar(&rng.vec(cout * h * w), cout, h, w, None).unwrap();
-    let wt = rng.vec(cout * (ca + cb) * 9);
-    let bias = rng.vec(cout);
+    let TwoSources {
+        a,
+        b,
+        res,
+        wt,
+        bias,
+    } = TwoSources::new([ca, cb, cout, h, w], 11);
     for row in f32_rows() {
         let plan = Conv3x3F32::with_kernel(&wt, &bias, ca + cb, cout, true, row).unwrap();
         let inputs = Inputs::new(&a).concat(&b).residual(&res);

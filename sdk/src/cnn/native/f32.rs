@@ -150,10 +150,15 @@ impl NativePlan {
         let net = Network { graph, layers, isa };
         // Column slabs, all `slabs.width` columns wide: the windows are that wide.
         // A wrong column at a slab's edge spoils one tile's columns per layer (see `slabs`).
-        let halo = net.layers.iter().map(|l| l.kernel().column_group()).sum();
+        let groups: Vec<usize> = net
+            .layers
+            .iter()
+            .map(|l| l.kernel().column_group())
+            .collect();
+        let halo = groups.iter().sum();
         let count = slabs
             .unwrap_or_else(|| Slabs::count_for(width, hidden * std::mem::size_of::<f32>(), halo));
-        let slabs = Slabs::new(width, halo, count);
+        let slabs = Slabs::new(width, &groups, count);
         let width = slabs.width;
         // Windows: the input (carry N·step + 1: the concat reads it N·step rows later, one above), s_1 …
         // s_{N−1} (carry 2·step: the next layer reads one row above its strip, the residual two layers on
@@ -260,6 +265,7 @@ impl NativePlan {
                         0,
                         Some(&self.x),
                         &mut self.s,
+                        &slab.layers,
                         strips,
                         m,
                         threads,
@@ -370,7 +376,12 @@ pub(super) fn last_layer_rows(
         .shifted(raw.shift_from(last), raw.shift_from(x), 0)
         .frame_row(raw.first_row(strips, m));
     let band = raw.buf.band_mut(rows.clone()).map_err(kernel_err)?;
-    bands_aligned(band, threads, strips.step, &|b| conv.run_band(inputs, b))?;
+    // The last layer's columns of the slab (the kept ones, where the slab's layers compute fewer than all).
+    let c = cols.slab.layers.last();
+    bands_aligned(band, threads, strips.step, &|b| match c {
+        Some(c) => conv.run_band_columns(inputs, b, c.clone()),
+        None => conv.run_band(inputs, b),
+    })?;
     let raw = &raw.buf;
     let raw_row = |c: usize, y: usize| raw.row(c, y - f0 + rows.start).unwrap_or(&[]);
     let frame_rows = f0..f0 + rows.len();

@@ -403,7 +403,16 @@ impl NativeInt8Plan {
                         b.requantize_rows_from(&x.buf, from, first.scale, cat_scale)
                     })?;
                 }
-                hidden_layers(&net.layers[..n - 1], 0, Some(&*x), s, strips, m, threads)?;
+                hidden_layers(
+                    &net.layers[..n - 1],
+                    0,
+                    Some(&*x),
+                    s,
+                    &[],
+                    strips,
+                    m,
+                    threads,
+                )?;
                 if let Some((rows, f0)) = raw_place.new_rows(strips, m).valid {
                     let o = *raw_place;
                     let last = &s[n - 2];
@@ -500,7 +509,7 @@ impl NativeInt8Plan {
                         b.quantize_rows_from(&y0.buf, from, s1_scale)
                     })?;
                 }
-                hidden_layers(&net.layers, 1, None, s, strips, m, threads)?;
+                hidden_layers(&net.layers, 1, None, s, &[], strips, m, threads)?;
                 // s_{N−1} dequantised for the f32 last layer.
                 if let Some((rows, _)) = last.new_rows(strips, m)? {
                     let src = &s[n - 2];

@@ -13,23 +13,34 @@
 //! the frame's edges (a layer would compute values there that the whole frame keeps at zero).
 //!
 //! All slabs have the same width, so one set of activation windows serves them one after the other.
+//!
+//! A layer need not compute a column that no kept column depends on: each slab's layers compute only the
+//! columns the layers after them read ([`Slab::layers`], worked back from the kept columns: a layer's tiles
+//! covering the columns the next layer reads, plus one column on each side for its own 3×3 reads). The first
+//! layer computes nearly the whole slab, the last only the kept columns; every computed column is still the
+//! whole frame's, since each tile computed reads only columns the layer before computed. At 1080p with four
+//! slabs of the 8-layer network, its seven F(4×4, 3×3) layers compute 2,016 columns each on average where they
+//! computed 2,176 (the whole slabs), and its last layer the 1,920 kept ones.
 
 use std::ops::Range;
 
-/// Columns of one slab: the frame columns `start .. start + width` it computes (`width` is the plan's
-/// [`Slabs::width`]) and the frame columns `keep` it writes out.
+/// Columns of one slab: the frame columns `start .. start + width` it holds (`width` is the plan's
+/// [`Slabs::width`]), the frame columns `keep` it writes out, and per layer the columns that layer computes
+/// (`layers[i]`, slab columns, i.e. frame columns less `start`; empty: every layer the whole slab).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub(super) struct Slab {
     pub start: usize,
     pub keep: Range<usize>,
+    pub layers: Vec<Range<usize>>,
 }
 
 impl Slab {
-    /// The whole frame, `frame_width` columns, as one slab.
+    /// The whole frame, `frame_width` columns, as one slab (every layer computes every column).
     pub(crate) fn whole(frame_width: usize) -> Self {
         Self {
             start: 0,
             keep: 0..frame_width,
+            layers: Vec::new(),
         }
     }
 }
@@ -61,10 +72,13 @@ impl Slabs {
     }
 
     /// `count` slabs (or fewer; one where they would not be narrower than the frame) of a frame
-    /// `frame_width` columns wide for a network whose spoiled columns reach `halo` columns (see the module
-    /// docs): the kept columns split near-equally at multiples of 4, every slab the same width, congruent to
-    /// the frame's modulo 4, so that the last slab ends at the frame's edge and starts at a multiple of 4.
-    pub(crate) fn new(frame_width: usize, halo: usize, count: usize) -> Self {
+    /// `frame_width` columns wide for a network whose layers' tiles span `groups` columns each
+    /// ([`KernelInfo::column_group`](tensorholo_kernels::KernelInfo::column_group), in layer order; their
+    /// sum is the halo, see the module docs): the kept columns split near-equally at multiples of 4, every
+    /// slab the same width, congruent to the frame's modulo 4, so that the last slab ends at the frame's edge
+    /// and starts at a multiple of 4; each slab's layers compute the columns [`layer_columns`] gives.
+    pub(crate) fn new(frame_width: usize, groups: &[usize], count: usize) -> Self {
+        let halo = groups.iter().sum();
         let count = count.max(1);
         let bounds: Vec<usize> = (0..=count)
             .map(|k| match k {
@@ -84,9 +98,14 @@ impl Slabs {
         let last_start = frame_width - width;
         let slabs = bounds
             .windows(2)
-            .map(|b| Slab {
-                start: (b[0].saturating_sub(halo) / 4 * 4).min(last_start),
-                keep: b[0]..b[1],
+            .map(|b| {
+                let start = (b[0].saturating_sub(halo) / 4 * 4).min(last_start);
+                let keep = b[0]..b[1];
+                Slab {
+                    layers: layer_columns(groups, &keep, (start, width), frame_width),
+                    start,
+                    keep,
+                }
             })
             .collect();
         Self {
@@ -128,6 +147,42 @@ impl Slabs {
     }
 }
 
+/// The columns each layer of a slab keeping frame columns `keep` computes, worked back from the last layer
+/// (slab columns: frame columns less `start`): the last computes `keep`; a layer whose tiles span `g`
+/// columns (`groups[i]`) computes the tiles covering the columns the layer after it reads (its own columns
+/// and one on each side), `g`-aligned in frame columns and clipped to the frame (there the frame's zero
+/// border is read, as in the whole frame). Each tile so computed reads only columns the layer before
+/// computed, so it is the whole frame's tile, bit for bit. The first layer reads inside the slab
+/// `start .. start + width` when the slab reaches the sum of `groups` past `keep` (or the frame's edge), as
+/// [`Slabs::new`] places it; for a slab that does not, every layer computes the whole slab (empty result:
+/// the spoiled columns then stay outside `keep` as the module docs say, given that reach).
+pub(super) fn layer_columns(
+    groups: &[usize],
+    keep: &Range<usize>,
+    (start, width): (usize, usize),
+    frame_width: usize,
+) -> Vec<Range<usize>> {
+    let mut need = keep.clone();
+    let mut layers = vec![0..0; groups.len()];
+    for (cols, &g) in layers.iter_mut().zip(groups).rev() {
+        let g = g.max(1);
+        let (lo, hi) = (
+            need.start / g * g,
+            need.end.next_multiple_of(g).min(frame_width),
+        );
+        *cols = lo..hi;
+        need = lo.saturating_sub(1)..(hi + 1).min(frame_width);
+    }
+    // The input columns the first layer reads (and so every layer's), inside the slab.
+    if need.start < start || need.end > start + width {
+        return Vec::new();
+    }
+    for cols in &mut layers {
+        *cols = cols.start - start..cols.end - start;
+    }
+    layers
+}
+
 /// The most bytes a slab's widest activation row (every channel) should take: 48 KiB, 480 columns of a
 /// 24-channel f32 network (holo8 at 1080p on Zen 5, four slabs against the whole frame: 394–404 against
 /// 535–561 ms on one thread, 243–247 against 263–296 on two; docs/BENCHMARKS.md, "Column slabs").
@@ -147,9 +202,19 @@ mod tests {
         for w in [
             97, 128, 383, 384, 511, 1000, 1917, 1918, 1919, 1920, 2001, 4096,
         ] {
-            for halo in [0, 1, 8, 16, 32, 120] {
+            for groups in [
+                vec![],
+                vec![1],
+                vec![1; 8],
+                vec![2; 8],
+                vec![4; 7],
+                [vec![4; 7], vec![1]].concat(),
+                [vec![1], vec![4; 6], vec![2]].concat(),
+                vec![4; 30],
+            ] {
+                let halo: usize = groups.iter().sum();
                 for count in 1..=6 {
-                    let s = Slabs::new(w, halo, count);
+                    let s = Slabs::new(w, &groups, count);
                     assert_eq!(s.frame_width, w);
                     // Kept columns tile 0..w in order.
                     let mut next = 0;
@@ -163,6 +228,11 @@ mod tests {
                         assert!(slab.start <= slab.keep.start.saturating_sub(halo));
                         let end = slab.start + s.width;
                         assert!(end >= (slab.keep.end + halo).min(w), "{s:?}");
+                        if s.slabs.len() > 1 {
+                            layers_read_only_what_the_layer_before_computed(
+                                &groups, slab, s.width, w,
+                            );
+                        }
                     }
                     assert_eq!(next, w);
                     if s.slabs.len() > 1 {
@@ -174,6 +244,44 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// A slab's layer columns ([`layer_columns`]): the last layer computes the kept columns; each layer's
+    /// first column is a multiple of its tile's columns in the frame (or the frame's edge), its tiles (the
+    /// last one whole, unless at the frame's edge) read only columns the layer before computed (the input:
+    /// the slab's) or the frame's zero border; and every layer computes fewer columns than the slab holds
+    /// where the slab is narrower than keep + halo on a side inside the frame.
+    fn layers_read_only_what_the_layer_before_computed(
+        groups: &[usize],
+        slab: &Slab,
+        width: usize,
+        frame_width: usize,
+    ) {
+        let at = format!("{groups:?} {slab:?} width {width}");
+        assert_eq!(slab.layers.len(), groups.len(), "{at}");
+        let frame = |r: &Range<usize>| r.start + slab.start..r.end + slab.start;
+        if let Some(last) = slab.layers.last() {
+            assert_eq!(frame(last), slab.keep, "{at}");
+        }
+        let mut before = slab.start..slab.start + width;
+        for (cols, &g) in slab.layers.iter().zip(groups) {
+            let c = frame(cols);
+            assert!(c.start < c.end && c.end <= slab.start + width, "{at}");
+            assert_eq!(c.start % g, 0, "{at}");
+            let tiles_end = c.end.next_multiple_of(g);
+            let reads = c.start.saturating_sub(1)..(tiles_end + 1).min(frame_width);
+            assert!(
+                before.start <= reads.start && reads.end <= before.end,
+                "{at}: reads {reads:?}, the layer before computed {before:?}"
+            );
+            // A read at the frame's edge is the zero border, not a column.
+            assert!(c.start > 0 || slab.start == 0, "{at}");
+            before = c;
+        }
+        if slab.keep.start > 0 && slab.keep.end < frame_width && groups.len() > 1 {
+            let first = &slab.layers[0];
+            assert!(first.len() < width, "{at}");
         }
     }
 

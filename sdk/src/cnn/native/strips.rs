@@ -299,11 +299,14 @@ pub(super) fn both(
 
 /// A planned convolution that writes row bands of a window (f32 or u8 activations).
 pub(super) trait BandConv<T: Element>: Sync {
-    /// Computes the rows of `band` (`Conv3x3F32::run_band`, `Conv3x3U8::run_band`).
+    /// Computes the rows of `band`, every column (`cols` `None`: `Conv3x3F32::run_band`,
+    /// `Conv3x3U8::run_band`) or columns `cols` only (`Conv3x3F32::run_band_columns`; the int8 rows compute
+    /// whole rows: an error for them).
     fn run_band(
         &self,
         inputs: Inputs<'_, T>,
         band: &mut RowBand<'_, T>,
+        cols: Option<Range<usize>>,
     ) -> std::result::Result<(), KernelError>;
 }
 
@@ -312,8 +315,12 @@ impl BandConv<f32> for Conv3x3F32 {
         &self,
         inputs: Inputs<'_, f32>,
         band: &mut RowBand<'_, f32>,
+        cols: Option<Range<usize>>,
     ) -> std::result::Result<(), KernelError> {
-        Conv3x3F32::run_band(self, inputs, band)
+        match cols {
+            Some(cols) => Conv3x3F32::run_band_columns(self, inputs, band, cols),
+            None => Conv3x3F32::run_band(self, inputs, band),
+        }
     }
 }
 
@@ -322,21 +329,31 @@ impl BandConv<u8> for Conv3x3U8 {
         &self,
         inputs: Inputs<'_, u8>,
         band: &mut RowBand<'_, u8>,
+        cols: Option<Range<usize>>,
     ) -> std::result::Result<(), KernelError> {
-        Conv3x3U8::run_band(self, inputs, band)
+        match cols {
+            Some(cols) => Err(KernelError::Shape {
+                what: format!("the int8 rows compute whole rows, not columns {cols:?}"),
+            }),
+            None => Conv3x3U8::run_band(self, inputs, band),
+        }
     }
 }
 
 /// Strip `m` of hidden layers: `layers[j]` is layer `i = first + j` (`first = 1` where the first layer runs
 /// elsewhere: the mixed-precision int8 engine's float first layer). Layer `i` reads `s_i` (`x` for `i = 0`,
 /// else `s[i − 1]`), adds `s_{i−1}` where `i + 1` is odd and ≥ 3 (the architecture's residual every two
-/// layers), writes `s_{i+1}` = `s[i]`; each layer's strip in `threads` bands on the current rayon pool.
+/// layers), writes `s_{i+1}` = `s[i]`; each layer's strip in `threads` bands on the current rayon pool,
+/// columns `cols[i]` of it (a column slab's [`Slab::layers`](super::slabs::Slab::layers); every column for
+/// a layer past `cols`' end, e.g. all of them for an empty `cols`).
 /// Errors: layer 0 without `x` ([`HoloError::Internal`]), the kernels' errors.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn hidden_layers<T: Element + Send + Sync, K: BandConv<T>>(
     layers: &[K],
     first: usize,
     x: Option<&Window<T>>,
     s: &mut [Window<T>],
+    cols: &[Range<usize>],
     strips: Strips,
     m: usize,
     threads: usize,
@@ -370,7 +387,10 @@ pub(super) fn hidden_layers<T: Element + Send + Sync, K: BandConv<T>>(
             .shifted(dst.shift_from(src), 0, d_r)
             .frame_row(dst.first_row(strips, m));
         let band = dst.buf.band_mut(rows).map_err(kernel_err)?;
-        bands_aligned(band, threads, strips.step, &|b| conv.run_band(inputs, b))?;
+        let c = cols.get(i);
+        bands_aligned(band, threads, strips.step, &|b| {
+            conv.run_band(inputs, b, c.cloned())
+        })?;
     }
     Ok(())
 }
