@@ -181,28 +181,32 @@ fn u8_rows(c: &mut Criterion) {
     group.finish();
 }
 
-/// The pre-filter's 5×5 base filter of 6 channels at 384² (one thread), on every path of the kernel table
-/// that this CPU has (`registry::depthwise_paths`; throughput in FLOP, 2 per tap).
+/// The pre-filter's 5×5 base filter of 6 channels (one thread) at 384² and on a strip of 16 rows of a 1080p
+/// frame's 1920 columns (what the fused base filters per strip: `sdk/src/cnn/native/f32.rs`, `FusedBase`),
+/// on every path of the kernel table that this CPU has (`registry::depthwise_paths`; throughput in FLOP, 2
+/// per tap).
 fn depthwise_paths(c: &mut Criterion) {
     let (ch, k) = (6, 5);
-    let input = data(ch * H * W, 7);
-    let kernel = data(ch * k * k, 8);
-    let mut out = data(ch * H * W, 9);
-    let mut group = c.benchmark_group("depthwise_6ch_5x5_384x384");
-    group.throughput(Throughput::Elements((2 * k * k * ch * H * W) as u64));
-    for isa in registry::depthwise_paths() {
-        if !isa.is_available() {
-            println!("SKIPPED depthwise.{isa}: this CPU lacks {isa}");
-            continue;
+    for (h, w) in [(H, W), (16, 1920)] {
+        let input = data(ch * h * w, 7);
+        let kernel = data(ch * k * k, 8);
+        let mut out = data(ch * h * w, 9);
+        let mut group = c.benchmark_group(format!("depthwise_6ch_5x5_{h}x{w}"));
+        group.throughput(Throughput::Elements((2 * k * k * ch * h * w) as u64));
+        for isa in registry::depthwise_paths() {
+            if !isa.is_available() {
+                println!("SKIPPED depthwise.{isa}: this CPU lacks {isa}");
+                continue;
+            }
+            group.bench_function(isa.name(), |bch| {
+                bch.iter(|| {
+                    depthwise(&input, ch, h, w, &kernel, k, &mut out, true, isa).expect("run");
+                    black_box(&out);
+                })
+            });
         }
-        group.bench_function(isa.name(), |bch| {
-            bch.iter(|| {
-                depthwise(&input, ch, H, W, &kernel, k, &mut out, true, isa).expect("run");
-                black_box(&out);
-            })
-        });
+        group.finish();
     }
-    group.finish();
 }
 
 fn phasor_paths(c: &mut Criterion) {
