@@ -54,6 +54,7 @@ mod pack;
 pub mod peak;
 pub mod phasor;
 mod quant;
+pub mod spectral;
 
 pub use buffer::{Affine, RowBand, RowPlanar};
 pub use conv3x3::registry::{self, Algorithm, DType, KernelInfo, PackKind};

@@ -34,6 +34,7 @@ use crate::heads::body as heads;
 use crate::isa::Isa;
 use crate::phasor::body as phasor;
 use crate::quant::QuantU8;
+use crate::spectral::body as spectral;
 
 /// The depthwise filter on output rows `rows` of one checked plane (`accumulate`: add to `out`).
 pub(crate) type DepthwiseFn = unsafe fn(&DepthwiseJob<'_>, Range<usize>, &mut [f32], bool);
@@ -41,6 +42,14 @@ pub(crate) type DepthwiseFn = unsafe fn(&DepthwiseJob<'_>, Range<usize>, &mut [f
 pub(crate) type HeadsFn = unsafe fn(&[f32], &mut [f32], f32, Option<QuantU8>);
 /// The output grid (`QuantizeLinear` then `DequantizeLinear`) in place.
 pub(crate) type GridFn = unsafe fn(&mut [f32], QuantU8);
+
+/// The spectral helpers ([`crate::spectral`]): the column moves and the complex multiply.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SpectralFns {
+    pub gather: unsafe fn(&[f32], [usize; 2], usize, &mut [f32], usize),
+    pub scatter: unsafe fn(&[f32], usize, &mut [f32], [usize; 2], usize),
+    pub multiply: unsafe fn(&mut [f32], &[f32], bool),
+}
 
 /// Pass 1 of the double phase encoding on a row: interleaved `(re, im)` in, `arg H` out; `(max |H|², Σ arg)`.
 pub(crate) type DpmAnalyseFn = unsafe fn(&[f32], &mut [f32]) -> (f32, f64);
@@ -108,6 +117,8 @@ pub(crate) struct Ops {
     pub phasors_in_place: Option<PhasorsInPlaceFn>,
     /// The quantised fills' conversion rows ([`ConvertFns`]).
     pub convert: Option<ConvertFns>,
+    /// The 2-D FFT filter's column moves and complex multiply ([`SpectralFns`]).
+    pub spectral: Option<SpectralFns>,
     /// The f32 FMA peak ([`crate::peak::f32_fma_gflops`]).
     pub peak_f32: Option<Peak<f32>>,
     /// The int8 dot-product peak ([`crate::peak::int8_dot_gops`]).
@@ -173,6 +184,11 @@ const SCALAR: Ops = Ops {
         dequantize: rows::dequantize_body,
         requantize: rows::requantize_body,
     }),
+    spectral: Some(SpectralFns {
+        gather: spectral::gather_body,
+        scatter: spectral::scatter_body,
+        multiply: spectral::multiply_body,
+    }),
     peak_f32: Some(Peak {
         ops_per_iter: 16.0 * 2.0,
         run: f32_scalar::peak,
@@ -204,6 +220,7 @@ static OPS: [Ops; 5] = [
         phasors: None,
         phasors_in_place: None,
         convert: None,
+        spectral: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 24.0 * 64.0 * 2.0,
@@ -277,6 +294,11 @@ static OPS: [Ops; 5] = [
             dequantize: rows::x86::dequantize_avx512,
             requantize: rows::x86::requantize_avx512,
         }),
+        spectral: Some(SpectralFns {
+            gather: spectral::x86::gather_avx512,
+            scatter: spectral::x86::scatter_avx512,
+            multiply: spectral::x86::multiply_avx512,
+        }),
         peak_f32: Some(Peak {
             ops_per_iter: 24.0 * 16.0 * 2.0,
             run: f32_avx512::peak,
@@ -301,6 +323,7 @@ static OPS: [Ops; 5] = [
         phasors: None,
         phasors_in_place: None,
         convert: None,
+        spectral: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 12.0 * 32.0 * 2.0,
@@ -430,6 +453,7 @@ static OPS: [Ops; 5] = [
             dequantize: rows::x86::dequantize_avx2,
             requantize: rows::x86::requantize_avx2,
         }),
+        spectral: None,
         peak_f32: Some(Peak {
             ops_per_iter: 12.0 * 8.0 * 2.0,
             run: f32_avx2::peak,
@@ -464,6 +488,7 @@ static OPS: [Ops; 4] = [
         phasors: None,
         phasors_in_place: None,
         convert: None,
+        spectral: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 24.0 * 16.0 * 2.0,
@@ -488,6 +513,7 @@ static OPS: [Ops; 4] = [
         phasors: None,
         phasors_in_place: None,
         convert: None,
+        spectral: None,
         peak_f32: None,
         peak_u8: Some(Peak {
             ops_per_iter: 24.0 * 16.0 * 2.0,
@@ -542,6 +568,7 @@ static OPS: [Ops; 4] = [
         phasors: None,
         phasors_in_place: None,
         convert: None,
+        spectral: None,
         peak_f32: Some(Peak {
             ops_per_iter: 24.0 * 4.0 * 2.0,
             run: f32_neon::peak,
@@ -768,6 +795,50 @@ pub(crate) fn run_heads(
     let run = entry(isa, |t| t.heads)?;
     // SAFETY: `entry` returned the entry of a level that `isa` includes, and `isa` is available on this CPU.
     unsafe { run(raw, out, scale, grid) };
+    Ok(())
+}
+
+/// [`crate::spectral::gather_columns`] under `isa` (checked arguments). Errors: `isa` not available.
+pub(crate) fn run_gather_columns(
+    isa: Isa,
+    field: &[f32],
+    hw: [usize; 2],
+    x0: usize,
+    block: &mut [f32],
+    bw: usize,
+) -> Result<(), KernelError> {
+    let run = entry(isa, |t| t.spectral)?.gather;
+    // SAFETY: `entry` returned the entry of a level that `isa` includes, and `isa` is available on this CPU;
+    // the caller checked the arguments.
+    unsafe { run(field, hw, x0, block, bw) };
+    Ok(())
+}
+
+/// [`crate::spectral::scatter_columns`] under `isa` (checked arguments). Errors: `isa` not available.
+pub(crate) fn run_scatter_columns(
+    isa: Isa,
+    block: &[f32],
+    bw: usize,
+    field: &mut [f32],
+    hw: [usize; 2],
+    x0: usize,
+) -> Result<(), KernelError> {
+    let run = entry(isa, |t| t.spectral)?.scatter;
+    // SAFETY: as `run_gather_columns`.
+    unsafe { run(block, bw, field, hw, x0) };
+    Ok(())
+}
+
+/// [`crate::spectral::multiply`] under `isa` (checked arguments). Errors: `isa` not available.
+pub(crate) fn run_complex_multiply(
+    isa: Isa,
+    values: &mut [f32],
+    by: &[f32],
+    mirrored: bool,
+) -> Result<(), KernelError> {
+    let run = entry(isa, |t| t.spectral)?.multiply;
+    // SAFETY: as `run_gather_columns`.
+    unsafe { run(values, by, mirrored) };
     Ok(())
 }
 

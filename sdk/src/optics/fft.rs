@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
+use tensorholo_kernels::{spectral, Isa};
 
 /// Columns per block of [`Fft2::filter`]: 16 complex values of each row (128 bytes, two cache lines), so that
 /// a block (`16 × height` values: 138 KB at 1080 rows, 276 KB at 2160) stays in a core's L2 from its
@@ -31,6 +32,8 @@ pub struct Fft2 {
     col_forward: Arc<dyn Fft<f32>>,
     col_inverse: Arc<dyn Fft<f32>>,
     scratch_len: usize,
+    /// The vector level of the column moves ([`tensorholo_kernels::spectral`]): the process's.
+    isa: Isa,
 }
 
 impl std::fmt::Debug for Fft2 {
@@ -66,6 +69,7 @@ impl Fft2 {
             col_forward,
             col_inverse,
             scratch_len,
+            isa: Isa::active().unwrap_or(Isa::Scalar),
         }
     }
 
@@ -185,13 +189,13 @@ impl Fft2 {
         for x0 in (0..w).step_by(BLOCK_COLUMNS) {
             let bw = BLOCK_COLUMNS.min(w - x0);
             let block = &mut block[..bw * h];
-            gather(data, w, x0, block, h);
+            gather(data, w, x0, block, h, self.isa);
             self.col_forward.process_with_scratch(block, scratch);
             for (b, column) in block.chunks_exact_mut(h).enumerate() {
                 multiply(x0 + b, column);
             }
             self.col_inverse.process_with_scratch(block, scratch);
-            scatter(block, h, data, w, x0);
+            scatter(block, h, data, w, x0, self.isa);
         }
         for y0 in (0..h).step_by(ROW_CHUNK) {
             let rows = y0..(y0 + ROW_CHUNK).min(h);
@@ -214,51 +218,28 @@ impl Fft2 {
 /// core's L2 between the hook and the row transforms.
 pub const ROW_CHUNK: usize = 8;
 
-/// Rows per tile of [`gather`] and [`scatter`]: a tile's column segment is 8 complex values (64 bytes, one
-/// cache line) written or read at once, instead of 8 values 8 bytes each at a stride of `height`.
-const TILE_ROWS: usize = 8;
-
 /// `block[b·h + y] = data[y·w + x0 + b]` for `b < block.len() / h`, `y < h`: the columns `x0..` of the
-/// row-major `[h, w]` field, transposed into `block`, in tiles of [`TILE_ROWS`] rows.
-fn gather(data: &[Complex32], w: usize, x0: usize, block: &mut [Complex32], h: usize) {
+/// row-major `[h, w]` field, transposed into `block` ([`tensorholo_kernels::spectral::gather_columns`]: 8 × 8
+/// tiles transposed in registers under AVX-512, tiles of 8 rows on the portable path).
+fn gather(data: &[Complex32], w: usize, x0: usize, block: &mut [Complex32], h: usize, isa: Isa) {
     let bw = block.len() / h;
-    let mut tile = [[Complex32::default(); TILE_ROWS]; BLOCK_COLUMNS];
-    for y0 in (0..h).step_by(TILE_ROWS) {
-        let rows = TILE_ROWS.min(h - y0);
-        for r in 0..rows {
-            let row = &data[(y0 + r) * w + x0..][..bw];
-            for (b, v) in row.iter().enumerate() {
-                tile[b][r] = *v;
-            }
-        }
-        for (b, column) in block.chunks_exact_mut(h).enumerate() {
-            match column[y0..].first_chunk_mut::<TILE_ROWS>() {
-                // A whole tile: a fixed-size copy (inlined; the general one calls memmove).
-                Some(dst) if rows == TILE_ROWS => *dst = tile[b],
-                _ => column[y0..y0 + rows].copy_from_slice(&tile[b][..rows]),
-            }
-        }
+    let field = bytemuck::cast_slice::<Complex32, f32>(data);
+    let out = bytemuck::cast_slice_mut::<Complex32, f32>(block);
+    // The lengths hold by construction (`filter_rows`), so only a level this CPU lacks could fail: the
+    // portable path then, which cannot.
+    if spectral::gather_columns(field, [h, w], x0, out, bw, isa).is_err() {
+        let _ = spectral::gather_columns(field, [h, w], x0, out, bw, Isa::Scalar);
     }
 }
 
 /// The inverse of [`gather`]: `data[y·w + x0 + b] = block[b·h + y]`.
-fn scatter(block: &[Complex32], h: usize, data: &mut [Complex32], w: usize, x0: usize) {
+fn scatter(block: &[Complex32], h: usize, data: &mut [Complex32], w: usize, x0: usize, isa: Isa) {
     let bw = block.len() / h;
-    let mut tile = [[Complex32::default(); TILE_ROWS]; BLOCK_COLUMNS];
-    for y0 in (0..h).step_by(TILE_ROWS) {
-        let rows = TILE_ROWS.min(h - y0);
-        for (b, column) in block.chunks_exact(h).enumerate() {
-            match column[y0..].first_chunk::<TILE_ROWS>() {
-                Some(src) if rows == TILE_ROWS => tile[b] = *src,
-                _ => tile[b][..rows].copy_from_slice(&column[y0..y0 + rows]),
-            }
-        }
-        for r in 0..rows {
-            let row = &mut data[(y0 + r) * w + x0..][..bw];
-            for (b, v) in row.iter_mut().enumerate() {
-                *v = tile[b][r];
-            }
-        }
+    let src = bytemuck::cast_slice::<Complex32, f32>(block);
+    let field = bytemuck::cast_slice_mut::<Complex32, f32>(data);
+    // As in `gather`.
+    if spectral::scatter_columns(src, bw, field, [h, w], x0, isa).is_err() {
+        let _ = spectral::scatter_columns(src, bw, field, [h, w], x0, Isa::Scalar);
     }
 }
 

@@ -5,6 +5,7 @@ use std::f64::consts::PI;
 
 use num_complex::Complex32;
 use rustfft::FftPlanner;
+use tensorholo_kernels::{spectral, Isa};
 
 use super::fft::{signed_index, Fft2};
 use crate::error::{invalid, HoloError, Result};
@@ -47,6 +48,8 @@ pub struct EvenMultiplier {
     cols: usize,
     /// `[rows/2 + 1][cols/2 + 1]`.
     values: Vec<Complex32>,
+    /// The vector level of the multiply ([`tensorholo_kernels::spectral::multiply`]): the process's.
+    isa: Isa,
 }
 
 impl EvenMultiplier {
@@ -71,7 +74,12 @@ impl EvenMultiplier {
         for r in 0..=rows / 2 {
             values.extend_from_slice(&full[r * cols..r * cols + qc]);
         }
-        Ok(Some(Self { rows, cols, values }))
+        Ok(Some(Self {
+            rows,
+            cols,
+            values,
+            isa: active_isa(),
+        }))
     }
 
     /// The compact form of the multiplier `f(kx, ky)` of signed DFT bin indices in `plan`'s layout (as
@@ -85,7 +93,12 @@ impl EvenMultiplier {
             let sr = signed_index(r, rows);
             values.extend((0..qc).map(|c| f(sr, signed_index(c, cols))));
         }
-        Self { rows, cols, values }
+        Self {
+            rows,
+            cols,
+            values,
+            isa: active_isa(),
+        }
     }
 
     fn quarter_cols(&self) -> usize {
@@ -94,16 +107,23 @@ impl EvenMultiplier {
 
     /// Multiplies row `r` of a spectrum (`cols` values, the plan's layout) by this multiplier's row `r`,
     /// read from the quarter: row `r` mirrors row `rows − r`, column `c ≥ cols/2 + 1` column `cols − c`.
+    /// On the kernels' vector path ([`tensorholo_kernels::spectral::multiply`]: `Complex32`'s own product,
+    /// bit for bit).
     fn multiply_row(&self, r: usize, row: &mut [Complex32]) {
         let (rows, cols, qc) = (self.rows, self.cols, self.quarter_cols());
         let q = &self.values[r.min(rows - r) * qc..][..qc];
         let (low, high) = row.split_at_mut(qc);
-        for (s, m) in low.iter_mut().zip(q) {
-            *s *= m;
-        }
         // Column c ≥ qc mirrors column cols − c, from cols − qc down to 1.
-        for (s, m) in high.iter_mut().zip(q[1..=cols - qc].iter().rev()) {
-            *s *= m;
+        let parts: [(&mut [Complex32], &[Complex32], bool); 2] =
+            [(low, q, false), (high, &q[1..=cols - qc], true)];
+        for (values, by, mirrored) in parts {
+            let v = bytemuck::cast_slice_mut::<Complex32, f32>(values);
+            let m = bytemuck::cast_slice::<Complex32, f32>(by);
+            // The lengths match by construction, so only a level this CPU lacks could fail: the portable
+            // path then, which cannot.
+            if spectral::multiply(v, m, mirrored, self.isa).is_err() {
+                let _ = spectral::multiply(v, m, mirrored, Isa::Scalar);
+            }
         }
     }
 
@@ -111,6 +131,12 @@ impl EvenMultiplier {
     pub fn bytes(&self) -> usize {
         self.values.len() * std::mem::size_of::<Complex32>()
     }
+}
+
+/// The process's vector level ([`Isa::active`]; the portable one for a `TENSORHOLO_ISA` it refuses, which
+/// the session reports where it plans the CNN).
+fn active_isa() -> Isa {
+    Isa::active().unwrap_or(Isa::Scalar)
 }
 
 /// A planned spectral (Fourier-domain) operation for fields of one size `[height, width]`, optionally with 2×
