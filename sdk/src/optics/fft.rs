@@ -7,7 +7,9 @@ use std::sync::Arc;
 
 use num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
-use tensorholo_kernels::{spectral, Isa};
+use tensorholo_kernels::{spectral, Isa, KernelError};
+
+use crate::error::kernel_isa;
 
 /// Columns per block of [`Fft2::filter`]: 16 complex values of each row (128 bytes, two cache lines), so that
 /// a block (`16 × height` values: 138 KB at 1080 rows, 276 KB at 2160) stays in a core's L2 from its
@@ -69,8 +71,14 @@ impl Fft2 {
             col_forward,
             col_inverse,
             scratch_len,
-            isa: Isa::active().unwrap_or(Isa::Scalar),
+            isa: kernel_isa().unwrap_or(Isa::Scalar),
         }
+    }
+
+    /// The vector level of the column pass's moves ([`kernel_isa`], read once at planning), for the spectral
+    /// multiply of the same filter.
+    pub(crate) fn isa(&self) -> Isa {
+        self.isa
     }
 
     /// Rows of the spatial buffer.
@@ -225,11 +233,9 @@ fn gather(data: &[Complex32], w: usize, x0: usize, block: &mut [Complex32], h: u
     let bw = block.len() / h;
     let field = bytemuck::cast_slice::<Complex32, f32>(data);
     let out = bytemuck::cast_slice_mut::<Complex32, f32>(block);
-    // The lengths hold by construction (`filter_rows`), so only a level this CPU lacks could fail: the
-    // portable path then, which cannot.
-    if spectral::gather_columns(field, [h, w], x0, out, bw, isa).is_err() {
-        let _ = spectral::gather_columns(field, [h, w], x0, out, bw, Isa::Scalar);
-    }
+    on_kernels(isa, |isa| {
+        spectral::gather_columns(field, [h, w], x0, out, bw, isa)
+    });
 }
 
 /// The inverse of [`gather`]: `data[y·w + x0 + b] = block[b·h + y]`.
@@ -237,9 +243,17 @@ fn scatter(block: &[Complex32], h: usize, data: &mut [Complex32], w: usize, x0: 
     let bw = block.len() / h;
     let src = bytemuck::cast_slice::<Complex32, f32>(block);
     let field = bytemuck::cast_slice_mut::<Complex32, f32>(data);
-    // As in `gather`.
-    if spectral::scatter_columns(src, bw, field, [h, w], x0, isa).is_err() {
-        let _ = spectral::scatter_columns(src, bw, field, [h, w], x0, Isa::Scalar);
+    on_kernels(isa, |isa| {
+        spectral::scatter_columns(src, bw, field, [h, w], x0, isa)
+    });
+}
+
+/// Runs one [`tensorholo_kernels::spectral`] call at `isa`. Its callers pass lengths that hold by
+/// construction and a level [`kernel_isa`] named (one this CPU has), so the call does not fail; were it to,
+/// it runs again on the portable level, which serves every CPU.
+pub(crate) fn on_kernels(isa: Isa, mut call: impl FnMut(Isa) -> Result<(), KernelError>) {
+    if call(isa).is_err() {
+        let _ = call(Isa::Scalar);
     }
 }
 

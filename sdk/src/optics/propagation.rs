@@ -7,7 +7,7 @@ use num_complex::Complex32;
 use rustfft::FftPlanner;
 use tensorholo_kernels::{spectral, Isa};
 
-use super::fft::{signed_index, Fft2};
+use super::fft::{on_kernels, signed_index, Fft2};
 use crate::error::{invalid, HoloError, Result};
 
 /// Options of the angular spectrum method that change its transfer function or grid.
@@ -48,8 +48,6 @@ pub struct EvenMultiplier {
     cols: usize,
     /// `[rows/2 + 1][cols/2 + 1]`.
     values: Vec<Complex32>,
-    /// The vector level of the multiply ([`tensorholo_kernels::spectral::multiply`]): the process's.
-    isa: Isa,
 }
 
 impl EvenMultiplier {
@@ -74,12 +72,7 @@ impl EvenMultiplier {
         for r in 0..=rows / 2 {
             values.extend_from_slice(&full[r * cols..r * cols + qc]);
         }
-        Ok(Some(Self {
-            rows,
-            cols,
-            values,
-            isa: active_isa(),
-        }))
+        Ok(Some(Self { rows, cols, values }))
     }
 
     /// The compact form of the multiplier `f(kx, ky)` of signed DFT bin indices in `plan`'s layout (as
@@ -93,12 +86,7 @@ impl EvenMultiplier {
             let sr = signed_index(r, rows);
             values.extend((0..qc).map(|c| f(sr, signed_index(c, cols))));
         }
-        Self {
-            rows,
-            cols,
-            values,
-            isa: active_isa(),
-        }
+        Self { rows, cols, values }
     }
 
     fn quarter_cols(&self) -> usize {
@@ -107,9 +95,9 @@ impl EvenMultiplier {
 
     /// Multiplies row `r` of a spectrum (`cols` values, the plan's layout) by this multiplier's row `r`,
     /// read from the quarter: row `r` mirrors row `rows − r`, column `c ≥ cols/2 + 1` column `cols − c`.
-    /// On the kernels' vector path ([`tensorholo_kernels::spectral::multiply`]: `Complex32`'s own product,
-    /// bit for bit).
-    fn multiply_row(&self, r: usize, row: &mut [Complex32]) {
+    /// On the kernels' vector path for `isa` ([`tensorholo_kernels::spectral::multiply`]: `Complex32`'s own
+    /// product, bit for bit).
+    fn multiply_row(&self, r: usize, row: &mut [Complex32], isa: Isa) {
         let (rows, cols, qc) = (self.rows, self.cols, self.quarter_cols());
         let q = &self.values[r.min(rows - r) * qc..][..qc];
         let (low, high) = row.split_at_mut(qc);
@@ -119,11 +107,7 @@ impl EvenMultiplier {
         for (values, by, mirrored) in parts {
             let v = bytemuck::cast_slice_mut::<Complex32, f32>(values);
             let m = bytemuck::cast_slice::<Complex32, f32>(by);
-            // The lengths match by construction, so only a level this CPU lacks could fail: the portable
-            // path then, which cannot.
-            if spectral::multiply(v, m, mirrored, self.isa).is_err() {
-                let _ = spectral::multiply(v, m, mirrored, Isa::Scalar);
-            }
+            on_kernels(isa, |isa| spectral::multiply(v, m, mirrored, isa));
         }
     }
 
@@ -131,12 +115,6 @@ impl EvenMultiplier {
     pub fn bytes(&self) -> usize {
         self.values.len() * std::mem::size_of::<Complex32>()
     }
-}
-
-/// The process's vector level ([`Isa::active`]; the portable one for a `TENSORHOLO_ISA` it refuses, which
-/// the session reports where it plans the CNN).
-fn active_isa() -> Isa {
-    Isa::active().unwrap_or(Isa::Scalar)
 }
 
 /// A planned spectral (Fourier-domain) operation for fields of one size `[height, width]`, optionally with 2×
@@ -363,7 +341,8 @@ impl SpectralPlan {
     ) -> Result<()> {
         self.check_field(field.len())?;
         self.check_even(multiplier)?;
-        let multiply = |r: usize, row: &mut [Complex32]| multiplier.multiply_row(r, row);
+        let isa = self.fft.isa();
+        let multiply = |r: usize, row: &mut [Complex32]| multiplier.multiply_row(r, row, isa);
         if self.pad {
             before(field, 0..self.height);
             self.filter_with(field, scratch, multiply);
@@ -472,7 +451,7 @@ impl SpectralPlan {
         spare.extend_from_slice(spectrum);
         let cols = self.spectrum_layout().1;
         for (r, row) in spare.chunks_exact_mut(cols).enumerate() {
-            multiplier.multiply_row(r, row);
+            multiplier.multiply_row(r, row, self.fft.isa());
         }
         self.inverse_of_spare(field, scratch);
         Ok(())

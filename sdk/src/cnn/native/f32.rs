@@ -39,8 +39,8 @@ use super::algorithm::{self, Choice};
 use super::kernel_err;
 use super::slabs::{Cols, Slabs};
 use super::strips::{
-    advance_all, bands, bands_aligned, both, hidden_layers, installed, row_bytes, F32Rows, Place,
-    Strips, Window,
+    advance_all, bands, bands_aligned, both, hidden_layers, installed, row_bytes, BandConv,
+    F32Rows, Place, Strips, Window,
 };
 use crate::cnn::plan::{check_output_planes, check_planes, CnnPlan};
 use crate::error::{HoloError, Result};
@@ -378,9 +378,8 @@ pub(super) fn last_layer_rows(
     let band = raw.buf.band_mut(rows.clone()).map_err(kernel_err)?;
     // The last layer's columns of the slab (the kept ones, where the slab's layers compute fewer than all).
     let c = cols.slab.layers.last();
-    bands_aligned(band, threads, strips.step, &|b| match c {
-        Some(c) => conv.run_band_columns(inputs, b, c.clone()),
-        None => conv.run_band(inputs, b),
+    bands_aligned(band, threads, strips.step, &|b| {
+        BandConv::run_band(conv, inputs, b, c.cloned())
     })?;
     let raw = &raw.buf;
     let raw_row = |c: usize, y: usize| raw.row(c, y - f0 + rows.start).unwrap_or(&[]);
