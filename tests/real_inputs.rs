@@ -262,7 +262,7 @@ fn native_int8_is_as_close_to_f32_as_tract_int8_on_a_real_photo() {
     };
     let run = |precision, engine| {
         let model = std::sync::Arc::new(embedded::hologram_model(8, precision, &cfg).unwrap());
-        let (mut plan, report) = cnn_plan(&model, h, w, engine, request).unwrap();
+        let (mut plan, report) = cnn_plan(&model, h, w, engine, &request).unwrap();
         assert_eq!(report.engine, engine);
         let (a, p) = plan.run_outputs(input.view()).unwrap();
         ndarray::concatenate![ndarray::Axis(0), a, p]

@@ -162,7 +162,8 @@ pub struct GeneratorConfig {
     /// Pre-filter CNN; `None` = [`PrefilterMode::Auto`].
     #[uniffi(default = None)]
     pub prefilter: Option<PrefilterMode>,
-    /// CNN threads; 0 (default) = time 1, half and all cores at creation and keep the fastest.
+    /// CNN threads; 0 (default) = the cores the device reports (with `tune`: the fastest of 1, half and all,
+    /// timed).
     #[uniffi(default = 0)]
     pub threads: u32,
     /// How camera frames fit the hologram; `None` = [`Fit::Crop`].
@@ -198,6 +199,17 @@ pub struct GeneratorConfig {
     /// wider value shows as "widened" in [`GeneratorInfo::display_mapping`].
     #[uniffi(default = 0.005)]
     pub wavelength_ratio_tolerance: f64,
+    /// Time the CNN candidates on this device at creation (engines, each layer's kernel row, threads; up to
+    /// a few seconds) instead of taking the plan table's (default `false`: the same SLM codes on every run).
+    /// [`GeneratorInfo::saved_plans`] then holds the result, to store and pass as `saved_plans` later.
+    #[uniffi(default = false)]
+    pub tune: bool,
+    /// CNN plans stored from an earlier generator's [`GeneratorInfo::saved_plans`] (a
+    /// `tensorholo.cnn-plans` JSON text): repeated without timing, so every run gives the same codes.
+    /// `None` (default): the plan table (or `tune`). Refused with `tune`, or when made on a device whose
+    /// kernels differ (another CPU class).
+    #[uniffi(default = None)]
+    pub saved_plans: Option<String>,
 }
 
 impl GeneratorConfig {
@@ -278,6 +290,11 @@ impl GeneratorConfig {
             }
         };
         c.wavelength_ratio_tolerance = self.wavelength_ratio_tolerance;
+        c.tune = self.tune;
+        c.saved_plans = match &self.saved_plans {
+            Some(json) => Some(Arc::new(tensorholo::cnn::SavedPlans::from_json(json)?)),
+            None => None,
+        };
         c.validate()?;
         Ok(c)
     }
@@ -338,6 +355,8 @@ impl From<core::GeneratorConfig> for GeneratorConfig {
                 tensorholo::cnn::CnnEngine::Tract => CnnEngine::Tract,
             }),
             wavelength_ratio_tolerance: c.wavelength_ratio_tolerance,
+            tune: c.tune,
+            saved_plans: c.saved_plans.map(|p| p.to_json()),
         }
     }
 }
@@ -776,6 +795,14 @@ pub struct GeneratorInfo {
     pub cnn_threads: u32,
     /// Whether the plan was chosen by timing candidates on this device.
     pub autotuned: bool,
+    /// Where the CNN plan came from: `table` (the plan table, nothing timed), `saved`
+    /// ([`GeneratorConfig::saved_plans`]) or `tuned` ([`GeneratorConfig::tune`]).
+    pub cnn_plan_source: String,
+    /// The same in words (with saved plans: what they decided and what the table filled in).
+    pub cnn_plan_detail: String,
+    /// This generator's CNN plans as a `tensorholo.cnn-plans` JSON text: store it (after a `tune` run) and
+    /// pass it as [`GeneratorConfig::saved_plans`] to repeat them.
+    pub saved_plans: String,
     /// What computes the frames now: `cpu` or `gpu`.
     pub backend: String,
     /// Why (no GPU, the first frame's self-check, a GPU failure mid-stream, …).
@@ -815,8 +842,8 @@ pub struct HologramGenerator {
 
 #[uniffi::export]
 impl HologramGenerator {
-    /// Loads the shipped CNNs and prepares everything for `config.width × config.height` frames (this times
-    /// the CNN plans on the device: up to a few seconds).
+    /// Loads the shipped CNNs and prepares everything for `config.width × config.height` frames (the CNN
+    /// plans from the plan table, or timed on the device with `config.tune`: up to a few seconds).
     ///
     /// Errors: [`TensorholoError::InvalidInput`] for a bad configuration (sizes, NaN or negative numbers,
     /// layers other than 8/15/30, a required pre-filter that is not shipped for the offset);
@@ -1000,6 +1027,9 @@ fn info(g: &core::HologramGenerator) -> Result<GeneratorInfo> {
         cnn_layout: i.plan.layout.to_string(),
         cnn_threads: i.plan.threads.unwrap_or(1) as u32,
         autotuned: i.plan.autotuned,
+        cnn_plan_source: i.plan.source.name().to_string(),
+        cnn_plan_detail: i.plan.source_detail.clone(),
+        saved_plans: i.plan.saved().to_json(),
         backend: i.backend.active.to_string(),
         backend_reason: i.backend.reason,
         gpu_adapter: i.backend.adapter,
@@ -1350,9 +1380,55 @@ mod tests {
             z_far_m: None,
             backend: None,
             gpu_precision: None,
-            // Pinned: `Auto` picks by timing, and the tests compare generators bit for bit.
+            // The plan table's engine, named: the tests need no tract.
             engine: Some(CnnEngine::Native),
             wavelength_ratio_tolerance: 0.005,
+            tune: false,
+            saved_plans: None,
+        }
+    }
+
+    /// A tuned generator's plans, stored as text and given to a new generator, give the same codes without
+    /// timing; the plan table's give the same codes in every generator; bad or conflicting plans are refused.
+    #[cfg(feature = "embedded-models")]
+    #[test]
+    fn saved_plans_repeat_a_tuned_generator() {
+        let tuned = HologramGenerator::new(GeneratorConfig {
+            tune: true,
+            threads: 0,
+            ..config(48, 32)
+        })
+        .unwrap();
+        let info = tuned.info().unwrap();
+        assert_eq!(info.cnn_plan_source, "tuned");
+        let again = HologramGenerator::new(GeneratorConfig {
+            saved_plans: Some(info.saved_plans.clone()),
+            threads: 0,
+            ..config(48, 32)
+        })
+        .unwrap();
+        let again_info = again.info().unwrap();
+        assert_eq!(again_info.cnn_plan_source, "saved");
+        assert_eq!(again_info.cnn_kernel, info.cnn_kernel);
+        assert_eq!(again_info.cnn_threads, info.cnn_threads);
+        let codes = |g: &HologramGenerator| {
+            let p = g.render(frame()).unwrap();
+            [p.red, p.green, p.blue]
+        };
+        assert_eq!(codes(&again), codes(&tuned));
+        let table = || codes(&HologramGenerator::new(config(48, 32)).unwrap());
+        assert_eq!(table(), table());
+        for (plans, tune) in [
+            (Some("{}".to_string()), false),
+            (Some(info.saved_plans), true),
+        ] {
+            let e = HologramGenerator::new(GeneratorConfig {
+                saved_plans: plans,
+                tune,
+                ..config(48, 32)
+            })
+            .unwrap_err();
+            assert!(matches!(e, TensorholoError::InvalidInput { .. }), "{e:?}");
         }
     }
 

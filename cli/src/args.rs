@@ -1,10 +1,12 @@
 //! Command-line flags shared by several subcommands.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde_json::json;
+use tensorholo::cnn::{ConvAlgorithm, SavedPlans};
 use tensorholo::display::DisplayProfile;
 use tensorholo::encoding::DoublePhaseMethod;
 use tensorholo::model::SceneInput;
@@ -443,4 +445,52 @@ pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
     let text = serde_json::to_string_pretty(value)? + "\n";
     tensorholo::io::write_atomic(path, text.as_bytes())
         .with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Where the CNN plans of `holo render`, `video` and `bench` come from: the plan table (the default: the same
+/// bits on every run), a timing now (`--tune`), or a tuning saved earlier (`--tuning FILE`).
+#[derive(Debug, Args, Clone, Default)]
+pub struct PlanArgs {
+    /// Time the CNN candidates when the session is created (the engines, each layer's kernel row, 1, half and
+    /// all cores) and keep the fastest, instead of the plan table's choices. Two tuned runs can differ in
+    /// their last bits where candidates are close: render and video write the result to OUT/tuning.json, and
+    /// --tuning repeats it.
+    #[arg(long, conflicts_with = "tuning")]
+    pub tune: bool,
+    /// Repeat the CNN plans of an earlier --tune (its OUT/tuning.json, a tensorholo.cnn-plans file): nothing
+    /// is timed and every run gives the same bits; refused if made for another CPU's kernels.
+    #[arg(long, value_name = "FILE")]
+    pub tuning: Option<PathBuf>,
+}
+
+impl PlanArgs {
+    /// The `--tuning` file, read and checked. Errors: an unreadable or bad file, naming it.
+    pub fn saved(&self) -> Result<Option<Arc<SavedPlans>>> {
+        let Some(path) = &self.tuning else {
+            return Ok(None);
+        };
+        let plans =
+            SavedPlans::read(path).with_context(|| format!("--tuning {}", path.display()))?;
+        Ok(Some(Arc::new(plans)))
+    }
+
+    /// The `--tuning` file for the output guard ([`crate::output::guard`]), if given.
+    pub fn guard_input(&self) -> Option<crate::output::Input<'_>> {
+        Some(crate::output::Input::file(
+            "--tuning",
+            self.tuning.as_deref()?,
+        ))
+    }
+}
+
+/// The f32 convolution algorithm the `TENSORHOLO_CONV` environment variable pins (`direct`, `winograd2x2`
+/// or `winograd`, `winograd4x4`; unset, empty or `auto`: each layer's row from the plan). Errors: another
+/// value, naming the variable.
+pub fn conv_from_env() -> Result<ConvAlgorithm> {
+    match std::env::var("TENSORHOLO_CONV") {
+        Ok(v) if !v.trim().is_empty() => {
+            ConvAlgorithm::parse(&v).with_context(|| "environment variable TENSORHOLO_CONV")
+        }
+        _ => Ok(ConvAlgorithm::Auto),
+    }
 }

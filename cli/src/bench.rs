@@ -5,12 +5,17 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::Args;
 use ndarray::Array3;
 use serde_json::json;
+use std::sync::Arc;
 use tensorholo::cnn::tract::{NodeTiming, TractModel};
-use tensorholo::cnn::{CnnEngine, CnnLayout, PlanRequest, ThreadCount};
+
+use tensorholo::cnn::{
+    CnnEngine, CnnLayout, ConvAlgorithm, PlanReport, PlanRequest, PlanSource, SavedPlans,
+    ThreadCount,
+};
 use tensorholo::model::{embedded, ModelConfig, Precision};
 use tensorholo::pipeline::{
     Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode,
@@ -84,6 +89,53 @@ pub struct BenchArgs {
     /// Also write every measurement to this JSON file.
     #[arg(long)]
     json: Option<PathBuf>,
+    #[command(flatten)]
+    plans: crate::args::PlanArgs,
+    /// Write the CNN plans every case used (with --tune: what the timings chose) to this tensorholo.cnn-plans
+    /// file, for --tuning on later runs.
+    #[arg(long, value_name = "FILE")]
+    save_tuning: Option<PathBuf>,
+}
+
+/// Where the cases' CNN plans come from, and every case's plans so far (for `--save-tuning`).
+struct BenchPlans {
+    source: PlanSource,
+    conv: ConvAlgorithm,
+    used: Option<SavedPlans>,
+}
+
+impl BenchPlans {
+    fn new(args: &BenchArgs) -> Result<Self> {
+        let source = match (args.plans.saved()?, args.plans.tune) {
+            (Some(p), _) => PlanSource::Saved(p),
+            (None, true) => PlanSource::Tune,
+            (None, false) => PlanSource::Table,
+        };
+        Ok(Self {
+            source,
+            conv: crate::args::conv_from_env()?,
+            used: None,
+        })
+    }
+
+    /// A request for `layout` and `threads` from this source.
+    fn request(&self, layout: CnnLayout, threads: usize) -> PlanRequest {
+        PlanRequest {
+            layout,
+            threads: ThreadCount::Fixed(threads),
+            conv: self.conv,
+            source: self.source.clone(),
+        }
+    }
+
+    /// Adds a case's plans to what `--save-tuning` writes.
+    fn record(&mut self, report: &PlanReport) -> Result<()> {
+        match &mut self.used {
+            Some(all) => all.merge(&report.saved())?,
+            None => self.used = Some(report.saved()),
+        }
+        Ok(())
+    }
 }
 
 const EXAMPLES: &str = "\
@@ -317,6 +369,7 @@ fn cnn_table(
     config: &ModelConfig,
     results: &mut Vec<serde_json::Value>,
     profiles: &mut Vec<(String, Vec<NodeTiming>)>,
+    plans: &mut BenchPlans,
 ) -> Result<()> {
     let mut peaks = std::collections::BTreeMap::new();
     if args.peak {
@@ -360,13 +413,11 @@ fn cnn_table(
                         };
                         for requested in layouts {
                             let t = Instant::now();
-                            let request = PlanRequest {
-                                layout: requested,
-                                threads: ThreadCount::Fixed(threads),
-                            };
+                            let request = plans.request(requested, threads);
                             let (plan, report) =
-                                tensorholo::cnn::cnn_plan(&model, h, w, engine, request)?;
+                                tensorholo::cnn::cnn_plan(&model, h, w, engine, &request)?;
                             let plan_ms = t.elapsed().as_secs_f64() * 1e3;
+                            plans.record(&report)?;
                             let engine_label = match engine {
                                 CnnEngine::Auto => format!("auto → {}", report.engine),
                                 e => e.to_string(),
@@ -421,11 +472,8 @@ fn cnn_table(
                             let case = format!(
                                 "holo{layers} | {precision} | {detail} | {h}x{w} | {threads}"
                             );
-                            let request = PlanRequest {
-                                layout: report.layout,
-                                threads: ThreadCount::Fixed(threads),
-                            };
-                            let (plan, _) = TractModel::of(&model)?.tuned_plan(h, w, request)?;
+                            let request = plans.request(report.layout, threads);
+                            let (plan, _) = TractModel::of(&model)?.tuned_plan(h, w, &request)?;
                             profiles.push((case, plan.profile(input.view())?));
                         }
                     }
@@ -476,8 +524,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     );
     let mut results = Vec::new();
     let mut profiles = Vec::new();
+    let mut plans = BenchPlans::new(args)?;
     if !args.skip_cnn {
-        cnn_table(args, &config, &mut results, &mut profiles)?;
+        cnn_table(args, &config, &mut results, &mut profiles, &mut plans)?;
     }
     if !profiles.is_empty() {
         print_profiles(&profiles, &mut results);
@@ -508,20 +557,26 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                             // Peak resident memory of this case: from here (the previous case's
                             // session is gone) to its last frame.
                             let reset = reset_peak_rss();
-                            let pipeline = HologramPipeline::embedded(
+                            let mut pipeline = HologramPipeline::embedded(
                                 &selection(args, layers, precision),
                                 PipelineConfig {
                                     offset_m: args.offset_mm as f64 * 1e-3,
                                     cnn_layout: layout,
                                     cnn_engine: engine,
                                     cnn_threads: ThreadCount::Fixed(threads),
+                                    cnn_conv: plans.conv,
+                                    cnn_tune: plans.source.tunes(),
                                     backend: Backend::Cpu,
                                     ..PipelineConfig::default()
                                 },
                             )?;
+                            if let Some(p) = plans.source.saved() {
+                                pipeline = pipeline.with_saved_plans(Arc::new(p.clone()))?;
+                            }
                             let t = Instant::now();
                             let mut session = pipeline.session(h, w)?;
                             let setup_s = t.elapsed().as_secs_f64();
+                            plans.record(session.plan_report())?;
                             session.set_full_outputs(!args.lean);
                             let layout = match layout {
                                 CnnLayout::Auto => {
@@ -584,6 +639,14 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             &json!({"cpu": cpu, "cores": cores, "results": results, "peak_rss_mib": peak,
                     "command": crate::output::command_line()}),
         )?;
+    }
+    if let Some(path) = &args.save_tuning {
+        let Some(used) = &plans.used else {
+            anyhow::bail!("--save-tuning: no CPU case ran, so there are no CNN plans to save");
+        };
+        tensorholo::io::write_atomic(path, used.to_json().as_bytes())
+            .with_context(|| format!("--save-tuning {}", path.display()))?;
+        println!("CNN plans of every case written to {}", path.display());
     }
     Ok(())
 }

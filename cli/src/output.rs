@@ -43,7 +43,9 @@ Outputs in --out:
                                        simulated reconstructions of the SLM patterns (Fourier filter +
                                        propagation) focused at the 5th/50th/95th depth percentiles
   target.png depth.png                 the scene amplitude and normalised depth (white = far)
-  report.json                          inputs, parameters, timings per stage, image statistics
+  report.json                          inputs, parameters, timings per stage, image statistics, how the
+                                       CNN plans were made (cnn_plan: the plan table, --tuning or --tune)
+  tuning.json                          (--tune) the CNN plans the timing chose; --tuning FILE repeats them
   cnn_input.npy                        (holo render --save-cnn-input) float32 [4*L, H, W] hologram CNN input";
 
 /// The command line for reports, each argument as text (a name that is not UTF-8 is written lossily, with
@@ -306,4 +308,26 @@ pub fn write_images(
 
 fn clamp01(a: &Array3<f32>) -> Array3<f32> {
     a.mapv(|v| v.clamp(0.0, 1.0))
+}
+
+/// With `--tune`, writes the session's CNN plans to `OUT/tuning.json` (a `tensorholo.cnn-plans` file that
+/// `--tuning` reads back) and says so; nothing otherwise.
+pub fn write_tuning(
+    out: &Path,
+    plans: &crate::args::PlanArgs,
+    report: &tensorholo::cnn::PlanReport,
+) -> Result<()> {
+    if !plans.tune {
+        return Ok(());
+    }
+    let path = out.join("tuning.json");
+    tensorholo::io::write_atomic(&path, report.saved().to_json().as_bytes())
+        .with_context(|| format!("writing {}", path.display()))?;
+    log::info!(
+        "CNN plans tuned in {:.2} s written to {} (repeat them with --tuning {})",
+        report.tuning_s,
+        path.display(),
+        path.display()
+    );
+    Ok(())
 }

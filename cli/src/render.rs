@@ -174,20 +174,21 @@ pub struct ModelArgs {
     /// Encode the CNN's hologram with --encoding (AA-DPM by default) instead of the DDPM pre-filter CNN.
     #[arg(long)]
     pub no_prefilter: bool,
-    /// Threads of the CNNs; 0 (the default) = time 1, half and all cores when the session is created and
-    /// keep the fastest. The three colours of the optics always run in parallel.
+    /// Threads of the CNNs; 0 (the default) = the cores the CPU reports (with --tune: the fastest of 1, half
+    /// and all cores). The three colours of the optics always run in parallel.
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=256))]
     pub threads: u32,
-    /// Engine of the CPU CNNs: auto times the native kernels and tract when the session is created and keeps
-    /// the faster (f32 and int8 QDQ models; int8 QOperator files run on tract); report.json's cnn_plan gives
-    /// the choice, the kernel and every timing.
+    /// Engine of the CPU CNNs: auto takes the plan table's (the native kernels wherever they run the models;
+    /// int8 QOperator files run on tract), or with --tune times them; report.json's cnn_plan gives the
+    /// choice, why, each layer's kernel row and any timing.
     #[arg(long, value_enum, default_value_t = EngineArg::Auto)]
     pub engine: EngineArg,
-    /// Memory layout tract runs the hologram CNN in: auto times both when the session is created (the
-    /// choice and timings go to report.json); nhwc is not for int8-qop. Which is faster depends on the CPU
-    /// and the frame size (`holo bench --layout nchw,nhwc,auto`).
+    /// Memory layout tract runs the hologram CNN in: auto takes the plan table's (nchw on x86-64, nhwc on
+    /// aarch64), or with --tune times both; nhwc is not for int8-qop.
     #[arg(long, value_enum, default_value_t = LayoutArg::Auto)]
     pub layout: LayoutArg,
+    #[command(flatten)]
+    pub plans: crate::args::PlanArgs,
     /// Where frames are computed: auto uses a hardware GPU (Vulkan, Metal) when the first frame agrees with
     /// the CPU (a software Vulkan such as lavapipe only with `gpu`); report.json says which ran and why.
     #[arg(long, value_enum, default_value_t = BackendArg::Auto)]
@@ -224,6 +225,7 @@ impl ModelArgs {
         .into_iter()
         .filter_map(|(flag, p)| Some(crate::output::Input::file(flag, p.as_deref()?)))
         .chain(self.optics.guard_input())
+        .chain(self.plans.guard_input())
         .collect()
     }
 
@@ -300,6 +302,8 @@ impl ModelArgs {
             cnn_layout: self.layout.into(),
             cnn_engine: self.engine.into(),
             cnn_threads: ThreadCount::from_count(self.threads as usize),
+            cnn_conv: crate::args::conv_from_env()?,
+            cnn_tune: self.plans.tune,
             backend: self.backend.into(),
             gpu_precision: self.gpu_precision.into(),
             wavelength_ratio_tolerance: self.wavelength_ratio_tolerance,
@@ -345,6 +349,9 @@ impl ModelArgs {
             .calibration
             .clone()
             .or_else(|| profile.as_ref().and_then(|p| p.calibration.clone()));
+        if let Some(plans) = self.plans.saved()? {
+            pipeline = pipeline.with_saved_plans(plans)?;
+        }
         if let Some(path) = &calibration {
             let cal = tensorholo::slm::DisplayCalibration::read(path)?;
             log::info!("display calibration {}: {}", path.display(), cal.summary());
@@ -386,6 +393,12 @@ impl ModelArgs {
             "cnn_threads": self.threads,
             "cnn_layout": pipeline.config().cnn_layout,
             "cnn_engine": pipeline.config().cnn_engine,
+            "cnn_conv": pipeline.config().cnn_conv,
+            "cnn_plans": match (&self.plans.tuning, self.plans.tune) {
+                (Some(f), _) => json!({ "source": "saved", "file": crate::output::path_text(f) }),
+                (None, true) => json!({ "source": "tune" }),
+                (None, false) => json!({ "source": "table" }),
+            },
             "hologram_cnn": describe(pipeline.hologram_model()),
             "prefilter_cnn": pipeline.prefilter_model().map(describe),
             "encoding": pipeline.encoding(),
@@ -488,6 +501,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let t = Instant::now();
     let mut session = pipeline.session(h, w)?;
     let session_s = t.elapsed().as_secs_f64();
+    crate::output::write_tuning(&args.out, &args.model.plans, session.plan_report())?;
     let what = || match args.scene.inputs().as_slice() {
         [] => "the built-in scene".to_string(),
         files => files

@@ -308,12 +308,7 @@ fn compare_reports_exactly_the_codes_that_differ() {
             "32x48",
             "--threads",
             "1",
-            "--layout",
-            "nchw",
-            // Pinned: `auto` picks the engine by timing, and on a loaded machine two runs can pick
-            // different ones (the same hologram to float rounding, not bit for bit).
-            "--engine",
-            "native",
+            // The plan table decides everything else: two processes give the same bits.
             "--repeat",
             "0",
             "--out",
@@ -551,4 +546,76 @@ fn render_reads_a_display_profile_and_refuses_a_bad_one_before_writing() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("pixel_pich_m"), "{}", stderr(&o));
     assert!(!out_bad.exists());
+}
+
+/// `--tune` times the plans and writes them to OUT/tuning.json; `--tuning` repeats them in another process,
+/// bit for bit and without timing; the plan table (no flag) gives the same bits in every process; a bad or
+/// foreign tuning file and `--tune` with `--tuning` are refused, naming the flag.
+#[test]
+fn tuned_plans_are_saved_and_repeated_and_the_table_repeats_itself() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = |name: &str| tmp.path().join(name);
+    let render = |out: &std::path::Path, extra: &[&str]| {
+        let mut args = vec!["render", "--size", "40x56", "--repeat", "0"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        holo(&args)
+    };
+    let bytes = |d: &std::path::Path, f: &str| std::fs::read(d.join(f)).unwrap();
+    let o = render(&dir("tuned"), &["--tune"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let tuning = dir("tuned").join("tuning.json");
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&tuning).unwrap()).unwrap();
+    assert_eq!(saved["format"], "tensorholo.cnn-plans");
+    assert!(!saved["rows"].as_array().unwrap().is_empty(), "{saved}");
+    assert_eq!(report(&dir("tuned"))["cnn_plan"]["source"], "tuned");
+
+    let o = render(&dir("again"), &["--tuning", tuning.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = report(&dir("again"));
+    assert_eq!(r["cnn_plan"]["source"], "saved");
+    assert_eq!(r["cnn_plan"]["tuning_s"], 0.0);
+    assert_eq!(r["cnn_plan"]["rows"], saved["rows"]);
+    assert!(!dir("again").join("tuning.json").exists());
+    for f in ["midpoint.npy", "phase_r.png", "phase_g.png", "phase_b.png"] {
+        assert!(
+            bytes(&dir("tuned"), f) == bytes(&dir("again"), f),
+            "{f} differs"
+        );
+    }
+
+    for name in ["table1", "table2"] {
+        let o = render(&dir(name), &[]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert_eq!(report(&dir(name))["cnn_plan"]["source"], "table");
+    }
+    for f in ["midpoint.npy", "phase_r.png", "phase_g.png", "phase_b.png"] {
+        assert!(
+            bytes(&dir("table1"), f) == bytes(&dir("table2"), f),
+            "{f} differs"
+        );
+    }
+
+    // Refusals: not a plans file, plans for another kernel level, both flags.
+    let bad = dir("bad.json");
+    std::fs::write(&bad, "{\"format\": \"tensorholo.cnn-plans\"}").unwrap();
+    let o = render(&dir("x"), &["--tuning", bad.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--tuning"), "{}", stderr(&o));
+    let other = if saved["isa"] == "scalar" {
+        "avx2"
+    } else {
+        "scalar"
+    };
+    let mut foreign = saved.clone();
+    foreign["isa"] = other.into();
+    foreign["rows"] = serde_json::json!([]);
+    let foreign_file = dir("foreign.json");
+    std::fs::write(&foreign_file, foreign.to_string()).unwrap();
+    let o = render(&dir("y"), &["--tuning", foreign_file.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("tune again"), "{}", stderr(&o));
+    let o = render(&dir("z"), &["--tune", "--tuning", tuning.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
 }

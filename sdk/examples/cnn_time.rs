@@ -5,12 +5,12 @@
 //! `hologram` or `prefilter`; e.g. `… models/prefilter_6mm.onnx prefilter 1080 1920 2 7`. Prints the kernel
 //! rows the plan runs, then `FILE HxW tT: min … med … ms`. The input is a fixed pattern in the file's
 //! channels; `run_outputs` allocates the two output arrays each run (a session writes into its own planes).
-//! `TENSORHOLO_CONV` pins the algorithm as for a session.
+//! `TENSORHOLO_CONV` pins the algorithm, as for `holo`; the rows otherwise come from the plan table.
 
 use std::sync::Arc;
 use std::time::Instant;
 
-use tensorholo::cnn::{cnn_plan, CnnEngine, CnnLayout, PlanRequest, ThreadCount};
+use tensorholo::cnn::{cnn_plan, CnnEngine, CnnLayout, ConvAlgorithm, PlanRequest, ThreadCount};
 use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
 
 fn main() {
@@ -30,11 +30,19 @@ fn main() {
     let (h, w, threads, runs) = (num(2), num(3), num(4), num(5));
     let model = HologramModel::from_path(file, kind, &ModelConfig::default())
         .unwrap_or_else(|e| panic!("{file}: {e}"));
+    // As `holo`, the example reads TENSORHOLO_CONV itself: the library reads no environment.
+    let conv = std::env::var("TENSORHOLO_CONV")
+        .ok()
+        .filter(|v| !v.trim().is_empty())
+        .map_or(Ok(ConvAlgorithm::Auto), |v| ConvAlgorithm::parse(&v))
+        .unwrap_or_else(|e| panic!("TENSORHOLO_CONV: {e}"));
     let request = PlanRequest {
         layout: CnnLayout::Auto,
         threads: ThreadCount::Fixed(threads),
+        conv,
+        ..PlanRequest::default()
     };
-    let (mut plan, report) = cnn_plan(&Arc::new(model), h, w, CnnEngine::Native, request)
+    let (mut plan, report) = cnn_plan(&Arc::new(model), h, w, CnnEngine::Native, &request)
         .unwrap_or_else(|e| panic!("plan: {e}"));
     println!("kernel rows: {}", report.kernel.as_deref().unwrap_or("-"));
     let c = plan.input_dim().0;

@@ -22,7 +22,9 @@ use std::time::Instant;
 
 use ndarray::{Array3, ArrayView3, Axis};
 
-use crate::cnn::{CnnEngine, CnnLayout, PlanReport, ThreadCount, MAX_CNN_THREADS};
+use crate::cnn::{
+    CnnEngine, CnnLayout, ConvAlgorithm, PlanReport, SavedPlans, ThreadCount, MAX_CNN_THREADS,
+};
 use crate::color::amplitude_to_srgb8;
 use crate::display::DisplayProfile;
 use crate::encoding::{DoublePhaseMethod, LinearLut};
@@ -50,7 +52,7 @@ pub const DEFAULT_STREAM_CAPACITY: usize = 2;
 
 /// Everything a [`HologramGenerator`] needs. Build with [`GeneratorConfig::new`] and change the fields
 /// you need; [`GeneratorConfig::validate`] says what is wrong.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct GeneratorConfig {
     /// Hologram (SLM) width in pixels.
     pub width: usize,
@@ -62,13 +64,24 @@ pub struct GeneratorConfig {
     /// Distance `s` from the midpoint hologram to the SLM in metres (Eq. 6; default 6e-3; shipped
     /// pre-filters exist for 6e-3 and 12e-3).
     pub offset_m: f64,
-    /// CNN threads ([`ThreadCount::Auto`] by default: timed at creation).
+    /// CNN threads ([`ThreadCount::Auto`] by default: the cores the CPU reports).
     pub threads: ThreadCount,
-    /// CNN memory layout ([`CnnLayout::Auto`] by default: timed at creation).
+    /// CNN memory layout of tract ([`CnnLayout::Auto`] by default: the plan table's).
     pub layout: CnnLayout,
-    /// CPU CNN engine ([`CnnEngine::Auto`] by default: for the f32 and int8 QDQ models the native kernels
-    /// and tract are timed at creation and the faster runs).
+    /// CPU CNN engine ([`CnnEngine::Auto`] by default: the plan table's, the native kernels wherever they
+    /// run the models).
     pub engine: CnnEngine,
+    /// Time the CNN candidates (engines, each layer's kernel row, threads) when the generator is made, instead
+    /// of taking the plan table's (the default, `false`: the same SLM codes on every run). Save the result
+    /// ([`GeneratorInfo::plan`], [`PlanReport::saved`]) and give it as `saved_plans` on later runs to repeat
+    /// it without timing.
+    pub tune: bool,
+    /// CNN plans saved from an earlier (tuned) generator ([`PlanReport::saved`], read back with
+    /// [`SavedPlans::from_json`]): repeated without timing, so every run gives the same SLM codes. `None`
+    /// (the default): the plan table, or a timing with `tune`. Refused with `tune`, and at creation when
+    /// made for another kernel ISA level than this CPU's.
+    #[serde(serialize_with = "saved_source")]
+    pub saved_plans: Option<Arc<SavedPlans>>,
     /// How camera frames fit the hologram ([`Fit::Crop`] by default).
     pub fit: Fit,
     /// Wavelengths (R, G, B), pixel pitch and volume depth, all in metres (the paper's display: 638, 520,
@@ -96,6 +109,17 @@ pub struct GeneratorConfig {
     pub wavelength_ratio_tolerance: f64,
 }
 
+/// [`GeneratorConfig::saved_plans`] in reports: the plans' origin, or null.
+fn saved_source<S: serde::Serializer>(
+    plans: &Option<Arc<SavedPlans>>,
+    s: S,
+) -> std::result::Result<S::Ok, S::Error> {
+    match plans {
+        Some(p) => s.serialize_some(&p.origin),
+        None => s.serialize_none(),
+    }
+}
+
 impl GeneratorConfig {
     /// The defaults for a `width × height` hologram: the shipped 8-layer f32 CNN, its pre-filter where it
     /// helps (Auto), SLM 6 mm from the midpoint hologram, autotuned CNN plan, centred crop, automatic depth
@@ -109,6 +133,8 @@ impl GeneratorConfig {
             threads: ThreadCount::Auto,
             layout: CnnLayout::Auto,
             engine: CnnEngine::Auto,
+            tune: false,
+            saved_plans: None,
             fit: Fit::default(),
             optics: OpticalSetup::default(),
             options: PropagationOptions::default(),
@@ -188,6 +214,15 @@ impl GeneratorConfig {
                 ));
             }
         }
+        if self.tune && self.saved_plans.is_some() {
+            return Err(invalid(
+                "tune",
+                "saved plans and a new tuning were both asked for: give one",
+            ));
+        }
+        if let Some(p) = &self.saved_plans {
+            p.validate()?;
+        }
         let t = self.wavelength_ratio_tolerance;
         if !(t.is_finite() && t >= 0.0) {
             return Err(invalid(
@@ -208,6 +243,8 @@ impl GeneratorConfig {
             cnn_layout: self.layout,
             cnn_engine: self.engine,
             cnn_threads: self.threads,
+            cnn_conv: ConvAlgorithm::Auto,
+            cnn_tune: self.tune,
             backend: self.backend,
             gpu_precision: self.gpu_precision,
             wavelength_ratio_tolerance: self.wavelength_ratio_tolerance,
@@ -481,6 +518,10 @@ impl HologramGenerator {
     /// Errors: as [`GeneratorConfig::validate`] and [`HologramPipeline::session`].
     pub fn with_pipeline(config: GeneratorConfig, pipeline: HologramPipeline) -> Result<Self> {
         config.validate()?;
+        let pipeline = match &config.saved_plans {
+            Some(plans) => pipeline.with_saved_plans(plans.clone())?,
+            None => pipeline,
+        };
         let calibration = pipeline.calibration().cloned();
         let session = open_session(&pipeline, &config, calibration.clone())?;
         Ok(Self {
@@ -747,8 +788,12 @@ impl HologramGenerator {
         if capacity == 0 {
             return Err(invalid("capacity", "a stream queue holds at least 1 frame"));
         }
-        let session = open_session(&self.pipeline, &self.config, self.calibration())?;
-        HologramStream::start(session, self.config, listener, capacity)
+        // The stream's session repeats this generator's plans (a tuned generator's too): both give the same
+        // codes.
+        let plans = Arc::new(self.session()?.plan_report().saved());
+        let pipeline = self.pipeline.repeating(plans);
+        let session = open_session(&pipeline, &self.config, self.calibration())?;
+        HologramStream::start(session, self.config.clone(), listener, capacity)
     }
 }
 
@@ -1133,7 +1178,7 @@ mod tests {
     fn the_wavelength_ratio_tolerance_reaches_the_model_check() {
         let mut c = quick(GeneratorConfig::new(64, 48));
         c.optics.wavelengths_m = [638e-9, 532e-9, 450e-9];
-        match HologramGenerator::new(c) {
+        match HologramGenerator::new(c.clone()) {
             Err(HoloError::ModelMetadata { key, .. }) => {
                 assert!(key.ends_with("wavelengths_m"), "{key}")
             }

@@ -66,7 +66,7 @@ fn config() -> GeneratorConfig {
     let mut c = GeneratorConfig::new(W, H);
     c.fit = Fit::Stretch;
     c.threads = ThreadCount::Fixed(1);
-    // One engine for every generator and session the tests compare bit for bit (`Auto` picks by timing).
+    // The plan table's engine, named (the tests compare generators and sessions bit for bit).
     c.engine = tensorholo::cnn::CnnEngine::Native;
     c
 }
@@ -365,9 +365,11 @@ fn autotuned_plans_report_their_candidates_and_agree_with_the_file_layout() {
             &embedded::hologram_model(8, precision, &cfg).unwrap(),
         )
         .unwrap();
-        let request = PlanRequest {
+        let request = &PlanRequest {
             layout: CnnLayout::Auto,
             threads: ThreadCount::Auto,
+            source: tensorholo::cnn::PlanSource::Tune,
+            ..PlanRequest::default()
         };
         let (plan, report) = m.tuned_plan(24, 40, request).unwrap();
         assert!(report.autotuned);
@@ -442,7 +444,7 @@ fn a_calibrated_generator_shows_on_its_panel_what_an_ideal_one_shows() {
     c.fit = Fit::Stretch;
     c.threads = ThreadCount::Fixed(1);
     let frame = camera_frame(h, w, 1.0);
-    let ideal = HologramGenerator::new(c).unwrap();
+    let ideal = HologramGenerator::new(c.clone()).unwrap();
     let ideal_patterns = ideal.render(&frame.view()).unwrap();
     let ideal_view = ideal.preview_patterns(&ideal_patterns, 0.5).unwrap();
 
@@ -519,7 +521,7 @@ fn an_ldi_generator_pads_missing_layers_and_refuses_extra_ones() {
     c.models.input = tensorholo::model::SceneInput::Ldi;
     // Pinned so that frame and LDI renders compare bit for bit.
     c.depth_range = Some(DepthRange::new(0.5, 3.0).unwrap());
-    let g = HologramGenerator::new(c).unwrap();
+    let g = HologramGenerator::new(c.clone()).unwrap();
     assert!(g.info().unwrap().hologram_model.contains("holo8_ldi"));
     let front = camera_frame(H, W, 1.0);
     // An RGB-D frame is a one-layer LDI: the CNN sees it padded with four empty layers either way.

@@ -32,8 +32,8 @@ fn config(offset_m: f64) -> PipelineConfig {
         offset_m,
         // These tests pin the CPU path (bit-exact streams, stage by stage); the GPU has gpu_pipeline.rs.
         backend: Backend::Cpu,
-        // and tract, which the naive composition runs (`CnnEngine::Auto` could pick either engine by timing;
-        // the native engine agrees with tract to ~1e-7, not bit for bit: src/cnn/tests.rs). A build without
+        // and tract, which the naive composition runs (`CnnEngine::Auto` is the native engine, which agrees
+        // with tract to ~1e-7, not bit for bit: src/cnn/tests.rs). A build without
         // tract runs the tests that do not compare with the naive composition on the native engine.
         cnn_engine: if cfg!(feature = "tract") {
             CnnEngine::Tract

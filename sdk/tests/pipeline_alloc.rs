@@ -175,7 +175,7 @@ fn cpu_frames_allocate_nothing_after_warm_up() {
             threads: ThreadCount::Fixed(threads),
             ..PlanRequest::default()
         };
-        let (mut plan, _) = cnn_plan(&model, h, w, CnnEngine::Native, request).unwrap();
+        let (mut plan, _) = cnn_plan(&model, h, w, CnnEngine::Native, &request).unwrap();
         plan.run_outputs(input.view()).unwrap();
         let ((n, bytes), _) = allocations_during(|| {
             for _ in 0..5 {

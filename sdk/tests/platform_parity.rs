@@ -35,7 +35,7 @@ struct Case {
     /// The case whose reference files it is compared with (its own, or the tract case of its precision).
     reference: &'static str,
     precision: Precision,
-    /// The session's CPU CNN engine (pinned: `Auto` picks by timing).
+    /// The session's CPU CNN engine.
     engine: CnnEngine,
     layout: CnnLayout,
     /// Largest |Δ| of the midpoint hologram over its largest |value|.

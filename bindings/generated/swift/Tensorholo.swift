@@ -737,8 +737,8 @@ open class HologramGenerator: HologramGeneratorProtocol, @unchecked Sendable {
         return try! rustCall { uniffi_tensorholo_ffi_fn_clone_hologramgenerator(self.handle, $0) }
     }
     /**
-     * Loads the shipped CNNs and prepares everything for `config.width × config.height` frames (this times
-     * the CNN plans on the device: up to a few seconds).
+     * Loads the shipped CNNs and prepares everything for `config.width × config.height` frames (the CNN
+     * plans from the plan table, or timed on the device with `config.tune`: up to a few seconds).
      *
      * Errors: [`TensorholoError::InvalidInput`] for a bad configuration (sizes, NaN or negative numbers,
      * layers other than 8/15/30, a required pre-filter that is not shipped for the offset);
@@ -1847,7 +1847,8 @@ public struct GeneratorConfig: Equatable, Hashable {
      */
     public var prefilter: PrefilterMode?
     /**
-     * CNN threads; 0 (default) = time 1, half and all cores at creation and keep the fastest.
+     * CNN threads; 0 (default) = the cores the device reports (with `tune`: the fastest of 1, half and all,
+     * timed).
      */
     public var threads: UInt32
     /**
@@ -1893,6 +1894,19 @@ public struct GeneratorConfig: Equatable, Hashable {
      * wider value shows as "widened" in [`GeneratorInfo::display_mapping`].
      */
     public var wavelengthRatioTolerance: Double
+    /**
+     * Time the CNN candidates on this device at creation (engines, each layer's kernel row, threads; up to
+     * a few seconds) instead of taking the plan table's (default `false`: the same SLM codes on every run).
+     * [`GeneratorInfo::saved_plans`] then holds the result, to store and pass as `saved_plans` later.
+     */
+    public var tune: Bool
+    /**
+     * CNN plans stored from an earlier generator's [`GeneratorInfo::saved_plans`] (a
+     * `tensorholo.cnn-plans` JSON text): repeated without timing, so every run gives the same codes.
+     * `None` (default): the plan table (or `tune`). Refused with `tune`, or when made on a device whose
+     * kernels differ (another CPU class).
+     */
+    public var savedPlans: String?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -1920,7 +1934,8 @@ public struct GeneratorConfig: Equatable, Hashable {
          * Pre-filter CNN; `None` = [`PrefilterMode::Auto`].
          */prefilter: PrefilterMode? = nil, 
         /**
-         * CNN threads; 0 (default) = time 1, half and all cores at creation and keep the fastest.
+         * CNN threads; 0 (default) = the cores the device reports (with `tune`: the fastest of 1, half and all,
+         * timed).
          */threads: UInt32 = UInt32(0), 
         /**
          * How camera frames fit the hologram; `None` = [`Fit::Crop`].
@@ -1954,7 +1969,18 @@ public struct GeneratorConfig: Equatable, Hashable {
          * Largest relative spread (a fraction: 0.005 = 0.5 %, the default) of the per-colour depth scales
          * accepted when the CNNs were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); a
          * wider value shows as "widened" in [`GeneratorInfo::display_mapping`].
-         */wavelengthRatioTolerance: Double = Double(0.005)) {
+         */wavelengthRatioTolerance: Double = Double(0.005), 
+        /**
+         * Time the CNN candidates on this device at creation (engines, each layer's kernel row, threads; up to
+         * a few seconds) instead of taking the plan table's (default `false`: the same SLM codes on every run).
+         * [`GeneratorInfo::saved_plans`] then holds the result, to store and pass as `saved_plans` later.
+         */tune: Bool = false, 
+        /**
+         * CNN plans stored from an earlier generator's [`GeneratorInfo::saved_plans`] (a
+         * `tensorholo.cnn-plans` JSON text): repeated without timing, so every run gives the same codes.
+         * `None` (default): the plan table (or `tune`). Refused with `tune`, or when made on a device whose
+         * kernels differ (another CPU class).
+         */savedPlans: String? = nil) {
         self.width = width
         self.height = height
         self.layers = layers
@@ -1973,6 +1999,8 @@ public struct GeneratorConfig: Equatable, Hashable {
         self.gpuPrecision = gpuPrecision
         self.engine = engine
         self.wavelengthRatioTolerance = wavelengthRatioTolerance
+        self.tune = tune
+        self.savedPlans = savedPlans
     }
 
     
@@ -2008,7 +2036,9 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
                 backend: FfiConverterOptionTypeBackend.read(from: &buf), 
                 gpuPrecision: FfiConverterOptionTypeGpuPrecision.read(from: &buf), 
                 engine: FfiConverterOptionTypeCnnEngine.read(from: &buf), 
-                wavelengthRatioTolerance: FfiConverterDouble.read(from: &buf)
+                wavelengthRatioTolerance: FfiConverterDouble.read(from: &buf), 
+                tune: FfiConverterBool.read(from: &buf), 
+                savedPlans: FfiConverterOptionString.read(from: &buf)
         )
     }
 
@@ -2031,6 +2061,8 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
         FfiConverterOptionTypeGpuPrecision.write(value.gpuPrecision, into: &buf)
         FfiConverterOptionTypeCnnEngine.write(value.engine, into: &buf)
         FfiConverterDouble.write(value.wavelengthRatioTolerance, into: &buf)
+        FfiConverterBool.write(value.tune, into: &buf)
+        FfiConverterOptionString.write(value.savedPlans, into: &buf)
     }
 }
 
@@ -2115,6 +2147,20 @@ public struct GeneratorInfo: Equatable, Hashable {
      */
     public var autotuned: Bool
     /**
+     * Where the CNN plan came from: `table` (the plan table, nothing timed), `saved`
+     * ([`GeneratorConfig::saved_plans`]) or `tuned` ([`GeneratorConfig::tune`]).
+     */
+    public var cnnPlanSource: String
+    /**
+     * The same in words (with saved plans: what they decided and what the table filled in).
+     */
+    public var cnnPlanDetail: String
+    /**
+     * This generator's CNN plans as a `tensorholo.cnn-plans` JSON text: store it (after a `tune` run) and
+     * pass it as [`GeneratorConfig::saved_plans`] to repeat them.
+     */
+    public var savedPlans: String
+    /**
      * What computes the frames now: `cpu` or `gpu`.
      */
     public var backend: String
@@ -2192,6 +2238,17 @@ public struct GeneratorInfo: Equatable, Hashable {
          * Whether the plan was chosen by timing candidates on this device.
          */autotuned: Bool, 
         /**
+         * Where the CNN plan came from: `table` (the plan table, nothing timed), `saved`
+         * ([`GeneratorConfig::saved_plans`]) or `tuned` ([`GeneratorConfig::tune`]).
+         */cnnPlanSource: String, 
+        /**
+         * The same in words (with saved plans: what they decided and what the table filled in).
+         */cnnPlanDetail: String, 
+        /**
+         * This generator's CNN plans as a `tensorholo.cnn-plans` JSON text: store it (after a `tune` run) and
+         * pass it as [`GeneratorConfig::saved_plans`] to repeat them.
+         */savedPlans: String, 
+        /**
          * What computes the frames now: `cpu` or `gpu`.
          */backend: String, 
         /**
@@ -2228,6 +2285,9 @@ public struct GeneratorInfo: Equatable, Hashable {
         self.cnnLayout = cnnLayout
         self.cnnThreads = cnnThreads
         self.autotuned = autotuned
+        self.cnnPlanSource = cnnPlanSource
+        self.cnnPlanDetail = cnnPlanDetail
+        self.savedPlans = savedPlans
         self.backend = backend
         self.backendReason = backendReason
         self.gpuAdapter = gpuAdapter
@@ -2267,6 +2327,9 @@ public struct FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer {
                 cnnLayout: FfiConverterString.read(from: &buf), 
                 cnnThreads: FfiConverterUInt32.read(from: &buf), 
                 autotuned: FfiConverterBool.read(from: &buf), 
+                cnnPlanSource: FfiConverterString.read(from: &buf), 
+                cnnPlanDetail: FfiConverterString.read(from: &buf), 
+                savedPlans: FfiConverterString.read(from: &buf), 
                 backend: FfiConverterString.read(from: &buf), 
                 backendReason: FfiConverterString.read(from: &buf), 
                 gpuAdapter: FfiConverterOptionString.read(from: &buf), 
@@ -2292,6 +2355,9 @@ public struct FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer {
         FfiConverterString.write(value.cnnLayout, into: &buf)
         FfiConverterUInt32.write(value.cnnThreads, into: &buf)
         FfiConverterBool.write(value.autotuned, into: &buf)
+        FfiConverterString.write(value.cnnPlanSource, into: &buf)
+        FfiConverterString.write(value.cnnPlanDetail, into: &buf)
+        FfiConverterString.write(value.savedPlans, into: &buf)
         FfiConverterString.write(value.backend, into: &buf)
         FfiConverterString.write(value.backendReason, into: &buf)
         FfiConverterOptionString.write(value.gpuAdapter, into: &buf)
@@ -4372,7 +4438,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_tensorholo_ffi_checksum_method_patternslistener_on_error() != 41699) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new() != 45138) {
+    if (uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new() != 38554) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_with_models() != 37417) {

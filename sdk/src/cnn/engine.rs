@@ -4,8 +4,10 @@
 
 use std::sync::Arc;
 
+use super::options::{CnnEngine, CnnLayout};
 use super::plan::CnnPlan;
-use super::tuning::{CnnEngine, CnnLayout, PlanRequest, PlanTiming};
+use super::saved::SavedRow;
+use super::tuning::{PlanRequest, PlanTiming};
 use crate::error::Result;
 use crate::model::HologramModel;
 
@@ -34,6 +36,10 @@ pub(crate) struct Tuning {
     pub(crate) candidates: Vec<PlanTiming>,
     /// Wall-clock seconds of the timing (plans and runs); 0 when nothing was timed or it came from a cache.
     pub(crate) seconds: f64,
+    /// The kernel row of each f32 layer shape (the native engine; empty for tract).
+    pub(crate) rows: Vec<SavedRow>,
+    /// What a saved tuning decided and what the table filled in, for the report (empty otherwise).
+    pub(crate) notes: Vec<String>,
 }
 
 impl Tuning {
@@ -67,19 +73,22 @@ pub(crate) trait Engine: Sync {
     /// network and what the engine lacks).
     fn supports(&self, nets: Networks<'_>) -> Result<()>;
 
-    /// Times this engine's candidates of `request` (layouts × thread counts it has) for `height × width`
-    /// frames of `nets.hologram` and picks the fastest; a single candidate is timed only when `time_single`
-    /// (to compare engines). `to_beat`: the best seconds of an engine timed before this one (on the same
-    /// input); an engine with several candidates times its likeliest first and may leave the others untimed
-    /// (reported as skipped) when that one is far slower (tract: 1.5×, its `PLAUSIBLE_FACTOR`).
+    /// Decides this engine's plans of `request` for `height × width` frames of `nets`: from the plan table
+    /// or a saved tuning (`request.source`), or, with [`super::PlanSource::Tune`], by timing its candidates
+    /// (layouts × thread counts it has, each f32 layer shape's rows) and keeping the fastest. A single
+    /// candidate is timed only when `time_single` (to compare engines). `to_beat`: the best seconds of an
+    /// engine timed before this one (on the same input); an engine with several candidates times its
+    /// likeliest first and may leave the others untimed (reported as skipped) when that one is far slower
+    /// (tract: 1.5×, its `PLAUSIBLE_FACTOR`).
     ///
-    /// Errors: the engine's plan and run errors.
+    /// Errors: [`crate::HoloError::InvalidParameter`] (`tuning`) for saved plans of another kernel ISA level;
+    /// the engine's plan and run errors.
     fn tune(
         &self,
         nets: Networks<'_>,
         height: usize,
         width: usize,
-        request: PlanRequest,
+        request: &PlanRequest,
         time_single: bool,
         to_beat: Option<f64>,
     ) -> Result<Tuning>;
@@ -91,8 +100,8 @@ pub(crate) trait Engine: Sync {
         None
     }
 
-    /// The plans of `nets` at `height × width` with `tuning`'s layout and threads (the pre-filter runs
-    /// channels-first with the same threads).
+    /// The plans of `nets` at `height × width` with `tuning`'s layout, threads and rows (the pre-filter runs
+    /// channels-first with the same threads), as `request` allows.
     ///
     /// Errors: the engine's plan errors.
     fn plans(
@@ -100,6 +109,7 @@ pub(crate) trait Engine: Sync {
         nets: Networks<'_>,
         height: usize,
         width: usize,
+        request: &PlanRequest,
         tuning: &Tuning,
     ) -> Result<EnginePlans>;
 }

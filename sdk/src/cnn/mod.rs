@@ -1,11 +1,16 @@
 //! The CNN engines, all in one place: a session's CNNs (hologram and pre-filter) run on the CPU on one of
-//! them, chosen per session ([`CnnEngine`]; `Auto` times them on the machine). The session's CNN stage
+//! them, chosen per session ([`CnnEngine`]; `Auto` takes the plan table's, or times them when asked:
+//! [`PlanSource`]). The session's CNN stage
 //! ([`crate::pipeline`]) holds a `Box<dyn CnnPlan>` and never asks which engine it is.
 //!
 //! One concept per file, lower files first:
 //!
-//! - `tuning`: what a session asks and gets: [`CnnEngine`], [`CnnLayout`], [`ThreadCount`], [`PlanRequest`],
-//!   [`PlanReport`] and the timing rule every engine shares;
+//! - `options`: what a caller may ask for: [`CnnEngine`], [`CnnLayout`], [`ThreadCount`], [`ConvAlgorithm`];
+//! - `saved`: [`SavedPlans`], a session's plan decisions as a JSON file the caller owns;
+//! - `tuning`: what a session asks and gets: [`PlanRequest`] (with its [`PlanSource`]: the plan table, a
+//!   saved tuning, or a timing), [`PlanReport`] and the timing rule every engine shares;
+//! - `table`: the plan table, the decisions made without timing (per ISA, layer shape and file), and where
+//!   each entry was measured;
 //! - `plan`: `CnnPlan`, one CNN at one resolution, whatever engine runs it;
 //! - `engine`: `Engine`, what an engine answers (can it run this model, its timing, its plans);
 //! - `native/`: our direct 3×3 convolutions (`tensorholo-kernels`, SIMD rows chosen at run time) over the
@@ -26,8 +31,11 @@
 
 mod engine;
 mod native;
+mod options;
 mod plan;
+mod saved;
 mod select;
+mod table;
 pub mod tract;
 mod tuning;
 
@@ -41,10 +49,16 @@ use crate::error::Result;
 use crate::model::HologramModel;
 
 pub use native::{f32_peak_gflops, int8_peak_gops, native_isa};
+pub use options::{
+    default_threads, CnnEngine, CnnLayout, ConvAlgorithm, ThreadCount, MAX_CNN_THREADS,
+};
+pub use saved::{
+    network_key, RowAlgorithms, SavedPlans, SavedRow, SavedSession, SAVED_PLANS_FORMAT,
+    SAVED_PLANS_VERSION,
+};
 pub use select::CpuCnnPlan;
 pub use tuning::{
-    auto_thread_candidates, CnnEngine, CnnLayout, PlanReport, PlanRequest, PlanTiming, ThreadCount,
-    MAX_CNN_THREADS,
+    auto_thread_candidates, PlanOrigin, PlanReport, PlanRequest, PlanSource, PlanTiming,
 };
 
 #[cfg(all(test, feature = "tract"))]
@@ -62,8 +76,8 @@ fn engines() -> Registry {
     ]
 }
 
-/// The plans for `height × width` frames of `hologram` (and `prefilter`) on `engine`, with tract's layout
-/// and threads from `request` (the native engine uses `request.threads`): a session's CNNs.
+/// The plans for `height × width` frames of `hologram` (and `prefilter`) on `engine`, made as `request`
+/// says: a session's CNNs.
 ///
 /// Errors: [`crate::HoloError::InvalidParameter`] (`engine`) for an engine this build lacks (naming its
 /// cargo feature) or one that cannot run the file (the reason is given);
@@ -74,7 +88,7 @@ pub(crate) fn select(
     height: usize,
     width: usize,
     engine: CnnEngine,
-    request: PlanRequest,
+    request: &PlanRequest,
 ) -> Result<CnnPlans> {
     select::select(
         engines(),
@@ -96,8 +110,8 @@ pub fn check_runnable(model: &Arc<HologramModel>) -> Result<()> {
     select::check_runnable(engines(), model)
 }
 
-/// `model`'s CNN for `height × width` inputs on `engine` (tract's layout and threads from `request`; the
-/// native engine uses `request.threads`), and how it was chosen, as a session chooses
+/// `model`'s CNN for `height × width` inputs on `engine`, made as `request` says, and how it was chosen, as a
+/// session chooses
 /// ([`PipelineConfig::cnn_engine`](crate::pipeline::PipelineConfig::cnn_engine)).
 ///
 /// Errors: as the session's choice: [`HoloError::InvalidParameter`] (`engine`) for an engine this build
@@ -107,7 +121,7 @@ pub fn cnn_plan(
     height: usize,
     width: usize,
     engine: CnnEngine,
-    request: PlanRequest,
+    request: &PlanRequest,
 ) -> Result<(CpuCnnPlan, PlanReport)> {
     select::cnn_plan(engines(), model, height, width, engine, request)
 }

@@ -1,20 +1,27 @@
 //! [`select`]: the CNN plans of one session, on the engine [`CnnEngine`] asks for or, for
-//! [`CnnEngine::Auto`], on the engine of this build that ran fastest on this machine at session creation;
-//! [`super::cnn_plan`] does the same for one CNN (what `holo bench` times), and [`super::check_runnable`] refuses, when a
-//! pipeline is made, a model no engine of this build can run.
+//! [`CnnEngine::Auto`], on the plan table's engine (`cnn/table.rs`), a saved tuning's, or with
+//! [`PlanSource::Tune`] the engine of this build that ran fastest on this machine at session creation;
+//! [`super::cnn_plan`] does the same for one CNN (what `holo bench` times), and [`super::check_runnable`]
+//! refuses, when a pipeline is made, a model no engine of this build can run.
 //!
 //! The timing rule is the same for every engine ([`crate::cnn::tuning`]): the same input (a constant 0.5),
 //! the same resolution ([`timing_resolution`]: the frame, or a full-width strip of a large one), one run or
 //! the fastest of three when a run is short. Each engine times its own candidates (tract: layouts × thread
-//! counts; native: thread counts); this file compares the engines' best.
+//! counts; native: layer rows, thread counts); this file compares the engines' best.
 
 use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3};
+use tensorholo_kernels::Isa;
 
 use super::engine::{Engine, Networks, Registry, Tuning};
+use super::options::CnnEngine;
 use super::plan::CnnPlan;
-use super::tuning::{timing_resolution, CnnEngine, PlanReport, PlanRequest, PlanTiming, NOT_TIMED};
+use super::saved::network_key;
+use super::table;
+use super::tuning::{
+    timing_resolution, PlanOrigin, PlanReport, PlanRequest, PlanSource, PlanTiming, NOT_TIMED,
+};
 use crate::error::{invalid, HoloError, Result};
 use crate::model::HologramModel;
 
@@ -26,12 +33,13 @@ pub(crate) struct CnnPlans {
     pub(crate) report: PlanReport,
 }
 
-/// The plans for `height × width` frames of `hologram` (and `prefilter`) on `engine`, with tract's layout
-/// and threads from `request` (the native engine uses `request.threads`).
+/// The plans for `height × width` frames of `hologram` (and `prefilter`) on `engine`, made as `request`
+/// says (its source: the plan table, a saved tuning, or timed now).
 ///
 /// Errors: [`HoloError::InvalidParameter`] (`engine`) for an engine this build lacks (naming its cargo
-/// feature) or one that cannot run the file (the reason is given); [`HoloError::ShapeMismatch`] if the file
-/// fixes another size; the engines' plan and run errors.
+/// feature) or one that cannot run the file (the reason is given); [`HoloError::InvalidParameter`]
+/// (`tuning`) for saved plans of another kernel ISA level; [`HoloError::ShapeMismatch`] if the file fixes
+/// another size; the engines' plan and run errors.
 pub(super) fn select(
     engines: Registry,
     hologram: &Arc<HologramModel>,
@@ -39,7 +47,7 @@ pub(super) fn select(
     height: usize,
     width: usize,
     engine: CnnEngine,
-    request: PlanRequest,
+    request: &PlanRequest,
 ) -> Result<CnnPlans> {
     hologram.check_fixed_size(height, width)?;
     let nets = Networks {
@@ -89,8 +97,41 @@ pub(super) fn select(
             let tuning = only.tune(nets, height, width, request, false, None)?;
             build(*only, nets, [height, width], request, &why, tuning)
         }
-        several => fastest(several, nets, [height, width], request),
+        several if request.source.tunes() => fastest(several, nets, [height, width], request),
+        several => planned(several, nets, [height, width], request),
     }
+}
+
+/// [`CnnEngine::Auto`] where several engines can run the files and nothing is timed: a saved tuning's engine
+/// for this session where it is one of them, else the plan table's ([`table::engine`]).
+fn planned(
+    able: &[&dyn Engine],
+    nets: Networks<'_>,
+    [height, width]: [usize; 2],
+    request: &PlanRequest,
+) -> Result<CnnPlans> {
+    let has = |id| able.iter().copied().find(|e| e.id() == id);
+    let saved = request
+        .source
+        .saved()
+        .and_then(|p| p.session(&network_key(nets.hologram), [height, width]))
+        .and_then(|s| has(s.engine));
+    let (engine, why) = match saved {
+        Some(e) => (e, "the saved plans".to_string()),
+        None => {
+            let isa = Isa::active().unwrap_or(Isa::Scalar);
+            let int8 = nets.each().any(|m| m.metadata().precision != "f32");
+            let native = has(CnnEngine::Native).is_some();
+            let tract = has(CnnEngine::Tract).is_some();
+            let (id, why) = table::engine(isa, int8, native, tract)
+                .ok_or_else(|| HoloError::Internal("no engine in the plan table".into()))?;
+            let e = has(id).ok_or_else(|| HoloError::Internal(format!("no {id} engine")))?;
+            (e, why)
+        }
+    };
+    log::info!("CNN engine for {height}×{width}: {}, {why}", engine.id());
+    let tuning = engine.tune(nets, height, width, request, false, None)?;
+    build(engine, nets, [height, width], request, &why, tuning)
 }
 
 /// [`CnnEngine::Auto`] where several engines can run the files: each timed on this machine, in the
@@ -102,7 +143,7 @@ fn fastest(
     able: &[&dyn Engine],
     nets: Networks<'_>,
     [height, width]: [usize; 2],
-    request: PlanRequest,
+    request: &PlanRequest,
 ) -> Result<CnnPlans> {
     let mut timed = Vec::new();
     let mut untimed = Vec::new();
@@ -160,23 +201,53 @@ fn fastest(
     Ok(plans)
 }
 
-/// The plans of `engine` for `tuning`, reported with what was asked (`request`), why (`why`), the timings
-/// and their cost.
+/// The plans of `engine` for `tuning`, reported with what was asked (`request`), why (`why`), the timings,
+/// their cost and where the decisions came from.
 fn build(
     engine: &dyn Engine,
     nets: Networks<'_>,
     [height, width]: [usize; 2],
-    request: PlanRequest,
+    request: &PlanRequest,
     why: &str,
     tuning: Tuning,
 ) -> Result<CnnPlans> {
-    let plans = engine.plans(nets, height, width, &tuning)?;
+    let plans = engine.plans(nets, height, width, request, &tuning)?;
+    let (source, source_detail) = match &request.source {
+        PlanSource::Table => (
+            PlanOrigin::Table,
+            "the plan table (a function of the CPU's features, the shapes, the size and the threads; \
+             nothing timed)"
+                .to_string(),
+        ),
+        PlanSource::Tune => (
+            PlanOrigin::Tuned,
+            format!(
+                "tuned on this machine in {:.2} s (save it to repeat these plans)",
+                tuning.seconds
+            ),
+        ),
+        PlanSource::Saved(p) => {
+            let mut notes = tuning.notes.clone();
+            if why == "the saved plans" {
+                notes.insert(0, format!("engine {} from the saved plans", engine.id()));
+            }
+            let what = if notes.is_empty() {
+                "nothing for this session: the plan table".to_string()
+            } else {
+                notes.join("; ")
+            };
+            (
+                PlanOrigin::Saved,
+                format!("saved plans ({}): {what}", p.origin),
+            )
+        }
+    };
     Ok(CnnPlans {
         hologram: plans.hologram,
         prefilter: plans.prefilter,
         report: PlanReport {
             resolution: [height, width],
-            request,
+            request: request.clone(),
             engine: engine.id(),
             engine_reason: why.to_string(),
             kernel: plans.kernel,
@@ -186,6 +257,11 @@ fn build(
             timed_resolution: timing_resolution(height, width),
             candidates: tuning.candidates,
             tuning_s: tuning.seconds,
+            source,
+            source_detail,
+            network: network_key(nets.hologram),
+            isa: Isa::active().map_or_else(|_| "none".to_string(), |i| i.name().to_string()),
+            rows: tuning.rows,
         },
     })
 }
@@ -300,7 +376,7 @@ pub(super) fn cnn_plan(
     height: usize,
     width: usize,
     engine: CnnEngine,
-    request: PlanRequest,
+    request: &PlanRequest,
 ) -> Result<(CpuCnnPlan, PlanReport)> {
     let plans = select(engines, model, None, height, width, engine, request)?;
     Ok((CpuCnnPlan(plans.hologram), plans.report))

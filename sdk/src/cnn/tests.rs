@@ -6,7 +6,7 @@ use std::sync::Arc;
 use ndarray::Array3;
 use tensorholo_kernels::{Algorithm, Isa};
 
-use super::native::{native_plan, NativeInt8Plan, NativePlan};
+use super::native::{table_plan as native_plan, NativeInt8Plan, NativePlan};
 use super::{select, CnnEngine, CnnPlan};
 use crate::cnn::{PlanRequest, ThreadCount};
 use crate::error::HoloError;
@@ -228,7 +228,7 @@ impl super::engine::Engine for TimedNative {
         nets: super::engine::Networks<'_>,
         height: usize,
         width: usize,
-        request: PlanRequest,
+        request: &PlanRequest,
         time_single: bool,
         to_beat: Option<f64>,
     ) -> crate::error::Result<super::engine::Tuning> {
@@ -239,9 +239,10 @@ impl super::engine::Engine for TimedNative {
         nets: super::engine::Networks<'_>,
         height: usize,
         width: usize,
+        request: &PlanRequest,
         tuning: &super::engine::Tuning,
     ) -> crate::error::Result<super::engine::EnginePlans> {
-        super::native::NativeEngine.plans(nets, height, width, tuning)
+        super::native::NativeEngine.plans(nets, height, width, request, tuning)
     }
 }
 
@@ -284,6 +285,7 @@ fn engine_choice_follows_the_request_and_the_file() {
         threads: ThreadCount::Fixed(1),
         ..PlanRequest::default()
     };
+    let request = &request;
     let x = input(4, 16, 24, 9);
     let native = select(&f32_model, None, 16, 24, CnnEngine::Native, request).unwrap();
     assert_eq!(native.report.engine, CnnEngine::Native);
@@ -301,10 +303,27 @@ fn engine_choice_follows_the_request_and_the_file() {
         &b.run_outputs(x.view()).unwrap(),
     );
     assert!(d <= 2e-5 * m.max(1.0));
-    // Auto times the native engine first. Where it outruns tract on this CPU (its x86-64 SIMD rows), tract
-    // is not timed and the report says why; otherwise both are timed and the faster one is kept. Both rules
-    // run here: the second through a registry whose native engine does not claim to outrun the others.
+    // Auto without tuning is the plan table's engine, native, and nothing is timed.
+    let table = select(&f32_model, None, 16, 24, CnnEngine::Auto, request).unwrap();
+    assert_eq!(table.report.engine, CnnEngine::Native);
+    assert!(
+        table.report.engine_reason.starts_with("the plan table"),
+        "{}",
+        table.report.engine_reason
+    );
+    assert!(table.report.candidates.is_empty());
+    assert_eq!(table.report.source, super::tuning::PlanOrigin::Table);
+    assert_eq!(table.report.tuning_s, 0.0);
+    // Tuned, Auto times the native engine first. Where it outruns tract on this CPU (its x86-64 SIMD rows),
+    // tract is not timed and the report says why; otherwise both are timed and the faster one is kept. Both
+    // rules run here: the second through a registry whose native engine does not claim to outrun the others.
+    let tuned = PlanRequest {
+        source: super::tuning::PlanSource::Tune,
+        ..request.clone()
+    };
+    let request = &tuned;
     let auto = select(&f32_model, None, 16, 24, CnnEngine::Auto, request).unwrap();
+    assert_eq!(auto.report.source, super::tuning::PlanOrigin::Tuned);
     use super::engine::Engine;
     match super::native::NativeEngine.outruns_the_others() {
         Some(why) => {
@@ -362,6 +381,7 @@ fn without_tract_the_native_engine_runs_everything_it_can_and_the_rest_is_refuse
         threads: ThreadCount::Fixed(1),
         ..PlanRequest::default()
     };
+    let request = &request;
     // Auto is the native engine, and says why.
     let auto = select(&f32_model, None, 16, 24, CnnEngine::Auto, request).unwrap();
     assert_eq!(auto.report.engine, CnnEngine::Native);
@@ -701,18 +721,30 @@ fn column_slabs_give_the_whole_frame_bit_for_bit() {
     let models = [f32s.swap_remove(0), f32s.pop().unwrap()];
     for model in &models {
         let graph = model.cnn_graph().unwrap();
-        // Each algorithm on every layer, and the rows the process's timing picks (layers of different tile
-        // widths in one network).
-        for conv in [
-            Some(Algorithm::Direct),
-            Some(Algorithm::Winograd2x2),
-            Some(Algorithm::Winograd4x4),
-            None,
+        // Each algorithm on every layer (`Some`), the plan table's rows (`None`), and the layer shapes cycling
+        // through the three algorithms (`mixed`: layers of different tile widths in one network).
+        for (conv, mixed) in [
+            (Some(Algorithm::Direct), false),
+            (Some(Algorithm::Winograd2x2), false),
+            (Some(Algorithm::Winograd4x4), false),
+            (None, false),
+            (None, true),
         ] {
             for (h, w) in [(13, 301), (9, 298)] {
                 let x = input(graph.in_channels, h, w, 21).mapv(|v| 0.75 * v - 0.05);
                 let y = input(graph.in_channels, h, w, 22);
                 let plan = |slabs: usize, threads: usize| {
+                    if mixed {
+                        return NativePlan::with_slabs_mixed(
+                            graph.clone(),
+                            h,
+                            w,
+                            threads,
+                            isa,
+                            Some(slabs),
+                        )
+                        .unwrap();
+                    }
                     NativePlan::with_slabs(
                         graph.clone(),
                         h,
@@ -734,7 +766,7 @@ fn column_slabs_give_the_whole_frame_bit_for_bit() {
                     for threads in [1, 3] {
                         let mut p = plan(slabs, threads);
                         let name = format!(
-                            "{} {conv:?} {h}×{w}, {slabs} slabs ×{threads}",
+                            "{} {conv:?} (mixed: {mixed}) {h}×{w}, {slabs} slabs ×{threads}",
                             model.source_name()
                         );
                         assert_eq!(p.slab_count(), slabs, "{name}");
@@ -809,12 +841,15 @@ fn an_input_given_plane_by_plane_gives_the_same_frame() {
 #[test]
 #[cfg(feature = "tract")]
 fn tract_stops_after_its_likeliest_candidate_when_another_engine_is_far_faster() {
+    use super::options::CnnLayout;
     use super::tract::TractModel;
-    use super::tuning::{auto_thread_candidates, CnnLayout, PLAUSIBLE_FACTOR};
+    use super::tuning::{auto_thread_candidates, PlanSource, PLAUSIBLE_FACTOR};
     let m = embedded::hologram_model(8, Precision::F32, &ModelConfig::default()).unwrap();
-    let request = PlanRequest {
+    let request = &PlanRequest {
         layout: CnnLayout::Auto,
         threads: ThreadCount::Auto,
+        source: PlanSource::Tune,
+        ..PlanRequest::default()
     };
     let threads = auto_thread_candidates();
     let all = CnnLayout::ALL.len() * threads.len();

@@ -1,142 +1,25 @@
-//! What a session asks of its CNN plans and what it got: the engine ([`CnnEngine`]), tract's memory layout
-//! ([`CnnLayout`]), the threads ([`ThreadCount`], at most [`MAX_CNN_THREADS`]), the request ([`PlanRequest`])
-//! and the report ([`PlanReport`]). Imports nothing of `cnn/`: every engine reads it.
+//! What a session asks of its CNN plans and what it got: the request ([`PlanRequest`]: engine options from
+//! `options.rs` and where the decisions come from, [`PlanSource`]) and the report ([`PlanReport`]).
 //!
-//! Autotuned CNN plans: which tract plan is fastest depends on the CPU (channels-first won at large frames on
-//! one 2-core Xeon, channels-last was 2.2× faster at 384×384 on another; a phone is yet another CPU), so the
-//! candidates are timed on the machine, at the session's resolution, when a session is created
-//! (`docs/BENCHMARKS.md`, "Autotuned plans").
+//! By default ([`PlanSource::Table`]) nothing is timed: the plans are a function of the build, the CPU's
+//! features, the layer shapes, the size and the thread count (the plan table, `cnn/table.rs`), so that the
+//! same command gives the same bits in every process, whatever else the machine is doing. Timing happens only
+//! when asked ([`PlanSource::Tune`]): each engine times its own candidates on the machine, at the session's
+//! resolution (`cnn/native/`: each f32 layer shape's kernel rows, then thread counts; `cnn/tract/`, cargo
+//! feature `tract`: layouts × thread counts), and `cnn/select.rs` compares the engines. A tuning's result
+//! can be saved ([`PlanReport::saved`], [`SavedPlans`]) and given to later sessions
+//! ([`PlanSource::Saved`]), which then make the same plans without timing.
 //!
-//! This module holds what every engine's tuning shares: the request ([`PlanRequest`], [`ThreadCount`]), the
-//! report ([`PlanReport`], [`PlanTiming`]), the candidates' resolution and thread counts, and the timing rule
-//! ([`fastest_run`]). Each engine times its own candidates (`cnn/native/`: thread counts; `cnn/tract/`, cargo
-//! feature `tract`: layouts × thread counts, cached per model, resolution and request so that a second
-//! session of the same size starts at once), and `cnn/select.rs` compares the engines.
+//! This module also holds what every engine's timing shares: the candidates' resolution and thread counts,
+//! and the timing rule ([`fastest_run`]).
 
-use crate::error::{invalid, Result};
+use std::sync::Arc;
 
-/// The most threads a CNN plan may use (tract's `ModelPlan::with_threads`, the native engine's thread
-/// count): far above any phone or desktop core count, low enough that a typo cannot ask the OS for a hundred
-/// thousand threads.
-pub const MAX_CNN_THREADS: usize = 256;
-
-/// The engine that runs a session's CNNs on the CPU
-/// ([`PipelineConfig::cnn_engine`](crate::pipeline::PipelineConfig::cnn_engine)).
-///
-/// - [`CnnEngine::Native`]: our direct 3×3 convolution kernels (`tensorholo-kernels`: AVX-512, AVX2+FMA,
-///   NEON or portable scalar rows, chosen at run time from the CPU's features), row bands on the plan's own
-///   threads. f32 files (agree with tract to float rounding) and int8 QDQ files (u8 × s8 kernels, each layer's
-///   convolution, ReLU, residual and requantisation fused; a mixed-precision file's f32 first and last layers
-///   on the f32 kernels: within the models' int8 tolerance of tract's node-by-node execution;
-///   `sdk/src/cnn/tests.rs`).
-/// - [`CnnEngine::Tract`]: tract's optimised plans (any file that passes the contract, int8 included; cargo
-///   feature `tract`, [`CnnEngine::cargo_feature`]).
-/// - [`CnnEngine::Auto`] (the default): the engines of this build that can run the file are timed at session
-///   creation on this machine (on the frame, or a full-width strip of a large one), the native engine first,
-///   and the faster runs; int8 QOperator files run on tract. Where the native engine runs its x86-64 SIMD
-///   rows, measured 2.3–20× tract's best on every such CPU tried, tract is not timed (0.3–0.4 s of a 1080p
-///   setup); on the portable rows and on ARM it is. The choice, the timings and what was not timed (with
-///   why) are in [`crate::cnn::PlanReport`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum CnnEngine {
-    /// Time the engines that can run the file; keep the fastest.
-    #[default]
-    Auto,
-    /// Our direct-convolution kernels (an error at session creation for a file they cannot run).
-    Native,
-    /// tract.
-    Tract,
-}
-
-impl CnnEngine {
-    /// The engines (every variant but [`CnnEngine::Auto`]), whether or not this build has them.
-    pub const ENGINES: [CnnEngine; 2] = [Self::Native, Self::Tract];
-
-    /// Short name: `auto`, `native`, `tract`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Auto => "auto",
-            Self::Native => "native",
-            Self::Tract => "tract",
-        }
-    }
-
-    /// The cargo feature of `tensorholo` (and `tensorholo-ffi`) that compiles this engine in, `None` for one
-    /// every build has (named by errors in a build without it).
-    pub fn cargo_feature(self) -> Option<&'static str> {
-        match self {
-            Self::Tract => Some("tract"),
-            Self::Auto | Self::Native => None,
-        }
-    }
-
-    /// Parses [`CnnEngine::name`]. Errors: [`crate::HoloError::InvalidParameter`] (`engine`) naming the
-    /// choices.
-    pub fn parse(name: &str) -> Result<Self> {
-        match name {
-            "auto" => Ok(Self::Auto),
-            "native" => Ok(Self::Native),
-            "tract" => Ok(Self::Tract),
-            other => Err(invalid(
-                "engine",
-                format!("unknown CNN engine `{other}` (auto, native or tract)"),
-            )),
-        }
-    }
-}
-
-impl std::fmt::Display for CnnEngine {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// The memory layout tract runs a CNN in. The ONNX files are always channels-first `[1, C, H, W]`
-/// (`docs/CONVENTIONS.md` §7) and a plan takes and returns `[C, H, W]` arrays in every layout; only tract's
-/// internal graph differs (`cnn::tract::TractModel::plan_with_layout`, feature `tract`). The native engine's
-/// buffers are channel-major within each row: it reports [`CnnLayout::ChannelsFirst`].
-///
-/// Which layout is faster depends on the CPU and the frame size (`docs/BENCHMARKS.md`: on one 2-core Xeon
-/// channels-first won at large frames, on another channels-last was 2.2× faster at 384×384), so the default
-/// is [`CnnLayout::Auto`]: the candidates are timed on the machine at session creation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum CnnLayout {
-    /// Time both layouts on this machine at the real resolution and keep the faster; a plan never runs in
-    /// `Auto` itself.
-    #[default]
-    Auto,
-    /// Channels first (NCHW), as in the file. tract 0.23 runs the 3×3 convolutions as its direct spatial
-    /// convolution (a filter along W, four output channels at a time) where the rows are ≥ 128 pixels wide.
-    ChannelsFirst,
-    /// Channels last (NHWC): the whole graph is moved by tract's axis-change propagation, and the
-    /// convolutions run as a lazy im2col (one gather per output pixel of 3 contiguous runs of 3·C values)
-    /// feeding tract's matrix-product kernels, after an explicit zero `Pad`. f32 and int8 QDQ files (float
-    /// convolutions); tract 0.23 does not move a quantised `QLinearConv` nor the pre-filter graph, so those
-    /// files in this layout are an error (and `Auto` skips it for them).
-    ChannelsLast,
-}
-
-impl CnnLayout {
-    /// The two concrete layouts, channels-first first.
-    pub const ALL: [CnnLayout; 2] = [Self::ChannelsFirst, Self::ChannelsLast];
-
-    /// Short name: `auto`, `nchw`, `nhwc`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Auto => "auto",
-            Self::ChannelsFirst => "nchw",
-            Self::ChannelsLast => "nhwc",
-        }
-    }
-}
-
-impl std::fmt::Display for CnnLayout {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
+use super::options::{
+    default_threads, CnnEngine, CnnLayout, ConvAlgorithm, ThreadCount, MAX_CNN_THREADS,
+};
+use super::saved::{SavedPlans, SavedRow, SavedSession};
+use crate::error::Result;
 
 /// Frames above this many pixels are timed on a full-width strip of about this many pixels (at least
 /// [`TUNE_MIN_ROWS`] rows) instead of the whole frame: the convolutions' cost is linear in the rows, and the
@@ -161,39 +44,91 @@ pub(crate) const PLAUSIBLE_FACTOR: f64 = 1.5;
 /// an engine [`crate::cnn::CnnEngine::Auto`] did not time at all (another outruns it on this CPU).
 pub(crate) const NOT_TIMED: &str = "not timed";
 
-/// How many threads a CNN plan uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ThreadCount {
-    /// Time [`auto_thread_candidates`] and keep the fastest.
+/// Where a session's CNN plans come from ([`PlanRequest::source`]).
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Default)]
+pub enum PlanSource {
+    /// The plan table (the default): the engine, tract's layout, each f32 layer's kernel row and the threads
+    /// follow from the build, the CPU's features, the shapes and the size (`cnn/table.rs`, made from
+    /// benchmarks); nothing is timed, and every process gives the same bits.
     #[default]
-    Auto,
-    /// Exactly this many threads (≥ 1) in the plan's own executor.
-    Fixed(usize),
-    /// tract's process-wide default executor (one thread), as plans made by `cnn::tract::TractModel::plan`
-    /// use; the native engine runs such a request on 1 thread.
-    ProcessDefault,
+    Table,
+    /// Time the candidates on this machine now (the engines, tract's layouts, each f32 layer shape's kernel
+    /// rows, 1, half and all cores) and keep the fastest. Where two candidates are close, or the machine is
+    /// busy, two processes can choose differently, and their last bits differ; save the result
+    /// ([`PlanReport::saved`]) to make later runs repeat it.
+    Tune,
+    /// The choices of a saved tuning ([`SavedPlans`]), the table's where it has none (the report says
+    /// which); nothing is timed. Refused at session creation when made for another kernel ISA level.
+    Saved(Arc<SavedPlans>),
 }
 
-impl ThreadCount {
-    /// `0` → [`ThreadCount::Auto`], `n` → [`ThreadCount::Fixed`]`(n)`: the `threads` convention of the
-    /// CLI and the bindings.
-    pub fn from_count(threads: usize) -> Self {
-        match threads {
-            0 => Self::Auto,
-            n => Self::Fixed(n),
+impl PlanSource {
+    /// Short name: `table`, `tune`, `saved`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Table => "table",
+            Self::Tune => "tune",
+            Self::Saved(_) => "saved",
+        }
+    }
+
+    /// Whether candidates are timed.
+    pub fn tunes(&self) -> bool {
+        matches!(self, Self::Tune)
+    }
+
+    /// The saved plans, if any.
+    pub fn saved(&self) -> Option<&SavedPlans> {
+        match self {
+            Self::Saved(p) => Some(p),
+            _ => None,
         }
     }
 }
 
-/// What a session's CNN plans may be chosen from: [`CnnLayout::Auto`] tries both of tract's layouts, a
-/// concrete layout only itself; [`ThreadCount::Auto`] tries [`auto_thread_candidates`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
+impl serde::Serialize for PlanSource {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+/// What a session's CNN plans are made from: each option's `Auto` is decided by `source` (the plan table by
+/// default, a timing, or a saved tuning); a concrete value is used as given.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Default, serde::Serialize)]
 pub struct PlanRequest {
-    /// Memory layout, or [`CnnLayout::Auto`].
+    /// tract's memory layout, or [`CnnLayout::Auto`].
     pub layout: CnnLayout,
-    /// Thread count, or [`ThreadCount::Auto`].
+    /// Thread count, or [`ThreadCount::Auto`] (the cores the CPU reports, or timed with
+    /// [`PlanSource::Tune`]).
     pub threads: ThreadCount,
+    /// The native engine's f32 convolution algorithm, or [`ConvAlgorithm::Auto`] (each layer shape's row
+    /// from `source`); a pinned algorithm still takes its row from `source`.
+    pub conv: ConvAlgorithm,
+    /// Where the decisions come from.
+    pub source: PlanSource,
+}
+
+/// How a session's plans were decided ([`PlanReport::source`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PlanOrigin {
+    /// The plan table, nothing timed.
+    Table,
+    /// A saved tuning ([`PlanSource::Saved`]), the table for what it lacks.
+    Saved,
+    /// Timed in this session ([`PlanSource::Tune`]).
+    Tuned,
+}
+
+impl PlanOrigin {
+    /// Short name: `table`, `saved`, `tuned`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Table => "table",
+            Self::Saved => "saved",
+            Self::Tuned => "tuned",
+        }
+    }
 }
 
 /// One candidate's timing.
@@ -213,7 +148,8 @@ pub struct PlanTiming {
 }
 
 /// What a session's engine choice ([`crate::pipeline::PipelineConfig::cnn_engine`]) and the engine's own
-/// timing (tract's layouts and threads, the native engine's threads) chose and why.
+/// choices (tract's layout and threads, the native engine's rows and threads) were, why, and where they came
+/// from ([`PlanReport::source`]).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct PlanReport {
     /// `[height, width]` the plan runs at.
@@ -242,10 +178,48 @@ pub struct PlanReport {
     /// Wall-clock seconds the tuning took (plans and timed runs), 0 when nothing was timed or the result came
     /// from the model's cache.
     pub tuning_s: f64,
+    /// Where the decisions came from: the plan table, a saved tuning or a timing in this session.
+    pub source: PlanOrigin,
+    /// The same in words: with a saved tuning, what it decided and what the table filled in.
+    pub source_detail: String,
+    /// The hologram CNN as saved plans name it ([`super::saved::network_key`]).
+    pub network: String,
+    /// The kernel ISA level of the native engine on this CPU (`avx512vnni`, `neondot`, …), what a saved tuning
+    /// is made for.
+    pub isa: String,
+    /// The kernel row of each f32 layer shape of the native engine's plans (empty for tract).
+    pub rows: Vec<SavedRow>,
 }
 
-/// The thread counts [`ThreadCount::Auto`] times on this machine: 1, half the available cores and all of
-/// them (deduplicated; `std::thread::available_parallelism`, at most [`MAX_CNN_THREADS`]).
+impl PlanReport {
+    /// These plans as a record to save ([`SavedPlans::to_json`]) and give to later sessions
+    /// ([`PlanSource::Saved`]): this session's engine, layout and threads, and its layers' rows.
+    pub fn saved(&self) -> SavedPlans {
+        let origin = format!(
+            "{} by tensorholo {} ({} threads available)",
+            match self.source {
+                PlanOrigin::Table => "the plan table",
+                PlanOrigin::Saved => "saved plans",
+                PlanOrigin::Tuned => "tuned",
+            },
+            env!("CARGO_PKG_VERSION"),
+            default_threads()
+        );
+        let mut plans = SavedPlans::new(&self.isa, &origin);
+        plans.sessions.push(SavedSession {
+            network: self.network.clone(),
+            resolution: self.resolution,
+            engine: self.engine,
+            layout: self.layout,
+            threads: self.threads,
+        });
+        plans.rows = self.rows.clone();
+        plans
+    }
+}
+
+/// The thread counts [`ThreadCount::Auto`] times with [`PlanSource::Tune`]: 1, half the available cores and
+/// all of them (deduplicated; `std::thread::available_parallelism`, at most [`MAX_CNN_THREADS`]).
 pub fn auto_thread_candidates() -> Vec<usize> {
     let n = std::thread::available_parallelism()
         .map(|n| n.get())

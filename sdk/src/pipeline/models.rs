@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use super::config::PipelineConfig;
 use super::selection::{shipped_prefilter, ModelSelection, PrefilterMode, PrefilterSource};
+use crate::cnn::{PlanRequest, PlanSource, SavedPlans};
 use crate::encoding::DoublePhaseMethod;
 #[cfg(doc)]
 use crate::error::HoloError;
@@ -25,6 +26,9 @@ pub struct HologramPipeline {
     display_mapping: DisplayMapping,
     /// The display calibration sessions apply ([`HologramPipeline::with_calibration`]); `None`: an ideal SLM.
     calibration: Option<Arc<DisplayCalibration>>,
+    /// The saved CNN plans sessions repeat ([`HologramPipeline::with_saved_plans`]); `None`: the plan table,
+    /// or a timing with [`PipelineConfig::cnn_tune`].
+    saved_plans: Option<Arc<SavedPlans>>,
     /// The app's own GPU context ([`HologramPipeline::with_gpu_context`]); `None`: the shared one.
     #[cfg(feature = "gpu")]
     gpu_context: Option<crate::gpu::GpuContext>,
@@ -86,6 +90,7 @@ impl HologramPipeline {
             prefilter_reason,
             display_mapping,
             calibration: None,
+            saved_plans: None,
             #[cfg(feature = "gpu")]
             gpu_context: None,
         })
@@ -200,6 +205,63 @@ impl HologramPipeline {
     pub fn with_gpu_context(mut self, ctx: crate::gpu::GpuContext) -> Self {
         self.gpu_context = Some(ctx);
         self
+    }
+
+    /// Makes every session from now on repeat `plans` (a tuning saved earlier, [`crate::cnn::PlanReport::saved`]):
+    /// its engine, layout, threads and layer rows where it has them for the session, the plan table's
+    /// otherwise; nothing is timed, so every run gives the same bits.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`cnn_tune`) where [`PipelineConfig::cnn_tune`] asks to time
+    /// instead; [`HoloError::InvalidParameter`] (`tuning`) for plans that fail
+    /// [`SavedPlans::validate`]. Plans made for another kernel ISA level are refused when a session is made.
+    pub fn with_saved_plans(mut self, plans: Arc<SavedPlans>) -> Result<Self> {
+        if self.config.cnn_tune {
+            return Err(invalid(
+                "cnn_tune",
+                "saved plans and a new tuning were both asked for: give one",
+            ));
+        }
+        plans.validate()?;
+        self.saved_plans = Some(plans);
+        Ok(self)
+    }
+
+    /// This pipeline with its sessions repeating `plans` (a session's own decisions,
+    /// [`crate::cnn::PlanReport::saved`]), `cnn_tune` off: a second session (a stream's) makes the same plans
+    /// as the first without timing again.
+    pub(crate) fn repeating(&self, plans: Arc<SavedPlans>) -> Self {
+        let mut p = self.clone();
+        p.config.cnn_tune = false;
+        p.saved_plans = Some(plans);
+        p
+    }
+
+    /// The saved CNN plans sessions repeat, if any ([`HologramPipeline::with_saved_plans`]).
+    pub fn saved_plans(&self) -> Option<&Arc<SavedPlans>> {
+        self.saved_plans.as_ref()
+    }
+
+    /// What a session's CNN plans are made from: the configuration's layout, threads and algorithm, from the
+    /// saved plans, a timing (`cnn_tune`) or the plan table.
+    pub(super) fn plan_request(&self) -> Result<PlanRequest> {
+        let c = &self.config;
+        let source = match (&self.saved_plans, c.cnn_tune) {
+            (Some(_), true) => {
+                return Err(invalid(
+                    "cnn_tune",
+                    "saved plans and a new tuning were both asked for: give one",
+                ))
+            }
+            (Some(p), false) => PlanSource::Saved(p.clone()),
+            (None, true) => PlanSource::Tune,
+            (None, false) => PlanSource::Table,
+        };
+        Ok(PlanRequest {
+            layout: c.cnn_layout,
+            threads: c.cnn_threads,
+            conv: c.cnn_conv,
+            source,
+        })
     }
 
     /// Applies a display's calibration (`.holocal`, [`DisplayCalibration`]) in every session made from now

@@ -16,7 +16,7 @@ use super::pool::OpticsPool;
 use super::report::BackendReport;
 use super::session::HologramSession;
 use super::workers::ColourWorkers;
-use crate::cnn::{CnnPlans, PlanRequest};
+use crate::cnn::CnnPlans;
 use crate::encoding::{ChannelEncoder, ChannelStats, PassOneLayout};
 #[cfg(not(feature = "gpu"))]
 use crate::error::invalid as invalid_backend;
@@ -75,10 +75,7 @@ impl HologramSession {
             backend.active,
             backend.reason
         );
-        let request = PlanRequest {
-            layout: pipeline.config().cnn_layout,
-            threads: pipeline.config().cnn_threads,
-        };
+        let request = pipeline.plan_request()?;
         let CnnPlans {
             hologram,
             prefilter,
@@ -89,7 +86,7 @@ impl HologramSession {
             height,
             width,
             pipeline.config().cnn_engine,
-            request,
+            &request,
         )?;
         let cfg = pipeline.config();
         let encoding = pipeline.encoding();

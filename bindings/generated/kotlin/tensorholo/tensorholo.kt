@@ -984,7 +984,7 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
     if ((lib.uniffi_tensorholo_ffi_checksum_method_patternslistener_on_error() and 0xFFFF) != 41699) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new() and 0xFFFF) != 45138) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new() and 0xFFFF) != 38554) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_with_models() and 0xFFFF) != 37417) {
@@ -1566,8 +1566,8 @@ open class HologramGenerator: Disposable, AutoCloseable, HologramGeneratorInterf
         this.cleanable = null
     }
     /**
-     * Loads the shipped CNNs and prepares everything for `config.width × config.height` frames (this times
-     * the CNN plans on the device: up to a few seconds).
+     * Loads the shipped CNNs and prepares everything for `config.width × config.height` frames (the CNN
+     * plans from the plan table, or timed on the device with `config.tune`: up to a few seconds).
      *
      * Errors: [`TensorholoError::InvalidInput`] for a bad configuration (sizes, NaN or negative numbers,
      * layers other than 8/15/30, a required pre-filter that is not shipped for the offset);
@@ -2907,7 +2907,8 @@ data class GeneratorConfig (
     var `prefilter`: PrefilterMode? = null 
     , 
     /**
-     * CNN threads; 0 (default) = time 1, half and all cores at creation and keep the fastest.
+     * CNN threads; 0 (default) = the cores the device reports (with `tune`: the fastest of 1, half and all,
+     * timed).
      */
     var `threads`: kotlin.UInt = 0u 
     , 
@@ -2963,6 +2964,21 @@ data class GeneratorConfig (
      * wider value shows as "widened" in [`GeneratorInfo::display_mapping`].
      */
     var `wavelengthRatioTolerance`: kotlin.Double = 0.005 
+    , 
+    /**
+     * Time the CNN candidates on this device at creation (engines, each layer's kernel row, threads; up to
+     * a few seconds) instead of taking the plan table's (default `false`: the same SLM codes on every run).
+     * [`GeneratorInfo::saved_plans`] then holds the result, to store and pass as `saved_plans` later.
+     */
+    var `tune`: kotlin.Boolean = false 
+    , 
+    /**
+     * CNN plans stored from an earlier generator's [`GeneratorInfo::saved_plans`] (a
+     * `tensorholo.cnn-plans` JSON text): repeated without timing, so every run gives the same codes.
+     * `None` (default): the plan table (or `tune`). Refused with `tune`, or when made on a device whose
+     * kernels differ (another CPU class).
+     */
+    var `savedPlans`: kotlin.String? = null 
     
 ){
     
@@ -2997,6 +3013,8 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalTypeGpuPrecision.read(buf),
             FfiConverterOptionalTypeCnnEngine.read(buf),
             FfiConverterDouble.read(buf),
+            FfiConverterBoolean.read(buf),
+            FfiConverterOptionalString.read(buf),
         )
     }
 
@@ -3018,7 +3036,9 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalTypeBackend.allocationSize(value.`backend`) +
             FfiConverterOptionalTypeGpuPrecision.allocationSize(value.`gpuPrecision`) +
             FfiConverterOptionalTypeCnnEngine.allocationSize(value.`engine`) +
-            FfiConverterDouble.allocationSize(value.`wavelengthRatioTolerance`)
+            FfiConverterDouble.allocationSize(value.`wavelengthRatioTolerance`) +
+            FfiConverterBoolean.allocationSize(value.`tune`) +
+            FfiConverterOptionalString.allocationSize(value.`savedPlans`)
     )
 
     override fun write(value: GeneratorConfig, buf: ByteBuffer) {
@@ -3040,6 +3060,8 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalTypeGpuPrecision.write(value.`gpuPrecision`, buf)
             FfiConverterOptionalTypeCnnEngine.write(value.`engine`, buf)
             FfiConverterDouble.write(value.`wavelengthRatioTolerance`, buf)
+            FfiConverterBoolean.write(value.`tune`, buf)
+            FfiConverterOptionalString.write(value.`savedPlans`, buf)
     }
 }
 
@@ -3125,6 +3147,23 @@ data class GeneratorInfo (
     var `autotuned`: kotlin.Boolean
     , 
     /**
+     * Where the CNN plan came from: `table` (the plan table, nothing timed), `saved`
+     * ([`GeneratorConfig::saved_plans`]) or `tuned` ([`GeneratorConfig::tune`]).
+     */
+    var `cnnPlanSource`: kotlin.String
+    , 
+    /**
+     * The same in words (with saved plans: what they decided and what the table filled in).
+     */
+    var `cnnPlanDetail`: kotlin.String
+    , 
+    /**
+     * This generator's CNN plans as a `tensorholo.cnn-plans` JSON text: store it (after a `tune` run) and
+     * pass it as [`GeneratorConfig::saved_plans`] to repeat them.
+     */
+    var `savedPlans`: kotlin.String
+    , 
+    /**
      * What computes the frames now: `cpu` or `gpu`.
      */
     var `backend`: kotlin.String
@@ -3190,6 +3229,9 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterBoolean.read(buf),
             FfiConverterString.read(buf),
             FfiConverterString.read(buf),
+            FfiConverterString.read(buf),
+            FfiConverterString.read(buf),
+            FfiConverterString.read(buf),
             FfiConverterOptionalString.read(buf),
             FfiConverterOptionalString.read(buf),
             FfiConverterString.read(buf),
@@ -3213,6 +3255,9 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterString.allocationSize(value.`cnnLayout`) +
             FfiConverterUInt.allocationSize(value.`cnnThreads`) +
             FfiConverterBoolean.allocationSize(value.`autotuned`) +
+            FfiConverterString.allocationSize(value.`cnnPlanSource`) +
+            FfiConverterString.allocationSize(value.`cnnPlanDetail`) +
+            FfiConverterString.allocationSize(value.`savedPlans`) +
             FfiConverterString.allocationSize(value.`backend`) +
             FfiConverterString.allocationSize(value.`backendReason`) +
             FfiConverterOptionalString.allocationSize(value.`gpuAdapter`) +
@@ -3237,6 +3282,9 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterString.write(value.`cnnLayout`, buf)
             FfiConverterUInt.write(value.`cnnThreads`, buf)
             FfiConverterBoolean.write(value.`autotuned`, buf)
+            FfiConverterString.write(value.`cnnPlanSource`, buf)
+            FfiConverterString.write(value.`cnnPlanDetail`, buf)
+            FfiConverterString.write(value.`savedPlans`, buf)
             FfiConverterString.write(value.`backend`, buf)
             FfiConverterString.write(value.`backendReason`, buf)
             FfiConverterOptionalString.write(value.`gpuAdapter`, buf)

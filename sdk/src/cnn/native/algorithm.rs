@@ -1,37 +1,38 @@
-//! Direct or Winograd, and which kernel row, per layer shape and CPU, chosen by measurement.
+//! Direct or Winograd, and which kernel row, per f32 layer shape: decided once per session, before any plan is
+//! built ([`Rows`], [`decide`]), from the plan table (`cnn/table.rs`, the default), a saved tuning, or a
+//! timing on this machine ([`PlanSource::Tune`]).
 //!
 //! The f32 kernels compute a 3×3 convolution directly (`9·C_in` multiply-adds per output value) or with
 //! Winograd's minimal filtering, F(2×2, 3×3) (`4·C_in` plus the tile transforms) or F(4×4, 3×3) (`2.25·C_in`,
 //! larger transforms; neither bit-identical with direct, within the bounds the kernels crate states). Which
 //! is fastest depends on the layer's channels and the CPU: the transforms cost relatively more where `C_in`
 //! or `C_out` is small. So does the row: under AVX-512, a 6-channel layer may run on the 6-channel AVX-512
-//! tile, the 8-channel one (a quarter of it wasted) or the 6-channel AVX2 tile, and which wins can differ
-//! between CPUs (of the last two, the AVX2 tile on Zen 4, the AVX-512 one on Zen 5: docs/BENCHMARKS.md).
+//! tile, the 8-channel one (a quarter of it wasted) or the 6-channel AVX2 tile.
 //!
-//! The first plan of a layer shape `(ISA, C_in, C_out)` in a process times every candidate row
-//! ([`tensorholo_kernels::registry::f32_rows_of`]: each algorithm's rows under the ISA) on a sample band
-//! ([`SAMPLE_ROWS`] × [`SAMPLE_WIDTH`], one thread, best of [`ROUNDS`] alternating runs) and keeps:
-//! - direct, unless the best Winograd row beats the best direct row by [`MARGIN`] (a near tie stays direct,
-//!   the reference path, so that the choice does not flip between processes on noise);
-//! - among Winograd, F(4×4, 3×3) where it beats F(2×2, 3×3) by [`MARGIN_F4`] (it rounds more, and a plan with
-//!   an F(4×4, 3×3) layer puts every layer 4 rows behind the one before: [`super::strips::Strips`]);
+//! A layer shape is `(C_in, C_out, the algorithms chosen among)`: every algorithm, or one (a pinned
+//! [`ConvAlgorithm`], or direct alone for the float layers of an int8 file, whose strips are one row apart).
+//! With [`PlanSource::Tune`] every candidate row ([`tensorholo_kernels::registry::f32_rows_of`]) is timed on a
+//! sample band ([`SAMPLE_ROWS`] × [`SAMPLE_WIDTH`], one thread, best of [`ROUNDS`] alternating runs), once per
+//! shape and session, and the rules of [`pick`] keep:
+//! - direct, unless the best Winograd row beats the best direct row by [`MARGIN`];
+//! - among Winograd, F(4×4, 3×3) where it beats F(2×2, 3×3) by [`MARGIN_F4`];
 //! - within the algorithm, the first row unless another beats it by [`MARGIN`].
 //!
-//! Later plans of that shape, whatever their size or thread count, reuse the choice, so every plan of a
-//! process computes a shape the same way.
-//!
-//! `TENSORHOLO_CONV=direct|winograd2x2|winograd4x4` pins the algorithm for every f32 layer (`winograd` is
-//! F(2×2, 3×3); `auto`, or unset: measure); the row within it is still timed.
+//! The plan table's rows are what these rules chose in most of 30–35 processes per shape on a quiet machine.
 
-use std::collections::HashMap;
-use std::sync::{Mutex, OnceLock};
+use std::collections::BTreeMap;
 use std::time::Instant;
 
 use tensorholo_kernels::{registry, Algorithm, Conv3x3F32, Inputs, Isa, RowPlanar};
 
 use super::kernel_err;
-use crate::error::{invalid, HoloError, Result};
+use crate::cnn::options::ConvAlgorithm;
+use crate::cnn::saved::{RowAlgorithms, SavedRow};
+use crate::cnn::table;
+use crate::cnn::PlanSource;
+use crate::error::{HoloError, Result};
 use crate::model::graph::ConvLayer;
+use crate::model::CnnWeights;
 
 /// Rows of the sample band (8 Winograd row pairs; the strips of a plan have up to 16 rows).
 const SAMPLE_ROWS: usize = 16;
@@ -45,76 +46,162 @@ const MARGIN: f64 = 1.15;
 /// How much faster F(4×4, 3×3) must run than F(2×2, 3×3) to be chosen.
 const MARGIN_F4: f64 = 1.1;
 
-/// The environment variable that pins the algorithm.
-pub(crate) const ENV: &str = "TENSORHOLO_CONV";
+/// A layer shape: `(C_in, C_out, what its row is chosen among)`.
+pub(crate) type RowKey = (usize, usize, RowAlgorithms);
 
-/// A layer shape and the algorithms its timing chose among.
-type Key = (Isa, usize, usize, Vec<Algorithm>);
-
-fn chosen() -> &'static Mutex<HashMap<Key, &'static str>> {
-    static CHOSEN: OnceLock<Mutex<HashMap<Key, &'static str>>> = OnceLock::new();
-    CHOSEN.get_or_init(|| Mutex::new(HashMap::new()))
+/// The kernel row of each f32 layer shape of a session's networks, and where each came from.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct Rows {
+    rows: BTreeMap<RowKey, &'static str>,
+    /// How many rows came from a saved tuning and how many from the table.
+    pub(crate) saved: usize,
+    pub(crate) table: usize,
 }
 
-/// The algorithm `TENSORHOLO_CONV` pins (`None`: unset or `auto`). Errors: [`HoloError::InvalidParameter`]
-/// (crate::error::HoloError) for another value.
-pub(crate) fn pinned() -> Result<Option<Algorithm>> {
-    parse(std::env::var(ENV).ok().as_deref())
-}
+impl Rows {
+    /// The row decided for `key`, if any.
+    fn get(&self, key: RowKey) -> Option<&'static str> {
+        self.rows.get(&key).copied()
+    }
 
-/// A `TENSORHOLO_CONV` value (`None`: unset). Errors: as [`pinned`].
-fn parse(value: Option<&str>) -> Result<Option<Algorithm>> {
-    match value.map(str::trim) {
-        None | Some("") | Some("auto") => Ok(None),
-        Some("direct") => Ok(Some(Algorithm::Direct)),
-        Some("winograd") | Some("winograd2x2") => Ok(Some(Algorithm::Winograd2x2)),
-        Some("winograd4x4") => Ok(Some(Algorithm::Winograd4x4)),
-        Some(other) => Err(invalid(
-            "TENSORHOLO_CONV",
-            format!("`{other}` is not one of direct, winograd2x2 (or winograd), winograd4x4, auto"),
-        )),
+    /// The rows of a list (a session's decisions, [`Rows::saved_rows`]), each where `isa` may run it.
+    pub(crate) fn from_saved(isa: Isa, list: &[SavedRow]) -> Self {
+        let mut rows = Self::default();
+        for r in list {
+            let key = (r.c_in, r.c_out, r.algorithms);
+            if let Some(name) = known(isa, key, &r.row) {
+                rows.rows.insert(key, name);
+            }
+        }
+        rows
+    }
+
+    /// Rows for `graph` whose layer shapes cycle through direct, F(2×2, 3×3) and F(4×4, 3×3), each on its
+    /// first row (tests: layers of different tile widths in one network).
+    #[cfg(test)]
+    pub(crate) fn mixed(graph: &CnnWeights, isa: Isa) -> Self {
+        let algorithms = [
+            Algorithm::Direct,
+            Algorithm::Winograd2x2,
+            Algorithm::Winograd4x4,
+        ];
+        let mut rows = Self::default();
+        for (i, (key, _)) in shapes(graph, ConvAlgorithm::Auto).into_iter().enumerate() {
+            let alg = algorithms[i % algorithms.len()];
+            if let Some(k) = registry::f32_rows_of(isa, key.1, alg).next() {
+                rows.rows.entry(key).or_insert(k.name);
+            }
+        }
+        rows
+    }
+
+    /// The rows as a saved tuning lists them.
+    pub(crate) fn saved_rows(&self) -> Vec<SavedRow> {
+        self.rows
+            .iter()
+            .map(|(&(c_in, c_out, algorithms), &row)| SavedRow {
+                c_in,
+                c_out,
+                algorithms,
+                row: row.into(),
+            })
+            .collect()
     }
 }
 
-/// How a layer's algorithm is picked ([`plan_layer`]).
+/// The layer shapes of `graph` (an f32 network's every layer under `conv`; an int8 file's float layers,
+/// direct only), with the layers.
+fn shapes(graph: &CnnWeights, conv: ConvAlgorithm) -> Vec<(RowKey, &ConvLayer)> {
+    fn key(l: &ConvLayer, set: RowAlgorithms) -> (RowKey, &ConvLayer) {
+        ((l.c_in, l.c_out, set), l)
+    }
+    match graph.quant {
+        None => {
+            let set = RowAlgorithms::of_request(conv);
+            graph.layers.iter().map(|l| key(l, set)).collect()
+        }
+        Some(_) => super::int8::float_layers(graph)
+            .map(|l| key(l, RowAlgorithms::Direct))
+            .collect(),
+    }
+}
+
+/// The rows of every f32 layer shape of `graphs` under `isa`, as `source` says: the plan table's; a saved
+/// tuning's, the table's where it lists none (after checking it was made for `isa`); or timed now.
+///
+/// Errors: [`HoloError::InvalidParameter`] (`tuning`) for saved plans of another ISA level; the kernels'
+/// plan errors while timing.
+pub(crate) fn decide(
+    graphs: &[&CnnWeights],
+    isa: Isa,
+    conv: ConvAlgorithm,
+    source: &PlanSource,
+) -> Result<Rows> {
+    if let PlanSource::Saved(p) = source {
+        p.check_isa(isa)?;
+    }
+    let mut rows = Rows::default();
+    for graph in graphs {
+        for ((c_in, c_out, set), layer) in shapes(graph, conv) {
+            let key = (c_in, c_out, set);
+            if rows.rows.contains_key(&key) {
+                continue;
+            }
+            let name = match source {
+                PlanSource::Table => {
+                    rows.table += 1;
+                    table::row(isa, c_in, c_out, set).0
+                }
+                PlanSource::Saved(p) => {
+                    match p.row(c_in, c_out, set).and_then(|n| known(isa, key, n)) {
+                        Some(name) => {
+                            rows.saved += 1;
+                            name
+                        }
+                        None => {
+                            rows.table += 1;
+                            table::row(isa, c_in, c_out, set).0
+                        }
+                    }
+                }
+                PlanSource::Tune => timed_row(layer, isa, set)?,
+            };
+            rows.rows.insert(key, name);
+        }
+    }
+    Ok(rows)
+}
+
+/// The compiled row `name` where `isa` may run it for `key` (a saved row's name as the registry's
+/// `&'static str`).
+fn known(isa: Isa, (_, c_out, set): RowKey, name: &str) -> Option<&'static str> {
+    set.algorithms()
+        .iter()
+        .flat_map(|&alg| registry::f32_rows_of(isa, c_out, alg))
+        .map(|k| k.name)
+        .find(|&k| k == name)
+}
+
+/// How a layer's row is picked ([`plan_layer`]).
 #[derive(Clone, Copy, Debug)]
 pub(crate) enum Choice<'a> {
-    /// The one [`TENSORHOLO_CONV`](ENV) pins or, unset, the fastest of every algorithm (measured).
-    Measure,
-    /// The fastest of these algorithms (measured; `TENSORHOLO_CONV` ignored): e.g. direct alone for the
-    /// float layers of the int8 plan, whose strips are one row apart.
-    Among(&'a [Algorithm]),
-    /// This algorithm on its first row, not timed (tests that compare algorithms).
+    /// The row `rows` holds for the layer's shape among these algorithms (the table's where it holds none).
+    Rows(&'a Rows, RowAlgorithms),
+    /// This algorithm on its first row (tests that compare algorithms).
+    #[cfg(test)]
     Exact(Algorithm),
 }
 
-/// The planned f32 convolution of `layer` (`relu` after the bias) for `isa`, its algorithm and row picked as
-/// `choice` says (measured once per process, shape and set of algorithms). Errors: the kernels' (as
-/// [`Conv3x3F32::new`]), a bad `TENSORHOLO_CONV`.
+/// The planned f32 convolution of `layer` (`relu` after the bias) for `isa`, on the row `choice` gives.
+/// Errors: the kernels' (as [`Conv3x3F32::new`]).
 pub(crate) fn plan_layer(
     layer: &ConvLayer,
     relu: bool,
     isa: Isa,
     choice: Choice<'_>,
 ) -> Result<Conv3x3F32> {
-    let row = |name: &str| {
-        Conv3x3F32::with_kernel(
-            &layer.weights,
-            &layer.bias,
-            layer.c_in,
-            layer.c_out,
-            relu,
-            name,
-        )
-        .map_err(kernel_err)
-    };
-    let all = [
-        Algorithm::Direct,
-        Algorithm::Winograd2x2,
-        Algorithm::Winograd4x4,
-    ];
-    let pin;
-    let algorithms: &[Algorithm] = match choice {
+    let name = match choice {
+        #[cfg(test)]
         Choice::Exact(alg) => {
             return Conv3x3F32::with_algorithm(
                 &layer.weights,
@@ -127,24 +214,37 @@ pub(crate) fn plan_layer(
             )
             .map_err(kernel_err)
         }
-        Choice::Among(algs) => algs,
-        Choice::Measure => match pinned()? {
-            Some(alg) => {
-                pin = [alg];
-                &pin
-            }
-            None => &all,
-        },
+        Choice::Rows(rows, set) => rows
+            .get((layer.c_in, layer.c_out, set))
+            .unwrap_or_else(|| table::row(isa, layer.c_in, layer.c_out, set).0),
     };
-    let key = (isa, layer.c_in, layer.c_out, algorithms.to_vec());
-    let known = chosen().lock().ok().and_then(|m| m.get(&key).copied());
-    if let Some(name) = known {
-        return row(name);
-    }
+    Conv3x3F32::with_kernel(
+        &layer.weights,
+        &layer.bias,
+        layer.c_in,
+        layer.c_out,
+        relu,
+        name,
+    )
+    .map_err(kernel_err)
+}
+
+/// The row [`pick`] keeps among every row of `set`'s algorithms for `layer`, timed on the sample band.
+fn timed_row(layer: &ConvLayer, isa: Isa, set: RowAlgorithms) -> Result<&'static str> {
     let mut candidates = Vec::new();
-    for &alg in algorithms {
+    for &alg in set.algorithms() {
         for info in registry::f32_rows_of(isa, layer.c_out, alg) {
-            candidates.push(row(info.name)?);
+            candidates.push(
+                Conv3x3F32::with_kernel(
+                    &layer.weights,
+                    &layer.bias,
+                    layer.c_in,
+                    layer.c_out,
+                    true,
+                    info.name,
+                )
+                .map_err(kernel_err)?,
+            );
         }
     }
     let times = best_times(&candidates)?;
@@ -163,14 +263,7 @@ pub(crate) fn plan_layer(
             .join(", "),
         candidates[best].kernel().name
     );
-    let name = candidates[best].kernel().name;
-    if let Ok(mut m) = chosen().lock() {
-        m.insert(key, name);
-    }
-    candidates
-        .into_iter()
-        .nth(best)
-        .ok_or_else(|| HoloError::Internal("the chosen convolution plan is missing".into()))
+    Ok(candidates[best].kernel().name)
 }
 
 /// The index of the row to keep among `plans` timed `times` (seconds; the rules in the module docs), `None`
@@ -241,73 +334,109 @@ fn best_times(plans: &[Conv3x3F32]) -> Result<Vec<f64>> {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use std::sync::Arc;
 
-    #[test]
-    fn the_pin_names_an_algorithm_or_is_refused() {
-        assert_eq!(parse(None).unwrap(), None);
-        assert_eq!(parse(Some(" auto")).unwrap(), None);
-        assert_eq!(parse(Some("direct")).unwrap(), Some(Algorithm::Direct));
-        assert_eq!(
-            parse(Some("winograd")).unwrap(),
-            Some(Algorithm::Winograd2x2)
-        );
-        assert_eq!(
-            parse(Some("winograd2x2")).unwrap(),
-            Some(Algorithm::Winograd2x2)
-        );
-        assert_eq!(
-            parse(Some("winograd4x4")).unwrap(),
-            Some(Algorithm::Winograd4x4)
-        );
-        let e = parse(Some("fft")).unwrap_err();
-        assert!(matches!(
-            e,
-            HoloError::InvalidParameter {
-                name: "TENSORHOLO_CONV",
-                ..
-            }
-        ));
-        assert!(e.to_string().contains("`fft`"), "{e}");
+    use super::*;
+    use crate::cnn::saved::SavedPlans;
+
+    fn graph(shapes: &[(usize, usize)]) -> CnnWeights {
+        CnnWeights {
+            in_channels: shapes[0].0,
+            layers: shapes
+                .iter()
+                .map(|&(c_in, c_out)| ConvLayer {
+                    c_in,
+                    c_out,
+                    weights: vec![0.25; c_out * c_in * 9],
+                    bias: vec![0.5; c_out],
+                })
+                .collect(),
+            input_offset: 0.0,
+            output: crate::model::graph::CnnOutput::Heads {
+                amplitude_scale: 1.0,
+                phase_scale: 0.5,
+            },
+            quant: None,
+        }
     }
 
     #[test]
-    fn a_measured_choice_is_kept_for_the_shape() {
-        // The second plan of a shape reuses the first one's choice (no second measurement), whatever it was.
-        if pinned().unwrap().is_some() {
-            println!("SKIPPED: TENSORHOLO_CONV pins the algorithm");
-            return;
-        }
-        let layer = ConvLayer {
-            c_in: 5,
-            c_out: 7,
-            weights: vec![0.25; 7 * 5 * 9],
-            bias: vec![0.5; 7],
-        };
+    fn the_table_decides_each_shape_once_and_the_same_every_time() {
         let isa = Isa::active().unwrap();
-        let first = plan_layer(&layer, true, isa, Choice::Measure)
-            .unwrap()
-            .kernel()
-            .name;
-        let all = vec![
-            Algorithm::Direct,
-            Algorithm::Winograd2x2,
-            Algorithm::Winograd4x4,
-        ];
-        let known = chosen().lock().unwrap().get(&(isa, 5, 7, all)).copied();
-        assert_eq!(known, Some(first));
-        let again = plan_layer(&layer, true, isa, Choice::Measure)
-            .unwrap()
-            .kernel()
-            .name;
-        assert_eq!(again, first);
-        // A choice among direct rows only stays direct; an exact algorithm overrides the measured one.
-        let direct = plan_layer(&layer, true, isa, Choice::Among(&[Algorithm::Direct])).unwrap();
-        assert_eq!(direct.kernel().algorithm, Algorithm::Direct);
-        for alg in [Algorithm::Direct, Algorithm::Winograd4x4] {
-            let exact = plan_layer(&layer, true, isa, Choice::Exact(alg)).unwrap();
-            assert_eq!(exact.kernel().algorithm, alg);
+        let g = graph(&[(4, 24), (24, 24), (24, 24), (28, 6)]);
+        let a = decide(&[&g], isa, ConvAlgorithm::Auto, &PlanSource::Table).unwrap();
+        let b = decide(&[&g], isa, ConvAlgorithm::Auto, &PlanSource::Table).unwrap();
+        assert_eq!(a, b);
+        assert_eq!((a.table, a.saved), (3, 0));
+        for (key, row) in &a.rows {
+            assert_eq!(*row, table::row(isa, key.0, key.1, key.2).0);
         }
+        // A pinned algorithm: every row of it.
+        let d = decide(&[&g], isa, ConvAlgorithm::Direct, &PlanSource::Table).unwrap();
+        for row in d.saved_rows() {
+            let k = registry::f32_kernels().find(|k| k.name == row.row).unwrap();
+            assert_eq!(k.algorithm, Algorithm::Direct, "{}", row.row);
+            assert_eq!(row.algorithms, RowAlgorithms::Direct);
+        }
+    }
+
+    #[test]
+    fn saved_rows_are_used_and_the_table_fills_the_rest() {
+        let isa = Isa::active().unwrap();
+        let g = graph(&[(4, 24), (24, 24), (28, 6)]);
+        // Save a row the table would not choose for 24→24: the direct one.
+        let direct = registry::f32_rows_of(isa, 24, Algorithm::Direct)
+            .next()
+            .unwrap();
+        let mut p = SavedPlans::new(isa.name(), "test");
+        p.rows.push(SavedRow {
+            c_in: 24,
+            c_out: 24,
+            algorithms: RowAlgorithms::Any,
+            row: direct.name.into(),
+        });
+        let source = PlanSource::Saved(Arc::new(p.clone()));
+        let rows = decide(&[&g], isa, ConvAlgorithm::Auto, &source).unwrap();
+        assert_eq!(rows.get((24, 24, RowAlgorithms::Any)), Some(direct.name));
+        assert_eq!((rows.saved, rows.table), (1, 2));
+        let plan = plan_layer(
+            &g.layers[1],
+            true,
+            isa,
+            Choice::Rows(&rows, RowAlgorithms::Any),
+        )
+        .unwrap();
+        assert_eq!(plan.kernel().name, direct.name);
+        // Made for another ISA level: refused, naming both.
+        let other = if isa == Isa::Scalar { "avx2" } else { "scalar" };
+        p.isa = other.into();
+        let e = decide(
+            &[&g],
+            isa,
+            ConvAlgorithm::Auto,
+            &PlanSource::Saved(Arc::new(p)),
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string().contains(other) && e.to_string().contains(isa.name()),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn tuning_times_the_rows_of_the_shape_and_keeps_one_of_them() {
+        let isa = Isa::active().unwrap();
+        let g = graph(&[(5, 7), (7, 7)]);
+        let rows = decide(&[&g], isa, ConvAlgorithm::Winograd4x4, &PlanSource::Tune).unwrap();
+        for row in rows.saved_rows() {
+            assert!(
+                registry::f32_rows_of(isa, row.c_out, Algorithm::Winograd4x4)
+                    .any(|k| k.name == row.row),
+                "{}",
+                row.row
+            );
+        }
+        assert_eq!(rows.saved_rows().len(), 2);
     }
 
     #[test]

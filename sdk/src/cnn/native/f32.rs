@@ -31,11 +31,11 @@ use std::sync::Arc;
 use ndarray::{Array3, ArrayView3, CowArray, Ix3};
 use rayon::prelude::*;
 use tensorholo_kernels::{
-    depthwise_rows, fake_quantize, tanh_heads, Algorithm, Conv3x3F32, Inputs, Isa, KernelError,
-    QuantU8, RowPlanar,
+    depthwise_rows, fake_quantize, tanh_heads, Conv3x3F32, Inputs, Isa, KernelError, QuantU8,
+    RowPlanar,
 };
 
-use super::algorithm::{self, Choice};
+use super::algorithm::{self, Choice, Rows};
 use super::kernel_err;
 use super::slabs::{Cols, Slabs};
 use super::strips::{
@@ -43,6 +43,7 @@ use super::strips::{
     F32Rows, Place, Strips, Window,
 };
 use crate::cnn::plan::{check_output_planes, check_planes, CnnPlan};
+use crate::cnn::saved::RowAlgorithms;
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnWeights, QuantGrid};
 
@@ -81,6 +82,7 @@ impl NativePlan {
     /// Errors: [`HoloError::InvalidData`] for non-finite weights; [`HoloError::InvalidParameter`] for 0
     /// threads; [`HoloError::Internal`] for an int8 graph (`NativeInt8Plan` runs those); [`HoloError::ModelRun`] for an ISA this CPU lacks, a size the kernels refuse or a thread
     /// pool the OS will not start.
+    #[cfg(test)]
     pub(crate) fn new(
         graph: Arc<CnnWeights>,
         height: usize,
@@ -91,8 +93,30 @@ impl NativePlan {
         Self::with_strip(graph, height, width, threads, isa, None, None)
     }
 
+    /// [`new`](Self::new) with every layer on the row `rows` decided for its shape among `set` (the table's
+    /// where it holds none). Errors: as `new`.
+    pub(crate) fn with_rows(
+        graph: Arc<CnnWeights>,
+        height: usize,
+        width: usize,
+        threads: usize,
+        isa: Isa,
+        (rows, set): (&Rows, RowAlgorithms),
+    ) -> Result<Self> {
+        Self::build(
+            graph,
+            height,
+            width,
+            threads,
+            isa,
+            (None, None),
+            Choice::Rows(rows, set),
+        )
+    }
+
     /// [`new`](Self::new) with strips of `strip` rows (`None`: `strips::strip_rows`; more than `H + N` rows:
-    /// one strip) and every layer on `conv` (`None`: as `algorithm::plan_layer` chooses). Errors: as `new`.
+    /// one strip) and every layer on `conv`'s first row (`None`: the plan table's row). Errors: as `new`.
+    #[cfg(test)]
     pub(crate) fn with_strip(
         graph: Arc<CnnWeights>,
         height: usize,
@@ -100,13 +124,14 @@ impl NativePlan {
         threads: usize,
         isa: Isa,
         strip: Option<usize>,
-        conv: Option<Algorithm>,
+        conv: Option<tensorholo_kernels::Algorithm>,
     ) -> Result<Self> {
         Self::with_slabs(graph, height, width, threads, isa, (strip, None), conv)
     }
 
     /// [`with_strip`](Self::with_strip) with the frame in `slabs` column slabs (`None`: as
     /// `Slabs::count_for` chooses; [`super::slabs`]). Errors: as `new`.
+    #[cfg(test)]
     pub(crate) fn with_slabs(
         graph: Arc<CnnWeights>,
         height: usize,
@@ -114,7 +139,37 @@ impl NativePlan {
         threads: usize,
         isa: Isa,
         (strip, slabs): (Option<usize>, Option<usize>),
-        conv: Option<Algorithm>,
+        conv: Option<tensorholo_kernels::Algorithm>,
+    ) -> Result<Self> {
+        let table = Rows::default();
+        let choice = conv.map_or(Choice::Rows(&table, RowAlgorithms::Any), Choice::Exact);
+        Self::build(graph, height, width, threads, isa, (strip, slabs), choice)
+    }
+
+    /// [`with_slabs`](Self::with_slabs) with the layer shapes cycling through the three algorithms
+    /// ([`Rows::mixed`]). Errors: as `new`.
+    #[cfg(test)]
+    pub(crate) fn with_slabs_mixed(
+        graph: Arc<CnnWeights>,
+        height: usize,
+        width: usize,
+        threads: usize,
+        isa: Isa,
+        slabs: Option<usize>,
+    ) -> Result<Self> {
+        let rows = Rows::mixed(&graph, isa);
+        let choice = Choice::Rows(&rows, RowAlgorithms::Any);
+        Self::build(graph, height, width, threads, isa, (None, slabs), choice)
+    }
+
+    fn build(
+        graph: Arc<CnnWeights>,
+        height: usize,
+        width: usize,
+        threads: usize,
+        isa: Isa,
+        (strip, slabs): (Option<usize>, Option<usize>),
+        choice: Choice<'_>,
     ) -> Result<Self> {
         if threads == 0 {
             return Err(crate::error::invalid(
@@ -135,7 +190,6 @@ impl NativePlan {
                     "CNN layer {i} holds NaN or infinite weights"
                 )));
             }
-            let choice = conv.map_or(Choice::Measure, Choice::Exact);
             layers.push(algorithm::plan_layer(l, i + 1 < n, isa, choice)?);
         }
         let c = graph.in_channels;

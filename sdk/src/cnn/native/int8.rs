@@ -42,9 +42,9 @@
 use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3};
-use tensorholo_kernels::{Algorithm, Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, RowPlanar};
+use tensorholo_kernels::{Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, Isa, RowPlanar};
 
-use super::algorithm::{self, Choice};
+use super::algorithm::{self, Choice, Rows};
 use super::f32::{
     finish_outputs, heads_of, heads_rows, input_rows, last_layer_rows, owned_outputs, planar_slice,
     pool, standard_input, u8_grid, BaseInput, FusedBase, Outputs, Planes,
@@ -55,6 +55,7 @@ use super::strips::{
     advance_all, bands, both, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window,
 };
 use crate::cnn::plan::{check_planes, CnnPlan};
+use crate::cnn::saved::RowAlgorithms;
 use crate::error::{HoloError, Result};
 use crate::model::{CnnQuant, CnnWeights, LayerQuant, QuantGrid};
 
@@ -77,6 +78,21 @@ impl Network {
             .as_ref()
             .ok_or_else(|| HoloError::Internal("native int8 plan without grids".into()))
     }
+}
+
+/// Whether an int8 file of `n` layers is mixed precision: float first and last layers (the graph reader allows
+/// no other float layers).
+fn is_mixed(quant: &CnnQuant, n: usize) -> bool {
+    n >= 3 && quant.layers[0].is_none() && quant.layers[n - 1].is_none()
+}
+
+/// The layers of an int8 file that run the f32 kernels: the first and the last of a mixed-precision file,
+/// none otherwise (and none for an f32 file).
+pub(super) fn float_layers(graph: &CnnWeights) -> impl Iterator<Item = &crate::model::ConvLayer> {
+    let n = graph.layers.len();
+    let mixed = graph.quant.as_ref().is_some_and(|q| is_mixed(q, n));
+    let ends = if mixed { vec![0, n - 1] } else { Vec::new() };
+    ends.into_iter().map(move |i| &graph.layers[i])
 }
 
 /// Layer `i`'s int8 form. Errors: a float layer ([`HoloError::ModelRun`]).
@@ -143,6 +159,7 @@ impl NativeInt8Plan {
     /// scales, weights or biases; [`HoloError::ModelRun`] for a graph without int8 grids, float layers other
     /// than the first and the last together, an ISA this CPU lacks, a size the kernels refuse or a thread
     /// pool the OS will not start.
+    #[cfg(test)]
     pub(crate) fn new(
         graph: Arc<CnnWeights>,
         height: usize,
@@ -150,10 +167,24 @@ impl NativeInt8Plan {
         threads: usize,
         isa: Isa,
     ) -> Result<Self> {
-        Self::with_strip(graph, height, width, threads, isa, None)
+        Self::build(graph, height, width, threads, isa, None, &Rows::default())
+    }
+
+    /// [`new`](Self::new) with the float layers on the rows `rows` decided (the table's where it holds none).
+    /// Errors: as `new`.
+    pub(crate) fn with_rows(
+        graph: Arc<CnnWeights>,
+        height: usize,
+        width: usize,
+        threads: usize,
+        isa: Isa,
+        rows: &Rows,
+    ) -> Result<Self> {
+        Self::build(graph, height, width, threads, isa, None, rows)
     }
 
     /// [`new`](Self::new) with strips of `strip` rows (`None`: `strips::strip_rows`). Errors: as `new`.
+    #[cfg(test)]
     pub(crate) fn with_strip(
         graph: Arc<CnnWeights>,
         height: usize,
@@ -161,6 +192,18 @@ impl NativeInt8Plan {
         threads: usize,
         isa: Isa,
         strip: Option<usize>,
+    ) -> Result<Self> {
+        Self::build(graph, height, width, threads, isa, strip, &Rows::default())
+    }
+
+    fn build(
+        graph: Arc<CnnWeights>,
+        height: usize,
+        width: usize,
+        threads: usize,
+        isa: Isa,
+        strip: Option<usize>,
+        rows: &Rows,
     ) -> Result<Self> {
         if threads == 0 {
             return Err(crate::error::invalid(
@@ -174,8 +217,7 @@ impl NativeInt8Plan {
         let n = graph.layers.len();
         let hidden = graph.layers[0].c_out;
         let c = graph.in_channels;
-        // Mixed precision: float first and last layers (the graph reader allows no other float layers).
-        let mixed = n >= 3 && quant.layers[0].is_none() && quant.layers[n - 1].is_none();
+        let mixed = is_mixed(quant, n);
         let int8 = if mixed { 1..n - 1 } else { 0..n };
         for (i, l) in graph.layers.iter().enumerate() {
             if l.bias.iter().chain(&l.weights).any(|v| !v.is_finite()) {
@@ -219,9 +261,9 @@ impl NativeInt8Plan {
         let float_ends = match mixed {
             true => {
                 let (l0, ln) = (&graph.layers[0], &graph.layers[n - 1]);
-                // Direct (the strips are one row apart), on the row measured fastest for the shape.
+                // Direct (the strips are one row apart), on the session's row for the shape.
                 let f = |l: &crate::model::ConvLayer, relu| {
-                    algorithm::plan_layer(l, relu, isa, Choice::Among(&[Algorithm::Direct]))
+                    algorithm::plan_layer(l, relu, isa, Choice::Rows(rows, RowAlgorithms::Direct))
                 };
                 Some([f(l0, true)?, f(ln, false)?])
             }

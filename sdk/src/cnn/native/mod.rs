@@ -8,10 +8,12 @@
 //! - `strips.rs`: the line buffers both plans share (each activation in a window of a few rows);
 //! - `slabs.rs`: column slabs, a wide frame run as a few narrower ones so a layer's rows stay in L2 (the f32
 //!   plan);
-//! - `algorithm.rs`: direct or Winograd, and which kernel row, per layer shape (measured).
+//! - `algorithm.rs`: direct or Winograd, and which kernel row, per layer shape (the plan table's, a saved
+//!   tuning's, or timed when asked).
 //!
-//! Its candidates are thread counts ([`NativeEngine`]'s [`Engine::tune`]); it has no per-model state beyond
-//! the graph the model reads once ([`crate::model::HologramModel::cnn_graph`]).
+//! [`NativeEngine`]'s [`Engine::tune`] decides each layer shape's row and the threads (timed only with
+//! [`crate::cnn::PlanSource::Tune`]); it has no per-model or per-process state beyond the graph the model
+//! reads once ([`crate::model::HologramModel::cnn_graph`]).
 
 mod algorithm;
 mod f32;
@@ -22,12 +24,13 @@ mod strips;
 use std::sync::Arc;
 use std::time::Instant;
 
+use algorithm::Rows;
+
 use super::engine::{Engine, EnginePlans, Networks, Tuning};
+use super::options::{default_threads, CnnEngine, CnnLayout, ConvAlgorithm, ThreadCount};
 use super::plan::{time_plan, CnnPlan};
-use super::tuning::{
-    auto_thread_candidates, timing_resolution, CnnEngine, CnnLayout, PlanRequest, PlanTiming,
-    ThreadCount,
-};
+use super::saved::{network_key, RowAlgorithms};
+use super::tuning::{auto_thread_candidates, timing_resolution, PlanRequest, PlanTiming};
 use crate::error::{HoloError, Result};
 use crate::model::CnnWeights;
 use tensorholo_kernels::Isa;
@@ -55,49 +58,76 @@ impl Engine for NativeEngine {
         nets: Networks<'_>,
         height: usize,
         width: usize,
-        request: PlanRequest,
+        request: &PlanRequest,
         time_single: bool,
         _to_beat: Option<f64>,
     ) -> Result<Tuning> {
-        let graph = nets.hologram.cnn_graph()?;
+        let start = Instant::now();
+        let isa = active_isa()?;
+        let graphs = nets
+            .each()
+            .map(|m| m.cnn_graph())
+            .collect::<Result<Vec<_>>>()?;
+        let refs: Vec<&CnnWeights> = graphs.iter().map(|g| g.as_ref()).collect();
+        let rows = algorithm::decide(&refs, isa, request.conv, &request.source)?;
+        let mut notes = Vec::new();
+        if request.source.saved().is_some() {
+            notes.push(format!(
+                "{} layer row(s) from the saved plans, {} from the table",
+                rows.saved, rows.table
+            ));
+        }
+        let saved = request
+            .source
+            .saved()
+            .and_then(|p| p.session(&network_key(nets.hologram), [height, width]))
+            .filter(|s| s.engine == CnnEngine::Native);
         let counts = match request.threads {
-            ThreadCount::Auto => auto_thread_candidates(),
+            ThreadCount::Auto if request.source.tunes() => auto_thread_candidates(),
+            ThreadCount::Auto => match saved.and_then(|s| s.threads) {
+                Some(t) => {
+                    notes.push(format!("{t} thread(s) from the saved plans"));
+                    vec![t]
+                }
+                None => vec![default_threads()],
+            },
             ThreadCount::Fixed(n) => vec![n],
             ThreadCount::ProcessDefault => vec![1],
         };
-        if counts.len() == 1 && !time_single {
-            return Ok(Tuning {
-                layout: CnnLayout::ChannelsFirst,
-                threads: Some(counts[0]),
-                candidates: Vec::new(),
-                seconds: 0.0,
-            });
-        }
-        let [th, tw] = timing_resolution(height, width);
-        let start = Instant::now();
-        let isa = active_isa()?;
+        let graph = &graphs[0];
         let mut candidates = Vec::new();
-        for &t in &counts {
-            let (mut plan, _) = native_plan(graph.clone(), th, tw, t, isa)?;
-            let s = time_plan(plan.as_mut(), graph.in_channels, th, tw)?;
-            candidates.push(PlanTiming {
-                engine: CnnEngine::Native,
-                layout: CnnLayout::ChannelsFirst,
-                threads: Some(t),
-                seconds: Some(s),
-                skipped: None,
-            });
+        if counts.len() > 1 || time_single {
+            let [th, tw] = timing_resolution(height, width);
+            for &t in &counts {
+                let (mut plan, _) =
+                    native_plan(graph.clone(), th, tw, t, isa, &rows, request.conv)?;
+                let s = time_plan(plan.as_mut(), graph.in_channels, th, tw)?;
+                candidates.push(PlanTiming {
+                    engine: CnnEngine::Native,
+                    layout: CnnLayout::ChannelsFirst,
+                    threads: Some(t),
+                    seconds: Some(s),
+                    skipped: None,
+                });
+            }
         }
         let threads = candidates
             .iter()
             .filter_map(|c| Some((c.seconds?, c.threads?)))
             .min_by(|a, b| a.0.total_cmp(&b.0))
-            .map_or(1, |(_, t)| t);
+            .map_or(counts[0], |(_, t)| t);
+        let timed = request.source.tunes() || !candidates.is_empty();
         Ok(Tuning {
             layout: CnnLayout::ChannelsFirst,
             threads: Some(threads),
             candidates,
-            seconds: start.elapsed().as_secs_f64(),
+            seconds: if timed {
+                start.elapsed().as_secs_f64()
+            } else {
+                0.0
+            },
+            rows: rows.saved_rows(),
+            notes,
         })
     }
 
@@ -124,14 +154,34 @@ impl Engine for NativeEngine {
         nets: Networks<'_>,
         height: usize,
         width: usize,
+        request: &PlanRequest,
         tuning: &Tuning,
     ) -> Result<EnginePlans> {
         let isa = active_isa()?;
         let threads = tuning.threads.unwrap_or(1);
-        let (hologram, kernel) =
-            native_plan(nets.hologram.cnn_graph()?, height, width, threads, isa)?;
+        let rows = Rows::from_saved(isa, &tuning.rows);
+        let (hologram, kernel) = native_plan(
+            nets.hologram.cnn_graph()?,
+            height,
+            width,
+            threads,
+            isa,
+            &rows,
+            request.conv,
+        )?;
         let prefilter = match nets.prefilter {
-            Some(p) => Some(native_plan(p.cnn_graph()?, height, width, threads, isa)?.0),
+            Some(p) => Some(
+                native_plan(
+                    p.cnn_graph()?,
+                    height,
+                    width,
+                    threads,
+                    isa,
+                    &rows,
+                    request.conv,
+                )?
+                .0,
+            ),
             None => None,
         };
         Ok(EnginePlans {
@@ -143,7 +193,8 @@ impl Engine for NativeEngine {
 }
 
 /// A native plan for `graph` at `height × width` on `threads` threads: the int8 engine for an int8 (QDQ)
-/// file, the f32 engine otherwise; with the kernel rows its layers run (`NativePlan::kernel_name`). Errors: as
+/// file, the f32 engine otherwise, each f32 layer on the row `rows` decided for its shape (chosen among the
+/// algorithms `conv` allows); with the kernel rows its layers run (`NativePlan::kernel_name`). Errors: as
 /// `NativePlan::new` / `NativeInt8Plan::new`.
 pub(super) fn native_plan(
     graph: Arc<CnnWeights>,
@@ -151,16 +202,40 @@ pub(super) fn native_plan(
     width: usize,
     threads: usize,
     isa: tensorholo_kernels::Isa,
+    rows: &Rows,
+    conv: ConvAlgorithm,
 ) -> Result<(Box<dyn CnnPlan>, String)> {
     if graph.quant.is_some() {
-        let p = int8::NativeInt8Plan::new(graph, height, width, threads, isa)?;
+        let p = int8::NativeInt8Plan::with_rows(graph, height, width, threads, isa, rows)?;
         let k = p.kernel_name().to_string();
         Ok((Box::new(p), k))
     } else {
-        let p = f32::NativePlan::new(graph, height, width, threads, isa)?;
+        let set = RowAlgorithms::of_request(conv);
+        let p = f32::NativePlan::with_rows(graph, height, width, threads, isa, (rows, set))?;
         let k = p.kernel_name();
         Ok((Box::new(p), k))
     }
+}
+
+/// [`native_plan`] with the plan table's rows (tests).
+#[cfg(test)]
+pub(super) fn table_plan(
+    graph: Arc<CnnWeights>,
+    height: usize,
+    width: usize,
+    threads: usize,
+    isa: tensorholo_kernels::Isa,
+) -> Result<(Box<dyn CnnPlan>, String)> {
+    let rows = Rows::default();
+    native_plan(
+        graph,
+        height,
+        width,
+        threads,
+        isa,
+        &rows,
+        ConvAlgorithm::Auto,
+    )
 }
 
 /// `model`'s native plan for `height × width` frames on one thread of `isa`'s kernel rows, whatever the
@@ -172,7 +247,17 @@ pub(crate) fn native_plan_on(
     width: usize,
     isa: tensorholo_kernels::Isa,
 ) -> Result<Box<dyn CnnPlan>> {
-    native_plan(model.cnn_graph()?, height, width, 1, isa).map(|(plan, _)| plan)
+    let rows = Rows::default();
+    native_plan(
+        model.cnn_graph()?,
+        height,
+        width,
+        1,
+        isa,
+        &rows,
+        ConvAlgorithm::Auto,
+    )
+    .map(|(plan, _)| plan)
 }
 
 /// [`tensorholo_kernels::Isa::active`] with its error as the SDK's ([`kernel_err`]).

@@ -20,8 +20,10 @@ pub use model::TractModel;
 pub use plan::{ModelPlan, NodeTiming};
 
 use super::engine::{Engine, EnginePlans, Networks, Tuning};
+use super::options::{CnnEngine, CnnLayout, ThreadCount};
 use super::plan::{time_plan, CnnPlan};
-use super::tuning::{CnnEngine, PlanRequest, PlanTiming};
+use super::saved::network_key;
+use super::tuning::{PlanRequest, PlanTiming};
 use crate::error::Result;
 use crate::model::HologramModel;
 
@@ -76,17 +78,40 @@ impl Engine for TractEngine {
         nets: Networks<'_>,
         height: usize,
         width: usize,
-        request: PlanRequest,
+        request: &PlanRequest,
         time_single: bool,
         to_beat: Option<f64>,
     ) -> Result<Tuning> {
         let model = TractModel::of(nets.hologram)?;
-        let report = model.tuning(height, width, request, to_beat)?;
+        // A saved tuning's layout and threads for this session, as if asked for.
+        let mut request = request.clone();
+        let mut notes = Vec::new();
+        let saved = request
+            .source
+            .saved()
+            .and_then(|p| p.session(&network_key(nets.hologram), [height, width]))
+            .filter(|s| s.engine == CnnEngine::Tract)
+            .cloned();
+        if let Some(s) = saved {
+            if request.layout == CnnLayout::Auto {
+                request.layout = s.layout;
+                notes.push(format!("tract layout {} from the saved plans", s.layout));
+            }
+            if request.threads == ThreadCount::Auto {
+                request.threads = s
+                    .threads
+                    .map_or(ThreadCount::ProcessDefault, ThreadCount::Fixed);
+                notes.push("tract threads from the saved plans".into());
+            }
+        }
+        let report = model.tuning(height, width, &request, to_beat)?;
         let mut tuning = Tuning {
             layout: report.layout,
             threads: report.threads,
             candidates: report.candidates,
             seconds: report.tuning_s,
+            rows: Vec::new(),
+            notes,
         };
         if tuning.candidates.is_empty() && time_single {
             // A single candidate was not timed: time it now, on the same input as the other engines.
@@ -113,6 +138,7 @@ impl Engine for TractEngine {
         nets: Networks<'_>,
         height: usize,
         width: usize,
+        _request: &PlanRequest,
         tuning: &Tuning,
     ) -> Result<EnginePlans> {
         let with_threads = |plan: ModelPlan| match tuning.threads {

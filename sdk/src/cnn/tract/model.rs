@@ -11,9 +11,11 @@ use num_complex::Complex32;
 use tract_onnx::prelude::{Framework, InferenceModelExt, IntoRunnable, Symbol, TDim, TypedModel};
 
 use super::plan::{optimise, tract_msg, ModelPlan, PlanFailure};
+use crate::cnn::options::{default_threads, CnnEngine, CnnLayout, ThreadCount};
+use crate::cnn::table;
 use crate::cnn::tuning::{
-    auto_thread_candidates, fastest_run, timing_resolution, CnnEngine, CnnLayout, PlanReport,
-    PlanRequest, PlanTiming, ThreadCount, NOT_TIMED, PLAUSIBLE_FACTOR,
+    auto_thread_candidates, fastest_run, timing_resolution, PlanOrigin, PlanReport, PlanRequest,
+    PlanTiming, NOT_TIMED, PLAUSIBLE_FACTOR,
 };
 use crate::error::{guarded, invalid, HoloError, Result};
 use crate::model::network::check_fixed_size;
@@ -159,8 +161,8 @@ impl TractModel {
 
     /// As [`TractModel::plan`], run in `layout` (see [`CnnLayout`]); plans are cached per resolution and
     /// layout. Inputs and outputs of the returned plan stay `[C, H, W]` / `[3, H, W]` whatever the layout.
-    /// [`CnnLayout::Auto`] times both layouts with tract's process-wide executor and returns the faster
-    /// ([`TractModel::tuned_plan`], which also reports the timings).
+    /// [`CnnLayout::Auto`] is the plan table's layout on tract's process-wide executor (nothing timed;
+    /// [`TractModel::tuned_plan`] with [`crate::cnn::PlanSource::Tune`] times both).
     ///
     /// Errors: as [`TractModel::plan`]; [`HoloError::InvalidParameter`] if tract cannot move this graph
     /// channels-last (int8 QOperator files: tract 0.23's quantised convolution takes no axis change).
@@ -174,8 +176,9 @@ impl TractModel {
             let request = PlanRequest {
                 layout,
                 threads: ThreadCount::ProcessDefault,
+                ..PlanRequest::default()
             };
-            return self.tuned_plan(height, width, request).map(|(p, _)| p);
+            return self.tuned_plan(height, width, &request).map(|(p, _)| p);
         }
         if let Some(p) = self.lock().get(&(height, width, layout)) {
             return Ok(p.clone());
@@ -274,7 +277,9 @@ impl TractModel {
         self.run(input.view())
     }
 
-    /// The fastest plan of `request` for `height × width` inputs, and the report of how it was chosen.
+    /// The plan of `request` for `height × width` inputs, and the report of how it was chosen: the plan
+    /// table's layout and threads for `Auto` ([`crate::cnn::PlanSource::Table`] or `Saved`: nothing timed), or
+    /// with [`crate::cnn::PlanSource::Tune`] the fastest candidate.
     ///
     /// Every candidate (layouts × thread counts; a layout tract cannot apply to this graph is skipped with
     /// the reason) runs on a constant input at the timing resolution (the frame, or a full-width strip of a frame above
@@ -289,7 +294,7 @@ impl TractModel {
         &self,
         height: usize,
         width: usize,
-        request: PlanRequest,
+        request: &PlanRequest,
     ) -> Result<(ModelPlan, PlanReport)> {
         let report = self.tuning(height, width, request, None)?;
         let plan = self.plan_with_layout(height, width, report.layout)?;
@@ -311,7 +316,7 @@ impl TractModel {
         &self,
         height: usize,
         width: usize,
-        request: PlanRequest,
+        request: &PlanRequest,
         to_beat: Option<f64>,
     ) -> Result<PlanReport> {
         if height == 0 || width == 0 {
@@ -321,7 +326,7 @@ impl TractModel {
             ));
         }
         self.check_fixed_size(height, width)?;
-        let key = (height, width, request);
+        let key = (height, width, request.clone());
         if let Some(mut r) = self.tuned_lock().get(&key).cloned() {
             r.tuning_s = 0.0;
             return Ok(r);
@@ -368,38 +373,35 @@ impl TractModel {
         &self,
         height: usize,
         width: usize,
-        request: PlanRequest,
+        request: &PlanRequest,
         to_beat: Option<f64>,
     ) -> Result<PlanReport> {
+        let tunes = request.source.tunes();
         let layouts: Vec<CnnLayout> = match request.layout {
-            CnnLayout::Auto => CnnLayout::ALL.to_vec(),
+            CnnLayout::Auto if tunes => CnnLayout::ALL.to_vec(),
+            CnnLayout::Auto => vec![self.table_layout(height, width)?],
             l => vec![l],
         };
         // The most threads first: the likeliest winner, timed before any early stop (`to_beat`).
         let threads: Vec<Option<usize>> = match request.threads {
-            ThreadCount::Auto => auto_thread_candidates()
+            ThreadCount::Auto if tunes => auto_thread_candidates()
                 .into_iter()
                 .rev()
                 .map(Some)
                 .collect(),
+            ThreadCount::Auto => vec![Some(default_threads())],
             ThreadCount::Fixed(n) => vec![Some(n)],
             ThreadCount::ProcessDefault => vec![None],
         };
         let timed_resolution = timing_resolution(height, width);
         if layouts.len() * threads.len() == 1 {
-            return Ok(PlanReport {
-                resolution: [height, width],
+            return Ok(self.report(
+                [height, width],
                 request,
-                engine: CnnEngine::Tract,
-                engine_reason: "tract's plan".into(),
-                kernel: None,
-                layout: layouts[0],
-                threads: threads[0],
-                autotuned: false,
-                timed_resolution,
-                candidates: Vec::new(),
-                tuning_s: 0.0,
-            });
+                (layouts[0], threads[0]),
+                Vec::new(),
+                0.0,
+            ));
         }
         let start = Instant::now();
         let [th, tw] = timed_resolution;
@@ -483,19 +485,62 @@ impl TractModel {
                     ),
                 )
             })?;
-        Ok(PlanReport {
-            resolution: [height, width],
+        Ok(self.report(
+            [height, width],
             request,
+            best,
+            candidates,
+            start.elapsed().as_secs_f64(),
+        ))
+    }
+
+    /// The plan table's layout for this graph: [`table::tract_layout`], or channels-first where tract cannot
+    /// move this graph channels-last (int8 QOperator files). Errors: as [`TractModel::plan_with_layout`].
+    fn table_layout(&self, height: usize, width: usize) -> Result<CnnLayout> {
+        let layout = table::tract_layout();
+        if layout == CnnLayout::ChannelsFirst {
+            return Ok(layout);
+        }
+        match self.plan_with_layout(height, width, layout) {
+            Ok(_) => Ok(layout),
+            Err(HoloError::InvalidParameter { name: "layout", .. }) => Ok(CnnLayout::ChannelsFirst),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// The report of tract's choice `(layout, threads)` for `request` at `resolution` among `candidates`
+    /// (timed in `tuning_s` seconds; none when nothing was timed).
+    fn report(
+        &self,
+        resolution: [usize; 2],
+        request: &PlanRequest,
+        (layout, threads): (CnnLayout, Option<usize>),
+        candidates: Vec<PlanTiming>,
+        tuning_s: f64,
+    ) -> PlanReport {
+        let autotuned = !candidates.is_empty();
+        PlanReport {
+            resolution,
+            request: request.clone(),
             engine: CnnEngine::Tract,
             engine_reason: "tract's plan".into(),
             kernel: None,
-            layout: best.0,
-            threads: best.1,
-            autotuned: true,
-            timed_resolution,
+            layout,
+            threads,
+            autotuned,
+            timed_resolution: timing_resolution(resolution[0], resolution[1]),
             candidates,
-            tuning_s: start.elapsed().as_secs_f64(),
-        })
+            tuning_s,
+            source: if autotuned {
+                PlanOrigin::Tuned
+            } else {
+                PlanOrigin::Table
+            },
+            source_detail: String::new(),
+            network: self.source_name().to_string(),
+            isa: String::new(),
+            rows: Vec::new(),
+        }
     }
 }
 

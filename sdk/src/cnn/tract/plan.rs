@@ -9,8 +9,8 @@ use num_complex::Complex32;
 use tract_linalg::multithread::{multithread_tract_scope, Executor};
 use tract_onnx::prelude::{tvec, IntoTValue, Tensor, TypedModel, TypedSimplePlan};
 
+use crate::cnn::options::{CnnLayout, MAX_CNN_THREADS};
 use crate::cnn::plan::CnnPlan;
-use crate::cnn::tuning::{CnnLayout, MAX_CNN_THREADS};
 use crate::error::{guarded, HoloError, Result};
 use crate::model::{heads_to_field, ModelKind};
 

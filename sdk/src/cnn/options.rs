@@ -1,0 +1,263 @@
+//! What a caller may ask of a session's CNN plans, each a plain value: the engine ([`CnnEngine`]), tract's
+//! memory layout ([`CnnLayout`]), the threads ([`ThreadCount`], at most [`MAX_CNN_THREADS`]) and the f32
+//! convolution algorithm ([`ConvAlgorithm`]). Their `Auto` values are decided by the plan table
+//! (`cnn/table.rs`), or timed on the machine when tuning is asked for ([`crate::cnn::PlanSource::Tune`]).
+//! Imports nothing of `cnn/`: every other file of it reads this one.
+
+use crate::error::{invalid, Result};
+
+/// The most threads a CNN plan may use (tract's `ModelPlan::with_threads`, the native engine's thread
+/// count): far above any phone or desktop core count, low enough that a typo cannot ask the OS for a hundred
+/// thousand threads.
+pub const MAX_CNN_THREADS: usize = 256;
+
+/// The engine that runs a session's CNNs on the CPU
+/// ([`PipelineConfig::cnn_engine`](crate::pipeline::PipelineConfig::cnn_engine)).
+///
+/// - [`CnnEngine::Native`]: our direct 3×3 convolution kernels (`tensorholo-kernels`: AVX-512, AVX2+FMA,
+///   NEON or portable scalar rows, chosen at run time from the CPU's features), row bands on the plan's own
+///   threads. f32 files (agree with tract to float rounding) and int8 QDQ files (u8 × s8 kernels, each layer's
+///   convolution, ReLU, residual and requantisation fused; a mixed-precision file's f32 first and last layers
+///   on the f32 kernels: within the models' int8 tolerance of tract's node-by-node execution;
+///   `sdk/src/cnn/tests.rs`).
+/// - [`CnnEngine::Tract`]: tract's optimised plans (any file that passes the contract, int8 included; cargo
+///   feature `tract`, [`CnnEngine::cargo_feature`]).
+/// - [`CnnEngine::Auto`] (the default): the plan table's engine, a function of the CPU's features and the
+///   files (`cnn/table.rs`): the native engine wherever it runs them (2.3–20× tract's best on x86-64, 2.3×
+///   fewer instructions on ARM), tract for int8 QOperator files and for int8 files on the portable rows
+///   (tract 4.3× the native portable int8 rows there). With [`crate::cnn::PlanSource::Tune`] the engines of
+///   this build that can run the files are timed instead and the fastest runs. The choice and why are in
+///   [`crate::cnn::PlanReport`].
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum CnnEngine {
+    /// The plan table's engine for this CPU and these files (timed with [`crate::cnn::PlanSource::Tune`]).
+    #[default]
+    Auto,
+    /// Our direct-convolution kernels (an error at session creation for a file they cannot run).
+    Native,
+    /// tract.
+    Tract,
+}
+
+impl CnnEngine {
+    /// The engines (every variant but [`CnnEngine::Auto`]), whether or not this build has them.
+    pub const ENGINES: [CnnEngine; 2] = [Self::Native, Self::Tract];
+
+    /// Short name: `auto`, `native`, `tract`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Native => "native",
+            Self::Tract => "tract",
+        }
+    }
+
+    /// The cargo feature of `tensorholo` (and `tensorholo-ffi`) that compiles this engine in, `None` for one
+    /// every build has (named by errors in a build without it).
+    pub fn cargo_feature(self) -> Option<&'static str> {
+        match self {
+            Self::Tract => Some("tract"),
+            Self::Auto | Self::Native => None,
+        }
+    }
+
+    /// Parses [`CnnEngine::name`]. Errors: [`crate::HoloError::InvalidParameter`] (`engine`) naming the
+    /// choices.
+    pub fn parse(name: &str) -> Result<Self> {
+        match name {
+            "auto" => Ok(Self::Auto),
+            "native" => Ok(Self::Native),
+            "tract" => Ok(Self::Tract),
+            other => Err(invalid(
+                "engine",
+                format!("unknown CNN engine `{other}` (auto, native or tract)"),
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for CnnEngine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The memory layout tract runs a CNN in. The ONNX files are always channels-first `[1, C, H, W]`
+/// (`docs/CONVENTIONS.md` §7) and a plan takes and returns `[C, H, W]` arrays in every layout; only tract's
+/// internal graph differs (`cnn::tract::TractModel::plan_with_layout`, feature `tract`). The native engine's
+/// buffers are channel-major within each row: it reports [`CnnLayout::ChannelsFirst`].
+///
+/// Which layout is faster depends on the CPU (`docs/BENCHMARKS.md`): the default, [`CnnLayout::Auto`], is the
+/// plan table's (`cnn/table.rs`: channels-first on x86-64, channels-last on aarch64 where tract can move the
+/// graph), or the faster of the two timed on the machine with [`crate::cnn::PlanSource::Tune`].
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum CnnLayout {
+    /// The plan table's layout (both timed with [`crate::cnn::PlanSource::Tune`]); a plan never runs in
+    /// `Auto` itself.
+    #[default]
+    Auto,
+    /// Channels first (NCHW), as in the file. tract 0.23 runs the 3×3 convolutions as its direct spatial
+    /// convolution (a filter along W, four output channels at a time) where the rows are ≥ 128 pixels wide.
+    ChannelsFirst,
+    /// Channels last (NHWC): the whole graph is moved by tract's axis-change propagation, and the
+    /// convolutions run as a lazy im2col (one gather per output pixel of 3 contiguous runs of 3·C values)
+    /// feeding tract's matrix-product kernels, after an explicit zero `Pad`. f32 and int8 QDQ files (float
+    /// convolutions); tract 0.23 does not move a quantised `QLinearConv` nor the pre-filter graph, so those
+    /// files in this layout are an error (and `Auto` skips it for them).
+    ChannelsLast,
+}
+
+impl CnnLayout {
+    /// The two concrete layouts, channels-first first.
+    pub const ALL: [CnnLayout; 2] = [Self::ChannelsFirst, Self::ChannelsLast];
+
+    /// Short name: `auto`, `nchw`, `nhwc`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::ChannelsFirst => "nchw",
+            Self::ChannelsLast => "nhwc",
+        }
+    }
+}
+
+impl std::fmt::Display for CnnLayout {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// How many threads a CNN plan uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ThreadCount {
+    /// The cores this CPU reports ([`default_threads`]); with [`crate::cnn::PlanSource::Tune`], the fastest
+    /// of [`crate::cnn::auto_thread_candidates`], timed.
+    #[default]
+    Auto,
+    /// Exactly this many threads (≥ 1) in the plan's own executor.
+    Fixed(usize),
+    /// tract's process-wide default executor (one thread), as plans made by `cnn::tract::TractModel::plan`
+    /// use; the native engine runs such a request on 1 thread.
+    ProcessDefault,
+}
+
+impl ThreadCount {
+    /// `0` → [`ThreadCount::Auto`], `n` → [`ThreadCount::Fixed`]`(n)`: the `threads` convention of the
+    /// CLI and the bindings.
+    pub fn from_count(threads: usize) -> Self {
+        match threads {
+            0 => Self::Auto,
+            n => Self::Fixed(n),
+        }
+    }
+}
+
+/// The threads [`ThreadCount::Auto`] runs on without tuning: the cores this CPU reports
+/// (`std::thread::available_parallelism`, 1 where it cannot tell), at most [`MAX_CNN_THREADS`]. On the
+/// 2-core Zen 4 of docs/BENCHMARKS.md two threads ran the 384² frame in 40–42 ms against 73–81 ms on one
+/// (`holo render --threads 1|2 --repeat 9`), where the timed choice had picked one thread in some processes.
+pub fn default_threads() -> usize {
+    std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
+        .clamp(1, MAX_CNN_THREADS)
+}
+
+/// The algorithm of the native engine's f32 3×3 convolutions ([`crate::cnn::PlanRequest::conv`]).
+///
+/// Direct convolution computes `9·C_in` multiply-adds per output value; Winograd's minimal filtering
+/// F(2×2, 3×3) `4·C_in` and F(4×4, 3×3) `2.25·C_in` plus the tile transforms (Lavin & Gray 2016). The
+/// Winograd forms round differently from direct, within the bounds `tensorholo-kernels` states. int8 layers
+/// are always direct.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum ConvAlgorithm {
+    /// Each layer shape's row from the plan table (or a tuning).
+    #[default]
+    Auto,
+    /// Direct convolution in every f32 layer.
+    Direct,
+    /// Winograd F(2×2, 3×3) in every f32 layer.
+    Winograd2x2,
+    /// Winograd F(4×4, 3×3) in every f32 layer.
+    Winograd4x4,
+}
+
+impl ConvAlgorithm {
+    /// Short name: `auto`, `direct`, `winograd2x2`, `winograd4x4`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Direct => "direct",
+            Self::Winograd2x2 => "winograd2x2",
+            Self::Winograd4x4 => "winograd4x4",
+        }
+    }
+
+    /// Parses [`ConvAlgorithm::name`] (also `winograd` for F(2×2, 3×3); surrounding spaces ignored).
+    /// Errors: [`crate::HoloError::InvalidParameter`] (`conv`) naming the choices.
+    pub fn parse(name: &str) -> Result<Self> {
+        match name.trim() {
+            "auto" => Ok(Self::Auto),
+            "direct" => Ok(Self::Direct),
+            "winograd" | "winograd2x2" => Ok(Self::Winograd2x2),
+            "winograd4x4" => Ok(Self::Winograd4x4),
+            other => Err(invalid(
+                "conv",
+                format!(
+                    "`{other}` is not one of direct, winograd2x2 (or winograd), winograd4x4, auto"
+                ),
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for ConvAlgorithm {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_algorithm_names_parse_back_and_others_are_refused() {
+        for a in [
+            ConvAlgorithm::Auto,
+            ConvAlgorithm::Direct,
+            ConvAlgorithm::Winograd2x2,
+            ConvAlgorithm::Winograd4x4,
+        ] {
+            assert_eq!(ConvAlgorithm::parse(a.name()).unwrap(), a);
+        }
+        assert_eq!(
+            ConvAlgorithm::parse(" winograd").unwrap(),
+            ConvAlgorithm::Winograd2x2
+        );
+        let e = ConvAlgorithm::parse("fft").unwrap_err();
+        assert!(
+            matches!(e, crate::HoloError::InvalidParameter { name: "conv", .. }),
+            "{e}"
+        );
+        assert!(e.to_string().contains("`fft`"), "{e}");
+    }
+
+    #[test]
+    fn the_default_thread_count_is_the_cores_reported() {
+        let n = default_threads();
+        assert!((1..=MAX_CNN_THREADS).contains(&n));
+        let reported = std::thread::available_parallelism().map_or(1, |n| n.get());
+        assert_eq!(n, reported.min(MAX_CNN_THREADS));
+    }
+}
