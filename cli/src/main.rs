@@ -24,7 +24,7 @@ use clap::{Parser, Subcommand};
 /// Units are SI on every flag whose name ends in `-m` (metres); `--offset-mm` is in millimetres as in the
 /// paper. Colour order is always R, G, B (638, 520, 450 nm by default).
 #[derive(Debug, Parser)]
-#[command(name = "holo", version, about, long_about = None, propagate_version = true)]
+#[command(name = "holo", version, about, long_about = None, propagate_version = true, after_help = ENVIRONMENT)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -36,6 +36,16 @@ struct Cli {
     #[arg(long, global = true, default_value_t = tensorholo::io::InputLimits::default().max_file_bytes)]
     max_file_bytes: u64,
 }
+
+/// The environment variables `holo` reads (the library reads none of its own).
+const ENVIRONMENT: &str = "\
+Environment:
+  TENSORHOLO_CONV=direct|winograd2x2|winograd4x4|auto
+                      pin the f32 convolution algorithm of the native engine's layers (render, video, bench);
+                      auto or unset: each layer's row from the plan table (or --tune, --tuning)
+  TENSORHOLO_ISA=scalar|avx2|avxvnni|avx512|avx512vnni|neon|neondot|neoni8mm
+                      lower the kernels' instruction set (the plan table's rows follow it)
+  RUST_LOG=debug      more log lines (e.g. each layer's timed rows with --tune)";
 
 #[derive(Debug, Subcommand)]
 enum Command {

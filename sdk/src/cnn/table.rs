@@ -23,17 +23,18 @@ use tensorholo_kernels::{registry, Algorithm, Isa};
 use super::options::CnnEngine;
 use super::saved::RowAlgorithms;
 
-/// Where the AVX-512 rows were measured: the timed choice (`PlanSource::Tune`) of 30–35 processes per shape.
-const ZEN4_AVX512: &str =
-    "AMD EPYC Zen 4 (family 25, model 17; 2 vCPUs), AVX-512: the row most processes' \
-     timing chose (16 × 384 band, best of 5 alternated runs, 30–35 processes per shape)";
+/// Where the AVX-512 rows were measured: the timed choice (`PlanSource::Tune`) of 7–49 processes per shape.
+const ZEN4_AVX512: &str = "AMD EPYC Zen 4 (family 25, model 17; 2 vCPUs), AVX-512: the row most of 7–49 \
+     processes' timing chose (16 × 384 band, best of 5 alternated runs; benchmarks/plan_table.sh HOLO 7, \
+     2026-11-27)";
 /// Where the AVX2 rows were measured.
 const ZEN4_AVX2: &str =
     "the same Zen 4 under TENSORHOLO_ISA=avx2 (the AVX2 rows on an AVX-512 core; no \
-     AVX2-only CPU measured): the row most processes' timing chose";
+     AVX2-only CPU measured): the row most processes' timing chose (benchmarks/plan_table.sh)";
 /// Where the portable rows were measured.
 const ZEN4_SCALAR: &str =
-    "the same Zen 4 under TENSORHOLO_ISA=scalar: the row most processes' timing chose";
+    "the same Zen 4 under TENSORHOLO_ISA=scalar: the row most processes' timing chose \
+     (benchmarks/plan_table.sh)";
 /// Where the NEON rows were measured.
 const QEMU_NEON: &str = "guest instructions under qemu-aarch64 (no ARM hardware): one 24→24 layer F(4×4, 3×3) \
      5.04 M, F(2×2, 3×3) 6.88 M, direct 10.15 M; a holo8 frame with its pre-filter 322 / 418 / 519 M \
