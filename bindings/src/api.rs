@@ -194,11 +194,12 @@ pub struct GeneratorConfig {
     /// The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`] says which runs).
     #[uniffi(default = None)]
     pub engine: Option<CnnEngine>,
-    /// Largest relative spread (a fraction: 0.005 = 0.5 %, the default) of the per-colour depth scales
-    /// accepted when the CNNs were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); a
-    /// wider value shows as "widened" in [`GeneratorInfo::display_mapping`].
-    #[uniffi(default = 0.005)]
-    pub wavelength_ratio_tolerance: f64,
+    /// Largest relative spread (a fraction: 0.01 = 1 %) of the lasers' depth scales accepted when the CNNs
+    /// were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); `None` (default): the
+    /// serving rule's, an estimated cost within 0.3 dB of the model's own score (about 1.8–2 %). A value
+    /// wider than that shows as "widened" in [`GeneratorInfo::display_mapping`], with its cost.
+    #[uniffi(default = None)]
+    pub wavelength_ratio_tolerance: Option<f64>,
     /// Time the CNN candidates on this device at creation (engines, each layer's kernel row, threads; up to
     /// a few seconds) instead of taking the plan table's (default `false`: the same SLM codes on every run).
     /// [`GeneratorInfo::saved_plans`] then holds the result, to store and pass as `saved_plans` later.
@@ -454,11 +455,124 @@ pub fn display_profile_from_json(json: String) -> Result<DisplayProfile> {
 ///
 /// Errors: [`TensorholoError::InvalidInput`] naming the key for a profile that breaks the profile rules (as
 /// [`display_profile_from_json`]). Whether the CNNs serve the display is checked by [`HologramGenerator::new`]
-/// ([`TensorholoError::InvalidModel`] naming `wavelengths_m` for lasers without one common depth scale,
-/// `volume_depth_m` for a volume other than `σ`·6 mm, `pixel_pitch_m` for a pitch too fine).
+/// ([`TensorholoError::InvalidModel`] naming `wavelengths_m` for lasers whose spread costs more than the
+/// rule allows, `volume_depth_m` for a volume deeper than `σ`·6 mm, `pixel_pitch_m` for a pitch too fine,
+/// each with what would serve) and beforehand by [`check_display`].
 #[uniffi::export]
 pub fn generator_config_for_display(profile: DisplayProfile) -> Result<GeneratorConfig> {
     guard(|| Ok(core::GeneratorConfig::for_display(&profile.to_core()?).into()))
+}
+
+/// One shipped CNN against a display ([`check_display`]): whether it serves the display at one offset and
+/// at what estimated cost, or why not and what would serve.
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct ShippedModelCheck {
+    /// The embedded file (`holo8_rgbd.onnx`, …); empty where no pre-filter is shipped for the offset.
+    pub file: String,
+    /// `hologram-cnn` or `prefilter-cnn`.
+    pub kind: String,
+    /// Layers of the hologram CNN (a pre-filter: of the CNN it pairs with).
+    pub layers: u32,
+    /// `rgbd` or `ldi`.
+    pub input: String,
+    /// `f32` or `int8-qdq`.
+    pub precision: String,
+    /// The offset checked, millimetres.
+    pub offset_mm: f64,
+    /// Whether the model serves the display at this offset.
+    pub served: bool,
+    /// `σ`, the depth scale of the mapping (served only).
+    pub scale: Option<f64>,
+    /// The lasers' spread, percent (served only).
+    pub spread_pct: Option<f64>,
+    /// The mapping's predicted ceiling in dB (served with a spread; `None` for no spread: no ceiling).
+    pub ceiling_db: Option<f64>,
+    /// The mapping's estimated cost in dB (served only).
+    pub cost_db: Option<f64>,
+    /// The mapping in one line (served), or why not and what would serve (refused), or why no model was
+    /// checked.
+    pub detail: String,
+    /// Refused: the nearest display this model serves, as a profile JSON to save (this profile with the
+    /// lasers, volume or offset changed).
+    pub nearest_profile_json: Option<String>,
+    /// Refused for its lasers: the `wavelength_ratio_tolerance` that serves the display as it is.
+    pub tolerance: Option<f64>,
+    /// The estimated cost in dB at that tolerance.
+    pub tolerance_cost_db: Option<f64>,
+}
+
+/// Which shipped CNNs serve a display, before making a generator (`holo display check`): at each of the
+/// profile's offsets, every hologram CNN of this library (each depth, f32 and int8) and the pre-filter each
+/// pairs with, with `wavelength_ratio_tolerance` (`None`: the serving rule's).
+///
+/// Errors: [`TensorholoError::InvalidInput`] for a profile that breaks the profile rules or a bad tolerance;
+/// [`TensorholoError::Unsupported`] in a library built without the shipped CNNs.
+#[uniffi::export]
+pub fn check_display(
+    profile: DisplayProfile,
+    wavelength_ratio_tolerance: Option<f64>,
+) -> Result<Vec<ShippedModelCheck>> {
+    guard(|| shipped_checks(profile.to_core()?, wavelength_ratio_tolerance))
+}
+
+#[cfg(not(feature = "embedded-models"))]
+fn shipped_checks(
+    _profile: core_display::DisplayProfile,
+    _tolerance: Option<f64>,
+) -> Result<Vec<ShippedModelCheck>> {
+    Err(TensorholoError::Unsupported {
+        message:
+            "this library was built without the shipped CNNs (cargo feature `embedded-models`)"
+                .into(),
+    })
+}
+
+#[cfg(feature = "embedded-models")]
+fn shipped_checks(
+    profile: core_display::DisplayProfile,
+    tolerance: Option<f64>,
+) -> Result<Vec<ShippedModelCheck>> {
+    let checks = tensorholo::model::embedded::check_display(
+        &profile.optics(),
+        &profile.offsets_m,
+        tolerance,
+    )?;
+    Ok(checks
+        .into_iter()
+        .map(|c| {
+            let m = c.mapping.as_ref();
+            let detail = match (&c.mapping, &c.refusal, &c.note) {
+                (Some(m), _, _) => m.description(&c.file),
+                (None, Some(r), _) => r.to_string(),
+                (None, None, note) => note.clone().unwrap_or_default(),
+            };
+            let nearest = c.refusal.as_ref().and_then(|r| {
+                Some(
+                    profile
+                        .with_optics(&r.nearest?.optics(), r.nearest?.offset_m)
+                        .to_json(),
+                )
+            });
+            let tolerance = c.refusal.as_ref().and_then(|r| r.tolerance);
+            ShippedModelCheck {
+                file: c.file.clone(),
+                kind: c.kind.to_string(),
+                layers: c.layers as u32,
+                input: c.input.clone(),
+                precision: c.precision.to_string(),
+                offset_mm: c.offset_m * 1e3,
+                served: c.served(),
+                scale: m.map(|m| m.scale),
+                spread_pct: m.map(|m| m.spread() * 100.0),
+                ceiling_db: m.map(|m| m.ceiling_db).filter(|x| x.is_finite()),
+                cost_db: m.map(|m| m.cost_db),
+                detail,
+                nearest_profile_json: nearest,
+                tolerance: tolerance.map(|t| t.0),
+                tolerance_cost_db: tolerance.map(|t| t.1),
+            }
+        })
+        .collect())
 }
 
 impl From<Fit> for scene::Fit {
@@ -1167,12 +1281,8 @@ mod tests {
                 core.threads,
                 "{file}"
             );
-            assert_eq!(
-                field("wavelengthRatioTolerance", "wavelengthRatioTolerance"),
-                core.wavelength_ratio_tolerance,
-                "{file}"
-            );
         }
+        assert_eq!(core.wavelength_ratio_tolerance, None);
         // And the fields the tests' config leaves `None` (or at the literal default) are the core's.
         let c = config(64, 48).to_core().unwrap();
         let want = core::GeneratorConfig::new(64, 48);
@@ -1210,7 +1320,7 @@ mod tests {
         assert_eq!(p.calibration.as_deref(), Some("slm.holocal"));
         let record = generator_config_for_display(p).unwrap();
         assert_eq!((record.width, record.height), (32, 24));
-        assert_eq!(record.wavelength_ratio_tolerance, 0.005);
+        assert_eq!(record.wavelength_ratio_tolerance, None);
         let back = record.to_core().unwrap();
         let want = core::GeneratorConfig::for_display(&core_profile);
         assert_eq!(
@@ -1382,7 +1492,7 @@ mod tests {
             gpu_precision: None,
             // The plan table's engine, named: the tests need no tract.
             engine: Some(CnnEngine::Native),
-            wavelength_ratio_tolerance: 0.005,
+            wavelength_ratio_tolerance: None,
             tune: false,
             saved_plans: None,
         }

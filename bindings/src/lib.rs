@@ -98,9 +98,10 @@ impl From<tensorholo::HoloError> for TensorholoError {
             | E::Npy { .. }
             | E::Calibration { .. }
             | E::WouldOverwriteInput(_) => Self::InvalidInput { message },
-            E::ModelLoad { .. } | E::ModelContract { .. } | E::ModelMetadata { .. } => {
-                Self::InvalidModel { message }
-            }
+            E::ModelLoad { .. }
+            | E::ModelContract { .. }
+            | E::ModelMetadata { .. }
+            | E::DisplayNotServed(_) => Self::InvalidModel { message },
             E::Gpu(_) => Self::Unsupported { message },
             E::ModelRun(_) | E::Internal(_) => Self::Internal { message },
         }

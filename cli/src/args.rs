@@ -474,6 +474,24 @@ impl PlanArgs {
         Ok(Some(Arc::new(plans)))
     }
 
+    /// With `--tune`, writes the session's CNN plans to `OUT/tuning.json` (a `tensorholo.cnn-plans` file that
+    /// `--tuning` reads back) and says so; nothing otherwise.
+    pub fn write_tuning(&self, out: &Path, report: &tensorholo::cnn::PlanReport) -> Result<()> {
+        if !self.tune {
+            return Ok(());
+        }
+        let path = out.join("tuning.json");
+        tensorholo::io::write_atomic(&path, report.saved().to_json().as_bytes())
+            .with_context(|| format!("writing {}", path.display()))?;
+        log::info!(
+            "CNN plans tuned in {:.2} s written to {} (repeat them with --tuning {})",
+            report.tuning_s,
+            path.display(),
+            path.display()
+        );
+        Ok(())
+    }
+
     /// The `--tuning` file for the output guard ([`crate::output::guard`]), if given.
     pub fn guard_input(&self) -> Option<crate::output::Input<'_>> {
         Some(crate::output::Input::file(

@@ -10,6 +10,7 @@ mod bench;
 mod calibrate;
 mod compare;
 mod dataset;
+mod display;
 mod encode;
 mod output;
 mod propagate;
@@ -83,6 +84,9 @@ enum Command {
     /// Compare two output folders of `holo render` (e.g. the same command on x86-64 and on aarch64): the
     /// midpoint hologram, the SLM codes and the simulated reconstructions.
     Compare(compare::CompareArgs),
+    /// Display profiles (docs/DISPLAYS.md): `holo display check FILE` says which shipped CNNs serve a display,
+    /// at what estimated cost, or why not and what would.
+    Display(display::DisplayArgs),
     /// Calibrate the display (paper Methods, Eq. 12-13): test patterns, a per-pixel phase look-up table from
     /// camera captures into a .holocal file, its curves as .npy, and a simulated SLM to try it on.
     Calibrate(calibrate::CalibrateArgs),
@@ -157,6 +161,12 @@ fn main() {
         Command::Baselines(args) => baselines::run(&args),
         Command::Compare(args) => compare::run(&args),
         Command::Calibrate(args) => calibrate::run(&args),
+        // Exit status for scripts: 1 where the display is not served.
+        Command::Display(args) => display::run(&args).map(|served| {
+            if !served {
+                std::process::exit(1);
+            }
+        }),
     });
     match outcome {
         Ok(Ok(())) => {}
@@ -164,7 +174,9 @@ fn main() {
             eprintln!("error: {err:#}");
             // The output guard's refusal is a usage error (the command line names an output among its
             // inputs), like the argument parser's: exit code 2. Every other refusal: 1.
-            let usage = err.chain().any(|e| e.is::<output::OutputGuard>());
+            let usage = err
+                .chain()
+                .any(|e| e.is::<output::OutputGuard>() || e.is::<output::UsageError>());
             std::process::exit(if usage { output::EXIT_USAGE } else { 1 });
         }
         Err(_) => {

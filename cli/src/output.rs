@@ -78,6 +78,19 @@ impl std::error::Error for OutputGuard {}
 /// Exit code of a usage error: the argument parser's, and the output guard's ([`OutputGuard`]).
 pub const EXIT_USAGE: i32 = 2;
 
+/// A usage error other than the output guard's (e.g. a bad profile given to `holo display check`): `main`
+/// exits with code 2 on it ([`EXIT_USAGE`]).
+#[derive(Debug)]
+pub struct UsageError(pub String);
+
+impl std::fmt::Display for UsageError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for UsageError {}
+
 /// What an input path is to the output guard ([`guard`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum InputKind {
@@ -308,26 +321,4 @@ pub fn write_images(
 
 fn clamp01(a: &Array3<f32>) -> Array3<f32> {
     a.mapv(|v| v.clamp(0.0, 1.0))
-}
-
-/// With `--tune`, writes the session's CNN plans to `OUT/tuning.json` (a `tensorholo.cnn-plans` file that
-/// `--tuning` reads back) and says so; nothing otherwise.
-pub fn write_tuning(
-    out: &Path,
-    plans: &crate::args::PlanArgs,
-    report: &tensorholo::cnn::PlanReport,
-) -> Result<()> {
-    if !plans.tune {
-        return Ok(());
-    }
-    let path = out.join("tuning.json");
-    tensorholo::io::write_atomic(&path, report.saved().to_json().as_bytes())
-        .with_context(|| format!("writing {}", path.display()))?;
-    log::info!(
-        "CNN plans tuned in {:.2} s written to {} (repeat them with --tuning {})",
-        report.tuning_s,
-        path.display(),
-        path.display()
-    );
-    Ok(())
 }

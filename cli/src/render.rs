@@ -202,11 +202,12 @@ pub struct ModelArgs {
     /// wavelengths must be the optics'. Without it: the linear look-up table of an ideal SLM.
     #[arg(long, visible_alias = "lut")]
     pub calibration: Option<PathBuf>,
-    /// Largest spread of the three colours' depth scales (a fraction: 0.005 = 0.5 %) accepted when the
-    /// models were trained for another, Fresnel-equivalent display (docs/DISPLAYS.md); wider than the
-    /// default, report.json's display_mapping says "widened".
-    #[arg(long, default_value_t = tensorholo::model::DEFAULT_WAVELENGTH_RATIO_TOLERANCE)]
-    pub wavelength_ratio_tolerance: f64,
+    /// Largest spread of the three lasers' depth scales (a fraction: 0.01 = 1 %) accepted when the models
+    /// were trained for another, Fresnel-equivalent display (docs/DISPLAYS.md). Default: the serving rule's
+    /// for the model (an estimated cost within 0.3 dB of its model-card score: about 1.8–2 %); wider than
+    /// that, report.json's display_mapping says "widened" and gives the estimated cost.
+    #[arg(long)]
+    pub wavelength_ratio_tolerance: Option<f64>,
     #[command(flatten)]
     pub encoding: crate::args::EncodingArgs,
     #[command(flatten)]
@@ -239,24 +240,6 @@ impl ModelArgs {
         self.offset_mm
             .or_else(|| profile.map(|p| p.default_offset_m() * 1e3))
             .unwrap_or(6.0)
-    }
-
-    /// Where a shipped model refuses the display (a [`tensorholo::model::DisplayMapping`] refusal): how to make
-    /// one for it, naming the `--display` file; empty for any other error.
-    fn retrain_hint(&self, e: &tensorholo::HoloError) -> String {
-        if !e.to_string().contains(tensorholo::model::RETRAIN_HINT) {
-            return String::new();
-        }
-        let profile = self
-            .optics
-            .display
-            .as_deref()
-            .map_or_else(|| "PROFILE.json".to_string(), crate::output::path_text);
-        format!(
-            ": no shipped model serves this display as it is; retrain for it (dataset, training, exports) with \
-             `training/retrain.sh --display {profile} --out retrain/display` (docs/DISPLAYS.md, \"Retraining for \
-             another display\")"
-        )
     }
 
     /// The selected weight format.
@@ -316,35 +299,33 @@ impl ModelArgs {
             input_layers: input.input_layers(),
             wavelength_ratio_tolerance: config.wavelength_ratio_tolerance,
         };
+        let display = self.optics.display.as_deref().zip(profile.as_ref());
+        let hint = |what: String| move |e| crate::display::with_serving_hint(e, &what, display);
         let hologram = match &self.model {
-            Some(p) => HologramModel::from_path(p, ModelKind::Hologram, &expected)?,
+            Some(p) => HologramModel::from_path(p, ModelKind::Hologram, &expected)
+                .map_err(hint(format!("--model {}", p.display())))?,
             None => tensorholo::model::embedded::scene_hologram_model(
                 input,
                 self.layers,
                 precision,
                 &expected,
             )
-            .map_err(|e| {
-                let hint = self.retrain_hint(&e);
-                anyhow::Error::new(e)
-                    .context(format!("loading the shipped {input} hologram CNN{hint}"))
-            })?,
+            .map_err(hint(format!("loading the shipped {input} hologram CNN")))?,
         };
         // The SDK's one rule: a given pre-filter is used or refused (e.g. at 0 mm), never dropped.
         let source = match &self.prefilter_model {
-            Some(p) => PrefilterSource::Given(Arc::new(HologramModel::from_path(
-                p,
-                ModelKind::PreFilter,
-                &expected,
-            )?)),
+            Some(p) => PrefilterSource::Given(Arc::new(
+                HologramModel::from_path(p, ModelKind::PreFilter, &expected)
+                    .map_err(hint(format!("--prefilter-model {}", p.display())))?,
+            )),
             None => PrefilterSource::Shipped(self.prefilter_mode()),
         };
         let mut pipeline =
             HologramPipeline::with_prefilter(Arc::new(hologram), source, precision, config)
-                .with_context(|| match &self.prefilter_model {
+                .map_err(hint(match &self.prefilter_model {
                     Some(p) => format!("--prefilter-model {}", p.display()),
                     None => "the pre-filter CNN".into(),
-                })?;
+                }))?;
         let calibration = self
             .calibration
             .clone()
@@ -409,6 +390,8 @@ impl ModelArgs {
             "display": self.optics.display.as_deref().map(crate::output::path_text),
             "display_name": profile.as_ref().and_then(|p| p.name.clone()),
             "display_mapping": pipeline.display_mapping_description(),
+            // The same as numbers: σ, the spread, the ceiling and the estimated cost (dB), the volume fit.
+            "display_mapping_detail": pipeline.display_mapping(),
             "load_s": t.elapsed().as_secs_f64(),
         });
         Ok((pipeline, info))
@@ -501,7 +484,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let t = Instant::now();
     let mut session = pipeline.session(h, w)?;
     let session_s = t.elapsed().as_secs_f64();
-    crate::output::write_tuning(&args.out, &args.model.plans, session.plan_report())?;
+    args.model
+        .plans
+        .write_tuning(&args.out, session.plan_report())?;
     let what = || match args.scene.inputs().as_slice() {
         [] => "the built-in scene".to_string(),
         files => files

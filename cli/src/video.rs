@@ -204,7 +204,9 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     let t = Instant::now();
     let mut session = pipeline.session(h, w)?;
     let session_s = t.elapsed().as_secs_f64();
-    crate::output::write_tuning(&args.out, &args.model.plans, session.plan_report())?;
+    args.model
+        .plans
+        .write_tuning(&args.out, session.plan_report())?;
     log::info!(
         "{} frames of {h}×{w}, depth range {:?} m, {}-layer CNN {}, offset {} mm",
         pairs.len(),

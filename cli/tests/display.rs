@@ -293,75 +293,109 @@ fn reference_dataset_and_calibrate_take_the_profile_and_flags_override_it() {
     );
 }
 
-#[test]
-fn an_unserved_display_names_the_colour_and_the_retraining_and_a_widened_tolerance_is_reported() {
-    let dir = tempfile::tempdir().unwrap();
-    // A 532 nm green laser beside 638/450 nm on an 8 µm SLM: σ_g = 520/532, 1.2 % off the others.
-    let (sg, sr): (f64, f64) = (520.0 / 532.0, 1.0);
-    let sigma = (sg * sr).sqrt();
+/// A profile of an 8 µm SLM with lasers 638/`green`/450 nm, its volume and offset at the common `σ`.
+fn green_profile(dir: &std::path::Path, green_nm: f64) -> std::path::PathBuf {
+    let (sg, sr): (f64, f64) = (520.0 / green_nm, 1.0);
+    let sigma = (sg.min(sr) * sg.max(sr)).sqrt();
     let text = format!(
-        r#"{{"pixel_pitch_m": 8e-6, "resolution": [40, 56], "wavelengths_m": [638e-9, 532e-9, 450e-9],
+        r#"{{"pixel_pitch_m": 8e-6, "resolution": [40, 56], "wavelengths_m": [638e-9, {}e-9, 450e-9],
             "volume_depth_m": {}, "offsets_m": [{}]}}"#,
+        green_nm,
         6e-3 * sigma,
         6e-3 * sigma
     );
-    let profile = dir.path().join("green532.json");
+    let profile = dir.join(format!("green{green_nm}.json"));
     std::fs::write(&profile, text).unwrap();
-    let p = profile.to_str().unwrap();
-    let out = dir.path().join("r");
-    let o = out.to_str().unwrap();
-    let r = holo(&[
-        "render",
-        "--size",
-        "40x56",
-        "--repeat",
-        "0",
-        "--display",
-        p,
-        "--out",
-        o,
-    ]);
+    profile
+}
+
+#[test]
+fn lasers_are_served_by_cost_and_a_refusal_names_what_would_serve() {
+    let dir = tempfile::tempdir().unwrap();
+    let render = |profile: &str, extra: &[&str], out: &std::path::Path| {
+        let mut args = vec![
+            "render",
+            "--size",
+            "40x56",
+            "--repeat",
+            "0",
+            "--display",
+            profile,
+        ];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        holo(&args)
+    };
+    // The most common green laser, 532 nm, beside 638/450 nm: 1.15 % off, served by the rule at a cost far
+    // under 0.3 dB, and the report says so.
+    let g532 = green_profile(dir.path(), 532.0);
+    let out = dir.path().join("r532");
+    let r = render(g532.to_str().unwrap(), &[], &out);
+    assert!(r.status.success(), "{}", stderr(&r));
+    let mapping = report(&out)["models"]["display_mapping"]
+        .as_str()
+        .unwrap_or_default()
+        .to_string();
+    assert!(mapping.contains("the rule's"), "{mapping}");
+    assert!(mapping.contains("wavelength mismatch 1.1"), "{mapping}");
+    assert!(mapping.contains("estimated cost 0.1"), "{mapping}");
+
+    // A green 8 % off 520 nm costs more than the rule allows: refused, naming green and, in order, the
+    // nearest profile that serves (valid JSON), the tolerance that serves it with its cost, retraining.
+    let g561 = green_profile(dir.path(), 561.6);
+    let p = g561.to_str().unwrap();
+    let out = dir.path().join("r561");
+    let r = render(p, &[], &out);
     let e = stderr(&r);
     assert!(!r.status.success());
     assert!(e.contains("green"), "{e}");
+    assert!(!out.exists());
+    let steps: Vec<usize> = [
+        "\n1. the nearest display",
+        "\n2. --wavelength-ratio-tolerance",
+        "\n3. retrain for it",
+    ]
+    .iter()
+    .map(|s| e.find(s).unwrap_or_else(|| panic!("{s:?} missing: {e}")))
+    .collect();
+    assert!(steps.windows(2).all(|w| w[0] < w[1]), "{e}");
     assert!(
         e.contains(&format!("training/retrain.sh --display {p} --out")),
         "{e}"
     );
-    assert!(e.contains("Retraining for another display"), "{e}");
-    assert!(!out.exists());
-
-    let r = holo(&[
-        "render",
-        "--size",
-        "40x56",
-        "--repeat",
-        "0",
-        "--display",
+    let json_start = e[steps[0]..].find('{').unwrap() + steps[0];
+    let json_end = e[json_start..].find("\n}").unwrap() + json_start + 2;
+    let nearest = dir.path().join("nearest.json");
+    std::fs::write(&nearest, &e[json_start..json_end]).unwrap();
+    let r = render(nearest.to_str().unwrap(), &[], &dir.path().join("rn"));
+    assert!(r.status.success(), "the nearest profile: {}", stderr(&r));
+    let tolerance = e[steps[1]..].split_whitespace().nth(2).unwrap().to_string();
+    let out = dir.path().join("rw");
+    let r = render(
         p,
-        "--wavelength-ratio-tolerance",
-        "0.02",
-        "--evaluate",
-        "--levels",
-        "64",
-        "--out",
-        o,
-    ]);
+        &[
+            "--wavelength-ratio-tolerance",
+            &tolerance,
+            "--evaluate",
+            "--levels",
+            "64",
+        ],
+        &out,
+    );
     assert!(r.status.success(), "{}", stderr(&r));
     let rep = report(&out);
-    // The mismatch's cost: a perfect 520 nm model shown with a 532 nm laser reaches about 44 dB (the
-    // mismatch curve of docs/DISPLAYS.md), well below the equivalent display's ceiling (> 50 dB) and far
-    // above the CNN's own error.
-    let ceiling = rep["evaluation"]["mapping_ceiling"]["psnr_amp"]
-        .as_f64()
-        .unwrap_or(0.0);
-    assert!((35.0..50.0).contains(&ceiling), "{rep}");
     let mapping = rep["models"]["display_mapping"]
         .as_str()
         .unwrap_or_default();
     assert!(mapping.contains("widened"), "{rep}");
-    assert!(mapping.contains("wavelength mismatch 1.1"), "{rep}");
+    // The mismatch's cost: a perfect 520 nm model shown with this green laser, well above the CNN's own
+    // error and near the predicted ceiling (docs/DISPLAYS.md).
+    let ceiling = rep["evaluation"]["mapping_ceiling"]["psnr_fs"]
+        .as_f64()
+        .unwrap_or(0.0);
+    assert!((25.0..40.0).contains(&ceiling), "{rep}");
 
+    let p = g532.to_str().unwrap();
     // calibrate global stores the profile's lasers: render accepts the file for this display, and refuses
     // one whose lasers --wavelengths-m set to the paper's (12 nm off in green).
     for (name, extra, accepted) in [
@@ -396,8 +430,6 @@ fn an_unserved_display_names_the_colour_and_the_retraining_and_a_widened_toleran
             "0",
             "--display",
             p,
-            "--wavelength-ratio-tolerance",
-            "0.02",
             "--calibration",
             &cal_text,
             "--out",
@@ -467,6 +499,111 @@ fn the_shipped_display_profiles_render_the_paper_display_codes() {
             "{name}: {}{}",
             stderr(&c),
             String::from_utf8_lossy(&c.stdout)
+        );
+    }
+}
+
+/// The issue's three lab profiles are served (exit 0), each row saying how; a volume deeper than the models
+/// serve exits 1 naming the largest served; a bad profile exits 2.
+#[test]
+fn display_check_serves_the_lab_profiles_and_exits_for_scripts() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, pitch: f64, green: f64, volume: f64, offset: f64| {
+        let path = dir.path().join(name);
+        std::fs::write(
+            &path,
+            format!(
+                r#"{{"name": "{name}", "pixel_pitch_m": {pitch}, "resolution": [2160, 3840],
+                    "wavelengths_m": [638e-9, {green}, 450e-9], "volume_depth_m": {volume},
+                    "offsets_m": [{offset}, 0.0]}}"#
+            ),
+        )
+        .unwrap();
+        path
+    };
+    let s374 = (3.74f64 / 8.0).powi(2);
+    let s532 = (520.0f64 / 532.0).sqrt() * s374;
+    let lab = [
+        // 3.74 µm with a 532 nm green laser (volume and the 6 mm pre-filter's offset at the common σ).
+        write("g532", 3.74e-6, 532e-9, 6e-3 * s532, 6e-3 * s532),
+        // The same SLM with a rounded 1.3 mm volume (σ·6 mm = 1.3113 mm) and its 6 mm pre-filter's offset.
+        write("round", 3.74e-6, 520e-9, 1.3e-3, 6e-3 * s374),
+        // A 12.5 µm SLM with a 12 mm volume, inside the 14.65 mm it maps.
+        write("deep", 12.5e-6, 520e-9, 12e-3, 0.0),
+    ];
+    for p in &lab {
+        let o = holo(&["display", "check", p.to_str().unwrap()]);
+        let out = String::from_utf8_lossy(&o.stdout).into_owned();
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "{}: {out}{}",
+            p.display(),
+            stderr(&o)
+        );
+        assert!(out.contains("| holo8_rgbd.onnx | f32 | yes |"), "{out}");
+    }
+    // JSON for scripts: every hologram CNN served, the 532 nm row with its cost.
+    let o = holo(&["display", "check", lab[0].to_str().unwrap(), "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["served"], true);
+    let cost = v["checks"][0]["mapping"]["cost_db"].as_f64().unwrap();
+    assert!(cost > 0.0 && cost < 0.3, "{cost}");
+    // Too deep: exit 1, naming the key and the largest volume served.
+    let too_deep = write("too_deep", 12.5e-6, 520e-9, 15e-3, 0.0);
+    let o = holo(&["display", "check", too_deep.to_str().unwrap()]);
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert_eq!(o.status.code(), Some(1), "{out}");
+    assert!(
+        out.contains("volume_depth_m") && out.contains("up to 14.7949219 mm"),
+        "{out}"
+    );
+    assert!(out.contains("1. the nearest display"), "{out}");
+    // A bad profile: a usage error.
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, r#"{"pixel_pitch_m": -1}"#).unwrap();
+    let o = holo(&["display", "check", bad.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+}
+
+/// The predicted mapping ceiling (report.json → display_mapping) against `--evaluate`'s measured one, three
+/// laser mismatches: within 4 dB at this small size (the fit was made at 384² with 2048 planes,
+/// docs/DISPLAYS.md).
+#[test]
+fn the_predicted_ceiling_agrees_with_the_measured_one() {
+    let dir = tempfile::tempdir().unwrap();
+    for green in [525.2, 530.4, 540.8] {
+        let p = green_profile(dir.path(), green);
+        let out = dir.path().join(format!("r{green}"));
+        let o = holo(&[
+            "render",
+            "--size",
+            "48x64",
+            "--repeat",
+            "0",
+            "--display",
+            p.to_str().unwrap(),
+            "--evaluate",
+            "--levels",
+            "128",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let rep = report(&out);
+        let measured = rep["evaluation"]["mapping_ceiling"]["psnr_fs"]
+            .as_f64()
+            .unwrap();
+        let mapping = rep["models"]["display_mapping"].as_str().unwrap();
+        let predicted: f64 = mapping
+            .split("mapping ceiling ")
+            .nth(1)
+            .and_then(|t| t.split(" dB").next())
+            .and_then(|t| t.parse().ok())
+            .unwrap_or_else(|| panic!("{mapping}"));
+        assert!(
+            (measured - predicted).abs() <= 4.0,
+            "green {green} nm: measured {measured:.2} dB, predicted {predicted:.2} dB"
         );
     }
 }

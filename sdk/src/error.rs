@@ -85,6 +85,10 @@ pub enum HoloError {
         /// The expected value or format.
         expected: String,
     },
+    /// A CNN does not serve the configured display (`docs/DISPLAYS.md`): which metadata key, why, and what
+    /// would serve it (the nearest display it serves, a wider laser tolerance with its cost, retraining).
+    #[error("{0}")]
+    DisplayNotServed(Box<DisplayRefusal>),
     /// Running a CNN failed inside the inference engine (the model stays usable).
     #[error("model inference failed: {0}")]
     ModelRun(String),
@@ -146,5 +150,75 @@ pub(crate) fn guarded<T, E: From<String>>(
                 .unwrap_or_else(|| "unknown panic".into());
             Err(E::from(format!("{what} panicked: {msg}")))
         }
+    }
+}
+
+/// What retraining for a display costs at the paper's scale (docs/DISPLAYS.md, "What it costs").
+pub const RETRAIN_COST: &str = "40–95 GPU-hours at the paper's scale";
+
+/// The nearest display a model serves ([`DisplayRefusal::nearest`]): the configured one with the lasers,
+/// volume or offset changed. Metres.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct NearestDisplay {
+    /// Laser wavelengths R, G, B.
+    pub wavelengths_m: [f64; 3],
+    /// SLM pixel pitch.
+    pub pixel_pitch_m: f64,
+    /// Volume depth.
+    pub volume_depth_m: f64,
+    /// Offset from the midpoint hologram to the SLM.
+    pub offset_m: f64,
+}
+
+/// Why a model cannot serve a display, and what would (the payload of [`HoloError::DisplayNotServed`]; built
+/// by `crate::display::DisplayMapping::refusal`), in the order a user should try: the nearest display it
+/// serves, a wider laser tolerance with its cost, retraining with its cost.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct DisplayRefusal {
+    /// The metadata key at fault: `tensorholo.wavelengths_m` (lasers), `tensorholo.pixel_pitch_m` (the
+    /// non-paraxial residual), `tensorholo.volume_depth_m` or `tensorholo.offset_m`.
+    pub key: String,
+    /// The model's value of that key.
+    pub found: String,
+    /// What would have to hold, in words.
+    pub expected: String,
+    /// The nearest display this model serves, if any.
+    pub nearest: Option<NearestDisplay>,
+    /// For lasers: the tolerance (a fraction) that would serve this display as it is, and the estimated cost
+    /// there (dB).
+    pub tolerance: Option<(f64, f64)>,
+}
+
+impl std::fmt::Display for DisplayRefusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "model metadata `{}` is `{}`, expected {}",
+            self.key, self.found, self.expected
+        )?;
+        let mut ways = Vec::new();
+        if let Some(n) = &self.nearest {
+            let w = n.wavelengths_m.map(|x| x * 1e9);
+            ways.push(format!(
+                "the nearest display it serves: {:.4} µm, lasers {:.2}/{:.2}/{:.2} nm, volume {:.6} mm, offset \
+                 {:.6} mm",
+                n.pixel_pitch_m * 1e6,
+                w[0],
+                w[1],
+                w[2],
+                n.volume_depth_m * 1e3,
+                n.offset_m * 1e3
+            ));
+        }
+        if let Some((t, cost)) = self.tolerance {
+            ways.push(format!(
+                "a laser tolerance of {:.2} % (`wavelength_ratio_tolerance` {t}; estimated cost {cost:.2} dB)",
+                t * 100.0
+            ));
+        }
+        ways.push(format!(
+            "retraining for this display (docs/DISPLAYS.md, \"Retraining for another display\"; {RETRAIN_COST})"
+        ));
+        write!(f, "; what would serve: {}", ways.join("; or "))
     }
 }

@@ -29,9 +29,7 @@ use crate::color::amplitude_to_srgb8;
 use crate::display::DisplayProfile;
 use crate::encoding::{DoublePhaseMethod, LinearLut};
 use crate::error::{invalid, HoloError, Result};
-use crate::model::{
-    HologramModel, ModelConfig, ModelKind, Precision, DEFAULT_WAVELENGTH_RATIO_TOLERANCE,
-};
+use crate::model::{HologramModel, ModelConfig, ModelKind, Precision};
 use crate::optics::{focal_stack, post_encoding_midpoint, OpticalSetup, PropagationOptions};
 use crate::pipeline::{
     Backend, BackendReport, FrameTimings, GpuPrecision, HologramPipeline, HologramSession,
@@ -102,11 +100,12 @@ pub struct GeneratorConfig {
     /// The GPU CNNs' arithmetic ([`GpuPrecision::Auto`] by default: f16 where the GPU has it, which halves
     /// their memory; docs/GPU.md).
     pub gpu_precision: GpuPrecision,
-    /// Largest relative spread (a fraction: 0.005 = 0.5 %) of the per-colour depth scales accepted when the
+    /// Largest relative spread (a fraction: 0.01 = 1 %) of the per-colour depth scales accepted when the
     /// CNNs were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`,
-    /// [`crate::model::DisplayMapping`]); default [`DEFAULT_WAVELENGTH_RATIO_TOLERANCE`]. A wider value is
-    /// reported as "widened" in [`GeneratorInfo::display_mapping`].
-    pub wavelength_ratio_tolerance: f64,
+    /// [`crate::display::DisplayMapping`]); `None` (the default): the serving rule's, whose estimated cost
+    /// stays within 0.3 dB of the model's own score. A value wider than the rule's is reported as "widened"
+    /// in [`GeneratorInfo::display_mapping`].
+    pub wavelength_ratio_tolerance: Option<f64>,
 }
 
 /// [`GeneratorConfig::saved_plans`] in reports: the plans' origin, or null.
@@ -143,7 +142,7 @@ impl GeneratorConfig {
             depth_mapping: DepthMapping::default(),
             backend: Backend::default(),
             gpu_precision: GpuPrecision::default(),
-            wavelength_ratio_tolerance: DEFAULT_WAVELENGTH_RATIO_TOLERANCE,
+            wavelength_ratio_tolerance: None,
         }
     }
 
@@ -223,12 +222,13 @@ impl GeneratorConfig {
         if let Some(p) = &self.saved_plans {
             p.validate()?;
         }
-        let t = self.wavelength_ratio_tolerance;
-        if !(t.is_finite() && t >= 0.0) {
-            return Err(invalid(
-                "wavelength_ratio_tolerance",
-                format!("must be a finite fraction ≥ 0 (0.005 = 0.5 %), got {t}"),
-            ));
+        if let Some(t) = self.wavelength_ratio_tolerance {
+            if !(t.is_finite() && t >= 0.0) {
+                return Err(invalid(
+                    "wavelength_ratio_tolerance",
+                    format!("must be a finite fraction ≥ 0 (0.01 = 1 %), got {t}"),
+                ));
+            }
         }
         Ok(())
     }
@@ -422,7 +422,7 @@ pub struct GeneratorInfo {
     /// The display calibration applied, in words ([`DisplayCalibration::summary`]), or `None`.
     pub calibration: Option<String>,
     /// How the hologram CNN's training display maps onto this display, in one line
-    /// ([`HologramPipeline::display_mapping_description`], [`crate::model::DisplayMapping::description`]),
+    /// ([`HologramPipeline::display_mapping_description`], [`crate::display::DisplayMapping::description`]),
     /// e.g. "… serves 4 µm with a 1.5 mm volume (σ = 0.250000); offset 1.5 mm ↔ 6 mm trained; …".
     pub display_mapping: String,
 }
@@ -1091,10 +1091,7 @@ mod tests {
             }
         );
         assert_eq!(c.offset_m, 1.5e-3);
-        assert_eq!(
-            c.wavelength_ratio_tolerance,
-            DEFAULT_WAVELENGTH_RATIO_TOLERANCE
-        );
+        assert_eq!(c.wavelength_ratio_tolerance, None);
         // Everything else is GeneratorConfig::new's.
         let want = GeneratorConfig {
             optics: c.optics,
@@ -1103,17 +1100,14 @@ mod tests {
         };
         assert_eq!(c, want);
         c.validate().unwrap();
-        assert_eq!(
-            c.pipeline_config().wavelength_ratio_tolerance,
-            DEFAULT_WAVELENGTH_RATIO_TOLERANCE
-        );
+        assert_eq!(c.pipeline_config().wavelength_ratio_tolerance, None);
     }
 
     #[test]
     fn a_bad_wavelength_ratio_tolerance_is_named() {
         for t in [f64::NAN, -0.01, f64::INFINITY] {
             let mut c = GeneratorConfig::new(64, 48);
-            c.wavelength_ratio_tolerance = t;
+            c.wavelength_ratio_tolerance = Some(t);
             assert!(
                 matches!(
                     c.validate(),
@@ -1176,21 +1170,29 @@ mod tests {
     #[cfg(feature = "embedded-models")]
     #[test]
     fn the_wavelength_ratio_tolerance_reaches_the_model_check() {
+        // A green 8 % off 520 nm costs more than the rule allows: refused, naming the lasers.
         let mut c = quick(GeneratorConfig::new(64, 48));
-        c.optics.wavelengths_m = [638e-9, 532e-9, 450e-9];
+        c.optics.wavelengths_m = [638e-9, 561.6e-9, 450e-9];
+        let sigma = |c: &GeneratorConfig| {
+            crate::display::DisplayMapping::compute(
+                &OpticalSetup::default(),
+                &c.optics,
+                0.0,
+                None,
+                28.08,
+            )
+            .unwrap()
+            .scale
+        };
+        c.optics.volume_depth_m = sigma(&c) * 6e-3;
+        c.offset_m = sigma(&c) * 6e-3;
         match HologramGenerator::new(c.clone()) {
-            Err(HoloError::ModelMetadata { key, .. }) => {
-                assert!(key.ends_with("wavelengths_m"), "{key}")
+            Err(HoloError::DisplayNotServed(r)) => {
+                assert!(r.key.ends_with("wavelengths_m"), "{}", r.key)
             }
             other => panic!("expected a refusal naming the wavelengths, got {other:?}"),
         }
-        c.wavelength_ratio_tolerance = 0.03;
-        let sigma =
-            crate::model::DisplayMapping::compute(&OpticalSetup::default(), &c.optics, 0.0, 0.03)
-                .unwrap()
-                .scale;
-        c.optics.volume_depth_m = sigma * 6e-3;
-        c.offset_m = sigma * 6e-3;
+        c.wavelength_ratio_tolerance = Some(0.05);
         let g = HologramGenerator::new(c).unwrap();
         let info = g.info().unwrap();
         assert!(

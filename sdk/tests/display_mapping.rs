@@ -2,8 +2,9 @@
 //! the paper's lasers with the volume and offset scaled by `σ = (p'/p)²`, and give the same SLM codes.
 #![cfg(feature = "embedded-models")]
 
+use tensorholo::display::MAX_NONPARAXIAL_RESIDUAL_RAD;
 use tensorholo::encoding::DoublePhaseMethod;
-use tensorholo::model::{Precision, MAX_NONPARAXIAL_RESIDUAL_RAD};
+use tensorholo::model::Precision;
 use tensorholo::optics::OpticalSetup;
 use tensorholo::optics::PropagationOptions;
 use tensorholo::pipeline::{Backend, HologramPipeline, ModelSelection, PipelineConfig};
@@ -94,27 +95,31 @@ fn equivalent_displays_give_the_paper_display_codes_in(precision: Precision) {
 #[test]
 fn a_display_outside_the_tolerance_is_refused_naming_the_colour() {
     let sel = ModelSelection::default();
+    // A green 8 % off 520 nm at 4 µm costs more than the rule allows: refused, naming green and what
+    // would serve.
     let mut cfg = config(4e-6, 1.5e-3, 1.5e-3);
-    cfg.optics.wavelengths_m[1] = 532e-9;
-    let e = HologramPipeline::embedded(&sel, cfg).unwrap_err();
-    assert!(
-        matches!(&e, HoloError::ModelMetadata { key, .. } if key == "tensorholo.wavelengths_m"),
-        "{e}"
-    );
-    assert!(e.to_string().contains("green"), "{e}");
-    // Widened, with the volume and offset of the common scale, it is served and reported as widened.
-    cfg.wavelength_ratio_tolerance = 0.02;
-    let m = tensorholo::model::DisplayMapping::compute(
+    cfg.optics.wavelengths_m[1] = 561.6e-9;
+    let m = tensorholo::display::DisplayMapping::compute(
         &OpticalSetup::default(),
         &cfg.optics,
         0.0,
-        cfg.wavelength_ratio_tolerance,
+        Some(1.0),
+        28.08,
     )
     .unwrap();
     cfg.optics.volume_depth_m = m.served_volume_depth_m();
     cfg.offset_m = 6e-3 * m.scale;
+    let e = HologramPipeline::embedded(&sel, cfg).unwrap_err();
+    let HoloError::DisplayNotServed(r) = &e else {
+        panic!("{e}")
+    };
+    assert_eq!(r.key, "tensorholo.wavelengths_m");
+    assert!(e.to_string().contains("green"), "{e}");
+    // Widened to what the refusal names, it is served and reported as widened, with its cost.
+    cfg.wavelength_ratio_tolerance = Some(r.tolerance.unwrap().0);
     let p = HologramPipeline::embedded(&sel, cfg).unwrap();
     assert!(p.display_mapping().widened);
+    assert!(p.display_mapping().cost_db > 0.3);
     assert!(p.display_mapping_description().contains("widened"));
     println!("{}", p.display_mapping_description());
 }
@@ -208,4 +213,51 @@ fn a_mapped_offset_without_a_prefilter_falls_back_and_says_so() {
         "{}",
         p.prefilter_reason()
     );
+}
+
+/// A volume smaller than the one the models serve runs on the central part of it: the same codes as the
+/// mapped-volume session given the scene's depths mapped there by hand (`0.5 + (d − 0.5)·V'/(σ·V)`), and the
+/// mapping says so. A volume within 1 % of `σ·V` runs at `σ·V`.
+#[test]
+fn a_smaller_volume_runs_on_part_of_the_models_volume() {
+    let sel = ModelSelection::default();
+    let small = HologramPipeline::embedded(&sel, config(4e-6, 1.0e-3, 1.5e-3)).unwrap();
+    let fraction = small.display_mapping().depth_fraction();
+    assert!((fraction - 1.0 / 1.5).abs() < 1e-12, "{fraction}");
+    assert!(
+        small
+            .display_mapping_description()
+            .contains("uses the central 66.7 %"),
+        "{}",
+        small.display_mapping_description()
+    );
+    let mapped = HologramPipeline::embedded(&sel, config(4e-6, 1.5e-3, 1.5e-3)).unwrap();
+    let frame = default_scene(SIZE.0, SIZE.1).unwrap();
+    let mut squeezed = frame.clone();
+    squeezed
+        .depth
+        .mapv_inplace(|d| 0.5 + (d - 0.5) * fraction as f32);
+    let codes = |p: &HologramPipeline, f| {
+        p.session(SIZE.0, SIZE.1)
+            .unwrap()
+            .render(f)
+            .unwrap()
+            .codes
+            .clone()
+    };
+    let (a, b) = (codes(&small, &frame), codes(&mapped, &squeezed));
+    let differ = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+    let worst = a
+        .iter()
+        .zip(&b)
+        .map(|(&x, &y)| x.wrapping_sub(y).min(y.wrapping_sub(x)))
+        .max()
+        .unwrap();
+    assert!(worst <= 1, "{differ} codes differ, by up to {worst}");
+    // And the depths do reach the CNN: the whole-volume frame gives other codes.
+    assert_ne!(codes(&mapped, &frame), a);
+    // Rounded: 1.49 mm runs at σ·V = 1.5 mm.
+    let rounded = HologramPipeline::embedded(&sel, config(4e-6, 1.49e-3, 1.5e-3)).unwrap();
+    assert_eq!(rounded.config().optics.volume_depth_m, 1.5e-3);
+    assert_eq!(codes(&rounded, &frame), codes(&mapped, &frame));
 }

@@ -171,7 +171,7 @@ fn metadata_mismatch_is_refused_naming_key_and_values() {
     let e = HologramModel::from_bytes(&bytes, ModelKind::Hologram, &cfg).unwrap_err();
     let msg = e.to_string();
     assert!(
-        matches!(&e, HoloError::ModelMetadata { key, .. } if key == "tensorholo.volume_depth_m"),
+        matches!(&e, HoloError::DisplayNotServed(r) if r.key == "tensorholo.volume_depth_m"),
         "{msg}"
     );
     assert!(
@@ -188,7 +188,7 @@ fn metadata_mismatch_is_refused_naming_key_and_values() {
     let e = HologramModel::from_bytes(&bytes, ModelKind::Hologram, &cfg).unwrap_err();
     let msg = e.to_string();
     assert!(
-        matches!(&e, HoloError::ModelMetadata { key, .. } if key == "tensorholo.pixel_pitch_m"),
+        matches!(&e, HoloError::DisplayNotServed(r) if r.key == "tensorholo.pixel_pitch_m"),
         "{msg}"
     );
     assert!(
@@ -202,7 +202,7 @@ fn metadata_mismatch_is_refused_naming_key_and_values() {
     };
     let e = HologramModel::from_bytes(&bytes, ModelKind::Hologram, &cfg).unwrap_err();
     assert!(
-        matches!(&e, HoloError::ModelMetadata { key, .. } if key == "tensorholo.offset_m"),
+        matches!(&e, HoloError::DisplayNotServed(r) if r.key == "tensorholo.offset_m"),
         "{e}"
     );
 
@@ -210,7 +210,7 @@ fn metadata_mismatch_is_refused_naming_key_and_values() {
     cfg.optics.wavelengths_m[2] = 473e-9;
     let e = HologramModel::from_bytes(&bytes, ModelKind::Hologram, &cfg).unwrap_err();
     assert!(
-        matches!(&e, HoloError::ModelMetadata { key, .. } if key == "tensorholo.wavelengths_m"),
+        matches!(&e, HoloError::DisplayNotServed(r) if r.key == "tensorholo.wavelengths_m"),
         "{e}"
     );
 

@@ -112,7 +112,7 @@ fn zero_offset_refuses_an_offset_trained_cnn_and_any_prefilter() {
         config(0.0),
     );
     // The fixture CNN was exported for 6 mm (jointly trained with its pre-filter), so 0 mm is refused ...
-    assert!(matches!(p, Err(HoloError::ModelMetadata { .. })));
+    assert!(matches!(p, Err(HoloError::DisplayNotServed(_))));
     // ... and a pre-filter never runs at 0 mm.
     let e = HologramPipeline::new(
         load("holo8_rgbd.onnx", ModelKind::Hologram),
@@ -125,7 +125,7 @@ fn zero_offset_refuses_an_offset_trained_cnn_and_any_prefilter() {
     .unwrap_err();
     assert!(matches!(
         e,
-        HoloError::ModelMetadata { .. } | HoloError::InvalidParameter { .. }
+        HoloError::DisplayNotServed(_) | HoloError::InvalidParameter { .. }
     ));
 }
 
@@ -203,14 +203,14 @@ fn pipeline_refuses_mismatched_models() {
     let pre = load("holo8_rgbd.prefilter.onnx", ModelKind::PreFilter);
     let e = HologramPipeline::new(holo.clone(), Some(pre), config(12e-3)).unwrap_err();
     assert!(
-        matches!(&e, HoloError::ModelMetadata { key, .. } if key.ends_with("offset_m")),
+        matches!(&e, HoloError::DisplayNotServed(r) if r.key.ends_with("offset_m")),
         "{e}"
     );
     let mut cfg = config(6e-3);
     cfg.optics.pixel_pitch_m = 6.4e-6;
     assert!(matches!(
         HologramPipeline::new(holo, None, cfg),
-        Err(HoloError::ModelMetadata { .. })
+        Err(HoloError::DisplayNotServed(_))
     ));
 }
 

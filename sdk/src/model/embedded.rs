@@ -328,3 +328,156 @@ pub fn paired_prefilter_model(
         _ => Ok(model),
     }
 }
+
+/// One shipped CNN against a display ([`check_display`]): whether it serves the display at one offset, and
+/// how (the mapping: `σ`, the laser spread's ceiling and estimated cost, the volume fit, the residual), or why
+/// not and what would serve.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ShippedModelCheck {
+    /// The embedded file (`holo8_rgbd.onnx`, `prefilter_6mm_holo15.int8-qdq.onnx`, …).
+    pub file: String,
+    /// `hologram-cnn` or `prefilter-cnn`.
+    pub kind: &'static str,
+    /// Convolution layers of the hologram CNN (a pre-filter: of the hologram CNN it pairs with).
+    pub layers: usize,
+    /// `rgbd` or `ldi` (a pre-filter: `rgbd`, the input of the CNN it pairs with).
+    pub input: String,
+    /// Weight format.
+    pub precision: Precision,
+    /// The display's offset checked, metres.
+    pub offset_m: f64,
+    /// How the model serves the display at that offset; `None` where it does not.
+    pub mapping: Option<crate::display::DisplayMapping>,
+    /// Why it does not, and what would serve; `None` where it does.
+    pub refusal: Option<crate::display::DisplayRefusal>,
+    /// Why no such model was checked (no pre-filter is shipped for the offset), where none was.
+    pub note: Option<String>,
+}
+
+impl ShippedModelCheck {
+    /// Whether the model serves the display at this offset.
+    pub fn served(&self) -> bool {
+        self.mapping.is_some()
+    }
+}
+
+/// Which shipped CNNs of this build serve a display (`docs/DISPLAYS.md`): at each offset of `offsets_m`
+/// (metres), every hologram CNN embedded (each depth, f32 and int8 QDQ; the LDI CNN), and the pre-filter each
+/// depth pairs with at that offset (the one whose offset on the training display is `s'/σ`: 6 or 12 mm), with
+/// the laser tolerance `tolerance` (`None`: the serving rule's, per model). What `holo display check` and
+/// the bindings' `checkDisplay` print.
+///
+/// Errors: [`HoloError::InvalidParameter`](crate::HoloError) for invalid optics, offsets or tolerance; model
+/// errors other than a display the model does not serve (a corrupt embedded file).
+pub fn check_display(
+    optics: &crate::optics::OpticalSetup,
+    offsets_m: &[f64],
+    tolerance: Option<f64>,
+) -> Result<Vec<ShippedModelCheck>> {
+    optics.validate()?;
+    if offsets_m.is_empty() || offsets_m.iter().any(|s| !s.is_finite()) {
+        return Err(invalid("offsets_m", "at least one finite offset in metres"));
+    }
+    let mut out = Vec::new();
+    let precisions = [Precision::F32, super::DEFAULT_INT8];
+    let hologram_cnns = LAYERS
+        .iter()
+        .map(|&l| (SceneInput::Rgbd, l))
+        .chain(SHIPPED_LDI_LAYERS.iter().map(|&l| (SceneInput::Ldi, l)));
+    for &offset_m in offsets_m {
+        let expected = |input: SceneInput| ModelConfig {
+            optics: *optics,
+            offset_m,
+            input_layers: input.input_layers(),
+            wavelength_ratio_tolerance: tolerance,
+        };
+        for (input, layers) in hologram_cnns.clone() {
+            for precision in precisions {
+                let file = scene_hologram_file(input, layers, precision);
+                let bytes = scene_hologram_cnn(input, layers, precision)?;
+                let loaded = HologramModel::from_named_bytes(
+                    bytes,
+                    &file,
+                    ModelKind::Hologram,
+                    &expected(input),
+                );
+                let what = (ModelKind::Hologram, layers, input, precision);
+                out.push(checked(file, what, &expected(input), loaded)?);
+            }
+        }
+        // The pre-filters: the one each RGB-D depth pairs with at this offset, by its offset on the
+        // training display (s'/σ; all shipped CNNs share the paper's display, so σ is one for all).
+        if offset_m == 0.0 {
+            continue;
+        }
+        let trained = crate::optics::OpticalSetup::default();
+        let sigma =
+            crate::display::DisplayMapping::compute(&trained, optics, offset_m, Some(1.0), 0.0)?
+                .scale;
+        let mm = offset_m / sigma * 1e3;
+        let paired = PREFILTER_OFFSETS_MM
+            .iter()
+            .copied()
+            .find(|&o| (mm - o as f64).abs() <= 1e-6 * o as f64);
+        for &layers in LAYERS {
+            for precision in precisions {
+                let Some(o) = paired else {
+                    out.push(ShippedModelCheck {
+                        file: String::new(),
+                        kind: ModelKind::PreFilter.metadata_name(),
+                        layers,
+                        input: SceneInput::Rgbd.to_string(),
+                        precision,
+                        offset_m,
+                        mapping: None,
+                        refusal: None,
+                        note: Some(format!(
+                            "no shipped pre-filter at {} mm ({} mm on the training display; shipped: 6 and 12 \
+                             mm): encoded with AA-DPM",
+                            offset_m * 1e3,
+                            crate::display::sig(mm)
+                        )),
+                    });
+                    continue;
+                };
+                let file = paired_prefilter_file(o, layers, precision);
+                let bytes = paired_prefilter_cnn(o, layers, precision)?;
+                let loaded = HologramModel::from_named_bytes(
+                    bytes,
+                    &file,
+                    ModelKind::PreFilter,
+                    &expected(SceneInput::Rgbd),
+                );
+                let what = (ModelKind::PreFilter, layers, SceneInput::Rgbd, precision);
+                out.push(checked(file, what, &expected(SceneInput::Rgbd), loaded)?);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The check of one model (`kind`, hologram layers, input, precision) loaded (or refused) against `expected`.
+/// Errors: `loaded`'s error other than a display refusal.
+fn checked(
+    file: String,
+    (kind, layers, input, precision): (ModelKind, usize, SceneInput, Precision),
+    expected: &ModelConfig,
+    loaded: Result<HologramModel>,
+) -> Result<ShippedModelCheck> {
+    let (mapping, refusal) = match loaded {
+        Ok(m) => (Some(m.metadata().check(kind, expected)?), None),
+        Err(crate::HoloError::DisplayNotServed(r)) => (None, Some(*r)),
+        Err(e) => return Err(e),
+    };
+    Ok(ShippedModelCheck {
+        file,
+        kind: kind.metadata_name(),
+        layers,
+        input: input.to_string(),
+        precision,
+        offset_m: expected.offset_m,
+        mapping,
+        refusal,
+        note: None,
+    })
+}

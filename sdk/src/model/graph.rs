@@ -682,6 +682,27 @@ impl CnnWeights {
         })
     }
 
+    /// Whether this is a mixed-precision int8 file: float first and last layers, int8 between (the graph
+    /// reader allows no other float layers); false for an f32 file.
+    pub fn is_mixed_precision(&self) -> bool {
+        let n = self.layers.len();
+        self.quant
+            .as_ref()
+            .is_some_and(|q| n >= 3 && q.layers[0].is_none() && q.layers[n - 1].is_none())
+    }
+
+    /// The layers of an int8 file that run in f32: the first and the last of a mixed-precision file, none
+    /// otherwise (and none for an f32 file, whose layers are all f32 anyway).
+    pub fn float_layers_of_int8(&self) -> impl Iterator<Item = &ConvLayer> {
+        let n = self.layers.len();
+        let ends = if self.is_mixed_precision() {
+            vec![0, n - 1]
+        } else {
+            Vec::new()
+        };
+        ends.into_iter().map(move |i| &self.layers[i])
+    }
+
     /// Multiply-adds per output pixel of the convolutions.
     pub fn macs_per_pixel(&self) -> usize {
         self.layers.iter().map(|l| l.c_out * l.c_in * 9).sum()

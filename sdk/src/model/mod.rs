@@ -136,8 +136,7 @@ impl std::fmt::Display for Precision {
 pub use contract::{head_to_phasor, heads_to_field};
 pub use graph::{CnnOutput, CnnQuant, CnnWeights, ConvLayer, LayerQuant, QuantGrid};
 pub use metadata::{
-    carrier_free_phase_rad, nonparaxial_residual_rad, DisplayMapping, ModelConfig, ModelKind,
-    ModelMetadata, DEFAULT_WAVELENGTH_RATIO_TOLERANCE, FORMAT_VERSION,
-    MAX_NONPARAXIAL_RESIDUAL_RAD, METADATA_PREFIX, PREFILTER_FORMAT_VERSION, RETRAIN_HINT,
+    ModelConfig, ModelKind, ModelMetadata, FORMAT_VERSION, METADATA_PREFIX,
+    PREFILTER_FORMAT_VERSION,
 };
 pub use network::HologramModel;

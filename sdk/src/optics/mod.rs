@@ -15,8 +15,8 @@ use rayon::prelude::*;
 
 pub use filter::FourierFilter;
 pub use propagation::{
-    Carrier, EvenMultiplier, Padding, PropagationOptions, Propagator, Scratch, SpectralPlan,
-    TransferFunction,
+    carrier_free_phase_rad, Carrier, EvenMultiplier, Padding, PropagationOptions, Propagator,
+    Scratch, SpectralPlan, TransferFunction,
 };
 pub use reconstruct::{focal_stack, post_encoding_midpoint, simulate_phase_only};
 

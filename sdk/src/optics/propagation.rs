@@ -649,15 +649,12 @@ impl Propagator {
             let fx = kx as f64 * dfx;
             let fy = ky as f64 * dfy;
             let f2 = fx * fx + fy * fy;
-            let arg = inv_lambda2 - f2;
-            if arg <= 0.0 || fx.abs() > fx_limit || fy.abs() > fy_limit {
+            if fx.abs() > fx_limit || fy.abs() > fy_limit {
                 return Complex32::new(0.0, 0.0);
             }
-            let kz = arg.sqrt();
-            let phase = match carrier {
-                Carrier::Keep => 2.0 * PI * distance_m * kz,
-                // kz − 1/λ = −f² / (kz + 1/λ): no cancellation error for small f.
-                Carrier::Remove => -2.0 * PI * distance_m * f2 / (kz + inv_lambda),
+            let Some(phase) = transfer_phase_rad(inv_lambda, inv_lambda2, distance_m, f2, carrier)
+            else {
+                return Complex32::new(0.0, 0.0);
             };
             let (s, c) = phase.sin_cos();
             Complex32::new(c as f32 * norm, s as f32 * norm)
@@ -701,4 +698,36 @@ impl Propagator {
         let mut scratch = self.plan.scratch();
         self.propagate(field, &tf, &mut scratch)
     }
+}
+/// The angular spectrum transfer function's phase in radians (paper Eq. 2, `docs/CONVENTIONS.md` §5.2) at
+/// squared radial frequency `f2` (cycles² per m²) over `distance_m` metres, for `inv_lambda = 1/λ` and
+/// `inv_lambda2 = 1/λ²`: `2π·z·√(1/λ² − f²)`, or with the carrier removed (Eq. 6, Eq. 10)
+/// `2π·z·(√(1/λ² − f²) − 1/λ)`, computed as `−2π·z·f²/(√(1/λ² − f²) + 1/λ)` (no cancellation for small `f`).
+/// `None` for an evanescent `f² ≥ 1/λ²`. The one transfer phase of the SDK: the propagator's transfer
+/// functions and the display mapping's residual (`crate::display`) both use it.
+#[inline]
+pub(crate) fn transfer_phase_rad(
+    inv_lambda: f64,
+    inv_lambda2: f64,
+    distance_m: f64,
+    f2: f64,
+    carrier: Carrier,
+) -> Option<f64> {
+    let arg = inv_lambda2 - f2;
+    if arg <= 0.0 {
+        return None;
+    }
+    let kz = arg.sqrt();
+    Some(match carrier {
+        Carrier::Keep => 2.0 * PI * distance_m * kz,
+        Carrier::Remove => -2.0 * PI * distance_m * f2 / (kz + inv_lambda),
+    })
+}
+
+/// The carrier-free transfer phase ([`transfer_phase_rad`] with [`Carrier::Remove`]) at wavelength
+/// `wavelength_m` and squared radial frequency `f2` (cycles² per m²) over `distance_m` metres, radians;
+/// `None` for an evanescent frequency.
+pub fn carrier_free_phase_rad(wavelength_m: f64, distance_m: f64, f2: f64) -> Option<f64> {
+    let inv = 1.0 / wavelength_m;
+    transfer_phase_rad(inv, inv * inv, distance_m, f2, Carrier::Remove)
 }

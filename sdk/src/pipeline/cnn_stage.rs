@@ -23,6 +23,10 @@ pub(super) struct CnnStage {
     pub(super) input: Array3<f32>,
     /// The display calibration whose laser intensity scale maps multiply the packed amplitudes.
     pub(super) calibration: Option<Arc<DisplayCalibration>>,
+    /// The fraction of the model's volume the display's volume uses
+    /// ([`crate::display::DisplayMapping::depth_fraction`]): each packed depth `d` becomes
+    /// `0.5 + (d − 0.5)·fraction`; 1 (no change, frames read in place) for a volume the models serve whole.
+    pub(super) depth_fraction: f32,
 }
 
 impl CnnStage {
@@ -32,6 +36,7 @@ impl CnnStage {
             plan: self.plan.spawn(),
             input: self.input.clone(),
             calibration: self.calibration.clone(),
+            depth_fraction: self.depth_fraction,
         }
     }
 
@@ -49,6 +54,7 @@ impl CnnStage {
         let mut input = self.input_mut();
         contract::pack_rgbd(frame, input.slice_mut(s![..4, .., ..]))?;
         contract::fill_empty_layers(input, 1, c / 4);
+        self.fit_depths(1);
         self.scale_intensity();
         self.check_not_black()
     }
@@ -102,8 +108,9 @@ impl CnnStage {
             .as_ref()
             .is_some_and(|cal| cal.colours.iter().any(|c| c.intensity_scale.is_some()));
         let (c, h, w) = self.plan.input_dim();
-        let (false, Some(amplitude), Some(depth), 4) = (
+        let (false, true, Some(amplitude), Some(depth), 4) = (
             scaled,
+            self.depth_fraction == 1.0,
             frame.amplitude.as_slice(),
             frame.depth.as_slice(),
             c,
@@ -208,8 +215,30 @@ impl CnnStage {
         }
         check_size("LDI", (3, ldi.height(), ldi.width()), (h, w))?;
         contract::pack_ldi(ldi, self.input_mut())?;
+        self.fit_depths(ldi.num_layers());
         self.scale_intensity();
         self.check_not_black()
+    }
+
+    /// Maps the packed depths of the first `layers` layers into the part of the model's volume the display
+    /// uses (`depth_fraction`): `d → 0.5 + (d − 0.5)·fraction`, the front layer's every depth and the back
+    /// layers' points (a depth of [`contract::INVALID_DEPTH`] there marks "no point" and stays). Nothing for
+    /// a fraction of 1.
+    fn fit_depths(&mut self, layers: usize) {
+        let k = self.depth_fraction;
+        if k == 1.0 {
+            return;
+        }
+        for layer in 0..layers {
+            let mut depth = self.input.index_axis_mut(Axis(0), 4 * layer + 3);
+            depth.mapv_inplace(|d| {
+                if layer > 0 && d >= contract::INVALID_DEPTH {
+                    d
+                } else {
+                    0.5 + (d - 0.5) * k
+                }
+            });
+        }
     }
 
     pub(super) fn run(&mut self, t: Instant) -> Result<(Heads, f64)> {

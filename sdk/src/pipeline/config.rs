@@ -148,11 +148,12 @@ pub struct PipelineConfig {
     /// The GPU CNNs' arithmetic (default [`GpuPrecision::Auto`]: f16 where the adapter has it); f16 falls back
     /// to f32 on an adapter without `SHADER_F16` (the backend report says so).
     pub gpu_precision: GpuPrecision,
-    /// Largest relative spread (fraction; 0.005 = 0.5 %) of the per-colour depth scales accepted when the
+    /// Largest relative spread (a fraction: 0.01 = 1 %) of the per-colour depth scales accepted when the
     /// models were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`,
-    /// [`crate::model::DisplayMapping`]); default [`crate::model::DEFAULT_WAVELENGTH_RATIO_TOLERANCE`]. A
+    /// [`crate::display::DisplayMapping`]); `None` (the default): the serving rule's, the spread whose
+    /// estimated cost stays within [`crate::display::MAPPING_COST_BUDGET_DB`] of the model's own score. A
     /// wider value shows in [`HologramPipeline::display_mapping`](crate::pipeline::HologramPipeline::display_mapping).
-    pub wavelength_ratio_tolerance: f64,
+    pub wavelength_ratio_tolerance: Option<f64>,
 }
 
 impl Default for PipelineConfig {
@@ -169,7 +170,7 @@ impl Default for PipelineConfig {
             cnn_tune: false,
             backend: Backend::default(),
             gpu_precision: GpuPrecision::default(),
-            wavelength_ratio_tolerance: crate::model::DEFAULT_WAVELENGTH_RATIO_TOLERANCE,
+            wavelength_ratio_tolerance: None,
         }
     }
 }

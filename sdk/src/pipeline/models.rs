@@ -7,11 +7,12 @@ use std::sync::Arc;
 use super::config::PipelineConfig;
 use super::selection::{shipped_prefilter, ModelSelection, PrefilterMode, PrefilterSource};
 use crate::cnn::{PlanRequest, PlanSource, SavedPlans};
+use crate::display::DisplayMapping;
 use crate::encoding::DoublePhaseMethod;
 #[cfg(doc)]
 use crate::error::HoloError;
 use crate::error::{invalid, Result};
-use crate::model::{DisplayMapping, HologramModel, ModelConfig, ModelKind, Precision};
+use crate::model::{HologramModel, ModelConfig, ModelKind, Precision};
 use crate::slm::{DisplayCalibration, LutRepresentation, PhaseLut};
 
 /// The loaded CNNs plus their configuration: a factory of [`HologramSession`](crate::pipeline::HologramSession)s.
@@ -37,15 +38,19 @@ pub struct HologramPipeline {
 impl HologramPipeline {
     /// Combines a hologram CNN with an optional pre-filter CNN (DDPM) under `config`.
     ///
+    /// A volume within 1 % of the one the models serve (`σ·V`, [`DisplayMapping`]) runs at `σ·V`
+    /// ([`HologramPipeline::config`] then holds it); a smaller one maps the scene's depths into the part of the
+    /// models' volume it needs ([`DisplayMapping::depth_fraction`], applied to every frame's depths).
+    ///
     /// Errors: [`HoloError::InvalidParameter`] for an invalid setup or offset, a pre-filter with a 0 m offset,
-    /// or models of the wrong kind; [`HoloError::ModelMetadata`] if a model's metadata does not match
-    /// `config` (optics; the pre-filter's offset); [`HoloError::ModelContract`] for a model no CPU CNN engine
+    /// or models of the wrong kind; [`HoloError::DisplayNotServed`] for a display the models do not serve
+    /// (what would serve it is in the error); [`HoloError::ModelMetadata`] for other metadata mismatches; [`HoloError::ModelContract`] for a model no CPU CNN engine
     /// of this build runs ([`crate::cnn::check_runnable`]: e.g. a graph only tract runs, in a build without
     /// the `tract` feature).
     pub fn new(
         hologram: Arc<HologramModel>,
         prefilter: Option<Arc<HologramModel>>,
-        config: PipelineConfig,
+        mut config: PipelineConfig,
     ) -> Result<Self> {
         config.optics.validate()?;
         if !config.offset_m.is_finite() {
@@ -71,6 +76,8 @@ impl HologramPipeline {
         if let Some(p) = &prefilter {
             crate::cnn::check_runnable(p)?;
         }
+        // A volume within the rounding of σ·V runs at σ·V (the mapping says so in its description).
+        config.optics.volume_depth_m = display_mapping.running_volume_depth_m();
         let prefilter_reason = if prefilter.is_some() {
             "pre-filter CNN given by the caller"
         } else if config.offset_m == 0.0 {

@@ -1,6 +1,6 @@
 //! Which CNNs run: the shipped models by name ([`ModelSelection`], [`PrefilterMode`]) and the one rule that
 //! pairs a hologram CNN with a shipped pre-filter by the offset mapped onto the training display (`s'/σ`,
-//! [`crate::model::DisplayMapping`]; 1.5 mm at 4 µm ↔ the 6 mm pre-filter) ([`shipped_prefilter`], used by
+//! [`crate::display::DisplayMapping`]; 1.5 mm at 4 µm ↔ the 6 mm pre-filter) ([`shipped_prefilter`], used by
 //! [`super::HologramPipeline::with_shipped_prefilter`], and through it by the CLI and the bindings).
 
 use std::sync::Arc;
@@ -80,11 +80,12 @@ pub(super) fn shipped_prefilter(
 ) -> Result<(Option<HologramModel>, String)> {
     // The shipped pre-filters are named by their offset on the training display (8 µm): a Fresnel-equivalent
     // display's offset s' maps to s'/σ there (docs/DISPLAYS.md); σ = 1 on the paper's display.
-    let scale = crate::model::DisplayMapping::compute(
+    let scale = crate::display::DisplayMapping::compute(
         &hologram.metadata().optics(),
         &config.optics,
         config.offset_m,
         config.wavelength_ratio_tolerance,
+        hologram.metadata().card_score_db(),
     )?
     .scale;
     let mm = config.offset_m / scale * 1e3;

@@ -133,6 +133,7 @@ impl HologramSession {
                 plan: hologram,
                 input: Array3::zeros((0, 0, 0)),
                 calibration: calibration.clone(),
+                depth_fraction: pipeline.display_mapping().depth_fraction() as f32,
             },
             prefilter,
             states,

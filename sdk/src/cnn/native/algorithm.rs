@@ -120,7 +120,8 @@ fn shapes(graph: &CnnWeights, conv: ConvAlgorithm) -> Vec<(RowKey, &ConvLayer)> 
             let set = RowAlgorithms::of_request(conv);
             graph.layers.iter().map(|l| key(l, set)).collect()
         }
-        Some(_) => super::int8::float_layers(graph)
+        Some(_) => graph
+            .float_layers_of_int8()
             .map(|l| key(l, RowAlgorithms::Direct))
             .collect(),
     }

@@ -80,21 +80,6 @@ impl Network {
     }
 }
 
-/// Whether an int8 file of `n` layers is mixed precision: float first and last layers (the graph reader allows
-/// no other float layers).
-fn is_mixed(quant: &CnnQuant, n: usize) -> bool {
-    n >= 3 && quant.layers[0].is_none() && quant.layers[n - 1].is_none()
-}
-
-/// The layers of an int8 file that run the f32 kernels: the first and the last of a mixed-precision file,
-/// none otherwise (and none for an f32 file).
-pub(super) fn float_layers(graph: &CnnWeights) -> impl Iterator<Item = &crate::model::ConvLayer> {
-    let n = graph.layers.len();
-    let mixed = graph.quant.as_ref().is_some_and(|q| is_mixed(q, n));
-    let ends = if mixed { vec![0, n - 1] } else { Vec::new() };
-    ends.into_iter().map(move |i| &graph.layers[i])
-}
-
 /// Layer `i`'s int8 form. Errors: a float layer ([`HoloError::ModelRun`]).
 fn int8_layer(quant: &CnnQuant, i: usize) -> Result<&LayerQuant> {
     quant.layers.get(i).and_then(Option::as_ref).ok_or_else(|| {
@@ -217,7 +202,7 @@ impl NativeInt8Plan {
         let n = graph.layers.len();
         let hidden = graph.layers[0].c_out;
         let c = graph.in_channels;
-        let mixed = is_mixed(quant, n);
+        let mixed = graph.is_mixed_precision();
         let int8 = if mixed { 1..n - 1 } else { 0..n };
         for (i, l) in graph.layers.iter().enumerate() {
             if l.bias.iter().chain(&l.weights).any(|v| !v.is_finite()) {

@@ -342,6 +342,46 @@ impl DisplayProfile {
     pub fn default_offset_m(&self) -> f64 {
         self.offsets_m.first().copied().unwrap_or(0.0)
     }
+
+    /// This profile with the display `optics` (pitch, lasers, volume, metres) and `offset_m` as its first
+    /// offset (the others kept, less any equal to it): e.g. the nearest display a model serves
+    /// ([`crate::display::DisplayRefusal::nearest`]).
+    pub fn with_optics(&self, optics: &OpticalSetup, offset_m: f64) -> Self {
+        let mut offsets_m = vec![offset_m];
+        offsets_m.extend(self.offsets_m.iter().copied().filter(|&s| s != offset_m));
+        Self {
+            pixel_pitch_m: optics.pixel_pitch_m,
+            wavelengths_m: optics.wavelengths_m,
+            volume_depth_m: optics.volume_depth_m,
+            offsets_m,
+            ..self.clone()
+        }
+    }
+
+    /// The profile as the JSON file [`DisplayProfile::from_json_str`] reads (the optional keys only where
+    /// set; a calibration path as given).
+    pub fn to_json(&self) -> String {
+        let mut v = serde_json::Map::new();
+        if let Some(n) = &self.name {
+            v.insert("name".into(), n.clone().into());
+        }
+        v.insert("pixel_pitch_m".into(), self.pixel_pitch_m.into());
+        v.insert("resolution".into(), serde_json::json!(self.resolution));
+        v.insert(
+            "wavelengths_m".into(),
+            serde_json::json!(self.wavelengths_m),
+        );
+        v.insert("volume_depth_m".into(), self.volume_depth_m.into());
+        v.insert("offsets_m".into(), serde_json::json!(self.offsets_m));
+        if let Some(c) = &self.calibration {
+            v.insert(
+                "calibration".into(),
+                c.to_string_lossy().into_owned().into(),
+            );
+        }
+        // Plain numbers and strings: serialising cannot fail.
+        serde_json::to_string_pretty(&serde_json::Value::Object(v)).unwrap_or_default() + "\n"
+    }
 }
 
 #[cfg(test)]

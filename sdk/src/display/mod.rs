@@ -1,0 +1,19 @@
+//! The display: its profile file (`profile.rs`: [`DisplayProfile`], what `holo --display FILE` and apps
+//! read) and how a model trained for one display serves another (`equivalence.rs`: the depth scale `σ`, the
+//! mapping, its ceiling and cost, the non-paraxial residual, and the rules that serve or refuse a display:
+//! [`DisplayMapping`]; a refusal, [`DisplayRefusal`], is defined with the error that carries it). `docs/DISPLAYS.md` is the user's page.
+//!
+//! Imports `optics` and `error` only: the model's metadata check (`model::metadata`) reads this module,
+//! never the reverse.
+
+mod equivalence;
+mod profile;
+
+pub use crate::error::{DisplayRefusal, NearestDisplay, RETRAIN_COST};
+pub(crate) use equivalence::{close, sig};
+pub use equivalence::{
+    mapping_cost_db, nonparaxial_residual_rad, predicted_ceiling_db, rule_tolerance,
+    DisplayMapping, VolumeFit, CEILING_AT_1PCT_DB, MAPPING_COST_BUDGET_DB,
+    MAX_NONPARAXIAL_RESIDUAL_RAD, VOLUME_ROUNDING,
+};
+pub use profile::{DisplayProfile, MAX_WAVELENGTH_M, MIN_WAVELENGTH_M};
