@@ -546,13 +546,10 @@ fn shipped_checks(
                 (None, Some(r), _) => r.to_string(),
                 (None, None, note) => note.clone().unwrap_or_default(),
             };
-            let nearest = c.refusal.as_ref().and_then(|r| {
-                Some(
-                    profile
-                        .with_optics(&r.nearest?.optics(), r.nearest?.offset_m)
-                        .to_json(),
-                )
-            });
+            let nearest = c
+                .refusal
+                .as_ref()
+                .and_then(|r| Some(profile.with_display(&r.nearest?).to_json()));
             let tolerance = c.refusal.as_ref().and_then(|r| r.tolerance);
             ShippedModelCheck {
                 file: c.file.clone(),

@@ -83,11 +83,11 @@ fn check(args: &CheckArgs) -> Result<bool> {
         w[0] * 1e9,
         w[1] * 1e9,
         w[2] * 1e9,
-        profile.volume_depth_m * 1e3,
+        mm(profile.volume_depth_m),
         profile
             .offsets_m
             .iter()
-            .map(|s| format!("{}", s * 1e3))
+            .map(|&s| format!("{}", mm(s)))
             .collect::<Vec<_>>()
             .join(", ")
     );
@@ -119,16 +119,13 @@ fn check(args: &CheckArgs) -> Result<bool> {
             (None, None, Some(note)) => format!("– | | | | | | {note}"),
             (None, None, None) => "? | | | | | | ".into(),
         };
-        println!(
-            "| {} | {model} | {} | {row} |",
-            c.offset_m * 1e3,
-            c.precision
-        );
+        println!("| {} | {model} | {} | {row} |", mm(c.offset_m), c.precision);
     }
     // Why not, once per distinct refusal, with what would serve.
     let mut seen = Vec::new();
     for r in checks.iter().filter_map(|c| c.refusal.as_ref()) {
-        let key = (r.key.clone(), r.expected.clone());
+        // One block per cause and remedy (the models of each depth refuse alike).
+        let key = (r.key.clone(), format!("{:?} {:?}", r.nearest, r.tolerance));
         if seen.contains(&key) {
             continue;
         }
@@ -152,15 +149,21 @@ fn check(args: &CheckArgs) -> Result<bool> {
 /// A volume fit in a table cell.
 fn volume(fit: VolumeFit, served_m: f64) -> String {
     match fit {
-        VolumeFit::Mapped => format!("{} mm", served_m * 1e3),
+        VolumeFit::Mapped => format!("{} mm", mm(served_m)),
         VolumeFit::Rounded { requested_m } => {
-            format!("{} mm → {} mm", requested_m * 1e3, served_m * 1e3)
+            format!("{} mm → {} mm", mm(requested_m), mm(served_m))
         }
         VolumeFit::Partial { fraction } => {
-            format!("{:.1} % of {} mm", fraction * 100.0, served_m * 1e3)
+            format!("{:.1} % of {} mm", fraction * 100.0, mm(served_m))
         }
         VolumeFit::TooDeep => "too deep".into(),
     }
+}
+
+/// Metres as millimetres to the nanometre, without the float noise of the conversion (1.3113375, not
+/// 1.3113375000000003).
+fn mm(metres: f64) -> f64 {
+    (metres * 1e12).round() / 1e9
 }
 
 /// What would serve a refused display, in the order to try, for the `--display` file where one was given:
@@ -179,7 +182,7 @@ pub fn serving_hint(r: &DisplayRefusal, profile: Option<(&Path, &DisplayProfile)
             Some((path, p)) => step(format!(
                 "the nearest display this model serves, as a profile to save beside {}:\n{}",
                 path.display(),
-                p.with_optics(&o, s).to_json().trim_end()
+                p.with_display(&n).to_json().trim_end()
             )),
             None => step(format!(
                 "the nearest display this model serves: --pitch-m {} --wavelengths-m {},{},{} \

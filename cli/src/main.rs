@@ -118,8 +118,24 @@ fn fixed_mmap_threshold() {
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
 fn fixed_mmap_threshold() {}
 
+/// A closed pipe ends `holo` quietly, as it does other command-line tools (`holo display check FILE | head`):
+/// Rust ignores SIGPIPE, so a write to a closed pipe would fail and `println!` would panic instead.
+#[cfg(unix)]
+fn quiet_on_closed_pipe() {
+    // SAFETY: `signal` only sets the disposition of SIGPIPE back to the default (terminate), before any other
+    // thread exists; SIG_DFL is a valid disposition.
+    #[allow(unsafe_code)]
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
+#[cfg(not(unix))]
+fn quiet_on_closed_pipe() {}
+
 fn main() {
     fixed_mmap_threshold();
+    quiet_on_closed_pipe();
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("info"))
         .format_timestamp(None)
         .init();

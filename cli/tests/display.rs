@@ -566,26 +566,28 @@ fn display_check_serves_the_lab_profiles_and_exits_for_scripts() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
 }
 
-/// The predicted mapping ceiling (report.json → display_mapping) against `--evaluate`'s measured one, three
-/// laser mismatches: within 4 dB at this small size (the fit was made at 384² with 2048 planes,
-/// docs/DISPLAYS.md).
+/// The predicted mapping ceiling (report.json → display_mapping_detail) against `--evaluate`'s measured one,
+/// three laser mismatches: the slope (6 dB per doubling of the spread) within 0.3 dB, and the level within
+/// 4.5 dB at this size. The prediction is the 384² fit of docs/DISPLAYS.md; a smaller frame measures a lower
+/// ceiling (96×128 with 256 planes: 4.0–4.1 dB lower; 192²: 1.5 dB; 384²: within 0.3 dB).
 #[test]
 fn the_predicted_ceiling_agrees_with_the_measured_one() {
     let dir = tempfile::tempdir().unwrap();
+    let mut pairs = Vec::new();
     for green in [525.2, 530.4, 540.8] {
         let p = green_profile(dir.path(), green);
         let out = dir.path().join(format!("r{green}"));
         let o = holo(&[
             "render",
             "--size",
-            "48x64",
+            "96x128",
             "--repeat",
             "0",
             "--display",
             p.to_str().unwrap(),
             "--evaluate",
             "--levels",
-            "128",
+            "256",
             "--out",
             out.to_str().unwrap(),
         ]);
@@ -594,16 +596,20 @@ fn the_predicted_ceiling_agrees_with_the_measured_one() {
         let measured = rep["evaluation"]["mapping_ceiling"]["psnr_fs"]
             .as_f64()
             .unwrap();
-        let mapping = rep["models"]["display_mapping"].as_str().unwrap();
-        let predicted: f64 = mapping
-            .split("mapping ceiling ")
-            .nth(1)
-            .and_then(|t| t.split(" dB").next())
-            .and_then(|t| t.parse().ok())
-            .unwrap_or_else(|| panic!("{mapping}"));
+        let predicted = rep["models"]["display_mapping_detail"]["ceiling_db"]
+            .as_f64()
+            .unwrap();
         assert!(
-            (measured - predicted).abs() <= 4.0,
+            (measured - predicted).abs() <= 4.5,
             "green {green} nm: measured {measured:.2} dB, predicted {predicted:.2} dB"
+        );
+        pairs.push((predicted, measured));
+    }
+    for w in pairs.windows(2) {
+        let (dp, dm) = (w[0].0 - w[1].0, w[0].1 - w[1].1);
+        assert!(
+            (dp - dm).abs() <= 0.3,
+            "slope: predicted {dp:.2} dB, measured {dm:.2} dB"
         );
     }
 }

@@ -168,6 +168,9 @@ pub struct NearestDisplay {
     pub volume_depth_m: f64,
     /// Offset from the midpoint hologram to the SLM.
     pub offset_m: f64,
+    /// The factor the display's other offsets take on it (the new depth scale over the old: 1 where the
+    /// scale stays, e.g. for a volume).
+    pub offsets_scale: f64,
 }
 
 /// Why a model cannot serve a display, and what would (the payload of [`HoloError::DisplayNotServed`]; built

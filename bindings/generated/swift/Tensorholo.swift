@@ -1889,11 +1889,12 @@ public struct GeneratorConfig: Equatable, Hashable {
      */
     public var engine: CnnEngine?
     /**
-     * Largest relative spread (a fraction: 0.005 = 0.5 %, the default) of the per-colour depth scales
-     * accepted when the CNNs were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); a
-     * wider value shows as "widened" in [`GeneratorInfo::display_mapping`].
+     * Largest relative spread (a fraction: 0.01 = 1 %) of the lasers' depth scales accepted when the CNNs
+     * were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); `None` (default): the
+     * serving rule's, an estimated cost within 0.3 dB of the model's own score (about 1.8–2 %). A value
+     * wider than that shows as "widened" in [`GeneratorInfo::display_mapping`], with its cost.
      */
-    public var wavelengthRatioTolerance: Double
+    public var wavelengthRatioTolerance: Double?
     /**
      * Time the CNN candidates on this device at creation (engines, each layer's kernel row, threads; up to
      * a few seconds) instead of taking the plan table's (default `false`: the same SLM codes on every run).
@@ -1966,10 +1967,11 @@ public struct GeneratorConfig: Equatable, Hashable {
          * The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`] says which runs).
          */engine: CnnEngine? = nil, 
         /**
-         * Largest relative spread (a fraction: 0.005 = 0.5 %, the default) of the per-colour depth scales
-         * accepted when the CNNs were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); a
-         * wider value shows as "widened" in [`GeneratorInfo::display_mapping`].
-         */wavelengthRatioTolerance: Double = Double(0.005), 
+         * Largest relative spread (a fraction: 0.01 = 1 %) of the lasers' depth scales accepted when the CNNs
+         * were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); `None` (default): the
+         * serving rule's, an estimated cost within 0.3 dB of the model's own score (about 1.8–2 %). A value
+         * wider than that shows as "widened" in [`GeneratorInfo::display_mapping`], with its cost.
+         */wavelengthRatioTolerance: Double? = nil, 
         /**
          * Time the CNN candidates on this device at creation (engines, each layer's kernel row, threads; up to
          * a few seconds) instead of taking the plan table's (default `false`: the same SLM codes on every run).
@@ -2036,7 +2038,7 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
                 backend: FfiConverterOptionTypeBackend.read(from: &buf), 
                 gpuPrecision: FfiConverterOptionTypeGpuPrecision.read(from: &buf), 
                 engine: FfiConverterOptionTypeCnnEngine.read(from: &buf), 
-                wavelengthRatioTolerance: FfiConverterDouble.read(from: &buf), 
+                wavelengthRatioTolerance: FfiConverterOptionDouble.read(from: &buf), 
                 tune: FfiConverterBool.read(from: &buf), 
                 savedPlans: FfiConverterOptionString.read(from: &buf)
         )
@@ -2060,7 +2062,7 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
         FfiConverterOptionTypeBackend.write(value.backend, into: &buf)
         FfiConverterOptionTypeGpuPrecision.write(value.gpuPrecision, into: &buf)
         FfiConverterOptionTypeCnnEngine.write(value.engine, into: &buf)
-        FfiConverterDouble.write(value.wavelengthRatioTolerance, into: &buf)
+        FfiConverterOptionDouble.write(value.wavelengthRatioTolerance, into: &buf)
         FfiConverterBool.write(value.tune, into: &buf)
         FfiConverterOptionString.write(value.savedPlans, into: &buf)
     }
@@ -2638,6 +2640,210 @@ public func FfiConverterTypeRgbdFrame_lift(_ buf: RustBuffer) throws -> RgbdFram
 #endif
 public func FfiConverterTypeRgbdFrame_lower(_ value: RgbdFrame) -> RustBuffer {
     return FfiConverterTypeRgbdFrame.lower(value)
+}
+
+
+/**
+ * One shipped CNN against a display ([`check_display`]): whether it serves the display at one offset and
+ * at what estimated cost, or why not and what would serve.
+ */
+public struct ShippedModelCheck: Equatable, Hashable {
+    /**
+     * The embedded file (`holo8_rgbd.onnx`, …); empty where no pre-filter is shipped for the offset.
+     */
+    public var file: String
+    /**
+     * `hologram-cnn` or `prefilter-cnn`.
+     */
+    public var kind: String
+    /**
+     * Layers of the hologram CNN (a pre-filter: of the CNN it pairs with).
+     */
+    public var layers: UInt32
+    /**
+     * `rgbd` or `ldi`.
+     */
+    public var input: String
+    /**
+     * `f32` or `int8-qdq`.
+     */
+    public var precision: String
+    /**
+     * The offset checked, millimetres.
+     */
+    public var offsetMm: Double
+    /**
+     * Whether the model serves the display at this offset.
+     */
+    public var served: Bool
+    /**
+     * `σ`, the depth scale of the mapping (served only).
+     */
+    public var scale: Double?
+    /**
+     * The lasers' spread, percent (served only).
+     */
+    public var spreadPct: Double?
+    /**
+     * The mapping's predicted ceiling in dB (served with a spread; `None` for no spread: no ceiling).
+     */
+    public var ceilingDb: Double?
+    /**
+     * The mapping's estimated cost in dB (served only).
+     */
+    public var costDb: Double?
+    /**
+     * The mapping in one line (served), or why not and what would serve (refused), or why no model was
+     * checked.
+     */
+    public var detail: String
+    /**
+     * Refused: the nearest display this model serves, as a profile JSON to save (this profile with the
+     * lasers, volume or offset changed).
+     */
+    public var nearestProfileJson: String?
+    /**
+     * Refused for its lasers: the `wavelength_ratio_tolerance` that serves the display as it is.
+     */
+    public var tolerance: Double?
+    /**
+     * The estimated cost in dB at that tolerance.
+     */
+    public var toleranceCostDb: Double?
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The embedded file (`holo8_rgbd.onnx`, …); empty where no pre-filter is shipped for the offset.
+         */file: String, 
+        /**
+         * `hologram-cnn` or `prefilter-cnn`.
+         */kind: String, 
+        /**
+         * Layers of the hologram CNN (a pre-filter: of the CNN it pairs with).
+         */layers: UInt32, 
+        /**
+         * `rgbd` or `ldi`.
+         */input: String, 
+        /**
+         * `f32` or `int8-qdq`.
+         */precision: String, 
+        /**
+         * The offset checked, millimetres.
+         */offsetMm: Double, 
+        /**
+         * Whether the model serves the display at this offset.
+         */served: Bool, 
+        /**
+         * `σ`, the depth scale of the mapping (served only).
+         */scale: Double?, 
+        /**
+         * The lasers' spread, percent (served only).
+         */spreadPct: Double?, 
+        /**
+         * The mapping's predicted ceiling in dB (served with a spread; `None` for no spread: no ceiling).
+         */ceilingDb: Double?, 
+        /**
+         * The mapping's estimated cost in dB (served only).
+         */costDb: Double?, 
+        /**
+         * The mapping in one line (served), or why not and what would serve (refused), or why no model was
+         * checked.
+         */detail: String, 
+        /**
+         * Refused: the nearest display this model serves, as a profile JSON to save (this profile with the
+         * lasers, volume or offset changed).
+         */nearestProfileJson: String?, 
+        /**
+         * Refused for its lasers: the `wavelength_ratio_tolerance` that serves the display as it is.
+         */tolerance: Double?, 
+        /**
+         * The estimated cost in dB at that tolerance.
+         */toleranceCostDb: Double?) {
+        self.file = file
+        self.kind = kind
+        self.layers = layers
+        self.input = input
+        self.precision = precision
+        self.offsetMm = offsetMm
+        self.served = served
+        self.scale = scale
+        self.spreadPct = spreadPct
+        self.ceilingDb = ceilingDb
+        self.costDb = costDb
+        self.detail = detail
+        self.nearestProfileJson = nearestProfileJson
+        self.tolerance = tolerance
+        self.toleranceCostDb = toleranceCostDb
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension ShippedModelCheck: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeShippedModelCheck: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> ShippedModelCheck {
+        return
+            try ShippedModelCheck(
+                file: FfiConverterString.read(from: &buf), 
+                kind: FfiConverterString.read(from: &buf), 
+                layers: FfiConverterUInt32.read(from: &buf), 
+                input: FfiConverterString.read(from: &buf), 
+                precision: FfiConverterString.read(from: &buf), 
+                offsetMm: FfiConverterDouble.read(from: &buf), 
+                served: FfiConverterBool.read(from: &buf), 
+                scale: FfiConverterOptionDouble.read(from: &buf), 
+                spreadPct: FfiConverterOptionDouble.read(from: &buf), 
+                ceilingDb: FfiConverterOptionDouble.read(from: &buf), 
+                costDb: FfiConverterOptionDouble.read(from: &buf), 
+                detail: FfiConverterString.read(from: &buf), 
+                nearestProfileJson: FfiConverterOptionString.read(from: &buf), 
+                tolerance: FfiConverterOptionDouble.read(from: &buf), 
+                toleranceCostDb: FfiConverterOptionDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: ShippedModelCheck, into buf: inout [UInt8]) {
+        FfiConverterString.write(value.file, into: &buf)
+        FfiConverterString.write(value.kind, into: &buf)
+        FfiConverterUInt32.write(value.layers, into: &buf)
+        FfiConverterString.write(value.input, into: &buf)
+        FfiConverterString.write(value.precision, into: &buf)
+        FfiConverterDouble.write(value.offsetMm, into: &buf)
+        FfiConverterBool.write(value.served, into: &buf)
+        FfiConverterOptionDouble.write(value.scale, into: &buf)
+        FfiConverterOptionDouble.write(value.spreadPct, into: &buf)
+        FfiConverterOptionDouble.write(value.ceilingDb, into: &buf)
+        FfiConverterOptionDouble.write(value.costDb, into: &buf)
+        FfiConverterString.write(value.detail, into: &buf)
+        FfiConverterOptionString.write(value.nearestProfileJson, into: &buf)
+        FfiConverterOptionDouble.write(value.tolerance, into: &buf)
+        FfiConverterOptionDouble.write(value.toleranceCostDb, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeShippedModelCheck_lift(_ buf: RustBuffer) throws -> ShippedModelCheck {
+    return try FfiConverterTypeShippedModelCheck.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeShippedModelCheck_lower(_ value: ShippedModelCheck) -> RustBuffer {
+    return FfiConverterTypeShippedModelCheck.lower(value)
 }
 
 
@@ -4291,6 +4497,31 @@ fileprivate struct FfiConverterSequenceTypeRgbdFrame: FfiConverterRustBuffer {
         return seq
     }
 }
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceTypeShippedModelCheck: FfiConverterRustBuffer {
+    typealias SwiftType = [ShippedModelCheck]
+
+    public static func write(_ value: [ShippedModelCheck], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeShippedModelCheck.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [ShippedModelCheck] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [ShippedModelCheck]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeShippedModelCheck.read(from: &buf))
+        }
+        return seq
+    }
+}
 /**
  * The version of the `tensorholo` core this library was built from (semver, e.g. `"0.1.0"`).
  *
@@ -4300,6 +4531,23 @@ public func version() -> String  {
     return try!  FfiConverterString.lift(try! rustCall() {
         uniffiCallStatus in
     uniffi_tensorholo_ffi_fn_func_version(uniffiCallStatus
+    )
+})
+}
+/**
+ * Which shipped CNNs serve a display, before making a generator (`holo display check`): at each of the
+ * profile's offsets, every hologram CNN of this library (each depth, f32 and int8) and the pre-filter each
+ * pairs with, with `wavelength_ratio_tolerance` (`None`: the serving rule's).
+ *
+ * Errors: [`TensorholoError::InvalidInput`] for a profile that breaks the profile rules or a bad tolerance;
+ * [`TensorholoError::Unsupported`] in a library built without the shipped CNNs.
+ */
+public func checkDisplay(profile: DisplayProfile, wavelengthRatioTolerance: Double?)throws  -> [ShippedModelCheck]  {
+    return try  FfiConverterSequenceTypeShippedModelCheck.lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_func_check_display(
+        FfiConverterTypeDisplayProfile_lower(profile),
+        FfiConverterOptionDouble.lower(wavelengthRatioTolerance),uniffiCallStatus
     )
 })
 }
@@ -4346,8 +4594,9 @@ public func displayProfileFromJson(json: String)throws  -> DisplayProfile  {
  *
  * Errors: [`TensorholoError::InvalidInput`] naming the key for a profile that breaks the profile rules (as
  * [`display_profile_from_json`]). Whether the CNNs serve the display is checked by [`HologramGenerator::new`]
- * ([`TensorholoError::InvalidModel`] naming `wavelengths_m` for lasers without one common depth scale,
- * `volume_depth_m` for a volume other than `σ`·6 mm, `pixel_pitch_m` for a pitch too fine).
+ * ([`TensorholoError::InvalidModel`] naming `wavelengths_m` for lasers whose spread costs more than the
+ * rule allows, `volume_depth_m` for a volume deeper than `σ`·6 mm, `pixel_pitch_m` for a pitch too fine,
+ * each with what would serve) and beforehand by [`check_display`].
  */
 public func generatorConfigForDisplay(profile: DisplayProfile)throws  -> GeneratorConfig  {
     return try  FfiConverterTypeGeneratorConfig_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
@@ -4390,13 +4639,16 @@ private let initializationResult: InitializationResult = {
     if (uniffi_tensorholo_ffi_checksum_func_version() != 14763) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_tensorholo_ffi_checksum_func_check_display() != 47754) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_tensorholo_ffi_checksum_func_convert_frame() != 5569) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_func_display_profile_from_json() != 64012) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_func_generator_config_for_display() != 57792) {
+    if (uniffi_tensorholo_ffi_checksum_func_generator_config_for_display() != 39811) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_func_pack_rgba() != 54530) {

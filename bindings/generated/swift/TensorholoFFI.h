@@ -378,6 +378,11 @@ RustBuffer uniffi_tensorholo_ffi_fn_func_version(RustCallStatus *_Nonnull out_st
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_CHECK_DISPLAY
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_CHECK_DISPLAY
+RustBuffer uniffi_tensorholo_ffi_fn_func_check_display(RustBuffer profile, RustBuffer wavelength_ratio_tolerance, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_CONVERT_FRAME
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_CONVERT_FRAME
 RustBuffer uniffi_tensorholo_ffi_fn_func_convert_frame(RustBuffer frame, uint32_t width, uint32_t height, RustBuffer fit, RustCallStatus *_Nonnull out_status
@@ -661,6 +666,12 @@ void ffi_tensorholo_ffi_rust_future_complete_void(uint64_t handle, RustCallStatu
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_VERSION
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_VERSION
 uint16_t uniffi_tensorholo_ffi_checksum_func_version(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_CHECK_DISPLAY
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_CHECK_DISPLAY
+uint16_t uniffi_tensorholo_ffi_checksum_func_check_display(void
     
 );
 #endif

@@ -272,7 +272,7 @@ def test_a_4um_display_profile_renders_with_the_shipped_models_at_sigma_a_quarte
     assert config.pixel_pitch_m == 4e-6 and config.volume_depth_m == 1.5e-3
     assert config.wavelengths_m == [638e-9, 520e-9, 450e-9]
     assert config.offset_mm == pytest.approx(1.5)
-    assert config.wavelength_ratio_tolerance == 0.005
+    assert config.wavelength_ratio_tolerance is None  # the serving rule's
     config.threads, config.engine = 1, CnnEngine.NATIVE
     gen = HologramGenerator(config)
     out = gen.render(small_frame())
@@ -283,6 +283,11 @@ def test_a_4um_display_profile_renders_with_the_shipped_models_at_sigma_a_quarte
     assert "serves 4 µm with a 1.5 mm volume" in info.display_mapping, info.display_mapping
     assert info.prefilter_model is not None and "6mm" in info.prefilter_model, info.prefilter_reason
     assert json.loads(info.json)["display_mapping"] == info.display_mapping
+    # Which shipped CNNs serve it, before a generator: every hologram CNN, at no cost (the paper's lasers).
+    checks = tensorholo.check_display(profile, None)
+    holo = [c for c in checks if c.kind == "hologram-cnn"]
+    assert holo and all(c.served and c.cost_db == 0.0 for c in holo), checks
+    assert any(c.file == "prefilter_6mm.onnx" and c.served for c in checks), checks
 
 
 # Each bad display: the change to PROFILE_4UM, the error class and the key its message must name. The first
@@ -291,8 +296,8 @@ def test_a_4um_display_profile_renders_with_the_shipped_models_at_sigma_a_quarte
 BAD_DISPLAYS = {
     "negative pitch": (dict(pixel_pitch_m=-4e-6), TensorholoError.InvalidInput, "pixel_pitch_m"),
     "resolution not [height, width]": (dict(resolution=[48]), TensorholoError.InvalidInput, "resolution"),
-    "532 nm green laser (not Fresnel-equivalent)": (dict(wavelengths_m=[638e-9, 532e-9, 450e-9]),
-                                                     TensorholoError.InvalidModel, "wavelengths_m"),
+    "a green laser 8 % off 520 nm (costs more than the rule allows)": (
+        dict(wavelengths_m=[638e-9, 561.6e-9, 450e-9]), TensorholoError.InvalidModel, "wavelengths_m"),
     "2 mm volume (σ·6 mm is 1.5 mm)": (dict(volume_depth_m=2e-3), TensorholoError.InvalidModel,
                                         "volume_depth_m"),
 }

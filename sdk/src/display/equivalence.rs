@@ -40,6 +40,10 @@ pub const VOLUME_ROUNDING: f64 = 0.01;
 /// band edge and the outermost depth.
 pub const MAX_NONPARAXIAL_RESIDUAL_RAD: f64 = 0.25;
 
+/// A laser spread below this (a fraction) is the rounding of wavelengths written in decimal (520e-9 against
+/// 5.2e-7), not a mismatch: no cost, an infinite ceiling.
+pub const SPREAD_NOISE: f64 = 1e-9;
+
 /// Frequencies sampled over the Nyquist band by [`nonparaxial_residual_rad`].
 const RESIDUAL_SAMPLES: usize = 1024;
 /// Relative tolerance of "the same length" (volumes, offsets, pitches).
@@ -49,9 +53,9 @@ const COLOUR: [&str; 3] = ["red", "green", "blue"];
 
 /// The mapping's predicted ceiling in dB at a relative laser spread `spread` (a fraction;
 /// [`DisplayMapping::spread`]): [`CEILING_AT_1PCT_DB`] less 6 dB per doubling of the spread (the mapping's
-/// error grows linearly with it); infinite at 0.
+/// error grows linearly with it); infinite at 0 (and below [`SPREAD_NOISE`], rounding of the wavelengths).
 pub fn predicted_ceiling_db(spread: f64) -> f64 {
-    if spread <= 0.0 {
+    if spread <= SPREAD_NOISE {
         f64::INFINITY
     } else {
         CEILING_AT_1PCT_DB - 20.0 * (spread / 0.01).log10()
@@ -129,7 +133,7 @@ pub enum VolumeFit {
     TooDeep,
 }
 
-/// How a model trained for one display serves another, Fresnel-equivalent one (see the [module docs](self)).
+/// How a model trained for one display serves another, Fresnel-equivalent one (see [the module](crate::display)).
 /// Built by [`DisplayMapping::compute`]; `ModelMetadata::check` accepts a model through it.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct DisplayMapping {
@@ -181,13 +185,14 @@ impl NearestDisplay {
         }
     }
 
-    /// `optics` at offset `offset_m` (metres).
-    pub fn new(optics: &OpticalSetup, offset_m: f64) -> Self {
+    /// `optics` at offset `offset_m` (metres), the display's other offsets scaled by `offsets_scale`.
+    pub fn new(optics: &OpticalSetup, offset_m: f64, offsets_scale: f64) -> Self {
         Self {
             wavelengths_m: optics.wavelengths_m,
             pixel_pitch_m: optics.pixel_pitch_m,
             volume_depth_m: optics.volume_depth_m,
             offset_m,
+            offsets_scale,
         }
     }
 }
@@ -264,7 +269,14 @@ impl DisplayMapping {
             });
         // Exactly the per-colour scale when the three agree (no rounding from the square root).
         let scale = if lo == hi { lo } else { (lo * hi).sqrt() };
-        let ratio_mismatch_pct = colour_scales.map(|s| 100.0 * (s / scale - 1.0));
+        let ratio_mismatch_pct = colour_scales.map(|s| {
+            let m = s / scale - 1.0;
+            if m.abs() <= SPREAD_NOISE {
+                0.0
+            } else {
+                100.0 * m
+            }
+        });
         let spread = ratio_mismatch_pct
             .iter()
             .fold(0.0f64, |a, &b| a.max(b.abs()))
@@ -378,7 +390,11 @@ impl DisplayMapping {
             pixel_pitch_m: self.display.pixel_pitch_m,
             volume_depth_m: median * self.trained.volume_depth_m,
         };
-        NearestDisplay::new(&optics, self.offset_m * median / self.scale)
+        NearestDisplay::new(
+            &optics,
+            self.offset_m * median / self.scale,
+            median / self.scale,
+        )
     }
 
     /// Why the model cannot serve the display, if it cannot, and what would: lasers whose spread exceeds the
@@ -461,6 +477,7 @@ impl DisplayMapping {
                         ..*d
                     },
                     self.offset_m,
+                    1.0,
                 )),
                 tolerance: None,
             });
@@ -493,6 +510,7 @@ impl DisplayMapping {
                             ..*d
                         },
                         0.0,
+                        1.0,
                     )
                 }),
                 tolerance: None,

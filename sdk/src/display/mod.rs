@@ -14,6 +14,6 @@ pub(crate) use equivalence::{close, sig};
 pub use equivalence::{
     mapping_cost_db, nonparaxial_residual_rad, predicted_ceiling_db, rule_tolerance,
     DisplayMapping, VolumeFit, CEILING_AT_1PCT_DB, MAPPING_COST_BUDGET_DB,
-    MAX_NONPARAXIAL_RESIDUAL_RAD, VOLUME_ROUNDING,
+    MAX_NONPARAXIAL_RESIDUAL_RAD, SPREAD_NOISE, VOLUME_ROUNDING,
 };
 pub use profile::{DisplayProfile, MAX_WAVELENGTH_M, MIN_WAVELENGTH_M};

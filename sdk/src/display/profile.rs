@@ -18,7 +18,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::error::{HoloError, Result};
+use crate::error::{HoloError, NearestDisplay, Result};
 use crate::optics::OpticalSetup;
 
 /// Shortest laser wavelength a profile may give, metres (the visible band).
@@ -343,16 +343,22 @@ impl DisplayProfile {
         self.offsets_m.first().copied().unwrap_or(0.0)
     }
 
-    /// This profile with the display `optics` (pitch, lasers, volume, metres) and `offset_m` as its first
-    /// offset (the others kept, less any equal to it): e.g. the nearest display a model serves
-    /// ([`crate::display::DisplayRefusal::nearest`]).
-    pub fn with_optics(&self, optics: &OpticalSetup, offset_m: f64) -> Self {
-        let mut offsets_m = vec![offset_m];
-        offsets_m.extend(self.offsets_m.iter().copied().filter(|&s| s != offset_m));
+    /// This profile for the display `nearest` (e.g. the nearest display a model serves,
+    /// [`crate::display::DisplayRefusal::nearest`]): its pitch, lasers and volume, its offset first and the
+    /// profile's other offsets scaled by its `offsets_scale` (less any equal to the first).
+    pub fn with_display(&self, nearest: &NearestDisplay) -> Self {
+        let mut offsets_m = vec![nearest.offset_m];
+        offsets_m.extend(
+            self.offsets_m
+                .iter()
+                .skip(1)
+                .map(|&s| s * nearest.offsets_scale)
+                .filter(|&s| s != nearest.offset_m),
+        );
         Self {
-            pixel_pitch_m: optics.pixel_pitch_m,
-            wavelengths_m: optics.wavelengths_m,
-            volume_depth_m: optics.volume_depth_m,
+            pixel_pitch_m: nearest.pixel_pitch_m,
+            wavelengths_m: nearest.wavelengths_m,
+            volume_depth_m: nearest.volume_depth_m,
             offsets_m,
             ..self.clone()
         }
@@ -361,18 +367,28 @@ impl DisplayProfile {
     /// The profile as the JSON file [`DisplayProfile::from_json_str`] reads (the optional keys only where
     /// set; a calibration path as given).
     pub fn to_json(&self) -> String {
+        // Twelve significant digits: no float noise of a computed value (0.0146484375, not
+        // 0.014648437500000005), and far finer than the SDK's relative 1e-6 comparisons.
+        let r = |x: f64| {
+            if x == 0.0 || !x.is_finite() {
+                return x;
+            }
+            let scale = 10f64.powi(11 - x.abs().log10().floor() as i32);
+            (x * scale).round() / scale
+        };
         let mut v = serde_json::Map::new();
         if let Some(n) = &self.name {
             v.insert("name".into(), n.clone().into());
         }
-        v.insert("pixel_pitch_m".into(), self.pixel_pitch_m.into());
+        v.insert("pixel_pitch_m".into(), r(self.pixel_pitch_m).into());
         v.insert("resolution".into(), serde_json::json!(self.resolution));
         v.insert(
             "wavelengths_m".into(),
-            serde_json::json!(self.wavelengths_m),
+            serde_json::json!(self.wavelengths_m.map(r)),
         );
-        v.insert("volume_depth_m".into(), self.volume_depth_m.into());
-        v.insert("offsets_m".into(), serde_json::json!(self.offsets_m));
+        v.insert("volume_depth_m".into(), r(self.volume_depth_m).into());
+        let offsets: Vec<f64> = self.offsets_m.iter().map(|&s| r(s)).collect();
+        v.insert("offsets_m".into(), serde_json::json!(offsets));
         if let Some(c) = &self.calibration {
             v.insert(
                 "calibration".into(),

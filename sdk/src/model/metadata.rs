@@ -408,6 +408,7 @@ impl ModelMetadata {
                         ..expected.optics
                     },
                     served_offset_m,
+                    1.0,
                 )),
                 tolerance: None,
             });

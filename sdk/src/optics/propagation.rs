@@ -724,7 +724,7 @@ pub(crate) fn transfer_phase_rad(
     })
 }
 
-/// The carrier-free transfer phase ([`transfer_phase_rad`] with [`Carrier::Remove`]) at wavelength
+/// The carrier-free transfer phase (the propagator's, with [`Carrier::Remove`]) at wavelength
 /// `wavelength_m` and squared radial frequency `f2` (cycles² per m²) over `distance_m` metres, radians;
 /// `None` for an evanescent frequency.
 pub fn carrier_free_phase_rad(wavelength_m: f64, distance_m: f64, f2: f64) -> Option<f64> {

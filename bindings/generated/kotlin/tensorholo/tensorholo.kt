@@ -705,6 +705,8 @@ internal object IntegrityCheckingUniffiLib {
     internal fun ensureInitialized() = Unit
     external fun uniffi_tensorholo_ffi_checksum_func_version(
     ): Int
+    external fun uniffi_tensorholo_ffi_checksum_func_check_display(
+    ): Int
     external fun uniffi_tensorholo_ffi_checksum_func_convert_frame(
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_func_display_profile_from_json(
@@ -805,6 +807,8 @@ internal object UniffiLib {
     external fun uniffi_tensorholo_ffi_fn_method_patternslistener_on_error(`ptr`: Long,`error`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): Unit
     external fun uniffi_tensorholo_ffi_fn_func_version(uniffi_out_err: UniffiRustCallStatus, 
+    ): RustBuffer.ByValue
+    external fun uniffi_tensorholo_ffi_fn_func_check_display(`profile`: RustBuffer.ByValue,`wavelengthRatioTolerance`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_func_convert_frame(`frame`: RustBuffer.ByValue,`width`: Int,`height`: Int,`fit`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
@@ -936,13 +940,16 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
     if ((lib.uniffi_tensorholo_ffi_checksum_func_version() and 0xFFFF) != 14763) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
+    if ((lib.uniffi_tensorholo_ffi_checksum_func_check_display() and 0xFFFF) != 47754) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
     if ((lib.uniffi_tensorholo_ffi_checksum_func_convert_frame() and 0xFFFF) != 5569) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_func_display_profile_from_json() and 0xFFFF) != 64012) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_func_generator_config_for_display() and 0xFFFF) != 57792) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_func_generator_config_for_display() and 0xFFFF) != 39811) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_func_pack_rgba() and 0xFFFF) != 54530) {
@@ -2959,11 +2966,12 @@ data class GeneratorConfig (
     var `engine`: CnnEngine? = null 
     , 
     /**
-     * Largest relative spread (a fraction: 0.005 = 0.5 %, the default) of the per-colour depth scales
-     * accepted when the CNNs were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); a
-     * wider value shows as "widened" in [`GeneratorInfo::display_mapping`].
+     * Largest relative spread (a fraction: 0.01 = 1 %) of the lasers' depth scales accepted when the CNNs
+     * were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); `None` (default): the
+     * serving rule's, an estimated cost within 0.3 dB of the model's own score (about 1.8–2 %). A value
+     * wider than that shows as "widened" in [`GeneratorInfo::display_mapping`], with its cost.
      */
-    var `wavelengthRatioTolerance`: kotlin.Double = 0.005 
+    var `wavelengthRatioTolerance`: kotlin.Double? = null 
     , 
     /**
      * Time the CNN candidates on this device at creation (engines, each layer's kernel row, threads; up to
@@ -3012,7 +3020,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalTypeBackend.read(buf),
             FfiConverterOptionalTypeGpuPrecision.read(buf),
             FfiConverterOptionalTypeCnnEngine.read(buf),
-            FfiConverterDouble.read(buf),
+            FfiConverterOptionalDouble.read(buf),
             FfiConverterBoolean.read(buf),
             FfiConverterOptionalString.read(buf),
         )
@@ -3036,7 +3044,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalTypeBackend.allocationSize(value.`backend`) +
             FfiConverterOptionalTypeGpuPrecision.allocationSize(value.`gpuPrecision`) +
             FfiConverterOptionalTypeCnnEngine.allocationSize(value.`engine`) +
-            FfiConverterDouble.allocationSize(value.`wavelengthRatioTolerance`) +
+            FfiConverterOptionalDouble.allocationSize(value.`wavelengthRatioTolerance`) +
             FfiConverterBoolean.allocationSize(value.`tune`) +
             FfiConverterOptionalString.allocationSize(value.`savedPlans`)
     )
@@ -3059,7 +3067,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalTypeBackend.write(value.`backend`, buf)
             FfiConverterOptionalTypeGpuPrecision.write(value.`gpuPrecision`, buf)
             FfiConverterOptionalTypeCnnEngine.write(value.`engine`, buf)
-            FfiConverterDouble.write(value.`wavelengthRatioTolerance`, buf)
+            FfiConverterOptionalDouble.write(value.`wavelengthRatioTolerance`, buf)
             FfiConverterBoolean.write(value.`tune`, buf)
             FfiConverterOptionalString.write(value.`savedPlans`, buf)
     }
@@ -3479,6 +3487,160 @@ public object FfiConverterTypeRgbdFrame: FfiConverterRustBuffer<RgbdFrame> {
             FfiConverterUInt.write(value.`depthRowStride`, buf)
             FfiConverterOptionalTypeRotation.write(value.`rotation`, buf)
             FfiConverterOptionalTypeCropRect.write(value.`colorCrop`, buf)
+    }
+}
+
+
+
+/**
+ * One shipped CNN against a display ([`check_display`]): whether it serves the display at one offset and
+ * at what estimated cost, or why not and what would serve.
+ */
+data class ShippedModelCheck (
+    /**
+     * The embedded file (`holo8_rgbd.onnx`, …); empty where no pre-filter is shipped for the offset.
+     */
+    var `file`: kotlin.String
+    , 
+    /**
+     * `hologram-cnn` or `prefilter-cnn`.
+     */
+    var `kind`: kotlin.String
+    , 
+    /**
+     * Layers of the hologram CNN (a pre-filter: of the CNN it pairs with).
+     */
+    var `layers`: kotlin.UInt
+    , 
+    /**
+     * `rgbd` or `ldi`.
+     */
+    var `input`: kotlin.String
+    , 
+    /**
+     * `f32` or `int8-qdq`.
+     */
+    var `precision`: kotlin.String
+    , 
+    /**
+     * The offset checked, millimetres.
+     */
+    var `offsetMm`: kotlin.Double
+    , 
+    /**
+     * Whether the model serves the display at this offset.
+     */
+    var `served`: kotlin.Boolean
+    , 
+    /**
+     * `σ`, the depth scale of the mapping (served only).
+     */
+    var `scale`: kotlin.Double?
+    , 
+    /**
+     * The lasers' spread, percent (served only).
+     */
+    var `spreadPct`: kotlin.Double?
+    , 
+    /**
+     * The mapping's predicted ceiling in dB (served with a spread; `None` for no spread: no ceiling).
+     */
+    var `ceilingDb`: kotlin.Double?
+    , 
+    /**
+     * The mapping's estimated cost in dB (served only).
+     */
+    var `costDb`: kotlin.Double?
+    , 
+    /**
+     * The mapping in one line (served), or why not and what would serve (refused), or why no model was
+     * checked.
+     */
+    var `detail`: kotlin.String
+    , 
+    /**
+     * Refused: the nearest display this model serves, as a profile JSON to save (this profile with the
+     * lasers, volume or offset changed).
+     */
+    var `nearestProfileJson`: kotlin.String?
+    , 
+    /**
+     * Refused for its lasers: the `wavelength_ratio_tolerance` that serves the display as it is.
+     */
+    var `tolerance`: kotlin.Double?
+    , 
+    /**
+     * The estimated cost in dB at that tolerance.
+     */
+    var `toleranceCostDb`: kotlin.Double?
+    
+){
+    
+
+    
+
+    
+    companion object
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeShippedModelCheck: FfiConverterRustBuffer<ShippedModelCheck> {
+    override fun read(buf: ByteBuffer): ShippedModelCheck {
+        return ShippedModelCheck(
+            FfiConverterString.read(buf),
+            FfiConverterString.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterString.read(buf),
+            FfiConverterString.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterBoolean.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+            FfiConverterString.read(buf),
+            FfiConverterOptionalString.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+        )
+    }
+
+    override fun allocationSize(value: ShippedModelCheck) = (
+            FfiConverterString.allocationSize(value.`file`) +
+            FfiConverterString.allocationSize(value.`kind`) +
+            FfiConverterUInt.allocationSize(value.`layers`) +
+            FfiConverterString.allocationSize(value.`input`) +
+            FfiConverterString.allocationSize(value.`precision`) +
+            FfiConverterDouble.allocationSize(value.`offsetMm`) +
+            FfiConverterBoolean.allocationSize(value.`served`) +
+            FfiConverterOptionalDouble.allocationSize(value.`scale`) +
+            FfiConverterOptionalDouble.allocationSize(value.`spreadPct`) +
+            FfiConverterOptionalDouble.allocationSize(value.`ceilingDb`) +
+            FfiConverterOptionalDouble.allocationSize(value.`costDb`) +
+            FfiConverterString.allocationSize(value.`detail`) +
+            FfiConverterOptionalString.allocationSize(value.`nearestProfileJson`) +
+            FfiConverterOptionalDouble.allocationSize(value.`tolerance`) +
+            FfiConverterOptionalDouble.allocationSize(value.`toleranceCostDb`)
+    )
+
+    override fun write(value: ShippedModelCheck, buf: ByteBuffer) {
+            FfiConverterString.write(value.`file`, buf)
+            FfiConverterString.write(value.`kind`, buf)
+            FfiConverterUInt.write(value.`layers`, buf)
+            FfiConverterString.write(value.`input`, buf)
+            FfiConverterString.write(value.`precision`, buf)
+            FfiConverterDouble.write(value.`offsetMm`, buf)
+            FfiConverterBoolean.write(value.`served`, buf)
+            FfiConverterOptionalDouble.write(value.`scale`, buf)
+            FfiConverterOptionalDouble.write(value.`spreadPct`, buf)
+            FfiConverterOptionalDouble.write(value.`ceilingDb`, buf)
+            FfiConverterOptionalDouble.write(value.`costDb`, buf)
+            FfiConverterString.write(value.`detail`, buf)
+            FfiConverterOptionalString.write(value.`nearestProfileJson`, buf)
+            FfiConverterOptionalDouble.write(value.`tolerance`, buf)
+            FfiConverterOptionalDouble.write(value.`toleranceCostDb`, buf)
     }
 }
 
@@ -4801,6 +4963,34 @@ public object FfiConverterSequenceTypeRgbdFrame: FfiConverterRustBuffer<List<Rgb
         }
     }
 }
+
+
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterSequenceTypeShippedModelCheck: FfiConverterRustBuffer<List<ShippedModelCheck>> {
+    override fun read(buf: ByteBuffer): List<ShippedModelCheck> {
+        val len = buf.getInt()
+        return List<ShippedModelCheck>(len) {
+            FfiConverterTypeShippedModelCheck.read(buf)
+        }
+    }
+
+    override fun allocationSize(value: List<ShippedModelCheck>): ULong {
+        val sizeForLength = 4UL
+        val sizeForItems = value.map { FfiConverterTypeShippedModelCheck.allocationSize(it) }.sum()
+        return sizeForLength + sizeForItems
+    }
+
+    override fun write(value: List<ShippedModelCheck>, buf: ByteBuffer) {
+        buf.putInt(value.size)
+        value.iterator().forEach {
+            FfiConverterTypeShippedModelCheck.write(it, buf)
+        }
+    }
+}
         /**
          * The version of the `tensorholo` core this library was built from (semver, e.g. `"0.1.0"`).
          *
@@ -4811,6 +5001,27 @@ public object FfiConverterSequenceTypeRgbdFrame: FfiConverterRustBuffer<List<Rgb
     UniffiLib.uniffi_tensorholo_ffi_fn_func_version(
     
         _status)
+}
+    )
+    }
+    
+
+        /**
+         * Which shipped CNNs serve a display, before making a generator (`holo display check`): at each of the
+         * profile's offsets, every hologram CNN of this library (each depth, f32 and int8) and the pre-filter each
+         * pairs with, with `wavelength_ratio_tolerance` (`None`: the serving rule's).
+         *
+         * Errors: [`TensorholoError::InvalidInput`] for a profile that breaks the profile rules or a bad tolerance;
+         * [`TensorholoError::Unsupported`] in a library built without the shipped CNNs.
+         */
+    @Throws(TensorholoException::class) fun `checkDisplay`(`profile`: DisplayProfile, `wavelengthRatioTolerance`: kotlin.Double?): List<ShippedModelCheck> {
+            return FfiConverterSequenceTypeShippedModelCheck.lift(
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_func_check_display(
+    
+        
+        FfiConverterTypeDisplayProfile.lower(`profile`),
+        FfiConverterOptionalDouble.lower(`wavelengthRatioTolerance`),_status)
 }
     )
     }
@@ -4867,8 +5078,9 @@ public object FfiConverterSequenceTypeRgbdFrame: FfiConverterRustBuffer<List<Rgb
          *
          * Errors: [`TensorholoError::InvalidInput`] naming the key for a profile that breaks the profile rules (as
          * [`display_profile_from_json`]). Whether the CNNs serve the display is checked by [`HologramGenerator::new`]
-         * ([`TensorholoError::InvalidModel`] naming `wavelengths_m` for lasers without one common depth scale,
-         * `volume_depth_m` for a volume other than `σ`·6 mm, `pixel_pitch_m` for a pitch too fine).
+         * ([`TensorholoError::InvalidModel`] naming `wavelengths_m` for lasers whose spread costs more than the
+         * rule allows, `volume_depth_m` for a volume deeper than `σ`·6 mm, `pixel_pitch_m` for a pitch too fine,
+         * each with what would serve) and beforehand by [`check_display`].
          */
     @Throws(TensorholoException::class) fun `generatorConfigForDisplay`(`profile`: DisplayProfile): GeneratorConfig {
             return FfiConverterTypeGeneratorConfig.lift(

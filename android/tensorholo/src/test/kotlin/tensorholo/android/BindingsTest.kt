@@ -20,6 +20,7 @@ import org.junit.AfterClass
 import org.junit.Assert.assertArrayEquals
 import org.junit.Assert.assertEquals
 import org.junit.Assert.assertFalse
+import org.junit.Assert.assertNull
 import org.junit.Assert.assertThrows
 import org.junit.Assert.assertTrue
 import org.junit.Assume.assumeTrue
@@ -35,6 +36,7 @@ import tensorholo.RgbdFrame
 import tensorholo.Rotation
 import tensorholo.SlmPatterns
 import tensorholo.TensorholoException
+import tensorholo.checkDisplay
 import tensorholo.displayProfileFromJson
 import tensorholo.generatorConfigForDisplay
 import tensorholo.packRgba
@@ -340,7 +342,10 @@ class BindingsTest {
         assertEquals(4e-6, config.pixelPitchM, 0.0)
         assertEquals(1.5e-3, config.volumeDepthM, 0.0)
         assertEquals(1.5, config.offsetMm, 1e-12)
-        assertEquals(0.005, config.wavelengthRatioTolerance, 0.0)
+        assertNull(config.wavelengthRatioTolerance) // the serving rule's
+        val checks = checkDisplay(profile, null)
+        val hologramChecks = checks.filter { it.kind == "hologram-cnn" }
+        assertTrue(checks.toString(), hologramChecks.isNotEmpty() && hologramChecks.all { it.served })
         generatorFor(profile).use { gen ->
             val out = gen.render(smallFrame())
             assertEquals(64u to 48u, out.width to out.height)
@@ -356,8 +361,8 @@ class BindingsTest {
     /**
      * Each bad display is an error naming the key, whether it comes as JSON or as a record built field by field:
      * a negative pitch and a resolution that is not [height, width] break the profile rules (InvalidInput); a
-     * 532 nm green laser (no common depth scale with 638/450 nm) and a volume other than σ·6 mm = 1.5 mm are
-     * displays the shipped CNNs do not serve (InvalidModel, when the generator checks its models).
+     * green laser 8 % off 520 nm (a spread that costs more than the serving rule allows) and a volume deeper than
+     * σ·6 mm = 1.5 mm are displays the shipped CNNs do not serve (InvalidModel, when the generator checks its models).
      */
     @Test
     fun badDisplayProfilesAreErrorsNamingTheKey() {
@@ -366,7 +371,7 @@ class BindingsTest {
             Bad("pixel_pitch_m", "-4e-6", profile4um.copy(pixelPitchM = -4e-6), TensorholoException.InvalidInput::class.java),
             Bad("resolution", "[48]", profile4um.copy(resolution = listOf(48u)), TensorholoException.InvalidInput::class.java),
             Bad(
-                "wavelengths_m", "[638e-9, 532e-9, 450e-9]", profile4um.copy(wavelengthsM = listOf(638e-9, 532e-9, 450e-9)),
+                "wavelengths_m", "[638e-9, 561.6e-9, 450e-9]", profile4um.copy(wavelengthsM = listOf(638e-9, 561.6e-9, 450e-9)),
                 TensorholoException.InvalidModel::class.java,
             ),
             Bad("volume_depth_m", "2e-3", profile4um.copy(volumeDepthM = 2e-3), TensorholoException.InvalidModel::class.java),
