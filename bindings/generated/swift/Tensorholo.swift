@@ -663,7 +663,7 @@ public protocol HologramGeneratorProtocol: AnyObject, Sendable {
      * the layers behind the first, a depth sample of 0 (or NaN, or confidence 0 %) means "no point here"; a
      * point may appear only where the layer in front holds one, no nearer than it. All layers share one
      * depth range (`z_near_m`/`z_far_m`, or the 1st/99th percentiles of every layer's depths). Needs a
-     * generator made with `input` = [`SceneInput::Ldi`]; fewer layers than its CNN takes (5) are padded with
+     * generator made with `input` = [`SceneInput::Ldi`](crate::SceneInput::Ldi); fewer layers than its CNN takes (5) are padded with
      * empty ones.
      *
      * Errors: [`TensorholoError::InvalidInput`] for no layer, more layers than the CNN takes (with an RGB-D
@@ -859,7 +859,7 @@ open func render(frame: RgbdFrame)throws  -> SlmPatterns  {
      * the layers behind the first, a depth sample of 0 (or NaN, or confidence 0 %) means "no point here"; a
      * point may appear only where the layer in front holds one, no nearer than it. All layers share one
      * depth range (`z_near_m`/`z_far_m`, or the 1st/99th percentiles of every layer's depths). Needs a
-     * generator made with `input` = [`SceneInput::Ldi`]; fewer layers than its CNN takes (5) are padded with
+     * generator made with `input` = [`SceneInput::Ldi`](crate::SceneInput::Ldi); fewer layers than its CNN takes (5) are padded with
      * empty ones.
      *
      * Errors: [`TensorholoError::InvalidInput`] for no layer, more layers than the CNN takes (with an RGB-D
@@ -963,7 +963,7 @@ public func FfiConverterTypeHologramGenerator_lower(_ value: HologramGenerator) 
 
 
 /**
- * A video stream ([`HologramGenerator::stream`]).
+ * A video stream ([`HologramGenerator::stream`](crate::HologramGenerator::stream)).
  */
 public protocol HologramStreamProtocol: AnyObject, Sendable {
     
@@ -988,7 +988,7 @@ public protocol HologramStreamProtocol: AnyObject, Sendable {
     
 }
 /**
- * A video stream ([`HologramGenerator::stream`]).
+ * A video stream ([`HologramGenerator::stream`](crate::HologramGenerator::stream)).
  */
 open class HologramStream: HologramStreamProtocol, @unchecked Sendable {
     fileprivate let handle: UInt64
@@ -1813,7 +1813,7 @@ public func FfiConverterTypeDisplayProfile_lower(_ value: DisplayProfile) -> Rus
 
 
 /**
- * Everything a [`HologramGenerator`] needs. Only `width` and `height` (the SLM's resolution in pixels) are
+ * Everything a [`HologramGenerator`](crate::HologramGenerator) needs. Only `width` and `height` (the SLM's resolution in pixels) are
  * required; every other field has the default named in its comment.
  */
 public struct GeneratorConfig: Equatable, Hashable {
@@ -1877,7 +1877,7 @@ public struct GeneratorConfig: Equatable, Hashable {
      */
     public var zFarM: Double?
     /**
-     * Where frames are computed; `None` = [`Backend::Auto`] ([`GeneratorInfo::backend`] says which runs).
+     * Where frames are computed; `None` = [`Backend::Auto`] ([`GeneratorInfo::backend`](crate::GeneratorInfo::backend) says which runs).
      */
     public var backend: Backend?
     /**
@@ -1885,24 +1885,24 @@ public struct GeneratorConfig: Equatable, Hashable {
      */
     public var gpuPrecision: GpuPrecision?
     /**
-     * The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`] says which runs).
+     * The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`](crate::GeneratorInfo::cnn_engine) says which runs).
      */
     public var engine: CnnEngine?
     /**
      * Largest relative spread (a fraction: 0.01 = 1 %) of the lasers' depth scales accepted when the CNNs
      * were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); `None` (default): the
      * serving rule's, an estimated cost within 0.3 dB of the model's own score (about 1.8–2 %). A value
-     * wider than that shows as "widened" in [`GeneratorInfo::display_mapping`], with its cost.
+     * wider than that shows as "widened" in [`GeneratorInfo::display_mapping`](crate::GeneratorInfo::display_mapping), with its cost.
      */
     public var wavelengthRatioTolerance: Double?
     /**
      * Time the CNN candidates on this device at creation (engines, each layer's kernel row, threads; up to
      * a few seconds) instead of taking the plan table's (default `false`: the same SLM codes on every run).
-     * [`GeneratorInfo::saved_plans`] then holds the result, to store and pass as `saved_plans` later.
+     * [`GeneratorInfo::saved_plans`](crate::GeneratorInfo::saved_plans) then holds the result, to store and pass as `saved_plans` later.
      */
     public var tune: Bool
     /**
-     * CNN plans stored from an earlier generator's [`GeneratorInfo::saved_plans`] (a
+     * CNN plans stored from an earlier generator's [`GeneratorInfo::saved_plans`](crate::GeneratorInfo::saved_plans) (a
      * `tensorholo.cnn-plans` JSON text): repeated without timing, so every run gives the same codes.
      * `None` (default): the plan table (or `tune`). Refused with `tune`, or when made on a device whose
      * kernels differ (another CPU class).
@@ -1958,27 +1958,27 @@ public struct GeneratorConfig: Equatable, Hashable {
          * Farthest scene depth in metres mapped to the back of the volume; give both or neither.
          */zFarM: Double? = nil, 
         /**
-         * Where frames are computed; `None` = [`Backend::Auto`] ([`GeneratorInfo::backend`] says which runs).
+         * Where frames are computed; `None` = [`Backend::Auto`] ([`GeneratorInfo::backend`](crate::GeneratorInfo::backend) says which runs).
          */backend: Backend? = nil, 
         /**
          * The GPU CNNs' arithmetic; `None` = [`GpuPrecision::Auto`].
          */gpuPrecision: GpuPrecision? = nil, 
         /**
-         * The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`] says which runs).
+         * The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`](crate::GeneratorInfo::cnn_engine) says which runs).
          */engine: CnnEngine? = nil, 
         /**
          * Largest relative spread (a fraction: 0.01 = 1 %) of the lasers' depth scales accepted when the CNNs
          * were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); `None` (default): the
          * serving rule's, an estimated cost within 0.3 dB of the model's own score (about 1.8–2 %). A value
-         * wider than that shows as "widened" in [`GeneratorInfo::display_mapping`], with its cost.
+         * wider than that shows as "widened" in [`GeneratorInfo::display_mapping`](crate::GeneratorInfo::display_mapping), with its cost.
          */wavelengthRatioTolerance: Double? = nil, 
         /**
          * Time the CNN candidates on this device at creation (engines, each layer's kernel row, threads; up to
          * a few seconds) instead of taking the plan table's (default `false`: the same SLM codes on every run).
-         * [`GeneratorInfo::saved_plans`] then holds the result, to store and pass as `saved_plans` later.
+         * [`GeneratorInfo::saved_plans`](crate::GeneratorInfo::saved_plans) then holds the result, to store and pass as `saved_plans` later.
          */tune: Bool = false, 
         /**
-         * CNN plans stored from an earlier generator's [`GeneratorInfo::saved_plans`] (a
+         * CNN plans stored from an earlier generator's [`GeneratorInfo::saved_plans`](crate::GeneratorInfo::saved_plans) (a
          * `tensorholo.cnn-plans` JSON text): repeated without timing, so every run gives the same codes.
          * `None` (default): the plan table (or `tune`). Refused with `tune`, or when made on a device whose
          * kernels differ (another CPU class).
@@ -2518,7 +2518,7 @@ public struct RgbdFrame: Equatable, Hashable {
      * The rectangle of the colour buffer (colour pixels, before the rotation) that covers the depth
      * buffer's field of view; `None` (default) = the whole colour buffer. ARCore needs it: its depth covers
      * the GPU texture's field of view (usually 16:9), a band of the 4:3 CPU image (Android:
-     * `RgbdFrames.fromArFrame` fills it). Errors: [`TensorholoError::InvalidInput`] when it is empty or not
+     * `RgbdFrames.fromArFrame` fills it). Errors: [`TensorholoError::InvalidInput`](crate::TensorholoError::InvalidInput) when it is empty or not
      * inside the colour buffer.
      */
     public var colorCrop: CropRect?
@@ -2563,7 +2563,7 @@ public struct RgbdFrame: Equatable, Hashable {
          * The rectangle of the colour buffer (colour pixels, before the rotation) that covers the depth
          * buffer's field of view; `None` (default) = the whole colour buffer. ARCore needs it: its depth covers
          * the GPU texture's field of view (usually 16:9), a band of the 4:3 CPU image (Android:
-         * `RgbdFrames.fromArFrame` fills it). Errors: [`TensorholoError::InvalidInput`] when it is empty or not
+         * `RgbdFrames.fromArFrame` fills it). Errors: [`TensorholoError::InvalidInput`](crate::TensorholoError::InvalidInput) when it is empty or not
          * inside the colour buffer.
          */colorCrop: CropRect? = nil) {
         self.color = color
@@ -3903,11 +3903,11 @@ public func FfiConverterTypeRotation_lower(_ value: Rotation) -> RustBuffer {
 public enum SceneInput: Equatable, Hashable {
     
     /**
-     * One RGB-D frame per hologram ([`HologramGenerator::render`]; the default).
+     * One RGB-D frame per hologram ([`HologramGenerator::render`](crate::HologramGenerator::render); the default).
      */
     case rgbd
     /**
-     * A layered depth image of up to 5 layers front to back ([`HologramGenerator::render_ldi`]; the shipped
+     * A layered depth image of up to 5 layers front to back ([`HologramGenerator::render_ldi`](crate::HologramGenerator::render_ldi); the shipped
      * 8-layer LDI CNN, paper Fig. 1). `render` still works: a frame is a one-layer LDI.
      */
     case ldi
@@ -4552,26 +4552,6 @@ public func checkDisplay(profile: DisplayProfile, wavelengthRatioTolerance: Doub
 })
 }
 /**
- * Converts a camera frame the way a generator does before its CNN (crop, rotation, depth to the colour
- * grid, automatic depth range, hole filling, `fit` to `width × height`; `fit` `None` = [`Fit::Crop`]),
- * without rendering: to check the orientation and the depth–colour registration on a device, e.g. by
- * drawing `depth` over `amplitude`.
- *
- * Errors: [`TensorholoError::InvalidInput`] for a `width` or `height` of 0, buffers that do not match
- * their sizes, strides and formats, a bad `color_crop`, or a depth map without one valid pixel.
- */
-public func convertFrame(frame: RgbdFrame, width: UInt32, height: UInt32, fit: Fit?)throws  -> ConvertedFrame  {
-    return try  FfiConverterTypeConvertedFrame_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
-        uniffiCallStatus in
-    uniffi_tensorholo_ffi_fn_func_convert_frame(
-        FfiConverterTypeRgbdFrame_lower(frame),
-        FfiConverterUInt32.lower(width),
-        FfiConverterUInt32.lower(height),
-        FfiConverterOptionTypeFit.lower(fit),uniffiCallStatus
-    )
-})
-}
-/**
  * Reads a display profile from its JSON text (a profile file's contents, `docs/DISPLAYS.md`): keys
  * `pixel_pitch_m`, `resolution`, `wavelengths_m`, `volume_depth_m`, `offsets_m` (SI units), optional `name`
  * and `calibration`; unknown keys are refused.
@@ -4607,10 +4587,30 @@ public func generatorConfigForDisplay(profile: DisplayProfile)throws  -> Generat
 })
 }
 /**
+ * Converts a camera frame the way a generator does before its CNN (crop, rotation, depth to the colour
+ * grid, automatic depth range, hole filling, `fit` to `width × height`; `fit` `None` = [`Fit::Crop`]),
+ * without rendering: to check the orientation and the depth–colour registration on a device, e.g. by
+ * drawing `depth` over `amplitude`.
+ *
+ * Errors: [`TensorholoError::InvalidInput`](crate::TensorholoError::InvalidInput) for a `width` or `height` of 0, buffers that do not match
+ * their sizes, strides and formats, a bad `color_crop`, or a depth map without one valid pixel.
+ */
+public func convertFrame(frame: RgbdFrame, width: UInt32, height: UInt32, fit: Fit?)throws  -> ConvertedFrame  {
+    return try  FfiConverterTypeConvertedFrame_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_func_convert_frame(
+        FfiConverterTypeRgbdFrame_lower(frame),
+        FfiConverterUInt32.lower(width),
+        FfiConverterUInt32.lower(height),
+        FfiConverterOptionTypeFit.lower(fit),uniffiCallStatus
+    )
+})
+}
+/**
  * The 32-bit frame colour-sequential SLM drivers take over HDMI: `width · height · 4` bytes, row-major, the
  * red laser's pattern in R, green in G, blue in B, alpha 255.
  *
- * Errors: [`TensorholoError::InvalidInput`] if a plane does not hold `width · height` codes.
+ * Errors: [`TensorholoError::InvalidInput`](crate::TensorholoError::InvalidInput) if a plane does not hold `width · height` codes.
  */
 public func packRgba(patterns: SlmPatterns)throws  -> Data  {
     return try  FfiConverterData.lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
@@ -4639,61 +4639,61 @@ private let initializationResult: InitializationResult = {
     if (uniffi_tensorholo_ffi_checksum_func_version() != 14763) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_func_check_display() != 47754) {
+    if (uniffi_tensorholo_ffi_checksum_func_check_display() != 21294) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_func_convert_frame() != 5569) {
+    if (uniffi_tensorholo_ffi_checksum_func_display_profile_from_json() != 33747) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_func_display_profile_from_json() != 64012) {
+    if (uniffi_tensorholo_ffi_checksum_func_generator_config_for_display() != 18236) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_func_generator_config_for_display() != 39811) {
+    if (uniffi_tensorholo_ffi_checksum_func_convert_frame() != 43829) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_func_pack_rgba() != 54530) {
+    if (uniffi_tensorholo_ffi_checksum_func_pack_rgba() != 5633) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_benchmark() != 9343) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_benchmark() != 2400) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_info() != 31754) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_info() != 33961) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_preview() != 40025) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_preview() != 40187) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render() != 59945) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render() != 59531) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi() != 11354) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi() != 60546) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration() != 29704) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration() != 48003) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream() != 44735) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream() != 59478) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_hologramstream_close() != 56790) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramstream_close() != 29435) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_hologramstream_dropped_frames() != 31345) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramstream_dropped_frames() != 31916) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_hologramstream_push() != 34294) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramstream_push() != 40801) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_patternslistener_on_patterns() != 9565) {
+    if (uniffi_tensorholo_ffi_checksum_method_patternslistener_on_patterns() != 30270) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_patternslistener_on_error() != 41699) {
+    if (uniffi_tensorholo_ffi_checksum_method_patternslistener_on_error() != 38417) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new() != 38554) {
+    if (uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new() != 57650) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_with_models() != 37417) {
+    if (uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_with_models() != 54985) {
         return InitializationResult.apiChecksumMismatch
     }
 

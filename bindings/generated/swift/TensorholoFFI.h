@@ -383,11 +383,6 @@ RustBuffer uniffi_tensorholo_ffi_fn_func_version(RustCallStatus *_Nonnull out_st
 RustBuffer uniffi_tensorholo_ffi_fn_func_check_display(RustBuffer profile, RustBuffer wavelength_ratio_tolerance, RustCallStatus *_Nonnull out_status
 );
 #endif
-#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_CONVERT_FRAME
-#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_CONVERT_FRAME
-RustBuffer uniffi_tensorholo_ffi_fn_func_convert_frame(RustBuffer frame, uint32_t width, uint32_t height, RustBuffer fit, RustCallStatus *_Nonnull out_status
-);
-#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_DISPLAY_PROFILE_FROM_JSON
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_DISPLAY_PROFILE_FROM_JSON
 RustBuffer uniffi_tensorholo_ffi_fn_func_display_profile_from_json(RustBuffer json, RustCallStatus *_Nonnull out_status
@@ -396,6 +391,11 @@ RustBuffer uniffi_tensorholo_ffi_fn_func_display_profile_from_json(RustBuffer js
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_GENERATOR_CONFIG_FOR_DISPLAY
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_GENERATOR_CONFIG_FOR_DISPLAY
 RustBuffer uniffi_tensorholo_ffi_fn_func_generator_config_for_display(RustBuffer profile, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_CONVERT_FRAME
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_CONVERT_FRAME
+RustBuffer uniffi_tensorholo_ffi_fn_func_convert_frame(RustBuffer frame, uint32_t width, uint32_t height, RustBuffer fit, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_PACK_RGBA
@@ -675,12 +675,6 @@ uint16_t uniffi_tensorholo_ffi_checksum_func_check_display(void
     
 );
 #endif
-#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_CONVERT_FRAME
-#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_CONVERT_FRAME
-uint16_t uniffi_tensorholo_ffi_checksum_func_convert_frame(void
-    
-);
-#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_DISPLAY_PROFILE_FROM_JSON
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_DISPLAY_PROFILE_FROM_JSON
 uint16_t uniffi_tensorholo_ffi_checksum_func_display_profile_from_json(void
@@ -690,6 +684,12 @@ uint16_t uniffi_tensorholo_ffi_checksum_func_display_profile_from_json(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_GENERATOR_CONFIG_FOR_DISPLAY
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_GENERATOR_CONFIG_FOR_DISPLAY
 uint16_t uniffi_tensorholo_ffi_checksum_func_generator_config_for_display(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_CONVERT_FRAME
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_CONVERT_FRAME
+uint16_t uniffi_tensorholo_ffi_checksum_func_convert_frame(void
     
 );
 #endif

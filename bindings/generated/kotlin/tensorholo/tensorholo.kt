@@ -707,11 +707,11 @@ internal object IntegrityCheckingUniffiLib {
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_func_check_display(
     ): Int
-    external fun uniffi_tensorholo_ffi_checksum_func_convert_frame(
-    ): Int
     external fun uniffi_tensorholo_ffi_checksum_func_display_profile_from_json(
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_func_generator_config_for_display(
+    ): Int
+    external fun uniffi_tensorholo_ffi_checksum_func_convert_frame(
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_func_pack_rgba(
     ): Int
@@ -810,11 +810,11 @@ internal object UniffiLib {
     ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_func_check_display(`profile`: RustBuffer.ByValue,`wavelengthRatioTolerance`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
-    external fun uniffi_tensorholo_ffi_fn_func_convert_frame(`frame`: RustBuffer.ByValue,`width`: Int,`height`: Int,`fit`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
-    ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_func_display_profile_from_json(`json`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_func_generator_config_for_display(`profile`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    ): RustBuffer.ByValue
+    external fun uniffi_tensorholo_ffi_fn_func_convert_frame(`frame`: RustBuffer.ByValue,`width`: Int,`height`: Int,`fit`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_func_pack_rgba(`patterns`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
@@ -940,61 +940,61 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
     if ((lib.uniffi_tensorholo_ffi_checksum_func_version() and 0xFFFF) != 14763) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_func_check_display() and 0xFFFF) != 47754) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_func_check_display() and 0xFFFF) != 21294) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_func_convert_frame() and 0xFFFF) != 5569) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_func_display_profile_from_json() and 0xFFFF) != 33747) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_func_display_profile_from_json() and 0xFFFF) != 64012) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_func_generator_config_for_display() and 0xFFFF) != 18236) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_func_generator_config_for_display() and 0xFFFF) != 39811) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_func_convert_frame() and 0xFFFF) != 43829) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_func_pack_rgba() and 0xFFFF) != 54530) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_func_pack_rgba() and 0xFFFF) != 5633) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_benchmark() and 0xFFFF) != 9343) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_benchmark() and 0xFFFF) != 2400) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_info() and 0xFFFF) != 31754) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_info() and 0xFFFF) != 33961) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_preview() and 0xFFFF) != 40025) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_preview() and 0xFFFF) != 40187) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render() and 0xFFFF) != 59945) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render() and 0xFFFF) != 59531) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi() and 0xFFFF) != 11354) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi() and 0xFFFF) != 60546) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration() and 0xFFFF) != 29704) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration() and 0xFFFF) != 48003) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream() and 0xFFFF) != 44735) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream() and 0xFFFF) != 59478) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramstream_close() and 0xFFFF) != 56790) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramstream_close() and 0xFFFF) != 29435) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramstream_dropped_frames() and 0xFFFF) != 31345) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramstream_dropped_frames() and 0xFFFF) != 31916) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramstream_push() and 0xFFFF) != 34294) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramstream_push() and 0xFFFF) != 40801) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_patternslistener_on_patterns() and 0xFFFF) != 9565) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_patternslistener_on_patterns() and 0xFFFF) != 30270) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_patternslistener_on_error() and 0xFFFF) != 41699) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_patternslistener_on_error() and 0xFFFF) != 38417) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new() and 0xFFFF) != 38554) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_new() and 0xFFFF) != 57650) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_with_models() and 0xFFFF) != 37417) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_constructor_hologramgenerator_with_models() and 0xFFFF) != 54985) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
 }
@@ -1512,7 +1512,7 @@ public interface HologramGeneratorInterface {
      * the layers behind the first, a depth sample of 0 (or NaN, or confidence 0 %) means "no point here"; a
      * point may appear only where the layer in front holds one, no nearer than it. All layers share one
      * depth range (`z_near_m`/`z_far_m`, or the 1st/99th percentiles of every layer's depths). Needs a
-     * generator made with `input` = [`SceneInput::Ldi`]; fewer layers than its CNN takes (5) are padded with
+     * generator made with `input` = [`SceneInput::Ldi`](crate::SceneInput::Ldi); fewer layers than its CNN takes (5) are padded with
      * empty ones.
      *
      * Errors: [`TensorholoError::InvalidInput`] for no layer, more layers than the CNN takes (with an RGB-D
@@ -1756,7 +1756,7 @@ open class HologramGenerator: Disposable, AutoCloseable, HologramGeneratorInterf
      * the layers behind the first, a depth sample of 0 (or NaN, or confidence 0 %) means "no point here"; a
      * point may appear only where the layer in front holds one, no nearer than it. All layers share one
      * depth range (`z_near_m`/`z_far_m`, or the 1st/99th percentiles of every layer's depths). Needs a
-     * generator made with `input` = [`SceneInput::Ldi`]; fewer layers than its CNN takes (5) are padded with
+     * generator made with `input` = [`SceneInput::Ldi`](crate::SceneInput::Ldi); fewer layers than its CNN takes (5) are padded with
      * empty ones.
      *
      * Errors: [`TensorholoError::InvalidInput`] for no layer, more layers than the CNN takes (with an RGB-D
@@ -1983,7 +1983,7 @@ public object FfiConverterTypeHologramGenerator: FfiConverter<HologramGenerator,
 
 
 /**
- * A video stream ([`HologramGenerator::stream`]).
+ * A video stream ([`HologramGenerator::stream`](crate::HologramGenerator::stream)).
  */
 public interface HologramStreamInterface {
     
@@ -2010,7 +2010,7 @@ public interface HologramStreamInterface {
 }
 
 /**
- * A video stream ([`HologramGenerator::stream`]).
+ * A video stream ([`HologramGenerator::stream`](crate::HologramGenerator::stream)).
  */
 open class HologramStream: Disposable, AutoCloseable, HologramStreamInterface
 {
@@ -2873,7 +2873,7 @@ public object FfiConverterTypeDisplayProfile: FfiConverterRustBuffer<DisplayProf
 
 
 /**
- * Everything a [`HologramGenerator`] needs. Only `width` and `height` (the SLM's resolution in pixels) are
+ * Everything a [`HologramGenerator`](crate::HologramGenerator) needs. Only `width` and `height` (the SLM's resolution in pixels) are
  * required; every other field has the default named in its comment.
  */
 data class GeneratorConfig (
@@ -2951,7 +2951,7 @@ data class GeneratorConfig (
     var `zFarM`: kotlin.Double? = null 
     , 
     /**
-     * Where frames are computed; `None` = [`Backend::Auto`] ([`GeneratorInfo::backend`] says which runs).
+     * Where frames are computed; `None` = [`Backend::Auto`] ([`GeneratorInfo::backend`](crate::GeneratorInfo::backend) says which runs).
      */
     var `backend`: Backend? = null 
     , 
@@ -2961,7 +2961,7 @@ data class GeneratorConfig (
     var `gpuPrecision`: GpuPrecision? = null 
     , 
     /**
-     * The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`] says which runs).
+     * The CPU CNN engine; `None` = [`CnnEngine::Auto`] ([`GeneratorInfo::cnn_engine`](crate::GeneratorInfo::cnn_engine) says which runs).
      */
     var `engine`: CnnEngine? = null 
     , 
@@ -2969,19 +2969,19 @@ data class GeneratorConfig (
      * Largest relative spread (a fraction: 0.01 = 1 %) of the lasers' depth scales accepted when the CNNs
      * were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`); `None` (default): the
      * serving rule's, an estimated cost within 0.3 dB of the model's own score (about 1.8–2 %). A value
-     * wider than that shows as "widened" in [`GeneratorInfo::display_mapping`], with its cost.
+     * wider than that shows as "widened" in [`GeneratorInfo::display_mapping`](crate::GeneratorInfo::display_mapping), with its cost.
      */
     var `wavelengthRatioTolerance`: kotlin.Double? = null 
     , 
     /**
      * Time the CNN candidates on this device at creation (engines, each layer's kernel row, threads; up to
      * a few seconds) instead of taking the plan table's (default `false`: the same SLM codes on every run).
-     * [`GeneratorInfo::saved_plans`] then holds the result, to store and pass as `saved_plans` later.
+     * [`GeneratorInfo::saved_plans`](crate::GeneratorInfo::saved_plans) then holds the result, to store and pass as `saved_plans` later.
      */
     var `tune`: kotlin.Boolean = false 
     , 
     /**
-     * CNN plans stored from an earlier generator's [`GeneratorInfo::saved_plans`] (a
+     * CNN plans stored from an earlier generator's [`GeneratorInfo::saved_plans`](crate::GeneratorInfo::saved_plans) (a
      * `tensorholo.cnn-plans` JSON text): repeated without timing, so every run gives the same codes.
      * `None` (default): the plan table (or `tune`). Refused with `tune`, or when made on a device whose
      * kernels differ (another CPU class).
@@ -3424,7 +3424,7 @@ data class RgbdFrame (
      * The rectangle of the colour buffer (colour pixels, before the rotation) that covers the depth
      * buffer's field of view; `None` (default) = the whole colour buffer. ARCore needs it: its depth covers
      * the GPU texture's field of view (usually 16:9), a band of the 4:3 CPU image (Android:
-     * `RgbdFrames.fromArFrame` fills it). Errors: [`TensorholoError::InvalidInput`] when it is empty or not
+     * `RgbdFrames.fromArFrame` fills it). Errors: [`TensorholoError::InvalidInput`](crate::TensorholoError::InvalidInput) when it is empty or not
      * inside the colour buffer.
      */
     var `colorCrop`: CropRect? = null 
@@ -4274,11 +4274,11 @@ public object FfiConverterTypeRotation: FfiConverterRustBuffer<Rotation> {
 enum class SceneInput {
     
     /**
-     * One RGB-D frame per hologram ([`HologramGenerator::render`]; the default).
+     * One RGB-D frame per hologram ([`HologramGenerator::render`](crate::HologramGenerator::render); the default).
      */
     RGBD,
     /**
-     * A layered depth image of up to 5 layers front to back ([`HologramGenerator::render_ldi`]; the shipped
+     * A layered depth image of up to 5 layers front to back ([`HologramGenerator::render_ldi`](crate::HologramGenerator::render_ldi); the shipped
      * 8-layer LDI CNN, paper Fig. 1). `render` still works: a frame is a one-layer LDI.
      */
     LDI;
@@ -5028,30 +5028,6 @@ public object FfiConverterSequenceTypeShippedModelCheck: FfiConverterRustBuffer<
     
 
         /**
-         * Converts a camera frame the way a generator does before its CNN (crop, rotation, depth to the colour
-         * grid, automatic depth range, hole filling, `fit` to `width × height`; `fit` `None` = [`Fit::Crop`]),
-         * without rendering: to check the orientation and the depth–colour registration on a device, e.g. by
-         * drawing `depth` over `amplitude`.
-         *
-         * Errors: [`TensorholoError::InvalidInput`] for a `width` or `height` of 0, buffers that do not match
-         * their sizes, strides and formats, a bad `color_crop`, or a depth map without one valid pixel.
-         */
-    @Throws(TensorholoException::class) fun `convertFrame`(`frame`: RgbdFrame, `width`: kotlin.UInt, `height`: kotlin.UInt, `fit`: Fit?): ConvertedFrame {
-            return FfiConverterTypeConvertedFrame.lift(
-    uniffiRustCallWithError(TensorholoException) { _status ->
-    UniffiLib.uniffi_tensorholo_ffi_fn_func_convert_frame(
-    
-        
-        FfiConverterTypeRgbdFrame.lower(`frame`),
-        FfiConverterUInt.lower(`width`),
-        FfiConverterUInt.lower(`height`),
-        FfiConverterOptionalTypeFit.lower(`fit`),_status)
-}
-    )
-    }
-    
-
-        /**
          * Reads a display profile from its JSON text (a profile file's contents, `docs/DISPLAYS.md`): keys
          * `pixel_pitch_m`, `resolution`, `wavelengths_m`, `volume_depth_m`, `offsets_m` (SI units), optional `name`
          * and `calibration`; unknown keys are refused.
@@ -5095,10 +5071,34 @@ public object FfiConverterSequenceTypeShippedModelCheck: FfiConverterRustBuffer<
     
 
         /**
+         * Converts a camera frame the way a generator does before its CNN (crop, rotation, depth to the colour
+         * grid, automatic depth range, hole filling, `fit` to `width × height`; `fit` `None` = [`Fit::Crop`]),
+         * without rendering: to check the orientation and the depth–colour registration on a device, e.g. by
+         * drawing `depth` over `amplitude`.
+         *
+         * Errors: [`TensorholoError::InvalidInput`](crate::TensorholoError::InvalidInput) for a `width` or `height` of 0, buffers that do not match
+         * their sizes, strides and formats, a bad `color_crop`, or a depth map without one valid pixel.
+         */
+    @Throws(TensorholoException::class) fun `convertFrame`(`frame`: RgbdFrame, `width`: kotlin.UInt, `height`: kotlin.UInt, `fit`: Fit?): ConvertedFrame {
+            return FfiConverterTypeConvertedFrame.lift(
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_func_convert_frame(
+    
+        
+        FfiConverterTypeRgbdFrame.lower(`frame`),
+        FfiConverterUInt.lower(`width`),
+        FfiConverterUInt.lower(`height`),
+        FfiConverterOptionalTypeFit.lower(`fit`),_status)
+}
+    )
+    }
+    
+
+        /**
          * The 32-bit frame colour-sequential SLM drivers take over HDMI: `width · height · 4` bytes, row-major, the
          * red laser's pattern in R, green in G, blue in B, alpha 255.
          *
-         * Errors: [`TensorholoError::InvalidInput`] if a plane does not hold `width · height` codes.
+         * Errors: [`TensorholoError::InvalidInput`](crate::TensorholoError::InvalidInput) if a plane does not hold `width · height` codes.
          */
     @Throws(TensorholoException::class) fun `packRgba`(`patterns`: SlmPatterns): kotlin.ByteArray {
             return FfiConverterByteArray.lift(

@@ -1,0 +1,339 @@
+//! [`GeneratorConfig`]: what a generator makes (size, CNNs, display, camera-frame fit) and its checks.
+
+use std::sync::Arc;
+
+#[cfg(doc)]
+use crate::cnn::PlanReport;
+use crate::cnn::{CnnEngine, CnnLayout, ConvAlgorithm, SavedPlans, ThreadCount, MAX_CNN_THREADS};
+use crate::display::DisplayProfile;
+use crate::encoding::DoublePhaseMethod;
+#[cfg(doc)]
+use crate::error::HoloError;
+use crate::error::{invalid, Result};
+use crate::optics::{OpticalSetup, PropagationOptions};
+use crate::pipeline::{Backend, GpuPrecision, ModelSelection, PipelineConfig, MAX_HOLOGRAM_PIXELS};
+use crate::scene::{DepthMapping, DepthRange, Fit, FrameOptions};
+
+/// Everything a [`HologramGenerator`] needs. Build with [`GeneratorConfig::new`] and change the fields
+/// you need; [`GeneratorConfig::validate`] says what is wrong.
+///
+/// [`HologramGenerator`]: super::HologramGenerator
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct GeneratorConfig {
+    /// Hologram (SLM) width in pixels.
+    pub width: usize,
+    /// Hologram (SLM) height in pixels.
+    pub height: usize,
+    /// The shipped CNNs: RGB-D or LDI input, layers 8/15/30, precision, pre-filter Auto/Off/Required
+    /// (default RGB-D, 8, f32, Auto).
+    pub models: ModelSelection,
+    /// Distance `s` from the midpoint hologram to the SLM in metres (Eq. 6; default 6e-3; shipped
+    /// pre-filters exist for 6e-3 and 12e-3).
+    pub offset_m: f64,
+    /// CNN threads ([`ThreadCount::Auto`] by default: the cores the CPU reports).
+    pub threads: ThreadCount,
+    /// CNN memory layout of tract ([`CnnLayout::Auto`] by default: the plan table's).
+    pub layout: CnnLayout,
+    /// CPU CNN engine ([`CnnEngine::Auto`] by default: the plan table's, the native kernels wherever they
+    /// run the models).
+    pub engine: CnnEngine,
+    /// Time the CNN candidates (engines, each layer's kernel row, threads) when the generator is made, instead
+    /// of taking the plan table's (the default, `false`: the same SLM codes on every run). Save the result
+    /// ([`GeneratorInfo::plan`], [`PlanReport::saved`]) and give it as `saved_plans` on later runs to repeat
+    /// it without timing.
+    ///
+    /// [`GeneratorInfo::plan`]: super::GeneratorInfo::plan
+    pub tune: bool,
+    /// CNN plans saved from an earlier (tuned) generator ([`PlanReport::saved`], read back with
+    /// [`SavedPlans::from_json`]): repeated without timing, so every run gives the same SLM codes. `None`
+    /// (the default): the plan table, or a timing with `tune`. Refused with `tune`, and at creation when
+    /// made for another kernel ISA level than this CPU's.
+    #[serde(serialize_with = "saved_source")]
+    pub saved_plans: Option<Arc<SavedPlans>>,
+    /// How camera frames fit the hologram ([`Fit::Crop`] by default).
+    pub fit: Fit,
+    /// Wavelengths (R, G, B), pixel pitch and volume depth, all in metres (the paper's display: 638, 520,
+    /// 450 nm, 8 µm, 6 mm).
+    pub optics: OpticalSetup,
+    /// Angular spectrum options (padding, band limit).
+    pub options: PropagationOptions,
+    /// Double phase method where no pre-filter CNN runs (AA-DPM by default).
+    pub encoding: DoublePhaseMethod,
+    /// Metric depth range mapped to the 3D volume (`None`: 1st/99th percentiles of each frame's valid
+    /// depths; a stream keeps its first frame's).
+    pub depth_range: Option<DepthRange>,
+    /// Metric depth → normalised depth mapping (linear in diopters by default).
+    pub depth_mapping: DepthMapping,
+    /// Where frames are computed ([`Backend::Auto`] by default: the phone's GPU where it passes a
+    /// first-frame self-check against the CPU, else the CPU; [`GeneratorInfo::backend`] says which).
+    ///
+    /// [`GeneratorInfo::backend`]: super::GeneratorInfo::backend
+    pub backend: Backend,
+    /// The GPU CNNs' arithmetic ([`GpuPrecision::Auto`] by default: f16 where the GPU has it, which halves
+    /// their memory; docs/GPU.md).
+    pub gpu_precision: GpuPrecision,
+    /// Largest relative spread (a fraction: 0.01 = 1 %) of the per-colour depth scales accepted when the
+    /// CNNs were trained for another, Fresnel-equivalent display (`docs/DISPLAYS.md`,
+    /// [`crate::display::DisplayMapping`]); `None` (the default): the serving rule's, whose estimated cost
+    /// stays within 0.3 dB of the model's own score. A value wider than the rule's is reported as "widened"
+    /// in [`GeneratorInfo::display_mapping`].
+    ///
+    /// [`GeneratorInfo::display_mapping`]: super::GeneratorInfo::display_mapping
+    pub wavelength_ratio_tolerance: Option<f64>,
+}
+
+/// [`GeneratorConfig::saved_plans`] in reports: the plans' origin, or null.
+fn saved_source<S: serde::Serializer>(
+    plans: &Option<Arc<SavedPlans>>,
+    s: S,
+) -> std::result::Result<S::Ok, S::Error> {
+    match plans {
+        Some(p) => s.serialize_some(&p.origin),
+        None => s.serialize_none(),
+    }
+}
+
+impl GeneratorConfig {
+    /// The defaults for a `width × height` hologram: the shipped 8-layer f32 CNN, its pre-filter where it
+    /// helps (Auto), SLM 6 mm from the midpoint hologram, autotuned CNN plan, centred crop, automatic depth
+    /// range, the paper's display.
+    pub fn new(width: usize, height: usize) -> Self {
+        Self {
+            width,
+            height,
+            models: ModelSelection::default(),
+            offset_m: 6e-3,
+            threads: ThreadCount::Auto,
+            layout: CnnLayout::Auto,
+            engine: CnnEngine::Auto,
+            tune: false,
+            saved_plans: None,
+            fit: Fit::default(),
+            optics: OpticalSetup::default(),
+            options: PropagationOptions::default(),
+            encoding: DoublePhaseMethod::default(),
+            depth_range: None,
+            depth_mapping: DepthMapping::default(),
+            backend: Backend::default(),
+            gpu_precision: GpuPrecision::default(),
+            wavelength_ratio_tolerance: None,
+        }
+    }
+
+    /// The defaults of [`GeneratorConfig::new`] for the display a profile describes (`docs/DISPLAYS.md`):
+    /// `width`/`height` from its `resolution` (`[height, width]` pixels), `optics` from
+    /// [`DisplayProfile::optics`] (wavelengths, pitch and volume depth in metres) and `offset_m` from
+    /// [`DisplayProfile::default_offset_m`] (the first of `offsets_m`). The profile's `calibration` file is
+    /// not read here: load it and pass it to [`HologramGenerator::set_calibration`].
+    ///
+    /// Errors: none here (a profile from [`DisplayProfile::from_json_str`] or [`DisplayProfile::new`] is
+    /// valid); whether the shipped CNNs serve the display (one depth scale `σ` for the three lasers, volume
+    /// and offsets `σ`·6 mm) is checked when the generator is made, as [`HologramGenerator::new`].
+    ///
+    /// [`HologramGenerator::set_calibration`]: super::HologramGenerator::set_calibration
+    /// [`HologramGenerator::new`]: super::HologramGenerator::new
+    pub fn for_display(profile: &DisplayProfile) -> Self {
+        let [height, width] = profile.resolution;
+        Self {
+            optics: profile.optics(),
+            offset_m: profile.default_offset_m(),
+            ..Self::new(width, height)
+        }
+    }
+
+    /// Checks everything that needs no model: non-zero sizes within [`MAX_HOLOGRAM_PIXELS`] whose RGBA
+    /// outputs (`width · height · 4` bytes) fit in a `u32`, a finite non-negative offset, valid optics and
+    /// depth range, a thread count within [`MAX_CNN_THREADS`] and a finite wavelength ratio tolerance ≥ 0.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] naming the field.
+    pub fn validate(&self) -> Result<()> {
+        if self.width == 0 || self.height == 0 {
+            return Err(invalid(
+                "width/height",
+                format!(
+                    "the hologram needs a non-zero size, got {}×{}",
+                    self.width, self.height
+                ),
+            ));
+        }
+        let pixels = self
+            .width
+            .checked_mul(self.height)
+            .filter(|&p| p <= MAX_HOLOGRAM_PIXELS);
+        let rgba_fits = pixels
+            .and_then(|p| p.checked_mul(4))
+            .is_some_and(|b| b <= u32::MAX as usize);
+        if pixels.is_none() || !rgba_fits {
+            return Err(invalid(
+                "width/height",
+                format!(
+                    "{}×{} is larger than the {MAX_HOLOGRAM_PIXELS} pixels a generator makes",
+                    self.width, self.height
+                ),
+            ));
+        }
+        if !(self.offset_m.is_finite() && self.offset_m >= 0.0) {
+            return Err(invalid(
+                "offset_m",
+                format!("must be finite and ≥ 0 metres, got {}", self.offset_m),
+            ));
+        }
+        self.optics.validate()?;
+        if let Some(r) = &self.depth_range {
+            r.validate()?;
+        }
+        if let ThreadCount::Fixed(n) = self.threads {
+            if n == 0 || n > MAX_CNN_THREADS {
+                return Err(invalid(
+                    "threads",
+                    format!("0 (automatic) to {} threads, got {n}", MAX_CNN_THREADS),
+                ));
+            }
+        }
+        if self.tune && self.saved_plans.is_some() {
+            return Err(invalid(
+                "tune",
+                "saved plans and a new tuning were both asked for: give one",
+            ));
+        }
+        if let Some(p) = &self.saved_plans {
+            p.validate()?;
+        }
+        if let Some(t) = self.wavelength_ratio_tolerance {
+            if !(t.is_finite() && t >= 0.0) {
+                return Err(invalid(
+                    "wavelength_ratio_tolerance",
+                    format!("must be a finite fraction ≥ 0 (0.01 = 1 %), got {t}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The pipeline part of this configuration.
+    pub fn pipeline_config(&self) -> PipelineConfig {
+        PipelineConfig {
+            optics: self.optics,
+            options: self.options,
+            offset_m: self.offset_m,
+            encoding: self.encoding,
+            cnn_layout: self.layout,
+            cnn_engine: self.engine,
+            cnn_threads: self.threads,
+            cnn_conv: ConvAlgorithm::Auto,
+            cnn_tune: self.tune,
+            backend: self.backend,
+            gpu_precision: self.gpu_precision,
+            wavelength_ratio_tolerance: self.wavelength_ratio_tolerance,
+        }
+    }
+
+    /// The camera-frame conversion part of this configuration.
+    pub fn frame_options(&self) -> FrameOptions {
+        FrameOptions {
+            fit: self.fit,
+            range: self.depth_range,
+            mapping: self.depth_mapping,
+        }
+    }
+}
+
+#[cfg(test)]
+pub(super) mod tests {
+    use super::*;
+    use crate::error::HoloError;
+
+    #[test]
+    fn config_refuses_what_cannot_work() {
+        assert!(GeneratorConfig::new(64, 48).validate().is_ok());
+        let bad = |f: fn(&mut GeneratorConfig)| {
+            let mut c = GeneratorConfig::new(64, 48);
+            f(&mut c);
+            c.validate().unwrap_err()
+        };
+        let name = |e: HoloError| match e {
+            HoloError::InvalidParameter { name, .. } => name,
+            e => panic!("unexpected {e}"),
+        };
+        assert_eq!(name(bad(|c| c.width = 0)), "width/height");
+        assert_eq!(name(bad(|c| c.height = usize::MAX)), "width/height");
+        assert_eq!(
+            name(bad(|c| {
+                c.width = 9000;
+                c.height = 9000;
+            })),
+            "width/height"
+        );
+        assert_eq!(name(bad(|c| c.offset_m = f64::NAN)), "offset_m");
+        assert_eq!(name(bad(|c| c.offset_m = -1e-3)), "offset_m");
+        assert_eq!(
+            name(bad(|c| c.threads = ThreadCount::Fixed(100_000))),
+            "threads"
+        );
+        assert!(matches!(
+            bad(|c| c.optics.pixel_pitch_m = f64::NAN),
+            HoloError::InvalidParameter { .. }
+        ));
+        assert!(matches!(
+            bad(|c| c.depth_range = Some(DepthRange {
+                z_near_m: 2.0,
+                z_far_m: 1.0
+            })),
+            HoloError::InvalidParameter { .. }
+        ));
+    }
+
+    /// A 4 µm SLM at the paper's lasers: σ = (4/8)² = 0.25, so a 1.5 mm volume and 1.5 mm offsets.
+    pub(in crate::generator) const PROFILE_4UM: &str = r#"{
+        "name": "4 µm test SLM",
+        "pixel_pitch_m": 4e-6,
+        "resolution": [48, 64],
+        "wavelengths_m": [638e-9, 520e-9, 450e-9],
+        "volume_depth_m": 1.5e-3,
+        "offsets_m": [1.5e-3, 3e-3]
+    }"#;
+
+    #[test]
+    fn for_display_takes_size_optics_and_offset_from_the_profile() {
+        let profile = DisplayProfile::from_json_str(PROFILE_4UM).unwrap();
+        let c = GeneratorConfig::for_display(&profile);
+        assert_eq!((c.width, c.height), (64, 48));
+        assert_eq!(
+            c.optics,
+            OpticalSetup {
+                wavelengths_m: [638e-9, 520e-9, 450e-9],
+                pixel_pitch_m: 4e-6,
+                volume_depth_m: 1.5e-3,
+            }
+        );
+        assert_eq!(c.offset_m, 1.5e-3);
+        assert_eq!(c.wavelength_ratio_tolerance, None);
+        // Everything else is GeneratorConfig::new's.
+        let want = GeneratorConfig {
+            optics: c.optics,
+            offset_m: c.offset_m,
+            ..GeneratorConfig::new(64, 48)
+        };
+        assert_eq!(c, want);
+        c.validate().unwrap();
+        assert_eq!(c.pipeline_config().wavelength_ratio_tolerance, None);
+    }
+
+    #[test]
+    fn a_bad_wavelength_ratio_tolerance_is_named() {
+        for t in [f64::NAN, -0.01, f64::INFINITY] {
+            let mut c = GeneratorConfig::new(64, 48);
+            c.wavelength_ratio_tolerance = Some(t);
+            assert!(
+                matches!(
+                    c.validate(),
+                    Err(HoloError::InvalidParameter {
+                        name: "wavelength_ratio_tolerance",
+                        ..
+                    })
+                ),
+                "{t}"
+            );
+        }
+    }
+}
