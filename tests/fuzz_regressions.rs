@@ -196,9 +196,44 @@ fn seeds(target: &str) -> Vec<Vec<u8>> {
         "camera_frame" => (0..6u8)
             .map(|d| camera_seed(d % 3, d, d, 0, d % 2 == 0))
             .collect(),
+        "display_profile" => [
+            DISPLAY_PAPER,
+            DISPLAY_LCOS,
+            // A BOM, a name with non-ASCII text, one offset.
+            "\u{feff}{\"name\": \"Ωmega 532\", \"pixel_pitch_m\": 6.4e-6, \"resolution\": [64, 96], \
+             \"wavelengths_m\": [532e-9, 532e-9, 532e-9], \"volume_depth_m\": 3e-3, \"offsets_m\": [0.0]}",
+        ]
+        .map(|s| s.as_bytes().to_vec())
+        .to_vec(),
+        "aberration" => vec![ABERRATION.as_bytes().to_vec()],
+        // A one-sample dataset written by `holo dataset --shard 0/1` and merged (committed under
+        // tests/fixtures/fuzz, so the replay test runs them too).
+        "shard_record" | "manifest" => {
+            std::fs::read_dir(fixtures().join(target))
+                .unwrap()
+                .map(|e| std::fs::read(e.unwrap().path()).unwrap())
+                .collect()
+        }
         other => panic!("no seeds for {other}"),
     }
 }
+
+/// docs/DISPLAYS.md's paper display and 3.74 µm LCoS.
+const DISPLAY_PAPER: &str = r#"{"name": "HOLOEYE PLUTO-2 (paper)", "pixel_pitch_m": 8e-6,
+  "resolution": [1080, 1920], "wavelengths_m": [638e-9, 520e-9, 450e-9], "volume_depth_m": 6e-3,
+  "offsets_m": [6e-3, 12e-3, 0.0]}"#;
+const DISPLAY_LCOS: &str = r#"{"name": "3.74 µm 4K LCoS", "pixel_pitch_m": 3.74e-6,
+  "resolution": [2160, 3840], "wavelengths_m": [638e-9, 520e-9, 450e-9],
+  "volume_depth_m": 1.3113375e-3, "offsets_m": [1.3113375e-3, 2.622675e-3, 0.0]}"#;
+/// docs/ABERRATION.md's example file.
+const ABERRATION: &str = r#"{"format": "tensorholo.aberration", "version": 1,
+  "wavelengths_m": [638e-9, 520e-9, 450e-9], "pixel_pitch_m": 8e-6,
+  "samples": [
+    {"distance_m": -0.010, "coefficients": {"focus": 3.5, "astigmatism_vertical": 7.0}},
+    {"distance_m": 0.010, "per_colour": [{"focus": 4.3, "astigmatism_vertical": 8.6},
+                                         {"focus": 3.5, "astigmatism_vertical": 7.0},
+                                         {"focus": 3.0, "astigmatism_vertical": 6.1}]}
+  ]}"#;
 
 /// Seeds the harness's parser must accept (so a harness that refuses everything fails this test).
 fn check_seeds_accepted(target: &str, seeds: &[Vec<u8>]) {
@@ -220,6 +255,30 @@ fn check_seeds_accepted(target: &str, seeds: &[Vec<u8>]) {
             "holocal" => DisplayCalibration::from_bytes(&s[1..], "seed")
                 .map(|_| ())
                 .map_err(|e| e.to_string()),
+            "display_profile" => std::str::from_utf8(s)
+                .map_err(|e| e.to_string())
+                .and_then(|t| {
+                    tensorholo::display::DisplayProfile::from_json_str(t)
+                        .map(|_| ())
+                        .map_err(|e| e.to_string())
+                }),
+            "aberration" => tensorholo::synthesis::aberration::AberrationProfile::from_json_str(
+                std::str::from_utf8(s).unwrap(),
+                "seed",
+            )
+            .map(|_| ())
+            .map_err(|e| e.to_string()),
+            "shard_record" => {
+                tensorholo::dataset::ShardRecord::from_json_str(std::str::from_utf8(s).unwrap())
+                    .map(|_| ())
+                    .ok_or_else(|| "not a shard record".to_string())
+            }
+            "manifest" => tensorholo::dataset::Manifest::from_json_str(
+                std::str::from_utf8(s).unwrap(),
+                "seed",
+            )
+            .map(|_| ())
+            .map_err(|e| e.to_string()),
             _ => Ok(()),
         };
         if let Err(e) = ok {

@@ -49,12 +49,7 @@ impl OpticsArgs {
     /// The `--display` profile, if given. Errors: the file cannot be read or is not a valid profile (the
     /// message names the key).
     pub fn profile(&self) -> Result<Option<DisplayProfile>> {
-        self.display
-            .as_deref()
-            .map(|p| {
-                DisplayProfile::from_path(p).with_context(|| format!("--display {}", p.display()))
-            })
-            .transpose()
+        self.display.as_deref().map(read_profile).transpose()
     }
 
     /// The `--display` file for the output guard ([`crate::output::guard`]), if given.
@@ -511,4 +506,21 @@ pub fn conv_from_env() -> Result<ConvAlgorithm> {
         }
         _ => Ok(ConvAlgorithm::Auto),
     }
+}
+
+/// The display profile at `path` (`--display`), read once per process: every later call gets the same
+/// profile without reading again, so that `--display /dev/stdin`, a pipe or a FIFO fed once serves every
+/// part of a command that asks for it. Errors: the file cannot be read or is not a valid profile (the
+/// message names the key and the file).
+pub fn read_profile(path: &Path) -> Result<DisplayProfile> {
+    static READ: std::sync::Mutex<Vec<(PathBuf, DisplayProfile)>> =
+        std::sync::Mutex::new(Vec::new());
+    let mut read = READ.lock().unwrap_or_else(|p| p.into_inner());
+    if let Some((_, p)) = read.iter().find(|(p, _)| p == path) {
+        return Ok(p.clone());
+    }
+    let profile =
+        DisplayProfile::from_path(path).with_context(|| format!("--display {}", path.display()))?;
+    read.push((path.to_path_buf(), profile.clone()));
+    Ok(profile)
 }

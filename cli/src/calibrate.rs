@@ -58,9 +58,7 @@ impl SlmArgs {
     fn profile(&self) -> Result<Option<DisplayProfile>> {
         self.display
             .as_deref()
-            .map(|p| {
-                DisplayProfile::from_path(p).with_context(|| format!("--display {}", p.display()))
-            })
+            .map(crate::args::read_profile)
             .transpose()
     }
 
@@ -382,8 +380,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             for (c, csv) in csvs.into_iter().enumerate() {
                 let curve = match csv {
                     Some(path) => {
-                        let text = std::fs::read_to_string(path)
-                            .with_context(|| format!("reading {}", path.display()))?;
+                        let text = tensorholo::io::read_text(path)?;
                         PhaseCurve::from_csv(&text, &path.display().to_string())?
                     }
                     None => match &model {

@@ -1,6 +1,7 @@
 //! `holo compare`: how far apart two output folders of `holo render` / `holo reference` are (the same
 //! command run on two machines, e.g. x86-64 and an aarch64 build under qemu or on a board): the midpoint
-//! hologram, the SLM codes (cyclic: code 255 and 0 are neighbours) and the simulated reconstructions.
+//! hologram, the SLM codes (cyclic: code 255 and 0 are neighbours) and the simulated reconstructions. A NaN
+//! or infinite value in either midpoint hologram is reported and the command fails: the outputs differ.
 
 use std::path::{Path, PathBuf};
 
@@ -66,6 +67,27 @@ pub fn run(args: &CompareArgs) -> Result<()> {
             "midpoint holograms differ in shape: {:?} vs {:?}",
             ma.dim(),
             mb.dim()
+        );
+    }
+    // NaN or ∞ in either hologram is a difference, never hidden by `max` (which skips NaN).
+    let not_finite = |m: &ndarray::Array3<num_complex::Complex32>| {
+        m.iter()
+            .filter(|v| !(v.re.is_finite() && v.im.is_finite()))
+            .count()
+    };
+    let (bad_a, bad_b) = (not_finite(&ma), not_finite(&mb));
+    if bad_a + bad_b > 0 {
+        println!(
+            "midpoint hologram {:?}: {bad_a} value(s) NaN or infinite in {}, {bad_b} in {}",
+            ma.dim(),
+            args.a.display(),
+            args.b.display()
+        );
+        bail!(
+            "the midpoint holograms hold NaN or infinite values ({bad_a} in {}, {bad_b} in {}): the outputs \
+             differ, whatever else agrees",
+            args.a.display(),
+            args.b.display()
         );
     }
     let scale = ma.iter().fold(0.0f32, |m, v| m.max(v.norm()));

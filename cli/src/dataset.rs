@@ -151,7 +151,7 @@ pub struct DatasetArgs {
     /// Finish a sharded dataset: check that --out holds every planned shard once, of one configuration
     /// (read from the shards' records: no other flag is needed), and write manifest.json. A missing or
     /// foreign shard is named, with the command that writes it.
-    #[arg(long, conflicts_with_all = ["shard", "export_ldi", "force"])]
+    #[arg(long, conflicts_with_all = ["shard", "export_ldi"])]
     merge: bool,
 }
 
@@ -175,13 +175,16 @@ fn shard_selection(shard: Option<&str>, shard_count: Option<usize>) -> Result<Sh
                 let step = env("SLURM_ARRAY_TASK_STEP")
                     .map(|v| number("SLURM_ARRAY_TASK_STEP", &v))
                     .transpose()?
-                    .unwrap_or(1)
-                    .max(1);
+                    .unwrap_or(1);
+                if step == 0 {
+                    bail!("--shard auto: SLURM_ARRAY_TASK_STEP=0, but a job array's step is at least 1");
+                }
                 let count = match (shard_count, env("SLURM_ARRAY_TASK_COUNT")) {
                     (Some(n), _) => n,
                     (None, Some(v)) => number("SLURM_ARRAY_TASK_COUNT", &v)?,
                     (None, None) => bail!(
-                        "--shard auto: SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_COUNT is not;                          pass --shard-count N"
+                        "--shard auto: SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_COUNT is not; pass \
+                         --shard-count N"
                     ),
                 };
                 if id < min || (id - min) % step != 0 {
@@ -190,18 +193,28 @@ fn shard_selection(shard: Option<&str>, shard_count: Option<usize>) -> Result<Sh
                         min + step
                     );
                 }
-                ShardSelection::new((id - min) / step, count)
+                ShardSelection::new((id - min) / step, count).with_context(|| {
+                    format!(
+                        "--shard auto: SLURM_ARRAY_TASK_ID={id} (part {} with SLURM_ARRAY_TASK_MIN={min}, \
+                         SLURM_ARRAY_TASK_STEP={step}) of {count} parts (SLURM_ARRAY_TASK_COUNT or --shard-count)",
+                        (id - min) / step
+                    )
+                })
             } else if let Some(index) = env("JOB_COMPLETION_INDEX") {
                 let index = number("JOB_COMPLETION_INDEX", &index)?;
                 let Some(count) = shard_count else {
                     bail!(
-                        "--shard auto in a Kubernetes Indexed Job (JOB_COMPLETION_INDEX={index}) needs                          --shard-count N, the Job's completions"
+                        "--shard auto in a Kubernetes Indexed Job (JOB_COMPLETION_INDEX={index}) needs \
+                         --shard-count N, the Job's completions"
                     );
                 };
-                ShardSelection::new(index, count)
+                ShardSelection::new(index, count).with_context(|| {
+                    format!("--shard auto: JOB_COMPLETION_INDEX={index} with --shard-count {count}")
+                })
             } else {
                 bail!(
-                    "--shard auto: neither a Slurm job array (SLURM_ARRAY_TASK_ID) nor a Kubernetes                      Indexed Job (JOB_COMPLETION_INDEX) is running this; give the part as --shard I/N"
+                    "--shard auto: neither a Slurm job array (SLURM_ARRAY_TASK_ID) nor a Kubernetes \
+                     Indexed Job (JOB_COMPLETION_INDEX) is running this; give the part as --shard I/N"
                 );
             }
         }
@@ -215,9 +228,10 @@ fn shard_selection(shard: Option<&str>, shard_count: Option<usize>) -> Result<Sh
                 );
             }
             ShardSelection::new(number("--shard I", i)?, number("--shard N", n)?)
+                .with_context(|| format!("--shard {text}"))
         }
     };
-    Ok(selection?)
+    selection
 }
 
 const EXAMPLES: &str = "\
@@ -389,7 +403,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
 /// `--merge`: the manifest of a sharded dataset.
 fn merge(args: &DatasetArgs) -> Result<()> {
     let t = std::time::Instant::now();
-    let manifest = merge_shards(&args.out)?;
+    let manifest = merge_shards(&args.out, args.force)?;
     let st = &manifest.statistics;
     log::info!(
         "merged {} ({} shards, {} samples) in {:.1} s: {:.2} s per sample on one worker, {:.1} s of \

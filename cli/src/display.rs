@@ -6,8 +6,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
-use tensorholo::display::{DisplayProfile, DisplayRefusal, VolumeFit, RETRAIN_COST};
-use tensorholo::model::embedded::{check_display, ShippedModelCheck};
+use tensorholo::display::{
+    DisplayMapping, DisplayProfile, DisplayRefusal, VolumeFit, RETRAIN_COST,
+};
+use tensorholo::model::embedded::{check_display, ShippedModelCheck, PREFILTER_OFFSETS_MM};
+use tensorholo::optics::OpticalSetup;
 use tensorholo::HoloError;
 
 /// Arguments of `holo display`.
@@ -123,7 +126,11 @@ fn check(args: &CheckArgs) -> Result<bool> {
     }
     // Why not, once per distinct refusal, with what would serve.
     let mut seen = Vec::new();
-    for r in checks.iter().filter_map(|c| c.refusal.as_ref()) {
+    let optics = profile.optics();
+    for (c, r) in checks
+        .iter()
+        .filter_map(|c| c.refusal.as_ref().map(|r| (c, r)))
+    {
         // One block per cause and remedy (the models of each depth refuse alike).
         let key = (r.key.clone(), format!("{:?} {:?}", r.nearest, r.tolerance));
         if seen.contains(&key) {
@@ -132,7 +139,13 @@ fn check(args: &CheckArgs) -> Result<bool> {
         seen.push(key);
         println!();
         println!("Not served: {r}");
-        println!("{}", serving_hint(r, Some((&args.file, &profile))));
+        let asked = Requested {
+            optics: &optics,
+            offset_m: c.offset_m,
+            tolerance: args.wavelength_ratio_tolerance,
+            profile: Some((&args.file, &profile)),
+        };
+        println!("{}", serving_hint(r, &asked));
     }
     println!();
     println!(
@@ -166,16 +179,76 @@ fn mm(metres: f64) -> f64 {
     (metres * 1e12).round() / 1e9
 }
 
+/// What a refused display was asked for: its optics, the SLM offset and laser tolerance in force, and the
+/// `--display` file where one was given.
+pub struct Requested<'a> {
+    /// The display's optics (metres).
+    pub optics: &'a OpticalSetup,
+    /// The SLM offset asked for, metres (`--offset-mm` or the profile's).
+    pub offset_m: f64,
+    /// `--wavelength-ratio-tolerance`, `None` for the serving rule's.
+    pub tolerance: Option<f64>,
+    /// The `--display` file and its profile.
+    pub profile: Option<(&'a Path, &'a DisplayProfile)>,
+}
+
+/// The offsets (metres) at which a shipped pre-filter serves `optics`, with the pre-filter's offset on the
+/// training display (mm): `σ·s` for `s` = 6 and 12 mm, where the hologram CNNs' mapping holds there (the
+/// non-paraxial residual grows with the offset, so a display may be served at one and not the other).
+fn prefilter_offsets(optics: &OpticalSetup, tolerance: Option<f64>) -> Vec<(f64, u32)> {
+    let trained = OpticalSetup::default();
+    let Ok(at_zero) = DisplayMapping::compute(&trained, optics, 0.0, tolerance, 0.0) else {
+        return Vec::new();
+    };
+    PREFILTER_OFFSETS_MM
+        .iter()
+        .map(|&mm| (at_zero.scale * mm as f64 * 1e-3, mm))
+        .filter(|&(s, _)| {
+            DisplayMapping::compute(&trained, optics, s, tolerance, 0.0)
+                .is_ok_and(|m| m.refusal("the shipped CNNs").is_none())
+        })
+        .collect()
+}
+
 /// What would serve a refused display, in the order to try, for the `--display` file where one was given:
-/// the nearest display the model serves (as a profile to save), the laser tolerance with its estimated cost,
-/// retraining with its cost.
-pub fn serving_hint(r: &DisplayRefusal, profile: Option<(&Path, &DisplayProfile)>) -> String {
+/// an offset a shipped pre-filter serves (where the offset is at fault), the nearest display the model
+/// serves (as a profile to save), the laser tolerance with its estimated cost, retraining with its cost.
+pub fn serving_hint(r: &DisplayRefusal, asked: &Requested) -> String {
+    let profile = asked.profile;
     let mut out = "What would serve this display:".to_string();
     let mut n = 0;
     let mut step = |text: String| {
         n += 1;
         out.push_str(&format!("\n{n}. {text}"));
     };
+    // An offset too far for the paraxial mapping (the pitch's residual) or one no model was trained for:
+    // the offsets the shipped pre-filters serve on this display, in the display's millimetres.
+    let offset_at_fault = r.key.ends_with("pixel_pitch_m") || r.key.ends_with("offset_m");
+    let served = prefilter_offsets(asked.optics, asked.tolerance);
+    if offset_at_fault && asked.offset_m != 0.0 && !served.is_empty() {
+        let list = served
+            .iter()
+            .map(|&(s, trained)| format!("--offset-mm {} (the {trained} mm pre-filter)", mm(s)))
+            .collect::<Vec<_>>()
+            .join(" or ");
+        // A profile offset given in metres where --offset-mm wants millimetres reads 1000× too small.
+        let units = profile
+            .and_then(|(_, p)| {
+                p.offsets_m
+                    .iter()
+                    .find(|&&o| o != 0.0 && (asked.offset_m * 1e3 - o).abs() <= 1e-9 * o.abs())
+            })
+            .map_or(String::new(), |o| {
+                format!(
+                    " (--offset-mm is in millimetres: the profile's offsets_m {o} m is --offset-mm {})",
+                    mm(*o)
+                )
+            });
+        step(format!(
+            "an offset the shipped pre-filters serve on this display: {list}, not {} mm{units}",
+            mm(asked.offset_m)
+        ));
+    }
     if let Some(n) = r.nearest {
         let (o, s) = (n.optics(), n.offset_m);
         match profile {
@@ -215,16 +288,12 @@ pub fn serving_hint(r: &DisplayRefusal, profile: Option<(&Path, &DisplayProfile)
 
 /// `e` with `what` as its context; where it is a display refusal, first prints what would serve the display
 /// ([`serving_hint`]) to stderr and says so in the context.
-pub fn with_serving_hint(
-    e: HoloError,
-    what: &str,
-    profile: Option<(&Path, &DisplayProfile)>,
-) -> anyhow::Error {
+pub fn with_serving_hint(e: HoloError, what: &str, asked: &Requested) -> anyhow::Error {
     match &e {
         HoloError::DisplayNotServed(r) => {
-            eprintln!("{}\n", serving_hint(r, profile));
+            eprintln!("{}\n", serving_hint(r, asked));
             anyhow::Error::new(e).context(format!(
-                "{what}: no shipped model serves this display as it is (what would serve it is above)"
+                "{what}: the model does not serve this display as it is (what would serve it is above)"
             ))
         }
         _ => anyhow::Error::new(e).context(what.to_string()),

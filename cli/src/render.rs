@@ -276,6 +276,9 @@ impl ModelArgs {
         if !offset_mm.is_finite() {
             bail!("--offset-mm must be a finite number of millimetres");
         }
+        if let (Some(given), Some(p)) = (self.offset_mm, profile.as_ref()) {
+            offset_against_profile(given, p);
+        }
         let (_, encoding) = self.encoding.method(crate::args::Encoding::AaDpm);
         let config = PipelineConfig {
             optics: self.optics.setup()?,
@@ -299,8 +302,16 @@ impl ModelArgs {
             input_layers: input.input_layers(),
             wavelength_ratio_tolerance: config.wavelength_ratio_tolerance,
         };
-        let display = self.optics.display.as_deref().zip(profile.as_ref());
-        let hint = |what: String| move |e| crate::display::with_serving_hint(e, &what, display);
+        let asked = crate::display::Requested {
+            optics: &config.optics,
+            offset_m: config.offset_m,
+            tolerance: config.wavelength_ratio_tolerance,
+            profile: self.optics.display.as_deref().zip(profile.as_ref()),
+        };
+        let hint = |what: String| {
+            let asked = &asked;
+            move |e| crate::display::with_serving_hint(e, &what, asked)
+        };
         let hologram = match &self.model {
             Some(p) => HologramModel::from_path(p, ModelKind::Hologram, &expected)
                 .map_err(hint(format!("--model {}", p.display())))?,
@@ -774,4 +785,33 @@ fn evaluate(
         "mapping_ceiling": mapping_ceiling,
         "seconds": t.elapsed().as_secs_f64(),
     }))
+}
+
+/// Warns where `--offset-mm` (millimetres) is none of the `--display` profile's offsets (metres): the
+/// profile's offsets in millimetres, and the one meant where the flag was given the metres' number.
+fn offset_against_profile(given_mm: f64, profile: &DisplayProfile) {
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1e-12);
+    if profile.offsets_m.iter().any(|&o| close(o * 1e3, given_mm)) {
+        return;
+    }
+    let list = profile
+        .offsets_m
+        .iter()
+        .map(|o| format!("{}", (o * 1e12).round() / 1e9))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let meant = profile
+        .offsets_m
+        .iter()
+        .find(|&&o| o != 0.0 && close(o, given_mm))
+        .map_or(String::new(), |o| {
+            format!(
+                "; --offset-mm is in millimetres, the profile's offsets_m in metres: its {o} m is \
+                 --offset-mm {}",
+                (o * 1e12).round() / 1e9
+            )
+        });
+    log::warn!(
+        "--offset-mm {given_mm} is none of the display profile's offsets ({list} mm){meant}"
+    );
 }

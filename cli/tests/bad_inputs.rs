@@ -597,3 +597,82 @@ fn ctrl_c_exits_130_and_leaves_no_report_and_no_temporary_file() {
     assert!(temporaries.is_empty(), "{temporaries:?}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Devices that never end (`/dev/zero`, `/dev/urandom`) given for any input file are refused naming the path
+/// and what it is, before anything is read (issue 57: they used to grow to gigabytes).
+#[cfg(unix)]
+#[test]
+fn devices_given_as_input_files_are_refused_naming_them() {
+    let ins = inputs("devices");
+    let (rgb, depth) = (
+        ins.rgb.display().to_string(),
+        ins.depth.display().to_string(),
+    );
+    let render = |extra: &[&str]| {
+        let mut v = s(&["render", "--size", "40x56", "--repeat", "0"]);
+        v.extend(s(extra));
+        v
+    };
+    let cases = vec![
+        (
+            "render: /dev/zero as the colour image",
+            s(&[
+                "render",
+                "--rgb",
+                "/dev/zero",
+                "--depth",
+                &depth,
+                "--depth-encoding",
+                "mm16",
+            ]),
+            vec!["/dev/zero", "device"],
+        ),
+        (
+            "render: /dev/urandom as the depth map",
+            s(&[
+                "render",
+                "--rgb",
+                &rgb,
+                "--depth",
+                "/dev/urandom",
+                "--depth-encoding",
+                "mm16",
+            ]),
+            vec!["/dev/urandom", "device"],
+        ),
+        (
+            "render: /dev/zero as the model",
+            render(&["--model", "/dev/zero"]),
+            vec!["/dev/zero", "device"],
+        ),
+        (
+            "render: /dev/zero as the calibration",
+            render(&["--calibration", "/dev/zero"]),
+            vec!["/dev/zero", "device"],
+        ),
+        (
+            "render: /dev/zero as the tuning",
+            render(&["--tuning", "/dev/zero"]),
+            vec!["/dev/zero", "device"],
+        ),
+        (
+            "reference: /dev/zero as the aberration file",
+            s(&[
+                "reference",
+                "--size",
+                "16x16",
+                "--levels",
+                "4",
+                "--aberration",
+                "/dev/zero",
+            ]),
+            vec!["/dev/zero", "device"],
+        ),
+        (
+            "encode: /dev/zero as the field",
+            s(&["encode", "--input", "/dev/zero"]),
+            vec!["/dev/zero", "device"],
+        ),
+    ];
+    run_matrix(&ins, "--out", cases);
+}

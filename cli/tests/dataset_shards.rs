@@ -201,7 +201,34 @@ fn a_merge_with_a_missing_or_foreign_shard_names_it_and_writes_nothing() {
     }
     let o = holo(&["dataset", "--merge", "--out", parts.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
-    std::fs::remove_file(parts.join("manifest.json")).unwrap();
+    // A rerun of the merge replaces its own manifest; a hand-edited one only with --force.
+    let o = holo(&["dataset", "--merge", "--out", parts.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let path = parts.join("manifest.json");
+    let edited = std::fs::read_to_string(&path).unwrap().replacen(
+        "\"seed\": 1,",
+        "\"seed\": 1, \"note\": \"checked by hand\",",
+        1,
+    );
+    assert!(edited.contains("checked by hand"));
+    std::fs::write(&path, &edited).unwrap();
+    let o = holo(&["dataset", "--merge", "--out", parts.to_str().unwrap()]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("manifest.json") && e.contains("--force"), "{e}");
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), edited);
+    let o = holo(&[
+        "dataset",
+        "--merge",
+        "--force",
+        "--out",
+        parts.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!std::fs::read_to_string(&path)
+        .unwrap()
+        .contains("checked by hand"));
+    std::fs::remove_file(&path).unwrap();
 
     // A shard of another configuration (another seed) copied in: named, with the key that differs.
     let other = dir.path().join("other");
@@ -258,6 +285,33 @@ fn a_merge_with_a_missing_or_foreign_shard_names_it_and_writes_nothing() {
         assert!(!o.status.success(), "{shard}");
         assert!(stderr(&o).contains(want), "{shard}: {}", stderr(&o));
         assert!(!out.exists(), "{shard}");
+    }
+    // A job array's bad variables are named, a step of 0 refused.
+    for (vars, want) in [
+        (
+            &[("SLURM_ARRAY_TASK_ID", "1"), ("SLURM_ARRAY_TASK_STEP", "0")][..],
+            "SLURM_ARRAY_TASK_STEP=0",
+        ),
+        (&[("SLURM_ARRAY_TASK_ID", "one")][..], "SLURM_ARRAY_TASK_ID"),
+        (
+            &[("JOB_COMPLETION_INDEX", "-2")][..],
+            "JOB_COMPLETION_INDEX",
+        ),
+    ] {
+        let out = dir.path().join("bad_env");
+        let o = Command::new(env!("CARGO_BIN_EXE_holo"))
+            .args(dataset_args(
+                &out,
+                &["--shard", "auto", "--shard-count", "3"],
+            ))
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .env_remove("JOB_COMPLETION_INDEX")
+            .envs(vars.iter().copied())
+            .output()
+            .unwrap();
+        assert!(!o.status.success(), "{vars:?}");
+        assert!(stderr(&o).contains(want), "{vars:?}: {}", stderr(&o));
+        assert!(!out.exists(), "{vars:?}");
     }
 }
 

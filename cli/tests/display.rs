@@ -41,48 +41,81 @@ fn with(line_key: &str, replacement: &str) -> String {
         .join("\n")
 }
 
+/// `holo render --size 40x56 --repeat 0 --display PROFILE EXTRA… --out OUT`.
+fn render_40x56(profile: &str, extra: &[&str], out: &std::path::Path) -> std::process::Output {
+    let mut args = vec![
+        "render",
+        "--size",
+        "40x56",
+        "--repeat",
+        "0",
+        "--display",
+        profile,
+    ];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+    holo(&args)
+}
+
 fn report(dir: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap()
 }
 
 /// Each bad profile, the key its error must name.
 fn bad_profiles() -> Vec<(&'static str, String)> {
-    vec![
-        ("pixel_pitch_m", with("pixel_pitch_m", "")),
+    let many_offsets = format!(r#""offsets_m": [{}]"#, vec!["1.5e-3"; 65].join(", "));
+    // (the key the error names, whose line is replaced by the new line: "" drops it). The bounds below
+    // the first block are shared with --size (no terabyte allocation) or stop values that would overflow
+    // after the check (σ = ∞ from a huge pitch, NaN holograms from a subnormal one).
+    let replaced: [(&'static str, &str); 16] = [
+        ("pixel_pitch_m", ""),
+        ("pixel_pitch_m", r#""pixel_pitch_m": -4e-6"#),
+        ("pixel_pitch_m", r#""pixel_pitch_m": 0"#),
+        ("pixel_pitch_m", r#""pixel_pitch_m": 1e999"#),
+        ("resolution", r#""resolution": [40, 56, 3]"#),
+        ("wavelengths_m", r#""wavelengths_m": [638e-9, 520e-9]"#),
         (
-            "pixel_pitch_m",
-            with("pixel_pitch_m", r#""pixel_pitch_m": -4e-6"#),
+            "wavelengths_m",
+            r#""wavelengths_m": [638e-9, 520e-9, 300e-9]"#,
         ),
-        (
-            "pixel_pitch_m",
-            with("pixel_pitch_m", r#""pixel_pitch_m": 0"#),
-        ),
-        (
-            "pixel_pitch_m",
-            with("pixel_pitch_m", r#""pixel_pitch_m": 1e999"#),
-        ),
+        ("volume_depth_m", ""),
+        ("offsets_m", r#""offsets_m": []"#),
+        ("resolution", r#""resolution": [1000000, 1000000]"#),
+        ("resolution", r#""resolution": [50000, 50000]"#),
+        ("pixel_pitch_m", r#""pixel_pitch_m": 1e308"#),
+        ("pixel_pitch_m", r#""pixel_pitch_m": 1e-310"#),
+        ("volume_depth_m", r#""volume_depth_m": 1e300"#),
+        ("offsets_m", &many_offsets),
+        ("offsets_m", r#""offsets_m": [2.0]"#),
+    ];
+    let mut cases: Vec<(&'static str, String)> = replaced
+        .into_iter()
+        .map(|(key, line)| (key, with(key, line)))
+        .collect();
+
+    cases.extend([
         (
             "pixel_pich_m",
             with("pixel_pitch_m", r#""pixel_pich_m": 4e-6"#),
         ),
+        // Strict JSON: the key given twice is named, a top-level array or trailing text is the profile's
+        // fault (not `offsets_m`'s), with no internal type names.
         (
-            "resolution",
-            with("resolution", r#""resolution": [40, 56, 3]"#),
-        ),
-        (
-            "wavelengths_m",
-            with("wavelengths_m", r#""wavelengths_m": [638e-9, 520e-9]"#),
-        ),
-        (
-            "wavelengths_m",
-            with(
-                "wavelengths_m",
-                r#""wavelengths_m": [638e-9, 520e-9, 300e-9]"#,
+            "`resolution` is given twice",
+            GOOD.replacen(
+                "\"resolution\"",
+                "\"resolution\": [8, 8],\n  \"resolution\"",
+                1,
             ),
         ),
-        ("volume_depth_m", with("volume_depth_m", "")),
-        ("offsets_m", with("offsets_m", r#""offsets_m": []"#)),
-    ]
+        ("one JSON object", format!("[{GOOD}]")),
+        ("after the profile's closing brace", format!("{GOOD} {{}}")),
+        (
+            "ends before the profile does",
+            GOOD[..GOOD.len() - 3].to_string(),
+        ),
+    ]);
+    cases
 }
 
 #[test]
@@ -154,6 +187,10 @@ fn every_bad_profile_is_refused_by_every_command_naming_its_key_and_nothing_is_w
             assert!(
                 e.contains(key),
                 "{args:?}: the error does not name `{key}`:\n{e}\n{text}"
+            );
+            assert!(
+                !e.contains("panicked") && !e.contains("struct ") && !e.contains("tensorholo::"),
+                "{args:?}: {e}"
             );
             assert!(!out.exists(), "{args:?} wrote {}", out.display());
         }
@@ -312,20 +349,7 @@ fn green_profile(dir: &std::path::Path, green_nm: f64) -> std::path::PathBuf {
 #[test]
 fn lasers_are_served_by_cost_and_a_refusal_names_what_would_serve() {
     let dir = tempfile::tempdir().unwrap();
-    let render = |profile: &str, extra: &[&str], out: &std::path::Path| {
-        let mut args = vec![
-            "render",
-            "--size",
-            "40x56",
-            "--repeat",
-            "0",
-            "--display",
-            profile,
-        ];
-        args.extend_from_slice(extra);
-        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
-        holo(&args)
-    };
+    let render = render_40x56;
     // The most common green laser, 532 nm, beside 638/450 nm: 1.15 % off, served by the rule at a cost far
     // under 0.3 dB, and the report says so.
     let g532 = green_profile(dir.path(), 532.0);
@@ -422,19 +446,7 @@ fn lasers_are_served_by_cost_and_a_refusal_names_what_would_serve() {
         let c = holo(&args);
         assert!(c.status.success(), "{}", stderr(&c));
         let out_cal = dir.path().join(format!("r_{name}"));
-        let r = holo(&[
-            "render",
-            "--size",
-            "40x56",
-            "--repeat",
-            "0",
-            "--display",
-            p,
-            "--calibration",
-            &cal_text,
-            "--out",
-            out_cal.to_str().unwrap(),
-        ]);
+        let r = render_40x56(p, &["--calibration", &cal_text], &out_cal);
         assert_eq!(r.status.success(), accepted, "{name}: {}", stderr(&r));
     }
 }
@@ -612,4 +624,80 @@ fn the_predicted_ceiling_agrees_with_the_measured_one() {
             "slope: predicted {dp:.2} dB, measured {dm:.2} dB"
         );
     }
+}
+
+/// The profile is read once, so `--display /dev/stdin` (a pipe) works; a device that never ends is refused
+/// naming it, before anything is read; a byte-order mark is accepted.
+#[cfg(unix)]
+#[test]
+fn a_profile_is_read_once_bounded_and_may_start_with_a_bom() {
+    use std::io::Write;
+    use std::process::{Command, Stdio};
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("stdin");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_holo"))
+        .args([
+            "render",
+            "--size",
+            "40x56",
+            "--repeat",
+            "0",
+            "--display",
+            "/dev/stdin",
+        ])
+        .args(["--out", out.to_str().unwrap()])
+        .stdin(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(GOOD.as_bytes())
+        .unwrap();
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(report(&out)["pipeline"]["optics"]["pixel_pitch_m"], 4e-6);
+    assert_eq!(report(&out)["pipeline"]["offset_m"], 1.5e-3);
+
+    for device in ["/dev/zero", "/dev/urandom"] {
+        let out = dir.path().join("device");
+        let t = std::time::Instant::now();
+        let o = render_40x56(device, &[], &out);
+        let e = stderr(&o);
+        assert!(!o.status.success());
+        assert!(e.contains(device) && e.contains("device"), "{e}");
+        assert!(t.elapsed().as_secs() < 30, "{device}: {:?}", t.elapsed());
+        assert!(!out.exists());
+    }
+
+    let bom = dir.path().join("bom.json");
+    std::fs::write(&bom, format!("\u{feff}{GOOD}")).unwrap();
+    let out = dir.path().join("bom");
+    let o = render_40x56(bom.to_str().unwrap(), &[], &out);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+/// A 4 µm display at `--offset-mm 6` (the paper's offset, too far for the paraxial mapping here) is told the
+/// offsets the shipped pre-filters serve on it, not only to retrain; the metres' number given to
+/// `--offset-mm` is caught.
+#[test]
+fn an_offset_in_the_wrong_units_or_too_far_names_the_offsets_that_serve() {
+    let dir = tempfile::tempdir().unwrap();
+    let profile = dir.path().join("p4.json");
+    std::fs::write(&profile, GOOD).unwrap();
+    let p = profile.to_str().unwrap();
+    let out = dir.path().join("out");
+    let r = render_40x56(p, &["--offset-mm", "6"], &out);
+    let e = stderr(&r);
+    assert!(!r.status.success());
+    assert!(
+        e.contains("--offset-mm 1.5 (the 6 mm pre-filter) or --offset-mm 3 (the 12 mm pre-filter), not 6 mm"),
+        "{e}"
+    );
+    assert!(!out.exists());
+    let r = render_40x56(p, &["--offset-mm", "0.0015"], &out);
+    let e = stderr(&r);
+    assert!(e.contains("its 0.0015 m is --offset-mm 1.5"), "{e}");
 }

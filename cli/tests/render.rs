@@ -349,6 +349,19 @@ fn compare_reports_exactly_the_codes_that_differ() {
     let o = run(&["--max-code-fraction", "0.01"]);
     assert!(!o.status.success(), "a 2-step code must fail");
     assert!(stderr(&o).contains("by more than 1 (2)"), "{}", stderr(&o));
+
+    // A NaN in one midpoint hologram is a difference, reported as such, whatever the codes say.
+    let mid = b.join("midpoint.npy");
+    let mut field = tensorholo::io::read_complex_npy(&mid).unwrap();
+    field[[1, 2, 3]] = num_complex::Complex32::new(f32::NAN, 0.0);
+    tensorholo::io::write_complex_npy(&mid, field.view()).unwrap();
+    let o = run(&[]);
+    assert!(!o.status.success(), "NaN must fail the comparison");
+    assert!(
+        stderr(&o).contains("NaN or infinite values (0 in") && stderr(&o).contains("1 in"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 #[test]

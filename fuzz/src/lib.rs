@@ -4,7 +4,7 @@
 //! (`tests/fuzz_regressions.rs` of the workspace's integration-test crate) includes this file and replays every
 //! input committed under `tests/fixtures/fuzz/<target>/`. How to run them: `docs/FUZZING.md`.
 //!
-//! Only `tensorholo` and `crc32fast` are used here, so the file compiles in both places.
+//! Only `tensorholo`, `serde_json` and `crc32fast` are used here, so the file compiles in both places.
 
 use std::path::Path;
 
@@ -32,14 +32,87 @@ fn init() {
 pub type Harness = fn(&[u8]);
 
 /// The harnesses by target name, for the regression test.
-pub const TARGETS: [(&str, Harness); 6] = [
+pub const TARGETS: [(&str, Harness); 10] = [
     ("depth_decode", depth_decode),
     ("rgb_decode", rgb_decode),
     ("npy", npy),
     ("holocal", holocal),
     ("onnx_model", onnx_model),
     ("camera_frame", camera_frame),
+    ("display_profile", display_profile),
+    ("aberration", aberration),
+    ("shard_record", shard_record),
+    ("manifest", manifest),
 ];
+
+/// Display profiles (`DisplayProfile::from_json_str`, as `--display` reads them). An accepted profile is
+/// valid, within the bounds every command shares, and reads back from its own JSON as itself.
+pub fn display_profile(data: &[u8]) {
+    init();
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    if let Ok(p) = tensorholo::display::DisplayProfile::from_json_str(text) {
+        p.validate().expect("an accepted profile is valid");
+        let [h, w] = p.resolution;
+        assert!(h * w <= tensorholo::display::MAX_SLM_PIXELS, "{h}x{w}");
+        assert!(p.offsets_m.len() <= tensorholo::display::MAX_OFFSETS);
+        assert!(p.pixel_pitch_m.is_finite() && p.volume_depth_m.is_finite());
+        let back = tensorholo::display::DisplayProfile::from_json_str(&p.to_json())
+            .expect("a profile's own JSON reads back");
+        assert_eq!(back.resolution, p.resolution);
+        assert_eq!(back.offsets_m.len(), p.offsets_m.len());
+    }
+}
+
+/// Aberration files (`AberrationProfile::from_json_str`, `--aberration`). An accepted file's coefficients
+/// are finite and its JSON reads back.
+pub fn aberration(data: &[u8]) {
+    init();
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    if let Ok(a) = tensorholo::synthesis::aberration::AberrationProfile::from_json_str(text, "fuzz")
+    {
+        let json = a.to_json_string();
+        let back =
+            tensorholo::synthesis::aberration::AberrationProfile::from_json_str(&json, "back")
+                .expect("an accepted aberration file's own JSON reads back");
+        assert_eq!(back, a);
+    }
+}
+
+/// Dataset shard records (`<shard>.shard.json`, read by a merge): accepted records are of their format and
+/// serialise back to a record that reads as the same.
+pub fn shard_record(data: &[u8]) {
+    init();
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    if let Some(r) = tensorholo::dataset::ShardRecord::from_json_str(text) {
+        assert_eq!(r.format, tensorholo::dataset::SHARD_RECORD_FORMAT);
+        let json = serde_json::to_string(&r).expect("a record serialises");
+        assert_eq!(
+            tensorholo::dataset::ShardRecord::from_json_str(&json),
+            Some(r)
+        );
+    }
+}
+
+/// Dataset manifests (`manifest.json`, read by training and by a merge's rerun): accepted manifests are of
+/// this format and read back from their own JSON.
+pub fn manifest(data: &[u8]) {
+    init();
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    if let Ok(m) = tensorholo::dataset::Manifest::from_json_str(text, "fuzz") {
+        let json = serde_json::to_string(&m).expect("a manifest serialises");
+        let back = tensorholo::dataset::Manifest::from_json_str(&json, "back")
+            .expect("a manifest's own JSON reads back");
+        assert_eq!(back, m);
+    }
+}
 
 /// Depth decoders (PNG, PGM/PPM with the hand-written Kinect PGM reader, JPEG): byte 0 picks the encoding,
 /// the rest is the file. Accepted maps: valid samples finite and (metric encodings) positive.

@@ -185,14 +185,8 @@ impl SavedPlans {
     /// Errors: [`HoloError::Io`] where the file cannot be read; [`HoloError::InvalidData`] above the limit;
     /// [`HoloError::InvalidParameter`] (`tuning`) as [`SavedPlans::from_json`], naming the file.
     pub fn read(path: &std::path::Path) -> Result<Self> {
-        let bytes = crate::io::read_bytes(path)?;
-        let text = std::str::from_utf8(&bytes).map_err(|e| {
-            invalid(
-                "tuning",
-                format!("`{}` is not UTF-8 text: {e}", path.display()),
-            )
-        })?;
-        Self::from_json(text).map_err(|e| match e {
+        let text = crate::io::read_text(path)?;
+        Self::from_json(&text).map_err(|e| match e {
             crate::HoloError::InvalidParameter { name, reason } => {
                 crate::HoloError::InvalidParameter {
                     name,

@@ -295,6 +295,20 @@ impl SampleGenerator {
             None => self.synthesis.synthesize(&layers, &|_, _| {})?,
         };
         drop(layers);
+        // A hologram that is not finite everywhere is no training target: refused before any shard holds it,
+        // naming the settings it came from.
+        let o = &self.synthesis.setup;
+        check_finite_midpoint(midpoint.iter(), || {
+            format!(
+                "sample {index} of the {} split (seed {seed}): the SM-LBM midpoint hologram, at pitch {} m, \
+                 wavelengths {:?} m, volume {} m and {} planes,",
+                split.name(),
+                o.pixel_pitch_m,
+                o.wavelengths_m,
+                o.volume_depth_m,
+                self.synthesis.levels
+            )
+        })?;
         Ok(Sample {
             split,
             index,
@@ -769,22 +783,46 @@ impl Manifest {
 /// format, or another format or a newer version.
 pub fn read_manifest(dir: &Path) -> Result<Manifest> {
     let path = dir.join(MANIFEST_FILE);
-    let text = std::fs::read_to_string(&path).map_err(io_error(&path))?;
-    let m: Manifest = serde_json::from_str(&text).map_err(|e| {
-        HoloError::InvalidData(format!(
-            "`{}` is not a dataset manifest: {e}",
-            path.display()
-        ))
-    })?;
-    if m.format != FORMAT_NAME || m.format_version > FORMAT_VERSION {
-        return Err(HoloError::InvalidData(format!(
-            "`{}` has format {} version {}; this build reads {FORMAT_NAME} up to version {FORMAT_VERSION}",
-            path.display(),
-            m.format,
-            m.format_version
-        )));
+    Manifest::from_json_str(&crate::io::read_text(&path)?, &path.display().to_string())
+}
+
+impl Manifest {
+    /// Parses and checks a manifest's JSON text; `source` names it in errors.
+    ///
+    /// Errors: [`HoloError::InvalidData`] naming `source` if it is not valid JSON of this format, or another
+    /// format or a newer version.
+    pub fn from_json_str(text: &str, source: &str) -> Result<Self> {
+        let m: Manifest = serde_json::from_str(text).map_err(|e| {
+            HoloError::InvalidData(format!("`{source}` is not a dataset manifest: {e}"))
+        })?;
+        if m.format != FORMAT_NAME || m.format_version > FORMAT_VERSION {
+            return Err(HoloError::InvalidData(format!(
+                "`{source}` has format {} version {}; this build reads {FORMAT_NAME} up to version \
+                 {FORMAT_VERSION}",
+                m.format, m.format_version
+            )));
+        }
+        Ok(m)
     }
-    Ok(m)
+}
+
+/// Refuses a midpoint hologram holding a NaN or an infinity (a training target must be finite everywhere);
+/// `what` names the sample and the optics it came from.
+///
+/// Errors: [`HoloError::InvalidData`] naming `what` and the first element that is not finite.
+fn check_finite_midpoint<'a>(
+    midpoint: impl Iterator<Item = &'a Complex32>,
+    what: impl FnOnce() -> String,
+) -> Result<()> {
+    let mut values = midpoint;
+    match values.position(|v| !(v.re.is_finite() && v.im.is_finite())) {
+        None => Ok(()),
+        Some(bad) => Err(HoloError::InvalidData(format!(
+            "{} holds a NaN or infinite value (element {bad}): these optics do not give a finite hologram; \
+             nothing of this sample is written",
+            what()
+        ))),
+    }
 }
 
 /// Shard file name: `<split>-<nnnnn>.npz`.
@@ -904,7 +942,8 @@ pub fn generate(
             let _ = std::fs::remove_file(out_dir.join(format!("{file}{SHARD_RECORD_SUFFIX}")));
         }
     }
-    merge_shards(out_dir)
+    // Generation has already refused a manifest it may not replace (without `overwrite`).
+    merge_shards(out_dir, true)
 }
 
 /// Saves previews of an LDI into `dir`: `<stem>_rgb.png` (layer 0 amplitude, sRGB), `<stem>_depth.png`
@@ -943,4 +982,31 @@ pub fn save_ldi_previews(dir: &Path, stem: &str, ldi: &LayeredDepthImage) -> Res
     let layers = dir.join(format!("{stem}_layers.png"));
     save_amplitude_png(&layers, mosaic.view(), 1.0)?;
     Ok(vec![rgb, depth, layers])
+}
+
+#[cfg(test)]
+mod finite_tests {
+    use super::*;
+
+    #[test]
+    fn a_midpoint_with_a_nan_or_infinity_is_refused_naming_the_sample_and_element() {
+        let mut field = [Complex32::new(0.5, -0.25); 12];
+        assert!(check_finite_midpoint(field.iter(), || "sample 0".into()).is_ok());
+        for (i, bad) in [
+            (7, Complex32::new(f32::NAN, 0.0)),
+            (3, Complex32::new(0.0, f32::INFINITY)),
+        ] {
+            let old = field[i];
+            field[i] = bad;
+            let e = check_finite_midpoint(field.iter(), || "sample 4 at pitch 1e-310 m".into())
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(&format!("element {i}")), "{e}");
+            assert!(
+                e.contains("pitch 1e-310 m") && e.contains("nothing of this sample is written"),
+                "{e}"
+            );
+            field[i] = old;
+        }
+    }
 }

@@ -353,9 +353,16 @@ fn record_path(out_dir: &Path, file: &str) -> PathBuf {
 }
 
 fn read_record(path: &Path) -> Option<ShardRecord> {
-    let text = std::fs::read_to_string(path).ok()?;
-    let r: ShardRecord = serde_json::from_str(&text).ok()?;
-    (r.format == SHARD_RECORD_FORMAT).then_some(r)
+    ShardRecord::from_json_str(&crate::io::read_text(path).ok()?)
+}
+
+impl ShardRecord {
+    /// A shard record from its JSON text, `None` for text that is not a record of
+    /// [`SHARD_RECORD_FORMAT`] (a merge reports such a record as unreadable).
+    pub fn from_json_str(text: &str) -> Option<Self> {
+        let r: ShardRecord = serde_json::from_str(text).ok()?;
+        (r.format == SHARD_RECORD_FORMAT).then_some(r)
+    }
 }
 
 /// What [`generate_shards`] did.
@@ -631,12 +638,14 @@ fn rerun_command(records: &[&ShardRecord], ordinal: usize) -> Option<String> {
 
 /// Checks that `out_dir` holds every shard of one plan exactly once, with its record (written by
 /// [`generate_shards`], in one process or many), combines their statistics in ordinal order and writes
-/// `manifest.json` atomically (replacing an older one). Returns the manifest.
+/// `manifest.json` atomically. A manifest already there is replaced only where it is this merge's own (a
+/// rerun: equal but for `created_unix_s` and `generator`) or with `force`. Returns the manifest.
 ///
 /// Errors: [`HoloError::InvalidData`] naming the shards of another plan (with the key that differs),
-/// unreadable records, or the missing shards with the command that writes them; nothing is written then.
+/// unreadable records, the missing shards with the command that writes them, or a manifest that is not
+/// this merge's (without `force`); nothing is written then.
 /// [`HoloError::Io`] if the folder cannot be read or the manifest written.
-pub fn merge_shards(out_dir: &Path) -> Result<Manifest> {
+pub fn merge_shards(out_dir: &Path, force: bool) -> Result<Manifest> {
     let all = read_records(out_dir)?;
     let unreadable: Vec<&String> = all
         .iter()
@@ -754,6 +763,36 @@ pub fn merge_shards(out_dir: &Path) -> Result<Manifest> {
     };
     let json = serde_json::to_string_pretty(&manifest)
         .map_err(|e| HoloError::InvalidData(format!("cannot serialise the manifest: {e}")))?;
+    // A manifest already there is replaced only where it is this merge's own (a rerun) or with `force`: a
+    // hand-edited one, or another dataset's, is the user's.
+    let path = out_dir.join(MANIFEST_FILE);
+    if path.exists() && !force {
+        // Equal but for when and by which command line it was written: any other edit is the user's.
+        let content = |v: serde_json::Value| match v {
+            serde_json::Value::Object(mut m) => {
+                m.remove("created_unix_s");
+                m.remove("generator");
+                Some(m)
+            }
+            _ => None,
+        };
+        // Both sides parsed from text: serde_json's float parsing need not round-trip a value exactly.
+        let new = serde_json::from_str::<serde_json::Value>(&json)
+            .ok()
+            .and_then(content);
+        let same = crate::io::read_text(&path)
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(content)
+            .is_some_and(|old| Some(old) == new);
+        if !same {
+            return Err(HoloError::InvalidData(format!(
+                "`{}` exists and is not the manifest this merge writes (hand-edited, or of another \
+                 dataset): move it away, or merge with --force to replace it",
+                path.display()
+            )));
+        }
+    }
     write_atomic(&out_dir.join(MANIFEST_FILE), |tmp| {
         std::fs::write(tmp, json + "\n").map_err(io_error(tmp))
     })?;

@@ -16,4 +16,7 @@ pub use equivalence::{
     DisplayMapping, VolumeFit, CEILING_AT_1PCT_DB, MAPPING_COST_BUDGET_DB,
     MAX_NONPARAXIAL_RESIDUAL_RAD, SPREAD_NOISE, VOLUME_ROUNDING,
 };
-pub use profile::{DisplayProfile, MAX_WAVELENGTH_M, MIN_WAVELENGTH_M};
+pub use profile::{
+    DisplayProfile, MAX_OFFSETS, MAX_OFFSET_M, MAX_SLM_PIXELS, MAX_SLM_SIDE, MAX_WAVELENGTH_M,
+    MIN_WAVELENGTH_M,
+};

@@ -19,12 +19,22 @@
 use std::path::{Path, PathBuf};
 
 use crate::error::{HoloError, NearestDisplay, Result};
-use crate::optics::OpticalSetup;
+use crate::optics::{OpticalSetup, MAX_VOLUME_DEPTH_M, PITCH_RANGE_M};
 
 /// Shortest laser wavelength a profile may give, metres (the visible band).
 pub const MIN_WAVELENGTH_M: f64 = 380e-9;
 /// Longest laser wavelength a profile may give, metres.
 pub const MAX_WAVELENGTH_M: f64 = 780e-9;
+
+/// The most pixels an SLM of a profile may have: 8192 × 8192, four times a 4K SLM (what a session makes,
+/// `crate::pipeline::MAX_HOLOGRAM_PIXELS`, and `--size`).
+pub const MAX_SLM_PIXELS: usize = 8192 * 8192;
+/// The most pixels a side of a profile's SLM may have (what `holo calibrate` takes).
+pub const MAX_SLM_SIDE: usize = 16_384;
+/// The most offsets a profile may list.
+pub const MAX_OFFSETS: usize = 64;
+/// The farthest offset a profile may give, metres from the midpoint hologram.
+pub const MAX_OFFSET_M: f64 = 1.0;
 
 /// Every key of a profile, for messages.
 const KEYS: &str =
@@ -80,6 +90,14 @@ fn number(key: &'static str, v: &serde_json::Value) -> Result<f64> {
         .ok_or_else(|| err(key, format!("must be a number, got {v}")))
 }
 
+/// Checks `x` lies within `[lo, hi]` (metres).
+fn within(key: &'static str, x: f64, (lo, hi): (f64, f64)) -> Result<f64> {
+    if !(lo..=hi).contains(&x) {
+        return Err(err(key, format!("{x} m is outside {lo}–{hi} m")));
+    }
+    Ok(x)
+}
+
 fn positive(key: &'static str, x: f64) -> Result<f64> {
     if !(x.is_finite() && x > 0.0) {
         return Err(err(
@@ -97,6 +115,70 @@ fn array<'a>(
 ) -> Result<&'a Vec<serde_json::Value>> {
     v.as_array()
         .ok_or_else(|| err(key, format!("must be an array {what}, got {v}")))
+}
+
+/// A JSON error of a profile's text as the user sees it: the key at fault and where, in the profile's terms
+/// (a key given twice, an unknown key, text after the object, a text that is not an object, a value that
+/// cannot be read), never the parser's own type names.
+fn json_error(text: &str, e: &serde_json::Error) -> HoloError {
+    let msg = e.to_string();
+    let at = format!("line {}, column {}", e.line(), e.column());
+    // serde_json's wording, less its position (given once, as `at`).
+    let bare = msg
+        .rsplit_once(" at line ")
+        .map_or(msg.as_str(), |(m, _)| m);
+    let named = |k: &str| KEYS.split(", ").find(|&known| known == k);
+    if let Some(rest) = bare.strip_prefix("unknown field ") {
+        let key = rest.split('`').nth(1).unwrap_or(rest);
+        return err(
+            "display profile",
+            format!("unknown key `{key}` at {at} (the keys are {KEYS}; a typo is never read as a default)"),
+        );
+    }
+    if let Some(rest) = bare.strip_prefix("duplicate field ") {
+        let key = rest.trim_matches('`');
+        return err(
+            named(key).unwrap_or("display profile"),
+            format!("`{key}` is given twice (again at {at}): give each key once"),
+        );
+    }
+    let first = text.trim_start().chars().next();
+    if first != Some('{') && first.is_some() {
+        let got = match first {
+            Some('[') => "an array",
+            Some('"') => "a string",
+            Some('t' | 'f') => "a boolean",
+            Some('n') => "null",
+            Some(c) if c == '-' || c.is_ascii_digit() => "a number",
+            _ => "another value",
+        };
+        return err(
+            "display profile",
+            format!("must be one JSON object {{…}} of the keys {KEYS}, got {got}"),
+        );
+    }
+    if bare.starts_with("trailing characters") {
+        return err(
+            "display profile",
+            format!("text after the profile's closing brace, at {at}: a file holds one profile"),
+        );
+    }
+    if e.is_eof() {
+        return err(
+            "display profile",
+            format!("the text ends before the profile does ({at}): a brace, bracket or string is not closed"),
+        );
+    }
+    match key_before(text, e.line(), e.column()) {
+        Some(k) => match named(&k) {
+            Some(known) => err(known, format!("{bare} at {at}")),
+            None => err("display profile", format!("key `{k}`: {bare} at {at}")),
+        },
+        None => err(
+            "display profile",
+            format!("not a JSON object of the keys {KEYS}: {bare} at {at}"),
+        ),
+    }
 }
 
 /// The key whose value is at `line`/`column` (1-based, serde_json's position) of `text`: the last
@@ -136,10 +218,7 @@ impl DisplayProfile {
     /// reason prefixed with the file name.
     pub fn from_path(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| HoloError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::io::read_text(path)?;
         let base = path.parent().unwrap_or_else(|| Path::new(""));
         Self::parse(&text, Some(base)).map_err(|e| match e {
             HoloError::InvalidParameter { name, reason } => HoloError::InvalidParameter {
@@ -151,28 +230,9 @@ impl DisplayProfile {
     }
 
     fn parse(text: &str, base: Option<&Path>) -> Result<Self> {
-        let raw: RawProfile = serde_json::from_str(text).map_err(|e| {
-            let msg = e.to_string();
-            if let Some(rest) = msg.strip_prefix("unknown field ") {
-                return err(
-                    "display profile",
-                    format!("unknown key {rest} (a typo is never read as a default)"),
-                );
-            }
-            match key_before(text, e.line(), e.column()) {
-                Some(k) if e.is_syntax() || e.is_data() => {
-                    let known = KEYS.split(", ").find(|&known| known == k);
-                    match known {
-                        Some(known) => err(known, msg),
-                        None => err("display profile", format!("key `{k}`: {msg}")),
-                    }
-                }
-                _ => err(
-                    "display profile",
-                    format!("not a JSON object of the keys {KEYS}: {msg}"),
-                ),
-            }
-        })?;
+        // A UTF-8 byte-order mark (some editors write one) is not part of the profile.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        let raw: RawProfile = serde_json::from_str(text).map_err(|e| json_error(text, &e))?;
         let name = match raw.name.filter(|v| !v.is_null()) {
             None => None,
             Some(v) => Some(
@@ -291,12 +351,23 @@ impl DisplayProfile {
     /// Errors: [`HoloError::InvalidParameter`] whose `name` is the key at fault; the reason names it too.
     pub fn validate(&self) -> Result<()> {
         positive("pixel_pitch_m", self.pixel_pitch_m)?;
+        within("pixel_pitch_m", self.pixel_pitch_m, PITCH_RANGE_M)?;
         if self.resolution.contains(&0) {
             return Err(err(
                 "resolution",
                 format!(
                     "[height, width] must be positive integers, got {:?}",
                     self.resolution
+                ),
+            ));
+        }
+        let [h, w] = self.resolution;
+        if h.max(w) > MAX_SLM_SIDE || h.saturating_mul(w) > MAX_SLM_PIXELS {
+            return Err(err(
+                "resolution",
+                format!(
+                    "{h}×{w} is above the largest SLM a session makes: {MAX_SLM_SIDE} pixels a side and \
+                     {MAX_SLM_PIXELS} pixels in all (8192 × 8192, four times a 4K SLM; as --size)"
                 ),
             ));
         }
@@ -313,11 +384,31 @@ impl DisplayProfile {
             }
         }
         positive("volume_depth_m", self.volume_depth_m)?;
+        within(
+            "volume_depth_m",
+            self.volume_depth_m,
+            (0.0, MAX_VOLUME_DEPTH_M),
+        )?;
         if self.offsets_m.is_empty() {
             return Err(err("offsets_m", "must not be empty (of offsets in metres)"));
         }
+        if self.offsets_m.len() > MAX_OFFSETS {
+            return Err(err(
+                "offsets_m",
+                format!(
+                    "holds {} offsets, more than the {MAX_OFFSETS} a profile may list",
+                    self.offsets_m.len()
+                ),
+            ));
+        }
         if let Some(x) = self.offsets_m.iter().find(|x| !x.is_finite()) {
             return Err(err("offsets_m", format!("must be finite, got {x}")));
+        }
+        if let Some(x) = self.offsets_m.iter().find(|x| x.abs() > MAX_OFFSET_M) {
+            return Err(err(
+                "offsets_m",
+                format!("{x} m is farther than {MAX_OFFSET_M} m from the midpoint hologram"),
+            ));
         }
         if self
             .calibration
@@ -590,6 +681,20 @@ mod tests {
         assert_eq!(with(&|p| p.volume_depth_m = 0.0), "volume_depth_m");
         assert_eq!(with(&|p| p.offsets_m.clear()), "offsets_m");
         assert_eq!(with(&|p| p.offsets_m[0] = f64::INFINITY), "offsets_m");
+        // Bounds shared with --size and the optics: nothing that overflows after the check.
+        assert_eq!(with(&|p| p.pixel_pitch_m = 1e308), "pixel_pitch_m");
+        assert_eq!(with(&|p| p.pixel_pitch_m = 1e-310), "pixel_pitch_m");
+        assert_eq!(
+            with(&|p| p.resolution = [1_000_000, 1_000_000]),
+            "resolution"
+        );
+        assert_eq!(with(&|p| p.resolution = [50_000, 50_000]), "resolution");
+        assert_eq!(with(&|p| p.resolution = [1, 20_000]), "resolution");
+        assert_eq!(with(&|p| p.volume_depth_m = 2.0), "volume_depth_m");
+        assert_eq!(with(&|p| p.offsets_m = vec![1e-3; 65]), "offsets_m");
+        assert_eq!(with(&|p| p.offsets_m[0] = -2.0), "offsets_m");
+        p_ok(&good, |p| p.resolution = [8192, 8192]);
+        p_ok(&good, |p| p.offsets_m = vec![1e-3; 64]);
         assert_eq!(
             with(&|p| p.calibration = Some(PathBuf::new())),
             "calibration"
@@ -609,5 +714,58 @@ mod tests {
             let (name, _) = fails(text);
             assert_eq!(name, "display profile");
         }
+    }
+
+    fn p_ok(good: &DisplayProfile, f: impl Fn(&mut DisplayProfile)) {
+        let mut p = good.clone();
+        f(&mut p);
+        p.validate().unwrap();
+    }
+
+    /// The profile's structure errors name what is wrong and where, never the parser's type names: a key
+    /// given twice, a top-level array, text after the object, an unclosed object; a byte-order mark is
+    /// accepted.
+    #[test]
+    fn structure_errors_say_what_and_where() {
+        let dup = GOOD.replacen(
+            "\"volume_depth_m\": 1.5e-3,",
+            "\"volume_depth_m\": 1.5e-3, \"volume_depth_m\": 2e-3,",
+            1,
+        );
+        let (key, msg) = fails(&dup);
+        assert_eq!(key, "volume_depth_m", "{msg}");
+        assert!(msg.contains("given twice (again at line"), "{msg}");
+        for (text, needle) in [
+            (
+                format!("[{GOOD}]"),
+                "must be one JSON object {…} of the keys",
+            ),
+            (
+                format!("{GOOD} x"),
+                "text after the profile's closing brace, at line",
+            ),
+            (
+                format!("{GOOD} {{}}"),
+                "text after the profile's closing brace",
+            ),
+            (
+                GOOD.trim_end().trim_end_matches('}').to_string(),
+                "the text ends before the profile does",
+            ),
+            ("\"just text\"".to_string(), "got a string"),
+        ] {
+            let (key, msg) = fails(&text);
+            assert_eq!(key, "display profile", "{msg}");
+            assert!(msg.contains(needle), "{needle}: {msg}");
+            assert!(
+                !msg.contains("RawProfile") && !msg.contains("struct"),
+                "{msg}"
+            );
+        }
+        let bom = format!("\u{feff}{GOOD}");
+        assert_eq!(
+            DisplayProfile::from_json_str(&bom).unwrap(),
+            DisplayProfile::from_json_str(GOOD).unwrap()
+        );
     }
 }

@@ -46,15 +46,25 @@ impl Default for OpticalSetup {
 }
 
 impl OpticalSetup {
-    /// Checks every field is finite and positive.
+    /// Checks every field is finite, positive and within the physical bounds of a holographic display
+    /// ([`PITCH_RANGE_M`], [`WAVELENGTH_RANGE_M`], [`MAX_VOLUME_DEPTH_M`]): a subnormal or astronomic value
+    /// is a typo, and would make every product of it (depth scales, transfer functions) overflow or vanish.
     ///
-    /// Errors: [`HoloError::InvalidParameter`] naming the offending field.
+    /// Errors: [`HoloError::InvalidParameter`] naming the offending field and its bounds.
     pub fn validate(&self) -> Result<()> {
         for w in self.wavelengths_m {
             check_positive("wavelength_m", w)?;
+            check_within("wavelength_m", w, WAVELENGTH_RANGE_M, "m")?;
         }
         check_positive("pixel_pitch_m", self.pixel_pitch_m)?;
-        check_positive("volume_depth_m", self.volume_depth_m)
+        check_within("pixel_pitch_m", self.pixel_pitch_m, PITCH_RANGE_M, "m")?;
+        check_positive("volume_depth_m", self.volume_depth_m)?;
+        check_within(
+            "volume_depth_m",
+            self.volume_depth_m,
+            (0.0, MAX_VOLUME_DEPTH_M),
+            "m",
+        )
     }
 
     /// Axial position in metres, relative to the midpoint plane, of normalised depth `d` (0 = near):
@@ -79,6 +89,31 @@ impl OpticalSetup {
             .map(|&l| Propagator::new(height, width, self.pixel_pitch_m, l, options))
             .collect()
     }
+}
+
+/// The pixel pitches a display may have, metres: 0.1 µm to 1 mm (SLMs are 1–20 µm).
+pub const PITCH_RANGE_M: (f64, f64) = (1e-7, 1e-3);
+/// The wavelengths a display may use, metres: 100 nm to 10 µm (lasers of the visible band are 380–780 nm;
+/// profiles hold them to that, `crate::display`).
+pub const WAVELENGTH_RANGE_M: (f64, f64) = (1e-7, 1e-5);
+/// The deepest volume a display may have, metres: 1 m (the paper's is 6 mm).
+pub const MAX_VOLUME_DEPTH_M: f64 = 1.0;
+
+/// Checks `value` lies within `[lo, hi]` (`unit` for the message). Errors: [`HoloError::InvalidParameter`]
+/// naming `name` and the bounds.
+pub(crate) fn check_within(
+    name: &'static str,
+    value: f64,
+    (lo, hi): (f64, f64),
+    unit: &str,
+) -> Result<()> {
+    if (lo..=hi).contains(&value) {
+        return Ok(());
+    }
+    Err(crate::error::invalid(
+        name,
+        format!("{value} {unit} is outside {lo}–{hi} {unit}"),
+    ))
 }
 
 /// Checks a colour stack is `[3, H, W]` with `H, W ≥ 1` and returns `(H, W)`.

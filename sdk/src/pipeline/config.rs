@@ -10,7 +10,7 @@ use crate::optics::{OpticalSetup, PropagationOptions};
 /// The largest hologram a session (and so a generator) makes, in pixels (`width · height`): 8192 × 8192, four
 /// times a 4K SLM. Above it the buffers of one session (≈ 200 bytes a pixel) would not fit a phone. Checked
 /// before anything is allocated ([`super::HologramPipeline::session`]).
-pub const MAX_HOLOGRAM_PIXELS: usize = 8192 * 8192;
+pub const MAX_HOLOGRAM_PIXELS: usize = crate::display::MAX_SLM_PIXELS;
 
 /// Where a [`HologramSession`](crate::pipeline::HologramSession) computes its frames.
 ///

@@ -450,10 +450,7 @@ impl AberrationProfile {
     ///
     /// Errors: [`HoloError::Io`] if unreadable; as [`AberrationProfile::from_json_str`] otherwise.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| HoloError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::io::read_text(path)?;
         Self::from_json_str(&text, &path.display().to_string())
     }
 

@@ -8,7 +8,6 @@
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Component, Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use ndarray::{
     Array3, ArrayD, ArrayView, ArrayView2, ArrayView3, ArrayViewD, Axis, Dimension, Ix3,
@@ -18,6 +17,13 @@ use num_complex::{Complex32, Complex64};
 
 use crate::color::amplitude_to_srgb8;
 use crate::error::{invalid, HoloError, Result};
+
+mod read;
+
+pub use read::{
+    input_limits, read_bytes, read_text, set_input_limits, InputLimits, MAX_STREAM_BYTES,
+    MAX_TEXT_BYTES,
+};
 
 /// Writes a complex field stack of shape `[C, H, W]` (channel order R, G, B for colour) to `path` as
 /// a NumPy `.npy` file of dtype `complex64` (`'<c8'`, little-endian), C order, shape `(C, H, W)`:
@@ -425,74 +431,6 @@ fn save_png(
             },
         )
     })
-}
-
-/// Limits on what an input file may make the SDK allocate, checked before anything is allocated
-/// ([`set_input_limits`] raises them for the whole process; the CLI's `--max-image-pixels` and
-/// `--max-file-bytes` do).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
-pub struct InputLimits {
-    /// Largest image decoded, in pixels (default 100 M: a 48 MP phone photo, an 8K frame, twice over). Read
-    /// from the file's header first; above it the file is refused naming the limit.
-    pub max_image_pixels: u64,
-    /// Largest input file read whole, in bytes (images, depth maps, `.npy`; default 4 GiB).
-    pub max_file_bytes: u64,
-}
-
-impl Default for InputLimits {
-    fn default() -> Self {
-        Self {
-            max_image_pixels: DEFAULT_MAX_IMAGE_PIXELS,
-            max_file_bytes: DEFAULT_MAX_FILE_BYTES,
-        }
-    }
-}
-
-const DEFAULT_MAX_IMAGE_PIXELS: u64 = 100_000_000;
-const DEFAULT_MAX_FILE_BYTES: u64 = 4 << 30;
-static MAX_IMAGE_PIXELS: AtomicU64 = AtomicU64::new(DEFAULT_MAX_IMAGE_PIXELS);
-static MAX_FILE_BYTES: AtomicU64 = AtomicU64::new(DEFAULT_MAX_FILE_BYTES);
-
-/// The input limits in force ([`InputLimits::default`] unless [`set_input_limits`] changed them).
-pub fn input_limits() -> InputLimits {
-    InputLimits {
-        max_image_pixels: MAX_IMAGE_PIXELS.load(Ordering::Relaxed),
-        max_file_bytes: MAX_FILE_BYTES.load(Ordering::Relaxed),
-    }
-}
-
-/// Sets the input limits of the whole process (e.g. to read a 200 MP panorama).
-///
-/// Errors: [`HoloError::InvalidParameter`] for a limit of 0.
-pub fn set_input_limits(limits: InputLimits) -> Result<()> {
-    if limits.max_image_pixels == 0 || limits.max_file_bytes == 0 {
-        return Err(crate::error::invalid(
-            "input limits",
-            format!("limits must be ≥ 1, got {limits:?}"),
-        ));
-    }
-    MAX_IMAGE_PIXELS.store(limits.max_image_pixels, Ordering::Relaxed);
-    MAX_FILE_BYTES.store(limits.max_file_bytes, Ordering::Relaxed);
-    Ok(())
-}
-
-/// Reads a whole file (at most [`InputLimits::max_file_bytes`], checked from its metadata first), naming it
-/// in the error ([`HoloError::Io`]; [`HoloError::InvalidData`] above the limit).
-pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>> {
-    let io = |source| HoloError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let len = std::fs::metadata(path).map_err(io)?.len();
-    let max = input_limits().max_file_bytes;
-    if len > max {
-        return Err(HoloError::InvalidData(format!(
-            "`{}` is {len} bytes, above the input limit of {max} bytes (raise it with --max-file-bytes or \
-             tensorholo::io::set_input_limits)",
-            path.display()
-        )));
-    }
-    std::fs::read(path).map_err(io)
 }
 
 /// Decodes an image file's bytes with the `image` crate (format guessed from the content), naming `path` in
