@@ -20,11 +20,12 @@
 
 mod common;
 
+use common::viewer::{psnr_in, seen, viewer_pupil, Lens, EYEPIECE_M};
+
 use std::f64::consts::PI;
 
-use ndarray::{Array2, Array3, Axis};
+use ndarray::{Array2, Array3};
 use num_complex::Complex32;
-use tensorholo::optics::fft::signed_index;
 use tensorholo::optics::{Carrier, OpticalSetup, PropagationOptions, Propagator};
 use tensorholo::synthesis::aberration::{corrected_subhologram, subhologram_radius_m};
 use tensorholo::synthesis::{
@@ -32,12 +33,15 @@ use tensorholo::synthesis::{
     ZernikeCoefficients,
 };
 
-/// Focal length of the paper's eyepiece (metres).
-const EYEPIECE_M: f64 = 21e-3;
 /// Focal length of the cylindrical lens in front of the viewer (metres).
 const CYLINDER_M: f64 = 0.2;
 const N: usize = 96;
 const LEVELS: usize = 32;
+
+/// The cylindrical lens in front of the viewer: vertical axis, power along x.
+fn lens() -> Option<Lens> {
+    Some(Lens::cylinder(CYLINDER_M, 90.0))
+}
 
 /// `c = π·λ·f_e²·f_N²/f_cyl`: the lens's pupil phase at the pupil edge along x (radians).
 fn lens_c(lambda: f64, pitch: f64) -> f64 {
@@ -66,85 +70,6 @@ fn correction_profile(setup: &OpticalSetup) -> AberrationProfile {
     )
     .expect("valid profile")
     .with_display(setup.wavelengths_m, setup.pixel_pitch_m)
-}
-
-/// `exp(−iπ·λ·f_e²·fx²/f_cyl)` (with `lens`) times the eyepiece pupil `|f| ≤ 1/(2p)`, in the spectrum layout of
-/// an unpadded `[h, w]` plan: index `kx·h + ky`, FFT order.
-fn viewer_pupil(h: usize, w: usize, pitch: f64, lambda: f64, lens: bool) -> Vec<Complex32> {
-    let f_n = 1.0 / (2.0 * pitch);
-    let mut out = Vec::with_capacity(h * w);
-    for kx in 0..w {
-        let fx = signed_index(kx, w) as f64 / (w as f64 * pitch);
-        for ky in 0..h {
-            let fy = signed_index(ky, h) as f64 / (h as f64 * pitch);
-            if fx * fx + fy * fy > f_n * f_n {
-                out.push(Complex32::new(0.0, 0.0));
-                continue;
-            }
-            let phase = if lens {
-                -PI * lambda * EYEPIECE_M * EYEPIECE_M * fx * fx / CYLINDER_M
-            } else {
-                0.0
-            };
-            let (s, c) = phase.sin_cos();
-            out.push(Complex32::new(c as f32, s as f32));
-        }
-    }
-    out
-}
-
-/// What the viewer sees focused at normalised depth `d`: `|ASM(F⁻¹{F(H)·P·circ}, z(d))|` per colour `[3, h, w]`.
-fn seen(hologram: &Array3<Complex32>, setup: &OpticalSetup, d: f64, lens: bool) -> Array3<f32> {
-    let (_, h, w) = hologram.dim();
-    let props = setup
-        .propagators(h, w, PropagationOptions::default())
-        .unwrap();
-    let mut out = Array3::<f32>::zeros((3, h, w));
-    for (c, prop) in props.iter().enumerate() {
-        let plan = prop.plan();
-        let mut scratch = plan.scratch();
-        let mut spectrum = vec![Complex32::default(); plan.spectrum_len()];
-        let lane = hologram.index_axis(Axis(0), c).to_owned();
-        plan.forward(lane.as_slice().unwrap(), &mut spectrum, &mut scratch)
-            .unwrap();
-        let mut tf = prop
-            .transfer_function(setup.depth_to_z(d), Carrier::Remove)
-            .unwrap();
-        tf.multiply(&viewer_pupil(
-            h,
-            w,
-            setup.pixel_pitch_m,
-            prop.wavelength_m(),
-            lens,
-        ))
-        .unwrap();
-        let mut field = vec![Complex32::default(); h * w];
-        plan.inverse(&spectrum, tf.values(), &mut field, &mut scratch)
-            .unwrap();
-        for (o, v) in out.index_axis_mut(Axis(0), c).iter_mut().zip(&field) {
-            *o = v.norm();
-        }
-    }
-    out
-}
-
-/// PSNR (data range 1) of `test` against `reference` over the pixels where `region` holds, all colours.
-fn psnr_in(reference: &Array3<f32>, test: &Array3<f32>, region: &Array2<bool>) -> f64 {
-    let (mut sum, mut n) = (0.0f64, 0usize);
-    for c in 0..3 {
-        for ((r, t), m) in reference
-            .index_axis(Axis(0), c)
-            .iter()
-            .zip(test.index_axis(Axis(0), c).iter())
-            .zip(region)
-        {
-            if *m {
-                sum += ((r - t) as f64).powi(2);
-                n += 1;
-            }
-        }
-    }
-    10.0 * (n as f64 / sum).log10()
 }
 
 /// A random-dot texture (2×2 dots, amplitude 0.2 or 0.9 per colour), with `stripes` at half contrast plus
@@ -194,9 +119,9 @@ fn figures(
 ) -> (f64, f64, f64) {
     let setup = OpticalSetup::default();
     (
-        psnr_in(target, &seen(plain, &setup, d, false), region),
-        psnr_in(target, &seen(plain, &setup, d, true), region),
-        psnr_in(target, &seen(corrected, &setup, d, true), region),
+        psnr_in(target, &seen(plain, &setup, d, None), Some(region)),
+        psnr_in(target, &seen(plain, &setup, d, lens()), Some(region)),
+        psnr_in(target, &seen(corrected, &setup, d, lens()), Some(region)),
     )
 }
 
@@ -335,7 +260,7 @@ fn corrected_subhologram_focuses_through_the_lens_to_a_tight_spot() {
         };
         assert!(subhologram_radius_m(p, lambda, d) < (n / 2) as f64 * p);
         let prop = Propagator::new(n, n, p, lambda, PropagationOptions::default()).unwrap();
-        let spot = |coefficients: &ZernikeCoefficients, lens: bool| {
+        let spot = |coefficients: &ZernikeCoefficients, lens: Option<Lens>| {
             let sub = corrected_subhologram(n, n, p, lambda, d, coefficients).unwrap();
             let mut field = sub.as_slice().unwrap().to_vec();
             let mut tf = prop.transfer_function(d, Carrier::Remove).unwrap();
@@ -344,10 +269,10 @@ fn corrected_subhologram_focuses_through_the_lens_to_a_tight_spot() {
                 .unwrap();
             peak_fraction(&field)
         };
-        let ideal = spot(&ZernikeCoefficients::ZERO, false);
-        let smeared = spot(&ZernikeCoefficients::ZERO, true);
-        let fixed = spot(&correction, true);
-        let wrong_sign = spot(&-correction, true);
+        let ideal = spot(&ZernikeCoefficients::ZERO, None);
+        let smeared = spot(&ZernikeCoefficients::ZERO, lens());
+        let fixed = spot(&correction, lens());
+        let wrong_sign = spot(&-correction, lens());
         eprintln!(
             "colour {c}, d = {d} m: peak/energy ideal {ideal:.4}, through the lens {smeared:.4}, corrected \
              {fixed:.4}, opposite correction {wrong_sign:.4}"

@@ -31,6 +31,7 @@ use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
 use tensorholo::pipeline::{Backend, HologramPipeline, PipelineConfig};
 use tensorholo::scene::RgbdFrame;
 use tensorholo::slm::{DisplayCalibration, LutRepresentation, PhaseCurve, PhaseLut, TiledCurves};
+use tensorholo::synthesis::{AberrationProfile, AberrationSample, ZernikeCoefficients};
 
 #[global_allocator]
 static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
@@ -98,7 +99,23 @@ fn cpu_frames_allocate_nothing_after_warm_up() {
         col.lut = PhaseLut::new(LutRepresentation::Tiled(tiles));
     }
     let cal = Arc::new(cal);
-    for (prefilter, calibrated) in [(true, false), (false, false), (false, true)] {
+    // The viewer's aberration correction (astigmatism, per colour): one more spectral multiply per row.
+    let aberration = Arc::new(
+        AberrationProfile::new(vec![AberrationSample {
+            distance_m: 0.0,
+            coefficients: [0.5, 1.0, 2.0].map(|a| ZernikeCoefficients {
+                astigmatism_oblique: a,
+                ..ZernikeCoefficients::ZERO
+            }),
+        }])
+        .unwrap(),
+    );
+    for (prefilter, calibrated, corrected) in [
+        (true, false, false),
+        (false, false, false),
+        (false, true, false),
+        (false, false, true),
+    ] {
         let pre = prefilter.then(|| load("holo8_rgbd.prefilter.onnx", ModelKind::PreFilter));
         let hologram = load("holo8_rgbd.onnx", ModelKind::Hologram);
         let engines: &[CnnEngine] = if cfg!(feature = "tract") {
@@ -118,6 +135,9 @@ fn cpu_frames_allocate_nothing_after_warm_up() {
                 HologramPipeline::new(hologram.clone(), pre.clone(), config).unwrap();
             if calibrated {
                 pipeline = pipeline.with_calibration(cal.clone()).unwrap();
+            }
+            if corrected {
+                pipeline = pipeline.with_aberration(aberration.clone()).unwrap();
             }
             let mut session = pipeline.session(h, w).unwrap();
             session.set_full_outputs(full);
@@ -144,7 +164,8 @@ fn cpu_frames_allocate_nothing_after_warm_up() {
                 last = session.output().codes.clone();
             }
             println!(
-                "{engine}, pre-filter {prefilter}, calibrated {calibrated}, full outputs {full}: \
+                "{engine}, pre-filter {prefilter}, calibrated {calibrated}, corrected {corrected}, full \
+                 outputs {full}: \
                  {allocations} allocations in 5 frames"
             );
             match engine {

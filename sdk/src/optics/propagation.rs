@@ -335,14 +335,68 @@ impl SpectralPlan {
         field: &mut [Complex32],
         multiplier: &EvenMultiplier,
         scratch: &mut Scratch,
-        mut before: impl FnMut(&mut [Complex32], std::ops::Range<usize>),
+        before: impl FnMut(&mut [Complex32], std::ops::Range<usize>),
         keep: bool,
-        mut after: impl FnMut(&[Complex32], std::ops::Range<usize>),
+        after: impl FnMut(&[Complex32], std::ops::Range<usize>),
     ) -> Result<()> {
         self.check_field(field.len())?;
         self.check_even(multiplier)?;
         let isa = self.fft.isa();
         let multiply = |r: usize, row: &mut [Complex32]| multiplier.multiply_row(r, row, isa);
+        self.filter_rows_with(field, scratch, before, keep, after, multiply);
+        Ok(())
+    }
+
+    /// [`apply_even_rows`](Self::apply_even_rows) with a second multiplier `full`, in this plan's spectrum
+    /// layout ([`SpectralPlan::spectrum_len`] values, as [`apply`](Self::apply) takes), applied after
+    /// `even` (or alone with `None`): `field ← F⁻¹{F{field}·even·full}`. The session's aberration correction
+    /// (`e^{iΣZ}` inside the pupil, which is not even in the frequencies) joins the offset propagation's
+    /// transfer function this way, in the same pass; with `None` the normalisation of the inverse transform
+    /// must be folded into `full`.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] if `field` has the wrong length or a multiplier was made for
+    /// another computational grid.
+    #[allow(clippy::too_many_arguments)]
+    pub fn apply_rows_then(
+        &self,
+        field: &mut [Complex32],
+        even: Option<&EvenMultiplier>,
+        full: &[Complex32],
+        scratch: &mut Scratch,
+        before: impl FnMut(&mut [Complex32], std::ops::Range<usize>),
+        keep: bool,
+        after: impl FnMut(&[Complex32], std::ops::Range<usize>),
+    ) -> Result<()> {
+        self.check_field(field.len())?;
+        self.check_multiplier(full.len())?;
+        if let Some(even) = even {
+            self.check_even(even)?;
+        }
+        let isa = self.fft.isa();
+        let cols = self.spectrum_layout().1;
+        let multiply = |r: usize, row: &mut [Complex32]| {
+            if let Some(even) = even {
+                even.multiply_row(r, row, isa);
+            }
+            let v = bytemuck::cast_slice_mut::<Complex32, f32>(row);
+            let m = bytemuck::cast_slice::<Complex32, f32>(&full[r * cols..(r + 1) * cols]);
+            on_kernels(isa, |isa| spectral::multiply(v, m, false, isa));
+        };
+        self.filter_rows_with(field, scratch, before, keep, after, multiply);
+        Ok(())
+    }
+
+    /// The row-fused filter of [`apply_even_rows`](Self::apply_even_rows) with any row multiply (lengths
+    /// checked by the caller).
+    fn filter_rows_with(
+        &self,
+        field: &mut [Complex32],
+        scratch: &mut Scratch,
+        mut before: impl FnMut(&mut [Complex32], std::ops::Range<usize>),
+        keep: bool,
+        mut after: impl FnMut(&[Complex32], std::ops::Range<usize>),
+        multiply: impl FnMut(usize, &mut [Complex32]),
+    ) {
         if self.pad {
             before(field, 0..self.height);
             self.filter_with(field, scratch, multiply);
@@ -355,7 +409,6 @@ impl SpectralPlan {
             self.fft
                 .filter_rows(field, block, fft, before, multiply, rows_out, after);
         }
-        Ok(())
     }
 
     /// Errors: [`HoloError::ShapeMismatch`] if `multiplier` was made for another computational grid.
@@ -457,20 +510,26 @@ impl SpectralPlan {
         Ok(())
     }
 
-    /// Calls `f(fx_index, fy_index, value)` to fill a multiplier in this plan's layout, where the indices are
-    /// signed DFT bin indices of the computational grid (see [`signed_index`]).
-    pub(crate) fn build_multiplier(
+    /// [`build_multiplier`](Self::build_multiplier) into the caller's buffer (resized to
+    /// [`SpectralPlan::spectrum_len`]: no allocation when it already has that capacity).
+    pub(crate) fn fill_multiplier(
         &self,
+        out: &mut Vec<Complex32>,
         mut f: impl FnMut(i64, i64) -> Complex32,
-    ) -> Vec<Complex32> {
+    ) {
         let (ch, cw) = self.computational_shape();
-        let mut out = Vec::with_capacity(ch * cw);
+        out.clear();
         for kx in 0..cw {
             let sx = signed_index(kx, cw);
-            for ky in 0..ch {
-                out.push(f(sx, signed_index(ky, ch)));
-            }
+            out.extend((0..ch).map(|ky| f(sx, signed_index(ky, ch))));
         }
+    }
+
+    /// Calls `f(fx_index, fy_index, value)` to fill a multiplier in this plan's layout, where the indices are
+    /// signed DFT bin indices of the computational grid (see [`signed_index`]).
+    pub(crate) fn build_multiplier(&self, f: impl FnMut(i64, i64) -> Complex32) -> Vec<Complex32> {
+        let mut out = Vec::with_capacity(self.spectrum_len());
+        self.fill_multiplier(&mut out, f);
         out
     }
 }

@@ -10,6 +10,7 @@ use num_complex::Complex32;
 use tensorholo_kernels::phasor::{phasors, phasors_in_place};
 use tensorholo_kernels::Isa;
 
+use super::correction::PupilCorrection;
 use super::frame::Heads;
 use crate::encoding::{ChannelEncoder, ChannelStats, PassOneLayout};
 use crate::error::{HoloError, Result};
@@ -48,6 +49,9 @@ pub(super) struct ColourState {
     /// Offset transfer function with the carrier removed (Eq. 6), as its even quarter (a function of the
     /// frequency radius: a quarter of the memory, [`EvenMultiplier`]); `None` at 0 m.
     pub(super) transfer: Option<EvenMultiplier>,
+    /// The viewer's aberration correction ([`PupilCorrection`], shared by the colours), multiplied onto the
+    /// spectrum after `transfer`; `None`: no correction.
+    pub(super) correction: Option<Arc<PupilCorrection>>,
     pub(super) scratch: Scratch,
     /// The pre-filter's input `(Re H, Im H)`, two `[H, W]` planes one after the other; empty in a session
     /// without a pre-filter.
@@ -69,7 +73,7 @@ impl ColourState {
     pub(super) fn run(&mut self, task: Task) -> Result<()> {
         match task {
             Task::Midpoint { prefilter, heads } => {
-                let finite = if self.transfer.is_some() {
+                let finite = if self.transfer.is_some() || self.correction.is_some() {
                     self.propagate(heads.as_deref(), prefilter)?
                 } else {
                     let finite = match &heads {
@@ -152,9 +156,6 @@ impl ColourState {
             Some(heads) => Some(colour_planes(heads, self.colour)?),
             None => None,
         };
-        let Some(transfer) = &self.transfer else {
-            return Err(HoloError::Internal("no transfer function to apply".into()));
-        };
         let n = self.field.len();
         let mut planes = if prefilter {
             Some(prefilter_planes(&mut self.prefilter_input, n)?)
@@ -163,37 +164,55 @@ impl ColourState {
         };
         let (width, isa, own_phase) = (self.size.1, self.isa, &self.phase);
         let (mut finite, mut failure) = (true, None);
-        self.plan.apply_even_rows(
-            &mut self.field,
-            transfer,
-            &mut self.scratch,
-            |field, rows| {
-                let made = match shared {
-                    Some((amplitude, phase)) => {
-                        let px = rows.start * width..rows.end * width;
-                        let out =
-                            bytemuck::cast_slice_mut::<Complex32, f32>(&mut field[px.clone()]);
-                        phasors(&amplitude[px.clone()], &phase[px], out, isa)
-                            .map_err(|e| HoloError::Internal(format!("phasor rows: {e}")))
-                    }
-                    None => phasor_rows(field, own_phase, rows, width, isa),
-                };
-                match made {
-                    Ok(f) => finite &= f,
-                    Err(e) => {
-                        failure.get_or_insert(e);
-                    }
-                }
-            },
-            // With the pre-filter the field is read only here (the pre-filter's output replaces it).
-            !prefilter,
-            |chunk, rows| {
-                if let Some((re, im)) = &mut planes {
+        let before = |field: &mut [Complex32], rows: std::ops::Range<usize>| {
+            let made = match shared {
+                Some((amplitude, phase)) => {
                     let px = rows.start * width..rows.end * width;
-                    split_planes(chunk, &mut re[px.clone()], &mut im[px]);
+                    let out = bytemuck::cast_slice_mut::<Complex32, f32>(&mut field[px.clone()]);
+                    phasors(&amplitude[px.clone()], &phase[px], out, isa)
+                        .map_err(|e| HoloError::Internal(format!("phasor rows: {e}")))
                 }
-            },
-        )?;
+                None => phasor_rows(field, own_phase, rows, width, isa),
+            };
+            match made {
+                Ok(f) => finite &= f,
+                Err(e) => {
+                    failure.get_or_insert(e);
+                }
+            }
+        };
+        let after = |chunk: &[Complex32], rows: std::ops::Range<usize>| {
+            if let Some((re, im)) = &mut planes {
+                let px = rows.start * width..rows.end * width;
+                split_planes(chunk, &mut re[px.clone()], &mut im[px]);
+            }
+        };
+        // With the pre-filter the field is read only in `after` (the pre-filter's output replaces it).
+        let keep = !prefilter;
+        match (&self.correction, &self.transfer) {
+            (Some(correction), transfer) => self.plan.apply_rows_then(
+                &mut self.field,
+                transfer.as_ref(),
+                correction.kernel(self.colour),
+                &mut self.scratch,
+                before,
+                keep,
+                after,
+            )?,
+            (None, Some(transfer)) => self.plan.apply_even_rows(
+                &mut self.field,
+                transfer,
+                &mut self.scratch,
+                before,
+                keep,
+                after,
+            )?,
+            (None, None) => {
+                return Err(HoloError::Internal(
+                    "no transfer function or correction to apply".into(),
+                ))
+            }
+        }
         failure.map_or(Ok(finite), Err)
     }
 

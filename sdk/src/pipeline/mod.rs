@@ -1,5 +1,6 @@
 //! The real-time hologram pipeline (`docs/CONVENTIONS.md` §8, paper Fig. 3): RGB-D frame (or layered depth
-//! image) → hologram CNN (tract) → midpoint hologram → offset propagation (Eq. 6) → pre-filter CNN (DDPM) →
+//! image) → hologram CNN → midpoint hologram → offset propagation (Eq. 6; with the viewer's aberration
+//! correction, Eq. 5) → pre-filter CNN (DDPM) →
 //! double phase encoding (Eq. 7) → look-up table → three 8-bit SLM planes.
 //!
 //! - [`HologramPipeline`] holds the loaded CNNs and the display configuration, checked against each other
@@ -19,6 +20,8 @@
 //! - `frame`: [`Heads`], [`SlmFrame`], [`FrameTimings`], [`check_not_black`] (what every executor produces);
 //! - `report`: [`BackendReport`], [`SelfCheck`];
 //! - `selection`: [`ModelSelection`], [`PrefilterMode`] and the one rule pairing a CNN with a pre-filter;
+//! - `correction`: the viewer's aberration correction in the frame ([`AberrationReport`]: the kernel of
+//!   paper Eq. 5 at the midpoint plane, joined to the offset propagation's pass);
 //! - `models`: [`HologramPipeline`] (models + display configuration + calibration);
 //! - `colour`, `workers`: one colour's optics and the three allocation-free worker threads;
 //! - `cnn_stage`: input packing and the hologram CNN on a `CnnPlan` (tract, or the native engine);
@@ -31,6 +34,7 @@ mod accelerated;
 mod cnn_stage;
 mod colour;
 pub(crate) mod config;
+mod correction;
 mod executor;
 pub(crate) mod frame;
 #[cfg(feature = "gpu")]
@@ -47,6 +51,7 @@ mod suite;
 mod workers;
 
 pub use config::{Backend, GpuPrecision, PipelineConfig, MAX_HOLOGRAM_PIXELS};
+pub use correction::{AberrationReport, RESIDUAL_PLANES};
 pub use frame::{check_not_black, FrameTimings, Heads, SlmFrame, BLACK_FRAME_AMPLITUDE};
 pub use models::HologramPipeline;
 pub use report::{BackendReport, SelfCheck, StageProfile, SELF_CHECK_MAX_FRACTION};

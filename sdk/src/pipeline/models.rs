@@ -14,6 +14,7 @@ use crate::error::HoloError;
 use crate::error::{invalid, Result};
 use crate::model::{HologramModel, ModelConfig, ModelKind, Precision};
 use crate::slm::{DisplayCalibration, LutRepresentation, PhaseLut};
+use crate::synthesis::aberration::AberrationProfile;
 
 /// The loaded CNNs plus their configuration: a factory of [`HologramSession`](crate::pipeline::HologramSession)s.
 #[derive(Debug, Clone)]
@@ -27,6 +28,9 @@ pub struct HologramPipeline {
     display_mapping: DisplayMapping,
     /// The display calibration sessions apply ([`HologramPipeline::with_calibration`]); `None`: an ideal SLM.
     calibration: Option<Arc<DisplayCalibration>>,
+    /// The viewer's aberration profile sessions correct ([`HologramPipeline::with_aberration`]); `None`: an
+    /// ideal eye behind ideal optics.
+    aberration: Option<Arc<AberrationProfile>>,
     /// The saved CNN plans sessions repeat ([`HologramPipeline::with_saved_plans`]); `None`: the plan table,
     /// or a timing with [`PipelineConfig::cnn_tune`].
     saved_plans: Option<Arc<SavedPlans>>,
@@ -97,6 +101,7 @@ impl HologramPipeline {
             prefilter_reason,
             display_mapping,
             calibration: None,
+            aberration: None,
             saved_plans: None,
             #[cfg(feature = "gpu")]
             gpu_context: None,
@@ -282,6 +287,45 @@ impl HologramPipeline {
         check_calibration_wavelengths(&calibration, &self.config.optics.wavelengths_m)?;
         self.calibration = Some(calibration);
         Ok(self)
+    }
+
+    /// Corrects the viewer's aberrations (`profile`, `docs/ABERRATION.md`) in every session made from now on:
+    /// the correction kernel of its coefficients at the midpoint plane multiplies the midpoint hologram's
+    /// spectrum in the offset propagation's pass ([`HologramSession::set_aberration`], which also changes it
+    /// on a running session). Sessions of such a pipeline run their frames on the CPU: [`Backend::Auto`]
+    /// picks it, and [`Backend::Gpu`] is refused when the session is made.
+    ///
+    /// The pipeline then encodes with its configured double phase method (AA-DPM by default), not with a DDPM
+    /// pre-filter CNN, which is dropped ([`HologramPipeline::prefilter_reason`] says so): the shipped
+    /// pre-filters were trained on uncorrected fields, and on corrected ones they fall far below AA-DPM once
+    /// the correction is more than weak. Measured on a real frame through a cylindrical lens, focal-stack PSNR
+    /// of the 6 mm pre-filter minus AA-DPM: +1.2 dB at 0.25 D, +0.2 at 0.5 D, −2.0 at 1 D, −14.6 at 2 D, −23.7
+    /// at 5 D (`sdk/tests/aberration_realtime.rs`, `the_ddpm_prefilter_falls_below_aa_dpm_on_corrected_fields`), so a
+    /// correction that a viewer may move (a slider) keeps one encoding that holds at every strength.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`wavelengths_m`, `pixel_pitch_m`) for a profile calibrated
+    /// for another display ([`AberrationProfile::check_setup`]).
+    ///
+    /// [`HologramSession::set_aberration`]: crate::pipeline::HologramSession::set_aberration
+    /// [`Backend::Auto`]: crate::pipeline::Backend::Auto
+    /// [`Backend::Gpu`]: crate::pipeline::Backend::Gpu
+    pub fn with_aberration(mut self, profile: Arc<AberrationProfile>) -> Result<Self> {
+        profile.check_setup(&self.config.optics)?;
+        if self.prefilter.take().is_some() {
+            self.prefilter_reason = format!(
+                "no pre-filter CNN: with an aberration correction the pipeline encodes with {:?} (the \
+                 shipped DDPM pre-filters were trained on uncorrected fields and fall below it on corrected \
+                 ones: −2 dB at 1 D of cylinder, −24 dB at 5 D; docs/ABERRATION.md)",
+                self.config.encoding
+            );
+        }
+        self.aberration = Some(profile);
+        Ok(self)
+    }
+
+    /// The viewer's aberration profile sessions correct, if any.
+    pub fn aberration(&self) -> Option<&Arc<AberrationProfile>> {
+        self.aberration.as_ref()
     }
 
     /// The display calibration sessions apply, if any.

@@ -12,6 +12,7 @@ use rayon::prelude::*;
 use super::cnn_stage::CnnStage;
 use super::colour::{ColourState, Task};
 use super::config::Backend;
+use super::correction::{AberrationReport, PupilCorrection};
 use super::executor::Accelerator;
 use super::frame::{FrameTimings, Heads, SlmFrame};
 use super::models::{calibrated_lut, check_calibration_wavelengths};
@@ -23,8 +24,10 @@ use crate::cnn::PlanReport;
 use crate::encoding::{normaliser, ChannelStats, DoublePhaseMethod};
 use crate::error::{HoloError, Result};
 use crate::model::contract;
+use crate::optics::OpticalSetup;
 use crate::scene::{LayeredDepthImage, RgbdFrame};
 use crate::slm::DisplayCalibration;
+use crate::synthesis::aberration::AberrationProfile;
 
 /// A hologram session for one resolution (see the [module docs](crate::pipeline)). Not `Sync`: one frame at a time;
 /// a failed frame (wrong size, NaN) leaves the session usable.
@@ -48,7 +51,12 @@ pub struct HologramSession {
     /// The display calibration applied (look-up tables, intensity scale maps), and the wavelengths it must
     /// match.
     pub(super) calibration: Option<Arc<DisplayCalibration>>,
-    pub(super) wavelengths_m: [f64; 3],
+    /// The display's optics (the calibration's wavelengths and the aberration file's display must match).
+    pub(super) display: OpticalSetup,
+    /// The viewer's aberration profile applied and its report ([`HologramSession::set_aberration`]), with
+    /// the kernels the colour workers share.
+    pub(super) aberration: Option<(Arc<AberrationProfile>, AberrationReport)>,
+    pub(super) correction: Option<Arc<PupilCorrection>>,
     /// The accelerator (the GPU frame) while it runs the frames; `None`: the CPU frame does.
     pub(super) accelerator: Option<Accelerator>,
 }
@@ -64,7 +72,7 @@ impl HologramSession {
     pub fn set_calibration(&mut self, calibration: Option<Arc<DisplayCalibration>>) -> Result<()> {
         if let Some(cal) = &calibration {
             cal.check_size(self.height, self.width)?;
-            check_calibration_wavelengths(cal, &self.wavelengths_m)?;
+            check_calibration_wavelengths(cal, &self.display.wavelengths_m)?;
         }
         self.cnn.calibration = calibration.clone();
         self.calibration = calibration;

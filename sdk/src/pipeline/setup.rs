@@ -9,6 +9,7 @@ use rayon::prelude::*;
 use super::cnn_stage::CnnStage;
 use super::colour::ColourState;
 use super::config::{Backend, MAX_HOLOGRAM_PIXELS};
+use super::correction::{AberrationReport, PupilCorrection};
 use super::executor::{Accelerator, BackendReportParts};
 use super::frame::{FrameTimings, SlmFrame};
 use super::models::HologramPipeline;
@@ -24,6 +25,8 @@ use crate::error::invalid as invalid_backend;
 use crate::error::HoloError;
 use crate::error::{invalid, kernel_isa, Result};
 use crate::optics::Carrier;
+use crate::synthesis::aberration::AberrationProfile;
+use std::sync::Arc;
 
 impl HologramPipeline {
     /// Prepares a session for `height × width` frames: plans the CNNs for that size on the engine the
@@ -109,6 +112,7 @@ impl HologramSession {
                 field: vec![Complex32::default(); n],
                 plan: prop.plan().clone(),
                 transfer,
+                correction: None,
                 scratch: prop.plan().scratch(),
                 prefilter_input: if pipeline.prefilter_model().is_some() {
                     vec![0.0; 2 * n]
@@ -124,7 +128,7 @@ impl HologramSession {
                 isa: kernel_isa()?,
             }));
         }
-        Ok(Self {
+        Self {
             height,
             width,
             encoding,
@@ -152,9 +156,97 @@ impl HologramSession {
             backend,
             full_outputs: true,
             calibration,
-            wavelengths_m: cfg.optics.wavelengths_m,
+            display: cfg.optics,
+            aberration: None,
+            correction: None,
             accelerator,
-        })
+        }
+        .with_aberration(pipeline.aberration().cloned())
+    }
+
+    /// The session with `profile` applied (errors as [`HologramSession::set_aberration`]).
+    fn with_aberration(mut self, profile: Option<Arc<AberrationProfile>>) -> Result<Self> {
+        if profile.is_some() {
+            self.set_aberration(profile)?;
+        }
+        Ok(self)
+    }
+
+    /// Replaces the viewer's aberration correction of this session's next frames (`None`: none), e.g. as a
+    /// viewer moves a prescription slider, without rebuilding the session: the correction kernel `Φ` of the
+    /// profile's coefficients at the midpoint plane (`d = −s`) multiplies the midpoint hologram's spectrum in
+    /// the offset propagation's pass, `H_SLM = F⁻¹{F{H}·Φ·T_s}` (paper Eq. 5 with one kernel, Eq. 6; exact for
+    /// coefficients the same at every distance, [`AberrationReport`] otherwise). At offset 0 this adds one
+    /// spectral pass per colour. The kernels' buffers are reused: a new profile with as many distinct
+    /// colour sets allocates nothing. On the CPU frame only. A session with a DDPM pre-filter keeps it (and
+    /// logs a warning): on corrected fields it falls below AA-DPM once the correction is more than weak, so
+    /// make sessions that correct from a pipeline with [`HologramPipeline::with_aberration`], which encodes
+    /// with AA-DPM.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`wavelengths_m`, `pixel_pitch_m`) for a profile calibrated
+    /// for another display ([`AberrationProfile::check_setup`]), or (`aberration`) on a session whose frames
+    /// run on the GPU, which does not apply a correction yet. The session keeps its correction on error.
+    pub fn set_aberration(&mut self, profile: Option<Arc<AberrationProfile>>) -> Result<()> {
+        let Some(profile) = profile else {
+            for state in self.states.iter_mut().flatten() {
+                state.correction = None;
+            }
+            self.correction = None;
+            self.aberration = None;
+            return Ok(());
+        };
+        if self.accelerator.is_some() {
+            return Err(invalid(
+                "aberration",
+                "this session runs its frames on the GPU, which does not apply an aberration correction \
+                 yet: make the session with Backend::Cpu (Backend::Auto picks the CPU for a pipeline with an \
+                 aberration profile)",
+            ));
+        }
+        profile.check_setup(&self.display)?;
+        let report = AberrationReport::new(&profile, &self.display, self.offset_m);
+        if self.prefilter.is_some() && !profile.is_zero() {
+            log::warn!(
+                "this session encodes with a DDPM pre-filter CNN, trained on uncorrected fields: on corrected \
+                 ones it falls below AA-DPM (−2 dB at 1 D of cylinder, −24 dB at 5 D); a pipeline made \
+                 with_aberration encodes with AA-DPM"
+            );
+        }
+        if self.states.iter().any(Option::is_none) {
+            return Err(super::workers::lost_state());
+        }
+        for state in self.states.iter_mut().flatten() {
+            state.correction = None;
+        }
+        let reuse = self.correction.take().and_then(|c| Arc::try_unwrap(c).ok());
+        let Some(plan) = self.states.iter().flatten().next().map(|s| &s.plan) else {
+            return Err(super::workers::lost_state());
+        };
+        // Without a transfer function (offset 0) the kernel carries the inverse transform's normalisation.
+        let (ch, cw) = plan.computational_shape();
+        let scale = if self.offset_m == 0.0 {
+            1.0 / (ch * cw) as f32
+        } else {
+            1.0
+        };
+        let correction = Arc::new(PupilCorrection::build(
+            plan,
+            &report.coefficients,
+            scale,
+            reuse,
+        )?);
+        for state in self.states.iter_mut().flatten() {
+            state.correction = Some(correction.clone());
+        }
+        self.correction = Some(correction);
+        self.aberration = Some((profile, report));
+        Ok(())
+    }
+
+    /// The viewer's aberration profile this session corrects, and what the correction applies and leaves
+    /// ([`AberrationReport`]); `None` without one.
+    pub fn aberration(&self) -> Option<(&Arc<AberrationProfile>, &AberrationReport)> {
+        self.aberration.as_ref().map(|(p, r)| (p, r))
     }
 }
 
@@ -173,6 +265,22 @@ pub(super) fn choose_backend(
     if requested == Backend::Cpu {
         return Ok((
             BackendReportParts::cpu(requested, "CPU requested".into()),
+            None,
+        ));
+    }
+    if pipeline.aberration().is_some() {
+        if requested == Backend::Gpu {
+            return Err(invalid(
+                "backend",
+                "the GPU frame does not apply an aberration correction yet: use the CPU (backend cpu or \
+                 auto) with an aberration profile",
+            ));
+        }
+        return Ok((
+            BackendReportParts::cpu(
+                requested,
+                "the aberration correction runs on the CPU frame".into(),
+            ),
             None,
         ));
     }

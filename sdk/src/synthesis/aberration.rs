@@ -620,14 +620,28 @@ pub(crate) fn pupil_multiplier(
     plan: &SpectralPlan,
     coefficients: &ZernikeCoefficients,
 ) -> Vec<Complex32> {
+    let mut out = Vec::with_capacity(plan.spectrum_len());
+    fill_pupil_multiplier(plan, coefficients, 1.0, &mut out);
+    out
+}
+
+/// [`pupil_multiplier`] times `scale`, written into `out` (no allocation when it has the capacity): the
+/// real-time pipeline's correction kernel (`scale`: the inverse transform's normalisation where no transfer
+/// function carries it).
+pub(crate) fn fill_pupil_multiplier(
+    plan: &SpectralPlan,
+    coefficients: &ZernikeCoefficients,
+    scale: f32,
+    out: &mut Vec<Complex32>,
+) {
     let (ch, cw) = plan.computational_shape();
-    plan.build_multiplier(|kx, ky| {
+    plan.fill_multiplier(out, |kx, ky| {
         let (rx, ry) = pupil_coordinates(kx, ky, ch, cw);
         if rx * rx + ry * ry > 1.0 {
             return Complex32::new(0.0, 0.0);
         }
         let (s, c) = coefficients.phase_xy(rx, ry).sin_cos();
-        Complex32::new(c as f32, s as f32)
+        Complex32::new(c as f32 * scale, s as f32 * scale)
     })
 }
 

@@ -1,6 +1,8 @@
 //! Shared helpers for integration tests (a deterministic RNG, energies, gradients).
 #![allow(dead_code)]
 
+pub mod viewer;
+
 use ndarray::{Array2, ArrayView2};
 use num_complex::Complex32;
 

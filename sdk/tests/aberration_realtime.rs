@@ -1,0 +1,408 @@
+//! The viewer's aberrations corrected in the real-time frame with the shipped CNNs (no retraining):
+//! `HologramPipeline::with_aberration` and `HologramSession::set_aberration` multiply the midpoint hologram's
+//! spectrum by the correction kernel `Φ = circ·e^{iΣZ}` of paper Eq. 5 in the offset propagation's pass.
+//!
+//! - The spectral identity: the corrected session's SLM pattern is the double phase encoding of
+//!   `F⁻¹{F{H}·Φ·T_s}` for the CNN's own midpoint hologram `H`, with `Φ` from the SDK's aberration code.
+//! - A simulated viewer on a real RGB-D frame (`../shared/data`), looking through a cylindrical lens written
+//!   from its physical formula (`common::viewer`): the corrected display seen through the lens is within
+//!   0.5 dB of the plain display seen without it, and the plain display through the lens is far worse; f32 and
+//!   int8. Rerun with the figures printed:
+//!   `cargo test -p tensorholo --test aberration_realtime -- --nocapture`.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use common::viewer::{psnr_in, seen, Lens, EYEPIECE_M};
+use ndarray::{Array3, Axis};
+use num_complex::Complex32;
+use tensorholo::encoding::double_phase_encode;
+use tensorholo::model::Precision;
+use tensorholo::optics::{
+    post_encoding_midpoint, Carrier, OpticalSetup, PropagationOptions, SpectralPlan,
+};
+use tensorholo::pipeline::{
+    Backend, HologramPipeline, HologramSession, ModelSelection, PipelineConfig, PrefilterMode,
+};
+use tensorholo::scene::{load_rgbd, DepthEncoding, LoadOptions, RgbdFrame};
+use tensorholo::synthesis::aberration::amplitude_transfer_function;
+use tensorholo::synthesis::{AberrationProfile, AberrationSample, ZernikeCoefficients};
+use tensorholo::HoloError;
+
+const OFFSET_M: f64 = 6e-3;
+
+/// Path of a shared data file; fails loudly (never skips) when the shared data checkout is missing.
+fn data(rel: &str) -> PathBuf {
+    let p = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")).join(rel);
+    assert!(
+        p.is_file(),
+        "shared test data file missing: {}",
+        p.display()
+    );
+    p
+}
+
+/// The TUM RGB-D frame (real Kinect v1 capture) at `h × w`.
+fn real_frame(h: usize, w: usize) -> RgbdFrame {
+    let options = LoadOptions {
+        size: Some((h, w)),
+        ..LoadOptions::default()
+    };
+    load_rgbd(
+        &data("tum/TUM_color.png"),
+        &data("tum/TUM_depth.png"),
+        DepthEncoding::Tum5000,
+        &options,
+    )
+    .unwrap()
+    .0
+}
+
+fn pipeline(precision: Precision, prefilter: PrefilterMode) -> HologramPipeline {
+    pipeline_at(OFFSET_M, precision, prefilter)
+}
+
+fn pipeline_at(offset_m: f64, precision: Precision, prefilter: PrefilterMode) -> HologramPipeline {
+    let selection = ModelSelection {
+        precision,
+        prefilter,
+        ..ModelSelection::default()
+    };
+    let config = PipelineConfig {
+        offset_m,
+        backend: Backend::Cpu,
+        ..PipelineConfig::default()
+    };
+    HologramPipeline::embedded(&selection, config).unwrap()
+}
+
+/// The Zernike coefficients (radians at the pupil edge, Eq. 14–18) that cancel `lens` at wavelength
+/// `lambda` on an SLM of pitch `pitch`, from the lens's pupil phase `−k·ρ²·(S + C·sin²(θ − a))`,
+/// `k = π·λ·f_e²·f_N²`: focus `+k·(S + C/2)/2`, astigmatism `−k·C/2·(cos 2a, sin 2a)` (the piston dropped).
+fn cancelling(lens: &Lens, lambda: f64, pitch: f64) -> ZernikeCoefficients {
+    let f_n = 1.0 / (2.0 * pitch);
+    let k = std::f64::consts::PI * lambda * EYEPIECE_M * EYEPIECE_M * f_n * f_n;
+    let a = 2.0 * lens.axis_deg.to_radians();
+    ZernikeCoefficients {
+        focus: k * (lens.sphere + lens.cylinder / 2.0) / 2.0,
+        astigmatism_vertical: -k * lens.cylinder / 2.0 * a.cos(),
+        astigmatism_oblique: -k * lens.cylinder / 2.0 * a.sin(),
+        ..ZernikeCoefficients::ZERO
+    }
+}
+
+/// The correction of `lens` on `setup`'s display, the same at every distance.
+fn correction(lens: &Lens, setup: &OpticalSetup) -> Arc<AberrationProfile> {
+    let per_colour =
+        std::array::from_fn(|c| cancelling(lens, setup.wavelengths_m[c], setup.pixel_pitch_m));
+    Arc::new(
+        AberrationProfile::new(vec![AberrationSample {
+            distance_m: 0.0,
+            coefficients: per_colour,
+        }])
+        .unwrap()
+        .with_display(setup.wavelengths_m, setup.pixel_pitch_m),
+    )
+}
+
+/// `F⁻¹{F{H}·Φ·T_s}` per colour: the CNN's midpoint hologram corrected with the SDK's kernel
+/// ([`amplitude_transfer_function`]) and propagated to the SLM by the angular spectrum method (Eq. 6).
+fn corrected_slm_field(
+    heads: &Array3<Complex32>,
+    setup: &OpticalSetup,
+    profile: &AberrationProfile,
+    offset_m: f64,
+) -> Array3<Complex32> {
+    let (_, h, w) = heads.dim();
+    let props = setup
+        .propagators(h, w, PropagationOptions::default())
+        .unwrap();
+    let mut out = heads.clone();
+    for (c, prop) in props.iter().enumerate() {
+        let plan: &SpectralPlan = prop.plan();
+        let phi = amplitude_transfer_function(h, w, &profile.coefficients(-offset_m, c)).unwrap();
+        let mut tf = prop.transfer_function(offset_m, Carrier::Remove).unwrap();
+        // Φ `[h, w]` in FFT order into the plan's transposed layout (index kx·h + ky).
+        let phi_t: Vec<Complex32> = (0..w)
+            .flat_map(|kx| (0..h).map(move |ky| (ky, kx)))
+            .map(|(ky, kx)| phi[[ky, kx]])
+            .collect();
+        tf.multiply(&phi_t).unwrap();
+        let mut lane = out.index_axis_mut(Axis(0), c);
+        let field = lane.as_slice_mut().unwrap();
+        prop.propagate(field, &tf, &mut plan.scratch()).unwrap();
+    }
+    out
+}
+
+/// Largest circular distance between two phase patterns, over all but the `skip` fraction of pixels where
+/// they differ most (the pixels of a near-zero amplitude, whose phase float rounding moves freely).
+fn phase_distance(a: &Array3<f32>, b: &Array3<f32>, skip: f64) -> f32 {
+    let mut d: Vec<f32> = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| {
+            let r = (x - y).rem_euclid(std::f32::consts::TAU);
+            r.min(std::f32::consts::TAU - r)
+        })
+        .collect();
+    d.sort_by(f32::total_cmp);
+    d[((1.0 - skip) * (d.len() - 1) as f64) as usize]
+}
+
+#[test]
+fn the_corrected_slm_pattern_is_the_encoding_of_the_midpoint_times_the_correction_kernel() {
+    let frame = real_frame(96, 128);
+    // An oblique cylinder and a coma that changes with distance (applied at the midpoint plane, d = −s).
+    let lens = Lens::cylinder(0.05, 30.0);
+    let setup = OpticalSetup::default();
+    let cylinder = correction(&lens, &setup);
+    let coma = |a: f64| ZernikeCoefficients {
+        coma_horizontal: a,
+        ..ZernikeCoefficients::ZERO
+    };
+    let varying = Arc::new(
+        AberrationProfile::new(vec![
+            AberrationSample {
+                distance_m: -0.02,
+                coefficients: [coma(9.0); 3],
+            },
+            AberrationSample {
+                distance_m: 0.02,
+                coefficients: [coma(-3.0); 3],
+            },
+        ])
+        .unwrap(),
+    );
+    for offset_m in [OFFSET_M, 0.0] {
+        for (profile, exact) in [(&cylinder, true), (&varying, false)] {
+            let plain = pipeline_at(offset_m, Precision::F32, PrefilterMode::Off);
+            let corrected = pipeline_at(offset_m, Precision::F32, PrefilterMode::Off)
+                .with_aberration(profile.clone())
+                .unwrap();
+            let mut session = corrected.session(96, 128).unwrap();
+            let out = session.render(&frame).unwrap().phase.clone();
+            let (_, report) = session.aberration().unwrap();
+            assert_eq!(report.exact, exact);
+            assert_eq!(report.distance_m, -offset_m);
+            if !exact {
+                // Coma 9 → −3 rad over ±20 mm: 4.8 rad at d = −6 mm, 3 rad at 0.
+                let expected = if offset_m == 0.0 { 3.0 } else { 4.8 };
+                assert!((report.coefficients[0].coma_horizontal - expected).abs() < 1e-9);
+                assert!(report.residual_rms_rad.iter().all(|&r| r > 0.0));
+            }
+
+            let heads = session.last_heads().unwrap().to_field().unwrap();
+            let expected = double_phase_encode(
+                corrected_slm_field(&heads, &setup, profile, offset_m).view(),
+                &session.encoding(),
+            )
+            .unwrap();
+            let uncorrected = plain
+                .session(96, 128)
+                .unwrap()
+                .render(&frame)
+                .unwrap()
+                .phase
+                .clone();
+            let same = phase_distance(&out, &expected.phase, 0.001);
+            let other = phase_distance(&out, &uncorrected, 0.5);
+            eprintln!(
+                "s = {offset_m} m, exact {exact}: corrected vs F⁻¹{{F{{H}}·Φ·T}} {same:.2e} rad (99.9 %); \
+                 vs uncorrected {other:.3} rad (median)"
+            );
+            // Float rounding of two orders of the same products: far below one 8-bit code (0.0245 rad).
+            assert!(same < 2e-3, "{same}");
+            assert!(other > 0.02, "{other}: the correction changes the pattern");
+        }
+    }
+}
+
+/// Focal-stack PSNR (dB, 5 depths) of what the viewer sees of `shown` through `lens`, against what the CNN's
+/// own midpoint hologram `target` shows through `target_lens`.
+fn focal_stack_psnr(
+    target: &Array3<Complex32>,
+    shown: &Array3<Complex32>,
+    setup: &OpticalSetup,
+    target_lens: Option<Lens>,
+    lens: Option<Lens>,
+) -> f64 {
+    let stack = |field: &Array3<Complex32>, lens: Option<Lens>| {
+        let views: Vec<Array3<f32>> = [0.1, 0.3, 0.5, 0.7, 0.9]
+            .iter()
+            .map(|&d| seen(field, setup, d, lens))
+            .collect();
+        ndarray::concatenate(Axis(1), &views.iter().map(|v| v.view()).collect::<Vec<_>>()).unwrap()
+    };
+    psnr_in(&stack(target, target_lens), &stack(shown, lens), None)
+}
+
+/// What a session's SLM pattern shows at the midpoint plane (after the display's Fourier filter), in the units
+/// of the encoded hologram.
+fn shown(
+    session: &mut HologramSession,
+    frame: &RgbdFrame,
+    setup: &OpticalSetup,
+) -> Array3<Complex32> {
+    let out = session.render(frame).unwrap();
+    post_encoding_midpoint(
+        out.phase.view(),
+        out.amplitude_scale,
+        setup,
+        OFFSET_M,
+        PropagationOptions::default(),
+    )
+    .unwrap()
+}
+
+/// Focal-stack PSNRs against what the CNN's own midpoint hologram shows without the lens: (plain display
+/// without the lens, plain display through it, corrected display through it). The plain pipeline runs the
+/// shipped DDPM pre-filter; the corrected one AA-DPM (`with_aberration`).
+fn through_the_lens(precision: Precision, lens: Lens, frame: &RgbdFrame) -> (f64, f64, f64) {
+    let (h, w) = (frame.height(), frame.width());
+    let plain = pipeline(precision, PrefilterMode::Auto);
+    assert!(plain.prefilter_model().is_some());
+    let setup = plain.config().optics;
+    let corrected = pipeline(precision, PrefilterMode::Auto)
+        .with_aberration(correction(&lens, &setup))
+        .unwrap();
+    let mut plain_session = plain.session(h, w).unwrap();
+    let plain_shown = shown(&mut plain_session, frame, &setup);
+    let target = plain_session.last_heads().unwrap().to_field().unwrap();
+    let corrected_shown = shown(&mut corrected.session(h, w).unwrap(), frame, &setup);
+    (
+        focal_stack_psnr(&target, &plain_shown, &setup, None, None),
+        focal_stack_psnr(&target, &plain_shown, &setup, None, Some(lens)),
+        focal_stack_psnr(&target, &corrected_shown, &setup, None, Some(lens)),
+    )
+}
+
+#[test]
+fn a_viewer_through_a_cylindrical_lens_sees_the_corrected_display_as_the_plain_one_without_it() {
+    let frame = real_frame(192, 256);
+    for precision in [Precision::F32, Precision::Int8Qdq] {
+        for lens in [Lens::cylinder(0.2, 90.0), Lens::cylinder(0.05, 30.0)] {
+            let (without, through, corrected) = through_the_lens(precision, lens, &frame);
+            eprintln!(
+                "{precision:?}, {lens:?}: plain without the lens {without:.2} dB, plain through it \
+                 {through:.2} dB, corrected through it {corrected:.2} dB"
+            );
+            assert!(
+                (corrected - without).abs() <= 0.5,
+                "{precision:?} {lens:?}: {corrected} vs {without}"
+            );
+            assert!(
+                through < without - 3.0,
+                "{precision:?} {lens:?}: {through} vs {without}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_profile_for_another_display_is_refused_naming_the_quantity_and_a_slider_needs_no_new_session()
+{
+    let plain = pipeline(Precision::F32, PrefilterMode::Off);
+    let setup = plain.config().optics;
+    let lens = Lens::cylinder(0.2, 90.0);
+    let other_pitch = AberrationProfile::uniform(cancelling(&lens, 520e-9, 8e-6))
+        .with_display(setup.wavelengths_m, 4e-6);
+    let e = pipeline(Precision::F32, PrefilterMode::Off)
+        .with_aberration(Arc::new(other_pitch.clone()))
+        .unwrap_err();
+    assert!(
+        matches!(&e, HoloError::InvalidParameter { name, .. } if *name == "pixel_pitch_m"),
+        "{e}"
+    );
+    let other_lasers = AberrationProfile::uniform(cancelling(&lens, 520e-9, 8e-6))
+        .with_display([640e-9, 532e-9, 450e-9], setup.pixel_pitch_m);
+    let e = pipeline(Precision::F32, PrefilterMode::Off)
+        .with_aberration(Arc::new(other_lasers))
+        .unwrap_err();
+    assert!(
+        matches!(&e, HoloError::InvalidParameter { name, .. } if *name == "wavelengths_m"),
+        "{e}"
+    );
+
+    // A slider: the same session, three prescriptions and none; each frame equals a fresh session's.
+    let frame = real_frame(48, 64);
+    let mut session = plain.session(48, 64).unwrap();
+    let e = session
+        .set_aberration(Some(Arc::new(other_pitch)))
+        .unwrap_err();
+    assert!(e.to_string().contains("pixel_pitch_m"), "{e}");
+    for focal in [0.5, 0.2, 0.1] {
+        let profile = correction(&Lens::cylinder(focal, 60.0), &setup);
+        session.set_aberration(Some(profile.clone())).unwrap();
+        let codes = session.render(&frame).unwrap().codes.clone();
+        let fresh = pipeline(Precision::F32, PrefilterMode::Off)
+            .with_aberration(profile)
+            .unwrap()
+            .session(48, 64)
+            .unwrap()
+            .render(&frame)
+            .unwrap()
+            .codes
+            .clone();
+        assert_eq!(codes, fresh, "{focal} m");
+    }
+    session.set_aberration(None).unwrap();
+    assert!(session.aberration().is_none());
+    let codes = session.render(&frame).unwrap().codes.clone();
+    let fresh = plain
+        .session(48, 64)
+        .unwrap()
+        .render(&frame)
+        .unwrap()
+        .codes
+        .clone();
+    assert_eq!(codes, fresh);
+}
+
+/// The measurement behind the rule that a pipeline with an aberration profile encodes with AA-DPM
+/// (`HologramPipeline::with_aberration`): the shipped 6 mm DDPM pre-filter, given corrected fields (a session
+/// of a DDPM pipeline with `set_aberration`), against AA-DPM, through the lens, focal-stack PSNR.
+/// Measured (f32, TUM frame at 192 × 256, vertical-axis cylinder; DDPM − AA-DPM): +1.24 dB at 0.25 D, +0.20 at
+/// 0.5 D, −2.03 at 1 D, −14.57 at 2 D, −23.74 at 5 D.
+#[test]
+fn the_ddpm_prefilter_falls_below_aa_dpm_on_corrected_fields() {
+    let frame = real_frame(192, 256);
+    let (h, w) = (frame.height(), frame.width());
+    let ddpm = pipeline(Precision::F32, PrefilterMode::Auto);
+    assert!(ddpm.prefilter_model().is_some());
+    let setup = ddpm.config().optics;
+    let mut gains = Vec::new();
+    for dioptres in [0.25, 1.0, 5.0] {
+        let lens = Lens::cylinder(1.0 / dioptres, 90.0);
+        let profile = correction(&lens, &setup);
+        let corrected = pipeline(Precision::F32, PrefilterMode::Auto)
+            .with_aberration(profile.clone())
+            .unwrap();
+        assert!(corrected.prefilter_model().is_none());
+        assert!(
+            corrected
+                .prefilter_reason()
+                .contains("aberration correction"),
+            "{}",
+            corrected.prefilter_reason()
+        );
+        let mut with_ddpm = ddpm.session(h, w).unwrap();
+        with_ddpm.set_aberration(Some(profile)).unwrap();
+        assert!(with_ddpm.has_prefilter());
+        let mut with_aa = corrected.session(h, w).unwrap();
+        assert!(!with_aa.has_prefilter());
+        // Each encoding against the CNN's own midpoint hologram seen without the lens.
+        let score = |session: &mut HologramSession| {
+            let field = shown(session, &frame, &setup);
+            let heads = session.last_heads().unwrap().to_field().unwrap();
+            focal_stack_psnr(&heads, &field, &setup, None, Some(lens))
+        };
+        let gain = score(&mut with_ddpm) - score(&mut with_aa);
+        eprintln!("{dioptres} D of cylinder: DDPM − AA-DPM on the corrected field {gain:+.2} dB");
+        gains.push(gain);
+    }
+    assert!(gains[0] > -0.5, "{gains:?}");
+    assert!(gains[1] < 0.0 && gains[2] < -10.0, "{gains:?}");
+}
