@@ -15,8 +15,8 @@ use tensorholo::evaluation::{focal_depths, table2};
 use tensorholo::model::{contract, HologramModel, ModelConfig, ModelKind, Precision, SceneInput};
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{
-    Backend, BackendReport, FrameTimings, GpuPrecision, Heads, HologramPipeline, PipelineConfig,
-    PrefilterMode, PrefilterSource, SlmFrame,
+    AberrationReport, Backend, BackendReport, FrameTimings, GpuPrecision, Heads, HologramPipeline,
+    PipelineConfig, PrefilterMode, PrefilterSource, SlmFrame,
 };
 use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
 use tensorholo::scene::RgbdFrame;
@@ -208,6 +208,14 @@ pub struct ModelArgs {
     /// that, report.json's display_mapping says "widened" and gives the estimated cost.
     #[arg(long)]
     pub wavelength_ratio_tolerance: Option<f64>,
+    /// Aberration file (tensorholo.aberration, docs/ABERRATION.md; `holo calibrate aberration` or a
+    /// prescription writes one): the viewer's eyes or the display optics, corrected in every frame with the
+    /// shipped CNNs (the coefficients at the midpoint plane multiply the hologram's spectrum; exact where they
+    /// are the same at every distance, report.json gives the residual otherwise). Overrides the --display
+    /// profile's `aberration`. Frames then run on the CPU and encode with --encoding (AA-DPM by default): the
+    /// DDPM pre-filters were trained on uncorrected fields.
+    #[arg(long, conflicts_with = "prefilter")]
+    pub aberration: Option<PathBuf>,
     #[command(flatten)]
     pub encoding: crate::args::EncodingArgs,
     #[command(flatten)]
@@ -222,6 +230,7 @@ impl ModelArgs {
             ("--model", &self.model),
             ("--prefilter-model", &self.prefilter_model),
             ("--calibration", &self.calibration),
+            ("--aberration", &self.aberration),
         ]
         .into_iter()
         .filter_map(|(flag, p)| Some(crate::output::Input::file(flag, p.as_deref()?)))
@@ -233,6 +242,29 @@ impl ModelArgs {
     /// The `--display` profile, if given (see [`crate::args::OpticsArgs::profile`]).
     pub fn profile(&self) -> Result<Option<DisplayProfile>> {
         self.optics.profile()
+    }
+
+    /// The files the `--display` profile names (its calibration and aberration file, where the flags do not
+    /// override them), as `(what, path)` for the output guard. A bad profile is an error here, before
+    /// anything is written.
+    pub fn profile_files(&self) -> Result<Vec<(&'static str, PathBuf)>> {
+        let Some(p) = self.profile()? else {
+            return Ok(Vec::new());
+        };
+        Ok([
+            ("--display's calibration", p.calibration),
+            ("--display's aberration", p.aberration),
+        ]
+        .into_iter()
+        .filter_map(|(what, f)| Some((what, f?)))
+        .collect())
+    }
+
+    /// The aberration file of this run: `--aberration`, else the profile's `aberration`.
+    fn aberration_file(&self, profile: Option<&DisplayProfile>) -> Option<PathBuf> {
+        self.aberration
+            .clone()
+            .or_else(|| profile.and_then(|p| p.aberration.clone()))
     }
 
     /// The offset in millimetres: `--offset-mm`, else the profile's first offset, else 6.
@@ -351,6 +383,41 @@ impl ModelArgs {
                 .with_calibration(Arc::new(cal))
                 .with_context(|| format!("--calibration {}", path.display()))?;
         }
+        let aberration_file = self.aberration_file(profile.as_ref());
+        let mut aberration = None;
+        if let Some(path) = &aberration_file {
+            let what = format!("--aberration {}", path.display());
+            if self.prefilter {
+                bail!(
+                    "{what}: --prefilter requires the DDPM pre-filter CNN, which was trained on uncorrected \
+                     fields and falls below AA-DPM on corrected ones (docs/ABERRATION.md); drop --prefilter"
+                );
+            }
+            let profile = Arc::new(crate::aberration::load(path)?);
+            let report = AberrationReport::new(&profile, &config.optics, config.offset_m);
+            log::info!(
+                "aberration correction {}: the coefficients at d = {} m, {}",
+                path.display(),
+                report.distance_m,
+                if report.exact {
+                    "exact (the same at every distance)".to_string()
+                } else {
+                    format!(
+                        "{:.3}/{:.3}/{:.3} rad RMS left uncorrected over the volume (R/G/B)",
+                        report.residual_rms_rad[0],
+                        report.residual_rms_rad[1],
+                        report.residual_rms_rad[2]
+                    )
+                }
+            );
+            pipeline = pipeline
+                .with_aberration(profile)
+                .with_context(|| what.clone())?;
+            aberration = Some(json!({
+                "file": crate::output::path_text(path),
+                "applied": report,
+            }));
+        }
         if pipeline.prefilter_model().is_none() {
             log::info!(
                 "encoding without a pre-filter CNN: {}",
@@ -398,6 +465,7 @@ impl ModelArgs {
                 "file": calibration.as_deref().map(crate::output::path_text),
                 "summary": c.summary(),
             })),
+            "aberration": aberration,
             "display": self.optics.display.as_deref().map(crate::output::path_text),
             "display_name": profile.as_ref().and_then(|p| p.name.clone()),
             "display_mapping": pipeline.display_mapping_description(),
@@ -458,14 +526,14 @@ Examples:
 /// Runs `holo render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let t_all = Instant::now();
-    // A bad display profile stops the command before anything is written; its calibration is an input too.
-    let profile_calibration = args.model.profile()?.and_then(|p| p.calibration);
+    // A bad display profile stops the command before anything is written; the files it names are inputs too.
+    let profile_files = args.model.profile_files()?;
     let mut inputs = args.scene.guard_inputs();
     inputs.extend(args.model.guard_inputs());
     inputs.extend(
-        profile_calibration
-            .as_deref()
-            .map(|c| crate::output::Input::file("--display's calibration", c)),
+        profile_files
+            .iter()
+            .map(|(what, f)| crate::output::Input::file(what, f)),
     );
     crate::output::guard("--out", &args.out, &inputs)?;
     let t = Instant::now();

@@ -141,8 +141,8 @@ fn frame_file(frames_dir: &Path, i: usize, ch: &str) -> PathBuf {
 
 /// Runs `holo video`.
 pub fn run(args: &VideoArgs) -> Result<()> {
-    // A bad display profile stops the command before anything is written; its calibration is an input too.
-    let profile_calibration = args.model.profile()?.and_then(|p| p.calibration);
+    // A bad display profile stops the command before anything is written; the files it names are inputs too.
+    let profile_files = args.model.profile_files()?;
     let t_all = Instant::now();
     let mut guarded = vec![
         crate::output::Input::folder("--rgb-dir", &args.rgb_dir),
@@ -150,9 +150,9 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     ];
     guarded.extend(args.model.guard_inputs());
     guarded.extend(
-        profile_calibration
-            .as_deref()
-            .map(|c| crate::output::Input::file("--display's calibration", c)),
+        profile_files
+            .iter()
+            .map(|(what, f)| crate::output::Input::file(what, f)),
     );
     crate::output::guard("--out", &args.out, &guarded)?;
     let encoding = args

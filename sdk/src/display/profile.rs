@@ -1,5 +1,5 @@
 //! Display profiles: one JSON file per holographic display (SLM pitch and resolution, laser wavelengths,
-//! volume, offsets, calibration), read by `holo --display FILE` and by apps (`docs/DISPLAYS.md`).
+//! volume, offsets, calibration, the viewer's aberrations), read by `holo --display FILE` and by apps (`docs/DISPLAYS.md`).
 //!
 //! ```json
 //! {
@@ -9,7 +9,8 @@
 //!   "wavelengths_m": [638e-9, 520e-9, 450e-9],
 //!   "volume_depth_m": 6e-3,
 //!   "offsets_m": [6e-3, 12e-3, 0.0],
-//!   "calibration": "pluto.holocal"
+//!   "calibration": "pluto.holocal",
+//!   "aberration": "viewer.json"
 //! }
 //! ```
 //!
@@ -38,7 +39,7 @@ pub const MAX_OFFSET_M: f64 = 1.0;
 
 /// Every key of a profile, for messages.
 const KEYS: &str =
-    "name, pixel_pitch_m, resolution, wavelengths_m, volume_depth_m, offsets_m, calibration";
+    "name, pixel_pitch_m, resolution, wavelengths_m, volume_depth_m, offsets_m, calibration, aberration";
 
 /// A holographic display, as a profile file describes it (`docs/DISPLAYS.md`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -58,6 +59,11 @@ pub struct DisplayProfile {
     /// `calibration`: the display's `.holocal` file ([`crate::slm::DisplayCalibration`]), resolved against
     /// the profile's folder ([`DisplayProfile::from_path`]); `None` for an ideal SLM.
     pub calibration: Option<PathBuf>,
+    /// `aberration`: the viewer's or the optics' aberration file (`tensorholo.aberration`,
+    /// [`crate::synthesis::aberration::AberrationProfile`], `docs/ABERRATION.md`) that sessions correct,
+    /// resolved against the profile's folder like `calibration`; `None`: an ideal eye behind ideal optics.
+    /// Set it in code with [`DisplayProfile::with_aberration_file`].
+    pub aberration: Option<PathBuf>,
 }
 
 /// The file as serde reads it: every key optional and untyped, so that each error can name its key.
@@ -71,6 +77,7 @@ struct RawProfile {
     volume_depth_m: Option<serde_json::Value>,
     offsets_m: Option<serde_json::Value>,
     calibration: Option<serde_json::Value>,
+    aberration: Option<serde_json::Value>,
 }
 
 fn err(key: &'static str, reason: impl Into<String>) -> HoloError {
@@ -273,19 +280,21 @@ impl DisplayProfile {
             .iter()
             .map(|v| number("offsets_m", v))
             .collect::<Result<Vec<_>>>()?;
-        let calibration = match raw.calibration.filter(|v| !v.is_null()) {
-            None => None,
-            Some(v) => {
-                let s = v
-                    .as_str()
-                    .ok_or_else(|| err("calibration", format!("must be a file path, got {v}")))?;
-                let p = PathBuf::from(s);
-                Some(match base {
-                    Some(b) if p.is_relative() && !s.is_empty() => b.join(p),
-                    _ => p,
-                })
-            }
+        let file = |key: &'static str, v: Option<serde_json::Value>| -> Result<Option<PathBuf>> {
+            let Some(v) = v.filter(|v| !v.is_null()) else {
+                return Ok(None);
+            };
+            let s = v
+                .as_str()
+                .ok_or_else(|| err(key, format!("must be a file path, got {v}")))?;
+            let p = PathBuf::from(s);
+            Ok(Some(match base {
+                Some(b) if p.is_relative() && !s.is_empty() => b.join(p),
+                _ => p,
+            }))
         };
+        let calibration = file("calibration", raw.calibration)?;
+        let aberration = file("aberration", raw.aberration)?;
         Self::new(
             name,
             pixel_pitch_m,
@@ -294,7 +303,18 @@ impl DisplayProfile {
             volume_depth_m,
             offsets_m,
             calibration,
-        )
+        )?
+        .with_aberration_file(aberration)
+    }
+
+    /// This profile with the aberration file `path` (`None`: none), checked as
+    /// [`DisplayProfile::validate`] checks it.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`aberration`) for an empty path.
+    pub fn with_aberration_file(mut self, path: Option<PathBuf>) -> Result<Self> {
+        self.aberration = path;
+        self.validate()?;
+        Ok(self)
     }
 
     /// A profile from its values (what [`DisplayProfile::from_json_str`] reads, for apps and bindings that
@@ -338,6 +358,7 @@ impl DisplayProfile {
             volume_depth_m,
             offsets_m,
             calibration,
+            aberration: None,
         };
         profile.validate()?;
         Ok(profile)
@@ -346,7 +367,7 @@ impl DisplayProfile {
     /// Checks the values (the one place a profile's rules live; [`DisplayProfile::from_json_str`] and
     /// [`DisplayProfile::new`] call it): a finite positive `pixel_pitch_m` and `volume_depth_m`, a
     /// `resolution` of at least 1×1, `wavelengths_m` within 380–780 nm (metres, not nanometres), a non-empty
-    /// `offsets_m` of finite values, and a non-empty `calibration` path if one is given.
+    /// `offsets_m` of finite values, and non-empty `calibration` and `aberration` paths where given.
     ///
     /// Errors: [`HoloError::InvalidParameter`] whose `name` is the key at fault; the reason names it too.
     pub fn validate(&self) -> Result<()> {
@@ -417,6 +438,13 @@ impl DisplayProfile {
         {
             return Err(err("calibration", "must be a file path, got an empty one"));
         }
+        if self
+            .aberration
+            .as_ref()
+            .is_some_and(|p| p.as_os_str().is_empty())
+        {
+            return Err(err("aberration", "must be a file path, got an empty one"));
+        }
         Ok(())
     }
 
@@ -480,11 +508,13 @@ impl DisplayProfile {
         v.insert("volume_depth_m".into(), r(self.volume_depth_m).into());
         let offsets: Vec<f64> = self.offsets_m.iter().map(|&s| r(s)).collect();
         v.insert("offsets_m".into(), serde_json::json!(offsets));
-        if let Some(c) = &self.calibration {
-            v.insert(
-                "calibration".into(),
-                c.to_string_lossy().into_owned().into(),
-            );
+        for (key, file) in [
+            ("calibration", &self.calibration),
+            ("aberration", &self.aberration),
+        ] {
+            if let Some(f) = file {
+                v.insert(key.into(), f.to_string_lossy().into_owned().into());
+            }
         }
         // Plain numbers and strings: serialising cannot fail.
         serde_json::to_string_pretty(&serde_json::Value::Object(v)).unwrap_or_default() + "\n"
@@ -554,6 +584,18 @@ mod tests {
         std::fs::write(&file, GOOD).unwrap();
         let p = DisplayProfile::from_path(&file).unwrap();
         assert_eq!(p.calibration, Some(dir.join("slm.holocal")));
+        assert_eq!(p.aberration, None);
+        // The aberration file likewise; written back and read again, the same profile; empty: refused.
+        let with_aberration = GOOD.replacen("{", r#"{ "aberration": "eye.json","#, 1);
+        std::fs::write(&file, &with_aberration).unwrap();
+        let p = DisplayProfile::from_path(&file).unwrap();
+        assert_eq!(p.aberration, Some(dir.join("eye.json")));
+        assert_eq!(DisplayProfile::from_json_str(&p.to_json()).unwrap(), p);
+        let empty = GOOD.replacen("{", r#"{ "aberration": "","#, 1);
+        match DisplayProfile::from_json_str(&empty) {
+            Err(HoloError::InvalidParameter { name, .. }) => assert_eq!(name, "aberration"),
+            other => panic!("{other:?}"),
+        }
         std::fs::remove_dir_all(&dir).unwrap();
         assert!(matches!(
             DisplayProfile::from_path(dir.join("absent.json")),

@@ -1,0 +1,169 @@
+//! `holo render | video --aberration FILE` and the display profile's `aberration` key (docs/ABERRATION.md):
+//! the viewer's aberrations corrected with the shipped CNNs, reported in report.json; bad aberration files
+//! refused naming the field, with nothing written.
+
+mod common;
+
+use std::path::Path;
+
+use common::{holo, stderr};
+
+/// A viewer's astigmatism, the same at every distance (radians at the pupil edge).
+const EYE: &str = r#"{
+  "format": "tensorholo.aberration",
+  "version": 1,
+  "samples": [
+    {"distance_m": 0.0, "coefficients": {"focus": 3.5, "astigmatism_vertical": -7.0}}
+  ]
+}"#;
+
+/// Display optics whose coma changes with distance.
+const VARYING: &str = r#"{
+  "format": "tensorholo.aberration",
+  "version": 1,
+  "pixel_pitch_m": 8e-6,
+  "samples": [
+    {"distance_m": -0.02, "coefficients": {"coma_horizontal": 9.0}},
+    {"distance_m": 0.02, "coefficients": {"coma_horizontal": -3.0}}
+  ]
+}"#;
+
+fn render(extra: &[&str], out: &Path) -> std::process::Output {
+    let mut args = vec!["render", "--size", "40x56", "--repeat", "0"];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+    holo(&args)
+}
+
+fn report(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn render_corrects_from_the_flag_or_the_profile_key_and_reports_what_it_applied() {
+    let dir = tempfile::tempdir().unwrap();
+    let eye = dir.path().join("eye.json");
+    std::fs::write(&eye, EYE).unwrap();
+    let plain = dir.path().join("plain");
+    assert!(render(&[], &plain).status.success());
+
+    let flag = dir.path().join("flag");
+    let o = render(&["--aberration", eye.to_str().unwrap()], &flag);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = report(&flag);
+    let applied = &r["models"]["aberration"]["applied"];
+    assert_eq!(applied["exact"], true);
+    assert_eq!(applied["distance_m"], -0.006);
+    assert_eq!(applied["coefficients"][1]["astigmatism_vertical"], -7.0);
+    // AA-DPM, not the DDPM pre-filter, and the CPU.
+    assert!(r["models"]["prefilter_cnn"].is_null());
+    assert!(r["models"]["prefilter_reason"]
+        .as_str()
+        .unwrap()
+        .contains("aberration correction"));
+    assert_eq!(r["backend"]["active"], "cpu");
+    let png = |d: &Path| std::fs::read(d.join("phase_g.png")).unwrap();
+    assert_ne!(
+        png(&flag),
+        png(&plain),
+        "the correction changes the pattern"
+    );
+
+    // The profile's key, relative to the profile's folder: the same pattern as the flag.
+    let profile = dir.path().join("display.json");
+    std::fs::write(
+        &profile,
+        r#"{"pixel_pitch_m": 8e-6, "resolution": [40, 56], "wavelengths_m": [638e-9, 520e-9, 450e-9],
+            "volume_depth_m": 6e-3, "offsets_m": [6e-3], "aberration": "eye.json"}"#,
+    )
+    .unwrap();
+    let keyed = dir.path().join("keyed");
+    let o = render(&["--display", profile.to_str().unwrap()], &keyed);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(png(&keyed), png(&flag));
+
+    // Coefficients that change with distance: applied at the midpoint plane, the residual reported.
+    let varying = dir.path().join("varying.json");
+    std::fs::write(&varying, VARYING).unwrap();
+    let out = dir.path().join("varying");
+    let o = render(&["--aberration", varying.to_str().unwrap()], &out);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let applied = report(&out)["models"]["aberration"]["applied"].clone();
+    assert_eq!(applied["exact"], false);
+    let coma = applied["coefficients"][0]["coma_horizontal"]
+        .as_f64()
+        .unwrap();
+    assert!((coma - 4.8).abs() < 1e-9, "{coma}");
+    let residual = applied["residual_rms_rad"][0].as_f64().unwrap();
+    assert!(residual > 0.0 && residual < 1.0, "{residual}");
+}
+
+#[test]
+fn bad_aberration_files_are_refused_naming_the_field_and_nothing_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&str, String, &str); 6] = [
+        (
+            "infinite",
+            EYE.replace("3.5", "1e999"),
+            "aberration profile",
+        ),
+        (
+            "unsorted",
+            VARYING.replace("-0.02", "0.03"),
+            "sorted by strictly increasing distance_m",
+        ),
+        ("pitch", VARYING.replace("8e-6", "4e-6"), "pixel_pitch_m"),
+        (
+            "lasers",
+            EYE.replace(
+                "\"version\": 1,",
+                "\"version\": 1, \"wavelengths_m\": [640e-9, 532e-9, 450e-9],",
+            ),
+            "wavelengths_m",
+        ),
+        ("not json", "focus 3".to_string(), "aberration profile"),
+        (
+            "unknown",
+            EYE.replace("\"focus\"", "\"defocus\""),
+            "defocus",
+        ),
+    ];
+    for (name, text, says) in cases {
+        let file = dir.path().join(format!("{}.json", name.replace(' ', "_")));
+        std::fs::write(&file, &text).unwrap();
+        let out = dir.path().join(format!("out_{}", name.replace(' ', "_")));
+        let o = render(&["--aberration", file.to_str().unwrap()], &out);
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{name}");
+        assert!(e.contains(says), "{name}: {e}");
+        assert!(e.contains("--aberration"), "{name}: {e}");
+        assert!(!e.contains("panicked"), "{name}: {e}");
+        assert!(!out.exists(), "{name}: wrote {}", out.display());
+    }
+
+    // The profile's aberration file is missing: named, nothing written.
+    let profile = dir.path().join("display.json");
+    std::fs::write(
+        &profile,
+        r#"{"pixel_pitch_m": 8e-6, "resolution": [40, 56], "wavelengths_m": [638e-9, 520e-9, 450e-9],
+            "volume_depth_m": 6e-3, "offsets_m": [6e-3], "aberration": "absent.json"}"#,
+    )
+    .unwrap();
+    let out = dir.path().join("out_missing");
+    let o = render(&["--display", profile.to_str().unwrap()], &out);
+    let e = stderr(&o);
+    assert!(!o.status.success());
+    assert!(e.contains("absent.json"), "{e}");
+    assert!(!out.exists());
+
+    // --prefilter asks for the pre-filter that a correction drops.
+    let eye = dir.path().join("eye.json");
+    std::fs::write(&eye, EYE).unwrap();
+    let out = dir.path().join("out_prefilter");
+    let o = render(
+        &["--aberration", eye.to_str().unwrap(), "--prefilter"],
+        &out,
+    );
+    assert!(!o.status.success());
+    assert!(!out.exists());
+}
