@@ -7,7 +7,9 @@ use tensorholo::cnn::ThreadCount;
 use tensorholo::generator as core;
 use tensorholo::optics::OpticalSetup;
 use tensorholo::scene::DepthRange;
+use tensorholo::synthesis::aberration::AberrationProfile;
 
+use crate::display::Prescription;
 use crate::enums::{Backend, CnnEngine, GpuPrecision, Precision, PrefilterMode, SceneInput};
 use crate::error::{invalid, Result};
 use crate::frames::Fit;
@@ -85,6 +87,15 @@ pub struct GeneratorConfig {
     /// kernels differ (another CPU class).
     #[uniffi(default = None)]
     pub saved_plans: Option<String>,
+    /// The viewer's spectacle prescription, corrected in every frame (`docs/ABERRATION.md`); `None`
+    /// (default): none. Give one (a zero one will do) to let [`HologramGenerator::set_prescription`](crate::HologramGenerator::set_prescription)
+    /// change it between frames (a slider). Frames then run on the CPU with AA-DPM.
+    #[uniffi(default = None)]
+    pub prescription: Option<Prescription>,
+    /// Measured aberrations, the JSON text of a `tensorholo.aberration` file (`holo calibrate aberration`),
+    /// corrected as `prescription`; at most one of the two. `None` (default): none.
+    #[uniffi(default = None)]
+    pub aberration: Option<String>,
 }
 
 impl GeneratorConfig {
@@ -148,6 +159,11 @@ impl GeneratorConfig {
             Some(json) => Some(Arc::new(tensorholo::cnn::SavedPlans::from_json(json)?)),
             None => None,
         };
+        c.prescription = self.prescription.map(Into::into);
+        c.aberration = match &self.aberration {
+            Some(json) => Some(AberrationProfile::from_json_str(json, "aberration")?),
+            None => None,
+        };
         c.validate()?;
         Ok(c)
     }
@@ -183,6 +199,8 @@ impl From<core::GeneratorConfig> for GeneratorConfig {
             wavelength_ratio_tolerance: c.wavelength_ratio_tolerance,
             tune: c.tune,
             saved_plans: c.saved_plans.map(|p| p.to_json()),
+            prescription: c.prescription.map(Into::into),
+            aberration: c.aberration.map(|a| a.to_json_string()),
         }
     }
 }
@@ -298,6 +316,8 @@ pub(crate) mod tests {
             wavelength_ratio_tolerance: None,
             tune: false,
             saved_plans: None,
+            prescription: None,
+            aberration: None,
         }
     }
 }

@@ -39,6 +39,56 @@ pub struct DisplayProfile {
     /// passes them to [`HologramGenerator::set_calibration`].
     #[uniffi(default = None)]
     pub calibration: Option<String>,
+    /// `aberration`: the viewer's or the optics' aberration file (`tensorholo.aberration`,
+    /// `docs/ABERRATION.md`) as the profile gives it, or `None` (default). Not read by the library: the app
+    /// passes the file's text as [`GeneratorConfig::aberration`].
+    #[uniffi(default = None)]
+    pub aberration: Option<String>,
+    /// `prescription`: the viewer's spectacle prescription, or `None` (default); at most one of `aberration`
+    /// and `prescription`. [`generator_config_for_display`] carries it into the configuration.
+    #[uniffi(default = None)]
+    pub prescription: Option<Prescription>,
+}
+
+/// A viewer's spectacle prescription, corrected in every frame with the shipped CNNs (`docs/ABERRATION.md`,
+/// "A viewer's prescription"): the display shows the hologram as this lens would let the viewer see it.
+/// Ophthalmic conventions: a myope's sphere is negative; the axis is degrees counterclockwise from the
+/// horizontal as the viewer sees the image.
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct Prescription {
+    /// Sphere in dioptres (negative for a myope), within ±20.
+    pub sphere_d: f64,
+    /// Cylinder in dioptres (either sign), within ±10; 0 (default) without astigmatism.
+    #[uniffi(default = 0.0)]
+    pub cylinder_d: f64,
+    /// The cylinder's axis in degrees, 0–180; required with a cylinder (default `None`).
+    #[uniffi(default = None)]
+    pub axis_deg: Option<f64>,
+    /// Focal length of the display's eyepiece in metres (default 0.021, the paper's).
+    #[uniffi(default = 0.021)]
+    pub eyepiece_focal_m: f64,
+}
+
+impl From<Prescription> for core_display::Prescription {
+    fn from(p: Prescription) -> Self {
+        Self {
+            sphere_d: p.sphere_d,
+            cylinder_d: p.cylinder_d,
+            axis_deg: p.axis_deg,
+            eyepiece_focal_m: p.eyepiece_focal_m,
+        }
+    }
+}
+
+impl From<core_display::Prescription> for Prescription {
+    fn from(p: core_display::Prescription) -> Self {
+        Self {
+            sphere_d: p.sphere_d,
+            cylinder_d: p.cylinder_d,
+            axis_deg: p.axis_deg,
+            eyepiece_focal_m: p.eyepiece_focal_m,
+        }
+    }
 }
 
 impl DisplayProfile {
@@ -56,7 +106,9 @@ impl DisplayProfile {
             self.volume_depth_m,
             self.offsets_m.clone(),
             self.calibration.clone().map(Into::into),
-        )?)
+        )?
+        .with_aberration_file(self.aberration.clone().map(Into::into))?
+        .with_prescription(self.prescription.map(Into::into))?)
     }
 
     /// The record of a core profile.
@@ -83,13 +135,15 @@ impl DisplayProfile {
             offsets_m: p.offsets_m,
             name: p.name,
             calibration: p.calibration.map(|c| c.to_string_lossy().into_owned()),
+            aberration: p.aberration.map(|c| c.to_string_lossy().into_owned()),
+            prescription: p.prescription.map(Into::into),
         })
     }
 }
 
 /// Reads a display profile from its JSON text (a profile file's contents, `docs/DISPLAYS.md`): keys
-/// `pixel_pitch_m`, `resolution`, `wavelengths_m`, `volume_depth_m`, `offsets_m` (SI units), optional `name`
-/// and `calibration`; unknown keys are refused.
+/// `pixel_pitch_m`, `resolution`, `wavelengths_m`, `volume_depth_m`, `offsets_m` (SI units), optional `name`,
+/// `calibration`, `aberration` and `prescription`; unknown keys are refused.
 ///
 /// Errors: [`TensorholoError::InvalidInput`] whose message names the key at fault (a missing key, a wrong
 /// type or array length, a non-positive pitch or volume, a wavelength outside 380–780 nm, an unknown key) or
@@ -100,7 +154,8 @@ pub fn display_profile_from_json(json: String) -> Result<DisplayProfile> {
 }
 
 /// The [`GeneratorConfig`] for a display: `width`/`height` from its `resolution`, its pitch, lasers and
-/// volume, its first offset; every other field at its default (change them before making the generator).
+/// volume, its first offset, its prescription; every other field at its default (change them before making
+/// the generator; the profile's `aberration` file is the app's to read into [`GeneratorConfig::aberration`]).
 ///
 /// Errors: [`TensorholoError::InvalidInput`] naming the key for a profile that breaks the profile rules (as
 /// [`display_profile_from_json`]). Whether the CNNs serve the display is checked by [`HologramGenerator::new`]

@@ -7,6 +7,7 @@ use tensorholo::generator as core;
 use tensorholo::scene;
 
 use crate::config::GeneratorConfig;
+use crate::display::Prescription;
 use crate::error::{guard, invalid, Result, TensorholoError};
 use crate::frames::{Preview, RgbdFrame, SlmPatterns, StageTimings};
 use crate::stream::{HologramStream, PatternsListener};
@@ -66,6 +67,10 @@ pub struct GeneratorInfo {
     /// 1.5 mm ↔ 6 mm trained; wavelength mismatch 0.00 % (tolerance 0.50 %); non-paraxial residual 0.084 rad
     /// (bound 0.25 rad)" (`docs/DISPLAYS.md`).
     pub display_mapping: String,
+    /// The viewer's aberration correction ([`HologramGenerator::set_prescription`]), in words: the distance
+    /// whose coefficients apply and, for coefficients that change with distance, the residual left over the
+    /// volume (radians RMS, R/G/B); `None` without one.
+    pub aberration: Option<String>,
     /// Everything above and the autotuning timings, as JSON.
     pub json: String,
 }
@@ -216,6 +221,37 @@ impl HologramGenerator {
         })
     }
 
+    /// Replaces the viewer's prescription of the frames rendered from now on and of streams started later
+    /// (`None`: none), without a new generator: a prescription slider. Make the generator with a
+    /// prescription in its configuration (a zero one will do) so that it encodes with AA-DPM.
+    ///
+    /// Errors: [`TensorholoError::InvalidInput`] naming the field (`sphere_d` beyond ±20 D, a cylinder
+    /// without `axis_deg`, an axis outside 0–180°, …), or on a generator whose frames run on the GPU; the
+    /// generator keeps its correction.
+    pub fn set_prescription(&self, prescription: Option<Prescription>) -> Result<()> {
+        guard(|| Ok(self.inner.set_prescription(prescription.map(Into::into))?))
+    }
+
+    /// [`HologramGenerator::set_prescription`] with measured aberrations: the JSON text of a
+    /// `tensorholo.aberration` file, or `None` for none.
+    ///
+    /// Errors: [`TensorholoError::InvalidInput`] for text that is not such a file (the message says what),
+    /// one calibrated for another pitch or other lasers, or on a generator whose frames run on the GPU.
+    pub fn set_aberration(&self, aberration: Option<String>) -> Result<()> {
+        guard(|| {
+            let profile = aberration
+                .map(|json| {
+                    tensorholo::synthesis::aberration::AberrationProfile::from_json_str(
+                        &json,
+                        "aberration",
+                    )
+                })
+                .transpose()?
+                .map(Arc::new);
+            Ok(self.inner.set_aberration(profile)?)
+        })
+    }
+
     /// The models, precision, pre-filter and CNN plan this generator runs.
     pub fn info(&self) -> Result<GeneratorInfo> {
         guard(|| info(&self.inner))
@@ -278,6 +314,17 @@ fn info(g: &core::HologramGenerator) -> Result<GeneratorInfo> {
         gpu_adapter: i.backend.adapter,
         calibration: i.calibration,
         display_mapping: i.display_mapping,
+        aberration: i.aberration.as_ref().map(|a| {
+            let r = a.residual_rms_rad;
+            if a.exact {
+                format!("the coefficients at d = {} m, exact", a.distance_m)
+            } else {
+                format!(
+                    "the coefficients at d = {} m; {:.3}/{:.3}/{:.3} rad RMS left over the volume (R/G/B)",
+                    a.distance_m, r[0], r[1], r[2]
+                )
+            }
+        }),
         json,
     })
 }
@@ -288,6 +335,7 @@ mod tests {
     use crate::config::tests::config;
     #[cfg(feature = "embedded-models")]
     use crate::display::tests::PROFILE_4UM;
+    use crate::display::Prescription;
     #[cfg(feature = "embedded-models")]
     use crate::display::{display_profile_from_json, generator_config_for_display};
     use crate::enums::CnnEngine;
@@ -352,6 +400,69 @@ mod tests {
             .unwrap_err();
             assert!(matches!(e, TensorholoError::InvalidInput { .. }), "{e:?}");
         }
+    }
+
+    /// A prescription slider: a generator made with a zero prescription encodes with AA-DPM and takes
+    /// prescriptions between frames; each frame equals a generator made with that prescription; a bad one is
+    /// `InvalidInput` naming the field and changes nothing; measured aberrations as text work alike.
+    #[cfg(feature = "embedded-models")]
+    #[test]
+    fn a_prescription_slider_changes_the_patterns_without_a_new_generator() {
+        let rx = |sphere_d: f64, cylinder_d: f64, axis_deg: Option<f64>| Prescription {
+            sphere_d,
+            cylinder_d,
+            axis_deg,
+            eyepiece_focal_m: 0.021,
+        };
+        let made = |p: Prescription| {
+            HologramGenerator::new(GeneratorConfig {
+                prescription: Some(p),
+                ..config(48, 32)
+            })
+            .unwrap()
+        };
+        let codes = |g: &HologramGenerator| {
+            let p = g.render(frame()).unwrap();
+            [p.red, p.green, p.blue]
+        };
+        let g = made(rx(0.0, 0.0, None));
+        let info = g.info().unwrap();
+        assert!(info.prefilter_model.is_none(), "{info:?}");
+        assert!(info.aberration.unwrap().contains("exact"));
+        let plain = codes(&g);
+        for p in [rx(-2.0, 0.0, None), rx(-1.0, -1.5, Some(30.0))] {
+            g.set_prescription(Some(p)).unwrap();
+            let now = codes(&g);
+            assert_ne!(now, plain, "{p:?}");
+            assert_eq!(now, codes(&made(p)), "{p:?}");
+        }
+        let before = codes(&g);
+        for (bad, field) in [
+            (rx(-25.0, 0.0, None), "sphere_d"),
+            (rx(-1.0, -1.0, None), "axis_deg"),
+            (rx(-1.0, -1.0, Some(200.0)), "axis_deg"),
+        ] {
+            match g.set_prescription(Some(bad)) {
+                Err(TensorholoError::InvalidInput { message }) => {
+                    assert!(message.contains(field), "{message}")
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        assert_eq!(codes(&g), before, "a refused prescription changes nothing");
+        g.set_aberration(Some(
+            r#"{"format": "tensorholo.aberration", "version": 1,
+                "samples": [{"distance_m": 0, "coefficients": {"astigmatism_oblique": 2}}]}"#
+                .into(),
+        ))
+        .unwrap();
+        assert_ne!(codes(&g), before);
+        assert!(matches!(
+            g.set_aberration(Some("{}".into())),
+            Err(TensorholoError::InvalidInput { .. })
+        ));
+        g.set_prescription(None).unwrap();
+        assert!(g.info().unwrap().aberration.is_none());
     }
 
     fn model_file(name: &str) -> Vec<u8> {

@@ -10,7 +10,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use tensorholo::cnn::{CnnEngine, CnnLayout, ThreadCount};
-use tensorholo::display::DisplayProfile;
+use tensorholo::display::{DisplayProfile, Prescription};
 use tensorholo::evaluation::{focal_depths, table2};
 use tensorholo::model::{contract, HologramModel, ModelConfig, ModelKind, Precision, SceneInput};
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
@@ -20,7 +20,7 @@ use tensorholo::pipeline::{
 };
 use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
 use tensorholo::scene::RgbdFrame;
-use tensorholo::synthesis::SmLbm;
+use tensorholo::synthesis::{AberrationProfile, SmLbm};
 
 use crate::args::Scene;
 
@@ -216,6 +216,17 @@ pub struct ModelArgs {
     /// DDPM pre-filters were trained on uncorrected fields.
     #[arg(long, conflicts_with = "prefilter")]
     pub aberration: Option<PathBuf>,
+    /// The viewer's spectacle prescription, corrected in every frame as an aberration file is:
+    /// SPHERE or SPHERE,CYLINDER,AXIS in dioptres and degrees, ophthalmic conventions (a myope's sphere is negative;
+    /// the axis is counterclockwise from the horizontal as the viewer sees the image), e.g.
+    /// --prescription=-2.00,-0.75,30. Overrides the --display profile's `prescription`
+    /// (docs/ABERRATION.md, "A viewer's prescription").
+    #[arg(long, allow_hyphen_values = true, conflicts_with_all = ["aberration", "prefilter"])]
+    pub prescription: Option<String>,
+    /// Focal length of the display's eyepiece in millimetres, for --prescription (the viewer's pupil sits at
+    /// its back focal plane; default: the paper's 21 mm).
+    #[arg(long, requires = "prescription")]
+    pub eyepiece_mm: Option<f64>,
     #[command(flatten)]
     pub encoding: crate::args::EncodingArgs,
     #[command(flatten)]
@@ -260,11 +271,43 @@ impl ModelArgs {
         .collect())
     }
 
-    /// The aberration file of this run: `--aberration`, else the profile's `aberration`.
-    fn aberration_file(&self, profile: Option<&DisplayProfile>) -> Option<PathBuf> {
-        self.aberration
-            .clone()
-            .or_else(|| profile.and_then(|p| p.aberration.clone()))
+    /// The aberration correction of this run, as `(what, json, profile)`: `--aberration`, `--prescription`,
+    /// else the profile's `aberration` or `prescription`; `None` without one.
+    fn aberration(
+        &self,
+        profile: Option<&DisplayProfile>,
+        optics: &tensorholo::optics::OpticalSetup,
+    ) -> Result<Option<(String, serde_json::Value, AberrationProfile)>> {
+        let from_file = |flag: &str, path: &std::path::Path| -> Result<_> {
+            Ok(Some((
+                format!("{flag} {}", path.display()),
+                json!({ "file": crate::output::path_text(path) }),
+                crate::aberration::load(path)?,
+            )))
+        };
+        let from_prescription = |flag: &str, rx: Prescription| -> Result<_> {
+            let p = AberrationProfile::from_prescription(&rx, optics)
+                .with_context(|| flag.to_string())?;
+            Ok(Some((flag.to_string(), json!({ "prescription": rx }), p)))
+        };
+        if let Some(path) = &self.aberration {
+            return from_file("--aberration", path);
+        }
+        if let Some(text) = &self.prescription {
+            let rx = parse_prescription(text, self.eyepiece_mm)?;
+            return from_prescription("--prescription", rx);
+        }
+        match profile {
+            Some(DisplayProfile {
+                aberration: Some(path),
+                ..
+            }) => from_file("the --display profile's aberration", path),
+            Some(DisplayProfile {
+                prescription: Some(rx),
+                ..
+            }) => from_prescription("the --display profile's prescription", *rx),
+            _ => Ok(None),
+        }
     }
 
     /// The offset in millimetres: `--offset-mm`, else the profile's first offset, else 6.
@@ -383,21 +426,20 @@ impl ModelArgs {
                 .with_calibration(Arc::new(cal))
                 .with_context(|| format!("--calibration {}", path.display()))?;
         }
-        let aberration_file = self.aberration_file(profile.as_ref());
         let mut aberration = None;
-        if let Some(path) = &aberration_file {
-            let what = format!("--aberration {}", path.display());
+        if let Some((what, mut source, profile)) =
+            self.aberration(profile.as_ref(), &config.optics)?
+        {
             if self.prefilter {
                 bail!(
                     "{what}: --prefilter requires the DDPM pre-filter CNN, which was trained on uncorrected \
                      fields and falls below AA-DPM on corrected ones (docs/ABERRATION.md); drop --prefilter"
                 );
             }
-            let profile = Arc::new(crate::aberration::load(path)?);
+            let profile = Arc::new(profile);
             let report = AberrationReport::new(&profile, &config.optics, config.offset_m);
             log::info!(
-                "aberration correction {}: the coefficients at d = {} m, {}",
-                path.display(),
+                "aberration correction ({what}): the coefficients at d = {} m, {}",
                 report.distance_m,
                 if report.exact {
                     "exact (the same at every distance)".to_string()
@@ -413,10 +455,8 @@ impl ModelArgs {
             pipeline = pipeline
                 .with_aberration(profile)
                 .with_context(|| what.clone())?;
-            aberration = Some(json!({
-                "file": crate::output::path_text(path),
-                "applied": report,
-            }));
+            source["applied"] = json!(report);
+            aberration = Some(source);
         }
         if pipeline.prefilter_model().is_none() {
             log::info!(
@@ -475,6 +515,37 @@ impl ModelArgs {
         });
         Ok((pipeline, info))
     }
+}
+
+/// `--prescription SPHERE[,CYLINDER,AXIS]` (dioptres, degrees) behind an eyepiece of `eyepiece_mm`
+/// millimetres (21 by default).
+fn parse_prescription(text: &str, eyepiece_mm: Option<f64>) -> Result<Prescription> {
+    let numbers = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<std::result::Result<Vec<f64>, _>>()
+        .map_err(|_| {
+            anyhow::anyhow!(
+                "--prescription {text:?}: expected SPHERE or SPHERE,CYLINDER,AXIS (dioptres, dioptres, \
+                 degrees), e.g. --prescription=-2.00,-0.75,30"
+            )
+        })?;
+    let (sphere, cylinder, axis) = match numbers[..] {
+        [s] => (s, 0.0, None),
+        [s, c, a] => (s, c, Some(a)),
+        _ => bail!(
+            "--prescription {text:?}: give SPHERE or SPHERE,CYLINDER,AXIS (3 values with a cylinder: its \
+             axis is needed), got {} values",
+            numbers.len()
+        ),
+    };
+    let mut rx = Prescription::new(sphere, cylinder, axis)
+        .with_context(|| format!("--prescription {text}"))?;
+    if let Some(mm) = eyepiece_mm {
+        rx.eyepiece_focal_m = mm * 1e-3;
+        rx.validate().context("--eyepiece-mm")?;
+    }
+    Ok(rx)
 }
 
 /// Arguments of `holo render`.

@@ -167,3 +167,52 @@ fn bad_aberration_files_are_refused_naming_the_field_and_nothing_is_written() {
     assert!(!o.status.success());
     assert!(!out.exists());
 }
+
+#[test]
+fn a_prescription_from_the_flag_or_the_profile_is_corrected_and_bad_ones_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let flag = dir.path().join("flag");
+    let o = render(&["--prescription=-2.00,-0.75,30"], &flag);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = report(&flag);
+    let a = &r["models"]["aberration"];
+    assert_eq!(a["prescription"]["sphere_d"], -2.0);
+    assert_eq!(a["prescription"]["axis_deg"], 30.0);
+    assert_eq!(a["prescription"]["eyepiece_focal_m"], 0.021);
+    assert_eq!(a["applied"]["exact"], true);
+    // Green, 8 µm, 21 mm: k = π·λ·f_e²/(4p²) = 2.8143 rad per dioptre; focus −k·(S + C/2)/2.
+    let focus = a["applied"]["coefficients"][1]["focus"].as_f64().unwrap();
+    assert!((focus - 2.8143 * 2.375 / 2.0).abs() < 1e-3, "{focus}");
+
+    let profile = dir.path().join("display.json");
+    std::fs::write(
+        &profile,
+        r#"{"pixel_pitch_m": 8e-6, "resolution": [40, 56], "wavelengths_m": [638e-9, 520e-9, 450e-9],
+            "volume_depth_m": 6e-3, "offsets_m": [6e-3],
+            "prescription": {"sphere_d": -2.0, "cylinder_d": -0.75, "axis_deg": 30}}"#,
+    )
+    .unwrap();
+    let keyed = dir.path().join("keyed");
+    let o = render(&["--display", profile.to_str().unwrap()], &keyed);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let png = |d: &Path| std::fs::read(d.join("phase_g.png")).unwrap();
+    assert_eq!(png(&keyed), png(&flag));
+
+    for (value, says) in [
+        ("--prescription=-25", "sphere_d"),
+        ("--prescription=-2,-1", "3 values"),
+        ("--prescription=-2,-1,200", "axis_deg"),
+        ("--prescription=two", "SPHERE,CYLINDER,AXIS"),
+    ] {
+        let out = dir.path().join("bad");
+        let o = render(&[value], &out);
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{value}");
+        assert!(e.contains(says), "{value}: {e}");
+        assert!(!out.exists(), "{value}");
+    }
+    let out = dir.path().join("bad");
+    let o = render(&["--prescription=-2", "--eyepiece-mm", "0.021"], &out);
+    assert!(stderr(&o).contains("eyepiece"), "{}", stderr(&o));
+    assert!(!out.exists());
+}

@@ -18,6 +18,7 @@ use std::sync::Arc;
 use common::viewer::{psnr_in, seen, Lens, EYEPIECE_M};
 use ndarray::{Array3, Axis};
 use num_complex::Complex32;
+use tensorholo::display::Prescription;
 use tensorholo::encoding::double_phase_encode;
 use tensorholo::model::Precision;
 use tensorholo::optics::{
@@ -258,15 +259,21 @@ fn shown(
 }
 
 /// Focal-stack PSNRs against what the CNN's own midpoint hologram shows without the lens: (plain display
-/// without the lens, plain display through it, corrected display through it). The plain pipeline runs the
-/// shipped DDPM pre-filter; the corrected one AA-DPM (`with_aberration`).
-fn through_the_lens(precision: Precision, lens: Lens, frame: &RgbdFrame) -> (f64, f64, f64) {
+/// without the lens, plain display through `eye`, display corrected with `profile` through `eye`). The plain
+/// pipeline runs in `plain_mode` (`Auto`: the shipped DDPM pre-filter; `Off`: AA-DPM); the corrected one
+/// AA-DPM (`with_aberration`).
+fn through(
+    precision: Precision,
+    plain_mode: PrefilterMode,
+    profile: Arc<AberrationProfile>,
+    eye: Lens,
+    frame: &RgbdFrame,
+) -> (f64, f64, f64) {
     let (h, w) = (frame.height(), frame.width());
-    let plain = pipeline(precision, PrefilterMode::Auto);
-    assert!(plain.prefilter_model().is_some());
+    let plain = pipeline(precision, plain_mode);
     let setup = plain.config().optics;
     let corrected = pipeline(precision, PrefilterMode::Auto)
-        .with_aberration(correction(&lens, &setup))
+        .with_aberration(profile)
         .unwrap();
     let mut plain_session = plain.session(h, w).unwrap();
     let plain_shown = shown(&mut plain_session, frame, &setup);
@@ -274,8 +281,8 @@ fn through_the_lens(precision: Precision, lens: Lens, frame: &RgbdFrame) -> (f64
     let corrected_shown = shown(&mut corrected.session(h, w).unwrap(), frame, &setup);
     (
         focal_stack_psnr(&target, &plain_shown, &setup, None, None),
-        focal_stack_psnr(&target, &plain_shown, &setup, None, Some(lens)),
-        focal_stack_psnr(&target, &corrected_shown, &setup, None, Some(lens)),
+        focal_stack_psnr(&target, &plain_shown, &setup, None, Some(eye)),
+        focal_stack_psnr(&target, &corrected_shown, &setup, None, Some(eye)),
     )
 }
 
@@ -284,7 +291,9 @@ fn a_viewer_through_a_cylindrical_lens_sees_the_corrected_display_as_the_plain_o
     let frame = real_frame(192, 256);
     for precision in [Precision::F32, Precision::Int8Qdq] {
         for lens in [Lens::cylinder(0.2, 90.0), Lens::cylinder(0.05, 30.0)] {
-            let (without, through, corrected) = through_the_lens(precision, lens, &frame);
+            let profile = correction(&lens, &OpticalSetup::default());
+            let (without, through, corrected) =
+                through(precision, PrefilterMode::Auto, profile, lens, &frame);
             eprintln!(
                 "{precision:?}, {lens:?}: plain without the lens {without:.2} dB, plain through it \
                  {through:.2} dB, corrected through it {corrected:.2} dB"
@@ -405,4 +414,47 @@ fn the_ddpm_prefilter_falls_below_aa_dpm_on_corrected_fields() {
     }
     assert!(gains[0] > -0.5, "{gains:?}");
     assert!(gains[1] < 0.0 && gains[2] < -10.0, "{gains:?}");
+}
+
+/// A myopic, astigmatic viewer (−2.00 / −3.00 × 45°) behind the 21 mm eyepiece sees the display corrected for
+/// the prescription as well as an emmetropic viewer sees the plain display encoded alike (AA-DPM, the encoding
+/// of every corrected pipeline); the prescription's signs (the sphere's, and the axis counterclockwise as the
+/// viewer sees the image) are pinned: flipping either leaves the viewer far worse off. The plain display with
+/// the shipped DDPM pre-filter is printed beside (docs/ABERRATION.md gives the figures).
+#[test]
+fn a_myopic_astigmatic_eye_sees_the_prescription_corrected_display_as_an_emmetropic_eye_sees_the_plain_one(
+) {
+    let frame = real_frame(192, 256);
+    let setup = OpticalSetup::default();
+    let (sphere, cylinder, axis) = (-2.0, -3.0, 45.0);
+    // The eye's own error is the opposite of the lens that corrects it; its axis, counterclockwise as seen
+    // (image up = −y), is 180° − axis measured from +x toward +y (rows).
+    let eye = Lens {
+        sphere: -sphere,
+        cylinder: -cylinder,
+        axis_deg: 180.0 - axis,
+    };
+    let profile = |s: f64, a: f64| {
+        let rx = Prescription::new(s, cylinder, Some(a)).unwrap();
+        Arc::new(AberrationProfile::from_prescription(&rx, &setup).unwrap())
+    };
+    for precision in [Precision::F32, Precision::Int8Qdq] {
+        let run = |mode, s, a| through(precision, mode, profile(s, a), eye, &frame);
+        let (without, uncorrected, corrected) = run(PrefilterMode::Off, sphere, axis);
+        let (ddpm_without, _, _) = run(PrefilterMode::Auto, sphere, axis);
+        let (_, _, sphere_flipped) = run(PrefilterMode::Off, -sphere, axis);
+        let (_, _, axis_mirrored) = run(PrefilterMode::Off, sphere, 180.0 - axis);
+        eprintln!(
+            "{precision:?}, −2.00/−3.00×45: emmetropic eye, plain display {without:.2} dB (with the DDPM \
+             pre-filter {ddpm_without:.2} dB); the eye, plain display {uncorrected:.2} dB; corrected \
+             {corrected:.2} dB; sphere sign flipped {sphere_flipped:.2} dB; axis mirrored {axis_mirrored:.2} dB"
+        );
+        assert!(
+            (corrected - without).abs() <= 0.5,
+            "{corrected} vs {without}"
+        );
+        assert!(uncorrected < without - 3.0, "{uncorrected} vs {without}");
+        assert!(sphere_flipped < corrected - 3.0, "{sphere_flipped}");
+        assert!(axis_mirrored < corrected - 1.0, "{axis_mirrored}");
+    }
 }

@@ -673,6 +673,15 @@ public protocol HologramGeneratorProtocol: AnyObject, Sendable {
     func renderLdi(layers: [RgbdFrame]) throws  -> SlmPatterns
     
     /**
+     * [`HologramGenerator::set_prescription`] with measured aberrations: the JSON text of a
+     * `tensorholo.aberration` file, or `None` for none.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for text that is not such a file (the message says what),
+     * one calibrated for another pitch or other lasers, or on a generator whose frames run on the GPU.
+     */
+    func setAberration(aberration: String?) throws 
+    
+    /**
      * Applies a display calibration file (the bytes of a `.holocal` made by `holo calibrate`, e.g. bundled
      * with the app or downloaded per device) to the frames rendered from now on and to streams started
      * later; `None` returns to an ideal SLM (linear look-up tables, no intensity map). Its per-colour
@@ -684,6 +693,17 @@ public protocol HologramGeneratorProtocol: AnyObject, Sendable {
      * generator's, or one measured at other wavelengths; the generator keeps its calibration.
      */
     func setCalibration(calibration: Data?) throws 
+    
+    /**
+     * Replaces the viewer's prescription of the frames rendered from now on and of streams started later
+     * (`None`: none), without a new generator: a prescription slider. Make the generator with a
+     * prescription in its configuration (a zero one will do) so that it encodes with AA-DPM.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] naming the field (`sphere_d` beyond ±20 D, a cylinder
+     * without `axis_deg`, an axis outside 0–180°, …), or on a generator whose frames run on the GPU; the
+     * generator keeps its correction.
+     */
+    func setPrescription(prescription: Prescription?) throws 
     
     /**
      * Starts a video stream: [`HologramStream::push`] frames, results reach `listener` in frame order on a
@@ -877,6 +897,22 @@ open func renderLdi(layers: [RgbdFrame])throws  -> SlmPatterns  {
 }
     
     /**
+     * [`HologramGenerator::set_prescription`] with measured aberrations: the JSON text of a
+     * `tensorholo.aberration` file, or `None` for none.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for text that is not such a file (the message says what),
+     * one calibrated for another pitch or other lasers, or on a generator whose frames run on the GPU.
+     */
+open func setAberration(aberration: String?)throws   {try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_hologramgenerator_set_aberration(
+            self.uniffiCloneHandle(),
+        FfiConverterOptionString.lower(aberration),uniffiCallStatus
+    )
+}
+}
+    
+    /**
      * Applies a display calibration file (the bytes of a `.holocal` made by `holo calibrate`, e.g. bundled
      * with the app or downloaded per device) to the frames rendered from now on and to streams started
      * later; `None` returns to an ideal SLM (linear look-up tables, no intensity map). Its per-colour
@@ -892,6 +928,24 @@ open func setCalibration(calibration: Data?)throws   {try rustCallWithError(FfiC
     uniffi_tensorholo_ffi_fn_method_hologramgenerator_set_calibration(
             self.uniffiCloneHandle(),
         FfiConverterOptionData.lower(calibration),uniffiCallStatus
+    )
+}
+}
+    
+    /**
+     * Replaces the viewer's prescription of the frames rendered from now on and of streams started later
+     * (`None`: none), without a new generator: a prescription slider. Make the generator with a
+     * prescription in its configuration (a zero one will do) so that it encodes with AA-DPM.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] naming the field (`sphere_d` beyond ±20 D, a cylinder
+     * without `axis_deg`, an axis outside 0–180°, …), or on a generator whose frames run on the GPU; the
+     * generator keeps its correction.
+     */
+open func setPrescription(prescription: Prescription?)throws   {try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_hologramgenerator_set_prescription(
+            self.uniffiCloneHandle(),
+        FfiConverterOptionTypePrescription.lower(prescription),uniffiCallStatus
     )
 }
 }
@@ -1721,6 +1775,17 @@ public struct DisplayProfile: Equatable, Hashable {
      * passes them to [`HologramGenerator::set_calibration`].
      */
     public var calibration: String?
+    /**
+     * `aberration`: the viewer's or the optics' aberration file (`tensorholo.aberration`,
+     * `docs/ABERRATION.md`) as the profile gives it, or `None` (default). Not read by the library: the app
+     * passes the file's text as [`GeneratorConfig::aberration`].
+     */
+    public var aberration: String?
+    /**
+     * `prescription`: the viewer's spectacle prescription, or `None` (default); at most one of `aberration`
+     * and `prescription`. [`generator_config_for_display`] carries it into the configuration.
+     */
+    public var prescription: Prescription?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -1749,7 +1814,16 @@ public struct DisplayProfile: Equatable, Hashable {
          * `calibration`: the display's `.holocal` file as the profile gives it (a relative path stays relative),
          * or `None` (default) for an ideal SLM. Not read by the library: the app loads the file's bytes and
          * passes them to [`HologramGenerator::set_calibration`].
-         */calibration: String? = nil) {
+         */calibration: String? = nil, 
+        /**
+         * `aberration`: the viewer's or the optics' aberration file (`tensorholo.aberration`,
+         * `docs/ABERRATION.md`) as the profile gives it, or `None` (default). Not read by the library: the app
+         * passes the file's text as [`GeneratorConfig::aberration`].
+         */aberration: String? = nil, 
+        /**
+         * `prescription`: the viewer's spectacle prescription, or `None` (default); at most one of `aberration`
+         * and `prescription`. [`generator_config_for_display`] carries it into the configuration.
+         */prescription: Prescription? = nil) {
         self.pixelPitchM = pixelPitchM
         self.resolution = resolution
         self.wavelengthsM = wavelengthsM
@@ -1757,6 +1831,8 @@ public struct DisplayProfile: Equatable, Hashable {
         self.offsetsM = offsetsM
         self.name = name
         self.calibration = calibration
+        self.aberration = aberration
+        self.prescription = prescription
     }
 
     
@@ -1781,7 +1857,9 @@ public struct FfiConverterTypeDisplayProfile: FfiConverterRustBuffer {
                 volumeDepthM: FfiConverterDouble.read(from: &buf), 
                 offsetsM: FfiConverterSequenceDouble.read(from: &buf), 
                 name: FfiConverterOptionString.read(from: &buf), 
-                calibration: FfiConverterOptionString.read(from: &buf)
+                calibration: FfiConverterOptionString.read(from: &buf), 
+                aberration: FfiConverterOptionString.read(from: &buf), 
+                prescription: FfiConverterOptionTypePrescription.read(from: &buf)
         )
     }
 
@@ -1793,6 +1871,8 @@ public struct FfiConverterTypeDisplayProfile: FfiConverterRustBuffer {
         FfiConverterSequenceDouble.write(value.offsetsM, into: &buf)
         FfiConverterOptionString.write(value.name, into: &buf)
         FfiConverterOptionString.write(value.calibration, into: &buf)
+        FfiConverterOptionString.write(value.aberration, into: &buf)
+        FfiConverterOptionTypePrescription.write(value.prescription, into: &buf)
     }
 }
 
@@ -1908,6 +1988,17 @@ public struct GeneratorConfig: Equatable, Hashable {
      * kernels differ (another CPU class).
      */
     public var savedPlans: String?
+    /**
+     * The viewer's spectacle prescription, corrected in every frame (`docs/ABERRATION.md`); `None`
+     * (default): none. Give one (a zero one will do) to let [`HologramGenerator::set_prescription`](crate::HologramGenerator::set_prescription)
+     * change it between frames (a slider). Frames then run on the CPU with AA-DPM.
+     */
+    public var prescription: Prescription?
+    /**
+     * Measured aberrations, the JSON text of a `tensorholo.aberration` file (`holo calibrate aberration`),
+     * corrected as `prescription`; at most one of the two. `None` (default): none.
+     */
+    public var aberration: String?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -1982,7 +2073,16 @@ public struct GeneratorConfig: Equatable, Hashable {
          * `tensorholo.cnn-plans` JSON text): repeated without timing, so every run gives the same codes.
          * `None` (default): the plan table (or `tune`). Refused with `tune`, or when made on a device whose
          * kernels differ (another CPU class).
-         */savedPlans: String? = nil) {
+         */savedPlans: String? = nil, 
+        /**
+         * The viewer's spectacle prescription, corrected in every frame (`docs/ABERRATION.md`); `None`
+         * (default): none. Give one (a zero one will do) to let [`HologramGenerator::set_prescription`](crate::HologramGenerator::set_prescription)
+         * change it between frames (a slider). Frames then run on the CPU with AA-DPM.
+         */prescription: Prescription? = nil, 
+        /**
+         * Measured aberrations, the JSON text of a `tensorholo.aberration` file (`holo calibrate aberration`),
+         * corrected as `prescription`; at most one of the two. `None` (default): none.
+         */aberration: String? = nil) {
         self.width = width
         self.height = height
         self.layers = layers
@@ -2003,6 +2103,8 @@ public struct GeneratorConfig: Equatable, Hashable {
         self.wavelengthRatioTolerance = wavelengthRatioTolerance
         self.tune = tune
         self.savedPlans = savedPlans
+        self.prescription = prescription
+        self.aberration = aberration
     }
 
     
@@ -2040,7 +2142,9 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
                 engine: FfiConverterOptionTypeCnnEngine.read(from: &buf), 
                 wavelengthRatioTolerance: FfiConverterOptionDouble.read(from: &buf), 
                 tune: FfiConverterBool.read(from: &buf), 
-                savedPlans: FfiConverterOptionString.read(from: &buf)
+                savedPlans: FfiConverterOptionString.read(from: &buf), 
+                prescription: FfiConverterOptionTypePrescription.read(from: &buf), 
+                aberration: FfiConverterOptionString.read(from: &buf)
         )
     }
 
@@ -2065,6 +2169,8 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
         FfiConverterOptionDouble.write(value.wavelengthRatioTolerance, into: &buf)
         FfiConverterBool.write(value.tune, into: &buf)
         FfiConverterOptionString.write(value.savedPlans, into: &buf)
+        FfiConverterOptionTypePrescription.write(value.prescription, into: &buf)
+        FfiConverterOptionString.write(value.aberration, into: &buf)
     }
 }
 
@@ -2187,6 +2293,12 @@ public struct GeneratorInfo: Equatable, Hashable {
      */
     public var displayMapping: String
     /**
+     * The viewer's aberration correction ([`HologramGenerator::set_prescription`]), in words: the distance
+     * whose coefficients apply and, for coefficients that change with distance, the residual left over the
+     * volume (radians RMS, R/G/B); `None` without one.
+     */
+    public var aberration: String?
+    /**
      * Everything above and the autotuning timings, as JSON.
      */
     public var json: String
@@ -2270,6 +2382,11 @@ public struct GeneratorInfo: Equatable, Hashable {
          * (bound 0.25 rad)" (`docs/DISPLAYS.md`).
          */displayMapping: String, 
         /**
+         * The viewer's aberration correction ([`HologramGenerator::set_prescription`]), in words: the distance
+         * whose coefficients apply and, for coefficients that change with distance, the residual left over the
+         * volume (radians RMS, R/G/B); `None` without one.
+         */aberration: String?, 
+        /**
          * Everything above and the autotuning timings, as JSON.
          */json: String) {
         self.version = version
@@ -2295,6 +2412,7 @@ public struct GeneratorInfo: Equatable, Hashable {
         self.gpuAdapter = gpuAdapter
         self.calibration = calibration
         self.displayMapping = displayMapping
+        self.aberration = aberration
         self.json = json
     }
 
@@ -2337,6 +2455,7 @@ public struct FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer {
                 gpuAdapter: FfiConverterOptionString.read(from: &buf), 
                 calibration: FfiConverterOptionString.read(from: &buf), 
                 displayMapping: FfiConverterString.read(from: &buf), 
+                aberration: FfiConverterOptionString.read(from: &buf), 
                 json: FfiConverterString.read(from: &buf)
         )
     }
@@ -2365,6 +2484,7 @@ public struct FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer {
         FfiConverterOptionString.write(value.gpuAdapter, into: &buf)
         FfiConverterOptionString.write(value.calibration, into: &buf)
         FfiConverterString.write(value.displayMapping, into: &buf)
+        FfiConverterOptionString.write(value.aberration, into: &buf)
         FfiConverterString.write(value.json, into: &buf)
     }
 }
@@ -2382,6 +2502,98 @@ public func FfiConverterTypeGeneratorInfo_lift(_ buf: RustBuffer) throws -> Gene
 #endif
 public func FfiConverterTypeGeneratorInfo_lower(_ value: GeneratorInfo) -> RustBuffer {
     return FfiConverterTypeGeneratorInfo.lower(value)
+}
+
+
+/**
+ * A viewer's spectacle prescription, corrected in every frame with the shipped CNNs (`docs/ABERRATION.md`,
+ * "A viewer's prescription"): the display shows the hologram as this lens would let the viewer see it.
+ * Ophthalmic conventions: a myope's sphere is negative; the axis is degrees counterclockwise from the
+ * horizontal as the viewer sees the image.
+ */
+public struct Prescription: Equatable, Hashable {
+    /**
+     * Sphere in dioptres (negative for a myope), within ±20.
+     */
+    public var sphereD: Double
+    /**
+     * Cylinder in dioptres (either sign), within ±10; 0 (default) without astigmatism.
+     */
+    public var cylinderD: Double
+    /**
+     * The cylinder's axis in degrees, 0–180; required with a cylinder (default `None`).
+     */
+    public var axisDeg: Double?
+    /**
+     * Focal length of the display's eyepiece in metres (default 0.021, the paper's).
+     */
+    public var eyepieceFocalM: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Sphere in dioptres (negative for a myope), within ±20.
+         */sphereD: Double, 
+        /**
+         * Cylinder in dioptres (either sign), within ±10; 0 (default) without astigmatism.
+         */cylinderD: Double = Double(0.0), 
+        /**
+         * The cylinder's axis in degrees, 0–180; required with a cylinder (default `None`).
+         */axisDeg: Double? = nil, 
+        /**
+         * Focal length of the display's eyepiece in metres (default 0.021, the paper's).
+         */eyepieceFocalM: Double = Double(0.021)) {
+        self.sphereD = sphereD
+        self.cylinderD = cylinderD
+        self.axisDeg = axisDeg
+        self.eyepieceFocalM = eyepieceFocalM
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension Prescription: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypePrescription: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Prescription {
+        return
+            try Prescription(
+                sphereD: FfiConverterDouble.read(from: &buf), 
+                cylinderD: FfiConverterDouble.read(from: &buf), 
+                axisDeg: FfiConverterOptionDouble.read(from: &buf), 
+                eyepieceFocalM: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: Prescription, into buf: inout [UInt8]) {
+        FfiConverterDouble.write(value.sphereD, into: &buf)
+        FfiConverterDouble.write(value.cylinderD, into: &buf)
+        FfiConverterOptionDouble.write(value.axisDeg, into: &buf)
+        FfiConverterDouble.write(value.eyepieceFocalM, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypePrescription_lift(_ buf: RustBuffer) throws -> Prescription {
+    return try FfiConverterTypePrescription.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypePrescription_lower(_ value: Prescription) -> RustBuffer {
+    return FfiConverterTypePrescription.lower(value)
 }
 
 
@@ -4209,6 +4421,30 @@ fileprivate struct FfiConverterOptionTypeCropRect: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterOptionTypePrescription: FfiConverterRustBuffer {
+    typealias SwiftType = Prescription?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypePrescription.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypePrescription.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterOptionTypeBackend: FfiConverterRustBuffer {
     typealias SwiftType = Backend?
 
@@ -4553,8 +4789,8 @@ public func checkDisplay(profile: DisplayProfile, wavelengthRatioTolerance: Doub
 }
 /**
  * Reads a display profile from its JSON text (a profile file's contents, `docs/DISPLAYS.md`): keys
- * `pixel_pitch_m`, `resolution`, `wavelengths_m`, `volume_depth_m`, `offsets_m` (SI units), optional `name`
- * and `calibration`; unknown keys are refused.
+ * `pixel_pitch_m`, `resolution`, `wavelengths_m`, `volume_depth_m`, `offsets_m` (SI units), optional `name`,
+ * `calibration`, `aberration` and `prescription`; unknown keys are refused.
  *
  * Errors: [`TensorholoError::InvalidInput`] whose message names the key at fault (a missing key, a wrong
  * type or array length, a non-positive pitch or volume, a wavelength outside 380–780 nm, an unknown key) or
@@ -4570,7 +4806,8 @@ public func displayProfileFromJson(json: String)throws  -> DisplayProfile  {
 }
 /**
  * The [`GeneratorConfig`] for a display: `width`/`height` from its `resolution`, its pitch, lasers and
- * volume, its first offset; every other field at its default (change them before making the generator).
+ * volume, its first offset, its prescription; every other field at its default (change them before making
+ * the generator; the profile's `aberration` file is the app's to read into [`GeneratorConfig::aberration`]).
  *
  * Errors: [`TensorholoError::InvalidInput`] naming the key for a profile that breaks the profile rules (as
  * [`display_profile_from_json`]). Whether the CNNs serve the display is checked by [`HologramGenerator::new`]
@@ -4642,10 +4879,10 @@ private let initializationResult: InitializationResult = {
     if (uniffi_tensorholo_ffi_checksum_func_check_display() != 21294) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_func_display_profile_from_json() != 33747) {
+    if (uniffi_tensorholo_ffi_checksum_func_display_profile_from_json() != 17171) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_func_generator_config_for_display() != 18236) {
+    if (uniffi_tensorholo_ffi_checksum_func_generator_config_for_display() != 9019) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_func_convert_frame() != 43829) {
@@ -4669,7 +4906,13 @@ private let initializationResult: InitializationResult = {
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi() != 60546) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_aberration() != 44201) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration() != 48003) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_prescription() != 43431) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream() != 59478) {

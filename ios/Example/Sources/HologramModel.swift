@@ -26,6 +26,25 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
     @Published private(set) var slmSize = HologramModel.previewOnlySize
     /// The last on-device benchmark (`HologramGenerator.benchmark`), or nil before the first.
     @Published private(set) var benchmarkText: String?
+    /// The viewer's spectacle prescription, corrected in every frame (docs/ABERRATION.md): sphere and cylinder
+    /// in dioptres (a myope's sphere is negative), axis in degrees counterclockwise as the viewer sees the
+    /// image. nil: none. Changing it remakes the generator with the prescription in its configuration (it then
+    /// runs on the CPU and encodes with AA-DPM, which holds for corrected fields).
+    @Published var prescription: Prescription? = nil {
+        didSet {
+            lock.lock()
+            currentPrescription = prescription
+            lock.unlock()
+            captureQueue.async {
+                guard self.generator != nil else { return }
+                do {
+                    try self.makeGenerator(size: self.generatorSize)
+                } catch {
+                    self.publish(status: "Prescription not applied: \(error)")
+                }
+            }
+        }
+    }
     /// Focus of the preview as normalised depth, 0 = near, 1 = far.
     @Published var focus: Float = 0.5 {
         didSet {
@@ -50,6 +69,7 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
     private var latestFrame: RgbdFrame?
     private var previewInFlight = false
     private var currentFocus: Float = 0.5
+    private var currentPrescription: Prescription?
     private var started = false
     private var lastDelivery = Date()
     /// Whether the relative depth accuracy was reported (on `captureQueue`).
@@ -118,17 +138,26 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
     }
 
     /// The generator's configuration for a `size` SLM: the display profile bundled with the app (`display.json`:
-    /// pitch, lasers, volume, offset; docs/DISPLAYS.md) where there is one, else the paper's 8 µm display. The
+    /// pitch, lasers, volume, offset; docs/DISPLAYS.md) where there is one, else the paper's 8 µm display, and the
+    /// viewer's prescription where one is set (it replaces the profile's). The
     /// display's mode gives the size (it is what the SLM is sent). A profile the shipped CNNs cannot serve fails
     /// when the generator is made, naming the key (`volume_depth_m`, `wavelengths_m`…).
     private func generatorConfig(size: (width: UInt32, height: UInt32)) throws -> GeneratorConfig {
-        guard let url = Bundle.main.url(forResource: "display", withExtension: "json") else {
-            return GeneratorConfig(width: size.width, height: size.height)
+        var config: GeneratorConfig
+        if let url = Bundle.main.url(forResource: "display", withExtension: "json") {
+            let profile = try displayProfileFromJson(json: String(contentsOf: url, encoding: .utf8))
+            config = try generatorConfigForDisplay(profile: profile)
+            config.width = size.width
+            config.height = size.height
+        } else {
+            config = GeneratorConfig(width: size.width, height: size.height)
         }
-        let profile = try displayProfileFromJson(json: String(contentsOf: url, encoding: .utf8))
-        var config = try generatorConfigForDisplay(profile: profile)
-        config.width = size.width
-        config.height = size.height
+        lock.lock()
+        let prescription = currentPrescription
+        lock.unlock()
+        if let prescription = prescription {
+            config.prescription = prescription
+        }
         return config
     }
 

@@ -24,6 +24,7 @@ struct ContentView: View {
             } maximumValueLabel: {
                 Text("far")
             }
+            PrescriptionView(model: model)
             Text(model.externalDisplayConnected
                 ? "SLM pattern on the external display (\(model.slmSize.width)×\(model.slmSize.height))"
                 : "Connect the SLM (USB-C DisplayPort / HDMI) to show the pattern")
@@ -39,6 +40,38 @@ struct ContentView: View {
         }
         .padding()
         .onAppear { model.start() }
+    }
+}
+
+/// The viewer's spectacle prescription: on or off, sphere and cylinder in 0.25 D steps, the axis in 5° steps.
+/// Applied when a stepper is released (the generator is remade with it: a moment).
+struct PrescriptionView: View {
+    @ObservedObject var model: HologramModel
+    @State private var enabled = false
+    @State private var sphere = 0.0
+    @State private var cylinder = 0.0
+    @State private var axis = 90.0
+
+    var body: some View {
+        VStack(alignment: .leading, spacing: 4) {
+            Toggle("Correct my eyes", isOn: $enabled)
+            if enabled {
+                Stepper("Sphere \(sphere, specifier: "%+.2f") D", value: $sphere, in: -20...20, step: 0.25)
+                Stepper("Cylinder \(cylinder, specifier: "%+.2f") D", value: $cylinder, in: -10...10, step: 0.25)
+                Stepper("Axis \(Int(axis))°", value: $axis, in: 0...180, step: 5)
+            }
+        }
+        .font(.footnote)
+        .onChange(of: enabled) { _ in apply() }
+        .onChange(of: sphere) { _ in apply() }
+        .onChange(of: cylinder) { _ in apply() }
+        .onChange(of: axis) { _ in apply() }
+    }
+
+    private func apply() {
+        model.prescription = enabled
+            ? Prescription(sphereD: sphere, cylinderD: cylinder, axisDeg: cylinder == 0 ? nil : axis)
+            : nil
     }
 }
 

@@ -10,7 +10,7 @@
 //!   "volume_depth_m": 6e-3,
 //!   "offsets_m": [6e-3, 12e-3, 0.0],
 //!   "calibration": "pluto.holocal",
-//!   "aberration": "viewer.json"
+//!   "prescription": {"sphere_d": -2.0, "cylinder_d": -0.75, "axis_deg": 30}
 //! }
 //! ```
 //!
@@ -19,6 +19,7 @@
 
 use std::path::{Path, PathBuf};
 
+use super::prescription::Prescription;
 use crate::error::{HoloError, NearestDisplay, Result};
 use crate::optics::{OpticalSetup, MAX_VOLUME_DEPTH_M, PITCH_RANGE_M};
 
@@ -39,7 +40,8 @@ pub const MAX_OFFSET_M: f64 = 1.0;
 
 /// Every key of a profile, for messages.
 const KEYS: &str =
-    "name, pixel_pitch_m, resolution, wavelengths_m, volume_depth_m, offsets_m, calibration, aberration";
+    "name, pixel_pitch_m, resolution, wavelengths_m, volume_depth_m, offsets_m, calibration, \
+                    aberration, prescription";
 
 /// A holographic display, as a profile file describes it (`docs/DISPLAYS.md`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -64,6 +66,10 @@ pub struct DisplayProfile {
     /// resolved against the profile's folder like `calibration`; `None`: an ideal eye behind ideal optics.
     /// Set it in code with [`DisplayProfile::with_aberration_file`].
     pub aberration: Option<PathBuf>,
+    /// `prescription`: the viewer's spectacle prescription ([`Prescription`]: sphere, cylinder, axis, the
+    /// eyepiece), corrected like an aberration file; `None`: none. At most one of `aberration` and
+    /// `prescription`. Set it in code with [`DisplayProfile::with_prescription`].
+    pub prescription: Option<Prescription>,
 }
 
 /// The file as serde reads it: every key optional and untyped, so that each error can name its key.
@@ -78,6 +84,7 @@ struct RawProfile {
     offsets_m: Option<serde_json::Value>,
     calibration: Option<serde_json::Value>,
     aberration: Option<serde_json::Value>,
+    prescription: Option<serde_json::Value>,
 }
 
 fn err(key: &'static str, reason: impl Into<String>) -> HoloError {
@@ -295,6 +302,18 @@ impl DisplayProfile {
         };
         let calibration = file("calibration", raw.calibration)?;
         let aberration = file("aberration", raw.aberration)?;
+        let prescription = match raw.prescription.filter(|v| !v.is_null()) {
+            None => None,
+            Some(v) => Some(serde_json::from_value::<Prescription>(v).map_err(|e| {
+                err(
+                    "prescription",
+                    format!(
+                        "{e} (expected {{\"sphere_d\": D, \"cylinder_d\": D, \"axis_deg\": degrees, \
+                         \"eyepiece_focal_m\": metres}}, docs/ABERRATION.md)"
+                    ),
+                )
+            })?),
+        };
         Self::new(
             name,
             pixel_pitch_m,
@@ -304,7 +323,19 @@ impl DisplayProfile {
             offsets_m,
             calibration,
         )?
-        .with_aberration_file(aberration)
+        .with_aberration_file(aberration)?
+        .with_prescription(prescription)
+    }
+
+    /// This profile with the viewer's prescription `prescription` (`None`: none), checked as
+    /// [`DisplayProfile::validate`] checks it.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`prescription`) for a bad prescription (the reason names its
+    /// field) or a profile that also has an aberration file.
+    pub fn with_prescription(mut self, prescription: Option<Prescription>) -> Result<Self> {
+        self.prescription = prescription;
+        self.validate()?;
+        Ok(self)
     }
 
     /// This profile with the aberration file `path` (`None`: none), checked as
@@ -359,6 +390,7 @@ impl DisplayProfile {
             offsets_m,
             calibration,
             aberration: None,
+            prescription: None,
         };
         profile.validate()?;
         Ok(profile)
@@ -445,6 +477,16 @@ impl DisplayProfile {
         {
             return Err(err("aberration", "must be a file path, got an empty one"));
         }
+        if let Some(p) = &self.prescription {
+            if self.aberration.is_some() {
+                return Err(err(
+                    "prescription",
+                    "give `aberration` (a file) or `prescription`, not both",
+                ));
+            }
+            p.validate()
+                .map_err(|e| err("prescription", e.to_string()))?;
+        }
         Ok(())
     }
 
@@ -515,6 +557,9 @@ impl DisplayProfile {
             if let Some(f) = file {
                 v.insert(key.into(), f.to_string_lossy().into_owned().into());
             }
+        }
+        if let Some(p) = &self.prescription {
+            v.insert("prescription".into(), serde_json::json!(p));
         }
         // Plain numbers and strings: serialising cannot fail.
         serde_json::to_string_pretty(&serde_json::Value::Object(v)).unwrap_or_default() + "\n"
@@ -595,6 +640,31 @@ mod tests {
         match DisplayProfile::from_json_str(&empty) {
             Err(HoloError::InvalidParameter { name, .. }) => assert_eq!(name, "aberration"),
             other => panic!("{other:?}"),
+        }
+        // A prescription: read, written back the same; refused with an aberration file or without an axis.
+        let rx = GOOD.replacen(
+            "{",
+            r#"{ "prescription": {"sphere_d": -2, "cylinder_d": -0.75, "axis_deg": 30},"#,
+            1,
+        );
+        let p = DisplayProfile::from_json_str(&rx).unwrap();
+        assert_eq!(p.prescription.unwrap().cylinder_d, -0.75);
+        assert_eq!(DisplayProfile::from_json_str(&p.to_json()).unwrap(), p);
+        for (bad, says) in [
+            (
+                rx.replacen("{", r#"{ "aberration": "eye.json","#, 1),
+                "not both",
+            ),
+            (rx.replace(r#", "axis_deg": 30"#, ""), "axis_deg"),
+            (rx.replace("sphere_d", "sphere"), "sphere"),
+        ] {
+            match DisplayProfile::from_json_str(&bad) {
+                Err(HoloError::InvalidParameter { name, reason }) => {
+                    assert_eq!(name, "prescription");
+                    assert!(reason.contains(says), "{reason}");
+                }
+                other => panic!("{other:?}"),
+            }
         }
         std::fs::remove_dir_all(&dir).unwrap();
         assert!(matches!(

@@ -5,7 +5,7 @@ use std::sync::Arc;
 #[cfg(doc)]
 use crate::cnn::PlanReport;
 use crate::cnn::{CnnEngine, CnnLayout, ConvAlgorithm, SavedPlans, ThreadCount, MAX_CNN_THREADS};
-use crate::display::DisplayProfile;
+use crate::display::{DisplayProfile, Prescription};
 use crate::encoding::DoublePhaseMethod;
 #[cfg(doc)]
 use crate::error::HoloError;
@@ -13,6 +13,7 @@ use crate::error::{invalid, Result};
 use crate::optics::{OpticalSetup, PropagationOptions};
 use crate::pipeline::{Backend, GpuPrecision, ModelSelection, PipelineConfig, MAX_HOLOGRAM_PIXELS};
 use crate::scene::{DepthMapping, DepthRange, Fit, FrameOptions};
+use crate::synthesis::aberration::AberrationProfile;
 
 /// Everything a [`HologramGenerator`] needs. Build with [`GeneratorConfig::new`] and change the fields
 /// you need; [`GeneratorConfig::validate`] says what is wrong.
@@ -80,6 +81,18 @@ pub struct GeneratorConfig {
     ///
     /// [`GeneratorInfo::display_mapping`]: super::GeneratorInfo::display_mapping
     pub wavelength_ratio_tolerance: Option<f64>,
+    /// The viewer's spectacle prescription ([`Prescription`]: sphere and cylinder in dioptres, axis in
+    /// degrees, the eyepiece in metres), corrected in every frame with the shipped CNNs
+    /// ([`AberrationProfile::from_prescription`], `docs/ABERRATION.md`); `None` (the default): none. A
+    /// generator made with one (a zero prescription included) can change it between frames
+    /// ([`HologramGenerator::set_prescription`], a slider). Frames then run on the CPU and encode with
+    /// `encoding` (AA-DPM), not a DDPM pre-filter CNN.
+    ///
+    /// [`HologramGenerator::set_prescription`]: super::HologramGenerator::set_prescription
+    pub prescription: Option<Prescription>,
+    /// Measured aberrations (a `tensorholo.aberration` file read with [`AberrationProfile::load`] or
+    /// [`AberrationProfile::from_json_str`]), corrected as `prescription`; at most one of the two.
+    pub aberration: Option<AberrationProfile>,
 }
 
 /// [`GeneratorConfig::saved_plans`] in reports: the plans' origin, or null.
@@ -117,6 +130,8 @@ impl GeneratorConfig {
             backend: Backend::default(),
             gpu_precision: GpuPrecision::default(),
             wavelength_ratio_tolerance: None,
+            prescription: None,
+            aberration: None,
         }
     }
 
@@ -137,13 +152,30 @@ impl GeneratorConfig {
         Self {
             optics: profile.optics(),
             offset_m: profile.default_offset_m(),
+            prescription: profile.prescription,
             ..Self::new(width, height)
         }
     }
 
+    /// The aberration profile sessions correct: the prescription's on this configuration's display, or the
+    /// measured one; `None` without either.
+    ///
+    /// Errors: as [`AberrationProfile::from_prescription`].
+    pub fn aberration_profile(&self) -> Result<Option<Arc<AberrationProfile>>> {
+        Ok(match (&self.prescription, &self.aberration) {
+            (Some(p), _) => Some(Arc::new(AberrationProfile::from_prescription(
+                p,
+                &self.optics,
+            )?)),
+            (None, Some(a)) => Some(Arc::new(a.clone())),
+            (None, None) => None,
+        })
+    }
+
     /// Checks everything that needs no model: non-zero sizes within [`MAX_HOLOGRAM_PIXELS`] whose RGBA
     /// outputs (`width · height · 4` bytes) fit in a `u32`, a finite non-negative offset, valid optics and
-    /// depth range, a thread count within [`MAX_CNN_THREADS`] and a finite wavelength ratio tolerance ≥ 0.
+    /// depth range, a thread count within [`MAX_CNN_THREADS`], a finite wavelength ratio tolerance ≥ 0, a
+    /// valid prescription or an aberration profile for this display (not both).
     ///
     /// Errors: [`HoloError::InvalidParameter`] naming the field.
     pub fn validate(&self) -> Result<()> {
@@ -198,6 +230,18 @@ impl GeneratorConfig {
         }
         if let Some(p) = &self.saved_plans {
             p.validate()?;
+        }
+        if let Some(p) = &self.prescription {
+            if self.aberration.is_some() {
+                return Err(invalid(
+                    "prescription",
+                    "a prescription and an aberration profile were both given: give one",
+                ));
+            }
+            p.validate()?;
+        }
+        if let Some(a) = &self.aberration {
+            a.check_setup(&self.optics)?;
         }
         if let Some(t) = self.wavelength_ratio_tolerance {
             if !(t.is_finite() && t >= 0.0) {

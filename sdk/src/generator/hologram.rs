@@ -5,15 +5,18 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
 use crate::cnn::PlanReport;
+use crate::display::Prescription;
 use crate::encoding::{DoublePhaseMethod, LinearLut};
 use crate::error::{invalid, HoloError, Result};
 use crate::model::{HologramModel, ModelConfig, ModelKind, Precision};
 use crate::optics::{focal_stack, post_encoding_midpoint};
 use crate::pipeline::{
-    BackendReport, HologramPipeline, HologramSession, PrefilterMode, PrefilterSource,
+    AberrationReport, BackendReport, HologramPipeline, HologramSession, PrefilterMode,
+    PrefilterSource,
 };
 use crate::scene::{ldi_from_camera_frames, CameraFrame, CameraFrameReport, RgbdFrame};
 use crate::slm::DisplayCalibration;
+use crate::synthesis::aberration::AberrationProfile;
 
 use super::config::GeneratorConfig;
 use super::frames::{preview_image, GeneratorBenchmark, PatternTimings, Preview, SlmPatterns};
@@ -54,6 +57,9 @@ pub struct GeneratorInfo {
     /// ([`HologramPipeline::display_mapping_description`], [`crate::display::DisplayMapping::description`]),
     /// e.g. "… serves 4 µm with a 1.5 mm volume (σ = 0.250000); offset 1.5 mm ↔ 6 mm trained; …".
     pub display_mapping: String,
+    /// The viewer's aberration correction: the applied distance and coefficients, and the residual left
+    /// over the volume ([`AberrationReport`]); `None` without one.
+    pub aberration: Option<AberrationReport>,
 }
 
 /// RGB-D camera frames → SLM patterns with the shipped CNNs (see the [module docs](super)).
@@ -64,6 +70,9 @@ pub struct HologramGenerator {
     session: Mutex<HologramSession>,
     /// The display calibration of new sessions and streams ([`HologramGenerator::set_calibration`]).
     calibration: Mutex<Option<Arc<DisplayCalibration>>>,
+    /// The viewer's aberration correction of new sessions and streams
+    /// ([`HologramGenerator::set_aberration`]).
+    aberration: Mutex<Option<Arc<AberrationProfile>>>,
 }
 
 impl HologramGenerator {
@@ -139,18 +148,54 @@ impl HologramGenerator {
     /// Errors: as [`GeneratorConfig::validate`] and [`HologramPipeline::session`].
     pub fn with_pipeline(config: GeneratorConfig, pipeline: HologramPipeline) -> Result<Self> {
         config.validate()?;
-        let pipeline = match &config.saved_plans {
+        let mut pipeline = match &config.saved_plans {
             Some(plans) => pipeline.with_saved_plans(plans.clone())?,
             None => pipeline,
         };
+        if let Some(profile) = config.aberration_profile()? {
+            pipeline = pipeline.with_aberration(profile)?;
+        }
         let calibration = pipeline.calibration().cloned();
-        let session = open_session(&pipeline, &config, calibration.clone())?;
+        let aberration = pipeline.aberration().cloned();
+        let session = open_session(&pipeline, &config, calibration.clone(), aberration.clone())?;
         Ok(Self {
             config,
             pipeline,
             session: Mutex::new(session),
             calibration: Mutex::new(calibration),
+            aberration: Mutex::new(aberration),
         })
+    }
+
+    /// Replaces the viewer's aberration correction of the frames rendered from now on and of streams started
+    /// later (`None`: none), without a new session ([`HologramSession::set_aberration`]): e.g. a slider of
+    /// measured coefficients. Make the generator with a prescription or an aberration profile in its
+    /// configuration (a zero one will do) so that it encodes with AA-DPM, which holds for corrected fields.
+    ///
+    /// Errors: as [`HologramSession::set_aberration`] (a profile for another display; a generator whose frames
+    /// run on the GPU). The generator keeps its correction on error.
+    pub fn set_aberration(&self, profile: Option<Arc<AberrationProfile>>) -> Result<()> {
+        let mut current = lock_slot(&self.aberration);
+        self.session()?.set_aberration(profile.clone())?;
+        *current = profile;
+        Ok(())
+    }
+
+    /// [`HologramGenerator::set_aberration`] with a spectacle prescription (`None`: none), converted on this
+    /// generator's display ([`AberrationProfile::from_prescription`]): a prescription slider.
+    ///
+    /// Errors: as [`Prescription::validate`] and [`HologramGenerator::set_aberration`].
+    pub fn set_prescription(&self, prescription: Option<Prescription>) -> Result<()> {
+        let profile = prescription
+            .map(|p| AberrationProfile::from_prescription(&p, &self.config.optics))
+            .transpose()?;
+        self.set_aberration(profile.map(Arc::new))
+    }
+
+    /// The viewer's aberration correction applied, if any, and what it applies and leaves.
+    pub fn aberration(&self) -> Option<(Arc<AberrationProfile>, AberrationReport)> {
+        let session = self.session().ok()?;
+        session.aberration().map(|(p, r)| (p.clone(), r.clone()))
     }
 
     /// Applies a display's calibration (`None`: an ideal SLM) to the frames rendered from now on and to
@@ -163,7 +208,7 @@ impl HologramGenerator {
     /// `config.height × config.width`; [`HoloError::InvalidParameter`] if its wavelengths differ from
     /// `config.optics` by more than 1 nm. The generator keeps its calibration on error.
     pub fn set_calibration(&self, calibration: Option<Arc<DisplayCalibration>>) -> Result<()> {
-        let mut current = lock_calibration(&self.calibration);
+        let mut current = lock_slot(&self.calibration);
         self.session()?.set_calibration(calibration.clone())?;
         *current = calibration;
         Ok(())
@@ -171,7 +216,7 @@ impl HologramGenerator {
 
     /// The display calibration applied, if any.
     pub fn calibration(&self) -> Option<Arc<DisplayCalibration>> {
-        lock_calibration(&self.calibration).clone()
+        lock_slot(&self.calibration).clone()
     }
 
     /// Renders the built-in test scene ([`crate::scene::procedural::default_scene`]) `frames` times after one
@@ -214,7 +259,8 @@ impl HologramGenerator {
             Ok(g) => Ok(g),
             Err(poisoned) => {
                 let mut g = poisoned.into_inner();
-                *g = open_session(&self.pipeline, &self.config, self.calibration())?;
+                let aberration = lock_slot(&self.aberration).clone();
+                *g = open_session(&self.pipeline, &self.config, self.calibration(), aberration)?;
                 self.session.clear_poison();
                 log::warn!("a call panicked while rendering; the session was recreated");
                 Ok(g)
@@ -366,11 +412,12 @@ impl HologramGenerator {
     ///
     /// Errors: [`HoloError::Internal`] only if the session cannot be recreated after a panic.
     pub fn info(&self) -> Result<GeneratorInfo> {
-        let (plan, backend) = {
+        let (plan, backend, aberration) = {
             let session = self.session()?;
             (
                 session.plan_report().clone(),
                 session.backend_report().clone(),
+                session.aberration().map(|(_, r)| r.clone()),
             )
         };
         let md = self.pipeline.hologram_model().metadata();
@@ -392,6 +439,7 @@ impl HologramGenerator {
             backend,
             calibration: self.calibration().map(|c| c.summary()),
             display_mapping: self.pipeline.display_mapping_description(),
+            aberration,
         })
     }
 
@@ -413,7 +461,8 @@ impl HologramGenerator {
         // codes.
         let plans = Arc::new(self.session()?.plan_report().saved());
         let pipeline = self.pipeline.repeating(plans);
-        let session = open_session(&pipeline, &self.config, self.calibration())?;
+        let aberration = lock_slot(&self.aberration).clone();
+        let session = open_session(&pipeline, &self.config, self.calibration(), aberration)?;
         HologramStream::start(session, self.config.clone(), listener, capacity)
     }
 }
@@ -424,17 +473,21 @@ fn open_session(
     pipeline: &HologramPipeline,
     config: &GeneratorConfig,
     calibration: Option<Arc<DisplayCalibration>>,
+    aberration: Option<Arc<AberrationProfile>>,
 ) -> Result<HologramSession> {
     let mut session = pipeline.session(config.height, config.width)?;
     session.set_full_outputs(false);
     session.set_calibration(calibration)?;
+    // The pipeline's own correction is already applied; a later `set_aberration` replaced it.
+    if pipeline.aberration() != aberration.as_ref() {
+        session.set_aberration(aberration)?;
+    }
     Ok(session)
 }
 
-/// The calibration slot; it holds a plain `Option<Arc>`, consistent whatever a panicking thread did.
-fn lock_calibration(
-    slot: &Mutex<Option<Arc<DisplayCalibration>>>,
-) -> MutexGuard<'_, Option<Arc<DisplayCalibration>>> {
+/// A slot of a plain `Option<Arc>` (the calibration, the aberration profile), consistent whatever a panicking
+/// thread did.
+fn lock_slot<T>(slot: &Mutex<Option<Arc<T>>>) -> MutexGuard<'_, Option<Arc<T>>> {
     slot.lock().unwrap_or_else(|e| e.into_inner())
 }
 

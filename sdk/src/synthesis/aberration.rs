@@ -33,6 +33,7 @@ use num_complex::Complex32;
 use serde::{Deserialize, Serialize};
 
 use super::sm_lbm::{GapPropagation, SceneLayer, SmLbm};
+use crate::display::Prescription;
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::{par_channels, Carrier, PropagationOptions, Propagator, SpectralPlan};
 use crate::optics::{propagation::check_positive, OpticalSetup};
@@ -346,6 +347,26 @@ impl AberrationProfile {
                 coefficients: [coefficients; 3],
             }],
         }
+    }
+
+    /// The profile that shows the hologram as `prescription`'s spectacle lens would let the viewer see it,
+    /// on `optics`' display (its lasers and pitch recorded): per colour the coefficients of
+    /// [`Prescription::zernike`], the same at every distance (the lens sits at the viewer's pupil, so the
+    /// real-time correction is exact; `docs/ABERRATION.md`, "A viewer's prescription").
+    ///
+    /// Errors: as [`Prescription::validate`].
+    pub fn from_prescription(prescription: &Prescription, optics: &OpticalSetup) -> Result<Self> {
+        prescription.validate()?;
+        let coefficients = std::array::from_fn(|c| {
+            ZernikeCoefficients::from_array(
+                prescription.zernike(optics.wavelengths_m[c], optics.pixel_pitch_m),
+            )
+        });
+        Ok(Self::new(vec![AberrationSample {
+            distance_m: 0.0,
+            coefficients,
+        }])?
+        .with_display(optics.wavelengths_m, optics.pixel_pitch_m))
     }
 
     /// Records the display the profile was calibrated for (R, G, B wavelengths and pixel pitch, metres), which

@@ -725,7 +725,11 @@ internal object IntegrityCheckingUniffiLib {
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi(
     ): Int
+    external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_aberration(
+    ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration(
+    ): Int
+    external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_prescription(
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream(
     ): Int
@@ -782,7 +786,11 @@ internal object UniffiLib {
     ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_render_ldi(`ptr`: Long,`layers`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
+    external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_set_aberration(`ptr`: Long,`aberration`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    ): Unit
     external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_set_calibration(`ptr`: Long,`calibration`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    ): Unit
+    external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_set_prescription(`ptr`: Long,`prescription`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): Unit
     external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_stream(`ptr`: Long,`listener`: Long,uniffi_out_err: UniffiRustCallStatus, 
     ): Long
@@ -943,10 +951,10 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
     if ((lib.uniffi_tensorholo_ffi_checksum_func_check_display() and 0xFFFF) != 21294) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_func_display_profile_from_json() and 0xFFFF) != 33747) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_func_display_profile_from_json() and 0xFFFF) != 17171) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_func_generator_config_for_display() and 0xFFFF) != 18236) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_func_generator_config_for_display() and 0xFFFF) != 9019) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_func_convert_frame() and 0xFFFF) != 43829) {
@@ -970,7 +978,13 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
     if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi() and 0xFFFF) != 60546) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_aberration() and 0xFFFF) != 44201) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
     if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration() and 0xFFFF) != 48003) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_prescription() and 0xFFFF) != 43431) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream() and 0xFFFF) != 59478) {
@@ -1522,6 +1536,15 @@ public interface HologramGeneratorInterface {
     fun `renderLdi`(`layers`: List<RgbdFrame>): SlmPatterns
     
     /**
+     * [`HologramGenerator::set_prescription`] with measured aberrations: the JSON text of a
+     * `tensorholo.aberration` file, or `None` for none.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for text that is not such a file (the message says what),
+     * one calibrated for another pitch or other lasers, or on a generator whose frames run on the GPU.
+     */
+    fun `setAberration`(`aberration`: kotlin.String?)
+    
+    /**
      * Applies a display calibration file (the bytes of a `.holocal` made by `holo calibrate`, e.g. bundled
      * with the app or downloaded per device) to the frames rendered from now on and to streams started
      * later; `None` returns to an ideal SLM (linear look-up tables, no intensity map). Its per-colour
@@ -1533,6 +1556,17 @@ public interface HologramGeneratorInterface {
      * generator's, or one measured at other wavelengths; the generator keeps its calibration.
      */
     fun `setCalibration`(`calibration`: kotlin.ByteArray?)
+    
+    /**
+     * Replaces the viewer's prescription of the frames rendered from now on and of streams started later
+     * (`None`: none), without a new generator: a prescription slider. Make the generator with a
+     * prescription in its configuration (a zero one will do) so that it encodes with AA-DPM.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] naming the field (`sphere_d` beyond ±20 D, a cylinder
+     * without `axis_deg`, an axis outside 0–180°, …), or on a generator whose frames run on the GPU; the
+     * generator keeps its correction.
+     */
+    fun `setPrescription`(`prescription`: Prescription?)
     
     /**
      * Starts a video stream: [`HologramStream::push`] frames, results reach `listener` in frame order on a
@@ -1779,6 +1813,27 @@ open class HologramGenerator: Disposable, AutoCloseable, HologramGeneratorInterf
 
     
     /**
+     * [`HologramGenerator::set_prescription`] with measured aberrations: the JSON text of a
+     * `tensorholo.aberration` file, or `None` for none.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for text that is not such a file (the message says what),
+     * one calibrated for another pitch or other lasers, or on a generator whose frames run on the GPU.
+     */
+    @Throws(TensorholoException::class)override fun `setAberration`(`aberration`: kotlin.String?)
+        = 
+    callWithHandle {
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_hologramgenerator_set_aberration(
+        it,
+        
+        FfiConverterOptionalString.lower(`aberration`),_status)
+}
+    }
+    
+    
+
+    
+    /**
      * Applies a display calibration file (the bytes of a `.holocal` made by `holo calibrate`, e.g. bundled
      * with the app or downloaded per device) to the frames rendered from now on and to streams started
      * later; `None` returns to an ideal SLM (linear look-up tables, no intensity map). Its per-colour
@@ -1797,6 +1852,29 @@ open class HologramGenerator: Disposable, AutoCloseable, HologramGeneratorInterf
         it,
         
         FfiConverterOptionalByteArray.lower(`calibration`),_status)
+}
+    }
+    
+    
+
+    
+    /**
+     * Replaces the viewer's prescription of the frames rendered from now on and of streams started later
+     * (`None`: none), without a new generator: a prescription slider. Make the generator with a
+     * prescription in its configuration (a zero one will do) so that it encodes with AA-DPM.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] naming the field (`sphere_d` beyond ±20 D, a cylinder
+     * without `axis_deg`, an axis outside 0–180°, …), or on a generator whose frames run on the GPU; the
+     * generator keeps its correction.
+     */
+    @Throws(TensorholoException::class)override fun `setPrescription`(`prescription`: Prescription?)
+        = 
+    callWithHandle {
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_hologramgenerator_set_prescription(
+        it,
+        
+        FfiConverterOptionalTypePrescription.lower(`prescription`),_status)
 }
     }
     
@@ -2823,6 +2901,19 @@ data class DisplayProfile (
      * passes them to [`HologramGenerator::set_calibration`].
      */
     var `calibration`: kotlin.String? = null 
+    , 
+    /**
+     * `aberration`: the viewer's or the optics' aberration file (`tensorholo.aberration`,
+     * `docs/ABERRATION.md`) as the profile gives it, or `None` (default). Not read by the library: the app
+     * passes the file's text as [`GeneratorConfig::aberration`].
+     */
+    var `aberration`: kotlin.String? = null 
+    , 
+    /**
+     * `prescription`: the viewer's spectacle prescription, or `None` (default); at most one of `aberration`
+     * and `prescription`. [`generator_config_for_display`] carries it into the configuration.
+     */
+    var `prescription`: Prescription? = null 
     
 ){
     
@@ -2846,6 +2937,8 @@ public object FfiConverterTypeDisplayProfile: FfiConverterRustBuffer<DisplayProf
             FfiConverterSequenceDouble.read(buf),
             FfiConverterOptionalString.read(buf),
             FfiConverterOptionalString.read(buf),
+            FfiConverterOptionalString.read(buf),
+            FfiConverterOptionalTypePrescription.read(buf),
         )
     }
 
@@ -2856,7 +2949,9 @@ public object FfiConverterTypeDisplayProfile: FfiConverterRustBuffer<DisplayProf
             FfiConverterDouble.allocationSize(value.`volumeDepthM`) +
             FfiConverterSequenceDouble.allocationSize(value.`offsetsM`) +
             FfiConverterOptionalString.allocationSize(value.`name`) +
-            FfiConverterOptionalString.allocationSize(value.`calibration`)
+            FfiConverterOptionalString.allocationSize(value.`calibration`) +
+            FfiConverterOptionalString.allocationSize(value.`aberration`) +
+            FfiConverterOptionalTypePrescription.allocationSize(value.`prescription`)
     )
 
     override fun write(value: DisplayProfile, buf: ByteBuffer) {
@@ -2867,6 +2962,8 @@ public object FfiConverterTypeDisplayProfile: FfiConverterRustBuffer<DisplayProf
             FfiConverterSequenceDouble.write(value.`offsetsM`, buf)
             FfiConverterOptionalString.write(value.`name`, buf)
             FfiConverterOptionalString.write(value.`calibration`, buf)
+            FfiConverterOptionalString.write(value.`aberration`, buf)
+            FfiConverterOptionalTypePrescription.write(value.`prescription`, buf)
     }
 }
 
@@ -2987,6 +3084,19 @@ data class GeneratorConfig (
      * kernels differ (another CPU class).
      */
     var `savedPlans`: kotlin.String? = null 
+    , 
+    /**
+     * The viewer's spectacle prescription, corrected in every frame (`docs/ABERRATION.md`); `None`
+     * (default): none. Give one (a zero one will do) to let [`HologramGenerator::set_prescription`](crate::HologramGenerator::set_prescription)
+     * change it between frames (a slider). Frames then run on the CPU with AA-DPM.
+     */
+    var `prescription`: Prescription? = null 
+    , 
+    /**
+     * Measured aberrations, the JSON text of a `tensorholo.aberration` file (`holo calibrate aberration`),
+     * corrected as `prescription`; at most one of the two. `None` (default): none.
+     */
+    var `aberration`: kotlin.String? = null 
     
 ){
     
@@ -3023,6 +3133,8 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalDouble.read(buf),
             FfiConverterBoolean.read(buf),
             FfiConverterOptionalString.read(buf),
+            FfiConverterOptionalTypePrescription.read(buf),
+            FfiConverterOptionalString.read(buf),
         )
     }
 
@@ -3046,7 +3158,9 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalTypeCnnEngine.allocationSize(value.`engine`) +
             FfiConverterOptionalDouble.allocationSize(value.`wavelengthRatioTolerance`) +
             FfiConverterBoolean.allocationSize(value.`tune`) +
-            FfiConverterOptionalString.allocationSize(value.`savedPlans`)
+            FfiConverterOptionalString.allocationSize(value.`savedPlans`) +
+            FfiConverterOptionalTypePrescription.allocationSize(value.`prescription`) +
+            FfiConverterOptionalString.allocationSize(value.`aberration`)
     )
 
     override fun write(value: GeneratorConfig, buf: ByteBuffer) {
@@ -3070,6 +3184,8 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalDouble.write(value.`wavelengthRatioTolerance`, buf)
             FfiConverterBoolean.write(value.`tune`, buf)
             FfiConverterOptionalString.write(value.`savedPlans`, buf)
+            FfiConverterOptionalTypePrescription.write(value.`prescription`, buf)
+            FfiConverterOptionalString.write(value.`aberration`, buf)
     }
 }
 
@@ -3201,6 +3317,13 @@ data class GeneratorInfo (
     var `displayMapping`: kotlin.String
     , 
     /**
+     * The viewer's aberration correction ([`HologramGenerator::set_prescription`]), in words: the distance
+     * whose coefficients apply and, for coefficients that change with distance, the residual left over the
+     * volume (radians RMS, R/G/B); `None` without one.
+     */
+    var `aberration`: kotlin.String?
+    , 
+    /**
      * Everything above and the autotuning timings, as JSON.
      */
     var `json`: kotlin.String
@@ -3243,6 +3366,7 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterOptionalString.read(buf),
             FfiConverterOptionalString.read(buf),
             FfiConverterString.read(buf),
+            FfiConverterOptionalString.read(buf),
             FfiConverterString.read(buf),
         )
     }
@@ -3271,6 +3395,7 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterOptionalString.allocationSize(value.`gpuAdapter`) +
             FfiConverterOptionalString.allocationSize(value.`calibration`) +
             FfiConverterString.allocationSize(value.`displayMapping`) +
+            FfiConverterOptionalString.allocationSize(value.`aberration`) +
             FfiConverterString.allocationSize(value.`json`)
     )
 
@@ -3298,7 +3423,74 @@ public object FfiConverterTypeGeneratorInfo: FfiConverterRustBuffer<GeneratorInf
             FfiConverterOptionalString.write(value.`gpuAdapter`, buf)
             FfiConverterOptionalString.write(value.`calibration`, buf)
             FfiConverterString.write(value.`displayMapping`, buf)
+            FfiConverterOptionalString.write(value.`aberration`, buf)
             FfiConverterString.write(value.`json`, buf)
+    }
+}
+
+
+
+/**
+ * A viewer's spectacle prescription, corrected in every frame with the shipped CNNs (`docs/ABERRATION.md`,
+ * "A viewer's prescription"): the display shows the hologram as this lens would let the viewer see it.
+ * Ophthalmic conventions: a myope's sphere is negative; the axis is degrees counterclockwise from the
+ * horizontal as the viewer sees the image.
+ */
+data class Prescription (
+    /**
+     * Sphere in dioptres (negative for a myope), within ±20.
+     */
+    var `sphereD`: kotlin.Double
+    , 
+    /**
+     * Cylinder in dioptres (either sign), within ±10; 0 (default) without astigmatism.
+     */
+    var `cylinderD`: kotlin.Double = 0.0 
+    , 
+    /**
+     * The cylinder's axis in degrees, 0–180; required with a cylinder (default `None`).
+     */
+    var `axisDeg`: kotlin.Double? = null 
+    , 
+    /**
+     * Focal length of the display's eyepiece in metres (default 0.021, the paper's).
+     */
+    var `eyepieceFocalM`: kotlin.Double = 0.021 
+    
+){
+    
+
+    
+
+    
+    companion object
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypePrescription: FfiConverterRustBuffer<Prescription> {
+    override fun read(buf: ByteBuffer): Prescription {
+        return Prescription(
+            FfiConverterDouble.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+            FfiConverterDouble.read(buf),
+        )
+    }
+
+    override fun allocationSize(value: Prescription) = (
+            FfiConverterDouble.allocationSize(value.`sphereD`) +
+            FfiConverterDouble.allocationSize(value.`cylinderD`) +
+            FfiConverterOptionalDouble.allocationSize(value.`axisDeg`) +
+            FfiConverterDouble.allocationSize(value.`eyepieceFocalM`)
+    )
+
+    override fun write(value: Prescription, buf: ByteBuffer) {
+            FfiConverterDouble.write(value.`sphereD`, buf)
+            FfiConverterDouble.write(value.`cylinderD`, buf)
+            FfiConverterOptionalDouble.write(value.`axisDeg`, buf)
+            FfiConverterDouble.write(value.`eyepieceFocalM`, buf)
     }
 }
 
@@ -4602,6 +4794,38 @@ public object FfiConverterOptionalTypeCropRect: FfiConverterRustBuffer<CropRect?
 /**
  * @suppress
  */
+public object FfiConverterOptionalTypePrescription: FfiConverterRustBuffer<Prescription?> {
+    override fun read(buf: ByteBuffer): Prescription? {
+        if (buf.get().toInt() == 0) {
+            return null
+        }
+        return FfiConverterTypePrescription.read(buf)
+    }
+
+    override fun allocationSize(value: Prescription?): ULong {
+        if (value == null) {
+            return 1UL
+        } else {
+            return 1UL + FfiConverterTypePrescription.allocationSize(value)
+        }
+    }
+
+    override fun write(value: Prescription?, buf: ByteBuffer) {
+        if (value == null) {
+            buf.put(0)
+        } else {
+            buf.put(1)
+            FfiConverterTypePrescription.write(value, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
 public object FfiConverterOptionalTypeBackend: FfiConverterRustBuffer<Backend?> {
     override fun read(buf: ByteBuffer): Backend? {
         if (buf.get().toInt() == 0) {
@@ -5029,8 +5253,8 @@ public object FfiConverterSequenceTypeShippedModelCheck: FfiConverterRustBuffer<
 
         /**
          * Reads a display profile from its JSON text (a profile file's contents, `docs/DISPLAYS.md`): keys
-         * `pixel_pitch_m`, `resolution`, `wavelengths_m`, `volume_depth_m`, `offsets_m` (SI units), optional `name`
-         * and `calibration`; unknown keys are refused.
+         * `pixel_pitch_m`, `resolution`, `wavelengths_m`, `volume_depth_m`, `offsets_m` (SI units), optional `name`,
+         * `calibration`, `aberration` and `prescription`; unknown keys are refused.
          *
          * Errors: [`TensorholoError::InvalidInput`] whose message names the key at fault (a missing key, a wrong
          * type or array length, a non-positive pitch or volume, a wavelength outside 380–780 nm, an unknown key) or
@@ -5050,7 +5274,8 @@ public object FfiConverterSequenceTypeShippedModelCheck: FfiConverterRustBuffer<
 
         /**
          * The [`GeneratorConfig`] for a display: `width`/`height` from its `resolution`, its pitch, lasers and
-         * volume, its first offset; every other field at its default (change them before making the generator).
+         * volume, its first offset, its prescription; every other field at its default (change them before making
+         * the generator; the profile's `aberration` file is the app's to read into [`GeneratorConfig::aberration`]).
          *
          * Errors: [`TensorholoError::InvalidInput`] naming the key for a profile that breaks the profile rules (as
          * [`display_profile_from_json`]). Whether the CNNs serve the display is checked by [`HologramGenerator::new`]

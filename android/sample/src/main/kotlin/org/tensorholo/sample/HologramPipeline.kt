@@ -10,6 +10,7 @@ import tensorholo.GeneratorConfig
 import tensorholo.HologramGenerator
 import tensorholo.HologramStream
 import tensorholo.PatternsListener
+import tensorholo.Prescription
 import tensorholo.RgbdFrame
 import tensorholo.SlmPatterns
 import tensorholo.TensorholoException
@@ -21,8 +22,8 @@ import tensorholo.generatorConfigForDisplay
 /**
  * Camera frames → SLM patterns, off the UI and GL threads.
  *
- * A [HologramGenerator] of the SLM's `width × height` is made on a worker thread (it times the CNN plans for
- * a few seconds) for the display that `profileJson` describes ([generatorConfig]), then a [HologramStream]:
+ * A [HologramGenerator] of the SLM's `width × height` is made on a worker thread for the display that
+ * `profileJson` describes and the viewer's sphere `sphereDioptres` ([generatorConfig]), then a [HologramStream]:
  * [push] hands it a frame without blocking, the stream's own thread renders and calls back [onSlm] with the
  * packed SLM bitmap. Every [PREVIEW_EVERY_MS] (and when [focus] changes) the worker renders a
  * [HologramGenerator.preview] of the latest frame for [onPreview]; the generator runs one call at a time, so
@@ -33,6 +34,7 @@ class HologramPipeline(
     width: Int,
     height: Int,
     private val profileJson: String?,
+    private val sphereDioptres: Double?,
     private val onSlm: (Bitmap) -> Unit,
     private val onPreview: (Bitmap) -> Unit,
     private val onStatus: (String) -> Unit,
@@ -93,9 +95,22 @@ class HologramPipeline(
      * made, naming the key (`volume_depth_m`, `wavelengths_m`…).
      */
     private fun generatorConfig(width: Int, height: Int): GeneratorConfig {
-        val json = profileJson ?: return GeneratorConfig(width = width.toUInt(), height = height.toUInt())
-        return generatorConfigForDisplay(displayProfileFromJson(json))
-            .copy(width = width.toUInt(), height = height.toUInt())
+        val json = profileJson ?: return withPrescription(GeneratorConfig(width = width.toUInt(), height = height.toUInt()))
+        return withPrescription(
+            generatorConfigForDisplay(displayProfileFromJson(json))
+                .copy(width = width.toUInt(), height = height.toUInt()),
+        )
+    }
+
+    /**
+     * `config` with the viewer's sphere from the slider (docs/ABERRATION.md, "A viewer's prescription"): the
+     * profile's prescription (cylinder, axis, eyepiece) with that sphere, or a sphere alone; without a sphere the
+     * profile's prescription as it is. A corrected generator runs on the CPU and encodes with AA-DPM.
+     */
+    private fun withPrescription(config: GeneratorConfig): GeneratorConfig {
+        val sphere = sphereDioptres ?: return config
+        val rx = config.prescription?.copy(sphereD = sphere) ?: Prescription(sphereD = sphere)
+        return config.copy(prescription = rx)
     }
 
     /**

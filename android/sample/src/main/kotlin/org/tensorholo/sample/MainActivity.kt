@@ -36,6 +36,8 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
     private lateinit var previewView: ImageView
     private lateinit var status: TextView
     private lateinit var focusBar: SeekBar
+    private lateinit var sphereBar: SeekBar
+    private lateinit var sphereLabel: TextView
     private val displays by lazy { getSystemService(DisplayManager::class.java) }
 
     /** The SLM's display profile, `assets/display.json` (docs/DISPLAYS.md), or null when the app ships none. */
@@ -69,6 +71,22 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
             override fun onStartTrackingTouch(bar: SeekBar) = Unit
 
             override fun onStopTrackingTouch(bar: SeekBar) = Unit
+        })
+        sphereBar = findViewById(R.id.sphere)
+        sphereLabel = findViewById(R.id.sphere_label)
+        sphereBar.setOnSeekBarChangeListener(object : SeekBar.OnSeekBarChangeListener {
+            override fun onProgressChanged(bar: SeekBar, progress: Int, fromUser: Boolean) {
+                val sphere = sphereDioptres(progress)
+                sphereLabel.text = if (sphere == null) "Correct my eyes: off" else "Correct my eyes: sphere %+.2f D".format(sphere)
+            }
+
+            override fun onStartTrackingTouch(bar: SeekBar) = Unit
+
+            // Remake the pipeline with the new prescription (a moment: the generator is made again).
+            override fun onStopTrackingTouch(bar: SeekBar) {
+                pipelineSize = null
+                updateOutput()
+            }
         })
         window.addFlags(WindowManager.LayoutParams.FLAG_KEEP_SCREEN_ON)
 
@@ -194,11 +212,16 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
             size.first,
             size.second,
             displayProfileJson,
+            sphereDioptres(sphereBar.progress),
             onSlm = { bitmap -> runOnUiThread { presentation?.showPattern(bitmap) } },
             onPreview = { bitmap -> runOnUiThread { previewView.setImageBitmap(bitmap) } },
             onStatus = { message -> runOnUiThread { status.text = message } },
         ).also { it.focus = focusBar.progress / 100f }
     }
+
+    /** The sphere the slider gives, dioptres in 0.25 D steps, or null in its middle (no correction). */
+    private fun sphereDioptres(progress: Int): Double? =
+        if (progress == SPHERE_OFF) null else (progress - SPHERE_OFF) * 0.25
 
     /** A shown presentation on `display`, or null when the display went away meanwhile (reported). */
     private fun showPresentation(display: Display): SlmPresentation? {
@@ -228,5 +251,8 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
 
         /** Hologram size when no SLM display is connected (preview only). */
         val PREVIEW_ONLY_SIZE = 640 to 360
+
+        /** The sphere slider's middle: no correction. */
+        const val SPHERE_OFF = 48
     }
 }
