@@ -62,6 +62,14 @@ pub struct BenchArgs {
     /// SLM offset (mm) of the pipeline rows (pre-filter CNN of that offset; 0 = AA-DPM, no pre-filter).
     #[arg(long, default_value_t = 6)]
     offset_mm: u32,
+    /// Encode the pipeline rows with AA-DPM at any offset (no pre-filter CNN).
+    #[arg(long)]
+    no_prefilter: bool,
+    /// Aberration file (tensorholo.aberration, docs/ABERRATION.md) the pipeline rows correct in every frame
+    /// (the correction joins the offset stage; such rows encode with AA-DPM). Compare with --no-prefilter
+    /// rows for the correction's cost.
+    #[arg(long, value_name = "FILE")]
+    aberration: Option<PathBuf>,
     /// Skip the CNN table.
     #[arg(long)]
     skip_cnn: bool,
@@ -223,7 +231,7 @@ fn selection(args: &BenchArgs, layers: usize, precision: Precision) -> ModelSele
     ModelSelection {
         layers,
         precision,
-        prefilter: if args.offset_mm != 0 {
+        prefilter: if args.offset_mm != 0 && !args.no_prefilter && args.aberration.is_none() {
             PrefilterMode::Required
         } else {
             PrefilterMode::Off
@@ -532,12 +540,20 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         print_profiles(&profiles, &mut results);
     }
     if !args.skip_pipeline && args.backend.contains(&BackendArg::Cpu) {
+        let aberration = match &args.aberration {
+            Some(path) => Some(Arc::new(crate::aberration::load(path)?)),
+            None => None,
+        };
         println!(
             "Pipeline (`HologramSession`, offset {} mm{}): median stage times in ms, end-to-end FPS of single \
              frames and of a stream (CNN of frame n+1 overlapping the optics of frame n); setup: the session's creation \
              (CNN plans, transfer functions, encoder) with the row's engine and threads\n",
             args.offset_mm,
-            if args.offset_mm == 0 { ", AA-DPM" } else { ", pre-filter CNN + DPM" }
+            match (&args.aberration, args.offset_mm == 0 || args.no_prefilter) {
+                (Some(_), _) => ", aberration corrected (--aberration), AA-DPM",
+                (None, true) => ", AA-DPM",
+                (None, false) => ", pre-filter CNN + DPM",
+            }
         );
         println!("| CNN | precision | layout | size (HxW) | threads | CNN | offset | pre-filter | DPM + LUT | frame | FPS | stream FPS | setup ms | peak MiB |");
         println!("|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
@@ -572,6 +588,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                             )?;
                             if let Some(p) = plans.source.saved() {
                                 pipeline = pipeline.with_saved_plans(Arc::new(p.clone()))?;
+                            }
+                            if let Some(a) = &aberration {
+                                pipeline = pipeline.with_aberration(a.clone())?;
                             }
                             let t = Instant::now();
                             let mut session = pipeline.session(h, w)?;

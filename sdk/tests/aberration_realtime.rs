@@ -458,3 +458,56 @@ fn a_myopic_astigmatic_eye_sees_the_prescription_corrected_display_as_an_emmetro
         assert!(axis_mirrored < corrected - 1.0, "{axis_mirrored}");
     }
 }
+
+/// The paper's Fig. 8 in simulation, for docs/ABERRATION.md: the TUM frame (288 × 384) through the paper's
+/// 200 mm cylindrical lens (vertical axis) in front of the viewer, focused near (d = 0.25) and far (0.75):
+/// columns the plain display without the lens, the plain display through it, the display corrected with the
+/// shipped CNN through it. Writes `docs/images/aberration_fig8.png` and prints each column's focal-stack PSNR.
+/// Run by hand: `cargo test --release -p tensorholo --test aberration_realtime -- --ignored fig8 --nocapture`.
+#[test]
+#[ignore = "writes docs/images/aberration_fig8.png; run by hand"]
+fn fig8_pictures() {
+    let frame = real_frame(288, 384);
+    let (h, w) = (frame.height(), frame.width());
+    let lens = Lens::cylinder(0.2, 90.0);
+    let setup = OpticalSetup::default();
+    let plain = pipeline(Precision::F32, PrefilterMode::Auto);
+    let corrected = pipeline(Precision::F32, PrefilterMode::Auto)
+        .with_aberration(correction(&lens, &setup))
+        .unwrap();
+    let mut plain_session = plain.session(h, w).unwrap();
+    let plain_shown = shown(&mut plain_session, &frame, &setup);
+    let target = plain_session.last_heads().unwrap().to_field().unwrap();
+    let corrected_shown = shown(&mut corrected.session(h, w).unwrap(), &frame, &setup);
+    let columns = [
+        ("plain display, no lens", &plain_shown, None),
+        ("plain display, through the lens", &plain_shown, Some(lens)),
+        (
+            "corrected display, through the lens",
+            &corrected_shown,
+            Some(lens),
+        ),
+    ];
+    let gap = 8;
+    let mut mosaic = Array3::<f32>::ones((3, 2 * h + gap, 3 * w + 2 * gap));
+    for (col, (name, field, lens)) in columns.iter().enumerate() {
+        let psnr = focal_stack_psnr(&target, field, &setup, None, *lens);
+        eprintln!("{name}: focal-stack PSNR {psnr:.2} dB");
+        for (row, d) in [0.25, 0.75].into_iter().enumerate() {
+            let view = seen(field, &setup, d, *lens);
+            mosaic
+                .slice_mut(ndarray::s![
+                    ..,
+                    row * (h + gap)..row * (h + gap) + h,
+                    col * (w + gap)..col * (w + gap) + w
+                ])
+                .assign(&view);
+        }
+    }
+    let path = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../docs/images/aberration_fig8.png"
+    ));
+    tensorholo::io::save_amplitude_png(path, mosaic.view(), 1.0).unwrap();
+    eprintln!("wrote {}", path.display());
+}
