@@ -323,16 +323,19 @@ fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
         options: args.optics.options(),
         silhouette_masks: true,
     };
-    let aberration = match &args.aberration {
-        Some(path) => {
-            if !args.offset_mm.is_finite() {
-                bail!("--offset-mm must be a finite number of millimetres");
-            }
-            Some(AberrationCorrection {
-                profile: crate::aberration::load(path)?,
-                slm_offset_m: args.offset_mm * 1e-3,
-            })
-        }
+    if let (None, Some((path, s))) = (&args.aberration, aberration_source(args)?) {
+        log::info!(
+            "the --display profile's aberration {}: the ground truth is the aberration-corrected SM-LBM \
+             (Eq. 5) for an SLM {} mm from the midpoint plane (the profile's first offset)",
+            path.display(),
+            s * 1e3
+        );
+    }
+    let aberration = match aberration_source(args)? {
+        Some((path, slm_offset_m)) => Some(AberrationCorrection {
+            profile: crate::aberration::load(&path)?,
+            slm_offset_m,
+        }),
         None => None,
     };
     let config = DatasetConfig {
@@ -357,20 +360,42 @@ fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
     Ok(config)
 }
 
+/// The aberration file the ground truth corrects and the SLM offset (metres) it is for: `--aberration` at
+/// `--offset-mm`, else the `--display` profile's `aberration` at the profile's first offset (so that
+/// `training/retrain.sh --display FILE` trains for it); `None` without either. A profile's `prescription` is
+/// not used here: the real-time correction is exact for it, no retraining needed.
+fn aberration_source(args: &DatasetArgs) -> Result<Option<(PathBuf, f64)>> {
+    if let Some(path) = &args.aberration {
+        if !args.offset_mm.is_finite() {
+            bail!("--offset-mm must be a finite number of millimetres");
+        }
+        return Ok(Some((path.clone(), args.offset_mm * 1e-3)));
+    }
+    let Some(profile) = args.optics.profile()? else {
+        return Ok(None);
+    };
+    Ok(profile
+        .aberration
+        .clone()
+        .map(|path| (path, profile.default_offset_m())))
+}
+
 /// Runs `holo dataset`.
 pub fn run(args: &DatasetArgs) -> Result<()> {
     let inputs: Vec<crate::output::Input> = [
         args.photos
             .as_deref()
             .map(|p| crate::output::Input::folder("--photos", p)),
-        args.aberration
-            .as_deref()
-            .map(|p| crate::output::Input::file("--aberration", p)),
         args.optics.guard_input(),
     ]
     .into_iter()
     .flatten()
     .collect();
+    let aberration = aberration_source(args)?;
+    let mut inputs = inputs;
+    if let Some((path, _)) = &aberration {
+        inputs.push(crate::output::Input::file("--aberration", path));
+    }
     crate::output::guard("--out", &args.out, &inputs)?;
     if args.merge {
         return merge(args);
@@ -548,7 +573,7 @@ fn run_in_pool(
         overwrite: args.force,
         git_commit: git_commit(),
         command: crate::output::command_line(),
-        aberration_file: args.aberration.clone(),
+        aberration_file: aberration_source(args)?.map(|(path, _)| path),
         display: args
             .optics
             .profile()?

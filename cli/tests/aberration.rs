@@ -216,3 +216,63 @@ fn a_prescription_from_the_flag_or_the_profile_is_corrected_and_bad_ones_are_nam
     assert!(stderr(&o).contains("eyepiece"), "{}", stderr(&o));
     assert!(!out.exists());
 }
+
+/// `holo dataset --display` with a profile's aberration file: the ground truth is the aberration-corrected
+/// SM-LBM at the profile's first offset, recorded in the manifest, so that `training/retrain.sh --display FILE`
+/// trains for it; the same as `--aberration FILE --offset-mm` given by hand.
+#[test]
+fn a_dataset_for_a_profile_with_an_aberration_file_is_corrected_for_it() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("optics.json"), VARYING).unwrap();
+    let profile = dir.path().join("display.json");
+    std::fs::write(
+        &profile,
+        r#"{"pixel_pitch_m": 8e-6, "resolution": [24, 24], "wavelengths_m": [638e-9, 520e-9, 450e-9],
+            "volume_depth_m": 6e-3, "offsets_m": [6e-3], "aberration": "optics.json"}"#,
+    )
+    .unwrap();
+    let dataset = |extra: &[&str], out: &Path| {
+        let mut args = vec![
+            "dataset",
+            "--train",
+            "1",
+            "--val",
+            "0",
+            "--test",
+            "0",
+            "--size",
+            "24",
+            "--levels",
+            "8",
+            "--layers",
+            "2",
+            "--previews",
+            "0",
+        ];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        holo(&args)
+    };
+    let keyed = dir.path().join("keyed");
+    let o = dataset(&["--display", profile.to_str().unwrap()], &keyed);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(keyed.join("manifest.json")).unwrap())
+            .unwrap();
+    let recorded = &manifest["synthesis"]["aberration"];
+    assert_eq!(recorded["slm_offset_m"], 0.006, "{recorded}");
+    assert!(
+        recorded["file"].as_str().unwrap().ends_with("optics.json"),
+        "{recorded}"
+    );
+
+    let by_hand = dir.path().join("by_hand");
+    let optics = dir.path().join("optics.json");
+    let o = dataset(
+        &["--aberration", optics.to_str().unwrap(), "--offset-mm", "6"],
+        &by_hand,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let shard = |d: &Path| std::fs::read(d.join("train-00000.npz")).unwrap();
+    assert_eq!(shard(&keyed), shard(&by_hand), "the same ground truth");
+}
