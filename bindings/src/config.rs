@@ -1,5 +1,5 @@
 //! [`GeneratorConfig`]: what a generator makes, as a record with the core's defaults, and its conversions to
-//! and from the core's configuration.
+//! and from the core's configuration; [`Prescription`], the viewer's spectacle prescription it may carry.
 
 use std::sync::Arc;
 
@@ -9,7 +9,6 @@ use tensorholo::optics::OpticalSetup;
 use tensorholo::scene::DepthRange;
 use tensorholo::synthesis::aberration::AberrationProfile;
 
-use crate::display::Prescription;
 use crate::enums::{Backend, CnnEngine, GpuPrecision, Precision, PrefilterMode, SceneInput};
 use crate::error::{invalid, Result};
 use crate::frames::Fit;
@@ -96,6 +95,47 @@ pub struct GeneratorConfig {
     /// corrected as `prescription`; at most one of the two. `None` (default): none.
     #[uniffi(default = None)]
     pub aberration: Option<String>,
+}
+
+/// A viewer's spectacle prescription, corrected in every frame with the shipped CNNs (`docs/ABERRATION.md`,
+/// "A viewer's prescription"): the display shows the hologram as this lens would let the viewer see it.
+/// Ophthalmic conventions: a myope's sphere is negative; the axis is degrees counterclockwise from the
+/// horizontal as the viewer sees the image.
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct Prescription {
+    /// Sphere in dioptres (negative for a myope), within ±20.
+    pub sphere_d: f64,
+    /// Cylinder in dioptres (either sign), within ±10; 0 (default) without astigmatism.
+    #[uniffi(default = 0.0)]
+    pub cylinder_d: f64,
+    /// The cylinder's axis in degrees, 0–180; required with a cylinder (default `None`).
+    #[uniffi(default = None)]
+    pub axis_deg: Option<f64>,
+    /// Focal length of the display's eyepiece in metres (default 0.021, the paper's).
+    #[uniffi(default = 0.021)]
+    pub eyepiece_focal_m: f64,
+}
+
+impl From<Prescription> for tensorholo::display::Prescription {
+    fn from(p: Prescription) -> Self {
+        Self {
+            sphere_d: p.sphere_d,
+            cylinder_d: p.cylinder_d,
+            axis_deg: p.axis_deg,
+            eyepiece_focal_m: p.eyepiece_focal_m,
+        }
+    }
+}
+
+impl From<tensorholo::display::Prescription> for Prescription {
+    fn from(p: tensorholo::display::Prescription) -> Self {
+        Self {
+            sphere_d: p.sphere_d,
+            cylinder_d: p.cylinder_d,
+            axis_deg: p.axis_deg,
+            eyepiece_focal_m: p.eyepiece_focal_m,
+        }
+    }
 }
 
 impl GeneratorConfig {

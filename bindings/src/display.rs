@@ -4,7 +4,7 @@
 use tensorholo::display as core_display;
 use tensorholo::generator as core;
 
-use crate::config::GeneratorConfig;
+use crate::config::{GeneratorConfig, Prescription};
 #[cfg(doc)]
 use crate::error::TensorholoError;
 use crate::error::{guard, invalid, Result};
@@ -48,47 +48,6 @@ pub struct DisplayProfile {
     /// and `prescription`. [`generator_config_for_display`] carries it into the configuration.
     #[uniffi(default = None)]
     pub prescription: Option<Prescription>,
-}
-
-/// A viewer's spectacle prescription, corrected in every frame with the shipped CNNs (`docs/ABERRATION.md`,
-/// "A viewer's prescription"): the display shows the hologram as this lens would let the viewer see it.
-/// Ophthalmic conventions: a myope's sphere is negative; the axis is degrees counterclockwise from the
-/// horizontal as the viewer sees the image.
-#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
-pub struct Prescription {
-    /// Sphere in dioptres (negative for a myope), within ±20.
-    pub sphere_d: f64,
-    /// Cylinder in dioptres (either sign), within ±10; 0 (default) without astigmatism.
-    #[uniffi(default = 0.0)]
-    pub cylinder_d: f64,
-    /// The cylinder's axis in degrees, 0–180; required with a cylinder (default `None`).
-    #[uniffi(default = None)]
-    pub axis_deg: Option<f64>,
-    /// Focal length of the display's eyepiece in metres (default 0.021, the paper's).
-    #[uniffi(default = 0.021)]
-    pub eyepiece_focal_m: f64,
-}
-
-impl From<Prescription> for core_display::Prescription {
-    fn from(p: Prescription) -> Self {
-        Self {
-            sphere_d: p.sphere_d,
-            cylinder_d: p.cylinder_d,
-            axis_deg: p.axis_deg,
-            eyepiece_focal_m: p.eyepiece_focal_m,
-        }
-    }
-}
-
-impl From<core_display::Prescription> for Prescription {
-    fn from(p: core_display::Prescription) -> Self {
-        Self {
-            sphere_d: p.sphere_d,
-            cylinder_d: p.cylinder_d,
-            axis_deg: p.axis_deg,
-            eyepiece_focal_m: p.eyepiece_focal_m,
-        }
-    }
 }
 
 impl DisplayProfile {

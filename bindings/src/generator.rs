@@ -6,8 +6,7 @@ use std::sync::Arc;
 use tensorholo::generator as core;
 use tensorholo::scene;
 
-use crate::config::GeneratorConfig;
-use crate::display::Prescription;
+use crate::config::{GeneratorConfig, Prescription};
 use crate::error::{guard, invalid, Result, TensorholoError};
 use crate::frames::{Preview, RgbdFrame, SlmPatterns, StageTimings};
 use crate::stream::{HologramStream, PatternsListener};
@@ -335,7 +334,6 @@ mod tests {
     use crate::config::tests::config;
     #[cfg(feature = "embedded-models")]
     use crate::display::tests::PROFILE_4UM;
-    use crate::display::Prescription;
     #[cfg(feature = "embedded-models")]
     use crate::display::{display_profile_from_json, generator_config_for_display};
     use crate::enums::CnnEngine;

@@ -4912,7 +4912,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration() != 48003) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_prescription() != 43431) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_prescription() != 54452) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream() != 59478) {

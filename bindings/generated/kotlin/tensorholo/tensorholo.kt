@@ -984,7 +984,7 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
     if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_calibration() and 0xFFFF) != 48003) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_prescription() and 0xFFFF) != 43431) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_prescription() and 0xFFFF) != 54452) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream() and 0xFFFF) != 59478) {
