@@ -212,8 +212,8 @@ pub struct ModelArgs {
     /// prescription writes one): the viewer's eyes or the display optics, corrected in every frame with the
     /// shipped CNNs (the coefficients at the midpoint plane multiply the hologram's spectrum; exact where they
     /// are the same at every distance, report.json gives the residual otherwise). Overrides the --display
-    /// profile's `aberration`. Frames then run on the CPU and encode with --encoding (AA-DPM by default): the
-    /// DDPM pre-filters were trained on uncorrected fields.
+    /// profile's `aberration`. On the CPU and the GPU alike; frames encode with --encoding (AA-DPM by
+    /// default): the DDPM pre-filters were trained on uncorrected fields.
     #[arg(long, conflicts_with = "prefilter")]
     pub aberration: Option<PathBuf>,
     /// The viewer's spectacle prescription, corrected in every frame as an aberration file is:

@@ -172,8 +172,8 @@ impl HologramGenerator {
     /// measured coefficients. Make the generator with a prescription or an aberration profile in its
     /// configuration (a zero one will do) so that it encodes with AA-DPM, which holds for corrected fields.
     ///
-    /// Errors: as [`HologramSession::set_aberration`] (a profile for another display; a generator whose frames
-    /// run on the GPU). The generator keeps its correction on error.
+    /// Errors: as [`HologramSession::set_aberration`] (a profile for another display). The generator keeps
+    /// its correction on error.
     pub fn set_aberration(&self, profile: Option<Arc<AberrationProfile>>) -> Result<()> {
         let mut current = lock_slot(&self.aberration);
         self.session()?.set_aberration(profile.clone())?;

@@ -249,11 +249,13 @@ pub struct GpuMultiplier {
     buffer: wgpu::Buffer,
 }
 
-/// One spectral operation bound to a field buffer and a multiplier ([`GpuSpectralPlan::bind`]).
+/// One spectral operation bound to a field buffer and one or more multipliers ([`GpuSpectralPlan::bind`],
+/// [`GpuSpectralPlan::bind_chain`]).
 pub struct GpuSpectralOp {
     plan: Arc<PlanInner>,
     embed: wgpu::BindGroup,
-    multiply: [wgpu::BindGroup; 2],
+    /// One multiply pass per multiplier, each bound both ways (spectrum in a, in b).
+    multiply: Vec<[wgpu::BindGroup; 2]>,
     crop: [wgpu::BindGroup; 2],
 }
 
@@ -349,6 +351,37 @@ impl GpuSpectralPlan {
         ctx: &GpuContext,
         per_channel: &[&[Complex32]],
     ) -> Result<GpuMultiplier> {
+        self.check_multipliers(per_channel)?;
+        let flat: Vec<[f32; 2]> = per_channel
+            .iter()
+            .flat_map(|m| m.iter().map(|v| [v.re, v.im]))
+            .collect();
+        Ok(GpuMultiplier {
+            buffer: ctx.storage_with("spectral multiplier", &flat)?,
+        })
+    }
+
+    /// Rewrites `target` (uploaded by [`GpuSpectralPlan::multiplier`] for this plan) with new multipliers of
+    /// the same layout, in place: no new GPU buffer, and operations bound to it use the new values from their
+    /// next recording (e.g. a viewer's prescription slider).
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for a wrong count or length.
+    pub(crate) fn rewrite(
+        &self,
+        ctx: &GpuContext,
+        target: &GpuMultiplier,
+        per_channel: &[&[Complex32]],
+    ) -> Result<()> {
+        self.check_multipliers(per_channel)?;
+        for (c, m) in per_channel.iter().enumerate() {
+            let offset = (c * m.len() * std::mem::size_of::<Complex32>()) as u64;
+            ctx.queue()
+                .write_buffer(&target.buffer, offset, bytemuck::cast_slice(m));
+        }
+        Ok(())
+    }
+
+    fn check_multipliers(&self, per_channel: &[&[Complex32]]) -> Result<()> {
         let p = &*self.inner;
         let (hc, wc) = p.comp;
         if per_channel.len() != p.channels || per_channel.iter().any(|m| m.len() != hc * wc) {
@@ -358,13 +391,7 @@ impl GpuSpectralPlan {
                 got: per_channel.iter().map(|m| m.len()).collect(),
             });
         }
-        let flat: Vec<[f32; 2]> = per_channel
-            .iter()
-            .flat_map(|m| m.iter().map(|v| [v.re, v.im]))
-            .collect();
-        Ok(GpuMultiplier {
-            buffer: ctx.storage_with("spectral multiplier", &flat)?,
-        })
+        Ok(())
     }
 
     /// Uploads the angular-spectrum transfer functions (Eq. 2, with `carrier`) of `props` (one propagator per
@@ -396,14 +423,40 @@ impl GpuSpectralPlan {
         field: &wgpu::Buffer,
         multiplier: &GpuMultiplier,
     ) -> Result<GpuSpectralOp> {
+        self.bind_chain(ctx, field, &[multiplier])
+    }
+
+    /// Binds `field ← F⁻¹{F{field}·M₁·M₂·…}` on `field` (complex `[C, H, W]`): one forward and one inverse
+    /// transform, and one multiply pass per multiplier (e.g. the offset's transfer function, then the viewer's
+    /// aberration correction kernel, paper Eq. 5–6). A multiplier rewritten with [`GpuMultiplier::write`]
+    /// takes effect at the next recording, without rebinding.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for no multiplier; [`HoloError::Gpu`].
+    pub(crate) fn bind_chain(
+        &self,
+        ctx: &GpuContext,
+        field: &wgpu::Buffer,
+        multipliers: &[&GpuMultiplier],
+    ) -> Result<GpuSpectralOp> {
+        if multipliers.is_empty() {
+            return Err(invalid(
+                "multipliers",
+                "a spectral operation needs ≥ 1 multiplier",
+            ));
+        }
         let p = &*self.inner;
         Ok(GpuSpectralOp {
             plan: Arc::clone(&self.inner),
             embed: ctx.bind(&p.embed_kernel, &[&p.grid, field, &p.a]),
-            multiply: [
-                ctx.bind(&p.multiply_kernel, &[&p.grid, &p.a, &multiplier.buffer]),
-                ctx.bind(&p.multiply_kernel, &[&p.grid, &p.b, &multiplier.buffer]),
-            ],
+            multiply: multipliers
+                .iter()
+                .map(|m| {
+                    [
+                        ctx.bind(&p.multiply_kernel, &[&p.grid, &p.a, &m.buffer]),
+                        ctx.bind(&p.multiply_kernel, &[&p.grid, &p.b, &m.buffer]),
+                    ]
+                })
+                .collect(),
             crop: [
                 ctx.bind(&p.crop_kernel, &[&p.grid, field, &p.a]),
                 ctx.bind(&p.crop_kernel, &[&p.grid, field, &p.b]),
@@ -430,8 +483,10 @@ impl GpuSpectralOp {
             .dispatch(&mut pass, &p.to_t[k], grid_2d(wc, hc, p.channels, [16, 16]));
         in_b = !in_b;
         in_b = p.rows_h.record(&mut pass, &p.pass_kernel, false, in_b);
-        p.multiply_kernel
-            .dispatch(&mut pass, &self.multiply[usize::from(in_b)], grid_1d(n));
+        for multiply in &self.multiply {
+            p.multiply_kernel
+                .dispatch(&mut pass, &multiply[usize::from(in_b)], grid_1d(n));
+        }
         in_b = p.rows_h.record(&mut pass, &p.pass_kernel, true, in_b);
         p.transpose_kernel.dispatch(
             &mut pass,
@@ -452,12 +507,14 @@ impl GpuSpectralOp {
         let p = &*self.plan;
         let (hc, wc) = p.comp;
         let n = (p.channels * hc * wc) as f64;
-        let flops = 2.0 * (p.rows_w.flops() + p.rows_h.flops()) + 6.0 * n;
+        let multiplies = self.multiply.len() as f64;
+        let flops = 2.0 * (p.rows_w.flops() + p.rows_h.flops()) + 6.0 * n * multiplies;
         // Every FFT pass and transpose reads and writes the grid once (8 B per complex value each way);
-        // embed writes it, multiply reads it, the multiplier and writes it, crop reads the field's part.
+        // embed writes it, each multiply reads it, its multiplier and writes it, crop reads the field's part.
         let passes = 2 * (p.rows_w.passes() + p.rows_h.passes()) + 2;
         let field = (p.channels * p.height * p.width) as f64;
-        let bytes = 16.0 * n * passes as f64 + 8.0 * n + 24.0 * n + 16.0 * field + 8.0 * field;
+        let bytes =
+            16.0 * n * passes as f64 + 8.0 * n + 24.0 * n * multiplies + 16.0 * field + 8.0 * field;
         StageCost { flops, bytes }
     }
 }

@@ -7,7 +7,8 @@
 //!
 //! ```text
 //! input [C,H,W] ─► hologram CNN ─► heads [6,H,W] ─► field [3,H,W] (A·e^{i(p−0.5)2π})
-//!   ─► offset ASM (Eq. 6, carrier removed; skipped at 0 m)
+//!   ─► offset ASM (Eq. 6, carrier removed) × the viewer's aberration correction (Eq. 5) if any
+//!      (one spectral pass; skipped at 0 m without a correction)
 //!   ─► [pre-filter: field → [Re,Im] planes ─► pre-filter CNN (+ AA-DPM base) ─► field]
 //!   ─► double phase (blur for AA-DPM; pass 1 + reduction; pass 2 + LUT) ─► codes (u8 ×4 per u32), phase, stats
 //! ```
@@ -15,6 +16,7 @@
 use std::time::Instant;
 
 use ndarray::Array3;
+use num_complex::Complex32;
 
 use super::cnn::{GpuCnn, GpuStorage};
 use super::context::GpuContext;
@@ -33,11 +35,28 @@ struct Prefilter {
     from_planes: GpuPlanesToField,
 }
 
-/// The offset propagation: the plan (scratch buffers), its transfer functions and the bound operation.
-struct Offset {
-    _plan: GpuSpectralPlan,
-    _multiplier: GpuMultiplier,
-    op: GpuSpectralOp,
+/// The spectral pass after the heads (one forward and one inverse transform): the offset propagation's
+/// transfer functions (Eq. 6) and/or the viewer's aberration correction kernels `Φ` (Eq. 5 with one kernel,
+/// `docs/ABERRATION.md` "In the real-time frame"), `field ← F⁻¹{F{field}·T_s·Φ}`.
+struct Spectral {
+    plan: GpuSpectralPlan,
+    /// The transfer functions and the operation applying them alone; `None` at offset 0.
+    offset: Option<(GpuMultiplier, GpuSpectralOp)>,
+    /// The correction kernels and the operation applying `T_s·Φ` (`Φ` alone at offset 0), built by the first
+    /// correction and rewritten in place by later ones.
+    correction: Option<(GpuMultiplier, GpuSpectralOp)>,
+    /// Whether frames apply the correction.
+    correcting: bool,
+}
+
+impl Spectral {
+    /// The operation a frame records, if any.
+    fn op(&self) -> Option<&GpuSpectralOp> {
+        match (&self.correction, self.correcting) {
+            (Some((_, op)), true) => Some(op),
+            _ => self.offset.as_ref().map(|(_, op)| op),
+        }
+    }
 }
 
 #[repr(C)]
@@ -77,7 +96,7 @@ const MAX_CACHED_FOCUS: usize = 8;
 /// One stage's name, work and traffic per frame, for `holo bench --backend gpu`.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct GpuStage {
-    /// Stage name: `hologram_cnn`, `heads_to_field`, `offset_asm`, `prefilter_cnn`, `double_phase`.
+    /// Stage name: `hologram_cnn`, `heads_to_field`, `offset_asm` (or `aberration`: a correction at offset 0), `prefilter_cnn`, `double_phase`.
     pub name: &'static str,
     /// Floating-point operations per frame (a multiply-add counts 2).
     pub flops: f64,
@@ -98,7 +117,9 @@ pub(crate) struct GpuFrameSession {
     heads: wgpu::Buffer,
     cnn: GpuCnn,
     to_field: GpuHeadsToField,
-    offset: Option<Offset>,
+    /// The CNN heads' complex field `[3, H, W]` that the spectral pass, the pre-filter and the encoder share.
+    field: wgpu::Buffer,
+    spectral: Option<Spectral>,
     prefilter: Option<Prefilter>,
     dp: GpuDoublePhase,
     staging_codes: wgpu::Buffer,
@@ -176,15 +197,16 @@ impl GpuFrameSession {
         let cnn = GpuCnn::new(ctx, hologram, height, width, &input, &heads, storage)?;
         let field = ctx.storage("field", bytes_of(3 * n, 8, "size")?)?;
         let to_field = GpuHeadsToField::new(ctx, height, width, &heads, &field)?;
-        let offset = if offset_m != 0.0 {
+        let spectral = if offset_m != 0.0 {
             let props = optics.propagators(height, width, options)?;
             let plan = GpuSpectralPlan::new(ctx, props[0].plan(), 3)?;
             let multiplier = plan.transfer_functions(ctx, &props, offset_m, Carrier::Remove)?;
             let op = plan.bind(ctx, &field, &multiplier)?;
-            Some(Offset {
-                _plan: plan,
-                _multiplier: multiplier,
-                op,
+            Some(Spectral {
+                plan,
+                offset: Some((multiplier, op)),
+                correction: None,
+                correcting: false,
             })
         } else {
             None
@@ -225,7 +247,8 @@ impl GpuFrameSession {
             heads,
             cnn,
             to_field,
-            offset,
+            field,
+            spectral,
             prefilter,
             dp,
             staging_codes,
@@ -397,6 +420,70 @@ impl GpuFrameSession {
         Ok(out)
     }
 
+    /// The spectral pass a frame records, if any.
+    fn spectral_op(&self) -> Option<&GpuSpectralOp> {
+        self.spectral.as_ref().and_then(Spectral::op)
+    }
+
+    /// The spectral stage's name in profiles: `offset_asm` (with or without a correction), or `aberration`
+    /// (a correction at offset 0).
+    fn spectral_name(&self) -> &'static str {
+        if self.offset_m != 0.0 {
+            "offset_asm"
+        } else {
+            "aberration"
+        }
+    }
+
+    /// Sets the viewer's aberration correction of the next frames: `kernels` are the correction kernels `Φ`
+    /// per colour (R, G, B) in the CPU [`crate::optics::SpectralPlan`] layout of this session's propagators
+    /// (`[Wc, Hc]`), scaled by the inverse transform's normalisation `1/(Hc·Wc)` at offset 0 (where no
+    /// transfer function carries it) and by 1 otherwise, as the CPU frame's; `None` turns the correction off.
+    /// The first correction uploads the kernels (and, at offset 0, plans the spectral pass); later ones rewrite
+    /// them in place, allocating no GPU memory.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for kernels of another size; [`HoloError::Gpu`].
+    pub(crate) fn set_correction(&mut self, kernels: Option<[&[Complex32]; 3]>) -> Result<()> {
+        let Some(kernels) = kernels else {
+            if let Some(s) = &mut self.spectral {
+                s.correcting = false;
+            }
+            return Ok(());
+        };
+        let spectral = match &mut self.spectral {
+            Some(s) => s,
+            None => {
+                let props = self
+                    .setup
+                    .propagators(self.height, self.width, self.options)?;
+                let plan = GpuSpectralPlan::new(&self.ctx, props[0].plan(), 3)?;
+                self.spectral.insert(Spectral {
+                    plan,
+                    offset: None,
+                    correction: None,
+                    correcting: false,
+                })
+            }
+        };
+        match &spectral.correction {
+            Some((multiplier, _)) => spectral.plan.rewrite(&self.ctx, multiplier, &kernels)?,
+            None => {
+                let multiplier = spectral.plan.multiplier(&self.ctx, &kernels)?;
+                let op = match &spectral.offset {
+                    Some((transfer, _)) => spectral.plan.bind_chain(
+                        &self.ctx,
+                        &self.field,
+                        &[transfer, &multiplier],
+                    )?,
+                    None => spectral.plan.bind(&self.ctx, &self.field, &multiplier)?,
+                };
+                spectral.correction = Some((multiplier, op));
+            }
+        }
+        spectral.correcting = true;
+        Ok(())
+    }
+
     /// The CNNs' activation storage (what runs: f32 where the adapter has no f16 shaders).
     pub(crate) fn storage(&self) -> GpuStorage {
         self.storage
@@ -406,8 +493,8 @@ impl GpuFrameSession {
     fn record(&self, encoder: &mut wgpu::CommandEncoder) {
         self.cnn.record(encoder);
         self.to_field.record(encoder);
-        if let Some(o) = &self.offset {
-            o.op.record(encoder);
+        if let Some(op) = self.spectral_op() {
+            op.record(encoder);
         }
         if let Some(p) = &self.prefilter {
             p.to_planes.record(encoder);
@@ -531,10 +618,10 @@ impl GpuFrameSession {
             flops,
             bytes,
         });
-        if let Some(o) = &self.offset {
-            let StageCost { flops, bytes } = o.op.cost();
+        if let Some(op) = self.spectral_op() {
+            let StageCost { flops, bytes } = op.cost();
             v.push(GpuStage {
-                name: "offset_asm",
+                name: self.spectral_name(),
                 flops,
                 bytes,
             });
@@ -569,8 +656,8 @@ impl GpuFrameSession {
             ("hologram_cnn", Box::new(|e| self.cnn.record(e))),
             ("heads_to_field", Box::new(|e| self.to_field.record(e))),
         ];
-        if let Some(o) = &self.offset {
-            stages.push(("offset_asm", Box::new(|e| o.op.record(e))));
+        if let Some(op) = self.spectral_op() {
+            stages.push((self.spectral_name(), Box::new(|e| op.record(e))));
         }
         if let Some(p) = &self.prefilter {
             stages.push((

@@ -7,6 +7,7 @@
 //! which one it is: an executor is a file plus one arm in `setup.rs`'s `choose_backend`.
 
 use ndarray::Array3;
+use num_complex::Complex32;
 
 use super::config::Backend;
 use super::frame::{Heads, SlmFrame};
@@ -39,6 +40,13 @@ pub(super) trait FrameExecutor: std::fmt::Debug + Send {
         amplitude_scale: f32,
         focus: f64,
     ) -> Result<Array3<f32>>;
+
+    /// Sets the viewer's aberration correction of the next frames: the kernels `Φ` per colour (R, G, B) as the
+    /// CPU frame multiplies them (`super::correction`'s `PupilCorrection`: the session's spectrum layout and
+    /// scale), or `None` for none. Called between frames; allocates nothing once a correction was set.
+    ///
+    /// Errors: [`crate::HoloError::ShapeMismatch`] for kernels of another size; [`crate::HoloError::Gpu`].
+    fn set_correction(&mut self, kernels: Option<[&[Complex32]; 3]>) -> Result<()>;
 
     /// Each stage of the last frame timed on its own (median of `repeats`), with its work and traffic.
     ///

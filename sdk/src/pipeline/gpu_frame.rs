@@ -3,6 +3,7 @@
 //! precision, the fallback reasons).
 
 use ndarray::Array3;
+use num_complex::Complex32;
 
 use super::config::{Backend, GpuPrecision};
 use super::executor::{Accelerator, BackendReportParts, FrameExecutor};
@@ -36,6 +37,10 @@ impl FrameExecutor for GpuFrameSession {
         focus: f64,
     ) -> Result<Array3<f32>> {
         GpuFrameSession::preview(self, codes, amplitude_scale, focus)
+    }
+
+    fn set_correction(&mut self, kernels: Option<[&[Complex32]; 3]>) -> Result<()> {
+        GpuFrameSession::set_correction(self, kernels)
     }
 
     fn stages(&self, repeats: usize) -> Result<Vec<StageProfile>> {

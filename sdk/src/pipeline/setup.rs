@@ -178,14 +178,16 @@ impl HologramSession {
     /// the offset propagation's pass, `H_SLM = F⁻¹{F{H}·Φ·T_s}` (paper Eq. 5 with one kernel, Eq. 6; exact for
     /// coefficients the same at every distance, [`AberrationReport`] otherwise). At offset 0 this adds one
     /// spectral pass per colour. The kernels' buffers are reused: a new profile with as many distinct
-    /// colour sets allocates nothing. On the CPU frame only. A session with a DDPM pre-filter keeps it (and
+    /// colour sets allocates nothing. The CPU frame and the GPU frame apply it alike (the GPU's kernels are
+    /// uploaded once and rewritten in place). A session with a DDPM pre-filter keeps it (and
     /// logs a warning): on corrected fields it falls below AA-DPM once the correction is more than weak, so
     /// make sessions that correct from a pipeline with [`HologramPipeline::with_aberration`], which encodes
     /// with AA-DPM.
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`wavelengths_m`, `pixel_pitch_m`) for a profile calibrated
-    /// for another display ([`AberrationProfile::check_setup`]), or (`aberration`) on a session whose frames
-    /// run on the GPU, which does not apply a correction yet. The session keeps its correction on error.
+    /// for another display ([`AberrationProfile::check_setup`]). The session keeps its correction on error.
+    /// A GPU frame that fails to take the kernels is dropped with a warning: the frames run on the CPU,
+    /// corrected, and [`HologramSession::backend_report`] says why.
     pub fn set_aberration(&mut self, profile: Option<Arc<AberrationProfile>>) -> Result<()> {
         let Some(profile) = profile else {
             for state in self.states.iter_mut().flatten() {
@@ -193,16 +195,11 @@ impl HologramSession {
             }
             self.correction = None;
             self.aberration = None;
+            if let Some(acc) = &mut self.accelerator {
+                acc.executor.set_correction(None)?;
+            }
             return Ok(());
         };
-        if self.accelerator.is_some() {
-            return Err(invalid(
-                "aberration",
-                "this session runs its frames on the GPU, which does not apply an aberration correction \
-                 yet: make the session with Backend::Cpu (Backend::Auto picks the CPU for a pipeline with an \
-                 aberration profile)",
-            ));
-        }
         profile.check_setup(&self.display)?;
         let report = AberrationReport::new(&profile, &self.display, self.offset_m);
         if self.prefilter.is_some() && !profile.is_zero() {
@@ -238,8 +235,24 @@ impl HologramSession {
         for state in self.states.iter_mut().flatten() {
             state.correction = Some(correction.clone());
         }
+        let gpu = match &mut self.accelerator {
+            Some(acc) => acc
+                .executor
+                .set_correction(Some([0, 1, 2].map(|c| correction.kernel(c)))),
+            None => Ok(()),
+        };
         self.correction = Some(correction);
         self.aberration = Some((profile, report));
+        if let Err(e) = gpu {
+            // The CPU frame is corrected: frames go on there rather than uncorrected on the GPU.
+            log::warn!(
+                "the GPU frame could not take the aberration correction, running on the CPU: {e}"
+            );
+            self.accelerator = None;
+            self.backend.active = Backend::Cpu;
+            self.backend.reason =
+                format!("the GPU frame could not take the aberration correction: {e}");
+        }
         Ok(())
     }
 
@@ -265,22 +278,6 @@ pub(super) fn choose_backend(
     if requested == Backend::Cpu {
         return Ok((
             BackendReportParts::cpu(requested, "CPU requested".into()),
-            None,
-        ));
-    }
-    if pipeline.aberration().is_some() {
-        if requested == Backend::Gpu {
-            return Err(invalid(
-                "backend",
-                "the GPU frame does not apply an aberration correction yet: use the CPU (backend cpu or \
-                 auto) with an aberration profile",
-            ));
-        }
-        return Ok((
-            BackendReportParts::cpu(
-                requested,
-                "the aberration correction runs on the CPU frame".into(),
-            ),
             None,
         ));
     }
