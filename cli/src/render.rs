@@ -430,22 +430,33 @@ impl ModelArgs {
         if let Some((what, mut source, profile)) =
             self.aberration(profile.as_ref(), &config.optics)?
         {
-            if self.prefilter {
+            if self.prefilter && !pipeline.corrected_by_cnn() {
                 bail!(
                     "{what}: --prefilter requires the DDPM pre-filter CNN, which was trained on uncorrected \
                      fields and falls below AA-DPM on corrected ones (docs/ABERRATION.md); drop --prefilter"
                 );
             }
             let profile = Arc::new(profile);
-            let report = AberrationReport::new(&profile, &config.optics, config.offset_m);
+            let report = if pipeline.corrected_by_cnn() {
+                AberrationReport::by_cnn(&profile, config.offset_m)
+            } else {
+                AberrationReport::new(&profile, &config.optics, config.offset_m)
+            };
             log::info!(
-                "aberration correction ({what}): the coefficients at d = {} m, {}",
-                report.distance_m,
-                if report.exact {
-                    "exact (the same at every distance)".to_string()
+                "aberration correction ({what}): {}",
+                if report.by_cnn {
+                    "by the hologram CNN, trained for these aberrations (at every distance)"
+                        .to_string()
+                } else if report.exact {
+                    format!(
+                        "the coefficients at d = {} m, exact (the same at every distance)",
+                        report.distance_m
+                    )
                 } else {
                     format!(
-                        "{:.3}/{:.3}/{:.3} rad RMS left uncorrected over the volume (R/G/B)",
+                        "the coefficients at d = {} m, {:.3}/{:.3}/{:.3} rad RMS left uncorrected over the \
+                         volume (R/G/B)",
+                        report.distance_m,
                         report.residual_rms_rad[0],
                         report.residual_rms_rad[1],
                         report.residual_rms_rad[2]

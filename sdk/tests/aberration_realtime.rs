@@ -26,8 +26,7 @@ use tensorholo::optics::{
     post_encoding_midpoint, Carrier, OpticalSetup, PropagationOptions, SpectralPlan,
 };
 use tensorholo::pipeline::{
-    Backend, GpuPrecision, HologramPipeline, HologramSession, ModelSelection, PipelineConfig,
-    PrefilterMode,
+    Backend, HologramPipeline, HologramSession, ModelSelection, PipelineConfig, PrefilterMode,
 };
 use tensorholo::scene::{load_rgbd, DepthEncoding, LoadOptions, RgbdFrame};
 use tensorholo::synthesis::aberration::amplitude_transfer_function;
@@ -533,6 +532,7 @@ fn fig8_pictures() {
 #[cfg(feature = "gpu")]
 #[test]
 fn the_gpu_frame_corrects_as_the_cpu_frame_and_the_viewer_sees_it() {
+    use tensorholo::pipeline::GpuPrecision;
     let Some(ctx) = tensorholo::gpu::test_context() else {
         return;
     };
@@ -649,4 +649,105 @@ fn the_gpu_frame_corrects_as_the_cpu_frame_and_the_viewer_sees_it() {
             "{precision:?}: {through} vs {without}"
         );
     }
+}
+
+/// The shipped 8-layer f32 hologram CNN's file with `tensorholo.aberration = json` appended to its
+/// `metadata_props` (ONNX field 14; protobuf readers concatenate repeated fields): the weights of the shipped
+/// CNN, the metadata of one retrained for aberrations (`training/retrain.sh --display` with an `aberration`).
+fn model_trained_for(json: &str) -> Vec<u8> {
+    fn varint(mut v: usize, out: &mut Vec<u8>) {
+        while v >= 0x80 {
+            out.push((v as u8 & 0x7f) | 0x80);
+            v >>= 7;
+        }
+        out.push(v as u8);
+    }
+    fn field(tag: u8, bytes: &[u8], out: &mut Vec<u8>) {
+        out.push(tag);
+        varint(bytes.len(), out);
+        out.extend_from_slice(bytes);
+    }
+    let mut entry = Vec::new();
+    field(0x0a, b"tensorholo.aberration", &mut entry);
+    field(0x12, json.as_bytes(), &mut entry);
+    let mut bytes = tensorholo::model::embedded::hologram_cnn(8, Precision::F32)
+        .unwrap()
+        .to_vec();
+    field(0x72, &entry, &mut bytes);
+    bytes
+}
+
+/// A CNN trained for aberrations that vary with distance corrects them itself: it runs only with the same
+/// profile (named in the refusal otherwise), no kernel is applied on top (its frames are the uncorrected
+/// pipeline's, bit for bit, since the weights here are the shipped ones), the report says so, and a slider
+/// is refused.
+#[test]
+fn a_cnn_trained_for_aberrations_runs_only_with_them_and_no_kernel_is_applied_on_top() {
+    use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
+    let setup = OpticalSetup::default();
+    let sample = |d: f64, a: f64| AberrationSample {
+        distance_m: d,
+        coefficients: [ZernikeCoefficients {
+            astigmatism_vertical: a,
+            ..ZernikeCoefficients::ZERO
+        }; 3],
+    };
+    let trained = Arc::new(
+        AberrationProfile::new(vec![sample(-9e-3, 1.0), sample(-3e-3, 2.0)])
+            .unwrap()
+            .with_display(setup.wavelengths_m, setup.pixel_pitch_m),
+    );
+    let other = Arc::new(
+        AberrationProfile::new(vec![sample(-9e-3, 1.0), sample(-3e-3, 2.5)])
+            .unwrap()
+            .with_display(setup.wavelengths_m, setup.pixel_pitch_m),
+    );
+    let bytes = model_trained_for(&trained.to_json_string());
+    let expected = ModelConfig {
+        offset_m: 0.0,
+        ..ModelConfig::default()
+    };
+    let model =
+        Arc::new(HologramModel::from_bytes(&bytes, ModelKind::Hologram, &expected).unwrap());
+    assert!(trained.same_aberrations(model.metadata().aberration.as_ref().unwrap()));
+    let config = PipelineConfig {
+        offset_m: OFFSET_M,
+        backend: Backend::Cpu,
+        ..PipelineConfig::default()
+    };
+    let pipeline = || HologramPipeline::new(model.clone(), None, config).unwrap();
+    assert!(pipeline().corrected_by_cnn());
+
+    // Without its aberrations, and with others: refused, naming the key and both profiles.
+    let e = pipeline().session(48, 64).unwrap_err();
+    assert!(
+        matches!(&e, HoloError::ModelMetadata { key, .. } if key == "tensorholo.aberration"),
+        "{e}"
+    );
+    assert!(e.to_string().contains("2 distances, -9 to -3 mm"), "{e}");
+    let e = pipeline().with_aberration(other).unwrap_err();
+    assert!(e.to_string().contains("tensorholo.aberration"), "{e}");
+    assert!(e.to_string().contains("2.500 rad"), "{e}");
+
+    // With them: the CNN's hologram as it is, no kernel on top.
+    let frame = real_frame(48, 64);
+    let mut session = pipeline()
+        .with_aberration(trained.clone())
+        .unwrap()
+        .session(48, 64)
+        .unwrap();
+    let codes = session.render(&frame).unwrap().codes.clone();
+    let shipped = pipeline_at(OFFSET_M, Precision::F32, PrefilterMode::Off)
+        .session(48, 64)
+        .unwrap()
+        .render(&frame)
+        .unwrap()
+        .codes
+        .clone();
+    assert_eq!(codes, shipped);
+    let (_, report) = session.aberration().unwrap();
+    assert!(report.by_cnn && report.exact);
+    assert_eq!(report.coefficients[1].astigmatism_vertical, 2.0 - 0.5);
+    let e = session.set_aberration(Some(trained)).unwrap_err();
+    assert!(e.to_string().contains("trained for its aberrations"), "{e}");
 }

@@ -25,7 +25,8 @@ Every file carries ``metadata_props`` (all keys prefixed ``tensorholo.``): ``kin
 ``precision`` (``f32``, ``int8-qoperator-conv``, ``int8-qdq-conv``), ``channels``, ``format_version`` and ``io``
 (a one-line statement of the input/output semantics), and for a pre-filter ``prefilter_base``
 (``aa-dpm(sigma_px=0.7,taps=5)`` or ``identity``) and ``hologram_layers`` (the depth of the hologram CNN it
-was trained with).
+was trained with); ``aberration`` (compact ``tensorholo.aberration`` JSON) when the training data was corrected
+for aberrations (the dataset manifest's ``synthesis.aberration``).
 """
 from __future__ import annotations
 
@@ -69,6 +70,7 @@ def model_metadata(
     training_commit: str,
     precision: str = "f32",
     hologram_layers: int | None = None,
+    aberration: dict | None = None,
 ) -> dict[str, str]:
     """The ``metadata_props`` of an exported CNN (``docs/CONVENTIONS.md`` §7.3), keys prefixed ``tensorholo.``.
 
@@ -82,6 +84,9 @@ def model_metadata(
         precision: ``f32``, ``int8-qoperator-conv`` or ``int8-qdq-conv``.
         hologram_layers: for a pre-filter, the depth of the hologram CNN it was trained with (written as
             ``tensorholo.hologram_layers``; the SDK runs a pre-filter by default only with that CNN's depth).
+        aberration: the ``tensorholo.aberration`` profile the training data was corrected for (the dataset
+            manifest's ``synthesis.aberration.profile``), written as ``tensorholo.aberration`` (compact JSON);
+            ``None``: none (the key is left out).
     Returns:
         dict of strings.
     """
@@ -104,6 +109,8 @@ def model_metadata(
     }
     if hologram_layers is not None:
         values["hologram_layers"] = str(int(hologram_layers))
+    if aberration is not None:
+        values["aberration"] = json.dumps(aberration, separators=(",", ":"), sort_keys=True)
     if isinstance(module, PrefilterCNN):
         values["prefilter_base"] = (f"aa-dpm(sigma_px={module.sigma_px!r},taps={module.size})"
                                     if module.base == "aa-dpm" else module.base)
@@ -572,7 +579,7 @@ def main(argv: list[str] | None = None) -> int:
     common = dict(wavelengths_m=cfg["wavelengths_m"], pixel_pitch_m=cfg["pixel_pitch_m"],
                   volume_depth_m=cfg["volume_depth_m"], offset_m=cfg["offset_mm"] * 1e-3,
                   input_layers=cfg["input_layers"], trained_resolution=ck["trained_resolution"],
-                  training_commit=ck["training_commit"])
+                  training_commit=ck["training_commit"], aberration=cfg.get("aberration"))
     written = []
     os.makedirs(args.out_dir, exist_ok=True)
     int8_weights = "quantisation-aware" if cfg.get("qat_grids_from") else "f32-file"

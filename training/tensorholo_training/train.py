@@ -92,6 +92,12 @@ class TrainConfig:
     volume_depth_m: float | None = None
     optics_override: bool = False
     offset_mm: float = 0.0
+    # the aberrations the dataset's ground truth corrects (manifest.json `synthesis.aberration.profile`, a
+    # tensorholo.aberration object: `holo dataset --aberration`, or `--display` with a profile's `aberration`),
+    # set from the manifest (a value given here is replaced); recorded in the exported models' metadata
+    # (`tensorholo.aberration`), so that the SDK runs them only with those aberrations and applies no
+    # correction on top (docs/ABERRATION.md)
+    aberration: dict | None = None
     # schedule
     stages: list = field(default_factory=lambda: ["stage1", "stage2"])
     batch_size: int = 2
@@ -332,7 +338,15 @@ def resolve_optics(cfg: TrainConfig, manifest: dict, rel_tol: float = 1e-6) -> T
                 f"(manifest.json `optics`); training reads the optics from the manifest, so drop `{key}` from the "
                 "configuration, or set optics_override=true to train for other optics than the data's")
         out[key] = list(given) if key == "wavelengths_m" else float(given)
-    return dataclasses.replace(cfg, **out)
+    return dataclasses.replace(cfg, **out, aberration=manifest_aberration(manifest))
+
+
+def manifest_aberration(manifest: dict) -> dict | None:
+    """The aberration profile (a ``tensorholo.aberration`` object) whose correction the dataset's ground truth
+    holds (``synthesis.aberration.profile``), or ``None``."""
+    syn = manifest.get("synthesis")
+    ab = syn.get("aberration") if isinstance(syn, dict) else None
+    return ab.get("profile") if isinstance(ab, dict) else None
 
 
 @dataclass

@@ -1,4 +1,5 @@
 """ONNX export round trip (f32 and int8) and metadata (docs/CONVENTIONS.md §7)."""
+import json
 import numpy as np
 import onnx
 import pytest
@@ -364,3 +365,29 @@ def test_mixed_precision_rounds_the_last_hidden_state_on_its_own_grid_and_errs_l
             e += [np.abs(a - r).mean() for a, r in zip(run_onnx(p, x, exact=True), ref)]
         errors[name] = float(np.mean(e))
     assert errors["mixed"] < 0.9 * errors["int8"], errors
+
+
+def test_the_aberrations_of_the_training_data_reach_the_exported_metadata():
+    """A dataset corrected for aberrations (manifest ``synthesis.aberration.profile``) is recorded in the
+    training configuration and in the exported models' ``tensorholo.aberration`` (compact JSON, parsed back to
+    the same profile); without one the key is absent."""
+    from tensorholo_training.train import TrainConfig, resolve_optics
+
+    profile = {"format": "tensorholo.aberration", "version": 1,
+               "samples": [{"distance_m": -0.009, "coefficients": {"astigmatism_vertical": 1.0}},
+                           {"distance_m": -0.003, "coefficients": {"astigmatism_vertical": 2.0}}]}
+    manifest = {"optics": {"wavelengths_m": [638e-9, 520e-9, 450e-9], "pixel_pitch_m": 8e-6,
+                           "volume_depth_m": 6e-3},
+                "synthesis": {"pad": False, "aberration": {"file": "a.json", "slm_offset_m": 0.006,
+                                                           "profile": profile}}}
+    cfg = resolve_optics(TrainConfig(), manifest)
+    assert cfg.aberration == profile
+    assert resolve_optics(TrainConfig(), {"optics": manifest["optics"]}).aberration is None
+    net = hologram_cnn(8)
+    common = dict(wavelengths_m=cfg.wavelengths_m, pixel_pitch_m=cfg.pixel_pitch_m,
+                  volume_depth_m=cfg.volume_depth_m, offset_m=0.0, input_layers=1,
+                  trained_resolution=(24, 24), training_commit="test")
+    md = model_metadata("hologram-cnn", net, **common, aberration=cfg.aberration)
+    assert json.loads(md["tensorholo.aberration"]) == profile
+    assert "\n" not in md["tensorholo.aberration"]
+    assert "tensorholo.aberration" not in model_metadata("hologram-cnn", net, **common)

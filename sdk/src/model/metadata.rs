@@ -12,6 +12,7 @@ use std::fmt;
 use crate::display::{close, sig, DisplayMapping, DisplayRefusal, NearestDisplay, VolumeFit};
 use crate::error::{HoloError, Result};
 use crate::optics::OpticalSetup;
+use crate::synthesis::aberration::AberrationProfile;
 
 /// Prefix of every key the SDK reads from an ONNX file's `metadata_props`.
 pub const METADATA_PREFIX: &str = "tensorholo.";
@@ -159,6 +160,13 @@ pub struct ModelMetadata {
     /// was trained on (it is known to help that CNN; `holo render` runs it by default only with it), if
     /// present.
     pub hologram_layers: Option<usize>,
+    /// `tensorholo.aberration`: the aberrations (a `tensorholo.aberration` JSON text, `docs/ABERRATION.md`)
+    /// whose correction the network learned from an aberration-corrected dataset (paper Eq. 5,
+    /// `holo dataset --aberration`, `training/retrain.sh --display` with a profile's `aberration`); `None`:
+    /// trained on uncorrected holograms (the shipped CNNs). Such a network corrects them itself, so a pipeline
+    /// runs it only with the same profile and applies no correction kernel on top
+    /// (`HologramPipeline::with_aberration`).
+    pub aberration: Option<AberrationProfile>,
     /// Every `metadata_props` entry of the file, prefixed or not (for display and forward compatibility).
     pub raw: BTreeMap<String, String>,
 }
@@ -279,6 +287,18 @@ impl ModelMetadata {
             hologram_layers: match opt("hologram_layers") {
                 None => None,
                 Some(v) => Some(parse("hologram_layers", v, "a positive integer")?),
+            },
+            aberration: match opt("aberration") {
+                None => None,
+                Some(v) => Some(
+                    AberrationProfile::from_json_str(v, "tensorholo.aberration").map_err(|e| {
+                        bad(
+                            "aberration",
+                            format!("{} ({e})", v.chars().take(80).collect::<String>()),
+                            "a tensorholo.aberration JSON text",
+                        )
+                    })?,
+                ),
             },
             raw: BTreeMap::new(),
         };
@@ -473,6 +493,30 @@ mod tests {
         match e {
             HoloError::DisplayNotServed(r) => r.key,
             other => panic!("expected a display refusal, got {other}"),
+        }
+    }
+
+    #[test]
+    fn the_aberration_key_is_parsed_and_a_bad_one_is_refused_naming_it() {
+        let md = metadata(ModelKind::Hologram, 0.0);
+        assert!(md.aberration.is_none());
+        let mut raw = md.raw.clone();
+        let key = format!("{METADATA_PREFIX}aberration");
+        raw.insert(
+            key.clone(),
+            r#"{"format":"tensorholo.aberration","version":1,"samples":[{"distance_m":0.0,"coefficients":{"focus":0.5}}]}"#
+                .into(),
+        );
+        let md = ModelMetadata::from_props(raw.clone()).unwrap();
+        let a = md.aberration.unwrap();
+        assert_eq!(a.coefficients(0.0, 1).focus, 0.5);
+        raw.insert(
+            key.clone(),
+            r#"{"format":"tensorholo.aberration","version":1,"samples":[]}"#.into(),
+        );
+        match ModelMetadata::from_props(raw) {
+            Err(HoloError::ModelMetadata { key: k, .. }) => assert_eq!(k, key),
+            other => panic!("{other:?}"),
         }
     }
 

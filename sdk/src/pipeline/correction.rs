@@ -40,6 +40,10 @@ pub struct AberrationReport {
     pub residual_rms_rad: [f64; 3],
     /// Whether the correction is exact (every residual is 0).
     pub exact: bool,
+    /// Whether the hologram CNN applies the correction itself, at every distance (it was trained for these
+    /// aberrations, metadata `tensorholo.aberration`): no kernel multiplies its hologram, and the residual is
+    /// 0 (what the CNN learned of Eq. 5 is measured by its evaluation, not here).
+    pub by_cnn: bool,
 }
 
 impl AberrationReport {
@@ -73,6 +77,20 @@ impl AberrationReport {
             coefficients,
             exact: residual_rms_rad.iter().all(|&r| r == 0.0),
             residual_rms_rad,
+            by_cnn: false,
+        }
+    }
+
+    /// The report of a session whose hologram CNN corrects `profile` itself ([`AberrationReport::by_cnn`]):
+    /// the coefficients at the midpoint plane for reference, no residual.
+    pub fn by_cnn(profile: &AberrationProfile, offset_m: f64) -> Self {
+        let distance_m = -offset_m;
+        Self {
+            distance_m,
+            coefficients: [0, 1, 2].map(|c| profile.coefficients(distance_m, c)),
+            residual_rms_rad: [0.0; 3],
+            exact: true,
+            by_cnn: true,
         }
     }
 }

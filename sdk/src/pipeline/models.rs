@@ -9,9 +9,7 @@ use super::selection::{shipped_prefilter, ModelSelection, PrefilterMode, Prefilt
 use crate::cnn::{PlanRequest, PlanSource, SavedPlans};
 use crate::display::DisplayMapping;
 use crate::encoding::DoublePhaseMethod;
-#[cfg(doc)]
-use crate::error::HoloError;
-use crate::error::{invalid, Result};
+use crate::error::{invalid, HoloError, Result};
 use crate::model::{HologramModel, ModelConfig, ModelKind, Precision};
 use crate::slm::{DisplayCalibration, LutRepresentation, PhaseLut};
 use crate::synthesis::aberration::AberrationProfile;
@@ -292,8 +290,12 @@ impl HologramPipeline {
     /// Corrects the viewer's aberrations (`profile`, `docs/ABERRATION.md`) in every session made from now on:
     /// the correction kernel of its coefficients at the midpoint plane multiplies the midpoint hologram's
     /// spectrum in the offset propagation's pass ([`HologramSession::set_aberration`], which also changes it
-    /// on a running session). Sessions of such a pipeline run their frames on the CPU: [`Backend::Auto`]
-    /// picks it, and [`Backend::Gpu`] is refused when the session is made.
+    /// on a running session), on the CPU frame and the GPU frame alike.
+    ///
+    /// A hologram CNN trained for aberrations (its metadata's `tensorholo.aberration`, from an
+    /// aberration-corrected dataset: `training/retrain.sh --display` with a profile's `aberration`) corrects
+    /// them itself, at every distance: it runs only with the same profile, no kernel is applied on top, and its
+    /// pre-filter (trained on its corrected holograms) is kept ([`HologramPipeline::corrected_by_cnn`]).
     ///
     /// The pipeline then encodes with its configured double phase method (AA-DPM by default), not with a DDPM
     /// pre-filter CNN, which is dropped ([`HologramPipeline::prefilter_reason`] says so): the shipped
@@ -304,13 +306,27 @@ impl HologramPipeline {
     /// correction that a viewer may move (a slider) keeps one encoding that holds at every strength.
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`wavelengths_m`, `pixel_pitch_m`) for a profile calibrated
-    /// for another display ([`AberrationProfile::check_setup`]).
+    /// for another display ([`AberrationProfile::check_setup`]); [`HoloError::ModelMetadata`]
+    /// (`tensorholo.aberration`) for a hologram CNN trained for other aberrations, naming both.
     ///
     /// [`HologramSession::set_aberration`]: crate::pipeline::HologramSession::set_aberration
-    /// [`Backend::Auto`]: crate::pipeline::Backend::Auto
-    /// [`Backend::Gpu`]: crate::pipeline::Backend::Gpu
     pub fn with_aberration(mut self, profile: Arc<AberrationProfile>) -> Result<Self> {
         profile.check_setup(&self.config.optics)?;
+        if let Some(trained) = &self.hologram.metadata().aberration {
+            if !trained.same_aberrations(&profile) {
+                return Err(HoloError::ModelMetadata {
+                    key: "tensorholo.aberration".into(),
+                    found: format!("trained for {}", trained.describe()),
+                    expected: format!(
+                        "the aberrations given ({}): retrain for them (training/retrain.sh --display with \
+                         the profile's `aberration`), or give the file the model was trained for",
+                        profile.describe()
+                    ),
+                });
+            }
+            self.aberration = Some(profile);
+            return Ok(self);
+        }
         if self.prefilter.take().is_some() {
             self.prefilter_reason = format!(
                 "no pre-filter CNN: with an aberration correction the pipeline encodes with {:?} (the \
@@ -326,6 +342,30 @@ impl HologramPipeline {
     /// The viewer's aberration profile sessions correct, if any.
     pub fn aberration(&self) -> Option<&Arc<AberrationProfile>> {
         self.aberration.as_ref()
+    }
+
+    /// Whether the hologram CNN itself corrects the pipeline's aberrations (it was trained for them, metadata
+    /// `tensorholo.aberration`): sessions then apply no correction kernel.
+    pub fn corrected_by_cnn(&self) -> bool {
+        self.hologram.metadata().aberration.is_some()
+    }
+
+    /// Checks, when a session is made, that a hologram CNN trained for aberrations runs with them.
+    ///
+    /// Errors: [`HoloError::ModelMetadata`] (`tensorholo.aberration`) for such a CNN in a pipeline without an
+    /// aberration profile.
+    pub(super) fn check_trained_aberration(&self) -> Result<()> {
+        match (&self.hologram.metadata().aberration, &self.aberration) {
+            (Some(trained), None) => Err(HoloError::ModelMetadata {
+                key: "tensorholo.aberration".into(),
+                found: format!("trained for {}", trained.describe()),
+                expected: "a pipeline with those aberrations (holo render --aberration FILE or the display \
+                           profile's `aberration`; HologramPipeline::with_aberration): without them its \
+                           holograms are corrected for optics that are not there"
+                    .into(),
+            }),
+            _ => Ok(()),
+        }
     }
 
     /// The display calibration sessions apply, if any.

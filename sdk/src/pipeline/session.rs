@@ -58,6 +58,8 @@ pub struct HologramSession {
     pub(super) aberration: Option<(Arc<AberrationProfile>, AberrationReport)>,
     pub(super) correction: Option<Arc<PupilCorrection>>,
     /// The accelerator (the GPU frame) while it runs the frames; `None`: the CPU frame does.
+    /// Whether the hologram CNN corrects the aberrations itself (trained for them): no kernel is applied.
+    pub(super) corrected_by_cnn: bool,
     pub(super) accelerator: Option<Accelerator>,
 }
 

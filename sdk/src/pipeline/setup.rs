@@ -54,6 +54,7 @@ impl HologramSession {
                 ),
             ));
         }
+        pipeline.check_trained_aberration()?;
         let calibration = pipeline.calibration().cloned();
         if let Some(cal) = &calibration {
             cal.check_size(height, width)?;
@@ -159,6 +160,7 @@ impl HologramSession {
             display: cfg.optics,
             aberration: None,
             correction: None,
+            corrected_by_cnn: pipeline.corrected_by_cnn(),
             accelerator,
         }
         .with_aberration(pipeline.aberration().cloned())
@@ -166,7 +168,12 @@ impl HologramSession {
 
     /// The session with `profile` applied (errors as [`HologramSession::set_aberration`]).
     fn with_aberration(mut self, profile: Option<Arc<AberrationProfile>>) -> Result<Self> {
-        if profile.is_some() {
+        if self.corrected_by_cnn {
+            if let Some(profile) = profile {
+                let report = AberrationReport::by_cnn(&profile, self.offset_m);
+                self.aberration = Some((profile, report));
+            }
+        } else if profile.is_some() {
             self.set_aberration(profile)?;
         }
         Ok(self)
@@ -185,10 +192,20 @@ impl HologramSession {
     /// with AA-DPM.
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`wavelengths_m`, `pixel_pitch_m`) for a profile calibrated
-    /// for another display ([`AberrationProfile::check_setup`]). The session keeps its correction on error.
+    /// for another display ([`AberrationProfile::check_setup`]), or (`aberration`) on a session whose hologram
+    /// CNN was trained for its aberrations ([`HologramPipeline::corrected_by_cnn`]). The session keeps its
+    /// correction on error.
     /// A GPU frame that fails to take the kernels is dropped with a warning: the frames run on the CPU,
     /// corrected, and [`HologramSession::backend_report`] says why.
     pub fn set_aberration(&mut self, profile: Option<Arc<AberrationProfile>>) -> Result<()> {
+        if self.corrected_by_cnn {
+            return Err(invalid(
+                "aberration",
+                "this session's hologram CNN was trained for its aberrations and corrects them itself \
+                 (metadata tensorholo.aberration): a correction that changes needs a CNN trained without \
+                 one, such as the shipped CNNs",
+            ));
+        }
         let Some(profile) = profile else {
             for state in self.states.iter_mut().flatten() {
                 state.correction = None;

@@ -399,6 +399,62 @@ impl AberrationProfile {
             .all(|s| s.coefficients.iter().all(ZernikeCoefficients::is_zero))
     }
 
+    /// Whether `other` describes the same aberrations: the same distances (within 1 nm) and coefficients
+    /// (within 10⁻⁶ rad) in every colour. The recorded display (lasers, pitch) is not compared.
+    pub fn same_aberrations(&self, other: &Self) -> bool {
+        self.samples.len() == other.samples.len()
+            && self.samples.iter().zip(&other.samples).all(|(a, b)| {
+                (a.distance_m - b.distance_m).abs() <= 1e-9
+                    && a.coefficients.iter().zip(&b.coefficients).all(|(x, y)| {
+                        x.to_array()
+                            .iter()
+                            .zip(y.to_array())
+                            .all(|(u, v)| (u - v).abs() <= 1e-6)
+                    })
+            })
+    }
+
+    /// A one-line description for messages: the calibrated distances and the largest coefficient, e.g.
+    /// `3 distances, −3 to 3 mm, largest |coefficient| 1.2 rad (green astigmatism_vertical at 0 mm)`.
+    pub fn describe(&self) -> String {
+        const NAMES: [&str; 5] = [
+            "focus",
+            "astigmatism_vertical",
+            "astigmatism_oblique",
+            "coma_horizontal",
+            "coma_vertical",
+        ];
+        let mut largest = (0.0f64, "", 0usize, 0.0f64);
+        for s in &self.samples {
+            for (c, k) in s.coefficients.iter().enumerate() {
+                for (j, a) in k.to_array().iter().enumerate() {
+                    if a.abs() > largest.0.abs() {
+                        largest = (*a, ["red", "green", "blue"][c], j, s.distance_m);
+                    }
+                }
+            }
+        }
+        let (first, last) = (
+            self.samples[0].distance_m * 1e3,
+            self.samples[self.samples.len() - 1].distance_m * 1e3,
+        );
+        let span = if self.samples.len() == 1 {
+            format!("1 distance, {first} mm")
+        } else {
+            format!("{} distances, {first} to {last} mm", self.samples.len())
+        };
+        if largest.0 == 0.0 {
+            return format!("{span}, all coefficients 0");
+        }
+        format!(
+            "{span}, largest |coefficient| {:.3} rad ({} {} at {} mm)",
+            largest.0.abs(),
+            largest.1,
+            NAMES[largest.2],
+            largest.3 * 1e3
+        )
+    }
+
     /// The coefficients of colour `channel` (0 = R, 1 = G, 2 = B) at signed distance `distance_m` (metres from
     /// the SLM plane to the focus, positive along the light): piecewise linear between the calibrated
     /// distances, constant (clamped) outside them. A `channel` above 2 is read as 2.
