@@ -225,6 +225,10 @@ enum CalibrateCommand {
         #[arg(long)]
         out: PathBuf,
     },
+    /// The display's aberration (paper Eq. 14–19) from camera captures of focused spots (phase diversity):
+    /// patterns, a simulated display and camera, and the fit into a tensorholo.aberration file
+    /// (docs/ABERRATION.md, "Calibration from captures").
+    Aberration(crate::calibrate_aberration::AberrationArgs),
     /// Write the captures of a simulated SLM (spatially varying response, Gaussian beam, noise, dust; camera at
     /// 2× resolution) into OUT/red, OUT/green, OUT/blue, and its diffuser captures (the beam alone) as
     /// OUT/diffuser_red.png …, to try `holo calibrate lut` and `holo calibrate intensity` without hardware.
@@ -420,6 +424,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             eprintln!("wrote {} ([{h}, {w}, 256] float32, radians)", out.display());
             Ok(())
         }
+        CalibrateCommand::Aberration(args) => crate::calibrate_aberration::run(args),
         CalibrateCommand::Simulate { size, seed, out } => {
             let sim = SimulatedSlm::new(size.0, size.1, *seed);
             sim.validate()?;

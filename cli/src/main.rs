@@ -8,6 +8,7 @@ mod args;
 mod baselines;
 mod bench;
 mod calibrate;
+mod calibrate_aberration;
 mod compare;
 mod dataset;
 mod display;

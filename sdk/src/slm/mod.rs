@@ -9,6 +9,15 @@
 //! - [`captures`]: PNG captures decoded row by row and downsampled to the SLM.
 //! - [`intensity`]: the laser intensity scale map (5×5 median, normalised).
 //! - [`simulate`]: [`simulate::SimulatedSlm`], a panel with a spatially varying response and its camera.
+#![cfg_attr(
+    feature = "research",
+    doc = "- [`spots`] (feature `research`): the display's aberration (Eq. 14–19) fitted from camera captures \
+           of focused spots (phase diversity): patterns, forward model, fit, simulated display."
+)]
+#![cfg_attr(
+    not(feature = "research"),
+    doc = "- `spots` (feature `research`, off in this build): the aberration calibration from spot captures."
+)]
 
 pub mod calibrate;
 pub mod captures;
@@ -16,6 +25,8 @@ pub mod file;
 pub mod intensity;
 pub mod lut;
 pub mod simulate;
+#[cfg(feature = "research")]
+pub mod spots;
 
 pub use file::{ColourCalibration, DisplayCalibration};
 pub use lut::{LutRepresentation, PhaseCurve, PhaseLut, TiledCurves};
