@@ -63,14 +63,14 @@ rustup target add "${triples[@]}"
 # 16 KB pages: NDK r28+ links so by default; r27 needs the flag (harmless where it is the default).
 # Packed relative relocations (Android's APS2 format, read by Android 6+; the .aar's minSdk is 26): recent
 # NDKs' clang packs them by default only from API 28 (RELR), older ones not at all, and unpacked they take 24
-# bytes each, ~1 MB of the library with tract (README "Size on a phone"; scripts/mobile-sizes.sh links the
+# bytes each, ~1 MB of the library with tract (docs/GUIDE.md "Size on a phone"; scripts/mobile-sizes.sh links the
 # same way).
 link_flags="-C link-arg=-Wl,-z,max-page-size=16384 -C link-arg=-Wl,--pack-dyn-relocs=android"
 export CARGO_TARGET_AARCH64_LINUX_ANDROID_RUSTFLAGS="$link_flags"
 export CARGO_TARGET_X86_64_LINUX_ANDROID_RUSTFLAGS="$link_flags"
 # The shared library alone (`cargo rustc --crate-type cdylib`): `cargo build` would compile the crate's three
 # types (lib, cdylib, staticlib) in one rustc run, whose LTO keeps every public Rust item of the rlib, 3 MB
-# more with tract (README "Size on a phone").
+# more with tract (docs/GUIDE.md "Size on a phone").
 cargo_args=(rustc --locked -p tensorholo-ffi --lib --crate-type cdylib --profile "$profile")
 [ -n "$features" ] && cargo_args+=(--features "$features")
 ndk_targets=()

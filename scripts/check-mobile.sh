@@ -21,6 +21,6 @@ mobile_cc_env "${targets[@]}"
 args=()
 for t in "${targets[@]}"; do args+=(--target "$t"); done
 cargo check --locked -p tensorholo-ffi "${args[@]}"
-# The small app library: no tract (README "Size on a phone"), the native engine and the GPU only.
+# The small app library: no tract (docs/GUIDE.md "Size on a phone"), the native engine and the GPU only.
 cargo check --locked -p tensorholo-ffi --no-default-features --features embedded-models,gpu "${args[@]}"
 echo "check-mobile: tensorholo-ffi checks for ${targets[*]}, with and without tract"

@@ -2,7 +2,7 @@
 # Usage: scripts/mobile-sizes.sh [--static] [TARGET…]
 #
 # Builds the app library (tensorholo-ffi) with the `mobile` profile (LTO, one codegen unit, stripped; the GPU
-# stack and tract optimised for size, Cargo.toml) and prints the sizes of README "Size on a phone" as a
+# stack and tract optimised for size, Cargo.toml) and prints the sizes of docs/GUIDE.md "Size on a phone" as a
 # Markdown table:
 #  - the linked shared library (libtensorholo_ffi.so) for the two Android ABIs that android/build-aar.sh ships,
 #    built for their Linux twins, which can be linked here: aarch64-unknown-linux-gnu (the same arm64 code as
@@ -22,7 +22,7 @@
 # Also prints what each crate adds to the default linked arm64 library (symbol sizes by crate, before
 # stripping). Builds in target/mobile-sizes (its own flags would rebuild the main target dir). Slow: every row
 # is a full LTO build (2-6 min each on two cores once the dependencies are built; 46 min in all with --static,
-# README "Size on a phone").
+# docs/GUIDE.md "Size on a phone").
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 # shellcheck source=bindings/tests/lib.sh

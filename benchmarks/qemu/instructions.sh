@@ -6,13 +6,13 @@
 # Arm code executes (NEON kernels included), the same on every x86 machine for the same binary and inputs,
 # so a change to the ARM path (tract, rustfft, our loops) can be compared here before it reaches a phone.
 # It says nothing of caches, memory bandwidth, issue width or the cost of each instruction; time a real
-# device for speed (`holo bench` built for aarch64, README "ARM"; the bindings' benchmark() on a phone).
+# device for speed (`holo bench` built for aarch64, docs/GUIDE.md "ARM and phones"; the bindings' benchmark() on a phone).
 #
 # Each case renders the built-in scene at SIZE (default 192x192) with the 8-layer CNN, the 6 mm DDPM
 # pre-filter, one thread, a fixed engine (tract with a fixed layout, or the native kernels) and an emulated
 # CPU (qemu's `max`: dot product and i8mm; `cortex-a76`: dot product only), twice: with --repeat 1 and
 # --repeat 3. The difference, halved, is one steady-state frame (loading, plan optimisation and output writing cancel out).
-# HOLO_AARCH64 defaults to target/aarch64-unknown-linux-gnu/release/holo (build it first as README "ARM"
+# HOLO_AARCH64 defaults to target/aarch64-unknown-linux-gnu/release/holo (build it first as docs/GUIDE.md "ARM and phones"
 # says; a build without tract, `--no-default-features`, runs the native cases: pick them with FRAME_CASES /
 # CNN_CASES, each a `;`-separated list of the cases below). The native f32 engine measures direct against
 # Winograd F(2×2, 3×3) per layer shape at its first plan, here by emulated time: pin it with

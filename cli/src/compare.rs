@@ -14,7 +14,7 @@ use crate::output::FOCUS;
 /// Arguments of `holo compare`.
 #[derive(Debug, Args)]
 #[command(
-    after_long_help = "Example (README \"ARM\"): the same render on x86-64 and on aarch64 under qemu:\n  \
+    after_long_help = "Example (docs/GUIDE.md \"ARM and phones\"): the same render on x86-64 and on aarch64 under qemu:\n  \
     holo render --rgb c.png --depth d.png --depth-encoding tum --out out/x86\n  \
     qemu-aarch64 -L /usr/aarch64-linux-gnu target/aarch64-unknown-linux-gnu/release/holo render … --out out/arm\n  \
     holo compare out/x86 out/arm --max-code-fraction 0.001"

@@ -1,7 +1,7 @@
 //! The same hologram on every CPU: a session renders the built-in scene with the shipped CNNs and its
 //! midpoint hologram and SLM codes are compared with reference files written on x86-64
-//! (`tests/fixtures/parity/`). CI runs this test natively and for aarch64 under `qemu-aarch64` (README
-//! "ARM"), where tract runs its NEON kernels and rustfft its NEON butterflies instead of AVX/FMA ones.
+//! (`tests/fixtures/parity/`). CI runs this test natively and for aarch64 under `qemu-aarch64` (docs/GUIDE.md
+//! "ARM and phones"), where tract runs its NEON kernels and rustfft its NEON butterflies instead of AVX/FMA ones.
 //!
 //! Where differences come from: the two CPUs sum the same products in another order (tract's matrix-product
 //! tiles, rustfft's radix passes) and fuse multiply-adds differently, so f32 results differ by rounding

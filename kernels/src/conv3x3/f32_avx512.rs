@@ -218,7 +218,7 @@ pub(crate) const WINO4_G: usize = 24;
 /// chains per reduction step (the 8-channel tile's 8 chains are just the latency × throughput of two FMA
 /// pipes: any stall shows) and one load of `V` per 24 multiply-adds instead of per 8. A 24-channel layer is
 /// one group, so each chunk's `V` (54 KiB, more than L1) is read once instead of three times. Measured on
-/// Zen 5 (docs/BENCHMARKS.md): the f32 8-layer CNN at 1080p on 2 threads about 9 % faster (medians of six rounds) than with the 8 × 1
+/// Zen 5 (benchmarks/history/BENCHMARKS-2026.md): the f32 8-layer CNN at 1080p on 2 threads about 9 % faster (medians of six rounds) than with the 8 × 1
 /// tile; layers of fewer channels keep the 8 × 1 row (the least padding, [`selected_f32_for`]).
 ///
 /// [`selected_f32_for`]: crate::registry::selected_f32_for

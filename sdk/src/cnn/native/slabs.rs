@@ -185,7 +185,7 @@ pub(super) fn layer_columns(
 
 /// The most bytes a slab's widest activation row (every channel) should take: 48 KiB, 480 columns of a
 /// 24-channel f32 network (holo8 at 1080p on Zen 5, four slabs against the whole frame: 394–404 against
-/// 535–561 ms on one thread, 243–247 against 263–296 on two; docs/BENCHMARKS.md, "Column slabs").
+/// 535–561 ms on one thread, 243–247 against 263–296 on two; benchmarks/history/BENCHMARKS-2026.md, "Column slabs").
 pub(super) const SLAB_ROW_BYTES: usize = 48 << 10;
 
 /// Frames whose widest activation row takes at most this many bytes (64 KiB) run as one slab: the

@@ -87,7 +87,7 @@ impl Strips {
         let rows = strip.unwrap_or_else(|| {
             // Every thread's band a whole number of tiles: a multiple of `step·threads` rows (12 rows on 2
             // threads would split 8 + 4), rounded down (within the budget; at 1080p the 8-layer network on 2
-            // threads ran faster in strips of 8 rows than in 16: docs/BENCHMARKS.md, "Winograd F(4×4, 3×3)").
+            // threads ran faster in strips of 8 rows than in 16: benchmarks/history/BENCHMARKS-2026.md, "Winograd F(4×4, 3×3)").
             let rows = strip_rows(height, lag, per_row, fixed, threads);
             match step {
                 1 => rows,

@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
-# Issue 40's check on another machine (docs/GPU.md "NVIDIA H100 through Vulkan", docs/BENCHMARKS.md "A second
-# machine"): two `holo` release builds alternated, two rounds each:
+# Two `holo` release builds compared, A/B, on any machine (figures: docs/GPU.md "NVIDIA H100 through Vulkan",
+# docs/BENCHMARKS.md "The H100 machine's Intel Xeon"): the two builds alternated, two rounds each:
 #   1. the GPU path (Vulkan) at 384² and 1080×1920, holo8 and holo30 (frames, then each stage on its own);
 #   2. the CPU frame at 1080×1920, holo8 + 6 mm pre-filter, int8 and f32, on 2 cores (taskset) and on all;
 #   3. the new build's f32 CNN with its measured algorithm choice against TENSORHOLO_CONV=direct and
 #      =winograd (F(2×2, 3×3)), with the choices it logged.
 #
-#   benchmarks/device_check_issue40.sh OLD_HOLO NEW_HOLO [OUT_DIR]
+#   benchmarks/ab_compare.sh OLD_HOLO NEW_HOLO [OUT_DIR]
 #
 # Where the Vulkan loader is missing, unpack Debian's libvulkan1 first (the GPU rows then fail with a clear
 # "no adapter" error and the CPU rows still run; SKIP_GPU=1 leaves them out). Prints Markdown rows (frame
