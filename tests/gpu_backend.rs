@@ -6,7 +6,7 @@
 //! `TENSORHOLO_REQUIRE_GPU=1`.
 
 use ndarray::Array3;
-use tensorholo::gpu::{test_context as context, GpuContext};
+use tensorholo::gpu::GpuContext;
 use tensorholo::metrics::psnr;
 use tensorholo::optics::focal_stack;
 use tensorholo::pipeline::{
@@ -17,6 +17,11 @@ use tensorholo::reference::ReferencePipeline;
 use tensorholo::scene::{load_rgbd, DepthEncoding, LoadOptions, RgbdFrame};
 use tensorholo::synthesis::SceneLayer;
 use tensorholo_integration_tests::{displayed_focal_stack, shared_data};
+
+/// A context on any adapter, or a skip; required where `TENSORHOLO_REQUIRE_GPU=1` (`.ci/run`).
+fn context() -> Option<GpuContext> {
+    tensorholo::gpu::test_context(std::env::var("TENSORHOLO_REQUIRE_GPU").as_deref() == Ok("1"))
+}
 
 /// The displayed focal stack (phase-only SLM simulation, Eq. 8–10) of one backend's frame, and its codes.
 fn displayed(

@@ -508,6 +508,25 @@ pub fn conv_from_env() -> Result<ConvAlgorithm> {
     }
 }
 
+/// The native engine's layout settings the `TENSORHOLO_STRIP_ROWS` and `TENSORHOLO_SLABS` environment
+/// variables give, `(strip_rows, slabs)` (`None`: unset or empty, the engine's rule), for
+/// `PipelineConfig::cnn_strip_rows` / `cnn_slabs`. Errors: a value that is not a positive integer, naming the
+/// variable.
+pub fn native_layout_from_env() -> Result<(Option<usize>, Option<usize>)> {
+    let read = |name: &str| -> Result<Option<usize>> {
+        match std::env::var(name) {
+            Ok(v) if !v.trim().is_empty() => match v.trim().parse::<usize>() {
+                Ok(n) if n > 0 => Ok(Some(n)),
+                _ => {
+                    bail!("environment variable {name}={v}: expected a positive integer (or unset)")
+                }
+            },
+            _ => Ok(None),
+        }
+    };
+    Ok((read("TENSORHOLO_STRIP_ROWS")?, read("TENSORHOLO_SLABS")?))
+}
+
 /// The display profile at `path` (`--display`), read once per process: every later call gets the same
 /// profile without reading again, so that `--display /dev/stdin`, a pipe or a FIFO fed once serves every
 /// part of a command that asks for it. Errors: the file cannot be read or is not a valid profile (the

@@ -109,6 +109,9 @@ pub struct BenchArgs {
 struct BenchPlans {
     source: PlanSource,
     conv: ConvAlgorithm,
+    /// `TENSORHOLO_STRIP_ROWS` and `TENSORHOLO_SLABS` (the native engine's layout; `None`: its rules).
+    strip_rows: Option<usize>,
+    slabs: Option<usize>,
     used: Option<SavedPlans>,
 }
 
@@ -119,9 +122,12 @@ impl BenchPlans {
             (None, true) => PlanSource::Tune,
             (None, false) => PlanSource::Table,
         };
+        let (strip_rows, slabs) = crate::args::native_layout_from_env()?;
         Ok(Self {
             source,
             conv: crate::args::conv_from_env()?,
+            strip_rows,
+            slabs,
             used: None,
         })
     }
@@ -133,6 +139,8 @@ impl BenchPlans {
             threads: ThreadCount::Fixed(threads),
             conv: self.conv,
             source: self.source.clone(),
+            strip_rows: self.strip_rows,
+            slabs: self.slabs,
         }
     }
 
@@ -582,6 +590,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                                     cnn_threads: ThreadCount::Fixed(threads),
                                     cnn_conv: plans.conv,
                                     cnn_tune: plans.source.tunes(),
+                                    cnn_strip_rows: plans.strip_rows,
+                                    cnn_slabs: plans.slabs,
                                     backend: Backend::Cpu,
                                     ..PipelineConfig::default()
                                 },

@@ -45,6 +45,11 @@ Environment:
   TENSORHOLO_CONV=direct|winograd2x2|winograd4x4|auto
                       pin the f32 convolution algorithm of the native engine's layers (render, video, bench);
                       auto or unset: each layer's row from the plan table (or --tune, --tuning)
+  TENSORHOLO_STRIP_ROWS=N
+                      the native engine's strip height in frame rows (render, video, bench; report.json's
+                      cnn_plan.request.strip_rows): for benchmarks of the layout; unset: the engine's rule
+  TENSORHOLO_SLABS=N  the native f32 engine's column slab count (render, video, bench; request.slabs);
+                      unset: the engine's rule
   TENSORHOLO_ISA=scalar|avx2|avxvnni|avx512|avx512vnni|neon|neondot|neoni8mm
                       lower the kernels' instruction set (the plan table's rows follow it)
   RUST_LOG=debug      more log lines (e.g. each layer's timed rows with --tune)";

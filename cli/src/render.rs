@@ -355,6 +355,7 @@ impl ModelArgs {
             offset_against_profile(given, p);
         }
         let (_, encoding) = self.encoding.method(crate::args::Encoding::AaDpm);
+        let (cnn_strip_rows, cnn_slabs) = crate::args::native_layout_from_env()?;
         let config = PipelineConfig {
             optics: self.optics.setup()?,
             options: self.optics.options(),
@@ -365,6 +366,8 @@ impl ModelArgs {
             cnn_threads: ThreadCount::from_count(self.threads as usize),
             cnn_conv: crate::args::conv_from_env()?,
             cnn_tune: self.plans.tune,
+            cnn_strip_rows,
+            cnn_slabs,
             backend: self.backend.into(),
             gpu_precision: self.gpu_precision.into(),
             wavelength_ratio_tolerance: self.wavelength_ratio_tolerance,

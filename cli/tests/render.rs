@@ -632,3 +632,51 @@ fn tuned_plans_are_saved_and_repeated_and_the_table_repeats_itself() {
     let o = render(&dir("z"), &["--tune", "--tuning", tuning.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
 }
+
+/// The native engine's layout settings reach the plan through `holo`'s environment (the library reads none):
+/// `report.json` names them in the plan request, the codes are the same bits (the layout does not change the
+/// arithmetic), and a bad value is refused naming the variable, nothing written.
+#[test]
+fn the_layout_environment_variables_reach_the_plan_and_bad_values_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, env: &[(&str, &str)]| {
+        let out = dir.path().join(name);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_holo"))
+            .args([
+                "render", "--size", "40x72", "--repeat", "1", "--engine", "native",
+            ])
+            .args(["--out", out.to_str().unwrap()])
+            .envs(env.iter().copied())
+            .env("RUST_LOG", "warn")
+            .output()
+            .unwrap();
+        (o, out)
+    };
+    let (o, plain) = run("plain", &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (o, pinned) = run(
+        "pinned",
+        &[("TENSORHOLO_STRIP_ROWS", "8"), ("TENSORHOLO_SLABS", "2")],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let request = &report(&pinned)["cnn_plan"]["request"];
+    assert_eq!(request["strip_rows"], 8, "{request}");
+    assert_eq!(request["slabs"], 2, "{request}");
+    assert!(report(&plain)["cnn_plan"]["request"]["strip_rows"].is_null());
+    for c in ["r", "g", "b"] {
+        let f = format!("phase_{c}.png");
+        assert_eq!(
+            std::fs::read(plain.join(&f)).unwrap(),
+            std::fs::read(pinned.join(&f)).unwrap(),
+            "{f}"
+        );
+    }
+    let (o, bad) = run("bad", &[("TENSORHOLO_SLABS", "two")]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("TENSORHOLO_SLABS=two"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!bad.exists());
+}

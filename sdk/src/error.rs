@@ -126,6 +126,14 @@ pub(crate) fn invalid(name: &'static str, reason: impl Into<String>) -> HoloErro
     }
 }
 
+/// A kernel-crate error (`tensorholo-kernels`: a size or ISA its kernels refuse) as [`HoloError::ModelRun`],
+/// naming the native kernels: what the native CNN engine's `?` gives.
+impl From<tensorholo_kernels::KernelError> for HoloError {
+    fn from(e: tensorholo_kernels::KernelError) -> Self {
+        HoloError::ModelRun(format!("native CNN engine: {e}"))
+    }
+}
+
 /// The instruction set of the SDK's row kernels (double phase encoding, heads to phasors):
 /// [`tensorholo_kernels::Isa::active`], this CPU's best, lowered by the `TENSORHOLO_ISA` environment variable.
 ///

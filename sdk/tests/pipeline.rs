@@ -268,3 +268,81 @@ fn sessions_without_full_outputs_keep_no_heads_and_the_same_codes() {
         assert!(none.is_none());
     }
 }
+
+/// Two sessions in one process with different plan settings (the f32 convolution algorithm, the native
+/// engine's strip height and slab count, all fields of the pipeline configuration and so of the plan request;
+/// the library reads no environment) each run their own plan, named in their reports, and give the same heads
+/// within the Winograd forms' rounding.
+#[test]
+fn two_sessions_with_different_plan_settings_run_their_own_plans_side_by_side() {
+    use tensorholo::cnn::ConvAlgorithm;
+    let model = Arc::new(
+        HologramModel::from_bytes(
+            tensorholo::model::embedded::hologram_cnn(8, tensorholo::model::Precision::F32)
+                .unwrap(),
+            ModelKind::Hologram,
+            &ModelConfig::default(),
+        )
+        .unwrap(),
+    );
+    let make = |conv, strip_rows, slabs| {
+        let config = PipelineConfig {
+            offset_m: 6e-3,
+            backend: Backend::Cpu,
+            cnn_engine: CnnEngine::Native,
+            cnn_conv: conv,
+            cnn_strip_rows: strip_rows,
+            cnn_slabs: slabs,
+            ..PipelineConfig::default()
+        };
+        HologramPipeline::new(model.clone(), None, config).unwrap()
+    };
+    let (h, w) = (40, 72);
+    let f = frame(h, w, 3);
+    let mut a = make(ConvAlgorithm::Direct, Some(4), Some(2))
+        .session(h, w)
+        .unwrap();
+    let mut b = make(ConvAlgorithm::Winograd4x4, None, None)
+        .session(h, w)
+        .unwrap();
+    // Interleaved frames: neither session's plan leaks into the other's.
+    for _ in 0..2 {
+        a.render(&f).unwrap();
+        b.render(&f).unwrap();
+    }
+    let (ra, rb) = (a.plan_report(), b.plan_report());
+    assert_eq!(
+        (ra.request.strip_rows, ra.request.slabs),
+        (Some(4), Some(2))
+    );
+    assert_eq!((rb.request.strip_rows, rb.request.slabs), (None, None));
+    let (ka, kb) = (ra.kernel.clone().unwrap(), rb.kernel.clone().unwrap());
+    assert!(!ka.contains("wino"), "{ka}");
+    assert!(kb.contains("wino4x4"), "{kb}");
+    let (ha, hb) = (a.last_heads().unwrap(), b.last_heads().unwrap());
+    let diff = |x: &Array3<f32>, y: &Array3<f32>| {
+        x.iter()
+            .zip(y)
+            .fold(0.0f32, |m, (p, q)| m.max((p - q).abs()))
+    };
+    let (da, dp) = (
+        diff(&ha.amplitude, &hb.amplitude),
+        diff(&ha.phase, &hb.phase),
+    );
+    println!("direct, 4-row strips, 2 slabs vs F(4×4, 3×3), the rules: |Δ amplitude| {da:.1e}, |Δ phase| {dp:.1e}");
+    assert!(da < 1e-3 && dp < 1e-3, "{da} {dp}");
+    assert!(
+        da > 0.0 || dp > 0.0,
+        "the two plans computed the very same bits: one setting was ignored"
+    );
+
+    // A zero is refused, naming the field.
+    let e = make(ConvAlgorithm::Auto, Some(0), None)
+        .session(h, w)
+        .unwrap_err();
+    assert!(e.to_string().contains("strip_rows"), "{e}");
+    let e = make(ConvAlgorithm::Auto, None, Some(0))
+        .session(h, w)
+        .unwrap_err();
+    assert!(e.to_string().contains("slabs"), "{e}");
+}

@@ -106,6 +106,14 @@ pub struct PlanRequest {
     pub conv: ConvAlgorithm,
     /// Where the decisions come from.
     pub source: PlanSource,
+    /// The native engine's strip height in frame rows (`None`, the default: the rule of
+    /// `cnn/native/strips.rs`, the most rows whose activation windows fit a cache budget), rounded up to a
+    /// whole number of its layers' row groups; more rows than the frame's make one strip. For benchmarks of the
+    /// layout (`holo` reads `TENSORHOLO_STRIP_ROWS`); the same value gives the same bits.
+    pub strip_rows: Option<usize>,
+    /// The native f32 engine's column slab count (`None`, the default: the rule of `cnn/native/slabs.rs`);
+    /// the int8 engine runs whole rows. For benchmarks of the layout (`holo` reads `TENSORHOLO_SLABS`).
+    pub slabs: Option<usize>,
 }
 
 /// How a session's plans were decided ([`PlanReport::source`]).

@@ -266,6 +266,8 @@ impl GeneratorConfig {
             cnn_threads: self.threads,
             cnn_conv: ConvAlgorithm::Auto,
             cnn_tune: self.tune,
+            cnn_strip_rows: None,
+            cnn_slabs: None,
             backend: self.backend,
             gpu_precision: self.gpu_precision,
             wavelength_ratio_tolerance: self.wavelength_ratio_tolerance,

@@ -311,7 +311,7 @@ pub(super) fn uniform_layouts() -> Vec<super::shader_tests::UniformLayout> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::test_context;
+    use crate::gpu::test_support::context as test_context;
     use crate::model::HologramModel;
     use crate::model::{embedded, ModelConfig, Precision};
     use ndarray::Array3;

@@ -608,7 +608,7 @@ pub(super) mod tests {
     use super::*;
     use crate::gpu::kernel::grid_1d;
     use crate::gpu::shaders;
-    use crate::gpu::test_context;
+    use crate::gpu::test_support::context as test_context;
 
     #[test]
     fn gpu_device_nodes_decide_whether_to_ask_the_drivers() {

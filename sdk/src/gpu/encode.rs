@@ -422,7 +422,7 @@ pub(super) fn uniform_layouts() -> Vec<super::shader_tests::UniformLayout> {
 mod tests {
     use super::*;
     use crate::encoding::{normaliser, ChannelEncoder, ChannelStats};
-    use crate::gpu::test_context;
+    use crate::gpu::test_support::context as test_context;
     use crate::model::contract::head_to_phasor;
     use num_complex::Complex32;
 

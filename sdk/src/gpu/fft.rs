@@ -557,7 +557,7 @@ pub(super) fn uniform_layouts() -> Vec<super::shader_tests::UniformLayout> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::test_context;
+    use crate::gpu::test_support::context as test_context;
     use crate::optics::{Carrier, OpticalSetup, Padding, PropagationOptions};
 
     /// Seeded complex noise in [−1, 1]².

@@ -30,20 +30,21 @@ pub use context::{GpuContext, GpuInfo, GpuOptions, ResourceCounts};
 
 #[cfg(test)]
 mod shader_tests;
+#[cfg(test)]
+pub(crate) mod test_support;
 
 /// For tests (this crate's, the workspace's): a context on any adapter (lavapipe in CI), or `None` with a
-/// message where none exists; `TENSORHOLO_REQUIRE_GPU=1` (set by `.ci/run`) turns a missing adapter into a
-/// panic, so that CI cannot skip the GPU tests silently.
+/// message where none exists; with `require` a missing adapter is a panic instead, so that CI cannot skip the
+/// GPU tests silently. The library reads no environment: the tests pass `TENSORHOLO_REQUIRE_GPU=1` (set by
+/// `.ci/run`) as `require` (`sdk/tests/gpu_common`, `test_support`).
 #[doc(hidden)]
-pub fn test_context() -> Option<GpuContext> {
+pub fn test_context(require: bool) -> Option<GpuContext> {
     match GpuContext::new(&GpuOptions {
         allow_software: true,
         name_contains: None,
     }) {
         Ok(ctx) => Some(ctx),
-        Err(e) if std::env::var("TENSORHOLO_REQUIRE_GPU").as_deref() == Ok("1") => {
-            panic!("TENSORHOLO_REQUIRE_GPU=1 but {e}")
-        }
+        Err(e) if require => panic!("a GPU adapter is required (TENSORHOLO_REQUIRE_GPU=1) but {e}"),
         Err(e) => {
             eprintln!("skipping: {e} (install mesa-vulkan-drivers libvulkan1 for lavapipe)");
             None

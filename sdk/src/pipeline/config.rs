@@ -143,6 +143,12 @@ pub struct PipelineConfig {
     /// pipelines ([`HologramPipeline::with_saved_plans`](crate::pipeline::HologramPipeline::with_saved_plans))
     /// to repeat it.
     pub cnn_tune: bool,
+    /// The native engine's strip height in frame rows ([`crate::cnn::PlanRequest::strip_rows`]; `None`, the
+    /// default: the engine's rule). A benchmark setting: `holo` reads `TENSORHOLO_STRIP_ROWS`.
+    pub cnn_strip_rows: Option<usize>,
+    /// The native f32 engine's column slab count ([`crate::cnn::PlanRequest::slabs`]; `None`, the default:
+    /// the engine's rule). A benchmark setting: `holo` reads `TENSORHOLO_SLABS`.
+    pub cnn_slabs: Option<usize>,
     /// Where sessions compute their frames ([`Backend`]; default [`Backend::Auto`]).
     pub backend: Backend,
     /// The GPU CNNs' arithmetic (default [`GpuPrecision::Auto`]: f16 where the adapter has it); f16 falls back
@@ -168,6 +174,8 @@ impl Default for PipelineConfig {
             cnn_threads: ThreadCount::default(),
             cnn_conv: ConvAlgorithm::default(),
             cnn_tune: false,
+            cnn_strip_rows: None,
+            cnn_slabs: None,
             backend: Backend::default(),
             gpu_precision: GpuPrecision::default(),
             wavelength_ratio_tolerance: None,

@@ -271,6 +271,8 @@ impl HologramPipeline {
             threads: c.cnn_threads,
             conv: c.cnn_conv,
             source,
+            strip_rows: c.cnn_strip_rows,
+            slabs: c.cnn_slabs,
         })
     }
 

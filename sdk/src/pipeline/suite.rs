@@ -180,7 +180,7 @@ fn run(case: &Case, runtime: Runtime, f: &RgbdFrame) -> Option<Frame> {
                     println!("  {runtime:?}: skipped (the GPU runs the f32 files)");
                     return None;
                 }
-                let ctx = crate::gpu::test_context()?;
+                let ctx = crate::gpu::test_support::context()?;
                 pipeline(case, Backend::Gpu, CnnEngine::Auto)
                     .with_gpu_context(ctx)
                     .session(h, w)

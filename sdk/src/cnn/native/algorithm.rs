@@ -25,11 +25,10 @@ use std::time::Instant;
 
 use tensorholo_kernels::{registry, Algorithm, Conv3x3F32, Inputs, Isa, RowPlanar};
 
-use super::kernel_err;
 use crate::cnn::options::ConvAlgorithm;
 use crate::cnn::saved::{RowAlgorithms, SavedRow};
 use crate::cnn::table;
-use crate::cnn::PlanSource;
+use crate::cnn::tuning::PlanSource;
 use crate::error::{HoloError, Result};
 use crate::model::graph::ConvLayer;
 use crate::model::CnnWeights;
@@ -213,7 +212,7 @@ pub(crate) fn plan_layer(
                 isa,
                 alg,
             )
-            .map_err(kernel_err)
+            .map_err(HoloError::from)
         }
         Choice::Rows(rows, set) => rows
             .get((layer.c_in, layer.c_out, set))
@@ -227,7 +226,7 @@ pub(crate) fn plan_layer(
         relu,
         name,
     )
-    .map_err(kernel_err)
+    .map_err(HoloError::from)
 }
 
 /// The row [`pick`] keeps among every row of `set`'s algorithms for `layer`, timed on the sample band.
@@ -244,7 +243,7 @@ fn timed_row(layer: &ConvLayer, isa: Isa, set: RowAlgorithms) -> Result<&'static
                     true,
                     info.name,
                 )
-                .map_err(kernel_err)?,
+                .map_err(HoloError::from)?,
             );
         }
     }
@@ -316,17 +315,19 @@ fn best_times(plans: &[Conv3x3F32]) -> Result<Vec<f64>> {
     let values: Vec<f32> = (0..c_in * h * w)
         .map(|i| ((i * 7919) % 1000) as f32 / 1000.0 - 0.5)
         .collect();
-    let a = RowPlanar::from_planar(&values, c_in, h, w, None).map_err(kernel_err)?;
-    let mut out = RowPlanar::new(c_out, h, w).map_err(kernel_err)?;
+    let a = RowPlanar::from_planar(&values, c_in, h, w, None).map_err(HoloError::from)?;
+    let mut out = RowPlanar::new(c_out, h, w).map_err(HoloError::from)?;
     // One untimed run each: the scratch and the packed weights in cache.
     for p in plans {
-        p.run(Inputs::new(&a), &mut out, 0..h).map_err(kernel_err)?;
+        p.run(Inputs::new(&a), &mut out, 0..h)
+            .map_err(HoloError::from)?;
     }
     let mut best = vec![f64::INFINITY; plans.len()];
     for _ in 0..ROUNDS {
         for (b, p) in best.iter_mut().zip(plans) {
             let t = Instant::now();
-            p.run(Inputs::new(&a), &mut out, 0..h).map_err(kernel_err)?;
+            p.run(Inputs::new(&a), &mut out, 0..h)
+                .map_err(HoloError::from)?;
             *b = b.min(t.elapsed().as_secs_f64());
         }
     }

@@ -36,7 +36,6 @@ use tensorholo_kernels::{
 };
 
 use super::algorithm::{self, Choice, Rows};
-use super::kernel_err;
 use super::slabs::{Cols, Slabs};
 use super::strips::{
     advance_all, bands, bands_aligned, both, hidden_layers, installed, row_bytes, BandConv,
@@ -94,7 +93,8 @@ impl NativePlan {
     }
 
     /// [`new`](Self::new) with every layer on the row `rows` decided for its shape among `set` (the table's
-    /// where it holds none). Errors: as `new`.
+    /// where it holds none), in strips of `strip` rows and `slabs` column slabs where given (`None`: the
+    /// rules of `strips::strip_rows` and `Slabs::count_for`). Errors: as `new`.
     pub(crate) fn with_rows(
         graph: Arc<CnnWeights>,
         height: usize,
@@ -102,6 +102,7 @@ impl NativePlan {
         threads: usize,
         isa: Isa,
         (rows, set): (&Rows, RowAlgorithms),
+        layout: (Option<usize>, Option<usize>),
     ) -> Result<Self> {
         Self::build(
             graph,
@@ -109,7 +110,7 @@ impl NativePlan {
             width,
             threads,
             isa,
-            (None, None),
+            layout,
             Choice::Rows(rows, set),
         )
     }
@@ -388,7 +389,7 @@ pub(super) fn input_rows(
     };
     let c = x.buf.channels();
     let y0 = rows.start;
-    let band = x.buf.band_mut(rows).map_err(kernel_err)?;
+    let band = x.buf.band_mut(rows).map_err(HoloError::from)?;
     bands(band, threads, &|b| {
         let f = f0 + b.rows().start - y0;
         for ch in 0..c {
@@ -429,7 +430,7 @@ pub(super) fn last_layer_rows(
         .concat(&x.buf)
         .shifted(raw.shift_from(last), raw.shift_from(x), 0)
         .frame_row(raw.first_row(strips, m));
-    let band = raw.buf.band_mut(rows.clone()).map_err(kernel_err)?;
+    let band = raw.buf.band_mut(rows.clone()).map_err(HoloError::from)?;
     // The last layer's columns of the slab (the kept ones, where the slab's layers compute fewer than all).
     let c = cols.slab.layers.last();
     bands_aligned(band, threads, strips.step, &|b| {
@@ -620,7 +621,7 @@ pub(super) fn heads_rows<'r>(
     } else {
         out.planes_mut().enumerate().try_for_each(channel)
     }
-    .map_err(kernel_err)
+    .map_err(HoloError::from)
 }
 
 /// A pre-filter's depthwise base filter (what [`finish_outputs`] adds to the whole output planes) added by
@@ -737,7 +738,7 @@ pub(super) fn finish_outputs(
                 } => {
                     plane.clear();
                     plane.extend(planar.plane(c).iter().map(|v| v + *offset));
-                    fake_quantize(plane, u8_grid(*grid), *isa).map_err(kernel_err)?;
+                    fake_quantize(plane, u8_grid(*grid), *isa).map_err(HoloError::from)?;
                     if *offset != 0.0 {
                         plane.iter_mut().for_each(|b| *b -= *offset);
                     }

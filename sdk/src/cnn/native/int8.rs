@@ -49,7 +49,6 @@ use super::f32::{
     finish_outputs, heads_of, heads_rows, input_rows, last_layer_rows, owned_outputs, planar_slice,
     pool, standard_input, u8_grid, BaseInput, FusedBase, Outputs, Planes,
 };
-use super::kernel_err;
 use super::slabs::{Cols, Slab};
 use super::strips::{
     advance_all, bands, both, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window,
@@ -164,8 +163,9 @@ impl NativeInt8Plan {
         threads: usize,
         isa: Isa,
         rows: &Rows,
+        strip: Option<usize>,
     ) -> Result<Self> {
-        Self::build(graph, height, width, threads, isa, None, rows)
+        Self::build(graph, height, width, threads, isa, strip, rows)
     }
 
     /// [`new`](Self::new) with strips of `strip` rows (`None`: `strips::strip_rows`). Errors: as `new`.
@@ -240,7 +240,7 @@ impl NativeInt8Plan {
                 residual: residual.then(|| u8_grid(hidden_grids[i - 2])),
                 output: (!last).then(|| u8_grid(hidden_grids[i])),
             };
-            layers.push(Conv3x3U8::new(&spec, isa).map_err(kernel_err)?);
+            layers.push(Conv3x3U8::new(&spec, isa).map_err(HoloError::from)?);
         }
         let c_out = graph.layers[n - 1].c_out;
         let float_ends = match mixed {
@@ -414,7 +414,7 @@ impl NativeInt8Plan {
                 // s_0 on both grids, in row bands (they were a tenth of a 2-thread frame when serial).
                 if let Some((rows, f0)) = x.new_rows(strips, m)? {
                     let y0 = rows.start;
-                    let band = x.buf.band_mut(rows).map_err(kernel_err)?;
+                    let band = x.buf.band_mut(rows).map_err(HoloError::from)?;
                     bands(band, threads, &|b| {
                         let f = f0 + b.rows().start - y0;
                         b.quantize_fill_planes_rows(|c| input.plane(c), f, offset, first.scale)
@@ -423,7 +423,7 @@ impl NativeInt8Plan {
                 if let Some((rows, f0)) = x_cat.new_rows(strips, m)? {
                     let (x, y0) = (&*x, rows.start);
                     let x_first = x.place.first_row(strips, m);
-                    let band = x_cat.buf.band_mut(rows).map_err(kernel_err)?;
+                    let band = x_cat.buf.band_mut(rows).map_err(HoloError::from)?;
                     bands(band, threads, &|b| {
                         let f = (f0 + b.rows().start - y0) as isize;
                         let from = (f - x_first) as usize;
@@ -525,12 +525,12 @@ impl NativeInt8Plan {
                 // Layer 0 in f32, its output rounded into s_1 (the same frame rows, at another carry).
                 if let Some((rows, _)) = y0.new_rows(strips, m)? {
                     let inputs = Inputs::new(&x.buf).shifted(y0.shift_from(x), 0, 0);
-                    let band = y0.buf.band_mut(rows).map_err(kernel_err)?;
+                    let band = y0.buf.band_mut(rows).map_err(HoloError::from)?;
                     bands(band, threads, &|b| first.run_band(inputs, b))?;
                 }
                 if let Some((rows, _)) = s[0].new_rows(strips, m)? {
                     let d = s[0].shift_from(y0);
-                    let (y0, band) = (&*y0, s[0].buf.band_mut(rows).map_err(kernel_err)?);
+                    let (y0, band) = (&*y0, s[0].buf.band_mut(rows).map_err(HoloError::from)?);
                     bands(band, threads, &|b| {
                         let from = (b.rows().start as isize - d) as usize;
                         b.quantize_rows_from(&y0.buf, from, s1_scale)
@@ -541,7 +541,7 @@ impl NativeInt8Plan {
                 if let Some((rows, _)) = last.new_rows(strips, m)? {
                     let src = &s[n - 2];
                     let d = last.shift_from(src);
-                    let band = last.buf.band_mut(rows).map_err(kernel_err)?;
+                    let band = last.buf.band_mut(rows).map_err(HoloError::from)?;
                     bands(band, threads, &|b| {
                         let from = (b.rows().start as isize - d) as usize;
                         b.dequantize_rows_from(&src.buf, from, last_scale)

@@ -70,6 +70,7 @@ impl Engine for NativeEngine {
             .collect::<Result<Vec<_>>>()?;
         let refs: Vec<&CnnWeights> = graphs.iter().map(|g| g.as_ref()).collect();
         let rows = algorithm::decide(&refs, isa, request.conv, &request.source)?;
+        let settings = NativeSettings::of(request)?;
         let mut notes = Vec::new();
         if request.source.saved().is_some() {
             notes.push(format!(
@@ -99,8 +100,7 @@ impl Engine for NativeEngine {
         if counts.len() > 1 || time_single {
             let [th, tw] = timing_resolution(height, width);
             for &t in &counts {
-                let (mut plan, _) =
-                    native_plan(graph.clone(), th, tw, t, isa, &rows, request.conv)?;
+                let (mut plan, _) = native_plan(graph.clone(), th, tw, t, isa, &rows, settings)?;
                 let s = time_plan(plan.as_mut(), graph.in_channels, th, tw)?;
                 candidates.push(PlanTiming {
                     engine: CnnEngine::Native,
@@ -160,6 +160,7 @@ impl Engine for NativeEngine {
         let isa = active_isa()?;
         let threads = tuning.threads.unwrap_or(1);
         let rows = Rows::from_saved(isa, &tuning.rows);
+        let settings = NativeSettings::of(request)?;
         let (hologram, kernel) = native_plan(
             nets.hologram.cnn_graph()?,
             height,
@@ -167,21 +168,12 @@ impl Engine for NativeEngine {
             threads,
             isa,
             &rows,
-            request.conv,
+            settings,
         )?;
         let prefilter = match nets.prefilter {
-            Some(p) => Some(
-                native_plan(
-                    p.cnn_graph()?,
-                    height,
-                    width,
-                    threads,
-                    isa,
-                    &rows,
-                    request.conv,
-                )?
-                .0,
-            ),
+            Some(p) => {
+                Some(native_plan(p.cnn_graph()?, height, width, threads, isa, &rows, settings)?.0)
+            }
             None => None,
         };
         Ok(EnginePlans {
@@ -192,10 +184,42 @@ impl Engine for NativeEngine {
     }
 }
 
+/// What a native plan is made with besides the graph, size, threads, ISA and rows: the f32 convolution
+/// algorithms allowed (`conv`) and the layout overrides of [`PlanRequest::strip_rows`] and
+/// [`PlanRequest::slabs`].
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct NativeSettings {
+    conv: ConvAlgorithm,
+    strip_rows: Option<usize>,
+    slabs: Option<usize>,
+}
+
+impl NativeSettings {
+    /// The settings `request` asks for.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`strip_rows`, `slabs`) for 0.
+    pub(super) fn of(request: &PlanRequest) -> Result<Self> {
+        for (name, v) in [("strip_rows", request.strip_rows), ("slabs", request.slabs)] {
+            if v == Some(0) {
+                return Err(crate::error::invalid(
+                    name,
+                    "must be at least 1 (or unset for the engine's rule)",
+                ));
+            }
+        }
+        Ok(Self {
+            conv: request.conv,
+            strip_rows: request.strip_rows,
+            slabs: request.slabs,
+        })
+    }
+}
+
 /// A native plan for `graph` at `height × width` on `threads` threads: the int8 engine for an int8 (QDQ)
 /// file, the f32 engine otherwise, each f32 layer on the row `rows` decided for its shape (chosen among the
-/// algorithms `conv` allows); with the kernel rows its layers run (`NativePlan::kernel_name`). Errors: as
-/// `NativePlan::new` / `NativeInt8Plan::new`.
+/// algorithms `settings.conv` allows), in the strips and slabs `settings` gives (the engine's rules where
+/// `None`); with the kernel rows its layers run (`NativePlan::kernel_name`). Errors: as `NativePlan::new` /
+/// `NativeInt8Plan::new`.
 pub(super) fn native_plan(
     graph: Arc<CnnWeights>,
     height: usize,
@@ -203,15 +227,31 @@ pub(super) fn native_plan(
     threads: usize,
     isa: tensorholo_kernels::Isa,
     rows: &Rows,
-    conv: ConvAlgorithm,
+    settings: NativeSettings,
 ) -> Result<(Box<dyn CnnPlan>, String)> {
     if graph.quant.is_some() {
-        let p = int8::NativeInt8Plan::with_rows(graph, height, width, threads, isa, rows)?;
+        let p = int8::NativeInt8Plan::with_rows(
+            graph,
+            height,
+            width,
+            threads,
+            isa,
+            rows,
+            settings.strip_rows,
+        )?;
         let k = p.kernel_name().to_string();
         Ok((Box::new(p), k))
     } else {
-        let set = RowAlgorithms::of_request(conv);
-        let p = f32::NativePlan::with_rows(graph, height, width, threads, isa, (rows, set))?;
+        let set = RowAlgorithms::of_request(settings.conv);
+        let p = f32::NativePlan::with_rows(
+            graph,
+            height,
+            width,
+            threads,
+            isa,
+            (rows, set),
+            (settings.strip_rows, settings.slabs),
+        )?;
         let k = p.kernel_name();
         Ok((Box::new(p), k))
     }
@@ -234,7 +274,7 @@ pub(super) fn table_plan(
         threads,
         isa,
         &rows,
-        ConvAlgorithm::Auto,
+        NativeSettings::default(),
     )
 }
 
@@ -255,19 +295,14 @@ pub(crate) fn native_plan_on(
         1,
         isa,
         &rows,
-        ConvAlgorithm::Auto,
+        NativeSettings::default(),
     )
     .map(|(plan, _)| plan)
 }
 
-/// [`tensorholo_kernels::Isa::active`] with its error as the SDK's ([`kernel_err`]).
+/// [`tensorholo_kernels::Isa::active`] with its error as the SDK's (`From<KernelError> for HoloError`).
 fn active_isa() -> Result<tensorholo_kernels::Isa> {
-    tensorholo_kernels::Isa::active().map_err(kernel_err)
-}
-
-/// A kernel-crate error as [`HoloError::ModelRun`], naming the native engine.
-fn kernel_err(e: tensorholo_kernels::KernelError) -> HoloError {
-    HoloError::ModelRun(format!("native CNN engine: {e}"))
+    tensorholo_kernels::Isa::active().map_err(HoloError::from)
 }
 
 /// The CPU features the native engine's kernels use on this machine (`avx2`, `avx512`, `neondot`, …;

@@ -119,15 +119,8 @@ impl Slabs {
     /// bytes per frame column (every channel) and spoiled columns reaching `halo`, uses: one where the
     /// frame's hidden row fits [`SLAB_MIN_ROW_BYTES`], else enough that a slab's fits [`SLAB_ROW_BYTES`],
     /// unless that recomputes (`2·halo` columns per slab boundary) more than an eighth of the frame: then
-    /// one. `TENSORHOLO_SLABS` overrides it (for benchmarks).
+    /// one. `PlanRequest::slabs` replaces it (for benchmarks).
     pub(crate) fn count_for(frame_width: usize, row_bytes: usize, halo: usize) -> usize {
-        if let Some(k) = std::env::var("TENSORHOLO_SLABS")
-            .ok()
-            .and_then(|v| v.parse::<usize>().ok())
-            .filter(|&k| k > 0)
-        {
-            return k;
-        }
         let row = frame_width * row_bytes;
         if row <= SLAB_MIN_ROW_BYTES {
             return 1;
@@ -287,10 +280,6 @@ mod tests {
 
     #[test]
     fn the_count_keeps_rows_small_and_the_recomputed_columns_few() {
-        if std::env::var("TENSORHOLO_SLABS").is_ok() {
-            println!("SKIPPED: TENSORHOLO_SLABS pins the count");
-            return;
-        }
         // holo8 at 1080p, 24 f32 channels, F(4×4, 3×3) everywhere (halo 32): 4 slabs of 480 kept columns.
         assert_eq!(Slabs::count_for(1920, 96, 32), 4);
         // At 384 columns, and the pre-filter's 8 channels at 1920: one.

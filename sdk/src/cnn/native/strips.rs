@@ -24,7 +24,6 @@ use std::ops::Range;
 use tensorholo_kernels::buffer::{padded_width, Element};
 use tensorholo_kernels::{Conv3x3F32, Conv3x3U8, Inputs, KernelError, RowBand, RowPlanar};
 
-use super::kernel_err;
 use crate::error::{HoloError, Result};
 
 /// Bytes the activation windows of one plan may take; the strip height is the largest that fits (see
@@ -114,7 +113,7 @@ pub(super) fn row_bytes<T: Element>(c: usize, w: usize) -> usize {
 /// The strip height for a plan whose windows take `per_row` bytes per strip row and `fixed` bytes besides
 /// (carried and border rows): the most rows within [`WINDOW_BUDGET_BYTES`] up to `MAX_ROWS` (16), at least
 /// `MIN_ROWS_PER_THREAD·threads` (4 per thread), at most `height + lag` (one strip for the whole frame).
-/// `TENSORHOLO_STRIP_ROWS` overrides it (for benchmarks of the strip height).
+/// `PlanRequest::strip_rows` replaces it (for benchmarks of the strip height).
 pub(super) fn strip_rows(
     height: usize,
     lag: usize,
@@ -123,13 +122,6 @@ pub(super) fn strip_rows(
     threads: usize,
 ) -> usize {
     let whole = height + lag;
-    if let Some(rows) = std::env::var("TENSORHOLO_STRIP_ROWS")
-        .ok()
-        .and_then(|v| v.parse::<usize>().ok())
-        .filter(|&r| r > 0)
-    {
-        return rows.min(whole);
-    }
     let fit = WINDOW_BUDGET_BYTES.saturating_sub(fixed) / per_row.max(1);
     fit.min(MAX_ROWS)
         .max(MIN_ROWS_PER_THREAD * threads)
@@ -203,7 +195,7 @@ impl<T: Element> Window<T> {
         strips: Strips,
         buffer: impl FnOnce(usize) -> std::result::Result<RowPlanar<T>, KernelError>,
     ) -> Result<Self> {
-        let buf = buffer(place.carry + strips.rows).map_err(kernel_err)?;
+        let buf = buffer(place.carry + strips.rows).map_err(HoloError::from)?;
         Ok(Self { buf, place })
     }
 
@@ -223,7 +215,7 @@ impl<T: Element> Window<T> {
     pub(crate) fn start_frame(&mut self) -> Result<()> {
         self.buf
             .fill_rows_with_border(0..self.place.carry)
-            .map_err(kernel_err)
+            .map_err(HoloError::from)
     }
 
     /// The new rows of strip `m` ([`Place::new_rows`]): those that stand for frame rows outside the frame
@@ -242,7 +234,7 @@ impl<T: Element> Window<T> {
         for outside in [all.start..a, b..all.end] {
             self.buf
                 .fill_rows_with_border(outside)
-                .map_err(kernel_err)?;
+                .map_err(HoloError::from)?;
         }
         Ok(valid)
     }
@@ -255,7 +247,7 @@ impl<T: Element> Window<T> {
         }
         self.buf
             .copy_rows(strips.rows..strips.rows + carry, 0)
-            .map_err(kernel_err)
+            .map_err(HoloError::from)
     }
 }
 
@@ -386,7 +378,7 @@ pub(super) fn hidden_layers<T: Element + Send + Sync, K: BandConv<T>>(
         let inputs = inputs
             .shifted(dst.shift_from(src), 0, d_r)
             .frame_row(dst.first_row(strips, m));
-        let band = dst.buf.band_mut(rows).map_err(kernel_err)?;
+        let band = dst.buf.band_mut(rows).map_err(HoloError::from)?;
         let c = cols.get(i);
         bands_aligned(band, threads, strips.step, &|b| {
             conv.run_band(inputs, b, c.cloned())
@@ -411,7 +403,7 @@ pub(super) fn installed<R: Send>(
 /// `work` on `rows` split into `threads` near-equal bands, in parallel on the current rayon pool (the plan's,
 /// installed around the frame; one band on the calling thread for one thread).
 pub(super) fn bands<B: Rows>(rows: B, threads: usize, work: &BandWork<'_, B>) -> Result<()> {
-    split_run(rows, threads, 1, work).map_err(kernel_err)
+    split_run(rows, threads, 1, work).map_err(HoloError::from)
 }
 
 /// [`bands`], each band but the first starting at a multiple of `align` (a window's interior rows; the
@@ -423,7 +415,7 @@ pub(super) fn bands_aligned<B: Rows>(
     align: usize,
     work: &BandWork<'_, B>,
 ) -> Result<()> {
-    split_run(rows, threads, align.max(1), work).map_err(kernel_err)
+    split_run(rows, threads, align.max(1), work).map_err(HoloError::from)
 }
 
 /// What one thread does to its share of the rows.
