@@ -186,20 +186,6 @@ fn time_runs(
     Ok((v[v.len() / 2], v.len()))
 }
 
-/// Resets this process's peak resident memory to what is resident now (Linux: `5` into
-/// `/proc/self/clear_refs`), so that [`peak_rss_mib`] measures the case that follows; false where it cannot.
-fn reset_peak_rss() -> bool {
-    std::fs::write("/proc/self/clear_refs", "5").is_ok()
-}
-
-/// Peak resident memory of this process (Linux `VmHWM`), in MiB.
-fn peak_rss_mib() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb / 1024.0)
-}
-
 /// Prints the `--profile` table: per case, the time of each tract operator kind (summed over its nodes) and
 /// its share of the run, largest first; adds each row to `results`.
 fn print_profiles(profiles: &[(String, Vec<NodeTiming>)], results: &mut Vec<serde_json::Value>) {
@@ -580,7 +566,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                         for &threads in &args.threads {
                             // Peak resident memory of this case: from here (the previous case's
                             // session is gone) to its last frame.
-                            let reset = reset_peak_rss();
+                            let reset = crate::memory::reset_peak_rss();
                             let mut pipeline = HologramPipeline::embedded(
                                 &selection(args, layers, precision),
                                 PipelineConfig {
@@ -628,7 +614,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                             session
                                 .render_stream((0..n).map(|_| Ok(frame.clone())), |_, _| Ok(()))?;
                             let stream_fps = n as f64 / t.elapsed().as_secs_f64();
-                            let peak = peak_rss_mib().filter(|_| reset);
+                            let peak = crate::memory::peak_rss_mib().filter(|_| reset);
                             let peak_cell = peak.map_or("–".to_string(), |p| format!("{p:.0}"));
                             println!(
                             "| holo{layers} | {precision} | {layout} | {h}x{w} | {threads} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {:.0} | {peak_cell} |",
@@ -658,7 +644,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     if args.backend.contains(&BackendArg::Gpu) {
         gpu_tables(args, &mut results)?;
     }
-    let peak = peak_rss_mib();
+    let peak = crate::memory::peak_rss_mib();
     if let Some(p) = peak {
         println!("Peak resident memory of the whole run: {p:.0} MiB");
     }

@@ -13,6 +13,7 @@ mod compare;
 mod dataset;
 mod display;
 mod encode;
+mod memory;
 mod output;
 mod propagate;
 mod reference;

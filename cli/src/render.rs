@@ -840,6 +840,8 @@ fn write_outputs(
         "evaluation": evaluation,
     });
     add(&mut report);
+    // The whole run's peak resident memory (session, previews, report images): scripts/memory-guard.sh.
+    report["peak_rss_mib"] = json!(crate::memory::peak_rss_mib());
     crate::args::write_json(&args.out.join("report.json"), &report)
 }
 
