@@ -15,9 +15,14 @@
 use super::{HologramModel, ModelConfig, ModelKind, Precision, SceneInput};
 use crate::error::{invalid, Result};
 
+// The bytes live in the crate `tensorholo-models` (the repository's models/ folder, so that `cargo package`
+// carries them), whose features of the same names this crate's turn on: a file missing there is a compile error.
 macro_rules! shipped {
     ($($name:literal),* $(,)?) => {
-        &[$(($name, include_bytes!(concat!(env!("CARGO_MANIFEST_DIR"), "/../models/", $name)))),*]
+        &[$(($name, match tensorholo_models::get($name) {
+            Some(bytes) => bytes,
+            None => panic!(concat!("tensorholo-models lacks ", $name, " (its cargo features)")),
+        })),*]
     };
 }
 
