@@ -25,15 +25,15 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::{
-    array_infos, io_error, shard_file_name, write_atomic, write_shard, AberrationInfo, ArrayInfo,
-    DatasetConfig, DatasetStatistics, DisplayInfo, GenerateOptions, GeneratorInfo, LdiStatistics,
-    Manifest, OpticsInfo, Sample, SampleGenerator, ShardInfo, Split, SplitInfo, SynthesisInfo,
-    FORMAT_NAME, FORMAT_VERSION, MANIFEST_FILE,
+use super::config::{DatasetConfig, GenerateOptions, Split};
+use super::manifest::{
+    shard_file_name, DatasetPlan, DatasetStatistics, GeneratorInfo, Manifest, FORMAT_NAME,
+    FORMAT_VERSION, MANIFEST_FILE,
 };
+use super::npz::{io_error, write_atomic, write_shard};
+use super::sample::{LdiStatistics, Sample, SampleGenerator};
 use crate::error::{invalid, HoloError, Result};
 use crate::io::ensure_not_input;
-use crate::scene::RandomSceneConfig;
 
 /// Suffix of a shard's record: `train-00000.npz` → `train-00000.npz.shard.json`.
 pub const SHARD_RECORD_SUFFIX: &str = ".shard.json";
@@ -90,132 +90,6 @@ impl ShardSelection {
 impl std::fmt::Display for ShardSelection {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{}/{}", self.index, self.count)
-    }
-}
-
-/// What a dataset is, whoever generates it: the [`Manifest`] less `format`, `generator`, `created_unix_s`
-/// and `statistics` (the manifest holds it flattened: these keys sit at its top level). Two runs of one
-/// crate version with equal plans write byte-identical shards; shards of different plans never mix.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct DatasetPlan {
-    /// Base seed.
-    pub seed: u64,
-    /// How per-sample seeds derive from the base seed ([`super::sample_seed`]).
-    pub seed_derivation: String,
-    /// `[H, W]` in pixels.
-    pub resolution: [usize; 2],
-    /// LDI layers `L`.
-    pub ldi_layers: usize,
-    /// Ground-truth synthesis.
-    pub synthesis: SynthesisInfo,
-    /// Display geometry.
-    pub optics: OpticsInfo,
-    /// The display profile the dataset was made for, if one was given (absent in older manifests).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub display: Option<DisplayInfo>,
-    /// Random-scene configuration.
-    pub scene: RandomSceneConfig,
-    /// Photos used for textures (paths as given, written lossily if not UTF-8), empty without a photo folder.
-    #[serde(serialize_with = "crate::io::lossy_path::list")]
-    pub photos: Vec<PathBuf>,
-    /// Samples per shard.
-    pub shard_size: usize,
-    /// Whether shard members are deflate-compressed.
-    pub compressed: bool,
-    /// The splits, train, val, test, and their shards (in ordinal order).
-    pub splits: Vec<SplitInfo>,
-    /// Arrays in every shard.
-    pub arrays: Vec<ArrayInfo>,
-}
-
-impl DatasetPlan {
-    /// The plan of `config` (photos as `generator` found them; `options`' aberration file and display
-    /// record).
-    pub fn new(
-        config: &DatasetConfig,
-        options: &GenerateOptions,
-        generator: &SampleGenerator,
-    ) -> Self {
-        let splits = Split::ALL
-            .iter()
-            .map(|&split| {
-                let count = config.count(split);
-                let shards = (0..count)
-                    .step_by(config.shard_size)
-                    .enumerate()
-                    .map(|(shard, first)| ShardInfo {
-                        file: shard_file_name(split, shard),
-                        samples: config.shard_size.min(count - first),
-                        first_index: first,
-                    })
-                    .collect();
-                SplitInfo {
-                    name: split,
-                    samples: count,
-                    shards,
-                }
-            })
-            .collect();
-        let setup = config.synthesis.setup;
-        Self {
-            seed: config.seed,
-            seed_derivation: "seed(split, i) = m(m(m(base_seed) ^ split_id) ^ i), m = SplitMix64 \
-                              finaliser, split_id train 0 / val 1 / test 2; scene RNG = \
-                              ChaCha8Rng::seed_from_u64(seed)"
-                .into(),
-            resolution: [config.scene.height, config.scene.width],
-            ldi_layers: config.scene.layers,
-            synthesis: SynthesisInfo {
-                method: if config.aberration.is_some() {
-                    "SM-LBM with aberration correction (Eq. 5)".into()
-                } else {
-                    "SM-LBM".into()
-                },
-                levels: config.synthesis.levels,
-                silhouette_masks: config.synthesis.silhouette_masks,
-                pad: config.synthesis.options.pad,
-                band_limit: config.synthesis.options.band_limit,
-                hologram_plane: "midpoint (z = 0)".into(),
-                initial_phase: "exp(i 2 pi z_n / lambda) (Maimone et al.)".into(),
-                aberration: config.aberration.as_ref().map(|a| AberrationInfo {
-                    file: options.aberration_file.clone(),
-                    slm_offset_m: a.slm_offset_m,
-                    profile: a.profile.clone(),
-                }),
-            },
-            optics: OpticsInfo {
-                wavelengths_m: setup.wavelengths_m,
-                pixel_pitch_m: setup.pixel_pitch_m,
-                volume_depth_m: setup.volume_depth_m,
-                depth_to_z: "z(d) = (0.5 - d) * volume_depth_m".into(),
-            },
-            display: options.display.clone(),
-            scene: config.scene.clone(),
-            photos: generator.scenes().photo_paths().to_vec(),
-            shard_size: config.shard_size,
-            compressed: config.compress,
-            splits,
-            arrays: array_infos(),
-        }
-    }
-
-    /// Every shard in ordinal order, with its split.
-    pub fn shards(&self) -> impl Iterator<Item = (Split, &ShardInfo)> {
-        self.splits
-            .iter()
-            .flat_map(|s| s.shards.iter().map(move |f| (s.name, f)))
-    }
-
-    /// The plan compared as JSON, with the format and crate versions (samples may change between versions):
-    /// what a record stores, read back the way a reader reads it, so that equal plans compare equal.
-    fn canonical(&self) -> serde_json::Value {
-        let key = serde_json::json!({
-            "format": FORMAT_NAME,
-            "format_version": FORMAT_VERSION,
-            "version": env!("CARGO_PKG_VERSION"),
-            "plan": self,
-        });
-        serde_json::from_str(&key.to_string()).unwrap_or(serde_json::Value::Null)
     }
 }
 

@@ -32,7 +32,7 @@ impl Heads {
 /// Wall-clock seconds of each stage of one frame.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct FrameTimings {
-    /// Hologram CNN (input packing + tract).
+    /// Hologram CNN (input packing + the engine: native, tract or the GPU).
     pub cnn_s: f64,
     /// Heads → field and offset propagation (Eq. 6), colours in parallel.
     pub offset_s: f64,

@@ -5,11 +5,12 @@
 //!
 //! - [`HologramPipeline`] holds the loaded CNNs and the display configuration, checked against each other
 //!   once.
-//! - [`HologramSession`] (one per resolution) owns everything a frame reuses: the tract plans, FFT plans,
-//!   transfer functions, double-phase encoders and scratch buffers, and three colour worker threads. After
-//!   the first frame, the optics stages (offset propagation, pre-filter input, double phase, LUT) perform no
-//!   heap allocation: with the native CNN engine a frame allocates only the CNNs' output arrays
-//!   (`sdk/tests/pipeline_alloc.rs` counts); tract allocates inside its plans.
+//! - [`HologramSession`] (one per resolution) owns everything a frame reuses: the CNN plans (the native
+//!   engine's by default, or tract's), FFT plans, transfer functions, double-phase encoders and scratch
+//!   buffers, and three colour worker threads. After the first frame, the optics stages (offset
+//!   propagation, pre-filter input, double phase, LUT) perform no heap allocation: with the native CNN
+//!   engine a frame allocates only the CNNs' output arrays (`sdk/tests/pipeline_alloc.rs` counts); tract
+//!   allocates inside its plans.
 //! - [`HologramSession::render_stream`] overlaps the hologram CNN of frame `n + 1` with the optics of frame
 //!   `n` (two threads); its output equals [`HologramSession::render`]'s bit for bit.
 //!
