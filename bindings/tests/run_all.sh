@@ -3,8 +3,9 @@
 #
 # Every check of the app bindings, in order, one line per step with its duration:
 # generate (release build + uniffi-bindgen, into a temp dir), check-generated (committed Kotlin/Swift up to
-# date), python (pytest), kotlin (the JUnit tests of android/ on the JVM + JNA), swift (header, symbols,
-# checksums). Stops at the first failure.
+# date), python (pytest), package (pip install ./bindings in a fresh venv, then pytest from outside the repo),
+# kotlin (the JUnit tests of android/ on the JVM + JNA), swift (header, symbols, checksums). Stops at the first
+# failure.
 # Tools each step needs are installed by the step itself when missing (see each check.sh).
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
@@ -38,6 +39,7 @@ step() {
 step generate "$bindings/generate.sh" "$out"
 step check-generated "$bindings/check-generated.sh" "$out"
 step python "$here/python/check.sh" "$out"
+step package "$here/package/check.sh" "$out"
 step kotlin "$here/kotlin/check.sh" "$out"
 step swift "$here/swift/check.sh" "$out"
 printf '%s\n' "== bindings summary" "${summary[@]}"
