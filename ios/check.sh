@@ -7,13 +7,18 @@
 #     by them (or by the Swift layer): types, argument labels of initialisers/methods/functions, enum cases,
 #     members of binding-typed values, free functions; other names must be the platform's
 #     (ios/ci/platform-names.txt);
-#  3. the sample's external display (ios/ci/check-scenes.py, python3, Info.plist read as XML with plistlib): the
+#  3. the examples of the READMEs: every ```swift block of README.md and ios/README.md, wrapped in a function
+#     body when it is a fragment of statements, parses, and every binding name it uses is declared as in 2 (types,
+#     argument labels, members, enum cases of binding enums, free functions), errors at the README's line; a
+#     Package.swift fragment (`.package(path:)`) is parsed only;
+#  4. the sample's external display (ios/ci/check-scenes.py, python3, Info.plist read as XML with plistlib): the
 #     scene manifest declares the role UIWindowSceneSessionRoleExternalDisplayNonInteractive (configuration name
 #     used by the Swift, delegate class declared as a UIWindowSceneDelegate) with multiple scenes on, and the
 #     Swift sets `overscanCompensation = .none`;
-#  4. self-test: the same checks on temporary copies with one wrong name injected (a member, an enum case of
+#  5. self-test: the same checks on temporary copies with one wrong name injected (a member, an enum case of
 #     the wrong enum, an argument label, a free function, a type, a method, a case in a tuple, labels in the
-#     sample app), one syntax error, a scene manifest without the external-display role, multiple scenes off
+#     sample app; in the READMEs' examples a label, a method, an initialiser's label), one syntax error (also in a
+#     README example), a scene manifest without the external-display role, multiple scenes off
 #     and the overscan left at `.scale` must fail, naming the problem.
 # The C header and module map of the bindings are checked by bindings/tests/swift/check.sh; compiling the Swift,
 # the XCFramework, the XCTests and the sample need a Mac (ios/README.md, ios/ci/macos-workflow.yml).
@@ -60,16 +65,19 @@ if ! (cd "$ci" && node --input-type=module -e "import 'tree-sitter'; import 'tre
 fi
 
 command -v python3 >/dev/null 2>&1 || skip_or_fail "python3 is not installed (Info.plist check)"
+# $1: the ios/ folder (or a copy); the top-level README.md is $1/../README.md.
 check() {
-  node "$ci/check-swift.mjs" --ios "$1" --generated "$generated" --platform-names "$ci/platform-names.txt" &&
+  node "$ci/check-swift.mjs" --ios "$1" --generated "$generated" --platform-names "$ci/platform-names.txt" \
+    --readme "$1/../README.md" --readme "$1/README.md" &&
     python3 "$ci/check-scenes.py" "$1"
 }
 
-echo "== Swift sources: parse + binding names; the sample's external-display scene and overscan"
+echo "== Swift sources and the READMEs' Swift examples: parse + binding names; the sample's external-display scene and overscan"
 check "$here"
 
-# Self-test: each line is FILE|TEXT|REPLACEMENT|what the failure must mention. TEXT must occur in FILE (this
-# script fails when the code no longer has it: update the line then).
+# Self-test: each line is FILE|TEXT|REPLACEMENT|what the failure must mention (several texts joined by `&`: each).
+# FILE is relative to ios/ (../README.md: the top-level one). TEXT must occur in FILE (this script fails when
+# the code no longer has it: update the line then).
 echo "== self-test: injected mistakes must fail"
 injections=(
   "Tests/TensorholoTests/SwiftLayerTests.swift|frame.colorRowStride|frame.colorRowStrid|RgbdFrame has no member \`colorRowStrid\`"
@@ -86,6 +94,11 @@ injections=(
   "Example/Info.plist|<key>UIApplicationSupportsMultipleScenes</key>|<key>UIApplicationSupportsMultipleScenesOff</key>|UIApplicationSupportsMultipleScenes must be true"
   "Example/Info.plist|.ExternalDisplaySceneDelegate</string>|.ExternalDisplayDelegate</string>|declares no class ExternalDisplayDelegate"
   "Example/Sources/TensorholoSampleApp.swift|screen.overscanCompensation = .none|screen.overscanCompensation = .scale|no \`overscanCompensation = .none\`"
+  "../README.md|packRgba(patterns: patterns)|packRgba(pattern: patterns)|README.md:&swift block of line&\`packRgba\` takes the arguments (pattern:)"
+  "../README.md|depthBuffer: depthPixelBuffer|depthBuf: depthPixelBuffer|README.md:&\`RgbdFrame\` takes the arguments (colorBuffer:depthBuf:)"
+  "README.md|generator.render(frame: frame)|generator.rendr(frame: frame)|README.md:&swift block of line&HologramGenerator has no member \`rendr\`"
+  "README.md|PatternsHandler(onPatterns:|PatternsHandler(onPattern:|README.md:&\`PatternsHandler\` takes the arguments (onPattern:)"
+  "README.md|_ = try stream.push(frame: frame)|_ = try stream.push(frame: frame|README.md:&swift block of line&missing )"
 )
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
@@ -95,6 +108,7 @@ for line in "${injections[@]}"; do
   rm -rf "$tmp/ios"
   mkdir -p "$tmp/ios"
   (cd "$here" && tar cf - --exclude=node_modules --exclude=.build --exclude=build --exclude='*.xcframework' .) | (cd "$tmp/ios" && tar xf -)
+  cp "$root/README.md" "$tmp/README.md"
   python3 - "$tmp/ios/$file" "$text" "$replacement" <<'EOF'
 import sys
 path, text, replacement = sys.argv[1:]
@@ -107,14 +121,18 @@ EOF
     echo "ios/check.sh: the check passed with $file: '$text' -> '$replacement'; it must fail" >&2
     exit 1
   fi
-  case "$out" in
-    *"$expected"*) n=$((n + 1)) ;;
-    *)
-      echo "ios/check.sh: with $file: '$text' -> '$replacement' the check failed without mentioning '$expected':" >&2
-      echo "$out" >&2
-      exit 1
-      ;;
-  esac
+  IFS='&' read -ra wanted <<<"$expected"
+  for w in "${wanted[@]}"; do
+    case "$out" in
+      *"$w"*) ;;
+      *)
+        echo "ios/check.sh: with $file: '$text' -> '$replacement' the check failed without mentioning '$w':" >&2
+        echo "$out" >&2
+        exit 1
+        ;;
+    esac
+  done
+  n=$((n + 1))
 done
 echo "  $n/${#injections[@]} injected mistakes fail as they should"
 echo "ios/check.sh: ok ($(($(date +%s) - start)) s)"

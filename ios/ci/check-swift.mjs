@@ -7,9 +7,16 @@
 //      Tensorholo.swift with the same parser, plus what the hand-written layer adds (extensions, new types).
 //      Names that are neither declared by the bindings/layer nor anywhere in the checked files must be listed
 //      in platform-names.txt (Apple SDK, Swift standard library, XCTest), so a misspelt binding type, free
-//      function or enum case fails as well ("closed world").
+//      function or enum case fails as well ("closed world");
+//  (c) the examples of the READMEs (--readme FILE, repeatable): every ```swift block is extracted; a block of
+//      statements is wrapped in a function body (`func readmeExample() throws { … }`, its leading `import`
+//      lines kept at file level), parsed (no ERROR/MISSING node) and checked as (b) checks the sample, so a
+//      misspelt type, function, method, argument label or enum case fails, reported at the README's line. A
+//      block that is a Package.swift fragment (its first code line starts with `.package(`) is wrapped in
+//      `Package(name:dependencies: [ … ])` and only parsed (its names are SwiftPM's, as Package.swift's are).
+//      A README given without any ```swift block fails (a renamed fence would otherwise check nothing).
 //
-// Usage: node check-swift.mjs --ios DIR --generated FILE [--platform-names FILE]
+// Usage: node check-swift.mjs --ios DIR --generated FILE [--platform-names FILE] [--readme FILE]…
 // Exit 0 when everything parses and resolves, 1 with file:line messages otherwise.
 //
 // What it cannot see (needs the compiler on a Mac): types it cannot infer locally (closure parameters,
@@ -33,6 +40,7 @@ function arg(name, fallback) {
 const iosDir = path.resolve(arg('--ios'));
 const generatedFile = path.resolve(arg('--generated'));
 const platformFile = path.resolve(arg('--platform-names', path.join(iosDir, 'ci', 'platform-names.txt')));
+const readmeFiles = args.flatMap((a, i) => (a === '--readme' && i + 1 < args.length ? [path.resolve(args[i + 1])] : []));
 
 // ---------------------------------------------------------------------------------------------------------
 // Parsing
@@ -50,11 +58,46 @@ const GRAMMAR_GAPS = [
   [/\bnonisolated\(unsafe\)/g, 'nonisolated        '],
 ];
 
-function parseFile(file) {
-  let text = fs.readFileSync(file, 'utf8');
+function parseText(file, text, extra = {}) {
   for (const [re, sub] of GRAMMAR_GAPS) text = text.replace(re, sub);
   const tree = parser.parse(text, null, { bufferSize: Math.max(text.length * 2, 65536) });
-  return { file, text, tree };
+  return { file, text, tree, ...extra };
+}
+const parseFile = (file) => parseText(file, fs.readFileSync(file, 'utf8'));
+
+/** The ```swift blocks of a Markdown file: { line (README line of the block's first code line), lines }. The
+ *  fence's indentation is removed from the block's lines. */
+function swiftBlocks(file) {
+  const blocks = [];
+  let cur = null;
+  fs.readFileSync(file, 'utf8').split('\n').forEach((l, i) => {
+    if (!cur) {
+      const m = /^(\s*)```swift\s*$/.exec(l);
+      if (m) cur = { line: i + 2, indent: m[1].length, lines: [] };
+    } else if (/^\s*```\s*$/.test(l)) {
+      blocks.push(cur);
+      cur = null;
+    } else cur.lines.push(l.slice(Math.min(cur.indent, l.length - l.trimStart().length)));
+  });
+  if (cur) blocks.push({ ...cur, unterminated: true });
+  return blocks;
+}
+
+/** One README block as a parse unit: the Swift text it is checked as, and lineMap (text row → README line,
+ *  null for the wrapper's own lines). Lines are not re-indented, so columns are the README's. */
+function readmeUnit(file, block) {
+  const code = block.lines.map((l, i) => [l, block.line + i]);
+  const first = code.find(([l]) => l.trim() && !/^\s*\/\//.test(l));
+  const out = [];
+  if (first && /^\s*\.package\(/.test(first[0])) {
+    out.push(['import PackageDescription', null], ['let package = Package(name: "ReadmeExample", dependencies: [', null]);
+    out.push(...code, ['])', null]);
+    return parseText(file, out.map(([l]) => l).join('\n') + '\n', { lineMap: out.map(([, n]) => n), readme: 'manifest', block });
+  }
+  let k = 0;
+  while (k < code.length && (/^\s*import\s/.test(code[k][0]) || !code[k][0].trim())) out.push(code[k++]);
+  out.push(['func readmeExample() throws {', null], ...code.slice(k), ['}', null]);
+  return parseText(file, out.map(([l]) => l).join('\n') + '\n', { lineMap: out.map(([, n]) => n), readme: 'statements', block });
 }
 
 function* walk(node) {
@@ -63,7 +106,15 @@ function* walk(node) {
 }
 
 function where(unit, node) {
-  return `${path.relative(process.cwd(), unit.file)}:${node.startPosition.row + 1}:${node.startPosition.column + 1}`;
+  const row = node.startPosition.row;
+  if (unit.lineMap) {
+    // A README block: the README's line (the nearest block line for the wrapper's own), and which block.
+    let line = unit.lineMap[row];
+    for (let r = row; line == null && r >= 0; r--) line = unit.lineMap[r];
+    line ??= unit.block.line;
+    return `${path.relative(process.cwd(), unit.file)}:${line}:${node.startPosition.column + 1} (\`\`\`swift block of line ${unit.block.line - 1})`;
+  }
+  return `${path.relative(process.cwd(), unit.file)}:${row + 1}:${node.startPosition.column + 1}`;
 }
 
 function swiftFiles(dir) {
@@ -87,8 +138,17 @@ const packageSwift = path.join(iosDir, 'Package.swift');
 const units = handWritten.map(parseFile);
 const generated = parseFile(generatedFile);
 const extra = fs.existsSync(packageSwift) ? [parseFile(packageSwift)] : [];
+const readmeUnits = [];
+for (const file of readmeFiles) {
+  const blocks = swiftBlocks(file);
+  if (!blocks.length) errors.push(`${path.relative(process.cwd(), file)}: no \`\`\`swift block (a renamed fence would leave its examples unchecked)`);
+  for (const b of blocks) {
+    if (b.unterminated) errors.push(`${path.relative(process.cwd(), file)}:${b.line - 1}: \`\`\`swift block without its closing fence`);
+    else readmeUnits.push(readmeUnit(file, b));
+  }
+}
 
-for (const unit of [generated, ...units, ...extra]) {
+for (const unit of [generated, ...units, ...extra, ...readmeUnits]) {
   for (const node of walk(unit.tree.rootNode)) {
     if (node.type === 'ERROR' || node.isMissing) {
       const what = node.isMissing ? `missing ${node.type}` : `syntax error near ${JSON.stringify(unit.text.slice(node.startIndex, node.startIndex + 40))}`;
@@ -99,7 +159,7 @@ for (const unit of [generated, ...units, ...extra]) {
 const parsedCount = 1 + units.length + extra.length;
 if (errors.length) {
   for (const e of errors) console.error(e);
-  console.error(`check-swift: ${errors.length} parse error(s) in ${parsedCount} Swift files`);
+  console.error(`check-swift: ${errors.length} parse error(s) in ${parsedCount} Swift files and ${readmeUnits.length} README blocks`);
   process.exit(1);
 }
 
@@ -310,6 +370,9 @@ for (const [unit, origin] of [[generated, 'generated'], ...units.map((u) => [u, 
 collectDeclarations(generated, 'generated');
 for (const unit of units) if (unit.file.startsWith(layerDir + path.sep)) collectDeclarations(unit, 'layer');
 for (const unit of units) if (!unit.file.startsWith(layerDir + path.sep)) collectDeclarations(unit, 'local');
+// README examples: what a block declares (its lets, closure parameters) is its own, as in the sample.
+const readmeChecked = readmeUnits.filter((u) => u.readme === 'statements');
+for (const unit of readmeChecked) collectDeclarations(unit, 'local');
 
 const platformNames = new Set(
   fs.existsSync(platformFile)
@@ -340,7 +403,9 @@ const isBindingName = (name) => (types.has(name) && types.get(name).checked) || 
 // ---------------------------------------------------------------------------------------------------------
 // Uses
 const used = new Map(); // "what" → origin ('generated' | 'layer')
+let useCount = 0; // every binding use checked (also repeated ones), to report a README block's
 function noteUse(what, origin) {
+  useCount++;
   if (!used.has(what)) used.set(what, origin);
 }
 const externalUsed = new Set();
@@ -640,6 +705,13 @@ function checkUnit(unit) {
 }
 
 for (const unit of units) checkUnit(unit);
+const readmeReport = [];
+for (const unit of readmeChecked) {
+  const before = useCount;
+  checkUnit(unit);
+  readmeReport.push(`${path.relative(process.cwd(), unit.file)}:${unit.block.line - 1} (${unit.block.lines.length} lines, ${useCount - before} binding uses)`);
+  if (useCount === before) errors.push(`${where(unit, unit.tree.rootNode)}: the block uses no binding name: nothing of it is checked`);
+}
 
 if (errors.length) {
   for (const e of errors) console.error(e);
@@ -653,6 +725,13 @@ console.log(
     `${used.size} binding names used (${fromGenerated} from the generated bindings, ${fromLayer} from the Swift layer), all declared; ` +
     `${externalUsed.size} platform names from ${path.basename(platformFile)}`,
 );
+if (readmeFiles.length) {
+  const manifests = readmeUnits.filter((u) => u.readme === 'manifest').map((u) => `${path.relative(process.cwd(), u.file)}:${u.block.line - 1}`);
+  console.log(
+    `${readmeUnits.length} README \`\`\`swift blocks parse; binding names checked in ${readmeChecked.length}: ${readmeReport.join(', ')}` +
+      (manifests.length ? `; parsed only (Package.swift fragments): ${manifests.join(', ')}` : ''),
+  );
+}
 if (process.env.CHECK_SWIFT_VERBOSE) {
   for (const [k, o] of [...used.entries()].sort()) console.log(`  ${o}\t${k}`);
 }
