@@ -13,7 +13,7 @@
 //! * [`Conv3x3U8`]: the int8 plan (u8 activations with zero points, s8 weights with per-channel scales, i32
 //!   accumulation, requantisation fused into the epilogue; every path bit-exact with the scalar one), any
 //!   row band; u8 buffers are filled as ONNX `QuantizeLinear` does and take a new zero point when reused.
-//! * [`Isa`]: detection and the `TENSORHOLO_ISA` override; [`registry`]: the kernel rows of the kernel table.
+//! * [`Isa`]: detection and the `TENSORHOLO_ISA` override; [`registry`]: the kernels compiled for this target (conv3x3 rows, other families' levels).
 //! * [`tanh_heads`], [`fake_quantize`]: the hologram CNN's heads and the int8 output grid, vectorised.
 //! * [`depthwise()`], [`depthwise_rows`]: the pre-filter's fixed depthwise filter, register-tiled; [`peak`]:
 //!   measured FMA / dot-product peaks.
@@ -38,28 +38,32 @@
 //!
 //! `unsafe` appears only in the ISA files (`conv3x3/*_{avx2,avx512,neon,…}.rs`, the generic SIMD loops, the
 //! `#[target_feature]` copies in `depthwise/body.rs`, `heads/body.rs`, `phasor/body.rs` and `buffer/rows.rs`,
-//! the intrinsics of `double_phase/avx2.rs` and `avx512.rs`) and in the single dispatch point,
-//! the kernel table `ops.rs` (one table per ISA level, which [`registry`] shows); every public function is
-//! safe and checks shapes and lengths. The crate's `README.md` maps the files.
+//! the intrinsics of `double_phase/avx2.rs` and `avx512.rs`) and where a family calls the path that
+//! `dispatch.rs` picked from its table (each family lists its paths per ISA level next to its safe API, the
+//! conv3x3 rows in `conv3x3/table.rs`; [`registry`] shows them); every public function is safe and checks
+//! shapes and lengths. The crate's `README.md` maps the files.
 
 pub mod buffer;
 pub mod conv3x3;
 pub mod depthwise;
+mod dispatch;
 pub mod double_phase;
 mod error;
 pub mod heads;
 pub mod isa;
-mod ops;
 mod pack;
 pub mod peak;
 pub mod phasor;
 mod quant;
+pub mod registry;
 pub mod spectral;
+#[cfg(test)]
+mod test_rng;
 
 pub use buffer::{Affine, RowBand, RowPlanar};
-pub use conv3x3::registry::{self, Algorithm, DType, KernelInfo, PackKind};
 pub use conv3x3::{Conv3x3F32, Conv3x3U8, Conv3x3U8Spec, Inputs, QuantU8};
 pub use depthwise::{depthwise, depthwise_rows};
 pub use error::KernelError;
 pub use heads::{fake_quantize, tanh_heads};
 pub use isa::Isa;
+pub use registry::{Algorithm, DType, KernelInfo, PackKind};

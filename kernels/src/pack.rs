@@ -76,7 +76,7 @@ pub(crate) fn pack_f32(
 }
 
 /// Packs OIHW `[C_out][C_in][3][3]` weights and `[C_out]` bias for a Winograd F(2×2, 3×3) kernel with an
-/// output-channel tile `g`: each filter `g₃ₓ₃` becomes `U = G g Gᵀ` (4×4; `G` as in `simd_winograd.rs`,
+/// output-channel tile `g`: each filter `g₃ₓ₃` becomes `U = G g Gᵀ` (4×4; `G` as in `wino2x2.rs`,
 /// computed in f64 and rounded once), packed `[16][ceil(C_out/g)][C_in][g]` (position `k = 4i + j` of `U`
 /// outermost: one product's weights are adjacent); bias `[ceil(C_out/g)·g]`, zero-padded.
 pub(crate) fn pack_winograd_f32(
@@ -96,7 +96,7 @@ pub(crate) fn pack_winograd_f32(
 }
 
 /// Packs OIHW `[C_out][C_in][3][3]` weights and `[C_out]` bias for a Winograd F(4×4, 3×3) kernel with an
-/// output-channel tile `g`: each filter becomes `U = G g Gᵀ` (6×6; `G` as in `simd_winograd4.rs`, computed in
+/// output-channel tile `g`: each filter becomes `U = G g Gᵀ` (6×6; `G` as in `wino4x4.rs`, computed in
 /// f64 and rounded once), packed `[36][ceil(C_out/g)][C_in][g]`; bias `[ceil(C_out/g)·g]`, zero-padded.
 pub(crate) fn pack_winograd4_f32(
     weights: &[f32],

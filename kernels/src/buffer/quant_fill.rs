@@ -3,9 +3,8 @@
 
 use super::band::{check_plane, check_source, RowBand};
 use super::planar::{Element, RowPlanar};
-use super::rows::level;
+use super::rows::{dequantize_row, level, quantize_row, requantize_row};
 use crate::error::KernelError;
-use crate::ops::{run_dequantize_row, run_quantize_row, run_requantize_row};
 use crate::quant::{check_scale, quantize};
 
 impl RowBand<'_, f32> {
@@ -30,7 +29,7 @@ impl RowBand<'_, f32> {
                 let from = other.index(4 * g, other_y0 + y - y0 + 1, 1);
                 let at = [0, 1, 2, 3].map(|k| self.interior_at(4 * g + k, y));
                 let rows = four_rows_mut(self.data, at, w);
-                run_dequantize_row(
+                dequantize_row(
                     level(),
                     &other.as_slice()[from..from + 4 * w],
                     rows,
@@ -168,7 +167,7 @@ impl RowBand<'_, u8> {
                 let at = self.interior_at(4 * g, y);
                 let sy = src_y0 + y - y0;
                 let rows = planes.map(|p| &p[sy * w..(sy + 1) * w]);
-                run_quantize_row(
+                quantize_row(
                     level(),
                     &mut self.data[at..at + 4 * w],
                     rows,
@@ -267,7 +266,7 @@ impl RowBand<'_, u8> {
                 let from = other.index(4 * g, other_y0 + y - y0 + 1, 1);
                 let src = &other.as_slice()[from..from + 4 * w];
                 let dst = &mut self.data[at..at + 4 * w];
-                run_requantize_row(level(), dst, src, (zo, other_scale), (zp, scale))?;
+                requantize_row(level(), dst, src, (zo, other_scale), (zp, scale))?;
             }
         }
         Ok(())
@@ -298,7 +297,7 @@ impl RowBand<'_, u8> {
                     &src[from..from + w]
                 });
                 // `(v + 0)/scale` is `v/scale` but for −0, which quantises as +0 does.
-                run_quantize_row(
+                quantize_row(
                     level(),
                     &mut self.data[at..at + 4 * w],
                     rows,

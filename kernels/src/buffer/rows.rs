@@ -2,15 +2,113 @@
 //! (`4·W` bytes, pixel `x`'s four channels at `4x..4x + 4`) from or to the group's four f32 rows, and a u8
 //! row requantised to another grid. Portable bodies on whole 4-byte pixels, compiled as they are (SSE2 on
 //! x86-64, NEON on aarch64) and in `#[target_feature]` copies (AVX2, AVX-512F/BW: [`x86`]), dispatched through
-//! the kernel table (`ops.rs`) under the process's level ([`level`]). Rust never contracts `a·b + c` into an
+//! [`PATHS`] under the process's level ([`level`]). Rust never contracts `a·b + c` into an
 //! FMA and never reorders float arithmetic, so every copy computes bit-identical values (tested). At 1080p
 //! the SSE2 copies were 4.6 % of an int8 frame's CPU time (the mixed-precision pre-filter's `s_1` and
 //! `s_{N−1}`, the hologram CNN's input and concat).
 
 use std::sync::OnceLock;
 
+use crate::dispatch::{self, Path};
+use crate::error::KernelError;
 use crate::isa::Isa;
 use crate::quant::quantize;
+
+/// One level's conversion rows: quantise four f32 rows into one interleaved u8 row (`dst, rows, zp,
+/// offset, scale`), dequantise one back (`src, rows, zp, scale`), requantise a u8 row (`dst, src, zo,
+/// other_scale, zp, scale`).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct ConvertFns {
+    pub quantize: QuantizeRowFn,
+    pub dequantize: DequantizeRowFn,
+    pub requantize: RequantizeRowFn,
+}
+
+/// [`ConvertFns::quantize`]: `(dst, rows, zp, offset, scale)`.
+pub(crate) type QuantizeRowFn = unsafe fn(&mut [u8], [&[f32]; 4], u8, f32, f32);
+/// [`ConvertFns::dequantize`]: `(src, rows, zp, scale)`.
+pub(crate) type DequantizeRowFn = unsafe fn(&[u8], [&mut [f32]; 4], f32, f32);
+/// [`ConvertFns::requantize`]: `(dst, src, zo, other_scale, zp, scale)`.
+pub(crate) type RequantizeRowFn = unsafe fn(&mut [u8], &[u8], f32, f32, u8, f32);
+
+/// The conversion rows' paths, best first: the portable bodies' `#[target_feature]` copies, then the
+/// bodies themselves (SSE2 / NEON).
+pub(crate) static PATHS: &[Path<ConvertFns>] = &[
+    #[cfg(target_arch = "x86_64")]
+    Path {
+        isa: Isa::Avx512,
+        run: ConvertFns {
+            quantize: x86::quantize_avx512,
+            dequantize: x86::dequantize_avx512,
+            requantize: x86::requantize_avx512,
+        },
+    },
+    #[cfg(target_arch = "x86_64")]
+    Path {
+        isa: Isa::Avx2Fma,
+        run: ConvertFns {
+            quantize: x86::quantize_avx2,
+            dequantize: x86::dequantize_avx2,
+            requantize: x86::requantize_avx2,
+        },
+    },
+    Path {
+        isa: Isa::Scalar,
+        run: ConvertFns {
+            quantize: quantize_body,
+            dequantize: dequantize_body,
+            requantize: requantize_body,
+        },
+    },
+];
+
+/// One interleaved u8 row of a channel group quantised from its four f32 rows under `isa`
+/// ([`ConvertFns::quantize`]; the pixels all slices hold). Errors: `isa` not available.
+pub(crate) fn quantize_row(
+    isa: Isa,
+    dst: &mut [u8],
+    rows: [&[f32]; 4],
+    zp: u8,
+    offset: f32,
+    scale: f32,
+) -> Result<(), KernelError> {
+    let run = dispatch::pick(PATHS, isa)?.quantize;
+    // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
+    // the body is safe code on any lengths.
+    unsafe { run(dst, rows, zp, offset, scale) };
+    Ok(())
+}
+
+/// One interleaved u8 row dequantised into its group's four f32 rows under `isa`
+/// ([`ConvertFns::dequantize`]). Errors: `isa` not available.
+pub(crate) fn dequantize_row(
+    isa: Isa,
+    src: &[u8],
+    rows: [&mut [f32]; 4],
+    zp: f32,
+    scale: f32,
+) -> Result<(), KernelError> {
+    let run = dispatch::pick(PATHS, isa)?.dequantize;
+    // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
+    // the body is safe code on any lengths.
+    unsafe { run(src, rows, zp, scale) };
+    Ok(())
+}
+
+/// A u8 row requantised under `isa` ([`ConvertFns::requantize`]). Errors: `isa` not available.
+pub(crate) fn requantize_row(
+    isa: Isa,
+    dst: &mut [u8],
+    src: &[u8],
+    (zo, other_scale): (f32, f32),
+    (zp, scale): (u8, f32),
+) -> Result<(), KernelError> {
+    let run = dispatch::pick(PATHS, isa)?.requantize;
+    // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
+    // the body is safe code on any lengths.
+    unsafe { run(dst, src, zo, other_scale, zp, scale) };
+    Ok(())
+}
 
 /// The level the conversions run under: the process's (`Isa::active`, so `TENSORHOLO_ISA` lowers it; read
 /// once), the portable body where that fails. The copies compute the same values, so the level changes the

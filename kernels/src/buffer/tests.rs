@@ -250,8 +250,8 @@ fn rows_convert_between_f32_and_u8_as_onnx_quantize_and_dequantize() {
 /// a length that is not a whole number of vectors, and slices of unequal length (the shortest counts).
 #[test]
 fn conversion_rows_on_every_level_equal_the_portable_body() {
+    use super::rows::{dequantize_row, quantize_row, requantize_row};
     use crate::isa::Isa;
-    use crate::ops::{run_dequantize_row, run_quantize_row, run_requantize_row};
     let n = 203;
     let mut state = 0x9E37_79B9_7F4A_7C15u64;
     let mut next = move || {
@@ -289,14 +289,14 @@ fn conversion_rows_on_every_level_equal_the_portable_body() {
     let rows = [&f32s[0][..], &f32s[1][..], &f32s[2][..], &f32s[3][..]];
     let run_all = |isa: Isa| {
         let mut q = vec![7u8; 4 * n + 5];
-        run_quantize_row(isa, &mut q, rows, 131, 0.25, 0.05).unwrap();
+        quantize_row(isa, &mut q, rows, 131, 0.25, 0.05).unwrap();
         let mut d: Vec<Vec<f32>> = (0..4).map(|k| vec![-1.0; n + 2 - k]).collect();
         let [d0, d1, d2, d3] = &mut d[..] else {
             unreachable!()
         };
-        run_dequantize_row(isa, &bytes, [d0, d1, d2, d3], 17.0, 0.031).unwrap();
+        dequantize_row(isa, &bytes, [d0, d1, d2, d3], 17.0, 0.031).unwrap();
         let mut r = vec![9u8; 4 * n + 1];
-        run_requantize_row(isa, &mut r, &bytes, (131.0, 0.05), (3, 0.07)).unwrap();
+        requantize_row(isa, &mut r, &bytes, (131.0, 0.05), (3, 0.07)).unwrap();
         let d: Vec<u32> = d.iter().flatten().map(|v| v.to_bits()).collect();
         (q, d, r)
     };

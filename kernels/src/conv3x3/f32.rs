@@ -3,12 +3,12 @@
 use super::inputs::Inputs;
 use super::job::{F32Job, F32Out};
 use super::row::{Algorithm, F32Row, KernelInfo};
-use super::simd_winograd;
+use super::table;
+use super::wino2x2;
 use crate::buffer::band::RowBand;
 use crate::buffer::planar::RowPlanar;
 use crate::error::KernelError;
 use crate::isa::Isa;
-use crate::ops;
 use crate::pack;
 use std::ops::Range;
 
@@ -63,7 +63,7 @@ impl Conv3x3F32 {
                 why: "not available on this CPU",
             });
         }
-        let row = ops::select_f32_algorithm(isa, c_out, algorithm);
+        let row = table::select_f32_algorithm(isa, c_out, algorithm);
         Self::with_row(weights, bias, c_in, c_out, relu, row)
     }
 
@@ -78,7 +78,7 @@ impl Conv3x3F32 {
         relu: bool,
         name: &str,
     ) -> Result<Self, KernelError> {
-        let row = ops::f32_rows()
+        let row = table::f32_rows()
             .find(|r| r.info.name == name && r.info.isa.is_available())
             .ok_or_else(|| KernelError::Kernel { name: name.into() })?;
         Self::with_row(weights, bias, c_in, c_out, relu, row)
@@ -119,7 +119,7 @@ impl Conv3x3F32 {
             Algorithm::Winograd2x2 => (16, 2),
             Algorithm::Winograd4x4 => (36, 4),
         };
-        simd_winograd::reserve_scratch(simd_winograd::scratch_len(
+        wino2x2::reserve_scratch(wino2x2::scratch_len(
             points,
             self.c_in,
             self.row.info.oc_tile,
@@ -256,7 +256,7 @@ impl Conv3x3F32 {
             data: band.data,
             base: band.base - k * stride - cols.start,
         };
-        ops::run_f32(self.row, &job, out)
+        table::run_f32(self.row, &job, out)
     }
 
     /// Computes output rows `rows` into a planar `[C_out][H][W]` f32 slice (the last layer: raw values, no
@@ -290,6 +290,6 @@ impl Conv3x3F32 {
             self.row.info.row_group(),
         )?;
         let (job, _) = self.job(&inputs, &rows, &(0..w));
-        ops::run_f32(self.row, &job, F32Out::Planar(out))
+        table::run_f32(self.row, &job, F32Out::Planar(out))
     }
 }

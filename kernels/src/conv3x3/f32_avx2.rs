@@ -8,7 +8,7 @@
 
 use super::job::{F32Job, F32Out};
 use super::simd_f32::{conv as generic_conv, SimdF32};
-use super::{simd_winograd, simd_winograd4};
+use super::{wino2x2, wino4x4};
 use std::arch::x86_64::*;
 
 /// Output-channel tile.
@@ -154,7 +154,7 @@ pub(crate) unsafe fn conv(job: &F32Job<'_>, out: &mut F32Out<'_>) {
 #[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: AVX2 + FMA enabled here; 32-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { simd_winograd::conv::<__m256, G, NV>(job, out) }
+    unsafe { wino2x2::conv::<__m256, G, NV>(job, out) }
 }
 
 /// FMA peak loop: `iters` × 12 independent 8-lane FMAs; returns a value derived from the result (to keep the
@@ -322,7 +322,7 @@ pub(crate) unsafe fn conv6_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out<'_
 #[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn winograd_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: as `winograd`; 64-pixel tile ≤ MAX_TILE.
-    unsafe { simd_winograd::conv::<Ymm2, 8, 2>(job, out) }
+    unsafe { wino2x2::conv::<Ymm2, 8, 2>(job, out) }
 }
 
 /// `conv3x3.f32.wino4x4.6x2.avx2`: Winograd F(4×4, 3×3) with the direct row's 6 × 2 register tile (6 output
@@ -333,7 +333,7 @@ pub(crate) unsafe fn winograd_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out
 #[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn winograd4(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: AVX2 + FMA enabled here; 64-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { simd_winograd4::conv::<__m256, G, NV>(job, out) }
+    unsafe { wino4x4::conv::<__m256, G, NV>(job, out) }
 }
 
 /// Tests only: the AVX-512 F(4×4, 3×3) geometry (8 channels × 1 vector of 16 lanes = 16 tiles) on AVX2
@@ -345,7 +345,7 @@ pub(crate) unsafe fn winograd4(job: &F32Job<'_>, out: &mut F32Out<'_>) {
 #[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn winograd4_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: as `winograd4`; 64-pixel tile ≤ MAX_TILE.
-    unsafe { simd_winograd4::conv::<Ymm2, 8, 1>(job, out) }
+    unsafe { wino4x4::conv::<Ymm2, 8, 1>(job, out) }
 }
 
 /// Tests only: the wide AVX-512 F(4×4, 3×3) geometry (24 channels × 1 vector of 16 lanes = 16 tiles) on AVX2
@@ -357,5 +357,5 @@ pub(crate) unsafe fn winograd4_avx512_geometry(job: &F32Job<'_>, out: &mut F32Ou
 #[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn winograd4_wide_avx512_geometry(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: as `winograd4`; 64-pixel tile ≤ MAX_TILE.
-    unsafe { simd_winograd4::conv::<Ymm2, 24, 1>(job, out) }
+    unsafe { wino4x4::conv::<Ymm2, 24, 1>(job, out) }
 }

@@ -8,7 +8,7 @@
 
 use super::job::{F32Job, F32Out};
 use super::simd_f32::{conv as generic_conv, SimdF32};
-use super::{simd_winograd, simd_winograd4};
+use super::{wino2x2, wino4x4};
 use std::arch::x86_64::*;
 
 /// Output-channel tile.
@@ -193,7 +193,7 @@ pub(crate) const WINO_NV: usize = 2;
 #[target_feature(enable = "avx512f,avx2,fma")]
 pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: AVX-512F enabled here; 64-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { simd_winograd::conv::<__m512, G, WINO_NV>(job, out) }
+    unsafe { wino2x2::conv::<__m512, G, WINO_NV>(job, out) }
 }
 
 /// `conv3x3.f32.wino4x4.8x1.avx512`: Winograd F(4×4, 3×3), 8 output channels × 1 zmm of tiles (16 tiles, 64
@@ -204,7 +204,7 @@ pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
 #[target_feature(enable = "avx512f,avx2,fma")]
 pub(crate) unsafe fn winograd4(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: AVX-512F enabled here; 64-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { simd_winograd4::conv::<__m512, G, 1>(job, out) }
+    unsafe { wino4x4::conv::<__m512, G, 1>(job, out) }
 }
 
 /// Output channels of the wide F(4×4, 3×3) register tile: a whole 24-channel layer in one group.
@@ -229,7 +229,7 @@ pub(crate) const WINO4_G: usize = 24;
 #[target_feature(enable = "avx512f,avx2,fma")]
 pub(crate) unsafe fn winograd4_wide(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: AVX-512F enabled here; 64-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { simd_winograd4::conv::<__m512, WINO4_G, 1>(job, out) }
+    unsafe { wino4x4::conv::<__m512, WINO4_G, 1>(job, out) }
 }
 
 /// FMA peak loop: `iters` × 24 independent 16-lane FMAs. FLOPs = `iters · 24 · 16 · 2`.

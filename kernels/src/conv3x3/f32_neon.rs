@@ -6,7 +6,7 @@
 
 use super::job::{F32Job, F32Out};
 use super::simd_f32::{conv as generic_conv, SimdF32};
-use super::{simd_winograd, simd_winograd4};
+use super::{wino2x2, wino4x4};
 use std::arch::aarch64::*;
 
 /// Output-channel tile.
@@ -161,7 +161,7 @@ pub(crate) unsafe fn conv(job: &F32Job<'_>, out: &mut F32Out<'_>) {
 #[target_feature(enable = "neon")]
 pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: NEON is baseline on aarch64; 24-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { simd_winograd::conv::<float32x4_t, G, NV>(job, out) }
+    unsafe { wino2x2::conv::<float32x4_t, G, NV>(job, out) }
 }
 
 /// FMA peak loop: `iters` × 24 independent 4-lane FMAs. FLOPs = `iters · 24 · 4 · 2`.
@@ -192,5 +192,5 @@ pub(crate) unsafe fn peak(iters: u64) -> f32 {
 /// `job` was checked by the safe API and its weights packed for F(4×4, 3×3).
 pub(crate) unsafe fn winograd4(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: NEON is baseline on aarch64; 48-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { simd_winograd4::conv::<float32x4_t, G, NV>(job, out) }
+    unsafe { wino4x4::conv::<float32x4_t, G, NV>(job, out) }
 }

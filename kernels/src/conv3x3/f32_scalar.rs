@@ -8,7 +8,7 @@
 
 use super::job::{F32Job, F32Out};
 use super::simd_f32::SimdF32;
-use super::{simd_winograd, simd_winograd4};
+use super::{wino2x2, wino4x4};
 
 /// Output-channel tile of the portable Winograd row.
 pub(crate) const WINO_G: usize = 4;
@@ -175,7 +175,7 @@ impl SimdF32 for f32 {
 /// `job` was checked by the safe API and its weights packed for Winograd with `G = 4`.
 pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: the job was checked by the caller; 8-pixel tile ≤ MAX_TILE.
-    unsafe { simd_winograd::conv::<f32, WINO_G, WINO_NV>(job, out) }
+    unsafe { wino2x2::conv::<f32, WINO_G, WINO_NV>(job, out) }
 }
 
 /// `conv3x3.f32.wino4x4.4x4.scalar`: Winograd F(4×4, 3×3) on any CPU, 4 output channels × 4 tiles.
@@ -184,5 +184,5 @@ pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
 /// `job` was checked by the safe API and its weights packed for F(4×4, 3×3) with `G = 4`.
 pub(crate) unsafe fn winograd4(job: &F32Job<'_>, out: &mut F32Out<'_>) {
     // SAFETY: the job was checked by the caller; 16-pixel tile ≤ MAX_TILE.
-    unsafe { simd_winograd4::conv::<f32, WINO_G, WINO_NV>(job, out) }
+    unsafe { wino4x4::conv::<f32, WINO_G, WINO_NV>(job, out) }
 }

@@ -1,7 +1,7 @@
 //! Direct 3×3 convolutions (stride 1, zero padding 1, no groups) on [`RowPlanar`](crate::RowPlanar) buffers.
 //!
 //! A plan ([`Conv3x3F32`]) packs the weights once for the kernel row it selected (see [`registry`]; the rows
-//! are listed per ISA level in the kernel table, `ops.rs`) and then runs any row band `[y0, y1)` of a frame:
+//! are listed per ISA level in `table.rs`) and then runs any row band `[y0, y1)` of a frame:
 //! every output pixel is computed by the same instruction sequence whatever the band, so any split of the
 //! rows (over threads, say) gives bit-identical frames.
 //!
@@ -14,7 +14,8 @@
 //! * The plans (safe API): [`Conv3x3F32`] in `f32.rs`, [`Conv3x3U8`] in `u8s8.rs`, their operands
 //!   ([`Inputs`]) in `inputs.rs`; [`registry`], the rows as callers see them.
 //! * The contract between a plan and a kernel: `job.rs` (what a kernel reads and where it writes) and
-//!   `row.rs` (a row's description and function type).
+//!   `row.rs` (a row's description and function type); `table.rs`, the rows of every ISA level and the
+//!   rules that pick one (the one place a row is called through `unsafe`).
 //! * The kernels, one file per element type and ISA family, `<dtype>_<isa>.rs` (`f32_avx2.rs`,
 //!   `u8s8_avx512vnni.rs`, …; `*_scalar.rs` the portable rows), most of them instances of the generic loops
 //!   `simd_f32.rs` and `simd_u8.rs`. Test builds add `reference.rs`, the obviously-correct direct loop.
@@ -25,6 +26,7 @@ mod f32;
 mod inputs;
 pub(crate) mod job;
 pub(crate) mod row;
+mod table;
 mod u8s8;
 
 pub(crate) mod f32_scalar;
@@ -37,9 +39,9 @@ pub(crate) mod f32_scalar;
 mod simd_f32;
 #[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
 mod simd_u8;
-mod simd_winograd;
-mod simd_winograd4;
 pub(crate) mod u8s8_scalar;
+mod wino2x2;
+mod wino4x4;
 
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod f32_avx2;
@@ -64,7 +66,7 @@ pub(crate) mod u8s8_neoni8mm;
 #[cfg(test)]
 mod reference;
 #[cfg(test)]
-pub(crate) mod tests;
+mod tests;
 
 pub use crate::quant::QuantU8;
 pub use f32::Conv3x3F32;

@@ -1,6 +1,6 @@
 //! A kernel row: its public description ([`KernelInfo`]: name, ISA level, register tile, element type), how
-//! an int8 row wants its weights packed ([`PackKind`]), and the function that the kernel table lists with it
-//! (`F32Row`, `U8Row`; the table is `ops.rs`).
+//! an int8 row wants its weights packed ([`PackKind`]), and the function that `table.rs` lists with it
+//! (`F32Row`, `U8Row`).
 //!
 //! Names: `conv3x3.<dtype>.<G>x<V>.<isa>`, `G` output channels × `V` vector registers of pixels per tile
 //! (for the scalar row, `V` counts pixels).

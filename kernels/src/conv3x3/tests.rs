@@ -4,38 +4,18 @@ use super::f32::Conv3x3F32;
 use super::inputs::Inputs;
 use super::reference::{self, RefU8Params};
 use super::registry::{self, Algorithm};
+use super::table;
 use super::u8s8::{Conv3x3U8, Conv3x3U8Spec};
 use crate::buffer::planar::RowPlanar;
 use crate::error::KernelError;
 use crate::isa::Isa;
-use crate::ops;
 use crate::quant::QuantU8;
-
-/// xorshift64*: deterministic test data without dependencies.
-pub(crate) struct Rng(u64);
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
-    }
-    pub fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    /// Uniform in [-1, 1).
-    pub fn f(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 23) as f32 - 1.0
-    }
-    pub fn vec(&mut self, n: usize) -> Vec<f32> {
-        (0..n).map(|_| self.f()).collect()
-    }
-}
+use crate::test_rng::Rng;
 
 /// f32 rows this CPU can run; prints the ones it skips.
 pub(crate) fn f32_rows() -> Vec<&'static str> {
     let mut names = Vec::new();
-    for r in ops::f32_rows() {
+    for r in table::f32_rows() {
         if r.info.is_available() {
             names.push(r.info.name);
         } else {
@@ -622,7 +602,7 @@ fn f32_bad_input_is_an_error_not_a_panic() {
 /// int8 rows this CPU can run; prints the ones it skips.
 pub(crate) fn u8_rows() -> Vec<&'static str> {
     let mut names = Vec::new();
-    for r in ops::u8_rows() {
+    for r in table::u8_rows() {
         if r.info.is_available() {
             names.push(r.info.name);
         } else {

@@ -13,11 +13,11 @@
 use super::inputs::Inputs;
 use super::job::{U8Job, U8Out};
 use super::row::{KernelInfo, PackKind, U8Row};
+use super::table;
 use crate::buffer::band::RowBand;
 use crate::buffer::planar::RowPlanar;
 use crate::error::KernelError;
 use crate::isa::Isa;
-use crate::ops;
 use crate::pack::{check_channels, check_len};
 use crate::quant::{check_scale, QuantU8};
 use std::ops::Range;
@@ -83,14 +83,14 @@ impl Conv3x3U8 {
                 why: "not available on this CPU",
             });
         }
-        Self::with_row(spec, ops::select_u8(isa))
+        Self::with_row(spec, table::select_u8(isa))
     }
 
     /// Plans with the int8 row named `name` (see [`registry::u8_kernels`](crate::registry::u8_kernels)).
     /// Errors: as [`new`](Self::new), and [`KernelError::Kernel`] for an unknown name or a row this CPU
     /// cannot run.
     pub fn with_kernel(spec: &Conv3x3U8Spec<'_>, name: &str) -> Result<Self, KernelError> {
-        let row = ops::u8_rows()
+        let row = table::u8_rows()
             .find(|r| r.info.name == name && r.info.isa.is_available())
             .ok_or_else(|| KernelError::Kernel { name: name.into() })?;
         Self::with_row(spec, row)
@@ -327,7 +327,7 @@ impl Conv3x3U8 {
             data: band.data,
             base: band.base - k * stride,
         };
-        ops::run_u8(self.row, &job, out)
+        table::run_u8(self.row, &job, out)
     }
 
     /// Computes output rows `rows` as raw f32 (dequantised, before any output quantisation) into a planar
@@ -397,6 +397,6 @@ impl Conv3x3U8 {
             y_stride,
             base,
         };
-        ops::run_u8(self.row, &job, out)
+        table::run_u8(self.row, &job, out)
     }
 }

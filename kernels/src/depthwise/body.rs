@@ -1,6 +1,6 @@
 //! The depthwise filter's path (the method: [`crate::depthwise`]): the portable body, generic over the tile
-//! width `L`, and its copies compiled inside `#[target_feature]` functions. The kernel table (`ops.rs`) lists
-//! which serves each ISA level.
+//! width `L`, and its copies compiled inside `#[target_feature]` functions. The filter's
+//! [`PATHS`](super::PATHS) list which serves each ISA level.
 
 use std::ops::Range;
 

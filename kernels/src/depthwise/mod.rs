@@ -18,12 +18,34 @@ use std::ops::Range;
 pub(crate) mod body;
 
 use crate::buffer::planar::check_dims;
+use crate::dispatch::{self, Path};
 use crate::error::KernelError;
 use crate::isa::Isa;
-use crate::ops;
 use body::Job;
 
 pub use body::MAX_TAPS;
+
+/// The depthwise filter on output rows `rows` of one checked plane (`accumulate`: add to `out`).
+pub(crate) type DepthwiseFn = unsafe fn(&Job<'_>, Range<usize>, &mut [f32], bool);
+
+/// The filter's paths, best first: the portable body's `#[target_feature]` copies, then the body itself
+/// (SSE2 / NEON).
+pub(crate) static PATHS: &[Path<DepthwiseFn>] = &[
+    #[cfg(target_arch = "x86_64")]
+    Path {
+        isa: Isa::Avx512,
+        run: body::x86::rows_avx512,
+    },
+    #[cfg(target_arch = "x86_64")]
+    Path {
+        isa: Isa::Avx2Fma,
+        run: body::x86::rows_avx2,
+    },
+    Path {
+        isa: Isa::Scalar,
+        run: body::rows_body::<{ body::PORTABLE_TILE }>,
+    },
+];
 
 /// Depthwise `k × k` filter (`k` odd, ≤ [`MAX_TAPS`]) of a planar `[C][H][W]` f32 image, edges replicated
 /// (clamp-to-edge): `out[c][y][x] (+)= Σ_{ky,kx} kernel[c][ky][kx] · in[c][clamp(y+ky−r)][clamp(x+kx−r)]`,
@@ -102,7 +124,11 @@ pub fn depthwise_rows(
         taps,
         k,
     };
-    ops::run_depthwise(isa, &job, rows, out, accumulate)
+    let run = dispatch::pick(PATHS, isa)?;
+    // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
+    // the plane, the kernel and the rows are checked above.
+    unsafe { run(&job, rows, out, accumulate) };
+    Ok(())
 }
 
 /// Errors: `k` even (0 included) or above [`MAX_TAPS`] ([`KernelError::Parameter`]).
@@ -118,7 +144,7 @@ fn check_taps(k: usize) -> Result<(), KernelError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::conv3x3::tests::Rng;
+    use crate::test_rng::Rng;
 
     fn reference(
         input: &[f32],
@@ -217,9 +243,7 @@ mod tests {
                 let taps = rng.vec(k * k);
                 let want = same_order_f32(&plane, h, w, &taps, k);
                 let base = rng.vec(h * w);
-                for (name, isa) in
-                    crate::ops::available_paths("depthwise", |t| t.depthwise.is_some())
-                {
+                for (name, isa) in crate::dispatch::available_paths("depthwise", PATHS) {
                     let mut out = vec![f32::NAN; h * w];
                     depthwise(&plane, 1, h, w, &taps, k, &mut out, false, isa).unwrap();
                     for (i, (a, b)) in out.iter().zip(&want).enumerate() {

@@ -47,9 +47,60 @@ pub(crate) mod body;
 
 pub use body::{acos_unit, atan2, linear_code_wrapped, wrap_phase};
 
+use crate::dispatch::{self, Path};
 use crate::error::KernelError;
 use crate::isa::Isa;
-use crate::ops;
+
+/// One level's double phase rows, on checked lengths.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct DpmFns {
+    /// Pass 1 ([`analyse_row`]): interleaved `(re, im)` in, `arg H` out; `(max |H|², Σ arg)`.
+    pub analyse: unsafe fn(&[f32], &mut [f32]) -> (f32, f64),
+    /// Pass 2 ([`encode_row`]): the wrapped double phase in place, codes if asked.
+    pub encode: EncodeFn,
+    /// Pass 1 on planes ([`analyse_planes_row`]): `re`, `Im H` in place → `arg H`, `|H|` out.
+    pub analyse_planes: AnalysePlanesFn,
+    /// Pass 2 on magnitudes ([`encode_abs_row`]).
+    pub encode_abs: EncodeFn,
+}
+
+/// Pass 1 on a row held as planes: `re`, `Im H` in place → `arg H`, `|H|` out; `(max |H|², Σ arg H)`.
+pub(crate) type AnalysePlanesFn = unsafe fn(&[f32], &mut [f32], &mut [f32]) -> (f32, f64);
+/// Pass 2 of the double phase encoding on a row: the wrapped double phase in place, codes if asked.
+pub(crate) type EncodeFn = unsafe fn(&[f32], &mut [f32], Option<&mut [u8]>, &body::EncodeParams);
+
+/// The double phase rows' paths, best first: AVX-512F (zmm), AVX2 (ymm), the portable body (SSE2 / NEON).
+pub(crate) static PATHS: &[Path<DpmFns>] = &[
+    #[cfg(target_arch = "x86_64")]
+    Path {
+        isa: Isa::Avx512,
+        run: DpmFns {
+            analyse: avx512::analyse_avx512,
+            encode: avx512::encode_avx512,
+            analyse_planes: avx512::analyse_planes_avx512,
+            encode_abs: avx512::encode_abs_avx512,
+        },
+    },
+    #[cfg(target_arch = "x86_64")]
+    Path {
+        isa: Isa::Avx2Fma,
+        run: DpmFns {
+            analyse: avx2::analyse_avx2,
+            encode: avx2::encode_avx2,
+            analyse_planes: avx2::analyse_planes_avx2,
+            encode_abs: avx2::encode_abs_avx2,
+        },
+    },
+    Path {
+        isa: Isa::Scalar,
+        run: DpmFns {
+            analyse: body::analyse_body,
+            encode: body::encode_body,
+            analyse_planes: body::analyse_planes_body,
+            encode_abs: body::encode_abs_body,
+        },
+    },
+];
 
 /// The maximum error of [`atan2`] in radians against the exact `atan2` (module docs: how it was measured).
 pub const ATAN2_MAX_ERROR: f32 = 4.8e-7;
@@ -81,7 +132,10 @@ pub fn analyse_row(field: &[f32], phase: &mut [f32], isa: Isa) -> Result<(f32, f
         2 * phase.len(),
         field.len(),
     )?;
-    ops::run_dpm_analyse(isa, field, phase)
+    let run = dispatch::pick(PATHS, isa)?.analyse;
+    // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
+    // the lengths are checked above.
+    Ok(unsafe { run(field, phase) })
 }
 
 /// Pass 2 of the double phase encoding on one row of `n` pixels (Eq. 7): `phase` holds `arg H` from
@@ -116,7 +170,10 @@ pub fn analyse_planes_row(
 ) -> Result<(f32, f64), KernelError> {
     check("double phase Re H plane", im_arg.len(), re.len())?;
     check("double phase |H| plane", im_arg.len(), abs.len())?;
-    ops::run_dpm_analyse_planes(isa, re, im_arg, abs)
+    let run = dispatch::pick(PATHS, isa)?.analyse_planes;
+    // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
+    // the lengths are checked above.
+    Ok(unsafe { run(re, im_arg, abs) })
 }
 
 /// [`encode_row`] on a row whose magnitudes `|H|` are given (`abs`, one value per pixel, from
@@ -155,8 +212,17 @@ fn encode_checked(
         check("double phase codes", phase.len(), c.len())?;
     }
     let params = body::EncodeParams::new(mean, inv_a, odd_row);
-    ops::run_dpm_encode(isa, magnitudes, values, phase, codes, &params)
+    let paths = dispatch::pick(PATHS, isa)?;
+    let run = if magnitudes {
+        paths.encode_abs
+    } else {
+        paths.encode
+    };
+    // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
+    // the lengths are checked above.
+    unsafe { run(values, phase, codes, &params) };
+    Ok(())
 }
 
 #[cfg(test)]
-pub(crate) mod tests;
+mod tests;

@@ -6,31 +6,7 @@
 use std::f32::consts::{PI, TAU};
 
 use super::*;
-
-/// xorshift64: a reproducible stream (the phasor tests use it too).
-pub(crate) struct Rng(pub(crate) u64);
-
-impl Rng {
-    pub(crate) fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    /// Uniform in [0, 1).
-    pub(crate) fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    /// Any finite f32 of either sign, exponents uniform (denormals and zeros included).
-    fn any_finite(&mut self) -> f32 {
-        loop {
-            let v = f32::from_bits(self.next() as u32);
-            if v.is_finite() {
-                return v;
-            }
-        }
-    }
-}
+use crate::test_rng::Rng;
 
 /// The error of `got` against the exact `atan2(y, x)` (f64), modulo 2π (±π are the same angle).
 fn atan2_err(y: f32, x: f32, got: f32) -> f64 {
@@ -82,7 +58,7 @@ fn old_wrap(phase: f32) -> f32 {
 }
 
 fn paths() -> Vec<(String, Isa)> {
-    crate::ops::available_paths("double_phase", |t| t.dpm_analyse.is_some())
+    crate::dispatch::available_paths("double_phase", PATHS)
 }
 
 /// A speckle-like row: amplitudes in [0, 1] (some exactly 0 and 1), phases uniform, some awkward values.
@@ -160,7 +136,7 @@ fn atan2_is_within_its_bound_on_a_dense_grid() {
             }
         }
     }
-    let mut rng = Rng(0x1234_5678_9abc_def1);
+    let mut rng = Rng::new(0x1234_5678_9abc_def1);
     for _ in 0..300_000 {
         let (y, x) = (rng.any_finite(), rng.any_finite());
         worst = worst.max(atan2_err(y, x, atan2(y, x)));
@@ -247,7 +223,7 @@ fn double_phase_exhaustive_bounds() {
     let worst = parts.iter().fold(0.0f64, |a, p| a.max(p.0));
     let worst_std = parts.iter().fold(0.0f32, |a, p| a.max(p.1));
     let parts = split(10_000_000, |r| {
-        let mut rng = Rng(0x0dd_ba11 + r.start);
+        let mut rng = Rng::new(0x0dd_ba11 + r.start);
         let (mut exact, mut std) = (0.0f64, 0.0f32);
         for _ in r {
             let (y, x) = (rng.any_finite(), rng.any_finite());
@@ -288,7 +264,7 @@ fn double_phase_exhaustive_bounds() {
 
 #[test]
 fn wrap_and_codes_equal_the_scalar_definitions() {
-    let mut rng = Rng(77);
+    let mut rng = Rng::new(77);
     let mut values: Vec<f32> = (0..200_000)
         .map(|_| (rng.unit() - 0.5) * 8.0 * TAU)
         .collect();
@@ -324,7 +300,7 @@ fn wrap_and_codes_equal_the_scalar_definitions() {
 
 #[test]
 fn every_path_is_bit_identical_with_the_portable_body() {
-    let mut rng = Rng(0xfeed);
+    let mut rng = Rng::new(0xfeed);
     for n in (0..=40).chain([1920, 1921]) {
         let f = row(&mut rng, n);
         let mut want = vec![0.0f32; n];
@@ -361,7 +337,7 @@ fn every_path_is_bit_identical_with_the_portable_body() {
 
 #[test]
 fn rows_match_libm_within_the_phase_bound_and_one_code_step() {
-    let mut rng = Rng(0xabcdef);
+    let mut rng = Rng::new(0xabcdef);
     let (mut pixels, mut differ, mut worst) = (0usize, 0usize, 0.0f32);
     for n in [1usize, 7, 8, 9, 15, 16, 17, 1920, 1921] {
         for y in 0..12usize {
@@ -437,7 +413,7 @@ fn a_mean_far_outside_the_circle_still_wraps() {
 /// is the value pass 2 computes from the pairs.
 #[test]
 fn planar_rows_equal_the_interleaved_rows_on_every_path() {
-    let mut rng = Rng(0xbead);
+    let mut rng = Rng::new(0xbead);
     for n in (0..=40).chain([1920, 1921]) {
         let mut f = row(&mut rng, n);
         for (i, v) in [(5, f32::NAN), (9, f32::INFINITY), (12, f32::NEG_INFINITY)] {

@@ -1,6 +1,6 @@
 //! The heads' and the output grid's paths (the method: [`crate::heads`]): one portable body each, compiled as
-//! it is and inside `#[target_feature]` functions. The kernel table (`ops.rs`) lists which serves each ISA
-//! level.
+//! it is and inside `#[target_feature]` functions. The heads' [`PATHS`](super::PATHS) list
+//! which serves each ISA level.
 
 use crate::quant::{quantize_f32, QuantU8, ROUND_MAGIC};
 

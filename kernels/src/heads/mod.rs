@@ -25,10 +25,47 @@
 
 pub(crate) mod body;
 
+use crate::dispatch::{self, Path};
 use crate::error::KernelError;
 use crate::isa::Isa;
-use crate::ops;
 use crate::quant::{check_scale, QuantU8};
+
+/// One level's heads and output grid.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct HeadsFns {
+    /// The heads `(tanh(v) + 1)·scale` of `raw` into `out` (same length), on the output grid when given.
+    pub heads: unsafe fn(&[f32], &mut [f32], f32, Option<QuantU8>),
+    /// The output grid (`QuantizeLinear` then `DequantizeLinear`) in place.
+    pub grid: unsafe fn(&mut [f32], QuantU8),
+}
+
+/// The heads' paths, best first: the portable body's `#[target_feature]` copies, then the body itself
+/// (SSE2 / NEON).
+pub(crate) static PATHS: &[Path<HeadsFns>] = &[
+    #[cfg(target_arch = "x86_64")]
+    Path {
+        isa: Isa::Avx512,
+        run: HeadsFns {
+            heads: body::x86::heads_avx512,
+            grid: body::x86::grid_avx512,
+        },
+    },
+    #[cfg(target_arch = "x86_64")]
+    Path {
+        isa: Isa::Avx2Fma,
+        run: HeadsFns {
+            heads: body::x86::heads_avx2,
+            grid: body::x86::grid_avx2,
+        },
+    },
+    Path {
+        isa: Isa::Scalar,
+        run: HeadsFns {
+            heads: body::heads_body,
+            grid: body::grid_body,
+        },
+    },
+];
 
 fn check(raw: &[f32], out: &[f32]) -> Result<(), KernelError> {
     if raw.len() != out.len() {
@@ -64,7 +101,11 @@ pub fn tanh_heads(
 ) -> Result<(), KernelError> {
     check(raw, out)?;
     check_grid(grid)?;
-    ops::run_heads(isa, raw, out, scale, grid)
+    let run = dispatch::pick(PATHS, isa)?.heads;
+    // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
+    // the lengths are checked above.
+    unsafe { run(raw, out, scale, grid) };
+    Ok(())
 }
 
 /// ONNX `QuantizeLinear` then `DequantizeLinear` on the u8 grid `grid`, in place: `v ← (clamp(
@@ -74,7 +115,11 @@ pub fn tanh_heads(
 /// ([`KernelError::Parameter`]).
 pub fn fake_quantize(values: &mut [f32], grid: QuantU8, isa: Isa) -> Result<(), KernelError> {
     check_grid(Some(grid))?;
-    ops::run_grid(isa, values, grid)
+    let run = dispatch::pick(PATHS, isa)?.grid;
+    // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
+    // the body takes any length.
+    unsafe { run(values, grid) };
+    Ok(())
 }
 
 #[cfg(test)]
@@ -121,7 +166,7 @@ mod tests {
     }
 
     fn available_paths() -> Vec<(String, Isa)> {
-        crate::ops::available_paths("heads", |t| t.heads.is_some())
+        crate::dispatch::available_paths("heads", PATHS)
     }
 
     #[test]

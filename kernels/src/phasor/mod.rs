@@ -32,10 +32,47 @@ pub(crate) mod body;
 
 pub use body::{phasor, sincos_turns};
 
+use crate::dispatch::{self, Path};
 use crate::error::KernelError;
 use crate::isa::Isa;
-use crate::ops;
 use crate::pack::check_len;
+
+/// One level's phasor rows.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PhasorFns {
+    /// [`phasors`] on checked lengths; whether every input was finite.
+    pub polar: unsafe fn(&[f32], &[f32], &mut [f32]) -> bool,
+    /// [`phasors_in_place`] on checked lengths.
+    pub polar_in_place: unsafe fn(&mut [f32], &[f32]) -> bool,
+}
+
+/// The phasor rows' paths, best first: the portable body's `#[target_feature]` copies, then the body
+/// itself (SSE2 / NEON).
+pub(crate) static PATHS: &[Path<PhasorFns>] = &[
+    #[cfg(target_arch = "x86_64")]
+    Path {
+        isa: Isa::Avx512,
+        run: PhasorFns {
+            polar: body::x86::polar_avx512,
+            polar_in_place: body::x86::polar_in_place_avx512,
+        },
+    },
+    #[cfg(target_arch = "x86_64")]
+    Path {
+        isa: Isa::Avx2Fma,
+        run: PhasorFns {
+            polar: body::x86::polar_avx2,
+            polar_in_place: body::x86::polar_in_place_avx2,
+        },
+    },
+    Path {
+        isa: Isa::Scalar,
+        run: PhasorFns {
+            polar: body::polar_body,
+            polar_in_place: body::polar_in_place_body,
+        },
+    },
+];
 
 /// The maximum error of each component of [`phasor`], in units of `|a|` (module docs: how it was measured).
 pub const PHASOR_MAX_ERROR: f32 = 1.0e-7;
@@ -53,7 +90,10 @@ pub fn phasors(
 ) -> Result<bool, KernelError> {
     check_len("phasor amplitudes", amplitude.len(), phase.len())?;
     check_len("phasors (2 values per pixel)", out.len(), 2 * phase.len())?;
-    ops::run_phasors(isa, amplitude, phase, out)
+    let run = dispatch::pick(PATHS, isa)?.polar;
+    // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
+    // the lengths are checked above.
+    Ok(unsafe { run(amplitude, phase, out) })
 }
 
 /// [`phasors`] in place: `buf` (`2n` values) holds the `n` amplitudes in its first half and receives the
@@ -61,7 +101,10 @@ pub fn phasors(
 /// into); `phase` holds the `n` phase heads. Bit-identical to [`phasors`]. Errors: as [`phasors`].
 pub fn phasors_in_place(buf: &mut [f32], phase: &[f32], isa: Isa) -> Result<bool, KernelError> {
     check_len("phasors (2 values per pixel)", buf.len(), 2 * phase.len())?;
-    ops::run_phasors_in_place(isa, buf, phase)
+    let run = dispatch::pick(PATHS, isa)?.polar_in_place;
+    // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
+    // the lengths are checked above.
+    Ok(unsafe { run(buf, phase) })
 }
 
 #[cfg(test)]

@@ -3,10 +3,10 @@
 //! `cargo test -p tensorholo-kernels --release -- --ignored phasor_exhaustive --nocapture`.
 
 use super::*;
-use crate::double_phase::tests::Rng;
+use crate::test_rng::Rng;
 
 fn available_paths() -> Vec<(String, Isa)> {
-    crate::ops::available_paths("phasors", |t| t.phasors.is_some())
+    crate::dispatch::available_paths("phasors", PATHS)
 }
 
 /// The exact `(a·cos θ, a·sin θ)` of `θ = 2π·(p − 0.5)`, `p − 0.5` rounded to f32 as the definition does.
@@ -44,7 +44,7 @@ fn phase_values() -> Vec<f32> {
         1e10,
         -1e10,
     ]);
-    let mut bits = Rng(0x2545_F491_4F6C_DD1D);
+    let mut bits = Rng::new(0x2545_F491_4F6C_DD1D);
     // Any sign and exponent up to 2³⁰ turns.
     v.extend((0..20_000).map(|_| {
         let e = (bits.next() % 60) as i32 - 30;
@@ -95,7 +95,7 @@ fn quarter_turns_and_whole_turns_are_exact() {
 
 #[test]
 fn phasor_is_periodic_and_odd_in_the_turn() {
-    let mut bits = Rng(7);
+    let mut bits = Rng::new(7);
     for _ in 0..10_000 {
         let t = bits.unit() - 0.5;
         let (s, c) = sincos_turns(t);
@@ -135,7 +135,7 @@ fn non_finite_heads_are_reported() {
 
 #[test]
 fn every_path_and_the_in_place_form_are_bit_identical_to_the_portable_body() {
-    let mut bits = Rng(0x9E37_79B9_7F4A_7C15);
+    let mut bits = Rng::new(0x9E37_79B9_7F4A_7C15);
     for n in (0..40).chain([63, 64, 65, 100, 257]) {
         let a: Vec<f32> = (0..n).map(|_| bits.unit() * 1.5).collect();
         let p: Vec<f32> = (0..n).map(|_| bits.unit() * 3.0 - 1.0).collect();
@@ -216,7 +216,7 @@ fn phasor_exhaustive_bound() {
             .map(|h| h.join().unwrap())
             .fold((0.0f64, 0.0f64), |a, b| (a.0.max(b.0), a.1.max(b.1)))
     });
-    let mut bits = Rng(0xD1B5_4A32_D192_ED03);
+    let mut bits = Rng::new(0xD1B5_4A32_D192_ED03);
     let random = worst_error((0..10_000_000).map(|_| {
         let e = (bits.next() % 80) as i32 - 40;
         (bits.unit() * 2.0 - 1.0) * 2f32.powi(e)

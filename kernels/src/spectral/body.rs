@@ -1,5 +1,5 @@
 //! The spectral helpers' paths (the method: [`crate::spectral`]): the portable bodies and the AVX-512F ones.
-//! The kernel table (`ops.rs`) lists which serves each ISA level.
+//! [`PATHS`](super::PATHS) lists which serves each ISA level.
 
 /// Rows per tile of the portable moves: a tile's column segment is 8 complex values (64 bytes, one cache
 /// line) written or read at once.

@@ -16,10 +16,42 @@
 
 pub(crate) mod body;
 
+use crate::dispatch::{self, Path};
 use crate::error::KernelError;
 use crate::isa::Isa;
-use crate::ops;
 use crate::pack::check_len;
+
+/// One level's column moves and complex multiply, on checked arguments.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SpectralFns {
+    /// [`gather_columns`].
+    pub gather: unsafe fn(&[f32], [usize; 2], usize, &mut [f32], usize),
+    /// [`scatter_columns`].
+    pub scatter: unsafe fn(&[f32], usize, &mut [f32], [usize; 2], usize),
+    /// [`multiply`].
+    pub multiply: unsafe fn(&mut [f32], &[f32], bool),
+}
+
+/// The paths, best first: AVX-512F's register transposes, then the portable loops.
+pub(crate) static PATHS: &[Path<SpectralFns>] = &[
+    #[cfg(target_arch = "x86_64")]
+    Path {
+        isa: Isa::Avx512,
+        run: SpectralFns {
+            gather: body::x86::gather_avx512,
+            scatter: body::x86::scatter_avx512,
+            multiply: body::x86::multiply_avx512,
+        },
+    },
+    Path {
+        isa: Isa::Scalar,
+        run: SpectralFns {
+            gather: body::gather_body,
+            scatter: body::scatter_body,
+            multiply: body::multiply_body,
+        },
+    },
+];
 
 /// Copies columns `x0 .. x0 + bw` of the row-major complex field `[h][w]` (`field`: `2·h·w` values) into the
 /// column-major block `[bw][h]` (`block`: `2·bw·h` values): `block[b][y] = field[y][x0 + b]`. Errors: a
@@ -34,7 +66,11 @@ pub fn gather_columns(
     isa: Isa,
 ) -> Result<(), KernelError> {
     check_columns([h, w], x0, bw, field.len(), block.len())?;
-    ops::run_gather_columns(isa, field, [h, w], x0, block, bw)
+    let run = dispatch::pick(PATHS, isa)?.gather;
+    // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
+    // the arguments are checked above.
+    unsafe { run(field, [h, w], x0, block, bw) };
+    Ok(())
 }
 
 /// The inverse of [`gather_columns`]: `field[y][x0 + b] = block[b][y]`; the field's other columns are left
@@ -48,7 +84,11 @@ pub fn scatter_columns(
     isa: Isa,
 ) -> Result<(), KernelError> {
     check_columns([h, w], x0, bw, field.len(), block.len())?;
-    ops::run_scatter_columns(isa, block, bw, field, [h, w], x0)
+    let run = dispatch::pick(PATHS, isa)?.scatter;
+    // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
+    // the arguments are checked above.
+    unsafe { run(block, bw, field, [h, w], x0) };
+    Ok(())
 }
 
 /// `values[i] ← values[i] · by[i]` (complex, interleaved; `values` and `by` of one even length), or with
@@ -69,7 +109,11 @@ pub fn multiply(
             got: values.len(),
         });
     }
-    ops::run_complex_multiply(isa, values, by, mirrored)
+    let run = dispatch::pick(PATHS, isa)?.multiply;
+    // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
+    // the lengths are checked above.
+    unsafe { run(values, by, mirrored) };
+    Ok(())
 }
 
 fn check_columns(
@@ -98,10 +142,10 @@ fn check_columns(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::conv3x3::tests::Rng;
+    use crate::test_rng::Rng;
 
     fn paths() -> Vec<(String, Isa)> {
-        ops::available_paths("spectral", |t| t.spectral.is_some())
+        dispatch::available_paths("spectral", PATHS)
     }
 
     #[test]

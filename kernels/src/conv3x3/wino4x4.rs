@@ -1,5 +1,5 @@
 //! Winograd F(4×4, 3×3) convolution, written once for every register type ([`SimdF32`]), as
-//! [`simd_winograd`](super::simd_winograd) is for F(2×2, 3×3).
+//! [`wino2x2`](super::wino2x2) is for F(2×2, 3×3).
 //!
 //! A 4×4 output tile `Y` comes from the 6×6 input tile `d` above it (Lavin & Gray 2016; the points 0, ±1, ±2
 //! and ∞): `Y = Aᵀ [Σ_c U_c ⊙ V_c] A`, with `V_c = Bᵀ d_c B` and `U_c = G g_c Gᵀ` (packed once, at plan time,
@@ -17,7 +17,7 @@
 //! 36 products per tile and input channel make 16 outputs: 2.25 multiply-adds per output and input channel,
 //! against 9 for the direct convolution and 4 for F(2×2, 3×3). The 36 products are small matrix products
 //! computed with the direct kernels' register tile (`G` output channels × `NV` registers of tiles;
-//! [`products`](super::simd_winograd::products), shared with F(2×2, 3×3)). Lanes hold consecutive tiles along
+//! [`products`](super::wino2x2::products), shared with F(2×2, 3×3)). Lanes hold consecutive tiles along
 //! the row: the input transform loads each row transposed by quadruples ([`SimdF32::load_stride4`], the
 //! tile's columns 0–3; columns 4–5 are the next tile's 0–1, [`SimdF32::next_columns`]) and the output
 //! transform transposes its four columns back into pixels
@@ -41,7 +41,7 @@
 
 use super::job::{F32Job, F32Out};
 use super::simd_f32::{store_pixels, SimdF32};
-use super::simd_winograd::{prefetch_lines, products, put_scratch, take_scratch};
+use super::wino2x2::{prefetch_lines, products, put_scratch, take_scratch};
 
 /// Products per tile: the 6×6 transformed tile.
 pub(crate) const POINTS: usize = 36;
@@ -91,7 +91,7 @@ pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
     let groups = job.cout.div_ceil(G);
     debug_assert!(job.weights.len() == POINTS * groups * cin * G && job.bias.len() == groups * G);
     let v_len = POINTS * cin * t;
-    let mut scratch = take_scratch(super::simd_winograd::scratch_len(POINTS, cin, G, t));
+    let mut scratch = take_scratch(super::wino2x2::scratch_len(POINTS, cin, G, t));
     let (vbuf, mbuf) = scratch.split_at_mut(v_len);
     // Each source with the number of buffer rows its view holds from kernel row 0 (the view runs to the end
     // of the operand's buffer, from its first row's column `cols.start` on, fewer than a row's values:
