@@ -35,8 +35,8 @@ pub(crate) mod test_support;
 
 /// For tests (this crate's, the workspace's): a context on any adapter (lavapipe in CI), or `None` with a
 /// message where none exists; with `require` a missing adapter is a panic instead, so that CI cannot skip the
-/// GPU tests silently. The library reads no environment: the tests pass `TENSORHOLO_REQUIRE_GPU=1` (set by
-/// `.ci/run`) as `require` (`sdk/tests/gpu_common`, `test_support`).
+/// GPU tests silently. The library reads no environment: the integration tests pass `TENSORHOLO_REQUIRE_GPU=1`
+/// (set by `.ci/run`) as `require` (`sdk/tests/gpu_common`); the unit tests skip (`test_support`).
 #[doc(hidden)]
 pub fn test_context(require: bool) -> Option<GpuContext> {
     match GpuContext::new(&GpuOptions {
