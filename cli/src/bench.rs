@@ -549,7 +549,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 (None, false) => ", pre-filter CNN + DPM",
             }
         );
-        println!("| CNN | precision | layout | size (HxW) | threads | CNN | offset | pre-filter | DPM + LUT | frame | FPS | stream FPS | setup ms | peak MiB |");
+        println!("| CNN | precision | layout | size (HxW) | threads | CNN | offset | pre-filter | DPM + LUT | frame | FPS | stream FPS | setup ms | peak MiB frame / stream |");
         println!("|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
         for &(h, w) in &args.sizes {
             let frame = procedural::default_scene(h, w)?;
@@ -609,13 +609,20 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                                 Ok(())
                             })?;
                             let med = tensorholo::pipeline::FrameTimings::median(&timings[1..]);
+                            // The session's peak over single frames; the stream below holds two frames in
+                            // flight (the CNN of frame n + 1 beside the optics of frame n), so its peak is
+                            // reported apart.
+                            let peak = crate::memory::peak_rss_mib().filter(|_| reset);
                             let n = 4usize;
                             let t = Instant::now();
                             session
                                 .render_stream((0..n).map(|_| Ok(frame.clone())), |_, _| Ok(()))?;
                             let stream_fps = n as f64 / t.elapsed().as_secs_f64();
-                            let peak = crate::memory::peak_rss_mib().filter(|_| reset);
-                            let peak_cell = peak.map_or("–".to_string(), |p| format!("{p:.0}"));
+                            let stream_peak = crate::memory::peak_rss_mib().filter(|_| reset);
+                            let peak_cell = match (peak, stream_peak) {
+                                (Some(f), Some(s)) => format!("{f:.0} / {s:.0}"),
+                                _ => "–".to_string(),
+                            };
                             println!(
                             "| holo{layers} | {precision} | {layout} | {h}x{w} | {threads} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {:.0} | {peak_cell} |",
                             med.cnn_s * 1e3,
@@ -632,6 +639,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                             "layout": layout, "size": [h, w], "threads": threads, "offset_mm": args.offset_mm,
                             "median_stages_s": med, "frame_ms": s * 1e3, "fps": 1.0 / s,
                             "stream_fps": stream_fps, "runs": runs, "peak_rss_mib": peak,
+                            "stream_peak_rss_mib": stream_peak,
                             "session_setup_s": setup_s}),
                         );
                         }

@@ -704,6 +704,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             med.total_s * 1e3,
         );
     }
+    // The peak up to here: the inputs, the session and its frames (the previews' share is reported apart).
+    let frames_peak = crate::memory::peak_rss_mib();
     // The previews and reconstructions below need only the last frame: the session's buffers go first.
     let (plan_report, backend_report) = (
         session.plan_report().clone(),
@@ -732,6 +734,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 "repeats": timed,
                 "fps_median": if med.total_s > 0.0 { 1.0 / med.total_s } else { 0.0 },
             });
+            report["frames_peak_rss_mib"] = json!(frames_peak);
         },
     )?;
     log::info!(
@@ -840,8 +843,19 @@ fn write_outputs(
         "evaluation": evaluation,
     });
     add(&mut report);
-    // The whole run's peak resident memory (session, previews, report images): scripts/memory-guard.sh.
-    report["peak_rss_mib"] = json!(crate::memory::peak_rss_mib());
+    // The whole run's peak resident memory (session, previews, report images), and what the previews and
+    // report images add over the frames' peak (`frames_peak_rss_mib`, set by `add`): scripts/memory-guard.sh.
+    let peak = crate::memory::peak_rss_mib();
+    report["peak_rss_mib"] = json!(peak);
+    let frames = report["frames_peak_rss_mib"].as_f64();
+    if let (Some(all), Some(frames)) = (peak, frames) {
+        report["previews_added_mib"] = json!((all - frames).max(0.0));
+        log::info!(
+            "peak resident memory {all:.0} MiB: {frames:.0} MiB up to the last frame, the previews and report \
+             images {:.0} MiB more",
+            (all - frames).max(0.0)
+        );
+    }
     crate::args::write_json(&args.out.join("report.json"), &report)
 }
 

@@ -6,7 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{holo, stderr};
+use common::{holo, stderr, ONE_SAMPLE_DATASET};
 
 /// A viewer's astigmatism, the same at every distance (radians at the pupil edge).
 const EYE: &str = r#"{
@@ -232,23 +232,7 @@ fn a_dataset_for_a_profile_with_an_aberration_file_is_corrected_for_it() {
     )
     .unwrap();
     let dataset = |extra: &[&str], out: &Path| {
-        let mut args = vec![
-            "dataset",
-            "--train",
-            "1",
-            "--val",
-            "0",
-            "--test",
-            "0",
-            "--size",
-            "24",
-            "--levels",
-            "8",
-            "--layers",
-            "2",
-            "--previews",
-            "0",
-        ];
+        let mut args = ONE_SAMPLE_DATASET.to_vec();
         args.extend_from_slice(extra);
         args.extend_from_slice(&["--out", out.to_str().unwrap()]);
         holo(&args)

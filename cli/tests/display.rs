@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{holo, png_size, stderr};
+use common::{holo, png_size, stderr, ONE_SAMPLE_DATASET};
 
 /// A 4 µm SLM at the paper's lasers: the shipped 8 µm models serve it with σ = 0.25.
 const GOOD: &str = r#"{
@@ -250,27 +250,9 @@ fn reference_dataset_and_calibrate_take_the_profile_and_flags_override_it() {
 
     // dataset: the manifest records the profile beside the optics it synthesised with.
     let data = dir.path().join("data");
-    let o = holo(&[
-        "dataset",
-        "--train",
-        "1",
-        "--val",
-        "0",
-        "--test",
-        "0",
-        "--size",
-        "24",
-        "--levels",
-        "8",
-        "--layers",
-        "2",
-        "--previews",
-        "0",
-        "--display",
-        p,
-        "--out",
-        data.to_str().unwrap(),
-    ]);
+    let mut args = ONE_SAMPLE_DATASET.to_vec();
+    args.extend_from_slice(&["--display", p, "--out", data.to_str().unwrap()]);
+    let o = holo(&args);
     assert!(o.status.success(), "{}", stderr(&o));
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(data.join("manifest.json")).unwrap())

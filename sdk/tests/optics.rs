@@ -449,7 +449,7 @@ fn even_transfer_function_quarter_applies_bit_identically() {
                         .copy_from_slice(&field[rows.start * w..rows.end * w])
                 },
                 keep,
-                |chunk, rows| seen[rows.start * w..rows.end * w].copy_from_slice(chunk),
+                |chunk, rows, _| seen[rows.start * w..rows.end * w].copy_from_slice(chunk),
             )
             .unwrap();
             let same = |v: &[Complex32]| a.iter().zip(v).all(|(x, y)| x == y);

@@ -13,6 +13,26 @@ pub fn holo(args: &[&str]) -> Output {
         .expect("holo runs")
 }
 
+/// `holo dataset` for one 24×24 training sample of 8 depth levels and 2 LDI layers, no previews (the caller
+/// adds its options and `--out`).
+pub const ONE_SAMPLE_DATASET: &[&str] = &[
+    "dataset",
+    "--train",
+    "1",
+    "--val",
+    "0",
+    "--test",
+    "0",
+    "--size",
+    "24",
+    "--levels",
+    "8",
+    "--layers",
+    "2",
+    "--previews",
+    "0",
+];
+
 /// The captured stderr as text.
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()

@@ -153,7 +153,15 @@ impl Fft2 {
         scratch: &mut [Complex32],
         multiply: impl FnMut(usize, &mut [Complex32]),
     ) {
-        self.filter_rows(data, block, scratch, |_, _| {}, multiply, None, |_, _| {});
+        self.filter_rows(
+            data,
+            block,
+            scratch,
+            |_, _| {},
+            multiply,
+            None,
+            |_, _, _| {},
+        );
     }
 
     /// [`Fft2::filter`] with a pass of the caller's fused into each end, on rows still in cache:
@@ -163,13 +171,16 @@ impl Fft2 {
     ///   rows `< rows.start` untouched. (So a field can be made in place from values packed in the first half
     ///   of its own memory: chunk `[y0, y1)` with `y0 > 0` writes values `2·y0·width..` and reads at most up to
     ///   `y1·width ≤ 2·y0·width`.)
-    /// - `after(chunk, rows)` reads the chunk's rows `rows` (`chunk`: those rows alone, row-major) just after
-    ///   their inverse row transforms, first chunk to last.
+    /// - `after(chunk, rows, spent)` reads the chunk's rows `rows` (`chunk`: those rows alone, row-major) just
+    ///   after their inverse row transforms, again from the **last** chunk to the first.
     ///
     /// With `rows_out` (at least `ROW_CHUNK·width` values) the inverse row transforms run there, on a copy of
     /// each chunk's rows, instead of in `data`: only `after` sees the result, and `data` is left holding the
     /// column pass's values, but it is not written a third time (a field whose result is read once by
-    /// `after` then spares 16.6 MB of writes at 1080p).
+    /// `after` then spares 16.6 MB of writes at 1080p). `spent` is then `data` from the chunk's first row to
+    /// the end (`data[rows.start·width..]`): rows whose values nothing reads any more (this chunk's were
+    /// copied, the later ones are done), which `after` may overwrite, e.g. to keep a plane of the result in
+    /// the field's own memory. Without `rows_out`, `spent` is empty.
     ///
     /// Without the hooks' own work it is [`Fft2::filter`], bit for bit (the row transforms are independent).
     /// Each fused pass saves a read and a write of the whole field from memory: at 1080p a field is 16.6 MB,
@@ -183,7 +194,7 @@ impl Fft2 {
         mut before: impl FnMut(&mut [Complex32], std::ops::Range<usize>),
         mut multiply: impl FnMut(usize, &mut [Complex32]),
         mut rows_out: Option<&mut [Complex32]>,
-        mut after: impl FnMut(&[Complex32], std::ops::Range<usize>),
+        mut after: impl FnMut(&[Complex32], std::ops::Range<usize>, &mut [Complex32]),
     ) {
         let (h, w) = (self.height, self.width);
         debug_assert_eq!(data.len(), h * w);
@@ -205,19 +216,22 @@ impl Fft2 {
             self.col_inverse.process_with_scratch(block, scratch);
             scatter(block, h, data, w, x0, self.isa);
         }
-        for y0 in (0..h).step_by(ROW_CHUNK) {
+        for y0 in (0..h).step_by(ROW_CHUNK).rev() {
             let rows = y0..(y0 + ROW_CHUNK).min(h);
-            let values = &mut data[rows.start * w..rows.end * w];
-            let chunk = match rows_out.as_deref_mut() {
+            let len = rows.len() * w;
+            match rows_out.as_deref_mut() {
                 Some(out) => {
-                    let out = &mut out[..values.len()];
-                    out.copy_from_slice(values);
-                    out
+                    let (out, spent) = (&mut out[..len], &mut data[rows.start * w..]);
+                    out.copy_from_slice(&spent[..len]);
+                    self.row_inverse.process_with_scratch(out, scratch);
+                    after(out, rows, spent);
                 }
-                None => values,
-            };
-            self.row_inverse.process_with_scratch(chunk, scratch);
-            after(chunk, rows);
+                None => {
+                    let chunk = &mut data[rows.start * w..rows.end * w];
+                    self.row_inverse.process_with_scratch(chunk, scratch);
+                    after(chunk, rows, &mut []);
+                }
+            }
         }
     }
 }
@@ -396,6 +410,7 @@ mod tests {
                 // Poisoned until `before` makes each row.
                 let mut got = vec![Complex32::new(f32::NAN, f32::NAN); h * w];
                 let (mut chunks, mut seen) = (Vec::new(), vec![Complex32::default(); h * w]);
+                let (mut after_chunks, has_out) = (Vec::new(), out.is_some());
                 fft.filter_rows(
                     &mut got,
                     &mut block,
@@ -411,8 +426,17 @@ mod tests {
                     },
                     multiply,
                     out.as_deref_mut(),
-                    |chunk, rows| seen[rows.start * w..rows.end * w].copy_from_slice(chunk),
+                    |chunk, rows, spent| {
+                        seen[rows.start * w..rows.end * w].copy_from_slice(chunk);
+                        // With rows out, the rows from this chunk on are spent: poisoned here, they must
+                        // change no later chunk's result.
+                        let spent_len = if has_out { (h - rows.start) * w } else { 0 };
+                        assert_eq!(spent.len(), spent_len, "{h}×{w}: spent of {rows:?}");
+                        spent.fill(Complex32::new(f32::NAN, f32::INFINITY));
+                        after_chunks.push(rows);
+                    },
                 );
+                assert_eq!(after_chunks, chunks, "{h}×{w}: after in before's order");
                 let starts: Vec<usize> = chunks.iter().map(|r| r.start).collect();
                 let mut descending = starts.clone();
                 descending.sort_by(|a, b| b.cmp(a));

@@ -314,19 +314,21 @@ impl SpectralPlan {
         multiplier: &EvenMultiplier,
         scratch: &mut Scratch,
     ) -> Result<()> {
-        self.apply_even_rows(field, multiplier, scratch, |_, _| {}, true, |_, _| {})
+        self.apply_even_rows(field, multiplier, scratch, |_, _| {}, true, |_, _, _| {})
     }
 
     /// [`apply_even`](Self::apply_even) (the angular spectrum method's spectral multiply, Eq. 2; the offset
     /// propagation, Eq. 6, with its transfer function) on `field`, row-major `[height, width]`, with a pass of
     /// the caller's fused into each end ([`Fft2::filter_rows`]): `before(field, rows)` makes or changes the field's rows `rows` just before they are transformed (chunks
     /// of [`crate::optics::fft::ROW_CHUNK`] rows, last chunk first, each starting at a multiple of it; the
-    /// whole field is passed, rows `≥ rows.end` already transformed), and `after(chunk, rows)` reads rows
-    /// `rows` of the result (`chunk`: those rows alone; first chunk first). With `keep` the field holds the
+    /// whole field is passed, rows `≥ rows.end` already transformed), and `after(chunk, rows, spent)` reads
+    /// rows `rows` of the result (`chunk`: those rows alone; last chunk first). With `keep` the field holds the
     /// result afterwards; without, an unpadded plan transforms each chunk's last pass in the scratch's own rows
     /// and leaves intermediate values in the field (not writing it a third time: 16.6 MB at 1080p, for a
-    /// caller that reads the result only in `after`). With padding the hooks run on the whole field, before
-    /// the embedding and after the crop (the field always holds the result). Bit-identical to `before` on the
+    /// caller that reads the result only in `after`), and `spent` is the field from row `rows.start` to the
+    /// end, values nothing reads any more that `after` may overwrite ([`crate::optics::fft::Fft2::filter_rows`]);
+    /// otherwise `spent` is empty. With padding the hooks run on the whole field, before the embedding and
+    /// after the crop (the field always holds the result; `spent` empty). Bit-identical to `before` on the
     /// whole field, `apply_even`, then `after`.
     ///
     /// Errors: as [`apply_even`](Self::apply_even).
@@ -337,7 +339,7 @@ impl SpectralPlan {
         scratch: &mut Scratch,
         before: impl FnMut(&mut [Complex32], std::ops::Range<usize>),
         keep: bool,
-        after: impl FnMut(&[Complex32], std::ops::Range<usize>),
+        after: impl FnMut(&[Complex32], std::ops::Range<usize>, &mut [Complex32]),
     ) -> Result<()> {
         self.check_field(field.len())?;
         self.check_even(multiplier)?;
@@ -365,7 +367,7 @@ impl SpectralPlan {
         scratch: &mut Scratch,
         before: impl FnMut(&mut [Complex32], std::ops::Range<usize>),
         keep: bool,
-        after: impl FnMut(&[Complex32], std::ops::Range<usize>),
+        after: impl FnMut(&[Complex32], std::ops::Range<usize>, &mut [Complex32]),
     ) -> Result<()> {
         self.check_field(field.len())?;
         self.check_multiplier(full.len())?;
@@ -394,13 +396,13 @@ impl SpectralPlan {
         scratch: &mut Scratch,
         mut before: impl FnMut(&mut [Complex32], std::ops::Range<usize>),
         keep: bool,
-        mut after: impl FnMut(&[Complex32], std::ops::Range<usize>),
+        mut after: impl FnMut(&[Complex32], std::ops::Range<usize>, &mut [Complex32]),
         multiply: impl FnMut(usize, &mut [Complex32]),
     ) {
         if self.pad {
             before(field, 0..self.height);
             self.filter_with(field, scratch, multiply);
-            after(field, 0..self.height);
+            after(field, 0..self.height, &mut []);
         } else {
             let Scratch {
                 block, fft, rows, ..

@@ -37,13 +37,14 @@ pub(super) type PlanePairMut<'a> = (&'a mut [f32], &'a mut [f32]);
 /// Everything one colour channel reuses between frames.
 #[derive(Debug)]
 pub(super) struct ColourState {
-    /// The complex field `[H, W]`. Its memory also holds two real planes (`[H, W]` each, [`ColourState::planes`])
-    /// while the session writes them: the midpoint amplitude head before [`Task::Midpoint`] in a session
-    /// without full outputs and, with a pre-filter, its output `Re H'` before the encoding's pass 1 (the phase
-    /// head and `Im H'` in `phase`); [`Task::Midpoint`] turns the heads into the field in place (no buffer of
-    /// their own: 50 MB less at 1080p), and with the plain method pass 1 leaves `Re H'` and `|H'|` here
-    /// (`layout`) instead of interleaving them. The pre-filter's input `(Re H, Im H)` waits in
-    /// `prefilter_input` ([`ColourState::prefilter_io`]).
+    /// The complex field `[H, W]`. Its memory also holds two real planes (`[H, W]` each) while the session
+    /// writes them: the midpoint amplitude head before [`Task::Midpoint`] in a session without full outputs
+    /// (the phase head in `phase`, [`ColourState::planes`]); [`Task::Midpoint`] turns the heads into the field
+    /// in place (no buffer of their own: 50 MB less at 1080p). With a pre-filter, [`Task::Midpoint`] leaves
+    /// the pre-filter's input `Im H` in the second half (`Re H` in `phase`), the pre-filter writes its output
+    /// `Re H'` into the first half ([`ColourState::prefilter_io`]), and with the plain method pass 1 leaves
+    /// `Re H'` and `|H'|` here (`layout`) instead of interleaving them: no buffer of the pre-filter's own
+    /// (its input and output were 50 + 50 MB at 1080p).
     pub(super) field: Vec<Complex32>,
     pub(super) plan: SpectralPlan,
     /// Offset transfer function with the carrier removed (Eq. 6), as its even quarter (a function of the
@@ -53,10 +54,10 @@ pub(super) struct ColourState {
     /// spectrum after `transfer`; `None`: no correction.
     pub(super) correction: Option<Arc<PupilCorrection>>,
     pub(super) scratch: Scratch,
-    /// The pre-filter's input `(Re H, Im H)`, two `[H, W]` planes one after the other; empty in a session
-    /// without a pre-filter.
-    pub(super) prefilter_input: Vec<f32>,
     pub(super) encoder: ChannelEncoder,
+    /// A real `[H, W]` plane: the midpoint phase head (a session without full outputs), then with a
+    /// pre-filter its input `Re H`, without one `arg H` from pass 1 and the pattern of a session without full
+    /// outputs.
     pub(super) phase: Vec<f32>,
     pub(super) stats: ChannelStats,
     /// Where pass 1 left each pixel's `|H|` for pass 2 (the interleaved field, or with a pre-filter and the
@@ -82,9 +83,7 @@ impl ColourState {
                     };
                     if prefilter {
                         // Pre-filter input (docs/CONVENTIONS.md §7.2, format 2): Re H and Im H, two planes.
-                        let n = self.field.len();
-                        let (re, im) = prefilter_planes(&mut self.prefilter_input, n)?;
-                        split_planes(&self.field, re, im);
+                        split_in_place(&mut self.field, &mut self.phase);
                     }
                     finite
                 };
@@ -110,21 +109,13 @@ impl ColourState {
         (amplitude, &mut self.phase[..])
     }
 
-    /// The pre-filter's input `(Re H, Im H)` that [`Task::Midpoint`] left in `prefilter_input`, beside the
-    /// planes the pre-filter writes its output `(Re H', Im H')` into: the first half of the field's memory and
-    /// `phase` (so that the encoding's pass 1 interleaves them into the field without copying a plane aside).
-    ///
-    /// Errors: [`HoloError::Internal`] if `prefilter_input` does not hold two planes (a session without a
-    /// pre-filter).
-    pub(super) fn prefilter_io(&mut self) -> Result<(PlanePair<'_>, PlanePairMut<'_>)> {
-        let n = self.field.len();
-        let input = self
-            .prefilter_input
-            .split_at_checked(n)
-            .filter(|(_, im)| im.len() == n)
-            .ok_or_else(no_room)?;
-        let (re, _) = field_planes(&mut self.field);
-        Ok((input, (re, &mut self.phase[..])))
+    /// The pre-filter's input `(Re H, Im H)` where [`Task::Midpoint`] left it (`phase` and the second half of
+    /// the field's memory), beside the plane the pre-filter writes its output `Re H'` into: the first half of
+    /// the field's memory (so that the encoding's pass 1 reads it there; the session gives `Im H'` a plane of
+    /// the frame's phase output, idle until pass 2 writes the pattern there).
+    pub(super) fn prefilter_io(&mut self) -> (PlanePair<'_>, &mut [f32]) {
+        let (re_out, im) = field_planes(&mut self.field);
+        ((&self.phase[..], &*im), re_out)
     }
 
     /// Turns the midpoint heads of [`ColourState::planes`] (amplitude in the field's memory, phase in `phase`)
@@ -144,7 +135,9 @@ impl ColourState {
     /// `(Re H, Im H)` (docs/CONVENTIONS.md §7.2, format 2) just after its inverse ones, while the rows are in
     /// cache: two passes over the field fewer, bit-identical to the passes apart (tested); with `prefilter`
     /// the last row transforms run on a copy of each chunk (`keep = false`), so the field is left with the
-    /// column pass's values (the pre-filter's output replaces them) and not written a third time. The heads are
+    /// column pass's values and not written a third time: `Re H` goes to `phase`, `Im H` to the second half of
+    /// the field's memory, into rows already spent (the chunks run last first, and pixel `p`'s value lands at
+    /// `n + p ≥ 2·p`, in row `≥` the chunk's first; a padded plan splits the whole field after). The heads are
     /// this colour's planes of `heads` (the session's `[3, H, W]` arrays, standard layout) or, with `None`,
     /// [`ColourState::planes`] ([`phasor_rows`] makes the chunks in place). Returns whether every head was
     /// finite.
@@ -157,13 +150,10 @@ impl ColourState {
             None => None,
         };
         let n = self.field.len();
-        let mut planes = if prefilter {
-            Some(prefilter_planes(&mut self.prefilter_input, n)?)
-        } else {
-            None
-        };
-        let (width, isa, own_phase) = (self.size.1, self.isa, &self.phase);
-        let (mut finite, mut failure) = (true, None);
+        // `before` reads the phase head there (a lean session), `after` writes `Re H` there: never at once.
+        let phase = std::cell::RefCell::new(&mut self.phase);
+        let (width, isa) = (self.size.1, self.isa);
+        let (mut finite, mut failure, mut split_after) = (true, None, false);
         let before = |field: &mut [Complex32], rows: std::ops::Range<usize>| {
             let made = match shared {
                 Some((amplitude, phase)) => {
@@ -172,7 +162,7 @@ impl ColourState {
                     phasors(&amplitude[px.clone()], &phase[px], out, isa)
                         .map_err(|e| HoloError::Internal(format!("phasor rows: {e}")))
                 }
-                None => phasor_rows(field, own_phase, rows, width, isa),
+                None => phasor_rows(field, &phase.borrow(), rows, width, isa),
             };
             match made {
                 Ok(f) => finite &= f,
@@ -181,10 +171,17 @@ impl ColourState {
                 }
             }
         };
-        let after = |chunk: &[Complex32], rows: std::ops::Range<usize>| {
-            if let Some((re, im)) = &mut planes {
-                let px = rows.start * width..rows.end * width;
-                split_planes(chunk, &mut re[px.clone()], &mut im[px]);
+        let after = |chunk: &[Complex32], rows: std::ops::Range<usize>, spent: &mut [Complex32]| {
+            if !prefilter {
+                return;
+            }
+            let px = rows.start * width..rows.end * width;
+            // `Im H` of pixel `p` at value `n + p` of the field's memory, `spent` starting at value `2·p0`.
+            let at = n - px.start;
+            let spent = bytemuck::cast_slice_mut::<Complex32, f32>(spent);
+            match spent.get_mut(at..at + px.len()) {
+                Some(im) => split_planes(chunk, &mut phase.borrow_mut()[px], im),
+                None => split_after = true,
             }
         };
         // With the pre-filter the field is read only in `after` (the pre-filter's output replaces it).
@@ -212,6 +209,9 @@ impl ColourState {
                     "no transfer function or correction to apply".into(),
                 ))
             }
+        }
+        if split_after {
+            split_in_place(&mut self.field, &mut self.phase);
         }
         failure.map_or(Ok(finite), Err)
     }
@@ -284,17 +284,6 @@ fn colour_planes(heads: &Heads, c: usize) -> Result<PlanePair<'_>> {
     }
 }
 
-/// The pre-filter's input planes `(Re H, Im H)` (docs/CONVENTIONS.md §7.2, format 2), `n` values each, in
-/// `prefilter_input`.
-///
-/// Errors: [`HoloError::Internal`] if it does not hold two planes (a session without a pre-filter).
-fn prefilter_planes(prefilter_input: &mut [f32], n: usize) -> Result<PlanePairMut<'_>> {
-    prefilter_input
-        .split_at_mut_checked(n)
-        .filter(|(_, im)| im.len() == n)
-        .ok_or_else(no_room)
-}
-
 /// `re[i], im[i] ← field[i]`.
 fn split_planes(field: &[Complex32], re: &mut [f32], im: &mut [f32]) {
     for ((r, i), v) in re.iter_mut().zip(im.iter_mut()).zip(field) {
@@ -303,9 +292,17 @@ fn split_planes(field: &[Complex32], re: &mut [f32], im: &mut [f32]) {
     }
 }
 
-/// The error for a scratch without room for the pre-filter's input (an internal inconsistency).
-fn no_room() -> HoloError {
-    HoloError::Internal("no room for the pre-filter's input planes".into())
+/// The pre-filter's input planes of a whole field in place: `re[i] ← Re field[i]`, and `Im field[i]` to
+/// value `n + i` of the field's memory (its second half), last pixel first (value `n + i ≥ 2·i + 1` belongs
+/// to a pixel already read).
+fn split_in_place(field: &mut [Complex32], re: &mut [f32]) {
+    let n = field.len();
+    let flat = bytemuck::cast_slice_mut::<Complex32, f32>(field);
+    for (i, r) in re.iter_mut().enumerate().rev() {
+        let (a, b) = (flat[2 * i], flat[2 * i + 1]);
+        *r = a;
+        flat[n + i] = b;
+    }
 }
 
 #[cfg(test)]

@@ -15,7 +15,6 @@
 use num_complex::Complex32;
 use serde::Serialize;
 
-use crate::error::Result;
 use crate::optics::{OpticalSetup, SpectralPlan};
 use crate::synthesis::aberration::{fill_pupil_multiplier, AberrationProfile, ZernikeCoefficients};
 
@@ -134,7 +133,7 @@ impl PupilCorrection {
         coefficients: &[ZernikeCoefficients; 3],
         scale: f32,
         reuse: Option<Self>,
-    ) -> Result<Self> {
+    ) -> Self {
         let mut distinct: Vec<ZernikeCoefficients> = Vec::with_capacity(3);
         let of_colour = coefficients.map(|c| match distinct.iter().position(|d| *d == c) {
             Some(i) => i,
@@ -149,7 +148,7 @@ impl PupilCorrection {
         for (kernel, c) in kernels.iter_mut().zip(&distinct) {
             fill_pupil_multiplier(plan, c, scale, kernel);
         }
-        Ok(Self { kernels, of_colour })
+        Self { kernels, of_colour }
     }
 
     /// Colour `colour`'s kernel (0 = R), in the plan's spectrum layout.
@@ -203,10 +202,10 @@ mod tests {
         let plan = SpectralPlan::new(8, 12, crate::optics::Padding::None).unwrap();
         let a = astigmatism(1.0);
         let b = astigmatism(-1.0);
-        let one = PupilCorrection::build(&plan, &[a, a, a], 1.0, None).unwrap();
+        let one = PupilCorrection::build(&plan, &[a, a, a], 1.0, None);
         assert_eq!(one.kernels.len(), 1);
         let ptr = one.kernels[0].as_ptr();
-        let two = PupilCorrection::build(&plan, &[a, b, a], 0.5, Some(one)).unwrap();
+        let two = PupilCorrection::build(&plan, &[a, b, a], 0.5, Some(one));
         assert_eq!(two.kernels.len(), 2);
         assert_eq!(two.kernels[0].as_ptr(), ptr);
         assert_eq!(two.kernel(0), two.kernel(2));

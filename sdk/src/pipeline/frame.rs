@@ -27,6 +27,30 @@ impl Heads {
     pub fn to_field(&self) -> Result<Array3<Complex32>> {
         contract::heads_to_field(self.amplitude.view(), self.phase.view())
     }
+
+    /// Zeroed heads `[3, height, width]` each.
+    pub(super) fn zeros(height: usize, width: usize) -> Self {
+        Self {
+            amplitude: Array3::zeros((3, height, width)),
+            phase: Array3::zeros((3, height, width)),
+        }
+    }
+
+    /// The six planes a CNN writes its heads into ([`crate::cnn::CnnPlan::run_planes_into`]): amplitude R,
+    /// G, B then phase R, G, B, `H·W` values each; `None` unless both heads are `[3, H, W]` in standard
+    /// layout.
+    pub(super) fn planes_mut(&mut self) -> Option<[&mut [f32]; 6]> {
+        let (c, h, w) = self.amplitude.dim();
+        if c != 3 || self.phase.dim() != (c, h, w) {
+            return None;
+        }
+        let n = h * w;
+        let (a0, a12) = self.amplitude.as_slice_mut()?.split_at_mut(n);
+        let (a1, a2) = a12.split_at_mut(n);
+        let (p0, p12) = self.phase.as_slice_mut()?.split_at_mut(n);
+        let (p1, p2) = p12.split_at_mut(n);
+        Some([a0, a1, a2, p0, p1, p2])
+    }
 }
 
 /// Wall-clock seconds of each stage of one frame.

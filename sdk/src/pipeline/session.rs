@@ -94,9 +94,10 @@ impl HologramSession {
     /// Whether GPU frames also download the double phase pattern ([`SlmFrame::phase`]) and the CNN heads
     /// ([`HologramSession::last_heads`]); on by default. Off, a GPU frame downloads only the codes and the
     /// normaliser (what an SLM needs): `phase` and `last_heads` then keep older values. On the CPU, off, the
-    /// heads are not kept after a frame (`last_heads` is `None`; two `[3, H, W]` f32 arrays, 50 MB at 1080p)
-    /// and `phase` is not filled (it keeps older values, zeros in a new session, whose pages then never
-    /// become resident: 25 MB at 1080p).
+    /// heads are not kept after a frame (`last_heads` is `None`; two `[3, H, W]` f32 arrays, 50 MB at 1080p);
+    /// `phase` is filled only in a session with a pre-filter (whose pass 1 works in those planes), elsewhere
+    /// it keeps older values (zeros in a new session, whose pages then never become resident: 25 MB at
+    /// 1080p).
     pub fn set_full_outputs(&mut self, full: bool) {
         self.full_outputs = full;
     }
@@ -181,27 +182,14 @@ impl HologramSession {
             let fits = |a: &Array3<f32>| a.dim() == (3, h, w) && a.is_standard_layout();
             let mut shared = match previous {
                 Some(p) if Arc::strong_count(&p) == 1 && fits(&p.amplitude) && fits(&p.phase) => p,
-                _ => Arc::new(Heads {
-                    amplitude: Array3::zeros((3, h, w)),
-                    phase: Array3::zeros((3, h, w)),
-                }),
+                _ => Arc::new(Heads::zeros(h, w)),
             };
-            let cnn_s = {
-                let heads = Arc::get_mut(&mut shared);
-                let Some((Some(a), Some(p))) =
-                    heads.map(|h| (h.amplitude.as_slice_mut(), h.phase.as_slice_mut()))
-                else {
-                    return Err(HoloError::Internal(
-                        "the kept heads are not writable".into(),
-                    ));
-                };
-                let n = h * w;
-                let (a0, a12) = a.split_at_mut(n);
-                let (a1, a2) = a12.split_at_mut(n);
-                let (p0, p12) = p.split_at_mut(n);
-                let (p1, p2) = p12.split_at_mut(n);
-                self.cnn.run_frame_into(frame, [a0, a1, a2, p0, p1, p2])?
+            let Some(planes) = Arc::get_mut(&mut shared).and_then(Heads::planes_mut) else {
+                return Err(HoloError::Internal(
+                    "the kept heads are not writable".into(),
+                ));
             };
+            let cnn_s = self.cnn.run_frame_into(frame, planes)?;
             return self.encode_shared(shared, cnn_s);
         }
         drop(previous);
@@ -298,7 +286,7 @@ impl HologramSession {
         if filtered {
             self.filtered()?;
         }
-        self.encode()?;
+        self.encode(filtered)?;
         let encoding_s = t.elapsed().as_secs_f64();
         self.output.timings = FrameTimings {
             cnn_s,
@@ -341,9 +329,9 @@ impl HologramSession {
 
     /// Stage 3 on its own: the pre-filter CNN, if the session has one, on `[Re H, Im H]` of the offset
     /// hologram (`docs/CONVENTIONS.md` §7.2, format 2), its outputs `(Re H', Im H')` written into the colour
-    /// workers' field memory; returns whether it ran. Pass 1 of the encoding then turns them into the
-    /// filtered field on the optics pool (timed as encoding: without a pre-filter, pass 1 runs in
-    /// [`Task::Midpoint`]).
+    /// workers' field memory (`Re H'`) and the frame's phase planes (`Im H'`: idle until pass 2 writes the
+    /// pattern there); returns whether it ran. Pass 1 of the encoding then turns them into the filtered field
+    /// on the optics pool (timed as encoding: without a pre-filter, pass 1 runs in [`Task::Midpoint`]).
     ///
     /// Errors: the engine's run errors ([`HoloError::ModelRun`]); call after
     /// [`HologramSession::propagate_to_slm`].
@@ -353,13 +341,13 @@ impl HologramSession {
         };
         let [r, g, b] = colour_states(&mut self.states)?;
         // The input: each colour's (Re H, Im H) where Task::Midpoint left them, read in place (no [6, H, W]
-        // copy, 50 MB at 1080p). The output: each colour's field memory, idle until pass 1 turns it into the
-        // filtered field (no output arrays, 50 MB).
-        let [(ri, ro), (gi, go), (bi, bo)] =
-            [r.prefilter_io()?, g.prefilter_io()?, b.prefilter_io()?];
+        // copy, 50 MB at 1080p). The output: Re H' in each colour's field memory, Im H' in the frame's phase
+        // planes (no output arrays, 50 MB).
+        let [(ri, ro), (gi, go), (bi, bo)] = [r.prefilter_io(), g.prefilter_io(), b.prefilter_io()];
+        let [rp, gp, bp] = phase_planes(&mut self.output)?;
         plan.run_planes_into(
             &contract::prefilter_planes([ri, gi, bi]),
-            [ro.0, go.0, bo.0, ro.1, go.1, bo.1],
+            [ro, go, bo, rp, gp, bp],
         )?;
         Ok(true)
     }
@@ -367,12 +355,13 @@ impl HologramSession {
     /// Stage 4 on its own (no heap allocation after the first frame): the global normaliser, pass 2 of the
     /// double phase encoding (Eq. 7) and the LUT, each colour's rows over the optics pool's threads
     /// ([`crate::encoding::ChannelEncoder::encode_on`], bit-identical to one thread per colour), writing
-    /// the codes straight into [`HologramSession::output`], and the phase too with full outputs (each row
-    /// copied from pass 1's plane as it is encoded, instead of a pass over the planes afterwards; timings are
-    /// not updated).
+    /// the codes straight into [`HologramSession::output`], and the phase too: in place where pass 1 left
+    /// `arg H'` in the frame's planes (`filtered`: after the pre-filter, [`HologramSession::filtered`]), else
+    /// with full outputs (each row copied from pass 1's plane as it is encoded, instead of a pass over the
+    /// planes afterwards). Timings are not updated.
     ///
     /// Errors: [`HoloError::InvalidData`] if the hologram is zero everywhere.
-    pub(crate) fn encode(&mut self) -> Result<&SlmFrame> {
+    pub(crate) fn encode(&mut self, filtered: bool) -> Result<&SlmFrame> {
         let mut stats = [ChannelStats::default(); 3];
         for (s, slot) in stats.iter_mut().zip(&self.states) {
             *s = slot.as_ref().ok_or_else(lost_state)?.stats;
@@ -396,10 +385,16 @@ impl HologramSession {
         optics.run(|| {
             colours.try_for_each(|(c, ((st, phase_out), codes_out))| -> Result<()> {
                 let (field, layout, params) = (&st.field, st.layout, (mean[c], a));
-                // The pattern straight into the frame's phase plane with full outputs (each row copied
-                // there from pass 1's plane just before it is encoded), else in place; the codes straight
-                // into the frame.
-                let phase: &[f32] = if full {
+                // The pattern straight into the frame's phase plane: in place where pass 1 left `arg H'`
+                // there (after the pre-filter), else with full outputs each row copied there from pass 1's
+                // plane just before it is encoded, or in place in that plane; the codes straight into the
+                // frame.
+                let phase: &[f32] = if filtered {
+                    let io = (None, &mut *phase_out);
+                    st.encoder
+                        .encode_on(field, layout, io, codes_out, params, true)?;
+                    phase_out
+                } else if full {
                     let io = (Some(&st.phase[..]), &mut *phase_out);
                     st.encoder
                         .encode_on(field, layout, io, codes_out, params, true)?;
@@ -424,19 +419,21 @@ impl HologramSession {
 
 impl HologramSession {
     /// Pass 1 of the encoding on the pre-filter's output (the colours' planes: `Re H'` in the field's memory,
-    /// `Im H'` in `phase`), each colour's rows over the optics pool's threads
-    /// ([`crate::encoding::ChannelEncoder::analyse_planes`] on the pool), the colours side by side.
+    /// `Im H'` in the frame's phase plane, which receives `arg H'`), each colour's rows over the optics pool's
+    /// threads ([`crate::encoding::ChannelEncoder::analyse_planes`] on the pool), the colours side by side.
     ///
     /// Errors: [`HoloError::Internal`] if a colour's state is lost or a thread panicked.
     fn filtered(&mut self) -> Result<()> {
         let states = colour_states(&mut self.states)?;
+        let planes = phase_planes(&mut self.output)?;
         self.optics.run(|| {
-            states.into_par_iter().try_for_each(|st| {
-                (st.stats, st.layout) =
-                    st.encoder
-                        .analyse_planes(&mut st.field, &mut st.phase, true)?;
-                Ok(())
-            })
+            states
+                .into_par_iter()
+                .zip(planes)
+                .try_for_each(|(st, arg)| {
+                    (st.stats, st.layout) = st.encoder.analyse_planes(&mut st.field, arg, true)?;
+                    Ok(())
+                })
         })
     }
 }
@@ -460,6 +457,18 @@ pub(super) fn apply_calibrated_luts(
         }
     }
     Ok(())
+}
+
+/// The frame's three phase planes (`[H, W]` each), each borrowed on its own.
+///
+/// Errors: [`HoloError::Internal`] if the frame's phase is not contiguous (the session makes it so).
+fn phase_planes(output: &mut SlmFrame) -> Result<[&mut [f32]; 3]> {
+    let (_, h, w) = output.phase.dim();
+    let not_contiguous = || HoloError::Internal("SLM frame not contiguous".into());
+    let all = output.phase.as_slice_mut().ok_or_else(not_contiguous)?;
+    let (r, gb) = all.split_at_mut(h * w);
+    let (g, b) = gb.split_at_mut(h * w);
+    Ok([r, g, b])
 }
 
 /// The three colour states, each borrowed on its own. Errors: as [`lost_state`] if a worker kept one.
@@ -597,13 +606,19 @@ mod tests {
         in_planes.set_full_outputs(false);
         load_planes(&mut in_planes, &varied);
         assert_eq!(in_planes.encode_loaded(0.0).unwrap().codes, shared_codes);
+        // The pre-filter's input `Re H` stays in each colour's `phase` (its `Im H` is overwritten by pass 1),
+        // and the pattern fills the frame's phase in both sessions.
         for (a, b) in shared.states.iter().zip(&in_planes.states) {
             let bits = |s: &Option<Box<super::ColourState>>| {
-                let input = &s.as_ref().unwrap().prefilter_input;
-                assert_eq!(input.len(), 2 * h * w);
-                input.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+                let re = &s.as_ref().unwrap().phase;
+                assert_eq!(re.len(), h * w);
+                assert!(re.iter().any(|&v| v != 0.0));
+                re.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
             };
             assert_eq!(bits(a), bits(b));
         }
+        let bits = |a: &Array3<f32>| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&shared.output.phase), bits(&in_planes.output.phase));
+        assert!(shared.output.phase.iter().any(|&v| v != 0.0));
     }
 }

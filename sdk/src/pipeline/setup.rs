@@ -115,11 +115,6 @@ impl HologramSession {
                 transfer,
                 correction: None,
                 scratch: prop.plan().scratch(),
-                prefilter_input: if pipeline.prefilter_model().is_some() {
-                    vec![0.0; 2 * n]
-                } else {
-                    Vec::new()
-                },
                 encoder: ChannelEncoder::new(height, width, encoding)?,
                 phase: vec![0.0; n],
                 stats: ChannelStats::default(),
@@ -248,7 +243,7 @@ impl HologramSession {
             &report.coefficients,
             scale,
             reuse,
-        )?);
+        ));
         for state in self.states.iter_mut().flatten() {
             state.correction = Some(correction.clone());
         }

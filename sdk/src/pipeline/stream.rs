@@ -61,7 +61,11 @@ impl HologramSession {
         }
         let mut cnn = self.cnn.spawn();
         std::thread::scope(|scope| {
-            let (tx, rx) = sync_channel::<(T, Result<(Heads, f64)>)>(1);
+            // A rendezvous: the CNN thread hands frame n + 1's heads over when the optics of frame n are
+            // done, and only then starts frame n + 2, so two frames' heads are alive at most (a queue of
+            // one would hold a third: 50 MB at 1080p, for no faster a stream while the CNN is the slower
+            // stage).
+            let (tx, rx) = sync_channel::<(T, Result<(Heads, f64)>)>(0);
             scope.spawn(move || {
                 for (tag, frame) in frames {
                     let out = frame.and_then(|f| cnn.run_frame(&f));
