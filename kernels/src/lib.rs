@@ -38,7 +38,9 @@
 //!
 //! `unsafe` appears only in the ISA files (`conv3x3/*_{avx2,avx512,neon,…}.rs`, the generic SIMD loops, the
 //! `#[target_feature]` copies in `depthwise/body.rs`, `heads/body.rs`, `phasor/body.rs` and `buffer/rows.rs`,
-//! the intrinsics of `double_phase/avx2.rs` and `avx512.rs`) and where a family calls the path that
+//! the register traits of `simd/` (`SimdF32`, shared by the conv3x3 f32 rows and the double phase rows,
+//! which write their bodies once and keep thin `#[target_feature]` entry points per ISA) and the double
+//! phase rows' `double_phase/{simd,x86}.rs`) and where a family calls the path that
 //! `dispatch.rs` picked from its table (each family lists its paths per ISA level next to its safe API, the
 //! conv3x3 rows in `conv3x3/table.rs`; [`registry`] shows them); every public function is safe and checks
 //! shapes and lengths. The crate's `README.md` maps the files.
@@ -56,6 +58,7 @@ pub mod peak;
 pub mod phasor;
 mod quant;
 pub mod registry;
+mod simd;
 pub mod spectral;
 #[cfg(test)]
 mod test_rng;

@@ -180,54 +180,47 @@ pub(crate) fn requantize_body(
 pub(crate) mod x86 {
     use super::{dequantize_body, quantize_body, requantize_body};
 
-    /// # Safety
-    /// The CPU has AVX2.
-    #[target_feature(enable = "avx2")]
-    pub(crate) unsafe fn quantize_avx2(d: &mut [u8], r: [&[f32]; 4], zp: u8, o: f32, s: f32) {
-        quantize_body(d, r, zp, o, s)
+    /// The three bodies' `#[target_feature]` copies for one level: `copies!("features", "the level";
+    /// quantize, dequantize, requantize)` (their names).
+    macro_rules! copies {
+        ($features:literal, $level:literal; $quantize:ident, $dequantize:ident, $requantize:ident) => {
+            #[doc = concat!("[`quantize_body`] compiled for ", $level, ".")]
+            #[doc = ""]
+            #[doc = "# Safety"]
+            #[doc = concat!("The CPU has ", $level, ".")]
+            #[target_feature(enable = $features)]
+            pub(crate) unsafe fn $quantize(d: &mut [u8], r: [&[f32]; 4], zp: u8, o: f32, s: f32) {
+                quantize_body(d, r, zp, o, s)
+            }
+            #[doc = concat!("[`dequantize_body`] compiled for ", $level, ".")]
+            #[doc = ""]
+            #[doc = "# Safety"]
+            #[doc = concat!("The CPU has ", $level, ".")]
+            #[target_feature(enable = $features)]
+            pub(crate) unsafe fn $dequantize(src: &[u8], r: [&mut [f32]; 4], zp: f32, s: f32) {
+                dequantize_body(src, r, zp, s)
+            }
+            #[doc = concat!("[`requantize_body`] compiled for ", $level, ".")]
+            #[doc = ""]
+            #[doc = "# Safety"]
+            #[doc = concat!("The CPU has ", $level, ".")]
+            #[target_feature(enable = $features)]
+            pub(crate) unsafe fn $requantize(
+                d: &mut [u8],
+                src: &[u8],
+                zo: f32,
+                so: f32,
+                zp: u8,
+                s: f32,
+            ) {
+                requantize_body(d, src, zo, so, zp, s)
+            }
+        };
     }
-    /// # Safety
-    /// The CPU has AVX-512F and AVX-512BW.
-    #[target_feature(enable = "avx512f,avx512bw")]
-    pub(crate) unsafe fn quantize_avx512(d: &mut [u8], r: [&[f32]; 4], zp: u8, o: f32, s: f32) {
-        quantize_body(d, r, zp, o, s)
-    }
-    /// # Safety
-    /// The CPU has AVX2.
-    #[target_feature(enable = "avx2")]
-    pub(crate) unsafe fn dequantize_avx2(src: &[u8], r: [&mut [f32]; 4], zp: f32, s: f32) {
-        dequantize_body(src, r, zp, s)
-    }
-    /// # Safety
-    /// The CPU has AVX-512F and AVX-512BW.
-    #[target_feature(enable = "avx512f,avx512bw")]
-    pub(crate) unsafe fn dequantize_avx512(src: &[u8], r: [&mut [f32]; 4], zp: f32, s: f32) {
-        dequantize_body(src, r, zp, s)
-    }
-    /// # Safety
-    /// The CPU has AVX2.
-    #[target_feature(enable = "avx2")]
-    pub(crate) unsafe fn requantize_avx2(
-        d: &mut [u8],
-        src: &[u8],
-        zo: f32,
-        so: f32,
-        zp: u8,
-        s: f32,
-    ) {
-        requantize_body(d, src, zo, so, zp, s)
-    }
-    /// # Safety
-    /// The CPU has AVX-512F and AVX-512BW.
-    #[target_feature(enable = "avx512f,avx512bw")]
-    pub(crate) unsafe fn requantize_avx512(
-        d: &mut [u8],
-        src: &[u8],
-        zo: f32,
-        so: f32,
-        zp: u8,
-        s: f32,
-    ) {
-        requantize_body(d, src, zo, so, zp, s)
-    }
+
+    copies!("avx2", "AVX2"; quantize_avx2, dequantize_avx2, requantize_avx2);
+    copies!(
+        "avx512f,avx512bw", "AVX-512F and AVX-512BW";
+        quantize_avx512, dequantize_avx512, requantize_avx512
+    );
 }

@@ -6,8 +6,9 @@
 //! index code is the generic [`simd_f32::conv`](super::simd_f32::conv) shared with the tested AVX2 and NEON
 //! rows; only the register operations below are specific (the test machine has no AVX-512).
 
-use super::job::{F32Job, F32Out};
-use super::simd_f32::{conv as generic_conv, SimdF32};
+use super::f32_avx2::x86_shared;
+use super::job::{entry_points, F32Job, F32Out};
+use super::simd_f32::{conv as generic_conv, peak_chains, ConvF32};
 use super::{wino2x2, wino4x4};
 use std::arch::x86_64::*;
 
@@ -16,61 +17,11 @@ pub(crate) const G: usize = 8;
 /// zmm vectors of pixels per tile.
 pub(crate) const NV: usize = 3;
 
-impl SimdF32 for __m512 {
-    const LANES: usize = 16;
-    #[inline(always)]
-    unsafe fn zero() -> Self {
-        // SAFETY: the caller guarantees AVX-512F.
-        unsafe { _mm512_setzero_ps() }
-    }
-    #[inline(always)]
-    unsafe fn splat(p: *const f32) -> Self {
-        // SAFETY: the caller guarantees AVX-512F and a valid `p`.
-        unsafe { _mm512_set1_ps(*p) }
-    }
-    #[inline(always)]
-    unsafe fn load(p: *const f32) -> Self {
-        // SAFETY: the caller guarantees AVX-512F and 16 readable values at `p`.
-        unsafe { _mm512_loadu_ps(p) }
-    }
-    #[inline(always)]
-    unsafe fn store(p: *mut f32, v: Self) {
-        // SAFETY: the caller guarantees AVX-512F and 16 writable values at `p`.
-        unsafe { _mm512_storeu_ps(p, v) }
-    }
+impl ConvF32 for __m512 {
     #[inline(always)]
     unsafe fn fma(acc: Self, a: Self, b: Self) -> Self {
         // SAFETY: the caller guarantees AVX-512F.
         unsafe { _mm512_fmadd_ps(a, b, acc) }
-    }
-    #[inline(always)]
-    unsafe fn add(a: Self, b: Self) -> Self {
-        // SAFETY: the caller guarantees AVX-512F.
-        unsafe { _mm512_add_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn relu(v: Self) -> Self {
-        // SAFETY: the caller guarantees AVX-512F. `vmaxps(v, 0)` returns the second operand for NaN and ±0.
-        unsafe { _mm512_max_ps(v, _mm512_setzero_ps()) }
-    }
-    #[inline(always)]
-    unsafe fn sub(a: Self, b: Self) -> Self {
-        // SAFETY: the caller guarantees AVX-512F.
-        unsafe { _mm512_sub_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn load_deinterleaved(p: *const f32) -> (Self, Self) {
-        // SAFETY: the caller guarantees AVX-512F and 32 readable values at `p`. Indices 0..16 pick from `a`,
-        // 16..32 from `b`.
-        unsafe {
-            let (a, b) = (_mm512_loadu_ps(p), _mm512_loadu_ps(p.add(16)));
-            let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
-            let odd = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
-            (
-                _mm512_permutex2var_ps(a, even, b),
-                _mm512_permutex2var_ps(a, odd, b),
-            )
-        }
     }
     #[inline(always)]
     unsafe fn interleave(e: Self, o: Self) -> (Self, Self) {
@@ -85,20 +36,13 @@ impl SimdF32 for __m512 {
             )
         }
     }
-    #[inline(always)]
-    unsafe fn load_stride4(p: *const f32) -> [Self; 4] {
-        // SAFETY: the caller guarantees AVX-512F and 64 readable values at `p`. A 4×4 transpose inside each
-        // 128-bit lane: lane `4q + k` holds quadruple `q + 4k`, the same for every `p`; the transpose is its
-        // own inverse (`interleave4`).
-        unsafe {
-            transpose4_in_lanes([
-                _mm512_loadu_ps(p),
-                _mm512_loadu_ps(p.add(16)),
-                _mm512_loadu_ps(p.add(32)),
-                _mm512_loadu_ps(p.add(48)),
-            ])
-        }
-    }
+    // `load_stride4`: lane `4q + k` holds quadruple `q + 4k`, the same for every `p`; `interleave4` undoes it.
+    x86_shared!(
+        _mm512_loadu_ps,
+        _mm512_unpacklo_ps,
+        _mm512_unpackhi_ps,
+        _mm512_shuffle_ps
+    );
     #[inline(always)]
     unsafe fn next_columns(p: *const f32, c0: Self, c1: Self) -> [Self; 2] {
         // SAFETY: the caller guarantees AVX-512F and `66` readable values at `p`. `load_stride4` puts
@@ -114,53 +58,12 @@ impl SimdF32 for __m512 {
         }
     }
     #[inline(always)]
-    unsafe fn interleave4(c: [Self; 4]) -> [Self; 4] {
-        // SAFETY: the caller guarantees AVX-512F.
-        unsafe { transpose4_in_lanes(c) }
-    }
-    #[inline(always)]
-    unsafe fn prefetch(p: *const f32) {
-        // SAFETY: `prefetcht0` never faults.
-        unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) }
-    }
-    #[inline(always)]
     unsafe fn keep_first(v: Self, n: usize) -> Self {
         debug_assert!(n < 16);
         let m: __mmask16 = ((1u32 << n) - 1) as u16;
         // SAFETY: the caller guarantees AVX-512F.
         unsafe { _mm512_maskz_mov_ps(m, v) }
     }
-}
-
-/// The 4×4 transpose inside every 128-bit lane of four registers (as the AVX2 row's).
-///
-/// # Safety
-/// The CPU has AVX-512F.
-#[inline(always)]
-unsafe fn transpose4_in_lanes(r: [__m512; 4]) -> [__m512; 4] {
-    // SAFETY: the caller guarantees AVX-512F.
-    unsafe {
-        let t0 = _mm512_unpacklo_ps(r[0], r[1]);
-        let t1 = _mm512_unpackhi_ps(r[0], r[1]);
-        let t2 = _mm512_unpacklo_ps(r[2], r[3]);
-        let t3 = _mm512_unpackhi_ps(r[2], r[3]);
-        [
-            _mm512_shuffle_ps::<0b01_00_01_00>(t0, t2),
-            _mm512_shuffle_ps::<0b11_10_11_10>(t0, t2),
-            _mm512_shuffle_ps::<0b01_00_01_00>(t1, t3),
-            _mm512_shuffle_ps::<0b11_10_11_10>(t1, t3),
-        ]
-    }
-}
-
-/// The registry entry.
-///
-/// # Safety
-/// The CPU has AVX-512F (and AVX2, FMA); `job` was checked by the safe API.
-#[target_feature(enable = "avx512f,avx2,fma")]
-pub(crate) unsafe fn conv(job: &F32Job<'_>, out: &mut F32Out<'_>) {
-    // SAFETY: AVX-512F enabled here; 48-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { generic_conv::<__m512, G, NV>(job, out) }
 }
 
 /// Output-channel tile of `conv3x3.f32.6x4.avx512`: the 6-channel last layers (the hologram CNN's 24 + 4 → 6,
@@ -172,64 +75,55 @@ pub(crate) const G6: usize = 6;
 /// loads + 6 broadcasts for 24 multiply-adds, every one of them useful at 6 channels.
 pub(crate) const NV6: usize = 4;
 
-/// The registry entry of `conv3x3.f32.6x4.avx512` (the generic direct loop at [`G6`] × [`NV6`]).
-///
-/// # Safety
-/// The CPU has AVX-512F (and AVX2, FMA); `job` was checked by the safe API.
-#[target_feature(enable = "avx512f,avx2,fma")]
-pub(crate) unsafe fn conv6(job: &F32Job<'_>, out: &mut F32Out<'_>) {
-    // SAFETY: AVX-512F enabled here; 64-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { generic_conv::<__m512, G6, NV6>(job, out) }
-}
-
 /// Vectors of tiles per Winograd register tile (8 channels × 2 × 16 = 32 tiles, 64 output pixels: the
 /// most `MAX_TILE` allows).
 pub(crate) const WINO_NV: usize = 2;
 
-/// `conv3x3.f32.wino2x2.8x2.avx512`: Winograd F(2×2, 3×3), 8 output channels × 2 zmm of tiles.
-///
-/// # Safety
-/// The CPU has AVX-512F; `job` was checked by the safe API and its weights packed for Winograd.
-#[target_feature(enable = "avx512f,avx2,fma")]
-pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
-    // SAFETY: AVX-512F enabled here; 64-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { wino2x2::conv::<__m512, G, WINO_NV>(job, out) }
-}
-
-/// `conv3x3.f32.wino4x4.8x1.avx512`: Winograd F(4×4, 3×3), 8 output channels × 1 zmm of tiles (16 tiles, 64
-/// output pixels: the most `MAX_TILE` allows; 8 accumulators, one load and 8 broadcasts per step).
-///
-/// # Safety
-/// The CPU has AVX-512F; `job` was checked by the safe API and its weights packed for F(4×4, 3×3).
-#[target_feature(enable = "avx512f,avx2,fma")]
-pub(crate) unsafe fn winograd4(job: &F32Job<'_>, out: &mut F32Out<'_>) {
-    // SAFETY: AVX-512F enabled here; 64-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { wino4x4::conv::<__m512, G, 1>(job, out) }
-}
-
 /// Output channels of the wide F(4×4, 3×3) register tile: a whole 24-channel layer in one group.
 pub(crate) const WINO4_G: usize = 24;
 
-/// `conv3x3.f32.wino4x4.24x1.avx512`: Winograd F(4×4, 3×3), 24 output channels × 1 zmm of tiles (16 tiles,
-/// 64 output pixels).
-///
-/// Register tile: 24 accumulators + 1 vector of transformed inputs, the 24 weights broadcast from memory by
-/// the multiply-adds themselves (`vfmadd231ps m32{1to16}`): 25 of the 32 zmm registers, 24 independent FMA
-/// chains per reduction step (the 8-channel tile's 8 chains are just the latency × throughput of two FMA
-/// pipes: any stall shows) and one load of `V` per 24 multiply-adds instead of per 8. A 24-channel layer is
-/// one group, so each chunk's `V` (54 KiB, more than L1) is read once instead of three times. Measured on
-/// Zen 5 (benchmarks/history/BENCHMARKS-2026.md): the f32 8-layer CNN at 1080p on 2 threads about 9 % faster (medians of six rounds) than with the 8 × 1
-/// tile; layers of fewer channels keep the 8 × 1 row (the least padding, [`selected_f32_for`]).
-///
-/// [`selected_f32_for`]: crate::registry::selected_f32_for
-///
-/// # Safety
-/// The CPU has AVX-512F; `job` was checked by the safe API and its weights packed for F(4×4, 3×3) with
-/// [`WINO4_G`] channels per group.
-#[target_feature(enable = "avx512f,avx2,fma")]
-pub(crate) unsafe fn winograd4_wide(job: &F32Job<'_>, out: &mut F32Out<'_>) {
-    // SAFETY: AVX-512F enabled here; 64-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { wino4x4::conv::<__m512, WINO4_G, 1>(job, out) }
+entry_points! {
+    "avx512f,avx2,fma", F32Job, F32Out;
+    /// The registry entry (48-pixel tile).
+    ///
+    /// # Safety
+    /// The CPU has AVX-512F (and AVX2, FMA); `job` was checked by the safe API.
+    fn conv = generic_conv::<__m512, G, NV>;
+    /// The registry entry of `conv3x3.f32.6x4.avx512` (the generic direct loop at [`G6`] × [`NV6`], 64
+    /// pixels).
+    ///
+    /// # Safety
+    /// The CPU has AVX-512F (and AVX2, FMA); `job` was checked by the safe API.
+    fn conv6 = generic_conv::<__m512, G6, NV6>;
+    /// `conv3x3.f32.wino2x2.8x2.avx512`: Winograd F(2×2, 3×3), 8 output channels × 2 zmm of tiles.
+    ///
+    /// # Safety
+    /// The CPU has AVX-512F; `job` was checked by the safe API and its weights packed for Winograd.
+    fn winograd = wino2x2::conv::<__m512, G, WINO_NV>;
+    /// `conv3x3.f32.wino4x4.8x1.avx512`: Winograd F(4×4, 3×3), 8 output channels × 1 zmm of tiles (16 tiles,
+    /// 64 output pixels: the most `MAX_TILE` allows; 8 accumulators, one load and 8 broadcasts per step).
+    ///
+    /// # Safety
+    /// The CPU has AVX-512F; `job` was checked by the safe API and its weights packed for F(4×4, 3×3).
+    fn winograd4 = wino4x4::conv::<__m512, G, 1>;
+    /// `conv3x3.f32.wino4x4.24x1.avx512`: Winograd F(4×4, 3×3), 24 output channels × 1 zmm of tiles (16
+    /// tiles, 64 output pixels).
+    ///
+    /// Register tile: 24 accumulators + 1 vector of transformed inputs, the 24 weights broadcast from memory
+    /// by the multiply-adds themselves (`vfmadd231ps m32{1to16}`): 25 of the 32 zmm registers, 24 independent
+    /// FMA chains per reduction step (the 8-channel tile's 8 chains are just the latency × throughput of two
+    /// FMA pipes: any stall shows) and one load of `V` per 24 multiply-adds instead of per 8. A 24-channel
+    /// layer is one group, so each chunk's `V` (54 KiB, more than L1) is read once instead of three times.
+    /// Measured on Zen 5 (benchmarks/history/BENCHMARKS-2026.md): the f32 8-layer CNN at 1080p on 2 threads
+    /// about 9 % faster (medians of six rounds) than with the 8 × 1 tile; layers of fewer channels keep the
+    /// 8 × 1 row (the least padding, [`selected_f32_for`]).
+    ///
+    /// [`selected_f32_for`]: crate::registry::selected_f32_for
+    ///
+    /// # Safety
+    /// The CPU has AVX-512F; `job` was checked by the safe API and its weights packed for F(4×4, 3×3) with
+    /// [`WINO4_G`] channels per group.
+    fn winograd4_wide = wino4x4::conv::<__m512, WINO4_G, 1>;
 }
 
 /// FMA peak loop: `iters` × 24 independent 16-lane FMAs. FLOPs = `iters · 24 · 16 · 2`.
@@ -238,17 +132,6 @@ pub(crate) unsafe fn winograd4_wide(job: &F32Job<'_>, out: &mut F32Out<'_>) {
 /// The CPU has AVX-512F.
 #[target_feature(enable = "avx512f")]
 pub(crate) unsafe fn peak(iters: u64) -> f32 {
-    let mut acc = [_mm512_set1_ps(1.0); 24];
-    let a = _mm512_set1_ps(0.999_999);
-    let b = _mm512_set1_ps(1e-7);
-    for _ in 0..iters {
-        for x in acc.iter_mut() {
-            *x = _mm512_fmadd_ps(*x, a, b);
-        }
-    }
-    let mut s = _mm512_setzero_ps();
-    for x in acc {
-        s = _mm512_add_ps(s, x);
-    }
-    _mm512_reduce_add_ps(s)
+    // SAFETY: AVX-512F enabled here and present on the CPU (the caller's guarantee).
+    unsafe { _mm512_reduce_add_ps(peak_chains::<__m512, 24>(iters)) }
 }

@@ -4,8 +4,8 @@
 //! broadcast weight (`ld1r`) = 28 of the 32 q registers. Per reduction step: 3 loads + 8 broadcast loads for
 //! 24 FMAs. Shares the generic loop [`simd_f32::conv`](super::simd_f32::conv) with the x86 rows.
 
-use super::job::{F32Job, F32Out};
-use super::simd_f32::{conv as generic_conv, SimdF32};
+use super::job::{entry_points, F32Job, F32Out};
+use super::simd_f32::{conv as generic_conv, peak_chains, ConvF32};
 use super::{wino2x2, wino4x4};
 use std::arch::aarch64::*;
 
@@ -16,37 +16,11 @@ pub(crate) const NV: usize = 3;
 
 static MASK: [u32; 8] = [u32::MAX, u32::MAX, u32::MAX, u32::MAX, 0, 0, 0, 0];
 
-impl SimdF32 for float32x4_t {
-    const LANES: usize = 4;
-    #[inline(always)]
-    unsafe fn zero() -> Self {
-        // SAFETY: NEON is part of every aarch64 target.
-        unsafe { vdupq_n_f32(0.0) }
-    }
-    #[inline(always)]
-    unsafe fn splat(p: *const f32) -> Self {
-        // SAFETY: NEON; the caller guarantees a valid `p`.
-        unsafe { vld1q_dup_f32(p) }
-    }
-    #[inline(always)]
-    unsafe fn load(p: *const f32) -> Self {
-        // SAFETY: NEON; the caller guarantees 4 readable values at `p`.
-        unsafe { vld1q_f32(p) }
-    }
-    #[inline(always)]
-    unsafe fn store(p: *mut f32, v: Self) {
-        // SAFETY: NEON; the caller guarantees 4 writable values at `p`.
-        unsafe { vst1q_f32(p, v) }
-    }
+impl ConvF32 for float32x4_t {
     #[inline(always)]
     unsafe fn fma(acc: Self, a: Self, b: Self) -> Self {
         // SAFETY: NEON.
         unsafe { vfmaq_f32(acc, a, b) }
-    }
-    #[inline(always)]
-    unsafe fn add(a: Self, b: Self) -> Self {
-        // SAFETY: NEON.
-        unsafe { vaddq_f32(a, b) }
     }
     #[inline(always)]
     unsafe fn fma_step<const G: usize, const NV: usize>(
@@ -73,19 +47,6 @@ impl SimdF32 for float32x4_t {
                     acc[4 * q + 3][v] = vfmaq_laneq_f32::<3>(acc[4 * q + 3][v], x[v], wq);
                 }
             }
-        }
-    }
-    #[inline(always)]
-    unsafe fn sub(a: Self, b: Self) -> Self {
-        // SAFETY: NEON is baseline on aarch64.
-        unsafe { vsubq_f32(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn load_deinterleaved(p: *const f32) -> (Self, Self) {
-        // SAFETY: the caller guarantees 8 readable values at `p`; `ld2` deinterleaves pairs.
-        unsafe {
-            let v = vld2q_f32(p);
-            (v.0, v.1)
         }
     }
     #[inline(always)]
@@ -143,25 +104,25 @@ impl SimdF32 for float32x4_t {
     }
 }
 
-/// The registry entry.
-///
-/// # Safety
-/// `job` was checked by the safe API (NEON is always present on aarch64).
-#[target_feature(enable = "neon")]
-pub(crate) unsafe fn conv(job: &F32Job<'_>, out: &mut F32Out<'_>) {
-    // SAFETY: NEON enabled; 12-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { generic_conv::<float32x4_t, G, NV>(job, out) }
-}
-
-/// `conv3x3.f32.wino2x2.8x3.neon`: Winograd F(2×2, 3×3) with the direct row's 8 × 3 register tile (8
-/// output channels × 12 tiles = 24 output pixels of two rows).
-///
-/// # Safety
-/// `job` was checked by the safe API and its weights packed for Winograd.
-#[target_feature(enable = "neon")]
-pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
-    // SAFETY: NEON is baseline on aarch64; 24-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { wino2x2::conv::<float32x4_t, G, NV>(job, out) }
+entry_points! {
+    "neon", F32Job, F32Out;
+    /// The registry entry (12-pixel tile).
+    ///
+    /// # Safety
+    /// `job` was checked by the safe API (NEON is always present on aarch64).
+    fn conv = generic_conv::<float32x4_t, G, NV>;
+    /// `conv3x3.f32.wino2x2.8x3.neon`: Winograd F(2×2, 3×3) with the direct row's 8 × 3 register tile (8
+    /// output channels × 12 tiles = 24 output pixels of two rows).
+    ///
+    /// # Safety
+    /// `job` was checked by the safe API and its weights packed for Winograd.
+    fn winograd = wino2x2::conv::<float32x4_t, G, NV>;
+    /// `conv3x3.f32.wino4x4.8x3.neon`: Winograd F(4×4, 3×3) with the direct row's 8 × 3 register tile (8
+    /// output channels × 3 q registers of tiles: 12 tiles, 48 output pixels).
+    ///
+    /// # Safety
+    /// `job` was checked by the safe API and its weights packed for F(4×4, 3×3).
+    fn winograd4 = wino4x4::conv::<float32x4_t, G, NV>;
 }
 
 /// FMA peak loop: `iters` × 24 independent 4-lane FMAs. FLOPs = `iters · 24 · 4 · 2`.
@@ -170,27 +131,6 @@ pub(crate) unsafe fn winograd(job: &F32Job<'_>, out: &mut F32Out<'_>) {
 /// None beyond NEON, which every aarch64 CPU has.
 #[target_feature(enable = "neon")]
 pub(crate) unsafe fn peak(iters: u64) -> f32 {
-    let mut acc = [vdupq_n_f32(1.0); 24];
-    let a = vdupq_n_f32(0.999_999);
-    let b = vdupq_n_f32(1e-7);
-    for _ in 0..iters {
-        for x in acc.iter_mut() {
-            *x = vfmaq_f32(b, *x, a);
-        }
-    }
-    let mut s = vdupq_n_f32(0.0);
-    for x in acc {
-        s = vaddq_f32(s, x);
-    }
-    vaddvq_f32(s)
-}
-
-/// `conv3x3.f32.wino4x4.8x3.neon`: Winograd F(4×4, 3×3) with the direct row's 8 × 3 register tile (8 output
-/// channels × 3 q registers of tiles: 12 tiles, 48 output pixels).
-///
-/// # Safety
-/// `job` was checked by the safe API and its weights packed for F(4×4, 3×3).
-pub(crate) unsafe fn winograd4(job: &F32Job<'_>, out: &mut F32Out<'_>) {
-    // SAFETY: NEON is baseline on aarch64; 48-pixel tile ≤ MAX_TILE; the job was checked by the caller.
-    unsafe { wino4x4::conv::<float32x4_t, G, NV>(job, out) }
+    // SAFETY: NEON enabled here and present on every aarch64 CPU.
+    vaddvq_f32(unsafe { peak_chains::<float32x4_t, 24>(iters) })
 }

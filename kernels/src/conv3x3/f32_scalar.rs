@@ -7,7 +7,7 @@
 //! tile measured the same as 8 × 8 on x86-64 SSE2).
 
 use super::job::{F32Job, F32Out};
-use super::simd_f32::SimdF32;
+use super::simd_f32::ConvF32;
 use super::{wino2x2, wino4x4};
 
 /// Output-channel tile of the portable Winograd row.
@@ -103,56 +103,15 @@ pub(crate) fn peak(iters: u64) -> f32 {
 
 /// One f32 as a one-lane register: the portable Winograd row is the generic body on it (multiply and add
 /// unfused, as the direct scalar row computes them: no libm `fmaf` on targets without FMA).
-impl SimdF32 for f32 {
-    const LANES: usize = 1;
-    #[inline(always)]
-    unsafe fn zero() -> Self {
-        0.0
-    }
-    #[inline(always)]
-    unsafe fn splat(p: *const f32) -> Self {
-        // SAFETY: the caller guarantees a valid `p`.
-        unsafe { *p }
-    }
-    #[inline(always)]
-    unsafe fn load(p: *const f32) -> Self {
-        // SAFETY: as above.
-        unsafe { *p }
-    }
-    #[inline(always)]
-    unsafe fn store(p: *mut f32, v: Self) {
-        // SAFETY: the caller guarantees a valid `p`.
-        unsafe { *p = v }
-    }
+impl ConvF32 for f32 {
     #[inline(always)]
     unsafe fn fma(acc: Self, a: Self, b: Self) -> Self {
         acc + a * b
     }
     #[inline(always)]
-    unsafe fn add(a: Self, b: Self) -> Self {
-        a + b
-    }
-    #[inline(always)]
-    unsafe fn sub(a: Self, b: Self) -> Self {
-        a - b
-    }
-    #[inline(always)]
-    unsafe fn relu(v: Self) -> Self {
-        if v > 0.0 {
-            v
-        } else {
-            0.0
-        }
-    }
-    #[inline(always)]
     unsafe fn keep_first(_v: Self, n: usize) -> Self {
         debug_assert!(n == 0);
         0.0
-    }
-    #[inline(always)]
-    unsafe fn load_deinterleaved(p: *const f32) -> (Self, Self) {
-        // SAFETY: the caller guarantees 2 readable values at `p`.
-        unsafe { (*p, *p.add(1)) }
     }
     #[inline(always)]
     unsafe fn interleave(e: Self, o: Self) -> (Self, Self) {

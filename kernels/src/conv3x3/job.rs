@@ -101,3 +101,21 @@ impl U8Out<'_> {
         o * c_stride + y * y_stride + x - base
     }
 }
+
+/// The `#[target_feature]` entry points of the kernel rows, each one call of a generic loop instantiated
+/// with the ISA's register type and tile: `entry_points!("features", Job, Out; $(#[attr])* fn name =
+/// loop::<V, G, NV>; …)` defines `pub(crate) unsafe fn name(job: &Job<'_>, out: &mut Out<'_>)` with the
+/// given attributes (the doc comment and its `# Safety` section, `#[cfg(test)]`) for each. Every tile it is
+/// given fits `MAX_TILE` (the table's tests run every row on every width).
+macro_rules! entry_points {
+    ($features:literal, $job:ident, $out:ident; $($(#[$attr:meta])* fn $name:ident = $body:expr;)+) => {$(
+        $(#[$attr])*
+        #[target_feature(enable = $features)]
+        pub(crate) unsafe fn $name(job: &$job<'_>, out: &mut $out<'_>) {
+            // SAFETY: the features are enabled here and present on the CPU, the job was checked by the safe
+            // API (the caller's guarantees), and the tile fits `MAX_TILE`.
+            unsafe { $body(job, out) }
+        }
+    )+};
+}
+pub(crate) use entry_points;

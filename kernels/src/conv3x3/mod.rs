@@ -18,7 +18,8 @@
 //!   rules that pick one (the one place a row is called through `unsafe`).
 //! * The kernels, one file per element type and ISA family, `<dtype>_<isa>.rs` (`f32_avx2.rs`,
 //!   `u8s8_avx512vnni.rs`, …; `*_scalar.rs` the portable rows), most of them instances of the generic loops
-//!   `simd_f32.rs` and `simd_u8.rs`. Test builds add `reference.rs`, the obviously-correct direct loop.
+//!   `simd_f32.rs` (over `ConvF32`, an extension of the crate's register trait `crate::simd::SimdF32`) and
+//!   `simd_u8.rs`. Test builds add `reference.rs`, the obviously-correct direct loop.
 
 pub mod registry;
 

@@ -1,32 +1,31 @@
 //! The f32 SIMD kernel, written once for every vector ISA.
 //!
-//! [`conv`] is generic over a register type ([`SimdF32`]: load, broadcast, FMA, store…) and over the register
-//! tile (`G` output channels × `NV` vectors of pixels). Each ISA file implements [`SimdF32`] for its register
-//! type and instantiates `conv` inside a `#[target_feature]` function; everything here is `#[inline(always)]`
+//! [`conv`] is generic over a register type (the crate's [`SimdF32`]: load, broadcast, add, store…, with this
+//! module's [`ConvF32`]: FMA, the Winograd transposes) and over the register tile (`G` output channels × `NV`
+//! vectors of pixels). Each ISA file implements [`ConvF32`] for its register type (`crate::simd` holds its
+//! [`SimdF32`] impl) and instantiates `conv` inside a `#[target_feature]` function; everything here is `#[inline(always)]`
 //! so it is compiled with that function's features. AVX-512 (not available on the machine the tests run on)
 //! thereby shares every line of loop and index logic with the tested AVX2 and NEON instances.
 
 use super::job::{F32Job, F32Out};
+#[cfg(test)]
+use crate::simd::Pair;
+use crate::simd::SimdF32;
 
-/// One SIMD register of `LANES` f32 values. All methods are `unsafe`: the caller guarantees the CPU has the
-/// ISA of the implementation and that pointers are valid for `LANES` values.
-pub(crate) trait SimdF32: Copy {
-    /// f32 lanes per register (at most 16).
-    const LANES: usize;
-    unsafe fn zero() -> Self;
-    /// Broadcast of the f32 at `p`.
-    unsafe fn splat(p: *const f32) -> Self;
-    /// Unaligned load of `LANES` values.
-    unsafe fn load(p: *const f32) -> Self;
-    /// Unaligned store of `LANES` values.
-    unsafe fn store(p: *mut f32, v: Self);
+/// The conv3x3 rows' operations on a [`SimdF32`] register: the fused multiply-add and its reduction step,
+/// the epilogue's ReLU and partial-register mask, and the Winograd transforms' deinterleaving loads and
+/// transposes. All methods are `unsafe`, as [`SimdF32`]'s.
+pub(crate) trait ConvF32: SimdF32 {
     /// `acc + a·b` (fused).
     unsafe fn fma(acc: Self, a: Self, b: Self) -> Self;
-    unsafe fn add(a: Self, b: Self) -> Self;
-    /// `a − b`.
-    unsafe fn sub(a: Self, b: Self) -> Self;
     /// `v > 0 ? v : 0` per lane.
-    unsafe fn relu(v: Self) -> Self;
+    ///
+    /// Default: [`SimdF32::max`]`(v, 0)` (`maxps` returns the second operand for NaN and ±0).
+    #[inline(always)]
+    unsafe fn relu(v: Self) -> Self {
+        // SAFETY: the caller guarantees the ISA.
+        unsafe { Self::max(v, Self::zero()) }
+    }
     /// Lanes `n..LANES` set to 0, lanes `0..n` kept (`n < LANES`).
     unsafe fn keep_first(v: Self, n: usize) -> Self;
     /// Loads the `LANES` pairs `(p[2i], p[2i + 1])` from `p` and returns them deinterleaved: the first
@@ -34,7 +33,13 @@ pub(crate) trait SimdF32: Copy {
     /// of the implementation's choosing (the identity, or what its shuffles give without crossing 128-bit
     /// lanes), the same for every `p` (the Winograd input transform's even and odd columns: lane `j` of the
     /// loads at `p` and at `p + 2` then belong to the same tile).
-    unsafe fn load_deinterleaved(p: *const f32) -> (Self, Self);
+    ///
+    /// Default: [`SimdF32::load_pairs`] (the identity).
+    #[inline(always)]
+    unsafe fn load_deinterleaved(p: *const f32) -> (Self, Self) {
+        // SAFETY: the caller guarantees `2·LANES` readable values at `p` and the ISA.
+        unsafe { Self::load_pairs(p) }
+    }
     /// The inverse of [`load_deinterleaved`](Self::load_deinterleaved) on registers: the `LANES` pairs
     /// `(e[j], o[j])` back in memory order, as two registers (the Winograd output transform's columns back
     /// to pixels).
@@ -75,7 +80,7 @@ pub(crate) trait SimdF32: Copy {
     ) {
         for (g, accg) in acc.iter_mut().enumerate() {
             // SAFETY: the caller guarantees `G` readable weights at `w` and the ISA.
-            let wv = unsafe { Self::splat(w.add(g)) };
+            let wv = unsafe { Self::load_splat(w.add(g)) };
             for (a, &xv) in accg.iter_mut().zip(x.iter()) {
                 // SAFETY: register arithmetic on the caller's ISA.
                 *a = unsafe { Self::fma(*a, xv, wv) };
@@ -99,7 +104,7 @@ pub(crate) trait SimdF32: Copy {
 /// pixels in the `RowPlanar` layout, weights packed for `G`, rows inside the frame, outputs of the right
 /// length), and `V::LANES · NV ≤ MAX_TILE`, so every load stays inside the padded rows.
 #[inline(always)]
-pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
+pub(crate) unsafe fn conv<V: ConvF32, const G: usize, const NV: usize>(
     job: &F32Job<'_>,
     out: &mut F32Out<'_>,
 ) {
@@ -128,7 +133,7 @@ pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
 /// # Safety
 /// As [`conv`]; `grp < groups`, `x0 < w`, `y0 ≤ y < y1`.
 #[inline(always)]
-unsafe fn tile_at<V: SimdF32, const G: usize, const NV: usize>(
+unsafe fn tile_at<V: ConvF32, const G: usize, const NV: usize>(
     job: &F32Job<'_>,
     out: &mut F32Out<'_>,
     srcs: &[(*const f32, usize); 2],
@@ -186,7 +191,7 @@ unsafe fn tile_at<V: SimdF32, const G: usize, const NV: usize>(
 /// # Safety
 /// As [`conv`].
 #[inline(always)]
-unsafe fn epilogue<V: SimdF32, const G: usize, const NV: usize>(
+unsafe fn epilogue<V: ConvF32, const G: usize, const NV: usize>(
     job: &F32Job<'_>,
     out: &mut F32Out<'_>,
     acc: &[[V; NV]; G],
@@ -201,7 +206,7 @@ unsafe fn epilogue<V: SimdF32, const G: usize, const NV: usize>(
             continue;
         }
         // SAFETY: `o < groups·G = bias.len()`.
-        let b = unsafe { V::splat(job.bias.as_ptr().add(o)) };
+        let b = unsafe { V::load_splat(job.bias.as_ptr().add(o)) };
         for (v, &a) in accg.iter().enumerate() {
             // SAFETY: register arithmetic, ISA guaranteed by the caller; pixels `x0 + v·l ..` of row `y`.
             unsafe { store_pixels(job, out, V::add(a, b), o, y, x0 + v * l) };
@@ -217,7 +222,7 @@ unsafe fn epilogue<V: SimdF32, const G: usize, const NV: usize>(
 /// # Safety
 /// As [`conv`]; `o < C_out`, row `y` inside the band, `px < w + MAX_TILE − LANES` (inside the padded row).
 #[inline(always)]
-pub(crate) unsafe fn store_pixels<V: SimdF32>(
+pub(crate) unsafe fn store_pixels<V: ConvF32>(
     job: &F32Job<'_>,
     out: &mut F32Out<'_>,
     mut r: V,
@@ -265,6 +270,97 @@ pub(crate) unsafe fn store_pixels<V: SimdF32>(
                 unsafe { V::store(tmp.as_mut_ptr(), r) };
                 d[i..i + valid].copy_from_slice(&tmp[..valid]);
             }
+        }
+    }
+}
+
+/// The FMA peak loop of the vector rows: `N` independent multiply-add chains `x ← x·0.999999 + 1e-7`, `iters`
+/// steps each, summed into one register (a value derived from every chain, to keep the loop alive). FLOPs =
+/// `iters · N · LANES · 2`.
+///
+/// # Safety
+/// The CPU has the ISA of `V`.
+#[inline(always)]
+pub(crate) unsafe fn peak_chains<V: ConvF32, const N: usize>(iters: u64) -> V {
+    // SAFETY: the caller guarantees the ISA of `V`; register-only operations.
+    unsafe {
+        let mut acc = [V::splat(1.0); N];
+        let a = V::splat(0.999_999);
+        let b = V::splat(1e-7);
+        for _ in 0..iters {
+            for x in acc.iter_mut() {
+                *x = V::fma(b, *x, a);
+            }
+        }
+        let mut s = V::zero();
+        for x in acc {
+            s = V::add(s, x);
+        }
+        s
+    }
+}
+
+/// Tests only: two registers as one ([`Pair`]): each operation on both halves, the deinterleaving loads and
+/// transposes half by half (the permutation of each half's lanes is `V`'s, the halves in order).
+#[cfg(test)]
+impl<V: ConvF32> ConvF32 for Pair<V> {
+    #[inline(always)]
+    unsafe fn fma(acc: Self, a: Self, b: Self) -> Self {
+        // SAFETY: the caller guarantees the ISA.
+        unsafe { Pair(V::fma(acc.0, a.0, b.0), V::fma(acc.1, a.1, b.1)) }
+    }
+    #[inline(always)]
+    unsafe fn relu(v: Self) -> Self {
+        // SAFETY: the caller guarantees the ISA.
+        unsafe { Pair(V::relu(v.0), V::relu(v.1)) }
+    }
+    #[inline(always)]
+    unsafe fn keep_first(v: Self, n: usize) -> Self {
+        let l = V::LANES;
+        // SAFETY: the caller guarantees the ISA; `n < 2·l`, so each half gets `n < l` or `n − l < l`.
+        unsafe {
+            match n.cmp(&l) {
+                std::cmp::Ordering::Less => Pair(V::keep_first(v.0, n), V::zero()),
+                std::cmp::Ordering::Equal => Pair(v.0, V::zero()),
+                std::cmp::Ordering::Greater => Pair(v.0, V::keep_first(v.1, n - l)),
+            }
+        }
+    }
+    #[inline(always)]
+    unsafe fn load_deinterleaved(p: *const f32) -> (Self, Self) {
+        // SAFETY: the caller guarantees the ISA and `4·V::LANES` readable values at `p`.
+        unsafe { Pair::halves(p, V::load_deinterleaved) }
+    }
+    #[inline(always)]
+    unsafe fn interleave(e: Self, o: Self) -> (Self, Self) {
+        // SAFETY: the caller guarantees the ISA.
+        unsafe {
+            let (p0, p1) = V::interleave(e.0, o.0);
+            let (p2, p3) = V::interleave(e.1, o.1);
+            (Pair(p0, p1), Pair(p2, p3))
+        }
+    }
+    #[inline(always)]
+    unsafe fn load_stride4(p: *const f32) -> [Self; 4] {
+        // SAFETY: the caller guarantees the ISA and `8·V::LANES` readable values at `p`.
+        unsafe {
+            let lo = V::load_stride4(p);
+            let hi = V::load_stride4(p.add(4 * V::LANES));
+            [0, 1, 2, 3].map(|j| Pair(lo[j], hi[j]))
+        }
+    }
+    #[inline(always)]
+    unsafe fn interleave4(c: [Self; 4]) -> [Self; 4] {
+        // SAFETY: the caller guarantees the ISA.
+        unsafe {
+            let lo = V::interleave4(c.map(|v| v.0));
+            let hi = V::interleave4(c.map(|v| v.1));
+            [
+                Pair(lo[0], lo[1]),
+                Pair(lo[2], lo[3]),
+                Pair(hi[0], hi[1]),
+                Pair(hi[2], hi[3]),
+            ]
         }
     }
 }

@@ -231,3 +231,23 @@ unsafe fn epilogue<Q: SimdQ, const G: usize, const NV: usize>(
         }
     }
 }
+
+/// The dot-product peak loop of the rows whose `dot` is one instruction (VNNI, `SDOT`, `USDOT`): `N`
+/// independent chains `acc ← acc.dot(x, w)` from 1, `iters` steps each; the caller sums the chains it gets
+/// back (a value derived from every chain, to keep the loop alive). Ops = `iters · N · PX · 4 · 2`.
+///
+/// # Safety
+/// The CPU has the ISA of `Q`.
+#[inline(always)]
+pub(crate) unsafe fn peak_chains<Q: SimdQ, const N: usize>(iters: u64, x: Q::X, w: Q::W) -> [Q; N] {
+    // SAFETY: the caller guarantees the ISA of `Q`; register-only operations.
+    unsafe {
+        let mut acc = [Q::init(1); N];
+        for _ in 0..iters {
+            for a in acc.iter_mut() {
+                *a = a.dot(x, w);
+            }
+        }
+        acc
+    }
+}

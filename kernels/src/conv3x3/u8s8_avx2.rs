@@ -10,7 +10,7 @@
 //! from this tested one only in `load_x`/`load_w`/`dot`/`to_f32`. In test builds this file also runs the two
 //! VNNI rows' tile geometries on AVX2 registers (`Wide16`, `conv_*_geometry`).
 
-use super::job::{U8Job, U8Out};
+use super::job::{entry_points, U8Job, U8Out};
 use super::simd_u8::{conv, SimdQ};
 use std::arch::x86_64::*;
 
@@ -154,15 +154,27 @@ impl SimdQ for Avx2Wide {
     }
 }
 
-/// `conv3x3.u8s8.4x1.avx2`.
-///
-/// # Safety
-/// The CPU has AVX2; the job was checked by the safe API and packed with
-/// [`PackKind::I16`](crate::registry::PackKind).
-#[target_feature(enable = "avx2,fma")]
-pub(crate) unsafe fn conv_avx2(job: &U8Job<'_>, out: &mut U8Out<'_>) {
-    // SAFETY: AVX2 enabled; the caller's guarantees.
-    unsafe { conv::<Avx2Wide, 4, 1>(job, out) }
+entry_points! {
+    "avx2,fma", U8Job, U8Out;
+    /// `conv3x3.u8s8.4x1.avx2`.
+    ///
+    /// # Safety
+    /// The CPU has AVX2; the job was checked by the safe API and packed with
+    /// [`PackKind::I16`](crate::registry::PackKind).
+    fn conv_avx2 = conv::<Avx2Wide, 4, 1>;
+    /// Tests only: the AVX-VNNI row's tile geometry (4 × 2 units of 8 pixels) with the AVX2 widening dot.
+    ///
+    /// # Safety
+    /// As [`conv_avx2`].
+    #[cfg(test)]
+    fn conv_avxvnni_geometry = conv::<Avx2Wide, 4, 2>;
+    /// Tests only: the AVX-512 VNNI row's tile geometry (8 × 3 units of 16 pixels) with the AVX2 widening
+    /// dot.
+    ///
+    /// # Safety
+    /// As [`conv_avx2`].
+    #[cfg(test)]
+    fn conv_avx512vnni_geometry = conv::<Wide16, 8, 3>;
 }
 
 /// `vpmaddwd` + `vpaddd` peak: 12 chains; ops = `iters · 12 · 16 · 2`.
@@ -288,26 +300,4 @@ impl SimdQ for Wide16 {
             }
         }
     }
-}
-
-/// Tests only: the AVX-VNNI row's tile geometry (4 × 2 units of 8 pixels) with the AVX2 widening dot.
-///
-/// # Safety
-/// As [`conv_avx2`].
-#[cfg(test)]
-#[target_feature(enable = "avx2,fma")]
-pub(crate) unsafe fn conv_avxvnni_geometry(job: &U8Job<'_>, out: &mut U8Out<'_>) {
-    // SAFETY: as `conv_avx2`.
-    unsafe { conv::<Avx2Wide, 4, 2>(job, out) }
-}
-
-/// Tests only: the AVX-512 VNNI row's tile geometry (8 × 3 units of 16 pixels) with the AVX2 widening dot.
-///
-/// # Safety
-/// As [`conv_avx2`].
-#[cfg(test)]
-#[target_feature(enable = "avx2,fma")]
-pub(crate) unsafe fn conv_avx512vnni_geometry(job: &U8Job<'_>, out: &mut U8Out<'_>) {
-    // SAFETY: as `conv_avx2`.
-    unsafe { conv::<Wide16, 8, 3>(job, out) }
 }

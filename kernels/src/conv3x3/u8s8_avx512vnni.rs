@@ -2,8 +2,8 @@
 //! generic loop [`simd_u8::conv`](super::simd_u8::conv): 8 output channels × 3 zmm (48 pixels) = 24
 //! accumulators + 3 inputs + 1 weight of 32 zmm.
 
-use super::job::{U8Job, U8Out};
-use super::simd_u8::{conv, SimdQ};
+use super::job::{entry_points, U8Job, U8Out};
+use super::simd_u8::{conv, peak_chains, SimdQ};
 use std::arch::x86_64::*;
 
 /// AVX-512 VNNI accumulator: 16 pixels.
@@ -107,14 +107,13 @@ impl SimdQ for Avx512Vnni {
     }
 }
 
-/// `conv3x3.u8s8.8x3.avx512vnni`.
-///
-/// # Safety
-/// The CPU has AVX-512F/BW and AVX-512 VNNI; the job was checked and packed with `PackKind::I8`.
-#[target_feature(enable = "avx512f,avx512bw,avx512vnni,avx2,fma")]
-pub(crate) unsafe fn conv_avx512vnni(job: &U8Job<'_>, out: &mut U8Out<'_>) {
-    // SAFETY: AVX-512 + VNNI enabled; the caller's guarantees.
-    unsafe { conv::<Avx512Vnni, 8, 3>(job, out) }
+entry_points! {
+    "avx512f,avx512bw,avx512vnni,avx2,fma", U8Job, U8Out;
+    /// `conv3x3.u8s8.8x3.avx512vnni`.
+    ///
+    /// # Safety
+    /// The CPU has AVX-512F/BW and AVX-512 VNNI; the job was checked and packed with `PackKind::I8`.
+    fn conv_avx512vnni = conv::<Avx512Vnni, 8, 3>;
 }
 
 /// 512-bit `vpdpbusd` peak: 24 chains; ops = `iters · 24 · 64 · 2`.
@@ -123,17 +122,11 @@ pub(crate) unsafe fn conv_avx512vnni(job: &U8Job<'_>, out: &mut U8Out<'_>) {
 /// The CPU has AVX-512 VNNI.
 #[target_feature(enable = "avx512f,avx512vnni")]
 pub(crate) unsafe fn peak_avx512vnni(iters: u64) -> i32 {
-    let mut acc = [_mm512_set1_epi32(1); 24];
-    let x = _mm512_set1_epi8(3);
-    let w = _mm512_set1_epi8(-2);
-    for _ in 0..iters {
-        for a in acc.iter_mut() {
-            *a = _mm512_dpbusd_epi32(*a, x, w);
-        }
-    }
-    let mut s = _mm512_setzero_si512();
-    for a in acc {
-        s = _mm512_add_epi32(s, a);
-    }
-    _mm512_reduce_add_epi32(s)
+    let (x, w) = (_mm512_set1_epi8(3), _mm512_set1_epi8(-2));
+    // SAFETY: AVX-512 VNNI enabled here and present on the CPU (the caller's guarantee).
+    let acc = unsafe { peak_chains::<Avx512Vnni, 24>(iters, x, w) };
+    _mm512_reduce_add_epi32(
+        acc.iter()
+            .fold(_mm512_setzero_si512(), |s, a| _mm512_add_epi32(s, a.0)),
+    )
 }

@@ -4,8 +4,8 @@
 //! from [`u8s8_avx2`](super::u8s8_avx2)): the row differs from the tested AVX2 row only in
 //! `load_x`/`load_w`/`dot`/`to_f32`.
 
-use super::job::{U8Job, U8Out};
-use super::simd_u8::{conv, SimdQ};
+use super::job::{entry_points, U8Job, U8Out};
+use super::simd_u8::{conv, peak_chains, SimdQ};
 use super::u8s8_avx2::{epilogue_256, MASK};
 use std::arch::x86_64::*;
 
@@ -46,14 +46,13 @@ impl SimdQ for AvxVnni {
     }
 }
 
-/// `conv3x3.u8s8.4x2.avxvnni`.
-///
-/// # Safety
-/// The CPU has AVX2 and AVX-VNNI; the job was checked and packed with `PackKind::I8`.
-#[target_feature(enable = "avx2,fma,avxvnni")]
-pub(crate) unsafe fn conv_avxvnni(job: &U8Job<'_>, out: &mut U8Out<'_>) {
-    // SAFETY: AVX2 + AVX-VNNI enabled; the caller's guarantees.
-    unsafe { conv::<AvxVnni, 4, 2>(job, out) }
+entry_points! {
+    "avx2,fma,avxvnni", U8Job, U8Out;
+    /// `conv3x3.u8s8.4x2.avxvnni`.
+    ///
+    /// # Safety
+    /// The CPU has AVX2 and AVX-VNNI; the job was checked and packed with `PackKind::I8`.
+    fn conv_avxvnni = conv::<AvxVnni, 4, 2>;
 }
 
 /// 256-bit `vpdpbusd` peak: 12 chains; ops = `iters · 12 · 32 · 2`.
@@ -62,17 +61,11 @@ pub(crate) unsafe fn conv_avxvnni(job: &U8Job<'_>, out: &mut U8Out<'_>) {
 /// The CPU has AVX-VNNI.
 #[target_feature(enable = "avx2,avxvnni")]
 pub(crate) unsafe fn peak_avxvnni(iters: u64) -> i32 {
-    let mut acc = [_mm256_set1_epi32(1); 12];
-    let x = _mm256_set1_epi8(3);
-    let w = _mm256_set1_epi8(-2);
-    for _ in 0..iters {
-        for a in acc.iter_mut() {
-            *a = _mm256_dpbusd_avx_epi32(*a, x, w);
-        }
-    }
-    let mut s = _mm256_setzero_si256();
-    for a in acc {
-        s = _mm256_add_epi32(s, a);
-    }
+    let (x, w) = (_mm256_set1_epi8(3), _mm256_set1_epi8(-2));
+    // SAFETY: AVX-VNNI enabled here and present on the CPU (the caller's guarantee).
+    let acc = unsafe { peak_chains::<AvxVnni, 12>(iters, x, w) };
+    let s = acc
+        .iter()
+        .fold(_mm256_setzero_si256(), |s, a| _mm256_add_epi32(s, a.0));
     _mm256_extract_epi32::<0>(s)
 }

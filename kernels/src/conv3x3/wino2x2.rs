@@ -1,4 +1,4 @@
-//! Winograd F(2×2, 3×3) convolution, written once for every register type ([`SimdF32`]: the AVX2, AVX-512 and
+//! Winograd F(2×2, 3×3) convolution, written once for every register type ([`ConvF32`]: the AVX2, AVX-512 and
 //! NEON registers, and plain `f32` for the portable row).
 //!
 //! A 2×2 output tile `Y` comes from the 4×4 input tile `d` above it (Lavin & Gray 2016):
@@ -31,7 +31,7 @@
 //! computes: any split into bands, windows or threads gives the same frame.
 
 use super::job::{F32Job, F32Out};
-use super::simd_f32::{store_pixels, SimdF32};
+use super::simd_f32::{store_pixels, ConvF32};
 use std::cell::Cell;
 
 thread_local! {
@@ -78,7 +78,7 @@ pub(crate) fn reserve_scratch(len: usize) {
 /// packed by `pack_winograd_f32` for `G`), and `2·V::LANES·NV ≤ MAX_TILE`, so every load and store stays
 /// inside the padded rows.
 #[inline(always)]
-pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
+pub(crate) unsafe fn conv<V: ConvF32, const G: usize, const NV: usize>(
     job: &F32Job<'_>,
     out: &mut F32Out<'_>,
 ) {
@@ -134,7 +134,7 @@ pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
 /// # Safety
 /// As [`conv`]; `t0 < ceil(w/2)`: columns `2·t0 ..< 2·(t0 + T) + 2 ≤ w + 1 + MAX_TILE < wp`.
 #[inline(always)]
-unsafe fn input_transform<V: SimdF32, const NV: usize>(
+unsafe fn input_transform<V: ConvF32, const NV: usize>(
     job: &F32Job<'_>,
     srcs: &[(*const f32, usize); 2],
     rows: [usize; 4],
@@ -190,7 +190,7 @@ unsafe fn input_transform<V: SimdF32, const NV: usize>(
 /// # Safety
 /// The ISA of `V`; `2·LANES + 2` readable values at `p`.
 #[inline(always)]
-unsafe fn row_transform<V: SimdF32>(p: *const f32) -> [V; 4] {
+unsafe fn row_transform<V: ConvF32>(p: *const f32) -> [V; 4] {
     // SAFETY: the caller's guarantees.
     unsafe {
         let (c0, c1) = V::load_deinterleaved(p);
@@ -211,7 +211,7 @@ unsafe fn row_transform<V: SimdF32>(p: *const f32) -> [V; 4] {
 /// As [`conv`]; `grp < groups`; `vbuf` holds this chunk's transformed inputs `V[P][C_in][T]` and the
 /// weights are packed `[P][groups][C_in][G]`.
 #[inline(always)]
-pub(super) unsafe fn products<V: SimdF32, const G: usize, const NV: usize, const P: usize>(
+pub(super) unsafe fn products<V: ConvF32, const G: usize, const NV: usize, const P: usize>(
     job: &F32Job<'_>,
     vbuf: &[f32],
     mbuf: &mut [f32],
@@ -257,7 +257,7 @@ pub(super) unsafe fn products<V: SimdF32, const G: usize, const NV: usize, const
 /// # Safety
 /// As [`conv`]; `mbuf` holds the group's products; the rows `write` selects are inside the band.
 #[inline(always)]
-unsafe fn output_transform<V: SimdF32, const G: usize, const NV: usize>(
+unsafe fn output_transform<V: ConvF32, const G: usize, const NV: usize>(
     job: &F32Job<'_>,
     out: &mut F32Out<'_>,
     mbuf: &[f32],
@@ -274,7 +274,7 @@ unsafe fn output_transform<V: SimdF32, const G: usize, const NV: usize>(
             break;
         }
         // SAFETY: `o < groups·G = bias.len()`.
-        let b = unsafe { V::splat(job.bias.as_ptr().add(o)) };
+        let b = unsafe { V::load_splat(job.bias.as_ptr().add(o)) };
         for v in 0..NV {
             // SAFETY: `mbuf[g][k][v·l ..]` inside the `G·16·T` scratch; register arithmetic on the ISA.
             let ys = unsafe {
@@ -316,7 +316,7 @@ unsafe fn output_transform<V: SimdF32, const G: usize, const NV: usize>(
 /// # Safety
 /// The ISA of `V`.
 #[inline(always)]
-unsafe fn output_columns<V: SimdF32>(r: [V; 4], b: V) -> (V, V) {
+unsafe fn output_columns<V: ConvF32>(r: [V; 4], b: V) -> (V, V) {
     // SAFETY: register arithmetic on the caller's ISA.
     unsafe {
         (
@@ -331,7 +331,7 @@ unsafe fn output_columns<V: SimdF32>(r: [V; 4], b: V) -> (V, V) {
 /// # Safety
 /// The ISA of `V` (a prefetch never faults; `p` is computed with wrapping arithmetic).
 #[inline(always)]
-pub(super) unsafe fn prefetch_lines<V: SimdF32>(p: *const f32, n: usize) {
+pub(super) unsafe fn prefetch_lines<V: ConvF32>(p: *const f32, n: usize) {
     for line in (0..n).step_by(16) {
         // SAFETY: a prefetch never faults.
         unsafe { V::prefetch(p.wrapping_add(line)) };

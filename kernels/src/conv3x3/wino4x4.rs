@@ -1,4 +1,4 @@
-//! Winograd F(4×4, 3×3) convolution, written once for every register type ([`SimdF32`]), as
+//! Winograd F(4×4, 3×3) convolution, written once for every register type ([`ConvF32`]), as
 //! [`wino2x2`](super::wino2x2) is for F(2×2, 3×3).
 //!
 //! A 4×4 output tile `Y` comes from the 6×6 input tile `d` above it (Lavin & Gray 2016; the points 0, ±1, ±2
@@ -18,10 +18,10 @@
 //! against 9 for the direct convolution and 4 for F(2×2, 3×3). The 36 products are small matrix products
 //! computed with the direct kernels' register tile (`G` output channels × `NV` registers of tiles;
 //! [`products`](super::wino2x2::products), shared with F(2×2, 3×3)). Lanes hold consecutive tiles along
-//! the row: the input transform loads each row transposed by quadruples ([`SimdF32::load_stride4`], the
-//! tile's columns 0–3; columns 4–5 are the next tile's 0–1, [`SimdF32::next_columns`]) and the output
+//! the row: the input transform loads each row transposed by quadruples ([`ConvF32::load_stride4`], the
+//! tile's columns 0–3; columns 4–5 are the next tile's 0–1, [`ConvF32::next_columns`]) and the output
 //! transform transposes its four columns back into pixels
-//! ([`SimdF32::interleave4`]) before the direct kernels' epilogue (bias, ReLU, residual, the zero right
+//! ([`ConvF32::interleave4`]) before the direct kernels' epilogue (bias, ReLU, residual, the zero right
 //! border).
 //!
 //! Work per chunk of `T = NV·LANES` tiles (4 output rows × `4T` pixels): the input transform of every input
@@ -40,7 +40,7 @@
 //! nearest buffer row, the zero border, as a taller frame's padding would.
 
 use super::job::{F32Job, F32Out};
-use super::simd_f32::{store_pixels, SimdF32};
+use super::simd_f32::{store_pixels, ConvF32};
 use super::wino2x2::{prefetch_lines, products, put_scratch, take_scratch};
 
 /// Products per tile: the 6×6 transformed tile.
@@ -56,7 +56,7 @@ struct Consts<V> {
     minus_five: V,
 }
 
-impl<V: SimdF32> Consts<V> {
+impl<V: ConvF32> Consts<V> {
     /// # Safety
     /// The ISA of `V`.
     #[inline(always)]
@@ -64,11 +64,11 @@ impl<V: SimdF32> Consts<V> {
         // SAFETY: broadcasts of local values on the caller's ISA.
         unsafe {
             Self {
-                two: V::splat(&2.0),
-                four: V::splat(&4.0),
-                eight: V::splat(&8.0),
-                minus_four: V::splat(&-4.0),
-                minus_five: V::splat(&-5.0),
+                two: V::load_splat(&2.0),
+                four: V::load_splat(&4.0),
+                eight: V::load_splat(&8.0),
+                minus_four: V::load_splat(&-4.0),
+                minus_five: V::load_splat(&-5.0),
             }
         }
     }
@@ -81,7 +81,7 @@ impl<V: SimdF32> Consts<V> {
 /// packed by `pack_winograd4_f32` for `G`), and `4·V::LANES·NV ≤ MAX_TILE`, so every load and store stays
 /// inside the padded rows.
 #[inline(always)]
-pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
+pub(crate) unsafe fn conv<V: ConvF32, const G: usize, const NV: usize>(
     job: &F32Job<'_>,
     out: &mut F32Out<'_>,
 ) {
@@ -140,7 +140,7 @@ pub(crate) unsafe fn conv<V: SimdF32, const G: usize, const NV: usize>(
 /// # Safety
 /// As [`conv`]; `t0 < ceil(w/4)`: columns `4·t0 ..< 4·(t0 + T) + 2 ≤ w + 1 + MAX_TILE < wp`.
 #[inline(always)]
-unsafe fn input_transform<V: SimdF32, const NV: usize>(
+unsafe fn input_transform<V: ConvF32, const NV: usize>(
     job: &F32Job<'_>,
     srcs: &[(*const f32, usize, usize); 2],
     top: isize,
@@ -194,12 +194,12 @@ unsafe fn input_transform<V: SimdF32, const NV: usize>(
 
 /// The row transform `d B` of one input row for `LANES` tiles from `p` (the first tile's first column): the
 /// tiles' six columns (quadruples transposed at `p`, columns 4 and 5 from the next quadruples:
-/// [`SimdF32::next_columns`]), then `Bᵀ` on them.
+/// [`ConvF32::next_columns`]), then `Bᵀ` on them.
 ///
 /// # Safety
 /// The ISA of `V`; `4·LANES + 2` readable values at `p`.
 #[inline(always)]
-unsafe fn row_transform<V: SimdF32>(p: *const f32, k: Consts<V>) -> [V; 6] {
+unsafe fn row_transform<V: ConvF32>(p: *const f32, k: Consts<V>) -> [V; 6] {
     // SAFETY: the caller's guarantees.
     unsafe {
         let [c0, c1, c2, c3] = V::load_stride4(p);
@@ -214,7 +214,7 @@ unsafe fn row_transform<V: SimdF32>(p: *const f32, k: Consts<V>) -> [V; 6] {
 /// # Safety
 /// The ISA of `V`.
 #[inline(always)]
-unsafe fn bt6<V: SimdF32>(x: [V; 6], k: Consts<V>) -> [V; 6] {
+unsafe fn bt6<V: ConvF32>(x: [V; 6], k: Consts<V>) -> [V; 6] {
     // SAFETY: register arithmetic on the caller's ISA.
     unsafe {
         let p = V::fma(x[4], x[2], k.minus_four);
@@ -239,7 +239,7 @@ unsafe fn bt6<V: SimdF32>(x: [V; 6], k: Consts<V>) -> [V; 6] {
 /// # Safety
 /// The ISA of `V`.
 #[inline(always)]
-unsafe fn at6<V: SimdF32>(m: [V; 6], k: Consts<V>) -> [V; 4] {
+unsafe fn at6<V: ConvF32>(m: [V; 6], k: Consts<V>) -> [V; 4] {
     // SAFETY: register arithmetic on the caller's ISA.
     unsafe {
         let (a, b) = (V::add(m[1], m[2]), V::sub(m[1], m[2]));
@@ -260,7 +260,7 @@ unsafe fn at6<V: SimdF32>(m: [V; 6], k: Consts<V>) -> [V; 4] {
 /// As [`conv`]; `mbuf` holds the group's products; the rows `write` selects are inside the band.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-unsafe fn output_transform<V: SimdF32, const G: usize, const NV: usize>(
+unsafe fn output_transform<V: ConvF32, const G: usize, const NV: usize>(
     job: &F32Job<'_>,
     out: &mut F32Out<'_>,
     mbuf: &[f32],
@@ -278,7 +278,7 @@ unsafe fn output_transform<V: SimdF32, const G: usize, const NV: usize>(
             break;
         }
         // SAFETY: `o < groups·G = bias.len()`.
-        let b = unsafe { V::splat(job.bias.as_ptr().add(o)) };
+        let b = unsafe { V::load_splat(job.bias.as_ptr().add(o)) };
         for v in 0..NV {
             // SAFETY: `mbuf[g][p][v·l ..]` inside the `G·36·T` scratch; register arithmetic on the ISA.
             let z = unsafe {

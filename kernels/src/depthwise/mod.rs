@@ -43,7 +43,7 @@ pub(crate) static PATHS: &[Path<DepthwiseFn>] = &[
     },
     Path {
         isa: Isa::Scalar,
-        run: body::rows_body::<{ body::PORTABLE_TILE }>,
+        run: body::rows::<body::Portable<{ body::PORTABLE_TILE }>>,
     },
 ];
 

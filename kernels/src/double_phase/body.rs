@@ -307,9 +307,10 @@ fn encode_chunk<const W: usize>(f: &[f32], phase: &mut [f32], prm: &EncodeParams
 
 /// Pass 2 on one row (lengths checked by the caller): `phase` holds `arg H` from pass 1 and becomes the
 /// wrapped double phase; `codes`, if given, the linear look-up table's codes. `field` holds `W` values per
-/// pixel ([`encode_chunk`]): `W = 2` for [`encode_body`], `W = 1` for [`encode_abs_body`].
+/// pixel ([`encode_chunk`]): `W = 2` interleaved pairs ([`super::encode_row`]'s portable path), `W = 1` the
+/// magnitudes `|H|` ([`super::encode_abs_row`]'s, bit-identical with `W = 2` on the pairs they came from).
 #[inline(always)]
-fn encode_row_of<const W: usize>(
+pub(crate) fn encode_row_of<const W: usize>(
     field: &[f32],
     phase: &mut [f32],
     codes: Option<&mut [u8]>,
@@ -336,29 +337,6 @@ fn encode_row_of<const W: usize>(
             encode_tail::<W>(fc.remainder(), pc.into_remainder(), &mut tail_codes, prm);
         }
     }
-}
-
-/// Pass 2 on one row of interleaved `(re, im)` pairs ([`encode_row_of`]).
-#[inline(always)]
-pub(crate) fn encode_body(
-    field: &[f32],
-    phase: &mut [f32],
-    codes: Option<&mut [u8]>,
-    prm: &EncodeParams,
-) {
-    encode_row_of::<2>(field, phase, codes, prm)
-}
-
-/// Pass 2 on one row whose magnitudes `|H|` are given (`abs`, one value per pixel, from
-/// [`analyse_planes_body`]): bit-identical to [`encode_body`] on the pairs they came from.
-#[inline(always)]
-pub(crate) fn encode_abs_body(
-    abs: &[f32],
-    phase: &mut [f32],
-    codes: Option<&mut [u8]>,
-    prm: &EncodeParams,
-) {
-    encode_row_of::<1>(abs, phase, codes, prm)
 }
 
 /// The last `phase.len() < LANES` pixels of a row, through a zero-padded chunk.

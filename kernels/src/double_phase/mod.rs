@@ -9,9 +9,10 @@
 //! polynomials), the wrap adds or subtracts `2π` by selects, and the code rounds by truncation and a
 //! compare (`f32::round` is a libm call on SSE2). Three paths: the portable body (`body.rs`, plain safe Rust
 //! on chunks of 8 pixels in fixed-size arrays, which the compiler vectorises as far as it can: SSE2 on
-//! x86-64, NEON on aarch64) and, on x86-64, the same operations in AVX2 intrinsics (`avx2.rs`, ymm, 8 pixels
-//! per step: the compiler's vectorisation of the body stayed at xmm width with spills, 2–3× slower) and in
-//! AVX-512F intrinsics (`avx512.rs`, zmm, 16 pixels per step, mask blends: 1.8× the AVX2 rows on Zen 5,
+//! x86-64, NEON on aarch64) and, on x86-64, the same operations written once over the crate's register
+//! trait (`simd.rs`, generic over `crate::simd::SimdF32`) and instantiated in `x86.rs` on AVX2 (ymm, 8
+//! pixels per step: the compiler's vectorisation of the body stayed at xmm width with spills, 2–3× slower)
+//! and on AVX-512F (zmm, 16 pixels per step, mask blends: 1.8× the AVX2 rows on Zen 5,
 //! `docs/BENCHMARKS.md`). None uses FMA
 //! (Rust does not contract `a·b + c`, and the intrinsics multiply and add apart), so every path is
 //! bit-identical (tested on rows and on the exhaustive sweep).
@@ -39,17 +40,18 @@
 //! within 1.2e-6 rad of a rounding boundary between two codes: on random fields about 1 pixel in 10⁴ at
 //! most (`tests`; the SDK counts the real frames).
 
-#[cfg(target_arch = "x86_64")]
-pub(crate) mod avx2;
-#[cfg(target_arch = "x86_64")]
-pub(crate) mod avx512;
 pub(crate) mod body;
+#[cfg(target_arch = "x86_64")]
+mod simd;
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod x86;
 
 pub use body::{acos_unit, atan2, linear_code_wrapped, wrap_phase};
 
 use crate::dispatch::{self, Path};
 use crate::error::KernelError;
 use crate::isa::Isa;
+use crate::pack::check_len;
 
 /// One level's double phase rows, on checked lengths.
 #[derive(Debug, Clone, Copy)]
@@ -75,29 +77,29 @@ pub(crate) static PATHS: &[Path<DpmFns>] = &[
     Path {
         isa: Isa::Avx512,
         run: DpmFns {
-            analyse: avx512::analyse_avx512,
-            encode: avx512::encode_avx512,
-            analyse_planes: avx512::analyse_planes_avx512,
-            encode_abs: avx512::encode_abs_avx512,
+            analyse: x86::analyse_avx512,
+            encode: x86::encode_avx512,
+            analyse_planes: x86::analyse_planes_avx512,
+            encode_abs: x86::encode_abs_avx512,
         },
     },
     #[cfg(target_arch = "x86_64")]
     Path {
         isa: Isa::Avx2Fma,
         run: DpmFns {
-            analyse: avx2::analyse_avx2,
-            encode: avx2::encode_avx2,
-            analyse_planes: avx2::analyse_planes_avx2,
-            encode_abs: avx2::encode_abs_avx2,
+            analyse: x86::analyse_avx2,
+            encode: x86::encode_avx2,
+            analyse_planes: x86::analyse_planes_avx2,
+            encode_abs: x86::encode_abs_avx2,
         },
     },
     Path {
         isa: Isa::Scalar,
         run: DpmFns {
             analyse: body::analyse_body,
-            encode: body::encode_body,
+            encode: body::encode_row_of::<2>,
             analyse_planes: body::analyse_planes_body,
-            encode_abs: body::encode_abs_body,
+            encode_abs: body::encode_row_of::<1>,
         },
     },
 ];
@@ -110,27 +112,16 @@ pub const ACOS_MAX_ERROR: f32 = 2.4e-7;
 /// with libm's `atan2f` and `acosf` for a mean phase in `[−π, π]`.
 pub const PHASE_MAX_ERROR: f32 = 1.2e-6;
 
-fn check(what: &'static str, expected: usize, got: usize) -> Result<(), KernelError> {
-    if expected != got {
-        return Err(KernelError::Length {
-            what,
-            expected,
-            got,
-        });
-    }
-    Ok(())
-}
-
 /// Pass 1 of the double phase encoding on one row of `n` pixels: `field` holds `2n` values, the
 /// interleaved `(Re H, Im H)` of each pixel (the memory of `n` complex f32), `phase` receives `arg H`
 /// ([`atan2`], radians in `[−π, π]`). Returns `(max |H|², Σ arg H)`, the sum in f64 (eight lanes summed
 /// apart, then together). A NaN `|H|²` is skipped by the maximum, as `f32::max` does. Errors: lengths
 /// ([`KernelError::Length`]), `isa` not available ([`KernelError::Isa`]).
 pub fn analyse_row(field: &[f32], phase: &mut [f32], isa: Isa) -> Result<(f32, f64), KernelError> {
-    check(
+    check_len(
         "double phase field (2 values per pixel)",
-        2 * phase.len(),
         field.len(),
+        2 * phase.len(),
     )?;
     let run = dispatch::pick(PATHS, isa)?.analyse;
     // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
@@ -168,8 +159,8 @@ pub fn analyse_planes_row(
     abs: &mut [f32],
     isa: Isa,
 ) -> Result<(f32, f64), KernelError> {
-    check("double phase Re H plane", im_arg.len(), re.len())?;
-    check("double phase |H| plane", im_arg.len(), abs.len())?;
+    check_len("double phase Re H plane", re.len(), im_arg.len())?;
+    check_len("double phase |H| plane", abs.len(), im_arg.len())?;
     let run = dispatch::pick(PATHS, isa)?.analyse_planes;
     // SAFETY: `pick` checked that this CPU has `isa`, which includes the level of the path it returned;
     // the lengths are checked above.
@@ -207,9 +198,9 @@ fn encode_checked(
     } else {
         ("double phase field (2 values per pixel)", 2)
     };
-    check(what, per_pixel * phase.len(), values.len())?;
+    check_len(what, values.len(), per_pixel * phase.len())?;
     if let Some(c) = &codes {
-        check("double phase codes", phase.len(), c.len())?;
+        check_len("double phase codes", c.len(), phase.len())?;
     }
     let params = body::EncodeParams::new(mean, inv_a, odd_row);
     let paths = dispatch::pick(PATHS, isa)?;

@@ -178,6 +178,28 @@ fn split<T: Send>(n: u64, f: impl Fn(std::ops::Range<u64>) -> T + Sync) -> Vec<T
     })
 }
 
+/// The worst `atan2` errors seen: against the exact value (f64) and against std's `atan2f` (modulo 2π).
+#[derive(Default)]
+struct Worst {
+    exact: f64,
+    std: f32,
+}
+
+impl Worst {
+    /// Counts `p` = `atan2(y, x)`.
+    fn note(&mut self, y: f32, x: f32, p: f32) {
+        self.exact = self.exact.max(atan2_err(y, x, p));
+        let d = (p - y.atan2(x)).abs();
+        self.std = self.std.max(d.min(TAU - d));
+    }
+
+    /// The worst of several parts' worsts.
+    fn of(parts: &[Worst]) -> (f64, f32) {
+        let exact = parts.iter().fold(0.0f64, |a, p| a.max(p.exact));
+        (exact, parts.iter().fold(0.0f32, |a, p| a.max(p.std)))
+    }
+}
+
 /// The exhaustive sweeps behind the module's bounds, on every path (release build, all cores: about a
 /// minute on two; debug: far longer): `cargo test -p tensorholo-kernels --release -- --ignored
 /// double_phase_exhaustive --nocapture`. Prints the worst errors against the exact value and against std's
@@ -190,7 +212,7 @@ fn double_phase_exhaustive_bounds() {
     let paths = paths();
     // Every non-negative y (all 2³¹ of them up to +∞) against each x, through the row kernels of every path.
     let parts = split((0x7f80_0001u64).div_ceil(BLOCK), |blocks| {
-        let (mut exact, mut std) = (0.0f64, 0.0f32);
+        let mut worst = Worst::default();
         let mut field = vec![0.0f32; 2 * BLOCK as usize];
         let (mut want, mut got) = (vec![0.0f32; BLOCK as usize], vec![0.0f32; BLOCK as usize]);
         for blk in blocks {
@@ -211,31 +233,23 @@ fn double_phase_exhaustive_bounds() {
                     assert!(same, "{name}: x {x}, y bits from {lo:#x}");
                 }
                 for (i, &p) in want[..n].iter().enumerate() {
-                    let y = field[2 * i + 1];
-                    exact = exact.max(atan2_err(y, x, p));
-                    let d = (p - y.atan2(x)).abs();
-                    std = std.max(d.min(TAU - d));
+                    worst.note(field[2 * i + 1], x, p);
                 }
             }
         }
-        (exact, std)
+        worst
     });
-    let worst = parts.iter().fold(0.0f64, |a, p| a.max(p.0));
-    let worst_std = parts.iter().fold(0.0f32, |a, p| a.max(p.1));
+    let (worst, worst_std) = Worst::of(&parts);
     let parts = split(10_000_000, |r| {
         let mut rng = Rng::new(0x0dd_ba11 + r.start);
-        let (mut exact, mut std) = (0.0f64, 0.0f32);
+        let mut worst = Worst::default();
         for _ in r {
             let (y, x) = (rng.any_finite(), rng.any_finite());
-            let p = atan2(y, x);
-            exact = exact.max(atan2_err(y, x, p));
-            let d = (p - y.atan2(x)).abs();
-            std = std.max(d.min(TAU - d));
+            worst.note(y, x, atan2(y, x));
         }
-        (exact, std)
+        worst
     });
-    let worst_r = parts.iter().fold(0.0f64, |a, p| a.max(p.0));
-    let worst_r_std = parts.iter().fold(0.0f32, |a, p| a.max(p.1));
+    let (worst_r, worst_r_std) = Worst::of(&parts);
     println!("atan2, every y ≥ 0 against x ∈ ±{{0, 1, 1.7}}: worst {worst:e} rad (std atan2f: {worst_std:e})");
     println!("atan2, 10⁷ random finite pairs: worst {worst_r:e} rad (std atan2f: {worst_r_std:e})");
     assert!(worst.max(worst_r) <= ATAN2_MAX_ERROR as f64);
