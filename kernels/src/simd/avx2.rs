@@ -15,8 +15,8 @@ impl SimdF32 for __m256 {
     ops! { (p: *mut f32, v: Self) -> () = (p, v); store: _mm256_storeu_ps }
     ops! { (v: Self) -> Self = (v); sqrt: _mm256_sqrt_ps }
     ops! { (a: Self, b: Self) -> Self = (a, b);
-    add: _mm256_add_ps, sub: _mm256_sub_ps, mul: _mm256_mul_ps, div: _mm256_div_ps, min: _mm256_min_ps,
-    max: _mm256_max_ps, and: _mm256_and_ps, or: _mm256_or_ps, andnot: _mm256_andnot_ps }
+    add: _mm256_add_ps, sub: _mm256_sub_ps, mul: _mm256_mul_ps, div: _mm256_div_ps,
+    max: _mm256_max_ps, and: _mm256_and_ps, or: _mm256_or_ps }
     ops! { (a: Self, b: Self) -> Self::Mask = (a, b);
     lt: _mm256_cmp_ps::<_CMP_LT_OQ>, gt: _mm256_cmp_ps::<_CMP_GT_OQ>, ge: _mm256_cmp_ps::<_CMP_GE_OQ>,
     eq: _mm256_cmp_ps::<_CMP_EQ_OQ>, ord: _mm256_cmp_ps::<_CMP_ORD_Q>, unord: _mm256_cmp_ps::<_CMP_UNORD_Q> }

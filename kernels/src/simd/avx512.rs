@@ -25,9 +25,8 @@ impl SimdF32 for __m512 {
     ops! { (p: *mut f32, v: Self) -> () = (p, v); store: _mm512_storeu_ps }
     ops! { (v: Self) -> Self = (v); sqrt: _mm512_sqrt_ps, abs: _mm512_abs_ps }
     ops! { (a: Self, b: Self) -> Self = (a, b);
-    add: _mm512_add_ps, sub: _mm512_sub_ps, mul: _mm512_mul_ps, div: _mm512_div_ps, min: _mm512_min_ps,
-    max: _mm512_max_ps, and: bits!(_mm512_and_si512), or: bits!(_mm512_or_si512),
-    andnot: bits!(_mm512_andnot_si512) }
+    add: _mm512_add_ps, sub: _mm512_sub_ps, mul: _mm512_mul_ps, div: _mm512_div_ps,
+    max: _mm512_max_ps, and: bits!(_mm512_and_si512), or: bits!(_mm512_or_si512) }
     ops! { (a: Self, b: Self) -> Self::Mask = (a, b);
     lt: _mm512_cmp_ps_mask::<_CMP_LT_OQ>, gt: _mm512_cmp_ps_mask::<_CMP_GT_OQ>,
     ge: _mm512_cmp_ps_mask::<_CMP_GE_OQ>, eq: _mm512_cmp_ps_mask::<_CMP_EQ_OQ>,

@@ -10,9 +10,9 @@
 //! multiply-add step (`conv3x3::simd_f32::ConvF32`), the double phase rows' pair loads, f64 sums and code
 //! stores (`double_phase::simd::DpmSimd`).
 //!
-//! Semantics are those of the x86 instructions where they differ: [`max`](SimdF32::max)/[`min`](SimdF32::min)
-//! return the second operand when either is NaN (x86; NEON returns NaN), comparisons are ordered and quiet
-//! (false on NaN, as Rust's `<`), [`to_i32`](SimdF32::to_i32) truncates (out-of-range lanes: `i32::MIN` on
+//! Semantics are those of the x86 instructions where they differ: [`max`](SimdF32::max) returns the second
+//! operand when either is NaN (x86's `maxps`; the NEON impl selects by a compare to match), comparisons are
+//! ordered and quiet (false on NaN, as Rust's `<`), [`to_i32`](SimdF32::to_i32) truncates (out-of-range lanes: `i32::MIN` on
 //! x86, saturated on NEON and scalar). The generic bodies that need bit-exact results across ISAs (the
 //! double phase rows) use only operations whose results agree.
 
@@ -80,8 +80,6 @@ pub(crate) trait SimdF32: Copy {
     unsafe fn div(a: Self, b: Self) -> Self;
     /// `√v` (IEEE, correctly rounded).
     unsafe fn sqrt(v: Self) -> Self;
-    /// `a < b ? a : b` per lane (NaN: `b`, as `minps`).
-    unsafe fn min(a: Self, b: Self) -> Self;
     /// `a > b ? a : b` per lane (NaN: `b`, as `maxps`).
     unsafe fn max(a: Self, b: Self) -> Self;
     /// `|v|` (the sign bit cleared).
@@ -91,8 +89,6 @@ pub(crate) trait SimdF32: Copy {
     unsafe fn and(a: Self, b: Self) -> Self;
     /// Bitwise `a | b`.
     unsafe fn or(a: Self, b: Self) -> Self;
-    /// Bitwise `!a & b`.
-    unsafe fn andnot(a: Self, b: Self) -> Self;
 
     /// `a < b` (ordered: false on NaN).
     unsafe fn lt(a: Self, b: Self) -> Self::Mask;

@@ -4,15 +4,12 @@
 use super::SimdF32;
 use std::arch::aarch64::*;
 
-/// `a` and `b` combined by the `uint32x4_t` operation `op` (with `swap`, as `op(b, a)`), as f32.
+/// `a` and `b` combined by the `uint32x4_t` operation `op`, as f32.
 macro_rules! bits {
     ($op:ident) => {
         |a: float32x4_t, b: float32x4_t| {
             vreinterpretq_f32_u32($op(vreinterpretq_u32_f32(a), vreinterpretq_u32_f32(b)))
         }
-    };
-    ($op:ident, swap) => {
-        |a: float32x4_t, b: float32x4_t| bits!($op)(b, a)
     };
 }
 
@@ -28,8 +25,8 @@ impl SimdF32 for float32x4_t {
     ops! { (v: Self) -> Self = (v); sqrt: vsqrtq_f32, abs: vabsq_f32 }
     ops! { (a: Self, b: Self) -> Self = (a, b);
     add: vaddq_f32, sub: vsubq_f32, mul: vmulq_f32, div: vdivq_f32,
-    min: |a, b| vbslq_f32(vcltq_f32(a, b), a, b), max: |a, b| vbslq_f32(vcgtq_f32(a, b), a, b),
-    and: bits!(vandq_u32), or: bits!(vorrq_u32), andnot: bits!(vbicq_u32, swap) }
+    max: |a, b| vbslq_f32(vcgtq_f32(a, b), a, b),
+    and: bits!(vandq_u32), or: bits!(vorrq_u32) }
     ops! { (a: Self, b: Self) -> Self::Mask = (a, b);
     lt: vcltq_f32, gt: vcgtq_f32, ge: vcgeq_f32, eq: vceqq_f32,
     ord: |a, b| vandq_u32(vceqq_f32(a, a), vceqq_f32(b, b)),

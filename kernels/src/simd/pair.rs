@@ -81,7 +81,7 @@ impl<V: SimdF32> SimdF32 for Pair<V> {
     }
     both! { Pair:
         add(a, b) -> Self; sub(a, b) -> Self; mul(a, b) -> Self; div(a, b) -> Self;
-        min(a, b) -> Self; max(a, b) -> Self; and(a, b) -> Self; or(a, b) -> Self; andnot(a, b) -> Self;
+        max(a, b) -> Self; and(a, b) -> Self; or(a, b) -> Self;
     }
     both! { tuple:
         lt(a, b) -> Self::Mask; gt(a, b) -> Self::Mask; ge(a, b) -> Self::Mask; eq(a, b) -> Self::Mask;

@@ -61,14 +61,6 @@ impl SimdF32 for f32 {
         v.sqrt()
     }
     #[inline(always)]
-    unsafe fn min(a: Self, b: Self) -> Self {
-        if a < b {
-            a
-        } else {
-            b
-        }
-    }
-    #[inline(always)]
     unsafe fn max(a: Self, b: Self) -> Self {
         if a > b {
             a
@@ -87,10 +79,6 @@ impl SimdF32 for f32 {
     #[inline(always)]
     unsafe fn or(a: Self, b: Self) -> Self {
         bits(a, b, |a, b| a | b)
-    }
-    #[inline(always)]
-    unsafe fn andnot(a: Self, b: Self) -> Self {
-        bits(a, b, |a, b| !a & b)
     }
     #[inline(always)]
     unsafe fn lt(a: Self, b: Self) -> bool {

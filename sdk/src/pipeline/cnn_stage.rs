@@ -47,14 +47,14 @@ impl CnnStage {
     /// Errors: as [`CnnStage::pack_frame`] and the plan's run.
     pub(super) fn run_frame(&mut self, frame: &RgbdFrame) -> Result<(Heads, f64)> {
         let t = Instant::now();
-        if self.frame_planes(frame, false)?.is_some() {
+        if let Some(planes) = self.frame_planes(frame, false)? {
             let (_, h, w) = self.plan.input_dim();
             let mut heads = Heads::zeros(h, w);
-            let planes = heads
+            let out = heads
                 .planes_mut()
                 .ok_or_else(|| HoloError::Internal("new heads not contiguous".into()))?;
-            let cnn_s = self.run_frame_into(frame, planes)?;
-            return Ok((heads, cnn_s));
+            self.plan.run_planes_into(&planes, out)?;
+            return Ok((heads, t.elapsed().as_secs_f64()));
         }
         self.pack_frame(frame)?;
         self.run(t)

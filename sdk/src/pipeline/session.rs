@@ -384,27 +384,25 @@ impl HologramSession {
             .enumerate();
         optics.run(|| {
             colours.try_for_each(|(c, ((st, phase_out), codes_out))| -> Result<()> {
-                let (field, layout, params) = (&st.field, st.layout, (mean[c], a));
-                // The pattern straight into the frame's phase plane: in place where pass 1 left `arg H'`
-                // there (after the pre-filter), else with full outputs each row copied there from pass 1's
-                // plane just before it is encoded, or in place in that plane; the codes straight into the
-                // frame.
-                let phase: &[f32] = if filtered {
-                    let io = (None, &mut *phase_out);
-                    st.encoder
-                        .encode_on(field, layout, io, codes_out, params, true)?;
-                    phase_out
-                } else if full {
-                    let io = (Some(&st.phase[..]), &mut *phase_out);
-                    st.encoder
-                        .encode_on(field, layout, io, codes_out, params, true)?;
-                    phase_out
-                } else {
-                    let io = (None, &mut st.phase[..]);
-                    st.encoder
-                        .encode_on(field, layout, io, codes_out, params, true)?;
-                    &st.phase
+                let ColourState {
+                    field,
+                    layout,
+                    encoder,
+                    phase: own,
+                    ..
+                } = &mut *st;
+                // The pattern: in place in the frame's phase plane where pass 1 left `arg H'` there (after
+                // the pre-filter); else with full outputs into that plane, each row copied there from pass
+                // 1's plane just before it is encoded; else in place in pass 1's plane. The codes straight
+                // into the frame.
+                let (arg, phase): (Option<&[f32]>, &mut [f32]) = match (filtered, full) {
+                    (true, _) => (None, phase_out),
+                    (false, true) => (Some(&own[..]), phase_out),
+                    (false, false) => (None, &mut own[..]),
                 };
+                let io = (arg, &mut *phase);
+                encoder.encode_on(field, *layout, io, codes_out, (mean[c], a), true)?;
+                let phase = &*phase;
                 if let Some(lut) = calibrated_lut(calibration.as_ref(), c) {
                     lut.apply(h, w, phase, codes_out)?;
                 }
@@ -496,6 +494,11 @@ mod tests {
     use crate::pipeline::{Backend, Heads, HologramPipeline, PipelineConfig};
 
     fn pipeline(prefilter: bool) -> HologramPipeline {
+        pipeline_padded(prefilter, false)
+    }
+
+    /// [`pipeline`] whose propagation zero-pads the field (`PropagationOptions::pad`) or not.
+    fn pipeline_padded(prefilter: bool, pad: bool) -> HologramPipeline {
         let load = |name: &str, kind| {
             let path = Path::new(env!("CARGO_MANIFEST_DIR"))
                 .join("tests/fixtures/models")
@@ -508,6 +511,10 @@ mod tests {
             offset_m: 6e-3,
             backend: Backend::Cpu,
             cnn_engine: CnnEngine::Native,
+            options: crate::optics::PropagationOptions {
+                pad,
+                ..Default::default()
+            },
             ..PipelineConfig::default()
         };
         HologramPipeline::new(load("holo8_rgbd.onnx", ModelKind::Hologram), pre, config).unwrap()
@@ -579,6 +586,61 @@ mod tests {
         let fine = heads(16, 20, 0.5);
         load_planes(&mut session, &fine);
         assert_eq!(session.encode_loaded(0.0).unwrap().codes, good);
+    }
+
+    /// Stage 2 leaves the pre-filter's input where the pre-filter reads it, `Re H` in each colour's `phase`
+    /// and `Im H` in the second half of its field's memory, equal bit for bit to the offset propagation of the
+    /// heads' phasors: written chunk by chunk into the rows the inverse row pass has spent (an unpadded plan)
+    /// or split in place after it (a padded plan, whose hooks see the whole field).
+    #[test]
+    fn stage_two_leaves_the_propagated_field_as_the_prefilter_input() {
+        let (h, w) = (16, 20);
+        let n = h * w;
+        let varied = Heads {
+            amplitude: Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+                ((x * 7 + y * 3 + c) % 13) as f32 / 9.0
+            }),
+            phase: Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+                ((x * 5 + y * 11 + 2 * c) % 17) as f32 / 16.0
+            }),
+        };
+        let isa = crate::error::kernel_isa().unwrap();
+        for pad in [false, true] {
+            let mut session = pipeline_padded(true, pad).session(h, w).unwrap();
+            session.propagate_to_slm(&Arc::new(varied.clone())).unwrap();
+            for (c, slot) in session.states.iter().enumerate() {
+                let st = slot.as_deref().unwrap();
+                let plane =
+                    |x: &Array3<f32>| x.index_axis(Axis(0), c).iter().copied().collect::<Vec<_>>();
+                let mut want = vec![num_complex::Complex32::default(); n];
+                let flat = bytemuck::cast_slice_mut::<_, f32>(&mut want);
+                tensorholo_kernels::phasor::phasors(
+                    &plane(&varied.amplitude),
+                    &plane(&varied.phase),
+                    flat,
+                    isa,
+                )
+                .unwrap();
+                let transfer = st.transfer.as_ref().unwrap();
+                st.plan
+                    .apply_even(&mut want, transfer, &mut st.plan.scratch())
+                    .unwrap();
+                let im = &bytemuck::cast_slice::<_, f32>(&st.field)[n..];
+                let re_bits = want
+                    .iter()
+                    .zip(&st.phase)
+                    .all(|(v, r)| v.re.to_bits() == r.to_bits());
+                let im_bits = want
+                    .iter()
+                    .zip(im)
+                    .all(|(v, i)| v.im.to_bits() == i.to_bits());
+                assert!(
+                    re_bits && im_bits,
+                    "pad {pad}, colour {c}: Re {re_bits}, Im {im_bits}"
+                );
+                assert!(want.iter().any(|v| v.im != 0.0), "pad {pad}, colour {c}");
+            }
+        }
     }
 
     #[test]
