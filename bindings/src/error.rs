@@ -57,6 +57,9 @@ impl From<tensorholo::HoloError> for TensorholoError {
             | E::Npy { .. }
             | E::Calibration { .. }
             | E::WouldOverwriteInput(_) => Self::InvalidInput { message },
+            // No exported call refines yet (the photo mode adds its own variant); classified here as the
+            // caller's doing.
+            E::Cancelled(_) => Self::InvalidInput { message },
             E::ModelLoad { .. }
             | E::ModelContract { .. }
             | E::ModelMetadata { .. }

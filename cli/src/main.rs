@@ -17,6 +17,7 @@ mod memory;
 mod output;
 mod propagate;
 mod reference;
+mod refine;
 mod render;
 mod video;
 

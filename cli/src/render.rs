@@ -586,6 +586,8 @@ pub struct RenderArgs {
     /// real frames (`python -m tensorholo_training.export --calib-npy`).
     #[arg(long)]
     save_cnn_input: bool,
+    #[command(flatten)]
+    refine: crate::refine::RefineArgs,
     /// Output folder (created if missing). Files of the same names in it are replaced; inputs never are.
     #[arg(long)]
     out: PathBuf,
@@ -611,6 +613,7 @@ Examples:
 /// Runs `holo render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let t_all = Instant::now();
+    let refine = args.refine.options()?;
     // A bad display profile stops the command before anything is written; the files it names are inputs too.
     let profile_files = args.model.profile_files()?;
     let mut inputs = args.scene.guard_inputs();
@@ -711,8 +714,23 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         session.plan_report().clone(),
         session.backend_report().clone(),
     );
-    let (out, heads) = session.into_last_frame();
+    let (mut out, heads) = session.into_last_frame();
     let heads = heads.context("no frame rendered")?;
+    let refined = match refine {
+        Some(options) => Some(crate::refine::refine_frame(
+            &args.refine,
+            options,
+            &pipeline,
+            &scene,
+            &heads,
+            &mut out,
+            match args.model.threads {
+                0 => tensorholo::cnn::default_threads(),
+                n => n as usize,
+            },
+        )?),
+        None => None,
+    };
     write_outputs(
         args,
         &pipeline,
@@ -734,6 +752,11 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 "repeats": timed,
                 "fps_median": if med.total_s > 0.0 { 1.0 / med.total_s } else { 0.0 },
             });
+            if let Some(r) = &refined {
+                report["timings_s"]["refine_target_s"] = json!(r.target_s);
+                report["timings_s"]["refine_iterations_s"] = json!(r.iterations_s);
+                report["refine"] = r.report.clone();
+            }
             report["frames_peak_rss_mib"] = json!(frames_peak);
         },
     )?;

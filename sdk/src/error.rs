@@ -110,6 +110,11 @@ pub enum HoloError {
         /// What is wrong.
         reason: String,
     },
+    /// Long work (the focal-stack refinement, `crate::refine`) stopped because its caller asked it to (a
+    /// progress callback's `ControlFlow::Break`); the message says what stopped and after how much of it.
+    /// Nothing it would have produced was written or returned.
+    #[error("cancelled: {0}")]
+    Cancelled(String),
     /// Refusing to overwrite a file the user passed in as input.
     #[error("refusing to overwrite input file `{0}`")]
     WouldOverwriteInput(PathBuf),

@@ -127,6 +127,7 @@ pub mod model;
 pub mod optics;
 pub mod pipeline;
 pub mod reference;
+pub mod refine;
 pub mod scene;
 pub mod slm;
 mod splitmix;

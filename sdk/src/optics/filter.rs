@@ -64,15 +64,26 @@ impl FourierFilter {
 
 /// The 0/1 circular aperture of Eq. 9 on any plan's computational grid (see [`FourierFilter`]).
 pub fn aperture_mask(plan: &SpectralPlan) -> Vec<f32> {
+    let aperture = aperture_fn(plan);
+    plan.build_multiplier(|kx, ky| Complex32::new(aperture(kx, ky), 0.0))
+        .into_iter()
+        .map(|c| c.re)
+        .collect()
+}
+
+/// The aperture of [`aperture_mask`] as a function of signed DFT bin indices `(kx, ky)` of `plan`'s
+/// computational grid: 1 inside, 0 outside (even in both indices).
+pub(crate) fn aperture_fn(plan: &SpectralPlan) -> impl Fn(i64, i64) -> f32 {
     let (ch, cw) = plan.computational_shape();
     let (h, w) = (plan.height() as f64, plan.width() as f64);
     let (sy, sx) = (h / ch as f64, w / cw as f64);
     let r = h.min(w) / 2.0;
-    plan.build_multiplier(|kx, ky| {
+    move |kx, ky| {
         let (u, v) = (kx as f64 * sx, ky as f64 * sy);
-        Complex32::new(if u * u + v * v <= r * r { 1.0 } else { 0.0 }, 0.0)
-    })
-    .into_iter()
-    .map(|c| c.re)
-    .collect()
+        if u * u + v * v <= r * r {
+            1.0
+        } else {
+            0.0
+        }
+    }
 }

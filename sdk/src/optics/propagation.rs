@@ -97,7 +97,7 @@ impl EvenMultiplier {
     /// read from the quarter: row `r` mirrors row `rows − r`, column `c ≥ cols/2 + 1` column `cols − c`.
     /// On the kernels' vector path for `isa` ([`tensorholo_kernels::spectral::multiply`]: `Complex32`'s own
     /// product, bit for bit).
-    fn multiply_row(&self, r: usize, row: &mut [Complex32], isa: Isa) {
+    pub(crate) fn multiply_row(&self, r: usize, row: &mut [Complex32], isa: Isa) {
         let (rows, cols, qc) = (self.rows, self.cols, self.quarter_cols());
         let q = &self.values[r.min(rows - r) * qc..][..qc];
         let (low, high) = row.split_at_mut(qc);
@@ -431,6 +431,12 @@ impl SpectralPlan {
         (self.fft.width(), self.fft.height())
     }
 
+    /// The planned 2D FFT of the computational grid (for callers that keep their own spectra, such as the
+    /// focal-stack refinement, `crate::refine`).
+    pub(crate) fn fft(&self) -> &Fft2 {
+        &self.fft
+    }
+
     /// Forward transform of a `[height, width]` field into `spectrum` (this plan's layout, unnormalised),
     /// for applying several multipliers to one spectrum with [`SpectralPlan::inverse`].
     ///
@@ -674,6 +680,21 @@ impl Propagator {
     ) -> Result<EvenMultiplier> {
         let value = self.transfer_value(distance_m, carrier)?;
         Ok(EvenMultiplier::from_fn(&self.plan, value))
+    }
+
+    /// [`Propagator::even_transfer_function`] times a real multiplier `mask(kx, ky)` of signed DFT bin
+    /// indices that is even in both (the Fourier filter's aperture, Eq. 9): filter and propagation as one
+    /// spectral multiplier. Errors: as [`Propagator::transfer_function`].
+    pub(crate) fn even_transfer_function_masked(
+        &self,
+        distance_m: f64,
+        carrier: Carrier,
+        mask: impl Fn(i64, i64) -> f32,
+    ) -> Result<EvenMultiplier> {
+        let value = self.transfer_value(distance_m, carrier)?;
+        Ok(EvenMultiplier::from_fn(&self.plan, |kx, ky| {
+            value(kx, ky) * mask(kx, ky)
+        }))
     }
 
     /// The transfer function's value at signed DFT bin `(kx, ky)` of the computational grid (Eq. 2, with the

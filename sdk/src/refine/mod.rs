@@ -1,0 +1,697 @@
+//! Focal-stack refinement of a phase-only SLM pattern: a few iterations of gradient descent (Adam) on the
+//! SLM phase so that what the viewer sees at a stack of focal planes matches a target hologram's focal
+//! stack, warm-started from the CNN's pattern (`docs/REFINE.md`).
+//!
+//! The image formation model is the display's own: the SLM field `e^{iφ}` through the Fourier filter
+//! (paper Eq. 8–9) and propagated by the angular spectrum method from the SLM plane to each focal plane
+//! (Eq. 2, Eq. 10). The loss, per colour, is `Σ_d ‖k·|U_d| − T_d‖²` with the least-squares scale `k` (as the
+//! scores of `docs/REFINE.md`); its gradient is analytic ([`model`]'s derivation), so no autodiff framework
+//! is needed. Targets: the SM-LBM ground truth (Eq. 1–4), the CNN's own midpoint hologram, or a given
+//! focal stack ([`FocalTarget`]). Starts: any phase pattern (the CNN's, the previous frame's refined one,
+//! SM-LBM + double phase), zero or random ([`initial_phase`]).
+//!
+//! A [`Refiner`] is made once per frame size, target and display; [`Refiner::refine`] allocates nothing per
+//! iteration after its first, runs colours and planes in parallel on its own threads, and gives the same
+//! bits for the same inputs whatever the thread count (every sum in a fixed order).
+
+mod model;
+pub mod target;
+#[cfg(test)]
+mod tests;
+
+use std::f32::consts::TAU;
+use std::ops::ControlFlow;
+use std::time::Instant;
+
+use ndarray::{Array3, ArrayView3, ArrayViewMut3};
+use num_complex::Complex32;
+use rayon::prelude::*;
+
+use crate::error::{invalid, HoloError, Result};
+use crate::optics::{check_colour_stack, OpticalSetup, Padding, PropagationOptions, SpectralPlan};
+use crate::slm::{DisplayCalibration, PhaseLut};
+use crate::splitmix::SplitMix64;
+use model::{plane_term, ColourModel};
+pub use target::{held_out_depths, loss_depths, FocalTarget, PLANES_RANGE};
+
+/// The most iterations one refinement runs: 10,000 (about an hour at 1080p on two cores; the issue's
+/// holograms converge within a few hundred).
+pub const MAX_ITERATIONS: usize = 10_000;
+
+/// The largest Adam step a refinement accepts, radians: `π` (a larger step jumps across whole fringes).
+pub const MAX_STEP_RAD: f32 = std::f32::consts::PI;
+
+/// What a refinement does: its iteration count, its optimiser's settings and how many focal planes the loss
+/// sees. `Default`: 10 iterations, Adam with step 0.04 rad, `β₁ = 0.9`, `β₂ = 0.999`, `ε = 1e-8`, 7 loss
+/// planes (chosen by measurement on real frames, `docs/REFINE.md`).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct RefineOptions {
+    /// Iterations, `1..=`[`MAX_ITERATIONS`].
+    pub iterations: usize,
+    /// Adam's step size (learning rate), radians of SLM phase; `(0, MAX_STEP_RAD]`.
+    pub step_rad: f32,
+    /// Adam's decay of the gradient's running mean, `[0, 1)`.
+    pub beta1: f32,
+    /// Adam's decay of the squared gradient's running mean, `[0, 1)`.
+    pub beta2: f32,
+    /// Adam's denominator guard, `> 0`.
+    pub epsilon: f32,
+    /// Loss planes ([`loss_depths`]), [`PLANES_RANGE`].
+    pub planes: usize,
+}
+
+impl Default for RefineOptions {
+    fn default() -> Self {
+        Self {
+            iterations: 10,
+            step_rad: 0.04,
+            beta1: 0.9,
+            beta2: 0.999,
+            epsilon: 1e-8,
+            planes: 7,
+        }
+    }
+}
+
+impl RefineOptions {
+    /// Checks every field against its range.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] naming the field (`iterations`, `step_rad`, `beta1`, `beta2`,
+    /// `epsilon`, `planes`) and its range.
+    pub fn validate(&self) -> Result<()> {
+        if !(1..=MAX_ITERATIONS).contains(&self.iterations) {
+            return Err(invalid(
+                "iterations",
+                format!(
+                    "{} refinement iterations; give 1 to {MAX_ITERATIONS}",
+                    self.iterations
+                ),
+            ));
+        }
+        if !(self.step_rad.is_finite() && self.step_rad > 0.0 && self.step_rad <= MAX_STEP_RAD) {
+            return Err(invalid(
+                "step_rad",
+                format!(
+                    "Adam step {} rad; give a finite step in (0, π] radians (default 0.04)",
+                    self.step_rad
+                ),
+            ));
+        }
+        for (name, v) in [("beta1", self.beta1), ("beta2", self.beta2)] {
+            if !(0.0..1.0).contains(&v) {
+                return Err(invalid(name, format!("{v}; Adam's decays lie in [0, 1)")));
+            }
+        }
+        if !(self.epsilon.is_finite() && self.epsilon > 0.0) {
+            return Err(invalid(
+                "epsilon",
+                format!("{}; give a finite value > 0", self.epsilon),
+            ));
+        }
+        loss_depths(self.planes).map(|_| ())
+    }
+}
+
+/// Where a refinement starts: the phase pattern it is handed, or one it makes ([`initial_phase`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RefineStart {
+    /// The CNN's SLM pattern (the default: a warm start).
+    Cnn,
+    /// The previous frame's refined pattern (video).
+    Previous,
+    /// SM-LBM (Eq. 1–4) encoded by the double phase method (Eq. 7), without CNN.
+    SmLbmDpm,
+    /// Zero phase everywhere (the cold start of iterative methods).
+    Zero,
+    /// Uniform random phase in `[0, 2π)` from a seeded SplitMix64 stream.
+    Random {
+        /// The stream's seed.
+        seed: u64,
+    },
+}
+
+/// A start pattern `[3, height, width]` (radians) that needs no hologram: zero for [`RefineStart::Zero`],
+/// uniform random in `[0, 2π)` for [`RefineStart::Random`] (pixel order, R then G then B).
+///
+/// Errors: [`HoloError::InvalidParameter`] (`start`) for a start that is a hologram's pattern
+/// ([`RefineStart::Cnn`], [`RefineStart::Previous`], [`RefineStart::SmLbmDpm`]: the caller makes those), or
+/// a zero size.
+pub fn initial_phase(start: RefineStart, height: usize, width: usize) -> Result<Array3<f32>> {
+    if height == 0 || width == 0 {
+        return Err(invalid("size", format!("{height}×{width}: both ≥ 1")));
+    }
+    match start {
+        RefineStart::Zero => Ok(Array3::zeros((3, height, width))),
+        RefineStart::Random { seed } => {
+            let mut rng = SplitMix64::new(seed);
+            Ok(Array3::from_shape_simple_fn((3, height, width), || {
+                (rng.next_f64() * std::f64::consts::TAU) as f32
+            }))
+        }
+        other => Err(invalid(
+            "start",
+            format!(
+                "{other:?} is the pattern of a hologram the caller computes, not one made here"
+            ),
+        )),
+    }
+}
+
+/// One point of a refinement's history: the loss and the PSNR against the target at the loss planes,
+/// before iteration `iteration` updates the phase (`iteration = iterations`: after the last update).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct IterationRecord {
+    /// Iterations done so far.
+    pub iteration: usize,
+    /// `Σ_colours Σ_d ‖k·|U_d| − T_d‖²` (amplitude², summed over pixels).
+    pub loss: f64,
+    /// `10·log10(1 / MSE)` dB, the MSE of that loss over every colour, plane and pixel (data range 1, as
+    /// the Table 2 protocol's amplitudes), with each colour's least-squares scale.
+    pub psnr_db: f64,
+}
+
+/// What [`Refiner::refine`] reports.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct RefineReport {
+    /// The loss and PSNR at the start and after every iteration (`iterations + 1` records).
+    pub history: Vec<IterationRecord>,
+    /// Wall-clock seconds of all iterations (the final loss evaluation included).
+    pub iterations_s: f64,
+}
+
+/// A refinement planned for one frame size, display, SLM offset and target: the loss planes' multipliers,
+/// the FFT plan, the per-colour buffers and the optimiser's state are made here once.
+#[derive(Debug)]
+pub struct Refiner {
+    options: RefineOptions,
+    target: FocalTarget,
+    plan: SpectralPlan,
+    colours: Vec<ColourModel>,
+    state: Vec<ColourState>,
+    slots: Vec<Slot>,
+    pool: rayon::ThreadPool,
+    /// Per colour `Σ_d ‖T_d‖²`.
+    target_energy: [f64; 3],
+}
+
+/// One colour's buffers.
+#[derive(Debug)]
+struct ColourState {
+    /// `F{u}` of this iteration.
+    spectrum: Vec<Complex32>,
+    /// `Σ_d conj(m_d)·F{V_d}`, then the gradient's spectrum.
+    adjoint: Vec<Complex32>,
+    /// `u`, then the gradient `g` in space.
+    field: Vec<Complex32>,
+    scratch: Vec<Complex32>,
+    /// Adam's running means of the gradient and its square.
+    mean: Vec<f32>,
+    square: Vec<f32>,
+    /// `(A, B)` of this iteration.
+    sums: (f64, f64),
+}
+
+/// One (colour, plane) term's buffers.
+#[derive(Debug)]
+struct Slot {
+    work: Vec<Complex32>,
+    field: Vec<Complex32>,
+    scratch: Vec<Complex32>,
+    sums: (f64, f64),
+}
+
+impl Refiner {
+    /// Plans a refinement of `[H, W]` patterns (the target's size) for the display `setup` with its SLM
+    /// `offset_m` metres from the midpoint plane (`docs/CONVENTIONS.md` §4), the loss at the target's planes,
+    /// on `threads` threads (≥ 1).
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for bad `options` (naming the field), a padded propagation
+    /// (`options.pad`: the refinement runs on the real-time pipeline's unpadded grid), a non-finite offset,
+    /// zero threads, an invalid setup; those of building the plans.
+    pub fn new(
+        setup: &OpticalSetup,
+        propagation: PropagationOptions,
+        offset_m: f64,
+        target: FocalTarget,
+        options: RefineOptions,
+        threads: usize,
+    ) -> Result<Self> {
+        options.validate()?;
+        setup.validate()?;
+        if propagation.pad {
+            return Err(invalid(
+                "pad",
+                "the refinement runs on the unpadded grid of the real-time pipeline (the Fourier filter and \
+                 the offset propagation as one multiplier); padded propagation is not supported",
+            ));
+        }
+        if !offset_m.is_finite() {
+            return Err(invalid(
+                "offset_m",
+                format!("must be finite, got {offset_m}"),
+            ));
+        }
+        if threads == 0 {
+            return Err(invalid("threads", "need at least one thread"));
+        }
+        let size = target.size();
+        let (h, w) = size;
+        let plan = SpectralPlan::new(h, w, Padding::None)?;
+        let colours = (0..3)
+            .map(|c| ColourModel::new(setup, propagation, c, size, offset_m, target.depths()))
+            .collect::<Result<Vec<_>>>()?;
+        let n = h * w;
+        let zero = Complex32::new(0.0, 0.0);
+        let scratch_len = plan.fft().scratch_len();
+        let state = (0..3)
+            .map(|_| ColourState {
+                spectrum: vec![zero; n],
+                adjoint: vec![zero; n],
+                field: vec![zero; n],
+                scratch: vec![zero; scratch_len],
+                mean: vec![0.0; n],
+                square: vec![0.0; n],
+                sums: (0.0, 0.0),
+            })
+            .collect();
+        // One slot a thread, at most one a (colour, plane) term.
+        let slots = (0..threads.min(3 * target.depths().len()))
+            .map(|_| Slot {
+                work: vec![zero; n],
+                field: vec![zero; n],
+                scratch: vec![zero; scratch_len],
+                sums: (0.0, 0.0),
+            })
+            .collect();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(|i| format!("tensorholo-refine-{i}"))
+            .build()
+            .map_err(|e| HoloError::Internal(format!("refinement thread pool: {e}")))?;
+        let mut target_energy = [0.0f64; 3];
+        for (c, e) in target_energy.iter_mut().enumerate() {
+            *e = (0..target.depths().len())
+                .flat_map(|k| target.plane(k, c))
+                .map(|&t| f64::from(t) * f64::from(t))
+                .sum();
+        }
+        Ok(Self {
+            options,
+            target,
+            plan,
+            colours,
+            state,
+            slots,
+            pool,
+            target_energy,
+        })
+    }
+
+    /// The options this refiner runs.
+    pub fn options(&self) -> &RefineOptions {
+        &self.options
+    }
+
+    /// The target it aims at.
+    pub fn target(&self) -> &FocalTarget {
+        &self.target
+    }
+
+    /// Refines `phase` `[3, H, W]` (radians, R, G, B; any values) in place for [`RefineOptions::iterations`]
+    /// iterations of Adam, each from a fresh optimiser state; the result is wrapped to `[0, 2π)`.
+    /// `progress(record)` is called with the start's record and after every iteration; returning
+    /// `ControlFlow::Break(())` stops the refinement, leaving `phase` as it was handed in.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for a pattern of another size than the target's;
+    /// [`HoloError::InvalidData`] for a non-finite phase; [`HoloError::Cancelled`] when `progress` stopped
+    /// it (naming the iteration).
+    pub fn refine(
+        &mut self,
+        mut phase: ArrayViewMut3<f32>,
+        progress: &mut dyn FnMut(&IterationRecord) -> ControlFlow<()>,
+    ) -> Result<RefineReport> {
+        self.check_phase(phase.view())?;
+        let t = Instant::now();
+        let mut work = phase.as_standard_layout().into_owned();
+        let n = self.plan.height() * self.plan.width();
+        for s in &mut self.state {
+            s.mean.fill(0.0);
+            s.square.fill(0.0);
+        }
+        let iterations = self.options.iterations;
+        let mut history = Vec::with_capacity(iterations + 1);
+        for it in 0..=iterations {
+            let last = it == iterations;
+            let flat = work
+                .as_slice_mut()
+                .ok_or_else(|| HoloError::Internal("refinement phase not contiguous".into()))?;
+            self.evaluate(flat, !last);
+            let record = self.record(it);
+            history.push(record);
+            if progress(&record).is_break() {
+                return Err(HoloError::Cancelled(format!(
+                    "refinement stopped by its caller after {it} of {iterations} iterations; the pattern \
+                     is unchanged"
+                )));
+            }
+            if !last {
+                self.step(flat, it + 1, n);
+            }
+        }
+        work.mapv_inplace(|p| {
+            let w = p.rem_euclid(TAU);
+            if w >= TAU {
+                0.0
+            } else {
+                w
+            }
+        });
+        phase.assign(&work);
+        Ok(RefineReport {
+            history,
+            iterations_s: t.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// The loss record of `phase` `[3, H, W]` against the target without changing it (iteration 0).
+    ///
+    /// Errors: as [`Refiner::refine`].
+    pub fn score(&mut self, phase: ArrayView3<f32>) -> Result<IterationRecord> {
+        self.check_phase(phase)?;
+        let mut work = phase.as_standard_layout().into_owned();
+        let flat = work
+            .as_slice_mut()
+            .ok_or_else(|| HoloError::Internal("refinement phase not contiguous".into()))?;
+        self.evaluate(flat, false);
+        Ok(self.record(0))
+    }
+
+    /// The loss of `phase` and its gradient `∂L/∂φ` `[3, H, W]` (for tests against finite differences).
+    #[cfg(test)]
+    pub(crate) fn loss_and_gradient(&mut self, phase: ArrayView3<f32>) -> (f64, Array3<f32>) {
+        let mut work = phase.as_standard_layout().into_owned();
+        let flat = work.as_slice_mut().unwrap();
+        self.evaluate(flat, true);
+        let loss = self.record(0).loss;
+        let (h, w) = (self.plan.height(), self.plan.width());
+        let mut grad = Array3::zeros((3, h, w));
+        for (c, g) in grad.outer_iter_mut().enumerate() {
+            let mut g = g;
+            gradient_of(
+                &self.state[c].field,
+                &flat[c * h * w..(c + 1) * h * w],
+                g.as_slice_mut().unwrap(),
+            );
+        }
+        (loss, grad)
+    }
+
+    fn check_phase(&self, phase: ArrayView3<f32>) -> Result<()> {
+        let (h, w) = check_colour_stack("refinement start pattern", &phase)?;
+        if (h, w) != self.target.size() {
+            return Err(HoloError::ShapeMismatch {
+                what: "refinement start pattern vs its target".into(),
+                expected: vec![3, self.plan.height(), self.plan.width()],
+                got: vec![3, h, w],
+            });
+        }
+        if let Some(v) = phase.iter().find(|v| !v.is_finite()) {
+            return Err(HoloError::InvalidData(format!(
+                "the refinement's start pattern holds {v}: phases are finite radians"
+            )));
+        }
+        Ok(())
+    }
+
+    /// This iteration's loss sums of `phase` (flat `[3, H, W]`), and with `gradient` each colour's gradient
+    /// `g` (in `state[c].field`, space).
+    fn evaluate(&mut self, phase: &[f32], gradient: bool) {
+        let Self {
+            plan,
+            colours,
+            state,
+            slots,
+            pool,
+            target,
+            ..
+        } = self;
+        let fft = plan.fft();
+        let n = plan.height() * plan.width();
+        let planes = target.depths().len();
+        pool.install(|| {
+            // 1. F{u} per colour.
+            state.par_iter_mut().enumerate().for_each(|(c, s)| {
+                for (u, &p) in s.field.iter_mut().zip(&phase[c * n..(c + 1) * n]) {
+                    let (sin, cos) = p.sin_cos();
+                    *u = Complex32::new(cos, sin);
+                }
+                fft.forward(&mut s.field, &mut s.spectrum, &mut s.scratch);
+                s.sums = (0.0, 0.0);
+                s.adjoint.fill(Complex32::new(0.0, 0.0));
+            });
+            // 2. The (colour, plane) terms in waves of one per slot, added to their colour in (colour, plane)
+            //    order whatever the wave's size.
+            let total = 3 * planes;
+            for start in (0..total).step_by(slots.len()) {
+                let wave = start..(start + slots.len()).min(total);
+                let term = |t: usize| (t / planes, t % planes);
+                slots[..wave.len()]
+                    .par_iter_mut()
+                    .enumerate()
+                    .for_each(|(i, slot)| {
+                        let (c, d) = term(start + i);
+                        slot.sums = plane_term(
+                            fft,
+                            &colours[c].planes[d],
+                            &state[c].spectrum,
+                            target.plane(d, c),
+                            &mut slot.work,
+                            &mut slot.field,
+                            &mut slot.scratch,
+                            gradient,
+                        );
+                    });
+                for (i, slot) in slots[..wave.len()].iter().enumerate() {
+                    let s = &mut state[term(start + i).0];
+                    s.sums.0 += slot.sums.0;
+                    s.sums.1 += slot.sums.1;
+                }
+                if gradient {
+                    add_terms(state, &slots[..wave.len()], |i| term(start + i).0);
+                }
+            }
+            if !gradient {
+                return;
+            }
+            // 3. g = F⁻¹{2k²·W·F{u} − 2k·Σ_d conj(m_d)·F{V_d}} per colour.
+            state
+                .par_iter_mut()
+                .zip(colours.par_iter())
+                .for_each(|(s, model)| {
+                    let k = least_squares_scale(s.sums) as f32;
+                    let (kk, k2) = (2.0 * k * k, 2.0 * k);
+                    for ((a, &x), &w) in s.adjoint.iter_mut().zip(&s.spectrum).zip(&model.weight) {
+                        *a = x * (kk * w) - *a * k2;
+                    }
+                    fft.inverse(&mut s.adjoint, &mut s.field, &mut s.scratch);
+                });
+        });
+    }
+
+    /// Adam's update of `phase` (flat `[3, H, W]`) from each colour's gradient, step `t` (1-based).
+    fn step(&mut self, phase: &mut [f32], t: usize, n: usize) {
+        let o = self.options;
+        let (c1, c2) = (1.0 - o.beta1.powi(t as i32), 1.0 - o.beta2.powi(t as i32));
+        let state = &mut self.state;
+        self.pool.install(|| {
+            phase
+                .par_chunks_mut(n)
+                .zip(state.par_iter_mut())
+                .for_each(|(p, s)| {
+                    let ColourState {
+                        field,
+                        mean,
+                        square,
+                        ..
+                    } = s;
+                    for (((p, g), m), v) in p.iter_mut().zip(field.iter()).zip(mean).zip(square) {
+                        let (sin, cos) = p.sin_cos();
+                        // ∂L/∂φ = Im(g·conj(u)), u = e^{iφ}.
+                        let grad = g.im * cos - g.re * sin;
+                        *m = o.beta1 * *m + (1.0 - o.beta1) * grad;
+                        *v = o.beta2 * *v + (1.0 - o.beta2) * grad * grad;
+                        *p -= o.step_rad * (*m / c1) / ((*v / c2).sqrt() + o.epsilon);
+                    }
+                });
+        });
+    }
+
+    /// The record of this iteration's sums.
+    fn record(&self, iteration: usize) -> IterationRecord {
+        let loss: f64 = self
+            .state
+            .iter()
+            .zip(&self.target_energy)
+            .map(|(s, &e)| {
+                let (a, b) = s.sums;
+                if b > 0.0 {
+                    (e - a * a / b).max(0.0)
+                } else {
+                    e
+                }
+            })
+            .sum();
+        let count = 3 * self.target.depths().len() * self.plan.height() * self.plan.width();
+        let mse = loss / count as f64;
+        IterationRecord {
+            iteration,
+            loss,
+            psnr_db: if mse > 0.0 {
+                -10.0 * mse.log10()
+            } else {
+                f64::INFINITY
+            },
+        }
+    }
+}
+
+/// Adds a wave's slot terms (`colour_of(i)`: slot `i`'s colour) to their colours' adjoint spectra, each
+/// colour's terms in slot order (chunks of the spectrum in parallel: the same sum, in the same order, for
+/// every element).
+fn add_terms(state: &mut [ColourState], slots: &[Slot], colour_of: impl Fn(usize) -> usize + Sync) {
+    const CHUNK: usize = 1 << 14;
+    for (c, s) in state.iter_mut().enumerate() {
+        if !(0..slots.len()).any(|i| colour_of(i) == c) {
+            continue;
+        }
+        s.adjoint
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(k, out)| {
+                for (i, slot) in slots.iter().enumerate() {
+                    if colour_of(i) != c {
+                        continue;
+                    }
+                    for (o, v) in out.iter_mut().zip(&slot.work[k * CHUNK..]) {
+                        *o += v;
+                    }
+                }
+            });
+    }
+}
+
+/// `k = A/B` (0 for a field that shows nothing).
+fn least_squares_scale((a, b): (f64, f64)) -> f64 {
+    if b > 0.0 {
+        a / b
+    } else {
+        0.0
+    }
+}
+
+/// `∂L/∂φ = Im(g·conj(e^{iφ}))` into `out`.
+#[cfg(test)]
+fn gradient_of(g: &[Complex32], phase: &[f32], out: &mut [f32]) {
+    for ((o, g), p) in out.iter_mut().zip(g).zip(phase) {
+        let (sin, cos) = p.sin_cos();
+        *o = g.im * cos - g.re * sin;
+    }
+}
+
+/// The phase in radians each 8-bit code of `codes` `[3, H, W]` displays on the SLM: through `calibration`'s
+/// look-up tables where one is given ([`crate::slm::PhaseLut::displayed_phases`]), the linear table's
+/// `2π·code/256` otherwise. What a refinement warm-started from an SLM frame starts from: the pattern the
+/// display shows, quantisation included.
+///
+/// Errors: [`HoloError::ShapeMismatch`] for codes that are not `[3, H, W]` or a calibration of another SLM
+/// size.
+pub fn displayed_phase(
+    codes: ArrayView3<u8>,
+    calibration: Option<&DisplayCalibration>,
+) -> Result<Array3<f32>> {
+    let (h, w) = check_colour_stack("SLM codes", &codes)?;
+    let codes = codes.as_standard_layout();
+    let mut out = Array3::<f32>::zeros((3, h, w));
+    let linear = PhaseLut::linear();
+    for c in 0..3 {
+        let lut = lut_of(calibration, c, &linear);
+        let k = plane(codes.as_slice(), c, h * w)?;
+        let o = &mut out
+            .as_slice_mut()
+            .ok_or_else(|| HoloError::Internal("fresh array".into()))?[c * h * w..(c + 1) * h * w];
+        lut.displayed_phases(h, w, k, o)?;
+    }
+    Ok(out)
+}
+
+/// The 8-bit codes `[3, H, W]` of a phase pattern `phase` (radians, any values: wrapped first), through
+/// `calibration`'s look-up tables where one is given ([`crate::slm::PhaseLut::apply`]), the linear table
+/// otherwise: what the SLM is sent after a refinement.
+///
+/// Errors: [`HoloError::ShapeMismatch`] as [`displayed_phase`]; [`HoloError::InvalidData`] for a non-finite
+/// phase.
+pub fn codes_of(
+    phase: ArrayView3<f32>,
+    calibration: Option<&DisplayCalibration>,
+) -> Result<Array3<u8>> {
+    let (h, w) = check_colour_stack("SLM phase pattern", &phase)?;
+    if phase.iter().any(|v| !v.is_finite()) {
+        return Err(HoloError::InvalidData(
+            "the SLM phase pattern holds NaN or infinite values".into(),
+        ));
+    }
+    let phase = phase.as_standard_layout();
+    let mut out = Array3::<u8>::zeros((3, h, w));
+    let linear = PhaseLut::linear();
+    for c in 0..3 {
+        let lut = lut_of(calibration, c, &linear);
+        let p = plane(phase.as_slice(), c, h * w)?;
+        let o = &mut out
+            .as_slice_mut()
+            .ok_or_else(|| HoloError::Internal("fresh array".into()))?[c * h * w..(c + 1) * h * w];
+        lut.apply(h, w, p, o)?;
+    }
+    Ok(out)
+}
+
+/// The PSNR in dB of what the SLM pattern `phase` `[3, H, W]` (radians) shows against `target`'s focal
+/// stack, each colour at its least-squares scale (the refinement's loss as a score,
+/// [`IterationRecord::psnr_db`]), for the display `setup` with its SLM `offset_m` metres from the midpoint
+/// plane. Scoring a refinement at [`held_out_depths`] measures it where its loss never looked.
+///
+/// Errors: as [`Refiner::new`] and [`Refiner::score`].
+pub fn focal_psnr(
+    phase: ArrayView3<f32>,
+    setup: &OpticalSetup,
+    propagation: PropagationOptions,
+    offset_m: f64,
+    target: FocalTarget,
+) -> Result<f64> {
+    let options = RefineOptions {
+        iterations: 1,
+        planes: target.depths().len().clamp(PLANES_RANGE.0, PLANES_RANGE.1),
+        ..Default::default()
+    };
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    Refiner::new(setup, propagation, offset_m, target, options, threads)?
+        .score(phase)
+        .map(|r| r.psnr_db)
+}
+
+/// Colour `c`'s look-up table: the calibration's, or `linear`.
+fn lut_of<'a>(
+    calibration: Option<&'a DisplayCalibration>,
+    c: usize,
+    linear: &'a PhaseLut,
+) -> &'a PhaseLut {
+    calibration
+        .and_then(|cal| cal.colours.get(c))
+        .map_or(linear, |col| &col.lut)
+}
+
+/// Plane `c` (`n` values) of a contiguous `[3, H, W]` array.
+fn plane<T>(all: Option<&[T]>, c: usize, n: usize) -> Result<&[T]> {
+    all.map(|a| &a[c * n..(c + 1) * n])
+        .ok_or_else(|| HoloError::Internal("standard-layout array not contiguous".into()))
+}

@@ -1,0 +1,142 @@
+//! The refinement's image formation model and its analytic gradient (`docs/REFINE.md`).
+//!
+//! For one colour with SLM phase `φ` `[H, W]` (radians), `u = e^{iφ}`, the field the viewer sees focused at
+//! loss plane `d` is `U_d = A_d u = F⁻¹{m_d · F{u}}` with `m_d = M · H(z_d − s)`: the Fourier filter's
+//! aperture (Eq. 8–9) times the carrier-free transfer function from the SLM plane at offset `s` to the focal
+//! plane `z_d` (Eq. 2, Eq. 10). The loss is `L = Σ_d ‖k·|U_d| − T_d‖²` with the least-squares scale
+//! `k = Σ_d⟨|U_d|, T_d⟩ / Σ_d ‖U_d‖²`, i.e. `L = Σ_d ‖T_d‖² − A²/B` with `A = Σ_d⟨|U_d|, T_d⟩`,
+//! `B = Σ_d ‖U_d‖²`.
+//!
+//! Its gradient with respect to `u` (as `∂L/∂Re u + i·∂L/∂Im u`; `k` at its optimum contributes nothing,
+//! ∂L/∂k = 0) is `g = Σ_d A_d^H (2k²·U_d − 2k·T_d·U_d/|U_d|)`, and `A_d^H = F⁻¹{conj(m_d) · F{·}}`, so
+//! `g = F⁻¹{2k²·W·F{u} − 2k·Σ_d conj(m_d)·F{V_d}}` with `W = N·Σ_d |m_d|²` (real, made once; `N` the
+//! grid's size, the FFT's normalisation being folded into `m_d`) and `V_d = T_d·U_d/|U_d|` (0 where
+//! `U_d = 0`). Then `∂L/∂φ = Im(g·conj(u))`. Per colour and iteration: one forward FFT of `u`, per plane one
+//! inverse (`U_d`) and one forward (`V_d`), and one inverse for `g`: `2D + 2` FFTs.
+
+use num_complex::Complex32;
+use tensorholo_kernels::Isa;
+
+use crate::error::Result;
+use crate::optics::fft::Fft2;
+use crate::optics::filter::aperture_fn;
+use crate::optics::{Carrier, EvenMultiplier, OpticalSetup, PropagationOptions, Propagator};
+
+/// One colour's fixed parts of the model: its loss planes' multipliers `m_d` and the weight `W`.
+#[derive(Debug)]
+pub(super) struct ColourModel {
+    /// `m_d = M · H(z_d − s)` per loss plane, in the compact even form.
+    pub(super) planes: Vec<EvenMultiplier>,
+    /// `W = N·Σ_d |m_d|²`, the plan's spectrum layout.
+    pub(super) weight: Vec<f32>,
+}
+
+impl ColourModel {
+    /// The model of colour `colour` of `setup` on an unpadded `[height, width]` grid for an SLM `offset_m`
+    /// metres from the midpoint plane and loss planes at normalised `depths`.
+    ///
+    /// Errors: as [`Propagator::new`] and [`Propagator::even_transfer_function`].
+    pub(super) fn new(
+        setup: &OpticalSetup,
+        options: PropagationOptions,
+        colour: usize,
+        (height, width): (usize, usize),
+        offset_m: f64,
+        depths: &[f64],
+    ) -> Result<Self> {
+        let prop = Propagator::new(
+            height,
+            width,
+            setup.pixel_pitch_m,
+            setup.wavelengths_m[colour],
+            options,
+        )?;
+        let plan = prop.plan();
+        let aperture = aperture_fn(plan);
+        let planes = depths
+            .iter()
+            .map(|&d| {
+                prop.even_transfer_function_masked(
+                    setup.depth_to_z(d) - offset_m,
+                    Carrier::Remove,
+                    &aperture,
+                )
+            })
+            .collect::<Result<Vec<_>>>()?;
+        // W from the full multipliers: apply each plane's m_d to a spectrum of ones.
+        let n = plan.spectrum_len();
+        let (rows, cols) = (plan.computational_shape().1, plan.computational_shape().0);
+        let isa = plan.fft().isa();
+        let mut weight = vec![0.0f32; n];
+        let mut row = vec![Complex32::new(0.0, 0.0); cols];
+        for m in &planes {
+            for r in 0..rows {
+                row.fill(Complex32::new(1.0, 0.0));
+                m.multiply_row(r, &mut row, isa);
+                for (w, v) in weight[r * cols..(r + 1) * cols].iter_mut().zip(&row) {
+                    *w += v.norm_sqr() * n as f32;
+                }
+            }
+        }
+        Ok(Self { planes, weight })
+    }
+}
+
+/// `spectrum ← m · spectrum` (`conjugate`: `conj(m) · spectrum`, computed as `conj(m · conj(spectrum))`),
+/// row by row on the plan's layout (`cols` values a row).
+pub(super) fn multiply(
+    m: &EvenMultiplier,
+    spectrum: &mut [Complex32],
+    cols: usize,
+    conjugate: bool,
+    isa: Isa,
+) {
+    for (r, row) in spectrum.chunks_exact_mut(cols).enumerate() {
+        if conjugate {
+            row.iter_mut().for_each(|v| *v = v.conj());
+        }
+        m.multiply_row(r, row, isa);
+        if conjugate {
+            row.iter_mut().for_each(|v| *v = v.conj());
+        }
+    }
+}
+
+/// One (colour, plane) term of an iteration, in a slot's buffers: from the colour's spectrum `spectrum`
+/// (`F{u}`), `field ← U_d`; the sums `(⟨|U_d|, T_d⟩, ‖U_d‖²)` (f64, pixel order); and, with `adjoint`,
+/// `work ← conj(m_d)·F{V_d}`. `work` and `field` are the slot's; `scratch` its FFT scratch.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn plane_term(
+    fft: &Fft2,
+    m: &EvenMultiplier,
+    spectrum: &[Complex32],
+    target: &[f32],
+    work: &mut [Complex32],
+    field: &mut [Complex32],
+    scratch: &mut [Complex32],
+    adjoint: bool,
+) -> (f64, f64) {
+    let cols = fft.height();
+    let isa = fft.isa();
+    work.copy_from_slice(spectrum);
+    multiply(m, work, cols, false, isa);
+    fft.inverse(work, field, scratch);
+    let (mut a, mut b) = (0.0f64, 0.0f64);
+    for (u, &t) in field.iter_mut().zip(target) {
+        let n = u.norm();
+        a += f64::from(n) * f64::from(t);
+        b += f64::from(n) * f64::from(n);
+        if adjoint {
+            *u = if n > 0.0 {
+                *u * (t / n)
+            } else {
+                Complex32::new(0.0, 0.0)
+            };
+        }
+    }
+    if adjoint {
+        fft.forward(field, work, scratch);
+        multiply(m, work, cols, true, isa);
+    }
+    (a, b)
+}

@@ -1,0 +1,326 @@
+//! The refinement's model, gradient, optimiser and refusals.
+
+use std::ops::ControlFlow;
+
+use ndarray::Array3;
+use num_complex::Complex32;
+
+use super::*;
+use crate::optics::focal_stack;
+
+const OFFSET_M: f64 = 2e-3;
+
+fn setup() -> OpticalSetup {
+    OpticalSetup::default()
+}
+
+/// A smooth random-ish complex midpoint hologram `[3, h, w]` (a scene-like target).
+fn midpoint(h: usize, w: usize, seed: u64) -> Array3<Complex32> {
+    let mut rng = SplitMix64::new(seed);
+    let blobs: Vec<[f64; 4]> = (0..6)
+        .map(|_| {
+            [
+                rng.next_f64() * h as f64,
+                rng.next_f64() * w as f64,
+                2.0 + 4.0 * rng.next_f64(),
+                0.3 + 0.7 * rng.next_f64(),
+            ]
+        })
+        .collect();
+    Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+        let a: f64 = blobs
+            .iter()
+            .map(|&[by, bx, r, v]| {
+                let d2 = (y as f64 - by).powi(2) + (x as f64 - bx).powi(2);
+                v * (-d2 / (2.0 * r * r)).exp() * (1.0 + 0.2 * c as f64)
+            })
+            .sum();
+        Complex32::from_polar(a as f32, ((x * 7 + y * 3 + c) % 11) as f32 * 0.3)
+    })
+}
+
+fn target(h: usize, w: usize, depths: &[f64]) -> FocalTarget {
+    FocalTarget::from_midpoint(
+        midpoint(h, w, 5).view(),
+        &setup(),
+        Default::default(),
+        depths,
+    )
+    .unwrap()
+}
+
+fn random_phase(h: usize, w: usize, seed: u64) -> Array3<f32> {
+    initial_phase(RefineStart::Random { seed }, h, w).unwrap()
+}
+
+fn refiner(target: FocalTarget, options: RefineOptions, threads: usize) -> Refiner {
+    Refiner::new(
+        &setup(),
+        Default::default(),
+        OFFSET_M,
+        target,
+        options,
+        threads,
+    )
+    .unwrap()
+}
+
+fn never_stop(_: &IterationRecord) -> ControlFlow<()> {
+    ControlFlow::Continue(())
+}
+
+/// The loss's model is the display's: the focal stack of the pattern itself (through the Fourier filter,
+/// from the SLM plane, `optics::focal_stack` with its aperture) as target gives a loss of ~0, and two
+/// different patterns' stacks do not.
+#[test]
+fn a_patterns_own_focal_stack_is_its_loss_minimum() {
+    let (h, w) = (24, 32);
+    let depths = loss_depths(3).unwrap();
+    let phase = random_phase(h, w, 1);
+    let field = phase.mapv(|p| Complex32::from_polar(1.0, p));
+    let own = focal_stack(
+        field.view(),
+        &setup(),
+        OFFSET_M,
+        &depths,
+        Default::default(),
+        true,
+    )
+    .unwrap();
+    // Scaled by 0.3: the least-squares scale absorbs it.
+    let own = own.into_iter().map(|a| a * 0.3).collect();
+    let mut r = refiner(
+        FocalTarget::from_stack(depths.clone(), own).unwrap(),
+        RefineOptions::default(),
+        2,
+    );
+    let same = r.score(phase.view()).unwrap();
+    assert!(same.psnr_db > 80.0, "{same:?}");
+    let other = r.score(random_phase(h, w, 2).view()).unwrap();
+    assert!(other.psnr_db < 40.0, "{other:?}");
+    let (_, grad) = r.loss_and_gradient(phase.view());
+    let (_, grad_other) = r.loss_and_gradient(random_phase(h, w, 2).view());
+    let max = |g: &Array3<f32>| g.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    assert!(
+        max(&grad) < 1e-3 * max(&grad_other),
+        "{} vs {}",
+        max(&grad),
+        max(&grad_other)
+    );
+}
+
+/// The analytic gradient against central finite differences of the loss, at pixels of every colour.
+#[test]
+fn the_analytic_gradient_matches_finite_differences() {
+    let (h, w) = (16, 20);
+    let t = target(h, w, &loss_depths(3).unwrap());
+    let mut r = refiner(t, RefineOptions::default(), 1);
+    let phase = random_phase(h, w, 3);
+    let (_, grad) = r.loss_and_gradient(phase.view());
+    let scale = grad.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    let mut rng = SplitMix64::new(9);
+    let step = 2e-3f32;
+    let mut checked = 0;
+    for _ in 0..12 {
+        let c = rng.below(0, 3);
+        let y = rng.below(0, h);
+        let x = rng.below(0, w);
+        let mut plus = phase.clone();
+        plus[[c, y, x]] += step;
+        let mut minus = phase.clone();
+        minus[[c, y, x]] -= step;
+        let lp = r.score(plus.view()).unwrap().loss;
+        let lm = r.score(minus.view()).unwrap().loss;
+        let fd = (lp - lm) / (2.0 * f64::from(step));
+        let an = f64::from(grad[[c, y, x]]);
+        assert!(
+            (fd - an).abs() <= 0.03 * f64::from(scale),
+            "pixel ({c}, {y}, {x}): finite difference {fd}, analytic {an} (largest |gradient| {scale})"
+        );
+        checked += 1;
+    }
+    assert_eq!(checked, 12);
+    // Not a gradient of zeros: the check above compares something.
+    assert!(scale > 0.0);
+}
+
+/// Adam lowers the loss at every iteration on a small scene, from a random and from a zero start, and the
+/// history has the start and every iteration.
+#[test]
+fn the_loss_falls() {
+    let (h, w) = (32, 32);
+    let t = target(h, w, &loss_depths(5).unwrap());
+    let options = RefineOptions {
+        iterations: 20,
+        planes: 5,
+        ..Default::default()
+    };
+    let mut r = refiner(t, options, 2);
+    for mut phase in [random_phase(h, w, 4), Array3::zeros((3, h, w))] {
+        let report = r.refine(phase.view_mut(), &mut never_stop).unwrap();
+        assert_eq!(report.history.len(), 21);
+        let first = report.history[0].loss;
+        let last = report.history[20].loss;
+        assert!(last < 0.7 * first, "{first} → {last}");
+        assert!(phase.iter().all(|p| (0.0..TAU).contains(p)));
+    }
+}
+
+/// The same bits on 1 and 3 threads (every sum in a fixed order), and run after run.
+#[test]
+fn the_same_bits_whatever_the_threads() {
+    let (h, w) = (20, 28);
+    let depths = loss_depths(4).unwrap();
+    let options = RefineOptions {
+        iterations: 3,
+        planes: 4,
+        ..Default::default()
+    };
+    let start = random_phase(h, w, 6);
+    let run = |threads| {
+        let mut r = refiner(target(h, w, &depths), options, threads);
+        let mut p = start.clone();
+        let report = r.refine(p.view_mut(), &mut never_stop).unwrap();
+        (p, report.history)
+    };
+    let (a, ha) = run(1);
+    let (b, hb) = run(3);
+    let (c, hc) = run(3);
+    assert_eq!(a, b);
+    assert_eq!(b, c);
+    assert_eq!(ha, hb);
+    assert_eq!(hb, hc);
+    assert_ne!(a, start.mapv(|p| p.rem_euclid(TAU)));
+}
+
+#[test]
+fn bad_settings_are_refused_naming_them() {
+    let t = || target(8, 8, &loss_depths(2).unwrap());
+    let bad = [
+        (
+            RefineOptions {
+                iterations: 0,
+                ..Default::default()
+            },
+            "iterations",
+        ),
+        (
+            RefineOptions {
+                iterations: MAX_ITERATIONS + 1,
+                ..Default::default()
+            },
+            "iterations",
+        ),
+        (
+            RefineOptions {
+                step_rad: f32::NAN,
+                ..Default::default()
+            },
+            "step_rad",
+        ),
+        (
+            RefineOptions {
+                step_rad: -0.1,
+                ..Default::default()
+            },
+            "step_rad",
+        ),
+        (
+            RefineOptions {
+                step_rad: f32::INFINITY,
+                ..Default::default()
+            },
+            "step_rad",
+        ),
+        (
+            RefineOptions {
+                beta2: 1.0,
+                ..Default::default()
+            },
+            "beta2",
+        ),
+        (
+            RefineOptions {
+                planes: 0,
+                ..Default::default()
+            },
+            "planes",
+        ),
+    ];
+    for (options, name) in bad {
+        let e = Refiner::new(&setup(), Default::default(), OFFSET_M, t(), options, 1).unwrap_err();
+        assert!(
+            matches!(&e, HoloError::InvalidParameter { name: n, .. } if *n == name),
+            "{name}: {e}"
+        );
+    }
+    let padded = PropagationOptions {
+        pad: true,
+        ..Default::default()
+    };
+    let e = Refiner::new(&setup(), padded, OFFSET_M, t(), Default::default(), 1).unwrap_err();
+    assert!(e.to_string().contains("pad"), "{e}");
+    let e = Refiner::new(
+        &setup(),
+        Default::default(),
+        OFFSET_M,
+        t(),
+        Default::default(),
+        0,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("threads"), "{e}");
+}
+
+/// A start of another size or holding NaN is refused, and a cancelled run leaves the pattern as it was.
+#[test]
+fn bad_starts_and_cancellation_leave_the_pattern_unchanged() {
+    let mut r = refiner(
+        target(8, 10, &loss_depths(2).unwrap()),
+        RefineOptions::default(),
+        1,
+    );
+    let mut wrong = Array3::<f32>::zeros((3, 8, 11));
+    let e = r.refine(wrong.view_mut(), &mut never_stop).unwrap_err();
+    assert!(
+        matches!(e, HoloError::ShapeMismatch { .. }) && e.to_string().contains("target"),
+        "{e}"
+    );
+    let mut nan = Array3::<f32>::zeros((3, 8, 10));
+    nan[[2, 1, 1]] = f32::NAN;
+    let e = r.refine(nan.view_mut(), &mut never_stop).unwrap_err();
+    assert!(e.to_string().contains("NaN"), "{e}");
+    let start = random_phase(8, 10, 8);
+    let mut phase = start.clone();
+    let mut seen = Vec::new();
+    let e = r
+        .refine(phase.view_mut(), &mut |rec| {
+            seen.push(rec.iteration);
+            if rec.iteration == 2 {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        })
+        .unwrap_err();
+    assert!(matches!(e, HoloError::Cancelled(_)), "{e}");
+    assert!(e.to_string().contains("after 2 of 10"), "{e}");
+    assert_eq!(seen, vec![0, 1, 2]);
+    assert_eq!(phase, start);
+}
+
+#[test]
+fn starts_made_here() {
+    let z = initial_phase(RefineStart::Zero, 2, 3).unwrap();
+    assert!(z.iter().all(|&p| p == 0.0));
+    let a = initial_phase(RefineStart::Random { seed: 1 }, 4, 5).unwrap();
+    let b = initial_phase(RefineStart::Random { seed: 1 }, 4, 5).unwrap();
+    let c = initial_phase(RefineStart::Random { seed: 2 }, 4, 5).unwrap();
+    assert_eq!(a, b);
+    assert_ne!(a, c);
+    assert!(a.iter().all(|p| (0.0..TAU).contains(p)));
+    let spread = a.iter().fold(0.0f32, |m, &p| m.max(p)) - a.iter().fold(TAU, |m, &p| m.min(p));
+    assert!(spread > 4.0, "{spread}");
+    assert!(initial_phase(RefineStart::Cnn, 2, 2).is_err());
+    assert!(initial_phase(RefineStart::Zero, 0, 2).is_err());
+}
