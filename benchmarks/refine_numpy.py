@@ -105,7 +105,7 @@ def main():
     p.add_argument("--iterations", type=int, default=10)
     p.add_argument("--runs", type=int, default=3)
     p.add_argument("--planes", type=int, default=7)
-    p.add_argument("--step", type=float, default=0.04)
+    p.add_argument("--step", type=float, default=0.02)
     p.add_argument("--pitch-m", type=float, default=8e-6)
     p.add_argument("--volume-m", type=float, default=6e-3)
     p.add_argument("--offset-m", type=float, default=6e-3)

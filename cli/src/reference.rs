@@ -35,6 +35,9 @@ pub struct ReferenceArgs {
     offset_mm: Option<f64>,
     #[command(flatten)]
     optics: crate::args::OpticsArgs,
+    /// --refine N: refine the SM-LBM + double phase pattern against SM-LBM's own focal stack (docs/REFINE.md).
+    #[command(flatten)]
+    refine: crate::refine::RefineCoreArgs,
     /// Output folder (created if missing). Files of the same names in it are replaced; inputs never are.
     #[arg(long)]
     out: PathBuf,
@@ -81,6 +84,16 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         .unwrap_or(0.0);
     if !offset_mm.is_finite() {
         bail!("--offset-mm must be a finite number of millimetres");
+    }
+    let refine = args.refine.options()?;
+    if refine.is_some() && args.aberration.is_some() {
+        bail!(
+            "--refine with --aberration is not supported yet: the refinement's model has no correction, and \
+             would undo it"
+        );
+    }
+    if refine.is_some() && args.optics.options().pad {
+        bail!("--refine runs on the unpadded grid of the real-time pipeline: leave out --pad");
     }
     let pipeline = ReferencePipeline {
         synthesis: SmLbm {
@@ -133,7 +146,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         None => pipeline.synthesis.propagation_count(&layers)?,
     };
     let bar = progress_bar(3 * per_colour as u64);
-    let hologram = match &aberration {
+    let mut hologram = match &aberration {
         Some((_, profile)) => pipeline
             .run_aberration_corrected(&layers, profile, &|done, _| bar.set_position(done))?,
         None => pipeline.run(&layers, &|done, _| bar.set_position(done))?,
@@ -145,6 +158,31 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         hologram.timings.offset_propagation_s,
         hologram.timings.encoding_s
     );
+
+    let refined = match refine {
+        Some(options) => {
+            let display = crate::refine::Display {
+                optics: setup,
+                options: args.optics.options(),
+                offset_m: offset_mm * 1e-3,
+            };
+            let r = crate::refine::refine_pattern(
+                &mut None,
+                options,
+                tensorholo::cnn::default_threads(),
+                &display,
+                None,
+                &hologram.midpoint,
+                &hologram.double_phase.phase,
+                None,
+            )?;
+            hologram.double_phase.phase = r.phase;
+            hologram.double_phase.amplitude_scale = r.amplitude_scale;
+            hologram.codes = r.codes;
+            Some((r.report, r.iterations_s))
+        }
+        None => None,
+    };
 
     let t = Instant::now();
     let depths = preview_depths(frame.depth.iter());
@@ -184,8 +222,11 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
             "lut": hologram.timings.lut_s,
             "reconstruction": reconstruction_s,
             "write": write_s,
+            "refine_target_s": refined.as_ref().map(|_| hologram.timings.synthesis_s),
+            "refine_iterations_s": refined.as_ref().map(|r| r.1),
             "total": t_all.elapsed().as_secs_f64(),
         },
+        "refine": refined.as_ref().map(|r| &r.0),
         "statistics": {
             "scene_mean_amplitude_rgb": channel_means(&frame.amplitude),
             "midpoint_mean_amplitude_rgb": channel_means(&amp),

@@ -234,6 +234,14 @@ pub struct ModelArgs {
 }
 
 impl ModelArgs {
+    /// `--threads`, or the cores the CPU reports for 0.
+    pub fn thread_count(&self) -> usize {
+        match self.threads {
+            0 => tensorholo::cnn::default_threads(),
+            n => n as usize,
+        }
+    }
+
     /// The input files (`--model`, `--prefilter-model`, `--calibration`) for the output guard
     /// ([`crate::output::guard`]).
     pub fn guard_inputs(&self) -> Vec<crate::output::Input<'_>> {
@@ -613,7 +621,7 @@ Examples:
 /// Runs `holo render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let t_all = Instant::now();
-    let refine = args.refine.options()?;
+    let refine = args.refine.options(false)?;
     // A bad display profile stops the command before anything is written; the files it names are inputs too.
     let profile_files = args.model.profile_files()?;
     let mut inputs = args.scene.guard_inputs();
@@ -717,18 +725,17 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let (mut out, heads) = session.into_last_frame();
     let heads = heads.context("no frame rendered")?;
     let refined = match refine {
-        Some(options) => Some(crate::refine::refine_frame(
-            &args.refine,
-            options,
-            &pipeline,
-            &scene,
-            &heads,
-            &mut out,
-            match args.model.threads {
-                0 => tensorholo::cnn::default_threads(),
-                n => n as usize,
-            },
-        )?),
+        Some(options) => {
+            let mut refiner = crate::refine::FrameRefiner::new(
+                &args.refine,
+                options,
+                &pipeline,
+                args.model.thread_count(),
+            )?;
+            let r = refiner.refine(&pipeline, &scene.layers(), Some(&heads), &out.codes)?;
+            let (target_s, iterations_s) = (r.target_s, r.iterations_s);
+            Some((r.apply(&mut out), target_s, iterations_s))
+        }
         None => None,
     };
     write_outputs(
@@ -752,10 +759,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 "repeats": timed,
                 "fps_median": if med.total_s > 0.0 { 1.0 / med.total_s } else { 0.0 },
             });
-            if let Some(r) = &refined {
-                report["timings_s"]["refine_target_s"] = json!(r.target_s);
-                report["timings_s"]["refine_iterations_s"] = json!(r.iterations_s);
-                report["refine"] = r.report.clone();
+            if let Some((refine, target_s, iterations_s)) = &refined {
+                report["timings_s"]["refine_target_s"] = json!(target_s);
+                report["timings_s"]["refine_iterations_s"] = json!(iterations_s);
+                report["refine"] = refine.clone();
             }
             report["frames_peak_rss_mib"] = json!(frames_peak);
         },

@@ -11,6 +11,7 @@ use serde_json::json;
 use tensorholo::io::{ensure_not_input, save_u8_png};
 use tensorholo::pipeline::Backend;
 use tensorholo::scene::{load_rgbd, DepthRange, LoadOptions, RgbdFrame};
+use tensorholo::synthesis::SceneLayer;
 use tensorholo::HoloError;
 
 /// Arguments of `holo video`.
@@ -38,6 +39,8 @@ pub struct VideoArgs {
     /// display would consume them).
     #[arg(long)]
     save_frames: bool,
+    #[command(flatten)]
+    refine: crate::refine::RefineArgs,
     /// Output folder for report.json (and frames/).
     #[arg(long)]
     out: PathBuf,
@@ -48,6 +51,9 @@ Examples:
   holo video --rgb-dir ../shared/data/redwood_livingroom_seq/color \\
       --depth-dir ../shared/data/redwood_livingroom_seq/depth --depth-encoding mm16 --size 384x512 --out out/video
       the 5-frame Redwood sequence (metric range from the first frame, kept for the whole sequence)
+  holo video ... --refine 10 --refine-init previous --out out/refined
+      each frame's SLM pattern refined 10 iterations against its SM-LBM focal stack, each frame starting
+      from the previous frame's refined pattern (docs/REFINE.md)
 
 Outputs in --out:
   report.json   per-frame timings (load+CNN, offset, pre-filter, encoding, frame period), mean FPS, and whether the
@@ -155,6 +161,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             .map(|(what, f)| crate::output::Input::file(what, f)),
     );
     crate::output::guard("--out", &args.out, &guarded)?;
+    let refine = args.refine.options(true)?;
     let encoding = args
         .depth
         .depth_encoding
@@ -231,6 +238,18 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     };
     let mut rows = Vec::new();
     let mut first_codes = None;
+    let mut refiner = match refine {
+        Some(options) => Some(crate::refine::FrameRefiner::new(
+            &args.refine,
+            options,
+            &pipeline,
+            args.model.thread_count(),
+        )?),
+        None => None,
+    };
+    // A refinement's error, to report as it is (the stream stops on it).
+    let mut refine_error = None;
+    let mut refine_s = (0.0f64, 0.0f64);
     let t_stream = Instant::now();
     let opts = options;
     // The frame whose error stops the stream, to name its files.
@@ -241,10 +260,33 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             let frame = loader(p, &opts).inspect(|_| {
                 log::debug!("loaded {} in {:.1} ms", p.0.display(), t.elapsed().as_secs_f64() * 1e3)
             });
-            (i, frame)
+            // A refinement needs the frame's points again (its SM-LBM target) after the CNN has it.
+            let kept = match (&refine, &frame) {
+                (Some(_), Ok(f)) => Some(f.clone()),
+                _ => None,
+            };
+            ((i, kept), frame)
         }),
-        |i, out| {
+        |(i, kept), out| {
             let out = out.inspect_err(|_| failed = Some(i))?;
+            let refined = match (&mut refiner, &kept) {
+                (Some(r), Some(frame)) => {
+                    match r.refine(&pipeline, &[SceneLayer::from(frame)], None, &out.codes) {
+                        Ok(refined) => {
+                            refine_s.0 += refined.target_s;
+                            refine_s.1 += refined.iterations_s;
+                            Some(refined)
+                        }
+                        Err(e) => {
+                            failed = Some(i);
+                            refine_error = Some(e);
+                            return Err(HoloError::Cancelled("the refinement failed".into()));
+                        }
+                    }
+                }
+                _ => None,
+            };
+            let codes = refined.as_ref().map_or(&out.codes, |r| &r.codes);
             let t = out.timings;
             if out.backend == Backend::Gpu {
                 log::info!(
@@ -268,10 +310,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             }
             if args.save_frames {
                 for (c, ch) in ["r", "g", "b"].iter().enumerate() {
-                    save_u8_png(
-                        &frame_file(&frames_dir, i, ch),
-                        out.codes.index_axis(Axis(0), c),
-                    )?;
+                    save_u8_png(&frame_file(&frames_dir, i, ch), codes.index_axis(Axis(0), c))?;
                 }
             }
             rows.push(json!({
@@ -280,11 +319,20 @@ pub fn run(args: &VideoArgs) -> Result<()> {
                 "depth": crate::output::path_text(&pairs[i].1),
                 "timings_s": t,
                 "backend": out.backend,
-                "amplitude_scale": out.amplitude_scale,
+                "amplitude_scale": refined.as_ref().map_or(out.amplitude_scale, |r| r.amplitude_scale),
+                "refine": refined.map(|r| r.report),
             }));
             Ok(())
         },
     );
+    if let Some(e) = refine_error {
+        let i = failed.unwrap_or(0);
+        return Err(e.context(format!(
+            "frame {i} (`{}` + `{}`)",
+            pairs[i].0.display(),
+            pairs[i].1.display()
+        )));
+    }
     let n = streamed.with_context(|| match failed {
         Some(i) => format!(
             "frame {i} (`{}` + `{}`)",
@@ -326,6 +374,8 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         "fps_steady": if mean_period > 0.0 { 1.0 / mean_period } else { 0.0 },
         "mean_period_after_first_s": mean_period,
         "stream_equals_single_frame": identical,
+        "refine_target_s": refine.map(|_| refine_s.0),
+        "refine_iterations_s": refine.map(|_| refine_s.1),
         "per_frame": rows,
         "total_s": t_all.elapsed().as_secs_f64(),
     });

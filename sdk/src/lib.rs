@@ -41,6 +41,8 @@
 //! - [`scene`]: RGB-D frames, layered depth images, depth decoders, the built-in procedural scene.
 //! - [`reference`](mod@reference): the non-learned pipeline (SM-LBM → offset → double phase → SLM codes →
 //!   previews).
+//! - [`refine`]: focal-stack refinement of an SLM pattern (Adam with the loss's analytic gradient),
+//!   warm-started from the CNN's codes, aimed at SM-LBM's focal stack (`docs/REFINE.md`).
 //! - [`metrics`]: PSNR and SSIM.
 //! - [`evaluation`]: the paper's Table 2 protocol (amplitude and focal-stack PSNR/SSIM against SM-LBM).
 //! - [`model`]: the hologram and pre-filter CNNs as files (ONNX), engine-neutral: metadata, I/O contract,

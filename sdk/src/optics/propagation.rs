@@ -111,6 +111,12 @@ impl EvenMultiplier {
         }
     }
 
+    /// Row `r`'s values in the quarter (`cols/2 + 1` of them): those of row `min(r, rows − r)`.
+    pub(crate) fn quarter_row(&self, r: usize) -> &[Complex32] {
+        let qc = self.quarter_cols();
+        &self.values[r.min(self.rows - r) * qc..][..qc]
+    }
+
     /// Bytes of the stored values.
     pub fn bytes(&self) -> usize {
         self.values.len() * std::mem::size_of::<Complex32>()

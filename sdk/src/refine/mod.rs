@@ -42,7 +42,7 @@ pub const MAX_ITERATIONS: usize = 10_000;
 pub const MAX_STEP_RAD: f32 = std::f32::consts::PI;
 
 /// What a refinement does: its iteration count, its optimiser's settings and how many focal planes the loss
-/// sees. `Default`: 10 iterations, Adam with step 0.04 rad, `β₁ = 0.9`, `β₂ = 0.999`, `ε = 1e-8`, 7 loss
+/// sees. `Default`: 10 iterations, Adam with step 0.02 rad, `β₁ = 0.9`, `β₂ = 0.999`, `ε = 1e-8`, 7 loss
 /// planes (chosen by measurement on real frames, `docs/REFINE.md`).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct RefineOptions {
@@ -58,17 +58,24 @@ pub struct RefineOptions {
     pub epsilon: f32,
     /// Loss planes ([`loss_depths`]), [`PLANES_RANGE`].
     pub planes: usize,
+    /// Evaluate the loss at the phase the SLM shows: `φ` through the look-up table to 8-bit codes and back
+    /// to the codes' displayed phases ([`Refiner::with_calibration`]; the linear table without one), the
+    /// gradient passed straight through the rounding (the straight-through estimator). The refined pattern
+    /// is then optimised as the display shows it, quantisation and the SLM's response included. `false`
+    /// optimises the continuous phase.
+    pub quantised: bool,
 }
 
 impl Default for RefineOptions {
     fn default() -> Self {
         Self {
             iterations: 10,
-            step_rad: 0.04,
+            step_rad: 0.02,
             beta1: 0.9,
             beta2: 0.999,
             epsilon: 1e-8,
             planes: 7,
+            quantised: true,
         }
     }
 }
@@ -92,7 +99,7 @@ impl RefineOptions {
             return Err(invalid(
                 "step_rad",
                 format!(
-                    "Adam step {} rad; give a finite step in (0, π] radians (default 0.04)",
+                    "Adam step {} rad; give a finite step in (0, π] radians (default 0.02)",
                     self.step_rad
                 ),
             ));
@@ -193,6 +200,8 @@ pub struct Refiner {
     pool: rayon::ThreadPool,
     /// Per colour `Σ_d ‖T_d‖²`.
     target_energy: [f64; 3],
+    /// The SLM's look-up tables (linear without a calibration).
+    luts: [PhaseLut; 3],
 }
 
 /// One colour's buffers.
@@ -202,8 +211,13 @@ struct ColourState {
     spectrum: Vec<Complex32>,
     /// `Σ_d conj(m_d)·F{V_d}`, then the gradient's spectrum.
     adjoint: Vec<Complex32>,
-    /// `u`, then the gradient `g` in space.
+    /// `u`, then (the FFT overwrites it) the gradient `g` in space.
     field: Vec<Complex32>,
+    /// `u = e^{iφ}` of this iteration (`φ` as the SLM shows it where quantised).
+    unit: Vec<Complex32>,
+    /// The codes and displayed phases of a quantised iteration.
+    codes: Vec<u8>,
+    shown: Vec<f32>,
     scratch: Vec<Complex32>,
     /// Adam's running means of the gradient and its square.
     mean: Vec<f32>,
@@ -269,6 +283,17 @@ impl Refiner {
                 spectrum: vec![zero; n],
                 adjoint: vec![zero; n],
                 field: vec![zero; n],
+                unit: vec![zero; n],
+                codes: if options.quantised {
+                    vec![0; n]
+                } else {
+                    Vec::new()
+                },
+                shown: if options.quantised {
+                    vec![0.0; n]
+                } else {
+                    Vec::new()
+                },
                 scratch: vec![zero; scratch_len],
                 mean: vec![0.0; n],
                 square: vec![0.0; n],
@@ -289,13 +314,7 @@ impl Refiner {
             .thread_name(|i| format!("tensorholo-refine-{i}"))
             .build()
             .map_err(|e| HoloError::Internal(format!("refinement thread pool: {e}")))?;
-        let mut target_energy = [0.0f64; 3];
-        for (c, e) in target_energy.iter_mut().enumerate() {
-            *e = (0..target.depths().len())
-                .flat_map(|k| target.plane(k, c))
-                .map(|&t| f64::from(t) * f64::from(t))
-                .sum();
-        }
+        let target_energy = energy(&target);
         Ok(Self {
             options,
             target,
@@ -305,7 +324,58 @@ impl Refiner {
             slots,
             pool,
             target_energy,
+            luts: [PhaseLut::linear(), PhaseLut::linear(), PhaseLut::linear()],
         })
+    }
+
+    /// The display calibration whose look-up tables a quantised refinement ([`RefineOptions::quantised`])
+    /// sends its phases through (`None`: an ideal SLM, the linear table).
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for a per-pixel calibration of another SLM size than the target's.
+    pub fn with_calibration(mut self, calibration: Option<&DisplayCalibration>) -> Result<Self> {
+        let (h, w) = self.target.size();
+        let linear = PhaseLut::linear();
+        for (c, lut) in self.luts.iter_mut().enumerate() {
+            let chosen = lut_of(calibration, c, &linear);
+            if let Some(size) = chosen.size().filter(|&s| s != (h, w)) {
+                return Err(HoloError::ShapeMismatch {
+                    what: "display calibration vs the refinement's SLM pattern".into(),
+                    expected: vec![size.0, size.1],
+                    got: vec![h, w],
+                });
+            }
+            *lut = chosen.clone();
+        }
+        Ok(self)
+    }
+
+    /// Replaces the target by `target` (e.g. the next video frame's), keeping the plans made for the old
+    /// one's size and planes.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for a target of another size; [`HoloError::InvalidParameter`]
+    /// (`depths`) for other planes. The refiner keeps its target on error.
+    pub fn set_target(&mut self, target: FocalTarget) -> Result<()> {
+        if target.size() != self.target.size() {
+            let ((h, w), (th, tw)) = (self.target.size(), target.size());
+            return Err(HoloError::ShapeMismatch {
+                what: "new refinement target vs the refiner's".into(),
+                expected: vec![3, h, w],
+                got: vec![3, th, tw],
+            });
+        }
+        if target.depths() != self.target.depths() {
+            return Err(invalid(
+                "depths",
+                format!(
+                    "the new target's planes {:?} differ from the refiner's {:?}",
+                    target.depths(),
+                    self.target.depths()
+                ),
+            ));
+        }
+        self.target_energy = energy(&target);
+        self.target = target;
+        Ok(())
     }
 
     /// The options this refiner runs.
@@ -346,7 +416,7 @@ impl Refiner {
             let flat = work
                 .as_slice_mut()
                 .ok_or_else(|| HoloError::Internal("refinement phase not contiguous".into()))?;
-            self.evaluate(flat, !last);
+            self.evaluate(flat, !last)?;
             let record = self.record(it);
             history.push(record);
             if progress(&record).is_break() {
@@ -383,7 +453,7 @@ impl Refiner {
         let flat = work
             .as_slice_mut()
             .ok_or_else(|| HoloError::Internal("refinement phase not contiguous".into()))?;
-        self.evaluate(flat, false);
+        self.evaluate(flat, false)?;
         Ok(self.record(0))
     }
 
@@ -392,17 +462,14 @@ impl Refiner {
     pub(crate) fn loss_and_gradient(&mut self, phase: ArrayView3<f32>) -> (f64, Array3<f32>) {
         let mut work = phase.as_standard_layout().into_owned();
         let flat = work.as_slice_mut().unwrap();
-        self.evaluate(flat, true);
+        self.evaluate(flat, true).unwrap();
         let loss = self.record(0).loss;
-        let (h, w) = (self.plan.height(), self.plan.width());
-        let mut grad = Array3::zeros((3, h, w));
-        for (c, g) in grad.outer_iter_mut().enumerate() {
-            let mut g = g;
-            gradient_of(
-                &self.state[c].field,
-                &flat[c * h * w..(c + 1) * h * w],
-                g.as_slice_mut().unwrap(),
-            );
+        let mut grad = Array3::zeros((3, self.plan.height(), self.plan.width()));
+        for (c, mut g) in grad.outer_iter_mut().enumerate() {
+            let s = &self.state[c];
+            for ((o, g), u) in g.iter_mut().zip(&s.field).zip(&s.unit) {
+                *o = g.im * u.re - g.re * u.im;
+            }
         }
         (loss, grad)
     }
@@ -426,7 +493,8 @@ impl Refiner {
 
     /// This iteration's loss sums of `phase` (flat `[3, H, W]`), and with `gradient` each colour's gradient
     /// `g` (in `state[c].field`, space).
-    fn evaluate(&mut self, phase: &[f32], gradient: bool) {
+    fn evaluate(&mut self, phase: &[f32], gradient: bool) -> Result<()> {
+        let quantised = self.options.quantised;
         let Self {
             plan,
             colours,
@@ -434,22 +502,30 @@ impl Refiner {
             slots,
             pool,
             target,
+            luts,
             ..
         } = self;
+        let (h, w) = (plan.height(), plan.width());
         let fft = plan.fft();
         let n = plan.height() * plan.width();
         let planes = target.depths().len();
         pool.install(|| {
             // 1. F{u} per colour.
-            state.par_iter_mut().enumerate().for_each(|(c, s)| {
-                for (u, &p) in s.field.iter_mut().zip(&phase[c * n..(c + 1) * n]) {
-                    let (sin, cos) = p.sin_cos();
-                    *u = Complex32::new(cos, sin);
+            state.par_iter_mut().enumerate().try_for_each(|(c, s)| {
+                let own = &phase[c * n..(c + 1) * n];
+                if quantised {
+                    luts[c].apply(h, w, own, &mut s.codes)?;
+                    luts[c].displayed_phases(h, w, &s.codes, &mut s.shown)?;
+                    unit_phasors(&s.shown, &mut s.unit);
+                } else {
+                    unit_phasors(own, &mut s.unit);
                 }
+                s.field.copy_from_slice(&s.unit);
                 fft.forward(&mut s.field, &mut s.spectrum, &mut s.scratch);
                 s.sums = (0.0, 0.0);
                 s.adjoint.fill(Complex32::new(0.0, 0.0));
-            });
+                Ok::<(), HoloError>(())
+            })?;
             // 2. The (colour, plane) terms in waves of one per slot, added to their colour in (colour, plane)
             //    order whatever the wave's size.
             let total = 3 * planes;
@@ -478,11 +554,13 @@ impl Refiner {
                     s.sums.1 += slot.sums.1;
                 }
                 if gradient {
-                    add_terms(state, &slots[..wave.len()], |i| term(start + i).0);
+                    add_terms(state, colours, &slots[..wave.len()], fft.height(), |i| {
+                        term(start + i)
+                    });
                 }
             }
             if !gradient {
-                return;
+                return Ok(());
             }
             // 3. g = F⁻¹{2k²·W·F{u} − 2k·Σ_d conj(m_d)·F{V_d}} per colour.
             state
@@ -496,7 +574,8 @@ impl Refiner {
                     }
                     fft.inverse(&mut s.adjoint, &mut s.field, &mut s.scratch);
                 });
-        });
+            Ok(())
+        })
     }
 
     /// Adam's update of `phase` (flat `[3, H, W]`) from each colour's gradient, step `t` (1-based).
@@ -511,14 +590,20 @@ impl Refiner {
                 .for_each(|(p, s)| {
                     let ColourState {
                         field,
+                        unit,
                         mean,
                         square,
                         ..
                     } = s;
-                    for (((p, g), m), v) in p.iter_mut().zip(field.iter()).zip(mean).zip(square) {
-                        let (sin, cos) = p.sin_cos();
+                    for ((((p, g), u), m), v) in p
+                        .iter_mut()
+                        .zip(field.iter())
+                        .zip(unit.iter())
+                        .zip(mean)
+                        .zip(square)
+                    {
                         // ∂L/∂φ = Im(g·conj(u)), u = e^{iφ}.
-                        let grad = g.im * cos - g.re * sin;
+                        let grad = g.im * u.re - g.re * u.im;
                         *m = o.beta1 * *m + (1.0 - o.beta1) * grad;
                         *v = o.beta2 * *v + (1.0 - o.beta2) * grad * grad;
                         *p -= o.step_rad * (*m / c1) / ((*v / c2).sqrt() + o.epsilon);
@@ -556,29 +641,59 @@ impl Refiner {
     }
 }
 
-/// Adds a wave's slot terms (`colour_of(i)`: slot `i`'s colour) to their colours' adjoint spectra, each
-/// colour's terms in slot order (chunks of the spectrum in parallel: the same sum, in the same order, for
-/// every element).
-fn add_terms(state: &mut [ColourState], slots: &[Slot], colour_of: impl Fn(usize) -> usize + Sync) {
-    const CHUNK: usize = 1 << 14;
+/// Adds a wave's slot terms (`term_of(i)`: slot `i`'s colour and plane) to their colours' adjoint spectra,
+/// `Σ conj(m_d)·F{V_d}`, each colour's terms in slot order (rows of the spectrum, `cols` values each, in
+/// parallel: the same sum, in the same order, for every element).
+fn add_terms(
+    state: &mut [ColourState],
+    colours: &[ColourModel],
+    slots: &[Slot],
+    cols: usize,
+    term_of: impl Fn(usize) -> (usize, usize) + Sync,
+) {
     for (c, s) in state.iter_mut().enumerate() {
-        if !(0..slots.len()).any(|i| colour_of(i) == c) {
+        if !(0..slots.len()).any(|i| term_of(i).0 == c) {
             continue;
         }
         s.adjoint
-            .par_chunks_mut(CHUNK)
+            .par_chunks_mut(cols)
             .enumerate()
-            .for_each(|(k, out)| {
+            .for_each(|(r, out)| {
                 for (i, slot) in slots.iter().enumerate() {
-                    if colour_of(i) != c {
-                        continue;
-                    }
-                    for (o, v) in out.iter_mut().zip(&slot.work[k * CHUNK..]) {
-                        *o += v;
+                    let (cc, d) = term_of(i);
+                    if cc == c {
+                        model::add_conj_product(
+                            &colours[c].planes[d],
+                            r,
+                            out,
+                            &slot.work[r * cols..(r + 1) * cols],
+                        );
                     }
                 }
             });
     }
+}
+
+/// `unit ← e^{iφ}` for the phases `phase` (radians), through the kernels' branch-free sine and cosine of an
+/// angle in turns ([`tensorholo_kernels::phasor::sincos_turns`], within 1e-7 of the exact values).
+fn unit_phasors(phase: &[f32], unit: &mut [Complex32]) {
+    const TURNS: f32 = 1.0 / TAU;
+    for (u, &p) in unit.iter_mut().zip(phase) {
+        let (sin, cos) = tensorholo_kernels::phasor::sincos_turns(p * TURNS);
+        *u = Complex32::new(cos, sin);
+    }
+}
+
+/// Per colour `Σ_d ‖T_d‖²` of `target`.
+fn energy(target: &FocalTarget) -> [f64; 3] {
+    let mut out = [0.0f64; 3];
+    for (c, e) in out.iter_mut().enumerate() {
+        *e = (0..target.depths().len())
+            .flat_map(|k| target.plane(k, c))
+            .map(|&t| f64::from(t) * f64::from(t))
+            .sum();
+    }
+    out
 }
 
 /// `k = A/B` (0 for a field that shows nothing).
@@ -587,15 +702,6 @@ fn least_squares_scale((a, b): (f64, f64)) -> f64 {
         a / b
     } else {
         0.0
-    }
-}
-
-/// `∂L/∂φ = Im(g·conj(e^{iφ}))` into `out`.
-#[cfg(test)]
-fn gradient_of(g: &[Complex32], phase: &[f32], out: &mut [f32]) {
-    for ((o, g), p) in out.iter_mut().zip(g).zip(phase) {
-        let (sin, cos) = p.sin_cos();
-        *o = g.im * cos - g.re * sin;
     }
 }
 
@@ -671,6 +777,7 @@ pub fn focal_psnr(
     let options = RefineOptions {
         iterations: 1,
         planes: target.depths().len().clamp(PLANES_RANGE.0, PLANES_RANGE.1),
+        quantised: false,
         ..Default::default()
     };
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());

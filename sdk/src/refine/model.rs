@@ -15,7 +15,6 @@
 //! inverse (`U_d`) and one forward (`V_d`), and one inverse for `g`: `2D + 2` FFTs.
 
 use num_complex::Complex32;
-use tensorholo_kernels::Isa;
 
 use crate::error::Result;
 use crate::optics::fft::Fft2;
@@ -82,29 +81,38 @@ impl ColourModel {
     }
 }
 
-/// `spectrum ← m · spectrum` (`conjugate`: `conj(m) · spectrum`, computed as `conj(m · conj(spectrum))`),
-/// row by row on the plan's layout (`cols` values a row).
-pub(super) fn multiply(
+/// `acc ← acc + conj(m)·x` on row `r` of the plan's layout (`acc` and `x` that row's values), reading the even
+/// multiplier's quarter: row `r` mirrors row `rows − r`, column `c ≥ cols/2 + 1` column `cols − c`.
+pub(super) fn add_conj_product(
     m: &EvenMultiplier,
-    spectrum: &mut [Complex32],
-    cols: usize,
-    conjugate: bool,
-    isa: Isa,
+    r: usize,
+    acc: &mut [Complex32],
+    x: &[Complex32],
 ) {
-    for (r, row) in spectrum.chunks_exact_mut(cols).enumerate() {
-        if conjugate {
-            row.iter_mut().for_each(|v| *v = v.conj());
-        }
-        m.multiply_row(r, row, isa);
-        if conjugate {
-            row.iter_mut().for_each(|v| *v = v.conj());
-        }
+    let q = m.quarter_row(r);
+    let qc = q.len();
+    let (acc_low, acc_high) = acc.split_at_mut(qc);
+    let (x_low, x_high) = x.split_at(qc);
+    for ((a, v), m) in acc_low.iter_mut().zip(x_low).zip(q) {
+        *a += m.conj() * v;
+    }
+    for ((a, v), m) in acc_high
+        .iter_mut()
+        .zip(x_high)
+        .zip(q[1..=x_high.len()].iter().rev())
+    {
+        *a += m.conj() * v;
     }
 }
 
+/// Pixels a lane of the sums of [`plane_term`] takes: sixteen independent partial sums, so that the loop
+/// vectorises (a fixed order all the same: the same bits on every run).
+const LANES: usize = 16;
+
 /// One (colour, plane) term of an iteration, in a slot's buffers: from the colour's spectrum `spectrum`
-/// (`F{u}`), `field ← U_d`; the sums `(⟨|U_d|, T_d⟩, ‖U_d‖²)` (f64, pixel order); and, with `adjoint`,
-/// `work ← conj(m_d)·F{V_d}`. `work` and `field` are the slot's; `scratch` its FFT scratch.
+/// (`F{u}`), `field ← U_d`; the sums `(⟨|U_d|, T_d⟩, ‖U_d‖²)`; and, with `adjoint`, `work ← F{V_d}` (the
+/// caller adds `conj(m_d)·work` to its colour, [`add_conj_product`]). `work` and `field` are the slot's;
+/// `scratch` its FFT scratch.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn plane_term(
     fft: &Fft2,
@@ -119,24 +127,37 @@ pub(super) fn plane_term(
     let cols = fft.height();
     let isa = fft.isa();
     work.copy_from_slice(spectrum);
-    multiply(m, work, cols, false, isa);
+    for (r, row) in work.chunks_exact_mut(cols).enumerate() {
+        m.multiply_row(r, row, isa);
+    }
     fft.inverse(work, field, scratch);
     let (mut a, mut b) = (0.0f64, 0.0f64);
-    for (u, &t) in field.iter_mut().zip(target) {
-        let n = u.norm();
-        a += f64::from(n) * f64::from(t);
-        b += f64::from(n) * f64::from(n);
-        if adjoint {
-            *u = if n > 0.0 {
-                *u * (t / n)
-            } else {
-                Complex32::new(0.0, 0.0)
-            };
+    let mut fields = field.chunks_exact_mut(LANES);
+    let mut targets = target.chunks_exact(LANES);
+    for (u, t) in (&mut fields).zip(&mut targets) {
+        let (mut la, mut lb) = ([0.0f32; LANES], [0.0f32; LANES]);
+        for k in 0..LANES {
+            let (n2, tk) = (u[k].norm_sqr(), t[k]);
+            let n = n2.sqrt();
+            la[k] = n * tk;
+            lb[k] = n2;
+            // V = T·U/|U| (0 where U = 0).
+            let s = if n > 0.0 { tk / n } else { 0.0 };
+            u[k] = Complex32::new(u[k].re * s, u[k].im * s);
         }
+        a += la.iter().map(|&v| f64::from(v)).sum::<f64>();
+        b += lb.iter().map(|&v| f64::from(v)).sum::<f64>();
+    }
+    for (u, &t) in fields.into_remainder().iter_mut().zip(targets.remainder()) {
+        let n2 = u.norm_sqr();
+        let n = n2.sqrt();
+        a += f64::from(n * t);
+        b += f64::from(n2);
+        let s = if n > 0.0 { t / n } else { 0.0 };
+        *u = Complex32::new(u.re * s, u.im * s);
     }
     if adjoint {
         fft.forward(field, work, scratch);
-        multiply(m, work, cols, true, isa);
     }
     (a, b)
 }
