@@ -161,25 +161,36 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
 
     let refined = match refine {
         Some(options) => {
-            let display = crate::refine::Display {
-                optics: setup,
-                options: args.optics.options(),
-                offset_m: offset_mm * 1e-3,
-            };
-            let r = crate::refine::refine_pattern(
-                &mut None,
+            let request = tensorholo::refine::FrameRefinement {
                 options,
+                start: tensorholo::refine::RefineStart::SmLbmDpm,
+                target: tensorholo::refine::RefineTarget::SmLbm {
+                    levels: args.levels,
+                },
+            };
+            let display = tensorholo::refine::RefineDisplay {
+                optics: setup,
+                propagation: args.optics.options(),
+                offset_m: offset_mm * 1e-3,
+                encoding,
+                calibration: None,
+            };
+            let mut refiner = tensorholo::refine::FrameRefiner::new(
+                request,
+                display,
                 tensorholo::cnn::default_threads(),
-                &display,
-                None,
-                &hologram.midpoint,
-                &hologram.double_phase.phase,
-                None,
             )?;
+            let r = refiner.refine_against(
+                hologram.midpoint.view(),
+                hologram.double_phase.phase.view(),
+                None,
+                &mut crate::refine::log_progress(options.iterations),
+            )?;
+            let report = crate::refine::report(&refiner, &r);
             hologram.double_phase.phase = r.phase;
             hologram.double_phase.amplitude_scale = r.amplitude_scale;
             hologram.codes = r.codes;
-            Some((r.report, r.iterations_s))
+            Some((report, r.report.iterations_s))
         }
         None => None,
     };

@@ -621,7 +621,7 @@ Examples:
 /// Runs `holo render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let t_all = Instant::now();
-    let refine = args.refine.options(false)?;
+    let refine = args.refine.request(false)?;
     // A bad display profile stops the command before anything is written; the files it names are inputs too.
     let profile_files = args.model.profile_files()?;
     let mut inputs = args.scene.guard_inputs();
@@ -725,16 +725,20 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let (mut out, heads) = session.into_last_frame();
     let heads = heads.context("no frame rendered")?;
     let refined = match refine {
-        Some(options) => {
-            let mut refiner = crate::refine::FrameRefiner::new(
-                &args.refine,
-                options,
-                &pipeline,
-                args.model.thread_count(),
+        Some(request) => {
+            let mut refiner =
+                crate::refine::frame_refiner(request, &pipeline, args.model.thread_count())?;
+            let midpoint = heads.to_field()?;
+            let r = refiner.refine(
+                &scene.layers(),
+                Some(midpoint.view()),
+                out.codes.view(),
+                &mut crate::refine::log_progress(request.options.iterations),
             )?;
-            let r = refiner.refine(&pipeline, &scene.layers(), Some(&heads), &out.codes)?;
-            let (target_s, iterations_s) = (r.target_s, r.iterations_s);
-            Some((r.apply(&mut out), target_s, iterations_s))
+            let report = crate::refine::report(&refiner, &r);
+            let (target_s, iterations_s) = (r.target_s, r.report.iterations_s);
+            crate::refine::apply(r, &mut out);
+            Some((report, target_s, iterations_s))
         }
         None => None,
     };

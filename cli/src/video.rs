@@ -161,7 +161,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             .map(|(what, f)| crate::output::Input::file(what, f)),
     );
     crate::output::guard("--out", &args.out, &guarded)?;
-    let refine = args.refine.options(true)?;
+    let refine = args.refine.request(true)?;
     let encoding = args
         .depth
         .depth_encoding
@@ -239,9 +239,8 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     let mut rows = Vec::new();
     let mut first_codes = None;
     let mut refiner = match refine {
-        Some(options) => Some(crate::refine::FrameRefiner::new(
-            &args.refine,
-            options,
+        Some(request) => Some(crate::refine::frame_refiner(
+            request,
             &pipeline,
             args.model.thread_count(),
         )?),
@@ -271,22 +270,31 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             let out = out.inspect_err(|_| failed = Some(i))?;
             let refined = match (&mut refiner, &kept) {
                 (Some(r), Some(frame)) => {
-                    match r.refine(&pipeline, &[SceneLayer::from(frame)], None, &out.codes) {
+                    let iterations = r.request().options.iterations;
+                    match r.refine(
+                        &[SceneLayer::from(frame)],
+                        None,
+                        out.codes.view(),
+                        &mut crate::refine::log_progress(iterations),
+                    ) {
                         Ok(refined) => {
                             refine_s.0 += refined.target_s;
-                            refine_s.1 += refined.iterations_s;
-                            Some(refined)
+                            refine_s.1 += refined.report.iterations_s;
+                            let report = crate::refine::report(r, &refined);
+                            Some((refined, report))
                         }
                         Err(e) => {
                             failed = Some(i);
+                            // The stream's own error is what stops it; the refinement's is reported.
+                            let text = e.to_string();
                             refine_error = Some(e);
-                            return Err(HoloError::Cancelled("the refinement failed".into()));
+                            return Err(HoloError::Cancelled(text));
                         }
                     }
                 }
                 _ => None,
             };
-            let codes = refined.as_ref().map_or(&out.codes, |r| &r.codes);
+            let codes = refined.as_ref().map_or(&out.codes, |r| &r.0.codes);
             let t = out.timings;
             if out.backend == Backend::Gpu {
                 log::info!(
@@ -319,15 +327,15 @@ pub fn run(args: &VideoArgs) -> Result<()> {
                 "depth": crate::output::path_text(&pairs[i].1),
                 "timings_s": t,
                 "backend": out.backend,
-                "amplitude_scale": refined.as_ref().map_or(out.amplitude_scale, |r| r.amplitude_scale),
-                "refine": refined.map(|r| r.report),
+                "amplitude_scale": refined.as_ref().map_or(out.amplitude_scale, |r| r.0.amplitude_scale),
+                "refine": refined.map(|r| r.1),
             }));
             Ok(())
         },
     );
     if let Some(e) = refine_error {
         let i = failed.unwrap_or(0);
-        return Err(e.context(format!(
+        return Err(anyhow::Error::new(e).context(format!(
             "frame {i} (`{}` + `{}`)",
             pairs[i].0.display(),
             pairs[i].1.display()

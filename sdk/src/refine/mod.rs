@@ -14,6 +14,7 @@
 //! iteration after its first, runs colours and planes in parallel on its own threads, and gives the same
 //! bits for the same inputs whatever the thread count (every sum in a fixed order).
 
+mod frame;
 mod model;
 pub mod target;
 #[cfg(test)]
@@ -32,6 +33,10 @@ use crate::optics::{check_colour_stack, OpticalSetup, Padding, PropagationOption
 use crate::slm::{DisplayCalibration, PhaseLut};
 use crate::splitmix::SplitMix64;
 use model::{plane_term, ColourModel};
+pub use frame::{
+    FrameRefinement, FrameRefiner, HeldOutScores, RefineDisplay, RefineTarget, RefinedFrame,
+    DEFAULT_TARGET_LEVELS,
+};
 pub use target::{held_out_depths, loss_depths, FocalTarget, PLANES_RANGE};
 
 /// The most iterations one refinement runs: 10,000 (about an hour at 1080p on two cores; the issue's

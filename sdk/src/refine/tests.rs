@@ -164,6 +164,7 @@ fn the_loss_falls() {
     let options = RefineOptions {
         iterations: 20,
         planes: 5,
+        step_rad: 0.1,
         ..Default::default()
     };
     let mut r = refiner(t, options, 2);

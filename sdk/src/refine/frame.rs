@@ -1,0 +1,331 @@
+//! One frame's refinement as apps and the CLI ask for it (the photo mode): what the frame is refined against
+//! ([`RefineTarget`]), where it starts ([`RefineStart`]), and the scores at the held-out planes
+//! ([`FrameRefiner`]).
+
+use std::ops::ControlFlow;
+use std::sync::Arc;
+use std::time::Instant;
+
+use ndarray::{Array3, ArrayView3};
+use num_complex::Complex32;
+
+use super::{
+    codes_of, displayed_phase, focal_psnr, held_out_depths, initial_phase, loss_depths,
+    FocalTarget, IterationRecord, RefineOptions, RefineReport, RefineStart, Refiner,
+};
+use crate::encoding::DoublePhaseMethod;
+use crate::error::{invalid, HoloError, Result};
+use crate::optics::{simulate_phase_only, OpticalSetup, PropagationOptions};
+use crate::reference::ReferencePipeline;
+use crate::slm::DisplayCalibration;
+use crate::synthesis::{SceneLayer, SmLbm};
+
+/// The SM-LBM planes of the default target: 512 (docs/REFINE.md: the target's cost against its levels).
+pub const DEFAULT_TARGET_LEVELS: usize = 512;
+
+/// What a frame is refined against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RefineTarget {
+    /// The SM-LBM ground truth of the frame's points (paper Eq. 1–4) with `levels` depth planes (the
+    /// default, with [`DEFAULT_TARGET_LEVELS`]).
+    SmLbm {
+        /// Depth planes, ≥ 1.
+        levels: usize,
+    },
+    /// The CNN's own midpoint hologram: no synthesis, recovers the encoding's loss and little more.
+    CnnMidpoint,
+}
+
+impl Default for RefineTarget {
+    fn default() -> Self {
+        Self::SmLbm {
+            levels: DEFAULT_TARGET_LEVELS,
+        }
+    }
+}
+
+/// One frame's refinement: the optimiser's options, the target, the start. `Default`: 10 iterations of
+/// [`RefineOptions::default`] against SM-LBM of 512 planes from the CNN's codes.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct FrameRefinement {
+    /// Iterations, step, planes.
+    pub options: RefineOptions,
+    /// What the frame is refined against.
+    pub target: RefineTarget,
+    /// Where it starts.
+    pub start: RefineStart,
+}
+
+impl Default for FrameRefinement {
+    fn default() -> Self {
+        Self {
+            options: RefineOptions::default(),
+            target: RefineTarget::default(),
+            start: RefineStart::Cnn,
+        }
+    }
+}
+
+impl FrameRefinement {
+    /// Checks the options and the target.
+    ///
+    /// Errors: as [`RefineOptions::validate`]; [`HoloError::InvalidParameter`] (`levels`) for 0 SM-LBM planes.
+    pub fn validate(&self) -> Result<()> {
+        self.options.validate()?;
+        if let RefineTarget::SmLbm { levels: 0 } = self.target {
+            return Err(invalid(
+                "levels",
+                format!("0 SM-LBM planes for the refinement's target; give ≥ 1 (default {DEFAULT_TARGET_LEVELS})"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The PSNR (dB) at the planes halfway between the loss planes ([`held_out_depths`]), which the loss never
+/// saw, against the target's focal stack, each colour at its least-squares scale.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct HeldOutScores {
+    /// The held-out planes' normalised depths.
+    pub depths: Vec<f64>,
+    /// The CNN's codes, as the display shows them (where the frame had them).
+    pub cnn_codes_psnr_db: Option<f64>,
+    /// The start.
+    pub start_psnr_db: f64,
+    /// The refined continuous phase.
+    pub refined_psnr_db: f64,
+    /// The refined pattern's 8-bit codes, as the display shows them: what the SLM is sent.
+    pub refined_codes_psnr_db: f64,
+}
+
+/// A refined frame.
+#[derive(Debug, Clone)]
+pub struct RefinedFrame {
+    /// The refined phase `[3, H, W]`, radians in `[0, 2π)`.
+    pub phase: Array3<f32>,
+    /// Its 8-bit codes `[3, H, W]` through the display's look-up tables.
+    pub codes: Array3<u8>,
+    /// The least-squares scale of what the codes show at the midpoint plane against the target midpoint's
+    /// amplitude, over every colour (the frame's `amplitude_scale`: previews and the Table 2 scores compare
+    /// `scale·|displayed|` with the target).
+    pub amplitude_scale: f32,
+    /// The loss and PSNR per iteration, and the iterations' seconds.
+    pub report: RefineReport,
+    /// The scores at the held-out planes.
+    pub held_out: HeldOutScores,
+    /// Seconds to make the target (and an SM-LBM start).
+    pub target_s: f64,
+}
+
+/// The display a frame is refined for.
+#[derive(Debug, Clone)]
+pub struct RefineDisplay {
+    /// Wavelengths, pixel pitch, volume.
+    pub optics: OpticalSetup,
+    /// The angular spectrum options (unpadded).
+    pub propagation: PropagationOptions,
+    /// The SLM's distance from the midpoint plane, metres.
+    pub offset_m: f64,
+    /// The double phase method of an SM-LBM start ([`RefineStart::SmLbmDpm`]).
+    pub encoding: DoublePhaseMethod,
+    /// The SLM's look-up tables (`None`: linear).
+    pub calibration: Option<Arc<DisplayCalibration>>,
+}
+
+/// Refines a session's frames one after another: one [`Refiner`] for the frame size (made at the first
+/// frame, its target replaced for each next one) and, for [`RefineStart::Previous`], the last refined
+/// pattern.
+#[derive(Debug)]
+pub struct FrameRefiner {
+    request: FrameRefinement,
+    display: RefineDisplay,
+    threads: usize,
+    refiner: Option<Refiner>,
+    previous: Option<Array3<f32>>,
+}
+
+impl FrameRefiner {
+    /// A refiner of frames on `display` with `threads` threads.
+    ///
+    /// Errors: as [`FrameRefinement::validate`]; [`HoloError::InvalidParameter`] for zero threads or a padded
+    /// propagation (`pad`).
+    pub fn new(request: FrameRefinement, display: RefineDisplay, threads: usize) -> Result<Self> {
+        request.validate()?;
+        if threads == 0 {
+            return Err(invalid("threads", "need at least one thread"));
+        }
+        if display.propagation.pad {
+            return Err(invalid(
+                "pad",
+                "the refinement runs on the unpadded grid of the real-time pipeline",
+            ));
+        }
+        Ok(Self {
+            request,
+            display,
+            threads,
+            refiner: None,
+            previous: None,
+        })
+    }
+
+    /// The request it runs.
+    pub fn request(&self) -> &FrameRefinement {
+        &self.request
+    }
+
+    /// Refines one frame: `layers` its scene points (the SM-LBM target and start), `cnn_midpoint` the CNN's
+    /// midpoint hologram `[3, H, W]` (the [`RefineTarget::CnnMidpoint`] target), `cnn_codes` its SLM codes
+    /// `[3, H, W]` (the [`RefineStart::Cnn`] start, scored too). `progress` as [`Refiner::refine`].
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`target`) for the CNN target without `cnn_midpoint`; those of
+    /// [`SmLbm::synthesize`], [`Refiner::new`] and [`Refiner::refine`] (a cancelled run:
+    /// [`HoloError::Cancelled`]).
+    pub fn refine(
+        &mut self,
+        layers: &[SceneLayer],
+        cnn_midpoint: Option<ArrayView3<Complex32>>,
+        cnn_codes: ArrayView3<u8>,
+        progress: &mut dyn FnMut(&IterationRecord) -> ControlFlow<()>,
+    ) -> Result<RefinedFrame> {
+        let t = Instant::now();
+        let d = &self.display;
+        let needs_smlbm = matches!(self.request.target, RefineTarget::SmLbm { .. })
+            || self.request.start == RefineStart::SmLbmDpm;
+        let levels = match self.request.target {
+            RefineTarget::SmLbm { levels } => levels,
+            RefineTarget::CnnMidpoint => DEFAULT_TARGET_LEVELS,
+        };
+        let reference = if needs_smlbm {
+            let pipeline = ReferencePipeline {
+                synthesis: SmLbm {
+                    levels,
+                    setup: d.optics,
+                    options: d.propagation,
+                    silhouette_masks: true,
+                },
+                offset_m: d.offset_m,
+                encoding: d.encoding,
+            };
+            Some(pipeline.run(layers, &|_, _| {})?)
+        } else {
+            None
+        };
+        let midpoint = match (self.request.target, &reference, cnn_midpoint) {
+            (RefineTarget::SmLbm { .. }, Some(r), _) => r.midpoint.clone(),
+            (RefineTarget::CnnMidpoint, _, Some(m)) => m.to_owned(),
+            _ => {
+                return Err(invalid(
+                    "target",
+                    "the CNN's midpoint hologram is the target, and none was given",
+                ))
+            }
+        };
+        let target_s = t.elapsed().as_secs_f64();
+        let calibration = d.calibration.as_deref();
+        let cnn_phase = displayed_phase(cnn_codes, calibration)?;
+        let (_, h, w) = cnn_phase.dim();
+        let start = match (self.request.start, &reference, &self.previous) {
+            (RefineStart::Cnn, _, _) | (RefineStart::Previous, _, None) => cnn_phase.clone(),
+            (RefineStart::Previous, _, Some(previous)) => previous.clone(),
+            (RefineStart::SmLbmDpm, Some(r), _) => r.double_phase.phase.clone(),
+            (RefineStart::SmLbmDpm, None, _) => {
+                return Err(HoloError::Internal(
+                    "the SM-LBM start was not made".into(),
+                ))
+            }
+            (other, _, _) => initial_phase(other, h, w)?,
+        };
+        let mut refined = self.refine_against(
+            midpoint.view(),
+            start.view(),
+            Some(cnn_phase.view()),
+            progress,
+        )?;
+        refined.target_s = target_s;
+        if self.request.start == RefineStart::Previous {
+            self.previous = Some(refined.phase.clone());
+        }
+        Ok(refined)
+    }
+
+    /// Refines `start` `[3, H, W]` (radians) against the focal stack of the target midpoint hologram
+    /// `midpoint` `[3, H, W]` (what [`FrameRefiner::refine`] does after making both; `holo reference
+    /// --refine` hands its own SM-LBM), scoring the start, the result and `cnn` (the CNN's pattern, where
+    /// given) at the held-out planes. `target_s` is 0.
+    ///
+    /// Errors: as [`Refiner::new`], [`Refiner::set_target`] and [`Refiner::refine`].
+    pub fn refine_against(
+        &mut self,
+        midpoint: ArrayView3<Complex32>,
+        start: ArrayView3<f32>,
+        cnn: Option<ArrayView3<f32>>,
+        progress: &mut dyn FnMut(&IterationRecord) -> ControlFlow<()>,
+    ) -> Result<RefinedFrame> {
+        let d = &self.display;
+        let options = self.request.options;
+        let calibration = d.calibration.as_deref();
+        let loss_planes = loss_depths(options.planes)?;
+        let target = FocalTarget::from_midpoint(midpoint, &d.optics, d.propagation, &loss_planes)?;
+        let refiner = match &mut self.refiner {
+            Some(r) => {
+                r.set_target(target)?;
+                r
+            }
+            slot @ None => slot.insert(
+                Refiner::new(
+                    &d.optics,
+                    d.propagation,
+                    d.offset_m,
+                    target,
+                    options,
+                    self.threads,
+                )?
+                .with_calibration(calibration)?,
+            ),
+        };
+        let mut phase = start.to_owned();
+        let report = refiner.refine(phase.view_mut(), progress)?;
+        let codes = codes_of(phase.view(), calibration)?;
+        let shown = displayed_phase(codes.view(), calibration)?;
+        let held = held_out_depths(options.planes)?;
+        let score = |p: ArrayView3<f32>| -> Result<f64> {
+            let target = FocalTarget::from_midpoint(midpoint, &d.optics, d.propagation, &held)?;
+            focal_psnr(p, &d.optics, d.propagation, d.offset_m, target)
+        };
+        let held_out = HeldOutScores {
+            cnn_codes_psnr_db: cnn.map(score).transpose()?,
+            start_psnr_db: score(start)?,
+            refined_psnr_db: score(phase.view())?,
+            refined_codes_psnr_db: score(shown.view())?,
+            depths: held,
+        };
+        let amplitude_scale = least_squares_scale(shown.view(), midpoint, d)?;
+        Ok(RefinedFrame {
+            phase,
+            codes,
+            amplitude_scale,
+            report,
+            held_out,
+            target_s: 0.0,
+        })
+    }
+}
+
+/// The least-squares scale of what `shown` (radians) shows at the midpoint plane against `midpoint`'s
+/// amplitude, over every colour (1 for a pattern that shows nothing).
+fn least_squares_scale(
+    shown: ArrayView3<f32>,
+    midpoint: ArrayView3<Complex32>,
+    d: &RefineDisplay,
+) -> Result<f32> {
+    let field = simulate_phase_only(shown, &d.optics, d.offset_m, d.propagation)?;
+    let (mut a, mut b) = (0.0f64, 0.0f64);
+    for (s, t) in field.iter().zip(midpoint.iter()) {
+        let (s, t) = (f64::from(s.norm()), f64::from(t.norm()));
+        a += s * t;
+        b += s * s;
+    }
+    Ok(if b > 0.0 { (a / b) as f32 } else { 1.0 })
+}
