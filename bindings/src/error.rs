@@ -33,6 +33,12 @@ pub enum TensorholoError {
         /// What is not supported.
         message: String,
     },
+    /// The app cancelled the call (a progress callback returned `false`): nothing was produced.
+    #[error("cancelled: {message}")]
+    Cancelled {
+        /// What stopped, and after how much of it.
+        message: String,
+    },
     /// A failure inside the library (inference engine error, or a panic: a bug, please report it).
     #[error("internal error: {message}")]
     Internal {
@@ -57,9 +63,7 @@ impl From<tensorholo::HoloError> for TensorholoError {
             | E::Npy { .. }
             | E::Calibration { .. }
             | E::WouldOverwriteInput(_) => Self::InvalidInput { message },
-            // No exported call refines yet (the photo mode adds its own variant); classified here as the
-            // caller's doing.
-            E::Cancelled(_) => Self::InvalidInput { message },
+            E::Cancelled(_) => Self::Cancelled { message },
             E::ModelLoad { .. }
             | E::ModelContract { .. }
             | E::ModelMetadata { .. }

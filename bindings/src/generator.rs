@@ -9,6 +9,7 @@ use tensorholo::scene;
 use crate::config::{GeneratorConfig, Prescription};
 use crate::error::{guard, invalid, Result, TensorholoError};
 use crate::frames::{Preview, RgbdFrame, SlmPatterns, StageTimings};
+use crate::refine::{RefineProgress, RefineSettings};
 use crate::stream::{HologramStream, PatternsListener};
 
 /// What a generator runs.
@@ -156,6 +157,30 @@ impl HologramGenerator {
         guard(|| {
             let frame = frame.into_core();
             Ok(self.inner.render(&frame.view())?.into())
+        })
+    }
+
+    /// The photo mode ("best quality"): renders `frame` as [`HologramGenerator::render`], then refines its
+    /// SLM patterns with `settings` (focal-stack refinement warm-started from the CNN's codes,
+    /// docs/REFINE.md: about +4 dB at 10 iterations on real photos). `progress` hears of every iteration and
+    /// may cancel. Takes seconds on a phone: call it off the main thread.
+    ///
+    /// Errors: as [`HologramGenerator::render`]; [`TensorholoError::InvalidInput`] for settings out of range
+    /// (naming them) or a generator correcting a viewer's aberration; [`TensorholoError::Cancelled`] when
+    /// `progress` returned `false`. The generator stays usable.
+    pub fn render_refined(
+        &self,
+        frame: RgbdFrame,
+        settings: RefineSettings,
+        progress: Option<Arc<dyn RefineProgress>>,
+    ) -> Result<SlmPatterns> {
+        guard(|| {
+            let frame = frame.into_core();
+            let mut progress = crate::refine::progress_of(progress, settings.iterations);
+            Ok(self
+                .inner
+                .render_refined(&frame.view(), &settings.to_core(), &mut progress)?
+                .into())
         })
     }
 

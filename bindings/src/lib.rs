@@ -33,6 +33,7 @@ pub mod enums;
 pub mod error;
 pub mod frames;
 pub mod generator;
+pub mod refine;
 pub mod stream;
 
 // `guard` is useless without unwinding: refuse to build (any profile, or `-C panic=abort` in RUSTFLAGS)
@@ -47,6 +48,7 @@ pub use display::*;
 pub use enums::*;
 pub use frames::*;
 pub use generator::*;
+pub use refine::*;
 pub use stream::*;
 
 pub use error::{guard, TensorholoError};

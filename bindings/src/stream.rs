@@ -29,6 +29,7 @@ impl core::StreamListener for ListenerBridge {
             TensorholoError::InvalidInput { message }
             | TensorholoError::InvalidModel { message }
             | TensorholoError::Unsupported { message }
+            | TensorholoError::Cancelled { message }
             | TensorholoError::Internal { message } => {
                 *message = format!("frame {index}: {message}")
             }

@@ -77,7 +77,9 @@ pub struct RefineArgs {
 /// The flag that sets an SDK refinement setting.
 fn flag_of(e: &HoloError) -> &'static str {
     match e {
-        HoloError::InvalidParameter { name: "step_rad", .. } => "--refine-step",
+        HoloError::InvalidParameter {
+            name: "step_rad", ..
+        } => "--refine-step",
         HoloError::InvalidParameter { name: "planes", .. } => "--refine-planes",
         HoloError::InvalidParameter { name: "levels", .. } => "--refine-levels",
         _ => "--refine",

@@ -673,6 +673,18 @@ public protocol HologramGeneratorProtocol: AnyObject, Sendable {
     func renderLdi(layers: [RgbdFrame]) throws  -> SlmPatterns
     
     /**
+     * The photo mode ("best quality"): renders `frame` as [`HologramGenerator::render`], then refines its
+     * SLM patterns with `settings` (focal-stack refinement warm-started from the CNN's codes,
+     * docs/REFINE.md: about +4 dB at 10 iterations on real photos). `progress` hears of every iteration and
+     * may cancel. Takes seconds on a phone: call it off the main thread.
+     *
+     * Errors: as [`HologramGenerator::render`]; [`TensorholoError::InvalidInput`] for settings out of range
+     * (naming them) or a generator correcting a viewer's aberration; [`TensorholoError::Cancelled`] when
+     * `progress` returned `false`. The generator stays usable.
+     */
+    func renderRefined(frame: RgbdFrame, settings: RefineSettings, progress: RefineProgress?) throws  -> SlmPatterns
+    
+    /**
      * [`HologramGenerator::set_prescription`] with measured aberrations: the JSON text of a
      * `tensorholo.aberration` file, or `None` for none.
      *
@@ -892,6 +904,28 @@ open func renderLdi(layers: [RgbdFrame])throws  -> SlmPatterns  {
     uniffi_tensorholo_ffi_fn_method_hologramgenerator_render_ldi(
             self.uniffiCloneHandle(),
         FfiConverterSequenceTypeRgbdFrame.lower(layers),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * The photo mode ("best quality"): renders `frame` as [`HologramGenerator::render`], then refines its
+     * SLM patterns with `settings` (focal-stack refinement warm-started from the CNN's codes,
+     * docs/REFINE.md: about +4 dB at 10 iterations on real photos). `progress` hears of every iteration and
+     * may cancel. Takes seconds on a phone: call it off the main thread.
+     *
+     * Errors: as [`HologramGenerator::render`]; [`TensorholoError::InvalidInput`] for settings out of range
+     * (naming them) or a generator correcting a viewer's aberration; [`TensorholoError::Cancelled`] when
+     * `progress` returned `false`. The generator stays usable.
+     */
+open func renderRefined(frame: RgbdFrame, settings: RefineSettings, progress: RefineProgress?)throws  -> SlmPatterns  {
+    return try  FfiConverterTypeSlmPatterns_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_hologramgenerator_render_refined(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeRgbdFrame_lower(frame),
+        FfiConverterTypeRefineSettings_lower(settings),
+        FfiConverterOptionTypeRefineProgress.lower(progress),uniffiCallStatus
     )
 })
 }
@@ -1436,6 +1470,227 @@ public func FfiConverterTypePatternsListener_lift(_ handle: UInt64) throws -> Pa
 #endif
 public func FfiConverterTypePatternsListener_lower(_ value: PatternsListener) -> UInt64 {
     return FfiConverterTypePatternsListener.lower(value)
+}
+
+
+
+
+
+
+/**
+ * The photo mode's progress, implemented by the app: called on the calling thread with the start's score
+ * (`iteration` 0) and after every iteration. Return `false` to cancel (the call then fails with
+ * [`TensorholoError::Cancelled`](crate::TensorholoError::Cancelled)).
+ */
+public protocol RefineProgress: AnyObject, Sendable {
+    
+    /**
+     * `iteration` of `iterations` done; `psnr_db`: the pattern against the target at the loss planes.
+     */
+    func onIteration(iteration: UInt32, iterations: UInt32, psnrDb: Double)  -> Bool
+    
+}
+/**
+ * The photo mode's progress, implemented by the app: called on the calling thread with the start's score
+ * (`iteration` 0) and after every iteration. Return `false` to cancel (the call then fails with
+ * [`TensorholoError::Cancelled`](crate::TensorholoError::Cancelled)).
+ */
+open class RefineProgressImpl: RefineProgress, @unchecked Sendable {
+    fileprivate let handle: UInt64
+
+    /// Used to instantiate a [FFIObject] without an actual handle, for fakes in tests, mostly.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public struct NoHandle {
+        public init() {}
+    }
+
+    // TODO: We'd like this to be `private` but for Swifty reasons,
+    // we can't implement `FfiConverter` without making this `required` and we can't
+    // make it `required` without making it `public`.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    required public init(unsafeFromHandle handle: UInt64) {
+        self.handle = handle
+    }
+
+    // This constructor can be used to instantiate a fake object.
+    // - Parameter noHandle: Placeholder value so we can have a constructor separate from the default empty one that may be implemented for classes extending [FFIObject].
+    //
+    // - Warning:
+    //     Any object instantiated with this constructor cannot be passed to an actual Rust-backed object. Since there isn't a backing handle the FFI lower functions will crash.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public init(noHandle: NoHandle) {
+        self.handle = 0
+    }
+
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public func uniffiCloneHandle() -> UInt64 {
+        return try! rustCall { uniffi_tensorholo_ffi_fn_clone_refineprogress(self.handle, $0) }
+    }
+    // No primary constructor declared for this class.
+
+    deinit {
+        if handle == 0 {
+            // Mock objects have handle=0 don't try to free them
+            return
+        }
+
+        try! rustCall { uniffi_tensorholo_ffi_fn_free_refineprogress(handle, $0) }
+    }
+
+    
+
+    
+    /**
+     * `iteration` of `iterations` done; `psnr_db`: the pattern against the target at the loss planes.
+     */
+open func onIteration(iteration: UInt32, iterations: UInt32, psnrDb: Double) -> Bool  {
+    return try!  FfiConverterBool.lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_refineprogress_on_iteration(
+            self.uniffiCloneHandle(),
+        FfiConverterUInt32.lower(iteration),
+        FfiConverterUInt32.lower(iterations),
+        FfiConverterDouble.lower(psnrDb),uniffiCallStatus
+    )
+})
+}
+    
+
+    
+}
+
+
+
+// Put the implementation in a struct so we don't pollute the top-level namespace
+fileprivate struct UniffiCallbackInterfaceRefineProgress {
+
+    // Create the VTable using a series of closures.
+    // Swift automatically converts these into C callback functions.
+    //
+    // Store the vtable directly.
+    static let vtable: UniffiVTableCallbackInterfaceRefineProgress = UniffiVTableCallbackInterfaceRefineProgress(
+        uniffiFree: { (uniffiHandle: UInt64) -> () in
+            do {
+                try FfiConverterTypeRefineProgress.handleMap.remove(handle: uniffiHandle)
+            } catch {
+                print("Uniffi callback interface RefineProgress: handle missing in uniffiFree")
+            }
+        },
+        uniffiClone: { (uniffiHandle: UInt64) -> UInt64 in
+            do {
+                return try FfiConverterTypeRefineProgress.handleMap.clone(handle: uniffiHandle)
+            } catch {
+                fatalError("Uniffi callback interface RefineProgress: handle missing in uniffiClone")
+            }
+        },
+        onIteration: { (
+            uniffiHandle: UInt64,
+            iteration: UInt32,
+            iterations: UInt32,
+            psnrDb: Double,
+            uniffiOutReturn: UnsafeMutablePointer<Int8>,
+            uniffiCallStatus: UnsafeMutablePointer<RustCallStatus>
+        ) in
+            let makeCall = {
+                () throws -> Bool in
+                guard let uniffiObj = try? FfiConverterTypeRefineProgress.handleMap.get(handle: uniffiHandle) else {
+                    throw UniffiInternalError.unexpectedStaleHandle
+                }
+                return uniffiObj.onIteration(
+                     iteration: try FfiConverterUInt32.lift(iteration),
+                     iterations: try FfiConverterUInt32.lift(iterations),
+                     psnrDb: try FfiConverterDouble.lift(psnrDb)
+                )
+            }
+
+            
+            let writeReturn = { uniffiOutReturn.pointee = FfiConverterBool.lower($0) }
+            uniffiTraitInterfaceCall(
+                callStatus: uniffiCallStatus,
+                makeCall: makeCall,
+                writeReturn: writeReturn
+            )
+        }
+    )
+
+    // Rust stores this pointer for future callback invocations, so it must live
+    // for the process lifetime (not just for the init function call).
+    //
+    // `nonisolated(unsafe)` is needed under Swift 6 strict concurrency.
+    // This is safe because the pointee is initialized once during static init
+    // and never mutated by either side of the FFI.  Its fields are C function pointers.
+    nonisolated(unsafe) static let vtablePtr: UnsafePointer<UniffiVTableCallbackInterfaceRefineProgress> = {
+        let ptr = UnsafeMutablePointer<UniffiVTableCallbackInterfaceRefineProgress>.allocate(capacity: 1)
+        ptr.initialize(to: vtable)
+        return UnsafePointer(ptr)
+    }()
+}
+
+private func uniffiCallbackInitRefineProgress() {
+    uniffi_tensorholo_ffi_fn_init_callback_vtable_refineprogress(UniffiCallbackInterfaceRefineProgress.vtablePtr)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeRefineProgress: FfiConverter {
+    fileprivate static let handleMap = UniffiHandleMap<RefineProgress>()
+
+    typealias FfiType = UInt64
+    typealias SwiftType = RefineProgress
+
+    public static func lift(_ handle: UInt64) throws -> RefineProgress {
+        if ((handle & 1) == 0) {
+            // Rust-generated handle, construct a new class that uses the handle to implement the
+            // interface
+            return RefineProgressImpl(unsafeFromHandle: handle)
+        } else {
+            // Swift-generated handle, get the object from the handle map
+            return try handleMap.remove(handle: handle)
+        }
+    }
+
+    public static func lower(_ value: RefineProgress) -> UInt64 {
+         if let rustImpl = value as? RefineProgressImpl {
+             // Rust-implemented object.  Clone the handle and return it
+            return rustImpl.uniffiCloneHandle()
+         } else {
+            // Swift object, generate a new vtable handle and return that.
+            return handleMap.insert(obj: value)
+         }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> RefineProgress {
+        let handle: UInt64 = try readInt(&buf)
+        return try lift(handle)
+    }
+
+    public static func write(_ value: RefineProgress, into buf: inout [UInt8]) {
+        writeInt(&buf, lower(value))
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRefineProgress_lift(_ handle: UInt64) throws -> RefineProgress {
+    return try FfiConverterTypeRefineProgress.lift(handle)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRefineProgress_lower(_ value: RefineProgress) -> UInt64 {
+    return FfiConverterTypeRefineProgress.lower(value)
 }
 
 
@@ -2674,6 +2929,106 @@ public func FfiConverterTypePreview_lift(_ buf: RustBuffer) throws -> Preview {
 #endif
 public func FfiConverterTypePreview_lower(_ value: Preview) -> RustBuffer {
     return FfiConverterTypePreview.lower(value)
+}
+
+
+/**
+ * The photo mode's settings (docs/REFINE.md). The defaults are the SDK's: 10 iterations of Adam, step
+ * 0.02 rad, 7 focal planes, against SM-LBM of 512 planes, from the CNN's codes.
+ */
+public struct RefineSettings: Equatable, Hashable {
+    /**
+     * Iterations, 1 to 10000.
+     */
+    public var iterations: UInt32
+    /**
+     * Adam's step size, radians (0 < step ≤ π).
+     */
+    public var stepRad: Float
+    /**
+     * Focal planes of the loss (1 to 64).
+     */
+    public var planes: UInt32
+    /**
+     * What the frame is refined against (none: SM-LBM).
+     */
+    public var target: RefineTargetKind?
+    /**
+     * SM-LBM depth planes of the `SmLbm` target (≥ 1).
+     */
+    public var targetLevels: UInt32
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Iterations, 1 to 10000.
+         */iterations: UInt32 = UInt32(10), 
+        /**
+         * Adam's step size, radians (0 < step ≤ π).
+         */stepRad: Float = Float(0.02), 
+        /**
+         * Focal planes of the loss (1 to 64).
+         */planes: UInt32 = UInt32(7), 
+        /**
+         * What the frame is refined against (none: SM-LBM).
+         */target: RefineTargetKind? = nil, 
+        /**
+         * SM-LBM depth planes of the `SmLbm` target (≥ 1).
+         */targetLevels: UInt32 = UInt32(512)) {
+        self.iterations = iterations
+        self.stepRad = stepRad
+        self.planes = planes
+        self.target = target
+        self.targetLevels = targetLevels
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension RefineSettings: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeRefineSettings: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> RefineSettings {
+        return
+            try RefineSettings(
+                iterations: FfiConverterUInt32.read(from: &buf), 
+                stepRad: FfiConverterFloat.read(from: &buf), 
+                planes: FfiConverterUInt32.read(from: &buf), 
+                target: FfiConverterOptionTypeRefineTargetKind.read(from: &buf), 
+                targetLevels: FfiConverterUInt32.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: RefineSettings, into buf: inout [UInt8]) {
+        FfiConverterUInt32.write(value.iterations, into: &buf)
+        FfiConverterFloat.write(value.stepRad, into: &buf)
+        FfiConverterUInt32.write(value.planes, into: &buf)
+        FfiConverterOptionTypeRefineTargetKind.write(value.target, into: &buf)
+        FfiConverterUInt32.write(value.targetLevels, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRefineSettings_lift(_ buf: RustBuffer) throws -> RefineSettings {
+    return try FfiConverterTypeRefineSettings.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRefineSettings_lower(_ value: RefineSettings) -> RustBuffer {
+    return FfiConverterTypeRefineSettings.lower(value)
 }
 
 
@@ -4014,6 +4369,82 @@ public func FfiConverterTypePrefilterMode_lower(_ value: PrefilterMode) -> RustB
 
 
 /**
+ * What the photo mode refines a frame against.
+ */
+
+public enum RefineTargetKind: Equatable, Hashable {
+    
+    /**
+     * The SM-LBM ground truth of the frame (`target_levels` depth planes): the better image, at the cost of
+     * a synthesis.
+     */
+    case smLbm
+    /**
+     * The CNN's own midpoint hologram: no synthesis; recovers the encoding's loss, little more.
+     */
+    case cnnMidpoint
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension RefineTargetKind: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeRefineTargetKind: FfiConverterRustBuffer {
+    typealias SwiftType = RefineTargetKind
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> RefineTargetKind {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .smLbm
+        
+        case 2: return .cnnMidpoint
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: RefineTargetKind, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .smLbm:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .cnnMidpoint:
+            writeInt(&buf, Int32(2))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRefineTargetKind_lift(_ buf: RustBuffer) throws -> RefineTargetKind {
+    return try FfiConverterTypeRefineTargetKind.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRefineTargetKind_lower(_ value: RefineTargetKind) -> RustBuffer {
+    return FfiConverterTypeRefineTargetKind.lower(value)
+}
+
+
+
+/**
  * Clockwise rotation that makes the camera buffers upright.
  */
 
@@ -4224,6 +4655,14 @@ enum TensorholoError: Swift.Error, Equatable, Hashable, Foundation.LocalizedErro
          */message: String
     )
     /**
+     * The app cancelled the call (a progress callback returned `false`): nothing was produced.
+     */
+    case Cancelled(
+        /**
+         * What stopped, and after how much of it.
+         */message: String
+    )
+    /**
      * A failure inside the library (inference engine error, or a panic: a bug, please report it).
      */
     case Internal(
@@ -4269,7 +4708,10 @@ public struct FfiConverterTypeTensorholoError: FfiConverterRustBuffer {
         case 3: return .Unsupported(
             message: try FfiConverterString.read(from: &buf)
             )
-        case 4: return .Internal(
+        case 4: return .Cancelled(
+            message: try FfiConverterString.read(from: &buf)
+            )
+        case 5: return .Internal(
             message: try FfiConverterString.read(from: &buf)
             )
 
@@ -4299,8 +4741,13 @@ public struct FfiConverterTypeTensorholoError: FfiConverterRustBuffer {
             FfiConverterString.write(message, into: &buf)
             
         
-        case let .Internal(message):
+        case let .Cancelled(message):
             writeInt(&buf, Int32(4))
+            FfiConverterString.write(message, into: &buf)
+            
+        
+        case let .Internal(message):
+            writeInt(&buf, Int32(5))
             FfiConverterString.write(message, into: &buf)
             
         }
@@ -4389,6 +4836,30 @@ fileprivate struct FfiConverterOptionData: FfiConverterRustBuffer {
         switch try readInt(&buf) as Int8 {
         case 0: return nil
         case 1: return try FfiConverterData.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionTypeRefineProgress: FfiConverterRustBuffer {
+    typealias SwiftType = RefineProgress?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeRefineProgress.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeRefineProgress.read(from: &buf)
         default: throw UniffiInternalError.unexpectedOptionalTag
         }
     }
@@ -4581,6 +5052,30 @@ fileprivate struct FfiConverterOptionTypePrefilterMode: FfiConverterRustBuffer {
         switch try readInt(&buf) as Int8 {
         case 0: return nil
         case 1: return try FfiConverterTypePrefilterMode.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionTypeRefineTargetKind: FfiConverterRustBuffer {
+    typealias SwiftType = RefineTargetKind?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeRefineTargetKind.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeRefineTargetKind.read(from: &buf)
         default: throw UniffiInternalError.unexpectedOptionalTag
         }
     }
@@ -4906,6 +5401,9 @@ private let initializationResult: InitializationResult = {
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi() != 60546) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_refined() != 10120) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_aberration() != 44201) {
         return InitializationResult.apiChecksumMismatch
     }
@@ -4916,6 +5414,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream() != 59478) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_method_refineprogress_on_iteration() != 58427) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_method_hologramstream_close() != 29435) {
@@ -4941,6 +5442,7 @@ private let initializationResult: InitializationResult = {
     }
 
     uniffiCallbackInitPatternsListener()
+    uniffiCallbackInitRefineProgress()
     return InitializationResult.ok
 }()
 

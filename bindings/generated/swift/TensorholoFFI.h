@@ -243,6 +243,13 @@ typedef void (*UniffiForeignFutureCompleteVoid)(uint64_t, UniffiForeignFutureRes
     );
 
 #endif
+#ifndef UNIFFI_FFIDEF_CALLBACK_INTERFACE_REFINE_PROGRESS_METHOD0
+#define UNIFFI_FFIDEF_CALLBACK_INTERFACE_REFINE_PROGRESS_METHOD0
+typedef void (*UniffiCallbackInterfaceRefineProgressMethod0)(uint64_t, uint32_t, uint32_t, double, int8_t* _Nonnull, 
+        RustCallStatus *_Nonnull uniffiCallStatus
+    );
+
+#endif
 #ifndef UNIFFI_FFIDEF_CALLBACK_INTERFACE_PATTERNS_LISTENER_METHOD0
 #define UNIFFI_FFIDEF_CALLBACK_INTERFACE_PATTERNS_LISTENER_METHOD0
 typedef void (*UniffiCallbackInterfacePatternsListenerMethod0)(uint64_t, uint64_t, RustBuffer, void* _Nonnull, 
@@ -255,6 +262,15 @@ typedef void (*UniffiCallbackInterfacePatternsListenerMethod0)(uint64_t, uint64_
 typedef void (*UniffiCallbackInterfacePatternsListenerMethod1)(uint64_t, RustBuffer, void* _Nonnull, 
         RustCallStatus *_Nonnull uniffiCallStatus
     );
+
+#endif
+#ifndef UNIFFI_FFIDEF_V_TABLE_CALLBACK_INTERFACE_REFINE_PROGRESS
+#define UNIFFI_FFIDEF_V_TABLE_CALLBACK_INTERFACE_REFINE_PROGRESS
+typedef struct UniffiVTableCallbackInterfaceRefineProgress {
+    UniffiCallbackInterfaceFree _Nonnull uniffiFree;
+    UniffiCallbackInterfaceClone _Nonnull uniffiClone;
+    UniffiCallbackInterfaceRefineProgressMethod0 _Nonnull onIteration;
+} UniffiVTableCallbackInterfaceRefineProgress;
 
 #endif
 #ifndef UNIFFI_FFIDEF_V_TABLE_CALLBACK_INTERFACE_PATTERNS_LISTENER
@@ -312,6 +328,11 @@ RustBuffer uniffi_tensorholo_ffi_fn_method_hologramgenerator_render(uint64_t ptr
 RustBuffer uniffi_tensorholo_ffi_fn_method_hologramgenerator_render_ldi(uint64_t ptr, RustBuffer layers, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_METHOD_HOLOGRAMGENERATOR_RENDER_REFINED
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_METHOD_HOLOGRAMGENERATOR_RENDER_REFINED
+RustBuffer uniffi_tensorholo_ffi_fn_method_hologramgenerator_render_refined(uint64_t ptr, RustBuffer frame, RustBuffer settings, RustBuffer progress, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_METHOD_HOLOGRAMGENERATOR_SET_ABERRATION
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_METHOD_HOLOGRAMGENERATOR_SET_ABERRATION
 void uniffi_tensorholo_ffi_fn_method_hologramgenerator_set_aberration(uint64_t ptr, RustBuffer aberration, RustCallStatus *_Nonnull out_status
@@ -330,6 +351,26 @@ void uniffi_tensorholo_ffi_fn_method_hologramgenerator_set_prescription(uint64_t
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_METHOD_HOLOGRAMGENERATOR_STREAM
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_METHOD_HOLOGRAMGENERATOR_STREAM
 uint64_t uniffi_tensorholo_ffi_fn_method_hologramgenerator_stream(uint64_t ptr, uint64_t listener, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_CLONE_REFINEPROGRESS
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_CLONE_REFINEPROGRESS
+uint64_t uniffi_tensorholo_ffi_fn_clone_refineprogress(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FREE_REFINEPROGRESS
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FREE_REFINEPROGRESS
+void uniffi_tensorholo_ffi_fn_free_refineprogress(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_INIT_CALLBACK_VTABLE_REFINEPROGRESS
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_INIT_CALLBACK_VTABLE_REFINEPROGRESS
+void uniffi_tensorholo_ffi_fn_init_callback_vtable_refineprogress(const UniffiVTableCallbackInterfaceRefineProgress* _Nonnull vtable
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_METHOD_REFINEPROGRESS_ON_ITERATION
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_METHOD_REFINEPROGRESS_ON_ITERATION
+int8_t uniffi_tensorholo_ffi_fn_method_refineprogress_on_iteration(uint64_t ptr, uint32_t iteration, uint32_t iterations, double psnr_db, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_CLONE_HOLOGRAMSTREAM
@@ -739,6 +780,12 @@ uint16_t uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_METHOD_HOLOGRAMGENERATOR_RENDER_REFINED
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_METHOD_HOLOGRAMGENERATOR_RENDER_REFINED
+uint16_t uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_refined(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_METHOD_HOLOGRAMGENERATOR_SET_ABERRATION
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_METHOD_HOLOGRAMGENERATOR_SET_ABERRATION
 uint16_t uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_aberration(void
@@ -760,6 +807,12 @@ uint16_t uniffi_tensorholo_ffi_checksum_method_hologramgenerator_set_prescriptio
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_METHOD_HOLOGRAMGENERATOR_STREAM
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_METHOD_HOLOGRAMGENERATOR_STREAM
 uint16_t uniffi_tensorholo_ffi_checksum_method_hologramgenerator_stream(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_METHOD_REFINEPROGRESS_ON_ITERATION
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_METHOD_REFINEPROGRESS_ON_ITERATION
+uint16_t uniffi_tensorholo_ffi_checksum_method_refineprogress_on_iteration(void
     
 );
 #endif

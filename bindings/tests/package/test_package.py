@@ -185,6 +185,20 @@ def test_good_small_arrays_render_and_the_core_errors_stay_tensorholo_errors(sma
         th.render_arrays(small_gen, np.zeros_like(RGB), DEPTH)
 
 
+def test_refine_is_the_photo_mode_and_bad_counts_are_refused(small_gen):
+    plain = th.render_arrays(small_gen, *_ok())
+    refined = th.render_arrays(small_gen, *_ok(), refine=3)
+    assert refined.shape == plain.shape and refined.dtype == np.uint8
+    assert not np.array_equal(refined, plain)
+    for bad, error in [(-1, ValueError), (2.5, TypeError), (True, TypeError)]:
+        with pytest.raises(error) as e:
+            th.render_arrays(small_gen, *_ok(), refine=bad)
+        assert "refine" in str(e.value)
+    with pytest.raises(th.TensorholoError.InvalidInput) as e:
+        th.render_arrays(small_gen, *_ok(), refine=10001)
+    assert "iterations" in str(e.value)
+
+
 MYPY_SNIPPET = """
 import numpy as np
 import tensorholo as th

@@ -330,3 +330,39 @@ def test_a_profile_typo_is_refused_by_name():
     assert "pixel_pich_m" in str(e.value)
     with pytest.raises(TensorholoError.InvalidInput):
         tensorholo.display_profile_from_json("not json")
+
+
+class _Progress(tensorholo.RefineProgress):
+    """Records every iteration; cancels after `stop_after` iterations (None: never)."""
+
+    def __init__(self, stop_after=None):
+        self.seen = []
+        self.stop_after = stop_after
+
+    def on_iteration(self, iteration, iterations, psnr_db):
+        self.seen.append((iteration, iterations, psnr_db))
+        return self.stop_after is None or iteration < self.stop_after
+
+
+def test_the_photo_mode_refines_reports_progress_and_cancels(case):
+    c, frame, _, gen = case
+    plain = codes_of(gen.render(frame))
+    progress = _Progress()
+    refined = codes_of(gen.render_refined(frame, tensorholo.RefineSettings(iterations=4), progress))
+    assert refined.shape == plain.shape
+    # The refinement changes the pattern, and its loss falls: the PSNR against the target rises.
+    assert np.mean(refined != plain) > 0.05
+    assert [s[0] for s in progress.seen] == [0, 1, 2, 3, 4]
+    assert all(s[1] == 4 for s in progress.seen)
+    assert progress.seen[-1][2] > progress.seen[0][2] + 1.0, progress.seen
+    # Cancelled after iteration 1: an error, and the generator goes on.
+    with pytest.raises(TensorholoError.Cancelled) as e:
+        gen.render_refined(frame, tensorholo.RefineSettings(iterations=4), _Progress(stop_after=1))
+    assert "after 1 of 4" in str(e.value)
+    for bad, field in [(dict(iterations=0), "iterations"), (dict(iterations=10001), "iterations"),
+                       (dict(step_rad=float("nan")), "step_rad"), (dict(planes=0), "planes"),
+                       (dict(target_levels=0), "levels")]:
+        with pytest.raises(TensorholoError.InvalidInput) as e:
+            gen.render_refined(frame, tensorholo.RefineSettings(**bad), None)
+        assert field in str(e.value), (bad, str(e.value))
+    assert np.array_equal(codes_of(gen.render(frame)), plain)

@@ -24,6 +24,10 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
     /// The hologram size in pixels: the external display's current mode when one is connected (its
     /// `UIScreen.currentMode.size`, whatever it is: 1920 × 1080, 3840 × 2160, …), else `previewOnlySize`.
     @Published private(set) var slmSize = HologramModel.previewOnlySize
+    /// Whether the SLM shows a best-quality photo (`captureBestQuality`); the stream's frames wait until `goLive`.
+    @Published private(set) var holdingPhoto = false
+    /// The photo mode's progress in [0, 1] while it runs, else nil.
+    @Published private(set) var photoProgress: Double?
     /// The last on-device benchmark (`HologramGenerator.benchmark`), or nil before the first.
     @Published private(set) var benchmarkText: String?
     /// The viewer's spectacle prescription, corrected in every frame (docs/ABERRATION.md): sphere and cylinder
@@ -76,6 +80,10 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
     private var relativeDepthReported = false
     /// The size the generator on `captureQueue` was made for.
     private var generatorSize = HologramModel.previewOnlySize
+    /// Set by `cancelPhoto`, read by the photo mode's progress callback (under `lock`).
+    private var photoCancelled = false
+    /// Whether the stream's frames reach the SLM (false while a photo is held; under `lock`).
+    private var showStream = true
 
     /// Asks for the camera, creates the generator (times the CNN plans: a few seconds) and starts capturing.
     /// Safe to call again: only the first call starts.
@@ -258,7 +266,9 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
         lock.lock()
         let period = now.timeIntervalSince(lastDelivery)
         lastDelivery = now
+        let show = showStream
         lock.unlock()
+        guard show else { return }
         DispatchQueue.main.async {
             self.slmImage = image
             self.status = String(format: "Frame %llu: %.1f fps, CNN %.0f ms", index, 1 / max(period, 1e-3), patterns.timings.cnnMs)
@@ -314,7 +324,79 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
         }
     }
 
+    /// The "best quality" photo: the latest frame refined on `previewQueue` (`HologramGenerator.renderRefined`:
+    /// 10 iterations of focal-stack refinement from the CNN's codes against the frame's SM-LBM focal stack, about
+    /// +4 dB, seconds on a phone; docs/REFINE.md). The refined pattern stays on the SLM until `goLive`.
+    func captureBestQuality(iterations: UInt32 = 10) {
+        lock.lock()
+        guard let generator = generator, let frame = latestFrame else {
+            lock.unlock()
+            return
+        }
+        photoCancelled = false
+        lock.unlock()
+        photoProgress = 0
+        let progress = PhotoProgress(model: self)
+        previewQueue.async {
+            do {
+                let patterns = try generator.renderRefined(
+                    frame: frame, settings: RefineSettings(iterations: iterations), progress: progress)
+                let image = try patterns.cgImage()
+                self.lock.lock()
+                self.showStream = false
+                self.lock.unlock()
+                DispatchQueue.main.async {
+                    self.slmImage = image
+                    self.holdingPhoto = true
+                    self.photoProgress = nil
+                    self.status = "Best quality photo on the SLM"
+                }
+            } catch {
+                DispatchQueue.main.async {
+                    self.photoProgress = nil
+                    self.status = "Best quality: \(error)"
+                }
+            }
+        }
+    }
+
+    /// Stops a running `captureBestQuality` at its next iteration.
+    func cancelPhoto() {
+        lock.lock()
+        photoCancelled = true
+        lock.unlock()
+    }
+
+    /// Back to the live stream after `captureBestQuality`.
+    func goLive() {
+        lock.lock()
+        showStream = true
+        lock.unlock()
+        holdingPhoto = false
+    }
+
+    /// The photo mode's progress callback (on `previewQueue`): publishes the fraction done, answers `cancelPhoto`.
+    fileprivate func photoIteration(_ iteration: UInt32, of iterations: UInt32) -> Bool {
+        DispatchQueue.main.async { self.photoProgress = Double(iteration) / Double(max(iterations, 1)) }
+        lock.lock()
+        defer { lock.unlock() }
+        return !photoCancelled
+    }
+
     private func publish(status: String) {
         DispatchQueue.main.async { self.status = status }
+    }
+}
+
+/// Relays the photo mode's iterations to the model (uniffi's `RefineProgress` callback interface).
+private final class PhotoProgress: RefineProgress, @unchecked Sendable {
+    private weak var model: HologramModel?
+
+    init(model: HologramModel) {
+        self.model = model
+    }
+
+    func onIteration(iteration: UInt32, iterations: UInt32, psnrDb: Double) -> Bool {
+        model?.photoIteration(iteration, of: iterations) ?? false
     }
 }

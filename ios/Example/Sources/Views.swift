@@ -32,6 +32,16 @@ struct ContentView: View {
             Text(model.status)
                 .font(.caption.monospacedDigit())
                 .foregroundColor(.secondary)
+            HStack {
+                if let progress = model.photoProgress {
+                    ProgressView(value: progress) { Text("Best quality…") }
+                    Button("Cancel") { model.cancelPhoto() }
+                } else if model.holdingPhoto {
+                    Button("Live") { model.goLive() }
+                } else {
+                    Button("Best quality") { model.captureBestQuality() }
+                }
+            }
             Button("Benchmark this device") { model.runBenchmark() }
             if let text = model.benchmarkText {
                 Text(text)

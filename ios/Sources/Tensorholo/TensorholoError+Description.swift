@@ -4,12 +4,14 @@ extension TensorholoError: CustomStringConvertible {
     /// The human-readable text of the error, naming the offending input (the core's message), whatever the case.
     public var message: String {
         switch self {
-        case let .InvalidInput(message), let .InvalidModel(message), let .Unsupported(message), let .Internal(message):
+        case let .InvalidInput(message), let .InvalidModel(message), let .Unsupported(message),
+             let .Cancelled(message), let .Internal(message):
             return message
         }
     }
 
-    /// `"invalid input: <message>"`, `"invalid model: …"`, `"unsupported: …"` or `"internal error: …"`: the
+    /// `"invalid input: <message>"`, `"invalid model: …"`, `"unsupported: …"`, `"cancelled: …"` or
+    /// `"internal error: …"`: the
     /// library's own wording (the Rust `Display` text). The generated `errorDescription` (and so
     /// `localizedDescription`) is `String(reflecting: self)`, which prints this.
     public var description: String {
@@ -20,6 +22,8 @@ extension TensorholoError: CustomStringConvertible {
             return "invalid model: \(message)"
         case let .Unsupported(message):
             return "unsupported: \(message)"
+        case let .Cancelled(message):
+            return "cancelled: \(message)"
         case let .Internal(message):
             return "internal error: \(message)"
         }
@@ -39,6 +43,8 @@ extension TensorholoError: CustomStringConvertible {
             return "Use another model: this one cannot be loaded or breaks the library's contract."
         case .Unsupported:
             return "This build or device does not support the request; choose another option."
+        case .Cancelled:
+            return "The app cancelled the call (its progress callback returned false); nothing was produced."
         case .Internal:
             return "A failure inside the library (a bug): please report it with the message."
         }

@@ -4,7 +4,9 @@
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
-use crate::cnn::PlanReport;
+use std::ops::ControlFlow;
+
+use crate::cnn::{PlanReport, ThreadCount};
 use crate::display::Prescription;
 use crate::encoding::{DoublePhaseMethod, LinearLut};
 use crate::error::{invalid, HoloError, Result};
@@ -14,9 +16,11 @@ use crate::pipeline::{
     AberrationReport, BackendReport, HologramPipeline, HologramSession, PrefilterMode,
     PrefilterSource,
 };
+use crate::refine::{FrameRefinement, FrameRefiner, IterationRecord, RefineDisplay, RefineTarget};
 use crate::scene::{ldi_from_camera_frames, CameraFrame, CameraFrameReport, RgbdFrame};
 use crate::slm::DisplayCalibration;
 use crate::synthesis::aberration::AberrationProfile;
+use crate::synthesis::SceneLayer;
 
 use super::config::GeneratorConfig;
 use super::frames::{preview_image, GeneratorBenchmark, PatternTimings, Preview, SlmPatterns};
@@ -293,6 +297,75 @@ impl HologramGenerator {
         let mut session = self.session()?;
         let out = session.render(&rgbd)?;
         Ok(SlmPatterns::from_frame(out, convert_s, report.range_used))
+    }
+
+    /// The photo mode: renders one camera frame as [`HologramGenerator::render`] does, then refines its SLM
+    /// patterns with `refinement` (focal-stack refinement warm-started from the CNN's codes, against the
+    /// frame's SM-LBM focal stack by default; [`crate::refine`], `docs/REFINE.md`) through the generator's
+    /// display calibration. `progress(record)` is called with the start's loss and after every iteration
+    /// (on the calling thread); `ControlFlow::Break(())` cancels. Takes seconds on a phone: call it off the
+    /// UI thread. The patterns' `amplitude_scale` is the refined pattern's least-squares scale.
+    ///
+    /// Errors: as [`HologramGenerator::render`]; [`HoloError::InvalidParameter`] for a bad `refinement`
+    /// (naming the setting: `iterations`, `step_rad`, `planes`, `levels`) or a generator that corrects a
+    /// viewer's aberration (`refine`: not modelled yet); [`HoloError::Cancelled`] when `progress` stopped it.
+    /// The generator stays usable after any error.
+    pub fn render_refined(
+        &self,
+        frame: &CameraFrame,
+        refinement: &FrameRefinement,
+        progress: &mut dyn FnMut(&IterationRecord) -> ControlFlow<()>,
+    ) -> Result<SlmPatterns> {
+        refinement.validate()?;
+        if lock_slot(&self.aberration).is_some() || self.pipeline.aberration().is_some() {
+            return Err(invalid(
+                "refine",
+                "the refinement does not model a viewer's aberration yet; refine without the correction",
+            ));
+        }
+        let t = Instant::now();
+        let (rgbd, report) = self.convert(frame)?;
+        let convert_s = t.elapsed().as_secs_f64();
+        let cnn_target = refinement.target == RefineTarget::CnnMidpoint;
+        let (mut patterns, midpoint) = {
+            let mut session = self.session()?;
+            if cnn_target {
+                session.set_full_outputs(true);
+            }
+            let rendered = session
+                .render(&rgbd)
+                .map(|out| SlmPatterns::from_frame(out, convert_s, report.range_used));
+            let midpoint = match (&rendered, cnn_target) {
+                (Ok(_), true) => session.last_heads().map(|h| h.to_field()).transpose(),
+                _ => Ok(None),
+            };
+            if cnn_target {
+                session.set_full_outputs(false);
+            }
+            (rendered?, midpoint?)
+        };
+        let cfg = self.pipeline.config();
+        let display = RefineDisplay {
+            optics: cfg.optics,
+            propagation: cfg.options,
+            offset_m: cfg.offset_m,
+            encoding: cfg.encoding,
+            calibration: self.calibration(),
+        };
+        let threads = match self.config.threads {
+            ThreadCount::Fixed(n) => n.max(1),
+            _ => crate::cnn::default_threads(),
+        };
+        let mut refiner = FrameRefiner::new(*refinement, display, threads)?;
+        let refined = refiner.refine(
+            &[SceneLayer::from(&rgbd)],
+            midpoint.as_ref().map(|m| m.view()),
+            patterns.codes.view(),
+            progress,
+        )?;
+        patterns.codes = refined.codes;
+        patterns.amplitude_scale = refined.amplitude_scale;
+        Ok(patterns)
     }
 
     /// Renders a layered depth image delivered as camera frames, one per layer front to back (a renderer's

@@ -231,9 +231,7 @@ impl FrameRefiner {
             (RefineStart::Previous, _, Some(previous)) => previous.clone(),
             (RefineStart::SmLbmDpm, Some(r), _) => r.double_phase.phase.clone(),
             (RefineStart::SmLbmDpm, None, _) => {
-                return Err(HoloError::Internal(
-                    "the SM-LBM start was not made".into(),
-                ))
+                return Err(HoloError::Internal("the SM-LBM start was not made".into()))
             }
             (other, _, _) => initial_phase(other, h, w)?,
         };

@@ -32,11 +32,11 @@ use crate::error::{invalid, HoloError, Result};
 use crate::optics::{check_colour_stack, OpticalSetup, Padding, PropagationOptions, SpectralPlan};
 use crate::slm::{DisplayCalibration, PhaseLut};
 use crate::splitmix::SplitMix64;
-use model::{plane_term, ColourModel};
 pub use frame::{
     FrameRefinement, FrameRefiner, HeldOutScores, RefineDisplay, RefineTarget, RefinedFrame,
     DEFAULT_TARGET_LEVELS,
 };
+use model::{plane_term, ColourModel};
 pub use target::{held_out_depths, loss_depths, FocalTarget, PLANES_RANGE};
 
 /// The most iterations one refinement runs: 10,000 (about an hour at 1080p on two cores; the issue's

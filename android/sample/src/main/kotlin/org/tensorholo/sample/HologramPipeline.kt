@@ -11,6 +11,8 @@ import tensorholo.HologramGenerator
 import tensorholo.HologramStream
 import tensorholo.PatternsListener
 import tensorholo.Prescription
+import tensorholo.RefineProgress
+import tensorholo.RefineSettings
 import tensorholo.RgbdFrame
 import tensorholo.SlmPatterns
 import tensorholo.TensorholoException
@@ -48,6 +50,9 @@ class HologramPipeline(
     private val latest = AtomicReference<RgbdFrame?>(null)
     private val previewQueued = AtomicBoolean(false)
     @Volatile private var lastPreview = 0L
+    /** While a best-quality photo is on the SLM, the stream's frames are not shown ([bestQuality], [live]). */
+    private val holdingPhoto = AtomicBoolean(false)
+    private val photoCancelled = AtomicBoolean(false)
 
     /** Focus of the preview's simulated eye, normalised depth in [0, 1] (0 = near). */
     @Volatile var focus = 0.5f
@@ -59,7 +64,7 @@ class HologramPipeline(
     private val listener = object : PatternsListener {
         override fun onPatterns(index: ULong, patterns: SlmPatterns) {
             delivered.incrementAndGet()
-            if (closed.get()) return
+            if (closed.get() || holdingPhoto.get()) return
             onSlm(patterns.toBitmap())
             requestPreview(force = false)
         }
@@ -187,6 +192,40 @@ class HologramPipeline(
             onStatus("benchmark: ${e.message}")
         }
     }
+
+    /**
+     * The "best quality" photo: the latest frame refined on the worker ([HologramGenerator.renderRefined],
+     * 10 iterations of focal-stack refinement from the CNN's codes against the frame's SM-LBM focal stack:
+     * about +4 dB, seconds on a phone; docs/REFINE.md). Progress goes to [onStatus]; [cancelPhoto] stops it.
+     * The refined pattern stays on the SLM until [live].
+     */
+    fun bestQuality(iterations: UInt = 10u) = runOnWorker {
+        val gen = generator ?: return@runOnWorker
+        val frame = latest.get() ?: return@runOnWorker
+        photoCancelled.set(false)
+        val progress = object : RefineProgress {
+            override fun onIteration(iteration: UInt, iterations: UInt, psnrDb: Double): Boolean {
+                onStatus("best quality: iteration $iteration of $iterations, %.1f dB".format(psnrDb))
+                return !photoCancelled.get() && !closed.get()
+            }
+        }
+        try {
+            val patterns = gen.renderRefined(frame, RefineSettings(iterations = iterations), progress)
+            holdingPhoto.set(true)
+            if (!closed.get()) onSlm(patterns.toBitmap())
+            onStatus("best quality photo on the SLM (tap Live to go back)")
+        } catch (e: TensorholoException.Cancelled) {
+            onStatus("best quality: cancelled")
+        } catch (e: TensorholoException) {
+            onStatus("best quality: ${e.message}")
+        }
+    }
+
+    /** Stops a running [bestQuality] (it ends at its next iteration). */
+    fun cancelPhoto() = photoCancelled.set(true)
+
+    /** Back to the live stream after [bestQuality]. */
+    fun live() = holdingPhoto.set(false)
 
     /** Stops the stream (delivering nothing more to the callbacks) and frees the generator, off the caller's thread. */
     override fun close() {

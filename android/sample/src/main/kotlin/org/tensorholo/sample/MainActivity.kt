@@ -63,6 +63,9 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
         status = findViewById(R.id.status)
         focusBar = findViewById(R.id.focus)
         findViewById<Button>(R.id.benchmark).setOnClickListener { pipeline?.benchmark() }
+        findViewById<Button>(R.id.best_quality).setOnClickListener { pipeline?.bestQuality() }
+        findViewById<Button>(R.id.cancel_photo).setOnClickListener { pipeline?.cancelPhoto() }
+        findViewById<Button>(R.id.live).setOnClickListener { pipeline?.live() }
         focusBar.setOnSeekBarChangeListener(object : SeekBar.OnSeekBarChangeListener {
             override fun onProgressChanged(bar: SeekBar, progress: Int, fromUser: Boolean) {
                 pipeline?.focus = progress / 100f
