@@ -220,6 +220,10 @@ mod tests {
             (HoloError::ModelRun("tract failed".into()), "Internal"),
             (HoloError::Internal("a worker stopped".into()), "Internal"),
             (HoloError::Gpu("no adapter".into()), "Unsupported"),
+            (
+                HoloError::Cancelled("refinement stopped after 2 of 10 iterations".into()),
+                "Cancelled",
+            ),
         ]
     }
 
@@ -231,6 +235,7 @@ mod tests {
                 TensorholoError::InvalidInput { message } => ("InvalidInput", message),
                 TensorholoError::InvalidModel { message } => ("InvalidModel", message),
                 TensorholoError::Unsupported { message } => ("Unsupported", message),
+                TensorholoError::Cancelled { message } => ("Cancelled", message),
                 TensorholoError::Internal { message } => ("Internal", message),
             };
             assert_eq!(variant, expected, "{text}");

@@ -5,7 +5,7 @@
 //! The image formation model is the display's own: the SLM field `e^{iφ}` through the Fourier filter
 //! (paper Eq. 8–9) and propagated by the angular spectrum method from the SLM plane to each focal plane
 //! (Eq. 2, Eq. 10). The loss, per colour, is `Σ_d ‖k·|U_d| − T_d‖²` with the least-squares scale `k` (as the
-//! scores of `docs/REFINE.md`); its gradient is analytic ([`model`]'s derivation), so no autodiff framework
+//! scores of `docs/REFINE.md`); its gradient is analytic (the derivation in `refine/model.rs` and `docs/REFINE.md`), so no autodiff framework
 //! is needed. Targets: the SM-LBM ground truth (Eq. 1–4), the CNN's own midpoint hologram, or a given
 //! focal stack ([`FocalTarget`]). Starts: any phase pattern (the CNN's, the previous frame's refined one,
 //! SM-LBM + double phase), zero or random ([`initial_phase`]).
