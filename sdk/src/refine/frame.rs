@@ -10,7 +10,7 @@ use ndarray::{Array3, ArrayView3};
 use num_complex::Complex32;
 
 use super::{
-    codes_of, displayed_phase, focal_psnr, held_out_depths, initial_phase, loss_depths,
+    codes_of, displayed_phase, held_out_depths, initial_phase, loss_depths,
     FocalTarget, IterationRecord, RefineOptions, RefineReport, RefineStart, Refiner,
 };
 use crate::encoding::DoublePhaseMethod;
@@ -212,8 +212,13 @@ impl FrameRefiner {
         } else {
             None
         };
-        let midpoint = match (self.request.target, &reference, cnn_midpoint) {
-            (RefineTarget::SmLbm { .. }, Some(r), _) => r.midpoint.clone(),
+        // Only the midpoint (the target) and the double phase pattern (a start) of the reference are kept.
+        let (smlbm_midpoint, smlbm_phase) = match reference {
+            Some(r) => (Some(r.midpoint), Some(r.double_phase.phase)),
+            None => (None, None),
+        };
+        let midpoint = match (self.request.target, smlbm_midpoint, cnn_midpoint) {
+            (RefineTarget::SmLbm { .. }, Some(m), _) => m,
             (RefineTarget::CnnMidpoint, _, Some(m)) => m.to_owned(),
             _ => {
                 return Err(invalid(
@@ -226,10 +231,10 @@ impl FrameRefiner {
         let calibration = d.calibration.as_deref();
         let cnn_phase = displayed_phase(cnn_codes, calibration)?;
         let (_, h, w) = cnn_phase.dim();
-        let start = match (self.request.start, &reference, &self.previous) {
+        let start = match (self.request.start, smlbm_phase, &self.previous) {
             (RefineStart::Cnn, _, _) | (RefineStart::Previous, _, None) => cnn_phase.clone(),
             (RefineStart::Previous, _, Some(previous)) => previous.clone(),
-            (RefineStart::SmLbmDpm, Some(r), _) => r.double_phase.phase.clone(),
+            (RefineStart::SmLbmDpm, Some(p), _) => p,
             (RefineStart::SmLbmDpm, None, _) => {
                 return Err(HoloError::Internal("the SM-LBM start was not made".into()))
             }
@@ -288,17 +293,29 @@ impl FrameRefiner {
         let codes = codes_of(phase.view(), calibration)?;
         let shown = displayed_phase(codes.view(), calibration)?;
         let held = held_out_depths(options.planes)?;
-        let score = |p: ArrayView3<f32>| -> Result<f64> {
-            let target = FocalTarget::from_midpoint(midpoint, &d.optics, d.propagation, &held)?;
-            focal_psnr(p, &d.optics, d.propagation, d.offset_m, target)
-        };
+        // One scorer for the four patterns: the held-out planes' target and multipliers made once.
+        let mut scorer = Refiner::new(
+            &d.optics,
+            d.propagation,
+            d.offset_m,
+            FocalTarget::from_midpoint(midpoint, &d.optics, d.propagation, &held)?,
+            RefineOptions {
+                iterations: 1,
+                planes: held.len().max(1),
+                quantised: false,
+                ..options
+            },
+            self.threads,
+        )?;
+        let mut score = |p: ArrayView3<f32>| scorer.score(p).map(|r| r.psnr_db);
         let held_out = HeldOutScores {
-            cnn_codes_psnr_db: cnn.map(score).transpose()?,
+            cnn_codes_psnr_db: cnn.map(&mut score).transpose()?,
             start_psnr_db: score(start)?,
             refined_psnr_db: score(phase.view())?,
             refined_codes_psnr_db: score(shown.view())?,
             depths: held,
         };
+        drop(scorer);
         let amplitude_scale = least_squares_scale(shown.view(), midpoint, d)?;
         Ok(RefinedFrame {
             phase,
