@@ -680,3 +680,81 @@ fn the_layout_environment_variables_reach_the_plan_and_bad_values_are_named() {
     );
     assert!(!bad.exists());
 }
+
+/// `--refine N` refines the frame's pattern: report.json's `refine` has the start and every iteration, the
+/// loss falls, the held-out scores and both timings are there, and the codes written are the refined ones
+/// (they differ from the plain render's).
+#[test]
+fn render_refine_reports_its_iterations_and_writes_the_refined_codes() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let mut args = vec!["render", "--size", "64x64", "--repeat", "0"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        let o = holo(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        out
+    };
+    let plain = run("plain", &[]);
+    let refined = run("refined", &["--refine", "3", "--refine-levels", "64"]);
+    let r = report(&refined);
+    let history = r["refine"]["history"].as_array().unwrap();
+    assert_eq!(history.len(), 4);
+    let loss = |i: usize| history[i]["loss"].as_f64().unwrap();
+    assert!(loss(3) < loss(0), "{history:?}");
+    let held = &r["refine"]["held_out"];
+    assert!(
+        held["refined_codes_psnr_db"].as_f64().unwrap()
+            > held["cnn_codes_psnr_db"].as_f64().unwrap()
+    );
+    assert!(r["timings_s"]["refine_target_s"].as_f64().unwrap() > 0.0);
+    assert!(r["timings_s"]["refine_iterations_s"].as_f64().unwrap() > 0.0);
+    assert_ne!(
+        std::fs::read(plain.join("phase_g.png")).unwrap(),
+        std::fs::read(refined.join("phase_g.png")).unwrap()
+    );
+}
+
+/// Bad refinement settings stop `holo render` before anything is written, naming the flag.
+#[test]
+fn render_refuses_bad_refinement_settings_naming_the_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    for (extra, flag) in [
+        (&["--refine", "0"][..], "--refine"),
+        (&["--refine", "10001"][..], "--refine"),
+        (
+            &["--refine", "2", "--refine-step", "NaN"][..],
+            "--refine-step",
+        ),
+        (
+            &["--refine", "2", "--refine-step", "-0.1"][..],
+            "--refine-step",
+        ),
+        (
+            &["--refine", "2", "--refine-planes", "0"][..],
+            "--refine-planes",
+        ),
+        (
+            &["--refine", "2", "--refine-levels", "0"][..],
+            "--refine-levels",
+        ),
+        (
+            &["--refine", "2", "--refine-init", "previous"][..],
+            "--refine-init previous",
+        ),
+    ] {
+        let out = dir.path().join("bad");
+        let mut args = vec!["render", "--size", "32x32", "--repeat", "0"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        let o = holo(&args);
+        assert!(!o.status.success(), "{extra:?} was accepted");
+        let e = stderr(&o);
+        assert!(e.contains(flag), "{extra:?}: {e}");
+        assert!(
+            !out.join("report.json").exists(),
+            "{extra:?} wrote a report"
+        );
+    }
+}

@@ -10,8 +10,8 @@ use ndarray::{Array3, ArrayView3};
 use num_complex::Complex32;
 
 use super::{
-    codes_of, displayed_phase, held_out_depths, initial_phase, loss_depths,
-    FocalTarget, IterationRecord, RefineOptions, RefineReport, RefineStart, Refiner,
+    codes_of, displayed_phase, held_out_depths, initial_phase, loss_depths, FocalTarget,
+    IterationRecord, RefineOptions, RefineReport, RefineStart, Refiner,
 };
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
