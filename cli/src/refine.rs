@@ -47,7 +47,7 @@ pub struct RefineCoreArgs {
     #[arg(long, value_name = "N")]
     pub refine: Option<usize>,
     /// Adam's step size, radians of SLM phase (0 < step ≤ π).
-    #[arg(long, default_value_t = RefineOptions::default().step_rad, requires = "refine")]
+    #[arg(long, default_value_t = RefineOptions::default().step_rad, requires = "refine", allow_hyphen_values = true)]
     pub refine_step: f32,
     /// Focal planes of the loss, evenly spaced over the volume, both ends included (1 to 64); the held-out
     /// scores are taken halfway between them.
