@@ -417,7 +417,6 @@ impl Refiner {
             s.mean.resize(n, 0.0);
             s.square.clear();
             s.square.resize(n, 0.0);
-            s.adjoint.resize(n, Complex32::new(0.0, 0.0));
         }
         let iterations = self.options.iterations;
         let mut history = Vec::with_capacity(iterations + 1);
@@ -533,7 +532,11 @@ impl Refiner {
                 s.field.copy_from_slice(&s.unit);
                 fft.forward(&mut s.field, &mut s.spectrum, &mut s.scratch);
                 s.sums = (0.0, 0.0);
-                s.adjoint.fill(Complex32::new(0.0, 0.0));
+                if gradient {
+                    // Made at the first gradient, kept after (a refiner that only scores never makes it).
+                    s.adjoint.resize(n, Complex32::new(0.0, 0.0));
+                    s.adjoint.fill(Complex32::new(0.0, 0.0));
+                }
                 Ok::<(), HoloError>(())
             })?;
             // 2. The (colour, plane) terms in waves of one per slot, added to their colour in (colour, plane)
