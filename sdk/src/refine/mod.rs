@@ -729,19 +729,9 @@ pub fn displayed_phase(
     codes: ArrayView3<u8>,
     calibration: Option<&DisplayCalibration>,
 ) -> Result<Array3<f32>> {
-    let (h, w) = check_colour_stack("SLM codes", &codes)?;
-    let codes = codes.as_standard_layout();
-    let mut out = Array3::<f32>::zeros((3, h, w));
-    let linear = PhaseLut::linear();
-    for c in 0..3 {
-        let lut = lut_of(calibration, c, &linear);
-        let k = plane(codes.as_slice(), c, h * w)?;
-        let o = &mut out
-            .as_slice_mut()
-            .ok_or_else(|| HoloError::Internal("fresh array".into()))?[c * h * w..(c + 1) * h * w];
-        lut.displayed_phases(h, w, k, o)?;
-    }
-    Ok(out)
+    per_colour(codes, "SLM codes", calibration, |lut, h, w, k, o| {
+        lut.displayed_phases(h, w, k, o)
+    })
 }
 
 /// The 8-bit codes `[3, H, W]` of a phase pattern `phase` (radians, any values: wrapped first), through
@@ -754,22 +744,43 @@ pub fn codes_of(
     phase: ArrayView3<f32>,
     calibration: Option<&DisplayCalibration>,
 ) -> Result<Array3<u8>> {
-    let (h, w) = check_colour_stack("SLM phase pattern", &phase)?;
     if phase.iter().any(|v| !v.is_finite()) {
         return Err(HoloError::InvalidData(
             "the SLM phase pattern holds NaN or infinite values".into(),
         ));
     }
-    let phase = phase.as_standard_layout();
-    let mut out = Array3::<u8>::zeros((3, h, w));
+    per_colour(
+        phase,
+        "SLM phase pattern",
+        calibration,
+        |lut, h, w, p, o| lut.apply(h, w, p, o),
+    )
+}
+
+/// `f(lut, H, W, input plane, output plane)` for each colour of a `[3, H, W]` input (`what` in a shape
+/// error) with that colour's look-up table ([`lut_of`]), into a new `[3, H, W]` array.
+fn per_colour<A: Copy, B: Copy + Default>(
+    input: ArrayView3<A>,
+    what: &str,
+    calibration: Option<&DisplayCalibration>,
+    f: impl Fn(&PhaseLut, usize, usize, &[A], &mut [B]) -> Result<()>,
+) -> Result<Array3<B>> {
+    let (h, w) = check_colour_stack(what, &input)?;
+    let input = input.as_standard_layout();
+    let mut out = Array3::<B>::from_elem((3, h, w), B::default());
     let linear = PhaseLut::linear();
-    for c in 0..3 {
-        let lut = lut_of(calibration, c, &linear);
-        let p = plane(phase.as_slice(), c, h * w)?;
-        let o = &mut out
-            .as_slice_mut()
-            .ok_or_else(|| HoloError::Internal("fresh array".into()))?[c * h * w..(c + 1) * h * w];
-        lut.apply(h, w, p, o)?;
+    let n = h * w;
+    let all = out
+        .as_slice_mut()
+        .ok_or_else(|| HoloError::Internal("fresh array not contiguous".into()))?;
+    for (c, o) in all.chunks_exact_mut(n).enumerate() {
+        f(
+            lut_of(calibration, c, &linear),
+            h,
+            w,
+            plane(input.as_slice(), c, n)?,
+            o,
+        )?;
     }
     Ok(out)
 }
