@@ -22,43 +22,49 @@ root="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$root"
 
 target=aarch64-unknown-linux-gnu
+tdir="${CARGO_TARGET_DIR:-target}"
 ensure_apt gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user ||
   { echo "test-aarch64: cannot install the aarch64 cross toolchain and qemu-user" >&2; exit 1; }
 rustup target list --installed | grep -qx "$target" || rustup target add "$target"
 
-cargo test --locked --target "$target" -p tensorholo --no-default-features \
-  --features "embedded-models models-15 models-30 tract" \
-  --test model --test shipped_models --test pipeline --test platform_parity "$@" -- --nocapture 2>&1 |
+# One cargo invocation builds everything the SDK's part of this step runs, so that every crate is compiled once
+# with one feature set: the SDK's integration tests and unit tests, and the aarch64 `holo` (built for the CLI
+# check below because holo's `output_guard` test needs it; holo pulls the SDK's `research` feature in, and a
+# separate `cargo build -p holo` resolved other features and rebuilt tract and the SDK: 6 min here, warm). No
+# `gpu` feature: wgpu is not what this step tests, and it would double the cross build.
+sdk=(--locked --target "$target" -p tensorholo -p holo --no-default-features
+  --features "tensorholo/embedded-models tensorholo/models-15 tensorholo/models-30 tensorholo/tract")
+sdk_tests=(--test model --test shipped_models --test pipeline --test platform_parity)
+cargo test "${sdk[@]}" --lib "${sdk_tests[@]}" --test output_guard --no-run "$@"
+
+cargo test "${sdk[@]}" "${sdk_tests[@]}" "$@" -- --nocapture 2>&1 |
   grep -vE '^(running [0-9]+ tests?|)$'
 
 # The native CNN engine (NEON kernel rows) against tract on every shipped f32 CNN, threads and bad input: the
 # SDK's unit tests of `cnn` (sdk/src/cnn/tests.rs); and the per-runtime suite (sdk/src/pipeline/suite.rs): one
 # list of frames through the session on tract and on the native engine at every NEON row qemu's `max` CPU
-# has, each against the stand-alone reference. Same features as above.
-cargo test --locked --target "$target" -p tensorholo --no-default-features \
-  --features "embedded-models models-15 models-30 tract" --lib "$@" -- --nocapture cnn:: pipeline::suite 2>&1 |
+# has, each against the stand-alone reference. Built above.
+cargo test "${sdk[@]}" --lib "$@" -- --nocapture cnn:: pipeline::suite 2>&1 |
   grep -vE '^(running [0-9]+ tests?|)$'
 
-# The CLI itself on ARM: the aarch64 `holo` (dev profile) starts under qemu-user without binfmt (it sets
-# glibc's mmap threshold in-process, no re-execution) and renders a real RGB-D frame (TUM, ../shared/data),
-# which `holo compare` then holds against the x86-64 render of the same command: at most 0.1 % of the SLM codes
-# may differ, none by more than one step.
+# The CLI itself on ARM: the aarch64 `holo` (dev profile, built above) starts under qemu-user without binfmt (it
+# sets glibc's mmap threshold in-process, no re-execution) and renders a real RGB-D frame (TUM,
+# ../shared/data), which `holo compare` then holds against the x86-64 render of the same command: at most
+# 0.1 % of the SLM codes may differ, none by more than one step.
 if [ "$#" -eq 0 ]; then
   frame=(--rgb ../shared/data/tum/TUM_color.png --depth ../shared/data/tum/TUM_depth.png
     --depth-encoding tum --size 96x128 --backend cpu --engine native --threads 1 --repeat 0)
   out="$(mktemp -d)"
   trap 'rm -rf "$out"' EXIT
-  # The aarch64 build without the `gpu` feature (wgpu is not what this step tests, and it would double the
-  # cross build). The x86-64 reference is the workspace's own `holo` (what `cargo test` built; the native
-  # engine's frame does not depend on the cargo features).
+  # The x86-64 reference is the workspace's own `holo` (what `cargo test` built; the native engine's frame does
+  # not depend on the cargo features).
   cargo build --locked -p holo
-  cargo build --locked --target "$target" -p holo --no-default-features
   # Both on the Winograd rows (AVX2/AVX-512 here, NEON there), the F(2×2, 3×3) path through the CLI on ARM.
   export TENSORHOLO_CONV=winograd
-  target/debug/holo render "${frame[@]}" --out "$out/x86" >/dev/null
+  "$tdir/debug/holo" render "${frame[@]}" --out "$out/x86" >/dev/null
   echo "== holo render (aarch64, qemu-user)"
-  qemu-aarch64 -L /usr/aarch64-linux-gnu "target/$target/debug/holo" render "${frame[@]}" --out "$out/arm"
-  target/debug/holo compare "$out/x86" "$out/arm" --max-code-fraction 0.001
+  qemu-aarch64 -L /usr/aarch64-linux-gnu "$tdir/$target/debug/holo" render "${frame[@]}" --out "$out/arm"
+  "$tdir/debug/holo" compare "$out/x86" "$out/arm" --max-code-fraction 0.001
 fi
 
 # The kernels crate (kernels/, tensorholo-kernels) under three emulated CPUs, so that every aarch64 kernel row

@@ -139,8 +139,51 @@ fn split(field: &Array3<Complex32>) -> Array4<f32> {
     .unwrap()
 }
 
+// One test per case, so that the harness runs them side by side (under qemu-aarch64 in CI, each takes a minute,
+// most of it tract loading and planning the two CNNs).
+
 #[test]
-fn builtin_scene_renders_the_x86_reference_on_this_cpu() {
+fn builtin_scene_renders_the_x86_reference_on_this_cpu_f32_nchw() {
+    check_case("f32_nchw");
+}
+
+#[test]
+fn builtin_scene_renders_the_x86_reference_on_this_cpu_f32_nhwc() {
+    check_case("f32_nhwc");
+}
+
+#[test]
+fn builtin_scene_renders_the_x86_reference_on_this_cpu_int8qdq_nchw() {
+    check_case("int8qdq_nchw");
+}
+
+#[test]
+fn builtin_scene_renders_the_x86_reference_on_this_cpu_int8qop_nchw() {
+    check_case("int8qop_nchw");
+}
+
+#[test]
+fn builtin_scene_renders_the_x86_reference_on_this_cpu_f32_native() {
+    check_case("f32_native");
+}
+
+#[test]
+fn every_case_has_a_test() {
+    let tested = [
+        "f32_nchw",
+        "f32_nhwc",
+        "int8qdq_nchw",
+        "int8qop_nchw",
+        "f32_native",
+    ];
+    let names: Vec<&str> = CASES.iter().map(|c| c.name).collect();
+    assert_eq!(names, tested);
+}
+
+/// Renders the case named `name` and compares it with its reference files (or writes them, with
+/// `TENSORHOLO_WRITE_PARITY=1`).
+fn check_case(name: &str) {
+    let case = CASES.iter().find(|c| c.name == name).unwrap();
     let write = std::env::var_os("TENSORHOLO_WRITE_PARITY").is_some();
     if write {
         if std::env::consts::ARCH != "x86_64" {
@@ -148,21 +191,16 @@ fn builtin_scene_renders_the_x86_reference_on_this_cpu() {
         }
         std::fs::create_dir_all(reference("")).unwrap();
     }
-    println!(
-        "platform parity on {} ({H}×{W} built-in scene, holo8 + DDPM pre-filter, 6 mm):",
-        std::env::consts::ARCH
-    );
-    for case in &CASES {
+    {
         let (midpoint, codes) = render(case);
         let field_file = reference(&format!("builtin_{}_midpoint.npy", case.reference));
         let codes_file = reference(&format!("builtin_{}_codes.npy", case.reference));
         if write {
-            if case.reference != case.name {
-                continue;
+            if case.reference == case.name {
+                write_npy(&field_file, &split(&midpoint)).unwrap();
+                write_npy(&codes_file, &codes).unwrap();
             }
-            write_npy(&field_file, &split(&midpoint)).unwrap();
-            write_npy(&codes_file, &codes).unwrap();
-            continue;
+            return;
         }
         let want_field: Array4<f32> =
             read_npy(&field_file).unwrap_or_else(|e| panic!("{}: {e}", field_file.display()));
@@ -193,8 +231,10 @@ fn builtin_scene_renders_the_x86_reference_on_this_cpu() {
         let changed = steps.iter().filter(|&&s| s != 0).count();
         let fraction = changed as f64 / steps.len() as f64;
         println!(
-            "  {:<13} midpoint hologram max |Δ|/max|h| {field_err:.1e} (tolerance {:.0e}); \
+            "platform parity on {} ({H}×{W} built-in scene, holo8 + DDPM pre-filter, 6 mm): \
+             {:<13} midpoint hologram max |Δ|/max|h| {field_err:.1e} (tolerance {:.0e}); \
              SLM codes: {changed} of {} differ ({:.3} %), by at most {max_step}",
+            std::env::consts::ARCH,
             case.name,
             case.field_tol,
             steps.len(),

@@ -207,9 +207,33 @@ fn codes_off(a: &Array3<u8>, b: &Array3<u8>) -> usize {
         .count()
 }
 
+// One test per case, so that the harness runs them side by side (under qemu-aarch64 in CI, tract's load and plan
+// of each case's CNNs take most of a minute).
+
 #[test]
-fn every_runtime_renders_every_case_as_the_reference() {
-    for case in cases() {
+fn every_runtime_renders_case_0_as_the_reference() {
+    every_runtime_renders_as_the_reference(0);
+}
+
+#[test]
+fn every_runtime_renders_case_1_as_the_reference() {
+    every_runtime_renders_as_the_reference(1);
+}
+
+#[test]
+fn every_runtime_renders_case_2_as_the_reference() {
+    every_runtime_renders_as_the_reference(2);
+}
+
+#[test]
+fn every_case_has_a_test() {
+    assert_eq!(cases().len(), 3, "add a test per new case above");
+}
+
+/// The case `index` of [`cases`] on every runtime, against the stand-alone reference.
+fn every_runtime_renders_as_the_reference(index: usize) {
+    {
+        let case = cases().swap_remove(index);
         let f = frame(case.height, case.width);
         let (ref_heads, ref_phase, ref_codes) =
             reference(&pipeline(&case, Backend::Cpu, CnnEngine::Tract), &f);
