@@ -88,8 +88,9 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     let refine = args.refine.options()?;
     if refine.is_some() && args.aberration.is_some() {
         bail!(
-            "--refine with --aberration is not supported yet: the refinement's model has no correction, and \
-             would undo it"
+            "holo reference --refine with --aberration: the aberration-corrected SM-LBM's midpoint hologram is \
+             the corrected one, not a target the viewer should see; refine a corrected display with `holo render \
+             --refine N --aberration FILE` (its model sees through the aberration)"
         );
     }
     if refine.is_some() && args.optics.options().pad {
@@ -174,6 +175,8 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
                 offset_m: offset_mm * 1e-3,
                 encoding,
                 calibration: None,
+                viewer: None,
+                viewer_corrected_by_cnn: false,
             };
             let mut refiner = tensorholo::refine::FrameRefiner::new(
                 request,

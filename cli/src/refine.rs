@@ -148,19 +148,13 @@ impl RefineArgs {
     }
 }
 
-/// The SDK's frame refiner for `pipeline`'s display and calibration. Errors: a pipeline with a viewer's
-/// aberration (not modelled yet).
+/// The SDK's frame refiner for `pipeline`'s display, calibration and viewer's aberration (which the
+/// refinement's model sees through, so that the refined pattern stays corrected).
 pub fn frame_refiner(
     request: FrameRefinement,
     pipeline: &HologramPipeline,
     threads: usize,
 ) -> Result<FrameRefiner> {
-    if pipeline.aberration().is_some() {
-        bail!(
-            "--refine with a viewer's aberration or prescription is not supported yet: the refinement's model \
-             has no correction, and would undo the display's"
-        );
-    }
     let cfg = pipeline.config();
     let display = RefineDisplay {
         optics: cfg.optics,
@@ -168,6 +162,8 @@ pub fn frame_refiner(
         offset_m: cfg.offset_m,
         encoding: cfg.encoding,
         calibration: pipeline.calibration().cloned(),
+        viewer: pipeline.aberration().cloned(),
+        viewer_corrected_by_cnn: pipeline.corrected_by_cnn(),
     };
     Ok(FrameRefiner::new(request, display, threads)?)
 }

@@ -260,3 +260,56 @@ fn a_dataset_for_a_profile_with_an_aberration_file_is_corrected_for_it() {
     let shard = |d: &Path| std::fs::read(d.join("train-00000.npz")).unwrap();
     assert_eq!(shard(&keyed), shard(&by_hand), "the same ground truth");
 }
+
+/// `holo render --refine N --aberration FILE`: the refinement's model sees through the viewer's eye, so the
+/// refined codes stay corrected (docs/REFINE.md "A viewer's aberration"): the held-out scores (through the same
+/// eye) rise from the corrected CNN's, and the refined pattern is not the one refined for an unaberrated viewer.
+/// `holo reference --refine` with `--aberration` is refused naming both, nothing written.
+#[test]
+fn render_refines_for_the_viewer_and_reference_refuses_refine_with_aberration() {
+    let dir = tempfile::tempdir().unwrap();
+    let eye = dir.path().join("eye.json");
+    std::fs::write(&eye, EYE).unwrap();
+    let refine = ["--refine", "3", "--refine-levels", "32"];
+    let corrected = dir.path().join("corrected");
+    let mut args = vec!["--aberration", eye.to_str().unwrap()];
+    args.extend_from_slice(&refine);
+    let o = render(&args, &corrected);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = report(&corrected);
+    assert_eq!(r["models"]["aberration"]["applied"]["exact"], true);
+    let held = &r["refine"]["held_out"];
+    let (cnn, refined) = (
+        held["cnn_codes_psnr_db"].as_f64().unwrap(),
+        held["refined_codes_psnr_db"].as_f64().unwrap(),
+    );
+    assert!(
+        refined > cnn,
+        "held-out through the eye: CNN {cnn} dB, refined {refined} dB"
+    );
+    let unaberrated = dir.path().join("unaberrated");
+    assert!(render(&refine, &unaberrated).status.success());
+    assert_ne!(
+        std::fs::read(corrected.join("phase_g.png")).unwrap(),
+        std::fs::read(unaberrated.join("phase_g.png")).unwrap()
+    );
+
+    let out = dir.path().join("reference");
+    let o = holo(&[
+        "reference",
+        "--size",
+        "40x56",
+        "--levels",
+        "16",
+        "--aberration",
+        eye.to_str().unwrap(),
+        "--refine",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("--refine") && e.contains("--aberration"), "{e}");
+    assert!(!out.exists(), "nothing written");
+}

@@ -304,11 +304,13 @@ impl HologramGenerator {
     /// frame's SM-LBM focal stack by default; [`crate::refine`], `docs/REFINE.md`) through the generator's
     /// display calibration. `progress(record)` is called with the start's loss and after every iteration
     /// (on the calling thread); `ControlFlow::Break(())` cancels. Takes seconds on a phone: call it off the
-    /// UI thread. The patterns' `amplitude_scale` is the refined pattern's least-squares scale.
+    /// UI thread. The patterns' `amplitude_scale` is the refined pattern's least-squares scale. With a
+    /// viewer's aberration (a prescription or an aberration profile), the refinement's model sees through the
+    /// viewer's eye, so the refined patterns stay corrected (`docs/REFINE.md`, "A viewer's aberration").
     ///
     /// Errors: as [`HologramGenerator::render`]; [`HoloError::InvalidParameter`] for a bad `refinement`
-    /// (naming the setting: `iterations`, `step_rad`, `planes`, `levels`) or a generator that corrects a
-    /// viewer's aberration (`refine`: not modelled yet); [`HoloError::Cancelled`] when `progress` stopped it.
+    /// (naming the setting: `iterations`, `step_rad`, `planes`, `levels`), or `target` for the CNN target with
+    /// a CNN trained for the viewer's aberration; [`HoloError::Cancelled`] when `progress` stopped it.
     /// The generator stays usable after any error.
     pub fn render_refined(
         &self,
@@ -317,12 +319,9 @@ impl HologramGenerator {
         progress: &mut dyn FnMut(&IterationRecord) -> ControlFlow<()>,
     ) -> Result<SlmPatterns> {
         refinement.validate()?;
-        if lock_slot(&self.aberration).is_some() || self.pipeline.aberration().is_some() {
-            return Err(invalid(
-                "refine",
-                "the refinement does not model a viewer's aberration yet; refine without the correction",
-            ));
-        }
+        // The viewer's aberration the session corrects (the generator's or the pipeline's): the refinement's
+        // model sees through it, so the refined pattern stays corrected.
+        let viewer = self.aberration();
         let t = Instant::now();
         let (rgbd, report) = self.convert(frame)?;
         let convert_s = t.elapsed().as_secs_f64();
@@ -351,6 +350,8 @@ impl HologramGenerator {
             offset_m: cfg.offset_m,
             encoding: cfg.encoding,
             calibration: self.calibration(),
+            viewer_corrected_by_cnn: viewer.as_ref().is_some_and(|(_, r)| r.by_cnn),
+            viewer: viewer.map(|(p, _)| p),
         };
         let threads = match self.config.threads {
             ThreadCount::Fixed(n) => n.max(1),

@@ -18,6 +18,7 @@ use crate::error::{invalid, HoloError, Result};
 use crate::optics::{simulate_phase_only, OpticalSetup, PropagationOptions};
 use crate::reference::ReferencePipeline;
 use crate::slm::DisplayCalibration;
+use crate::synthesis::aberration::AberrationProfile;
 use crate::synthesis::{SceneLayer, SmLbm};
 
 /// The SM-LBM planes of the default target: 512 (docs/REFINE.md: the target's cost against its levels).
@@ -131,6 +132,14 @@ pub struct RefineDisplay {
     pub encoding: DoublePhaseMethod,
     /// The SLM's look-up tables (`None`: linear).
     pub calibration: Option<Arc<DisplayCalibration>>,
+    /// The viewer's aberration (`None`: none), which the refinement's model sees through
+    /// ([`Refiner::with_viewer`]): the refined pattern stays corrected, at every loss plane's own distance.
+    /// The target is the unaberrated one, so [`RefineTarget::CnnMidpoint`] is refused where the CNN corrects
+    /// the aberration itself (`viewer_corrected_by_cnn`: its midpoint hologram is the corrected one).
+    pub viewer: Option<Arc<AberrationProfile>>,
+    /// Whether the hologram CNN was trained for `viewer`'s aberration (the session's
+    /// [`AberrationReport::by_cnn`](crate::pipeline::AberrationReport::by_cnn)).
+    pub viewer_corrected_by_cnn: bool,
 }
 
 /// Refines a session's frames one after another: one [`Refiner`] for the frame size (made at the first
@@ -217,6 +226,16 @@ impl FrameRefiner {
             Some(r) => (Some(r.midpoint), Some(r.double_phase.phase)),
             None => (None, None),
         };
+        if self.request.target == RefineTarget::CnnMidpoint
+            && d.viewer.is_some()
+            && d.viewer_corrected_by_cnn
+        {
+            return Err(invalid(
+                "target",
+                "the CNN's midpoint hologram cannot be the target of a viewer whose aberration the CNN \
+                 corrects itself (it is the corrected hologram, not the scene): refine against SM-LBM",
+            ));
+        }
         let midpoint = match (self.request.target, smlbm_midpoint, cnn_midpoint) {
             (RefineTarget::SmLbm { .. }, Some(m), _) => m,
             (RefineTarget::CnnMidpoint, _, Some(m)) => m.to_owned(),
@@ -285,7 +304,8 @@ impl FrameRefiner {
                     options,
                     self.threads,
                 )?
-                .with_calibration(calibration)?,
+                .with_calibration(calibration)?
+                .with_viewer(d.viewer.as_deref())?,
             ),
         };
         let mut phase = start.to_owned();
@@ -293,21 +313,15 @@ impl FrameRefiner {
         let codes = codes_of(phase.view(), calibration)?;
         let shown = displayed_phase(codes.view(), calibration)?;
         let held = held_out_depths(options.planes)?;
-        // One scorer for the four patterns: the held-out planes' target and multipliers made once.
-        let mut scorer = Refiner::new(
+        // The held-out planes scored with the refiner's own buffers: only their target and multipliers are
+        // made (and dropped after).
+        let mut set = refiner.plane_set(FocalTarget::from_midpoint(
+            midpoint,
             &d.optics,
             d.propagation,
-            d.offset_m,
-            FocalTarget::from_midpoint(midpoint, &d.optics, d.propagation, &held)?,
-            RefineOptions {
-                iterations: 1,
-                planes: held.len().max(1),
-                quantised: false,
-                ..options
-            },
-            self.threads,
-        )?;
-        let mut score = |p: ArrayView3<f32>| scorer.score(p).map(|r| r.psnr_db);
+            &held,
+        )?)?;
+        let mut score = |p: ArrayView3<f32>| refiner.score_planes(&mut set, p).map(|r| r.psnr_db);
         let held_out = HeldOutScores {
             cnn_codes_psnr_db: cnn.map(&mut score).transpose()?,
             start_psnr_db: score(start)?,
@@ -315,7 +329,7 @@ impl FrameRefiner {
             refined_codes_psnr_db: score(shown.view())?,
             depths: held,
         };
-        drop(scorer);
+        drop(set);
         let amplitude_scale = least_squares_scale(shown.view(), midpoint, d)?;
         Ok(RefinedFrame {
             phase,
@@ -329,7 +343,8 @@ impl FrameRefiner {
 }
 
 /// The least-squares scale of what `shown` (radians) shows at the midpoint plane against `midpoint`'s
-/// amplitude, over every colour (1 for a pattern that shows nothing).
+/// amplitude, over every colour (1 for a pattern that shows nothing). Without the viewer's aberration: a
+/// scale for previews, which show the pattern without an eye.
 fn least_squares_scale(
     shown: ArrayView3<f32>,
     midpoint: ArrayView3<Complex32>,

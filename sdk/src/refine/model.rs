@@ -13,6 +13,14 @@
 //! grid's size, the FFT's normalisation being folded into `m_d`) and `V_d = T_d·U_d/|U_d|` (0 where
 //! `U_d = 0`). Then `∂L/∂φ = Im(g·conj(u))`. Per colour and iteration: one forward FFT of `u`, per plane one
 //! inverse (`U_d`) and one forward (`V_d`), and one inverse for `g`: `2D + 2` FFTs.
+//!
+//! A viewer with an aberration (`AberrationProfile`: a prescription or measured Zernike coefficients) sees
+//! through the eye's pupil function `E_d = circ(ρ ≤ 1)·exp(−i·ΣZ_j(ρ, θ))`, the conjugate of the correction
+//! kernel `Φ_d` of Eq. 5 (`Φ_d·E_d = circ`: the corrected hologram looks sharp), with the coefficients at each
+//! loss plane's own distance `d = z_d − s` from the SLM. The model is then `m_d = M · H(z_d − s) · E_d` and
+//! the target stays the unaberrated one: minimising the loss makes a pattern that the viewer sees sharp,
+//! corrected at every loss plane (where the real-time path applies one distance's kernel). `E_d` has odd
+//! terms (coma, oblique astigmatism), so such `m_d` are kept whole instead of in the even multiplier's quarter.
 
 use num_complex::Complex32;
 
@@ -20,19 +28,46 @@ use crate::error::Result;
 use crate::optics::fft::Fft2;
 use crate::optics::filter::aperture_fn;
 use crate::optics::{Carrier, EvenMultiplier, OpticalSetup, PropagationOptions, Propagator};
+use crate::synthesis::aberration::{pupil_multiplier, AberrationProfile};
+use tensorholo_kernels::Isa;
+
+/// One loss plane's multiplier `m_d`.
+#[derive(Debug)]
+pub(super) enum PlaneMultiplier {
+    /// `M · H(z_d − s)`, even in both frequencies: its quarter.
+    Even(EvenMultiplier),
+    /// `M · H(z_d − s) · E_d` with a viewer's aberration: every value, in the plan's spectrum layout.
+    Full(Vec<Complex32>),
+}
+
+impl PlaneMultiplier {
+    /// `row ← m_d·row` on row `r` of the plan's spectrum layout.
+    pub(super) fn multiply_row(&self, r: usize, row: &mut [Complex32], isa: Isa) {
+        match self {
+            Self::Even(m) => m.multiply_row(r, row, isa),
+            Self::Full(m) => {
+                let cols = row.len();
+                for (x, m) in row.iter_mut().zip(&m[r * cols..(r + 1) * cols]) {
+                    *x *= m;
+                }
+            }
+        }
+    }
+}
 
 /// One colour's fixed parts of the model: its loss planes' multipliers `m_d` and the weight `W`.
 #[derive(Debug)]
 pub(super) struct ColourModel {
-    /// `m_d = M · H(z_d − s)` per loss plane, in the compact even form.
-    pub(super) planes: Vec<EvenMultiplier>,
+    /// `m_d` per loss plane.
+    pub(super) planes: Vec<PlaneMultiplier>,
     /// `W = N·Σ_d |m_d|²`, the plan's spectrum layout.
     pub(super) weight: Vec<f32>,
 }
 
 impl ColourModel {
     /// The model of colour `colour` of `setup` on an unpadded `[height, width]` grid for an SLM `offset_m`
-    /// metres from the midpoint plane and loss planes at normalised `depths`.
+    /// metres from the midpoint plane and loss planes at normalised `depths`, seen through `viewer`'s
+    /// aberration where one is given (see the module docs).
     ///
     /// Errors: as [`Propagator::new`] and [`Propagator::even_transfer_function`].
     pub(super) fn new(
@@ -42,6 +77,7 @@ impl ColourModel {
         (height, width): (usize, usize),
         offset_m: f64,
         depths: &[f64],
+        viewer: Option<&AberrationProfile>,
     ) -> Result<Self> {
         let prop = Propagator::new(
             height,
@@ -52,20 +88,32 @@ impl ColourModel {
         )?;
         let plan = prop.plan();
         let aperture = aperture_fn(plan);
-        let planes = depths
-            .iter()
-            .map(|&d| {
-                prop.even_transfer_function_masked(
-                    setup.depth_to_z(d) - offset_m,
-                    Carrier::Remove,
-                    &aperture,
-                )
-            })
-            .collect::<Result<Vec<_>>>()?;
-        // W from the full multipliers: apply each plane's m_d to a spectrum of ones.
         let n = plan.spectrum_len();
         let (rows, cols) = (plan.computational_shape().1, plan.computational_shape().0);
         let isa = plan.fft().isa();
+        let planes = depths
+            .iter()
+            .map(|&d| {
+                let distance_m = setup.depth_to_z(d) - offset_m;
+                let even =
+                    prop.even_transfer_function_masked(distance_m, Carrier::Remove, &aperture)?;
+                let Some(viewer) = viewer else {
+                    return Ok(PlaneMultiplier::Even(even));
+                };
+                // m_d = M·H·E_d: the even multiplier's values, times the conjugate of the correction kernel at
+                // this plane's distance.
+                let mut full = vec![Complex32::new(1.0, 0.0); n];
+                for (r, row) in full.chunks_exact_mut(cols).enumerate() {
+                    even.multiply_row(r, row, isa);
+                }
+                let kernel = pupil_multiplier(plan, &viewer.coefficients(distance_m, colour));
+                for (m, k) in full.iter_mut().zip(&kernel) {
+                    *m *= k.conj();
+                }
+                Ok(PlaneMultiplier::Full(full))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        // W from the full multipliers: apply each plane's m_d to a spectrum of ones.
         let mut weight = vec![0.0f32; n];
         let mut row = vec![Complex32::new(0.0, 0.0); cols];
         for m in &planes {
@@ -84,11 +132,21 @@ impl ColourModel {
 /// `acc ← acc + conj(m)·x` on row `r` of the plan's layout (`acc` and `x` that row's values), reading the even
 /// multiplier's quarter: row `r` mirrors row `rows − r`, column `c ≥ cols/2 + 1` column `cols − c`.
 pub(super) fn add_conj_product(
-    m: &EvenMultiplier,
+    m: &PlaneMultiplier,
     r: usize,
     acc: &mut [Complex32],
     x: &[Complex32],
 ) {
+    let m = match m {
+        PlaneMultiplier::Even(m) => m,
+        PlaneMultiplier::Full(m) => {
+            let cols = acc.len();
+            for ((a, v), m) in acc.iter_mut().zip(x).zip(&m[r * cols..(r + 1) * cols]) {
+                *a += m.conj() * v;
+            }
+            return;
+        }
+    };
     let q = m.quarter_row(r);
     let qc = q.len();
     let (acc_low, acc_high) = acc.split_at_mut(qc);
@@ -116,7 +174,7 @@ const LANES: usize = 16;
 #[allow(clippy::too_many_arguments)]
 pub(super) fn plane_term(
     fft: &Fft2,
-    m: &EvenMultiplier,
+    m: &PlaneMultiplier,
     spectrum: &[Complex32],
     target: &[f32],
     work: &mut [Complex32],

@@ -155,6 +155,54 @@ fn the_analytic_gradient_matches_finite_differences() {
     assert!(scale > 0.0);
 }
 
+/// The loss and the analytic gradient against PyTorch autograd through `training/`'s optics (its
+/// `focal_stack` with the Fourier filter, from the SLM plane): the fixture `sdk/tests/fixtures/refine_gradient`
+/// written by `training/make_refine_fixture.py` (random phase, a noisy focal stack of another pattern as the
+/// target, 3 planes, 2 mm offset; `training/tests/test_refine_fixture.py` checks that it is autograd's today).
+#[test]
+fn the_loss_and_gradient_are_pytorch_autograds() {
+    let dir =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/refine_gradient");
+    let read3 = |name: &str| -> Array3<f32> {
+        ndarray_npy::read_npy(dir.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
+    };
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("meta.json")).unwrap()).unwrap();
+    let depths: Vec<f64> = meta["depths"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d.as_f64().unwrap())
+        .collect();
+    assert_eq!(depths, loss_depths(3).unwrap());
+    assert_eq!(meta["offset_m"].as_f64(), Some(OFFSET_M));
+    let stack: ndarray::Array4<f32> = ndarray_npy::read_npy(dir.join("target.npy")).unwrap();
+    let target = FocalTarget::from_stack(
+        depths.clone(),
+        stack.outer_iter().map(|p| p.to_owned()).collect(),
+    )
+    .unwrap();
+    let phase = read3("phase.npy");
+    let want = read3("gradient.npy");
+    let mut r = refiner(target, CONTINUOUS, 2);
+    let (loss, grad) = r.loss_and_gradient(phase.view());
+    let want_loss = meta["loss"].as_f64().unwrap();
+    let scale = want.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    let err = grad
+        .iter()
+        .zip(&want)
+        .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+    println!(
+        "loss {loss:.6e} (autograd {want_loss:.6e}); gradient max |Δ| {err:.2e} of max |∂L/∂φ| {scale:.2e}"
+    );
+    assert!(
+        (loss - want_loss).abs() <= 1e-4 * want_loss,
+        "{loss} vs {want_loss}"
+    );
+    assert!(scale > 0.0);
+    assert!(err <= 1e-3 * scale, "{err} vs {scale}");
+}
+
 /// Adam lowers the loss at every iteration on a small scene, from a random and from a zero start, and the
 /// history has the start and every iteration.
 #[test]
