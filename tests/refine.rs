@@ -1,6 +1,7 @@
 //! The focal-stack refinement (`tensorholo::refine`, docs/REFINE.md) on real RGB-D frames: warm-started from
 //! the shipped CNN's SLM codes and aimed at the SM-LBM ground truth, 10 iterations beat the CNN at focal
-//! planes the loss never saw, the 8-bit codes keep the gain, and the warm start beats the cold one.
+//! planes the loss never saw, the 8-bit codes keep the gain (within 0.2 dB of an unquantised refinement), and
+//! the warm start beats the cold one.
 
 use std::ops::ControlFlow;
 
@@ -86,7 +87,15 @@ impl Case {
 
     /// Refines `start` 10 iterations with the defaults; returns the refined phase and the loss history.
     fn refine(&self, start: &Array3<f32>) -> (Array3<f32>, Vec<IterationRecord>) {
-        let options = RefineOptions::default();
+        self.refine_with(start, RefineOptions::default())
+    }
+
+    /// Refines `start` with `options`.
+    fn refine_with(
+        &self,
+        start: &Array3<f32>,
+        options: RefineOptions,
+    ) -> (Array3<f32>, Vec<IterationRecord>) {
         let mut refiner = Refiner::new(
             &self.config.optics,
             self.config.options,
@@ -152,10 +161,25 @@ fn refinement_beats_the_cnn_at_unseen_planes_on_real_frames() {
             codes_db >= cnn + 2.0,
             "frame {k}: 10 iterations gain ≥ 2 dB at unseen planes: CNN {cnn:.2}, refined codes {codes_db:.2}"
         );
-        // Measured 0.04 (Redwood) and 0.14 dB (TUM) here; docs/REFINE.md: 0.1–0.35 dB at 384².
+        // What 8 bits cost: the codes of the default (quantised) refinement against an unquantised refinement's
+        // continuous phase, which no SLM can show.
+        let (continuous, _) = c.refine_with(
+            &start,
+            RefineOptions {
+                quantised: false,
+                ..RefineOptions::default()
+            },
+        );
+        let continuous_db = c.held_out(&continuous);
+        eprintln!(
+            "frame {k}: unquantised refinement {continuous_db:.2} dB; the quantised one's codes lose {:.3} dB",
+            continuous_db - codes_db
+        );
+        // Measured here: 0.03 dB (Redwood), 0.16 dB (TUM); the issue's goal is 0.1 (docs/REFINE.md, limits).
         assert!(
-            codes_db >= refined_db - 0.25,
-            "frame {k}: the 8-bit codes lose ≤ 0.25 dB: {refined_db:.2} → {codes_db:.2}"
+            codes_db >= continuous_db - 0.2,
+            "frame {k}: the 8-bit codes lose ≤ 0.2 dB against an unquantised refinement: \
+             {continuous_db:.2} → {codes_db:.2}"
         );
         if k == 0 {
             let zero = initial_phase(RefineStart::Zero, SIZE.0, SIZE.1).unwrap();
