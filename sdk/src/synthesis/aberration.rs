@@ -536,14 +536,13 @@ impl AberrationProfile {
         serde_json::to_string_pretty(self).expect("a profile always serialises")
     }
 
-    /// Writes the JSON form to `path`.
+    /// Writes the JSON form to `path`, atomically ([`crate::io::write_atomic`]: a temporary file renamed over
+    /// `path`, so a reader never sees half a file, and a symbolic link at `path` is replaced, not followed: the
+    /// file it pointed to is left as it was).
     ///
-    /// Errors: [`HoloError::Io`].
+    /// Errors: [`HoloError::Io`] naming `path`.
     pub fn save(&self, path: &Path) -> Result<()> {
-        std::fs::write(path, self.to_json_string() + "\n").map_err(|source| HoloError::Io {
-            path: path.to_path_buf(),
-            source,
-        })
+        crate::io::write_atomic(path, (self.to_json_string() + "\n").as_bytes())
     }
 }
 
@@ -1015,6 +1014,29 @@ mod tests {
             },
         ])
         .expect("valid profile")
+    }
+
+    /// `save` writes atomically and replaces a symbolic link at its path instead of writing through it: the
+    /// unrelated file the link pointed to keeps its bytes, and the saved file reads back as the profile.
+    #[cfg(unix)]
+    #[test]
+    fn save_replaces_a_link_at_its_path_and_leaves_the_linked_file_alone() {
+        let dir = tempfile::tempdir().unwrap();
+        let unrelated = dir.path().join("unrelated.txt");
+        std::fs::write(&unrelated, "keep me").unwrap();
+        let out = dir.path().join("eye.json");
+        std::os::unix::fs::symlink(&unrelated, &out).unwrap();
+        let profile = two_point_profile();
+        profile.save(&out).unwrap();
+        assert_eq!(std::fs::read_to_string(&unrelated).unwrap(), "keep me");
+        assert!(!std::fs::symlink_metadata(&out)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        let back = AberrationProfile::load(&out).unwrap();
+        assert!(back.same_aberrations(&profile));
+        // No temporary file left beside it.
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
     }
 
     #[test]
