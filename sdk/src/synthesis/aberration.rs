@@ -42,6 +42,13 @@ use crate::optics::{propagation::check_positive, OpticalSetup};
 pub const ABERRATION_FORMAT: &str = "tensorholo.aberration";
 /// Version of the aberration file format this build reads and writes.
 pub const ABERRATION_FORMAT_VERSION: u32 = 1;
+/// The largest magnitude of a Zernike coefficient, radians at the pupil edge: 10⁴. The correction kernel
+/// `e^{iΣZ}` is sampled on the frequency grid, where the focus term's phase changes by `8|a|/N` between
+/// neighbouring bins at the pupil edge (`N` bins across the grid); beyond `π` it aliases. At the largest SLM
+/// side the SDK accepts (8192 pixels) that is `|a| ≈ 3.2·10³`, so no grid samples a larger coefficient, while
+/// the strongest prescription the SDK converts stays far below (about 35 rad per colour on an 8 µm display,
+/// 2.2·10³ at 1 µm). Larger values are a unit or typing error (or overflow to NaN in the kernel).
+pub const MAX_COEFFICIENT_RAD: f64 = 1e4;
 
 /// The five Zernike coefficients of the paper's aberration model (Eq. 14–18), in radians of phase at the
 /// pupil edge (`ρ = 1`): the paper's `a3d … a7d` at one focus distance `d` and one wavelength.
@@ -314,6 +321,25 @@ impl AberrationProfile {
                 if k.to_array().iter().any(|a| !a.is_finite()) {
                     return Err(HoloError::InvalidData(format!(
                         "sample {i} (distance {} m), colour {}: coefficients must be finite, got {k:?}",
+                        s.distance_m,
+                        ["R", "G", "B"][c]
+                    )));
+                }
+                let names = [
+                    "focus",
+                    "astigmatism_vertical",
+                    "astigmatism_oblique",
+                    "coma_horizontal",
+                    "coma_vertical",
+                ];
+                if let Some((name, a)) = names
+                    .iter()
+                    .zip(k.to_array())
+                    .find(|(_, a)| a.abs() > MAX_COEFFICIENT_RAD)
+                {
+                    return Err(HoloError::InvalidData(format!(
+                        "sample {i} (distance {} m), colour {}: {name} = {a} rad is beyond ±{MAX_COEFFICIENT_RAD} \
+                         rad at the pupil edge (no SLM grid samples it; a unit error?)",
                         s.distance_m,
                         ["R", "G", "B"][c]
                     )));
@@ -1037,6 +1063,34 @@ mod tests {
         assert!(back.same_aberrations(&profile));
         // No temporary file left beside it.
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
+    }
+
+    /// Coefficients beyond ±MAX_COEFFICIENT_RAD are refused naming the sample, the colour and the term (1e20
+    /// rendered silently and 1e308 overflowed to NaN before); the bound itself is accepted.
+    #[test]
+    fn huge_coefficients_are_refused_naming_the_term() {
+        let profile = |a: f64| {
+            AberrationProfile::new(vec![AberrationSample {
+                distance_m: 0.0,
+                coefficients: [
+                    ZernikeCoefficients::ZERO,
+                    ZernikeCoefficients {
+                        coma_vertical: a,
+                        ..ZernikeCoefficients::ZERO
+                    },
+                    ZernikeCoefficients::ZERO,
+                ],
+            }])
+        };
+        for a in [1e20, -1e308, MAX_COEFFICIENT_RAD * 1.001] {
+            let e = profile(a).unwrap_err().to_string();
+            assert!(
+                e.contains("sample 0") && e.contains("colour G") && e.contains("coma_vertical"),
+                "{e}"
+            );
+        }
+        assert!(profile(MAX_COEFFICIENT_RAD).is_ok());
+        assert!(profile(-250.0).is_ok());
     }
 
     #[test]
