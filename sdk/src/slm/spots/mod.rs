@@ -294,15 +294,13 @@ impl SpotPlan {
         format!("capture_{}_d{i}_k{k}.png", COLOURS[c.min(2)])
     }
 
-    /// Reads and checks `dir/plan.json`. Errors: [`HoloError::Io`] naming the file if it cannot be read,
-    /// [`HoloError::InvalidData`] naming it (and the field) for bad JSON or a field [`SpotPlan::validate`]
-    /// refuses.
+    /// Reads and checks `dir/plan.json` through the SDK's bounded reader ([`crate::io::read_text`]: at most
+    /// [`crate::io::MAX_TEXT_BYTES`], a folder or a device refused). Errors: those of [`crate::io::read_text`]
+    /// naming the file (unreadable, too large, not a regular file, not UTF-8), [`HoloError::InvalidData`]
+    /// naming it (and the field) for bad JSON or a field [`SpotPlan::validate`] refuses.
     pub fn load(dir: &Path) -> Result<Self> {
         let path = dir.join(PLAN_FILE);
-        let text = std::fs::read_to_string(&path).map_err(|source| HoloError::Io {
-            path: path.clone(),
-            source,
-        })?;
+        let text = crate::io::read_text(&path)?;
         let bad = |e: String| HoloError::InvalidData(format!("plan `{}`: {e}", path.display()));
         let plan: Self = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
         plan.validate().map_err(|e| bad(e.to_string()))?;
@@ -333,6 +331,30 @@ mod tests {
             32,
         )
         .unwrap()
+    }
+
+    /// The plan is read through the bounded reader: a plan that is a link to `/dev/zero` is refused at once
+    /// (it was read until memory ran out), and one over `MAX_TEXT_BYTES` is refused naming the limit; a saved
+    /// plan still reads back.
+    #[cfg(unix)]
+    #[test]
+    fn a_plan_is_read_within_the_text_limit() {
+        let dir = tempfile::tempdir().unwrap();
+        plan().save(dir.path()).unwrap();
+        assert_eq!(SpotPlan::load(dir.path()).unwrap().slm_size, [48, 64]);
+        let path = dir.path().join(PLAN_FILE);
+        std::fs::remove_file(&path).unwrap();
+        std::os::unix::fs::symlink("/dev/zero", &path).unwrap();
+        let e = SpotPlan::load(dir.path()).unwrap_err().to_string();
+        assert!(e.contains(PLAN_FILE), "{e}");
+        std::fs::remove_file(&path).unwrap();
+        let big = format!(
+            "{{\"pad\": \"{}\"}}",
+            " ".repeat(crate::io::MAX_TEXT_BYTES as usize)
+        );
+        std::fs::write(&path, big).unwrap();
+        let e = SpotPlan::load(dir.path()).unwrap_err().to_string();
+        assert!(e.contains(PLAN_FILE) && e.contains("input limit"), "{e}");
     }
 
     #[test]
