@@ -12,7 +12,8 @@
 #   - a whole `holo render --refine 1 --refine-target cnn` at 1080p (the focal-stack refinement, docs/REFINE.md:
 #     its 7 loss planes' target and multipliers, per colour the spectra, fields and Adam's moments, the
 #     held-out planes scored with the same buffers; memory does not grow with the iterations), report.json's
-#     `peak_rss_mib`: 1203 MiB measured (Intel Xeon VM, debug build), of which the refinement ~950.
+#     `peak_rss_mib`: 1203 MiB measured (Intel Xeon VM, debug build): 248 up to the last frame, then ~105 of
+#     previews and ~850 of the refinement.
 # Today's figures (AMD EPYC Zen 4, 2 threads, release build; the debug build CI runs is within a few MiB):
 # session 1080p 235 MiB (f32) / 222 MiB (int8), 384² 39 / 32 MiB; streams 1080p 324 / 308, 384² 53 / 39;
 # `holo render` 1080p 241 MiB up to its last frame, 345 MiB with the previews (+105). The session limits are

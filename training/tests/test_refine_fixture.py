@@ -25,7 +25,8 @@ def test_the_committed_fixture_is_autograds(tmp_path):
 
 
 def test_the_autograd_gradient_matches_finite_differences():
-    """Autograd's gradient is the loss's: a central difference of the float64 loss along a random direction."""
+    """Autograd's gradient is the loss's: a central difference of the loss (float32 fields, float64 sums) along
+    a random direction."""
     import torch
 
     display = make_refine_fixture.Display()

@@ -157,8 +157,8 @@ pub struct FrameRefiner {
 impl FrameRefiner {
     /// A refiner of frames on `display` with `threads` threads.
     ///
-    /// Errors: as [`FrameRefinement::validate`]; [`HoloError::InvalidParameter`] for zero threads or a padded
-    /// propagation (`pad`).
+    /// Errors: as [`FrameRefinement::validate`]; [`HoloError::InvalidParameter`] for zero threads, a padded
+    /// propagation (`pad`), or the CNN target for a viewer whose aberration the CNN corrects itself (`target`).
     pub fn new(request: FrameRefinement, display: RefineDisplay, threads: usize) -> Result<Self> {
         request.validate()?;
         if threads == 0 {
@@ -168,6 +168,16 @@ impl FrameRefiner {
             return Err(invalid(
                 "pad",
                 "the refinement runs on the unpadded grid of the real-time pipeline",
+            ));
+        }
+        if request.target == RefineTarget::CnnMidpoint
+            && display.viewer.is_some()
+            && display.viewer_corrected_by_cnn
+        {
+            return Err(invalid(
+                "target",
+                "the CNN's midpoint hologram cannot be the target of a viewer whose aberration the CNN \
+                 corrects itself (it is the corrected hologram, not the scene): refine against SM-LBM",
             ));
         }
         Ok(Self {
@@ -226,16 +236,6 @@ impl FrameRefiner {
             Some(r) => (Some(r.midpoint), Some(r.double_phase.phase)),
             None => (None, None),
         };
-        if self.request.target == RefineTarget::CnnMidpoint
-            && d.viewer.is_some()
-            && d.viewer_corrected_by_cnn
-        {
-            return Err(invalid(
-                "target",
-                "the CNN's midpoint hologram cannot be the target of a viewer whose aberration the CNN \
-                 corrects itself (it is the corrected hologram, not the scene): refine against SM-LBM",
-            ));
-        }
         let midpoint = match (self.request.target, smlbm_midpoint, cnn_midpoint) {
             (RefineTarget::SmLbm { .. }, Some(m), _) => m,
             (RefineTarget::CnnMidpoint, _, Some(m)) => m.to_owned(),

@@ -384,3 +384,36 @@ fn starts_made_here() {
     assert!(initial_phase(RefineStart::Cnn, 2, 2).is_err());
     assert!(initial_phase(RefineStart::Zero, 0, 2).is_err());
 }
+
+/// The CNN's midpoint hologram is refused as the target for a viewer whose aberration the CNN corrects itself
+/// (its midpoint is the corrected hologram), when the frame refiner is made, naming `target`; SM-LBM is taken,
+/// and so is the CNN target where the kernel, not the CNN, corrects.
+#[test]
+fn the_cnn_target_is_refused_where_the_cnn_corrects_the_viewer() {
+    use crate::synthesis::aberration::ZernikeCoefficients;
+    use std::sync::Arc;
+
+    let display = |by_cnn: bool| RefineDisplay {
+        optics: setup(),
+        propagation: Default::default(),
+        offset_m: OFFSET_M,
+        encoding: Default::default(),
+        calibration: None,
+        viewer: Some(Arc::new(AberrationProfile::uniform(ZernikeCoefficients {
+            focus: 2.0,
+            ..ZernikeCoefficients::ZERO
+        }))),
+        viewer_corrected_by_cnn: by_cnn,
+    };
+    let request = |target| FrameRefinement {
+        target,
+        ..FrameRefinement::default()
+    };
+    let e = FrameRefiner::new(request(RefineTarget::CnnMidpoint), display(true), 1).unwrap_err();
+    assert!(
+        matches!(&e, HoloError::InvalidParameter { name, .. } if *name == "target"),
+        "{e:?}"
+    );
+    assert!(FrameRefiner::new(request(RefineTarget::default()), display(true), 1).is_ok());
+    assert!(FrameRefiner::new(request(RefineTarget::CnnMidpoint), display(false), 1).is_ok());
+}
