@@ -11,10 +11,10 @@ use tensorholo::synthesis::{AberrationCorrectedSmLbm, AberrationProfile};
 /// `G·(G + 1)/2` for `G` non-empty planes).
 pub const MAX_PROPAGATIONS_PER_COLOUR: usize = 5_000_000;
 
-/// Loads an aberration profile file.
-pub fn load(path: &Path) -> Result<AberrationProfile> {
-    AberrationProfile::load(path)
-        .with_context(|| format!("cannot use --aberration {}", path.display()))
+/// Loads an aberration profile file; `what` names where the file was given (`--aberration`, or `the --display
+/// profile's aberration`), so that an error blames what the user wrote.
+pub fn load(what: &str, path: &Path) -> Result<AberrationProfile> {
+    AberrationProfile::load(path).with_context(|| format!("cannot use {what} {}", path.display()))
 }
 
 /// Refuses a run of `propagations` per colour above [`MAX_PROPAGATIONS_PER_COLOUR`] (`what` says whether the

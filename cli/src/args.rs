@@ -487,6 +487,17 @@ impl PlanArgs {
         Ok(())
     }
 
+    /// `e` with the `--tuning` file named where the SDK blames the saved plans (`tuning`: a saved session
+    /// this network cannot run), so that the message points at the file, not at a flag.
+    pub fn blame(&self, e: tensorholo::HoloError) -> anyhow::Error {
+        match (&self.tuning, &e) {
+            (Some(path), tensorholo::HoloError::InvalidParameter { name: "tuning", .. }) => {
+                anyhow::Error::new(e).context(format!("--tuning {}", path.display()))
+            }
+            _ => e.into(),
+        }
+    }
+
     /// The `--tuning` file for the output guard ([`crate::output::guard`]), if given.
     pub fn guard_input(&self) -> Option<crate::output::Input<'_>> {
         Some(crate::output::Input::file(
@@ -525,6 +536,17 @@ pub fn native_layout_from_env() -> Result<(Option<usize>, Option<usize>)> {
         }
     };
     Ok((read("TENSORHOLO_STRIP_ROWS")?, read("TENSORHOLO_SLABS")?))
+}
+
+/// Checks `--offset-mm` (millimetres): finite and within the SDK's ±[`tensorholo::optics::MAX_OFFSET_M`].
+/// Errors: the flag, the value and the bound.
+pub fn check_offset_mm(offset_mm: f64) -> Result<()> {
+    tensorholo::optics::check_offset("offset_m", offset_mm * 1e-3).with_context(|| {
+        format!(
+            "--offset-mm {offset_mm}: the SLM's offset must be a finite number of millimetres within ±{} mm",
+            tensorholo::optics::MAX_OFFSET_M * 1e3
+        )
+    })
 }
 
 /// The display profile at `path` (`--display`), read once per process: every later call gets the same

@@ -535,7 +535,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
     if !args.skip_pipeline && args.backend.contains(&BackendArg::Cpu) {
         let aberration = match &args.aberration {
-            Some(path) => Some(Arc::new(crate::aberration::load(path)?)),
+            Some(path) => Some(Arc::new(crate::aberration::load("--aberration", path)?)),
             None => None,
         };
         println!(

@@ -323,7 +323,7 @@ fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
         options: args.optics.options(),
         silhouette_masks: true,
     };
-    if let (None, Some((path, s))) = (&args.aberration, aberration_source(args)?) {
+    if let (None, Some((path, s, _))) = (&args.aberration, aberration_source(args)?) {
         log::info!(
             "the --display profile's aberration {}: the ground truth is the aberration-corrected SM-LBM \
              (Eq. 5) for an SLM {} mm from the midpoint plane (the profile's first offset)",
@@ -332,8 +332,8 @@ fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
         );
     }
     let aberration = match aberration_source(args)? {
-        Some((path, slm_offset_m)) => Some(AberrationCorrection {
-            profile: crate::aberration::load(&path)?,
+        Some((path, slm_offset_m, what)) => Some(AberrationCorrection {
+            profile: crate::aberration::load(what, &path)?,
             slm_offset_m,
         }),
         None => None,
@@ -364,20 +364,21 @@ fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
 /// `--offset-mm`, else the `--display` profile's `aberration` at the profile's first offset (so that
 /// `training/retrain.sh --display FILE` trains for it); `None` without either. A profile's `prescription` is
 /// not used here: the real-time correction is exact for it, no retraining needed.
-fn aberration_source(args: &DatasetArgs) -> Result<Option<(PathBuf, f64)>> {
+fn aberration_source(args: &DatasetArgs) -> Result<Option<(PathBuf, f64, &'static str)>> {
     if let Some(path) = &args.aberration {
-        if !args.offset_mm.is_finite() {
-            bail!("--offset-mm must be a finite number of millimetres");
-        }
-        return Ok(Some((path.clone(), args.offset_mm * 1e-3)));
+        crate::args::check_offset_mm(args.offset_mm)?;
+        return Ok(Some((path.clone(), args.offset_mm * 1e-3, "--aberration")));
     }
     let Some(profile) = args.optics.profile()? else {
         return Ok(None);
     };
-    Ok(profile
-        .aberration
-        .clone()
-        .map(|path| (path, profile.default_offset_m())))
+    Ok(profile.aberration.clone().map(|path| {
+        (
+            path,
+            profile.default_offset_m(),
+            "the --display profile's aberration",
+        )
+    }))
 }
 
 /// Runs `holo dataset`.
@@ -393,8 +394,8 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     .collect();
     let aberration = aberration_source(args)?;
     let mut inputs = inputs;
-    if let Some((path, _)) = &aberration {
-        inputs.push(crate::output::Input::file("--aberration", path));
+    if let Some((path, _, what)) = &aberration {
+        inputs.push(crate::output::Input::file(what, path));
     }
     crate::output::guard("--out", &args.out, &inputs)?;
     if args.merge {
@@ -573,7 +574,7 @@ fn run_in_pool(
         overwrite: args.force,
         git_commit: git_commit(),
         command: crate::output::command_line(),
-        aberration_file: aberration_source(args)?.map(|(path, _)| path),
+        aberration_file: aberration_source(args)?.map(|(path, _, _)| path),
         display: args
             .optics
             .profile()?

@@ -72,9 +72,7 @@ pub fn run(args: &EncodeArgs) -> Result<()> {
             .chain(args.optics.guard_input())
             .collect::<Vec<_>>(),
     )?;
-    if !args.offset_mm.is_finite() {
-        bail!("--offset-mm must be a finite number of millimetres");
-    }
+    crate::args::check_offset_mm(args.offset_mm)?;
     if args.depths.is_empty() {
         bail!("--depths needs at least one normalised depth in [0, 1]");
     }

@@ -49,9 +49,10 @@ Environment:
                       auto or unset: each layer's row from the plan table (or --tune, --tuning)
   TENSORHOLO_STRIP_ROWS=N
                       the native engine's strip height in frame rows (render, video, bench; report.json's
-                      cnn_plan.request.strip_rows): for benchmarks of the layout; unset: the engine's rule
+                      cnn_plan.request.strip_rows): for benchmarks of the layout; unset: the engine's rule;
+                      more rows than the frame's (plus the network's lag): one strip
   TENSORHOLO_SLABS=N  the native f32 engine's column slab count (render, video, bench; request.slabs);
-                      unset: the engine's rule
+                      unset: the engine's rule; more than ⌈width/4⌉: the whole frame
   TENSORHOLO_ISA=scalar|avx2|avxvnni|avx512|avx512vnni|neon|neondot|neoni8mm
                       lower the kernels' instruction set (the plan table's rows follow it)
   RUST_LOG=debug      more log lines (e.g. each layer's timed rows with --tune)";

@@ -82,9 +82,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         .offset_mm
         .or_else(|| profile.as_ref().map(|p| p.default_offset_m() * 1e3))
         .unwrap_or(0.0);
-    if !offset_mm.is_finite() {
-        bail!("--offset-mm must be a finite number of millimetres");
-    }
+    crate::args::check_offset_mm(offset_mm)?;
     let refine = args.refine.options()?;
     if refine.is_some() && args.aberration.is_some() {
         bail!(
@@ -116,7 +114,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     );
     crate::output::guard("--out", &args.out, &inputs)?;
     let aberration = match &args.aberration {
-        Some(path) => Some((path, crate::aberration::load(path)?)),
+        Some(path) => Some((path, crate::aberration::load("--aberration", path)?)),
         None => None,
     };
     crate::output::prepare(&args.out, &inputs)?;

@@ -290,7 +290,7 @@ impl ModelArgs {
             Ok(Some((
                 format!("{flag} {}", path.display()),
                 json!({ "file": crate::output::path_text(path) }),
-                crate::aberration::load(path)?,
+                crate::aberration::load(flag, path)?,
             )))
         };
         let from_prescription = |flag: &str, rx: Prescription| -> Result<_> {
@@ -356,9 +356,7 @@ impl ModelArgs {
     pub fn pipeline(&self, input: SceneInput) -> Result<(HologramPipeline, serde_json::Value)> {
         let profile = self.profile()?;
         let offset_mm = self.offset_mm(profile.as_ref());
-        if !offset_mm.is_finite() {
-            bail!("--offset-mm must be a finite number of millimetres");
-        }
+        crate::args::check_offset_mm(offset_mm)?;
         if let (Some(given), Some(p)) = (self.offset_mm, profile.as_ref()) {
             offset_against_profile(given, p);
         }
@@ -657,7 +655,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         }
     );
     let t = Instant::now();
-    let mut session = pipeline.session(h, w)?;
+    let mut session = pipeline
+        .session(h, w)
+        .map_err(|e| args.model.plans.blame(e))?;
     let session_s = t.elapsed().as_secs_f64();
     args.model
         .plans

@@ -209,7 +209,9 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     let range: Option<DepthRange> = options.range;
     let (h, w) = (first.height(), first.width());
     let t = Instant::now();
-    let mut session = pipeline.session(h, w)?;
+    let mut session = pipeline
+        .session(h, w)
+        .map_err(|e| args.model.plans.blame(e))?;
     let session_s = t.elapsed().as_secs_f64();
     args.model
         .plans

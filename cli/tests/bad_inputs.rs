@@ -372,6 +372,22 @@ fn render_and_reference_refuse_every_bad_input_cleanly() {
             reference(&rgb, &["--levels", "0"]),
             vec!["levels"],
         ),
+        // An offset beyond any display (1 m) is a typing or unit error, named, not a zero hologram.
+        (
+            "render: an offset of 1e308 mm",
+            pair(&rgb, &depth, &["--offset-mm", "1e308"]),
+            vec!["--offset-mm", "1e308", "1000 mm"],
+        ),
+        (
+            "render: an offset of 5 m",
+            pair(&rgb, &depth, &["--offset-mm", "5000"]),
+            vec!["--offset-mm", "5000"],
+        ),
+        (
+            "reference: an offset of -1e308 mm",
+            reference(&rgb, &["--offset-mm=-1e308"]),
+            vec!["--offset-mm", "1000 mm"],
+        ),
     ]);
     run_matrix(&ins, "--out", cases);
     std::fs::remove_dir_all(&ins.dir).unwrap();

@@ -154,6 +154,24 @@ fn bad_captures_are_refused_naming_the_file_and_nothing_is_written() {
         &["missing capture", name],
         &out,
     );
+    // A folder or a device at the capture's name is not "missing": it is named for what it is.
+    std::fs::create_dir(&capture).unwrap();
+    refused(
+        &fit(&patterns, &captures, &out),
+        &[name, "is a folder"],
+        &out,
+    );
+    std::fs::remove_dir(&capture).unwrap();
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink("/dev/null", &capture).unwrap();
+        refused(
+            &fit(&patterns, &captures, &out),
+            &[name, "not a regular file"],
+            &out,
+        );
+        std::fs::remove_file(&capture).unwrap();
+    }
 
     image::GrayImage::from_pixel(48, 40, image::Luma([90]))
         .save(&capture)
@@ -219,6 +237,30 @@ fn bad_plans_parameters_and_outputs_are_refused_naming_the_field() {
         &["plan.json", "camera_scale"],
         &out,
     );
+    // A hand-made plan for an SLM of 16384² (within 16384 a side, 4 times the 8192² a profile allows), a
+    // diversity of 1e308 rad, a wrong type (the key path named), a key given twice.
+    for (from, to, says) in [
+        (
+            "\"slm_size\": [\n    64,\n    64\n  ]",
+            "\"slm_size\": [16384, 16384]",
+            "slm_size",
+        ),
+        ("\"focus\": 2.0", "\"focus\": 1e308", "diversities"),
+        (
+            "\"camera_scale\": 2.0",
+            "\"camera_scale\": \"2\"",
+            "at `camera_scale`",
+        ),
+        (
+            "\"camera_scale\": 2.0",
+            "\"camera_scale\": 2.0, \"camera_scale\": 3.0",
+            "duplicate field",
+        ),
+    ] {
+        assert!(text.contains(from), "{from} not in {text}");
+        std::fs::write(&plan, text.replacen(from, to, 1)).unwrap();
+        refused(&fit(&patterns, &captures, &out), &["plan.json", says], &out);
+    }
     std::fs::write(&plan, &text).unwrap();
 
     let elsewhere = dir.path().join("other");
@@ -248,6 +290,12 @@ fn bad_plans_parameters_and_outputs_are_refused_naming_the_field() {
     refused(
         &patterns_cmd(&["--distances-mm", "0"]),
         &["distances_m", "sub-hologram"],
+        &elsewhere,
+    );
+    // A 4 × 4 SLM cannot hold a spot's sub-hologram: named, not four meaningless patterns.
+    refused(
+        &patterns_cmd(&["--size", "4x4"]),
+        &["distances_m", "cut the spot"],
         &elsewhere,
     );
     refused(

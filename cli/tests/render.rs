@@ -631,6 +631,33 @@ fn tuned_plans_are_saved_and_repeated_and_the_table_repeats_itself() {
     assert!(stderr(&o).contains("tune again"), "{}", stderr(&o));
     let o = render(&dir("z"), &["--tune", "--tuning", tuning.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    // A saved session this network cannot run (tract cannot move a QOperator int8 graph to channels-last):
+    // the file and its session are blamed, not `--layout`, a flag nobody gave.
+    let impossible = serde_json::json!({
+        "format": "tensorholo.cnn-plans", "version": 1, "isa": saved["isa"], "origin": "edited by hand",
+        "sessions": [{"network": "hologram-cnn-8-int8-qoperator-conv-in4", "resolution": [40, 56],
+                      "engine": "tract", "layout": "channels-last", "threads": 1}],
+        "rows": []
+    });
+    let impossible_file = dir("impossible.json");
+    std::fs::write(&impossible_file, impossible.to_string()).unwrap();
+    let o = render(
+        &dir("w"),
+        &[
+            "--precision",
+            "int8-qop",
+            "--tuning",
+            impossible_file.to_str().unwrap(),
+        ],
+    );
+    let e = stderr(&o);
+    assert!(!o.status.success(), "{e}");
+    assert!(
+        e.contains("--tuning") && e.contains("impossible.json") && e.contains("the saved plans"),
+        "{e}"
+    );
+    assert!(!e.contains("error: invalid parameter `layout`"), "{e}");
+    assert!(std::fs::read_dir(dir("w")).map_or(true, |mut d| d.next().is_none()));
 }
 
 /// The native engine's layout settings reach the plan through `holo`'s environment (the library reads none):
@@ -668,6 +695,23 @@ fn the_layout_environment_variables_reach_the_plan_and_bad_values_are_named() {
         assert_eq!(
             std::fs::read(plain.join(&f)).unwrap(),
             std::fs::read(pinned.join(&f)).unwrap(),
+            "{f}"
+        );
+    }
+    // Any integer is a layout: past the frame's, one strip and the whole frame, the same bits.
+    let (o, huge) = run(
+        "huge",
+        &[
+            ("TENSORHOLO_STRIP_ROWS", "18446744073709551615"),
+            ("TENSORHOLO_SLABS", "18446744073709551615"),
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    for c in ["r", "g", "b"] {
+        let f = format!("phase_{c}.png");
+        assert_eq!(
+            std::fs::read(plain.join(&f)).unwrap(),
+            std::fs::read(huge.join(&f)).unwrap(),
             "{f}"
         );
     }

@@ -174,7 +174,7 @@ impl SavedPlans {
     /// Errors: [`HoloError::InvalidParameter`] (`tuning`) for text that is not such a record (not JSON, an
     /// unknown or missing key, another format or version) or fails the checks, naming the entry.
     pub fn from_json(text: &str) -> Result<Self> {
-        let plans: Self = serde_json::from_str(text.trim_start_matches('\u{feff}'))
+        let plans: Self = crate::io::parse_json_object(text, "a saved-plans record")
             .map_err(|e| invalid("tuning", format!("not a {SAVED_PLANS_FORMAT} file: {e}")))?;
         plans.validate()?;
         Ok(plans)

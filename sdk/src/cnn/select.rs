@@ -211,7 +211,29 @@ fn build(
     why: &str,
     tuning: Tuning,
 ) -> Result<CnnPlans> {
-    let plans = engine.plans(nets, height, width, request, &tuning)?;
+    let plans = engine
+        .plans(nets, height, width, request, &tuning)
+        .map_err(|e| match (&request.source, e) {
+            // A saved session's engine or layout this network cannot run: the saved plans are at fault (their
+            // file and session), not a setting the user gave.
+            (PlanSource::Saved(p), HoloError::InvalidParameter { name, reason })
+                if why == "the saved plans" || !tuning.notes.is_empty() =>
+            {
+                invalid(
+                    "tuning",
+                    format!(
+                        "the saved plans ({}) give the session of {} at {height}×{width} the {} engine \
+                         with layout {}, which it cannot run ({name}: {reason}); tune again (--tune) or \
+                         remove that session from the file",
+                        p.origin,
+                        network_key(nets.hologram),
+                        engine.id(),
+                        tuning.layout
+                    ),
+                )
+            }
+            (_, e) => e,
+        })?;
     let (source, source_detail) = match &request.source {
         PlanSource::Table => (
             PlanOrigin::Table,

@@ -699,7 +699,8 @@ fn the_prefilter_base_is_added_once_to_every_row_as_the_rows_are_written() {
             )
             .unwrap();
         }
-        for strip in [1, 4, 7, h + 3] {
+        // `usize::MAX` (an environment setting of any size): one strip, as `h + 3`.
+        for strip in [1, 4, 7, h + 3, usize::MAX] {
             for threads in [1, 3] {
                 let name = format!("{} strip {strip} ×{threads}", model.source_name());
                 let (re, im) = plan(&graph, strip, threads).run_outputs(x.view()).unwrap();
@@ -762,6 +763,10 @@ fn column_slabs_give_the_whole_frame_bit_for_bit() {
                     whole.run_outputs(x.view()).unwrap(),
                     whole.run_outputs(y.view()).unwrap(),
                 );
+                // More slabs than the frame has columns (an environment setting of any size): the whole frame.
+                let mut many = plan(usize::MAX, 1);
+                assert_eq!(many.slab_count(), 1);
+                assert!(many.run_outputs(x.view()).unwrap() == a);
                 for slabs in [2, 3, 4] {
                     for threads in [1, 3] {
                         let mut p = plan(slabs, threads);

@@ -112,7 +112,9 @@ pub struct PlanRequest {
     /// layout (`holo` reads `TENSORHOLO_STRIP_ROWS`); the same value gives the same bits.
     pub strip_rows: Option<usize>,
     /// The native f32 engine's column slab count (`None`, the default: the rule of `cnn/native/slabs.rs`);
-    /// the int8 engine runs whole rows. For benchmarks of the layout (`holo` reads `TENSORHOLO_SLABS`).
+    /// the int8 engine runs whole rows. More slabs than the frame can hold (each starts at its own multiple of
+    /// 4 columns: at most `⌈W/4⌉`) run the whole frame. For benchmarks of the layout (`holo` reads
+    /// `TENSORHOLO_SLABS`).
     pub slabs: Option<usize>,
 }
 

@@ -35,8 +35,7 @@ pub const MAX_SLM_PIXELS: usize = 8192 * 8192;
 pub const MAX_SLM_SIDE: usize = 16_384;
 /// The most offsets a profile may list.
 pub const MAX_OFFSETS: usize = 64;
-/// The farthest offset a profile may give, metres from the midpoint hologram.
-pub const MAX_OFFSET_M: f64 = 1.0;
+pub use crate::optics::MAX_OFFSET_M;
 
 /// Every key of a profile, for messages.
 const KEYS: &str =
@@ -84,7 +83,9 @@ struct RawProfile {
     offsets_m: Option<serde_json::Value>,
     calibration: Option<serde_json::Value>,
     aberration: Option<serde_json::Value>,
-    prescription: Option<serde_json::Value>,
+    /// Its own text, parsed strictly ([`crate::io::parse_json_object`]): a key given twice inside it is
+    /// refused, as at the top level (a `serde_json::Value` would keep the last).
+    prescription: Option<Box<serde_json::value::RawValue>>,
 }
 
 fn err(key: &'static str, reason: impl Into<String>) -> HoloError {
@@ -302,17 +303,27 @@ impl DisplayProfile {
         };
         let calibration = file("calibration", raw.calibration)?;
         let aberration = file("aberration", raw.aberration)?;
-        let prescription = match raw.prescription.filter(|v| !v.is_null()) {
+        let prescription = match raw.prescription.filter(|v| v.get().trim() != "null") {
             None => None,
-            Some(v) => Some(serde_json::from_value::<Prescription>(v).map_err(|e| {
-                err(
-                    "prescription",
-                    format!(
-                        "{e} (expected {{\"sphere_d\": D, \"cylinder_d\": D, \"axis_deg\": degrees, \
-                         \"eyepiece_focal_m\": metres}}, docs/ABERRATION.md)"
-                    ),
-                )
-            })?),
+            Some(v) => Some(
+                crate::io::parse_json_object::<Prescription>(v.get(), "the prescription").map_err(
+                    |e| {
+                        let at = if e.path.is_empty() {
+                            String::new()
+                        } else {
+                            format!("at `prescription.{}`: ", e.path)
+                        };
+                        err(
+                            "prescription",
+                            format!(
+                                "{at}{} (expected {{\"sphere_d\": D, \"cylinder_d\": D, \"axis_deg\": \
+                                 degrees, \"eyepiece_focal_m\": metres}}, docs/ABERRATION.md)",
+                                e.reason
+                            ),
+                        )
+                    },
+                )?,
+            ),
         };
         Self::new(
             name,
@@ -657,11 +668,29 @@ mod tests {
             ),
             (rx.replace(r#", "axis_deg": 30"#, ""), "axis_deg"),
             (rx.replace("sphere_d", "sphere"), "sphere"),
+            // A key given twice inside the object is refused as at the top level (not the last one taken).
+            (
+                rx.replace(r#""axis_deg": 30"#, r#""axis_deg": 30, "sphere_d": -6"#),
+                "duplicate field `sphere_d`",
+            ),
+            // The wrong type names the key and the object expected, not a Rust type.
+            (
+                rx.replace(
+                    r#"{"sphere_d": -2, "cylinder_d": -0.75, "axis_deg": 30}"#,
+                    r#""-2 -0.75 x 30""#,
+                ),
+                "must be one JSON object",
+            ),
+            (
+                rx.replace(r#""axis_deg": 30"#, r#""axis_deg": "30""#),
+                "at `prescription.axis_deg`",
+            ),
         ] {
             match DisplayProfile::from_json_str(&bad) {
                 Err(HoloError::InvalidParameter { name, reason }) => {
                     assert_eq!(name, "prescription");
                     assert!(reason.contains(says), "{reason}");
+                    assert!(!reason.contains("struct"), "{reason}");
                 }
                 other => panic!("{other:?}"),
             }

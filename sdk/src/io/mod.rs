@@ -18,8 +18,10 @@ use num_complex::{Complex32, Complex64};
 use crate::color::amplitude_to_srgb8;
 use crate::error::{invalid, HoloError, Result};
 
+mod json;
 mod read;
 
+pub use json::{parse_json_object, JsonError};
 pub use read::{
     input_limits, read_bytes, read_text, set_input_limits, InputLimits, MAX_STREAM_BYTES,
     MAX_TEXT_BYTES,

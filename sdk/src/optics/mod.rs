@@ -98,6 +98,26 @@ pub const PITCH_RANGE_M: (f64, f64) = (1e-7, 1e-3);
 pub const WAVELENGTH_RANGE_M: (f64, f64) = (1e-7, 1e-5);
 /// The deepest volume a display may have, metres: 1 m (the paper's is 6 mm).
 pub const MAX_VOLUME_DEPTH_M: f64 = 1.0;
+/// The farthest the SLM may sit from the midpoint hologram, metres (either side): 1 m, as deep as the deepest
+/// volume (the paper's offsets are millimetres). A display profile's `offsets_m`, a session's `offset_m` and
+/// an aberration correction's `slm_offset_m` are held to it.
+pub const MAX_OFFSET_M: f64 = 1.0;
+
+/// Checks an SLM offset `offset_m` (metres from the midpoint hologram): finite and within ±[`MAX_OFFSET_M`].
+///
+/// Errors: [`HoloError::InvalidParameter`] naming `name`, the value and the bound.
+pub fn check_offset(name: &'static str, offset_m: f64) -> Result<()> {
+    if !(offset_m.is_finite() && offset_m.abs() <= MAX_OFFSET_M) {
+        return Err(invalid(
+            name,
+            format!(
+                "the SLM's offset from the midpoint hologram must be a finite distance within \
+                 ±{MAX_OFFSET_M} m, got {offset_m} m"
+            ),
+        ));
+    }
+    Ok(())
+}
 
 /// Checks `value` lies within `[lo, hi]` (`unit` for the message). Errors: [`HoloError::InvalidParameter`]
 /// naming `name` and the bounds.

@@ -55,9 +55,7 @@ impl HologramPipeline {
         mut config: PipelineConfig,
     ) -> Result<Self> {
         config.optics.validate()?;
-        if !config.offset_m.is_finite() {
-            return Err(invalid("offset_m", "must be finite"));
-        }
+        crate::optics::check_offset("offset_m", config.offset_m)?;
         let expected = ModelConfig {
             optics: config.optics,
             offset_m: config.offset_m,
@@ -156,9 +154,7 @@ impl HologramPipeline {
         precision: Precision,
         config: PipelineConfig,
     ) -> Result<Self> {
-        if !config.offset_m.is_finite() {
-            return Err(invalid("offset_m", "must be finite"));
-        }
+        crate::optics::check_offset("offset_m", config.offset_m)?;
         let (prefilter, reason) = shipped_prefilter(&hologram, mode, precision, &config)?;
         let mut pipeline = Self::new(hologram, prefilter.map(Arc::new), config)?;
         pipeline.prefilter_reason = reason;

@@ -142,13 +142,19 @@ pub fn png_size(path: &Path) -> Result<(usize, usize)> {
     let reader = decoder.read_info().map_err(|e| png_error(path, e))?;
     let info = reader.info();
     let (w, h) = (info.width as u64, info.height as u64);
-    if w * h > MAX_CAPTURE_PIXELS {
+    check_pixels(path, w, h)?;
+    Ok((h as usize, w as usize))
+}
+
+/// Refuses a capture of `width × height` above [`MAX_CAPTURE_PIXELS`], naming `path`.
+fn check_pixels(path: &Path, width: u64, height: u64) -> Result<()> {
+    if width * height > MAX_CAPTURE_PIXELS {
         return Err(HoloError::InvalidData(format!(
-            "capture `{}` is {w}×{h} pixels; at most {MAX_CAPTURE_PIXELS} pixels are accepted",
+            "capture `{}` is {width}×{height} pixels; at most {MAX_CAPTURE_PIXELS} pixels are accepted",
             path.display()
         )));
     }
-    Ok((h as usize, w as usize))
+    Ok(())
 }
 
 fn binning_for(
@@ -205,9 +211,50 @@ fn read_binned(
     }
     out.fill(0.0);
     clipped.fill(false);
+    let crop = binning.crop;
+    for_each_row(path, crop.x..crop.x + crop.width, |y, values, full| {
+        if y >= crop.y && y < crop.y + crop.height {
+            let r = binning.row_bin[y - crop.y] as usize;
+            let dst = &mut out[r * w..(r + 1) * w];
+            let dst_clip = &mut clipped[r * w..(r + 1) * w];
+            for ((&bin, &v), &f) in binning.col_bin.iter().zip(values).zip(full) {
+                dst[bin as usize] += v;
+                dst_clip[bin as usize] |= f;
+            }
+        }
+        Ok(())
+    })?;
+    for (v, c) in out.iter_mut().zip(&binning.counts) {
+        *v /= c;
+    }
+    Ok(())
+}
+
+/// Decodes the PNG capture at `path` row by row (8- or 16-bit, grey, grey + alpha, RGB or RGBA, palette
+/// expanded; colour averaged to one intensity) and calls `f(y, values, full)` for every row `y` with the
+/// columns `cols` of it: `values` in units of full scale `[0, 1]`, `full[i]` where any colour channel of the
+/// pixel is at full scale. Memory: one decoded row and one row of `cols`, whatever the capture's size.
+///
+/// Errors: as [`read_png_downsampled`]; `cols` beyond the capture's width; an interlaced PNG; whatever `f`
+/// returns (which stops the decoding).
+pub(crate) fn for_each_row(
+    path: &Path,
+    cols: std::ops::Range<usize>,
+    mut f: impl FnMut(usize, &[f32], &[bool]) -> Result<()>,
+) -> Result<()> {
     let mut decoder = png::Decoder::new(open(path)?);
     decoder.set_transformations(png::Transformations::EXPAND);
     let mut reader = decoder.read_info().map_err(|e| png_error(path, e))?;
+    let (width, height) = (reader.info().width as u64, reader.info().height as u64);
+    check_pixels(path, width, height)?;
+    if cols.end as u64 > width || cols.start > cols.end {
+        return Err(HoloError::InvalidData(format!(
+            "capture `{}` is {width} pixels wide: columns {}–{} lie outside it",
+            path.display(),
+            cols.start,
+            cols.end
+        )));
+    }
     if reader.info().interlaced {
         return Err(HoloError::InvalidData(format!(
             "capture `{}` is an interlaced PNG; save captures without interlacing",
@@ -222,37 +269,56 @@ fn read_binned(
     };
     let sixteen = depth == png::BitDepth::Sixteen;
     let full = if sixteen { 65535.0 } else { 255.0 };
-    let crop = binning.crop;
+    let mut values = vec![0f32; cols.len()];
+    let mut at_full = vec![false; cols.len()];
     let mut y = 0usize;
     while let Some(row) = reader.next_row().map_err(|e| png_error(path, e))? {
-        if y >= crop.y && y < crop.y + crop.height {
-            let data = row.data();
-            let r = binning.row_bin[y - crop.y] as usize;
-            let dst = &mut out[r * w..(r + 1) * w];
-            let dst_clip = &mut clipped[r * w..(r + 1) * w];
-            for (i, &bin) in binning.col_bin.iter().enumerate() {
-                let px = (crop.x + i) * samples;
-                let mut sum = 0f32;
-                let mut at_full = false;
-                for c in 0..colour_channels {
-                    let v = if sixteen {
-                        u16::from_be_bytes([data[2 * (px + c)], data[2 * (px + c) + 1]]) as f32
-                    } else {
-                        data[px + c] as f32
-                    };
-                    at_full |= v >= full;
-                    sum += v;
-                }
-                dst[bin as usize] += sum / (colour_channels as f32 * full);
-                dst_clip[bin as usize] |= at_full;
+        let data = row.data();
+        for (i, (v, f)) in values.iter_mut().zip(&mut at_full).enumerate() {
+            let px = (cols.start + i) * samples;
+            let mut sum = 0f32;
+            let mut top = false;
+            for c in 0..colour_channels {
+                let x = if sixteen {
+                    u16::from_be_bytes([data[2 * (px + c)], data[2 * (px + c) + 1]]) as f32
+                } else {
+                    data[px + c] as f32
+                };
+                top |= x >= full;
+                sum += x;
             }
+            *v = sum / (colour_channels as f32 * full);
+            *f = top;
         }
+        f(y, &values, &at_full)?;
         y += 1;
     }
-    for (v, c) in out.iter_mut().zip(&binning.counts) {
-        *v /= c;
-    }
     Ok(())
+}
+
+/// Checks that the capture `path` is a regular file (or a link to one): "missing" only where nothing is
+/// there. Errors: [`HoloError::InvalidData`] naming the path and `what` (e.g. `capture`, with the plan's
+/// context): missing, a folder, or another kind of file (a device, a pipe).
+pub(crate) fn check_capture_file(path: &Path, what: &str) -> Result<()> {
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_file() => Ok(()),
+        Ok(m) if m.is_dir() => Err(HoloError::InvalidData(format!(
+            "{what} `{}` is a folder, not a PNG file",
+            path.display()
+        ))),
+        Ok(_) => Err(HoloError::InvalidData(format!(
+            "{what} `{}` is not a regular file (a device, a pipe or a socket): give the PNG itself",
+            path.display()
+        ))),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(HoloError::InvalidData(format!(
+            "missing {what} `{}`",
+            path.display()
+        ))),
+        Err(source) => Err(HoloError::Io {
+            path: path.to_path_buf(),
+            source,
+        }),
+    }
 }
 
 /// The 256 captures `capture_000.png` … `capture_255.png` of one colour in a folder, read on demand.
@@ -289,7 +355,7 @@ impl PngCaptureDir {
             )));
         }
         let paths: Vec<PathBuf> = (0..CODES).map(|k| dir.join(capture_name(k))).collect();
-        let missing: Vec<usize> = (0..CODES).filter(|&k| !paths[k].is_file()).collect();
+        let missing: Vec<usize> = (0..CODES).filter(|&k| !paths[k].exists()).collect();
         if let Some(&first) = missing.first() {
             return Err(HoloError::InvalidData(format!(
                 "capture folder `{}` lacks {} of the 256 captures (first missing: {}); every code 0–255 needs \
@@ -298,6 +364,9 @@ impl PngCaptureDir {
                 missing.len(),
                 capture_name(first)
             )));
+        }
+        for p in &paths {
+            check_capture_file(p, "capture")?;
         }
         let size = png_size(&paths[0])?;
         for p in &paths[1..] {
@@ -372,4 +441,93 @@ pub fn downsample(
         *v /= c;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 256 captures of 6×4 pixels, code `k` at grey level `k`.
+    fn captures(dir: &Path) {
+        for k in 0..CODES {
+            image::GrayImage::from_pixel(6, 4, image::Luma([k as u8]))
+                .save(dir.join(capture_name(k)))
+                .unwrap();
+        }
+    }
+
+    #[test]
+    fn a_capture_folder_names_what_is_missing_and_what_is_not_a_file() {
+        let dir = tempfile::tempdir().unwrap();
+        captures(dir.path());
+        let c = PngCaptureDir::open(dir.path(), (2, 3), None).unwrap();
+        let (mut out, mut clipped) = (vec![0f32; 6], vec![false; 6]);
+        c.read(255, &mut out, &mut clipped).unwrap();
+        assert!(out.iter().all(|&v| v == 1.0) && clipped.iter().all(|&b| b));
+        c.read(51, &mut out, &mut clipped).unwrap();
+        assert!(out.iter().all(|&v| v == 51.0 / 255.0) && !clipped.iter().any(|&b| b));
+        let path = dir.path().join(capture_name(7));
+        std::fs::remove_file(&path).unwrap();
+        let e = PngCaptureDir::open(dir.path(), (2, 3), None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("lacks 1 of the 256") && e.contains("capture_007.png"),
+            "{e}"
+        );
+        std::fs::create_dir(&path).unwrap();
+        let e = PngCaptureDir::open(dir.path(), (2, 3), None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("capture_007.png") && e.contains("is a folder"),
+            "{e}"
+        );
+        std::fs::remove_dir(&path).unwrap();
+        #[cfg(unix)]
+        {
+            std::os::unix::fs::symlink("/dev/null", &path).unwrap();
+            let e = PngCaptureDir::open(dir.path(), (2, 3), None)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("capture_007.png") && e.contains("not a regular file"),
+                "{e}"
+            );
+        }
+        let e = PngCaptureDir::open(&dir.path().join("none"), (2, 3), None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("does not exist or is not a folder"), "{e}");
+    }
+
+    #[test]
+    fn rows_average_the_colours_and_flag_full_scale() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rgb16.png");
+        let img = image::ImageBuffer::<image::Rgb<u16>, _>::from_fn(5, 3, |x, y| {
+            image::Rgb([(1000 * x + 7 * y) as u16, 65535, 300 * y as u16])
+        });
+        img.save(&path).unwrap();
+        let mut rows = Vec::new();
+        for_each_row(&path, 1..4, |y, v, f| {
+            rows.push((y, v.to_vec(), f.to_vec()));
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(rows.len(), 3);
+        for (y, v, f) in rows {
+            for (i, (&got, &full)) in v.iter().zip(&f).enumerate() {
+                let x = i + 1;
+                let want =
+                    ((1000 * x + 7 * y) as f32 + 65535.0 + (300 * y) as f32) / (3.0 * 65535.0);
+                assert_eq!(got, want, "row {y} column {x}");
+                assert!(full, "the green channel is at full scale");
+            }
+        }
+        let e = for_each_row(&path, 3..6, |_, _, _| Ok(()))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("5 pixels wide"), "{e}");
+    }
 }

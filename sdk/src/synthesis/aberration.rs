@@ -537,11 +537,12 @@ impl AberrationProfile {
 
     /// Parses the JSON form (`docs/ABERRATION.md`); `source` names the input in error messages.
     ///
-    /// Errors: [`HoloError::InvalidData`] naming `source` and what is wrong: not JSON of this form, another
-    /// format or version, no sample, non-finite values, duplicate distances, a sample with both or neither of
-    /// `coefficients` and `per_colour`.
+    /// Errors: [`HoloError::InvalidData`] naming `source`, the key path (`samples[0].per_colour`, through
+    /// [`crate::io::parse_json_object`]) and what is wrong: not one JSON object of this form, another format
+    /// or version, no sample, non-finite values, duplicate distances, a sample with both or neither of
+    /// `coefficients` and `per_colour`, an array of the wrong length, a key given twice.
     pub fn from_json_str(text: &str, source: &str) -> Result<Self> {
-        serde_json::from_str::<Self>(text).map_err(|e| {
+        crate::io::parse_json_object::<Self>(text, "an aberration profile").map_err(|e| {
             HoloError::InvalidData(format!(
                 "`{source}` is not a valid aberration profile ({ABERRATION_FORMAT} version \
                  {ABERRATION_FORMAT_VERSION}, docs/ABERRATION.md): {e}"
@@ -882,9 +883,7 @@ impl AberrationCorrectedSmLbm {
     /// Errors: [`HoloError::InvalidParameter`].
     pub fn validate(&self) -> Result<()> {
         self.base.validate()?;
-        if !self.correction.slm_offset_m.is_finite() {
-            return Err(invalid("slm_offset_m", "must be finite"));
-        }
+        crate::optics::check_offset("slm_offset_m", self.correction.slm_offset_m)?;
         self.correction.profile.check_setup(&self.base.setup)
     }
 
@@ -1143,7 +1142,21 @@ mod tests {
     fn bad_files_are_errors_naming_the_file_and_the_problem() {
         let head = r#""format": "tensorholo.aberration", "version": 1"#;
         let cases = [
-            ("not json", "expected".to_string()),
+            ("not json", "text that is not JSON".to_string()),
+            (&*Box::leak(format!("[{{{head}, \"samples\": []}}]").into_boxed_str()), "must be one JSON object".into()),
+            // Four colours where `per_colour` holds R, G, B: the key path and the reason, not "trailing characters".
+            (
+                &*Box::leak(format!(r#"{{{head}, "samples": [{{"distance_m": 0.001, "per_colour": [{{}}, {{}}, {{}}, {{}}]}}]}}"#).into_boxed_str()),
+                "at `samples[0].per_colour`: more entries".into(),
+            ),
+            (
+                &*Box::leak(format!(r#"{{{head}, "samples": [{{"distance_m": "1 mm", "coefficients": {{}}}}]}}"#).into_boxed_str()),
+                "at `samples[0].distance_m`: invalid type: string".into(),
+            ),
+            (
+                &*Box::leak(format!(r#"{{{head}, "samples": [{{"distance_m": 0.001, "coefficients": {{"focus": 1, "focus": 2}}}}]}}"#).into_boxed_str()),
+                "at `samples[0].coefficients`: duplicate field `focus`".into(),
+            ),
             (
                 r#"{"format": "other", "version": 1, "samples": [{"distance_m": 0, "coefficients": {}}]}"#,
                 "format is `other`".into(),

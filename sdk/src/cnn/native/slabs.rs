@@ -79,7 +79,13 @@ impl Slabs {
     /// and starts at a multiple of 4; each slab's layers compute the columns [`layer_columns`] gives.
     pub(crate) fn new(frame_width: usize, groups: &[usize], count: usize) -> Self {
         let halo = groups.iter().sum();
-        let count = count.max(1);
+        // More slabs than multiples of 4 in the frame cannot have distinct starts: the whole frame (as the
+        // check below would decide), without forming `count` bounds (`TENSORHOLO_SLABS` may be any integer).
+        let count = if count > frame_width.div_ceil(4) {
+            1
+        } else {
+            count.max(1)
+        };
         let bounds: Vec<usize> = (0..=count)
             .map(|k| match k {
                 0 => 0,
@@ -206,6 +212,10 @@ mod tests {
                 vec![4; 30],
             ] {
                 let halo: usize = groups.iter().sum();
+                // Counts past the frame's multiples of 4 (any integer a setting gives): the whole frame.
+                for count in [usize::div_ceil(w, 4) + 1, usize::MAX] {
+                    assert_eq!(Slabs::new(w, &groups, count).slabs.len(), 1);
+                }
                 for count in 1..=6 {
                     let s = Slabs::new(w, &groups, count);
                     assert_eq!(s.frame_width, w);

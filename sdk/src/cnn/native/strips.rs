@@ -60,8 +60,10 @@ impl Strips {
     pub(crate) fn new(rows: usize, height: usize, layers: usize, step: usize) -> Self {
         let step = step.max(1);
         let lag = layers * step;
+        // Clamped to the whole frame before rounding up: a strip taller than `height + lag` rows is one strip
+        // (and `TENSORHOLO_STRIP_ROWS=18446744073709551615` rounds without overflowing).
         let rows = rows
-            .max(1)
+            .clamp(1, (height + lag).max(1))
             .next_multiple_of(step)
             .min((height + lag).next_multiple_of(step));
         Self {

@@ -69,6 +69,10 @@ pub const MAX_DISTANCE_M: f64 = 1.0;
 /// (`d = 0`: a spot on the SLM itself) the double phase encoding's leak through the Fourier filter outweighs
 /// the spot.
 pub const MIN_SUBHOLOGRAM_PX: f64 = 4.0;
+/// The largest `|coefficient|` of a diversity phase, radians at the pupil edge: 4π (two waves). Phase diversity
+/// uses a wave or less (the default [`DIVERSITY_RAD`]); beyond two waves the spot spreads past the fitted
+/// window and the fit sees only its tails.
+pub const MAX_DIVERSITY_RAD: f64 = 4.0 * std::f64::consts::PI;
 /// Default camera pixels per SLM pixel pitch at the focal plane.
 pub const DEFAULT_CAMERA_SCALE: f64 = 4.0;
 /// Default side of the fitted window in camera pixels.
@@ -189,10 +193,20 @@ impl SpotPlan {
                 ),
             ));
         }
-        if self.slm_size.contains(&0) || self.slm_size.iter().any(|&s| s > 16384) {
+        let [h, w] = self.slm_size;
+        if h == 0
+            || w == 0
+            || h.max(w) > crate::display::MAX_SLM_SIDE
+            || h.saturating_mul(w) > crate::display::MAX_SLM_PIXELS
+        {
             return Err(invalid(
                 "slm_size",
-                format!("must be 1–16384 pixels a side, got {:?}", self.slm_size),
+                format!(
+                    "must be 1–{} pixels a side and at most {} pixels (8192 × 8192, as a display \
+                     profile), got [{h}, {w}]",
+                    crate::display::MAX_SLM_SIDE,
+                    crate::display::MAX_SLM_PIXELS
+                ),
             ));
         }
         OpticalSetup {
@@ -217,6 +231,25 @@ impl SpotPlan {
             let sin = self.wavelengths_m[c] / (2.0 * self.pixel_pitch_m);
             let px_per_m =
                 sin.min(0.99) / (1.0 - sin.min(0.99).powi(2)).sqrt() / self.pixel_pitch_m;
+            // The model takes the whole pupil: a sub-hologram wider than the SLM would be cut by its edge.
+            if let Some(&d) = self
+                .distances_m
+                .iter()
+                .find(|d| 2.0 * d.abs() * px_per_m > h.min(w) as f64)
+            {
+                return Err(invalid(
+                    "distances_m",
+                    format!(
+                        "at {:+.3} mm the {} spot's sub-hologram is {:.0} SLM pixels across, more than the \
+                         {h} × {w} SLM: the SLM's edge would cut the spot's pupil (|d| ≤ {:.3} mm here, or \
+                         a larger SLM size)",
+                        d * 1e3,
+                        COLOURS[c],
+                        2.0 * d.abs() * px_per_m,
+                        h.min(w) as f64 / (2.0 * px_per_m) * 1e3
+                    ),
+                ));
+            }
             if let Some(&d) = self
                 .distances_m
                 .iter()
@@ -247,15 +280,18 @@ impl SpotPlan {
         if self.diversities.is_empty() {
             return Err(invalid("diversities", "needs at least one diversity phase"));
         }
-        if let Some((k, _)) = self
-            .diversities
-            .iter()
-            .enumerate()
-            .find(|(_, d)| d.to_array().iter().any(|v| !v.is_finite()))
-        {
+        if let Some((k, _)) = self.diversities.iter().enumerate().find(|(_, d)| {
+            d.to_array()
+                .iter()
+                .any(|v| !(v.is_finite() && v.abs() <= MAX_DIVERSITY_RAD))
+        }) {
             return Err(invalid(
                 "diversities",
-                format!("diversity {k} has a non-finite coefficient"),
+                format!(
+                    "diversity {k} has a coefficient beyond ±{MAX_DIVERSITY_RAD:.2} rad (4π, two waves at \
+                     the pupil edge) or not finite: {:?}",
+                    self.diversities[k].to_array()
+                ),
             ));
         }
         SpotModel::new(self.window_px, self.camera_scale).map(|_| ())
@@ -297,12 +333,14 @@ impl SpotPlan {
     /// Reads and checks `dir/plan.json` through the SDK's bounded reader ([`crate::io::read_text`]: at most
     /// [`crate::io::MAX_TEXT_BYTES`], a folder or a device refused). Errors: those of [`crate::io::read_text`]
     /// naming the file (unreadable, too large, not a regular file, not UTF-8), [`HoloError::InvalidData`]
-    /// naming it (and the field) for bad JSON or a field [`SpotPlan::validate`] refuses.
+    /// naming it and the key path (`diversities[2].focus`) for bad JSON, or the field [`SpotPlan::validate`]
+    /// refuses.
     pub fn load(dir: &Path) -> Result<Self> {
         let path = dir.join(PLAN_FILE);
         let text = crate::io::read_text(&path)?;
         let bad = |e: String| HoloError::InvalidData(format!("plan `{}`: {e}", path.display()));
-        let plan: Self = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+        let plan: Self =
+            crate::io::parse_json_object(&text, "a spot plan").map_err(|e| bad(e.to_string()))?;
         plan.validate().map_err(|e| bad(e.to_string()))?;
         Ok(plan)
     }
@@ -355,6 +393,28 @@ mod tests {
         std::fs::write(&path, big).unwrap();
         let e = SpotPlan::load(dir.path()).unwrap_err().to_string();
         assert!(e.contains(PLAN_FILE) && e.contains("input limit"), "{e}");
+    }
+
+    /// A write that fails after the patterns (here at `plan.json`, a folder in the way) leaves none of them;
+    /// what was in the folder before stays.
+    #[test]
+    fn a_failed_pattern_write_leaves_nothing_behind() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("patterns");
+        std::fs::create_dir_all(out.join(PLAN_FILE)).unwrap();
+        assert!(plan().write_patterns(&out, &|_, _| {}).is_err());
+        let left: Vec<_> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(
+            left,
+            [std::ffi::OsString::from(PLAN_FILE)],
+            "only what was there"
+        );
+        let fresh = dir.path().join("fresh");
+        let n = plan().write_patterns(&fresh, &|_, _| {}).unwrap();
+        assert_eq!(std::fs::read_dir(&fresh).unwrap().count(), n + 1);
     }
 
     #[test]

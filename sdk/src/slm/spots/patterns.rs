@@ -66,28 +66,42 @@ impl SpotPlan {
     }
 
     /// Writes every pattern of the plan and `plan.json` into `dir` (created), calling `progress(done,
-    /// total)` after each. Returns the number of patterns.
+    /// total)` after each. Returns the number of patterns. On an error nothing of the run stays: the patterns
+    /// written are removed, and `dir` too where this call created it.
     ///
     /// Errors: as [`SpotPlan::pattern_codes`]; [`HoloError::Io`] / [`HoloError::Image`] naming the file.
     pub fn write_patterns(&self, dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<usize> {
         let colours = self.colour_indices()?;
+        let created = !dir.exists();
         std::fs::create_dir_all(dir).map_err(|source| HoloError::Io {
             path: dir.to_path_buf(),
             source,
         })?;
         let total = colours.len() * self.distances_m.len() * self.diversities.len();
-        let mut done = 0;
-        for &c in &colours {
-            for i in 0..self.distances_m.len() {
-                for k in 0..self.diversities.len() {
-                    let codes = self.pattern_codes(c, i, k)?;
-                    crate::io::save_u8_png(&dir.join(Self::pattern_name(c, i, k)), codes.view())?;
-                    done += 1;
-                    progress(done, total);
+        let mut written = Vec::with_capacity(total);
+        let mut write = || -> Result<()> {
+            for &c in &colours {
+                for i in 0..self.distances_m.len() {
+                    for k in 0..self.diversities.len() {
+                        let codes = self.pattern_codes(c, i, k)?;
+                        let path = dir.join(Self::pattern_name(c, i, k));
+                        crate::io::save_u8_png(&path, codes.view())?;
+                        written.push(path);
+                        progress(written.len(), total);
+                    }
                 }
             }
+            self.save(dir)
+        };
+        if let Err(e) = write() {
+            for path in &written {
+                let _ = std::fs::remove_file(path);
+            }
+            if created {
+                let _ = std::fs::remove_dir(dir);
+            }
+            return Err(e);
         }
-        self.save(dir)?;
         Ok(total)
     }
 }

@@ -195,6 +195,10 @@ fn focal_spectrum(
 /// The camera's intensity `[frame, frame]` (arbitrary units) of the focal spectrum `u` `[h, w]`, the SLM's
 /// centre imaged at camera pixel `(cx, cy)`, `scale` camera pixels per SLM pitch, sampled 2× finer and
 /// binned 2×2.
+///
+/// Memory besides the result: `h × 2·frame` complex values (the transform along rows) and a few rows; the
+/// phase factors are made one row or column at a time and the fine field one row at a time (a 4096-pixel
+/// frame of a 1080-row SLM: 141 MiB, where the whole fine field and both factor tables took 1.5 GiB).
 fn camera_intensity(
     u: &[Complex64],
     h: usize,
@@ -204,56 +208,69 @@ fn camera_intensity(
     centre: (f64, f64),
 ) -> Vec<f64> {
     let fine = 2 * frame;
-    // Fine sample j sits at camera coordinate (j + 0.5)/2, i.e. SLM coordinate centre_slm + (that − c)/scale.
-    let axis = |len: usize, c: f64, centre_slm: f64| -> Vec<Complex64> {
-        let coords: Vec<f64> = (0..fine)
+    // Fine sample j sits at camera coordinate (j + 0.5)/2, i.e. SLM coordinate centre_slm + (that − c)/scale;
+    // frequency index k of an axis of `len` samples contributes e^{2πi·f_k·x_j}.
+    let coords = |c: f64, centre_slm: f64| -> Vec<f64> {
+        (0..fine)
             .map(|j| centre_slm + ((j as f64 + 0.5) / 2.0 - c) / scale)
-            .collect();
-        (0..len)
-            .flat_map(|k| {
-                let f = signed_index(k, len) as f64 / len as f64;
-                coords
-                    .iter()
-                    .map(move |&x| Complex64::from_polar(1.0, TAU * f * x))
-                    .collect::<Vec<_>>()
-            })
             .collect()
     };
-    let ex = axis(w, centre.0, (w / 2) as f64);
-    let ey = axis(h, centre.1, (h / 2) as f64);
+    let factor = |k: usize, len: usize, x: f64| {
+        Complex64::from_polar(1.0, TAU * (signed_index(k, len) as f64 / len as f64) * x)
+    };
+    let (xs, ys) = (
+        coords(centre.0, (w / 2) as f64),
+        coords(centre.1, (h / 2) as f64),
+    );
+    // Along rows: g[ky][j] = Σ_kx u[ky][kx]·e^{2πi f_kx x_j}, summed in increasing kx as before.
     let mut g = vec![Complex64::default(); h * fine];
-    for ky in 0..h {
-        let row = &u[ky * w..(ky + 1) * w];
-        if row.iter().all(|v| *v == Complex64::default()) {
+    let mut ex = vec![Complex64::default(); fine];
+    for kx in 0..w {
+        if (0..h).all(|ky| u[ky * w + kx] == Complex64::default()) {
             continue;
         }
-        let out = &mut g[ky * fine..(ky + 1) * fine];
-        for (kx, &v) in row.iter().enumerate() {
+        for (e, &x) in ex.iter_mut().zip(&xs) {
+            *e = factor(kx, w, x);
+        }
+        for ky in 0..h {
+            let v = u[ky * w + kx];
             if v == Complex64::default() {
                 continue;
             }
-            for (o, e) in out.iter_mut().zip(&ex[kx * fine..(kx + 1) * fine]) {
+            for (o, e) in g[ky * fine..(ky + 1) * fine].iter_mut().zip(&ex) {
                 *o += v * e;
             }
         }
     }
-    let mut field = vec![Complex64::default(); fine * fine];
-    for ky in 0..h {
-        let gr = &g[ky * fine..(ky + 1) * fine];
-        for i in 0..fine {
-            let e = ey[ky * fine + i];
-            let out = &mut field[i * fine..(i + 1) * fine];
-            for (o, v) in out.iter_mut().zip(gr) {
+    // Down columns, one fine row at a time, binned 2×2 into the camera's pixels.
+    let mut img = vec![0f64; frame * frame];
+    let mut row = vec![Complex64::default(); fine];
+    for (i, &y) in ys.iter().enumerate() {
+        row.fill(Complex64::default());
+        for ky in 0..h {
+            let e = factor(ky, h, y);
+            for (o, v) in row.iter_mut().zip(&g[ky * fine..(ky + 1) * fine]) {
                 *o += e * v;
             }
         }
-    }
-    let mut img = vec![0f64; frame * frame];
-    for (i, v) in field.iter().enumerate() {
-        img[(i / fine / 2) * frame + (i % fine) / 2] += 0.25 * v.norm_sqr();
+        let out = &mut img[(i / 2) * frame..(i / 2 + 1) * frame];
+        for (x, v) in row.iter().enumerate() {
+            out[x / 2] += 0.25 * v.norm_sqr();
+        }
     }
     img
 }
+
+/// Bytes one simulated capture holds at its peak: the focal spectrum and the row transform (complex), the
+/// intensity (f64), the noisy capture (f32) and its PNG samples.
+fn capture_bytes(slm: [usize; 2], frame: usize) -> usize {
+    let [h, w] = slm;
+    16 * h * w + 16 * h * 2 * frame + (8 + 4 + 2) * frame * frame
+}
+
+/// The memory simulated captures may hold at once: captures run in parallel up to the session's threads, as
+/// many as fit (at least one).
+const SIMULATE_BUDGET_BYTES: usize = 1 << 30;
 
 /// Simulates the captures of every pattern of `plan` (read from `patterns`) into `out` (created) under the
 /// names the plan expects ([`SpotPlan::capture_name`]), and writes `out/hidden.json`. `progress(done,
@@ -293,51 +310,60 @@ pub fn simulate_captures(
     })?;
     let done = AtomicUsize::new(0);
     let total = jobs.len();
-    jobs.par_iter().try_for_each(|(c, i, k, codes)| {
-        let (c, i, k) = (*c, *i, *k);
-        let d = plan.distances_m[i];
-        let z = hidden.samples()[i].coefficients[c];
-        let u = focal_spectrum(codes, plan.pixel_pitch_m, plan.wavelengths_m[c], d, &z);
-        // The spot's position and black level: per colour and distance.
-        let mut place = SplitMix64::new(splitmix64(
-            options.seed ^ (((c * 64 + i) as u64) << 20) ^ 0x0B1A_5ED0,
-        ));
-        let margin = (frame - plan.window_px) as f64 / 2.0;
-        let centre = (
-            frame as f64 / 2.0 + margin * (2.0 * place.next_f64() - 1.0) * 0.9,
-            frame as f64 / 2.0 + margin * (2.0 * place.next_f64() - 1.0) * 0.9,
-        );
-        let black = 0.01 + 0.04 * place.next_f64();
-        let img = camera_intensity(
-            &u,
-            plan.slm_size[0],
-            plan.slm_size[1],
-            plan.camera_scale,
-            frame,
-            centre,
-        );
-        let peak = img.iter().cloned().fold(0.0, f64::max);
-        let mut rng = SplitMix64::new(splitmix64(
-            options.seed ^ ((((c * 64 + i) * 64 + k) as u64) << 24) ^ 0x00CA_3E4A,
-        ));
-        let exposure = (0.55 + 0.6 * rng.next_f64()) / peak.max(f64::MIN_POSITIVE);
-        let captured = Array2::from_shape_fn((frame, frame), |(y, x)| {
-            let s = exposure * img[y * frame + x];
-            let var = options.noise * options.noise
-                + if options.full_well > 0.0 {
-                    s / options.full_well
-                } else {
-                    0.0
-                };
-            (black + s + var.sqrt() * gaussian(&mut rng)) as f32
-        });
-        write_grey_png(
-            &out.join(SpotPlan::capture_name(c, i, k)),
-            captured.view(),
-            options.bit_depth,
-        )?;
-        progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
-        Ok::<(), HoloError>(())
+    // As many captures at once as the budget holds (a 4096-pixel frame of a 1080 × 1920 SLM: ~400 MiB each).
+    let at_once = (SIMULATE_BUDGET_BYTES / capture_bytes(plan.slm_size, frame))
+        .clamp(1, rayon::current_num_threads());
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(at_once)
+        .build()
+        .map_err(|e| HoloError::Internal(format!("capture simulation threads: {e}")))?;
+    pool.install(|| {
+        jobs.par_iter().try_for_each(|(c, i, k, codes)| {
+            let (c, i, k) = (*c, *i, *k);
+            let d = plan.distances_m[i];
+            let z = hidden.samples()[i].coefficients[c];
+            let u = focal_spectrum(codes, plan.pixel_pitch_m, plan.wavelengths_m[c], d, &z);
+            // The spot's position and black level: per colour and distance.
+            let mut place = SplitMix64::new(splitmix64(
+                options.seed ^ (((c * 64 + i) as u64) << 20) ^ 0x0B1A_5ED0,
+            ));
+            let margin = (frame - plan.window_px) as f64 / 2.0;
+            let centre = (
+                frame as f64 / 2.0 + margin * (2.0 * place.next_f64() - 1.0) * 0.9,
+                frame as f64 / 2.0 + margin * (2.0 * place.next_f64() - 1.0) * 0.9,
+            );
+            let black = 0.01 + 0.04 * place.next_f64();
+            let img = camera_intensity(
+                &u,
+                plan.slm_size[0],
+                plan.slm_size[1],
+                plan.camera_scale,
+                frame,
+                centre,
+            );
+            let peak = img.iter().cloned().fold(0.0, f64::max);
+            let mut rng = SplitMix64::new(splitmix64(
+                options.seed ^ ((((c * 64 + i) * 64 + k) as u64) << 24) ^ 0x00CA_3E4A,
+            ));
+            let exposure = (0.55 + 0.6 * rng.next_f64()) / peak.max(f64::MIN_POSITIVE);
+            let captured = Array2::from_shape_fn((frame, frame), |(y, x)| {
+                let s = exposure * img[y * frame + x];
+                let var = options.noise * options.noise
+                    + if options.full_well > 0.0 {
+                        s / options.full_well
+                    } else {
+                        0.0
+                    };
+                (black + s + var.sqrt() * gaussian(&mut rng)) as f32
+            });
+            write_grey_png(
+                &out.join(SpotPlan::capture_name(c, i, k)),
+                captured.view(),
+                options.bit_depth,
+            )?;
+            progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
+            Ok::<(), HoloError>(())
+        })
     })?;
     hidden.save(&out.join(HIDDEN_FILE))?;
     Ok(hidden)

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use super::{SpotPlan, COLOURS};
 use crate::error::{HoloError, Result};
-use crate::slm::captures::{png_size, read_png_downsampled};
+use crate::slm::captures::{check_capture_file, for_each_row, png_size};
 
 /// Below this peak-to-valley (fraction of full scale) a capture is "all black".
 const MIN_CONTRAST: f32 = 0.02;
@@ -21,13 +21,31 @@ pub struct CaptureWindow {
     pub valid: Vec<bool>,
 }
 
+/// The most cells of the grid on which a distance's captures are summed to find the spot: captures of up to
+/// this many pixels are summed pixel by pixel; larger ones in square blocks of `b × b` pixels, `b` the
+/// smallest that fits (a 36 MP capture in blocks of 6, 400 MP in blocks of 20). 8 bytes a cell: with the blur's
+/// two copies, 24 MiB per distance fitted at once, whatever the camera's resolution.
+pub const SPOT_GRID_CELLS: usize = 1 << 20;
+
+/// The block side `b` for a `h × w` capture ([`SPOT_GRID_CELLS`]).
+fn block_for(h: usize, w: usize) -> usize {
+    (1..)
+        .find(|&b| h.div_ceil(b) * w.div_ceil(b) <= SPOT_GRID_CELLS)
+        .unwrap_or(1)
+}
+
 /// Reads the captures of colour `c` at distance index `i` from `dir`, finds the spot in their sum (the peak of
 /// a box-blurred copy), and cuts the same `n × n` window from each. Returns the windows and the window's
 /// top-left corner `(x, y)` in the captures.
 ///
-/// Errors ([`HoloError::InvalidData`] naming the file): a missing capture, captures of different sizes or
-/// smaller than the window, an all-black capture, one with more than half of its pixels saturated; read
-/// errors as [`read_png_downsampled`].
+/// Memory does not grow with the camera's resolution: each capture is decoded row by row twice, once into the
+/// sum (on a grid of at most [`SPOT_GRID_CELLS`] cells: blocks of `b × b` pixels above it, the spot then
+/// placed within `b/2` pixels, which the fit's offset absorbs) and for its saturation and contrast, once
+/// to cut its window. Captures of up to [`SPOT_GRID_CELLS`] pixels give the windows a whole-frame sum would.
+///
+/// Errors ([`HoloError::InvalidData`] naming the file): a missing capture, one that is a folder or a device,
+/// captures of different sizes or smaller than the window, an all-black capture, one with more than half of
+/// its pixels saturated; read errors as [`crate::slm::captures::read_png_downsampled`].
 pub fn load_windows(
     plan: &SpotPlan,
     dir: &Path,
@@ -35,19 +53,18 @@ pub fn load_windows(
     i: usize,
 ) -> Result<(Vec<CaptureWindow>, (usize, usize))> {
     let n = plan.window_px;
-    let mut frames = Vec::new();
+    let mut paths = Vec::new();
     let mut size = None;
-    let mut first = PathBuf::new();
     for k in 0..plan.diversities.len() {
         let path = dir.join(SpotPlan::capture_name(c, i, k));
-        if !path.is_file() {
-            return Err(HoloError::InvalidData(format!(
-                "missing capture `{}` ({} laser, distance {:+.3} mm, diversity {k})",
-                path.display(),
+        check_capture_file(
+            &path,
+            &format!(
+                "capture ({} laser, distance {:+.3} mm, diversity {k})",
                 COLOURS[c],
                 plan.distances_m[i] * 1e3
-            )));
-        }
+            ),
+        )?;
         let (h, w) = png_size(&path)?;
         match size {
             None => {
@@ -58,24 +75,41 @@ pub fn load_windows(
                     )));
                 }
                 size = Some((h, w));
-                first = path.clone();
             }
             Some(s) if s != (h, w) => {
                 return Err(HoloError::InvalidData(format!(
                     "capture `{}` is {w}×{h} pixels but `{}` is {}×{}: the captures of one distance must \
                      share the camera's frame",
                     path.display(),
-                    first.display(),
+                    paths
+                        .first()
+                        .map_or(String::new(), |p: &PathBuf| p.display().to_string()),
                     s.1,
                     s.0
                 )))
             }
             Some(_) => {}
         }
-        let mut values = vec![0f32; h * w];
-        let mut clipped = vec![false; h * w];
-        read_png_downsampled(&path, (h, w), None, &mut values, &mut clipped)?;
-        let saturated = clipped.iter().filter(|&&c| c).count() as f64 / clipped.len() as f64;
+        paths.push(path);
+    }
+    let (h, w) = size.ok_or_else(|| HoloError::InvalidData("the plan has no diversity".into()))?;
+    // Pass 1: the sum on the grid, each capture's saturation and contrast.
+    let b = block_for(h, w);
+    let (hc, wc) = (h.div_ceil(b), w.div_ceil(b));
+    let mut sum = vec![0f64; hc * wc];
+    for path in &paths {
+        let (mut saturated, mut lo, mut hi) = (0usize, f32::MAX, f32::MIN);
+        for_each_row(path, 0..w, |y, values, full| {
+            saturated += full.iter().filter(|&&f| f).count();
+            let line = &mut sum[(y / b) * wc..(y / b + 1) * wc];
+            for (x, &v) in values.iter().enumerate() {
+                lo = lo.min(v);
+                hi = hi.max(v);
+                line[x / b] += v as f64;
+            }
+            Ok(())
+        })?;
+        let saturated = saturated as f64 / (h * w) as f64;
         if saturated > MAX_SATURATED {
             return Err(HoloError::InvalidData(format!(
                 "capture `{}` is saturated ({:.0} % of its pixels at full scale): shorten the exposure",
@@ -83,9 +117,6 @@ pub fn load_windows(
                 saturated * 100.0
             )));
         }
-        let (lo, hi) = values
-            .iter()
-            .fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
         if hi - lo < MIN_CONTRAST {
             return Err(HoloError::InvalidData(format!(
                 "capture `{}` is all black (values {lo:.4}–{hi:.4} of full scale): no spot; check the laser \
@@ -93,34 +124,42 @@ pub fn load_windows(
                 path.display()
             )));
         }
-        frames.push((path, values, clipped));
     }
-    let (h, w) = size.ok_or_else(|| HoloError::InvalidData("the plan has no diversity".into()))?;
-    // The spot: the peak of the summed captures, blurred by a box of ~2 SLM pixels.
-    let mut sum = vec![0f64; h * w];
-    for (_, v, _) in &frames {
-        for (s, &x) in sum.iter_mut().zip(v) {
-            *s += x as f64;
-        }
-    }
+    // The spot: the peak of the summed captures, blurred by a box of ~2 SLM pixels (at least one cell).
     let r = (plan.camera_scale.round() as usize).clamp(1, n / 4);
-    let blurred = box_blur(&sum, h, w, r);
+    let blurred = box_blur(&sum, hc, wc, r.div_ceil(b));
+    drop(sum);
     let peak = blurred
         .iter()
         .enumerate()
         .fold((0, f64::MIN), |b, (j, &v)| if v > b.1 { (j, v) } else { b })
         .0;
-    let x0 = (peak % w).saturating_sub(n / 2).min(w - n);
-    let y0 = (peak / w).saturating_sub(n / 2).min(h - n);
+    // The peak cell's centre in camera pixels.
+    let (cx, cy) = (
+        ((peak % wc) * b + b / 2).min(w - 1),
+        ((peak / wc) * b + b / 2).min(h - 1),
+    );
+    let x0 = cx.saturating_sub(n / 2).min(w - n);
+    let y0 = cy.saturating_sub(n / 2).min(h - n);
+    // Pass 2: each capture's window.
     let mut windows = Vec::new();
-    for (path, v, clip) in &frames {
+    for path in &paths {
         let mut values = Vec::with_capacity(n * n);
         let mut valid = Vec::with_capacity(n * n);
-        for y in y0..y0 + n {
-            for x in x0..x0 + n {
-                values.push(v[y * w + x] as f64);
-                valid.push(!clip[y * w + x]);
+        for_each_row(path, x0..x0 + n, |y, v, full| {
+            if (y0..y0 + n).contains(&y) {
+                values.extend(v.iter().map(|&x| x as f64));
+                valid.extend(full.iter().map(|&f| !f));
             }
+            Ok(())
+        })?;
+        if values.len() != n * n {
+            return Err(HoloError::InvalidData(format!(
+                "capture `{}` changed while it was read (its window has {} of {} pixels)",
+                path.display(),
+                values.len(),
+                n * n
+            )));
         }
         let usable = valid.iter().filter(|&&b| b).count() as f64 / (n * n) as f64;
         if usable < 1.0 - MAX_SATURATED {
