@@ -290,6 +290,14 @@ impl From<core::PatternTimings> for StageTimings {
     }
 }
 
+/// The most pixels a frame's colour or depth buffer may have (width × height): the core's image limit
+/// (`tensorholo::io::InputLimits::max_image_pixels`, 100 M by default: a 48 MP phone photo twice over). A
+/// larger buffer is `InvalidInput`; the Python package refuses it before copying an array.
+#[uniffi::export]
+pub fn max_frame_pixels() -> u64 {
+    tensorholo::io::input_limits().max_image_pixels
+}
+
 /// The 32-bit frame colour-sequential SLM drivers take over HDMI: `width · height · 4` bytes, row-major, the
 /// red laser's pattern in R, green in G, blue in B, alpha 255.
 ///

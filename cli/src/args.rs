@@ -542,8 +542,13 @@ pub fn native_layout_from_env() -> Result<(Option<usize>, Option<usize>)> {
 /// Errors: the flag, the value and the bound.
 pub fn check_offset_mm(offset_mm: f64) -> Result<()> {
     tensorholo::optics::check_offset("offset_m", offset_mm * 1e-3).with_context(|| {
+        let given = if offset_mm.abs() < 1e6 {
+            offset_mm.to_string()
+        } else {
+            format!("{offset_mm:e}")
+        };
         format!(
-            "--offset-mm {offset_mm}: the SLM's offset must be a finite number of millimetres within ±{} mm",
+            "--offset-mm {given}: the SLM's offset must be a finite number of millimetres within ±{} mm",
             tensorholo::optics::MAX_OFFSET_M * 1e3
         )
     })

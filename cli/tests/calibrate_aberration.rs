@@ -293,11 +293,16 @@ fn bad_plans_parameters_and_outputs_are_refused_naming_the_field() {
         &elsewhere,
     );
     // A 4 × 4 SLM cannot hold a spot's sub-hologram: named, not four meaningless patterns.
-    refused(
-        &patterns_cmd(&["--size", "4x4"]),
-        &["distances_m", "cut the spot"],
-        &elsewhere,
-    );
+    let o = holo(&[
+        "calibrate",
+        "aberration",
+        "patterns",
+        "--size",
+        "4x4",
+        "--out",
+        s(&elsewhere),
+    ]);
+    refused(&o, &["distances_m", "cut the spot"], &elsewhere);
     refused(
         &patterns_cmd(&["--camera-scale", "nan"]),
         &["camera_scale"],

@@ -5339,6 +5339,18 @@ public func convertFrame(frame: RgbdFrame, width: UInt32, height: UInt32, fit: F
 })
 }
 /**
+ * The most pixels a frame's colour or depth buffer may have (width × height): the core's image limit
+ * (`tensorholo::io::InputLimits::max_image_pixels`, 100 M by default: a 48 MP phone photo twice over). A
+ * larger buffer is `InvalidInput`; the Python package refuses it before copying an array.
+ */
+public func maxFramePixels() -> UInt64  {
+    return try!  FfiConverterUInt64.lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_func_max_frame_pixels(uniffiCallStatus
+    )
+})
+}
+/**
  * The 32-bit frame colour-sequential SLM drivers take over HDMI: `width · height · 4` bytes, row-major, the
  * red laser's pattern in R, green in G, blue in B, alpha 255.
  *
@@ -5381,6 +5393,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_func_convert_frame() != 43829) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_func_max_frame_pixels() != 39729) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_func_pack_rgba() != 5633) {

@@ -449,6 +449,12 @@ RustBuffer uniffi_tensorholo_ffi_fn_func_generator_config_for_display(RustBuffer
 RustBuffer uniffi_tensorholo_ffi_fn_func_convert_frame(RustBuffer frame, uint32_t width, uint32_t height, RustBuffer fit, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_MAX_FRAME_PIXELS
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_MAX_FRAME_PIXELS
+uint64_t uniffi_tensorholo_ffi_fn_func_max_frame_pixels(RustCallStatus *_Nonnull out_status
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_PACK_RGBA
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_PACK_RGBA
 RustBuffer uniffi_tensorholo_ffi_fn_func_pack_rgba(RustBuffer patterns, RustCallStatus *_Nonnull out_status
@@ -741,6 +747,12 @@ uint16_t uniffi_tensorholo_ffi_checksum_func_generator_config_for_display(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_CONVERT_FRAME
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_CONVERT_FRAME
 uint16_t uniffi_tensorholo_ffi_checksum_func_convert_frame(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_MAX_FRAME_PIXELS
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_FUNC_MAX_FRAME_PIXELS
+uint16_t uniffi_tensorholo_ffi_checksum_func_max_frame_pixels(void
     
 );
 #endif

@@ -20,6 +20,7 @@ from ._uniffi.tensorholo import (
     RefineSettings,
     RgbdFrame,
     SlmPatterns,
+    max_frame_pixels,
 )
 
 __all__ = ["patterns_array", "render_arrays"]
@@ -34,6 +35,15 @@ def _array(name: str, value: object) -> np.ndarray:
     return value
 
 
+def _within_limit(name: str, a: np.ndarray, h: int, w: int) -> None:
+    """Refuses a frame above the core's pixel limit before anything is copied or scanned (a broadcast view of
+    20000 x 20000 holds no memory until it is copied: 1.2 GB for the bytes, again for the crossing)."""
+    limit = max_frame_pixels()
+    if h * w > limit:
+        raise ValueError(f"{name} is {h} x {w} = {h * w} pixels ({a.dtype}, shape {list(a.shape)}), more "
+                         f"than the {limit} a frame may have (tensorholo.max_frame_pixels()); downscale it")
+
+
 def _color(rgb: object) -> tuple[bytes, ColorFormat, int, int]:
     a = _array("rgb", rgb)
     if a.dtype != np.uint8:
@@ -45,6 +55,7 @@ def _color(rgb: object) -> tuple[bytes, ColorFormat, int, int]:
     h, w, c = a.shape
     if h == 0 or w == 0:
         raise ValueError(f"rgb is empty: shape {list(a.shape)}")
+    _within_limit("rgb", a, h, w)
     fmt = ColorFormat.RGB8 if c == 3 else ColorFormat.RGBA8
     return np.ascontiguousarray(a).tobytes(), fmt, w, h
 
@@ -65,6 +76,7 @@ def _depth(depth: object) -> tuple[bytes, DepthFormat, int, int]:
     h, w = a.shape
     if h == 0 or w == 0:
         raise ValueError(f"depth is empty: shape {list(a.shape)}")
+    _within_limit("depth", a, h, w)
     if fmt is DepthFormat.METRES_F32:
         nan = int(np.isnan(a).sum())
         if nan:
@@ -116,8 +128,9 @@ def render_arrays(generator: HologramGenerator, rgb: npt.NDArray[np.uint8],
 
     Raises:
         TypeError: ``rgb`` or ``depth`` is not a numpy array, or has another dtype (the message names it).
-        ValueError: a wrong shape, an empty array, NaN, infinite or negative depths, or a depth without one
-            valid (non-zero) pixel (the message names the argument).
+        ValueError: a wrong shape, an empty array, more pixels than ``max_frame_pixels()`` (refused before
+            any copy), NaN, infinite or negative depths, or a depth without one valid (non-zero) pixel (the
+            message names the argument).
         TensorholoError.InvalidInput: what the core refuses beyond that (e.g. a frame too large, more than
             10000 refinement iterations).
         TensorholoError.Cancelled: ``progress`` returned ``False``.

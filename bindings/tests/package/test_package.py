@@ -156,6 +156,12 @@ BAD = {
     "depth negative": (RGB, -DEPTH, ValueError, ["depth", "negative"]),
     "depth all 0": (RGB, np.zeros_like(DEPTH), ValueError, ["depth", "no valid pixel"]),
     "depth all 0 mm": (RGB, np.zeros(DEPTH.shape, np.uint16), ValueError, ["depth", "no valid pixel"]),
+    # Broadcast views of 20000 x 20000 hold 3 and 4 bytes until copied (1.2 GB, then again for the crossing):
+    # refused by their pixel count before any copy, naming the argument, dtype, shape and the limit.
+    "rgb 400 MP view": (np.broadcast_to(np.uint8(128), (20000, 20000, 3)), DEPTH, ValueError,
+                        ["rgb", "400000000 pixels", "uint8", "[20000, 20000, 3]", "max_frame_pixels"]),
+    "depth 400 MP view": (RGB, np.broadcast_to(np.float32(1.0), (20000, 20000)), ValueError,
+                          ["depth", "400000000 pixels", "float32", "[20000, 20000]", "max_frame_pixels"]),
 }
 
 
@@ -227,3 +233,18 @@ def test_mypy_sees_the_typed_api(tmp_path):
     assert any("RgbdFrame" in ln and "SlmPatterns" in ln for ln in lines if "Revealed" in ln), out
     assert any("arg-type" in ln and "render_arrays" in ln for ln in lines), out
     assert r.returncode == 1 and sum("error:" in ln for ln in lines) == 1, out
+
+
+@pytest.mark.parametrize("value, words", [
+    # Beyond any SLM grid's sampling of the correction (a unit error): the sample, colour and term.
+    ("1e308", ["aberration", "focus", "beyond"]),
+    # Beyond f64 itself: the key path, not an error blamed on the scene or the frame.
+    ("1e999", ["aberration", "samples[0].coefficients.focus"]),
+])
+def test_an_aberration_beyond_any_slm_is_refused_naming_the_term(value, words):
+    text = ('{"format": "tensorholo.aberration", "version": 1, "samples": '
+            '[{"distance_m": 0.0, "coefficients": {"focus": %s}}]}' % value)
+    with pytest.raises(th.TensorholoError.InvalidInput) as e:
+        th.HologramGenerator(th.GeneratorConfig(width=24, height=16, threads=1, aberration=text))
+    for word in words:
+        assert word in str(e.value), (value, str(e.value))

@@ -108,11 +108,17 @@ pub const MAX_OFFSET_M: f64 = 1.0;
 /// Errors: [`HoloError::InvalidParameter`] naming `name`, the value and the bound.
 pub fn check_offset(name: &'static str, offset_m: f64) -> Result<()> {
     if !(offset_m.is_finite() && offset_m.abs() <= MAX_OFFSET_M) {
+        // 1e308 in scientific notation, not 309 digits.
+        let got = if offset_m.abs() < 1e6 {
+            offset_m.to_string()
+        } else {
+            format!("{offset_m:e}")
+        };
         return Err(invalid(
             name,
             format!(
                 "the SLM's offset from the midpoint hologram must be a finite distance within \
-                 ±{MAX_OFFSET_M} m, got {offset_m} m"
+                 ±{MAX_OFFSET_M} m, got {got} m"
             ),
         ));
     }

@@ -357,6 +357,19 @@ fn check_layout(
             ),
         ));
     }
+    // A frame no camera makes is refused by its pixel count before its bytes are read (the image files'
+    // limit, `crate::io::InputLimits::max_image_pixels`: 100 M by default).
+    let max = crate::io::input_limits().max_image_pixels;
+    if width as u64 * height as u64 > max {
+        return Err(invalid(
+            name,
+            format!(
+                "the {name} buffer is {width} × {height} = {} pixels, more than the {max} a frame may have \
+                 (tensorholo::io::InputLimits::max_image_pixels)",
+                width as u64 * height as u64
+            ),
+        ));
+    }
     let row = width.checked_mul(bpp).ok_or_else(|| {
         invalid(
             name,
@@ -1113,6 +1126,27 @@ mod tests {
                     assert!(!seen[y * w + x], "{rot:?}: not a bijection");
                     seen[y * w + x] = true;
                 }
+            }
+        }
+    }
+
+    /// A buffer claiming more pixels than a frame may have is refused by its count, before its bytes (a
+    /// 20000 × 20000 frame: 400 M pixels against the 100 M limit), naming the buffer and the limit.
+    #[test]
+    fn a_frame_beyond_the_pixel_limit_is_refused_by_its_count() {
+        let max = crate::io::input_limits().max_image_pixels;
+        for (w, h, refused) in [
+            (20_000, 20_000, true),
+            (10_000, 10_001, true),
+            (10_000, 10_000, false),
+        ] {
+            let e = check_layout("depth", "depth_row_stride", 4, w, h, 2, 0).unwrap_err();
+            let e = e.to_string();
+            assert_eq!(e.contains("pixels, more than"), refused, "{w}×{h}: {e}");
+            if refused {
+                assert!(e.contains(&max.to_string()) && e.contains("depth"), "{e}");
+            } else {
+                assert!(e.contains("too short"), "{e}");
             }
         }
     }

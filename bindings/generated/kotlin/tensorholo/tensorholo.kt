@@ -735,6 +735,8 @@ internal object IntegrityCheckingUniffiLib {
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_func_convert_frame(
     ): Int
+    external fun uniffi_tensorholo_ffi_checksum_func_max_frame_pixels(
+    ): Int
     external fun uniffi_tensorholo_ffi_checksum_func_pack_rgba(
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_benchmark(
@@ -861,6 +863,8 @@ internal object UniffiLib {
     ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_func_convert_frame(`frame`: RustBuffer.ByValue,`width`: Int,`height`: Int,`fit`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
+    external fun uniffi_tensorholo_ffi_fn_func_max_frame_pixels(uniffi_out_err: UniffiRustCallStatus, 
+    ): Long
     external fun uniffi_tensorholo_ffi_fn_func_pack_rgba(`patterns`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
     external fun ffi_tensorholo_ffi_rustbuffer_alloc(`size`: Long,uniffi_out_err: UniffiRustCallStatus, 
@@ -995,6 +999,9 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_func_convert_frame() and 0xFFFF) != 43829) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_func_max_frame_pixels() and 0xFFFF) != 39729) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_func_pack_rgba() and 0xFFFF) != 5633) {
@@ -5935,6 +5942,21 @@ public object FfiConverterSequenceTypeShippedModelCheck: FfiConverterRustBuffer<
         FfiConverterUInt.lower(`width`),
         FfiConverterUInt.lower(`height`),
         FfiConverterOptionalTypeFit.lower(`fit`),_status)
+}
+    )
+    }
+    
+
+        /**
+         * The most pixels a frame's colour or depth buffer may have (width × height): the core's image limit
+         * (`tensorholo::io::InputLimits::max_image_pixels`, 100 M by default: a 48 MP phone photo twice over). A
+         * larger buffer is `InvalidInput`; the Python package refuses it before copying an array.
+         */ fun `maxFramePixels`(): kotlin.ULong {
+            return FfiConverterULong.lift(
+    uniffiRustCall() { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_func_max_frame_pixels(
+    
+        _status)
 }
     )
     }
