@@ -9,7 +9,7 @@ seconds=${1:-240}
 shift || true
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(depth_decode rgb_decode npy holocal camera_frame onnx_model display_profile aberration shard_record manifest)
+    targets=(depth_decode rgb_decode npy holocal camera_frame onnx_model display_profile aberration shard_record manifest spot_plan saved_plans)
 fi
 cargo +nightly fuzz build -O
 mkdir -p logs

@@ -206,6 +206,22 @@ fn seeds(target: &str) -> Vec<Vec<u8>> {
         .map(|s| s.as_bytes().to_vec())
         .to_vec(),
         "aberration" => vec![ABERRATION.as_bytes().to_vec()],
+        // What `holo calibrate aberration patterns` writes: a 64² SLM, green and blue, two distances.
+        "spot_plan" => vec![serde_json::to_string_pretty(
+            &tensorholo::slm::spots::SpotPlan::new(
+                [64, 64],
+                &tensorholo::optics::OpticalSetup::default(),
+                &[1, 2],
+                vec![-3e-3, 4e-3],
+                2.0,
+                32,
+            )
+            .unwrap(),
+        )
+        .unwrap()
+        .into_bytes()],
+        // A `--tune` run's tuning.json: two sessions and three rows.
+        "saved_plans" => vec![SAVED_PLANS.as_bytes().to_vec()],
         // A one-sample dataset written by `holo dataset --shard 0/1` and merged (committed under
         // tests/fixtures/fuzz, so the replay test runs them too).
         "shard_record" | "manifest" => {
@@ -233,6 +249,21 @@ const ABERRATION: &str = r#"{"format": "tensorholo.aberration", "version": 1,
     {"distance_m": 0.010, "per_colour": [{"focus": 4.3, "astigmatism_vertical": 8.6},
                                          {"focus": 3.5, "astigmatism_vertical": 7.0},
                                          {"focus": 3.0, "astigmatism_vertical": 6.1}]}
+  ]}"#;
+
+/// A saved-plans record as `holo render --tune` writes it (tuning.json), for the scalar kernels (every build).
+const SAVED_PLANS: &str = r#"{"format": "tensorholo.cnn-plans", "version": 1, "isa": "scalar",
+  "origin": "tuned by tensorholo 0.1.0 (2 threads available)",
+  "sessions": [
+    {"network": "hologram-cnn-8-f32-in4", "resolution": [40, 72], "engine": "native",
+     "layout": "channels-first", "threads": 2},
+    {"network": "hologram-cnn-8-int8-qoperator-conv-in4", "resolution": [384, 384], "engine": "tract",
+     "layout": "channels-last", "threads": null}
+  ],
+  "rows": [
+    {"c_in": 4, "c_out": 24, "algorithms": "any", "row": "conv3x3.f32.8x8.scalar"},
+    {"c_in": 24, "c_out": 24, "algorithms": "any", "row": "conv3x3.f32.wino4x4.4x4.scalar"},
+    {"c_in": 28, "c_out": 6, "algorithms": "any", "row": "conv3x3.f32.wino2x2.4x4.scalar"}
   ]}"#;
 
 /// Seeds the harness's parser must accept (so a harness that refuses everything fails this test).
@@ -272,6 +303,17 @@ fn check_seeds_accepted(target: &str, seeds: &[Vec<u8>]) {
                 tensorholo::dataset::ShardRecord::from_json_str(std::str::from_utf8(s).unwrap())
                     .map(|_| ())
                     .ok_or_else(|| "not a shard record".to_string())
+            }
+            "spot_plan" => tensorholo::slm::spots::SpotPlan::from_json_str(
+                std::str::from_utf8(s).unwrap(),
+                "seed",
+            )
+            .map(|_| ())
+            .map_err(|e| e.to_string()),
+            "saved_plans" => {
+                tensorholo::cnn::SavedPlans::from_json(std::str::from_utf8(s).unwrap())
+                    .map(|_| ())
+                    .map_err(|e| e.to_string())
             }
             "manifest" => tensorholo::dataset::Manifest::from_json_str(
                 std::str::from_utf8(s).unwrap(),

@@ -32,7 +32,7 @@ fn init() {
 pub type Harness = fn(&[u8]);
 
 /// The harnesses by target name, for the regression test.
-pub const TARGETS: [(&str, Harness); 10] = [
+pub const TARGETS: [(&str, Harness); 12] = [
     ("depth_decode", depth_decode),
     ("rgb_decode", rgb_decode),
     ("npy", npy),
@@ -43,7 +43,43 @@ pub const TARGETS: [(&str, Harness); 10] = [
     ("aberration", aberration),
     ("shard_record", shard_record),
     ("manifest", manifest),
+    ("spot_plan", spot_plan),
+    ("saved_plans", saved_plans),
 ];
+
+/// Spot calibration plans (`plan.json`, `SpotPlan::from_json_str`, as `holo calibrate aberration simulate | fit`
+/// read them). An accepted plan is valid, within the SLM bound profiles share, and reads back from its own
+/// JSON as itself.
+pub fn spot_plan(data: &[u8]) {
+    init();
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    if let Ok(p) = tensorholo::slm::spots::SpotPlan::from_json_str(text, "fuzz") {
+        p.validate().expect("an accepted plan is valid");
+        let [h, w] = p.slm_size;
+        assert!(h * w <= tensorholo::display::MAX_SLM_PIXELS, "{h}x{w}");
+        let json = serde_json::to_string(&p).expect("a plan serialises");
+        let back = tensorholo::slm::spots::SpotPlan::from_json_str(&json, "back")
+            .expect("an accepted plan's own JSON reads back");
+        assert_eq!(back, p);
+    }
+}
+
+/// Saved CNN plans (`--tuning FILE`, a `GeneratorConfig`'s `saved_plans`: `SavedPlans::from_json`). An
+/// accepted record reads back from its own JSON (sorted) as the same record.
+pub fn saved_plans(data: &[u8]) {
+    init();
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    if let Ok(p) = tensorholo::cnn::SavedPlans::from_json(text) {
+        let json = p.to_json();
+        let back = tensorholo::cnn::SavedPlans::from_json(&json)
+            .expect("an accepted record's own JSON reads back");
+        assert_eq!(back.to_json(), json);
+    }
+}
 
 /// Display profiles (`DisplayProfile::from_json_str`, as `--display` reads them). An accepted profile is
 /// valid, within the bounds every command shares, and reads back from its own JSON as itself.

@@ -338,9 +338,18 @@ impl SpotPlan {
     pub fn load(dir: &Path) -> Result<Self> {
         let path = dir.join(PLAN_FILE);
         let text = crate::io::read_text(&path)?;
-        let bad = |e: String| HoloError::InvalidData(format!("plan `{}`: {e}", path.display()));
+        Self::from_json_str(&text, &path.display().to_string())
+    }
+
+    /// Parses and checks a plan's JSON text (`plan.json`); `source` names it in errors.
+    ///
+    /// Errors: [`HoloError::InvalidData`] naming `source` and the key path (`diversities[2].focus`) for bad
+    /// JSON (not one object, an unknown, missing or repeated key, a wrong type), or the field
+    /// [`SpotPlan::validate`] refuses.
+    pub fn from_json_str(text: &str, source: &str) -> Result<Self> {
+        let bad = |e: String| HoloError::InvalidData(format!("plan `{source}`: {e}"));
         let plan: Self =
-            crate::io::parse_json_object(&text, "a spot plan").map_err(|e| bad(e.to_string()))?;
+            crate::io::parse_json_object(text, "a spot plan").map_err(|e| bad(e.to_string()))?;
         plan.validate().map_err(|e| bad(e.to_string()))?;
         Ok(plan)
     }
