@@ -218,6 +218,8 @@ struct PlanInner {
     embed_kernel: Kernel,
     crop_kernel: Kernel,
     multiply_kernel: Kernel,
+    /// Made by the first operation that multiplies by conjugates ([`GpuSpectralPlan::bind_adjoint`]).
+    multiply_conj_kernel: std::sync::OnceLock<Kernel>,
     /// Along the width (rows of `[C·Hc, Wc]`) and along the height (rows of the transposed `[C·Wc, Hc]`).
     rows_w: RowFft,
     rows_h: RowFft,
@@ -256,6 +258,8 @@ pub struct GpuSpectralOp {
     embed: wgpu::BindGroup,
     /// One multiply pass per multiplier, each bound both ways (spectrum in a, in b).
     multiply: Vec<[wgpu::BindGroup; 2]>,
+    /// Whether the multipliers are applied conjugated ([`GpuSpectralPlan::bind_adjoint`]).
+    conjugate: bool,
     crop: [wgpu::BindGroup; 2],
 }
 
@@ -334,6 +338,7 @@ impl GpuSpectralPlan {
                 embed_kernel,
                 crop_kernel,
                 multiply_kernel,
+                multiply_conj_kernel: std::sync::OnceLock::new(),
                 rows_w,
                 rows_h,
                 to_t,
@@ -444,7 +449,36 @@ impl GpuSpectralPlan {
                 "a spectral operation needs ≥ 1 multiplier",
             ));
         }
+        self.bind_with(ctx, field, multipliers, false)
+    }
+
+    /// Binds the adjoint of [`GpuSpectralPlan::bind`]: `field ← F⁻¹{F{field}·conj(M)}` (the gradient's
+    /// back-propagation through a spectral operation, e.g. the refinement's `A_d^H`).
+    ///
+    /// Errors: [`HoloError::Gpu`] if the conjugate multiply kernel does not compile.
+    pub(crate) fn bind_adjoint(
+        &self,
+        ctx: &GpuContext,
+        field: &wgpu::Buffer,
+        multiplier: &GpuMultiplier,
+    ) -> Result<GpuSpectralOp> {
         let p = &*self.inner;
+        if p.multiply_conj_kernel.get().is_none() {
+            let kernel = ctx.kernel(&shaders::SPECTRAL, "multiply_conj")?;
+            let _ = p.multiply_conj_kernel.set(kernel);
+        }
+        self.bind_with(ctx, field, &[multiplier], true)
+    }
+
+    fn bind_with(
+        &self,
+        ctx: &GpuContext,
+        field: &wgpu::Buffer,
+        multipliers: &[&GpuMultiplier],
+        conjugate: bool,
+    ) -> Result<GpuSpectralOp> {
+        let p = &*self.inner;
+        let multiply = p.multiply_kernel_for(conjugate)?;
         Ok(GpuSpectralOp {
             plan: Arc::clone(&self.inner),
             embed: ctx.bind(&p.embed_kernel, &[&p.grid, field, &p.a]),
@@ -452,16 +486,29 @@ impl GpuSpectralPlan {
                 .iter()
                 .map(|m| {
                     [
-                        ctx.bind(&p.multiply_kernel, &[&p.grid, &p.a, &m.buffer]),
-                        ctx.bind(&p.multiply_kernel, &[&p.grid, &p.b, &m.buffer]),
+                        ctx.bind(multiply, &[&p.grid, &p.a, &m.buffer]),
+                        ctx.bind(multiply, &[&p.grid, &p.b, &m.buffer]),
                     ]
                 })
                 .collect(),
+            conjugate,
             crop: [
                 ctx.bind(&p.crop_kernel, &[&p.grid, field, &p.a]),
                 ctx.bind(&p.crop_kernel, &[&p.grid, field, &p.b]),
             ],
         })
+    }
+}
+
+impl PlanInner {
+    /// The multiply kernel, or its conjugate variant (made by [`GpuSpectralPlan::bind_adjoint`]).
+    fn multiply_kernel_for(&self, conjugate: bool) -> Result<&Kernel> {
+        if !conjugate {
+            return Ok(&self.multiply_kernel);
+        }
+        self.multiply_conj_kernel
+            .get()
+            .ok_or_else(|| HoloError::Internal("conjugate multiply kernel not made".into()))
     }
 }
 
@@ -483,9 +530,11 @@ impl GpuSpectralOp {
             .dispatch(&mut pass, &p.to_t[k], grid_2d(wc, hc, p.channels, [16, 16]));
         in_b = !in_b;
         in_b = p.rows_h.record(&mut pass, &p.pass_kernel, false, in_b);
+        let kernel = p
+            .multiply_kernel_for(self.conjugate)
+            .unwrap_or(&p.multiply_kernel);
         for multiply in &self.multiply {
-            p.multiply_kernel
-                .dispatch(&mut pass, &multiply[usize::from(in_b)], grid_1d(n));
+            kernel.dispatch(&mut pass, &multiply[usize::from(in_b)], grid_1d(n));
         }
         in_b = p.rows_h.record(&mut pass, &p.pass_kernel, true, in_b);
         p.transpose_kernel.dispatch(

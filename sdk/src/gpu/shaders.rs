@@ -69,6 +69,9 @@ pub(crate) const HEADS: Shader = shader!("heads.wgsl");
 /// Previews: SLM codes → displayed field, field → amplitude (`preview.wgsl`).
 pub(crate) const PREVIEW: Shader = shader!("preview.wgsl");
 
+/// The focal-stack refinement's element-wise steps: phasors, plane terms and sums, Adam (`refine.wgsl`).
+pub(crate) const REFINE: Shader = shader!("refine.wgsl");
+
 /// Every shader of the GPU path.
 #[cfg(test)]
 pub(crate) const ALL: &[Shader] = &[
@@ -82,4 +85,5 @@ pub(crate) const ALL: &[Shader] = &[
     CONV3X3_F16,
     HEADS,
     PREVIEW,
+    REFINE,
 ];

@@ -15,6 +15,8 @@
 //! bits for the same inputs whatever the thread count (every sum in a fixed order).
 
 mod frame;
+#[cfg(feature = "gpu")]
+mod gpu;
 mod model;
 pub mod target;
 #[cfg(test)]
@@ -37,6 +39,8 @@ pub use frame::{
     FrameRefinement, FrameRefiner, HeldOutScores, RefineDisplay, RefineTarget, RefinedFrame,
     DEFAULT_TARGET_LEVELS,
 };
+#[cfg(feature = "gpu")]
+pub use gpu::GpuRefinement;
 use model::{plane_term, ColourModel};
 pub use target::{held_out_depths, loss_depths, FocalTarget, PLANES_RANGE};
 
@@ -720,30 +724,34 @@ impl Refiner {
 
     /// The record of this iteration's sums.
     fn record(&self, iteration: usize) -> IterationRecord {
-        let loss: f64 = self
-            .state
-            .iter()
-            .zip(&self.target_energy)
-            .map(|(s, &e)| {
-                let (a, b) = s.sums;
-                if b > 0.0 {
-                    (e - a * a / b).max(0.0)
-                } else {
-                    e
-                }
-            })
-            .sum();
+        let sums = std::array::from_fn(|c| self.state[c].sums);
         let count = 3 * self.target.depths().len() * self.plan.height() * self.plan.width();
-        let mse = loss / count as f64;
-        IterationRecord {
-            iteration,
-            loss,
-            psnr_db: if mse > 0.0 {
-                -10.0 * mse.log10()
-            } else {
-                f64::INFINITY
-            },
-        }
+        loss_record(iteration, sums, &self.target_energy, count)
+    }
+}
+
+/// The record of an iteration from each colour's sums `(A, B)` (`L = Σ_c (E_c − A²/B)`, `E_c` the target's
+/// energy) over `count` values.
+fn loss_record(
+    iteration: usize,
+    sums: [(f64, f64); 3],
+    energy: &[f64; 3],
+    count: usize,
+) -> IterationRecord {
+    let loss: f64 = sums
+        .iter()
+        .zip(energy)
+        .map(|(&(a, b), &e)| if b > 0.0 { (e - a * a / b).max(0.0) } else { e })
+        .sum();
+    let mse = loss / count as f64;
+    IterationRecord {
+        iteration,
+        loss,
+        psnr_db: if mse > 0.0 {
+            -10.0 * mse.log10()
+        } else {
+            f64::INFINITY
+        },
     }
 }
 

@@ -41,6 +41,15 @@ pub(super) enum PlaneMultiplier {
 }
 
 impl PlaneMultiplier {
+    /// Every value `[rows, cols]` of the plan's spectrum layout (the even form expanded), e.g. for the GPU.
+    pub(super) fn full(&self, rows: usize, cols: usize, isa: Isa) -> Vec<Complex32> {
+        let mut full = vec![Complex32::new(1.0, 0.0); rows * cols];
+        for (r, row) in full.chunks_exact_mut(cols).enumerate() {
+            self.multiply_row(r, row, isa);
+        }
+        full
+    }
+
     /// `row ← m_d·row` on row `r` of the plan's spectrum layout.
     pub(super) fn multiply_row(&self, r: usize, row: &mut [Complex32], isa: Isa) {
         match self {

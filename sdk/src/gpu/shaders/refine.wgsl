@@ -1,0 +1,175 @@
+// The focal-stack refinement's element-wise steps (refine::model, docs/REFINE.md) around the spectral
+// operations of spectral.wgsl / fft.wgsl, all three colours at once:
+//   `phasor`     u = e^{iφ}; quantised: φ through the linear look-up table first (code = round(wrap(φ)·256/2π)
+//                mod 256, shown phase 2π·code/256, as encoding::LinearLut)
+//   `plane`      from U_d (in `work`) and the target T_d: per workgroup of one channel the partial sums
+//                (⟨|U_d|, T_d⟩, ‖U_d‖²) (a fixed tree: the same bits on every run), then V_d = T_d·U_d/|U_d|
+//                in place (0 where U_d = 0)
+//   `accumulate` acc = work at the plane marked first, acc + work after
+//   `reduce`     per channel (one workgroup each): A and B over planes and workgroups in a fixed order, and the
+//                least-squares scale k = A/B (0 where B = 0) into sums[c] = (A, B, k, 0)
+//   `adam`       g = 2k²·work − 2k·acc (work: F⁻¹{W·F{u}}, acc: Σ_d F⁻¹{conj(m_d)·F{V_d}}), ∂L/∂φ =
+//                Im(g·conj(u)), and Adam's update of φ
+//
+// Bindings (group 0; each entry point uses some):
+//   0: uniform Params
+//   1: uniform PlaneParams (the plane's index, whether it is the first)
+//   2: storage phase:   array<f32>,        [C, H, W] radians
+//   3: storage unit:    array<vec2<f32>>,  [C, H, W]
+//   4: storage work:    array<vec2<f32>>,  [C, H, W]
+//   5: storage acc:     array<vec2<f32>>,  [C, H, W]
+//   6: storage target:  array<f32>,        [D, C, H, W]
+//   7: storage partial: array<vec2<f32>>,  [D, C, G] (G = `groups`, workgroups per channel plane)
+//   8: storage sums:    array<vec4<f32>>,  [C]
+//   9: storage mean:    array<f32>,        [C, H, W] (Adam's first moment)
+//  10: storage square:  array<f32>,        [C, H, W] (Adam's second moment)
+// Grids: `phasor`, `accumulate`, `adam` over C·H·W elements (1D, 256 per workgroup, spread over x/y); `plane`
+// over H·W elements in x/y (the same spread) and the channel in z; `reduce` one workgroup per channel.
+
+struct Params {
+    hw: u32,
+    channels: u32,
+    groups: u32,
+    planes: u32,
+    quantised: u32,
+    step: f32,
+    beta1: f32,
+    beta2: f32,
+    epsilon: f32,
+    c1: f32,
+    c2: f32,
+}
+
+struct PlaneParams {
+    plane: u32,
+    first: u32,
+}
+
+const TAU: f32 = 6.283185307179586;
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<uniform> plane_params: PlaneParams;
+@group(0) @binding(2) var<storage, read_write> phase: array<f32>;
+@group(0) @binding(3) var<storage, read_write> unit: array<vec2<f32>>;
+@group(0) @binding(4) var<storage, read_write> work: array<vec2<f32>>;
+@group(0) @binding(5) var<storage, read_write> acc: array<vec2<f32>>;
+@group(0) @binding(6) var<storage, read> target_amp: array<f32>;
+@group(0) @binding(7) var<storage, read_write> partial: array<vec2<f32>>;
+@group(0) @binding(8) var<storage, read_write> sums: array<vec4<f32>>;
+@group(0) @binding(9) var<storage, read_write> mean: array<f32>;
+@group(0) @binding(10) var<storage, read_write> square: array<f32>;
+
+fn index_of(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
+    return gid.x + gid.y * groups.x * 256u;
+}
+
+@compute @workgroup_size(256)
+fn phasor(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = index_of(gid, groups);
+    if (i >= params.channels * params.hw) {
+        return;
+    }
+    var p = phase[i];
+    if (params.quantised != 0u) {
+        let wrapped = p - TAU * floor(p / TAU);
+        let code = u32(round(wrapped * (256.0 / TAU))) % 256u;
+        p = f32(code) * (TAU / 256.0);
+    }
+    unit[i] = vec2<f32>(cos(p), sin(p));
+}
+
+var<workgroup> lanes: array<vec2<f32>, 256>;
+
+@compute @workgroup_size(256)
+fn plane(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let p = index_of(gid, groups);
+    let c = gid.z;
+    var s = vec2<f32>(0.0, 0.0);
+    if (p < params.hw) {
+        let i = c * params.hw + p;
+        let u = work[i];
+        let t = target_amp[(plane_params.plane * params.channels + c) * params.hw + p];
+        let n2 = dot(u, u);
+        let n = sqrt(n2);
+        s = vec2<f32>(n * t, n2);
+        var scale = 0.0;
+        if (n > 0.0) {
+            scale = t / n;
+        }
+        work[i] = u * scale;
+    }
+    lanes[lid] = s;
+    workgroupBarrier();
+    for (var half = 128u; half > 0u; half = half >> 1u) {
+        if (lid < half) {
+            lanes[lid] = lanes[lid] + lanes[lid + half];
+        }
+        workgroupBarrier();
+    }
+    if (lid == 0u) {
+        let wg = p / 256u;
+        partial[(plane_params.plane * params.channels + c) * params.groups + wg] = lanes[0];
+    }
+}
+
+@compute @workgroup_size(256)
+fn accumulate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = index_of(gid, groups);
+    if (i >= params.channels * params.hw) {
+        return;
+    }
+    if (plane_params.first != 0u) {
+        acc[i] = work[i];
+    } else {
+        acc[i] = acc[i] + work[i];
+    }
+}
+
+@compute @workgroup_size(256)
+fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let c = wid.x;
+    var s = vec2<f32>(0.0, 0.0);
+    for (var d = 0u; d < params.planes; d = d + 1u) {
+        let base = (d * params.channels + c) * params.groups;
+        for (var g = lid; g < params.groups; g = g + 256u) {
+            s = s + partial[base + g];
+        }
+    }
+    lanes[lid] = s;
+    workgroupBarrier();
+    for (var half = 128u; half > 0u; half = half >> 1u) {
+        if (lid < half) {
+            lanes[lid] = lanes[lid] + lanes[lid + half];
+        }
+        workgroupBarrier();
+    }
+    if (lid == 0u) {
+        let total = lanes[0];
+        var k = 0.0;
+        if (total.y > 0.0) {
+            k = total.x / total.y;
+        }
+        sums[c] = vec4<f32>(total.x, total.y, k, 0.0);
+    }
+}
+
+@compute @workgroup_size(256)
+fn adam(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = index_of(gid, groups);
+    if (i >= params.channels * params.hw) {
+        return;
+    }
+    let k = sums[i / params.hw].z;
+    let g = work[i] * (2.0 * k * k) - acc[i] * (2.0 * k);
+    let u = unit[i];
+    let grad = g.y * u.x - g.x * u.y;
+    let m = params.beta1 * mean[i] + (1.0 - params.beta1) * grad;
+    let v = params.beta2 * square[i] + (1.0 - params.beta2) * grad * grad;
+    mean[i] = m;
+    square[i] = v;
+    phase[i] = phase[i] - params.step * (m / params.c1) / (sqrt(v / params.c2) + params.epsilon);
+}
