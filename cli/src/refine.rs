@@ -153,6 +153,7 @@ impl RefineArgs {
 pub fn frame_refiner(
     request: FrameRefinement,
     pipeline: &HologramPipeline,
+    backend: &tensorholo::pipeline::BackendReport,
     threads: usize,
 ) -> Result<FrameRefiner> {
     let cfg = pipeline.config();
@@ -165,7 +166,13 @@ pub fn frame_refiner(
         viewer: pipeline.aberration().cloned(),
         viewer_corrected_by_cnn: pipeline.corrected_by_cnn(),
     };
-    Ok(FrameRefiner::new(request, display, threads)?)
+    let refiner = FrameRefiner::new(request, display, threads)?;
+    // The iterations run where the frames run: on the session's GPU when it has one.
+    #[cfg(feature = "gpu")]
+    let refiner = refiner.with_gpu(pipeline.frame_gpu_context(backend)?);
+    #[cfg(not(feature = "gpu"))]
+    let _ = backend;
+    Ok(refiner)
 }
 
 /// Logs each iteration (the refinement's progress).
@@ -188,7 +195,7 @@ pub fn report(refiner: &FrameRefiner, refined: &RefinedFrame) -> serde_json::Val
     let base = s.cnn_codes_psnr_db.unwrap_or(s.start_psnr_db);
     log::info!(
         "--refine: at {} held-out focal planes, the start {:.2} dB, refined {:.2} dB, its 8-bit codes {:.2} dB \
-         ({:+.2} dB over the {}); {} iterations in {:.2} s, target {:.2} s",
+         ({:+.2} dB over the {}); {} iterations in {:.2} s on {}, target {:.2} s",
         s.depths.len(),
         s.start_psnr_db,
         s.refined_psnr_db,
@@ -201,6 +208,7 @@ pub fn report(refiner: &FrameRefiner, refined: &RefinedFrame) -> serde_json::Val
         },
         request.options.iterations,
         refined.report.iterations_s,
+        refined.backend,
         refined.target_s
     );
     json!({
@@ -212,6 +220,8 @@ pub fn report(refiner: &FrameRefiner, refined: &RefinedFrame) -> serde_json::Val
         "held_out": s,
         "gain_db": s.refined_codes_psnr_db - base,
         "amplitude_scale": refined.amplitude_scale,
+        "backend": refined.backend,
+        "backend_reason": refined.backend_reason,
     })
 }
 

@@ -726,8 +726,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let heads = heads.context("no frame rendered")?;
     let refined = match refine {
         Some(request) => {
-            let mut refiner =
-                crate::refine::frame_refiner(request, &pipeline, args.model.thread_count())?;
+            let mut refiner = crate::refine::frame_refiner(
+                request,
+                &pipeline,
+                &backend_report,
+                args.model.thread_count(),
+            )?;
             let midpoint = heads.to_field()?;
             let r = refiner.refine(
                 &scene.layers(),

@@ -244,6 +244,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         Some(request) => Some(crate::refine::frame_refiner(
             request,
             &pipeline,
+            session.backend_report(),
             args.model.thread_count(),
         )?),
         None => None,

@@ -802,3 +802,59 @@ fn render_refuses_bad_refinement_settings_naming_the_flag() {
         );
     }
 }
+
+/// `--refine N --backend gpu`: the iterations run on the session's GPU (report.json's `refine.backend`: the
+/// adapter the frames ran on), and the refined codes score as the CPU's do (within 0.1 dB at the held-out
+/// planes). Skips without an adapter unless `TENSORHOLO_REQUIRE_GPU=1` (CI: lavapipe).
+#[test]
+fn render_refines_on_the_gpu_where_the_frames_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |backend: &str| {
+        let out = dir.path().join(backend);
+        let o = holo(&[
+            "render",
+            "--size",
+            "40x56",
+            "--repeat",
+            "0",
+            "--refine",
+            "3",
+            "--backend",
+            backend,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        (o, out)
+    };
+    let (o, gpu) = run("gpu");
+    if !o.status.success() {
+        let required = std::env::var("TENSORHOLO_REQUIRE_GPU").as_deref() == Ok("1");
+        assert!(!required, "a GPU is required: {}", stderr(&o));
+        eprintln!("skipping: no GPU ({})", stderr(&o));
+        return;
+    }
+    let (o, cpu) = run("cpu");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (g, c) = (report(&gpu), report(&cpu));
+    let name = g["refine"]["backend"].as_str().unwrap().to_string();
+    assert_ne!(name, "cpu", "{}", g["refine"]);
+    assert!(
+        g["backend"]["adapter"].as_str().unwrap().starts_with(&name),
+        "{} vs {}",
+        g["backend"]["adapter"],
+        name
+    );
+    assert_eq!(c["refine"]["backend"], "cpu");
+    let score = |r: &serde_json::Value| {
+        r["refine"]["held_out"]["refined_codes_psnr_db"]
+            .as_f64()
+            .unwrap()
+    };
+    assert!(
+        (score(&g) - score(&c)).abs() < 0.1,
+        "GPU {} vs CPU {}",
+        score(&g),
+        score(&c)
+    );
+    assert_eq!(g["refine"]["history"].as_array().unwrap().len(), 4);
+}

@@ -306,7 +306,9 @@ impl HologramGenerator {
     /// (on the calling thread); `ControlFlow::Break(())` cancels. Takes seconds on a phone: call it off the
     /// UI thread. The patterns' `amplitude_scale` is the refined pattern's least-squares scale. With a
     /// viewer's aberration (a prescription or an aberration profile), the refinement's model sees through the
-    /// viewer's eye, so the refined patterns stay corrected (`docs/REFINE.md`, "A viewer's aberration").
+    /// viewer's eye, so the refined patterns stay corrected (`docs/REFINE.md`, "A viewer's aberration"). The
+    /// iterations run where the session's frames run: on its GPU where it has one (`gpu` feature,
+    /// [`FrameRefiner::with_gpu`]).
     ///
     /// Errors: as [`HologramGenerator::render`]; [`HoloError::InvalidParameter`] for a bad `refinement`
     /// (naming the setting: `iterations`, `step_rad`, `planes`, `levels`), or `target` for the CNN target with
@@ -326,7 +328,7 @@ impl HologramGenerator {
         let (rgbd, report) = self.convert(frame)?;
         let convert_s = t.elapsed().as_secs_f64();
         let cnn_target = refinement.target == RefineTarget::CnnMidpoint;
-        let (mut patterns, midpoint) = {
+        let (mut patterns, midpoint, backend) = {
             let mut session = self.session()?;
             if cnn_target {
                 session.set_full_outputs(true);
@@ -341,7 +343,7 @@ impl HologramGenerator {
             if cnn_target {
                 session.set_full_outputs(false);
             }
-            (rendered?, midpoint?)
+            (rendered?, midpoint?, session.backend_report().clone())
         };
         let cfg = self.pipeline.config();
         let display = RefineDisplay {
@@ -357,7 +359,13 @@ impl HologramGenerator {
             ThreadCount::Fixed(n) => n.max(1),
             _ => crate::cnn::default_threads(),
         };
-        let mut refiner = FrameRefiner::new(*refinement, display, threads)?;
+        let refiner = FrameRefiner::new(*refinement, display, threads)?;
+        // The iterations run where the frames run (the session's GPU, where it has one).
+        #[cfg(feature = "gpu")]
+        let refiner = refiner.with_gpu(self.pipeline.frame_gpu_context(&backend)?);
+        #[cfg(not(feature = "gpu"))]
+        let _ = backend;
+        let mut refiner = refiner;
         let refined = refiner.refine(
             &[SceneLayer::from(&rgbd)],
             midpoint.as_ref().map(|m| m.view()),

@@ -58,6 +58,33 @@ impl FrameExecutor for GpuFrameSession {
     }
 }
 
+/// The options of the shared context a session without the app's own runs on: a software adapter only where
+/// [`Backend::Gpu`] asks for the GPU.
+fn shared_options(requested: Backend) -> GpuOptions {
+    GpuOptions {
+        allow_software: requested == Backend::Gpu,
+        name_contains: None,
+    }
+}
+
+impl HologramPipeline {
+    /// The GPU context a session of this pipeline whose frames run on the GPU (`report.active`, its
+    /// [`super::BackendReport`]) uses: the app's ([`HologramPipeline::with_gpu_context`]) or the shared one;
+    /// `None` where the frames run on the CPU. For work beside the frames on the same device (the
+    /// refinement: [`crate::refine::FrameRefiner::with_gpu`]).
+    ///
+    /// Errors: [`crate::HoloError::Gpu`] where the shared context can no longer be made.
+    pub fn frame_gpu_context(&self, report: &super::BackendReport) -> Result<Option<GpuContext>> {
+        if report.active != Backend::Gpu {
+            return Ok(None);
+        }
+        match self.gpu_context() {
+            Some(ctx) => Ok(Some(ctx.clone())),
+            None => GpuContext::shared(&shared_options(self.config().backend)).map(Some),
+        }
+    }
+}
+
 /// The GPU frame of `pipeline` at `height × width` (`setup.rs`'s `choose_backend` with the `gpu` feature): on the app's context or the shared one (a software adapter only for [`Backend::Gpu`]), the CNN
 /// graphs read once by the models ([`crate::model::HologramModel::cnn_graph`]).
 pub(super) fn build(
@@ -79,10 +106,7 @@ pub(super) fn build(
                 None,
             ));
         }
-        None => GpuContext::shared(&GpuOptions {
-            allow_software: requested == Backend::Gpu,
-            name_contains: None,
-        }),
+        None => GpuContext::shared(&shared_options(requested)),
     };
     let ctx = match (ctx, requested) {
         (Ok(ctx), _) => ctx,

@@ -117,6 +117,10 @@ pub struct RefinedFrame {
     pub held_out: HeldOutScores,
     /// Seconds to make the target (and an SM-LBM start).
     pub target_s: f64,
+    /// Where the iterations ran: `cpu`, or the GPU adapter's name ([`FrameRefiner::with_gpu`]).
+    pub backend: String,
+    /// Why the CPU ran them where a GPU was given (a calibrated look-up table), else `None`.
+    pub backend_reason: Option<String>,
 }
 
 /// The display a frame is refined for.
@@ -152,6 +156,9 @@ pub struct FrameRefiner {
     threads: usize,
     refiner: Option<Refiner>,
     previous: Option<Array3<f32>>,
+    /// The GPU the iterations run on ([`FrameRefiner::with_gpu`]).
+    #[cfg(feature = "gpu")]
+    gpu: Option<crate::gpu::GpuContext>,
 }
 
 impl FrameRefiner {
@@ -186,7 +193,19 @@ impl FrameRefiner {
             threads,
             refiner: None,
             previous: None,
+            #[cfg(feature = "gpu")]
+            gpu: None,
         })
+    }
+
+    /// Runs the iterations on `ctx`'s GPU (`None`: the CPU): the same model, loss and Adam
+    /// ([`Refiner::on_gpu`]), each frame's target uploaded afresh; the held-out scores stay on the CPU. A
+    /// quantised refinement through a calibrated look-up table runs on the CPU (the GPU knows the linear one):
+    /// [`RefinedFrame::backend_reason`] says so.
+    #[cfg(feature = "gpu")]
+    pub fn with_gpu(mut self, ctx: Option<crate::gpu::GpuContext>) -> Self {
+        self.gpu = ctx;
+        self
     }
 
     /// The request it runs.
@@ -309,7 +328,33 @@ impl FrameRefiner {
             ),
         };
         let mut phase = start.to_owned();
-        let report = refiner.refine(phase.view_mut(), progress)?;
+        // Set where a GPU is given (the `gpu` feature).
+        #[allow(unused_mut)]
+        let (mut backend, mut backend_reason) = ("cpu".to_string(), None);
+        #[cfg(feature = "gpu")]
+        let on_gpu = match &self.gpu {
+            Some(ctx) => match refiner.on_gpu(ctx) {
+                Ok(g) => Some((g, ctx.info().name.clone())),
+                Err(HoloError::InvalidParameter {
+                    name: "calibration",
+                    reason,
+                }) => {
+                    backend_reason = Some(reason);
+                    None
+                }
+                Err(e) => return Err(e),
+            },
+            None => None,
+        };
+        #[cfg(not(feature = "gpu"))]
+        let on_gpu: Option<(Refiner, String)> = None;
+        let report = match on_gpu {
+            Some((mut g, name)) => {
+                backend = name;
+                g.refine(phase.view_mut(), progress)?
+            }
+            None => refiner.refine(phase.view_mut(), progress)?,
+        };
         let codes = codes_of(phase.view(), calibration)?;
         let shown = displayed_phase(codes.view(), calibration)?;
         let held = held_out_depths(options.planes)?;
@@ -338,6 +383,8 @@ impl FrameRefiner {
             report,
             held_out,
             target_s: 0.0,
+            backend,
+            backend_reason,
         })
     }
 }

@@ -41,7 +41,7 @@ pub(super) enum PlaneMultiplier {
 }
 
 impl PlaneMultiplier {
-    /// Every value `[rows, cols]` of the plan's spectrum layout (the even form expanded), e.g. for the GPU.
+    /// Every value `[rows, cols]` of the plan's spectrum layout (the even form expanded): for `W`, and the GPU.
     pub(super) fn full(&self, rows: usize, cols: usize, isa: Isa) -> Vec<Complex32> {
         let mut full = vec![Complex32::new(1.0, 0.0); rows * cols];
         for (r, row) in full.chunks_exact_mut(cols).enumerate() {
@@ -111,10 +111,7 @@ impl ColourModel {
                 };
                 // m_d = M·H·E_d: the even multiplier's values, times the conjugate of the correction kernel at
                 // this plane's distance.
-                let mut full = vec![Complex32::new(1.0, 0.0); n];
-                for (r, row) in full.chunks_exact_mut(cols).enumerate() {
-                    even.multiply_row(r, row, isa);
-                }
+                let mut full = PlaneMultiplier::Even(even).full(rows, cols, isa);
                 let kernel = pupil_multiplier(plan, &viewer.coefficients(distance_m, colour));
                 for (m, k) in full.iter_mut().zip(&kernel) {
                     *m *= k.conj();
@@ -124,14 +121,9 @@ impl ColourModel {
             .collect::<Result<Vec<_>>>()?;
         // W from the full multipliers: apply each plane's m_d to a spectrum of ones.
         let mut weight = vec![0.0f32; n];
-        let mut row = vec![Complex32::new(0.0, 0.0); cols];
         for m in &planes {
-            for r in 0..rows {
-                row.fill(Complex32::new(1.0, 0.0));
-                m.multiply_row(r, &mut row, isa);
-                for (w, v) in weight[r * cols..(r + 1) * cols].iter_mut().zip(&row) {
-                    *w += v.norm_sqr() * n as f32;
-                }
+            for (w, v) in weight.iter_mut().zip(&m.full(rows, cols, isa)) {
+                *w += v.norm_sqr() * n as f32;
             }
         }
         Ok(Self { planes, weight })
