@@ -8,6 +8,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use ndarray::Axis;
 use serde_json::json;
+use tensorholo::encoding::{align_global_phase, phase_churn, PhaseChurn};
 use tensorholo::io::{ensure_not_input, save_u8_png};
 use tensorholo::pipeline::Backend;
 use tensorholo::scene::{load_rgbd, DepthRange, LoadOptions, RgbdFrame};
@@ -41,6 +42,12 @@ pub struct VideoArgs {
     save_frames: bool,
     #[command(flatten)]
     refine: crate::refine::RefineArgs,
+    /// Shift each colour's codes so that its global phase follows the previous frame's (a global phase changes
+    /// nothing the viewer sees; with the linear look-up table the shift is exact): less phase churn for the SLM
+    /// to settle (report.json's `temporal`). Not with a calibrated look-up table (--calibration or the
+    /// profile's), where a code shift is not a phase shift.
+    #[arg(long)]
+    align_phase: bool,
     /// Output folder for report.json (and frames/).
     #[arg(long)]
     out: PathBuf,
@@ -56,8 +63,10 @@ Examples:
       from the previous frame's refined pattern (docs/REFINE.md)
 
 Outputs in --out:
-  report.json   per-frame timings (load+CNN, offset, pre-filter, encoding, frame period), mean FPS, and whether the
-                streamed first frame equals a single-frame render of it bit for bit
+  report.json   per-frame timings (load+CNN, offset, pre-filter, encoding, frame period), mean FPS, whether the
+                streamed first frame equals a single-frame render of it bit for bit, and the temporal numbers:
+                per frame and in summary the SLM phase churn from the previous frame (mean wrapped |Δφ|,
+                radians, and the share of pixels changing by more than π/2), with --align-phase the shifts
   frames/       with --save-frames: NNNNN_phase_r.png, _g, _b per frame";
 
 /// Pairs the files of the two folders by stem (sorted by name; hidden files such as `.DS_Store` are ignored).
@@ -143,6 +152,26 @@ fn pair_frames(
 /// The file `--save-frames` writes for frame `i`, colour `ch` (`r`, `g`, `b`).
 fn frame_file(frames_dir: &Path, i: usize, ch: &str) -> PathBuf {
     frames_dir.join(format!("{i:05}_phase_{ch}.png"))
+}
+
+/// report.json's `temporal`: the phase churn between consecutive frames' patterns
+/// ([`tensorholo::encoding::phase_churn`]) over the sequence; `null` for one frame.
+fn temporal_summary(churns: &[PhaseChurn], aligned: bool) -> serde_json::Value {
+    if churns.is_empty() {
+        return serde_json::Value::Null;
+    }
+    let n = churns.len() as f64;
+    let mean = |f: fn(&PhaseChurn) -> f64| churns.iter().map(f).sum::<f64>() / n;
+    let max = |f: fn(&PhaseChurn) -> f64| churns.iter().map(f).fold(0.0, f64::max);
+    json!({
+        "transitions": churns.len(),
+        "mean_churn_rad": mean(|c| c.mean_abs_rad),
+        "max_churn_rad": max(|c| c.mean_abs_rad),
+        "mean_above_half_pi": mean(|c| c.above_half_pi),
+        "max_above_half_pi": max(|c| c.above_half_pi),
+        "align_phase": aligned,
+        "definition": "through the linear look-up table (code c = phase 2πc/256): mean wrapped |Δφ| between consecutive frames' codes, radians, and the share of (colour, pixel) values changing by more than π/2",
+    })
 }
 
 /// Runs `holo video`.
@@ -238,8 +267,17 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         }
         Ok(f)
     };
+    if args.align_phase && pipeline.calibration().is_some() {
+        bail!(
+            "--align-phase shifts the codes, which is a global phase only through the linear look-up table; \
+             this run sends its codes through a display calibration (--calibration or the --display profile's)"
+        );
+    }
     let mut rows = Vec::new();
     let mut first_codes = None;
+    // The last pattern sent, for the churn and the alignment.
+    let mut previous: Option<ndarray::Array3<u8>> = None;
+    let mut churns = Vec::new();
     let mut refiner = match refine {
         Some(request) => Some(crate::refine::frame_refiner(
             request,
@@ -297,7 +335,21 @@ pub fn run(args: &VideoArgs) -> Result<()> {
                 }
                 _ => None,
             };
-            let codes = refined.as_ref().map_or(&out.codes, |r| &r.0.codes);
+            let mut codes = refined
+                .as_ref()
+                .map_or_else(|| out.codes.clone(), |r| r.0.codes.clone());
+            let (shifts, churn) = match &previous {
+                Some(p) => {
+                    let shifts = if args.align_phase {
+                        Some(align_global_phase(p.view(), codes.view_mut())?)
+                    } else {
+                        None
+                    };
+                    (shifts, Some(phase_churn(p.view(), codes.view())?))
+                }
+                None => (None, None),
+            };
+            churns.extend(churn);
             let t = out.timings;
             if out.backend == Backend::Gpu {
                 log::info!(
@@ -324,6 +376,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
                     save_u8_png(&frame_file(&frames_dir, i, ch), codes.index_axis(Axis(0), c))?;
                 }
             }
+            previous = Some(codes);
             rows.push(json!({
                 "index": i,
                 "rgb": crate::output::path_text(&pairs[i].0),
@@ -332,6 +385,11 @@ pub fn run(args: &VideoArgs) -> Result<()> {
                 "backend": out.backend,
                 "amplitude_scale": refined.as_ref().map_or(out.amplitude_scale, |r| r.0.amplitude_scale),
                 "refine": refined.map(|r| r.1),
+                "temporal": churn.map(|c| json!({
+                    "churn_rad": c.mean_abs_rad,
+                    "above_half_pi": c.above_half_pi,
+                    "aligned_shift_codes": shifts,
+                })),
             }));
             Ok(())
         },
@@ -387,6 +445,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         "stream_equals_single_frame": identical,
         "refine_target_s": refine.map(|_| refine_s.0),
         "refine_iterations_s": refine.map(|_| refine_s.1),
+        "temporal": temporal_summary(&churns, args.align_phase),
         "per_frame": rows,
         "total_s": t_all.elapsed().as_secs_f64(),
     });

@@ -209,6 +209,87 @@ fn video_streams_the_redwood_sequence_and_matches_single_frames() {
     let a = std::fs::read(out.join("frames/00000_phase_g.png")).unwrap();
     let b = std::fs::read(out.join("frames/00004_phase_g.png")).unwrap();
     assert_ne!(a, b);
+    // The temporal numbers: a churn per transition, none for the first frame.
+    let t = &r["temporal"];
+    assert_eq!(t["transitions"], 4, "{t}");
+    let churn = t["mean_churn_rad"].as_f64().unwrap();
+    assert!(churn > 0.0 && churn < std::f64::consts::PI, "{t}");
+    assert!(r["per_frame"][0]["temporal"].is_null());
+    assert!(r["per_frame"][1]["temporal"]["churn_rad"].as_f64().unwrap() > 0.0);
+
+    // --align-phase: each colour's codes are the unaligned ones shifted by the reported whole number of codes
+    // (a global phase: the same displayed intensity), and the churn does not rise (the double phase encoding
+    // already subtracts each frame's mean phase: on this sequence every shift is 0, docs/VIDEO.md).
+    let aligned = dir.path().join("aligned");
+    let o = holo(&[
+        "video",
+        "--rgb-dir",
+        rgb.to_str().unwrap(),
+        "--depth-dir",
+        depth.to_str().unwrap(),
+        "--depth-encoding",
+        "mm16",
+        "--size",
+        "48x64",
+        "--save-frames",
+        "--align-phase",
+        "--out",
+        aligned.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let ra = report(&aligned);
+    let aligned_churn = ra["temporal"]["mean_churn_rad"].as_f64().unwrap();
+    assert!(aligned_churn <= churn, "aligned {aligned_churn} vs {churn}");
+    let codes =
+        |d: &std::path::Path, f: &str| image::open(d.join("frames").join(f)).unwrap().to_luma8();
+    let mut total: [u8; 3] = [0; 3];
+    for i in 1..5 {
+        let shifts = &ra["per_frame"][i]["temporal"]["aligned_shift_codes"];
+        for (c, ch) in ["r", "g", "b"].iter().enumerate() {
+            total[c] = total[c].wrapping_add(shifts[c].as_u64().unwrap() as u8);
+            let f = format!("{i:05}_phase_{ch}.png");
+            let (plain, moved) = (codes(&out, &f), codes(&aligned, &f));
+            assert!(
+                plain
+                    .iter()
+                    .zip(moved.iter())
+                    .all(|(&p, &m)| p.wrapping_add(total[c]) == m),
+                "frame {i} {ch}: not a shift by {}",
+                total[c]
+            );
+        }
+    }
+
+    // A still scene (one frame three times): no churn at all.
+    let (still_rgb, still_depth) = (dir.path().join("rgb"), dir.path().join("depth"));
+    std::fs::create_dir_all(&still_rgb).unwrap();
+    std::fs::create_dir_all(&still_depth).unwrap();
+    for k in 0..3 {
+        std::fs::copy(rgb.join("00000.jpg"), still_rgb.join(format!("{k:02}.jpg"))).unwrap();
+        std::fs::copy(
+            depth.join("00000.png"),
+            still_depth.join(format!("{k:02}.png")),
+        )
+        .unwrap();
+    }
+    let still = dir.path().join("still");
+    let o = holo(&[
+        "video",
+        "--rgb-dir",
+        still_rgb.to_str().unwrap(),
+        "--depth-dir",
+        still_depth.to_str().unwrap(),
+        "--depth-encoding",
+        "mm16",
+        "--size",
+        "48x64",
+        "--out",
+        still.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let rs = report(&still);
+    assert_eq!(rs["temporal"]["max_churn_rad"], 0.0, "{}", rs["temporal"]);
+    assert_eq!(rs["temporal"]["max_above_half_pi"], 0.0);
 }
 
 #[test]
@@ -857,4 +938,34 @@ fn render_refines_on_the_gpu_where_the_frames_run() {
         score(&c)
     );
     assert_eq!(g["refine"]["history"].as_array().unwrap().len(), 4);
+}
+
+/// The 40-frame RealSense sequence (real, handheld, depth not registered to colour) runs through `holo
+/// video`: every frame streamed, the temporal numbers for its 39 transitions (a moving camera over a still
+/// lab: some churn, few pixels swinging by more than π/2).
+#[test]
+fn video_runs_the_realsense_sequence_with_its_temporal_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("rs");
+    let o = holo(&[
+        "video",
+        "--rgb-dir",
+        shared("realsense_seq/rgb").to_str().unwrap(),
+        "--depth-dir",
+        shared("realsense_seq/depth").to_str().unwrap(),
+        "--depth-encoding",
+        "mm16",
+        "--size",
+        "24x32",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = report(&out);
+    assert_eq!(r["frames"], 40);
+    let t = &r["temporal"];
+    assert_eq!(t["transitions"], 39, "{t}");
+    let churn = t["mean_churn_rad"].as_f64().unwrap();
+    assert!(churn > 0.0 && churn < 1.0, "{t}");
+    assert!(t["max_above_half_pi"].as_f64().unwrap() < 0.5, "{t}");
 }

@@ -694,16 +694,17 @@ fn bad_inputs_give_typed_errors() {
         "color",
         &["at most 120", "got 121"],
     );
-    // Sizes overflowing usize: width·bpp, then stride·(height − 1).
+    // Sizes no camera makes: refused by their pixel count before any arithmetic on bytes (the image limit);
+    // then a stride overflowing usize: stride·(height − 1).
     assert_invalid(
         with(g, |f| f.color.width = usize::MAX / 2),
         "color",
-        &["overflows"],
+        &["pixels, more than"],
     );
     assert_invalid(
         with(g, |f| f.depth.width = usize::MAX / 3),
         "depth",
-        &["overflows"],
+        &["pixels, more than"],
     );
     assert_invalid(
         with(g, |f| {
@@ -720,7 +721,7 @@ fn bad_inputs_give_typed_errors() {
             f.color.width = usize::MAX;
         }),
         "color",
-        &["overflows"],
+        &["pixels, more than"],
     );
     // Target size and range.
     assert_invalid(good.view().to_rgbd(0, 6, &opts), "height", &[]);

@@ -344,6 +344,47 @@ fn load_rgb_is_linear_amplitude_in_rgb_order() {
     );
 }
 
+/// A depth map at a quarter of the colour's resolution (a phone's LiDAR depth under its image; the same field
+/// of view) loads: brought to the colour's resolution by nearest neighbour, the camera path's rule, so the frame
+/// is the one of a full-resolution depth file holding those nearest samples, bit for bit; the report gives
+/// both sizes.
+#[test]
+fn a_depth_map_of_lower_resolution_is_brought_to_the_colour_by_nearest_neighbour() {
+    let rgb = data("redwood_livingroom_seq/color/00000.jpg"); // 640×480
+    let full = image::open(data("redwood_livingroom_seq/depth/00000.png"))
+        .unwrap()
+        .to_luma16();
+    let (w, h) = full.dimensions();
+    let (ws, hs) = (w / 4, h / 4);
+    let small = image::ImageBuffer::<image::Luma<u16>, _>::from_fn(ws, hs, |x, y| {
+        *full.get_pixel(4 * x + 2, 4 * y + 2)
+    });
+    // The nearest rule of the camera path: output pixel o reads input ⌊(o + ½)·n_in/n_out⌋.
+    let near = |o: u32, n_in: u32, n_out: u32| {
+        (((o as f64 + 0.5) * n_in as f64 / n_out as f64).floor() as u32).min(n_in - 1)
+    };
+    let up = image::ImageBuffer::<image::Luma<u16>, _>::from_fn(w, h, |x, y| {
+        *small.get_pixel(near(x, ws, w), near(y, hs, h))
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let (small_path, up_path) = (dir.path().join("small.png"), dir.path().join("up.png"));
+    small.save(&small_path).unwrap();
+    up.save(&up_path).unwrap();
+    let options = LoadOptions::default();
+    let (a, ra) =
+        load_rgbd(&rgb, &small_path, DepthEncoding::Millimetres16, &options).expect("loads");
+    let (b, rb) = load_rgbd(&rgb, &up_path, DepthEncoding::Millimetres16, &options).unwrap();
+    assert_eq!(ra.depth_size, (hs as usize, ws as usize));
+    assert_eq!((ra.source_size, rb.depth_size), ((480, 640), (480, 640)));
+    assert_eq!(a, b);
+    // Another aspect ratio (a crop of the depth) is refused, not stretched.
+    let cropped = image::imageops::crop_imm(&small, 0, 0, ws, hs - 20).to_image();
+    cropped.save(&small_path).unwrap();
+    let e = load_rgbd(&rgb, &small_path, DepthEncoding::Millimetres16, &options).unwrap_err();
+    assert!(matches!(e, HoloError::ShapeMismatch { .. }), "{e}");
+    assert!(e.to_string().contains("aspect ratio"), "{e}");
+}
+
 #[test]
 fn mismatched_rgb_and_depth_sizes_are_an_error_naming_both_files() {
     let rgb = data("sun/SUN_color.jpg"); // 640×480

@@ -35,7 +35,7 @@ use serde::Serialize;
 use super::depth::{
     fill_invalid, normalise_depth, DecodedDepth, DepthEncoding, DepthMapping, DepthRange,
 };
-use super::frame::{resize_nearest, LayeredDepthImage, LdiLayer, RgbdFrame};
+use super::frame::{LayeredDepthImage, LdiLayer, RgbdFrame};
 use super::ldi_files::assemble_layers;
 use crate::color::srgb8_to_amplitude;
 use crate::error::{invalid, HoloError, Result};
@@ -360,13 +360,13 @@ fn check_layout(
     // A frame no camera makes is refused by its pixel count before its bytes are read (the image files'
     // limit, `crate::io::InputLimits::max_image_pixels`: 100 M by default).
     let max = crate::io::input_limits().max_image_pixels;
-    if width as u64 * height as u64 > max {
+    let pixels = (width as u64).saturating_mul(height as u64);
+    if pixels > max {
         return Err(invalid(
             name,
             format!(
-                "the {name} buffer is {width} × {height} = {} pixels, more than the {max} a frame may have \
-                 (tensorholo::io::InputLimits::max_image_pixels)",
-                width as u64 * height as u64
+                "the {name} buffer is {width} × {height} = {pixels} pixels, more than the {max} a frame may \
+                 have (tensorholo::io::InputLimits::max_image_pixels)"
             ),
         ));
     }
@@ -950,24 +950,17 @@ impl CameraFrame<'_> {
 
         // 4. Depth to colour resolution, nearest neighbour (values and validity alike).
         let (hd, wd) = decoded.values.dim();
-        let decoded = if (hd, wd) == (hc, wc) {
-            decoded
-        } else {
-            // Aspect ratios differing by more than 2 %: the depth map is stretched (same field of view).
-            let (a, b) = (hd as f64 * wc as f64, hc as f64 * wd as f64);
-            if (a / b - 1.0).abs() > 0.02 && !ASPECT_WARNED.swap(true, Ordering::Relaxed) {
-                log::warn!(
-                    "depth buffer {hd}x{wd} and colour buffer {hc}x{wc} (after crop and rotation) differ in \
-                     aspect ratio; the depth map is stretched onto the colour frame (same field of view \
-                     assumed; ARCore needs color_crop); warned once"
-                );
-            }
-            DecodedDepth {
-                values: resize_nearest(&decoded.values, hc, wc),
-                valid: resize_nearest(&decoded.valid, hc, wc),
-                metric: true,
-            }
-        };
+        // Aspect ratios differing by more than 2 %: the depth map is stretched (same field of view).
+        if decoded.aspect_mismatch(hc, wc) > super::depth::MAX_DEPTH_ASPECT_MISMATCH
+            && !ASPECT_WARNED.swap(true, Ordering::Relaxed)
+        {
+            log::warn!(
+                "depth buffer {hd}x{wd} and colour buffer {hc}x{wc} (after crop and rotation) differ in \
+                 aspect ratio; the depth map is stretched onto the colour frame (same field of view \
+                 assumed; ARCore needs color_crop); warned once"
+            );
+        }
+        let decoded = decoded.to_resolution(hc, wc);
         Ok((amplitude, decoded, invalid_fraction))
     }
 }

@@ -172,16 +172,22 @@ pub struct DepthReport {
     pub metric_max_m: Option<f32>,
     /// Range mapped to `d ∈ [0,1]` (given or automatic); `None` for relative encodings.
     pub range_used: Option<DepthRange>,
-    /// `(height, width)` of the files, before any resize.
+    /// `(height, width)` of the colour file, before any resize.
     pub source_size: (usize, usize),
+    /// `(height, width)` of the depth file: the colour's, or a lower (or higher) resolution of the same field
+    /// of view, brought to the colour's ([`DecodedDepth::to_resolution`]).
+    pub depth_size: (usize, usize),
 }
 
-/// Loads an RGB-D pair into an [`RgbdFrame`]: [`load_rgb`], [`decode_depth_file`], check that both have
-/// the same `H × W`, [`normalise_depth`] with `options.range`/`options.mapping`, [`fill_invalid`] (so holes
-/// are never read as near), then [`RgbdFrame::resize`] to `options.size` if given. Mismatched inputs are
-/// never resized silently (NYU's raw depth is unregistered but has the RGB's size, so it loads).
+/// Loads an RGB-D pair into an [`RgbdFrame`]: [`load_rgb`], [`decode_depth_file`], a depth map of another
+/// resolution brought to the colour's as the camera path does ([`DecodedDepth::to_resolution`]: the same
+/// field of view, e.g. a phone's 256 × 192 LiDAR depth under its 1920 × 1440 image; nearest neighbour),
+/// [`normalise_depth`] with `options.range`/`options.mapping`, [`fill_invalid`] (so holes are never read as
+/// near), then [`RgbdFrame::resize`] to `options.size` if given. A depth map of another aspect ratio (beyond
+/// [`MAX_DEPTH_ASPECT_MISMATCH`](super::depth::MAX_DEPTH_ASPECT_MISMATCH)) is refused, never stretched (NYU's
+/// raw depth is unregistered but has the RGB's size, so it loads).
 ///
-/// Errors: those of the steps above; [`HoloError::ShapeMismatch`] naming both files when their sizes
+/// Errors: those of the steps above; [`HoloError::ShapeMismatch`] naming both files when their aspect ratios
 /// differ (expected = RGB `[H, W]`, got = depth `[H, W]`).
 pub fn load_rgbd(
     rgb: &Path,
@@ -192,10 +198,13 @@ pub fn load_rgbd(
     let amplitude = load_rgb(rgb)?;
     let decoded = decode_depth_file(depth, encoding)?;
     let (_, h, w) = amplitude.dim();
-    if decoded.values.dim() != (h, w) {
+    let depth_size = decoded.values.dim();
+    if decoded.aspect_mismatch(h, w) > super::depth::MAX_DEPTH_ASPECT_MISMATCH {
         return Err(HoloError::ShapeMismatch {
             what: format!(
-                "depth map `{}` vs RGB image `{}`",
+                "depth map `{}` vs RGB image `{}` (another aspect ratio: a depth map of another resolution \
+                 is brought to the colour's only where it covers the same field of view, aspect ratios within \
+                 2 %)",
                 depth.display(),
                 rgb.display()
             ),
@@ -204,6 +213,15 @@ pub fn load_rgbd(
         });
     }
     check_depth_sanity(&decoded, encoding, options, depth)?;
+    if depth_size != (h, w) {
+        log::info!(
+            "depth map `{}` is {}x{}: brought to the colour's {h}x{w} (nearest neighbour, the camera path's)",
+            depth.display(),
+            depth_size.0,
+            depth_size.1
+        );
+    }
+    let decoded = decoded.to_resolution(h, w);
     let (d, range_used) = normalise_depth(&decoded, options.range, options.mapping)?;
     let filled = fill_invalid(&d, &decoded.valid)?;
     let min_max = decoded.valid_min_max().filter(|_| decoded.metric);
@@ -214,6 +232,7 @@ pub fn load_rgbd(
         metric_max_m: min_max.map(|m| m.1),
         range_used,
         source_size: (h, w),
+        depth_size,
     };
     log::info!(
         "loaded `{}` + `{}` ({encoding}): {h}x{w}, {:.1} % invalid, range {}",
