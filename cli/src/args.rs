@@ -232,6 +232,29 @@ pub struct DepthArgs {
     /// range (they would be clamped onto its ends).
     #[arg(long, default_value_t = 0.5, value_parser = parse_fraction)]
     pub max_depth_outside_range: f32,
+    /// How a depth map of lower resolution than the colour (the same field of view: a phone's LiDAR depth
+    /// under its image) is brought to the colour's: joint-bilateral (guided by the colour, docs/VIDEO.md) or
+    /// nearest.
+    #[arg(long, value_enum, default_value_t = DepthUpsamplingArg::JointBilateral)]
+    pub depth_upsampling: DepthUpsamplingArg,
+}
+
+/// `--depth-upsampling` ([`tensorholo::scene::DepthUpsampling`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DepthUpsamplingArg {
+    /// The colour-guided joint bilateral upsampling (Kopf et al. 2007).
+    JointBilateral,
+    /// Nearest neighbour: the depth map's own blocky edges.
+    Nearest,
+}
+
+impl From<DepthUpsamplingArg> for tensorholo::scene::DepthUpsampling {
+    fn from(a: DepthUpsamplingArg) -> Self {
+        match a {
+            DepthUpsamplingArg::JointBilateral => Self::JointBilateral,
+            DepthUpsamplingArg::Nearest => Self::Nearest,
+        }
+    }
 }
 
 /// A fraction in [0, 1].
@@ -258,6 +281,7 @@ impl DepthArgs {
             size: self.size,
             max_invalid_fraction: self.max_invalid_depth,
             max_outside_range_fraction: self.max_depth_outside_range,
+            depth_upsampling: self.depth_upsampling.into(),
         })
     }
 }

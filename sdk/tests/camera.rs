@@ -152,6 +152,8 @@ fn fixed(fit: Fit, near: f32, far: f32) -> FrameOptions {
         fit,
         range: Some(DepthRange::new(near, far).unwrap()),
         mapping: DepthMapping::LinearMetres,
+        // These tests check the nearest rule's samples; the joint bilateral default has its own.
+        depth_upsampling: DepthUpsampling::Nearest,
     }
 }
 
@@ -174,6 +176,7 @@ fn every_depth_format_decodes_known_values_to_the_same_depth() {
         fit: Fit::Stretch,
         range: Some(range),
         mapping: DepthMapping::LinearDiopters,
+        depth_upsampling: DepthUpsampling::Nearest,
     };
     let color = color_buf(ColorFormat::Rgb8, 2, 2, 0, rgb_at);
     let mut first: Option<RgbdFrame> = None;
@@ -912,7 +915,11 @@ proptest! {
             format: DepthFormat::MetresF32, width: wd, height: hd, row_stride: 0,
         };
         let f = frame(color_buf(ColorFormat::Rgba8, h, w, 0, rgb_at), depth, ALL_ROT[rot]);
-        let options = FrameOptions { fit: [Fit::Crop, Fit::Letterbox, Fit::Stretch][fit], ..FrameOptions::default() };
+        let options = FrameOptions {
+            fit: [Fit::Crop, Fit::Letterbox, Fit::Stretch][fit],
+            depth_upsampling: DepthUpsampling::Nearest,
+            ..FrameOptions::default()
+        };
         let (out, report) = f.view().to_rgbd(th, tw, &options).unwrap();
         prop_assert_eq!(out.depth.dim(), (th, tw));
         // A valid frame: RgbdFrame::new accepts it unchanged.
@@ -924,6 +931,12 @@ proptest! {
         let r = report.range_used.unwrap();
         let allowed: Vec<f32> = zs.iter().flatten().map(|&z| DepthMapping::LinearDiopters.apply(z, &r)).collect();
         prop_assert!(out.depth.iter().all(|d| allowed.contains(d) || (fit == 1 && *d == 1.0)));
+        // The joint bilateral default: a valid frame too, its depths within the valid inputs' span (weighted
+        // means of them; holes filled from them), plus 1 in letterbox margins.
+        let guided = FrameOptions { depth_upsampling: DepthUpsampling::JointBilateral, ..options };
+        let (out, _) = f.view().to_rgbd(th, tw, &guided).unwrap();
+        let (lo, hi) = allowed.iter().fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        prop_assert!(out.depth.iter().all(|&d| (lo - 1e-6..=hi + 1e-6).contains(&d) || (fit == 1 && d == 1.0)));
     }
 }
 

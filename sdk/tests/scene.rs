@@ -345,9 +345,9 @@ fn load_rgb_is_linear_amplitude_in_rgb_order() {
 }
 
 /// A depth map at a quarter of the colour's resolution (a phone's LiDAR depth under its image; the same field
-/// of view) loads: brought to the colour's resolution by nearest neighbour, the camera path's rule, so the frame
-/// is the one of a full-resolution depth file holding those nearest samples, bit for bit; the report gives
-/// both sizes.
+/// of view) loads: with `DepthUpsampling::Nearest`, the frame is the one of a full-resolution depth file holding
+/// the nearest samples, bit for bit; the report gives both sizes. The joint bilateral default differs from it
+/// (the upsampling's closeness to full-resolution depth is measured in `tests/real_inputs.rs`).
 #[test]
 fn a_depth_map_of_lower_resolution_is_brought_to_the_colour_by_nearest_neighbour() {
     let rgb = data("redwood_livingroom_seq/color/00000.jpg"); // 640×480
@@ -370,13 +370,25 @@ fn a_depth_map_of_lower_resolution_is_brought_to_the_colour_by_nearest_neighbour
     let (small_path, up_path) = (dir.path().join("small.png"), dir.path().join("up.png"));
     small.save(&small_path).unwrap();
     up.save(&up_path).unwrap();
-    let options = LoadOptions::default();
+    let options = LoadOptions {
+        depth_upsampling: DepthUpsampling::Nearest,
+        ..LoadOptions::default()
+    };
     let (a, ra) =
         load_rgbd(&rgb, &small_path, DepthEncoding::Millimetres16, &options).expect("loads");
     let (b, rb) = load_rgbd(&rgb, &up_path, DepthEncoding::Millimetres16, &options).unwrap();
     assert_eq!(ra.depth_size, (hs as usize, ws as usize));
     assert_eq!((ra.source_size, rb.depth_size), ((480, 640), (480, 640)));
     assert_eq!(a, b);
+    let (guided, _) = load_rgbd(
+        &rgb,
+        &small_path,
+        DepthEncoding::Millimetres16,
+        &LoadOptions::default(),
+    )
+    .unwrap();
+    assert_ne!(guided.depth, a.depth);
+    assert!(guided.depth.iter().all(|d| (0.0..=1.0).contains(d)));
     // Another aspect ratio (a crop of the depth) is refused, not stretched.
     let cropped = image::imageops::crop_imm(&small, 0, 0, ws, hs - 20).to_image();
     cropped.save(&small_path).unwrap();

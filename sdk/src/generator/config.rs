@@ -280,6 +280,7 @@ impl GeneratorConfig {
             fit: self.fit,
             range: self.depth_range,
             mapping: self.depth_mapping,
+            ..FrameOptions::default()
         }
     }
 }

@@ -12,8 +12,11 @@
 //!    ([`DepthFormat`], little-endian) → metres + validity mask ([`DecodedDepth`], metric);
 //! 3. the clockwise [`Rotation`] that makes both buffers upright (fused with step 2: each output pixel reads
 //!    its source pixel, no extra copy);
-//! 4. depth (values and validity) resampled to the colour resolution by **nearest neighbour**, so no depth
-//!    is ever mixed across an occlusion edge. The (cropped) colour and the depth are assumed to cover the
+//! 4. depth (values and validity) brought to the colour resolution by nearest neighbour (the default: no depth
+//!    mixed across an occlusion edge) or, with [`FrameOptions::depth_upsampling`], by the colour-guided joint
+//!    bilateral upsampling ([`super::upsample_depth`]: depth mixed only among samples of similar colour, a
+//!    hole's edge following the colour's).
+//!    The (cropped) colour and the depth are assumed to cover the
 //!    same field of view, as AVFoundation's `AVDepthData` (delivered alongside the photo / video frame) and
 //!    ARKit's `sceneDepth` do, and ARCore's depth image does after the crop of step 1: the depth map is
 //!    stretched onto the colour frame, so a depth map with another aspect ratio is stretched too (logged as
@@ -675,8 +678,10 @@ impl CameraFrameBuf {
 }
 
 /// Options of [`CameraFrame::to_rgbd`]. `Default`: [`Fit::Crop`], automatic range (1st/99th percentiles
-/// of the valid depths, as [`normalise_depth`]), linear in diopters.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+/// of the valid depths, as [`normalise_depth`]), linear in diopters, depth of a lower resolution brought to
+/// the colour's by nearest neighbour (the joint bilateral upsampling is closer to full-resolution depth but
+/// costs 85 ms at 1080p on two desktop cores, too much of a phone's frame for now: docs/VIDEO.md).
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FrameOptions {
     /// How the frame fits the hologram's size.
     pub fit: Fit,
@@ -685,6 +690,20 @@ pub struct FrameOptions {
     pub range: Option<DepthRange>,
     /// Metric → `d` mapping ([`DepthMapping::LinearDiopters`] by default).
     pub mapping: DepthMapping,
+    /// How a depth buffer of another resolution than the colour's is brought to it (step 4;
+    /// [`super::upsample_depth`]; nearest neighbour by default, see above).
+    pub depth_upsampling: super::DepthUpsampling,
+}
+
+impl Default for FrameOptions {
+    fn default() -> Self {
+        Self {
+            fit: Fit::default(),
+            range: None,
+            mapping: DepthMapping::default(),
+            depth_upsampling: super::DepthUpsampling::Nearest,
+        }
+    }
 }
 
 /// What [`CameraFrame::to_rgbd`] found, for logs and app diagnostics (serialisable to JSON).
@@ -836,8 +855,9 @@ impl CameraFrame<'_> {
     ///    ([`ColorImage::crop`], no copy);
     /// 2. decodes both buffers ([`ColorImage::to_amplitude`], [`DepthImage::decode`]),
     /// 3. applying the [`Rotation`] to both while decoding (no extra copy);
-    /// 4. resamples depth (values and validity) to the (cropped) colour resolution by nearest neighbour,
-    ///    never mixing depths across an edge. Depth and (cropped) colour must cover the same field of view
+    /// 4. resamples depth (values and validity) to the (cropped) colour resolution
+    ///    ([`FrameOptions::depth_upsampling`]: nearest neighbour by default, or colour-guided joint bilateral).
+    ///    Depth and (cropped) colour must cover the same field of view
     ///    (as `AVDepthData` and ARKit's `sceneDepth` do, and ARCore's depth image with the crop of its
     ///    texture's field of view): the depth map is stretched onto the colour frame, whatever its aspect
     ///    ratio (a mismatch over 2 % is logged as a warning, once per process);
@@ -948,7 +968,7 @@ impl CameraFrame<'_> {
         let amplitude = color.to_amplitude(self.rotation)?;
         let (_, hc, wc) = amplitude.dim();
 
-        // 4. Depth to colour resolution, nearest neighbour (values and validity alike).
+        // 4. Depth to colour resolution (joint bilateral or nearest: values and validity alike).
         let (hd, wd) = decoded.values.dim();
         // Aspect ratios differing by more than 2 %: the depth map is stretched (same field of view).
         if decoded.aspect_mismatch(hc, wc) > super::depth::MAX_DEPTH_ASPECT_MISMATCH
@@ -960,7 +980,7 @@ impl CameraFrame<'_> {
                  assumed; ARCore needs color_crop); warned once"
             );
         }
-        let decoded = decoded.to_resolution(hc, wc);
+        let decoded = super::upsample_depth(decoded, amplitude.view(), options.depth_upsampling);
         Ok((amplitude, decoded, invalid_fraction))
     }
 }
@@ -1407,6 +1427,8 @@ mod tests {
         };
         let options = FrameOptions {
             fit: Fit::Stretch,
+            // The registration is checked on nearest neighbour's samples (the rows it reads are documented).
+            depth_upsampling: super::super::DepthUpsampling::Nearest,
             ..FrameOptions::default()
         };
         frame.to_rgbd(ho, wo, &options).unwrap()

@@ -404,15 +404,29 @@ pub(crate) fn resize_amplitude(
     out
 }
 
-/// Nearest-neighbour resize of an `[H, W]` map (pixel centres aligned).
-pub(crate) fn resize_nearest<T: Copy>(map: &Array2<T>, height: usize, width: usize) -> Array2<T> {
+/// The input index output index `o` of `n_out` reads in a nearest-neighbour resize from `n_in` (pixel centres
+/// aligned): `⌊(o + ½)·n_in/n_out⌋`.
+pub(crate) fn nearest_index(o: usize, n_in: usize, n_out: usize) -> usize {
+    (((o as f64 + 0.5) * n_in as f64 / n_out as f64).floor() as usize).min(n_in - 1)
+}
+
+/// Nearest-neighbour resize of an `[H, W]` map (pixel centres aligned, [`nearest_index`]; the column indices
+/// computed once, rows copied from them).
+pub(crate) fn resize_nearest<T: Copy + Default>(
+    map: &Array2<T>,
+    height: usize,
+    width: usize,
+) -> Array2<T> {
     let (h, w) = map.dim();
-    let src = |o: usize, n_in: usize, n_out: usize| {
-        (((o as f64 + 0.5) * n_in as f64 / n_out as f64).floor() as usize).min(n_in - 1)
-    };
-    Array2::from_shape_fn((height, width), |(y, x)| {
-        map[[src(y, h, height), src(x, w, width)]]
-    })
+    let cols: Vec<usize> = (0..width).map(|x| nearest_index(x, w, width)).collect();
+    let mut out = Array2::from_elem((height, width), T::default());
+    for (y, mut row) in out.outer_iter_mut().enumerate() {
+        let src = map.row(nearest_index(y, h, height));
+        for (o, &x) in row.iter_mut().zip(&cols) {
+            *o = src[x];
+        }
+    }
+    out
 }
 
 #[cfg(test)]

@@ -81,6 +81,9 @@ pub struct LoadOptions {
     /// Largest fraction of the valid depths that may lie outside an explicit `range` (default 0.5; they are
     /// clamped to its ends, so beyond that most of the scene would sit on one plane). Ignored without a range.
     pub max_outside_range_fraction: f32,
+    /// How a depth map of lower resolution than the colour is brought to the colour's
+    /// ([`crate::scene::upsample_depth`]; joint bilateral by default).
+    pub depth_upsampling: crate::scene::DepthUpsampling,
 }
 
 impl Default for LoadOptions {
@@ -91,6 +94,7 @@ impl Default for LoadOptions {
             size: None,
             max_invalid_fraction: 0.75,
             max_outside_range_fraction: 0.5,
+            depth_upsampling: crate::scene::DepthUpsampling::default(),
         }
     }
 }
@@ -180,8 +184,9 @@ pub struct DepthReport {
 }
 
 /// Loads an RGB-D pair into an [`RgbdFrame`]: [`load_rgb`], [`decode_depth_file`], a depth map of another
-/// resolution brought to the colour's as the camera path does ([`DecodedDepth::to_resolution`]: the same
-/// field of view, e.g. a phone's 256 × 192 LiDAR depth under its 1920 × 1440 image; nearest neighbour),
+/// resolution brought to the colour's as the camera path does ([`crate::scene::upsample_depth`] with
+/// `options.depth_upsampling`: the same field of view, e.g. a phone's 256 × 192 LiDAR depth under its
+/// 1920 × 1440 image),
 /// [`normalise_depth`] with `options.range`/`options.mapping`, [`fill_invalid`] (so holes are never read as
 /// near), then [`RgbdFrame::resize`] to `options.size` if given. A depth map of another aspect ratio (beyond
 /// [`MAX_DEPTH_ASPECT_MISMATCH`](super::depth::MAX_DEPTH_ASPECT_MISMATCH)) is refused, never stretched (NYU's
@@ -215,13 +220,14 @@ pub fn load_rgbd(
     check_depth_sanity(&decoded, encoding, options, depth)?;
     if depth_size != (h, w) {
         log::info!(
-            "depth map `{}` is {}x{}: brought to the colour's {h}x{w} (nearest neighbour, the camera path's)",
+            "depth map `{}` is {}x{}: brought to the colour's {h}x{w} ({}, as the camera path)",
             depth.display(),
             depth_size.0,
-            depth_size.1
+            depth_size.1,
+            options.depth_upsampling.name()
         );
     }
-    let decoded = decoded.to_resolution(h, w);
+    let decoded = crate::scene::upsample_depth(decoded, amplitude.view(), options.depth_upsampling);
     let (d, range_used) = normalise_depth(&decoded, options.range, options.mapping)?;
     let filled = fill_invalid(&d, &decoded.valid)?;
     let min_max = decoded.valid_min_max().filter(|_| decoded.metric);

@@ -35,6 +35,7 @@ mod load;
 pub mod procedural;
 #[cfg(feature = "research")]
 pub mod random;
+mod upsample;
 
 pub use camera::{
     ldi_from_camera_frames, CameraFrame, CameraFrameBuf, CameraFrameReport, ColorFormat,
@@ -55,3 +56,4 @@ pub use procedural::{default_scene, default_scene_ldi};
 pub use random::{
     ldi_from_fragments, list_photos, random_ldi, Fragment, RandomSceneConfig, RandomSceneGenerator,
 };
+pub use upsample::{upsample_depth, DepthUpsampling};
