@@ -176,13 +176,15 @@ fn render_refuses_bad_models_and_options_clearly() {
     }
 }
 
-#[test]
-fn video_streams_the_redwood_sequence_and_matches_single_frames() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("v");
-    let rgb = shared("redwood_livingroom_seq/color");
-    let depth = shared("redwood_livingroom_seq/depth");
-    let o = holo(&[
+/// `holo video` of the mm16 frames in `rgb` and `depth` at `size` into `out`, with `extra` flags.
+fn video(
+    rgb: &std::path::Path,
+    depth: &std::path::Path,
+    size: &str,
+    extra: &[&str],
+    out: &std::path::Path,
+) -> std::process::Output {
+    let mut args = vec![
         "video",
         "--rgb-dir",
         rgb.to_str().unwrap(),
@@ -191,11 +193,20 @@ fn video_streams_the_redwood_sequence_and_matches_single_frames() {
         "--depth-encoding",
         "mm16",
         "--size",
-        "48x64",
-        "--save-frames",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+        size,
+    ];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+    holo(&args)
+}
+
+#[test]
+fn video_streams_the_redwood_sequence_and_matches_single_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("v");
+    let rgb = shared("redwood_livingroom_seq/color");
+    let depth = shared("redwood_livingroom_seq/depth");
+    let o = video(&rgb, &depth, "48x64", &["--save-frames"], &out);
     assert!(o.status.success(), "{}", stderr(&o));
     let r = report(&out);
     assert_eq!(r["frames"], 5);
@@ -221,21 +232,13 @@ fn video_streams_the_redwood_sequence_and_matches_single_frames() {
     // (a global phase: the same displayed intensity), and the churn does not rise (the double phase encoding
     // already subtracts each frame's mean phase: on this sequence every shift is 0, docs/VIDEO.md).
     let aligned = dir.path().join("aligned");
-    let o = holo(&[
-        "video",
-        "--rgb-dir",
-        rgb.to_str().unwrap(),
-        "--depth-dir",
-        depth.to_str().unwrap(),
-        "--depth-encoding",
-        "mm16",
-        "--size",
+    let o = video(
+        &rgb,
+        &depth,
         "48x64",
-        "--save-frames",
-        "--align-phase",
-        "--out",
-        aligned.to_str().unwrap(),
-    ]);
+        &["--save-frames", "--align-phase"],
+        &aligned,
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     let ra = report(&aligned);
     let aligned_churn = ra["temporal"]["mean_churn_rad"].as_f64().unwrap();
@@ -273,19 +276,7 @@ fn video_streams_the_redwood_sequence_and_matches_single_frames() {
         .unwrap();
     }
     let still = dir.path().join("still");
-    let o = holo(&[
-        "video",
-        "--rgb-dir",
-        still_rgb.to_str().unwrap(),
-        "--depth-dir",
-        still_depth.to_str().unwrap(),
-        "--depth-encoding",
-        "mm16",
-        "--size",
-        "48x64",
-        "--out",
-        still.to_str().unwrap(),
-    ]);
+    let o = video(&still_rgb, &still_depth, "48x64", &[], &still);
     assert!(o.status.success(), "{}", stderr(&o));
     let rs = report(&still);
     assert_eq!(rs["temporal"]["max_churn_rad"], 0.0, "{}", rs["temporal"]);
@@ -947,19 +938,13 @@ fn render_refines_on_the_gpu_where_the_frames_run() {
 fn video_runs_the_realsense_sequence_with_its_temporal_numbers() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("rs");
-    let o = holo(&[
-        "video",
-        "--rgb-dir",
-        shared("realsense_seq/rgb").to_str().unwrap(),
-        "--depth-dir",
-        shared("realsense_seq/depth").to_str().unwrap(),
-        "--depth-encoding",
-        "mm16",
-        "--size",
+    let o = video(
+        &shared("realsense_seq/rgb"),
+        &shared("realsense_seq/depth"),
         "24x32",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+        &[],
+        &out,
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     let r = report(&out);
     assert_eq!(r["frames"], 40);

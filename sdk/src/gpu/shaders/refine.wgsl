@@ -80,6 +80,20 @@ fn phasor(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
 
 var<workgroup> lanes: array<vec2<f32>, 256>;
 
+// The sum of every invocation's `s` over the workgroup, in a fixed tree (the same bits on every run); every
+// invocation calls it (its barriers), the result is lanes[0].
+fn tree_sum(lid: u32, s: vec2<f32>) -> vec2<f32> {
+    lanes[lid] = s;
+    workgroupBarrier();
+    for (var half = 128u; half > 0u; half = half >> 1u) {
+        if (lid < half) {
+            lanes[lid] = lanes[lid] + lanes[lid + half];
+        }
+        workgroupBarrier();
+    }
+    return lanes[0];
+}
+
 @compute @workgroup_size(256)
 fn plane(
     @builtin(global_invocation_id) gid: vec3<u32>,
@@ -102,17 +116,10 @@ fn plane(
         }
         work[i] = u * scale;
     }
-    lanes[lid] = s;
-    workgroupBarrier();
-    for (var half = 128u; half > 0u; half = half >> 1u) {
-        if (lid < half) {
-            lanes[lid] = lanes[lid] + lanes[lid + half];
-        }
-        workgroupBarrier();
-    }
+    let total = tree_sum(lid, s);
     if (lid == 0u) {
         let wg = p / 256u;
-        partial[(plane_params.plane * params.channels + c) * params.groups + wg] = lanes[0];
+        partial[(plane_params.plane * params.channels + c) * params.groups + wg] = total;
     }
 }
 
@@ -139,16 +146,8 @@ fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index
             s = s + partial[base + g];
         }
     }
-    lanes[lid] = s;
-    workgroupBarrier();
-    for (var half = 128u; half > 0u; half = half >> 1u) {
-        if (lid < half) {
-            lanes[lid] = lanes[lid] + lanes[lid + half];
-        }
-        workgroupBarrier();
-    }
+    let total = tree_sum(lid, s);
     if (lid == 0u) {
-        let total = lanes[0];
         var k = 0.0;
         if (total.y > 0.0) {
             k = total.x / total.y;
