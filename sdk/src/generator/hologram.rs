@@ -308,7 +308,7 @@ impl HologramGenerator {
     /// viewer's aberration (a prescription or an aberration profile), the refinement's model sees through the
     /// viewer's eye, so the refined patterns stay corrected (`docs/REFINE.md`, "A viewer's aberration"). The
     /// iterations run where the session's frames run: on its GPU where it has one (`gpu` feature,
-    /// [`FrameRefiner::with_gpu`]).
+    /// `FrameRefiner::with_gpu`).
     ///
     /// Errors: as [`HologramGenerator::render`]; [`HoloError::InvalidParameter`] for a bad `refinement`
     /// (naming the setting: `iterations`, `step_rad`, `planes`, `levels`), or `target` for the CNN target with

@@ -117,7 +117,8 @@ pub struct RefinedFrame {
     pub held_out: HeldOutScores,
     /// Seconds to make the target (and an SM-LBM start).
     pub target_s: f64,
-    /// Where the iterations ran: `cpu`, or the GPU adapter's name ([`FrameRefiner::with_gpu`]).
+    /// Where the iterations ran: `cpu`, or the GPU adapter's name (`FrameRefiner::with_gpu`, cargo feature
+    /// `gpu`).
     pub backend: String,
     /// Why the CPU ran them where a GPU was given (a calibrated look-up table), else `None`.
     pub backend_reason: Option<String>,

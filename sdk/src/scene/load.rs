@@ -189,7 +189,7 @@ pub struct DepthReport {
 /// 1920 × 1440 image),
 /// [`normalise_depth`] with `options.range`/`options.mapping`, [`fill_invalid`] (so holes are never read as
 /// near), then [`RgbdFrame::resize`] to `options.size` if given. A depth map of another aspect ratio (beyond
-/// [`MAX_DEPTH_ASPECT_MISMATCH`](super::depth::MAX_DEPTH_ASPECT_MISMATCH)) is refused, never stretched (NYU's
+/// [`MAX_DEPTH_ASPECT_MISMATCH`](crate::scene::MAX_DEPTH_ASPECT_MISMATCH)) is refused, never stretched (NYU's
 /// raw depth is unregistered but has the RGB's size, so it loads).
 ///
 /// Errors: those of the steps above; [`HoloError::ShapeMismatch`] naming both files when their aspect ratios

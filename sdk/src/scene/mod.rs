@@ -44,7 +44,7 @@ pub use camera::{
 };
 pub use depth::{
     decode_depth, decode_depth_bytes, decode_depth_file, fill_invalid, normalise_depth,
-    DecodedDepth, DepthEncoding, DepthMapping, DepthRange,
+    DecodedDepth, DepthEncoding, DepthMapping, DepthRange, MAX_DEPTH_ASPECT_MISMATCH,
 };
 pub use frame::{LayeredDepthImage, LdiLayer, RgbdFrame};
 pub use ldi_files::{
