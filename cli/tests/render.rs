@@ -929,6 +929,36 @@ fn render_refines_on_the_gpu_where_the_frames_run() {
         score(&c)
     );
     assert_eq!(g["refine"]["history"].as_array().unwrap().len(), 4);
+    // A video: the GPU refinement made at the first frame takes each next frame's target; every frame as the
+    // CPU's.
+    let (rgb, depth) = (
+        shared("redwood_livingroom_seq/color"),
+        shared("redwood_livingroom_seq/depth"),
+    );
+    let runs: Vec<serde_json::Value> = ["gpu", "cpu"]
+        .iter()
+        .map(|backend| {
+            let out = dir.path().join(format!("video_{backend}"));
+            let extra = ["--limit", "3", "--refine", "2", "--backend", backend];
+            let o = video(&rgb, &depth, "24x32", &extra, &out);
+            assert!(o.status.success(), "{}", stderr(&o));
+            report(&out)
+        })
+        .collect();
+    for i in 0..3 {
+        let at = |r: &serde_json::Value| {
+            r["per_frame"][i]["refine"]["held_out"]["refined_codes_psnr_db"]
+                .as_f64()
+                .unwrap()
+        };
+        assert_ne!(runs[0]["per_frame"][i]["refine"]["backend"], "cpu");
+        assert!(
+            (at(&runs[0]) - at(&runs[1])).abs() < 0.1,
+            "frame {i}: {} vs {}",
+            at(&runs[0]),
+            at(&runs[1])
+        );
+    }
 }
 
 /// The 40-frame RealSense sequence (real, handheld, depth not registered to colour) runs through `holo

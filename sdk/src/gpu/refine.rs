@@ -97,6 +97,7 @@ pub(crate) struct GpuRefiner {
     work: wgpu::Buffer,
     sums: wgpu::Buffer,
     staging: wgpu::Buffer,
+    target: wgpu::Buffer,
     kernels: Kernels,
     groups: [u32; 3],
     /// Per plane: `U_d`, its adjoint, and the plane's `plane` and `accumulate` bind groups.
@@ -272,6 +273,7 @@ impl GpuRefiner {
             work,
             sums,
             staging,
+            target,
             kernels,
             groups: [groups_1d[0], groups_1d[1], 3],
             forward,
@@ -287,6 +289,23 @@ impl GpuRefiner {
             adam,
             base,
         })
+    }
+
+    /// Replaces the target amplitudes (`[D, 3, H, W]` flat, as made) in place: the next frame of a video, the
+    /// multipliers kept.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for another length.
+    pub(crate) fn set_target(&self, target: &[f32]) -> Result<()> {
+        if target.len() != self.planes * 3 * self.n {
+            return Err(HoloError::ShapeMismatch {
+                what: "GPU refinement target".into(),
+                expected: vec![self.planes * 3 * self.n],
+                got: vec![target.len()],
+            });
+        }
+        self.ctx
+            .write(&self.target, 0, bytemuck::cast_slice(target));
+        Ok(())
     }
 
     /// Refines `phase` (`[3, H, W]` flat, radians) in place for `iterations` Adam steps from a fresh
@@ -310,10 +329,6 @@ impl GpuRefiner {
         }
         let ctx = &self.ctx;
         ctx.write(&self.phase, 0, bytemuck::cast_slice(phase));
-        let zeros = vec![0f32; 3 * self.n];
-        ctx.write(&self.mean, 0, bytemuck::cast_slice(&zeros));
-        ctx.write(&self.square, 0, bytemuck::cast_slice(&zeros));
-        drop(zeros);
         for it in 0..=iterations {
             let step = it < iterations;
             let t = (it + 1) as i32;
@@ -324,6 +339,11 @@ impl GpuRefiner {
             };
             ctx.write(&self.params, 0, bytemuck::bytes_of(&params));
             let mut encoder = ctx.encoder("refine iteration");
+            if it == 0 {
+                // A fresh optimiser state.
+                encoder.clear_buffer(&self.mean, 0, None);
+                encoder.clear_buffer(&self.square, 0, None);
+            }
             self.record(&mut encoder, step);
             encoder.copy_buffer_to_buffer(&self.sums, 0, &self.staging, 0, 3 * 16);
             ctx.submit_and_wait(encoder)?;

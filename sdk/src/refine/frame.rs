@@ -157,9 +157,12 @@ pub struct FrameRefiner {
     threads: usize,
     refiner: Option<Refiner>,
     previous: Option<Array3<f32>>,
-    /// The GPU the iterations run on ([`FrameRefiner::with_gpu`]).
+    /// The GPU the iterations run on ([`FrameRefiner::with_gpu`]), and the refinement uploaded to it at the
+    /// first frame (later frames replace its target only).
     #[cfg(feature = "gpu")]
     gpu: Option<crate::gpu::GpuContext>,
+    #[cfg(feature = "gpu")]
+    on_gpu: Option<super::GpuRefinement>,
 }
 
 impl FrameRefiner {
@@ -196,11 +199,14 @@ impl FrameRefiner {
             previous: None,
             #[cfg(feature = "gpu")]
             gpu: None,
+            #[cfg(feature = "gpu")]
+            on_gpu: None,
         })
     }
 
     /// Runs the iterations on `ctx`'s GPU (`None`: the CPU): the same model, loss and Adam
-    /// ([`Refiner::on_gpu`]), each frame's target uploaded afresh; the held-out scores stay on the CPU. A
+    /// ([`Refiner::on_gpu`], uploaded at the first frame; each later frame uploads its target only); the
+    /// held-out scores stay on the CPU. A
     /// quantised refinement through a calibrated look-up table runs on the CPU (the GPU knows the linear one):
     /// [`RefinedFrame::backend_reason`] says so.
     #[cfg(feature = "gpu")]
@@ -333,9 +339,13 @@ impl FrameRefiner {
         #[allow(unused_mut)]
         let (mut backend, mut backend_reason) = ("cpu".to_string(), None);
         #[cfg(feature = "gpu")]
-        let on_gpu = match &self.gpu {
-            Some(ctx) => match refiner.on_gpu(ctx) {
-                Ok(g) => Some((g, ctx.info().name.clone())),
+        let on_gpu = match (&self.gpu, &mut self.on_gpu) {
+            (Some(ctx), Some(g)) => {
+                g.set_target(refiner)?;
+                Some((g, ctx.info().name.clone()))
+            }
+            (Some(ctx), slot @ None) => match refiner.on_gpu(ctx) {
+                Ok(g) => Some((slot.insert(g), ctx.info().name.clone())),
                 Err(HoloError::InvalidParameter {
                     name: "calibration",
                     reason,
@@ -345,12 +355,12 @@ impl FrameRefiner {
                 }
                 Err(e) => return Err(e),
             },
-            None => None,
+            (None, _) => None,
         };
         #[cfg(not(feature = "gpu"))]
-        let on_gpu: Option<(Refiner, String)> = None;
+        let on_gpu: Option<(&mut Refiner, String)> = None;
         let report = match on_gpu {
-            Some((mut g, name)) => {
+            Some((g, name)) => {
                 backend = name;
                 g.refine(phase.view_mut(), progress)?
             }

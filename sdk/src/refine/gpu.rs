@@ -15,7 +15,7 @@ use crate::gpu::GpuContext;
 use crate::slm::LutRepresentation;
 
 /// A [`Refiner`]'s refinement uploaded to a GPU: its loss planes' multipliers, weights and target as they
-/// are when [`Refiner::on_gpu`] makes it (a later [`Refiner::set_target`] does not reach it). Memory on the
+/// are when [`Refiner::on_gpu`] makes it (a later target: [`GpuRefinement::set_target`]). Memory on the
 /// GPU: per loss plane a complex multiplier and the target, 3 colours each, and eight `[3, H, W]` planes
 /// (384², 7 planes: 40 MB; 1080p: 0.6 GB).
 pub struct GpuRefinement {
@@ -64,12 +64,7 @@ impl Refiner {
         let multipliers: Vec<[Vec<_>; 3]> = (0..planes)
             .map(|d| std::array::from_fn(|c| self.colours[c].planes[d].full(rows, cols, isa)))
             .collect();
-        let mut target = Vec::with_capacity(planes * 3 * h * w);
-        for d in 0..planes {
-            for c in 0..3 {
-                target.extend_from_slice(self.target.plane(d, c));
-            }
-        }
+        let target = flat_target(self);
         let model = GpuRefineModel {
             plan: &self.plan,
             multipliers: &multipliers,
@@ -98,7 +93,31 @@ impl Refiner {
     }
 }
 
+/// `refiner`'s target amplitudes `[D, 3, H, W]`, flat.
+fn flat_target(refiner: &Refiner) -> Vec<f32> {
+    let (h, w) = refiner.target.size();
+    let planes = refiner.target.depths().len();
+    let mut target = Vec::with_capacity(planes * 3 * h * w);
+    for d in 0..planes {
+        for c in 0..3 {
+            target.extend_from_slice(refiner.target.plane(d, c));
+        }
+    }
+    target
+}
+
 impl GpuRefinement {
+    /// Takes `refiner`'s current target (after [`Refiner::set_target`]: the next video frame) without
+    /// uploading the multipliers again.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for a refiner of another size or plane count than the one this
+    /// was made from.
+    pub fn set_target(&mut self, refiner: &Refiner) -> Result<()> {
+        self.inner.set_target(&flat_target(refiner))?;
+        self.energy = refiner.target_energy;
+        Ok(())
+    }
+
     /// As [`Refiner::refine`], on the GPU: refines `phase` `[3, H, W]` (radians) in place, wrapped to
     /// `[0, 2π)`, with `progress` hearing of the start and every iteration.
     ///

@@ -54,8 +54,10 @@ const MAX_SUMMED_DEPTH: f32 = 1e30;
 /// Entries of the colour weight's table over `‖ΔI‖² ∈ [0, 9σ²]` (beyond: 0).
 const TABLE: usize = 1024;
 
-/// `decoded` at the size of `guide` (`[3, H, W]`, the colour's linear amplitude at the output resolution) by
-/// `method`. The same map where the size is already the guide's.
+/// `decoded` (`[h, w]` depths in metres, or relative, with their validity) at the size of `guide` (`[3, H, W]`,
+/// the colour's linear amplitude at the output resolution) by `method`: nearest neighbour, or the joint
+/// bilateral upsampling of Kopf et al. 2007 as the module docs give it. The same map where the size is already
+/// the guide's. No errors: every size is accepted (a depth larger than the guide is resampled down the same way).
 pub fn upsample_depth(
     decoded: DecodedDepth,
     guide: ArrayView3<f32>,
