@@ -14,7 +14,7 @@ use tensorholo::refine::{
 };
 use tensorholo::scene::{load_rgbd, DepthEncoding, LoadOptions, RgbdFrame};
 use tensorholo::synthesis::{SceneLayer, SmLbm};
-use tensorholo::Complex32;
+use tensorholo::{Complex32, HoloError};
 use tensorholo_integration_tests::shared_data;
 
 const SIZE: (usize, usize) = (256, 256);
@@ -201,9 +201,9 @@ fn refinement_beats_the_cnn_at_unseen_planes_on_real_frames() {
 
 /// The GPU refinement (`Refiner::on_gpu`: the WGSL kernels of `tensorholo::gpu`, lavapipe in CI) follows the
 /// CPU's on a real frame, quantised (the default) and not: every iteration's loss-plane PSNR within 0.05 dB
-/// of the CPU's (f32 sums on the GPU, f64 on the CPU; the adjoint added in space), the refined pattern's
-/// score at the held-out planes within 0.05 dB, and it refines (+1 dB at least). Skips without an adapter
-/// unless `TENSORHOLO_REQUIRE_GPU=1`.
+/// of the CPU's (f32 sums on the GPU, f64 on the CPU), the records in order although read back in batches, the
+/// refined pattern's score at the held-out planes within 0.05 dB, and it refines (+1 dB at least); stopped by
+/// its caller it leaves the pattern unchanged. Skips without an adapter unless `TENSORHOLO_REQUIRE_GPU=1`.
 #[test]
 fn the_gpu_refines_as_the_cpu_does() {
     let Some(ctx) = tensorholo::gpu::test_context(
@@ -235,6 +235,12 @@ fn the_gpu_refines_as_the_cpu_does() {
             .expect("refines on the GPU");
         let gpu_s = t.elapsed().as_secs_f64();
         assert_eq!(report.history.len(), cpu_history.len());
+        // In order, although read back in batches.
+        assert!(report
+            .history
+            .iter()
+            .enumerate()
+            .all(|(i, r)| r.iteration == i));
         for (a, b) in cpu_history.iter().zip(&report.history) {
             eprintln!(
                 "quantised {quantised}, iteration {}: CPU {:.4} dB, GPU {:.4} dB",
@@ -262,5 +268,25 @@ fn the_gpu_refines_as_the_cpu_does() {
             (held_cpu - held_gpu).abs() < 0.05,
             "{held_cpu} vs {held_gpu}"
         );
+        if quantised {
+            // Stopped at iteration 9, after a batch of read-backs: every record up to it heard, the
+            // pattern unchanged.
+            let mut stopped = start.clone();
+            let mut seen = Vec::new();
+            let e = on_gpu
+                .refine(stopped.view_mut(), &mut |r| {
+                    seen.push(r.iteration);
+                    if r.iteration == 9 {
+                        ControlFlow::Break(())
+                    } else {
+                        ControlFlow::Continue(())
+                    }
+                })
+                .unwrap_err();
+            assert!(matches!(e, HoloError::Cancelled(_)), "{e}");
+            assert!(e.to_string().contains("after 9 of 10"), "{e}");
+            assert_eq!(seen, (0..=9).collect::<Vec<_>>());
+            assert_eq!(stopped, start);
+        }
     }
 }

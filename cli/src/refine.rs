@@ -27,7 +27,9 @@ pub enum TargetArg {
 pub enum InitArg {
     /// The CNN's SLM codes, as the display shows them (a warm start).
     Cnn,
-    /// `holo video`: the previous frame's refined pattern (the first frame starts from the CNN's).
+    /// `holo video`: the previous frame's refined pattern where its loss against this frame's target is lower
+    /// than the CNN's codes' (a still camera), else the CNN's codes (the first frame; a new view);
+    /// report.json's `started_from` says which.
     Previous,
     /// SM-LBM + the pipeline's double phase encoding, without CNN.
     SmlbmDpm,
@@ -215,6 +217,7 @@ pub fn report(refiner: &FrameRefiner, refined: &RefinedFrame) -> serde_json::Val
         "options": request.options,
         "target": request.target,
         "start": request.start,
+        "started_from": refined.start,
         "loss_depths": loss_depths(request.options.planes).ok(),
         "history": refined.report.history,
         "held_out": s,

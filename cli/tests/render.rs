@@ -817,6 +817,7 @@ fn render_refine_reports_its_iterations_and_writes_the_refined_codes() {
     let r = report(&refined);
     let history = r["refine"]["history"].as_array().unwrap();
     assert_eq!(history.len(), 4);
+    assert_eq!(r["refine"]["started_from"], "cnn", "{}", r["refine"]);
     let loss = |i: usize| history[i]["loss"].as_f64().unwrap();
     assert!(loss(3) < loss(0), "{history:?}");
     let held = &r["refine"]["held_out"];

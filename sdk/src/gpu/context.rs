@@ -521,6 +521,16 @@ impl GpuContext {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) })
     }
 
+    /// Submits `encoder` without waiting for it (a later [`GpuContext::submit_and_wait`] or read-back waits
+    /// for every submission before it).
+    ///
+    /// Errors: [`HoloError::Gpu`] for a validation error or a lost device found so far.
+    pub(crate) fn submit(&self, encoder: wgpu::CommandEncoder) -> Result<()> {
+        self.take_error()?;
+        self.queue.submit(Some(encoder.finish()));
+        Ok(())
+    }
+
     /// Submits `encoder` and blocks until the GPU has finished it.
     ///
     /// Errors: [`HoloError::Gpu`] for a validation error, a lost device or a failed wait.

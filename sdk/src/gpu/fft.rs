@@ -218,8 +218,8 @@ struct PlanInner {
     embed_kernel: Kernel,
     crop_kernel: Kernel,
     multiply_kernel: Kernel,
-    /// Made by the first operation that multiplies by conjugates ([`GpuSpectralPlan::bind_adjoint`]).
-    multiply_conj_kernel: std::sync::OnceLock<Kernel>,
+    /// Made by the first transform that adds into a spectrum ([`GpuSpectralPlan::bind_forward_conj_add`]).
+    multiply_conj_add_kernel: std::sync::OnceLock<Kernel>,
     /// Along the width (rows of `[C·Hc, Wc]`) and along the height (rows of the transposed `[C·Wc, Hc]`).
     rows_w: RowFft,
     rows_h: RowFft,
@@ -258,8 +258,33 @@ pub struct GpuSpectralOp {
     embed: wgpu::BindGroup,
     /// One multiply pass per multiplier, each bound both ways (spectrum in a, in b).
     multiply: Vec<[wgpu::BindGroup; 2]>,
-    /// Whether the multipliers are applied conjugated ([`GpuSpectralPlan::bind_adjoint`]).
-    conjugate: bool,
+    crop: [wgpu::BindGroup; 2],
+}
+
+/// A forward transform bound to a field buffer ([`GpuSpectralPlan::bind_forward`],
+/// [`GpuSpectralPlan::bind_forward_conj_add`]): `F{field}` copied into a spectrum buffer, or multiplied by a
+/// multiplier's conjugate and added into one.
+pub(crate) struct GpuForwardOp {
+    plan: Arc<PlanInner>,
+    embed: wgpu::BindGroup,
+    sink: ForwardSink,
+}
+
+/// Where a [`GpuForwardOp`] leaves its spectrum.
+enum ForwardSink {
+    /// Copied into this buffer (`[C, Wc, Hc]`).
+    Copy(wgpu::Buffer),
+    /// `sum += conj(M)·F{field}`, bound both ways (the spectrum in a, in b).
+    ConjAdd([wgpu::BindGroup; 2]),
+}
+
+/// An inverse transform bound to a spectrum buffer and a field buffer ([`GpuSpectralPlan::bind_inverse`]):
+/// `field ← F⁻¹{spectrum·M}` (or without a multiplier), the spectrum buffer left as it is.
+pub(crate) struct GpuInverseOp {
+    plan: Arc<PlanInner>,
+    spectrum: wgpu::Buffer,
+    /// The multiply pass on the spectrum's copy in `a`.
+    multiply: Option<wgpu::BindGroup>,
     crop: [wgpu::BindGroup; 2],
 }
 
@@ -338,7 +363,7 @@ impl GpuSpectralPlan {
                 embed_kernel,
                 crop_kernel,
                 multiply_kernel,
-                multiply_conj_kernel: std::sync::OnceLock::new(),
+                multiply_conj_add_kernel: std::sync::OnceLock::new(),
                 rows_w,
                 rows_h,
                 to_t,
@@ -449,25 +474,79 @@ impl GpuSpectralPlan {
                 "a spectral operation needs ≥ 1 multiplier",
             ));
         }
-        self.bind_with(ctx, field, multipliers, false)
+        self.bind_with(ctx, field, multipliers)
     }
 
-    /// Binds the adjoint of [`GpuSpectralPlan::bind`]: `field ← F⁻¹{F{field}·conj(M)}` (the gradient's
-    /// back-propagation through a spectral operation, e.g. the refinement's `A_d^H`).
+    /// A buffer for one spectrum of this plan (`[C, Wc, Hc]` complex, [`GpuSpectralPlan::bind_forward`],
+    /// [`GpuSpectralPlan::bind_inverse`]).
     ///
-    /// Errors: [`HoloError::Gpu`] if the conjugate multiply kernel does not compile.
-    pub(crate) fn bind_adjoint(
+    /// Errors: [`HoloError::Gpu`] beyond the device's limits.
+    pub(crate) fn spectrum(&self, ctx: &GpuContext, label: &str) -> Result<wgpu::Buffer> {
+        ctx.storage(label, self.inner.a.size())
+    }
+
+    /// Binds `spectrum ← F{field}` (field complex `[C, H, W]`, embedded as [`GpuSpectralPlan::bind`] does).
+    pub(crate) fn bind_forward(
+        &self,
+        ctx: &GpuContext,
+        field: &wgpu::Buffer,
+        spectrum: &wgpu::Buffer,
+    ) -> GpuForwardOp {
+        let p = &*self.inner;
+        GpuForwardOp {
+            plan: Arc::clone(&self.inner),
+            embed: ctx.bind(&p.embed_kernel, &[&p.grid, field, &p.a]),
+            sink: ForwardSink::Copy(spectrum.clone()),
+        }
+    }
+
+    /// Binds `sum ← sum + conj(M)·F{field}` (`sum` a [`GpuSpectralPlan::spectrum`] buffer): the adjoint of
+    /// [`GpuSpectralPlan::bind_inverse`] with `M`, added up in the spectrum (e.g. the refinement's
+    /// `Σ_d A_d^H V_d`, one inverse transform for all planes).
+    ///
+    /// Errors: [`HoloError::Gpu`] if its kernel does not compile.
+    pub(crate) fn bind_forward_conj_add(
         &self,
         ctx: &GpuContext,
         field: &wgpu::Buffer,
         multiplier: &GpuMultiplier,
-    ) -> Result<GpuSpectralOp> {
+        sum: &wgpu::Buffer,
+    ) -> Result<GpuForwardOp> {
         let p = &*self.inner;
-        if p.multiply_conj_kernel.get().is_none() {
-            let kernel = ctx.kernel(&shaders::SPECTRAL, "multiply_conj")?;
-            let _ = p.multiply_conj_kernel.set(kernel);
+        if p.multiply_conj_add_kernel.get().is_none() {
+            let kernel = ctx.kernel(&shaders::SPECTRAL, "multiply_conj_add")?;
+            let _ = p.multiply_conj_add_kernel.set(kernel);
         }
-        self.bind_with(ctx, field, &[multiplier], true)
+        let kernel = p
+            .multiply_conj_add_kernel
+            .get()
+            .ok_or_else(|| HoloError::Internal("conjugate multiply-add kernel not made".into()))?;
+        Ok(GpuForwardOp {
+            plan: Arc::clone(&self.inner),
+            embed: ctx.bind(&p.embed_kernel, &[&p.grid, field, &p.a]),
+            sink: ForwardSink::ConjAdd([
+                ctx.bind(kernel, &[&p.grid, &p.a, &multiplier.buffer, sum]),
+                ctx.bind(kernel, &[&p.grid, &p.b, &multiplier.buffer, sum]),
+            ]),
+        })
+    }
+
+    /// Binds `field ← F⁻¹{spectrum·M}` (`spectrum` a [`GpuSpectralPlan::spectrum`] buffer, kept; without a
+    /// multiplier `F⁻¹{spectrum}`, the inverse normalisation then being the caller's).
+    pub(crate) fn bind_inverse(
+        &self,
+        ctx: &GpuContext,
+        spectrum: &wgpu::Buffer,
+        multiplier: Option<&GpuMultiplier>,
+        field: &wgpu::Buffer,
+    ) -> GpuInverseOp {
+        let p = &*self.inner;
+        GpuInverseOp {
+            plan: Arc::clone(&self.inner),
+            spectrum: spectrum.clone(),
+            multiply: multiplier.map(|m| ctx.bind(&p.multiply_kernel, &[&p.grid, &p.a, &m.buffer])),
+            crop: p.crop_binds(ctx, field),
+        }
     }
 
     fn bind_with(
@@ -475,10 +554,8 @@ impl GpuSpectralPlan {
         ctx: &GpuContext,
         field: &wgpu::Buffer,
         multipliers: &[&GpuMultiplier],
-        conjugate: bool,
     ) -> Result<GpuSpectralOp> {
         let p = &*self.inner;
-        let multiply = p.multiply_kernel_for(conjugate)?;
         Ok(GpuSpectralOp {
             plan: Arc::clone(&self.inner),
             embed: ctx.bind(&p.embed_kernel, &[&p.grid, field, &p.a]),
@@ -486,30 +563,78 @@ impl GpuSpectralPlan {
                 .iter()
                 .map(|m| {
                     [
-                        ctx.bind(multiply, &[&p.grid, &p.a, &m.buffer]),
-                        ctx.bind(multiply, &[&p.grid, &p.b, &m.buffer]),
+                        ctx.bind(&p.multiply_kernel, &[&p.grid, &p.a, &m.buffer]),
+                        ctx.bind(&p.multiply_kernel, &[&p.grid, &p.b, &m.buffer]),
                     ]
                 })
                 .collect(),
-            conjugate,
-            crop: [
-                ctx.bind(&p.crop_kernel, &[&p.grid, field, &p.a]),
-                ctx.bind(&p.crop_kernel, &[&p.grid, field, &p.b]),
-            ],
+            crop: p.crop_binds(ctx, field),
         })
     }
 }
 
 impl PlanInner {
-    /// The multiply kernel, or its conjugate variant (made by [`GpuSpectralPlan::bind_adjoint`]).
-    fn multiply_kernel_for(&self, conjugate: bool) -> Result<&Kernel> {
-        if !conjugate {
-            return Ok(&self.multiply_kernel);
-        }
-        self.multiply_conj_kernel
-            .get()
-            .ok_or_else(|| HoloError::Internal("conjugate multiply kernel not made".into()))
+    /// `crop` from either scratch buffer into `field`.
+    fn crop_binds(&self, ctx: &GpuContext, field: &wgpu::Buffer) -> [wgpu::BindGroup; 2] {
+        [
+            ctx.bind(&self.crop_kernel, &[&self.grid, field, &self.a]),
+            ctx.bind(&self.crop_kernel, &[&self.grid, field, &self.b]),
+        ]
     }
+
+    /// The scratch buffer `b` (`in_b`) or `a`.
+    fn scratch(&self, in_b: bool) -> &wgpu::Buffer {
+        if in_b {
+            &self.b
+        } else {
+            &self.a
+        }
+    }
+
+    fn elements(&self) -> usize {
+        self.channels * self.comp.0 * self.comp.1
+    }
+
+    /// Records the forward 2D FFT of the grid in `b` (`in_b`) or `a`: along rows → transpose → along
+    /// columns, leaving the transposed spectrum `[C, Wc, Hc]`; returns where it is.
+    fn record_forward(&self, pass: &mut wgpu::ComputePass<'_>, in_b: bool) -> bool {
+        let (hc, wc) = self.comp;
+        let in_b = self.rows_w.record(pass, &self.pass_kernel, false, in_b);
+        self.transpose_kernel.dispatch(
+            pass,
+            &self.to_t[usize::from(in_b)],
+            grid_2d(wc, hc, self.channels, [16, 16]),
+        );
+        self.rows_h.record(pass, &self.pass_kernel, false, !in_b)
+    }
+
+    /// Records the inverse of [`PlanInner::record_forward`] (unnormalised) on the spectrum in `b` (`in_b`) or
+    /// `a`; returns where the grid is.
+    fn record_inverse(&self, pass: &mut wgpu::ComputePass<'_>, in_b: bool) -> bool {
+        let (hc, wc) = self.comp;
+        let in_b = self.rows_h.record(pass, &self.pass_kernel, true, in_b);
+        self.transpose_kernel.dispatch(
+            pass,
+            &self.from_t[usize::from(in_b)],
+            grid_2d(hc, wc, self.channels, [16, 16]),
+        );
+        self.rows_w.record(pass, &self.pass_kernel, true, !in_b)
+    }
+
+    fn crop(&self, pass: &mut wgpu::ComputePass<'_>, binds: &[wgpu::BindGroup; 2], in_b: bool) {
+        self.crop_kernel.dispatch(
+            pass,
+            &binds[usize::from(in_b)],
+            grid_1d(self.channels * self.height * self.width),
+        );
+    }
+}
+
+fn begin<'e>(encoder: &'e mut wgpu::CommandEncoder, label: &str) -> wgpu::ComputePass<'e> {
+    encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some(label),
+        timestamp_writes: None,
+    })
 }
 
 impl GpuSpectralOp {
@@ -517,38 +642,16 @@ impl GpuSpectralOp {
     /// FFT along columns → multiply → inverse along columns → transpose back → inverse along rows → crop.
     pub(crate) fn record(&self, encoder: &mut wgpu::CommandEncoder) {
         let p = &*self.plan;
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("spectral op"),
-            timestamp_writes: None,
-        });
-        let (hc, wc) = p.comp;
-        let n = p.channels * hc * wc;
+        let mut pass = begin(encoder, "spectral op");
+        let n = p.elements();
         p.embed_kernel.dispatch(&mut pass, &self.embed, grid_1d(n));
-        let mut in_b = p.rows_w.record(&mut pass, &p.pass_kernel, false, false);
-        let k = usize::from(in_b);
-        p.transpose_kernel
-            .dispatch(&mut pass, &p.to_t[k], grid_2d(wc, hc, p.channels, [16, 16]));
-        in_b = !in_b;
-        in_b = p.rows_h.record(&mut pass, &p.pass_kernel, false, in_b);
-        let kernel = p
-            .multiply_kernel_for(self.conjugate)
-            .unwrap_or(&p.multiply_kernel);
+        let in_b = p.record_forward(&mut pass, false);
         for multiply in &self.multiply {
-            kernel.dispatch(&mut pass, &multiply[usize::from(in_b)], grid_1d(n));
+            p.multiply_kernel
+                .dispatch(&mut pass, &multiply[usize::from(in_b)], grid_1d(n));
         }
-        in_b = p.rows_h.record(&mut pass, &p.pass_kernel, true, in_b);
-        p.transpose_kernel.dispatch(
-            &mut pass,
-            &p.from_t[usize::from(in_b)],
-            grid_2d(hc, wc, p.channels, [16, 16]),
-        );
-        in_b = !in_b;
-        in_b = p.rows_w.record(&mut pass, &p.pass_kernel, true, in_b);
-        p.crop_kernel.dispatch(
-            &mut pass,
-            &self.crop[usize::from(in_b)],
-            grid_1d(p.channels * p.height * p.width),
-        );
+        let in_b = p.record_inverse(&mut pass, in_b);
+        p.crop(&mut pass, &self.crop, in_b);
     }
 
     /// Work and traffic per [`GpuSpectralOp::record`].
@@ -565,6 +668,44 @@ impl GpuSpectralOp {
         let bytes =
             16.0 * n * passes as f64 + 8.0 * n + 24.0 * n * multiplies + 16.0 * field + 8.0 * field;
         StageCost { flops, bytes }
+    }
+}
+
+impl GpuForwardOp {
+    /// Records the transform: embed → forward FFT → copy into the spectrum buffer, or the conjugate
+    /// multiply-add into the sum.
+    pub(crate) fn record(&self, encoder: &mut wgpu::CommandEncoder) {
+        let p = &*self.plan;
+        let n = p.elements();
+        let in_b = {
+            let mut pass = begin(encoder, "forward transform");
+            p.embed_kernel.dispatch(&mut pass, &self.embed, grid_1d(n));
+            let in_b = p.record_forward(&mut pass, false);
+            if let (ForwardSink::ConjAdd(binds), Some(kernel)) =
+                (&self.sink, p.multiply_conj_add_kernel.get())
+            {
+                kernel.dispatch(&mut pass, &binds[usize::from(in_b)], grid_1d(n));
+            }
+            in_b
+        };
+        if let ForwardSink::Copy(spectrum) = &self.sink {
+            encoder.copy_buffer_to_buffer(p.scratch(in_b), 0, spectrum, 0, spectrum.size());
+        }
+    }
+}
+
+impl GpuInverseOp {
+    /// Records the transform: the spectrum copied into the plan's scratch → multiply → inverse FFT → crop.
+    pub(crate) fn record(&self, encoder: &mut wgpu::CommandEncoder) {
+        let p = &*self.plan;
+        encoder.copy_buffer_to_buffer(&self.spectrum, 0, &p.a, 0, self.spectrum.size());
+        let mut pass = begin(encoder, "inverse transform");
+        if let Some(bind) = &self.multiply {
+            p.multiply_kernel
+                .dispatch(&mut pass, bind, grid_1d(p.elements()));
+        }
+        let in_b = p.record_inverse(&mut pass, false);
+        p.crop(&mut pass, &self.crop, in_b);
     }
 }
 

@@ -1,18 +1,23 @@
 //! The focal-stack refinement on the GPU (`refine.wgsl`; the model and its analytic gradient are
 //! `crate::refine::model`'s, docs/REFINE.md): the three colours at once, per iteration
 //!
-//! 1. `u = e^{iφ}` (`phasor`, through the linear look-up table when quantised);
-//! 2. per loss plane `d`: `U_d = F⁻¹{m_d·F{u}}` (a spectral operation on a copy of `u`), the partial sums
-//!    `(⟨|U_d|, T_d⟩, ‖U_d‖²)` per workgroup and `V_d = T_d·U_d/|U_d|` (`plane`), then the adjoint
-//!    `F⁻¹{conj(m_d)·F{V_d}}` added to `acc` (`accumulate`): by linearity in space, where the CPU adds spectra;
+//! 1. `u = e^{iφ}` (`phasor`, through the linear look-up table when quantised) and its spectrum `S = F{u}`,
+//!    kept;
+//! 2. per loss plane `d`: `U_d = F⁻¹{m_d·S}` (one inverse transform), the partial sums
+//!    `(⟨|U_d|, T_d⟩, ‖U_d‖²)` per workgroup and `V_d = T_d·U_d/|U_d|` (`plane`), then `conj(m_d)·F{V_d}`
+//!    added to the adjoint's spectrum (one forward transform), as the CPU does;
 //! 3. the sums reduced in a fixed order and `k = A/B` per colour (`reduce`);
-//! 4. `F⁻¹{W·F{u}}` (one more spectral operation) and Adam's update (`adam`) with
-//!    `g = 2k²·F⁻¹{W·F{u}} − 2k·acc`, `∂L/∂φ = Im(g·conj(u))`.
+//! 4. `acc = F⁻¹{Σ_d conj(m_d)·F{V_d}}`, `F⁻¹{W·S}` and Adam's update (`adam`) with
+//!    `g = 2k²·F⁻¹{W·S} − 2k·acc`, `∂L/∂φ = Im(g·conj(u))`.
 //!
-//! One submission per iteration (Adam's bias corrections change), its sums read back for the iteration's
-//! record. This module knows no refinement types: the caller (`crate::refine`) hands it the multipliers, the
-//! weights and the target as plain arrays. Memory: per loss plane one multiplier (3 colours, complex) and the
-//! target (3 colours), and eight `[3, H, W]` planes besides (at 384², 7 planes: 40 MB; at 1080p: 0.6 GB).
+//! So an iteration with `D` loss planes takes `2D + 3` 2D FFTs of the three colours (17 for 7 planes; each plane
+//! as a whole spectral operation and its adjoint would take `4D + 2`, 30). One submission per iteration
+//! (Adam's bias corrections change), none waited for: each iteration's sums are copied into a slot of a
+//! read-back buffer, read every [`READ_BACK_EVERY`] iterations and at the end for the iterations' records, so
+//! the CPU records the next iteration while the GPU runs this one. This module knows no refinement types: the
+//! caller (`crate::refine`) hands it the multipliers, the weights and the target as plain arrays. Memory: per
+//! loss plane one multiplier (3 colours, complex) and the target (3 colours), `W` (complex), and seven complex
+//! and three real `[3, H, W]` planes besides (at 384², 7 planes: 71 MB; at 1080p: 1.0 GB).
 
 use std::ops::ControlFlow;
 
@@ -20,7 +25,7 @@ use bytemuck::{Pod, Zeroable};
 use num_complex::Complex32;
 
 use super::context::GpuContext;
-use super::fft::{GpuMultiplier, GpuSpectralOp, GpuSpectralPlan};
+use super::fft::{GpuForwardOp, GpuInverseOp, GpuMultiplier, GpuSpectralPlan};
 use super::kernel::{grid_1d, Kernel};
 use super::shaders;
 use crate::error::{invalid, HoloError, Result};
@@ -49,9 +54,15 @@ pub(crate) struct RefineParams {
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 pub(crate) struct PlaneParams {
     plane: u32,
-    first: u32,
-    _pad: [u32; 2],
+    _pad: [u32; 3],
 }
+
+/// Iterations submitted between two read-backs of their sums (and calls of the progress callback, so also
+/// how late a cancellation can take effect).
+pub(crate) const READ_BACK_EVERY: usize = 8;
+
+/// Bytes of one iteration's sums (`[C]` of `vec4<f32>`).
+const SUMS_BYTES: u64 = 3 * 16;
 
 /// Adam's settings of a GPU refinement (those of `crate::refine::RefineOptions`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -93,19 +104,22 @@ pub(crate) struct GpuRefiner {
     phase: wgpu::Buffer,
     mean: wgpu::Buffer,
     square: wgpu::Buffer,
-    unit: wgpu::Buffer,
-    work: wgpu::Buffer,
     sums: wgpu::Buffer,
     staging: wgpu::Buffer,
     target: wgpu::Buffer,
+    /// The adjoint's spectrum, `Σ_d conj(m_d)·F{V_d}`.
+    adjoint_sum: wgpu::Buffer,
     kernels: Kernels,
     groups: [u32; 3],
-    /// Per plane: `U_d`, its adjoint, and the plane's `plane` and `accumulate` bind groups.
-    forward: Vec<GpuSpectralOp>,
-    adjoint: Vec<GpuSpectralOp>,
+    /// `S = F{u}`.
+    spectrum: GpuForwardOp,
+    /// Per plane: `U_d = F⁻¹{m_d·S}`, the plane's `plane` bind group, and `conj(m_d)·F{V_d}` added up.
+    forward: Vec<GpuInverseOp>,
     plane_binds: Vec<wgpu::BindGroup>,
-    accumulate_binds: Vec<wgpu::BindGroup>,
-    weight_op: GpuSpectralOp,
+    adjoint: Vec<GpuForwardOp>,
+    /// `acc = F⁻¹{Σ_d conj(m_d)·F{V_d}}` and `work = F⁻¹{W·S}`.
+    adjoint_op: GpuInverseOp,
+    weight_op: GpuInverseOp,
     phasor_bind: wgpu::BindGroup,
     reduce_bind: wgpu::BindGroup,
     adam_bind: wgpu::BindGroup,
@@ -119,7 +133,6 @@ pub(crate) struct GpuRefiner {
 struct Kernels {
     phasor: Kernel,
     plane: Kernel,
-    accumulate: Kernel,
     reduce: Kernel,
     adam: Kernel,
 }
@@ -174,10 +187,10 @@ impl GpuRefiner {
             "refine partial sums",
             (planes * 3 * groups_per_channel * 8) as u64,
         )?;
-        let sums = ctx.storage("refine sums", 3 * 16)?;
+        let sums = ctx.storage("refine sums", SUMS_BYTES)?;
         let staging = ctx.buffer(
             "refine sums read-back",
-            3 * 16,
+            SUMS_BYTES * READ_BACK_EVERY as u64,
             wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         )?;
         let base = RefineParams {
@@ -198,27 +211,26 @@ impl GpuRefiner {
         let kernels = Kernels {
             phasor: ctx.kernel(&shaders::REFINE, "phasor")?,
             plane: ctx.kernel(&shaders::REFINE, "plane")?,
-            accumulate: ctx.kernel(&shaders::REFINE, "accumulate")?,
             reduce: ctx.kernel(&shaders::REFINE, "reduce")?,
             adam: ctx.kernel(&shaders::REFINE, "adam")?,
         };
+        let spectrum_buf = gpu_plan.spectrum(ctx, "refine spectrum")?;
+        let adjoint_sum = gpu_plan.spectrum(ctx, "refine adjoint spectrum")?;
         let mut multipliers = Vec::with_capacity(planes + 1);
         let mut forward = Vec::with_capacity(planes);
         let mut adjoint = Vec::with_capacity(planes);
         let mut plane_binds = Vec::with_capacity(planes);
-        let mut accumulate_binds = Vec::with_capacity(planes);
         for (d, m) in model.multipliers.iter().enumerate() {
             let values: Vec<&[Complex32]> = m.iter().map(Vec::as_slice).collect();
             let multiplier = gpu_plan.multiplier(ctx, &values)?;
-            forward.push(gpu_plan.bind(ctx, &work, &multiplier)?);
-            adjoint.push(gpu_plan.bind_adjoint(ctx, &work, &multiplier)?);
+            forward.push(gpu_plan.bind_inverse(ctx, &spectrum_buf, Some(&multiplier), &work));
+            adjoint.push(gpu_plan.bind_forward_conj_add(ctx, &work, &multiplier, &adjoint_sum)?);
             multipliers.push(multiplier);
             let plane_params = ctx.uniform(
                 "refine plane",
                 &PlaneParams {
                     plane: d as u32,
-                    first: u32::from(d == 0),
-                    _pad: [0; 2],
+                    _pad: [0; 3],
                 },
             )?;
             plane_binds.push(ctx.bind_at(
@@ -231,10 +243,6 @@ impl GpuRefiner {
                     (7, &partial),
                 ],
             ));
-            accumulate_binds.push(ctx.bind_at(
-                &kernels.accumulate,
-                &[(0, &params), (1, &plane_params), (4, &work), (5, &acc)],
-            ));
         }
         let weights: Vec<Vec<Complex32>> = model
             .weights
@@ -243,8 +251,10 @@ impl GpuRefiner {
             .collect();
         let values: Vec<&[Complex32]> = weights.iter().map(Vec::as_slice).collect();
         let weight = gpu_plan.multiplier(ctx, &values)?;
-        let weight_op = gpu_plan.bind(ctx, &work, &weight)?;
+        let weight_op = gpu_plan.bind_inverse(ctx, &spectrum_buf, Some(&weight), &work);
         multipliers.push(weight);
+        let adjoint_op = gpu_plan.bind_inverse(ctx, &adjoint_sum, None, &acc);
+        let spectrum = gpu_plan.bind_forward(ctx, &unit, &spectrum_buf);
         let phasor_bind = ctx.bind_at(&kernels.phasor, &[(0, &params), (2, &phase), (3, &unit)]);
         let reduce_bind = ctx.bind_at(&kernels.reduce, &[(0, &params), (7, &partial), (8, &sums)]);
         let adam_bind = ctx.bind_at(
@@ -269,17 +279,17 @@ impl GpuRefiner {
             phase,
             mean,
             square,
-            unit,
-            work,
             sums,
             staging,
             target,
+            adjoint_sum,
             kernels,
             groups: [groups_1d[0], groups_1d[1], 3],
+            spectrum,
             forward,
-            adjoint,
             plane_binds,
-            accumulate_binds,
+            adjoint,
+            adjoint_op,
             weight_op,
             phasor_bind,
             reduce_bind,
@@ -329,6 +339,7 @@ impl GpuRefiner {
         }
         let ctx = &self.ctx;
         ctx.write(&self.phase, 0, bytemuck::cast_slice(phase));
+        let mut pending = 0;
         for it in 0..=iterations {
             let step = it < iterations;
             let t = (it + 1) as i32;
@@ -337,6 +348,7 @@ impl GpuRefiner {
                 c2: 1.0 - self.adam.beta2.powi(t),
                 ..self.base
             };
+            // Ordered before this iteration's submission and after the last one's.
             ctx.write(&self.params, 0, bytemuck::bytes_of(&params));
             let mut encoder = ctx.encoder("refine iteration");
             if it == 0 {
@@ -345,19 +357,35 @@ impl GpuRefiner {
                 encoder.clear_buffer(&self.square, 0, None);
             }
             self.record(&mut encoder, step);
-            encoder.copy_buffer_to_buffer(&self.sums, 0, &self.staging, 0, 3 * 16);
-            ctx.submit_and_wait(encoder)?;
-            let mut bytes = [0u8; 48];
-            ctx.read_staging(&self.staging, &mut bytes)?;
-            let values: &[f32] = bytemuck::cast_slice(&bytes);
-            let sums: ColourSums =
-                std::array::from_fn(|c| (f64::from(values[4 * c]), f64::from(values[4 * c + 1])));
-            if progress(it, sums).is_break() {
-                return Err(HoloError::Cancelled(format!(
-                    "refinement stopped by its caller after {it} of {iterations} iterations; the pattern \
-                     is unchanged"
-                )));
+            encoder.copy_buffer_to_buffer(
+                &self.sums,
+                0,
+                &self.staging,
+                pending as u64 * SUMS_BYTES,
+                SUMS_BYTES,
+            );
+            pending += 1;
+            if pending < READ_BACK_EVERY && step {
+                ctx.submit(encoder)?;
+                continue;
             }
+            ctx.submit_and_wait(encoder)?;
+            let mut bytes = [0u8; SUMS_BYTES as usize * READ_BACK_EVERY];
+            let bytes = &mut bytes[..pending * SUMS_BYTES as usize];
+            ctx.read_staging(&self.staging, bytes)?;
+            let values: &[f32] = bytemuck::cast_slice(bytes);
+            for (slot, v) in values.chunks_exact(12).enumerate() {
+                let sums: ColourSums =
+                    std::array::from_fn(|c| (f64::from(v[4 * c]), f64::from(v[4 * c + 1])));
+                let done = it + 1 - pending + slot;
+                if progress(done, sums).is_break() {
+                    return Err(HoloError::Cancelled(format!(
+                        "refinement stopped by its caller after {done} of {iterations} iterations; the \
+                         pattern is unchanged"
+                    )));
+                }
+            }
+            pending = 0;
         }
         let out: Vec<f32> = ctx.read_buffer(&self.phase, 3 * self.n)?;
         phase.copy_from_slice(&out);
@@ -367,7 +395,6 @@ impl GpuRefiner {
     /// Records one iteration: the loss's sums of the current phase and, with `step`, the gradient and Adam's
     /// update.
     fn record(&self, encoder: &mut wgpu::CommandEncoder, step: bool) {
-        let bytes = (3 * self.n * 8) as u64;
         let elements = grid_1d(3 * self.n);
         let dispatch = |encoder: &mut wgpu::CommandEncoder,
                         kernel: &Kernel,
@@ -380,8 +407,11 @@ impl GpuRefiner {
             kernel.dispatch(&mut pass, bind, groups);
         };
         dispatch(encoder, &self.kernels.phasor, &self.phasor_bind, elements);
+        self.spectrum.record(encoder);
+        if step {
+            encoder.clear_buffer(&self.adjoint_sum, 0, None);
+        }
         for d in 0..self.planes {
-            encoder.copy_buffer_to_buffer(&self.unit, 0, &self.work, 0, bytes);
             self.forward[d].record(encoder);
             dispatch(
                 encoder,
@@ -391,17 +421,11 @@ impl GpuRefiner {
             );
             if step {
                 self.adjoint[d].record(encoder);
-                dispatch(
-                    encoder,
-                    &self.kernels.accumulate,
-                    &self.accumulate_binds[d],
-                    elements,
-                );
             }
         }
         dispatch(encoder, &self.kernels.reduce, &self.reduce_bind, [3, 1, 1]);
         if step {
-            encoder.copy_buffer_to_buffer(&self.unit, 0, &self.work, 0, bytes);
+            self.adjoint_op.record(encoder);
             self.weight_op.record(encoder);
             dispatch(encoder, &self.kernels.adam, &self.adam_bind, elements);
         }
@@ -430,6 +454,6 @@ pub(super) fn uniform_layouts() -> Vec<super::shader_tests::UniformLayout> {
                 c2
             }
         ),
-        uniform_layout!(&REFINE, "PlaneParams", PlaneParams { plane, first }),
+        uniform_layout!(&REFINE, "PlaneParams", PlaneParams { plane }),
     ]
 }

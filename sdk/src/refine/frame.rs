@@ -117,6 +117,11 @@ pub struct RefinedFrame {
     pub held_out: HeldOutScores,
     /// Seconds to make the target (and an SM-LBM start).
     pub target_s: f64,
+    /// The start the iterations ran from: the request's, except that [`RefineStart::Previous`] starts from
+    /// the CNN's pattern ([`RefineStart::Cnn`]) at the first frame and wherever the CNN's pattern has the
+    /// lower loss against this frame's target (a moving camera: the previous frame's pattern shows the last
+    /// view).
+    pub start: RefineStart,
     /// Where the iterations ran: `cpu`, or the GPU adapter's name (`FrameRefiner::with_gpu`, cargo feature
     /// `gpu`).
     pub backend: String,
@@ -276,21 +281,25 @@ impl FrameRefiner {
         let calibration = d.calibration.as_deref();
         let cnn_phase = displayed_phase(cnn_codes, calibration)?;
         let (_, h, w) = cnn_phase.dim();
-        let start = match (self.request.start, smlbm_phase, &self.previous) {
-            (RefineStart::Cnn, _, _) | (RefineStart::Previous, _, None) => cnn_phase.clone(),
-            (RefineStart::Previous, _, Some(previous)) => previous.clone(),
-            (RefineStart::SmLbmDpm, Some(p), _) => p,
+        let start = match (self.request.start, smlbm_phase, self.previous.take()) {
+            (RefineStart::Cnn, _, _) | (RefineStart::Previous, _, None) => None,
+            (RefineStart::Previous, _, Some(previous)) => Some(previous),
+            (RefineStart::SmLbmDpm, Some(p), _) => Some(p),
             (RefineStart::SmLbmDpm, None, _) => {
                 return Err(HoloError::Internal("the SM-LBM start was not made".into()))
             }
-            (other, _, _) => initial_phase(other, h, w)?,
+            (other, _, _) => Some(initial_phase(other, h, w)?),
         };
-        let mut refined = self.refine_against(
-            midpoint.view(),
-            start.view(),
-            Some(cnn_phase.view()),
-            progress,
-        )?;
+        let starts = match &start {
+            // The previous frame's pattern, or the CNN's where it scores better.
+            Some(p) if self.request.start == RefineStart::Previous => {
+                Starts::BetterOf(p.view(), cnn_phase.view())
+            }
+            Some(p) => Starts::One(p.view(), self.request.start),
+            None => Starts::One(cnn_phase.view(), RefineStart::Cnn),
+        };
+        let mut refined =
+            self.refine_from(midpoint.view(), starts, Some(cnn_phase.view()), progress)?;
         refined.target_s = target_s;
         if self.request.start == RefineStart::Previous {
             self.previous = Some(refined.phase.clone());
@@ -308,6 +317,18 @@ impl FrameRefiner {
         &mut self,
         midpoint: ArrayView3<Complex32>,
         start: ArrayView3<f32>,
+        cnn: Option<ArrayView3<f32>>,
+        progress: &mut dyn FnMut(&IterationRecord) -> ControlFlow<()>,
+    ) -> Result<RefinedFrame> {
+        let kind = self.request.start;
+        self.refine_from(midpoint, Starts::One(start, kind), cnn, progress)
+    }
+
+    /// [`FrameRefiner::refine_against`] from `starts`.
+    fn refine_from(
+        &mut self,
+        midpoint: ArrayView3<Complex32>,
+        starts: Starts<'_>,
         cnn: Option<ArrayView3<f32>>,
         progress: &mut dyn FnMut(&IterationRecord) -> ControlFlow<()>,
     ) -> Result<RefinedFrame> {
@@ -333,6 +354,17 @@ impl FrameRefiner {
                 .with_calibration(calibration)?
                 .with_viewer(d.viewer.as_deref())?,
             ),
+        };
+        let (start, start_kind) = match starts {
+            Starts::One(p, kind) => (p, kind),
+            Starts::BetterOf(previous, cnn_start) => {
+                // Two loss evaluations on the CPU (half an iteration each).
+                if refiner.score(cnn_start)?.loss < refiner.score(previous)?.loss {
+                    (cnn_start, RefineStart::Cnn)
+                } else {
+                    (previous, RefineStart::Previous)
+                }
+            }
         };
         let mut phase = start.to_owned();
         // Set where a GPU is given (the `gpu` feature).
@@ -394,10 +426,18 @@ impl FrameRefiner {
             report,
             held_out,
             target_s: 0.0,
+            start: start_kind,
             backend,
             backend_reason,
         })
     }
+}
+
+/// Where [`FrameRefiner::refine_from`] starts: one pattern (and what it is), or the better of the previous
+/// frame's and the CNN's by their loss against the frame's target.
+enum Starts<'a> {
+    One(ArrayView3<'a, f32>, RefineStart),
+    BetterOf(ArrayView3<'a, f32>, ArrayView3<'a, f32>),
 }
 
 /// The least-squares scale of what `shown` (radians) shows at the midpoint plane against `midpoint`'s

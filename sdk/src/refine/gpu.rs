@@ -1,7 +1,8 @@
 //! The refinement on a GPU ([`GpuRefinement`], cargo feature `gpu`): the same model, loss, gradient and Adam
 //! as [`Refiner::refine`], run by `crate::gpu::refine`'s WGSL kernels. What differs: the sums are f32 on the
-//! GPU (f64 on the CPU), the adjoint is added in space (by linearity) where the CPU adds spectra, and the
-//! quantised evaluation knows the linear look-up table only (a calibrated display refines on the CPU).
+//! GPU (f64 on the CPU), the progress callback hears of the iterations in batches (a cancellation takes effect
+//! within `crate::gpu::refine::READ_BACK_EVERY` iterations), and the quantised evaluation knows the linear
+//! look-up table only (a calibrated display refines on the CPU).
 
 use std::ops::ControlFlow;
 use std::time::Instant;
@@ -16,8 +17,8 @@ use crate::slm::LutRepresentation;
 
 /// A [`Refiner`]'s refinement uploaded to a GPU: its loss planes' multipliers, weights and target as they
 /// are when [`Refiner::on_gpu`] makes it (a later target: [`GpuRefinement::set_target`]). Memory on the
-/// GPU: per loss plane a complex multiplier and the target, 3 colours each, and eight `[3, H, W]` planes
-/// (384², 7 planes: 40 MB; 1080p: 0.6 GB).
+/// GPU: per loss plane a complex multiplier and the target, 3 colours each, `W`, and seven complex and three
+/// real `[3, H, W]` planes (384², 7 planes: 71 MB; 1080p: 1.0 GB).
 pub struct GpuRefinement {
     inner: GpuRefiner,
     iterations: usize,

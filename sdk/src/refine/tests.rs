@@ -417,3 +417,57 @@ fn the_cnn_target_is_refused_where_the_cnn_corrects_the_viewer() {
     assert!(FrameRefiner::new(request(RefineTarget::default()), display(true), 1).is_ok());
     assert!(FrameRefiner::new(request(RefineTarget::CnnMidpoint), display(false), 1).is_ok());
 }
+
+/// `RefineStart::Previous` in a video: the first frame starts from the CNN's codes; a frame like the last one
+/// starts from the last refined pattern (its loss is lower than the CNN's); a new view, which the CNN's codes
+/// show exactly, starts from them, so a moving camera never starts worse than the CNN.
+#[test]
+fn the_previous_start_falls_back_to_the_cnn_where_the_view_changed() {
+    let (h, w) = (16, 20);
+    let display = RefineDisplay {
+        optics: setup(),
+        propagation: Default::default(),
+        offset_m: OFFSET_M,
+        encoding: Default::default(),
+        calibration: None,
+        viewer: None,
+        viewer_corrected_by_cnn: false,
+    };
+    let request = FrameRefinement {
+        target: RefineTarget::CnnMidpoint,
+        start: RefineStart::Previous,
+        options: RefineOptions {
+            iterations: 5,
+            ..RefineOptions::default()
+        },
+    };
+    let mut refiner = FrameRefiner::new(request, display.clone(), 1).unwrap();
+    let scene = midpoint(h, w, 5);
+    let codes = |seed| {
+        let mut rng = SplitMix64::new(seed);
+        Array3::from_shape_fn((3, h, w), |_| (rng.next_f64() * 256.0) as u8)
+    };
+    let cnn = codes(1);
+    let mut run = |target: &Array3<Complex32>, cnn: &Array3<u8>| {
+        refiner
+            .refine(&[], Some(target.view()), cnn.view(), &mut |_| {
+                ControlFlow::Continue(())
+            })
+            .unwrap()
+    };
+    let first = run(&scene, &cnn);
+    assert_eq!(first.start, RefineStart::Cnn);
+    let second = run(&scene, &cnn);
+    assert_eq!(second.start, RefineStart::Previous);
+    assert!(second.report.history[0].loss < first.report.history[0].loss);
+    // A new view: the midpoint field that the new CNN codes show.
+    let new_codes = codes(2);
+    let shown = displayed_phase(new_codes.view(), None).unwrap();
+    let view =
+        crate::optics::simulate_phase_only(shown.view(), &setup(), OFFSET_M, Default::default())
+            .unwrap();
+    let third = run(&view, &new_codes);
+    assert_eq!(third.start, RefineStart::Cnn);
+    let held = &third.held_out;
+    assert_eq!(Some(held.start_psnr_db), held.cnn_codes_psnr_db);
+}

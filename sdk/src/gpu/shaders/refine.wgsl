@@ -5,15 +5,14 @@
 //   `plane`      from U_d (in `work`) and the target T_d: per workgroup of one channel the partial sums
 //                (⟨|U_d|, T_d⟩, ‖U_d‖²) (a fixed tree: the same bits on every run), then V_d = T_d·U_d/|U_d|
 //                in place (0 where U_d = 0)
-//   `accumulate` acc = work at the plane marked first, acc + work after
 //   `reduce`     per channel (one workgroup each): A and B over planes and workgroups in a fixed order, and the
 //                least-squares scale k = A/B (0 where B = 0) into sums[c] = (A, B, k, 0)
-//   `adam`       g = 2k²·work − 2k·acc (work: F⁻¹{W·F{u}}, acc: Σ_d F⁻¹{conj(m_d)·F{V_d}}), ∂L/∂φ =
+//   `adam`       g = 2k²·work − 2k·acc (work: F⁻¹{W·F{u}}, acc: F⁻¹{Σ_d conj(m_d)·F{V_d}}), ∂L/∂φ =
 //                Im(g·conj(u)), and Adam's update of φ
 //
 // Bindings (group 0; each entry point uses some):
 //   0: uniform Params
-//   1: uniform PlaneParams (the plane's index, whether it is the first)
+//   1: uniform PlaneParams (the plane's index)
 //   2: storage phase:   array<f32>,        [C, H, W] radians
 //   3: storage unit:    array<vec2<f32>>,  [C, H, W]
 //   4: storage work:    array<vec2<f32>>,  [C, H, W]
@@ -23,7 +22,7 @@
 //   8: storage sums:    array<vec4<f32>>,  [C]
 //   9: storage mean:    array<f32>,        [C, H, W] (Adam's first moment)
 //  10: storage square:  array<f32>,        [C, H, W] (Adam's second moment)
-// Grids: `phasor`, `accumulate`, `adam` over C·H·W elements (1D, 256 per workgroup, spread over x/y); `plane`
+// Grids: `phasor`, `adam` over C·H·W elements (1D, 256 per workgroup, spread over x/y); `plane`
 // over H·W elements in x/y (the same spread) and the channel in z; `reduce` one workgroup per channel.
 
 struct Params {
@@ -42,7 +41,6 @@ struct Params {
 
 struct PlaneParams {
     plane: u32,
-    first: u32,
 }
 
 const TAU: f32 = 6.283185307179586;
@@ -120,19 +118,6 @@ fn plane(
     if (lid == 0u) {
         let wg = p / 256u;
         partial[(plane_params.plane * params.channels + c) * params.groups + wg] = total;
-    }
-}
-
-@compute @workgroup_size(256)
-fn accumulate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let i = index_of(gid, groups);
-    if (i >= params.channels * params.hw) {
-        return;
-    }
-    if (plane_params.first != 0u) {
-        acc[i] = work[i];
-    } else {
-        acc[i] = acc[i] + work[i];
     }
 }
 

@@ -9,11 +9,13 @@
 //   2: storage work:  array<vec2<f32>>, [C, Hc, Wc]
 //   Grid: embed over C·Hc·Wc elements, crop over C·H·W (1D, 256 per workgroup, spread over x/y).
 //
-// `multiply` — spectrum[i] *= multiplier[i], both [C, Wc, Hc] (transposed spectrum); `multiply_conj` by its
-// conjugate instead (an operation's adjoint, e.g. the refinement's gradient):
+// `multiply` — spectrum[i] *= multiplier[i], all [C, Wc, Hc] (transposed spectrum); `multiply_conj_add`
+// sum[i] += conj(multiplier[i])·spectrum[i] instead (an operation's adjoint summed over several, e.g. the
+// refinement's gradient over its loss planes):
 //   0: uniform Grid (channels·hc·wc elements)
 //   1: storage spectrum: array<vec2<f32>>
 //   2: storage read multiplier: array<vec2<f32>>
+//   3: storage sum: array<vec2<f32>> (multiply_conj_add only)
 
 struct Grid {
     h: u32,
@@ -77,13 +79,15 @@ fn multiply(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgrou
     spectrum[i] = vec2<f32>(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x);
 }
 
+@group(0) @binding(3) var<storage, read_write> sum: array<vec2<f32>>;
+
 @compute @workgroup_size(256)
-fn multiply_conj(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+fn multiply_conj_add(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = index_of(gid, groups);
     if (i >= grid.channels * grid.hc * grid.wc) {
         return;
     }
     let a = spectrum[i];
     let b = multiplier[i];
-    spectrum[i] = vec2<f32>(a.x * b.x + a.y * b.y, a.y * b.x - a.x * b.y);
+    sum[i] = sum[i] + vec2<f32>(a.x * b.x + a.y * b.y, a.y * b.x - a.x * b.y);
 }
