@@ -12,7 +12,7 @@ use tensorholo::encoding::DoublePhaseMethod;
 use tensorholo::model::SceneInput;
 use tensorholo::optics::{OpticalSetup, PropagationOptions};
 use tensorholo::scene::{
-    load_ldi_dir, load_rgbd, procedural, DepthEncoding, DepthMapping, DepthRange,
+    load_ldi_dir, load_rgbd_with_confidence, procedural, DepthEncoding, DepthMapping, DepthRange,
     LayeredDepthImage, LoadOptions, RgbdFrame,
 };
 use tensorholo::synthesis::{ldi_layers, SceneLayer};
@@ -207,7 +207,7 @@ pub struct DepthArgs {
     /// How the depth file stores depth: mm16 (16-bit millimetres: Redwood, derived NYU/SUN), tum (16-bit,
     /// /5000 m), sun (SUN RGB-D bit-rotated mm), kinect-disparity (NYU raw PGM), iphone-disparity (8-bit
     /// normalised disparity of iPhone portraits), relative-near-bright, relative-near-dark (8-bit unitless),
-    /// relative16 (16-bit unitless, 0 = no point: LDI folders).
+    /// relative16 (16-bit unitless, 0 = no point: LDI folders), metres (float metres in OpenEXR: Record3D).
     #[arg(long, value_parser = parse_depth_encoding)]
     pub depth_encoding: Option<DepthEncoding>,
     /// Nearest metric depth mapped to the front of the 3D volume (metres). Default: 1st percentile of the
@@ -237,6 +237,11 @@ pub struct DepthArgs {
     /// nearest.
     #[arg(long, value_enum, default_value_t = DepthUpsamplingArg::JointBilateral)]
     pub depth_upsampling: DepthUpsamplingArg,
+    /// With depth confidence maps (--confidence, --confidence-dir, a --recording's): depth pixels of lower
+    /// confidence are invalid, filled from their confident neighbours. 0 to 255: ARKit and Stray Scanner
+    /// store 0 (low), 1 (medium), 2 (high); ARCore 0–255.
+    #[arg(long, default_value_t = tensorholo::scene::DEFAULT_MIN_CONFIDENCE)]
+    pub min_confidence: u8,
 }
 
 /// `--depth-upsampling` ([`tensorholo::scene::DepthUpsampling`]).
@@ -282,6 +287,7 @@ impl DepthArgs {
             max_invalid_fraction: self.max_invalid_depth,
             max_outside_range_fraction: self.max_depth_outside_range,
             depth_upsampling: self.depth_upsampling.into(),
+            min_confidence: self.min_confidence,
         })
     }
 }
@@ -293,9 +299,13 @@ pub struct SceneArgs {
     /// RGB image (PNG, JPEG or PPM, sRGB). Omit (with --depth) to use the built-in procedural scene.
     #[arg(long, requires_all = ["depth", "depth_encoding"], conflicts_with = "ldi")]
     pub rgb: Option<PathBuf>,
-    /// Depth map matching the RGB image pixel for pixel.
+    /// Depth map of the RGB image: its size, or a lower resolution of the same field of view (a phone's).
     #[arg(long, requires = "rgb")]
     pub depth: Option<PathBuf>,
+    /// The depth map's confidence map (8-bit, at the depth map's resolution: ARKit's confidenceMap, Stray
+    /// Scanner's confidence/N.png, ARCore's raw depth confidence): pixels below --min-confidence are invalid.
+    #[arg(long, requires = "depth")]
+    pub confidence: Option<PathBuf>,
     /// A layered depth image: a folder of rgb_0.png depth_0.png rgb_1.png depth_1.png …, front layer first
     /// (what a depth-peeling pass writes; docs/CONVENTIONS.md §6.3), its depths in --depth-encoding; in the
     /// layers behind the first a stored depth of 0 means "no point here". Without a folder: the built-in
@@ -365,10 +375,14 @@ impl SceneArgs {
 
     /// The input files for the output guard ([`crate::output::guard`]), with their flags.
     pub fn guard_inputs(&self) -> Vec<crate::output::Input<'_>> {
-        let mut inputs: Vec<_> = [("--rgb", &self.rgb), ("--depth", &self.depth)]
-            .into_iter()
-            .filter_map(|(flag, p)| Some(crate::output::Input::file(flag, p.as_deref()?)))
-            .collect();
+        let mut inputs: Vec<_> = [
+            ("--rgb", &self.rgb),
+            ("--depth", &self.depth),
+            ("--confidence", &self.confidence),
+        ]
+        .into_iter()
+        .filter_map(|(flag, p)| Some(crate::output::Input::file(flag, p.as_deref()?)))
+        .collect();
         inputs.extend(
             self.ldi_dir()
                 .map(|p| crate::output::Input::folder("--ldi", p)),
@@ -425,13 +439,20 @@ impl SceneArgs {
         match (&self.rgb, &self.depth, encoding) {
             (Some(rgb), Some(depth), Some(encoding)) => {
                 let options = self.depth_args.load_options()?;
-                let (frame, report) = load_rgbd(rgb, depth, encoding, &options)?;
+                let (frame, report) = load_rgbd_with_confidence(
+                    rgb,
+                    depth,
+                    self.confidence.as_deref(),
+                    encoding,
+                    &options,
+                )?;
                 Ok((
                     Scene::Frame(frame),
                     json!({
                         "kind": "rgbd-files",
                         "rgb": crate::output::path_text(rgb),
                         "depth": crate::output::path_text(depth),
+                        "confidence": self.confidence.as_deref().map(crate::output::path_text),
                         "depth_report": report,
                     }),
                 ))

@@ -11,7 +11,10 @@ use serde_json::json;
 use tensorholo::encoding::{align_global_phase, phase_churn, PhaseChurn};
 use tensorholo::io::{ensure_not_input, save_u8_png};
 use tensorholo::pipeline::Backend;
-use tensorholo::scene::{load_rgbd, DepthRange, LoadOptions, RgbdFrame};
+use tensorholo::scene::{
+    load_rgbd_with_confidence, open_recording, DepthEncoding, DepthRange, LoadOptions, Recording,
+    RgbdFrame,
+};
 use tensorholo::synthesis::SceneLayer;
 use tensorholo::HoloError;
 
@@ -20,11 +23,21 @@ use tensorholo::HoloError;
 #[command(after_long_help = EXAMPLES)]
 pub struct VideoArgs {
     /// Folder of RGB frames (PNG, JPEG or PPM); frames are paired with --depth-dir by file stem, in name order.
-    #[arg(long)]
-    rgb_dir: PathBuf,
+    #[arg(long, required_unless_present = "recording", requires = "depth_dir")]
+    rgb_dir: Option<PathBuf>,
     /// Folder of depth frames with the same stems as the RGB frames.
-    #[arg(long)]
-    depth_dir: PathBuf,
+    #[arg(long, requires = "rgb_dir")]
+    depth_dir: Option<PathBuf>,
+    /// Folder of depth confidence maps (8-bit, at the depth maps' resolution) with the same stems as the
+    /// depth frames: pixels below --min-confidence are invalid.
+    #[arg(long, requires = "depth_dir")]
+    confidence_dir: Option<PathBuf>,
+    /// A phone recording as its app exports it: Record3D's "EXR + JPG" export (rgb/, depth/*.exr,
+    /// metadata.json) or a Stray Scanner folder (rgb/ extracted from rgb.mp4, depth/, confidence/,
+    /// odometry.csv); frames in the order of the recording's timestamps, its confidence maps applied
+    /// (docs/VIDEO.md).
+    #[arg(long, conflicts_with_all = ["rgb_dir", "depth_dir", "confidence_dir"])]
+    recording: Option<PathBuf>,
     #[command(flatten)]
     depth: crate::args::DepthArgs,
     #[command(flatten)]
@@ -58,6 +71,8 @@ Examples:
   holo video --rgb-dir ../shared/data/redwood_livingroom_seq/color \\
       --depth-dir ../shared/data/redwood_livingroom_seq/depth --depth-encoding mm16 --size 384x512 --out out/video
       the 5-frame Redwood sequence (metric range from the first frame, kept for the whole sequence)
+  holo video --recording my-record3d-export --size 1080x1920 --out out/phone
+      an iPhone LiDAR recording as Record3D exports it (EXR + JPG), or a Stray Scanner folder
   holo video ... --refine 10 --refine-init previous --out out/refined
       each frame's SLM pattern refined 10 iterations against its SM-LBM focal stack, each frame starting
       from the previous frame's refined pattern (docs/REFINE.md)
@@ -69,6 +84,103 @@ Outputs in --out:
                 radians, and the share of pixels changing by more than π/2), with --align-phase the shifts
   frames/       with --save-frames: NNNNN_phase_r.png, _g, _b per frame";
 
+/// One frame's files (and time, from a recording).
+#[derive(Debug, Clone)]
+struct FrameFiles {
+    rgb: PathBuf,
+    depth: PathBuf,
+    confidence: Option<PathBuf>,
+    time_s: Option<f64>,
+}
+
+/// The sequence's frames and their depth encoding: a recording's (`--recording`), or the folders' paired by
+/// stem (`--rgb-dir`, `--depth-dir`, `--confidence-dir`, `--depth-encoding`).
+fn frames_of(args: &VideoArgs) -> Result<(Vec<FrameFiles>, DepthEncoding, Option<Recording>)> {
+    if let Some(dir) = &args.recording {
+        if let Some(e) = args.depth.depth_encoding {
+            bail!(
+                "--depth-encoding {e} with --recording: a recording's depth encoding is its app's (metres for \
+                 Record3D's OpenEXR, mm16 for Stray Scanner); leave it out"
+            );
+        }
+        let recording = open_recording(dir)?;
+        let frames = recording
+            .frames
+            .iter()
+            .map(|f| FrameFiles {
+                rgb: f.rgb.clone(),
+                depth: f.depth.clone(),
+                confidence: f.confidence.clone(),
+                time_s: f.time_s,
+            })
+            .collect();
+        log::info!(
+            "recording {} ({:?}): {} frames{}, depth {}{}",
+            dir.display(),
+            recording.kind,
+            recording.frames.len(),
+            recording
+                .fps
+                .map_or_else(String::new, |f| format!(" at {f:.1} FPS")),
+            recording.encoding,
+            if recording.frames.iter().any(|f| f.confidence.is_some()) {
+                " with confidence maps"
+            } else {
+                ""
+            }
+        );
+        return Ok((frames, recording.encoding, Some(recording)));
+    }
+    let (Some(rgb_dir), Some(depth_dir)) = (&args.rgb_dir, &args.depth_dir) else {
+        bail!("give --rgb-dir and --depth-dir, or --recording");
+    };
+    let encoding = args
+        .depth
+        .depth_encoding
+        .context("--depth-encoding is required (how the depth frames store depth)")?;
+    let mut frames: Vec<FrameFiles> = pair_frames(rgb_dir, depth_dir, args.skip_unmatched)?
+        .into_iter()
+        .map(|(rgb, depth)| FrameFiles {
+            rgb,
+            depth,
+            confidence: None,
+            time_s: None,
+        })
+        .collect();
+    if let Some(dir) = &args.confidence_dir {
+        let maps: std::collections::HashMap<std::ffi::OsString, PathBuf> = list_files(dir)?
+            .into_iter()
+            .filter_map(|p| Some((p.file_stem()?.to_owned(), p)))
+            .collect();
+        for f in &mut frames {
+            let map = f.depth.file_stem().and_then(|s| maps.get(s)).with_context(|| {
+                format!(
+                    "depth frame `{}` has no confidence map of the same name stem in --confidence-dir {}",
+                    f.depth.display(),
+                    dir.display()
+                )
+            })?;
+            f.confidence = Some(map.clone());
+        }
+    }
+    Ok((frames, encoding, None))
+}
+
+/// The files of `dir`, sorted by name, hidden files (`.DS_Store`) left out.
+fn list_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot read folder {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file())
+        .filter(|p| {
+            !p.file_name()
+                .is_some_and(|n| n.as_encoded_bytes().starts_with(b"."))
+        })
+        .collect();
+    v.sort();
+    Ok(v)
+}
+
 /// Pairs the files of the two folders by stem (sorted by name; hidden files such as `.DS_Store` are ignored).
 /// A file of either folder without a partner is an error naming it, unless `skip_unmatched` (then a warning).
 fn pair_frames(
@@ -76,20 +188,7 @@ fn pair_frames(
     depth_dir: &Path,
     skip_unmatched: bool,
 ) -> Result<Vec<(PathBuf, PathBuf)>> {
-    let list = |dir: &Path| -> Result<Vec<PathBuf>> {
-        let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
-            .with_context(|| format!("cannot read folder {}", dir.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.is_file())
-            .filter(|p| {
-                !p.file_name()
-                    .is_some_and(|n| n.as_encoded_bytes().starts_with(b"."))
-            })
-            .collect();
-        v.sort();
-        Ok(v)
-    };
-    let (rgbs, depths) = (list(rgb_dir)?, list(depth_dir)?);
+    let (rgbs, depths) = (list_files(rgb_dir)?, list_files(depth_dir)?);
     let by_stem = |files: &[PathBuf]| -> std::collections::HashMap<std::ffi::OsString, PathBuf> {
         files
             .iter()
@@ -179,10 +278,15 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     // A bad display profile stops the command before anything is written; the files it names are inputs too.
     let profile_files = args.model.profile_files()?;
     let t_all = Instant::now();
-    let mut guarded = vec![
-        crate::output::Input::folder("--rgb-dir", &args.rgb_dir),
-        crate::output::Input::folder("--depth-dir", &args.depth_dir),
-    ];
+    let mut guarded: Vec<crate::output::Input> = [
+        ("--rgb-dir", &args.rgb_dir),
+        ("--depth-dir", &args.depth_dir),
+        ("--confidence-dir", &args.confidence_dir),
+        ("--recording", &args.recording),
+    ]
+    .into_iter()
+    .filter_map(|(flag, dir)| Some(crate::output::Input::folder(flag, dir.as_ref()?)))
+    .collect();
     guarded.extend(args.model.guard_inputs());
     guarded.extend(
         profile_files
@@ -191,11 +295,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     );
     crate::output::guard("--out", &args.out, &guarded)?;
     let refine = args.refine.request(true)?;
-    let encoding = args
-        .depth
-        .depth_encoding
-        .context("--depth-encoding is required (how the depth frames store depth)")?;
-    let mut pairs = pair_frames(&args.rgb_dir, &args.depth_dir, args.skip_unmatched)?;
+    let (mut pairs, encoding, recording) = frames_of(args)?;
     if let Some(n) = args.limit {
         if n == 0 {
             bail!("--limit must be at least 1");
@@ -204,7 +304,14 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     }
     let inputs: Vec<&Path> = pairs
         .iter()
-        .flat_map(|(r, d)| [r.as_path(), d.as_path()])
+        .flat_map(|f| {
+            [
+                Some(f.rgb.as_path()),
+                Some(f.depth.as_path()),
+                f.confidence.as_deref(),
+            ]
+        })
+        .flatten()
         .collect();
     ensure_not_input(&args.out.join("report.json"), &inputs)?;
     let frames_dir = args.out.join("frames");
@@ -231,7 +338,15 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     // One metric range for the whole sequence (the first frame's percentiles unless given), so that the
     // depth mapping does not flicker from frame to frame.
     let mut options = args.depth.load_options()?;
-    let (first, first_report) = load_rgbd(&pairs[0].0, &pairs[0].1, encoding, &options)?;
+    let first_files = &pairs[0];
+    let (first, first_report) = load_rgbd_with_confidence(
+        &first_files.rgb,
+        &first_files.depth,
+        first_files.confidence.as_deref(),
+        encoding,
+        &options,
+    )
+    .with_context(|| format!("frame 0 (`{}`)", first_files.rgb.display()))?;
     if options.range.is_none() {
         options.range = first_report.range_used;
     }
@@ -254,13 +369,17 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         pipeline.config().offset_m * 1e3
     );
 
-    let loader = |(rgb, depth): &(PathBuf, PathBuf),
-                  options: &LoadOptions|
-     -> tensorholo::Result<RgbdFrame> {
-        let (f, _) = load_rgbd(rgb, depth, encoding, options)?;
+    let loader = |files: &FrameFiles, options: &LoadOptions| -> tensorholo::Result<RgbdFrame> {
+        let (f, _) = load_rgbd_with_confidence(
+            &files.rgb,
+            &files.depth,
+            files.confidence.as_deref(),
+            encoding,
+            options,
+        )?;
         if (f.height(), f.width()) != (h, w) {
             return Err(HoloError::ShapeMismatch {
-                what: format!("frame {} vs the first frame", rgb.display()),
+                what: format!("frame {} vs the first frame", files.rgb.display()),
                 expected: vec![h, w],
                 got: vec![f.height(), f.width()],
             });
@@ -298,7 +417,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         pairs.iter().enumerate().map(|(i, p)| {
             let t = Instant::now();
             let frame = loader(p, &opts).inspect(|_| {
-                log::debug!("loaded {} in {:.1} ms", p.0.display(), t.elapsed().as_secs_f64() * 1e3)
+                log::debug!("loaded {} in {:.1} ms", p.rgb.display(), t.elapsed().as_secs_f64() * 1e3)
             });
             // A refinement needs the frame's points again (its SM-LBM target) after the CNN has it.
             let kept = match (&refine, &frame) {
@@ -379,8 +498,10 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             previous = Some(codes);
             rows.push(json!({
                 "index": i,
-                "rgb": crate::output::path_text(&pairs[i].0),
-                "depth": crate::output::path_text(&pairs[i].1),
+                "rgb": crate::output::path_text(&pairs[i].rgb),
+                "depth": crate::output::path_text(&pairs[i].depth),
+                "confidence": pairs[i].confidence.as_deref().map(crate::output::path_text),
+                "time_s": pairs[i].time_s,
                 "timings_s": t,
                 "backend": out.backend,
                 "amplitude_scale": refined.as_ref().map_or(out.amplitude_scale, |r| r.0.amplitude_scale),
@@ -398,15 +519,15 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         let i = failed.unwrap_or(0);
         return Err(anyhow::Error::new(e).context(format!(
             "frame {i} (`{}` + `{}`)",
-            pairs[i].0.display(),
-            pairs[i].1.display()
+            pairs[i].rgb.display(),
+            pairs[i].depth.display()
         )));
     }
     let n = streamed.with_context(|| match failed {
         Some(i) => format!(
             "frame {i} (`{}` + `{}`)",
-            pairs[i].0.display(),
-            pairs[i].1.display()
+            pairs[i].rgb.display(),
+            pairs[i].depth.display()
         ),
         None => "the video stream".to_string(),
     })?;
@@ -433,6 +554,15 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         "frames": n,
         "size": [h, w],
         "depth_range_m": range.map(|r| [r.z_near_m, r.z_far_m]),
+        "depth_encoding": encoding,
+        "recording": recording.as_ref().map(|r| json!({
+            "kind": r.kind,
+            "dir": crate::output::path_text(&r.dir),
+            "fps": r.fps,
+            "intrinsics_px": r.intrinsics,
+            "frames": r.frames.len(),
+            "confidence_maps": r.frames.iter().any(|f| f.confidence.is_some()),
+        })),
         "models": models,
         "pipeline": pipeline.config(),
         "session_setup_s": session_s,

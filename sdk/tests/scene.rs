@@ -941,3 +941,211 @@ fn camera_layers_make_one_ldi_with_one_range_and_fit_alike() {
     assert!(e.contains("buffer 1") && e.contains("nearer"), "{e}");
     assert!(ldi_from_camera_frames(&[], h, w, &options).is_err());
 }
+
+/// Writes a one-channel OpenEXR file `name` of `values` `[H, W]` (f32, or f16 with `half`).
+#[cfg(feature = "research")]
+fn write_exr(path: &Path, name: &str, values: &Array2<f32>, half: bool) {
+    use exr::prelude::*;
+    let (h, w) = values.dim();
+    let samples = if half {
+        FlatSamples::F16(values.iter().map(|&v| f16::from_f32(v)).collect())
+    } else {
+        FlatSamples::F32(values.iter().copied().collect())
+    };
+    let channels = AnyChannels::sort(vec![AnyChannel::new(name, samples)].into());
+    let layer = Layer::new(
+        (w, h),
+        LayerAttributes::default(),
+        Encoding::FAST_LOSSLESS,
+        channels,
+    );
+    Image::from_layer(layer).write().to_file(path).unwrap();
+}
+
+/// `metres` (Record3D's OpenEXR depth): f32 files decode to the very values the 16-bit millimetre PNG of the
+/// same depths gives (`v/1000`), half-float files within half's precision; zero, negative, NaN and ∞ samples
+/// are invalid; the two encodings refuse each other's files, naming the right one.
+#[cfg(feature = "research")]
+#[test]
+fn openexr_depth_in_metres_decodes_as_the_millimetre_png_does() {
+    let png = data("redwood_livingroom_seq/depth/00000.png");
+    let mm = decode(
+        "redwood_livingroom_seq/depth/00000.png",
+        DepthEncoding::Millimetres16,
+    );
+    let raw = image::open(&png).unwrap().to_luma16();
+    let metres = Array2::from_shape_fn(mm.values.dim(), |(y, x)| {
+        raw.get_pixel(x as u32, y as u32).0[0] as f32 / 1000.0
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let exr = dir.path().join("0.exr");
+    write_exr(&exr, "Y", &metres, false);
+    let d = decode_depth_file(&exr, DepthEncoding::Metres).expect("decodes");
+    assert!(d.metric);
+    assert_eq!(d, mm);
+
+    let half = dir.path().join("half.exr");
+    write_exr(&half, "R", &metres, true);
+    let h = decode_depth_file(&half, DepthEncoding::Metres).unwrap();
+    assert_eq!(h.valid, mm.valid);
+    for (a, b) in h.values.iter().zip(mm.values.iter()) {
+        assert!((a - b).abs() <= b * 1e-3, "{a} vs {b}");
+    }
+
+    let odd =
+        Array2::from_shape_vec((1, 5), vec![1.5, 0.0, -2.0, f32::NAN, f32::INFINITY]).unwrap();
+    let path = dir.path().join("odd.exr");
+    write_exr(&path, "Z", &odd, false);
+    let d = decode_depth_file(&path, DepthEncoding::Metres).unwrap();
+    assert_eq!(
+        d.valid.iter().copied().collect::<Vec<_>>(),
+        [true, false, false, false, false]
+    );
+    assert_eq!(d.values[[0, 0]], 1.5);
+
+    let e = decode_depth_file(&exr, DepthEncoding::Millimetres16).unwrap_err();
+    assert!(
+        e.to_string().contains("`metres`") && e.to_string().contains("0.exr"),
+        "{e}"
+    );
+    let e = decode_depth_file(&png, DepthEncoding::Metres).unwrap_err();
+    assert!(e.to_string().contains("not an OpenEXR file"), "{e}");
+    // Truncated: named, never completed.
+    let bytes = std::fs::read(&exr).unwrap();
+    let cut = dir.path().join("cut.exr");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let e = decode_depth_file(&cut, DepthEncoding::Metres).unwrap_err();
+    assert!(
+        matches!(e, HoloError::InvalidDepth(_)) && e.to_string().contains("cut.exr"),
+        "{e}"
+    );
+}
+
+/// Several channels: the depth one is taken by name; none named for depth is refused, listing them.
+#[cfg(feature = "research")]
+#[test]
+fn openexr_depth_takes_the_depth_channel_by_name() {
+    use exr::prelude::*;
+    let dir = tempfile::tempdir().unwrap();
+    let write = |names: [&str; 2]| {
+        let path = dir.path().join(format!("{}{}.exr", names[0], names[1]));
+        let channels = AnyChannels::sort(
+            vec![
+                AnyChannel::new(names[0], FlatSamples::F32(vec![2.0; 6])),
+                AnyChannel::new(names[1], FlatSamples::F32(vec![3.0; 6])),
+            ]
+            .into(),
+        );
+        let layer = Layer::new(
+            (3, 2),
+            LayerAttributes::default(),
+            Encoding::UNCOMPRESSED,
+            channels,
+        );
+        Image::from_layer(layer).write().to_file(&path).unwrap();
+        decode_depth_file(&path, DepthEncoding::Metres)
+    };
+    let d = write(["A", "Z"]).unwrap();
+    assert!(d.values.iter().all(|&v| v == 3.0));
+    let e = write(["A", "B"]).unwrap_err();
+    assert!(e.to_string().contains("A, B"), "{e}");
+}
+
+/// A confidence map invalidates its low-confidence pixels before anything reads them: a near block of low
+/// confidence on a far background takes the background's depth (never read as near), the report counts it,
+/// and a map of another size than the depth is refused naming it.
+#[test]
+fn low_confidence_depth_is_filled_from_its_confident_neighbours_never_read_as_near() {
+    let (h, w) = (24, 32);
+    let dir = tempfile::tempdir().unwrap();
+    let rgb = dir.path().join("rgb.png");
+    image::RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 8) as u8, (y * 10) as u8, 90]))
+        .save(&rgb)
+        .unwrap();
+    let block = |x: u32, y: u32| (10..18).contains(&x) && (8..16).contains(&y);
+    let depth = dir.path().join("depth.png");
+    image::ImageBuffer::<image::Luma<u16>, _>::from_fn(w, h, |x, y| {
+        image::Luma([if block(x, y) {
+            300
+        } else {
+            2000 + 20 * x as u16
+        }])
+    })
+    .save(&depth)
+    .unwrap();
+    let confidence = dir.path().join("confidence.png");
+    image::GrayImage::from_fn(w, h, |x, y| image::Luma([if block(x, y) { 0 } else { 2 }]))
+        .save(&confidence)
+        .unwrap();
+    let options = LoadOptions {
+        range: Some(DepthRange {
+            z_near_m: 0.25,
+            z_far_m: 3.0,
+        }),
+        ..LoadOptions::default()
+    };
+    let (plain, plain_report) =
+        load_rgbd(&rgb, &depth, DepthEncoding::Millimetres16, &options).unwrap();
+    let (f, report) = load_rgbd_with_confidence(
+        &rgb,
+        &depth,
+        Some(&confidence),
+        DepthEncoding::Millimetres16,
+        &options,
+    )
+    .unwrap();
+    assert_eq!(plain_report.low_confidence_fraction, None);
+    assert_eq!(report.low_confidence_fraction, Some(64.0 / (24.0 * 32.0)));
+    let background_min = (0..h as usize)
+        .flat_map(|y| (0..w as usize).map(move |x| (y, x)))
+        .filter(|&(y, x)| !block(x as u32, y as u32))
+        .map(|(y, x)| f.depth[[y, x]])
+        .fold(f32::INFINITY, f32::min);
+    for y in 8..16 {
+        for x in 10..18 {
+            // Without the confidence map the block is near (d ≈ 0.18); with it, as far as the background.
+            assert!(plain.depth[[y, x]] < 0.2, "{}", plain.depth[[y, x]]);
+            assert!(
+                f.depth[[y, x]] >= background_min,
+                "({y}, {x}): {}",
+                f.depth[[y, x]]
+            );
+        }
+    }
+    // A medium threshold keeps confidence 1, a high one drops it.
+    image::GrayImage::from_fn(w, h, |x, y| image::Luma([if block(x, y) { 1 } else { 2 }]))
+        .save(&confidence)
+        .unwrap();
+    let load = |min| {
+        let o = LoadOptions {
+            min_confidence: min,
+            ..options
+        };
+        load_rgbd_with_confidence(
+            &rgb,
+            &depth,
+            Some(&confidence),
+            DepthEncoding::Millimetres16,
+            &o,
+        )
+        .unwrap()
+    };
+    assert_eq!(load(1).0, plain);
+    assert_ne!(load(2).0, plain);
+    let small = dir.path().join("small.png");
+    image::GrayImage::from_pixel(w / 2, h / 2, image::Luma([2]))
+        .save(&small)
+        .unwrap();
+    let e = load_rgbd_with_confidence(
+        &rgb,
+        &depth,
+        Some(&small),
+        DepthEncoding::Millimetres16,
+        &options,
+    )
+    .unwrap_err();
+    assert!(
+        matches!(e, HoloError::ShapeMismatch { .. }) && e.to_string().contains("small.png"),
+        "{e}"
+    );
+}

@@ -467,7 +467,7 @@ pub(crate) fn decode_image(path: &Path, bytes: &[u8]) -> Result<image::DynamicIm
 }
 
 /// The pixel count `w·h` of an image whose header says `w × h`, if within [`InputLimits::max_image_pixels`].
-fn check_image_pixels(path: &Path, w: u64, h: u64) -> Result<u64> {
+pub(crate) fn check_image_pixels(path: &Path, w: u64, h: u64) -> Result<u64> {
     let pixels = w.saturating_mul(h);
     let max = input_limits().max_image_pixels;
     if pixels > max {

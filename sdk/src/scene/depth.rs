@@ -32,6 +32,7 @@ use crate::error::{invalid, HoloError, Result};
 /// | [`RelativeNearBright`](Self::RelativeNearBright) | `relative-near-bright` | 8 | `d = 1 − v/255` | `v = 0` |
 /// | [`RelativeNearDark`](Self::RelativeNearDark) | `relative-near-dark` | 8 | `d = v/255` | none |
 /// | [`Relative16`](Self::Relative16) | `relative16` | 16 | `d = (v − 1)/65534` | `v = 0` |
+/// | [`Metres`](Self::Metres) | `metres` | float (OpenEXR) | `v` m | `v ≤ 0`, NaN, ∞ |
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 pub enum DepthEncoding {
     /// `mm16`: 16-bit z-depth in millimetres, `z = v/1000` m, `v = 0` invalid (Redwood, `nyu/derived`,
@@ -68,12 +69,18 @@ pub enum DepthEncoding {
     /// 65,534 levels, and a 0 that never collides with a depth.
     #[serde(rename = "relative16")]
     Relative16,
+    /// `metres`: float z-depth in metres in an OpenEXR file (half or single precision; Record3D's export of
+    /// an iPhone's LiDAR depth), `z = v` m; `v ≤ 0`, NaN and ∞ invalid. A single-channel file uses its
+    /// channel, else the first of `Z`, `Y`, `R`, `depth` it has. Read through the exr crate (cargo feature
+    /// `research`; without it such files are refused, naming the feature).
+    #[serde(rename = "metres")]
+    Metres,
 }
 
 impl DepthEncoding {
     /// Every encoding, in the order of the encoding table (`docs/CONVENTIONS.md` §6.1; for CLI `--help` and
     /// exhaustive tests).
-    pub const ALL: [DepthEncoding; 8] = [
+    pub const ALL: [DepthEncoding; 9] = [
         DepthEncoding::Millimetres16,
         DepthEncoding::Tum5000,
         DepthEncoding::SunRotated,
@@ -82,6 +89,7 @@ impl DepthEncoding {
         DepthEncoding::RelativeNearBright,
         DepthEncoding::RelativeNearDark,
         DepthEncoding::Relative16,
+        DepthEncoding::Metres,
     ];
 
     /// The kebab-case name used by [`fmt::Display`], [`FromStr`] and serde (e.g. `"mm16"`).
@@ -95,6 +103,7 @@ impl DepthEncoding {
             DepthEncoding::RelativeNearBright => "relative-near-bright",
             DepthEncoding::RelativeNearDark => "relative-near-dark",
             DepthEncoding::Relative16 => "relative16",
+            DepthEncoding::Metres => "metres",
         }
     }
 
@@ -123,12 +132,17 @@ impl DepthEncoding {
             DepthEncoding::Relative16 => {
                 "16-bit relative depth, larger = farther, d = (v-1)/65534, 0 = no point (LDI exchange), unitless"
             }
+            DepthEncoding::Metres => {
+                "float z-depth in metres in OpenEXR (half or float; Record3D), <= 0, NaN or inf = invalid"
+            }
         }
     }
 
-    /// Bits per sample the file must have: 16 for the sensor formats, 8 for the others.
+    /// Bits per sample the file must have: 16 for the sensor formats, 8 for the others, 32 for
+    /// [`DepthEncoding::Metres`] (float samples: half-precision files are read as float too).
     pub fn bits_per_sample(&self) -> u32 {
         match self {
+            DepthEncoding::Metres => 32,
             DepthEncoding::Millimetres16
             | DepthEncoding::Tum5000
             | DepthEncoding::SunRotated
@@ -152,9 +166,11 @@ impl DepthEncoding {
 
     /// Decodes one stored sample: `Some(metres)` (metric encodings) or `Some(d)` (relative encodings,
     /// `d ∈ [0,1]`, 0 = near), `None` when the sample is invalid. Samples above 255 are invalid for the
-    /// 8-bit encodings. Formulas: `docs/CONVENTIONS.md` §6.
+    /// 8-bit encodings. Formulas: `docs/CONVENTIONS.md` §6. [`DepthEncoding::Metres`] stores floats, not
+    /// integer samples: `None` (its files are decoded by [`decode_depth_bytes`]).
     pub fn decode_sample(&self, v: u16) -> Option<f32> {
         match self {
+            DepthEncoding::Metres => None,
             DepthEncoding::Millimetres16 => (v != 0).then(|| v as f32 / 1000.0),
             DepthEncoding::Tum5000 => (v != 0).then(|| v as f32 / 5000.0),
             DepthEncoding::SunRotated => {
@@ -322,10 +338,37 @@ pub fn decode_depth_bytes(
     source: &Path,
     encoding: DepthEncoding,
 ) -> Result<DecodedDepth> {
+    if encoding == DepthEncoding::Metres {
+        return decode_float_depth(bytes, source);
+    }
     Ok(decode_depth(
         &read_depth_samples(bytes, source, encoding)?,
         encoding,
     ))
+}
+
+/// The magic number that starts every OpenEXR file.
+const EXR_MAGIC: [u8; 4] = [0x76, 0x2f, 0x31, 0x01];
+
+/// A [`DepthEncoding::Metres`] file: OpenEXR through the exr crate.
+#[cfg(feature = "research")]
+fn decode_float_depth(bytes: &[u8], source: &Path) -> Result<DecodedDepth> {
+    if !bytes.starts_with(&EXR_MAGIC) {
+        return Err(HoloError::InvalidDepth(format!(
+            "`{}` is not an OpenEXR file, which depth encoding `metres` reads ({})",
+            source.display(),
+            DepthEncoding::Metres.description()
+        )));
+    }
+    super::exr::decode_exr_depth(bytes, source)
+}
+
+#[cfg(not(feature = "research"))]
+fn decode_float_depth(_bytes: &[u8], source: &Path) -> Result<DecodedDepth> {
+    Err(HoloError::InvalidDepth(format!(
+        "`{}`: depth encoding `metres` (OpenEXR) needs the library's `research` feature, off in this build",
+        source.display()
+    )))
 }
 
 /// The stored samples `[H, W]` of a depth file already in memory, before decoding (the first step of
@@ -338,6 +381,20 @@ pub(crate) fn read_depth_samples(
     encoding: DepthEncoding,
 ) -> Result<Array2<u16>> {
     let path = source;
+    if bytes.starts_with(&EXR_MAGIC) {
+        return Err(HoloError::InvalidDepth(format!(
+            "`{}` is an OpenEXR file (float depth), but depth encoding `{encoding}` reads {}-bit integer \
+             samples: an OpenEXR depth map in metres (Record3D's export) takes depth encoding `metres`",
+            path.display(),
+            encoding.bits_per_sample()
+        )));
+    }
+    if encoding == DepthEncoding::Metres {
+        return Err(HoloError::InvalidDepth(format!(
+            "`{}`: depth encoding `metres` is float depth in OpenEXR files, not integer samples",
+            path.display()
+        )));
+    }
     let (raw, bits) = if encoding == DepthEncoding::KinectDisparity && bytes.starts_with(b"P5") {
         read_kinect_pgm(bytes, path)?
     } else {
@@ -689,6 +746,82 @@ pub fn normalise_depth(
             .and(valid)
             .map_collect(|&z, &ok| if ok { mapping.apply(z, &range) } else { 0.0 });
     Ok((d, Some(range)))
+}
+
+/// The usual lowest confidence kept by [`apply_confidence`]: 1, ARKit's `ARConfidenceLevel.medium` (0 low,
+/// 1 medium, 2 high; Stray Scanner's confidence PNGs store the same values). ARCore's raw depth confidence is
+/// 0–255 (255 = most confident): give a threshold on that scale, e.g. 128.
+pub const DEFAULT_MIN_CONFIDENCE: u8 = 1;
+
+/// Reads a depth confidence map `[H, W]` from an 8-bit image file (PNG or PNM; the first channel of a
+/// colour file): ARKit's `confidenceMap` or Stray Scanner's `confidence/N.png` (0, 1, 2), ARCore's raw depth
+/// confidence (0–255).
+///
+/// Errors: [`HoloError::Io`] / [`HoloError::Image`] naming `path`; [`HoloError::InvalidDepth`] for samples
+/// of more than 8 bits or an empty image.
+pub fn decode_confidence_file(path: &Path) -> Result<Array2<u8>> {
+    let bytes = crate::io::read_bytes(path)?;
+    let img = crate::io::decode_image(path, &bytes)?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    if w == 0 || h == 0 {
+        return Err(HoloError::InvalidDepth(format!(
+            "confidence map `{}` is an empty image",
+            path.display()
+        )));
+    }
+    let channels = match &img {
+        DynamicImage::ImageLuma8(_) => 1,
+        DynamicImage::ImageLumaA8(_) => 2,
+        DynamicImage::ImageRgb8(_) => 3,
+        DynamicImage::ImageRgba8(_) => 4,
+        other => {
+            return Err(HoloError::InvalidDepth(format!(
+                "confidence map `{}` has {:?} samples: a confidence map is 8-bit (0/1/2 as ARKit and Stray \
+                 Scanner store it, or 0–255 as ARCore)",
+                path.display(),
+                other.color()
+            )))
+        }
+    };
+    let raw = img.as_bytes();
+    Ok(Array2::from_shape_fn((h, w), |(y, x)| {
+        raw[(y * w + x) * channels]
+    }))
+}
+
+/// Invalidates the pixels of `depth` whose `confidence` (`[H, W]`, the depth map's own resolution) is below
+/// `min`, so that uncertain depth is filled from its confident neighbours ([`fill_invalid`]) and never read
+/// as near. Returns the number of valid pixels it invalidated.
+///
+/// Errors: [`HoloError::ShapeMismatch`] naming `source` (the confidence file) when the shapes differ.
+pub fn apply_confidence(
+    depth: &mut DecodedDepth,
+    confidence: &Array2<u8>,
+    min: u8,
+    source: &Path,
+) -> Result<usize> {
+    if confidence.dim() != depth.values.dim() {
+        return Err(HoloError::ShapeMismatch {
+            what: format!(
+                "confidence map `{}` vs its depth map (a confidence map has the depth map's resolution)",
+                source.display()
+            ),
+            expected: depth.values.shape().to_vec(),
+            got: confidence.shape().to_vec(),
+        });
+    }
+    let mut dropped = 0;
+    Zip::from(&mut depth.valid)
+        .and(&mut depth.values)
+        .and(confidence)
+        .for_each(|ok, v, &c| {
+            if *ok && c < min {
+                *ok = false;
+                *v = 0.0;
+                dropped += 1;
+            }
+        });
+    Ok(dropped)
 }
 
 /// Fills invalid pixels of `depth` `[H, W]`; call it before any resizing so holes are never read as near.

@@ -84,6 +84,9 @@ pub struct LoadOptions {
     /// How a depth map of lower resolution than the colour is brought to the colour's
     /// ([`crate::scene::upsample_depth`]; joint bilateral by default).
     pub depth_upsampling: crate::scene::DepthUpsampling,
+    /// With a confidence map ([`load_rgbd_with_confidence`]): depth pixels of lower confidence are invalid
+    /// ([`crate::scene::apply_confidence`]; default [`crate::scene::DEFAULT_MIN_CONFIDENCE`], ARKit's medium).
+    pub min_confidence: u8,
 }
 
 impl Default for LoadOptions {
@@ -95,6 +98,7 @@ impl Default for LoadOptions {
             max_invalid_fraction: 0.75,
             max_outside_range_fraction: 0.5,
             depth_upsampling: crate::scene::DepthUpsampling::default(),
+            min_confidence: super::depth::DEFAULT_MIN_CONFIDENCE,
         }
     }
 }
@@ -181,6 +185,9 @@ pub struct DepthReport {
     /// `(height, width)` of the depth file: the colour's, or a lower (or higher) resolution of the same field
     /// of view, brought to the colour's ([`DecodedDepth::to_resolution`]).
     pub depth_size: (usize, usize),
+    /// With a confidence map: the fraction of the depth map's pixels invalidated for a confidence below
+    /// [`LoadOptions::min_confidence`] (`None` without one).
+    pub low_confidence_fraction: Option<f32>,
 }
 
 /// Loads an RGB-D pair into an [`RgbdFrame`]: [`load_rgb`], [`decode_depth_file`], a depth map of another
@@ -200,8 +207,35 @@ pub fn load_rgbd(
     encoding: DepthEncoding,
     options: &LoadOptions,
 ) -> Result<(RgbdFrame, DepthReport)> {
+    load_rgbd_with_confidence(rgb, depth, None, encoding, options)
+}
+
+/// [`load_rgbd`] with the depth map's confidence map `confidence` (an 8-bit file at the depth map's
+/// resolution: ARKit's `confidenceMap`, Stray Scanner's `confidence/N.png`, ARCore's raw depth confidence;
+/// [`crate::scene::decode_confidence_file`]): depth pixels below `options.min_confidence` are invalid before
+/// the sanity checks, the upsampling and the hole filling, so uncertain depth takes its confident
+/// neighbours' values and is never read as near.
+///
+/// Errors: those of [`load_rgbd`]; those of [`crate::scene::decode_confidence_file`] and
+/// [`crate::scene::apply_confidence`] (another resolution than the depth map's), naming the file.
+pub fn load_rgbd_with_confidence(
+    rgb: &Path,
+    depth: &Path,
+    confidence: Option<&Path>,
+    encoding: DepthEncoding,
+    options: &LoadOptions,
+) -> Result<(RgbdFrame, DepthReport)> {
     let amplitude = load_rgb(rgb)?;
-    let decoded = decode_depth_file(depth, encoding)?;
+    let mut decoded = decode_depth_file(depth, encoding)?;
+    let low_confidence_fraction = match confidence {
+        Some(path) => {
+            let map = super::depth::decode_confidence_file(path)?;
+            let dropped =
+                super::depth::apply_confidence(&mut decoded, &map, options.min_confidence, path)?;
+            Some(dropped as f32 / decoded.values.len().max(1) as f32)
+        }
+        None => None,
+    };
     let (_, h, w) = amplitude.dim();
     let depth_size = decoded.values.dim();
     if decoded.aspect_mismatch(h, w) > super::depth::MAX_DEPTH_ASPECT_MISMATCH {
@@ -217,7 +251,16 @@ pub fn load_rgbd(
             got: decoded.values.shape().to_vec(),
         });
     }
-    check_depth_sanity(&decoded, encoding, options, depth)?;
+    check_depth_sanity(&decoded, encoding, options, depth).map_err(|e| {
+        match (e, low_confidence_fraction.filter(|&f| f > 0.0)) {
+            (HoloError::InvalidDepth(m), Some(f)) => HoloError::InvalidDepth(format!(
+                "{m} ({:.0} % of its pixels are below confidence {}: lower --min-confidence)",
+                100.0 * f,
+                options.min_confidence
+            )),
+            (e, _) => e,
+        }
+    })?;
     if depth_size != (h, w) {
         log::info!(
             "depth map `{}` is {}x{}: brought to the colour's {h}x{w} ({}, as the camera path)",
@@ -239,6 +282,7 @@ pub fn load_rgbd(
         range_used,
         source_size: (h, w),
         depth_size,
+        low_confidence_fraction,
     };
     log::info!(
         "loaded `{}` + `{}` ({encoding}): {h}x{w}, {:.1} % invalid, range {}",

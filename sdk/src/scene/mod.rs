@@ -26,15 +26,24 @@
     doc = "* `random` (feature `research`, off in this build): random textured scenes for the training \
            dataset."
 )]
+#![cfg_attr(
+    feature = "research",
+    doc = "* [`recording`] (feature `research`): phone recordings as Record3D and Stray Scanner export them \
+           ([`open_recording`]), frame by frame with depth confidence ([`load_rgbd_with_confidence`])."
+)]
 
 mod camera;
 mod depth;
+#[cfg(feature = "research")]
+mod exr;
 mod frame;
 mod ldi_files;
 mod load;
 pub mod procedural;
 #[cfg(feature = "research")]
 pub mod random;
+#[cfg(feature = "research")]
+pub mod recording;
 mod upsample;
 
 pub use camera::{
@@ -43,17 +52,22 @@ pub use camera::{
     Rotation,
 };
 pub use depth::{
-    decode_depth, decode_depth_bytes, decode_depth_file, fill_invalid, normalise_depth,
-    DecodedDepth, DepthEncoding, DepthMapping, DepthRange, MAX_DEPTH_ASPECT_MISMATCH,
+    apply_confidence, decode_confidence_file, decode_depth, decode_depth_bytes, decode_depth_file,
+    fill_invalid, normalise_depth, DecodedDepth, DepthEncoding, DepthMapping, DepthRange,
+    DEFAULT_MIN_CONFIDENCE, MAX_DEPTH_ASPECT_MISMATCH,
 };
 pub use frame::{LayeredDepthImage, LdiLayer, RgbdFrame};
 pub use ldi_files::{
     ldi_files, load_ldi_dir, write_ldi_dir, LdiLayerFiles, LdiReport, MAX_LDI_FOLDER_LAYERS,
 };
-pub use load::{decode_rgb_bytes, load_rgb, load_rgbd, DepthReport, LoadOptions};
+pub use load::{
+    decode_rgb_bytes, load_rgb, load_rgbd, load_rgbd_with_confidence, DepthReport, LoadOptions,
+};
 pub use procedural::{default_scene, default_scene_ldi};
 #[cfg(feature = "research")]
 pub use random::{
     ldi_from_fragments, list_photos, random_ldi, Fragment, RandomSceneConfig, RandomSceneGenerator,
 };
+#[cfg(feature = "research")]
+pub use recording::{open_recording, Recording, RecordingFrame, RecordingKind};
 pub use upsample::{upsample_depth, DepthUpsampling};
