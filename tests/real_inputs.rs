@@ -192,6 +192,7 @@ fn redwood_camera_buffers_equal_load_rgbd() {
         },
         rotation: Rotation::Deg0,
         color_crop: None,
+        confidence: None,
     };
     let options = FrameOptions {
         fit: Fit::Stretch,

@@ -111,6 +111,20 @@ pub struct RgbdFrame {
     /// inside the colour buffer.
     #[uniffi(default = None)]
     pub color_crop: Option<CropRect>,
+    /// The depth buffer's confidence, one byte per depth sample (`depth_width × depth_height`, rows
+    /// `confidence_row_stride` apart): ARKit's `sceneDepth.confidenceMap` (0 low, 1 medium, 2 high), ARCore's
+    /// `acquireRawDepthConfidenceImage` (0–255). Depth samples below `min_confidence` are invalid, filled from
+    /// their confident neighbours (never read as near). `None` (default): every depth sample is taken.
+    /// Errors: [`TensorholoError::InvalidInput`](crate::TensorholoError::InvalidInput) for another size than
+    /// the depth buffer's or a buffer of the wrong length.
+    #[uniffi(default = None)]
+    pub confidence: Option<Vec<u8>>,
+    /// Bytes from one confidence row to the next; 0 (default) = packed.
+    #[uniffi(default = 0)]
+    pub confidence_row_stride: u32,
+    /// The lowest confidence kept: 1 (default: ARKit's medium and high); on ARCore's 0–255 scale e.g. 128.
+    #[uniffi(default = 1)]
+    pub min_confidence: u8,
 }
 
 /// A rectangle of a colour buffer in pixels, before any rotation: columns `x .. x + width`, rows
@@ -158,6 +172,13 @@ impl RgbdFrame {
             },
             rotation: self.rotation.unwrap_or(Rotation::Deg0).into(),
             color_crop: self.color_crop.map(Into::into),
+            confidence: self.confidence.map(|data| scene::ConfidenceImageBuf {
+                data,
+                min_confidence: self.min_confidence,
+                width: self.depth_width as usize,
+                height: self.depth_height as usize,
+                row_stride: self.confidence_row_stride as usize,
+            }),
         }
     }
 }
@@ -369,6 +390,9 @@ pub(crate) mod tests {
             depth_row_stride: 0,
             rotation: None,
             color_crop: None,
+            confidence: None,
+            confidence_row_stride: 0,
+            min_confidence: 1,
         }
     }
 

@@ -290,6 +290,7 @@ pub fn camera_frame(data: &[u8]) {
         },
         rotation,
         color_crop: None,
+        confidence: None,
     };
     let options = FrameOptions {
         fit,

@@ -143,6 +143,7 @@ fn frame(color: ColorImageBuf, depth: DepthImageBuf, rotation: Rotation) -> Came
         depth,
         rotation,
         color_crop: None,
+        confidence: None,
     }
 }
 
@@ -444,6 +445,7 @@ fn crop_keeps_the_centre_at_the_target_aspect() {
         },
         rotation: Rotation::Deg0,
         color_crop: None,
+        confidence: None,
     };
     let stretched = cropped
         .to_rgbd(
@@ -846,6 +848,7 @@ proptest! {
             depth: depth.view(),
             rotation: Rotation::Deg90,
             color_crop: None,
+            confidence: None,
         };
         let ok = length_rule(len, w, h, format.bytes_per_pixel(), stride);
         let r = f.to_rgbd(3, 2, &FrameOptions::default());
@@ -879,6 +882,7 @@ proptest! {
             depth: DepthImage { data: &data, format, width: w, height: h, row_stride: stride },
             rotation: Rotation::Deg270,
             color_crop: None,
+            confidence: None,
         };
         let ok = length_rule(len, w, h, format.bytes_per_pixel(), stride);
         prop_assert_eq!(f.depth.validate().is_ok(), ok);
@@ -960,4 +964,89 @@ fn owned_buffers_round_trip() {
     let json = serde_json::to_value(&rb).unwrap();
     assert_eq!(json["color_size"], serde_json::json!([3, 4]));
     assert!(json["range_used"]["z_near_m"].as_f64().unwrap() > 0.9);
+}
+
+/// A depth buffer's confidence (ARKit's 0/1/2, ARCore's 0–255): samples below the buffer's minimum are
+/// invalid, so the frame equals the one whose depth buffer holds invalid samples there, under every rotation
+/// (the confidence turns with the depth) and with a row stride; a low-confidence near block is never read as
+/// near; a confidence buffer of another size than the depth is refused naming `confidence`.
+#[test]
+fn low_confidence_depth_samples_are_invalid_under_every_rotation() {
+    let (hc, wc, hd, wd) = (12, 16, 6, 8);
+    let near = |y: usize, x: usize| (1..3).contains(&y) && (2..5).contains(&x);
+    let z = move |y: usize, x: usize| {
+        if near(y, x) {
+            0.3
+        } else {
+            1.0 + 0.1 * x as f32
+        }
+    };
+    let rating = move |y: usize, x: usize| -> u8 {
+        if near(y, x) {
+            0
+        } else if x == 0 {
+            1
+        } else {
+            2
+        }
+    };
+    let options = fixed(Fit::Stretch, 0.25, 2.0);
+    for rotation in ALL_ROT {
+        for (min, scale) in [(1u8, 1u8), (128, 100)] {
+            let color = color_buf(ColorFormat::Rgba8, hc, wc, 0, rgb_at);
+            let depth = depth_buf(DepthFormat::MetresF32, hd, wd, 0, z);
+            let stride = wd + 3;
+            let confidence = ConfidenceImageBuf {
+                data: pack(hd, wd, 1, stride, false, |y, x| {
+                    vec![rating(y, x).saturating_mul(scale)]
+                }),
+                min_confidence: min,
+                width: wd,
+                height: hd,
+                row_stride: stride,
+            };
+            let mut with = frame(color.clone(), depth, rotation);
+            with.confidence = Some(confidence);
+            // The same frame with its depth invalid (0 m) where the confidence is low (on ARCore's scale,
+            // 100 < 128: the medium column too).
+            let holes = depth_buf(DepthFormat::MetresF32, hd, wd, 0, move |y, x| {
+                if rating(y, x).saturating_mul(scale) < min {
+                    0.0
+                } else {
+                    z(y, x)
+                }
+            });
+            let expected = native(&frame(color.clone(), holes, rotation), &options);
+            let got = native(&with, &options);
+            assert_eq!(got, expected, "{rotation:?}, min {min}");
+            let plain = native(
+                &frame(
+                    color,
+                    depth_buf(DepthFormat::MetresF32, hd, wd, 0, z),
+                    rotation,
+                ),
+                &options,
+            );
+            let nearest = |f: &RgbdFrame| f.depth.iter().fold(f32::INFINITY, |m, &d| m.min(d));
+            assert!(nearest(&plain) < 0.05, "{rotation:?}: {}", nearest(&plain));
+            assert!(nearest(&got) > 0.3, "{rotation:?}: {}", nearest(&got));
+        }
+    }
+    let mut wrong = frame(
+        color_buf(ColorFormat::Rgba8, hc, wc, 0, rgb_at),
+        depth_buf(DepthFormat::MetresF32, hd, wd, 0, z),
+        Rotation::Deg0,
+    );
+    wrong.confidence = Some(ConfidenceImageBuf {
+        data: vec![2; hd * wd / 2],
+        min_confidence: 1,
+        width: wd / 2,
+        height: hd,
+        row_stride: 0,
+    });
+    let e = wrong.view().to_rgbd(hc, wc, &options).unwrap_err();
+    assert!(
+        matches!(&e, HoloError::InvalidParameter { name, .. } if *name == "confidence"),
+        "{e}"
+    );
 }

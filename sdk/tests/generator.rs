@@ -59,6 +59,7 @@ fn camera_frame(h: usize, w: usize, shift: f32) -> CameraFrameBuf {
         },
         rotation: Rotation::Deg0,
         color_crop: None,
+        confidence: None,
     }
 }
 

@@ -882,6 +882,7 @@ fn camera_layer(
         },
         rotation: Rotation::Deg0,
         color_crop: None,
+        confidence: None,
     }
 }
 

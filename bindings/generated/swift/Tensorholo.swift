@@ -471,6 +471,22 @@ private let UNIFFI_CALLBACK_UNEXPECTED_ERROR: Int32 = 2
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterUInt8: FfiConverterPrimitive {
+    typealias FfiType = UInt8
+    typealias SwiftType = UInt8
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> UInt8 {
+        return try lift(readInt(&buf))
+    }
+
+    public static func write(_ value: UInt8, into buf: inout [UInt8]) {
+        writeInt(&buf, lower(value))
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterUInt32: FfiConverterPrimitive {
     typealias FfiType = UInt32
     typealias SwiftType = UInt32
@@ -3089,6 +3105,23 @@ public struct RgbdFrame: Equatable, Hashable {
      * inside the colour buffer.
      */
     public var colorCrop: CropRect?
+    /**
+     * The depth buffer's confidence, one byte per depth sample (`depth_width × depth_height`, rows
+     * `confidence_row_stride` apart): ARKit's `sceneDepth.confidenceMap` (0 low, 1 medium, 2 high), ARCore's
+     * `acquireRawDepthConfidenceImage` (0–255). Depth samples below `min_confidence` are invalid, filled from
+     * their confident neighbours (never read as near). `None` (default): every depth sample is taken.
+     * Errors: [`TensorholoError::InvalidInput`](crate::TensorholoError::InvalidInput) for another size than
+     * the depth buffer's or a buffer of the wrong length.
+     */
+    public var confidence: Data?
+    /**
+     * Bytes from one confidence row to the next; 0 (default) = packed.
+     */
+    public var confidenceRowStride: UInt32
+    /**
+     * The lowest confidence kept: 1 (default: ARKit's medium and high); on ARCore's 0–255 scale e.g. 128.
+     */
+    public var minConfidence: UInt8
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -3132,7 +3165,21 @@ public struct RgbdFrame: Equatable, Hashable {
          * the GPU texture's field of view (usually 16:9), a band of the 4:3 CPU image (Android:
          * `RgbdFrames.fromArFrame` fills it). Errors: [`TensorholoError::InvalidInput`](crate::TensorholoError::InvalidInput) when it is empty or not
          * inside the colour buffer.
-         */colorCrop: CropRect? = nil) {
+         */colorCrop: CropRect? = nil, 
+        /**
+         * The depth buffer's confidence, one byte per depth sample (`depth_width × depth_height`, rows
+         * `confidence_row_stride` apart): ARKit's `sceneDepth.confidenceMap` (0 low, 1 medium, 2 high), ARCore's
+         * `acquireRawDepthConfidenceImage` (0–255). Depth samples below `min_confidence` are invalid, filled from
+         * their confident neighbours (never read as near). `None` (default): every depth sample is taken.
+         * Errors: [`TensorholoError::InvalidInput`](crate::TensorholoError::InvalidInput) for another size than
+         * the depth buffer's or a buffer of the wrong length.
+         */confidence: Data? = nil, 
+        /**
+         * Bytes from one confidence row to the next; 0 (default) = packed.
+         */confidenceRowStride: UInt32 = UInt32(0), 
+        /**
+         * The lowest confidence kept: 1 (default: ARKit's medium and high); on ARCore's 0–255 scale e.g. 128.
+         */minConfidence: UInt8 = UInt8(1)) {
         self.color = color
         self.colorFormat = colorFormat
         self.colorWidth = colorWidth
@@ -3145,6 +3192,9 @@ public struct RgbdFrame: Equatable, Hashable {
         self.depthRowStride = depthRowStride
         self.rotation = rotation
         self.colorCrop = colorCrop
+        self.confidence = confidence
+        self.confidenceRowStride = confidenceRowStride
+        self.minConfidence = minConfidence
     }
 
     
@@ -3174,7 +3224,10 @@ public struct FfiConverterTypeRgbdFrame: FfiConverterRustBuffer {
                 colorRowStride: FfiConverterUInt32.read(from: &buf), 
                 depthRowStride: FfiConverterUInt32.read(from: &buf), 
                 rotation: FfiConverterOptionTypeRotation.read(from: &buf), 
-                colorCrop: FfiConverterOptionTypeCropRect.read(from: &buf)
+                colorCrop: FfiConverterOptionTypeCropRect.read(from: &buf), 
+                confidence: FfiConverterOptionData.read(from: &buf), 
+                confidenceRowStride: FfiConverterUInt32.read(from: &buf), 
+                minConfidence: FfiConverterUInt8.read(from: &buf)
         )
     }
 
@@ -3191,6 +3244,9 @@ public struct FfiConverterTypeRgbdFrame: FfiConverterRustBuffer {
         FfiConverterUInt32.write(value.depthRowStride, into: &buf)
         FfiConverterOptionTypeRotation.write(value.rotation, into: &buf)
         FfiConverterOptionTypeCropRect.write(value.colorCrop, into: &buf)
+        FfiConverterOptionData.write(value.confidence, into: &buf)
+        FfiConverterUInt32.write(value.confidenceRowStride, into: &buf)
+        FfiConverterUInt8.write(value.minConfidence, into: &buf)
     }
 }
 

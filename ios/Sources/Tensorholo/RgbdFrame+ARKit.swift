@@ -26,6 +26,9 @@ extension RgbdFrame {
     ///   - orientation: the EXIF orientation of ARKit's landscape buffers relative to the upright scene
     ///     (`Rotation(orientation:)`): `.right` in a portrait UI.
     ///   - smoothedDepth: read `frame.smoothedSceneDepth` (temporally smoothed) instead of `frame.sceneDepth`.
+    ///   - minConfidence: the lowest `ARConfidenceLevel` of `confidenceMap` whose depth is kept (default
+    ///     `.medium`): depth of lower confidence is invalid, filled from its confident neighbours and never
+    ///     read as near (docs/VIDEO.md); `nil` takes every depth sample and leaves the confidence map out.
     ///   - context: the Core Image context that converts the colour; pass one kept for the session (a context
     ///     is costly to create), or `nil` for one shared by every call.
     /// - Throws: `TensorholoError.Unsupported` if the frame has no (smoothed) scene depth, the orientation is
@@ -36,6 +39,7 @@ extension RgbdFrame {
         frame: ARFrame,
         orientation: CGImagePropertyOrientation,
         smoothedDepth: Bool = false,
+        minConfidence: ARConfidenceLevel? = .medium,
         context: CIContext? = nil
     ) throws {
         let sceneDepth = smoothedDepth ? frame.smoothedSceneDepth : frame.sceneDepth
@@ -63,6 +67,10 @@ extension RgbdFrame {
         let color = try PixelBufferCopy(bgra, bytesPerPixel: 4, name: "colour")
         let depthFormat = try DepthFormat(pixelFormat: CVPixelBufferGetPixelFormatType(depthMap))
         let depth = try PixelBufferCopy(depthMap, bytesPerPixel: depthFormat.bytesPerSample, name: "depth")
+        // ARKit's confidence map: one UInt8 ARConfidenceLevel per depth sample (OneComponent8).
+        let confidence = try minConfidence.flatMap { _ in sceneDepth?.confidenceMap }.map {
+            try PixelBufferCopy($0, bytesPerPixel: 1, name: "confidence")
+        }
         self.init(
             color: color.data,
             colorFormat: .bgra8,
@@ -74,7 +82,10 @@ extension RgbdFrame {
             depthHeight: depth.height,
             colorRowStride: color.rowStride,
             depthRowStride: depth.rowStride,
-            rotation: rotation
+            rotation: rotation,
+            confidence: confidence?.data,
+            confidenceRowStride: confidence?.rowStride ?? 0,
+            minConfidence: UInt8(clamping: minConfidence?.rawValue ?? 0)
         )
     }
 }

@@ -579,6 +579,93 @@ impl DepthImage<'_> {
     }
 }
 
+/// A depth buffer's confidence, borrowed: one byte per depth sample, `[height, width]` as the depth buffer,
+/// rows `row_stride` bytes apart (`0` = packed). ARKit's `ARDepthData.confidenceMap` (`ARConfidenceLevel`: 0
+/// low, 1 medium, 2 high) and ARCore's `Frame.acquireRawDepthConfidenceImage` (0–255, 255 = most confident).
+/// Depth samples below `min_confidence` are invalid ([`crate::scene::apply_confidence`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ConfidenceImage<'a> {
+    /// One byte per sample.
+    pub data: &'a [u8],
+    /// The lowest confidence kept, on the buffer's own scale: [`crate::scene::DEFAULT_MIN_CONFIDENCE`] (1,
+    /// ARKit's medium) for ARKit; e.g. 128 for ARCore's 0–255.
+    pub min_confidence: u8,
+    /// Samples per row (the depth buffer's).
+    pub width: usize,
+    /// Rows (the depth buffer's).
+    pub height: usize,
+    /// Bytes from the start of one row to the next; `0` = packed (`width`).
+    pub row_stride: usize,
+}
+
+impl ConfidenceImage<'_> {
+    /// Checks the buffer like [`ColorImage::validate`].
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] with name `confidence` (zero size, size overflow, buffer too
+    /// short or too long) or `confidence_row_stride`.
+    pub fn validate(&self) -> Result<()> {
+        self.layout().map(|_| ())
+    }
+
+    fn layout(&self) -> Result<Layout> {
+        check_layout(
+            "confidence",
+            "confidence_row_stride",
+            self.data.len(),
+            self.width,
+            self.height,
+            1,
+            self.row_stride,
+        )
+    }
+
+    /// The confidence `[H', W']` after `rotation` (as [`DepthImage::decode`] turns its depth buffer).
+    ///
+    /// Errors: those of [`ConfidenceImage::validate`].
+    pub fn decode(&self, rotation: Rotation) -> Result<Array2<u8>> {
+        let layout = self.layout()?;
+        let (ho, wo) = rotation.rotated_size(self.height, self.width);
+        let mut out = vec![0u8; ho * wo];
+        for_each_rotated(
+            self.data,
+            layout,
+            self.height,
+            self.width,
+            rotation,
+            |i, px| out[i] = px[0],
+        );
+        Array2::from_shape_vec((ho, wo), out).map_err(shape_error)
+    }
+}
+
+/// An owned confidence buffer: the fields of [`ConfidenceImage`] with a `Vec<u8>`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConfidenceImageBuf {
+    /// One byte per sample.
+    pub data: Vec<u8>,
+    /// The lowest confidence kept ([`ConfidenceImage::min_confidence`]).
+    pub min_confidence: u8,
+    /// Samples per row.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// Bytes from the start of one row to the next; `0` = packed.
+    pub row_stride: usize,
+}
+
+impl ConfidenceImageBuf {
+    /// Borrows as a [`ConfidenceImage`].
+    pub fn view(&self) -> ConfidenceImage<'_> {
+        ConfidenceImage {
+            data: &self.data,
+            min_confidence: self.min_confidence,
+            width: self.width,
+            height: self.height,
+            row_stride: self.row_stride,
+        }
+    }
+}
+
 /// One phone camera frame, borrowed: a colour buffer, a depth buffer covering the same field of view as the
 /// colour (or as its [`color_crop`](Self::color_crop)) at any resolution, and the clockwise rotation that
 /// makes both upright. Convert with [`CameraFrame::to_rgbd`].
@@ -594,6 +681,9 @@ pub struct CameraFrame<'a> {
     /// of view; `None` = the whole colour buffer. Applied before the rotation and the fit, so that colour
     /// and depth are registered (see [`CropRect`]; ARCore needs it).
     pub color_crop: Option<CropRect>,
+    /// The depth buffer's confidence, where the camera gives one (ARKit, ARCore's raw depth): depth samples
+    /// below its `min_confidence` are invalid, filled from their confident neighbours.
+    pub confidence: Option<ConfidenceImage<'a>>,
 }
 
 /// An owned colour buffer: the fields of [`ColorImage`] with a `Vec<u8>`.
@@ -663,6 +753,8 @@ pub struct CameraFrameBuf {
     pub rotation: Rotation,
     /// The rectangle of `color` covering the depth's field of view ([`CameraFrame::color_crop`]).
     pub color_crop: Option<CropRect>,
+    /// The depth buffer's confidence ([`CameraFrame::confidence`]).
+    pub confidence: Option<ConfidenceImageBuf>,
 }
 
 impl CameraFrameBuf {
@@ -673,6 +765,7 @@ impl CameraFrameBuf {
             depth: self.depth.view(),
             rotation: self.rotation,
             color_crop: self.color_crop,
+            confidence: self.confidence.as_ref().map(ConfidenceImageBuf::view),
         }
     }
 }
@@ -844,6 +937,13 @@ impl CameraFrame<'_> {
             },
             rotation: self.rotation,
             color_crop: self.color_crop,
+            confidence: self.confidence.map(|c| ConfidenceImageBuf {
+                data: c.data.to_vec(),
+                min_confidence: c.min_confidence,
+                width: c.width,
+                height: c.height,
+                row_stride: c.row_stride,
+            }),
         }
     }
 
@@ -876,7 +976,8 @@ impl CameraFrame<'_> {
     /// Errors, all before any allocation except the last: [`HoloError::InvalidParameter`] for a target
     /// `height` or `width` of 0 (`height` / `width`) or too large (`size`), an invalid
     /// [`FrameOptions::range`] (`depth_range`), or a bad buffer (`color`, `color_row_stride`, `depth`,
-    /// `depth_row_stride`; see [`ColorImage::validate`]), or a crop that is empty or outside the colour
+    /// `depth_row_stride`, `confidence`, `confidence_row_stride`; see [`ColorImage::validate`]; a confidence
+    /// buffer of another size than the depth buffer: `confidence`), or a crop that is empty or outside the colour
     /// buffer (`color_crop`); [`HoloError::InvalidDepth`] when every depth
     /// pixel is invalid (or, after a downsampling of depth to colour resolution, no valid one is left).
     pub fn to_rgbd(
@@ -943,13 +1044,36 @@ impl CameraFrame<'_> {
         }
         self.color.validate()?;
         self.depth.validate()?;
+        if let Some(c) = &self.confidence {
+            c.validate()?;
+            if (c.height, c.width) != (self.depth.height, self.depth.width) {
+                return Err(invalid(
+                    "confidence",
+                    format!(
+                        "the confidence buffer is {}x{} (height x width), its depth buffer {}x{}: one \
+                         confidence byte per depth sample",
+                        c.height, c.width, self.depth.height, self.depth.width
+                    ),
+                ));
+            }
+        }
         let color = match self.color_crop {
             Some(crop) => self.color.crop(crop)?,
             None => self.color,
         };
 
-        // 2 + 3. Decode with the rotation; depth first (small, and all-invalid fails early).
-        let decoded = self.depth.decode(self.rotation)?;
+        // 2 + 3. Decode with the rotation; depth first (small, and all-invalid fails early), its
+        // low-confidence samples invalid.
+        let mut decoded = self.depth.decode(self.rotation)?;
+        if let Some(c) = &self.confidence {
+            let map = c.decode(self.rotation)?;
+            super::depth::apply_confidence(
+                &mut decoded,
+                &map,
+                c.min_confidence,
+                std::path::Path::new("the confidence buffer"),
+            )?;
+        }
         let invalid_fraction = decoded.invalid_fraction();
         if need_depth && decoded.valid.iter().all(|&v| !v) {
             return Err(HoloError::InvalidDepth(format!(
@@ -958,10 +1082,10 @@ impl CameraFrame<'_> {
                 self.depth.height,
                 self.depth.width,
                 self.depth.format,
-                if self.depth.format == DepthFormat::Depth16 {
-                    " or confidence 0 %"
-                } else {
-                    ""
+                match (self.depth.format, self.confidence.is_some()) {
+                    (_, true) => " or below the minimum confidence",
+                    (DepthFormat::Depth16, false) => " or confidence 0 %",
+                    _ => "",
                 }
             )));
         }
@@ -1420,6 +1544,7 @@ mod tests {
             },
             rotation: Rotation::Deg90,
             color_crop: crop,
+            confidence: None,
         };
         let (ho, wo) = match crop {
             Some(c) => (c.width, c.height),
@@ -1497,6 +1622,7 @@ mod tests {
                 width: 3,
                 height: 2,
             }),
+            confidence: None,
         };
         match frame.to_rgbd(2, 2, &FrameOptions::default()) {
             Err(HoloError::InvalidParameter { name, reason }) => {

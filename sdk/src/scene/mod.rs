@@ -48,8 +48,8 @@ mod upsample;
 
 pub use camera::{
     ldi_from_camera_frames, CameraFrame, CameraFrameBuf, CameraFrameReport, ColorFormat,
-    ColorImage, ColorImageBuf, CropRect, DepthFormat, DepthImage, DepthImageBuf, Fit, FrameOptions,
-    Rotation,
+    ColorImage, ColorImageBuf, ConfidenceImage, ConfidenceImageBuf, CropRect, DepthFormat,
+    DepthImage, DepthImageBuf, Fit, FrameOptions, Rotation,
 };
 pub use depth::{
     apply_confidence, decode_confidence_file, decode_depth, decode_depth_bytes, decode_depth_file,

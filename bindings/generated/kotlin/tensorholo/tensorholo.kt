@@ -1252,6 +1252,33 @@ private class JavaLangRefCleanable(
 /**
  * @suppress
  */
+public object FfiConverterUByte: FfiConverter<UByte, Byte> {
+    override fun lift(value: Byte): UByte {
+        return value.toUByte()
+    }
+
+    fun lift(value: Int): UByte {
+        return value.toUByte()
+    }
+
+    override fun read(buf: ByteBuffer): UByte {
+        return lift(buf.get())
+    }
+
+    override fun lower(value: UByte): Byte {
+        return value.toByte()
+    }
+
+    override fun allocationSize(value: UByte) = 1UL
+
+    override fun write(value: UByte, buf: ByteBuffer) {
+        buf.put(value.toByte())
+    }
+}
+
+/**
+ * @suppress
+ */
 public object FfiConverterUInt: FfiConverter<UInt, Int> {
     override fun lift(value: Int): UInt {
         return value.toUInt()
@@ -4113,6 +4140,26 @@ data class RgbdFrame (
      * inside the colour buffer.
      */
     var `colorCrop`: CropRect? = null 
+    , 
+    /**
+     * The depth buffer's confidence, one byte per depth sample (`depth_width × depth_height`, rows
+     * `confidence_row_stride` apart): ARKit's `sceneDepth.confidenceMap` (0 low, 1 medium, 2 high), ARCore's
+     * `acquireRawDepthConfidenceImage` (0–255). Depth samples below `min_confidence` are invalid, filled from
+     * their confident neighbours (never read as near). `None` (default): every depth sample is taken.
+     * Errors: [`TensorholoError::InvalidInput`](crate::TensorholoError::InvalidInput) for another size than
+     * the depth buffer's or a buffer of the wrong length.
+     */
+    var `confidence`: kotlin.ByteArray? = null 
+    , 
+    /**
+     * Bytes from one confidence row to the next; 0 (default) = packed.
+     */
+    var `confidenceRowStride`: kotlin.UInt = 0u 
+    , 
+    /**
+     * The lowest confidence kept: 1 (default: ARKit's medium and high); on ARCore's 0–255 scale e.g. 128.
+     */
+    var `minConfidence`: kotlin.UByte = 1u 
     
 ){
     
@@ -4141,6 +4188,9 @@ public object FfiConverterTypeRgbdFrame: FfiConverterRustBuffer<RgbdFrame> {
             FfiConverterUInt.read(buf),
             FfiConverterOptionalTypeRotation.read(buf),
             FfiConverterOptionalTypeCropRect.read(buf),
+            FfiConverterOptionalByteArray.read(buf),
+            FfiConverterUInt.read(buf),
+            FfiConverterUByte.read(buf),
         )
     }
 
@@ -4156,7 +4206,10 @@ public object FfiConverterTypeRgbdFrame: FfiConverterRustBuffer<RgbdFrame> {
             FfiConverterUInt.allocationSize(value.`colorRowStride`) +
             FfiConverterUInt.allocationSize(value.`depthRowStride`) +
             FfiConverterOptionalTypeRotation.allocationSize(value.`rotation`) +
-            FfiConverterOptionalTypeCropRect.allocationSize(value.`colorCrop`)
+            FfiConverterOptionalTypeCropRect.allocationSize(value.`colorCrop`) +
+            FfiConverterOptionalByteArray.allocationSize(value.`confidence`) +
+            FfiConverterUInt.allocationSize(value.`confidenceRowStride`) +
+            FfiConverterUByte.allocationSize(value.`minConfidence`)
     )
 
     override fun write(value: RgbdFrame, buf: ByteBuffer) {
@@ -4172,6 +4225,9 @@ public object FfiConverterTypeRgbdFrame: FfiConverterRustBuffer<RgbdFrame> {
             FfiConverterUInt.write(value.`depthRowStride`, buf)
             FfiConverterOptionalTypeRotation.write(value.`rotation`, buf)
             FfiConverterOptionalTypeCropRect.write(value.`colorCrop`, buf)
+            FfiConverterOptionalByteArray.write(value.`confidence`, buf)
+            FfiConverterUInt.write(value.`confidenceRowStride`, buf)
+            FfiConverterUByte.write(value.`minConfidence`, buf)
     }
 }
 

@@ -15,4 +15,6 @@ abstract class Frame {
 
     abstract fun acquireCameraImage(): Image
     abstract fun acquireDepthImage16Bits(): Image
+    abstract fun acquireRawDepthImage16Bits(): Image
+    abstract fun acquireRawDepthConfidenceImage(): Image
 }

@@ -29,6 +29,10 @@ import tensorholo.Rotation
  * @param frame the frame `Session.update()` returned.
  * @param rotation clockwise rotation making the sensor-oriented images upright ([CameraPlanes.rotationFor]).
  * @param rgbaOut optional reusable colour array, as in [RgbdFrames.fromImages].
+ * @param rawDepth read ARCore's raw depth (`acquireRawDepthImage16Bits`, unsmoothed, with holes) and its
+ *   confidence (`acquireRawDepthConfidenceImage`, 0–255) instead of the smoothed depth: samples below
+ *   `minConfidence` are invalid, filled from their confident neighbours (never read as near).
+ * @param minConfidence with `rawDepth`: the lowest confidence kept, 0–255 (default 128).
  * @throws com.google.ar.core.exceptions.NotYetAvailableException when this frame has no camera image or no
  *   depth yet (common for the first frames): skip the frame.
  * @throws com.google.ar.core.exceptions.DeadlineExceededException when the frame is too old to acquire its
@@ -39,7 +43,14 @@ import tensorholo.Rotation
  *   of view is not inside the CPU image (see [CameraPlanes.cropForTexture]).
  */
 @JvmOverloads
-fun RgbdFrames.fromArFrame(frame: Frame, rotation: Rotation, rgbaOut: ByteArray? = null): RgbdFrame {
+fun RgbdFrames.fromArFrame(
+    frame: Frame,
+    rotation: Rotation,
+    rgbaOut: ByteArray? = null,
+    rawDepth: Boolean = false,
+    minConfidence: Int = 128,
+): RgbdFrame {
+    require(minConfidence in 0..255) { "minConfidence is 0 to 255, got $minConfidence" }
     val imageCorners = FloatArray(8)
     frame.transformCoordinates2d(
         Coordinates2d.TEXTURE_NORMALIZED,
@@ -48,9 +59,26 @@ fun RgbdFrames.fromArFrame(frame: Frame, rotation: Rotation, rgbaOut: ByteArray?
         imageCorners,
     )
     return frame.acquireCameraImage().use { color ->
-        frame.acquireDepthImage16Bits().use { depth ->
-            val crop = CameraPlanes.cropForTexture(imageCorners, color.width, color.height)
-            fromImages(color, depth, rotation, rgbaOut, crop)
+        val crop = CameraPlanes.cropForTexture(imageCorners, color.width, color.height)
+        if (!rawDepth) {
+            frame.acquireDepthImage16Bits().use { depth -> fromImages(color, depth, rotation, rgbaOut, crop) }
+        } else {
+            frame.acquireRawDepthImage16Bits().use { depth ->
+                frame.acquireRawDepthConfidenceImage().use { confidence ->
+                    val plane = confidence.planes.single()
+                    require(confidence.width == depth.width && confidence.height == depth.height) {
+                        "raw depth ${depth.width}x${depth.height} and its confidence " +
+                            "${confidence.width}x${confidence.height} differ in size"
+                    }
+                    val bytes = CameraPlanes.bytes8Packed(
+                        plane.buffer, confidence.width, confidence.height, plane.rowStride,
+                    )
+                    fromImages(color, depth, rotation, rgbaOut, crop).copy(
+                        confidence = bytes,
+                        minConfidence = minConfidence.toUByte(),
+                    )
+                }
+            }
         }
     }
 }

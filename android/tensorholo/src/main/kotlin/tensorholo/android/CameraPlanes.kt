@@ -159,8 +159,11 @@ object CameraPlanes {
         depthFormat: DepthFormat,
         rotation: Rotation,
         colorCrop: CropRect? = null,
+        confidence: ByteArray? = null,
+        minConfidence: Int = 1,
     ): RgbdFrame {
         require(width > 0 && height > 0) { "colour size must be positive, got ${width}x$height" }
+        require(minConfidence in 0..255) { "minConfidence is 0 to 255, got $minConfidence" }
         require(rgba.size.toLong() == width.toLong() * height * 4) {
             "rgba has ${rgba.size} bytes, a packed ${width}x$height RGBA8 image has ${width.toLong() * height * 4}"
         }
@@ -177,7 +180,31 @@ object CameraPlanes {
             depthHeight = depthHeight.toUInt(),
             rotation = rotation,
             colorCrop = colorCrop,
+            confidence = confidence,
+            minConfidence = minConfidence.toUByte(),
         )
+    }
+
+    /**
+     * The bytes of an 8-bit one-plane image (ARCore's raw depth confidence, `acquireRawDepthConfidenceImage`:
+     * 0–255, 255 = most confident) without its row padding: `width × height` bytes, row by row.
+     *
+     * @throws IllegalArgumentException for a non-positive size, a row stride shorter than a row, or a buffer
+     *   too short for its rows.
+     */
+    @JvmStatic
+    fun bytes8Packed(buffer: ByteBuffer, width: Int, height: Int, rowStride: Int): ByteArray {
+        require(width > 0 && height > 0) { "confidence size must be positive, got ${width}x$height" }
+        require(rowStride >= width) { "confidence row stride $rowStride is shorter than one row ($width bytes)" }
+        checkPlane("confidence", buffer, rowStride, height, width.toLong())
+        val out = ByteArray(width * height)
+        val src = buffer.duplicate()
+        val base = buffer.position()
+        for (r in 0 until height) {
+            src.position(base + r * rowStride)
+            src.get(out, r * width, width)
+        }
+        return out
     }
 
     /** `android.graphics.ImageFormat.DEPTH16`: Camera2 depth, and ARCore's deprecated `acquireDepthImage()`. */

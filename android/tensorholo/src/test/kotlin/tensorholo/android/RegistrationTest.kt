@@ -8,6 +8,7 @@ package tensorholo.android
 import java.nio.ByteBuffer
 import java.nio.ByteOrder
 import org.junit.Assert.assertEquals
+import org.junit.Assert.assertFalse
 import org.junit.Assert.assertThrows
 import org.junit.Assert.assertTrue
 import org.junit.Test
@@ -175,5 +176,37 @@ class RegistrationTest {
         val wrong = range(DepthFormat.DEPTH16)
         assertEquals(1.0, wrong.first, 1e-3)
         assertEquals(1.808, wrong.second, 1e-3)
+    }
+
+    /**
+     * ARCore's raw depth confidence (0–255): the test scene's top rows hold a wrong, nearer depth (300 mm) rated
+     * 0, the rest 255, packed from a padded plane ([CameraPlanes.bytes8Packed]) and passed by
+     * [CameraPlanes.rgbdFrame]: the converted frame equals the one whose depth holds 0 (invalid) there, and
+     * differs from the one that takes the wrong depth.
+     */
+    @Test
+    fun lowConfidenceRawDepthIsNeverReadAsNear() {
+        val (w, h, stride) = listOf(160, 90, 176)
+        val confidencePlane = ByteBuffer.wrap(ByteArray(stride * (h - 1) + w) { i ->
+            (if (i / stride <= 16) 0 else 255).toByte()
+        })
+        val confidence = CameraPlanes.bytes8Packed(confidencePlane, w, h, stride)
+        assertEquals(w * h, confidence.size)
+        val rgba = arcoreFrame(null).first.color
+        val format = CameraPlanes.depthFormatOf(CameraPlanes.HARDWARE_BUFFER_D_16)
+        val depthStride = 2 * w + 16
+        fun frame(top: Int, rated: ByteArray?) = CameraPlanes.rgbdFrame(
+            rgba, 640, 480,
+            depthD16(w, h, depthStride) { _, row -> if (row <= 16) top else if (row <= 32) 500 else 2000 },
+            w, h, depthStride, format, Rotation.DEG90, null, rated, 128,
+        )
+        fun converted(f: RgbdFrame) = convertFrame(f, 480u, 640u, Fit.STRETCH).depth
+        val rated = frame(300, confidence)
+        assertEquals(128.toUByte(), rated.minConfidence)
+        assertEquals(converted(frame(0, null)), converted(rated))
+        assertFalse("the wrong depth is read without the confidence", converted(frame(300, null)) == converted(rated))
+        assertThrows(IllegalArgumentException::class.java) {
+            CameraPlanes.bytes8Packed(confidencePlane, w, h, w - 1)
+        }
     }
 }
