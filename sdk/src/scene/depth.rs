@@ -360,7 +360,16 @@ fn decode_float_depth(bytes: &[u8], source: &Path) -> Result<DecodedDepth> {
             DepthEncoding::Metres.description()
         )));
     }
-    super::exr::decode_exr_depth(bytes, source)
+    let samples = super::exr::read_exr_depth(bytes, source)?;
+    let valid = samples.mapv(|z| z.is_finite() && z > 0.0);
+    let values = Zip::from(&samples)
+        .and(&valid)
+        .map_collect(|&z, &ok| if ok { z } else { 0.0 });
+    Ok(DecodedDepth {
+        values,
+        valid,
+        metric: true,
+    })
 }
 
 #[cfg(not(feature = "research"))]

@@ -7,20 +7,19 @@ use std::path::Path;
 use exr::prelude::{read, FlatSamples, ReadChannels, ReadLayers};
 use ndarray::Array2;
 
-use super::depth::DecodedDepth;
 use crate::error::{HoloError, Result};
 
 /// Channel names taken for depth in a file with several channels, in this order (case-insensitive).
 const DEPTH_CHANNELS: [&str; 4] = ["Z", "Y", "R", "depth"];
 
-/// Decodes an OpenEXR file's depth channel (see [`DEPTH_CHANNELS`]) of its first layer at the largest
-/// resolution into `[H, W]` metres; samples that are not finite and > 0 are invalid. The image size is
+/// The samples `[H, W]` of an OpenEXR file's depth channel (see [`DEPTH_CHANNELS`]) of its first layer at the
+/// largest resolution, as f32 (half-precision files widened), before any validity rule. The image size is
 /// checked against [`crate::io::InputLimits`] from the header before the pixels are read.
 ///
 /// Errors: [`HoloError::InvalidDepth`] naming `source` for a file the exr crate cannot read (truncated,
 /// corrupt, deep data), an empty image, or several channels none of which is named for depth (listing them);
 /// [`HoloError::InvalidData`] above the pixel limit.
-pub(crate) fn decode_exr_depth(bytes: &[u8], source: &Path) -> Result<DecodedDepth> {
+pub(crate) fn read_exr_depth(bytes: &[u8], source: &Path) -> Result<Array2<f32>> {
     let bad = |why: String| HoloError::InvalidDepth(format!("`{}`: {why}", source.display()));
     let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false)
         .map_err(|e| bad(format!("not a readable OpenEXR file ({e})")))?;
@@ -71,21 +70,6 @@ pub(crate) fn decode_exr_depth(bytes: &[u8], source: &Path) -> Result<DecodedDep
             samples.len()
         )));
     }
-    let mut values = Array2::<f32>::zeros((h, w));
-    let mut valid = Array2::<bool>::from_elem((h, w), false);
-    for ((v, ok), z) in values
-        .iter_mut()
-        .zip(valid.iter_mut())
-        .zip(samples.values_as_f32())
-    {
-        if z.is_finite() && z > 0.0 {
-            *v = z;
-            *ok = true;
-        }
-    }
-    Ok(DecodedDepth {
-        values,
-        valid,
-        metric: true,
-    })
+    Array2::from_shape_vec((h, w), samples.values_as_f32().collect())
+        .map_err(|e| bad(format!("its samples do not fill {w}×{h} pixels ({e})")))
 }
