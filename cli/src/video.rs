@@ -36,7 +36,7 @@ pub struct VideoArgs {
     /// metadata.json) or a Stray Scanner folder (rgb/ extracted from rgb.mp4, depth/, confidence/,
     /// odometry.csv); frames in the order of the recording's timestamps, its confidence maps applied
     /// (docs/VIDEO.md).
-    #[arg(long, conflicts_with_all = ["rgb_dir", "depth_dir", "confidence_dir"])]
+    #[arg(long, conflicts_with_all = ["rgb_dir", "depth_dir", "confidence_dir", "skip_unmatched"])]
     recording: Option<PathBuf>,
     #[command(flatten)]
     depth: crate::args::DepthArgs,

@@ -474,7 +474,21 @@ impl GpuSpectralPlan {
                 "a spectral operation needs ≥ 1 multiplier",
             ));
         }
-        self.bind_with(ctx, field, multipliers)
+        let p = &*self.inner;
+        Ok(GpuSpectralOp {
+            plan: Arc::clone(&self.inner),
+            embed: ctx.bind(&p.embed_kernel, &[&p.grid, field, &p.a]),
+            multiply: multipliers
+                .iter()
+                .map(|m| {
+                    [
+                        ctx.bind(&p.multiply_kernel, &[&p.grid, &p.a, &m.buffer]),
+                        ctx.bind(&p.multiply_kernel, &[&p.grid, &p.b, &m.buffer]),
+                    ]
+                })
+                .collect(),
+            crop: p.crop_binds(ctx, field),
+        })
     }
 
     /// A buffer for one spectrum of this plan (`[C, Wc, Hc]` complex, [`GpuSpectralPlan::bind_forward`],
@@ -547,29 +561,6 @@ impl GpuSpectralPlan {
             multiply: multiplier.map(|m| ctx.bind(&p.multiply_kernel, &[&p.grid, &p.a, &m.buffer])),
             crop: p.crop_binds(ctx, field),
         }
-    }
-
-    fn bind_with(
-        &self,
-        ctx: &GpuContext,
-        field: &wgpu::Buffer,
-        multipliers: &[&GpuMultiplier],
-    ) -> Result<GpuSpectralOp> {
-        let p = &*self.inner;
-        Ok(GpuSpectralOp {
-            plan: Arc::clone(&self.inner),
-            embed: ctx.bind(&p.embed_kernel, &[&p.grid, field, &p.a]),
-            multiply: multipliers
-                .iter()
-                .map(|m| {
-                    [
-                        ctx.bind(&p.multiply_kernel, &[&p.grid, &p.a, &m.buffer]),
-                        ctx.bind(&p.multiply_kernel, &[&p.grid, &p.b, &m.buffer]),
-                    ]
-                })
-                .collect(),
-            crop: p.crop_binds(ctx, field),
-        })
     }
 }
 
