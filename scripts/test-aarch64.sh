@@ -8,13 +8,21 @@
 # libc6-dev-arm64-cross, qemu-user; rustup: the target).
 #
 # What runs: the kernels crate under three emulated CPUs (see the end), the aarch64 `holo render` on a real
-# frame against the x86-64 one (`holo compare`), the native CNN engine against tract
-# (the `cnn::` unit tests), and every shipped CNN (8/15/30 layers, pre-filters; f32, int8 QOperator and QDQ) and the fixture
-# CNNs against their PyTorch outputs with the x86 tolerances (tests model, shipped_models), the pipeline
-# tests (session vs the stand-alone stages, streaming, bad input), and platform_parity: the built-in scene
-# rendered to the same midpoint hologram and SLM codes as the x86-64 reference files, within the tolerances
-# that test states (it prints the differences). A debug build (deps optimised as in the dev profile), so it
-# stays a few minutes on two cores. Emulated timings mean nothing: never read them as phone speed.
+# frame against the x86-64 one (`holo compare`), the native CNN engine's unit tests (the `cnn::` tests), every
+# shipped CNN (8/15/30 layers, pre-filters; f32 and int8 QDQ) and the fixture CNNs against their PyTorch outputs
+# with the x86 tolerances (tests model, shipped_models), the pipeline tests (session vs the stand-alone stages,
+# streaming, bad input), and platform_parity: the built-in scene rendered to the same midpoint hologram and SLM
+# codes as the x86-64 reference files, within the tolerances that test states (it prints the differences). A
+# debug build (deps optimised as in the dev profile), so it stays a few minutes on two cores. Emulated timings
+# mean nothing: never read them as phone speed.
+#
+# tract under qemu: built and run (the same tests with its cases: tract against PyTorch, the native engine
+# against tract, the int8 QOperator files, platform_parity's tract cases) only where it can have changed since
+# the previous commit: Cargo.lock (tract's version), a Cargo.toml, tract's engine (sdk/src/cnn/tract) or the
+# shipped models (models/); also without a previous commit, or with TENSORHOLO_ARM_TRACT=1. Otherwise the step
+# builds what the native engine needs, no tract: tract's crates were half of the aarch64 build (tract-core alone
+# 432 of 801 s from scratch here), and tract's own CI tests its NEON kernels. Set TENSORHOLO_ARM_TRACT=0 to leave
+# it out regardless.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 # shellcheck source=bindings/tests/lib.sh
@@ -32,18 +40,32 @@ rustup target list --installed | grep -qx "$target" || rustup target add "$targe
 # check below because holo's `output_guard` test needs it; holo pulls the SDK's `research` feature in, and a
 # separate `cargo build -p holo` resolved other features and rebuilt tract and the SDK: 6 min here, warm). No
 # `gpu` feature: wgpu is not what this step tests, and it would double the cross build.
-sdk=(--locked --target "$target" -p tensorholo -p holo --no-default-features
-  --features "tensorholo/embedded-models tensorholo/models-15 tensorholo/models-30 tensorholo/tract")
+features="tensorholo/embedded-models tensorholo/models-15 tensorholo/models-30"
+arm_tract="${TENSORHOLO_ARM_TRACT:-}"
+if [ -z "$arm_tract" ]; then
+  arm_tract=0
+  if ! git rev-parse -q --verify HEAD~1 >/dev/null 2>&1 \
+    || git diff --name-only HEAD~1 -- Cargo.lock '*Cargo.toml' sdk/src/cnn/tract models | grep -q .; then
+    arm_tract=1
+  fi
+fi
+if [ "$arm_tract" = 1 ]; then
+  features+=" tensorholo/tract holo/tract"
+  echo "== aarch64 with tract (TENSORHOLO_ARM_TRACT=1, or tract's version, a manifest, its engine or the models changed)"
+else
+  echo "== aarch64 without tract (the native engine; TENSORHOLO_ARM_TRACT=1 adds tract)"
+fi
+sdk=(--locked --target "$target" -p tensorholo -p holo --no-default-features --features "$features")
 sdk_tests=(--test model --test shipped_models --test pipeline --test platform_parity)
 cargo test "${sdk[@]}" --lib "${sdk_tests[@]}" --test output_guard --no-run "$@"
 
 cargo test "${sdk[@]}" "${sdk_tests[@]}" "$@" -- --nocapture 2>&1 |
   grep -vE '^(running [0-9]+ tests?|)$'
 
-# The native CNN engine (NEON kernel rows) against tract on every shipped f32 CNN, threads and bad input: the
-# SDK's unit tests of `cnn` (sdk/src/cnn/tests.rs); and the per-runtime suite (sdk/src/pipeline/suite.rs): one
-# list of frames through the session on tract and on the native engine at every NEON row qemu's `max` CPU
-# has, each against the stand-alone reference. Built above.
+# The native CNN engine (NEON kernel rows) on every shipped f32 CNN, threads and bad input, against tract where
+# it is built: the SDK's unit tests of `cnn` (sdk/src/cnn/tests.rs); and the per-runtime suite
+# (sdk/src/pipeline/suite.rs): one list of frames through the session on the native engine at every NEON row
+# qemu's `max` CPU has (and on tract), each against the stand-alone reference. Built above.
 cargo test "${sdk[@]}" --lib "$@" -- --nocapture cnn:: pipeline::suite 2>&1 |
   grep -vE '^(running [0-9]+ tests?|)$'
 

@@ -478,12 +478,140 @@ fn edge_aware_depth_upsampling_is_closer_to_the_full_resolution_hologram_than_ne
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// A simulated phone depth sensor on a rendered frame whose depth is exact (Redwood frame 0): depth at a
-/// quarter of the resolution, 1 % noise on z, and at depth edges "flying pixels" (a depth anywhere between
-/// the near and the far side, what a LiDAR or time-of-flight sensor returns across an edge) rated confidence
-/// 0, the rest 2, as ARKit rates its depth. With the confidence map the flying pixels are invalid and filled
-/// from their confident neighbours, so the shipped CNN's displayed focal stack is closer to the one of the exact
-/// full-resolution depth than without it (PSNR over 5 planes; docs/VIDEO.md gives the figures).
+/// A phone depth sensor simulated on an exact 16-bit millimetre depth map: one sample per 4×4 block (its centre),
+/// 1 % uniform noise on z, and where the block spans more than 10 cm (a depth edge) a "flying pixel" anywhere
+/// between its near and far depth, rated confidence 0 (the rest 2, as ARKit rates). `frame` draws other noise
+/// and other flying depths (a sensor's next frame of a still scene). Returns the depth, the confidence map and
+/// the number of flying samples.
+fn simulated_phone_sensor(
+    source: &image::ImageBuffer<image::Luma<u16>, Vec<u16>>,
+    frame: u64,
+) -> (
+    image::ImageBuffer<image::Luma<u16>, Vec<u16>>,
+    image::GrayImage,
+    usize,
+) {
+    let (w, h) = (source.width() / 4, source.height() / 4);
+    // A fixed pseudo-random number in [0, 1) per sample and frame (SplitMix64 of its index).
+    let unit = |i: u64, salt: u64| {
+        let mut z = (i * 2 + salt).wrapping_add(0x9E37_79B9_7F4A_7C15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut sensor = image::ImageBuffer::<image::Luma<u16>, _>::new(w, h);
+    let mut confidence = image::GrayImage::new(w, h);
+    let mut flying = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let block: Vec<f64> = (0..16)
+                .map(|k| f64::from(source.get_pixel(4 * x + k % 4, 4 * y + k / 4).0[0]))
+                .filter(|&v| v > 0.0)
+                .collect();
+            let i = u64::from(y * w + x) + frame * u64::from(w * h);
+            let (lo, hi) = block
+                .iter()
+                .fold((f64::INFINITY, 0f64), |(l, u), &v| (l.min(v), u.max(v)));
+            let centre = f64::from(source.get_pixel(4 * x + 2, 4 * y + 2).0[0]);
+            let (value, rating) = if block.len() < 16 || centre == 0.0 {
+                (centre, 2) // a hole of the exact depth stays a hole
+            } else if hi - lo > 100.0 {
+                flying += 1;
+                (lo + unit(i, 0) * (hi - lo), 0)
+            } else {
+                (
+                    centre * (1.0 + 0.01 * (2.0 * unit(i, 1) - 1.0) * 3f64.sqrt()),
+                    2,
+                )
+            };
+            sensor.put_pixel(x, y, image::Luma([value.round() as u16]));
+            confidence.put_pixel(x, y, image::Luma([rating]));
+        }
+    }
+    (sensor, confidence, flying)
+}
+
+/// A still scene (Redwood frame 0, its depth exact) seen by the simulated phone sensor of
+/// [`simulated_phone_sensor`] over 5 frames, each with its own noise and flying pixels, through one session of
+/// the shipped CNN at 192 × 256: the SLM patterns churn (`encoding::phase_churn`, mean wrapped |Δφ| between
+/// consecutive patterns) although nothing moved, and the confidence map lowers that churn (the flying pixels,
+/// which change most from frame to frame, are filled from steady neighbours); the exact depth on every frame
+/// churns not at all. docs/VIDEO.md gives the figures.
+#[test]
+fn a_still_scene_through_a_simulated_phone_sensor_churns_less_with_its_confidence_map() {
+    use tensorholo::encoding::phase_churn;
+    use tensorholo::scene::load_rgbd_with_confidence;
+    let rgb = shared_data("redwood_livingroom_seq/color/00000.jpg");
+    let depth = shared_data("redwood_livingroom_seq/depth/00000.png");
+    let options = LoadOptions {
+        size: Some((192, 256)),
+        ..LoadOptions::default()
+    };
+    let (exact, report) = load_rgbd(&rgb, &depth, DepthEncoding::Millimetres16, &options).unwrap();
+    let options = LoadOptions {
+        range: report.range_used,
+        ..options
+    };
+    let config = PipelineConfig {
+        offset_m: 6e-3,
+        ..PipelineConfig::default()
+    };
+    let pipeline = HologramPipeline::embedded(&ModelSelection::default(), config).expect("models");
+    let mut session = pipeline.session(192, 256).expect("session");
+    let mut codes = |frame: &RgbdFrame| session.render(frame).expect("frame").codes.clone();
+    let mean_churn = |patterns: &[Array3<u8>]| {
+        patterns
+            .windows(2)
+            .map(|p| phase_churn(p[0].view(), p[1].view()).unwrap().mean_abs_rad)
+            .sum::<f64>()
+            / (patterns.len() - 1) as f64
+    };
+    let still = [codes(&exact), codes(&exact)];
+    assert_eq!(mean_churn(&still), 0.0);
+
+    let source = image::open(&depth).unwrap().to_luma16();
+    let dir = std::env::temp_dir().join(format!("tensorholo-churn-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (mut without, mut with) = (Vec::new(), Vec::new());
+    for frame in 0..5 {
+        let (sensor, confidence, _) = simulated_phone_sensor(&source, frame);
+        let (sensor_path, confidence_path) = (dir.join("d.png"), dir.join("c.png"));
+        sensor.save(&sensor_path).unwrap();
+        confidence.save(&confidence_path).unwrap();
+        let load = |confidence: Option<&Path>| {
+            load_rgbd_with_confidence(
+                &rgb,
+                &sensor_path,
+                confidence,
+                DepthEncoding::Millimetres16,
+                &options,
+            )
+            .unwrap()
+            .0
+        };
+        without.push(codes(&load(None)));
+        with.push(codes(&load(Some(&confidence_path))));
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+    let (without, with) = (mean_churn(&without), mean_churn(&with));
+    eprintln!(
+        "Redwood frame 0, still, 5 frames of a simulated phone sensor: SLM phase churn {without:.4} rad \
+         without the confidence map, {with:.4} rad with it (0 with the exact depth)"
+    );
+    assert!(without > 0.0, "{without}");
+    assert!(
+        with < 0.9 * without,
+        "with {with:.4} rad, without {without:.4} rad"
+    );
+}
+
+/// A simulated phone depth sensor ([`simulated_phone_sensor`]) on a rendered frame whose depth is exact
+/// (Redwood frame 0): depth at a quarter of the resolution, 1 % noise on z, and at depth edges "flying pixels" (a
+/// depth anywhere between the near and the far side, what a LiDAR or time-of-flight sensor returns across an
+/// edge) rated confidence 0, the rest 2, as ARKit rates its depth. With the confidence map the flying pixels
+/// are invalid and filled from their confident neighbours, so the shipped CNN's displayed focal stack is closer
+/// to the one of the exact full-resolution depth than without it (PSNR over 5 planes; docs/VIDEO.md gives the
+/// figures).
 #[test]
 fn confidence_maps_bring_a_simulated_phone_sensor_closer_to_the_exact_depth() {
     use tensorholo::scene::load_rgbd_with_confidence;
@@ -514,43 +642,8 @@ fn confidence_maps_bring_a_simulated_phone_sensor_closer_to_the_exact_depth() {
     };
     // The sensor: each 4×4 block of the exact depth gives one sample.
     let source = image::open(&depth).unwrap().to_luma16();
-    let (w, h) = (source.width() / 4, source.height() / 4);
-    // A fixed pseudo-random number in [0, 1) per sample (SplitMix64 of its index).
-    let unit = |i: u64, salt: u64| {
-        let mut z = (i * 2 + salt).wrapping_add(0x9E37_79B9_7F4A_7C15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    };
-    let mut sensor = image::ImageBuffer::<image::Luma<u16>, _>::new(w, h);
-    let mut confidence = image::GrayImage::new(w, h);
-    let mut flying = 0;
-    for y in 0..h {
-        for x in 0..w {
-            let block: Vec<f64> = (0..16)
-                .map(|k| f64::from(source.get_pixel(4 * x + k % 4, 4 * y + k / 4).0[0]))
-                .filter(|&v| v > 0.0)
-                .collect();
-            let i = u64::from(y * w + x);
-            let (lo, hi) = block
-                .iter()
-                .fold((f64::INFINITY, 0f64), |(l, u), &v| (l.min(v), u.max(v)));
-            let centre = f64::from(source.get_pixel(4 * x + 2, 4 * y + 2).0[0]);
-            let (value, rating) = if block.len() < 16 || centre == 0.0 {
-                (centre, 2) // a hole of the exact depth stays a hole
-            } else if hi - lo > 100.0 {
-                flying += 1;
-                (lo + unit(i, 0) * (hi - lo), 0)
-            } else {
-                (
-                    centre * (1.0 + 0.01 * (2.0 * unit(i, 1) - 1.0) * 3f64.sqrt()),
-                    2,
-                )
-            };
-            sensor.put_pixel(x, y, image::Luma([value.round() as u16]));
-            confidence.put_pixel(x, y, image::Luma([rating]));
-        }
-    }
+    let (sensor, confidence, flying) = simulated_phone_sensor(&source, 0);
+    let (w, h) = sensor.dimensions();
     let dir = std::env::temp_dir().join(format!("tensorholo-confidence-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let (sensor_path, confidence_path) = (dir.join("d.png"), dir.join("c.png"));

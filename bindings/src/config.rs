@@ -11,7 +11,7 @@ use tensorholo::synthesis::aberration::AberrationProfile;
 
 use crate::enums::{Backend, CnnEngine, GpuPrecision, Precision, PrefilterMode, SceneInput};
 use crate::error::{invalid, Result};
-use crate::frames::Fit;
+use crate::frames::{DepthUpsampling, Fit};
 
 /// Everything a [`HologramGenerator`](crate::HologramGenerator) needs. Only `width` and `height` (the SLM's resolution in pixels) are
 /// required; every other field has the default named in its comment.
@@ -44,6 +44,10 @@ pub struct GeneratorConfig {
     /// How camera frames fit the hologram; `None` = [`Fit::Crop`].
     #[uniffi(default = None)]
     pub fit: Option<Fit>,
+    /// How a camera frame's depth of a lower resolution than its colour is brought to the colour's;
+    /// `None` = [`DepthUpsampling::Nearest`].
+    #[uniffi(default = None)]
+    pub depth_upsampling: Option<DepthUpsampling>,
     /// SLM pixel pitch in metres (default 8e-6).
     #[uniffi(default = 8e-6)]
     pub pixel_pitch_m: f64,
@@ -160,6 +164,9 @@ impl GeneratorConfig {
         if let Some(fit) = self.fit {
             c.fit = fit.into();
         }
+        if let Some(upsampling) = self.depth_upsampling {
+            c.depth_upsampling = upsampling.into();
+        }
         if let Some(backend) = self.backend {
             c.backend = backend.into();
         }
@@ -228,6 +235,7 @@ impl From<core::GeneratorConfig> for GeneratorConfig {
                 ThreadCount::ProcessDefault => 1,
             },
             fit: Some(c.fit.into()),
+            depth_upsampling: Some(c.depth_upsampling.into()),
             pixel_pitch_m: c.optics.pixel_pitch_m,
             wavelengths_m: c.optics.wavelengths_m.to_vec(),
             volume_depth_m: c.optics.volume_depth_m,
@@ -324,8 +332,13 @@ pub(crate) mod tests {
         assert_eq!(c.optics, want.optics);
         assert_eq!(c.offset_m, want.offset_m);
         assert_eq!(
-            (c.fit, c.backend, c.gpu_precision),
-            (want.fit, want.backend, want.gpu_precision)
+            (c.fit, c.depth_upsampling, c.backend, c.gpu_precision),
+            (
+                want.fit,
+                want.depth_upsampling,
+                want.backend,
+                want.gpu_precision
+            )
         );
         assert_eq!(
             c.wavelength_ratio_tolerance,
@@ -344,6 +357,7 @@ pub(crate) mod tests {
             prefilter: None,
             threads: 1,
             fit: None,
+            depth_upsampling: None,
             pixel_pitch_m: 8e-6,
             wavelengths_m: vec![],
             volume_depth_m: 6e-3,

@@ -21,6 +21,21 @@ pub enum Fit {
 
 mirror_enum!(Fit <=> scene::Fit { Crop, Letterbox, Stretch });
 
+/// How a depth buffer of a lower resolution than the colour's (ARKit's 256 × 192 LiDAR depth under a
+/// 1920 × 1440 image, ARCore's ~160 × 120) is brought to the colour's resolution (`docs/VIDEO.md`, "Depth of
+/// another resolution").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum DepthUpsampling {
+    /// Nearest neighbour (the default): blocky depth edges at the depth's own resolution, the cheapest.
+    Nearest,
+    /// Joint bilateral upsampling guided by the colour (Kopf et al. 2007): depth edges follow the colour's,
+    /// closer to full-resolution depth (1.4–6.4 dB closer on rendered frames with exact depth at 1/4 and
+    /// 1/8 resolution), at about 85 ms per 1080p frame on two desktop cores.
+    JointBilateral,
+}
+
+mirror_enum!(DepthUpsampling <=> scene::DepthUpsampling { Nearest, JointBilateral });
+
 /// Byte layout of an interleaved 8-bit sRGB colour pixel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
 pub enum ColorFormat {
@@ -208,19 +223,23 @@ pub struct ConvertedFrame {
 /// without rendering: to check the orientation and the depth–colour registration on a device, e.g. by
 /// drawing `depth` over `amplitude`.
 ///
+/// `depth_upsampling` `None` (default) = [`DepthUpsampling::Nearest`], as a generator's default.
+///
 /// Errors: [`TensorholoError::InvalidInput`](crate::TensorholoError::InvalidInput) for a `width` or `height` of 0, buffers that do not match
 /// their sizes, strides and formats, a bad `color_crop`, or a depth map without one valid pixel.
-#[uniffi::export]
+#[uniffi::export(default(depth_upsampling = None))]
 pub fn convert_frame(
     frame: RgbdFrame,
     width: u32,
     height: u32,
     fit: Option<Fit>,
+    depth_upsampling: Option<DepthUpsampling>,
 ) -> Result<ConvertedFrame> {
     guard(|| {
         let frame = frame.into_core();
         let options = scene::FrameOptions {
             fit: fit.unwrap_or(Fit::Crop).into(),
+            depth_upsampling: depth_upsampling.unwrap_or(DepthUpsampling::Nearest).into(),
             ..scene::FrameOptions::default()
         };
         let (rgbd, report) = frame
@@ -405,7 +424,7 @@ pub(crate) mod tests {
             let v = if i % 48 < 24 { 0 } else { 255 };
             px.copy_from_slice(&[v; 3]);
         }
-        let whole = convert_frame(f.clone(), 24, 32, Some(Fit::Stretch)).unwrap();
+        let whole = convert_frame(f.clone(), 24, 32, Some(Fit::Stretch), None).unwrap();
         assert_eq!(
             (whole.amplitude.len(), whole.depth.len()),
             (3 * 24 * 32, 24 * 32)
@@ -425,6 +444,7 @@ pub(crate) mod tests {
             24,
             32,
             Some(Fit::Stretch),
+            None,
         )
         .unwrap();
         assert!(right.amplitude.iter().all(|&a| a == 1.0));
@@ -438,7 +458,7 @@ pub(crate) mod tests {
             color_crop: Some(CropRect { x: 25, ..crop }),
             ..f
         };
-        match convert_frame(bad, 24, 32, None) {
+        match convert_frame(bad, 24, 32, None, None) {
             Err(TensorholoError::InvalidInput { message }) => {
                 assert!(
                     message.contains("color_crop") && message.contains("48x32"),
@@ -447,5 +467,67 @@ pub(crate) mod tests {
             }
             other => panic!("expected InvalidInput, got {other:?}"),
         }
+    }
+
+    /// Depth at 1/8 of the colour's resolution: a near object ending at column 22 of the colour (dark | bright)
+    /// is, in the 6 × 4 depth, near in the block centred on column 20 and far from column 28 on. Nearest
+    /// neighbour puts the depth edge at the blocks' border (column 24); the joint bilateral upsampling at the
+    /// colour's (22), both through `convert_frame` and through a generator's configuration.
+    #[test]
+    fn depth_upsampling_puts_a_coarse_depth_edge_on_the_colour_edge() {
+        let (w, h, edge) = (48u32, 32u32, 22u32);
+        let mut f = frame();
+        for (i, px) in f.color.chunks_mut(3).enumerate() {
+            let v = if (i as u32 % w) < edge { 20 } else { 230 };
+            px.copy_from_slice(&[v; 3]);
+        }
+        let (dw, dh) = (w / 8, h / 8);
+        f.depth = (0..dw * dh)
+            .flat_map(|i| {
+                let centre = (i % dw) * 8 + 4;
+                (if centre < edge { 0.5f32 } else { 2.0 }).to_le_bytes()
+            })
+            .collect();
+        (f.depth_width, f.depth_height) = (dw, dh);
+        let at = |c: &ConvertedFrame, x: u32| c.depth[(h / 2 * w + x) as usize];
+        let nearest = convert_frame(f.clone(), w, h, Some(Fit::Stretch), None).unwrap();
+        let bilateral = convert_frame(
+            f.clone(),
+            w,
+            h,
+            Some(Fit::Stretch),
+            Some(DepthUpsampling::JointBilateral),
+        )
+        .unwrap();
+        // 0 = near, 1 = far (the range is the frame's own: 0.5 and 2 m).
+        for x in [edge, edge + 1] {
+            assert!(
+                at(&nearest, x) < 0.05,
+                "nearest at {x}: {}",
+                at(&nearest, x)
+            );
+            assert!(
+                at(&bilateral, x) > 0.95,
+                "joint bilateral at {x}: {}",
+                at(&bilateral, x)
+            );
+        }
+        for x in [edge - 2, edge - 1] {
+            assert!(
+                at(&bilateral, x) < 0.05,
+                "joint bilateral at {x}: {}",
+                at(&bilateral, x)
+            );
+        }
+        let mut config = crate::config::tests::config(w, h);
+        assert_eq!(
+            config.to_core().unwrap().frame_options().depth_upsampling,
+            scene::DepthUpsampling::Nearest
+        );
+        config.depth_upsampling = Some(DepthUpsampling::JointBilateral);
+        assert_eq!(
+            config.to_core().unwrap().frame_options().depth_upsampling,
+            scene::DepthUpsampling::JointBilateral
+        );
     }
 }

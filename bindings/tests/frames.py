@@ -78,6 +78,12 @@ def _padded(rows: np.ndarray, stride: int) -> bytes:
     return buf.tobytes()[: stride * (h - 1) + row]
 
 
+# Beside each case's `holo_depth` (the camera's depth brought to the colour's resolution by nearest neighbour, as
+# a generator does by default): the same depth at the camera's own, half resolution, for `holo render` to bring
+# to the colour's itself (`--depth-upsampling`).
+LOW_DEPTH = "depth_half.png"
+
+
 def iphone(tmp: Path) -> tuple[Case, bytes, bytes]:
     """The iPhone portrait as iOS delivers it: BGRA with padded rows, f16 disparity (1/m) at half resolution."""
     src = SHARED / "iphone_portrait_vase"
@@ -93,6 +99,7 @@ def iphone(tmp: Path) -> tuple[Case, bytes, bytes]:
     tmp.mkdir(parents=True, exist_ok=True)
     Image.fromarray(rgb).save(tmp / "rgb.png")
     Image.fromarray(np.repeat(np.repeat(v_half, 2, 0), 2, 1)).save(tmp / "depth.png")
+    Image.fromarray(v_half).save(tmp / LOW_DEPTH)
     case = Case("iphone", "BGRA8", w, h, stride, "DISPARITY_F16", w // 2, h // 2, 0, "DEG0",
                 w // 2, h // 2, str(tmp / "rgb.png"), str(tmp / "depth.png"), "iphone-disparity")
     return case, color, depth
@@ -112,6 +119,7 @@ def redwood(tmp: Path) -> tuple[Case, bytes, bytes]:
     tmp.mkdir(parents=True, exist_ok=True)
     Image.fromarray(rgb).save(tmp / "rgb.png")
     Image.fromarray(np.repeat(np.repeat(mm_half, 2, 0), 2, 1).astype(np.uint16)).save(tmp / "depth.png")
+    Image.fromarray(mm_half.astype(np.uint16)).save(tmp / LOW_DEPTH)
     sh, sw = sensor_mm.shape
     case = Case("redwood", "RGBA8", sensor_rgba.shape[1], sensor_rgba.shape[0], 0, "MILLIMETRES_U16", sw, sh, 0,
                 "DEG90", w // 2, h // 2, str(tmp / "rgb.png"), str(tmp / "depth.png"), "mm16")
@@ -121,10 +129,10 @@ def redwood(tmp: Path) -> tuple[Case, bytes, bytes]:
 CASES = {"iphone": iphone, "redwood": redwood}
 
 
-def holo_codes(case: Case, out: Path, calibration: Path | None = None) -> np.ndarray:
+def holo_codes(case: Case, out: Path, calibration: Path | None = None, depth: str | None = None) -> np.ndarray:
     """`holo render` of the case's files at its hologram size (defaults otherwise, through `calibration` if
-    given): codes `[3, H, W]`."""
-    cmd = [str(holo_binary()), "render", "--rgb", case.holo_rgb, "--depth", case.holo_depth,
+    given; `depth` instead of the case's depth file): codes `[3, H, W]`."""
+    cmd = [str(holo_binary()), "render", "--rgb", case.holo_rgb, "--depth", depth or case.holo_depth,
            "--depth-encoding", case.holo_encoding, "--size", f"{case.out_height}x{case.out_width}",
            "--repeat", "0", "--out", str(out)]
     if calibration is not None:

@@ -2,6 +2,7 @@
 //! stages and the end-to-end pipeline, as a Markdown table (docs/BENCHMARKS.md). Compare with
 //! `benchmarks/cnn_onnxruntime.py` (onnxruntime and the NumPy matmul peak on the same machine).
 
+use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -10,6 +11,7 @@ use clap::Args;
 use ndarray::Array3;
 use serde_json::json;
 use std::sync::Arc;
+#[cfg(feature = "tract")]
 use tensorholo::cnn::tract::{NodeTiming, TractModel};
 
 use tensorholo::cnn::{
@@ -20,7 +22,9 @@ use tensorholo::model::{embedded, ModelConfig, Precision};
 use tensorholo::pipeline::{
     Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode,
 };
+use tensorholo::refine::{FrameRefinement, RefineOptions, DEFAULT_TARGET_LEVELS};
 use tensorholo::scene::procedural;
+use tensorholo::synthesis::SceneLayer;
 
 use crate::args::parse_size;
 use crate::render::{BackendArg, EngineArg, GpuPrecisionArg, LayoutArg, PrecisionArg};
@@ -33,7 +37,7 @@ pub struct BenchArgs {
     #[arg(long, value_delimiter = ',', default_values_t = [8, 15, 30])]
     layers: Vec<usize>,
     /// Weight formats to measure.
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [PrecisionArg::F32, PrecisionArg::Int8Qop, PrecisionArg::Int8Qdq])]
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = default_precisions())]
     precision: Vec<PrecisionArg>,
     /// Frame sizes HEIGHTxWIDTH.
     #[arg(long, value_delimiter = ',', value_parser = parse_size, default_values = ["384x384", "540x960", "1080x1920"])]
@@ -44,7 +48,7 @@ pub struct BenchArgs {
     layout: Vec<LayoutArg>,
     /// CPU CNN engines, timed alternately case by case in the CNN table (native: f32 and int8 QDQ models;
     /// auto: as a session chooses); the pipeline table uses the first.
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [EngineArg::Native, EngineArg::Tract])]
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = default_engines())]
     engine: Vec<EngineArg>,
     /// Measure this machine's f32 FMA and int8 dot-product peaks per thread count first (register-only loops
     /// on every thread, about 0.3 s each) and give each CNN row's share of the f32 peak.
@@ -94,6 +98,12 @@ pub struct BenchArgs {
     /// The GPU's peak f32 throughput in GFLOP/s (from its data sheet), to print each GPU stage's fraction of it.
     #[arg(long)]
     gpu_peak_gflops: Option<f64>,
+    /// Also time the focal-stack refinement (docs/REFINE.md): N iterations from the 8-layer f32 CNN's codes
+    /// against the SM-LBM target, one frame of the built-in scene per --sizes, --backend and --threads case (one
+    /// run each: seconds). A table gives the target's time, the iterations' and the gain at the focal planes
+    /// the loss never saw.
+    #[arg(long, value_name = "N")]
+    refine: Option<usize>,
     /// Also write every measurement to this JSON file.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -186,9 +196,37 @@ fn time_runs(
     Ok((v[v.len() / 2], v.len()))
 }
 
+/// The `--profile` runs: per case, the time of each tract node.
+#[cfg(feature = "tract")]
+type Profiles = Vec<(String, Vec<NodeTiming>)>;
+/// Without tract there is nothing to profile (`--profile` is refused).
+#[cfg(not(feature = "tract"))]
+type Profiles = Vec<(String, ())>;
+
+/// The `--engine` values by default: the native engine, and tract where this build has it.
+fn default_engines() -> Vec<EngineArg> {
+    let mut engines = vec![EngineArg::Native];
+    if cfg!(feature = "tract") {
+        engines.push(EngineArg::Tract);
+    }
+    engines
+}
+
+/// The `--precision` values by default: f32 and int8 QDQ, and int8 QOperator (tract's alone) where this build
+/// has tract.
+fn default_precisions() -> Vec<PrecisionArg> {
+    let mut precisions = vec![PrecisionArg::F32];
+    if cfg!(feature = "tract") {
+        precisions.push(PrecisionArg::Int8Qop);
+    }
+    precisions.push(PrecisionArg::Int8Qdq);
+    precisions
+}
+
 /// Prints the `--profile` table: per case, the time of each tract operator kind (summed over its nodes) and
 /// its share of the run, largest first; adds each row to `results`.
-fn print_profiles(profiles: &[(String, Vec<NodeTiming>)], results: &mut Vec<serde_json::Value>) {
+#[cfg(feature = "tract")]
+fn print_profiles(profiles: &Profiles, results: &mut Vec<serde_json::Value>) {
     println!("Time per tract operator (one profiled run per case; `--profile`)\n");
     println!("| CNN | precision | layout | size (HxW) | threads | operator | nodes | ms | share |");
     println!("|---|---|---|---|---:|---|---:|---:|---:|");
@@ -370,9 +408,11 @@ fn cnn_table(
     args: &BenchArgs,
     config: &ModelConfig,
     results: &mut Vec<serde_json::Value>,
-    profiles: &mut Vec<(String, Vec<NodeTiming>)>,
+    profiles: &mut Profiles,
     plans: &mut BenchPlans,
 ) -> Result<()> {
+    #[cfg(not(feature = "tract"))]
+    let _ = profiles;
     let mut peaks = std::collections::BTreeMap::new();
     if args.peak {
         for &t in &args.threads {
@@ -470,6 +510,7 @@ fn cnn_table(
                             "gflops": gflops, "peak_gflops": peaks.get(&threads).map(peak_of),
                             "runs": runs, "macs_per_pixel": macs, "plan_ms": plan_ms}),
                         );
+                        #[cfg(feature = "tract")]
                         if args.profile && report.engine == CnnEngine::Tract {
                             let case = format!(
                                 "holo{layers} | {precision} | {detail} | {h}x{w} | {threads}"
@@ -497,7 +538,87 @@ fn pipeline_engine(args: &BenchArgs, precision: Precision) -> CnnEngine {
 }
 
 /// Runs `holo bench`.
+/// The refinement table (`--refine N`): per size, backend and thread count, one frame of the built-in scene
+/// rendered by the 8-layer f32 CNN, its codes refined for `iterations` against the SM-LBM target (the defaults
+/// of `holo render --refine`).
+fn refine_table(
+    args: &BenchArgs,
+    iterations: usize,
+    results: &mut Vec<serde_json::Value>,
+) -> Result<()> {
+    let request = FrameRefinement {
+        options: RefineOptions {
+            iterations,
+            ..RefineOptions::default()
+        },
+        ..FrameRefinement::default()
+    };
+    request.validate().context("--refine")?;
+    println!(
+        "Refinement (`--refine {iterations}`, docs/REFINE.md): one frame of the built-in scene, the 8-layer f32 \
+         CNN's codes refined against the SM-LBM target ({} levels, {} loss planes), offset {} mm; one run per \
+         case; held-out: PSNR at the focal planes between the loss's\n",
+        DEFAULT_TARGET_LEVELS, request.options.planes, args.offset_mm
+    );
+    println!("| size (HxW) | backend | threads | target s | iterations s | ms per iteration | held-out dB: CNN's codes → refined codes |");
+    println!("|---|---|---:|---:|---:|---:|---|");
+    for &(h, w) in &args.sizes {
+        let frame = procedural::default_scene(h, w)?;
+        for &backend in &args.backend {
+            for &threads in &args.threads {
+                let pipeline = HologramPipeline::embedded(
+                    &ModelSelection::default(),
+                    PipelineConfig {
+                        offset_m: args.offset_mm as f64 * 1e-3,
+                        cnn_threads: ThreadCount::Fixed(threads),
+                        backend: backend.into(),
+                        ..PipelineConfig::default()
+                    },
+                )?;
+                let mut session = pipeline.session(h, w)?;
+                session.render(&frame)?;
+                let backend_report = session.backend_report().clone();
+                let (out, heads) = session.into_last_frame();
+                let midpoint = heads.context("no frame rendered")?.to_field()?;
+                let mut refiner =
+                    crate::refine::frame_refiner(request, &pipeline, &backend_report, threads)?;
+                let r = refiner.refine(
+                    &[SceneLayer::from(&frame)],
+                    Some(midpoint.view()),
+                    out.codes.view(),
+                    &mut |_| ControlFlow::Continue(()),
+                )?;
+                let s = &r.held_out;
+                let base = s.cnn_codes_psnr_db.unwrap_or(s.start_psnr_db);
+                let per_iteration_ms = r.report.iterations_s / iterations as f64 * 1e3;
+                println!(
+                    "| {h}x{w} | {} | {threads} | {:.2} | {:.2} | {per_iteration_ms:.1} | {base:.2} → {:.2} ({:+.2}) |",
+                    r.backend,
+                    r.target_s,
+                    r.report.iterations_s,
+                    s.refined_codes_psnr_db,
+                    s.refined_codes_psnr_db - base
+                );
+                results.push(
+                    json!({"kind": "refine", "size": [h, w], "backend": r.backend,
+                    "threads": threads, "iterations": iterations, "target_s": r.target_s,
+                    "iterations_s": r.report.iterations_s, "per_iteration_ms": per_iteration_ms,
+                    "held_out": s, "gain_db": s.refined_codes_psnr_db - base}),
+                );
+            }
+        }
+    }
+    println!();
+    Ok(())
+}
+
 pub fn run(args: &BenchArgs) -> Result<()> {
+    #[cfg(not(feature = "tract"))]
+    if args.profile {
+        anyhow::bail!(
+            "--profile times tract's operators: this holo was built without the `tract` feature"
+        );
+    }
     if let Some(path) = &args.json {
         // A stale file from an earlier run must not pass for this one's if the run fails: removed now,
         // written at the end.
@@ -530,6 +651,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     if !args.skip_cnn {
         cnn_table(args, &config, &mut results, &mut profiles, &mut plans)?;
     }
+    #[cfg(feature = "tract")]
     if !profiles.is_empty() {
         print_profiles(&profiles, &mut results);
     }
@@ -651,6 +773,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
     if args.backend.contains(&BackendArg::Gpu) {
         gpu_tables(args, &mut results)?;
+    }
+    if let Some(iterations) = args.refine {
+        refine_table(args, iterations, &mut results)?;
     }
     let peak = crate::memory::peak_rss_mib();
     if let Some(p) = peak {

@@ -11,6 +11,9 @@
 //!
 //! Regenerate the references (x86-64 only; review the diff): `TENSORHOLO_WRITE_PARITY=1 cargo test -p
 //! tensorholo --test platform_parity`.
+//!
+//! The tract cases need the feature `tract`; the native engine's case runs in every build (CI's ARM step
+//! builds without tract, as the phone library can: scripts/test-aarch64.sh).
 #![cfg(feature = "embedded-models")]
 
 use std::path::PathBuf;
@@ -18,6 +21,7 @@ use std::path::PathBuf;
 use ndarray::{Array3, Array4, Axis};
 use ndarray_npy::{read_npy, write_npy};
 use num_complex::Complex32;
+#[cfg(feature = "tract")]
 use tensorholo::cnn::tract::TractModel;
 use tensorholo::cnn::{CnnEngine, CnnLayout, ThreadCount};
 use tensorholo::model::Precision;
@@ -120,13 +124,23 @@ fn render(case: &Case) -> (Array3<Complex32>, Array3<u8>) {
     };
     let pipeline = HologramPipeline::embedded(&selection, config).unwrap();
     let frame = default_scene(H, W).unwrap();
-    // The midpoint of tract's channels-first plan, as the references were written.
-    let midpoint = TractModel::new(pipeline.hologram_model())
-        .unwrap()
-        .run_frame(&frame)
-        .unwrap();
     let mut session = pipeline.session(H, W).unwrap();
     let codes = session.render(&frame).unwrap().codes.clone();
+    let midpoint = match case.engine {
+        // The midpoint of tract's channels-first plan, as the references were written.
+        #[cfg(feature = "tract")]
+        CnnEngine::Tract => TractModel::new(pipeline.hologram_model())
+            .unwrap()
+            .run_frame(&frame)
+            .unwrap(),
+        // The native engine's own midpoint (the session's CNN output), against tract's reference.
+        _ => session
+            .into_last_frame()
+            .1
+            .expect("the session keeps its heads")
+            .to_field()
+            .unwrap(),
+    };
     (midpoint, codes)
 }
 
@@ -140,24 +154,28 @@ fn split(field: &Array3<Complex32>) -> Array4<f32> {
 }
 
 // One test per case, so that the harness runs them side by side (under qemu-aarch64 in CI, each takes a minute,
-// most of it tract loading and planning the two CNNs).
+// most of it loading and planning the two CNNs).
 
 #[test]
+#[cfg(feature = "tract")]
 fn builtin_scene_renders_the_x86_reference_on_this_cpu_f32_nchw() {
     check_case("f32_nchw");
 }
 
 #[test]
+#[cfg(feature = "tract")]
 fn builtin_scene_renders_the_x86_reference_on_this_cpu_f32_nhwc() {
     check_case("f32_nhwc");
 }
 
 #[test]
+#[cfg(feature = "tract")]
 fn builtin_scene_renders_the_x86_reference_on_this_cpu_int8qdq_nchw() {
     check_case("int8qdq_nchw");
 }
 
 #[test]
+#[cfg(feature = "tract")]
 fn builtin_scene_renders_the_x86_reference_on_this_cpu_int8qop_nchw() {
     check_case("int8qop_nchw");
 }

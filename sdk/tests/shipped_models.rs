@@ -1,14 +1,37 @@
-//! Every shipped model file (`models/`, embedded with the default feature `embedded-models`) loads with tract,
-//! carries the metadata its name promises, and reproduces PyTorch's output of the checkpoint it was exported
-//! from (`models/fixtures/`, written by `training/make_shipped_fixtures.py`): f32 within 1e-4, int8 within the
-//! quantisation tolerance of `training/tests/test_export.py` (mean |error| < 0.01, max < 0.1).
+//! Every shipped model file (`models/`, embedded with the default feature `embedded-models`) loads, carries the
+//! metadata its name promises, and reproduces PyTorch's output of the checkpoint it was exported from
+//! (`models/fixtures/`, written by `training/make_shipped_fixtures.py`) on every CPU engine of the build that
+//! runs it (tract with the feature `tract`; the native engine: f32 and int8 QDQ): f32 within 1e-4, int8 within
+//! the quantisation tolerance of `training/tests/test_export.py` (mean |error| < 0.01, max < 0.1). Without
+//! `tract` (the phone library's build, the ARM step of CI) the native engine runs alone and the int8 QOperator
+//! files, which only tract runs, are not embedded.
 #![cfg(feature = "embedded-models")]
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use ndarray::Array3;
-use tensorholo::cnn::tract::TractModel;
+use tensorholo::cnn::{cnn_plan, CnnEngine, PlanRequest, ThreadCount};
 use tensorholo::model::{embedded, HologramModel, ModelConfig, ModelKind, Precision, SceneInput};
+
+/// The precisions whose files this build embeds: the int8 QOperator forms only with tract.
+fn precisions() -> impl Iterator<Item = Precision> {
+    Precision::ALL
+        .into_iter()
+        .filter(|&p| cfg!(feature = "tract") || p != Precision::Int8QOperator)
+}
+
+/// The CPU engines of this build that run `precision`'s files (QOperator int8: tract's alone).
+fn engines(precision: Precision) -> Vec<CnnEngine> {
+    let mut engines = Vec::new();
+    if cfg!(feature = "tract") {
+        engines.push(CnnEngine::Tract);
+    }
+    if precision != Precision::Int8QOperator {
+        engines.push(CnnEngine::Native);
+    }
+    engines
+}
 
 fn fixture(name: &str) -> Array3<f32> {
     let path: PathBuf = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -38,35 +61,42 @@ fn check(
     assert_ne!(md.training_commit, "fixture", "{name}");
     let stem = name.split('.').next().unwrap();
     let input = fixture(&format!("{stem}_input.npy"));
-    let (a, p) = TractModel::new(&model)
-        .unwrap()
-        .plan(input.dim().1, input.dim().2)
-        .unwrap()
-        .run_outputs(input.view())
-        .unwrap();
     let [first, second] = kind.output_names();
     let (ra, rp) = (
         fixture(&format!("{stem}_{first}.npy")),
         fixture(&format!("{stem}_{second}.npy")),
     );
-    let diffs: Vec<f32> = a
-        .iter()
-        .zip(ra.iter())
-        .chain(p.iter().zip(rp.iter()))
-        .map(|(x, y)| (x - y).abs())
-        .collect();
-    let max = diffs.iter().copied().fold(0.0f32, f32::max);
-    let mean = diffs.iter().sum::<f32>() / diffs.len() as f32;
-    println!("{name}: max |tract − torch| {max:.2e}, mean {mean:.2e}");
-    if precision == Precision::F32 {
-        assert!(max < 1e-4, "{name}: {max}");
-    } else {
-        assert!(mean < 0.01 && max < 0.1, "{name}: mean {mean}, max {max}");
+    let model = Arc::new(model);
+    let request = PlanRequest {
+        threads: ThreadCount::Fixed(1),
+        ..PlanRequest::default()
+    };
+    for engine in engines(precision) {
+        let (mut plan, _) = cnn_plan(&model, input.dim().1, input.dim().2, engine, &request)
+            .unwrap_or_else(|e| panic!("{name} on {engine:?}: {e}"));
+        let (a, p) = plan.run_outputs(input.view()).unwrap();
+        let diffs: Vec<f32> = a
+            .iter()
+            .zip(ra.iter())
+            .chain(p.iter().zip(rp.iter()))
+            .map(|(x, y)| (x - y).abs())
+            .collect();
+        let max = diffs.iter().copied().fold(0.0f32, f32::max);
+        let mean = diffs.iter().sum::<f32>() / diffs.len() as f32;
+        println!("{name} on {engine:?}: max |cnn − torch| {max:.2e}, mean {mean:.2e}");
+        if precision == Precision::F32 {
+            assert!(max < 1e-4, "{name} on {engine:?}: {max}");
+        } else {
+            assert!(
+                mean < 0.01 && max < 0.1,
+                "{name} on {engine:?}: mean {mean}, max {max}"
+            );
+        }
     }
 }
 
-// One test per group, so that the test harness runs them side by side (under qemu-aarch64 in CI, tract's
-// load and plan of each file dominate: scripts/test-aarch64.sh).
+// One test per group, so that the test harness runs them side by side (under qemu-aarch64 in CI, the load and
+// plan of each file dominate: scripts/test-aarch64.sh).
 
 #[test]
 fn shipped_hologram_cnns_match_pytorch_8_layers() {
@@ -87,11 +117,11 @@ fn shipped_hologram_cnns_match_pytorch_30_layers() {
 
 /// Every precision of the `layers`-layer hologram CNN against PyTorch. Hologram CNNs predict the midpoint
 /// hologram (offset 0 in their metadata) and serve every offset: the file loads for each (its metadata checked
-/// by `check` at offset 0 and again here), and its output does not depend on the offset, so tract runs it once.
+/// by `check` at offset 0 and again here), and its output does not depend on the offset, so it runs once.
 fn hologram_cnns(layers: usize) {
     assert!(embedded::LAYERS.contains(&layers), "{layers}");
     let base = ModelConfig::default();
-    for precision in Precision::ALL {
+    for precision in precisions() {
         let name = embedded::hologram_file(layers, precision);
         let bytes = embedded::hologram_cnn(layers, precision).unwrap();
         check(&name, bytes, ModelKind::Hologram, &base, layers, precision);
@@ -112,7 +142,7 @@ fn shipped_prefilters_match_pytorch() {
             offset_m: mm as f64 * 1e-3,
             ..base
         };
-        for precision in Precision::ALL {
+        for precision in precisions() {
             let name = embedded::prefilter_file(mm, precision);
             let bytes = embedded::prefilter_cnn(mm, precision).unwrap();
             check(&name, bytes, ModelKind::PreFilter, &config, 8, precision);
@@ -137,7 +167,7 @@ fn shipped_paired_prefilters_match_pytorch() {
                 offset_m: mm as f64 * 1e-3,
                 ..base
             };
-            for precision in Precision::ALL {
+            for precision in precisions() {
                 let name = embedded::paired_prefilter_file(mm, layers, precision);
                 let bytes = embedded::paired_prefilter_cnn(mm, layers, precision).unwrap();
                 check(&name, bytes, ModelKind::PreFilter, &config, 8, precision);
@@ -154,7 +184,7 @@ fn shipped_paired_prefilters_match_pytorch() {
 #[test]
 fn shipped_ldi_cnns_match_pytorch() {
     let base = ModelConfig::default();
-    for precision in Precision::ALL {
+    for precision in precisions() {
         let name = embedded::scene_hologram_file(SceneInput::Ldi, 8, precision);
         let config = ModelConfig {
             input_layers: 5,

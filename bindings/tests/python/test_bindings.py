@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import tensorholo
-from tensorholo import (CnnEngine, ColorFormat, DepthFormat, DisplayProfile, Fit, GeneratorConfig,
+from tensorholo import (CnnEngine, ColorFormat, DepthFormat, DepthUpsampling, DisplayProfile, Fit, GeneratorConfig,
                         HologramGenerator, PatternsListener, PrefilterMode, RgbdFrame, Rotation, SceneInput,
                         TensorholoError)
 
@@ -76,6 +76,24 @@ def test_phone_frame_renders_the_codes_of_holo_render(case):
     px = np.frombuffer(rgba, np.uint8).reshape(c.out_height, c.out_width, 4)
     np.testing.assert_array_equal(px[..., :3].transpose(2, 0, 1), codes_of(out))
     assert (px[..., 3] == 255).all()
+
+
+def test_joint_bilateral_upsampling_renders_the_codes_of_holo_render_from_the_camera_resolution_depth(case, tmp_path):
+    """The frame's depth is at half the colour's resolution. With `depth_upsampling=JOINT_BILATERAL` a generator
+    brings it to the colour's as `holo render` does with the same half-resolution depth file (the files'
+    default): the same SDK function on both paths, so the same codes; nearest neighbour (the generator's
+    default) gives other codes."""
+    c, frame, want_nearest, _ = case
+    want = frames.holo_codes(c, tmp_path / "holo", depth=str(Path(c.holo_depth).with_name(frames.LOW_DEPTH)))
+    gen = HologramGenerator(GeneratorConfig(width=c.out_width, height=c.out_height,
+                                            depth_upsampling=DepthUpsampling.JOINT_BILATERAL))
+    got = codes_of(gen.render(frame))
+    stats = frames.compare_codes(got, want)
+    print(f"{c.name}: joint bilateral vs holo render {stats}")
+    assert frames.circular_diff(got, want_nearest).mean() > 10 * max(stats["mean"], 1e-3), stats
+    converted = tensorholo.convert_frame(frame, c.out_width, c.out_height, None, DepthUpsampling.JOINT_BILATERAL)
+    nearest = tensorholo.convert_frame(frame, c.out_width, c.out_height)
+    assert converted.depth != nearest.depth
 
 
 def test_preview_is_an_image_of_the_scene(case):

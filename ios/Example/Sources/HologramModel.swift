@@ -1,12 +1,19 @@
+import ARKit
 import AVFoundation
 import CoreGraphics
+import CoreImage
 import Foundation
 import Tensorholo
 
-/// The sample's engine: captures colour + depth with `AVCaptureSession`, streams the frames through a
-/// `HologramGenerator` off the main thread, and publishes the SLM pattern (for the external display) and a
-/// simulated preview at the chosen focus (for the phone's screen). One instance, shared by both scenes.
-final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchronizerDelegate {
+/// The sample's engine: captures colour + depth, streams the frames through a `HologramGenerator` off the main
+/// thread, and publishes the SLM pattern (for the external display) and a simulated preview at the chosen focus
+/// (for the phone's screen). One instance, shared by both scenes.
+///
+/// The capture: on a LiDAR device an `ARSession` with scene depth (256 × 192 metres under the colour) and its
+/// confidence map: `RgbdFrame(frame:orientation:minConfidence:)` keeps depth of medium and high confidence, the
+/// rest is invalid and filled from its confident neighbours (docs/VIDEO.md). Elsewhere `AVCaptureSession` with
+/// the dual camera's depth (filtered by AVFoundation; it has no confidence map).
+final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchronizerDelegate, ARSessionDelegate {
     /// The instance both scenes show.
     static let shared = HologramModel()
 
@@ -59,7 +66,12 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
         }
     }
 
-    private let session = AVCaptureSession()
+    private let captureSession = AVCaptureSession()
+    private let arSession = ARSession()
+    /// Converts ARKit's YpCbCr colour (kept for the session: a context is costly to create).
+    private let ciContext = CIContext()
+    /// The timestamp of the last ARKit frame converted (on `captureQueue`).
+    private var lastARFrameTimestamp: TimeInterval = 0
     private let videoOutput = AVCaptureVideoDataOutput()
     private let depthOutput = AVCaptureDepthDataOutput()
     private var synchronizer: AVCaptureDataOutputSynchronizer?
@@ -173,11 +185,42 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
         do {
             let size = DispatchQueue.main.sync { slmSize }
             try makeGenerator(size: size)
-            try configureSession()
-            session.startRunning()
+            if ARWorldTrackingConfiguration.supportsFrameSemantics(.sceneDepth) {
+                startARSession()
+            } else {
+                try configureSession()
+                captureSession.startRunning()
+            }
         } catch {
             publish(status: "Cannot start: \(error)")
         }
+    }
+
+    /// LiDAR: ARKit's world tracking with scene depth, frames delivered on `captureQueue`.
+    private func startARSession() {
+        let configuration = ARWorldTrackingConfiguration()
+        configuration.frameSemantics = [.sceneDepth]
+        arSession.delegate = self
+        arSession.delegateQueue = captureQueue
+        arSession.run(configuration)
+    }
+
+    /// `ARSessionDelegate`: one ARKit frame, on `captureQueue`. ARKit delivers 60 a second; at most 30 are
+    /// converted (the stream drops the oldest waiting frame anyway). The depth below medium confidence is left out.
+    func session(_ session: ARSession, didUpdate frame: ARFrame) {
+        guard frame.timestamp - lastARFrameTimestamp >= 1.0 / 30 else { return }
+        lastARFrameTimestamp = frame.timestamp
+        do {
+            // Portrait UI: ARKit's buffers are the sensor's landscape, turned 90° counter-clockwise.
+            try push(RgbdFrame(frame: frame, orientation: .right, minConfidence: .medium, context: ciContext))
+        } catch {
+            publish(status: error.localizedDescription)
+        }
+    }
+
+    /// `ARSessionDelegate`: the session stopped (camera denied, sensor failure).
+    func session(_ session: ARSession, didFailWithError error: Error) {
+        publish(status: "ARKit: \(error.localizedDescription)")
     }
 
     /// Colour (BGRA) + depth from the best depth camera, synchronised.
@@ -188,25 +231,25 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
         else {
             throw TensorholoError.Unsupported(message: "this device has no back depth camera (LiDAR or dual camera)")
         }
-        session.beginConfiguration()
-        defer { session.commitConfiguration() }
-        session.sessionPreset = .photo
+        captureSession.beginConfiguration()
+        defer { captureSession.commitConfiguration() }
+        captureSession.sessionPreset = .photo
         let input = try AVCaptureDeviceInput(device: device)
-        guard session.canAddInput(input) else {
+        guard captureSession.canAddInput(input) else {
             throw TensorholoError.Unsupported(message: "cannot use the camera as a capture input")
         }
-        session.addInput(input)
+        captureSession.addInput(input)
 
         // The library reads BGRA, not the camera's default YpCbCr 4:2:0.
         videoOutput.videoSettings = [kCVPixelBufferPixelFormatTypeKey as String: kCVPixelFormatType_32BGRA]
         videoOutput.alwaysDiscardsLateVideoFrames = true
         depthOutput.isFilteringEnabled = true
         depthOutput.alwaysDiscardsLateDepthData = true
-        guard session.canAddOutput(videoOutput), session.canAddOutput(depthOutput) else {
+        guard captureSession.canAddOutput(videoOutput), captureSession.canAddOutput(depthOutput) else {
             throw TensorholoError.Unsupported(message: "cannot capture video and depth together")
         }
-        session.addOutput(videoOutput)
-        session.addOutput(depthOutput)
+        captureSession.addOutput(videoOutput)
+        captureSession.addOutput(depthOutput)
         depthOutput.connection(with: .depthData)?.isEnabled = true
 
         // A video format with depth (the `.photo` preset's may have none, e.g. on the LiDAR camera), then its
@@ -248,15 +291,19 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
                 relativeDepthReported = true
                 publish(status: "Depth accuracy is relative (not metres): the automatic depth range still applies")
             }
-            let frame = try RgbdFrame(sampleBuffer: video.sampleBuffer, depthData: depth.depthData, orientation: .right)
-            lock.lock()
-            latestFrame = frame
-            let stream = self.stream
-            lock.unlock()
-            _ = try stream?.push(frame: frame)
+            try push(RgbdFrame(sampleBuffer: video.sampleBuffer, depthData: depth.depthData, orientation: .right))
         } catch {
             publish(status: error.localizedDescription)
         }
+    }
+
+    /// Keeps `frame` for the preview and the photo mode and pushes it into the stream (never blocks).
+    private func push(_ frame: RgbdFrame) throws {
+        lock.lock()
+        latestFrame = frame
+        let stream = self.stream
+        lock.unlock()
+        _ = try stream?.push(frame: frame)
     }
 
     /// The stream's result (its background thread): the SLM image for the external display, then a preview.

@@ -12,7 +12,7 @@ use crate::error::HoloError;
 use crate::error::{invalid, Result};
 use crate::optics::{OpticalSetup, PropagationOptions};
 use crate::pipeline::{Backend, GpuPrecision, ModelSelection, PipelineConfig, MAX_HOLOGRAM_PIXELS};
-use crate::scene::{DepthMapping, DepthRange, Fit, FrameOptions};
+use crate::scene::{DepthMapping, DepthRange, DepthUpsampling, Fit, FrameOptions};
 use crate::synthesis::aberration::AberrationProfile;
 
 /// Everything a [`HologramGenerator`] needs. Build with [`GeneratorConfig::new`] and change the fields
@@ -53,6 +53,11 @@ pub struct GeneratorConfig {
     pub saved_plans: Option<Arc<SavedPlans>>,
     /// How camera frames fit the hologram ([`Fit::Crop`] by default).
     pub fit: Fit,
+    /// How a camera frame's depth buffer of a lower resolution than its colour (ARKit's 256 × 192 LiDAR
+    /// depth under a 1920 × 1440 image) is brought to the colour's resolution ([`FrameOptions::depth_upsampling`]):
+    /// [`DepthUpsampling::Nearest`] by default (its cost), [`DepthUpsampling::JointBilateral`] for edges that
+    /// follow the colour's (closer to full-resolution depth; docs/VIDEO.md gives both and the cost).
+    pub depth_upsampling: DepthUpsampling,
     /// Wavelengths (R, G, B), pixel pitch and volume depth, all in metres (the paper's display: 638, 520,
     /// 450 nm, 8 µm, 6 mm).
     pub optics: OpticalSetup,
@@ -122,6 +127,7 @@ impl GeneratorConfig {
             tune: false,
             saved_plans: None,
             fit: Fit::default(),
+            depth_upsampling: DepthUpsampling::Nearest,
             optics: OpticalSetup::default(),
             options: PropagationOptions::default(),
             encoding: DoublePhaseMethod::default(),
@@ -280,7 +286,7 @@ impl GeneratorConfig {
             fit: self.fit,
             range: self.depth_range,
             mapping: self.depth_mapping,
-            ..FrameOptions::default()
+            depth_upsampling: self.depth_upsampling,
         }
     }
 }

@@ -27,7 +27,9 @@ import tensorholo.android.fromArFrame
  * sensor orientation) and the Depth API image (`acquireDepthImage16Bits`: 16-bit millimetres covering the
  * GPU texture's field of view) into a registered [tensorholo.RgbdFrame] (the CPU image cropped to the depth's
  * field of view; a few ms of conversion), both images are closed at once, and the frame is pushed (never
- * blocks).
+ * blocks). With [rawDepth] on, the frame carries ARCore's raw depth (`acquireRawDepthImage16Bits`: unsmoothed,
+ * with holes) and its confidence image (`acquireRawDepthConfidenceImage`, 0–255) instead: depth below
+ * [MIN_CONFIDENCE] is invalid and filled from its confident neighbours by the library, never read as near.
  *
  * No exception escapes to the GL thread (one would kill the app): a frame without depth yet, a frame too old
  * or too many held images skip the frame; anything else is reported through [onError] once per message and
@@ -35,6 +37,7 @@ import tensorholo.android.fromArFrame
  *
  * @param session the session once made (ARCore may need installing first), else null.
  * @param displayRotation the display's `Surface.ROTATION_*`.
+ * @param rawDepth whether to take the raw depth and its confidence (read for every frame: a switch).
  * @param onError a problem for the user (called on the GL thread; post it to the UI thread).
  */
 class ArFrameSource(
@@ -42,6 +45,7 @@ class ArFrameSource(
     private val session: () -> Session?,
     private val displayRotation: () -> Int,
     private val pipeline: () -> HologramPipeline?,
+    private val rawDepth: () -> Boolean = { false },
     private val onError: (String) -> Unit = {},
 ) : GLSurfaceView.Renderer {
     private var lastError: String? = null
@@ -110,7 +114,7 @@ class ArFrameSource(
         val p = pipeline() ?: return
         if (!p.wantsFrame()) return
         val rgbd = try {
-            RgbdFrames.fromArFrame(frame, rotation)
+            RgbdFrames.fromArFrame(frame, rotation, rawDepth = rawDepth(), minConfidence = MIN_CONFIDENCE)
         } catch (e: NotYetAvailableException) {
             return // no camera image or depth for this frame yet
         } catch (e: DeadlineExceededException) {
@@ -124,5 +128,8 @@ class ArFrameSource(
 
     private companion object {
         const val TAG = "tensorholo"
+
+        /** The lowest raw-depth confidence kept (ARCore's 0–255 scale; about half of its range). */
+        const val MIN_CONFIDENCE = 128
     }
 }

@@ -11,6 +11,7 @@ import android.util.Log
 import android.view.Display
 import android.view.WindowManager
 import android.widget.Button
+import android.widget.Switch
 import android.widget.ImageView
 import android.widget.SeekBar
 import android.widget.TextView
@@ -54,6 +55,7 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
     private var pipelineSize: Pair<Int, Int>? = null
     private var presentation: SlmPresentation? = null
     private var installRequested = false
+    private lateinit var rawDepthSwitch: Switch
 
     override fun onCreate(savedInstanceState: Bundle?) {
         super.onCreate(savedInstanceState)
@@ -66,6 +68,7 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
         findViewById<Button>(R.id.best_quality).setOnClickListener { pipeline?.bestQuality() }
         findViewById<Button>(R.id.cancel_photo).setOnClickListener { pipeline?.cancelPhoto() }
         findViewById<Button>(R.id.live).setOnClickListener { pipeline?.live() }
+        rawDepthSwitch = findViewById(R.id.raw_depth)
         focusBar.setOnSeekBarChangeListener(object : SeekBar.OnSeekBarChangeListener {
             override fun onProgressChanged(bar: SeekBar, progress: Int, fromUser: Boolean) {
                 pipeline?.focus = progress / 100f
@@ -98,7 +101,13 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
         surface.setEGLContextClientVersion(2)
         @Suppress("DEPRECATION")
         surface.setRenderer(
-            ArFrameSource(this, { session }, { windowManager.defaultDisplay.rotation }, { pipeline }) { message ->
+            ArFrameSource(
+                this,
+                { session },
+                { windowManager.defaultDisplay.rotation },
+                { pipeline },
+                rawDepth = { rawDepthSwitch.isChecked },
+            ) { message ->
                 runOnUiThread { status.text = message }
             },
         )
