@@ -78,9 +78,11 @@ if [ "$#" -eq 0 ]; then
     --depth-encoding tum --size 96x128 --backend cpu --engine native --threads 1 --repeat 0)
   out="$(mktemp -d)"
   trap 'rm -rf "$out"' EXIT
-  # The x86-64 reference is the workspace's own `holo` (what `cargo test` built; the native engine's frame does
-  # not depend on the cargo features).
-  cargo build --locked -p holo
+  # The x86-64 reference is the workspace's own `holo`, as the README's `cargo test --workspace --locked` builds
+  # it (the native engine's frame does not depend on the cargo features): in CI a no-op after the tests. A
+  # `cargo build -p holo` resolves other features (no dev-dependencies) and rebuilt tract and the SDK for x86:
+  # 6–8 min of a fresh CI machine.
+  cargo test --workspace --locked --no-run
   # Both on the Winograd rows (AVX2/AVX-512 here, NEON there), the F(2×2, 3×3) path through the CLI on ARM.
   export TENSORHOLO_CONV=winograd
   "$tdir/debug/holo" render "${frame[@]}" --out "$out/x86" >/dev/null

@@ -446,7 +446,7 @@ RustBuffer uniffi_tensorholo_ffi_fn_func_generator_config_for_display(RustBuffer
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_CONVERT_FRAME
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_CONVERT_FRAME
-RustBuffer uniffi_tensorholo_ffi_fn_func_convert_frame(RustBuffer frame, uint32_t width, uint32_t height, RustBuffer fit, RustCallStatus *_Nonnull out_status
+RustBuffer uniffi_tensorholo_ffi_fn_func_convert_frame(RustBuffer frame, uint32_t width, uint32_t height, RustBuffer fit, RustBuffer depth_upsampling, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_FUNC_MAX_FRAME_PIXELS

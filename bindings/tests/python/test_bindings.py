@@ -92,7 +92,7 @@ def test_joint_bilateral_upsampling_renders_the_codes_of_holo_render_from_the_ca
     print(f"{c.name}: joint bilateral vs holo render {stats}")
     assert frames.circular_diff(got, want_nearest).mean() > 10 * max(stats["mean"], 1e-3), stats
     converted = tensorholo.convert_frame(frame, c.out_width, c.out_height, None, DepthUpsampling.JOINT_BILATERAL)
-    nearest = tensorholo.convert_frame(frame, c.out_width, c.out_height)
+    nearest = tensorholo.convert_frame(frame, c.out_width, c.out_height, None)
     assert converted.depth != nearest.depth
 
 
