@@ -531,6 +531,35 @@ fn simulated_phone_sensor(
     (sensor, confidence, flying)
 }
 
+/// Frame `frame` of [`simulated_phone_sensor`] on `source` (the exact depth of `rgb`), loaded beside `rgb` as
+/// `holo render` loads files, without and with its confidence map (the files written into `dir`); and the
+/// number of its flying samples.
+fn simulated_sensor_frames(
+    rgb: &Path,
+    source: &image::ImageBuffer<image::Luma<u16>, Vec<u16>>,
+    frame: u64,
+    dir: &Path,
+    options: &LoadOptions,
+) -> (RgbdFrame, RgbdFrame, usize) {
+    use tensorholo::scene::load_rgbd_with_confidence;
+    let (sensor, confidence, flying) = simulated_phone_sensor(source, frame);
+    let (sensor_path, confidence_path) = (dir.join("d.png"), dir.join("c.png"));
+    sensor.save(&sensor_path).unwrap();
+    confidence.save(&confidence_path).unwrap();
+    let load = |confidence: Option<&Path>| {
+        load_rgbd_with_confidence(
+            rgb,
+            &sensor_path,
+            confidence,
+            DepthEncoding::Millimetres16,
+            options,
+        )
+        .unwrap()
+        .0
+    };
+    (load(None), load(Some(&confidence_path)), flying)
+}
+
 /// A still scene (Redwood frame 0, its depth exact) seen by the simulated phone sensor of
 /// [`simulated_phone_sensor`] over 5 frames, each with its own noise and flying pixels, through one session of
 /// the shipped CNN at 192 × 256: the SLM patterns churn (`encoding::phase_churn`, mean wrapped |Δφ| between
@@ -540,7 +569,6 @@ fn simulated_phone_sensor(
 #[test]
 fn a_still_scene_through_a_simulated_phone_sensor_churns_less_with_its_confidence_map() {
     use tensorholo::encoding::phase_churn;
-    use tensorholo::scene::load_rgbd_with_confidence;
     let rgb = shared_data("redwood_livingroom_seq/color/00000.jpg");
     let depth = shared_data("redwood_livingroom_seq/depth/00000.png");
     let options = LoadOptions {
@@ -574,23 +602,9 @@ fn a_still_scene_through_a_simulated_phone_sensor_churns_less_with_its_confidenc
     std::fs::create_dir_all(&dir).unwrap();
     let (mut without, mut with) = (Vec::new(), Vec::new());
     for frame in 0..5 {
-        let (sensor, confidence, _) = simulated_phone_sensor(&source, frame);
-        let (sensor_path, confidence_path) = (dir.join("d.png"), dir.join("c.png"));
-        sensor.save(&sensor_path).unwrap();
-        confidence.save(&confidence_path).unwrap();
-        let load = |confidence: Option<&Path>| {
-            load_rgbd_with_confidence(
-                &rgb,
-                &sensor_path,
-                confidence,
-                DepthEncoding::Millimetres16,
-                &options,
-            )
-            .unwrap()
-            .0
-        };
-        without.push(codes(&load(None)));
-        with.push(codes(&load(Some(&confidence_path))));
+        let (plain, confident, _) = simulated_sensor_frames(&rgb, &source, frame, &dir, &options);
+        without.push(codes(&plain));
+        with.push(codes(&confident));
     }
     std::fs::remove_dir_all(&dir).unwrap();
     let (without, with) = (mean_churn(&without), mean_churn(&with));
@@ -614,7 +628,6 @@ fn a_still_scene_through_a_simulated_phone_sensor_churns_less_with_its_confidenc
 /// figures).
 #[test]
 fn confidence_maps_bring_a_simulated_phone_sensor_closer_to_the_exact_depth() {
-    use tensorholo::scene::load_rgbd_with_confidence;
     let depths = [0.1, 0.3, 0.5, 0.7, 0.9];
     let rgb = shared_data("redwood_livingroom_seq/color/00000.jpg");
     let depth = shared_data("redwood_livingroom_seq/depth/00000.png");
@@ -642,34 +655,19 @@ fn confidence_maps_bring_a_simulated_phone_sensor_closer_to_the_exact_depth() {
     };
     // The sensor: each 4×4 block of the exact depth gives one sample.
     let source = image::open(&depth).unwrap().to_luma16();
-    let (sensor, confidence, flying) = simulated_phone_sensor(&source, 0);
-    let (w, h) = sensor.dimensions();
+    let samples = (source.width() / 4) * (source.height() / 4);
     let dir = std::env::temp_dir().join(format!("tensorholo-confidence-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let (sensor_path, confidence_path) = (dir.join("d.png"), dir.join("c.png"));
-    sensor.save(&sensor_path).unwrap();
-    confidence.save(&confidence_path).unwrap();
     let options = LoadOptions {
         range: report.range_used,
         ..options
     };
-    let load = |confidence: Option<&Path>| {
-        load_rgbd_with_confidence(
-            &rgb,
-            &sensor_path,
-            confidence,
-            DepthEncoding::Millimetres16,
-            &options,
-        )
-        .unwrap()
-        .0
-    };
-    let (without, with) = (score(&load(None)), score(&load(Some(&confidence_path))));
+    let (plain, confident, flying) = simulated_sensor_frames(&rgb, &source, 0, &dir, &options);
+    let (without, with) = (score(&plain), score(&confident));
     eprintln!(
-        "Redwood, a simulated phone sensor (1/4 resolution, 1 % noise, {flying} of {} samples flying at \
+        "Redwood, a simulated phone sensor (1/4 resolution, 1 % noise, {flying} of {samples} samples flying at \
          edges): without its confidence map {without:.2} dB, with it {with:.2} dB against the exact depth's \
-         displayed focal stack",
-        w * h
+         displayed focal stack"
     );
     std::fs::remove_dir_all(&dir).unwrap();
     assert!(flying > 100, "{flying}");
