@@ -173,7 +173,9 @@ Examples:
                                                time per tract operator (which convolution algorithm ran)
   TRACT_DISABLE_DIRECT_SPATIAL=1 holo bench ... tract's own knobs (environment) change what it plans
   holo bench --skip-cnn --backend cpu,gpu --sizes 384x384,1080x1920 --layers 8 --precision f32
-                                               CPU against GPU, per GPU stage (--gpu-peak-gflops for % of peak)";
+                                               CPU against GPU, per GPU stage (--gpu-peak-gflops for % of peak)
+  holo bench --skip-cnn --skip-pipeline --refine 10 --sizes 384x384 --threads 2
+                                               the focal-stack refinement alone: target, iterations, gain";
 
 /// Median and count of timed runs of `f` after one warm-up, within `budget` seconds.
 fn time_runs(

@@ -283,6 +283,55 @@ fn video_streams_the_redwood_sequence_and_matches_single_frames() {
     assert_eq!(rs["temporal"]["max_above_half_pi"], 0.0);
 }
 
+/// `holo bench --refine N`: one row per size × backend × threads with the target's and the iterations' time, and
+/// a positive gain at the held-out planes (the refinement improves the CNN's codes where the loss never looked,
+/// docs/REFINE.md); the JSON holds the same figures.
+#[test]
+fn bench_refine_times_the_refinement_and_reports_its_held_out_gain() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("bench.json");
+    let o = holo(&[
+        "bench",
+        "--skip-cnn",
+        "--skip-pipeline",
+        "--refine",
+        "3",
+        "--sizes",
+        "48x64",
+        "--threads",
+        "1",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let table = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(
+        table
+            .lines()
+            .filter(|l| l.starts_with("| 48x64 | cpu | 1 |"))
+            .count(),
+        1,
+        "{table}"
+    );
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let rows: Vec<&serde_json::Value> = r["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|x| x["kind"] == "refine")
+        .collect();
+    assert_eq!(rows.len(), 1, "{r}");
+    let row = rows[0];
+    assert_eq!(row["iterations"], 3, "{row}");
+    assert!(row["target_s"].as_f64().unwrap() > 0.0, "{row}");
+    assert!(row["iterations_s"].as_f64().unwrap() > 0.0, "{row}");
+    assert!(row["gain_db"].as_f64().unwrap() > 0.0, "{row}");
+    // Without --refine there is no such table.
+    let o = holo(&["bench", "--skip-cnn", "--skip-pipeline"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("Refinement"));
+}
+
 #[test]
 fn bench_prints_a_row_per_case() {
     let o = holo(&[
