@@ -22,8 +22,8 @@ pub enum Fit {
 mirror_enum!(Fit <=> scene::Fit { Crop, Letterbox, Stretch });
 
 /// How a depth buffer of a lower resolution than the colour's (ARKit's 256 × 192 LiDAR depth under a
-/// 1920 × 1440 image, ARCore's ~160 × 120) is brought to the colour's resolution (`docs/VIDEO.md`, "Depth of
-/// another resolution").
+/// 1920 × 1440 image, ARCore's ~160 × 120) is brought to the colour's resolution (`docs/VIDEO.md`, "Depth at
+/// the sensor's resolution").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
 pub enum DepthUpsampling {
     /// Nearest neighbour (the default): blocky depth edges at the depth's own resolution, the cheapest.

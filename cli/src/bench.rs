@@ -22,7 +22,9 @@ use tensorholo::model::{embedded, ModelConfig, Precision};
 use tensorholo::pipeline::{
     Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode,
 };
-use tensorholo::refine::{FrameRefinement, RefineOptions, DEFAULT_TARGET_LEVELS};
+use tensorholo::refine::{
+    FrameRefinement, RefineOptions, RefineStart, RefineTarget, DEFAULT_TARGET_LEVELS,
+};
 use tensorholo::scene::procedural;
 use tensorholo::synthesis::SceneLayer;
 
@@ -548,19 +550,21 @@ fn refine_table(
     iterations: usize,
     results: &mut Vec<serde_json::Value>,
 ) -> Result<()> {
+    let levels = DEFAULT_TARGET_LEVELS;
     let request = FrameRefinement {
         options: RefineOptions {
             iterations,
             ..RefineOptions::default()
         },
-        ..FrameRefinement::default()
+        target: RefineTarget::SmLbm { levels },
+        start: RefineStart::Cnn,
     };
     request.validate().context("--refine")?;
     println!(
         "Refinement (`--refine {iterations}`, docs/REFINE.md): one frame of the built-in scene, the 8-layer f32 \
          CNN's codes refined against the SM-LBM target ({} levels, {} loss planes), offset {} mm; one run per \
          case; held-out: PSNR at the focal planes between the loss's\n",
-        DEFAULT_TARGET_LEVELS, request.options.planes, args.offset_mm
+        levels, request.options.planes, args.offset_mm
     );
     println!("| size (HxW) | backend | threads | target s | iterations s | ms per iteration | held-out dB: CNN's codes → refined codes |");
     println!("|---|---|---:|---:|---:|---:|---|");

@@ -87,7 +87,8 @@ const CASES: [Case; 5] = [
         field_tol: 2e-2,
         code_fraction_tol: 1e-2,
     },
-    // The native engine (this CPU's SIMD kernel row) against the tract reference: its SLM codes.
+    // The native engine (this CPU's SIMD kernel row) against the tract reference: its own midpoint hologram
+    // (the session's CNN output) and its SLM codes.
     Case {
         name: "f32_native",
         reference: "f32_nchw",

@@ -4108,8 +4108,8 @@ public func FfiConverterTypeDepthFormat_lower(_ value: DepthFormat) -> RustBuffe
 
 /**
  * How a depth buffer of a lower resolution than the colour's (ARKit's 256 × 192 LiDAR depth under a
- * 1920 × 1440 image, ARCore's ~160 × 120) is brought to the colour's resolution (`docs/VIDEO.md`, "Depth of
- * another resolution").
+ * 1920 × 1440 image, ARCore's ~160 × 120) is brought to the colour's resolution (`docs/VIDEO.md`, "Depth at
+ * the sensor's resolution").
  */
 
 public enum DepthUpsampling: Equatable, Hashable {

@@ -4784,8 +4784,8 @@ public object FfiConverterTypeDepthFormat: FfiConverterRustBuffer<DepthFormat> {
 
 /**
  * How a depth buffer of a lower resolution than the colour's (ARKit's 256 × 192 LiDAR depth under a
- * 1920 × 1440 image, ARCore's ~160 × 120) is brought to the colour's resolution (`docs/VIDEO.md`, "Depth of
- * another resolution").
+ * 1920 × 1440 image, ARCore's ~160 × 120) is brought to the colour's resolution (`docs/VIDEO.md`, "Depth at
+ * the sensor's resolution").
  */
 
 enum class DepthUpsampling {
