@@ -22,7 +22,8 @@
 # shipped models (models/); also without a previous commit, or with TENSORHOLO_ARM_TRACT=1. Otherwise the step
 # builds what the native engine needs, no tract: tract's crates were half of the aarch64 build (tract-core alone
 # 432 of 801 s from scratch here), and tract's own CI tests its NEON kernels. Set TENSORHOLO_ARM_TRACT=0 to leave
-# it out regardless.
+# it out regardless. The rule is scripts/arm-tract.sh's, which .ci/run also asks: the run without tract here is
+# CI's run of the library without tract, and where this step builds tract, CI runs that on x86-64 instead.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 # shellcheck source=bindings/tests/lib.sh
@@ -41,14 +42,7 @@ rustup target list --installed | grep -qx "$target" || rustup target add "$targe
 # separate `cargo build -p holo` resolved other features and rebuilt tract and the SDK: 6 min here, warm). No
 # `gpu` feature: wgpu is not what this step tests, and it would double the cross build.
 features="tensorholo/embedded-models tensorholo/models-15 tensorholo/models-30"
-arm_tract="${TENSORHOLO_ARM_TRACT:-}"
-if [ -z "$arm_tract" ]; then
-  arm_tract=0
-  if ! git rev-parse -q --verify HEAD~1 >/dev/null 2>&1 \
-    || git diff --name-only HEAD~1 -- Cargo.lock '*Cargo.toml' sdk/src/cnn/tract models | grep -q .; then
-    arm_tract=1
-  fi
-fi
+arm_tract="$(scripts/arm-tract.sh)"
 if [ "$arm_tract" = 1 ]; then
   features+=" tensorholo/tract holo/tract"
   echo "== aarch64 with tract (TENSORHOLO_ARM_TRACT=1, or tract's version, a manifest, its engine or the models changed)"
