@@ -8,7 +8,8 @@
 # (pointer width 32, Android's cfg without tract). Each check covers what differs and nothing twice:
 # - with tract, each OS of the arm64 packages (iOS and Android: their cfg, tract's aarch64 code);
 # - the third packaged ABI, x86_64-linux-android, is the test build's x86-64 code (tract's x86-64 kernels)
-#   under Android's cfg, which the two Android checks cover: it is left out (80 s of a fresh machine);
+#   under Android's cfg, which the two Android checks cover: it is left out (about a third of the with-tract
+#   check's 247 s on a fresh machine, estimated from its share of the targets);
 # - without tract, the `cfg(not(feature = "tract"))` code, also checked on x86-64 by CI's clippy of the
 #   application build and run on aarch64 by scripts/test-aarch64.sh: once here, on 32 bits.
 # Measured on a fresh target directory (Intel Xeon VM, 2 vCPUs): the six checks this replaced took 307 s.
