@@ -293,7 +293,7 @@ fn check_seeds_accepted(target: &str, seeds: &[Vec<u8>]) {
                         .map(|_| ())
                         .map_err(|e| e.to_string())
                 }),
-            "aberration" => tensorholo::synthesis::aberration::AberrationProfile::from_json_str(
+            "aberration" => tensorholo::display::AberrationProfile::from_json_str(
                 std::str::from_utf8(s).unwrap(),
                 "seed",
             )

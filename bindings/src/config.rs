@@ -4,10 +4,10 @@
 use std::sync::Arc;
 
 use tensorholo::cnn::ThreadCount;
+use tensorholo::display::AberrationProfile;
 use tensorholo::generator as core;
 use tensorholo::optics::OpticalSetup;
 use tensorholo::scene::DepthRange;
-use tensorholo::synthesis::aberration::AberrationProfile;
 
 use crate::enums::{Backend, CnnEngine, GpuPrecision, Precision, PrefilterMode, SceneInput};
 use crate::error::{invalid, Result};

@@ -265,10 +265,7 @@ impl HologramGenerator {
         guard(|| {
             let profile = aberration
                 .map(|json| {
-                    tensorholo::synthesis::aberration::AberrationProfile::from_json_str(
-                        &json,
-                        "aberration",
-                    )
+                    tensorholo::display::AberrationProfile::from_json_str(&json, "aberration")
                 })
                 .transpose()?
                 .map(Arc::new);
@@ -338,17 +335,7 @@ fn info(g: &core::HologramGenerator) -> Result<GeneratorInfo> {
         gpu_adapter: i.backend.adapter,
         calibration: i.calibration,
         display_mapping: i.display_mapping,
-        aberration: i.aberration.as_ref().map(|a| {
-            let r = a.residual_rms_rad;
-            if a.exact {
-                format!("the coefficients at d = {} m, exact", a.distance_m)
-            } else {
-                format!(
-                    "the coefficients at d = {} m; {:.3}/{:.3}/{:.3} rad RMS left over the volume (R/G/B)",
-                    a.distance_m, r[0], r[1], r[2]
-                )
-            }
-        }),
+        aberration: i.aberration.as_ref().map(ToString::to_string),
         json,
     })
 }

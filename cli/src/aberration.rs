@@ -5,7 +5,8 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use serde_json::{json, Value};
-use tensorholo::synthesis::{AberrationCorrectedSmLbm, AberrationProfile};
+use tensorholo::display::AberrationProfile;
+use tensorholo::synthesis::AberrationCorrectedSmLbm;
 
 /// Most propagations per colour a run may need before it is refused (the corrected SM-LBM needs
 /// `G·(G + 1)/2` for `G` non-empty planes).

@@ -6,13 +6,13 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
+use tensorholo::display::AberrationProfile;
 use tensorholo::optics::OpticalSetup;
 use tensorholo::slm::spots::simulate::{simulate_captures, SimulateOptions};
 use tensorholo::slm::spots::{
     fit_captures, FitOptions, SpotPlan, COLOURS, DEFAULT_CAMERA_SCALE, DEFAULT_WINDOW_PX,
     HIDDEN_FILE,
 };
-use tensorholo::synthesis::aberration::AberrationProfile;
 
 use crate::args::parse_size;
 use crate::output::{guard, Input};

@@ -10,7 +10,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use tensorholo::cnn::{CnnEngine, CnnLayout, ThreadCount};
-use tensorholo::display::{DisplayProfile, Prescription};
+use tensorholo::display::{AberrationProfile, AberrationSource, DisplayProfile, Prescription};
 use tensorholo::evaluation::{focal_depths, table2};
 use tensorholo::model::{contract, HologramModel, ModelConfig, ModelKind, Precision, SceneInput};
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
@@ -20,7 +20,7 @@ use tensorholo::pipeline::{
 };
 use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
 use tensorholo::scene::RgbdFrame;
-use tensorholo::synthesis::{AberrationProfile, SmLbm};
+use tensorholo::synthesis::SmLbm;
 
 use crate::args::Scene;
 
@@ -279,43 +279,40 @@ impl ModelArgs {
         .collect())
     }
 
-    /// The aberration correction of this run, as `(what, json, profile)`: `--aberration`, `--prescription`,
-    /// else the profile's `aberration` or `prescription`; `None` without one.
+    /// The aberration correction of this run, as `(what, json, profile)`: `--aberration` or `--prescription`,
+    /// else the profile's `aberration` or `prescription` (the SDK's rule, [`AberrationSource::select`]); `None`
+    /// without one.
     fn aberration(
         &self,
         profile: Option<&DisplayProfile>,
         optics: &tensorholo::optics::OpticalSetup,
     ) -> Result<Option<(String, serde_json::Value, AberrationProfile)>> {
-        let from_file = |flag: &str, path: &std::path::Path| -> Result<_> {
-            Ok(Some((
-                format!("{flag} {}", path.display()),
-                json!({ "file": crate::output::path_text(path) }),
-                crate::aberration::load(flag, path)?,
-            )))
+        let given = match (&self.aberration, &self.prescription) {
+            (Some(path), _) => Some(AberrationSource::File(path.clone())),
+            (None, Some(text)) => Some(AberrationSource::Prescription(parse_prescription(
+                text,
+                self.eyepiece_mm,
+            )?)),
+            (None, None) => None,
         };
-        let from_prescription = |flag: &str, rx: Prescription| -> Result<_> {
-            let p = AberrationProfile::from_prescription(&rx, optics)
-                .with_context(|| flag.to_string())?;
-            Ok(Some((flag.to_string(), json!({ "prescription": rx }), p)))
+        let by_flag = given.is_some();
+        let Some(source) = AberrationSource::select(given, profile) else {
+            return Ok(None);
         };
-        if let Some(path) = &self.aberration {
-            return from_file("--aberration", path);
-        }
-        if let Some(text) = &self.prescription {
-            let rx = parse_prescription(text, self.eyepiece_mm)?;
-            return from_prescription("--prescription", rx);
-        }
-        match profile {
-            Some(DisplayProfile {
-                aberration: Some(path),
-                ..
-            }) => from_file("the --display profile's aberration", path),
-            Some(DisplayProfile {
-                prescription: Some(rx),
-                ..
-            }) => from_prescription("the --display profile's prescription", *rx),
-            _ => Ok(None),
-        }
+        let what = match (&source, by_flag) {
+            (AberrationSource::File(path), true) => format!("--aberration {}", path.display()),
+            (AberrationSource::File(path), false) => {
+                format!("the --display profile's aberration {}", path.display())
+            }
+            (_, true) => "--prescription".to_string(),
+            (_, false) => "the --display profile's prescription".to_string(),
+        };
+        let json = source.to_json();
+        let resolved = source.resolve(optics).with_context(|| match &source {
+            AberrationSource::File(_) => format!("cannot use {what}"),
+            _ => what.clone(),
+        })?;
+        Ok(Some((what, json, resolved)))
     }
 
     /// The offset in millimetres: `--offset-mm`, else the profile's first offset, else 6.
@@ -451,27 +448,7 @@ impl ModelArgs {
             } else {
                 AberrationReport::new(&profile, &config.optics, config.offset_m)
             };
-            log::info!(
-                "aberration correction ({what}): {}",
-                if report.by_cnn {
-                    "by the hologram CNN, trained for these aberrations (at every distance)"
-                        .to_string()
-                } else if report.exact {
-                    format!(
-                        "the coefficients at d = {} m, exact (the same at every distance)",
-                        report.distance_m
-                    )
-                } else {
-                    format!(
-                        "the coefficients at d = {} m, {:.3}/{:.3}/{:.3} rad RMS left uncorrected over the \
-                         volume (R/G/B)",
-                        report.distance_m,
-                        report.residual_rms_rad[0],
-                        report.residual_rms_rad[1],
-                        report.residual_rms_rad[2]
-                    )
-                }
-            );
+            log::info!("aberration correction ({what}): {report}");
             pipeline = pipeline
                 .with_aberration(profile)
                 .with_context(|| what.clone())?;

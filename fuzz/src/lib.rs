@@ -108,12 +108,10 @@ pub fn aberration(data: &[u8]) {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
-    if let Ok(a) = tensorholo::synthesis::aberration::AberrationProfile::from_json_str(text, "fuzz")
-    {
+    if let Ok(a) = tensorholo::display::AberrationProfile::from_json_str(text, "fuzz") {
         let json = a.to_json_string();
-        let back =
-            tensorholo::synthesis::aberration::AberrationProfile::from_json_str(&json, "back")
-                .expect("an accepted aberration file's own JSON reads back");
+        let back = tensorholo::display::AberrationProfile::from_json_str(&json, "back")
+            .expect("an accepted aberration file's own JSON reads back");
         assert_eq!(back, a);
     }
 }

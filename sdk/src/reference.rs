@@ -7,12 +7,11 @@ use std::time::Instant;
 use ndarray::{Array3, Axis};
 use num_complex::Complex32;
 
+use crate::display::AberrationProfile;
 use crate::encoding::{double_phase_encode, phase_to_codes, DoublePhase, DoublePhaseMethod};
 use crate::error::{invalid, Result};
 use crate::optics::{focal_stack, post_encoding_midpoint, propagate_colour, Carrier};
-use crate::synthesis::{
-    AberrationCorrectedSmLbm, AberrationCorrection, AberrationProfile, SceneLayer, SmLbm,
-};
+use crate::synthesis::{AberrationCorrectedSmLbm, AberrationCorrection, SceneLayer, SmLbm};
 
 /// Configuration of [`ReferencePipeline::run`].
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]

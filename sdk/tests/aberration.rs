@@ -26,12 +26,13 @@ use std::f64::consts::PI;
 
 use ndarray::{Array2, Array3};
 use num_complex::Complex32;
+use tensorholo::display::AberrationProfile;
+use tensorholo::display::AberrationSample;
+use tensorholo::optics::zernike::corrected_subhologram;
+use tensorholo::optics::zernike::subhologram_radius_m;
+use tensorholo::optics::ZernikeCoefficients;
 use tensorholo::optics::{Carrier, OpticalSetup, PropagationOptions, Propagator};
-use tensorholo::synthesis::aberration::{corrected_subhologram, subhologram_radius_m};
-use tensorholo::synthesis::{
-    AberrationCorrection, AberrationProfile, AberrationSample, SceneLayer, SmLbm,
-    ZernikeCoefficients,
-};
+use tensorholo::synthesis::{AberrationCorrection, SceneLayer, SmLbm};
 
 /// Focal length of the cylindrical lens in front of the viewer (metres).
 const CYLINDER_M: f64 = 0.2;

@@ -19,9 +19,13 @@ use std::sync::Arc;
 use common::viewer::{psnr_in, seen, Lens, EYEPIECE_M};
 use ndarray::{Array3, Axis};
 use num_complex::Complex32;
+use tensorholo::display::AberrationProfile;
+use tensorholo::display::AberrationSample;
 use tensorholo::display::Prescription;
 use tensorholo::encoding::double_phase_encode;
 use tensorholo::model::Precision;
+use tensorholo::optics::zernike::amplitude_transfer_function;
+use tensorholo::optics::ZernikeCoefficients;
 use tensorholo::optics::{
     post_encoding_midpoint, Carrier, OpticalSetup, PropagationOptions, SpectralPlan,
 };
@@ -29,8 +33,6 @@ use tensorholo::pipeline::{
     Backend, HologramPipeline, HologramSession, ModelSelection, PipelineConfig, PrefilterMode,
 };
 use tensorholo::scene::{load_rgbd, DepthEncoding, LoadOptions, RgbdFrame};
-use tensorholo::synthesis::aberration::amplitude_transfer_function;
-use tensorholo::synthesis::{AberrationProfile, AberrationSample, ZernikeCoefficients};
 use tensorholo::HoloError;
 
 const OFFSET_M: f64 = 6e-3;

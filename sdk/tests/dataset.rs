@@ -631,7 +631,9 @@ fn a_shard_with_inconsistent_arrays_is_refused() {
 
 #[test]
 fn an_aberration_corrected_dataset_records_its_correction_and_stores_the_corrected_hologram() {
-    use tensorholo::synthesis::{AberrationCorrection, AberrationProfile, ZernikeCoefficients};
+    use tensorholo::display::AberrationProfile;
+    use tensorholo::optics::ZernikeCoefficients;
+    use tensorholo::synthesis::AberrationCorrection;
     let dir = scratch("aberration");
     let profile = AberrationProfile::uniform(ZernikeCoefficients {
         astigmatism_vertical: 2.0,

@@ -27,11 +27,13 @@ use std::sync::Arc;
 use ndarray::{Array2, Array3};
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 use tensorholo::cnn::{cnn_plan, CnnEngine, PlanRequest, ThreadCount};
+use tensorholo::display::AberrationProfile;
+use tensorholo::display::AberrationSample;
 use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
+use tensorholo::optics::ZernikeCoefficients;
 use tensorholo::pipeline::{Backend, HologramPipeline, PipelineConfig};
 use tensorholo::scene::RgbdFrame;
 use tensorholo::slm::{DisplayCalibration, LutRepresentation, PhaseCurve, PhaseLut, TiledCurves};
-use tensorholo::synthesis::{AberrationProfile, AberrationSample, ZernikeCoefficients};
 
 #[global_allocator]
 static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;

@@ -8,9 +8,9 @@ use serde::{Deserialize, Serialize};
 
 use super::config::{DatasetConfig, DisplayInfo, GenerateOptions, Split};
 use super::sample::SampleGenerator;
+use crate::display::AberrationProfile;
 use crate::error::{HoloError, Result};
 use crate::scene::RandomSceneConfig;
-use crate::synthesis::AberrationProfile;
 
 /// Value of the manifest's `format` field.
 pub const FORMAT_NAME: &str = "tensorholo-ldi-hologram-dataset";

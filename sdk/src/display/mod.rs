@@ -3,16 +3,23 @@
 //! mapping, its ceiling and cost, the non-paraxial residual, and the rules that serve or refuse a display:
 //! [`DisplayMapping`]; a refusal, [`DisplayRefusal`], is defined with the error that carries it) and the
 //! viewer in front of it (`prescription.rs`: [`Prescription`], a spectacle prescription as the Zernike
-//! coefficients that correct it). `docs/DISPLAYS.md` is the user's page.
+//! coefficients that correct it) and its measured aberrations (`aberration.rs`: [`AberrationProfile`], the
+//! `tensorholo.aberration` file, and [`AberrationSource`], the one rule for which aberration a session
+//! corrects). `docs/DISPLAYS.md` is the user's page.
 //!
 //! Imports `optics` and `error` only: the model's metadata check (`model::metadata`) reads this module,
 //! never the reverse.
 
+pub(crate) mod aberration;
 mod equivalence;
 mod prescription;
 mod profile;
 
 pub use crate::error::{DisplayRefusal, NearestDisplay, RETRAIN_COST};
+pub use aberration::{
+    AberrationProfile, AberrationSample, AberrationSource, ABERRATION_FORMAT,
+    ABERRATION_FORMAT_VERSION,
+};
 pub(crate) use equivalence::{close, sig};
 pub use equivalence::{
     mapping_cost_db, nonparaxial_residual_rad, predicted_ceiling_db, rule_tolerance,

@@ -61,7 +61,7 @@ pub struct DisplayProfile {
     /// the profile's folder ([`DisplayProfile::from_path`]); `None` for an ideal SLM.
     pub calibration: Option<PathBuf>,
     /// `aberration`: the viewer's or the optics' aberration file (`tensorholo.aberration`,
-    /// [`crate::synthesis::aberration::AberrationProfile`], `docs/ABERRATION.md`) that sessions correct,
+    /// [`crate::display::AberrationProfile`], `docs/ABERRATION.md`) that sessions correct,
     /// resolved against the profile's folder like `calibration`; `None`: an ideal eye behind ideal optics.
     /// Set it in code with [`DisplayProfile::with_aberration_file`].
     pub aberration: Option<PathBuf>,

@@ -5,7 +5,7 @@ use std::sync::Arc;
 #[cfg(doc)]
 use crate::cnn::PlanReport;
 use crate::cnn::{CnnEngine, CnnLayout, ConvAlgorithm, SavedPlans, ThreadCount, MAX_CNN_THREADS};
-use crate::display::{DisplayProfile, Prescription};
+use crate::display::{AberrationProfile, AberrationSource, DisplayProfile, Prescription};
 use crate::encoding::DoublePhaseMethod;
 #[cfg(doc)]
 use crate::error::HoloError;
@@ -13,7 +13,6 @@ use crate::error::{invalid, Result};
 use crate::optics::{OpticalSetup, PropagationOptions};
 use crate::pipeline::{Backend, GpuPrecision, ModelSelection, PipelineConfig, MAX_HOLOGRAM_PIXELS};
 use crate::scene::{DepthMapping, DepthRange, DepthUpsampling, Fit, FrameOptions};
-use crate::synthesis::aberration::AberrationProfile;
 
 /// Everything a [`HologramGenerator`] needs. Build with [`GeneratorConfig::new`] and change the fields
 /// you need; [`GeneratorConfig::validate`] says what is wrong.
@@ -166,16 +165,14 @@ impl GeneratorConfig {
     /// The aberration profile sessions correct: the prescription's on this configuration's display, or the
     /// measured one; `None` without either.
     ///
-    /// Errors: as [`AberrationProfile::from_prescription`].
+    /// The rule is [`AberrationSource::from_either`]'s.
+    ///
+    /// Errors: as [`AberrationSource::from_either`] and [`AberrationProfile::from_prescription`].
     pub fn aberration_profile(&self) -> Result<Option<Arc<AberrationProfile>>> {
-        Ok(match (&self.prescription, &self.aberration) {
-            (Some(p), _) => Some(Arc::new(AberrationProfile::from_prescription(
-                p,
-                &self.optics,
-            )?)),
-            (None, Some(a)) => Some(Arc::new(a.clone())),
-            (None, None) => None,
-        })
+        let source = AberrationSource::from_either(self.prescription, self.aberration.clone())?;
+        source
+            .map(|s| s.resolve(&self.optics).map(Arc::new))
+            .transpose()
     }
 
     /// Checks everything that needs no model: non-zero sizes within [`MAX_HOLOGRAM_PIXELS`] whose RGBA
@@ -237,13 +234,8 @@ impl GeneratorConfig {
         if let Some(p) = &self.saved_plans {
             p.validate()?;
         }
+        AberrationSource::from_either(self.prescription, self.aberration.clone())?;
         if let Some(p) = &self.prescription {
-            if self.aberration.is_some() {
-                return Err(invalid(
-                    "prescription",
-                    "a prescription and an aberration profile were both given: give one",
-                ));
-            }
             p.validate()?;
         }
         if let Some(a) = &self.aberration {

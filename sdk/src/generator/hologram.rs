@@ -7,6 +7,7 @@ use std::time::Instant;
 use std::ops::ControlFlow;
 
 use crate::cnn::{PlanReport, ThreadCount};
+use crate::display::AberrationProfile;
 use crate::display::Prescription;
 use crate::encoding::{DoublePhaseMethod, LinearLut};
 use crate::error::{invalid, HoloError, Result};
@@ -19,7 +20,6 @@ use crate::pipeline::{
 use crate::refine::{FrameRefinement, FrameRefiner, IterationRecord, RefineDisplay, RefineTarget};
 use crate::scene::{ldi_from_camera_frames, CameraFrame, CameraFrameReport, RgbdFrame};
 use crate::slm::DisplayCalibration;
-use crate::synthesis::aberration::AberrationProfile;
 use crate::synthesis::SceneLayer;
 
 use super::config::GeneratorConfig;

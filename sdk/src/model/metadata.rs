@@ -9,10 +9,10 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
+use crate::display::AberrationProfile;
 use crate::display::{close, sig, DisplayMapping, DisplayRefusal, NearestDisplay, VolumeFit};
 use crate::error::{HoloError, Result};
 use crate::optics::OpticalSetup;
-use crate::synthesis::aberration::AberrationProfile;
 
 /// Prefix of every key the SDK reads from an ONNX file's `metadata_props`.
 pub const METADATA_PREFIX: &str = "tensorholo.";

@@ -1,5 +1,6 @@
 //! Wave optics: the angular spectrum method (paper Eq. 2), offset propagation (Eq. 6, Eq. 10), the Fourier
-//! (aperture) filter (Eq. 8–9) and focal-stack reconstruction.
+//! (aperture) filter (Eq. 8–9), focal-stack reconstruction, and the aberrations' Zernike terms and pupil kernel
+//! (Eq. 14–19, [`zernike`]).
 //!
 //! Fields are `Complex32`, row-major `[height, width]`; colour stacks are `[channel, height, width]` in R, G, B
 //! order and are processed one colour per thread (rayon).
@@ -8,6 +9,7 @@ pub mod fft;
 pub mod filter;
 pub mod propagation;
 pub mod reconstruct;
+pub mod zernike;
 
 use ndarray::{Array3, ArrayView3, Axis};
 use num_complex::Complex32;
@@ -19,6 +21,7 @@ pub use propagation::{
     Scratch, SpectralPlan, TransferFunction,
 };
 pub use reconstruct::{focal_stack, post_encoding_midpoint, simulate_phase_only};
+pub use zernike::{ZernikeCoefficients, MAX_COEFFICIENT_RAD};
 
 use crate::error::{invalid, HoloError, Result};
 use propagation::check_positive;

@@ -1,6 +1,6 @@
 //! The viewer's aberration correction in the real-time frame ([`AberrationReport`], `PupilCorrection`):
 //! the correction kernel `Φ = circ(ρ ≤ 1)·exp(i·ΣZ_j(ρ, θ))` of the aberration-corrected SM-LBM (paper Eq. 5,
-//! [`crate::synthesis::aberration::amplitude_transfer_function`]) multiplied onto the spectrum of the CNN's
+//! [`crate::optics::zernike::amplitude_transfer_function`]) multiplied onto the spectrum of the CNN's
 //! midpoint hologram, in the same spectral pass as the offset propagation's transfer function (Eq. 6):
 //! `H_SLM = F⁻¹{F{H_mid}·Φ·T_s}`.
 //!
@@ -15,8 +15,10 @@
 use num_complex::Complex32;
 use serde::Serialize;
 
+use crate::display::AberrationProfile;
+use crate::optics::zernike::fill_pupil_multiplier;
+use crate::optics::ZernikeCoefficients;
 use crate::optics::{OpticalSetup, SpectralPlan};
-use crate::synthesis::aberration::{fill_pupil_multiplier, AberrationProfile, ZernikeCoefficients};
 
 /// Depth planes over the volume at which [`AberrationReport::residual_rms_rad`] compares the calibrated
 /// coefficients with the applied ones.
@@ -94,6 +96,32 @@ impl AberrationReport {
     }
 }
 
+impl std::fmt::Display for AberrationReport {
+    /// The report in words, as `holo` logs it and the bindings' `GeneratorInfo::aberration` gives it: who
+    /// corrects, the distance whose coefficients are applied, and the residual per colour (R/G/B, radians RMS).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let r = self.residual_rms_rad;
+        if self.by_cnn {
+            write!(
+                f,
+                "by the hologram CNN, trained for these aberrations (at every distance)"
+            )
+        } else if self.exact {
+            write!(
+                f,
+                "the coefficients at d = {} m, exact (the same at every distance)",
+                self.distance_m
+            )
+        } else {
+            write!(
+                f,
+                "the coefficients at d = {} m; {:.3}/{:.3}/{:.3} rad RMS left uncorrected over the volume (R/G/B)",
+                self.distance_m, r[0], r[1], r[2]
+            )
+        }
+    }
+}
+
 /// Calls `f(ρx, ρy)` at the points of a [`PUPIL_GRID`]² grid (cell centres over `[−1, 1]²`) inside the unit
 /// pupil.
 fn for_each_pupil_point(mut f: impl FnMut(f64, f64)) {
@@ -160,7 +188,7 @@ impl PupilCorrection {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synthesis::aberration::AberrationSample;
+    use crate::display::AberrationSample;
 
     fn astigmatism(a: f64) -> ZernikeCoefficients {
         ZernikeCoefficients {

@@ -7,12 +7,12 @@ use std::sync::Arc;
 use super::config::PipelineConfig;
 use super::selection::{shipped_prefilter, ModelSelection, PrefilterMode, PrefilterSource};
 use crate::cnn::{PlanRequest, PlanSource, SavedPlans};
+use crate::display::AberrationProfile;
 use crate::display::DisplayMapping;
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
 use crate::model::{HologramModel, ModelConfig, ModelKind, Precision};
 use crate::slm::{DisplayCalibration, LutRepresentation, PhaseLut};
-use crate::synthesis::aberration::AberrationProfile;
 
 /// The loaded CNNs plus their configuration: a factory of [`HologramSession`](crate::pipeline::HologramSession)s.
 #[derive(Debug, Clone)]

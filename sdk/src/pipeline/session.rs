@@ -21,13 +21,13 @@ use super::report::BackendReport;
 use super::workers::{lost_state, ColourWorkers};
 use crate::cnn::CnnPlan;
 use crate::cnn::PlanReport;
+use crate::display::AberrationProfile;
 use crate::encoding::{normaliser, ChannelStats, DoublePhaseMethod};
 use crate::error::{HoloError, Result};
 use crate::model::contract;
 use crate::optics::OpticalSetup;
 use crate::scene::{LayeredDepthImage, RgbdFrame};
 use crate::slm::DisplayCalibration;
-use crate::synthesis::aberration::AberrationProfile;
 
 /// A hologram session for one resolution (see the [module docs](crate::pipeline)). Not `Sync`: one frame at a time;
 /// a failed frame (wrong size, NaN) leaves the session usable.

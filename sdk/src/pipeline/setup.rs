@@ -18,6 +18,7 @@ use super::report::BackendReport;
 use super::session::HologramSession;
 use super::workers::ColourWorkers;
 use crate::cnn::CnnPlans;
+use crate::display::AberrationProfile;
 use crate::encoding::{ChannelEncoder, ChannelStats, PassOneLayout};
 #[cfg(not(feature = "gpu"))]
 use crate::error::invalid as invalid_backend;
@@ -25,7 +26,6 @@ use crate::error::invalid as invalid_backend;
 use crate::error::HoloError;
 use crate::error::{invalid, kernel_isa, Result};
 use crate::optics::Carrier;
-use crate::synthesis::aberration::AberrationProfile;
 use std::sync::Arc;
 
 impl HologramPipeline {

@@ -13,12 +13,12 @@ use super::{
     codes_of, displayed_phase, held_out_depths, initial_phase, loss_depths, FocalTarget,
     IterationRecord, RefineOptions, RefineReport, RefineStart, Refiner,
 };
+use crate::display::AberrationProfile;
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::{simulate_phase_only, OpticalSetup, PropagationOptions};
 use crate::reference::ReferencePipeline;
 use crate::slm::DisplayCalibration;
-use crate::synthesis::aberration::AberrationProfile;
 use crate::synthesis::{SceneLayer, SmLbm};
 
 /// The SM-LBM planes of the default target: 512 (docs/REFINE.md: the target's cost against its levels).

@@ -30,11 +30,11 @@ use ndarray::{Array3, ArrayView3, ArrayViewMut3};
 use num_complex::Complex32;
 use rayon::prelude::*;
 
+use crate::display::AberrationProfile;
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::{check_colour_stack, OpticalSetup, Padding, PropagationOptions, SpectralPlan};
 use crate::slm::{DisplayCalibration, PhaseLut};
 use crate::splitmix::SplitMix64;
-use crate::synthesis::aberration::AberrationProfile;
 pub use frame::{
     FrameRefinement, FrameRefiner, HeldOutScores, RefineDisplay, RefineTarget, RefinedFrame,
     DEFAULT_TARGET_LEVELS,

@@ -24,11 +24,12 @@
 
 use num_complex::Complex32;
 
+use crate::display::AberrationProfile;
 use crate::error::Result;
 use crate::optics::fft::Fft2;
 use crate::optics::filter::aperture_fn;
+use crate::optics::zernike::pupil_multiplier;
 use crate::optics::{Carrier, EvenMultiplier, OpticalSetup, PropagationOptions, Propagator};
-use crate::synthesis::aberration::{pupil_multiplier, AberrationProfile};
 use tensorholo_kernels::Isa;
 
 /// One loss plane's multiplier `m_d`.

@@ -390,7 +390,7 @@ fn starts_made_here() {
 /// and so is the CNN target where the kernel, not the CNN, corrects.
 #[test]
 fn the_cnn_target_is_refused_where_the_cnn_corrects_the_viewer() {
-    use crate::synthesis::aberration::ZernikeCoefficients;
+    use crate::optics::ZernikeCoefficients;
     use std::sync::Arc;
 
     let display = |by_cnn: bool| RefineDisplay {

@@ -1,14 +1,12 @@
 //! Reference hologram synthesis: the silhouette-mask layer-based method (SM-LBM, paper Eq. 1–4) on RGB-D
 //! images and layered depth images, producing the midpoint hologram that the CNNs learn, and its
-//! aberration-corrected variant (Eq. 5, Zernike model of Eq. 14–19; `docs/ABERRATION.md`).
+//! aberration-corrected variant (Eq. 5; the Zernike terms and the pupil kernel of Eq. 14–19 are
+//! [`crate::optics::zernike`], the calibrated profile [`crate::display::AberrationProfile`]; `docs/ABERRATION.md`).
 
-pub mod aberration;
+mod aberration;
 mod sm_lbm;
 
-pub use aberration::{
-    AberrationCorrectedSmLbm, AberrationCorrection, AberrationProfile, AberrationSample,
-    ZernikeCoefficients,
-};
+pub use aberration::{AberrationCorrectedSmLbm, AberrationCorrection};
 pub use sm_lbm::{SceneLayer, SmLbm};
 
 use crate::scene::{LayeredDepthImage, LdiLayer, RgbdFrame};

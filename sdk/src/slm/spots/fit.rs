@@ -11,8 +11,10 @@ use rayon::prelude::*;
 use super::model::{ModelScratch, SpotModel};
 use super::windows::{initial_offset, load_windows, CaptureWindow};
 use super::{wavelength_scaled, SpotPlan, COLOURS};
+use crate::display::AberrationProfile;
+use crate::display::AberrationSample;
 use crate::error::{HoloError, Result};
-use crate::synthesis::aberration::{AberrationProfile, AberrationSample, ZernikeCoefficients};
+use crate::optics::ZernikeCoefficients;
 
 /// Largest `|coefficient|` (radians) and spot offset (fraction of the window) the fit explores.
 const MAX_COEFFICIENT_RAD: f64 = 8.0;

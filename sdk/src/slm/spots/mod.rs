@@ -46,7 +46,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::OpticalSetup;
-use crate::synthesis::aberration::ZernikeCoefficients;
+use crate::optics::ZernikeCoefficients;
 
 pub(crate) use patterns::fft2;
 

@@ -8,7 +8,7 @@ use num_complex::Complex64;
 use rustfft::{Fft, FftPlanner};
 
 use crate::error::{invalid, Result};
-use crate::synthesis::aberration::ZernikeCoefficients;
+use crate::optics::ZernikeCoefficients;
 
 /// Sub-samples per bin side for the pupil edge's anti-aliasing (the fraction of each bin inside `ρ ≤ 1`).
 const EDGE_SUBSAMPLES: usize = 4;

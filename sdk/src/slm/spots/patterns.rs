@@ -11,8 +11,8 @@ use super::SpotPlan;
 use crate::encoding::{double_phase_encode, phase_to_codes, DoublePhaseMethod};
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::fft::signed_index;
+use crate::optics::zernike::amplitude_transfer_function;
 use crate::optics::{Carrier, PropagationOptions, Propagator};
-use crate::synthesis::aberration::amplitude_transfer_function;
 
 impl SpotPlan {
     /// The SLM codes `[height, width]` of colour `c`, distance index `i`, diversity `k` (module docs): the

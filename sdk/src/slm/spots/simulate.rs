@@ -25,12 +25,14 @@ use num_complex::Complex64;
 use rayon::prelude::*;
 
 use super::{fft2, wavelength_scaled, SpotPlan, HIDDEN_FILE};
+use crate::display::AberrationProfile;
+use crate::display::AberrationSample;
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::carrier_free_phase_rad;
 use crate::optics::fft::signed_index;
+use crate::optics::ZernikeCoefficients;
 use crate::slm::simulate::write_grey_png;
 use crate::splitmix::{splitmix64, SplitMix64};
-use crate::synthesis::aberration::{AberrationProfile, AberrationSample, ZernikeCoefficients};
 
 /// The simulated camera and the hidden aberration's size.
 #[derive(Debug, Clone, Copy, PartialEq)]
