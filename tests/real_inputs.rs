@@ -240,7 +240,7 @@ fn redwood_camera_buffers_equal_load_rgbd() {
 /// against the f32 CNN's, native within 0.1 dB of tract (or better).
 #[test]
 fn native_int8_is_as_close_to_f32_as_tract_int8_on_a_real_photo() {
-    use tensorholo::cnn::{cnn_plan, CnnEngine, PlanRequest, ThreadCount};
+    use tensorholo::cnn::{cnn_plan, CnnEngine, CnnOptions, PlanRequest, ThreadCount};
     use tensorholo::model::{embedded, ModelConfig, Precision};
     let options = LoadOptions {
         size: Some((256, 192)),
@@ -257,13 +257,17 @@ fn native_int8_is_as_close_to_f32_as_tract_int8_on_a_real_photo() {
     let mut input = Array3::zeros((4, h, w));
     tensorholo::model::contract::pack_rgbd(&frame, input.view_mut()).unwrap();
     let cfg = ModelConfig::default();
-    let request = PlanRequest {
-        threads: ThreadCount::Fixed(2),
-        ..PlanRequest::default()
-    };
     let run = |precision, engine| {
         let model = std::sync::Arc::new(embedded::hologram_model(8, precision, &cfg).unwrap());
-        let (mut plan, report) = cnn_plan(&model, h, w, engine, &request).unwrap();
+        let request = PlanRequest {
+            cnn: CnnOptions {
+                engine,
+                threads: ThreadCount::Fixed(2),
+                ..CnnOptions::default()
+            },
+            ..PlanRequest::default()
+        };
+        let (mut plan, report) = cnn_plan(&model, h, w, &request).unwrap();
         assert_eq!(report.engine, engine);
         let (a, p) = plan.run_outputs(input.view()).unwrap();
         ndarray::concatenate![ndarray::Axis(0), a, p]
@@ -288,7 +292,7 @@ fn native_int8_is_as_close_to_f32_as_tract_int8_on_a_real_photo() {
 /// on the native engine: int8 within 0.1 dB of f32.
 #[test]
 fn native_int8_displayed_hologram_is_within_a_tenth_of_a_db_of_f32() {
-    use tensorholo::cnn::CnnEngine;
+    use tensorholo::cnn::{CnnEngine, CnnOptions};
     use tensorholo::evaluation::{focal_depths, table2};
     use tensorholo::model::Precision;
     let options = LoadOptions {
@@ -314,8 +318,11 @@ fn native_int8_displayed_hologram_is_within_a_tenth_of_a_db_of_f32() {
     let depths = focal_depths(frame.depth.view(), 200, 15, 5, 3).unwrap();
     let config = PipelineConfig {
         offset_m: 6e-3,
-        cnn_engine: CnnEngine::Native,
         backend: tensorholo::pipeline::Backend::Cpu,
+        cnn: CnnOptions {
+            engine: CnnEngine::Native,
+            ..CnnOptions::default()
+        },
         ..PipelineConfig::default()
     };
     let score = |precision| {

@@ -18,8 +18,8 @@ work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 gcc -O2 -shared -fPIC -o "$work/libinsn_count.so" "$here/insn_count.c"
 count() { # row rounds → guest instructions
-  CONV_ROWS="$1" qemu-aarch64 -L /usr/aarch64-linux-gnu -plugin "$work/libinsn_count.so" -d plugin \
-    -D "$work/plugin.log" "$bin" "${shape[@]}" "$2" >/dev/null
+  qemu-aarch64 -L /usr/aarch64-linux-gnu -plugin "$work/libinsn_count.so" -d plugin \
+    -D "$work/plugin.log" "$bin" "${shape[@]}" "$2" plain "$1" >/dev/null
   sed -n 's/^insn_count: //p' "$work/plugin.log"
 }
 echo "| row (${shape[0]}→${shape[1]}, ${shape[3]} rows × ${shape[2]}) | guest instructions per layer | per output pixel |"

@@ -160,7 +160,7 @@ impl GeneratorConfig {
             c.models.prefilter = prefilter.into();
         }
         c.offset_m = self.offset_mm * 1e-3;
-        c.threads = ThreadCount::from_count(self.threads as usize);
+        c.cnn.threads = ThreadCount::from_count(self.threads as usize);
         if let Some(fit) = self.fit {
             c.fit = fit.into();
         }
@@ -171,7 +171,7 @@ impl GeneratorConfig {
             c.backend = backend.into();
         }
         if let Some(engine) = self.engine {
-            c.engine = engine.into();
+            c.cnn.engine = engine.into();
         }
         if let Some(precision) = self.gpu_precision {
             c.gpu_precision = precision.into();
@@ -201,7 +201,7 @@ impl GeneratorConfig {
             }
         };
         c.wavelength_ratio_tolerance = self.wavelength_ratio_tolerance;
-        c.tune = self.tune;
+        c.cnn.tune = self.tune;
         c.saved_plans = match &self.saved_plans {
             Some(json) => Some(Arc::new(tensorholo::cnn::SavedPlans::from_json(json)?)),
             None => None,
@@ -228,7 +228,7 @@ impl From<core::GeneratorConfig> for GeneratorConfig {
             precision: Some(c.models.precision.into()),
             offset_mm: c.offset_m * 1e3,
             prefilter: Some(c.models.prefilter.into()),
-            threads: match c.threads {
+            threads: match c.cnn.threads {
                 ThreadCount::Auto => 0,
                 ThreadCount::Fixed(n) => n as u32,
                 // tract's one-thread default executor: one thread.
@@ -243,9 +243,9 @@ impl From<core::GeneratorConfig> for GeneratorConfig {
             z_far_m: c.depth_range.map(|r| r.z_far_m as f64),
             backend: Some(c.backend.into()),
             gpu_precision: Some(c.gpu_precision.into()),
-            engine: Some(c.engine.into()),
+            engine: Some(c.cnn.engine.into()),
             wavelength_ratio_tolerance: c.wavelength_ratio_tolerance,
-            tune: c.tune,
+            tune: c.cnn.tune,
             saved_plans: c.saved_plans.map(|p| p.to_json()),
             prescription: c.prescription.map(Into::into),
             aberration: c.aberration.map(|a| a.to_json_string()),
@@ -320,7 +320,7 @@ pub(crate) mod tests {
             );
             assert_eq!(
                 ThreadCount::from_count(field("threads", "threads") as usize),
-                core.threads,
+                core.cnn.threads,
                 "{file}"
             );
         }

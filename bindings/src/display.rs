@@ -270,20 +270,20 @@ pub(crate) mod tests {
                 back.height,
                 back.models,
                 back.optics,
-                back.threads
+                back.cnn.threads
             ),
             (
                 want.width,
                 want.height,
                 want.models,
                 want.optics,
-                want.threads
+                want.cnn.threads
             )
         );
         assert!((back.offset_m - want.offset_m).abs() < 1e-15);
         assert_eq!(
-            (back.fit, back.backend, back.gpu_precision, back.engine),
-            (want.fit, want.backend, want.gpu_precision, want.engine)
+            (back.fit, back.backend, back.gpu_precision, back.cnn.engine),
+            (want.fit, want.backend, want.gpu_precision, want.cnn.engine)
         );
         assert_eq!(
             back.wavelength_ratio_tolerance,

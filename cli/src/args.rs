@@ -6,7 +6,7 @@ use std::sync::Arc;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde_json::json;
-use tensorholo::cnn::{ConvAlgorithm, SavedPlans};
+use tensorholo::cnn::{CnnOptions, ConvAlgorithm, Isa, SavedPlans};
 use tensorholo::display::DisplayProfile;
 use tensorholo::encoding::DoublePhaseMethod;
 use tensorholo::model::SceneInput;
@@ -552,35 +552,54 @@ impl PlanArgs {
     }
 }
 
-/// The f32 convolution algorithm the `TENSORHOLO_CONV` environment variable pins (`direct`, `winograd2x2`
-/// or `winograd`, `winograd4x4`; unset, empty or `auto`: each layer's row from the plan). Errors: another
-/// value, naming the variable.
-pub fn conv_from_env() -> Result<ConvAlgorithm> {
-    match std::env::var("TENSORHOLO_CONV") {
-        Ok(v) if !v.trim().is_empty() => {
-            ConvAlgorithm::parse(&v).with_context(|| "environment variable TENSORHOLO_CONV")
-        }
-        _ => Ok(ConvAlgorithm::Auto),
-    }
-}
-
-/// The native engine's layout settings the `TENSORHOLO_STRIP_ROWS` and `TENSORHOLO_SLABS` environment
-/// variables give, `(strip_rows, slabs)` (`None`: unset or empty, the engine's rule), for
-/// `PipelineConfig::cnn_strip_rows` / `cnn_slabs`. Errors: a value that is not a positive integer, naming the
-/// variable.
-pub fn native_layout_from_env() -> Result<(Option<usize>, Option<usize>)> {
-    let read = |name: &str| -> Result<Option<usize>> {
-        match std::env::var(name) {
-            Ok(v) if !v.trim().is_empty() => match v.trim().parse::<usize>() {
+/// The CNN options the environment sets, every other field at its default ([`CnnOptions::default`]): the one
+/// place `holo` reads them, so the SDK reads no environment.
+///
+/// - `TENSORHOLO_ISA` → [`CnnOptions::isa`]: lowers the kernels' instruction set (`scalar`, `avx2`,
+///   `avxvnni`, `avx512`, `avx512vnni`, `neon`, `neondot`, `neoni8mm`; a level this CPU lacks is refused);
+/// - `TENSORHOLO_CONV` → [`CnnOptions::algorithm`]: pins the f32 convolution algorithm (`direct`,
+///   `winograd2x2` or `winograd`, `winograd4x4`; `auto`: each layer's row from the plan);
+/// - `TENSORHOLO_STRIP_ROWS`, `TENSORHOLO_SLABS` → [`CnnOptions::strip_rows`], [`CnnOptions::slabs`]: the
+///   native engine's layout (positive integers).
+///
+/// Unset or empty: the default. Errors: another value, naming the variable.
+pub fn cnn_options_from_env() -> Result<CnnOptions> {
+    let var = |name: &str| std::env::var(name).ok().filter(|v| !v.trim().is_empty());
+    let count = |name: &str| -> Result<Option<usize>> {
+        match var(name) {
+            Some(v) => match v.trim().parse::<usize>() {
                 Ok(n) if n > 0 => Ok(Some(n)),
                 _ => {
                     bail!("environment variable {name}={v}: expected a positive integer (or unset)")
                 }
             },
-            _ => Ok(None),
+            None => Ok(None),
         }
     };
-    Ok((read("TENSORHOLO_STRIP_ROWS")?, read("TENSORHOLO_SLABS")?))
+    let isa = match var("TENSORHOLO_ISA") {
+        Some(v) => Some(Isa::from_name(&v).with_context(|| {
+            format!(
+                "environment variable TENSORHOLO_ISA={v} (this CPU has: {})",
+                Isa::available()
+                    .iter()
+                    .map(|i| i.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        })?),
+        None => None,
+    };
+    let algorithm = match var("TENSORHOLO_CONV") {
+        Some(v) => ConvAlgorithm::parse(&v).context("environment variable TENSORHOLO_CONV")?,
+        None => ConvAlgorithm::Auto,
+    };
+    Ok(CnnOptions {
+        algorithm,
+        strip_rows: count("TENSORHOLO_STRIP_ROWS")?,
+        slabs: count("TENSORHOLO_SLABS")?,
+        isa,
+        ..CnnOptions::default()
+    })
 }
 
 /// Checks `--offset-mm` (millimetres): finite and within the SDK's ±[`tensorholo::optics::MAX_OFFSET_M`].

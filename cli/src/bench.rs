@@ -15,8 +15,7 @@ use std::sync::Arc;
 use tensorholo::cnn::tract::{NodeTiming, TractModel};
 
 use tensorholo::cnn::{
-    CnnEngine, CnnLayout, ConvAlgorithm, PlanReport, PlanRequest, PlanSource, SavedPlans,
-    ThreadCount,
+    CnnEngine, CnnLayout, CnnOptions, PlanReport, PlanRequest, PlanSource, SavedPlans, ThreadCount,
 };
 use tensorholo::model::{embedded, ModelConfig, Precision};
 use tensorholo::pipeline::{
@@ -120,10 +119,9 @@ pub struct BenchArgs {
 /// Where the cases' CNN plans come from, and every case's plans so far (for `--save-tuning`).
 struct BenchPlans {
     source: PlanSource,
-    conv: ConvAlgorithm,
-    /// `TENSORHOLO_STRIP_ROWS` and `TENSORHOLO_SLABS` (the native engine's layout; `None`: its rules).
-    strip_rows: Option<usize>,
-    slabs: Option<usize>,
+    /// What the environment sets ([`crate::args::cnn_options_from_env`]: the ISA, the algorithm, the native
+    /// engine's strips and slabs); each case sets its engine, layout and threads on top.
+    env: CnnOptions,
     used: Option<SavedPlans>,
 }
 
@@ -134,25 +132,29 @@ impl BenchPlans {
             (None, true) => PlanSource::Tune,
             (None, false) => PlanSource::Table,
         };
-        let (strip_rows, slabs) = crate::args::native_layout_from_env()?;
         Ok(Self {
             source,
-            conv: crate::args::conv_from_env()?,
-            strip_rows,
-            slabs,
+            env: crate::args::cnn_options_from_env()?,
             used: None,
         })
     }
 
-    /// A request for `layout` and `threads` from this source.
-    fn request(&self, layout: CnnLayout, threads: usize) -> PlanRequest {
-        PlanRequest {
+    /// The options of a case on `engine` with `layout` and `threads` (tuned where the source times).
+    fn options(&self, engine: CnnEngine, layout: CnnLayout, threads: usize) -> CnnOptions {
+        CnnOptions {
+            engine,
             layout,
             threads: ThreadCount::Fixed(threads),
-            conv: self.conv,
+            tune: self.source.tunes(),
+            ..self.env
+        }
+    }
+
+    /// A request for `engine`, `layout` and `threads` from this source.
+    fn request(&self, engine: CnnEngine, layout: CnnLayout, threads: usize) -> PlanRequest {
+        PlanRequest {
+            cnn: self.options(engine, layout, threads),
             source: self.source.clone(),
-            strip_rows: self.strip_rows,
-            slabs: self.slabs,
         }
     }
 
@@ -420,12 +422,10 @@ fn cnn_table(
     let mut peaks = std::collections::BTreeMap::new();
     if args.peak {
         for &t in &args.threads {
-            let g = tensorholo::cnn::f32_peak_gflops(t, 300)?;
-            let q = tensorholo::cnn::int8_peak_gops(t, 300)?;
-            println!(
-                "peak, {t} thread(s): f32 {g:.1} GFLOP/s, int8 {q:.1} GOP/s (register loops, {})",
-                tensorholo::cnn::native_isa()?
-            );
+            let isa = plans.env.kernel_isa()?;
+            let g = tensorholo::cnn::f32_peak_gflops(isa, t, 300)?;
+            let q = tensorholo::cnn::int8_peak_gops(isa, t, 300)?;
+            println!("peak, {t} thread(s): f32 {g:.1} GFLOP/s, int8 {q:.1} GOP/s (register loops, {isa})");
             results.push(json!({"kind": "peak", "threads": t, "gflops": g, "int8_gops": q}));
             peaks.insert(t, (g, q));
         }
@@ -459,9 +459,8 @@ fn cnn_table(
                         };
                         for requested in layouts {
                             let t = Instant::now();
-                            let request = plans.request(requested, threads);
-                            let (plan, report) =
-                                tensorholo::cnn::cnn_plan(&model, h, w, engine, &request)?;
+                            let request = plans.request(engine, requested, threads);
+                            let (plan, report) = tensorholo::cnn::cnn_plan(&model, h, w, &request)?;
                             let plan_ms = t.elapsed().as_secs_f64() * 1e3;
                             plans.record(&report)?;
                             let engine_label = match engine {
@@ -519,7 +518,7 @@ fn cnn_table(
                             let case = format!(
                                 "holo{layers} | {precision} | {detail} | {h}x{w} | {threads}"
                             );
-                            let request = plans.request(report.layout, threads);
+                            let request = plans.request(CnnEngine::Tract, report.layout, threads);
                             let (plan, _) = TractModel::of(&model)?.tuned_plan(h, w, &request)?;
                             profiles.push((case, plan.profile(input.view())?));
                         }
@@ -551,6 +550,7 @@ fn refine_table(
     results: &mut Vec<serde_json::Value>,
 ) -> Result<()> {
     let levels = DEFAULT_TARGET_LEVELS;
+    let env = crate::args::cnn_options_from_env()?;
     let request = FrameRefinement {
         options: RefineOptions {
             iterations,
@@ -576,8 +576,11 @@ fn refine_table(
                     &ModelSelection::default(),
                     PipelineConfig {
                         offset_m: args.offset_mm as f64 * 1e-3,
-                        cnn_threads: ThreadCount::Fixed(threads),
                         backend: backend.into(),
+                        cnn: CnnOptions {
+                            threads: ThreadCount::Fixed(threads),
+                            ..env
+                        },
                         ..PipelineConfig::default()
                     },
                 )?;
@@ -699,14 +702,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                                 &selection(args, layers, precision),
                                 PipelineConfig {
                                     offset_m: args.offset_mm as f64 * 1e-3,
-                                    cnn_layout: layout,
-                                    cnn_engine: engine,
-                                    cnn_threads: ThreadCount::Fixed(threads),
-                                    cnn_conv: plans.conv,
-                                    cnn_tune: plans.source.tunes(),
-                                    cnn_strip_rows: plans.strip_rows,
-                                    cnn_slabs: plans.slabs,
                                     backend: Backend::Cpu,
+                                    cnn: plans.options(engine, layout, threads),
                                     ..PipelineConfig::default()
                                 },
                             )?;

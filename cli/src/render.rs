@@ -9,10 +9,10 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
-use tensorholo::cnn::{CnnEngine, CnnLayout, ThreadCount};
+use tensorholo::cnn::{CnnEngine, CnnLayout, CnnOptions, ThreadCount};
 use tensorholo::display::{AberrationProfile, AberrationSource, DisplayProfile, Prescription};
 use tensorholo::evaluation::{focal_depths, table2};
-use tensorholo::model::{contract, HologramModel, ModelConfig, ModelKind, Precision, SceneInput};
+use tensorholo::model::{contract, HologramModel, ModelKind, Precision, SceneInput};
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{
     AberrationReport, Backend, BackendReport, FrameTimings, GpuPrecision, Heads, HologramPipeline,
@@ -358,31 +358,25 @@ impl ModelArgs {
             offset_against_profile(given, p);
         }
         let (_, encoding) = self.encoding.method(crate::args::Encoding::AaDpm);
-        let (cnn_strip_rows, cnn_slabs) = crate::args::native_layout_from_env()?;
         let config = PipelineConfig {
             optics: self.optics.setup()?,
             options: self.optics.options(),
             offset_m: offset_mm * 1e-3,
             encoding,
-            cnn_layout: self.layout.into(),
-            cnn_engine: self.engine.into(),
-            cnn_threads: ThreadCount::from_count(self.threads as usize),
-            cnn_conv: crate::args::conv_from_env()?,
-            cnn_tune: self.plans.tune,
-            cnn_strip_rows,
-            cnn_slabs,
             backend: self.backend.into(),
             gpu_precision: self.gpu_precision.into(),
             wavelength_ratio_tolerance: self.wavelength_ratio_tolerance,
+            cnn: CnnOptions {
+                layout: self.layout.into(),
+                engine: self.engine.into(),
+                threads: ThreadCount::from_count(self.threads as usize),
+                tune: self.plans.tune,
+                ..crate::args::cnn_options_from_env()?
+            },
         };
         let precision = self.precision();
         let t = Instant::now();
-        let expected = ModelConfig {
-            optics: config.optics,
-            offset_m: config.offset_m,
-            input_layers: input.input_layers(),
-            wavelength_ratio_tolerance: config.wavelength_ratio_tolerance,
-        };
+        let expected = config.model_config(input.input_layers());
         let asked = crate::display::Requested {
             optics: &config.optics,
             offset_m: config.offset_m,
@@ -487,9 +481,9 @@ impl ModelArgs {
             "precision": precision,
             "prefilter_reason": pipeline.prefilter_reason(),
             "cnn_threads": self.threads,
-            "cnn_layout": pipeline.config().cnn_layout,
-            "cnn_engine": pipeline.config().cnn_engine,
-            "cnn_conv": pipeline.config().cnn_conv,
+            "cnn_layout": pipeline.config().cnn.layout,
+            "cnn_engine": pipeline.config().cnn.engine,
+            "cnn_conv": pipeline.config().cnn.algorithm,
             "cnn_plans": match (&self.plans.tuning, self.plans.tune) {
                 (Some(f), _) => json!({ "source": "saved", "file": crate::output::path_text(f) }),
                 (None, true) => json!({ "source": "tune" }),

@@ -1,10 +1,10 @@
 //! Direct against Winograd on one layer shape, alternated, best of N: less sensitive to a noisy host than
 //! a criterion run of one row after the other.
 //!
-//! `cargo run --release -p tensorholo-kernels --example conv_best_of -- C_IN C_OUT WIDTH ROWS ROUNDS [residual]`
-//! (defaults: 24 24 384 16 30). Prints, per available f32 row, the best time of a band of `ROWS` rows and its
+//! `cargo run --release -p tensorholo-kernels --example conv_best_of -- C_IN C_OUT WIDTH ROWS ROUNDS
+//! [residual|plain] [FILTER]` (defaults: 24 24 384 16 30 plain). Prints, per available f32 row, the best time of a band of `ROWS` rows and its
 //! effective GFLOP/s (`2·9·C_in·C_out` operations per output pixel, whatever the algorithm).
-//! `CONV_ROWS=text` keeps only the rows whose name contains `text` (for instruction counts under qemu:
+//! `FILTER` keeps only the rows whose name contains it (for instruction counts under qemu:
 //! `benchmarks/qemu/layer_instructions.sh`).
 
 use std::time::Instant;
@@ -24,7 +24,7 @@ fn main() {
     let r = RowPlanar::from_planar(&values(c_out * h * w, 2), c_out, h, w, None).expect("r");
     let rows: Vec<_> = registry::f32_kernels()
         .filter(|k| k.is_available())
-        .filter(|k| std::env::var("CONV_ROWS").map_or(true, |f| k.name.contains(f.as_str())))
+        .filter(|k| args.get(6).is_none_or(|f| k.name.contains(f.as_str())))
         .map(|k| {
             let plan = Conv3x3F32::with_kernel(
                 &values(c_out * c_in * 9, 3),

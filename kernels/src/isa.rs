@@ -1,11 +1,8 @@
-//! Instruction-set levels, their run-time detection and the `TENSORHOLO_ISA` override.
+//! Instruction-set levels and their run-time detection. The crate reads no environment: a caller that lowers
+//! the level passes it to each plan (`holo` maps `TENSORHOLO_ISA` onto the SDK's `CnnOptions::isa`).
 
 use crate::error::KernelError;
 use std::sync::OnceLock;
-
-/// Name of the environment variable that lowers the ISA the plans use (`scalar`, `avx2`, `avxvnni`, `avx512`,
-/// `avx512vnni`, `neon`, `neondot`, `neoni8mm`). It can only lower: an ISA this CPU lacks is refused.
-pub const ISA_ENV: &str = "TENSORHOLO_ISA";
 
 /// An instruction-set level. Each level is a set of CPU features; a kernel row of level `r` may run under a
 /// selected level `s` when `s.includes(r)` (the features of `r` are a subset of those of `s`).
@@ -50,7 +47,7 @@ impl Isa {
         Isa::NeonI8mm,
     ];
 
-    /// The name used in `TENSORHOLO_ISA` and in kernel names (`scalar`, `avx2`, `avxvnni`, `avx512`,
+    /// The name used in kernel names and by `holo`'s `TENSORHOLO_ISA` (`scalar`, `avx2`, `avxvnni`, `avx512`,
     /// `avx512vnni`, `neon`, `neondot`, `neoni8mm`).
     pub fn name(self) -> &'static str {
         match self {
@@ -138,15 +135,6 @@ impl Isa {
             .find(|i| i.is_available())
             .unwrap_or(Isa::Scalar)
     }
-
-    /// The level the plans use by default: [`Isa::detect`], lowered by the `TENSORHOLO_ISA` environment
-    /// variable when it is set. Errors: an unknown name or a level this CPU lacks ([`KernelError::Isa`]).
-    pub fn active() -> Result<Isa, KernelError> {
-        match std::env::var(ISA_ENV) {
-            Ok(name) if !name.trim().is_empty() => Isa::from_name(&name),
-            _ => Ok(Isa::detect()),
-        }
-    }
 }
 
 impl std::fmt::Display for Isa {
@@ -203,14 +191,10 @@ mod tests {
     use super::*;
 
     #[test]
-    fn env_override_can_only_lower() {
-        // The only test that reads or writes TENSORHOLO_ISA (Isa::active is not called by other tests).
-        let saved = std::env::var(ISA_ENV).ok();
-        std::env::set_var(ISA_ENV, "scalar");
-        assert_eq!(Isa::active(), Ok(Isa::Scalar));
+    fn names_parse_back_and_only_available_levels_are_taken() {
         for isa in Isa::ALL {
-            std::env::set_var(ISA_ENV, isa.name().to_uppercase());
-            let got = Isa::active();
+            assert_eq!(Isa::parse(&isa.name().to_uppercase()), Ok(isa));
+            let got = Isa::from_name(isa.name());
             if isa.is_available() {
                 assert_eq!(got, Ok(isa));
             } else {
@@ -220,14 +204,9 @@ mod tests {
                 );
             }
         }
-        std::env::set_var(ISA_ENV, "sse9");
-        assert!(matches!(Isa::active(), Err(KernelError::Isa { .. })));
-        std::env::set_var(ISA_ENV, "");
-        assert_eq!(Isa::active(), Ok(Isa::detect()));
-        match saved {
-            Some(v) => std::env::set_var(ISA_ENV, v),
-            None => std::env::remove_var(ISA_ENV),
-        }
+        assert!(matches!(Isa::parse("sse9"), Err(KernelError::Isa { .. })));
+        assert!(Isa::detect().is_available());
+        assert!(Isa::available().contains(&Isa::Scalar));
     }
 
     #[test]

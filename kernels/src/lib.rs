@@ -13,7 +13,7 @@
 //! * [`Conv3x3U8`]: the int8 plan (u8 activations with zero points, s8 weights with per-channel scales, i32
 //!   accumulation, requantisation fused into the epilogue; every path bit-exact with the scalar one), any
 //!   row band; u8 buffers are filled as ONNX `QuantizeLinear` does and take a new zero point when reused.
-//! * [`Isa`]: detection and the `TENSORHOLO_ISA` override; [`registry`]: the kernels compiled for this target (conv3x3 rows, other families' levels).
+//! * [`Isa`]: detection (the crate reads no environment; a caller lowers the level per plan); [`registry`]: the kernels compiled for this target (conv3x3 rows, other families' levels).
 //! * [`tanh_heads`], [`fake_quantize`]: the hologram CNN's heads and the int8 output grid, vectorised.
 //! * [`depthwise()`], [`depthwise_rows`]: the pre-filter's fixed depthwise filter, register-tiled; [`peak`]:
 //!   measured FMA / dot-product peaks.
@@ -25,7 +25,7 @@
 //! let (c_in, c_out, h, w) = (4, 24, 8, 10);
 //! let weights = vec![0.01f32; c_out * c_in * 9];
 //! let bias = vec![0.0f32; c_out];
-//! let plan = Conv3x3F32::new(&weights, &bias, c_in, c_out, true, Isa::active()?)?;
+//! let plan = Conv3x3F32::new(&weights, &bias, c_in, c_out, true, Isa::detect())?;
 //! let rgbd = vec![0.5f32; c_in * h * w];
 //! let offset = [-0.5f32; 4];
 //! let input = RowPlanar::from_planar(&rgbd, c_in, h, w,

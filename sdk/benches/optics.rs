@@ -15,6 +15,7 @@ use std::time::Duration;
 use tensorholo::encoding::{
     double_phase_encode, normaliser, wrap_phase, ChannelEncoder, DoublePhaseMethod, LinearLut,
 };
+use tensorholo::cnn::Isa;
 use tensorholo::optics::{Carrier, PropagationOptions, Propagator};
 use tensorholo::scene::procedural;
 use tensorholo::synthesis::{SceneLayer, SmLbm};
@@ -120,8 +121,8 @@ fn double_phase(c: &mut Criterion) {
 /// (what a colour worker of the real-time pipeline runs): pass 1 (`analyse`: `arg H`, max `|H|²`, `Σ arg H`)
 /// and pass 2 (`encode`: `φ − mean ± acos(|H|/a)`, wrap, linear LUT codes). The field is speckle-like
 /// (pseudo-random amplitude and phase per pixel), as a propagated hologram is. Divide by 1080·1920 =
-/// 2 073 600 for ns per pixel. `TENSORHOLO_ISA=scalar` runs the row kernels' portable path; `*_libm` are the
-/// passes as they were before the row kernels.
+/// 2 073 600 for ns per pixel. Each pass runs on this CPU's best row kernels and on the portable ones
+/// (`analyse/avx512` beside `analyse/scalar`); `*_libm` are the passes as they were before the row kernels.
 fn encode_rows(c: &mut Criterion) {
     let (h, w) = (1080, 1920);
     let mut group = c.benchmark_group("encode_rows_1080p");
@@ -141,24 +142,36 @@ fn encode_rows(c: &mut Criterion) {
             Complex32::from_polar(a, (next() - 0.5) * std::f32::consts::TAU)
         })
         .collect();
-    let mut enc = ChannelEncoder::new(h, w, DoublePhaseMethod::Plain).expect("valid size");
     let mut phase = vec![0.0f32; h * w];
     let mut codes = vec![0u8; h * w];
-    group.bench_function("analyse", |b| {
-        b.iter(|| enc.analyse(&mut field, &mut phase).expect("sizes match"))
-    });
-    let stats = enc.analyse(&mut field, &mut phase).expect("sizes match");
+    // This CPU's best rows and the portable ones, side by side in one run (`analyse/avx512`, `analyse/scalar`, …).
+    let mut isas = vec![Isa::detect(), Isa::Scalar];
+    isas.dedup();
+    for isa in isas {
+        let mut enc = ChannelEncoder::new(h, w, DoublePhaseMethod::Plain)
+            .and_then(|e| e.with_isa(isa))
+            .expect("valid size and level");
+        group.bench_function(BenchmarkId::new("analyse", isa.name()), |b| {
+            b.iter(|| enc.analyse(&mut field, &mut phase).expect("sizes match"))
+        });
+        let stats = enc.analyse(&mut field, &mut phase).expect("sizes match");
+        let (a, mean) = normaliser(&[stats; 3], h * w).expect("non-zero field");
+        group.bench_function(BenchmarkId::new("encode", isa.name()), |b| {
+            b.iter_batched_ref(
+                || phase.clone(),
+                |p| {
+                    enc.encode(&field, p, &mut codes, mean[0], a)
+                        .expect("sizes match")
+                },
+                BatchSize::LargeInput,
+            )
+        });
+    }
+    let stats = ChannelEncoder::new(h, w, DoublePhaseMethod::Plain)
+        .expect("valid size")
+        .analyse(&mut field, &mut phase)
+        .expect("sizes match");
     let (a, mean) = normaliser(&[stats; 3], h * w).expect("non-zero field");
-    group.bench_function("encode", |b| {
-        b.iter_batched_ref(
-            || phase.clone(),
-            |p| {
-                enc.encode(&field, p, &mut codes, mean[0], a)
-                    .expect("sizes match")
-            },
-            BatchSize::LargeInput,
-        )
-    });
     // The same two passes as the SDK ran them before the row kernels of `tensorholo-kernels`: libm
     // `atan2f`/`acosf` per pixel, the scalar wrap, `LinearLut::code` (the "before" of docs/BENCHMARKS.md).
     group.bench_function("analyse_libm", |b| {

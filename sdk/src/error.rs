@@ -139,14 +139,6 @@ impl From<tensorholo_kernels::KernelError> for HoloError {
     }
 }
 
-/// The instruction set of the SDK's row kernels (double phase encoding, heads to phasors):
-/// [`tensorholo_kernels::Isa::active`], this CPU's best, lowered by the `TENSORHOLO_ISA` environment variable.
-///
-/// Errors: [`HoloError::InvalidParameter`] (`TENSORHOLO_ISA`) where it names an unknown or unavailable ISA.
-pub(crate) fn kernel_isa() -> Result<tensorholo_kernels::Isa> {
-    tensorholo_kernels::Isa::active().map_err(|e| invalid("TENSORHOLO_ISA", e.to_string()))
-}
-
 /// Runs `f`, turning a panic inside it into an error `"{what} panicked: …"`: tract and the layer reader
 /// walk untrusted graphs, and a corrupt file must never panic the caller.
 pub(crate) fn guarded<T, E: From<String>>(

@@ -6,7 +6,7 @@
 
 use std::sync::{Arc, Mutex};
 
-use tensorholo::cnn::{CnnLayout, PlanRequest, ThreadCount};
+use tensorholo::cnn::{CnnLayout, CnnOptions, PlanRequest, ThreadCount};
 use tensorholo::color::amplitude_to_srgb8;
 use tensorholo::generator::{
     pack_rgba, GeneratorConfig, HologramGenerator, SlmPatterns, StreamListener,
@@ -66,9 +66,9 @@ fn camera_frame(h: usize, w: usize, shift: f32) -> CameraFrameBuf {
 fn config() -> GeneratorConfig {
     let mut c = GeneratorConfig::new(W, H);
     c.fit = Fit::Stretch;
-    c.threads = ThreadCount::Fixed(1);
+    c.cnn.threads = ThreadCount::Fixed(1);
     // The plan table's engine, named (the tests compare generators and sessions bit for bit).
-    c.engine = tensorholo::cnn::CnnEngine::Native;
+    c.cnn.engine = tensorholo::cnn::CnnEngine::Native;
     c
 }
 
@@ -233,7 +233,7 @@ fn preview_is_sharpest_at_the_scene_depth() {
     let (h, w) = (64, 64);
     let mut c = GeneratorConfig::new(w, h);
     c.fit = Fit::Stretch;
-    c.threads = ThreadCount::Fixed(1);
+    c.cnn.threads = ThreadCount::Fixed(1);
     c.depth_range = Some(DepthRange::new(0.5, 2.0).unwrap());
     let g = HologramGenerator::new(c).unwrap();
     let mut frame = camera_frame(h, w, 1.0);
@@ -367,10 +367,12 @@ fn autotuned_plans_report_their_candidates_and_agree_with_the_file_layout() {
         )
         .unwrap();
         let request = &PlanRequest {
-            layout: CnnLayout::Auto,
-            threads: ThreadCount::Auto,
             source: tensorholo::cnn::PlanSource::Tune,
-            ..PlanRequest::default()
+            cnn: CnnOptions {
+                layout: CnnLayout::Auto,
+                threads: ThreadCount::Auto,
+                ..CnnOptions::default()
+            },
         };
         let (plan, report) = m.tuned_plan(24, 40, request).unwrap();
         assert!(report.autotuned);
@@ -443,7 +445,7 @@ fn a_calibrated_generator_shows_on_its_panel_what_an_ideal_one_shows() {
     let (h, w) = (64, 64);
     let mut c = GeneratorConfig::new(w, h);
     c.fit = Fit::Stretch;
-    c.threads = ThreadCount::Fixed(1);
+    c.cnn.threads = ThreadCount::Fixed(1);
     let frame = camera_frame(h, w, 1.0);
     let ideal = HologramGenerator::new(c.clone()).unwrap();
     let ideal_patterns = ideal.render(&frame.view()).unwrap();

@@ -10,7 +10,7 @@ use std::sync::Arc;
 use ndarray::{Array2, Array3};
 #[cfg(feature = "tract")]
 use tensorholo::cnn::tract::TractModel;
-use tensorholo::cnn::{CnnEngine, CnnLayout};
+use tensorholo::cnn::{CnnEngine, CnnLayout, CnnOptions};
 use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
 use tensorholo::pipeline::{Backend, HologramPipeline, PipelineConfig};
 use tensorholo::scene::RgbdFrame;
@@ -35,10 +35,13 @@ fn config(offset_m: f64) -> PipelineConfig {
         // and tract, which the naive composition runs (`CnnEngine::Auto` is the native engine, which agrees
         // with tract to ~1e-7, not bit for bit: src/cnn/tests.rs). A build without
         // tract runs the tests that do not compare with the naive composition on the native engine.
-        cnn_engine: if cfg!(feature = "tract") {
-            CnnEngine::Tract
-        } else {
-            CnnEngine::Native
+        cnn: CnnOptions {
+            engine: if cfg!(feature = "tract") {
+                CnnEngine::Tract
+            } else {
+                CnnEngine::Native
+            },
+            ..CnnOptions::default()
         },
         ..PipelineConfig::default()
     }
@@ -73,7 +76,10 @@ fn channels_last_session_agrees_with_channels_first() {
             load("holo8_rgbd.onnx", ModelKind::Hologram),
             Some(load("holo8_rgbd.prefilter.onnx", ModelKind::PreFilter)),
             PipelineConfig {
-                cnn_layout: layout,
+                cnn: CnnOptions {
+                    layout,
+                    ..CnnOptions::default()
+                },
                 ..config(6e-3)
             },
         )
@@ -289,10 +295,13 @@ fn two_sessions_with_different_plan_settings_run_their_own_plans_side_by_side() 
         let config = PipelineConfig {
             offset_m: 6e-3,
             backend: Backend::Cpu,
-            cnn_engine: CnnEngine::Native,
-            cnn_conv: conv,
-            cnn_strip_rows: strip_rows,
-            cnn_slabs: slabs,
+            cnn: CnnOptions {
+                engine: CnnEngine::Native,
+                algorithm: conv,
+                strip_rows,
+                slabs,
+                ..CnnOptions::default()
+            },
             ..PipelineConfig::default()
         };
         HologramPipeline::new(model.clone(), None, config).unwrap()
@@ -312,10 +321,13 @@ fn two_sessions_with_different_plan_settings_run_their_own_plans_side_by_side() 
     }
     let (ra, rb) = (a.plan_report(), b.plan_report());
     assert_eq!(
-        (ra.request.strip_rows, ra.request.slabs),
+        (ra.request.cnn.strip_rows, ra.request.cnn.slabs),
         (Some(4), Some(2))
     );
-    assert_eq!((rb.request.strip_rows, rb.request.slabs), (None, None));
+    assert_eq!(
+        (rb.request.cnn.strip_rows, rb.request.cnn.slabs),
+        (None, None)
+    );
     let (ka, kb) = (ra.kernel.clone().unwrap(), rb.kernel.clone().unwrap());
     assert!(!ka.contains("wino"), "{ka}");
     assert!(kb.contains("wino4x4"), "{kb}");

@@ -26,7 +26,7 @@ use std::sync::Arc;
 
 use ndarray::{Array2, Array3};
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
-use tensorholo::cnn::{cnn_plan, CnnEngine, PlanRequest, ThreadCount};
+use tensorholo::cnn::{cnn_plan, CnnEngine, CnnOptions, PlanRequest, ThreadCount};
 use tensorholo::display::AberrationProfile;
 use tensorholo::display::AberrationSample;
 use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
@@ -130,7 +130,10 @@ fn cpu_frames_allocate_nothing_after_warm_up() {
                 offset_m: 6e-3,
                 // Allocation counting is about the CPU path's colour workers.
                 backend: Backend::Cpu,
-                cnn_engine: engine,
+                cnn: CnnOptions {
+                    engine,
+                    ..CnnOptions::default()
+                },
                 ..PipelineConfig::default()
             };
             let mut pipeline =
@@ -195,10 +198,14 @@ fn cpu_frames_allocate_nothing_after_warm_up() {
     });
     for threads in [1, 2] {
         let request = PlanRequest {
-            threads: ThreadCount::Fixed(threads),
+            cnn: CnnOptions {
+                engine: CnnEngine::Native,
+                threads: ThreadCount::Fixed(threads),
+                ..CnnOptions::default()
+            },
             ..PlanRequest::default()
         };
-        let (mut plan, _) = cnn_plan(&model, h, w, CnnEngine::Native, &request).unwrap();
+        let (mut plan, _) = cnn_plan(&model, h, w, &request).unwrap();
         plan.run_outputs(input.view()).unwrap();
         let ((n, bytes), _) = allocations_during(|| {
             for _ in 0..5 {

@@ -23,7 +23,7 @@ use ndarray_npy::{read_npy, write_npy};
 use num_complex::Complex32;
 #[cfg(feature = "tract")]
 use tensorholo::cnn::tract::TractModel;
-use tensorholo::cnn::{CnnEngine, CnnLayout, ThreadCount};
+use tensorholo::cnn::{CnnEngine, CnnLayout, CnnOptions, ThreadCount};
 use tensorholo::model::Precision;
 use tensorholo::pipeline::{
     Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode,
@@ -116,11 +116,14 @@ fn render(case: &Case) -> (Array3<Complex32>, Array3<u8>) {
     };
     let config = PipelineConfig {
         offset_m: 6e-3,
-        cnn_layout: case.layout,
-        cnn_engine: case.engine,
-        cnn_threads: ThreadCount::Fixed(1),
         // The CPU path's parity across CPUs; the GPU has its own tests (gpu_pipeline.rs).
         backend: Backend::Cpu,
+        cnn: CnnOptions {
+            layout: case.layout,
+            engine: case.engine,
+            threads: ThreadCount::Fixed(1),
+            ..CnnOptions::default()
+        },
         ..PipelineConfig::default()
     };
     let pipeline = HologramPipeline::embedded(&selection, config).unwrap();

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use ndarray::Array3;
-use tensorholo::cnn::{cnn_plan, CnnEngine, PlanRequest, ThreadCount};
+use tensorholo::cnn::{cnn_plan, CnnEngine, CnnOptions, PlanRequest, ThreadCount};
 use tensorholo::model::{embedded, HologramModel, ModelConfig, ModelKind, Precision, SceneInput};
 
 /// The precisions whose files this build embeds: the int8 QOperator forms only with tract.
@@ -67,12 +67,16 @@ fn check(
         fixture(&format!("{stem}_{second}.npy")),
     );
     let model = Arc::new(model);
-    let request = PlanRequest {
-        threads: ThreadCount::Fixed(1),
-        ..PlanRequest::default()
-    };
     for engine in engines(precision) {
-        let (mut plan, _) = cnn_plan(&model, input.dim().1, input.dim().2, engine, &request)
+        let request = PlanRequest {
+            cnn: CnnOptions {
+                engine,
+                threads: ThreadCount::Fixed(1),
+                ..CnnOptions::default()
+            },
+            ..PlanRequest::default()
+        };
+        let (mut plan, _) = cnn_plan(&model, input.dim().1, input.dim().2, &request)
             .unwrap_or_else(|e| panic!("{name} on {engine:?}: {e}"));
         let (a, p) = plan.run_outputs(input.view()).unwrap();
         let diffs: Vec<f32> = a

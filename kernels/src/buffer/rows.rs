@@ -7,8 +7,6 @@
 //! the SSE2 copies were 4.6 % of an int8 frame's CPU time (the mixed-precision pre-filter's `s_1` and
 //! `s_{N−1}`, the hologram CNN's input and concat).
 
-use std::sync::OnceLock;
-
 use crate::dispatch::{self, Path};
 use crate::error::KernelError;
 use crate::isa::Isa;
@@ -110,12 +108,10 @@ pub(crate) fn requantize_row(
     Ok(())
 }
 
-/// The level the conversions run under: the process's (`Isa::active`, so `TENSORHOLO_ISA` lowers it; read
-/// once), the portable body where that fails. The copies compute the same values, so the level changes the
-/// speed only.
+/// The level the conversions run under: this CPU's best ([`Isa::detect`]). The copies compute the same
+/// values, so the level changes the speed only.
 pub(crate) fn level() -> Isa {
-    static LEVEL: OnceLock<Isa> = OnceLock::new();
-    *LEVEL.get_or_init(|| Isa::active().unwrap_or(Isa::Scalar))
+    Isa::detect()
 }
 
 /// `dst[4x + k] = quantize((rows[k][x] + offset) / scale, zp)` (ONNX `QuantizeLinear` of `x + offset`), for

@@ -1017,7 +1017,7 @@ fn a_reused_u8_buffer_takes_a_new_zero_point() {
     d.zp[3] = 200;
     let sp = spec(case, &d);
     let a = RowPlanar::from_planar_u8(&d.a, 6, 5, 13, d.zp[0]).unwrap();
-    let plan = Conv3x3U8::new(&sp, Isa::active().unwrap()).unwrap();
+    let plan = Conv3x3U8::new(&sp, Isa::detect()).unwrap();
     let mut fresh = RowPlanar::new_quantized(6, 5, 13, 200).unwrap();
     plan.run(Inputs::new(&a), &mut fresh, 0..5).unwrap();
     let old: Vec<u8> = (0..6 * 5 * 13).map(|i| (i * 7 % 251) as u8).collect();
@@ -1534,7 +1534,7 @@ fn shifts_of_absent_operands_are_ignored() {
                 zero_point: 3,
             }),
         },
-        Isa::active().unwrap(),
+        Isa::detect(),
     )
     .unwrap();
     let qa = RowPlanar::quantize_from_planar(&src, ca, h, w, 0.02, 9).unwrap();

@@ -4,6 +4,8 @@
 
 use std::sync::Arc;
 
+use tensorholo_kernels::Isa;
+
 use super::options::{CnnEngine, CnnLayout};
 use super::plan::CnnPlan;
 use super::saved::SavedRow;
@@ -94,9 +96,10 @@ pub(crate) trait Engine: Sync {
     ) -> Result<Tuning>;
 
     /// `Some(why)` where this engine, able to run the files, is known to outrun every other engine of the
-    /// build on this CPU, so that [`super::CnnEngine::Auto`] does not time the engines after it (tract's
-    /// plan and run cost 0.3–0.4 s of a 1080p session's setup). `None`, the default: they are timed.
-    fn outruns_the_others(&self) -> Option<String> {
+    /// build on this CPU at the instruction set `isa`, so that [`super::CnnEngine::Auto`] does not time the
+    /// engines after it (tract's plan and run cost 0.3–0.4 s of a 1080p session's setup). `None`, the default:
+    /// they are timed.
+    fn outruns_the_others(&self, _isa: Isa) -> Option<String> {
         None
     }
 

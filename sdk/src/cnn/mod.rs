@@ -5,7 +5,8 @@
 //!
 //! One concept per file, lower files first:
 //!
-//! - `options`: what a caller may ask for: [`CnnEngine`], [`CnnLayout`], [`ThreadCount`], [`ConvAlgorithm`];
+//! - `options`: what a caller may ask for, as one [`CnnOptions`]: [`CnnEngine`], [`CnnLayout`], [`ThreadCount`],
+//!   [`ConvAlgorithm`], the kernels' [`Isa`];
 //! - `saved`: [`SavedPlans`], a session's plan decisions as a JSON file the caller owns;
 //! - `tuning`: what a session asks and gets: [`PlanRequest`] (with its [`PlanSource`]: the plan table, a
 //!   saved tuning, or a timing), [`PlanReport`] and the timing rule every engine shares;
@@ -48,15 +49,16 @@ use crate::error::HoloError;
 use crate::error::Result;
 use crate::model::HologramModel;
 
-pub use native::{f32_peak_gflops, int8_peak_gops, native_isa};
+pub use native::{f32_peak_gflops, int8_peak_gops};
 pub use options::{
-    default_threads, CnnEngine, CnnLayout, ConvAlgorithm, ThreadCount, MAX_CNN_THREADS,
+    default_threads, CnnEngine, CnnLayout, CnnOptions, ConvAlgorithm, ThreadCount, MAX_CNN_THREADS,
 };
 pub use saved::{
     network_key, RowAlgorithms, SavedPlans, SavedRow, SavedSession, SAVED_PLANS_FORMAT,
     SAVED_PLANS_VERSION,
 };
 pub use select::CpuCnnPlan;
+pub use tensorholo_kernels::Isa;
 pub use tuning::{
     auto_thread_candidates, PlanOrigin, PlanReport, PlanRequest, PlanSource, PlanTiming,
 };
@@ -76,8 +78,8 @@ fn engines() -> Registry {
     ]
 }
 
-/// The plans for `height × width` frames of `hologram` (and `prefilter`) on `engine`, made as `request`
-/// says: a session's CNNs.
+/// The plans for `height × width` frames of `hologram` (and `prefilter`) on the engine `request` names, made
+/// as it says: a session's CNNs.
 ///
 /// Errors: [`crate::HoloError::InvalidParameter`] (`engine`) for an engine this build lacks (naming its
 /// cargo feature) or one that cannot run the file (the reason is given);
@@ -87,18 +89,9 @@ pub(crate) fn select(
     prefilter: Option<&Arc<HologramModel>>,
     height: usize,
     width: usize,
-    engine: CnnEngine,
     request: &PlanRequest,
 ) -> Result<CnnPlans> {
-    select::select(
-        engines(),
-        hologram,
-        prefilter,
-        height,
-        width,
-        engine,
-        request,
-    )
+    select::select(engines(), hologram, prefilter, height, width, request)
 }
 
 /// Refuses a model that no CPU engine of this build can run, when a pipeline is made (so that a phone build
@@ -110,9 +103,8 @@ pub fn check_runnable(model: &Arc<HologramModel>) -> Result<()> {
     select::check_runnable(engines(), model)
 }
 
-/// `model`'s CNN for `height × width` inputs on `engine`, made as `request` says, and how it was chosen, as a
-/// session chooses
-/// ([`PipelineConfig::cnn_engine`](crate::pipeline::PipelineConfig::cnn_engine)).
+/// `model`'s CNN for `height × width` inputs on the engine `request` names ([`CnnOptions::engine`]), made as
+/// it says, and how it was chosen, as a session chooses.
 ///
 /// Errors: as the session's choice: [`HoloError::InvalidParameter`] (`engine`) for an engine this build
 /// lacks or one that cannot run the file; the engine's plan errors.
@@ -120,10 +112,9 @@ pub fn cnn_plan(
     model: &Arc<HologramModel>,
     height: usize,
     width: usize,
-    engine: CnnEngine,
     request: &PlanRequest,
 ) -> Result<(CpuCnnPlan, PlanReport)> {
-    select::cnn_plan(engines(), model, height, width, engine, request)
+    select::cnn_plan(engines(), model, height, width, request)
 }
 
 #[cfg(all(test, feature = "embedded-models"))]

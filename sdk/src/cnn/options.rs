@@ -1,10 +1,123 @@
-//! What a caller may ask of a session's CNN plans, each a plain value: the engine ([`CnnEngine`]), tract's
-//! memory layout ([`CnnLayout`]), the threads ([`ThreadCount`], at most [`MAX_CNN_THREADS`]) and the f32
-//! convolution algorithm ([`ConvAlgorithm`]). Their `Auto` values are decided by the plan table
-//! (`cnn/table.rs`), or timed on the machine when tuning is asked for ([`crate::cnn::PlanSource::Tune`]).
-//! Imports nothing of `cnn/`: every other file of it reads this one.
+//! What a caller may ask of a session's CNN plans, as one value that travels whole from the request
+//! ([`crate::pipeline::PipelineConfig::cnn`], [`crate::generator::GeneratorConfig::cnn`], the bindings) to the
+//! plans and the kernels: [`CnnOptions`], made of the engine ([`CnnEngine`]), tract's memory layout
+//! ([`CnnLayout`]), the threads ([`ThreadCount`], at most [`MAX_CNN_THREADS`]), the f32 convolution algorithm
+//! ([`ConvAlgorithm`]), whether to time the candidates, the native engine's strips and slabs, and the kernels'
+//! instruction set ([`Isa`]). Their `Auto` values are decided by the plan table (`cnn/table.rs`), or timed on
+//! the machine when tuning is asked for ([`crate::cnn::PlanSource::Tune`]). Imports nothing of `cnn/`: every
+//! other file of it reads this one.
+
+use tensorholo_kernels::Isa;
 
 use crate::error::{invalid, Result};
+
+/// How a session's CNNs run: one value from the request to the kernels. `Default` is every decision the plan
+/// table's (the same bits in every process), on the cores the CPU reports and this CPU's best instruction set.
+///
+/// The engine's plans read it whole ([`crate::cnn::PlanRequest::cnn`]); nothing in the SDK reads the
+/// environment for it (`holo` maps `TENSORHOLO_ISA`, `TENSORHOLO_CONV`, `TENSORHOLO_STRIP_ROWS` and
+/// `TENSORHOLO_SLABS` onto it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
+pub struct CnnOptions {
+    /// The engine of the CPU CNNs ([`CnnEngine::Auto`], the default: the plan table's, the native engine
+    /// wherever it runs the files; the native engine runs the f32 and the int8 QDQ files, tract every file,
+    /// int8 QOperator included; with `tune` the engines are timed and the fastest runs).
+    pub engine: CnnEngine,
+    /// Memory layout tract runs the hologram CNN in ([`CnnLayout`]; results agree to float rounding);
+    /// [`CnnLayout::Auto`] (the default) is the plan table's (both timed with `tune`). The pre-filter CNN
+    /// always runs channels-first: with its 8 filters the channels-last matrix product has only 8 rows, and it
+    /// measured 2.1× slower (`holo bench --skip-cnn --layout nchw,nhwc`, 384², 1 thread: 89 ms against
+    /// 42 ms); tract 0.23 cannot move its graph channels-last anyway.
+    pub layout: CnnLayout,
+    /// Threads of the CNNs ([`ThreadCount::Auto`], the default: the cores the CPU reports; with `tune`, the
+    /// fastest of 1, half and all cores, timed). The optics run on their own threads (the offset propagation
+    /// one thread per colour, the encoding on a pool of all the cores).
+    pub threads: ThreadCount,
+    /// The native engine's f32 convolution algorithm ([`ConvAlgorithm::Auto`], the default: each layer
+    /// shape's row from the plan table, a saved tuning or the timing); a pinned algorithm still takes its row
+    /// from there.
+    pub algorithm: ConvAlgorithm,
+    /// Time the CNN candidates when a session is created ([`crate::cnn::PlanSource::Tune`]: engines, layouts,
+    /// each layer shape's kernel row, thread counts) instead of taking the plan table's (the default,
+    /// `false`: the same bits in every process). Two tuned processes can differ in their last bits where two
+    /// candidates are close; save a session's choice ([`crate::cnn::PlanReport::saved`]) and give it to later
+    /// pipelines ([`HologramPipeline::with_saved_plans`](crate::pipeline::HologramPipeline::with_saved_plans))
+    /// to repeat it.
+    pub tune: bool,
+    /// The native engine's strip height in frame rows (`None`, the default: the rule of
+    /// `cnn/native/strips.rs`, the most rows whose activation windows fit a cache budget), rounded up to a
+    /// whole number of its layers' row groups; more rows than the frame's make one strip. A benchmark setting
+    /// (`holo` reads `TENSORHOLO_STRIP_ROWS`); the same value gives the same bits.
+    pub strip_rows: Option<usize>,
+    /// The native f32 engine's column slab count (`None`, the default: the rule of `cnn/native/slabs.rs`);
+    /// the int8 engine runs whole rows. More slabs than the frame can hold (each starts at its own multiple of
+    /// 4 columns: at most `⌈W/4⌉`) run the whole frame. A benchmark setting (`holo` reads `TENSORHOLO_SLABS`).
+    pub slabs: Option<usize>,
+    /// The highest instruction-set level the kernels may use (`None`, the default: this CPU's best,
+    /// [`Isa::detect`]); a lower level runs the same plans on that level's kernel rows (the portable ones with
+    /// [`Isa::Scalar`]), to compare or to reproduce another machine's bits. Resolved once per session
+    /// ([`CnnOptions::kernel_isa`]). `holo` maps `TENSORHOLO_ISA` onto it.
+    #[serde(serialize_with = "isa_name")]
+    pub isa: Option<Isa>,
+}
+
+/// [`CnnOptions::isa`] in reports: its name, or null.
+fn isa_name<S: serde::Serializer>(isa: &Option<Isa>, s: S) -> std::result::Result<S::Ok, S::Error> {
+    match isa {
+        Some(i) => s.serialize_some(i.name()),
+        None => s.serialize_none(),
+    }
+}
+
+impl CnnOptions {
+    /// Checks the values: a fixed thread count in 1..=[`MAX_CNN_THREADS`], strip rows and slabs ≥ 1 where
+    /// given, and an instruction set this CPU has.
+    ///
+    /// Errors: [`crate::HoloError::InvalidParameter`] naming the field (`threads`, `strip_rows`, `slabs`,
+    /// `isa`).
+    pub fn validate(&self) -> Result<()> {
+        if let ThreadCount::Fixed(n) = self.threads {
+            if n == 0 || n > MAX_CNN_THREADS {
+                return Err(invalid(
+                    "threads",
+                    format!("0 (automatic) to {MAX_CNN_THREADS} threads, got {n}"),
+                ));
+            }
+        }
+        for (name, v) in [("strip_rows", self.strip_rows), ("slabs", self.slabs)] {
+            if v == Some(0) {
+                return Err(invalid(
+                    name,
+                    "must be at least 1 (or unset for the engine's rule)",
+                ));
+            }
+        }
+        self.kernel_isa().map(drop)
+    }
+
+    /// The instruction-set level the kernels run at: [`CnnOptions::isa`], else this CPU's best
+    /// ([`Isa::detect`]).
+    ///
+    /// Errors: [`crate::HoloError::InvalidParameter`] (`isa`) for a level this CPU does not have.
+    pub fn kernel_isa(&self) -> Result<Isa> {
+        match self.isa {
+            None => Ok(Isa::detect()),
+            Some(isa) if isa.is_available() => Ok(isa),
+            Some(isa) => Err(invalid(
+                "isa",
+                format!(
+                    "`{}` is not available on this CPU (it has: {})",
+                    isa.name(),
+                    Isa::available()
+                        .iter()
+                        .map(|i| i.name())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            )),
+        }
+    }
+}
 
 /// The most threads a CNN plan may use (tract's `ModelPlan::with_threads`, the native engine's thread
 /// count): far above any phone or desktop core count, low enough that a typo cannot ask the OS for a hundred

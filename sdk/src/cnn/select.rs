@@ -12,7 +12,6 @@
 use std::sync::Arc;
 
 use ndarray::{Array3, ArrayView3};
-use tensorholo_kernels::Isa;
 
 use super::engine::{Engine, Networks, Registry, Tuning};
 use super::options::CnnEngine;
@@ -46,9 +45,9 @@ pub(super) fn select(
     prefilter: Option<&Arc<HologramModel>>,
     height: usize,
     width: usize,
-    engine: CnnEngine,
     request: &PlanRequest,
 ) -> Result<CnnPlans> {
+    let engine = request.cnn.engine;
     hologram.check_fixed_size(height, width)?;
     let nets = Networks {
         hologram,
@@ -119,7 +118,7 @@ fn planned(
     let (engine, why) = match saved {
         Some(e) => (e, "the saved plans".to_string()),
         None => {
-            let isa = Isa::active().unwrap_or(Isa::Scalar);
+            let isa = request.cnn.kernel_isa()?;
             let int8 = nets.each().any(|m| m.metadata().precision != "f32");
             let native = has(CnnEngine::Native).is_some();
             let tract = has(CnnEngine::Tract).is_some();
@@ -154,7 +153,7 @@ fn fastest(
         if let Some((first, why)) = &decided {
             untimed.push(PlanTiming {
                 engine: e.id(),
-                layout: request.layout,
+                layout: request.cnn.layout,
                 threads: None,
                 seconds: None,
                 skipped: Some(format!("{NOT_TIMED}: the {first} engine runs {why}")),
@@ -166,7 +165,9 @@ fn fastest(
         to_beat = Some(to_beat.map_or(best, |b| b.min(best)));
         timed.push((*e, tuning, best));
         if timed.len() == 1 && best.is_finite() {
-            decided = e.outruns_the_others().map(|why| (e.id(), why));
+            decided = e
+                .outruns_the_others(request.cnn.kernel_isa()?)
+                .map(|why| (e.id(), why));
         }
     }
     timed.sort_by(|a, b| a.2.total_cmp(&b.2));
@@ -282,7 +283,10 @@ fn build(
             source,
             source_detail,
             network: network_key(nets.hologram),
-            isa: Isa::active().map_or_else(|_| "none".to_string(), |i| i.name().to_string()),
+            isa: request
+                .cnn
+                .kernel_isa()
+                .map_or_else(|_| "none".to_string(), |i| i.name().to_string()),
             rows: tuning.rows,
         },
     })
@@ -397,9 +401,8 @@ pub(super) fn cnn_plan(
     model: &Arc<HologramModel>,
     height: usize,
     width: usize,
-    engine: CnnEngine,
     request: &PlanRequest,
 ) -> Result<(CpuCnnPlan, PlanReport)> {
-    let plans = select(engines, model, None, height, width, engine, request)?;
+    let plans = select(engines, model, None, height, width, request)?;
     Ok((CpuCnnPlan(plans.hologram), plans.report))
 }

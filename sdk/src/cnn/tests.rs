@@ -8,7 +8,7 @@ use tensorholo_kernels::{Algorithm, Isa};
 
 use super::native::{table_plan as native_plan, NativeInt8Plan, NativePlan};
 use super::{select, CnnEngine, CnnPlan};
-use crate::cnn::{PlanRequest, ThreadCount};
+use crate::cnn::{CnnOptions, PlanRequest, ThreadCount};
 use crate::error::HoloError;
 use crate::model::{embedded, HologramModel, ModelConfig, Precision};
 
@@ -72,7 +72,7 @@ fn native_matches_tract_on_every_shipped_f32_model() {
             .unwrap()
             .run_outputs(x.view())
             .unwrap();
-        let isas: Vec<Isa> = [Isa::Scalar, Isa::active().unwrap()].into();
+        let isas: Vec<Isa> = [Isa::Scalar, Isa::detect()].into();
         for isa in isas {
             for threads in [1, 3] {
                 let mut plan = NativePlan::new(graph.clone(), h, w, threads, isa).unwrap();
@@ -96,7 +96,7 @@ fn threads_and_spawned_plans_give_bit_identical_frames() {
     let model = &shipped()[0];
     let graph = model.cnn_graph().unwrap();
     let (h, w) = (19, 70);
-    let isa = Isa::active().unwrap();
+    let isa = Isa::detect();
     let x = input(graph.in_channels, h, w, 3);
     for conv in [
         Algorithm::Direct,
@@ -144,7 +144,7 @@ fn winograd_matches_direct_on_every_shipped_f32_model() {
     for model in shipped() {
         let graph = model.cnn_graph().unwrap();
         let x = input(graph.in_channels, h, w, 21);
-        for (isa, winograd) in [Isa::Scalar, Isa::active().unwrap()]
+        for (isa, winograd) in [Isa::Scalar, Isa::detect()]
             .into_iter()
             .flat_map(|i| [(i, Algorithm::Winograd2x2), (i, Algorithm::Winograd4x4)])
         {
@@ -181,7 +181,7 @@ fn winograd_matches_direct_on_every_shipped_f32_model() {
 fn bad_input_and_bad_weights_are_errors() {
     let model = &shipped()[0];
     let graph = model.cnn_graph().unwrap();
-    let isa = Isa::active().unwrap();
+    let isa = Isa::detect();
     let mut plan = NativePlan::new(graph.clone(), 8, 9, 1, isa).unwrap();
     let wrong = Array3::<f32>::zeros((graph.in_channels, 8, 10));
     assert!(matches!(
@@ -272,6 +272,17 @@ fn assert_auto_keeps_the_faster(report: &super::tuning::PlanReport) {
     );
 }
 
+/// `request` on `engine`.
+fn on(engine: CnnEngine, request: &PlanRequest) -> PlanRequest {
+    PlanRequest {
+        cnn: CnnOptions {
+            engine,
+            ..request.cnn
+        },
+        source: request.source.clone(),
+    }
+}
+
 #[test]
 #[cfg(feature = "tract")]
 fn engine_choice_follows_the_request_and_the_file() {
@@ -282,12 +293,15 @@ fn engine_choice_follows_the_request_and_the_file() {
     let f32_model = Arc::new(embedded::hologram_model(8, Precision::F32, &cfg).unwrap());
     let int8 = Arc::new(embedded::hologram_model(8, Precision::Int8QOperator, &cfg).unwrap());
     let request = PlanRequest {
-        threads: ThreadCount::Fixed(1),
+        cnn: CnnOptions {
+            threads: ThreadCount::Fixed(1),
+            ..CnnOptions::default()
+        },
         ..PlanRequest::default()
     };
     let request = &request;
     let x = input(4, 16, 24, 9);
-    let native = select(&f32_model, None, 16, 24, CnnEngine::Native, request).unwrap();
+    let native = select(&f32_model, None, 16, 24, &on(CnnEngine::Native, request)).unwrap();
     assert_eq!(native.report.engine, CnnEngine::Native);
     assert!(native
         .report
@@ -295,7 +309,7 @@ fn engine_choice_follows_the_request_and_the_file() {
         .as_deref()
         .unwrap()
         .starts_with("conv3x3.f32."));
-    let tract = select(&f32_model, None, 16, 24, CnnEngine::Tract, request).unwrap();
+    let tract = select(&f32_model, None, 16, 24, &on(CnnEngine::Tract, request)).unwrap();
     assert_eq!(tract.report.engine, CnnEngine::Tract);
     let (mut a, mut b) = (native.hologram, tract.hologram);
     let (d, m) = diff(
@@ -304,7 +318,7 @@ fn engine_choice_follows_the_request_and_the_file() {
     );
     assert!(d <= 2e-5 * m.max(1.0));
     // Auto without tuning is the plan table's engine, native, and nothing is timed.
-    let table = select(&f32_model, None, 16, 24, CnnEngine::Auto, request).unwrap();
+    let table = select(&f32_model, None, 16, 24, &on(CnnEngine::Auto, request)).unwrap();
     assert_eq!(table.report.engine, CnnEngine::Native);
     assert!(
         table.report.engine_reason.starts_with("the plan table"),
@@ -322,10 +336,10 @@ fn engine_choice_follows_the_request_and_the_file() {
         ..request.clone()
     };
     let request = &tuned;
-    let auto = select(&f32_model, None, 16, 24, CnnEngine::Auto, request).unwrap();
+    let auto = select(&f32_model, None, 16, 24, &on(CnnEngine::Auto, request)).unwrap();
     assert_eq!(auto.report.source, super::tuning::PlanOrigin::Tuned);
     use super::engine::Engine;
-    match super::native::NativeEngine.outruns_the_others() {
+    match super::native::NativeEngine.outruns_the_others(Isa::detect()) {
         Some(why) => {
             assert_eq!(auto.report.engine, CnnEngine::Native);
             assert_eq!(auto.report.engine_reason, why);
@@ -346,22 +360,29 @@ fn engine_choice_follows_the_request_and_the_file() {
         None => assert_auto_keeps_the_faster(&auto.report),
     }
     let both: super::engine::Registry = &[&TimedNative, &super::tract::TractEngine];
-    let timed =
-        super::select::select(both, &f32_model, None, 16, 24, CnnEngine::Auto, request).unwrap();
+    let timed = super::select::select(
+        both,
+        &f32_model,
+        None,
+        16,
+        24,
+        &on(CnnEngine::Auto, request),
+    )
+    .unwrap();
     assert_auto_keeps_the_faster(&timed.report);
     // int8 files: Native is refused with the reason, Auto runs tract and says why.
-    let err = select(&int8, None, 16, 24, CnnEngine::Native, request).unwrap_err();
+    let err = select(&int8, None, 16, 24, &on(CnnEngine::Native, request)).unwrap_err();
     assert!(matches!(
         err,
         HoloError::InvalidParameter { name: "engine", .. }
     ));
     assert!(err.to_string().contains("QOperator"), "{err}");
-    let auto8 = select(&int8, None, 16, 24, CnnEngine::Auto, request).unwrap();
+    let auto8 = select(&int8, None, 16, 24, &on(CnnEngine::Auto, request)).unwrap();
     assert_eq!(auto8.report.engine, CnnEngine::Tract);
     assert!(auto8.report.engine_reason.contains("QOperator"));
     // int8 QDQ files run natively, on the int8 kernels.
     let qdq = Arc::new(embedded::hologram_model(8, Precision::Int8Qdq, &cfg).unwrap());
-    let native8 = select(&qdq, None, 16, 24, CnnEngine::Native, request).unwrap();
+    let native8 = select(&qdq, None, 16, 24, &on(CnnEngine::Native, request)).unwrap();
     assert_eq!(native8.report.engine, CnnEngine::Native);
     let kernel = native8.report.kernel.as_deref().unwrap();
     assert!(kernel.starts_with("conv3x3.u8s8."), "{kernel}");
@@ -378,12 +399,15 @@ fn without_tract_the_native_engine_runs_everything_it_can_and_the_rest_is_refuse
     };
     let f32_model = Arc::new(embedded::hologram_model(8, Precision::F32, &cfg).unwrap());
     let request = PlanRequest {
-        threads: ThreadCount::Fixed(1),
+        cnn: CnnOptions {
+            threads: ThreadCount::Fixed(1),
+            ..CnnOptions::default()
+        },
         ..PlanRequest::default()
     };
     let request = &request;
     // Auto is the native engine, and says why.
-    let auto = select(&f32_model, None, 16, 24, CnnEngine::Auto, request).unwrap();
+    let auto = select(&f32_model, None, 16, 24, &on(CnnEngine::Auto, request)).unwrap();
     assert_eq!(auto.report.engine, CnnEngine::Native);
     assert!(
         auto.report.engine_reason.contains("`tract`"),
@@ -391,7 +415,7 @@ fn without_tract_the_native_engine_runs_everything_it_can_and_the_rest_is_refuse
         auto.report.engine_reason
     );
     // Asking for tract is an error naming the feature.
-    let err = select(&f32_model, None, 16, 24, CnnEngine::Tract, request).unwrap_err();
+    let err = select(&f32_model, None, 16, 24, &on(CnnEngine::Tract, request)).unwrap_err();
     assert!(matches!(
         err,
         HoloError::InvalidParameter { name: "engine", .. }
@@ -533,7 +557,7 @@ fn native_int8_matches_tract_on_every_shipped_qdq_model() {
             crate::model::ModelKind::PreFilter => (2.0 * 2.2e-3, 2.0 * 1.0e-2),
         };
         let mut first: Option<(Array3<f32>, Array3<f32>)> = None;
-        for isa in [Isa::Scalar, Isa::active().unwrap()] {
+        for isa in [Isa::Scalar, Isa::detect()] {
             // The f32 first and last layers of a mixed-precision file sum in another order on each ISA: its
             // frames are bit-identical across thread counts, and within the tolerance across ISAs.
             if quant.layers[0].is_none() {
@@ -572,7 +596,7 @@ fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
     // input N rows later, and the frame's top and bottom edges fall inside strips). F(4×4, 3×3) puts each
     // layer 4 rows behind the one before and rounds the strips up to its 4-row tiles.
     let (h, w) = (17, 29);
-    let isa = Isa::active().unwrap();
+    let isa = Isa::detect();
     let (mut f32s, mut int8s) = (shipped(), shipped_qdq());
     // f32: a hologram CNN and a pre-filter; int8: an all-int8 hologram CNN, a mixed-precision pre-filter (the
     // last shipped one) and an all-int8 pre-filter (the earlier shipped one).
@@ -643,7 +667,7 @@ fn the_prefilter_base_is_added_once_to_every_row_as_the_rows_are_written() {
     // or a channel's base on another, shows. (A frame of several column slabs takes the separate pass:
     // `column_slabs_give_the_whole_frame_bit_for_bit` holds it to the fused one.)
     let (h, w) = (19, 27);
-    let isa = Isa::active().unwrap();
+    let isa = Isa::detect();
     let (mut f32s, mut int8s) = (shipped(), shipped_qdq());
     let mixed = int8s.len() - 3;
     for model in [f32s.pop().unwrap(), int8s.remove(mixed)] {
@@ -717,7 +741,7 @@ fn column_slabs_give_the_whole_frame_bit_for_bit() {
     // read) gives the whole frame's bits: the f32 hologram CNN and pre-filter, each algorithm (the Winograd
     // tiles of slab and frame coincide) and the timed mix, frames whose width is and is not a multiple of 4,
     // 1 and 3 threads, two frames through the same windows.
-    let isa = Isa::active().unwrap();
+    let isa = Isa::detect();
     let mut f32s = shipped();
     let models = [f32s.swap_remove(0), f32s.pop().unwrap()];
     for model in &models {
@@ -790,7 +814,7 @@ fn a_1080p_plan_keeps_its_activations_to_a_few_rows() {
     // 0.19 MB a row in f32) hold 8–16 rows, not the frame's 1080.
     let model = &shipped()[0];
     let graph = model.cnn_graph().unwrap();
-    let isa = Isa::active().unwrap();
+    let isa = Isa::detect();
     let plan = NativePlan::new(graph, 1080, 1920, 2, isa).unwrap();
     let rows = plan.strip_rows();
     assert!((8..=16).contains(&rows), "{rows} rows per strip");
@@ -803,7 +827,7 @@ fn an_input_given_plane_by_plane_gives_the_same_frame() {
     // and int8, whose base filter reads the planes too) and on tract; a wrong plane count or length is a
     // shape error.
     let (h, w) = (13, 21);
-    let isa = Isa::active().unwrap();
+    let isa = Isa::detect();
     for model in [shipped().pop().unwrap(), shipped_qdq().pop().unwrap()] {
         let graph = model.cnn_graph().unwrap();
         let x = input(graph.in_channels, h, w, 5).mapv(|v| 0.75 * v - 0.05);
@@ -851,10 +875,12 @@ fn tract_stops_after_its_likeliest_candidate_when_another_engine_is_far_faster()
     use super::tuning::{auto_thread_candidates, PlanSource, PLAUSIBLE_FACTOR};
     let m = embedded::hologram_model(8, Precision::F32, &ModelConfig::default()).unwrap();
     let request = &PlanRequest {
-        layout: CnnLayout::Auto,
-        threads: ThreadCount::Auto,
         source: PlanSource::Tune,
-        ..PlanRequest::default()
+        cnn: CnnOptions {
+            layout: CnnLayout::Auto,
+            threads: ThreadCount::Auto,
+            ..CnnOptions::default()
+        },
     };
     let threads = auto_thread_candidates();
     let all = CnnLayout::ALL.len() * threads.len();

@@ -15,9 +15,7 @@
 
 use std::sync::Arc;
 
-use super::options::{
-    default_threads, CnnEngine, CnnLayout, ConvAlgorithm, ThreadCount, MAX_CNN_THREADS,
-};
+use super::options::{default_threads, CnnEngine, CnnLayout, CnnOptions, MAX_CNN_THREADS};
 use super::saved::{SavedPlans, SavedRow, SavedSession};
 use crate::error::Result;
 
@@ -96,26 +94,11 @@ impl serde::Serialize for PlanSource {
 /// default, a timing, or a saved tuning); a concrete value is used as given.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Default, serde::Serialize)]
 pub struct PlanRequest {
-    /// tract's memory layout, or [`CnnLayout::Auto`].
-    pub layout: CnnLayout,
-    /// Thread count, or [`ThreadCount::Auto`] (the cores the CPU reports, or timed with
-    /// [`PlanSource::Tune`]).
-    pub threads: ThreadCount,
-    /// The native engine's f32 convolution algorithm, or [`ConvAlgorithm::Auto`] (each layer shape's row
-    /// from `source`); a pinned algorithm still takes its row from `source`.
-    pub conv: ConvAlgorithm,
+    /// The caller's options, whole ([`CnnOptions`]: engine, layout, threads, algorithm, strips, slabs,
+    /// instruction set; `tune` is read into `source`).
+    pub cnn: CnnOptions,
     /// Where the decisions come from.
     pub source: PlanSource,
-    /// The native engine's strip height in frame rows (`None`, the default: the rule of
-    /// `cnn/native/strips.rs`, the most rows whose activation windows fit a cache budget), rounded up to a
-    /// whole number of its layers' row groups; more rows than the frame's make one strip. For benchmarks of the
-    /// layout (`holo` reads `TENSORHOLO_STRIP_ROWS`); the same value gives the same bits.
-    pub strip_rows: Option<usize>,
-    /// The native f32 engine's column slab count (`None`, the default: the rule of `cnn/native/slabs.rs`);
-    /// the int8 engine runs whole rows. More slabs than the frame can hold (each starts at its own multiple of
-    /// 4 columns: at most `⌈W/4⌉`) run the whole frame. For benchmarks of the layout (`holo` reads
-    /// `TENSORHOLO_SLABS`).
-    pub slabs: Option<usize>,
 }
 
 /// How a session's plans were decided ([`PlanReport::source`]).
@@ -266,6 +249,7 @@ pub(crate) fn fastest_run(mut run: impl FnMut() -> Result<f64>) -> Result<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cnn::ThreadCount;
 
     #[test]
     fn strips_keep_the_width_and_the_pixel_budget() {

@@ -7,7 +7,7 @@ use num_complex::Complex32;
 use rayon::prelude::*;
 use tensorholo_kernels::{double_phase as kernel, Isa};
 
-use crate::error::{invalid, kernel_isa, HoloError, Result};
+use crate::error::{invalid, HoloError, Result};
 use crate::optics::{check_colour_stack, check_finite_field, par_channels, Scratch, SpectralPlan};
 
 /// Which low-pass pre-filter, if any, to apply to the complex hologram before double phase encoding.
@@ -102,8 +102,7 @@ pub struct DoublePhase {
 /// by one step), on bands of rows on rayon's threads.
 ///
 /// Errors: a field that is not `[3, H, W]` ([`HoloError::ShapeMismatch`]), non-finite values or an all-zero
-/// field ([`HoloError::InvalidData`]), invalid method parameters or a `TENSORHOLO_ISA` override naming an
-/// unknown or unavailable ISA ([`HoloError::InvalidParameter`]).
+/// field ([`HoloError::InvalidData`]), invalid method parameters ([`HoloError::InvalidParameter`]).
 pub fn double_phase_encode(
     field: ArrayView3<Complex32>,
     method: &DoublePhaseMethod,
@@ -111,7 +110,7 @@ pub fn double_phase_encode(
     let (h, w) = check_colour_stack("hologram", &field)?;
     check_finite_field("hologram", &field)?;
     method.validate()?;
-    let isa = kernel_isa()?;
+    let isa = Isa::detect();
     let filtered: CowArray<Complex32, Ix3> = match *method {
         DoublePhaseMethod::Plain => field.as_standard_layout(),
         _ => {
@@ -373,13 +372,29 @@ pub struct ChannelEncoder {
 }
 
 impl ChannelEncoder {
-    /// Prepares the encoder for `[height, width]` channels.
+    /// This encoder on the row kernels of `isa`: the same codes at every level (one portable body compiled
+    /// per level), a lower one to compare their speeds or to run what a session's
+    /// [`crate::cnn::CnnOptions::isa`] allows.
     ///
-    /// Errors: [`HoloError::InvalidParameter`] for invalid method parameters, an empty size, or a
-    /// `TENSORHOLO_ISA` override naming an unknown or unavailable ISA.
+    /// Errors: [`HoloError::InvalidParameter`] (`isa`) for a level this CPU does not have.
+    pub fn with_isa(mut self, isa: Isa) -> Result<Self> {
+        if !isa.is_available() {
+            return Err(invalid(
+                "isa",
+                format!("`{}` is not available on this CPU", isa.name()),
+            ));
+        }
+        self.isa = isa;
+        Ok(self)
+    }
+
+    /// Prepares the encoder for `[height, width]` channels, on this CPU's best row kernels ([`Isa::detect`];
+    /// [`ChannelEncoder::with_isa`] lowers them).
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] for invalid method parameters or an empty size.
     pub fn new(height: usize, width: usize, method: DoublePhaseMethod) -> Result<Self> {
         method.validate()?;
-        let isa = kernel_isa()?;
+        let isa = Isa::detect();
         if height == 0 || width == 0 {
             return Err(invalid(
                 "channel size",

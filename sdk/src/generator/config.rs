@@ -4,7 +4,11 @@ use std::sync::Arc;
 
 #[cfg(doc)]
 use crate::cnn::PlanReport;
-use crate::cnn::{CnnEngine, CnnLayout, ConvAlgorithm, SavedPlans, ThreadCount, MAX_CNN_THREADS};
+#[cfg(test)]
+use crate::cnn::ThreadCount;
+#[cfg(doc)]
+use crate::cnn::MAX_CNN_THREADS;
+use crate::cnn::{CnnOptions, SavedPlans};
 use crate::display::{AberrationProfile, AberrationSource, DisplayProfile, Prescription};
 use crate::encoding::DoublePhaseMethod;
 #[cfg(doc)]
@@ -30,23 +34,17 @@ pub struct GeneratorConfig {
     /// Distance `s` from the midpoint hologram to the SLM in metres (Eq. 6; default 6e-3; shipped
     /// pre-filters exist for 6e-3 and 12e-3).
     pub offset_m: f64,
-    /// CNN threads ([`ThreadCount::Auto`] by default: the cores the CPU reports).
-    pub threads: ThreadCount,
-    /// CNN memory layout of tract ([`CnnLayout::Auto`] by default: the plan table's).
-    pub layout: CnnLayout,
-    /// CPU CNN engine ([`CnnEngine::Auto`] by default: the plan table's, the native kernels wherever they
-    /// run the models).
-    pub engine: CnnEngine,
-    /// Time the CNN candidates (engines, each layer's kernel row, threads) when the generator is made, instead
-    /// of taking the plan table's (the default, `false`: the same SLM codes on every run). Save the result
-    /// ([`GeneratorInfo::plan`], [`PlanReport::saved`]) and give it as `saved_plans` on later runs to repeat
-    /// it without timing.
+    /// How the CPU CNNs run ([`CnnOptions`]; the default: the plan table's engine, layout and kernel rows on
+    /// the cores the CPU reports, this CPU's best instruction set). With `cnn.tune` the candidates (engines,
+    /// each layer's kernel row, threads) are timed when the generator is made, instead of taking the plan
+    /// table's (the default: the same SLM codes on every run); save the result ([`GeneratorInfo::plan`],
+    /// [`PlanReport::saved`]) and give it as `saved_plans` on later runs to repeat it without timing.
     ///
     /// [`GeneratorInfo::plan`]: super::GeneratorInfo::plan
-    pub tune: bool,
+    pub cnn: CnnOptions,
     /// CNN plans saved from an earlier (tuned) generator ([`PlanReport::saved`], read back with
     /// [`SavedPlans::from_json`]): repeated without timing, so every run gives the same SLM codes. `None`
-    /// (the default): the plan table, or a timing with `tune`. Refused with `tune`, and at creation when
+    /// (the default): the plan table, or a timing with `cnn.tune`. Refused with `cnn.tune`, and at creation when
     /// made for another kernel ISA level than this CPU's.
     #[serde(serialize_with = "saved_source")]
     pub saved_plans: Option<Arc<SavedPlans>>,
@@ -120,10 +118,7 @@ impl GeneratorConfig {
             height,
             models: ModelSelection::default(),
             offset_m: 6e-3,
-            threads: ThreadCount::Auto,
-            layout: CnnLayout::Auto,
-            engine: CnnEngine::Auto,
-            tune: false,
+            cnn: CnnOptions::default(),
             saved_plans: None,
             fit: Fit::default(),
             depth_upsampling: DepthUpsampling::Nearest,
@@ -217,15 +212,8 @@ impl GeneratorConfig {
         if let Some(r) = &self.depth_range {
             r.validate()?;
         }
-        if let ThreadCount::Fixed(n) = self.threads {
-            if n == 0 || n > MAX_CNN_THREADS {
-                return Err(invalid(
-                    "threads",
-                    format!("0 (automatic) to {} threads, got {n}", MAX_CNN_THREADS),
-                ));
-            }
-        }
-        if self.tune && self.saved_plans.is_some() {
+        self.cnn.validate()?;
+        if self.cnn.tune && self.saved_plans.is_some() {
             return Err(invalid(
                 "tune",
                 "saved plans and a new tuning were both asked for: give one",
@@ -259,13 +247,7 @@ impl GeneratorConfig {
             options: self.options,
             offset_m: self.offset_m,
             encoding: self.encoding,
-            cnn_layout: self.layout,
-            cnn_engine: self.engine,
-            cnn_threads: self.threads,
-            cnn_conv: ConvAlgorithm::Auto,
-            cnn_tune: self.tune,
-            cnn_strip_rows: None,
-            cnn_slabs: None,
+            cnn: self.cnn,
             backend: self.backend,
             gpu_precision: self.gpu_precision,
             wavelength_ratio_tolerance: self.wavelength_ratio_tolerance,
@@ -312,7 +294,7 @@ pub(super) mod tests {
         assert_eq!(name(bad(|c| c.offset_m = f64::NAN)), "offset_m");
         assert_eq!(name(bad(|c| c.offset_m = -1e-3)), "offset_m");
         assert_eq!(
-            name(bad(|c| c.threads = ThreadCount::Fixed(100_000))),
+            name(bad(|c| c.cnn.threads = ThreadCount::Fixed(100_000))),
             "threads"
         );
         assert!(matches!(

@@ -11,7 +11,7 @@ use crate::display::AberrationProfile;
 use crate::display::Prescription;
 use crate::encoding::{DoublePhaseMethod, LinearLut};
 use crate::error::{invalid, HoloError, Result};
-use crate::model::{HologramModel, ModelConfig, ModelKind, Precision};
+use crate::model::{HologramModel, ModelKind, Precision};
 use crate::optics::{focal_stack, post_encoding_midpoint};
 use crate::pipeline::{
     AberrationReport, BackendReport, HologramPipeline, HologramSession, PrefilterMode,
@@ -110,12 +110,7 @@ impl HologramGenerator {
     ) -> Result<Self> {
         config.validate()?;
         let pipeline_config = config.pipeline_config();
-        let expected = ModelConfig {
-            optics: pipeline_config.optics,
-            offset_m: pipeline_config.offset_m,
-            input_layers: 1,
-            wavelength_ratio_tolerance: pipeline_config.wavelength_ratio_tolerance,
-        };
+        let expected = pipeline_config.model_config(1);
         let load =
             |bytes, name, kind| HologramModel::from_named_bytes(bytes, name, kind, &expected);
         let hologram = load(
@@ -355,7 +350,7 @@ impl HologramGenerator {
             viewer_corrected_by_cnn: viewer.as_ref().is_some_and(|(_, r)| r.by_cnn),
             viewer: viewer.map(|(p, _)| p),
         };
-        let threads = match self.config.threads {
+        let threads = match self.config.cnn.threads {
             ThreadCount::Fixed(n) => n.max(1),
             _ => crate::cnn::default_threads(),
         };
@@ -584,8 +579,8 @@ mod tests {
 
     /// Small and deterministic: one thread, the native engine, the CPU.
     fn quick(mut c: GeneratorConfig) -> GeneratorConfig {
-        c.threads = ThreadCount::Fixed(1);
-        c.engine = CnnEngine::Native;
+        c.cnn.threads = ThreadCount::Fixed(1);
+        c.cnn.engine = CnnEngine::Native;
         c.backend = Backend::Cpu;
         c
     }

@@ -14,7 +14,7 @@
 use ndarray::{s, Array3, ArrayView3, ArrayViewMut3, Axis, Zip};
 use num_complex::Complex32;
 
-use crate::error::{invalid, kernel_isa, HoloError, Result};
+use crate::error::{invalid, HoloError, Result};
 use crate::scene::{LayeredDepthImage, RgbdFrame};
 
 /// Amplitude an invalid LDI pixel takes in the hologram CNN's input (black).
@@ -35,8 +35,8 @@ pub fn head_to_phasor(a: f32, p: f32) -> Complex32 {
 /// ([`head_to_phasor`] on every pixel, on the vectorised rows of [`tensorholo_kernels::phasor`]).
 ///
 /// `amplitude` (in `[0, √2]`) and `phase` (in `[0, 1]`) are `[3, H, W]`; the result is `[3, H, W]`
-/// (R, G, B). Errors: [`HoloError::ShapeMismatch`] if the two shapes differ;
-/// [`HoloError::InvalidParameter`] (`TENSORHOLO_ISA`) for an unknown or unavailable ISA override.
+/// (R, G, B), on this CPU's best rows ([`tensorholo_kernels::Isa::detect`]: every level computes the same
+/// values). Errors: [`HoloError::ShapeMismatch`] if the two shapes differ.
 pub fn heads_to_field(
     amplitude: ArrayView3<f32>,
     phase: ArrayView3<f32>,
@@ -48,7 +48,7 @@ pub fn heads_to_field(
             got: phase.shape().to_vec(),
         });
     }
-    let isa = kernel_isa()?;
+    let isa = tensorholo_kernels::Isa::detect();
     let (amplitude, phase) = (amplitude.as_standard_layout(), phase.as_standard_layout());
     let mut out = Array3::<Complex32>::zeros(amplitude.raw_dim());
     let (Some(a), Some(p), Some(o)) = (amplitude.as_slice(), phase.as_slice(), out.as_slice_mut())

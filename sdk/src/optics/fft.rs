@@ -9,8 +9,6 @@ use num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
 use tensorholo_kernels::{spectral, Isa, KernelError};
 
-use crate::error::kernel_isa;
-
 /// Columns per block of [`Fft2::filter`]: 16 complex values of each row (128 bytes, two cache lines), so that
 /// a block (`16 × height` values: 138 KB at 1080 rows, 276 KB at 2160) stays in a core's L2 from its
 /// gather through its column transforms, the multiplier and back, and every cache line read from the field is
@@ -71,11 +69,11 @@ impl Fft2 {
             col_forward,
             col_inverse,
             scratch_len,
-            isa: kernel_isa().unwrap_or(Isa::Scalar),
+            isa: Isa::detect(),
         }
     }
 
-    /// The vector level of the column pass's moves ([`kernel_isa`], read once at planning), for the spectral
+    /// The vector level of the column pass's moves (this CPU's best, [`Isa::detect`], read once at planning), for the spectral
     /// multiply of the same filter.
     pub(crate) fn isa(&self) -> Isa {
         self.isa
@@ -263,7 +261,7 @@ fn scatter(block: &[Complex32], h: usize, data: &mut [Complex32], w: usize, x0: 
 }
 
 /// Runs one [`tensorholo_kernels::spectral`] call at `isa`. Its callers pass lengths that hold by
-/// construction and a level [`kernel_isa`] named (one this CPU has), so the call does not fail; were it to,
+/// construction and a level [`Isa::detect`] found (one this CPU has), so the call does not fail; were it to,
 /// it runs again on the portable level, which serves every CPU.
 pub(crate) fn on_kernels(isa: Isa, mut call: impl FnMut(Isa) -> Result<(), KernelError>) {
     if call(isa).is_err() {

@@ -2,9 +2,10 @@
 //! ([`Backend`], [`GpuPrecision`]) and the size limit of a session ([`MAX_HOLOGRAM_PIXELS`]). Imports nothing
 //! of the pipeline: every executor may read it.
 
-use crate::cnn::{CnnEngine, CnnLayout, ConvAlgorithm, ThreadCount};
+use crate::cnn::CnnOptions;
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
+use crate::model::ModelConfig;
 use crate::optics::{OpticalSetup, PropagationOptions};
 
 /// The largest hologram a session (and so a generator) makes, in pixels (`width · height`): 8192 × 8192, four
@@ -119,36 +120,9 @@ pub struct PipelineConfig {
     pub offset_m: f64,
     /// Double phase method used *without* a pre-filter CNN (with one, DDPM encodes with plain Eq. 7).
     pub encoding: DoublePhaseMethod,
-    /// Memory layout tract runs the hologram CNN in ([`CnnLayout`]; results agree to float rounding);
-    /// [`CnnLayout::Auto`] (the default) is the plan table's (both timed with `cnn_tune`). The
-    /// pre-filter CNN always runs channels-first: with its 8 filters the channels-last matrix product has
-    /// only 8 rows, and it measured 2.1× slower (`holo bench --skip-cnn --layout nchw,nhwc`, 384², 1
-    /// thread: 89 ms against 42 ms); tract 0.23 cannot move its graph channels-last anyway.
-    pub cnn_layout: CnnLayout,
-    /// The engine of the CPU CNNs ([`CnnEngine::Auto`], the default: the plan table's, the native engine
-    /// wherever it runs the files; the native engine runs the f32 and the int8 QDQ files, tract every file,
-    /// int8 QOperator included; with `cnn_tune` the engines are timed and the fastest runs).
-    pub cnn_engine: CnnEngine,
-    /// Threads of the CNNs ([`ThreadCount::Auto`], the default: the cores the CPU reports; with `cnn_tune`,
-    /// the fastest of 1, half and all cores, timed). The optics run on their own threads (the offset
-    /// propagation one thread per colour, the encoding on a pool of all the cores).
-    pub cnn_threads: ThreadCount,
-    /// The native engine's f32 convolution algorithm ([`ConvAlgorithm::Auto`], the default: each layer
-    /// shape's row from the plan table, a saved tuning or the timing).
-    pub cnn_conv: ConvAlgorithm,
-    /// Time the CNN candidates when a session is created ([`crate::cnn::PlanSource::Tune`]: engines, layouts,
-    /// each layer shape's kernel row, thread counts) instead of taking the plan table's (the default,
-    /// `false`: the same bits in every process). Two tuned processes can differ in their last bits where two
-    /// candidates are close; save a session's choice ([`crate::cnn::PlanReport::saved`]) and give it to later
-    /// pipelines ([`HologramPipeline::with_saved_plans`](crate::pipeline::HologramPipeline::with_saved_plans))
-    /// to repeat it.
-    pub cnn_tune: bool,
-    /// The native engine's strip height in frame rows ([`crate::cnn::PlanRequest::strip_rows`]; `None`, the
-    /// default: the engine's rule). A benchmark setting: `holo` reads `TENSORHOLO_STRIP_ROWS`.
-    pub cnn_strip_rows: Option<usize>,
-    /// The native f32 engine's column slab count ([`crate::cnn::PlanRequest::slabs`]; `None`, the default:
-    /// the engine's rule). A benchmark setting: `holo` reads `TENSORHOLO_SLABS`.
-    pub cnn_slabs: Option<usize>,
+    /// How the CPU CNNs run ([`CnnOptions`]: engine, layout, threads, algorithm, tuning, strips, slabs and the
+    /// kernels' instruction set; the default: every decision the plan table's, on the cores the CPU reports).
+    pub cnn: CnnOptions,
     /// Where sessions compute their frames ([`Backend`]; default [`Backend::Auto`]).
     pub backend: Backend,
     /// The GPU CNNs' arithmetic (default [`GpuPrecision::Auto`]: f16 where the adapter has it); f16 falls back
@@ -169,16 +143,24 @@ impl Default for PipelineConfig {
             options: PropagationOptions::default(),
             offset_m: 0.0,
             encoding: DoublePhaseMethod::default(),
-            cnn_layout: CnnLayout::default(),
-            cnn_engine: CnnEngine::default(),
-            cnn_threads: ThreadCount::default(),
-            cnn_conv: ConvAlgorithm::default(),
-            cnn_tune: false,
-            cnn_strip_rows: None,
-            cnn_slabs: None,
+            cnn: CnnOptions::default(),
             backend: Backend::default(),
             gpu_precision: GpuPrecision::default(),
             wavelength_ratio_tolerance: None,
+        }
+    }
+}
+
+impl PipelineConfig {
+    /// What the models of a session with this configuration must have been trained for: this display
+    /// (`optics`), this offset and wavelength tolerance, and `input_layers` (1 for RGB-D, 5 for a layered depth
+    /// image), as [`crate::model::HologramModel::from_path`] and the shipped models check it.
+    pub fn model_config(&self, input_layers: usize) -> ModelConfig {
+        ModelConfig {
+            optics: self.optics,
+            offset_m: self.offset_m,
+            input_layers,
+            wavelength_ratio_tolerance: self.wavelength_ratio_tolerance,
         }
     }
 }

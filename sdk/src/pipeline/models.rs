@@ -11,7 +11,7 @@ use crate::display::AberrationProfile;
 use crate::display::DisplayMapping;
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
-use crate::model::{HologramModel, ModelConfig, ModelKind, Precision};
+use crate::model::{HologramModel, ModelKind, Precision};
 use crate::slm::{DisplayCalibration, LutRepresentation, PhaseLut};
 
 /// The loaded CNNs plus their configuration: a factory of [`HologramSession`](crate::pipeline::HologramSession)s.
@@ -30,7 +30,7 @@ pub struct HologramPipeline {
     /// ideal eye behind ideal optics.
     aberration: Option<Arc<AberrationProfile>>,
     /// The saved CNN plans sessions repeat ([`HologramPipeline::with_saved_plans`]); `None`: the plan table,
-    /// or a timing with [`PipelineConfig::cnn_tune`].
+    /// or a timing with [`CnnOptions::tune`](crate::cnn::CnnOptions::tune).
     saved_plans: Option<Arc<SavedPlans>>,
     /// The app's own GPU context ([`HologramPipeline::with_gpu_context`]); `None`: the shared one.
     #[cfg(feature = "gpu")]
@@ -56,12 +56,8 @@ impl HologramPipeline {
     ) -> Result<Self> {
         config.optics.validate()?;
         crate::optics::check_offset("offset_m", config.offset_m)?;
-        let expected = ModelConfig {
-            optics: config.optics,
-            offset_m: config.offset_m,
-            input_layers: hologram.metadata().input_layers,
-            wavelength_ratio_tolerance: config.wavelength_ratio_tolerance,
-        };
+        config.cnn.validate()?;
+        let expected = config.model_config(hologram.metadata().input_layers);
         let display_mapping = hologram.metadata().check(ModelKind::Hologram, &expected)?;
         if let Some(p) = &prefilter {
             if config.offset_m == 0.0 {
@@ -113,12 +109,7 @@ impl HologramPipeline {
     /// offset without a shipped model; as [`HologramModel::from_bytes`] and [`HologramPipeline::new`].
     #[cfg(feature = "embedded-models")]
     pub fn embedded(selection: &ModelSelection, config: PipelineConfig) -> Result<Self> {
-        let expected = ModelConfig {
-            optics: config.optics,
-            offset_m: config.offset_m,
-            input_layers: selection.input.input_layers(),
-            wavelength_ratio_tolerance: config.wavelength_ratio_tolerance,
-        };
+        let expected = config.model_config(selection.input.input_layers());
         let hologram = crate::model::embedded::scene_hologram_model(
             selection.input,
             selection.layers,
@@ -217,13 +208,13 @@ impl HologramPipeline {
     /// its engine, layout, threads and layer rows where it has them for the session, the plan table's
     /// otherwise; nothing is timed, so every run gives the same bits.
     ///
-    /// Errors: [`HoloError::InvalidParameter`] (`cnn_tune`) where [`PipelineConfig::cnn_tune`] asks to time
+    /// Errors: [`HoloError::InvalidParameter`] (`cnn.tune`) where [`CnnOptions::tune`](crate::cnn::CnnOptions::tune) asks to time
     /// instead; [`HoloError::InvalidParameter`] (`tuning`) for plans that fail
     /// [`SavedPlans::validate`]. Plans made for another kernel ISA level are refused when a session is made.
     pub fn with_saved_plans(mut self, plans: Arc<SavedPlans>) -> Result<Self> {
-        if self.config.cnn_tune {
+        if self.config.cnn.tune {
             return Err(invalid(
-                "cnn_tune",
+                "cnn.tune",
                 "saved plans and a new tuning were both asked for: give one",
             ));
         }
@@ -233,11 +224,11 @@ impl HologramPipeline {
     }
 
     /// This pipeline with its sessions repeating `plans` (a session's own decisions,
-    /// [`crate::cnn::PlanReport::saved`]), `cnn_tune` off: a second session (a stream's) makes the same plans
+    /// [`crate::cnn::PlanReport::saved`]), `cnn.tune` off: a second session (a stream's) makes the same plans
     /// as the first without timing again.
     pub(crate) fn repeating(&self, plans: Arc<SavedPlans>) -> Self {
         let mut p = self.clone();
-        p.config.cnn_tune = false;
+        p.config.cnn.tune = false;
         p.saved_plans = Some(plans);
         p
     }
@@ -248,13 +239,13 @@ impl HologramPipeline {
     }
 
     /// What a session's CNN plans are made from: the configuration's layout, threads and algorithm, from the
-    /// saved plans, a timing (`cnn_tune`) or the plan table.
+    /// saved plans, a timing (`cnn.tune`) or the plan table.
     pub(super) fn plan_request(&self) -> Result<PlanRequest> {
         let c = &self.config;
-        let source = match (&self.saved_plans, c.cnn_tune) {
+        let source = match (&self.saved_plans, c.cnn.tune) {
             (Some(_), true) => {
                 return Err(invalid(
-                    "cnn_tune",
+                    "cnn.tune",
                     "saved plans and a new tuning were both asked for: give one",
                 ))
             }
@@ -262,14 +253,7 @@ impl HologramPipeline {
             (None, true) => PlanSource::Tune,
             (None, false) => PlanSource::Table,
         };
-        Ok(PlanRequest {
-            layout: c.cnn_layout,
-            threads: c.cnn_threads,
-            conv: c.cnn_conv,
-            source,
-            strip_rows: c.cnn_strip_rows,
-            slabs: c.cnn_slabs,
-        })
+        Ok(PlanRequest { cnn: c.cnn, source })
     }
 
     /// Applies a display's calibration (`.holocal`, [`DisplayCalibration`]) in every session made from now

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use super::config::PipelineConfig;
 use crate::error::{invalid, Result};
-use crate::model::{HologramModel, ModelConfig, Precision, SceneInput};
+use crate::model::{HologramModel, Precision, SceneInput};
 
 /// Whether the DDPM pre-filter CNN runs between offset propagation and double phase encoding (paper Eq. 6),
 /// chosen by name ([`HologramPipeline::with_shipped_prefilter`](crate::pipeline::HologramPipeline::with_shipped_prefilter) has the rule).
@@ -134,12 +134,7 @@ pub(super) fn shipped_prefilter(
                 )),
             };
         };
-        let expected = ModelConfig {
-            optics: config.optics,
-            offset_m: config.offset_m,
-            input_layers: hologram.metadata().input_layers,
-            wavelength_ratio_tolerance: config.wavelength_ratio_tolerance,
-        };
+        let expected = config.model_config(hologram.metadata().input_layers);
         let layers = hologram.metadata().layers;
         let mapped = if scale == 1.0 {
             String::new()

@@ -488,7 +488,7 @@ mod tests {
 
     use ndarray::{Array3, Axis};
 
-    use crate::cnn::CnnEngine;
+    use crate::cnn::{CnnEngine, CnnOptions};
     use crate::error::HoloError;
     use crate::model::{HologramModel, ModelConfig, ModelKind};
     use crate::pipeline::{Backend, Heads, HologramPipeline, PipelineConfig};
@@ -510,10 +510,13 @@ mod tests {
             // The fixtures are trained for a 6 mm offset.
             offset_m: 6e-3,
             backend: Backend::Cpu,
-            cnn_engine: CnnEngine::Native,
             options: crate::optics::PropagationOptions {
                 pad,
                 ..Default::default()
+            },
+            cnn: CnnOptions {
+                engine: CnnEngine::Native,
+                ..CnnOptions::default()
             },
             ..PipelineConfig::default()
         };
@@ -604,7 +607,7 @@ mod tests {
                 ((x * 5 + y * 11 + 2 * c) % 17) as f32 / 16.0
             }),
         };
-        let isa = crate::error::kernel_isa().unwrap();
+        let isa = tensorholo_kernels::Isa::detect();
         for pad in [false, true] {
             let mut session = pipeline_padded(true, pad).session(h, w).unwrap();
             session.propagate_to_slm(&Arc::new(varied.clone())).unwrap();

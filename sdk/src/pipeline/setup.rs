@@ -24,7 +24,7 @@ use crate::encoding::{ChannelEncoder, ChannelStats, PassOneLayout};
 use crate::error::invalid as invalid_backend;
 #[cfg(doc)]
 use crate::error::HoloError;
-use crate::error::{invalid, kernel_isa, Result};
+use crate::error::{invalid, Result};
 use crate::optics::Carrier;
 use std::sync::Arc;
 
@@ -80,6 +80,8 @@ impl HologramSession {
             backend.reason
         );
         let request = pipeline.plan_request()?;
+        // The kernels' instruction set, resolved once for the session: its CNNs, encoders and colour rows.
+        let isa = request.cnn.kernel_isa()?;
         let CnnPlans {
             hologram,
             prefilter,
@@ -89,7 +91,6 @@ impl HologramSession {
             pipeline.prefilter_model(),
             height,
             width,
-            pipeline.config().cnn_engine,
             &request,
         )?;
         let cfg = pipeline.config();
@@ -115,13 +116,13 @@ impl HologramSession {
                 transfer,
                 correction: None,
                 scratch: prop.plan().scratch(),
-                encoder: ChannelEncoder::new(height, width, encoding)?,
+                encoder: ChannelEncoder::new(height, width, encoding)?.with_isa(isa)?,
                 phase: vec![0.0; n],
                 stats: ChannelStats::default(),
                 layout: PassOneLayout::Field,
                 colour,
                 size: (height, width),
-                isa: kernel_isa()?,
+                isa,
             }));
         }
         Self {

@@ -13,7 +13,7 @@ use super::config::{Backend, GpuPrecision, PipelineConfig};
 use super::models::HologramPipeline;
 use super::selection::{ModelSelection, PrefilterMode};
 use crate::cnn::tract::TractModel;
-use crate::cnn::{CnnEngine, CnnLayout, ThreadCount};
+use crate::cnn::{CnnEngine, CnnLayout, CnnOptions, ThreadCount};
 use crate::encoding::{double_phase_encode, phase_to_codes};
 use crate::model::{contract, heads_to_field, Precision, SceneInput};
 use crate::optics::{propagate_colour, Carrier};
@@ -101,11 +101,14 @@ fn pipeline(case: &Case, backend: Backend, engine: CnnEngine) -> HologramPipelin
     let config = PipelineConfig {
         offset_m: case.offset_m,
         backend,
-        cnn_engine: engine,
-        cnn_threads: ThreadCount::Fixed(1),
-        // The reference runs tract channels-first; channels-last differs by float rounding.
-        cnn_layout: CnnLayout::ChannelsFirst,
         gpu_precision: GpuPrecision::F32,
+        cnn: CnnOptions {
+            engine,
+            // The reference runs tract channels-first; channels-last differs by float rounding.
+            layout: CnnLayout::ChannelsFirst,
+            threads: ThreadCount::Fixed(1),
+            ..CnnOptions::default()
+        },
         ..PipelineConfig::default()
     };
     HologramPipeline::embedded(&selection, config).unwrap()

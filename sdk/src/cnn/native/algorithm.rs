@@ -364,7 +364,7 @@ mod tests {
 
     #[test]
     fn the_table_decides_each_shape_once_and_the_same_every_time() {
-        let isa = Isa::active().unwrap();
+        let isa = Isa::detect();
         let g = graph(&[(4, 24), (24, 24), (24, 24), (28, 6)]);
         let a = decide(&[&g], isa, ConvAlgorithm::Auto, &PlanSource::Table).unwrap();
         let b = decide(&[&g], isa, ConvAlgorithm::Auto, &PlanSource::Table).unwrap();
@@ -384,7 +384,7 @@ mod tests {
 
     #[test]
     fn saved_rows_are_used_and_the_table_fills_the_rest() {
-        let isa = Isa::active().unwrap();
+        let isa = Isa::detect();
         let g = graph(&[(4, 24), (24, 24), (28, 6)]);
         // Save a row the table would not choose for 24→24: the direct one.
         let direct = registry::f32_rows_of(isa, 24, Algorithm::Direct)
@@ -427,7 +427,7 @@ mod tests {
 
     #[test]
     fn tuning_times_the_rows_of_the_shape_and_keeps_one_of_them() {
-        let isa = Isa::active().unwrap();
+        let isa = Isa::detect();
         let g = graph(&[(5, 7), (7, 7)]);
         let rows = decide(&[&g], isa, ConvAlgorithm::Winograd4x4, &PlanSource::Tune).unwrap();
         for row in rows.saved_rows() {
@@ -445,7 +445,7 @@ mod tests {
     fn the_margins_decide_between_algorithms_and_rows() {
         // Rows of a 6-channel layer under the active ISA: direct, F(2×2, 3×3) and F(4×4, 3×3), with made-up
         // times, so the rules are checked whatever this CPU measures.
-        let isa = Isa::active().unwrap();
+        let isa = Isa::detect();
         let plan = |alg| {
             Conv3x3F32::with_algorithm(&[0.5; 6 * 4 * 9], &[0.0; 6], 4, 6, true, isa, alg).unwrap()
         };

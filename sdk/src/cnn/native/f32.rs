@@ -1,6 +1,6 @@
 //! The native engine's f32 plan: a TensorHolo CNN ([`CnnWeights`], read once by [`crate::model::graph`]) on the direct
 //! 3×3 convolution kernels of `tensorholo-kernels` (f32; the kernel row is chosen at run time from the CPU's
-//! instruction set, [`Isa::active`]).
+//! instruction set, the session's [`crate::cnn::CnnOptions::kernel_isa`]).
 //!
 //! One frame, for `N` layers (`s_0` = the centred input `x − input_offset`, kept for the final concat):
 //!

@@ -27,7 +27,7 @@ use std::time::Instant;
 use algorithm::Rows;
 
 use super::engine::{Engine, EnginePlans, Networks, Tuning};
-use super::options::{default_threads, CnnEngine, CnnLayout, ConvAlgorithm, ThreadCount};
+use super::options::{default_threads, CnnEngine, CnnLayout, CnnOptions, ThreadCount};
 use super::plan::{time_plan, CnnPlan};
 use super::saved::{network_key, RowAlgorithms};
 use super::tuning::{auto_thread_candidates, timing_resolution, PlanRequest, PlanTiming};
@@ -50,7 +50,7 @@ impl Engine for NativeEngine {
         for model in nets.each() {
             model.cnn_graph()?;
         }
-        active_isa().map(drop)
+        Ok(())
     }
 
     fn tune(
@@ -63,14 +63,14 @@ impl Engine for NativeEngine {
         _to_beat: Option<f64>,
     ) -> Result<Tuning> {
         let start = Instant::now();
-        let isa = active_isa()?;
+        let isa = request.cnn.kernel_isa()?;
         let graphs = nets
             .each()
             .map(|m| m.cnn_graph())
             .collect::<Result<Vec<_>>>()?;
         let refs: Vec<&CnnWeights> = graphs.iter().map(|g| g.as_ref()).collect();
-        let rows = algorithm::decide(&refs, isa, request.conv, &request.source)?;
-        let settings = NativeSettings::of(request)?;
+        request.cnn.validate()?;
+        let rows = algorithm::decide(&refs, isa, request.cnn.algorithm, &request.source)?;
         let mut notes = Vec::new();
         if request.source.saved().is_some() {
             notes.push(format!(
@@ -83,7 +83,7 @@ impl Engine for NativeEngine {
             .saved()
             .and_then(|p| p.session(&network_key(nets.hologram), [height, width]))
             .filter(|s| s.engine == CnnEngine::Native);
-        let counts = match request.threads {
+        let counts = match request.cnn.threads {
             ThreadCount::Auto if request.source.tunes() => auto_thread_candidates(),
             ThreadCount::Auto => match saved.and_then(|s| s.threads) {
                 Some(t) => {
@@ -100,7 +100,8 @@ impl Engine for NativeEngine {
         if counts.len() > 1 || time_single {
             let [th, tw] = timing_resolution(height, width);
             for &t in &counts {
-                let (mut plan, _) = native_plan(graph.clone(), th, tw, t, isa, &rows, settings)?;
+                let (mut plan, _) =
+                    native_plan(graph.clone(), th, tw, t, isa, &rows, &request.cnn)?;
                 let s = time_plan(plan.as_mut(), graph.in_channels, th, tw)?;
                 candidates.push(PlanTiming {
                     engine: CnnEngine::Native,
@@ -134,9 +135,8 @@ impl Engine for NativeEngine {
     /// On the x86-64 SIMD levels, where it was measured against tract (2.3–3.5× tract's best in f32 and
     /// 11–20× in int8, on Zen 3 and Zen 4, at 384² and 1080p: the "CNN engine for …" line `holo render`
     /// logs, and docs/BENCHMARKS.md), and only there: on the
-    /// portable rows (`TENSORHOLO_ISA=scalar`) and on ARM, measured under emulation only, tract is timed too.
-    fn outruns_the_others(&self) -> Option<String> {
-        let isa = active_isa().ok()?;
+    /// portable rows ([`Isa::Scalar`]) and on ARM, measured under emulation only, tract is timed too.
+    fn outruns_the_others(&self, isa: Isa) -> Option<String> {
         matches!(
             isa,
             Isa::Avx2Fma | Isa::AvxVnni | Isa::Avx512 | Isa::Avx512Vnni
@@ -157,10 +157,9 @@ impl Engine for NativeEngine {
         request: &PlanRequest,
         tuning: &Tuning,
     ) -> Result<EnginePlans> {
-        let isa = active_isa()?;
+        let isa = request.cnn.kernel_isa()?;
         let threads = tuning.threads.unwrap_or(1);
         let rows = Rows::from_saved(isa, &tuning.rows);
-        let settings = NativeSettings::of(request)?;
         let (hologram, kernel) = native_plan(
             nets.hologram.cnn_graph()?,
             height,
@@ -168,12 +167,21 @@ impl Engine for NativeEngine {
             threads,
             isa,
             &rows,
-            settings,
+            &request.cnn,
         )?;
         let prefilter = match nets.prefilter {
-            Some(p) => {
-                Some(native_plan(p.cnn_graph()?, height, width, threads, isa, &rows, settings)?.0)
-            }
+            Some(p) => Some(
+                native_plan(
+                    p.cnn_graph()?,
+                    height,
+                    width,
+                    threads,
+                    isa,
+                    &rows,
+                    &request.cnn,
+                )?
+                .0,
+            ),
             None => None,
         };
         Ok(EnginePlans {
@@ -184,41 +192,10 @@ impl Engine for NativeEngine {
     }
 }
 
-/// What a native plan is made with besides the graph, size, threads, ISA and rows: the f32 convolution
-/// algorithms allowed (`conv`) and the layout overrides of [`PlanRequest::strip_rows`] and
-/// [`PlanRequest::slabs`].
-#[derive(Debug, Clone, Copy, Default)]
-pub(super) struct NativeSettings {
-    conv: ConvAlgorithm,
-    strip_rows: Option<usize>,
-    slabs: Option<usize>,
-}
-
-impl NativeSettings {
-    /// The settings `request` asks for.
-    ///
-    /// Errors: [`HoloError::InvalidParameter`] (`strip_rows`, `slabs`) for 0.
-    pub(super) fn of(request: &PlanRequest) -> Result<Self> {
-        for (name, v) in [("strip_rows", request.strip_rows), ("slabs", request.slabs)] {
-            if v == Some(0) {
-                return Err(crate::error::invalid(
-                    name,
-                    "must be at least 1 (or unset for the engine's rule)",
-                ));
-            }
-        }
-        Ok(Self {
-            conv: request.conv,
-            strip_rows: request.strip_rows,
-            slabs: request.slabs,
-        })
-    }
-}
-
 /// A native plan for `graph` at `height × width` on `threads` threads: the int8 engine for an int8 (QDQ)
 /// file, the f32 engine otherwise, each f32 layer on the row `rows` decided for its shape (chosen among the
-/// algorithms `settings.conv` allows), in the strips and slabs `settings` gives (the engine's rules where
-/// `None`); with the kernel rows its layers run (`NativePlan::kernel_name`). Errors: as `NativePlan::new` /
+/// algorithms `options.algorithm` allows), in the strips and slabs `options` gives (the engine's rules where
+/// `None`; checked by [`CnnOptions::validate`]); with the kernel rows its layers run (`NativePlan::kernel_name`). Errors: as `NativePlan::new` /
 /// `NativeInt8Plan::new`.
 pub(super) fn native_plan(
     graph: Arc<CnnWeights>,
@@ -227,7 +204,7 @@ pub(super) fn native_plan(
     threads: usize,
     isa: tensorholo_kernels::Isa,
     rows: &Rows,
-    settings: NativeSettings,
+    options: &CnnOptions,
 ) -> Result<(Box<dyn CnnPlan>, String)> {
     if graph.quant.is_some() {
         let p = int8::NativeInt8Plan::with_rows(
@@ -237,12 +214,12 @@ pub(super) fn native_plan(
             threads,
             isa,
             rows,
-            settings.strip_rows,
+            options.strip_rows,
         )?;
         let k = p.kernel_name().to_string();
         Ok((Box::new(p), k))
     } else {
-        let set = RowAlgorithms::of_request(settings.conv);
+        let set = RowAlgorithms::of_request(options.algorithm);
         let p = f32::NativePlan::with_rows(
             graph,
             height,
@@ -250,7 +227,7 @@ pub(super) fn native_plan(
             threads,
             isa,
             (rows, set),
-            (settings.strip_rows, settings.slabs),
+            (options.strip_rows, options.slabs),
         )?;
         let k = p.kernel_name();
         Ok((Box::new(p), k))
@@ -274,7 +251,7 @@ pub(super) fn table_plan(
         threads,
         isa,
         &rows,
-        NativeSettings::default(),
+        &CnnOptions::default(),
     )
 }
 
@@ -295,50 +272,43 @@ pub(crate) fn native_plan_on(
         1,
         isa,
         &rows,
-        NativeSettings::default(),
+        &CnnOptions::default(),
     )
     .map(|(plan, _)| plan)
 }
 
-/// [`tensorholo_kernels::Isa::active`] with its error as the SDK's (`From<KernelError> for HoloError`).
-fn active_isa() -> Result<tensorholo_kernels::Isa> {
-    tensorholo_kernels::Isa::active().map_err(HoloError::from)
-}
-
-/// The CPU features the native engine's kernels use on this machine (`avx2`, `avx512`, `neondot`, …;
-/// lowered by the `TENSORHOLO_ISA` environment variable), or why it cannot run.
-///
-/// Errors: [`HoloError::ModelRun`] where the `TENSORHOLO_ISA` override names an unknown or unavailable ISA.
-pub fn native_isa() -> Result<&'static str> {
-    active_isa().map(|i| i.name())
-}
-
 /// This machine's measured f32 peak in GFLOP/s for `threads` threads: one FMA loop per thread in registers
-/// (the widest FMA of [`native_isa`]), about `millis` ms, all threads at once: the denominator of "% of
-/// peak" in `holo bench --peak`. Errors: as [`native_isa`].
-pub fn f32_peak_gflops(threads: usize, millis: u64) -> Result<f64> {
-    on_threads(threads, |isa| {
+/// (the widest FMA of `isa`), about `millis` ms, all threads at once: the denominator of "% of peak" in
+/// `holo bench --peak`. Errors: [`HoloError::ModelRun`] for a level this CPU lacks.
+pub fn f32_peak_gflops(isa: Isa, threads: usize, millis: u64) -> Result<f64> {
+    on_threads(isa, threads, |isa| {
         tensorholo_kernels::peak::f32_fma_gflops(isa, millis)
     })
 }
 
 /// This machine's measured int8 multiply-accumulate peak in GOP/s (a multiply-add counts 2) for `threads`
-/// threads: the best int8 dot-product instruction of [`native_isa`] (`vpdpbusd` with VNNI, `vpmaddwd` on
-/// AVX2, `USDOT`/`SDOT`/`SMLAL` on aarch64) in a register loop on every thread, about `millis` ms.
-/// Errors: as [`native_isa`].
-pub fn int8_peak_gops(threads: usize, millis: u64) -> Result<f64> {
-    on_threads(threads, |isa| {
+/// threads: the best int8 dot-product instruction of `isa` (`vpdpbusd` with VNNI, `vpmaddwd` on AVX2,
+/// `USDOT`/`SDOT`/`SMLAL` on aarch64) in a register loop on every thread, about `millis` ms.
+/// Errors: as [`f32_peak_gflops`].
+pub fn int8_peak_gops(isa: Isa, threads: usize, millis: u64) -> Result<f64> {
+    on_threads(isa, threads, |isa| {
         tensorholo_kernels::peak::int8_dot_gops(isa, millis)
     })
 }
 
 /// Runs `f` on `threads` threads at once and sums what they measured.
 fn on_threads(
+    isa: Isa,
     threads: usize,
     f: impl Fn(tensorholo_kernels::Isa) -> std::result::Result<f64, tensorholo_kernels::KernelError>
         + Sync,
 ) -> Result<f64> {
-    let isa = active_isa()?;
+    if !isa.is_available() {
+        return Err(HoloError::ModelRun(format!(
+            "the {} instruction set is not available on this CPU",
+            isa.name()
+        )));
+    }
     let f = &f;
     let per: Vec<f64> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..threads.max(1))

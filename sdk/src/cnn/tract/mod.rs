@@ -93,12 +93,12 @@ impl Engine for TractEngine {
             .filter(|s| s.engine == CnnEngine::Tract)
             .cloned();
         if let Some(s) = saved {
-            if request.layout == CnnLayout::Auto {
-                request.layout = s.layout;
+            if request.cnn.layout == CnnLayout::Auto {
+                request.cnn.layout = s.layout;
                 notes.push(format!("tract layout {} from the saved plans", s.layout));
             }
-            if request.threads == ThreadCount::Auto {
-                request.threads = s
+            if request.cnn.threads == ThreadCount::Auto {
+                request.cnn.threads = s
                     .threads
                     .map_or(ThreadCount::ProcessDefault, ThreadCount::Fixed);
                 notes.push("tract threads from the saved plans".into());

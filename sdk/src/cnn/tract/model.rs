@@ -11,7 +11,7 @@ use num_complex::Complex32;
 use tract_onnx::prelude::{Framework, InferenceModelExt, IntoRunnable, Symbol, TDim, TypedModel};
 
 use super::plan::{optimise, tract_msg, ModelPlan, PlanFailure};
-use crate::cnn::options::{default_threads, CnnEngine, CnnLayout, ThreadCount};
+use crate::cnn::options::{default_threads, CnnEngine, CnnLayout, CnnOptions, ThreadCount};
 use crate::cnn::table;
 use crate::cnn::tuning::{
     auto_thread_candidates, fastest_run, timing_resolution, PlanOrigin, PlanReport, PlanRequest,
@@ -174,8 +174,11 @@ impl TractModel {
     ) -> Result<ModelPlan> {
         if layout == CnnLayout::Auto {
             let request = PlanRequest {
-                layout,
-                threads: ThreadCount::ProcessDefault,
+                cnn: CnnOptions {
+                    layout,
+                    threads: ThreadCount::ProcessDefault,
+                    ..CnnOptions::default()
+                },
                 ..PlanRequest::default()
             };
             return self.tuned_plan(height, width, &request).map(|(p, _)| p);
@@ -377,13 +380,13 @@ impl TractModel {
         to_beat: Option<f64>,
     ) -> Result<PlanReport> {
         let tunes = request.source.tunes();
-        let layouts: Vec<CnnLayout> = match request.layout {
+        let layouts: Vec<CnnLayout> = match request.cnn.layout {
             CnnLayout::Auto if tunes => CnnLayout::ALL.to_vec(),
             CnnLayout::Auto => vec![self.table_layout(height, width)?],
             l => vec![l],
         };
         // The most threads first: the likeliest winner, timed before any early stop (`to_beat`).
-        let threads: Vec<Option<usize>> = match request.threads {
+        let threads: Vec<Option<usize>> = match request.cnn.threads {
             ThreadCount::Auto if tunes => auto_thread_candidates()
                 .into_iter()
                 .rev()
