@@ -28,7 +28,7 @@ use tensorholo::scene::procedural;
 use tensorholo::synthesis::SceneLayer;
 
 use crate::args::parse_size;
-use crate::render::{BackendArg, EngineArg, GpuPrecisionArg, LayoutArg, PrecisionArg};
+use crate::model_args::{BackendArg, EngineArg, GpuPrecisionArg, LayoutArg, PrecisionArg};
 
 /// Arguments of `holo bench`.
 #[derive(Debug, Args)]

@@ -14,6 +14,7 @@ mod dataset;
 mod display;
 mod encode;
 mod memory;
+mod model_args;
 mod output;
 mod propagate;
 mod reference;

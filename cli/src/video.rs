@@ -41,7 +41,7 @@ pub struct VideoArgs {
     #[command(flatten)]
     depth: crate::args::DepthArgs,
     #[command(flatten)]
-    model: crate::render::ModelArgs,
+    model: crate::model_args::ModelArgs,
     /// Process at most this many frames.
     #[arg(long)]
     limit: Option<usize>,

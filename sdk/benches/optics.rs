@@ -12,10 +12,10 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use ndarray::{Array2, Array3};
 use num_complex::Complex32;
 use std::time::Duration;
+use tensorholo::cnn::Isa;
 use tensorholo::encoding::{
     double_phase_encode, normaliser, wrap_phase, ChannelEncoder, DoublePhaseMethod, LinearLut,
 };
-use tensorholo::cnn::Isa;
 use tensorholo::optics::{Carrier, PropagationOptions, Propagator};
 use tensorholo::scene::procedural;
 use tensorholo::synthesis::{SceneLayer, SmLbm};

@@ -54,8 +54,7 @@ pub use options::{
     default_threads, CnnEngine, CnnLayout, CnnOptions, ConvAlgorithm, ThreadCount, MAX_CNN_THREADS,
 };
 pub use saved::{
-    network_key, RowAlgorithms, SavedPlans, SavedRow, SavedSession, SAVED_PLANS_FORMAT,
-    SAVED_PLANS_VERSION,
+    network_key, SavedPlans, SavedRow, SavedSession, SAVED_PLANS_FORMAT, SAVED_PLANS_VERSION,
 };
 pub use select::CpuCnnPlan;
 pub use tensorholo_kernels::Isa;

@@ -7,7 +7,7 @@
 //! the machine when tuning is asked for ([`crate::cnn::PlanSource::Tune`]). Imports nothing of `cnn/`: every
 //! other file of it reads this one.
 
-use tensorholo_kernels::Isa;
+use tensorholo_kernels::{Algorithm, Isa};
 
 use crate::error::{invalid, Result};
 
@@ -283,19 +283,33 @@ pub fn default_threads() -> usize {
         .clamp(1, MAX_CNN_THREADS)
 }
 
-/// The algorithm of the native engine's f32 3×3 convolutions ([`crate::cnn::PlanRequest::conv`]).
+/// The algorithm of the native engine's f32 3×3 convolutions: what a caller pins ([`CnnOptions::algorithm`])
+/// and what a saved layer row was chosen among ([`crate::cnn::SavedRow::algorithms`]); the one enum for the
+/// choice (the kernels' concrete [`Algorithm`] is what a row runs).
 ///
 /// Direct convolution computes `9·C_in` multiply-adds per output value; Winograd's minimal filtering
 /// F(2×2, 3×3) `4·C_in` and F(4×4, 3×3) `2.25·C_in` plus the tile transforms (Lavin & Gray 2016). The
 /// Winograd forms round differently from direct, within the bounds `tensorholo-kernels` states. int8 layers
 /// are always direct.
 #[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Hash,
+    PartialOrd,
+    Ord,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
 )]
 #[serde(rename_all = "kebab-case")]
 pub enum ConvAlgorithm {
-    /// Each layer shape's row from the plan table (or a tuning).
+    /// Each layer shape's row from the plan table (or a tuning), among every algorithm. Saved-plans files of
+    /// version 1 wrote it `any`, which still reads.
     #[default]
+    #[serde(alias = "any")]
     Auto,
     /// Direct convolution in every f32 layer.
     Direct,
@@ -306,6 +320,20 @@ pub enum ConvAlgorithm {
 }
 
 impl ConvAlgorithm {
+    /// The kernels' algorithms a layer chooses among: all three for [`ConvAlgorithm::Auto`], else the one.
+    pub(crate) fn algorithms(self) -> &'static [Algorithm] {
+        match self {
+            Self::Auto => &[
+                Algorithm::Direct,
+                Algorithm::Winograd2x2,
+                Algorithm::Winograd4x4,
+            ],
+            Self::Direct => &[Algorithm::Direct],
+            Self::Winograd2x2 => &[Algorithm::Winograd2x2],
+            Self::Winograd4x4 => &[Algorithm::Winograd4x4],
+        }
+    }
+
     /// Short name: `auto`, `direct`, `winograd2x2`, `winograd4x4`.
     pub fn name(self) -> &'static str {
         match self {

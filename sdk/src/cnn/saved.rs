@@ -1,5 +1,5 @@
 //! [`SavedPlans`]: what a session's CNN plans were made of, as a JSON file the caller owns (format
-//! `tensorholo.cnn-plans`, version 1): per session (network and resolution) the engine, tract's layout and the
+//! `tensorholo.cnn-plans`, version 2; version 1 files, whose rows say `any` for `auto`, still read): per session (network and resolution) the engine, tract's layout and the
 //! threads, and per f32 layer shape the kernel row it ran. A tuning ([`crate::cnn::PlanSource::Tune`]) writes
 //! one; a later session given it ([`crate::cnn::PlanSource::Saved`]) makes the same plans without timing
 //! anything, so every run with the file gives the same bits.
@@ -7,12 +7,12 @@
 //! ```json
 //! {
 //!   "format": "tensorholo.cnn-plans",
-//!   "version": 1,
+//!   "version": 2,
 //!   "isa": "avx512vnni",
 //!   "origin": "tuned by tensorholo 0.1.0 on 2 threads",
 //!   "sessions": [{ "network": "hologram-cnn-8-f32-in4", "resolution": [384, 384],
 //!                  "engine": "native", "layout": "channels-first", "threads": 2 }],
-//!   "rows": [{ "c_in": 24, "c_out": 24, "algorithms": "any", "row": "conv3x3.f32.wino4x4.24x1.avx512" }]
+//!   "rows": [{ "c_in": 24, "c_out": 24, "algorithms": "auto", "row": "conv3x3.f32.wino4x4.24x1.avx512" }]
 //! }
 //! ```
 //!
@@ -21,7 +21,7 @@
 
 use std::collections::BTreeSet;
 
-use tensorholo_kernels::{registry, Algorithm, Isa};
+use tensorholo_kernels::{registry, Isa};
 
 use super::options::{CnnEngine, CnnLayout, ConvAlgorithm, MAX_CNN_THREADS};
 #[cfg(doc)]
@@ -30,65 +30,13 @@ use crate::error::{invalid, Result};
 
 /// The `format` of a saved-plans file.
 pub const SAVED_PLANS_FORMAT: &str = "tensorholo.cnn-plans";
-/// The `version` this build reads and writes.
-pub const SAVED_PLANS_VERSION: u32 = 1;
+/// The `version` this build writes; it reads it and version 1 (whose rows say `any` where version 2 says
+/// `auto`: one algorithm enum, [`ConvAlgorithm`], since version 2).
+pub const SAVED_PLANS_VERSION: u32 = 2;
 /// The most input or output channels a saved row may name (far above any TensorHolo layer's 24).
 const MAX_CHANNELS: usize = 4096;
 /// The most entries of either list: far above the layer shapes and sizes one app uses.
 const MAX_ENTRIES: usize = 4096;
-
-/// The algorithms a layer's row was chosen among: every algorithm, or one (a pinned
-/// [`ConvAlgorithm`], or direct alone for an int8 file's f32 first and last layers).
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
-)]
-#[serde(rename_all = "kebab-case")]
-pub enum RowAlgorithms {
-    /// Direct or either Winograd form.
-    Any,
-    /// Direct convolution only.
-    Direct,
-    /// Winograd F(2×2, 3×3) only.
-    Winograd2x2,
-    /// Winograd F(4×4, 3×3) only.
-    Winograd4x4,
-}
-
-impl RowAlgorithms {
-    /// What an f32 network's layers choose among under a request's [`ConvAlgorithm`].
-    pub fn of_request(conv: ConvAlgorithm) -> Self {
-        match conv {
-            ConvAlgorithm::Auto => Self::Any,
-            ConvAlgorithm::Direct => Self::Direct,
-            ConvAlgorithm::Winograd2x2 => Self::Winograd2x2,
-            ConvAlgorithm::Winograd4x4 => Self::Winograd4x4,
-        }
-    }
-
-    /// The kernels' algorithms of this set.
-    pub(crate) fn algorithms(self) -> &'static [Algorithm] {
-        match self {
-            Self::Any => &[
-                Algorithm::Direct,
-                Algorithm::Winograd2x2,
-                Algorithm::Winograd4x4,
-            ],
-            Self::Direct => &[Algorithm::Direct],
-            Self::Winograd2x2 => &[Algorithm::Winograd2x2],
-            Self::Winograd4x4 => &[Algorithm::Winograd4x4],
-        }
-    }
-
-    /// Short name: `any`, `direct`, `winograd2x2`, `winograd4x4`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Any => "any",
-            Self::Direct => "direct",
-            Self::Winograd2x2 => "winograd2x2",
-            Self::Winograd4x4 => "winograd4x4",
-        }
-    }
-}
 
 /// One f32 layer shape's kernel row: a `c_in → c_out` 3×3 convolution chosen among `algorithms` runs the row
 /// named `row` (`tensorholo_kernels::registry`, e.g. `conv3x3.f32.wino4x4.24x1.avx512`).
@@ -99,8 +47,9 @@ pub struct SavedRow {
     pub c_in: usize,
     /// Output channels.
     pub c_out: usize,
-    /// What the row was chosen among.
-    pub algorithms: RowAlgorithms,
+    /// What the row was chosen among: [`ConvAlgorithm::Auto`] for every algorithm (`any` in version 1
+    /// files), or the one pinned (direct alone for an int8 file's f32 first and last layers).
+    pub algorithms: ConvAlgorithm,
     /// The kernel row's name.
     pub row: String,
 }
@@ -131,12 +80,12 @@ pub struct SavedSession {
 /// ```json
 /// {
 ///   "format": "tensorholo.cnn-plans",
-///   "version": 1,
+///   "version": 2,
 ///   "isa": "avx512vnni",
 ///   "origin": "tuned by tensorholo 0.1.0 (2 threads available)",
 ///   "sessions": [{ "network": "hologram-cnn-8-f32-in4", "resolution": [384, 384],
 ///                  "engine": "native", "layout": "channels-first", "threads": 2 }],
-///   "rows": [{ "c_in": 24, "c_out": 24, "algorithms": "any", "row": "conv3x3.f32.wino4x4.24x1.avx512" }]
+///   "rows": [{ "c_in": 24, "c_out": 24, "algorithms": "auto", "row": "conv3x3.f32.wino4x4.24x1.avx512" }]
 /// }
 /// ```
 #[derive(Debug, Clone, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -169,14 +118,17 @@ impl SavedPlans {
         }
     }
 
-    /// Reads a record from its JSON text and checks it ([`SavedPlans::validate`]).
+    /// Reads a record from its JSON text (version 1 or 2, returned as version 2) and checks it
+    /// ([`SavedPlans::validate`]).
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`tuning`) for text that is not such a record (not JSON, an
     /// unknown or missing key, another format or version) or fails the checks, naming the entry.
     pub fn from_json(text: &str) -> Result<Self> {
-        let plans: Self = crate::io::parse_json_object(text, "a saved-plans record")
+        let mut plans: Self = crate::io::parse_json_object(text, "a saved-plans record")
             .map_err(|e| invalid("tuning", format!("not a {SAVED_PLANS_FORMAT} file: {e}")))?;
         plans.validate()?;
+        // Read as this version: written back, the rows say `auto` where a version 1 file said `any`.
+        plans.version = SAVED_PLANS_VERSION;
         Ok(plans)
     }
 
@@ -218,9 +170,9 @@ impl SavedPlans {
                 self.format
             ));
         }
-        if self.version != SAVED_PLANS_VERSION {
+        if !(1..=SAVED_PLANS_VERSION).contains(&self.version) {
             return bad(format!(
-                "version {} is not the {SAVED_PLANS_VERSION} this build reads",
+                "version {} is not one this build reads (1 to {SAVED_PLANS_VERSION})",
                 self.version
             ));
         }
@@ -281,7 +233,7 @@ impl SavedPlans {
     }
 
     /// The row saved for a `c_in → c_out` layer chosen among `algorithms`, if any.
-    pub fn row(&self, c_in: usize, c_out: usize, algorithms: RowAlgorithms) -> Option<&str> {
+    pub fn row(&self, c_in: usize, c_out: usize, algorithms: ConvAlgorithm) -> Option<&str> {
         self.rows
             .iter()
             .find(|r| (r.c_in, r.c_out, r.algorithms) == (c_in, c_out, algorithms))
@@ -377,14 +329,14 @@ mod tests {
 
     fn sample() -> SavedPlans {
         let isa = Isa::detect();
-        let direct = registry::f32_rows_of(isa, 24, Algorithm::Direct)
+        let direct = registry::f32_rows_of(isa, 24, tensorholo_kernels::Algorithm::Direct)
             .next()
             .unwrap();
         let mut p = SavedPlans::new(isa.name(), "test");
         p.rows.push(SavedRow {
             c_in: 24,
             c_out: 24,
-            algorithms: RowAlgorithms::Any,
+            algorithms: ConvAlgorithm::Auto,
             row: direct.name.into(),
         });
         p.sessions.push(SavedSession {
@@ -397,16 +349,31 @@ mod tests {
         p
     }
 
+    /// Version 2 writes the one algorithm enum's `auto`; a version 1 file, whose rows said `any`, reads as
+    /// the same plans.
+    #[test]
+    fn version_1_files_read_as_version_2() {
+        let p = sample();
+        let json = p.to_json();
+        assert!(json.contains("\"version\": 2"), "{json}");
+        assert!(json.contains("\"algorithms\": \"auto\""), "{json}");
+        let v1 = json
+            .replace("\"version\": 2", "\"version\": 1")
+            .replace("\"algorithms\": \"auto\"", "\"algorithms\": \"any\"");
+        let back = SavedPlans::from_json(&v1).unwrap();
+        assert_eq!(back, p, "read as version 2");
+    }
+
     #[test]
     fn a_record_reads_back_what_it_wrote() {
         let p = sample();
         let back = SavedPlans::from_json(&p.to_json()).unwrap();
         assert_eq!(back, p);
         assert_eq!(
-            back.row(24, 24, RowAlgorithms::Any),
+            back.row(24, 24, ConvAlgorithm::Auto),
             Some(p.rows[0].row.as_str())
         );
-        assert_eq!(back.row(24, 24, RowAlgorithms::Direct), None);
+        assert_eq!(back.row(24, 24, ConvAlgorithm::Direct), None);
         assert_eq!(
             back.session("hologram-cnn-8-f32-in4", [384, 384])
                 .unwrap()
@@ -434,14 +401,14 @@ mod tests {
             assert!(e.to_string().contains(needle), "{needle}: {e}");
         };
         refused(&|p| p.format = "other".into(), "format is `other`");
-        refused(&|p| p.version = 2, "version 2");
+        refused(&|p| p.version = 3, "version 3");
         refused(&|p| p.isa = "avx9".into(), "isa");
         refused(
             &|p| p.rows[0].row = "conv3x3.f32.nope".into(),
             "`conv3x3.f32.nope`",
         );
         refused(
-            &|p| p.rows[0].algorithms = RowAlgorithms::Winograd4x4,
+            &|p| p.rows[0].algorithms = ConvAlgorithm::Winograd4x4,
             "rows[0]",
         );
         refused(&|p| p.rows[0].c_in = 0, "channels");

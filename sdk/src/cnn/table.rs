@@ -20,8 +20,7 @@
 
 use tensorholo_kernels::{registry, Algorithm, Isa};
 
-use super::options::CnnEngine;
-use super::saved::RowAlgorithms;
+use super::options::{CnnEngine, ConvAlgorithm};
 
 /// Where the AVX-512 rows were measured: the timed choice (`PlanSource::Tune`) of 7–49 processes per shape.
 const ZEN4_AVX512: &str = "AMD EPYC Zen 4 (family 25, model 17; 2 vCPUs), AVX-512: the row most of 7–49 \
@@ -47,7 +46,7 @@ pub(crate) struct RowEntry {
     pub(crate) class: Isa,
     pub(crate) c_in: usize,
     pub(crate) c_out: usize,
-    pub(crate) algorithms: RowAlgorithms,
+    pub(crate) algorithms: ConvAlgorithm,
     pub(crate) row: &'static str,
     pub(crate) measured: &'static str,
 }
@@ -55,7 +54,7 @@ pub(crate) struct RowEntry {
 const fn entry(
     class: Isa,
     (c_in, c_out): (usize, usize),
-    algorithms: RowAlgorithms,
+    algorithms: ConvAlgorithm,
     row: &'static str,
     measured: &'static str,
 ) -> RowEntry {
@@ -69,7 +68,7 @@ const fn entry(
     }
 }
 
-use RowAlgorithms::{Any, Direct};
+use ConvAlgorithm::{Auto, Direct};
 
 /// The measured rows: every f32 layer shape of the shipped networks (hologram CNNs 4→24, 24→24, 28→6; the LDI
 /// CNN 20→24, 44→6; the pre-filters 6→8, 8→8, 14→6; the int8 pre-filters' f32 first and last layers, direct
@@ -79,56 +78,56 @@ pub(crate) const ROWS: &[RowEntry] = &[
     entry(
         Isa::Avx512,
         (4, 24),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.24x1.avx512",
         ZEN4_AVX512,
     ),
     entry(
         Isa::Avx512,
         (24, 24),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.24x1.avx512",
         ZEN4_AVX512,
     ),
     entry(
         Isa::Avx512,
         (28, 6),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.8x1.avx512",
         ZEN4_AVX512,
     ),
     entry(
         Isa::Avx512,
         (20, 24),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.24x1.avx512",
         ZEN4_AVX512,
     ),
     entry(
         Isa::Avx512,
         (44, 6),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.8x1.avx512",
         ZEN4_AVX512,
     ),
     entry(
         Isa::Avx512,
         (6, 8),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.8x1.avx512",
         ZEN4_AVX512,
     ),
     entry(
         Isa::Avx512,
         (8, 8),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.8x1.avx512",
         ZEN4_AVX512,
     ),
     entry(
         Isa::Avx512,
         (14, 6),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.8x1.avx512",
         ZEN4_AVX512,
     ),
@@ -150,56 +149,56 @@ pub(crate) const ROWS: &[RowEntry] = &[
     entry(
         Isa::Avx2Fma,
         (4, 24),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.6x2.avx2",
         ZEN4_AVX2,
     ),
     entry(
         Isa::Avx2Fma,
         (24, 24),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.6x2.avx2",
         ZEN4_AVX2,
     ),
     entry(
         Isa::Avx2Fma,
         (28, 6),
-        Any,
+        Auto,
         "conv3x3.f32.6x2.avx2",
         ZEN4_AVX2,
     ),
     entry(
         Isa::Avx2Fma,
         (20, 24),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.6x2.avx2",
         ZEN4_AVX2,
     ),
     entry(
         Isa::Avx2Fma,
         (44, 6),
-        Any,
+        Auto,
         "conv3x3.f32.wino2x2.6x2.avx2",
         ZEN4_AVX2,
     ),
     entry(
         Isa::Avx2Fma,
         (6, 8),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.6x2.avx2",
         ZEN4_AVX2,
     ),
     entry(
         Isa::Avx2Fma,
         (8, 8),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.6x2.avx2",
         ZEN4_AVX2,
     ),
     entry(
         Isa::Avx2Fma,
         (14, 6),
-        Any,
+        Auto,
         "conv3x3.f32.6x2.avx2",
         ZEN4_AVX2,
     ),
@@ -221,56 +220,56 @@ pub(crate) const ROWS: &[RowEntry] = &[
     entry(
         Isa::Neon,
         (4, 24),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.8x3.neon",
         QEMU_NEON,
     ),
     entry(
         Isa::Neon,
         (24, 24),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.8x3.neon",
         QEMU_NEON,
     ),
     entry(
         Isa::Neon,
         (28, 6),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.8x3.neon",
         QEMU_NEON,
     ),
     entry(
         Isa::Neon,
         (20, 24),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.8x3.neon",
         QEMU_NEON,
     ),
     entry(
         Isa::Neon,
         (44, 6),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.8x3.neon",
         QEMU_NEON,
     ),
     entry(
         Isa::Neon,
         (6, 8),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.8x3.neon",
         QEMU_NEON,
     ),
     entry(
         Isa::Neon,
         (8, 8),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.8x3.neon",
         QEMU_NEON,
     ),
     entry(
         Isa::Neon,
         (14, 6),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.8x3.neon",
         QEMU_NEON,
     ),
@@ -286,56 +285,56 @@ pub(crate) const ROWS: &[RowEntry] = &[
     entry(
         Isa::Scalar,
         (4, 24),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.4x4.scalar",
         ZEN4_SCALAR,
     ),
     entry(
         Isa::Scalar,
         (24, 24),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.4x4.scalar",
         ZEN4_SCALAR,
     ),
     entry(
         Isa::Scalar,
         (28, 6),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.4x4.scalar",
         ZEN4_SCALAR,
     ),
     entry(
         Isa::Scalar,
         (20, 24),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.4x4.scalar",
         ZEN4_SCALAR,
     ),
     entry(
         Isa::Scalar,
         (44, 6),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.4x4.scalar",
         ZEN4_SCALAR,
     ),
     entry(
         Isa::Scalar,
         (6, 8),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.4x4.scalar",
         ZEN4_SCALAR,
     ),
     entry(
         Isa::Scalar,
         (8, 8),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.4x4.scalar",
         ZEN4_SCALAR,
     ),
     entry(
         Isa::Scalar,
         (14, 6),
-        Any,
+        Auto,
         "conv3x3.f32.wino4x4.4x4.scalar",
         ZEN4_SCALAR,
     ),
@@ -369,10 +368,10 @@ pub(crate) fn f32_class(isa: Isa) -> Isa {
 /// The algorithm of a layer shape the table does not list: F(4×4, 3×3), which won every listed shape but the
 /// AVX2 rows of 6-channel outputs; direct there (output channels under 8 on AVX2); the one algorithm of a
 /// pinned set.
-pub(crate) fn default_algorithm(isa: Isa, c_out: usize, algorithms: RowAlgorithms) -> Algorithm {
+pub(crate) fn default_algorithm(isa: Isa, c_out: usize, algorithms: ConvAlgorithm) -> Algorithm {
     match algorithms {
-        RowAlgorithms::Any if f32_class(isa) == Isa::Avx2Fma && c_out < 8 => Algorithm::Direct,
-        RowAlgorithms::Any => Algorithm::Winograd4x4,
+        ConvAlgorithm::Auto if f32_class(isa) == Isa::Avx2Fma && c_out < 8 => Algorithm::Direct,
+        ConvAlgorithm::Auto => Algorithm::Winograd4x4,
         set => set.algorithms()[0],
     }
 }
@@ -385,7 +384,7 @@ pub(crate) fn row(
     isa: Isa,
     c_in: usize,
     c_out: usize,
-    algorithms: RowAlgorithms,
+    algorithms: ConvAlgorithm,
 ) -> (&'static str, &'static str) {
     let runnable = |name: &str| {
         algorithms
@@ -395,12 +394,12 @@ pub(crate) fn row(
             .any(|k| k.name == name)
     };
     let class = f32_class(isa);
-    let listed = |set: RowAlgorithms| {
+    let listed = |set: ConvAlgorithm| {
         ROWS.iter()
             .find(|e| e.class == class && (e.c_in, e.c_out, e.algorithms) == (c_in, c_out, set))
             .filter(|e| runnable(e.row))
     };
-    if let Some(e) = listed(algorithms).or_else(|| listed(RowAlgorithms::Any)) {
+    if let Some(e) = listed(algorithms).or_else(|| listed(ConvAlgorithm::Auto)) {
         return (e.row, e.measured);
     }
     let alg = default_algorithm(isa, c_out, algorithms);
@@ -513,10 +512,10 @@ mod tests {
             // A pinned algorithm takes the listed row where it is of that algorithm, else its first row.
             for (c_in, c_out) in [(24, 24), (3, 5), (64, 6)] {
                 for set in [
-                    RowAlgorithms::Any,
-                    RowAlgorithms::Direct,
-                    RowAlgorithms::Winograd2x2,
-                    RowAlgorithms::Winograd4x4,
+                    ConvAlgorithm::Auto,
+                    ConvAlgorithm::Direct,
+                    ConvAlgorithm::Winograd2x2,
+                    ConvAlgorithm::Winograd4x4,
                 ] {
                     let (name, _) = row(isa, c_in, c_out, set);
                     let k = registry::f32_kernels().find(|k| k.name == name).unwrap();
@@ -530,15 +529,15 @@ mod tests {
         }
         // Unlisted shapes: F(4×4, 3×3), but direct for 6-channel outputs on AVX2.
         assert_eq!(
-            default_algorithm(Isa::Avx512, 6, RowAlgorithms::Any),
+            default_algorithm(Isa::Avx512, 6, ConvAlgorithm::Auto),
             Algorithm::Winograd4x4
         );
         assert_eq!(
-            default_algorithm(Isa::AvxVnni, 6, RowAlgorithms::Any),
+            default_algorithm(Isa::AvxVnni, 6, ConvAlgorithm::Auto),
             Algorithm::Direct
         );
         assert_eq!(
-            default_algorithm(Isa::Avx2Fma, 6, RowAlgorithms::Winograd2x2),
+            default_algorithm(Isa::Avx2Fma, 6, ConvAlgorithm::Winograd2x2),
             Algorithm::Winograd2x2
         );
     }

@@ -95,7 +95,8 @@ impl serde::Serialize for PlanSource {
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Default, serde::Serialize)]
 pub struct PlanRequest {
     /// The caller's options, whole ([`CnnOptions`]: engine, layout, threads, algorithm, strips, slabs,
-    /// instruction set; `tune` is read into `source`).
+    /// instruction set; `tune` is read into `source`). Flat in reports: `request.strip_rows`, `request.isa`, ….
+    #[serde(flatten)]
     pub cnn: CnnOptions,
     /// Where the decisions come from.
     pub source: PlanSource,

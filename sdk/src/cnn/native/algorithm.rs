@@ -26,7 +26,7 @@ use std::time::Instant;
 use tensorholo_kernels::{registry, Algorithm, Conv3x3F32, Inputs, Isa, RowPlanar};
 
 use crate::cnn::options::ConvAlgorithm;
-use crate::cnn::saved::{RowAlgorithms, SavedRow};
+use crate::cnn::saved::SavedRow;
 use crate::cnn::table;
 use crate::cnn::tuning::PlanSource;
 use crate::error::{HoloError, Result};
@@ -46,7 +46,7 @@ const MARGIN: f64 = 1.15;
 const MARGIN_F4: f64 = 1.1;
 
 /// A layer shape: `(C_in, C_out, what its row is chosen among)`.
-pub(crate) type RowKey = (usize, usize, RowAlgorithms);
+pub(crate) type RowKey = (usize, usize, ConvAlgorithm);
 
 /// The kernel row of each f32 layer shape of a session's networks, and where each came from.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -111,17 +111,14 @@ impl Rows {
 /// The layer shapes of `graph` (an f32 network's every layer under `conv`; an int8 file's float layers,
 /// direct only), with the layers.
 fn shapes(graph: &CnnWeights, conv: ConvAlgorithm) -> Vec<(RowKey, &ConvLayer)> {
-    fn key(l: &ConvLayer, set: RowAlgorithms) -> (RowKey, &ConvLayer) {
+    fn key(l: &ConvLayer, set: ConvAlgorithm) -> (RowKey, &ConvLayer) {
         ((l.c_in, l.c_out, set), l)
     }
     match graph.quant {
-        None => {
-            let set = RowAlgorithms::of_request(conv);
-            graph.layers.iter().map(|l| key(l, set)).collect()
-        }
+        None => graph.layers.iter().map(|l| key(l, conv)).collect(),
         Some(_) => graph
             .float_layers_of_int8()
-            .map(|l| key(l, RowAlgorithms::Direct))
+            .map(|l| key(l, ConvAlgorithm::Direct))
             .collect(),
     }
 }
@@ -186,7 +183,7 @@ fn known(isa: Isa, (_, c_out, set): RowKey, name: &str) -> Option<&'static str> 
 #[derive(Clone, Copy, Debug)]
 pub(crate) enum Choice<'a> {
     /// The row `rows` holds for the layer's shape among these algorithms (the table's where it holds none).
-    Rows(&'a Rows, RowAlgorithms),
+    Rows(&'a Rows, ConvAlgorithm),
     /// This algorithm on its first row (tests that compare algorithms).
     #[cfg(test)]
     Exact(Algorithm),
@@ -230,7 +227,7 @@ pub(crate) fn plan_layer(
 }
 
 /// The row [`pick`] keeps among every row of `set`'s algorithms for `layer`, timed on the sample band.
-fn timed_row(layer: &ConvLayer, isa: Isa, set: RowAlgorithms) -> Result<&'static str> {
+fn timed_row(layer: &ConvLayer, isa: Isa, set: ConvAlgorithm) -> Result<&'static str> {
     let mut candidates = Vec::new();
     for &alg in set.algorithms() {
         for info in registry::f32_rows_of(isa, layer.c_out, alg) {
@@ -378,7 +375,7 @@ mod tests {
         for row in d.saved_rows() {
             let k = registry::f32_kernels().find(|k| k.name == row.row).unwrap();
             assert_eq!(k.algorithm, Algorithm::Direct, "{}", row.row);
-            assert_eq!(row.algorithms, RowAlgorithms::Direct);
+            assert_eq!(row.algorithms, ConvAlgorithm::Direct);
         }
     }
 
@@ -394,18 +391,18 @@ mod tests {
         p.rows.push(SavedRow {
             c_in: 24,
             c_out: 24,
-            algorithms: RowAlgorithms::Any,
+            algorithms: ConvAlgorithm::Auto,
             row: direct.name.into(),
         });
         let source = PlanSource::Saved(Arc::new(p.clone()));
         let rows = decide(&[&g], isa, ConvAlgorithm::Auto, &source).unwrap();
-        assert_eq!(rows.get((24, 24, RowAlgorithms::Any)), Some(direct.name));
+        assert_eq!(rows.get((24, 24, ConvAlgorithm::Auto)), Some(direct.name));
         assert_eq!((rows.saved, rows.table), (1, 2));
         let plan = plan_layer(
             &g.layers[1],
             true,
             isa,
-            Choice::Rows(&rows, RowAlgorithms::Any),
+            Choice::Rows(&rows, ConvAlgorithm::Auto),
         )
         .unwrap();
         assert_eq!(plan.kernel().name, direct.name);

@@ -41,8 +41,8 @@ use super::strips::{
     advance_all, bands, bands_aligned, both, hidden_layers, installed, row_bytes, BandConv,
     F32Rows, Place, Strips, Window,
 };
+use crate::cnn::options::ConvAlgorithm;
 use crate::cnn::plan::{check_output_planes, check_planes, CnnPlan};
-use crate::cnn::saved::RowAlgorithms;
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnWeights, QuantGrid};
 
@@ -101,7 +101,7 @@ impl NativePlan {
         width: usize,
         threads: usize,
         isa: Isa,
-        (rows, set): (&Rows, RowAlgorithms),
+        (rows, set): (&Rows, ConvAlgorithm),
         layout: (Option<usize>, Option<usize>),
     ) -> Result<Self> {
         Self::build(
@@ -143,7 +143,7 @@ impl NativePlan {
         conv: Option<tensorholo_kernels::Algorithm>,
     ) -> Result<Self> {
         let table = Rows::default();
-        let choice = conv.map_or(Choice::Rows(&table, RowAlgorithms::Any), Choice::Exact);
+        let choice = conv.map_or(Choice::Rows(&table, ConvAlgorithm::Auto), Choice::Exact);
         Self::build(graph, height, width, threads, isa, (strip, slabs), choice)
     }
 
@@ -159,7 +159,7 @@ impl NativePlan {
         slabs: Option<usize>,
     ) -> Result<Self> {
         let rows = Rows::mixed(&graph, isa);
-        let choice = Choice::Rows(&rows, RowAlgorithms::Any);
+        let choice = Choice::Rows(&rows, ConvAlgorithm::Auto);
         Self::build(graph, height, width, threads, isa, (None, slabs), choice)
     }
 

@@ -53,8 +53,8 @@ use super::slabs::{Cols, Slab};
 use super::strips::{
     advance_all, bands, both, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window,
 };
+use crate::cnn::options::ConvAlgorithm;
 use crate::cnn::plan::{check_planes, CnnPlan};
-use crate::cnn::saved::RowAlgorithms;
 use crate::error::{HoloError, Result};
 use crate::model::{CnnQuant, CnnWeights, LayerQuant, QuantGrid};
 
@@ -248,7 +248,7 @@ impl NativeInt8Plan {
                 let (l0, ln) = (&graph.layers[0], &graph.layers[n - 1]);
                 // Direct (the strips are one row apart), on the session's row for the shape.
                 let f = |l: &crate::model::ConvLayer, relu| {
-                    algorithm::plan_layer(l, relu, isa, Choice::Rows(rows, RowAlgorithms::Direct))
+                    algorithm::plan_layer(l, relu, isa, Choice::Rows(rows, ConvAlgorithm::Direct))
                 };
                 Some([f(l0, true)?, f(ln, false)?])
             }

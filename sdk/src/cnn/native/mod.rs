@@ -29,7 +29,7 @@ use algorithm::Rows;
 use super::engine::{Engine, EnginePlans, Networks, Tuning};
 use super::options::{default_threads, CnnEngine, CnnLayout, CnnOptions, ThreadCount};
 use super::plan::{time_plan, CnnPlan};
-use super::saved::{network_key, RowAlgorithms};
+use super::saved::network_key;
 use super::tuning::{auto_thread_candidates, timing_resolution, PlanRequest, PlanTiming};
 use crate::error::{HoloError, Result};
 use crate::model::CnnWeights;
@@ -219,14 +219,13 @@ pub(super) fn native_plan(
         let k = p.kernel_name().to_string();
         Ok((Box::new(p), k))
     } else {
-        let set = RowAlgorithms::of_request(options.algorithm);
         let p = f32::NativePlan::with_rows(
             graph,
             height,
             width,
             threads,
             isa,
-            (rows, set),
+            (rows, options.algorithm),
             (options.strip_rows, options.slabs),
         )?;
         let k = p.kernel_name();
