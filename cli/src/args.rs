@@ -46,8 +46,9 @@ pub struct OpticsArgs {
 }
 
 impl OpticsArgs {
-    /// The `--display` profile, if given. Errors: the file cannot be read or is not a valid profile (the
-    /// message names the key).
+    /// Reads the `--display` profile, if given. A command reads it once, at its start, and passes it down
+    /// (so that `--display /dev/stdin` or a pipe fed once serves every part of the command). Errors: the file
+    /// cannot be read or is not a valid profile (the message names the key).
     pub fn profile(&self) -> Result<Option<DisplayProfile>> {
         self.display.as_deref().map(read_profile).transpose()
     }
@@ -60,15 +61,11 @@ impl OpticsArgs {
         ))
     }
 
-    /// The validated optical setup: the `--display` profile's (the paper's display without one) with the
-    /// single flags in place of its values. Errors: a bad profile (naming its key), not exactly 3
+    /// The validated optical setup: `profile`'s (the `--display` profile [`OpticsArgs::profile`] read; the
+    /// paper's display without one) with the single flags in place of its values. Errors: not exactly 3
     /// wavelengths, or a non-positive value.
-    pub fn setup(&self) -> Result<OpticalSetup> {
-        let base = self
-            .profile()?
-            .as_ref()
-            .map_or_else(OpticalSetup::default, DisplayProfile::optics);
-        self.setup_over(base)
+    pub fn setup(&self, profile: Option<&DisplayProfile>) -> Result<OpticalSetup> {
+        self.setup_over(profile.map_or_else(OpticalSetup::default, DisplayProfile::optics))
     }
 
     /// The validated optical setup: `base` (the paper's display, or a display profile's) with the flags
@@ -618,19 +615,9 @@ pub fn check_offset_mm(offset_mm: f64) -> Result<()> {
     })
 }
 
-/// The display profile at `path` (`--display`), read once per process: every later call gets the same
-/// profile without reading again, so that `--display /dev/stdin`, a pipe or a FIFO fed once serves every
-/// part of a command that asks for it. Errors: the file cannot be read or is not a valid profile (the
-/// message names the key and the file).
+/// Reads the display profile at `path` (`--display`). Commands read it once and pass it down (no cache: what
+/// a command uses is what it read). Errors: the file cannot be read or is not a valid profile (the message
+/// names the key and the file).
 pub fn read_profile(path: &Path) -> Result<DisplayProfile> {
-    static READ: std::sync::Mutex<Vec<(PathBuf, DisplayProfile)>> =
-        std::sync::Mutex::new(Vec::new());
-    let mut read = READ.lock().unwrap_or_else(|p| p.into_inner());
-    if let Some((_, p)) = read.iter().find(|(p, _)| p == path) {
-        return Ok(p.clone());
-    }
-    let profile =
-        DisplayProfile::from_path(path).with_context(|| format!("--display {}", path.display()))?;
-    read.push((path.to_path_buf(), profile.clone()));
-    Ok(profile)
+    DisplayProfile::from_path(path).with_context(|| format!("--display {}", path.display()))
 }

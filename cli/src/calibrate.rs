@@ -53,37 +53,42 @@ struct SlmArgs {
     size: Option<(usize, usize)>,
 }
 
+/// The SLM the flags describe, its `--display` profile read once ([`SlmArgs::read`]).
+struct Slm {
+    profile: Option<DisplayProfile>,
+    /// `--size`, else the profile's resolution, `(height, width)`.
+    size: (usize, usize),
+}
+
+impl Slm {
+    /// The lasers: `flag` (`--wavelengths-m`) if given, else the profile's, else the paper's.
+    fn wavelengths_m(&self, flag: &Option<Vec<f64>>) -> Vec<f64> {
+        match (flag, &self.profile) {
+            (Some(w), _) => w.clone(),
+            (None, Some(p)) => p.wavelengths_m.to_vec(),
+            (None, None) => OpticalSetup::default().wavelengths_m.to_vec(),
+        }
+    }
+}
+
 impl SlmArgs {
-    /// The `--display` profile, if given. Errors: unreadable, or a bad profile (naming the key).
-    fn profile(&self) -> Result<Option<DisplayProfile>> {
-        self.display
+    /// Reads the `--display` profile, if given, once, and the SLM size: `--size`, else the profile's
+    /// resolution. Errors: unreadable or a bad profile (naming the key; an error even where --size overrides
+    /// its resolution), or no size.
+    fn read(&self) -> Result<Slm> {
+        let profile = self
+            .display
             .as_deref()
             .map(crate::args::read_profile)
-            .transpose()
-    }
-
-    /// The SLM size: `--size`, else the profile's resolution. Errors: neither given, or a bad profile.
-    fn size(&self) -> Result<(usize, usize)> {
-        // A bad profile is an error even where --size overrides its resolution.
-        let profile = self.profile()?;
-        if let Some(s) = self.size {
-            return Ok(s);
-        }
-        match profile {
-            Some(p) => Ok((p.resolution[0], p.resolution[1])),
-            None => bail!("give the SLM size: --size HEIGHTxWIDTH or --display PROFILE.json"),
-        }
-    }
-
-    /// The lasers: `flag` (`--wavelengths-m`) if given, else the profile's, else the paper's.
-    fn wavelengths_m(&self, flag: &Option<Vec<f64>>) -> Result<Vec<f64>> {
-        if let Some(w) = flag {
-            return Ok(w.clone());
-        }
-        Ok(self.profile()?.map_or_else(
-            || OpticalSetup::default().wavelengths_m.to_vec(),
-            |p| p.wavelengths_m.to_vec(),
-        ))
+            .transpose()?;
+        let size = match (self.size, &profile) {
+            (Some(s), _) => s,
+            (None, Some(p)) => (p.resolution[0], p.resolution[1]),
+            (None, None) => {
+                bail!("give the SLM size: --size HEIGHTxWIDTH or --display PROFILE.json")
+            }
+        };
+        Ok(Slm { profile, size })
     }
 
     /// The profile file as a guard input (it is read, never written).
@@ -258,7 +263,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         CalibrateCommand::Patterns { slm, out } => {
             let inputs: Vec<Input> = slm.guard_input().into_iter().collect();
             guard("--out", out, &inputs)?;
-            let size = slm.size()?;
+            let size = slm.read()?.size;
             std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
             for k in 0..CODES {
                 let p = calibration_pattern(size.0, size.1, k as u8);
@@ -283,8 +288,9 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             wavelengths_m,
             out,
         } => {
-            let size = &slm.size()?;
-            let wavelengths_m = &slm.wavelengths_m(wavelengths_m)?;
+            let slm_read = slm.read()?;
+            let size = &slm_read.size;
+            let wavelengths_m = &slm_read.wavelengths_m(wavelengths_m);
             let crop: Option<Crop> = crop.as_deref().map(str::parse).transpose()?;
             if red.is_none() && green.is_none() && blue.is_none() {
                 bail!(
@@ -374,9 +380,9 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
                 .chain(slm.guard_input())
                 .collect();
             guard("--out", out, &inputs)?;
-            let size = slm.size()?;
-            let mut cal = DisplayCalibration::linear(size.0, size.1)?;
-            set_wavelengths(&mut cal, &slm.wavelengths_m(wavelengths_m)?)?;
+            let slm = slm.read()?;
+            let mut cal = DisplayCalibration::linear(slm.size.0, slm.size.1)?;
+            set_wavelengths(&mut cal, &slm.wavelengths_m(wavelengths_m))?;
             let model = match (range_rad, gamma) {
                 (Some(r), Some(g)) => Some(PhaseCurve::gamma(*r, *g)?),
                 _ => None,
@@ -467,7 +473,7 @@ fn intensity(
     let mut cal = match base {
         Some(b) => DisplayCalibration::read(b)?,
         None => {
-            let (h, w) = slm.size()?;
+            let (h, w) = slm.read()?.size;
             DisplayCalibration::linear(h, w)?
         }
     };

@@ -11,6 +11,7 @@ use tensorholo::dataset::{
     generate, generate_shards, merge_shards, save_ldi_previews, DatasetConfig, DisplayInfo,
     GenerateOptions, SampleGenerator, ShardSelection, Split, MANIFEST_FILE,
 };
+use tensorholo::display::DisplayProfile;
 use tensorholo::io::ensure_not_input;
 use tensorholo::scene::{write_ldi_dir, DepthEncoding, RandomSceneConfig};
 use tensorholo::synthesis::{AberrationCorrection, SmLbm};
@@ -304,8 +305,8 @@ fn progress_bar(total: u64) -> ProgressBar {
     bar
 }
 
-/// Builds the dataset configuration from the arguments.
-fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
+/// Builds the dataset configuration from the arguments and the `--display` profile the command read.
+fn config(args: &DatasetArgs, profile: Option<&DisplayProfile>) -> Result<DatasetConfig> {
     let defaults = RandomSceneConfig::default();
     let scene = RandomSceneConfig {
         height: args.size.0,
@@ -319,11 +320,11 @@ fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
     };
     let synthesis = SmLbm {
         levels: args.levels,
-        setup: args.optics.setup()?,
+        setup: args.optics.setup(profile)?,
         options: args.optics.options(),
         silhouette_masks: true,
     };
-    if let (None, Some((path, s, _))) = (&args.aberration, aberration_source(args)?) {
+    if let (None, Some((path, s, _))) = (&args.aberration, aberration_source(args, profile)?) {
         log::info!(
             "the --display profile's aberration {}: the ground truth is the aberration-corrected SM-LBM \
              (Eq. 5) for an SLM {} mm from the midpoint plane (the profile's first offset)",
@@ -331,7 +332,7 @@ fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
             s * 1e3
         );
     }
-    let aberration = match aberration_source(args)? {
+    let aberration = match aberration_source(args, profile)? {
         Some((path, slm_offset_m, what)) => Some(AberrationCorrection {
             profile: crate::aberration::load(what, &path)?,
             slm_offset_m,
@@ -364,12 +365,15 @@ fn config(args: &DatasetArgs) -> Result<DatasetConfig> {
 /// `--offset-mm`, else the `--display` profile's `aberration` at the profile's first offset (so that
 /// `training/retrain.sh --display FILE` trains for it); `None` without either. A profile's `prescription` is
 /// not used here: the real-time correction is exact for it, no retraining needed.
-fn aberration_source(args: &DatasetArgs) -> Result<Option<(PathBuf, f64, &'static str)>> {
+fn aberration_source(
+    args: &DatasetArgs,
+    profile: Option<&DisplayProfile>,
+) -> Result<Option<(PathBuf, f64, &'static str)>> {
     if let Some(path) = &args.aberration {
         crate::args::check_offset_mm(args.offset_mm)?;
         return Ok(Some((path.clone(), args.offset_mm * 1e-3, "--aberration")));
     }
-    let Some(profile) = args.optics.profile()? else {
+    let Some(profile) = profile else {
         return Ok(None);
     };
     Ok(profile.aberration.clone().map(|path| {
@@ -392,7 +396,9 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     .into_iter()
     .flatten()
     .collect();
-    let aberration = aberration_source(args)?;
+    // The display profile, read once and passed down.
+    let profile = args.optics.profile()?;
+    let aberration = aberration_source(args, profile.as_ref())?;
     let mut inputs = inputs;
     if let Some((path, _, what)) = &aberration {
         inputs.push(crate::output::Input::file(what, path));
@@ -402,7 +408,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         return merge(args);
     }
     let selection = shard_selection(args.shard.as_deref(), args.shard_count)?;
-    let config = config(args)?;
+    let config = config(args, profile.as_ref())?;
     if let Some((split, index)) = args.export_ldi {
         return export_ldi(args, &config, split, index);
     }
@@ -423,7 +429,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         }
         b.build().context("cannot start the worker threads")?
     };
-    pool.install(|| run_in_pool(args, &config, selection))
+    pool.install(|| run_in_pool(args, &config, selection, profile.as_ref()))
 }
 
 /// `--merge`: the manifest of a sharded dataset.
@@ -527,6 +533,7 @@ fn run_in_pool(
     args: &DatasetArgs,
     config: &DatasetConfig,
     selection: ShardSelection,
+    profile: Option<&DisplayProfile>,
 ) -> Result<()> {
     let generator = SampleGenerator::new(config)?;
     let photos = photo_paths(&generator);
@@ -574,11 +581,8 @@ fn run_in_pool(
         overwrite: args.force,
         git_commit: git_commit(),
         command: crate::output::command_line(),
-        aberration_file: aberration_source(args)?.map(|(path, _, _)| path),
-        display: args
-            .optics
-            .profile()?
-            .map(|p| DisplayInfo::new(&p, args.optics.display.as_deref())),
+        aberration_file: aberration_source(args, profile)?.map(|(path, _, _)| path),
+        display: profile.map(|p| DisplayInfo::new(p, args.optics.display.as_deref())),
     };
     if selection != ShardSelection::ALL {
         let run = generate_shards(&args.out, config, &options, selection, &|done, total| {

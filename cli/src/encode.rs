@@ -76,7 +76,7 @@ pub fn run(args: &EncodeArgs) -> Result<()> {
     if args.depths.is_empty() {
         bail!("--depths needs at least one normalised depth in [0, 1]");
     }
-    let setup = args.optics.setup()?;
+    let setup = args.optics.setup(args.optics.profile()?.as_ref())?;
     let (name, method) = args.encoding.method(crate::args::Encoding::Dpm);
     let options = args.optics.options();
     let offset_m = args.offset_mm * 1e-3;

@@ -252,25 +252,25 @@ impl ModelArgs {
         .collect()
     }
 
-    /// The `--display` profile, if given (see [`crate::args::OpticsArgs::profile`]).
+    /// Reads the `--display` profile, if given (see [`crate::args::OpticsArgs::profile`]): once per command,
+    /// passed to [`ModelArgs::profile_files`] and [`ModelArgs::pipeline`].
     pub fn profile(&self) -> Result<Option<DisplayProfile>> {
         self.optics.profile()
     }
 
-    /// The files the `--display` profile names (its calibration and aberration file, where the flags do not
-    /// override them), as `(what, path)` for the output guard. A bad profile is an error here, before
-    /// anything is written.
-    pub fn profile_files(&self) -> Result<Vec<(&'static str, PathBuf)>> {
-        let Some(p) = self.profile()? else {
-            return Ok(Vec::new());
+    /// The files `profile` (the `--display` profile) names, its calibration and aberration file, as
+    /// `(what, path)` for the output guard.
+    pub fn profile_files(profile: Option<&DisplayProfile>) -> Vec<(&'static str, PathBuf)> {
+        let Some(p) = profile else {
+            return Vec::new();
         };
-        Ok([
-            ("--display's calibration", p.calibration),
-            ("--display's aberration", p.aberration),
+        [
+            ("--display's calibration", &p.calibration),
+            ("--display's aberration", &p.aberration),
         ]
         .into_iter()
-        .filter_map(|(what, f)| Some((what, f?)))
-        .collect())
+        .filter_map(|(what, f)| Some((what, f.clone()?)))
+        .collect()
     }
 
     /// The aberration correction of this run, as `(what, json, profile)`: `--aberration` or `--prescription`,
@@ -343,17 +343,21 @@ impl ModelArgs {
     ///
     /// The hologram CNN: `--model`'s file (it must take `input`), or the shipped one of `--layers` for
     /// `input`. The pre-filter CNN: `--prefilter-model`'s file, or the shipped one as
-    /// [`ModelArgs::prefilter_mode`] says; the rule is the SDK's (the CLI and the bindings share it).
-    pub fn pipeline(&self, input: SceneInput) -> Result<(HologramPipeline, serde_json::Value)> {
-        let profile = self.profile()?;
-        let offset_mm = self.offset_mm(profile.as_ref());
+    /// [`ModelArgs::prefilter_mode`] says; the rule is the SDK's (the CLI and the bindings share it). `profile`
+    /// is the `--display` profile the command read ([`ModelArgs::profile`]).
+    pub fn pipeline(
+        &self,
+        input: SceneInput,
+        profile: Option<&DisplayProfile>,
+    ) -> Result<(HologramPipeline, serde_json::Value)> {
+        let offset_mm = self.offset_mm(profile);
         crate::args::check_offset_mm(offset_mm)?;
-        if let (Some(given), Some(p)) = (self.offset_mm, profile.as_ref()) {
+        if let (Some(given), Some(p)) = (self.offset_mm, profile) {
             offset_against_profile(given, p);
         }
         let (_, encoding) = self.encoding.method(crate::args::Encoding::AaDpm);
         let config = PipelineConfig {
-            optics: self.optics.setup()?,
+            optics: self.optics.setup(profile)?,
             options: self.optics.options(),
             offset_m: offset_mm * 1e-3,
             encoding,
@@ -375,7 +379,7 @@ impl ModelArgs {
             optics: &config.optics,
             offset_m: config.offset_m,
             tolerance: config.wavelength_ratio_tolerance,
-            profile: self.optics.display.as_deref().zip(profile.as_ref()),
+            profile: self.optics.display.as_deref().zip(profile),
         };
         let hint = |what: String| {
             let asked = &asked;
@@ -409,7 +413,7 @@ impl ModelArgs {
         let calibration = self
             .calibration
             .clone()
-            .or_else(|| profile.as_ref().and_then(|p| p.calibration.clone()));
+            .or_else(|| profile.and_then(|p| p.calibration.clone()));
         if let Some(plans) = self.plans.saved()? {
             pipeline = pipeline.with_saved_plans(plans)?;
         }
@@ -421,9 +425,7 @@ impl ModelArgs {
                 .with_context(|| format!("--calibration {}", path.display()))?;
         }
         let mut aberration = None;
-        if let Some((what, mut source, profile)) =
-            self.aberration(profile.as_ref(), &config.optics)?
-        {
+        if let Some((what, mut source, profile)) = self.aberration(profile, &config.optics)? {
             if self.prefilter && !pipeline.corrected_by_cnn() {
                 bail!(
                     "{what}: --prefilter requires the DDPM pre-filter CNN, which was trained on uncorrected \
@@ -492,7 +494,7 @@ impl ModelArgs {
             })),
             "aberration": aberration,
             "display": self.optics.display.as_deref().map(crate::output::path_text),
-            "display_name": profile.as_ref().and_then(|p| p.name.clone()),
+            "display_name": profile.and_then(|p| p.name.clone()),
             "display_mapping": pipeline.display_mapping_description(),
             // The same as numbers: σ, the spread, the ceiling and the estimated cost (dB), the volume fit.
             "display_mapping_detail": pipeline.display_mapping(),

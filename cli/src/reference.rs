@@ -76,7 +76,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     let t_all = Instant::now();
     // A bad display profile stops the command before anything is written.
     let profile = args.optics.profile()?;
-    let setup = args.optics.setup()?;
+    let setup = args.optics.setup(profile.as_ref())?;
     let (encoding_name, encoding) = args.encoding.method(crate::args::Encoding::AaDpm);
     let offset_mm = args
         .offset_mm

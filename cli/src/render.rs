@@ -71,8 +71,10 @@ Examples:
 pub fn run(args: &RenderArgs) -> Result<()> {
     let t_all = Instant::now();
     let refine = args.refine.request(false)?;
-    // A bad display profile stops the command before anything is written; the files it names are inputs too.
-    let profile_files = args.model.profile_files()?;
+    // The display profile, read once: a bad one stops the command before anything is written; the files it
+    // names are inputs too.
+    let profile = args.model.profile()?;
+    let profile_files = ModelArgs::profile_files(profile.as_ref());
     let mut inputs = args.scene.guard_inputs();
     inputs.extend(args.model.guard_inputs());
     inputs.extend(
@@ -86,8 +88,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let load_s = t.elapsed().as_secs_f64();
     // A display no model serves stops the command before anything is written too; an earlier run's report
     // in the folder goes, so that it is not taken for this run's.
-    let (pipeline, models) =
-        crate::output::before_writing(&args.out, args.model.pipeline(scene.input()))?;
+    let (pipeline, models) = crate::output::before_writing(
+        &args.out,
+        args.model.pipeline(scene.input(), profile.as_ref()),
+    )?;
     crate::output::prepare(&args.out, &inputs)?;
     let (h, w) = scene.size();
     // What runs: the model file's own depth and precision (a --model file need not match --layers/--precision).

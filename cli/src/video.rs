@@ -275,8 +275,10 @@ fn temporal_summary(churns: &[PhaseChurn], aligned: bool) -> serde_json::Value {
 
 /// Runs `holo video`.
 pub fn run(args: &VideoArgs) -> Result<()> {
-    // A bad display profile stops the command before anything is written; the files it names are inputs too.
-    let profile_files = args.model.profile_files()?;
+    // The display profile, read once: a bad one stops the command before anything is written; the files it
+    // names are inputs too.
+    let profile = args.model.profile()?;
+    let profile_files = crate::model_args::ModelArgs::profile_files(profile.as_ref());
     let t_all = Instant::now();
     let mut guarded: Vec<crate::output::Input> = [
         ("--rgb-dir", &args.rgb_dir),
@@ -331,7 +333,8 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     // A display no model serves stops the command before anything is written (an old report goes).
     let (pipeline, models) = crate::output::before_writing(
         &args.out,
-        args.model.pipeline(tensorholo::model::SceneInput::Rgbd),
+        args.model
+            .pipeline(tensorholo::model::SceneInput::Rgbd, profile.as_ref()),
     )?;
     crate::output::start_run(&args.out, subfolders, Some(&args.out.join("report.json")))?;
 
