@@ -304,14 +304,16 @@ fn two_sessions_with_different_plan_settings_run_their_own_plans_side_by_side() 
             },
             ..PipelineConfig::default()
         };
-        HologramPipeline::new(model.clone(), None, config).unwrap()
+        HologramPipeline::new(model.clone(), None, config)
     };
     let (h, w) = (40, 72);
     let f = frame(h, w, 3);
     let mut a = make(ConvAlgorithm::Direct, Some(4), Some(2))
+        .unwrap()
         .session(h, w)
         .unwrap();
     let mut b = make(ConvAlgorithm::Winograd4x4, None, None)
+        .unwrap()
         .session(h, w)
         .unwrap();
     // Interleaved frames: neither session's plan leaks into the other's.
@@ -348,13 +350,9 @@ fn two_sessions_with_different_plan_settings_run_their_own_plans_side_by_side() 
         "the two plans computed the very same bits: one setting was ignored"
     );
 
-    // A zero is refused, naming the field.
-    let e = make(ConvAlgorithm::Auto, Some(0), None)
-        .session(h, w)
-        .unwrap_err();
+    // A zero is refused when the pipeline is made, naming the field.
+    let e = make(ConvAlgorithm::Auto, Some(0), None).unwrap_err();
     assert!(e.to_string().contains("strip_rows"), "{e}");
-    let e = make(ConvAlgorithm::Auto, None, Some(0))
-        .session(h, w)
-        .unwrap_err();
+    let e = make(ConvAlgorithm::Auto, None, Some(0)).unwrap_err();
     assert!(e.to_string().contains("slabs"), "{e}");
 }

@@ -125,7 +125,7 @@ impl CnnOptions {
 pub const MAX_CNN_THREADS: usize = 256;
 
 /// The engine that runs a session's CNNs on the CPU
-/// ([`PipelineConfig::cnn_engine`](crate::pipeline::PipelineConfig::cnn_engine)).
+/// ([`CnnOptions::engine`]).
 ///
 /// - [`CnnEngine::Native`]: our direct 3×3 convolution kernels (`tensorholo-kernels`: AVX-512, AVX2+FMA,
 ///   NEON or portable scalar rows, chosen at run time from the CPU's features), row bands on the plan's own

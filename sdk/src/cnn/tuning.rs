@@ -141,7 +141,7 @@ pub struct PlanTiming {
     pub skipped: Option<String>,
 }
 
-/// What a session's engine choice ([`crate::pipeline::PipelineConfig::cnn_engine`]) and the engine's own
+/// What a session's engine choice ([`CnnOptions::engine`](crate::cnn::CnnOptions::engine)) and the engine's own
 /// choices (tract's layout and threads, the native engine's rows and threads) were, why, and where they came
 /// from ([`PlanReport::source`]).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -212,7 +212,7 @@ impl PlanReport {
     }
 }
 
-/// The thread counts [`ThreadCount::Auto`] times with [`PlanSource::Tune`]: 1, half the available cores and
+/// The thread counts [`ThreadCount::Auto`](crate::cnn::ThreadCount::Auto) times with [`PlanSource::Tune`]: 1, half the available cores and
 /// all of them (deduplicated; `std::thread::available_parallelism`, at most [`MAX_CNN_THREADS`]).
 pub fn auto_thread_candidates() -> Vec<usize> {
     let n = std::thread::available_parallelism()

@@ -415,7 +415,7 @@ impl AberrationProfile {
     /// Parses the JSON form (`docs/ABERRATION.md`); `source` names the input in error messages.
     ///
     /// Errors: [`HoloError::InvalidData`] naming `source`, the key path (`samples[0].per_colour`, through
-    /// [`crate::io::parse_json_object`]) and what is wrong: not one JSON object of this form, another format
+    /// `io::parse_json_object`) and what is wrong: not one JSON object of this form, another format
     /// or version, no sample, non-finite values, duplicate distances, a sample with both or neither of
     /// `coefficients` and `per_colour`, an array of the wrong length, a key given twice.
     pub fn from_json_str(text: &str, source: &str) -> Result<Self> {

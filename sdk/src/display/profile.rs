@@ -83,7 +83,7 @@ struct RawProfile {
     offsets_m: Option<serde_json::Value>,
     calibration: Option<serde_json::Value>,
     aberration: Option<serde_json::Value>,
-    /// Its own text, parsed strictly ([`crate::io::parse_json_object`]): a key given twice inside it is
+    /// Its own text, parsed strictly (`io::parse_json_object`): a key given twice inside it is
     /// refused, as at the top level (a `serde_json::Value` would keep the last).
     prescription: Option<Box<serde_json::value::RawValue>>,
 }

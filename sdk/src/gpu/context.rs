@@ -593,7 +593,7 @@ impl GpuContext {
     /// buffer. Frames use preallocated staging buffers instead.
     ///
     /// Errors: [`HoloError::Gpu`] if the copy or the mapping fails.
-    pub fn read_buffer<T: bytemuck::Pod + Default>(
+    pub(crate) fn read_buffer<T: bytemuck::Pod + Default>(
         &self,
         buffer: &wgpu::Buffer,
         len: usize,

@@ -52,7 +52,7 @@ fn kind_of(text: &str) -> Option<&'static str> {
 /// Errors: [`JsonError`] with the key path: not an object ("must be one JSON object"), text after it, an
 /// array with more entries than `T` holds, and every error of `T`'s deserialisation (a missing, unknown or
 /// repeated key, a value of the wrong type, an error of a `try_from` check) in serde's words.
-pub fn parse_json_object<T: DeserializeOwned>(
+pub(crate) fn parse_json_object<T: DeserializeOwned>(
     text: &str,
     what: &str,
 ) -> std::result::Result<T, JsonError> {

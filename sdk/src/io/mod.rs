@@ -21,7 +21,8 @@ use crate::error::{invalid, HoloError, Result};
 mod json;
 mod read;
 
-pub use json::{parse_json_object, JsonError};
+pub(crate) use json::parse_json_object;
+pub use json::JsonError;
 pub use read::{
     input_limits, read_bytes, read_text, set_input_limits, InputLimits, MAX_STREAM_BYTES,
     MAX_TEXT_BYTES,

@@ -146,7 +146,7 @@ const fn prefilter_channels(c: usize) -> [usize; 2] {
 /// The pre-filter input (format 2) as six channel planes, without copying them: `[Re H_R, Re H_G, Re H_B,
 /// Im H_R, Im H_G, Im H_B]` from the three colours' `(Re, Im)` planes (`H·W` values each, row-major), the
 /// channel order [`pack_prefilter_colour`] writes.
-pub fn prefilter_planes<'a>(colours: [(&'a [f32], &'a [f32]); 3]) -> [&'a [f32]; 6] {
+pub(crate) fn prefilter_planes<'a>(colours: [(&'a [f32], &'a [f32]); 3]) -> [&'a [f32]; 6] {
     let mut planes: [&[f32]; 6] = [&[]; 6];
     for (c, (re, im)) in colours.into_iter().enumerate() {
         let [a, b] = prefilter_channels(c);
@@ -159,8 +159,10 @@ pub fn prefilter_planes<'a>(colours: [(&'a [f32], &'a [f32]); 3]) -> [&'a [f32];
 /// `[6, H, W]` (format 2): `re` (`H·W` values, row-major) into channel `c`, `im` into channel `3 + c`.
 ///
 /// Errors: [`HoloError::InvalidParameter`] for `c > 2`; [`HoloError::ShapeMismatch`] if `out` is not
-/// `[6, H, W]` with `H·W` = `re.len()` = `im.len()`.
-pub fn pack_prefilter_colour(
+/// `[6, H, W]` with `H·W` = `re.len()` = `im.len()`. The layout's reference for the tests (the sessions write
+/// the planes in place).
+#[cfg(test)]
+pub(crate) fn pack_prefilter_colour(
     c: usize,
     re: &[f32],
     im: &[f32],

@@ -684,7 +684,7 @@ impl CnnWeights {
 
     /// Whether this is a mixed-precision int8 file: float first and last layers, int8 between (the graph
     /// reader allows no other float layers); false for an f32 file.
-    pub fn is_mixed_precision(&self) -> bool {
+    pub(crate) fn is_mixed_precision(&self) -> bool {
         let n = self.layers.len();
         self.quant
             .as_ref()
@@ -693,7 +693,7 @@ impl CnnWeights {
 
     /// The layers of an int8 file that run in f32: the first and the last of a mixed-precision file, none
     /// otherwise (and none for an f32 file, whose layers are all f32 anyway).
-    pub fn float_layers_of_int8(&self) -> impl Iterator<Item = &ConvLayer> {
+    pub(crate) fn float_layers_of_int8(&self) -> impl Iterator<Item = &ConvLayer> {
         let n = self.layers.len();
         let ends = if self.is_mixed_precision() {
             vec![0, n - 1]

@@ -51,7 +51,7 @@ pub enum ModelKind {
 
 impl ModelKind {
     /// The `tensorholo.kind` value of this kind: `hologram-cnn` or `prefilter-cnn`.
-    pub fn metadata_name(self) -> &'static str {
+    pub(crate) fn metadata_name(self) -> &'static str {
         match self {
             ModelKind::Hologram => "hologram-cnn",
             ModelKind::PreFilter => "prefilter-cnn",
@@ -59,7 +59,7 @@ impl ModelKind {
     }
 
     /// The name of the network's single input in the ONNX graph: `rgbd` or `slm_field`.
-    pub fn input_name(self) -> &'static str {
+    pub(crate) fn input_name(self) -> &'static str {
         match self {
             ModelKind::Hologram => "rgbd",
             ModelKind::PreFilter => "slm_field",
@@ -76,7 +76,7 @@ impl ModelKind {
     }
 
     /// Parses a `tensorholo.kind` value; `None` if unknown.
-    pub fn from_metadata_name(s: &str) -> Option<Self> {
+    pub(crate) fn from_metadata_name(s: &str) -> Option<Self> {
         match s {
             "hologram-cnn" => Some(ModelKind::Hologram),
             "prefilter-cnn" => Some(ModelKind::PreFilter),

@@ -93,7 +93,7 @@ impl Precision {
     pub const ALL: [Precision; 3] = [Self::F32, Self::Int8QOperator, Self::Int8Qdq];
 
     /// The file-name suffix before `.onnx` (`""`, `".int8-qop"`, `".int8-qdq"`).
-    pub fn file_suffix(self) -> &'static str {
+    pub(crate) fn file_suffix(self) -> &'static str {
         match self {
             Self::F32 => "",
             Self::Int8QOperator => ".int8-qop",
@@ -103,7 +103,7 @@ impl Precision {
 
     /// The form a model's `tensorholo.precision` metadata names ([`ModelMetadata::precision`]: `f32`,
     /// `int8-qoperator-conv`, `int8-qdq-conv`); `None` for another value.
-    pub fn from_metadata(value: &str) -> Option<Self> {
+    pub(crate) fn from_metadata(value: &str) -> Option<Self> {
         match value {
             "f32" => Some(Self::F32),
             "int8-qoperator-conv" => Some(Self::Int8QOperator),

@@ -148,7 +148,7 @@ pub enum Padding {
 
 impl Padding {
     /// `Double` when `pad`, as [`PropagationOptions::pad`] says.
-    pub fn from_pad(pad: bool) -> Self {
+    pub(crate) fn from_pad(pad: bool) -> Self {
         if pad {
             Self::Double
         } else {
@@ -196,7 +196,7 @@ impl SpectralPlan {
     }
 
     /// Computational grid `(rows, columns)`: the field size, doubled when padded.
-    pub fn computational_shape(&self) -> (usize, usize) {
+    pub(crate) fn computational_shape(&self) -> (usize, usize) {
         (self.fft.height(), self.fft.width())
     }
 
@@ -365,7 +365,7 @@ impl SpectralPlan {
     /// Errors: [`HoloError::ShapeMismatch`] if `field` has the wrong length or a multiplier was made for
     /// another computational grid.
     #[allow(clippy::too_many_arguments)]
-    pub fn apply_rows_then(
+    pub(crate) fn apply_rows_then(
         &self,
         field: &mut [Complex32],
         even: Option<&EvenMultiplier>,

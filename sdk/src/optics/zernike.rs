@@ -28,6 +28,8 @@ use serde::{Deserialize, Serialize};
 
 use super::propagation::check_positive;
 use super::{Carrier, PropagationOptions, Propagator, SpectralPlan};
+#[cfg(doc)]
+use crate::error::HoloError;
 use crate::error::{invalid, Result};
 
 /// The largest magnitude of a Zernike coefficient, radians at the pupil edge: 10⁴. The correction kernel
@@ -306,7 +308,7 @@ pub(crate) fn fill_pupil_multiplier(
 /// The frequency-domain amplitude transfer function `Φ(fx, fy) = circ(ρ ≤ 1)·exp(i·ΣZ_j(ρ, θ))` `[height,
 /// width]` in FFT order (row `ky`, column `kx`, frequencies `fx = kx/(width·p)`, `fy = ky/(height·p)` as
 /// `numpy.fft.fftfreq`), with `ρ = |f|/f_N`, `f_N = 1/(2p)` and `θ = atan2(fy, fx)`: the form of Eq. 5's
-/// kernel that [`AberrationCorrectedSmLbm`] uses. Unit magnitude inside the pupil. Independent of the pitch
+/// kernel that [`crate::synthesis::AberrationCorrectedSmLbm`] uses. Unit magnitude inside the pupil. Independent of the pitch
 /// and wavelength: the coefficients are radians at the pupil edge.
 ///
 /// Errors: [`HoloError::InvalidParameter`] for a zero size.

@@ -243,7 +243,7 @@ pub const MAX_DEPTH_ASPECT_MISMATCH: f64 = 0.02;
 impl DecodedDepth {
     /// The relative difference `|h_d·w_c / (h_c·w_d) − 1|` between this map's aspect ratio and a colour
     /// frame's of `height × width` (0 for the same shape).
-    pub fn aspect_mismatch(&self, height: usize, width: usize) -> f64 {
+    pub(crate) fn aspect_mismatch(&self, height: usize, width: usize) -> f64 {
         let (hd, wd) = self.values.dim();
         let (a, b) = (hd as f64 * width as f64, height as f64 * wd as f64);
         if b == 0.0 {

@@ -112,7 +112,7 @@ pub fn auto_tile(height: usize, width: usize) -> usize {
 
 impl CalibrationOptions {
     /// The tile side these options give for an SLM of `height × width` ([`auto_tile`] for 0).
-    pub fn tile_for(&self, height: usize, width: usize) -> usize {
+    pub(crate) fn tile_for(&self, height: usize, width: usize) -> usize {
         if self.tile == 0 {
             auto_tile(height, width)
         } else {

@@ -14,7 +14,7 @@ use ndarray::{Array2, ArrayView2};
 use crate::error::{invalid, HoloError, Result};
 
 /// The 5×5 median filter of `[height, width]` (borders use the part of the window inside the image).
-pub fn median5(img: ArrayView2<f32>) -> Array2<f32> {
+pub(crate) fn median5(img: ArrayView2<f32>) -> Array2<f32> {
     let (h, w) = img.dim();
     let mut window = Vec::with_capacity(25);
     Array2::from_shape_fn((h, w), |(y, x)| {

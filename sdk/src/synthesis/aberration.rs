@@ -11,6 +11,8 @@ use serde::{Deserialize, Serialize};
 
 use super::sm_lbm::{GapPropagation, SceneLayer, SmLbm};
 use crate::display::AberrationProfile;
+#[cfg(doc)]
+use crate::error::HoloError;
 use crate::error::Result;
 use crate::optics::zernike::pupil_multiplier;
 use crate::optics::{par_channels, Carrier};
@@ -32,7 +34,7 @@ pub struct AberrationCorrection {
 /// Maimone et al.'s initial phase, as [`SmLbm`]), propagate it toward the viewer through every nearer non-empty
 /// plane applying only that plane's silhouette mask (occlusion, Eq. 3, without the addition term of Eq. 4),
 /// propagate the result back to plane `N` (the occlusion-processed `L′_N`), multiply its spectrum by the
-/// correction kernel `Φ_{d_N}` (Eq. 5; frequency-domain form, [`amplitude_transfer_function`]) with the
+/// correction kernel `Φ_{d_N}` (Eq. 5; frequency-domain form, [`crate::optics::zernike::amplitude_transfer_function`]) with the
 /// coefficients of [`AberrationProfile::coefficients`] at `d_N = z_N − s`, propagate it to the midpoint plane
 /// `z = 0`, and sum over `N`.
 ///

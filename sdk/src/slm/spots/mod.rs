@@ -299,7 +299,7 @@ impl SpotPlan {
 
     /// The plan's colours as indices 0–2 (R, G, B). Errors: [`HoloError::InvalidParameter`] (`colours`) for
     /// none, an unknown name or a repeat.
-    pub fn colour_indices(&self) -> Result<Vec<usize>> {
+    pub(crate) fn colour_indices(&self) -> Result<Vec<usize>> {
         if self.colours.is_empty() {
             return Err(invalid("colours", "needs at least one of red, green, blue"));
         }

@@ -161,8 +161,10 @@ impl SpotModel {
         self.camera_scale
     }
 
-    /// The pupil radius in frequency bins of the window, `n/(2·camera_scale)`.
-    pub fn pupil_radius_bins(&self) -> f64 {
+    /// The pupil radius in frequency bins of the window, `n/(2·camera_scale)` (what the tests check the
+    /// simulated spot against).
+    #[cfg(test)]
+    pub(crate) fn pupil_radius_bins(&self) -> f64 {
         self.n as f64 / (2.0 * self.camera_scale)
     }
 

@@ -120,7 +120,11 @@ fn gaussian(rng: &mut SplitMix64) -> f64 {
 /// The hidden aberration of the simulated display for `plan` (module docs), with the plan's display.
 ///
 /// Errors: as [`AberrationProfile::new`] (none for a valid plan).
-pub fn hidden_profile(plan: &SpotPlan, seed: u64, max_rad: f64) -> Result<AberrationProfile> {
+pub(crate) fn hidden_profile(
+    plan: &SpotPlan,
+    seed: u64,
+    max_rad: f64,
+) -> Result<AberrationProfile> {
     let reference = plan.colour_indices()?[0];
     let mut rng = SplitMix64::new(splitmix64(seed ^ 0x5EED_AB3E));
     let samples = plan
