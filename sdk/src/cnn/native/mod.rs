@@ -160,28 +160,11 @@ impl Engine for NativeEngine {
         let isa = request.cnn.kernel_isa()?;
         let threads = tuning.threads.unwrap_or(1);
         let rows = Rows::from_saved(isa, &tuning.rows);
-        let (hologram, kernel) = native_plan(
-            nets.hologram.cnn_graph()?,
-            height,
-            width,
-            threads,
-            isa,
-            &rows,
-            &request.cnn,
-        )?;
+        // The hologram CNN's plan and its pre-filter's: the same size, threads, rows and options.
+        let plan = |graph| native_plan(graph, height, width, threads, isa, &rows, &request.cnn);
+        let (hologram, kernel) = plan(nets.hologram.cnn_graph()?)?;
         let prefilter = match nets.prefilter {
-            Some(p) => Some(
-                native_plan(
-                    p.cnn_graph()?,
-                    height,
-                    width,
-                    threads,
-                    isa,
-                    &rows,
-                    &request.cnn,
-                )?
-                .0,
-            ),
+            Some(p) => Some(plan(p.cnn_graph()?)?.0),
             None => None,
         };
         Ok(EnginePlans {
