@@ -426,12 +426,6 @@ impl ModelArgs {
         }
         let mut aberration = None;
         if let Some((what, mut source, profile)) = self.aberration(profile, &config.optics)? {
-            if self.prefilter && !pipeline.corrected_by_cnn() {
-                bail!(
-                    "{what}: --prefilter requires the DDPM pre-filter CNN, which was trained on uncorrected \
-                     fields and falls below AA-DPM on corrected ones (docs/ABERRATION.md); drop --prefilter"
-                );
-            }
             let profile = Arc::new(profile);
             let report = if pipeline.corrected_by_cnn() {
                 AberrationReport::by_cnn(&profile, config.offset_m)
@@ -439,9 +433,14 @@ impl ModelArgs {
                 AberrationReport::new(&profile, &config.optics, config.offset_m)
             };
             log::info!("aberration correction ({what}): {report}");
-            pipeline = pipeline
-                .with_aberration(profile)
-                .with_context(|| what.clone())?;
+            let given = self.prefilter || self.prefilter_model.is_some();
+            pipeline = pipeline.with_aberration(profile).with_context(|| {
+                if given {
+                    format!("{what} with --prefilter/--prefilter-model (drop it: the pipeline then encodes with AA-DPM)")
+                } else {
+                    what.clone()
+                }
+            })?;
             source["applied"] = json!(report);
             aberration = Some(source);
         }

@@ -26,10 +26,8 @@ use std::f64::consts::PI;
 
 use ndarray::{Array2, Array3};
 use num_complex::Complex32;
-use tensorholo::display::AberrationProfile;
-use tensorholo::display::AberrationSample;
-use tensorholo::optics::zernike::corrected_subhologram;
-use tensorholo::optics::zernike::subhologram_radius_m;
+use tensorholo::display::{AberrationProfile, AberrationSample};
+use tensorholo::optics::zernike::{corrected_subhologram, subhologram_radius_m};
 use tensorholo::optics::ZernikeCoefficients;
 use tensorholo::optics::{Carrier, OpticalSetup, PropagationOptions, Propagator};
 use tensorholo::synthesis::{AberrationCorrection, SceneLayer, SmLbm};

@@ -19,9 +19,7 @@ use std::sync::Arc;
 use common::viewer::{psnr_in, seen, Lens, EYEPIECE_M};
 use ndarray::{Array3, Axis};
 use num_complex::Complex32;
-use tensorholo::display::AberrationProfile;
-use tensorholo::display::AberrationSample;
-use tensorholo::display::Prescription;
+use tensorholo::display::{AberrationProfile, AberrationSample, Prescription};
 use tensorholo::encoding::double_phase_encode;
 use tensorholo::model::Precision;
 use tensorholo::optics::zernike::amplitude_transfer_function;
@@ -393,6 +391,30 @@ fn a_profile_for_another_display_is_refused_naming_the_quantity_and_a_slider_nee
 /// of a DDPM pipeline with `set_aberration`), against AA-DPM, through the lens, focal-stack PSNR.
 /// Measured (f32, TUM frame at 192 × 256, vertical-axis cylinder; DDPM − AA-DPM): +1.24 dB at 0.25 D, +0.20 at
 /// 0.5 D, −2.03 at 1 D, −14.57 at 2 D, −23.74 at 5 D.
+/// A pre-filter the pipeline chose (Auto) is dropped for AA-DPM when a correction is applied; one the caller
+/// required is refused, naming it, never dropped.
+#[test]
+fn a_required_prefilter_is_refused_with_a_correction_and_an_automatic_one_dropped() {
+    let auto = pipeline(Precision::F32, PrefilterMode::Auto);
+    let profile = correction(&Lens::cylinder(1.0, 90.0), &auto.config().optics);
+    assert!(auto.prefilter_model().is_some());
+    let dropped = auto.with_aberration(profile.clone()).unwrap();
+    assert!(dropped.prefilter_model().is_none());
+    let e = pipeline(Precision::F32, PrefilterMode::Required)
+        .with_aberration(profile)
+        .unwrap_err();
+    assert!(
+        matches!(
+            e,
+            HoloError::InvalidParameter {
+                name: "prefilter",
+                ..
+            }
+        ),
+        "{e}"
+    );
+}
+
 #[test]
 fn the_ddpm_prefilter_falls_below_aa_dpm_on_corrected_fields() {
     let frame = real_frame(192, 256);

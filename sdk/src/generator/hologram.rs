@@ -7,8 +7,7 @@ use std::time::Instant;
 use std::ops::ControlFlow;
 
 use crate::cnn::{PlanReport, ThreadCount};
-use crate::display::AberrationProfile;
-use crate::display::Prescription;
+use crate::display::{AberrationProfile, Prescription};
 use crate::encoding::{DoublePhaseMethod, LinearLut};
 use crate::error::{invalid, HoloError, Result};
 use crate::model::{HologramModel, ModelKind, Precision};

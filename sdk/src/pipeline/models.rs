@@ -7,8 +7,7 @@ use std::sync::Arc;
 use super::config::PipelineConfig;
 use super::selection::{shipped_prefilter, ModelSelection, PrefilterMode, PrefilterSource};
 use crate::cnn::{PlanRequest, PlanSource, SavedPlans};
-use crate::display::AberrationProfile;
-use crate::display::DisplayMapping;
+use crate::display::{AberrationProfile, DisplayMapping};
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
 use crate::model::{HologramModel, ModelKind, Precision};
@@ -22,6 +21,9 @@ pub struct HologramPipeline {
     prefilter: Option<Arc<HologramModel>>,
     /// Why the pipeline runs (or does not run) a pre-filter CNN, for logs and reports.
     prefilter_reason: String,
+    /// Whether the caller gave the pre-filter CNN or required it ([`PrefilterMode::Required`]): such a
+    /// pre-filter is used or refused, never dropped ([`HologramPipeline::with_aberration`]).
+    prefilter_given: bool,
     /// How the hologram CNN's training display maps onto the configured one.
     display_mapping: DisplayMapping,
     /// The display calibration sessions apply ([`HologramPipeline::with_calibration`]); `None`: an ideal SLM.
@@ -74,7 +76,8 @@ impl HologramPipeline {
         }
         // A volume within the rounding of σ·V runs at σ·V (the mapping says so in its description).
         config.optics.volume_depth_m = display_mapping.running_volume_depth_m();
-        let prefilter_reason = if prefilter.is_some() {
+        let prefilter_given = prefilter.is_some();
+        let prefilter_reason = if prefilter_given {
             "pre-filter CNN given by the caller"
         } else if config.offset_m == 0.0 {
             "no pre-filter at a 0 mm offset"
@@ -91,6 +94,7 @@ impl HologramPipeline {
             hologram,
             prefilter,
             prefilter_reason,
+            prefilter_given,
             display_mapping,
             calibration: None,
             aberration: None,
@@ -149,6 +153,7 @@ impl HologramPipeline {
         let (prefilter, reason) = shipped_prefilter(&hologram, mode, precision, &config)?;
         let mut pipeline = Self::new(hologram, prefilter.map(Arc::new), config)?;
         pipeline.prefilter_reason = reason;
+        pipeline.prefilter_given = mode == PrefilterMode::Required;
         Ok(pipeline)
     }
 
@@ -280,7 +285,8 @@ impl HologramPipeline {
     /// pre-filter (trained on its corrected holograms) is kept ([`HologramPipeline::corrected_by_cnn`]).
     ///
     /// The pipeline then encodes with its configured double phase method (AA-DPM by default), not with a DDPM
-    /// pre-filter CNN, which is dropped ([`HologramPipeline::prefilter_reason`] says so): the shipped
+    /// pre-filter CNN, which is dropped ([`HologramPipeline::prefilter_reason`] says so) where the pipeline
+    /// chose it ([`PrefilterMode::Auto`]) and refused where the caller gave or required it: the shipped
     /// pre-filters were trained on uncorrected fields, and on corrected ones they fall far below AA-DPM once
     /// the correction is more than weak. Measured on a real frame through a cylindrical lens, focal-stack PSNR
     /// of the 6 mm pre-filter minus AA-DPM: +1.2 dB at 0.25 D, +0.2 at 0.5 D, −2.0 at 1 D, −14.6 at 2 D, −23.7
@@ -288,7 +294,8 @@ impl HologramPipeline {
     /// correction that a viewer may move (a slider) keeps one encoding that holds at every strength.
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`wavelengths_m`, `pixel_pitch_m`) for a profile calibrated
-    /// for another display ([`AberrationProfile::check_setup`]); [`HoloError::ModelMetadata`]
+    /// for another display ([`AberrationProfile::check_setup`]), or (`prefilter`) for a pre-filter CNN the
+    /// caller gave or required ([`PrefilterMode::Required`]); [`HoloError::ModelMetadata`]
     /// (`tensorholo.aberration`) for a hologram CNN trained for other aberrations, naming both.
     ///
     /// [`HologramSession::set_aberration`]: crate::pipeline::HologramSession::set_aberration
@@ -308,6 +315,15 @@ impl HologramPipeline {
             }
             self.aberration = Some(profile);
             return Ok(self);
+        }
+        if self.prefilter.is_some() && self.prefilter_given {
+            return Err(invalid(
+                "prefilter",
+                "a pre-filter CNN was given or required, but the DDPM pre-filters were trained on uncorrected \
+                 fields and fall below AA-DPM on corrected ones (−2 dB at 1 D of cylinder, −24 dB at 5 D; \
+                 docs/ABERRATION.md): with an aberration correction, let the pipeline choose \
+                 (PrefilterMode::Auto) or give none",
+            ));
         }
         if self.prefilter.take().is_some() {
             self.prefilter_reason = format!(

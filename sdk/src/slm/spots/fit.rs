@@ -11,8 +11,7 @@ use rayon::prelude::*;
 use super::model::{ModelScratch, SpotModel};
 use super::windows::{initial_offset, load_windows, CaptureWindow};
 use super::{wavelength_scaled, SpotPlan, COLOURS};
-use crate::display::AberrationProfile;
-use crate::display::AberrationSample;
+use crate::display::{AberrationProfile, AberrationSample};
 use crate::error::{HoloError, Result};
 use crate::optics::ZernikeCoefficients;
 

@@ -45,8 +45,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{invalid, HoloError, Result};
-use crate::optics::OpticalSetup;
-use crate::optics::ZernikeCoefficients;
+use crate::optics::{OpticalSetup, ZernikeCoefficients};
 
 pub(crate) use patterns::fft2;
 

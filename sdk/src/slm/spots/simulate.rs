@@ -25,8 +25,7 @@ use num_complex::Complex64;
 use rayon::prelude::*;
 
 use super::{fft2, wavelength_scaled, SpotPlan, HIDDEN_FILE};
-use crate::display::AberrationProfile;
-use crate::display::AberrationSample;
+use crate::display::{AberrationProfile, AberrationSample};
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::carrier_free_phase_rad;
 use crate::optics::fft::signed_index;
