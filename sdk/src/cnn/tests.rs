@@ -6,9 +6,11 @@ use std::sync::Arc;
 use ndarray::Array3;
 use tensorholo_kernels::{Algorithm, Isa};
 
-use super::native::{table_plan as native_plan, NativeInt8Plan, NativePlan};
+use super::native::{
+    table_plan as native_plan, Choice, NativeInt8Plan, NativePlan, PlanSpec, Rows, TABLE_ROWS,
+};
 use super::{select, CnnEngine, CnnPlan};
-use crate::cnn::{CnnOptions, PlanRequest, ThreadCount};
+use crate::cnn::{CnnOptions, ConvAlgorithm, PlanRequest, ThreadCount};
 use crate::error::HoloError;
 use crate::model::{embedded, HologramModel, ModelConfig, Precision};
 
@@ -75,7 +77,12 @@ fn native_matches_tract_on_every_shipped_f32_model() {
         let isas: Vec<Isa> = [Isa::Scalar, Isa::detect()].into();
         for isa in isas {
             for threads in [1, 3] {
-                let mut plan = NativePlan::new(graph.clone(), h, w, threads, isa).unwrap();
+                let mut plan = NativePlan::new(
+                    graph.clone(),
+                    PlanSpec::new(h, w, threads, isa),
+                    Choice::table_or(None),
+                )
+                .unwrap();
                 let native = plan.run_outputs(x.view()).unwrap();
                 let (d, m) = diff(&native, &tract);
                 println!(
@@ -104,7 +111,12 @@ fn threads_and_spawned_plans_give_bit_identical_frames() {
         Algorithm::Winograd4x4,
     ] {
         let plan = |threads| {
-            NativePlan::with_strip(graph.clone(), h, w, threads, isa, None, Some(conv)).unwrap()
+            NativePlan::new(
+                graph.clone(),
+                PlanSpec::new(h, w, threads, isa),
+                Choice::table_or(Some(conv)),
+            )
+            .unwrap()
         };
         let a = plan(1).run_outputs(x.view()).unwrap();
         for threads in [2, 3, 4, 40] {
@@ -118,10 +130,20 @@ fn threads_and_spawned_plans_give_bit_identical_frames() {
             assert_eq!(copy.run_outputs(x.view()).unwrap(), a);
         }
     }
-    let mut one = NativePlan::new(graph.clone(), h, w, 1, isa).unwrap();
+    let mut one = NativePlan::new(
+        graph.clone(),
+        PlanSpec::new(h, w, 1, isa),
+        Choice::table_or(None),
+    )
+    .unwrap();
     let a = one.run_outputs(x.view()).unwrap();
     for threads in [2, 4, 40] {
-        let mut many = NativePlan::new(graph.clone(), h, w, threads, isa).unwrap();
+        let mut many = NativePlan::new(
+            graph.clone(),
+            PlanSpec::new(h, w, threads, isa),
+            Choice::table_or(None),
+        )
+        .unwrap();
         assert_eq!(many.run_outputs(x.view()).unwrap(), a, "{threads} threads");
         let mut copy = many.spawn();
         assert_eq!(copy.run_outputs(x.view()).unwrap(), a);
@@ -129,7 +151,8 @@ fn threads_and_spawned_plans_give_bit_identical_frames() {
     // A second frame through the same plan: no state leaks from the first.
     let y = input(graph.in_channels, h, w, 4);
     let b = one.run_outputs(y.view()).unwrap();
-    let mut fresh = NativePlan::new(graph, h, w, 1, isa).unwrap();
+    let mut fresh =
+        NativePlan::new(graph, PlanSpec::new(h, w, 1, isa), Choice::table_or(None)).unwrap();
     assert_eq!(fresh.run_outputs(y.view()).unwrap(), b);
     assert_ne!(a, b);
 }
@@ -149,8 +172,12 @@ fn winograd_matches_direct_on_every_shipped_f32_model() {
             .flat_map(|i| [(i, Algorithm::Winograd2x2), (i, Algorithm::Winograd4x4)])
         {
             let run = |conv| {
-                let mut p =
-                    NativePlan::with_strip(graph.clone(), h, w, 1, isa, None, Some(conv)).unwrap();
+                let mut p = NativePlan::new(
+                    graph.clone(),
+                    PlanSpec::new(h, w, 1, isa),
+                    Choice::table_or(Some(conv)),
+                )
+                .unwrap();
                 (p.run_outputs(x.view()).unwrap(), p.kernel_name())
             };
             let ((d, kd), (wg, kw)) = (run(Algorithm::Direct), run(winograd));
@@ -182,7 +209,12 @@ fn bad_input_and_bad_weights_are_errors() {
     let model = &shipped()[0];
     let graph = model.cnn_graph().unwrap();
     let isa = Isa::detect();
-    let mut plan = NativePlan::new(graph.clone(), 8, 9, 1, isa).unwrap();
+    let mut plan = NativePlan::new(
+        graph.clone(),
+        PlanSpec::new(8, 9, 1, isa),
+        Choice::table_or(None),
+    )
+    .unwrap();
     let wrong = Array3::<f32>::zeros((graph.in_channels, 8, 10));
     assert!(matches!(
         plan.run_outputs(wrong.view()),
@@ -197,7 +229,11 @@ fn bad_input_and_bad_weights_are_errors() {
         plan.run_outputs(x.view()).unwrap()
     );
     assert!(matches!(
-        NativePlan::new(graph.clone(), 8, 9, 0, isa),
+        NativePlan::new(
+            graph.clone(),
+            PlanSpec::new(8, 9, 0, isa),
+            Choice::table_or(None)
+        ),
         Err(HoloError::InvalidParameter {
             name: "threads",
             ..
@@ -206,7 +242,11 @@ fn bad_input_and_bad_weights_are_errors() {
     let mut nan = (*graph).clone();
     nan.layers[2].weights[5] = f32::NAN;
     assert!(matches!(
-        NativePlan::new(Arc::new(nan), 8, 9, 1, isa),
+        NativePlan::new(
+            Arc::new(nan),
+            PlanSpec::new(8, 9, 1, isa),
+            Choice::table_or(None)
+        ),
         Err(HoloError::InvalidData(_))
     ));
 }
@@ -628,15 +668,36 @@ fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
         let plan = |strip: usize, threads: usize| -> Box<dyn CnnPlan> {
             let g = graph.clone();
             if graph.quant.is_some() {
-                Box::new(NativeInt8Plan::with_strip(g, h, w, threads, isa, Some(strip)).unwrap())
+                Box::new(
+                    NativeInt8Plan::new(
+                        g,
+                        PlanSpec {
+                            strip_rows: Some(strip),
+                            ..PlanSpec::new(h, w, threads, isa)
+                        },
+                        &TABLE_ROWS,
+                    )
+                    .unwrap(),
+                )
             } else {
-                Box::new(NativePlan::with_strip(g, h, w, threads, isa, Some(strip), conv).unwrap())
+                Box::new(
+                    NativePlan::new(
+                        g,
+                        PlanSpec {
+                            strip_rows: Some(strip),
+                            ..PlanSpec::new(h, w, threads, isa)
+                        },
+                        Choice::table_or(conv),
+                    )
+                    .unwrap(),
+                )
             }
         };
         if let Some(q) = &graph.quant {
-            let mixed = NativeInt8Plan::new(graph.clone(), h, w, 1, isa)
-                .unwrap()
-                .is_mixed();
+            let mixed =
+                NativeInt8Plan::new(graph.clone(), PlanSpec::new(h, w, 1, isa), &TABLE_ROWS)
+                    .unwrap()
+                    .is_mixed();
             assert_eq!(mixed, q.layers[0].is_none(), "{}", model.source_name());
         }
         let mut whole = plan(h + 4 * n, 1);
@@ -686,17 +747,26 @@ fn the_prefilter_base_is_added_once_to_every_row_as_the_rows_are_written() {
         let plan = |g: &Arc<crate::model::CnnWeights>, strip: usize, threads: usize| {
             let g = g.clone();
             let p: Box<dyn CnnPlan> = if g.quant.is_some() {
-                Box::new(NativeInt8Plan::with_strip(g, h, w, threads, isa, Some(strip)).unwrap())
+                Box::new(
+                    NativeInt8Plan::new(
+                        g,
+                        PlanSpec {
+                            strip_rows: Some(strip),
+                            ..PlanSpec::new(h, w, threads, isa)
+                        },
+                        &TABLE_ROWS,
+                    )
+                    .unwrap(),
+                )
             } else {
                 Box::new(
-                    NativePlan::with_strip(
+                    NativePlan::new(
                         g,
-                        h,
-                        w,
-                        threads,
-                        isa,
-                        Some(strip),
-                        Some(Algorithm::Direct),
+                        PlanSpec {
+                            strip_rows: Some(strip),
+                            ..PlanSpec::new(h, w, threads, isa)
+                        },
+                        Choice::table_or(Some(Algorithm::Direct)),
                     )
                     .unwrap(),
                 )
@@ -759,27 +829,17 @@ fn column_slabs_give_the_whole_frame_bit_for_bit() {
                 let x = input(graph.in_channels, h, w, 21).mapv(|v| 0.75 * v - 0.05);
                 let y = input(graph.in_channels, h, w, 22);
                 let plan = |slabs: usize, threads: usize| {
-                    if mixed {
-                        return NativePlan::with_slabs_mixed(
-                            graph.clone(),
-                            h,
-                            w,
-                            threads,
-                            isa,
-                            Some(slabs),
-                        )
-                        .unwrap();
-                    }
-                    NativePlan::with_slabs(
-                        graph.clone(),
-                        h,
-                        w,
-                        threads,
-                        isa,
-                        (None, Some(slabs)),
-                        conv,
-                    )
-                    .unwrap()
+                    let spec = PlanSpec {
+                        slabs: Some(slabs),
+                        ..PlanSpec::new(h, w, threads, isa)
+                    };
+                    let mixed_rows = Rows::mixed(&graph, isa);
+                    let choice = if mixed {
+                        Choice::Rows(&mixed_rows, ConvAlgorithm::Auto)
+                    } else {
+                        Choice::table_or(conv)
+                    };
+                    NativePlan::new(graph.clone(), spec, choice).unwrap()
                 };
                 let mut whole = plan(1, 1);
                 assert_eq!(whole.slab_count(), 1);
@@ -815,7 +875,12 @@ fn a_1080p_plan_keeps_its_activations_to_a_few_rows() {
     let model = &shipped()[0];
     let graph = model.cnn_graph().unwrap();
     let isa = Isa::detect();
-    let plan = NativePlan::new(graph, 1080, 1920, 2, isa).unwrap();
+    let plan = NativePlan::new(
+        graph,
+        PlanSpec::new(1080, 1920, 2, isa),
+        Choice::table_or(None),
+    )
+    .unwrap();
     let rows = plan.strip_rows();
     assert!((8..=16).contains(&rows), "{rows} rows per strip");
 }

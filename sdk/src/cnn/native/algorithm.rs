@@ -57,6 +57,14 @@ pub(crate) struct Rows {
     pub(crate) table: usize,
 }
 
+/// No decided rows: every layer on the plan table's row (tests that plan without a session).
+#[cfg(test)]
+pub(crate) static TABLE_ROWS: Rows = Rows {
+    rows: BTreeMap::new(),
+    saved: 0,
+    table: 0,
+};
+
 impl Rows {
     /// The row decided for `key`, if any.
     fn get(&self, key: RowKey) -> Option<&'static str> {
@@ -187,6 +195,17 @@ pub(crate) enum Choice<'a> {
     /// This algorithm on its first row (tests that compare algorithms).
     #[cfg(test)]
     Exact(Algorithm),
+}
+
+#[cfg(test)]
+impl Choice<'static> {
+    /// `conv`'s first row in every layer, or the plan table's row among every algorithm for `None` (tests).
+    pub(crate) fn table_or(conv: Option<Algorithm>) -> Self {
+        conv.map_or(
+            Choice::Rows(&TABLE_ROWS, ConvAlgorithm::Auto),
+            Choice::Exact,
+        )
+    }
 }
 
 /// The planned f32 convolution of `layer` (`relu` after the bias) for `isa`, on the row `choice` gives.

@@ -35,13 +35,13 @@ use tensorholo_kernels::{
     RowPlanar,
 };
 
-use super::algorithm::{self, Choice, Rows};
+use super::algorithm::{self, Choice};
 use super::slabs::{Cols, Slabs};
 use super::strips::{
     advance_all, bands, bands_aligned, both, hidden_layers, installed, row_bytes, BandConv,
     F32Rows, Place, Strips, Window,
 };
-use crate::cnn::options::ConvAlgorithm;
+use super::PlanSpec;
 use crate::cnn::plan::{check_output_planes, check_planes, CnnPlan};
 use crate::error::{HoloError, Result};
 use crate::model::{CnnOutput, CnnWeights, QuantGrid};
@@ -75,103 +75,24 @@ pub(crate) struct NativePlan {
 }
 
 impl NativePlan {
-    /// Packs `graph`'s layers for the best kernels of `isa` and allocates the activation windows of
-    /// `height × width` frames (strips of `strips::strip_rows`), run on `threads` threads (≥ 1).
+    /// Packs `graph`'s layers for the kernel rows of `spec.isa`, each layer on the row `choice` gives, and
+    /// allocates the activation windows of `spec`'s frames (strips of `strips::strip_rows` and column slabs
+    /// of `Slabs::count_for` where `spec` sets none), run on `spec.threads` threads (≥ 1). The one
+    /// constructor: the engine passes a session's [`CnnOptions`](crate::cnn::CnnOptions) through `spec`.
     ///
     /// Errors: [`HoloError::InvalidData`] for non-finite weights; [`HoloError::InvalidParameter`] for 0
-    /// threads; [`HoloError::Internal`] for an int8 graph (`NativeInt8Plan` runs those); [`HoloError::ModelRun`] for an ISA this CPU lacks, a size the kernels refuse or a thread
-    /// pool the OS will not start.
-    #[cfg(test)]
-    pub(crate) fn new(
-        graph: Arc<CnnWeights>,
-        height: usize,
-        width: usize,
-        threads: usize,
-        isa: Isa,
-    ) -> Result<Self> {
-        Self::with_strip(graph, height, width, threads, isa, None, None)
-    }
-
-    /// [`new`](Self::new) with every layer on the row `rows` decided for its shape among `set` (the table's
-    /// where it holds none), in strips of `strip` rows and `slabs` column slabs where given (`None`: the
-    /// rules of `strips::strip_rows` and `Slabs::count_for`). Errors: as `new`.
-    pub(crate) fn with_rows(
-        graph: Arc<CnnWeights>,
-        height: usize,
-        width: usize,
-        threads: usize,
-        isa: Isa,
-        (rows, set): (&Rows, ConvAlgorithm),
-        layout: (Option<usize>, Option<usize>),
-    ) -> Result<Self> {
-        Self::build(
-            graph,
+    /// threads; [`HoloError::Internal`] for an int8 graph (`NativeInt8Plan` runs those);
+    /// [`HoloError::ModelRun`] for an ISA this CPU lacks, a size the kernels refuse or a thread pool the OS
+    /// will not start.
+    pub(crate) fn new(graph: Arc<CnnWeights>, spec: PlanSpec, choice: Choice<'_>) -> Result<Self> {
+        let PlanSpec {
             height,
             width,
             threads,
             isa,
-            layout,
-            Choice::Rows(rows, set),
-        )
-    }
-
-    /// [`new`](Self::new) with strips of `strip` rows (`None`: `strips::strip_rows`; more than `H + N` rows:
-    /// one strip) and every layer on `conv`'s first row (`None`: the plan table's row). Errors: as `new`.
-    #[cfg(test)]
-    pub(crate) fn with_strip(
-        graph: Arc<CnnWeights>,
-        height: usize,
-        width: usize,
-        threads: usize,
-        isa: Isa,
-        strip: Option<usize>,
-        conv: Option<tensorholo_kernels::Algorithm>,
-    ) -> Result<Self> {
-        Self::with_slabs(graph, height, width, threads, isa, (strip, None), conv)
-    }
-
-    /// [`with_strip`](Self::with_strip) with the frame in `slabs` column slabs (`None`: as
-    /// `Slabs::count_for` chooses; [`super::slabs`]). Errors: as `new`.
-    #[cfg(test)]
-    pub(crate) fn with_slabs(
-        graph: Arc<CnnWeights>,
-        height: usize,
-        width: usize,
-        threads: usize,
-        isa: Isa,
-        (strip, slabs): (Option<usize>, Option<usize>),
-        conv: Option<tensorholo_kernels::Algorithm>,
-    ) -> Result<Self> {
-        let table = Rows::default();
-        let choice = conv.map_or(Choice::Rows(&table, ConvAlgorithm::Auto), Choice::Exact);
-        Self::build(graph, height, width, threads, isa, (strip, slabs), choice)
-    }
-
-    /// [`with_slabs`](Self::with_slabs) with the layer shapes cycling through the three algorithms
-    /// ([`Rows::mixed`]). Errors: as `new`.
-    #[cfg(test)]
-    pub(crate) fn with_slabs_mixed(
-        graph: Arc<CnnWeights>,
-        height: usize,
-        width: usize,
-        threads: usize,
-        isa: Isa,
-        slabs: Option<usize>,
-    ) -> Result<Self> {
-        let rows = Rows::mixed(&graph, isa);
-        let choice = Choice::Rows(&rows, ConvAlgorithm::Auto);
-        Self::build(graph, height, width, threads, isa, (None, slabs), choice)
-    }
-
-    fn build(
-        graph: Arc<CnnWeights>,
-        height: usize,
-        width: usize,
-        threads: usize,
-        isa: Isa,
-        (strip, slabs): (Option<usize>, Option<usize>),
-        choice: Choice<'_>,
-    ) -> Result<Self> {
+            strip_rows: strip,
+            slabs,
+        } = spec;
         if threads == 0 {
             return Err(crate::error::invalid(
                 "threads",

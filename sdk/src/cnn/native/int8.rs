@@ -53,6 +53,7 @@ use super::slabs::{Cols, Slab};
 use super::strips::{
     advance_all, bands, both, hidden_layers, installed, row_bytes, F32Rows, Place, Strips, Window,
 };
+use super::PlanSpec;
 use crate::cnn::options::ConvAlgorithm;
 use crate::cnn::plan::{check_planes, CnnPlan};
 use crate::error::{HoloError, Result};
@@ -135,61 +136,24 @@ pub(crate) struct NativeInt8Plan {
 }
 
 impl NativeInt8Plan {
-    /// Packs `graph`'s int8 layers (and the f32 first and last layers of a mixed-precision file) for the best
-    /// kernels of `isa` and allocates the activation windows of `height × width` frames (strips of
-    /// `strips::strip_rows`), run on `threads` threads (≥ 1).
+    /// Packs `graph`'s int8 layers (and its float first and last layers on the rows `rows` decided, the
+    /// table's where it holds none) for `spec.isa` and allocates the activation windows of `spec`'s frames
+    /// (strips of `spec.strip_rows`, else `strips::strip_rows`; whole rows: `spec.slabs` is the f32 plan's),
+    /// run on `spec.threads` threads (≥ 1). The one constructor.
     ///
     /// Errors: [`HoloError::InvalidParameter`] for 0 threads; [`HoloError::InvalidData`] for non-finite
     /// scales, weights or biases; [`HoloError::ModelRun`] for a graph without int8 grids, float layers other
     /// than the first and the last together, an ISA this CPU lacks, a size the kernels refuse or a thread
     /// pool the OS will not start.
-    #[cfg(test)]
-    pub(crate) fn new(
-        graph: Arc<CnnWeights>,
-        height: usize,
-        width: usize,
-        threads: usize,
-        isa: Isa,
-    ) -> Result<Self> {
-        Self::build(graph, height, width, threads, isa, None, &Rows::default())
-    }
-
-    /// [`new`](Self::new) with the float layers on the rows `rows` decided (the table's where it holds none).
-    /// Errors: as `new`.
-    pub(crate) fn with_rows(
-        graph: Arc<CnnWeights>,
-        height: usize,
-        width: usize,
-        threads: usize,
-        isa: Isa,
-        rows: &Rows,
-        strip: Option<usize>,
-    ) -> Result<Self> {
-        Self::build(graph, height, width, threads, isa, strip, rows)
-    }
-
-    /// [`new`](Self::new) with strips of `strip` rows (`None`: `strips::strip_rows`). Errors: as `new`.
-    #[cfg(test)]
-    pub(crate) fn with_strip(
-        graph: Arc<CnnWeights>,
-        height: usize,
-        width: usize,
-        threads: usize,
-        isa: Isa,
-        strip: Option<usize>,
-    ) -> Result<Self> {
-        Self::build(graph, height, width, threads, isa, strip, &Rows::default())
-    }
-
-    fn build(
-        graph: Arc<CnnWeights>,
-        height: usize,
-        width: usize,
-        threads: usize,
-        isa: Isa,
-        strip: Option<usize>,
-        rows: &Rows,
-    ) -> Result<Self> {
+    pub(crate) fn new(graph: Arc<CnnWeights>, spec: PlanSpec, rows: &Rows) -> Result<Self> {
+        let PlanSpec {
+            height,
+            width,
+            threads,
+            isa,
+            strip_rows: strip,
+            slabs: _,
+        } = spec;
         if threads == 0 {
             return Err(crate::error::invalid(
                 "threads",

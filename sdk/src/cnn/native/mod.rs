@@ -24,7 +24,7 @@ mod strips;
 use std::sync::Arc;
 use std::time::Instant;
 
-use algorithm::Rows;
+pub(super) use algorithm::{Choice, Rows};
 
 use super::engine::{Engine, EnginePlans, Networks, Tuning};
 use super::options::{default_threads, CnnEngine, CnnLayout, CnnOptions, ThreadCount};
@@ -36,7 +36,7 @@ use crate::model::CnnWeights;
 use tensorholo_kernels::Isa;
 
 #[cfg(test)]
-pub(super) use {f32::NativePlan, int8::NativeInt8Plan};
+pub(super) use {algorithm::TABLE_ROWS, f32::NativePlan, int8::NativeInt8Plan};
 
 /// The native engine (registered in `cnn/mod.rs`).
 pub(crate) struct NativeEngine;
@@ -175,42 +175,58 @@ impl Engine for NativeEngine {
     }
 }
 
+/// What a native plan is made for besides its graph and rows: `height × width` frames on `threads` threads
+/// (≥ 1) of `isa`'s kernel rows, in strips of `strip_rows` frame rows and `slabs` column slabs where given
+/// (`None`: the rules of `strips.rs` and `slabs.rs`; [`CnnOptions::strip_rows`], [`CnnOptions::slabs`]).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PlanSpec {
+    pub(crate) height: usize,
+    pub(crate) width: usize,
+    pub(crate) threads: usize,
+    pub(crate) isa: Isa,
+    pub(crate) strip_rows: Option<usize>,
+    pub(crate) slabs: Option<usize>,
+}
+
+impl PlanSpec {
+    /// `height × width` frames on `threads` threads of `isa`'s rows, strips and slabs by the engine's rules.
+    pub(crate) fn new(height: usize, width: usize, threads: usize, isa: Isa) -> Self {
+        Self {
+            height,
+            width,
+            threads,
+            isa,
+            strip_rows: None,
+            slabs: None,
+        }
+    }
+}
+
 /// A native plan for `graph` at `height × width` on `threads` threads: the int8 engine for an int8 (QDQ)
 /// file, the f32 engine otherwise, each f32 layer on the row `rows` decided for its shape (chosen among the
 /// algorithms `options.algorithm` allows), in the strips and slabs `options` gives (the engine's rules where
-/// `None`; checked by [`CnnOptions::validate`]); with the kernel rows its layers run (`NativePlan::kernel_name`). Errors: as `NativePlan::new` /
-/// `NativeInt8Plan::new`.
+/// `None`; checked by [`CnnOptions::validate`]); with the kernel rows its layers run (`NativePlan::kernel_name`).
+/// Errors: as `NativePlan::new` / `NativeInt8Plan::new`.
 pub(super) fn native_plan(
     graph: Arc<CnnWeights>,
     height: usize,
     width: usize,
     threads: usize,
-    isa: tensorholo_kernels::Isa,
+    isa: Isa,
     rows: &Rows,
     options: &CnnOptions,
 ) -> Result<(Box<dyn CnnPlan>, String)> {
+    let spec = PlanSpec {
+        strip_rows: options.strip_rows,
+        slabs: options.slabs,
+        ..PlanSpec::new(height, width, threads, isa)
+    };
     if graph.quant.is_some() {
-        let p = int8::NativeInt8Plan::with_rows(
-            graph,
-            height,
-            width,
-            threads,
-            isa,
-            rows,
-            options.strip_rows,
-        )?;
+        let p = int8::NativeInt8Plan::new(graph, spec, rows)?;
         let k = p.kernel_name().to_string();
         Ok((Box::new(p), k))
     } else {
-        let p = f32::NativePlan::with_rows(
-            graph,
-            height,
-            width,
-            threads,
-            isa,
-            (rows, options.algorithm),
-            (options.strip_rows, options.slabs),
-        )?;
+        let p = f32::NativePlan::new(graph, spec, Choice::Rows(rows, options.algorithm))?;
         let k = p.kernel_name();
         Ok((Box::new(p), k))
     }
@@ -223,16 +239,15 @@ pub(super) fn table_plan(
     height: usize,
     width: usize,
     threads: usize,
-    isa: tensorholo_kernels::Isa,
+    isa: Isa,
 ) -> Result<(Box<dyn CnnPlan>, String)> {
-    let rows = Rows::default();
     native_plan(
         graph,
         height,
         width,
         threads,
         isa,
-        &rows,
+        &Rows::default(),
         &CnnOptions::default(),
     )
 }
@@ -246,17 +261,7 @@ pub(crate) fn native_plan_on(
     width: usize,
     isa: tensorholo_kernels::Isa,
 ) -> Result<Box<dyn CnnPlan>> {
-    let rows = Rows::default();
-    native_plan(
-        model.cnn_graph()?,
-        height,
-        width,
-        1,
-        isa,
-        &rows,
-        &CnnOptions::default(),
-    )
-    .map(|(plan, _)| plan)
+    table_plan(model.cnn_graph()?, height, width, 1, isa).map(|(plan, _)| plan)
 }
 
 /// This machine's measured f32 peak in GFLOP/s for `threads` threads: one FMA loop per thread in registers
