@@ -312,6 +312,27 @@ fn assert_auto_keeps_the_faster(report: &super::tuning::PlanReport) {
     );
 }
 
+/// A native plan of `graph` (f32 or int8) for `h × w` frames on `threads` threads of `isa`'s rows in strips
+/// of `strip` rows, its f32 layers on `conv`'s first row (the table's for `None`).
+fn strip_plan(
+    graph: &Arc<crate::model::CnnWeights>,
+    (h, w): (usize, usize),
+    threads: usize,
+    isa: Isa,
+    strip: usize,
+    conv: Option<Algorithm>,
+) -> Box<dyn CnnPlan> {
+    let spec = PlanSpec {
+        strip_rows: Some(strip),
+        ..PlanSpec::new(h, w, threads, isa)
+    };
+    if graph.quant.is_some() {
+        Box::new(NativeInt8Plan::new(graph.clone(), spec, &TABLE_ROWS).unwrap())
+    } else {
+        Box::new(NativePlan::new(graph.clone(), spec, Choice::table_or(conv)).unwrap())
+    }
+}
+
 /// `request` on `engine`.
 fn on(engine: CnnEngine, request: &PlanRequest) -> PlanRequest {
     PlanRequest {
@@ -665,34 +686,8 @@ fn strips_of_any_height_give_the_whole_frame_bit_for_bit() {
         let n = graph.layers.len();
         let x = input(graph.in_channels, h, w, 11).mapv(|v| 0.75 * v - 0.05);
         let y = input(graph.in_channels, h, w, 12);
-        let plan = |strip: usize, threads: usize| -> Box<dyn CnnPlan> {
-            let g = graph.clone();
-            if graph.quant.is_some() {
-                Box::new(
-                    NativeInt8Plan::new(
-                        g,
-                        PlanSpec {
-                            strip_rows: Some(strip),
-                            ..PlanSpec::new(h, w, threads, isa)
-                        },
-                        &TABLE_ROWS,
-                    )
-                    .unwrap(),
-                )
-            } else {
-                Box::new(
-                    NativePlan::new(
-                        g,
-                        PlanSpec {
-                            strip_rows: Some(strip),
-                            ..PlanSpec::new(h, w, threads, isa)
-                        },
-                        Choice::table_or(conv),
-                    )
-                    .unwrap(),
-                )
-            }
-        };
+        let plan =
+            |strip: usize, threads: usize| strip_plan(&graph, (h, w), threads, isa, strip, conv);
         if let Some(q) = &graph.quant {
             let mixed =
                 NativeInt8Plan::new(graph.clone(), PlanSpec::new(h, w, 1, isa), &TABLE_ROWS)
@@ -745,33 +740,7 @@ fn the_prefilter_base_is_added_once_to_every_row_as_the_rows_are_written() {
         let zero = Arc::new(zero);
         let x = input(graph.in_channels, h, w, 21).mapv(|v| 0.75 * v - 0.05);
         let plan = |g: &Arc<crate::model::CnnWeights>, strip: usize, threads: usize| {
-            let g = g.clone();
-            let p: Box<dyn CnnPlan> = if g.quant.is_some() {
-                Box::new(
-                    NativeInt8Plan::new(
-                        g,
-                        PlanSpec {
-                            strip_rows: Some(strip),
-                            ..PlanSpec::new(h, w, threads, isa)
-                        },
-                        &TABLE_ROWS,
-                    )
-                    .unwrap(),
-                )
-            } else {
-                Box::new(
-                    NativePlan::new(
-                        g,
-                        PlanSpec {
-                            strip_rows: Some(strip),
-                            ..PlanSpec::new(h, w, threads, isa)
-                        },
-                        Choice::table_or(Some(Algorithm::Direct)),
-                    )
-                    .unwrap(),
-                )
-            };
-            p
+            strip_plan(g, (h, w), threads, isa, strip, Some(Algorithm::Direct))
         };
         let (mut re0, mut im0) = plan(&zero, h, 1).run_outputs(x.view()).unwrap();
         // The separate pass: channel c of the six outputs (Re planes, then Im) gets the base of input c.
