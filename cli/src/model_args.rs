@@ -14,8 +14,7 @@ use tensorholo::cnn::{CnnEngine, CnnLayout, CnnOptions, ThreadCount};
 use tensorholo::display::{AberrationProfile, AberrationSource, DisplayProfile, Prescription};
 use tensorholo::model::{HologramModel, ModelKind, Precision, SceneInput};
 use tensorholo::pipeline::{
-    AberrationReport, Backend, GpuPrecision, HologramPipeline, PipelineConfig, PrefilterMode,
-    PrefilterSource,
+    Backend, GpuPrecision, HologramPipeline, PipelineConfig, PrefilterMode, PrefilterSource,
 };
 
 /// Weight formats selectable on the command line.
@@ -339,24 +338,45 @@ impl ModelArgs {
     }
 
     /// Loads the models for scenes of `input` (an RGB-D image or a layered depth image) and builds the
-    /// pipeline; also returns a JSON description of what was loaded.
-    ///
-    /// The hologram CNN: `--model`'s file (it must take `input`), or the shipped one of `--layers` for
-    /// `input`. The pre-filter CNN: `--prefilter-model`'s file, or the shipped one as
-    /// [`ModelArgs::prefilter_mode`] says; the rule is the SDK's (the CLI and the bindings share it). `profile`
-    /// is the `--display` profile the command read ([`ModelArgs::profile`]).
+    /// pipeline; also returns a JSON description of what was loaded. `profile` is the `--display` profile the
+    /// command read ([`ModelArgs::profile`]). Flags become the SDK's values ([`ModelArgs::config`]); which CNNs,
+    /// pre-filter and aberration apply is the SDK's rule ([`ModelArgs::load`], [`ModelArgs::extras`]).
     pub fn pipeline(
         &self,
         input: SceneInput,
         profile: Option<&DisplayProfile>,
     ) -> Result<(HologramPipeline, serde_json::Value)> {
+        let config = self.config(profile)?;
+        let t = Instant::now();
+        let pipeline = self.load(input, config, profile)?;
+        let (pipeline, calibration, aberration) = self.extras(pipeline, profile)?;
+        if pipeline.prefilter_model().is_none() {
+            log::info!(
+                "encoding without a pre-filter CNN: {}",
+                pipeline.prefilter_reason()
+            );
+        }
+        let mut info = self.describe(&pipeline, profile);
+        info["calibration"] = json!(pipeline.calibration().map(|c| json!({
+            "file": calibration.as_deref().map(crate::output::path_text),
+            "summary": c.summary(),
+        })));
+        info["aberration"] = json!(aberration);
+        info["load_s"] = json!(t.elapsed().as_secs_f64());
+        Ok((pipeline, info))
+    }
+
+    /// The pipeline configuration the flags, the environment's CNN options
+    /// ([`crate::args::cnn_options_from_env`]) and `profile` give. Errors: a bad offset or optical setup, a
+    /// bad environment value.
+    fn config(&self, profile: Option<&DisplayProfile>) -> Result<PipelineConfig> {
         let offset_mm = self.offset_mm(profile);
         crate::args::check_offset_mm(offset_mm)?;
         if let (Some(given), Some(p)) = (self.offset_mm, profile) {
             offset_against_profile(given, p);
         }
         let (_, encoding) = self.encoding.method(crate::args::Encoding::AaDpm);
-        let config = PipelineConfig {
+        Ok(PipelineConfig {
             optics: self.optics.setup(profile)?,
             options: self.optics.options(),
             offset_m: offset_mm * 1e-3,
@@ -371,9 +391,20 @@ impl ModelArgs {
                 tune: self.plans.tune,
                 ..crate::args::cnn_options_from_env()?
             },
-        };
+        })
+    }
+
+    /// The hologram CNN (`--model`'s file, which must take `input`, or the shipped one of `--layers`) and its
+    /// pre-filter (`--prefilter-model`'s file, or the shipped one as [`ModelArgs::prefilter_mode`] says): the
+    /// SDK's one rule ([`HologramPipeline::with_prefilter`]: a given pre-filter is used or refused, never
+    /// dropped). Errors name the file or the shipped model, with what would serve the display.
+    fn load(
+        &self,
+        input: SceneInput,
+        config: PipelineConfig,
+        profile: Option<&DisplayProfile>,
+    ) -> Result<HologramPipeline> {
         let precision = self.precision();
-        let t = Instant::now();
         let expected = config.model_config(input.input_layers());
         let asked = crate::display::Requested {
             optics: &config.optics,
@@ -396,7 +427,6 @@ impl ModelArgs {
             )
             .map_err(hint(format!("loading the shipped {input} hologram CNN")))?,
         };
-        // The SDK's one rule: a given pre-filter is used or refused (e.g. at 0 mm), never dropped.
         let source = match &self.prefilter_model {
             Some(p) => PrefilterSource::Given(Arc::new(
                 HologramModel::from_path(p, ModelKind::PreFilter, &expected)
@@ -404,19 +434,29 @@ impl ModelArgs {
             )),
             None => PrefilterSource::Shipped(self.prefilter_mode()),
         };
-        let mut pipeline =
-            HologramPipeline::with_prefilter(Arc::new(hologram), source, precision, config)
-                .map_err(hint(match &self.prefilter_model {
-                    Some(p) => format!("--prefilter-model {}", p.display()),
-                    None => "the pre-filter CNN".into(),
-                }))?;
+        let what = match &self.prefilter_model {
+            Some(p) => format!("--prefilter-model {}", p.display()),
+            None => "the pre-filter CNN".into(),
+        };
+        HologramPipeline::with_prefilter(Arc::new(hologram), source, precision, config)
+            .map_err(hint(what))
+    }
+
+    /// `pipeline` with the saved plans (`--tuning`), the display calibration (`--calibration`, else the
+    /// profile's) and the aberration correction ([`ModelArgs::aberration`]) applied; also the calibration file
+    /// and the aberration's report entry. Errors name the flag or file at fault.
+    fn extras(
+        &self,
+        mut pipeline: HologramPipeline,
+        profile: Option<&DisplayProfile>,
+    ) -> Result<(HologramPipeline, Option<PathBuf>, Option<serde_json::Value>)> {
+        if let Some(plans) = self.plans.saved()? {
+            pipeline = pipeline.with_saved_plans(plans)?;
+        }
         let calibration = self
             .calibration
             .clone()
             .or_else(|| profile.and_then(|p| p.calibration.clone()));
-        if let Some(plans) = self.plans.saved()? {
-            pipeline = pipeline.with_saved_plans(plans)?;
-        }
         if let Some(path) = &calibration {
             let cal = tensorholo::slm::DisplayCalibration::read(path)?;
             log::info!("display calibration {}: {}", path.display(), cal.summary());
@@ -424,33 +464,40 @@ impl ModelArgs {
                 .with_calibration(Arc::new(cal))
                 .with_context(|| format!("--calibration {}", path.display()))?;
         }
-        let mut aberration = None;
-        if let Some((what, mut source, profile)) = self.aberration(profile, &config.optics)? {
-            let profile = Arc::new(profile);
-            let report = if pipeline.corrected_by_cnn() {
-                AberrationReport::by_cnn(&profile, config.offset_m)
-            } else {
-                AberrationReport::new(&profile, &config.optics, config.offset_m)
-            };
-            log::info!("aberration correction ({what}): {report}");
-            let given = self.prefilter || self.prefilter_model.is_some();
-            pipeline = pipeline.with_aberration(profile).with_context(|| {
+        let optics = pipeline.config().optics;
+        let Some((what, mut source, aberration)) = self.aberration(profile, &optics)? else {
+            return Ok((pipeline, calibration, None));
+        };
+        let given = self.prefilter || self.prefilter_model.is_some();
+        pipeline = pipeline
+            .with_aberration(Arc::new(aberration))
+            .with_context(|| {
                 if given {
-                    format!("{what} with --prefilter/--prefilter-model (drop it: the pipeline then encodes with AA-DPM)")
+                    format!(
+                        "{what} with --prefilter/--prefilter-model (drop it: the pipeline then \
+                         encodes with AA-DPM)"
+                    )
                 } else {
                     what.clone()
                 }
             })?;
-            source["applied"] = json!(report);
-            aberration = Some(source);
+        let report = pipeline.aberration_report();
+        if let Some(r) = &report {
+            log::info!("aberration correction ({what}): {r}");
         }
-        if pipeline.prefilter_model().is_none() {
-            log::info!(
-                "encoding without a pre-filter CNN: {}",
-                pipeline.prefilter_reason()
-            );
-        }
-        let describe = |m: &std::sync::Arc<HologramModel>| {
+        source["applied"] = json!(report);
+        Ok((pipeline, calibration, Some(source)))
+    }
+
+    /// What was loaded, for report.json: the CNNs' source, precision and metadata, the engine settings, the
+    /// encoding, the display and its mapping (the calibration, the aberration and the load time are added by
+    /// [`ModelArgs::pipeline`]).
+    fn describe(
+        &self,
+        pipeline: &HologramPipeline,
+        profile: Option<&DisplayProfile>,
+    ) -> serde_json::Value {
+        let model = |m: &Arc<HologramModel>| {
             let md = m.metadata();
             json!({
                 "layers": md.layers,
@@ -463,7 +510,8 @@ impl ModelArgs {
                 "hologram_layers": md.hologram_layers,
             })
         };
-        let info = json!({
+        let cnn = &pipeline.config().cnn;
+        json!({
             "source": match (&self.model, &self.prefilter_model) {
                 (None, None) => "shipped (embedded)".to_string(),
                 (m, p) => {
@@ -473,33 +521,26 @@ impl ModelArgs {
                     format!("files: {} {}", name(m), name(p))
                 }
             },
-            "precision": precision,
+            "precision": self.precision(),
             "prefilter_reason": pipeline.prefilter_reason(),
             "cnn_threads": self.threads,
-            "cnn_layout": pipeline.config().cnn.layout,
-            "cnn_engine": pipeline.config().cnn.engine,
-            "cnn_conv": pipeline.config().cnn.algorithm,
+            "cnn_layout": cnn.layout,
+            "cnn_engine": cnn.engine,
+            "cnn_conv": cnn.algorithm,
             "cnn_plans": match (&self.plans.tuning, self.plans.tune) {
                 (Some(f), _) => json!({ "source": "saved", "file": crate::output::path_text(f) }),
                 (None, true) => json!({ "source": "tune" }),
                 (None, false) => json!({ "source": "table" }),
             },
-            "hologram_cnn": describe(pipeline.hologram_model()),
-            "prefilter_cnn": pipeline.prefilter_model().map(describe),
+            "hologram_cnn": model(pipeline.hologram_model()),
+            "prefilter_cnn": pipeline.prefilter_model().map(model),
             "encoding": pipeline.encoding(),
-            "calibration": pipeline.calibration().map(|c| json!({
-                "file": calibration.as_deref().map(crate::output::path_text),
-                "summary": c.summary(),
-            })),
-            "aberration": aberration,
             "display": self.optics.display.as_deref().map(crate::output::path_text),
             "display_name": profile.and_then(|p| p.name.clone()),
             "display_mapping": pipeline.display_mapping_description(),
             // The same as numbers: σ, the spread, the ceiling and the estimated cost (dB), the volume fit.
             "display_mapping_detail": pipeline.display_mapping(),
-            "load_s": t.elapsed().as_secs_f64(),
-        });
-        Ok((pipeline, info))
+        })
     }
 }
 

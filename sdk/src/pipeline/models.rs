@@ -5,6 +5,7 @@
 use std::sync::Arc;
 
 use super::config::PipelineConfig;
+use super::correction::AberrationReport;
 use super::selection::{shipped_prefilter, ModelSelection, PrefilterMode, PrefilterSource};
 use crate::cnn::{PlanRequest, PlanSource, SavedPlans};
 use crate::display::{AberrationProfile, DisplayMapping};
@@ -340,6 +341,20 @@ impl HologramPipeline {
     /// The viewer's aberration profile sessions correct, if any.
     pub fn aberration(&self) -> Option<&Arc<AberrationProfile>> {
         self.aberration.as_ref()
+    }
+
+    /// What the pipeline's aberration correction applies and leaves, as its sessions report it
+    /// ([`HologramSession::aberration`](crate::pipeline::HologramSession::aberration)): the coefficients at the
+    /// midpoint plane and the residual over the volume, or that the CNN corrects ([`AberrationReport::by_cnn`]);
+    /// `None` without a correction.
+    pub fn aberration_report(&self) -> Option<AberrationReport> {
+        let profile = self.aberration.as_ref()?;
+        let (optics, offset_m) = (&self.config.optics, self.config.offset_m);
+        Some(if self.corrected_by_cnn() {
+            AberrationReport::by_cnn(profile, offset_m)
+        } else {
+            AberrationReport::new(profile, optics, offset_m)
+        })
     }
 
     /// Whether the hologram CNN itself corrects the pipeline's aberrations (it was trained for them, metadata
