@@ -846,6 +846,38 @@ fn the_layout_environment_variables_reach_the_plan_and_bad_values_are_named() {
     assert!(!bad.exists());
 }
 
+/// `TENSORHOLO_ISA` is `holo`'s mapping onto the SDK's `CnnOptions::isa` (the library reads no environment):
+/// `scalar` reaches the plan (its kernel rows are the portable ones), and a name that is no level is refused
+/// naming the variable, nothing written.
+#[test]
+fn the_isa_variable_reaches_the_plan_and_a_bad_name_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, isa: &str| {
+        let out = dir.path().join(name);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_holo"))
+            .args([
+                "render", "--size", "24x32", "--repeat", "0", "--engine", "native",
+            ])
+            .args(["--out", out.to_str().unwrap()])
+            .env("TENSORHOLO_ISA", isa)
+            .env("RUST_LOG", "warn")
+            .output()
+            .unwrap();
+        (o, out)
+    };
+    let (o, scalar) = run("scalar", "scalar");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let plan = &report(&scalar)["cnn_plan"];
+    assert_eq!(plan["isa"], "scalar", "{plan}");
+    assert_eq!(plan["request"]["isa"], "scalar", "{plan}");
+    let kernel = plan["kernel"].as_str().unwrap();
+    assert!(kernel.ends_with(".scalar"), "{kernel}");
+    let (o, bad) = run("bad", "sse9");
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("TENSORHOLO_ISA=sse9"), "{}", stderr(&o));
+    assert!(!bad.exists());
+}
+
 /// `--refine N` refines the frame's pattern: report.json's `refine` has the start and every iteration, the
 /// loss falls, the held-out scores and both timings are there, and the codes written are the refined ones
 /// (they differ from the plain render's).

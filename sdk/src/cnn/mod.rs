@@ -64,6 +64,7 @@ pub use tuning::{
 
 #[cfg(all(test, feature = "tract"))]
 pub(crate) use native::native_plan_on;
+pub(crate) use options::available;
 pub(crate) use plan::CnnPlan;
 pub(crate) use select::CnnPlans;
 

@@ -100,23 +100,27 @@ impl CnnOptions {
     ///
     /// Errors: [`crate::HoloError::InvalidParameter`] (`isa`) for a level this CPU does not have.
     pub fn kernel_isa(&self) -> Result<Isa> {
-        match self.isa {
-            None => Ok(Isa::detect()),
-            Some(isa) if isa.is_available() => Ok(isa),
-            Some(isa) => Err(invalid(
-                "isa",
-                format!(
-                    "`{}` is not available on this CPU (it has: {})",
-                    isa.name(),
-                    Isa::available()
-                        .iter()
-                        .map(|i| i.name())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            )),
-        }
+        self.isa.map_or(Ok(Isa::detect()), available)
     }
+}
+
+/// `isa` where this CPU has it: the one check of an instruction set a caller names (the options, an encoder's
+/// [`crate::encoding::ChannelEncoder::with_isa`], the peak loops).
+///
+/// Errors: [`crate::HoloError::InvalidParameter`] (`isa`) naming the levels this CPU has.
+pub(crate) fn available(isa: Isa) -> Result<Isa> {
+    if isa.is_available() {
+        return Ok(isa);
+    }
+    let has: Vec<&str> = Isa::available().iter().map(|i| i.name()).collect();
+    Err(invalid(
+        "isa",
+        format!(
+            "`{}` is not available on this CPU (it has: {})",
+            isa.name(),
+            has.join(", ")
+        ),
+    ))
 }
 
 /// The most threads a CNN plan may use (tract's `ModelPlan::with_threads`, the native engine's thread
@@ -392,6 +396,55 @@ mod tests {
             "{e}"
         );
         assert!(e.to_string().contains("`fft`"), "{e}");
+    }
+
+    /// The options' instruction set is this CPU's best by default, a level it has as given, and a level it
+    /// lacks (or a zero strip count, or too many threads) is refused naming the field.
+    #[test]
+    fn the_options_resolve_the_isa_and_refuse_what_cannot_run() {
+        let name = |o: CnnOptions| match o.validate().unwrap_err() {
+            crate::HoloError::InvalidParameter { name, .. } => name,
+            e => panic!("unexpected {e}"),
+        };
+        assert_eq!(CnnOptions::default().kernel_isa().unwrap(), Isa::detect());
+        let scalar = CnnOptions {
+            isa: Some(Isa::Scalar),
+            ..CnnOptions::default()
+        };
+        assert_eq!(scalar.kernel_isa().unwrap(), Isa::Scalar);
+        let lacking = Isa::ALL.into_iter().find(|i| !i.is_available()).unwrap();
+        let e = CnnOptions {
+            isa: Some(lacking),
+            ..CnnOptions::default()
+        }
+        .kernel_isa()
+        .unwrap_err();
+        assert!(e.to_string().contains(lacking.name()), "{e}");
+        for (o, field) in [
+            (
+                CnnOptions {
+                    isa: Some(lacking),
+                    ..CnnOptions::default()
+                },
+                "isa",
+            ),
+            (
+                CnnOptions {
+                    strip_rows: Some(0),
+                    ..CnnOptions::default()
+                },
+                "strip_rows",
+            ),
+            (
+                CnnOptions {
+                    threads: ThreadCount::Fixed(MAX_CNN_THREADS + 1),
+                    ..CnnOptions::default()
+                },
+                "threads",
+            ),
+        ] {
+            assert_eq!(name(o), field);
+        }
     }
 
     #[test]

@@ -47,6 +47,8 @@ pub(super) fn select(
     width: usize,
     request: &PlanRequest,
 ) -> Result<CnnPlans> {
+    // The options once for every engine: threads, strips, slabs, and an instruction set this CPU has.
+    request.cnn.validate()?;
     let engine = request.cnn.engine;
     hologram.check_fixed_size(height, width)?;
     let nets = Networks {
@@ -144,6 +146,7 @@ fn fastest(
     [height, width]: [usize; 2],
     request: &PlanRequest,
 ) -> Result<CnnPlans> {
+    let isa = request.cnn.kernel_isa()?;
     let mut timed = Vec::new();
     let mut untimed = Vec::new();
     // Why the engines after the first one timed are not timed: that engine's reason, with its id.
@@ -165,9 +168,7 @@ fn fastest(
         to_beat = Some(to_beat.map_or(best, |b| b.min(best)));
         timed.push((*e, tuning, best));
         if timed.len() == 1 && best.is_finite() {
-            decided = e
-                .outruns_the_others(request.cnn.kernel_isa()?)
-                .map(|why| (e.id(), why));
+            decided = e.outruns_the_others(isa).map(|why| (e.id(), why));
         }
     }
     timed.sort_by(|a, b| a.2.total_cmp(&b.2));
@@ -283,10 +284,7 @@ fn build(
             source,
             source_detail,
             network: network_key(nets.hologram),
-            isa: request
-                .cnn
-                .kernel_isa()
-                .map_or_else(|_| "none".to_string(), |i| i.name().to_string()),
+            isa: request.cnn.kernel_isa()?.name().to_string(),
             rows: tuning.rows,
         },
     })

@@ -722,4 +722,56 @@ pub(crate) mod tests {
         let missing = AberrationProfile::load(Path::new("/nonexistent/aberration.json"));
         assert!(matches!(missing, Err(HoloError::Io { .. })));
     }
+
+    /// The one rule: what the caller gave before the profile's own; a profile's file before its prescription
+    /// (the profile keeps at most one); a prescription and a measured profile together refused; a
+    /// prescription resolves to its coefficients on the display in use.
+    #[test]
+    fn the_source_rule_takes_the_callers_before_the_profiles() {
+        let rx = Prescription::new(-2.0, -0.75, Some(30.0)).unwrap();
+        let measured = two_point_profile();
+        let json = r#"{"pixel_pitch_m": 8e-6, "resolution": [48, 64], "wavelengths_m": [638e-9, 520e-9, 450e-9],
+            "volume_depth_m": 6e-3, "offsets_m": [6e-3]}"#;
+        let plain = DisplayProfile::from_json_str(json).unwrap();
+        let with_rx = plain.clone().with_prescription(Some(rx)).unwrap();
+        let with_file = plain
+            .clone()
+            .with_aberration_file(Some("eyes.json".into()))
+            .unwrap();
+        assert_eq!(AberrationSource::select(None, Some(&plain)), None);
+        assert_eq!(
+            AberrationSource::select(None, Some(&with_rx)),
+            Some(AberrationSource::Prescription(rx))
+        );
+        assert_eq!(
+            AberrationSource::select(None, Some(&with_file)),
+            Some(AberrationSource::File("eyes.json".into()))
+        );
+        let given = AberrationSource::Measured(measured.clone());
+        assert_eq!(
+            AberrationSource::select(Some(given.clone()), Some(&with_rx)),
+            Some(given)
+        );
+        let both = AberrationSource::from_either(Some(rx), Some(measured.clone()));
+        assert!(matches!(
+            both,
+            Err(HoloError::InvalidParameter {
+                name: "prescription",
+                ..
+            })
+        ));
+        let optics = OpticalSetup::default();
+        assert_eq!(
+            AberrationSource::Prescription(rx).resolve(&optics).unwrap(),
+            AberrationProfile::from_prescription(&rx, &optics).unwrap()
+        );
+        assert_eq!(
+            AberrationSource::from_either(None, Some(measured.clone()))
+                .unwrap()
+                .unwrap()
+                .resolve(&optics)
+                .unwrap(),
+            measured
+        );
+    }
 }

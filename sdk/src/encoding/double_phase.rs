@@ -378,13 +378,7 @@ impl ChannelEncoder {
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`isa`) for a level this CPU does not have.
     pub fn with_isa(mut self, isa: Isa) -> Result<Self> {
-        if !isa.is_available() {
-            return Err(invalid(
-                "isa",
-                format!("`{}` is not available on this CPU", isa.name()),
-            ));
-        }
-        self.isa = isa;
+        self.isa = crate::cnn::available(isa)?;
         Ok(self)
     }
 

@@ -222,12 +222,9 @@ impl GeneratorConfig {
         if let Some(p) = &self.saved_plans {
             p.validate()?;
         }
-        AberrationSource::from_either(self.prescription, self.aberration.clone())?;
-        if let Some(p) = &self.prescription {
-            p.validate()?;
-        }
-        if let Some(a) = &self.aberration {
-            a.check_setup(&self.optics)?;
+        // One of a prescription (valid) and a measured profile, for this display.
+        if let Some(profile) = self.aberration_profile()? {
+            profile.check_setup(&self.optics)?;
         }
         if let Some(t) = self.wavelength_ratio_tolerance {
             if !(t.is_finite() && t >= 0.0) {

@@ -31,7 +31,9 @@ use super::options::{default_threads, CnnEngine, CnnLayout, CnnOptions, ThreadCo
 use super::plan::{time_plan, CnnPlan};
 use super::saved::network_key;
 use super::tuning::{auto_thread_candidates, timing_resolution, PlanRequest, PlanTiming};
-use crate::error::{HoloError, Result};
+#[cfg(doc)]
+use crate::error::HoloError;
+use crate::error::Result;
 use crate::model::CnnWeights;
 use tensorholo_kernels::Isa;
 
@@ -69,7 +71,6 @@ impl Engine for NativeEngine {
             .map(|m| m.cnn_graph())
             .collect::<Result<Vec<_>>>()?;
         let refs: Vec<&CnnWeights> = graphs.iter().map(|g| g.as_ref()).collect();
-        request.cnn.validate()?;
         let rows = algorithm::decide(&refs, isa, request.cnn.algorithm, &request.source)?;
         let mut notes = Vec::new();
         if request.source.saved().is_some() {
@@ -266,7 +267,7 @@ pub(crate) fn native_plan_on(
 
 /// This machine's measured f32 peak in GFLOP/s for `threads` threads: one FMA loop per thread in registers
 /// (the widest FMA of `isa`), about `millis` ms, all threads at once: the denominator of "% of peak" in
-/// `holo bench --peak`. Errors: [`HoloError::ModelRun`] for a level this CPU lacks.
+/// `holo bench --peak`. Errors: [`HoloError::InvalidParameter`] (`isa`) for a level this CPU lacks.
 pub fn f32_peak_gflops(isa: Isa, threads: usize, millis: u64) -> Result<f64> {
     on_threads(isa, threads, |isa| {
         tensorholo_kernels::peak::f32_fma_gflops(isa, millis)
@@ -290,12 +291,7 @@ fn on_threads(
     f: impl Fn(tensorholo_kernels::Isa) -> std::result::Result<f64, tensorholo_kernels::KernelError>
         + Sync,
 ) -> Result<f64> {
-    if !isa.is_available() {
-        return Err(HoloError::ModelRun(format!(
-            "the {} instruction set is not available on this CPU",
-            isa.name()
-        )));
-    }
+    let isa = super::options::available(isa)?;
     let f = &f;
     let per: Vec<f64> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..threads.max(1))
