@@ -3,7 +3,7 @@
 
 /// sRGB-encoded value in `[0, 1]` → linear intensity in `[0, 1]` (IEC 61966-2-1 piecewise curve).
 /// Values outside `[0, 1]` are clamped first.
-pub fn srgb_to_linear(v: f32) -> f32 {
+pub(crate) fn srgb_to_linear(v: f32) -> f32 {
     let v = v.clamp(0.0, 1.0);
     if v <= 0.04045 {
         v / 12.92
@@ -14,7 +14,7 @@ pub fn srgb_to_linear(v: f32) -> f32 {
 
 /// Linear intensity in `[0, 1]` → sRGB-encoded value in `[0, 1]` (inverse of [`srgb_to_linear`]).
 /// Values outside `[0, 1]` (and NaN, mapped to 0) are clamped first.
-pub fn linear_to_srgb(v: f32) -> f32 {
+pub(crate) fn linear_to_srgb(v: f32) -> f32 {
     let v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
     if v <= 0.003_130_8 {
         v * 12.92

@@ -75,7 +75,7 @@ impl CnnOptions {
     ///
     /// Errors: [`crate::HoloError::InvalidParameter`] naming the field (`threads`, `strip_rows`, `slabs`,
     /// `isa`).
-    pub fn validate(&self) -> Result<()> {
+    pub(crate) fn validate(&self) -> Result<()> {
         if let ThreadCount::Fixed(n) = self.threads {
             if n == 0 || n > MAX_CNN_THREADS {
                 return Err(invalid(
@@ -138,7 +138,7 @@ pub const MAX_CNN_THREADS: usize = 256;
 ///   on the f32 kernels: within the models' int8 tolerance of tract's node-by-node execution;
 ///   `sdk/src/cnn/tests.rs`).
 /// - [`CnnEngine::Tract`]: tract's optimised plans (any file that passes the contract, int8 included; cargo
-///   feature `tract`, [`CnnEngine::cargo_feature`]).
+///   feature `tract`, `CnnEngine::cargo_feature`).
 /// - [`CnnEngine::Auto`] (the default): the plan table's engine, a function of the CPU's features and the
 ///   files (`cnn/table.rs`): the native engine wherever it runs them (2.3–20× tract's best on x86-64, 2.3×
 ///   fewer instructions on ARM), tract for int8 QOperator files and for int8 files on the portable rows
@@ -164,7 +164,7 @@ impl CnnEngine {
     pub const ENGINES: [CnnEngine; 2] = [Self::Native, Self::Tract];
 
     /// Short name: `auto`, `native`, `tract`.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Self::Auto => "auto",
             Self::Native => "native",
@@ -174,14 +174,14 @@ impl CnnEngine {
 
     /// The cargo feature of `tensorholo` (and `tensorholo-ffi`) that compiles this engine in, `None` for one
     /// every build has (named by errors in a build without it).
-    pub fn cargo_feature(self) -> Option<&'static str> {
+    pub(crate) fn cargo_feature(self) -> Option<&'static str> {
         match self {
             Self::Tract => Some("tract"),
             Self::Auto | Self::Native => None,
         }
     }
 
-    /// Parses [`CnnEngine::name`]. Errors: [`crate::HoloError::InvalidParameter`] (`engine`) naming the
+    /// Parses `CnnEngine::name`. Errors: [`crate::HoloError::InvalidParameter`] (`engine`) naming the
     /// choices.
     pub fn parse(name: &str) -> Result<Self> {
         match name {
@@ -235,7 +235,7 @@ impl CnnLayout {
     pub const ALL: [CnnLayout; 2] = [Self::ChannelsFirst, Self::ChannelsLast];
 
     /// Short name: `auto`, `nchw`, `nhwc`.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Self::Auto => "auto",
             Self::ChannelsFirst => "nchw",
@@ -339,7 +339,7 @@ impl ConvAlgorithm {
     }
 
     /// Short name: `auto`, `direct`, `winograd2x2`, `winograd4x4`.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Self::Auto => "auto",
             Self::Direct => "direct",
@@ -348,7 +348,7 @@ impl ConvAlgorithm {
         }
     }
 
-    /// Parses [`ConvAlgorithm::name`] (also `winograd` for F(2×2, 3×3); surrounding spaces ignored).
+    /// Parses `ConvAlgorithm::name` (also `winograd` for F(2×2, 3×3); surrounding spaces ignored).
     /// Errors: [`crate::HoloError::InvalidParameter`] (`conv`) naming the choices.
     pub fn parse(name: &str) -> Result<Self> {
         match name.trim() {

@@ -107,7 +107,7 @@ pub struct SavedPlans {
 
 impl SavedPlans {
     /// An empty record for kernel ISA level `isa`, made as `origin` says.
-    pub fn new(isa: &str, origin: &str) -> Self {
+    pub(crate) fn new(isa: &str, origin: &str) -> Self {
         Self {
             format: SAVED_PLANS_FORMAT.into(),
             version: SAVED_PLANS_VERSION,
@@ -119,7 +119,7 @@ impl SavedPlans {
     }
 
     /// Reads a record from its JSON text (version 1 or 2, returned as version 2) and checks it
-    /// ([`SavedPlans::validate`]).
+    /// (`SavedPlans::validate`).
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`tuning`) for text that is not such a record (not JSON, an
     /// unknown or missing key, another format or version) or fails the checks, naming the entry.
@@ -162,7 +162,7 @@ impl SavedPlans {
     /// layout with 1..=[`MAX_CNN_THREADS`] threads (or `null`) at a non-empty resolution, and no entry twice.
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`tuning`) naming the entry and what is wrong.
-    pub fn validate(&self) -> Result<()> {
+    pub(crate) fn validate(&self) -> Result<()> {
         let bad = |what: String| Err(invalid("tuning", what));
         if self.format != SAVED_PLANS_FORMAT {
             return bad(format!(
@@ -233,7 +233,7 @@ impl SavedPlans {
     }
 
     /// The row saved for a `c_in → c_out` layer chosen among `algorithms`, if any.
-    pub fn row(&self, c_in: usize, c_out: usize, algorithms: ConvAlgorithm) -> Option<&str> {
+    pub(crate) fn row(&self, c_in: usize, c_out: usize, algorithms: ConvAlgorithm) -> Option<&str> {
         self.rows
             .iter()
             .find(|r| (r.c_in, r.c_out, r.algorithms) == (c_in, c_out, algorithms))
@@ -241,7 +241,7 @@ impl SavedPlans {
     }
 
     /// The session saved for `network` at `resolution`, if any.
-    pub fn session(&self, network: &str, resolution: [usize; 2]) -> Option<&SavedSession> {
+    pub(crate) fn session(&self, network: &str, resolution: [usize; 2]) -> Option<&SavedSession> {
         self.sessions
             .iter()
             .find(|s| s.network == network && s.resolution == resolution)

@@ -62,7 +62,7 @@ pub enum PlanSource {
 
 impl PlanSource {
     /// Short name: `table`, `tune`, `saved`.
-    pub fn name(&self) -> &'static str {
+    pub(crate) fn name(&self) -> &'static str {
         match self {
             Self::Table => "table",
             Self::Tune => "tune",

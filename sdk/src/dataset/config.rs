@@ -37,7 +37,7 @@ impl Split {
     }
 
     /// Numeric id mixed into [`sample_seed`]: train 0, val 1, test 2.
-    pub fn id(self) -> u64 {
+    pub(crate) fn id(self) -> u64 {
         match self {
             Split::Train => 0,
             Split::Val => 1,
@@ -105,7 +105,7 @@ impl DatasetConfig {
     }
 
     /// Number of samples of `split`.
-    pub fn count(&self, split: Split) -> usize {
+    pub(crate) fn count(&self, split: Split) -> usize {
         match split {
             Split::Train => self.train,
             Split::Val => self.val,
@@ -116,8 +116,8 @@ impl DatasetConfig {
     /// Checks the configuration.
     ///
     /// Errors: [`HoloError::InvalidParameter`](crate::HoloError::InvalidParameter) for a bad scene
-    /// configuration ([`RandomSceneConfig::validate`]), bad synthesis parameters (`levels`, optics; the
-    /// aberration correction's offset and display, [`AberrationCorrectedSmLbm::validate`]), `shard_size`
+    /// configuration (`RandomSceneConfig::validate`), bad synthesis parameters (`levels`, optics; the
+    /// aberration correction's offset and display, `AberrationCorrectedSmLbm::validate`), `shard_size`
     /// of 0, or no sample at all (`train + val + test = 0`), or more than 10⁸ samples per split.
     pub fn validate(&self) -> Result<()> {
         self.scene.validate()?;

@@ -241,7 +241,7 @@ pub struct DatasetPlan {
 impl DatasetPlan {
     /// The plan of `config` (photos as `generator` found them; `options`' aberration file and display
     /// record).
-    pub fn new(
+    pub(crate) fn new(
         config: &DatasetConfig,
         options: &GenerateOptions,
         generator: &SampleGenerator,
@@ -310,7 +310,7 @@ impl DatasetPlan {
     }
 
     /// Every shard in ordinal order, with its split.
-    pub fn shards(&self) -> impl Iterator<Item = (Split, &ShardInfo)> {
+    pub(crate) fn shards(&self) -> impl Iterator<Item = (Split, &ShardInfo)> {
         self.splits
             .iter()
             .flat_map(|s| s.shards.iter().map(move |f| (s.name, f)))

@@ -77,12 +77,12 @@ impl ShardSelection {
     }
 
     /// The number of parts.
-    pub fn count(self) -> usize {
+    pub(crate) fn count(self) -> usize {
         self.count
     }
 
     /// Whether this part writes the shard of plan ordinal `ordinal`.
-    pub fn selects(self, ordinal: usize) -> bool {
+    pub(crate) fn selects(self, ordinal: usize) -> bool {
         ordinal % self.count == self.index
     }
 }

@@ -49,7 +49,7 @@ pub struct AberrationSample {
 /// ```
 ///
 /// `wavelengths_m` and `pixel_pitch_m` are optional; when present they are checked against the display
-/// ([`AberrationProfile::check_setup`]). Each sample has either `coefficients` (all colours) or `per_colour`
+/// (`AberrationProfile::check_setup`). Each sample has either `coefficients` (all colours) or `per_colour`
 /// (R, G, B).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "ProfileFile", into = "ProfileFile")]
@@ -254,7 +254,7 @@ impl AberrationProfile {
 
     /// The profile that shows the hologram as `prescription`'s spectacle lens would let the viewer see it,
     /// on `optics`' display (its lasers and pitch recorded): per colour the coefficients of
-    /// [`Prescription::zernike`], the same at every distance (the lens sits at the viewer's pupil, so the
+    /// `Prescription::zernike`, the same at every distance (the lens sits at the viewer's pupil, so the
     /// real-time correction is exact; `docs/ABERRATION.md`, "A viewer's prescription").
     ///
     /// Errors: as [`Prescription::validate`].
@@ -273,7 +273,7 @@ impl AberrationProfile {
     }
 
     /// Records the display the profile was calibrated for (R, G, B wavelengths and pixel pitch, metres), which
-    /// [`AberrationProfile::check_setup`] then compares with the display in use.
+    /// `AberrationProfile::check_setup` then compares with the display in use.
     pub fn with_display(mut self, wavelengths_m: [f64; 3], pixel_pitch_m: f64) -> Self {
         self.wavelengths_m = Some(wavelengths_m);
         self.pixel_pitch_m = Some(pixel_pitch_m);
@@ -296,7 +296,7 @@ impl AberrationProfile {
     }
 
     /// Whether every coefficient of every sample is zero.
-    pub fn is_zero(&self) -> bool {
+    pub(crate) fn is_zero(&self) -> bool {
         self.samples
             .iter()
             .all(|s| s.coefficients.iter().all(ZernikeCoefficients::is_zero))
@@ -319,7 +319,7 @@ impl AberrationProfile {
 
     /// A one-line description for messages: the calibrated distances and the largest coefficient, e.g.
     /// `3 distances, −3 to 3 mm, largest |coefficient| 1.2 rad (green astigmatism_vertical at 0 mm)`.
-    pub fn describe(&self) -> String {
+    pub(crate) fn describe(&self) -> String {
         const NAMES: [&str; 5] = [
             "focus",
             "astigmatism_vertical",
@@ -381,7 +381,7 @@ impl AberrationProfile {
     /// Checks the recorded wavelengths and pitch, if any, against `setup` (relative tolerance 10⁻⁶).
     ///
     /// Errors: [`HoloError::InvalidParameter`] naming the quantity, the profile's value and the display's.
-    pub fn check_setup(&self, setup: &OpticalSetup) -> Result<()> {
+    pub(crate) fn check_setup(&self, setup: &OpticalSetup) -> Result<()> {
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b.abs();
         if let Some(w) = self.wavelengths_m {
             if !w
@@ -466,15 +466,15 @@ pub enum AberrationSource {
 impl AberrationSource {
     /// The SDK's one rule for which aberration a session corrects, used by `holo` and the bindings alike: what
     /// the caller gave (`given`: a flag, a generator configuration's field) before the display profile's own
-    /// ([`AberrationSource::of_profile`]); `None` without either. A caller gives at most one source, and a
-    /// profile has at most one ([`AberrationSource::from_either`], [`DisplayProfile::with_prescription`]).
+    /// (`AberrationSource::of_profile`); `None` without either. A caller gives at most one source, and a
+    /// profile has at most one (`AberrationSource::from_either`, [`DisplayProfile::with_prescription`]).
     pub fn select(given: Option<Self>, profile: Option<&DisplayProfile>) -> Option<Self> {
         given.or_else(|| profile.and_then(Self::of_profile))
     }
 
     /// A display profile's own aberration: its `aberration` file, else its `prescription`; `None` without
     /// either.
-    pub fn of_profile(profile: &DisplayProfile) -> Option<Self> {
+    pub(crate) fn of_profile(profile: &DisplayProfile) -> Option<Self> {
         match (&profile.aberration, profile.prescription) {
             (Some(path), _) => Some(Self::File(path.clone())),
             (None, Some(rx)) => Some(Self::Prescription(rx)),
@@ -486,7 +486,7 @@ impl AberrationSource {
     /// generator's, the bindings'): the one given, or `None`.
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`prescription`) when both are given.
-    pub fn from_either(
+    pub(crate) fn from_either(
         prescription: Option<Prescription>,
         measured: Option<AberrationProfile>,
     ) -> Result<Option<Self>> {

@@ -186,7 +186,7 @@ impl NearestDisplay {
     }
 
     /// `optics` at offset `offset_m` (metres), the display's other offsets scaled by `offsets_scale`.
-    pub fn new(optics: &OpticalSetup, offset_m: f64, offsets_scale: f64) -> Self {
+    pub(crate) fn new(optics: &OpticalSetup, offset_m: f64, offsets_scale: f64) -> Self {
         Self {
             wavelengths_m: optics.wavelengths_m,
             pixel_pitch_m: optics.pixel_pitch_m,
@@ -331,7 +331,7 @@ impl DisplayMapping {
 
     /// The volume the pipeline runs with: `σ·V` where the configured volume is within the rounding of it,
     /// the configured one otherwise.
-    pub fn running_volume_depth_m(&self) -> f64 {
+    pub(crate) fn running_volume_depth_m(&self) -> f64 {
         match self.volume {
             VolumeFit::Rounded { .. } => self.served_volume_depth_m(),
             _ => self.display.volume_depth_m,
@@ -348,7 +348,7 @@ impl DisplayMapping {
     }
 
     /// The largest volume this model serves on this display: `σ·V` and the rounding above it, metres.
-    pub fn largest_volume_m(&self) -> f64 {
+    pub(crate) fn largest_volume_m(&self) -> f64 {
         self.served_volume_depth_m() * (1.0 + VOLUME_ROUNDING)
     }
 

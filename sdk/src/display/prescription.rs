@@ -128,7 +128,7 @@ impl Prescription {
     /// The Zernike coefficients `[a3, a4, a5, a6, a7]` (focus, vertical and oblique astigmatism, the two
     /// comas: radians at the pupil edge, Eq. 14–18) that apply this prescription's lens for wavelength
     /// `wavelength_m` on an SLM of pitch `pixel_pitch_m` (metres; see the module docs for the formula).
-    pub fn zernike(&self, wavelength_m: f64, pixel_pitch_m: f64) -> [f64; 5] {
+    pub(crate) fn zernike(&self, wavelength_m: f64, pixel_pitch_m: f64) -> [f64; 5] {
         let f_n = 1.0 / (2.0 * pixel_pitch_m);
         let k = std::f64::consts::PI
             * wavelength_m

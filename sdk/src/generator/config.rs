@@ -163,7 +163,7 @@ impl GeneratorConfig {
     /// The rule is [`AberrationSource::from_either`]'s.
     ///
     /// Errors: as [`AberrationSource::from_either`] and [`AberrationProfile::from_prescription`].
-    pub fn aberration_profile(&self) -> Result<Option<Arc<AberrationProfile>>> {
+    pub(crate) fn aberration_profile(&self) -> Result<Option<Arc<AberrationProfile>>> {
         let source = AberrationSource::from_either(self.prescription, self.aberration.clone())?;
         source
             .map(|s| s.resolve(&self.optics).map(Arc::new))

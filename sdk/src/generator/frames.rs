@@ -24,7 +24,7 @@ pub struct PatternTimings {
 
 impl PatternTimings {
     /// The median of each stage over `timings` ([`FrameTimings::median`] for the session's stages).
-    pub fn median(timings: &[PatternTimings]) -> PatternTimings {
+    pub(crate) fn median(timings: &[PatternTimings]) -> PatternTimings {
         let frames: Vec<FrameTimings> = timings.iter().map(|t| t.frame).collect();
         let mut convert: Vec<f64> = timings.iter().map(|t| t.convert_s).collect();
         convert.sort_by(f64::total_cmp);
@@ -42,7 +42,7 @@ impl PatternTimings {
 pub struct GeneratorBenchmark {
     /// Frames timed (after one warm-up frame).
     pub frames: usize,
-    /// The median of each stage ([`PatternTimings::median`]).
+    /// The median of each stage (`PatternTimings::median`).
     pub median: PatternTimings,
     /// Frames per second of one frame after another: `1 / (convert_s + total_s)` of the medians; 0 where
     /// that time is 0.

@@ -144,7 +144,10 @@ impl HologramGenerator {
     /// As [`HologramGenerator::new`] with CNNs the caller loaded (`config.models` is then only reported).
     ///
     /// Errors: as [`GeneratorConfig::validate`] and [`HologramPipeline::session`].
-    pub fn with_pipeline(config: GeneratorConfig, pipeline: HologramPipeline) -> Result<Self> {
+    pub(crate) fn with_pipeline(
+        config: GeneratorConfig,
+        pipeline: HologramPipeline,
+    ) -> Result<Self> {
         config.validate()?;
         let mut pipeline = match &config.saved_plans {
             Some(plans) => pipeline.with_saved_plans(plans.clone())?,
@@ -191,7 +194,7 @@ impl HologramGenerator {
     }
 
     /// The viewer's aberration correction applied, if any, and what it applies and leaves.
-    pub fn aberration(&self) -> Option<(Arc<AberrationProfile>, AberrationReport)> {
+    pub(crate) fn aberration(&self) -> Option<(Arc<AberrationProfile>, AberrationReport)> {
         let session = self.session().ok()?;
         session.aberration().map(|(p, r)| (p.clone(), r.clone()))
     }
@@ -213,7 +216,7 @@ impl HologramGenerator {
     }
 
     /// The display calibration applied, if any.
-    pub fn calibration(&self) -> Option<Arc<DisplayCalibration>> {
+    pub(crate) fn calibration(&self) -> Option<Arc<DisplayCalibration>> {
         lock_slot(&self.calibration).clone()
     }
 
@@ -221,7 +224,7 @@ impl HologramGenerator {
     /// warm-up frame, at this generator's resolution, and returns the median stage timings: what an app shows
     /// as its device's speed.
     ///
-    /// Errors: [`HoloError::InvalidParameter`] (`frames`) for 0 frames; as [`HologramGenerator::render_rgbd`].
+    /// Errors: [`HoloError::InvalidParameter`] (`frames`) for 0 frames; as `HologramGenerator::render_rgbd`.
     pub fn benchmark(&self, frames: usize) -> Result<GeneratorBenchmark> {
         if frames == 0 {
             return Err(invalid("frames", "a benchmark needs at least 1 frame"));
@@ -247,7 +250,7 @@ impl HologramGenerator {
     }
 
     /// The configuration.
-    pub fn config(&self) -> &GeneratorConfig {
+    pub(crate) fn config(&self) -> &GeneratorConfig {
         &self.config
     }
 
@@ -398,7 +401,7 @@ impl HologramGenerator {
     /// Renders an RGB-D frame already at the hologram resolution (`[3, H, W]` amplitude, `[H, W]` depth).
     ///
     /// Errors: as [`HologramSession::render`].
-    pub fn render_rgbd(&self, frame: &RgbdFrame) -> Result<SlmPatterns> {
+    pub(crate) fn render_rgbd(&self, frame: &RgbdFrame) -> Result<SlmPatterns> {
         let mut session = self.session()?;
         let out = session.render(frame)?;
         Ok(SlmPatterns::from_frame(out, 0.0, None))

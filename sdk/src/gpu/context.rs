@@ -233,7 +233,7 @@ impl GpuContext {
     /// session that does not bring its own; re-created if its device was lost.
     ///
     /// Errors: as [`GpuContext::new`] (not cached: a later call tries again).
-    pub fn shared(options: &GpuOptions) -> Result<Self> {
+    pub(crate) fn shared(options: &GpuOptions) -> Result<Self> {
         static SHARED: Mutex<Vec<(GpuOptions, GpuContext)>> = Mutex::new(Vec::new());
         let mut shared = SHARED
             .lock()
@@ -313,7 +313,7 @@ impl GpuContext {
     }
 
     /// The wgpu queue.
-    pub fn queue(&self) -> &wgpu::Queue {
+    pub(crate) fn queue(&self) -> &wgpu::Queue {
         &self.queue
     }
 
@@ -327,7 +327,7 @@ impl GpuContext {
     }
 
     /// Whether the device has been lost (every later call fails; make a new context).
-    pub fn is_lost(&self) -> bool {
+    pub(crate) fn is_lost(&self) -> bool {
         self.lost.load(Ordering::SeqCst)
     }
 

@@ -675,17 +675,23 @@ pub fn write_f32_npy_streaming(
 /// bytes are not text, instead of failing (serde's own `Path` serialisation refuses such a name). For report
 /// and manifest fields (`#[serde(serialize_with = "...")]`); reading them back gives the lossy text as a path.
 pub mod lossy_path {
-    use std::path::{Path, PathBuf};
+    use std::path::Path;
+    #[cfg(feature = "research")]
+    use std::path::PathBuf;
 
     use serde::Serializer;
 
     /// One path.
-    pub fn serialize<S: Serializer>(path: &Path, s: S) -> std::result::Result<S::Ok, S::Error> {
+    pub(crate) fn serialize<S: Serializer>(
+        path: &Path,
+        s: S,
+    ) -> std::result::Result<S::Ok, S::Error> {
         s.serialize_str(&path.to_string_lossy())
     }
 
+    #[cfg(feature = "research")]
     /// An optional path (`null` when absent).
-    pub fn option<S: Serializer>(
+    pub(crate) fn option<S: Serializer>(
         path: &Option<PathBuf>,
         s: S,
     ) -> std::result::Result<S::Ok, S::Error> {
@@ -695,8 +701,12 @@ pub mod lossy_path {
         }
     }
 
+    #[cfg(feature = "research")]
     /// A list of paths.
-    pub fn list<S: Serializer>(paths: &[PathBuf], s: S) -> std::result::Result<S::Ok, S::Error> {
+    pub(crate) fn list<S: Serializer>(
+        paths: &[PathBuf],
+        s: S,
+    ) -> std::result::Result<S::Ok, S::Error> {
         s.collect_seq(paths.iter().map(|p| p.to_string_lossy()))
     }
 }

@@ -111,7 +111,7 @@ pub const SHIPPED_LAYERS: [usize; 3] = [8, 15, 30];
 pub const SHIPPED_LDI_LAYERS: [usize; 1] = [8];
 
 /// Layer counts of the shipped hologram CNNs taking `input`.
-pub fn shipped_layers(input: SceneInput) -> &'static [usize] {
+pub(crate) fn shipped_layers(input: SceneInput) -> &'static [usize] {
     match input {
         SceneInput::Rgbd => &SHIPPED_LAYERS,
         SceneInput::Ldi => &SHIPPED_LDI_LAYERS,
@@ -193,7 +193,7 @@ pub fn hologram_cnn(layers: usize, precision: Precision) -> Result<&'static [u8]
     scene_hologram_cnn(SceneInput::Rgbd, layers, precision)
 }
 
-/// The ONNX bytes of the shipped hologram CNN taking `input` with `layers` layers ([`shipped_layers`]: 8, 15
+/// The ONNX bytes of the shipped hologram CNN taking `input` with `layers` layers (`shipped_layers`: 8, 15
 /// or 30 for RGB-D, 8 for LDI).
 ///
 /// Errors: as [`hologram_cnn`].
@@ -295,7 +295,7 @@ pub fn scene_hologram_model(
 /// errors name the embedded file.
 ///
 /// Errors: as [`prefilter_cnn`] and [`HologramModel::from_bytes`].
-pub fn prefilter_model(
+pub(crate) fn prefilter_model(
     offset_mm: u32,
     precision: Precision,
     expected: &ModelConfig,
@@ -308,7 +308,7 @@ pub fn prefilter_model(
 ///
 /// Errors: as [`paired_prefilter_cnn`] and [`HologramModel::from_bytes`]; [`HoloError::ModelMetadata`](crate::HoloError)
 /// if the file's `tensorholo.hologram_layers` is not `hologram_layers`.
-pub fn paired_prefilter_model(
+pub(crate) fn paired_prefilter_model(
     offset_mm: u32,
     hologram_layers: usize,
     precision: Precision,

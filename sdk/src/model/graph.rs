@@ -94,7 +94,7 @@ pub struct CnnQuant {
     pub base_reads_rounded_input: bool,
 }
 
-/// A TensorHolo residual CNN read from its ONNX graph ([`CnnWeights::from_model`]).
+/// A TensorHolo residual CNN read from its ONNX graph (`CnnWeights::from_model`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CnnWeights {
     /// Network input channels (`4·L` for the hologram CNN, 6 for the pre-filter).
@@ -703,8 +703,9 @@ impl CnnWeights {
         ends.into_iter().map(move |i| &self.layers[i])
     }
 
+    #[cfg(feature = "gpu")]
     /// Multiply-adds per output pixel of the convolutions.
-    pub fn macs_per_pixel(&self) -> usize {
+    pub(crate) fn macs_per_pixel(&self) -> usize {
         self.layers.iter().map(|l| l.c_out * l.c_in * 9).sum()
     }
 }

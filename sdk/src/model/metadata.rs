@@ -92,7 +92,7 @@ impl fmt::Display for ModelKind {
 }
 
 /// What the SDK expects of a CNN file: the display it drives and the pipeline settings the network was
-/// trained for. A file whose metadata disagrees is refused ([`ModelMetadata::check`]).
+/// trained for. A file whose metadata disagrees is refused (`ModelMetadata::check`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ModelConfig {
     /// The display: wavelengths, pixel pitch and volume depth. The model's `tensorholo.wavelengths_m`,
@@ -107,7 +107,7 @@ pub struct ModelConfig {
     /// that of the hologram CNN it was trained with.
     pub input_layers: usize,
     /// Largest relative spread (a fraction: 0.01 = 1 %) of the per-colour depth scales of a
-    /// Fresnel-equivalent display that [`ModelMetadata::check`] accepts ([`DisplayMapping`]); `None` (the
+    /// Fresnel-equivalent display that `ModelMetadata::check` accepts ([`DisplayMapping`]); `None` (the
     /// default): the serving rule's for this model, the spread whose estimated cost stays within
     /// [`crate::display::MAPPING_COST_BUDGET_DB`] ([`crate::display::rule_tolerance`] of its model-card
     /// score). A value wider than the rule's is reported ([`DisplayMapping::widened`]).
@@ -324,7 +324,7 @@ impl ModelMetadata {
     }
 
     /// Channels of the network input: `4·L` for a hologram CNN, 6 for a pre-filter (`docs/CONVENTIONS.md` §7).
-    pub fn input_channels(&self) -> usize {
+    pub(crate) fn input_channels(&self) -> usize {
         match self.kind {
             ModelKind::Hologram => 4 * self.input_layers,
             ModelKind::PreFilter => 6,
@@ -333,7 +333,7 @@ impl ModelMetadata {
 
     /// The display this file was trained for: `tensorholo.wavelengths_m`, `pixel_pitch_m`,
     /// `volume_depth_m`.
-    pub fn optics(&self) -> OpticalSetup {
+    pub(crate) fn optics(&self) -> OpticalSetup {
         OpticalSetup {
             wavelengths_m: self.wavelengths_m,
             pixel_pitch_m: self.pixel_pitch_m,
@@ -342,7 +342,7 @@ impl ModelMetadata {
     }
 
     /// A short name for messages: "the 8-layer hologram CNN" or "the 8-layer pre-filter CNN".
-    pub fn describe(&self) -> String {
+    pub(crate) fn describe(&self) -> String {
         match self.kind {
             ModelKind::Hologram => format!("the {}-layer hologram CNN", self.layers),
             ModelKind::PreFilter => format!("the {}-layer pre-filter CNN", self.layers),
@@ -352,7 +352,7 @@ impl ModelMetadata {
     /// The test-split focal-stack PSNR (dB) on the model card of the shipped CNN of this shape (a
     /// pre-filter: of the hologram CNN it was trained with), or the best shipped one's for another shape:
     /// the score the serving rule holds a display mapping's error against.
-    pub fn card_score_db(&self) -> f64 {
+    pub(crate) fn card_score_db(&self) -> f64 {
         let shape = match self.kind {
             ModelKind::Hologram => (self.layers, self.input_layers),
             ModelKind::PreFilter => (self.hologram_layers.unwrap_or(8), 1),
@@ -381,7 +381,7 @@ impl ModelMetadata {
     /// [`HoloError::InvalidParameter`] for an invalid configuration or metadata optics. A hologram CNN whose
     /// `offset_m` is 0 (trained for the midpoint hologram alone) matches any offset; a pre-filter's
     /// `input_layers` is not checked (it sees the offset hologram, not the scene).
-    pub fn check(&self, kind: ModelKind, expected: &ModelConfig) -> Result<DisplayMapping> {
+    pub(crate) fn check(&self, kind: ModelKind, expected: &ModelConfig) -> Result<DisplayMapping> {
         if self.kind != kind {
             return Err(bad("kind", self.kind.metadata_name(), kind.metadata_name()));
         }

@@ -57,7 +57,7 @@ impl SceneInput {
     }
 
     /// The name in shipped file names (`holo8_rgbd.onnx`, `holo8_ldi.onnx`): `rgbd` or `ldi`.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Self::Rgbd => "rgbd",
             Self::Ldi => "ldi",
@@ -113,7 +113,7 @@ impl Precision {
     }
 
     /// Short name: `f32`, `int8-qop`, `int8-qdq`.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Self::F32 => "f32",
             Self::Int8QOperator => "int8-qop",

@@ -126,7 +126,7 @@ fn check_contract(graph: &pb::GraphProto, md: &ModelMetadata) -> std::result::Re
 /// planned per resolution by an engine ([`crate::cnn`], the GPU).
 ///
 /// Holds the file (its bytes, for engines that read it themselves), its decoded graph and metadata, and the
-/// graph read as the TensorHolo residual CNN ([`HologramModel::cnn_graph`], for the native engine and the
+/// graph read as the TensorHolo residual CNN (`HologramModel::cnn_graph`, for the native engine and the
 /// GPU). `Send + Sync`: engines plan and run it from several threads.
 pub struct HologramModel {
     metadata: ModelMetadata,
@@ -170,7 +170,7 @@ impl HologramModel {
 
     /// As [`HologramModel::from_bytes`], naming the source `name` (e.g. the embedded file's name) in every
     /// error message instead of `<bytes>`.
-    pub fn from_named_bytes(
+    pub(crate) fn from_named_bytes(
         bytes: &[u8],
         name: &str,
         kind: ModelKind,
@@ -296,7 +296,7 @@ impl CnnWeights {
     ///
     /// Errors: [`HoloError::ModelContract`] naming the first node that breaks the pattern (int8 files among
     /// them: the GPU runs the f32 files).
-    pub fn from_model(model: &HologramModel) -> Result<Self> {
+    pub(crate) fn from_model(model: &HologramModel) -> Result<Self> {
         Self::from_graph(model.onnx_graph(), model.kind(), model.source_name())
     }
 }
@@ -307,7 +307,7 @@ impl HologramModel {
     ///
     /// Errors: [`HoloError::ModelContract`] (every call, the same reason) where the graph is not the
     /// architecture; such a model runs on tract only.
-    pub fn cnn_graph(&self) -> Result<Arc<CnnWeights>> {
+    pub(crate) fn cnn_graph(&self) -> Result<Arc<CnnWeights>> {
         // The reader walks an untrusted graph: a file on which it would panic is refused, not a crash.
         let cached = self.cnn_graph.get_or_init(|| {
             guarded(

@@ -1,6 +1,6 @@
 //! Planned 2D FFT on row-major `[height, width]` complex buffers (rustfft), with the spectrum kept in
 //! **transposed** layout `[width, height]` so that a spectral operation costs two transposes instead of four,
-//! and a cache-blocked filter ([`Fft2::filter`]) that never writes the whole spectrum: three passes over the
+//! and a cache-blocked filter (`Fft2::filter`) that never writes the whole spectrum: three passes over the
 //! field instead of seven.
 
 use std::sync::Arc;
@@ -9,7 +9,7 @@ use num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
 use tensorholo_kernels::{spectral, Isa, KernelError};
 
-/// Columns per block of [`Fft2::filter`]: 16 complex values of each row (128 bytes, two cache lines), so that
+/// Columns per block of `Fft2::filter`: 16 complex values of each row (128 bytes, two cache lines), so that
 /// a block (`16 × height` values: 138 KB at 1080 rows, 276 KB at 2160) stays in a core's L2 from its
 /// gather through its column transforms, the multiplier and back, and every cache line read from the field is
 /// used whole.
@@ -17,12 +17,12 @@ pub const BLOCK_COLUMNS: usize = 16;
 
 /// A 2D discrete Fourier transform of one size, planned once and applied many times.
 ///
-/// - [`Fft2::forward`] transforms a row-major `[height, width]` buffer and writes its unnormalised spectrum to
+/// - `Fft2::forward` transforms a row-major `[height, width]` buffer and writes its unnormalised spectrum to
 ///   a row-major `[width, height]` buffer (the transpose of the usual layout: element `[kx, ky]`).
-/// - [`Fft2::inverse`] takes such a transposed spectrum back to a `[height, width]` buffer, **unnormalised**
+/// - `Fft2::inverse` takes such a transposed spectrum back to a `[height, width]` buffer, **unnormalised**
 ///   (the caller folds the `1/(height·width)` factor into its spectral multiplier).
 ///
-/// The caller owns the scratch space ([`Fft2::scratch_len`] complex values), so the hot path allocates nothing.
+/// The caller owns the scratch space (`Fft2::scratch_len` complex values), so the hot path allocates nothing.
 #[derive(Clone)]
 pub struct Fft2 {
     height: usize,
@@ -47,7 +47,7 @@ impl std::fmt::Debug for Fft2 {
 
 impl Fft2 {
     /// Plans the four 1D transforms of a `[height, width]` 2D FFT. Both sizes must be ≥ 1 (checked by callers).
-    pub fn new(planner: &mut FftPlanner<f32>, height: usize, width: usize) -> Self {
+    pub(crate) fn new(planner: &mut FftPlanner<f32>, height: usize, width: usize) -> Self {
         let row_forward = planner.plan_fft_forward(width);
         let row_inverse = planner.plan_fft_inverse(width);
         let col_forward = planner.plan_fft_forward(height);
@@ -80,28 +80,28 @@ impl Fft2 {
     }
 
     /// Rows of the spatial buffer.
-    pub fn height(&self) -> usize {
+    pub(crate) fn height(&self) -> usize {
         self.height
     }
 
     /// Columns of the spatial buffer.
-    pub fn width(&self) -> usize {
+    pub(crate) fn width(&self) -> usize {
         self.width
     }
 
     /// Number of complex values of the column block [`Fft2::filter`] needs.
-    pub fn block_len(&self) -> usize {
+    pub(crate) fn block_len(&self) -> usize {
         BLOCK_COLUMNS.min(self.width) * self.height
     }
 
     /// Number of complex values of scratch that [`Fft2::forward`] and [`Fft2::inverse`] need.
-    pub fn scratch_len(&self) -> usize {
+    pub(crate) fn scratch_len(&self) -> usize {
         self.scratch_len
     }
 
     /// Forward DFT: `data` `[height, width]` (overwritten with intermediate row transforms) → `spectrum`
     /// `[width, height]` (transposed). Both slices must hold `height·width` values.
-    pub fn forward(
+    pub(crate) fn forward(
         &self,
         data: &mut [Complex32],
         spectrum: &mut [Complex32],
@@ -117,7 +117,7 @@ impl Fft2 {
 
     /// Inverse DFT (unnormalised): transposed `spectrum` `[width, height]` (overwritten) → `data`
     /// `[height, width]`.
-    pub fn inverse(
+    pub(crate) fn inverse(
         &self,
         spectrum: &mut [Complex32],
         data: &mut [Complex32],
@@ -144,7 +144,7 @@ impl Fft2 {
     ///
     /// `data` must hold `height·width` values and `block` at least [`Fft2::block_len`] (as for the other
     /// methods, the callers' plans size them; a shorter `block` panics).
-    pub fn filter(
+    pub(crate) fn filter(
         &self,
         data: &mut [Complex32],
         block: &mut [Complex32],
@@ -184,7 +184,7 @@ impl Fft2 {
     /// Each fused pass saves a read and a write of the whole field from memory: at 1080p a field is 16.6 MB,
     /// far more than a core's L2.
     #[allow(clippy::too_many_arguments)]
-    pub fn filter_rows(
+    pub(crate) fn filter_rows(
         &self,
         data: &mut [Complex32],
         block: &mut [Complex32],
@@ -234,7 +234,7 @@ impl Fft2 {
     }
 }
 
-/// Rows per chunk of [`Fft2::filter_rows`]' hooks: 8 rows of 1920 complex values are 123 KB, well inside a
+/// Rows per chunk of `Fft2::filter_rows`' hooks: 8 rows of 1920 complex values are 123 KB, well inside a
 /// core's L2 between the hook and the row transforms.
 pub const ROW_CHUNK: usize = 8;
 

@@ -50,9 +50,10 @@ impl FourierFilter {
         self.plan.apply(field, &self.multiplier, scratch)
     }
 
+    #[cfg(feature = "gpu")]
     /// The spectral multiplier [`FourierFilter::apply`] uses: the aperture with the inverse-FFT normalisation,
     /// in [`SpectralPlan`] layout.
-    pub fn multiplier(&self) -> &[Complex32] {
+    pub(crate) fn multiplier(&self) -> &[Complex32] {
         &self.multiplier
     }
 
@@ -63,7 +64,7 @@ impl FourierFilter {
 }
 
 /// The 0/1 circular aperture of Eq. 9 on any plan's computational grid (see [`FourierFilter`]).
-pub fn aperture_mask(plan: &SpectralPlan) -> Vec<f32> {
+pub(crate) fn aperture_mask(plan: &SpectralPlan) -> Vec<f32> {
     let aperture = aperture_fn(plan);
     plan.build_multiplier(|kx, ky| Complex32::new(aperture(kx, ky), 0.0))
         .into_iter()

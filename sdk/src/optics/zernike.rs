@@ -81,7 +81,7 @@ impl ZernikeCoefficients {
     }
 
     /// Coefficients from `[a3, a4, a5, a6, a7]`.
-    pub fn from_array(a: [f64; 5]) -> Self {
+    pub(crate) fn from_array(a: [f64; 5]) -> Self {
         Self {
             focus: a[0],
             astigmatism_vertical: a[1],
@@ -92,12 +92,12 @@ impl ZernikeCoefficients {
     }
 
     /// Whether every coefficient is zero.
-    pub fn is_zero(&self) -> bool {
+    pub(crate) fn is_zero(&self) -> bool {
         self.to_array().iter().all(|&a| a == 0.0)
     }
 
     /// `self + t·(other − self)`, coefficient by coefficient.
-    pub fn lerp(&self, other: &Self, t: f64) -> Self {
+    pub(crate) fn lerp(&self, other: &Self, t: f64) -> Self {
         let (a, b) = (self.to_array(), other.to_array());
         Self::from_array(std::array::from_fn(|j| a[j] + t * (b[j] - a[j])))
     }
@@ -111,7 +111,7 @@ impl ZernikeCoefficients {
     }
 
     /// [`ZernikeCoefficients::phase`] in Cartesian pupil coordinates `(ρ·cos θ, ρ·sin θ)` (no trigonometry).
-    pub fn phase_xy(&self, rx: f64, ry: f64) -> f64 {
+    pub(crate) fn phase_xy(&self, rx: f64, ry: f64) -> f64 {
         let r2 = rx * rx + ry * ry;
         let coma = 3.0 * r2 - 2.0;
         self.focus * (2.0 * r2 - 1.0)

@@ -42,7 +42,7 @@ pub enum Backend {
 
 impl Backend {
     /// Short name: `auto`, `cpu`, `gpu`.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Self::Auto => "auto",
             Self::Cpu => "cpu",
@@ -98,9 +98,10 @@ impl GpuPrecision {
         }
     }
 
+    #[cfg(feature = "gpu")]
     /// What runs on an adapter with (`shader_f16`) or without f16 shaders: [`GpuPrecision::F32`] or
     /// [`GpuPrecision::F16`].
-    pub fn resolve(self, shader_f16: bool) -> Self {
+    pub(crate) fn resolve(self, shader_f16: bool) -> Self {
         match self {
             Self::F16 | Self::Auto if shader_f16 => Self::F16,
             _ => Self::F32,

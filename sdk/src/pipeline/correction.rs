@@ -50,7 +50,7 @@ pub struct AberrationReport {
 impl AberrationReport {
     /// The report of `profile` applied at the midpoint plane of a session with offset `offset_m` (metres)
     /// on a display with `optics` (its volume depth bounds the residual's planes).
-    pub fn new(profile: &AberrationProfile, optics: &OpticalSetup, offset_m: f64) -> Self {
+    pub(crate) fn new(profile: &AberrationProfile, optics: &OpticalSetup, offset_m: f64) -> Self {
         let distance_m = -offset_m;
         let coefficients = [0, 1, 2].map(|c| profile.coefficients(distance_m, c));
         let residual_rms_rad = [0, 1, 2].map(|c| {
@@ -84,7 +84,7 @@ impl AberrationReport {
 
     /// The report of a session whose hologram CNN corrects `profile` itself ([`AberrationReport::by_cnn`]):
     /// the coefficients at the midpoint plane for reference, no residual.
-    pub fn by_cnn(profile: &AberrationProfile, offset_m: f64) -> Self {
+    pub(crate) fn by_cnn(profile: &AberrationProfile, offset_m: f64) -> Self {
         let distance_m = -offset_m;
         Self {
             distance_m,

@@ -108,7 +108,7 @@ impl HologramPipeline {
     /// The shipped models (`models/`, feature `embedded-models`) chosen by name: the hologram CNN taking
     /// `selection.input` with `selection.layers` layers (RGB-D: 8, 15 or 30; LDI: 8) in `selection.precision`,
     /// and the DDPM pre-filter CNN of
-    /// `config.offset_m` as `selection.prefilter` says ([`HologramPipeline::with_shipped_prefilter`]).
+    /// `config.offset_m` as `selection.prefilter` says (`HologramPipeline::with_shipped_prefilter`).
     ///
     /// Errors: [`HoloError::InvalidParameter`] for a layer count or (with [`PrefilterMode::Required`]) an
     /// offset without a shipped model; as [`HologramModel::from_bytes`] and [`HologramPipeline::new`].
@@ -160,12 +160,12 @@ impl HologramPipeline {
 
     /// Combines `hologram` with its pre-filter CNN from `source`: the one rule that decides which CNNs run,
     /// used by [`HologramPipeline::embedded`], `HologramGenerator::from_onnx` and `holo render`.
-    /// - [`PrefilterSource::Shipped`]: as [`HologramPipeline::with_shipped_prefilter`] (shipped pre-filters in
+    /// - [`PrefilterSource::Shipped`]: as `HologramPipeline::with_shipped_prefilter` (shipped pre-filters in
     ///   `precision`);
     /// - [`PrefilterSource::Given`]: the caller's pre-filter, as [`HologramPipeline::new`] (refused at a 0 m
     ///   offset, never silently dropped).
     ///
-    /// Errors: as [`HologramPipeline::with_shipped_prefilter`] and [`HologramPipeline::new`].
+    /// Errors: as `HologramPipeline::with_shipped_prefilter` and [`HologramPipeline::new`].
     pub fn with_prefilter(
         hologram: Arc<HologramModel>,
         source: PrefilterSource,
@@ -216,7 +216,7 @@ impl HologramPipeline {
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`cnn.tune`) where [`CnnOptions::tune`](crate::cnn::CnnOptions::tune) asks to time
     /// instead; [`HoloError::InvalidParameter`] (`tuning`) for plans that fail
-    /// [`SavedPlans::validate`]. Plans made for another kernel ISA level are refused when a session is made.
+    /// `SavedPlans::validate`. Plans made for another kernel ISA level are refused when a session is made.
     pub fn with_saved_plans(mut self, plans: Arc<SavedPlans>) -> Result<Self> {
         if self.config.cnn.tune {
             return Err(invalid(
@@ -295,7 +295,7 @@ impl HologramPipeline {
     /// correction that a viewer may move (a slider) keeps one encoding that holds at every strength.
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`wavelengths_m`, `pixel_pitch_m`) for a profile calibrated
-    /// for another display ([`AberrationProfile::check_setup`]), or (`prefilter`) for a pre-filter CNN the
+    /// for another display (`AberrationProfile::check_setup`), or (`prefilter`) for a pre-filter CNN the
     /// caller gave or required ([`PrefilterMode::Required`]); [`HoloError::ModelMetadata`]
     /// (`tensorholo.aberration`) for a hologram CNN trained for other aberrations, naming both.
     ///
@@ -345,7 +345,7 @@ impl HologramPipeline {
 
     /// What the pipeline's aberration correction applies and leaves, as its sessions report it
     /// ([`HologramSession::aberration`](crate::pipeline::HologramSession::aberration)): the coefficients at the
-    /// midpoint plane and the residual over the volume, or that the CNN corrects ([`AberrationReport::by_cnn`]);
+    /// midpoint plane and the residual over the volume, or that the CNN corrects (`AberrationReport::by_cnn`);
     /// `None` without a correction.
     pub fn aberration_report(&self) -> Option<AberrationReport> {
         let profile = self.aberration.as_ref()?;

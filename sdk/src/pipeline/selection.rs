@@ -10,7 +10,7 @@ use crate::error::{invalid, Result};
 use crate::model::{HologramModel, Precision, SceneInput};
 
 /// Whether the DDPM pre-filter CNN runs between offset propagation and double phase encoding (paper Eq. 6),
-/// chosen by name ([`HologramPipeline::with_shipped_prefilter`](crate::pipeline::HologramPipeline::with_shipped_prefilter) has the rule).
+/// chosen by name (`HologramPipeline::with_shipped_prefilter` has the rule).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum PrefilterMode {
@@ -64,7 +64,7 @@ impl Default for ModelSelection {
 /// the CLI, the generator and the bindings share).
 #[derive(Debug, Clone)]
 pub enum PrefilterSource {
-    /// The shipped pre-filter of the offset, as the mode says ([`super::HologramPipeline::with_shipped_prefilter`]).
+    /// The shipped pre-filter of the offset, as the mode says (`super::HologramPipeline::with_shipped_prefilter`).
     Shipped(PrefilterMode),
     /// The caller's own pre-filter CNN (e.g. `holo render --prefilter-model`): always used, and refused
     /// where it cannot be (a 0 m offset, metadata of another display or offset).

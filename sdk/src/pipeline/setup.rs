@@ -35,7 +35,7 @@ impl HologramPipeline {
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`size`) for a size of 0 or above
     /// [`MAX_HOLOGRAM_PIXELS`], checked first; [`HoloError::ShapeMismatch`] for a display calibration of
-    /// another size; as [`crate::cnn::cnn_plan`] (the CNN engine's plans), [`crate::optics::SpectralPlan::new`]
+    /// another size; as [`crate::cnn::cnn_plan`] (the CNN engine's plans), `crate::optics::SpectralPlan::new`
     /// and [`ChannelEncoder::new`]; with [`Backend::Gpu`], the GPU's errors ([`HoloError::Gpu`]).
     pub fn session(&self, height: usize, width: usize) -> Result<HologramSession> {
         HologramSession::new(self, height, width)
@@ -188,7 +188,7 @@ impl HologramSession {
     /// with AA-DPM.
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`wavelengths_m`, `pixel_pitch_m`) for a profile calibrated
-    /// for another display ([`AberrationProfile::check_setup`]), or (`aberration`) on a session whose hologram
+    /// for another display (`AberrationProfile::check_setup`), or (`aberration`) on a session whose hologram
     /// CNN was trained for its aberrations ([`HologramPipeline::corrected_by_cnn`]). The session keeps its
     /// correction on error.
     /// A GPU frame that fails to take the kernels is dropped with a warning: the frames run on the CPU,

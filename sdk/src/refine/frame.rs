@@ -143,12 +143,12 @@ pub struct RefineDisplay {
     /// The SLM's look-up tables (`None`: linear).
     pub calibration: Option<Arc<DisplayCalibration>>,
     /// The viewer's aberration (`None`: none), which the refinement's model sees through
-    /// ([`Refiner::with_viewer`]): the refined pattern stays corrected, at every loss plane's own distance.
+    /// (`Refiner::with_viewer`): the refined pattern stays corrected, at every loss plane's own distance.
     /// The target is the unaberrated one, so [`RefineTarget::CnnMidpoint`] is refused where the CNN corrects
     /// the aberration itself (`viewer_corrected_by_cnn`: its midpoint hologram is the corrected one).
     pub viewer: Option<Arc<AberrationProfile>>,
     /// Whether the hologram CNN was trained for `viewer`'s aberration (the session's
-    /// [`AberrationReport::by_cnn`](crate::pipeline::AberrationReport::by_cnn)).
+    /// `AberrationReport::by_cnn`).
     pub viewer_corrected_by_cnn: bool,
 }
 
@@ -312,7 +312,7 @@ impl FrameRefiner {
     /// --refine` hands its own SM-LBM), scoring the start, the result and `cnn` (the CNN's pattern, where
     /// given) at the held-out planes. `target_s` is 0.
     ///
-    /// Errors: as [`Refiner::new`], [`Refiner::set_target`] and [`Refiner::refine`].
+    /// Errors: as [`Refiner::new`], `Refiner::set_target` and [`Refiner::refine`].
     pub fn refine_against(
         &mut self,
         midpoint: ArrayView3<Complex32>,

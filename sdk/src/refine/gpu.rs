@@ -16,7 +16,7 @@ use crate::gpu::GpuContext;
 use crate::slm::LutRepresentation;
 
 /// A [`Refiner`]'s refinement uploaded to a GPU: its loss planes' multipliers, weights and target as they
-/// are when [`Refiner::on_gpu`] makes it (a later target: [`GpuRefinement::set_target`]). Memory on the
+/// are when [`Refiner::on_gpu`] makes it (a later target: `GpuRefinement::set_target`). Memory on the
 /// GPU: per loss plane a complex multiplier and the target, 3 colours each, `W`, and seven complex and three
 /// real `[3, H, W]` planes (384², 7 planes: 71 MB; 1080p: 1.0 GB).
 pub struct GpuRefinement {
@@ -113,7 +113,7 @@ impl GpuRefinement {
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for a refiner of another size or plane count than the one this
     /// was made from.
-    pub fn set_target(&mut self, refiner: &Refiner) -> Result<()> {
+    pub(crate) fn set_target(&mut self, refiner: &Refiner) -> Result<()> {
         self.inner.set_target(&flat_target(refiner))?;
         self.energy = refiner.target_energy;
         Ok(())

@@ -69,7 +69,7 @@ pub struct RefineOptions {
     /// Loss planes ([`loss_depths`]), [`PLANES_RANGE`].
     pub planes: usize,
     /// Evaluate the loss at the phase the SLM shows: `φ` through the look-up table to 8-bit codes and back
-    /// to the codes' displayed phases ([`Refiner::with_calibration`]; the linear table without one), the
+    /// to the codes' displayed phases (`Refiner::with_calibration`; the linear table without one), the
     /// gradient passed straight through the rounding (the straight-through estimator). The refined pattern
     /// is then optimised as the display shows it, quantisation and the SLM's response included. `false`
     /// optimises the continuous phase.
@@ -220,7 +220,7 @@ pub struct Refiner {
 
 /// Another focal stack's planes (e.g. the held-out ones) with their multipliers, seen as a [`Refiner`]'s model
 /// sees them (its display, offset and viewer): scored with that refiner's buffers by
-/// [`Refiner::score_planes`], so that a score at other planes needs no second set of FFT and field buffers
+/// `Refiner::score_planes`, so that a score at other planes needs no second set of FFT and field buffers
 /// (at 1080p, 0.2 GB less than a second refiner).
 #[derive(Debug)]
 pub struct PlaneSet {
@@ -380,7 +380,7 @@ impl Refiner {
     /// (display, offset, viewer), for [`Refiner::score_planes`].
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for a target of another size; those of making the multipliers.
-    pub fn plane_set(&self, target: FocalTarget) -> Result<PlaneSet> {
+    pub(crate) fn plane_set(&self, target: FocalTarget) -> Result<PlaneSet> {
         if target.size() != self.target.size() {
             let ((h, w), (th, tw)) = (self.target.size(), target.size());
             return Err(HoloError::ShapeMismatch {
@@ -401,7 +401,7 @@ impl Refiner {
     /// state are left as they were.
     ///
     /// Errors: as [`Refiner::score`].
-    pub fn score_planes(
+    pub(crate) fn score_planes(
         &mut self,
         set: &mut PlaneSet,
         phase: ArrayView3<f32>,
@@ -426,7 +426,7 @@ impl Refiner {
     /// focal stack. `None`: an unaberrated viewer (as [`Refiner::new`]).
     ///
     /// Errors: as [`Refiner::new`] (remaking the multipliers).
-    pub fn with_viewer(mut self, viewer: Option<&AberrationProfile>) -> Result<Self> {
+    pub(crate) fn with_viewer(mut self, viewer: Option<&AberrationProfile>) -> Result<Self> {
         self.viewer = viewer.cloned();
         self.colours = self.colour_models(self.target.depths())?;
         Ok(self)
@@ -436,7 +436,10 @@ impl Refiner {
     /// sends its phases through (`None`: an ideal SLM, the linear table).
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for a per-pixel calibration of another SLM size than the target's.
-    pub fn with_calibration(mut self, calibration: Option<&DisplayCalibration>) -> Result<Self> {
+    pub(crate) fn with_calibration(
+        mut self,
+        calibration: Option<&DisplayCalibration>,
+    ) -> Result<Self> {
         let (h, w) = self.target.size();
         let linear = PhaseLut::linear();
         for (c, lut) in self.luts.iter_mut().enumerate() {
@@ -458,7 +461,7 @@ impl Refiner {
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for a target of another size; [`HoloError::InvalidParameter`]
     /// (`depths`) for other planes. The refiner keeps its target on error.
-    pub fn set_target(&mut self, target: FocalTarget) -> Result<()> {
+    pub(crate) fn set_target(&mut self, target: FocalTarget) -> Result<()> {
         if target.size() != self.target.size() {
             let ((h, w), (th, tw)) = (self.target.size(), target.size());
             return Err(HoloError::ShapeMismatch {
@@ -553,7 +556,7 @@ impl Refiner {
     /// The loss record of `phase` `[3, H, W]` against the target without changing it (iteration 0).
     ///
     /// Errors: as [`Refiner::refine`].
-    pub fn score(&mut self, phase: ArrayView3<f32>) -> Result<IterationRecord> {
+    pub(crate) fn score(&mut self, phase: ArrayView3<f32>) -> Result<IterationRecord> {
         self.check_phase(phase)?;
         let mut work = phase.as_standard_layout().into_owned();
         let flat = work
@@ -820,7 +823,7 @@ fn least_squares_scale((a, b): (f64, f64)) -> f64 {
 }
 
 /// The phase in radians each 8-bit code of `codes` `[3, H, W]` displays on the SLM: through `calibration`'s
-/// look-up tables where one is given ([`crate::slm::PhaseLut::displayed_phases`]), the linear table's
+/// look-up tables where one is given (`crate::slm::PhaseLut::displayed_phases`), the linear table's
 /// `2π·code/256` otherwise. What a refinement warm-started from an SLM frame starts from: the pattern the
 /// display shows, quantisation included.
 ///
@@ -891,7 +894,7 @@ fn per_colour<A: Copy, B: Copy + Default>(
 /// [`IterationRecord::psnr_db`]), for the display `setup` with its SLM `offset_m` metres from the midpoint
 /// plane. Scoring a refinement at [`held_out_depths`] measures it where its loss never looked.
 ///
-/// Errors: as [`Refiner::new`] and [`Refiner::score`].
+/// Errors: as [`Refiner::new`] and `Refiner::score`.
 pub fn focal_psnr(
     phase: ArrayView3<f32>,
     setup: &OpticalSetup,

@@ -54,7 +54,7 @@ fn check_planes(planes: usize) -> Result<()> {
     Ok(())
 }
 
-/// A target focal stack: for each normalised depth `d` of [`FocalTarget::depths`], the amplitude `[3, H, W]`
+/// A target focal stack: for each normalised depth `d` of `FocalTarget::depths`, the amplitude `[3, H, W]`
 /// (R, G, B) the viewer should see when focused at `z(d) = (0.5 − d)·volume` (`docs/CONVENTIONS.md` §4).
 /// Its scale is free: the loss fits one least-squares scale per colour (`docs/REFINE.md`).
 #[derive(Debug, Clone, PartialEq)]
@@ -132,17 +132,17 @@ impl FocalTarget {
     }
 
     /// The planes' normalised depths (0 = near).
-    pub fn depths(&self) -> &[f64] {
+    pub(crate) fn depths(&self) -> &[f64] {
         &self.depths
     }
 
-    /// The amplitude of each plane, `[3, H, W]`, in the order of [`FocalTarget::depths`].
+    /// The amplitude of each plane, `[3, H, W]`, in the order of `FocalTarget::depths`.
     pub fn stack(&self) -> &[Array3<f32>] {
         &self.stack
     }
 
     /// The frame size `(H, W)`.
-    pub fn size(&self) -> (usize, usize) {
+    pub(crate) fn size(&self) -> (usize, usize) {
         let (_, h, w) = self.stack[0].dim();
         (h, w)
     }

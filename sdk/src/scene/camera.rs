@@ -296,7 +296,7 @@ impl CropRect {
     /// arithmetic, so no sum overflows).
     ///
     /// Errors: [`HoloError::InvalidParameter`] named `color_crop`, giving the rectangle and the buffer's size.
-    pub fn validate(&self, buffer_width: usize, buffer_height: usize) -> Result<()> {
+    pub(crate) fn validate(&self, buffer_width: usize, buffer_height: usize) -> Result<()> {
         let CropRect {
             x,
             y,
@@ -467,7 +467,7 @@ impl<'a> ColorImage<'a> {
     ///
     /// Errors: those of [`ColorImage::validate`] for this buffer, then those of [`CropRect::validate`]
     /// (`color_crop`: empty, or not inside the buffer).
-    pub fn crop(&self, crop: CropRect) -> Result<ColorImage<'a>> {
+    pub(crate) fn crop(&self, crop: CropRect) -> Result<ColorImage<'a>> {
         let Layout { stride, bpp } = self.layout()?;
         crop.validate(self.width, self.height)?;
         // Inside the validated buffer: start + stride·(h−1) + w·bpp = stride·(y+h−1) + (x+w)·bpp
@@ -500,7 +500,7 @@ impl<'a> ColorImage<'a> {
     /// `rotation` is applied while decoding, so `(H', W') = rotation.rotated_size(height, width)`.
     ///
     /// Errors: those of [`ColorImage::validate`], checked before allocating.
-    pub fn to_amplitude(&self, rotation: Rotation) -> Result<Array3<f32>> {
+    pub(crate) fn to_amplitude(self, rotation: Rotation) -> Result<Array3<f32>> {
         let layout = self.layout()?;
         let lut: [f32; 256] = std::array::from_fn(|c| srgb8_to_amplitude(c as u8));
         let (ho, wo) = rotation.rotated_size(self.height, self.width);
@@ -603,7 +603,7 @@ impl ConfidenceImage<'_> {
     ///
     /// Errors: [`HoloError::InvalidParameter`] with name `confidence` (zero size, size overflow, buffer too
     /// short or too long) or `confidence_row_stride`.
-    pub fn validate(&self) -> Result<()> {
+    pub(crate) fn validate(&self) -> Result<()> {
         self.layout().map(|_| ())
     }
 
@@ -622,7 +622,7 @@ impl ConfidenceImage<'_> {
     /// The confidence `[H', W']` after `rotation` (as [`DepthImage::decode`] turns its depth buffer).
     ///
     /// Errors: those of [`ConfidenceImage::validate`].
-    pub fn decode(&self, rotation: Rotation) -> Result<Array2<u8>> {
+    pub(crate) fn decode(&self, rotation: Rotation) -> Result<Array2<u8>> {
         let layout = self.layout()?;
         let (ho, wo) = rotation.rotated_size(self.height, self.width);
         let mut out = vec![0u8; ho * wo];
@@ -655,7 +655,7 @@ pub struct ConfidenceImageBuf {
 
 impl ConfidenceImageBuf {
     /// Borrows as a [`ConfidenceImage`].
-    pub fn view(&self) -> ConfidenceImage<'_> {
+    pub(crate) fn view(&self) -> ConfidenceImage<'_> {
         ConfidenceImage {
             data: &self.data,
             min_confidence: self.min_confidence,
@@ -950,10 +950,10 @@ impl CameraFrame<'_> {
     /// Converts the camera frame to an [`RgbdFrame`] of `height × width` pixels (`amplitude` `[3, height,
     /// width]` linear, R, G, B; `depth` `[height, width]`, `d ∈ [0,1]`, 0 = near) and a report:
     /// 1. validates the target size, [`FrameOptions::range`], both buffers ([`ColorImage::validate`],
-    ///    [`DepthImage::validate`]) and the colour crop ([`CropRect::validate`]) before allocating anything;
+    ///    [`DepthImage::validate`]) and the colour crop (`CropRect::validate`) before allocating anything;
     ///    with a [`color_crop`](Self::color_crop) the rest sees only that rectangle of the colour buffer
-    ///    ([`ColorImage::crop`], no copy);
-    /// 2. decodes both buffers ([`ColorImage::to_amplitude`], [`DepthImage::decode`]),
+    ///    (`ColorImage::crop`, no copy);
+    /// 2. decodes both buffers (`ColorImage::to_amplitude`, [`DepthImage::decode`]),
     /// 3. applying the [`Rotation`] to both while decoding (no extra copy);
     /// 4. resamples depth (values and validity) to the (cropped) colour resolution
     ///    ([`FrameOptions::depth_upsampling`]: nearest neighbour by default, or colour-guided joint bilateral).

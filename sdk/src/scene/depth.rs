@@ -19,7 +19,7 @@ use serde::Serialize;
 use crate::error::{invalid, HoloError, Result};
 
 /// How depth is stored in a file. Each variant is one row of the encoding table in
-/// `docs/CONVENTIONS.md` §6; its kebab-case name (see [`DepthEncoding::name`], [`fmt::Display`] and
+/// `docs/CONVENTIONS.md` §6; its kebab-case name (see `DepthEncoding::name`, [`fmt::Display`] and
 /// [`FromStr`]) is what the CLI accepts.
 ///
 /// | variant | name | bits | to metres / relative | invalid |
@@ -93,7 +93,7 @@ impl DepthEncoding {
     ];
 
     /// The kebab-case name used by [`fmt::Display`], [`FromStr`] and serde (e.g. `"mm16"`).
-    pub fn name(&self) -> &'static str {
+    pub(crate) fn name(&self) -> &'static str {
         match self {
             DepthEncoding::Millimetres16 => "mm16",
             DepthEncoding::Tum5000 => "tum",
@@ -108,7 +108,7 @@ impl DepthEncoding {
     }
 
     /// One line describing the stored quantity and its conversion, for CLI `--help`.
-    pub fn description(&self) -> &'static str {
+    pub(crate) fn description(&self) -> &'static str {
         match self {
             DepthEncoding::Millimetres16 => {
                 "16-bit z-depth in mm, v/1000 m, 0 = invalid (Redwood, NYU/SUN derived)"
@@ -140,7 +140,7 @@ impl DepthEncoding {
 
     /// Bits per sample the file must have: 16 for the sensor formats, 8 for the others, 32 for
     /// [`DepthEncoding::Metres`] (float samples: half-precision files are read as float too).
-    pub fn bits_per_sample(&self) -> u32 {
+    pub(crate) fn bits_per_sample(&self) -> u32 {
         match self {
             DepthEncoding::Metres => 32,
             DepthEncoding::Millimetres16
@@ -168,7 +168,7 @@ impl DepthEncoding {
     /// `d ∈ [0,1]`, 0 = near), `None` when the sample is invalid. Samples above 255 are invalid for the
     /// 8-bit encodings. Formulas: `docs/CONVENTIONS.md` §6. [`DepthEncoding::Metres`] stores floats, not
     /// integer samples: `None` (its files are decoded by [`decode_depth_bytes`]).
-    pub fn decode_sample(&self, v: u16) -> Option<f32> {
+    pub(crate) fn decode_sample(&self, v: u16) -> Option<f32> {
         match self {
             DepthEncoding::Metres => None,
             DepthEncoding::Millimetres16 => (v != 0).then(|| v as f32 / 1000.0),
@@ -237,7 +237,7 @@ pub struct DecodedDepth {
 
 /// The largest relative difference in aspect ratio between a depth map and its colour image for which the
 /// depth is taken to cover the colour's field of view and is brought to the colour's resolution
-/// ([`DecodedDepth::to_resolution`]): 2 % (a phone's 256 × 192 LiDAR depth under a 1920 × 1440 image is 0 %).
+/// (`DecodedDepth::into_resolution`): 2 % (a phone's 256 × 192 LiDAR depth under a 1920 × 1440 image is 0 %).
 pub const MAX_DEPTH_ASPECT_MISMATCH: f64 = 0.02;
 
 impl DecodedDepth {
@@ -258,7 +258,7 @@ impl DecodedDepth {
     /// camera path ([`crate::scene::CameraFrame::to_rgbd`], the bindings) and the file loader
     /// ([`crate::scene::load_rgbd`]) both bring depth to the colour this way. The same map where the size is
     /// already `height × width`.
-    pub fn to_resolution(self, height: usize, width: usize) -> Self {
+    pub(crate) fn into_resolution(self, height: usize, width: usize) -> Self {
         if self.values.dim() == (height, width) {
             return self;
         }
@@ -291,7 +291,7 @@ impl DecodedDepth {
     }
 }
 
-/// Decodes raw samples `[H, W]` with `encoding`, pixel by pixel ([`DepthEncoding::decode_sample`]; formulas
+/// Decodes raw samples `[H, W]` with `encoding`, pixel by pixel (`DepthEncoding::decode_sample`; formulas
 /// from `docs/CONVENTIONS.md` §6). Pure and infallible: out-of-range samples (e.g. > 255 for an 8-bit
 /// encoding) are marked invalid.
 pub fn decode_depth(raw: &Array2<u16>, encoding: DepthEncoding) -> DecodedDepth {
@@ -316,7 +316,7 @@ pub fn decode_depth(raw: &Array2<u16>, encoding: DepthEncoding) -> DecodedDepth 
 /// Reads a depth file (PNG, JPEG or PNM) and decodes it with `encoding` ([`decode_depth`]).
 ///
 /// Multi-channel files (odak stores depth as 8-bit ×3) use the first channel. The file's bit depth must
-/// match [`DepthEncoding::bits_per_sample`]. For [`DepthEncoding::KinectDisparity`] a binary PGM (`P5`)
+/// match `DepthEncoding::bits_per_sample`. For [`DepthEncoding::KinectDisparity`] a binary PGM (`P5`)
 /// is read by hand: NYU stores it little-endian despite the PGM spec, so the byte order under which every
 /// sample is a valid 11-bit Kinect value (≤ 2047) is used, little-endian when both are.
 ///
@@ -565,7 +565,7 @@ impl DepthMapping {
     pub const ALL: [DepthMapping; 2] = [DepthMapping::LinearDiopters, DepthMapping::LinearMetres];
 
     /// The name used by [`fmt::Display`] / [`FromStr`]: `"diopters"` or `"metres"`.
-    pub fn name(&self) -> &'static str {
+    pub(crate) fn name(&self) -> &'static str {
         match self {
             DepthMapping::LinearDiopters => "diopters",
             DepthMapping::LinearMetres => "metres",
@@ -611,7 +611,7 @@ impl FromStr for DepthMapping {
 }
 
 /// Metric depth range `[z_near_m, z_far_m]` in metres mapped to `d = 0` and `d = 1`.
-/// Valid when `0 < z_near_m < z_far_m` and both are finite ([`DepthRange::new`], [`DepthRange::validate`]).
+/// Valid when `0 < z_near_m < z_far_m` and both are finite ([`DepthRange::new`], `DepthRange::validate`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct DepthRange {
     /// Distance mapped to `d = 0` (near), metres.
@@ -630,7 +630,7 @@ impl DepthRange {
 
     /// Checks `0 < z_near_m < z_far_m`, both finite (the fields are public, so callers of
     /// [`normalise_depth`] may pass an unchecked value). Error: [`HoloError::InvalidParameter`].
-    pub fn validate(&self) -> Result<()> {
+    pub(crate) fn validate(&self) -> Result<()> {
         let (n, f) = (self.z_near_m, self.z_far_m);
         if !(n.is_finite() && f.is_finite() && n > 0.0 && n < f) {
             return Err(invalid(

@@ -256,7 +256,7 @@ impl LayeredDepthImage {
     /// output.
     ///
     /// Error: [`HoloError::InvalidParameter`] if `height` or `width` is 0.
-    pub fn resize(&self, height: usize, width: usize) -> Result<Self> {
+    pub(crate) fn resize(&self, height: usize, width: usize) -> Result<Self> {
         check_target_size(height, width)?;
         if (height, width) == (self.height(), self.width()) {
             return Ok(self.clone());

@@ -160,7 +160,7 @@ pub struct LdiReport {
 ///   and no nearer than it: `d[K] ≥ d[K − 1]`.
 /// - Metric depths of all layers map to `d ∈ [0, 1]` with one range: `options.range`, or the 1st/99th
 ///   percentiles of every layer's valid depths together, and `options.mapping`.
-/// - Resized to `options.size` last ([`LayeredDepthImage::resize`]).
+/// - Resized to `options.size` last (`LayeredDepthImage::resize`).
 ///
 /// Errors: as [`ldi_files`], [`load_rgb`] and [`super::decode_depth_file`];
 /// [`HoloError::ShapeMismatch`] naming the file whose size differs from `rgb_0`'s (expected = `[H, W]` of

@@ -183,7 +183,7 @@ pub struct DepthReport {
     /// `(height, width)` of the colour file, before any resize.
     pub source_size: (usize, usize),
     /// `(height, width)` of the depth file: the colour's, or a lower (or higher) resolution of the same field
-    /// of view, brought to the colour's ([`DecodedDepth::to_resolution`]).
+    /// of view, brought to the colour's (`DecodedDepth::into_resolution`).
     pub depth_size: (usize, usize),
     /// With a confidence map: the fraction of the depth map's pixels invalidated for a confidence below
     /// [`LoadOptions::min_confidence`] (`None` without one).

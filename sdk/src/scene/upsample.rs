@@ -66,7 +66,7 @@ pub fn upsample_depth(
     let (_, h, w) = guide.dim();
     let (hd, wd) = decoded.values.dim();
     if (hd, wd) == (h, w) || method == DepthUpsampling::Nearest || hd == 0 || wd == 0 {
-        return decoded.to_resolution(h, w);
+        return decoded.into_resolution(h, w);
     }
     let metric = decoded.metric;
     let low = LowRes::new(&decoded.values, &decoded.valid, &guide, (h, w));

@@ -50,7 +50,7 @@ pub trait CaptureStack: Sync {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct CalibrationOptions {
     /// Tile side in SLM pixels (even, ≥ 2): the spatial resolution of the per-pixel table. 0 (the default)
-    /// picks [`auto_tile`].
+    /// picks `auto_tile`.
     pub tile: usize,
     /// A pixel that reaches full scale in more than this many captures is unusable (saturated). Default 0.
     pub max_clipped_captures: usize,
@@ -102,7 +102,7 @@ impl Default for CalibrationOptions {
 
 /// The default tile side for an SLM of `height × width`: `2·⌊min(H, W)/64⌋` clamped to 4–16 (64 px → 4,
 /// 256 px → 8, ≥ 512 px → 16), enlarged (even) until three colours' tables fit in 16 MB (a 4K panel gets 32).
-pub fn auto_tile(height: usize, width: usize) -> usize {
+pub(crate) fn auto_tile(height: usize, width: usize) -> usize {
     let mut tile = (2 * (height.min(width) / 64)).clamp(4, 16);
     while 3 * height.div_ceil(tile) * width.div_ceil(tile) * CODES * 2 > 16 << 20 {
         tile += 2;

@@ -137,7 +137,7 @@ fn png_error(path: &Path, e: png::DecodingError) -> HoloError {
 /// A PNG's `(height, width)` from its header alone.
 ///
 /// Errors: as [`read_png_downsampled`].
-pub fn png_size(path: &Path) -> Result<(usize, usize)> {
+pub(crate) fn png_size(path: &Path) -> Result<(usize, usize)> {
     let decoder = png::Decoder::new(open(path)?);
     let reader = decoder.read_info().map_err(|e| png_error(path, e))?;
     let info = reader.info();

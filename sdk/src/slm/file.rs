@@ -106,7 +106,7 @@ impl DisplayCalibration {
     /// Refuses a calibration made for another SLM size than the `height × width` frames it is used with.
     ///
     /// Errors: [`HoloError::ShapeMismatch`] naming both sizes.
-    pub fn check_size(&self, height: usize, width: usize) -> Result<()> {
+    pub(crate) fn check_size(&self, height: usize, width: usize) -> Result<()> {
         if (self.height, self.width) != (height, width) {
             return Err(HoloError::ShapeMismatch {
                 what: format!(
@@ -164,7 +164,7 @@ impl DisplayCalibration {
     }
 
     /// Whether any colour's look-up table is other than the linear one (codes then differ from an ideal SLM's).
-    pub fn has_calibrated_lut(&self) -> bool {
+    pub(crate) fn has_calibrated_lut(&self) -> bool {
         self.colours
             .iter()
             .any(|c| !matches!(c.lut.representation(), LutRepresentation::Linear))

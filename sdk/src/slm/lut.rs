@@ -46,7 +46,7 @@ impl PhaseCurve {
     /// Errors: [`HoloError::InvalidData`] if there are not exactly 256 values, any is NaN or infinite, the
     /// curve decreases anywhere by more than 1e-4 rad (smaller decreases, float noise, are flattened), or its
     /// range exceeds [`MAX_CURVE_PHASE`].
-    pub fn new(phases: &[f32]) -> Result<Self> {
+    pub(crate) fn new(phases: &[f32]) -> Result<Self> {
         if phases.len() != CODES {
             return Err(HoloError::InvalidData(format!(
                 "a phase curve has {CODES} values (codes 0–255), got {}",
@@ -117,7 +117,7 @@ impl PhaseCurve {
     /// `source` names the file in errors.
     ///
     /// Errors: [`HoloError::InvalidData`] naming `source` and the line for a malformed row, a code outside
-    /// 0–255, a repeated or missing code, or a curve [`PhaseCurve::new`] refuses.
+    /// 0–255, a repeated or missing code, or a curve `PhaseCurve::new` refuses.
     pub fn from_csv(text: &str, source: &str) -> Result<Self> {
         let mut phases = [f32::NAN; CODES];
         let mut seen = [false; CODES];
@@ -174,7 +174,7 @@ impl PhaseCurve {
     }
 
     /// The phase of code 255 (radians): the SLM's modulation range at this wavelength.
-    pub fn range(&self) -> f32 {
+    pub(crate) fn range(&self) -> f32 {
         self.phases[CODES - 1]
     }
 
@@ -299,7 +299,7 @@ impl TiledCurves {
     }
 
     /// SLM size `(height, width)` in pixels.
-    pub fn size(&self) -> (usize, usize) {
+    pub(crate) fn size(&self) -> (usize, usize) {
         (self.height, self.width)
     }
 
@@ -309,7 +309,7 @@ impl TiledCurves {
     }
 
     /// Tile grid `(rows, cols)`.
-    pub fn grid(&self) -> (usize, usize) {
+    pub(crate) fn grid(&self) -> (usize, usize) {
         (
             self.height.div_ceil(self.tile_height),
             self.width.div_ceil(self.tile_width),
@@ -520,7 +520,7 @@ impl PhaseLut {
     }
 
     /// The SLM size a per-pixel LUT is made for (`None` for linear and global tables, which fit any size).
-    pub fn size(&self) -> Option<(usize, usize)> {
+    pub(crate) fn size(&self) -> Option<(usize, usize)> {
         match &self.representation {
             LutRepresentation::Tiled(t) => Some(t.size()),
             _ => None,
@@ -635,7 +635,7 @@ impl PhaseLut {
     /// (same length); allocation-free. What a viewer of a calibrated display sees (the preview).
     ///
     /// Errors: [`HoloError::ShapeMismatch`] as [`PhaseLut::apply`].
-    pub fn displayed_phases(
+    pub(crate) fn displayed_phases(
         &self,
         height: usize,
         width: usize,

@@ -65,7 +65,7 @@ pub fn black_test_codes(luts: [&PhaseLut; 3], height: usize, width: usize) -> Re
 }
 
 /// The phase in radians `[3, H, W]` (relative to code 0) that panels with the look-up tables `luts` (R, G, B)
-/// display for `codes` `[3, H, W]` ([`PhaseLut::displayed_phases`] per colour): what a viewer of the calibrated
+/// display for `codes` `[3, H, W]` (`PhaseLut::displayed_phases` per colour): what a viewer of the calibrated
 /// display sees.
 ///
 /// Errors: [`HoloError::ShapeMismatch`] for codes that are not `[3, H, W]` or a per-pixel LUT of another size.

@@ -56,7 +56,7 @@ pub struct AberrationCorrectedSmLbm {
 impl AberrationCorrectedSmLbm {
     /// The propagation count of a scene with `nonempty_planes` non-empty planes: `G·(G + 1)/2` with silhouette
     /// masks, `G` without. Saturates instead of overflowing.
-    pub fn propagations_for(&self, nonempty_planes: usize) -> usize {
+    pub(crate) fn propagations_for(&self, nonempty_planes: usize) -> usize {
         let g = nonempty_planes;
         if self.base.silhouette_masks {
             g.saturating_mul(g.saturating_add(1)) / 2
@@ -65,7 +65,7 @@ impl AberrationCorrectedSmLbm {
         }
     }
 
-    /// The most propagations per colour any scene can need: [`Self::propagations_for`]`(levels)`.
+    /// The most propagations per colour any scene can need: `Self::propagations_for``(levels)`.
     pub fn worst_case_propagation_count(&self) -> usize {
         self.propagations_for(self.base.levels)
     }
@@ -82,7 +82,7 @@ impl AberrationCorrectedSmLbm {
     /// against the setup.
     ///
     /// Errors: [`HoloError::InvalidParameter`].
-    pub fn validate(&self) -> Result<()> {
+    pub(crate) fn validate(&self) -> Result<()> {
         self.base.validate()?;
         crate::optics::check_offset("slm_offset_m", self.correction.slm_offset_m)?;
         self.correction.profile.check_setup(&self.base.setup)
@@ -95,7 +95,7 @@ impl AberrationCorrectedSmLbm {
     /// parallel), `total = 3 ·` [`AberrationCorrectedSmLbm::propagation_count`].
     ///
     /// Errors: those of [`SmLbm::synthesize`]; [`HoloError::InvalidParameter`] for a non-finite offset or a
-    /// profile calibrated for another display ([`AberrationProfile::check_setup`]).
+    /// profile calibrated for another display (`AberrationProfile::check_setup`).
     pub fn synthesize(
         &self,
         layers: &[SceneLayer],

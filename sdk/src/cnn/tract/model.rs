@@ -124,12 +124,12 @@ impl TractModel {
     }
 
     /// Channels of the network input `[C, H, W]`.
-    pub fn input_channels(&self) -> usize {
+    pub(crate) fn input_channels(&self) -> usize {
         self.channels
     }
 
     /// The model file's name, as errors name it.
-    pub fn source_name(&self) -> &str {
+    pub(crate) fn source_name(&self) -> &str {
         &self.source_name
     }
 
@@ -245,7 +245,7 @@ impl TractModel {
         })
     }
 
-    /// Runs the network on one input `[C, H, W]` (`C` = [`TractModel::input_channels`]; hologram CNN:
+    /// Runs the network on one input `[C, H, W]` (`C` = `TractModel::input_channels`; hologram CNN:
     /// per layer `r, g, b` amplitude then depth `d`, all in `[0, 1]`; pre-filter: `Re H` then `Im H` of the
     /// offset hologram), planning `H × W` if needed.
     ///
@@ -288,10 +288,10 @@ impl TractModel {
     /// the reason) runs on a constant input at the timing resolution (the frame, or a full-width strip of a frame above
     /// 64 Ki pixels): once, or three times when a run takes
     /// under 0.25 s (the fastest run counts). The winner's plan is then built at the real resolution (cached
-    /// like [`TractModel::plan_with_layout`]'s) with its thread count ([`ModelPlan::with_threads`]).
+    /// like [`TractModel::plan_with_layout`]'s) with its thread count (`ModelPlan::with_threads`).
     /// With a single candidate nothing is timed. Results are cached per `(height, width, request)`.
     ///
-    /// Errors: as [`TractModel::plan_with_layout`] and [`ModelPlan::with_threads`];
+    /// Errors: as [`TractModel::plan_with_layout`] and `ModelPlan::with_threads`;
     /// [`HoloError::InvalidParameter`] if no candidate can run.
     pub fn tuned_plan(
         &self,

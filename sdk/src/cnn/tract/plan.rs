@@ -111,7 +111,7 @@ impl ModelPlan {
     ///
     /// Errors: [`HoloError::InvalidParameter`] for 0 threads or more than [`MAX_CNN_THREADS`], or if the
     /// operating system refuses to start the threads.
-    pub fn with_threads(&self, threads: usize) -> Result<ModelPlan> {
+    pub(crate) fn with_threads(&self, threads: usize) -> Result<ModelPlan> {
         let executor = match threads {
             0 => {
                 return Err(crate::error::invalid(
@@ -144,7 +144,7 @@ impl ModelPlan {
         })
     }
 
-    /// The threads of this plan's own executor ([`ModelPlan::with_threads`]); `None` when it uses tract's
+    /// The threads of this plan's own executor (`ModelPlan::with_threads`); `None` when it uses tract's
     /// process-wide default.
     pub fn threads(&self) -> Option<usize> {
         self.threads

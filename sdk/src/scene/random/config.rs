@@ -112,7 +112,7 @@ impl RandomSceneConfig {
     /// size or layers (or more than 4096 pixels a side, 64 layers), an empty or reversed range, a shape
     /// count above 10,000, sizes outside `(0, 4]`, probabilities outside `[0, 1]`, depths outside `[0, 1]`,
     /// tilts outside `[0, 1]`, thin widths outside `(0, 64]` pixels, `photo_max_side` < 8.
-    pub fn validate(&self) -> Result<()> {
+    pub(crate) fn validate(&self) -> Result<()> {
         if self.height == 0 || self.width == 0 || self.height > 4096 || self.width > 4096 {
             return Err(invalid(
                 "size",

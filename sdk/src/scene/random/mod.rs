@@ -102,7 +102,7 @@ impl RandomSceneGenerator {
     /// Validates `config` and loads the photos of [`RandomSceneConfig::photo_folder`] (see
     /// [`list_photos`]), each downscaled to at most [`RandomSceneConfig::photo_max_side`] pixels.
     ///
-    /// Errors: as [`RandomSceneConfig::validate`] and [`list_photos`]; [`HoloError::Io`] /
+    /// Errors: as `RandomSceneConfig::validate` and [`list_photos`]; [`HoloError::Io`] /
     /// [`HoloError::Image`] naming a photo that cannot be read or decoded.
     pub fn new(config: RandomSceneConfig) -> Result<Self> {
         config.validate()?;

@@ -49,7 +49,7 @@ pub struct DistanceFit {
 /// The fit of one colour.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ColourFit {
-    /// Fitted from its own captures; else derived by [`super::wavelength_scaled`].
+    /// Fitted from its own captures; else derived by `super::wavelength_scaled`.
     pub fitted: bool,
     /// For a derived colour, the colour index (0–2) it was derived from.
     pub derived_from: Option<usize>,
@@ -198,7 +198,7 @@ impl CostFunction for CostRef<'_> {
 ///
 /// Errors: [`HoloError::InvalidData`] for windows of another count or size, or captures without contrast;
 /// [`HoloError::Internal`] if the optimiser fails.
-pub fn fit_distance(
+pub(crate) fn fit_distance(
     model: &SpotModel,
     diversities: &[ZernikeCoefficients],
     windows: &[CaptureWindow],
@@ -265,12 +265,12 @@ pub fn fit_distance(
 /// Fits every colour of `plan` that has captures in `dir` (all of its captures; a colour of the plan with
 /// none is derived, see below), at every distance, and returns the report and the aberration profile
 /// (one sample per distance, R, G, B, with the plan's wavelengths and pitch). Colours without captures take
-/// the fitted colour of nearest wavelength through [`super::wavelength_scaled`]. `progress` gets one line
+/// the fitted colour of nearest wavelength through `super::wavelength_scaled`. `progress` gets one line
 /// per fitted distance. Distances and colours run in parallel (rayon); each fit is serial and
 /// deterministic, so the result does not depend on the thread count.
 ///
-/// Errors: as [`super::windows::load_windows`] (a missing capture names the file; when no colour has captures, the first
-/// capture of the plan) and [`fit_distance`]; [`HoloError::InvalidData`] for a non-finite fitted value.
+/// Errors: as `super::windows::load_windows` (a missing capture names the file; when no colour has captures, the first
+/// capture of the plan) and `fit_distance`; [`HoloError::InvalidData`] for a non-finite fitted value.
 pub fn fit_captures(
     plan: &SpotPlan,
     dir: &Path,

@@ -2,9 +2,9 @@
 //! hardware imperfection", Eq. 14–19), by phase diversity: the paper's user calibration ("adjust the
 //! coefficients until the camera images a tightly focused spot at `d`"), automated. Feature `research`.
 //!
-//! **Patterns** ([`SpotPlan::pattern_codes`]): for each colour, each signed distance `d` (metres, SLM →
+//! **Patterns** (`SpotPlan::pattern_codes`): for each colour, each signed distance `d` (metres, SLM →
 //! focus, positive along the light, `docs/ABERRATION.md` "Distance") and each known diversity phase `D_k`
-//! ([`diversity_set`]: none, focus `±δ`, vertical and oblique astigmatism `+δ`, `δ = 2 rad`
+//! (`diversity_set`: none, focus `±δ`, vertical and oblique astigmatism `+δ`, `δ = 2 rad`
 //! ([`DIVERSITY_RAD`])), the SLM pattern whose field at `d` has the spectrum `circ(ρ ≤ 1)·exp(i·D_k)`: that
 //! spectrum (centred on the SLM) propagated by `−d` with the angular spectrum method ([`crate::optics`],
 //! carrier removed, no padding or band limit, so that the display's propagation by `d` returns it exactly),
@@ -18,13 +18,13 @@
 //! camera pixels per SLM pixel pitch in the focal plane (the camera's magnification over its pixel pitch
 //! times the SLM's pitch); the pupil edge `ρ = 1` then lies `n/(2S)` frequency bins from the window's centre.
 //!
-//! **Fit** ([`fit::fit_distance`]): per distance, the spot is found in the sum of its captures (the peak of a
+//! **Fit** (`fit::fit_distance`): per distance, the spot is found in the sum of its captures (the peak of a
 //! blurred copy), the same `n × n` window is cut from every capture, and the five coefficients plus the
 //! spot's two-pixel position (the tip/tilt, shared by the distance's captures) minimise the captures'
 //! residual, each capture fitted with its own exposure and black level in closed form (least squares of
 //! `a·I_k + b`), saturated pixels left out; Nelder–Mead (argmin) from deterministic starts.
 //!
-//! **Colours without captures** ([`wavelength_scaled`]): an aberration of refractive optics is an optical
+//! **Colours without captures** (`wavelength_scaled`): an aberration of refractive optics is an optical
 //! path difference `W(u)` that does not depend on `λ` (dispersion neglected), a function of the ray angle
 //! `u = λ·f`; with `ρ = |f|/f_N` for every colour (one pitch), the phase `2π·W(λ·f_N·ρ)/λ` of a quadratic
 //! term `w₂·u²` is `2π·w₂·f_N²·λ·ρ²` and of a cubic one `w₃·u³` is `2π·w₃·f_N³·λ²·ρ³`: focus and astigmatism
@@ -83,7 +83,7 @@ pub const COLOURS: [&str; 3] = ["red", "green", "blue"];
 /// `1` focus `+δ`, `2` focus `−δ`, `3` vertical astigmatism `+δ`, `4` oblique astigmatism `+δ`. The focus
 /// pair tells `±a3` apart (the twin image of a pupil phase `φ(ρ, θ)` is `−φ(ρ, θ + π)`); the astigmatic
 /// ones do the same for `a4`, `a5`.
-pub fn diversity_set(delta: f64) -> Vec<ZernikeCoefficients> {
+pub(crate) fn diversity_set(delta: f64) -> Vec<ZernikeCoefficients> {
     let z = ZernikeCoefficients::ZERO;
     vec![
         z,
@@ -102,14 +102,18 @@ pub fn diversity_set(delta: f64) -> Vec<ZernikeCoefficients> {
 
 /// The coefficients of wavelength `from_m` carried to wavelength `to_m` (metres) by the rule of the module
 /// docs: focus and astigmatism times `to/from`, coma times `(to/from)²`.
-pub fn wavelength_scaled(z: &ZernikeCoefficients, from_m: f64, to_m: f64) -> ZernikeCoefficients {
+pub(crate) fn wavelength_scaled(
+    z: &ZernikeCoefficients,
+    from_m: f64,
+    to_m: f64,
+) -> ZernikeCoefficients {
     let r = to_m / from_m;
     let a = z.to_array();
     ZernikeCoefficients::from_array([a[0] * r, a[1] * r, a[2] * r, a[3] * r * r, a[4] * r * r])
 }
 
 /// A spot calibration plan (`plan.json` in the patterns folder): the display, the colours, distances and
-/// diversities, and the camera's sampling. File names follow from it ([`SpotPlan::pattern_name`],
+/// diversities, and the camera's sampling. File names follow from it (`SpotPlan::pattern_name`,
 /// [`SpotPlan::capture_name`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -128,7 +132,7 @@ pub struct SpotPlan {
     pub colours: Vec<String>,
     /// Focus distances `d` in metres (signed, strictly increasing, `|d| ≤ 1 m`).
     pub distances_m: Vec<f64>,
-    /// Diversity phases `D_k` (radians at `ρ = 1`), [`diversity_set`] by default.
+    /// Diversity phases `D_k` (radians at `ρ = 1`), `diversity_set` by default.
     pub diversities: Vec<ZernikeCoefficients>,
     /// Camera pixels per SLM pixel pitch at the focal plane (`S`; the pupil spans `window_px/(2S)` bins).
     pub camera_scale: f64,
@@ -175,7 +179,7 @@ impl SpotPlan {
     /// [`crate::optics::WAVELENGTH_RANGE_M`], an unknown or repeated colour, no distance, a non-finite
     /// distance or one beyond ±[`MAX_DISTANCE_M`], one so near the SLM that the spot's sub-hologram is
     /// smaller than [`MIN_SUBHOLOGRAM_PX`], unsorted or repeated distances, no diversity or a
-    /// non-finite one, and a camera scale or window the model refuses ([`SpotModel::new`]).
+    /// non-finite one, and a camera scale or window the model refuses (`SpotModel::new`).
     pub fn validate(&self) -> Result<()> {
         if self.format != PLAN_FORMAT {
             return Err(invalid(
@@ -320,7 +324,7 @@ impl SpotPlan {
 
     /// The pattern file of colour `c` (0–2), distance index `i` and diversity `k`:
     /// `pattern_<colour>_d<i>_k<k>.png`.
-    pub fn pattern_name(c: usize, i: usize, k: usize) -> String {
+    pub(crate) fn pattern_name(c: usize, i: usize, k: usize) -> String {
         format!("pattern_{}_d{i}_k{k}.png", COLOURS[c.min(2)])
     }
 
@@ -354,7 +358,7 @@ impl SpotPlan {
     }
 
     /// Writes `dir/plan.json` (pretty JSON; atomically). Errors: [`HoloError::Io`] naming the file.
-    pub fn save(&self, dir: &Path) -> Result<()> {
+    pub(crate) fn save(&self, dir: &Path) -> Result<()> {
         let text = serde_json::to_string_pretty(self)
             .map_err(|e| HoloError::Internal(format!("plan to JSON: {e}")))?;
         crate::io::write_atomic(&dir.join(PLAN_FILE), text.as_bytes())

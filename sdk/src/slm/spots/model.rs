@@ -57,7 +57,7 @@ impl std::fmt::Debug for SpotModel {
     }
 }
 
-/// Scratch buffers of [`SpotModel::intensity`] (one per thread).
+/// Scratch buffers of `SpotModel::intensity` (one per thread).
 #[derive(Debug, Clone)]
 pub struct ModelScratch {
     field: Vec<Complex64>,
@@ -69,7 +69,7 @@ impl SpotModel {
     /// (finite, ≥ 0.5), whose pupil radius `n/(2·camera_scale)` must be at least 2 bins and below `n/2`.
     ///
     /// Errors: [`crate::HoloError::InvalidParameter`] naming `window_px` or `camera_scale`.
-    pub fn new(n: usize, camera_scale: f64) -> Result<Self> {
+    pub(crate) fn new(n: usize, camera_scale: f64) -> Result<Self> {
         if !(8..=1024).contains(&n) || !n.is_multiple_of(2) {
             return Err(invalid(
                 "window_px",
@@ -152,7 +152,7 @@ impl SpotModel {
     }
 
     /// The window side `n` in camera pixels.
-    pub fn window_px(&self) -> usize {
+    pub(crate) fn window_px(&self) -> usize {
         self.n
     }
 
@@ -169,7 +169,7 @@ impl SpotModel {
     }
 
     /// Fresh scratch buffers for [`SpotModel::intensity`].
-    pub fn scratch(&self) -> ModelScratch {
+    pub(crate) fn scratch(&self) -> ModelScratch {
         let len = self.n * self.n;
         ModelScratch {
             field: vec![Complex64::default(); len],
@@ -182,7 +182,7 @@ impl SpotModel {
     /// centre in camera pixels.
     ///
     /// Errors: [`crate::HoloError::InvalidParameter`] if `out` is not `n·n` long.
-    pub fn intensity(
+    pub(crate) fn intensity(
         &self,
         phase: &ZernikeCoefficients,
         shift: (f64, f64),

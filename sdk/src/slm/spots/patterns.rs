@@ -20,7 +20,7 @@ impl SpotPlan {
     ///
     /// Errors: [`HoloError::InvalidParameter`] for an index out of the plan, or as the propagator and the
     /// double phase encoding.
-    pub fn pattern_codes(&self, c: usize, i: usize, k: usize) -> Result<Array2<u8>> {
+    pub(crate) fn pattern_codes(&self, c: usize, i: usize, k: usize) -> Result<Array2<u8>> {
         let [h, w] = self.slm_size;
         let (Some(&d), Some(div), Some(&lambda)) = (
             self.distances_m.get(i),
@@ -69,7 +69,7 @@ impl SpotPlan {
     /// total)` after each. Returns the number of patterns. On an error nothing of the run stays: the patterns
     /// written are removed, and `dir` too where this call created it.
     ///
-    /// Errors: as [`SpotPlan::pattern_codes`]; [`HoloError::Io`] / [`HoloError::Image`] naming the file.
+    /// Errors: as `SpotPlan::pattern_codes`; [`HoloError::Io`] / [`HoloError::Image`] naming the file.
     pub fn write_patterns(&self, dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<usize> {
         let colours = self.colour_indices()?;
         let created = !dir.exists();

@@ -14,7 +14,7 @@
 //! bits with saturation at full scale.
 //!
 //! **Truth.** Per distance, the first colour of the plan has coefficients uniform in `±max_rad`; the others
-//! follow by [`super::wavelength_scaled`]. Written as `hidden.json` (a `tensorholo.aberration` file).
+//! follow by `super::wavelength_scaled`. Written as `hidden.json` (a `tensorholo.aberration` file).
 
 use std::f64::consts::TAU;
 use std::path::Path;
@@ -65,7 +65,7 @@ impl Default for SimulateOptions {
 
 impl SimulateOptions {
     /// Checks the fields. Errors: [`HoloError::InvalidParameter`] naming the field.
-    pub fn validate(&self, window_px: usize) -> Result<()> {
+    pub(crate) fn validate(&self, window_px: usize) -> Result<()> {
         if !(self.max_rad.is_finite() && (0.0..=3.0).contains(&self.max_rad)) {
             return Err(invalid(
                 "max_rad",

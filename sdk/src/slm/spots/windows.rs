@@ -46,7 +46,7 @@ fn block_for(h: usize, w: usize) -> usize {
 /// Errors ([`HoloError::InvalidData`] naming the file): a missing capture, one that is a folder or a device,
 /// captures of different sizes or smaller than the window, an all-black capture, one with more than half of
 /// its pixels saturated; read errors as [`crate::slm::captures::read_png_downsampled`].
-pub fn load_windows(
+pub(crate) fn load_windows(
     plan: &SpotPlan,
     dir: &Path,
     c: usize,
