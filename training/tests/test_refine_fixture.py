@@ -18,8 +18,12 @@ def test_the_committed_fixture_is_autograds(tmp_path):
     meta = make_refine_fixture.make(tmp_path)
     committed = json.loads((FIXTURE / "meta.json").read_text())
     assert abs(meta["loss"] - committed["loss"]) <= 1e-6 * committed["loss"]
-    for name in ("phase", "target"):
-        np.testing.assert_array_equal(np.load(tmp_path / f"{name}.npy"), np.load(FIXTURE / f"{name}.npy"))
+    # The phase is NumPy's seeded draw: bit for bit. The target goes through torch's FFT (the focal stack of
+    # another pattern), whose float32 rounding depends on the machine: equal to a few ulps (an Intel Sapphire
+    # Rapids VM differs from the committed file by at most 2.4e-7 of 1.25, 9e-6 relative at a small value).
+    np.testing.assert_array_equal(np.load(tmp_path / "phase.npy"), np.load(FIXTURE / "phase.npy"))
+    got_target, want_target = np.load(tmp_path / "target.npy"), np.load(FIXTURE / "target.npy")
+    assert np.abs(got_target - want_target).max() <= 1e-6 * np.abs(want_target).max()
     got, want = np.load(tmp_path / "gradient.npy"), np.load(FIXTURE / "gradient.npy")
     assert np.abs(got - want).max() <= 1e-5 * np.abs(want).max()
 
