@@ -15,7 +15,7 @@
 //! - `plan`: `CnnPlan`, one CNN at one resolution, whatever engine runs it;
 //! - `engine`: `Engine`, what an engine answers (can it run this model, its timing, its plans);
 //! - `native/`: our direct 3×3 convolutions (`tensorholo-kernels`, SIMD rows chosen at run time) over the
-//!   graph read by [`crate::model::graph`]; f32 and int8 QDQ files;
+//!   graph read by `model::graph`; f32 and int8 QDQ files;
 //! - `tract/` (cargo feature `tract`): tract's optimised plans, any ONNX graph that passes the contract
 //!   (`docs/CONVENTIONS.md` §7), with its own per-model plan cache (`tract::TractModel`);
 //! - `select`: the engine of a session ([`CnnEngine::Auto`] times those that can run the file),

@@ -12,7 +12,7 @@
 //! 3. its graph inputs/outputs are checked against the contract (hologram CNN: `rgbd` `[1,4L,H,W]` →
 //!    `amplitude`, `phase` `[1,3,H,W]`; pre-filter (format 2): `slm_field` `[1,6,H,W]` = `[Re H, Im H]` →
 //!    `real`, `imag` `[1,3,H,W]`; f32 → otherwise [`HoloError::ModelContract`](crate::HoloError));
-//! 4. the engines read it: the native CPU engine and the GPU path through [`CnnWeights`] (the graph read as
+//! 4. the engines read it: the native CPU engine and the GPU path through `CnnWeights` (the graph read as
 //!    the TensorHolo residual CNN, `model/graph.rs`, cached in the model); tract (cargo feature `tract`) from
 //!    the file's bytes, in its own per-model cache (`cnn/tract/`).
 //!
@@ -21,13 +21,13 @@
 //! residual CNN (and every int8 QOperator file), naming the feature.
 //!
 //! Files: `onnx` (the schema's fields the SDK reads), `metadata` (the `tensorholo.*` keys and the display
-//! check), `network` ([`HologramModel`]), `graph` ([`CnnWeights`]), `contract` (input packing, heads → field),
+//! check), `network` ([`HologramModel`]), `graph` (`CnnWeights`), `contract` (input packing, heads → field),
 //! `embedded` (the shipped files).
 
 pub mod contract;
 #[cfg(feature = "embedded-models")]
 pub mod embedded;
-pub mod graph;
+pub(crate) mod graph;
 mod metadata;
 pub(crate) mod network;
 pub(crate) mod onnx;
@@ -134,7 +134,7 @@ impl std::fmt::Display for Precision {
 }
 
 pub use contract::{head_to_phasor, heads_to_field};
-pub use graph::{CnnOutput, CnnQuant, CnnWeights, ConvLayer, LayerQuant, QuantGrid};
+pub(crate) use graph::{CnnOutput, CnnQuant, CnnWeights, ConvLayer, LayerQuant, QuantGrid};
 pub use metadata::{
     ModelConfig, ModelKind, ModelMetadata, FORMAT_VERSION, METADATA_PREFIX,
     PREFILTER_FORMAT_VERSION,

@@ -24,7 +24,7 @@ pub const BLOCK_COLUMNS: usize = 16;
 ///
 /// The caller owns the scratch space (`Fft2::scratch_len` complex values), so the hot path allocates nothing.
 #[derive(Clone)]
-pub struct Fft2 {
+pub(crate) struct Fft2 {
     height: usize,
     width: usize,
     row_forward: Arc<dyn Fft<f32>>,

@@ -223,7 +223,7 @@ pub struct Refiner {
 /// `Refiner::score_planes`, so that a score at other planes needs no second set of FFT and field buffers
 /// (at 1080p, 0.2 GB less than a second refiner).
 #[derive(Debug)]
-pub struct PlaneSet {
+pub(crate) struct PlaneSet {
     target: FocalTarget,
     colours: Vec<ColourModel>,
     energy: [f64; 3],

@@ -12,7 +12,7 @@
 //! (`code = 256·φ/2π`). The user shows each pattern and photographs the focal plane at `d` through the
 //! display's optics.
 //!
-//! **Model** ([`model::SpotModel`]): what the camera sees is `I_k = |F⁻¹{circ(ρ)·exp(i(Z_a + D_k + tilt))}|²`,
+//! **Model** (`model::SpotModel`): what the camera sees is `I_k = |F⁻¹{circ(ρ)·exp(i(Z_a + D_k + tilt))}|²`,
 //! `Z_a` the display's aberration at `d` (Eq. 14–18), on an `n × n` window ([`SpotPlan::window_px`]) of camera
 //! pixels, integrated over each pixel. `camera_scale = S` ([`SpotPlan::camera_scale`]) is the number of
 //! camera pixels per SLM pixel pitch in the focal plane (the camera's magnification over its pixel pitch
@@ -35,7 +35,7 @@
 //! the model's discretisation, to try the loop without hardware.
 
 pub mod fit;
-pub mod model;
+pub(crate) mod model;
 mod patterns;
 pub mod simulate;
 pub mod windows;
@@ -50,7 +50,6 @@ use crate::optics::{OpticalSetup, ZernikeCoefficients};
 pub(crate) use patterns::fft2;
 
 pub use fit::{fit_captures, FitOptions, FitReport};
-pub use model::SpotModel;
 
 /// Value of `plan.json`'s `format` field.
 pub const PLAN_FORMAT: &str = "tensorholo.aberration-plan";
@@ -297,7 +296,7 @@ impl SpotPlan {
                 ),
             ));
         }
-        SpotModel::new(self.window_px, self.camera_scale).map(|_| ())
+        model::SpotModel::new(self.window_px, self.camera_scale).map(|_| ())
     }
 
     /// The plan's colours as indices 0–2 (R, G, B). Errors: [`HoloError::InvalidParameter`] (`colours`) for

@@ -156,11 +156,6 @@ impl SpotModel {
         self.n
     }
 
-    /// Camera pixels per SLM pixel pitch at the focal plane.
-    pub fn camera_scale(&self) -> f64 {
-        self.camera_scale
-    }
-
     /// The pupil radius in frequency bins of the window, `n/(2·camera_scale)` (what the tests check the
     /// simulated spot against).
     #[cfg(test)]
