@@ -13,6 +13,7 @@ mod compare;
 mod dataset;
 mod display;
 mod encode;
+mod fovea;
 mod memory;
 mod model_args;
 mod output;

@@ -217,9 +217,11 @@ pub struct ModelArgs {
     #[arg(long, allow_hyphen_values = true, conflicts_with_all = ["aberration", "prefilter"])]
     pub prescription: Option<String>,
     /// Focal length of the display's eyepiece in millimetres, for --prescription (the viewer's pupil sits at
-    /// its back focal plane; default: the paper's 21 mm).
-    #[arg(long, requires = "prescription")]
+    /// its back focal plane) and --fovea-deg (degrees of visual angle); default: the paper's 21 mm.
+    #[arg(long)]
     pub eyepiece_mm: Option<f64>,
+    #[command(flatten)]
+    pub fovea: crate::fovea::FoveaArgs,
     #[command(flatten)]
     pub encoding: crate::args::EncodingArgs,
     #[command(flatten)]
@@ -372,6 +374,13 @@ impl ModelArgs {
     fn config(&self, profile: Option<&DisplayProfile>) -> Result<PipelineConfig> {
         let offset_mm = self.offset_mm(profile);
         crate::args::check_offset_mm(offset_mm)?;
+        if self.eyepiece_mm.is_some()
+            && self.prescription.is_none()
+            && self.fovea.fovea_deg.is_none()
+            && self.fovea.gaze.is_none()
+        {
+            bail!("--eyepiece-mm applies to --prescription and to --gaze/--fovea-deg: give one of them");
+        }
         if let (Some(given), Some(p)) = (self.offset_mm, profile) {
             offset_against_profile(given, p);
         }
@@ -384,6 +393,7 @@ impl ModelArgs {
             backend: self.backend.into(),
             gpu_precision: self.gpu_precision.into(),
             wavelength_ratio_tolerance: self.wavelength_ratio_tolerance,
+            foveation: self.fovea.options(self.eyepiece_mm)?,
             cnn: CnnOptions {
                 layout: self.layout.into(),
                 engine: self.engine.into(),

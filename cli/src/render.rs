@@ -71,6 +71,7 @@ Examples:
 pub fn run(args: &RenderArgs) -> Result<()> {
     let t_all = Instant::now();
     let refine = args.refine.request(false)?;
+    let gaze = args.model.fovea.gaze()?;
     // The display profile, read once: a bad one stops the command before anything is written; the files it
     // names are inputs too.
     let profile = args.model.profile()?;
@@ -126,9 +127,15 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             .join(" + "),
     };
     let mut render = || -> Result<FrameTimings> {
-        let out = match &scene {
-            Scene::Frame(frame) => session.render(frame),
-            Scene::Ldi(ldi) => session.render_ldi(ldi),
+        let out = match (&scene, &gaze) {
+            (Scene::Frame(frame), Some(gaze)) => session.render_foveated(frame, gaze),
+            (Scene::Frame(frame), None) => session.render(frame),
+            (Scene::Ldi(_), Some(_)) => {
+                anyhow::bail!(
+                    "--gaze: foveated frames take an RGB-D frame, not a layered depth image"
+                )
+            }
+            (Scene::Ldi(ldi), None) => session.render_ldi(ldi),
         };
         Ok(out.with_context(what)?.timings)
     };
@@ -173,9 +180,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     // The peak up to here: the inputs, the session and its frames (the previews' share is reported apart).
     let frames_peak = crate::memory::peak_rss_mib();
     // The previews and reconstructions below need only the last frame: the session's buffers go first.
-    let (plan_report, backend_report) = (
+    let (plan_report, backend_report, fovea) = (
         session.plan_report().clone(),
         session.backend_report().clone(),
+        session.fovea_report().copied(),
     );
     let (mut out, heads) = session.into_last_frame();
     let heads = heads.context("no frame rendered")?;
@@ -228,6 +236,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 report["refine"] = refine.clone();
             }
             report["frames_peak_rss_mib"] = json!(frames_peak);
+            if let Some(fovea) = &fovea {
+                report["fovea"] = json!(fovea);
+            }
         },
     )?;
     log::info!(

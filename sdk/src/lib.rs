@@ -43,6 +43,8 @@
 //!   previews).
 //! - [`refine`]: focal-stack refinement of an SLM pattern (Adam with the loss's analytic gradient),
 //!   warm-started from the CNN's codes, aimed at SM-LBM's focal stack (`docs/REFINE.md`).
+//! - [`foveation`]: gaze-contingent holograms: the 3D CNN in the fovea, a 2D hologram with synthetic blur
+//!   elsewhere (the paper's Discussion; `docs/FOVEATION.md`).
 //! - [`metrics`]: PSNR and SSIM.
 //! - [`evaluation`]: the paper's Table 2 protocol (amplitude and focal-stack PSNR/SSIM against SM-LBM).
 //! - [`model`]: the hologram and pre-filter CNNs as files (ONNX), engine-neutral: metadata, I/O contract,
@@ -120,6 +122,7 @@ pub mod display;
 pub mod encoding;
 pub mod error;
 pub mod evaluation;
+pub mod foveation;
 pub mod generator;
 #[cfg(feature = "gpu")]
 pub mod gpu;

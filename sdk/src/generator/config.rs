@@ -248,6 +248,7 @@ impl GeneratorConfig {
             backend: self.backend,
             gpu_precision: self.gpu_precision,
             wavelength_ratio_tolerance: self.wavelength_ratio_tolerance,
+            foveation: None,
         }
     }
 

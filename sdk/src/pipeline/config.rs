@@ -5,6 +5,7 @@
 use crate::cnn::CnnOptions;
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
+use crate::foveation::FoveationOptions;
 use crate::model::ModelConfig;
 use crate::optics::{OpticalSetup, PropagationOptions};
 
@@ -135,6 +136,10 @@ pub struct PipelineConfig {
     /// estimated cost stays within [`crate::display::MAPPING_COST_BUDGET_DB`] of the model's own score. A
     /// wider value shows in [`HologramPipeline::display_mapping`](crate::pipeline::HologramPipeline::display_mapping).
     pub wavelength_ratio_tolerance: Option<f64>,
+    /// Foveated frames ([`HologramSession::render_foveated`](crate::pipeline::HologramSession::render_foveated),
+    /// `docs/FOVEATION.md`): the fovea, its blend band and the periphery's blur; `None` (the default): a
+    /// session plans no tile and renders full frames only.
+    pub foveation: Option<FoveationOptions>,
 }
 
 impl Default for PipelineConfig {
@@ -148,6 +153,7 @@ impl Default for PipelineConfig {
             backend: Backend::default(),
             gpu_precision: GpuPrecision::default(),
             wavelength_ratio_tolerance: None,
+            foveation: None,
         }
     }
 }

@@ -70,6 +70,9 @@ pub struct FrameTimings {
     /// packing of an LDI or an intensity-mapped frame).
     /// `holo bench --backend gpu` times the GPU stages one by one. 0 on the CPU backend.
     pub gpu_s: f64,
+    /// A foveated frame's periphery ([`crate::foveation`]): the gaze's depth, the synthetic blur and the blend
+    /// with the tile's CNN heads (0 for a full frame).
+    pub periphery_s: f64,
     /// The whole frame (in a stream: from the end of the previous frame, i.e. the frame period).
     pub total_s: f64,
 }
@@ -92,6 +95,7 @@ impl FrameTimings {
             prefilter_s: m(|t| t.prefilter_s),
             encoding_s: m(|t| t.encoding_s),
             gpu_s: m(|t| t.gpu_s),
+            periphery_s: m(|t| t.periphery_s),
             total_s: m(|t| t.total_s),
         }
     }

@@ -27,7 +27,8 @@
 //! - `colour`, `workers`: one colour's optics and the three allocation-free worker threads;
 //! - `cnn_stage`: input packing and the hologram CNN on a `CnnPlan` (tract, or the native engine);
 //! - `executor`, `gpu_frame`: whole-frame accelerators behind one trait, and the GPU's;
-//! - `session`: [`HologramSession`] and its CPU frame; `setup`: how a session is built (checks, the choice of
+//! - `session`: [`HologramSession`] and its CPU frame; `foveated`: its foveated frames (the CNN on a tile
+//!   around the gaze, [`crate::foveation`]); `setup`: how a session is built (checks, the choice of
 //!   an executor, the CNN plans, the colour states); `accelerated`: its frames on an accelerator (fallback,
 //!   first-frame self-check, previews, stage timings); `stream`: its streams.
 
@@ -37,6 +38,7 @@ mod colour;
 pub(crate) mod config;
 mod correction;
 mod executor;
+mod foveated;
 pub(crate) mod frame;
 #[cfg(feature = "gpu")]
 mod gpu_frame;

@@ -60,6 +60,12 @@ pub struct HologramSession {
     /// Whether the hologram CNN corrects the aberrations itself (trained for them): no kernel is applied.
     pub(super) corrected_by_cnn: bool,
     pub(super) accelerator: Option<Accelerator>,
+    /// The foveated frames' state ([`HologramSession::render_foveated`]); `None` without
+    /// [`PipelineConfig::foveation`](crate::pipeline::PipelineConfig::foveation).
+    pub(super) foveated: Option<Box<super::foveated::FoveatedState>>,
+    /// The double phase normaliser of the frame being encoded where it does not come from the field (a
+    /// foveated frame's, [`crate::foveation::FOVEATED_NORMALISER_GAIN`]); `None`: the field's largest `|H|`.
+    pub(super) fixed_normaliser: Option<f32>,
 }
 
 impl HologramSession {
@@ -239,7 +245,7 @@ impl HologramSession {
 
     /// [`HologramSession::encode_heads`] for heads in standard layout, shared with the colour workers (no
     /// copy); they become [`HologramSession::last_heads`] with full outputs.
-    fn encode_shared(&mut self, heads: Arc<Heads>, cnn_s: f64) -> Result<&SlmFrame> {
+    pub(super) fn encode_shared(&mut self, heads: Arc<Heads>, cnn_s: f64) -> Result<&SlmFrame> {
         self.last_heads = None;
         let t0 = Instant::now();
         self.propagate_to_slm(&heads)?;
@@ -254,7 +260,7 @@ impl HologramSession {
     /// colour workers check the heads are finite as they turn them into fields); no heads are kept.
     ///
     /// Errors: [`HoloError::InvalidData`] for non-finite heads; as [`HologramSession::encode_heads`].
-    fn encode_loaded(&mut self, cnn_s: f64) -> Result<&SlmFrame> {
+    pub(super) fn encode_loaded(&mut self, cnn_s: f64) -> Result<&SlmFrame> {
         self.last_heads = None;
         let t0 = Instant::now();
         let prefilter = self.prefilter.is_some();
@@ -293,6 +299,7 @@ impl HologramSession {
             prefilter_s,
             encoding_s,
             gpu_s: 0.0,
+            periphery_s: 0.0,
             total_s: cnn_s + t0.elapsed().as_secs_f64(),
         };
         self.output.backend = Backend::Cpu;
@@ -367,6 +374,7 @@ impl HologramSession {
         }
         let (h, w) = (self.height, self.width);
         let (a, mean) = normaliser(&stats, h * w)?;
+        let a = self.fixed_normaliser.unwrap_or(a);
         let (full, calibration, optics) = (self.full_outputs, &self.calibration, &self.optics);
         let states = colour_states(&mut self.states)?;
         let (Some(phase_out), Some(codes_out)) = (
@@ -469,7 +477,9 @@ fn phase_planes(output: &mut SlmFrame) -> Result<[&mut [f32]; 3]> {
 }
 
 /// The three colour states, each borrowed on its own. Errors: as [`lost_state`] if a worker kept one.
-fn colour_states(states: &mut [Option<Box<ColourState>>; 3]) -> Result<[&mut ColourState; 3]> {
+pub(super) fn colour_states(
+    states: &mut [Option<Box<ColourState>>; 3],
+) -> Result<[&mut ColourState; 3]> {
     let [r, g, b] = states;
     match (r.as_deref_mut(), g.as_deref_mut(), b.as_deref_mut()) {
         (Some(r), Some(g), Some(b)) => Ok([r, g, b]),

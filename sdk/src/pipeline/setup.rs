@@ -11,6 +11,7 @@ use super::colour::ColourState;
 use super::config::{Backend, MAX_HOLOGRAM_PIXELS};
 use super::correction::{AberrationReport, PupilCorrection};
 use super::executor::{Accelerator, BackendReportParts};
+use super::foveated::FoveatedState;
 use super::frame::{FrameTimings, SlmFrame};
 use super::models::HologramPipeline;
 use super::pool::OpticsPool;
@@ -105,6 +106,16 @@ impl HologramSession {
                     .transpose()
             })
             .collect::<Result<Vec<_>>>()?;
+        let foveated = match cfg.foveation {
+            Some(options) => Some(Box::new(FoveatedState::new(
+                pipeline,
+                options,
+                &request,
+                (height, width),
+                std::thread::available_parallelism().map_or(1, |n| n.get()),
+            )?)),
+            None => None,
+        };
         let n = height * width;
         let mut states: [Option<Box<ColourState>>; 3] = [None, None, None];
         for (colour, ((slot, prop), transfer)) in
@@ -158,6 +169,8 @@ impl HologramSession {
             correction: None,
             corrected_by_cnn: pipeline.corrected_by_cnn(),
             accelerator,
+            foveated,
+            fixed_normaliser: None,
         }
         .with_aberration(pipeline.aberration().cloned())
     }

@@ -1,0 +1,339 @@
+//! A session's foveated frames ([`HologramSession::render_foveated`]; [`crate::foveation`]): the hologram CNN
+//! on a tile around the gaze, the periphery's 2D hologram with synthetic blur, their blend, then the rest of
+//! the CPU frame (offset propagation, pre-filter, encoding) on the composed midpoint hologram, with a
+//! normaliser that does not follow the gaze.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use ndarray::{s, Array3};
+
+use super::cnn_stage::CnnStage;
+use super::colour::ColourState;
+use super::frame::{check_not_black, max_and_finite, Heads, SlmFrame};
+use super::models::HologramPipeline;
+use super::session::{colour_states, HologramSession};
+use crate::cnn::{CnnPlans, PlanRequest};
+use crate::error::{invalid, HoloError, Result};
+use crate::foveation::{
+    gaze_depth, ColourInputs, FoveaReport, FoveationOptions, FrameInputs, Gaze, GazeDepthSource,
+    Periphery, TileGeometry, FOVEATED_NORMALISER_GAIN,
+};
+use crate::model::contract;
+use crate::scene::RgbdFrame;
+
+/// What a foveated session keeps between frames: the tile's CNN and buffers, the periphery's tables, the
+/// last frame's report.
+#[derive(Debug)]
+pub(super) struct FoveatedState {
+    radius_deg: Option<f64>,
+    /// The hologram CNN's plan for the tile (same engine and options as the frame's), with its input buffer.
+    cnn: CnnStage,
+    /// The tile's heads: amplitude R, G, B then phase R, G, B, `T_h·T_w` values each.
+    heads: Vec<f32>,
+    periphery: Periphery,
+    /// `κ·V·λ/(2p²)` per colour: the blur radius at a depth difference of 1, pixels.
+    blur_px: [f64; 3],
+    /// The display's volume depth, metres.
+    volume_m: f64,
+    pub(super) report: Option<FoveaReport>,
+}
+
+impl FoveatedState {
+    /// The foveated state of `pipeline`'s sessions at `height × width`: the tile's geometry from the options
+    /// and the hologram CNN's receptive radius, its plan (made as the frame's, [`crate::cnn::select`]), the
+    /// periphery's buffers for `threads` threads.
+    ///
+    /// Errors: the options' ([`FoveationOptions`]); the CNN engine's plan errors.
+    pub(super) fn new(
+        pipeline: &HologramPipeline,
+        options: FoveationOptions,
+        request: &PlanRequest,
+        (height, width): (usize, usize),
+        threads: usize,
+    ) -> Result<Self> {
+        let optics = pipeline.config().optics;
+        let (radius_px, radius_deg) = options.radius_px(optics.pixel_pitch_m)?;
+        let model = pipeline.hologram_model();
+        // A 3 × 3 convolution reaches one pixel further: the receptive radius is the number of convolutions
+        // (the graph's where the native reader knows it, else the file's declared layers).
+        let margin = model
+            .cnn_graph()
+            .map_or(model.metadata().layers, |g| g.layers.len());
+        let geometry = TileGeometry::new(radius_px, options.band_px, margin, height, width);
+        let (th, tw) = geometry.tile;
+        let CnnPlans { hologram, .. } = crate::cnn::select(model, None, th, tw, request)?;
+        let p = optics.pixel_pitch_m;
+        let blur_px = optics
+            .wavelengths_m
+            .map(|l| options.blur_scale * optics.volume_depth_m * l / (2.0 * p * p));
+        let max_blur = blur_px.iter().copied().fold(0.0, f64::max);
+        let (c, _, _) = hologram.input_dim();
+        Ok(Self {
+            radius_deg,
+            cnn: CnnStage {
+                plan: hologram,
+                input: Array3::zeros((c, th, tw)),
+                calibration: pipeline.calibration().cloned(),
+                depth_fraction: pipeline.display_mapping().depth_fraction() as f32,
+            },
+            heads: vec![0.0; 6 * th * tw],
+            periphery: Periphery::new(geometry, max_blur, threads),
+            blur_px,
+            volume_m: optics.volume_depth_m,
+            report: None,
+        })
+    }
+
+    /// Packs the tile at `origin` of the frame's planes (amplitude R, G, B, depth) into the tile CNN's input,
+    /// as [`CnnStage::pack_frame`] packs a frame: the calibration's intensity maps on the amplitudes, the
+    /// display's depth fraction on the depth, empty back layers for an LDI CNN.
+    fn pack_tile(&mut self, planes: [&[f32]; 4], width: usize, (oy, ox): (usize, usize)) {
+        let (c, th, tw) = self.cnn.input.dim();
+        let k = self.cnn.depth_fraction;
+        for (i, src) in planes.iter().enumerate() {
+            let scale = (i < 3)
+                .then(|| {
+                    self.cnn
+                        .calibration
+                        .as_ref()
+                        .and_then(|cal| cal.colours[i].intensity_scale.as_ref())
+                        .and_then(|m| m.as_slice())
+                })
+                .flatten();
+            let mut dst = self.cnn.input.slice_mut(s![i, .., ..]);
+            for (ty, mut row) in dst.outer_iter_mut().enumerate() {
+                let start = (oy + ty) * width + ox;
+                let src = &src[start..start + tw];
+                match (i, scale) {
+                    (3, _) if k != 1.0 => {
+                        row.iter_mut()
+                            .zip(src)
+                            .for_each(|(o, &d)| *o = 0.5 + (d - 0.5) * k);
+                    }
+                    (_, Some(scale)) => {
+                        let scale = &scale[start..start + tw];
+                        row.iter_mut()
+                            .zip(src.iter().zip(scale))
+                            .for_each(|(o, (&a, &s))| *o = a * s);
+                    }
+                    _ => row.iter_mut().zip(src).for_each(|(o, &v)| *o = v),
+                }
+            }
+        }
+        contract::fill_empty_layers(self.cnn.input.view_mut(), 1, c / 4);
+        debug_assert_eq!(self.cnn.input.dim(), (c, th, tw));
+    }
+}
+
+impl HologramSession {
+    /// Renders one RGB-D frame foveated on `gaze` (`docs/FOVEATION.md`; [`crate::foveation`]): the hologram
+    /// CNN runs on a tile around the gaze (the fovea, its blend band and the CNN's receptive radius), the rest
+    /// of the midpoint hologram is the paper's 2D hologram with synthetic blur, in focus at the gaze's depth;
+    /// offset propagation, pre-filter and encoding then run on the whole frame. Inside the fovea the field
+    /// is the full frame's CNN field; the double phase normaliser is
+    /// [`FOVEATED_NORMALISER_GAIN`]` · max A`, the same for every gaze. A fovea that covers the frame renders
+    /// the frame as [`HologramSession::render`] does, bit for bit. The tile has one size for every gaze (one
+    /// plan, made with the session) and nothing is allocated per frame once the first has run.
+    /// [`HologramSession::fovea_report`] says what the frame did. Runs on the CPU (a session on the GPU runs
+    /// its foveated frames on its CPU frame).
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] naming `foveation` (a session made without
+    /// [`PipelineConfig::foveation`](crate::pipeline::PipelineConfig::foveation)), `gaze` or `gaze_depth_m`
+    /// ([`Gaze`]); otherwise as [`HologramSession::render`]. The session stays usable after an error.
+    pub fn render_foveated(&mut self, frame: &RgbdFrame, gaze: &Gaze) -> Result<&SlmFrame> {
+        let t = Instant::now();
+        let Some(mut fov) = self.foveated.take() else {
+            return Err(invalid(
+                "foveation",
+                "this session was made without foveation options (PipelineConfig::foveation)",
+            ));
+        };
+        let result = self.foveated_frame(&mut fov, frame, gaze, t);
+        self.foveated = Some(fov);
+        result?;
+        Ok(&self.output)
+    }
+
+    /// What the last foveated frame did (gaze, its depth, the fovea, the tile, the share of the frame the
+    /// CNN ran on); `None` before the first or after a frame that failed.
+    pub fn fovea_report(&self) -> Option<&FoveaReport> {
+        self.foveated.as_ref().and_then(|f| f.report.as_ref())
+    }
+
+    fn foveated_frame(
+        &mut self,
+        fov: &mut FoveatedState,
+        frame: &RgbdFrame,
+        gaze: &Gaze,
+        t: Instant,
+    ) -> Result<()> {
+        fov.report = None;
+        let (h, w) = (self.height, self.width);
+        gaze.check(h, w)?;
+        if frame.amplitude.dim() != (3, h, w) || frame.depth.dim() != (h, w) {
+            return Err(HoloError::ShapeMismatch {
+                what: "RGB-D frame vs the session's [H, W]".into(),
+                expected: vec![h, w],
+                got: vec![frame.height(), frame.width()],
+            });
+        }
+        let geometry = *fov.periphery.geometry();
+        let (radius_px, band_px) = (geometry.radius_px, geometry.band_px);
+        let mut report = FoveaReport {
+            gaze: *gaze,
+            gaze_depth: 0.0,
+            gaze_depth_source: GazeDepthSource::Scene,
+            radius_px,
+            radius_deg: fov.radius_deg,
+            band_px,
+            cnn_margin_px: geometry.margin,
+            tile: [0, 0, h, w],
+            cnn_share: 1.0,
+            covers_frame: true,
+            periphery_phase_rad: [0.0; 3],
+        };
+        if geometry.covers_frame(gaze) {
+            self.render(frame)?;
+            fov.report = Some(report);
+            return Ok(());
+        }
+        let amplitude = frame.amplitude.as_standard_layout();
+        let depth = frame.depth.as_standard_layout();
+        let (Some(amplitude), Some(depth)) = (amplitude.as_slice(), depth.as_slice()) else {
+            return Err(HoloError::Internal("standard layout is contiguous".into()));
+        };
+        let (r, gb) = amplitude.split_at(h * w);
+        let (g, b) = gb.split_at(h * w);
+        let planes = [r, g, b, depth];
+        // The frame's checks (as the CNN stage's): finite values, not black; the normaliser's `max A` after
+        // the intensity maps, which the periphery shows.
+        let scales = [0, 1, 2].map(|c| {
+            self.calibration
+                .as_ref()
+                .and_then(|cal| cal.colours[c].intensity_scale.as_ref())
+                .and_then(|m| m.as_slice())
+        });
+        let mut brightest = 0.0f32;
+        for (plane, scale) in planes[..3].iter().zip(scales) {
+            let (m, finite) = max_and_finite(plane);
+            if !finite {
+                return Err(HoloError::InvalidData(
+                    "the RGB-D frame holds NaN or infinite values".into(),
+                ));
+            }
+            let m = match scale {
+                Some(s) => plane.iter().zip(s).fold(0.0f32, |m, (&a, &s)| m.max(a * s)),
+                None => m,
+            };
+            brightest = brightest.max(m);
+        }
+        if !max_and_finite(depth).1 {
+            return Err(HoloError::InvalidData(
+                "the RGB-D frame's depth holds NaN or infinite values".into(),
+            ));
+        }
+        check_not_black(brightest)?;
+
+        let t_periphery = Instant::now();
+        let d_g = match gaze.depth_m {
+            Some(z) => {
+                report.gaze_depth_source = GazeDepthSource::Given;
+                (0.5 - z / fov.volume_m).clamp(0.0, 1.0) as f32
+            }
+            None => gaze_depth(depth, (h, w), gaze, &mut fov.periphery.window),
+        };
+        let mut periphery_s = t_periphery.elapsed().as_secs_f64();
+        let origin = geometry.origin(gaze);
+
+        // The tile's CNN.
+        let t_cnn = Instant::now();
+        fov.pack_tile(planes, w, origin);
+        let (th, tw) = geometry.tile;
+        {
+            let [a0, a1, a2, p0, p1, p2] = tile_planes(&mut fov.heads, th * tw);
+            let input = CnnStage::planes_of(&fov.cnn.input);
+            fov.cnn
+                .plan
+                .run_planes_into(&input, [a0, a1, a2, p0, p1, p2])?;
+        }
+        let cnn_s = t_cnn.elapsed().as_secs_f64();
+
+        // The composed midpoint hologram, written where the colour workers read heads.
+        let t_compose = Instant::now();
+        let n = th * tw;
+        let tile_heads = |c: usize| {
+            (
+                &fov.heads[c * n..(c + 1) * n],
+                &fov.heads[(3 + c) * n..(4 + c) * n],
+            )
+        };
+        let colours = [0, 1, 2].map(|c| ColourInputs {
+            amplitude: planes[c],
+            scale: scales[c],
+            tile_heads: tile_heads(c),
+            blur_px: fov.blur_px[c],
+        });
+        let inputs = FrameInputs {
+            depth,
+            gaze: (gaze.x, gaze.y),
+            gaze_depth: d_g,
+            origin,
+        };
+        let periphery = &fov.periphery;
+        let previous = self.last_heads.take();
+        let shared = if self.full_outputs {
+            let fits = |a: &Array3<f32>| a.dim() == (3, h, w) && a.is_standard_layout();
+            let mut shared = match previous {
+                Some(p) if Arc::strong_count(&p) == 1 && fits(&p.amplitude) && fits(&p.phase) => p,
+                _ => Arc::new(Heads::zeros(h, w)),
+            };
+            let Some(out) = Arc::get_mut(&mut shared).and_then(Heads::planes_mut) else {
+                return Err(HoloError::Internal(
+                    "the kept heads are not writable".into(),
+                ));
+            };
+            report.periphery_phase_rad = self
+                .optics
+                .run(|| periphery.compose(inputs, colours, out))?;
+            Some(shared)
+        } else {
+            drop(previous);
+            let [(a0, p0), (a1, p1), (a2, p2)] =
+                colour_states(&mut self.states)?.map(ColourState::planes);
+            let out = [a0, a1, a2, p0, p1, p2];
+            report.periphery_phase_rad = self
+                .optics
+                .run(|| periphery.compose(inputs, colours, out))?;
+            None
+        };
+        periphery_s += t_compose.elapsed().as_secs_f64();
+
+        // The rest of the frame, with the gaze-independent normaliser.
+        self.fixed_normaliser = Some(FOVEATED_NORMALISER_GAIN * brightest);
+        let encoded = match shared {
+            Some(heads) => self.encode_shared(heads, cnn_s).map(|_| ()),
+            None => self.encode_loaded(cnn_s).map(|_| ()),
+        };
+        self.fixed_normaliser = None;
+        encoded?;
+        self.output.timings.periphery_s = periphery_s;
+        self.output.timings.total_s = t.elapsed().as_secs_f64();
+        report.gaze_depth = f64::from(d_g);
+        report.tile = [origin.0, origin.1, th, tw];
+        report.cnn_share = geometry.share();
+        report.covers_frame = false;
+        fov.report = Some(report);
+        Ok(())
+    }
+}
+
+/// The six `n`-value planes of the tile's heads buffer.
+fn tile_planes(buf: &mut [f32], n: usize) -> [&mut [f32]; 6] {
+    let (a0, rest) = buf.split_at_mut(n);
+    let (a1, rest) = rest.split_at_mut(n);
+    let (a2, rest) = rest.split_at_mut(n);
+    let (p0, rest) = rest.split_at_mut(n);
+    let (p1, p2) = rest.split_at_mut(n);
+    [a0, a1, a2, p0, p1, p2]
+}
