@@ -28,6 +28,8 @@ use tensorholo::scene::procedural;
 use tensorholo::synthesis::SceneLayer;
 
 use crate::args::parse_size;
+
+mod fovea;
 use crate::model_args::{BackendArg, EngineArg, GpuPrecisionArg, LayoutArg, PrecisionArg};
 
 /// Arguments of `holo bench`.
@@ -105,6 +107,11 @@ pub struct BenchArgs {
     /// the loss never saw.
     #[arg(long, value_name = "N")]
     refine: Option<usize>,
+    /// Also time foveated frames (docs/FOVEATION.md): a fovea of each of these radii in degrees (behind the
+    /// paper's 21 mm eyepiece, gaze at the centre) beside the full frame, timed alternately, per stage, for
+    /// every --sizes × --layers × --precision × --threads case.
+    #[arg(long, value_name = "DEGREES", value_delimiter = ',')]
+    fovea_deg: Vec<f64>,
     /// Also write every measurement to this JSON file.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -773,6 +780,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             }
         }
         println!();
+    }
+    if !args.fovea_deg.is_empty() {
+        fovea::fovea_table(args, &plans, &mut results)?;
     }
     if args.backend.contains(&BackendArg::Gpu) {
         gpu_tables(args, &mut results)?;

@@ -12,8 +12,9 @@
 //!   blurred per pixel by a square of the area of a disc of radius
 //!   `κ·|d − d_g|·V·λ/(2p²)` pixels (`d` the pixel's normalised depth, `d_g` the gaze's, `V` the volume
 //!   depth, `λ` the colour's wavelength, `p` the pixel pitch; `κ = 1` would be the `λ/(2p)` diffraction cone),
-//!   placed at the midpoint plane with one constant phase per colour: the phase that best matches the CNN's
-//!   field in the band (`arg Σ_band U_cnn·A_2D`), so that the blend has no dark ring.
+//!   placed at the midpoint plane with one constant phase per colour: the phase that best aligns the CNN's
+//!   field in the band with the image's amplitude there (`arg Σ_band U_cnn·A`), so that the blend has no dark
+//!   ring.
 //!
 //! The rest of the frame (offset propagation, pre-filter, double phase encoding) runs on the composed
 //! midpoint hologram as on a full frame. The double phase normaliser follows a rule that does not depend on
@@ -47,7 +48,7 @@ pub const DEFAULT_BAND_PX: f64 = 16.0;
 /// on one frame give the same normaliser, bit for bit. The gain is the largest ratio of the full frame's
 /// normaliser to `max A` measured on the real frames of the tests (`docs/FOVEATION.md`, "The normaliser"), so
 /// the fovea clips no more than a bright full frame would.
-pub const FOVEATED_NORMALISER_GAIN: f32 = 1.5;
+pub const FOVEATED_NORMALISER_GAIN: f32 = 1.25;
 
 /// The size of the fovea: an angle of view behind the display's eyepiece, or pixels of the SLM.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]

@@ -76,6 +76,8 @@ pub(crate) struct Periphery {
     /// The largest box half-width any pixel can ask for (`⌊h⌋ + 1` at the largest depth difference).
     reach: usize,
     tables: Vec<Mutex<Vec<f64>>>,
+    /// `1/(2k + 1)²` for `k ≤ reach`: the area of a box the frame does not clip.
+    inv_area: Vec<f64>,
     /// The gaze window's depths ([`gaze_depth`]).
     pub(crate) window: Vec<f32>,
 }
@@ -97,6 +99,9 @@ impl Periphery {
             band_rows,
             reach,
             tables,
+            inv_area: (0..=reach)
+                .map(|k| 1.0 / ((2 * k + 1) * (2 * k + 1)) as f64)
+                .collect(),
             window: Vec::with_capacity(side * side),
         }
     }
@@ -134,7 +139,11 @@ impl Periphery {
                 "foveated frame: planes of the wrong size".into(),
             ));
         }
-        let phases = colours.map(|c| self.band_phase(&frame, &c));
+        let mut phases = [0.0f64; 3];
+        phases
+            .par_iter_mut()
+            .zip(colours)
+            .for_each(|(t, c)| *t = self.band_phase(&frame, &c));
         let [a0, a1, a2, p0, p1, p2] = out;
         let work = [(a0, p0), (a1, p1), (a2, p2)];
         work.into_par_iter().zip(colours).zip(phases).try_for_each(
@@ -152,26 +161,30 @@ impl Periphery {
         Ok(phases.map(|t| t as f32))
     }
 
-    /// The periphery's phase of one colour: `arg Σ_band U_cnn·A_2D` over the band's pixels, in row order (0
-    /// where the sum vanishes).
+    /// The periphery's phase of one colour: `arg Σ_band U_cnn·A` over the band's pixels, `A` the colour's
+    /// amplitude (the periphery's field before its blur: the phase that best aligns the two fields, at one
+    /// multiply-add a pixel), summed in row order; 0 where the sum vanishes.
     fn band_phase(&self, frame: &FrameInputs<'_>, colour: &ColourInputs<'_>) -> f64 {
         let g = &self.geometry;
         let (h, w) = g.frame;
         let (gx, gy) = frame.gaze;
-        let (r_in, r_out) = (g.radius_px, g.radius_px + g.band_px);
-        let rows = row_span(gy, r_out, h);
+        let (r_in2, r_out) = (g.radius_px * g.radius_px, g.radius_px + g.band_px);
+        let r_out2 = r_out * r_out;
         let (mut re, mut im) = (0.0f64, 0.0f64);
-        for y in rows {
-            for x in row_span(gx, r_out, w) {
-                let r = (x as f64 - gx).hypot(y as f64 - gy);
-                if r <= r_in || r >= r_out {
+        for y in row_span(gy, r_out, h) {
+            let dy = y as f64 - gy;
+            let reach = (r_out2 - dy * dy).max(0.0).sqrt();
+            for x in row_span(gx, reach, w) {
+                let dx = x as f64 - gx;
+                let r2 = dx * dx + dy * dy;
+                if r2 <= r_in2 || r2 >= r_out2 {
                     continue;
                 }
                 let (a, p) = tile_head(g, frame.origin, colour.tile_heads, y, x);
-                let blurred = direct_blur(frame, colour, (h, w), y, x);
+                let amplitude = f64::from(a) * f64::from(amplitude_at(colour, y * w + x));
                 let phi = (f64::from(p) - 0.5) * TAU;
-                re += f64::from(a) * phi.cos() * blurred;
-                im += f64::from(a) * phi.sin() * blurred;
+                re += amplitude * phi.cos();
+                im += amplitude * phi.sin();
             }
         }
         if re == 0.0 && im == 0.0 {
@@ -206,13 +219,35 @@ impl Periphery {
         let (r_in, r_out) = (g.radius_px, g.radius_px + g.band_px);
         let (cos_t, sin_t) = (theta.cos(), theta.sin());
         let periphery_p = (theta / TAU + 0.5) as f32;
-        let box_sum = |y: usize, x: usize, k: usize| {
+        let inv_area = &self.inv_area;
+        // The half-width, at most `reach − 1` (the table's rows; a depth outside [0, 1] is clamped there).
+        let max_hw = (self.reach - 1) as f64;
+        let box_mean = |y: usize, x: usize, k: usize| {
             let (r0, r1) = (y.saturating_sub(k), (y + k).min(h - 1));
             let (c0, c1) = (x.saturating_sub(k), (x + k).min(w - 1));
             let (t0, t1) = ((r0 - ys) * stride, (r1 + 1 - ys) * stride);
             let sum = table[t1 + c1 + 1] - table[t0 + c1 + 1] - table[t1 + c0] + table[t0 + c0];
-            sum / ((r1 - r0 + 1) * (c1 - c0 + 1)) as f64
+            let n = (r1 - r0 + 1) * (c1 - c0 + 1);
+            match inv_area.get(k) {
+                Some(&inv) if n == (2 * k + 1) * (2 * k + 1) => sum * inv,
+                _ => sum / n as f64,
+            }
         };
+        let blurred = |y: usize, x: usize, d: f32| {
+            let hw = half_width(blur_radius(colour.blur_px, d, frame.gaze_depth)).min(max_hw);
+            let k = hw.floor();
+            let t = hw - k;
+            let k = k as usize;
+            let m = box_mean(y, x, k);
+            if t > 0.0 {
+                m + t * (box_mean(y, x, k + 1) - m)
+            } else {
+                m
+            }
+        };
+        let (r_in2, r_out2) = (r_in * r_in, r_out * r_out);
+        // `h = |d − d_g|·scale − 1/2` ([`half_width`] of [`blur_radius`]).
+        let scale = colour.blur_px * PI.sqrt() / 2.0;
         for (i, (arow, prow)) in amp
             .chunks_exact_mut(w)
             .zip(phase.chunks_exact_mut(w))
@@ -221,32 +256,57 @@ impl Periphery {
             let y = y0 + i;
             let dy = y as f64 - gy;
             let drow = &frame.depth[y * w..(y + 1) * w];
-            for (x, ((a, p), &d)) in arow.iter_mut().zip(prow.iter_mut()).zip(drow).enumerate() {
-                let r = (x as f64 - gx).hypot(dy);
-                if r <= r_in {
-                    (*a, *p) = tile_head(g, frame.origin, colour.tile_heads, y, x);
+            // The columns within R + B of the gaze on this row (none beyond it): the rest is periphery.
+            let near = row_span(gx, (r_out2 - dy * dy).max(0.0).sqrt(), w);
+            let near = if dy * dy < r_out2 { near } else { 0..0 };
+            // Rows whose every box stays inside the frame: the boxes' corners without clipping.
+            let inner_row = y >= self.reach && y + self.reach < h;
+            let (lo, hi) = (self.reach.min(w), w.saturating_sub(self.reach));
+            for x in (0..near.start).chain(near.end..w) {
+                prow[x] = periphery_p;
+                if !(inner_row && x >= lo && x < hi) {
+                    arow[x] = blurred(y, x, drow[x]) as f32;
                     continue;
                 }
-                let hw = half_width(blur_radius(colour.blur_px, d, frame.gaze_depth));
-                let k = hw.floor();
-                let t = hw - k;
-                let k = k as usize;
-                let mut m = box_sum(y, x, k);
-                if t > 0.0 {
-                    m += t * (box_sum(y, x, k + 1) - m);
-                }
-                if r >= r_out {
-                    *a = m as f32;
-                    *p = periphery_p;
+                let hw = (f64::from((drow[x] - frame.gaze_depth).abs()) * scale - 0.5)
+                    .clamp(0.0, max_hw);
+                let k = hw as usize;
+                let t = hw - k as f64;
+                let b0 = (y - k - ys) * stride;
+                let b1 = (y + k + 1 - ys) * stride;
+                let m = (table[b1 + x + k + 1] - table[b0 + x + k + 1] - table[b1 + x - k]
+                    + table[b0 + x - k])
+                    * inv_area[k];
+                arow[x] = if t > 0.0 {
+                    let (b0, b1, k) = (b0 - stride, b1 + stride, k + 1);
+                    let m1 = (table[b1 + x + k + 1] - table[b0 + x + k + 1] - table[b1 + x - k]
+                        + table[b0 + x - k])
+                        * inv_area[k];
+                    m + t * (m1 - m)
+                } else {
+                    m
+                } as f32;
+            }
+            for x in near {
+                let dx = x as f64 - gx;
+                let r2 = dx * dx + dy * dy;
+                if r2 <= r_in2 {
+                    (arow[x], prow[x]) = tile_head(g, frame.origin, colour.tile_heads, y, x);
                     continue;
                 }
-                let wgt = (r_out - r) / g.band_px;
+                let m = blurred(y, x, drow[x]);
+                if r2 >= r_out2 {
+                    arow[x] = m as f32;
+                    prow[x] = periphery_p;
+                    continue;
+                }
+                let wgt = (r_out - r2.sqrt()) / g.band_px;
                 let (ta, tp) = tile_head(g, frame.origin, colour.tile_heads, y, x);
                 let phi = (f64::from(tp) - 0.5) * TAU;
                 let re = wgt * f64::from(ta) * phi.cos() + (1.0 - wgt) * m * cos_t;
                 let im = wgt * f64::from(ta) * phi.sin() + (1.0 - wgt) * m * sin_t;
-                *a = re.hypot(im) as f32;
-                *p = (im.atan2(re) / TAU + 0.5) as f32;
+                arow[x] = (re * re + im * im).sqrt() as f32;
+                prow[x] = (im.atan2(re) / TAU + 0.5) as f32;
             }
         }
         Ok(())
@@ -280,40 +340,6 @@ fn tile_head(
 ) -> (f32, f32) {
     let i = (y - oy) * g.tile.1 + (x - ox);
     (amp[i], phase[i])
-}
-
-/// One pixel's blurred amplitude by direct sums (the band's pixels, before the tables exist): the same mean
-/// as the tables give, up to rounding.
-fn direct_blur(
-    frame: &FrameInputs<'_>,
-    colour: &ColourInputs<'_>,
-    (h, w): (usize, usize),
-    y: usize,
-    x: usize,
-) -> f64 {
-    let hw = half_width(blur_radius(
-        colour.blur_px,
-        frame.depth[y * w + x],
-        frame.gaze_depth,
-    ));
-    let k = hw.floor();
-    let t = hw - k;
-    let mean = |k: usize| {
-        let (mut sum, mut count) = (0.0f64, 0usize);
-        for yy in y.saturating_sub(k)..=(y + k).min(h - 1) {
-            for xx in x.saturating_sub(k)..=(x + k).min(w - 1) {
-                sum += f64::from(amplitude_at(colour, yy * w + xx));
-                count += 1;
-            }
-        }
-        sum / count as f64
-    };
-    let m = mean(k as usize);
-    if t > 0.0 {
-        m + t * (mean(k as usize + 1) - m)
-    } else {
-        m
-    }
 }
 
 /// The colour's amplitude at pixel `i`, times its intensity scale map.
@@ -357,6 +383,39 @@ mod tests {
             x,
             y,
             depth_m: None,
+        }
+    }
+
+    /// One pixel's blurred amplitude by direct sums: the naive reference of the tables' means.
+    fn direct_blur(
+        frame: &FrameInputs<'_>,
+        colour: &ColourInputs<'_>,
+        (h, w): (usize, usize),
+        y: usize,
+        x: usize,
+    ) -> f64 {
+        let hw = half_width(blur_radius(
+            colour.blur_px,
+            frame.depth[y * w + x],
+            frame.gaze_depth,
+        ));
+        let k = hw.floor();
+        let t = hw - k;
+        let mean = |k: usize| {
+            let (mut sum, mut count) = (0.0f64, 0usize);
+            for yy in y.saturating_sub(k)..=(y + k).min(h - 1) {
+                for xx in x.saturating_sub(k)..=(x + k).min(w - 1) {
+                    sum += f64::from(amplitude_at(colour, yy * w + xx));
+                    count += 1;
+                }
+            }
+            sum / count as f64
+        };
+        let m = mean(k as usize);
+        if t > 0.0 {
+            m + t * (mean(k as usize + 1) - m)
+        } else {
+            m
         }
     }
 
@@ -440,8 +499,9 @@ mod tests {
                     let i = y * w + x;
                     let (a, p) = (out[c][i], out[3 + c][i]);
                     let r = (x as f64 - g.x).hypot(y as f64 - g.y);
-                    let (ta, tp) = tile_head(&geometry, origin, colours[c].tile_heads, y, x);
+                    let head = || tile_head(&geometry, origin, colours[c].tile_heads, y, x);
                     if r <= 12.0 {
+                        let (ta, tp) = head();
                         assert_eq!((a.to_bits(), p.to_bits()), (ta.to_bits(), tp.to_bits()));
                         checked[0] += 1;
                         continue;
@@ -454,6 +514,7 @@ mod tests {
                     } else {
                         checked[1] += 1;
                         let wgt = (18.0 - r) / 6.0;
+                        let (ta, tp) = head();
                         let cnn = num_complex::Complex64::from_polar(
                             f64::from(ta),
                             (f64::from(tp) - 0.5) * TAU,
@@ -487,5 +548,18 @@ mod tests {
             .unwrap();
         assert_eq!(out[1][0], amplitude[1][0]);
         assert_eq!(out[2][h * w - 1], amplitude[2][h * w - 1]);
+        // Depths outside [0, 1] blur no further than the largest difference the tables hold.
+        let wild = vec![40.0f32; h * w];
+        let frame = FrameInputs {
+            depth: &wild,
+            ..frame
+        };
+        let [o0, o1, o2, o3, o4, o5] = &mut out[..] else {
+            unreachable!()
+        };
+        periphery
+            .compose(frame, colours, [o0, o1, o2, o3, o4, o5])
+            .unwrap();
+        assert!(out[0].iter().all(|v| v.is_finite()));
     }
 }

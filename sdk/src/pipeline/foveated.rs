@@ -8,18 +8,22 @@ use std::time::Instant;
 
 use ndarray::{s, Array3};
 
+use rayon::prelude::*;
+use tensorholo_kernels::{depthwise_rows, Isa};
+
 use super::cnn_stage::CnnStage;
-use super::colour::ColourState;
-use super::frame::{check_not_black, max_and_finite, Heads, SlmFrame};
+use super::colour::{ColourState, Task};
+use super::frame::{check_not_black, max_and_finite, FrameTimings, Heads, SlmFrame};
 use super::models::HologramPipeline;
-use super::session::{colour_states, HologramSession};
-use crate::cnn::{CnnPlans, PlanRequest};
+use super::session::{colour_states, phase_planes, HologramSession};
+use crate::cnn::{CnnPlan, CnnPlans, PlanRequest};
 use crate::error::{invalid, HoloError, Result};
 use crate::foveation::{
     gaze_depth, ColourInputs, FoveaReport, FoveationOptions, FrameInputs, Gaze, GazeDepthSource,
     Periphery, TileGeometry, FOVEATED_NORMALISER_GAIN,
 };
 use crate::model::contract;
+use crate::model::graph::CnnOutput;
 use crate::scene::RgbdFrame;
 
 /// What a foveated session keeps between frames: the tile's CNN and buffers, the periphery's tables, the
@@ -36,8 +40,40 @@ pub(super) struct FoveatedState {
     blur_px: [f64; 3],
     /// The display's volume depth, metres.
     volume_m: f64,
+    /// The pre-filter CNN on its own tile (a session with a pre-filter whose graph the native reader knows),
+    /// its base filter elsewhere; `None`: the pre-filter runs on the whole frame.
+    prefilter: Option<PrefilterTile>,
     pub(super) report: Option<FoveaReport>,
 }
+
+/// The pre-filter CNN of a foveated frame (`H' = base(H) + CNN(H)`, DDPM): the CNN's residual where the fovea's
+/// light lies at the SLM, its depthwise base filter (the AA-DPM blur) everywhere.
+///
+/// The light the viewer sees in the fovea (`r < R + B`) at any focal plane of the volume left the SLM within
+/// `(|s| + V/2)·tan(asin(λ/2p))/p` pixels of it (the SLM lies `|s|` from the midpoint plane, the focal planes
+/// up to `V/2` beyond; the band-limited angular spectrum's largest angle, the reddest colour): within
+/// `R_p = R + B + spread` of the gaze the frame keeps the whole pre-filter, exactly the full frame's for the
+/// same field; the residual then fades linearly to 0 over [`PREFILTER_RAMP_PX`]. The tile holds that disc and
+/// the pre-filter's receptive radius.
+#[derive(Debug)]
+struct PrefilterTile {
+    plan: Box<dyn CnnPlan>,
+    /// `radius_px`: `R_p`; `band_px`: the residual's ramp; `margin`: the pre-filter's receptive radius.
+    geometry: TileGeometry,
+    /// The tile's input and output, six planes `[Re R, Re G, Re B, Im R, Im G, Im B]` of `T_h·T_w` values.
+    input: Vec<f32>,
+    output: Vec<f32>,
+    /// The base filter `[6][taps][taps]`.
+    base: Vec<f32>,
+    taps: usize,
+    isa: Isa,
+}
+
+/// Width in pixels over which a foveated frame's pre-filter residual fades out beyond `R_p`.
+const PREFILTER_RAMP_PX: f64 = 64.0;
+
+/// Rows per task of the base filter over the whole frame.
+const BASE_ROWS: usize = 32;
 
 impl FoveatedState {
     /// The foveated state of `pipeline`'s sessions at `height × width`: the tile's geometry from the options
@@ -69,6 +105,23 @@ impl FoveatedState {
             .map(|l| options.blur_scale * optics.volume_depth_m * l / (2.0 * p * p));
         let max_blur = blur_px.iter().copied().fold(0.0, f64::max);
         let (c, _, _) = hologram.input_dim();
+        let spread = optics
+            .wavelengths_m
+            .iter()
+            .map(|&l| {
+                let reach_m = pipeline.config().offset_m.abs() + optics.volume_depth_m / 2.0;
+                reach_m * (l / (2.0 * p)).asin().tan() / p
+            })
+            .fold(0.0, f64::max);
+        let prefilter = match pipeline.prefilter_model() {
+            Some(model) => PrefilterTile::new(
+                model,
+                radius_px + options.band_px + spread,
+                request,
+                (height, width),
+            )?,
+            None => None,
+        };
         Ok(Self {
             radius_deg,
             cnn: CnnStage {
@@ -81,6 +134,7 @@ impl FoveatedState {
             periphery: Periphery::new(geometry, max_blur, threads),
             blur_px,
             volume_m: optics.volume_depth_m,
+            prefilter,
             report: None,
         })
     }
@@ -123,6 +177,128 @@ impl FoveatedState {
         }
         contract::fill_empty_layers(self.cnn.input.view_mut(), 1, c / 4);
         debug_assert_eq!(self.cnn.input.dim(), (c, th, tw));
+    }
+}
+
+impl PrefilterTile {
+    /// The pre-filter's tile for a disc of radius `zone_px` (plus the ramp) on `height × width` frames;
+    /// `None` where the native reader does not know the file's graph (its base filter): the whole frame's
+    /// pre-filter runs then.
+    ///
+    /// Errors: the CNN engine's plan errors.
+    fn new(
+        model: &Arc<crate::model::HologramModel>,
+        zone_px: f64,
+        request: &PlanRequest,
+        (height, width): (usize, usize),
+    ) -> Result<Option<Self>> {
+        let Ok(graph) = model.cnn_graph() else {
+            return Ok(None);
+        };
+        let CnnOutput::Prefilter { taps, base } = &graph.output else {
+            return Ok(None);
+        };
+        if graph.in_channels != 6
+            || graph
+                .quant
+                .as_ref()
+                .is_some_and(|q| q.base_reads_rounded_input)
+        {
+            return Ok(None);
+        }
+        let margin = graph.layers.len().max(taps / 2);
+        let geometry = TileGeometry::new(zone_px, PREFILTER_RAMP_PX, margin, height, width);
+        let (th, tw) = geometry.tile;
+        let CnnPlans { hologram: plan, .. } = crate::cnn::select(model, None, th, tw, request)?;
+        Ok(Some(Self {
+            plan,
+            geometry,
+            input: vec![0.0; 6 * th * tw],
+            output: vec![0.0; 6 * th * tw],
+            base: base.clone(),
+            taps: *taps,
+            isa: request.cnn.kernel_isa()?,
+        }))
+    }
+
+    /// The pre-filter of a foveated frame on the offset hologram the colour workers left (`Re H` in each
+    /// colour's `phase`, `Im H` in the second half of its field), written where the whole frame's pre-filter
+    /// writes (`Re H'` in the field's first half, `Im H'` in the frame's phase planes): the base filter on the
+    /// whole frame (bands of rows on the pool's threads), the CNN on the tile, its residual blended in.
+    ///
+    /// Errors: the kernels' and the engine's run errors.
+    fn run(
+        &mut self,
+        states: [&mut ColourState; 3],
+        phase: [&mut [f32]; 3],
+        gaze: &Gaze,
+        (height, width): (usize, usize),
+    ) -> Result<()> {
+        let n = height * width;
+        let [r, g, b] = states;
+        let [(ri, ro), (gi, go), (bi, bo)] = [r.prefilter_io(), g.prefilter_io(), b.prefilter_io()];
+        let [rp, gp, bp] = phase;
+        let inputs = contract::prefilter_planes([ri, gi, bi]);
+        let mut outputs: [&mut [f32]; 6] = [ro, go, bo, rp, gp, bp];
+        let (taps, isa, base) = (self.taps, self.isa, &self.base);
+        // The base filter on every plane, bands of rows.
+        outputs
+            .par_iter_mut()
+            .zip(inputs.par_iter())
+            .enumerate()
+            .try_for_each(|(ch, (out, input))| {
+                let kernel = &base[ch * taps * taps..(ch + 1) * taps * taps];
+                out[..n]
+                    .par_chunks_mut(BASE_ROWS * width)
+                    .enumerate()
+                    .try_for_each(|(band, rows)| {
+                        let y0 = band * BASE_ROWS;
+                        let y1 = y0 + rows.len() / width;
+                        depthwise_rows(input, height, width, kernel, taps, y0..y1, rows, false, isa)
+                            .map_err(HoloError::from)
+                    })
+            })?;
+        // The CNN on the tile.
+        let (oy, ox) = self.geometry.origin(gaze);
+        let (th, tw) = self.geometry.tile;
+        let m = th * tw;
+        for (ch, input) in inputs.iter().enumerate() {
+            let tile = &mut self.input[ch * m..(ch + 1) * m];
+            for (ty, row) in tile.chunks_exact_mut(tw).enumerate() {
+                let start = (oy + ty) * width + ox;
+                row.copy_from_slice(&input[start..start + tw]);
+            }
+        }
+        {
+            let planes: Vec<&[f32]> = self.input.chunks_exact(m).collect();
+            let [a, b, c, d, e, f] = tile_planes(&mut self.output, m);
+            self.plan.run_planes_into(&planes, [a, b, c, d, e, f])?;
+        }
+        // Its residual, blended in: weight 1 within R_p, fading to 0 over the ramp.
+        let g = &self.geometry;
+        let (r_in, r_out) = (g.radius_px, g.radius_px + g.band_px);
+        let (r_in2, r_out2) = (r_in * r_in, r_out * r_out);
+        outputs
+            .par_iter_mut()
+            .zip(self.output.par_chunks_exact(m))
+            .for_each(|(out, tile)| {
+                for (ty, trow) in tile.chunks_exact(tw).enumerate() {
+                    let y = oy + ty;
+                    let dy = y as f64 - gaze.y;
+                    let row = &mut out[y * width + ox..y * width + ox + tw];
+                    for (tx, (o, &t)) in row.iter_mut().zip(trow).enumerate() {
+                        let dx = (ox + tx) as f64 - gaze.x;
+                        let r2 = dx * dx + dy * dy;
+                        if r2 <= r_in2 {
+                            *o = t;
+                        } else if r2 < r_out2 {
+                            let wgt = ((r_out - r2.sqrt()) / g.band_px) as f32;
+                            *o += wgt * (t - *o);
+                        }
+                    }
+                }
+            });
+        Ok(())
     }
 }
 
@@ -309,16 +485,46 @@ impl HologramSession {
         };
         periphery_s += t_compose.elapsed().as_secs_f64();
 
-        // The rest of the frame, with the gaze-independent normaliser.
-        self.fixed_normaliser = Some(FOVEATED_NORMALISER_GAIN * brightest);
-        let encoded = match shared {
-            Some(heads) => self.encode_shared(heads, cnn_s).map(|_| ()),
-            None => self.encode_loaded(cnn_s).map(|_| ()),
+        // The rest of the frame: offset propagation, the pre-filter (on its tile where it can), the encoding
+        // with the gaze-independent normaliser.
+        self.last_heads = None;
+        let t_offset = Instant::now();
+        let prefilter = self.prefilter.is_some();
+        self.workers.run(&mut self.states, |_| Task::Midpoint {
+            prefilter,
+            heads: shared.clone(),
+        })?;
+        let offset_s = t_offset.elapsed().as_secs_f64();
+        let t_prefilter = Instant::now();
+        let filtered = match (&mut fov.prefilter, prefilter) {
+            (Some(tile), true) => {
+                let states = colour_states(&mut self.states)?;
+                let planes = phase_planes(&mut self.output)?;
+                self.optics.run(|| tile.run(states, planes, gaze, (h, w)))?;
+                true
+            }
+            _ => self.run_prefilter_cnn()?,
         };
+        let prefilter_s = t_prefilter.elapsed().as_secs_f64();
+        let t_encoding = Instant::now();
+        if filtered {
+            self.filtered()?;
+        }
+        self.fixed_normaliser = Some(FOVEATED_NORMALISER_GAIN * brightest);
+        let encoded = self.encode(filtered).map(|_| ());
         self.fixed_normaliser = None;
         encoded?;
-        self.output.timings.periphery_s = periphery_s;
-        self.output.timings.total_s = t.elapsed().as_secs_f64();
+        self.output.timings = FrameTimings {
+            cnn_s,
+            offset_s,
+            prefilter_s: if filtered { prefilter_s } else { 0.0 },
+            encoding_s: t_encoding.elapsed().as_secs_f64(),
+            gpu_s: 0.0,
+            periphery_s,
+            total_s: t.elapsed().as_secs_f64(),
+        };
+        self.output.backend = super::config::Backend::Cpu;
+        self.last_heads = shared;
         report.gaze_depth = f64::from(d_g);
         report.tile = [origin.0, origin.1, th, tw];
         report.cnn_share = geometry.share();

@@ -245,7 +245,7 @@ impl HologramSession {
 
     /// [`HologramSession::encode_heads`] for heads in standard layout, shared with the colour workers (no
     /// copy); they become [`HologramSession::last_heads`] with full outputs.
-    pub(super) fn encode_shared(&mut self, heads: Arc<Heads>, cnn_s: f64) -> Result<&SlmFrame> {
+    fn encode_shared(&mut self, heads: Arc<Heads>, cnn_s: f64) -> Result<&SlmFrame> {
         self.last_heads = None;
         let t0 = Instant::now();
         self.propagate_to_slm(&heads)?;
@@ -260,7 +260,7 @@ impl HologramSession {
     /// colour workers check the heads are finite as they turn them into fields); no heads are kept.
     ///
     /// Errors: [`HoloError::InvalidData`] for non-finite heads; as [`HologramSession::encode_heads`].
-    pub(super) fn encode_loaded(&mut self, cnn_s: f64) -> Result<&SlmFrame> {
+    fn encode_loaded(&mut self, cnn_s: f64) -> Result<&SlmFrame> {
         self.last_heads = None;
         let t0 = Instant::now();
         let prefilter = self.prefilter.is_some();
@@ -428,7 +428,7 @@ impl HologramSession {
     /// threads ([`crate::encoding::ChannelEncoder::analyse_planes`] on the pool), the colours side by side.
     ///
     /// Errors: [`HoloError::Internal`] if a colour's state is lost or a thread panicked.
-    fn filtered(&mut self) -> Result<()> {
+    pub(super) fn filtered(&mut self) -> Result<()> {
         let states = colour_states(&mut self.states)?;
         let planes = phase_planes(&mut self.output)?;
         self.optics.run(|| {
@@ -467,7 +467,7 @@ pub(super) fn apply_calibrated_luts(
 /// The frame's three phase planes (`[H, W]` each), each borrowed on its own.
 ///
 /// Errors: [`HoloError::Internal`] if the frame's phase is not contiguous (the session makes it so).
-fn phase_planes(output: &mut SlmFrame) -> Result<[&mut [f32]; 3]> {
+pub(super) fn phase_planes(output: &mut SlmFrame) -> Result<[&mut [f32]; 3]> {
     let (_, h, w) = output.phase.dim();
     let not_contiguous = || HoloError::Internal("SLM frame not contiguous".into());
     let all = output.phase.as_slice_mut().ok_or_else(not_contiguous)?;

@@ -1,0 +1,127 @@
+//! `holo bench --fovea-deg R,…`: foveated frames (docs/FOVEATION.md) beside the full frame of the same
+//! configuration, timed alternately in one run, stage by stage.
+
+use anyhow::Result;
+use serde_json::json;
+use tensorholo::display::DEFAULT_EYEPIECE_FOCAL_M;
+use tensorholo::foveation::{FoveaRadius, FoveationOptions, Gaze};
+use tensorholo::model::Precision;
+use tensorholo::pipeline::{Backend, FrameTimings, HologramPipeline, PipelineConfig};
+use tensorholo::scene::procedural;
+
+use super::{pipeline_engine, selection, time_alternating, BenchArgs, BenchPlans};
+
+/// The foveation table: per size, depth, precision and thread count, the full frame and a frame foveated on
+/// the centre for each `--fovea-deg` (behind the paper's 21 mm eyepiece), timed alternately; each stage's
+/// median and the frame's time against the full frame's.
+pub(super) fn fovea_table(
+    args: &BenchArgs,
+    plans: &BenchPlans,
+    results: &mut Vec<serde_json::Value>,
+) -> Result<()> {
+    println!(
+        "Foveated frames (`render_foveated`, gaze at the centre, fovea in degrees behind a {} mm eyepiece, \
+         offset {} mm): median stage times in ms, the full frame and each fovea timed alternately\n",
+        DEFAULT_EYEPIECE_FOCAL_M * 1e3,
+        args.offset_mm
+    );
+    println!("| CNN | precision | size (HxW) | threads | fovea | R px | CNN share | CNN | periphery | offset | pre-filter | DPM + LUT | frame | × full |");
+    println!("|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for &(h, w) in &args.sizes {
+        let frame = procedural::default_scene(h, w)?;
+        let gaze = Gaze {
+            x: (w as f64 - 1.0) / 2.0,
+            y: (h as f64 - 1.0) / 2.0,
+            depth_m: None,
+        };
+        for &layers in &args.layers {
+            for &p in &args.precision {
+                let precision: Precision = p.into();
+                let engine = pipeline_engine(args, precision);
+                for &threads in &args.threads {
+                    let config = |foveation| PipelineConfig {
+                        offset_m: args.offset_mm as f64 * 1e-3,
+                        backend: Backend::Cpu,
+                        cnn: plans.options(engine, tensorholo::cnn::CnnLayout::Auto, threads),
+                        foveation,
+                        ..PipelineConfig::default()
+                    };
+                    let fovea = |degrees| FoveationOptions {
+                        radius: FoveaRadius::Degrees {
+                            degrees,
+                            eyepiece_focal_m: DEFAULT_EYEPIECE_FOCAL_M,
+                        },
+                        ..FoveationOptions::default()
+                    };
+                    let make = |f| -> Result<_> {
+                        let pipeline = HologramPipeline::embedded(
+                            &selection(args, layers, precision),
+                            config(f),
+                        )?;
+                        let mut session = pipeline.session(h, w)?;
+                        session.set_full_outputs(!args.lean);
+                        Ok(session)
+                    };
+                    let mut full = make(None)?;
+                    let mut foveated = args
+                        .fovea_deg
+                        .iter()
+                        .map(|&d| make(Some(fovea(d))))
+                        .collect::<Result<Vec<_>>>()?;
+                    let mut timings: Vec<Vec<FrameTimings>> = vec![Vec::new(); 1 + foveated.len()];
+                    let (first, rest) = timings.split_at_mut(1);
+                    let mut fs: Vec<Box<dyn FnMut() -> Result<()> + '_>> = Vec::new();
+                    let frame = &frame;
+                    fs.push(Box::new(|| {
+                        first[0].push(full.render(frame)?.timings);
+                        Ok(())
+                    }));
+                    for (session, t) in foveated.iter_mut().zip(rest.iter_mut()) {
+                        fs.push(Box::new(move || {
+                            t.push(session.render_foveated(frame, &gaze)?.timings);
+                            Ok(())
+                        }));
+                    }
+                    let times = time_alternating(args.repeat, args.max_seconds, &mut fs)?;
+                    drop(fs);
+                    let full_s = times[0].0;
+                    let reports: Vec<_> =
+                        foveated.iter().map(|s| s.fovea_report().copied()).collect();
+                    let labels = std::iter::once(None).chain(args.fovea_deg.iter().map(Some));
+                    for (i, label) in labels.enumerate() {
+                        // The warm-up run is not counted.
+                        let med = FrameTimings::median(&timings[i][1..]);
+                        let (s, runs) = times[i];
+                        let report = i.checked_sub(1).and_then(|k| reports[k]);
+                        let (fovea_cell, radius, share) = match (label, report) {
+                            (Some(d), Some(r)) => (
+                                format!("{d}°"),
+                                format!("{:.0}", r.radius_px),
+                                format!("{:.3}", r.cnn_share),
+                            ),
+                            _ => ("full".into(), "–".into(), "1".into()),
+                        };
+                        println!(
+                            "| holo{layers} | {precision} | {h}x{w} | {threads} | {fovea_cell} | {radius} | {share} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} |",
+                            med.cnn_s * 1e3,
+                            med.periphery_s * 1e3,
+                            med.offset_s * 1e3,
+                            med.prefilter_s * 1e3,
+                            med.encoding_s * 1e3,
+                            s * 1e3,
+                            s / full_s,
+                        );
+                        results.push(
+                            json!({"kind": "fovea", "layers": layers, "precision": precision,
+                            "size": [h, w], "threads": threads, "offset_mm": args.offset_mm,
+                            "fovea_deg": label, "fovea": report, "median_stages_s": med,
+                            "frame_ms": s * 1e3, "relative_to_full": s / full_s, "runs": runs}),
+                        );
+                    }
+                }
+            }
+        }
+    }
+    println!();
+    Ok(())
+}
