@@ -28,6 +28,7 @@ use ndarray::{Array2, Array3};
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 use tensorholo::cnn::{cnn_plan, CnnEngine, CnnOptions, PlanRequest, ThreadCount};
 use tensorholo::display::{AberrationProfile, AberrationSample};
+use tensorholo::foveation::{FoveaRadius, FoveationOptions, Gaze};
 use tensorholo::model::{HologramModel, ModelConfig, ModelKind};
 use tensorholo::optics::ZernikeCoefficients;
 use tensorholo::pipeline::{Backend, HologramPipeline, PipelineConfig};
@@ -187,6 +188,56 @@ fn cpu_frames_allocate_nothing_after_warm_up() {
                 ),
             }
         }
+    }
+
+    // Foveated frames (the hologram and pre-filter CNNs on their tiles, the periphery's tables, the gaze's
+    // window): a gaze that jumps across the frame, each corner, allocates nothing either.
+    let gazes = [
+        (24.0, 16.0),
+        (0.0, 0.0),
+        (47.5, 31.5),
+        (-0.5, 31.0),
+        (40.0, 2.0),
+    ];
+    for full in [true, false] {
+        let config = PipelineConfig {
+            offset_m: 6e-3,
+            backend: Backend::Cpu,
+            cnn: CnnOptions {
+                engine: CnnEngine::Native,
+                ..CnnOptions::default()
+            },
+            foveation: Some(FoveationOptions {
+                radius: FoveaRadius::Pixels { pixels: 5.0 },
+                band_px: 4.0,
+                ..FoveationOptions::default()
+            }),
+            ..PipelineConfig::default()
+        };
+        let pre = load("holo8_rgbd.prefilter.onnx", ModelKind::PreFilter);
+        let hologram = load("holo8_rgbd.onnx", ModelKind::Hologram);
+        let pipeline = HologramPipeline::new(hologram, Some(pre), config).unwrap();
+        let mut session = pipeline.session(h, w).unwrap();
+        session.set_full_outputs(full);
+        let gaze = |(x, y)| Gaze {
+            x,
+            y,
+            depth_m: None,
+        };
+        session
+            .render_foveated(&frames[0], &gaze(gazes[0]))
+            .unwrap();
+        let (mut allocations, mut bytes) = (0, 0);
+        for (f, &g) in frames[1..].iter().zip(&gazes) {
+            let ((n, b), r) =
+                allocations_during(|| session.render_foveated(f, &gaze(g)).map(|_| ()));
+            r.unwrap();
+            assert!(!session.fovea_report().unwrap().covers_frame);
+            allocations += n;
+            bytes += b;
+        }
+        println!("foveated, full outputs {full}: {allocations} allocations in 5 frames");
+        assert_only((allocations, bytes), 0, 0, "foveated frames");
     }
 
     // The native CNN engine, 1 and 2 threads: after warm-up a run allocates exactly its two output arrays

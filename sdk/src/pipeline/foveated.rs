@@ -72,6 +72,9 @@ struct PrefilterTile {
 /// Width in pixels over which a foveated frame's pre-filter residual fades out beyond `R_p`.
 const PREFILTER_RAMP_PX: f64 = 64.0;
 
+/// The most input planes of a tile's hologram CNN passed without a list on the heap (an LDI CNN of 8 layers).
+const MAX_TILE_PLANES: usize = 32;
+
 /// Rows per task of the base filter over the whole frame.
 const BASE_ROWS: usize = 32;
 
@@ -270,7 +273,10 @@ impl PrefilterTile {
             }
         }
         {
-            let planes: Vec<&[f32]> = self.input.chunks_exact(m).collect();
+            let mut planes: [&[f32]; 6] = [&[]; 6];
+            for (p, plane) in planes.iter_mut().zip(self.input.chunks_exact(m)) {
+                *p = plane;
+            }
             let [a, b, c, d, e, f] = tile_planes(&mut self.output, m);
             self.plan.run_planes_into(&planes, [a, b, c, d, e, f])?;
         }
@@ -428,10 +434,20 @@ impl HologramSession {
         let (th, tw) = geometry.tile;
         {
             let [a0, a1, a2, p0, p1, p2] = tile_planes(&mut fov.heads, th * tw);
-            let input = CnnStage::planes_of(&fov.cnn.input);
-            fov.cnn
-                .plan
-                .run_planes_into(&input, [a0, a1, a2, p0, p1, p2])?;
+            // The input's planes without a list on the heap (an RGB-D CNN's 4, an LDI CNN's up to 32).
+            let mut planes: [&[f32]; MAX_TILE_PLANES] = [&[]; MAX_TILE_PLANES];
+            let input = fov.cnn.input.as_slice().unwrap_or_default();
+            let c = fov.cnn.input.dim().0;
+            for (p, plane) in planes.iter_mut().zip(input.chunks_exact(th * tw)) {
+                *p = plane;
+            }
+            let out = [a0, a1, a2, p0, p1, p2];
+            if c <= MAX_TILE_PLANES {
+                fov.cnn.plan.run_planes_into(&planes[..c], out)?;
+            } else {
+                let input = CnnStage::planes_of(&fov.cnn.input);
+                fov.cnn.plan.run_planes_into(&input, out)?;
+            }
         }
         let cnn_s = t_cnn.elapsed().as_secs_f64();
 
