@@ -379,3 +379,74 @@ fn refinement_bounds_are_named_on_their_flags() {
         "{e}\n{text}"
     );
 }
+
+/// Issue 80: a depth map whose valid depths leave no usable pixel once normalised (1e-40 m everywhere: 1/z
+/// overflows) is refused naming the file in every command that reads one, and leaves no output behind.
+#[test]
+fn a_depth_map_that_leaves_no_usable_pixel_is_refused_naming_it_in_every_command() {
+    use exr::prelude::*;
+    let dir = tempfile::tempdir().unwrap();
+    let (rgb_dir, depth_dir) = (dir.path().join("rgb"), dir.path().join("depth"));
+    std::fs::create_dir_all(&rgb_dir).unwrap();
+    std::fs::create_dir_all(&depth_dir).unwrap();
+    let (rgb, _) = frame(0);
+    std::fs::copy(&rgb, rgb_dir.join("a.jpg")).unwrap();
+    let depth = depth_dir.join("a.exr");
+    let channels = AnyChannels::sort(
+        vec![AnyChannel::new(
+            "Z",
+            FlatSamples::F32(vec![1e-40; 160 * 120]),
+        )]
+        .into(),
+    );
+    let layer = Layer::new(
+        (160, 120),
+        LayerAttributes::default(),
+        Encoding::FAST_LOSSLESS,
+        channels,
+    );
+    Image::from_layer(layer).write().to_file(&depth).unwrap();
+    let (rgb, depth) = (rgb_dir.join("a.jpg"), depth);
+    let (rgb, depth) = (rgb.to_str().unwrap(), depth.to_str().unwrap());
+    let out = dir.path().join("out");
+    let out_s = out.to_str().unwrap();
+    let single = |command: &'static str| {
+        vec![
+            command,
+            "--rgb",
+            rgb,
+            "--depth",
+            depth,
+            "--depth-encoding",
+            "metres",
+            "--size",
+            "48x64",
+        ]
+    };
+    for mut args in [
+        single("render"),
+        single("reference"),
+        vec![
+            "video",
+            "--rgb-dir",
+            rgb_dir.to_str().unwrap(),
+            "--depth-dir",
+            depth_dir.to_str().unwrap(),
+            "--depth-encoding",
+            "metres",
+            "--size",
+            "48x64",
+            "--save-frames",
+        ],
+    ] {
+        args.extend(["--out", out_s]);
+        let o = holo(&args);
+        let e = stderr(&o);
+        assert!(
+            !o.status.success() && e.contains("a.exr") && e.contains("no usable pixel"),
+            "{}: {e}",
+            args[0]
+        );
+        assert!(!out.exists(), "{} left {out_s}", args[0]);
+    }
+}

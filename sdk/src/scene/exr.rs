@@ -85,16 +85,21 @@ pub(crate) fn read_exr_depth(bytes: &[u8], source: &Path) -> Result<Array2<f32>>
         .saturating_mul(block_h as u64)
         .saturating_mul(pixel_bytes);
     let depth_bytes = pixels.saturating_mul(4);
-    // The table of chunk offsets, 8 bytes a chunk, is read first (a tiny tile makes it large).
-    let offsets = (header.chunk_count as u64).saturating_mul(8);
+    // The tables of chunk offsets, 8 bytes a chunk of every layer, are read first (a tiny tile makes them
+    // large).
+    let offsets = meta
+        .headers
+        .iter()
+        .fold(0u64, |n, h| n.saturating_add(h.chunk_count as u64))
+        .saturating_mul(8);
     let need = depth_bytes.saturating_add(chunk).saturating_add(offsets);
     let budget = pixels.saturating_mul(BYTES_PER_PIXEL).max(BUDGET_FLOOR);
     if need > budget {
         return Err(HoloError::InvalidData(format!(
-            "`{}`: reading its depth channel `{}` takes {need} bytes (the channel's {depth_bytes}, and a decoded \
-             chunk of {chunk}: {} channels of {pixel_bytes} bytes a pixel × {block_h} lines × \
-             {block_w} pixels; its offset table's {offsets}), above the decoders' budget of {budget} bytes for a {w}×{h} image ({BYTES_PER_PIXEL} \
-             bytes a pixel, at least 1 MiB)",
+            "`{}`: reading its depth channel `{}` takes {need} bytes (the channel's {depth_bytes}, a \
+             decoded chunk of {chunk}: {} channels of {pixel_bytes} bytes a pixel × {block_h} lines × {block_w} \
+             pixels, and its offset tables' {offsets}), above the decoders' budget of {budget} bytes for a \
+             {w}×{h} image ({BYTES_PER_PIXEL} bytes a pixel, at least 1 MiB)",
             source.display(),
             channel.name,
             channels.len(),
