@@ -1024,3 +1024,68 @@ mod output_nodes {
         std::fs::remove_dir_all(&root).unwrap();
     }
 }
+
+/// Issue 80: `holo dataset` whose `--out` holds a `manifest.json` that is a FIFO (no reader) or a link to
+/// /dev/null is refused at once naming it: without --force as a folder holding a dataset, with --force (which
+/// reads the old manifest: a FIFO would block the read, and removes it) as a node; the node stays.
+#[cfg(target_os = "linux")]
+#[test]
+fn dataset_refuses_a_node_for_its_manifest_at_once() {
+    let root = fresh("nodes-dataset");
+    let out = root.join("ds");
+    std::fs::create_dir_all(&out).unwrap();
+    let manifest = out.join("manifest.json");
+    for node in ["fifo", "null"] {
+        let _ = std::fs::remove_file(&manifest);
+        if node == "fifo" {
+            assert!(std::process::Command::new("mkfifo")
+                .arg(&manifest)
+                .status()
+                .unwrap()
+                .success());
+        } else {
+            std::os::unix::fs::symlink("/dev/null", &manifest).unwrap();
+        }
+        for force in [false, true] {
+            let mut args: Vec<&str> = common::ONE_SAMPLE_DATASET.to_vec();
+            args.extend(["--out", out.to_str().unwrap()]);
+            if force {
+                args.push("--force");
+            }
+            let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_holo"))
+                .args(&args)
+                .env("RUST_LOG", "warn")
+                .stderr(std::process::Stdio::piped())
+                .stdout(std::process::Stdio::null())
+                .spawn()
+                .unwrap();
+            let start = std::time::Instant::now();
+            while child.try_wait().unwrap().is_none() {
+                if start.elapsed() > std::time::Duration::from_secs(60) {
+                    let _ = child.kill();
+                    panic!("dataset {node} (force {force}) waits on manifest.json");
+                }
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            let o = child.wait_with_output().unwrap();
+            let e = stderr(&o);
+            assert!(
+                !o.status.success()
+                    && e.contains("manifest.json")
+                    && (!force || e.contains("not a dataset manifest")),
+                "{node} (force {force}): {e}"
+            );
+            let meta = std::fs::symlink_metadata(&manifest).unwrap();
+            assert!(
+                meta.file_type().is_symlink() || !meta.is_file(),
+                "{node}: manifest.json was replaced"
+            );
+            let shards = std::fs::read_dir(&out).unwrap().count();
+            assert_eq!(
+                shards, 1,
+                "{node} (force {force}): the refused run wrote into --out"
+            );
+        }
+    }
+    std::fs::remove_dir_all(&root).unwrap();
+}
