@@ -375,7 +375,10 @@ fn refinement_bounds_are_named_on_their_flags() {
     ]);
     let (e, text) = (stderr(&o), String::from_utf8_lossy(&o.stdout).into_owned());
     assert!(
-        !o.status.success() && e.contains("8×8") && e.contains("11×11") && !text.contains("NaN"),
+        !o.status.success()
+            && e.contains("--sizes 8x8")
+            && e.contains("11×11")
+            && !text.contains("NaN"),
         "{e}\n{text}"
     );
 }
