@@ -247,33 +247,11 @@ pub fn before_writing<T>(out: &Path, step: Result<T>) -> Result<T> {
 }
 
 /// Removes a previous run's report at `report`, if there is one (the run writes its own last). A device, a
-/// FIFO or a socket there, or a link to one (`--json /dev/null`, `--json /dev/stdout`), is not a report: it is
-/// left as it is (docs/INPUTS.md, "Outputs").
+/// FIFO or a socket there, a link to one, or a standard stream (`--json /dev/stdout`, `/dev/fd/1`) is not a
+/// report: it is left as it is (`tensorholo::io::remove_output`; docs/INPUTS.md, "Outputs").
 pub fn remove_old_report(report: &Path) -> Result<()> {
-    if is_node(report) {
-        return Ok(());
-    }
-    match std::fs::remove_file(report) {
-        Ok(()) => Ok(()),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => Err(e).with_context(|| format!("cannot remove the old {}", report.display())),
-    }
-}
-
-/// Whether `path` is, or links to, a device, a FIFO or a socket: an output written into, never removed.
-#[cfg(unix)]
-pub fn is_node(path: &Path) -> bool {
-    use std::os::unix::fs::FileTypeExt;
-    std::fs::metadata(path).is_ok_and(|m| {
-        let t = m.file_type();
-        t.is_char_device() || t.is_block_device() || t.is_fifo() || t.is_socket()
-    })
-}
-
-/// Whether `path` is, or links to, a device, a FIFO or a socket (none off Unix).
-#[cfg(not(unix))]
-pub fn is_node(_path: &Path) -> bool {
-    false
+    tensorholo::io::remove_output(report)
+        .with_context(|| format!("cannot remove the old {}", report.display()))
 }
 
 /// `create_dir_all`, which fails on an existing file of that name, with the folder named.

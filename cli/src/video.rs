@@ -619,9 +619,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
 /// if they are empty, innermost first.
 fn remove_written(written: &[PathBuf], created: &[PathBuf]) {
     for path in written {
-        if !crate::output::is_node(path) {
-            let _ = std::fs::remove_file(path);
-        }
+        let _ = tensorholo::io::remove_output(path);
     }
     for dir in created.iter().rev() {
         let _ = std::fs::remove_dir(dir);

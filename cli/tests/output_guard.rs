@@ -961,6 +961,46 @@ mod output_nodes {
         std::fs::remove_dir_all(&root).unwrap();
     }
 
+    /// `--json /dev/stdout` (and `/dev/fd/1`) writes into the process's standard output whatever it is: a
+    /// pipe, or a file the shell redirected it to (appended to; the link is never renamed over nor removed, as
+    /// `bench --json` removes an old report). Links of the test's own to `/proc/self/fd/1` and `/dev/fd/1`
+    /// stand for `/dev/stdout`, so that a regression cannot replace the system's.
+    #[test]
+    fn dev_stdout_is_written_into_whether_a_pipe_or_a_redirected_file() {
+        let root = fresh("nodes-stdout");
+        let (proc_link, fd_link) = (root.join("stdout"), root.join("fd1"));
+        std::os::unix::fs::symlink("/proc/self/fd/1", &proc_link).unwrap();
+        std::os::unix::fs::symlink("/dev/fd/1", &fd_link).unwrap();
+        for path in [&proc_link, &fd_link] {
+            for (name, args) in commands(&root, path) {
+                // A pipe (the test reads it as it comes: `output` drains stdout while the run writes).
+                let o = holo(&args);
+                let shown = path.display();
+                assert_eq!(o.status.code(), Some(0), "{name} {shown}: {}", stderr(&o));
+                assert!(!o.stdout.is_empty(), "{name} wrote nothing to {shown}");
+                assert!(is_link(path), "{name} replaced {shown}");
+                // A regular file.
+                let file = root.join("stdout.txt");
+                let _ = std::fs::remove_file(&file);
+                let o = std::process::Command::new(env!("CARGO_BIN_EXE_holo"))
+                    .args(&args)
+                    .env("RUST_LOG", "warn")
+                    .stdout(std::fs::File::create(&file).unwrap())
+                    .output()
+                    .unwrap();
+                assert_eq!(
+                    o.status.code(),
+                    Some(0),
+                    "{name} {shown} > file: {}",
+                    stderr(&o)
+                );
+                assert!(std::fs::metadata(&file).unwrap().len() > 0, "{name} > file");
+                assert!(is_link(path), "{name} replaced {shown}");
+            }
+        }
+        std::fs::remove_dir_all(&root).unwrap();
+    }
+
     #[test]
     fn character_devices_are_written_into_block_devices_and_sockets_refused() {
         let root = fresh("nodes-devices");

@@ -747,6 +747,40 @@ mod output_nodes {
     }
 
     #[test]
+    fn remove_output_leaves_nodes_and_standard_streams_removes_files_and_links() {
+        use tensorholo::io::remove_output;
+        let dir = scratch("remove");
+        let fifo = dir.join("fifo");
+        mkfifo(&fifo);
+        let null = dir.join("null");
+        std::os::unix::fs::symlink("/dev/null", &null).unwrap();
+        let stdout = dir.join("stdout");
+        std::os::unix::fs::symlink("/proc/self/fd/1", &stdout).unwrap();
+        let fd = dir.join("fd1");
+        std::os::unix::fs::symlink("/dev/fd/1", &fd).unwrap();
+        for kept in [&fifo, &null, &stdout, &fd] {
+            remove_output(kept).unwrap();
+            assert!(
+                fs::symlink_metadata(kept).is_ok(),
+                "{} removed",
+                kept.display()
+            );
+        }
+        let file = dir.join("report.json");
+        fs::write(&file, "{}").unwrap();
+        let link = dir.join("link.json");
+        std::os::unix::fs::symlink(&file, &link).unwrap();
+        remove_output(&link).unwrap();
+        assert!(
+            fs::symlink_metadata(&link).is_err() && file.is_file(),
+            "the link, not its file"
+        );
+        remove_output(&file).unwrap();
+        assert!(!file.exists());
+        remove_output(&file).unwrap();
+    }
+
+    #[test]
     fn links_to_files_folders_and_nothing_are_replaced_not_followed() {
         let dir = scratch("links");
         let target = dir.join("target.txt");

@@ -22,7 +22,8 @@ mod json;
 mod output;
 mod read;
 
-pub(crate) use output::{node_at, remove_output};
+pub(crate) use output::node_at;
+pub use output::remove_output;
 
 pub(crate) use json::parse_json_object;
 pub use json::JsonError;

@@ -80,13 +80,17 @@ pub(crate) fn node_at(path: &Path) -> Option<&'static str> {
         .and_then(|m| node_kind(m.file_type()))
 }
 
-/// Removes a file this program wrote or is about to replace at `path` (a previous run's report, a failed
-/// run's partial output), unless it is a node ([`node_at`]: a device, a FIFO or a socket, or a link to one),
-/// which is left as it is. Nothing there is not an error.
+/// Removes an output file at `path` that a program wrote or is about to replace (a previous run's report, a
+/// failed run's partial output), unless it is what outputs are written into rather than replaced
+/// (docs/INPUTS.md, "Outputs"): a device, a FIFO or a socket, itself or at the end of links, or a link
+/// through `/proc` (`/dev/stdout`, `/dev/fd/1`, whatever it leads to). Those are left as they are. A link to
+/// anything else is removed (the link, not what it leads to). Nothing there is not an error.
 ///
-/// Errors: the removal's, as [`HoloError::Io`] naming `path`.
-pub(crate) fn remove_output(path: &Path) -> Result<()> {
-    if node_at(path).is_some() {
+/// # Errors
+/// [`HoloError::Io`] naming `path` if the removal fails.
+pub fn remove_output(path: &Path) -> Result<()> {
+    let is_link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
+    if node_at(path).is_some() || (is_link && through_proc(path)) {
         return Ok(());
     }
     match std::fs::remove_file(path) {
@@ -110,9 +114,16 @@ fn through_proc(path: &Path) -> bool {
     if !cfg!(target_os = "linux") {
         return false;
     }
+    let under_proc = |p: &Path| {
+        p.starts_with("/proc")
+            || p.parent()
+                .and_then(|d| d.canonicalize().ok())
+                .is_some_and(|d| d.starts_with("/proc"))
+    };
     let mut p: PathBuf = path.to_path_buf();
     for _ in 0..40 {
-        if p.starts_with("/proc") {
+        // `/dev/fd/1` lies in `/proc/self/fd` once its folder (a link) is resolved.
+        if under_proc(&p) {
             return true;
         }
         match std::fs::read_link(&p) {
