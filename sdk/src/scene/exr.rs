@@ -19,10 +19,10 @@ const BUDGET_FLOOR: u64 = 1 << 20;
 
 /// The samples `[H, W]` of an OpenEXR file's depth channel (see [`DEPTH_CHANNELS`]) of its first layer at the
 /// largest resolution, as f32 (half-precision files widened), before any validity rule. Only that channel is
-/// read: what the read allocates (the channel, and the largest decoded chunk: all its channels × lines ×
-/// width × sample size) is counted from the header against the decoders' budget (16 bytes a pixel of the
-/// image, at least 1 MiB; the size against [`crate::io::InputLimits`]) before any pixel is read. Channels
-/// that are skipped only count in that chunk.
+/// read: what the read allocates (the channel, the largest decoded chunk: all its channels × lines × width ×
+/// sample size, and the tables of chunk offsets) is counted from the header against the decoders' budget (16
+/// bytes a pixel of the image, at least 1 MiB; the size against [`crate::io::InputLimits`]) before any pixel
+/// is read. Channels that are skipped only count in that chunk.
 ///
 /// Errors: [`HoloError::InvalidDepth`] naming `source` for a file the exr crate cannot read (truncated,
 /// corrupt, deep data), an empty image, subsampled channels, or several channels none of which is named for
