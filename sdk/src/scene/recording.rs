@@ -124,7 +124,7 @@ fn is_file_entry(path: &Path, role: &str) -> Result<bool> {
     match entry_kind(path) {
         None => Ok(false),
         Some(kind) => Err(HoloError::InvalidData(format!(
-            "`{}` is {kind}: {role} is a file",
+            "`{}` is {kind}, where {role} must be a file",
             path.display()
         ))),
     }
@@ -139,7 +139,7 @@ fn is_dir_entry(path: &Path, role: &str) -> Result<bool> {
     match entry_kind(path) {
         None => Ok(false),
         Some(kind) => Err(HoloError::InvalidData(format!(
-            "`{}` is {kind}: {role} is a folder",
+            "`{}` is {kind}, where {role} must be a folder",
             path.display()
         ))),
     }
@@ -223,7 +223,7 @@ fn open_record3d(dir: &Path, metadata: &Path) -> Result<Recording> {
 }
 
 fn open_stray_scanner(dir: &Path) -> Result<Recording> {
-    if !is_dir_entry(&dir.join("rgb"), "a recording's colour frames")? {
+    if !is_dir_entry(&dir.join("rgb"), "the recording's `rgb/`")? {
         return Err(HoloError::InvalidData(format!(
             "recording `{}` (Stray Scanner): its colour is the video rgb.mp4; extract its frames into rgb/, \
              numbered from 0 as the depth files are: `ffmpeg -i rgb.mp4 -start_number 0 rgb/%06d.png`",
@@ -298,7 +298,7 @@ fn finish(
 /// does not exist.
 fn numbered(dir: &Path, sub: &str) -> Result<Option<BTreeMap<u64, PathBuf>>> {
     let folder = dir.join(sub);
-    if !is_dir_entry(&folder, &format!("a recording's {sub}/"))? {
+    if !is_dir_entry(&folder, &format!("the recording's `{sub}/`"))? {
         return Ok(None);
     }
     let entries = std::fs::read_dir(&folder).map_err(|source| HoloError::Io {
@@ -319,7 +319,7 @@ fn numbered(dir: &Path, sub: &str) -> Result<Option<BTreeMap<u64, PathBuf>>> {
         }
         // A frame file that is a folder, a device, a FIFO or a broken link is named for what it is, not
         // taken as missing.
-        is_file_entry(&path, "a recording's frame")?;
+        is_file_entry(&path, "a frame")?;
         let number = path
             .file_stem()
             .and_then(|s| s.to_str())
