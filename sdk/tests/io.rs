@@ -781,6 +781,20 @@ mod output_nodes {
     }
 
     #[test]
+    fn a_standard_stream_that_leads_nowhere_is_refused_not_replaced() {
+        let dir = scratch("closed-stream");
+        let link = dir.join("stdout");
+        // No process keeps fd 987 open: the link through /proc leads nowhere.
+        std::os::unix::fs::symlink("/proc/self/fd/987", &link).unwrap();
+        for (name, write) in writers() {
+            let e = write(&link).expect_err(name);
+            assert_refused(e, &link, "a standard stream that leads nowhere");
+            assert!(is_link(&link), "{name} replaced the link");
+        }
+        no_temporaries(&dir);
+    }
+
+    #[test]
     fn links_to_files_folders_and_nothing_are_replaced_not_followed() {
         let dir = scratch("links");
         let target = dir.join("target.txt");

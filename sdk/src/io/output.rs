@@ -149,6 +149,12 @@ pub(crate) fn open_output(path: &Path) -> Result<Target> {
     let meta = if entry.file_type().is_symlink() {
         match std::fs::metadata(path) {
             Ok(m) => m,
+            // A standard stream that is closed (`/dev/stdout` with no fd 1): never replaced.
+            Err(_) if stream => return Err(refusal(
+                path,
+                "is a standard stream that leads nowhere (closed): refusing to replace its link"
+                    .into(),
+            )),
             // A dangling or looping link: replaced.
             Err(_) => return Ok(Target::Replace),
         }
@@ -171,6 +177,13 @@ pub(crate) fn open_output(path: &Path) -> Result<Target> {
                     source,
                 })?;
             return Ok(Target::Stream(NodeWriter { file }));
+        }
+        if stream {
+            // A standard stream open on a folder: its link is never replaced.
+            return Err(refusal(
+                path,
+                "is a standard stream open on a folder: refusing to replace its link".into(),
+            ));
         }
         return Ok(Target::Replace);
     };
