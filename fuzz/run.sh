@@ -9,7 +9,7 @@ seconds=${1:-240}
 shift || true
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(depth_decode rgb_decode npy holocal camera_frame onnx_model display_profile aberration shard_record manifest spot_plan saved_plans)
+    targets=(depth_decode rgb_decode npy holocal camera_frame onnx_model display_profile aberration shard_record manifest spot_plan saved_plans exr_depth record3d_metadata stray_odometry stray_camera_matrix)
 fi
 cargo +nightly fuzz build -O
 mkdir -p logs

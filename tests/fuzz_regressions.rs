@@ -230,8 +230,94 @@ fn seeds(target: &str) -> Vec<Vec<u8>> {
                 .map(|e| std::fs::read(e.unwrap().path()).unwrap())
                 .collect()
         }
+        // Uncompressed single-layer scan-line files: one f32 `Z` channel (Record3D's), a half-float `Y` beside
+        // other channels, and one 32-bit unsigned channel.
+        "exr_depth" => vec![
+            exr_file(5, 3, &[("Z", 2)]),
+            exr_file(4, 4, &[("A", 1), ("B", 2), ("Y", 1)]),
+            exr_file(3, 2, &[("depth", 0)]),
+        ],
+        "record3d_metadata" => vec![
+            br#"{"K": [1445.3, 0, 0, 0, 1445.3, 0, 962.1, 718.4, 1], "fps": 60,
+                "frameTimestamps": [0.0, 0.0167, 0.0333], "w": 1920, "h": 1440}"#
+                .to_vec(),
+            br#"{"fps": 30}"#.to_vec(),
+        ],
+        "stray_odometry" => vec![
+            harness::STRAY_ODOMETRY.as_bytes().to_vec(),
+            // Rows in any order: frames run in timestamp order.
+            b"timestamp,frame\n2.5,1\n1.5,2\n3.5,0\n".to_vec(),
+        ],
+        "stray_camera_matrix" => vec![
+            harness::STRAY_CAMERA.as_bytes().to_vec(),
+            b"500,0,320\n0,500.5,240\n0,0,1".to_vec(),
+        ],
         other => panic!("no seeds for {other}"),
     }
+}
+
+/// An uncompressed single-layer scan-line OpenEXR file of `w × h` pixels with `channels` (name, pixel type:
+/// 0 u32, 1 half, 2 f32; sorted by name as the format stores them), samples `1 + x/10 + y/100` (a valid depth
+/// in metres), written by hand from the OpenEXR file layout (no exr crate in this test crate).
+fn exr_file(w: i32, h: i32, channels: &[(&str, i32)]) -> Vec<u8> {
+    fn attribute(out: &mut Vec<u8>, name: &str, kind: &str, value: &[u8]) {
+        out.extend(name.as_bytes());
+        out.push(0);
+        out.extend(kind.as_bytes());
+        out.push(0);
+        out.extend((value.len() as i32).to_le_bytes());
+        out.extend(value);
+    }
+    let mut sorted = channels.to_vec();
+    sorted.sort_by_key(|c| c.0);
+    let mut out = vec![0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0];
+    let mut list = Vec::new();
+    for (name, kind) in &sorted {
+        list.extend(name.as_bytes());
+        list.push(0);
+        list.extend(kind.to_le_bytes());
+        list.extend([0, 0, 0, 0]);
+        list.extend(1i32.to_le_bytes());
+        list.extend(1i32.to_le_bytes());
+    }
+    list.push(0);
+    attribute(&mut out, "channels", "chlist", &list);
+    attribute(&mut out, "compression", "compression", &[0]);
+    let window: Vec<u8> = [0, 0, w - 1, h - 1]
+        .iter()
+        .flat_map(|v: &i32| v.to_le_bytes())
+        .collect();
+    attribute(&mut out, "dataWindow", "box2i", &window);
+    attribute(&mut out, "displayWindow", "box2i", &window);
+    attribute(&mut out, "lineOrder", "lineOrder", &[0]);
+    attribute(&mut out, "pixelAspectRatio", "float", &1f32.to_le_bytes());
+    attribute(&mut out, "screenWindowCenter", "v2f", &[0; 8]);
+    attribute(&mut out, "screenWindowWidth", "float", &1f32.to_le_bytes());
+    out.push(0);
+    // One chunk a line: the offset table, then each line's y, size and samples, channel by channel.
+    let line_bytes: i32 = sorted
+        .iter()
+        .map(|(_, kind)| if *kind == 1 { 2 } else { 4 } * w)
+        .sum();
+    let table_end = out.len() + 8 * h as usize;
+    for y in 0..h as usize {
+        out.extend(((table_end + y * (8 + line_bytes as usize)) as u64).to_le_bytes());
+    }
+    for y in 0..h {
+        out.extend(y.to_le_bytes());
+        out.extend(line_bytes.to_le_bytes());
+        for (_, kind) in &sorted {
+            for x in 0..w {
+                let v = 1.0 + x as f32 / 10.0 + y as f32 / 100.0;
+                match kind {
+                    0 => out.extend((v.round() as u32).to_le_bytes()),
+                    1 => out.extend(half::f16::from_f32(v).to_le_bytes()),
+                    _ => out.extend(v.to_le_bytes()),
+                }
+            }
+        }
+    }
+    out
 }
 
 /// docs/DISPLAYS.md's paper display and 3.74 µm LCoS.
@@ -315,6 +401,28 @@ fn check_seeds_accepted(target: &str, seeds: &[Vec<u8>]) {
                     .map(|_| ())
                     .map_err(|e| e.to_string())
             }
+            "exr_depth" => decode_depth_bytes(s, Path::new("seed"), DepthEncoding::Metres)
+                .map(|_| ())
+                .map_err(|e| e.to_string()),
+            "record3d_metadata" | "stray_odometry" | "stray_camera_matrix" => {
+                // The harness writes the seed into its recording folder and lists it; a refusal panics here.
+                let name = match target {
+                    "record3d_metadata" => "metadata.json",
+                    "stray_odometry" => "odometry.csv",
+                    _ => "camera_matrix.csv",
+                };
+                let dir = std::env::temp_dir().join(format!(
+                    "tensorholo-seed-{target}-{}-{i}",
+                    std::process::id()
+                ));
+                recording_seed_dir(&dir, target == "record3d_metadata");
+                std::fs::write(dir.join(name), s).unwrap();
+                let r = tensorholo::scene::open_recording(&dir)
+                    .map(|_| ())
+                    .map_err(|e| e.to_string());
+                std::fs::remove_dir_all(&dir).unwrap();
+                r
+            }
             "manifest" => tensorholo::dataset::Manifest::from_json_str(
                 std::str::from_utf8(s).unwrap(),
                 "seed",
@@ -326,6 +434,26 @@ fn check_seeds_accepted(target: &str, seeds: &[Vec<u8>]) {
         if let Err(e) = ok {
             panic!("{target} seed {i} is refused: {e}");
         }
+    }
+}
+
+/// A recording folder of three frames (empty files) for the recording seeds: Record3D's or Stray Scanner's.
+fn recording_seed_dir(dir: &Path, record3d: bool) {
+    for sub in ["rgb", "depth"] {
+        std::fs::create_dir_all(dir.join(sub)).unwrap();
+    }
+    for i in 0..3 {
+        let (rgb, depth) = if record3d {
+            (format!("rgb/{i}.jpg"), format!("depth/{i}.exr"))
+        } else {
+            (format!("rgb/{i:06}.png"), format!("depth/{i:06}.png"))
+        };
+        std::fs::write(dir.join(rgb), b"").unwrap();
+        std::fs::write(dir.join(depth), b"").unwrap();
+    }
+    if !record3d {
+        std::fs::write(dir.join("odometry.csv"), harness::STRAY_ODOMETRY).unwrap();
+        std::fs::write(dir.join("camera_matrix.csv"), harness::STRAY_CAMERA).unwrap();
     }
 }
 

@@ -635,6 +635,15 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             "--profile times tract's operators: this holo was built without the `tract` feature"
         );
     }
+    // The refinement's frames, as render's, are at least the SSIM window: refused before any table runs.
+    let min = tensorholo::metrics::SSIM_WINDOW;
+    if let Some(&(h, w)) = args.sizes.iter().find(|(h, w)| *h < min || *w < min) {
+        if args.refine.is_some() {
+            anyhow::bail!(
+                "--sizes {h}x{w} with --refine: the refinement needs at least {min}×{min} pixels"
+            );
+        }
+    }
     if let Some(path) = &args.json {
         // A stale file from an earlier run must not pass for this one's if the run fails: removed now,
         // written at the end.

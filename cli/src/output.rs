@@ -246,13 +246,12 @@ pub fn before_writing<T>(out: &Path, step: Result<T>) -> Result<T> {
     step
 }
 
-/// Removes a previous run's report at `report`, if there is one (the run writes its own last).
+/// Removes a previous run's report at `report`, if there is one (the run writes its own last). A device, a
+/// FIFO or a socket there, a link to one, or a standard stream (`--json /dev/stdout`, `/dev/fd/1`) is not a
+/// report: it is left as it is (`tensorholo::io::remove_output`; docs/INPUTS.md, "Outputs").
 pub fn remove_old_report(report: &Path) -> Result<()> {
-    match std::fs::remove_file(report) {
-        Ok(()) => Ok(()),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => Err(e).with_context(|| format!("cannot remove the old {}", report.display())),
-    }
+    tensorholo::io::remove_output(report)
+        .with_context(|| format!("cannot remove the old {}", report.display()))
 }
 
 /// `create_dir_all`, which fails on an existing file of that name, with the folder named.

@@ -117,11 +117,11 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         Some(path) => Some((path, crate::aberration::load("--aberration", path)?)),
         None => None,
     };
-    crate::output::prepare(&args.out, &inputs)?;
-
+    // The scene first, as render does: a refused input leaves no output folder (an old report goes).
     let t = Instant::now();
-    let (scene, source) = args.scene.load()?;
+    let (scene, source) = crate::output::before_writing(&args.out, args.scene.load())?;
     let load_s = t.elapsed().as_secs_f64();
+    crate::output::prepare(&args.out, &inputs)?;
     let frame = scene.front();
     log::info!(
         "scene {}×{} ({}), {} depth planes, {:?}",

@@ -336,263 +336,292 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         args.model
             .pipeline(tensorholo::model::SceneInput::Rgbd, profile.as_ref()),
     )?;
+    // What this run creates, removed again if it fails: a refused video leaves nothing (its old report is gone
+    // already, so the folder does not read as a complete run).
+    let created: Vec<PathBuf> = [&args.out, &frames_dir]
+        .into_iter()
+        .filter(|d| !d.exists())
+        .cloned()
+        .collect();
     crate::output::start_run(&args.out, subfolders, Some(&args.out.join("report.json")))?;
-
-    // One metric range for the whole sequence (the first frame's percentiles unless given), so that the
-    // depth mapping does not flicker from frame to frame.
-    let mut options = args.depth.load_options()?;
-    let first_files = &pairs[0];
-    let (first, first_report) = load_rgbd_with_confidence(
-        &first_files.rgb,
-        &first_files.depth,
-        first_files.confidence.as_deref(),
-        encoding,
-        &options,
-    )
-    .with_context(|| format!("frame 0 (`{}`)", first_files.rgb.display()))?;
-    if options.range.is_none() {
-        options.range = first_report.range_used;
-    }
-    let range: Option<DepthRange> = options.range;
-    let (h, w) = (first.height(), first.width());
-    let t = Instant::now();
-    let mut session = pipeline
-        .session(h, w)
-        .map_err(|e| args.model.plans.blame(e))?;
-    let session_s = t.elapsed().as_secs_f64();
-    args.model
-        .plans
-        .write_tuning(&args.out, session.plan_report())?;
-    log::info!(
-        "{} frames of {h}×{w}, depth range {:?} m, {}-layer CNN {}, offset {} mm",
-        pairs.len(),
-        range.map(|r| (r.z_near_m, r.z_far_m)),
-        args.model.layers,
-        args.model.precision(),
-        pipeline.config().offset_m * 1e3
-    );
-
-    let loader = |files: &FrameFiles, options: &LoadOptions| -> tensorholo::Result<RgbdFrame> {
-        let (f, _) = load_rgbd_with_confidence(
-            &files.rgb,
-            &files.depth,
-            files.confidence.as_deref(),
+    let mut written: Vec<PathBuf> = Vec::new();
+    let result = (|| -> Result<()> {
+        // One metric range for the whole sequence (the first frame's percentiles unless given), so that the
+        // depth mapping does not flicker from frame to frame.
+        let mut options = args.depth.load_options()?;
+        let first_files = &pairs[0];
+        let (first, first_report) = load_rgbd_with_confidence(
+            &first_files.rgb,
+            &first_files.depth,
+            first_files.confidence.as_deref(),
             encoding,
-            options,
-        )?;
-        if (f.height(), f.width()) != (h, w) {
-            return Err(HoloError::ShapeMismatch {
-                what: format!("frame {} vs the first frame", files.rgb.display()),
-                expected: vec![h, w],
-                got: vec![f.height(), f.width()],
-            });
+            &options,
+        )
+        .with_context(|| format!("frame 0 (`{}`)", first_files.rgb.display()))?;
+        if options.range.is_none() {
+            options.range = first_report.range_used;
         }
-        Ok(f)
-    };
-    if args.align_phase && pipeline.calibration().is_some() {
-        bail!(
-            "--align-phase shifts the codes, which is a global phase only through the linear look-up table; \
-             this run sends its codes through a display calibration (--calibration or the --display profile's)"
+        let range: Option<DepthRange> = options.range;
+        let (h, w) = (first.height(), first.width());
+        let t = Instant::now();
+        let mut session = pipeline
+            .session(h, w)
+            .map_err(|e| args.model.plans.blame(e))?;
+        let session_s = t.elapsed().as_secs_f64();
+        args.model
+            .plans
+            .write_tuning(&args.out, session.plan_report())?;
+        if args.model.plans.tune {
+            written.push(args.out.join("tuning.json"));
+        }
+        log::info!(
+            "{} frames of {h}×{w}, depth range {:?} m, {}-layer CNN {}, offset {} mm",
+            pairs.len(),
+            range.map(|r| (r.z_near_m, r.z_far_m)),
+            args.model.layers,
+            args.model.precision(),
+            pipeline.config().offset_m * 1e3
         );
-    }
-    let mut rows = Vec::new();
-    let mut first_codes = None;
-    // The last pattern sent, for the churn and the alignment.
-    let mut previous: Option<ndarray::Array3<u8>> = None;
-    let mut churns = Vec::new();
-    let mut refiner = match refine {
-        Some(request) => Some(crate::refine::frame_refiner(
-            request,
-            &pipeline,
-            session.backend_report(),
-            args.model.thread_count(),
-        )?),
-        None => None,
-    };
-    // A refinement's error, to report as it is (the stream stops on it).
-    let mut refine_error = None;
-    let mut refine_s = (0.0f64, 0.0f64);
-    let t_stream = Instant::now();
-    let opts = options;
-    // The frame whose error stops the stream, to name its files.
-    let mut failed = None;
-    let streamed = session.render_stream_each(
-        pairs.iter().enumerate().map(|(i, p)| {
-            let t = Instant::now();
-            let frame = loader(p, &opts).inspect(|_| {
-                log::debug!("loaded {} in {:.1} ms", p.rgb.display(), t.elapsed().as_secs_f64() * 1e3)
-            });
-            // A refinement needs the frame's points again (its SM-LBM target) after the CNN has it.
-            let kept = match (&refine, &frame) {
-                (Some(_), Ok(f)) => Some(f.clone()),
-                _ => None,
-            };
-            ((i, kept), frame)
-        }),
-        |(i, kept), out| {
-            let out = out.inspect_err(|_| failed = Some(i))?;
-            let refined = match (&mut refiner, &kept) {
-                (Some(r), Some(frame)) => {
-                    let iterations = r.request().options.iterations;
-                    match r.refine(
-                        &[SceneLayer::from(frame)],
-                        None,
-                        out.codes.view(),
-                        &mut crate::refine::log_progress(iterations),
-                    ) {
-                        Ok(refined) => {
-                            refine_s.0 += refined.target_s;
-                            refine_s.1 += refined.report.iterations_s;
-                            let report = crate::refine::report(r, &refined);
-                            Some((refined, report))
-                        }
-                        Err(e) => {
-                            failed = Some(i);
-                            // The stream's own error is what stops it; the refinement's is reported.
-                            let text = e.to_string();
-                            refine_error = Some(e);
-                            return Err(HoloError::Cancelled(text));
+
+        let loader = |files: &FrameFiles, options: &LoadOptions| -> tensorholo::Result<RgbdFrame> {
+            let (f, _) = load_rgbd_with_confidence(
+                &files.rgb,
+                &files.depth,
+                files.confidence.as_deref(),
+                encoding,
+                options,
+            )?;
+            if (f.height(), f.width()) != (h, w) {
+                return Err(HoloError::ShapeMismatch {
+                    what: format!("frame {} vs the first frame", files.rgb.display()),
+                    expected: vec![h, w],
+                    got: vec![f.height(), f.width()],
+                });
+            }
+            Ok(f)
+        };
+        if args.align_phase && pipeline.calibration().is_some() {
+            bail!(
+                "--align-phase shifts the codes, which is a global phase only through the linear look-up table; \
+                 this run sends its codes through a display calibration (--calibration or the --display profile's)"
+            );
+        }
+        let mut rows = Vec::new();
+        let mut first_codes = None;
+        // The last pattern sent, for the churn and the alignment.
+        let mut previous: Option<ndarray::Array3<u8>> = None;
+        let mut churns = Vec::new();
+        let mut refiner = match refine {
+            Some(request) => Some(crate::refine::frame_refiner(
+                request,
+                &pipeline,
+                session.backend_report(),
+                args.model.thread_count(),
+            )?),
+            None => None,
+        };
+        // A refinement's error, to report as it is (the stream stops on it).
+        let mut refine_error = None;
+        let mut refine_s = (0.0f64, 0.0f64);
+        let t_stream = Instant::now();
+        let opts = options;
+        // The frame whose error stops the stream, to name its files.
+        let mut failed = None;
+        let streamed = session.render_stream_each(
+            pairs.iter().enumerate().map(|(i, p)| {
+                let t = Instant::now();
+                let frame = loader(p, &opts).inspect(|_| {
+                    log::debug!("loaded {} in {:.1} ms", p.rgb.display(), t.elapsed().as_secs_f64() * 1e3)
+                });
+                // A refinement needs the frame's points again (its SM-LBM target) after the CNN has it.
+                let kept = match (&refine, &frame) {
+                    (Some(_), Ok(f)) => Some(f.clone()),
+                    _ => None,
+                };
+                ((i, kept), frame)
+            }),
+            |(i, kept), out| {
+                let out = out.inspect_err(|_| failed = Some(i))?;
+                let refined = match (&mut refiner, &kept) {
+                    (Some(r), Some(frame)) => {
+                        let iterations = r.request().options.iterations;
+                        match r.refine(
+                            &[SceneLayer::from(frame)],
+                            None,
+                            out.codes.view(),
+                            &mut crate::refine::log_progress(iterations),
+                        ) {
+                            Ok(refined) => {
+                                refine_s.0 += refined.target_s;
+                                refine_s.1 += refined.report.iterations_s;
+                                let report = crate::refine::report(r, &refined);
+                                Some((refined, report))
+                            }
+                            Err(e) => {
+                                failed = Some(i);
+                                // The stream's own error is what stops it; the refinement's is reported.
+                                let text = e.to_string();
+                                refine_error = Some(e);
+                                return Err(HoloError::Cancelled(text));
+                            }
                         }
                     }
+                    _ => None,
+                };
+                let mut codes = refined
+                    .as_ref()
+                    .map_or_else(|| out.codes.clone(), |r| r.0.codes.clone());
+                let (shifts, churn) = match &previous {
+                    Some(p) => {
+                        let shifts = if args.align_phase {
+                            Some(align_global_phase(p.view(), codes.view_mut())?)
+                        } else {
+                            None
+                        };
+                        (shifts, Some(phase_churn(p.view(), codes.view())?))
+                    }
+                    None => (None, None),
+                };
+                churns.extend(churn);
+                let t = out.timings;
+                if out.backend == Backend::Gpu {
+                    log::info!(
+                        "frame {i} (GPU): packing {:.1} ms, GPU {:.1} ms, period {:.1} ms",
+                        t.cnn_s * 1e3,
+                        t.gpu_s * 1e3,
+                        t.total_s * 1e3
+                    );
+                } else {
+                    log::info!(
+                        "frame {i}: CNN {:.1} ms, offset {:.1} ms, pre-filter {:.1} ms, encoding {:.1} ms, period {:.1} ms",
+                        t.cnn_s * 1e3,
+                        t.offset_s * 1e3,
+                        t.prefilter_s * 1e3,
+                        t.encoding_s * 1e3,
+                        t.total_s * 1e3
+                    );
                 }
-                _ => None,
-            };
-            let mut codes = refined
-                .as_ref()
-                .map_or_else(|| out.codes.clone(), |r| r.0.codes.clone());
-            let (shifts, churn) = match &previous {
-                Some(p) => {
-                    let shifts = if args.align_phase {
-                        Some(align_global_phase(p.view(), codes.view_mut())?)
-                    } else {
-                        None
-                    };
-                    (shifts, Some(phase_churn(p.view(), codes.view())?))
+                if i == 0 {
+                    first_codes = Some(out.codes.clone());
                 }
-                None => (None, None),
-            };
-            churns.extend(churn);
-            let t = out.timings;
-            if out.backend == Backend::Gpu {
-                log::info!(
-                    "frame {i} (GPU): packing {:.1} ms, GPU {:.1} ms, period {:.1} ms",
-                    t.cnn_s * 1e3,
-                    t.gpu_s * 1e3,
-                    t.total_s * 1e3
-                );
-            } else {
-                log::info!(
-                    "frame {i}: CNN {:.1} ms, offset {:.1} ms, pre-filter {:.1} ms, encoding {:.1} ms, period {:.1} ms",
-                    t.cnn_s * 1e3,
-                    t.offset_s * 1e3,
-                    t.prefilter_s * 1e3,
-                    t.encoding_s * 1e3,
-                    t.total_s * 1e3
-                );
-            }
-            if i == 0 {
-                first_codes = Some(out.codes.clone());
-            }
-            if args.save_frames {
-                for (c, ch) in ["r", "g", "b"].iter().enumerate() {
-                    save_u8_png(&frame_file(&frames_dir, i, ch), codes.index_axis(Axis(0), c))?;
+                if args.save_frames {
+                    for (c, ch) in ["r", "g", "b"].iter().enumerate() {
+                        let file = frame_file(&frames_dir, i, ch);
+                        save_u8_png(&file, codes.index_axis(Axis(0), c))?;
+                        written.push(file);
+                    }
                 }
-            }
-            previous = Some(codes);
-            rows.push(json!({
-                "index": i,
-                "rgb": crate::output::path_text(&pairs[i].rgb),
-                "depth": crate::output::path_text(&pairs[i].depth),
-                "confidence": pairs[i].confidence.as_deref().map(crate::output::path_text),
-                "time_s": pairs[i].time_s,
-                "timings_s": t,
-                "backend": out.backend,
-                "amplitude_scale": refined.as_ref().map_or(out.amplitude_scale, |r| r.0.amplitude_scale),
-                "refine": refined.map(|r| r.1),
-                "temporal": churn.map(|c| json!({
-                    "churn_rad": c.mean_abs_rad,
-                    "above_half_pi": c.above_half_pi,
-                    "aligned_shift_codes": shifts,
-                })),
-            }));
-            Ok(())
-        },
-    );
-    if let Some(e) = refine_error {
-        let i = failed.unwrap_or(0);
-        return Err(anyhow::Error::new(e).context(format!(
-            "frame {i} (`{}` + `{}`)",
-            pairs[i].rgb.display(),
-            pairs[i].depth.display()
-        )));
-    }
-    let n = streamed.with_context(|| match failed {
-        Some(i) => format!(
-            "frame {i} (`{}` + `{}`)",
-            pairs[i].rgb.display(),
-            pairs[i].depth.display()
-        ),
-        None => "the video stream".to_string(),
-    })?;
-    let stream_s = t_stream.elapsed().as_secs_f64();
-    // The streamed output must equal a single-frame render of the same frame.
-    let single = session.render(&loader(&pairs[0], &options)?)?.codes.clone();
-    let identical = first_codes.as_ref() == Some(&single);
-    if !identical {
-        log::warn!("streamed frame 0 differs from its single-frame render");
-    }
-    let periods: Vec<f64> = rows
-        .iter()
-        .skip(1)
-        .filter_map(|r| r["timings_s"]["total_s"].as_f64())
-        .collect();
-    let mean_period = if periods.is_empty() {
-        stream_s / n.max(1) as f64
-    } else {
-        periods.iter().sum::<f64>() / periods.len() as f64
-    };
-    let report = json!({
-        "tensorholo_version": env!("CARGO_PKG_VERSION"),
-        "command": crate::output::command_line(),
-        "frames": n,
-        "size": [h, w],
-        "depth_range_m": range.map(|r| [r.z_near_m, r.z_far_m]),
-        "depth_encoding": encoding,
-        "recording": recording.as_ref().map(|r| json!({
-            "kind": r.kind,
-            "dir": crate::output::path_text(&r.dir),
-            "fps": r.fps,
-            "intrinsics_px": r.intrinsics,
-            "frames": r.frames.len(),
-            "confidence_maps": r.frames.iter().any(|f| f.confidence.is_some()),
-        })),
-        "models": models,
-        "pipeline": pipeline.config(),
-        "session_setup_s": session_s,
-        "cnn_plan": session.plan_report(),
-        "backend": session.backend_report(),
-        "stream_s": stream_s,
-        "fps_overall": n as f64 / stream_s,
-        "fps_steady": if mean_period > 0.0 { 1.0 / mean_period } else { 0.0 },
-        "mean_period_after_first_s": mean_period,
-        "stream_equals_single_frame": identical,
-        "refine_target_s": refine.map(|_| refine_s.0),
-        "refine_iterations_s": refine.map(|_| refine_s.1),
-        "temporal": temporal_summary(&churns, args.align_phase),
-        "per_frame": rows,
-        "total_s": t_all.elapsed().as_secs_f64(),
-    });
-    crate::args::write_json(&args.out.join("report.json"), &report)?;
-    log::info!(
-        "{n} frames in {:.2} s: {:.2} FPS overall, {:.2} FPS after the first frame; report in {}",
-        stream_s,
-        n as f64 / stream_s,
-        if mean_period > 0.0 {
-            1.0 / mean_period
+                previous = Some(codes);
+                rows.push(json!({
+                    "index": i,
+                    "rgb": crate::output::path_text(&pairs[i].rgb),
+                    "depth": crate::output::path_text(&pairs[i].depth),
+                    "confidence": pairs[i].confidence.as_deref().map(crate::output::path_text),
+                    "time_s": pairs[i].time_s,
+                    "timings_s": t,
+                    "backend": out.backend,
+                    "amplitude_scale": refined.as_ref().map_or(out.amplitude_scale, |r| r.0.amplitude_scale),
+                    "refine": refined.map(|r| r.1),
+                    "temporal": churn.map(|c| json!({
+                        "churn_rad": c.mean_abs_rad,
+                        "above_half_pi": c.above_half_pi,
+                        "aligned_shift_codes": shifts,
+                    })),
+                }));
+                Ok(())
+            },
+        );
+        if let Some(e) = refine_error {
+            let i = failed.unwrap_or(0);
+            return Err(anyhow::Error::new(e).context(format!(
+                "frame {i} (`{}` + `{}`)",
+                pairs[i].rgb.display(),
+                pairs[i].depth.display()
+            )));
+        }
+        let n = streamed.with_context(|| match failed {
+            Some(i) => format!(
+                "frame {i} (`{}` + `{}`)",
+                pairs[i].rgb.display(),
+                pairs[i].depth.display()
+            ),
+            None => "the video stream".to_string(),
+        })?;
+        let stream_s = t_stream.elapsed().as_secs_f64();
+        // The streamed output must equal a single-frame render of the same frame.
+        let single = session.render(&loader(&pairs[0], &options)?)?.codes.clone();
+        let identical = first_codes.as_ref() == Some(&single);
+        if !identical {
+            log::warn!("streamed frame 0 differs from its single-frame render");
+        }
+        let periods: Vec<f64> = rows
+            .iter()
+            .skip(1)
+            .filter_map(|r| r["timings_s"]["total_s"].as_f64())
+            .collect();
+        let mean_period = if periods.is_empty() {
+            stream_s / n.max(1) as f64
         } else {
-            0.0
-        },
-        args.out.display()
-    );
-    Ok(())
+            periods.iter().sum::<f64>() / periods.len() as f64
+        };
+        let report = json!({
+            "tensorholo_version": env!("CARGO_PKG_VERSION"),
+            "command": crate::output::command_line(),
+            "frames": n,
+            "size": [h, w],
+            "depth_range_m": range.map(|r| [r.z_near_m, r.z_far_m]),
+            "depth_encoding": encoding,
+            "recording": recording.as_ref().map(|r| json!({
+                "kind": r.kind,
+                "dir": crate::output::path_text(&r.dir),
+                "fps": r.fps,
+                "intrinsics_px": r.intrinsics,
+                "frames": r.frames.len(),
+                "confidence_maps": r.frames.iter().any(|f| f.confidence.is_some()),
+            })),
+            "models": models,
+            "pipeline": pipeline.config(),
+            "session_setup_s": session_s,
+            "cnn_plan": session.plan_report(),
+            "backend": session.backend_report(),
+            "stream_s": stream_s,
+            "fps_overall": n as f64 / stream_s,
+            "fps_steady": if mean_period > 0.0 { 1.0 / mean_period } else { 0.0 },
+            "mean_period_after_first_s": mean_period,
+            "stream_equals_single_frame": identical,
+            "refine_target_s": refine.map(|_| refine_s.0),
+            "refine_iterations_s": refine.map(|_| refine_s.1),
+            "temporal": temporal_summary(&churns, args.align_phase),
+            "per_frame": rows,
+            "total_s": t_all.elapsed().as_secs_f64(),
+        });
+        crate::args::write_json(&args.out.join("report.json"), &report)?;
+        log::info!(
+            "{n} frames in {:.2} s: {:.2} FPS overall, {:.2} FPS after the first frame; report in {}",
+            stream_s,
+            n as f64 / stream_s,
+            if mean_period > 0.0 {
+                1.0 / mean_period
+            } else {
+                0.0
+            },
+            args.out.display()
+        );
+        Ok(())
+    })();
+    if result.is_err() {
+        remove_written(&written, &created);
+    }
+    result
+}
+
+/// Removes the files a failed run wrote (never a device or a FIFO it wrote into), then the folders it created
+/// if they are empty, innermost first.
+fn remove_written(written: &[PathBuf], created: &[PathBuf]) {
+    for path in written {
+        let _ = tensorholo::io::remove_output(path);
+    }
+    for dir in created.iter().rev() {
+        let _ = std::fs::remove_dir(dir);
+    }
 }

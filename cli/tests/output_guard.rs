@@ -735,3 +735,397 @@ mod non_utf8 {
         std::fs::remove_dir_all(&root).unwrap();
     }
 }
+
+/// Issue 80: every single-file output of `holo` (`propagate --output`, `calibrate global --out`, `calibrate
+/// curves --out`, `bench --json` and `--save-tuning`) looks at what is at its path first: a character device
+/// or a FIFO with a reader is written straight into, a FIFO with no reader, a block device or a socket is
+/// refused naming the path and what it is, never waited on; none is renamed over nor removed (`bench --json`
+/// removes an old report first: not a node). Before, each was replaced by a regular file and the run exited 0.
+#[cfg(target_os = "linux")]
+mod output_nodes {
+    use std::ffi::OsString;
+    use std::io::Read;
+    use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
+    use std::path::{Path, PathBuf};
+    use std::time::{Duration, Instant};
+
+    use super::{field, fresh, holo, os, stderr};
+
+    const O_NONBLOCK: i32 = 0o4000;
+
+    /// One command per single-file writer of `holo`, writing `out`; `cal` is a calibration file made here.
+    fn commands(root: &Path, out: &Path) -> Vec<(&'static str, Vec<OsString>)> {
+        let input = root.join("field.npy");
+        if !input.exists() {
+            field(&input);
+        }
+        let cal = root.join("panel.holocal");
+        if !cal.exists() {
+            let o = holo(&os(&[
+                &"calibrate",
+                &"global",
+                &"--size",
+                &"16x24",
+                &"--range-rad",
+                &"7",
+                &"--gamma",
+                &"1.1",
+                &"--out",
+                &cal,
+            ]));
+            assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+        }
+        let bench = |flag: &str| {
+            os(&[
+                &"bench",
+                &"--skip-pipeline",
+                &"--layers",
+                &"8",
+                &"--precision",
+                &"f32",
+                &"--sizes",
+                &"16x16",
+                &"--threads",
+                &"1",
+                &"--repeat",
+                &"1",
+                &flag,
+                &out,
+            ])
+        };
+        vec![
+            (
+                "propagate --output",
+                os(&[
+                    &"propagate",
+                    &"--input",
+                    &input,
+                    &"--distance-m",
+                    &"1e-3",
+                    &"--wavelength-m",
+                    &"520e-9",
+                    &"--pitch-m",
+                    &"8e-6",
+                    &"--output",
+                    &out,
+                ]),
+            ),
+            (
+                "calibrate global --out",
+                os(&[
+                    &"calibrate",
+                    &"global",
+                    &"--size",
+                    &"16x24",
+                    &"--range-rad",
+                    &"7",
+                    &"--gamma",
+                    &"1.1",
+                    &"--out",
+                    &out,
+                ]),
+            ),
+            (
+                "calibrate curves --out",
+                os(&[
+                    &"calibrate",
+                    &"curves",
+                    &cal,
+                    &"--color",
+                    &"green",
+                    &"--out",
+                    &out,
+                ]),
+            ),
+            ("bench --json", bench("--json")),
+            ("bench --save-tuning", bench("--save-tuning")),
+        ]
+    }
+
+    fn mkfifo(path: &Path) {
+        let ok = std::process::Command::new("mkfifo")
+            .arg(path)
+            .status()
+            .unwrap();
+        assert!(ok.success());
+    }
+
+    /// `mknod`; false, with a message, where nodes cannot be made (not root, a `nodev` file system).
+    fn mknod(path: &Path, kind: &str, major: &str, minor: &str) -> bool {
+        let made = std::process::Command::new("mknod")
+            .arg(path)
+            .args([kind, major, minor])
+            .stderr(std::process::Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success());
+        if !made {
+            eprintln!(
+                "skipped: cannot mknod {} here (not root, or nodev)",
+                path.display()
+            );
+        }
+        made
+    }
+
+    fn file_type(path: &Path) -> std::fs::FileType {
+        std::fs::metadata(path).unwrap().file_type()
+    }
+
+    fn is_link(path: &Path) -> bool {
+        std::fs::symlink_metadata(path)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    }
+
+    /// Runs `args`, killing it (and failing) after 60 s: a run waiting on a FIFO.
+    fn run_within(name: &str, args: &[OsString]) -> std::process::Output {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_holo"))
+            .args(args)
+            .env("RUST_LOG", "warn")
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let start = Instant::now();
+        while child.try_wait().unwrap().is_none() {
+            if start.elapsed() > Duration::from_secs(60) {
+                let _ = child.kill();
+                panic!("{name} waited on its output");
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        child.wait_with_output().unwrap()
+    }
+
+    #[test]
+    fn fifos_with_and_without_a_reader_itself_or_through_a_link() {
+        let root = fresh("nodes-fifo");
+        let fifo = root.join("out.fifo");
+        mkfifo(&fifo);
+        let link = root.join("link.out");
+        std::os::unix::fs::symlink(&fifo, &link).unwrap();
+        for path in [&fifo, &link] {
+            for (name, args) in commands(&root, path) {
+                // No reader: refused at once, naming the path and why.
+                let o = run_within(name, &args);
+                let err = stderr(&o);
+                assert_ne!(o.status.code(), Some(0), "{name}: {err}");
+                assert!(
+                    err.contains(&path.display().to_string())
+                        && err.contains("a FIFO with no reader"),
+                    "{name}: {err}"
+                );
+                assert!(file_type(&fifo).is_fifo(), "{name} replaced the FIFO");
+                assert!(is_link(&link), "{name} replaced the link");
+                // A reader: written into.
+                let mut reader = std::fs::OpenOptions::new()
+                    .read(true)
+                    .custom_flags(O_NONBLOCK)
+                    .open(&fifo)
+                    .unwrap();
+                let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_holo"))
+                    .args(&args)
+                    .env("RUST_LOG", "warn")
+                    .stdout(std::process::Stdio::null())
+                    .stderr(std::process::Stdio::piped())
+                    .spawn()
+                    .unwrap();
+                let (mut got, mut buf, start) = (Vec::new(), vec![0u8; 1 << 16], Instant::now());
+                let status = loop {
+                    match reader.read(&mut buf) {
+                        Ok(n) if n > 0 => got.extend_from_slice(&buf[..n]),
+                        _ => {
+                            if let Some(status) = child.try_wait().unwrap() {
+                                let _ = reader.read_to_end(&mut got);
+                                break status;
+                            }
+                            assert!(start.elapsed() < Duration::from_secs(60), "{name} hangs");
+                            std::thread::sleep(Duration::from_millis(5));
+                        }
+                    }
+                };
+                let mut err = String::new();
+                child
+                    .stderr
+                    .take()
+                    .unwrap()
+                    .read_to_string(&mut err)
+                    .unwrap();
+                assert!(status.success(), "{name} into a FIFO with a reader: {err}");
+                assert!(!got.is_empty(), "{name} wrote nothing into the FIFO");
+                assert!(file_type(&fifo).is_fifo(), "{name} replaced the FIFO");
+                assert!(is_link(&link), "{name} replaced the link");
+            }
+        }
+        std::fs::remove_dir_all(&root).unwrap();
+    }
+
+    /// `--json /dev/stdout` (and `/dev/fd/1`) writes into the process's standard output whatever it is: a
+    /// pipe, or a file the shell redirected it to (appended to; the link is never renamed over nor removed, as
+    /// `bench --json` removes an old report). Links of the test's own to `/proc/self/fd/1` and `/dev/fd/1`
+    /// stand for `/dev/stdout`, so that a regression cannot replace the system's.
+    #[test]
+    fn dev_stdout_is_written_into_whether_a_pipe_or_a_redirected_file() {
+        let root = fresh("nodes-stdout");
+        let (proc_link, fd_link) = (root.join("stdout"), root.join("fd1"));
+        std::os::unix::fs::symlink("/proc/self/fd/1", &proc_link).unwrap();
+        std::os::unix::fs::symlink("/dev/fd/1", &fd_link).unwrap();
+        for path in [&proc_link, &fd_link] {
+            for (name, args) in commands(&root, path) {
+                // A pipe (the test reads it as it comes: `output` drains stdout while the run writes).
+                let o = holo(&args);
+                let shown = path.display();
+                assert_eq!(o.status.code(), Some(0), "{name} {shown}: {}", stderr(&o));
+                assert!(!o.stdout.is_empty(), "{name} wrote nothing to {shown}");
+                assert!(is_link(path), "{name} replaced {shown}");
+                // A regular file.
+                let file = root.join("stdout.txt");
+                let _ = std::fs::remove_file(&file);
+                let o = std::process::Command::new(env!("CARGO_BIN_EXE_holo"))
+                    .args(&args)
+                    .env("RUST_LOG", "warn")
+                    .stdout(std::fs::File::create(&file).unwrap())
+                    .output()
+                    .unwrap();
+                assert_eq!(
+                    o.status.code(),
+                    Some(0),
+                    "{name} {shown} > file: {}",
+                    stderr(&o)
+                );
+                assert!(std::fs::metadata(&file).unwrap().len() > 0, "{name} > file");
+                assert!(is_link(path), "{name} replaced {shown}");
+            }
+        }
+        std::fs::remove_dir_all(&root).unwrap();
+    }
+
+    #[test]
+    fn character_devices_are_written_into_block_devices_and_sockets_refused() {
+        let root = fresh("nodes-devices");
+        let null_link = root.join("null.out");
+        std::os::unix::fs::symlink("/dev/null", &null_link).unwrap();
+        let full_link = root.join("full.out");
+        std::os::unix::fs::symlink("/dev/full", &full_link).unwrap();
+        let socket = root.join("out.sock");
+        let _listener = std::os::unix::net::UnixListener::bind(&socket).unwrap();
+        let mut written: Vec<PathBuf> = vec![null_link.clone()];
+        let mut refused = vec![(socket.clone(), "a socket")];
+        let null_node = root.join("null-node");
+        if mknod(&null_node, "c", "1", "3") {
+            written.push(null_node.clone());
+        }
+        let block = root.join("block-node");
+        if mknod(&block, "b", "7", "0") {
+            refused.push((block.clone(), "a block device"));
+        }
+        for path in &written {
+            for (name, args) in commands(&root, path) {
+                let o = run_within(name, &args);
+                assert_eq!(
+                    o.status.code(),
+                    Some(0),
+                    "{name} into {}: {}",
+                    path.display(),
+                    stderr(&o)
+                );
+                assert!(
+                    file_type(path).is_char_device(),
+                    "{name} replaced {}",
+                    path.display()
+                );
+            }
+        }
+        assert!(is_link(&null_link) && file_type(Path::new("/dev/null")).is_char_device());
+        for (name, args) in commands(&root, &full_link) {
+            // /dev/full takes no byte: a failure naming the path; the link and the device stay.
+            let o = run_within(name, &args);
+            assert_ne!(o.status.code(), Some(0), "{name} into /dev/full");
+            assert!(stderr(&o).contains("full.out"), "{name}: {}", stderr(&o));
+            assert!(is_link(&full_link) && file_type(Path::new("/dev/full")).is_char_device());
+        }
+        for (path, what) in &refused {
+            for (name, args) in commands(&root, path) {
+                let o = run_within(name, &args);
+                let err = stderr(&o);
+                assert_ne!(o.status.code(), Some(0), "{name} onto {what}: {err}");
+                assert!(
+                    err.contains(&path.display().to_string()) && err.contains(what),
+                    "{name}: {err}"
+                );
+                let t = file_type(path);
+                assert!(
+                    t.is_socket() || t.is_block_device(),
+                    "{name} replaced {what}"
+                );
+            }
+        }
+        std::fs::remove_dir_all(&root).unwrap();
+    }
+}
+
+/// Issue 80: `holo dataset` whose `--out` holds a `manifest.json` that is a FIFO (no reader) or a link to
+/// /dev/null is refused at once naming it: without --force as a folder holding a dataset, with --force (which
+/// reads the old manifest: a FIFO would block the read, and removes it) as a node; the node stays.
+#[cfg(target_os = "linux")]
+#[test]
+fn dataset_refuses_a_node_for_its_manifest_at_once() {
+    let root = fresh("nodes-dataset");
+    let out = root.join("ds");
+    std::fs::create_dir_all(&out).unwrap();
+    let manifest = out.join("manifest.json");
+    for node in ["fifo", "null"] {
+        let _ = std::fs::remove_file(&manifest);
+        if node == "fifo" {
+            assert!(std::process::Command::new("mkfifo")
+                .arg(&manifest)
+                .status()
+                .unwrap()
+                .success());
+        } else {
+            std::os::unix::fs::symlink("/dev/null", &manifest).unwrap();
+        }
+        for force in [false, true] {
+            let mut args: Vec<&str> = common::ONE_SAMPLE_DATASET.to_vec();
+            args.extend(["--out", out.to_str().unwrap()]);
+            if force {
+                args.push("--force");
+            }
+            let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_holo"))
+                .args(&args)
+                .env("RUST_LOG", "warn")
+                .stderr(std::process::Stdio::piped())
+                .stdout(std::process::Stdio::null())
+                .spawn()
+                .unwrap();
+            let start = std::time::Instant::now();
+            while child.try_wait().unwrap().is_none() {
+                if start.elapsed() > std::time::Duration::from_secs(60) {
+                    let _ = child.kill();
+                    panic!("dataset {node} (force {force}) waits on manifest.json");
+                }
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            let o = child.wait_with_output().unwrap();
+            let e = stderr(&o);
+            assert!(
+                !o.status.success()
+                    && e.contains("manifest.json")
+                    && (!force || e.contains("not a dataset manifest")),
+                "{node} (force {force}): {e}"
+            );
+            let meta = std::fs::symlink_metadata(&manifest).unwrap();
+            assert!(
+                meta.file_type().is_symlink() || !meta.is_file(),
+                "{node}: manifest.json was replaced"
+            );
+            let shards = std::fs::read_dir(&out).unwrap().count();
+            assert_eq!(
+                shards, 1,
+                "{node} (force {force}): the refused run wrote into --out"
+            );
+        }
+    }
+    std::fs::remove_dir_all(&root).unwrap();
+}

@@ -273,3 +273,183 @@ fn a_stray_scanner_folder_renders_in_time_order_with_its_confidence() {
         stderr(&o)
     );
 }
+
+/// Issue 80: a refused `holo video --save-frames` leaves nothing: the frames it wrote before the frame that
+/// stopped it are removed, with the `frames/` folder it made; an old report.json in `--out` is removed first.
+/// Before, the first frames' patterns stayed.
+#[test]
+fn a_refused_video_removes_the_frames_it_wrote() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rgb_dir, depth_dir) = (dir.path().join("rgb"), dir.path().join("depth"));
+    std::fs::create_dir_all(&rgb_dir).unwrap();
+    std::fs::create_dir_all(&depth_dir).unwrap();
+    for i in 0..3 {
+        let (rgb, depth) = frame(i);
+        std::fs::copy(&rgb, rgb_dir.join(format!("f{i}.jpg"))).unwrap();
+        depth.save(depth_dir.join(format!("f{i}.png"))).unwrap();
+    }
+    // The third depth map is truncated: frames 0 and 1 render (and are saved) before it stops the run.
+    let last = depth_dir.join("f2.png");
+    let bytes = std::fs::read(&last).unwrap();
+    std::fs::write(&last, &bytes[..bytes.len() / 2]).unwrap();
+    let out = dir.path().join("out");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("report.json"), "{}").unwrap();
+    let o = video(
+        &[
+            "--rgb-dir",
+            rgb_dir.to_str().unwrap(),
+            "--depth-dir",
+            depth_dir.to_str().unwrap(),
+            "--depth-encoding",
+            "mm16",
+        ],
+        &out,
+    );
+    let e = stderr(&o);
+    assert!(!o.status.success() && e.contains("f2.png"), "{e}");
+    let left: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert!(left.is_empty(), "a refused video left {left:?}");
+}
+
+/// Issue 80: `--refine-levels` is checked at its flag, in every command that takes it, before any work
+/// (1 to 2²⁰, the synthesis's bound: was blamed on "`levels`", in `holo video` only at the first frame); the
+/// refinement refuses frames under 11 × 11 as render does (`holo bench --refine` printed `inf → inf (NaN)`).
+#[test]
+fn refinement_bounds_are_named_on_their_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rgb, depth) = frame(0);
+    let frames = dir.path().join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    let depth_file = frames.join("d.png");
+    depth.save(&depth_file).unwrap();
+    let (rgb, depth_file) = (rgb.to_str().unwrap(), depth_file.to_str().unwrap());
+    let out = dir.path().join("out");
+    let out = out.to_str().unwrap();
+    for levels in ["0", "1048577", "99999999999"] {
+        for args in [
+            vec![
+                "render",
+                "--rgb",
+                rgb,
+                "--depth",
+                depth_file,
+                "--depth-encoding",
+                "mm16",
+                "--size",
+                "48x64",
+            ],
+            vec![
+                "video",
+                "--rgb-dir",
+                frames.to_str().unwrap(),
+                "--depth-dir",
+                frames.to_str().unwrap(),
+            ],
+        ] {
+            let mut args = args.clone();
+            args.extend(["--refine", "2", "--refine-levels", levels, "--out", out]);
+            let o = holo(&args);
+            let e = stderr(&o);
+            assert!(
+                !o.status.success() && e.contains("--refine-levels") && !e.contains("frame 0"),
+                "{} --refine-levels {levels}: {e}",
+                args[0]
+            );
+            assert!(!Path::new(out).exists(), "{}: wrote {out}", args[0]);
+        }
+    }
+    let o = holo(&[
+        "bench",
+        "--skip-cnn",
+        "--skip-pipeline",
+        "--refine",
+        "2",
+        "--sizes",
+        "8x8",
+        "--threads",
+        "1",
+    ]);
+    let (e, text) = (stderr(&o), String::from_utf8_lossy(&o.stdout).into_owned());
+    assert!(
+        !o.status.success()
+            && e.contains("--sizes 8x8")
+            && e.contains("11×11")
+            && !text.contains("NaN"),
+        "{e}\n{text}"
+    );
+}
+
+/// Issue 80: a depth map whose valid depths leave no usable pixel once normalised (1e-40 m everywhere: 1/z
+/// overflows) is refused naming the file in every command that reads one, and leaves no output behind.
+#[test]
+fn a_depth_map_that_leaves_no_usable_pixel_is_refused_naming_it_in_every_command() {
+    use exr::prelude::*;
+    let dir = tempfile::tempdir().unwrap();
+    let (rgb_dir, depth_dir) = (dir.path().join("rgb"), dir.path().join("depth"));
+    std::fs::create_dir_all(&rgb_dir).unwrap();
+    std::fs::create_dir_all(&depth_dir).unwrap();
+    let (rgb, _) = frame(0);
+    std::fs::copy(&rgb, rgb_dir.join("a.jpg")).unwrap();
+    let depth = depth_dir.join("a.exr");
+    let channels = AnyChannels::sort(
+        vec![AnyChannel::new(
+            "Z",
+            FlatSamples::F32(vec![1e-40; 160 * 120]),
+        )]
+        .into(),
+    );
+    let layer = Layer::new(
+        (160, 120),
+        LayerAttributes::default(),
+        Encoding::FAST_LOSSLESS,
+        channels,
+    );
+    Image::from_layer(layer).write().to_file(&depth).unwrap();
+    let (rgb, depth) = (rgb_dir.join("a.jpg"), depth);
+    let (rgb, depth) = (rgb.to_str().unwrap(), depth.to_str().unwrap());
+    let out = dir.path().join("out");
+    let out_s = out.to_str().unwrap();
+    let single = |command: &'static str| {
+        vec![
+            command,
+            "--rgb",
+            rgb,
+            "--depth",
+            depth,
+            "--depth-encoding",
+            "metres",
+            "--size",
+            "48x64",
+        ]
+    };
+    for mut args in [
+        single("render"),
+        single("reference"),
+        vec![
+            "video",
+            "--rgb-dir",
+            rgb_dir.to_str().unwrap(),
+            "--depth-dir",
+            depth_dir.to_str().unwrap(),
+            "--depth-encoding",
+            "metres",
+            "--size",
+            "48x64",
+            "--save-frames",
+        ],
+    ] {
+        args.extend(["--out", out_s]);
+        let o = holo(&args);
+        let e = stderr(&o);
+        assert!(
+            !o.status.success() && e.contains("a.exr") && e.contains("no usable pixel"),
+            "{}: {e}",
+            args[0]
+        );
+        assert!(!out.exists(), "{} left {out_s}", args[0]);
+    }
+}

@@ -32,7 +32,7 @@ fn init() {
 pub type Harness = fn(&[u8]);
 
 /// The harnesses by target name, for the regression test.
-pub const TARGETS: [(&str, Harness); 12] = [
+pub const TARGETS: [(&str, Harness); 16] = [
     ("depth_decode", depth_decode),
     ("rgb_decode", rgb_decode),
     ("npy", npy),
@@ -45,7 +45,132 @@ pub const TARGETS: [(&str, Harness); 12] = [
     ("manifest", manifest),
     ("spot_plan", spot_plan),
     ("saved_plans", saved_plans),
+    ("exr_depth", exr_depth),
+    ("record3d_metadata", record3d_metadata),
+    ("stray_odometry", stray_odometry),
+    ("stray_camera_matrix", stray_camera_matrix),
 ];
+
+/// OpenEXR depth maps (`decode_depth_bytes` with the `metres` encoding, Record3D's depth): the header's size
+/// and channels are checked against the decoders' budget before any pixel is read (the exr crate's parser is
+/// not ours, the budget is). An accepted map is non-empty, within the pixel limit, metric, and its valid
+/// samples are finite and positive.
+pub fn exr_depth(data: &[u8]) {
+    init();
+    if let Ok(d) = decode_depth_bytes(data, Path::new("fuzz"), DepthEncoding::Metres) {
+        let (h, w) = d.values.dim();
+        assert!(
+            h * w > 0 && (h * w) as u64 <= FUZZ_LIMITS.max_image_pixels,
+            "{h}x{w}"
+        );
+        assert_eq!(d.valid.dim(), (h, w));
+        assert!(d.metric);
+        for (&v, &ok) in d.values.iter().zip(d.valid.iter()) {
+            assert!(!ok || (v.is_finite() && v > 0.0), "valid depth {v}");
+        }
+    }
+}
+
+/// A recording folder of this thread for the recording harnesses, made once: Record3D's (`rgb/N.jpg`,
+/// `depth/N.exr`, N = 0, 1, 2) or Stray Scanner's (`rgb/00000N.png`, `depth/00000N.png`, `odometry.csv` and
+/// `camera_matrix.csv` valid). Listing a recording reads no frame, so the frame files are empty; each input
+/// replaces one file.
+fn recording_dir(kind: &str) -> std::path::PathBuf {
+    let thread = format!("{:?}", std::thread::current().id());
+    let thread: String = thread.chars().filter(char::is_ascii_digit).collect();
+    let dir = std::env::temp_dir().join(format!(
+        "tensorholo-fuzz-{kind}-{}-{thread}",
+        std::process::id()
+    ));
+    if !dir.join("depth").is_dir() {
+        for sub in ["rgb", "depth"] {
+            std::fs::create_dir_all(dir.join(sub)).expect("a scratch folder");
+        }
+        for i in 0..3 {
+            let (rgb, depth) = if kind == "record3d" {
+                (format!("rgb/{i}.jpg"), format!("depth/{i}.exr"))
+            } else {
+                (format!("rgb/{i:06}.png"), format!("depth/{i:06}.png"))
+            };
+            std::fs::write(dir.join(rgb), b"").expect("a scratch file");
+            std::fs::write(dir.join(depth), b"").expect("a scratch file");
+        }
+        if kind != "record3d" {
+            std::fs::write(dir.join("odometry.csv"), STRAY_ODOMETRY).expect("a scratch file");
+            std::fs::write(dir.join("camera_matrix.csv"), STRAY_CAMERA).expect("a scratch file");
+        }
+    }
+    dir
+}
+
+/// Stray Scanner's `odometry.csv` of frames 0, 1, 2 (a header, then timestamp, frame and pose).
+pub const STRAY_ODOMETRY: &str = "timestamp, frame, x, y, z, qx, qy, qz, qw\n\
+    0.125, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0\n\
+    0.1583, 1, 0.001, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0\n\
+    0.1916, 2, 0.002, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0\n";
+
+/// Stray Scanner's `camera_matrix.csv`: the 3 × 3 intrinsics of a 1920 × 1440 colour camera.
+pub const STRAY_CAMERA: &str = "1445.3,0.0,962.1\n0.0,1445.3,718.4\n0.0,0.0,1.0\n";
+
+/// The invariants of a listed recording of three frames.
+fn check_recording(r: &tensorholo::scene::Recording) {
+    assert_eq!(r.frames.len(), 3);
+    assert!(
+        r.fps.is_none_or(|f| f.is_finite() && f > 0.0),
+        "fps {:?}",
+        r.fps
+    );
+    let times: Vec<f64> = r.frames.iter().filter_map(|f| f.time_s).collect();
+    assert!(times.iter().all(|t| t.is_finite()), "{times:?}");
+    assert!(
+        times.windows(2).all(|w| w[0] <= w[1]),
+        "frames out of time order: {times:?}"
+    );
+    if let Some(k) = r.intrinsics {
+        assert!(k.iter().all(|v| v.is_finite()), "{k:?}");
+    }
+}
+
+/// Record3D's `metadata.json` (`scene::open_recording` on an export whose metadata is the input): an accepted
+/// file lists the three frames in time order, with a finite positive frame rate if any.
+pub fn record3d_metadata(data: &[u8]) {
+    init();
+    let dir = recording_dir("record3d");
+    std::fs::write(dir.join("metadata.json"), data).expect("a scratch file");
+    if let Ok(r) = tensorholo::scene::open_recording(&dir) {
+        assert_eq!(r.kind, tensorholo::scene::RecordingKind::Record3d);
+        check_recording(&r);
+    }
+}
+
+/// Stray Scanner's `odometry.csv` (`scene::open_recording` on a folder whose odometry is the input): an
+/// accepted file gives every frame a distinct finite time, or none, and a finite positive frame rate if any.
+pub fn stray_odometry(data: &[u8]) {
+    init();
+    let dir = recording_dir("stray");
+    std::fs::write(dir.join("odometry.csv"), data).expect("a scratch file");
+    if let Ok(r) = tensorholo::scene::open_recording(&dir) {
+        assert_eq!(r.kind, tensorholo::scene::RecordingKind::StrayScanner);
+        check_recording(&r);
+        let times: Vec<f64> = r.frames.iter().filter_map(|f| f.time_s).collect();
+        assert!(
+            times.windows(2).all(|w| w[0] < w[1]),
+            "two frames at one time: {times:?}"
+        );
+    }
+}
+
+/// Stray Scanner's `camera_matrix.csv`: accepted intrinsics are finite, with positive focal lengths.
+pub fn stray_camera_matrix(data: &[u8]) {
+    init();
+    let dir = recording_dir("stray-camera");
+    std::fs::write(dir.join("camera_matrix.csv"), data).expect("a scratch file");
+    if let Ok(r) = tensorholo::scene::open_recording(&dir) {
+        check_recording(&r);
+        let k = r.intrinsics.expect("a camera matrix was given");
+        assert!(k[0] > 0.0 && k[1] > 0.0, "{k:?}");
+    }
+}
 
 /// Spot calibration plans (`plan.json`, `SpotPlan::from_json_str`, as `holo calibrate aberration simulate | fit`
 /// read them). An accepted plan is valid, within the SLM bound profiles share, and reads back from its own

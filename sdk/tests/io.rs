@@ -492,3 +492,330 @@ fn a_npy_header_length_beyond_the_file_is_refused_without_allocating_it() {
         assert!(e.to_string().contains("header declares"), "{e}");
     }
 }
+
+/// Issue 80: outputs look at what is at their path first. A character device or a FIFO with a reader is
+/// written straight into, a FIFO with no reader, a block device or a socket is refused naming the path and what
+/// it is; none is ever renamed over nor removed, itself or at the end of a symbolic link (docs/INPUTS.md,
+/// "Outputs"). Before, every writer renamed a temporary file over the path: the node became a regular file.
+#[cfg(target_os = "linux")]
+mod output_nodes {
+    use std::fs;
+    use std::io::Read;
+    use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
+    use std::path::{Path, PathBuf};
+    use std::time::Duration;
+
+    use ndarray::{Array2, Array3};
+    use tensorholo::io::{
+        save_u8_png, write_atomic, write_complex_npy, write_f32_npy, write_f32_npy_streaming,
+    };
+    use tensorholo::{Complex32, HoloError, Result};
+
+    const O_NONBLOCK: i32 = 0o4000;
+
+    /// A writer of one output file.
+    type Writer = fn(&Path) -> Result<()>;
+
+    /// Every single-file writer of the SDK, by name, writing `path`.
+    fn writers() -> Vec<(&'static str, Writer)> {
+        vec![
+            ("write_atomic", |p| write_atomic(p, b"{\"a\": 1}\n")),
+            ("write_complex_npy", |p| {
+                write_complex_npy(p, Array3::<Complex32>::zeros((1, 4, 4)).view())
+            }),
+            ("write_f32_npy", |p| {
+                write_f32_npy(p, Array2::<f32>::zeros((4, 4)).view())
+            }),
+            ("write_f32_npy_streaming", |p| {
+                write_f32_npy_streaming(p, &[4, 4], 4, |_, b| {
+                    b.fill(1.0);
+                    Ok(())
+                })
+            }),
+            ("save_u8_png", |p| {
+                save_u8_png(p, Array2::<u8>::zeros((4, 4)).view())
+            }),
+        ]
+    }
+
+    fn scratch(name: &str) -> PathBuf {
+        super::scratch(&format!("nodes-{name}"))
+    }
+
+    fn mkfifo(path: &Path) {
+        let ok = std::process::Command::new("mkfifo")
+            .arg(path)
+            .status()
+            .unwrap();
+        assert!(ok.success(), "mkfifo {}", path.display());
+    }
+
+    /// `mknod PATH KIND MAJOR MINOR`; false (with a message) where it cannot be made (not root, a `nodev` file
+    /// system).
+    fn mknod(path: &Path, kind: &str, major: u32, minor: u32) -> bool {
+        let made = std::process::Command::new("mknod")
+            .arg(path)
+            .args([kind, &major.to_string(), &minor.to_string()])
+            .stderr(std::process::Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success());
+        if !made {
+            eprintln!(
+                "skipped: cannot mknod {} {kind} here (not root, or the folder's file system forbids nodes)",
+                path.display()
+            );
+        }
+        made
+    }
+
+    /// Runs `f` on a thread, failing the test if it has not returned within 20 s (a write waiting on a FIFO).
+    fn within_time<T: Send + 'static>(what: &str, f: impl FnOnce() -> T + Send + 'static) -> T {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = tx.send(f());
+        });
+        rx.recv_timeout(Duration::from_secs(20))
+            .unwrap_or_else(|_| panic!("{what} did not return: it waits"))
+    }
+
+    fn file_type(path: &Path) -> fs::FileType {
+        fs::metadata(path).unwrap().file_type()
+    }
+
+    fn is_link(path: &Path) -> bool {
+        fs::symlink_metadata(path).unwrap().file_type().is_symlink()
+    }
+
+    /// The refusal names the path and `what`, and leaves nothing beside it.
+    fn assert_refused(e: HoloError, path: &Path, what: &str) {
+        let text = e.to_string();
+        assert!(
+            text.contains(&path.display().to_string()) && text.contains(what),
+            "{text}"
+        );
+        assert!(matches!(e, HoloError::InvalidData(_)), "{e:?}");
+    }
+
+    fn no_temporaries(dir: &Path) {
+        let left: Vec<_> = fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .filter(|n| n.to_string_lossy().contains(".tmp-"))
+            .collect();
+        assert!(left.is_empty(), "temporary files left: {left:?}");
+    }
+
+    #[test]
+    fn a_fifo_with_no_reader_is_refused_at_once_itself_or_through_a_link() {
+        let dir = scratch("fifo-no-reader");
+        let fifo = dir.join("out.fifo");
+        mkfifo(&fifo);
+        let link = dir.join("link.json");
+        std::os::unix::fs::symlink(&fifo, &link).unwrap();
+        for (name, write) in writers() {
+            for path in [fifo.clone(), link.clone()] {
+                let p = path.clone();
+                let e = within_time(name, move || write(&p))
+                    .expect_err(&format!("{name} wrote into a FIFO with no reader"));
+                assert_refused(e, &path, "a FIFO with no reader");
+                assert!(file_type(&fifo).is_fifo(), "{name}: the FIFO was replaced");
+                assert!(is_link(&link), "{name}: the link was replaced");
+            }
+        }
+        no_temporaries(&dir);
+    }
+
+    #[test]
+    fn a_fifo_with_a_reader_is_written_into_itself_or_through_a_link() {
+        let dir = scratch("fifo-reader");
+        let fifo = dir.join("out.fifo");
+        mkfifo(&fifo);
+        let link = dir.join("link.npy");
+        std::os::unix::fs::symlink(&fifo, &link).unwrap();
+        // The read end, opened first (non-blocking, so that it needs no writer to open).
+        let mut reader = fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(O_NONBLOCK)
+            .open(&fifo)
+            .unwrap();
+        for (name, write) in writers() {
+            for path in [fifo.clone(), link.clone()] {
+                let p = path.clone();
+                within_time(name, move || write(&p)).unwrap_or_else(|e| panic!("{name}: {e}"));
+                let mut got = Vec::new();
+                let _ = reader.read_to_end(&mut got);
+                assert!(
+                    !got.is_empty(),
+                    "{name} wrote nothing into {}",
+                    path.display()
+                );
+                assert!(file_type(&fifo).is_fifo(), "{name}: the FIFO was replaced");
+                assert!(is_link(&link), "{name}: the link was replaced");
+            }
+        }
+        // More than a pipe holds (64 KiB): the write waits for the reader, which takes it all.
+        let big = Array3::<Complex32>::from_elem((1, 256, 256), Complex32::new(1.0, -1.0));
+        let expected = 256 * 256 * 8;
+        let p = fifo.clone();
+        let writer = std::thread::spawn(move || write_complex_npy(&p, big.view()));
+        let mut got = Vec::new();
+        let mut buf = vec![0u8; 1 << 16];
+        loop {
+            match reader.read(&mut buf) {
+                Ok(n) if n > 0 => got.extend_from_slice(&buf[..n]),
+                // Empty: done once the writer is (its data was read before the pipe emptied).
+                _ if writer.is_finished() => break,
+                _ => std::thread::sleep(Duration::from_millis(1)),
+            }
+        }
+        writer.join().unwrap().unwrap();
+        assert!(
+            got.len() > expected && got.starts_with(b"\x93NUMPY"),
+            "{}",
+            got.len()
+        );
+        no_temporaries(&dir);
+    }
+
+    #[test]
+    fn a_character_device_is_written_into_through_a_link_or_made_with_mknod() {
+        let dir = scratch("char");
+        let null_link = dir.join("null.json");
+        std::os::unix::fs::symlink("/dev/null", &null_link).unwrap();
+        let full_link = dir.join("full.json");
+        std::os::unix::fs::symlink("/dev/full", &full_link).unwrap();
+        for (name, write) in writers() {
+            write(&null_link).unwrap_or_else(|e| panic!("{name} into /dev/null: {e}"));
+            assert!(
+                is_link(&null_link),
+                "{name}: the link to /dev/null was replaced"
+            );
+            assert!(file_type(Path::new("/dev/null")).is_char_device());
+            // /dev/full takes no byte: the write fails, naming the path, and the device stays.
+            let e = write(&full_link).expect_err(&format!("{name} into /dev/full"));
+            assert!(e.to_string().contains("full.json"), "{e}");
+            assert!(
+                is_link(&full_link),
+                "{name}: the link to /dev/full was replaced"
+            );
+            assert!(file_type(Path::new("/dev/full")).is_char_device());
+        }
+        let node = dir.join("null-node");
+        if mknod(&node, "c", 1, 3) {
+            for (name, write) in writers() {
+                write(&node).unwrap_or_else(|e| panic!("{name} into a char device: {e}"));
+                assert!(
+                    file_type(&node).is_char_device(),
+                    "{name} replaced the device"
+                );
+            }
+        }
+        no_temporaries(&dir);
+    }
+
+    #[test]
+    fn a_block_device_and_a_socket_are_refused_naming_them_itself_or_through_a_link() {
+        let dir = scratch("block-socket");
+        let socket = dir.join("out.sock");
+        let _listener = std::os::unix::net::UnixListener::bind(&socket).unwrap();
+        let socket_link = dir.join("socket.json");
+        std::os::unix::fs::symlink(&socket, &socket_link).unwrap();
+        let mut cases = vec![
+            (socket.clone(), "a socket"),
+            (socket_link.clone(), "a socket"),
+        ];
+        let block = dir.join("block");
+        if mknod(&block, "b", 7, 0) {
+            let block_link = dir.join("block.json");
+            std::os::unix::fs::symlink(&block, &block_link).unwrap();
+            cases.push((block.clone(), "a block device"));
+            cases.push((block_link, "a block device"));
+        }
+        for (name, write) in writers() {
+            for (path, what) in &cases {
+                let e = write(path).expect_err(&format!("{name} wrote onto {what}"));
+                assert_refused(e, path, what);
+                let t = file_type(path);
+                assert!(
+                    t.is_socket() || t.is_block_device(),
+                    "{name} replaced {what}"
+                );
+            }
+        }
+        assert!(is_link(&socket_link));
+        no_temporaries(&dir);
+    }
+
+    #[test]
+    fn remove_output_leaves_nodes_and_standard_streams_removes_files_and_links() {
+        use tensorholo::io::remove_output;
+        let dir = scratch("remove");
+        let fifo = dir.join("fifo");
+        mkfifo(&fifo);
+        let null = dir.join("null");
+        std::os::unix::fs::symlink("/dev/null", &null).unwrap();
+        let stdout = dir.join("stdout");
+        std::os::unix::fs::symlink("/proc/self/fd/1", &stdout).unwrap();
+        let fd = dir.join("fd1");
+        std::os::unix::fs::symlink("/dev/fd/1", &fd).unwrap();
+        for kept in [&fifo, &null, &stdout, &fd] {
+            remove_output(kept).unwrap();
+            assert!(
+                fs::symlink_metadata(kept).is_ok(),
+                "{} removed",
+                kept.display()
+            );
+        }
+        let file = dir.join("report.json");
+        fs::write(&file, "{}").unwrap();
+        let link = dir.join("link.json");
+        std::os::unix::fs::symlink(&file, &link).unwrap();
+        remove_output(&link).unwrap();
+        assert!(
+            fs::symlink_metadata(&link).is_err() && file.is_file(),
+            "the link, not its file"
+        );
+        remove_output(&file).unwrap();
+        assert!(!file.exists());
+        remove_output(&file).unwrap();
+    }
+
+    #[test]
+    fn a_standard_stream_that_leads_nowhere_is_refused_not_replaced() {
+        let dir = scratch("closed-stream");
+        let link = dir.join("stdout");
+        // No process keeps fd 987 open: the link through /proc leads nowhere.
+        std::os::unix::fs::symlink("/proc/self/fd/987", &link).unwrap();
+        for (name, write) in writers() {
+            let e = write(&link).expect_err(name);
+            assert_refused(e, &link, "a standard stream that leads nowhere");
+            assert!(is_link(&link), "{name} replaced the link");
+        }
+        no_temporaries(&dir);
+    }
+
+    #[test]
+    fn links_to_files_folders_and_nothing_are_replaced_not_followed() {
+        let dir = scratch("links");
+        let target = dir.join("target.txt");
+        fs::write(&target, "keep").unwrap();
+        let sub = dir.join("sub");
+        fs::create_dir(&sub).unwrap();
+        for (name, write) in writers() {
+            for to in [target.as_path(), sub.as_path(), Path::new("/nonexistent/x")] {
+                let link = dir.join("link");
+                let _ = fs::remove_file(&link);
+                std::os::unix::fs::symlink(to, &link).unwrap();
+                write(&link)
+                    .unwrap_or_else(|e| panic!("{name} over a link to {}: {e}", to.display()));
+                assert!(fs::symlink_metadata(&link).unwrap().is_file(), "{name}");
+            }
+        }
+        assert_eq!(fs::read_to_string(&target).unwrap(), "keep");
+        assert_eq!(fs::read_dir(&sub).unwrap().count(), 0);
+        // A folder itself is refused, naming it.
+        let e = write_atomic(&sub, b"x").unwrap_err();
+        assert_refused(e, &sub, "is a folder");
+        no_temporaries(&dir);
+    }
+}

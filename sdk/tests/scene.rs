@@ -1052,6 +1052,57 @@ fn openexr_depth_takes_the_depth_channel_by_name() {
     assert!(e.to_string().contains("A, B"), "{e}");
 }
 
+/// Issue 80: what reading an OpenEXR depth map allocates (its depth channel and the largest decoded chunk of
+/// all channels, and its offset table) is counted from the header against the decoders' budget (16 bytes a
+/// pixel, at least 1 MiB) before any pixel is read. A header declaring 32 float channels of 2048² pixels in one
+/// tile (a 512 MiB chunk) is refused naming the file and the budget; before, every channel was allocated
+/// (512 MiB) from a 925-byte file.
+#[cfg(feature = "research")]
+#[test]
+fn openexr_depth_is_counted_against_the_decoders_budget_from_its_header() {
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/fuzz/exr_depth");
+    let tile = std::fs::read(fixtures.join("32-channels-2048x2048-one-tile-header-only")).unwrap();
+    let e = decode_depth_bytes(&tile, Path::new("tiled.exr"), DepthEncoding::Metres).unwrap_err();
+    let text = e.to_string();
+    assert!(
+        matches!(e, HoloError::InvalidData(_))
+            && text.contains("tiled.exr")
+            && text.contains("budget")
+            && text.contains("32 channels"),
+        "{text}"
+    );
+    // The same header in scan lines (ZIP, 16 lines a chunk) is within the budget: it fails only for want of
+    // pixels, naming the file.
+    let lines = std::fs::read(fixtures.join("32-channels-2048x2048-zip-header-only")).unwrap();
+    let e = decode_depth_bytes(&lines, Path::new("lines.exr"), DepthEncoding::Metres).unwrap_err();
+    assert!(
+        matches!(e, HoloError::InvalidDepth(_)) && e.to_string().contains("lines.exr"),
+        "{e}"
+    );
+}
+
+/// Issue 80: a depth map whose valid depths leave no usable pixel once normalised (all positive, but 1e-40 m:
+/// 1/z overflows) is refused naming the file, not passed on as NaN nor refused anonymously.
+#[cfg(feature = "research")]
+#[test]
+fn a_depth_map_that_leaves_no_valid_pixel_is_refused_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let rgb = dir.path().join("rgb.png");
+    image::RgbImage::from_pixel(16, 12, image::Rgb([120, 90, 60]))
+        .save(&rgb)
+        .unwrap();
+    let depth = dir.path().join("tiny.exr");
+    write_exr(&depth, "Z", &Array2::from_elem((12, 16), 1e-40), false);
+    let e = load_rgbd(&rgb, &depth, DepthEncoding::Metres, &LoadOptions::default()).unwrap_err();
+    let text = e.to_string();
+    assert!(
+        matches!(e, HoloError::InvalidDepth(_))
+            && text.contains("tiny.exr")
+            && text.contains("no usable pixel"),
+        "{text}"
+    );
+}
+
 /// A confidence map invalidates its low-confidence pixels before anything reads them: a near block of low
 /// confidence on a far background takes the background's depth (never read as near), the report counts it,
 /// and a map of another size than the depth is refused naming it.

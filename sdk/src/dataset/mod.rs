@@ -72,6 +72,7 @@ pub fn generate(
     options: &GenerateOptions,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<Manifest> {
+    shards::refuse_node_manifest(out_dir)?;
     // Shards of a replaced dataset that the new one does not have go, with their records.
     let stale: Vec<String> = if options.overwrite {
         let mut files: Vec<String> = read_manifest(out_dir)
@@ -107,8 +108,8 @@ pub fn generate(
             .file_name()
             .is_some_and(|n| n == file.as_str());
         if plain && file.ends_with(".npz") && !current.contains(file.as_str()) {
-            let _ = std::fs::remove_file(out_dir.join(file));
-            let _ = std::fs::remove_file(out_dir.join(format!("{file}{SHARD_RECORD_SUFFIX}")));
+            let _ = crate::io::remove_output(&out_dir.join(file));
+            let _ = crate::io::remove_output(&out_dir.join(format!("{file}{SHARD_RECORD_SUFFIX}")));
         }
     }
     // Generation has already refused a manifest it may not replace (without `overwrite`).

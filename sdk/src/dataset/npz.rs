@@ -67,6 +67,13 @@ pub(super) fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>)
     let name = path
         .file_name()
         .ok_or_else(|| invalid("path", format!("`{}` has no file name", path.display())))?;
+    if let Some(kind) = crate::io::node_at(path) {
+        return Err(HoloError::InvalidData(format!(
+            "output `{}` is {kind}: refusing to replace it with a dataset file (it is never renamed over nor \
+             removed)",
+            path.display()
+        )));
+    }
     let tmp = path.with_file_name(format!(".{}.partial", name.to_string_lossy()));
     let result = write(&tmp).and_then(|()| std::fs::rename(&tmp, path).map_err(io_error(path)));
     if result.is_err() {

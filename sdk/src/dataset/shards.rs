@@ -274,6 +274,20 @@ fn generator_info(options: &GenerateOptions) -> GeneratorInfo {
     }
 }
 
+/// Refuses an `out_dir` whose `manifest.json` is a device, a FIFO or a socket (or a link to one), before any
+/// work and before anything reads it (a FIFO would block the read): the manifest is written last, and a node is
+/// never replaced nor removed.
+pub(super) fn refuse_node_manifest(out_dir: &Path) -> Result<()> {
+    let manifest_path = out_dir.join(MANIFEST_FILE);
+    match crate::io::node_at(&manifest_path) {
+        Some(kind) => Err(HoloError::InvalidData(format!(
+            "`{}` is {kind}, not a dataset manifest: refusing to read or replace it (choose another folder)",
+            manifest_path.display()
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// Writes the shards of `selection` (all of them with [`ShardSelection::ALL`]) into `out_dir`, each with
 /// its record, and no manifest: [`merge_shards`] writes it once every part has run. A shard already there
 /// with a record of the same plan and its recorded size is kept (resume); a missing, partial or foreign
@@ -283,7 +297,8 @@ fn generator_info(options: &GenerateOptions) -> GeneratorInfo {
 ///
 /// Errors: as [`SampleGenerator::new`] and [`SampleGenerator::sample`];
 /// [`HoloError::InvalidParameter`] (`out_dir`) if the folder holds a dataset (`manifest.json`) and
-/// `overwrite` is false; [`HoloError::WouldOverwriteInput`] if a file would replace a photo;
+/// `overwrite` is false; [`HoloError::InvalidData`] if its `manifest.json` is a device, a FIFO or a socket
+/// (before any work); [`HoloError::WouldOverwriteInput`] if a file would replace a photo;
 /// [`HoloError::Io`] / [`HoloError::Npy`] for write failures.
 pub fn generate_shards(
     out_dir: &Path,
@@ -294,6 +309,7 @@ pub fn generate_shards(
 ) -> Result<ShardRun> {
     let generator = SampleGenerator::new(config)?;
     let manifest_path = out_dir.join(MANIFEST_FILE);
+    refuse_node_manifest(out_dir)?;
     if manifest_path.exists() {
         if !options.overwrite {
             return Err(invalid(
@@ -516,10 +532,12 @@ fn rerun_command(records: &[&ShardRecord], ordinal: usize) -> Option<String> {
 /// rerun: equal but for `created_unix_s` and `generator`) or with `force`. Returns the manifest.
 ///
 /// Errors: [`HoloError::InvalidData`] naming the shards of another plan (with the key that differs),
-/// unreadable records, the missing shards with the command that writes them, or a manifest that is not
-/// this merge's (without `force`); nothing is written then.
+/// unreadable records, the missing shards with the command that writes them, a manifest that is not this
+/// merge's (without `force`), or a `manifest.json` that is a device, a FIFO or a socket (never read nor
+/// replaced); nothing is written then.
 /// [`HoloError::Io`] if the folder cannot be read or the manifest written.
 pub fn merge_shards(out_dir: &Path, force: bool) -> Result<Manifest> {
+    refuse_node_manifest(out_dir)?;
     let all = read_records(out_dir)?;
     let unreadable: Vec<&String> = all
         .iter()

@@ -19,7 +19,11 @@ use crate::color::amplitude_to_srgb8;
 use crate::error::{invalid, HoloError, Result};
 
 mod json;
+mod output;
 mod read;
+
+pub(crate) use output::node_at;
+pub use output::remove_output;
 
 pub(crate) use json::parse_json_object;
 pub use json::JsonError;
@@ -379,34 +383,55 @@ where
         path: path.to_path_buf(),
         source,
     };
-    via_temporary(path, |tmp| {
-        let file = File::create(tmp).map_err(io_err)?;
-        let mut writer = BufWriter::new(file);
+    write_output(path, false, |writer| {
         a.as_standard_layout()
-            .write_npy(&mut writer)
+            .write_npy(writer)
             .map_err(|e| match e {
                 ndarray_npy::WriteNpyError::Io(source) => io_err(source),
                 other => npy_error(path, other.to_string()),
-            })?;
-        writer.flush().map_err(io_err)
+            })
     })
 }
 
-/// Writes `path` through `write(temporary)`: a temporary file in the same folder, renamed over `path` once
-/// complete, removed on error. A failed or interrupted write (a full disk, Ctrl-C) never leaves a truncated
-/// `path`, and a symlink planted at `path` is replaced rather than followed. Errors name `path`.
-fn via_temporary(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
-    let tmp = temporary_sibling(path);
-    let result = write(&tmp).and_then(|()| {
-        std::fs::rename(&tmp, path).map_err(|source| HoloError::Io {
-            path: path.to_path_buf(),
-            source,
-        })
-    });
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
+/// Writes the output `path` through `write(writer)`, by the rule of [`output::open_output`]: a regular file (or
+/// nothing, or a link to neither a device nor a FIFO) is written to a temporary file in the same folder, renamed
+/// over `path` once complete and removed on error, so that a failed or interrupted write (a full disk, Ctrl-C)
+/// never leaves a truncated `path` and a symlink planted at `path` is replaced rather than followed; a character
+/// device or a FIFO with a reader is written straight into; anything else is refused. `sync`: flush the
+/// temporary file to disk before the rename. Errors name `path`.
+pub(crate) fn write_output(
+    path: &Path,
+    sync: bool,
+    write: impl FnOnce(&mut dyn Write) -> Result<()>,
+) -> Result<()> {
+    let io_err = |source| HoloError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    match output::open_output(path)? {
+        output::Target::Stream(node) => {
+            let mut w = BufWriter::new(node);
+            write(&mut w)?;
+            w.flush().map_err(io_err)
+        }
+        output::Target::Replace => {
+            let tmp = temporary_sibling(path);
+            let result = (|| {
+                let mut w = BufWriter::new(File::create(&tmp).map_err(io_err)?);
+                write(&mut w)?;
+                w.flush().map_err(io_err)?;
+                if sync {
+                    w.get_ref().sync_all().map_err(io_err)?;
+                }
+                drop(w);
+                std::fs::rename(&tmp, path).map_err(io_err)
+            })();
+            if result.is_err() {
+                let _ = std::fs::remove_file(&tmp);
+            }
+            result
+        }
     }
-    result
 }
 
 /// PNG sizes are non-zero `u32`s.
@@ -419,20 +444,30 @@ fn png_dims(w: usize, h: usize) -> Result<(u32, u32)> {
     }
 }
 
-fn save_png(
+/// Encodes 8- or 16-bit (native byte order) samples as PNG into the output `path` ([`write_output`]).
+pub(crate) fn save_png(
     path: &Path,
     bytes: &[u8],
     w: u32,
     h: u32,
     color: image::ExtendedColorType,
 ) -> Result<()> {
-    via_temporary(path, |tmp| {
-        image::save_buffer_with_format(tmp, bytes, w, h, color, image::ImageFormat::Png).map_err(
-            |source| HoloError::Image {
+    use image::ImageEncoder;
+    write_output(path, false, |writer| {
+        image::codecs::png::PngEncoder::new(writer)
+            .write_image(bytes, w, h, color)
+            .map_err(|source| HoloError::Image {
                 path: path.to_path_buf(),
                 source,
-            },
-        )
+            })
+    })
+    .map_err(|e| match e {
+        // The file's own errors (create, write, rename) as the image's, as documented.
+        HoloError::Io { path, source } => HoloError::Image {
+            path,
+            source: image::ImageError::IoError(source),
+        },
+        other => other,
     })
 }
 
@@ -590,30 +625,28 @@ pub fn remove_temporary_files() -> usize {
 }
 
 /// Writes `bytes` to `path` atomically: to a temporary file in the same folder, flushed to disk, then renamed
-/// over `path`, so that a reader (or a crash) sees the old file or the new one, never a partial one.
+/// over `path`, so that a reader (or a crash) sees the old file or the new one, never a partial one. What is at
+/// `path` is looked at first (docs/INPUTS.md, "Outputs"): a symbolic link is replaced, not followed; a
+/// character device or a FIFO with a reader (itself or at the end of links, e.g. `/dev/null`, `/dev/stdout`)
+/// is written straight into, never renamed over nor removed.
 ///
 /// # Errors
-/// [`HoloError::Io`] naming `path` (the temporary file is removed on failure).
+/// [`HoloError::Io`] naming `path` (the temporary file is removed on failure); [`HoloError::InvalidData`]
+/// naming it and what it is for a FIFO with no reader (refused, never waited on), a block device, a socket or
+/// a folder.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = temporary_sibling(path);
-    let result = (|| {
-        let mut f = File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    result.map_err(|source| {
-        let _ = std::fs::remove_file(&tmp);
-        HoloError::Io {
+    write_output(path, true, |w| {
+        w.write_all(bytes).map_err(|source| HoloError::Io {
             path: path.to_path_buf(),
             source,
-        }
+        })
     })
 }
 
 /// Writes a little-endian float32 `.npy` file of `shape` whose C-order data `fill` produces chunk by chunk
 /// (`fill(start, buffer)` writes elements `start..start + buffer.len()`), so that arrays larger than memory
-/// can be written. The file appears atomically (temporary name, then renamed).
+/// can be written. The file appears atomically (temporary name, then renamed); a character device or a FIFO
+/// with a reader is written straight into, as by [`write_atomic`].
 ///
 /// # Errors
 /// [`HoloError::Io`] naming `path`; whatever `fill` returns.
@@ -639,13 +672,11 @@ pub fn write_f32_npy_streaming(
     let pad = (64 - (10 + header.len() + 1) % 64) % 64;
     header.extend(std::iter::repeat_n(b' ', pad));
     header.push(b'\n');
-    let tmp = temporary_sibling(path);
     let io_err = |source| HoloError::Io {
         path: path.to_path_buf(),
         source,
     };
-    let result = (|| -> Result<()> {
-        let mut w = BufWriter::new(File::create(&tmp).map_err(io_err)?);
+    write_output(path, true, |w| {
         w.write_all(b"\x93NUMPY\x01\x00").map_err(io_err)?;
         w.write_all(&(header.len() as u16).to_le_bytes())
             .map_err(io_err)?;
@@ -660,15 +691,8 @@ pub fn write_f32_npy_streaming(
             }
             start += n;
         }
-        w.flush().map_err(io_err)?;
-        w.get_ref().sync_all().map_err(io_err)?;
-        drop(w);
-        std::fs::rename(&tmp, path).map_err(io_err)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+        Ok(())
+    })
 }
 
 /// Serde helpers that write paths as text, lossily: a name that is not UTF-8 is written with U+FFFD where its

@@ -24,6 +24,9 @@ use crate::synthesis::{SceneLayer, SmLbm};
 /// The SM-LBM planes of the default target: 512 (docs/REFINE.md: the target's cost against its levels).
 pub const DEFAULT_TARGET_LEVELS: usize = 512;
 
+/// The most SM-LBM planes a refinement's target may have: the synthesis's own bound (2²⁰).
+pub(crate) const MAX_TARGET_LEVELS: usize = 1 << 20;
+
 /// What a frame is refined against.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -71,14 +74,20 @@ impl Default for FrameRefinement {
 impl FrameRefinement {
     /// Checks the options and the target.
     ///
-    /// Errors: as [`RefineOptions::validate`]; [`HoloError::InvalidParameter`] (`levels`) for 0 SM-LBM planes.
+    /// Errors: as [`RefineOptions::validate`]; [`HoloError::InvalidParameter`] (`levels`) for SM-LBM planes
+    /// outside 1..=2²⁰ (the synthesis's bound).
     pub fn validate(&self) -> Result<()> {
         self.options.validate()?;
-        if let RefineTarget::SmLbm { levels: 0 } = self.target {
-            return Err(invalid(
-                "levels",
-                format!("0 SM-LBM planes for the refinement's target; give ≥ 1 (default {DEFAULT_TARGET_LEVELS})"),
-            ));
+        if let RefineTarget::SmLbm { levels } = self.target {
+            if !(1..=MAX_TARGET_LEVELS).contains(&levels) {
+                return Err(invalid(
+                    "levels",
+                    format!(
+                        "{levels} SM-LBM planes for the refinement's target; give 1 to {MAX_TARGET_LEVELS} (the \
+                         synthesis's bound; default {DEFAULT_TARGET_LEVELS})"
+                    ),
+                ));
+            }
         }
         Ok(())
     }
@@ -229,7 +238,9 @@ impl FrameRefiner {
     /// midpoint hologram `[3, H, W]` (the [`RefineTarget::CnnMidpoint`] target), `cnn_codes` its SLM codes
     /// `[3, H, W]` (the [`RefineStart::Cnn`] start, scored too). `progress` as [`Refiner::refine`].
     ///
-    /// Errors: [`HoloError::InvalidParameter`] (`target`) for the CNN target without `cnn_midpoint`; those of
+    /// Errors: [`HoloError::InvalidData`] for a frame under 11 × 11 pixels (the SSIM window: `holo render`
+    /// refuses such frames, and the held-out scores of so few pixels are not numbers);
+    /// [`HoloError::InvalidParameter`] (`target`) for the CNN target without `cnn_midpoint`; those of
     /// [`SmLbm::synthesize`], [`Refiner::new`] and [`Refiner::refine`] (a cancelled run:
     /// [`HoloError::Cancelled`]).
     pub fn refine(
@@ -239,6 +250,14 @@ impl FrameRefiner {
         cnn_codes: ArrayView3<u8>,
         progress: &mut dyn FnMut(&IterationRecord) -> ControlFlow<()>,
     ) -> Result<RefinedFrame> {
+        let (_, h, w) = cnn_codes.dim();
+        let min = crate::metrics::SSIM_WINDOW;
+        if h < min || w < min {
+            return Err(HoloError::InvalidData(format!(
+                "the frame is {h}×{w} pixels: the refinement needs at least {min}×{min} (the SSIM window of the \
+                 quality scores; render larger)"
+            )));
+        }
         let t = Instant::now();
         let d = &self.display;
         let needs_smlbm = matches!(self.request.target, RefineTarget::SmLbm { .. })

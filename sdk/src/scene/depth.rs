@@ -667,8 +667,8 @@ fn percentile_sorted(sorted: &[f32], p: f32) -> f32 {
 ///
 /// Errors: [`HoloError::ShapeMismatch`] if `values` and `valid` differ in shape;
 /// [`HoloError::InvalidParameter`] for an invalid `range`; [`HoloError::InvalidDepth`] if no pixel is
-/// valid (metric, automatic range) or a valid value is non-finite, ≤ 0 m (metric) or outside `[0,1]`
-/// (relative).
+/// valid (metric, automatic range), a valid value is non-finite, ≤ 0 m (metric) or outside `[0,1]`
+/// (relative), or the mapping of a valid value overflows (depths of 1e-40 m).
 pub fn normalise_depth(
     decoded: &DecodedDepth,
     range: Option<DepthRange>,
@@ -754,6 +754,22 @@ pub fn normalise_depth(
         Zip::from(values)
             .and(valid)
             .map_collect(|&z, &ok| if ok { mapping.apply(z, &range) } else { 0.0 });
+    // Depths so small or so close that the mapping's arithmetic overflows (1/z of 1e-40 m) leave no pixel a
+    // normalised depth: refused here, not passed on as NaN.
+    let lost = Zip::from(&d)
+        .and(values)
+        .and(valid)
+        .fold(None, |first, &dv, &z, &ok| {
+            first.or((ok && !dv.is_finite()).then_some(z))
+        });
+    if let Some(z) = lost {
+        return Err(HoloError::InvalidDepth(format!(
+            "the valid depths leave no usable pixel: {z:e} m maps to no normalised depth in the range \
+             [{:e}, {:e}] m ({mapping}); values this small are not metres (check --depth-encoding, or give \
+             --z-near-m/--z-far-m)",
+            range.z_near_m, range.z_far_m
+        )));
+    }
     Ok((d, Some(range)))
 }
 

@@ -225,7 +225,8 @@ pub fn load_ldi_dir(
         .map(|f| format!("`{}`", file_name(&f.depth)))
         .collect();
     let (ldi, range_used) =
-        assemble_layers(amplitudes, decoded, &names, options.range, options.mapping)?;
+        assemble_layers(amplitudes, decoded, &names, options.range, options.mapping)
+            .map_err(|e| super::load::name_depth_file(e, dir))?;
     let report = LdiReport {
         encoding,
         files,

@@ -103,6 +103,17 @@ impl Default for LoadOptions {
     }
 }
 
+/// A depth error that does not name the depth file `depth` (a map that leaves no valid pixel once normalised),
+/// with it named.
+pub(super) fn name_depth_file(e: HoloError, depth: &Path) -> HoloError {
+    match e {
+        HoloError::InvalidDepth(m) if !m.contains(&*depth.to_string_lossy()) => {
+            HoloError::InvalidDepth(format!("`{}`: {m}", depth.display()))
+        }
+        other => other,
+    }
+}
+
 /// The sanity checks of [`load_rgbd`] on a decoded depth map (see [`LoadOptions`]).
 fn check_depth_sanity(
     decoded: &DecodedDepth,
@@ -271,8 +282,9 @@ pub fn load_rgbd_with_confidence(
         );
     }
     let decoded = crate::scene::upsample_depth(decoded, amplitude.view(), options.depth_upsampling);
-    let (d, range_used) = normalise_depth(&decoded, options.range, options.mapping)?;
-    let filled = fill_invalid(&d, &decoded.valid)?;
+    let (d, range_used) = normalise_depth(&decoded, options.range, options.mapping)
+        .map_err(|e| name_depth_file(e, depth))?;
+    let filled = fill_invalid(&d, &decoded.valid).map_err(|e| name_depth_file(e, depth))?;
     let min_max = decoded.valid_min_max().filter(|_| decoded.metric);
     let report = DepthReport {
         encoding,
@@ -291,7 +303,7 @@ pub fn load_rgbd_with_confidence(
         100.0 * report.invalid_fraction,
         range_used.map_or_else(|| "relative".to_string(), |r| r.to_string())
     );
-    let frame = RgbdFrame::new(amplitude, filled)?;
+    let frame = RgbdFrame::new(amplitude, filled).map_err(|e| name_depth_file(e, depth))?;
     let frame = match options.size {
         Some((height, width)) => frame.resize(height, width)?,
         None => frame,

@@ -73,6 +73,78 @@ struct Record3dMetadata {
     frame_timestamps: Option<Vec<f64>>,
 }
 
+/// What the entry at `path` is, for a message: "a folder", "a file", "a character device", "a FIFO", "a
+/// socket", "a block device", a symbolic link followed to say what it leads to ("a symbolic link to a
+/// character device"), "a looping symbolic link" or "a dangling symbolic link". `None` where nothing is there.
+fn entry_kind(path: &Path) -> Option<String> {
+    let entry = std::fs::symlink_metadata(path).ok()?;
+    if !entry.file_type().is_symlink() {
+        return Some(type_name(entry.file_type()).into());
+    }
+    Some(match std::fs::metadata(path) {
+        Ok(target) => format!("a symbolic link to {}", type_name(target.file_type())),
+        // ELOOP: too many levels of symbolic links.
+        Err(e) if e.raw_os_error() == Some(40) => "a looping symbolic link".into(),
+        Err(_) => match std::fs::read_link(path) {
+            Ok(to) => format!("a dangling symbolic link (to `{}`)", to.display()),
+            Err(_) => "a dangling symbolic link".into(),
+        },
+    })
+}
+
+fn type_name(t: std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_char_device() {
+            return "a character device";
+        } else if t.is_block_device() {
+            return "a block device";
+        } else if t.is_fifo() {
+            return "a FIFO";
+        } else if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if t.is_dir() {
+        "a folder"
+    } else if t.is_file() {
+        "a file"
+    } else {
+        "neither a file nor a folder"
+    }
+}
+
+/// Whether the recording's entry `path` is a file (following links); an error naming what it is when it
+/// exists as something else (a folder, a device, a FIFO, a looping or dangling link); `false` when absent.
+fn is_file_entry(path: &Path, role: &str) -> Result<bool> {
+    if std::fs::metadata(path).is_ok_and(|m| m.is_file()) {
+        return Ok(true);
+    }
+    match entry_kind(path) {
+        None => Ok(false),
+        Some(kind) => Err(HoloError::InvalidData(format!(
+            "`{}` is {kind}, where {role} must be a file",
+            path.display()
+        ))),
+    }
+}
+
+/// Whether the recording's entry `path` is a folder (following links); an error naming what it is when it
+/// exists as something else; `false` when absent.
+fn is_dir_entry(path: &Path, role: &str) -> Result<bool> {
+    if std::fs::metadata(path).is_ok_and(|m| m.is_dir()) {
+        return Ok(true);
+    }
+    match entry_kind(path) {
+        None => Ok(false),
+        Some(kind) => Err(HoloError::InvalidData(format!(
+            "`{}` is {kind}, where {role} must be a folder",
+            path.display()
+        ))),
+    }
+}
+
 /// Lists the recording in `dir` (Record3D or Stray Scanner, told apart by their files; see the module docs).
 ///
 /// Errors: [`HoloError::InvalidData`] naming the folder or file: a folder of neither layout (saying what
@@ -83,18 +155,29 @@ struct Record3dMetadata {
 pub fn open_recording(dir: &Path) -> Result<Recording> {
     let bad = |why: String| HoloError::InvalidData(format!("recording `{}`: {why}", dir.display()));
     if !dir.is_dir() {
-        return Err(bad("not a folder".into()));
+        return Err(bad(match entry_kind(dir) {
+            Some(kind) => format!("not a folder but {kind}"),
+            None => "not a folder (nothing is there)".into(),
+        }));
     }
-    let metadata = ["metadata.json", "metadata"]
-        .iter()
-        .map(|n| dir.join(n))
-        .find(|p| p.is_file());
+    let mut metadata = None;
+    for name in ["metadata.json", "metadata"] {
+        let path = dir.join(name);
+        if metadata.is_none() && is_file_entry(&path, "Record3D's metadata")? {
+            metadata = Some(path);
+        }
+    }
     if let Some(metadata) = metadata {
         return open_record3d(dir, &metadata);
     }
-    let stray = ["camera_matrix.csv", "odometry.csv", "rgb.mp4"]
-        .iter()
-        .any(|n| dir.join(n).is_file());
+    let mut stray = false;
+    for (name, role) in [
+        ("camera_matrix.csv", "Stray Scanner's intrinsics"),
+        ("odometry.csv", "Stray Scanner's odometry"),
+        ("rgb.mp4", "Stray Scanner's colour video"),
+    ] {
+        stray |= is_file_entry(&dir.join(name), role)?;
+    }
     if stray {
         return open_stray_scanner(dir);
     }
@@ -140,7 +223,7 @@ fn open_record3d(dir: &Path, metadata: &Path) -> Result<Recording> {
 }
 
 fn open_stray_scanner(dir: &Path) -> Result<Recording> {
-    if !dir.join("rgb").is_dir() {
+    if !is_dir_entry(&dir.join("rgb"), "the recording's `rgb/`")? {
         return Err(HoloError::InvalidData(format!(
             "recording `{}` (Stray Scanner): its colour is the video rgb.mp4; extract its frames into rgb/, \
              numbered from 0 as the depth files are: `ffmpeg -i rgb.mp4 -start_number 0 rgb/%06d.png`",
@@ -149,7 +232,7 @@ fn open_stray_scanner(dir: &Path) -> Result<Recording> {
     }
     let mut frames = pair_frames(dir, false)?;
     let odometry = dir.join("odometry.csv");
-    if odometry.is_file() {
+    if is_file_entry(&odometry, "Stray Scanner's odometry")? {
         let times = read_odometry_times(&odometry)?;
         for f in &mut frames {
             f.time_s = times.get(&f.number).copied();
@@ -164,7 +247,7 @@ fn open_stray_scanner(dir: &Path) -> Result<Recording> {
         }
     }
     let camera = dir.join("camera_matrix.csv");
-    let intrinsics = if camera.is_file() {
+    let intrinsics = if is_file_entry(&camera, "Stray Scanner's intrinsics")? {
         Some(read_camera_matrix(&camera)?)
     } else {
         None
@@ -199,6 +282,8 @@ fn finish(
         let (first, last) = (frames.first()?.time_s?, frames.last()?.time_s?);
         (frames.len() > 1 && last > first).then(|| (frames.len() - 1) as f64 / (last - first))
     });
+    // A span of 1e-300 s is positive, but no frame rate.
+    let fps = fps.filter(|f| f.is_finite() && *f > 0.0);
     Recording {
         kind,
         dir: dir.to_path_buf(),
@@ -213,7 +298,7 @@ fn finish(
 /// does not exist.
 fn numbered(dir: &Path, sub: &str) -> Result<Option<BTreeMap<u64, PathBuf>>> {
     let folder = dir.join(sub);
-    if !folder.is_dir() {
+    if !is_dir_entry(&folder, &format!("the recording's `{sub}/`"))? {
         return Ok(None);
     }
     let entries = std::fs::read_dir(&folder).map_err(|source| HoloError::Io {
@@ -229,9 +314,12 @@ fn numbered(dir: &Path, sub: &str) -> Result<Option<BTreeMap<u64, PathBuf>>> {
             })?
             .path();
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
-        if !path.is_file() || name.as_deref().is_none_or(|n| n.starts_with('.')) {
+        if name.as_deref().is_none_or(|n| n.starts_with('.')) {
             continue;
         }
+        // A frame file that is a folder, a device, a FIFO or a broken link is named for what it is, not
+        // taken as missing.
+        is_file_entry(&path, "a frame")?;
         let number = path
             .file_stem()
             .and_then(|s| s.to_str())
@@ -345,7 +433,7 @@ fn read_odometry_times(path: &Path) -> Result<BTreeMap<u64, f64>> {
             path.display()
         )));
     };
-    let mut out = BTreeMap::new();
+    let mut rows: BTreeMap<u64, (f64, usize)> = BTreeMap::new();
     for (i, line) in lines.enumerate() {
         let values = csv_numbers(line)
             .filter(|v| v.len() > t.max(f))
@@ -366,9 +454,42 @@ fn read_odometry_times(path: &Path) -> Result<BTreeMap<u64, f64>> {
                 values[t]
             )));
         }
-        out.insert(frame as u64, values[t]);
+        let line = i + 2;
+        if let Some((_, first)) = rows.insert(frame as u64, (values[t], line)) {
+            return Err(HoloError::InvalidData(format!(
+                "`{}`, line {line}: frame {frame} is listed twice (first on line {first})",
+                path.display()
+            )));
+        }
     }
-    Ok(out)
+    // Frames run in timestamp order, in any order in the file; two frames at one time have no order, and a
+    // span that overflows has no frame rate.
+    let mut by_time: Vec<(f64, u64, usize)> =
+        rows.iter().map(|(&f, &(t, line))| (t, f, line)).collect();
+    by_time.sort_by(|a, b| a.0.total_cmp(&b.0));
+    if let Some(w) = by_time.windows(2).find(|w| w[0].0 == w[1].0) {
+        return Err(HoloError::InvalidData(format!(
+            "`{}`: frames {} (line {}) and {} (line {}) are both at {} s: two frames at one timestamp",
+            path.display(),
+            w[0].1,
+            w[0].2,
+            w[1].1,
+            w[1].2,
+            w[0].0
+        )));
+    }
+    if let (Some(first), Some(last)) = (by_time.first(), by_time.last()) {
+        let span = last.0 - first.0;
+        if by_time.len() > 1 && !(span.is_finite() && span > 0.0) {
+            return Err(HoloError::InvalidData(format!(
+                "`{}`: its timestamps span {span} s (first {} s, last {} s): not a finite, positive time",
+                path.display(),
+                first.0,
+                last.0
+            )));
+        }
+    }
+    Ok(rows.into_iter().map(|(f, (t, _))| (f, t)).collect())
 }
 
 /// Stray Scanner's `camera_matrix.csv`: the 3 × 3 intrinsic matrix, one row per line.
@@ -380,7 +501,22 @@ fn read_camera_matrix(path: &Path) -> Result<[f64; 4]> {
         .map(csv_numbers)
         .collect();
     match rows.as_deref() {
-        Some([a, b, _]) if a.len() == 3 && b.len() == 3 => Ok([a[0], b[1], a[2], b[2]]),
+        Some([a, b, c]) if a.len() == 3 && b.len() == 3 && c.len() == 3 => {
+            let k = [a[0], b[1], a[2], b[2]];
+            if k.iter().all(|v| v.is_finite()) && k[0] > 0.0 && k[1] > 0.0 {
+                Ok(k)
+            } else {
+                Err(HoloError::InvalidData(format!(
+                    "`{}`: focal lengths {} and {} px, centre ({}, {}) px: intrinsics are finite, with positive \
+                     focal lengths",
+                    path.display(),
+                    k[0],
+                    k[1],
+                    k[2],
+                    k[3]
+                )))
+            }
+        }
         _ => Err(HoloError::InvalidData(format!(
             "`{}`: not a 3 × 3 matrix of comma-separated numbers (Stray Scanner's intrinsics)",
             path.display()

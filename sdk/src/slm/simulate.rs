@@ -322,23 +322,7 @@ pub fn write_grey_png(path: &Path, img: ArrayView2<f32>, bit_depth: u8) -> Resul
             image::ExtendedColorType::L16,
         )
     };
-    let tmp = crate::io::temporary_sibling(path);
-    image::save_buffer_with_format(
-        &tmp,
-        &bytes,
-        w as u32,
-        h as u32,
-        color,
-        image::ImageFormat::Png,
-    )
-    .map_err(|source| HoloError::Image {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    std::fs::rename(&tmp, path).map_err(|source| HoloError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    crate::io::save_png(path, &bytes, w as u32, h as u32, color)
 }
 
 /// The in-memory capture stack of one colour of a [`SimulatedSlm`].

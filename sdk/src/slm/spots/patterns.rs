@@ -95,7 +95,7 @@ impl SpotPlan {
         };
         if let Err(e) = write() {
             for path in &written {
-                let _ = std::fs::remove_file(path);
+                let _ = crate::io::remove_output(path);
             }
             if created {
                 let _ = std::fs::remove_dir(dir);
