@@ -275,6 +275,11 @@ fn temporal_summary(churns: &[PhaseChurn], aligned: bool) -> serde_json::Value {
 
 /// Runs `holo video`.
 pub fn run(args: &VideoArgs) -> Result<()> {
+    if args.model.fovea.gaze.is_some() {
+        anyhow::bail!(
+            "--gaze: holo video does not foveate its frames yet (holo render does; docs/FOVEATION.md)"
+        );
+    }
     // The display profile, read once: a bad one stops the command before anything is written; the files it
     // names are inputs too.
     let profile = args.model.profile()?;

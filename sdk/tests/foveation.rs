@@ -408,7 +408,8 @@ fn a_fovea_covering_the_frame_is_the_full_frame_bit_for_bit() {
         want.amplitude_scale.to_bits()
     );
     assert!(fov.fovea_report().unwrap().covers_frame);
-    // A corner: no longer covered, foveated.
+    // A corner: the fovea no longer covers the frame, but a fovea that can cover it from the centre has a
+    // tile as large as the frame: the full frame still.
     fov.render_foveated(
         frame,
         &Gaze {
@@ -418,7 +419,31 @@ fn a_fovea_covering_the_frame_is_the_full_frame_bit_for_bit() {
         },
     )
     .unwrap();
-    assert!(!fov.fovea_report().unwrap().covers_frame);
+    assert!(fov.fovea_report().unwrap().covers_frame);
+    // A tile that is the whole frame (a 10-pixel fovea, its band and the CNN's 8-pixel margin need 71 pixels
+    // of a 48 × 64 frame): nothing to save, the full frame.
+    let small = &real_frames(48, 64)[1].1;
+    let want = pipeline(Precision::F32, None)
+        .session(48, 64)
+        .unwrap()
+        .render(small)
+        .unwrap()
+        .clone();
+    let mut tiny = pipeline(Precision::F32, Some(pixels(10.0)))
+        .session(48, 64)
+        .unwrap();
+    let got = tiny
+        .render_foveated(
+            small,
+            &Gaze {
+                x: 0.0,
+                y: 0.0,
+                depth_m: None,
+            },
+        )
+        .unwrap();
+    assert_eq!(got.codes, want.codes);
+    assert!(tiny.fovea_report().unwrap().covers_frame);
 }
 
 #[test]

@@ -252,8 +252,8 @@ pub struct FoveaReport {
     pub tile: [usize; 4],
     /// The share of the frame's pixels the hologram CNN ran on (`1` where the fovea covers the frame).
     pub cnn_share: f64,
-    /// Whether the fovea covered the whole frame: the frame was then rendered in full, as
-    /// [`crate::pipeline::HologramSession::render`] renders it.
+    /// Whether the frame was rendered in full, as [`crate::pipeline::HologramSession::render`] renders it: the
+    /// fovea covered the whole frame, or the hologram CNN's tile is the whole frame (nothing to save).
     pub covers_frame: bool,
     /// The constant phase of each colour's periphery (radians): the band's phase.
     pub periphery_phase_rad: [f32; 3],

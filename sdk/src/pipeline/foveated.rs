@@ -314,8 +314,9 @@ impl HologramSession {
     /// of the midpoint hologram is the paper's 2D hologram with synthetic blur, in focus at the gaze's depth;
     /// offset propagation, pre-filter and encoding then run on the whole frame. Inside the fovea the field
     /// is the full frame's CNN field; the double phase normaliser is
-    /// [`FOVEATED_NORMALISER_GAIN`]` · max A`, the same for every gaze. A fovea that covers the frame renders
-    /// the frame as [`HologramSession::render`] does, bit for bit. The tile has one size for every gaze (one
+    /// [`FOVEATED_NORMALISER_GAIN`]` · max A`, the same for every gaze. A fovea that covers the frame, or a
+    /// session whose tile is the whole frame (a small frame, a wide fovea: no CNN work to save), renders the
+    /// frame as [`HologramSession::render`] does, bit for bit. The tile has one size for every gaze (one
     /// plan, made with the session) and nothing is allocated per frame once the first has run.
     /// [`HologramSession::fovea_report`] says what the frame did. Runs on the CPU (a session on the GPU runs
     /// its foveated frames on its CPU frame).
@@ -375,7 +376,8 @@ impl HologramSession {
             covers_frame: true,
             periphery_phase_rad: [0.0; 3],
         };
-        if geometry.covers_frame(gaze) {
+        // The fovea holds the whole frame, or the CNN's tile does (no CNN work to save): the full frame.
+        if geometry.covers_frame(gaze) || geometry.tile == geometry.frame {
             self.render(frame)?;
             fov.report = Some(report);
             return Ok(());
