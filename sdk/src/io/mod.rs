@@ -22,6 +22,7 @@ mod json;
 mod output;
 mod read;
 
+#[cfg(feature = "research")]
 pub(crate) use output::node_at;
 pub use output::remove_output;
 

@@ -477,11 +477,7 @@ impl HologramSession {
         let periphery = &fov.periphery;
         let previous = self.last_heads.take();
         let shared = if self.full_outputs {
-            let fits = |a: &Array3<f32>| a.dim() == (3, h, w) && a.is_standard_layout();
-            let mut shared = match previous {
-                Some(p) if Arc::strong_count(&p) == 1 && fits(&p.amplitude) && fits(&p.phase) => p,
-                _ => Arc::new(Heads::zeros(h, w)),
-            };
+            let mut shared = Heads::reuse_or_new(previous, h, w);
             let Some(out) = Arc::get_mut(&mut shared).and_then(Heads::planes_mut) else {
                 return Err(HoloError::Internal(
                     "the kept heads are not writable".into(),

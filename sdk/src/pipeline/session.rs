@@ -183,12 +183,7 @@ impl HologramSession {
             // The CNN writes its heads into the arrays the session keeps, and the colour workers read them
             // there (no copy: 50 MB at 1080p). The previous frame's arrays are reused (no allocation; written
             // pages: fresh arrays cost the CNN 5–10 % at 1080p in page faults).
-            let (h, w) = (self.height, self.width);
-            let fits = |a: &Array3<f32>| a.dim() == (3, h, w) && a.is_standard_layout();
-            let mut shared = match previous {
-                Some(p) if Arc::strong_count(&p) == 1 && fits(&p.amplitude) && fits(&p.phase) => p,
-                _ => Arc::new(Heads::zeros(h, w)),
-            };
+            let mut shared = Heads::reuse_or_new(previous, self.height, self.width);
             let Some(planes) = Arc::get_mut(&mut shared).and_then(Heads::planes_mut) else {
                 return Err(HoloError::Internal(
                     "the kept heads are not writable".into(),
