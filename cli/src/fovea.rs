@@ -35,11 +35,16 @@ pub struct FoveaArgs {
     )]
     pub fovea_deg: Option<f64>,
     /// The fovea's radius in SLM pixels (instead of --fovea-deg).
-    #[arg(long, value_name = "PIXELS", requires = "gaze")]
+    #[arg(
+        long,
+        value_name = "PIXELS",
+        allow_hyphen_values = true,
+        requires = "gaze"
+    )]
     pub fovea_px: Option<f64>,
     /// Width in pixels of the blend band outside the fovea (from R to R + band): the CNN's field fades
     /// linearly into the periphery's there.
-    #[arg(long, value_name = "PIXELS", requires = "gaze", default_value_t = DEFAULT_BAND_PX)]
+    #[arg(long, value_name = "PIXELS", allow_hyphen_values = true, requires = "gaze", default_value_t = DEFAULT_BAND_PX)]
     pub fovea_band_px: f64,
 }
 
@@ -122,4 +127,110 @@ pub fn parse_point(text: &str) -> Result<(f64, f64)> {
         Ok(v)
     };
     Ok((number(x, "X")?, number(y, "Y")?))
+}
+
+/// The full 3D frame of a foveated `holo render --evaluate`: what the same session renders without a gaze,
+/// kept to score the foveated frame against, bin by bin.
+pub struct FullFrame {
+    /// The CNN's midpoint hologram `[3, H, W]`.
+    pub midpoint: ndarray::Array3<num_complex::Complex32>,
+    /// What the SLM displays, as the post-encoding midpoint hologram `[3, H, W]` (Eq. 8–10).
+    pub displayed: ndarray::Array3<num_complex::Complex32>,
+}
+
+/// The normalised depths of the eccentricity bins' focal planes.
+const BIN_DEPTHS: [f64; 5] = [0.0, 0.25, 0.5, 0.75, 1.0];
+
+/// `--evaluate`'s scores of a foveated frame by eccentricity: for the bins `0–R`, `R–2R`, `2R–4R` and beyond
+/// (pixels from the gaze), per focal plane of [`BIN_DEPTHS`], the PSNR of the foveated frame's focal stack
+/// (its midpoint hologram and what its SLM codes display) against the full 3D frame's and against SM-LBM's
+/// (`truth`), and the full frame's against SM-LBM's for comparison. Each score puts the test at its
+/// least-squares scale in the bin (the normalisers differ) and takes the reference's largest value on the
+/// plane as the peak.
+///
+/// Errors: the reconstructions' ([`tensorholo::optics::focal_stack`]).
+pub fn eccentricity_bins(
+    report: &tensorholo::foveation::FoveaReport,
+    foveated: [&ndarray::Array3<num_complex::Complex32>; 2],
+    full: &FullFrame,
+    truth: &ndarray::Array3<num_complex::Complex32>,
+    setup: &tensorholo::optics::OpticalSetup,
+    options: tensorholo::optics::PropagationOptions,
+) -> Result<serde_json::Value> {
+    let (_, h, w) = truth.dim();
+    let r = report.radius_px.max(1.0);
+    let edges = [0.0, r, 2.0 * r, 4.0 * r, f64::INFINITY];
+    let stack = |f: &ndarray::Array3<num_complex::Complex32>| {
+        tensorholo::optics::focal_stack(f.view(), setup, 0.0, &BIN_DEPTHS, options, false)
+    };
+    let truth = stack(truth)?;
+    let full_mid = stack(&full.midpoint)?;
+    let full_shown = stack(&full.displayed)?;
+    let fov_mid = stack(foveated[0])?;
+    let fov_shown = stack(foveated[1])?;
+    let bin_of = |y: usize, x: usize| {
+        let d = (x as f64 - report.gaze.x).hypot(y as f64 - report.gaze.y);
+        edges.windows(2).position(|e| d >= e[0] && d < e[1])
+    };
+    let bins: Vec<usize> = (0..h * w)
+        .map(|i| bin_of(i / w, i % w).unwrap_or(edges.len() - 2))
+        .collect();
+    let scores = |reference: &[ndarray::Array3<f32>], test: &[ndarray::Array3<f32>]| {
+        reference
+            .iter()
+            .zip(test)
+            .map(|(r, t)| binned_psnr(r, t, &bins, edges.len() - 1))
+            .collect::<Vec<_>>()
+    };
+    Ok(serde_json::json!({
+        "bins_px": edges.windows(2).map(|e| [e[0], e[1]]).collect::<Vec<_>>(),
+        "focal_depths": BIN_DEPTHS,
+        "against_full": {
+            "midpoint": scores(&full_mid, &fov_mid),
+            "displayed": scores(&full_shown, &fov_shown),
+        },
+        "against_sm_lbm": {
+            "foveated_midpoint": scores(&truth, &fov_mid),
+            "foveated_displayed": scores(&truth, &fov_shown),
+            "full_midpoint": scores(&truth, &full_mid),
+            "full_displayed": scores(&truth, &full_shown),
+        },
+    }))
+}
+
+/// PSNR (dB) of `test` against `reference` (`[3, H, W]`) in each of `n` bins (`bins`: a bin per pixel), the
+/// test at its least-squares scale in the bin, the peak the reference's largest value; `null` for an empty
+/// bin.
+fn binned_psnr(
+    reference: &ndarray::Array3<f32>,
+    test: &ndarray::Array3<f32>,
+    bins: &[usize],
+    n: usize,
+) -> Vec<Option<f64>> {
+    let peak = f64::from(reference.iter().copied().fold(0.0f32, f32::max));
+    let (mut rt, mut tt, mut rr, mut count) = (
+        vec![0.0f64; n],
+        vec![0.0f64; n],
+        vec![0.0f64; n],
+        vec![0usize; n],
+    );
+    let hw = bins.len();
+    for (c, (r, t)) in reference.iter().zip(test.iter()).enumerate() {
+        let b = bins[c % hw];
+        let (r, t) = (f64::from(*r), f64::from(*t));
+        rt[b] += r * t;
+        tt[b] += t * t;
+        rr[b] += r * r;
+        count[b] += 1;
+    }
+    (0..n)
+        .map(|b| {
+            (count[b] > 0).then(|| {
+                let s = if tt[b] > 0.0 { rt[b] / tt[b] } else { 0.0 };
+                // Σ(r − s·t)² = Σr² − 2sΣrt + s²Σt².
+                let se = (rr[b] - 2.0 * s * rt[b] + s * s * tt[b]).max(1e-30);
+                10.0 * (peak * peak * count[b] as f64 / se).log10()
+            })
+        })
+        .collect()
 }

@@ -9,6 +9,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use serde_json::json;
 use tensorholo::evaluation::{focal_depths, table2};
+use tensorholo::foveation::FoveaReport;
 use tensorholo::model::contract;
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{BackendReport, FrameTimings, Heads, HologramPipeline, SlmFrame};
@@ -93,6 +94,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         &args.out,
         args.model.pipeline(scene.input(), profile.as_ref()),
     )?;
+    if let Some(g) = &gaze {
+        let (h, w) = scene.size();
+        g.check(h, w).context("--gaze")?;
+    }
     crate::output::prepare(&args.out, &inputs)?;
     let (h, w) = scene.size();
     // What runs: the model file's own depth and precision (a --model file need not match --layers/--precision).
@@ -125,6 +130,29 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             .map(|f| format!("`{}`", f.display()))
             .collect::<Vec<_>>()
             .join(" + "),
+    };
+    // A foveated --evaluate also scores against the full 3D frame of the same session, rendered first.
+    let full = match (&scene, &gaze, args.evaluate) {
+        (Scene::Frame(frame), Some(_), true) => {
+            let cfg = pipeline.config();
+            let out = session.render(frame).with_context(what)?;
+            let displayed = post_encoding_midpoint(
+                out.phase.view(),
+                out.amplitude_scale,
+                &cfg.optics,
+                cfg.offset_m,
+                cfg.options,
+            )?;
+            let midpoint = session
+                .last_heads()
+                .context("no frame rendered")?
+                .to_field()?;
+            Some(crate::fovea::FullFrame {
+                midpoint,
+                displayed,
+            })
+        }
+        _ => None,
     };
     let mut render = || -> Result<FrameTimings> {
         let out = match (&scene, &gaze) {
@@ -216,6 +244,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             out: &out,
             heads,
             backend: &backend_report,
+            fovea: fovea.as_ref().zip(full.as_ref()),
         },
         &scene,
         source,
@@ -254,6 +283,8 @@ struct LastFrame<'a> {
     out: &'a SlmFrame,
     heads: Heads,
     backend: &'a BackendReport,
+    /// A foveated frame's report and the full 3D frame it is scored against (`--gaze --evaluate`).
+    fovea: Option<(&'a FoveaReport, &'a crate::fovea::FullFrame)>,
 }
 
 /// Previews, midpoint, codes, optional evaluation and report.json of the session's last frame.
@@ -320,7 +351,12 @@ fn write_outputs(
     }
     let evaluation = match &displayed {
         Some(displayed) => Some(evaluate(
-            args, pipeline, scene, frame, &midpoint, displayed,
+            args,
+            pipeline,
+            scene,
+            frame,
+            [&midpoint, displayed],
+            last.fovea,
         )?),
         None => None,
     };
@@ -371,8 +407,8 @@ fn evaluate(
     pipeline: &HologramPipeline,
     scene: &Scene,
     front: &RgbdFrame,
-    midpoint: &ndarray::Array3<num_complex::Complex32>,
-    displayed: &ndarray::Array3<num_complex::Complex32>,
+    [midpoint, displayed]: [&ndarray::Array3<num_complex::Complex32>; 2],
+    fovea: Option<(&FoveaReport, &crate::fovea::FullFrame)>,
 ) -> Result<serde_json::Value> {
     let cfg = pipeline.config();
     let t = Instant::now();
@@ -441,7 +477,20 @@ fn evaluate(
         reference_shown.psnr_amp,
         reference_shown.psnr_fs
     );
+    // A foveated frame: the scores by eccentricity, against the full 3D frame and against SM-LBM.
+    let fovea_bins = match fovea {
+        Some((report, full)) => Some(crate::fovea::eccentricity_bins(
+            report,
+            [midpoint, displayed],
+            full,
+            &gt.midpoint,
+            &cfg.optics,
+            cfg.options,
+        )?),
+        None => None,
+    };
     Ok(json!({
+        "fovea_bins": fovea_bins,
         "ground_truth": {
             "method": match scene {
                 Scene::Frame(_) => "SM-LBM (Eq. 1-4) of the RGB-D input",

@@ -1066,3 +1066,95 @@ fn video_runs_the_realsense_sequence_with_its_temporal_numbers() {
     assert!(churn > 0.0 && churn < 1.0, "{t}");
     assert!(t["max_above_half_pi"].as_f64().unwrap() < 0.5, "{t}");
 }
+
+/// `--gaze`: a foveated frame (docs/FOVEATION.md), its report section, and with `--evaluate` its scores by
+/// eccentricity against the full 3D frame and SM-LBM; bad gazes and radii are refused naming the flag before
+/// anything is written.
+#[test]
+fn render_foveates_on_a_gaze_and_scores_it_by_eccentricity() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("fovea");
+    let o = holo(&[
+        "render",
+        "--size",
+        "96x128",
+        "--gaze",
+        "40,30",
+        "--fovea-px",
+        "20",
+        "--evaluate",
+        "--levels",
+        "64",
+        "--repeat",
+        "0",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = report(&out);
+    let fovea = &r["fovea"];
+    assert_eq!(fovea["radius_px"], 20.0);
+    assert_eq!(fovea["covers_frame"], false);
+    let share = fovea["cnn_share"].as_f64().unwrap();
+    assert!(share > 0.0 && share < 1.0, "{fovea}");
+    assert!(
+        r["timings_s"]["first_frame"]["periphery_s"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    let bins = &r["evaluation"]["fovea_bins"];
+    assert_eq!(bins["bins_px"].as_array().unwrap().len(), 4);
+    // In the fovea at the midpoint plane (d = 0.5, the third), the foveated midpoint hologram is the full
+    // frame's; beyond 4R it is the periphery's 2D hologram.
+    let against_full = &bins["against_full"]["midpoint"][2];
+    let (fovea_db, far_db) = (
+        against_full[0].as_f64().unwrap(),
+        against_full[3].as_f64().unwrap(),
+    );
+    assert!(fovea_db > 60.0 && far_db < fovea_db, "{against_full}");
+    for key in [
+        "foveated_midpoint",
+        "foveated_displayed",
+        "full_midpoint",
+        "full_displayed",
+    ] {
+        assert_eq!(
+            bins["against_sm_lbm"][key].as_array().unwrap().len(),
+            5,
+            "{key}"
+        );
+    }
+
+    for (extra, flag) in [
+        (&["--gaze", "nan,3"][..], "--gaze"),
+        (&["--gaze", "3"][..], "--gaze"),
+        (&["--gaze", "32,3"][..], "--gaze"),
+        (&["--gaze", "3,-0.6"][..], "--gaze"),
+        (&["--gaze", "3,3", "--fovea-px", "-1"][..], "--fovea-px"),
+        (&["--gaze", "3,3", "--fovea-deg", "NaN"][..], "--fovea-deg"),
+        (
+            &["--gaze", "3,3", "--fovea-deg", "5", "--eyepiece-mm", "0"][..],
+            "--eyepiece-mm",
+        ),
+        (
+            &["--gaze", "3,3", "--fovea-band-px", "0"][..],
+            "--fovea-band-px",
+        ),
+        (
+            &["--gaze", "3,3", "--gaze-depth", "inf"][..],
+            "--gaze-depth",
+        ),
+        (&["--gaze-depth", "0.001"][..], "--gaze"),
+    ] {
+        let out = dir.path().join("bad");
+        let mut args = vec!["render", "--size", "32x32", "--repeat", "0"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        let o = holo(&args);
+        assert!(!o.status.success(), "{extra:?} was accepted");
+        let e = stderr(&o);
+        assert!(e.contains(flag), "{extra:?}: {e}");
+        assert!(!out.exists(), "{extra:?} wrote {}", out.display());
+    }
+}

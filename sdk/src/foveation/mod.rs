@@ -184,11 +184,12 @@ pub struct Gaze {
 pub const GAZE_DEPTH_WINDOW_PX: usize = 8;
 
 impl Gaze {
-    /// Checks the gaze against a `height × width` frame.
+    /// Checks the gaze against a `height × width` frame (as
+    /// [`crate::pipeline::HologramSession::render_foveated`] does before anything else).
     ///
     /// Errors: [`crate::HoloError::InvalidParameter`] naming `gaze` (a coordinate not finite or outside the
     /// frame) or `gaze_depth_m` (not finite).
-    pub(crate) fn check(&self, height: usize, width: usize) -> Result<()> {
+    pub fn check(&self, height: usize, width: usize) -> Result<()> {
         for (name, v, n) in [("x", self.x, width), ("y", self.y, height)] {
             if !v.is_finite() {
                 return Err(invalid(
