@@ -15,6 +15,11 @@ pub struct FoveaArgs {
     /// gaze's depth. Default fovea: 5° behind the paper's 21 mm eyepiece.
     #[arg(long, value_name = "X,Y", allow_hyphen_values = true)]
     pub gaze: Option<String>,
+    /// `holo video`: a moving gaze, one CSV row per frame: `frame,x,y[,depth]` (`frame` the 0-based index of
+    /// the frame in the sequence; x, y as --gaze; depth in metres as --gaze-depth, or empty), a header row
+    /// allowed; every frame once.
+    #[arg(long, value_name = "FILE.csv", conflicts_with_all = ["gaze", "gaze_depth"])]
+    pub gaze_track: Option<std::path::PathBuf>,
     /// The depth the viewer focuses at, metres from the midpoint plane in hologram space (positive towards
     /// the viewer, as the focal planes: the volume's near end at +volume/2). Default: the scene's depth at the
     /// gaze point (the median of a 17×17 window).
@@ -44,7 +49,7 @@ pub struct FoveaArgs {
     pub fovea_px: Option<f64>,
     /// Width in pixels of the blend band outside the fovea (from R to R + band): the CNN's field fades
     /// linearly into the periphery's there.
-    #[arg(long, value_name = "PIXELS", allow_hyphen_values = true, requires = "gaze", default_value_t = DEFAULT_BAND_PX)]
+    #[arg(long, value_name = "PIXELS", allow_hyphen_values = true, default_value_t = DEFAULT_BAND_PX)]
     pub fovea_band_px: f64,
 }
 
@@ -52,7 +57,16 @@ impl FoveaArgs {
     /// The foveation options of the flags (`None` without --gaze); `eyepiece_mm` is --eyepiece-mm.
     /// Errors: name the flag of a value the SDK refuses (a negative or non-finite radius, a band under 1).
     pub fn options(&self, eyepiece_mm: Option<f64>) -> Result<Option<FoveationOptions>> {
-        if self.gaze.is_none() {
+        if self.gaze.is_none() && self.gaze_track.is_none() {
+            let given = [
+                ("--gaze-depth", self.gaze_depth.is_some()),
+                ("--fovea-deg", self.fovea_deg.is_some()),
+                ("--fovea-px", self.fovea_px.is_some()),
+                ("--fovea-band-px", self.fovea_band_px != DEFAULT_BAND_PX),
+            ];
+            if let Some((flag, _)) = given.iter().find(|(_, g)| *g) {
+                bail!("{flag} foveates frames: give the gaze too (--gaze X,Y, or --gaze-track FILE.csv in holo video)");
+            }
             return Ok(None);
         }
         let radius = match (self.fovea_px, self.fovea_deg) {
@@ -231,6 +245,66 @@ fn binned_psnr(
                 let se = (rr[b] - 2.0 * s * rt[b] + s * s * tt[b]).max(1e-30);
                 10.0 * (peak * peak * count[b] as f64 / se).log10()
             })
+        })
+        .collect()
+}
+
+/// The gazes of `--gaze-track FILE.csv` for a sequence of `frames` frames, in frame order: rows
+/// `frame,x,y[,depth]` (a header row allowed, blank lines skipped).
+///
+/// Errors: name the file and the line: a row that is not 3 or 4 fields of numbers (a frame index, finite x
+/// and y, a finite depth or nothing), a frame listed twice, a frame beyond the sequence; and a frame of the
+/// sequence the file leaves out.
+pub fn read_gaze_track(path: &std::path::Path, frames: usize) -> Result<Vec<Gaze>> {
+    let text = tensorholo::io::read_text(path)
+        .with_context(|| format!("--gaze-track {}", path.display()))?;
+    let mut gazes: Vec<Option<Gaze>> = vec![None; frames];
+    for (n, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let at = || format!("--gaze-track {}, line {}", path.display(), n + 1);
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if n == 0 && fields.first().is_some_and(|f| f.parse::<f64>().is_err()) {
+            continue; // the header
+        }
+        if !(3..=4).contains(&fields.len()) {
+            bail!("{}: expected frame,x,y[,depth], got {line:?}", at());
+        }
+        let frame: usize = fields[0].parse().with_context(|| {
+            format!("{}: the frame {:?} is not a 0-based index", at(), fields[0])
+        })?;
+        let (x, y) = parse_point(&format!("{},{}", fields[1], fields[2])).with_context(at)?;
+        let depth_m = match fields.get(3).filter(|d| !d.is_empty()) {
+            Some(d) => {
+                let v: f64 = d
+                    .parse()
+                    .with_context(|| format!("{}: the depth {d:?} is not a number", at()))?;
+                if !v.is_finite() {
+                    bail!("{}: the depth {d:?} is not finite", at());
+                }
+                Some(v)
+            }
+            None => None,
+        };
+        let Some(slot) = gazes.get_mut(frame) else {
+            bail!(
+                "{}: frame {frame}, but the sequence has {frames} frames (0 to {})",
+                at(),
+                frames.saturating_sub(1)
+            );
+        };
+        if slot.is_some() {
+            bail!("{}: frame {frame} is listed twice", at());
+        }
+        *slot = Some(Gaze { x, y, depth_m });
+    }
+    gazes
+        .into_iter()
+        .enumerate()
+        .map(|(i, g)| {
+            g.with_context(|| format!("--gaze-track {}: no row for frame {i}", path.display()))
         })
         .collect()
 }

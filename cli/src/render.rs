@@ -73,6 +73,11 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let t_all = Instant::now();
     let refine = args.refine.request(false)?;
     let gaze = args.model.fovea.gaze()?;
+    if args.model.fovea.gaze_track.is_some() {
+        anyhow::bail!(
+            "--gaze-track is for holo video's sequences: give holo render one gaze (--gaze X,Y)"
+        );
+    }
     // The display profile, read once: a bad one stops the command before anything is written; the files it
     // names are inputs too.
     let profile = args.model.profile()?;

@@ -275,11 +275,6 @@ fn temporal_summary(churns: &[PhaseChurn], aligned: bool) -> serde_json::Value {
 
 /// Runs `holo video`.
 pub fn run(args: &VideoArgs) -> Result<()> {
-    if args.model.fovea.gaze.is_some() {
-        anyhow::bail!(
-            "--gaze: holo video does not foveate its frames yet (holo render does; docs/FOVEATION.md)"
-        );
-    }
     // The display profile, read once: a bad one stops the command before anything is written; the files it
     // names are inputs too.
     let profile = args.model.profile()?;
@@ -295,6 +290,9 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     .filter_map(|(flag, dir)| Some(crate::output::Input::folder(flag, dir.as_ref()?)))
     .collect();
     guarded.extend(args.model.guard_inputs());
+    if let Some(track) = &args.model.fovea.gaze_track {
+        guarded.push(crate::output::Input::file("--gaze-track", track));
+    }
     guarded.extend(
         profile_files
             .iter()
@@ -309,6 +307,12 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         }
         pairs.truncate(n);
     }
+    // Foveated frames: one gaze for every frame (--gaze) or a row per frame (--gaze-track).
+    let gazes = match (args.model.fovea.gaze()?, &args.model.fovea.gaze_track) {
+        (Some(g), _) => Some(vec![g; pairs.len()]),
+        (None, Some(track)) => Some(crate::fovea::read_gaze_track(track, pairs.len())?),
+        (None, None) => None,
+    };
     let inputs: Vec<&Path> = pairs
         .iter()
         .flat_map(|f| {
@@ -432,72 +436,76 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         let opts = options;
         // The frame whose error stops the stream, to name its files.
         let mut failed = None;
-        let streamed = session.render_stream_each(
-            pairs.iter().enumerate().map(|(i, p)| {
-                let t = Instant::now();
-                let frame = loader(p, &opts).inspect(|_| {
-                    log::debug!("loaded {} in {:.1} ms", p.rgb.display(), t.elapsed().as_secs_f64() * 1e3)
-                });
-                // A refinement needs the frame's points again (its SM-LBM target) after the CNN has it.
-                let kept = match (&refine, &frame) {
-                    (Some(_), Ok(f)) => Some(f.clone()),
-                    _ => None,
-                };
-                ((i, kept), frame)
-            }),
-            |(i, kept), out| {
-                let out = out.inspect_err(|_| failed = Some(i))?;
-                let refined = match (&mut refiner, &kept) {
-                    (Some(r), Some(frame)) => {
-                        let iterations = r.request().options.iterations;
-                        match r.refine(
-                            &[SceneLayer::from(frame)],
-                            None,
-                            out.codes.view(),
-                            &mut crate::refine::log_progress(iterations),
-                        ) {
-                            Ok(refined) => {
-                                refine_s.0 += refined.target_s;
-                                refine_s.1 += refined.report.iterations_s;
-                                let report = crate::refine::report(r, &refined);
-                                Some((refined, report))
-                            }
-                            Err(e) => {
-                                failed = Some(i);
-                                // The stream's own error is what stops it; the refinement's is reported.
-                                let text = e.to_string();
-                                refine_error = Some(e);
-                                return Err(HoloError::Cancelled(text));
-                            }
+        let frames = pairs.iter().enumerate().map(|(i, p)| {
+            let t = Instant::now();
+            let frame = loader(p, &opts).inspect(|_| {
+                log::debug!(
+                    "loaded {} in {:.1} ms",
+                    p.rgb.display(),
+                    t.elapsed().as_secs_f64() * 1e3
+                )
+            });
+            // A refinement needs the frame's points again (its SM-LBM target) after the CNN has it.
+            let kept = match (&refine, &frame) {
+                (Some(_), Ok(f)) => Some(f.clone()),
+                _ => None,
+            };
+            ((i, kept), frame)
+        });
+        let sink = |(i, kept): (usize, Option<RgbdFrame>),
+                    out: tensorholo::Result<&tensorholo::pipeline::SlmFrame>| {
+            let out = out.inspect_err(|_| failed = Some(i))?;
+            let refined = match (&mut refiner, &kept) {
+                (Some(r), Some(frame)) => {
+                    let iterations = r.request().options.iterations;
+                    match r.refine(
+                        &[SceneLayer::from(frame)],
+                        None,
+                        out.codes.view(),
+                        &mut crate::refine::log_progress(iterations),
+                    ) {
+                        Ok(refined) => {
+                            refine_s.0 += refined.target_s;
+                            refine_s.1 += refined.report.iterations_s;
+                            let report = crate::refine::report(r, &refined);
+                            Some((refined, report))
+                        }
+                        Err(e) => {
+                            failed = Some(i);
+                            // The stream's own error is what stops it; the refinement's is reported.
+                            let text = e.to_string();
+                            refine_error = Some(e);
+                            return Err(HoloError::Cancelled(text));
                         }
                     }
-                    _ => None,
-                };
-                let mut codes = refined
-                    .as_ref()
-                    .map_or_else(|| out.codes.clone(), |r| r.0.codes.clone());
-                let (shifts, churn) = match &previous {
-                    Some(p) => {
-                        let shifts = if args.align_phase {
-                            Some(align_global_phase(p.view(), codes.view_mut())?)
-                        } else {
-                            None
-                        };
-                        (shifts, Some(phase_churn(p.view(), codes.view())?))
-                    }
-                    None => (None, None),
-                };
-                churns.extend(churn);
-                let t = out.timings;
-                if out.backend == Backend::Gpu {
-                    log::info!(
-                        "frame {i} (GPU): packing {:.1} ms, GPU {:.1} ms, period {:.1} ms",
-                        t.cnn_s * 1e3,
-                        t.gpu_s * 1e3,
-                        t.total_s * 1e3
-                    );
-                } else {
-                    log::info!(
+                }
+                _ => None,
+            };
+            let mut codes = refined
+                .as_ref()
+                .map_or_else(|| out.codes.clone(), |r| r.0.codes.clone());
+            let (shifts, churn) = match &previous {
+                Some(p) => {
+                    let shifts = if args.align_phase {
+                        Some(align_global_phase(p.view(), codes.view_mut())?)
+                    } else {
+                        None
+                    };
+                    (shifts, Some(phase_churn(p.view(), codes.view())?))
+                }
+                None => (None, None),
+            };
+            churns.extend(churn);
+            let t = out.timings;
+            if out.backend == Backend::Gpu {
+                log::info!(
+                    "frame {i} (GPU): packing {:.1} ms, GPU {:.1} ms, period {:.1} ms",
+                    t.cnn_s * 1e3,
+                    t.gpu_s * 1e3,
+                    t.total_s * 1e3
+                );
+            } else {
+                log::info!(
                         "frame {i}: CNN {:.1} ms, offset {:.1} ms, pre-filter {:.1} ms, encoding {:.1} ms, period {:.1} ms",
                         t.cnn_s * 1e3,
                         t.offset_s * 1e3,
@@ -505,19 +513,19 @@ pub fn run(args: &VideoArgs) -> Result<()> {
                         t.encoding_s * 1e3,
                         t.total_s * 1e3
                     );
+            }
+            if i == 0 {
+                first_codes = Some(out.codes.clone());
+            }
+            if args.save_frames {
+                for (c, ch) in ["r", "g", "b"].iter().enumerate() {
+                    let file = frame_file(&frames_dir, i, ch);
+                    save_u8_png(&file, codes.index_axis(Axis(0), c))?;
+                    written.push(file);
                 }
-                if i == 0 {
-                    first_codes = Some(out.codes.clone());
-                }
-                if args.save_frames {
-                    for (c, ch) in ["r", "g", "b"].iter().enumerate() {
-                        let file = frame_file(&frames_dir, i, ch);
-                        save_u8_png(&file, codes.index_axis(Axis(0), c))?;
-                        written.push(file);
-                    }
-                }
-                previous = Some(codes);
-                rows.push(json!({
+            }
+            previous = Some(codes);
+            rows.push(json!({
                     "index": i,
                     "rgb": crate::output::path_text(&pairs[i].rgb),
                     "depth": crate::output::path_text(&pairs[i].depth),
@@ -533,9 +541,15 @@ pub fn run(args: &VideoArgs) -> Result<()> {
                         "aligned_shift_codes": shifts,
                     })),
                 }));
-                Ok(())
-            },
-        );
+            Ok(())
+        };
+        let streamed = match &gazes {
+            None => session.render_stream_each(frames, sink),
+            Some(gazes) => session.render_foveated_stream_each(
+                frames.map(|((i, kept), frame)| ((i, kept), frame.map(|f| (f, gazes[i])))),
+                sink,
+            ),
+        };
         if let Some(e) = refine_error {
             let i = failed.unwrap_or(0);
             return Err(anyhow::Error::new(e).context(format!(
@@ -554,7 +568,13 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         })?;
         let stream_s = t_stream.elapsed().as_secs_f64();
         // The streamed output must equal a single-frame render of the same frame.
-        let single = session.render(&loader(&pairs[0], &options)?)?.codes.clone();
+        let first_frame = loader(&pairs[0], &options)?;
+        let single = match &gazes {
+            Some(g) => session.render_foveated(&first_frame, &g[0])?,
+            None => session.render(&first_frame)?,
+        }
+        .codes
+        .clone();
         let identical = first_codes.as_ref() == Some(&single);
         if !identical {
             log::warn!("streamed frame 0 differs from its single-frame render");
@@ -594,6 +614,11 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             "fps_steady": if mean_period > 0.0 { 1.0 / mean_period } else { 0.0 },
             "mean_period_after_first_s": mean_period,
             "stream_equals_single_frame": identical,
+            "fovea": gazes.as_ref().map(|_| json!({
+                "gaze": if args.model.fovea.gaze_track.is_some() { "track" } else { "fixed" },
+                "gaze_track": args.model.fovea.gaze_track.as_deref().map(crate::output::path_text),
+                "first_frame": session.fovea_report(),
+            })),
             "refine_target_s": refine.map(|_| refine_s.0),
             "refine_iterations_s": refine.map(|_| refine_s.1),
             "temporal": temporal_summary(&churns, args.align_phase),

@@ -1158,3 +1158,68 @@ fn render_foveates_on_a_gaze_and_scores_it_by_eccentricity() {
         assert!(!out.exists(), "{extra:?} wrote {}", out.display());
     }
 }
+
+/// `holo video --gaze` (one gaze for every frame) and `--gaze-track FILE.csv` (a row per frame): foveated
+/// frames, the stream equal to single foveated frames; a track with a missing frame, a frame listed twice, a
+/// bad row or a frame beyond the sequence is refused naming the file and the line before anything is written.
+#[test]
+fn video_foveates_on_a_fixed_gaze_and_on_a_gaze_track() {
+    let seq = shared("realsense_seq");
+    let (rgb, depth) = (seq.join("rgb"), seq.join("depth"));
+    let dir = tempfile::tempdir().unwrap();
+    let track = dir.path().join("track.csv");
+    std::fs::write(
+        &track,
+        "frame,x,y,depth\n0,100,80,\n2,150,100,\n1,20.5,30,0.001\n",
+    )
+    .unwrap();
+    let track_arg = track.to_str().unwrap();
+    for (extra, kind) in [
+        (vec!["--gaze", "80,60", "--fovea-px", "20"], "fixed"),
+        (vec!["--gaze-track", track_arg, "--fovea-px", "20"], "track"),
+    ] {
+        let out = dir.path().join(kind);
+        let mut args = vec!["--limit", "3"];
+        args.extend_from_slice(&extra);
+        let o = video(&rgb, &depth, "120x160", &args, &out);
+        assert!(o.status.success(), "{kind}: {}", stderr(&o));
+        let r = report(&out);
+        assert_eq!(r["frames"], 3);
+        assert_eq!(r["fovea"]["gaze"], kind);
+        assert_eq!(r["stream_equals_single_frame"], true, "{kind}");
+        assert_eq!(r["fovea"]["first_frame"]["covers_frame"], false);
+        for f in r["per_frame"].as_array().unwrap() {
+            assert!(
+                f["timings_s"]["periphery_s"].as_f64().unwrap() > 0.0,
+                "{kind}: {f}"
+            );
+        }
+    }
+    for (rows, what) in [
+        ("0,1,1\n1,2,2\n", "no row for frame 2"),
+        (
+            "0,1,1\n1,2,2\n1,3,3\n2,1,1\n",
+            "line 3: frame 1 is listed twice",
+        ),
+        ("0,1,1\n1,abc,2\n2,1,1\n", "line 2"),
+        ("0,1,1\n1,2,2\n2,1,1\n7,1,1\n", "line 4: frame 7"),
+        ("0,1,1,nan\n1,2,2\n2,1,1\n", "line 1"),
+    ] {
+        std::fs::write(&track, rows).unwrap();
+        let out = dir.path().join("bad");
+        let o = video(
+            &rgb,
+            &depth,
+            "120x160",
+            &["--limit", "3", "--gaze-track", track_arg],
+            &out,
+        );
+        assert!(!o.status.success(), "{rows:?} was accepted");
+        let e = stderr(&o);
+        assert!(
+            e.contains("--gaze-track") && e.contains(what),
+            "{rows:?}: {e}"
+        );
+        assert!(!out.exists(), "{rows:?} wrote {}", out.display());
+    }
+}

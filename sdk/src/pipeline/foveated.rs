@@ -338,6 +338,36 @@ impl HologramSession {
         Ok(&self.output)
     }
 
+    /// Renders a stream of foveated frames, each on its own gaze (an eye tracker's, frame by frame), handing
+    /// each result to `sink` with its tag as [`HologramSession::render_stream_each`] does: a frame's error
+    /// goes to `sink` and the stream goes on unless `sink` returns it; `sink`'s own error stops the stream.
+    /// The frames run one after another ([`HologramSession::render_foveated`]: the tile's CNN is short, there
+    /// is little to overlap); each output's `timings.total_s` is the frame period (from the previous
+    /// frame's end). Returns the number of frames taken from `frames`.
+    ///
+    /// Errors: the first error `sink` returns.
+    pub fn render_foveated_stream_each<T, I, F>(&mut self, frames: I, mut sink: F) -> Result<usize>
+    where
+        I: IntoIterator<Item = (T, Result<(RgbdFrame, Gaze)>)>,
+        F: FnMut(T, Result<&SlmFrame>) -> Result<()>,
+    {
+        let mut count = 0;
+        let mut last = Instant::now();
+        for (tag, frame) in frames {
+            count += 1;
+            match frame.and_then(|(f, gaze)| self.render_foveated(&f, &gaze).map(drop)) {
+                Ok(()) => {
+                    let now = Instant::now();
+                    self.output.timings.total_s = (now - last).as_secs_f64();
+                    last = now;
+                    sink(tag, Ok(&self.output))?;
+                }
+                Err(e) => sink(tag, Err(e))?,
+            }
+        }
+        Ok(count)
+    }
+
     /// What the last foveated frame did (gaze, its depth, the fovea, the tile, the share of the frame the
     /// CNN ran on); `None` before the first or after a frame that failed.
     pub fn fovea_report(&self) -> Option<&FoveaReport> {
