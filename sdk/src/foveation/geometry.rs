@@ -1,7 +1,7 @@
 //! [`TileGeometry`]: the hologram CNN's tile of a foveated frame — one size for every gaze (one CNN plan per
 //! session), placed on the gaze and kept inside the frame.
 
-use super::Gaze;
+use super::gaze::Gaze;
 
 /// The fovea, its band and the hologram CNN's tile for `height × width` frames.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -14,8 +14,8 @@ use std::sync::Mutex;
 
 use rayon::prelude::*;
 
+use super::gaze::{Gaze, GAZE_DEPTH_WINDOW_PX};
 use super::geometry::TileGeometry;
-use super::{Gaze, GAZE_DEPTH_WINDOW_PX};
 use crate::error::{HoloError, Result};
 
 /// The scene's normalised depth at `gaze`: the median (the upper middle) of `depth` (`[H, W]`) over the

@@ -27,6 +27,7 @@
 //! - `colour`, `workers`: one colour's optics and the three allocation-free worker threads;
 //! - `cnn_stage`: input packing and the hologram CNN on a `CnnPlan` (tract, or the native engine);
 //! - `executor`, `gpu_frame`: whole-frame accelerators behind one trait, and the GPU's;
+//! - `fovea_tiles`: what a foveated session keeps (the CNNs' tiles and buffers, the periphery's tables);
 //! - `session`: [`HologramSession`] and its CPU frame; `foveated`: its foveated frames (the CNN on a tile
 //!   around the gaze, [`crate::foveation`]); `setup`: how a session is built (checks, the choice of
 //!   an executor, the CNN plans, the colour states); `accelerated`: its frames on an accelerator (fallback,
@@ -38,6 +39,7 @@ mod colour;
 pub(crate) mod config;
 mod correction;
 mod executor;
+mod fovea_tiles;
 mod foveated;
 pub(crate) mod frame;
 #[cfg(feature = "gpu")]

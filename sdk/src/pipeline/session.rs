@@ -62,7 +62,7 @@ pub struct HologramSession {
     pub(super) accelerator: Option<Accelerator>,
     /// The foveated frames' state ([`HologramSession::render_foveated`]); `None` without
     /// [`PipelineConfig::foveation`](crate::pipeline::PipelineConfig::foveation).
-    pub(super) foveated: Option<Box<super::foveated::FoveatedState>>,
+    pub(super) foveated: Option<Box<super::fovea_tiles::FoveatedState>>,
     /// The double phase normaliser of the frame being encoded where it does not come from the field (a
     /// foveated frame's, [`crate::foveation::FOVEATED_NORMALISER_GAIN`]); `None`: the field's largest `|H|`.
     pub(super) fixed_normaliser: Option<f32>,

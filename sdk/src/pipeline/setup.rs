@@ -11,7 +11,7 @@ use super::colour::ColourState;
 use super::config::{Backend, MAX_HOLOGRAM_PIXELS};
 use super::correction::{AberrationReport, PupilCorrection};
 use super::executor::{Accelerator, BackendReportParts};
-use super::foveated::FoveatedState;
+use super::fovea_tiles::FoveatedState;
 use super::frame::{FrameTimings, SlmFrame};
 use super::models::HologramPipeline;
 use super::pool::OpticsPool;
