@@ -105,12 +105,6 @@ impl FoveationOptions {
     /// more), `eyepiece_focal_m` (outside [`EYEPIECE_FOCAL_RANGE_M`]), `band_px` (under 1 or not finite) or
     /// `blur_scale` (negative or not finite).
     pub fn check(&self) -> Result<()> {
-        self.radius_px(8e-6).map(|_| ())
-    }
-
-    /// The fovea's radius in pixels on an SLM of pitch `pixel_pitch_m` (metres), and in degrees where the
-    /// options give an angle. Errors: as [`FoveationOptions::check`].
-    pub(crate) fn radius_px(&self, pixel_pitch_m: f64) -> Result<(f64, Option<f64>)> {
         if !(self.band_px.is_finite() && self.band_px >= 1.0) {
             return Err(invalid(
                 "band_px",
@@ -136,7 +130,7 @@ impl FoveationOptions {
                         ),
                     ));
                 }
-                Ok((pixels, None))
+                Ok(())
             }
             FoveaRadius::Degrees {
                 degrees,
@@ -157,10 +151,25 @@ impl FoveationOptions {
                         ),
                     ));
                 }
-                let pixels = eyepiece_focal_m * degrees.to_radians().tan() / pixel_pitch_m;
-                Ok((pixels, Some(degrees)))
+                Ok(())
             }
         }
+    }
+
+    /// The fovea's radius in pixels on an SLM of pitch `pixel_pitch_m` (metres), and in degrees where the
+    /// options give an angle. Errors: as [`FoveationOptions::check`].
+    pub(crate) fn radius_px(&self, pixel_pitch_m: f64) -> Result<(f64, Option<f64>)> {
+        self.check()?;
+        Ok(match self.radius {
+            FoveaRadius::Pixels { pixels } => (pixels, None),
+            FoveaRadius::Degrees {
+                degrees,
+                eyepiece_focal_m,
+            } => (
+                eyepiece_focal_m * degrees.to_radians().tan() / pixel_pitch_m,
+                Some(degrees),
+            ),
+        })
     }
 }
 

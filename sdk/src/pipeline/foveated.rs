@@ -55,26 +55,16 @@ impl HologramSession {
     /// frame's end). Returns the number of frames taken from `frames`.
     ///
     /// Errors: the first error `sink` returns.
-    pub fn render_foveated_stream_each<T, I, F>(&mut self, frames: I, mut sink: F) -> Result<usize>
+    pub fn render_foveated_stream_each<T, I, F>(&mut self, frames: I, sink: F) -> Result<usize>
     where
         I: IntoIterator<Item = (T, Result<(RgbdFrame, Gaze)>)>,
         F: FnMut(T, Result<&SlmFrame>) -> Result<()>,
     {
-        let mut count = 0;
-        let mut last = Instant::now();
-        for (tag, frame) in frames {
-            count += 1;
-            match frame.and_then(|(f, gaze)| self.render_foveated(&f, &gaze).map(drop)) {
-                Ok(()) => {
-                    let now = Instant::now();
-                    self.output.timings.total_s = (now - last).as_secs_f64();
-                    last = now;
-                    sink(tag, Ok(&self.output))?;
-                }
-                Err(e) => sink(tag, Err(e))?,
-            }
-        }
-        Ok(count)
+        self.deliver_each(
+            frames,
+            |s, (f, gaze)| s.render_foveated(&f, &gaze).map(drop),
+            sink,
+        )
     }
 
     /// What the last foveated frame did (gaze, its depth, the fovea, the tile, the share of the frame the

@@ -33,7 +33,7 @@ impl HologramSession {
     /// an error returned by `sink` stops the stream. The session stays usable after a failed frame.
     ///
     /// Returns the number of items delivered. Errors: the first error `sink` returns.
-    pub fn render_stream_each<T, I, F>(&mut self, frames: I, mut sink: F) -> Result<usize>
+    pub fn render_stream_each<T, I, F>(&mut self, frames: I, sink: F) -> Result<usize>
     where
         T: Send,
         I: IntoIterator<Item = (T, Result<RgbdFrame>)>,
@@ -43,21 +43,7 @@ impl HologramSession {
         let frames = frames.into_iter();
         if self.accelerator.is_some() {
             // The GPU runs whole frames; the CPU only packs inputs, so frames go one after another.
-            let mut count = 0;
-            let mut last = Instant::now();
-            for (tag, frame) in frames {
-                count += 1;
-                match frame.and_then(|f| self.render(&f).map(drop)) {
-                    Ok(()) => {
-                        let now = Instant::now();
-                        self.output.timings.total_s = (now - last).as_secs_f64();
-                        last = now;
-                        sink(tag, Ok(&self.output))?;
-                    }
-                    Err(e) => sink(tag, Err(e))?,
-                }
-            }
-            return Ok(count);
+            return self.deliver_each(frames, |s, f| s.render(&f).map(drop), sink);
         }
         let mut cnn = self.cnn.spawn();
         std::thread::scope(|scope| {
@@ -74,23 +60,41 @@ impl HologramSession {
                     }
                 }
             });
-            let mut count = 0;
-            let mut last = Instant::now();
-            for (tag, item) in rx {
-                let encoded =
-                    item.and_then(|(heads, cnn_s)| self.encode_heads(heads, cnn_s).map(drop));
-                count += 1;
-                match encoded {
-                    Ok(()) => {
-                        let now = Instant::now();
-                        self.output.timings.total_s = (now - last).as_secs_f64();
-                        last = now;
-                        sink(tag, Ok(&self.output))?;
-                    }
-                    Err(e) => sink(tag, Err(e))?,
-                }
-            }
-            Ok(count)
+            self.deliver_each(
+                rx,
+                |s, (heads, cnn_s)| s.encode_heads(heads, cnn_s).map(drop),
+                sink,
+            )
         })
+    }
+
+    /// The delivery loop of a stream: `step` turns each item's input into [`HologramSession::output`] (a whole
+    /// frame, or the rest of one whose CNN ran elsewhere), and `sink(tag, result)` receives every item in
+    /// order, the output's `timings.total_s` set to the frame period (from the previous frame's end). An
+    /// item's error goes to `sink`; only `sink`'s own error stops the loop. Returns the number of items.
+    pub(super) fn deliver_each<T, X, F>(
+        &mut self,
+        items: impl IntoIterator<Item = (T, Result<X>)>,
+        mut step: impl FnMut(&mut Self, X) -> Result<()>,
+        mut sink: F,
+    ) -> Result<usize>
+    where
+        F: FnMut(T, Result<&SlmFrame>) -> Result<()>,
+    {
+        let mut count = 0;
+        let mut last = Instant::now();
+        for (tag, item) in items {
+            count += 1;
+            match item.and_then(|x| step(self, x)) {
+                Ok(()) => {
+                    let now = Instant::now();
+                    self.output.timings.total_s = (now - last).as_secs_f64();
+                    last = now;
+                    sink(tag, Ok(&self.output))?;
+                }
+                Err(e) => sink(tag, Err(e))?,
+            }
+        }
+        Ok(count)
     }
 }
