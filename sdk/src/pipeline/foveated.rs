@@ -236,10 +236,7 @@ impl HologramSession {
         if filtered {
             self.filtered()?;
         }
-        self.fixed_normaliser = Some(FOVEATED_NORMALISER_GAIN * brightest);
-        let encoded = self.encode(filtered).map(|_| ());
-        self.fixed_normaliser = None;
-        encoded?;
+        self.encode(filtered, Some(FOVEATED_NORMALISER_GAIN * brightest))?;
         self.output.timings = FrameTimings {
             cnn_s,
             offset_s,

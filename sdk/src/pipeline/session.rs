@@ -63,9 +63,6 @@ pub struct HologramSession {
     /// The foveated frames' state ([`HologramSession::render_foveated`]); `None` without
     /// [`PipelineConfig::foveation`](crate::pipeline::PipelineConfig::foveation).
     pub(super) foveated: Option<Box<super::fovea_tiles::FoveatedState>>,
-    /// The double phase normaliser of the frame being encoded where it does not come from the field (a
-    /// foveated frame's, [`crate::foveation::FOVEATED_NORMALISER_GAIN`]); `None`: the field's largest `|H|`.
-    pub(super) fixed_normaliser: Option<f32>,
 }
 
 impl HologramSession {
@@ -286,7 +283,7 @@ impl HologramSession {
         if filtered {
             self.filtered()?;
         }
-        self.encode(filtered)?;
+        self.encode(filtered, None)?;
         let encoding_s = t.elapsed().as_secs_f64();
         self.output.timings = FrameTimings {
             cnn_s,
@@ -359,17 +356,19 @@ impl HologramSession {
     /// the codes straight into [`HologramSession::output`], and the phase too: in place where pass 1 left
     /// `arg H'` in the frame's planes (`filtered`: after the pre-filter, [`HologramSession::filtered`]), else
     /// with full outputs (each row copied from pass 1's plane as it is encoded, instead of a pass over the
-    /// planes afterwards). Timings are not updated.
+    /// planes afterwards). Timings are not updated. `fixed`: the global normaliser `a` where it does not
+    /// come from the field (a foveated frame's, [`crate::foveation::FOVEATED_NORMALISER_GAIN`]); `None`: the
+    /// field's largest `|H|`.
     ///
     /// Errors: [`HoloError::InvalidData`] if the hologram is zero everywhere.
-    pub(crate) fn encode(&mut self, filtered: bool) -> Result<&SlmFrame> {
+    pub(crate) fn encode(&mut self, filtered: bool, fixed: Option<f32>) -> Result<&SlmFrame> {
         let mut stats = [ChannelStats::default(); 3];
         for (s, slot) in stats.iter_mut().zip(&self.states) {
             *s = slot.as_ref().ok_or_else(lost_state)?.stats;
         }
         let (h, w) = (self.height, self.width);
         let (a, mean) = normaliser(&stats, h * w)?;
-        let a = self.fixed_normaliser.unwrap_or(a);
+        let a = fixed.unwrap_or(a);
         let (full, calibration, optics) = (self.full_outputs, &self.calibration, &self.optics);
         let states = colour_states(&mut self.states)?;
         let (Some(phase_out), Some(codes_out)) = (

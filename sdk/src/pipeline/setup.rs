@@ -170,7 +170,6 @@ impl HologramSession {
             corrected_by_cnn: pipeline.corrected_by_cnn(),
             accelerator,
             foveated,
-            fixed_normaliser: None,
         }
         .with_aberration(pipeline.aberration().cloned())
     }
