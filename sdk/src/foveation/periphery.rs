@@ -173,8 +173,16 @@ impl Periphery {
         let (mut re, mut im) = (0.0f64, 0.0f64);
         for y in row_span(gy, r_out, h) {
             let dy = y as f64 - gy;
-            let reach = (r_out2 - dy * dy).max(0.0).sqrt();
-            for x in row_span(gx, reach, w) {
+            let outer = row_span(gx, (r_out2 - dy * dy).max(0.0).sqrt(), w);
+            // The fovea's chord, one pixel short at each end (surely inside `R`), is skipped whole.
+            let inner = if dy * dy < r_in2 {
+                let s = row_span(gx, (r_in2 - dy * dy).sqrt() - 1.0, w);
+                s.start.max(outer.start)..s.end.min(outer.end)
+            } else {
+                outer.start..outer.start
+            };
+            let inner = inner.start..inner.end.max(inner.start);
+            for x in (outer.start..inner.start).chain(inner.end..outer.end) {
                 let dx = x as f64 - gx;
                 let r2 = dx * dx + dy * dy;
                 if r2 <= r_in2 || r2 >= r_out2 {
@@ -259,33 +267,38 @@ impl Periphery {
             // The columns within R + B of the gaze on this row (none beyond it): the rest is periphery.
             let near = row_span(gx, (r_out2 - dy * dy).max(0.0).sqrt(), w);
             let near = if dy * dy < r_out2 { near } else { 0..0 };
-            // Rows whose every box stays inside the frame: the boxes' corners without clipping.
-            let inner_row = y >= self.reach && y + self.reach < h;
-            let (lo, hi) = (self.reach.min(w), w.saturating_sub(self.reach));
-            for x in (0..near.start).chain(near.end..w) {
-                prow[x] = periphery_p;
-                if !(inner_row && x >= lo && x < hi) {
+            // Rows whose every box stays inside the frame: the boxes' corners without clipping, on the columns
+            // `fast` (a box of half-width `reach` fits); elsewhere the clipped means.
+            let fast = if y >= self.reach && y + self.reach < h {
+                self.reach.min(w)..w.saturating_sub(self.reach)
+            } else {
+                0..0
+            };
+            for seg in [0..near.start, near.end..w] {
+                prow[seg.clone()].fill(periphery_p);
+                let a = seg.start.max(fast.start).min(seg.end);
+                let b = seg.end.min(fast.end).max(a);
+                for x in (seg.start..a).chain(b..seg.end) {
                     arow[x] = blurred(y, x, drow[x]) as f32;
-                    continue;
                 }
-                let hw = (f64::from((drow[x] - frame.gaze_depth).abs()) * scale - 0.5)
-                    .clamp(0.0, max_hw);
-                let k = hw as usize;
-                let t = hw - k as f64;
-                let b0 = (y - k - ys) * stride;
-                let b1 = (y + k + 1 - ys) * stride;
-                let m = (table[b1 + x + k + 1] - table[b0 + x + k + 1] - table[b1 + x - k]
-                    + table[b0 + x - k])
-                    * inv_area[k];
-                arow[x] = if t > 0.0 {
+                for x in a..b {
+                    let hw = (f64::from((drow[x] - frame.gaze_depth).abs()) * scale - 0.5)
+                        .clamp(0.0, max_hw);
+                    let k = hw as usize;
+                    let t = hw - k as f64;
+                    // The box of half-width `k` and the next (`k + 1 ≤ reach`: inside the table and the
+                    // frame), interpolated by `t` (`t = 0`: the first box's mean exactly).
+                    let b0 = (y - k - ys) * stride;
+                    let b1 = (y + k + 1 - ys) * stride;
+                    let m = (table[b1 + x + k + 1] - table[b0 + x + k + 1] - table[b1 + x - k]
+                        + table[b0 + x - k])
+                        * inv_area[k];
                     let (b0, b1, k) = (b0 - stride, b1 + stride, k + 1);
                     let m1 = (table[b1 + x + k + 1] - table[b0 + x + k + 1] - table[b1 + x - k]
                         + table[b0 + x - k])
                         * inv_area[k];
-                    m + t * (m1 - m)
-                } else {
-                    m
-                } as f32;
+                    arow[x] = (m + t * (m1 - m)) as f32;
+                }
             }
             for x in near {
                 let dx = x as f64 - gx;
@@ -363,13 +376,25 @@ fn summed_area(
     table[..stride].fill(0.0);
     for (i, y) in rows.enumerate() {
         let (above, below) = table.split_at_mut((i + 1) * stride);
-        let above = &above[i * stride..];
-        let row = &mut below[..stride];
-        row[0] = 0.0;
+        let above = &above[i * stride + 1..];
+        let (first, row) = below[..stride].split_at_mut(1);
+        first[0] = 0.0;
+        let amplitude = &colour.amplitude[y * w..(y + 1) * w];
         let mut acc = 0.0f64;
-        for x in 0..w {
-            acc += f64::from(amplitude_at(colour, y * w + x));
-            row[x + 1] = above[x + 1] + acc;
+        match colour.scale {
+            Some(scale) => {
+                let scale = &scale[y * w..(y + 1) * w];
+                for (((t, &up), &a), &s) in row.iter_mut().zip(above).zip(amplitude).zip(scale) {
+                    acc += f64::from(a * s);
+                    *t = up + acc;
+                }
+            }
+            None => {
+                for ((t, &up), &a) in row.iter_mut().zip(above).zip(amplitude) {
+                    acc += f64::from(a);
+                    *t = up + acc;
+                }
+            }
         }
     }
 }
