@@ -11,6 +11,7 @@ use tensorholo::scene::DepthRange;
 
 use crate::enums::{Backend, CnnEngine, GpuPrecision, Precision, PrefilterMode, SceneInput};
 use crate::error::{invalid, Result};
+use crate::foveation::Foveation;
 use crate::frames::{DepthUpsampling, Fit};
 
 /// Everything a [`HologramGenerator`](crate::HologramGenerator) needs. Only `width` and `height` (the SLM's resolution in pixels) are
@@ -99,6 +100,10 @@ pub struct GeneratorConfig {
     /// corrected as `prescription`; at most one of the two. `None` (default): none.
     #[uniffi(default = None)]
     pub aberration: Option<String>,
+    /// Gaze-contingent frames ([`HologramGenerator::render_foveated`](crate::HologramGenerator::render_foveated),
+    /// `docs/FOVEATION.md`); `None` (default): none, and that call is refused.
+    #[uniffi(default = None)]
+    pub foveation: Option<Foveation>,
 }
 
 /// A viewer's spectacle prescription, corrected in every frame with the shipped CNNs (`docs/ABERRATION.md`,
@@ -211,6 +216,7 @@ impl GeneratorConfig {
             Some(json) => Some(AberrationProfile::from_json_str(json, "aberration")?),
             None => None,
         };
+        c.foveation = self.foveation.map(Into::into);
         c.validate()?;
         Ok(c)
     }
@@ -249,6 +255,7 @@ impl From<core::GeneratorConfig> for GeneratorConfig {
             saved_plans: c.saved_plans.map(|p| p.to_json()),
             prescription: c.prescription.map(Into::into),
             aberration: c.aberration.map(|a| a.to_json_string()),
+            foveation: c.foveation.map(Into::into),
         }
     }
 }
@@ -257,14 +264,14 @@ impl From<core::GeneratorConfig> for GeneratorConfig {
 pub(crate) mod tests {
     use super::*;
 
-    /// The default a generated binding gives `GeneratorConfig`'s `field` (`name: Type = value` in Kotlin,
+    /// The default a generated binding gives the `record`'s `field` (`name: Type = value` in Kotlin,
     /// `name: Type = Type(value)` in Swift), as a number. Other records (`DisplayProfile`) have fields of the
-    /// same names: the search starts at `GeneratorConfig`'s definition.
-    fn generated_default(source: &str, field: &str) -> f64 {
+    /// same names: the search starts at the record's definition.
+    fn generated_default(source: &str, record: &str, field: &str) -> f64 {
         let start = source
-            .find("data class GeneratorConfig (")
-            .or_else(|| source.find("public struct GeneratorConfig:"))
-            .expect("no GeneratorConfig in the generated binding");
+            .find(&format!("data class {record} ("))
+            .or_else(|| source.find(&format!("public struct {record}:")))
+            .unwrap_or_else(|| panic!("no {record} in the generated binding"));
         let source = &source[start..];
         let at = source
             .find(&format!("{field}`: kotlin."))
@@ -294,10 +301,26 @@ pub(crate) mod tests {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("generated");
         for file in ["kotlin/tensorholo/tensorholo.kt", "swift/Tensorholo.swift"] {
             let source = std::fs::read_to_string(dir.join(file)).unwrap();
-            let field = |kotlin: &str, swift: &str| {
-                let name = if file.ends_with(".kt") { kotlin } else { swift };
-                generated_default(&source, name)
+            let name = |kotlin: &'static str, swift: &'static str| {
+                if file.ends_with(".kt") {
+                    kotlin
+                } else {
+                    swift
+                }
             };
+            let field =
+                |kotlin, swift| generated_default(&source, "GeneratorConfig", name(kotlin, swift));
+            // The fovea's record: its defaults are the core's `FoveationOptions::default()`.
+            let fovea = crate::foveation::Foveation::default();
+            for (kotlin, swift, want) in [
+                ("radiusDeg", "radiusDeg", fovea.radius_deg),
+                ("eyepieceFocalM", "eyepieceFocalM", fovea.eyepiece_focal_m),
+                ("bandPx", "bandPx", fovea.band_px),
+                ("blurScale", "blurScale", fovea.blur_scale),
+            ] {
+                let got = generated_default(&source, "Foveation", name(kotlin, swift));
+                assert_eq!(got, want, "{file}: Foveation.{kotlin}");
+            }
             assert_eq!(
                 field("layers", "layers") as usize,
                 core.models.layers,
@@ -372,6 +395,7 @@ pub(crate) mod tests {
             saved_plans: None,
             prescription: None,
             aberration: None,
+            foveation: None,
         }
     }
 }

@@ -31,6 +31,7 @@ pub mod config;
 pub mod display;
 pub mod enums;
 pub mod error;
+pub mod foveation;
 pub mod frames;
 pub mod generator;
 pub mod refine;
@@ -46,6 +47,7 @@ compile_error!(
 pub use config::*;
 pub use display::*;
 pub use enums::*;
+pub use foveation::*;
 pub use frames::*;
 pub use generator::*;
 pub use refine::*;

@@ -5,6 +5,7 @@ use std::sync::Arc;
 use tensorholo::generator as core;
 
 use crate::error::{guard, Result, TensorholoError};
+use crate::foveation::Gaze;
 use crate::frames::{RgbdFrame, SlmPatterns};
 
 /// Receives a [`HologramStream`]'s results, implemented by the app (Kotlin/Swift/Python). Called on the
@@ -66,6 +67,17 @@ impl HologramStream {
     /// Errors: [`TensorholoError::InvalidInput`] after [`HologramStream::close`].
     pub fn push(&self, frame: RgbdFrame) -> Result<u64> {
         guard(|| Ok(self.inner.push(frame.into_core())?))
+    }
+
+    /// Queues a frame to be rendered foveated on `gaze` (this frame's eye-tracker, face-tracking or touch
+    /// point, in hologram pixels; [`HologramGenerator::render_foveated`](crate::HologramGenerator::render_foveated)),
+    /// as [`HologramStream::push`] does.
+    ///
+    /// Errors: [`TensorholoError::InvalidInput`] for a generator made without
+    /// [`GeneratorConfig::foveation`](crate::GeneratorConfig::foveation), a gaze outside the hologram or not
+    /// finite (naming it), or after [`HologramStream::close`].
+    pub fn push_foveated(&self, frame: RgbdFrame, gaze: Gaze) -> Result<u64> {
+        guard(|| Ok(self.inner.push_foveated(frame.into_core(), gaze.into())?))
     }
 
     /// Frames dropped so far because the queue was full.

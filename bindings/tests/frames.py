@@ -129,14 +129,16 @@ def redwood(tmp: Path) -> tuple[Case, bytes, bytes]:
 CASES = {"iphone": iphone, "redwood": redwood}
 
 
-def holo_codes(case: Case, out: Path, calibration: Path | None = None, depth: str | None = None) -> np.ndarray:
+def holo_codes(case: Case, out: Path, calibration: Path | None = None, depth: str | None = None,
+               extra: list[str] | None = None) -> np.ndarray:
     """`holo render` of the case's files at its hologram size (defaults otherwise, through `calibration` if
-    given; `depth` instead of the case's depth file): codes `[3, H, W]`."""
+    given; `depth` instead of the case's depth file; `extra` arguments appended): codes `[3, H, W]`."""
     cmd = [str(holo_binary()), "render", "--rgb", case.holo_rgb, "--depth", depth or case.holo_depth,
            "--depth-encoding", case.holo_encoding, "--size", f"{case.out_height}x{case.out_width}",
            "--repeat", "0", "--out", str(out)]
     if calibration is not None:
         cmd += ["--calibration", str(calibration)]
+    cmd += extra or []
     subprocess.run(cmd, check=True, capture_output=True, text=True)
     return read_codes(out)
 

@@ -781,3 +781,70 @@ fn the_photo_mode_refines_for_a_viewer_with_a_prescription() {
     );
     assert!(myope.render(&frame).is_ok());
 }
+
+/// A foveating generator: single frames and a stream's frames on a gaze are the session's foveated frames,
+/// bit for bit, unlike the full frame far from the gaze; frames pushed without a gaze are full frames; a
+/// gaze outside the hologram, or one for a generator made without foveation, is refused by name.
+#[test]
+fn a_foveating_generator_renders_gazes_in_frames_and_streams() {
+    use tensorholo::foveation::{FoveaRadius, FoveationOptions, Gaze};
+    let mut cfg = config();
+    cfg.foveation = Some(FoveationOptions {
+        radius: FoveaRadius::Pixels { pixels: 6.0 },
+        ..FoveationOptions::default()
+    });
+    let g = HologramGenerator::new(cfg.clone()).unwrap();
+    let frame = camera_frame(H, W, 1.0);
+    let gaze = Gaze {
+        x: 12.0,
+        y: 10.0,
+        depth_m: None,
+    };
+    let full = g.render(&frame.view()).unwrap();
+    let fov = g.render_foveated(&frame.view(), &gaze).unwrap();
+    // The session's own foveated frame of the converted frame.
+    let (rgbd, _) = g.convert(&frame.view()).unwrap();
+    let pipeline =
+        HologramPipeline::embedded(&ModelSelection::default(), cfg.pipeline_config()).unwrap();
+    let mut session = pipeline.session(H, W).unwrap();
+    assert_eq!(
+        fov.codes,
+        session.render_foveated(&rgbd, &gaze).unwrap().codes
+    );
+    let far = |p: &tensorholo::generator::SlmPatterns| {
+        p.codes.slice(ndarray::s![.., 30.., 40..]).to_owned()
+    };
+    let differ = far(&fov)
+        .iter()
+        .zip(far(&full).iter())
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(
+        differ * 2 > far(&full).len(),
+        "{differ} of {}",
+        far(&full).len()
+    );
+
+    let rec = Arc::new(Mutex::new(Recorder::default()));
+    let stream = g.stream(Box::new(Shared(Arc::clone(&rec))), 8).unwrap();
+    stream.push_foveated(frame.clone(), gaze).unwrap();
+    stream.push(frame.clone()).unwrap();
+    let outside = Gaze { x: 99.0, ..gaze };
+    let e = stream.push_foveated(frame.clone(), outside).unwrap_err();
+    assert!(e.to_string().contains("gaze"), "{e}");
+    stream.close();
+    let rec = rec.lock().unwrap();
+    assert!(rec.errors.is_empty(), "{:?}", rec.errors);
+    assert_eq!(rec.patterns.len(), 2);
+    assert_eq!(rec.patterns[0].1.codes, fov.codes);
+    assert_eq!(rec.patterns[1].1.codes, full.codes);
+
+    let plain = generator();
+    let e = plain.render_foveated(&frame.view(), &gaze).unwrap_err();
+    assert!(e.to_string().contains("foveation"), "{e}");
+    let stream = plain
+        .stream(Box::new(Shared(Arc::new(Mutex::default()))), 2)
+        .unwrap();
+    let e = stream.push_foveated(frame, gaze).unwrap_err();
+    assert!(e.to_string().contains("foveation"), "{e}");
+}

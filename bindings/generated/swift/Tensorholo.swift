@@ -674,6 +674,18 @@ public protocol HologramGeneratorProtocol: AnyObject, Sendable {
     func render(frame: RgbdFrame) throws  -> SlmPatterns
     
     /**
+     * Renders one camera frame foveated on `gaze` (`docs/FOVEATION.md`): the 3D CNN where the viewer looks,
+     * the paper's 2D hologram with synthetic blur (in focus at the gaze's depth) elsewhere; at 1080p with a 5°
+     * fovea about 0.4 of [`HologramGenerator::render`]'s time. Needs a generator made with
+     * [`GeneratorConfig::foveation`](crate::GeneratorConfig::foveation); pass this frame's gaze (an eye
+     * tracker's, ARKit face tracking's, or a touch point) in hologram pixels.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for a generator made without foveation, a gaze outside the
+     * hologram or not finite (naming it), and as [`HologramGenerator::render`]; the generator stays usable.
+     */
+    func renderFoveated(frame: RgbdFrame, gaze: Gaze) throws  -> SlmPatterns
+    
+    /**
      * Renders a layered depth image into SLM patterns: one [`RgbdFrame`] per layer, front to back (what a
      * renderer's depth-peeling pass gives), each with the buffer rules of [`HologramGenerator::render`]. In
      * the layers behind the first, a depth sample of 0 (or NaN, or confidence 0 %) means "no point here"; a
@@ -897,6 +909,27 @@ open func render(frame: RgbdFrame)throws  -> SlmPatterns  {
     uniffi_tensorholo_ffi_fn_method_hologramgenerator_render(
             self.uniffiCloneHandle(),
         FfiConverterTypeRgbdFrame_lower(frame),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Renders one camera frame foveated on `gaze` (`docs/FOVEATION.md`): the 3D CNN where the viewer looks,
+     * the paper's 2D hologram with synthetic blur (in focus at the gaze's depth) elsewhere; at 1080p with a 5°
+     * fovea about 0.4 of [`HologramGenerator::render`]'s time. Needs a generator made with
+     * [`GeneratorConfig::foveation`](crate::GeneratorConfig::foveation); pass this frame's gaze (an eye
+     * tracker's, ARKit face tracking's, or a touch point) in hologram pixels.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for a generator made without foveation, a gaze outside the
+     * hologram or not finite (naming it), and as [`HologramGenerator::render`]; the generator stays usable.
+     */
+open func renderFoveated(frame: RgbdFrame, gaze: Gaze)throws  -> SlmPatterns  {
+    return try  FfiConverterTypeSlmPatterns_lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_hologramgenerator_render_foveated(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeRgbdFrame_lower(frame),
+        FfiConverterTypeGaze_lower(gaze),uniffiCallStatus
     )
 })
 }
@@ -2164,6 +2197,197 @@ public func FfiConverterTypeDisplayProfile_lower(_ value: DisplayProfile) -> Rus
 
 
 /**
+ * How a generator foveates its frames ([`HologramGenerator::render_foveated`](crate::HologramGenerator::render_foveated);
+ * `docs/FOVEATION.md`). The defaults: a 5° fovea behind the paper's 21 mm eyepiece (about 230 pixels of an
+ * 8 µm SLM), a 16-pixel blend band, the periphery blurred by a quarter of the diffraction cone's defocus.
+ */
+public struct Foveation: Equatable, Hashable {
+    /**
+     * The fovea's radius in degrees of visual angle (eccentricity) behind the eyepiece, `0 ≤ R < 90`
+     * (default 5); not read when `radius_px` is given.
+     */
+    public var radiusDeg: Double
+    /**
+     * The eyepiece's focal length in metres (default 0.021, the paper's): `R_px = f·tan(R)/p`.
+     */
+    public var eyepieceFocalM: Double
+    /**
+     * The fovea's radius in hologram pixels instead (≥ 0); `None` (default): `radius_deg`.
+     */
+    public var radiusPx: Double?
+    /**
+     * The blend band's width in pixels outside the fovea (≥ 1, default 16).
+     */
+    public var bandPx: Double
+    /**
+     * The periphery's blur scale κ, a fraction of the λ/(2p) diffraction cone's defocus (≥ 0, default
+     * 0.25; 0: no blur).
+     */
+    public var blurScale: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The fovea's radius in degrees of visual angle (eccentricity) behind the eyepiece, `0 ≤ R < 90`
+         * (default 5); not read when `radius_px` is given.
+         */radiusDeg: Double = Double(5.0), 
+        /**
+         * The eyepiece's focal length in metres (default 0.021, the paper's): `R_px = f·tan(R)/p`.
+         */eyepieceFocalM: Double = Double(0.021), 
+        /**
+         * The fovea's radius in hologram pixels instead (≥ 0); `None` (default): `radius_deg`.
+         */radiusPx: Double? = nil, 
+        /**
+         * The blend band's width in pixels outside the fovea (≥ 1, default 16).
+         */bandPx: Double = Double(16.0), 
+        /**
+         * The periphery's blur scale κ, a fraction of the λ/(2p) diffraction cone's defocus (≥ 0, default
+         * 0.25; 0: no blur).
+         */blurScale: Double = Double(0.25)) {
+        self.radiusDeg = radiusDeg
+        self.eyepieceFocalM = eyepieceFocalM
+        self.radiusPx = radiusPx
+        self.bandPx = bandPx
+        self.blurScale = blurScale
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension Foveation: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeFoveation: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Foveation {
+        return
+            try Foveation(
+                radiusDeg: FfiConverterDouble.read(from: &buf), 
+                eyepieceFocalM: FfiConverterDouble.read(from: &buf), 
+                radiusPx: FfiConverterOptionDouble.read(from: &buf), 
+                bandPx: FfiConverterDouble.read(from: &buf), 
+                blurScale: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: Foveation, into buf: inout [UInt8]) {
+        FfiConverterDouble.write(value.radiusDeg, into: &buf)
+        FfiConverterDouble.write(value.eyepieceFocalM, into: &buf)
+        FfiConverterOptionDouble.write(value.radiusPx, into: &buf)
+        FfiConverterDouble.write(value.bandPx, into: &buf)
+        FfiConverterDouble.write(value.blurScale, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeFoveation_lift(_ buf: RustBuffer) throws -> Foveation {
+    return try FfiConverterTypeFoveation.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeFoveation_lower(_ value: Foveation) -> RustBuffer {
+    return FfiConverterTypeFoveation.lower(value)
+}
+
+
+/**
+ * Where the viewer looks, for one frame: a point of the hologram in pixels of its `width × height` (after
+ * the camera frame's fit; `(0, 0)` the top-left pixel's centre, x right, y down), and the eye tracker's
+ * vergence depth in metres where it has one. An iOS app maps ARKit's `lookAtPoint` or a touch point to the
+ * hologram's pixels; an OpenXR app its eye-gaze pose (`docs/FOVEATION.md`, "Passing the gaze").
+ */
+public struct Gaze: Equatable, Hashable {
+    /**
+     * Column, pixels (`-0.5 ≤ x ≤ width − 0.5`).
+     */
+    public var x: Double
+    /**
+     * Row, pixels (`-0.5 ≤ y ≤ height − 0.5`).
+     */
+    public var y: Double
+    /**
+     * The depth the viewer focuses at: the signed distance in metres from the midpoint hologram's plane,
+     * positive towards the viewer (the volume's near end at `+volume_depth_m/2`; beyond it, its nearer end).
+     * `None` (default): the scene's depth at the gaze point (the median of a 17 × 17 window).
+     */
+    public var depthM: Double?
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Column, pixels (`-0.5 ≤ x ≤ width − 0.5`).
+         */x: Double, 
+        /**
+         * Row, pixels (`-0.5 ≤ y ≤ height − 0.5`).
+         */y: Double, 
+        /**
+         * The depth the viewer focuses at: the signed distance in metres from the midpoint hologram's plane,
+         * positive towards the viewer (the volume's near end at `+volume_depth_m/2`; beyond it, its nearer end).
+         * `None` (default): the scene's depth at the gaze point (the median of a 17 × 17 window).
+         */depthM: Double? = nil) {
+        self.x = x
+        self.y = y
+        self.depthM = depthM
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension Gaze: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeGaze: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Gaze {
+        return
+            try Gaze(
+                x: FfiConverterDouble.read(from: &buf), 
+                y: FfiConverterDouble.read(from: &buf), 
+                depthM: FfiConverterOptionDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: Gaze, into buf: inout [UInt8]) {
+        FfiConverterDouble.write(value.x, into: &buf)
+        FfiConverterDouble.write(value.y, into: &buf)
+        FfiConverterOptionDouble.write(value.depthM, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGaze_lift(_ buf: RustBuffer) throws -> Gaze {
+    return try FfiConverterTypeGaze.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGaze_lower(_ value: Gaze) -> RustBuffer {
+    return FfiConverterTypeGaze.lower(value)
+}
+
+
+/**
  * Everything a [`HologramGenerator`](crate::HologramGenerator) needs. Only `width` and `height` (the SLM's resolution in pixels) are
  * required; every other field has the default named in its comment.
  */
@@ -2275,6 +2499,11 @@ public struct GeneratorConfig: Equatable, Hashable {
      * corrected as `prescription`; at most one of the two. `None` (default): none.
      */
     public var aberration: String?
+    /**
+     * Gaze-contingent frames ([`HologramGenerator::render_foveated`](crate::HologramGenerator::render_foveated),
+     * `docs/FOVEATION.md`); `None` (default): none, and that call is refused.
+     */
+    public var foveation: Foveation?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -2362,7 +2591,11 @@ public struct GeneratorConfig: Equatable, Hashable {
         /**
          * Measured aberrations, the JSON text of a `tensorholo.aberration` file (`holo calibrate aberration`),
          * corrected as `prescription`; at most one of the two. `None` (default): none.
-         */aberration: String? = nil) {
+         */aberration: String? = nil, 
+        /**
+         * Gaze-contingent frames ([`HologramGenerator::render_foveated`](crate::HologramGenerator::render_foveated),
+         * `docs/FOVEATION.md`); `None` (default): none, and that call is refused.
+         */foveation: Foveation? = nil) {
         self.width = width
         self.height = height
         self.layers = layers
@@ -2386,6 +2619,7 @@ public struct GeneratorConfig: Equatable, Hashable {
         self.savedPlans = savedPlans
         self.prescription = prescription
         self.aberration = aberration
+        self.foveation = foveation
     }
 
     
@@ -2426,7 +2660,8 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
                 tune: FfiConverterBool.read(from: &buf), 
                 savedPlans: FfiConverterOptionString.read(from: &buf), 
                 prescription: FfiConverterOptionTypePrescription.read(from: &buf), 
-                aberration: FfiConverterOptionString.read(from: &buf)
+                aberration: FfiConverterOptionString.read(from: &buf), 
+                foveation: FfiConverterOptionTypeFoveation.read(from: &buf)
         )
     }
 
@@ -2454,6 +2689,7 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
         FfiConverterOptionString.write(value.savedPlans, into: &buf)
         FfiConverterOptionTypePrescription.write(value.prescription, into: &buf)
         FfiConverterOptionString.write(value.aberration, into: &buf)
+        FfiConverterOptionTypeFoveation.write(value.foveation, into: &buf)
     }
 }
 
@@ -5039,6 +5275,30 @@ fileprivate struct FfiConverterOptionTypeCropRect: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterOptionTypeFoveation: FfiConverterRustBuffer {
+    typealias SwiftType = Foveation?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeFoveation.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeFoveation.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterOptionTypePrescription: FfiConverterRustBuffer {
     typealias SwiftType = Prescription?
 
@@ -5585,6 +5845,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render() != 59531) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_foveated() != 10330) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi() != 60546) {

@@ -15,6 +15,7 @@ import numpy.typing as npt
 from ._uniffi.tensorholo import (
     ColorFormat,
     DepthFormat,
+    Gaze,
     HologramGenerator,
     RefineProgress,
     RefineSettings,
@@ -105,7 +106,9 @@ def patterns_array(patterns: SlmPatterns) -> npt.NDArray[np.uint8]:
 
 def render_arrays(generator: HologramGenerator, rgb: npt.NDArray[np.uint8],
                   depth: DepthArray, refine: int = 0,
-                  progress: RefineProgress | None = None) -> npt.NDArray[np.uint8]:
+                  progress: RefineProgress | None = None,
+                  gaze: tuple[float, float] | tuple[float, float, float] | None = None
+                  ) -> npt.NDArray[np.uint8]:
     """Renders one RGB-D frame given as numpy arrays into the three SLM patterns.
 
     Args:
@@ -121,28 +124,51 @@ def render_arrays(generator: HologramGenerator, rgb: npt.NDArray[np.uint8],
             +4 dB at 10 on real photos, seconds of work); 0 (default) renders as the camera path does.
         progress: with ``refine``, a ``RefineProgress`` whose ``on_iteration(iteration, iterations,
             psnr_db)`` hears of every iteration and returns ``False`` to cancel.
+        gaze: a foveated frame (docs/FOVEATION.md; ``generator.render_foveated``): ``(x, y)`` where the
+            viewer looks, in pixels of the hologram (``0, 0`` the top-left pixel's centre, x right, y down),
+            or ``(x, y, depth_m)`` with an eye tracker's vergence depth in metres from the midpoint plane
+            (positive towards the viewer). Needs a generator made with ``GeneratorConfig.foveation``; not
+            with ``refine``. ``None`` (default): the full 3D frame.
 
     Returns:
         ``uint8 [3, height, width]`` at the generator's size: the red, green and blue SLM patterns (code
         ``c`` = phase ``2πc/256``), as ``patterns_array(generator.render(frame))``.
 
     Raises:
-        TypeError: ``rgb`` or ``depth`` is not a numpy array, or has another dtype (the message names it).
+        TypeError: ``rgb`` or ``depth`` is not a numpy array, or has another dtype (the message names it);
+            ``gaze`` is not a tuple of 2 or 3 numbers.
         ValueError: a wrong shape, an empty array, more pixels than ``max_frame_pixels()`` (refused before
             any copy), NaN, infinite or negative depths, or a depth without one valid (non-zero) pixel (the
             message names the argument).
         TensorholoError.InvalidInput: what the core refuses beyond that (e.g. a frame too large, more than
-            10000 refinement iterations).
+            10000 refinement iterations, a gaze outside the hologram, a generator without foveation).
         TensorholoError.Cancelled: ``progress`` returned ``False``.
     """
     if isinstance(refine, bool) or not isinstance(refine, int):
         raise TypeError(f"refine must be an int (iterations), not {type(refine).__name__}")
     if refine < 0:
         raise ValueError(f"refine must be >= 0 iterations, got {refine}")
+    point = _gaze(gaze)
+    if point is not None and refine:
+        raise ValueError("gaze and refine cannot be combined: a refined frame is a full 3D frame")
     color, color_format, cw, ch = _color(rgb)
     data, depth_format, dw, dh = _depth(depth)
     frame = RgbdFrame(color=color, color_format=color_format, color_width=cw, color_height=ch,
                       depth=data, depth_format=depth_format, depth_width=dw, depth_height=dh)
     if refine:
         return patterns_array(generator.render_refined(frame, RefineSettings(iterations=refine), progress))
+    if point is not None:
+        return patterns_array(generator.render_foveated(frame, point))
     return patterns_array(generator.render(frame))
+
+
+def _gaze(gaze: object) -> Gaze | None:
+    """``render_arrays``'s ``gaze`` as a ``Gaze`` record (``None`` stays ``None``)."""
+    if gaze is None:
+        return None
+    if not isinstance(gaze, (tuple, list)) or len(gaze) not in (2, 3) or not all(
+            isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) for v in gaze):
+        raise TypeError(f"gaze must be (x, y) or (x, y, depth_m) numbers, got {gaze!r}")
+    x, y = float(gaze[0]), float(gaze[1])
+    depth_m = float(gaze[2]) if len(gaze) == 3 else None
+    return Gaze(x=x, y=y, depth_m=depth_m)

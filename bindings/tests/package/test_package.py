@@ -205,6 +205,34 @@ def test_refine_is_the_photo_mode_and_bad_counts_are_refused(small_gen):
     assert "iterations" in str(e.value)
 
 
+def test_a_gaze_renders_a_foveated_frame_and_bad_gazes_are_refused():
+    # 64 x 96 with a 10-pixel fovea: its tile is smaller than the frame.
+    rgb = np.zeros((64, 96, 3), np.uint8)
+    rgb[::2] = 200
+    rgb[:, ::3, 1] = 90
+    depth = np.full((64, 96), 1.5, np.float32)
+    depth[:, :48] = 0.8
+    gen = th.HologramGenerator(th.GeneratorConfig(width=96, height=64, threads=1, engine=th.CnnEngine.NATIVE,
+                                                  foveation=th.Foveation(radius_px=10.0)))
+    full = th.render_arrays(gen, rgb, depth)
+    fov = th.render_arrays(gen, rgb, depth, gaze=(30, 20))
+    # The same as the uniffi call it wraps, with or without the vergence depth given as a third number.
+    frame = th.RgbdFrame(color=rgb.tobytes(), color_format=th.ColorFormat.RGB8, color_width=96, color_height=64,
+                         depth=depth.tobytes(), depth_format=th.DepthFormat.METRES_F32, depth_width=96,
+                         depth_height=64)
+    np.testing.assert_array_equal(fov, th.patterns_array(gen.render_foveated(frame, th.Gaze(x=30, y=20))))
+    np.testing.assert_array_equal(
+        th.render_arrays(gen, rgb, depth, gaze=(30, 20, 0.001)),
+        th.patterns_array(gen.render_foveated(frame, th.Gaze(x=30, y=20, depth_m=0.001))))
+    # Far from the gaze the periphery is a 2D hologram, not the full frame's.
+    assert (fov[:, 40:, 70:] != full[:, 40:, 70:]).mean() > 0.5
+    for bad, error in [((30,), TypeError), ("30,20", TypeError), ((30, True), TypeError),
+                       ((500, 20), th.TensorholoError.InvalidInput), ((30, 20), ValueError)]:
+        with pytest.raises(error) as e:
+            th.render_arrays(gen, rgb, depth, gaze=bad, refine=1 if error is ValueError else 0)
+        assert "gaze" in str(e.value), str(e.value)
+
+
 MYPY_SNIPPET = """
 import numpy as np
 import tensorholo as th

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 import tensorholo
-from tensorholo import (CnnEngine, ColorFormat, DepthFormat, DepthUpsampling, DisplayProfile, Fit, GeneratorConfig,
-                        HologramGenerator, PatternsListener, PrefilterMode, RgbdFrame, Rotation, SceneInput,
+from tensorholo import (CnnEngine, ColorFormat, DepthFormat, DepthUpsampling, DisplayProfile, Fit, Foveation, Gaze,
+                        GeneratorConfig, HologramGenerator, PatternsListener, PrefilterMode, RgbdFrame, Rotation, SceneInput,
                         TensorholoError)
 
 HERE = Path(__file__).resolve().parent
@@ -94,6 +94,29 @@ def test_joint_bilateral_upsampling_renders_the_codes_of_holo_render_from_the_ca
     converted = tensorholo.convert_frame(frame, c.out_width, c.out_height, None, DepthUpsampling.JOINT_BILATERAL)
     nearest = tensorholo.convert_frame(frame, c.out_width, c.out_height, None)
     assert converted.depth != nearest.depth
+
+
+def test_a_foveated_frame_is_holo_renders_on_the_same_gaze_and_differs_from_the_full_frame(case, tmp_path):
+    c, frame, full, _ = case
+    # A fovea of a sixth of the frame's shorter side, off-centre: the tile is smaller than the frame.
+    radius = min(c.out_width, c.out_height) / 6
+    x, y = c.out_width * 0.3, c.out_height * 0.6
+    want = frames.holo_codes(c, tmp_path / "holo", extra=["--gaze", f"{x},{y}", "--fovea-px", str(radius)])
+    gen = HologramGenerator(GeneratorConfig(width=c.out_width, height=c.out_height,
+                                            foveation=Foveation(radius_px=radius)))
+    out = codes_of(gen.render_foveated(frame, Gaze(x=x, y=y)))
+    stats = frames.compare_codes(out, want)
+    print(f"{c.name}: foveated vs holo render --gaze {stats}")
+    # Far from the gaze the periphery is a 2D hologram: codes unlike the full 3D frame's.
+    yy, xx = np.mgrid[:c.out_height, :c.out_width]
+    far = np.hypot(xx - x, yy - y) > 2 * radius + 32
+    diff = frames.circular_diff(out, full)[:, far]
+    assert diff.mean() > 4, diff.mean()
+    # A gaze outside the hologram, or a generator without foveation, raise naming them.
+    with pytest.raises(TensorholoError.InvalidInput, match="gaze"):
+        gen.render_foveated(frame, Gaze(x=-5.0, y=y))
+    with pytest.raises(TensorholoError.InvalidInput, match="foveation"):
+        case[3].render_foveated(frame, Gaze(x=x, y=y))
 
 
 def test_preview_is_an_image_of_the_scene(case):

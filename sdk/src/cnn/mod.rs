@@ -53,9 +53,7 @@ pub use native::{f32_peak_gflops, int8_peak_gops};
 pub use options::{
     default_threads, CnnEngine, CnnLayout, CnnOptions, ConvAlgorithm, ThreadCount, MAX_CNN_THREADS,
 };
-pub use saved::{
-    network_key, SavedPlans, SavedRow, SavedSession, SAVED_PLANS_FORMAT, SAVED_PLANS_VERSION,
-};
+pub use saved::{SavedPlans, SavedRow, SavedSession, SAVED_PLANS_FORMAT, SAVED_PLANS_VERSION};
 pub use select::CpuCnnPlan;
 pub use tensorholo_kernels::Isa;
 pub use tuning::{

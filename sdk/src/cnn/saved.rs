@@ -311,7 +311,7 @@ fn row_info(isa: Isa, r: &SavedRow) -> Option<&'static tensorholo_kernels::Kerne
 /// The name a saved session gives a hologram CNN: `<kind>-<layers>-<precision>-in<channels>` (e.g.
 /// `hologram-cnn-8-f32-in4`, `hologram-cnn-8-int8-qdq-conv-in20`): what decides its plans (depth, weight format,
 /// input channels), not its weights, so that a retrained file of the same shape reuses the entry.
-pub fn network_key(model: &crate::model::HologramModel) -> String {
+pub(crate) fn network_key(model: &crate::model::HologramModel) -> String {
     let md = model.metadata();
     format!(
         "{}-{}-{}-in{}",

@@ -14,7 +14,7 @@
 //!   test split). That sets the default tolerance per model ([`rule_tolerance`]); a caller may give another.
 //! - **volume**: within [`VOLUME_ROUNDING`] of `σ·V`, served at `σ·V`; smaller, served by mapping the scene's
 //!   depths into the part of the model's volume it needs ([`VolumeFit::Partial`]); deeper, refused.
-//! - **the non-paraxial residual** the mapping leaves ([`nonparaxial_residual_rad`]): at most
+//! - **the non-paraxial residual** the mapping leaves (`nonparaxial_residual_rad`): at most
 //!   [`MAX_NONPARAXIAL_RESIDUAL_RAD`].
 //!
 //! Every refusal says what would serve ([`DisplayRefusal`], defined with the error that carries it): the
@@ -44,7 +44,7 @@ pub const MAX_NONPARAXIAL_RESIDUAL_RAD: f64 = 0.25;
 /// 5.2e-7), not a mismatch: no cost, an infinite ceiling.
 pub const SPREAD_NOISE: f64 = 1e-9;
 
-/// Frequencies sampled over the Nyquist band by [`nonparaxial_residual_rad`].
+/// Frequencies sampled over the Nyquist band by `nonparaxial_residual_rad`.
 const RESIDUAL_SAMPLES: usize = 1024;
 /// Relative tolerance of "the same length" (volumes, offsets, pitches).
 const REL_TOL: f64 = 1e-6;
@@ -88,7 +88,7 @@ pub fn rule_tolerance(score_db: f64) -> f64 {
 /// `−π·λ·z·f²` and cancel when `λ'·z'/p'² = λ·z/p²`; what remains is the `f⁴` term and beyond.
 ///
 /// Lengths in metres. Returns `f64::INFINITY` when a frequency of either grid is evanescent.
-pub fn nonparaxial_residual_rad(
+pub(crate) fn nonparaxial_residual_rad(
     trained_pitch_m: f64,
     trained_wavelength_m: f64,
     trained_distance_m: f64,
@@ -168,7 +168,7 @@ pub struct DisplayMapping {
     pub offset_m: f64,
     /// `s'/σ`: the offset on the training display that the user's offset corresponds to, metres.
     pub trained_offset_m: f64,
-    /// Per-colour non-paraxial residual in radians ([`nonparaxial_residual_rad`] at `z = max_distance_m/σ`
+    /// Per-colour non-paraxial residual in radians (`nonparaxial_residual_rad` at `z = max_distance_m/σ`
     /// on the training display and `z' = σ_c·z` on the user's), R, G, B.
     pub colour_residual_rad: [f64; 3],
     /// The largest of [`DisplayMapping::colour_residual_rad`], radians.

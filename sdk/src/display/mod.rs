@@ -22,9 +22,9 @@ pub use aberration::{
 };
 pub(crate) use equivalence::{close, sig};
 pub use equivalence::{
-    mapping_cost_db, nonparaxial_residual_rad, predicted_ceiling_db, rule_tolerance,
-    DisplayMapping, VolumeFit, CEILING_AT_1PCT_DB, MAPPING_COST_BUDGET_DB,
-    MAX_NONPARAXIAL_RESIDUAL_RAD, SPREAD_NOISE, VOLUME_ROUNDING,
+    mapping_cost_db, predicted_ceiling_db, rule_tolerance, DisplayMapping, VolumeFit,
+    CEILING_AT_1PCT_DB, MAPPING_COST_BUDGET_DB, MAX_NONPARAXIAL_RESIDUAL_RAD, SPREAD_NOISE,
+    VOLUME_ROUNDING,
 };
 pub use prescription::{
     Prescription, DEFAULT_EYEPIECE_FOCAL_M, EYEPIECE_FOCAL_RANGE_M, MAX_CYLINDER_D, MAX_SPHERE_D,

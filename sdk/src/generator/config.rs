@@ -14,6 +14,7 @@ use crate::encoding::DoublePhaseMethod;
 #[cfg(doc)]
 use crate::error::HoloError;
 use crate::error::{invalid, Result};
+use crate::foveation::FoveationOptions;
 use crate::optics::{OpticalSetup, PropagationOptions};
 use crate::pipeline::{Backend, GpuPrecision, ModelSelection, PipelineConfig, MAX_HOLOGRAM_PIXELS};
 use crate::scene::{DepthMapping, DepthRange, DepthUpsampling, Fit, FrameOptions};
@@ -95,6 +96,11 @@ pub struct GeneratorConfig {
     /// Measured aberrations (a `tensorholo.aberration` file read with [`AberrationProfile::load`] or
     /// [`AberrationProfile::from_json_str`]), corrected as `prescription`; at most one of the two.
     pub aberration: Option<AberrationProfile>,
+    /// Gaze-contingent frames (`docs/FOVEATION.md`): the fovea's radius, blend band and periphery blur that
+    /// [`HologramGenerator::render_foveated`] uses; `None` (the default): none, and that call is refused.
+    ///
+    /// [`HologramGenerator::render_foveated`]: super::HologramGenerator::render_foveated
+    pub foveation: Option<FoveationOptions>,
 }
 
 /// [`GeneratorConfig::saved_plans`] in reports: the plans' origin, or null.
@@ -132,6 +138,7 @@ impl GeneratorConfig {
             wavelength_ratio_tolerance: None,
             prescription: None,
             aberration: None,
+            foveation: None,
         }
     }
 
@@ -173,7 +180,8 @@ impl GeneratorConfig {
     /// Checks everything that needs no model: non-zero sizes within [`MAX_HOLOGRAM_PIXELS`] whose RGBA
     /// outputs (`width · height · 4` bytes) fit in a `u32`, a finite non-negative offset, valid optics and
     /// depth range, a thread count within [`MAX_CNN_THREADS`], a finite wavelength ratio tolerance ≥ 0, a
-    /// valid prescription or an aberration profile for this display (not both).
+    /// valid prescription or an aberration profile for this display (not both), valid foveation options
+    /// ([`FoveationOptions::check`]).
     ///
     /// Errors: [`HoloError::InvalidParameter`] naming the field.
     pub fn validate(&self) -> Result<()> {
@@ -234,6 +242,9 @@ impl GeneratorConfig {
                 ));
             }
         }
+        if let Some(f) = &self.foveation {
+            f.check()?;
+        }
         Ok(())
     }
 
@@ -248,7 +259,7 @@ impl GeneratorConfig {
             backend: self.backend,
             gpu_precision: self.gpu_precision,
             wavelength_ratio_tolerance: self.wavelength_ratio_tolerance,
-            foveation: None,
+            foveation: self.foveation,
         }
     }
 

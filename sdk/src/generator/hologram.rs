@@ -10,11 +10,12 @@ use crate::cnn::{PlanReport, ThreadCount};
 use crate::display::{AberrationProfile, Prescription};
 use crate::encoding::{DoublePhaseMethod, LinearLut};
 use crate::error::{invalid, HoloError, Result};
+use crate::foveation::Gaze;
 use crate::model::{HologramModel, ModelKind, Precision};
 use crate::optics::{focal_stack, post_encoding_midpoint};
 use crate::pipeline::{
     AberrationReport, BackendReport, HologramPipeline, HologramSession, PrefilterMode,
-    PrefilterSource,
+    PrefilterSource, SlmFrame,
 };
 use crate::refine::{FrameRefinement, FrameRefiner, IterationRecord, RefineDisplay, RefineTarget};
 use crate::scene::{ldi_from_camera_frames, CameraFrame, CameraFrameReport, RgbdFrame};
@@ -288,12 +289,35 @@ impl HologramGenerator {
     /// e.g. a covered lens, whose hologram would be the CNN's bias shown at full brightness). The generator
     /// stays usable after any error.
     pub fn render(&self, frame: &CameraFrame) -> Result<SlmPatterns> {
+        self.render_with(frame, |session, rgbd| session.render(rgbd))
+    }
+
+    /// Converts `frame`, then renders it with `render` on the generator's session.
+    fn render_with(
+        &self,
+        frame: &CameraFrame,
+        render: impl for<'s> FnOnce(&'s mut HologramSession, &RgbdFrame) -> Result<&'s SlmFrame>,
+    ) -> Result<SlmPatterns> {
         let t = Instant::now();
         let (rgbd, report) = self.convert(frame)?;
         let convert_s = t.elapsed().as_secs_f64();
         let mut session = self.session()?;
-        let out = session.render(&rgbd)?;
+        let out = render(&mut session, &rgbd)?;
         Ok(SlmPatterns::from_frame(out, convert_s, report.range_used))
+    }
+
+    /// Renders one camera frame foveated on `gaze` (`docs/FOVEATION.md`): the 3D CNN around the gaze, the
+    /// paper's 2D hologram with synthetic blur, in focus at the gaze's depth, elsewhere
+    /// ([`HologramSession::render_foveated`]). `gaze` is a point of the hologram (after the camera frame's
+    /// fit: pixels of the `width × height` output, `(0, 0)` the top-left pixel's centre, x right, y down), with
+    /// an eye tracker's vergence depth in metres if it has one ([`Gaze::depth_m`]; else the scene's depth
+    /// there). The patterns' normaliser is the same for every gaze on one frame.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] naming `foveation` for a generator made without
+    /// [`GeneratorConfig::foveation`], or `gaze` for a point outside the hologram or not finite; otherwise
+    /// as [`HologramGenerator::render`]. The generator stays usable after any error.
+    pub fn render_foveated(&self, frame: &CameraFrame, gaze: &Gaze) -> Result<SlmPatterns> {
+        self.render_with(frame, |session, rgbd| session.render_foveated(rgbd, gaze))
     }
 
     /// The photo mode: renders one camera frame as [`HologramGenerator::render`] does, then refines its SLM

@@ -8,6 +8,7 @@ use std::thread::JoinHandle;
 use std::time::Instant;
 
 use crate::error::{invalid, HoloError, Result};
+use crate::foveation::Gaze;
 use crate::pipeline::HologramSession;
 use crate::scene::CameraFrameBuf;
 
@@ -29,7 +30,7 @@ pub trait StreamListener: Send {
 /// The queue between [`HologramStream::push`] and the worker.
 #[derive(Debug, Default)]
 struct Queue {
-    frames: VecDeque<(u64, CameraFrameBuf)>,
+    frames: VecDeque<(u64, CameraFrameBuf, Option<Gaze>)>,
     next_index: u64,
     dropped: u64,
     closed: bool,
@@ -48,7 +49,7 @@ impl Shared {
     }
 
     /// The next frame, waiting for one; `None` once closed and drained.
-    fn pop(&self) -> Option<(u64, CameraFrameBuf)> {
+    fn pop(&self) -> Option<(u64, CameraFrameBuf, Option<Gaze>)> {
         let mut q = self.lock();
         loop {
             if let Some(f) = q.frames.pop_front() {
@@ -70,6 +71,8 @@ impl Shared {
 pub struct HologramStream {
     shared: Arc<Shared>,
     capacity: usize,
+    /// The hologram's `(height, width)` where the generator foveates ([`GeneratorConfig::foveation`]).
+    foveated: Option<(usize, usize)>,
     worker: Mutex<Option<JoinHandle<()>>>,
 }
 
@@ -82,6 +85,8 @@ impl HologramStream {
     ) -> Result<Self> {
         let shared = Arc::new(Shared::default());
         let source = Arc::clone(&shared);
+        let foveated = config.foveation.is_some();
+        let size = foveated.then_some((config.height, config.width));
         let worker = std::thread::Builder::new()
             .name("tensorholo-stream".into())
             .spawn(move || {
@@ -91,7 +96,7 @@ impl HologramStream {
                     // The CNN thread converts frames (the first auto range is locked for the rest); each
                     // frame's range and conversion time travel to the sink in its tag.
                     let frames = std::iter::from_fn(|| {
-                        let (index, buf) = source.pop()?;
+                        let (index, buf, gaze) = source.pop()?;
                         let t = Instant::now();
                         let converted = buf.view().to_rgbd(config.height, config.width, &options);
                         let convert_s = t.elapsed().as_secs_f64();
@@ -99,16 +104,31 @@ impl HologramStream {
                         if options.range.is_none() {
                             options.range = range;
                         }
-                        Some(((index, range, convert_s), converted.map(|(frame, _)| frame)))
+                        let frame = converted.map(|(frame, _)| (frame, gaze));
+                        Some(((index, range, convert_s), frame))
                     });
-                    session.render_stream_each(frames, |(index, range, convert_s), result| {
+                    let sink = |(index, range, convert_s), result: Result<&_>| {
                         match result {
                             Ok(out) => listener
                                 .on_patterns(index, SlmPatterns::from_frame(out, convert_s, range)),
                             Err(e) => listener.on_error(index, e),
                         }
                         Ok(())
-                    })
+                    };
+                    if foveated {
+                        // One frame after another, each on its own gaze (or the full frame without one).
+                        session.deliver_each(
+                            frames,
+                            |s, (frame, gaze)| match gaze {
+                                Some(g) => s.render_foveated(&frame, &g).map(drop),
+                                None => s.render(&frame).map(drop),
+                            },
+                            sink,
+                        )
+                    } else {
+                        let frames = frames.map(|(tag, f)| (tag, f.map(|(frame, _)| frame)));
+                        session.render_stream_each(frames, sink)
+                    }
                 }));
                 let failure = match run {
                     Ok(Ok(_)) => None,
@@ -124,6 +144,7 @@ impl HologramStream {
         Ok(Self {
             shared,
             capacity,
+            foveated: size,
             worker: Mutex::new(Some(worker)),
         })
     }
@@ -134,13 +155,38 @@ impl HologramStream {
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`stream`) after [`HologramStream::close`].
     pub fn push(&self, frame: CameraFrameBuf) -> Result<u64> {
+        self.enqueue(frame, None)
+    }
+
+    /// Queues a frame to be rendered foveated on `gaze` (`docs/FOVEATION.md`,
+    /// [`HologramGenerator::render_foveated`]: the gaze in pixels of the hologram), as
+    /// [`HologramStream::push`] does. A foveating generator's stream renders its frames one after another
+    /// (the tile's CNN is short), frames pushed without a gaze as full frames.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] naming `foveation` for a generator made without
+    /// [`GeneratorConfig::foveation`], `gaze` or `gaze_depth_m` for a gaze outside the hologram or not finite
+    /// ([`Gaze::check`]), `stream` after [`HologramStream::close`].
+    ///
+    /// [`HologramGenerator::render_foveated`]: super::HologramGenerator::render_foveated
+    pub fn push_foveated(&self, frame: CameraFrameBuf, gaze: Gaze) -> Result<u64> {
+        let Some((height, width)) = self.foveated else {
+            return Err(invalid(
+                "foveation",
+                "this stream's generator was made without foveation (GeneratorConfig::foveation)",
+            ));
+        };
+        gaze.check(height, width)?;
+        self.enqueue(frame, Some(gaze))
+    }
+
+    fn enqueue(&self, frame: CameraFrameBuf, gaze: Option<Gaze>) -> Result<u64> {
         let mut q = self.shared.lock();
         if q.closed {
             return Err(invalid("stream", "this stream is closed; start a new one"));
         }
         let index = q.next_index;
         q.next_index += 1;
-        q.frames.push_back((index, frame));
+        q.frames.push_back((index, frame, gaze));
         while q.frames.len() > self.capacity {
             q.frames.pop_front();
             q.dropped += 1;

@@ -72,7 +72,7 @@ impl HologramSession {
     /// frame, or the rest of one whose CNN ran elsewhere), and `sink(tag, result)` receives every item in
     /// order, the output's `timings.total_s` set to the frame period (from the previous frame's end). An
     /// item's error goes to `sink`; only `sink`'s own error stops the loop. Returns the number of items.
-    pub(super) fn deliver_each<T, X, F>(
+    pub(crate) fn deliver_each<T, X, F>(
         &mut self,
         items: impl IntoIterator<Item = (T, Result<X>)>,
         mut step: impl FnMut(&mut Self, X) -> Result<()>,

@@ -747,6 +747,8 @@ internal object IntegrityCheckingUniffiLib {
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render(
     ): Int
+    external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_foveated(
+    ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi(
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_refined(
@@ -812,6 +814,8 @@ internal object UniffiLib {
     external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_preview(`ptr`: Long,`frame`: RustBuffer.ByValue,`focus`: Float,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_render(`ptr`: Long,`frame`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    ): RustBuffer.ByValue
+    external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_render_foveated(`ptr`: Long,`frame`: RustBuffer.ByValue,`gaze`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
     external fun uniffi_tensorholo_ffi_fn_method_hologramgenerator_render_ldi(`ptr`: Long,`layers`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): RustBuffer.ByValue
@@ -1017,6 +1021,9 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render() and 0xFFFF) != 59531) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_foveated() and 0xFFFF) != 10330) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi() and 0xFFFF) != 60546) {
@@ -1598,6 +1605,18 @@ public interface HologramGeneratorInterface {
     fun `render`(`frame`: RgbdFrame): SlmPatterns
     
     /**
+     * Renders one camera frame foveated on `gaze` (`docs/FOVEATION.md`): the 3D CNN where the viewer looks,
+     * the paper's 2D hologram with synthetic blur (in focus at the gaze's depth) elsewhere; at 1080p with a 5°
+     * fovea about 0.4 of [`HologramGenerator::render`]'s time. Needs a generator made with
+     * [`GeneratorConfig::foveation`](crate::GeneratorConfig::foveation); pass this frame's gaze (an eye
+     * tracker's, ARKit face tracking's, or a touch point) in hologram pixels.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for a generator made without foveation, a gaze outside the
+     * hologram or not finite (naming it), and as [`HologramGenerator::render`]; the generator stays usable.
+     */
+    fun `renderFoveated`(`frame`: RgbdFrame, `gaze`: Gaze): SlmPatterns
+    
+    /**
      * Renders a layered depth image into SLM patterns: one [`RgbdFrame`] per layer, front to back (what a
      * renderer's depth-peeling pass gives), each with the buffer rules of [`HologramGenerator::render`]. In
      * the layers behind the first, a depth sample of 0 (or NaN, or confidence 0 %) means "no point here"; a
@@ -1866,6 +1885,32 @@ open class HologramGenerator: Disposable, AutoCloseable, HologramGeneratorInterf
         it,
         
         FfiConverterTypeRgbdFrame.lower(`frame`),_status)
+}
+    }
+    )
+    }
+    
+
+    
+    /**
+     * Renders one camera frame foveated on `gaze` (`docs/FOVEATION.md`): the 3D CNN where the viewer looks,
+     * the paper's 2D hologram with synthetic blur (in focus at the gaze's depth) elsewhere; at 1080p with a 5°
+     * fovea about 0.4 of [`HologramGenerator::render`]'s time. Needs a generator made with
+     * [`GeneratorConfig::foveation`](crate::GeneratorConfig::foveation); pass this frame's gaze (an eye
+     * tracker's, ARKit face tracking's, or a touch point) in hologram pixels.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for a generator made without foveation, a gaze outside the
+     * hologram or not finite (naming it), and as [`HologramGenerator::render`]; the generator stays usable.
+     */
+    @Throws(TensorholoException::class)override fun `renderFoveated`(`frame`: RgbdFrame, `gaze`: Gaze): SlmPatterns {
+            return FfiConverterTypeSlmPatterns.lift(
+    callWithHandle {
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_hologramgenerator_render_foveated(
+        it,
+        
+        FfiConverterTypeRgbdFrame.lower(`frame`),
+        FfiConverterTypeGaze.lower(`gaze`),_status)
 }
     }
     )
@@ -3418,6 +3463,141 @@ public object FfiConverterTypeDisplayProfile: FfiConverterRustBuffer<DisplayProf
 
 
 /**
+ * How a generator foveates its frames ([`HologramGenerator::render_foveated`](crate::HologramGenerator::render_foveated);
+ * `docs/FOVEATION.md`). The defaults: a 5° fovea behind the paper's 21 mm eyepiece (about 230 pixels of an
+ * 8 µm SLM), a 16-pixel blend band, the periphery blurred by a quarter of the diffraction cone's defocus.
+ */
+data class Foveation (
+    /**
+     * The fovea's radius in degrees of visual angle (eccentricity) behind the eyepiece, `0 ≤ R < 90`
+     * (default 5); not read when `radius_px` is given.
+     */
+    var `radiusDeg`: kotlin.Double = 5.0 
+    , 
+    /**
+     * The eyepiece's focal length in metres (default 0.021, the paper's): `R_px = f·tan(R)/p`.
+     */
+    var `eyepieceFocalM`: kotlin.Double = 0.021 
+    , 
+    /**
+     * The fovea's radius in hologram pixels instead (≥ 0); `None` (default): `radius_deg`.
+     */
+    var `radiusPx`: kotlin.Double? = null 
+    , 
+    /**
+     * The blend band's width in pixels outside the fovea (≥ 1, default 16).
+     */
+    var `bandPx`: kotlin.Double = 16.0 
+    , 
+    /**
+     * The periphery's blur scale κ, a fraction of the λ/(2p) diffraction cone's defocus (≥ 0, default
+     * 0.25; 0: no blur).
+     */
+    var `blurScale`: kotlin.Double = 0.25 
+    
+){
+    
+
+    
+
+    
+    companion object
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeFoveation: FfiConverterRustBuffer<Foveation> {
+    override fun read(buf: ByteBuffer): Foveation {
+        return Foveation(
+            FfiConverterDouble.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterDouble.read(buf),
+        )
+    }
+
+    override fun allocationSize(value: Foveation) = (
+            FfiConverterDouble.allocationSize(value.`radiusDeg`) +
+            FfiConverterDouble.allocationSize(value.`eyepieceFocalM`) +
+            FfiConverterOptionalDouble.allocationSize(value.`radiusPx`) +
+            FfiConverterDouble.allocationSize(value.`bandPx`) +
+            FfiConverterDouble.allocationSize(value.`blurScale`)
+    )
+
+    override fun write(value: Foveation, buf: ByteBuffer) {
+            FfiConverterDouble.write(value.`radiusDeg`, buf)
+            FfiConverterDouble.write(value.`eyepieceFocalM`, buf)
+            FfiConverterOptionalDouble.write(value.`radiusPx`, buf)
+            FfiConverterDouble.write(value.`bandPx`, buf)
+            FfiConverterDouble.write(value.`blurScale`, buf)
+    }
+}
+
+
+
+/**
+ * Where the viewer looks, for one frame: a point of the hologram in pixels of its `width × height` (after
+ * the camera frame's fit; `(0, 0)` the top-left pixel's centre, x right, y down), and the eye tracker's
+ * vergence depth in metres where it has one. An iOS app maps ARKit's `lookAtPoint` or a touch point to the
+ * hologram's pixels; an OpenXR app its eye-gaze pose (`docs/FOVEATION.md`, "Passing the gaze").
+ */
+data class Gaze (
+    /**
+     * Column, pixels (`-0.5 ≤ x ≤ width − 0.5`).
+     */
+    var `x`: kotlin.Double
+    , 
+    /**
+     * Row, pixels (`-0.5 ≤ y ≤ height − 0.5`).
+     */
+    var `y`: kotlin.Double
+    , 
+    /**
+     * The depth the viewer focuses at: the signed distance in metres from the midpoint hologram's plane,
+     * positive towards the viewer (the volume's near end at `+volume_depth_m/2`; beyond it, its nearer end).
+     * `None` (default): the scene's depth at the gaze point (the median of a 17 × 17 window).
+     */
+    var `depthM`: kotlin.Double? = null 
+    
+){
+    
+
+    
+
+    
+    companion object
+}
+
+/**
+ * @suppress
+ */
+public object FfiConverterTypeGaze: FfiConverterRustBuffer<Gaze> {
+    override fun read(buf: ByteBuffer): Gaze {
+        return Gaze(
+            FfiConverterDouble.read(buf),
+            FfiConverterDouble.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+        )
+    }
+
+    override fun allocationSize(value: Gaze) = (
+            FfiConverterDouble.allocationSize(value.`x`) +
+            FfiConverterDouble.allocationSize(value.`y`) +
+            FfiConverterOptionalDouble.allocationSize(value.`depthM`)
+    )
+
+    override fun write(value: Gaze, buf: ByteBuffer) {
+            FfiConverterDouble.write(value.`x`, buf)
+            FfiConverterDouble.write(value.`y`, buf)
+            FfiConverterOptionalDouble.write(value.`depthM`, buf)
+    }
+}
+
+
+
+/**
  * Everything a [`HologramGenerator`](crate::HologramGenerator) needs. Only `width` and `height` (the SLM's resolution in pixels) are
  * required; every other field has the default named in its comment.
  */
@@ -3551,6 +3731,12 @@ data class GeneratorConfig (
      * corrected as `prescription`; at most one of the two. `None` (default): none.
      */
     var `aberration`: kotlin.String? = null 
+    , 
+    /**
+     * Gaze-contingent frames ([`HologramGenerator::render_foveated`](crate::HologramGenerator::render_foveated),
+     * `docs/FOVEATION.md`); `None` (default): none, and that call is refused.
+     */
+    var `foveation`: Foveation? = null 
     
 ){
     
@@ -3590,6 +3776,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalString.read(buf),
             FfiConverterOptionalTypePrescription.read(buf),
             FfiConverterOptionalString.read(buf),
+            FfiConverterOptionalTypeFoveation.read(buf),
         )
     }
 
@@ -3616,7 +3803,8 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterBoolean.allocationSize(value.`tune`) +
             FfiConverterOptionalString.allocationSize(value.`savedPlans`) +
             FfiConverterOptionalTypePrescription.allocationSize(value.`prescription`) +
-            FfiConverterOptionalString.allocationSize(value.`aberration`)
+            FfiConverterOptionalString.allocationSize(value.`aberration`) +
+            FfiConverterOptionalTypeFoveation.allocationSize(value.`foveation`)
     )
 
     override fun write(value: GeneratorConfig, buf: ByteBuffer) {
@@ -3643,6 +3831,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalString.write(value.`savedPlans`, buf)
             FfiConverterOptionalTypePrescription.write(value.`prescription`, buf)
             FfiConverterOptionalString.write(value.`aberration`, buf)
+            FfiConverterOptionalTypeFoveation.write(value.`foveation`, buf)
     }
 }
 
@@ -5492,6 +5681,38 @@ public object FfiConverterOptionalTypeCropRect: FfiConverterRustBuffer<CropRect?
         } else {
             buf.put(1)
             FfiConverterTypeCropRect.write(value, buf)
+        }
+    }
+}
+
+
+
+
+/**
+ * @suppress
+ */
+public object FfiConverterOptionalTypeFoveation: FfiConverterRustBuffer<Foveation?> {
+    override fun read(buf: ByteBuffer): Foveation? {
+        if (buf.get().toInt() == 0) {
+            return null
+        }
+        return FfiConverterTypeFoveation.read(buf)
+    }
+
+    override fun allocationSize(value: Foveation?): ULong {
+        if (value == null) {
+            return 1UL
+        } else {
+            return 1UL + FfiConverterTypeFoveation.allocationSize(value)
+        }
+    }
+
+    override fun write(value: Foveation?, buf: ByteBuffer) {
+        if (value == null) {
+            buf.put(0)
+        } else {
+            buf.put(1)
+            FfiConverterTypeFoveation.write(value, buf)
         }
     }
 }

@@ -29,6 +29,8 @@ import tensorholo.CnnEngine
 import tensorholo.ColorFormat
 import tensorholo.DepthFormat
 import tensorholo.DisplayProfile
+import tensorholo.Foveation
+import tensorholo.Gaze
 import tensorholo.GeneratorConfig
 import tensorholo.HologramGenerator
 import tensorholo.PatternsListener
@@ -264,6 +266,37 @@ class BindingsTest {
                 assertEquals(0uL, stream.droppedFrames())
                 assertThrows(TensorholoException.InvalidInput::class.java) { stream.push(case.frame) }
             }
+        }
+    }
+
+    /**
+     * A generator with a fovea renders a gaze's frame: the full frame's codes nowhere near the gaze, the same
+     * codes for the same gaze, and a gaze outside the hologram or a generator without a fovea refused by name.
+     */
+    @Test
+    fun aGazeRendersAFoveatedFrame() {
+        val frame = smallFrame(96, 64)
+        HologramGenerator(
+            GeneratorConfig(width = 96u, height = 64u, threads = 1u, foveation = Foveation(radiusPx = 10.0)),
+        ).use { gen ->
+            val full = gen.render(frame)
+            val gaze = Gaze(x = 30.0, y = 20.0)
+            val fov = gen.renderFoveated(frame, gaze)
+            assertArrayEquals("same gaze, same codes", fov.green, gen.renderFoveated(frame, gaze).green)
+            // The far corner (beyond the fovea, its band and the CNN's margin) holds the periphery's codes.
+            var differ = 0
+            for (y in 40 until 64) for (x in 70 until 96) if (fov.green[y * 96 + x] != full.green[y * 96 + x]) differ++
+            assertTrue("periphery differs from the full frame at $differ of ${24 * 26} pixels", differ > 24 * 26 / 2)
+            val outside = assertThrows(TensorholoException.InvalidInput::class.java) {
+                gen.renderFoveated(frame, Gaze(x = 500.0, y = 20.0))
+            }
+            assertTrue(outside.reason, outside.reason.contains("gaze"))
+        }
+        HologramGenerator(GeneratorConfig(width = 96u, height = 64u, threads = 1u)).use { gen ->
+            val none = assertThrows(TensorholoException.InvalidInput::class.java) {
+                gen.renderFoveated(frame, Gaze(x = 30.0, y = 20.0))
+            }
+            assertTrue(none.reason, none.reason.contains("foveation"))
         }
     }
 
