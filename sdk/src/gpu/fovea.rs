@@ -107,7 +107,7 @@ impl GpuCompose {
                 format!("a tile of {th}×{tw} on a {height}×{width} frame"),
             ));
         }
-        if !(shape.band_px > 0.0) {
+        if shape.band_px.is_nan() || shape.band_px <= 0.0 {
             return Err(invalid(
                 "foveation",
                 format!(
