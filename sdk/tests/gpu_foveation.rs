@@ -2,7 +2,8 @@
 //! frames of the same configuration, on real RGB-D frames from `../shared/data` with the shipped 8-layer CNN
 //! (f32), on whatever adapter exists (CI: Mesa's lavapipe): the composed midpoint hologram, the periphery's
 //! phase, the normaliser, the SLM pattern and what it displays; a gaze at a corner; a fovea covering the frame
-//! and a tile as large as the frame give the GPU's `render` bit for bit; a moving gaze creates no GPU object.
+//! and a tile as large as the frame give the GPU's `render` bit for bit; a moving gaze creates no GPU object;
+//! `Backend::Auto` makes its self-check on a full frame before the first foveated frame.
 //! Skips with a message where no adapter exists, unless `TENSORHOLO_REQUIRE_GPU=1`.
 //!
 //! Rerun with the figures printed: `cargo test -p tensorholo --features gpu --test gpu_foveation -- --nocapture`.
@@ -88,7 +89,15 @@ fn session(
         .with_gpu_context(ctx.clone())
         .session(H, W)
         .unwrap();
-    assert_eq!(s.backend_report().active, backend);
+    // Auto picks the GPU only on hardware, or on the context an app hands in (this one).
+    assert_eq!(
+        s.backend_report().active,
+        if backend == Backend::Auto {
+            Backend::Gpu
+        } else {
+            backend
+        }
+    );
     s
 }
 
@@ -301,16 +310,17 @@ fn full_frames_bit_for_bit_and_a_moving_gaze_without_new_gpu_objects() {
         y: 0.0,
         depth_m: None,
     };
-    // 400 pixels covers the frame from its centre; 120 pixels makes the tile (2·⌈R + B⌉ + 3 + 2·8 = 291) the
-    // whole frame, from any gaze.
-    for (radius, gaze) in [(400.0, centre), (120.0, corner)] {
-        let mut s = session(&ctx, Backend::Gpu, PrefilterMode::Required, radius);
-        let full = s.render(&frame).unwrap().clone();
+    // 160 pixels covers the frame from its centre (its corners 159.3 pixels away), and makes the tile
+    // (2·⌈R + B⌉ + 3 + 2·8 = 371) the whole frame from any gaze, the corner's included.
+    let mut s = session(&ctx, Backend::Gpu, PrefilterMode::Required, 160.0);
+    let full = s.render(&frame).unwrap().clone();
+    for gaze in [centre, corner] {
         let fov = s.render_foveated(&frame, &gaze).unwrap().clone();
         let report = *s.fovea_report().unwrap();
-        assert!(report.covers_frame || report.cnn_share == 1.0, "{report:?}");
+        // The report says a full frame was rendered (as the CPU's).
+        assert!(report.covers_frame && report.cnn_share == 1.0, "{report:?}");
         assert_eq!(fov.backend, Backend::Gpu);
-        assert_eq!(fov.codes, full.codes, "radius {radius}");
+        assert_eq!(fov.codes, full.codes, "gaze {gaze:?}");
         assert_eq!(
             fov.phase.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
             full.phase.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
@@ -320,7 +330,14 @@ fn full_frames_bit_for_bit_and_a_moving_gaze_without_new_gpu_objects() {
             full.amplitude_scale.to_bits()
         );
     }
-    let mut s = session(&ctx, Backend::Gpu, PrefilterMode::Required, RADIUS);
+    // Backend::Auto: the first foveated frame makes the self-check on a full frame, then runs on the GPU.
+    let mut s = session(&ctx, Backend::Auto, PrefilterMode::Required, RADIUS);
+    assert!(s.backend_report().self_check.is_none());
+    let out = s.render_foveated(&frame, &centre).unwrap();
+    assert_eq!(out.backend, Backend::Gpu);
+    let check = s.backend_report().self_check.unwrap();
+    assert!(check.passed, "{check:?}");
+    assert!(!s.fovea_report().unwrap().covers_frame);
     s.set_full_outputs(false);
     let gazes = [
         Gaze {

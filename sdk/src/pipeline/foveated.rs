@@ -31,10 +31,9 @@ impl HologramSession {
     /// plan, made with the session) and nothing is allocated per frame once the first has run.
     /// [`HologramSession::fovea_report`] says what the frame did. A session whose frames run on the GPU runs
     /// its foveated frames there (the tile's CNN, the periphery's blur and blend in WGSL, then the GPU
-    /// frame's stages with the pre-filter over the whole frame; `SlmFrame::backend` says which ran), except
-    /// while [`Backend::Auto`]'s first-frame self-check is pending (the CPU frame runs them until a
-    /// [`HologramSession::render`] made the check); a GPU failure re-renders the frame on the CPU and stays
-    /// there.
+    /// frame's stages with the pre-filter over the whole frame; `SlmFrame::backend` says which ran). Where
+    /// [`Backend::Auto`]'s first-frame self-check has yet to run, the first foveated frame renders the full
+    /// frame first for it (once per session); a GPU failure re-renders the frame on the CPU and stays there.
     ///
     /// Errors: [`HoloError::InvalidParameter`] naming `foveation` (a session made without
     /// [`PipelineConfig::foveation`](crate::pipeline::PipelineConfig::foveation)), `gaze` or `gaze_depth_m`
@@ -172,8 +171,13 @@ impl HologramSession {
         report.cnn_share = geometry.share();
         report.covers_frame = false;
 
-        // On the accelerator where it runs them (after Auto's self-check).
-        if fov.on_accelerator && self.accelerator.as_ref().is_some_and(|a| !a.pending_check) {
+        // On the accelerator where it runs them. Backend::Auto's first-frame self-check compares a full frame
+        // with the CPU's (a foveated pattern is not the CPU's foveated pattern bit for bit: its pre-filter runs
+        // over the whole frame): once per session, before the first foveated frame.
+        if fov.on_accelerator && self.accelerator.as_ref().is_some_and(|a| a.pending_check) {
+            self.render(frame)?;
+        }
+        if fov.on_accelerator && self.accelerator.is_some() {
             let normaliser = FOVEATED_NORMALISER_GAIN * brightest;
             let frame = AcceleratedFoveated {
                 planes,
