@@ -9,7 +9,7 @@
 // The blur of a pixel at normalised depth d: half-width h = clamp(|d − d_g|·s_c − 1/2, 0, max_hw) with
 // s_c = blur_px_c·√π/2 (the square of a disc's area, radius blur_px_c·|d − d_g|), the mean of the image over
 // the squares of half-widths ⌊h⌋ and ⌊h⌋ + 1, each clipped to the frame, weighted by the fraction of h: the
-// CPU's formula, summed directly over the box (at most (2·max_hw + 3)² values).
+// CPU's formula, summed directly over the boxes (the larger at most (2·max_hw + 1)² values).
 //
 // Bindings (group 0):
 //   0: uniform Fovea (below); gaze = (gx + gx_frac, gy + gy_frac) pixels, gx = ⌊gaze x⌋
