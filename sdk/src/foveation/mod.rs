@@ -31,6 +31,9 @@ mod periphery;
 pub use gaze::{Gaze, GAZE_DEPTH_WINDOW_PX};
 
 pub(crate) use geometry::TileGeometry;
+/// The GPU's foveated frame clamps its blur as the CPU's periphery does.
+#[cfg(feature = "gpu")]
+pub(crate) use periphery::half_width;
 pub(crate) use periphery::{gaze_depth, ColourInputs, FrameInputs, Periphery};
 
 use crate::display::{DEFAULT_EYEPIECE_FOCAL_M, EYEPIECE_FOCAL_RANGE_M};

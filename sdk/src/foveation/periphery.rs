@@ -332,7 +332,7 @@ fn blur_radius(blur_px: f64, d: f32, d_g: f32) -> f64 {
 }
 
 /// The continuous half-width `h = (r·√π − 1)/2 ≥ 0` of the square of a disc's area (`r` its radius).
-fn half_width(radius: f64) -> f64 {
+pub(crate) fn half_width(radius: f64) -> f64 {
     ((radius * PI.sqrt() - 1.0) / 2.0).max(0.0)
 }
 

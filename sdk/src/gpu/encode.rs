@@ -210,6 +210,9 @@ pub struct GpuDoublePhase {
     phase: wgpu::Buffer,
     stats: wgpu::Buffer,
     codes: wgpu::Buffer,
+    /// The normaliser given from outside (`double_phase.wgsl` binding 6; 0: the field's own) and its value.
+    fixed: wgpu::Buffer,
+    fixed_value: f32,
 }
 
 impl GpuDoublePhase {
@@ -276,12 +279,16 @@ impl GpuDoublePhase {
         let partials = ctx.storage("double phase partials", (CHANNELS * groups * 8) as u64)?;
         let stats = ctx.storage("double phase stats", STATS_BYTES)?;
         let codes = ctx.storage("codes", elements.div_ceil(4) as u64 * 4)?;
+        let fixed = ctx.storage("double phase fixed normaliser", 16)?;
         let analyse = ctx.kernel(&shaders::DOUBLE_PHASE, "analyse")?;
         let finish = ctx.kernel(&shaders::DOUBLE_PHASE, "finish")?;
         let encode = ctx.kernel(&shaders::DOUBLE_PHASE, "encode")?;
         let binds = [
             ctx.bind(&analyse, &[&params, field, &phase, &partials]),
-            ctx.bind_at(&finish, &[(0, &params), (3, &partials), (4, &stats)]),
+            ctx.bind_at(
+                &finish,
+                &[(0, &params), (3, &partials), (4, &stats), (6, &fixed)],
+            ),
             ctx.bind_at(
                 &encode,
                 &[
@@ -305,7 +312,20 @@ impl GpuDoublePhase {
             phase,
             stats,
             codes,
+            fixed,
+            fixed_value: 0.0,
         })
+    }
+
+    /// Sets the global normaliser `a` of the next frames: `Some(a)` (`a > 0`: a foveated frame's,
+    /// [`crate::foveation::FOVEATED_NORMALISER_GAIN`]` · max A`) instead of the field's largest `|H|`, or
+    /// `None` for the field's own. Writes the device's copy only when the value changes (no allocation).
+    pub(crate) fn set_normaliser(&mut self, ctx: &GpuContext, a: Option<f32>) {
+        let value = a.filter(|a| *a > 0.0 && a.is_finite()).unwrap_or(0.0);
+        if value.to_bits() != self.fixed_value.to_bits() {
+            ctx.write(&self.fixed, 0, bytemuck::bytes_of(&value));
+            self.fixed_value = value;
+        }
     }
 
     /// Records blur (AA-DPM), pass 1, the normaliser and pass 2 with the look-up table.
@@ -636,6 +656,50 @@ mod tests {
                 assert!(differ as f64 <= 1e-2 * (3 * n) as f64);
             }
         }
+    }
+
+    /// A normaliser given from outside (a foveated frame's) replaces the field's own in the statistics and
+    /// the pattern, as the CPU's `encode` with a fixed `a`; `None` restores the field's own.
+    #[test]
+    fn a_fixed_normaliser_replaces_the_fields_own() {
+        let Some(ctx) = test_context() else { return };
+        let (h, w) = (45, 75);
+        let n = h * w;
+        let input = field(h, w, 11);
+        let buf = upload_c(&ctx, &input);
+        let mut dp = GpuDoublePhase::new(&ctx, h, w, &DoublePhaseMethod::Plain, &buf).unwrap();
+        let (_, _, _, own, mean) = cpu_encode(&input, h, w, DoublePhaseMethod::Plain);
+        let fixed = 1.3 * own;
+        let stats_of = |dp: &GpuDoublePhase| {
+            let stats: Vec<u8> = ctx
+                .read_buffer(dp.stats_buffer(), STATS_BYTES as usize)
+                .unwrap();
+            GpuDoublePhase::read_stats(&stats).unwrap()
+        };
+        dp.set_normaliser(&ctx, Some(fixed));
+        run(&ctx, |e| dp.record(e));
+        let (a, _) = stats_of(&dp);
+        assert_eq!(a.to_bits(), fixed.to_bits());
+        let gphase: Vec<f32> = ctx.read_buffer(dp.phase_buffer(), 3 * n).unwrap();
+        // The CPU's pattern with the same a.
+        let mut worst = 0.0f32;
+        for c in 0..3 {
+            let mut enc = ChannelEncoder::new(h, w, DoublePhaseMethod::Plain).unwrap();
+            let mut f = input[c * n..(c + 1) * n].to_vec();
+            let mut phase = vec![0.0; n];
+            let mut codes = vec![0u8; n];
+            enc.analyse(&mut f, &mut phase).unwrap();
+            enc.encode(&f, &mut phase, &mut codes, mean[c], fixed)
+                .unwrap();
+            for (g, p) in gphase[c * n..(c + 1) * n].iter().zip(&phase) {
+                worst = worst.max(cyclic(*g, *p));
+            }
+        }
+        assert!(worst < 2e-3, "phase {worst}");
+        dp.set_normaliser(&ctx, None);
+        run(&ctx, |e| dp.record(e));
+        let (a, _) = stats_of(&dp);
+        assert!((a - own).abs() / own < 1e-6, "{a} vs {own}");
     }
 
     #[test]

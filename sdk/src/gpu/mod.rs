@@ -12,8 +12,9 @@
 //! - `kernel`: one compute pipeline per WGSL entry point, bound by position, dispatched over 1D/2D grids.
 //! - `shaders`: every `.wgsl` source by name; `shader_tests` translates each to MSL and SPIR-V with naga and
 //!   checks every uniform struct against its `#[repr(C)]` Rust twin.
-//! - `fft`, `encode`, `cnn`, `session`: the optics, the encoding, the CNNs and one whole frame; `refine`: the
-//!   focal-stack refinement's iterations (its model handed in by `crate::refine`).
+//! - `fft`, `encode`, `cnn`, `session`: the optics, the encoding, the CNNs and one whole frame; `fovea`: a
+//!   foveated frame's tile CNN, periphery blur and blend (`crate::foveation`); `refine`: the focal-stack
+//!   refinement's iterations (its model handed in by `crate::refine`).
 //!
 //! Layout convention shared by all kernels: real planes are `array<f32>` `[C, H, W]` row-major (as the CPU
 //! path's `Array3`), complex planes `array<vec2<f32>>` `[C, H, W]` (re, im), codes four per `u32`
@@ -23,6 +24,7 @@ pub(crate) mod cnn;
 pub(crate) mod context;
 pub(crate) mod encode;
 pub(crate) mod fft;
+pub(crate) mod fovea;
 pub(crate) mod kernel;
 pub(crate) mod refine;
 pub(crate) mod session;

@@ -22,6 +22,7 @@ use super::cnn::{GpuCnn, GpuStorage};
 use super::context::GpuContext;
 use super::encode::{GpuDoublePhase, GpuFieldToPlanes, GpuHeadsToField, GpuPlanesToField};
 use super::fft::{GpuMultiplier, GpuSpectralOp, GpuSpectralPlan, StageCost};
+use super::fovea::{GpuFovea, GpuFoveaFrame, GpuFoveaShape};
 use super::kernel::Kernel;
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
@@ -131,6 +132,8 @@ pub(crate) struct GpuFrameSession {
     options: crate::optics::PropagationOptions,
     offset_m: f64,
     previews: Option<Previews>,
+    /// The foveated frames' tile CNN and composition ([`GpuFrameSession::plan_fovea`]).
+    fovea: Option<GpuFovea>,
 }
 
 impl std::fmt::Debug for GpuFrameSession {
@@ -260,7 +263,65 @@ impl GpuFrameSession {
             options,
             offset_m,
             previews: None,
+            fovea: None,
         })
+    }
+
+    /// Plans this session's foveated frames ([`GpuFrameSession::run_foveated`]): the hologram CNN
+    /// `hologram` (the frame's graph) on a tile of `shape.tile`, its heads composed with the periphery into
+    /// the frame's heads. Once per session: every gaze uses this plan.
+    ///
+    /// Errors: as [`GpuFovea::new`].
+    pub(crate) fn plan_fovea(&mut self, hologram: &CnnWeights, shape: GpuFoveaShape) -> Result<()> {
+        self.fovea = Some(GpuFovea::new(
+            &self.ctx,
+            hologram,
+            shape,
+            (self.height, self.width),
+            &self.heads,
+            self.storage,
+        )?);
+        Ok(())
+    }
+
+    /// Runs one foveated frame (`docs/FOVEATION.md`): uploads the tile's CNN input and the image
+    /// ([`GpuFoveaFrame`]), runs the tile's CNN, the band's phase and the composition into the heads, then
+    /// the frame's stages after the heads (offset propagation, pre-filter over the whole frame, double phase
+    /// encoding) with the global normaliser `normaliser` (`> 0`) instead of the field's own; downloads as
+    /// [`GpuFrameSession::run`] does. Returns the frame's output and the band's phase per colour (radians).
+    ///
+    /// Errors: [`HoloError::Internal`] before [`GpuFrameSession::plan_fovea`]; [`HoloError::InvalidParameter`]
+    /// for a normaliser that is not positive and finite; otherwise as [`GpuFovea::upload`] and
+    /// [`GpuFrameSession::run`].
+    pub(crate) fn run_foveated(
+        &mut self,
+        frame: &GpuFoveaFrame<'_>,
+        normaliser: f32,
+        codes: &mut Array3<u8>,
+        phase: Option<&mut Array3<f32>>,
+    ) -> Result<(GpuFrameOutput, [f32; 3])> {
+        if !(normaliser > 0.0 && normaliser.is_finite()) {
+            return Err(invalid(
+                "normaliser",
+                format!("must be > 0 and finite, got {normaliser}"),
+            ));
+        }
+        let Some(fovea) = &self.fovea else {
+            return Err(HoloError::Internal(
+                "a foveated GPU frame before its plan".into(),
+            ));
+        };
+        fovea.upload(&self.ctx, frame)?;
+        let mut encoder = self.ctx.encoder("foveated frame");
+        fovea.record(&mut encoder);
+        self.record_after_heads(&mut encoder);
+        self.dp.set_normaliser(&self.ctx, Some(normaliser));
+        let out = self.download(encoder, codes, phase)?;
+        let theta = match &self.fovea {
+            Some(f) => f.read_theta(&self.ctx)?,
+            None => [0.0; 3],
+        };
+        Ok((out, theta))
     }
 
     fn build_previews(&self) -> Result<Previews> {
@@ -492,6 +553,11 @@ impl GpuFrameSession {
     /// Records the frame's dispatches (after the input upload) into `encoder`.
     fn record(&self, encoder: &mut wgpu::CommandEncoder) {
         self.cnn.record(encoder);
+        self.record_after_heads(encoder);
+    }
+
+    /// Records the frame's dispatches after the hologram CNN's heads into `encoder`.
+    fn record_after_heads(&self, encoder: &mut wgpu::CommandEncoder) {
         self.to_field.record(encoder);
         if let Some(op) = self.spectral_op() {
             op.record(encoder);
@@ -518,7 +584,6 @@ impl GpuFrameSession {
         codes: &mut Array3<u8>,
         phase: Option<&mut Array3<f32>>,
     ) -> Result<GpuFrameOutput> {
-        let full = phase.is_some();
         let n = self.height * self.width;
         if input.len() != self.in_channels || input.iter().any(|p| p.len() != n) {
             return Err(HoloError::ShapeMismatch {
@@ -531,8 +596,24 @@ impl GpuFrameSession {
             self.ctx
                 .write(&self.input, (i * n * 4) as u64, bytemuck::cast_slice(plane));
         }
+        self.dp.set_normaliser(&self.ctx, None);
         let mut encoder = self.ctx.encoder("frame");
         self.record(&mut encoder);
+        self.download(encoder, codes, phase)
+    }
+
+    /// Adds the read-backs to a frame's `encoder` (the codes and statistics; with `phase`, the double phase
+    /// pattern and the heads), submits it, waits, and reads them.
+    ///
+    /// Errors: as [`GpuFrameSession::run`].
+    fn download(
+        &mut self,
+        mut encoder: wgpu::CommandEncoder,
+        codes: &mut Array3<u8>,
+        phase: Option<&mut Array3<f32>>,
+    ) -> Result<GpuFrameOutput> {
+        let full = phase.is_some();
+        let n = self.height * self.width;
         let codes_bytes = (3 * n) as u64;
         encoder.copy_buffer_to_buffer(
             self.dp.codes_buffer(),

@@ -162,6 +162,7 @@ fn all_layouts() -> Vec<UniformLayout> {
     v.extend(super::encode::uniform_layouts());
     v.extend(super::cnn::uniform_layouts());
     v.extend(super::session::uniform_layouts());
+    v.extend(super::fovea::uniform_layouts());
     v.extend(super::refine::uniform_layouts());
     v
 }

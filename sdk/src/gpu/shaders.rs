@@ -66,6 +66,10 @@ pub(crate) const CONV3X3_F16: Shader =
 /// The CNNs' output stages: tanh heads, the pre-filter's base filter (`heads.wgsl`).
 pub(crate) const HEADS: Shader = shader!("heads.wgsl");
 
+/// A foveated frame's band phase and composed heads: the tile's CNN heads, the periphery's blur, the blend
+/// (`fovea.wgsl`).
+pub(crate) const FOVEA: Shader = shader!("fovea.wgsl");
+
 /// Previews: SLM codes → displayed field, field → amplitude (`preview.wgsl`).
 pub(crate) const PREVIEW: Shader = shader!("preview.wgsl");
 
@@ -84,6 +88,7 @@ pub(crate) const ALL: &[Shader] = &[
     CONV3X3,
     CONV3X3_F16,
     HEADS,
+    FOVEA,
     PREVIEW,
     REFINE,
 ];

@@ -11,8 +11,31 @@ use num_complex::Complex32;
 
 use super::config::Backend;
 use super::frame::{Heads, SlmFrame};
+use super::models::HologramPipeline;
 use super::report::StageProfile;
-use crate::error::Result;
+use crate::error::{HoloError, Result};
+use crate::foveation::TileGeometry;
+
+/// One foveated frame's inputs to [`FrameExecutor::run_foveated`] (`super::foveated`).
+#[derive(Debug, Clone, Copy)]
+#[cfg_attr(not(feature = "gpu"), allow(dead_code))]
+pub(super) struct FoveatedInput<'a> {
+    /// The tile's CNN input: `C` planes of `T_h·T_w` values, packed as the frame's input is
+    /// (`super::fovea_tiles::FoveatedState::pack_tile`).
+    pub(super) tile: &'a [&'a [f32]],
+    /// The frame's amplitude R, G, B after a calibration's intensity maps, `H·W` values each.
+    pub(super) amplitude: [&'a [f32]; 3],
+    /// The frame's normalised depth, `H·W` values.
+    pub(super) depth: &'a [f32],
+    /// The gaze point `(x, y)`, pixels of the frame.
+    pub(super) gaze: (f64, f64),
+    /// The gaze's normalised depth.
+    pub(super) gaze_depth: f32,
+    /// The tile's top-left pixel `(y, x)`.
+    pub(super) origin: (usize, usize),
+    /// The double phase normaliser `a` (`> 0`): [`crate::foveation::FOVEATED_NORMALISER_GAIN`]` · max A`.
+    pub(super) normaliser: f32,
+}
 
 /// A whole frame on an accelerator: the CNN input planes in, SLM patterns out.
 pub(super) trait FrameExecutor: std::fmt::Debug + Send {
@@ -52,6 +75,41 @@ pub(super) trait FrameExecutor: std::fmt::Debug + Send {
     ///
     /// Errors: [`crate::HoloError::Gpu`].
     fn stages(&self, repeats: usize) -> Result<Vec<StageProfile>>;
+
+    /// Prepares the foveated frames of `pipeline`'s session (`docs/FOVEATION.md`): the tile `geometry` (one
+    /// size for every gaze), the periphery's blur radius per unit of depth difference `blur_px` (pixels, per
+    /// colour). Called once, when the session is made. Returns whether this executor runs them
+    /// ([`FrameExecutor::run_foveated`]); by default it does not, and the CPU frame runs them.
+    ///
+    /// Errors: the executor's (e.g. [`crate::HoloError::Gpu`]); the session then runs them on the CPU, or
+    /// fails where the GPU was asked for.
+    fn plan_foveated(
+        &mut self,
+        _pipeline: &HologramPipeline,
+        _geometry: &TileGeometry,
+        _blur_px: [f64; 3],
+    ) -> Result<bool> {
+        Ok(false)
+    }
+
+    /// Runs one foveated frame planned by [`FrameExecutor::plan_foveated`] into `out`, as
+    /// [`FrameExecutor::run`] runs a frame (the codes and the normaliser always, the pattern and the
+    /// composed heads only when `full`): the tile's CNN, the periphery's blur and blend, then the frame's
+    /// stages with the normaliser `input.normaliser`. Returns the heads (with `full`) and the periphery's
+    /// phase per colour (radians).
+    ///
+    /// Errors: [`crate::HoloError::Internal`] where the executor runs no foveated frames; otherwise as
+    /// [`FrameExecutor::run`].
+    fn run_foveated(
+        &mut self,
+        _input: &FoveatedInput<'_>,
+        _out: &mut SlmFrame,
+        _full: bool,
+    ) -> Result<(Option<Heads>, [f32; 3])> {
+        Err(HoloError::Internal(
+            "this executor runs no foveated frames".into(),
+        ))
+    }
 }
 
 /// The accelerator a session runs on, and whether the self-check of [`Backend::Auto`] has yet to run.

@@ -36,6 +36,11 @@ pub(super) struct FoveatedState {
     /// its base filter elsewhere; `None`: the pre-filter runs on the whole frame.
     pub(super) prefilter: Option<PrefilterTile>,
     pub(super) report: Option<FoveaReport>,
+    /// Whether the session's accelerator runs the foveated frames (`FrameExecutor::plan_foveated`).
+    pub(super) on_accelerator: bool,
+    /// The frame's amplitude after a calibration's intensity maps, `[3, H, W]`, for the accelerator (sized by
+    /// the first calibrated frame).
+    pub(super) scaled: Vec<f32>,
 }
 
 /// The pre-filter CNN of a foveated frame (`H' = base(H) + CNN(H)`, DDPM): the CNN's residual where the fovea's
@@ -65,7 +70,7 @@ pub(super) struct PrefilterTile {
 const PREFILTER_RAMP_PX: f64 = 64.0;
 
 /// The most input planes of a tile's hologram CNN passed without a list on the heap (an LDI CNN of 8 layers).
-const MAX_TILE_PLANES: usize = 32;
+pub(super) const MAX_TILE_PLANES: usize = 32;
 
 /// Rows per task of the base filter over the whole frame.
 const BASE_ROWS: usize = 32;
@@ -131,6 +136,8 @@ impl FoveatedState {
             volume_m: optics.volume_depth_m,
             prefilter,
             report: None,
+            on_accelerator: false,
+            scaled: Vec::new(),
         })
     }
 

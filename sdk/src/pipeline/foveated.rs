@@ -7,9 +7,11 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use super::colour::{ColourState, Task};
-use super::fovea_tiles::FoveatedState;
+use super::config::Backend;
+use super::executor::FoveatedInput;
+use super::fovea_tiles::{FoveatedState, MAX_TILE_PLANES};
 use super::frame::{check_not_black, max_and_finite, FrameTimings, Heads, SlmFrame};
-use super::session::{colour_states, phase_planes, HologramSession};
+use super::session::{apply_calibrated_luts, colour_states, phase_planes, HologramSession};
 use crate::error::{invalid, HoloError, Result};
 use crate::foveation::{
     gaze_depth, ColourInputs, FoveaReport, FrameInputs, Gaze, GazeDepthSource,
@@ -27,8 +29,11 @@ impl HologramSession {
     /// session whose tile is the whole frame (a small frame, a wide fovea: no CNN work to save), renders the
     /// frame as [`HologramSession::render`] does, bit for bit. The tile has one size for every gaze (one
     /// plan, made with the session) and nothing is allocated per frame once the first has run.
-    /// [`HologramSession::fovea_report`] says what the frame did. Runs on the CPU (a session on the GPU runs
-    /// its foveated frames on its CPU frame).
+    /// [`HologramSession::fovea_report`] says what the frame did. A session whose frames run on the GPU runs
+    /// its foveated frames there (the tile's CNN, the periphery's blur and blend in WGSL, then the GPU
+    /// frame's stages with the pre-filter over the whole frame; `SlmFrame::backend` says which ran). Where
+    /// [`Backend::Auto`]'s first-frame self-check has yet to run, the first foveated frame renders the full
+    /// frame first for it (once per session); a GPU failure re-renders the frame on the CPU and stays there.
     ///
     /// Errors: [`HoloError::InvalidParameter`] naming `foveation` (a session made without
     /// [`PipelineConfig::foveation`](crate::pipeline::PipelineConfig::foveation)), `gaze` or `gaze_depth_m`
@@ -121,8 +126,11 @@ impl HologramSession {
         let planes = [r, g, b, depth];
         // The frame's checks (as the CNN stage's): finite values, not black; the normaliser's `max A` after
         // the intensity maps, which the periphery shows.
+        // The session's handle on the calibration (a reference count, no copy), so that the frame may run
+        // on the session's accelerator while the maps are borrowed.
+        let calibration = self.calibration.clone();
         let scales = [0, 1, 2].map(|c| {
-            self.calibration
+            calibration
                 .as_ref()
                 .and_then(|cal| cal.colours[c].intensity_scale.as_ref())
                 .and_then(|m| m.as_slice())
@@ -158,6 +166,45 @@ impl HologramSession {
         };
         let mut periphery_s = t_periphery.elapsed().as_secs_f64();
         let origin = geometry.origin(gaze);
+        report.gaze_depth = f64::from(d_g);
+        report.tile = [origin.0, origin.1, geometry.tile.0, geometry.tile.1];
+        report.cnn_share = geometry.share();
+        report.covers_frame = false;
+
+        // On the accelerator where it runs them. Backend::Auto's first-frame self-check compares a full frame
+        // with the CPU's (a foveated pattern is not the CPU's foveated pattern bit for bit: its pre-filter runs
+        // over the whole frame): once per session, before the first foveated frame.
+        if fov.on_accelerator && self.accelerator.as_ref().is_some_and(|a| a.pending_check) {
+            self.render(frame)?;
+        }
+        if fov.on_accelerator && self.accelerator.is_some() {
+            let normaliser = FOVEATED_NORMALISER_GAIN * brightest;
+            let frame = AcceleratedFoveated {
+                planes,
+                scales,
+                gaze,
+                gaze_depth: d_g,
+                origin,
+                normaliser,
+            };
+            match self.foveated_on_accelerator(fov, frame, t, periphery_s) {
+                Ok(theta) => {
+                    report.periphery_phase_rad = theta;
+                    fov.report = Some(report);
+                    return Ok(());
+                }
+                Err(HoloError::Gpu(e)) => {
+                    log::warn!(
+                        "GPU foveated frame failed ({e}); this frame and the next run on the CPU"
+                    );
+                    self.accelerator = None;
+                    self.backend.active = Backend::Cpu;
+                    self.backend.gpu_precision = None;
+                    self.backend.reason = format!("GPU failed mid-stream, CPU since: {e}");
+                }
+                Err(e) => return Err(e),
+            }
+        }
 
         // The tile's CNN.
         let t_cnn = Instant::now();
@@ -246,13 +293,115 @@ impl HologramSession {
             periphery_s,
             total_s: t.elapsed().as_secs_f64(),
         };
-        self.output.backend = super::config::Backend::Cpu;
+        self.output.backend = Backend::Cpu;
         self.last_heads = shared;
-        report.gaze_depth = f64::from(d_g);
-        report.tile = [origin.0, origin.1, th, tw];
-        report.cnn_share = geometry.share();
-        report.covers_frame = false;
         fov.report = Some(report);
         Ok(())
     }
+
+    /// The foveated frame `frame` on the session's accelerator: the tile packed here (the CPU's packing, its
+    /// time the frame's `cnn_s`), the amplitude after the intensity maps where a calibration has them, then
+    /// [`super::executor::FrameExecutor::run_foveated`]; a calibrated look-up table on the downloaded
+    /// pattern. Returns the periphery's phase per colour. `periphery_s`: the gaze depth's time so far.
+    ///
+    /// Errors: as [`super::executor::FrameExecutor::run_foveated`] ([`HoloError::Gpu`]: the caller falls back
+    /// to the CPU).
+    fn foveated_on_accelerator(
+        &mut self,
+        fov: &mut FoveatedState,
+        frame: AcceleratedFoveated<'_>,
+        t: Instant,
+        periphery_s: f64,
+    ) -> Result<[f32; 3]> {
+        let AcceleratedFoveated { planes, scales, .. } = frame;
+        let (h, w) = (self.height, self.width);
+        let n = h * w;
+        let t_cnn = Instant::now();
+        fov.pack_tile(planes, w, frame.origin);
+        let cnn_s = t_cnn.elapsed().as_secs_f64();
+        let t_scale = Instant::now();
+        let maps = scales.iter().any(Option::is_some);
+        if maps {
+            fov.scaled.resize(3 * n, 0.0);
+            for ((dst, src), scale) in fov.scaled.chunks_exact_mut(n).zip(planes).zip(scales) {
+                match scale {
+                    Some(s) => dst
+                        .iter_mut()
+                        .zip(src.iter().zip(s))
+                        .for_each(|(o, (&a, &s))| *o = a * s),
+                    None => dst.copy_from_slice(src),
+                }
+            }
+        }
+        let periphery_s = periphery_s + t_scale.elapsed().as_secs_f64();
+        let amplitude: [&[f32]; 3] = if maps {
+            let (r, gb) = fov.scaled.split_at(n);
+            let (g, b) = gb.split_at(n);
+            [r, g, b]
+        } else {
+            [planes[0], planes[1], planes[2]]
+        };
+        let (c, th, tw) = fov.cnn.input.dim();
+        let Some(input) = fov.cnn.input.as_slice() else {
+            return Err(HoloError::Internal("the tile's input is contiguous".into()));
+        };
+        let mut list: [&[f32]; MAX_TILE_PLANES] = [&[]; MAX_TILE_PLANES];
+        let many: Vec<&[f32]>;
+        let tile: &[&[f32]] = if c <= MAX_TILE_PLANES {
+            for (p, plane) in list.iter_mut().zip(input.chunks_exact(th * tw)) {
+                *p = plane;
+            }
+            &list[..c]
+        } else {
+            many = input.chunks_exact(th * tw).collect();
+            &many
+        };
+        let calibrated = self
+            .calibration
+            .as_ref()
+            .is_some_and(|c| c.has_calibrated_lut());
+        let full = self.full_outputs || calibrated;
+        let Some(acc) = self.accelerator.as_mut() else {
+            return Err(HoloError::Internal("no accelerator".into()));
+        };
+        let t_gpu = Instant::now();
+        let input = FoveatedInput {
+            tile,
+            amplitude,
+            depth: planes[3],
+            gaze: (frame.gaze.x, frame.gaze.y),
+            gaze_depth: frame.gaze_depth,
+            origin: frame.origin,
+            normaliser: frame.normaliser,
+        };
+        let (heads, theta) = acc.executor.run_foveated(&input, &mut self.output, full)?;
+        let backend = acc.executor.backend();
+        if calibrated {
+            apply_calibrated_luts(self.calibration.as_ref(), &mut self.output)?;
+        }
+        self.output.backend = backend;
+        self.output.timings = FrameTimings {
+            cnn_s,
+            periphery_s,
+            gpu_s: t_gpu.elapsed().as_secs_f64(),
+            total_s: t.elapsed().as_secs_f64(),
+            ..FrameTimings::default()
+        };
+        self.last_heads = heads.map(Arc::new);
+        Ok(theta)
+    }
+}
+
+/// What [`HologramSession::foveated_on_accelerator`] takes of a checked foveated frame.
+#[derive(Clone, Copy)]
+struct AcceleratedFoveated<'a> {
+    /// The frame's amplitude R, G, B and depth, `H·W` values each.
+    planes: [&'a [f32]; 4],
+    /// A calibration's intensity scale maps, per colour.
+    scales: [Option<&'a [f32]>; 3],
+    gaze: &'a Gaze,
+    gaze_depth: f32,
+    origin: (usize, usize),
+    /// [`FOVEATED_NORMALISER_GAIN`]` · max A`.
+    normaliser: f32,
 }

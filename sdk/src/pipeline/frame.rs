@@ -88,7 +88,9 @@ pub struct FrameTimings {
     /// `holo bench --backend gpu` times the GPU stages one by one. 0 on the CPU backend.
     pub gpu_s: f64,
     /// A foveated frame's periphery ([`crate::foveation`]): the gaze's depth, the synthetic blur and the blend
-    /// with the tile's CNN heads (0 for a full frame).
+    /// with the tile's CNN heads (0 for a full frame). On the GPU backend the gaze's depth (and a
+    /// calibration's intensity maps on the amplitude) only: the blur and the blend are in `gpu_s`, and `cnn_s`
+    /// is the tile's packing.
     pub periphery_s: f64,
     /// The whole frame (in a stream: from the end of the previous frame, i.e. the frame period).
     pub total_s: f64,

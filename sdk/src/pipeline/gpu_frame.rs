@@ -6,12 +6,14 @@ use ndarray::Array3;
 use num_complex::Complex32;
 
 use super::config::{Backend, GpuPrecision};
-use super::executor::{Accelerator, BackendReportParts, FrameExecutor};
+use super::executor::{Accelerator, BackendReportParts, FoveatedInput, FrameExecutor};
 use super::frame::{Heads, SlmFrame};
 use super::models::HologramPipeline;
 use super::report::StageProfile;
 use crate::error::Result;
+use crate::foveation::TileGeometry;
 use crate::gpu::cnn::GpuStorage;
+use crate::gpu::fovea::{max_half_width, GpuFoveaFrame, GpuFoveaShape};
 use crate::gpu::session::GpuFrameSession;
 use crate::gpu::{GpuContext, GpuOptions};
 
@@ -55,6 +57,54 @@ impl FrameExecutor for GpuFrameSession {
                 seconds,
             })
             .collect())
+    }
+
+    fn plan_foveated(
+        &mut self,
+        pipeline: &HologramPipeline,
+        geometry: &TileGeometry,
+        blur_px: [f64; 3],
+    ) -> Result<bool> {
+        // A tile as large as the frame: every foveated frame is a full frame (`render`), nothing to plan.
+        if geometry.tile == geometry.frame {
+            return Ok(true);
+        }
+        let (h, w) = geometry.frame;
+        let shape = GpuFoveaShape {
+            tile: geometry.tile,
+            radius_px: geometry.radius_px,
+            band_px: geometry.band_px,
+            blur_px,
+            max_half_width: max_half_width(blur_px.iter().copied().fold(0.0, f64::max), h, w),
+        };
+        let hologram = pipeline.hologram_model().cnn_graph()?;
+        self.plan_fovea(&hologram, shape)?;
+        Ok(true)
+    }
+
+    fn run_foveated(
+        &mut self,
+        input: &FoveatedInput<'_>,
+        out: &mut SlmFrame,
+        full: bool,
+    ) -> Result<(Option<Heads>, [f32; 3])> {
+        let frame = GpuFoveaFrame {
+            tile: input.tile,
+            amplitude: input.amplitude,
+            depth: input.depth,
+            gaze: input.gaze,
+            gaze_depth: input.gaze_depth,
+            origin: input.origin,
+        };
+        let phase = full.then_some(&mut out.phase);
+        let (frame, theta) =
+            GpuFrameSession::run_foveated(self, &frame, input.normaliser, &mut out.codes, phase)?;
+        out.amplitude_scale = frame.amplitude_scale;
+        out.mean_phase = frame.mean_phase;
+        let heads = frame
+            .heads
+            .map(|(amplitude, phase)| Heads { amplitude, phase });
+        Ok((heads, theta))
     }
 }
 

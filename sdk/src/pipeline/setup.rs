@@ -60,7 +60,7 @@ impl HologramSession {
         if let Some(cal) = &calibration {
             cal.check_size(height, width)?;
         }
-        let (parts, accelerator) = choose_backend(pipeline, height, width)?;
+        let (parts, mut accelerator) = choose_backend(pipeline, height, width)?;
         let backend = BackendReport {
             requested: parts.requested,
             active: accelerator
@@ -116,6 +116,16 @@ impl HologramSession {
             )?)),
             None => None,
         };
+        // The accelerator runs the foveated frames where it can (one plan for every gaze).
+        let mut foveated = foveated;
+        if let (Some(acc), Some(fov)) = (accelerator.as_mut(), foveated.as_mut()) {
+            let geometry = *fov.periphery.geometry();
+            match acc.executor.plan_foveated(pipeline, &geometry, fov.blur_px) {
+                Ok(runs) => fov.on_accelerator = runs,
+                Err(e) if backend.requested == Backend::Gpu => return Err(e),
+                Err(e) => log::warn!("foveated frames run on the CPU frame: {e}"),
+            }
+        }
         let n = height * width;
         let mut states: [Option<Box<ColourState>>; 3] = [None, None, None];
         for (colour, ((slot, prop), transfer)) in

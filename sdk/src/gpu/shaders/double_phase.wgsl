@@ -14,6 +14,9 @@
 //   4: storage       stats: array<f32, 8> = [a, mean_r, mean_g, mean_b, max_sq_r, max_sq_g, max_sq_b, invalid]
 //                    (invalid = 1 when a is 0 or not finite: a hologram that is zero everywhere)
 //   5: storage       codes: array<u32>, ceil(C·H·W / 4) words, code of element e in byte e % 4 of word e / 4
+//   6: storage read  fixed: array<f32>, 4: a normaliser given from outside (fixed[0] > 0: a foveated frame's,
+//                    foveation::FOVEATED_NORMALISER_GAIN · max A) used instead of the field's own; 0: the
+//                    field's own. `invalid` always follows the field's own.
 // Grids: `analyse` (G, C) workgroups of 256, each looping over its channel with stride 256·G; `finish` one
 // workgroup of 256; `encode` ceil(C·H·W / 4) invocations (256 per workgroup, spread over x/y).
 
@@ -30,6 +33,7 @@ struct Dims {
 @group(0) @binding(3) var<storage, read_write> partials: array<vec2<f32>>;
 @group(0) @binding(4) var<storage, read_write> stats: array<f32, 8>;
 @group(0) @binding(5) var<storage, read_write> codes: array<u32>;
+@group(0) @binding(6) var<storage, read> fixed: array<f32>;
 
 const TAU: f32 = 6.283185307179586;
 
@@ -95,10 +99,10 @@ fn finish(@builtin(local_invocation_id) lid3: vec3<u32>) {
         workgroupBarrier();
     }
     if (lid == 0u) {
-        let a = sqrt(a_sq);
-        stats[0] = a;
-        // a > 0 is false for 0 and NaN; a − a ≠ 0 for ±∞.
-        stats[7] = select(1.0, 0.0, a > 0.0 && (a - a) == 0.0);
+        let own = sqrt(a_sq);
+        stats[0] = select(own, fixed[0], fixed[0] > 0.0);
+        // own > 0 is false for 0 and NaN; own − own ≠ 0 for ±∞.
+        stats[7] = select(1.0, 0.0, own > 0.0 && (own - own) == 0.0);
     }
 }
 
