@@ -1123,6 +1123,17 @@ public protocol HologramStreamProtocol: AnyObject, Sendable {
      */
     func push(frame: RgbdFrame) throws  -> UInt64
     
+    /**
+     * Queues a frame to be rendered foveated on `gaze` (this frame's eye-tracker, face-tracking or touch
+     * point, in hologram pixels; [`HologramGenerator::render_foveated`](crate::HologramGenerator::render_foveated)),
+     * as [`HologramStream::push`] does.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for a generator made without
+     * [`GeneratorConfig::foveation`](crate::GeneratorConfig::foveation), a gaze outside the hologram or not
+     * finite (naming it), or after [`HologramStream::close`].
+     */
+    func pushFoveated(frame: RgbdFrame, gaze: Gaze) throws  -> UInt64
+    
 }
 /**
  * A video stream ([`HologramGenerator::stream`](crate::HologramGenerator::stream)).
@@ -1216,6 +1227,26 @@ open func push(frame: RgbdFrame)throws  -> UInt64  {
     uniffi_tensorholo_ffi_fn_method_hologramstream_push(
             self.uniffiCloneHandle(),
         FfiConverterTypeRgbdFrame_lower(frame),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Queues a frame to be rendered foveated on `gaze` (this frame's eye-tracker, face-tracking or touch
+     * point, in hologram pixels; [`HologramGenerator::render_foveated`](crate::HologramGenerator::render_foveated)),
+     * as [`HologramStream::push`] does.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for a generator made without
+     * [`GeneratorConfig::foveation`](crate::GeneratorConfig::foveation), a gaze outside the hologram or not
+     * finite (naming it), or after [`HologramStream::close`].
+     */
+open func pushFoveated(frame: RgbdFrame, gaze: Gaze)throws  -> UInt64  {
+    return try  FfiConverterUInt64.lift(try rustCallWithError(FfiConverterTypeTensorholoError_lift) {
+        uniffiCallStatus in
+    uniffi_tensorholo_ffi_fn_method_hologramstream_push_foveated(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeRgbdFrame_lower(frame),
+        FfiConverterTypeGaze_lower(gaze),uniffiCallStatus
     )
 })
 }
@@ -5878,6 +5909,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_method_hologramstream_push() != 40801) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_tensorholo_ffi_checksum_method_hologramstream_push_foveated() != 33729) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_method_patternslistener_on_patterns() != 30270) {

@@ -403,6 +403,11 @@ uint64_t uniffi_tensorholo_ffi_fn_method_hologramstream_dropped_frames(uint64_t 
 uint64_t uniffi_tensorholo_ffi_fn_method_hologramstream_push(uint64_t ptr, RustBuffer frame, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_METHOD_HOLOGRAMSTREAM_PUSH_FOVEATED
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_METHOD_HOLOGRAMSTREAM_PUSH_FOVEATED
+uint64_t uniffi_tensorholo_ffi_fn_method_hologramstream_push_foveated(uint64_t ptr, RustBuffer frame, RustBuffer gaze, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_CLONE_PATTERNSLISTENER
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_FN_CLONE_PATTERNSLISTENER
 uint64_t uniffi_tensorholo_ffi_fn_clone_patternslistener(uint64_t handle, RustCallStatus *_Nonnull out_status
@@ -854,6 +859,12 @@ uint16_t uniffi_tensorholo_ffi_checksum_method_hologramstream_dropped_frames(voi
 #ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_METHOD_HOLOGRAMSTREAM_PUSH
 #define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_METHOD_HOLOGRAMSTREAM_PUSH
 uint16_t uniffi_tensorholo_ffi_checksum_method_hologramstream_push(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_METHOD_HOLOGRAMSTREAM_PUSH_FOVEATED
+#define UNIFFI_FFIDEF_UNIFFI_TENSORHOLO_FFI_CHECKSUM_METHOD_HOLOGRAMSTREAM_PUSH_FOVEATED
+uint16_t uniffi_tensorholo_ffi_checksum_method_hologramstream_push_foveated(void
     
 );
 #endif

@@ -13,6 +13,11 @@ import Tensorholo
 /// confidence map: `RgbdFrame(frame:orientation:minConfidence:)` keeps depth of medium and high confidence, the
 /// rest is invalid and filled from its confident neighbours (docs/VIDEO.md). Elsewhere `AVCaptureSession` with
 /// the dual camera's depth (filtered by AVFoundation; it has no confidence map).
+///
+/// Foveation (docs/FOVEATION.md): frames are rendered foveated on the viewer's gaze, the 3D CNN around it and a
+/// 2D hologram with synthetic blur elsewhere. The gaze comes from ARKit's face tracking (the front camera's
+/// `ARFaceAnchor.lookAtPoint`, while the back camera tracks the world) where the device has it, else from the
+/// last touch on the preview; without either, full 3D frames.
 final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchronizerDelegate, ARSessionDelegate {
     /// The instance both scenes show.
     static let shared = HologramModel()
@@ -96,6 +101,21 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
     private var photoCancelled = false
     /// Whether the stream's frames reach the SLM (false while a photo is held; under `lock`).
     private var showStream = true
+    /// Where the viewer looks, as fractions of the hologram's width and height (0…1, top-left origin): the face
+    /// tracker's or the last touch's; nil: none yet, full 3D frames (under `lock`).
+    private var gaze: (x: Double, y: Double)?
+    /// Whether the face tracker gives the gaze (then touches do not; under `lock`).
+    private var faceGaze = false
+
+    /// The gaze from a touch on the preview, as fractions of its width and height; ignored while the face
+    /// tracker gives one.
+    func setTouchGaze(x: Double, y: Double) {
+        lock.lock()
+        if !faceGaze {
+            gaze = (min(max(x, 0), 1), min(max(y, 0), 1))
+        }
+        lock.unlock()
+    }
 
     /// Asks for the camera, creates the generator (times the CNN plans: a few seconds) and starts capturing.
     /// Safe to call again: only the first call starts.
@@ -178,6 +198,8 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
         if let prescription = prescription {
             config.prescription = prescription
         }
+        // A 5° fovea behind the paper's 21 mm eyepiece (a display profile's own eyepiece would go here).
+        config.foveation = Foveation()
         return config
     }
 
@@ -200,6 +222,8 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
     private func startARSession() {
         let configuration = ARWorldTrackingConfiguration()
         configuration.frameSemantics = [.sceneDepth]
+        // The viewer's face through the front camera while the back camera tracks the world: the gaze.
+        configuration.userFaceTrackingEnabled = ARWorldTrackingConfiguration.supportsUserFaceTracking
         arSession.delegate = self
         arSession.delegateQueue = captureQueue
         arSession.run(configuration)
@@ -210,12 +234,42 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
     func session(_ session: ARSession, didUpdate frame: ARFrame) {
         guard frame.timestamp - lastARFrameTimestamp >= 1.0 / 30 else { return }
         lastARFrameTimestamp = frame.timestamp
+        if let face = frame.anchors.compactMap({ $0 as? ARFaceAnchor }).first, face.isTracked,
+           let point = screenGaze(face: face, camera: frame.camera) {
+            lock.lock()
+            faceGaze = true
+            gaze = point
+            lock.unlock()
+        }
         do {
             // Portrait UI: ARKit's buffers are the sensor's landscape, turned 90° counter-clockwise.
             try push(RgbdFrame(frame: frame, orientation: .right, minConfidence: .medium, context: ciContext))
         } catch {
             publish(status: error.localizedDescription)
         }
+    }
+
+    /// Where the face's gaze meets the phone's screen, as fractions of the portrait screen's width and height, or
+    /// nil when it looks away from the screen. The gaze ray runs from between the eyes towards
+    /// `ARFaceAnchor.lookAtPoint` (face coordinates, metres); the screen is approximated by the camera's plane,
+    /// `screenHalfSize` metres either side of the camera's axis (a 6.1" phone; an app would read the device's).
+    private func screenGaze(face: ARFaceAnchor, camera: ARCamera) -> (x: Double, y: Double)? {
+        let screenHalfSize = SIMD2<Float>(0.032, 0.070)
+        let toCamera = camera.transform.inverse * face.transform
+        let eyes = (face.leftEyeTransform.columns.3 + face.rightEyeTransform.columns.3) / 2
+        let origin = toCamera * SIMD4<Float>(eyes.x, eyes.y, eyes.z, 1)
+        let target = toCamera * SIMD4<Float>(face.lookAtPoint, 1)
+        let direction = target - origin
+        // The camera's plane is z = 0 in its own coordinates; the face is at z > 0 (in front of the screen).
+        guard abs(direction.z) > 1e-6 else { return nil }
+        let t = -origin.z / direction.z
+        guard t > 0 else { return nil }
+        let hit = origin + t * direction
+        // ARKit's camera axes are the sensor's landscape ones: x along the long side. Portrait: x ↔ y.
+        let u = 0.5 + Double(hit.y / screenHalfSize.x) / 2
+        let v = 0.5 + Double(hit.x / screenHalfSize.y) / 2
+        guard (0...1).contains(u), (0...1).contains(v) else { return nil }
+        return (u, v)
     }
 
     /// `ARSessionDelegate`: the session stopped (camera denied, sensor failure).
@@ -302,8 +356,16 @@ final class HologramModel: NSObject, ObservableObject, AVCaptureDataOutputSynchr
         lock.lock()
         latestFrame = frame
         let stream = self.stream
+        let gaze = self.gaze
+        let size = generatorSize
         lock.unlock()
-        _ = try stream?.push(frame: frame)
+        if let gaze = gaze {
+            // Fractions of the hologram to its pixels (0, 0 the top-left pixel's centre).
+            let point = Gaze(x: gaze.x * Double(size.width - 1), y: gaze.y * Double(size.height - 1))
+            _ = try stream?.pushFoveated(frame: frame, gaze: point)
+        } else {
+            _ = try stream?.push(frame: frame)
+        }
     }
 
     /// The stream's result (its background thread): the SLM image for the external display, then a preview.

@@ -9,9 +9,19 @@ struct ContentView: View {
         VStack(spacing: 16) {
             Group {
                 if let image = model.previewImage {
-                    Image(decorative: image, scale: 1)
-                        .resizable()
-                        .aspectRatio(contentMode: .fit)
+                    // A touch on the preview is the gaze where the device has no face tracking
+                    // (docs/FOVEATION.md): the hologram's 3D CNN runs around it.
+                    GeometryReader { geometry in
+                        Image(decorative: image, scale: 1)
+                            .resizable()
+                            .aspectRatio(contentMode: .fit)
+                            .frame(width: geometry.size.width, height: geometry.size.height)
+                            .gesture(DragGesture(minimumDistance: 0).onChanged { touch in
+                                model.setTouchGaze(
+                                    x: touch.location.x / max(geometry.size.width, 1),
+                                    y: touch.location.y / max(geometry.size.height, 1))
+                            })
+                    }
                 } else {
                     ProgressView()
                 }

@@ -769,6 +769,8 @@ internal object IntegrityCheckingUniffiLib {
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_hologramstream_push(
     ): Int
+    external fun uniffi_tensorholo_ffi_checksum_method_hologramstream_push_foveated(
+    ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_patternslistener_on_patterns(
     ): Int
     external fun uniffi_tensorholo_ffi_checksum_method_patternslistener_on_error(
@@ -846,6 +848,8 @@ internal object UniffiLib {
     external fun uniffi_tensorholo_ffi_fn_method_hologramstream_dropped_frames(`ptr`: Long,uniffi_out_err: UniffiRustCallStatus, 
     ): Long
     external fun uniffi_tensorholo_ffi_fn_method_hologramstream_push(`ptr`: Long,`frame`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
+    ): Long
+    external fun uniffi_tensorholo_ffi_fn_method_hologramstream_push_foveated(`ptr`: Long,`frame`: RustBuffer.ByValue,`gaze`: RustBuffer.ByValue,uniffi_out_err: UniffiRustCallStatus, 
     ): Long
     external fun uniffi_tensorholo_ffi_fn_clone_patternslistener(`handle`: Long,uniffi_out_err: UniffiRustCallStatus, 
     ): Long
@@ -1054,6 +1058,9 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramstream_push() and 0xFFFF) != 40801) {
+        throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
+    }
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramstream_push_foveated() and 0xFFFF) != 33729) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_method_patternslistener_on_patterns() and 0xFFFF) != 30270) {
@@ -2245,6 +2252,17 @@ public interface HologramStreamInterface {
      */
     fun `push`(`frame`: RgbdFrame): kotlin.ULong
     
+    /**
+     * Queues a frame to be rendered foveated on `gaze` (this frame's eye-tracker, face-tracking or touch
+     * point, in hologram pixels; [`HologramGenerator::render_foveated`](crate::HologramGenerator::render_foveated)),
+     * as [`HologramStream::push`] does.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for a generator made without
+     * [`GeneratorConfig::foveation`](crate::GeneratorConfig::foveation), a gaze outside the hologram or not
+     * finite (naming it), or after [`HologramStream::close`].
+     */
+    fun `pushFoveated`(`frame`: RgbdFrame, `gaze`: Gaze): kotlin.ULong
+    
     companion object
 }
 
@@ -2399,6 +2417,31 @@ open class HologramStream: Disposable, AutoCloseable, HologramStreamInterface
         it,
         
         FfiConverterTypeRgbdFrame.lower(`frame`),_status)
+}
+    }
+    )
+    }
+    
+
+    
+    /**
+     * Queues a frame to be rendered foveated on `gaze` (this frame's eye-tracker, face-tracking or touch
+     * point, in hologram pixels; [`HologramGenerator::render_foveated`](crate::HologramGenerator::render_foveated)),
+     * as [`HologramStream::push`] does.
+     *
+     * Errors: [`TensorholoError::InvalidInput`] for a generator made without
+     * [`GeneratorConfig::foveation`](crate::GeneratorConfig::foveation), a gaze outside the hologram or not
+     * finite (naming it), or after [`HologramStream::close`].
+     */
+    @Throws(TensorholoException::class)override fun `pushFoveated`(`frame`: RgbdFrame, `gaze`: Gaze): kotlin.ULong {
+            return FfiConverterULong.lift(
+    callWithHandle {
+    uniffiRustCallWithError(TensorholoException) { _status ->
+    UniffiLib.uniffi_tensorholo_ffi_fn_method_hologramstream_push_foveated(
+        it,
+        
+        FfiConverterTypeRgbdFrame.lower(`frame`),
+        FfiConverterTypeGaze.lower(`gaze`),_status)
 }
     }
     )

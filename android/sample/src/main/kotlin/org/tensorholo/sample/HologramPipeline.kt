@@ -6,6 +6,8 @@ import java.util.concurrent.RejectedExecutionException
 import java.util.concurrent.atomic.AtomicBoolean
 import java.util.concurrent.atomic.AtomicLong
 import java.util.concurrent.atomic.AtomicReference
+import tensorholo.Foveation
+import tensorholo.Gaze
 import tensorholo.GeneratorConfig
 import tensorholo.HologramGenerator
 import tensorholo.HologramStream
@@ -31,6 +33,10 @@ import tensorholo.generatorConfigForDisplay
  * [HologramGenerator.preview] of the latest frame for [onPreview]; the generator runs one call at a time, so
  * previews slow the stream a little. Callbacks arrive on background threads; the caller posts them to the UI
  * thread.
+ *
+ * Foveation (docs/FOVEATION.md): once [gaze] is set (the sample sets it from a touch on the preview), frames
+ * are rendered foveated on it ([HologramStream.pushFoveated]): the 3D CNN around the gaze, a 2D hologram with
+ * synthetic blur elsewhere, a fraction of a full frame's time at the SLM's resolution.
  */
 class HologramPipeline(
     width: Int,
@@ -53,6 +59,14 @@ class HologramPipeline(
     /** While a best-quality photo is on the SLM, the stream's frames are not shown ([bestQuality], [live]). */
     private val holdingPhoto = AtomicBoolean(false)
     private val photoCancelled = AtomicBoolean(false)
+
+    /**
+     * Where the viewer looks, as fractions of the hologram's width and height (0..1, top-left origin), or null
+     * (the default) for full 3D frames.
+     */
+    @Volatile var gaze: Pair<Float, Float>? = null
+
+    private val size = width to height
 
     /** Focus of the preview's simulated eye, normalised depth in [0, 1] (0 = near). */
     @Volatile var focus = 0.5f
@@ -113,9 +127,10 @@ class HologramPipeline(
      * profile's prescription as it is. A corrected generator runs on the CPU and encodes with AA-DPM.
      */
     private fun withPrescription(config: GeneratorConfig): GeneratorConfig {
-        val sphere = sphereDioptres ?: return config
+        // A 5° fovea behind the paper's 21 mm eyepiece, used once a gaze is set.
+        val sphere = sphereDioptres ?: return config.copy(foveation = Foveation())
         val rx = config.prescription?.copy(sphereD = sphere) ?: Prescription(sphereD = sphere)
-        return config.copy(prescription = rx)
+        return config.copy(prescription = rx, foveation = Foveation())
     }
 
     /**
@@ -138,7 +153,15 @@ class HologramPipeline(
         val s = stream ?: return
         latest.set(frame)
         try {
-            s.push(frame)
+            val g = gaze
+            if (g == null) {
+                s.push(frame)
+            } else {
+                // Fractions to hologram pixels (0, 0 the top-left pixel's centre).
+                val x = g.first.coerceIn(0f, 1f) * (size.first - 1)
+                val y = g.second.coerceIn(0f, 1f) * (size.second - 1)
+                s.pushFoveated(frame, Gaze(x = x.toDouble(), y = y.toDouble()))
+            }
             pushed.incrementAndGet()
         } catch (e: TensorholoException) {
             onStatus("push: ${e.message}")

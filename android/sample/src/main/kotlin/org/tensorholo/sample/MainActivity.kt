@@ -69,6 +69,14 @@ class MainActivity : Activity(), DisplayManager.DisplayListener {
         findViewById<Button>(R.id.cancel_photo).setOnClickListener { pipeline?.cancelPhoto() }
         findViewById<Button>(R.id.live).setOnClickListener { pipeline?.live() }
         rawDepthSwitch = findViewById(R.id.raw_depth)
+        // A touch on the preview is the viewer's gaze (docs/FOVEATION.md): frames are then foveated on it.
+        previewView.setOnTouchListener { view, event ->
+            if (view.width > 0 && view.height > 0) {
+                pipeline?.gaze = event.x / view.width to event.y / view.height
+            }
+            view.performClick()
+            true
+        }
         focusBar.setOnSeekBarChangeListener(object : SeekBar.OnSeekBarChangeListener {
             override fun onProgressChanged(bar: SeekBar, progress: Int, fromUser: Boolean) {
                 pipeline?.focus = progress / 100f
