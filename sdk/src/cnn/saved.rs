@@ -54,12 +54,12 @@ pub struct SavedRow {
     pub row: String,
 }
 
-/// One session's engine, layout and threads: the hologram CNN `network` ([`network_key`]) at `resolution`
+/// One session's engine, layout and threads: the hologram CNN `network` (`network_key`) at `resolution`
 /// `[height, width]` pixels (its pre-filter runs on the same engine and threads).
 #[derive(Debug, Clone, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SavedSession {
-    /// The hologram CNN, as [`network_key`] names it (e.g. `hologram-cnn-8-f32-in4`).
+    /// The hologram CNN, as `network_key` names it (e.g. `hologram-cnn-8-f32-in4`).
     pub network: String,
     /// `[height, width]` in pixels.
     pub resolution: [usize; 2],

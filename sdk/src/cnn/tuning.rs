@@ -176,7 +176,7 @@ pub struct PlanReport {
     pub source: PlanOrigin,
     /// The same in words: with a saved tuning, what it decided and what the table filled in.
     pub source_detail: String,
-    /// The hologram CNN as saved plans name it ([`super::saved::network_key`]).
+    /// The hologram CNN as saved plans name it (`network_key`).
     pub network: String,
     /// The kernel ISA level of the native engine on this CPU (`avx512vnni`, `neondot`, …), what a saved tuning
     /// is made for.
