@@ -17,7 +17,7 @@
 mod frame;
 #[cfg(feature = "gpu")]
 mod gpu;
-mod model;
+pub(crate) mod model;
 pub mod target;
 #[cfg(test)]
 mod tests;

@@ -1,0 +1,535 @@
+//! A display model fitted from camera captures (`tensorholo.display-model`, docs/CALIBRATION.md "The display
+//! model"): per colour the source field over the SLM, the SLM's crosstalk in the drive domain, its phase
+//! response, the undiffracted (zero-order) light and the optics' aberration. Every part is optional; a model
+//! without parts is the ideal display of `docs/REFINE.md` (a plane wave, each pixel showing `2π·code/256`).
+//!
+//! The field leaving the SLM for 8-bit codes (drive) `c` `[H, W]` is
+//!
+//! ```text
+//! u = S · (exp(i·R(K ∗ c)) + z)
+//! ```
+//!
+//! with `K` the crosstalk kernel (a small odd-size convolution of the drive, edges clamped: the fringing field
+//! between neighbouring pixels), `R` the phase response (a 256-entry curve of the existing look-up tables,
+//! `slm::PhaseCurve`, interpolated linearly between codes; `2π·v/256` without one), `z` the complex
+//! zero-order fraction (`|z| < 1`) and `S = exp(P_a + i·P_φ)` the source, `P_a` and `P_φ` polynomials in the
+//! SLM's normalised coordinates (a Gaussian beam is a quadratic `P_a`). A camera focused `distance_m` from the
+//! SLM sees `g·|F⁻¹{M·E·H(distance_m)·F{u}}|²`, the refinement's display simulation (`refine::model`): `M` the
+//! Fourier filter (Eq. 8–9), `H` the transfer function (Eq. 2, Eq. 10), `E = circ·exp(−i·ΣZ_j)` the optics'
+//! aberration (the Zernike terms of Eq. 14–18) and `g` the capture set's gain.
+
+use std::path::Path;
+
+use num_complex::Complex32;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{HoloError, Result};
+use crate::optics::filter::aperture_fn;
+use crate::optics::{OpticalSetup, PropagationOptions, Propagator, ZernikeCoefficients};
+use crate::refine::model::{plane_multiplier, PlaneMultiplier};
+use crate::slm::PhaseCurve;
+
+/// Value of a display model file's `format` field.
+pub const DISPLAY_MODEL_FORMAT: &str = "tensorholo.display-model";
+/// Version of the display model format this build reads and writes.
+pub const DISPLAY_MODEL_VERSION: u32 = 1;
+/// The colours' keys in a model file and a capture manifest, in channel order (R, G, B).
+pub const COLOUR_KEYS: [&str; 3] = ["red", "green", "blue"];
+/// The largest crosstalk kernel side a model holds: 15 pixels.
+pub const MAX_KERNEL_SIDE: usize = 15;
+
+/// The source field over the SLM, `S = exp(P_a + i·P_φ)`, each polynomial's terms
+/// `[x, y, x², y², x·y]` in the SLM's normalised coordinates (`x = (2j + 1)/W − 1`, `y = (2i + 1)/H − 1`,
+/// `[-1, 1]` across the panel; `i` the row). The constant of `P_a` is the capture set's gain and that of `P_φ`
+/// invisible, so neither is stored. A Gaussian beam of waist `w` (normalised) centred at `(x₀, y₀)` has
+/// `log_amplitude = [2x₀/w², 2y₀/w², −1/w², −1/w², 0]`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SourceField {
+    /// `P_a`'s coefficients (natural log of the amplitude).
+    pub log_amplitude: [f64; 5],
+    /// `P_φ`'s coefficients, radians.
+    pub phase_rad: [f64; 5],
+}
+
+/// The SLM's crosstalk: a `[rows, cols]` kernel (both odd) applied to the drive (the codes as numbers) before
+/// the phase response, centred, edges clamped. Not assumed isotropic. Weights summing to 1 keep a flat drive.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Crosstalk {
+    /// `[rows, cols]`, both odd, at most [`MAX_KERNEL_SIDE`].
+    pub size: [usize; 2],
+    /// `rows·cols` weights, row-major.
+    pub weights: Vec<f64>,
+}
+
+/// The phase response in a model file: the phase in radians each code displays (the look-up tables' curve,
+/// `slm::PhaseCurve`: 256 non-decreasing values, code 0 first).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ResponseFile {
+    phases_rad: Vec<f32>,
+}
+
+/// One colour's parts of a [`DisplayModel`]; each `None` is ideal.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ColourDisplay {
+    /// The source field over the SLM (`None`: a uniform plane wave).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<SourceField>,
+    /// The phase response (`None`: code `k` shows `2π·k/256`).
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        with = "response_serde"
+    )]
+    pub response: Option<PhaseCurve>,
+    /// The crosstalk kernel (`None`: none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crosstalk: Option<Crosstalk>,
+    /// The zero-order fraction `z = [re, im]`, `|z| < 1` (`None`: 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zero_order: Option<[f64; 2]>,
+    /// The optics' aberration in the Fourier plane, the Zernike terms of Eq. 14–18 (`None`: none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub aberration: Option<ZernikeCoefficients>,
+}
+
+mod response_serde {
+    use super::{PhaseCurve, ResponseFile};
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    pub(super) fn serialize<S: Serializer>(
+        v: &Option<PhaseCurve>,
+        s: S,
+    ) -> std::result::Result<S::Ok, S::Error> {
+        v.as_ref()
+            .map(|c| ResponseFile {
+                phases_rad: c.phases().to_vec(),
+            })
+            .serialize(s)
+    }
+
+    pub(super) fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> std::result::Result<Option<PhaseCurve>, D::Error> {
+        Option::<ResponseFile>::deserialize(d)?
+            .map(|f| PhaseCurve::new(&f.phases_rad).map_err(serde::de::Error::custom))
+            .transpose()
+    }
+}
+
+impl ColourDisplay {
+    /// Whether every part is ideal.
+    pub(crate) fn is_ideal(&self) -> bool {
+        self == &Self::default()
+    }
+
+    /// Checks the parts; `colour` names the entry.
+    fn validate(&self, colour: &str) -> Result<()> {
+        let bad = |part: &str, why: String| {
+            Err(HoloError::InvalidData(format!(
+                "display model `{colour}.{part}`: {why}"
+            )))
+        };
+        if let Some(s) = &self.source {
+            if s.log_amplitude
+                .iter()
+                .chain(&s.phase_rad)
+                .any(|v| !v.is_finite() || v.abs() > 1e3)
+            {
+                return bad(
+                    "source",
+                    "coefficients must be finite and within ±1000".into(),
+                );
+            }
+        }
+        if let Some(k) = &self.crosstalk {
+            let [r, c] = k.size;
+            if r % 2 == 0 || c % 2 == 0 || r > MAX_KERNEL_SIDE || c > MAX_KERNEL_SIDE {
+                return bad(
+                    "crosstalk",
+                    format!(
+                        "kernel of {r}×{c}: both sides odd (centred on the pixel), 1 to {MAX_KERNEL_SIDE}"
+                    ),
+                );
+            }
+            if k.weights.len() != r * c {
+                return bad(
+                    "crosstalk",
+                    format!("{} weights for a {r}×{c} kernel", k.weights.len()),
+                );
+            }
+            if k.weights.iter().any(|v| !v.is_finite()) {
+                return bad("crosstalk", "weights must be finite".into());
+            }
+        }
+        if let Some([re, im]) = self.zero_order {
+            let m = re.hypot(im);
+            if !(m < 1.0) {
+                return bad(
+                    "zero_order",
+                    format!("|z| = {m}: the undiffracted fraction is finite and below 1"),
+                );
+            }
+        }
+        if let Some(a) = &self.aberration {
+            if a.to_array().iter().any(|v| !v.is_finite()) {
+                return bad("aberration", "coefficients must be finite".into());
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A display model (module docs; docs/CALIBRATION.md "The display model"): the SLM size it was fitted for
+/// and each colour's parts. Stored as JSON:
+///
+/// ```json
+/// {"format": "tensorholo.display-model", "version": 1, "slm_size": [96, 96],
+///  "green": {"source": {"log_amplitude": [0.1, 0, -0.8, -0.8, 0]},
+///            "crosstalk": {"size": [3, 3], "weights": [0, 0.02, 0, 0.03, 0.9, 0.03, 0, 0.02, 0]},
+///            "zero_order": [0.05, -0.02], "aberration": {"focus": 0.3}}}
+/// ```
+///
+/// A colour without an entry is ideal; unknown keys are refused.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct DisplayModel {
+    /// The SLM's `[height, width]` in pixels.
+    pub slm_size: [usize; 2],
+    /// R, G, B.
+    pub colours: [ColourDisplay; 3],
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ModelFile {
+    format: String,
+    version: u32,
+    slm_size: [usize; 2],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    red: Option<ColourDisplay>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    green: Option<ColourDisplay>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    blue: Option<ColourDisplay>,
+}
+
+impl DisplayModel {
+    /// Whether every colour is ideal (the refinement then runs exactly as without a model).
+    pub(crate) fn is_ideal(&self) -> bool {
+        self.colours.iter().all(ColourDisplay::is_ideal)
+    }
+
+    /// Checks every part (naming the entry, `green.crosstalk`) and the SLM size.
+    ///
+    /// Errors: [`HoloError::InvalidData`] naming the entry: a kernel of even size or of the wrong number of
+    /// weights, non-finite values, `|zero_order| ≥ 1`, a zero SLM size.
+    pub(crate) fn validate(&self) -> Result<()> {
+        let [h, w] = self.slm_size;
+        if h == 0 || w == 0 {
+            return Err(HoloError::InvalidData(format!(
+                "display model `slm_size`: {h}×{w}, both ≥ 1"
+            )));
+        }
+        for (c, part) in self.colours.iter().enumerate() {
+            part.validate(COLOUR_KEYS[c])?;
+        }
+        Ok(())
+    }
+
+    /// Refuses a model made for another SLM size than `[height, width]`.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`].
+    pub(crate) fn check_size(&self, height: usize, width: usize) -> Result<()> {
+        if self.slm_size != [height, width] {
+            return Err(HoloError::ShapeMismatch {
+                what: "display model's SLM size vs the frame's".into(),
+                expected: self.slm_size.to_vec(),
+                got: vec![height, width],
+            });
+        }
+        Ok(())
+    }
+
+    /// Parses the JSON form; `source` names the input in errors.
+    ///
+    /// Errors: [`HoloError::InvalidData`] naming `source` and the entry: not this format or version, an
+    /// unknown part or key, a value of the wrong type, and those of validation (kernel of even size,
+    /// non-finite values, `|zero_order| ≥ 1`, a response curve that decreases).
+    pub(crate) fn from_json_str(text: &str, source: &str) -> Result<Self> {
+        let refuse = |why: String| {
+            HoloError::InvalidData(format!(
+                "`{source}` is not a valid display model ({DISPLAY_MODEL_FORMAT} version \
+                 {DISPLAY_MODEL_VERSION}, docs/CALIBRATION.md): {why}"
+            ))
+        };
+        let file: ModelFile = crate::io::parse_json_object(text, "a display model")
+            .map_err(|e| refuse(e.to_string()))?;
+        if file.format != DISPLAY_MODEL_FORMAT || file.version != DISPLAY_MODEL_VERSION {
+            return Err(refuse(format!(
+                "format `{}` version {}",
+                file.format, file.version
+            )));
+        }
+        let model = Self {
+            slm_size: file.slm_size,
+            colours: [
+                file.red.unwrap_or_default(),
+                file.green.unwrap_or_default(),
+                file.blue.unwrap_or_default(),
+            ],
+        };
+        model.validate().map_err(|e| refuse(e.to_string()))?;
+        Ok(model)
+    }
+
+    /// Reads a model file (`tensorholo.display-model`, the struct's docs).
+    ///
+    /// Errors: [`HoloError::Io`] if unreadable; [`HoloError::InvalidData`] naming the file and the entry at
+    /// fault (an unknown part, a kernel of even size, non-finite values, a zero-order fraction of 1 or more).
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = crate::io::read_text(path)?;
+        Self::from_json_str(&text, &path.display().to_string())
+    }
+
+    /// The JSON form, pretty-printed, which [`DisplayModel::load`] reads back.
+    pub(crate) fn to_json_string(&self) -> String {
+        let part = |c: usize| Some(self.colours[c].clone()).filter(|p| !p.is_ideal());
+        let file = ModelFile {
+            format: DISPLAY_MODEL_FORMAT.into(),
+            version: DISPLAY_MODEL_VERSION,
+            slm_size: self.slm_size,
+            red: part(0),
+            green: part(1),
+            blue: part(2),
+        };
+        serde_json::to_string_pretty(&file).expect("a display model always serialises")
+    }
+
+    /// Writes the JSON form to `path` atomically (`io::write_atomic`).
+    ///
+    /// Errors: [`HoloError::InvalidData`] for a model that does not validate (nothing written);
+    /// [`HoloError::Io`] naming `path`.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        self.validate()?;
+        crate::io::write_atomic(path, (self.to_json_string() + "\n").as_bytes())
+    }
+}
+
+/// The normalised coordinate of index `k` of `n`: `(2k + 1)/n − 1`.
+pub(crate) fn normalised(k: usize, n: usize) -> f64 {
+    (2 * k + 1) as f64 / n as f64 - 1.0
+}
+
+/// The polynomial terms `[x, y, x², y², x·y]` at `(x, y)`.
+pub(crate) fn source_terms(x: f64, y: f64) -> [f64; 5] {
+    [x, y, x * x, y * y, x * y]
+}
+
+/// One colour's model on a `[H, W]` grid, ready to run: the source map, the kernel, the response table, the
+/// zero order, and the buffers of the last forward pass (for the gradient).
+#[derive(Debug, Clone)]
+pub(crate) struct ColourRuntime {
+    height: usize,
+    width: usize,
+    /// `S` per pixel, `None` for a plane wave.
+    pub(crate) source: Option<Vec<Complex32>>,
+    /// `(rows, cols, weights)`.
+    kernel: Option<(usize, usize, Vec<f32>)>,
+    /// Phase per code, `None`: `2π·v/256`.
+    response: Option<[f32; 256]>,
+    pub(crate) zero: Complex32,
+    /// `K ∗ c` of the last forward pass.
+    pub(crate) crossed: Vec<f32>,
+    /// `S·exp(i·R(K ∗ c))` of the last forward pass.
+    pub(crate) modulated: Vec<Complex32>,
+    /// `∂L/∂c` of the last backward pass.
+    pub(crate) grad: Vec<f32>,
+    /// `∂L/∂(K ∗ c)` of the last backward pass.
+    dphi: Vec<f32>,
+}
+
+/// The linear response's slope, radians per code.
+pub(crate) const LINEAR_SLOPE: f32 = std::f32::consts::TAU / 256.0;
+
+impl ColourRuntime {
+    /// Colour `part` on a `[height, width]` grid.
+    pub(crate) fn new(part: &ColourDisplay, height: usize, width: usize) -> Self {
+        let source = part.source.map(|s| {
+            let mut out = Vec::with_capacity(height * width);
+            for i in 0..height {
+                let y = normalised(i, height);
+                for j in 0..width {
+                    let t = source_terms(normalised(j, width), y);
+                    let dot = |c: &[f64; 5]| c.iter().zip(&t).map(|(a, b)| a * b).sum::<f64>();
+                    out.push(Complex32::from_polar(
+                        dot(&s.log_amplitude).exp() as f32,
+                        dot(&s.phase_rad) as f32,
+                    ));
+                }
+            }
+            out
+        });
+        let n = height * width;
+        Self {
+            height,
+            width,
+            source,
+            kernel: part.crosstalk.as_ref().map(|k| {
+                (
+                    k.size[0],
+                    k.size[1],
+                    k.weights.iter().map(|&v| v as f32).collect(),
+                )
+            }),
+            response: part.response.as_ref().map(|c| *c.phases()),
+            zero: part
+                .zero_order
+                .map_or(Complex32::new(0.0, 0.0), |[re, im]| {
+                    Complex32::new(re as f32, im as f32)
+                }),
+            crossed: vec![0.0; n],
+            modulated: vec![Complex32::new(0.0, 0.0); n],
+            grad: vec![0.0; n],
+            dphi: Vec::with_capacity(n),
+        }
+    }
+
+    /// Replaces the response by the table `phases` (radians per code; the fit's trial curves, unchecked).
+    pub(crate) fn set_response(&mut self, phases: [f32; 256]) {
+        self.response = Some(phases);
+    }
+
+    /// `out ← K ∗ input` (`transpose`: the adjoint, `Kᵀ ∗`, scattering to the clamped neighbours).
+    fn convolve(&self, input: &[f32], out: &mut [f32], transpose: bool) {
+        let Some((kr, kc, k)) = &self.kernel else {
+            out.copy_from_slice(input);
+            return;
+        };
+        let (h, w) = (self.height as isize, self.width as isize);
+        let (hr, hc) = ((*kr / 2) as isize, (*kc / 2) as isize);
+        out.fill(0.0);
+        for i in 0..h {
+            for j in 0..w {
+                let p = (i * w + j) as usize;
+                for (a, row) in k.chunks_exact(*kc).enumerate() {
+                    let ii = (i + a as isize - hr).clamp(0, h - 1);
+                    for (b, &kv) in row.iter().enumerate() {
+                        let q = (ii * w + (j + b as isize - hc).clamp(0, w - 1)) as usize;
+                        if transpose {
+                            out[q] += kv * input[p];
+                        } else {
+                            out[p] += kv * input[q];
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The response at drive `v` (codes as numbers) and its slope.
+    pub(crate) fn respond(&self, v: f32) -> (f32, f32) {
+        match &self.response {
+            None => (v * LINEAR_SLOPE, LINEAR_SLOPE),
+            Some(t) => {
+                let i = (v.floor() as isize).clamp(0, 254) as usize;
+                let slope = t[i + 1] - t[i];
+                (t[i] + (v - i as f32) * slope, slope)
+            }
+        }
+    }
+
+    /// `unit ← u = S·(exp(i·R(K ∗ drive)) + z)` for the drive `drive` `[H, W]` (codes as numbers), keeping
+    /// what [`ColourRuntime::backward`] needs.
+    pub(crate) fn forward(&mut self, drive: &[f32], unit: &mut [Complex32]) {
+        let mut crossed = std::mem::take(&mut self.crossed);
+        self.convolve(drive, &mut crossed, false);
+        let mut modulated = std::mem::take(&mut self.modulated);
+        for (p, (&v, (m, u))) in crossed
+            .iter()
+            .zip(modulated.iter_mut().zip(unit.iter_mut()))
+            .enumerate()
+        {
+            let (phi, _) = self.respond(v);
+            let (s, c) = phi.sin_cos();
+            let src = self
+                .source
+                .as_ref()
+                .map_or(Complex32::new(1.0, 0.0), |s| s[p]);
+            *m = src * Complex32::new(c, s);
+            *u = *m + src * self.zero;
+        }
+        self.modulated = modulated;
+        self.crossed = crossed;
+    }
+
+    /// `grad ← ∂L/∂drive` from `g = ∂L/∂Re u + i·∂L/∂Im u` `[H, W]` of the last forward pass: through the
+    /// source and the response (`∂L/∂φ = Im(g·conj(S·e^{iφ}))`, times the response's slope) and the kernel's
+    /// adjoint.
+    pub(crate) fn backward(&mut self, g: &[Complex32]) {
+        let mut dphi = std::mem::take(&mut self.dphi);
+        dphi.clear();
+        dphi.extend(
+            g.iter()
+                .zip(&self.modulated)
+                .zip(&self.crossed)
+                .map(|((g, m), &v)| (g.im * m.re - g.re * m.im) * self.respond(v).1),
+        );
+        let mut grad = std::mem::take(&mut self.grad);
+        self.convolve(&dphi, &mut grad, true);
+        self.grad = grad;
+        self.dphi = dphi;
+    }
+}
+
+/// A camera's view of one capture: the multiplier `M·E·H(distance_m)` of colour `colour` on a `[H, W]` grid
+/// with the model's aberration (`refine::model::plane_multiplier`).
+///
+/// Errors: as `Propagator::new` and the transfer function's.
+pub(crate) fn capture_multiplier(
+    setup: &OpticalSetup,
+    colour: usize,
+    (height, width): (usize, usize),
+    distance_m: f64,
+    aberration: Option<&ZernikeCoefficients>,
+) -> Result<(Propagator, PlaneMultiplier)> {
+    let prop = Propagator::new(
+        height,
+        width,
+        setup.pixel_pitch_m,
+        setup.wavelengths_m[colour],
+        PropagationOptions::default(),
+    )?;
+    let aperture = aperture_fn(prop.plan());
+    let m = plane_multiplier(&prop, &aperture, distance_m, aberration)?;
+    Ok((prop, m))
+}
+
+/// The intensity `|F⁻¹{m·F{u}}|²` `[H, W]` of the SLM field `u` `[H, W]` through `m` on `prop`'s grid, with
+/// the field `U` left in `field`.
+pub(crate) fn intensity_of(
+    prop: &Propagator,
+    m: &PlaneMultiplier,
+    u: &[Complex32],
+    field: &mut Vec<Complex32>,
+) -> Vec<f32> {
+    let plan = prop.plan();
+    let fft = plan.fft();
+    let n = u.len();
+    let mut data = u.to_vec();
+    let mut spectrum = vec![Complex32::new(0.0, 0.0); n];
+    let mut scratch = vec![Complex32::new(0.0, 0.0); fft.scratch_len()];
+    fft.forward(&mut data, &mut spectrum, &mut scratch);
+    let cols = fft.height();
+    for (r, row) in spectrum.chunks_exact_mut(cols).enumerate() {
+        m.multiply_row(r, row, fft.isa());
+    }
+    field.resize(n, Complex32::new(0.0, 0.0));
+    fft.inverse(&mut spectrum, field, &mut scratch);
+    field.iter().map(|v| v.norm_sqr()).collect()
+}
+
+#[cfg(test)]
+mod tests;

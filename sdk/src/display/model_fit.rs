@@ -1,0 +1,765 @@
+//! Fitting a display model (`display::model`) to camera captures by Levenberg–Marquardt least squares, with
+//! the Jacobian made analytically (forward-mode: each parameter's derivative of the SLM field, propagated as
+//! the field is), docs/CALIBRATION.md "The fit".
+//!
+//! Per colour the parameters are the set's log-gain `ln g`, the source's log-amplitude polynomial (5 terms;
+//! its phase is held flat), the response's `(s, r₂, r₃)` (`model_captures::response_basis`), the crosstalk
+//! kernel's neighbour weights (the centre is `1 − Σ`, so a flat drive stays flat: the response's scale holds
+//! the rest), the zero order `(Re z, Im z)` and the aberration's five Zernike terms. The residual is
+//! `g·|U|² − I` over every capture's unsaturated pixels, `U = F⁻¹{M·E·H·F{u}}` (`display::model`).
+//! `∂(g|U|²)/∂θ = 2g·Re(conj(U)·∂U/∂θ)` with `∂U/∂θ = F⁻¹{M·E·H·F{∂u/∂θ}}` for the field's parameters and
+//! `F⁻¹{−i·Z_j·M·E·H·F{u}}` for an aberration term `a_j` (`E = circ·exp(−i·Σa_jZ_j)`).
+
+use num_complex::Complex32;
+
+use super::model::{
+    capture_multiplier, normalised, source_terms, ColourDisplay, ColourRuntime, Crosstalk,
+    DisplayModel, SourceField, COLOUR_KEYS,
+};
+use super::model_captures::{response_basis, response_curve, CaptureSet};
+use crate::error::{invalid, HoloError, Result};
+use crate::optics::propagation::SpectralPlan;
+use crate::optics::zernike::pupil_multiplier;
+use crate::optics::{OpticalSetup, Padding, ZernikeCoefficients};
+
+/// How a fit runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitOptions {
+    /// The display's wavelengths and pitch (the captures' distances are given).
+    pub setup: OpticalSetup,
+    /// Levenberg–Marquardt iterations at most, `1..=500`.
+    pub iterations: usize,
+    /// The crosstalk kernel's side: 1 (no crosstalk fitted), 3 or 5.
+    pub kernel_side: usize,
+    /// A simulation's hidden parameters: the report then gives the error of each fitted part against them.
+    pub truth: Option<DisplayModel>,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        Self {
+            setup: OpticalSetup::default(),
+            iterations: 40,
+            kernel_side: 3,
+            truth: None,
+        }
+    }
+}
+
+/// One capture's residual after the fit.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct CaptureResidual {
+    /// The capture file's name in the manifest.
+    pub capture: String,
+    /// RMS of `g·|U|² − I` over its used pixels, in units of full scale.
+    pub rms: f64,
+    /// That RMS before the fit (the ideal display at the best gain).
+    pub ideal_rms: f64,
+}
+
+/// A fitted part's error against a simulation's hidden parameters.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct PartError {
+    /// `green.crosstalk`, …
+    pub part: String,
+    /// What is compared and the largest absolute error, in the part's units.
+    pub measure: String,
+    /// The error.
+    pub error: f64,
+}
+
+/// What [`fit`] returns.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitReport {
+    /// The fitted model (parts the captures do not determine kept ideal).
+    pub model: DisplayModel,
+    /// Per capture, in the manifest's order.
+    pub residuals: Vec<CaptureResidual>,
+    /// Parts the captures do not determine, each naming the colour, part and parameter.
+    pub warnings: Vec<String>,
+    /// Per colour the gain `g` (None: no captures).
+    pub gains: [Option<f64>; 3],
+    /// Errors against [`FitOptions::truth`] where one was given.
+    pub truth_errors: Vec<PartError>,
+}
+
+/// The parameter layout of one colour.
+#[derive(Debug, Clone, Copy)]
+struct Layout {
+    /// Neighbour count of the kernel (`side² − 1`).
+    kernel: usize,
+    side: usize,
+}
+
+const PARTS: [&str; 6] = [
+    "gain",
+    "source",
+    "response",
+    "crosstalk",
+    "zero_order",
+    "aberration",
+];
+
+impl Layout {
+    fn ranges(&self) -> [std::ops::Range<usize>; 6] {
+        let k = 9 + self.kernel;
+        [0..1, 1..6, 6..9, 9..k, k..k + 2, k + 2..k + 7]
+    }
+    fn len(&self) -> usize {
+        16 + self.kernel
+    }
+    /// Neighbour `n`'s kernel offset `(dy, dx)` and index in the row-major kernel.
+    fn neighbour(&self, n: usize) -> (isize, isize, usize) {
+        let centre = self.side * self.side / 2;
+        let idx = if n < centre { n } else { n + 1 };
+        let h = (self.side / 2) as isize;
+        (
+            (idx / self.side) as isize - h,
+            (idx % self.side) as isize - h,
+            idx,
+        )
+    }
+    fn ideal(&self) -> Vec<f64> {
+        let mut t = vec![0.0; self.len()];
+        t[6] = 1.0;
+        t
+    }
+    /// The colour's parts of `theta` (`free[part]`: fitted; others ideal). The response is not checked here.
+    fn display(&self, theta: &[f64], free: &[bool; 6]) -> (ColourDisplay, Option<[f32; 256]>) {
+        let r = self.ranges();
+        let mut part = ColourDisplay::default();
+        if free[1] {
+            let mut a = [0.0; 5];
+            a.copy_from_slice(&theta[r[1].clone()]);
+            part.source = Some(SourceField {
+                log_amplitude: a,
+                phase_rad: [0.0; 5],
+            });
+        }
+        let table = free[2].then(|| {
+            std::array::from_fn(|k| {
+                let b = response_basis(k);
+                (theta[6] * b[0] + theta[7] * b[1] + theta[8] * b[2]) as f32
+            })
+        });
+        if free[3] && self.kernel > 0 {
+            let mut weights = vec![0.0; self.side * self.side];
+            let mut centre = 1.0;
+            for n in 0..self.kernel {
+                let (_, _, idx) = self.neighbour(n);
+                weights[idx] = theta[r[3].start + n];
+                centre -= theta[r[3].start + n];
+            }
+            weights[self.side * self.side / 2] = centre;
+            part.crosstalk = Some(Crosstalk {
+                size: [self.side, self.side],
+                weights,
+            });
+        }
+        if free[4] {
+            part.zero_order = Some([theta[r[4].start], theta[r[4].start + 1]]);
+        }
+        if free[5] {
+            let mut a = [0.0; 5];
+            a.copy_from_slice(&theta[r[5].clone()]);
+            part.aberration = Some(ZernikeCoefficients::from_array(a));
+        }
+        (part, table)
+    }
+}
+
+/// One distance's fixed multiplier `M·H` (full spectrum layout) and its grid.
+struct Plane {
+    distance_m: f64,
+    mh: Vec<Complex32>,
+}
+
+/// What one evaluation of the least-squares problem gives.
+struct Normal {
+    cost: f64,
+    jtj: Vec<f64>,
+    jtr: Vec<f64>,
+    rms: Vec<f64>,
+}
+
+/// One colour's problem.
+struct Problem<'a> {
+    set: &'a CaptureSet,
+    colour: usize,
+    captures: Vec<usize>,
+    layout: Layout,
+    plan: SpectralPlan,
+    planes: Vec<Plane>,
+    /// The Zernike terms `Z_j` on the spectrum layout (real).
+    zernike: Vec<Vec<f32>>,
+    /// The source's polynomial terms per pixel.
+    terms: Vec<[f64; 5]>,
+}
+
+impl<'a> Problem<'a> {
+    fn new(set: &'a CaptureSet, colour: usize, options: &FitOptions) -> Result<Self> {
+        let (h, w) = set.size;
+        let captures: Vec<usize> = (0..set.captures.len())
+            .filter(|&i| set.captures[i].colour == colour)
+            .collect();
+        let mut planes: Vec<Plane> = Vec::new();
+        for &i in &captures {
+            let d = set.captures[i].distance_m;
+            if planes.iter().any(|p| p.distance_m == d) {
+                continue;
+            }
+            let (prop, m) = capture_multiplier(&options.setup, colour, (h, w), d, None)?;
+            let (rows, cols) = (
+                prop.plan().computational_shape().1,
+                prop.plan().computational_shape().0,
+            );
+            planes.push(Plane {
+                distance_m: d,
+                mh: m.full(rows, cols, prop.plan().fft().isa()),
+            });
+        }
+        let plan = SpectralPlan::new(h, w, Padding::None)?;
+        let (ch, cw) = plan.computational_shape();
+        let zernike = (0..5)
+            .map(|j| {
+                let mut a = [0.0; 5];
+                a[j] = 1.0;
+                let z = ZernikeCoefficients::from_array(a);
+                plan.build_multiplier(|kx, ky| {
+                    let (rx, ry) = (2.0 * kx as f64 / cw as f64, 2.0 * ky as f64 / ch as f64);
+                    Complex32::new(z.phase_xy(rx, ry) as f32, 0.0)
+                })
+                .into_iter()
+                .map(|v| v.re)
+                .collect()
+            })
+            .collect();
+        let terms = (0..h)
+            .flat_map(|i| (0..w).map(move |j| source_terms(normalised(j, w), normalised(i, h))))
+            .collect();
+        let side = options.kernel_side;
+        Ok(Self {
+            set,
+            colour,
+            captures,
+            layout: Layout {
+                kernel: side * side - 1,
+                side,
+            },
+            plan,
+            planes,
+            zernike,
+            terms,
+        })
+    }
+
+    /// The cost, and with `free` the normal equations of the free parameters' Jacobian, at `theta`.
+    fn evaluate(&self, theta: &[f64], free: &[bool; 6], with_jacobian: bool) -> Normal {
+        let (h, w) = self.set.size;
+        let n = h * w;
+        let fft = self.plan.fft();
+        let zero = Complex32::new(0.0, 0.0);
+        let ranges = self.layout.ranges();
+        // The free parameters' indices.
+        let index: Vec<usize> = (0..6)
+            .filter(|&p| free[p] || p == 0)
+            .flat_map(|p| ranges[p].clone())
+            .collect();
+        let np = index.len();
+        let (part, table) = self.layout.display(theta, free);
+        let mut runtime = ColourRuntime::new(&part, h, w);
+        if let Some(t) = table {
+            runtime.set_response(t);
+        }
+        let e = free[5].then(|| {
+            pupil_multiplier(
+                &self.plan,
+                part.aberration.as_ref().expect("made when free"),
+            )
+        });
+        let gain = theta[0].exp();
+        let mut scratch = vec![zero; fft.scratch_len()];
+        let mut unit = vec![zero; n];
+        let mut jtj = vec![0.0f64; np * np];
+        let mut jtr = vec![0.0f64; np];
+        let mut cost = 0.0;
+        let mut rms = Vec::new();
+        let cols = fft.height();
+        let mut last_pattern = usize::MAX;
+        let mut spectra: Vec<Vec<Complex32>> = Vec::new();
+        for &ci in &self.captures {
+            let cap = &self.set.captures[ci];
+            if cap.pattern != last_pattern {
+                last_pattern = cap.pattern;
+                let drive: Vec<f32> = self.set.patterns[cap.pattern]
+                    .iter()
+                    .map(|&c| f32::from(c))
+                    .collect();
+                runtime.forward(&drive, &mut unit);
+                // The field's derivatives (index order), then their spectra; the field's own first.
+                let mut fields = vec![unit.clone()];
+                if with_jacobian {
+                    for &k in &index {
+                        if let Some(d) = self.field_derivative(k, &runtime, &unit, &drive, theta) {
+                            fields.push(d);
+                        }
+                    }
+                }
+                spectra = fields
+                    .into_iter()
+                    .map(|mut f| {
+                        let mut s = vec![zero; n];
+                        fft.forward(&mut f, &mut s, &mut scratch);
+                        s
+                    })
+                    .collect();
+            }
+            let plane = self
+                .planes
+                .iter()
+                .find(|p| p.distance_m == cap.distance_m)
+                .expect("a plane per distance");
+            let mut m = plane.mh.clone();
+            if let Some(e) = &e {
+                for (m, e) in m.iter_mut().zip(e) {
+                    *m *= e.conj();
+                }
+            }
+            let apply = |s: &[Complex32], extra: Option<&[f32]>, scratch: &mut [Complex32]| {
+                let mut y: Vec<Complex32> = s.iter().zip(&m).map(|(a, b)| a * b).collect();
+                if let Some(z) = extra {
+                    for (y, &z) in y.iter_mut().zip(z) {
+                        *y *= Complex32::new(0.0, -z);
+                    }
+                }
+                let mut out = vec![zero; n];
+                fft.inverse(&mut y, &mut out, scratch);
+                out
+            };
+            debug_assert_eq!(cols * (n / cols), n);
+            let field = apply(&spectra[0], None, &mut scratch);
+            // Jacobian columns, index order.
+            let mut columns: Vec<Vec<f32>> = Vec::new();
+            if with_jacobian {
+                let mut next = 1;
+                for &k in &index {
+                    let du = if k == 0 {
+                        None
+                    } else if ranges[5].contains(&k) {
+                        Some(apply(&spectra[0], Some(&self.zernike[k - ranges[5].start]), &mut scratch))
+                    } else {
+                        next += 1;
+                        Some(apply(&spectra[next - 1], None, &mut scratch))
+                    };
+                    columns.push(match du {
+                        None => field.iter().map(|u| gain as f32 * u.norm_sqr()).collect(),
+                        Some(d) => field
+                            .iter()
+                            .zip(&d)
+                            .map(|(u, d)| 2.0 * gain as f32 * (u.conj() * d).re)
+                            .collect(),
+                    });
+                }
+            }
+            let (mut sum, mut count) = (0.0f64, 0usize);
+            for q in 0..n {
+                if !cap.valid[q] {
+                    continue;
+                }
+                let r = gain * f64::from(field[q].norm_sqr()) - f64::from(cap.intensity[q]);
+                sum += r * r;
+                count += 1;
+                if with_jacobian {
+                    for a in 0..np {
+                        let ja = f64::from(columns[a][q]);
+                        jtr[a] += ja * r;
+                        for b in a..np {
+                            jtj[a * np + b] += ja * f64::from(columns[b][q]);
+                        }
+                    }
+                }
+            }
+            cost += sum;
+            rms.push((sum / count.max(1) as f64).sqrt());
+        }
+        for a in 0..np {
+            for b in 0..a {
+                jtj[a * np + b] = jtj[b * np + a];
+            }
+        }
+        Normal {
+            cost,
+            jtj,
+            jtr,
+            rms,
+        }
+    }
+
+    /// `∂u/∂θ_k` of the last forward pass of `runtime` (`None` for parameters outside the field: the gain and
+    /// the aberration).
+    fn field_derivative(
+        &self,
+        k: usize,
+        runtime: &ColourRuntime,
+        unit: &[Complex32],
+        drive: &[f32],
+        theta: &[f64],
+    ) -> Option<Vec<Complex32>> {
+        let r = self.layout.ranges();
+        let (h, w) = self.set.size;
+        let src = |p: usize| {
+            runtime
+                .source
+                .as_ref()
+                .map_or(Complex32::new(1.0, 0.0), |s| s[p])
+        };
+        let i_dphi = |p: usize, dphi: f32| runtime.modulated[p] * Complex32::new(0.0, dphi);
+        if r[1].contains(&k) {
+            let t = k - r[1].start;
+            return Some(
+                unit.iter()
+                    .zip(&self.terms)
+                    .map(|(u, b)| u * b[t] as f32)
+                    .collect(),
+            );
+        }
+        if r[2].contains(&k) {
+            let j = k - r[2].start;
+            return Some(
+                (0..h * w)
+                    .map(|p| {
+                        let v = runtime.crossed[p];
+                        let i = (v.floor() as isize).clamp(0, 254) as usize;
+                        let (b0, b1) = (response_basis(i)[j], response_basis(i + 1)[j]);
+                        i_dphi(p, (b0 + (f64::from(v) - i as f64) * (b1 - b0)) as f32)
+                    })
+                    .collect(),
+            );
+        }
+        if r[3].contains(&k) {
+            let (dy, dx, _) = self.layout.neighbour(k - r[3].start);
+            return Some(
+                (0..h * w)
+                    .map(|p| {
+                        let (i, j) = ((p / w) as isize, (p % w) as isize);
+                        let q = ((i + dy).clamp(0, h as isize - 1) * w as isize
+                            + (j + dx).clamp(0, w as isize - 1)) as usize;
+                        let slope = runtime.respond(runtime.crossed[p]).1;
+                        i_dphi(p, slope * (drive[q] - drive[p]))
+                    })
+                    .collect(),
+            );
+        }
+        if r[4].contains(&k) {
+            let c = if k == r[4].start {
+                Complex32::new(1.0, 0.0)
+            } else {
+                Complex32::new(0.0, 1.0)
+            };
+            return Some((0..h * w).map(|p| src(p) * c).collect());
+        }
+        let _ = theta;
+        None
+    }
+}
+
+/// Solves `a·x = b` (`n × n`, symmetric positive definite after damping) by Gaussian elimination with
+/// partial pivoting; `None` when singular.
+fn solve(mut a: Vec<f64>, mut b: Vec<f64>) -> Option<Vec<f64>> {
+    let n = b.len();
+    for c in 0..n {
+        let p = (c..n).max_by(|&i, &j| a[i * n + c].abs().total_cmp(&a[j * n + c].abs()))?;
+        if a[p * n + c].abs() < 1e-300 {
+            return None;
+        }
+        for k in 0..n {
+            a.swap(c * n + k, p * n + k);
+        }
+        b.swap(c, p);
+        for r in c + 1..n {
+            let f = a[r * n + c] / a[c * n + c];
+            for k in c..n {
+                a[r * n + k] -= f * a[c * n + k];
+            }
+            b[r] -= f * b[c];
+        }
+    }
+    let mut x = vec![0.0; n];
+    for r in (0..n).rev() {
+        let s: f64 = (r + 1..n).map(|k| a[r * n + k] * x[k]).sum();
+        x[r] = (b[r] - s) / a[r * n + r];
+    }
+    Some(x)
+}
+
+/// The parameters the normal matrix `jtj` (`np × np`) does not determine: a zero diagonal against the gain's,
+/// or a variance inflation (the diagonal of the inverse correlation matrix) above 10⁸.
+fn undetermined(jtj: &[f64], np: usize) -> Vec<usize> {
+    let d: Vec<f64> = (0..np).map(|i| jtj[i * np + i]).collect();
+    let floor = 1e-9 * d[0].max(f64::MIN_POSITIVE);
+    let live: Vec<usize> = (0..np).filter(|&i| d[i] > floor).collect();
+    let mut out: Vec<usize> = (0..np).filter(|&i| d[i] <= floor).collect();
+    let m = live.len();
+    let corr: Vec<f64> = live
+        .iter()
+        .flat_map(|&i| {
+            let d = &d;
+            live.iter()
+                .map(move |&j| jtj[i * np + j] / (d[i] * d[j]).sqrt())
+        })
+        .collect();
+    for (a, &i) in live.iter().enumerate() {
+        let mut e = vec![0.0; m];
+        e[a] = 1.0;
+        let vif = solve(corr.clone(), e).map_or(f64::INFINITY, |x| x[a]);
+        if !(vif.abs() < 1e8) {
+            out.push(i);
+        }
+    }
+    out
+}
+
+/// Fits a display model to `set`'s captures (module docs): per colour with captures, Levenberg–Marquardt
+/// from the ideal display. A part the captures do not determine (a parameter with no effect on them, or one
+/// they cannot tell from others) is named in [`FitReport::warnings`] and kept ideal; colours without captures
+/// stay ideal.
+///
+/// Errors: [`HoloError::InvalidParameter`] for `iterations` outside `1..=500` or a `kernel_side` other than
+/// 1, 3 or 5; [`HoloError::ShapeMismatch`] for a truth model of another SLM size; those of the propagation.
+pub fn fit(set: &CaptureSet, options: &FitOptions) -> Result<FitReport> {
+    if !(1..=500).contains(&options.iterations) {
+        return Err(invalid("iterations", format!("{}; give 1 to 500", options.iterations)));
+    }
+    if ![1, 3, 5].contains(&options.kernel_side) {
+        return Err(invalid(
+            "kernel_side",
+            format!("{}; give 1, 3 or 5", options.kernel_side),
+        ));
+    }
+    options.setup.validate()?;
+    let (h, w) = set.size;
+    if let Some(t) = &options.truth {
+        t.check_size(h, w)?;
+    }
+    let mut report = FitReport {
+        model: DisplayModel {
+            slm_size: [h, w],
+            ..Default::default()
+        },
+        residuals: Vec::new(),
+        warnings: Vec::new(),
+        gains: [None; 3],
+        truth_errors: Vec::new(),
+    };
+    let mut residuals = vec![None; set.captures.len()];
+    for colour in 0..3 {
+        let problem = Problem::new(set, colour, options)?;
+        if problem.captures.is_empty() {
+            continue;
+        }
+        let layout = problem.layout;
+        let ranges = layout.ranges();
+        let mut free = [true, true, true, layout.kernel > 0, true, true];
+        let mut theta = layout.ideal();
+        // The gain at the ideal display in closed form, g = Σ I·|U|² / Σ |U|⁴ (at g = 1 the gain's column is
+        // |U|², so Σ J·r = Σ|U|⁴ − Σ I·|U|²).
+        let only_gain = [true, false, false, false, false, false];
+        let ideal = problem.evaluate(&theta, &only_gain, true);
+        let g = (ideal.jtj[0] - ideal.jtr[0]) / ideal.jtj[0].max(f64::MIN_POSITIVE);
+        theta[0] = g.max(1e-12).ln();
+        let ideal_rms = problem.evaluate(&theta, &only_gain, false).rms;
+        // Which parts do the captures determine? Judged at the ideal display.
+        let start = problem.evaluate(&theta, &free, true);
+        let idx: Vec<usize> = (0..6)
+            .filter(|&p| free[p] || p == 0)
+            .flat_map(|p| ranges[p].clone())
+            .collect();
+        for i in undetermined(&start.jtj, idx.len()) {
+            let k = idx[i];
+            let p = (0..6).find(|&p| ranges[p].contains(&k)).expect("in a part");
+            if p == 0 || !free[p] {
+                continue;
+            }
+            free[p] = false;
+            report.warnings.push(format!(
+                "{}.{}: parameter {} is not determined by the captures; the part is kept ideal",
+                COLOUR_KEYS[colour],
+                PARTS[p],
+                k - ranges[p].start
+            ));
+        }
+        for (p, r) in ranges.iter().enumerate() {
+            if !free[p] && p > 0 {
+                for k in r.clone() {
+                    theta[k] = layout.ideal()[k];
+                }
+            }
+        }
+        let idx: Vec<usize> = (0..6)
+            .filter(|&p| free[p] || p == 0)
+            .flat_map(|p| ranges[p].clone())
+            .collect();
+        let mut current = problem.evaluate(&theta, &free, true);
+        let mut lambda = 1e-3;
+        for _ in 0..options.iterations {
+            let np = idx.len();
+            let mut a = current.jtj.clone();
+            for i in 0..np {
+                a[i * np + i] *= 1.0 + lambda;
+                a[i * np + i] += 1e-30;
+            }
+            let b: Vec<f64> = current.jtr.iter().map(|v| -v).collect();
+            let Some(step) = solve(a, b) else { break };
+            let mut trial = theta.clone();
+            for (s, &k) in step.iter().zip(&idx) {
+                trial[k] += s;
+            }
+            let next = problem.evaluate(&trial, &free, true);
+            if next.cost.is_finite() && next.cost < current.cost {
+                let gain = (current.cost - next.cost) / current.cost.max(f64::MIN_POSITIVE);
+                theta = trial;
+                current = next;
+                lambda = (lambda / 3.0).max(1e-12);
+                if gain < 1e-9 {
+                    break;
+                }
+            } else {
+                lambda *= 4.0;
+                if lambda > 1e12 {
+                    break;
+                }
+            }
+        }
+        for (k, &ci) in problem.captures.iter().enumerate() {
+            residuals[ci] = Some(CaptureResidual {
+                capture: set.captures[ci].name.clone(),
+                rms: current.rms[k],
+                ideal_rms: ideal_rms[k],
+            });
+        }
+        report.gains[colour] = Some(theta[0].exp());
+        let (mut part, _) = layout.display(&theta, &free);
+        if free[2] {
+            match response_curve(theta[6], theta[7], theta[8]) {
+                Ok(c) => part.response = Some(c),
+                Err(e) => report.warnings.push(format!(
+                    "{}.response: the fitted curve is not a look-up table ({e}); kept ideal",
+                    COLOUR_KEYS[colour]
+                )),
+            }
+        }
+        if let Some([re, im]) = part.zero_order {
+            if re.hypot(im) >= 1.0 {
+                report.warnings.push(format!(
+                    "{}.zero_order: fitted |z| ≥ 1; kept ideal",
+                    COLOUR_KEYS[colour]
+                ));
+                part.zero_order = None;
+            }
+        }
+        if let Some(truth) = &options.truth {
+            report
+                .truth_errors
+                .extend(part_errors(colour, &part, &truth.colours[colour], (h, w)));
+        }
+        report.model.colours[colour] = part;
+    }
+    report.residuals = residuals.into_iter().flatten().collect();
+    report.model.validate().map_err(|e| {
+        HoloError::Internal(format!("the fitted display model does not validate: {e}"))
+    })?;
+    Ok(report)
+}
+
+/// The errors of `fitted` against `truth` for one colour: the source's relative amplitude (largest over the
+/// SLM, after both are scaled to mean 1), the response (largest phase difference over the codes, radians),
+/// the crosstalk (largest weight difference), the zero order (`|Δz|`) and the aberration (largest
+/// coefficient difference, radians).
+fn part_errors(
+    colour: usize,
+    fitted: &ColourDisplay,
+    truth: &ColourDisplay,
+    (h, w): (usize, usize),
+) -> Vec<PartError> {
+    let name = |p: &str| format!("{}.{p}", COLOUR_KEYS[colour]);
+    let mut out = Vec::new();
+    let amp = |c: &ColourDisplay| -> Vec<f64> {
+        let r = ColourRuntime::new(c, h, w);
+        let a: Vec<f64> = (0..h * w)
+            .map(|p| r.source.as_ref().map_or(1.0, |s| f64::from(s[p].norm())))
+            .collect();
+        let mean = a.iter().sum::<f64>() / a.len() as f64;
+        a.into_iter().map(|v| v / mean).collect()
+    };
+    let (fa, ta) = (amp(fitted), amp(truth));
+    out.push(PartError {
+        part: name("source"),
+        measure: "largest relative amplitude difference".into(),
+        error: fa.iter().zip(&ta).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max),
+    });
+    let curve = |c: &ColourDisplay| {
+        let r = ColourRuntime::new(c, 1, 1);
+        (0..256).map(move |k| f64::from(r.respond(k as f32).0))
+    };
+    out.push(PartError {
+        part: name("response"),
+        measure: "largest phase difference over the codes, rad".into(),
+        error: curve(fitted)
+            .zip(curve(truth))
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max),
+    });
+    let kernel = |c: &ColourDisplay, side: usize| -> Vec<f64> {
+        let mut k = vec![0.0; side * side];
+        match &c.crosstalk {
+            None => k[side * side / 2] = 1.0,
+            Some(x) => {
+                let (kr, kc) = (x.size[0], x.size[1]);
+                for a in 0..kr {
+                    for b in 0..kc {
+                        let (i, j) = (a + (side - kr) / 2, b + (side - kc) / 2);
+                        if i < side && j < side {
+                            k[i * side + j] = x.weights[a * kc + b];
+                        }
+                    }
+                }
+            }
+        }
+        k
+    };
+    let side = [fitted, truth]
+        .iter()
+        .filter_map(|c| c.crosstalk.as_ref().map(|x| x.size[0].max(x.size[1])))
+        .max()
+        .unwrap_or(1);
+    out.push(PartError {
+        part: name("crosstalk"),
+        measure: "largest kernel weight difference".into(),
+        error: kernel(fitted, side)
+            .iter()
+            .zip(&kernel(truth, side))
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max),
+    });
+    let z = |c: &ColourDisplay| c.zero_order.unwrap_or([0.0; 2]);
+    let (fz, tz) = (z(fitted), z(truth));
+    out.push(PartError {
+        part: name("zero_order"),
+        measure: "|Δz|".into(),
+        error: (fz[0] - tz[0]).hypot(fz[1] - tz[1]),
+    });
+    let a = |c: &ColourDisplay| c.aberration.unwrap_or_default().to_array();
+    out.push(PartError {
+        part: name("aberration"),
+        measure: "largest Zernike coefficient difference, rad".into(),
+        error: a(fitted)
+            .iter()
+            .zip(&a(truth))
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max),
+    });
+    out
+}
+
+#[cfg(test)]
+mod tests;
