@@ -596,8 +596,13 @@ fn refine_table(
                 let backend_report = session.backend_report().clone();
                 let (out, heads) = session.into_last_frame();
                 let midpoint = heads.context("no frame rendered")?.to_field()?;
-                let mut refiner =
-                    crate::refine::frame_refiner(request, &pipeline, &backend_report, threads)?;
+                let mut refiner = crate::refine::frame_refiner(
+                    request,
+                    &pipeline,
+                    &backend_report,
+                    threads,
+                    None,
+                )?;
                 let r = refiner.refine(
                     &[SceneLayer::from(&frame)],
                     Some(midpoint.view()),

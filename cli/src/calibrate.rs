@@ -234,6 +234,10 @@ enum CalibrateCommand {
     /// patterns, a simulated display and camera, and the fit into a tensorholo.aberration file
     /// (docs/ABERRATION.md, "Calibration from captures").
     Aberration(crate::calibrate_aberration::AberrationArgs),
+    /// A display model (source, SLM crosstalk, phase response, zero order, aberration) fitted from camera
+    /// captures, for `--refine N --display-model MODEL`: patterns and a capture plan, a simulated display,
+    /// and the fit (docs/CALIBRATION.md, "The display model").
+    Model(crate::calibrate_model::ModelArgs),
     /// Write the captures of a simulated SLM (spatially varying response, Gaussian beam, noise, dust; camera at
     /// 2× resolution) into OUT/red, OUT/green, OUT/blue, and its diffuser captures (the beam alone) as
     /// OUT/diffuser_red.png …, to try `holo calibrate lut` and `holo calibrate intensity` without hardware.
@@ -431,6 +435,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
             Ok(())
         }
         CalibrateCommand::Aberration(args) => crate::calibrate_aberration::run(args),
+        CalibrateCommand::Model(args) => crate::calibrate_model::run(args),
         CalibrateCommand::Simulate { size, seed, out } => {
             let sim = SimulatedSlm::new(size.0, size.1, *seed);
             sim.validate()?;

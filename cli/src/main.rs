@@ -9,6 +9,7 @@ mod baselines;
 mod bench;
 mod calibrate;
 mod calibrate_aberration;
+mod calibrate_model;
 mod compare;
 mod dataset;
 mod display;

@@ -180,7 +180,8 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
                 request,
                 display,
                 tensorholo::cnn::default_threads(),
-            )?;
+            )?
+            .with_display_model(args.refine.display_model()?)?;
             let r = refiner.refine_against(
                 hologram.midpoint.view(),
                 hologram.double_phase.phase.view(),

@@ -2,10 +2,12 @@
 //! refinement (`tensorholo::refine`, docs/REFINE.md), its progress in the log, and its part of report.json.
 
 use std::ops::ControlFlow;
+use std::sync::Arc;
 
 use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
+use tensorholo::display::model::DisplayModel;
 use tensorholo::pipeline::{HologramPipeline, SlmFrame};
 use tensorholo::refine::{
     loss_depths, FrameRefinement, FrameRefiner, IterationRecord, RefineDisplay, RefineOptions,
@@ -55,6 +57,10 @@ pub struct RefineCoreArgs {
     /// scores are taken halfway between them.
     #[arg(long, default_value_t = RefineOptions::default().planes, requires = "refine")]
     pub refine_planes: usize,
+    /// Refine through a fitted display model (tensorholo.display-model, `holo calibrate model fit`): the
+    /// codes are optimised, and scored at the held-out planes, as that display shows them (docs/REFINE.md).
+    #[arg(long, value_name = "MODEL", requires = "refine")]
+    pub display_model: Option<std::path::PathBuf>,
 }
 
 /// The refinement's flags of the CNN commands (`holo render`, `holo video`).
@@ -89,6 +95,18 @@ fn flag_of(e: &HoloError) -> &'static str {
 }
 
 impl RefineCoreArgs {
+    /// The `--display-model` file, read and checked.
+    pub fn display_model(&self) -> Result<Option<Arc<DisplayModel>>> {
+        self.display_model
+            .as_deref()
+            .map(|p| {
+                DisplayModel::load(p)
+                    .map(Arc::new)
+                    .map_err(|e| anyhow::Error::new(e).context("--display-model"))
+            })
+            .transpose()
+    }
+
     /// The refinement's options, checked, or `None` without --refine. Errors name the flag.
     pub fn options(&self) -> Result<Option<RefineOptions>> {
         let Some(iterations) = self.refine else {
@@ -157,6 +175,7 @@ pub fn frame_refiner(
     pipeline: &HologramPipeline,
     backend: &tensorholo::pipeline::BackendReport,
     threads: usize,
+    model: Option<Arc<DisplayModel>>,
 ) -> Result<FrameRefiner> {
     let cfg = pipeline.config();
     let display = RefineDisplay {
@@ -168,7 +187,9 @@ pub fn frame_refiner(
         viewer: pipeline.aberration().cloned(),
         viewer_corrected_by_cnn: pipeline.corrected_by_cnn(),
     };
-    let refiner = FrameRefiner::new(request, display, threads)?;
+    let refiner = FrameRefiner::new(request, display, threads)?
+        .with_display_model(model)
+        .map_err(|e| anyhow::Error::new(e).context("--display-model"))?;
     // The iterations run where the frames run: on the session's GPU when it has one.
     #[cfg(feature = "gpu")]
     let refiner = refiner.with_gpu(pipeline.frame_gpu_context(backend)?);

@@ -227,6 +227,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 &pipeline,
                 &backend_report,
                 args.model.thread_count(),
+                args.refine.core.display_model()?,
             )?;
             let midpoint = heads.to_field()?;
             let r = refiner.refine(

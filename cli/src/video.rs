@@ -426,6 +426,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
                 &pipeline,
                 session.backend_report(),
                 args.model.thread_count(),
+                args.refine.core.display_model()?,
             )?),
             None => None,
         };

@@ -83,7 +83,10 @@ fn entry_error(i: usize, what: &str, why: impl std::fmt::Display) -> HoloError {
 
 /// Reads a grey PNG `path` of `size` (or any size when `None`) as intensities in `[0, 1]` and its full-scale
 /// flags.
-fn read_grey(path: &Path, size: Option<(usize, usize)>) -> Result<(usize, usize, Vec<f32>, Vec<bool>)> {
+fn read_grey(
+    path: &Path,
+    size: Option<(usize, usize)>,
+) -> Result<(usize, usize, Vec<f32>, Vec<bool>)> {
     let (h, w) = png_size(path)?;
     if let Some(s) = size.filter(|&s| s != (h, w)) {
         return Err(HoloError::ShapeMismatch {
@@ -138,7 +141,11 @@ impl CaptureSet {
                 .iter()
                 .position(|&k| k == e.colour)
                 .ok_or_else(|| {
-                    entry_error(i, &e.pattern, format!("colour `{}`: red, green or blue", e.colour))
+                    entry_error(
+                        i,
+                        &e.pattern,
+                        format!("colour `{}`: red, green or blue", e.colour),
+                    )
                 })?;
             if !e.distance_m.is_finite() {
                 return Err(entry_error(
@@ -190,8 +197,8 @@ impl CaptureSet {
                     format!("the capture file of captures[{j}] too: one file per entry"),
                 ));
             }
-            let (_, _, intensity, clipped) =
-                read_grey(&capture_path, Some(set.size)).map_err(|err| entry_error(i, name, err))?;
+            let (_, _, intensity, clipped) = read_grey(&capture_path, Some(set.size))
+                .map_err(|err| entry_error(i, name, err))?;
             let saturated = clipped.iter().filter(|&&c| c).count();
             if saturated as f64 > MAX_SATURATED * clipped.len() as f64 {
                 return Err(entry_error(
@@ -241,13 +248,17 @@ pub fn write_manifest(path: &Path, entries: &[ManifestEntry]) -> Result<()> {
 /// 1-pixel gratings along rows and along columns (0/128 and 0/160), and a blazed grating of period 8.
 pub fn capture_patterns(height: usize, width: usize, seed: u64) -> Vec<Array2<u8>> {
     let mut rng = SplitMix64::new(seed);
-    let mut random = || Array2::from_shape_simple_fn((height, width), || (rng.next_f64() * 256.0) as u8);
+    let mut random =
+        || Array2::from_shape_simple_fn((height, width), || (rng.next_f64() * 256.0) as u8);
     let (a, b) = (random(), random());
-    let f = |g: &dyn Fn(usize, usize) -> u8| Array2::from_shape_fn((height, width), |(i, j)| g(i, j));
+    let f =
+        |g: &dyn Fn(usize, usize) -> u8| Array2::from_shape_fn((height, width), |(i, j)| g(i, j));
     let smooth = f(&|i, j| {
         let (x, y) = (j as f64 / width as f64, i as f64 / height as f64);
-        (127.5 + 120.0 * (std::f64::consts::TAU * (x + 0.5 * y)).sin() * (std::f64::consts::PI * y).cos())
-            as u8
+        (127.5
+            + 120.0
+                * (std::f64::consts::TAU * (x + 0.5 * y)).sin()
+                * (std::f64::consts::PI * y).cos()) as u8
     });
     vec![
         a,
@@ -289,7 +300,9 @@ pub fn draw_display(size: [usize; 2], colour: usize, seed: u64) -> DisplayModel 
             log_amplitude: [2.0 * x0 / w2, 2.0 * y0 / w2, -1.0 / w2, -1.0 / w2, 0.0],
             phase_rad: [0.0; 5],
         }),
-        response: Some(response_curve(s, r2, r3).expect("the drawn ranges keep the curve monotone")),
+        response: Some(
+            response_curve(s, r2, r3).expect("the drawn ranges keep the curve monotone"),
+        ),
         crosstalk: Some(Crosstalk {
             size: [3, 3],
             weights: vec![d, v, d, h, 1.0 - 2.0 * (h + v) - 4.0 * d, h, d, v, d],
@@ -304,7 +317,11 @@ pub fn draw_display(size: [usize; 2], colour: usize, seed: u64) -> DisplayModel 
 pub(crate) fn response_basis(k: usize) -> [f64; 3] {
     let x = k as f64 / 256.0;
     let t = std::f64::consts::TAU;
-    [t * x, t * x * (1.0 - x), t * (-2.0 * x * x * x + 3.0 * x * x - x)]
+    [
+        t * x,
+        t * x * (1.0 - x),
+        t * (-2.0 * x * x * x + 3.0 * x * x - x),
+    ]
 }
 
 /// The curve `s·b₀ + r₂·b₁ + r₃·b₂` ([`response_basis`]).
@@ -353,7 +370,11 @@ pub fn simulate_captures(
         out.push(intensity_of(&prop, &m, &unit, &mut field));
     }
     let peak = out.iter().flatten().fold(0.0f32, |a, &b| a.max(b));
-    let gain = if peak > 0.0 { 0.85 / f64::from(peak) } else { 1.0 };
+    let gain = if peak > 0.0 {
+        0.85 / f64::from(peak)
+    } else {
+        1.0
+    };
     let mut rng = SplitMix64::new(seed);
     let captures = out
         .into_iter()

@@ -346,7 +346,11 @@ impl<'a> Problem<'a> {
                     let du = if k == 0 {
                         None
                     } else if ranges[5].contains(&k) {
-                        Some(apply(&spectra[0], Some(&self.zernike[k - ranges[5].start]), &mut scratch))
+                        Some(apply(
+                            &spectra[0],
+                            Some(&self.zernike[k - ranges[5].start]),
+                            &mut scratch,
+                        ))
                     } else {
                         next += 1;
                         Some(apply(&spectra[next - 1], None, &mut scratch))
@@ -443,7 +447,8 @@ impl<'a> Problem<'a> {
                     .map(|p| {
                         let (i, j) = ((p / w) as isize, (p % w) as isize);
                         let q = ((i + dy).clamp(0, h as isize - 1) * w as isize
-                            + (j + dx).clamp(0, w as isize - 1)) as usize;
+                            + (j + dx).clamp(0, w as isize - 1))
+                            as usize;
                         let slope = runtime.respond(runtime.crossed[p]).1;
                         i_dphi(p, slope * (drive[q] - drive[p]))
                     })
@@ -528,7 +533,10 @@ fn undetermined(jtj: &[f64], np: usize) -> Vec<usize> {
 /// 1, 3 or 5; [`HoloError::ShapeMismatch`] for a truth model of another SLM size; those of the propagation.
 pub fn fit(set: &CaptureSet, options: &FitOptions) -> Result<FitReport> {
     if !(1..=500).contains(&options.iterations) {
-        return Err(invalid("iterations", format!("{}; give 1 to 500", options.iterations)));
+        return Err(invalid(
+            "iterations",
+            format!("{}; give 1 to 500", options.iterations),
+        ));
     }
     if ![1, 3, 5].contains(&options.kernel_side) {
         return Err(invalid(
@@ -695,7 +703,11 @@ fn part_errors(
     out.push(PartError {
         part: name("source"),
         measure: "largest relative amplitude difference".into(),
-        error: fa.iter().zip(&ta).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max),
+        error: fa
+            .iter()
+            .zip(&ta)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max),
     });
     let curve = |c: &ColourDisplay| {
         let r = ColourRuntime::new(c, 1, 1);

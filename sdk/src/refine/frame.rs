@@ -13,6 +13,7 @@ use super::{
     codes_of, displayed_phase, held_out_depths, initial_phase, loss_depths, FocalTarget,
     IterationRecord, RefineOptions, RefineReport, RefineStart, Refiner,
 };
+use crate::display::model::DisplayModel;
 use crate::display::AberrationProfile;
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
@@ -171,6 +172,8 @@ pub struct FrameRefiner {
     threads: usize,
     refiner: Option<Refiner>,
     previous: Option<Array3<f32>>,
+    /// The display model the loss sees ([`FrameRefiner::with_display_model`]).
+    model: Option<Arc<DisplayModel>>,
     /// The GPU the iterations run on ([`FrameRefiner::with_gpu`]), and the refinement uploaded to it at the
     /// first frame (later frames replace its target only).
     #[cfg(feature = "gpu")]
@@ -211,6 +214,7 @@ impl FrameRefiner {
             threads,
             refiner: None,
             previous: None,
+            model: None,
             #[cfg(feature = "gpu")]
             gpu: None,
             #[cfg(feature = "gpu")]
@@ -230,6 +234,43 @@ impl FrameRefiner {
     }
 
     /// The request it runs.
+    /// Refines through the fitted display `model` (`display::model`, docs/REFINE.md "Through a display
+    /// model"): the codes are optimised as that display shows them (source, crosstalk, phase response, zero
+    /// order, aberration), kept in 0…255 by a projected step, and the held-out scores are what it shows. The
+    /// model's response replaces a calibration's look-up table. On the GPU backend the iterations fall back
+    /// to the CPU (`RefinedFrame::backend_reason` says so). `None`, or a model without parts: the ideal
+    /// display, bit for bit.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`display_model`) for a model with a phase response beside a
+    /// calibration with a calibrated look-up table, or a model with an aberration beside a viewer's; a model
+    /// that does not validate ([`HoloError::InvalidData`] naming the entry). A model of another SLM size than
+    /// the frame's is refused at the first frame ([`HoloError::ShapeMismatch`]).
+    pub fn with_display_model(mut self, model: Option<Arc<DisplayModel>>) -> Result<Self> {
+        if let Some(m) = &model {
+            m.validate()?;
+            let calibrated = self
+                .display
+                .calibration
+                .as_deref()
+                .is_some_and(DisplayCalibration::has_calibrated_lut);
+            if calibrated {
+                return Err(invalid(
+                    "display_model",
+                    "a display model and a calibration's look-up table at once: the model's phase response                      replaces the table (fit the model from the captures instead)",
+                ));
+            }
+            if self.display.viewer.is_some() && m.colours.iter().any(|c| c.aberration.is_some()) {
+                return Err(invalid(
+                    "display_model",
+                    "a display model with an aberration and a viewer's aberration at once: give one",
+                ));
+            }
+        }
+        self.model = model;
+        self.refiner = None;
+        Ok(self)
+    }
+
     pub fn request(&self) -> &FrameRefinement {
         &self.request
     }
@@ -371,7 +412,8 @@ impl FrameRefiner {
                     self.threads,
                 )?
                 .with_calibration(calibration)?
-                .with_viewer(d.viewer.as_deref())?,
+                .with_viewer(d.viewer.as_deref())?
+                .with_display_model(self.model.as_deref())?,
             ),
         };
         let (start, start_kind) = match starts {

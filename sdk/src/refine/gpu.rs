@@ -55,6 +55,15 @@ impl Refiner {
                  on the CPU",
             ));
         }
+        if self.display.iter().any(Option::is_some) {
+            log::info!(
+                "the refinement through a display model runs on the CPU (the GPU's has none)"
+            );
+            return Err(invalid(
+                "calibration",
+                "the GPU refinement has no display model; a refinement through one runs on the CPU",
+            ));
+        }
         let (h, w) = self.target.size();
         let (rows, cols) = (
             self.plan.computational_shape().1,

@@ -30,6 +30,7 @@ use ndarray::{Array3, ArrayView3, ArrayViewMut3};
 use num_complex::Complex32;
 use rayon::prelude::*;
 
+use crate::display::model::{ColourRuntime, DisplayModel, LINEAR_SLOPE};
 use crate::display::AberrationProfile;
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::{check_colour_stack, OpticalSetup, Padding, PropagationOptions, SpectralPlan};
@@ -50,6 +51,10 @@ pub const MAX_ITERATIONS: usize = 10_000;
 
 /// The largest Adam step a refinement accepts, radians: `π` (a larger step jumps across whole fringes).
 pub const MAX_STEP_RAD: f32 = std::f32::consts::PI;
+
+/// The largest drive a refinement through a display model reaches, radians of the linear table: code 255,
+/// `2π·255/256`.
+const MAX_DRIVE_RAD: f32 = 255.0 * LINEAR_SLOPE;
 
 /// What a refinement does: its iteration count, its optimiser's settings and how many focal planes the loss
 /// sees. `Default`: 10 iterations, Adam with step 0.02 rad, `β₁ = 0.9`, `β₂ = 0.999`, `ε = 1e-8`, 7 loss
@@ -216,6 +221,8 @@ pub struct Refiner {
     model_inputs: (OpticalSetup, PropagationOptions, f64),
     /// The viewer's aberration the model sees through ([`Refiner::with_viewer`]).
     viewer: Option<AberrationProfile>,
+    /// Per colour the display model's SLM (`Refiner::with_display_model`); `None`: the ideal SLM.
+    display: Vec<Option<ColourRuntime>>,
 }
 
 /// Another focal stack's planes (e.g. the held-out ones) with their multipliers, seen as a [`Refiner`]'s model
@@ -354,6 +361,7 @@ impl Refiner {
             luts: [PhaseLut::linear(), PhaseLut::linear(), PhaseLut::linear()],
             model_inputs: (*setup, propagation, offset_m),
             viewer: None,
+            display: vec![None, None, None],
         })
     }
 
@@ -429,6 +437,43 @@ impl Refiner {
     pub(crate) fn with_viewer(mut self, viewer: Option<&AberrationProfile>) -> Result<Self> {
         self.viewer = viewer.cloned();
         self.colours = self.colour_models(self.target.depths())?;
+        Ok(self)
+    }
+
+    /// Refines through the display model `model` (`display::model`, docs/REFINE.md "Through a display
+    /// model"): the phase is then the SLM's drive in radians of the linear table (`2π·code/256`), kept in
+    /// `[0, 2π·255/256]` by a projected step instead of wrapping, and the loss sees
+    /// `u = S·(exp(i·R(K ∗ codes)) + z)` through the model's aberration. `None` or a model without parts: the
+    /// ideal display, bit for bit.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for a model of another SLM size; [`HoloError::InvalidParameter`]
+    /// (`display_model`) for a model with an aberration on a refiner that already sees through a viewer's;
+    /// those of remaking the multipliers.
+    pub(crate) fn with_display_model(mut self, model: Option<&DisplayModel>) -> Result<Self> {
+        let Some(model) = model.filter(|m| !m.is_ideal()) else {
+            return Ok(self);
+        };
+        let (h, w) = self.target.size();
+        model.validate()?;
+        model.check_size(h, w)?;
+        for (slot, part) in self.display.iter_mut().zip(&model.colours) {
+            *slot = Some(ColourRuntime::new(part, h, w));
+        }
+        if model.colours.iter().any(|c| c.aberration.is_some()) {
+            if self.viewer.is_some() {
+                return Err(invalid(
+                    "display_model",
+                    "a display model with an aberration and a viewer's aberration at once: give one",
+                ));
+            }
+            let coefficients =
+                std::array::from_fn(|c| model.colours[c].aberration.unwrap_or_default());
+            let optics = AberrationProfile::new(vec![crate::display::AberrationSample {
+                distance_m: 0.0,
+                coefficients,
+            }])?;
+            self = self.with_viewer(Some(&optics))?;
+        }
         Ok(self)
     }
 
@@ -511,6 +556,10 @@ impl Refiner {
         self.check_phase(phase.view())?;
         let t = Instant::now();
         let mut work = phase.as_standard_layout().into_owned();
+        if self.display.iter().any(Option::is_some) {
+            // Through a display model the phase is the drive: projected into the codes' range.
+            work.mapv_inplace(|p| p.rem_euclid(TAU).min(MAX_DRIVE_RAD));
+        }
         let n = self.plan.height() * self.plan.width();
         for s in &mut self.state {
             s.mean.clear();
@@ -576,6 +625,13 @@ impl Refiner {
         let mut grad = Array3::zeros((3, self.plan.height(), self.plan.width()));
         for (c, mut g) in grad.outer_iter_mut().enumerate() {
             let s = &self.state[c];
+            if let Some(model) = &mut self.display[c] {
+                model.backward(&s.field);
+                for (o, d) in g.iter_mut().zip(&model.grad) {
+                    *o = d / LINEAR_SLOPE;
+                }
+                continue;
+            }
             for ((o, g), u) in g.iter_mut().zip(&s.field).zip(&s.unit) {
                 *o = g.im * u.re - g.re * u.im;
             }
@@ -612,6 +668,7 @@ impl Refiner {
             pool,
             target,
             luts,
+            display,
             ..
         } = self;
         let (h, w) = (plan.height(), plan.width());
@@ -620,25 +677,37 @@ impl Refiner {
         let planes = target.depths().len();
         pool.install(|| {
             // 1. F{u} per colour.
-            state.par_iter_mut().enumerate().try_for_each(|(c, s)| {
-                let own = &phase[c * n..(c + 1) * n];
-                if quantised {
-                    luts[c].apply(h, w, own, &mut s.codes)?;
-                    luts[c].displayed_phases(h, w, &s.codes, &mut s.shown)?;
-                    unit_phasors(&s.shown, &mut s.unit);
-                } else {
-                    unit_phasors(own, &mut s.unit);
-                }
-                s.field.copy_from_slice(&s.unit);
-                fft.forward(&mut s.field, &mut s.spectrum, &mut s.scratch);
-                s.sums = (0.0, 0.0);
-                if gradient {
-                    // Made at the first gradient, kept after (a refiner that only scores never makes it).
-                    s.adjoint.resize(n, Complex32::new(0.0, 0.0));
-                    s.adjoint.fill(Complex32::new(0.0, 0.0));
-                }
-                Ok::<(), HoloError>(())
-            })?;
+            state
+                .par_iter_mut()
+                .zip(display.par_iter_mut())
+                .enumerate()
+                .try_for_each(|(c, (s, model))| {
+                    let own = &phase[c * n..(c + 1) * n];
+                    if let Some(model) = model {
+                        // The drive in codes (rounded where quantised: the gradient passes straight through).
+                        s.shown.resize(n, 0.0);
+                        for (d, &p) in s.shown.iter_mut().zip(own) {
+                            let v = (p / LINEAR_SLOPE).clamp(0.0, 255.0);
+                            *d = if quantised { v.round() } else { v };
+                        }
+                        model.forward(&s.shown, &mut s.unit);
+                    } else if quantised {
+                        luts[c].apply(h, w, own, &mut s.codes)?;
+                        luts[c].displayed_phases(h, w, &s.codes, &mut s.shown)?;
+                        unit_phasors(&s.shown, &mut s.unit);
+                    } else {
+                        unit_phasors(own, &mut s.unit);
+                    }
+                    s.field.copy_from_slice(&s.unit);
+                    fft.forward(&mut s.field, &mut s.spectrum, &mut s.scratch);
+                    s.sums = (0.0, 0.0);
+                    if gradient {
+                        // Made at the first gradient, kept after (a refiner that only scores never makes it).
+                        s.adjoint.resize(n, Complex32::new(0.0, 0.0));
+                        s.adjoint.fill(Complex32::new(0.0, 0.0));
+                    }
+                    Ok::<(), HoloError>(())
+                })?;
             // 2. The (colour, plane) terms in waves of one per slot, added to their colour in (colour, plane)
             //    order whatever the wave's size.
             let total = 3 * planes;
@@ -695,12 +764,13 @@ impl Refiner {
     fn step(&mut self, phase: &mut [f32], t: usize, n: usize) {
         let o = self.options;
         let (c1, c2) = (1.0 - o.beta1.powi(t as i32), 1.0 - o.beta2.powi(t as i32));
-        let state = &mut self.state;
+        let (state, display) = (&mut self.state, &mut self.display);
         self.pool.install(|| {
             phase
                 .par_chunks_mut(n)
                 .zip(state.par_iter_mut())
-                .for_each(|(p, s)| {
+                .zip(display.par_iter_mut())
+                .for_each(|((p, s), model)| {
                     let ColourState {
                         field,
                         unit,
@@ -708,18 +778,32 @@ impl Refiner {
                         square,
                         ..
                     } = s;
-                    for ((((p, g), u), m), v) in p
+                    // Through a display model: ∂L/∂drive back through the model (display::model), per radian
+                    // of the drive.
+                    let through = model.as_mut().map(|model| {
+                        model.backward(field);
+                        &model.grad[..]
+                    });
+                    for (i, ((((p, g), u), m), v)) in p
                         .iter_mut()
                         .zip(field.iter())
                         .zip(unit.iter())
                         .zip(mean)
                         .zip(square)
+                        .enumerate()
                     {
                         // ∂L/∂φ = Im(g·conj(u)), u = e^{iφ}.
-                        let grad = g.im * u.re - g.re * u.im;
+                        let grad = match through {
+                            Some(d) => d[i] / LINEAR_SLOPE,
+                            None => g.im * u.re - g.re * u.im,
+                        };
                         *m = o.beta1 * *m + (1.0 - o.beta1) * grad;
                         *v = o.beta2 * *v + (1.0 - o.beta2) * grad * grad;
                         *p -= o.step_rad * (*m / c1) / ((*v / c2).sqrt() + o.epsilon);
+                        if through.is_some() {
+                            // A projected step: the codes stay in 0…255 (wrapping diverged with crosstalk).
+                            *p = p.clamp(0.0, MAX_DRIVE_RAD);
+                        }
                     }
                 });
         });

@@ -1,1 +1,239 @@
+//! The display model's file, its validation, and the refinement through it: the ideal model bit for bit, the
+//! gradient through each part against finite differences, the projected step.
+
+use std::ops::ControlFlow;
+
+use ndarray::Array3;
+
 use super::*;
+use crate::display::model_captures::{draw_display, response_curve};
+use crate::refine::{loss_depths, FocalTarget, RefineOptions, Refiner};
+use crate::splitmix::SplitMix64;
+
+const OFFSET_M: f64 = 2e-3;
+
+fn target(h: usize, w: usize, seed: u64) -> FocalTarget {
+    let mut rng = SplitMix64::new(seed);
+    let mid = Array3::from_shape_simple_fn((3, h, w), || {
+        Complex32::from_polar(0.2 + rng.next_f64() as f32, (rng.next_f64() * 6.28) as f32)
+    });
+    FocalTarget::from_midpoint(
+        mid.view(),
+        &OpticalSetup::default(),
+        PropagationOptions::default(),
+        &loss_depths(3).unwrap(),
+    )
+    .unwrap()
+}
+
+fn refiner(h: usize, w: usize, quantised: bool, model: Option<&DisplayModel>) -> Refiner {
+    let options = RefineOptions {
+        quantised,
+        planes: 3,
+        ..Default::default()
+    };
+    Refiner::new(
+        &OpticalSetup::default(),
+        PropagationOptions::default(),
+        OFFSET_M,
+        target(h, w, 3),
+        options,
+        2,
+    )
+    .unwrap()
+    .with_display_model(model)
+    .unwrap()
+}
+
+/// A phase inside the drive's range, away from its ends (the projection's clamp has no gradient there).
+fn drive_phase(h: usize, w: usize, seed: u64) -> Array3<f32> {
+    let mut rng = SplitMix64::new(seed);
+    Array3::from_shape_simple_fn((3, h, w), || {
+        (0.2 + rng.next_f64() * (f64::from(255.0 * LINEAR_SLOPE) - 0.4)) as f32
+    })
+}
+
+fn with_part(h: usize, w: usize, f: impl Fn(&mut ColourDisplay)) -> DisplayModel {
+    let mut m = DisplayModel {
+        slm_size: [h, w],
+        ..Default::default()
+    };
+    for c in &mut m.colours {
+        f(c);
+    }
+    m
+}
+
+#[test]
+fn a_model_without_parts_refines_bit_for_bit_as_the_ideal_display() {
+    let (h, w) = (16, 20);
+    let start = drive_phase(h, w, 5);
+    let run = |model: Option<&DisplayModel>| {
+        let mut r = refiner(h, w, true, model);
+        let mut p = start.clone();
+        let report = r
+            .refine(p.view_mut(), &mut |_| ControlFlow::Continue(()))
+            .unwrap();
+        (p, report.history)
+    };
+    let ideal = run(None);
+    let empty = DisplayModel {
+        slm_size: [h, w],
+        ..Default::default()
+    };
+    let through = run(Some(&empty));
+    assert!(ideal
+        .0
+        .iter()
+        .zip(&through.0)
+        .all(|(a, b)| a.to_bits() == b.to_bits()));
+    assert_eq!(ideal.1, through.1);
+    // And the file of such a model reads back as one without parts.
+    let back = DisplayModel::from_json_str(&empty.to_json_string(), "t").unwrap();
+    assert!(back.is_ideal());
+}
+
+#[test]
+fn the_gradient_through_each_part_matches_finite_differences() {
+    let (h, w) = (12, 14);
+    let drawn = draw_display([h, w], 1, 4).colours[1].clone();
+    let parts: Vec<(&str, DisplayModel)> = vec![
+        ("source", with_part(h, w, |c| c.source = drawn.source)),
+        (
+            "response",
+            with_part(h, w, |c| {
+                c.response = Some(response_curve(1.05, 0.2, -0.1).unwrap())
+            }),
+        ),
+        (
+            "crosstalk",
+            with_part(h, w, |c| {
+                c.crosstalk = Some(Crosstalk {
+                    size: [3, 3],
+                    weights: vec![0.0, 0.08, 0.01, 0.12, 0.7, 0.05, 0.02, 0.02, 0.0],
+                })
+            }),
+        ),
+        (
+            "zero_order",
+            with_part(h, w, |c| c.zero_order = Some([0.2, -0.1])),
+        ),
+        (
+            "aberration",
+            with_part(h, w, |c| c.aberration = drawn.aberration),
+        ),
+        ("all", with_part(h, w, |c| *c = drawn.clone())),
+    ];
+    for (name, model) in parts {
+        let mut r = refiner(h, w, false, Some(&model));
+        let phase = drive_phase(h, w, 8);
+        let (_, grad) = r.loss_and_gradient(phase.view());
+        let scale = grad.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        assert!(scale > 0.0, "{name}");
+        let mut rng = SplitMix64::new(9);
+        let step = 2e-3f32;
+        for _ in 0..10 {
+            let (c, y, x) = (
+                (rng.next_f64() * 3.0) as usize,
+                (rng.next_f64() * h as f64) as usize,
+                (rng.next_f64() * w as f64) as usize,
+            );
+            let mut plus = phase.clone();
+            plus[[c, y, x]] += step;
+            let mut minus = phase.clone();
+            minus[[c, y, x]] -= step;
+            let fd = (r.score(plus.view()).unwrap().loss - r.score(minus.view()).unwrap().loss)
+                / (2.0 * f64::from(step));
+            let an = f64::from(grad[[c, y, x]]);
+            assert!(
+                (fd - an).abs() <= 0.03 * f64::from(scale),
+                "{name}: pixel ({c}, {y}, {x}): finite difference {fd}, analytic {an} (largest {scale})"
+            );
+        }
+    }
+}
+
+#[test]
+fn refinement_through_a_model_keeps_the_codes_in_range_and_lowers_its_loss() {
+    let (h, w) = (16, 16);
+    let model = draw_display([h, w], 1, 2);
+    let mut model3 = model.clone();
+    model3.colours = [
+        model.colours[1].clone(),
+        model.colours[1].clone(),
+        model.colours[1].clone(),
+    ];
+    let mut r = refiner(h, w, true, Some(&model3));
+    // A start that wraps: values beyond 2π and below 0 are projected into the drive's range.
+    let mut p = drive_phase(h, w, 1).mapv(|v| v * 1.3 - 0.5);
+    let report = r
+        .refine(p.view_mut(), &mut |_| ControlFlow::Continue(()))
+        .unwrap();
+    assert!(p.iter().all(|&v| (0.0..=255.0 * LINEAR_SLOPE).contains(&v)));
+    let (first, last) = (report.history[0].loss, report.history.last().unwrap().loss);
+    assert!(last < 0.9 * first, "loss {first} → {last}");
+}
+
+#[test]
+fn bad_model_files_are_refused_naming_the_entry() {
+    let base = r#"{"format": "tensorholo.display-model", "version": 1, "slm_size": [8, 8], "green": PART}"#;
+    let cases = [
+        (r#"{"bogus": {}}"#, "bogus"),
+        (
+            r#"{"crosstalk": {"size": [2, 3], "weights": [0, 0, 0, 0, 1, 0]}}"#,
+            "green.crosstalk",
+        ),
+        (r#"{"zero_order": [0.8, 0.7]}"#, "green.zero_order"),
+        (r#"{"zero_order": [1.0, 0.0]}"#, "green.zero_order"),
+        (
+            r#"{"source": {"log_amplitude": [1e999, 0, 0, 0, 0]}}"#,
+            "source",
+        ),
+    ];
+    for (part, named) in cases {
+        let text = base.replace("PART", part);
+        let e = DisplayModel::from_json_str(&text, "m.json")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(named) && e.contains("m.json"), "{part}: {e}");
+    }
+    let mut m = with_part(8, 8, |c| {
+        c.crosstalk = Some(Crosstalk {
+            size: [3, 3],
+            weights: vec![0.0, 0.0, 0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0],
+        })
+    });
+    assert!(m
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("red.crosstalk"));
+    m.colours = Default::default();
+    m.colours[2].aberration = Some(ZernikeCoefficients {
+        focus: f64::INFINITY,
+        ..Default::default()
+    });
+    assert!(m
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("blue.aberration"));
+    // Another SLM size than the frame's.
+    let model = with_part(8, 8, |c| c.zero_order = Some([0.1, 0.0]));
+    let e = Refiner::new(
+        &OpticalSetup::default(),
+        PropagationOptions::default(),
+        OFFSET_M,
+        target(16, 16, 1),
+        RefineOptions::default(),
+        1,
+    )
+    .unwrap()
+    .with_display_model(Some(&model))
+    .unwrap_err();
+    assert!(matches!(e, HoloError::ShapeMismatch { .. }), "{e}");
+    // A model reads back as written.
+    let drawn = draw_display([8, 8], 0, 3);
+    let back = DisplayModel::from_json_str(&drawn.to_json_string(), "t").unwrap();
+    assert_eq!(back, drawn);
+}
