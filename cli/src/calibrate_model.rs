@@ -9,7 +9,8 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use tensorholo::display::model::{DisplayModel, COLOUR_KEYS};
 use tensorholo::display::model_captures::{
-    capture_patterns, draw_display, simulate_captures, write_manifest, CaptureSet, ManifestEntry,
+    capture_patterns, simulate_display, ManifestEntry, ManifestFile, CAPTURES_FORMAT,
+    CAPTURES_VERSION,
 };
 use tensorholo::display::model_fit::{fit, FitOptions};
 use tensorholo::optics::OpticalSetup;
@@ -105,6 +106,20 @@ enum ModelCommand {
         #[arg(long)]
         out: PathBuf,
     },
+}
+
+/// Writes a capture manifest of `entries` to `path` atomically.
+fn write_manifest(path: &Path, entries: &[ManifestEntry]) -> Result<()> {
+    let file = ManifestFile {
+        format: CAPTURES_FORMAT.into(),
+        version: CAPTURES_VERSION,
+        captures: entries.to_vec(),
+    };
+    tensorholo::io::write_atomic(
+        path,
+        (serde_json::to_string_pretty(&file)? + "\n").as_bytes(),
+    )?;
+    Ok(())
 }
 
 /// The optics and SLM size of `--display` / `--size`.
@@ -253,19 +268,9 @@ pub fn run(args: &ModelArgs) -> Result<()> {
                 bail!("--noise {noise}: give 0 to 0.5 (of full scale)");
             }
             let (setup, slm, entries) = plan.resolve()?;
-            let mut truth = DisplayModel {
-                slm_size: slm,
-                ..Default::default()
-            };
-            for c in 0..3 {
-                if entries.iter().any(|e| e.1 == c) {
-                    truth.colours[c] =
-                        draw_display(slm, c, seed.wrapping_add(c as u64)).colours[c].clone();
-                }
-            }
             let (patterns, manifest) = plan.write_patterns(out, slm, &entries, true)?;
-            let (captures, gain) =
-                simulate_captures(&truth, &setup, &patterns, &entries, *noise, *seed)?;
+            let sim = simulate_display(slm, &setup, &patterns, &entries, *noise, *seed)?;
+            let (captures, gain, truth) = (sim.captures, sim.gain, sim.truth);
             for (e, img) in manifest.iter().zip(&captures) {
                 let name = e.capture.as_deref().expect("named");
                 write_grey_png(&out.join(name), img.view(), 16)?;
@@ -296,16 +301,6 @@ pub fn run(args: &ModelArgs) -> Result<()> {
             inputs.extend(truth.as_deref().map(|t| Input::file("--truth", t)));
             guard("--out", out, &inputs)?;
             let (setup, slm) = optics_of(display.as_deref(), *size)?;
-            let set = CaptureSet::read(captures).context("--captures")?;
-            if let Some(s) = slm.filter(|s| *s != [set.size.0, set.size.1]) {
-                bail!(
-                    "--size/--display: the SLM is {}x{}, the manifest's patterns {}x{}",
-                    s[0],
-                    s[1],
-                    set.size.0,
-                    set.size.1
-                );
-            }
             let truth = truth
                 .as_deref()
                 .map(DisplayModel::load)
@@ -318,7 +313,16 @@ pub fn run(args: &ModelArgs) -> Result<()> {
                 truth,
             };
             let t = std::time::Instant::now();
-            let report = fit(&set, &options)?;
+            let report = fit(captures, &options).context("--captures")?;
+            if let Some(s) = slm.filter(|s| *s != report.model.slm_size) {
+                bail!(
+                    "--size/--display: the SLM is {}x{}, the manifest's patterns {}x{}",
+                    s[0],
+                    s[1],
+                    report.model.slm_size[0],
+                    report.model.slm_size[1]
+                );
+            }
             for r in &report.residuals {
                 eprintln!(
                     "{}: residual {:.5} (RMS, of full scale; the ideal display {:.5})",
@@ -334,7 +338,7 @@ pub fn run(args: &ModelArgs) -> Result<()> {
             report.model.save(out)?;
             eprintln!(
                 "fitted {} captures in {:.2} s; wrote the display model {}",
-                set.captures.len(),
+                report.residuals.len(),
                 t.elapsed().as_secs_f64(),
                 out.display()
             );

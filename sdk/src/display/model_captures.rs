@@ -41,17 +41,22 @@ pub struct ManifestEntry {
     pub capture: Option<String>,
 }
 
-#[derive(Serialize, Deserialize)]
+/// A capture manifest (`tensorholo.captures` version 1, docs/CALIBRATION.md): what a bench writes, and what
+/// `holo calibrate model patterns` writes without the `capture` entries.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct ManifestFile {
-    format: String,
-    version: u32,
-    captures: Vec<ManifestEntry>,
+pub struct ManifestFile {
+    /// [`CAPTURES_FORMAT`].
+    pub format: String,
+    /// [`CAPTURES_VERSION`].
+    pub version: u32,
+    /// The entries.
+    pub captures: Vec<ManifestEntry>,
 }
 
 /// One capture as the fit reads it.
 #[derive(Debug, Clone)]
-pub struct Capture {
+pub(crate) struct Capture {
     /// The manifest's name of the capture file.
     pub name: String,
     /// Index into [`CaptureSet::patterns`].
@@ -68,7 +73,7 @@ pub struct Capture {
 
 /// A manifest's patterns and captures, checked and read.
 #[derive(Debug, Clone)]
-pub struct CaptureSet {
+pub(crate) struct CaptureSet {
     /// The SLM size `(height, width)`, that of every pattern.
     pub size: (usize, usize),
     /// The patterns' codes, `[H, W]` row-major each.
@@ -110,7 +115,7 @@ impl CaptureSet {
     /// pattern, colour and distance twice, one capture file in two entries, patterns of different sizes, a
     /// saturated capture (more than [`MAX_SATURATED`] of its pixels at full scale), no capture at all;
     /// [`HoloError::ShapeMismatch`] for a capture of another size than its pattern.
-    pub fn read(path: &Path) -> Result<Self> {
+    pub(crate) fn read(path: &Path) -> Result<Self> {
         let text = crate::io::read_text(path)?;
         let file: ManifestFile = crate::io::parse_json_object(&text, "a capture manifest")
             .map_err(|e| {
@@ -230,19 +235,6 @@ impl CaptureSet {
     }
 }
 
-/// Writes a capture manifest `path` of `entries` atomically.
-///
-/// Errors: [`HoloError::Io`] naming `path`.
-pub fn write_manifest(path: &Path, entries: &[ManifestEntry]) -> Result<()> {
-    let file = ManifestFile {
-        format: CAPTURES_FORMAT.into(),
-        version: CAPTURES_VERSION,
-        captures: entries.to_vec(),
-    };
-    let text = serde_json::to_string_pretty(&file).expect("a manifest always serialises");
-    crate::io::write_atomic(path, (text + "\n").as_bytes())
-}
-
 /// The 8 test patterns `[height, width]` that determine every part of a display model from 3 distances:
 /// random codes (two seeds from `seed`), a smooth phase, two 1-pixel checkerboards (0/128 and 64/224),
 /// 1-pixel gratings along rows and along columns (0/128 and 0/160), and a blazed grating of period 8.
@@ -273,17 +265,17 @@ pub fn capture_patterns(height: usize, width: usize, seed: u64) -> Vec<Array2<u8
 }
 
 /// A simulated display's hidden parameters for colour `colour` of an SLM of `size` `[height, width]`, drawn
-/// with `seed` from the ranges of docs/CALIBRATION.md: a Gaussian beam (centre within ±0.25, waist 0.9–1.6 of
+/// with `seed` from the ranges of docs/CALIBRATION.md: a Gaussian beam (centre within ±0.2, waist 1.3–2.0 of
 /// the half-width), a response `2π·(s·x + r₂·x(1−x) + r₃·(−2x³ + 3x² − x))` (`s` 0.92–1.08, `r₂` ±0.25, `r₃`
-/// ±0.15), crosstalk of 2–6 % to each horizontal and 1–5 % to each vertical neighbour (0–1 % diagonal, a
+/// ±0.15), crosstalk of 1.5–4 % to each horizontal and 1–3 % to each vertical neighbour (0–0.5 % diagonal, a
 /// kernel summing to 1), a zero order of modulus 0.03–0.08 and a focus and astigmatism of ±0.4 rad each.
-pub fn draw_display(size: [usize; 2], colour: usize, seed: u64) -> DisplayModel {
+pub(crate) fn draw_display(size: [usize; 2], colour: usize, seed: u64) -> DisplayModel {
     let mut rng = SplitMix64::new(seed ^ 0x5eed_d15b);
     let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.next_f64();
-    let (x0, y0, w) = (u(-0.25, 0.25), u(-0.25, 0.25), u(0.9, 1.6));
+    let (x0, y0, w) = (u(-0.2, 0.2), u(-0.2, 0.2), u(1.3, 2.0));
     let w2 = w * w;
     let (s, r2, r3) = (u(0.92, 1.08), u(-0.25, 0.25), u(-0.15, 0.15));
-    let (h, v, d) = (u(0.02, 0.06), u(0.01, 0.05), u(0.0, 0.01));
+    let (h, v, d) = (u(0.015, 0.04), u(0.01, 0.03), u(0.0, 0.005));
     let (zm, za) = (u(0.03, 0.08), u(0.0, std::f64::consts::TAU));
     let aberration = ZernikeCoefficients {
         focus: u(-0.4, 0.4),
@@ -344,7 +336,7 @@ pub(crate) fn response_curve(s: f64, r2: f64, r3: f64) -> Result<PhaseCurve> {
 ///
 /// Errors: [`HoloError::ShapeMismatch`] for patterns of another size than the model's; those of the
 /// propagation.
-pub fn simulate_captures(
+pub(crate) fn simulate_captures(
     model: &DisplayModel,
     setup: &OpticalSetup,
     patterns: &[Array2<u8>],
@@ -387,6 +379,57 @@ pub fn simulate_captures(
         })
         .collect();
     Ok((captures, gain))
+}
+
+/// A simulated display and its captures ([`simulate_display`]).
+#[derive(Debug, Clone)]
+pub struct SimulatedCaptures {
+    /// The hidden parameters: per colour of the plan, parts drawn from the ranges of docs/CALIBRATION.md
+    /// (seed `seed + colour`); the other colours ideal.
+    pub truth: DisplayModel,
+    /// Per plan entry the capture `[H, W]`, in units of full scale.
+    pub captures: Vec<Array2<f32>>,
+    /// The set's gain `g` (the brightest pixel at 0.85 of full scale).
+    pub gain: f64,
+}
+
+/// Captures of a simulated display of SLM size `size` `[height, width]` on `setup`, its hidden parameters
+/// drawn with `seed` for each colour `plan` names (the ranges of docs/CALIBRATION.md), for each
+/// `(pattern index, colour, distance_m)` of `plan`: one gain for the set, Gaussian noise of standard deviation
+/// `noise` (of full scale), clamped to `[0, 1]`.
+///
+/// Errors: [`HoloError::InvalidData`] for a plan naming a pattern that is not there, a colour above 2, a
+/// non-finite distance or noise; [`HoloError::ShapeMismatch`] for patterns of another size; those of the
+/// propagation.
+pub fn simulate_display(
+    size: [usize; 2],
+    setup: &OpticalSetup,
+    patterns: &[Array2<u8>],
+    plan: &[(usize, usize, f64)],
+    noise: f32,
+    seed: u64,
+) -> Result<SimulatedCaptures> {
+    if plan.iter().any(|e| e.1 > 2 || !e.2.is_finite()) || !noise.is_finite() {
+        return Err(HoloError::InvalidData(
+            "the simulated plan's colours are 0 to 2, its distances and noise finite".into(),
+        ));
+    }
+    let mut truth = DisplayModel {
+        slm_size: size,
+        ..Default::default()
+    };
+    for c in 0..3 {
+        if plan.iter().any(|e| e.1 == c) {
+            truth.colours[c] =
+                draw_display(size, c, seed.wrapping_add(c as u64)).colours[c].clone();
+        }
+    }
+    let (captures, gain) = simulate_captures(&truth, setup, patterns, plan, noise, seed)?;
+    Ok(SimulatedCaptures {
+        truth,
+        captures,
+        gain,
+    })
 }
 
 /// A standard normal deviate (Box–Muller).

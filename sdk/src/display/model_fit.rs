@@ -185,7 +185,6 @@ struct Normal {
 /// One colour's problem.
 struct Problem<'a> {
     set: &'a CaptureSet,
-    colour: usize,
     captures: Vec<usize>,
     layout: Layout,
     plan: SpectralPlan,
@@ -240,7 +239,6 @@ impl<'a> Problem<'a> {
         let side = options.kernel_side;
         Ok(Self {
             set,
-            colour,
             captures,
             layout: Layout {
                 kernel: side * side - 1,
@@ -524,6 +522,16 @@ fn undetermined(jtj: &[f64], np: usize) -> Vec<usize> {
     out
 }
 
+/// Fits a display model to the captures of the manifest `manifest` (`tensorholo.captures`, read as
+/// `CaptureSet::read` reads it: every file checked first), as [`fit_set`] does.
+///
+/// Errors: those of reading the manifest, each naming the entry (a missing file, a capture of another size
+/// than its pattern, patterns of different sizes, a duplicate entry, a non-finite distance, a saturated
+/// capture); as below.
+pub fn fit(manifest: &std::path::Path, options: &FitOptions) -> Result<FitReport> {
+    fit_set(&CaptureSet::read(manifest)?, options)
+}
+
 /// Fits a display model to `set`'s captures (module docs): per colour with captures, Levenberg–Marquardt
 /// from the ideal display. A part the captures do not determine (a parameter with no effect on them, or one
 /// they cannot tell from others) is named in [`FitReport::warnings`] and kept ideal; colours without captures
@@ -531,7 +539,7 @@ fn undetermined(jtj: &[f64], np: usize) -> Vec<usize> {
 ///
 /// Errors: [`HoloError::InvalidParameter`] for `iterations` outside `1..=500` or a `kernel_side` other than
 /// 1, 3 or 5; [`HoloError::ShapeMismatch`] for a truth model of another SLM size; those of the propagation.
-pub fn fit(set: &CaptureSet, options: &FitOptions) -> Result<FitReport> {
+pub(crate) fn fit_set(set: &CaptureSet, options: &FitOptions) -> Result<FitReport> {
     if !(1..=500).contains(&options.iterations) {
         return Err(invalid(
             "iterations",

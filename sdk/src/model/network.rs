@@ -1,6 +1,6 @@
 //! [`HologramModel`]: one ONNX CNN, decoded ([`super::onnx`]) and checked against the I/O contract and
 //! metadata of `docs/CONVENTIONS.md` §7. The engines run it: the native CPU engine and the GPU path through
-//! [`HologramModel::cnn_graph`]; tract (cargo feature `tract`) from [`HologramModel::file_bytes`], in its own
+//! [`HologramModel::cnn_graph`]; tract (cargo feature `tract`) from `HologramModel::file_bytes`, in its own
 //! cache (`cnn/tract/`). The model holds no engine's state.
 
 use std::collections::BTreeMap;
@@ -246,13 +246,13 @@ impl HologramModel {
     }
 
     /// The ONNX file's bytes, as loaded (what an engine that parses the file itself reads, e.g. tract).
-    pub fn file_bytes(&self) -> &[u8] {
+    pub(crate) fn file_bytes(&self) -> &[u8] {
         &self.bytes
     }
 
     /// The input's `[height, width]` where the file fixes them (`None` where symbolic, as the shipped files
     /// leave both).
-    pub fn fixed_size(&self) -> [Option<usize>; 2] {
+    pub(crate) fn fixed_size(&self) -> [Option<usize>; 2] {
         self.fixed
     }
 

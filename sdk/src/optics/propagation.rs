@@ -503,7 +503,7 @@ impl SpectralPlan {
     /// bit-identical to `inverse` with the full multiplier it stands for.
     ///
     /// Errors: [`HoloError::ShapeMismatch`] on wrong lengths or a multiplier of another grid.
-    pub fn inverse_even(
+    pub(crate) fn inverse_even(
         &self,
         spectrum: &[Complex32],
         multiplier: &EvenMultiplier,

@@ -233,7 +233,6 @@ impl FrameRefiner {
         self
     }
 
-    /// The request it runs.
     /// Refines through the fitted display `model` (`display::model`, docs/REFINE.md "Through a display
     /// model"): the codes are optimised as that display shows them (source, crosstalk, phase response, zero
     /// order, aberration), kept in 0…255 by a projected step, and the held-out scores are what it shows. The
@@ -271,6 +270,7 @@ impl FrameRefiner {
         Ok(self)
     }
 
+    /// The request it runs.
     pub fn request(&self) -> &FrameRefinement {
         &self.request
     }

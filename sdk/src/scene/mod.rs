@@ -66,7 +66,7 @@ pub use load::{
 pub use procedural::{default_scene, default_scene_ldi};
 #[cfg(feature = "research")]
 pub use random::{
-    ldi_from_fragments, list_photos, random_ldi, Fragment, RandomSceneConfig, RandomSceneGenerator,
+    ldi_from_fragments, random_ldi, Fragment, RandomSceneConfig, RandomSceneGenerator,
 };
 #[cfg(feature = "research")]
 pub use recording::{open_recording, Recording, RecordingFrame, RecordingKind};

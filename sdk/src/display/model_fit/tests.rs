@@ -55,7 +55,7 @@ fn the_fit_recovers_a_simulated_display_drawn_from_ranges() {
         let truth = draw_display([48, 48], 1, seed);
         let set = simulated_set(&truth, &[1], 8, &DISTANCES, 0.01);
         let t = std::time::Instant::now();
-        let report = fit(
+        let report = fit_set(
             &set,
             &FitOptions {
                 truth: Some(truth.clone()),
@@ -95,7 +95,7 @@ fn too_few_captures_name_the_parts_they_do_not_determine() {
     let mut set = simulated_set(&truth, &[1], 8, &DISTANCES[..1], 0.01);
     set.patterns[0].fill(100);
     set.captures.retain(|c| c.pattern == 0);
-    let report = fit(&set, &FitOptions::default()).unwrap();
+    let report = fit_set(&set, &FitOptions::default()).unwrap();
     let named = report.warnings.join("\n");
     assert!(named.contains("green.crosstalk"), "{named}");
     assert!(named.contains("green.response"), "{named}");
@@ -164,7 +164,7 @@ fn refinement_through_the_fitted_model_beats_the_ideal_display_at_unseen_planes(
         .map(|&d| setup.depth_to_z(d) - offset)
         .collect();
     let set = simulated_set(&truth, &[0, 1, 2], 8, &distances, 0.01);
-    let fitted = fit(&set, &FitOptions::default()).unwrap();
+    let fitted = fit_set(&set, &FitOptions::default()).unwrap();
     assert!(fitted.warnings.is_empty(), "{:?}", fitted.warnings);
     let refine = |model: Option<&DisplayModel>| {
         let target = FocalTarget::from_midpoint(

@@ -59,7 +59,7 @@ const PHOTO_EXTENSIONS: [&str; 5] = ["png", "jpg", "jpeg", "ppm", "pgm"];
 ///
 /// Errors: [`HoloError::Io`] if the folder cannot be read; [`HoloError::InvalidParameter`]
 /// (`photo_folder`) if it holds no such file.
-pub fn list_photos(folder: &Path) -> Result<Vec<PathBuf>> {
+pub(crate) fn list_photos(folder: &Path) -> Result<Vec<PathBuf>> {
     let io = |source| HoloError::Io {
         path: folder.to_path_buf(),
         source,
@@ -100,9 +100,9 @@ pub struct RandomSceneGenerator {
 
 impl RandomSceneGenerator {
     /// Validates `config` and loads the photos of [`RandomSceneConfig::photo_folder`] (see
-    /// [`list_photos`]), each downscaled to at most [`RandomSceneConfig::photo_max_side`] pixels.
+    /// `list_photos`), each downscaled to at most [`RandomSceneConfig::photo_max_side`] pixels.
     ///
-    /// Errors: as `RandomSceneConfig::validate` and [`list_photos`]; [`HoloError::Io`] /
+    /// Errors: as `RandomSceneConfig::validate` and `list_photos`; [`HoloError::Io`] /
     /// [`HoloError::Image`] naming a photo that cannot be read or decoded.
     pub fn new(config: RandomSceneConfig) -> Result<Self> {
         config.validate()?;
