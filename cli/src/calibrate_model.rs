@@ -108,6 +108,13 @@ enum ModelCommand {
     },
 }
 
+/// Writes a display model to `path` atomically (its JSON form, `tensorholo.display-model`).
+fn save_model(path: &Path, model: &DisplayModel) -> Result<()> {
+    let text = serde_json::to_string_pretty(model)? + "\n";
+    tensorholo::io::write_atomic(path, text.as_bytes())?;
+    Ok(())
+}
+
 /// Writes a capture manifest of `entries` to `path` atomically.
 fn write_manifest(path: &Path, entries: &[ManifestEntry]) -> Result<()> {
     let file = ManifestFile {
@@ -153,9 +160,12 @@ fn optics_of(
     })
 }
 
+/// The optics, SLM size and the plan's `(pattern, colour, distance_m)` entries.
+type Resolved = (OpticalSetup, [usize; 2], Vec<(usize, usize, f64)>);
+
 impl PlanArgs {
     /// The optics, SLM size, colours, distances (m) and the manifest entries `(pattern, colour, distance)`.
-    fn resolve(&self) -> Result<(OpticalSetup, [usize; 2], Vec<(usize, usize, f64)>)> {
+    fn resolve(&self) -> Result<Resolved> {
         let (setup, slm) = optics_of(self.display.as_deref(), self.size)?;
         let slm = slm.context("give the SLM: --size HEIGHTxWIDTH or --display PROFILE.json")?;
         let colours: Vec<usize> = self
@@ -276,7 +286,7 @@ pub fn run(args: &ModelArgs) -> Result<()> {
                 write_grey_png(&out.join(name), img.view(), 16)?;
             }
             write_manifest(&out.join("manifest.json"), &manifest)?;
-            truth.save(&out.join("hidden.json"))?;
+            save_model(&out.join("hidden.json"), &truth)?;
             eprintln!(
                 "wrote {} captures of a simulated {}x{} display (gain {gain:.4}, noise {noise}), manifest.json and \
                  its hidden parameters hidden.json to {}",
@@ -335,7 +345,7 @@ pub fn run(args: &ModelArgs) -> Result<()> {
             for e in &report.truth_errors {
                 eprintln!("{}: {} {:.5}", e.part, e.measure, e.error);
             }
-            report.model.save(out)?;
+            save_model(out, &report.model)?;
             eprintln!(
                 "fitted {} captures in {:.2} s; wrote the display model {}",
                 report.residuals.len(),

@@ -83,7 +83,7 @@ pub fn rule_tolerance(score_db: f64) -> f64 {
 
 /// The non-paraxial residual (radians) of serving a display with the model of another: the largest
 /// `|φ'(f') − φ(f'·p'/p)|` over `f' ∈ [0, 1/(2p')]` (the user grid's Nyquist band along an axis), where
-/// `φ'` is the carrier-free transfer phase ([`carrier_free_phase_rad`]) at the user's `(λ', z')` and `φ` the
+/// `φ'` is the carrier-free transfer phase (`optics::carrier_free_phase_rad`) at the user's `(λ', z')` and `φ` the
 /// training display's at `(λ, z)`, at the same frequency index of both grids. Paraxially both are
 /// `−π·λ·z·f²` and cancel when `λ'·z'/p'² = λ·z/p²`; what remains is the `f⁴` term and beyond.
 ///

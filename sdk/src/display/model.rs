@@ -167,7 +167,7 @@ impl ColourDisplay {
         }
         if let Some([re, im]) = self.zero_order {
             let m = re.hypot(im);
-            if !(m < 1.0) {
+            if m.is_nan() || m >= 1.0 {
                 return bad(
                     "zero_order",
                     format!("|z| = {m}: the undiffracted fraction is finite and below 1"),
@@ -193,8 +193,10 @@ impl ColourDisplay {
 ///            "zero_order": [0.05, -0.02], "aberration": {"focus": 0.3}}}
 /// ```
 ///
-/// A colour without an entry is ideal; unknown keys are refused.
-#[derive(Debug, Clone, Default, PartialEq)]
+/// A colour without an entry is ideal; unknown keys are refused. Serialises to this form (`serde_json`);
+/// [`DisplayModel::load`] reads it, validating every part.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "ModelFile", into = "ModelFile")]
 pub struct DisplayModel {
     /// The SLM's `[height, width]` in pixels.
     pub slm_size: [usize; 2],
@@ -202,7 +204,7 @@ pub struct DisplayModel {
     pub colours: [ColourDisplay; 3],
 }
 
-#[derive(Serialize, Deserialize)]
+#[derive(Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ModelFile {
     format: String,
@@ -259,33 +261,16 @@ impl DisplayModel {
     /// unknown part or key, a value of the wrong type, and those of validation (kernel of even size,
     /// non-finite values, `|zero_order| ≥ 1`, a response curve that decreases).
     pub(crate) fn from_json_str(text: &str, source: &str) -> Result<Self> {
-        let refuse = |why: String| {
+        crate::io::parse_json_object::<Self>(text, "a display model").map_err(|e| {
             HoloError::InvalidData(format!(
                 "`{source}` is not a valid display model ({DISPLAY_MODEL_FORMAT} version \
-                 {DISPLAY_MODEL_VERSION}, docs/CALIBRATION.md): {why}"
+                 {DISPLAY_MODEL_VERSION}, docs/CALIBRATION.md): {e}"
             ))
-        };
-        let file: ModelFile = crate::io::parse_json_object(text, "a display model")
-            .map_err(|e| refuse(e.to_string()))?;
-        if file.format != DISPLAY_MODEL_FORMAT || file.version != DISPLAY_MODEL_VERSION {
-            return Err(refuse(format!(
-                "format `{}` version {}",
-                file.format, file.version
-            )));
-        }
-        let model = Self {
-            slm_size: file.slm_size,
-            colours: [
-                file.red.unwrap_or_default(),
-                file.green.unwrap_or_default(),
-                file.blue.unwrap_or_default(),
-            ],
-        };
-        model.validate().map_err(|e| refuse(e.to_string()))?;
-        Ok(model)
+        })
     }
 
-    /// Reads a model file (`tensorholo.display-model`, the struct's docs).
+    /// Reads a model file (`tensorholo.display-model`, the struct's docs; written by `serde_json` from the
+    /// model, which serialises to that form).
     ///
     /// Errors: [`HoloError::Io`] if unreadable; [`HoloError::InvalidData`] naming the file and the entry at
     /// fault (an unknown part, a kernel of even size, non-finite values, a zero-order fraction of 1 or more).
@@ -295,26 +280,43 @@ impl DisplayModel {
     }
 
     /// The JSON form, pretty-printed, which [`DisplayModel::load`] reads back.
+    #[cfg(test)]
     pub(crate) fn to_json_string(&self) -> String {
-        let part = |c: usize| Some(self.colours[c].clone()).filter(|p| !p.is_ideal());
-        let file = ModelFile {
+        serde_json::to_string_pretty(self).expect("a display model always serialises")
+    }
+}
+
+impl TryFrom<ModelFile> for DisplayModel {
+    type Error = String;
+
+    fn try_from(file: ModelFile) -> std::result::Result<Self, String> {
+        if file.format != DISPLAY_MODEL_FORMAT || file.version != DISPLAY_MODEL_VERSION {
+            return Err(format!("format `{}` version {}", file.format, file.version));
+        }
+        let model = Self {
+            slm_size: file.slm_size,
+            colours: [
+                file.red.unwrap_or_default(),
+                file.green.unwrap_or_default(),
+                file.blue.unwrap_or_default(),
+            ],
+        };
+        model.validate().map_err(|e| e.to_string())?;
+        Ok(model)
+    }
+}
+
+impl From<DisplayModel> for ModelFile {
+    fn from(model: DisplayModel) -> Self {
+        let [red, green, blue] = model.colours.map(|p| Some(p).filter(|p| !p.is_ideal()));
+        Self {
             format: DISPLAY_MODEL_FORMAT.into(),
             version: DISPLAY_MODEL_VERSION,
-            slm_size: self.slm_size,
-            red: part(0),
-            green: part(1),
-            blue: part(2),
-        };
-        serde_json::to_string_pretty(&file).expect("a display model always serialises")
-    }
-
-    /// Writes the JSON form to `path` atomically (`io::write_atomic`).
-    ///
-    /// Errors: [`HoloError::InvalidData`] for a model that does not validate (nothing written);
-    /// [`HoloError::Io`] naming `path`.
-    pub fn save(&self, path: &Path) -> Result<()> {
-        self.validate()?;
-        crate::io::write_atomic(path, (self.to_json_string() + "\n").as_bytes())
+            slm_size: model.slm_size,
+            red,
+            green,
+            blue,
+        }
     }
 }
 

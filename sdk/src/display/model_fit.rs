@@ -515,7 +515,7 @@ fn undetermined(jtj: &[f64], np: usize) -> Vec<usize> {
         let mut e = vec![0.0; m];
         e[a] = 1.0;
         let vif = solve(corr.clone(), e).map_or(f64::INFINITY, |x| x[a]);
-        if !(vif.abs() < 1e8) {
+        if vif.is_nan() || vif.abs() >= 1e8 {
             out.push(i);
         }
     }
@@ -568,7 +568,7 @@ pub(crate) fn fit_set(set: &CaptureSet, options: &FitOptions) -> Result<FitRepor
         truth_errors: Vec::new(),
     };
     let mut residuals = vec![None; set.captures.len()];
-    for colour in 0..3 {
+    for (colour, key) in COLOUR_KEYS.iter().enumerate() {
         let problem = Problem::new(set, colour, options)?;
         if problem.captures.is_empty() {
             continue;
@@ -599,7 +599,7 @@ pub(crate) fn fit_set(set: &CaptureSet, options: &FitOptions) -> Result<FitRepor
             free[p] = false;
             report.warnings.push(format!(
                 "{}.{}: parameter {} is not determined by the captures; the part is kept ideal",
-                COLOUR_KEYS[colour],
+                key,
                 PARTS[p],
                 k - ranges[p].start
             ));
@@ -660,16 +660,15 @@ pub(crate) fn fit_set(set: &CaptureSet, options: &FitOptions) -> Result<FitRepor
                 Ok(c) => part.response = Some(c),
                 Err(e) => report.warnings.push(format!(
                     "{}.response: the fitted curve is not a look-up table ({e}); kept ideal",
-                    COLOUR_KEYS[colour]
+                    key
                 )),
             }
         }
         if let Some([re, im]) = part.zero_order {
             if re.hypot(im) >= 1.0 {
-                report.warnings.push(format!(
-                    "{}.zero_order: fitted |z| ≥ 1; kept ideal",
-                    COLOUR_KEYS[colour]
-                ));
+                report
+                    .warnings
+                    .push(format!("{}.zero_order: fitted |z| ≥ 1; kept ideal", key));
                 part.zero_order = None;
             }
         }

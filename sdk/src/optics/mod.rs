@@ -16,9 +16,10 @@ use num_complex::Complex32;
 use rayon::prelude::*;
 
 pub use filter::FourierFilter;
+pub(crate) use propagation::carrier_free_phase_rad;
 pub use propagation::{
-    carrier_free_phase_rad, Carrier, EvenMultiplier, Padding, PropagationOptions, Propagator,
-    Scratch, SpectralPlan, TransferFunction,
+    Carrier, EvenMultiplier, Padding, PropagationOptions, Propagator, Scratch, SpectralPlan,
+    TransferFunction,
 };
 pub use reconstruct::{focal_stack, post_encoding_midpoint, simulate_phase_only};
 pub use zernike::{ZernikeCoefficients, MAX_COEFFICIENT_RAD};

@@ -503,7 +503,7 @@ impl SpectralPlan {
     /// bit-identical to `inverse` with the full multiplier it stands for.
     ///
     /// Errors: [`HoloError::ShapeMismatch`] on wrong lengths or a multiplier of another grid.
-    pub(crate) fn inverse_even(
+    pub fn inverse_even(
         &self,
         spectrum: &[Complex32],
         multiplier: &EvenMultiplier,
@@ -815,7 +815,7 @@ pub(crate) fn transfer_phase_rad(
 /// The carrier-free transfer phase (the propagator's, with [`Carrier::Remove`]) at wavelength
 /// `wavelength_m` and squared radial frequency `f2` (cycles² per m²) over `distance_m` metres, radians;
 /// `None` for an evanescent frequency.
-pub fn carrier_free_phase_rad(wavelength_m: f64, distance_m: f64, f2: f64) -> Option<f64> {
+pub(crate) fn carrier_free_phase_rad(wavelength_m: f64, distance_m: f64, f2: f64) -> Option<f64> {
     let inv = 1.0 / wavelength_m;
     transfer_phase_rad(inv, inv * inv, distance_m, f2, Carrier::Remove)
 }

@@ -411,7 +411,7 @@ impl CaptureStack for PngCaptureDir {
 ///
 /// Errors: [`HoloError::InvalidData`] for a capture smaller than the SLM; [`HoloError::ShapeMismatch`] for
 /// buffers of the wrong length.
-pub(crate) fn downsample(
+pub fn downsample(
     capture: ndarray::ArrayView2<f32>,
     slm: (usize, usize),
     out: &mut [f32],

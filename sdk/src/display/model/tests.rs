@@ -15,7 +15,10 @@ const OFFSET_M: f64 = 2e-3;
 fn target(h: usize, w: usize, seed: u64) -> FocalTarget {
     let mut rng = SplitMix64::new(seed);
     let mid = Array3::from_shape_simple_fn((3, h, w), || {
-        Complex32::from_polar(0.2 + rng.next_f64() as f32, (rng.next_f64() * 6.28) as f32)
+        Complex32::from_polar(
+            0.2 + rng.next_f64() as f32,
+            (rng.next_f64() * std::f64::consts::TAU) as f32,
+        )
     });
     FocalTarget::from_midpoint(
         mid.view(),
