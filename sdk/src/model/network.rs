@@ -131,7 +131,8 @@ fn check_contract(graph: &pb::GraphProto, md: &ModelMetadata) -> std::result::Re
 pub struct HologramModel {
     metadata: ModelMetadata,
     source_name: String,
-    /// The ONNX file as loaded.
+    /// The ONNX file as loaded (read by the tract engine).
+    #[cfg_attr(not(feature = "tract"), allow(dead_code))]
     bytes: Arc<[u8]>,
     /// The file's ONNX graph as decoded (weights included), read by [`super::graph`].
     graph: Arc<pb::GraphProto>,
@@ -246,12 +247,14 @@ impl HologramModel {
     }
 
     /// The ONNX file's bytes, as loaded (what an engine that parses the file itself reads, e.g. tract).
+    #[cfg(feature = "tract")]
     pub(crate) fn file_bytes(&self) -> &[u8] {
         &self.bytes
     }
 
     /// The input's `[height, width]` where the file fixes them (`None` where symbolic, as the shipped files
     /// leave both).
+    #[cfg(feature = "tract")]
     pub(crate) fn fixed_size(&self) -> [Option<usize>; 2] {
         self.fixed
     }
