@@ -438,3 +438,6 @@ fn gaussian(rng: &mut SplitMix64) -> f32 {
     let u2 = rng.next_f64();
     ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
 }
+
+#[cfg(test)]
+mod tests;
