@@ -110,11 +110,11 @@ impl CaptureSet {
     /// Reads the manifest `path` (`tensorholo.captures` version 1, docs/CALIBRATION.md), its patterns and
     /// captures (paths relative to its folder). Entries without a capture are skipped.
     ///
-    /// Errors, each naming the entry (`captures[3]`) and its file: [`HoloError::Io`] for a missing file;
-    /// [`HoloError::InvalidData`] for another format, an unknown colour, a non-finite distance, the same
-    /// pattern, colour and distance twice, one capture file in two entries, patterns of different sizes, a
-    /// saturated capture (more than [`MAX_SATURATED`] of its pixels at full scale), no capture at all;
-    /// [`HoloError::ShapeMismatch`] for a capture of another size than its pattern.
+    /// Errors: [`HoloError::Io`] for an unreadable manifest; [`HoloError::InvalidData`] for another format,
+    /// no capture at all, and each bad entry, naming it (`captures[3]`) and its file: a missing or unreadable
+    /// file, an unknown colour, a non-finite distance, the same pattern, colour and distance twice, one
+    /// capture file in two entries, patterns of different sizes, a capture of another size than its pattern,
+    /// a saturated capture (more than [`MAX_SATURATED`] of its pixels at full scale).
     pub(crate) fn read(path: &Path) -> Result<Self> {
         let text = crate::io::read_text(path)?;
         let file: ManifestFile = crate::io::parse_json_object(&text, "a capture manifest")

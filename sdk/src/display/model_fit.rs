@@ -522,23 +522,23 @@ fn undetermined(jtj: &[f64], np: usize) -> Vec<usize> {
     out
 }
 
-/// Fits a display model to the captures of the manifest `manifest` (`tensorholo.captures`, read as
-/// `CaptureSet::read` reads it: every file checked first), as [`fit_set`] does.
+/// Fits a display model to the captures of the manifest `manifest` (`tensorholo.captures`,
+/// docs/CALIBRATION.md; every file checked before the fit): per colour with captures, Levenberg–Marquardt
+/// from the ideal display (module docs). A part the captures do not determine (a parameter with no effect on
+/// them, or one they cannot tell from others) is named in [`FitReport::warnings`] and kept ideal; colours
+/// without captures stay ideal. Nothing is written: the caller writes [`FitReport::model`].
 ///
-/// Errors: those of reading the manifest, each naming the entry (a missing file, a capture of another size
-/// than its pattern, patterns of different sizes, a duplicate entry, a non-finite distance, a saturated
-/// capture); as below.
+/// Errors: [`HoloError::Io`] for an unreadable manifest; [`HoloError::InvalidData`] for one that is not a
+/// capture manifest, and for each bad entry, naming it (`captures[3]`) and its file: a missing or unreadable
+/// file, a capture of another size than its pattern, patterns of different sizes, a duplicate entry, a
+/// non-finite distance, a saturated capture; [`HoloError::InvalidParameter`] for
+/// `iterations` outside `1..=500` or a `kernel_side` other than 1, 3 or 5; [`HoloError::ShapeMismatch`] for a
+/// truth model of another SLM size; those of the propagation.
 pub fn fit(manifest: &std::path::Path, options: &FitOptions) -> Result<FitReport> {
     fit_set(&CaptureSet::read(manifest)?, options)
 }
 
-/// Fits a display model to `set`'s captures (module docs): per colour with captures, Levenberg–Marquardt
-/// from the ideal display. A part the captures do not determine (a parameter with no effect on them, or one
-/// they cannot tell from others) is named in [`FitReport::warnings`] and kept ideal; colours without captures
-/// stay ideal.
-///
-/// Errors: [`HoloError::InvalidParameter`] for `iterations` outside `1..=500` or a `kernel_side` other than
-/// 1, 3 or 5; [`HoloError::ShapeMismatch`] for a truth model of another SLM size; those of the propagation.
+/// [`fit`] on a capture set already read.
 pub(crate) fn fit_set(set: &CaptureSet, options: &FitOptions) -> Result<FitReport> {
     if !(1..=500).contains(&options.iterations) {
         return Err(invalid(
