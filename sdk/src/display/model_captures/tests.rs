@@ -117,7 +117,7 @@ fn bad_manifests_are_refused_naming_the_entry() {
     let path = bench(dir.path(), |_| {});
     let text = std::fs::read_to_string(&path)
         .unwrap()
-        .replace("0.003", "1e999");
+        .replace("\"distance_m\":0.003", "\"distance_m\":1e999");
     std::fs::write(&path, text).unwrap();
     let err = CaptureSet::read(&path).unwrap_err().to_string();
     assert!(err.contains("captures[1].distance_m"), "{err}");
