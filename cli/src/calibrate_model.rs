@@ -164,6 +164,17 @@ fn optics_of(
 type Resolved = (OpticalSetup, [usize; 2], Vec<(usize, usize, f64)>);
 
 impl PlanArgs {
+    /// Refuses an `--out` that would overwrite or sit among the inputs.
+    fn guard(&self, out: &Path) -> Result<()> {
+        let inputs: Vec<Input> = self
+            .display
+            .as_deref()
+            .map(|d| Input::file("--display", d))
+            .into_iter()
+            .collect();
+        guard("--out", out, &inputs)
+    }
+
     /// The optics, SLM size, colours, distances (m) and the manifest entries `(pattern, colour, distance)`.
     fn resolve(&self) -> Result<Resolved> {
         let (setup, slm) = optics_of(self.display.as_deref(), self.size)?;
@@ -225,13 +236,7 @@ impl PlanArgs {
 pub fn run(args: &ModelArgs) -> Result<()> {
     match &args.command {
         ModelCommand::Patterns { plan, out } => {
-            let inputs: Vec<Input> = plan
-                .display
-                .as_deref()
-                .map(|d| Input::file("--display", d))
-                .into_iter()
-                .collect();
-            guard("--out", out, &inputs)?;
+            plan.guard(out)?;
             let (_, slm, entries) = plan.resolve()?;
             let (_, manifest) = plan.write_patterns(out, slm, &entries, false)?;
             write_manifest(&out.join("manifest.json"), &manifest)?;
@@ -267,13 +272,7 @@ pub fn run(args: &ModelArgs) -> Result<()> {
             noise,
             out,
         } => {
-            let inputs: Vec<Input> = plan
-                .display
-                .as_deref()
-                .map(|d| Input::file("--display", d))
-                .into_iter()
-                .collect();
-            guard("--out", out, &inputs)?;
+            plan.guard(out)?;
             if !(noise.is_finite() && (0.0..=0.5).contains(noise)) {
                 bail!("--noise {noise}: give 0 to 0.5 (of full scale)");
             }

@@ -103,6 +103,19 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         let (h, w) = scene.size();
         g.check(h, w).context("--gaze")?;
     }
+    // A display model of another SLM size than the frame's stops the command before anything is written.
+    let display_model = args.refine.core.display_model()?;
+    if let Some(m) = &display_model {
+        let (h, w) = scene.size();
+        if m.slm_size != [h, w] {
+            anyhow::bail!(
+                "--display-model: the model is fitted for a {}x{} SLM, the frame is {h}x{w} (render at the \
+                 model's size, or fit a model for this one)",
+                m.slm_size[0],
+                m.slm_size[1]
+            );
+        }
+    }
     crate::output::prepare(&args.out, &inputs)?;
     let (h, w) = scene.size();
     // What runs: the model file's own depth and precision (a --model file need not match --layers/--precision).
@@ -227,7 +240,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 &pipeline,
                 &backend_report,
                 args.model.thread_count(),
-                args.refine.core.display_model()?,
+                display_model.clone(),
             )?;
             let midpoint = heads.to_field()?;
             let r = refiner.refine(

@@ -1,0 +1,130 @@
+//! `holo calibrate model` (docs/CALIBRATION.md, "The display model"): patterns and plan, a simulated display's
+//! captures, the fit against its hidden parameters, and `holo render --refine --display-model` through the
+//! fitted model; bad input refused naming the entry, with nothing written.
+
+mod common;
+
+use std::path::Path;
+
+use common::{holo, stderr};
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn simulate_fit_and_refine_through_the_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, model) = (
+        dir.path().join("sim"),
+        dir.path().join("display.model.json"),
+    );
+    let o = holo(&[
+        "calibrate",
+        "model",
+        "simulate",
+        "--size",
+        "32x32",
+        "--seed",
+        "4",
+        "--out",
+        s(&sim),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(sim.join("pattern_7.png").exists() && sim.join("capture_23.png").exists());
+    let o = holo(&[
+        "calibrate",
+        "model",
+        "fit",
+        "--captures",
+        s(&sim.join("manifest.json")),
+        "--truth",
+        s(&sim.join("hidden.json")),
+        "--out",
+        s(&model),
+    ]);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    // The fitted crosstalk within 0.005 of the hidden one, every capture's residual at the noise's level.
+    let crosstalk: f64 = err
+        .lines()
+        .find_map(|l| l.strip_prefix("green.crosstalk: largest kernel weight difference "))
+        .expect("the crosstalk's error")
+        .trim()
+        .parse()
+        .unwrap();
+    assert!(crosstalk < 0.005, "{err}");
+    assert_eq!(
+        err.matches("residual 0.01").count() + err.matches("residual 0.00").count(),
+        24,
+        "{err}"
+    );
+    let out = dir.path().join("render");
+    let o = holo(&[
+        "render",
+        "--size",
+        "32x32",
+        "--refine",
+        "2",
+        "--refine-levels",
+        "16",
+        "--display-model",
+        s(&model),
+        "--out",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.join("report.json").exists());
+    // A model of another SLM size than the frame's: refused, nothing written.
+    let other = dir.path().join("other");
+    let o = holo(&[
+        "render",
+        "--size",
+        "40x40",
+        "--refine",
+        "2",
+        "--display-model",
+        s(&model),
+        "--out",
+        s(&other),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--display-model"), "{}", stderr(&o));
+    assert!(!other.exists());
+}
+
+#[test]
+fn patterns_write_a_plan_and_bad_manifests_write_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = dir.path().join("plan");
+    let o = holo(&[
+        "calibrate",
+        "model",
+        "patterns",
+        "--size",
+        "16x24",
+        "--colours",
+        "red,green",
+        "--out",
+        s(&plan),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let manifest = std::fs::read_to_string(plan.join("manifest.json")).unwrap();
+    assert_eq!(manifest.matches("\"pattern\"").count(), 8 * 2 * 3);
+    assert!(!manifest.contains("\"capture\""));
+    assert!(plan.join("capture_plan.txt").exists());
+    // The plan without captures: refused, no model written.
+    let out = dir.path().join("m.json");
+    let o = holo(&[
+        "calibrate",
+        "model",
+        "fit",
+        "--captures",
+        s(&plan.join("manifest.json")),
+        "--out",
+        s(&out),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("no capture"), "{}", stderr(&o));
+    assert!(!out.exists());
+}
