@@ -10,8 +10,8 @@ use crate::slm::simulate::write_grey_png;
 /// A folder with two 8×8 patterns, three captures and their manifest; `edit` changes the entries first.
 fn bench(dir: &Path, edit: impl FnOnce(&mut Vec<ManifestEntry>)) -> std::path::PathBuf {
     let patterns = capture_patterns(8, 8, 1);
-    for k in 0..2 {
-        crate::io::save_u8_png(&dir.join(format!("p{k}.png")), patterns[k].view()).unwrap();
+    for (k, p) in patterns.iter().take(2).enumerate() {
+        crate::io::save_u8_png(&dir.join(format!("p{k}.png")), p.view()).unwrap();
     }
     let grey = Array2::from_shape_fn((8, 8), |(i, j)| (i * 8 + j) as f32 / 100.0);
     for k in 0..3 {
@@ -132,8 +132,8 @@ fn a_few_saturated_pixels_are_left_out_of_the_fit() {
     write_grey_png(&dir.path().join("c0.png"), img.view(), 16).unwrap();
     // Another size than the patterns' now: make the patterns 16×16 too.
     let patterns = capture_patterns(16, 16, 1);
-    for k in 0..2 {
-        crate::io::save_u8_png(&dir.path().join(format!("p{k}.png")), patterns[k].view()).unwrap();
+    for (k, p) in patterns.iter().take(2).enumerate() {
+        crate::io::save_u8_png(&dir.path().join(format!("p{k}.png")), p.view()).unwrap();
     }
     for k in 1..3 {
         write_grey_png(
