@@ -784,7 +784,7 @@ pub const DEFAULT_MIN_CONFIDENCE: u8 = 1;
 ///
 /// Errors: [`HoloError::Io`] / [`HoloError::Image`] naming `path`; [`HoloError::InvalidDepth`] for samples
 /// of more than 8 bits or an empty image.
-pub fn decode_confidence_file(path: &Path) -> Result<Array2<u8>> {
+pub(crate) fn decode_confidence_file(path: &Path) -> Result<Array2<u8>> {
     let bytes = crate::io::read_bytes(path)?;
     let img = crate::io::decode_image(path, &bytes)?;
     let (w, h) = (img.width() as usize, img.height() as usize);

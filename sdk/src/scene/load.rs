@@ -223,11 +223,11 @@ pub fn load_rgbd(
 
 /// [`load_rgbd`] with the depth map's confidence map `confidence` (an 8-bit file at the depth map's
 /// resolution: ARKit's `confidenceMap`, Stray Scanner's `confidence/N.png`, ARCore's raw depth confidence;
-/// [`crate::scene::decode_confidence_file`]): depth pixels below `options.min_confidence` are invalid before
+/// `scene::depth::decode_confidence_file`): depth pixels below `options.min_confidence` are invalid before
 /// the sanity checks, the upsampling and the hole filling, so uncertain depth takes its confident
 /// neighbours' values and is never read as near.
 ///
-/// Errors: those of [`load_rgbd`]; those of [`crate::scene::decode_confidence_file`] and
+/// Errors: those of [`load_rgbd`]; those of `scene::depth::decode_confidence_file` and
 /// [`crate::scene::apply_confidence`] (another resolution than the depth map's), naming the file.
 pub fn load_rgbd_with_confidence(
     rgb: &Path,

@@ -52,9 +52,9 @@ pub use camera::{
     DepthImage, DepthImageBuf, Fit, FrameOptions, Rotation,
 };
 pub use depth::{
-    apply_confidence, decode_confidence_file, decode_depth, decode_depth_bytes, decode_depth_file,
-    fill_invalid, normalise_depth, DecodedDepth, DepthEncoding, DepthMapping, DepthRange,
-    DEFAULT_MIN_CONFIDENCE, MAX_DEPTH_ASPECT_MISMATCH,
+    apply_confidence, decode_depth, decode_depth_bytes, decode_depth_file, fill_invalid,
+    normalise_depth, DecodedDepth, DepthEncoding, DepthMapping, DepthRange, DEFAULT_MIN_CONFIDENCE,
+    MAX_DEPTH_ASPECT_MISMATCH,
 };
 pub use frame::{LayeredDepthImage, LdiLayer, RgbdFrame};
 pub use ldi_files::{
