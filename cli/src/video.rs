@@ -11,6 +11,7 @@ use serde_json::json;
 use tensorholo::encoding::{align_global_phase, phase_churn, PhaseChurn};
 use tensorholo::io::{ensure_not_input, save_u8_png};
 use tensorholo::pipeline::Backend;
+use tensorholo::refine::FrameRefiner;
 use tensorholo::scene::{
     load_rgbd_with_confidence, open_recording, DepthEncoding, DepthRange, LoadOptions, Recording,
     RgbdFrame,
@@ -421,7 +422,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         let mut previous: Option<ndarray::Array3<u8>> = None;
         let mut churns = Vec::new();
         let mut refiner = match refine {
-            Some(request) => Some(crate::refine::frame_refiner(
+            Some(request) => Some(FrameRefiner::for_pipeline(
                 request,
                 &pipeline,
                 session.backend_report(),
