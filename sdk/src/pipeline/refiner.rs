@@ -8,7 +8,8 @@ use super::models::HologramPipeline;
 use super::report::BackendReport;
 use crate::display::AberrationProfile;
 use crate::error::Result;
-use crate::refine::{FrameRefinement, FrameRefiner, RefineDevice, RefineDisplay};
+use crate::refine::device::RefineDevice;
+use crate::refine::frame::{FrameRefinement, FrameRefiner, RefineDisplay};
 use crate::slm::DisplayCalibration;
 
 impl FrameRefiner {

@@ -469,7 +469,7 @@ mod tests {
     use std::path::Path;
     use std::sync::Arc;
 
-    use ndarray::Array3;
+    use ndarray::{Array3, Axis};
 
     use crate::cnn::{CnnEngine, CnnOptions};
     use crate::error::HoloError;

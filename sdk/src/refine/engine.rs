@@ -1,7 +1,7 @@
 //! The engine of a refinement, in two parts as a planner and its plan: [`Refiner::new`] plans one frame
 //! size, display, SLM offset and target (the loss planes' multipliers, the FFT plan, the per-colour buffers
 //! and the optimiser's state, made once), and the process runs it (the loss, its analytic gradient, Adam's
-//! step; [`Refiner::refine`] through [`super::device::drive`], which the GPU's iterations share).
+//! step; [`Refiner::refine`] through [`super::iterations::drive`], which the GPU's iterations share).
 
 use std::f32::consts::TAU;
 use std::ops::ControlFlow;
@@ -12,7 +12,7 @@ use ndarray::{ArrayView3, ArrayViewMut3};
 use num_complex::Complex32;
 use rayon::prelude::*;
 
-use super::device::{check_start, drive, loss_record, Iterations};
+use super::iterations::{check_start, drive, loss_record, Iterations};
 use super::model::{add_conj_product, plane_term, ColourModel};
 use super::options::{IterationRecord, RefineOptions, RefineReport};
 use super::target::FocalTarget;
@@ -201,19 +201,27 @@ impl Refiner {
             .collect()
     }
 
+    /// Checks that `target` has this refiner's size (`what` names the two in the error).
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`].
+    fn check_size(&self, target: &FocalTarget, what: &str) -> Result<()> {
+        let ((h, w), (th, tw)) = (self.target.size(), target.size());
+        if (th, tw) == (h, w) {
+            return Ok(());
+        }
+        Err(HoloError::ShapeMismatch {
+            what: what.into(),
+            expected: vec![3, h, w],
+            got: vec![3, th, tw],
+        })
+    }
+
     /// The planes of `target` (its own depths, e.g. [`held_out_depths`]) as this refiner's model sees them
     /// (display, offset, viewer), for [`Refiner::score_planes`].
     ///
     /// Errors: [`HoloError::ShapeMismatch`] for a target of another size; those of making the multipliers.
     pub(crate) fn plane_set(&self, target: FocalTarget) -> Result<PlaneSet> {
-        if target.size() != self.target.size() {
-            let ((h, w), (th, tw)) = (self.target.size(), target.size());
-            return Err(HoloError::ShapeMismatch {
-                what: "plane set's target vs the refiner's".into(),
-                expected: vec![3, h, w],
-                got: vec![3, th, tw],
-            });
-        }
+        self.check_size(&target, "plane set's target vs the refiner's")?;
         Ok(PlaneSet {
             colours: self.colour_models(target.depths())?,
             energy: energy(&target),
@@ -286,14 +294,7 @@ impl Refiner {
     /// Errors: [`HoloError::ShapeMismatch`] for a target of another size; [`HoloError::InvalidParameter`]
     /// (`depths`) for other planes. The refiner keeps its target on error.
     pub(crate) fn set_target(&mut self, target: FocalTarget) -> Result<()> {
-        if target.size() != self.target.size() {
-            let ((h, w), (th, tw)) = (self.target.size(), target.size());
-            return Err(HoloError::ShapeMismatch {
-                what: "new refinement target vs the refiner's".into(),
-                expected: vec![3, h, w],
-                got: vec![3, th, tw],
-            });
-        }
+        self.check_size(&target, "new refinement target vs the refiner's")?;
         if target.depths() != self.target.depths() {
             return Err(invalid(
                 "depths",
@@ -307,16 +308,6 @@ impl Refiner {
         self.target_energy = energy(&target);
         self.target = target;
         Ok(())
-    }
-
-    /// The options this refiner runs.
-    pub fn options(&self) -> &RefineOptions {
-        &self.options
-    }
-
-    /// The target it aims at.
-    pub fn target(&self) -> &FocalTarget {
-        &self.target
     }
 
     /// Refines `phase` `[3, H, W]` (radians, R, G, B; any values) in place for [`RefineOptions::iterations`]

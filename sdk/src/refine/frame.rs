@@ -9,8 +9,9 @@ use std::time::Instant;
 use ndarray::{Array3, ArrayView3};
 use num_complex::Complex32;
 
-use super::device::{drive, DeviceIterations, Prepared, RefineDevice};
+use super::device::{DeviceIterations, Prepared, RefineDevice};
 use super::engine::{least_squares_scale, Refiner};
+use super::iterations::drive;
 use super::options::{initial_phase, IterationRecord, RefineOptions, RefineReport, RefineStart};
 use super::target::{held_out_depths, loss_depths, FocalTarget};
 use crate::display::AberrationProfile;

@@ -1,6 +1,6 @@
 //! The refinement on a GPU ([`GpuRefinement`], cargo feature `gpu`): the same model, loss, gradient and Adam
 //! as [`Refiner::refine`], run by `crate::gpu::refine`'s WGSL kernels, behind the same
-//! [`super::device::drive`] (start check, records, cancellation, wrap). What differs: the sums are f32 on
+//! [`super::iterations::drive`] (start check, records, cancellation, wrap). What differs: the sums are f32 on
 //! the GPU (f64 on the CPU), the progress callback hears of the iterations in batches (a cancellation takes
 //! effect within `crate::gpu::refine::READ_BACK_EVERY` iterations), and the quantised evaluation knows the
 //! linear look-up table only (a calibrated display refines on the CPU).
@@ -9,8 +9,9 @@ use std::ops::ControlFlow;
 
 use ndarray::ArrayViewMut3;
 
-use super::device::{drive, DeviceIterations, Iterations, Prepared, RefineDevice};
+use super::device::{DeviceIterations, Prepared, RefineDevice};
 use super::engine::Refiner;
+use super::iterations::{drive, Iterations};
 use super::options::{IterationRecord, RefineReport};
 use crate::error::{invalid, HoloError, Result};
 use crate::gpu::refine::{GpuAdam, GpuRefineModel, GpuRefiner};

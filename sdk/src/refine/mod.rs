@@ -21,8 +21,9 @@
 //! - `target`: the focal stack aimed at ([`FocalTarget`], [`loss_depths`], [`held_out_depths`]);
 //! - `model`: the image formation model, its loss terms and their gradient;
 //! - `engine`: [`Refiner`], planned once ([`Refiner::new`]) and run ([`Refiner::refine`]);
-//! - `device`: where the iterations run, chosen once (the CPU, or a device such as the GPU), with what every
-//!   device shares written once: the start's check, the records, the cancellation, the wrap;
+//! - `iterations`: the iterations on any device behind one trait, with what every device shares written
+//!   once: the start's check, the records, the cancellation, the wrap;
+//! - `device`: where a frame refiner's iterations run, chosen once (the CPU, or a device such as the GPU);
 //! - `gpu` (cargo feature `gpu`): [`GpuRefinement`], the iterations on a GPU;
 //! - `frame`: one frame's refinement as apps and `holo` ask for it ([`FrameRefiner`]; the refiner of a
 //!   pipeline's frames is `FrameRefiner::for_pipeline`, in `crate::pipeline`).
@@ -31,18 +32,18 @@
 //! ([`crate::slm::codes`]); the refinement's loss as a score of any pattern is
 //! [`crate::evaluation::focal_psnr`].
 
-mod device;
+pub(crate) mod device;
 pub(crate) mod engine;
-mod frame;
+pub(crate) mod frame;
 #[cfg(feature = "gpu")]
 mod gpu;
+mod iterations;
 mod model;
 pub(crate) mod options;
 pub mod target;
 #[cfg(test)]
 mod tests;
 
-pub(crate) use device::RefineDevice;
 pub use engine::Refiner;
 pub use frame::{
     FrameRefinement, FrameRefiner, HeldOutScores, RefineDisplay, RefineTarget, RefinedFrame,

@@ -1,11 +1,13 @@
 //! The refinement's model, gradient, optimiser and refusals.
 
+use std::f32::consts::TAU;
 use std::ops::ControlFlow;
 
 use ndarray::Array3;
 use num_complex::Complex32;
 
 use super::*;
+use crate::display::AberrationProfile;
 use crate::error::HoloError;
 use crate::optics::{focal_stack, OpticalSetup, PropagationOptions};
 use crate::slm::codes::displayed_phase;

@@ -281,6 +281,16 @@ pub fn load_rgbd_with_confidence(
             options.depth_upsampling.name()
         );
     }
+    // A depth map of another resolution is upsampled at the output size, guided by the colour already brought
+    // there (the camera path's order; a phone's 1920×1440 colour is not guided at full size only to be shrunk
+    // after): within `docs/CONVENTIONS.md` §6's bound of resizing after (`sdk/tests/recording.rs`).
+    let amplitude = match options.size {
+        Some((oh, ow)) if depth_size != (h, w) && oh <= h && ow <= w && (oh, ow) != (h, w) => {
+            super::frame::check_target_size(oh, ow)?;
+            super::frame::resize_amplitude(&amplitude, oh, ow)
+        }
+        _ => amplitude,
+    };
     let decoded = crate::scene::upsample_depth(decoded, amplitude.view(), options.depth_upsampling);
     let (d, range_used) = normalise_depth(&decoded, options.range, options.mapping)
         .map_err(|e| name_depth_file(e, depth))?;
