@@ -11,6 +11,7 @@ use super::depth::{
     DepthRange,
 };
 use super::frame::RgbdFrame;
+use super::upsample::{upsample_depth, DepthUpsampling};
 use crate::color::{srgb8_to_amplitude, srgb_to_linear};
 use crate::error::{HoloError, Result};
 
@@ -83,7 +84,7 @@ pub struct LoadOptions {
     pub max_outside_range_fraction: f32,
     /// How a depth map of lower resolution than the colour is brought to the colour's
     /// ([`crate::scene::upsample_depth`]; joint bilateral by default).
-    pub depth_upsampling: crate::scene::DepthUpsampling,
+    pub depth_upsampling: DepthUpsampling,
     /// With a confidence map ([`load_rgbd_with_confidence`]): depth pixels of lower confidence are invalid
     /// ([`crate::scene::apply_confidence`]; default [`crate::scene::DEFAULT_MIN_CONFIDENCE`], ARKit's medium).
     pub min_confidence: u8,
@@ -97,7 +98,7 @@ impl Default for LoadOptions {
             size: None,
             max_invalid_fraction: 0.75,
             max_outside_range_fraction: 0.5,
-            depth_upsampling: crate::scene::DepthUpsampling::default(),
+            depth_upsampling: DepthUpsampling::default(),
             min_confidence: super::depth::DEFAULT_MIN_CONFIDENCE,
         }
     }
@@ -291,7 +292,7 @@ pub fn load_rgbd_with_confidence(
         }
         _ => amplitude,
     };
-    let decoded = crate::scene::upsample_depth(decoded, amplitude.view(), options.depth_upsampling);
+    let decoded = upsample_depth(decoded, amplitude.view(), options.depth_upsampling);
     let (d, range_used) = normalise_depth(&decoded, options.range, options.mapping)
         .map_err(|e| name_depth_file(e, depth))?;
     let filled = fill_invalid(&d, &decoded.valid).map_err(|e| name_depth_file(e, depth))?;
