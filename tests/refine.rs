@@ -6,13 +6,15 @@
 use std::ops::ControlFlow;
 
 use ndarray::Array3;
+use tensorholo::evaluation::focal_psnr;
 use tensorholo::pipeline::{HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode};
 use tensorholo::reference::ReferencePipeline;
 use tensorholo::refine::{
-    codes_of, displayed_phase, focal_psnr, held_out_depths, initial_phase, loss_depths,
-    FocalTarget, IterationRecord, RefineOptions, RefineStart, Refiner,
+    held_out_depths, initial_phase, loss_depths, FocalTarget, IterationRecord, RefineOptions,
+    RefineStart, Refiner,
 };
 use tensorholo::scene::{load_rgbd, DepthEncoding, LoadOptions, RgbdFrame};
+use tensorholo::slm::codes::{codes_of, displayed_phase};
 use tensorholo::synthesis::{SceneLayer, SmLbm};
 use tensorholo::{Complex32, HoloError};
 use tensorholo_integration_tests::shared_data;

@@ -22,7 +22,7 @@ use tensorholo::pipeline::{
     Backend, HologramPipeline, ModelSelection, PipelineConfig, PrefilterMode,
 };
 use tensorholo::refine::{
-    FrameRefinement, RefineOptions, RefineStart, RefineTarget, DEFAULT_TARGET_LEVELS,
+    FrameRefinement, FrameRefiner, RefineOptions, RefineStart, RefineTarget, DEFAULT_TARGET_LEVELS,
 };
 use tensorholo::scene::procedural;
 use tensorholo::synthesis::SceneLayer;
@@ -596,13 +596,8 @@ fn refine_table(
                 let backend_report = session.backend_report().clone();
                 let (out, heads) = session.into_last_frame();
                 let midpoint = heads.context("no frame rendered")?.to_field()?;
-                let mut refiner = crate::refine::frame_refiner(
-                    request,
-                    &pipeline,
-                    &backend_report,
-                    threads,
-                    None,
-                )?;
+                let mut refiner =
+                    FrameRefiner::for_pipeline(request, &pipeline, &backend_report, threads)?;
                 let r = refiner.refine(
                     &[SceneLayer::from(&frame)],
                     Some(midpoint.view()),

@@ -519,7 +519,7 @@ fn black(file: &std::path::Path, out: &std::path::Path) -> Result<()> {
     // What the calibrated panel shows for each set of codes, by its own measured curves.
     let shown = |codes: &ndarray::Array3<u8>| -> Result<[f64; 3]> {
         Ok(filtered_intensity(
-            displayed_phase(luts, codes.view())?.view(),
+            displayed_phase(codes.view(), Some(&cal))?.view(),
         )?)
     };
     let (with, without) = (shown(&calibrated)?, shown(&uncalibrated)?);

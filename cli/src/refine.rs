@@ -8,10 +8,10 @@ use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use tensorholo::display::model::DisplayModel;
-use tensorholo::pipeline::{HologramPipeline, SlmFrame};
+use tensorholo::pipeline::SlmFrame;
 use tensorholo::refine::{
-    loss_depths, FrameRefinement, FrameRefiner, IterationRecord, RefineDisplay, RefineOptions,
-    RefineStart, RefineTarget, RefinedFrame, DEFAULT_TARGET_LEVELS,
+    loss_depths, FrameRefinement, FrameRefiner, IterationRecord, RefineOptions, RefineStart,
+    RefineTarget, RefinedFrame, DEFAULT_TARGET_LEVELS,
 };
 use tensorholo::HoloError;
 
@@ -166,36 +166,6 @@ impl RefineArgs {
         })?;
         Ok(Some(request))
     }
-}
-
-/// The SDK's frame refiner for `pipeline`'s display, calibration and viewer's aberration (which the
-/// refinement's model sees through, so that the refined pattern stays corrected).
-pub fn frame_refiner(
-    request: FrameRefinement,
-    pipeline: &HologramPipeline,
-    backend: &tensorholo::pipeline::BackendReport,
-    threads: usize,
-    model: Option<Arc<DisplayModel>>,
-) -> Result<FrameRefiner> {
-    let cfg = pipeline.config();
-    let display = RefineDisplay {
-        optics: cfg.optics,
-        propagation: cfg.options,
-        offset_m: cfg.offset_m,
-        encoding: cfg.encoding,
-        calibration: pipeline.calibration().cloned(),
-        viewer: pipeline.aberration().cloned(),
-        viewer_corrected_by_cnn: pipeline.corrected_by_cnn(),
-    };
-    let refiner = FrameRefiner::new(request, display, threads)?
-        .with_display_model(model)
-        .map_err(|e| anyhow::Error::new(e).context("--display-model"))?;
-    // The iterations run where the frames run: on the session's GPU when it has one.
-    #[cfg(feature = "gpu")]
-    let refiner = refiner.with_gpu(pipeline.frame_gpu_context(backend)?);
-    #[cfg(not(feature = "gpu"))]
-    let _ = backend;
-    Ok(refiner)
 }
 
 /// Logs each iteration (the refinement's progress).

@@ -14,6 +14,7 @@ use tensorholo::model::contract;
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
 use tensorholo::pipeline::{BackendReport, FrameTimings, Heads, HologramPipeline, SlmFrame};
 use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
+use tensorholo::refine::FrameRefiner;
 use tensorholo::scene::RgbdFrame;
 use tensorholo::synthesis::SmLbm;
 
@@ -235,13 +236,14 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let heads = heads.context("no frame rendered")?;
     let refined = match refine {
         Some(request) => {
-            let mut refiner = crate::refine::frame_refiner(
+            let mut refiner = FrameRefiner::for_pipeline(
                 request,
                 &pipeline,
                 &backend_report,
                 args.model.thread_count(),
-                display_model.clone(),
-            )?;
+            )?
+            .with_display_model(display_model.clone())
+            .map_err(|e| anyhow::Error::new(e).context("--display-model"))?;
             let midpoint = heads.to_field()?;
             let r = refiner.refine(
                 &scene.layers(),

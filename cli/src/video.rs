@@ -11,6 +11,7 @@ use serde_json::json;
 use tensorholo::encoding::{align_global_phase, phase_churn, PhaseChurn};
 use tensorholo::io::{ensure_not_input, save_u8_png};
 use tensorholo::pipeline::Backend;
+use tensorholo::refine::FrameRefiner;
 use tensorholo::scene::{
     load_rgbd_with_confidence, open_recording, DepthEncoding, DepthRange, LoadOptions, Recording,
     RgbdFrame,
@@ -249,6 +250,25 @@ fn pair_frames(
 }
 
 /// The file `--save-frames` writes for frame `i`, colour `ch` (`r`, `g`, `b`).
+/// Runs `stream` over `frames` pulled one ahead on a thread of their own (the next frame loads while the
+/// stream computes this one), in order; the loader stops when the stream stops taking frames.
+fn loaded_ahead<T: Send, R>(
+    frames: impl Iterator<Item = T> + Send,
+    stream: impl FnOnce(std::sync::mpsc::IntoIter<T>) -> R,
+) -> R {
+    std::thread::scope(|scope| {
+        let (tx, rx) = std::sync::mpsc::sync_channel(1);
+        scope.spawn(move || {
+            for frame in frames {
+                if tx.send(frame).is_err() {
+                    break;
+                }
+            }
+        });
+        stream(rx.into_iter())
+    })
+}
+
 fn frame_file(frames_dir: &Path, i: usize, ch: &str) -> PathBuf {
     frames_dir.join(format!("{i:05}_phase_{ch}.png"))
 }
@@ -421,13 +441,16 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         let mut previous: Option<ndarray::Array3<u8>> = None;
         let mut churns = Vec::new();
         let mut refiner = match refine {
-            Some(request) => Some(crate::refine::frame_refiner(
-                request,
-                &pipeline,
-                session.backend_report(),
-                args.model.thread_count(),
-                args.refine.core.display_model()?,
-            )?),
+            Some(request) => Some(
+                FrameRefiner::for_pipeline(
+                    request,
+                    &pipeline,
+                    session.backend_report(),
+                    args.model.thread_count(),
+                )?
+                .with_display_model(args.refine.core.display_model()?)
+                .map_err(|e| anyhow::Error::new(e).context("--display-model"))?,
+            ),
             None => None,
         };
         // A refinement's error, to report as it is (the stream stops on it).
@@ -544,13 +567,14 @@ pub fn run(args: &VideoArgs) -> Result<()> {
                 }));
             Ok(())
         };
-        let streamed = match &gazes {
+        // The next frame is decoded on a thread of its own while this one computes.
+        let streamed = loaded_ahead(frames, |frames| match &gazes {
             None => session.render_stream_each(frames, sink),
             Some(gazes) => session.render_foveated_stream_each(
                 frames.map(|((i, kept), frame)| ((i, kept), frame.map(|f| (f, gazes[i])))),
                 sink,
             ),
-        };
+        });
         if let Some(e) = refine_error {
             let i = failed.unwrap_or(0);
             return Err(anyhow::Error::new(e).context(format!(

@@ -8,6 +8,9 @@
 use crate::error::{invalid, Result};
 use crate::metrics::{psnr, ssim_multichannel};
 use crate::optics::{focal_stack, OpticalSetup, PropagationOptions};
+use crate::refine::engine::Refiner;
+use crate::refine::options::RefineOptions;
+use crate::refine::target::{FocalTarget, PLANES_RANGE};
 use crate::splitmix::SplitMix64;
 use ndarray::{ArrayView2, ArrayView3};
 use num_complex::Complex32;
@@ -109,6 +112,35 @@ pub fn table2(
         psnr_fs: psnr_fs / n,
         ssim_fs: ssim_fs / n,
     })
+}
+
+/// The PSNR in dB of what the SLM pattern `phase` `[3, H, W]` (radians, as displayed: not quantised) shows
+/// against `target`'s focal stack (amplitudes, data range 1), each colour at its least-squares scale: the
+/// focal-stack refinement's loss as a score ([`crate::refine::IterationRecord::psnr_db`]), for the display
+/// `setup` with its SLM `offset_m` metres from the midpoint plane (`docs/REFINE.md`). Scoring a refinement at
+/// [`crate::refine::held_out_depths`] measures it where its loss never looked. It runs the refinement's own
+/// model (its plan for `target`, every core), without the gradient's buffers.
+///
+/// Errors: [`crate::HoloError::InvalidParameter`] for a padded propagation, a non-finite offset or an invalid
+/// setup; [`crate::HoloError::ShapeMismatch`] for a pattern of another size than the target's;
+/// [`crate::HoloError::InvalidData`] for a non-finite phase.
+pub fn focal_psnr(
+    phase: ArrayView3<f32>,
+    setup: &OpticalSetup,
+    propagation: PropagationOptions,
+    offset_m: f64,
+    target: FocalTarget,
+) -> Result<f64> {
+    let options = RefineOptions {
+        iterations: 1,
+        planes: target.depths().len().clamp(PLANES_RANGE.0, PLANES_RANGE.1),
+        quantised: false,
+        ..Default::default()
+    };
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    Refiner::new(setup, propagation, offset_m, target, options, threads)?
+        .score(phase)
+        .map(|r| r.psnr_db)
 }
 
 #[cfg(test)]

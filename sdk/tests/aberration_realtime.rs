@@ -838,7 +838,7 @@ fn refinement_for_a_viewer_through_a_cylindrical_lens_beats_the_corrected_cnn_an
                 ControlFlow::Continue(())
             })
             .unwrap();
-        let phase = tensorholo::refine::displayed_phase(refined.codes.view(), None).unwrap();
+        let phase = tensorholo::slm::codes::displayed_phase(refined.codes.view(), None).unwrap();
         let field = post_encoding_midpoint(
             phase.view(),
             refined.amplitude_scale,

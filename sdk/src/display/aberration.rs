@@ -9,7 +9,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::{DisplayProfile, Prescription};
+use super::prescription::Prescription;
+use super::profile::DisplayProfile;
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::{OpticalSetup, ZernikeCoefficients, MAX_COEFFICIENT_RAD};
 

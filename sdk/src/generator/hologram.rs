@@ -8,7 +8,7 @@ use std::ops::ControlFlow;
 
 use crate::cnn::{PlanReport, ThreadCount};
 use crate::display::{AberrationProfile, Prescription};
-use crate::encoding::{DoublePhaseMethod, LinearLut};
+use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
 use crate::foveation::Gaze;
 use crate::model::{HologramModel, ModelKind, Precision};
@@ -17,8 +17,9 @@ use crate::pipeline::{
     AberrationReport, BackendReport, HologramPipeline, HologramSession, PrefilterMode,
     PrefilterSource, SlmFrame,
 };
-use crate::refine::{FrameRefinement, FrameRefiner, IterationRecord, RefineDisplay, RefineTarget};
+use crate::refine::{FrameRefinement, FrameRefiner, IterationRecord, RefineTarget};
 use crate::scene::{ldi_from_camera_frames, CameraFrame, CameraFrameReport, RgbdFrame};
+use crate::slm::codes::displayed_phase;
 use crate::slm::DisplayCalibration;
 use crate::synthesis::SceneLayer;
 
@@ -329,7 +330,7 @@ impl HologramGenerator {
     /// viewer's aberration (a prescription or an aberration profile), the refinement's model sees through the
     /// viewer's eye, so the refined patterns stay corrected (`docs/REFINE.md`, "A viewer's aberration"). The
     /// iterations run where the session's frames run: on its GPU where it has one (`gpu` feature,
-    /// `FrameRefiner::with_gpu`).
+    /// [`FrameRefiner::for_pipeline`]).
     ///
     /// Errors: as [`HologramGenerator::render`]; [`HoloError::InvalidParameter`] for a bad `refinement`
     /// (naming the setting: `iterations`, `step_rad`, `planes`, `levels`), or `target` for the CNN target with
@@ -344,7 +345,7 @@ impl HologramGenerator {
         refinement.validate()?;
         // The viewer's aberration the session corrects (the generator's or the pipeline's): the refinement's
         // model sees through it, so the refined pattern stays corrected.
-        let viewer = self.aberration();
+        let viewer = self.aberration().map(|(profile, _)| profile);
         let t = Instant::now();
         let (rgbd, report) = self.convert(frame)?;
         let convert_s = t.elapsed().as_secs_f64();
@@ -366,27 +367,18 @@ impl HologramGenerator {
             }
             (rendered?, midpoint?, session.backend_report().clone())
         };
-        let cfg = self.pipeline.config();
-        let display = RefineDisplay {
-            optics: cfg.optics,
-            propagation: cfg.options,
-            offset_m: cfg.offset_m,
-            encoding: cfg.encoding,
-            calibration: self.calibration(),
-            viewer_corrected_by_cnn: viewer.as_ref().is_some_and(|(_, r)| r.by_cnn),
-            viewer: viewer.map(|(p, _)| p),
-        };
         let threads = match self.config.cnn.threads {
             ThreadCount::Fixed(n) => n.max(1),
             _ => crate::cnn::default_threads(),
         };
-        let refiner = FrameRefiner::new(*refinement, display, threads)?;
-        // The iterations run where the frames run (the session's GPU, where it has one).
-        #[cfg(feature = "gpu")]
-        let refiner = refiner.with_gpu(self.pipeline.frame_gpu_context(&backend)?);
-        #[cfg(not(feature = "gpu"))]
-        let _ = backend;
-        let mut refiner = refiner;
+        // The calibration and the viewer's aberration the session applies now.
+        let mut refiner = FrameRefiner::for_session(
+            *refinement,
+            &self.pipeline,
+            &backend,
+            (self.calibration(), viewer),
+            threads,
+        )?;
         let refined = refiner.refine(
             &[SceneLayer::from(&rgbd)],
             midpoint.as_ref().map(|m| m.view()),
@@ -433,7 +425,7 @@ impl HologramGenerator {
 
     /// What a viewer sees of `patterns` focused at normalised depth `focus` ∈ [0, 1] (0 = near): the phase
     /// the SLM displays for the 8-bit codes (through the calibrated curves of
-    /// [`HologramGenerator::set_calibration`], else [`LinearLut::phase`]; quantisation included), as a phase-only
+    /// [`HologramGenerator::set_calibration`], else [`crate::encoding::LinearLut::phase`]; quantisation included), as a phase-only
     /// field (Eq. 8–10, no aperture) propagated from the midpoint plane to `z(focus)`, as sRGB.
     ///
     /// Errors: [`HoloError::InvalidParameter`] for a focus outside [0, 1] or NaN; as
@@ -470,10 +462,7 @@ impl HologramGenerator {
             }
         }
         let cfg = &self.config;
-        let phase = match (&calibration, calibrated) {
-            (Some(cal), true) => crate::slm::displayed_phase(cal.luts(), patterns.codes.view())?,
-            _ => patterns.codes.mapv(|c| LinearLut.phase(c)),
-        };
+        let phase = displayed_phase(patterns.codes.view(), calibration.as_deref())?;
         let shown = post_encoding_midpoint(
             phase.view(),
             patterns.amplitude_scale,

@@ -320,10 +320,11 @@ impl GpuRefiner {
 
     /// Refines `phase` (`[3, H, W]` flat, radians) in place for `iterations` Adam steps from a fresh
     /// optimiser state, calling `progress(iteration, sums)` with the sums of the start (iteration 0) and of
-    /// each step's result; the last evaluation takes no step. `ControlFlow::Break` stops it: `phase` is then
-    /// unchanged and the error is [`HoloError::Cancelled`]. `phase` is left unwrapped (the caller wraps it).
+    /// each step's result; the last evaluation takes no step. `ControlFlow::Break` stops it at once (`Ok`,
+    /// `phase` unchanged; the caller reports the cancellation). `phase` is left unwrapped (the caller wraps
+    /// it).
     ///
-    /// Errors: [`HoloError::ShapeMismatch`] for a phase of another size; [`HoloError::Gpu`]; cancellation.
+    /// Errors: [`HoloError::ShapeMismatch`] for a phase of another size; [`HoloError::Gpu`].
     pub(crate) fn refine(
         &mut self,
         phase: &mut [f32],
@@ -379,10 +380,7 @@ impl GpuRefiner {
                     std::array::from_fn(|c| (f64::from(v[4 * c]), f64::from(v[4 * c + 1])));
                 let done = it + 1 - pending + slot;
                 if progress(done, sums).is_break() {
-                    return Err(HoloError::Cancelled(format!(
-                        "refinement stopped by its caller after {done} of {iterations} iterations; the \
-                         pattern is unchanged"
-                    )));
+                    return Ok(());
                 }
             }
             pending = 0;

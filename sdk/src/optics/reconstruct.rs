@@ -5,8 +5,10 @@ use num_complex::Complex32;
 use rayon::prelude::*;
 
 use super::filter::aperture_mask;
+use super::filter::FourierFilter;
+use super::propagation::{Carrier, PropagationOptions};
+use super::OpticalSetup;
 use super::{check_colour_stack, check_finite_field, par_channels};
-use super::{Carrier, FourierFilter, OpticalSetup, PropagationOptions};
 use crate::error::{invalid, HoloError, Result};
 
 /// Amplitude focal stack: for every normalised depth `d` in `depths`, `|ASM(field, z(d) − plane_z_m)|` per

@@ -27,7 +27,7 @@ use num_complex::Complex32;
 use serde::{Deserialize, Serialize};
 
 use super::propagation::check_positive;
-use super::{Carrier, PropagationOptions, Propagator, SpectralPlan};
+use super::propagation::{Carrier, PropagationOptions, Propagator, SpectralPlan};
 #[cfg(doc)]
 use crate::error::HoloError;
 use crate::error::{invalid, Result};

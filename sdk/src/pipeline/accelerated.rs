@@ -10,8 +10,9 @@ use ndarray::Array3;
 use super::config::Backend;
 use super::frame::{max_and_finite, FrameTimings, SlmFrame};
 use super::report::{SelfCheck, StageProfile};
-use super::session::{apply_calibrated_luts, HologramSession};
+use super::session::HologramSession;
 use crate::error::{HoloError, Result};
+use crate::slm::codes::recode_calibrated;
 
 impl HologramSession {
     /// What a viewer sees focused at normalised depth `focus` ∈ [0, 1] (0 = near) from `codes` `[3, H, W]`
@@ -83,7 +84,11 @@ impl HologramSession {
         match gpu.executor.run(input, &mut self.output, full) {
             Ok(heads) => {
                 if calibrated {
-                    apply_calibrated_luts(self.calibration.as_ref(), &mut self.output)?;
+                    recode_calibrated(
+                        self.calibration.as_deref(),
+                        self.output.phase.view(),
+                        self.output.codes.view_mut(),
+                    )?;
                 }
                 let gpu_s = t_gpu.elapsed().as_secs_f64();
                 self.output.backend = backend;

@@ -11,13 +11,14 @@ use super::config::Backend;
 use super::executor::FoveatedInput;
 use super::fovea_tiles::{FoveatedState, MAX_TILE_PLANES};
 use super::frame::{check_not_black, max_and_finite, FrameTimings, Heads, SlmFrame};
-use super::session::{apply_calibrated_luts, colour_states, phase_planes, HologramSession};
+use super::session::{colour_states, phase_planes, HologramSession};
 use crate::error::{invalid, HoloError, Result};
 use crate::foveation::{
     gaze_depth, ColourInputs, FoveaReport, FrameInputs, Gaze, GazeDepthSource,
     FOVEATED_NORMALISER_GAIN,
 };
 use crate::scene::RgbdFrame;
+use crate::slm::codes::recode_calibrated;
 
 impl HologramSession {
     /// Renders one RGB-D frame foveated on `gaze` (`docs/FOVEATION.md`; [`crate::foveation`]): the hologram
@@ -377,7 +378,11 @@ impl HologramSession {
         let (heads, theta) = acc.executor.run_foveated(&input, &mut self.output, full)?;
         let backend = acc.executor.backend();
         if calibrated {
-            apply_calibrated_luts(self.calibration.as_ref(), &mut self.output)?;
+            recode_calibrated(
+                self.calibration.as_deref(),
+                self.output.phase.view(),
+                self.output.codes.view_mut(),
+            )?;
         }
         self.output.backend = backend;
         self.output.timings = FrameTimings {

@@ -121,10 +121,13 @@ impl HologramPipeline {
     /// The GPU context a session of this pipeline whose frames run on the GPU (`report.active`, its
     /// [`super::BackendReport`]) uses: the app's ([`HologramPipeline::with_gpu_context`]) or the shared one;
     /// `None` where the frames run on the CPU. For work beside the frames on the same device (the
-    /// refinement: [`crate::refine::FrameRefiner::with_gpu`]).
+    /// refinement: [`crate::refine::FrameRefiner::for_pipeline`]).
     ///
     /// Errors: [`crate::HoloError::Gpu`] where the shared context can no longer be made.
-    pub fn frame_gpu_context(&self, report: &super::BackendReport) -> Result<Option<GpuContext>> {
+    pub(crate) fn frame_gpu_context(
+        &self,
+        report: &super::BackendReport,
+    ) -> Result<Option<GpuContext>> {
         if report.active != Backend::Gpu {
             return Ok(None);
         }

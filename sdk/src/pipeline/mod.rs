@@ -31,7 +31,8 @@
 //! - `session`: [`HologramSession`] and its CPU frame; `foveated`: its foveated frames (the CNN on a tile
 //!   around the gaze, [`crate::foveation`]); `setup`: how a session is built (checks, the choice of
 //!   an executor, the CNN plans, the colour states); `accelerated`: its frames on an accelerator (fallback,
-//!   first-frame self-check, previews, stage timings); `stream`: its streams.
+//!   first-frame self-check, previews, stage timings); `stream`: its streams;
+//! - `refiner`: the refinement of a pipeline's frames ([`crate::refine::FrameRefiner::for_pipeline`]).
 
 mod accelerated;
 mod cnn_stage;
@@ -46,6 +47,7 @@ pub(crate) mod frame;
 mod gpu_frame;
 mod models;
 mod pool;
+mod refiner;
 mod report;
 mod selection;
 mod session;

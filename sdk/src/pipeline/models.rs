@@ -12,7 +12,7 @@ use crate::display::{AberrationProfile, DisplayMapping};
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
 use crate::model::{HologramModel, ModelKind, Precision};
-use crate::slm::{DisplayCalibration, LutRepresentation, PhaseLut};
+use crate::slm::DisplayCalibration;
 
 /// The loaded CNNs plus their configuration: a factory of [`HologramSession`](crate::pipeline::HologramSession)s.
 #[derive(Debug, Clone)]
@@ -445,11 +445,4 @@ pub(super) fn check_calibration_wavelengths(
         }
     }
     Ok(())
-}
-
-/// Colour `c`'s look-up table in `cal`, or `None` where the linear table of the double phase encoder
-/// already gives its codes.
-pub(super) fn calibrated_lut(cal: Option<&Arc<DisplayCalibration>>, c: usize) -> Option<&PhaseLut> {
-    let lut = &cal?.colours.get(c)?.lut;
-    (!matches!(lut.representation(), LutRepresentation::Linear)).then_some(lut)
 }

@@ -6,7 +6,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use ndarray::{Array3, Axis};
+use ndarray::Array3;
 use rayon::prelude::*;
 
 use super::cnn_stage::CnnStage;
@@ -15,7 +15,7 @@ use super::config::Backend;
 use super::correction::{AberrationReport, PupilCorrection};
 use super::executor::Accelerator;
 use super::frame::{FrameTimings, Heads, SlmFrame};
-use super::models::{calibrated_lut, check_calibration_wavelengths};
+use super::models::check_calibration_wavelengths;
 use super::pool::OpticsPool;
 use super::report::BackendReport;
 use super::workers::{lost_state, ColourWorkers};
@@ -26,6 +26,7 @@ use crate::error::{HoloError, Result};
 use crate::model::contract;
 use crate::optics::OpticalSetup;
 use crate::scene::{LayeredDepthImage, RgbdFrame};
+use crate::slm::codes::calibrated_lut;
 use crate::slm::DisplayCalibration;
 
 /// A hologram session for one resolution (see the [module docs](crate::pipeline)). Not `Sync`: one frame at a time;
@@ -404,7 +405,7 @@ impl HologramSession {
                 let io = (arg, &mut *phase);
                 encoder.encode_on(field, *layout, io, codes_out, (mean[c], a), true)?;
                 let phase = &*phase;
-                if let Some(lut) = calibrated_lut(calibration.as_ref(), c) {
+                if let Some(lut) = calibrated_lut(calibration.as_deref(), c) {
                     lut.apply(h, w, phase, codes_out)?;
                 }
                 Ok(())
@@ -435,27 +436,6 @@ impl HologramSession {
                 })
         })
     }
-}
-
-/// Replaces `out.codes` by the calibrated look-up tables' codes of `out.phase` (colours with a linear table
-/// keep theirs).
-pub(super) fn apply_calibrated_luts(
-    cal: Option<&Arc<DisplayCalibration>>,
-    out: &mut SlmFrame,
-) -> Result<()> {
-    let (_, h, w) = out.codes.dim();
-    for c in 0..3 {
-        let Some(lut) = calibrated_lut(cal, c) else {
-            continue;
-        };
-        let phase = out.phase.index_axis(Axis(0), c);
-        let mut codes = out.codes.index_axis_mut(Axis(0), c);
-        match (phase.as_slice(), codes.as_slice_mut()) {
-            (Some(p), Some(k)) => lut.apply(h, w, p, k)?,
-            _ => return Err(HoloError::Internal("SLM frame not contiguous".into())),
-        }
-    }
-    Ok(())
 }
 
 /// The frame's three phase planes (`[H, W]` each), each borrowed on its own.

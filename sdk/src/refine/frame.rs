@@ -9,16 +9,18 @@ use std::time::Instant;
 use ndarray::{Array3, ArrayView3};
 use num_complex::Complex32;
 
-use super::{
-    codes_of, displayed_phase, held_out_depths, initial_phase, loss_depths, FocalTarget,
-    IterationRecord, RefineOptions, RefineReport, RefineStart, Refiner,
-};
+use super::device::{DeviceIterations, Prepared, RefineDevice};
+use super::engine::{least_squares_scale, Refiner};
+use super::iterations::drive;
+use super::options::{initial_phase, IterationRecord, RefineOptions, RefineReport, RefineStart};
+use super::target::{held_out_depths, loss_depths, FocalTarget};
 use crate::display::model::DisplayModel;
 use crate::display::AberrationProfile;
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::{simulate_phase_only, OpticalSetup, PropagationOptions};
 use crate::reference::ReferencePipeline;
+use crate::slm::codes::{codes_of, displayed_phase};
 use crate::slm::DisplayCalibration;
 use crate::synthesis::{SceneLayer, SmLbm};
 
@@ -132,8 +134,8 @@ pub struct RefinedFrame {
     /// lower loss against this frame's target (a moving camera: the previous frame's pattern shows the last
     /// view).
     pub start: RefineStart,
-    /// Where the iterations ran: `cpu`, or the GPU adapter's name (`FrameRefiner::with_gpu`, cargo feature
-    /// `gpu`).
+    /// Where the iterations ran: `cpu`, or the GPU adapter's name (`FrameRefiner::for_pipeline` on a session's GPU,
+    /// cargo feature `gpu`).
     pub backend: String,
     /// Why the CPU ran them where a GPU was given (a calibrated look-up table), else `None`.
     pub backend_reason: Option<String>,
@@ -174,12 +176,10 @@ pub struct FrameRefiner {
     previous: Option<Array3<f32>>,
     /// The display model the loss sees ([`FrameRefiner::with_display_model`]).
     model: Option<Arc<DisplayModel>>,
-    /// The GPU the iterations run on ([`FrameRefiner::with_gpu`]), and the refinement uploaded to it at the
-    /// first frame (later frames replace its target only).
-    #[cfg(feature = "gpu")]
-    gpu: Option<crate::gpu::GpuContext>,
-    #[cfg(feature = "gpu")]
-    on_gpu: Option<super::GpuRefinement>,
+    /// The device the iterations run on (`None`: the CPU), chosen once (`FrameRefiner::for_pipeline`), and
+    /// the refinement prepared on it at the first frame (later frames replace its target only).
+    device: Option<Box<dyn RefineDevice>>,
+    on_device: Option<Box<dyn DeviceIterations>>,
 }
 
 impl FrameRefiner {
@@ -215,22 +215,9 @@ impl FrameRefiner {
             refiner: None,
             previous: None,
             model: None,
-            #[cfg(feature = "gpu")]
-            gpu: None,
-            #[cfg(feature = "gpu")]
-            on_gpu: None,
+            device: None,
+            on_device: None,
         })
-    }
-
-    /// Runs the iterations on `ctx`'s GPU (`None`: the CPU): the same model, loss and Adam
-    /// ([`Refiner::on_gpu`], uploaded at the first frame; each later frame uploads its target only); the
-    /// held-out scores stay on the CPU. A
-    /// quantised refinement through a calibrated look-up table runs on the CPU (the GPU knows the linear one):
-    /// [`RefinedFrame::backend_reason`] says so.
-    #[cfg(feature = "gpu")]
-    pub fn with_gpu(mut self, ctx: Option<crate::gpu::GpuContext>) -> Self {
-        self.gpu = ctx;
-        self
     }
 
     /// Refines through the fitted display `model` (`display::model`, docs/REFINE.md "Through a display
@@ -255,7 +242,8 @@ impl FrameRefiner {
             if calibrated {
                 return Err(invalid(
                     "display_model",
-                    "a display model and a calibration's look-up table at once: the model's phase response                      replaces the table (fit the model from the captures instead)",
+                    "a display model and a calibration's look-up table at once: the model's phase response \
+                     replaces the table (fit the model from the captures instead)",
                 ));
             }
             if self.display.viewer.is_some() && m.colours.iter().any(|c| c.aberration.is_some()) {
@@ -267,7 +255,18 @@ impl FrameRefiner {
         }
         self.model = model;
         self.refiner = None;
+        self.on_device = None;
         Ok(self)
+    }
+
+    /// Runs the iterations on `device` (`None`: the CPU): the same model, loss and Adam, prepared there at
+    /// the first frame (each later frame hands it its target only); the held-out scores stay on the CPU. A
+    /// device may decline a refinement (the GPU a quantised one through a calibrated look-up table): it then
+    /// runs on the CPU and [`RefinedFrame::backend_reason`] says why.
+    pub(crate) fn on_device(mut self, device: Option<Box<dyn RefineDevice>>) -> Self {
+        self.device = device;
+        self.on_device = None;
+        self
     }
 
     /// The request it runs.
@@ -428,36 +427,30 @@ impl FrameRefiner {
             }
         };
         let mut phase = start.to_owned();
-        // Set where a GPU is given (the `gpu` feature).
-        #[allow(unused_mut)]
-        let (mut backend, mut backend_reason) = ("cpu".to_string(), None);
-        #[cfg(feature = "gpu")]
-        let on_gpu = match (&self.gpu, &mut self.on_gpu) {
-            (Some(ctx), Some(g)) => {
+        let mut backend_reason = None;
+        let prepared = match (&self.device, &mut self.on_device) {
+            (Some(_), Some(g)) => {
                 g.set_target(refiner)?;
-                Some((g, ctx.info().name.clone()))
+                Some(g)
             }
-            (Some(ctx), slot @ None) => match refiner.on_gpu(ctx) {
-                Ok(g) => Some((slot.insert(g), ctx.info().name.clone())),
-                Err(HoloError::InvalidParameter {
-                    name: "calibration",
-                    reason,
-                }) => {
+            (Some(device), slot @ None) => match device.prepare(refiner)? {
+                Prepared::Ready(g) => Some(slot.insert(g)),
+                Prepared::Declined(reason) => {
                     backend_reason = Some(reason);
                     None
                 }
-                Err(e) => return Err(e),
             },
             (None, _) => None,
         };
-        #[cfg(not(feature = "gpu"))]
-        let on_gpu: Option<(&mut Refiner, String)> = None;
-        let report = match on_gpu {
-            Some((g, name)) => {
-                backend = name;
-                g.refine(phase.view_mut(), progress)?
-            }
-            None => refiner.refine(phase.view_mut(), progress)?,
+        let (report, backend) = match (prepared, &self.device) {
+            (Some(g), Some(device)) => (
+                drive(g.as_mut(), phase.view_mut(), progress)?,
+                device.name(),
+            ),
+            _ => (
+                refiner.refine(phase.view_mut(), progress)?,
+                "cpu".to_string(),
+            ),
         };
         let codes = codes_of(phase.view(), calibration)?;
         let shown = displayed_phase(codes.view(), calibration)?;
@@ -479,7 +472,7 @@ impl FrameRefiner {
             depths: held,
         };
         drop(set);
-        let amplitude_scale = least_squares_scale(shown.view(), midpoint, d)?;
+        let amplitude_scale = amplitude_scale(shown.view(), midpoint, d)?;
         Ok(RefinedFrame {
             phase,
             codes,
@@ -504,7 +497,7 @@ enum Starts<'a> {
 /// The least-squares scale of what `shown` (radians) shows at the midpoint plane against `midpoint`'s
 /// amplitude, over every colour (1 for a pattern that shows nothing). Without the viewer's aberration: a
 /// scale for previews, which show the pattern without an eye.
-fn least_squares_scale(
+fn amplitude_scale(
     shown: ArrayView3<f32>,
     midpoint: ArrayView3<Complex32>,
     d: &RefineDisplay,
@@ -516,5 +509,5 @@ fn least_squares_scale(
         a += s * t;
         b += s * s;
     }
-    Ok(if b > 0.0 { (a / b) as f32 } else { 1.0 })
+    Ok(least_squares_scale((a, b)).map_or(1.0, |k| k as f32))
 }

@@ -1,15 +1,18 @@
 //! The refinement on a GPU ([`GpuRefinement`], cargo feature `gpu`): the same model, loss, gradient and Adam
-//! as [`Refiner::refine`], run by `crate::gpu::refine`'s WGSL kernels. What differs: the sums are f32 on the
-//! GPU (f64 on the CPU), the progress callback hears of the iterations in batches (a cancellation takes effect
-//! within `crate::gpu::refine::READ_BACK_EVERY` iterations), and the quantised evaluation knows the linear
-//! look-up table only (a calibrated display refines on the CPU).
+//! as [`Refiner::refine`], run by `crate::gpu::refine`'s WGSL kernels, behind the same
+//! [`super::iterations::drive`] (start check, records, cancellation, wrap). What differs: the sums are f32 on
+//! the GPU (f64 on the CPU), the progress callback hears of the iterations in batches (a cancellation takes
+//! effect within `crate::gpu::refine::READ_BACK_EVERY` iterations), and the quantised evaluation knows the
+//! linear look-up table only (a calibrated display refines on the CPU).
 
 use std::ops::ControlFlow;
-use std::time::Instant;
 
 use ndarray::ArrayViewMut3;
 
-use super::{loss_record, IterationRecord, RefineReport, Refiner};
+use super::device::{DeviceIterations, Prepared, RefineDevice};
+use super::engine::Refiner;
+use super::iterations::{drive, Iterations};
+use super::options::{IterationRecord, RefineReport};
 use crate::error::{invalid, HoloError, Result};
 use crate::gpu::refine::{GpuAdam, GpuRefineModel, GpuRefiner};
 use crate::gpu::GpuContext;
@@ -117,17 +120,6 @@ fn flat_target(refiner: &Refiner) -> Vec<f32> {
 }
 
 impl GpuRefinement {
-    /// Takes `refiner`'s current target (after [`Refiner::set_target`]: the next video frame) without
-    /// uploading the multipliers again.
-    ///
-    /// Errors: [`HoloError::ShapeMismatch`] for a refiner of another size or plane count than the one this
-    /// was made from.
-    pub(crate) fn set_target(&mut self, refiner: &Refiner) -> Result<()> {
-        self.inner.set_target(&flat_target(refiner))?;
-        self.energy = refiner.target_energy;
-        Ok(())
-    }
-
     /// As [`Refiner::refine`], on the GPU: refines `phase` `[3, H, W]` (radians) in place, wrapped to
     /// `[0, 2π)`, with `progress` hearing of the start and every iteration.
     ///
@@ -135,39 +127,52 @@ impl GpuRefinement {
     /// phase; [`HoloError::Cancelled`] when `progress` stopped it (the pattern unchanged); [`HoloError::Gpu`].
     pub fn refine(
         &mut self,
-        mut phase: ArrayViewMut3<f32>,
+        phase: ArrayViewMut3<f32>,
         progress: &mut dyn FnMut(&IterationRecord) -> ControlFlow<()>,
     ) -> Result<RefineReport> {
-        let (h, w) = self.size;
-        if phase.dim() != (3, h, w) {
-            return Err(HoloError::ShapeMismatch {
-                what: "refinement start pattern vs its target".into(),
-                expected: vec![3, h, w],
-                got: phase.shape().to_vec(),
-            });
+        drive(self, phase, progress)
+    }
+}
+
+impl Iterations for GpuRefinement {
+    fn size(&self) -> (usize, usize) {
+        self.size
+    }
+
+    fn records(&self) -> ([f64; 3], usize, usize) {
+        (self.energy, self.count, self.iterations)
+    }
+
+    fn run(
+        &mut self,
+        phase: &mut [f32],
+        sums: &mut dyn FnMut(usize, [(f64, f64); 3]) -> ControlFlow<()>,
+    ) -> Result<()> {
+        self.inner.refine(phase, self.iterations, sums)
+    }
+}
+
+impl DeviceIterations for GpuRefinement {
+    fn set_target(&mut self, refiner: &Refiner) -> Result<()> {
+        self.inner.set_target(&flat_target(refiner))?;
+        self.energy = refiner.target_energy;
+        Ok(())
+    }
+}
+
+impl RefineDevice for GpuContext {
+    fn name(&self) -> String {
+        self.info().name.clone()
+    }
+
+    fn prepare(&self, refiner: &Refiner) -> Result<Prepared> {
+        match refiner.on_gpu(self) {
+            Ok(g) => Ok(Prepared::Ready(Box::new(g))),
+            Err(HoloError::InvalidParameter {
+                name: "calibration",
+                reason,
+            }) => Ok(Prepared::Declined(reason)),
+            Err(e) => Err(e),
         }
-        if let Some(v) = phase.iter().find(|v| !v.is_finite()) {
-            return Err(HoloError::InvalidData(format!(
-                "the refinement's start pattern holds {v}: phases are finite radians"
-            )));
-        }
-        let t = Instant::now();
-        let mut work: Vec<f32> = phase.iter().copied().collect();
-        let mut history = Vec::with_capacity(self.iterations + 1);
-        let (energy, count) = (self.energy, self.count);
-        self.inner
-            .refine(&mut work, self.iterations, &mut |it, sums| {
-                let record = loss_record(it, sums, &energy, count);
-                history.push(record);
-                progress(&record)
-            })?;
-        for (o, &p) in phase.iter_mut().zip(&work) {
-            let w = p.rem_euclid(std::f32::consts::TAU);
-            *o = if w >= std::f32::consts::TAU { 0.0 } else { w };
-        }
-        Ok(RefineReport {
-            history,
-            iterations_s: t.elapsed().as_secs_f64(),
-        })
     }
 }

@@ -1,12 +1,17 @@
 //! The refinement's model, gradient, optimiser and refusals.
 
+use std::f32::consts::TAU;
 use std::ops::ControlFlow;
 
 use ndarray::Array3;
 use num_complex::Complex32;
 
 use super::*;
-use crate::optics::focal_stack;
+use crate::display::AberrationProfile;
+use crate::error::HoloError;
+use crate::optics::{focal_stack, OpticalSetup, PropagationOptions};
+use crate::slm::codes::displayed_phase;
+use crate::splitmix::SplitMix64;
 
 const OFFSET_M: f64 = 2e-3;
 

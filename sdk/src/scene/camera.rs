@@ -785,7 +785,7 @@ pub struct FrameOptions {
     pub mapping: DepthMapping,
     /// How a depth buffer of another resolution than the colour's is brought to it (step 4;
     /// [`super::upsample_depth`]; nearest neighbour by default, see above).
-    pub depth_upsampling: super::DepthUpsampling,
+    pub depth_upsampling: super::upsample::DepthUpsampling,
 }
 
 impl Default for FrameOptions {
@@ -794,7 +794,7 @@ impl Default for FrameOptions {
             fit: Fit::default(),
             range: None,
             mapping: DepthMapping::default(),
-            depth_upsampling: super::DepthUpsampling::Nearest,
+            depth_upsampling: super::upsample::DepthUpsampling::Nearest,
         }
     }
 }
@@ -1104,7 +1104,8 @@ impl CameraFrame<'_> {
                  assumed; ARCore needs color_crop); warned once"
             );
         }
-        let decoded = super::upsample_depth(decoded, amplitude.view(), options.depth_upsampling);
+        let decoded =
+            super::upsample::upsample_depth(decoded, amplitude.view(), options.depth_upsampling);
         Ok((amplitude, decoded, invalid_fraction))
     }
 }

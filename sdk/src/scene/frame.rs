@@ -307,7 +307,7 @@ impl From<RgbdFrame> for LayeredDepthImage {
 }
 
 /// Refuses a resize target of zero height or width. Error: [`HoloError::InvalidParameter`] (`size`).
-fn check_target_size(height: usize, width: usize) -> Result<()> {
+pub(crate) fn check_target_size(height: usize, width: usize) -> Result<()> {
     if height == 0 || width == 0 {
         return Err(invalid(
             "size",

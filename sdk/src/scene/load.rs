@@ -11,6 +11,7 @@ use super::depth::{
     DepthRange,
 };
 use super::frame::RgbdFrame;
+use super::upsample::{upsample_depth, DepthUpsampling};
 use crate::color::{srgb8_to_amplitude, srgb_to_linear};
 use crate::error::{HoloError, Result};
 
@@ -83,7 +84,7 @@ pub struct LoadOptions {
     pub max_outside_range_fraction: f32,
     /// How a depth map of lower resolution than the colour is brought to the colour's
     /// ([`crate::scene::upsample_depth`]; joint bilateral by default).
-    pub depth_upsampling: crate::scene::DepthUpsampling,
+    pub depth_upsampling: DepthUpsampling,
     /// With a confidence map ([`load_rgbd_with_confidence`]): depth pixels of lower confidence are invalid
     /// ([`crate::scene::apply_confidence`]; default [`crate::scene::DEFAULT_MIN_CONFIDENCE`], ARKit's medium).
     pub min_confidence: u8,
@@ -97,7 +98,7 @@ impl Default for LoadOptions {
             size: None,
             max_invalid_fraction: 0.75,
             max_outside_range_fraction: 0.5,
-            depth_upsampling: crate::scene::DepthUpsampling::default(),
+            depth_upsampling: DepthUpsampling::default(),
             min_confidence: super::depth::DEFAULT_MIN_CONFIDENCE,
         }
     }
@@ -281,7 +282,17 @@ pub fn load_rgbd_with_confidence(
             options.depth_upsampling.name()
         );
     }
-    let decoded = crate::scene::upsample_depth(decoded, amplitude.view(), options.depth_upsampling);
+    // A depth map of another resolution is upsampled at the output size, guided by the colour already brought
+    // there (the camera path's order; a phone's 1920×1440 colour is not guided at full size only to be shrunk
+    // after): within `docs/CONVENTIONS.md` §6's bound of resizing after (`sdk/tests/recording.rs`).
+    let amplitude = match options.size {
+        Some((oh, ow)) if depth_size != (h, w) && oh <= h && ow <= w && (oh, ow) != (h, w) => {
+            super::frame::check_target_size(oh, ow)?;
+            super::frame::resize_amplitude(&amplitude, oh, ow)
+        }
+        _ => amplitude,
+    };
+    let decoded = upsample_depth(decoded, amplitude.view(), options.depth_upsampling);
     let (d, range_used) = normalise_depth(&decoded, options.range, options.mapping)
         .map_err(|e| name_depth_file(e, depth))?;
     let filled = fill_invalid(&d, &decoded.valid).map_err(|e| name_depth_file(e, depth))?;

@@ -226,7 +226,8 @@ impl PhaseCurve {
 
     /// The code whose displayed phase is nearest `θ` (wrapped to `[0, 2π)` first), by the same rule as the
     /// inverse tables but without their interpolation: the naive reference of the tests.
-    pub fn nearest_code(&self, theta: f32) -> u8 {
+    #[cfg(test)]
+    pub(crate) fn nearest_code(&self, theta: f32) -> u8 {
         let t = crate::encoding::wrap_phase(theta);
         let mut best = (f32::INFINITY, 0u8);
         for (k, &p) in self.phases.iter().enumerate() {

@@ -4,6 +4,8 @@
 //!
 //! - [`lut`]: [`PhaseCurve`] (phase of each code), [`TiledCurves`] (per-pixel curves, bilinear between tiles),
 //!   [`PhaseLut`] (phase → code, allocation-free).
+//! - [`codes`]: the one map between 8-bit codes and displayed phase ([`displayed_phase`], [`codes_of`]):
+//!   a calibration's look-up tables or the linear one.
 //! - [`mod@file`]: [`DisplayCalibration`], the versioned `.holocal` file with a checksum.
 //! - [`calibrate`]: the 2×2 calibration patterns and [`calibrate::calibrate`] (Eq. 12–13, streamed).
 //! - [`captures`]: PNG captures decoded row by row and downsampled to the SLM.
@@ -21,6 +23,7 @@
 
 pub mod calibrate;
 pub mod captures;
+pub mod codes;
 pub mod file;
 pub mod intensity;
 pub mod lut;
@@ -28,6 +31,7 @@ pub mod simulate;
 #[cfg(feature = "research")]
 pub mod spots;
 
+pub use codes::{codes_of, displayed_phase};
 pub use file::{ColourCalibration, DisplayCalibration};
 pub use lut::{LutRepresentation, PhaseCurve, PhaseLut, TiledCurves};
 
@@ -62,33 +66,6 @@ pub fn black_test_codes(luts: [&PhaseLut; 3], height: usize, width: usize) -> Re
         lut.apply(height, width, &phase, out)?;
     }
     Ok(codes)
-}
-
-/// The phase in radians `[3, H, W]` (relative to code 0) that panels with the look-up tables `luts` (R, G, B)
-/// display for `codes` `[3, H, W]` (`PhaseLut::displayed_phases` per colour): what a viewer of the calibrated
-/// display sees.
-///
-/// Errors: [`HoloError::ShapeMismatch`] for codes that are not `[3, H, W]` or a per-pixel LUT of another size.
-pub fn displayed_phase(luts: [&PhaseLut; 3], codes: ArrayView3<u8>) -> Result<Array3<f32>> {
-    let (c, h, w) = codes.dim();
-    if c != 3 {
-        return Err(HoloError::ShapeMismatch {
-            what: "SLM codes".into(),
-            expected: vec![3, h, w],
-            got: codes.shape().to_vec(),
-        });
-    }
-    let mut phase = Array3::<f32>::zeros((3, h, w));
-    for (c, lut) in luts.iter().enumerate() {
-        let k = codes.index_axis(ndarray::Axis(0), c);
-        let k = k.as_standard_layout();
-        let mut p = phase.index_axis_mut(ndarray::Axis(0), c);
-        match (k.as_slice(), p.as_slice_mut()) {
-            (Some(k), Some(p)) => lut.displayed_phases(h, w, k, p)?,
-            _ => return Err(HoloError::Internal("pattern planes not contiguous".into())),
-        }
-    }
-    Ok(phase)
 }
 
 /// Mean intensity per colour that a phase-only SLM showing `phase` `[3, H, W]` (radians, as displayed)

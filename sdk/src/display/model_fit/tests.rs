@@ -113,9 +113,10 @@ fn refinement_through_the_fitted_model_beats_the_ideal_display_at_unseen_planes(
     use crate::encoding::DoublePhaseMethod;
     use crate::optics::PropagationOptions;
     use crate::reference::ReferencePipeline;
-    use crate::refine::{codes_of, displayed_phase, held_out_depths, loss_depths, FocalTarget};
+    use crate::refine::{held_out_depths, loss_depths, FocalTarget};
     use crate::refine::{RefineOptions, Refiner};
     use crate::scene::{load_rgbd, DepthEncoding, LoadOptions};
+    use crate::slm::codes::{codes_of, displayed_phase};
     use crate::synthesis::{SceneLayer, SmLbm};
 
     let (h, w) = (64, 64);
