@@ -8,6 +8,8 @@ use super::iterations::Iterations;
 use crate::error::Result;
 
 /// What a device makes of a refinement it is handed ([`RefineDevice::prepare`]).
+// Made by the devices there are: the GPU's (cargo feature `gpu`); a build without one only matches on it.
+#[cfg_attr(not(feature = "gpu"), allow(dead_code))]
 pub(crate) enum Prepared {
     /// The refinement uploaded, ready to run.
     Ready(Box<dyn DeviceIterations>),

@@ -24,7 +24,7 @@
 //! - `iterations`: the iterations on any device behind one trait, with what every device shares written
 //!   once: the start's check, the records, the cancellation, the wrap;
 //! - `device`: where a frame refiner's iterations run, chosen once (the CPU, or a device such as the GPU);
-//! - `gpu` (cargo feature `gpu`): [`GpuRefinement`], the iterations on a GPU;
+//! - `gpu` (cargo feature `gpu`): `GpuRefinement`, the iterations on a GPU;
 //! - `frame`: one frame's refinement as apps and `holo` ask for it ([`FrameRefiner`]; the refiner of a
 //!   pipeline's frames is `FrameRefiner::for_pipeline`, in `crate::pipeline`).
 //!

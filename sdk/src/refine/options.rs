@@ -57,7 +57,7 @@ impl Default for RefineOptions {
 impl RefineOptions {
     /// Checks every field against its range.
     ///
-    /// Errors: [`HoloError::InvalidParameter`] naming the field (`iterations`, `step_rad`, `beta1`, `beta2`,
+    /// Errors: [`crate::HoloError::InvalidParameter`] naming the field (`iterations`, `step_rad`, `beta1`, `beta2`,
     /// `epsilon`, `planes`) and its range.
     pub fn validate(&self) -> Result<()> {
         if !(1..=MAX_ITERATIONS).contains(&self.iterations) {
@@ -115,7 +115,7 @@ pub enum RefineStart {
 /// A start pattern `[3, height, width]` (radians) that needs no hologram: zero for [`RefineStart::Zero`],
 /// uniform random in `[0, 2π)` for [`RefineStart::Random`] (pixel order, R then G then B).
 ///
-/// Errors: [`HoloError::InvalidParameter`] (`start`) for a start that is a hologram's pattern
+/// Errors: [`crate::HoloError::InvalidParameter`] (`start`) for a start that is a hologram's pattern
 /// ([`RefineStart::Cnn`], [`RefineStart::Previous`], [`RefineStart::SmLbmDpm`]: the caller makes those), or
 /// a zero size.
 pub fn initial_phase(start: RefineStart, height: usize, width: usize) -> Result<Array3<f32>> {
@@ -152,7 +152,7 @@ pub struct IterationRecord {
     pub psnr_db: f64,
 }
 
-/// What [`Refiner::refine`] reports.
+/// What [`Refiner::refine`](super::engine::Refiner::refine) reports.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct RefineReport {
     /// The loss and PSNR at the start and after every iteration (`iterations + 1` records).
