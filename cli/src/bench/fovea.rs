@@ -109,14 +109,7 @@ fn cpu_fovea_table(
                         let med = FrameTimings::median(&timings[i][1..]);
                         let (s, runs) = times[i];
                         let report = i.checked_sub(1).and_then(|k| reports[k]);
-                        let (fovea_cell, radius, share) = match (label, report) {
-                            (Some(d), Some(r)) => (
-                                format!("{d}°"),
-                                format!("{:.0}", r.radius_px),
-                                format!("{:.3}", r.cnn_share),
-                            ),
-                            _ => ("full".into(), "–".into(), "1".into()),
-                        };
+                        let (fovea_cell, radius, share) = fovea_cells(label, report);
                         println!(
                             "| holo{layers} | {precision} | {h}x{w} | {threads} | {fovea_cell} | {radius} | {share} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} |",
                             med.cnn_s * 1e3,
@@ -227,14 +220,7 @@ fn gpu_fovea_table(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Re
                 let med = FrameTimings::median(&timings[i][1..]);
                 let (s, runs) = times[i];
                 let report = i.checked_sub(1).and_then(|k| reports[k]);
-                let (fovea_cell, radius, share) = match (degrees, report) {
-                    (Some(d), Some(r)) => (
-                        format!("{d}°"),
-                        format!("{:.0}", r.radius_px),
-                        format!("{:.3}", r.cnn_share),
-                    ),
-                    _ => ("full".into(), "–".into(), "1".into()),
-                };
+                let (fovea_cell, radius, share) = fovea_cells(degrees, report);
                 println!(
                     "| holo{layers} | {h}x{w} | {label} | {fovea_cell} | {radius} | {share} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} |",
                     med.cnn_s * 1e3,
@@ -259,4 +245,20 @@ fn gpu_fovea_table(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Re
 #[cfg(not(feature = "gpu"))]
 fn gpu_fovea_table(_: &BenchArgs, _: &mut Vec<serde_json::Value>) -> Result<()> {
     anyhow::bail!("--backend gpu: this holo was built without the `gpu` feature")
+}
+
+/// A row's fovea cells: its radius in degrees and pixels and the share of the frame the CNN ran on, or the
+/// full frame's (`degrees` `None`, or no report).
+fn fovea_cells(
+    degrees: Option<&f64>,
+    report: Option<tensorholo::foveation::FoveaReport>,
+) -> (String, String, String) {
+    match (degrees, report) {
+        (Some(d), Some(r)) => (
+            format!("{d}°"),
+            format!("{:.0}", r.radius_px),
+            format!("{:.3}", r.cnn_share),
+        ),
+        _ => ("full".into(), "–".into(), "1".into()),
+    }
 }
