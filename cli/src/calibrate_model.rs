@@ -7,13 +7,13 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use tensorholo::display::model::{DisplayModel, COLOUR_KEYS};
-use tensorholo::display::model_captures::{
+use tensorholo::optics::OpticalSetup;
+use tensorholo::slm::model::{DisplayModel, COLOUR_KEYS};
+use tensorholo::slm::model_captures::{
     capture_patterns, simulate_display, ManifestEntry, ManifestFile, CAPTURES_FORMAT,
     CAPTURES_VERSION,
 };
-use tensorholo::display::model_fit::{fit, FitOptions};
-use tensorholo::optics::OpticalSetup;
+use tensorholo::slm::model_fit::{fit, FitOptions};
 use tensorholo::slm::simulate::write_grey_png;
 
 use crate::args::parse_size;

@@ -7,12 +7,12 @@ use std::sync::Arc;
 use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
-use tensorholo::display::model::DisplayModel;
 use tensorholo::pipeline::SlmFrame;
 use tensorholo::refine::{
     loss_depths, FrameRefinement, FrameRefiner, IterationRecord, RefineOptions, RefineStart,
     RefineTarget, RefinedFrame, DEFAULT_TARGET_LEVELS,
 };
+use tensorholo::slm::model::DisplayModel;
 use tensorholo::HoloError;
 
 /// What the refinement aims at.

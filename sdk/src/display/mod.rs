@@ -12,9 +12,6 @@
 
 pub(crate) mod aberration;
 mod equivalence;
-pub mod model;
-pub mod model_captures;
-pub mod model_fit;
 mod prescription;
 mod profile;
 

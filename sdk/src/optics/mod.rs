@@ -7,6 +7,7 @@
 
 pub mod fft;
 pub mod filter;
+pub(crate) mod multiplier;
 pub mod propagation;
 pub mod reconstruct;
 pub mod zernike;

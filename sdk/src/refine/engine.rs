@@ -16,11 +16,11 @@ use super::iterations::{check_start, drive, loss_record, Iterations};
 use super::model::{add_conj_product, plane_term, ColourModel};
 use super::options::{IterationRecord, RefineOptions, RefineReport};
 use super::target::FocalTarget;
-use crate::display::model::{ColourRuntime, DisplayModel, LINEAR_SLOPE};
 use crate::display::AberrationProfile;
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::{OpticalSetup, Padding, PropagationOptions, SpectralPlan};
 use crate::slm::codes::colour_lut;
+use crate::slm::model::{ColourRuntime, DisplayModel, LINEAR_SLOPE};
 use crate::slm::{DisplayCalibration, PhaseLut};
 
 /// The largest drive a refinement through a display model reaches, radians of the linear table: code 255,
@@ -273,7 +273,7 @@ impl Refiner {
         Ok(self)
     }
 
-    /// Refines through the display model `model` (`display::model`, docs/REFINE.md "Through a display
+    /// Refines through the display model `model` (`slm::model`, docs/REFINE.md "Through a display
     /// model"): the phase is then the SLM's drive in radians of the linear table (`2π·code/256`), kept in
     /// `[0, 2π·255/256]` by a projected step instead of wrapping, and the loss sees
     /// `u = S·(exp(i·R(K ∗ codes)) + z)` through the model's aberration. `None` or a model without parts: the
@@ -530,7 +530,7 @@ impl Refiner {
                         square,
                         ..
                     } = s;
-                    // Through a display model: ∂L/∂drive back through the model (display::model), per radian
+                    // Through a display model: ∂L/∂drive back through the model (slm::model), per radian
                     // of the drive.
                     let through = model.as_mut().map(|model| {
                         model.backward(field);

@@ -14,13 +14,13 @@ use super::engine::{least_squares_scale, Refiner};
 use super::iterations::drive;
 use super::options::{initial_phase, IterationRecord, RefineOptions, RefineReport, RefineStart};
 use super::target::{held_out_depths, loss_depths, FocalTarget};
-use crate::display::model::DisplayModel;
 use crate::display::AberrationProfile;
 use crate::encoding::DoublePhaseMethod;
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::{simulate_phase_only, OpticalSetup, PropagationOptions};
 use crate::reference::ReferencePipeline;
 use crate::slm::codes::{codes_of, displayed_phase};
+use crate::slm::model::DisplayModel;
 use crate::slm::DisplayCalibration;
 use crate::synthesis::{SceneLayer, SmLbm};
 
@@ -220,7 +220,7 @@ impl FrameRefiner {
         })
     }
 
-    /// Refines through the fitted display `model` (`display::model`, docs/REFINE.md "Through a display
+    /// Refines through the fitted display `model` (`slm::model`, docs/REFINE.md "Through a display
     /// model"): the codes are optimised as that display shows them (source, crosstalk, phase response, zero
     /// order, aberration), kept in 0…255 by a projected step, and the held-out scores are what it shows. The
     /// model's response replaces a calibration's look-up table. On the GPU backend the iterations fall back

@@ -11,6 +11,9 @@
 //! - [`captures`]: PNG captures decoded row by row and downsampled to the SLM.
 //! - [`intensity`]: the laser intensity scale map (5×5 median, normalised).
 //! - [`simulate`]: [`simulate::SimulatedSlm`], a panel with a spatially varying response and its camera.
+//! - [`model`]: [`model::DisplayModel`], the display as it is (source, crosstalk, phase response, zero order,
+//!   aberration) in a `tensorholo.display-model` file; [`model_captures`], the test patterns, the captures'
+//!   manifest and a simulated display's captures; [`model_fit`], the model fitted from captures.
 #![cfg_attr(
     feature = "research",
     doc = "- [`spots`] (feature `research`): the display's aberration (Eq. 14–19) fitted from camera captures \
@@ -27,6 +30,9 @@ pub mod codes;
 pub mod file;
 pub mod intensity;
 pub mod lut;
+pub mod model;
+pub mod model_captures;
+pub mod model_fit;
 pub mod simulate;
 #[cfg(feature = "research")]
 pub mod spots;

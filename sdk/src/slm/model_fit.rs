@@ -1,4 +1,4 @@
-//! Fitting a display model (`display::model`) to camera captures by Levenberg–Marquardt least squares, with
+//! Fitting a display model (`slm::model`) to camera captures by Levenberg–Marquardt least squares, with
 //! the Jacobian made analytically (forward-mode: each parameter's derivative of the SLM field, propagated as
 //! the field is), docs/CALIBRATION.md "The fit".
 //!
@@ -6,7 +6,7 @@
 //! its phase is held flat), the response's `(s, r₂, r₃)` (`model_captures::response_basis`), the crosstalk
 //! kernel's neighbour weights (the centre is `1 − Σ`, so a flat drive stays flat: the response's scale holds
 //! the rest), the zero order `(Re z, Im z)` and the aberration's five Zernike terms. The residual is
-//! `g·|U|² − I` over every capture's unsaturated pixels, `U = F⁻¹{M·E·H·F{u}}` (`display::model`).
+//! `g·|U|² − I` over every capture's unsaturated pixels, `U = F⁻¹{M·E·H·F{u}}` (`slm::model`).
 //! `∂(g|U|²)/∂θ = 2g·Re(conj(U)·∂U/∂θ)` with `∂U/∂θ = F⁻¹{M·E·H·F{∂u/∂θ}}` for the field's parameters and
 //! `F⁻¹{−i·Z_j·M·E·H·F{u}}` for an aberration term `a_j` (`E = circ·exp(−i·Σa_jZ_j)`).
 

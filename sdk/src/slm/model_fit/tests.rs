@@ -1,5 +1,5 @@
 use super::*;
-use crate::display::model_captures::{capture_patterns, draw_display, simulate_captures, Capture};
+use crate::slm::model_captures::{capture_patterns, draw_display, simulate_captures, Capture};
 
 /// A capture set of `model`'s colour `colour` from the 8 patterns at `distances`, with `noise`.
 pub(crate) fn simulated_set(

@@ -6,8 +6,8 @@ use std::ops::ControlFlow;
 use ndarray::Array3;
 
 use super::*;
-use crate::display::model_captures::{draw_display, response_curve};
 use crate::refine::{loss_depths, FocalTarget, RefineOptions, Refiner};
+use crate::slm::model_captures::{draw_display, response_curve};
 use crate::splitmix::SplitMix64;
 
 const OFFSET_M: f64 = 2e-3;

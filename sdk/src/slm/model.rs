@@ -25,8 +25,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{HoloError, Result};
 use crate::optics::filter::aperture_fn;
+use crate::optics::multiplier::{plane_multiplier, PlaneMultiplier};
 use crate::optics::{OpticalSetup, PropagationOptions, Propagator, ZernikeCoefficients};
-use crate::refine::model::{plane_multiplier, PlaneMultiplier};
 use crate::slm::PhaseCurve;
 
 /// Value of a display model file's `format` field.
@@ -487,7 +487,7 @@ impl ColourRuntime {
 }
 
 /// A camera's view of one capture: the multiplier `M·E·H(distance_m)` of colour `colour` on a `[H, W]` grid
-/// with the model's aberration (`refine::model::plane_multiplier`).
+/// with the model's aberration (`optics::multiplier::plane_multiplier`).
 ///
 /// Errors: as `Propagator::new` and the transfer function's.
 pub(crate) fn capture_multiplier(
