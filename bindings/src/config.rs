@@ -8,6 +8,7 @@ use tensorholo::display::AberrationProfile;
 use tensorholo::generator as core;
 use tensorholo::optics::OpticalSetup;
 use tensorholo::scene::DepthRange;
+use tensorholo::slm::model::DisplayModel;
 
 use crate::enums::{Backend, CnnEngine, GpuPrecision, Precision, PrefilterMode, SceneInput};
 use crate::error::{invalid, Result};
@@ -104,6 +105,12 @@ pub struct GeneratorConfig {
     /// `docs/FOVEATION.md`); `None` (default): none, and that call is refused.
     #[uniffi(default = None)]
     pub foveation: Option<Foveation>,
+    /// A display model fitted from camera captures: the JSON text of a `tensorholo.display-model` file
+    /// (`holo calibrate model fit`, docs/CALIBRATION.md "The display model"), of the hologram's size. The photo
+    /// mode ([`HologramGenerator::render_refined`](crate::HologramGenerator::render_refined)) then refines the
+    /// patterns as that display shows them. `None` (default): the ideal display.
+    #[uniffi(default = None)]
+    pub display_model: Option<String>,
 }
 
 /// A viewer's spectacle prescription, corrected in every frame with the shipped CNNs (`docs/ABERRATION.md`,
@@ -217,6 +224,13 @@ impl GeneratorConfig {
             None => None,
         };
         c.foveation = self.foveation.map(Into::into);
+        c.display_model = match &self.display_model {
+            Some(json) => Some(Arc::new(DisplayModel::from_json_str(
+                json,
+                "display_model",
+            )?)),
+            None => None,
+        };
         c.validate()?;
         Ok(c)
     }
@@ -256,6 +270,10 @@ impl From<core::GeneratorConfig> for GeneratorConfig {
             prescription: c.prescription.map(Into::into),
             aberration: c.aberration.map(|a| a.to_json_string()),
             foveation: c.foveation.map(Into::into),
+            // A model serialises to its file's JSON (serde of plain fields: it cannot fail).
+            display_model: c
+                .display_model
+                .and_then(|m| serde_json::to_string(&*m).ok()),
         }
     }
 }
@@ -396,6 +414,7 @@ pub(crate) mod tests {
             prescription: None,
             aberration: None,
             foveation: None,
+            display_model: None,
         }
     }
 }

@@ -848,3 +848,55 @@ fn a_foveating_generator_renders_gazes_in_frames_and_streams() {
     let e = stream.push_foveated(frame, gaze).unwrap_err();
     assert!(e.to_string().contains("foveation"), "{e}");
 }
+
+/// The photo mode refines through a generator's display model: other codes than through the ideal display; a
+/// model of another SLM size is refused when the generator is made, naming `display_model`.
+#[test]
+fn the_photo_mode_refines_through_the_generators_display_model() {
+    use std::ops::ControlFlow;
+    use tensorholo::refine::FrameRefinement;
+    use tensorholo::slm::model::DisplayModel;
+    let model = |h: usize, w: usize| {
+        let json = format!(
+            r#"{{"format": "tensorholo.display-model", "version": 1, "slm_size": [{h}, {w}],
+                "green": {{"crosstalk": {{"size": [3, 3], "weights": [0, 0.05, 0, 0.05, 0.8, 0.05, 0, 0.05, 0]}},
+                          "zero_order": [0.05, 0.0]}}}}"#
+        );
+        Arc::new(DisplayModel::from_json_str(&json, "test").unwrap())
+    };
+    let frame = camera_frame(H, W, 1.0);
+    let mut refinement = FrameRefinement::default();
+    refinement.options.iterations = 3;
+    let ideal = generator()
+        .render_refined(&frame.view(), &refinement, &mut |_| {
+            ControlFlow::Continue(())
+        })
+        .unwrap();
+    let mut cfg = config();
+    cfg.display_model = Some(model(H, W));
+    let through = HologramGenerator::new(cfg)
+        .unwrap()
+        .render_refined(&frame.view(), &refinement, &mut |_| {
+            ControlFlow::Continue(())
+        })
+        .unwrap();
+    let green =
+        |p: &tensorholo::generator::SlmPatterns| p.codes.index_axis(ndarray::Axis(0), 1).to_owned();
+    let differ = green(&ideal)
+        .iter()
+        .zip(green(&through).iter())
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(
+        differ * 10 > H * W,
+        "{differ} of {} green codes differ",
+        H * W
+    );
+    let mut wrong = config();
+    wrong.display_model = Some(model(H + 2, W));
+    let e = HologramGenerator::new(wrong).unwrap_err();
+    assert!(
+        e.to_string().contains("model") || e.to_string().contains("size"),
+        "{e}"
+    );
+}

@@ -2535,6 +2535,13 @@ public struct GeneratorConfig: Equatable, Hashable {
      * `docs/FOVEATION.md`); `None` (default): none, and that call is refused.
      */
     public var foveation: Foveation?
+    /**
+     * A display model fitted from camera captures: the JSON text of a `tensorholo.display-model` file
+     * (`holo calibrate model fit`, docs/CALIBRATION.md "The display model"), of the hologram's size. The photo
+     * mode ([`HologramGenerator::render_refined`](crate::HologramGenerator::render_refined)) then refines the
+     * patterns as that display shows them. `None` (default): the ideal display.
+     */
+    public var displayModel: String?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -2626,7 +2633,13 @@ public struct GeneratorConfig: Equatable, Hashable {
         /**
          * Gaze-contingent frames ([`HologramGenerator::render_foveated`](crate::HologramGenerator::render_foveated),
          * `docs/FOVEATION.md`); `None` (default): none, and that call is refused.
-         */foveation: Foveation? = nil) {
+         */foveation: Foveation? = nil, 
+        /**
+         * A display model fitted from camera captures: the JSON text of a `tensorholo.display-model` file
+         * (`holo calibrate model fit`, docs/CALIBRATION.md "The display model"), of the hologram's size. The photo
+         * mode ([`HologramGenerator::render_refined`](crate::HologramGenerator::render_refined)) then refines the
+         * patterns as that display shows them. `None` (default): the ideal display.
+         */displayModel: String? = nil) {
         self.width = width
         self.height = height
         self.layers = layers
@@ -2651,6 +2664,7 @@ public struct GeneratorConfig: Equatable, Hashable {
         self.prescription = prescription
         self.aberration = aberration
         self.foveation = foveation
+        self.displayModel = displayModel
     }
 
     
@@ -2692,7 +2706,8 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
                 savedPlans: FfiConverterOptionString.read(from: &buf), 
                 prescription: FfiConverterOptionTypePrescription.read(from: &buf), 
                 aberration: FfiConverterOptionString.read(from: &buf), 
-                foveation: FfiConverterOptionTypeFoveation.read(from: &buf)
+                foveation: FfiConverterOptionTypeFoveation.read(from: &buf), 
+                displayModel: FfiConverterOptionString.read(from: &buf)
         )
     }
 
@@ -2721,6 +2736,7 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
         FfiConverterOptionTypePrescription.write(value.prescription, into: &buf)
         FfiConverterOptionString.write(value.aberration, into: &buf)
         FfiConverterOptionTypeFoveation.write(value.foveation, into: &buf)
+        FfiConverterOptionString.write(value.displayModel, into: &buf)
     }
 }
 

@@ -413,3 +413,22 @@ def test_the_photo_mode_refines_reports_progress_and_cancels(case):
             gen.render_refined(frame, tensorholo.RefineSettings(**bad), None)
         assert field in str(e.value), (bad, str(e.value))
     assert np.array_equal(codes_of(gen.render(frame)), plain)
+
+
+def test_the_photo_mode_refines_through_a_display_model_and_a_bad_one_is_refused_by_name(case):
+    c, frame, _, gen = case
+    model = json.dumps({"format": "tensorholo.display-model", "version": 1,
+                        "slm_size": [c.out_height, c.out_width],
+                        "green": {"crosstalk": {"size": [3, 3], "weights": [0, .05, 0, .05, .8, .05, 0, .05, 0]},
+                                  "zero_order": [0.05, 0.0]}})
+    fitted = HologramGenerator(GeneratorConfig(width=c.out_width, height=c.out_height, display_model=model))
+    settings = tensorholo.RefineSettings(iterations=2)
+    ideal = codes_of(gen.render_refined(frame, settings, None))
+    through = codes_of(fitted.render_refined(frame, settings, None))
+    # The green pattern is refined for the crosstalk and zero order: other codes.
+    assert np.mean(ideal[1] != through[1]) > 0.1
+    for bad in ['{"format": "tensorholo.display-model", "version": 1, "slm_size": [4, 4]}',
+                model.replace('"size": [3, 3]', '"size": [2, 2]')]:
+        with pytest.raises(TensorholoError.InvalidInput) as e:
+            HologramGenerator(GeneratorConfig(width=c.out_width, height=c.out_height, display_model=bad))
+        assert "model" in str(e.value), str(e.value)

@@ -18,6 +18,7 @@ use crate::foveation::FoveationOptions;
 use crate::optics::{OpticalSetup, PropagationOptions};
 use crate::pipeline::{Backend, GpuPrecision, ModelSelection, PipelineConfig, MAX_HOLOGRAM_PIXELS};
 use crate::scene::{DepthMapping, DepthRange, DepthUpsampling, Fit, FrameOptions};
+use crate::slm::model::DisplayModel;
 
 /// Everything a [`HologramGenerator`] needs. Build with [`GeneratorConfig::new`] and change the fields
 /// you need; [`GeneratorConfig::validate`] says what is wrong.
@@ -101,6 +102,26 @@ pub struct GeneratorConfig {
     ///
     /// [`HologramGenerator::render_foveated`]: super::HologramGenerator::render_foveated
     pub foveation: Option<FoveationOptions>,
+    /// A display model fitted from camera captures (`tensorholo.display-model`, [`DisplayModel::load`] or
+    /// [`DisplayModel::from_json_str`]; docs/CALIBRATION.md "The display model"): the photo mode
+    /// ([`HologramGenerator::render_refined`]) then refines the patterns as that display shows them (its
+    /// source, crosstalk, phase response, zero order, aberration). `None` (the default): the ideal display.
+    /// Its SLM size must be the hologram's.
+    ///
+    /// [`HologramGenerator::render_refined`]: super::HologramGenerator::render_refined
+    #[serde(serialize_with = "model_itself")]
+    pub display_model: Option<Arc<DisplayModel>>,
+}
+
+/// [`GeneratorConfig::display_model`] in reports: the model itself, or null.
+fn model_itself<S: serde::Serializer>(
+    model: &Option<Arc<DisplayModel>>,
+    s: S,
+) -> std::result::Result<S::Ok, S::Error> {
+    match model {
+        Some(m) => s.serialize_some(&**m),
+        None => s.serialize_none(),
+    }
 }
 
 /// [`GeneratorConfig::saved_plans`] in reports: the plans' origin, or null.
@@ -139,6 +160,7 @@ impl GeneratorConfig {
             prescription: None,
             aberration: None,
             foveation: None,
+            display_model: None,
         }
     }
 
@@ -181,7 +203,7 @@ impl GeneratorConfig {
     /// outputs (`width · height · 4` bytes) fit in a `u32`, a finite non-negative offset, valid optics and
     /// depth range, a thread count within [`MAX_CNN_THREADS`], a finite wavelength ratio tolerance ≥ 0, a
     /// valid prescription or an aberration profile for this display (not both), valid foveation options
-    /// ([`FoveationOptions::check`]).
+    /// ([`FoveationOptions::check`]), a valid display model of the hologram's size.
     ///
     /// Errors: [`HoloError::InvalidParameter`] naming the field.
     pub fn validate(&self) -> Result<()> {
@@ -244,6 +266,10 @@ impl GeneratorConfig {
         }
         if let Some(f) = &self.foveation {
             f.check()?;
+        }
+        if let Some(m) = &self.display_model {
+            m.validate()?;
+            m.check_size(self.height, self.width)?;
         }
         Ok(())
     }

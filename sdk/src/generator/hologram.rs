@@ -378,7 +378,8 @@ impl HologramGenerator {
             &backend,
             (self.calibration(), viewer),
             threads,
-        )?;
+        )?
+        .with_display_model(self.config.display_model.clone())?;
         let refined = refiner.refine(
             &[SceneLayer::from(&rgbd)],
             midpoint.as_ref().map(|m| m.view()),

@@ -260,7 +260,7 @@ impl DisplayModel {
     /// Errors: [`HoloError::InvalidData`] naming `source` and the entry: not this format or version, an
     /// unknown part or key, a value of the wrong type, and those of validation (kernel of even size,
     /// non-finite values, `|zero_order| ≥ 1`, a response curve that decreases).
-    pub(crate) fn from_json_str(text: &str, source: &str) -> Result<Self> {
+    pub fn from_json_str(text: &str, source: &str) -> Result<Self> {
         crate::io::parse_json_object::<Self>(text, "a display model").map_err(|e| {
             HoloError::InvalidData(format!(
                 "`{source}` is not a valid display model ({DISPLAY_MODEL_FORMAT} version \

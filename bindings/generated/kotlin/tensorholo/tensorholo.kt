@@ -3780,6 +3780,14 @@ data class GeneratorConfig (
      * `docs/FOVEATION.md`); `None` (default): none, and that call is refused.
      */
     var `foveation`: Foveation? = null 
+    , 
+    /**
+     * A display model fitted from camera captures: the JSON text of a `tensorholo.display-model` file
+     * (`holo calibrate model fit`, docs/CALIBRATION.md "The display model"), of the hologram's size. The photo
+     * mode ([`HologramGenerator::render_refined`](crate::HologramGenerator::render_refined)) then refines the
+     * patterns as that display shows them. `None` (default): the ideal display.
+     */
+    var `displayModel`: kotlin.String? = null 
     
 ){
     
@@ -3820,6 +3828,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalTypePrescription.read(buf),
             FfiConverterOptionalString.read(buf),
             FfiConverterOptionalTypeFoveation.read(buf),
+            FfiConverterOptionalString.read(buf),
         )
     }
 
@@ -3847,7 +3856,8 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalString.allocationSize(value.`savedPlans`) +
             FfiConverterOptionalTypePrescription.allocationSize(value.`prescription`) +
             FfiConverterOptionalString.allocationSize(value.`aberration`) +
-            FfiConverterOptionalTypeFoveation.allocationSize(value.`foveation`)
+            FfiConverterOptionalTypeFoveation.allocationSize(value.`foveation`) +
+            FfiConverterOptionalString.allocationSize(value.`displayModel`)
     )
 
     override fun write(value: GeneratorConfig, buf: ByteBuffer) {
@@ -3875,6 +3885,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalTypePrescription.write(value.`prescription`, buf)
             FfiConverterOptionalString.write(value.`aberration`, buf)
             FfiConverterOptionalTypeFoveation.write(value.`foveation`, buf)
+            FfiConverterOptionalString.write(value.`displayModel`, buf)
     }
 }
 
