@@ -676,7 +676,7 @@ public protocol HologramGeneratorProtocol: AnyObject, Sendable {
     /**
      * Renders one camera frame foveated on `gaze` (`docs/FOVEATION.md`): the 3D CNN where the viewer looks,
      * the paper's 2D hologram with synthetic blur (in focus at the gaze's depth) elsewhere; at 1080p with a 5°
-     * fovea about 0.4 of [`HologramGenerator::render`]'s time. Needs a generator made with
+     * fovea 0.41–0.45 of [`HologramGenerator::render`]'s time (int8, two Zen 4 cores, docs/BENCHMARKS.md). Needs a generator made with
      * [`GeneratorConfig::foveation`](crate::GeneratorConfig::foveation); pass this frame's gaze (an eye
      * tracker's, ARKit face tracking's, or a touch point) in hologram pixels.
      *
@@ -916,7 +916,7 @@ open func render(frame: RgbdFrame)throws  -> SlmPatterns  {
     /**
      * Renders one camera frame foveated on `gaze` (`docs/FOVEATION.md`): the 3D CNN where the viewer looks,
      * the paper's 2D hologram with synthetic blur (in focus at the gaze's depth) elsewhere; at 1080p with a 5°
-     * fovea about 0.4 of [`HologramGenerator::render`]'s time. Needs a generator made with
+     * fovea 0.41–0.45 of [`HologramGenerator::render`]'s time (int8, two Zen 4 cores, docs/BENCHMARKS.md). Needs a generator made with
      * [`GeneratorConfig::foveation`](crate::GeneratorConfig::foveation); pass this frame's gaze (an eye
      * tracker's, ARKit face tracking's, or a touch point) in hologram pixels.
      *
@@ -5894,7 +5894,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render() != 59531) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_foveated() != 10330) {
+    if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_foveated() != 20666) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi() != 60546) {

@@ -45,11 +45,7 @@ fn cpu_fovea_table(
     println!("|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for &(h, w) in &args.sizes {
         let frame = procedural::default_scene(h, w)?;
-        let gaze = Gaze {
-            x: (w as f64 - 1.0) / 2.0,
-            y: (h as f64 - 1.0) / 2.0,
-            depth_m: None,
-        };
+        let gaze = centre_gaze(h, w);
         for &layers in &args.layers {
             for &p in &args.precision {
                 let precision: Precision = p.into();
@@ -61,13 +57,6 @@ fn cpu_fovea_table(
                         cnn: plans.options(engine, tensorholo::cnn::CnnLayout::Auto, threads),
                         foveation,
                         ..PipelineConfig::default()
-                    };
-                    let fovea = |degrees| FoveationOptions {
-                        radius: FoveaRadius::Degrees {
-                            degrees,
-                            eyepiece_focal_m: DEFAULT_EYEPIECE_FOCAL_M,
-                        },
-                        ..FoveationOptions::default()
                     };
                     let make = |f| -> Result<_> {
                         let pipeline = HologramPipeline::embedded(
@@ -151,20 +140,10 @@ fn gpu_fovea_table(args: &BenchArgs, results: &mut Vec<serde_json::Value>) -> Re
     println!("|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|");
     for &(h, w) in &args.sizes {
         let frame = procedural::default_scene(h, w)?;
-        let gaze = Gaze {
-            x: (w as f64 - 1.0) / 2.0,
-            y: (h as f64 - 1.0) / 2.0,
-            depth_m: None,
-        };
+        let gaze = centre_gaze(h, w);
         for &layers in &args.layers {
             let make = |degrees: Option<f64>| -> Result<_> {
-                let foveation = degrees.map(|degrees| FoveationOptions {
-                    radius: FoveaRadius::Degrees {
-                        degrees,
-                        eyepiece_focal_m: DEFAULT_EYEPIECE_FOCAL_M,
-                    },
-                    ..FoveationOptions::default()
-                });
+                let foveation = degrees.map(fovea);
                 let pipeline = HologramPipeline::embedded(
                     &selection(args, layers, Precision::F32),
                     PipelineConfig {
@@ -260,5 +239,25 @@ fn fovea_cells(
             format!("{:.3}", r.cnn_share),
         ),
         _ => ("full".into(), "–".into(), "1".into()),
+    }
+}
+
+/// The gaze at the centre of an `h × w` frame, the scene's depth there.
+fn centre_gaze(h: usize, w: usize) -> Gaze {
+    Gaze {
+        x: (w as f64 - 1.0) / 2.0,
+        y: (h as f64 - 1.0) / 2.0,
+        depth_m: None,
+    }
+}
+
+/// A fovea of `degrees` behind the paper's 21 mm eyepiece, the other options the defaults.
+fn fovea(degrees: f64) -> FoveationOptions {
+    FoveationOptions {
+        radius: FoveaRadius::Degrees {
+            degrees,
+            eyepiece_focal_m: DEFAULT_EYEPIECE_FOCAL_M,
+        },
+        ..FoveationOptions::default()
     }
 }

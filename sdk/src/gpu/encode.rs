@@ -442,19 +442,9 @@ pub(super) fn uniform_layouts() -> Vec<super::shader_tests::UniformLayout> {
 mod tests {
     use super::*;
     use crate::encoding::{normaliser, ChannelEncoder, ChannelStats};
-    use crate::gpu::test_support::context as test_context;
+    use crate::gpu::test_support::{context as test_context, uniform as lcg};
     use crate::model::contract::head_to_phasor;
     use num_complex::Complex32;
-
-    fn lcg(seed: u64) -> impl FnMut() -> f32 {
-        let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
-        move || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        }
-    }
 
     /// A smooth field with a random speckle on top, `[3, H, W]`.
     fn field(h: usize, w: usize, seed: u64) -> Vec<Complex32> {

@@ -360,19 +360,9 @@ pub(super) fn uniform_layouts() -> Vec<super::shader_tests::UniformLayout> {
 mod tests {
     use super::*;
     use crate::foveation::{ColourInputs, FrameInputs, Gaze, Periphery, TileGeometry};
-    use crate::gpu::test_support::context as test_context;
+    use crate::gpu::test_support::{context as test_context, uniform as lcg};
     use num_complex::Complex64;
     use std::f64::consts::TAU;
-
-    fn lcg(seed: u64) -> impl FnMut() -> f32 {
-        let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
-        move || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        }
-    }
 
     fn phasor(a: f32, p: f32) -> Complex64 {
         Complex64::from_polar(f64::from(a), (f64::from(p) - 0.5) * TAU)

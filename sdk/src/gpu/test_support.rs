@@ -9,3 +9,9 @@ use super::GpuContext;
 pub(crate) fn context() -> Option<GpuContext> {
     super::test_context(false)
 }
+
+/// Uniform values in `[0, 1)` from `seed` ([`crate::splitmix::SplitMix64`]): the shader tests' random inputs.
+pub(crate) fn uniform(seed: u64) -> impl FnMut() -> f32 {
+    let mut rng = crate::splitmix::SplitMix64::new(seed);
+    move || rng.next_f64() as f32
+}

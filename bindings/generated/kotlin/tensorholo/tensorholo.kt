@@ -1027,7 +1027,7 @@ private fun uniffiCheckApiChecksums(lib: IntegrityCheckingUniffiLib) {
     if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render() and 0xFFFF) != 59531) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
-    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_foveated() and 0xFFFF) != 10330) {
+    if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_foveated() and 0xFFFF) != 20666) {
         throw RuntimeException("UniFFI API checksum mismatch: try cleaning and rebuilding your project")
     }
     if ((lib.uniffi_tensorholo_ffi_checksum_method_hologramgenerator_render_ldi() and 0xFFFF) != 60546) {
@@ -1614,7 +1614,7 @@ public interface HologramGeneratorInterface {
     /**
      * Renders one camera frame foveated on `gaze` (`docs/FOVEATION.md`): the 3D CNN where the viewer looks,
      * the paper's 2D hologram with synthetic blur (in focus at the gaze's depth) elsewhere; at 1080p with a 5°
-     * fovea about 0.4 of [`HologramGenerator::render`]'s time. Needs a generator made with
+     * fovea 0.41–0.45 of [`HologramGenerator::render`]'s time (int8, two Zen 4 cores, docs/BENCHMARKS.md). Needs a generator made with
      * [`GeneratorConfig::foveation`](crate::GeneratorConfig::foveation); pass this frame's gaze (an eye
      * tracker's, ARKit face tracking's, or a touch point) in hologram pixels.
      *
@@ -1902,7 +1902,7 @@ open class HologramGenerator: Disposable, AutoCloseable, HologramGeneratorInterf
     /**
      * Renders one camera frame foveated on `gaze` (`docs/FOVEATION.md`): the 3D CNN where the viewer looks,
      * the paper's 2D hologram with synthetic blur (in focus at the gaze's depth) elsewhere; at 1080p with a 5°
-     * fovea about 0.4 of [`HologramGenerator::render`]'s time. Needs a generator made with
+     * fovea 0.41–0.45 of [`HologramGenerator::render`]'s time (int8, two Zen 4 cores, docs/BENCHMARKS.md). Needs a generator made with
      * [`GeneratorConfig::foveation`](crate::GeneratorConfig::foveation); pass this frame's gaze (an eye
      * tracker's, ARKit face tracking's, or a touch point) in hologram pixels.
      *
