@@ -1,5 +1,6 @@
 //! Every available kernel row × the TensorHolo layer shapes at 384×384, one thread; the pre-filter's
-//! depthwise base filter on every path; the heads as phasors (`phasors_1080p`: one 1080×1920 plane).
+//! depthwise base filter on every path; the heads as phasors (`phasors_1080p`: one 1080×1920 plane); the box
+//! means of a foveated periphery's blur (`box_means_1080p`: one 1080×1920 plane).
 //!
 //! Throughput is reported in "elements" = operations (2 per multiply-add, `2·9·C_in·C_out·H·W` per layer),
 //! so criterion's `Gelem/s` reads as GFLOP/s (f32) or GOP/s (int8). The peaks of each ISA are measured with
@@ -243,11 +244,72 @@ fn phasor_paths(c: &mut Criterion) {
     group.finish();
 }
 
+/// The box means over one 1080×1920 plane (a foveated periphery's blur, red at 8 µm: half-widths up to 6),
+/// its rows' unclipped columns as the SDK runs them, on every path.
+fn box_means_paths(c: &mut Criterion) {
+    use tensorholo_kernels::box_blur::{box_means, Defocus, SatRow};
+    let (h, w, reach) = (1080usize, 1920usize, 7usize);
+    let stride = w + 1;
+    let image = data(h * w, 13);
+    let mut table = vec![0.0f64; (h + 1) * stride];
+    for y in 0..h {
+        let mut acc = 0.0f64;
+        for x in 0..w {
+            acc += f64::from(image[y * w + x].abs());
+            table[(y + 1) * stride + x + 1] = table[y * stride + x + 1] + acc;
+        }
+    }
+    // A depth that varies slowly along a row and down the frame, as a scene's.
+    let depth: Vec<f32> = (0..h * w)
+        .map(|i| (i % w) as f32 / w as f32 * 0.7 + (i / w) as f32 / h as f32 * 0.3)
+        .collect();
+    let defocus = Defocus {
+        gaze_depth: 0.4,
+        scale: 6.6,
+        max_half: (reach - 1) as f64,
+    };
+    let mut out = vec![0.0f32; w];
+    let mut group = c.benchmark_group("box_means_1080p");
+    group.throughput(Throughput::Elements(
+        ((h - 2 * reach) * (w - 2 * reach)) as u64,
+    ));
+    for isa in registry::box_means_paths() {
+        if !isa.is_available() {
+            println!("SKIPPED box_means.{isa}: this CPU lacks {isa}");
+            continue;
+        }
+        group.bench_function(isa.name(), |bch| {
+            bch.iter(|| {
+                for y in reach..h - reach {
+                    let sat = SatRow {
+                        table: &table,
+                        stride,
+                        row: y,
+                        x0: reach,
+                    };
+                    let cols = reach..w - reach;
+                    let row_depth = &depth[y * w + cols.start..y * w + cols.end];
+                    box_means(sat, row_depth, defocus, &mut out[cols.clone()], isa).expect("run");
+                }
+                black_box(&out);
+            })
+        });
+    }
+    group.finish();
+}
+
 // criterion_group! generates an undocumented function.
 #[allow(missing_docs)]
 mod group {
     use super::*;
-    criterion_group!(benches, f32_rows, u8_rows, depthwise_paths, phasor_paths);
+    criterion_group!(
+        benches,
+        f32_rows,
+        u8_rows,
+        depthwise_paths,
+        phasor_paths,
+        box_means_paths
+    );
 }
 use group::benches;
 criterion_main!(benches);

@@ -17,6 +17,8 @@
 //! * [`tanh_heads`], [`fake_quantize`]: the hologram CNN's heads and the int8 output grid, vectorised.
 //! * [`depthwise()`], [`depthwise_rows`]: the pre-filter's fixed depthwise filter, register-tiled; [`peak`]:
 //!   measured FMA / dot-product peaks.
+//! * [`box_blur`]: box means of a per-pixel size from a summed-area table (a foveated periphery's synthetic
+//!   defocus blur), vectorised.
 //! * [`double_phase`]: the double phase encoding's rows (polynomial `atan2`/`acos`, wrap, linear look-up
 //!   table codes) with documented error bounds, vectorised.
 //!
@@ -45,6 +47,7 @@
 //! conv3x3 rows in `conv3x3/table.rs`; [`registry`] shows them); every public function is safe and checks
 //! shapes and lengths. The crate's `README.md` maps the files.
 
+pub mod box_blur;
 pub mod buffer;
 pub mod conv3x3;
 pub mod depthwise;

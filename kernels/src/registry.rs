@@ -16,6 +16,11 @@ pub fn phasor_paths() -> impl Iterator<Item = Isa> {
     crate::phasor::PATHS.iter().map(|p| p.isa)
 }
 
+/// The ISA levels with a copy of their own of the box means ([`crate::box_blur::box_means`]), best first.
+pub fn box_means_paths() -> impl Iterator<Item = Isa> {
+    crate::box_blur::PATHS.iter().map(|p| p.isa)
+}
+
 #[cfg(test)]
 mod tests {
     use crate::dispatch::{assert_best_first_ending_portable, Path};
@@ -30,6 +35,7 @@ mod tests {
         assert_best_first_ending_portable(&levels(crate::depthwise::PATHS));
         assert_best_first_ending_portable(&levels(crate::heads::PATHS));
         assert_best_first_ending_portable(&levels(crate::phasor::PATHS));
+        assert_best_first_ending_portable(&levels(crate::box_blur::PATHS));
         assert_best_first_ending_portable(&levels(crate::double_phase::PATHS));
         assert_best_first_ending_portable(&levels(crate::spectral::PATHS));
         assert_best_first_ending_portable(&levels(crate::buffer::rows::PATHS));

@@ -34,7 +34,7 @@ pub(crate) use geometry::TileGeometry;
 /// The GPU's foveated frame clamps its blur as the CPU's periphery does.
 #[cfg(feature = "gpu")]
 pub(crate) use periphery::half_width;
-pub(crate) use periphery::{gaze_depth, ColourInputs, FrameInputs, Periphery};
+pub(crate) use periphery::{gaze_depth, row_span, ColourInputs, FrameInputs, Periphery};
 
 use crate::display::{DEFAULT_EYEPIECE_FOCAL_M, EYEPIECE_FOCAL_RANGE_M};
 use crate::error::{invalid, Result};

@@ -13,6 +13,8 @@ use std::f64::consts::{PI, TAU};
 use std::sync::Mutex;
 
 use rayon::prelude::*;
+use tensorholo_kernels::box_blur::{box_means, Defocus, SatRow};
+use tensorholo_kernels::Isa;
 
 use super::gaze::{Gaze, GAZE_DEPTH_WINDOW_PX};
 use super::geometry::TileGeometry;
@@ -80,12 +82,14 @@ pub(crate) struct Periphery {
     inv_area: Vec<f64>,
     /// The gaze window's depths ([`gaze_depth`]).
     pub(crate) window: Vec<f32>,
+    /// The kernels' level for the unclipped boxes.
+    isa: Isa,
 }
 
 impl Periphery {
     /// The buffers for frames of `geometry` whose largest blur radius (a depth difference of 1) is
-    /// `max_blur_px` pixels, composed on `threads` threads.
-    pub(crate) fn new(geometry: TileGeometry, max_blur_px: f64, threads: usize) -> Self {
+    /// `max_blur_px` pixels, composed on `threads` threads with the kernels of level `isa`.
+    pub(crate) fn new(geometry: TileGeometry, max_blur_px: f64, threads: usize, isa: Isa) -> Self {
         let (height, width) = geometry.frame;
         let reach = (half_width(max_blur_px).floor() as usize + 1).min(height.max(width));
         let band_rows = 64.max(2 * reach).min(height);
@@ -103,6 +107,7 @@ impl Periphery {
                 .map(|k| 1.0 / ((2 * k + 1) * (2 * k + 1)) as f64)
                 .collect(),
             window: Vec::with_capacity(side * side),
+            isa,
         }
     }
 
@@ -281,24 +286,23 @@ impl Periphery {
                 for x in (seg.start..a).chain(b..seg.end) {
                     arow[x] = blurred(y, x, drow[x]) as f32;
                 }
-                for x in a..b {
-                    let hw = (f64::from((drow[x] - frame.gaze_depth).abs()) * scale - 0.5)
-                        .clamp(0.0, max_hw);
-                    let k = hw as usize;
-                    let t = hw - k as f64;
-                    // The box of half-width `k` and the next (`k + 1 ≤ reach`: inside the table and the
-                    // frame), interpolated by `t` (`t = 0`: the first box's mean exactly).
-                    let b0 = (y - k - ys) * stride;
-                    let b1 = (y + k + 1 - ys) * stride;
-                    let m = (table[b1 + x + k + 1] - table[b0 + x + k + 1] - table[b1 + x - k]
-                        + table[b0 + x - k])
-                        * inv_area[k];
-                    let (b0, b1, k) = (b0 - stride, b1 + stride, k + 1);
-                    let m1 = (table[b1 + x + k + 1] - table[b0 + x + k + 1] - table[b1 + x - k]
-                        + table[b0 + x - k])
-                        * inv_area[k];
-                    arow[x] = (m + t * (m1 - m)) as f32;
-                }
+                // The unclipped boxes, vectorised ([`tensorholo_kernels::box_blur`]).
+                box_means(
+                    SatRow {
+                        table,
+                        stride,
+                        row: y - ys,
+                        x0: a,
+                    },
+                    &drow[a..b],
+                    Defocus {
+                        gaze_depth: frame.gaze_depth,
+                        scale,
+                        max_half: max_hw,
+                    },
+                    &mut arow[a..b],
+                    self.isa,
+                )?;
             }
             for x in near {
                 let dx = x as f64 - gx;
@@ -337,7 +341,7 @@ pub(crate) fn half_width(radius: f64) -> f64 {
 }
 
 /// The pixels of a row (or column) within `reach` of `g` on a line of `n`.
-fn row_span(g: f64, reach: f64, n: usize) -> std::ops::Range<usize> {
+pub(crate) fn row_span(g: f64, reach: f64, n: usize) -> std::ops::Range<usize> {
     let lo = (g - reach).ceil().max(0.0) as usize;
     let hi = ((g + reach).floor().max(-1.0) + 1.0).min(n as f64) as usize;
     lo.min(n)..hi.max(lo.min(n))
@@ -365,37 +369,89 @@ fn amplitude_at(colour: &ColourInputs<'_>, i: usize) -> f32 {
 
 /// The summed-area table of the colour's amplitude over the frame rows `rows` (all `w` columns) into
 /// `table` (`(rows + 1) × (w + 1)`, row 0 and column 0 zero): `table[i + 1][x + 1]` is the sum over the first
-/// `i + 1` rows and the first `x + 1` columns.
+/// `i + 1` rows and the first `x + 1` columns, each row's running sum (f64, left to right) added to the
+/// table's row above.
 fn summed_area(
     colour: &ColourInputs<'_>,
     w: usize,
     rows: std::ops::Range<usize>,
     table: &mut [f64],
 ) {
+    match colour.scale {
+        Some(scale) => summed_area_of(colour.amplitude, Some(scale), w, rows, table),
+        None => summed_area_of(colour.amplitude, None, w, rows, table),
+    }
+}
+
+/// Rows of the table built together: each row's running sum is a chain of additions as slow as their
+/// latency, and [`SAT_GROUP`] independent chains keep the adder busy.
+const SAT_GROUP: usize = 4;
+
+/// [`summed_area`] of `amplitude` (times `scale` where given): [`SAT_GROUP`] rows at a time, in one pass
+/// over their columns.
+#[inline(always)]
+fn summed_area_of(
+    amplitude: &[f32],
+    scale: Option<&[f32]>,
+    w: usize,
+    rows: std::ops::Range<usize>,
+    table: &mut [f64],
+) {
     let stride = w + 1;
     table[..stride].fill(0.0);
-    for (i, y) in rows.enumerate() {
-        let (above, below) = table.split_at_mut((i + 1) * stride);
-        let above = &above[i * stride + 1..];
-        let (first, row) = below[..stride].split_at_mut(1);
-        first[0] = 0.0;
-        let amplitude = &colour.amplitude[y * w..(y + 1) * w];
-        let mut acc = 0.0f64;
-        match colour.scale {
-            Some(scale) => {
-                let scale = &scale[y * w..(y + 1) * w];
-                for (((t, &up), &a), &s) in row.iter_mut().zip(above).zip(amplitude).zip(scale) {
-                    acc += f64::from(a * s);
-                    *t = up + acc;
-                }
+    let value = |y: usize, x: usize| match scale {
+        Some(s) => f64::from(amplitude[y * w + x] * s[y * w + x]),
+        None => f64::from(amplitude[y * w + x]),
+    };
+    let mut y = rows.start;
+    let mut i = 0;
+    while y < rows.end {
+        // Table rows `i ..= i + g`: row `i` done, rows `i + 1 ..= i + g` written here.
+        let g = (rows.end - y).min(SAT_GROUP);
+        let group = &mut table[i * stride..(i + g + 1) * stride];
+        if g == SAT_GROUP && scale.is_none() {
+            let (above, below) = group.split_at_mut(stride);
+            let (t1, below) = below.split_at_mut(stride);
+            let (t2, below) = below.split_at_mut(stride);
+            let (t3, t4) = below.split_at_mut(stride);
+            let (above, t1, t2, t3, t4) = (
+                &above[1..=w],
+                &mut t1[1..=w],
+                &mut t2[1..=w],
+                &mut t3[1..=w],
+                &mut t4[1..=w],
+            );
+            let (a0, a1, a2, a3) = (
+                &amplitude[y * w..][..w],
+                &amplitude[(y + 1) * w..][..w],
+                &amplitude[(y + 2) * w..][..w],
+                &amplitude[(y + 3) * w..][..w],
+            );
+            let (mut c0, mut c1, mut c2, mut c3) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+            for x in 0..w {
+                c0 += f64::from(a0[x]);
+                c1 += f64::from(a1[x]);
+                c2 += f64::from(a2[x]);
+                c3 += f64::from(a3[x]);
+                t1[x] = above[x] + c0;
+                t2[x] = t1[x] + c1;
+                t3[x] = t2[x] + c2;
+                t4[x] = t3[x] + c3;
             }
-            None => {
-                for ((t, &up), &a) in row.iter_mut().zip(above).zip(amplitude) {
-                    acc += f64::from(a);
-                    *t = up + acc;
+        } else {
+            for r in 0..g {
+                let mut acc = 0.0f64;
+                for x in 0..w {
+                    acc += value(y + r, x);
+                    group[(r + 1) * stride + x + 1] = group[r * stride + x + 1] + acc;
                 }
             }
         }
+        for r in 1..=g {
+            group[r * stride] = 0.0;
+        }
+        y += g;
+        i += g;
     }
 }
 
@@ -476,7 +532,7 @@ mod tests {
     fn compose_matches_a_naive_reference() {
         let (h, w) = (70, 90);
         let geometry = TileGeometry::new(12.0, 6.0, 3, h, w);
-        let periphery = Periphery::new(geometry, 9.0, 3);
+        let periphery = Periphery::new(geometry, 9.0, 3, Isa::detect());
         let amplitude: Vec<Vec<f32>> = (0..3)
             .map(|c| {
                 (0..h * w)

@@ -380,7 +380,7 @@ mod tests {
         let geometry = TileGeometry::new(radius, band, 3, h, w);
         let blur_px = [3.0, 4.5, 9.0];
         let max_blur = 9.0;
-        let periphery = Periphery::new(geometry, max_blur, 2);
+        let periphery = Periphery::new(geometry, max_blur, 2, tensorholo_kernels::Isa::detect());
         let shape = GpuFoveaShape {
             tile: geometry.tile,
             radius_px: radius,
