@@ -111,6 +111,11 @@ pub struct GeneratorConfig {
     /// patterns as that display shows them. `None` (default): the ideal display.
     #[uniffi(default = None)]
     pub display_model: Option<String>,
+    /// A stream's frames with each colour's global phase aligned to the previous frame's (less phase churn
+    /// for the SLM to settle; nothing the viewer sees), `docs/VIDEO.md`. Through the linear look-up table
+    /// only: a stream through a calibrated one is refused. Default `false`.
+    #[uniffi(default = false)]
+    pub align_phase: bool,
 }
 
 /// A viewer's spectacle prescription, corrected in every frame with the shipped CNNs (`docs/ABERRATION.md`,
@@ -231,6 +236,7 @@ impl GeneratorConfig {
             )?)),
             None => None,
         };
+        c.align_phase = self.align_phase;
         c.validate()?;
         Ok(c)
     }
@@ -274,6 +280,7 @@ impl From<core::GeneratorConfig> for GeneratorConfig {
             display_model: c
                 .display_model
                 .and_then(|m| serde_json::to_string(&*m).ok()),
+            align_phase: c.align_phase,
         }
     }
 }
@@ -415,6 +422,7 @@ pub(crate) mod tests {
             aberration: None,
             foveation: None,
             display_model: None,
+            align_phase: false,
         }
     }
 }

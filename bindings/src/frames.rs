@@ -297,6 +297,13 @@ pub struct SlmPatterns {
     pub z_far_m: Option<f64>,
     /// Stage timings.
     pub timings: StageTimings,
+    /// In a stream, the phase change from the previous frame's patterns: the mean wrapped `|Δφ|` over every
+    /// colour and pixel, radians (through the linear look-up table); `None` for a stream's first frame and
+    /// outside a stream.
+    pub phase_churn_rad: Option<f64>,
+    /// In a stream, the share of (colour, pixel) values whose phase changed by more than π/2 since the
+    /// previous frame, `[0, 1]`; `None` as `phase_churn_rad`.
+    pub churn_above_half_pi: Option<f64>,
 }
 
 impl From<core::SlmPatterns> for SlmPatterns {
@@ -312,6 +319,8 @@ impl From<core::SlmPatterns> for SlmPatterns {
             z_near_m: p.depth_range.map(|r| r.z_near_m as f64),
             z_far_m: p.depth_range.map(|r| r.z_far_m as f64),
             timings: t.into(),
+            phase_churn_rad: p.phase_churn.map(|c| c.mean_abs_rad),
+            churn_above_half_pi: p.phase_churn.map(|c| c.above_half_pi),
         }
     }
 }

@@ -8,13 +8,14 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use ndarray::Axis;
 use serde_json::json;
-use tensorholo::encoding::{align_global_phase, phase_churn, PhaseChurn};
+use tensorholo::encoding::{PhaseContinuity, TemporalSummary};
+use tensorholo::foveation::Gaze;
 use tensorholo::io::{ensure_not_input, save_u8_png};
-use tensorholo::pipeline::Backend;
-use tensorholo::refine::FrameRefiner;
+use tensorholo::pipeline::{Backend, HologramPipeline, HologramSession, SlmFrame};
+use tensorholo::refine::{FrameRefinement, FrameRefiner, RefinedFrame};
 use tensorholo::scene::{
-    load_rgbd_with_confidence, open_recording, DepthEncoding, DepthRange, LoadOptions, Recording,
-    RgbdFrame,
+    load_rgbd_with_confidence, open_frame_folders, open_recording, DepthRange, FrameFolders,
+    LoadOptions, Recording, RecordingFrame, RecordingKind, RgbdFrame,
 };
 use tensorholo::synthesis::SceneLayer;
 use tensorholo::HoloError;
@@ -85,18 +86,9 @@ Outputs in --out:
                 radians, and the share of pixels changing by more than π/2), with --align-phase the shifts
   frames/       with --save-frames: NNNNN_phase_r.png, _g, _b per frame";
 
-/// One frame's files (and time, from a recording).
-#[derive(Debug, Clone)]
-struct FrameFiles {
-    rgb: PathBuf,
-    depth: PathBuf,
-    confidence: Option<PathBuf>,
-    time_s: Option<f64>,
-}
-
-/// The sequence's frames and their depth encoding: a recording's (`--recording`), or the folders' paired by
-/// stem (`--rgb-dir`, `--depth-dir`, `--confidence-dir`, `--depth-encoding`).
-fn frames_of(args: &VideoArgs) -> Result<(Vec<FrameFiles>, DepthEncoding, Option<Recording>)> {
+/// The sequence: a recording's frames (`--recording`), or the folders' paired by stem (`--rgb-dir`,
+/// `--depth-dir`, `--confidence-dir`, `--depth-encoding`, `--skip-unmatched`), as a [`Recording`].
+fn frames_of(args: &VideoArgs) -> Result<Recording> {
     if let Some(dir) = &args.recording {
         if let Some(e) = args.depth.depth_encoding {
             bail!(
@@ -105,16 +97,6 @@ fn frames_of(args: &VideoArgs) -> Result<(Vec<FrameFiles>, DepthEncoding, Option
             );
         }
         let recording = open_recording(dir)?;
-        let frames = recording
-            .frames
-            .iter()
-            .map(|f| FrameFiles {
-                rgb: f.rgb.clone(),
-                depth: f.depth.clone(),
-                confidence: f.confidence.clone(),
-                time_s: f.time_s,
-            })
-            .collect();
         log::info!(
             "recording {} ({:?}): {} frames{}, depth {}{}",
             dir.display(),
@@ -130,126 +112,24 @@ fn frames_of(args: &VideoArgs) -> Result<(Vec<FrameFiles>, DepthEncoding, Option
                 ""
             }
         );
-        return Ok((frames, recording.encoding, Some(recording)));
+        return Ok(recording);
     }
-    let (Some(rgb_dir), Some(depth_dir)) = (&args.rgb_dir, &args.depth_dir) else {
+    let (Some(rgb), Some(depth)) = (&args.rgb_dir, &args.depth_dir) else {
         bail!("give --rgb-dir and --depth-dir, or --recording");
     };
     let encoding = args
         .depth
         .depth_encoding
         .context("--depth-encoding is required (how the depth frames store depth)")?;
-    let mut frames: Vec<FrameFiles> = pair_frames(rgb_dir, depth_dir, args.skip_unmatched)?
-        .into_iter()
-        .map(|(rgb, depth)| FrameFiles {
-            rgb,
-            depth,
-            confidence: None,
-            time_s: None,
-        })
-        .collect();
-    if let Some(dir) = &args.confidence_dir {
-        let maps: std::collections::HashMap<std::ffi::OsString, PathBuf> = list_files(dir)?
-            .into_iter()
-            .filter_map(|p| Some((p.file_stem()?.to_owned(), p)))
-            .collect();
-        for f in &mut frames {
-            let map = f.depth.file_stem().and_then(|s| maps.get(s)).with_context(|| {
-                format!(
-                    "depth frame `{}` has no confidence map of the same name stem in --confidence-dir {}",
-                    f.depth.display(),
-                    dir.display()
-                )
-            })?;
-            f.confidence = Some(map.clone());
-        }
-    }
-    Ok((frames, encoding, None))
+    Ok(open_frame_folders(&FrameFolders {
+        rgb,
+        depth,
+        confidence: args.confidence_dir.as_deref(),
+        encoding,
+        skip_unmatched: args.skip_unmatched,
+    })?)
 }
 
-/// The files of `dir`, sorted by name, hidden files (`.DS_Store`) left out.
-fn list_files(dir: &Path) -> Result<Vec<PathBuf>> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot read folder {}", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_file())
-        .filter(|p| {
-            !p.file_name()
-                .is_some_and(|n| n.as_encoded_bytes().starts_with(b"."))
-        })
-        .collect();
-    v.sort();
-    Ok(v)
-}
-
-/// Pairs the files of the two folders by stem (sorted by name; hidden files such as `.DS_Store` are ignored).
-/// A file of either folder without a partner is an error naming it, unless `skip_unmatched` (then a warning).
-fn pair_frames(
-    rgb_dir: &Path,
-    depth_dir: &Path,
-    skip_unmatched: bool,
-) -> Result<Vec<(PathBuf, PathBuf)>> {
-    let (rgbs, depths) = (list_files(rgb_dir)?, list_files(depth_dir)?);
-    let by_stem = |files: &[PathBuf]| -> std::collections::HashMap<std::ffi::OsString, PathBuf> {
-        files
-            .iter()
-            .filter_map(|p| Some((p.file_stem()?.to_owned(), p.clone())))
-            .collect()
-    };
-    let (rgb_stems, depth_stems) = (by_stem(&rgbs), by_stem(&depths));
-    let mut pairs = Vec::new();
-    let mut unmatched = Vec::new();
-    for rgb in &rgbs {
-        match rgb.file_stem().and_then(|s| depth_stems.get(s)) {
-            Some(d) => pairs.push((rgb.clone(), d.clone())),
-            None => unmatched.push(rgb.clone()),
-        }
-    }
-    unmatched.extend(
-        depths
-            .iter()
-            .filter(|d| d.file_stem().is_none_or(|s| !rgb_stems.contains_key(s)))
-            .cloned(),
-    );
-    if !unmatched.is_empty() {
-        let names: Vec<String> = unmatched
-            .iter()
-            .take(5)
-            .map(|p| p.display().to_string())
-            .collect();
-        let more = unmatched.len().saturating_sub(5);
-        let list = format!(
-            "{}{}",
-            names.join(", "),
-            if more > 0 {
-                format!(" and {more} more")
-            } else {
-                String::new()
-            }
-        );
-        if !skip_unmatched {
-            bail!(
-                "{} file(s) have no partner of the same name stem in the other folder: {list}; pair them, or \
-                 pass --skip-unmatched to leave them out",
-                unmatched.len()
-            );
-        }
-        log::warn!(
-            "skipping {} file(s) without a partner: {list}",
-            unmatched.len()
-        );
-    }
-    if pairs.is_empty() {
-        bail!(
-            "no RGB frame in {} has a depth frame of the same name stem in {}",
-            rgb_dir.display(),
-            depth_dir.display()
-        );
-    }
-    Ok(pairs)
-}
-
-/// The file `--save-frames` writes for frame `i`, colour `ch` (`r`, `g`, `b`).
 /// Runs `stream` over `frames` pulled one ahead on a thread of their own (the next frame loads while the
 /// stream computes this one), in order; the loader stops when the stream stops taking frames.
 fn loaded_ahead<T: Send, R>(
@@ -269,37 +149,182 @@ fn loaded_ahead<T: Send, R>(
     })
 }
 
+/// The file `--save-frames` writes for frame `i`, colour `ch` (`r`, `g`, `b`).
 fn frame_file(frames_dir: &Path, i: usize, ch: &str) -> PathBuf {
     frames_dir.join(format!("{i:05}_phase_{ch}.png"))
 }
 
-/// report.json's `temporal`: the phase churn between consecutive frames' patterns
-/// ([`tensorholo::encoding::phase_churn`]) over the sequence; `null` for one frame.
-fn temporal_summary(churns: &[PhaseChurn], aligned: bool) -> serde_json::Value {
-    if churns.is_empty() {
-        return serde_json::Value::Null;
+/// report.json's `temporal`: the phase churn between consecutive frames' patterns over the sequence
+/// ([`PhaseContinuity`]); `null` for one frame.
+fn temporal_summary(summary: Option<TemporalSummary>) -> serde_json::Value {
+    match summary {
+        None => serde_json::Value::Null,
+        Some(s) => json!({
+            "transitions": s.transitions,
+            "mean_churn_rad": s.mean_churn_rad,
+            "max_churn_rad": s.max_churn_rad,
+            "mean_above_half_pi": s.mean_above_half_pi,
+            "max_above_half_pi": s.max_above_half_pi,
+            "align_phase": s.align_phase,
+            "definition": "through the linear look-up table (code c = phase 2πc/256): mean wrapped |Δφ| between consecutive frames' codes, radians, and the share of (colour, pixel) values changing by more than π/2",
+        }),
     }
-    let n = churns.len() as f64;
-    let mean = |f: fn(&PhaseChurn) -> f64| churns.iter().map(f).sum::<f64>() / n;
-    let max = |f: fn(&PhaseChurn) -> f64| churns.iter().map(f).fold(0.0, f64::max);
-    json!({
-        "transitions": churns.len(),
-        "mean_churn_rad": mean(|c| c.mean_abs_rad),
-        "max_churn_rad": max(|c| c.mean_abs_rad),
-        "mean_above_half_pi": mean(|c| c.above_half_pi),
-        "max_above_half_pi": max(|c| c.above_half_pi),
-        "align_phase": aligned,
-        "definition": "through the linear look-up table (code c = phase 2πc/256): mean wrapped |Δφ| between consecutive frames' codes, radians, and the share of (colour, pixel) values changing by more than π/2",
-    })
 }
 
-/// Runs `holo video`.
-pub fn run(args: &VideoArgs) -> Result<()> {
-    // The display profile, read once: a bad one stops the command before anything is written; the files it
-    // names are inputs too.
-    let profile = args.model.profile()?;
-    let profile_files = crate::model_args::ModelArgs::profile_files(profile.as_ref());
-    let t_all = Instant::now();
+/// The frame files each frame reads, for the output guards.
+fn frame_inputs(frames: &[RecordingFrame]) -> Vec<&Path> {
+    frames
+        .iter()
+        .flat_map(|f| {
+            [
+                Some(f.rgb.as_path()),
+                Some(f.depth.as_path()),
+                f.confidence.as_deref(),
+            ]
+        })
+        .flatten()
+        .collect()
+}
+
+/// Loads one frame of the sequence and checks it has the first frame's size.
+fn load_frame(
+    files: &RecordingFrame,
+    recording: &Recording,
+    options: &LoadOptions,
+    size: (usize, usize),
+) -> tensorholo::Result<RgbdFrame> {
+    let (f, _) = load_rgbd_with_confidence(
+        &files.rgb,
+        &files.depth,
+        files.confidence.as_deref(),
+        recording.encoding,
+        options,
+    )?;
+    if (f.height(), f.width()) != size {
+        return Err(HoloError::ShapeMismatch {
+            what: format!("frame {} vs the first frame", files.rgb.display()),
+            expected: vec![size.0, size.1],
+            got: vec![f.height(), f.width()],
+        });
+    }
+    Ok(f)
+}
+
+/// Names frame `i`'s files.
+fn frame_context(recording: &Recording, i: usize) -> String {
+    let f = &recording.frames[i];
+    format!(
+        "frame {i} (`{}` + `{}`)",
+        f.rgb.display(),
+        f.depth.display()
+    )
+}
+
+/// What the stream's sink does with each frame: the refinement, the temporal state, the saved frames, the
+/// report's rows.
+struct FrameSink<'a> {
+    args: &'a VideoArgs,
+    recording: &'a Recording,
+    frames_dir: PathBuf,
+    refiner: Option<FrameRefiner>,
+    temporal: PhaseContinuity,
+    rows: Vec<serde_json::Value>,
+    first_codes: Option<ndarray::Array3<u8>>,
+    written: Vec<PathBuf>,
+    /// Seconds spent building SM-LBM targets and iterating.
+    refine_s: (f64, f64),
+    /// The frame whose error stopped the stream, and whether its refinement failed.
+    failed: Option<(usize, bool)>,
+}
+
+impl FrameSink<'_> {
+    /// Frame `i`'s result (`kept`: the frame's points, for a refinement's SM-LBM target).
+    fn take(
+        &mut self,
+        i: usize,
+        kept: Option<&RgbdFrame>,
+        out: tensorholo::Result<&SlmFrame>,
+    ) -> tensorholo::Result<()> {
+        let out = out.inspect_err(|_| self.failed = Some((i, false)))?;
+        let refined = match (&mut self.refiner, kept) {
+            (Some(r), Some(frame)) => {
+                let iterations = r.request().options.iterations;
+                let refined = r
+                    .refine(
+                        &[SceneLayer::from(frame)],
+                        None,
+                        out.codes.view(),
+                        &mut crate::refine::log_progress(iterations),
+                    )
+                    .inspect_err(|_| self.failed = Some((i, true)))?;
+                self.refine_s.0 += refined.target_s;
+                self.refine_s.1 += refined.report.iterations_s;
+                let report = crate::refine::report(r, &refined);
+                Some((refined, report))
+            }
+            _ => None,
+        };
+        let mut codes = refined.as_ref().map_or_else(
+            || out.codes.clone(),
+            |r: &(RefinedFrame, _)| r.0.codes.clone(),
+        );
+        let step = self.temporal.next(codes.view_mut())?;
+        log_frame(i, out);
+        if i == 0 {
+            self.first_codes = Some(out.codes.clone());
+        }
+        if self.args.save_frames {
+            for (c, ch) in ["r", "g", "b"].iter().enumerate() {
+                let file = frame_file(&self.frames_dir, i, ch);
+                save_u8_png(&file, codes.index_axis(Axis(0), c))?;
+                self.written.push(file);
+            }
+        }
+        let files = &self.recording.frames[i];
+        self.rows.push(json!({
+            "index": i,
+            "rgb": crate::output::path_text(&files.rgb),
+            "depth": crate::output::path_text(&files.depth),
+            "confidence": files.confidence.as_deref().map(crate::output::path_text),
+            "time_s": files.time_s,
+            "timings_s": out.timings,
+            "backend": out.backend,
+            "amplitude_scale": refined.as_ref().map_or(out.amplitude_scale, |r| r.0.amplitude_scale),
+            "refine": refined.map(|r| r.1),
+            "temporal": step.map(|s| json!({
+                "churn_rad": s.churn.mean_abs_rad,
+                "above_half_pi": s.churn.above_half_pi,
+                "aligned_shift_codes": s.aligned_shift_codes,
+            })),
+        }));
+        Ok(())
+    }
+}
+
+/// One frame's stage times in the log.
+fn log_frame(i: usize, out: &SlmFrame) {
+    let t = out.timings;
+    if out.backend == Backend::Gpu {
+        log::info!(
+            "frame {i} (GPU): packing {:.1} ms, GPU {:.1} ms, period {:.1} ms",
+            t.cnn_s * 1e3,
+            t.gpu_s * 1e3,
+            t.total_s * 1e3
+        );
+    } else {
+        log::info!(
+            "frame {i}: CNN {:.1} ms, offset {:.1} ms, pre-filter {:.1} ms, encoding {:.1} ms, period {:.1} ms",
+            t.cnn_s * 1e3,
+            t.offset_s * 1e3,
+            t.prefilter_s * 1e3,
+            t.encoding_s * 1e3,
+            t.total_s * 1e3
+        );
+    }
+}
+
+/// The output guards: every input folder and file (frames, models, profile, gaze track) kept from `--out`.
+fn guard_outputs(args: &VideoArgs, profile_files: &[(&str, PathBuf)]) -> Result<()> {
     let mut guarded: Vec<crate::output::Input> = [
         ("--rgb-dir", &args.rgb_dir),
         ("--depth-dir", &args.depth_dir),
@@ -318,37 +343,39 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             .iter()
             .map(|(what, f)| crate::output::Input::file(what, f)),
     );
-    crate::output::guard("--out", &args.out, &guarded)?;
+    crate::output::guard("--out", &args.out, &guarded)
+}
+
+/// Runs `holo video`.
+pub fn run(args: &VideoArgs) -> Result<()> {
+    // The display profile, read once: a bad one stops the command before anything is written; the files it
+    // names are inputs too.
+    let profile = args.model.profile()?;
+    let profile_files = crate::model_args::ModelArgs::profile_files(profile.as_ref());
+    let t_all = Instant::now();
+    guard_outputs(args, &profile_files)?;
     let refine = args.refine.request(true)?;
-    let (mut pairs, encoding, recording) = frames_of(args)?;
+    let mut recording = frames_of(args)?;
+    let recorded_frames = recording.frames.len();
     if let Some(n) = args.limit {
         if n == 0 {
             bail!("--limit must be at least 1");
         }
-        pairs.truncate(n);
+        recording.frames.truncate(n);
     }
     // Foveated frames: one gaze for every frame (--gaze) or a row per frame (--gaze-track).
+    let n = recording.frames.len();
     let gazes = match (args.model.fovea.gaze()?, &args.model.fovea.gaze_track) {
-        (Some(g), _) => Some(vec![g; pairs.len()]),
-        (None, Some(track)) => Some(crate::fovea::read_gaze_track(track, pairs.len())?),
+        (Some(g), _) => Some(vec![g; n]),
+        (None, Some(track)) => Some(crate::fovea::read_gaze_track(track, n)?),
         (None, None) => None,
     };
-    let inputs: Vec<&Path> = pairs
-        .iter()
-        .flat_map(|f| {
-            [
-                Some(f.rgb.as_path()),
-                Some(f.depth.as_path()),
-                f.confidence.as_deref(),
-            ]
-        })
-        .flatten()
-        .collect();
+    let inputs = frame_inputs(&recording.frames);
     ensure_not_input(&args.out.join("report.json"), &inputs)?;
     let frames_dir = args.out.join("frames");
     if args.save_frames {
         // Every frame file is checked before the first is written (the input folder may be --out/frames).
-        for i in 0..pairs.len() {
+        for i in 0..n {
             for ch in ["r", "g", "b"] {
                 ensure_not_input(&frame_file(&frames_dir, i, ch), &inputs)?;
             }
@@ -374,27 +401,75 @@ pub fn run(args: &VideoArgs) -> Result<()> {
         .collect();
     crate::output::start_run(&args.out, subfolders, Some(&args.out.join("report.json")))?;
     let mut written: Vec<PathBuf> = Vec::new();
-    let result = (|| -> Result<()> {
+    let run = Video {
+        args,
+        recording: &recording,
+        recorded_frames,
+        pipeline: &pipeline,
+        gazes: gazes.as_deref(),
+        refine,
+        frames_dir,
+    };
+    let result = run
+        .stream(&mut written)
+        .and_then(|(streamed, session)| run.report(streamed, session, models, t_all));
+    if result.is_err() {
+        remove_written(&written, &created);
+    }
+    result
+}
+
+/// One `holo video` run, its inputs checked and its outputs guarded.
+struct Video<'a> {
+    args: &'a VideoArgs,
+    recording: &'a Recording,
+    /// The recording's frames before `--limit`.
+    recorded_frames: usize,
+    pipeline: &'a HologramPipeline,
+    gazes: Option<&'a [Gaze]>,
+    refine: Option<FrameRefinement>,
+    frames_dir: PathBuf,
+}
+
+/// What the stream left for the report.
+struct Streamed {
+    frames: usize,
+    size: (usize, usize),
+    range: Option<DepthRange>,
+    options: LoadOptions,
+    session_s: f64,
+    stream_s: f64,
+    rows: Vec<serde_json::Value>,
+    first_codes: Option<ndarray::Array3<u8>>,
+    temporal: Option<TemporalSummary>,
+    refine_s: (f64, f64),
+}
+
+impl Video<'_> {
+    /// The session on the first frame's size, then every frame through it (the next frame decoded on a thread
+    /// of its own while this one computes). `written`: the files written so far.
+    fn stream(&self, written: &mut Vec<PathBuf>) -> Result<(Streamed, HologramSession)> {
+        let (args, recording) = (self.args, self.recording);
         // One metric range for the whole sequence (the first frame's percentiles unless given), so that the
         // depth mapping does not flicker from frame to frame.
         let mut options = args.depth.load_options()?;
-        let first_files = &pairs[0];
+        let first_files = &recording.frames[0];
         let (first, first_report) = load_rgbd_with_confidence(
             &first_files.rgb,
             &first_files.depth,
             first_files.confidence.as_deref(),
-            encoding,
+            recording.encoding,
             &options,
         )
         .with_context(|| format!("frame 0 (`{}`)", first_files.rgb.display()))?;
         if options.range.is_none() {
             options.range = first_report.range_used;
         }
-        let range: Option<DepthRange> = options.range;
-        let (h, w) = (first.height(), first.width());
+        let size = (first.height(), first.width());
         let t = Instant::now();
-        let mut session = pipeline
-            .session(h, w)
+        let mut session = self
+            .pipeline
+            .session(size.0, size.1)
             .map_err(|e| args.model.plans.blame(e))?;
         let session_s = t.elapsed().as_secs_f64();
         args.model
@@ -404,47 +479,28 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             written.push(args.out.join("tuning.json"));
         }
         log::info!(
-            "{} frames of {h}×{w}, depth range {:?} m, {}-layer CNN {}, offset {} mm",
-            pairs.len(),
-            range.map(|r| (r.z_near_m, r.z_far_m)),
+            "{} frames of {}×{}, depth range {:?} m, {}-layer CNN {}, offset {} mm",
+            recording.frames.len(),
+            size.0,
+            size.1,
+            options.range.map(|r| (r.z_near_m, r.z_far_m)),
             args.model.layers,
             args.model.precision(),
-            pipeline.config().offset_m * 1e3
+            self.pipeline.config().offset_m * 1e3
         );
-
-        let loader = |files: &FrameFiles, options: &LoadOptions| -> tensorholo::Result<RgbdFrame> {
-            let (f, _) = load_rgbd_with_confidence(
-                &files.rgb,
-                &files.depth,
-                files.confidence.as_deref(),
-                encoding,
-                options,
-            )?;
-            if (f.height(), f.width()) != (h, w) {
-                return Err(HoloError::ShapeMismatch {
-                    what: format!("frame {} vs the first frame", files.rgb.display()),
-                    expected: vec![h, w],
-                    got: vec![f.height(), f.width()],
-                });
-            }
-            Ok(f)
-        };
-        if args.align_phase && pipeline.calibration().is_some() {
-            bail!(
-                "--align-phase shifts the codes, which is a global phase only through the linear look-up table; \
-                 this run sends its codes through a display calibration (--calibration or the --display profile's)"
-            );
-        }
-        let mut rows = Vec::new();
-        let mut first_codes = None;
-        // The last pattern sent, for the churn and the alignment.
-        let mut previous: Option<ndarray::Array3<u8>> = None;
-        let mut churns = Vec::new();
-        let mut refiner = match refine {
+        let temporal = PhaseContinuity::new(args.align_phase, self.pipeline.calibration().is_some())
+            .map_err(|_| {
+                anyhow::anyhow!(
+                    "--align-phase shifts the codes, which is a global phase only through the linear look-up \
+                     table; this run sends its codes through a display calibration (--calibration or the \
+                     --display profile's)"
+                )
+            })?;
+        let refiner = match self.refine {
             Some(request) => Some(
                 FrameRefiner::for_pipeline(
                     request,
-                    &pipeline,
+                    self.pipeline,
                     session.backend_report(),
                     args.model.thread_count(),
                 )?
@@ -453,16 +509,23 @@ pub fn run(args: &VideoArgs) -> Result<()> {
             ),
             None => None,
         };
-        // A refinement's error, to report as it is (the stream stops on it).
-        let mut refine_error = None;
-        let mut refine_s = (0.0f64, 0.0f64);
+        let mut sink = FrameSink {
+            args,
+            recording,
+            frames_dir: self.frames_dir.clone(),
+            refiner,
+            temporal,
+            rows: Vec::new(),
+            first_codes: None,
+            written: Vec::new(),
+            refine_s: (0.0, 0.0),
+            failed: None,
+        };
         let t_stream = Instant::now();
-        let opts = options;
-        // The frame whose error stops the stream, to name its files.
-        let mut failed = None;
-        let frames = pairs.iter().enumerate().map(|(i, p)| {
+        let refining = self.refine.is_some();
+        let frames = recording.frames.iter().enumerate().map(|(i, p)| {
             let t = Instant::now();
-            let frame = loader(p, &opts).inspect(|_| {
+            let frame = load_frame(p, recording, &options, size).inspect(|_| {
                 log::debug!(
                     "loaded {} in {:.1} ms",
                     p.rgb.display(),
@@ -470,204 +533,130 @@ pub fn run(args: &VideoArgs) -> Result<()> {
                 )
             });
             // A refinement needs the frame's points again (its SM-LBM target) after the CNN has it.
-            let kept = match (&refine, &frame) {
-                (Some(_), Ok(f)) => Some(f.clone()),
+            let kept = match (refining, &frame) {
+                (true, Ok(f)) => Some(f.clone()),
                 _ => None,
             };
             ((i, kept), frame)
         });
-        let sink = |(i, kept): (usize, Option<RgbdFrame>),
-                    out: tensorholo::Result<&tensorholo::pipeline::SlmFrame>| {
-            let out = out.inspect_err(|_| failed = Some(i))?;
-            let refined = match (&mut refiner, &kept) {
-                (Some(r), Some(frame)) => {
-                    let iterations = r.request().options.iterations;
-                    match r.refine(
-                        &[SceneLayer::from(frame)],
-                        None,
-                        out.codes.view(),
-                        &mut crate::refine::log_progress(iterations),
-                    ) {
-                        Ok(refined) => {
-                            refine_s.0 += refined.target_s;
-                            refine_s.1 += refined.report.iterations_s;
-                            let report = crate::refine::report(r, &refined);
-                            Some((refined, report))
-                        }
-                        Err(e) => {
-                            failed = Some(i);
-                            // The stream's own error is what stops it; the refinement's is reported.
-                            let text = e.to_string();
-                            refine_error = Some(e);
-                            return Err(HoloError::Cancelled(text));
-                        }
-                    }
-                }
-                _ => None,
-            };
-            let mut codes = refined
-                .as_ref()
-                .map_or_else(|| out.codes.clone(), |r| r.0.codes.clone());
-            let (shifts, churn) = match &previous {
-                Some(p) => {
-                    let shifts = if args.align_phase {
-                        Some(align_global_phase(p.view(), codes.view_mut())?)
-                    } else {
-                        None
-                    };
-                    (shifts, Some(phase_churn(p.view(), codes.view())?))
-                }
-                None => (None, None),
-            };
-            churns.extend(churn);
-            let t = out.timings;
-            if out.backend == Backend::Gpu {
-                log::info!(
-                    "frame {i} (GPU): packing {:.1} ms, GPU {:.1} ms, period {:.1} ms",
-                    t.cnn_s * 1e3,
-                    t.gpu_s * 1e3,
-                    t.total_s * 1e3
-                );
-            } else {
-                log::info!(
-                        "frame {i}: CNN {:.1} ms, offset {:.1} ms, pre-filter {:.1} ms, encoding {:.1} ms, period {:.1} ms",
-                        t.cnn_s * 1e3,
-                        t.offset_s * 1e3,
-                        t.prefilter_s * 1e3,
-                        t.encoding_s * 1e3,
-                        t.total_s * 1e3
-                    );
-            }
-            if i == 0 {
-                first_codes = Some(out.codes.clone());
-            }
-            if args.save_frames {
-                for (c, ch) in ["r", "g", "b"].iter().enumerate() {
-                    let file = frame_file(&frames_dir, i, ch);
-                    save_u8_png(&file, codes.index_axis(Axis(0), c))?;
-                    written.push(file);
-                }
-            }
-            previous = Some(codes);
-            rows.push(json!({
-                    "index": i,
-                    "rgb": crate::output::path_text(&pairs[i].rgb),
-                    "depth": crate::output::path_text(&pairs[i].depth),
-                    "confidence": pairs[i].confidence.as_deref().map(crate::output::path_text),
-                    "time_s": pairs[i].time_s,
-                    "timings_s": t,
-                    "backend": out.backend,
-                    "amplitude_scale": refined.as_ref().map_or(out.amplitude_scale, |r| r.0.amplitude_scale),
-                    "refine": refined.map(|r| r.1),
-                    "temporal": churn.map(|c| json!({
-                        "churn_rad": c.mean_abs_rad,
-                        "above_half_pi": c.above_half_pi,
-                        "aligned_shift_codes": shifts,
-                    })),
-                }));
-            Ok(())
+        let take = |(i, kept): (usize, Option<RgbdFrame>), out: tensorholo::Result<&SlmFrame>| {
+            sink.take(i, kept.as_ref(), out)
         };
-        // The next frame is decoded on a thread of its own while this one computes.
-        let streamed = loaded_ahead(frames, |frames| match &gazes {
-            None => session.render_stream_each(frames, sink),
+        let streamed = loaded_ahead(frames, |frames| match self.gazes {
+            None => session.render_stream_each(frames, take),
             Some(gazes) => session.render_foveated_stream_each(
                 frames.map(|((i, kept), frame)| ((i, kept), frame.map(|f| (f, gazes[i])))),
-                sink,
+                take,
             ),
         });
-        if let Some(e) = refine_error {
-            let i = failed.unwrap_or(0);
-            return Err(anyhow::Error::new(e).context(format!(
-                "frame {i} (`{}` + `{}`)",
-                pairs[i].rgb.display(),
-                pairs[i].depth.display()
-            )));
-        }
-        let n = streamed.with_context(|| match failed {
-            Some(i) => format!(
-                "frame {i} (`{}` + `{}`)",
-                pairs[i].rgb.display(),
-                pairs[i].depth.display()
-            ),
+        written.append(&mut sink.written);
+        let count = streamed.with_context(|| match sink.failed {
+            Some((i, true)) => format!("refining {}", frame_context(recording, i)),
+            Some((i, false)) => frame_context(recording, i),
             None => "the video stream".to_string(),
         })?;
-        let stream_s = t_stream.elapsed().as_secs_f64();
+        Ok((
+            Streamed {
+                frames: count,
+                size,
+                range: options.range,
+                options,
+                session_s,
+                stream_s: t_stream.elapsed().as_secs_f64(),
+                rows: sink.rows,
+                first_codes: sink.first_codes,
+                temporal: sink.temporal.summary(),
+                refine_s: sink.refine_s,
+            },
+            session,
+        ))
+    }
+
+    /// Checks the streamed first frame against a single-frame render of it and writes report.json.
+    fn report(
+        &self,
+        s: Streamed,
+        mut session: HologramSession,
+        models: serde_json::Value,
+        t_all: Instant,
+    ) -> Result<()> {
+        let (args, recording) = (self.args, self.recording);
         // The streamed output must equal a single-frame render of the same frame.
-        let first_frame = loader(&pairs[0], &options)?;
-        let single = match &gazes {
+        let first_frame = load_frame(&recording.frames[0], recording, &s.options, s.size)?;
+        let single = match self.gazes {
             Some(g) => session.render_foveated(&first_frame, &g[0])?,
             None => session.render(&first_frame)?,
         }
         .codes
         .clone();
-        let identical = first_codes.as_ref() == Some(&single);
+        let identical = s.first_codes.as_ref() == Some(&single);
         if !identical {
             log::warn!("streamed frame 0 differs from its single-frame render");
         }
-        let periods: Vec<f64> = rows
+        let periods: Vec<f64> = s
+            .rows
             .iter()
             .skip(1)
             .filter_map(|r| r["timings_s"]["total_s"].as_f64())
             .collect();
         let mean_period = if periods.is_empty() {
-            stream_s / n.max(1) as f64
+            s.stream_s / s.frames.max(1) as f64
         } else {
             periods.iter().sum::<f64>() / periods.len() as f64
         };
+        let fps_steady = if mean_period > 0.0 {
+            1.0 / mean_period
+        } else {
+            0.0
+        };
+        // An app's export is a recording in the report; folders paired by stem are not.
+        let app = (recording.kind != RecordingKind::FrameFolders).then_some(recording);
         let report = json!({
             "tensorholo_version": env!("CARGO_PKG_VERSION"),
             "command": crate::output::command_line(),
-            "frames": n,
-            "size": [h, w],
-            "depth_range_m": range.map(|r| [r.z_near_m, r.z_far_m]),
-            "depth_encoding": encoding,
-            "recording": recording.as_ref().map(|r| json!({
+            "frames": s.frames,
+            "size": [s.size.0, s.size.1],
+            "depth_range_m": s.range.map(|r| [r.z_near_m, r.z_far_m]),
+            "depth_encoding": recording.encoding,
+            "recording": app.map(|r| json!({
                 "kind": r.kind,
                 "dir": crate::output::path_text(&r.dir),
                 "fps": r.fps,
                 "intrinsics_px": r.intrinsics,
-                "frames": r.frames.len(),
+                "frames": self.recorded_frames,
                 "confidence_maps": r.frames.iter().any(|f| f.confidence.is_some()),
             })),
             "models": models,
-            "pipeline": pipeline.config(),
-            "session_setup_s": session_s,
+            "pipeline": self.pipeline.config(),
+            "session_setup_s": s.session_s,
             "cnn_plan": session.plan_report(),
             "backend": session.backend_report(),
-            "stream_s": stream_s,
-            "fps_overall": n as f64 / stream_s,
-            "fps_steady": if mean_period > 0.0 { 1.0 / mean_period } else { 0.0 },
+            "stream_s": s.stream_s,
+            "fps_overall": s.frames as f64 / s.stream_s,
+            "fps_steady": fps_steady,
             "mean_period_after_first_s": mean_period,
             "stream_equals_single_frame": identical,
-            "fovea": gazes.as_ref().map(|_| json!({
+            "fovea": self.gazes.map(|_| json!({
                 "gaze": if args.model.fovea.gaze_track.is_some() { "track" } else { "fixed" },
                 "gaze_track": args.model.fovea.gaze_track.as_deref().map(crate::output::path_text),
                 "first_frame": session.fovea_report(),
             })),
-            "refine_target_s": refine.map(|_| refine_s.0),
-            "refine_iterations_s": refine.map(|_| refine_s.1),
-            "temporal": temporal_summary(&churns, args.align_phase),
-            "per_frame": rows,
+            "refine_target_s": self.refine.map(|_| s.refine_s.0),
+            "refine_iterations_s": self.refine.map(|_| s.refine_s.1),
+            "temporal": temporal_summary(s.temporal),
+            "per_frame": s.rows,
             "total_s": t_all.elapsed().as_secs_f64(),
         });
         crate::args::write_json(&args.out.join("report.json"), &report)?;
         log::info!(
-            "{n} frames in {:.2} s: {:.2} FPS overall, {:.2} FPS after the first frame; report in {}",
-            stream_s,
-            n as f64 / stream_s,
-            if mean_period > 0.0 {
-                1.0 / mean_period
-            } else {
-                0.0
-            },
+            "{} frames in {:.2} s: {:.2} FPS overall, {fps_steady:.2} FPS after the first frame; report in {}",
+            s.frames,
+            s.stream_s,
+            s.frames as f64 / s.stream_s,
             args.out.display()
         );
         Ok(())
-    })();
-    if result.is_err() {
-        remove_written(&written, &created);
     }
-    result
 }
 
 /// Removes the files a failed run wrote (never a device or a FIFO it wrote into), then the folders it created

@@ -329,6 +329,66 @@ fn stream_keeps_the_first_frames_depth_range() {
     );
 }
 
+/// A stream's temporal state (`encoding::PhaseContinuity`): each frame after the first carries its churn from
+/// the previous delivered pattern; with `align_phase` each frame's colours are shifted towards the previous
+/// frame's global phase (the codes a whole-code shift of the unaligned ones, the churn no higher).
+#[test]
+fn a_stream_counts_phase_churn_and_aligns_when_asked() {
+    use tensorholo::encoding::phase_churn;
+    let frames = [
+        camera_frame(H, W, 1.0),
+        camera_frame(H, W, 1.3),
+        camera_frame(H, W, 1.0),
+    ];
+    let run = |align: bool| {
+        let mut c = config();
+        c.align_phase = align;
+        let g = HologramGenerator::new(c).unwrap();
+        let rec = Arc::new(Mutex::new(Recorder::default()));
+        let stream = g.stream(Box::new(Shared(Arc::clone(&rec))), 4).unwrap();
+        for f in &frames {
+            stream.push(f.clone()).unwrap();
+        }
+        stream.close();
+        let rec = rec.lock().unwrap();
+        assert!(rec.errors.is_empty(), "{:?}", rec.errors);
+        rec.patterns
+            .iter()
+            .map(|(_, p)| p.clone())
+            .collect::<Vec<_>>()
+    };
+    let plain = run(false);
+    assert_eq!(plain.len(), 3);
+    assert!(plain[0].phase_churn.is_none());
+    for i in 1..3 {
+        let want = phase_churn(plain[i - 1].codes.view(), plain[i].codes.view()).unwrap();
+        assert_eq!(plain[i].phase_churn, Some(want));
+        assert!(want.mean_abs_rad > 0.0, "frame {i} equals the one before");
+    }
+    let aligned = run(true);
+    assert_eq!(aligned[0].codes, plain[0].codes);
+    for i in 1..3 {
+        for c in 0..3 {
+            let (a, p) = (
+                aligned[i].codes.index_axis(ndarray::Axis(0), c),
+                plain[i].codes.index_axis(ndarray::Axis(0), c),
+            );
+            let shift = a[[0, 0]].wrapping_sub(p[[0, 0]]);
+            assert!(
+                a.iter()
+                    .zip(p.iter())
+                    .all(|(&x, &y)| x == y.wrapping_add(shift)),
+                "frame {i} colour {c}: not a whole-code shift"
+            );
+        }
+        let (a, p) = (
+            aligned[i].phase_churn.unwrap(),
+            plain[i].phase_churn.unwrap(),
+        );
+        assert!(a.mean_abs_rad <= p.mean_abs_rad + 1e-12, "{a:?} vs {p:?}");
+    }
+}
+
 #[test]
 fn a_full_stream_queue_drops_the_oldest_frames() {
     let g = generator();

@@ -2542,6 +2542,12 @@ public struct GeneratorConfig: Equatable, Hashable {
      * patterns as that display shows them. `None` (default): the ideal display.
      */
     public var displayModel: String?
+    /**
+     * A stream's frames with each colour's global phase aligned to the previous frame's (less phase churn
+     * for the SLM to settle; nothing the viewer sees), `docs/VIDEO.md`. Through the linear look-up table
+     * only: a stream through a calibrated one is refused. Default `false`.
+     */
+    public var alignPhase: Bool
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -2639,7 +2645,12 @@ public struct GeneratorConfig: Equatable, Hashable {
          * (`holo calibrate model fit`, docs/CALIBRATION.md "The display model"), of the hologram's size. The photo
          * mode ([`HologramGenerator::render_refined`](crate::HologramGenerator::render_refined)) then refines the
          * patterns as that display shows them. `None` (default): the ideal display.
-         */displayModel: String? = nil) {
+         */displayModel: String? = nil, 
+        /**
+         * A stream's frames with each colour's global phase aligned to the previous frame's (less phase churn
+         * for the SLM to settle; nothing the viewer sees), `docs/VIDEO.md`. Through the linear look-up table
+         * only: a stream through a calibrated one is refused. Default `false`.
+         */alignPhase: Bool = false) {
         self.width = width
         self.height = height
         self.layers = layers
@@ -2665,6 +2676,7 @@ public struct GeneratorConfig: Equatable, Hashable {
         self.aberration = aberration
         self.foveation = foveation
         self.displayModel = displayModel
+        self.alignPhase = alignPhase
     }
 
     
@@ -2707,7 +2719,8 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
                 prescription: FfiConverterOptionTypePrescription.read(from: &buf), 
                 aberration: FfiConverterOptionString.read(from: &buf), 
                 foveation: FfiConverterOptionTypeFoveation.read(from: &buf), 
-                displayModel: FfiConverterOptionString.read(from: &buf)
+                displayModel: FfiConverterOptionString.read(from: &buf), 
+                alignPhase: FfiConverterBool.read(from: &buf)
         )
     }
 
@@ -2737,6 +2750,7 @@ public struct FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer {
         FfiConverterOptionString.write(value.aberration, into: &buf)
         FfiConverterOptionTypeFoveation.write(value.foveation, into: &buf)
         FfiConverterOptionString.write(value.displayModel, into: &buf)
+        FfiConverterBool.write(value.alignPhase, into: &buf)
     }
 }
 
@@ -3802,6 +3816,17 @@ public struct SlmPatterns: Equatable, Hashable {
      * Stage timings.
      */
     public var timings: StageTimings
+    /**
+     * In a stream, the phase change from the previous frame's patterns: the mean wrapped `|Δφ|` over every
+     * colour and pixel, radians (through the linear look-up table); `None` for a stream's first frame and
+     * outside a stream.
+     */
+    public var phaseChurnRad: Double?
+    /**
+     * In a stream, the share of (colour, pixel) values whose phase changed by more than π/2 since the
+     * previous frame, `[0, 1]`; `None` as `phase_churn_rad`.
+     */
+    public var churnAboveHalfPi: Double?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -3829,7 +3854,16 @@ public struct SlmPatterns: Equatable, Hashable {
          */zFarM: Double?, 
         /**
          * Stage timings.
-         */timings: StageTimings) {
+         */timings: StageTimings, 
+        /**
+         * In a stream, the phase change from the previous frame's patterns: the mean wrapped `|Δφ|` over every
+         * colour and pixel, radians (through the linear look-up table); `None` for a stream's first frame and
+         * outside a stream.
+         */phaseChurnRad: Double?, 
+        /**
+         * In a stream, the share of (colour, pixel) values whose phase changed by more than π/2 since the
+         * previous frame, `[0, 1]`; `None` as `phase_churn_rad`.
+         */churnAboveHalfPi: Double?) {
         self.width = width
         self.height = height
         self.red = red
@@ -3838,6 +3872,8 @@ public struct SlmPatterns: Equatable, Hashable {
         self.zNearM = zNearM
         self.zFarM = zFarM
         self.timings = timings
+        self.phaseChurnRad = phaseChurnRad
+        self.churnAboveHalfPi = churnAboveHalfPi
     }
 
     
@@ -3863,7 +3899,9 @@ public struct FfiConverterTypeSlmPatterns: FfiConverterRustBuffer {
                 blue: FfiConverterData.read(from: &buf), 
                 zNearM: FfiConverterOptionDouble.read(from: &buf), 
                 zFarM: FfiConverterOptionDouble.read(from: &buf), 
-                timings: FfiConverterTypeStageTimings.read(from: &buf)
+                timings: FfiConverterTypeStageTimings.read(from: &buf), 
+                phaseChurnRad: FfiConverterOptionDouble.read(from: &buf), 
+                churnAboveHalfPi: FfiConverterOptionDouble.read(from: &buf)
         )
     }
 
@@ -3876,6 +3914,8 @@ public struct FfiConverterTypeSlmPatterns: FfiConverterRustBuffer {
         FfiConverterOptionDouble.write(value.zNearM, into: &buf)
         FfiConverterOptionDouble.write(value.zFarM, into: &buf)
         FfiConverterTypeStageTimings.write(value.timings, into: &buf)
+        FfiConverterOptionDouble.write(value.phaseChurnRad, into: &buf)
+        FfiConverterOptionDouble.write(value.churnAboveHalfPi, into: &buf)
     }
 }
 

@@ -12,4 +12,4 @@ pub use double_phase::{
     double_phase_encode, normaliser, ChannelEncoder, ChannelStats, DoublePhase, DoublePhaseMethod,
 };
 pub use lut::{phase_to_codes, wrap_phase, LinearLut};
-pub use temporal::{align_global_phase, phase_churn, PhaseChurn};
+pub use temporal::{phase_churn, PhaseChurn, PhaseContinuity, TemporalStep, TemporalSummary};

@@ -10,8 +10,12 @@
 //! removes that part of the churn. With the linear look-up table (`2π·c/256`) a shift of the codes by `s` is
 //! exactly a global phase of `2π·s/256`; through a calibrated table it is not, so alignment is for the linear
 //! table only.
+//!
+//! [`PhaseContinuity`] keeps a stream's temporal state (the last pattern sent, the churn so far, the
+//! alignment and its rule): `holo video` and [`crate::generator::HologramStream`] both run their patterns
+//! through it.
 
-use ndarray::{ArrayView3, ArrayViewMut3, Axis};
+use ndarray::{Array3, ArrayView3, ArrayViewMut3, Axis};
 
 use crate::error::{HoloError, Result};
 
@@ -71,7 +75,7 @@ pub fn phase_churn(previous: ArrayView3<u8>, current: ArrayView3<u8>) -> Result<
 /// shifts (codes, `0..256`).
 ///
 /// Errors: [`HoloError::ShapeMismatch`] for patterns of different shapes or empty ones.
-pub fn align_global_phase(
+pub(crate) fn align_global_phase(
     previous: ArrayView3<u8>,
     mut current: ArrayViewMut3<u8>,
 ) -> Result<Vec<u8>> {
@@ -96,6 +100,112 @@ pub fn align_global_phase(
         shifts.push(s);
     }
     Ok(shifts)
+}
+
+/// What one frame of a stream changed on the SLM ([`PhaseContinuity::next`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct TemporalStep {
+    /// The churn from the previous pattern sent to this one (after the alignment, where it applies).
+    pub churn: PhaseChurn,
+    /// With the alignment: each colour's code shift (`0..256`) applied to this frame's codes.
+    pub aligned_shift_codes: Option<Vec<u8>>,
+}
+
+/// A stream's churn over its frames ([`PhaseContinuity::summary`]).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct TemporalSummary {
+    /// Frame-to-frame transitions counted (frames − 1).
+    pub transitions: usize,
+    /// The mean over the transitions of [`PhaseChurn::mean_abs_rad`], radians.
+    pub mean_churn_rad: f64,
+    /// The largest [`PhaseChurn::mean_abs_rad`], radians.
+    pub max_churn_rad: f64,
+    /// The mean of [`PhaseChurn::above_half_pi`], `[0, 1]`.
+    pub mean_above_half_pi: f64,
+    /// The largest [`PhaseChurn::above_half_pi`], `[0, 1]`.
+    pub max_above_half_pi: f64,
+    /// Whether each frame's global phase was aligned to the previous frame's.
+    pub align_phase: bool,
+}
+
+/// The temporal state of a stream of SLM patterns: the last pattern sent, the churn so far and, where asked,
+/// each colour's global phase aligned to the previous frame's ([`align_global_phase`]'s rule: through the
+/// linear look-up table only). One per stream; [`PhaseContinuity::next`] on each frame's codes in order.
+#[derive(Debug, Clone, Default)]
+pub struct PhaseContinuity {
+    align: bool,
+    previous: Option<Array3<u8>>,
+    transitions: usize,
+    sum: (f64, f64),
+    max: (f64, f64),
+}
+
+impl PhaseContinuity {
+    /// A stream's state: `align_phase` to shift each frame's codes so that each colour's global phase follows
+    /// the previous frame's; `calibrated_lut`: whether the codes go through a calibrated look-up table.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`align_phase`) for an alignment through a calibrated table,
+    /// where a code shift is not a global phase.
+    pub fn new(align_phase: bool, calibrated_lut: bool) -> Result<Self> {
+        if align_phase && calibrated_lut {
+            return Err(crate::error::invalid(
+                "align_phase",
+                "a code shift is a global phase only through the linear look-up table; these codes go through \
+                 a display calibration's table",
+            ));
+        }
+        Ok(Self {
+            align: align_phase,
+            ..Self::default()
+        })
+    }
+
+    /// Takes the next frame's codes (`[C, H, W]`, the SLM pattern about to be sent): aligns them to the
+    /// previous frame's where asked (in place), counts the churn from the previous frame and keeps them as
+    /// the previous frame (its buffer reused). `None` for the first frame.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for codes of another shape than the previous frame's (the state
+    /// is unchanged).
+    pub fn next(&mut self, mut codes: ArrayViewMut3<u8>) -> Result<Option<TemporalStep>> {
+        let step = match &self.previous {
+            Some(p) => {
+                let shifts = if self.align {
+                    Some(align_global_phase(p.view(), codes.view_mut())?)
+                } else {
+                    None
+                };
+                let churn = phase_churn(p.view(), codes.view())?;
+                self.transitions += 1;
+                self.sum.0 += churn.mean_abs_rad;
+                self.sum.1 += churn.above_half_pi;
+                self.max.0 = self.max.0.max(churn.mean_abs_rad);
+                self.max.1 = self.max.1.max(churn.above_half_pi);
+                Some(TemporalStep {
+                    churn,
+                    aligned_shift_codes: shifts,
+                })
+            }
+            None => None,
+        };
+        match &mut self.previous {
+            Some(p) => p.assign(&codes),
+            None => self.previous = Some(codes.to_owned()),
+        }
+        Ok(step)
+    }
+
+    /// The churn over the frames so far; `None` before the second frame.
+    pub fn summary(&self) -> Option<TemporalSummary> {
+        let n = self.transitions;
+        (n > 0).then(|| TemporalSummary {
+            transitions: n,
+            mean_churn_rad: self.sum.0 / n as f64,
+            max_churn_rad: self.max.0,
+            mean_above_half_pi: self.sum.1 / n as f64,
+            max_above_half_pi: self.max.1,
+            align_phase: self.align,
+        })
+    }
 }
 
 #[cfg(test)]
@@ -184,5 +294,61 @@ mod tests {
             vec![0, 0, 0]
         );
         assert_eq!(same, a);
+    }
+
+    /// The stream's state: nothing for the first frame; each later frame's churn from the one before (as
+    /// [`phase_churn`] counts it), aligned where asked; the summary's means and maxima; another shape refused
+    /// with the state unchanged; alignment through a calibrated table refused.
+    #[test]
+    fn phase_continuity_counts_churn_and_aligns_frame_to_frame() {
+        let frames = [random(11), random(12), random(13)];
+        let mut plain = PhaseContinuity::new(false, true).unwrap();
+        let mut churns = Vec::new();
+        for (i, f) in frames.iter().enumerate() {
+            let mut codes = f.clone();
+            let step = plain.next(codes.view_mut()).unwrap();
+            assert_eq!(codes, *f, "codes changed without alignment");
+            match i {
+                0 => assert!(step.is_none() && plain.summary().is_none()),
+                _ => {
+                    let want = phase_churn(frames[i - 1].view(), f.view()).unwrap();
+                    assert_eq!(step.unwrap().churn, want);
+                    churns.push(want);
+                }
+            }
+        }
+        let s = plain.summary().unwrap();
+        assert_eq!(s.transitions, 2);
+        assert!(
+            (s.mean_churn_rad - (churns[0].mean_abs_rad + churns[1].mean_abs_rad) / 2.0).abs()
+                < 1e-15
+        );
+        assert_eq!(
+            s.max_churn_rad,
+            churns[0].mean_abs_rad.max(churns[1].mean_abs_rad)
+        );
+        assert!(!s.align_phase);
+        // Another shape: refused, the state kept.
+        let mut small = Array3::<u8>::zeros((3, 2, 2));
+        assert!(plain.next(small.view_mut()).is_err());
+        assert_eq!(plain.summary().unwrap().transitions, 2);
+
+        // Aligned: a frame that is the previous one with each colour's global phase moved comes back as it.
+        let mut aligned = PhaseContinuity::new(true, false).unwrap();
+        let mut first = frames[0].clone();
+        aligned.next(first.view_mut()).unwrap();
+        let mut moved = frames[0].clone();
+        for (c, shift) in [(0, 9u8), (1, 100), (2, 250)] {
+            moved
+                .index_axis_mut(Axis(0), c)
+                .mapv_inplace(|v| v.wrapping_add(shift));
+        }
+        let step = aligned.next(moved.view_mut()).unwrap().unwrap();
+        assert_eq!(moved, frames[0]);
+        assert_eq!(step.aligned_shift_codes, Some(vec![247, 156, 6]));
+        assert_eq!(step.churn.mean_abs_rad, 0.0);
+        assert!(aligned.summary().unwrap().align_phase);
+        let e = PhaseContinuity::new(true, true).unwrap_err().to_string();
+        assert!(e.contains("align_phase"), "{e}");
     }
 }

@@ -111,6 +111,13 @@ pub struct GeneratorConfig {
     /// [`HologramGenerator::render_refined`]: super::HologramGenerator::render_refined
     #[serde(serialize_with = "model_itself")]
     pub display_model: Option<Arc<DisplayModel>>,
+    /// A stream's frames ([`HologramGenerator::stream`]) with each colour's global phase aligned to the previous
+    /// frame's ([`crate::encoding::PhaseContinuity`]: less phase churn for the SLM to settle, nothing the
+    /// viewer sees); the linear look-up table only: a stream through a calibrated table is refused. Default
+    /// `false`.
+    ///
+    /// [`HologramGenerator::stream`]: super::HologramGenerator::stream
+    pub align_phase: bool,
 }
 
 /// [`GeneratorConfig::display_model`] in reports: the model itself, or null.
@@ -161,6 +168,7 @@ impl GeneratorConfig {
             aberration: None,
             foveation: None,
             display_model: None,
+            align_phase: false,
         }
     }
 

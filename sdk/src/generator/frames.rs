@@ -4,6 +4,7 @@
 use ndarray::{Array3, ArrayView3, Axis};
 
 use crate::color::amplitude_to_srgb8;
+use crate::encoding::PhaseChurn;
 #[cfg(doc)]
 use crate::error::HoloError;
 use crate::error::{invalid, Result};
@@ -65,6 +66,9 @@ pub struct SlmPatterns {
     pub depth_range: Option<DepthRange>,
     /// Stage timings.
     pub timings: PatternTimings,
+    /// In a stream ([`super::HologramStream`]), the phase churn from the previous frame's patterns
+    /// ([`crate::encoding::PhaseContinuity`]); `None` for a stream's first frame and outside a stream.
+    pub phase_churn: Option<PhaseChurn>,
 }
 
 impl SlmPatterns {
@@ -80,6 +84,7 @@ impl SlmPatterns {
             codes: out.codes.clone(),
             amplitude_scale: out.amplitude_scale,
             depth_range,
+            phase_churn: None,
             timings: PatternTimings {
                 convert_s,
                 frame: out.timings,

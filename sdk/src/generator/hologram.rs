@@ -8,7 +8,7 @@ use std::ops::ControlFlow;
 
 use crate::cnn::{PlanReport, ThreadCount};
 use crate::display::{AberrationProfile, Prescription};
-use crate::encoding::DoublePhaseMethod;
+use crate::encoding::{DoublePhaseMethod, PhaseContinuity};
 use crate::error::{invalid, HoloError, Result};
 use crate::foveation::Gaze;
 use crate::model::{HologramModel, ModelKind, Precision};
@@ -539,9 +539,11 @@ impl HologramGenerator {
     /// Starts a video stream whose results go to `listener` ([`HologramStream`]); its queue holds
     /// `capacity` frames (≥ 1; [`DEFAULT_STREAM_CAPACITY`]). The stream has its own session (the CNN plans
     /// and the autotuning result are shared with this generator's), so [`HologramGenerator::render`] stays
-    /// available meanwhile.
+    /// available meanwhile. Each delivered [`SlmPatterns::phase_churn`] counts the change from the previous
+    /// frame; [`GeneratorConfig::align_phase`] aligns each frame's global phase to the previous one's.
     ///
-    /// Errors: [`HoloError::InvalidParameter`] for a capacity of 0; as [`HologramPipeline::session`].
+    /// Errors: [`HoloError::InvalidParameter`] for a capacity of 0, or `align_phase` with a calibration whose
+    /// look-up tables are calibrated; as [`HologramPipeline::session`].
     pub fn stream(
         &self,
         listener: Box<dyn StreamListener>,
@@ -555,8 +557,11 @@ impl HologramGenerator {
         let plans = Arc::new(self.session()?.plan_report().saved());
         let pipeline = self.pipeline.repeating(plans);
         let aberration = lock_slot(&self.aberration).clone();
-        let session = open_session(&pipeline, &self.config, self.calibration(), aberration)?;
-        HologramStream::start(session, self.config.clone(), listener, capacity)
+        let calibration = self.calibration();
+        let calibrated = calibration.as_ref().is_some_and(|c| c.has_calibrated_lut());
+        let temporal = PhaseContinuity::new(self.config.align_phase, calibrated)?;
+        let session = open_session(&pipeline, &self.config, calibration, aberration)?;
+        HologramStream::start(session, self.config.clone(), temporal, listener, capacity)
     }
 }
 

@@ -7,6 +7,7 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::Instant;
 
+use crate::encoding::PhaseContinuity;
 use crate::error::{invalid, HoloError, Result};
 use crate::foveation::Gaze;
 use crate::pipeline::HologramSession;
@@ -80,6 +81,7 @@ impl HologramStream {
     pub(super) fn start(
         mut session: HologramSession,
         config: GeneratorConfig,
+        mut temporal: PhaseContinuity,
         listener: Box<dyn StreamListener>,
         capacity: usize,
     ) -> Result<Self> {
@@ -107,10 +109,16 @@ impl HologramStream {
                         let frame = converted.map(|(frame, _)| (frame, gaze));
                         Some(((index, range, convert_s), frame))
                     });
+                    // Each delivered pattern through the stream's temporal state (the churn from the
+                    // previous one, the alignment where asked).
                     let sink = |(index, range, convert_s), result: Result<&_>| {
-                        match result {
-                            Ok(out) => listener
-                                .on_patterns(index, SlmPatterns::from_frame(out, convert_s, range)),
+                        let patterns = result.and_then(|out| {
+                            let mut p = SlmPatterns::from_frame(out, convert_s, range);
+                            p.phase_churn = temporal.next(p.codes.view_mut())?.map(|s| s.churn);
+                            Ok(p)
+                        });
+                        match patterns {
+                            Ok(p) => listener.on_patterns(index, p),
                             Err(e) => listener.on_error(index, e),
                         }
                         Ok(())

@@ -29,7 +29,8 @@
 #![cfg_attr(
     feature = "research",
     doc = "* [`recording`] (feature `research`): phone recordings as Record3D and Stray Scanner export them \
-           ([`open_recording`]), frame by frame with depth confidence ([`load_rgbd_with_confidence`])."
+           ([`open_recording`]), and folders of colour and depth frames paired by stem \
+           ([`open_frame_folders`]), frame by frame with depth confidence ([`load_rgbd_with_confidence`])."
 )]
 
 mod camera;
@@ -37,6 +38,8 @@ mod depth;
 #[cfg(feature = "research")]
 mod exr;
 mod frame;
+#[cfg(feature = "research")]
+mod frame_folders;
 mod ldi_files;
 mod load;
 pub mod procedural;
@@ -57,6 +60,8 @@ pub use depth::{
     MAX_DEPTH_ASPECT_MISMATCH,
 };
 pub use frame::{LayeredDepthImage, LdiLayer, RgbdFrame};
+#[cfg(feature = "research")]
+pub use frame_folders::{open_frame_folders, FrameFolders};
 pub use ldi_files::{
     ldi_files, load_ldi_dir, write_ldi_dir, LdiLayerFiles, LdiReport, MAX_LDI_FOLDER_LAYERS,
 };

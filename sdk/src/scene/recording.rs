@@ -27,6 +27,9 @@ pub enum RecordingKind {
     Record3d,
     /// Stray Scanner's folder, colour frames extracted into `rgb/`.
     StrayScanner,
+    /// A folder of colour frames and one of depth frames paired by file stem
+    /// ([`super::frame_folders::open_frame_folders`]).
+    FrameFolders,
 }
 
 /// One frame of a [`Recording`]: its files and time.

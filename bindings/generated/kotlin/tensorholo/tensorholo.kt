@@ -3788,6 +3788,13 @@ data class GeneratorConfig (
      * patterns as that display shows them. `None` (default): the ideal display.
      */
     var `displayModel`: kotlin.String? = null 
+    , 
+    /**
+     * A stream's frames with each colour's global phase aligned to the previous frame's (less phase churn
+     * for the SLM to settle; nothing the viewer sees), `docs/VIDEO.md`. Through the linear look-up table
+     * only: a stream through a calibrated one is refused. Default `false`.
+     */
+    var `alignPhase`: kotlin.Boolean = false 
     
 ){
     
@@ -3829,6 +3836,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalString.read(buf),
             FfiConverterOptionalTypeFoveation.read(buf),
             FfiConverterOptionalString.read(buf),
+            FfiConverterBoolean.read(buf),
         )
     }
 
@@ -3857,7 +3865,8 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalTypePrescription.allocationSize(value.`prescription`) +
             FfiConverterOptionalString.allocationSize(value.`aberration`) +
             FfiConverterOptionalTypeFoveation.allocationSize(value.`foveation`) +
-            FfiConverterOptionalString.allocationSize(value.`displayModel`)
+            FfiConverterOptionalString.allocationSize(value.`displayModel`) +
+            FfiConverterBoolean.allocationSize(value.`alignPhase`)
     )
 
     override fun write(value: GeneratorConfig, buf: ByteBuffer) {
@@ -3886,6 +3895,7 @@ public object FfiConverterTypeGeneratorConfig: FfiConverterRustBuffer<GeneratorC
             FfiConverterOptionalString.write(value.`aberration`, buf)
             FfiConverterOptionalTypeFoveation.write(value.`foveation`, buf)
             FfiConverterOptionalString.write(value.`displayModel`, buf)
+            FfiConverterBoolean.write(value.`alignPhase`, buf)
     }
 }
 
@@ -4683,6 +4693,19 @@ data class SlmPatterns (
      * Stage timings.
      */
     var `timings`: StageTimings
+    , 
+    /**
+     * In a stream, the phase change from the previous frame's patterns: the mean wrapped `|Δφ|` over every
+     * colour and pixel, radians (through the linear look-up table); `None` for a stream's first frame and
+     * outside a stream.
+     */
+    var `phaseChurnRad`: kotlin.Double?
+    , 
+    /**
+     * In a stream, the share of (colour, pixel) values whose phase changed by more than π/2 since the
+     * previous frame, `[0, 1]`; `None` as `phase_churn_rad`.
+     */
+    var `churnAboveHalfPi`: kotlin.Double?
     
 ){
     
@@ -4707,6 +4730,8 @@ public object FfiConverterTypeSlmPatterns: FfiConverterRustBuffer<SlmPatterns> {
             FfiConverterOptionalDouble.read(buf),
             FfiConverterOptionalDouble.read(buf),
             FfiConverterTypeStageTimings.read(buf),
+            FfiConverterOptionalDouble.read(buf),
+            FfiConverterOptionalDouble.read(buf),
         )
     }
 
@@ -4718,7 +4743,9 @@ public object FfiConverterTypeSlmPatterns: FfiConverterRustBuffer<SlmPatterns> {
             FfiConverterByteArray.allocationSize(value.`blue`) +
             FfiConverterOptionalDouble.allocationSize(value.`zNearM`) +
             FfiConverterOptionalDouble.allocationSize(value.`zFarM`) +
-            FfiConverterTypeStageTimings.allocationSize(value.`timings`)
+            FfiConverterTypeStageTimings.allocationSize(value.`timings`) +
+            FfiConverterOptionalDouble.allocationSize(value.`phaseChurnRad`) +
+            FfiConverterOptionalDouble.allocationSize(value.`churnAboveHalfPi`)
     )
 
     override fun write(value: SlmPatterns, buf: ByteBuffer) {
@@ -4730,6 +4757,8 @@ public object FfiConverterTypeSlmPatterns: FfiConverterRustBuffer<SlmPatterns> {
             FfiConverterOptionalDouble.write(value.`zNearM`, buf)
             FfiConverterOptionalDouble.write(value.`zFarM`, buf)
             FfiConverterTypeStageTimings.write(value.`timings`, buf)
+            FfiConverterOptionalDouble.write(value.`phaseChurnRad`, buf)
+            FfiConverterOptionalDouble.write(value.`churnAboveHalfPi`, buf)
     }
 }
 
