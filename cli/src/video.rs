@@ -320,6 +320,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     );
     crate::output::guard("--out", &args.out, &guarded)?;
     let refine = args.refine.request(true)?;
+    args.refine.core.check_display_model_use(false)?;
     let (mut pairs, encoding, recording) = frames_of(args)?;
     if let Some(n) = args.limit {
         if n == 0 {
