@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use clap::Args;
+use clap::{Args, ValueEnum};
 use ndarray::Array3;
 use serde_json::json;
 use std::sync::Arc;
@@ -25,6 +25,7 @@ use tensorholo::refine::{
     FrameRefinement, FrameRefiner, RefineOptions, RefineStart, RefineTarget, DEFAULT_TARGET_LEVELS,
 };
 use tensorholo::scene::procedural;
+use tensorholo::slm::model::DisplayModel;
 use tensorholo::synthesis::SceneLayer;
 
 use crate::args::parse_size;
@@ -107,6 +108,11 @@ pub struct BenchArgs {
     /// the loss never saw.
     #[arg(long, value_name = "N")]
     refine: Option<usize>,
+    /// With --refine: time the refinement through a display model of each of these parts (docs/REFINE.md
+    /// "Through a display model"; fixed values in the ranges of `holo calibrate model simulate`, the same for
+    /// the three colours) beside `ideal` (no model), one run each: the time per iteration each part costs.
+    #[arg(long, value_enum, value_delimiter = ',', requires = "refine")]
+    display_model_parts: Vec<ModelPart>,
     /// Also time foveated frames (docs/FOVEATION.md): a fovea of each of these radii in degrees (behind the
     /// paper's 21 mm eyepiece, gaze at the centre) beside the full frame, timed alternately, per stage, for
     /// every --sizes × --layers × --precision × --threads case.
@@ -186,7 +192,69 @@ Examples:
   holo bench --skip-cnn --backend cpu,gpu --sizes 384x384,1080x1920 --layers 8 --precision f32
                                                CPU against GPU, per GPU stage (--gpu-peak-gflops for % of peak)
   holo bench --skip-cnn --skip-pipeline --refine 10 --sizes 384x384 --threads 2
-                                               the focal-stack refinement alone: target, iterations, gain";
+                                               the focal-stack refinement alone: target, iterations, gain
+  holo bench --skip-cnn --skip-pipeline --refine 3 --sizes 384x384 --threads 2 \\
+      --display-model-parts ideal,source,response,crosstalk,zero-order,aberration,all
+                                               its time per iteration through each part of a display model";
+
+/// A part of a display model for `holo bench --display-model-parts`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum ModelPart {
+    /// No model: the ideal display.
+    Ideal,
+    /// A Gaussian beam with a smooth phase.
+    Source,
+    /// A non-linear phase response.
+    Response,
+    /// A 3×3 crosstalk kernel.
+    Crosstalk,
+    /// A zero order of 5 %.
+    ZeroOrder,
+    /// Focus and astigmatism.
+    Aberration,
+    /// Every part above.
+    All,
+}
+
+/// The display model of `part` for a `[h, w]` SLM, the same for the three colours (`None` for `ideal`): a
+/// Gaussian beam with a smooth phase, a response `2π·(1.02·x + 0.15·x(1 − x))`, 2–3 % crosstalk to each
+/// neighbour, a zero order of 5 %, focus 0.3 rad and astigmatism 0.1 rad.
+fn bench_model(part: ModelPart, h: usize, w: usize) -> Result<Option<Arc<DisplayModel>>> {
+    let phases: Vec<f64> = (0..256)
+        .map(|k| {
+            let x = f64::from(k) / 256.0;
+            std::f64::consts::TAU * (1.02 * x + 0.15 * x * (1.0 - x))
+        })
+        .collect();
+    let every = json!({
+        "source": {"log_amplitude": [0.1, -0.05, -0.35, -0.35, 0.02], "phase_rad": [0.2, -0.1, 0.3, 0.2, 0.0]},
+        "response": {"phases_rad": phases},
+        "crosstalk": {"size": [3, 3], "weights": [0.0, 0.02, 0.0, 0.03, 0.9, 0.03, 0.0, 0.02, 0.0]},
+        "zero_order": [0.05, -0.02],
+        "aberration": {"focus": 0.3, "astigmatism_vertical": 0.1},
+    });
+    let key = match part {
+        ModelPart::Ideal => return Ok(None),
+        ModelPart::Source => "source",
+        ModelPart::Response => "response",
+        ModelPart::Crosstalk => "crosstalk",
+        ModelPart::ZeroOrder => "zero_order",
+        ModelPart::Aberration => "aberration",
+        ModelPart::All => "",
+    };
+    let colour = if key.is_empty() {
+        every
+    } else {
+        json!({ key: every[key].clone() })
+    };
+    let text = json!({"format": "tensorholo.display-model", "version": 1, "slm_size": [h, w],
+                      "red": colour, "green": colour, "blue": colour})
+    .to_string();
+    Ok(Some(Arc::new(DisplayModel::from_json_str(
+        &text,
+        "holo bench's display model",
+    )?)))
+}
 
 /// Median and count of timed runs of `f` after one warm-up, within `budget` seconds.
 fn time_runs(
@@ -550,7 +618,7 @@ fn pipeline_engine(args: &BenchArgs, precision: Precision) -> CnnEngine {
 /// Runs `holo bench`.
 /// The refinement table (`--refine N`): per size, backend and thread count, one frame of the built-in scene
 /// rendered by the 8-layer f32 CNN, its codes refined for `iterations` against the SM-LBM target (the defaults
-/// of `holo render --refine`).
+/// of `holo render --refine`); with `--display-model-parts`, once through each part's model.
 fn refine_table(
     args: &BenchArgs,
     iterations: usize,
@@ -573,8 +641,19 @@ fn refine_table(
          case; held-out: PSNR at the focal planes between the loss's\n",
         levels, request.options.planes, args.offset_mm
     );
-    println!("| size (HxW) | backend | threads | target s | iterations s | ms per iteration | held-out dB: CNN's codes → refined codes |");
-    println!("|---|---|---:|---:|---:|---:|---|");
+    let parts = if args.display_model_parts.is_empty() {
+        vec![None]
+    } else {
+        args.display_model_parts.iter().copied().map(Some).collect()
+    };
+    let model_column = if parts[0].is_some() {
+        " display model |"
+    } else {
+        ""
+    };
+    let model_rule = if parts[0].is_some() { "---|" } else { "" };
+    println!("| size (HxW) | backend | threads |{model_column} target s | iterations s | ms per iteration | held-out dB: CNN's codes → refined codes |");
+    println!("|---|---|---:|{model_rule}---:|---:|---:|---|");
     for &(h, w) in &args.sizes {
         let frame = procedural::default_scene(h, w)?;
         for &backend in &args.backend {
@@ -596,31 +675,43 @@ fn refine_table(
                 let backend_report = session.backend_report().clone();
                 let (out, heads) = session.into_last_frame();
                 let midpoint = heads.context("no frame rendered")?.to_field()?;
-                let mut refiner =
-                    FrameRefiner::for_pipeline(request, &pipeline, &backend_report, threads)?;
-                let r = refiner.refine(
-                    &[SceneLayer::from(&frame)],
-                    Some(midpoint.view()),
-                    out.codes.view(),
-                    &mut |_| ControlFlow::Continue(()),
-                )?;
-                let s = &r.held_out;
-                let base = s.cnn_codes_psnr_db.unwrap_or(s.start_psnr_db);
-                let per_iteration_ms = r.report.iterations_s / iterations as f64 * 1e3;
-                println!(
-                    "| {h}x{w} | {} | {threads} | {:.2} | {:.2} | {per_iteration_ms:.1} | {base:.2} → {:.2} ({:+.2}) |",
+                for &part in &parts {
+                    let model = part.map(|p| bench_model(p, h, w)).transpose()?.flatten();
+                    let mut refiner =
+                        FrameRefiner::for_pipeline(request, &pipeline, &backend_report, threads)?
+                            .with_display_model(model)?;
+                    let r = refiner.refine(
+                        &[SceneLayer::from(&frame)],
+                        Some(midpoint.view()),
+                        out.codes.view(),
+                        &mut |_| ControlFlow::Continue(()),
+                    )?;
+                    let s = &r.held_out;
+                    let base = s.cnn_codes_psnr_db.unwrap_or(s.start_psnr_db);
+                    let per_iteration_ms = r.report.iterations_s / iterations as f64 * 1e3;
+                    let part_cell = part.map_or(String::new(), |p| {
+                        format!(
+                            " {} |",
+                            p.to_possible_value()
+                                .map_or("?".into(), |v| v.get_name().to_string())
+                        )
+                    });
+                    println!(
+                    "| {h}x{w} | {} | {threads} |{part_cell} {:.2} | {:.2} | {per_iteration_ms:.1} | {base:.2} → {:.2} ({:+.2}) |",
                     r.backend,
                     r.target_s,
                     r.report.iterations_s,
                     s.refined_codes_psnr_db,
                     s.refined_codes_psnr_db - base
                 );
-                results.push(
-                    json!({"kind": "refine", "size": [h, w], "backend": r.backend,
+                    results.push(
+                        json!({"kind": "refine", "size": [h, w], "backend": r.backend,
                     "threads": threads, "iterations": iterations, "target_s": r.target_s,
+                    "display_model": part.map(|p| format!("{p:?}")),
                     "iterations_s": r.report.iterations_s, "per_iteration_ms": per_iteration_ms,
                     "held_out": s, "gain_db": s.refined_codes_psnr_db - base}),
-                );
+                    );
+                }
             }
         }
     }

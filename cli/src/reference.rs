@@ -84,6 +84,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         .unwrap_or(0.0);
     crate::args::check_offset_mm(offset_mm)?;
     let refine = args.refine.options()?;
+    args.refine.check_display_model_use(false)?;
     if refine.is_some() && args.aberration.is_some() {
         bail!(
             "holo reference --refine with --aberration: the aberration-corrected SM-LBM's midpoint hologram is \

@@ -58,8 +58,9 @@ pub struct RefineCoreArgs {
     #[arg(long, default_value_t = RefineOptions::default().planes, requires = "refine")]
     pub refine_planes: usize,
     /// Refine through a fitted display model (tensorholo.display-model, `holo calibrate model fit`): the
-    /// codes are optimised, and scored at the held-out planes, as that display shows them (docs/REFINE.md).
-    #[arg(long, value_name = "MODEL", requires = "refine")]
+    /// codes are optimised, and scored at the held-out planes, as that display shows them (docs/REFINE.md);
+    /// `holo render --evaluate` then scores what that display shows too (with --refine, or alone).
+    #[arg(long, value_name = "MODEL")]
     pub display_model: Option<std::path::PathBuf>,
 }
 
@@ -95,6 +96,17 @@ fn flag_of(e: &HoloError) -> &'static str {
 }
 
 impl RefineCoreArgs {
+    /// Refuses `--display-model` without `--refine` (nor, where `evaluate` is given, `holo render --evaluate`):
+    /// it would change nothing.
+    pub fn check_display_model_use(&self, evaluate: bool) -> Result<()> {
+        if self.display_model.is_some() && self.refine.is_none() && !evaluate {
+            bail!(
+                "--display-model: the model is used by --refine N (and by holo render --evaluate); give one of                  them"
+            );
+        }
+        Ok(())
+    }
+
     /// The `--display-model` file, read and checked.
     pub fn display_model(&self) -> Result<Option<Arc<DisplayModel>>> {
         self.display_model

@@ -12,10 +12,13 @@ use tensorholo::evaluation::{focal_depths, table2};
 use tensorholo::foveation::FoveaReport;
 use tensorholo::model::contract;
 use tensorholo::optics::{focal_stack, post_encoding_midpoint};
-use tensorholo::pipeline::{BackendReport, FrameTimings, Heads, HologramPipeline, SlmFrame};
+use tensorholo::pipeline::{
+    BackendReport, FrameTimings, Heads, HologramPipeline, PipelineConfig, SlmFrame,
+};
 use tensorholo::reference::{channel_means, preview_depths, ReferencePipeline};
 use tensorholo::refine::FrameRefiner;
 use tensorholo::scene::RgbdFrame;
+use tensorholo::slm::model::{ColourDisplay, DisplayModel};
 use tensorholo::synthesis::SmLbm;
 
 use crate::args::Scene;
@@ -34,7 +37,9 @@ pub struct RenderArgs {
     repeat: usize,
     /// Also compute the SM-LBM ground truth of the input (--levels planes) and score the CNN's midpoint
     /// hologram and what the SLM shows with the paper's Table 2 protocol (PSNR/SSIM of the amplitude and of
-    /// a 15 + 5-depth focal stack), next to SM-LBM + the same double phase method without CNN.
+    /// a 15 + 5-depth focal stack), next to SM-LBM + the same double phase method without CNN. With
+    /// --display-model, what the SLM shows is what that fitted display shows of the codes (report.json's
+    /// `evaluation.display`).
     #[arg(long)]
     evaluate: bool,
     /// SM-LBM depth planes of the --evaluate ground truth.
@@ -73,6 +78,7 @@ Examples:
 pub fn run(args: &RenderArgs) -> Result<()> {
     let t_all = Instant::now();
     let refine = args.refine.request(false)?;
+    args.refine.core.check_display_model_use(args.evaluate)?;
     let gaze = args.model.fovea.gaze()?;
     if args.model.fovea.gaze_track.is_some() {
         anyhow::bail!(
@@ -153,15 +159,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     // A foveated --evaluate also scores against the full 3D frame of the same session, rendered first.
     let full = match (&scene, &gaze, args.evaluate) {
         (Scene::Frame(frame), Some(_), true) => {
-            let cfg = pipeline.config();
             let out = session.render(frame).with_context(what)?;
-            let displayed = post_encoding_midpoint(
-                out.phase.view(),
-                out.amplitude_scale,
-                &cfg.optics,
-                cfg.offset_m,
-                cfg.options,
-            )?;
+            let displayed = shown_midpoint(pipeline.config(), display_model.as_deref(), out)?;
             let midpoint = session
                 .last_heads()
                 .context("no frame rendered")?
@@ -266,6 +265,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             heads,
             backend: &backend_report,
             fovea: fovea.as_ref().zip(full.as_ref()),
+            display_model: display_model.as_deref(),
         },
         &scene,
         source,
@@ -306,6 +306,59 @@ struct LastFrame<'a> {
     backend: &'a BackendReport,
     /// A foveated frame's report and the full 3D frame it is scored against (`--gaze --evaluate`).
     fovea: Option<(&'a FoveaReport, &'a crate::fovea::FullFrame)>,
+    /// The fitted display `--evaluate` scores through (`--display-model`).
+    display_model: Option<&'a DisplayModel>,
+}
+
+/// The display model of `model` that changes what the display shows: `None` for no model or one without parts
+/// (the ideal display, bit for bit).
+fn with_parts(model: Option<&DisplayModel>) -> Option<&DisplayModel> {
+    model.filter(|m| m.colours.iter().any(|c| *c != ColourDisplay::default()))
+}
+
+/// What the display shows of `frame`'s pattern at the midpoint plane, in the encoded hologram's units (the
+/// Table 2 protocol's "displayed"): through the fitted display `model` where it has parts (its simulation of
+/// the codes, `DisplayModel::shown_midpoint`), else the ideal display of the phase (`post_encoding_midpoint`).
+fn shown_midpoint(
+    cfg: &PipelineConfig,
+    model: Option<&DisplayModel>,
+    frame: &SlmFrame,
+) -> Result<ndarray::Array3<num_complex::Complex32>> {
+    shown_pattern(
+        cfg,
+        model,
+        frame.phase.view(),
+        frame.codes.view(),
+        frame.amplitude_scale,
+    )
+}
+
+/// [`shown_midpoint`] of a pattern's phase `[3, H, W]` (radians), its codes `[3, H, W]` and amplitude scale.
+fn shown_pattern(
+    cfg: &PipelineConfig,
+    model: Option<&DisplayModel>,
+    phase: ndarray::ArrayView3<f32>,
+    codes: ndarray::ArrayView3<u8>,
+    amplitude_scale: f32,
+) -> Result<ndarray::Array3<num_complex::Complex32>> {
+    Ok(match with_parts(model) {
+        Some(m) => m
+            .shown_midpoint(
+                codes,
+                amplitude_scale,
+                &cfg.optics,
+                cfg.offset_m,
+                cfg.options,
+            )
+            .context("--display-model")?,
+        None => post_encoding_midpoint(
+            phase,
+            amplitude_scale,
+            &cfg.optics,
+            cfg.offset_m,
+            cfg.options,
+        )?,
+    })
 }
 
 /// Previews, midpoint, codes, optional evaluation and report.json of the session's last frame.
@@ -341,8 +394,16 @@ fn write_outputs(
         cfg.options,
         false,
     )?;
-    // The displayed field is kept only for the evaluation (50 MB at 1080p).
-    let displayed = args.evaluate.then_some(displayed);
+    // The displayed field is kept only for the evaluation (50 MB at 1080p); through a fitted display, the
+    // evaluation scores what that display shows instead (the previews stay the ideal display's).
+    let displayed = match (args.evaluate, with_parts(last.display_model)) {
+        (false, _) => None,
+        (true, None) => Some(displayed),
+        (true, Some(model)) => {
+            drop(displayed);
+            Some(shown_midpoint(cfg, Some(model), out)?)
+        }
+    };
     let ideal = focal_stack(
         midpoint.view(),
         &cfg.optics,
@@ -378,6 +439,7 @@ fn write_outputs(
             frame,
             [&midpoint, displayed],
             last.fovea,
+            last.display_model,
         )?),
         None => None,
     };
@@ -430,6 +492,7 @@ fn evaluate(
     front: &RgbdFrame,
     [midpoint, displayed]: [&ndarray::Array3<num_complex::Complex32>; 2],
     fovea: Option<(&FoveaReport, &crate::fovea::FullFrame)>,
+    display_model: Option<&DisplayModel>,
 ) -> Result<serde_json::Value> {
     let cfg = pipeline.config();
     let t = Instant::now();
@@ -448,12 +511,12 @@ fn evaluate(
         args.levels
     );
     let gt = reference.run(&scene.layers(), &|_, _| {})?;
-    let reference_displayed = post_encoding_midpoint(
+    let reference_displayed = shown_pattern(
+        cfg,
+        display_model,
         gt.double_phase.phase.view(),
+        gt.codes.view(),
         gt.double_phase.amplitude_scale,
-        &cfg.optics,
-        cfg.offset_m,
-        cfg.options,
     )?;
     let depths = focal_depths(front.depth.view(), 200, 15, 5, 0)?;
     let score = |pred: &ndarray::Array3<num_complex::Complex32>| {
@@ -520,6 +583,9 @@ fn evaluate(
             "levels": args.levels,
         },
         "focal_depths": depths,
+        // Which display "displayed" is what of: the fitted model's simulation of the codes, or the ideal.
+        "display": if display_model.is_some() { "model" } else { "ideal" },
+        "display_model": args.refine.core.display_model.as_ref().and_then(|p| p.file_name()).map(|n| n.to_string_lossy()),
         "cnn_midpoint": cnn,
         "displayed": shown,
         "smlbm_encoded_displayed": {"encoding": cfg.encoding, "scores": reference_shown},

@@ -355,6 +355,7 @@ pub fn run(args: &VideoArgs) -> Result<()> {
     let t_all = Instant::now();
     guard_outputs(args, &profile_files)?;
     let refine = args.refine.request(true)?;
+    args.refine.core.check_display_model_use(false)?;
     let mut recording = frames_of(args)?;
     let recorded_frames = recording.frames.len();
     if let Some(n) = args.limit {

@@ -75,6 +75,56 @@ fn simulate_fit_and_refine_through_the_model() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(out.join("report.json").exists());
+    // --evaluate scores what the fitted display shows (no --refine needed), and says so: not the ideal
+    // display's scores.
+    let evaluate = |model: Option<&Path>, name: &str| {
+        let out = dir.path().join(name);
+        let mut a = vec![
+            "render",
+            "--size",
+            "32x32",
+            "--repeat",
+            "1",
+            "--evaluate",
+            "--levels",
+            "16",
+        ];
+        if let Some(m) = model {
+            a.extend(["--display-model", s(m)]);
+        }
+        a.extend(["--out", s(&out)]);
+        let o = holo(&a);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let text = std::fs::read_to_string(out.join("report.json")).unwrap();
+        let report: serde_json::Value = serde_json::from_str(&text).unwrap();
+        report["evaluation"].clone()
+    };
+    let (ideal, fitted) = (
+        evaluate(None, "ideal"),
+        evaluate(Some(&sim.join("hidden.json")), "hidden"),
+    );
+    assert_eq!(ideal["display"], "ideal");
+    assert_eq!(fitted["display"], "model");
+    assert_eq!(fitted["display_model"], "hidden.json");
+    assert_eq!(fitted["cnn_midpoint"], ideal["cnn_midpoint"]);
+    let db = |e: &serde_json::Value| e["displayed"]["psnr_fs"].as_f64().unwrap();
+    assert!(
+        (db(&ideal) - db(&fitted)).abs() > 0.05,
+        "the model's display scored as the ideal one: {} dB",
+        db(&ideal)
+    );
+    // --display-model with neither --refine nor --evaluate changes nothing: refused.
+    let o = holo(&[
+        "render",
+        "--size",
+        "32x32",
+        "--display-model",
+        s(&model),
+        "--out",
+        s(&dir.path().join("x")),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--display-model"), "{}", stderr(&o));
     // A model of another SLM size than the frame's: refused, nothing written.
     let other = dir.path().join("other");
     let o = holo(&[

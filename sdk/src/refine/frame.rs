@@ -152,7 +152,8 @@ pub struct RefineDisplay {
     pub offset_m: f64,
     /// The double phase method of an SM-LBM start ([`RefineStart::SmLbmDpm`]).
     pub encoding: DoublePhaseMethod,
-    /// The SLM's look-up tables (`None`: linear).
+    /// The SLM's look-up tables (`None`: linear) and laser intensity maps, which scale the SM-LBM target (and
+    /// start) as they scale the CNN's input: the refinement keeps what the map gains.
     pub calibration: Option<Arc<DisplayCalibration>>,
     /// The viewer's aberration (`None`: none), which the refinement's model sees through
     /// (`Refiner::with_viewer`): the refined pattern stays corrected, at every loss plane's own distance.
@@ -162,6 +163,40 @@ pub struct RefineDisplay {
     /// Whether the hologram CNN was trained for `viewer`'s aberration (the session's
     /// `AberrationReport::by_cnn`).
     pub viewer_corrected_by_cnn: bool,
+}
+
+/// The amplitudes `[3, H, W]` of `layers` each multiplied per colour by `calibration`'s laser intensity map
+/// (`slm::intensity`; a colour without one unscaled), as the pipeline scales the CNN's input; `None` without
+/// a calibration or maps.
+///
+/// Errors: [`HoloError::ShapeMismatch`] for a map of another size than the layers'.
+fn intensity_scaled(
+    layers: &[SceneLayer],
+    calibration: Option<&DisplayCalibration>,
+) -> Result<Option<Vec<Array3<f32>>>> {
+    let Some(cal) = calibration.filter(|c| c.has_intensity()) else {
+        return Ok(None);
+    };
+    layers
+        .iter()
+        .map(|l| {
+            let mut a = l.amplitude.to_owned();
+            for (mut plane, colour) in a.outer_iter_mut().zip(&cal.colours) {
+                if let Some(map) = &colour.intensity_scale {
+                    if map.dim() != plane.dim() {
+                        return Err(HoloError::ShapeMismatch {
+                            what: "laser intensity map vs the refined frame".into(),
+                            expected: vec![map.dim().0, map.dim().1],
+                            got: vec![plane.dim().0, plane.dim().1],
+                        });
+                    }
+                    plane *= map;
+                }
+            }
+            Ok(a)
+        })
+        .collect::<Result<Vec<_>>>()
+        .map(Some)
 }
 
 /// Refines a session's frames one after another: one [`Refiner`] for the frame size (made at the first
@@ -317,7 +352,21 @@ impl FrameRefiner {
                 offset_m: d.offset_m,
                 encoding: d.encoding,
             };
-            Some(pipeline.run(layers, &|_, _| {})?)
+            // A calibration's laser intensity maps scale the target as they scale the CNN's: the refinement
+            // aims at what the unevenly lit display can show, and keeps what the map gains.
+            let scaled = intensity_scaled(layers, d.calibration.as_deref())?;
+            let layers: Vec<SceneLayer> = layers
+                .iter()
+                .enumerate()
+                .map(|(k, l)| SceneLayer {
+                    amplitude: scaled
+                        .as_ref()
+                        .map_or_else(|| l.amplitude.view(), |a| a[k].view()),
+                    depth: l.depth.view(),
+                    valid: l.valid.as_ref().map(|v| v.view()),
+                })
+                .collect();
+            Some(pipeline.run(&layers, &|_, _| {})?)
         } else {
             None
         };

@@ -476,3 +476,148 @@ fn the_previous_start_falls_back_to_the_cnn_where_the_view_changed() {
     let held = &third.held_out;
     assert_eq!(Some(held.start_psnr_db), held.cnn_codes_psnr_db);
 }
+
+/// The issue's other beam case: a display whose only flaw is its beam, calibrated the paper's way (a diffuser
+/// capture of the beam → the laser intensity map, `slm::intensity`). The codes made with the map (the target
+/// scaled by it, as the CNN's is) gain over the codes made without; refining them with the calibration must
+/// keep that gain (the refinement aims at the same scaled target), never scoring below the unrefined codes as
+/// the beam shows them, at the planes the loss never saw, against the unscaled scene.
+#[test]
+fn with_an_intensity_map_refinement_never_scores_below_the_unrefined_codes() {
+    use crate::encoding::DoublePhaseMethod;
+    use crate::reference::ReferencePipeline;
+    use crate::scene::{load_rgbd, DepthEncoding, LoadOptions};
+    use crate::slm::intensity::{intensity_scale_map, IntensityFloor};
+    use crate::slm::model::DisplayModel;
+    use crate::slm::model_captures::draw_display;
+    use crate::slm::{codes::codes_of, DisplayCalibration};
+    use crate::synthesis::{SceneLayer, SmLbm};
+    use std::sync::Arc;
+
+    let (h, w) = (64, 64);
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/tum");
+    let options = LoadOptions {
+        size: Some((h, w)),
+        ..LoadOptions::default()
+    };
+    let frame = load_rgbd(
+        &root.join("TUM_color.png"),
+        &root.join("TUM_depth.png"),
+        DepthEncoding::Tum5000,
+        &options,
+    )
+    .expect("the shared TUM frame")
+    .0;
+    let (setup, prop, offset) = (setup(), PropagationOptions::default(), 6e-3);
+    // The beam: a Gaussian drawn from the simulated displays' ranges, the same for the three colours.
+    let source = draw_display([h, w], 1, 21).colours[1].source;
+    let mut beam = DisplayModel {
+        slm_size: [h, w],
+        ..Default::default()
+    };
+    for c in &mut beam.colours {
+        c.source = source;
+    }
+    // Its diffuser capture (the beam's intensity, the peak at 0.8 of full scale) and the map made from it.
+    let mut unit = vec![Complex32::new(0.0, 0.0); h * w];
+    crate::slm::model::ColourRuntime::new(&beam.colours[1], h, w)
+        .forward(&vec![0.0; h * w], &mut unit);
+    let intensity =
+        ndarray::Array2::from_shape_vec((h, w), unit.iter().map(|u| u.norm_sqr()).collect())
+            .unwrap();
+    let peak = intensity.iter().fold(0.0f32, |m, &v| m.max(v));
+    let (map, _) = intensity_scale_map(
+        intensity.mapv(|v| 0.8 * v / peak).view(),
+        IntensityFloor::default(),
+    )
+    .unwrap();
+    let mut calibration = DisplayCalibration::linear(h, w).unwrap();
+    for c in &mut calibration.colours {
+        c.intensity_scale = Some(map.clone());
+    }
+    // The codes made from the scene, and from the scene scaled by the map (what the pipeline does with it).
+    let smlbm = |amplitude: &Array3<f32>| {
+        ReferencePipeline {
+            synthesis: SmLbm {
+                levels: 64,
+                setup,
+                options: prop,
+                silhouette_masks: true,
+            },
+            offset_m: offset,
+            encoding: DoublePhaseMethod::default(),
+        }
+        .run(
+            &[SceneLayer {
+                amplitude: amplitude.view(),
+                depth: frame.depth.view(),
+                valid: None,
+            }],
+            &|_, _| {},
+        )
+        .unwrap()
+    };
+    let plain = smlbm(&frame.amplitude);
+    let mut scaled_amplitude = frame.amplitude.clone();
+    for mut plane in scaled_amplitude.outer_iter_mut() {
+        plane *= &map;
+    }
+    let scaled = smlbm(&scaled_amplitude);
+    let codes = |phase: &Array3<f32>| codes_of(phase.view(), None).unwrap();
+    // Scored as the beam shows them at the held-out planes, against the unscaled scene's focal stack.
+    let score = |codes: &Array3<u8>| {
+        let held = held_out_depths(7).unwrap();
+        let target =
+            FocalTarget::from_midpoint(plain.midpoint.view(), &setup, prop, &held).unwrap();
+        let mut r = Refiner::new(
+            &setup,
+            prop,
+            offset,
+            target.clone(),
+            RefineOptions::default(),
+            2,
+        )
+        .unwrap()
+        .with_display_model(Some(&beam))
+        .unwrap();
+        let mut set = r.plane_set(target).unwrap();
+        let shown = displayed_phase(codes.view(), None).unwrap();
+        r.score_planes(&mut set, shown.view()).unwrap().psnr_db
+    };
+    let without_map = score(&codes(&plain.double_phase.phase));
+    let with_map_codes = codes(&scaled.double_phase.phase);
+    let with_map = score(&with_map_codes);
+    let display = RefineDisplay {
+        optics: setup,
+        propagation: prop,
+        offset_m: offset,
+        encoding: DoublePhaseMethod::default(),
+        calibration: Some(Arc::new(calibration)),
+        viewer: None,
+        viewer_corrected_by_cnn: false,
+    };
+    let request = FrameRefinement {
+        options: RefineOptions::default(),
+        target: RefineTarget::SmLbm { levels: 64 },
+        start: RefineStart::Cnn,
+    };
+    let refined = FrameRefiner::new(request, display, 2)
+        .unwrap()
+        .refine(
+            &[SceneLayer::from(&frame)],
+            None,
+            with_map_codes.view(),
+            &mut never_stop,
+        )
+        .unwrap();
+    let refined = score(&refined.codes);
+    eprintln!(
+        "through the beam: the codes without the map {without_map:.2} dB, with it {with_map:.2} dB, refined with \
+         it {refined:.2} dB"
+    );
+    assert!(
+        with_map > without_map + 0.5,
+        "{with_map:.2} vs {without_map:.2}"
+    );
+    assert!(refined >= with_map, "{refined:.2} < {with_map:.2}");
+}

@@ -20,10 +20,12 @@
 
 use std::path::Path;
 
+use ndarray::{Array3, ArrayView3, Axis};
 use num_complex::Complex32;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{HoloError, Result};
+use crate::error::{invalid, HoloError, Result};
 use crate::optics::filter::aperture_fn;
 use crate::optics::multiplier::{plane_multiplier, PlaneMultiplier};
 use crate::optics::{OpticalSetup, PropagationOptions, Propagator, ZernikeCoefficients};
@@ -279,6 +281,88 @@ impl DisplayModel {
         Self::from_json_str(&text, &path.display().to_string())
     }
 
+    /// What the display this model describes shows of the SLM codes `codes` `[3, H, W]` (R, G, B: the 8-bit
+    /// codes sent to the SLM), after the display's Fourier filter, expressed at the midpoint plane and
+    /// multiplied by the frame's `amplitude_scale` `a`: per colour `a·F⁻¹{M·E·H(−s)·F{u}}` with
+    /// `u = S·(exp(i·R(K ∗ codes)) + z)` and `s = offset_m` the SLM's distance from the midpoint plane in
+    /// metres (the module docs: the same forward simulation as the refinement's loss and the simulated
+    /// captures). It is the fitted display's counterpart of
+    /// [`post_encoding_midpoint`](crate::optics::post_encoding_midpoint), which shows the ideal display of the
+    /// codes' phases: `holo render --evaluate --display-model` scores it with the Table 2 protocol. A colour
+    /// without parts shows the ideal display of its codes (`2π·code/256`). Returns `[3, H, W]` complex.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] for codes that are not `[3, H, W]` of the model's SLM size;
+    /// [`HoloError::InvalidParameter`] for a padded propagation (`pad`: the model runs on the refinement's
+    /// unpadded grid), a non-finite offset or a scale that is not positive and finite; those of the
+    /// propagation (an invalid `setup`).
+    pub fn shown_midpoint(
+        &self,
+        codes: ArrayView3<u8>,
+        amplitude_scale: f32,
+        setup: &OpticalSetup,
+        offset_m: f64,
+        options: PropagationOptions,
+    ) -> Result<Array3<Complex32>> {
+        let (channels, h, w) = codes.dim();
+        if channels != 3 {
+            return Err(HoloError::ShapeMismatch {
+                what: "SLM codes shown through a display model".into(),
+                expected: vec![3, h, w],
+                got: vec![channels, h, w],
+            });
+        }
+        self.check_size(h, w)?;
+        if options.pad {
+            return Err(invalid(
+                "pad",
+                "a display model runs on the refinement's unpadded grid; padded propagation is not supported",
+            ));
+        }
+        if !offset_m.is_finite() {
+            return Err(invalid(
+                "offset_m",
+                format!("must be finite, got {offset_m}"),
+            ));
+        }
+        if !(amplitude_scale > 0.0 && amplitude_scale.is_finite()) {
+            return Err(invalid(
+                "amplitude_scale",
+                format!("must be > 0, got {amplitude_scale}"),
+            ));
+        }
+        setup.validate()?;
+        let mut out = Array3::<Complex32>::zeros((3, h, w));
+        out.axis_iter_mut(Axis(0))
+            .into_par_iter()
+            .enumerate()
+            .try_for_each(|(c, mut lane)| -> Result<()> {
+                let part = &self.colours[c];
+                let mut runtime = ColourRuntime::new(part, h, w);
+                let drive: Vec<f32> = codes
+                    .index_axis(Axis(0), c)
+                    .iter()
+                    .map(|&v| f32::from(v))
+                    .collect();
+                let mut unit = vec![Complex32::new(0.0, 0.0); h * w];
+                runtime.forward(&drive, &mut unit);
+                let (prop, m) = capture_multiplier(
+                    setup,
+                    options,
+                    c,
+                    (h, w),
+                    -offset_m,
+                    part.aberration.as_ref(),
+                )?;
+                let mut field = Vec::new();
+                field_of(&prop, &m, &unit, &mut field);
+                for (o, v) in lane.iter_mut().zip(&field) {
+                    *o = v * amplitude_scale;
+                }
+                Ok(())
+            })?;
+        Ok(out)
+    }
+
     /// The JSON form, pretty-printed, which [`DisplayModel::load`] reads back.
     #[cfg(test)]
     pub(crate) fn to_json_string(&self) -> String {
@@ -487,11 +571,13 @@ impl ColourRuntime {
 }
 
 /// A camera's view of one capture: the multiplier `M·E·H(distance_m)` of colour `colour` on a `[H, W]` grid
-/// with the model's aberration (`optics::multiplier::plane_multiplier`).
+/// with the model's aberration (`optics::multiplier::plane_multiplier`), the angular spectrum's `options`
+/// unpadded (the captures and the fit: the defaults).
 ///
 /// Errors: as `Propagator::new` and the transfer function's.
 pub(crate) fn capture_multiplier(
     setup: &OpticalSetup,
+    options: PropagationOptions,
     colour: usize,
     (height, width): (usize, usize),
     distance_m: f64,
@@ -502,7 +588,7 @@ pub(crate) fn capture_multiplier(
         width,
         setup.pixel_pitch_m,
         setup.wavelengths_m[colour],
-        PropagationOptions::default(),
+        options,
     )?;
     let aperture = aperture_fn(prop.plan());
     let m = plane_multiplier(&prop, &aperture, distance_m, aberration)?;
@@ -517,6 +603,12 @@ pub(crate) fn intensity_of(
     u: &[Complex32],
     field: &mut Vec<Complex32>,
 ) -> Vec<f32> {
+    field_of(prop, m, u, field);
+    field.iter().map(|v| v.norm_sqr()).collect()
+}
+
+/// `field ← U = F⁻¹{m·F{u}}` `[H, W]` of the SLM field `u` `[H, W]` through `m` on `prop`'s (unpadded) grid.
+fn field_of(prop: &Propagator, m: &PlaneMultiplier, u: &[Complex32], field: &mut Vec<Complex32>) {
     let plan = prop.plan();
     let fft = plan.fft();
     let n = u.len();
@@ -530,7 +622,6 @@ pub(crate) fn intensity_of(
     }
     field.resize(n, Complex32::new(0.0, 0.0));
     fft.inverse(&mut spectrum, field, &mut scratch);
-    field.iter().map(|v| v.norm_sqr()).collect()
 }
 
 #[cfg(test)]

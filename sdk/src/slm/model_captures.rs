@@ -14,7 +14,7 @@ use super::model::{
     SourceField, COLOUR_KEYS,
 };
 use crate::error::{HoloError, Result};
-use crate::optics::{OpticalSetup, ZernikeCoefficients};
+use crate::optics::{OpticalSetup, PropagationOptions, ZernikeCoefficients};
 use crate::slm::captures::{png_size, read_png_downsampled};
 use crate::slm::PhaseCurve;
 use crate::splitmix::SplitMix64;
@@ -357,8 +357,14 @@ pub(crate) fn simulate_captures(
         let mut runtime = ColourRuntime::new(part, h, w);
         let drive: Vec<f32> = pattern.iter().map(|&c| f32::from(c)).collect();
         runtime.forward(&drive, &mut unit);
-        let (prop, m) =
-            capture_multiplier(setup, colour, (h, w), distance_m, part.aberration.as_ref())?;
+        let (prop, m) = capture_multiplier(
+            setup,
+            PropagationOptions::default(),
+            colour,
+            (h, w),
+            distance_m,
+            part.aberration.as_ref(),
+        )?;
         out.push(intensity_of(&prop, &m, &unit, &mut field));
     }
     let peak = out.iter().flatten().fold(0.0f32, |a, &b| a.max(b));

@@ -20,7 +20,7 @@ use super::model_captures::{response_basis, response_curve, CaptureSet};
 use crate::error::{invalid, HoloError, Result};
 use crate::optics::propagation::SpectralPlan;
 use crate::optics::zernike::pupil_multiplier;
-use crate::optics::{OpticalSetup, Padding, ZernikeCoefficients};
+use crate::optics::{OpticalSetup, Padding, PropagationOptions, ZernikeCoefficients};
 
 /// How a fit runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -207,7 +207,14 @@ impl<'a> Problem<'a> {
             if planes.iter().any(|p| p.distance_m == d) {
                 continue;
             }
-            let (prop, m) = capture_multiplier(&options.setup, colour, (h, w), d, None)?;
+            let (prop, m) = capture_multiplier(
+                &options.setup,
+                PropagationOptions::default(),
+                colour,
+                (h, w),
+                d,
+                None,
+            )?;
             let (rows, cols) = (
                 prop.plan().computational_shape().1,
                 prop.plan().computational_shape().0,

@@ -177,6 +177,104 @@ fn refinement_through_a_model_keeps_the_codes_in_range_and_lowers_its_loss() {
     assert!(last < 0.9 * first, "loss {first} → {last}");
 }
 
+/// What a fitted display shows of codes at the midpoint plane (`DisplayModel::shown_midpoint`, the evaluation's
+/// "displayed"), refocused at a plane, is that display's direct simulation there (the captures' forward model,
+/// `M·E·H(z_d − s)` in one multiplier); with a strong crosstalk it is far from the ideal display's, and a model
+/// without parts is the ideal display of the codes.
+#[test]
+fn what_a_model_shows_is_its_direct_simulation_and_not_the_ideal_display() {
+    let (h, w) = (24, 32);
+    let setup = OpticalSetup::default();
+    let options = PropagationOptions::default();
+    let mut rng = SplitMix64::new(21);
+    let codes = Array3::from_shape_simple_fn((3, h, w), || (rng.next_f64() * 256.0) as u8);
+    let phase = codes.mapv(|c| f32::from(c) * LINEAR_SLOPE);
+    let drawn = draw_display([h, w], 1, 6).colours[1].clone();
+    let model = with_part(h, w, |c| {
+        *c = drawn.clone();
+        c.crosstalk = Some(Crosstalk {
+            size: [3, 3],
+            weights: vec![0.03, 0.1, 0.03, 0.14, 0.4, 0.14, 0.03, 0.1, 0.03],
+        });
+    });
+    let scale = 0.7f32;
+    let shown = model
+        .shown_midpoint(codes.view(), scale, &setup, OFFSET_M, options)
+        .unwrap();
+    let ideal =
+        crate::optics::post_encoding_midpoint(phase.view(), scale, &setup, OFFSET_M, options)
+            .unwrap();
+    let depths = [0.15, 0.6, 0.95];
+    let stack =
+        crate::optics::focal_stack(shown.view(), &setup, 0.0, &depths, options, false).unwrap();
+    let ideal_stack =
+        crate::optics::focal_stack(ideal.view(), &setup, 0.0, &depths, options, false).unwrap();
+    for (k, &d) in depths.iter().enumerate() {
+        let planes: Vec<_> = (0..3)
+            .map(|c| (c, c, setup.depth_to_z(d) - OFFSET_M))
+            .collect();
+        let patterns: Vec<_> = codes.outer_iter().map(|p| p.to_owned()).collect();
+        let (direct, gain) = crate::slm::model_captures::simulate_captures(
+            &model, &setup, &patterns, &planes, 0.0, 1,
+        )
+        .unwrap();
+        for (c, captured) in direct.iter().enumerate() {
+            let want = captured.mapv(|v| v / gain as f32 * scale * scale);
+            let got = stack[k].index_axis(ndarray::Axis(0), c).mapv(|a| a * a);
+            let peak = want.iter().fold(0.0f32, |m, &v| m.max(v));
+            let err = got
+                .iter()
+                .zip(&want)
+                .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+            assert!(err < 1e-4 * peak, "depth {d}, colour {c}: {err} of {peak}");
+            let ideal_i = ideal_stack[k]
+                .index_axis(ndarray::Axis(0), c)
+                .mapv(|a| a * a);
+            let off = ideal_i
+                .iter()
+                .zip(&want)
+                .map(|(a, b)| (a - b).abs())
+                .sum::<f32>()
+                / want.iter().sum::<f32>();
+            assert!(
+                off > 0.2,
+                "depth {d}, colour {c}: the ideal display within {off} of the model's"
+            );
+        }
+    }
+    let none = DisplayModel {
+        slm_size: [h, w],
+        ..Default::default()
+    }
+    .shown_midpoint(codes.view(), scale, &setup, OFFSET_M, options)
+    .unwrap();
+    let err = none
+        .iter()
+        .zip(&ideal)
+        .fold(0.0f32, |m, (a, b)| m.max((a - b).norm()));
+    assert!(
+        err < 1e-4,
+        "a model without parts: {err} from the ideal display"
+    );
+    // Codes of another size than the model's, and a padded propagation: refused.
+    assert!(model
+        .shown_midpoint(
+            codes.slice(ndarray::s![.., ..20, ..]),
+            scale,
+            &setup,
+            OFFSET_M,
+            options
+        )
+        .is_err());
+    let padded = PropagationOptions {
+        pad: true,
+        ..options
+    };
+    assert!(model
+        .shown_midpoint(codes.view(), scale, &setup, OFFSET_M, padded)
+        .is_err());
+}
+
 #[test]
 fn bad_model_files_are_refused_naming_the_entry() {
     let base = r#"{"format": "tensorholo.display-model", "version": 1, "slm_size": [8, 8], "green": PART}"#;
