@@ -171,7 +171,7 @@ impl DisplayCalibration {
     }
 
     /// Whether any colour has an intensity scale map.
-    pub fn has_intensity(&self) -> bool {
+    pub(crate) fn has_intensity(&self) -> bool {
         self.colours.iter().any(|c| c.intensity_scale.is_some())
     }
 

@@ -528,18 +528,6 @@ impl PhaseLut {
         }
     }
 
-    /// Memory the LUT holds while applied (stored curves and inverse tables), in bytes.
-    pub fn memory_bytes(&self) -> usize {
-        let curves = match &self.representation {
-            LutRepresentation::Linear => 0,
-            LutRepresentation::Global(_) => CODES * 4,
-            LutRepresentation::Tiled(t) => t.curves.len() * CODES * 4,
-        };
-        curves
-            + self.inverse.len() * 2
-            + (self.rows.len() + self.cols.len()) * std::mem::size_of::<(u32, u32, f32)>()
-    }
-
     /// The phase in radians that `code` displays at pixel `(y, x)` (relative to code 0).
     ///
     /// Errors: [`HoloError::InvalidParameter`] for a pixel outside a per-pixel LUT's SLM.
