@@ -1,6 +1,6 @@
 //! What changes on the SLM from one video frame to the next: the phase churn of consecutive 8-bit patterns
 //! ([`phase_churn`]) and the alignment of each colour's global phase to the previous frame
-//! ([`align_global_phase`]).
+//! ([`PhaseContinuity`]).
 //!
 //! A liquid-crystal SLM settles more slowly after a large phase swing than after a small one (Otón et al.,
 //! "Dynamic response of liquid-crystal spatial light modulators", 2009), so the change between consecutive
@@ -129,7 +129,7 @@ pub struct TemporalSummary {
 }
 
 /// The temporal state of a stream of SLM patterns: the last pattern sent, the churn so far and, where asked,
-/// each colour's global phase aligned to the previous frame's ([`align_global_phase`]'s rule: through the
+/// each colour's global phase aligned to the previous frame's (a whole-code shift per colour, through the
 /// linear look-up table only). One per stream; [`PhaseContinuity::next`] on each frame's codes in order.
 #[derive(Debug, Clone, Default)]
 pub struct PhaseContinuity {
