@@ -237,11 +237,14 @@ pub fn convert_frame(
 ) -> Result<ConvertedFrame> {
     guard(|| {
         let frame = frame.into_core();
-        let options = scene::FrameOptions {
-            fit: fit.unwrap_or(Fit::Crop).into(),
-            depth_upsampling: depth_upsampling.unwrap_or(DepthUpsampling::Nearest).into(),
-            ..scene::FrameOptions::default()
-        };
+        // `None`: the core's default (`FrameOptions::default()`, the one statement of the camera's defaults).
+        let mut options = scene::FrameOptions::default();
+        if let Some(fit) = fit {
+            options.fit = fit.into();
+        }
+        if let Some(upsampling) = depth_upsampling {
+            options.depth_upsampling = upsampling.into();
+        }
         let (rgbd, report) = frame
             .view()
             .to_rgbd(height as usize, width as usize, &options)?;

@@ -218,7 +218,7 @@ impl HologramGenerator {
         guard(|| {
             let buffers: Vec<scene::CameraFrameBuf> =
                 layers.into_iter().map(RgbdFrame::into_core).collect();
-            let views: Vec<scene::CameraFrame<'_>> =
+            let views: Vec<scene::CameraFrame<&[u8]>> =
                 buffers.iter().map(scene::CameraFrameBuf::view).collect();
             Ok(self.inner.render_ldi(&views)?.into())
         })

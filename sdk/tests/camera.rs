@@ -597,8 +597,8 @@ fn low_resolution_depth_is_upsampled_without_mixing_depths() {
 
 /// `f` edited by `edit`, converted to the good frame's 4 × 6 with default options.
 fn with<'a>(
-    mut f: CameraFrame<'a>,
-    edit: impl FnOnce(&mut CameraFrame<'a>),
+    mut f: CameraFrame<&'a [u8]>,
+    edit: impl FnOnce(&mut CameraFrame<&'a [u8]>),
 ) -> Result<(RgbdFrame, CameraFrameReport), HoloError> {
     edit(&mut f);
     f.to_rgbd(4, 6, &FrameOptions::default())
@@ -844,7 +844,7 @@ proptest! {
         let data = vec![77u8; len];
         let depth = depth_buf(DepthFormat::MillimetresU16, 1, 1, 0, |_, _| 1.0);
         let f = CameraFrame {
-            color: ColorImage { data: &data, format, width: w, height: h, row_stride: stride },
+            color: ColorImage { data: &data[..], format, width: w, height: h, row_stride: stride },
             depth: depth.view(),
             rotation: Rotation::Deg90,
             color_crop: None,
@@ -879,7 +879,7 @@ proptest! {
         let color = color_buf(ColorFormat::Rgb8, 3, 4, 0, rgb_at);
         let f = CameraFrame {
             color: color.view(),
-            depth: DepthImage { data: &data, format, width: w, height: h, row_stride: stride },
+            depth: DepthImage { data: &data[..], format, width: w, height: h, row_stride: stride },
             rotation: Rotation::Deg270,
             color_crop: None,
             confidence: None,

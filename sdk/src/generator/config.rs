@@ -147,6 +147,8 @@ impl GeneratorConfig {
     /// helps (Auto), SLM 6 mm from the midpoint hologram, autotuned CNN plan, centred crop, automatic depth
     /// range, the paper's display.
     pub fn new(width: usize, height: usize) -> Self {
+        // The camera's defaults (fit, depth range and mapping, depth upsampling) are the conversion's own.
+        let camera = FrameOptions::default();
         Self {
             width,
             height,
@@ -154,13 +156,13 @@ impl GeneratorConfig {
             offset_m: 6e-3,
             cnn: CnnOptions::default(),
             saved_plans: None,
-            fit: Fit::default(),
-            depth_upsampling: DepthUpsampling::Nearest,
+            fit: camera.fit,
+            depth_upsampling: camera.depth_upsampling,
             optics: OpticalSetup::default(),
             options: PropagationOptions::default(),
             encoding: DoublePhaseMethod::default(),
-            depth_range: None,
-            depth_mapping: DepthMapping::default(),
+            depth_range: camera.range,
+            depth_mapping: camera.mapping,
             backend: Backend::default(),
             gpu_precision: GpuPrecision::default(),
             wavelength_ratio_tolerance: None,
@@ -312,6 +314,13 @@ impl GeneratorConfig {
 pub(super) mod tests {
     use super::*;
     use crate::error::HoloError;
+
+    /// The camera's defaults are stated once, in `FrameOptions::default()`: a new configuration's are those.
+    #[test]
+    fn camera_defaults_are_the_conversions_own() {
+        let c = GeneratorConfig::new(64, 48);
+        assert_eq!(c.frame_options(), FrameOptions::default());
+    }
 
     #[test]
     fn config_refuses_what_cannot_work() {

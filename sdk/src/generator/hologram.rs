@@ -275,7 +275,7 @@ impl HologramGenerator {
     /// ([`CameraFrame::to_rgbd`] with the configuration's fit and depth range).
     ///
     /// Errors: as [`CameraFrame::to_rgbd`].
-    pub fn convert(&self, frame: &CameraFrame) -> Result<(RgbdFrame, CameraFrameReport)> {
+    pub fn convert(&self, frame: &CameraFrame<&[u8]>) -> Result<(RgbdFrame, CameraFrameReport)> {
         frame.to_rgbd(
             self.config.height,
             self.config.width,
@@ -289,14 +289,14 @@ impl HologramGenerator {
     /// and the session's ([`HologramSession::render`]: among them [`HoloError::InvalidData`] for a black frame,
     /// e.g. a covered lens, whose hologram would be the CNN's bias shown at full brightness). The generator
     /// stays usable after any error.
-    pub fn render(&self, frame: &CameraFrame) -> Result<SlmPatterns> {
+    pub fn render(&self, frame: &CameraFrame<&[u8]>) -> Result<SlmPatterns> {
         self.render_with(frame, |session, rgbd| session.render(rgbd))
     }
 
     /// Converts `frame`, then renders it with `render` on the generator's session.
     fn render_with(
         &self,
-        frame: &CameraFrame,
+        frame: &CameraFrame<&[u8]>,
         render: impl for<'s> FnOnce(&'s mut HologramSession, &RgbdFrame) -> Result<&'s SlmFrame>,
     ) -> Result<SlmPatterns> {
         let t = Instant::now();
@@ -317,7 +317,7 @@ impl HologramGenerator {
     /// Errors: [`HoloError::InvalidParameter`] naming `foveation` for a generator made without
     /// [`GeneratorConfig::foveation`], or `gaze` for a point outside the hologram or not finite; otherwise
     /// as [`HologramGenerator::render`]. The generator stays usable after any error.
-    pub fn render_foveated(&self, frame: &CameraFrame, gaze: &Gaze) -> Result<SlmPatterns> {
+    pub fn render_foveated(&self, frame: &CameraFrame<&[u8]>, gaze: &Gaze) -> Result<SlmPatterns> {
         self.render_with(frame, |session, rgbd| session.render_foveated(rgbd, gaze))
     }
 
@@ -338,7 +338,7 @@ impl HologramGenerator {
     /// The generator stays usable after any error.
     pub fn render_refined(
         &self,
-        frame: &CameraFrame,
+        frame: &CameraFrame<&[u8]>,
         refinement: &FrameRefinement,
         progress: &mut dyn FnMut(&IterationRecord) -> ControlFlow<()>,
     ) -> Result<SlmPatterns> {
@@ -401,7 +401,7 @@ impl HologramGenerator {
     /// Errors: the conversion's ([`ldi_from_camera_frames`]: buffers, layer sizes, depth order);
     /// [`HoloError::InvalidParameter`] (`ldi`) for more layers than the CNN takes (with an RGB-D CNN: more than
     /// one); as [`HologramSession::render_ldi`]. The generator stays usable after any error.
-    pub fn render_ldi(&self, layers: &[CameraFrame]) -> Result<SlmPatterns> {
+    pub fn render_ldi(&self, layers: &[CameraFrame<&[u8]>]) -> Result<SlmPatterns> {
         let t = Instant::now();
         let (ldi, report) = ldi_from_camera_frames(
             layers,
@@ -489,7 +489,7 @@ impl HologramGenerator {
     /// ([`HologramGenerator::preview_patterns`]), for the phone's screen.
     ///
     /// Errors: as [`HologramGenerator::render`] and [`HologramGenerator::preview_patterns`].
-    pub fn preview(&self, frame: &CameraFrame, focus: f32) -> Result<Preview> {
+    pub fn preview(&self, frame: &CameraFrame<&[u8]>, focus: f32) -> Result<Preview> {
         if !(0.0..=1.0).contains(&focus) {
             return Err(invalid(
                 "focus",

@@ -11,6 +11,7 @@
 use std::fmt;
 use std::path::Path;
 use std::str::FromStr;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use image::DynamicImage;
 use ndarray::{Array2, Zip};
@@ -238,7 +239,27 @@ pub struct DecodedDepth {
 /// The largest relative difference in aspect ratio between a depth map and its colour image for which the
 /// depth is taken to cover the colour's field of view and is brought to the colour's resolution
 /// (`DecodedDepth::into_resolution`): 2 % (a phone's 256 × 192 LiDAR depth under a 1920 × 1440 image is 0 %).
+/// Beyond it, the other-aspect rule decides (files refuse, cameras warn and stretch).
 pub const MAX_DEPTH_ASPECT_MISMATCH: f64 = 0.02;
+
+/// The other-aspect rule, written once for files and cameras: what a source does with a depth map whose
+/// aspect ratio differs from its colour's by more than [`MAX_DEPTH_ASPECT_MISMATCH`] (so it cannot cover
+/// the colour's field of view as it is), applied by [`DecodedDepth::check_aspect`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum OtherAspect {
+    /// Refused with [`HoloError::ShapeMismatch`]: files ([`crate::scene::load_rgbd`]), paired by hand, where
+    /// another aspect ratio means another field of view or a wrong pair (NYU's raw depth has the RGB's size).
+    Refuse,
+    /// Stretched onto the colour frame, logged as a warning once per process: camera buffers
+    /// ([`crate::scene::CameraFrame::to_rgbd`]), delivered together by one sensor for one field of view, where
+    /// a mismatch is a missing colour crop (ARCore's 4:3 CPU image under its 16:9 depth) that still gives a
+    /// usable, stretched frame, and refusing would drop every frame of a live stream.
+    WarnAndStretch,
+}
+
+/// Set once a depth map of another aspect ratio has been stretched with a warning (once per process, not
+/// per frame).
+static STRETCH_WARNED: AtomicBool = AtomicBool::new(false);
 
 impl DecodedDepth {
     /// The relative difference `|h_d·w_c / (h_c·w_d) − 1|` between this map's aspect ratio and a colour
@@ -250,6 +271,38 @@ impl DecodedDepth {
             return f64::INFINITY;
         }
         (a / b - 1.0).abs()
+    }
+
+    /// Applies the other-aspect `rule` to this map against a colour frame of `height × width`: `Ok` when the
+    /// aspect ratios differ by at most [`MAX_DEPTH_ASPECT_MISMATCH`]; beyond it, with
+    /// [`OtherAspect::WarnAndStretch`] `Ok` after `what()` is logged as a warning (once per process), with
+    /// [`OtherAspect::Refuse`] an error.
+    ///
+    /// Errors: [`HoloError::ShapeMismatch`] (`what()`, expected = the colour's `[height, width]`, got = this
+    /// map's `[H, W]`) with [`OtherAspect::Refuse`].
+    pub(crate) fn check_aspect(
+        &self,
+        height: usize,
+        width: usize,
+        rule: OtherAspect,
+        what: impl FnOnce() -> String,
+    ) -> Result<()> {
+        if self.aspect_mismatch(height, width) <= MAX_DEPTH_ASPECT_MISMATCH {
+            return Ok(());
+        }
+        match rule {
+            OtherAspect::Refuse => Err(HoloError::ShapeMismatch {
+                what: what(),
+                expected: vec![height, width],
+                got: self.values.shape().to_vec(),
+            }),
+            OtherAspect::WarnAndStretch => {
+                if !STRETCH_WARNED.swap(true, Ordering::Relaxed) {
+                    log::warn!("{}; warned once", what());
+                }
+                Ok(())
+            }
+        }
     }
 
     /// This map at `height × width` pixels covering the same field of view (the colour's resolution, e.g. a

@@ -8,7 +8,7 @@ use serde::Serialize;
 
 use super::depth::{
     decode_depth_file, fill_invalid, normalise_depth, DecodedDepth, DepthEncoding, DepthMapping,
-    DepthRange,
+    DepthRange, OtherAspect,
 };
 use super::frame::RgbdFrame;
 use super::upsample::{upsample_depth, DepthUpsampling};
@@ -250,19 +250,15 @@ pub fn load_rgbd_with_confidence(
     };
     let (_, h, w) = amplitude.dim();
     let depth_size = decoded.values.dim();
-    if decoded.aspect_mismatch(h, w) > super::depth::MAX_DEPTH_ASPECT_MISMATCH {
-        return Err(HoloError::ShapeMismatch {
-            what: format!(
-                "depth map `{}` vs RGB image `{}` (another aspect ratio: a depth map of another resolution \
-                 is brought to the colour's only where it covers the same field of view, aspect ratios within \
-                 2 %)",
-                depth.display(),
-                rgb.display()
-            ),
-            expected: vec![h, w],
-            got: decoded.values.shape().to_vec(),
-        });
-    }
+    // Another aspect ratio: the files' rule, refused (`OtherAspect::Refuse`).
+    decoded.check_aspect(h, w, OtherAspect::Refuse, || {
+        format!(
+            "depth map `{}` vs RGB image `{}` (another aspect ratio: a depth map of another resolution is \
+             brought to the colour's only where it covers the same field of view, aspect ratios within 2 %)",
+            depth.display(),
+            rgb.display()
+        )
+    })?;
     check_depth_sanity(&decoded, encoding, options, depth).map_err(|e| {
         match (e, low_confidence_fraction.filter(|&f| f > 0.0)) {
             (HoloError::InvalidDepth(m), Some(f)) => HoloError::InvalidDepth(format!(
