@@ -330,7 +330,7 @@ fn catmull_rom(x: f32) -> f32 {
 }
 
 /// Per output sample: first input index and normalised weights (edge samples replicated).
-fn resample_weights(n_in: usize, n_out: usize) -> Vec<(Vec<usize>, Vec<f32>)> {
+pub(crate) fn resample_weights(n_in: usize, n_out: usize) -> Vec<(Vec<usize>, Vec<f32>)> {
     let scale = n_in as f32 / n_out as f32;
     let fscale = scale.max(1.0);
     let support = 2.0 * fscale;
@@ -355,29 +355,76 @@ fn resample_weights(n_in: usize, n_out: usize) -> Vec<(Vec<usize>, Vec<f32>)> {
         .collect()
 }
 
-/// Separable Catmull-Rom resampling of one `[H, W]` plane.
-fn resample_plane(
-    plane: ndarray::ArrayView2<f32>,
+/// Separable Catmull-Rom resampling of one `[H_in, W_in]` plane whose rows `fill(y, row)` writes (so that a
+/// plane computed from another, e.g. intensities from 8-bit codes, is never held whole): rows first, then
+/// columns, each output the sum of its taps' products in tap order from `−0.0` (as `Iterator::sum`). The
+/// rows' pass takes [`RESAMPLE_ROWS`] rows at a time through a transposed block (`block[j][r]`: column `j` of
+/// row `r`), each tap one contiguous multiply-add over the rows; the columns' pass accumulates a whole output
+/// row per tap.
+pub(crate) fn resample_rows(
+    h_in: usize,
+    w_in: usize,
+    mut fill: impl FnMut(usize, &mut [f32]),
     wy: &[(Vec<usize>, Vec<f32>)],
     wx: &[(Vec<usize>, Vec<f32>)],
 ) -> Array2<f32> {
-    let h_in = plane.nrows();
-    // Horizontal pass: [H_in, W_out].
-    let tmp: Array2<f32> = Array2::from_shape_fn((h_in, wx.len()), |(y, x)| {
-        let (idx, wts) = &wx[x];
-        idx.iter()
-            .zip(wts)
-            .map(|(&j, &w)| plane[[y, j]] * w)
-            .sum::<f32>()
-    });
-    Array2::from_shape_fn((wy.len(), wx.len()), |(y, x)| {
-        let (idx, wts) = &wy[y];
-        idx.iter()
-            .zip(wts)
-            .map(|(&j, &w)| tmp[[j, x]] * w)
-            .sum::<f32>()
-    })
+    const R: usize = RESAMPLE_ROWS;
+    let w_out = wx.len();
+    let mut tmp = vec![0.0f32; h_in * w_out];
+    let mut rows = vec![0.0f32; w_in * R];
+    let mut block = vec![0.0f32; w_in * R];
+    for (b, rows_out) in tmp.chunks_mut(R * w_out).enumerate() {
+        let n = rows_out.len() / w_out.max(1);
+        for (r, row) in rows.chunks_exact_mut(w_in).take(n).enumerate() {
+            fill(b * R + r, row);
+        }
+        if n == R {
+            for (r, row) in rows.chunks_exact(w_in).enumerate() {
+                for (col, &v) in block.chunks_exact_mut(R).zip(row) {
+                    col[r] = v;
+                }
+            }
+            for (x, (idx, wts)) in wx.iter().enumerate() {
+                let mut acc = [-0.0f32; R];
+                for (&j, &w) in idx.iter().zip(wts) {
+                    let col = &block[j * R..(j + 1) * R];
+                    for (a, &v) in acc.iter_mut().zip(col) {
+                        *a += v * w;
+                    }
+                }
+                for (r, &a) in acc.iter().enumerate() {
+                    rows_out[r * w_out + x] = a;
+                }
+            }
+            continue;
+        }
+        for (row_out, row_in) in rows_out
+            .chunks_exact_mut(w_out)
+            .zip(rows.chunks_exact(w_in))
+        {
+            for (o, (idx, wts)) in row_out.iter_mut().zip(wx) {
+                *o = idx
+                    .iter()
+                    .zip(wts)
+                    .map(|(&j, &w)| row_in[j] * w)
+                    .sum::<f32>();
+            }
+        }
+    }
+    let mut out = vec![-0.0f32; wy.len() * w_out];
+    for (row_out, (idx, wts)) in out.chunks_exact_mut(w_out).zip(wy) {
+        for (&j, &w) in idx.iter().zip(wts) {
+            let row = &tmp[j * w_out..(j + 1) * w_out];
+            for (o, &t) in row_out.iter_mut().zip(row) {
+                *o += t * w;
+            }
+        }
+    }
+    Array2::from_shape_vec((wy.len(), w_out), out).unwrap_or_default()
 }
+
+/// Rows of [`resample_rows`]'s first pass taken together.
+const RESAMPLE_ROWS: usize = 8;
 
 /// Resizes `[3, H, W]` amplitude in the intensity domain (see [`RgbdFrame::resize`]).
 pub(crate) fn resize_amplitude(
@@ -391,11 +438,24 @@ pub(crate) fn resize_amplitude(
     let mut out = Array3::<f32>::zeros((c, height, width));
     let planes: Vec<Array2<f32>> = (0..c)
         .map(|ch| {
-            let intensity = amplitude.index_axis(Axis(0), ch).mapv(|a| a * a);
+            let plane = amplitude.index_axis(Axis(0), ch);
+            let plane = plane.as_standard_layout();
+            let src = plane.as_slice().unwrap_or_default();
             // Catmull-Rom over- and undershoots at edges: clamp to the plane's own intensity range, so that
             // an image in [0, 1] stays in [0, 1] (the CNN's training range) and no negative intensity appears.
-            let top = intensity.iter().copied().fold(0.0f32, f32::max);
-            resample_plane(intensity.view(), &wy, &wx).mapv(|i| i.clamp(0.0, top).sqrt())
+            let top = src.iter().map(|&a| a * a).fold(0.0f32, f32::max);
+            resample_rows(
+                h,
+                w,
+                |y, row| {
+                    for (i, &a) in row.iter_mut().zip(&src[y * w..(y + 1) * w]) {
+                        *i = a * a;
+                    }
+                },
+                &wy,
+                &wx,
+            )
+            .mapv(|i| i.clamp(0.0, top).sqrt())
         })
         .collect();
     for (ch, p) in planes.into_iter().enumerate() {

@@ -32,36 +32,116 @@ pub fn load_rgb(path: &Path) -> Result<Array3<f32>> {
 ///
 /// Errors: as [`load_rgb`], naming `source`.
 pub fn decode_rgb_bytes(bytes: &[u8], source: &Path) -> Result<Array3<f32>> {
-    let path = source;
-    let img = crate::io::decode_image(path, bytes)?;
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    if w == 0 || h == 0 {
-        return Err(HoloError::InvalidData(format!(
-            "`{}` is an empty image",
-            path.display()
-        )));
-    }
-    let eight_bit = matches!(
-        img,
-        DynamicImage::ImageLuma8(_)
+    Ok(Colour::decode(bytes, source)?.into_amplitude())
+}
+
+/// A decoded colour image before it becomes amplitude: 8-bit sRGB as decoded (most files), or amplitude
+/// already (16-bit files).
+enum Colour {
+    Srgb8(image::RgbImage),
+    Amplitude(Array3<f32>),
+}
+
+impl Colour {
+    /// Decodes an image file's bytes (`source` names it in errors; [`decode_rgb_bytes`]'s checks).
+    fn decode(bytes: &[u8], source: &Path) -> Result<Self> {
+        let path = source;
+        let img = crate::io::decode_image(path, bytes)?;
+        let (w, h) = (img.width() as usize, img.height() as usize);
+        if w == 0 || h == 0 {
+            return Err(HoloError::InvalidData(format!(
+                "`{}` is an empty image",
+                path.display()
+            )));
+        }
+        Ok(match img {
+            // An RGB image as it is (no copy).
+            DynamicImage::ImageRgb8(rgb) => Colour::Srgb8(rgb),
+            DynamicImage::ImageLuma8(_)
             | DynamicImage::ImageLumaA8(_)
-            | DynamicImage::ImageRgb8(_)
-            | DynamicImage::ImageRgba8(_)
-    );
-    Ok(if eight_bit {
+            | DynamicImage::ImageRgba8(_) => Colour::Srgb8(img.to_rgb8()),
+            _ => {
+                let rgb = img.to_rgb32f();
+                let raw = rgb.as_raw();
+                Colour::Amplitude(Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+                    srgb_to_linear(raw[(y * w + x) * 3 + c]).sqrt()
+                }))
+            }
+        })
+    }
+
+    /// `(height, width)`.
+    fn dim(&self) -> (usize, usize) {
+        match self {
+            Colour::Srgb8(rgb) => (rgb.height() as usize, rgb.width() as usize),
+            Colour::Amplitude(a) => (a.dim().1, a.dim().2),
+        }
+    }
+
+    /// The amplitude `[3, H, W]`: 8-bit codes through [`srgb8_to_amplitude`]'s table, each plane written in
+    /// one pass over the pixels.
+    fn into_amplitude(self) -> Array3<f32> {
+        let rgb = match self {
+            Colour::Amplitude(a) => return a,
+            Colour::Srgb8(rgb) => rgb,
+        };
+        let (h, w) = (rgb.height() as usize, rgb.width() as usize);
         let lut: [f32; 256] = std::array::from_fn(|c| srgb8_to_amplitude(c as u8));
-        let rgb = img.to_rgb8();
+        let mut out = Array3::<f32>::zeros((3, h, w));
+        if let Some(planes) = out.as_slice_mut() {
+            let (r, gb) = planes.split_at_mut(h * w);
+            let (g, b) = gb.split_at_mut(h * w);
+            for (((r, g), b), px) in r
+                .iter_mut()
+                .zip(g.iter_mut())
+                .zip(b.iter_mut())
+                .zip(rgb.as_raw().chunks_exact(3))
+            {
+                *r = lut[px[0] as usize];
+                *g = lut[px[1] as usize];
+                *b = lut[px[2] as usize];
+            }
+        }
+        out
+    }
+
+    /// The amplitude resized to `height × width` ([`super::frame::resize_amplitude`], bit for bit), an 8-bit
+    /// image's intensities computed row by row from its codes as the resampling reads them (the full-size
+    /// amplitude never made: a phone's 1920 × 1440 colour is 33 MB of f32).
+    fn resized(self, height: usize, width: usize) -> Array3<f32> {
+        let rgb = match self {
+            Colour::Amplitude(a) => return super::frame::resize_amplitude(&a, height, width),
+            Colour::Srgb8(rgb) => rgb,
+        };
+        let (h, w) = (rgb.height() as usize, rgb.width() as usize);
+        let lut: [f32; 256] = std::array::from_fn(|c| srgb8_to_amplitude(c as u8));
+        let wy = super::frame::resample_weights(h, height);
+        let wx = super::frame::resample_weights(w, width);
         let raw = rgb.as_raw();
-        Array3::from_shape_fn((3, h, w), |(c, y, x)| {
-            lut[raw[(y * w + x) * 3 + c] as usize]
-        })
-    } else {
-        let rgb = img.to_rgb32f();
-        let raw = rgb.as_raw();
-        Array3::from_shape_fn((3, h, w), |(c, y, x)| {
-            srgb_to_linear(raw[(y * w + x) * 3 + c]).sqrt()
-        })
-    })
+        let mut out = Array3::<f32>::zeros((3, height, width));
+        for (ch, mut plane) in out.outer_iter_mut().enumerate() {
+            // The largest intensity: the table rises with the code, and so does its square.
+            let top_code = raw.iter().skip(ch).step_by(3).copied().max().unwrap_or(0);
+            let top = lut[top_code as usize] * lut[top_code as usize];
+            let resampled = super::frame::resample_rows(
+                h,
+                w,
+                |y, row| {
+                    for (i, px) in row
+                        .iter_mut()
+                        .zip(raw[y * w * 3..(y + 1) * w * 3].chunks_exact(3))
+                    {
+                        let a = lut[px[ch] as usize];
+                        *i = a * a;
+                    }
+                },
+                &wy,
+                &wx,
+            );
+            plane.assign(&resampled.mapv(|i| i.clamp(0.0, top).sqrt()));
+        }
+        out
+    }
 }
 
 /// Options of [`load_rgbd`]. `Default`: automatic range (1st/99th percentiles), linear in diopters,
@@ -237,7 +317,7 @@ pub fn load_rgbd_with_confidence(
     encoding: DepthEncoding,
     options: &LoadOptions,
 ) -> Result<(RgbdFrame, DepthReport)> {
-    let amplitude = load_rgb(rgb)?;
+    let colour = Colour::decode(&crate::io::read_bytes(rgb)?, rgb)?;
     let mut decoded = decode_depth_file(depth, encoding)?;
     let low_confidence_fraction = match confidence {
         Some(path) => {
@@ -248,7 +328,7 @@ pub fn load_rgbd_with_confidence(
         }
         None => None,
     };
-    let (_, h, w) = amplitude.dim();
+    let (h, w) = colour.dim();
     let depth_size = decoded.values.dim();
     // Another aspect ratio: the files' rule, refused (`OtherAspect::Refuse`).
     decoded.check_aspect(h, w, OtherAspect::Refuse, || {
@@ -284,9 +364,9 @@ pub fn load_rgbd_with_confidence(
     let amplitude = match options.size {
         Some((oh, ow)) if depth_size != (h, w) && oh <= h && ow <= w && (oh, ow) != (h, w) => {
             super::frame::check_target_size(oh, ow)?;
-            super::frame::resize_amplitude(&amplitude, oh, ow)
+            colour.resized(oh, ow)
         }
-        _ => amplitude,
+        _ => colour.into_amplitude(),
     };
     let decoded = upsample_depth(decoded, amplitude.view(), options.depth_upsampling);
     let (d, range_used) = normalise_depth(&decoded, options.range, options.mapping)
