@@ -397,7 +397,11 @@ fn write_outputs(
     // The displayed field is kept only for the evaluation (50 MB at 1080p); through a fitted display, the
     // evaluation scores what that display shows instead (the previews stay the ideal display's).
     let displayed = match (args.evaluate, with_parts(last.display_model)) {
-        (false, _) => None,
+        (false, _) => {
+            // Freed here, before the focal stacks (a match arm that does not move it would keep it alive).
+            drop(displayed);
+            None
+        }
         (true, None) => Some(displayed),
         (true, Some(model)) => {
             drop(displayed);

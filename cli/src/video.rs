@@ -1,4 +1,4 @@
-//! `holo video`: an RGB-D sequence through one [`HologramSession`](tensorholo::pipeline::HologramSession),
+//! `holo video`: an RGB-D sequence through one [`HologramSession`],
 //! with the hologram CNN of frame n + 1 overlapping the optics of frame n; per-frame latency and FPS.
 
 use std::path::{Path, PathBuf};

@@ -17,7 +17,7 @@
 //! The half-width of a pixel comes from its depth, as the defocus of a 2D hologram focused at the gaze's
 //! depth: `h = clamp(|d − d_g|·scale − 1/2, 0, max_half)` ([`Defocus`]).
 //!
-//! One portable body ([`body`]) in plain safe Rust, compiled as it is (SSE2 / NEON: 2 f64 lanes) and inside
+//! One portable body (`body.rs`) in plain safe Rust, compiled as it is (SSE2 / NEON: 2 f64 lanes) and inside
 //! `#[target_feature]` functions (AVX2: 4 lanes, AVX-512F: 8). Rust neither contracts `a·b + c` into an FMA
 //! nor reorders float arithmetic: every path gives the same bits (tested), and the mean is within a few
 //! ulps of the direct sum (tested against a naive reference on random images).
