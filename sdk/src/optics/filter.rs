@@ -24,7 +24,7 @@ impl FourierFilter {
     ///
     /// Errors: [`crate::HoloError::InvalidParameter`] for a zero size.
     pub fn new(height: usize, width: usize) -> Result<Self> {
-        let plan = SpectralPlan::new(height, width, crate::optics::Padding::None)?;
+        let plan = SpectralPlan::new(height, width, super::propagation::Padding::None)?;
         let mask = aperture_mask(&plan);
         let norm = 1.0 / plan.spectrum_len() as f32;
         let multiplier = mask

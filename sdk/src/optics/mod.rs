@@ -5,16 +5,17 @@
 //! Fields are `Complex32`, row-major `[height, width]`; colour stacks are `[channel, height, width]` in R, G, B
 //! order and are processed one colour per thread (rayon).
 
+mod channels;
 pub mod fft;
 pub mod filter;
 pub(crate) mod multiplier;
 pub mod propagation;
 pub mod reconstruct;
+mod setup;
 pub mod zernike;
 
-use ndarray::{Array3, ArrayView3, Axis};
-use num_complex::Complex32;
-use rayon::prelude::*;
+pub use channels::propagate_colour;
+pub(crate) use channels::{check_colour_stack, check_finite_field, par_channels};
 
 pub use filter::FourierFilter;
 pub(crate) use propagation::carrier_free_phase_rad;
@@ -25,194 +26,6 @@ pub use propagation::{
 pub use reconstruct::{focal_stack, post_encoding_midpoint, simulate_phase_only};
 pub use zernike::{ZernikeCoefficients, MAX_COEFFICIENT_RAD};
 
-use crate::error::{invalid, HoloError, Result};
-use propagation::check_positive;
-
-/// The display geometry of `docs/CONVENTIONS.md` §3: laser wavelengths, SLM pixel pitch and the depth of the
-/// 3D volume centred on the midpoint hologram. `Default` is the paper's setup (638/520/450 nm, 8 µm, 6 mm).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub struct OpticalSetup {
-    /// Wavelengths in metres of the R, G, B lasers.
-    pub wavelengths_m: [f64; 3],
-    /// SLM pixel pitch in metres.
-    pub pixel_pitch_m: f64,
-    /// Depth of the 3D volume in metres; normalised depth `d ∈ [0,1]` spans it, centred on the midpoint plane.
-    pub volume_depth_m: f64,
-}
-
-impl Default for OpticalSetup {
-    fn default() -> Self {
-        Self {
-            wavelengths_m: [638e-9, 520e-9, 450e-9],
-            pixel_pitch_m: 8e-6,
-            volume_depth_m: 6e-3,
-        }
-    }
-}
-
-impl OpticalSetup {
-    /// Checks every field is finite, positive and within the physical bounds of a holographic display
-    /// ([`PITCH_RANGE_M`], [`WAVELENGTH_RANGE_M`], [`MAX_VOLUME_DEPTH_M`]): a subnormal or astronomic value
-    /// is a typo, and would make every product of it (depth scales, transfer functions) overflow or vanish.
-    ///
-    /// Errors: [`HoloError::InvalidParameter`] naming the offending field and its bounds.
-    pub fn validate(&self) -> Result<()> {
-        for w in self.wavelengths_m {
-            check_positive("wavelength_m", w)?;
-            check_within("wavelength_m", w, WAVELENGTH_RANGE_M, "m")?;
-        }
-        check_positive("pixel_pitch_m", self.pixel_pitch_m)?;
-        check_within("pixel_pitch_m", self.pixel_pitch_m, PITCH_RANGE_M, "m")?;
-        check_positive("volume_depth_m", self.volume_depth_m)?;
-        check_within(
-            "volume_depth_m",
-            self.volume_depth_m,
-            (0.0, MAX_VOLUME_DEPTH_M),
-            "m",
-        )
-    }
-
-    /// Axial position in metres, relative to the midpoint plane, of normalised depth `d` (0 = near):
-    /// `z(d) = (0.5 − d) · volume_depth` (`docs/CONVENTIONS.md` §4; near points are on the viewer's side,
-    /// `z > 0`).
-    pub fn depth_to_z(&self, d: f64) -> f64 {
-        (0.5 - d) * self.volume_depth_m
-    }
-
-    /// One [`Propagator`] per colour for `[height, width]` fields.
-    ///
-    /// Errors: as [`Propagator::new`].
-    pub fn propagators(
-        &self,
-        height: usize,
-        width: usize,
-        options: PropagationOptions,
-    ) -> Result<Vec<Propagator>> {
-        self.validate()?;
-        self.wavelengths_m
-            .iter()
-            .map(|&l| Propagator::new(height, width, self.pixel_pitch_m, l, options))
-            .collect()
-    }
-}
-
-/// The pixel pitches a display may have, metres: 0.1 µm to 1 mm (SLMs are 1–20 µm).
-pub const PITCH_RANGE_M: (f64, f64) = (1e-7, 1e-3);
-/// The wavelengths a display may use, metres: 100 nm to 10 µm (lasers of the visible band are 380–780 nm;
-/// profiles hold them to that, `crate::display`).
-pub const WAVELENGTH_RANGE_M: (f64, f64) = (1e-7, 1e-5);
-/// The deepest volume a display may have, metres: 1 m (the paper's is 6 mm).
-pub const MAX_VOLUME_DEPTH_M: f64 = 1.0;
-/// The farthest the SLM may sit from the midpoint hologram, metres (either side): 1 m, as deep as the deepest
-/// volume (the paper's offsets are millimetres). A display profile's `offsets_m`, a session's `offset_m` and
-/// an aberration correction's `slm_offset_m` are held to it.
-pub const MAX_OFFSET_M: f64 = 1.0;
-
-/// Checks an SLM offset `offset_m` (metres from the midpoint hologram): finite and within ±[`MAX_OFFSET_M`].
-///
-/// Errors: [`HoloError::InvalidParameter`] naming `name`, the value and the bound.
-pub fn check_offset(name: &'static str, offset_m: f64) -> Result<()> {
-    if !(offset_m.is_finite() && offset_m.abs() <= MAX_OFFSET_M) {
-        // 1e308 in scientific notation, not 309 digits.
-        let got = if offset_m.abs() < 1e6 {
-            offset_m.to_string()
-        } else {
-            format!("{offset_m:e}")
-        };
-        return Err(invalid(
-            name,
-            format!(
-                "the SLM's offset from the midpoint hologram must be a finite distance within \
-                 ±{MAX_OFFSET_M} m, got {got} m"
-            ),
-        ));
-    }
-    Ok(())
-}
-
-/// Checks `value` lies within `[lo, hi]` (`unit` for the message). Errors: [`HoloError::InvalidParameter`]
-/// naming `name` and the bounds.
-pub(crate) fn check_within(
-    name: &'static str,
-    value: f64,
-    (lo, hi): (f64, f64),
-    unit: &str,
-) -> Result<()> {
-    if (lo..=hi).contains(&value) {
-        return Ok(());
-    }
-    Err(crate::error::invalid(
-        name,
-        format!("{value} {unit} is outside {lo}–{hi} {unit}"),
-    ))
-}
-
-/// Checks a colour stack is `[3, H, W]` with `H, W ≥ 1` and returns `(H, W)`.
-pub(crate) fn check_colour_stack<T>(what: &str, a: &ArrayView3<T>) -> Result<(usize, usize)> {
-    let (c, h, w) = a.dim();
-    if c != 3 || h == 0 || w == 0 {
-        return Err(HoloError::ShapeMismatch {
-            what: format!("{what} (expected [3, height, width], channels R, G, B)"),
-            expected: vec![3, h.max(1), w.max(1)],
-            got: vec![c, h, w],
-        });
-    }
-    Ok((h, w))
-}
-
-/// Checks every value of a complex field is finite.
-pub(crate) fn check_finite_field(what: &str, a: &ArrayView3<Complex32>) -> Result<()> {
-    let bad = a.iter().filter(|v| !v.is_finite()).count();
-    if bad > 0 {
-        return Err(HoloError::InvalidData(format!(
-            "{what} has {bad} non-finite (NaN or infinite) values"
-        )));
-    }
-    Ok(())
-}
-
-/// Runs `f(channel, slice)` on each channel of a standard-layout `[C, H, W]` array, channels in parallel.
-pub(crate) fn par_channels<T: Send + Sync>(
-    field: &mut Array3<T>,
-    f: impl Fn(usize, &mut [T]) -> Result<()> + Sync + Send,
-) -> Result<()> {
-    field
-        .axis_iter_mut(Axis(0))
-        .into_par_iter()
-        .enumerate()
-        .try_for_each(|(c, mut lane)| {
-            let slice = lane
-                .as_slice_mut()
-                .ok_or_else(|| invalid("field", "must be in standard (row-major) layout"))?;
-            f(c, slice)
-        })
-}
-
-/// Propagates a colour stack `[3, H, W]` (R, G, B) in place by `distance_m` metres with the angular spectrum
-/// method (Eq. 2), one colour per thread, each at its own wavelength of `setup`.
-///
-/// With [`Carrier::Remove`] this is the offset propagation of Eq. 6 (`distance_m = s`, midpoint → SLM) and
-/// its inverse of Eq. 10 (`distance_m = −s`, SLM → midpoint), `docs/CONVENTIONS.md` §5.2.
-///
-/// Allocating convenience: plans and transfer functions are built per call. Hot paths keep [`Propagator`]s,
-/// [`TransferFunction`]s and [`Scratch`] instead.
-///
-/// Errors: invalid setup or distance ([`HoloError::InvalidParameter`]), a field that is not `[3, H, W]`
-/// ([`HoloError::ShapeMismatch`]), non-finite values ([`HoloError::InvalidData`]).
-pub fn propagate_colour(
-    field: &mut Array3<Complex32>,
-    setup: &OpticalSetup,
-    distance_m: f64,
-    carrier: Carrier,
-    options: PropagationOptions,
-) -> Result<()> {
-    let (h, w) = check_colour_stack("field", &field.view())?;
-    check_finite_field("field", &field.view())?;
-    if !field.is_standard_layout() {
-        *field = field.as_standard_layout().into_owned();
-    }
-    let props = setup.propagators(h, w, options)?;
-    par_channels(field, |c, slice| {
-        props[c].propagate_by(slice, distance_m, carrier)
-    })
-}
+pub use setup::{
+    check_offset, OpticalSetup, MAX_OFFSET_M, MAX_VOLUME_DEPTH_M, PITCH_RANGE_M, WAVELENGTH_RANGE_M,
+};

@@ -30,7 +30,7 @@ pub struct Scratch {
     spare: Vec<Complex32>,
     /// The column block of [`Fft2::filter`].
     block: Vec<Complex32>,
-    /// One chunk of rows ([`crate::optics::fft::ROW_CHUNK`]) for [`SpectralPlan::apply_even_rows`] when
+    /// One chunk of rows ([`super::fft::ROW_CHUNK`]) for [`SpectralPlan::apply_even_rows`] when
     /// the field's own memory need not hold the result (unpadded plans).
     rows: Vec<Complex32>,
     fft: Vec<Complex32>,
@@ -326,13 +326,13 @@ impl SpectralPlan {
     /// [`apply_even`](Self::apply_even) (the angular spectrum method's spectral multiply, Eq. 2; the offset
     /// propagation, Eq. 6, with its transfer function) on `field`, row-major `[height, width]`, with a pass of
     /// the caller's fused into each end (`Fft2::filter_rows`): `before(field, rows)` makes or changes the field's rows `rows` just before they are transformed (chunks
-    /// of [`crate::optics::fft::ROW_CHUNK`] rows, last chunk first, each starting at a multiple of it; the
+    /// of [`super::fft::ROW_CHUNK`] rows, last chunk first, each starting at a multiple of it; the
     /// whole field is passed, rows `≥ rows.end` already transformed), and `after(chunk, rows, spent)` reads
     /// rows `rows` of the result (`chunk`: those rows alone; last chunk first). With `keep` the field holds the
     /// result afterwards; without, an unpadded plan transforms each chunk's last pass in the scratch's own rows
     /// and leaves intermediate values in the field (not writing it a third time: 16.6 MB at 1080p, for a
     /// caller that reads the result only in `after`), and `spent` is the field from row `rows.start` to the
-    /// end, values nothing reads any more that `after` may overwrite (`crate::optics::fft::Fft2::filter_rows`);
+    /// end, values nothing reads any more that `after` may overwrite (`super::fft::Fft2::filter_rows`);
     /// otherwise `spent` is empty. With padding the hooks run on the whole field, before the embedding and
     /// after the crop (the field always holds the result; `spent` empty). Bit-identical to `before` on the
     /// whole field, `apply_even`, then `after`.

@@ -4,11 +4,11 @@ use ndarray::{Array3, ArrayView3, Axis};
 use num_complex::Complex32;
 use rayon::prelude::*;
 
+use super::channels::{check_colour_stack, check_finite_field, par_channels};
 use super::filter::aperture_mask;
 use super::filter::FourierFilter;
 use super::propagation::{Carrier, PropagationOptions};
-use super::OpticalSetup;
-use super::{check_colour_stack, check_finite_field, par_channels};
+use super::setup::OpticalSetup;
 use crate::error::{invalid, HoloError, Result};
 
 /// Amplitude focal stack: for every normalised depth `d` in `depths`, `|ASM(field, z(d) − plane_z_m)|` per

@@ -211,7 +211,7 @@ pub fn corrected_subhologram(
 
 /// The point spread function `PSF_d = ASM(φ_d, d)` `[height, width]` of the corrected sub-hologram
 /// ([`corrected_subhologram`]) at its focus (paper text after Eq. 19), with the angular spectrum method of
-/// [`crate::optics::Propagator`] (no padding, the on-axis carrier `exp(i·2π·d/λ)` removed, Eq. 6). The spot
+/// [`Propagator`] (no padding, the on-axis carrier `exp(i·2π·d/λ)` removed, Eq. 6). The spot
 /// sits at pixel `(width/2, height/2)`.
 ///
 /// Errors: as [`corrected_subhologram`].
@@ -317,7 +317,7 @@ pub fn amplitude_transfer_function(
     width: usize,
     coefficients: &ZernikeCoefficients,
 ) -> Result<Array2<Complex32>> {
-    let plan = SpectralPlan::new(height, width, crate::optics::Padding::None)?;
+    let plan = SpectralPlan::new(height, width, super::propagation::Padding::None)?;
     Ok(plan_layout_to_array(
         &plan,
         &pupil_multiplier(&plan, coefficients),
@@ -347,7 +347,7 @@ pub fn amplitude_transfer_function_from_subhologram(
         distance_m,
         coefficients,
     )?;
-    let plan = SpectralPlan::new(height, width, crate::optics::Padding::None)?;
+    let plan = SpectralPlan::new(height, width, super::propagation::Padding::None)?;
     let mut scratch = plan.scratch();
     let mut spectrum = vec![Complex32::default(); plan.spectrum_len()];
     plan.forward(
