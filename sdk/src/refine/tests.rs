@@ -486,7 +486,6 @@ fn the_previous_start_falls_back_to_the_cnn_where_the_view_changed() {
 fn with_an_intensity_map_refinement_never_scores_below_the_unrefined_codes() {
     use crate::encoding::DoublePhaseMethod;
     use crate::reference::ReferencePipeline;
-    use crate::scene::{load_rgbd, DepthEncoding, LoadOptions};
     use crate::slm::intensity::{intensity_scale_map, IntensityFloor};
     use crate::slm::model::DisplayModel;
     use crate::slm::model_captures::draw_display;
@@ -495,19 +494,7 @@ fn with_an_intensity_map_refinement_never_scores_below_the_unrefined_codes() {
     use std::sync::Arc;
 
     let (h, w) = (64, 64);
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/tum");
-    let options = LoadOptions {
-        size: Some((h, w)),
-        ..LoadOptions::default()
-    };
-    let frame = load_rgbd(
-        &root.join("TUM_color.png"),
-        &root.join("TUM_depth.png"),
-        DepthEncoding::Tum5000,
-        &options,
-    )
-    .expect("the shared TUM frame")
-    .0;
+    let frame = crate::scene::shared_tum_frame(h, w);
     let (setup, prop, offset) = (setup(), PropagationOptions::default(), 6e-3);
     // The beam: a Gaussian drawn from the simulated displays' ranges, the same for the three colours.
     let source = draw_display([h, w], 1, 21).colours[1].source;

@@ -397,3 +397,22 @@ pub fn load_rgbd_with_confidence(
     };
     Ok((frame, report))
 }
+
+/// The shared TUM frame (`../shared/data/tum`) loaded at `height × width`: the real frame unit tests of other
+/// modules run on.
+#[cfg(test)]
+pub(crate) fn shared_tum_frame(height: usize, width: usize) -> RgbdFrame {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/tum");
+    let options = LoadOptions {
+        size: Some((height, width)),
+        ..LoadOptions::default()
+    };
+    load_rgbd(
+        &root.join("TUM_color.png"),
+        &root.join("TUM_depth.png"),
+        DepthEncoding::Tum5000,
+        &options,
+    )
+    .expect("the shared TUM frame")
+    .0
+}

@@ -65,6 +65,8 @@ pub use frame_folders::{open_frame_folders, FrameFolders};
 pub use ldi_files::{
     ldi_files, load_ldi_dir, write_ldi_dir, LdiLayerFiles, LdiReport, MAX_LDI_FOLDER_LAYERS,
 };
+#[cfg(test)]
+pub(crate) use load::shared_tum_frame;
 pub use load::{
     decode_rgb_bytes, load_rgb, load_rgbd, load_rgbd_with_confidence, DepthReport, LoadOptions,
 };

@@ -115,24 +115,11 @@ fn refinement_through_the_fitted_model_beats_the_ideal_display_at_unseen_planes(
     use crate::reference::ReferencePipeline;
     use crate::refine::{held_out_depths, loss_depths, FocalTarget};
     use crate::refine::{RefineOptions, Refiner};
-    use crate::scene::{load_rgbd, DepthEncoding, LoadOptions};
     use crate::slm::codes::{codes_of, displayed_phase};
     use crate::synthesis::{SceneLayer, SmLbm};
 
     let (h, w) = (64, 64);
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/tum");
-    let options = LoadOptions {
-        size: Some((h, w)),
-        ..LoadOptions::default()
-    };
-    let frame = load_rgbd(
-        &root.join("TUM_color.png"),
-        &root.join("TUM_depth.png"),
-        DepthEncoding::Tum5000,
-        &options,
-    )
-    .expect("the shared TUM frame")
-    .0;
+    let frame = crate::scene::shared_tum_frame(h, w);
     let setup = OpticalSetup::default();
     let (offset, prop) = (6e-3, PropagationOptions::default());
     let hologram = ReferencePipeline {
