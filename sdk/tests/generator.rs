@@ -331,7 +331,8 @@ fn stream_keeps_the_first_frames_depth_range() {
 
 /// A stream's temporal state (`encoding::PhaseContinuity`): each frame after the first carries its churn from
 /// the previous delivered pattern; with `align_phase` each frame's colours are shifted towards the previous
-/// frame's global phase (the codes a whole-code shift of the unaligned ones, the churn no higher).
+/// frame's global phase (the codes a whole-code shift of the unaligned ones, as `PhaseContinuity` shifts them,
+/// the churn no higher); through a calibrated look-up table the aligning stream is refused.
 #[test]
 fn a_stream_counts_phase_churn_and_aligns_when_asked() {
     use tensorholo::encoding::phase_churn;
@@ -387,6 +388,23 @@ fn a_stream_counts_phase_churn_and_aligns_when_asked() {
         );
         assert!(a.mean_abs_rad <= p.mean_abs_rad + 1e-12, "{a:?} vs {p:?}");
     }
+    // The aligned stream is the plain one through an aligning `PhaseContinuity`, frame for frame.
+    let mut state = tensorholo::encoding::PhaseContinuity::new(true, false).unwrap();
+    for (p, a) in plain.iter().zip(&aligned) {
+        let mut codes = p.codes.clone();
+        let step = state.next(codes.view_mut()).unwrap();
+        assert_eq!(codes, a.codes);
+        assert_eq!(step.map(|s| s.churn), a.phase_churn);
+    }
+    // Alignment through a calibrated look-up table is refused when the stream starts, naming the setting.
+    let mut c = config();
+    c.align_phase = true;
+    let g = HologramGenerator::new(c).unwrap();
+    g.set_calibration(Some(Arc::new(panel_calibration(H, W))))
+        .unwrap();
+    let rec = Arc::new(Mutex::new(Recorder::default()));
+    let e = g.stream(Box::new(Shared(rec)), 4).unwrap_err().to_string();
+    assert!(e.contains("align_phase"), "{e}");
 }
 
 #[test]

@@ -367,36 +367,22 @@ fn amplitude_at(colour: &ColourInputs<'_>, i: usize) -> f32 {
     }
 }
 
-/// The summed-area table of the colour's amplitude over the frame rows `rows` (all `w` columns) into
-/// `table` (`(rows + 1) × (w + 1)`, row 0 and column 0 zero): `table[i + 1][x + 1]` is the sum over the first
-/// `i + 1` rows and the first `x + 1` columns, each row's running sum (f64, left to right) added to the
-/// table's row above.
+/// Rows of the table built together: each row's running sum is a chain of additions as slow as their
+/// latency, and [`SAT_GROUP`] independent chains keep the adder busy.
+const SAT_GROUP: usize = 4;
+
+/// The summed-area table of the colour's amplitude (times its scale map, where it has one) over the frame
+/// rows `rows` (all `w` columns) into `table` (`(rows + 1) × (w + 1)`, row 0 and column 0 zero):
+/// `table[i + 1][x + 1]` is the sum over the first `i + 1` rows and the first `x + 1` columns, each row's
+/// running sum (f64, left to right) added to the table's row above. Rows without a scale map are built
+/// [`SAT_GROUP`] at a time, in one pass over their columns.
 fn summed_area(
     colour: &ColourInputs<'_>,
     w: usize,
     rows: std::ops::Range<usize>,
     table: &mut [f64],
 ) {
-    match colour.scale {
-        Some(scale) => summed_area_of(colour.amplitude, Some(scale), w, rows, table),
-        None => summed_area_of(colour.amplitude, None, w, rows, table),
-    }
-}
-
-/// Rows of the table built together: each row's running sum is a chain of additions as slow as their
-/// latency, and [`SAT_GROUP`] independent chains keep the adder busy.
-const SAT_GROUP: usize = 4;
-
-/// [`summed_area`] of `amplitude` (times `scale` where given): [`SAT_GROUP`] rows at a time, in one pass
-/// over their columns.
-#[inline(always)]
-fn summed_area_of(
-    amplitude: &[f32],
-    scale: Option<&[f32]>,
-    w: usize,
-    rows: std::ops::Range<usize>,
-    table: &mut [f64],
-) {
+    let (amplitude, scale) = (colour.amplitude, colour.scale);
     let stride = w + 1;
     table[..stride].fill(0.0);
     let value = |y: usize, x: usize| match scale {

@@ -70,6 +70,25 @@ impl OpticalSetup {
             .map(|&l| Propagator::new(height, width, self.pixel_pitch_m, l, options))
             .collect()
     }
+
+    /// The propagator of colour `colour` (0 R, 1 G, 2 B) on `height × width` fields ([`Propagator::new`] at
+    /// this pitch and the colour's wavelength; the setup itself is not validated).
+    ///
+    /// Errors: as [`Propagator::new`].
+    pub(crate) fn propagator(
+        &self,
+        colour: usize,
+        (height, width): (usize, usize),
+        options: PropagationOptions,
+    ) -> Result<Propagator> {
+        Propagator::new(
+            height,
+            width,
+            self.pixel_pitch_m,
+            self.wavelengths_m[colour],
+            options,
+        )
+    }
 }
 
 /// The pixel pitches a display may have, metres: 0.1 µm to 1 mm (SLMs are 1–20 µm).

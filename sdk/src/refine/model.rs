@@ -29,7 +29,7 @@ use crate::error::Result;
 use crate::optics::fft::Fft2;
 use crate::optics::filter::aperture_fn;
 use crate::optics::multiplier::{plane_multiplier, PlaneMultiplier};
-use crate::optics::{OpticalSetup, PropagationOptions, Propagator};
+use crate::optics::{OpticalSetup, PropagationOptions};
 
 /// One colour's fixed parts of the model: its loss planes' multipliers `m_d` and the weight `W`.
 #[derive(Debug)]
@@ -45,7 +45,7 @@ impl ColourModel {
     /// metres from the midpoint plane and loss planes at normalised `depths`, seen through `viewer`'s
     /// aberration where one is given (see the module docs).
     ///
-    /// Errors: as [`Propagator::new`] and [`Propagator::even_transfer_function`].
+    /// Errors: as [`crate::optics::Propagator::new`] and [`crate::optics::Propagator::even_transfer_function`].
     pub(super) fn new(
         setup: &OpticalSetup,
         options: PropagationOptions,
@@ -55,13 +55,7 @@ impl ColourModel {
         depths: &[f64],
         viewer: Option<&AberrationProfile>,
     ) -> Result<Self> {
-        let prop = Propagator::new(
-            height,
-            width,
-            setup.pixel_pitch_m,
-            setup.wavelengths_m[colour],
-            options,
-        )?;
+        let prop = setup.propagator(colour, (height, width), options)?;
         let plan = prop.plan();
         let aperture = aperture_fn(plan);
         let n = plan.spectrum_len();

@@ -330,7 +330,7 @@ fn catmull_rom(x: f32) -> f32 {
 }
 
 /// Per output sample: first input index and normalised weights (edge samples replicated).
-pub(crate) fn resample_weights(n_in: usize, n_out: usize) -> Vec<(Vec<usize>, Vec<f32>)> {
+fn resample_weights(n_in: usize, n_out: usize) -> Vec<(Vec<usize>, Vec<f32>)> {
     let scale = n_in as f32 / n_out as f32;
     let fscale = scale.max(1.0);
     let support = 2.0 * fscale;
@@ -361,7 +361,7 @@ pub(crate) fn resample_weights(n_in: usize, n_out: usize) -> Vec<(Vec<usize>, Ve
 /// rows' pass takes [`RESAMPLE_ROWS`] rows at a time through a transposed block (`block[j][r]`: column `j` of
 /// row `r`), each tap one contiguous multiply-add over the rows; the columns' pass accumulates a whole output
 /// row per tap.
-pub(crate) fn resample_rows(
+fn resample_rows(
     h_in: usize,
     w_in: usize,
     mut fill: impl FnMut(usize, &mut [f32]),
@@ -433,33 +433,43 @@ pub(crate) fn resize_amplitude(
     width: usize,
 ) -> Array3<f32> {
     let (c, h, w) = amplitude.dim();
+    let amplitude = amplitude.as_standard_layout();
+    let src = amplitude.as_slice().unwrap_or_default();
+    let plane = |ch: usize| &src[ch * h * w..(ch + 1) * h * w];
+    resize_intensity_rows(
+        c,
+        (h, w),
+        (height, width),
+        |ch| plane(ch).iter().map(|&a| a * a).fold(0.0f32, f32::max),
+        |ch, y, row| {
+            for (i, &a) in row.iter_mut().zip(&plane(ch)[y * w..(y + 1) * w]) {
+                *i = a * a;
+            }
+        },
+    )
+}
+
+/// The resize of [`resize_amplitude`] from planes given row by row: `channels` planes of `h × w`
+/// intensities (`fill(channel, y, row)` writes row `y`'s, the amplitude squared), resampled to
+/// `height × width` (Catmull-Rom, [`resample_rows`]), each clamped to `[0, top(channel)]` (the plane's own
+/// largest intensity: Catmull-Rom over- and undershoots at edges, and an image in `[0, 1]` stays there, the
+/// CNN's training range, with no negative intensity) and returned as amplitude `[channels, height, width]`.
+pub(crate) fn resize_intensity_rows(
+    channels: usize,
+    (h, w): (usize, usize),
+    (height, width): (usize, usize),
+    mut top: impl FnMut(usize) -> f32,
+    mut fill: impl FnMut(usize, usize, &mut [f32]),
+) -> Array3<f32> {
     let wy = resample_weights(h, height);
     let wx = resample_weights(w, width);
-    let mut out = Array3::<f32>::zeros((c, height, width));
-    let planes: Vec<Array2<f32>> = (0..c)
-        .map(|ch| {
-            let plane = amplitude.index_axis(Axis(0), ch);
-            let plane = plane.as_standard_layout();
-            let src = plane.as_slice().unwrap_or_default();
-            // Catmull-Rom over- and undershoots at edges: clamp to the plane's own intensity range, so that
-            // an image in [0, 1] stays in [0, 1] (the CNN's training range) and no negative intensity appears.
-            let top = src.iter().map(|&a| a * a).fold(0.0f32, f32::max);
-            resample_rows(
-                h,
-                w,
-                |y, row| {
-                    for (i, &a) in row.iter_mut().zip(&src[y * w..(y + 1) * w]) {
-                        *i = a * a;
-                    }
-                },
-                &wy,
-                &wx,
-            )
-            .mapv(|i| i.clamp(0.0, top).sqrt())
-        })
-        .collect();
-    for (ch, p) in planes.into_iter().enumerate() {
-        out.index_axis_mut(Axis(0), ch).assign(&p);
+    let mut out = Array3::<f32>::zeros((channels, height, width));
+    for (ch, mut plane) in out.outer_iter_mut().enumerate() {
+        let top = top(ch);
+        let resampled = resample_rows(h, w, |y, row| fill(ch, y, row), &wy, &wx);
+        Zip::from(&mut plane)
+            .and(&resampled)
+            .for_each(|o, &i| *o = i.clamp(0.0, top).sqrt());
     }
     out
 }

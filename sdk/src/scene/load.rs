@@ -115,32 +115,26 @@ impl Colour {
         };
         let (h, w) = (rgb.height() as usize, rgb.width() as usize);
         let lut: [f32; 256] = std::array::from_fn(|c| srgb8_to_amplitude(c as u8));
-        let wy = super::frame::resample_weights(h, height);
-        let wx = super::frame::resample_weights(w, width);
         let raw = rgb.as_raw();
-        let mut out = Array3::<f32>::zeros((3, height, width));
-        for (ch, mut plane) in out.outer_iter_mut().enumerate() {
+        super::frame::resize_intensity_rows(
+            3,
+            (h, w),
+            (height, width),
             // The largest intensity: the table rises with the code, and so does its square.
-            let top_code = raw.iter().skip(ch).step_by(3).copied().max().unwrap_or(0);
-            let top = lut[top_code as usize] * lut[top_code as usize];
-            let resampled = super::frame::resample_rows(
-                h,
-                w,
-                |y, row| {
-                    for (i, px) in row
-                        .iter_mut()
-                        .zip(raw[y * w * 3..(y + 1) * w * 3].chunks_exact(3))
-                    {
-                        let a = lut[px[ch] as usize];
-                        *i = a * a;
-                    }
-                },
-                &wy,
-                &wx,
-            );
-            plane.assign(&resampled.mapv(|i| i.clamp(0.0, top).sqrt()));
-        }
-        out
+            |ch| {
+                let top = raw.iter().skip(ch).step_by(3).copied().max().unwrap_or(0);
+                lut[top as usize] * lut[top as usize]
+            },
+            |ch, y, row| {
+                for (i, px) in row
+                    .iter_mut()
+                    .zip(raw[y * w * 3..(y + 1) * w * 3].chunks_exact(3))
+                {
+                    let a = lut[px[ch] as usize];
+                    *i = a * a;
+                }
+            },
+        )
     }
 }
 

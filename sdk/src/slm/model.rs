@@ -583,13 +583,7 @@ pub(crate) fn capture_multiplier(
     distance_m: f64,
     aberration: Option<&ZernikeCoefficients>,
 ) -> Result<(Propagator, PlaneMultiplier)> {
-    let prop = Propagator::new(
-        height,
-        width,
-        setup.pixel_pitch_m,
-        setup.wavelengths_m[colour],
-        options,
-    )?;
+    let prop = setup.propagator(colour, (height, width), options)?;
     let aperture = aperture_fn(prop.plan());
     let m = plane_multiplier(&prop, &aperture, distance_m, aberration)?;
     Ok((prop, m))
