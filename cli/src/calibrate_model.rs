@@ -338,6 +338,18 @@ pub fn run(args: &ModelArgs) -> Result<()> {
                     r.capture, r.rms, r.ideal_rms
                 );
             }
+            if let Some(g) = report.gain {
+                let powers: Vec<String> = COLOUR_KEYS
+                    .iter()
+                    .zip(&report.power)
+                    .filter_map(|(k, p)| p.map(|p| format!("{k} {p:.4}")))
+                    .collect();
+                eprintln!(
+                    "the set's gain {g:.5} (of full scale per unit intensity); each colour's source power \
+                     against the brightest's: {}",
+                    powers.join(", ")
+                );
+            }
             for w in &report.warnings {
                 log::warn!("{w}");
             }

@@ -266,7 +266,8 @@ pub fn capture_patterns(height: usize, width: usize, seed: u64) -> Vec<Array2<u8
 
 /// A simulated display's hidden parameters for colour `colour` of an SLM of `size` `[height, width]`, drawn
 /// with `seed` from the ranges of docs/CALIBRATION.md: a Gaussian beam (centre within ±0.2, waist 1.3–2.0 of
-/// the half-width), a response `2π·(s·x + r₂·x(1−x) + r₃·(−2x³ + 3x² − x))` (`s` 0.92–1.08, `r₂` ±0.25, `r₃`
+/// the half-width; its wavefront tilted by ±0.5 rad toward each edge, curved by ±0.8 rad at the edges and
+/// ±0.2 rad more along one axis than the other), a response `2π·(s·x + r₂·x(1−x) + r₃·(−2x³ + 3x² − x))` (`s` 0.92–1.08, `r₂` ±0.25, `r₃`
 /// ±0.15), crosstalk of 1.5–4 % to each horizontal and 1–3 % to each vertical neighbour (0–0.5 % diagonal, a
 /// kernel summing to 1), a zero order of modulus 0.03–0.08 and a focus and astigmatism of ±0.4 rad each.
 pub(crate) fn draw_display(size: [usize; 2], colour: usize, seed: u64) -> DisplayModel {
@@ -277,6 +278,7 @@ pub(crate) fn draw_display(size: [usize; 2], colour: usize, seed: u64) -> Displa
     let (s, r2, r3) = (u(0.92, 1.08), u(-0.25, 0.25), u(-0.15, 0.15));
     let (h, v, d) = (u(0.015, 0.04), u(0.01, 0.03), u(0.0, 0.005));
     let (zm, za) = (u(0.03, 0.08), u(0.0, std::f64::consts::TAU));
+    let (tx, ty, curve, twist) = (u(-0.5, 0.5), u(-0.5, 0.5), u(-0.8, 0.8), u(-0.2, 0.2));
     let aberration = ZernikeCoefficients {
         focus: u(-0.4, 0.4),
         astigmatism_vertical: u(-0.4, 0.4),
@@ -290,7 +292,7 @@ pub(crate) fn draw_display(size: [usize; 2], colour: usize, seed: u64) -> Displa
     model.colours[colour] = ColourDisplay {
         source: Some(SourceField {
             log_amplitude: [2.0 * x0 / w2, 2.0 * y0 / w2, -1.0 / w2, -1.0 / w2, 0.0],
-            phase_rad: [0.0; 5],
+            phase_rad: [tx, ty, curve + twist, curve - twist, 0.0],
         }),
         response: Some(
             response_curve(s, r2, r3).expect("the drawn ranges keep the curve monotone"),

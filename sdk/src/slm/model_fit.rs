@@ -2,8 +2,10 @@
 //! the Jacobian made analytically (forward-mode: each parameter's derivative of the SLM field, propagated as
 //! the field is), docs/CALIBRATION.md "The fit".
 //!
-//! Per colour the parameters are the set's log-gain `ln g`, the source's log-amplitude polynomial (5 terms;
-//! its phase is held flat), the response's `(s, r₂, r₃)` (`model_captures::response_basis`), the crosstalk
+//! Per colour the parameters are the colour's log-gain `ln g_c` (the set's one gain `g` times the colour's
+//! source power: the two are one parameter to the captures of one colour, and are told apart afterwards,
+//! the brightest colour's power being 1), the source's log-amplitude and phase polynomials
+//! (5 terms each), the response's `(s, r₂, r₃)` (`model_captures::response_basis`), the crosstalk
 //! kernel's neighbour weights (the centre is `1 − Σ`, so a flat drive stays flat: the response's scale holds
 //! the rest), the zero order `(Re z, Im z)` and the aberration's five Zernike terms. The residual is
 //! `g·|U|² − I` over every capture's unsaturated pixels, `U = F⁻¹{M·E·H·F{u}}` (`slm::model`).
@@ -77,8 +79,13 @@ pub struct FitReport {
     pub residuals: Vec<CaptureResidual>,
     /// Parts the captures do not determine, each naming the colour, part and parameter.
     pub warnings: Vec<String>,
-    /// Per colour the gain `g` (None: no captures).
-    pub gains: [Option<f64>; 3],
+    /// The capture set's one gain `g` (captured intensity per unit of `|U|²`; `None`: no captures), with the
+    /// brightest colour's source taken at power 1.
+    pub gain: Option<f64>,
+    /// Per colour the source's power relative to the brightest colour's (`None`: no captures of it): the
+    /// constant of the source's log-amplitude, `ln(power)/2`, which the fit separates from the one gain. The
+    /// model file does not store it: the refinement and the evaluation scale each colour by least squares.
+    pub power: [Option<f64>; 3],
     /// Errors against [`FitOptions::truth`] where one was given.
     pub truth_errors: Vec<PartError>,
 }
@@ -91,22 +98,42 @@ struct Layout {
     side: usize,
 }
 
-const PARTS: [&str; 6] = [
+/// The parts' names in warnings (`green.source.phase_rad`), by index: [`GAIN`], [`AMPLITUDE`], [`PHASE`],
+/// [`RESPONSE`], [`CROSSTALK`], [`ZERO_ORDER`], [`ABERRATION`].
+const PARTS: [&str; 7] = [
     "gain",
-    "source",
+    "source.log_amplitude",
+    "source.phase_rad",
     "response",
     "crosstalk",
     "zero_order",
     "aberration",
 ];
+const GAIN: usize = 0;
+const AMPLITUDE: usize = 1;
+const PHASE: usize = 2;
+const RESPONSE: usize = 3;
+const CROSSTALK: usize = 4;
+const ZERO_ORDER: usize = 5;
+const ABERRATION: usize = 6;
 
 impl Layout {
-    fn ranges(&self) -> [std::ops::Range<usize>; 6] {
-        let k = 9 + self.kernel;
-        [0..1, 1..6, 6..9, 9..k, k..k + 2, k + 2..k + 7]
+    /// Each part's parameters: the gain (1), the source's log-amplitude (5) and phase (5), the response (3),
+    /// the kernel's neighbours, the zero order (2) and the aberration (5).
+    fn ranges(&self) -> [std::ops::Range<usize>; 7] {
+        let k = 14 + self.kernel;
+        [0..1, 1..6, 6..11, 11..14, 14..k, k..k + 2, k + 2..k + 7]
     }
     fn len(&self) -> usize {
-        16 + self.kernel
+        21 + self.kernel
+    }
+    /// The indices of the free parts' parameters (the gain always), in order.
+    fn free_indices(&self, free: &[bool; 7]) -> Vec<usize> {
+        let ranges = self.ranges();
+        (0..PARTS.len())
+            .filter(|&p| free[p] || p == GAIN)
+            .flat_map(|p| ranges[p].clone())
+            .collect()
     }
     /// Neighbour `n`'s kernel offset `(dy, dx)` and index in the row-major kernel.
     fn neighbour(&self, n: usize) -> (isize, isize, usize) {
@@ -121,34 +148,39 @@ impl Layout {
     }
     fn ideal(&self) -> Vec<f64> {
         let mut t = vec![0.0; self.len()];
-        t[6] = 1.0;
+        t[self.ranges()[RESPONSE].start] = 1.0;
         t
     }
     /// The colour's parts of `theta` (`free[part]`: fitted; others ideal). The response is not checked here.
-    fn display(&self, theta: &[f64], free: &[bool; 6]) -> (ColourDisplay, Option<[f32; 256]>) {
+    fn display(&self, theta: &[f64], free: &[bool; 7]) -> (ColourDisplay, Option<[f32; 256]>) {
         let r = self.ranges();
         let mut part = ColourDisplay::default();
-        if free[1] {
-            let mut a = [0.0; 5];
-            a.copy_from_slice(&theta[r[1].clone()]);
-            part.source = Some(SourceField {
-                log_amplitude: a,
-                phase_rad: [0.0; 5],
-            });
+        if free[AMPLITUDE] || free[PHASE] {
+            let mut source = SourceField::default();
+            if free[AMPLITUDE] {
+                source
+                    .log_amplitude
+                    .copy_from_slice(&theta[r[AMPLITUDE].clone()]);
+            }
+            if free[PHASE] {
+                source.phase_rad.copy_from_slice(&theta[r[PHASE].clone()]);
+            }
+            part.source = Some(source);
         }
-        let table = free[2].then(|| {
+        let response = &theta[r[RESPONSE].clone()];
+        let table = free[RESPONSE].then(|| {
             std::array::from_fn(|k| {
                 let b = response_basis(k);
-                (theta[6] * b[0] + theta[7] * b[1] + theta[8] * b[2]) as f32
+                (response[0] * b[0] + response[1] * b[1] + response[2] * b[2]) as f32
             })
         });
-        if free[3] && self.kernel > 0 {
+        if free[CROSSTALK] && self.kernel > 0 {
             let mut weights = vec![0.0; self.side * self.side];
             let mut centre = 1.0;
             for n in 0..self.kernel {
                 let (_, _, idx) = self.neighbour(n);
-                weights[idx] = theta[r[3].start + n];
-                centre -= theta[r[3].start + n];
+                weights[idx] = theta[r[CROSSTALK].start + n];
+                centre -= theta[r[CROSSTALK].start + n];
             }
             weights[self.side * self.side / 2] = centre;
             part.crosstalk = Some(Crosstalk {
@@ -156,12 +188,13 @@ impl Layout {
                 weights,
             });
         }
-        if free[4] {
-            part.zero_order = Some([theta[r[4].start], theta[r[4].start + 1]]);
+        if free[ZERO_ORDER] {
+            let z = r[ZERO_ORDER].start;
+            part.zero_order = Some([theta[z], theta[z + 1]]);
         }
-        if free[5] {
+        if free[ABERRATION] {
             let mut a = [0.0; 5];
-            a.copy_from_slice(&theta[r[5].clone()]);
+            a.copy_from_slice(&theta[r[ABERRATION].clone()]);
             part.aberration = Some(ZernikeCoefficients::from_array(a));
         }
         (part, table)
@@ -259,24 +292,21 @@ impl<'a> Problem<'a> {
     }
 
     /// The cost, and with `free` the normal equations of the free parameters' Jacobian, at `theta`.
-    fn evaluate(&self, theta: &[f64], free: &[bool; 6], with_jacobian: bool) -> Normal {
+    fn evaluate(&self, theta: &[f64], free: &[bool; 7], with_jacobian: bool) -> Normal {
         let (h, w) = self.set.size;
         let n = h * w;
         let fft = self.plan.fft();
         let zero = Complex32::new(0.0, 0.0);
         let ranges = self.layout.ranges();
         // The free parameters' indices.
-        let index: Vec<usize> = (0..6)
-            .filter(|&p| free[p] || p == 0)
-            .flat_map(|p| ranges[p].clone())
-            .collect();
+        let index = self.layout.free_indices(free);
         let np = index.len();
         let (part, table) = self.layout.display(theta, free);
         let mut runtime = ColourRuntime::new(&part, h, w);
         if let Some(t) = table {
             runtime.set_response(t);
         }
-        let e = free[5].then(|| {
+        let e = free[ABERRATION].then(|| {
             pupil_multiplier(
                 &self.plan,
                 part.aberration.as_ref().expect("made when free"),
@@ -350,10 +380,10 @@ impl<'a> Problem<'a> {
                 for &k in &index {
                     let du = if k == 0 {
                         None
-                    } else if ranges[5].contains(&k) {
+                    } else if ranges[ABERRATION].contains(&k) {
                         Some(apply(
                             &spectra[0],
-                            Some(&self.zernike[k - ranges[5].start]),
+                            Some(&self.zernike[k - ranges[ABERRATION].start]),
                             &mut scratch,
                         ))
                     } else {
@@ -423,8 +453,8 @@ impl<'a> Problem<'a> {
                 .map_or(Complex32::new(1.0, 0.0), |s| s[p])
         };
         let i_dphi = |p: usize, dphi: f32| runtime.modulated[p] * Complex32::new(0.0, dphi);
-        if r[1].contains(&k) {
-            let t = k - r[1].start;
+        if r[AMPLITUDE].contains(&k) {
+            let t = k - r[AMPLITUDE].start;
             return Some(
                 unit.iter()
                     .zip(&self.terms)
@@ -432,8 +462,18 @@ impl<'a> Problem<'a> {
                     .collect(),
             );
         }
-        if r[2].contains(&k) {
-            let j = k - r[2].start;
+        if r[PHASE].contains(&k) {
+            // ∂u/∂φ_t = i·b_t·u: the source multiplies the modulated light and the zero order alike.
+            let t = k - r[PHASE].start;
+            return Some(
+                unit.iter()
+                    .zip(&self.terms)
+                    .map(|(u, b)| u * Complex32::new(0.0, b[t] as f32))
+                    .collect(),
+            );
+        }
+        if r[RESPONSE].contains(&k) {
+            let j = k - r[RESPONSE].start;
             return Some(
                 (0..h * w)
                     .map(|p| {
@@ -445,8 +485,8 @@ impl<'a> Problem<'a> {
                     .collect(),
             );
         }
-        if r[3].contains(&k) {
-            let (dy, dx, _) = self.layout.neighbour(k - r[3].start);
+        if r[CROSSTALK].contains(&k) {
+            let (dy, dx, _) = self.layout.neighbour(k - r[CROSSTALK].start);
             return Some(
                 (0..h * w)
                     .map(|p| {
@@ -460,8 +500,8 @@ impl<'a> Problem<'a> {
                     .collect(),
             );
         }
-        if r[4].contains(&k) {
-            let c = if k == r[4].start {
+        if r[ZERO_ORDER].contains(&k) {
+            let c = if k == r[ZERO_ORDER].start {
                 Complex32::new(1.0, 0.0)
             } else {
                 Complex32::new(0.0, 1.0)
@@ -571,7 +611,8 @@ pub(crate) fn fit_set(set: &CaptureSet, options: &FitOptions) -> Result<FitRepor
         },
         residuals: Vec::new(),
         warnings: Vec::new(),
-        gains: [None; 3],
+        gain: None,
+        power: [None; 3],
         truth_errors: Vec::new(),
     };
     let mut residuals = vec![None; set.captures.len()];
@@ -582,25 +623,24 @@ pub(crate) fn fit_set(set: &CaptureSet, options: &FitOptions) -> Result<FitRepor
         }
         let layout = problem.layout;
         let ranges = layout.ranges();
-        let mut free = [true, true, true, layout.kernel > 0, true, true];
+        let mut free = [true, true, true, true, layout.kernel > 0, true, true];
         let mut theta = layout.ideal();
         // The gain at the ideal display in closed form, g = Σ I·|U|² / Σ |U|⁴ (at g = 1 the gain's column is
         // |U|², so Σ J·r = Σ|U|⁴ − Σ I·|U|²).
-        let only_gain = [true, false, false, false, false, false];
+        let only_gain = [true, false, false, false, false, false, false];
         let ideal = problem.evaluate(&theta, &only_gain, true);
         let g = (ideal.jtj[0] - ideal.jtr[0]) / ideal.jtj[0].max(f64::MIN_POSITIVE);
         theta[0] = g.max(1e-12).ln();
         let ideal_rms = problem.evaluate(&theta, &only_gain, false).rms;
         // Which parts do the captures determine? Judged at the ideal display.
         let start = problem.evaluate(&theta, &free, true);
-        let idx: Vec<usize> = (0..6)
-            .filter(|&p| free[p] || p == 0)
-            .flat_map(|p| ranges[p].clone())
-            .collect();
+        let idx = layout.free_indices(&free);
         for i in undetermined(&start.jtj, idx.len()) {
             let k = idx[i];
-            let p = (0..6).find(|&p| ranges[p].contains(&k)).expect("in a part");
-            if p == 0 || !free[p] {
+            let p = (0..PARTS.len())
+                .find(|&p| ranges[p].contains(&k))
+                .expect("in a part");
+            if p == GAIN || !free[p] {
                 continue;
             }
             free[p] = false;
@@ -612,16 +652,13 @@ pub(crate) fn fit_set(set: &CaptureSet, options: &FitOptions) -> Result<FitRepor
             ));
         }
         for (p, r) in ranges.iter().enumerate() {
-            if !free[p] && p > 0 {
+            if !free[p] && p != GAIN {
                 for k in r.clone() {
                     theta[k] = layout.ideal()[k];
                 }
             }
         }
-        let idx: Vec<usize> = (0..6)
-            .filter(|&p| free[p] || p == 0)
-            .flat_map(|p| ranges[p].clone())
-            .collect();
+        let idx = layout.free_indices(&free);
         let mut current = problem.evaluate(&theta, &free, true);
         let mut lambda = 1e-3;
         for _ in 0..options.iterations {
@@ -660,10 +697,12 @@ pub(crate) fn fit_set(set: &CaptureSet, options: &FitOptions) -> Result<FitRepor
                 ideal_rms: ideal_rms[k],
             });
         }
-        report.gains[colour] = Some(theta[0].exp());
+        // A gain per colour is the set's gain times that colour's source power (the source's constant).
+        report.power[colour] = Some(theta[GAIN].exp());
         let (mut part, _) = layout.display(&theta, &free);
-        if free[2] {
-            match response_curve(theta[6], theta[7], theta[8]) {
+        if free[RESPONSE] {
+            let r = &theta[ranges[RESPONSE].clone()];
+            match response_curve(r[0], r[1], r[2]) {
                 Ok(c) => part.response = Some(c),
                 Err(e) => report.warnings.push(format!(
                     "{}.response: the fitted curve is not a look-up table ({e}); kept ideal",
@@ -686,6 +725,17 @@ pub(crate) fn fit_set(set: &CaptureSet, options: &FitOptions) -> Result<FitRepor
         }
         report.model.colours[colour] = part;
     }
+    let brightest = report
+        .power
+        .iter()
+        .flatten()
+        .fold(0.0, |a: f64, &b| a.max(b));
+    if brightest > 0.0 {
+        report.gain = Some(brightest);
+        for p in report.power.iter_mut().flatten() {
+            *p /= brightest;
+        }
+    }
     report.residuals = residuals.into_iter().flatten().collect();
     report.model.validate().map_err(|e| {
         HoloError::Internal(format!("the fitted display model does not validate: {e}"))
@@ -694,7 +744,8 @@ pub(crate) fn fit_set(set: &CaptureSet, options: &FitOptions) -> Result<FitRepor
 }
 
 /// The errors of `fitted` against `truth` for one colour: the source's relative amplitude (largest over the
-/// SLM, after both are scaled to mean 1), the response (largest phase difference over the codes, radians),
+/// SLM, after both are scaled to mean 1) and phase (largest over the SLM, radians, both means removed), the
+/// response (largest phase difference over the codes, radians),
 /// the crosstalk (largest weight difference), the zero order (`|Δz|`) and the aberration (largest
 /// coefficient difference, radians).
 fn part_errors(
@@ -715,11 +766,32 @@ fn part_errors(
     };
     let (fa, ta) = (amp(fitted), amp(truth));
     out.push(PartError {
-        part: name("source"),
+        part: name("source.log_amplitude"),
         measure: "largest relative amplitude difference".into(),
         error: fa
             .iter()
             .zip(&ta)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max),
+    });
+    // The phase's constant is invisible: compare with each map's mean removed.
+    let phase = |c: &ColourDisplay| -> Vec<f64> {
+        let k = c.source.map_or([0.0; 5], |s| s.phase_rad);
+        let p: Vec<f64> = (0..h * w)
+            .map(|p| {
+                let t = source_terms(normalised(p % w, w), normalised(p / w, h));
+                k.iter().zip(&t).map(|(a, b)| a * b).sum()
+            })
+            .collect();
+        let mean = p.iter().sum::<f64>() / p.len() as f64;
+        p.into_iter().map(|v| v - mean).collect()
+    };
+    out.push(PartError {
+        part: name("source.phase_rad"),
+        measure: "largest phase difference over the SLM (means removed), rad".into(),
+        error: phase(fitted)
+            .iter()
+            .zip(&phase(truth))
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max),
     });
