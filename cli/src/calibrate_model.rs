@@ -15,6 +15,7 @@ use tensorholo::slm::model_captures::{
 };
 use tensorholo::slm::model_fit::{fit, FitOptions};
 use tensorholo::slm::simulate::write_grey_png;
+use tensorholo::slm::{DisplayCalibration, LutRepresentation};
 
 use crate::args::parse_size;
 use crate::output::{guard, Input};
@@ -96,6 +97,11 @@ enum ModelCommand {
         /// A simulation's hidden parameters (tensorholo.display-model).
         #[arg(long)]
         truth: Option<PathBuf>,
+        /// A display calibration (.holocal, `holo calibrate lut`): its calibrated look-up tables, global or per
+        /// pixel, are the model's phase response, held while the other parts are fitted (colours with the
+        /// linear table fit one curve).
+        #[arg(long, value_name = "FILE")]
+        calibration: Option<PathBuf>,
         /// Levenberg–Marquardt iterations at most.
         #[arg(long, default_value_t = FitOptions::default().iterations)]
         iterations: usize,
@@ -301,6 +307,7 @@ pub fn run(args: &ModelArgs) -> Result<()> {
             display,
             size,
             truth,
+            calibration,
             iterations,
             kernel,
             out,
@@ -308,6 +315,11 @@ pub fn run(args: &ModelArgs) -> Result<()> {
             let mut inputs = vec![Input::file("--captures", captures)];
             inputs.extend(display.as_deref().map(|d| Input::file("--display", d)));
             inputs.extend(truth.as_deref().map(|t| Input::file("--truth", t)));
+            inputs.extend(
+                calibration
+                    .as_deref()
+                    .map(|c| Input::file("--calibration", c)),
+            );
             guard("--out", out, &inputs)?;
             let (setup, slm) = optics_of(display.as_deref(), *size)?;
             let truth = truth
@@ -315,11 +327,22 @@ pub fn run(args: &ModelArgs) -> Result<()> {
                 .map(DisplayModel::load)
                 .transpose()
                 .context("--truth")?;
+            let responses = match calibration.as_deref() {
+                None => Default::default(),
+                Some(path) => {
+                    let cal = DisplayCalibration::read(path).context("--calibration")?;
+                    cal.luts().map(|lut| match lut.representation() {
+                        LutRepresentation::Linear => None,
+                        r => Some(r.clone()),
+                    })
+                }
+            };
             let options = FitOptions {
                 setup,
                 iterations: *iterations,
                 kernel_side: *kernel,
                 truth,
+                responses,
             };
             let t = std::time::Instant::now();
             let report = fit(captures, &options).context("--captures")?;

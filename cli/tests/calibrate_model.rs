@@ -59,6 +59,41 @@ fn simulate_fit_and_refine_through_the_model() {
         24,
         "{err}"
     );
+    // --calibration: its per-pixel tables are the model's response, held (a calibration of the same panel size).
+    let lut = dir.path().join("lut");
+    let o = holo(&["calibrate", "simulate", "--size", "32x32", "--out", s(&lut)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let cal = dir.path().join("d.holocal");
+    let o = holo(&[
+        "calibrate",
+        "lut",
+        "--green",
+        s(&lut.join("green")),
+        "--size",
+        "32x32",
+        "--out",
+        s(&cal),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let held = dir.path().join("held.json");
+    let o = holo(&[
+        "calibrate",
+        "model",
+        "fit",
+        "--captures",
+        s(&sim.join("manifest.json")),
+        "--calibration",
+        s(&cal),
+        "--out",
+        s(&held),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&held).unwrap();
+    let held: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(
+        held["green"]["response"]["per_pixel"]["slm_size"],
+        serde_json::json!([32, 32])
+    );
     let out = dir.path().join("render");
     let o = holo(&[
         "render",

@@ -402,6 +402,15 @@ impl TiledCurves {
         top * (1.0 - wy.2) + bottom * wy.2
     }
 
+    /// The phase in radians the drive `v` (a code as a number, linear between codes, clamped to the table) shows
+    /// at pixel `(y, x)` (bilinear between tile centres, as [`TiledCurves::pixel_curve`]), and its slope per
+    /// code. `(y, x)` must lie on the SLM.
+    pub(crate) fn phase_and_slope(&self, y: usize, x: usize, v: f32) -> (f32, f32) {
+        let wy = Self::axis_weight(y, self.height, self.tile_height);
+        let wx = Self::axis_weight(x, self.width, self.tile_width);
+        interpolate_codes(v, |k| self.blend_at(wy, wx, k))
+    }
+
     /// Writes the response curves of rows `rows` of the SLM into `out` (`[rows.len(), width, 256]`
     /// row-major, radians).
     ///
@@ -440,6 +449,15 @@ impl TiledCurves {
     pub fn stored_bytes(&self) -> usize {
         self.curves.len() * CODES * 2
     }
+}
+
+/// A response at the drive `v` (a code as a number), linear between the codes `phase_of(k)`, `k` clamped to
+/// 0…255, and its slope per code.
+pub(crate) fn interpolate_codes(v: f32, phase_of: impl Fn(u8) -> f32) -> (f32, f32) {
+    let i = (v.floor() as isize).clamp(0, CODES as isize - 2) as u8;
+    let (a, b) = (phase_of(i), phase_of(i + 1));
+    let slope = b - a;
+    (a + (v - f32::from(i)) * slope, slope)
 }
 
 /// How one colour's look-up table is represented.

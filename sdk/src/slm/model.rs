@@ -29,7 +29,8 @@ use crate::error::{invalid, HoloError, Result};
 use crate::optics::filter::aperture_fn;
 use crate::optics::multiplier::{plane_multiplier, PlaneMultiplier};
 use crate::optics::{OpticalSetup, PropagationOptions, Propagator, ZernikeCoefficients};
-use crate::slm::PhaseCurve;
+use crate::slm::lut::interpolate_codes;
+use crate::slm::{LutRepresentation, PhaseCurve, TiledCurves};
 
 /// Value of a display model file's `format` field.
 pub const DISPLAY_MODEL_FORMAT: &str = "tensorholo.display-model";
@@ -65,12 +66,26 @@ pub struct Crosstalk {
     pub weights: Vec<f64>,
 }
 
-/// The phase response in a model file: the phase in radians each code displays (the look-up tables' curve,
-/// `slm::PhaseCurve`: 256 non-decreasing values, code 0 first).
+/// The phase response in a model file, one of: `phases_rad`, the phase in radians each code displays over
+/// the whole panel (the look-up tables' curve, `slm::PhaseCurve`: 256 non-decreasing values, code 0 first);
+/// or `per_pixel`, the tiled per-pixel form of a calibration (`slm::TiledCurves`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ResponseFile {
-    phases_rad: Vec<f32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    phases_rad: Option<Vec<f32>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    per_pixel: Option<TiledFile>,
+}
+
+/// A per-pixel response in a model file: the SLM's `[height, width]`, the tile's `[height, width]` and one
+/// 256-value curve (radians) per tile, tiles row-major (`slm::TiledCurves`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TiledFile {
+    slm_size: [usize; 2],
+    tile: [usize; 2],
+    tiles_rad: Vec<Vec<f32>>,
 }
 
 /// One colour's parts of a [`DisplayModel`]; each `None` is ideal.
@@ -80,13 +95,15 @@ pub struct ColourDisplay {
     /// The source field over the SLM (`None`: a uniform plane wave).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub source: Option<SourceField>,
-    /// The phase response (`None`: code `k` shows `2π·k/256`).
+    /// The phase response: the look-up tables' form, global ([`LutRepresentation::Global`]) or per pixel
+    /// ([`LutRepresentation::Tiled`], of the model's SLM size) (`None`, or [`LutRepresentation::Linear`]:
+    /// code `k` shows `2π·k/256`).
     #[serde(
         default,
         skip_serializing_if = "Option::is_none",
         with = "response_serde"
     )]
-    pub response: Option<PhaseCurve>,
+    pub response: Option<LutRepresentation>,
     /// The crosstalk kernel (`None`: none).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub crosstalk: Option<Crosstalk>,
@@ -99,26 +116,70 @@ pub struct ColourDisplay {
 }
 
 mod response_serde {
-    use super::{PhaseCurve, ResponseFile};
+    use super::{LutRepresentation, PhaseCurve, ResponseFile, TiledCurves, TiledFile};
     use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
     pub(super) fn serialize<S: Serializer>(
-        v: &Option<PhaseCurve>,
+        v: &Option<LutRepresentation>,
         s: S,
     ) -> std::result::Result<S::Ok, S::Error> {
         v.as_ref()
-            .map(|c| ResponseFile {
-                phases_rad: c.phases().to_vec(),
+            .map(|r| match r {
+                LutRepresentation::Linear => ResponseFile {
+                    phases_rad: Some(PhaseCurve::linear().phases().to_vec()),
+                    per_pixel: None,
+                },
+                LutRepresentation::Global(c) => ResponseFile {
+                    phases_rad: Some(c.phases().to_vec()),
+                    per_pixel: None,
+                },
+                LutRepresentation::Tiled(t) => {
+                    let (h, w) = t.size();
+                    let (th, tw) = t.tile();
+                    ResponseFile {
+                        phases_rad: None,
+                        per_pixel: Some(TiledFile {
+                            slm_size: [h, w],
+                            tile: [th, tw],
+                            tiles_rad: t.curves().iter().map(|c| c.phases().to_vec()).collect(),
+                        }),
+                    }
+                }
             })
             .serialize(s)
     }
 
     pub(super) fn deserialize<'de, D: Deserializer<'de>>(
         d: D,
-    ) -> std::result::Result<Option<PhaseCurve>, D::Error> {
-        Option::<ResponseFile>::deserialize(d)?
-            .map(|f| PhaseCurve::new(&f.phases_rad).map_err(serde::de::Error::custom))
-            .transpose()
+    ) -> std::result::Result<Option<LutRepresentation>, D::Error> {
+        use serde::de::Error;
+        let Some(file) = Option::<ResponseFile>::deserialize(d)? else {
+            return Ok(None);
+        };
+        let r = match (file.phases_rad, file.per_pixel) {
+            (Some(p), None) => {
+                LutRepresentation::Global(PhaseCurve::new(&p).map_err(Error::custom)?)
+            }
+            (None, Some(t)) => {
+                let curves = t
+                    .tiles_rad
+                    .iter()
+                    .enumerate()
+                    .map(|(i, c)| {
+                        PhaseCurve::new(c).map_err(|e| Error::custom(format!("tile {i}: {e}")))
+                    })
+                    .collect::<std::result::Result<Vec<_>, _>>()?;
+                let [h, w] = t.slm_size;
+                let [th, tw] = t.tile;
+                LutRepresentation::Tiled(
+                    TiledCurves::new(h, w, th, tw, curves).map_err(Error::custom)?,
+                )
+            }
+            _ => return Err(Error::custom(
+                "a response gives either `phases_rad` (one curve) or `per_pixel` (tiled curves)",
+            )),
+        };
+        Ok(Some(r))
     }
 }
 
@@ -239,6 +300,16 @@ impl DisplayModel {
         }
         for (c, part) in self.colours.iter().enumerate() {
             part.validate(COLOUR_KEYS[c])?;
+            if let Some(LutRepresentation::Tiled(t)) = &part.response {
+                if t.size() != (h, w) {
+                    let (th, tw) = t.size();
+                    return Err(HoloError::InvalidData(format!(
+                        "display model `{}.response`: per-pixel tables of a {th}×{tw} SLM in a model of \
+                         {h}×{w}",
+                        COLOUR_KEYS[c]
+                    )));
+                }
+            }
         }
         Ok(())
     }
@@ -424,8 +495,8 @@ pub(crate) struct ColourRuntime {
     pub(crate) source: Option<Vec<Complex32>>,
     /// `(rows, cols, weights)`.
     kernel: Option<(usize, usize, Vec<f32>)>,
-    /// Phase per code, `None`: `2π·v/256`.
-    response: Option<[f32; 256]>,
+    /// The phase response, `None`: `2π·v/256`.
+    response: Option<Response>,
     pub(crate) zero: Complex32,
     /// `K ∗ c` of the last forward pass.
     pub(crate) crossed: Vec<f32>,
@@ -435,6 +506,15 @@ pub(crate) struct ColourRuntime {
     pub(crate) grad: Vec<f32>,
     /// `∂L/∂(K ∗ c)` of the last backward pass.
     dphi: Vec<f32>,
+}
+
+/// A runtime's phase response.
+#[derive(Debug, Clone)]
+enum Response {
+    /// Phase per code, the whole panel.
+    Table([f32; 256]),
+    /// Per pixel, tiled.
+    Tiled(TiledCurves),
 }
 
 /// The linear response's slope, radians per code.
@@ -470,7 +550,11 @@ impl ColourRuntime {
                     k.weights.iter().map(|&v| v as f32).collect(),
                 )
             }),
-            response: part.response.as_ref().map(|c| *c.phases()),
+            response: part.response.as_ref().and_then(|r| match r {
+                LutRepresentation::Linear => None,
+                LutRepresentation::Global(c) => Some(Response::Table(*c.phases())),
+                LutRepresentation::Tiled(t) => Some(Response::Tiled(t.clone())),
+            }),
             zero: part
                 .zero_order
                 .map_or(Complex32::new(0.0, 0.0), |[re, im]| {
@@ -485,7 +569,7 @@ impl ColourRuntime {
 
     /// Replaces the response by the table `phases` (radians per code; the fit's trial curves, unchecked).
     pub(crate) fn set_response(&mut self, phases: [f32; 256]) {
-        self.response = Some(phases);
+        self.response = Some(Response::Table(phases));
     }
 
     /// `out ← K ∗ input` (`transpose`: the adjoint, `Kᵀ ∗`, scattering to the clamped neighbours).
@@ -515,15 +599,12 @@ impl ColourRuntime {
         }
     }
 
-    /// The response at drive `v` (codes as numbers) and its slope.
-    pub(crate) fn respond(&self, v: f32) -> (f32, f32) {
+    /// The response at pixel `p` (row-major) to drive `v` (codes as numbers) and its slope.
+    pub(crate) fn respond(&self, p: usize, v: f32) -> (f32, f32) {
         match &self.response {
             None => (v * LINEAR_SLOPE, LINEAR_SLOPE),
-            Some(t) => {
-                let i = (v.floor() as isize).clamp(0, 254) as usize;
-                let slope = t[i + 1] - t[i];
-                (t[i] + (v - i as f32) * slope, slope)
-            }
+            Some(Response::Table(t)) => interpolate_codes(v, |k| t[usize::from(k)]),
+            Some(Response::Tiled(t)) => t.phase_and_slope(p / self.width, p % self.width, v),
         }
     }
 
@@ -538,7 +619,7 @@ impl ColourRuntime {
             .zip(modulated.iter_mut().zip(unit.iter_mut()))
             .enumerate()
         {
-            let (phi, _) = self.respond(v);
+            let (phi, _) = self.respond(p, v);
             let (s, c) = phi.sin_cos();
             let src = self
                 .source
@@ -561,7 +642,8 @@ impl ColourRuntime {
             g.iter()
                 .zip(&self.modulated)
                 .zip(&self.crossed)
-                .map(|((g, m), &v)| (g.im * m.re - g.re * m.im) * self.respond(v).1),
+                .enumerate()
+                .map(|(p, ((g, m), &v))| (g.im * m.re - g.re * m.im) * self.respond(p, v).1),
         );
         let mut grad = std::mem::take(&mut self.grad);
         self.convolve(&dphi, &mut grad, true);

@@ -16,7 +16,7 @@ use super::model::{
 use crate::error::{HoloError, Result};
 use crate::optics::{OpticalSetup, PropagationOptions, ZernikeCoefficients};
 use crate::slm::captures::{png_size, read_png_downsampled};
-use crate::slm::PhaseCurve;
+use crate::slm::{LutRepresentation, PhaseCurve};
 use crate::splitmix::SplitMix64;
 
 /// Value of a capture manifest's `format` field.
@@ -294,9 +294,9 @@ pub(crate) fn draw_display(size: [usize; 2], colour: usize, seed: u64) -> Displa
             log_amplitude: [2.0 * x0 / w2, 2.0 * y0 / w2, -1.0 / w2, -1.0 / w2, 0.0],
             phase_rad: [tx, ty, curve + twist, curve - twist, 0.0],
         }),
-        response: Some(
+        response: Some(LutRepresentation::Global(
             response_curve(s, r2, r3).expect("the drawn ranges keep the curve monotone"),
-        ),
+        )),
         crosstalk: Some(Crosstalk {
             size: [3, 3],
             weights: vec![d, v, d, h, 1.0 - 2.0 * (h + v) - 4.0 * d, h, d, v, d],
@@ -329,6 +329,24 @@ pub(crate) fn response_curve(s: f64, r2: f64, r3: f64) -> Result<PhaseCurve> {
         })
         .collect();
     PhaseCurve::new(&phases)
+}
+
+/// A per-pixel response over an SLM of `[height, width]` in tiles of `tile` pixels: the curve of
+/// [`response_curve`] whose `s` runs from 0.9 at the top left to 1.1 at the bottom right and whose `r₂` turns
+/// from −0.2 to 0.2 across the rows (a panel whose cell gap varies).
+#[cfg(test)]
+pub(crate) fn varying_response(height: usize, width: usize, tile: usize) -> LutRepresentation {
+    let (rows, cols) = (height.div_ceil(tile), width.div_ceil(tile));
+    let curves = (0..rows * cols)
+        .map(|t| {
+            let (y, x) = ((t / cols) as f64, (t % cols) as f64);
+            let (fy, fx) = (y / (rows - 1).max(1) as f64, x / (cols - 1).max(1) as f64);
+            response_curve(0.9 + 0.1 * (fy + fx), 0.4 * fx - 0.2, 0.0).expect("monotone")
+        })
+        .collect();
+    LutRepresentation::Tiled(
+        crate::slm::TiledCurves::new(height, width, tile, tile, curves).expect("a valid tiling"),
+    )
 }
 
 /// Captures `[H, W]` of `model`'s display on `setup` for each `(pattern index, colour, distance_m)` of

@@ -23,6 +23,7 @@ use crate::error::{invalid, HoloError, Result};
 use crate::optics::propagation::SpectralPlan;
 use crate::optics::zernike::pupil_multiplier;
 use crate::optics::{OpticalSetup, Padding, PropagationOptions, ZernikeCoefficients};
+use crate::slm::LutRepresentation;
 
 /// How a fit runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -35,6 +36,10 @@ pub struct FitOptions {
     pub kernel_side: usize,
     /// A simulation's hidden parameters: the report then gives the error of each fitted part against them.
     pub truth: Option<DisplayModel>,
+    /// Per colour (R, G, B) a phase response the fit holds instead of fitting one: a calibration's look-up
+    /// tables (`DisplayCalibration::luts`, Eq. 12–13), global or per pixel (of the captures' SLM size). The
+    /// model keeps it as its response. `None`: the response is fitted (one curve for the panel).
+    pub responses: [Option<LutRepresentation>; 3],
 }
 
 impl Default for FitOptions {
@@ -44,6 +49,7 @@ impl Default for FitOptions {
             iterations: 40,
             kernel_side: 3,
             truth: None,
+            responses: [None, None, None],
         }
     }
 }
@@ -226,6 +232,8 @@ struct Problem<'a> {
     zernike: Vec<Vec<f32>>,
     /// The source's polynomial terms per pixel.
     terms: Vec<[f64; 5]>,
+    /// The response held ([`FitOptions::responses`]), `None`: fitted.
+    held_response: Option<LutRepresentation>,
 }
 
 impl<'a> Problem<'a> {
@@ -288,6 +296,7 @@ impl<'a> Problem<'a> {
             planes,
             zernike,
             terms,
+            held_response: options.responses[colour].clone(),
         })
     }
 
@@ -301,7 +310,8 @@ impl<'a> Problem<'a> {
         // The free parameters' indices.
         let index = self.layout.free_indices(free);
         let np = index.len();
-        let (part, table) = self.layout.display(theta, free);
+        let (mut part, table) = self.layout.display(theta, free);
+        part.response.clone_from(&self.held_response);
         let mut runtime = ColourRuntime::new(&part, h, w);
         if let Some(t) = table {
             runtime.set_response(t);
@@ -494,7 +504,7 @@ impl<'a> Problem<'a> {
                         let q = ((i + dy).clamp(0, h as isize - 1) * w as isize
                             + (j + dx).clamp(0, w as isize - 1))
                             as usize;
-                        let slope = runtime.respond(runtime.crossed[p]).1;
+                        let slope = runtime.respond(p, runtime.crossed[p]).1;
                         i_dphi(p, slope * (drive[q] - drive[p]))
                     })
                     .collect(),
@@ -580,7 +590,7 @@ fn undetermined(jtj: &[f64], np: usize) -> Vec<usize> {
 /// file, a capture of another size than its pattern, patterns of different sizes, a duplicate entry, a
 /// non-finite distance, a saturated capture; [`HoloError::InvalidParameter`] for
 /// `iterations` outside `1..=500` or a `kernel_side` other than 1, 3 or 5; [`HoloError::ShapeMismatch`] for a
-/// truth model of another SLM size; those of the propagation.
+/// truth model or a held per-pixel response of another SLM size; those of the propagation.
 pub fn fit(manifest: &std::path::Path, options: &FitOptions) -> Result<FitReport> {
     fit_set(&CaptureSet::read(manifest)?, options)
 }
@@ -604,6 +614,17 @@ pub(crate) fn fit_set(set: &CaptureSet, options: &FitOptions) -> Result<FitRepor
     if let Some(t) = &options.truth {
         t.check_size(h, w)?;
     }
+    for r in options.responses.iter().flatten() {
+        if let LutRepresentation::Tiled(t) = r {
+            if t.size() != (h, w) {
+                return Err(HoloError::ShapeMismatch {
+                    what: "the held per-pixel response vs the captures' SLM size".into(),
+                    expected: vec![h, w],
+                    got: vec![t.size().0, t.size().1],
+                });
+            }
+        }
+    }
     let mut report = FitReport {
         model: DisplayModel {
             slm_size: [h, w],
@@ -623,7 +644,8 @@ pub(crate) fn fit_set(set: &CaptureSet, options: &FitOptions) -> Result<FitRepor
         }
         let layout = problem.layout;
         let ranges = layout.ranges();
-        let mut free = [true, true, true, true, layout.kernel > 0, true, true];
+        let held = problem.held_response.is_some();
+        let mut free = [true, true, true, !held, layout.kernel > 0, true, true];
         let mut theta = layout.ideal();
         // The gain at the ideal display in closed form, g = Σ I·|U|² / Σ |U|⁴ (at g = 1 the gain's column is
         // |U|², so Σ J·r = Σ|U|⁴ − Σ I·|U|²).
@@ -700,10 +722,11 @@ pub(crate) fn fit_set(set: &CaptureSet, options: &FitOptions) -> Result<FitRepor
         // A gain per colour is the set's gain times that colour's source power (the source's constant).
         report.power[colour] = Some(theta[GAIN].exp());
         let (mut part, _) = layout.display(&theta, &free);
+        part.response.clone_from(&problem.held_response);
         if free[RESPONSE] {
             let r = &theta[ranges[RESPONSE].clone()];
             match response_curve(r[0], r[1], r[2]) {
-                Ok(c) => part.response = Some(c),
+                Ok(c) => part.response = Some(LutRepresentation::Global(c)),
                 Err(e) => report.warnings.push(format!(
                     "{}.response: the fitted curve is not a look-up table ({e}); kept ideal",
                     key
@@ -795,15 +818,18 @@ fn part_errors(
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max),
     });
-    let curve = |c: &ColourDisplay| {
-        let r = ColourRuntime::new(c, 1, 1);
-        (0..256).map(move |k| f64::from(r.respond(k as f32).0))
+    let curve = |c: &ColourDisplay| -> Vec<f64> {
+        let r = &ColourRuntime::new(c, h, w);
+        (0..h * w)
+            .flat_map(|p| (0..256).map(move |k| f64::from(r.respond(p, k as f32).0)))
+            .collect()
     };
     out.push(PartError {
         part: name("response"),
-        measure: "largest phase difference over the codes, rad".into(),
+        measure: "largest phase difference over the codes and pixels, rad".into(),
         error: curve(fitted)
-            .zip(curve(truth))
+            .iter()
+            .zip(&curve(truth))
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max),
     });

@@ -7,7 +7,7 @@ use ndarray::Array3;
 
 use super::*;
 use crate::refine::{loss_depths, FocalTarget, RefineOptions, Refiner};
-use crate::slm::model_captures::{draw_display, response_curve};
+use crate::slm::model_captures::{draw_display, response_curve, varying_response};
 use crate::splitmix::SplitMix64;
 
 const OFFSET_M: f64 = 2e-3;
@@ -105,7 +105,9 @@ fn the_gradient_through_each_part_matches_finite_differences() {
         (
             "response",
             with_part(h, w, |c| {
-                c.response = Some(response_curve(1.05, 0.2, -0.1).unwrap())
+                c.response = Some(LutRepresentation::Global(
+                    response_curve(1.05, 0.2, -0.1).unwrap(),
+                ))
             }),
         ),
         (
@@ -116,6 +118,10 @@ fn the_gradient_through_each_part_matches_finite_differences() {
                     weights: vec![0.0, 0.08, 0.01, 0.12, 0.7, 0.05, 0.02, 0.02, 0.0],
                 })
             }),
+        ),
+        (
+            "per-pixel response",
+            with_part(h, w, |c| c.response = Some(varying_response(h, w, 4))),
         ),
         (
             "zero_order",
@@ -333,8 +339,26 @@ fn bad_model_files_are_refused_naming_the_entry() {
     .with_display_model(Some(&model))
     .unwrap_err();
     assert!(matches!(e, HoloError::ShapeMismatch { .. }), "{e}");
-    // A model reads back as written.
-    let drawn = draw_display([8, 8], 0, 3);
+    // A model reads back as written, a per-pixel response too.
+    let mut drawn = draw_display([8, 8], 0, 3);
     let back = DisplayModel::from_json_str(&drawn.to_json_string(), "t").unwrap();
     assert_eq!(back, drawn);
+    drawn.colours[0].response = Some(varying_response(8, 8, 4));
+    let text = drawn.to_json_string();
+    assert!(text.contains("per_pixel"));
+    assert_eq!(DisplayModel::from_json_str(&text, "t").unwrap(), drawn);
+    // Per-pixel tables of another SLM size than the model's, or both forms at once: refused, naming the entry.
+    drawn.colours[0].response = Some(varying_response(8, 12, 4));
+    let e = DisplayModel::from_json_str(&drawn.to_json_string(), "m.json")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("red.response") && e.contains("8×12"), "{e}");
+    let both = base.replace(
+        "PART",
+        r#"{"response": {"phases_rad": [], "per_pixel": {"slm_size": [8, 8], "tile": [8, 8], "tiles_rad": []}}}"#,
+    );
+    let e = DisplayModel::from_json_str(&both, "m.json")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("either"), "{e}");
 }

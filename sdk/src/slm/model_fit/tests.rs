@@ -142,6 +142,70 @@ fn the_fit_recovers_each_part_alone() {
     }
 }
 
+/// A panel whose response varies across it: the fit that holds the calibration's per-pixel tables recovers
+/// the other parts and falls to the noise; one fitted curve for the whole panel cannot.
+#[test]
+fn a_held_per_pixel_response_is_the_models_response() {
+    let mut truth = draw_display([40, 40], 1, 6);
+    let tables = crate::slm::model_captures::varying_response(40, 40, 8);
+    truth.colours[1].response = Some(tables.clone());
+    let (set, _) = simulated_set(&truth, &[1], 8, &DISTANCES, 0.01);
+    let fit = |responses: [Option<LutRepresentation>; 3]| {
+        fit_set(
+            &set,
+            &FitOptions {
+                truth: Some(truth.clone()),
+                responses,
+                ..Default::default()
+            },
+        )
+        .unwrap()
+    };
+    let held = fit([None, Some(tables.clone()), None]);
+    assert!(held.warnings.is_empty(), "{:?}", held.warnings);
+    assert_eq!(held.model.colours[1].response, Some(tables.clone()));
+    for r in &held.residuals {
+        assert!(r.rms < 0.0115, "{r:?}");
+    }
+    for (name, err) in errors(&held) {
+        let bound = if name.ends_with("crosstalk") || name.ends_with("zero_order") {
+            0.005
+        } else {
+            0.05
+        };
+        assert!(err < bound, "{name} off by {err}");
+    }
+    let global = fit([None, None, None]);
+    let worst = |r: &FitReport| r.residuals.iter().map(|r| r.rms).fold(0.0, f64::max);
+    let response_error = |r: &FitReport| {
+        errors(r)
+            .into_iter()
+            .find(|(n, _)| n == "green.response")
+            .unwrap()
+            .1
+    };
+    eprintln!(
+        "held tables: worst residual {:.4}, response off by {:.4} rad; one fitted curve: {:.4}, {:.4} rad",
+        worst(&held),
+        response_error(&held),
+        worst(&global),
+        response_error(&global)
+    );
+    assert!(response_error(&global) > 0.2, "{}", response_error(&global));
+    // Tables of another SLM size: refused.
+    let other = crate::slm::model_captures::varying_response(40, 48, 8);
+    assert!(matches!(
+        fit_set(
+            &set,
+            &FitOptions {
+                responses: [None, Some(other), None],
+                ..Default::default()
+            }
+        ),
+        Err(HoloError::ShapeMismatch { .. })
+    ));
+}
+
 #[test]
 fn too_few_captures_name_the_parts_they_do_not_determine() {
     let truth = draw_display([32, 32], 1, 3);
