@@ -26,6 +26,7 @@ use tensorholo::refine::{
 };
 use tensorholo::scene::procedural;
 use tensorholo::slm::model::DisplayModel;
+use tensorholo::slm::{LutRepresentation, PhaseCurve, TiledCurves};
 use tensorholo::synthesis::SceneLayer;
 
 use crate::args::parse_size;
@@ -194,7 +195,7 @@ Examples:
   holo bench --skip-cnn --skip-pipeline --refine 10 --sizes 384x384 --threads 2
                                                the focal-stack refinement alone: target, iterations, gain
   holo bench --skip-cnn --skip-pipeline --refine 3 --sizes 384x384 --threads 2 \\
-      --display-model-parts ideal,source,response,crosstalk,zero-order,aberration,all
+      --display-model-parts ideal,source,response,per-pixel-response,crosstalk,zero-order,aberration,all
                                                its time per iteration through each part of a display model";
 
 /// A part of a display model for `holo bench --display-model-parts`.
@@ -206,20 +207,44 @@ enum ModelPart {
     Source,
     /// A non-linear phase response.
     Response,
+    /// A phase response per pixel (tiles of 16 pixels, as a calibration's).
+    PerPixelResponse,
     /// A 3×3 crosstalk kernel.
     Crosstalk,
     /// A zero order of 5 %.
     ZeroOrder,
     /// Focus and astigmatism.
     Aberration,
-    /// Every part above.
+    /// Every part above (the global response).
     All,
 }
 
 /// The display model of `part` for a `[h, w]` SLM, the same for the three colours (`None` for `ideal`): a
 /// Gaussian beam with a smooth phase, a response `2π·(1.02·x + 0.15·x(1 − x))`, 2–3 % crosstalk to each
-/// neighbour, a zero order of 5 %, focus 0.3 rad and astigmatism 0.1 rad.
+/// neighbour, a zero order of 5 %, focus 0.3 rad and astigmatism 0.1 rad; or per-pixel responses in tiles of 16
+/// pixels whose range runs from 2π to 1.04·2π and gamma from 0.95 to 1.05 across the panel.
 fn bench_model(part: ModelPart, h: usize, w: usize) -> Result<Option<Arc<DisplayModel>>> {
+    if part == ModelPart::PerPixelResponse {
+        let (rows, cols) = (h.div_ceil(16), w.div_ceil(16));
+        let curves = (0..rows * cols)
+            .map(|t| {
+                let (fy, fx) = (
+                    (t / cols) as f32 / rows.max(2) as f32,
+                    (t % cols) as f32 / cols.max(2) as f32,
+                );
+                PhaseCurve::gamma(std::f32::consts::TAU * (1.0 + 0.04 * fx), 0.95 + 0.1 * fy)
+            })
+            .collect::<tensorholo::Result<Vec<_>>>()?;
+        let tiled = LutRepresentation::Tiled(TiledCurves::new(h, w, 16.min(h), 16.min(w), curves)?);
+        let mut model = DisplayModel {
+            slm_size: [h, w],
+            ..Default::default()
+        };
+        for c in &mut model.colours {
+            c.response = Some(tiled.clone());
+        }
+        return Ok(Some(Arc::new(model)));
+    }
     let phases: Vec<f64> = (0..256)
         .map(|k| {
             let x = f64::from(k) / 256.0;
@@ -237,6 +262,7 @@ fn bench_model(part: ModelPart, h: usize, w: usize) -> Result<Option<Arc<Display
         ModelPart::Ideal => return Ok(None),
         ModelPart::Source => "source",
         ModelPart::Response => "response",
+        ModelPart::PerPixelResponse => unreachable!("made above"),
         ModelPart::Crosstalk => "crosstalk",
         ModelPart::ZeroOrder => "zero_order",
         ModelPart::Aberration => "aberration",

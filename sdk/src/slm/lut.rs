@@ -393,6 +393,7 @@ impl TiledCurves {
 
     /// The phase code `code` displays under row weights `wy` and column weights `wx` (one value of
     /// [`TiledCurves::blend`]).
+    #[inline]
     fn blend_at(&self, wy: (u32, u32, f32), wx: (u32, u32, f32), code: u8) -> f32 {
         let cols = self.grid().1;
         let at =
@@ -402,12 +403,25 @@ impl TiledCurves {
         top * (1.0 - wy.2) + bottom * wy.2
     }
 
+    /// The bilinear weights of every row and every column (`(tile a, tile b, weight of b)`), for
+    /// [`TiledCurves::phase_and_slope`].
+    pub(crate) fn row_and_column_weights(&self) -> (Vec<(u32, u32, f32)>, Vec<(u32, u32, f32)>) {
+        (
+            Self::axis_weights(self.height, self.tile_height),
+            Self::axis_weights(self.width, self.tile_width),
+        )
+    }
+
     /// The phase in radians the drive `v` (a code as a number, linear between codes, clamped to the table) shows
-    /// at pixel `(y, x)` (bilinear between tile centres, as [`TiledCurves::pixel_curve`]), and its slope per
-    /// code. `(y, x)` must lie on the SLM.
-    pub(crate) fn phase_and_slope(&self, y: usize, x: usize, v: f32) -> (f32, f32) {
-        let wy = Self::axis_weight(y, self.height, self.tile_height);
-        let wx = Self::axis_weight(x, self.width, self.tile_width);
+    /// at the pixel of row weights `wy` and column weights `wx` ([`TiledCurves::row_and_column_weights`]; the
+    /// bilinear blend of [`TiledCurves::pixel_curve`]), and its slope per code.
+    #[inline]
+    pub(crate) fn phase_and_slope(
+        &self,
+        wy: (u32, u32, f32),
+        wx: (u32, u32, f32),
+        v: f32,
+    ) -> (f32, f32) {
         interpolate_codes(v, |k| self.blend_at(wy, wx, k))
     }
 
@@ -453,6 +467,7 @@ impl TiledCurves {
 
 /// A response at the drive `v` (a code as a number), linear between the codes `phase_of(k)`, `k` clamped to
 /// 0…255, and its slope per code.
+#[inline]
 pub(crate) fn interpolate_codes(v: f32, phase_of: impl Fn(u8) -> f32) -> (f32, f32) {
     let i = (v.floor() as isize).clamp(0, CODES as isize - 2) as u8;
     let (a, b) = (phase_of(i), phase_of(i + 1));

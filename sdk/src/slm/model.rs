@@ -10,8 +10,9 @@
 //! ```
 //!
 //! with `K` the crosstalk kernel (a small odd-size convolution of the drive, edges clamped: the fringing field
-//! between neighbouring pixels), `R` the phase response (a 256-entry curve of the existing look-up tables,
-//! `slm::PhaseCurve`, interpolated linearly between codes; `2π·v/256` without one), `z` the complex
+//! between neighbouring pixels), `R` the phase response (the existing look-up tables: one 256-entry curve,
+//! `slm::PhaseCurve`, or per-pixel tiled curves, `slm::TiledCurves`; linear between codes; `2π·v/256`
+//! without one), `z` the complex
 //! zero-order fraction (`|z| < 1`) and `S = exp(P_a + i·P_φ)` the source, `P_a` and `P_φ` polynomials in the
 //! SLM's normalised coordinates (a Gaussian beam is a quadratic `P_a`). A camera focused `distance_m` from the
 //! SLM sees `g·|F⁻¹{M·E·H(distance_m)·F{u}}|²`, the refinement's display simulation (`refine::model`): `M` the
@@ -43,9 +44,10 @@ pub const MAX_KERNEL_SIDE: usize = 15;
 
 /// The source field over the SLM, `S = exp(P_a + i·P_φ)`, each polynomial's terms
 /// `[x, y, x², y², x·y]` in the SLM's normalised coordinates (`x = (2j + 1)/W − 1`, `y = (2i + 1)/H − 1`,
-/// `[-1, 1]` across the panel; `i` the row). The constant of `P_a` is the capture set's gain and that of `P_φ`
-/// invisible, so neither is stored. A Gaussian beam of waist `w` (normalised) centred at `(x₀, y₀)` has
-/// `log_amplitude = [2x₀/w², 2y₀/w², −1/w², −1/w², 0]`.
+/// `[-1, 1]` across the panel; `i` the row). Neither constant is stored: that of `P_a` is the colour's power,
+/// which the refinement's least-squares scale per colour absorbs (the fit reports it,
+/// `model_fit::FitReport::power`), and that of `P_φ` is invisible. A Gaussian beam of waist `w` (normalised)
+/// centred at `(x₀, y₀)` has `log_amplitude = [2x₀/w², 2y₀/w², −1/w², −1/w², 0]`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SourceField {
@@ -513,8 +515,12 @@ pub(crate) struct ColourRuntime {
 enum Response {
     /// Phase per code, the whole panel.
     Table([f32; 256]),
-    /// Per pixel, tiled.
-    Tiled(TiledCurves),
+    /// Per pixel, tiled, with each row's and column's bilinear weights.
+    Tiled {
+        curves: TiledCurves,
+        rows: Vec<(u32, u32, f32)>,
+        columns: Vec<(u32, u32, f32)>,
+    },
 }
 
 /// The linear response's slope, radians per code.
@@ -553,7 +559,14 @@ impl ColourRuntime {
             response: part.response.as_ref().and_then(|r| match r {
                 LutRepresentation::Linear => None,
                 LutRepresentation::Global(c) => Some(Response::Table(*c.phases())),
-                LutRepresentation::Tiled(t) => Some(Response::Tiled(t.clone())),
+                LutRepresentation::Tiled(t) => {
+                    let (rows, columns) = t.row_and_column_weights();
+                    Some(Response::Tiled {
+                        curves: t.clone(),
+                        rows,
+                        columns,
+                    })
+                }
             }),
             zero: part
                 .zero_order
@@ -600,11 +613,16 @@ impl ColourRuntime {
     }
 
     /// The response at pixel `p` (row-major) to drive `v` (codes as numbers) and its slope.
+    #[inline]
     pub(crate) fn respond(&self, p: usize, v: f32) -> (f32, f32) {
         match &self.response {
             None => (v * LINEAR_SLOPE, LINEAR_SLOPE),
             Some(Response::Table(t)) => interpolate_codes(v, |k| t[usize::from(k)]),
-            Some(Response::Tiled(t)) => t.phase_and_slope(p / self.width, p % self.width, v),
+            Some(Response::Tiled {
+                curves,
+                rows,
+                columns,
+            }) => curves.phase_and_slope(rows[p / self.width], columns[p % self.width], v),
         }
     }
 

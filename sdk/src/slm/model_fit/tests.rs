@@ -224,8 +224,8 @@ fn too_few_captures_name_the_parts_they_do_not_determine() {
 /// The measurement: a real frame (TUM) seen through a simulated display with hidden parameters drawn
 /// from ranges; 10 iterations through the model fitted from 8 patterns × 3 distances of 1 %-noise captures
 /// against 10 through the ideal display, scored as the hidden display shows their codes at the held-out
-/// planes. And through a display whose only flaw is its beam, refinement through the fitted beam never
-/// scores below the unrefined codes.
+/// planes. And through a display whose only flaw is its source (beam and wavefront), refinement through the
+/// fitted source never scores below the unrefined codes.
 #[test]
 fn refinement_through_the_fitted_model_beats_the_ideal_display_at_unseen_planes() {
     use crate::encoding::DoublePhaseMethod;
@@ -338,7 +338,7 @@ fn refinement_through_the_fitted_model_beats_the_ideal_display_at_unseen_planes(
         through - ideal >= 2.0,
         "fitted {through:.2} dB vs ideal {ideal:.2} dB"
     );
-    // A display whose only flaw is its beam, and the fitted beam alone.
+    // A display whose only flaw is its source, and the fitted source alone.
     let beam = |m: &DisplayModel| {
         let mut b = DisplayModel {
             slm_size: [h, w],
@@ -352,6 +352,6 @@ fn refinement_through_the_fitted_model_beats_the_ideal_display_at_unseen_planes(
     let (true_beam, fitted_beam) = (beam(&truth), beam(&fitted.model));
     let unrefined = score(&true_beam, &start);
     let refined = score(&true_beam, &refine(Some(&fitted_beam)));
-    eprintln!("a beam alone: unrefined {unrefined:.2} dB, refined through the fitted beam {refined:.2} dB");
+    eprintln!("a source alone: unrefined {unrefined:.2} dB, refined through the fitted source {refined:.2} dB");
     assert!(refined >= unrefined, "{refined:.2} < {unrefined:.2}");
 }
