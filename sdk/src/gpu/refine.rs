@@ -46,7 +46,7 @@ pub(crate) struct RefineParams {
     epsilon: f32,
     c1: f32,
     c2: f32,
-    _pad: u32,
+    width: u32,
 }
 
 /// `PlaneParams` of `refine.wgsl`.
@@ -90,6 +90,32 @@ pub(crate) struct GpuRefineModel<'a> {
     pub weights: [&'a [f32]; 3],
     /// The target amplitudes `[D, 3, H, W]`, flat.
     pub target: &'a [f32],
+    /// The display model the loss sees (`None`: the ideal SLM, `u = e^{iφ}`).
+    pub display: Option<&'a GpuDisplayModel>,
+}
+
+/// A display model (`crate::slm::model`) as the GPU refinement's `model_` kernels read it: per colour the
+/// source, a response table, a crosstalk kernel and the zero order (ideal parts as their identities).
+pub(crate) struct GpuDisplayModel {
+    /// `S`, `[3, H, W]` flat.
+    pub source: Vec<Complex32>,
+    /// Per colour the phase in radians each code shows, `[3, 256]` flat.
+    pub tables: Vec<f32>,
+    /// Per colour the kernel's `(rows, cols, weights row-major)`.
+    pub kernels: [(usize, usize, Vec<f32>); 3],
+    /// Per colour `z`.
+    pub zero: [Complex32; 3],
+}
+
+/// The display model's buffers and kernels on the GPU (the buffers kept alive for the bind groups).
+struct ModelOps {
+    phasor: Kernel,
+    gradient: Kernel,
+    adam: Kernel,
+    phasor_bind: wgpu::BindGroup,
+    gradient_bind: wgpu::BindGroup,
+    adam_bind: wgpu::BindGroup,
+    _buffers: Vec<wgpu::Buffer>,
 }
 
 /// One iteration's sums per colour, `(⟨|U|, T⟩, ‖U‖²)` over the loss planes (f32 on the GPU).
@@ -123,6 +149,8 @@ pub(crate) struct GpuRefiner {
     phasor_bind: wgpu::BindGroup,
     reduce_bind: wgpu::BindGroup,
     adam_bind: wgpu::BindGroup,
+    /// Through a display model: the kernels that stand for `phasor` and `adam`.
+    model: Option<ModelOps>,
     // Kept alive for the bind groups.
     _multipliers: Vec<GpuMultiplier>,
     _plan: GpuSpectralPlan,
@@ -205,7 +233,7 @@ impl GpuRefiner {
             epsilon: adam.epsilon,
             c1: 1.0,
             c2: 1.0,
-            _pad: 0,
+            width: w as u32,
         };
         let params = ctx.uniform("refine params", &base)?;
         let kernels = Kernels {
@@ -270,6 +298,18 @@ impl GpuRefiner {
                 (10, &square),
             ],
         );
+        let model_ops = model
+            .display
+            .map(|d| {
+                model_ops(
+                    ctx,
+                    d,
+                    n,
+                    &params,
+                    [&phase, &unit, &work, &acc, &sums, &mean, &square],
+                )
+            })
+            .transpose()?;
         ctx.take_error()?;
         Ok(Self {
             ctx: ctx.clone(),
@@ -294,6 +334,7 @@ impl GpuRefiner {
             phasor_bind,
             reduce_bind,
             adam_bind,
+            model: model_ops,
             _multipliers: multipliers,
             _plan: gpu_plan,
             adam,
@@ -404,7 +445,10 @@ impl GpuRefiner {
             });
             kernel.dispatch(&mut pass, bind, groups);
         };
-        dispatch(encoder, &self.kernels.phasor, &self.phasor_bind, elements);
+        match &self.model {
+            Some(m) => dispatch(encoder, &m.phasor, &m.phasor_bind, elements),
+            None => dispatch(encoder, &self.kernels.phasor, &self.phasor_bind, elements),
+        }
         self.spectrum.record(encoder);
         if step {
             encoder.clear_buffer(&self.adjoint_sum, 0, None);
@@ -425,9 +469,99 @@ impl GpuRefiner {
         if step {
             self.adjoint_op.record(encoder);
             self.weight_op.record(encoder);
-            dispatch(encoder, &self.kernels.adam, &self.adam_bind, elements);
+            match &self.model {
+                Some(m) => {
+                    dispatch(encoder, &m.gradient, &m.gradient_bind, elements);
+                    dispatch(encoder, &m.adam, &m.adam_bind, elements);
+                }
+                None => dispatch(encoder, &self.kernels.adam, &self.adam_bind, elements),
+            }
         }
     }
+}
+
+/// Uploads `display` (`n` pixels per colour) and binds the `model_` kernels of `refine.wgsl` to it and to the
+/// refinement's `params` and `[phase, unit, work, acc, sums, mean, square]`.
+///
+/// Errors: [`HoloError::ShapeMismatch`] for a source or tables of the wrong length; [`HoloError::Gpu`].
+fn model_ops(
+    ctx: &GpuContext,
+    display: &GpuDisplayModel,
+    n: usize,
+    params: &wgpu::Buffer,
+    [phase, unit, work, acc, sums, mean, square]: [&wgpu::Buffer; 7],
+) -> Result<ModelOps> {
+    if display.source.len() != 3 * n || display.tables.len() != 3 * 256 {
+        return Err(HoloError::ShapeMismatch {
+            what: "GPU display model vs its frames".into(),
+            expected: vec![3 * n, 3 * 256],
+            got: vec![display.source.len(), display.tables.len()],
+        });
+    }
+    let source: Vec<[f32; 2]> = display.source.iter().map(|v| [v.re, v.im]).collect();
+    let mut weights = Vec::new();
+    let mut info = Vec::with_capacity(24);
+    for ((rows, cols, k), z) in display.kernels.iter().zip(&display.zero) {
+        info.extend([*rows as f32, *cols as f32, weights.len() as f32, 0.0]);
+        info.extend([z.re, z.im, 0.0, 0.0]);
+        weights.extend_from_slice(k);
+    }
+    let source = ctx.storage_with("refine model source", &source)?;
+    let tables = ctx.storage_with("refine model tables", &display.tables)?;
+    let weights = ctx.storage_with("refine model kernels", &weights)?;
+    let info = ctx.storage_with("refine model info", &info)?;
+    let crossed = ctx.storage("refine model crossed drive", (3 * n * 4) as u64)?;
+    let dphi = ctx.storage("refine model phase gradient", (3 * n * 4) as u64)?;
+    let phasor = ctx.kernel(&shaders::REFINE, "model_phasor")?;
+    let gradient = ctx.kernel(&shaders::REFINE, "model_gradient")?;
+    let adam = ctx.kernel(&shaders::REFINE, "model_adam")?;
+    let phasor_bind = ctx.bind_at(
+        &phasor,
+        &[
+            (0, params),
+            (2, phase),
+            (3, unit),
+            (11, &source),
+            (12, &tables),
+            (13, &weights),
+            (14, &crossed),
+            (16, &info),
+        ],
+    );
+    let gradient_bind = ctx.bind_at(
+        &gradient,
+        &[
+            (0, params),
+            (4, work),
+            (5, acc),
+            (8, sums),
+            (11, &source),
+            (12, &tables),
+            (14, &crossed),
+            (15, &dphi),
+        ],
+    );
+    let adam_bind = ctx.bind_at(
+        &adam,
+        &[
+            (0, params),
+            (2, phase),
+            (9, mean),
+            (10, square),
+            (13, &weights),
+            (15, &dphi),
+            (16, &info),
+        ],
+    );
+    Ok(ModelOps {
+        phasor,
+        gradient,
+        adam,
+        phasor_bind,
+        gradient_bind,
+        adam_bind,
+        _buffers: vec![source, tables, weights, info, crossed, dphi],
+    })
 }
 
 #[cfg(test)]
@@ -449,7 +583,8 @@ pub(super) fn uniform_layouts() -> Vec<super::shader_tests::UniformLayout> {
                 beta2,
                 epsilon,
                 c1,
-                c2
+                c2,
+                width
             }
         ),
         uniform_layout!(&REFINE, "PlaneParams", PlaneParams { plane }),

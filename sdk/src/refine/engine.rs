@@ -27,6 +27,14 @@ use crate::slm::{DisplayCalibration, PhaseLut};
 /// `2π·255/256`.
 const MAX_DRIVE_RAD: f32 = 255.0 * LINEAR_SLOPE;
 
+/// Through a display model the phase is the drive: `phase` projected into the codes' range,
+/// `[0, 2π·255/256]` (wrapped first), before the iterations start (the CPU's and the GPU's alike).
+pub(super) fn project_drive(phase: &mut [f32]) {
+    for p in phase.iter_mut() {
+        *p = p.rem_euclid(TAU).min(MAX_DRIVE_RAD);
+    }
+}
+
 /// A refinement planned for one frame size, display, SLM offset and target: the loss planes' multipliers,
 /// the FFT plan, the per-colour buffers and the optimiser's state are made here once.
 #[derive(Debug)]
@@ -590,10 +598,7 @@ impl Iterations for Refiner {
         sums: &mut dyn FnMut(usize, [(f64, f64); 3]) -> ControlFlow<()>,
     ) -> Result<()> {
         if self.display.iter().any(Option::is_some) {
-            // Through a display model the phase is the drive: projected into the codes' range.
-            for p in phase.iter_mut() {
-                *p = p.rem_euclid(TAU).min(MAX_DRIVE_RAD);
-            }
+            project_drive(phase);
         }
         let n = self.plan.height() * self.plan.width();
         for s in &mut self.state {

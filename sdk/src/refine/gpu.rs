@@ -3,20 +3,26 @@
 //! [`super::iterations::drive`] (start check, records, cancellation, wrap). What differs: the sums are f32 on
 //! the GPU (f64 on the CPU), the progress callback hears of the iterations in batches (a cancellation takes
 //! effect within `crate::gpu::refine::READ_BACK_EVERY` iterations), and the quantised evaluation knows the
-//! linear look-up table only (a calibrated display refines on the CPU).
+//! linear look-up table only (a calibrated display refines on the CPU). Through a display model
+//! (`Refiner::with_display_model`) the GPU runs the model's forward pass and its gradient (`refine.wgsl`'s
+//! `model_` kernels: crosstalk and its adjoint, one response table per colour, source, zero order; the
+//! aberration is in the loss planes' multipliers); a model with a per-pixel response refines on the CPU.
 
 use std::ops::ControlFlow;
 
 use ndarray::ArrayViewMut3;
 
 use super::device::{DeviceIterations, Prepared, RefineDevice};
+use super::engine::project_drive;
 use super::engine::Refiner;
 use super::iterations::{drive, Iterations};
 use super::options::{IterationRecord, RefineReport};
 use crate::error::{invalid, HoloError, Result};
-use crate::gpu::refine::{GpuAdam, GpuRefineModel, GpuRefiner};
+use crate::gpu::refine::{GpuAdam, GpuDisplayModel, GpuRefineModel, GpuRefiner};
 use crate::gpu::GpuContext;
+use crate::slm::model::{ColourDisplay, ColourRuntime};
 use crate::slm::LutRepresentation;
+use num_complex::Complex32;
 
 /// A [`Refiner`]'s refinement uploaded to a GPU: its loss planes' multipliers, weights and target as they
 /// are when [`Refiner::on_gpu`] makes it (a later target: `GpuRefinement::set_target`). Memory on the
@@ -24,6 +30,8 @@ use crate::slm::LutRepresentation;
 /// real `[3, H, W]` planes (384², 7 planes: 71 MB; 1080p: 1.0 GB).
 pub struct GpuRefinement {
     inner: GpuRefiner,
+    /// Through a display model: the phase is the drive (projected before the iterations).
+    through_model: bool,
     iterations: usize,
     energy: [f64; 3],
     count: usize,
@@ -43,7 +51,8 @@ impl Refiner {
     /// This refinement on the GPU of `ctx` (see [`GpuRefinement`]).
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`calibration`) for a quantised refinement through a
-    /// calibrated look-up table (the GPU knows the linear one); [`HoloError::Gpu`] for memory beyond the
+    /// calibrated look-up table (the GPU knows the linear one) or through a display model with a per-pixel
+    /// response (the GPU's kernels know one table per colour); [`HoloError::Gpu`] for memory beyond the
     /// device's limits or a kernel that does not compile.
     pub fn on_gpu(&self, ctx: &GpuContext) -> Result<GpuRefinement> {
         if self.options.quantised
@@ -58,16 +67,8 @@ impl Refiner {
                  on the CPU",
             ));
         }
-        if self.display.iter().any(Option::is_some) {
-            log::info!(
-                "the refinement through a display model runs on the CPU (the GPU's has none)"
-            );
-            return Err(invalid(
-                "calibration",
-                "the GPU refinement has no display model; a refinement through one runs on the CPU",
-            ));
-        }
         let (h, w) = self.target.size();
+        let display = self.gpu_display_model(h * w)?;
         let (rows, cols) = (
             self.plan.computational_shape().1,
             self.plan.computational_shape().0,
@@ -83,6 +84,7 @@ impl Refiner {
             multipliers: &multipliers,
             weights: std::array::from_fn(|c| self.colours[c].weight.as_slice()),
             target: &target,
+            display: display.as_ref(),
         };
         let o = self.options;
         let inner = GpuRefiner::new(
@@ -98,11 +100,57 @@ impl Refiner {
         )?;
         Ok(GpuRefinement {
             inner,
+            through_model: display.is_some(),
             iterations: o.iterations,
             energy: self.target_energy,
             count: 3 * planes * h * w,
             size: (h, w),
         })
+    }
+}
+
+impl Refiner {
+    /// The display model's parts as the GPU's kernels read them (`n` pixels per colour), `None` for the ideal
+    /// SLM.
+    ///
+    /// Errors: [`HoloError::InvalidParameter`] (`calibration`: the refinement then runs on the CPU) for a
+    /// per-pixel response.
+    fn gpu_display_model(&self, n: usize) -> Result<Option<GpuDisplayModel>> {
+        if self.display.iter().all(Option::is_none) {
+            return Ok(None);
+        }
+        let (h, w) = self.target.size();
+        let ideal = ColourRuntime::new(&ColourDisplay::default(), h, w);
+        let mut model = GpuDisplayModel {
+            source: Vec::with_capacity(3 * n),
+            tables: Vec::with_capacity(3 * 256),
+            kernels: Default::default(),
+            zero: [Complex32::new(0.0, 0.0); 3],
+        };
+        for c in 0..3 {
+            let parts = self.display[c]
+                .as_ref()
+                .unwrap_or(&ideal)
+                .uniform_parts()
+                .ok_or_else(|| {
+                    log::info!("a display model with a per-pixel response refines on the CPU");
+                    invalid(
+                        "calibration",
+                        "the GPU refinement knows one phase response per colour; a display model with a \
+                         per-pixel response refines on the CPU",
+                    )
+                })?;
+            match parts.source {
+                Some(s) => model.source.extend_from_slice(s),
+                None => model
+                    .source
+                    .extend(std::iter::repeat_n(Complex32::new(1.0, 0.0), n)),
+            }
+            model.tables.extend_from_slice(&parts.table);
+            model.kernels[c] = parts.kernel;
+            model.zero[c] = parts.zero;
+        }
+        Ok(Some(model))
     }
 }
 
@@ -148,6 +196,9 @@ impl Iterations for GpuRefinement {
         phase: &mut [f32],
         sums: &mut dyn FnMut(usize, [(f64, f64); 3]) -> ControlFlow<()>,
     ) -> Result<()> {
+        if self.through_model {
+            project_drive(phase);
+        }
         self.inner.refine(phase, self.iterations, sums)
     }
 }

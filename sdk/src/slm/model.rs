@@ -523,6 +523,19 @@ enum Response {
     },
 }
 
+/// A colour's parts as one table and one kernel ([`ColourRuntime::uniform_parts`]).
+#[cfg_attr(not(feature = "gpu"), allow(dead_code))]
+pub(crate) struct UniformParts<'a> {
+    /// `S` per pixel `[H, W]`, `None`: a plane wave.
+    pub(crate) source: Option<&'a [Complex32]>,
+    /// The phase in radians each code shows.
+    pub(crate) table: [f32; 256],
+    /// `(rows, cols, weights row-major)`.
+    pub(crate) kernel: (usize, usize, Vec<f32>),
+    /// The zero order `z`.
+    pub(crate) zero: Complex32,
+}
+
 /// The linear response's slope, radians per code.
 pub(crate) const LINEAR_SLOPE: f32 = std::f32::consts::TAU / 256.0;
 
@@ -610,6 +623,24 @@ impl ColourRuntime {
                 }
             }
         }
+    }
+
+    /// This colour's parts as one table and one kernel, for the GPU refinement's kernels: `S` per pixel
+    /// (`None`: a plane wave), the response per code (radians; the linear table `2π·k/256` without one), the
+    /// kernel's `(rows, cols, weights)` (`(1, 1, [1])` without one) and `z`. `None` for a per-pixel response.
+    #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
+    pub(crate) fn uniform_parts(&self) -> Option<UniformParts<'_>> {
+        let table = match &self.response {
+            None => std::array::from_fn(|k| k as f32 * LINEAR_SLOPE),
+            Some(Response::Table(t)) => *t,
+            Some(Response::Tiled { .. }) => return None,
+        };
+        Some(UniformParts {
+            source: self.source.as_deref(),
+            table,
+            kernel: self.kernel.clone().unwrap_or_else(|| (1, 1, vec![1.0])),
+            zero: self.zero,
+        })
     }
 
     /// The response at pixel `p` (row-major) to drive `v` (codes as numbers) and its slope.

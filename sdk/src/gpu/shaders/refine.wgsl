@@ -9,6 +9,14 @@
 //                least-squares scale k = A/B (0 where B = 0) into sums[c] = (A, B, k, 0)
 //   `adam`       g = 2k²·work − 2k·acc (work: F⁻¹{W·F{u}}, acc: F⁻¹{Σ_d conj(m_d)·F{V_d}}), ∂L/∂φ =
 //                Im(g·conj(u)), and Adam's update of φ
+// Through a display model (slm::model, docs/REFINE.md "Through a display model") the phase is the SLM's drive
+// in radians of the linear table (codes v = φ·256/2π, clamped to 0…255, rounded where quantised) and three
+// kernels stand for `phasor` and `adam`:
+//   `model_phasor`   c' = K ∗ v (the colour's kernel, edges clamped) into `crossed`, u = S·(e^{iR(c')} + z)
+//   `model_gradient` g as `adam`'s, dphi = Im(g·conj(S·e^{iR(c')}))·R'(c') (R linear between codes)
+//   `model_adam`     ∂L/∂v = Kᵀ ∗ dphi (the clamped convolution's adjoint, gathered: every pixel whose
+//                    clamped tap lands here), ∂L/∂φ = ∂L/∂v ÷ (2π/256), Adam's update, then the projected
+//                    step: φ clamped to [0, 2π·255/256]
 //
 // Bindings (group 0; each entry point uses some):
 //   0: uniform Params
@@ -22,8 +30,15 @@
 //   8: storage sums:    array<vec4<f32>>,  [C]
 //   9: storage mean:    array<f32>,        [C, H, W] (Adam's first moment)
 //  10: storage square:  array<f32>,        [C, H, W] (Adam's second moment)
-// Grids: `phasor`, `adam` over C·H·W elements (1D, 256 per workgroup, spread over x/y); `plane`
-// over H·W elements in x/y (the same spread) and the channel in z; `reduce` one workgroup per channel.
+//  11: storage source:  array<vec2<f32>>,  [C, H, W] (the display model's S)
+//  12: storage table:   array<f32>,        [C, 256] (the response R per code, radians)
+//  13: storage weights: array<f32>,        each colour's kernel, row-major, at its offset
+//  14: storage crossed: array<f32>,        [C, H, W] (K ∗ v)
+//  15: storage dphi:    array<f32>,        [C, H, W]
+//  16: storage info:    array<vec4<f32>>,  [C, 2]: (kernel rows, cols, offset, 0), (Re z, Im z, 0, 0)
+// Grids: `phasor`, `adam` and the three `model_` kernels over C·H·W elements (1D, 256 per workgroup, spread
+// over x/y); `plane` over H·W elements in x/y (the same spread) and the channel in z; `reduce` one workgroup
+// per channel.
 
 struct Params {
     hw: u32,
@@ -37,6 +52,7 @@ struct Params {
     epsilon: f32,
     c1: f32,
     c2: f32,
+    width: u32,
 }
 
 struct PlaneParams {
@@ -56,6 +72,12 @@ const TAU: f32 = 6.283185307179586;
 @group(0) @binding(8) var<storage, read_write> sums: array<vec4<f32>>;
 @group(0) @binding(9) var<storage, read_write> mean: array<f32>;
 @group(0) @binding(10) var<storage, read_write> square: array<f32>;
+@group(0) @binding(11) var<storage, read> source: array<vec2<f32>>;
+@group(0) @binding(12) var<storage, read> table: array<f32>;
+@group(0) @binding(13) var<storage, read> weights: array<f32>;
+@group(0) @binding(14) var<storage, read_write> crossed: array<f32>;
+@group(0) @binding(15) var<storage, read_write> dphi: array<f32>;
+@group(0) @binding(16) var<storage, read> info: array<vec4<f32>>;
 
 fn index_of(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
     return gid.x + gid.y * groups.x * 256u;
@@ -156,4 +178,128 @@ fn adam(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     mean[i] = m;
     square[i] = v;
     phase[i] = phase[i] - params.step * (m / params.c1) / (sqrt(v / params.c2) + params.epsilon);
+}
+
+// Radians of the linear table per code, and the largest drive (code 255).
+const SLOPE: f32 = 0.02454369260617026;
+const MAX_DRIVE: f32 = 6.258641614573416;
+
+fn cmul(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
+    return vec2<f32>(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x);
+}
+
+// The drive (codes as numbers) of element i.
+fn drive_of(i: u32) -> f32 {
+    let v = clamp(phase[i] / SLOPE, 0.0, 255.0);
+    if (params.quantised != 0u) {
+        return round(v);
+    }
+    return v;
+}
+
+// Colour c's response to drive v and its slope per code (linear between codes, clamped to the table).
+fn respond(c: u32, v: f32) -> vec2<f32> {
+    let k = u32(clamp(floor(v), 0.0, 254.0));
+    let a = table[c * 256u + k];
+    let b = table[c * 256u + k + 1u];
+    return vec2<f32>(a + (v - f32(k)) * (b - a), b - a);
+}
+
+// Colour c's kernel: (rows, cols, offset into `weights`).
+fn kernel_of(c: u32) -> vec3<u32> {
+    let k = info[2u * c];
+    return vec3<u32>(u32(k.x), u32(k.y), u32(k.z));
+}
+
+@compute @workgroup_size(256)
+fn model_phasor(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = index_of(gid, groups);
+    if (i >= params.channels * params.hw) {
+        return;
+    }
+    let c = i / params.hw;
+    let p = i - c * params.hw;
+    let w = params.width;
+    let h = params.hw / w;
+    let y = i32(p / w);
+    let x = i32(p % w);
+    let k = kernel_of(c);
+    let hr = i32(k.x / 2u);
+    let hc = i32(k.y / 2u);
+    var sum = 0.0;
+    for (var a = 0u; a < k.x; a = a + 1u) {
+        let yy = u32(clamp(y + i32(a) - hr, 0, i32(h) - 1));
+        for (var b = 0u; b < k.y; b = b + 1u) {
+            let xx = u32(clamp(x + i32(b) - hc, 0, i32(w) - 1));
+            sum = sum + weights[k.z + a * k.y + b] * drive_of(c * params.hw + yy * w + xx);
+        }
+    }
+    crossed[i] = sum;
+    let r = respond(c, sum).x;
+    let z = info[2u * c + 1u].xy;
+    unit[i] = cmul(source[i], vec2<f32>(cos(r), sin(r)) + z);
+}
+
+@compute @workgroup_size(256)
+fn model_gradient(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = index_of(gid, groups);
+    if (i >= params.channels * params.hw) {
+        return;
+    }
+    let c = i / params.hw;
+    let k = sums[c].z;
+    let g = work[i] * (2.0 * k * k) - acc[i] * (2.0 * k);
+    let r = respond(c, crossed[i]);
+    let m = cmul(source[i], vec2<f32>(cos(r.x), sin(r.x)));
+    dphi[i] = (g.y * m.x - g.x * m.y) * r.y;
+}
+
+// The indices j in [0, n) with clamp(j + d, 0, n − 1) = q, as an inclusive range (empty when x > y).
+fn preimage(q: i32, d: i32, n: i32) -> vec2<i32> {
+    var lo = q - d;
+    var hi = q - d;
+    if (q == 0) {
+        lo = 0;
+    }
+    if (q == n - 1) {
+        hi = n - 1;
+    }
+    return vec2<i32>(max(lo, 0), min(hi, n - 1));
+}
+
+@compute @workgroup_size(256)
+fn model_adam(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = index_of(gid, groups);
+    if (i >= params.channels * params.hw) {
+        return;
+    }
+    let c = i / params.hw;
+    let p = i - c * params.hw;
+    let w = params.width;
+    let h = params.hw / w;
+    let y = i32(p / w);
+    let x = i32(p % w);
+    let k = kernel_of(c);
+    let hr = i32(k.x / 2u);
+    let hc = i32(k.y / 2u);
+    var sum = 0.0;
+    for (var a = 0u; a < k.x; a = a + 1u) {
+        let rows = preimage(y, i32(a) - hr, i32(h));
+        for (var b = 0u; b < k.y; b = b + 1u) {
+            let cols = preimage(x, i32(b) - hc, i32(w));
+            let kv = weights[k.z + a * k.y + b];
+            for (var yy = rows.x; yy <= rows.y; yy = yy + 1) {
+                for (var xx = cols.x; xx <= cols.y; xx = xx + 1) {
+                    sum = sum + kv * dphi[c * params.hw + u32(yy) * w + u32(xx)];
+                }
+            }
+        }
+    }
+    let grad = sum / SLOPE;
+    let m = params.beta1 * mean[i] + (1.0 - params.beta1) * grad;
+    let v = params.beta2 * square[i] + (1.0 - params.beta2) * grad * grad;
+    mean[i] = m;
+    square[i] = v;
+    let next = phase[i] - params.step * (m / params.c1) / (sqrt(v / params.c2) + params.epsilon);
+    phase[i] = clamp(next, 0.0, MAX_DRIVE);
 }
