@@ -95,16 +95,29 @@ pub(crate) struct GpuRefineModel<'a> {
 }
 
 /// A display model (`crate::slm::model`) as the GPU refinement's `model_` kernels read it: per colour the
-/// source, a response table, a crosstalk kernel and the zero order (ideal parts as their identities).
+/// source, the response in the tiled form, a crosstalk kernel and the zero order (ideal parts as their
+/// identities).
 pub(crate) struct GpuDisplayModel {
     /// `S`, `[3, H, W]` flat.
     pub source: Vec<Complex32>,
-    /// Per colour the phase in radians each code shows, `[3, 256]` flat.
-    pub tables: Vec<f32>,
-    /// Per colour the kernel's `(rows, cols, weights row-major)`.
-    pub kernels: [(usize, usize, Vec<f32>); 3],
-    /// Per colour `z`.
-    pub zero: [Complex32; 3],
+    /// R, G, B.
+    pub colours: [GpuDisplayColour; 3],
+}
+
+/// One colour of a [`GpuDisplayModel`].
+pub(crate) struct GpuDisplayColour {
+    /// The response's tile curves `[tiles, 256]` flat, radians per code (one tile: a global table).
+    pub curves: Vec<f32>,
+    /// Tiles per row of the tile grid.
+    pub grid_cols: usize,
+    /// Each row's `[H]` bilinear tile weights `(tile a, tile b, weight of b)`.
+    pub rows: Vec<(u32, u32, f32)>,
+    /// Each column's `[W]`.
+    pub columns: Vec<(u32, u32, f32)>,
+    /// The kernel's `(rows, cols, weights row-major)`.
+    pub kernel: (usize, usize, Vec<f32>),
+    /// `z`.
+    pub zero: Complex32,
 }
 
 /// The display model's buffers and kernels on the GPU (the buffers kept alive for the bind groups).
@@ -304,7 +317,7 @@ impl GpuRefiner {
                 model_ops(
                     ctx,
                     d,
-                    n,
+                    (n, w),
                     &params,
                     [&phase, &unit, &work, &acc, &sums, &mean, &square],
                 )
@@ -480,37 +493,59 @@ impl GpuRefiner {
     }
 }
 
-/// Uploads `display` (`n` pixels per colour) and binds the `model_` kernels of `refine.wgsl` to it and to the
+/// Uploads `display` (`n` pixels per colour in rows of `width`) and binds the `model_` kernels of `refine.wgsl` to it and to the
 /// refinement's `params` and `[phase, unit, work, acc, sums, mean, square]`.
 ///
-/// Errors: [`HoloError::ShapeMismatch`] for a source or tables of the wrong length; [`HoloError::Gpu`].
+/// Errors: [`HoloError::ShapeMismatch`] for a source, tile weights, curves or a kernel of the wrong length;
+/// [`HoloError::Gpu`].
 fn model_ops(
     ctx: &GpuContext,
     display: &GpuDisplayModel,
-    n: usize,
+    (n, width): (usize, usize),
     params: &wgpu::Buffer,
     [phase, unit, work, acc, sums, mean, square]: [&wgpu::Buffer; 7],
 ) -> Result<ModelOps> {
-    if display.source.len() != 3 * n || display.tables.len() != 3 * 256 {
+    let (h, w) = (n / width.max(1), width);
+    let bad = display.source.len() != 3 * n
+        || display.colours.iter().any(|c| {
+            c.rows.len() != h
+                || c.columns.len() != w
+                || c.curves.is_empty()
+                || c.curves.len() % 256 != 0
+                || c.kernel.2.len() != c.kernel.0 * c.kernel.1
+        });
+    if bad {
         return Err(HoloError::ShapeMismatch {
             what: "GPU display model vs its frames".into(),
-            expected: vec![3 * n, 3 * 256],
-            got: vec![display.source.len(), display.tables.len()],
+            expected: vec![3, h, w],
+            got: vec![display.source.len()],
         });
     }
     let source: Vec<[f32; 2]> = display.source.iter().map(|v| [v.re, v.im]).collect();
-    let mut weights = Vec::new();
-    let mut info = Vec::with_capacity(24);
-    for ((rows, cols, k), z) in display.kernels.iter().zip(&display.zero) {
-        info.extend([*rows as f32, *cols as f32, weights.len() as f32, 0.0]);
-        info.extend([z.re, z.im, 0.0, 0.0]);
+    let (mut weights, mut tables, mut axes) = (Vec::new(), Vec::new(), Vec::new());
+    let mut info: Vec<u32> = Vec::with_capacity(36);
+    for c in &display.colours {
+        let (rows, cols, k) = &c.kernel;
+        info.extend([*rows as u32, *cols as u32, weights.len() as u32, 0]);
+        info.extend([c.zero.re.to_bits(), c.zero.im.to_bits(), 0, 0]);
+        info.extend([
+            tables.len() as u32,
+            c.grid_cols as u32,
+            axes.len() as u32,
+            (axes.len() + h) as u32,
+        ]);
         weights.extend_from_slice(k);
+        tables.extend_from_slice(&c.curves);
+        for &(a, b, t) in c.rows.iter().chain(&c.columns) {
+            axes.push([a as f32, b as f32, t, 0.0]);
+        }
     }
     let source = ctx.storage_with("refine model source", &source)?;
-    let tables = ctx.storage_with("refine model tables", &display.tables)?;
+    let tables = ctx.storage_with("refine model response tiles", &tables)?;
     let weights = ctx.storage_with("refine model kernels", &weights)?;
     let info = ctx.storage_with("refine model info", &info)?;
-    let crossed = ctx.storage("refine model crossed drive", (3 * n * 4) as u64)?;
+    let axes = ctx.storage_with("refine model tile weights", &axes)?;
+    let shown = ctx.storage("refine model shown phase", (3 * n * 8) as u64)?;
     let dphi = ctx.storage("refine model phase gradient", (3 * n * 4) as u64)?;
     let phasor = ctx.kernel(&shaders::REFINE, "model_phasor")?;
     let gradient = ctx.kernel(&shaders::REFINE, "model_gradient")?;
@@ -524,8 +559,9 @@ fn model_ops(
             (11, &source),
             (12, &tables),
             (13, &weights),
-            (14, &crossed),
+            (14, &shown),
             (16, &info),
+            (17, &axes),
         ],
     );
     let gradient_bind = ctx.bind_at(
@@ -536,8 +572,7 @@ fn model_ops(
             (5, acc),
             (8, sums),
             (11, &source),
-            (12, &tables),
-            (14, &crossed),
+            (14, &shown),
             (15, &dphi),
         ],
     );
@@ -560,7 +595,7 @@ fn model_ops(
         phasor_bind,
         gradient_bind,
         adam_bind,
-        _buffers: vec![source, tables, weights, info, crossed, dphi],
+        _buffers: vec![source, tables, weights, info, axes, shown, dphi],
     })
 }
 

@@ -5,8 +5,8 @@
 //! effect within `crate::gpu::refine::READ_BACK_EVERY` iterations), and the quantised evaluation knows the
 //! linear look-up table only (a calibrated display refines on the CPU). Through a display model
 //! (`Refiner::with_display_model`) the GPU runs the model's forward pass and its gradient (`refine.wgsl`'s
-//! `model_` kernels: crosstalk and its adjoint, one response table per colour, source, zero order; the
-//! aberration is in the loss planes' multipliers); a model with a per-pixel response refines on the CPU.
+//! `model_` kernels: crosstalk and its adjoint, the response global or per pixel, source, zero order; the
+//! aberration is in the loss planes' multipliers).
 
 use std::ops::ControlFlow;
 
@@ -18,7 +18,7 @@ use super::engine::Refiner;
 use super::iterations::{drive, Iterations};
 use super::options::{IterationRecord, RefineReport};
 use crate::error::{invalid, HoloError, Result};
-use crate::gpu::refine::{GpuAdam, GpuDisplayModel, GpuRefineModel, GpuRefiner};
+use crate::gpu::refine::{GpuAdam, GpuDisplayColour, GpuDisplayModel, GpuRefineModel, GpuRefiner};
 use crate::gpu::GpuContext;
 use crate::slm::model::{ColourDisplay, ColourRuntime};
 use crate::slm::LutRepresentation;
@@ -51,8 +51,7 @@ impl Refiner {
     /// This refinement on the GPU of `ctx` (see [`GpuRefinement`]).
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`calibration`) for a quantised refinement through a
-    /// calibrated look-up table (the GPU knows the linear one) or through a display model with a per-pixel
-    /// response (the GPU's kernels know one table per colour); [`HoloError::Gpu`] for memory beyond the
+    /// calibrated look-up table (the GPU knows the linear one); [`HoloError::Gpu`] for memory beyond the
     /// device's limits or a kernel that does not compile.
     pub fn on_gpu(&self, ctx: &GpuContext) -> Result<GpuRefinement> {
         if self.options.quantised
@@ -68,7 +67,7 @@ impl Refiner {
             ));
         }
         let (h, w) = self.target.size();
-        let display = self.gpu_display_model(h * w)?;
+        let display = self.gpu_display_model(h * w);
         let (rows, cols) = (
             self.plan.computational_shape().1,
             self.plan.computational_shape().0,
@@ -112,45 +111,29 @@ impl Refiner {
 impl Refiner {
     /// The display model's parts as the GPU's kernels read them (`n` pixels per colour), `None` for the ideal
     /// SLM.
-    ///
-    /// Errors: [`HoloError::InvalidParameter`] (`calibration`: the refinement then runs on the CPU) for a
-    /// per-pixel response.
-    fn gpu_display_model(&self, n: usize) -> Result<Option<GpuDisplayModel>> {
+    fn gpu_display_model(&self, n: usize) -> Option<GpuDisplayModel> {
         if self.display.iter().all(Option::is_none) {
-            return Ok(None);
+            return None;
         }
         let (h, w) = self.target.size();
         let ideal = ColourRuntime::new(&ColourDisplay::default(), h, w);
-        let mut model = GpuDisplayModel {
-            source: Vec::with_capacity(3 * n),
-            tables: Vec::with_capacity(3 * 256),
-            kernels: Default::default(),
-            zero: [Complex32::new(0.0, 0.0); 3],
-        };
-        for c in 0..3 {
-            let parts = self.display[c]
-                .as_ref()
-                .unwrap_or(&ideal)
-                .uniform_parts()
-                .ok_or_else(|| {
-                    log::info!("a display model with a per-pixel response refines on the CPU");
-                    invalid(
-                        "calibration",
-                        "the GPU refinement knows one phase response per colour; a display model with a \
-                         per-pixel response refines on the CPU",
-                    )
-                })?;
+        let mut source = Vec::with_capacity(3 * n);
+        let colours = std::array::from_fn(|c| {
+            let parts = self.display[c].as_ref().unwrap_or(&ideal).plain_parts();
             match parts.source {
-                Some(s) => model.source.extend_from_slice(s),
-                None => model
-                    .source
-                    .extend(std::iter::repeat_n(Complex32::new(1.0, 0.0), n)),
+                Some(s) => source.extend_from_slice(s),
+                None => source.extend(std::iter::repeat_n(Complex32::new(1.0, 0.0), n)),
             }
-            model.tables.extend_from_slice(&parts.table);
-            model.kernels[c] = parts.kernel;
-            model.zero[c] = parts.zero;
-        }
-        Ok(Some(model))
+            GpuDisplayColour {
+                curves: parts.curves,
+                grid_cols: parts.grid_cols,
+                rows: parts.rows,
+                columns: parts.columns,
+                kernel: parts.kernel,
+                zero: parts.zero,
+            }
+        });
+        Some(GpuDisplayModel { source, colours })
     }
 }
 

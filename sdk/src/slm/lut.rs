@@ -240,6 +240,10 @@ impl PhaseCurve {
     }
 }
 
+/// One pixel's bilinear weights along one axis of a [`TiledCurves`]: `(tile index a, tile index b, weight of
+/// b)`.
+pub(crate) type AxisWeight = (u32, u32, f32);
+
 /// Per-pixel phase responses in compact form: one [`PhaseCurve`] per tile of `tile_height × tile_width`
 /// pixels of an SLM of `height × width` pixels, tiles in row-major order `[rows, cols]`. A pixel's response is
 /// the bilinear interpolation of the curves at the four nearest tile centres (clamped at the borders).
@@ -338,12 +342,12 @@ impl TiledCurves {
     /// Bilinear weights along one axis: for each pixel, `(tile index a, tile index b, weight of b)`. Within the
     /// half tile beyond the outermost tile centres the two outermost tiles extrapolate linearly (weights
     /// outside `[0, 1]`), which follows a smooth response to the panel's edge better than clamping.
-    fn axis_weights(len: usize, tile: usize) -> Vec<(u32, u32, f32)> {
+    fn axis_weights(len: usize, tile: usize) -> Vec<AxisWeight> {
         (0..len).map(|i| Self::axis_weight(i, len, tile)).collect()
     }
 
     /// The weights of [`TiledCurves::axis_weights`] for pixel `i` alone.
-    fn axis_weight(i: usize, len: usize, tile: usize) -> (u32, u32, f32) {
+    fn axis_weight(i: usize, len: usize, tile: usize) -> AxisWeight {
         let n = len.div_ceil(tile);
         if n == 1 {
             return (0, 0, 0.0);
@@ -374,7 +378,7 @@ impl TiledCurves {
     }
 
     /// `out` (256 values) ← the bilinear blend of the four tile curves of row weights `wy`, column weights `wx`.
-    fn blend(&self, wy: (u32, u32, f32), wx: (u32, u32, f32), out: &mut [f32]) {
+    fn blend(&self, wy: AxisWeight, wx: AxisWeight, out: &mut [f32]) {
         let cols = self.grid().1;
         out.fill(0.0);
         let corners = [
@@ -394,7 +398,7 @@ impl TiledCurves {
     /// The phase code `code` displays under row weights `wy` and column weights `wx` (one value of
     /// [`TiledCurves::blend`]).
     #[inline]
-    fn blend_at(&self, wy: (u32, u32, f32), wx: (u32, u32, f32), code: u8) -> f32 {
+    fn blend_at(&self, wy: AxisWeight, wx: AxisWeight, code: u8) -> f32 {
         let cols = self.grid().1;
         let at =
             |ty: u32, tx: u32| self.curves[ty as usize * cols + tx as usize].phases[code as usize];
@@ -405,7 +409,7 @@ impl TiledCurves {
 
     /// The bilinear weights of every row and every column (`(tile a, tile b, weight of b)`), for
     /// [`TiledCurves::phase_and_slope`].
-    pub(crate) fn row_and_column_weights(&self) -> (Vec<(u32, u32, f32)>, Vec<(u32, u32, f32)>) {
+    pub(crate) fn row_and_column_weights(&self) -> (Vec<AxisWeight>, Vec<AxisWeight>) {
         (
             Self::axis_weights(self.height, self.tile_height),
             Self::axis_weights(self.width, self.tile_width),
@@ -416,12 +420,7 @@ impl TiledCurves {
     /// at the pixel of row weights `wy` and column weights `wx` ([`TiledCurves::row_and_column_weights`]; the
     /// bilinear blend of [`TiledCurves::pixel_curve`]), and its slope per code.
     #[inline]
-    pub(crate) fn phase_and_slope(
-        &self,
-        wy: (u32, u32, f32),
-        wx: (u32, u32, f32),
-        v: f32,
-    ) -> (f32, f32) {
+    pub(crate) fn phase_and_slope(&self, wy: AxisWeight, wx: AxisWeight, v: f32) -> (f32, f32) {
         interpolate_codes(v, |k| self.blend_at(wy, wx, k))
     }
 
@@ -505,8 +504,8 @@ pub struct PhaseLut {
     /// Inverse tables, `(INVERSE_BINS + 1)` entries per curve (one curve for `Global`, one per tile).
     inverse: Vec<u16>,
     /// Per SLM row: (tile row a, tile row b, weight of b); per column likewise (`Tiled` only).
-    rows: Vec<(u32, u32, f32)>,
-    cols: Vec<(u32, u32, f32)>,
+    rows: Vec<AxisWeight>,
+    cols: Vec<AxisWeight>,
     grid_cols: usize,
 }
 

@@ -30,7 +30,7 @@ use crate::error::{invalid, HoloError, Result};
 use crate::optics::filter::aperture_fn;
 use crate::optics::multiplier::{plane_multiplier, PlaneMultiplier};
 use crate::optics::{OpticalSetup, PropagationOptions, Propagator, ZernikeCoefficients};
-use crate::slm::lut::interpolate_codes;
+use crate::slm::lut::{interpolate_codes, AxisWeight};
 use crate::slm::{LutRepresentation, PhaseCurve, TiledCurves};
 
 /// Value of a display model file's `format` field.
@@ -514,22 +514,29 @@ pub(crate) struct ColourRuntime {
 #[derive(Debug, Clone)]
 enum Response {
     /// Phase per code, the whole panel.
-    Table([f32; 256]),
+    Table(Box<[f32; 256]>),
     /// Per pixel, tiled, with each row's and column's bilinear weights.
     Tiled {
         curves: TiledCurves,
-        rows: Vec<(u32, u32, f32)>,
-        columns: Vec<(u32, u32, f32)>,
+        rows: Vec<AxisWeight>,
+        columns: Vec<AxisWeight>,
     },
 }
 
-/// A colour's parts as one table and one kernel ([`ColourRuntime::uniform_parts`]).
+/// A colour's parts as plain arrays ([`ColourRuntime::plain_parts`]), the response always in the tiled form
+/// (one tile for a global table).
 #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
-pub(crate) struct UniformParts<'a> {
+pub(crate) struct PlainParts<'a> {
     /// `S` per pixel `[H, W]`, `None`: a plane wave.
     pub(crate) source: Option<&'a [Complex32]>,
-    /// The phase in radians each code shows.
-    pub(crate) table: [f32; 256],
+    /// The tiles' curves, `[tiles, 256]` flat, radians per code, tiles row-major.
+    pub(crate) curves: Vec<f32>,
+    /// Tiles per row of the tile grid.
+    pub(crate) grid_cols: usize,
+    /// Each row's bilinear weights `[H]` (all `(0, 0, 0)` for one tile).
+    pub(crate) rows: Vec<AxisWeight>,
+    /// Each column's bilinear weights `[W]`.
+    pub(crate) columns: Vec<AxisWeight>,
     /// `(rows, cols, weights row-major)`.
     pub(crate) kernel: (usize, usize, Vec<f32>),
     /// The zero order `z`.
@@ -571,7 +578,7 @@ impl ColourRuntime {
             }),
             response: part.response.as_ref().and_then(|r| match r {
                 LutRepresentation::Linear => None,
-                LutRepresentation::Global(c) => Some(Response::Table(*c.phases())),
+                LutRepresentation::Global(c) => Some(Response::Table(Box::new(*c.phases()))),
                 LutRepresentation::Tiled(t) => {
                     let (rows, columns) = t.row_and_column_weights();
                     Some(Response::Tiled {
@@ -595,7 +602,7 @@ impl ColourRuntime {
 
     /// Replaces the response by the table `phases` (radians per code; the fit's trial curves, unchecked).
     pub(crate) fn set_response(&mut self, phases: [f32; 256]) {
-        self.response = Some(Response::Table(phases));
+        self.response = Some(Response::Table(Box::new(phases)));
     }
 
     /// `out ← K ∗ input` (`transpose`: the adjoint, `Kᵀ ∗`, scattering to the clamped neighbours).
@@ -625,22 +632,48 @@ impl ColourRuntime {
         }
     }
 
-    /// This colour's parts as one table and one kernel, for the GPU refinement's kernels: `S` per pixel
-    /// (`None`: a plane wave), the response per code (radians; the linear table `2π·k/256` without one), the
-    /// kernel's `(rows, cols, weights)` (`(1, 1, [1])` without one) and `z`. `None` for a per-pixel response.
+    /// This colour's parts as plain arrays, for the GPU refinement's kernels: `S` per pixel (`None`: a plane
+    /// wave), the response as tiles (one tile for a global table; the linear table `2π·k/256` without one) with
+    /// each row's and column's weights, the kernel's `(rows, cols, weights)` (`(1, 1, [1])` without one) and
+    /// `z`.
     #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
-    pub(crate) fn uniform_parts(&self) -> Option<UniformParts<'_>> {
-        let table = match &self.response {
-            None => std::array::from_fn(|k| k as f32 * LINEAR_SLOPE),
-            Some(Response::Table(t)) => *t,
-            Some(Response::Tiled { .. }) => return None,
+    pub(crate) fn plain_parts(&self) -> PlainParts<'_> {
+        let one_tile = |table: &[f32]| {
+            (
+                table.to_vec(),
+                1,
+                vec![(0, 0, 0.0); self.height],
+                vec![(0, 0, 0.0); self.width],
+            )
         };
-        Some(UniformParts {
+        let linear: [f32; 256] = std::array::from_fn(|k| k as f32 * LINEAR_SLOPE);
+        let (curves, grid_cols, rows, columns) = match &self.response {
+            None => one_tile(&linear),
+            Some(Response::Table(t)) => one_tile(&t[..]),
+            Some(Response::Tiled {
+                curves,
+                rows,
+                columns,
+            }) => (
+                curves
+                    .curves()
+                    .iter()
+                    .flat_map(|c| c.phases().iter().copied())
+                    .collect(),
+                curves.grid().1,
+                rows.clone(),
+                columns.clone(),
+            ),
+        };
+        PlainParts {
             source: self.source.as_deref(),
-            table,
+            curves,
+            grid_cols,
+            rows,
+            columns,
             kernel: self.kernel.clone().unwrap_or_else(|| (1, 1, vec![1.0])),
             zero: self.zero,
-        })
+        }
     }
 
     /// The response at pixel `p` (row-major) to drive `v` (codes as numbers) and its slope.

@@ -12,8 +12,10 @@
 // Through a display model (slm::model, docs/REFINE.md "Through a display model") the phase is the SLM's drive
 // in radians of the linear table (codes v = φ·256/2π, clamped to 0…255, rounded where quantised) and three
 // kernels stand for `phasor` and `adam`:
-//   `model_phasor`   c' = K ∗ v (the colour's kernel, edges clamped) into `crossed`, u = S·(e^{iR(c')} + z)
-//   `model_gradient` g as `adam`'s, dphi = Im(g·conj(S·e^{iR(c')}))·R'(c') (R linear between codes)
+//   `model_phasor`   c' = K ∗ v (the colour's kernel, edges clamped), (R(c'), R'(c')) into `shown` (R the
+//                    response: the bilinear blend of its four nearest tiles' curves at the pixel, one tile for
+//                    a global table, linear between codes), u = S·(e^{iR(c')} + z)
+//   `model_gradient` g as `adam`'s, dphi = Im(g·conj(S·e^{iR(c')}))·R'(c')
 //   `model_adam`     ∂L/∂v = Kᵀ ∗ dphi (the clamped convolution's adjoint, gathered: every pixel whose
 //                    clamped tap lands here), ∂L/∂φ = ∂L/∂v ÷ (2π/256), Adam's update, then the projected
 //                    step: φ clamped to [0, 2π·255/256]
@@ -31,11 +33,15 @@
 //   9: storage mean:    array<f32>,        [C, H, W] (Adam's first moment)
 //  10: storage square:  array<f32>,        [C, H, W] (Adam's second moment)
 //  11: storage source:  array<vec2<f32>>,  [C, H, W] (the display model's S)
-//  12: storage table:   array<f32>,        [C, 256] (the response R per code, radians)
+//  12: storage table:   array<f32>,        each colour's tile curves [tiles, 256] (radians) at its offset
 //  13: storage weights: array<f32>,        each colour's kernel, row-major, at its offset
-//  14: storage crossed: array<f32>,        [C, H, W] (K ∗ v)
+//  14: storage shown:   array<vec2<f32>>,  [C, H, W]: (R(K ∗ v), R'(K ∗ v))
 //  15: storage dphi:    array<f32>,        [C, H, W]
-//  16: storage info:    array<vec4<f32>>,  [C, 2]: (kernel rows, cols, offset, 0), (Re z, Im z, 0, 0)
+//  16: storage info:    array<vec4<u32>>,  [C, 3]: (kernel rows, cols, offset, 0), (Re z, Im z, 0, 0) as f32
+//                                          bits, (curves' offset, tiles per grid row, rows' and columns'
+//                                          offsets into `axes`)
+//  17: storage axes:    array<vec4<f32>>,  each colour's [H] row and [W] column tile weights (tile a, tile b,
+//                                          weight of b, 0) at their offsets
 // Grids: `phasor`, `adam` and the three `model_` kernels over C·H·W elements (1D, 256 per workgroup, spread
 // over x/y); `plane` over H·W elements in x/y (the same spread) and the channel in z; `reduce` one workgroup
 // per channel.
@@ -75,9 +81,10 @@ const TAU: f32 = 6.283185307179586;
 @group(0) @binding(11) var<storage, read> source: array<vec2<f32>>;
 @group(0) @binding(12) var<storage, read> table: array<f32>;
 @group(0) @binding(13) var<storage, read> weights: array<f32>;
-@group(0) @binding(14) var<storage, read_write> crossed: array<f32>;
+@group(0) @binding(14) var<storage, read_write> shown: array<vec2<f32>>;
 @group(0) @binding(15) var<storage, read_write> dphi: array<f32>;
-@group(0) @binding(16) var<storage, read> info: array<vec4<f32>>;
+@group(0) @binding(16) var<storage, read> info: array<vec4<u32>>;
+@group(0) @binding(17) var<storage, read> axes: array<vec4<f32>>;
 
 fn index_of(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
     return gid.x + gid.y * groups.x * 256u;
@@ -197,18 +204,33 @@ fn drive_of(i: u32) -> f32 {
     return v;
 }
 
-// Colour c's response to drive v and its slope per code (linear between codes, clamped to the table).
-fn respond(c: u32, v: f32) -> vec2<f32> {
+// Code k's phase under the tiles `t` (info's third entry) at row weights `ry` and column weights `rx`: the
+// bilinear blend of the four tiles' curves (as slm::TiledCurves).
+fn curve_at(t: vec4<u32>, ry: vec4<f32>, rx: vec4<f32>, k: u32) -> f32 {
+    let top = t.x + u32(ry.x) * t.y * 256u + k;
+    let bottom = t.x + u32(ry.y) * t.y * 256u + k;
+    let left = u32(rx.x) * 256u;
+    let right = u32(rx.y) * 256u;
+    let upper = table[top + left] * (1.0 - rx.z) + table[top + right] * rx.z;
+    let lower = table[bottom + left] * (1.0 - rx.z) + table[bottom + right] * rx.z;
+    return upper * (1.0 - ry.z) + lower * ry.z;
+}
+
+// Colour c's response at pixel p to drive v and its slope per code (linear between codes, clamped to the
+// table).
+fn respond(c: u32, p: u32, v: f32) -> vec2<f32> {
+    let t = info[3u * c + 2u];
+    let ry = axes[t.z + p / params.width];
+    let rx = axes[t.w + p % params.width];
     let k = u32(clamp(floor(v), 0.0, 254.0));
-    let a = table[c * 256u + k];
-    let b = table[c * 256u + k + 1u];
+    let a = curve_at(t, ry, rx, k);
+    let b = curve_at(t, ry, rx, k + 1u);
     return vec2<f32>(a + (v - f32(k)) * (b - a), b - a);
 }
 
 // Colour c's kernel: (rows, cols, offset into `weights`).
 fn kernel_of(c: u32) -> vec3<u32> {
-    let k = info[2u * c];
-    return vec3<u32>(u32(k.x), u32(k.y), u32(k.z));
+    return info[3u * c].xyz;
 }
 
 @compute @workgroup_size(256)
@@ -234,10 +256,10 @@ fn model_phasor(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_work
             sum = sum + weights[k.z + a * k.y + b] * drive_of(c * params.hw + yy * w + xx);
         }
     }
-    crossed[i] = sum;
-    let r = respond(c, sum).x;
-    let z = info[2u * c + 1u].xy;
-    unit[i] = cmul(source[i], vec2<f32>(cos(r), sin(r)) + z);
+    let r = respond(c, p, sum);
+    shown[i] = r;
+    let z = bitcast<vec2<f32>>(info[3u * c + 1u].xy);
+    unit[i] = cmul(source[i], vec2<f32>(cos(r.x), sin(r.x)) + z);
 }
 
 @compute @workgroup_size(256)
@@ -249,7 +271,7 @@ fn model_gradient(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_wo
     let c = i / params.hw;
     let k = sums[c].z;
     let g = work[i] * (2.0 * k * k) - acc[i] * (2.0 * k);
-    let r = respond(c, crossed[i]);
+    let r = shown[i];
     let m = cmul(source[i], vec2<f32>(cos(r.x), sin(r.x)));
     dphi[i] = (g.y * m.x - g.x * m.y) * r.y;
 }
