@@ -228,9 +228,35 @@ fn respond(c: u32, p: u32, v: f32) -> vec2<f32> {
     return vec2<f32>(a + (v - f32(k)) * (b - a), b - a);
 }
 
-// Colour c's kernel: (rows, cols, offset into `weights`).
-fn kernel_of(c: u32) -> vec3<u32> {
-    return info[3u * c].xyz;
+// Element i of a [C, H, W] plane: its channel, its pixel's index, row and column, and the plane's size.
+struct Pixel {
+    c: u32,
+    p: u32,
+    y: i32,
+    x: i32,
+    h: i32,
+    w: i32,
+}
+
+fn pixel_of(i: u32) -> Pixel {
+    let c = i / params.hw;
+    let p = i - c * params.hw;
+    let w = params.width;
+    return Pixel(c, p, i32(p / w), i32(p % w), i32(params.hw / w), i32(w));
+}
+
+// A colour's crosstalk kernel: its rows and columns, its offset into `weights` and its half sizes.
+struct Kernel {
+    rows: u32,
+    cols: u32,
+    offset: u32,
+    half_rows: i32,
+    half_cols: i32,
+}
+
+fn kernel_of(c: u32) -> Kernel {
+    let k = info[3u * c];
+    return Kernel(k.x, k.y, k.z, i32(k.x / 2u), i32(k.y / 2u));
 }
 
 @compute @workgroup_size(256)
@@ -239,24 +265,19 @@ fn model_phasor(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_work
     if (i >= params.channels * params.hw) {
         return;
     }
-    let c = i / params.hw;
-    let p = i - c * params.hw;
-    let w = params.width;
-    let h = params.hw / w;
-    let y = i32(p / w);
-    let x = i32(p % w);
+    let at = pixel_of(i);
+    let c = at.c;
     let k = kernel_of(c);
-    let hr = i32(k.x / 2u);
-    let hc = i32(k.y / 2u);
     var sum = 0.0;
-    for (var a = 0u; a < k.x; a = a + 1u) {
-        let yy = u32(clamp(y + i32(a) - hr, 0, i32(h) - 1));
-        for (var b = 0u; b < k.y; b = b + 1u) {
-            let xx = u32(clamp(x + i32(b) - hc, 0, i32(w) - 1));
-            sum = sum + weights[k.z + a * k.y + b] * drive_of(c * params.hw + yy * w + xx);
+    for (var a = 0u; a < k.rows; a = a + 1u) {
+        let yy = u32(clamp(at.y + i32(a) - k.half_rows, 0, at.h - 1));
+        for (var b = 0u; b < k.cols; b = b + 1u) {
+            let xx = u32(clamp(at.x + i32(b) - k.half_cols, 0, at.w - 1));
+            let v = drive_of(c * params.hw + yy * params.width + xx);
+            sum = sum + weights[k.offset + a * k.cols + b] * v;
         }
     }
-    let r = respond(c, p, sum);
+    let r = respond(c, at.p, sum);
     shown[i] = r;
     let z = bitcast<vec2<f32>>(info[3u * c + 1u].xy);
     unit[i] = cmul(source[i], vec2<f32>(cos(r.x), sin(r.x)) + z);
@@ -295,24 +316,18 @@ fn model_adam(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
     if (i >= params.channels * params.hw) {
         return;
     }
-    let c = i / params.hw;
-    let p = i - c * params.hw;
-    let w = params.width;
-    let h = params.hw / w;
-    let y = i32(p / w);
-    let x = i32(p % w);
+    let at = pixel_of(i);
+    let c = at.c;
     let k = kernel_of(c);
-    let hr = i32(k.x / 2u);
-    let hc = i32(k.y / 2u);
     var sum = 0.0;
-    for (var a = 0u; a < k.x; a = a + 1u) {
-        let rows = preimage(y, i32(a) - hr, i32(h));
-        for (var b = 0u; b < k.y; b = b + 1u) {
-            let cols = preimage(x, i32(b) - hc, i32(w));
-            let kv = weights[k.z + a * k.y + b];
+    for (var a = 0u; a < k.rows; a = a + 1u) {
+        let rows = preimage(at.y, i32(a) - k.half_rows, at.h);
+        for (var b = 0u; b < k.cols; b = b + 1u) {
+            let cols = preimage(at.x, i32(b) - k.half_cols, at.w);
+            let kv = weights[k.offset + a * k.cols + b];
             for (var yy = rows.x; yy <= rows.y; yy = yy + 1) {
                 for (var xx = cols.x; xx <= cols.y; xx = xx + 1) {
-                    sum = sum + kv * dphi[c * params.hw + u32(yy) * w + u32(xx)];
+                    sum = sum + kv * dphi[c * params.hw + u32(yy) * params.width + u32(xx)];
                 }
             }
         }

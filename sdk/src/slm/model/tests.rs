@@ -35,6 +35,15 @@ fn refiner(h: usize, w: usize, quantised: bool, model: Option<&DisplayModel>) ->
         planes: 3,
         ..Default::default()
     };
+    refiner_with(h, w, options, model)
+}
+
+fn refiner_with(
+    h: usize,
+    w: usize,
+    options: RefineOptions,
+    model: Option<&DisplayModel>,
+) -> Refiner {
     Refiner::new(
         &OpticalSetup::default(),
         PropagationOptions::default(),
@@ -397,19 +406,7 @@ fn the_gpu_refines_through_a_model_as_the_cpu_does() {
             iterations: 6,
             ..Default::default()
         };
-        let make = || {
-            Refiner::new(
-                &OpticalSetup::default(),
-                PropagationOptions::default(),
-                OFFSET_M,
-                target(h, w, 3),
-                options,
-                2,
-            )
-            .unwrap()
-            .with_display_model(Some(&model))
-            .unwrap()
-        };
+        let make = || refiner_with(h, w, options, Some(&model));
         let start = drive_phase(h, w, 12);
         let mut cpu = start.clone();
         let cpu_report = make()
