@@ -18,6 +18,11 @@
 //! caller (`crate::refine`) hands it the multipliers, the weights and the target as plain arrays. Memory: per
 //! loss plane one multiplier (3 colours, complex) and the target (3 colours), `W` (complex), and seven complex
 //! and three real `[3, H, W]` planes besides (at 384², 7 planes: 71 MB; at 1080p: 1.0 GB).
+//!
+//! Through a display model ([`GpuRefineModel::display`]) the phase is the SLM's drive and `model_phasor`,
+//! `model_gradient` and `model_adam` stand for `phasor` and `adam` (`refine.wgsl`'s header): two complex and
+//! one real `[3, H, W]` planes more (the source, the shown phase and its slope, the phase's gradient: 124 MB
+//! at 1080p), the response's tile curves (8 MB per colour for 16-pixel tiles at 1080p) and the kernels.
 
 use std::ops::ControlFlow;
 
@@ -493,8 +498,8 @@ impl GpuRefiner {
     }
 }
 
-/// Uploads `display` (`n` pixels per colour in rows of `width`) and binds the `model_` kernels of `refine.wgsl` to it and to the
-/// refinement's `params` and `[phase, unit, work, acc, sums, mean, square]`.
+/// Uploads `display` (`n` pixels per colour in rows of `width`) and binds the `model_` kernels of
+/// `refine.wgsl` to it and to the refinement's `params` and `[phase, unit, work, acc, sums, mean, square]`.
 ///
 /// Errors: [`HoloError::ShapeMismatch`] for a source, tile weights, curves or a kernel of the wrong length;
 /// [`HoloError::Gpu`].

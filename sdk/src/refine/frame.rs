@@ -258,9 +258,8 @@ impl FrameRefiner {
     /// Refines through the fitted display `model` (`slm::model`, docs/REFINE.md "Through a display
     /// model"): the codes are optimised as that display shows them (source, crosstalk, phase response, zero
     /// order, aberration), kept in 0…255 by a projected step, and the held-out scores are what it shows. The
-    /// model's response replaces a calibration's look-up table. On the GPU backend the iterations run there,
-    /// but for a model with a per-pixel response, which refines on the CPU (`RefinedFrame::backend_reason`
-    /// says so). `None`, or a model without parts: the ideal
+    /// model's response replaces a calibration's look-up table. On the GPU backend the iterations run there
+    /// through the model (`refine.wgsl`'s `model_` kernels). `None`, or a model without parts: the ideal
     /// display, bit for bit.
     ///
     /// Errors: [`HoloError::InvalidParameter`] (`display_model`) for a model with a phase response beside a

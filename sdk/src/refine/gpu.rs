@@ -27,7 +27,8 @@ use num_complex::Complex32;
 /// A [`Refiner`]'s refinement uploaded to a GPU: its loss planes' multipliers, weights and target as they
 /// are when [`Refiner::on_gpu`] makes it (a later target: `GpuRefinement::set_target`). Memory on the
 /// GPU: per loss plane a complex multiplier and the target, 3 colours each, `W`, and seven complex and three
-/// real `[3, H, W]` planes (384², 7 planes: 71 MB; 1080p: 1.0 GB).
+/// real `[3, H, W]` planes (384², 7 planes: 71 MB; 1080p: 1.0 GB); through a display model two complex and one
+/// real plane more and the response's tiles (`crate::gpu::refine`).
 pub struct GpuRefinement {
     inner: GpuRefiner,
     /// Through a display model: the phase is the drive (projected before the iterations).
