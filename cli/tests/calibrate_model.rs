@@ -54,6 +54,12 @@ fn simulate_fit_and_refine_through_the_model() {
         .parse()
         .unwrap();
     assert!(crosstalk < 0.005, "{err}");
+    // One gain for the set, green's power 1 (the only colour), and the source's phase named apart.
+    assert!(
+        err.contains("the set's gain") && err.contains("green 1.0000"),
+        "{err}"
+    );
+    assert!(err.contains("green.source.phase_rad: "), "{err}");
     assert_eq!(
         err.matches("residual 0.01").count() + err.matches("residual 0.00").count(),
         24,
