@@ -114,9 +114,19 @@ enum ModelCommand {
     },
 }
 
-/// Writes a display model to `path` atomically (its JSON form, `tensorholo.display-model`).
+/// Writes a display model to `path` atomically (its JSON form, `tensorholo.display-model`): indented for
+/// reading, or compact where a colour's response is per pixel (at 1080p its tiles' curves are about 20 MB of
+/// numbers a colour compact, more than twice that indented, one number a line).
 fn save_model(path: &Path, model: &DisplayModel) -> Result<()> {
-    let text = serde_json::to_string_pretty(model)? + "\n";
+    let per_pixel = model
+        .colours
+        .iter()
+        .any(|c| matches!(c.response, Some(LutRepresentation::Tiled(_))));
+    let text = if per_pixel {
+        serde_json::to_string(model)?
+    } else {
+        serde_json::to_string_pretty(model)?
+    } + "\n";
     tensorholo::io::write_atomic(path, text.as_bytes())?;
     Ok(())
 }
