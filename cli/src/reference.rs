@@ -177,19 +177,21 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
                 viewer: None,
                 viewer_corrected_by_cnn: false,
             };
-            let mut refiner = tensorholo::refine::FrameRefiner::new(
-                request,
-                display,
-                tensorholo::cnn::default_threads(),
-            )?
-            .with_display_model(args.refine.display_model()?)?;
+            let mut refiner = args.refine.with_models(
+                tensorholo::refine::FrameRefiner::new(
+                    request,
+                    display,
+                    tensorholo::cnn::default_threads(),
+                )?,
+                args.refine.display_model()?,
+            )?;
             let r = refiner.refine_against(
                 hologram.midpoint.view(),
                 hologram.double_phase.phase.view(),
                 None,
                 &mut crate::refine::log_progress(options.iterations),
             )?;
-            let report = crate::refine::report(&refiner, &r);
+            let report = crate::refine::report(&refiner, &r, &args.refine);
             hologram.double_phase.phase = r.phase;
             hologram.double_phase.amplitude_scale = r.amplitude_scale;
             hologram.codes = r.codes;

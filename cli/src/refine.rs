@@ -62,6 +62,11 @@ pub struct RefineCoreArgs {
     /// `holo render --evaluate` then scores what that display shows too (with --refine, or alone).
     #[arg(long, value_name = "MODEL")]
     pub display_model: Option<std::path::PathBuf>,
+    /// Score the held-out planes as this display model's display shows the patterns (tensorholo.display-model:
+    /// a simulated display's hidden.json), instead of the display refined through: what --display-model gains
+    /// on that display (docs/REFINE.md); report.json's `refine.held_out_display` names it.
+    #[arg(long, value_name = "MODEL", requires = "refine")]
+    pub score_display_model: Option<std::path::PathBuf>,
 }
 
 /// The refinement's flags of the CNN commands (`holo render`, `holo video`).
@@ -109,14 +114,43 @@ impl RefineCoreArgs {
 
     /// The `--display-model` file, read and checked.
     pub fn display_model(&self) -> Result<Option<Arc<DisplayModel>>> {
-        self.display_model
-            .as_deref()
-            .map(|p| {
-                DisplayModel::load(p)
-                    .map(Arc::new)
-                    .map_err(|e| anyhow::Error::new(e).context("--display-model"))
-            })
-            .transpose()
+        load_model(self.display_model.as_deref(), "--display-model")
+    }
+
+    /// A display model of another SLM size than the frame's `[h, w]` (`--display-model`, or
+    /// `--score-display-model`) stops the command before anything is written.
+    pub fn check_model_sizes(&self, h: usize, w: usize) -> Result<()> {
+        for (path, flag) in [
+            (&self.display_model, "--display-model"),
+            (&self.score_display_model, "--score-display-model"),
+        ] {
+            if let Some(m) = load_model(path.as_deref(), flag)? {
+                if m.slm_size != [h, w] {
+                    bail!(
+                        "{flag}: the model is fitted for a {}x{} SLM, the frame is {h}x{w} (render at the \
+                         model's size, or fit a model for this one)",
+                        m.slm_size[0],
+                        m.slm_size[1]
+                    );
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// `refiner` through `model` (the `--display-model` file, read by the caller) and scored at the held-out
+    /// planes through `--score-display-model`; errors name the flag.
+    pub fn with_models(
+        &self,
+        refiner: FrameRefiner,
+        model: Option<Arc<DisplayModel>>,
+    ) -> Result<FrameRefiner> {
+        let scoring = load_model(self.score_display_model.as_deref(), "--score-display-model")?;
+        refiner
+            .with_display_model(model)
+            .map_err(|e| anyhow::Error::new(e).context("--display-model"))?
+            .with_scoring_model(scoring)
+            .map_err(|e| anyhow::Error::new(e).context("--score-display-model"))
     }
 
     /// The refinement's options, checked, or `None` without --refine. Errors name the flag.
@@ -193,8 +227,24 @@ pub fn log_progress(iterations: usize) -> impl FnMut(&IterationRecord) -> Contro
     }
 }
 
-/// report.json's `refine` of a refined frame (and the summary line in the log).
-pub fn report(refiner: &FrameRefiner, refined: &RefinedFrame) -> serde_json::Value {
+/// A display model file of `flag`, read and checked (`None` without one).
+fn load_model(path: Option<&std::path::Path>, flag: &str) -> Result<Option<Arc<DisplayModel>>> {
+    path.map(|p| {
+        DisplayModel::load(p)
+            .map(Arc::new)
+            .map_err(|e| anyhow::Error::new(e).context(flag.to_string()))
+    })
+    .transpose()
+}
+
+/// report.json's `refine` of a refined frame (and the summary line in the log); `core`'s
+/// `--score-display-model` names the display the held-out planes were scored through
+/// (`held_out_display`: the file's name, or "refined through" for the display the loss sees).
+pub fn report(
+    refiner: &FrameRefiner,
+    refined: &RefinedFrame,
+    core: &RefineCoreArgs,
+) -> serde_json::Value {
     let request = refiner.request();
     let s = &refined.held_out;
     let base = s.cnn_codes_psnr_db.unwrap_or(s.start_psnr_db);
@@ -224,6 +274,10 @@ pub fn report(refiner: &FrameRefiner, refined: &RefinedFrame) -> serde_json::Val
         "loss_depths": loss_depths(request.options.planes).ok(),
         "history": refined.report.history,
         "held_out": s,
+        "held_out_display": core.score_display_model.as_deref().map_or_else(
+            || "refined through".to_string(),
+            |p| p.file_name().map_or_else(|| p.display().to_string(), |n| n.to_string_lossy().into_owned()),
+        ),
         "gain_db": s.refined_codes_psnr_db - base,
         "amplitude_scale": refined.amplitude_scale,
         "backend": refined.backend,

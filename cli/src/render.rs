@@ -112,16 +112,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     // A display model of another SLM size than the frame's stops the command before anything is written.
     let display_model = args.refine.core.display_model()?;
-    if let Some(m) = &display_model {
+    {
         let (h, w) = scene.size();
-        if m.slm_size != [h, w] {
-            anyhow::bail!(
-                "--display-model: the model is fitted for a {}x{} SLM, the frame is {h}x{w} (render at the \
-                 model's size, or fit a model for this one)",
-                m.slm_size[0],
-                m.slm_size[1]
-            );
-        }
+        args.refine.core.check_model_sizes(h, w)?;
     }
     crate::output::prepare(&args.out, &inputs)?;
     let (h, w) = scene.size();
@@ -235,14 +228,15 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let heads = heads.context("no frame rendered")?;
     let refined = match refine {
         Some(request) => {
-            let mut refiner = FrameRefiner::for_pipeline(
-                request,
-                &pipeline,
-                &backend_report,
-                args.model.thread_count(),
-            )?
-            .with_display_model(display_model.clone())
-            .map_err(|e| anyhow::Error::new(e).context("--display-model"))?;
+            let mut refiner = args.refine.core.with_models(
+                FrameRefiner::for_pipeline(
+                    request,
+                    &pipeline,
+                    &backend_report,
+                    args.model.thread_count(),
+                )?,
+                display_model.clone(),
+            )?;
             let midpoint = heads.to_field()?;
             let r = refiner.refine(
                 &scene.layers(),
@@ -250,7 +244,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 out.codes.view(),
                 &mut crate::refine::log_progress(request.options.iterations),
             )?;
-            let report = crate::refine::report(&refiner, &r);
+            let report = crate::refine::report(&refiner, &r, &args.refine.core);
             let (target_s, iterations_s) = (r.target_s, r.report.iterations_s);
             crate::refine::apply(r, &mut out);
             Some((report, target_s, iterations_s))

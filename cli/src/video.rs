@@ -259,7 +259,7 @@ impl FrameSink<'_> {
                     .inspect_err(|_| self.failed = Some((i, true)))?;
                 self.refine_s.0 += refined.target_s;
                 self.refine_s.1 += refined.report.iterations_s;
-                let report = crate::refine::report(r, &refined);
+                let report = crate::refine::report(r, &refined, &self.args.refine.core);
                 Some((refined, report))
             }
             _ => None,
@@ -498,16 +498,15 @@ impl Video<'_> {
                 )
             })?;
         let refiner = match self.refine {
-            Some(request) => Some(
+            Some(request) => Some(args.refine.core.with_models(
                 FrameRefiner::for_pipeline(
                     request,
                     self.pipeline,
                     session.backend_report(),
                     args.model.thread_count(),
-                )?
-                .with_display_model(args.refine.core.display_model()?)
-                .map_err(|e| anyhow::Error::new(e).context("--display-model"))?,
-            ),
+                )?,
+                args.refine.core.display_model()?,
+            )?),
             None => None,
         };
         let mut sink = FrameSink {

@@ -211,6 +211,10 @@ pub struct FrameRefiner {
     previous: Option<Array3<f32>>,
     /// The display model the loss sees ([`FrameRefiner::with_display_model`]).
     model: Option<Arc<DisplayModel>>,
+    /// The display model the held-out planes are scored through ([`FrameRefiner::with_scoring_model`]), and
+    /// its refiner (made at the first frame).
+    scoring: Option<Arc<DisplayModel>>,
+    scorer: Option<Refiner>,
     /// The device the iterations run on (`None`: the CPU), chosen once (`FrameRefiner::for_pipeline`), and
     /// the refinement prepared on it at the first frame (later frames replace its target only).
     device: Option<Box<dyn RefineDevice>>,
@@ -250,6 +254,8 @@ impl FrameRefiner {
             refiner: None,
             previous: None,
             model: None,
+            scoring: None,
+            scorer: None,
             device: None,
             on_device: None,
         })
@@ -291,6 +297,30 @@ impl FrameRefiner {
         self.model = model;
         self.refiner = None;
         self.on_device = None;
+        Ok(self)
+    }
+
+    /// Scores the held-out planes ([`RefinedFrame::held_out`]) as the display of `model` shows the patterns,
+    /// instead of the display the loss sees: a simulated display's hidden parameters (`holo calibrate model
+    /// simulate`'s `hidden.json`), to measure what refining through a fitted model gains on that display
+    /// (docs/REFINE.md "Through a display model"). A second refiner scores them (made at the first frame).
+    /// `None`: the display the loss sees.
+    ///
+    /// Errors: [`HoloError::InvalidData`] for a model that does not validate (naming the entry);
+    /// [`HoloError::InvalidParameter`] (`display_model`) for a model with an aberration beside a viewer's. A
+    /// model of another SLM size than the frame's is refused at the first frame ([`HoloError::ShapeMismatch`]).
+    pub fn with_scoring_model(mut self, model: Option<Arc<DisplayModel>>) -> Result<Self> {
+        if let Some(m) = &model {
+            m.validate()?;
+            if self.display.viewer.is_some() && m.colours.iter().any(|c| c.aberration.is_some()) {
+                return Err(invalid(
+                    "display_model",
+                    "a scoring display model with an aberration and a viewer's aberration at once: give one",
+                ));
+            }
+        }
+        self.scoring = model;
+        self.scorer = None;
         Ok(self)
     }
 
@@ -504,15 +534,28 @@ impl FrameRefiner {
         let codes = codes_of(phase.view(), calibration)?;
         let shown = displayed_phase(codes.view(), calibration)?;
         let held = held_out_depths(options.planes)?;
-        // The held-out planes scored with the refiner's own buffers: only their target and multipliers are
-        // made (and dropped after).
-        let mut set = refiner.plane_set(FocalTarget::from_midpoint(
-            midpoint,
-            &d.optics,
-            d.propagation,
-            &held,
-        )?)?;
-        let mut score = |p: ArrayView3<f32>| refiner.score_planes(&mut set, p).map(|r| r.psnr_db);
+        let held_target = FocalTarget::from_midpoint(midpoint, &d.optics, d.propagation, &held)?;
+        // Scored with the refiner's own buffers (only the held-out planes' target and multipliers are made,
+        // and dropped after), or with the scoring model's refiner.
+        let scorer = match (&self.scoring, &mut self.scorer) {
+            (None, _) => refiner,
+            (Some(_), Some(s)) => s,
+            (Some(model), slot @ None) => slot.insert(
+                Refiner::new(
+                    &d.optics,
+                    d.propagation,
+                    d.offset_m,
+                    held_target.clone(),
+                    options,
+                    self.threads,
+                )?
+                .with_calibration(calibration)?
+                .with_viewer(d.viewer.as_deref())?
+                .with_display_model(Some(model))?,
+            ),
+        };
+        let mut set = scorer.plane_set(held_target)?;
+        let mut score = |p: ArrayView3<f32>| scorer.score_planes(&mut set, p).map(|r| r.psnr_db);
         let held_out = HeldOutScores {
             cnn_codes_psnr_db: cnn.map(&mut score).transpose()?,
             start_psnr_db: score(start)?,

@@ -608,3 +608,81 @@ fn with_an_intensity_map_refinement_never_scores_below_the_unrefined_codes() {
     );
     assert!(refined >= with_map, "{refined:.2} < {with_map:.2}");
 }
+
+/// `FrameRefiner::with_scoring_model`: the refinement is the same (the loss sees its own display), and the
+/// held-out scores are what the scoring model's display shows of each pattern, as a refiner through that
+/// model scores them directly; they differ from the ideal display's.
+#[test]
+fn held_out_scores_through_a_scoring_model_are_what_that_display_shows() {
+    use crate::slm::codes::codes_of;
+    use crate::slm::model::DisplayModel;
+    use crate::slm::model_captures::draw_display;
+    use std::sync::Arc;
+
+    let (h, w) = (24, 32);
+    let mid = midpoint(h, w, 5);
+    let start = random_phase(h, w, 3);
+    let mut hidden = DisplayModel {
+        slm_size: [h, w],
+        ..Default::default()
+    };
+    for c in 0..3 {
+        hidden.colours[c] = draw_display([h, w], c, 40 + c as u64).colours[c].clone();
+    }
+    let options = RefineOptions {
+        iterations: 3,
+        ..RefineOptions::default()
+    };
+    let display = RefineDisplay {
+        optics: setup(),
+        propagation: Default::default(),
+        offset_m: OFFSET_M,
+        encoding: Default::default(),
+        calibration: None,
+        viewer: None,
+        viewer_corrected_by_cnn: false,
+    };
+    let request = FrameRefinement {
+        options,
+        ..FrameRefinement::default()
+    };
+    let run = |scoring: Option<Arc<DisplayModel>>| {
+        FrameRefiner::new(request, display.clone(), 2)
+            .unwrap()
+            .with_scoring_model(scoring)
+            .unwrap()
+            .refine_against(mid.view(), start.view(), None, &mut never_stop)
+            .unwrap()
+    };
+    let (own, scored) = (run(None), run(Some(Arc::new(hidden.clone()))));
+    assert_eq!(own.codes, scored.codes);
+    let held = held_out_depths(options.planes).unwrap();
+    let target =
+        FocalTarget::from_midpoint(mid.view(), &setup(), Default::default(), &held).unwrap();
+    let mut direct = refiner(target.clone(), options, 2)
+        .with_display_model(Some(&hidden))
+        .unwrap();
+    let mut set = direct.plane_set(target).unwrap();
+    let mut score = |p: &Array3<f32>| direct.score_planes(&mut set, p.view()).unwrap().psnr_db;
+    let shown = displayed_phase(codes_of(scored.phase.view(), None).unwrap().view(), None).unwrap();
+    let s = &scored.held_out;
+    assert_eq!(s.start_psnr_db, score(&start));
+    assert_eq!(s.refined_psnr_db, score(&scored.phase));
+    assert_eq!(s.refined_codes_psnr_db, score(&shown));
+    assert!(
+        (s.refined_codes_psnr_db - own.held_out.refined_codes_psnr_db).abs() > 0.1,
+        "{s:?} vs {:?}",
+        own.held_out
+    );
+    // A scoring model of another SLM size: refused at the frame.
+    let e = FrameRefiner::new(request, display, 2)
+        .unwrap()
+        .with_scoring_model(Some(Arc::new(DisplayModel {
+            slm_size: [h, w + 8],
+            ..hidden
+        })))
+        .unwrap()
+        .refine_against(mid.view(), start.view(), None, &mut never_stop)
+        .unwrap_err();
+    assert!(matches!(e, HoloError::ShapeMismatch { .. }), "{e}");
+}
