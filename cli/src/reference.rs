@@ -177,14 +177,14 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
                 viewer: None,
                 viewer_corrected_by_cnn: false,
             };
-            let mut refiner = args.refine.with_models(
-                tensorholo::refine::FrameRefiner::new(
-                    request,
-                    display,
-                    tensorholo::cnn::default_threads(),
-                )?,
-                args.refine.display_model()?,
-            )?;
+            let mut refiner =
+                args.refine
+                    .display_models()?
+                    .apply(tensorholo::refine::FrameRefiner::new(
+                        request,
+                        display,
+                        tensorholo::cnn::default_threads(),
+                    )?)?;
             let r = refiner.refine_against(
                 hologram.midpoint.view(),
                 hologram.double_phase.phase.view(),

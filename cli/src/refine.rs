@@ -106,51 +106,19 @@ impl RefineCoreArgs {
     pub fn check_display_model_use(&self, evaluate: bool) -> Result<()> {
         if self.display_model.is_some() && self.refine.is_none() && !evaluate {
             bail!(
-                "--display-model: the model is used by --refine N (and by holo render --evaluate); give one of                  them"
+                "--display-model: the model is used by --refine N (and by holo render --evaluate); give one \
+                 of them"
             );
         }
         Ok(())
     }
 
-    /// The `--display-model` file, read and checked.
-    pub fn display_model(&self) -> Result<Option<Arc<DisplayModel>>> {
-        load_model(self.display_model.as_deref(), "--display-model")
-    }
-
-    /// A display model of another SLM size than the frame's `[h, w]` (`--display-model`, or
-    /// `--score-display-model`) stops the command before anything is written.
-    pub fn check_model_sizes(&self, h: usize, w: usize) -> Result<()> {
-        for (path, flag) in [
-            (&self.display_model, "--display-model"),
-            (&self.score_display_model, "--score-display-model"),
-        ] {
-            if let Some(m) = load_model(path.as_deref(), flag)? {
-                if m.slm_size != [h, w] {
-                    bail!(
-                        "{flag}: the model is fitted for a {}x{} SLM, the frame is {h}x{w} (render at the \
-                         model's size, or fit a model for this one)",
-                        m.slm_size[0],
-                        m.slm_size[1]
-                    );
-                }
-            }
-        }
-        Ok(())
-    }
-
-    /// `refiner` through `model` (the `--display-model` file, read by the caller) and scored at the held-out
-    /// planes through `--score-display-model`; errors name the flag.
-    pub fn with_models(
-        &self,
-        refiner: FrameRefiner,
-        model: Option<Arc<DisplayModel>>,
-    ) -> Result<FrameRefiner> {
-        let scoring = load_model(self.score_display_model.as_deref(), "--score-display-model")?;
-        refiner
-            .with_display_model(model)
-            .map_err(|e| anyhow::Error::new(e).context("--display-model"))?
-            .with_scoring_model(scoring)
-            .map_err(|e| anyhow::Error::new(e).context("--score-display-model"))
+    /// The `--display-model` and `--score-display-model` files, each read and checked once.
+    pub fn display_models(&self) -> Result<DisplayModels> {
+        Ok(DisplayModels {
+            display: load_model(self.display_model.as_deref(), "--display-model")?,
+            scoring: load_model(self.score_display_model.as_deref(), "--score-display-model")?,
+        })
     }
 
     /// The refinement's options, checked, or `None` without --refine. Errors name the flag.
@@ -224,6 +192,45 @@ pub fn log_progress(iterations: usize) -> impl FnMut(&IterationRecord) -> Contro
             r.psnr_db
         );
         ControlFlow::Continue(())
+    }
+}
+
+/// A refinement's display models: what the loss sees (`--display-model`) and what the held-out planes are
+/// scored through (`--score-display-model`).
+pub struct DisplayModels {
+    /// `--display-model`.
+    pub display: Option<Arc<DisplayModel>>,
+    /// `--score-display-model`.
+    scoring: Option<Arc<DisplayModel>>,
+}
+
+impl DisplayModels {
+    /// A model of another SLM size than the frame's `[h, w]` stops the command before anything is written.
+    pub fn check_sizes(&self, h: usize, w: usize) -> Result<()> {
+        for (model, flag) in [
+            (&self.display, "--display-model"),
+            (&self.scoring, "--score-display-model"),
+        ] {
+            if let Some(m) = model.as_deref().filter(|m| m.slm_size != [h, w]) {
+                bail!(
+                    "{flag}: the model is fitted for a {}x{} SLM, the frame is {h}x{w} (render at the \
+                     model's size, or fit a model for this one)",
+                    m.slm_size[0],
+                    m.slm_size[1]
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// `refiner` through `--display-model` and scored at the held-out planes through `--score-display-model`;
+    /// errors name the flag.
+    pub fn apply(&self, refiner: FrameRefiner) -> Result<FrameRefiner> {
+        refiner
+            .with_display_model(self.display.clone())
+            .map_err(|e| anyhow::Error::new(e).context("--display-model"))?
+            .with_scoring_model(self.scoring.clone())
+            .map_err(|e| anyhow::Error::new(e).context("--score-display-model"))
     }
 }
 

@@ -111,10 +111,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         g.check(h, w).context("--gaze")?;
     }
     // A display model of another SLM size than the frame's stops the command before anything is written.
-    let display_model = args.refine.core.display_model()?;
+    let display_models = args.refine.core.display_models()?;
     {
         let (h, w) = scene.size();
-        args.refine.core.check_model_sizes(h, w)?;
+        display_models.check_sizes(h, w)?;
     }
     crate::output::prepare(&args.out, &inputs)?;
     let (h, w) = scene.size();
@@ -153,7 +153,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let full = match (&scene, &gaze, args.evaluate) {
         (Scene::Frame(frame), Some(_), true) => {
             let out = session.render(frame).with_context(what)?;
-            let displayed = shown_midpoint(pipeline.config(), display_model.as_deref(), out)?;
+            let displayed =
+                shown_midpoint(pipeline.config(), display_models.display.as_deref(), out)?;
             let midpoint = session
                 .last_heads()
                 .context("no frame rendered")?
@@ -228,15 +229,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let heads = heads.context("no frame rendered")?;
     let refined = match refine {
         Some(request) => {
-            let mut refiner = args.refine.core.with_models(
-                FrameRefiner::for_pipeline(
-                    request,
-                    &pipeline,
-                    &backend_report,
-                    args.model.thread_count(),
-                )?,
-                display_model.clone(),
-            )?;
+            let mut refiner = display_models.apply(FrameRefiner::for_pipeline(
+                request,
+                &pipeline,
+                &backend_report,
+                args.model.thread_count(),
+            )?)?;
             let midpoint = heads.to_field()?;
             let r = refiner.refine(
                 &scene.layers(),
@@ -259,7 +257,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             heads,
             backend: &backend_report,
             fovea: fovea.as_ref().zip(full.as_ref()),
-            display_model: display_model.as_deref(),
+            display_model: display_models.display.as_deref(),
         },
         &scene,
         source,

@@ -498,14 +498,13 @@ impl Video<'_> {
                 )
             })?;
         let refiner = match self.refine {
-            Some(request) => Some(args.refine.core.with_models(
+            Some(request) => Some(args.refine.core.display_models()?.apply(
                 FrameRefiner::for_pipeline(
                     request,
                     self.pipeline,
                     session.backend_report(),
                     args.model.thread_count(),
                 )?,
-                args.refine.core.display_model()?,
             )?),
             None => None,
         };

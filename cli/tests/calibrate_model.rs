@@ -12,6 +12,20 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// `holo render ARGS [--display-model MODEL] --out OUT`, which must succeed; its report.json.
+fn render_report(args: &[&str], model: Option<&Path>, out: &Path) -> serde_json::Value {
+    let mut a = vec!["render"];
+    a.extend_from_slice(args);
+    if let Some(m) = model {
+        a.extend(["--display-model", s(m)]);
+    }
+    a.extend(["--out", s(out)]);
+    let o = holo(&a);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(out.join("report.json")).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
 #[test]
 fn simulate_fit_and_refine_through_the_model() {
     let dir = tempfile::tempdir().unwrap();
@@ -105,24 +119,20 @@ fn simulate_fit_and_refine_through_the_model() {
     // 14.98 dB; the done-when's measurement at 128×128 in docs/REFINE.md).
     let hidden = sim.join("hidden.json");
     let scored = |model: Option<&Path>, name: &str| {
-        let out = dir.path().join(name);
-        let mut a = vec![
-            "render",
-            "--size",
-            "32x32",
-            "--refine",
-            "10",
-            "--refine-levels",
-            "16",
-        ];
-        if let Some(m) = model {
-            a.extend(["--display-model", s(m)]);
-        }
-        a.extend(["--score-display-model", s(&hidden), "--out", s(&out)]);
-        let o = holo(&a);
-        assert!(o.status.success(), "{}", stderr(&o));
-        let text = std::fs::read_to_string(out.join("report.json")).unwrap();
-        let report: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let report = render_report(
+            &[
+                "--size",
+                "32x32",
+                "--refine",
+                "10",
+                "--refine-levels",
+                "16",
+                "--score-display-model",
+                s(&hidden),
+            ],
+            model,
+            &dir.path().join(name),
+        );
         assert_eq!(report["refine"]["held_out_display"], "hidden.json");
         report["refine"]["held_out"]["refined_codes_psnr_db"]
             .as_f64()
@@ -136,28 +146,10 @@ fn simulate_fit_and_refine_through_the_model() {
         fitted > ideal + 0.3,
         "fitted {fitted:.2} dB, ideal {ideal:.2} dB"
     );
-    let out = dir.path().join("render");
-    let o = holo(&[
-        "render",
-        "--size",
-        "32x32",
-        "--refine",
-        "2",
-        "--refine-levels",
-        "16",
-        "--display-model",
-        s(&model),
-        "--out",
-        s(&out),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(out.join("report.json").exists());
     // --evaluate scores what the fitted display shows (no --refine needed), and says so: not the ideal
     // display's scores.
     let evaluate = |model: Option<&Path>, name: &str| {
-        let out = dir.path().join(name);
-        let mut a = vec![
-            "render",
+        let args = [
             "--size",
             "32x32",
             "--repeat",
@@ -166,15 +158,7 @@ fn simulate_fit_and_refine_through_the_model() {
             "--levels",
             "16",
         ];
-        if let Some(m) = model {
-            a.extend(["--display-model", s(m)]);
-        }
-        a.extend(["--out", s(&out)]);
-        let o = holo(&a);
-        assert!(o.status.success(), "{}", stderr(&o));
-        let text = std::fs::read_to_string(out.join("report.json")).unwrap();
-        let report: serde_json::Value = serde_json::from_str(&text).unwrap();
-        report["evaluation"].clone()
+        render_report(&args, model, &dir.path().join(name))["evaluation"].clone()
     };
     let (ideal, fitted) = (
         evaluate(None, "ideal"),

@@ -295,18 +295,12 @@ impl Refiner {
             return Ok(self);
         };
         let (h, w) = self.target.size();
-        model.validate()?;
+        model.validate_for(self.viewer.is_some())?;
         model.check_size(h, w)?;
         for (slot, part) in self.display.iter_mut().zip(&model.colours) {
             *slot = Some(ColourRuntime::new(part, h, w));
         }
         if model.colours.iter().any(|c| c.aberration.is_some()) {
-            if self.viewer.is_some() {
-                return Err(invalid(
-                    "display_model",
-                    "a display model with an aberration and a viewer's aberration at once: give one",
-                ));
-            }
             let coefficients =
                 std::array::from_fn(|c| model.colours[c].aberration.unwrap_or_default());
             let optics = AberrationProfile::new(vec![crate::display::AberrationSample {
@@ -682,4 +676,30 @@ fn energy(target: &FocalTarget) -> [f64; 3] {
 /// records and its frame's `amplitude_scale`. `None` for a field that shows nothing (`B = 0`).
 pub(super) fn least_squares_scale((a, b): (f64, f64)) -> Option<f64> {
     (b > 0.0).then(|| a / b)
+}
+
+/// The PSNR (dB) of `phase` `[3, H, W]` (radians of the drive) at the held-out planes of a refinement with
+/// `planes` loss planes ([`super::held_out_depths`]), as the display of `model` shows it, against the focal
+/// stack of `midpoint` `[3, H, W]`: the tests' score of a pattern on a simulated display (what
+/// `FrameRefiner::with_scoring_model` reports).
+#[cfg(test)]
+pub(crate) fn held_out_psnr(
+    (setup, propagation, offset_m): (&OpticalSetup, PropagationOptions, f64),
+    midpoint: ndarray::ArrayView3<Complex32>,
+    planes: usize,
+    model: &DisplayModel,
+    phase: ArrayView3<f32>,
+) -> f64 {
+    let held = super::held_out_depths(planes).unwrap();
+    let target = FocalTarget::from_midpoint(midpoint, setup, propagation, &held).unwrap();
+    let options = RefineOptions {
+        planes,
+        ..RefineOptions::default()
+    };
+    let mut r = Refiner::new(setup, propagation, offset_m, target.clone(), options, 2)
+        .unwrap()
+        .with_display_model(Some(model))
+        .unwrap();
+    let mut set = r.plane_set(target).unwrap();
+    r.score_planes(&mut set, phase).unwrap().psnr_db
 }

@@ -274,7 +274,7 @@ impl FrameRefiner {
     /// the frame's is refused at the first frame ([`HoloError::ShapeMismatch`]).
     pub fn with_display_model(mut self, model: Option<Arc<DisplayModel>>) -> Result<Self> {
         if let Some(m) = &model {
-            m.validate()?;
+            m.validate_for(self.display.viewer.is_some())?;
             let calibrated = self
                 .display
                 .calibration
@@ -285,12 +285,6 @@ impl FrameRefiner {
                     "display_model",
                     "a display model and a calibration's look-up table at once: the model's phase response \
                      replaces the table (fit the model from the captures instead)",
-                ));
-            }
-            if self.display.viewer.is_some() && m.colours.iter().any(|c| c.aberration.is_some()) {
-                return Err(invalid(
-                    "display_model",
-                    "a display model with an aberration and a viewer's aberration at once: give one",
                 ));
             }
         }
@@ -311,13 +305,7 @@ impl FrameRefiner {
     /// model of another SLM size than the frame's is refused at the first frame ([`HoloError::ShapeMismatch`]).
     pub fn with_scoring_model(mut self, model: Option<Arc<DisplayModel>>) -> Result<Self> {
         if let Some(m) = &model {
-            m.validate()?;
-            if self.display.viewer.is_some() && m.colours.iter().any(|c| c.aberration.is_some()) {
-                return Err(invalid(
-                    "display_model",
-                    "a scoring display model with an aberration and a viewer's aberration at once: give one",
-                ));
-            }
+            m.validate_for(self.display.viewer.is_some())?;
         }
         self.scoring = model;
         self.scorer = None;

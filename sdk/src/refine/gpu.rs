@@ -20,7 +20,7 @@ use super::options::{IterationRecord, RefineReport};
 use crate::error::{invalid, HoloError, Result};
 use crate::gpu::refine::{GpuAdam, GpuDisplayColour, GpuDisplayModel, GpuRefineModel, GpuRefiner};
 use crate::gpu::GpuContext;
-use crate::slm::model::{ColourDisplay, ColourRuntime};
+use crate::slm::model::ColourRuntime;
 use crate::slm::LutRepresentation;
 use num_complex::Complex32;
 
@@ -111,16 +111,16 @@ impl Refiner {
 
 impl Refiner {
     /// The display model's parts as the GPU's kernels read them (`n` pixels per colour), `None` for the ideal
-    /// SLM.
+    /// SLM (`Refiner::with_display_model` gives every colour a runtime, or none).
     fn gpu_display_model(&self, n: usize) -> Option<GpuDisplayModel> {
-        if self.display.iter().all(Option::is_none) {
-            return None;
-        }
-        let (h, w) = self.target.size();
-        let ideal = ColourRuntime::new(&ColourDisplay::default(), h, w);
+        let runtimes: Vec<&ColourRuntime> = self
+            .display
+            .iter()
+            .map(Option::as_ref)
+            .collect::<Option<_>>()?;
         let mut source = Vec::with_capacity(3 * n);
         let colours = std::array::from_fn(|c| {
-            let parts = self.display[c].as_ref().unwrap_or(&ideal).plain_parts();
+            let parts = runtimes[c].plain_parts();
             match parts.source {
                 Some(s) => source.extend_from_slice(s),
                 None => source.extend(std::iter::repeat_n(Complex32::new(1.0, 0.0), n)),

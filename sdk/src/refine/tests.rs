@@ -10,6 +10,7 @@ use super::*;
 use crate::display::AberrationProfile;
 use crate::error::HoloError;
 use crate::optics::{focal_stack, OpticalSetup, PropagationOptions};
+use crate::refine::engine::held_out_psnr;
 use crate::slm::codes::displayed_phase;
 use crate::splitmix::SplitMix64;
 
@@ -79,6 +80,19 @@ fn refiner(target: FocalTarget, options: RefineOptions, threads: usize) -> Refin
         threads,
     )
     .unwrap()
+}
+
+/// The display of the tests' frame refiners: the default optics at [`OFFSET_M`], no calibration, no viewer.
+fn ideal_display() -> RefineDisplay {
+    RefineDisplay {
+        optics: setup(),
+        propagation: Default::default(),
+        offset_m: OFFSET_M,
+        encoding: Default::default(),
+        calibration: None,
+        viewer: None,
+        viewer_corrected_by_cnn: false,
+    }
 }
 
 fn never_stop(_: &IterationRecord) -> ControlFlow<()> {
@@ -399,16 +413,12 @@ fn the_cnn_target_is_refused_where_the_cnn_corrects_the_viewer() {
     use std::sync::Arc;
 
     let display = |by_cnn: bool| RefineDisplay {
-        optics: setup(),
-        propagation: Default::default(),
-        offset_m: OFFSET_M,
-        encoding: Default::default(),
-        calibration: None,
         viewer: Some(Arc::new(AberrationProfile::uniform(ZernikeCoefficients {
             focus: 2.0,
             ..ZernikeCoefficients::ZERO
         }))),
         viewer_corrected_by_cnn: by_cnn,
+        ..ideal_display()
     };
     let request = |target| FrameRefinement {
         target,
@@ -429,15 +439,7 @@ fn the_cnn_target_is_refused_where_the_cnn_corrects_the_viewer() {
 #[test]
 fn the_previous_start_falls_back_to_the_cnn_where_the_view_changed() {
     let (h, w) = (16, 20);
-    let display = RefineDisplay {
-        optics: setup(),
-        propagation: Default::default(),
-        offset_m: OFFSET_M,
-        encoding: Default::default(),
-        calibration: None,
-        viewer: None,
-        viewer_corrected_by_cnn: false,
-    };
+    let display = ideal_display();
     let request = FrameRefinement {
         target: RefineTarget::CnnMidpoint,
         start: RefineStart::Previous,
@@ -553,23 +555,14 @@ fn with_an_intensity_map_refinement_never_scores_below_the_unrefined_codes() {
     let codes = |phase: &Array3<f32>| codes_of(phase.view(), None).unwrap();
     // Scored as the beam shows them at the held-out planes, against the unscaled scene's focal stack.
     let score = |codes: &Array3<u8>| {
-        let held = held_out_depths(7).unwrap();
-        let target =
-            FocalTarget::from_midpoint(plain.midpoint.view(), &setup, prop, &held).unwrap();
-        let mut r = Refiner::new(
-            &setup,
-            prop,
-            offset,
-            target.clone(),
-            RefineOptions::default(),
-            2,
-        )
-        .unwrap()
-        .with_display_model(Some(&beam))
-        .unwrap();
-        let mut set = r.plane_set(target).unwrap();
         let shown = displayed_phase(codes.view(), None).unwrap();
-        r.score_planes(&mut set, shown.view()).unwrap().psnr_db
+        held_out_psnr(
+            (&setup, prop, offset),
+            plain.midpoint.view(),
+            7,
+            &beam,
+            shown.view(),
+        )
     };
     let without_map = score(&codes(&plain.double_phase.phase));
     let with_map_codes = codes(&scaled.double_phase.phase);
@@ -633,15 +626,7 @@ fn held_out_scores_through_a_scoring_model_are_what_that_display_shows() {
         iterations: 3,
         ..RefineOptions::default()
     };
-    let display = RefineDisplay {
-        optics: setup(),
-        propagation: Default::default(),
-        offset_m: OFFSET_M,
-        encoding: Default::default(),
-        calibration: None,
-        viewer: None,
-        viewer_corrected_by_cnn: false,
-    };
+    let display = ideal_display();
     let request = FrameRefinement {
         options,
         ..FrameRefinement::default()
@@ -656,14 +641,15 @@ fn held_out_scores_through_a_scoring_model_are_what_that_display_shows() {
     };
     let (own, scored) = (run(None), run(Some(Arc::new(hidden.clone()))));
     assert_eq!(own.codes, scored.codes);
-    let held = held_out_depths(options.planes).unwrap();
-    let target =
-        FocalTarget::from_midpoint(mid.view(), &setup(), Default::default(), &held).unwrap();
-    let mut direct = refiner(target.clone(), options, 2)
-        .with_display_model(Some(&hidden))
-        .unwrap();
-    let mut set = direct.plane_set(target).unwrap();
-    let mut score = |p: &Array3<f32>| direct.score_planes(&mut set, p.view()).unwrap().psnr_db;
+    let score = |p: &Array3<f32>| {
+        held_out_psnr(
+            (&setup(), Default::default(), OFFSET_M),
+            mid.view(),
+            options.planes,
+            &hidden,
+            p.view(),
+        )
+    };
     let shown = displayed_phase(codes_of(scored.phase.view(), None).unwrap().view(), None).unwrap();
     let s = &scored.held_out;
     assert_eq!(s.start_psnr_db, score(&start));
@@ -685,4 +671,57 @@ fn held_out_scores_through_a_scoring_model_are_what_that_display_shows() {
         .refine_against(mid.view(), start.view(), None, &mut never_stop)
         .unwrap_err();
     assert!(matches!(e, HoloError::ShapeMismatch { .. }), "{e}");
+}
+
+/// A display model with an aberration and a viewer's aberration at once: refused, naming `display_model`,
+/// whether the loss sees the model or the held-out planes are scored through it; a model without one is
+/// taken beside the viewer.
+#[test]
+fn a_model_aberration_beside_a_viewers_is_refused() {
+    use crate::optics::ZernikeCoefficients;
+    use crate::slm::model::DisplayModel;
+    use std::sync::Arc;
+
+    let (h, w) = (8, 8);
+    let viewer = Arc::new(AberrationProfile::uniform(ZernikeCoefficients {
+        focus: 1.0,
+        ..ZernikeCoefficients::ZERO
+    }));
+    let mut model = DisplayModel {
+        slm_size: [h, w],
+        ..Default::default()
+    };
+    model.colours[1].zero_order = Some([0.05, 0.0]);
+    let display = RefineDisplay {
+        viewer: Some(viewer.clone()),
+        ..ideal_display()
+    };
+    let frame = || FrameRefiner::new(FrameRefinement::default(), display.clone(), 1).unwrap();
+    assert!(frame()
+        .with_display_model(Some(Arc::new(model.clone())))
+        .is_ok());
+    model.colours[1].aberration = Some(ZernikeCoefficients {
+        focus: 0.3,
+        ..ZernikeCoefficients::ZERO
+    });
+    let named = |e: HoloError| {
+        matches!(
+            e,
+            HoloError::InvalidParameter {
+                name: "display_model",
+                ..
+            }
+        )
+    };
+    let m = Arc::new(model.clone());
+    assert!(named(
+        frame().with_display_model(Some(m.clone())).unwrap_err()
+    ));
+    assert!(named(frame().with_scoring_model(Some(m)).unwrap_err()));
+    let e = refiner(target(h, w, &[0.5]), CONTINUOUS, 1)
+        .with_viewer(Some(&viewer))
+        .unwrap()
+        .with_display_model(Some(&model))
+        .unwrap_err();
+    assert!(named(e));
 }

@@ -316,6 +316,22 @@ impl DisplayModel {
         Ok(())
     }
 
+    /// Checks the model (as [`DisplayModel::validate`]) for a refinement that does (`viewer`) or does not see
+    /// through a viewer's aberration: the two aberrations at once are refused.
+    ///
+    /// Errors: those of validation; [`HoloError::InvalidParameter`] (`display_model`) for a model with an
+    /// aberration beside a viewer's.
+    pub(crate) fn validate_for(&self, viewer: bool) -> Result<()> {
+        self.validate()?;
+        if viewer && self.colours.iter().any(|c| c.aberration.is_some()) {
+            return Err(invalid(
+                "display_model",
+                "a display model with an aberration and a viewer's aberration at once: give one",
+            ));
+        }
+        Ok(())
+    }
+
     /// Refuses a model made for another SLM size than `[height, width]`.
     ///
     /// Errors: [`HoloError::ShapeMismatch`].

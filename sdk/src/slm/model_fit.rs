@@ -779,15 +779,18 @@ fn part_errors(
 ) -> Vec<PartError> {
     let name = |p: &str| format!("{}.{p}", COLOUR_KEYS[colour]);
     let mut out = Vec::new();
-    let amp = |c: &ColourDisplay| -> Vec<f64> {
-        let r = ColourRuntime::new(c, h, w);
+    let (fr, tr) = (
+        ColourRuntime::new(fitted, h, w),
+        ColourRuntime::new(truth, h, w),
+    );
+    let amp = |r: &ColourRuntime| -> Vec<f64> {
         let a: Vec<f64> = (0..h * w)
             .map(|p| r.source.as_ref().map_or(1.0, |s| f64::from(s[p].norm())))
             .collect();
         let mean = a.iter().sum::<f64>() / a.len() as f64;
         a.into_iter().map(|v| v / mean).collect()
     };
-    let (fa, ta) = (amp(fitted), amp(truth));
+    let (fa, ta) = (amp(&fr), amp(&tr));
     out.push(PartError {
         part: name("source.log_amplitude"),
         measure: "largest relative amplitude difference".into(),
@@ -818,19 +821,13 @@ fn part_errors(
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max),
     });
-    let curve = |c: &ColourDisplay| -> Vec<f64> {
-        let r = &ColourRuntime::new(c, h, w);
-        (0..h * w)
-            .flat_map(|p| (0..256).map(move |k| f64::from(r.respond(p, k as f32).0)))
-            .collect()
-    };
+    // Every pixel's curve (a per-pixel response), compared code by code without storing them.
     out.push(PartError {
         part: name("response"),
         measure: "largest phase difference over the codes and pixels, rad".into(),
-        error: curve(fitted)
-            .iter()
-            .zip(&curve(truth))
-            .map(|(a, b)| (a - b).abs())
+        error: (0..h * w)
+            .flat_map(|p| (0..256).map(move |k| (p, k as f32)))
+            .map(|(p, v)| f64::from((fr.respond(p, v).0 - tr.respond(p, v).0).abs()))
             .fold(0.0, f64::max),
     });
     let kernel = |c: &ColourDisplay, side: usize| -> Vec<f64> {

@@ -435,6 +435,7 @@ fn the_gpu_refines_through_a_model_as_the_cpu_does() {
             .zip(&gpu)
             .map(|(a, b)| (a - b).abs())
             .fold(0.0f32, f32::max);
+        eprintln!("quantised {quantised}: the GPU's drive within {worst:.1e} rad of the CPU's");
         assert!(
             worst < 1e-3,
             "quantised {quantised}: drives differ by {worst} rad"

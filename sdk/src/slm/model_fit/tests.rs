@@ -231,7 +231,8 @@ fn refinement_through_the_fitted_model_beats_the_ideal_display_at_unseen_planes(
     use crate::encoding::DoublePhaseMethod;
     use crate::optics::PropagationOptions;
     use crate::reference::ReferencePipeline;
-    use crate::refine::{held_out_depths, loss_depths, FocalTarget};
+    use crate::refine::engine::held_out_psnr;
+    use crate::refine::{loss_depths, FocalTarget};
     use crate::refine::{RefineOptions, Refiner};
     use crate::slm::codes::{codes_of, displayed_phase};
     use crate::synthesis::{SceneLayer, SmLbm};
@@ -297,22 +298,13 @@ fn refinement_through_the_fitted_model_beats_the_ideal_display_at_unseen_planes(
     };
     // Scored as `display` shows the codes, at the held-out planes.
     let score = |display: &DisplayModel, shown: &ndarray::Array3<f32>| {
-        let held = held_out_depths(7).unwrap();
-        let target =
-            FocalTarget::from_midpoint(hologram.midpoint.view(), &setup, prop, &held).unwrap();
-        let mut r = Refiner::new(
-            &setup,
-            prop,
-            offset,
-            target.clone(),
-            RefineOptions::default(),
-            2,
+        held_out_psnr(
+            (&setup, prop, offset),
+            hologram.midpoint.view(),
+            7,
+            display,
+            shown.view(),
         )
-        .unwrap()
-        .with_display_model(Some(display))
-        .unwrap();
-        let mut set = r.plane_set(target).unwrap();
-        r.score_planes(&mut set, shown.view()).unwrap().psnr_db
     };
     for part in 0..6 {
         let mut only = truth.clone();
